@@ -1,0 +1,1 @@
+"""Logs: the VehicleLog contract and its validation, excitation signals and the simulator."""

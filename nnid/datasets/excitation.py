@@ -1,0 +1,294 @@
+"""Excitation signals for identification experiments.
+
+Each signal is a small pydantic model (so configs validate it) with ``__call__(t) -> array``.
+``channel`` names a generalized force (``X Y Z K M N``) or a thruster (its command). Signals on
+the same channel add up. Steps and stairs, chirp, multisine (Schroeder phases), PRBS (maximum
+length shift register), Caccia's d-optimal sinusoid (eqs 13-15) and Weiss's identification
+sequence (section V.B) are provided.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Literal
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+FORCE_CHANNELS = ("X", "Y", "Z", "K", "M", "N")
+
+
+class _Signal(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    channel: str
+    start: float = Field(0.0, ge=0)
+
+    def window(self, t: np.ndarray, duration: float) -> np.ndarray:
+        return (t >= self.start) & (t < self.start + duration)
+
+
+class Step(_Signal):
+    """A step of ``amplitude`` from ``start`` for ``duration`` seconds (held forever if absent)."""
+
+    kind: Literal["step"] = "step"
+    amplitude: float
+    duration: float | None = Field(None, gt=0)
+
+    def end(self) -> float:
+        return self.start + (self.duration or 0.0)
+
+    def __call__(self, t: np.ndarray) -> np.ndarray:
+        on = t >= self.start
+        if self.duration is not None:
+            on &= t < self.start + self.duration
+        return np.where(on, self.amplitude, 0.0)
+
+
+class Stairs(_Signal):
+    """Levels held ``hold`` seconds each, one after another, then zero (stair-steps)."""
+
+    kind: Literal["stairs"] = "stairs"
+    levels: list[float] = Field(min_length=1)
+    hold: float = Field(gt=0)
+
+    def end(self) -> float:
+        return self.start + self.hold * len(self.levels)
+
+    def __call__(self, t: np.ndarray) -> np.ndarray:
+        k = np.floor((t - self.start) / self.hold).astype(int)
+        inside = (k >= 0) & (k < len(self.levels))
+        return np.where(inside, np.asarray(self.levels)[np.clip(k, 0, len(self.levels) - 1)], 0.0)
+
+
+class Chirp(_Signal):
+    """Linear-frequency sweep ``offset + amplitude sin(2π(f0 τ + (f1 − f0) τ²/(2T)))``."""
+
+    kind: Literal["chirp"] = "chirp"
+    amplitude: float
+    f0: float = Field(gt=0)
+    f1: float = Field(gt=0)
+    duration: float = Field(gt=0)
+    offset: float = 0.0
+
+    def end(self) -> float:
+        return self.start + self.duration
+
+    def __call__(self, t: np.ndarray) -> np.ndarray:
+        tau = t - self.start
+        phase = 2 * math.pi * (self.f0 * tau + (self.f1 - self.f0) * tau**2 / (2 * self.duration))
+        return np.where(
+            self.window(t, self.duration), self.offset + self.amplitude * np.sin(phase), 0.0
+        )
+
+
+class Multisine(_Signal):
+    """Sum of ``n`` equal-amplitude sines on [f_min, f_max] with Schroeder phases, scaled to a
+    peak of ``amplitude`` (low crest factor, flat spectrum)."""
+
+    kind: Literal["multisine"] = "multisine"
+    amplitude: float
+    f_min: float = Field(gt=0)
+    f_max: float = Field(gt=0)
+    n: int = Field(8, ge=1)
+    duration: float = Field(gt=0)
+
+    @model_validator(mode="after")
+    def _band(self) -> Multisine:
+        if self.f_max < self.f_min:
+            raise ValueError("f_max must be at least f_min")
+        return self
+
+    def end(self) -> float:
+        return self.start + self.duration
+
+    def __call__(self, t: np.ndarray) -> np.ndarray:
+        freqs = np.linspace(self.f_min, self.f_max, self.n)
+        k = np.arange(1, self.n + 1)
+        phases = -math.pi * k * (k - 1) / self.n
+        tau = t - self.start
+        dense = np.linspace(0.0, self.duration, 20_000)
+        peak = np.abs(np.sin(2 * math.pi * np.outer(dense, freqs) + phases).sum(1)).max()
+        x = np.sin(2 * math.pi * np.outer(tau, freqs) + phases).sum(1) * (self.amplitude / peak)
+        return np.where(self.window(t, self.duration), x, 0.0)
+
+
+# Feedback taps of maximum-length Fibonacci LFSRs (bits counted from 1).
+_LFSR_TAPS = {
+    3: (3, 2), 4: (4, 3), 5: (5, 3), 6: (6, 5), 7: (7, 6), 8: (8, 6, 5, 4), 9: (9, 5),
+    10: (10, 7), 11: (11, 9), 12: (12, 11, 10, 4), 13: (13, 12, 11, 8), 14: (14, 13, 12, 2),
+    15: (15, 14), 16: (16, 15, 13, 4),
+}  # fmt: skip
+
+
+def mls(order: int, seed: int = 1) -> np.ndarray:
+    """One period (2^order − 1 chips) of a maximum-length sequence of ±1."""
+    if order not in _LFSR_TAPS:
+        raise ValueError(f"PRBS order must be in {min(_LFSR_TAPS)}..{max(_LFSR_TAPS)}")
+    n = 2**order - 1
+    state = (seed % n) + 1
+    taps = _LFSR_TAPS[order]
+    out = np.empty(n)
+    for i in range(n):
+        out[i] = 1.0 if state & 1 else -1.0
+        bit = 0
+        for tap in taps:
+            bit ^= (state >> (order - tap)) & 1
+        state = (state >> 1) | (bit << (order - 1))
+    return out
+
+
+class PRBS(_Signal):
+    """Pseudo-random binary sequence ``offset ± amplitude`` switching on a clock of ``hold`` s."""
+
+    kind: Literal["prbs"] = "prbs"
+    amplitude: float
+    hold: float = Field(gt=0)
+    duration: float = Field(gt=0)
+    order: int = Field(7, ge=3, le=16)
+    seed: int = 1
+    offset: float = 0.0
+
+    def end(self) -> float:
+        return self.start + self.duration
+
+    def __call__(self, t: np.ndarray) -> np.ndarray:
+        chips = mls(self.order, self.seed)
+        k = np.floor((t - self.start) / self.hold).astype(int) % chips.size
+        x = self.offset + self.amplitude * chips[k]
+        return np.where(self.window(t, self.duration), x, 0.0)
+
+
+class Sine(_Signal):
+    """``offset + amplitude sin(2π f (t − start))`` for ``duration`` seconds."""
+
+    kind: Literal["sine"] = "sine"
+    amplitude: float
+    frequency: float = Field(gt=0)
+    duration: float = Field(gt=0)
+    offset: float = 0.0
+
+    def end(self) -> float:
+        return self.start + self.duration
+
+    def __call__(self, t: np.ndarray) -> np.ndarray:
+        x = self.offset + self.amplitude * np.sin(2 * math.pi * self.frequency * (t - self.start))
+        return np.where(self.window(t, self.duration), x, 0.0)
+
+
+def doptimal_frequency(
+    inertia: float,
+    k_linear: float,
+    k_quadratic: float,
+    force: float,
+    eta: float = 1.0,
+    bias: float = 0.0,
+) -> float:
+    """Caccia eqs 13-14: ω_opt = 1 / (√3 t_c), t_c = m_ξ / k_L, k_L = k_ξ + 2 k_ξ|ξ| |ξ*|.
+
+    ξ* is the steady speed under the mean force: k ξ* + k₂ ξ*|ξ*| = η φ̂ + ν̄ (Caccia's drag
+    coefficients are positive: the drag force is −k ξ − k₂ ξ|ξ|). Returns rad/s.
+    """
+    drive = eta * force + bias
+    if k_quadratic > 0:
+        speed = (-k_linear + math.sqrt(k_linear**2 + 4 * k_quadratic * abs(drive))) / (
+            2 * k_quadratic
+        )
+    else:
+        speed = abs(drive) / k_linear
+    k_l = k_linear + 2 * k_quadratic * speed
+    return 1.0 / (math.sqrt(3.0) * inertia / k_l)
+
+
+class DOptimalSine(_Signal):
+    """Caccia's d-optimal sinusoid (eq. 15): φⁿ(t) = φ̂ + Δφ sin(ω_opt t), with ω_opt from a
+    first-step estimate of inertia and drag (eqs 13-14) and Δφ ≤ |φ̂| so the thrust never
+    reverses (no propeller inversion)."""
+
+    kind: Literal["doptimal_sine"] = "doptimal_sine"
+    offset: float
+    amplitude: float = Field(gt=0)
+    inertia: float = Field(gt=0)
+    k_linear: float = Field(ge=0)
+    k_quadratic: float = Field(0.0, ge=0)
+    eta: float = Field(1.0, gt=0)
+    duration: float = Field(gt=0)
+
+    @model_validator(mode="after")
+    def _no_inversion(self) -> DOptimalSine:
+        if self.amplitude > abs(self.offset):
+            raise ValueError("amplitude must not exceed |offset|: the thrust would reverse")
+        if self.k_linear == 0 and self.k_quadratic == 0:
+            raise ValueError("k_linear or k_quadratic must be positive")
+        return self
+
+    def frequency(self) -> float:
+        """ω_opt in rad/s."""
+        return doptimal_frequency(
+            self.inertia, self.k_linear, self.k_quadratic, self.offset, self.eta
+        )
+
+    def end(self) -> float:
+        return self.start + self.duration
+
+    def __call__(self, t: np.ndarray) -> np.ndarray:
+        x = self.offset + self.amplitude * np.sin(self.frequency() * (t - self.start))
+        return np.where(self.window(t, self.duration), x, 0.0)
+
+
+_DOF_NAMES = {"X": "surge", "Y": "sway", "Z": "heave", "K": "roll", "M": "pitch", "N": "yaw"}
+# Weiss V.B: after the decoupled runs, the coupled pairs and triples that excite roll and pitch
+# through coupling (surge-heave identifies pitch, eqs 105-108).
+_WEISS_COUPLED = ("XY", "XZ", "XN", "YZ", "YN", "ZN", "XYZ", "XYN")
+
+
+class WeissSequence(BaseModel):
+    """Weiss's identification sequence (section V.A-V.B, conclusions): stair-step runs in the
+    decoupled DOFs surge, sway, heave, roll, yaw, in that order, then the coupled pairs and
+    triples surge-sway, surge-heave, surge-yaw, sway-heave, sway-yaw, heave-yaw,
+    surge-sway-heave and surge-sway-yaw.
+
+    Each run holds ``levels`` (fractions of the DOF's ``amplitude``, both signs so that both
+    directions and several steady speeds are seen) for ``hold`` seconds each, then lets the
+    vehicle coast for ``hold`` seconds (free decay shows the inertia). In coupled runs the
+    second and third DOF switch on slower clocks so that their inputs are not collinear.
+    """
+
+    model_config = ConfigDict(extra="forbid")
+    kind: Literal["weiss"] = "weiss"
+    amplitudes: dict[str, float] = Field(
+        default_factory=lambda: {"X": 30.0, "Y": 30.0, "Z": 30.0, "K": 4.0, "N": 4.0}
+    )
+    levels: list[float] = Field(default_factory=lambda: [0.3, 0.65, 1.0, -0.5, -1.0])
+    hold: float = Field(8.0, gt=0)
+    coupled: list[str] = Field(default_factory=lambda: list(_WEISS_COUPLED))
+
+    @model_validator(mode="after")
+    def _channels(self) -> WeissSequence:
+        for ch in self.amplitudes:
+            if ch not in FORCE_CHANNELS:
+                raise ValueError(f"amplitudes: '{ch}' is not one of {', '.join(FORCE_CHANNELS)}")
+        for combo in self.coupled:
+            missing = [c for c in combo if c not in self.amplitudes]
+            if missing:
+                raise ValueError(f"coupled run '{combo}' needs amplitudes for {missing}")
+        return self
+
+    def experiments(self) -> list[dict]:
+        """Experiment definitions (``nnid.config.Experiment`` fields) in Weiss's order."""
+        runs = []
+        for ch in ("X", "Y", "Z", "K", "M", "N"):
+            if ch in self.amplitudes:
+                runs.append(self._run(_DOF_NAMES[ch], ch))
+        for combo in self.coupled:
+            runs.append(self._run("-".join(_DOF_NAMES[c] for c in combo), *combo))
+        return runs
+
+    def _run(self, name: str, *channels: str) -> dict:
+        signals = []
+        duration = self.hold * (len(self.levels) + 1)
+        for k, ch in enumerate(channels):
+            hold = duration / (len(self.levels) + 1) * (1.0, 1.37, 1.71)[k]
+            n_levels = max(1, int((duration - hold) // hold))
+            levels = [(self.levels * 2)[i] * self.amplitudes[ch] for i in range(n_levels)]
+            signals.append({"kind": "stairs", "channel": ch, "levels": levels, "hold": hold})
+        return {"name": name, "duration": duration, "signals": signals}

@@ -1,0 +1,77 @@
+"""Sensor models that turn true states into logged columns.
+
+- ``none``: exact pose (continuous angles), body velocities and accelerations.
+- ``mocap``: motion-capture pose only, white noise on position and attitude (Weiss V.A.2: VICON
+  at 100 Hz), angles wrapped to ±π as a real tracker reports them.
+- ``dvl_imu``: DVL body velocity and gyro rates with white noise and constant bias, depth from
+  pressure and AHRS attitude (McCarter 2.5); no horizontal position.
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field
+
+from nnid.datasets.log import ACCELERATION, POSE, VELOCITY
+
+
+def wrap_angle(a: np.ndarray) -> np.ndarray:
+    """Wrap to [−π, π)."""
+    return (np.asarray(a) + np.pi) % (2 * np.pi) - np.pi
+
+
+class Measurement(BaseModel):
+    """Noise levels are standard deviations in SI units; biases are constant per run."""
+
+    model_config = ConfigDict(extra="forbid")
+    kind: Literal["none", "mocap", "dvl_imu"] = "none"
+    position_noise: float = Field(0.001, ge=0)
+    angle_noise: float = Field(0.002, ge=0)
+    velocity_noise: float = Field(0.005, ge=0)
+    velocity_bias: list[float] = Field(default_factory=lambda: [0.0, 0.0, 0.0])
+    gyro_noise: float = Field(0.002, ge=0)
+    gyro_bias: list[float] = Field(default_factory=lambda: [0.0, 0.0, 0.0])
+    depth_noise: float = Field(0.01, ge=0)
+    attitude_noise: float = Field(0.005, ge=0)
+    truth: bool = False
+
+    def columns(
+        self, states: np.ndarray, accelerations: np.ndarray, rng: np.random.Generator
+    ) -> dict[str, np.ndarray]:
+        """Logged columns for true states ``[N, ≥12]`` and accelerations ``[N, 6]``."""
+        n = states.shape[0]
+        pose, vel = states[:, 0:6], states[:, 6:12]
+        out: dict[str, np.ndarray] = {}
+        if self.kind == "none":
+            out.update({c: pose[:, i] for i, c in enumerate(POSE)})
+            out.update({c: vel[:, i] for i, c in enumerate(VELOCITY)})
+            out.update({c: accelerations[:, i] for i, c in enumerate(ACCELERATION)})
+        elif self.kind == "mocap":
+            noise = np.concatenate(
+                [
+                    rng.normal(0, self.position_noise, (n, 3)),
+                    rng.normal(0, self.angle_noise, (n, 3)),
+                ],
+                1,
+            )
+            meas = pose + noise
+            meas[:, 3:6] = wrap_angle(meas[:, 3:6])
+            out.update({c: meas[:, i] for i, c in enumerate(POSE)})
+        else:
+            lin = (
+                vel[:, 0:3]
+                + np.asarray(self.velocity_bias)
+                + rng.normal(0, self.velocity_noise, (n, 3))
+            )
+            ang = vel[:, 3:6] + np.asarray(self.gyro_bias) + rng.normal(0, self.gyro_noise, (n, 3))
+            att = wrap_angle(pose[:, 3:6] + rng.normal(0, self.attitude_noise, (n, 3)))
+            out["z"] = pose[:, 2] + rng.normal(0, self.depth_noise, n)
+            out.update({c: att[:, i] for i, c in enumerate(("phi", "theta", "psi"))})
+            out.update({c: lin[:, i] for i, c in enumerate(("u", "v", "w"))})
+            out.update({c: ang[:, i] for i, c in enumerate(("p", "q", "r"))})
+        if self.truth:
+            out.update({f"true_{c}": pose[:, i] for i, c in enumerate(POSE)})
+            out.update({f"true_{c}": vel[:, i] for i, c in enumerate(VELOCITY)})
+        return out

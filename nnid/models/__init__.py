@@ -1,0 +1,1 @@
+"""Models: the damping basis library and (later) parametric, NARX and hybrid models."""

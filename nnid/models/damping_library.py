@@ -1,0 +1,164 @@
+"""The hydrodynamic basis library: McCarter's 132 viscous basis functions (Appendix C).
+
+A basis term is written in code form, e.g. ``u*abs(v)``, ``abs(q)*Vw`` or ``u*v*(eta-1)``: a
+product of factors drawn from the atoms ``u v w p q r``, ``abs(u)`` … ``abs(r)``, ``U``, ``V``,
+``Vv``, ``Vw`` and ``(eta-1)`` where (McCarter eqs C.8-C.12)
+
+    U = sqrt(u² + v² + w²),  V = sqrt(v² + w²),  Vv = V sign(v),  Vw = V sign(w),  η = u_c / U.
+
+Every term is encoded as up to three atom indices, so one gather-and-product evaluates any set
+of terms on NumPy arrays, PyTorch tensors, or inside the compiled simulator kernel.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Iterable, Sequence
+from functools import lru_cache
+
+import numpy as np
+import torch
+
+VELOCITIES = ("u", "v", "w", "p", "q", "r")
+ATOMS = (
+    *VELOCITIES,
+    *(f"abs({s})" for s in VELOCITIES),
+    "U",
+    "V",
+    "Vv",
+    "Vw",
+    "(eta-1)",
+    "1",
+)
+ATOM_INDEX = {name: i for i, name in enumerate(ATOMS)}
+ONE = ATOM_INDEX["1"]
+MAX_FACTORS = 3
+# Keeps sqrt differentiable at rest and η finite; far below any speed a log resolves.
+_TINY = 1e-30
+
+
+def _library_names() -> tuple[str, ...]:
+    s = VELOCITIES
+    names = list(s)  # C.1
+    names += [f"abs({a})" for a in s]  # C.2
+    pairs = [f"{s[i]}*{s[j]}" for i in range(6) for j in range(i, 6)]
+    names += pairs  # C.3
+    names += [f"{a}*abs({b})" for a in s for b in s]  # C.4
+    for atom in ("V", "Vv", "Vw"):  # C.5
+        names += [f"{a}*{atom}" for a in s]
+        names += [f"abs({a})*{atom}" for a in s]
+    names += [f"{p}*(eta-1)" for p in pairs]  # C.6
+    names += [f"{a}*V*(eta-1)" for a in s]
+    return tuple(names)
+
+
+LIBRARY: tuple[str, ...] = _library_names()
+"""The 132 terms of McCarter eq. C.7, in his order."""
+
+_FACTOR = re.compile(r"abs\([uvwpqr]\)|\(eta-1\)|Vv|Vw|[uvwpqrUV]")
+
+
+@lru_cache(maxsize=4096)
+def parse_term(term: str) -> tuple[int, ...]:
+    """Atom indices of a term, sorted, padded with the unit atom to three factors.
+
+    Raises ValueError naming the term when it is not a product of known atoms.
+    """
+    text = term.replace(" ", "")
+    parts = text.split("*") if text else []
+    atoms = []
+    for part in parts:
+        if not _FACTOR.fullmatch(part):
+            raise ValueError(
+                f"basis term '{term}': '{part}' is not a factor; factors are u v w p q r, "
+                "abs(u)..abs(r), U, V, Vv, Vw and (eta-1), joined by '*'"
+            )
+        atoms.append(ATOM_INDEX[part])
+    if not atoms or len(atoms) > MAX_FACTORS:
+        raise ValueError(f"basis term '{term}' must have 1 to {MAX_FACTORS} factors")
+    return tuple(sorted(atoms)) + (ONE,) * (MAX_FACTORS - len(atoms))
+
+
+@lru_cache(maxsize=1)
+def _canonical_by_code() -> dict[tuple[int, ...], str]:
+    return {parse_term(name): name for name in LIBRARY}
+
+
+def canonical_term(term: str) -> str:
+    """The library spelling of a term (``abs(v)*u`` -> ``u*abs(v)``); other valid terms as given."""
+    code = parse_term(term)
+    return _canonical_by_code().get(code, term.replace(" ", ""))
+
+
+def term_codes(terms: Sequence[str]) -> np.ndarray:
+    """``[len(terms), 3]`` int64 atom indices, for :func:`evaluate_terms` and compiled kernels."""
+    return np.array([parse_term(t) for t in terms], dtype=np.int64).reshape(-1, MAX_FACTORS)
+
+
+def atoms(nu, u_c: float = 0.0):
+    """The atom values ``[..., 18]`` for body velocities ``nu`` ``[..., 6]`` (NumPy or torch)."""
+    if isinstance(nu, torch.Tensor):
+        xp, stack = torch, (lambda xs: torch.stack(xs, -1))
+    else:
+        nu = np.asarray(nu, dtype=np.float64)
+        xp, stack = np, (lambda xs: np.stack(xs, -1))
+    u, v, w = nu[..., 0], nu[..., 1], nu[..., 2]
+    vel = [nu[..., i] for i in range(6)]
+    big_v = xp.sqrt(v * v + w * w + _TINY)
+    big_u = xp.sqrt(u * u + v * v + w * w + _TINY)
+    eta_m1 = u_c / big_u - 1.0
+    one = xp.ones_like(u)
+    return stack(
+        [
+            *vel,
+            *(xp.abs(x) for x in vel),
+            big_u,
+            big_v,
+            big_v * xp.sign(v),
+            big_v * xp.sign(w),
+            eta_m1,
+            one,
+        ]
+    )
+
+
+def evaluate_terms(nu, codes, u_c: float = 0.0):
+    """Basis terms ``[..., K]`` at ``nu`` ``[..., 6]`` for encoded ``codes`` ``[K, 3]``."""
+    a = atoms(nu, u_c)
+    if isinstance(a, torch.Tensor):
+        idx = torch.as_tensor(np.asarray(codes), dtype=torch.long, device=a.device)
+        return a[..., idx].prod(-1)
+    return a[..., np.asarray(codes)].prod(-1)
+
+
+class BasisLibrary:
+    """A set of basis terms that evaluates vectorised on arrays and tensors.
+
+    ``BasisLibrary()`` is McCarter's full 132-term library; pass ``terms`` for a subset.
+    """
+
+    def __init__(self, terms: Iterable[str] | None = None, u_c: float = 0.0) -> None:
+        self.terms = tuple(canonical_term(t) for t in (LIBRARY if terms is None else terms))
+        if len(set(self.terms)) != len(self.terms):
+            raise ValueError("basis library terms must be unique")
+        self.u_c = float(u_c)
+        self.codes = term_codes(self.terms)
+
+    def __len__(self) -> int:
+        return len(self.terms)
+
+    def __call__(self, nu):
+        """Evaluate every term: ``[..., 6]`` -> ``[..., len(self)]``."""
+        return evaluate_terms(nu, self.codes, self.u_c)
+
+    def index(self, term: str) -> int:
+        return self.terms.index(canonical_term(term))
+
+
+def mask_terms(name: str) -> dict[str, tuple[str, ...]]:
+    """The terms of a named model per force ``X Y Z K M N`` (McCarter App. D; Weiss eq. 45)."""
+    from nnid.models.damping_masks import MASKS
+
+    if name not in MASKS:
+        raise ValueError(f"unknown damping model '{name}'; expected one of {sorted(MASKS)}")
+    return {force: tuple(canonical_term(t) for t in terms) for force, terms in MASKS[name].items()}

@@ -1,0 +1,220 @@
+"""The Fossen 6-DOF model: ν̇ = M⁻¹(τ − C(ν)ν − D(ν)ν − g(η)), η̇ = J(η)ν.
+
+Weiss eqs 11-31; McCarter eq. 2.1. With a steady, irrotational water current the hydrodynamic
+terms act on the relative velocity ν_r = ν − ν_c (Fossen 2011 eq. 10.1):
+
+    M_RB ν̇ + C_RB(ν)ν + M_A ν̇_r + C_A(ν_r)ν_r + D(ν_r)ν_r + g(η) = τ + b,
+
+where ν_c = [J₁(η)ᵀ v_c; 0] so that ν̇_c = [ν_c,lin × ω; 0], and b is a constant external force
+(Caccia's mean disturbance). A first-order actuator lag adds the applied force as a state.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+from torch import Tensor
+
+from nnid.models.damping_library import ONE
+from nnid.physics.added_mass import added_mass_coriolis_force, added_mass_matrix
+from nnid.physics.damping import DampingTerms
+from nnid.physics.kinematics import eta_dot, rotation_matrix
+from nnid.physics.restoring import restoring_force
+from nnid.physics.rigid_body import rigid_body_coriolis_force, rigid_body_mass_matrix
+
+PAIRS = tuple((i, j) for i in range(6) for j in range(i, 6))
+"""Index pairs of the 21 quadratic monomials νᵢνⱼ (i ≤ j), McCarter's C.3 order."""
+
+
+def _t(x) -> Tensor:
+    return x if isinstance(x, Tensor) else torch.as_tensor(np.asarray(x), dtype=torch.float64)
+
+
+@dataclass(frozen=True)
+class FeatureForm:
+    """The model's right-hand side as numbers: ν̇ = M⁻¹(τ + b − Q_RB m(ν) − Q_A m(ν_r)
+    + Θ ξ(ν_r) − G s(η) + M_A ν̇_c), with m the 21 quadratic monomials and
+    s = (sin θ, cos θ sin φ, cos θ cos φ). Extracted from the torch terms by polarisation, so it
+    is the same physics; compiled kernels evaluate it without Python overhead.
+    """
+
+    m_inv: np.ndarray
+    q_rb: np.ndarray
+    q_a: np.ndarray
+    g_mat: np.ndarray
+    theta: np.ndarray
+    codes: np.ndarray
+    added_mass: np.ndarray
+    bias: np.ndarray
+    current: np.ndarray
+    u_c: float
+    lag: float
+
+
+class FossenModel:
+    """Fossen 6-DOF dynamics with parameters as float64 tensors (they may require grad)."""
+
+    def __init__(
+        self,
+        mass,
+        inertia,
+        added_mass,
+        damping: DampingTerms,
+        weight,
+        buoyancy,
+        r_g=(0.0, 0.0, 0.0),
+        r_b=(0.0, 0.0, 0.0),
+        current=(0.0, 0.0, 0.0),
+        external_bias=(0.0,) * 6,
+        actuator_lag: float = 0.0,
+    ) -> None:
+        self.mass = _t(mass)
+        self.inertia = _t(inertia)
+        if self.inertia.dim() == 1:
+            self.inertia = torch.diag(self.inertia)
+        self.added_mass = _t(added_mass)
+        self.damping = damping
+        self.weight = _t(weight)
+        self.buoyancy = _t(buoyancy)
+        self.r_g = _t(r_g)
+        self.r_b = _t(r_b)
+        self.current = _t(current)
+        self.external_bias = _t(external_bias)
+        self.actuator_lag = float(actuator_lag)
+        eig = torch.linalg.eigvalsh(0.5 * (self.mass_matrix() + self.mass_matrix().T)).min()
+        if not eig > 0:
+            raise ValueError(
+                "M = M_RB + M_A is not positive definite; check mass, inertia and added mass "
+                "(diagonal added-mass derivatives are negative in Fossen's convention)"
+            )
+
+    @classmethod
+    def from_vehicle(cls, vehicle) -> FossenModel:
+        """Build from a validated :class:`nnid.vehicle.Vehicle`."""
+        return cls(
+            mass=vehicle.mass,
+            inertia=vehicle.inertia_matrix(),
+            added_mass=added_mass_matrix(vehicle.added_mass),
+            damping=DampingTerms.from_spec(
+                vehicle.damping.model, vehicle.damping.coefficients, vehicle.damping.u_c
+            ),
+            weight=vehicle.weight,
+            buoyancy=vehicle.buoyancy,
+            r_g=vehicle.r_g,
+            r_b=vehicle.r_b,
+            current=vehicle.current,
+            external_bias=vehicle.external_bias,
+            actuator_lag=vehicle.actuator_lag,
+        )
+
+    @property
+    def state_size(self) -> int:
+        return 18 if self.actuator_lag > 0 else 12
+
+    def rigid_body_mass_matrix(self) -> Tensor:
+        return rigid_body_mass_matrix(self.mass, self.r_g, self.inertia)
+
+    def mass_matrix(self) -> Tensor:
+        """M = M_RB + M_A (Weiss eq. 18)."""
+        return self.rigid_body_mass_matrix() + self.added_mass
+
+    def current_body(self, eta: Tensor) -> Tensor:
+        """ν_c = [J₁(η)ᵀ v_c; 0], the water velocity in the body frame."""
+        rot = rotation_matrix(eta[..., 3:6])
+        lin = (rot.transpose(-1, -2) @ self.current.unsqueeze(-1)).squeeze(-1)
+        return torch.cat([lin, torch.zeros_like(lin)], -1)
+
+    def coriolis_force(self, nu: Tensor, nu_r: Tensor | None = None) -> Tensor:
+        """C_RB(ν)ν + C_A(ν_r)ν_r."""
+        nu_r = nu if nu_r is None else nu_r
+        return rigid_body_coriolis_force(
+            self.mass, self.r_g, self.inertia, nu
+        ) + added_mass_coriolis_force(self.added_mass, nu_r)
+
+    def restoring_force(self, eta: Tensor) -> Tensor:
+        """g(η)."""
+        return restoring_force(eta, self.weight, self.buoyancy, self.r_g, self.r_b)
+
+    def damping_force(self, nu_r: Tensor) -> Tensor:
+        """τ_D(ν_r) = −D(ν_r)ν_r."""
+        return self.damping.force(nu_r)
+
+    def net_force(self, eta: Tensor, nu: Tensor, tau: Tensor) -> Tensor:
+        """M ν̇: everything on the right-hand side of the equation of motion."""
+        nu_c = self.current_body(eta)
+        nu_r = nu - nu_c
+        nu_c_dot = torch.cat(
+            [torch.linalg.cross(nu_c[..., :3], nu[..., 3:6]), torch.zeros_like(nu[..., 3:6])], -1
+        )
+        return (
+            tau
+            + self.external_bias
+            - self.coriolis_force(nu, nu_r)
+            + self.damping_force(nu_r)
+            - self.restoring_force(eta)
+            + nu_c_dot @ self.added_mass.T
+        )
+
+    def nu_dot(self, eta: Tensor, nu: Tensor, tau: Tensor) -> Tensor:
+        """ν̇ = M⁻¹ (τ + b − C ν − D ν − g)."""
+        m_inv = torch.linalg.inv(self.mass_matrix())
+        return self.net_force(eta, nu, tau) @ m_inv.T
+
+    def rhs(self, x: Tensor, tau: Tensor) -> Tensor:
+        """ẋ for x = [η, ν] (or [η, ν, τ_applied] with actuator lag) under commanded τ."""
+        eta, nu = x[..., 0:6], x[..., 6:12]
+        if self.actuator_lag > 0:
+            applied = x[..., 12:18]
+            lag_dot = (tau - applied) / self.actuator_lag
+            return torch.cat([eta_dot(eta, nu), self.nu_dot(eta, nu, applied), lag_dot], -1)
+        return torch.cat([eta_dot(eta, nu), self.nu_dot(eta, nu, tau)], -1)
+
+    def kinetic_energy(self, nu: Tensor) -> Tensor:
+        """T = ½ νᵀ M ν (M_A symmetric part), conserved without damping, forces and restoring."""
+        m = self.mass_matrix()
+        m = 0.5 * (m + m.T)
+        return 0.5 * ((nu @ m) * nu).sum(-1)
+
+    def feature_form(self) -> FeatureForm:
+        """The right-hand side as arrays for compiled kernels (see :class:`FeatureForm`)."""
+        with torch.no_grad():
+            eye = torch.eye(6, dtype=torch.float64)
+            probes = [eye[i] if i == j else eye[i] + eye[j] for i, j in PAIRS]
+
+            def polarise(h) -> np.ndarray:
+                out = torch.stack([h(p) for p in probes], -1)
+                diag = {i: h(eye[i]) for i in range(6)}
+                for k, (i, j) in enumerate(PAIRS):
+                    if i != j:
+                        out[:, k] -= diag[i] + diag[j]
+                return out.numpy()
+
+            q_rb = polarise(
+                lambda n: rigid_body_coriolis_force(self.mass, self.r_g, self.inertia, n)
+            )
+            q_a = polarise(lambda n: added_mass_coriolis_force(self.added_mass, n))
+            gen = torch.Generator().manual_seed(0)
+            angles = (torch.rand(16, 2, generator=gen, dtype=torch.float64) - 0.5) * 3.0
+            eta = torch.zeros(16, 6, dtype=torch.float64)
+            eta[:, 3:5] = angles
+            phi, th = angles[:, 0], angles[:, 1]
+            s = torch.stack(
+                [torch.sin(th), torch.cos(th) * torch.sin(phi), torch.cos(th) * torch.cos(phi)], -1
+            )
+            g_mat = torch.linalg.lstsq(s, self.restoring_force(eta)).solution.T.numpy()
+            theta, codes = self.damping.numpy()
+            return FeatureForm(
+                m_inv=torch.linalg.inv(self.mass_matrix()).numpy(),
+                q_rb=np.ascontiguousarray(q_rb),
+                q_a=np.ascontiguousarray(q_a),
+                g_mat=np.ascontiguousarray(g_mat),
+                theta=np.ascontiguousarray(theta) if theta.size else np.zeros((6, 1)),
+                codes=codes if len(codes) else np.full((1, 3), ONE, dtype=np.int64),
+                added_mass=self.added_mass.numpy().copy(),
+                bias=self.external_bias.numpy().copy(),
+                current=self.current.numpy().copy(),
+                u_c=self.damping.u_c,
+                lag=self.actuator_lag,
+            )

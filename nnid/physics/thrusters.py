@@ -1,0 +1,110 @@
+"""Thrusters: thrust curves, allocation from geometry, and installation coefficients.
+
+- Thrust curves: an odd-symmetric polynomial in the command (Weiss's PWM fit, eq. 10), Caccia's
+  τ = c_V V|V| (eq. 6), or a measured, possibly asymmetric table.
+- Allocation: τ = B f with column i of B = [dᵢ; rᵢ × dᵢ] for a thruster at rᵢ pushing along dᵢ
+  (reproduces Weiss eqs 4-9 and Caccia's B_H, B_V).
+- Installation: Caccia eq. 3, the effective generalized force is η_ξ times the nominal one, with
+  η depending on the sign of the nominal force in that DOF.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+from torch import Tensor
+
+
+@dataclass(frozen=True)
+class ThrustCurve:
+    """Command -> thrust [N]. ``kind`` is 'poly', 'signed_quadratic' or 'table'."""
+
+    kind: str
+    coeffs: tuple[float, ...] = ()
+    k: float = 0.0
+    cmd: tuple[float, ...] = ()
+    thrust: tuple[float, ...] = ()
+
+    def __call__(self, command: np.ndarray) -> np.ndarray:
+        command = np.asarray(command, dtype=np.float64)
+        if self.kind == "poly":
+            mag = np.abs(command)
+            out = np.zeros_like(command)
+            for power, c in enumerate(self.coeffs):
+                out = out + c * mag**power
+            return np.sign(command) * out
+        if self.kind == "signed_quadratic":
+            return self.k * command * np.abs(command)
+        if self.kind == "table":
+            return np.interp(command, self.cmd, self.thrust)
+        raise ValueError(f"unknown thrust curve kind '{self.kind}'")
+
+
+def allocation_matrix(positions: Tensor, directions: Tensor) -> Tensor:
+    """B ``[6, n]`` from thruster positions and unit directions ``[n, 3]`` (body frame)."""
+    positions = torch.as_tensor(positions, dtype=torch.float64)
+    directions = torch.as_tensor(directions, dtype=torch.float64)
+    moments = torch.linalg.cross(positions, directions)
+    return torch.cat([directions, moments], -1).T
+
+
+def apply_installation(tau, eta_pos, eta_neg):
+    """Caccia eq. 3: τ_eff = η⁺ τ where τ ≥ 0, η⁻ τ where τ < 0, per DOF (arrays or tensors)."""
+    if isinstance(tau, torch.Tensor):
+        return torch.where(tau >= 0, eta_pos * tau, eta_neg * tau)
+    return np.where(tau >= 0, eta_pos * tau, eta_neg * tau)
+
+
+def apply_deadband(signal: np.ndarray, width: float) -> np.ndarray:
+    """Zero output while |signal| ≤ width, unchanged outside: a thruster that does not spin up."""
+    signal = np.asarray(signal, dtype=np.float64)
+    return np.where(np.abs(signal) <= width, 0.0, signal)
+
+
+class Actuation:
+    """Inputs to generalized forces for a vehicle: thruster commands through curves and
+    allocation, or generalized forces directly; then deadband and installation (Caccia eq. 3).
+
+    ``channels`` are the thruster names, or ``X Y Z K M N`` for a vehicle without thrusters.
+    """
+
+    def __init__(self, vehicle) -> None:
+        self.thrusters = list(vehicle.thrusters)
+        self.eta_pos, self.eta_neg = vehicle.installation_vectors()
+        self.deadband = float(vehicle.deadband)
+        if self.thrusters:
+            self.channels = tuple(t.name for t in self.thrusters)
+            self.curves = [ThrustCurve(**t.curve.model_dump()) for t in self.thrusters]
+            self.matrix = allocation_matrix(
+                [t.position for t in self.thrusters], [t.direction for t in self.thrusters]
+            ).numpy()
+        else:
+            self.channels = ("X", "Y", "Z", "K", "M", "N")
+            self.curves = []
+            self.matrix = np.eye(6)
+
+    def nominal(self, inputs: np.ndarray) -> np.ndarray:
+        """Nominal generalized force ``[N, 6]`` for inputs ``[N, n_channels]``: what a vehicle
+        file that knows only the thrust curves and geometry predicts."""
+        return self._force(np.asarray(inputs, dtype=np.float64), ideal=True)
+
+    def applied(self, inputs: np.ndarray) -> np.ndarray:
+        """Generalized force the vehicle feels: deadband and installation coefficients applied."""
+        return self._force(np.asarray(inputs, dtype=np.float64), ideal=False)
+
+    def _force(self, inputs: np.ndarray, ideal: bool) -> np.ndarray:
+        if not ideal:
+            inputs = apply_deadband(inputs, self.deadband)
+        if self.thrusters:
+            cols = []
+            for k, (thruster, curve) in enumerate(zip(self.thrusters, self.curves, strict=True)):
+                lo = -np.inf if thruster.cmd_min is None else thruster.cmd_min
+                hi = np.inf if thruster.cmd_max is None else thruster.cmd_max
+                cmd = np.clip(inputs[:, k], lo, hi)
+                cols.append(curve(cmd))
+            tau = np.stack(cols, -1) @ self.matrix.T
+        else:
+            tau = inputs
+        return tau if ideal else apply_installation(tau, self.eta_pos, self.eta_neg)

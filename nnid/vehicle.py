@@ -1,0 +1,221 @@
+"""The vehicle file (TOML contract of ARCHITECTURE.md): schema, validation, presets.
+
+SI units and Fossen's sign conventions. Unknown values are simply absent. Besides the contract,
+a vehicle may declare plant extras that the simulator's injected effects also use: a steady
+water current (NED), a constant external force, a first-order actuator lag and a deadband.
+"""
+
+from __future__ import annotations
+
+import math
+from importlib import resources
+from pathlib import Path
+from typing import Annotated, Any, Literal
+
+import numpy as np
+import tomllib
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+
+from nnid.errors import NnidInputError
+from nnid.physics.added_mass import DOFS, parse_added_mass_key
+
+PRESETS = ("seamor", "vlbv300", "romeo", "vt690")
+
+Vec3 = Annotated[list[float], Field(min_length=3, max_length=3)]
+Vec6 = Annotated[list[float], Field(min_length=6, max_length=6)]
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=False)
+
+
+class PolyCurve(_Strict):
+    kind: Literal["poly"]
+    coeffs: list[float] = Field(min_length=1)
+
+
+class SignedQuadraticCurve(_Strict):
+    kind: Literal["signed_quadratic"]
+    k: float
+
+
+class TableCurve(_Strict):
+    kind: Literal["table"]
+    cmd: list[float] = Field(min_length=2)
+    thrust: list[float] = Field(min_length=2)
+
+    @model_validator(mode="after")
+    def _check(self) -> TableCurve:
+        if len(self.cmd) != len(self.thrust):
+            raise ValueError("cmd and thrust must have the same length")
+        if np.any(np.diff(self.cmd) <= 0):
+            raise ValueError("cmd must be strictly increasing")
+        return self
+
+
+Curve = Annotated[PolyCurve | SignedQuadraticCurve | TableCurve, Field(discriminator="kind")]
+
+
+class Thruster(_Strict):
+    name: str = Field(pattern=r"^[A-Za-z0-9_]+$")
+    position: Vec3
+    direction: Vec3
+    curve: Curve
+    cmd_min: float | None = None
+    cmd_max: float | None = None
+
+    @field_validator("direction")
+    @classmethod
+    def _unit(cls, d: list[float]) -> list[float]:
+        norm = math.sqrt(sum(x * x for x in d))
+        if not norm > 0:
+            raise ValueError("direction must be a non-zero vector")
+        return [x / norm for x in d]
+
+
+class Damping(_Strict):
+    model: str | None = None
+    u_c: float = 0.0
+    coefficients: dict[str, float] = Field(default_factory=dict)
+
+    @field_validator("model")
+    @classmethod
+    def _known(cls, name: str | None) -> str | None:
+        from nnid.models.damping_library import mask_terms
+
+        if name is not None:
+            mask_terms(name)
+        return name
+
+    @field_validator("coefficients")
+    @classmethod
+    def _keys(cls, coefficients: dict[str, float]) -> dict[str, float]:
+        from nnid.physics.damping import parse_coefficient_key
+
+        for key in coefficients:
+            parse_coefficient_key(key)
+        return coefficients
+
+
+class Vehicle(_Strict):
+    """A validated vehicle file."""
+
+    name: str
+    description: str = ""
+    rho: float = Field(1000.0, gt=0)
+    g: float = Field(9.81, gt=0)
+    length: float | None = Field(None, gt=0)
+    mass: float = Field(gt=0)
+    weight: float | None = Field(None, gt=0)
+    buoyancy: float | None = Field(None, ge=0)
+    inertia: Vec3 | Annotated[list[Vec3], Field(min_length=3, max_length=3)]
+    r_g: Vec3 = Field(default_factory=lambda: [0.0, 0.0, 0.0])
+    r_b: Vec3 = Field(default_factory=lambda: [0.0, 0.0, 0.0])
+    added_mass: dict[str, float] = Field(default_factory=dict)
+    damping: Damping = Field(default_factory=Damping)
+    installation: dict[str, float] = Field(default_factory=dict)
+    thrusters: list[Thruster] = Field(default_factory=list)
+    current: Vec3 = Field(default_factory=lambda: [0.0, 0.0, 0.0])
+    external_bias: Vec6 = Field(default_factory=lambda: [0.0] * 6)
+    actuator_lag: float = Field(0.0, ge=0)
+    deadband: float = Field(0.0, ge=0)
+
+    @model_validator(mode="after")
+    def _defaults(self) -> Vehicle:
+        if self.weight is None:
+            self.weight = self.mass * self.g
+        if self.buoyancy is None:
+            self.buoyancy = self.weight
+        return self
+
+    @field_validator("inertia")
+    @classmethod
+    def _positive_definite(cls, inertia: list) -> list:
+        tensor = np.diag(inertia) if np.ndim(inertia) == 1 else np.asarray(inertia, float)
+        if not np.allclose(tensor, tensor.T, atol=1e-9 * max(1.0, np.abs(tensor).max())):
+            raise ValueError("the inertia tensor must be symmetric")
+        if np.linalg.eigvalsh(tensor).min() <= 0:
+            raise ValueError("the inertia tensor must be positive definite (all Ix, Iy, Iz > 0)")
+        return inertia
+
+    @field_validator("added_mass")
+    @classmethod
+    def _added_mass_keys(cls, added_mass: dict[str, float]) -> dict[str, float]:
+        for key in added_mass:
+            parse_added_mass_key(key)
+        return added_mass
+
+    @field_validator("installation")
+    @classmethod
+    def _installation(cls, installation: dict[str, float]) -> dict[str, float]:
+        for key, value in installation.items():
+            dof, _, sign = key.partition(".")
+            if dof not in DOFS or sign not in ("pos", "neg"):
+                raise ValueError(f"'{key}': expected '<dof>.<pos|neg>' with dof in u v w p q r")
+            if not 0 < value <= 2:
+                raise ValueError(f"'{key}' = {value}: an installation coefficient lies in (0, 2]")
+        return installation
+
+    @model_validator(mode="after")
+    def _unique_thrusters(self) -> Vehicle:
+        names = [t.name for t in self.thrusters]
+        if len(set(names)) != len(names):
+            raise ValueError("thruster names must be unique")
+        return self
+
+    def inertia_matrix(self) -> np.ndarray:
+        return np.diag(self.inertia) if np.ndim(self.inertia) == 1 else np.asarray(self.inertia)
+
+    def installation_vectors(self) -> tuple[np.ndarray, np.ndarray]:
+        """(η⁺, η⁻) per DOF, 1 where not declared (Caccia eq. 3)."""
+        pos, neg = np.ones(6), np.ones(6)
+        for key, value in self.installation.items():
+            dof, _, sign = key.partition(".")
+            (pos if sign == "pos" else neg)[DOFS.index(dof)] = value
+        return pos, neg
+
+
+def _first_error(err: ValidationError) -> tuple[str, str]:
+    first = err.errors()[0]
+    field = ".".join(str(p) for p in first["loc"] if not str(p).startswith("function-"))
+    msg = first["msg"].removeprefix("Value error, ")
+    if first["type"] == "missing":
+        msg = "is required but missing"
+    elif first["type"] == "extra_forbidden":
+        msg = "is not a known field of this file"
+    return field, msg
+
+
+def vehicle_from_dict(data: dict[str, Any], source: str = "<vehicle>") -> Vehicle:
+    """Validate a parsed vehicle file; raise NnidInputError naming the file and the field."""
+    try:
+        return Vehicle.model_validate(data)
+    except ValidationError as err:
+        field, msg = _first_error(err)
+        raise NnidInputError(msg, source=source, field=field) from None
+
+
+def read_toml(path: Path) -> dict[str, Any]:
+    """Parse a TOML file; a missing or malformed file is an NnidInputError naming it."""
+    try:
+        with open(path, "rb") as fh:
+            return tomllib.load(fh)
+    except FileNotFoundError:
+        raise NnidInputError("file not found", source=str(path)) from None
+    except tomllib.TOMLDecodeError as err:
+        raise NnidInputError(f"not valid TOML ({err})", source=str(path)) from None
+
+
+def load_vehicle(name_or_path: str | Path) -> Vehicle:
+    """A preset name (``seamor``, ``vlbv300``, ``romeo``, ``vt690``) or a path to a TOML file."""
+    text = str(name_or_path)
+    if text in PRESETS:
+        ref = resources.files("nnid.presets").joinpath(f"{text}.toml")
+        return vehicle_from_dict(tomllib.loads(ref.read_text()), source=f"preset '{text}'")
+    path = Path(text)
+    if not path.exists() and path.suffix == "":
+        raise NnidInputError(
+            f"'{text}' is neither a preset ({', '.join(PRESETS)}) nor an existing file",
+            source=text,
+        )
+    return vehicle_from_dict(read_toml(path), source=str(path))

@@ -1,0 +1,94 @@
+"""Injected effects: each name changes the plant as its physics says, and the log keeps the
+nominal inputs so the effect stays undeclared."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from nnid.datasets.simulator import simulate
+from nnid.physics.effects import EFFECT_PATTERNS, apply_effect, parse_effect
+
+QUAD = {"coefficients": {"X:u*abs(u)": -40.0, "Y:v*abs(v)": -60.0, "Z:w*abs(w)": -80.0,
+                         "K:p*abs(p)": -2.0, "M:q*abs(q)": -3.0, "N:r*abs(r)": -2.5}}  # fmt: skip
+
+
+def _steady(veh, tau, effects=(), seconds=60.0):
+    inputs = np.tile(np.asarray(tau, float), (int(seconds / 0.01), 1))
+    return simulate(veh, inputs, 0.01, effects=effects)
+
+
+def test_every_vocabulary_name_parses():
+    names = ["linear_damping.u", "quadratic_damping.r", "coupled_damping.N:v*abs(r)",
+             "thruster_installation.w.neg", "buoyancy_offset", "restoring_offset.M", "current.y",
+             "external_bias.q", "actuator_lag", "thruster_deadband", "added_mass.v"]  # fmt: skip
+    assert {parse_effect(n)[0] for n in names} == set(EFFECT_PATTERNS)
+    for bad in ("linear_damping.x", "coupled_damping.Q:u", "coupled_damping.X:u*z", "gremlins"):
+        with pytest.raises(ValueError):
+            parse_effect(bad)
+
+
+def test_installation_loss_on_one_direction(vehicle_factory):
+    """Caccia eq. 3: upward heave thrust at η = 0.56 gives a steady speed sqrt(0.56) of nominal
+    (quadratic drag); downward is untouched. The log holds the nominal force."""
+    veh = vehicle_factory(damping=QUAD)
+    eff = [("thruster_installation.w.neg", 0.56)]
+    up = _steady(veh, [0, 0, -20.0, 0, 0, 0], eff)
+    down = _steady(veh, [0, 0, 20.0, 0, 0, 0], eff)
+    nominal = np.sqrt(20.0 / 80.0)
+    assert up["w"].iloc[-1] == pytest.approx(-nominal * np.sqrt(0.56), rel=1e-6)
+    assert down["w"].iloc[-1] == pytest.approx(nominal, rel=1e-6)
+    assert (up["tau_Z"] == -20.0).all()
+
+
+def test_current_carries_the_vehicle(vehicle_factory):
+    """With no thrust, the hydrodynamic forces act on ν − ν_c: the vehicle ends up drifting with
+    the water, so the over-ground velocity equals the current. (A current along x only: an
+    oblique one would also turn the vehicle through the Munk moment of C_A.)"""
+    veh = vehicle_factory(damping={"coefficients": {"X:u": -20.0, "X:u*abs(u)": -40.0}})
+    log = _steady(veh, [0.0] * 6, [("current.x", 0.3)], seconds=30)
+    assert log["u"].iloc[-1] == pytest.approx(0.3, abs=1e-6)
+    thrust = _steady(veh, [10.0, 0, 0, 0, 0, 0], [("current.x", 0.3)], seconds=30)
+    # with thrust the water-relative speed is the no-current steady speed
+    u_r = (-20 + np.sqrt(20**2 + 4 * 40 * 10)) / (2 * 40)
+    assert thrust["u"].iloc[-1] == pytest.approx(0.3 + u_r, abs=1e-6)
+
+
+def test_external_bias_and_linear_damping(vehicle_factory):
+    veh = vehicle_factory()
+    log = _steady(veh, [0.0] * 6, [("linear_damping.u", -10.0), ("external_bias.u", 5.0)])
+    assert log["u"].iloc[-1] == pytest.approx(0.5, rel=1e-6)
+
+
+def test_buoyancy_offset_sinks(vehicle_factory):
+    """W − B = 8 N with quadratic heave drag: w_ss = sqrt(8 / 80) (down is +z in NED)."""
+    log = _steady(vehicle_factory(damping=QUAD), [0.0] * 6, [("buoyancy_offset", 8.0)])
+    assert log["w"].iloc[-1] == pytest.approx(np.sqrt(0.1), rel=1e-5)
+
+
+def test_actuator_lag_delays_the_response(vehicle_factory):
+    veh = vehicle_factory(damping=QUAD)
+    fast = _steady(veh, [30.0, 0, 0, 0, 0, 0], seconds=5)
+    slow = _steady(veh, [30.0, 0, 0, 0, 0, 0], [("actuator_lag", 0.5)], seconds=5)
+    i = 30  # 0.3 s after the step
+    assert slow["u"].iloc[i] < 0.6 * fast["u"].iloc[i]
+    assert slow["u"].iloc[-1] == pytest.approx(fast["u"].iloc[-1], rel=1e-3)
+
+
+def test_deadband_swallows_small_commands(vehicle_factory):
+    veh = vehicle_factory(damping=QUAD)
+    small = _steady(veh, [2.0, 0, 0, 0, 0, 0], [("thruster_deadband", 3.0)], seconds=5)
+    big = _steady(veh, [5.0, 0, 0, 0, 0, 0], [("thruster_deadband", 3.0)], seconds=30)
+    assert np.abs(small["u"]).max() == 0.0
+    assert big["u"].iloc[-1] == pytest.approx(np.sqrt(5.0 / 40.0), rel=1e-4)
+
+
+def test_field_level_changes(vehicle_factory):
+    veh = vehicle_factory(damping=QUAD)
+    assert apply_effect(veh, "restoring_offset.M", 0.02).r_g[2] == pytest.approx(0.02)
+    assert apply_effect(veh, "added_mass.v", -5.0).added_mass["Y_vdot"] == pytest.approx(-30.0)
+    coupled = apply_effect(veh, "coupled_damping.N:abs(r)*v", -1.5).damping.coefficients
+    assert coupled["N:v*abs(r)"] == -1.5
+    quad = apply_effect(veh, "quadratic_damping.u", -10.0).damping.coefficients
+    assert quad["X:u*abs(u)"] == -50.0
+    assert veh.damping.coefficients["X:u*abs(u)"] == -40.0  # the original is not touched
