@@ -21,6 +21,7 @@ from nnid.datasets.excitation import (
     WeissSequence,
 )
 from nnid.datasets.measurement import Measurement
+from nnid.datasets.simulator import Autopilot
 from nnid.errors import NnidInputError
 from nnid.physics.effects import parse_effect
 from nnid.vehicle import _first_error, read_toml
@@ -81,6 +82,7 @@ class SimulateConfig(_Strict):
     measurement: Measurement = Field(default_factory=Measurement)
     experiments: list[Experiment] = Field(default_factory=list)
     sequence: WeissSequence | None = None
+    autopilot: Autopilot | None = None
 
     def all_experiments(self) -> list[Experiment]:
         """The explicit experiments followed by those of the sequence."""

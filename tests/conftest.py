@@ -18,8 +18,14 @@ def make_vehicle(**overrides):
         name="testbox",
         mass=30.0,
         inertia=[1.2, 2.5, 2.8],
-        added_mass={"X_udot": -10.0, "Y_vdot": -25.0, "Z_wdot": -30.0, "K_pdot": -0.8,
-                    "M_qdot": -1.5, "N_rdot": -1.2},
+        added_mass={
+            "X_udot": -10.0,
+            "Y_vdot": -25.0,
+            "Z_wdot": -30.0,
+            "K_pdot": -0.8,
+            "M_qdot": -1.5,
+            "N_rdot": -1.2,
+        },
         damping={"model": None, "coefficients": {}},
     )
     data.update(overrides)

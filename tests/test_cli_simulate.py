@@ -44,7 +44,9 @@ def _write(tmp_path, name, text):
 def test_seamor_sequence_log_is_valid_and_in_weiss_order(tmp_path):
     """The bundled config simulates Weiss's sequence; the log passes the validator."""
     out = tmp_path / "x.parquet"
-    result = runner.invoke(app, ["simulate", str(ROOT / "configs/seamor_sequence.toml"), "--out", str(out)])
+    result = runner.invoke(
+        app, ["simulate", str(ROOT / "configs/seamor_sequence.toml"), "--out", str(out)]
+    )
     assert result.exit_code == 0, result.output
     log = read_log(out)
     order = list(dict.fromkeys(log["experiment"]))
@@ -53,17 +55,25 @@ def test_seamor_sequence_log_is_valid_and_in_weiss_order(tmp_path):
     assert {"x", "y", "z", "phi", "theta", "psi", "tau_X", "tau_N"} <= set(log.columns)
     # the decoupled surge run excites surge only, and the vehicle moves
     surge = log[log["experiment"] == "surge"]
-    assert surge["tau_X"].abs().max() > 0 and surge[["tau_Y", "tau_Z", "tau_K", "tau_N"]].abs().max().max() == 0
+    assert (
+        surge["tau_X"].abs().max() > 0
+        and surge[["tau_Y", "tau_Z", "tau_K", "tau_N"]].abs().max().max() == 0
+    )
     assert surge["true_u"].abs().max() > 0.3
     assert (log.groupby("experiment")["t"].diff().dropna() > 0).all()
 
 
 def test_simulate_is_deterministic_for_a_seed(tmp_path):
     veh = _write(tmp_path, "box.toml", GOOD_VEHICLE)
-    cfg = _write(tmp_path, "sim.toml", CONFIG.format(vehicle=veh) + '[measurement]\nkind = "mocap"\n')
+    cfg = _write(
+        tmp_path, "sim.toml", CONFIG.format(vehicle=veh) + '[measurement]\nkind = "mocap"\n'
+    )
     a, b = tmp_path / "a.csv", tmp_path / "b.csv"
     for out in (a, b):
-        assert runner.invoke(app, ["simulate", str(cfg), "--out", str(out), "--seed", "3"]).exit_code == 0
+        assert (
+            runner.invoke(app, ["simulate", str(cfg), "--out", str(out), "--seed", "3"]).exit_code
+            == 0
+        )
     pd.testing.assert_frame_equal(pd.read_csv(a), pd.read_csv(b))
     c = tmp_path / "c.csv"
     runner.invoke(app, ["simulate", str(cfg), "--out", str(c), "--seed", "4"])
@@ -73,10 +83,22 @@ def test_simulate_is_deterministic_for_a_seed(tmp_path):
 BAD_VEHICLES = {
     "missing mass": (GOOD_VEHICLE.replace("mass = 30.0\n", ""), "mass", "required"),
     "negative mass": (GOOD_VEHICLE.replace("mass = 30.0", "mass = -3.0"), "mass", "greater than 0"),
-    "inertia not PD": (GOOD_VEHICLE.replace("[1.0, 2.0, 2.0]", "[1.0, -2.0, 2.0]"), "inertia", "positive definite"),
-    "unknown mask": (GOOD_VEHICLE.replace("weiss_quadratic", "magic"), "damping.model", "unknown damping model"),
+    "inertia not PD": (
+        GOOD_VEHICLE.replace("[1.0, 2.0, 2.0]", "[1.0, -2.0, 2.0]"),
+        "inertia",
+        "positive definite",
+    ),
+    "unknown mask": (
+        GOOD_VEHICLE.replace("weiss_quadratic", "magic"),
+        "damping.model",
+        "unknown damping model",
+    ),
     "wrong type": (GOOD_VEHICLE.replace("mass = 30.0", 'mass = "heavy"'), "mass", "number"),
-    "bad term": (GOOD_VEHICLE.replace('"X:u*abs(u)"', '"X:u*zz"'), "damping.coefficients", "not a factor"),
+    "bad term": (
+        GOOD_VEHICLE.replace('"X:u*abs(u)"', '"X:u*zz"'),
+        "damping.coefficients",
+        "not a factor",
+    ),
     "bad added mass key": (GOOD_VEHICLE.replace("X_udot", "X_xdot"), "added_mass", "X_xdot"),
     "unknown field": ("colour = 'yellow'\n" + GOOD_VEHICLE, "colour", "not a known field"),
     "broken toml": (GOOD_VEHICLE.replace("mass = 30.0", "mass = = 30"), None, "not valid TOML"),
@@ -99,9 +121,15 @@ def test_bad_vehicle_file_exits_2_naming_the_field(tmp_path, case):
 
 
 BAD_CONFIGS = {
-    "unknown signal kind": (CONFIG.replace('kind = "step"', 'kind = "wiggle"'), "experiments.0.signals.0"),
+    "unknown signal kind": (
+        CONFIG.replace('kind = "step"', 'kind = "wiggle"'),
+        "experiments.0.signals.0",
+    ),
     "negative dt": (CONFIG.replace("dt = 0.05", "dt = -0.05"), "dt"),
-    "unknown channel": (CONFIG.replace('channel = "X"', 'channel = "Q"'), "experiments.0.signals.0.channel"),
+    "unknown channel": (
+        CONFIG.replace('channel = "X"', 'channel = "Q"'),
+        "experiments.0.signals.0.channel",
+    ),
     "unknown effect": (CONFIG + '[[effects]]\nname = "gremlins"\nvalue = 1.0\n', "effects.0.name"),
     "missing vehicle": (CONFIG.replace('vehicle = "{vehicle}"', ""), "vehicle"),
 }

@@ -79,7 +79,10 @@ def test_restoring_equals_weight_and_buoyancy_in_body_frame(rng):
     f_g = rt @ torch.tensor([0.0, 0.0, w_])
     f_b = -rt @ torch.tensor([0.0, 0.0, b_])
     expected = -torch.cat(
-        [f_g + f_b, torch.linalg.cross(r_g.expand(40, 3), f_g) + torch.linalg.cross(r_b.expand(40, 3), f_b)],
+        [
+            f_g + f_b,
+            torch.linalg.cross(r_g.expand(40, 3), f_g) + torch.linalg.cross(r_b.expand(40, 3), f_b),
+        ],
         -1,
     )
     got = restoring_force(eta, torch.tensor(w_), torch.tensor(b_), r_g, r_b)
@@ -89,6 +92,8 @@ def test_restoring_equals_weight_and_buoyancy_in_body_frame(rng):
 def test_bottom_heavy_restoring_opposes_tilt():
     """CG below CB: positive roll and pitch give moments that push back (g on the LHS)."""
     eta = torch.tensor([0.0, 0.0, 0.0, 0.2, 0.1, 0.0])
-    g = restoring_force(eta, torch.tensor(100.0), torch.tensor(100.0), torch.tensor([0, 0, 0.05]), torch.zeros(3))
+    g = restoring_force(
+        eta, torch.tensor(100.0), torch.tensor(100.0), torch.tensor([0, 0, 0.05]), torch.zeros(3)
+    )
     assert g[3] > 0 and g[4] > 0  # M ν̇ = −g: restoring accelerations are negative
     assert torch.allclose(g[:3], torch.zeros(3, dtype=torch.float64), atol=1e-14)

@@ -31,9 +31,18 @@ def test_library_has_mccarters_132_terms_in_groups():
 def test_terms_evaluate_as_written():
     """V = sqrt(v²+w²), Vv = V sign(v), Vw = V sign(w), η = u_c / U (C.8-C.12)."""
     nu = np.array([2.0, -3.0, 4.0, 0.5, -0.25, 1.5])
-    lib = BasisLibrary(["u*abs(v)", "abs(q)*Vv", "w*Vw", "u*u*(eta-1)", "p*r", "r*V*(eta-1)"], u_c=1.0)
+    lib = BasisLibrary(
+        ["u*abs(v)", "abs(q)*Vv", "w*Vw", "u*u*(eta-1)", "p*r", "r*V*(eta-1)"], u_c=1.0
+    )
     big_v, big_u = 5.0, np.sqrt(29.0)
-    expected = [2 * 3, 0.25 * -big_v, 4 * big_v, 4 * (1 / big_u - 1), 0.75, 1.5 * big_v * (1 / big_u - 1)]
+    expected = [
+        2 * 3,
+        0.25 * -big_v,
+        4 * big_v,
+        4 * (1 / big_u - 1),
+        0.75,
+        1.5 * big_v * (1 / big_u - 1),
+    ]
     assert np.allclose(lib(nu), expected, rtol=1e-12)
 
 

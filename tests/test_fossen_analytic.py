@@ -13,7 +13,7 @@ from nnid.vehicle import load_vehicle
 
 def _run(vehicle, tau, seconds, dt=0.01, x0=None, integrator="rk4"):
     model = FossenModel.from_vehicle(vehicle)
-    n = int(round(seconds / dt))
+    n = round(seconds / dt)
     x = np.zeros(model.state_size)
     if x0 is not None:
         x[: len(x0)] = x0
@@ -50,8 +50,9 @@ def _free_body(vehicle_factory):
     added = {"X_udot": -10.0, "Y_vdot": -25.0, "Z_wdot": -30.0, "K_pdot": -0.8,
              "M_qdot": -1.5, "N_rdot": -1.2, "Y_rdot": -2.0, "N_vdot": -2.0,
              "Z_qdot": 1.5, "M_wdot": 1.5}  # fmt: skip
-    return vehicle_factory(added_mass=added, r_g=[0.02, 0.01, 0.04], r_b=[0.02, 0.01, 0.04],
-                           inertia=[[1.2, 0.1, 0.05], [0.1, 2.5, 0.02], [0.05, 0.02, 2.8]])  # fmt: skip
+    inertia = [[1.2, 0.1, 0.05], [0.1, 2.5, 0.02], [0.05, 0.02, 2.8]]
+    r = [0.02, 0.01, 0.04]
+    return vehicle_factory(added_mass=added, r_g=r, r_b=r, inertia=inertia)
 
 
 def test_kinetic_energy_conserved(vehicle_factory):

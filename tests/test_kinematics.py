@@ -33,9 +33,13 @@ def test_rotation_is_orthonormal_with_unit_determinant(rng):
 def test_rotation_is_zyx_composition():
     """J₁ = R_z(ψ) R_y(θ) R_x(φ): a pure yaw of 90° maps body x to NED east (y)."""
     r = rotation_matrix(torch.tensor([0.0, 0.0, np.pi / 2]))
-    assert torch.allclose(r @ torch.tensor([1.0, 0.0, 0.0]), torch.tensor([0.0, 1.0, 0.0]), atol=1e-15)
+    assert torch.allclose(
+        r @ torch.tensor([1.0, 0.0, 0.0]), torch.tensor([0.0, 1.0, 0.0]), atol=1e-15
+    )
     r = rotation_matrix(torch.tensor([0.0, np.pi / 2, 0.0]))  # nose up: body x points up (−z)
-    assert torch.allclose(r @ torch.tensor([1.0, 0.0, 0.0]), torch.tensor([0.0, 0.0, -1.0]), atol=1e-15)
+    assert torch.allclose(
+        r @ torch.tensor([1.0, 0.0, 0.0]), torch.tensor([0.0, 0.0, -1.0]), atol=1e-15
+    )
 
 
 def test_euler_rates_match_rotation_kinematics(rng):

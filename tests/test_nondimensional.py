@@ -66,9 +66,7 @@ def test_angular_damping_divisors_follow_fossen(speed):
         assert damping_scale(key, RHO, L, speed) == pytest.approx(HALF_RHO_L5, rel=1e-12)
     assert damping_scale("N:r*abs(r)", RHO, L, speed) != pytest.approx(HALF_RHO_L3)
     # Fossen: N_r' = N_r / (rho/2 U L^4); X_vr' = X_vr / (rho/2 L^3)
-    assert damping_scale("N:r", RHO, L, speed) == pytest.approx(
-        0.5 * RHO * speed * L**4, rel=1e-12
-    )
+    assert damping_scale("N:r", RHO, L, speed) == pytest.approx(0.5 * RHO * speed * L**4, rel=1e-12)
     assert damping_scale("X:v*r", RHO, L, speed) == pytest.approx(HALF_RHO_L3, rel=1e-12)
 
 

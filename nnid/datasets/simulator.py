@@ -16,10 +16,12 @@ from collections.abc import Iterable, Sequence
 import numpy as np
 import pandas as pd
 import torch
+from pydantic import BaseModel, ConfigDict, Field
 from scipy.integrate import solve_ivp
 
 from nnid.datasets.log import TAU
-from nnid.datasets.measurement import Measurement
+from nnid.datasets.measurement import Measurement, wrap_angle
+from nnid.errors import NnidInputError
 from nnid.physics import compiled
 from nnid.physics.effects import apply_effect
 from nnid.physics.fossen import FossenModel
@@ -27,6 +29,24 @@ from nnid.physics.integrate import rk4
 from nnid.physics.thrusters import Actuation
 
 INTEGRATORS = ("rk4", "adaptive", "torch")
+
+
+class Autopilot(BaseModel):
+    """A digital PD autopilot on generalized forces, evaluated once per sample and held:
+    τ_fb = −k_p (η − η_ref) − k_d ν per DOF (heading error wrapped to ±π). DOFs with k_p = k_d = 0
+    are left free. Open-loop-unstable vehicles (an AUV without its fin controller, McCarter
+    ch. 5) fly under it; the log records the total commanded force, feedback included.
+    """
+
+    model_config = ConfigDict(extra="forbid")
+    kp: list[float] = Field(default_factory=lambda: [0.0] * 6, min_length=6, max_length=6)
+    kd: list[float] = Field(default_factory=lambda: [0.0] * 6, min_length=6, max_length=6)
+    reference: list[float] = Field(default_factory=lambda: [0.0] * 6, min_length=6, max_length=6)
+
+    def force(self, state: np.ndarray) -> np.ndarray:
+        error = state[0:6] - np.asarray(self.reference)
+        error[3:6] = wrap_angle(error[3:6])
+        return -np.asarray(self.kp) * error - np.asarray(self.kd) * state[6:12]
 
 
 def plant(vehicle, effects: Iterable[tuple[str, float]] = ()):
@@ -89,12 +109,15 @@ def simulate(
     measurement: Measurement | None = None,
     seed: int = 0,
     experiment: str | None = None,
+    autopilot: Autopilot | None = None,
 ) -> pd.DataFrame:
     """Simulate one experiment and return its log (log contract).
 
     ``inputs`` is ``[N, n_channels]``: thruster commands in the order of ``vehicle.thrusters``,
     or generalized forces ``X Y Z K M N`` for a vehicle without thrusters; sample k is applied
-    over [k dt, (k+1) dt). The log has N rows at t = k dt.
+    over [k dt, (k+1) dt). The log has N rows at t = k dt. With an ``autopilot`` (vehicles
+    without thrusters only) the feedback is added to the inputs sample by sample.
+    Raises :class:`NnidInputError` if the trajectory diverges.
     """
     inputs = np.atleast_2d(np.asarray(inputs, dtype=np.float64))
     truth = plant(vehicle, effects)
@@ -105,11 +128,30 @@ def simulate(
             f"({', '.join(actuation.channels)})"
         )
     model = FossenModel.from_vehicle(truth)
-    applied = actuation.applied(inputs)
     state = np.zeros(model.state_size)
     if x0 is not None:
         state[: len(x0)] = np.asarray(x0, dtype=np.float64)
-    states = integrate(model, state, applied[:-1], dt, substeps, integrator)
+    if autopilot is None:
+        applied = actuation.applied(inputs)
+        states = integrate(model, state, applied[:-1], dt, substeps, integrator)
+    else:
+        if vehicle.thrusters:
+            raise NnidInputError(
+                "the autopilot commands generalized forces; this vehicle has thrusters",
+                field="autopilot",
+            )
+        inputs, applied, states = _closed_loop(
+            model, actuation, autopilot, state, inputs, dt, substeps, integrator
+        )
+    if not np.isfinite(states).all():
+        k = int(np.flatnonzero(~np.isfinite(states).all(1))[0])
+        raise NnidInputError(
+            f"the simulation diverged at t = {k * dt:.2f} s"
+            + (f" in experiment '{experiment}'" if experiment else "")
+            + ": the vehicle is unstable for these inputs (check damping signs and amplitudes, "
+            "or fly it under an autopilot)",
+            field="experiments",
+        )
     with torch.no_grad():
         xdot = model.rhs(torch.as_tensor(states), torch.as_tensor(applied)).numpy()
     measurement = measurement or Measurement()
@@ -124,6 +166,23 @@ def simulate(
     else:
         columns.update({c: inputs[:, k] for k, c in enumerate(TAU)})
     return pd.DataFrame(columns)
+
+
+def _closed_loop(model, actuation, autopilot, state, inputs, dt, substeps, integrator):
+    """Step the plant one sample at a time, adding the autopilot's held feedback force."""
+    n = inputs.shape[0]
+    commanded = inputs.copy()
+    states = np.empty((n, state.size))
+    states[0] = state
+    for k in range(n - 1):
+        commanded[k] = inputs[k] + autopilot.force(states[k])
+        applied = actuation.applied(commanded[k : k + 1])
+        states[k + 1] = integrate(model, states[k], applied, dt, substeps, integrator)[-1]
+        if not np.isfinite(states[k + 1]).all():
+            states[k + 2 :] = np.nan
+            break
+    commanded[-1] = inputs[-1] + autopilot.force(states[-1])
+    return commanded, actuation.applied(commanded), states
 
 
 def experiment_inputs(
@@ -172,6 +231,7 @@ def simulate_config(config, vehicle, progress=None) -> pd.DataFrame:
                 measurement=config.measurement,
                 seed=config.seed + i,
                 experiment=exp.name,
+                autopilot=config.autopilot,
             )
         )
         if progress:

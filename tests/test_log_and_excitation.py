@@ -1,0 +1,155 @@
+"""The log validator, excitation signals, the autopilot and divergence reporting."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from nnid.datasets.excitation import (
+    PRBS,
+    Chirp,
+    DOptimalSine,
+    Multisine,
+    Stairs,
+    Step,
+    WeissSequence,
+    doptimal_frequency,
+    mls,
+)
+from nnid.datasets.log import read_log, validate_log
+from nnid.datasets.simulator import Autopilot, simulate
+from nnid.errors import NnidInputError
+from nnid.vehicle import load_vehicle
+
+
+def _log(n=20):
+    t = np.arange(n) * 0.1
+    return pd.DataFrame({"t": t, "u": np.sin(t), "psi": 0.1 * t, "tau_X": np.ones(n)})
+
+
+def test_valid_log_passes_untouched():
+    df = _log()
+    assert validate_log(df, "a.csv") is df
+
+
+@pytest.mark.parametrize(
+    "mutate, column, row, words",
+    [
+        (lambda d: d.drop(columns="t"), None, None, "'t'"),
+        (lambda d: d.drop(columns=["u", "psi"]), None, None, "no motion columns"),
+        (lambda d: d.drop(columns="tau_X"), None, None, "no input columns"),
+        (lambda d: d.assign(t=d["t"].where(d.index != 7, d["t"][6])), "t", 7, "duplicated"),
+        (lambda d: d.assign(t=d["t"].where(d.index != 9, 0.05)), "t", 9, "decreasing"),
+        (lambda d: d.assign(u=d["u"].where(d.index != 4, np.nan)), "u", 4, "not a finite number"),
+        (lambda d: d.assign(tau_X=d["tau_X"].where(d.index != 3, np.inf)), "tau_X", 3, "finite"),
+        (lambda d: d.assign(psi=d["psi"] * 180), "psi", 19, "degrees"),
+    ],
+)
+def test_bad_logs_name_file_column_row(mutate, column, row, words):
+    with pytest.raises(NnidInputError) as info:
+        validate_log(mutate(_log()), "run7.csv")
+    msg = str(info.value)
+    assert "run7.csv" in msg and words in msg
+    if column:
+        assert f"column '{column}'" in msg and f"row {row}" in msg
+
+
+def test_time_restarts_per_experiment_are_fine(tmp_path):
+    a, b = _log(), _log()
+    a["experiment"], b["experiment"] = "a", "b"
+    both = pd.concat([a, b], ignore_index=True)
+    both.to_csv(tmp_path / "x.csv", index=False)
+    assert len(read_log(tmp_path / "x.csv")) == 40
+    (tmp_path / "y.txt").write_text("t,u\n")
+    with pytest.raises(NnidInputError, match="unknown log format"):
+        read_log(tmp_path / "y.txt")
+    (tmp_path / "z.parquet").write_bytes(b"PAR1 truncated")
+    with pytest.raises(NnidInputError, match="cannot be read"):
+        read_log(tmp_path / "z.parquet")
+
+
+def test_prbs_is_maximum_length():
+    """An MLS of order n has period 2ⁿ − 1, one more +1 than −1, and a two-valued
+    circular autocorrelation (N at lag 0, −1 elsewhere)."""
+    for order in (5, 7, 9):
+        s = mls(order)
+        n = 2**order - 1
+        assert s.size == n and s.sum() == 1
+        acf = [np.dot(s, np.roll(s, k)) for k in range(n)]
+        assert acf[0] == n and set(acf[1:]) == {-1}
+    sig = PRBS(channel="X", amplitude=2.0, hold=0.5, duration=10.0, offset=1.0)
+    x = sig(np.arange(0, 12, 0.01))
+    assert set(np.unique(x[:1000])) == {-1.0, 3.0} and (x[1000:] == 0).all()
+
+
+def test_multisine_peak_and_spectrum():
+    sig = Multisine(channel="Y", amplitude=3.0, f_min=0.1, f_max=1.0, n=10, duration=100.0)
+    t = np.arange(0, 100, 0.01)
+    x = sig(t)
+    assert abs(np.abs(x).max() - 3.0) < 0.01
+    spec = np.abs(np.fft.rfft(x))
+    freqs = np.fft.rfftfreq(t.size, 0.01)
+    lines = freqs[np.argsort(spec)[-10:]]
+    assert np.allclose(np.sort(lines), np.linspace(0.1, 1.0, 10), atol=0.011)
+
+
+def test_steps_stairs_chirp():
+    t = np.arange(0, 10, 0.01)
+    assert Step(channel="X", amplitude=2.0, start=1.0, duration=2.0)(t)[
+        [50, 150, 350]
+    ].tolist() == [0, 2, 0]
+    stairs = Stairs(channel="X", levels=[1.0, -2.0, 3.0], hold=2.0)(t)
+    assert stairs[[100, 300, 500, 700]].tolist() == [1.0, -2.0, 3.0, 0.0]
+    chirp = Chirp(channel="N", amplitude=1.0, f0=0.5, f1=2.0, duration=10.0)(t)
+    crossings = t[np.flatnonzero(np.diff(np.sign(chirp)) != 0)]
+    # half a period between zero crossings at the instantaneous f(t) = f0 + (f1 - f0) t / T
+    mid, half = 0.5 * (crossings[1:] + crossings[:-1]), np.diff(crossings)
+    assert np.allclose(1.0 / (2.0 * half), 0.5 + 1.5 * mid / 10.0, rtol=0.03)
+
+
+def test_doptimal_frequency_reproduces_caccia():
+    """Caccia eqs 13-14 on ROMEO: yaw (linear, k_r = 28.6, prior I = 93.75) ω = 0.176 rad/s;
+    surge (675 kg prior, k = 46.9, k₂ = 306.2, φ̂ = 35 N so ξ* ≈ 0.27 m/s) ω ≈ 0.18 rad/s."""
+    assert doptimal_frequency(93.75, 28.6, 0.0, -5.0) == pytest.approx(0.176, abs=1e-3)
+    assert doptimal_frequency(675.0, 46.9, 306.2, 35.0) == pytest.approx(0.1815, abs=1e-3)
+    sig = DOptimalSine(channel="X", offset=35.0, amplitude=25.0, inertia=675.0, k_linear=46.9,
+                       k_quadratic=306.2, duration=100.0)  # fmt: skip
+    x = sig(np.arange(0, 100, 0.1))
+    assert x.min() > 0  # never reverses thrust
+    with pytest.raises(ValueError):
+        DOptimalSine(
+            channel="X", offset=10.0, amplitude=25.0, inertia=1.0, k_linear=1.0, duration=1.0
+        )
+
+
+def test_weiss_sequence_order_and_non_collinear_coupled_runs():
+    seq = WeissSequence().experiments()
+    names = [e["name"] for e in seq]
+    assert names[:5] == ["surge", "sway", "heave", "roll", "yaw"]
+    assert names[5:] == ["surge-sway", "surge-heave", "surge-yaw", "sway-heave", "sway-yaw",
+                         "heave-yaw", "surge-sway-heave", "surge-sway-yaw"]  # fmt: skip
+    run = next(e for e in seq if e["name"] == "surge-sway-heave")
+    t = np.arange(0, run["duration"], 0.01)
+    x = np.stack([Stairs(**s)(t) for s in run["signals"]], 1)
+    assert np.linalg.matrix_rank(x) == 3 and np.linalg.cond(x) < 20
+
+
+def test_autopilot_holds_an_unstable_vehicle_and_logs_its_force():
+    """The bare VT 690 hull with McFarland damping diverges in open loop (M:q*abs(u) > 0);
+    under a PD autopilot it cruises, and the log carries the commanded feedback."""
+    veh = load_vehicle("vt690")
+    inputs = np.tile([11.0, 0, 0, 0, 0, 0], (600, 1))
+    x0 = [0, 0, 2, 0, 0, 0, 1.5, 0, 0, 0, 0, 0]
+    with pytest.raises(NnidInputError, match="diverged at t = "):
+        simulate(veh, inputs, 0.05, x0=x0, substeps=5)
+    ap = Autopilot(
+        kp=[0, 0, 40, 5, 60, 30], kd=[0, 0, 60, 1.5, 80, 80], reference=[0, 0, 2, 0, 0, 0]
+    )
+    log = simulate(veh, inputs, 0.05, x0=x0, substeps=5, autopilot=ap)
+    assert np.abs(log["theta"]).max() < 0.1 and abs(log["z"].iloc[-1] - 2.0) < 0.05
+    assert log["u"].iloc[-1] == pytest.approx(1.5, abs=0.1)
+    assert np.abs(log["tau_M"]).max() > 0  # feedback is in the logged input
+    assert math.isclose(log["tau_X"].iloc[0], 11.0)
