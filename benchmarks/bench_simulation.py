@@ -1,0 +1,89 @@
+"""Simulation speed (issue: Foundation). Run by hand: ``python benchmarks/bench_simulation.py``.
+
+Targets on the 2-core reference machine: one 10-minute trajectory at 100 Hz (60,000 RK4 steps)
+in at most 2 s, and 1,024 trajectories of 1,000 steps, batched, in at most 2 s. The baseline in
+the same run is the differentiable torch RK4 on the same model (the one physics implementation
+evaluated op by op), so the ratio shows what the compiled feature form buys.
+"""
+
+from __future__ import annotations
+
+import datetime
+import os
+import platform
+import time
+
+import numpy as np
+import torch
+
+from nnid.datasets.simulator import integrate
+from nnid.physics import compiled
+from nnid.physics.fossen import FossenModel
+from nnid.physics.integrate import rk4
+from nnid.vehicle import load_vehicle
+
+
+def best_of(fn, repeats=3):
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t0)
+    return min(times)
+
+
+def machine() -> str:
+    cpu = "unknown CPU"
+    try:
+        with open("/proc/cpuinfo") as fh:
+            cpu = next(line.split(":", 1)[1].strip() for line in fh if "model name" in line)
+    except (OSError, StopIteration):
+        pass
+    python = platform.python_version()
+    return f"{cpu}, {os.cpu_count()} cores, Python {python}, torch {torch.__version__}"
+
+
+def main() -> None:
+    torch.set_num_threads(os.cpu_count() or 1)
+    model = FossenModel.from_vehicle(load_vehicle("seamor"))
+    form = model.feature_form()
+    rng = np.random.default_rng(0)
+    dt = 0.01
+    tau_long = np.repeat(rng.normal(0, 20, (600, 6)), 100, axis=0)  # 60,000 steps, 1 s holds
+    x0 = np.zeros(12)
+    compiled.integrate_rk4(form, x0, tau_long[:10], dt)  # compile outside the timing
+    single = best_of(lambda: integrate(model, x0, tau_long, dt))
+
+    n_torch = 2_000
+    tau_t = torch.as_tensor(tau_long[:n_torch])
+    torch_single = best_of(lambda: rk4(model.rhs, torch.as_tensor(x0), tau_t, dt), 1)
+    torch_single_60k = torch_single * tau_long.shape[0] / n_torch
+
+    tau_batch = rng.normal(0, 20, (1024, 1000, 6))
+    x0b = np.zeros((1024, 12))
+    compiled.integrate_rk4(form, x0b[:2], tau_batch[:2, :10], dt)
+    batch = best_of(lambda: compiled.integrate_rk4(form, x0b, tau_batch, dt))
+    tau_bt = torch.as_tensor(tau_batch[:, :100]).transpose(0, 1).contiguous()
+    torch_batch = best_of(lambda: rk4(model.rhs, torch.as_tensor(x0b), tau_bt, dt), 1) * 10
+
+    check = integrate(model, x0, tau_long[:n_torch], dt)
+    ref = rk4(model.rhs, torch.as_tensor(x0), tau_t, dt).numpy()
+    agree = float(np.abs(check - ref).max())
+
+    print(f"machine: {machine()}")
+    print(f"date: {datetime.date.today().isoformat()}")
+    print(f"single 60,000 steps, compiled RK4: {single:.3f} s (target <= 2 s)")
+    print(
+        f"single 60,000 steps, torch RK4 (from {n_torch} steps): {torch_single_60k:.1f} s "
+        f"-> compiled is {torch_single_60k / single:.0f}x faster"
+    )
+    print(f"batch 1,024 x 1,000 steps, compiled RK4 (threads): {batch:.3f} s (target <= 2 s)")
+    print(
+        f"batch 1,024 x 1,000 steps, torch RK4 (from 100 steps): {torch_batch:.2f} s "
+        f"-> compiled is {torch_batch / batch:.1f}x faster"
+    )
+    print(f"max |compiled - torch| over {n_torch} steps: {agree:.1e}")
+
+
+if __name__ == "__main__":
+    main()
