@@ -139,3 +139,25 @@ def test_batched_equals_single(vehicle_factory, rng):
     batch = compiled.integrate_rk4(form, x0, tau, 0.01, 2)
     for b in range(3):
         assert np.array_equal(batch[b], compiled.integrate_rk4(form, x0[b], tau[b], 0.01, 2))
+
+
+def test_rhs_is_differentiable_in_the_parameters(vehicle_factory):
+    """Gradients reach damping coefficients, added mass and mass (for hybrids and physics fits):
+    gradcheck against finite differences in float64."""
+    veh = vehicle_factory(damping={"coefficients": {"X:u*abs(u)": -40.0, "N:v*abs(r)": -2.0}})
+    base = FossenModel.from_vehicle(veh)
+    x = torch.tensor([0.1, 0.2, 0.3, 0.1, -0.2, 0.4, 0.5, -0.3, 0.2, 0.1, -0.2, 0.3])
+    tau = torch.tensor([5.0, 1.0, -2.0, 0.1, 0.2, -0.3])
+
+    def f(coef, added, mass):
+        base.damping.coefficients = coef
+        base.added_mass = added
+        base.mass = mass
+        return base.rhs(x, tau)
+
+    args = (
+        base.damping.coefficients.clone().requires_grad_(True),
+        base.added_mass.clone().requires_grad_(True),
+        base.mass.clone().requires_grad_(True),
+    )
+    assert torch.autograd.gradcheck(f, args)

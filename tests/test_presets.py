@@ -1,6 +1,6 @@
 """Every preset equals its seed tables.
 
-Expected numbers are typed from the seed texts under /work/shared/seeds/ (never read back from
+Expected numbers are typed from the seed texts under ../shared/seeds/ (never read back from
 the preset files). "Weiss L<n>" = line n of 000_738d95e604f0f71d.txt (Weiss 2013, NPS thesis),
 "Caccia L<n>" = line n of 001_f0911909a12443cd.txt (Caccia, Indiveri & Veruggio 2000),
 "McCarter l.<n>" = line n of 002_2a6246727713bc4f.txt (McCarter 2014, VT thesis).

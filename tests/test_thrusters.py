@@ -1,7 +1,7 @@
 """Thruster allocation, thrust curves and installation coefficients against the seeds.
 
 "Weiss L<n>" = line n of seed 000 (Weiss 2013), "Caccia L<n>" = line n of seed 001 (Caccia et
-al. 2000). Sign-corrected Weiss eqs 7 and 9 are derived in /tmp/notes/weiss.md section 2.
+al. 2000). Sign-corrected Weiss eqs 7 and 9 are derived in docs/seed_notes/weiss.md section 2.
 """
 
 from __future__ import annotations
