@@ -70,7 +70,7 @@ def simulate(
                 cfg, veh, progress=lambda done, total: bar.update(task, completed=done)
             )
     except NnidInputError as exc:
-        raise NnidInputError(str(exc), source=str(config)) from None
+        raise exc.with_source(str(config)) from None
     validate_log(log, source=str(out_path))
     write_log(log, out_path)
     n_exp = log["experiment"].nunique() if "experiment" in log else 1

@@ -8,7 +8,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Annotated, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from nnid.datasets.excitation import (
     PRBS,
@@ -22,9 +22,8 @@ from nnid.datasets.excitation import (
 )
 from nnid.datasets.measurement import Measurement
 from nnid.datasets.simulator import Autopilot
-from nnid.errors import NnidInputError
 from nnid.physics.effects import parse_effect
-from nnid.vehicle import _first_error, read_toml
+from nnid.validation import read_toml, validated
 
 Signal = Annotated[
     Step | Stairs | Chirp | Multisine | PRBS | Sine | DOptimalSine, Field(discriminator="kind")
@@ -92,9 +91,4 @@ class SimulateConfig(_Strict):
 
 def load_config(path: str | Path, model: type[BaseModel] = SimulateConfig) -> BaseModel:
     """Read and validate a TOML config; raise NnidInputError naming the file and field."""
-    data = read_toml(Path(path))
-    try:
-        return model.model_validate(data)
-    except ValidationError as err:
-        field, msg = _first_error(err)
-        raise NnidInputError(msg, source=str(path), field=field) from None
+    return validated(model, read_toml(path), str(path))

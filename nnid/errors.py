@@ -17,6 +17,7 @@ class NnidInputError(ValueError):
         field: str | None = None,
         row: int | None = None,
     ) -> None:
+        self.message = message
         self.source = source
         self.field = field
         self.row = row
@@ -29,3 +30,9 @@ class NnidInputError(ValueError):
             where.append(f"row {row}")
         prefix = ", ".join(where) + ": " if where else ""
         super().__init__(prefix + message)
+
+    def with_source(self, source: str) -> NnidInputError:
+        """The same error, naming ``source`` if it named no file yet."""
+        if self.source is not None:
+            return self
+        return NnidInputError(self.message, source=source, field=self.field, row=self.row)

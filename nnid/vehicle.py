@@ -14,10 +14,11 @@ from typing import Annotated, Any, Literal
 
 import numpy as np
 import tomllib
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 from nnid.errors import NnidInputError
 from nnid.physics.added_mass import DOFS, parse_added_mass_key
+from nnid.validation import read_toml, validated
 
 PRESETS = ("seamor", "vlbv300", "romeo", "vt690")
 
@@ -175,35 +176,9 @@ class Vehicle(_Strict):
         return pos, neg
 
 
-def _first_error(err: ValidationError) -> tuple[str, str]:
-    first = err.errors()[0]
-    field = ".".join(str(p) for p in first["loc"] if not str(p).startswith("function-"))
-    msg = first["msg"].removeprefix("Value error, ")
-    if first["type"] == "missing":
-        msg = "is required but missing"
-    elif first["type"] == "extra_forbidden":
-        msg = "is not a known field of this file"
-    return field, msg
-
-
 def vehicle_from_dict(data: dict[str, Any], source: str = "<vehicle>") -> Vehicle:
     """Validate a parsed vehicle file; raise NnidInputError naming the file and the field."""
-    try:
-        return Vehicle.model_validate(data)
-    except ValidationError as err:
-        field, msg = _first_error(err)
-        raise NnidInputError(msg, source=source, field=field) from None
-
-
-def read_toml(path: Path) -> dict[str, Any]:
-    """Parse a TOML file; a missing or malformed file is an NnidInputError naming it."""
-    try:
-        with open(path, "rb") as fh:
-            return tomllib.load(fh)
-    except FileNotFoundError:
-        raise NnidInputError("file not found", source=str(path)) from None
-    except tomllib.TOMLDecodeError as err:
-        raise NnidInputError(f"not valid TOML ({err})", source=str(path)) from None
+    return validated(Vehicle, data, source)
 
 
 def load_vehicle(name_or_path: str | Path) -> Vehicle:

@@ -101,6 +101,18 @@ BAD_VEHICLES = {
     ),
     "bad added mass key": (GOOD_VEHICLE.replace("X_udot", "X_xdot"), "added_mass", "X_xdot"),
     "unknown field": ("colour = 'yellow'\n" + GOOD_VEHICLE, "colour", "not a known field"),
+    "bad installation key": (
+        GOOD_VEHICLE.replace("[added_mass]", '[installation]\n"w.up" = 0.5\n[added_mass]'),
+        "installation",
+        "<dof>.<pos|neg>",
+    ),
+    "zero thruster direction": (
+        GOOD_VEHICLE
+        + '[[thrusters]]\nname = "T1"\nposition = [0, 0, 0]\ndirection = [0, 0, 0]\n'
+        + 'curve = { kind = "signed_quadratic", k = 1.0 }\n',
+        "thrusters.0.direction",
+        "non-zero",
+    ),
     "broken toml": (GOOD_VEHICLE.replace("mass = 30.0", "mass = = 30"), None, "not valid TOML"),
 }
 

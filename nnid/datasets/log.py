@@ -30,7 +30,7 @@ def input_columns(df: pd.DataFrame) -> list[str]:
 def validate_log(
     df: pd.DataFrame, source: str = "<log>", require_inputs: bool = True
 ) -> pd.DataFrame:
-    """Check a log against the contract; return it sorted by experiment order, unchanged otherwise.
+    """Check a log against the contract and return it unchanged.
 
     Raises :class:`NnidInputError` naming the file, the column and the row of the first problem.
     Nothing is dropped or repaired here.

@@ -189,8 +189,6 @@ def experiment_inputs(
     experiment, channels: Sequence[str], dt: float, where: str = ""
 ) -> np.ndarray:
     """Inputs ``[N, len(channels)]`` of a config experiment: its signals summed per channel."""
-    from nnid.errors import NnidInputError
-
     end = experiment.end()
     if end <= 0:
         raise NnidInputError(

@@ -19,6 +19,9 @@ is Weiss eq. 45 (diagonal quadratic drag), 6 terms by construction.
 
 from __future__ import annotations
 
+# The 36 sign-preserving quadratics a*abs(b) of basis block C.4, in C.4 order.
+_SIGN_PRESERVING = tuple(f"{a}*abs({b})" for a in "uvwpqr" for b in "uvwpqr")
+
 # fmt: off
 MASKS: dict[str, dict[str, tuple[str, ...]]] = {
     # Gertler & Hagen (McCarter sec. 3.2.1, eqs 3.13-3.18; Appendix D Table D.4; coefficients Table
@@ -89,68 +92,12 @@ MASKS: dict[str, dict[str, tuple[str, ...]]] = {
     },
     # Linear (McCarter sec. 3.2.4, eqs 3.32-3.33; Appendix D Table D.5; Table E.7): full 6x6 K_nu.
     # Per force 6 x 6 = 36 = Table 5.1 n.
-    "linear": {
-        "X": ("u", "v", "w", "p", "q", "r"),
-        "Y": ("u", "v", "w", "p", "q", "r"),
-        "Z": ("u", "v", "w", "p", "q", "r"),
-        "K": ("u", "v", "w", "p", "q", "r"),
-        "M": ("u", "v", "w", "p", "q", "r"),
-        "N": ("u", "v", "w", "p", "q", "r"),
-    },
+    "linear": {force: ("u", "v", "w", "p", "q", "r") for force in "XYZKMN"},
     # McFarland & Whitcomb (McCarter sec. 3.2.5, eq. 3.34; Appendix D Tables D.1-D.2; Tables
     # E.1-E.3): all 36 sign-preserving quadratics a*abs(b) (basis block C.4) in every force. Eq.
     # 3.34 prints K diag(nu)|nu| (a 6-vector); the 6x36 coefficient matrix shows it means K (nu kron
     # |nu|). Per force 36 x 6 = 216 = Table 5.1 n.
-    "mcfarland": {
-        "X": (
-            "u*abs(u)", "u*abs(v)", "u*abs(w)", "u*abs(p)", "u*abs(q)", "u*abs(r)", "v*abs(u)",
-            "v*abs(v)", "v*abs(w)", "v*abs(p)", "v*abs(q)", "v*abs(r)", "w*abs(u)", "w*abs(v)",
-            "w*abs(w)", "w*abs(p)", "w*abs(q)", "w*abs(r)", "p*abs(u)", "p*abs(v)", "p*abs(w)",
-            "p*abs(p)", "p*abs(q)", "p*abs(r)", "q*abs(u)", "q*abs(v)", "q*abs(w)", "q*abs(p)",
-            "q*abs(q)", "q*abs(r)", "r*abs(u)", "r*abs(v)", "r*abs(w)", "r*abs(p)", "r*abs(q)",
-            "r*abs(r)",
-        ),
-        "Y": (
-            "u*abs(u)", "u*abs(v)", "u*abs(w)", "u*abs(p)", "u*abs(q)", "u*abs(r)", "v*abs(u)",
-            "v*abs(v)", "v*abs(w)", "v*abs(p)", "v*abs(q)", "v*abs(r)", "w*abs(u)", "w*abs(v)",
-            "w*abs(w)", "w*abs(p)", "w*abs(q)", "w*abs(r)", "p*abs(u)", "p*abs(v)", "p*abs(w)",
-            "p*abs(p)", "p*abs(q)", "p*abs(r)", "q*abs(u)", "q*abs(v)", "q*abs(w)", "q*abs(p)",
-            "q*abs(q)", "q*abs(r)", "r*abs(u)", "r*abs(v)", "r*abs(w)", "r*abs(p)", "r*abs(q)",
-            "r*abs(r)",
-        ),
-        "Z": (
-            "u*abs(u)", "u*abs(v)", "u*abs(w)", "u*abs(p)", "u*abs(q)", "u*abs(r)", "v*abs(u)",
-            "v*abs(v)", "v*abs(w)", "v*abs(p)", "v*abs(q)", "v*abs(r)", "w*abs(u)", "w*abs(v)",
-            "w*abs(w)", "w*abs(p)", "w*abs(q)", "w*abs(r)", "p*abs(u)", "p*abs(v)", "p*abs(w)",
-            "p*abs(p)", "p*abs(q)", "p*abs(r)", "q*abs(u)", "q*abs(v)", "q*abs(w)", "q*abs(p)",
-            "q*abs(q)", "q*abs(r)", "r*abs(u)", "r*abs(v)", "r*abs(w)", "r*abs(p)", "r*abs(q)",
-            "r*abs(r)",
-        ),
-        "K": (
-            "u*abs(u)", "u*abs(v)", "u*abs(w)", "u*abs(p)", "u*abs(q)", "u*abs(r)", "v*abs(u)",
-            "v*abs(v)", "v*abs(w)", "v*abs(p)", "v*abs(q)", "v*abs(r)", "w*abs(u)", "w*abs(v)",
-            "w*abs(w)", "w*abs(p)", "w*abs(q)", "w*abs(r)", "p*abs(u)", "p*abs(v)", "p*abs(w)",
-            "p*abs(p)", "p*abs(q)", "p*abs(r)", "q*abs(u)", "q*abs(v)", "q*abs(w)", "q*abs(p)",
-            "q*abs(q)", "q*abs(r)", "r*abs(u)", "r*abs(v)", "r*abs(w)", "r*abs(p)", "r*abs(q)",
-            "r*abs(r)",
-        ),
-        "M": (
-            "u*abs(u)", "u*abs(v)", "u*abs(w)", "u*abs(p)", "u*abs(q)", "u*abs(r)", "v*abs(u)",
-            "v*abs(v)", "v*abs(w)", "v*abs(p)", "v*abs(q)", "v*abs(r)", "w*abs(u)", "w*abs(v)",
-            "w*abs(w)", "w*abs(p)", "w*abs(q)", "w*abs(r)", "p*abs(u)", "p*abs(v)", "p*abs(w)",
-            "p*abs(p)", "p*abs(q)", "p*abs(r)", "q*abs(u)", "q*abs(v)", "q*abs(w)", "q*abs(p)",
-            "q*abs(q)", "q*abs(r)", "r*abs(u)", "r*abs(v)", "r*abs(w)", "r*abs(p)", "r*abs(q)",
-            "r*abs(r)",
-        ),
-        "N": (
-            "u*abs(u)", "u*abs(v)", "u*abs(w)", "u*abs(p)", "u*abs(q)", "u*abs(r)", "v*abs(u)",
-            "v*abs(v)", "v*abs(w)", "v*abs(p)", "v*abs(q)", "v*abs(r)", "w*abs(u)", "w*abs(v)",
-            "w*abs(w)", "w*abs(p)", "w*abs(q)", "w*abs(r)", "p*abs(u)", "p*abs(v)", "p*abs(w)",
-            "p*abs(p)", "p*abs(q)", "p*abs(r)", "q*abs(u)", "q*abs(v)", "q*abs(w)", "q*abs(p)",
-            "q*abs(q)", "q*abs(r)", "r*abs(u)", "r*abs(v)", "r*abs(w)", "r*abs(p)", "r*abs(q)",
-            "r*abs(r)",
-        ),
-    },
+    "mcfarland": {force: _SIGN_PRESERVING for force in "XYZKMN"},
     # Uncoupled (McCarter sec. 3.2.6, eqs 3.35-3.40; Appendix D Table D.8; Table E.10): a, a*a,
     # abs(a), a*abs(a) with a the velocity of the force axis. 4 x 6 = 24 = Tables 5.1/5.2 n. NOTE:
     # the Fig. 5.14 caption says n = 22 and Table E.10 lists 22 coefficients, omitting X_u and
