@@ -1,0 +1,123 @@
+"""The reader config (a small TOML next to a log): which files, which time column, which columns
+become which log columns, in which units and frames, and the common time base.
+
+```toml
+name = "liu-bluerov1-2016"
+root = "../../../shared/data/liu-bluerov1-2016"   # relative to this file; --data overrides
+rate = 50.0                   # Hz: resample every source onto one time base
+gap = 0.5                     # s: a longer gap splits an experiment instead of being bridged
+experiment = "run"            # column naming the run; "file" = the file stem; absent = one run
+include = "^(all|yaw)_"       # optional regex on experiment names (exclude likewise)
+drop_nonfinite = false        # true: drop NaN/inf rows and report the count; false: error
+vehicle = "bluerov1_liu.toml" # optional vehicle file, relative to this file
+
+[[sources]]
+file = "thrusters.csv.gz"     # a path or glob under root (or a bag topic, an ArduPilot message)
+time = "t_unix_s"             # time column
+time_scale = 1.0              # to seconds (1e-9 for nanoseconds)
+method = "hold"               # "hold" (zero-order, commands sent on change) or "linear"
+frame = "ned_frd"             # or "enu_flu": converted to NED/FRD after renaming
+quaternion = []               # [w, x, y, z] source columns -> phi theta psi
+[sources.columns]             # log column = source column, or a table
+cmd_1 = { from = "pwm_1", offset = -1500.0, scale = 0.0025 }   # (pwm - 1500) / 400
+psi = { from = "yaw", unit = "deg" }       # value = (x + offset) * scale, then the unit
+```
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, Field, field_validator
+
+UNITS = {"rad": 1.0, "deg": 0.017453292519943295, "rad/s": 1.0, "deg/s": 0.017453292519943295,
+         "m": 1.0, "cm": 0.01, "mm": 0.001, "s": 1.0, "ms": 0.001}  # fmt: skip
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+
+class ColumnSpec(_Strict):
+    """value = (source + offset) * scale, then converted from ``unit`` to SI."""
+
+    source: str = Field(alias="from")
+    offset: float = 0.0
+    scale: float = 1.0
+    unit: str | None = None
+
+    @field_validator("unit")
+    @classmethod
+    def _unit(cls, unit: str | None) -> str | None:
+        if unit is not None and unit not in UNITS:
+            raise ValueError(f"unknown unit '{unit}'; expected one of {', '.join(UNITS)}")
+        return unit
+
+    def factor(self) -> float:
+        return self.scale * (UNITS[self.unit] if self.unit else 1.0)
+
+
+class Source(_Strict):
+    file: str
+    time: str
+    time_scale: float = Field(1.0, gt=0)
+    method: Literal["hold", "linear"] = "linear"
+    frame: Literal["ned_frd", "enu_flu"] = "ned_frd"
+    quaternion: list[str] = Field(default_factory=list)
+    columns: dict[str, str | ColumnSpec] = Field(default_factory=dict)
+
+    @field_validator("quaternion")
+    @classmethod
+    def _quat(cls, q: list[str]) -> list[str]:
+        if q and len(q) != 4:
+            raise ValueError("quaternion names four columns: w, x, y, z")
+        return q
+
+    def specs(self) -> dict[str, ColumnSpec]:
+        return {
+            name: ColumnSpec.model_validate({"from": spec}) if isinstance(spec, str) else spec
+            for name, spec in self.columns.items()
+        }
+
+
+class ColumnMap(_Strict):
+    """A validated reader config."""
+
+    name: str = "log"
+    root: str | None = None
+    rate: float | None = Field(None, gt=0)
+    gap: float | None = Field(None, gt=0)
+    experiment: str | None = None
+    include: str | None = None
+    exclude: str | None = None
+    drop_nonfinite: bool = False
+    vehicle: str | None = None
+    sources: list[Source] = Field(min_length=1)
+
+    @field_validator("include", "exclude")
+    @classmethod
+    def _regex(cls, pattern: str | None) -> str | None:
+        if pattern is not None:
+            re.compile(pattern)
+        return pattern
+
+    def keeps(self, experiment: str) -> bool:
+        if self.include and not re.search(self.include, experiment):
+            return False
+        return not (self.exclude and re.search(self.exclude, experiment))
+
+    def resolve_root(self, config_path: Path | None, data: str | Path | None = None) -> Path:
+        """Where the files live: ``data`` if given, else ``root`` relative to the config."""
+        if data is not None:
+            return Path(data)
+        base = config_path.parent if config_path else Path.cwd()
+        return (base / self.root) if self.root else base
+
+
+def load_column_map(path: str | Path) -> ColumnMap:
+    """Read and validate a reader config; NnidInputError names the file and the field."""
+    from nnid.validation import read_toml, validated
+
+    return validated(ColumnMap, read_toml(path), str(path))

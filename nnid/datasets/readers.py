@@ -1,0 +1,287 @@
+"""Measured logs in: tables (CSV, Parquet) through a column map, onto one time base.
+
+Every reader (this one, ROS bags, ArduPilot logs) produces raw source tables; ``assemble`` maps
+their columns (names, units, frames, quaternions), resamples them onto a uniform time base per
+experiment (zero-order hold for commands, linear interpolation for measurements) and splits
+experiments at gaps instead of bridging them. Everything it does goes into the cleaning report.
+"""
+
+from __future__ import annotations
+
+import glob
+import re
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from nnid.datasets.cleaning import CleaningReport
+from nnid.datasets.column_map import ColumnMap, Source, load_column_map
+from nnid.datasets.log import ANGLES, validate_log
+from nnid.errors import NnidInputError
+
+# ENU -> NED for world vectors, FLU -> FRD for body vectors (both are their own inverse).
+_ENU_NED = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
+_FLU_FRD = np.diag([1.0, -1.0, -1.0])
+
+
+def read_table(path: str | Path) -> pd.DataFrame:
+    """A CSV (optionally gzipped) or Parquet file; unreadable files are an NnidInputError."""
+    path = Path(path)
+    if not path.exists():
+        raise NnidInputError("file not found", source=str(path))
+    name = path.name.lower()
+    try:
+        if name.endswith(".parquet"):
+            return pd.read_parquet(path)
+        if name.endswith((".csv", ".csv.gz", ".txt")):
+            return pd.read_csv(path)
+    except Exception as err:  # pandas/pyarrow raise many types for truncated or corrupt files
+        raise NnidInputError(f"cannot be read as a table ({err})", source=str(path)) from None
+    raise NnidInputError(
+        "unknown table format; expected .csv, .csv.gz or .parquet", source=str(path)
+    )
+
+
+def euler_from_rotation(rot: np.ndarray) -> np.ndarray:
+    """zyx Euler angles (φ, θ, ψ) of rotation matrices ``[..., 3, 3]`` (inverse of J₁)."""
+    phi = np.arctan2(rot[..., 2, 1], rot[..., 2, 2])
+    theta = -np.arcsin(np.clip(rot[..., 2, 0], -1.0, 1.0))
+    psi = np.arctan2(rot[..., 1, 0], rot[..., 0, 0])
+    return np.stack([phi, theta, psi], -1)
+
+
+def rotation_from_quaternion(q: np.ndarray) -> np.ndarray:
+    """Rotation matrices of unit quaternions ``[..., 4]`` (w, x, y, z), normalised first."""
+    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
+    w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    return np.stack(
+        [
+            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
+            np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
+            np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
+        ],
+        -2,
+    )
+
+
+def rotation_from_euler(angles: np.ndarray) -> np.ndarray:
+    """J₁(Θ) in NumPy (same convention as :func:`nnid.physics.kinematics.rotation_matrix`)."""
+    import torch
+
+    from nnid.physics.kinematics import rotation_matrix
+
+    return rotation_matrix(torch.as_tensor(angles, dtype=torch.float64)).numpy()
+
+
+def _to_ned_frd(out: pd.DataFrame) -> None:
+    """Convert the standard columns present from ENU world / FLU body to NED / FRD in place."""
+    for group in (("x", "y", "z"),):
+        if all(c in out for c in group):
+            out[list(group)] = out[list(group)].to_numpy() @ _ENU_NED.T
+    for group in (("u", "v", "w"), ("p", "q", "r"), ("du", "dv", "dw"), ("dp", "dq", "dr")):
+        if all(c in out for c in group):
+            out[list(group)] = out[list(group)].to_numpy() @ _FLU_FRD.T
+    if all(c in out for c in ANGLES):
+        rot = rotation_from_euler(out[list(ANGLES)].to_numpy())
+        out[list(ANGLES)] = euler_from_rotation(_ENU_NED @ rot @ _FLU_FRD)
+
+
+def map_source(
+    raw: pd.DataFrame,
+    source: Source,
+    origin: str,
+    experiment: str | None,
+    drop_nonfinite: bool,
+    report: CleaningReport,
+) -> pd.DataFrame:
+    """Rename and convert one source table: columns ``t``, ``experiment`` and the mapped ones."""
+    needed = [source.time, *source.quaternion, *(s.source for s in source.specs().values())]
+    if experiment and experiment != "file":
+        needed.append(experiment)
+    for col in needed:
+        if col not in raw.columns:
+            raise NnidInputError(
+                f"column '{col}' named in the reader config is missing; the file has "
+                f"{', '.join(map(str, raw.columns[:20]))}",
+                source=origin,
+            )
+    numeric = [c for c in needed if c != experiment]
+    values = raw[numeric].apply(pd.to_numeric, errors="coerce")
+    bad = ~np.isfinite(values.to_numpy(dtype=np.float64))
+    if bad.any():
+        rows, cols = np.nonzero(bad)
+        if not drop_nonfinite:
+            raise NnidInputError(
+                f"value {raw[numeric[cols[0]]].iloc[rows[0]]!r} is not a finite number "
+                f"({int(bad.any(1).sum())} rows have one; set drop_nonfinite = true in the reader "
+                "config to drop them)",
+                source=origin,
+                field=numeric[cols[0]],
+                row=int(rows[0]),
+            )
+        keep = ~bad.any(1)
+        report.add(
+            "drop non-finite",
+            f"{origin}: rows with NaN/inf in {sorted({numeric[c] for c in cols})}",
+            int((~keep).sum()),
+        )
+        raw, values = raw[keep], values[keep]
+    out = pd.DataFrame(index=raw.index)
+    out["t"] = values[source.time].to_numpy(dtype=np.float64) * source.time_scale
+    if experiment == "file":
+        out["experiment"] = Path(origin).name.split(".")[0]
+    elif experiment:
+        out["experiment"] = raw[experiment].astype(str).to_numpy()
+    else:
+        out["experiment"] = "0"
+    for name, spec in source.specs().items():
+        out[name] = (values[spec.source].to_numpy(dtype=np.float64) + spec.offset) * spec.factor()
+    if source.quaternion:
+        rot = rotation_from_quaternion(values[source.quaternion].to_numpy(dtype=np.float64))
+        out["phi"], out["theta"], out["psi"] = euler_from_rotation(rot).T
+    if source.frame == "enu_flu":
+        _to_ned_frd(out)
+        report.add("frame", f"{origin}: ENU/FLU converted to NED/FRD")
+    return out.reset_index(drop=True)
+
+
+def _grid(start: float, stop: float, rate: float) -> np.ndarray:
+    return start + np.arange(int(np.floor((stop - start) * rate + 1e-9)) + 1) / rate
+
+
+def _resample(t_src: np.ndarray, values: np.ndarray, grid: np.ndarray, method: str):
+    """Values on ``grid`` and the mask of grid points each source sample pair supports."""
+    order = np.argsort(t_src, kind="stable")
+    t_src, values = t_src[order], values[order]
+    t_src, first = np.unique(t_src, return_index=True)  # duplicated stamps: keep the first
+    values = values[first]
+    idx = np.searchsorted(t_src, grid, side="right") - 1
+    if method == "hold":
+        out = values[np.clip(idx, 0, len(t_src) - 1)]
+    else:
+        out = np.stack([np.interp(grid, t_src, values[:, k]) for k in range(values.shape[1])], 1)
+    return out, t_src
+
+
+def assemble(
+    tables: list[tuple[Source, pd.DataFrame]], cmap: ColumnMap, report: CleaningReport
+) -> pd.DataFrame:
+    """Put mapped source tables onto one time base per experiment, splitting at gaps."""
+    experiments = sorted(set().union(*(set(df["experiment"]) for _, df in tables)), key=_natural)
+    kept = [e for e in experiments if cmap.keeps(e)]
+    if len(kept) < len(experiments):
+        report.add(
+            "select",
+            f"{len(experiments) - len(kept)} of {len(experiments)} experiments "
+            "left out by include/exclude",
+        )
+    pieces = []
+    for exp in kept:
+        parts = [(s, df[df["experiment"] == exp]) for s, df in tables]
+        parts = [(s, df) for s, df in parts if len(df)]
+        if len(parts) < len(tables):
+            report.add("skip experiment", f"'{exp}': not every source has data", 0)
+            continue
+        start = max(df["t"].min() for _, df in parts)
+        # a command logged on change holds until the next one: only measured (linear)
+        # sources bound the end of the window
+        linear = [df for s, df in parts if s.method == "linear"] or [df for _, df in parts]
+        stop = min(df["t"].max() for df in linear)
+        rate = cmap.rate or 1.0 / float(np.median(np.diff(np.sort(parts[0][1]["t"].to_numpy()))))
+        if stop <= start:
+            report.add("skip experiment", f"'{exp}': the sources do not overlap in time", 0)
+            continue
+        grid = _grid(start, stop, rate)
+        columns: dict[str, np.ndarray] = {}
+        valid = np.ones(grid.size, dtype=bool)
+        for source, df in parts:
+            names = [c for c in df.columns if c not in ("t", "experiment")]
+            values, t_src = _resample(
+                df["t"].to_numpy(), df[names].to_numpy(np.float64), grid, source.method
+            )
+            columns.update(dict(zip(names, values.T, strict=True)))
+            if cmap.gap and source.method == "linear":
+                gaps = np.flatnonzero(np.diff(t_src) > cmap.gap)
+                for g in gaps:
+                    valid &= ~((grid > t_src[g]) & (grid < t_src[g + 1]))
+        segments = _runs(valid)
+        if len(segments) > 1:
+            report.add(
+                "split at gaps",
+                f"'{exp}': {len(segments)} pieces (gaps > {cmap.gap} s are not interpolated)",
+                int((~valid).sum()),
+            )
+        for k, (a, b) in enumerate(segments):
+            piece = pd.DataFrame(
+                {"t": grid[a:b] - grid[a]} | {c: v[a:b] for c, v in columns.items()}
+            )
+            piece.insert(1, "experiment", exp if len(segments) == 1 else f"{exp}#{k}")
+            pieces.append(piece)
+        report.add(
+            "resample",
+            f"'{exp}': {grid.size} samples at {rate:g} Hz "
+            f"({', '.join(f'{s.file}: {s.method}' for s, _ in parts)})",
+        )
+    if not pieces:
+        raise NnidInputError("no experiment left after selection and alignment", source=cmap.name)
+    return pd.concat(pieces, ignore_index=True)
+
+
+def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], mask.astype(int), [0]])))
+    return [(int(a), int(b)) for a, b in zip(edges[::2], edges[1::2], strict=True) if b - a > 1]
+
+
+def _natural(name: str):
+    return [int(s) if s.isdigit() else s for s in re.split(r"(\d+)", name)]
+
+
+def read_mapped(
+    cmap: ColumnMap, root: Path, report: CleaningReport | None = None
+) -> tuple[pd.DataFrame, CleaningReport]:
+    """Read every source of a column map under ``root`` and assemble the log."""
+    report = report or CleaningReport(source=cmap.name)
+    tables = []
+    for i, source in enumerate(cmap.sources):
+        files = sorted(glob.glob(str(root / source.file)), key=_natural)
+        if not files:
+            raise NnidInputError(
+                f"no file matches '{source.file}' under {root}",
+                source=cmap.name,
+                field=f"sources.{i}.file",
+            )
+        frames = [
+            map_source(read_table(f), source, f, cmap.experiment, cmap.drop_nonfinite, report)
+            for f in files
+        ]
+        tables.append((source, pd.concat(frames, ignore_index=True)))
+        report.add(
+            "read", f"{source.file}: {sum(len(f) for f in frames)} rows from {len(files)} files"
+        )
+    return assemble(tables, cmap, report), report
+
+
+def load_log(
+    path: str | Path, columns: str | Path | None = None
+) -> tuple[pd.DataFrame, CleaningReport]:
+    """A log file in the contract, or any table/folder read through a column map.
+
+    ``columns`` is the reader config (``--columns MAP.toml``); with it, ``path`` is the data
+    root or file the config's sources are found under. Returns the validated log and the
+    cleaning report.
+    """
+    if columns is None:
+        report = CleaningReport(source=str(path))
+        df = read_table(path)
+        report.add("read", f"{len(df)} rows, contract columns as given")
+        return validate_log(df, source=str(path)), report
+    cmap = load_column_map(columns)
+    root = Path(path)
+    if root.is_file():
+        cmap = cmap.model_copy(
+            update={"sources": [s.model_copy(update={"file": root.name}) for s in cmap.sources]}
+        )
+        root = root.parent
+    df, report = read_mapped(cmap, root)
+    return validate_log(df, source=f"{path} (through {columns})"), report
