@@ -71,7 +71,7 @@ def rotation_from_euler(angles: np.ndarray) -> np.ndarray:
 
     from nnid.physics.kinematics import rotation_matrix
 
-    return rotation_matrix(torch.as_tensor(angles, dtype=torch.float64)).numpy()
+    return rotation_matrix(torch.tensor(np.asarray(angles, dtype=np.float64))).numpy()
 
 
 def _to_ned_frd(out: pd.DataFrame) -> None:

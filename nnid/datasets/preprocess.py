@@ -1,0 +1,391 @@
+"""Preprocessing of measured logs, with every change in the cleaning report.
+
+- resampling onto a uniform time base, splitting experiments at gaps instead of bridging them;
+- angle unwrapping;
+- Savitzky-Golay differentiation (Caccia III-B and IV-D used fourth order, symmetric windows),
+  with the noise gain the filter theory predicts;
+- body velocities from pose rates through ν = J⁻¹(η) η̇ (Weiss eq. 17);
+- zero-phase Butterworth low-pass filtering (Weiss V.A.2);
+- jump (occlusion) detection for motion capture (Weiss V.A.2);
+- accelerometer and gyro bias estimation (McCarter eqs 2.84-2.87);
+- derived accelerations ν̇ where a trainer needs them.
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+import numpy as np
+import pandas as pd
+from pydantic import BaseModel, ConfigDict, Field
+from scipy.integrate import cumulative_trapezoid
+from scipy.signal import butter, filtfilt, medfilt, savgol_coeffs, savgol_filter
+
+from nnid.datasets.cleaning import CleaningReport
+from nnid.datasets.log import ACCELERATION, ANGLES, POSE, VELOCITY, input_columns
+from nnid.errors import NnidInputError
+
+
+def experiments(log: pd.DataFrame):
+    """(name, index) of each experiment, in order of appearance."""
+    if "experiment" not in log:
+        return [(None, log.index)]
+    return [(name, idx) for name, idx in log.groupby("experiment", sort=False).groups.items()]
+
+
+def sample_rate(t: np.ndarray) -> float:
+    return 1.0 / float(np.median(np.diff(t)))
+
+
+# --- time base -------------------------------------------------------------------------------
+
+
+def resample_log(
+    log: pd.DataFrame, rate: float, gap: float | None = None, report: CleaningReport | None = None
+) -> pd.DataFrame:
+    """Every experiment onto a uniform grid at ``rate`` Hz: inputs by zero-order hold, the rest
+    by linear interpolation; gaps longer than ``gap`` s split the experiment."""
+    held = set(input_columns(log))
+    numeric = [
+        c
+        for c in log.columns
+        if c not in ("t", "experiment") and pd.api.types.is_numeric_dtype(log[c])
+    ]
+    pieces = []
+    for name, idx in experiments(log):
+        part = log.loc[idx]
+        t = part["t"].to_numpy(np.float64)
+        cuts = np.flatnonzero(np.diff(t) > gap) + 1 if gap else np.array([], int)
+        bounds = np.split(np.arange(t.size), cuts)
+        for k, seg in enumerate(bounds):
+            if seg.size < 2:
+                continue
+            ts = t[seg]
+            grid = ts[0] + np.arange(int(np.floor((ts[-1] - ts[0]) * rate + 1e-9)) + 1) / rate
+            out = {"t": grid - grid[0]}
+            for col in numeric:
+                y = part[col].to_numpy(np.float64)[seg]
+                if col in held:
+                    out[col] = y[np.clip(np.searchsorted(ts, grid, "right") - 1, 0, None)]
+                else:
+                    out[col] = np.interp(grid, ts, y)
+            frame = pd.DataFrame(out)
+            label = name if len(bounds) == 1 else f"{name}#{k}"
+            if name is not None or len(bounds) > 1:
+                frame.insert(1, "experiment", label)
+            pieces.append(frame)
+        if report is not None:
+            report.add(
+                "resample",
+                f"experiment {name!r}: {t.size} samples -> uniform {rate:g} Hz"
+                + (f", split in {len(bounds)} at gaps > {gap} s" if len(bounds) > 1 else ""),
+            )
+    return pd.concat(pieces, ignore_index=True)
+
+
+def unwrap_angles(log: pd.DataFrame, report: CleaningReport | None = None) -> pd.DataFrame:
+    """Unwrap φ, θ, ψ within each experiment (readers may deliver them wrapped at ±π)."""
+    out = log.copy()
+    for col in ANGLES:
+        if col not in out:
+            continue
+        changed = 0
+        for _, idx in experiments(out):
+            raw = out.loc[idx, col].to_numpy(np.float64)
+            unwrapped = np.unwrap(raw)
+            changed += int(np.sum(np.abs(unwrapped - raw) > 1e-12))
+            out.loc[idx, col] = unwrapped
+        if report is not None and changed:
+            report.add("unwrap", f"{col}: {changed} samples shifted by multiples of 2π")
+    return out
+
+
+# --- Savitzky-Golay ---------------------------------------------------------------------------
+
+
+def savgol_window(seconds: float, rate: float, order: int) -> int:
+    """An odd window (samples) of about ``seconds`` that a polynomial of ``order`` fits."""
+    n = max(round(seconds * rate), order + 2)
+    return n if n % 2 else n + 1
+
+
+def savgol_derivative(
+    y: np.ndarray, dt: float, window: int, order: int = 4, deriv: int = 1, where: str = "signal"
+) -> np.ndarray:
+    """Symmetric-window Savitzky-Golay derivative of order ``deriv`` (Caccia III-B)."""
+    if window % 2 == 0 or window <= order:
+        raise NnidInputError(
+            f"Savitzky-Golay window {window} must be odd and larger than the order {order}",
+            field="savgol.window",
+        )
+    if len(y) < window:
+        raise NnidInputError(
+            f"{len(y)} samples are too few for the Savitzky-Golay window of {window} samples",
+            field=where,
+        )
+    return savgol_filter(y, window, order, deriv=deriv, delta=dt, mode="interp")
+
+
+def savgol_noise_gain(window: int, order: int, dt: float, deriv: int = 1) -> float:
+    """Standard deviation of the SG estimate per unit white measurement noise: sqrt(Σ cₖ²)."""
+    return float(np.sqrt(np.sum(savgol_coeffs(window, order, deriv=deriv, delta=dt) ** 2)))
+
+
+def derive_velocities(
+    log: pd.DataFrame,
+    window_s: float = 0.5,
+    order: int = 4,
+    report: CleaningReport | None = None,
+    overwrite: bool = False,
+) -> pd.DataFrame:
+    """Body velocities from pose by SG differentiation and ν = J⁻¹(η) η̇ (Weiss eq. 17).
+
+    With the full pose: u v w p q r. With attitude only: p q r = T_Θ⁻¹ Θ̇. With depth and
+    attitude but no x, y: also w ≈ ż / (cos θ cos φ), exact when u = v = 0 and reported as an
+    approximation. Existing velocity columns are kept unless ``overwrite``.
+    """
+    from nnid.datasets.readers import rotation_from_euler
+
+    have = [c for c in POSE if c in log]
+    if not all(a in have for a in ANGLES):
+        raise NnidInputError("deriving body velocities needs phi, theta and psi", field="phi")
+    out = unwrap_angles(log)
+    new = {c: np.full(len(out), np.nan) for c in VELOCITY}
+    for name, idx in experiments(out):
+        t = out.loc[idx, "t"].to_numpy(np.float64)
+        dt = float(np.median(np.diff(t)))
+        window = savgol_window(window_s, 1.0 / dt, order)
+        rates = {
+            c: savgol_derivative(
+                out.loc[idx, c].to_numpy(np.float64),
+                dt,
+                window,
+                order,
+                where=f"experiment {name!r}",
+            )
+            for c in have
+        }
+        angles = out.loc[idx, list(ANGLES)].to_numpy(np.float64)
+        phi, theta = angles[:, 0], angles[:, 1]
+        dphi, dth, dpsi = rates["phi"], rates["theta"], rates["psi"]
+        pos = np.flatnonzero(np.isin(out.index, idx))
+        new["p"][pos] = dphi - np.sin(theta) * dpsi
+        new["q"][pos] = np.cos(phi) * dth + np.cos(theta) * np.sin(phi) * dpsi
+        new["r"][pos] = -np.sin(phi) * dth + np.cos(theta) * np.cos(phi) * dpsi
+        if all(c in have for c in ("x", "y", "z")):
+            ned = np.stack([rates["x"], rates["y"], rates["z"]], 1)
+            body = np.einsum("nji,nj->ni", rotation_from_euler(angles), ned)  # J₁ᵀ ṗ
+            for k, c in enumerate(("u", "v", "w")):
+                new[c][pos] = body[:, k]
+        elif "z" in have:
+            new["w"][pos] = rates["z"] / (np.cos(theta) * np.cos(phi))
+    made = []
+    for c, values in new.items():
+        if np.isfinite(values).all() and (overwrite or c not in out):
+            out[c] = values
+            made.append(c)
+    if report is not None and made:
+        approx = (
+            " (w from depth rate, assuming u = v = 0)" if "w" in made and "x" not in have else ""
+        )
+        report.add(
+            "derive velocities",
+            f"{', '.join(made)} from pose by Savitzky-Golay "
+            f"(order {order}, {window_s:g} s window) and J⁻¹(η){approx}",
+            columns=made,
+        )
+    return out
+
+
+def derive_accelerations(
+    log: pd.DataFrame, window_s: float = 0.5, order: int = 4, report: CleaningReport | None = None
+) -> pd.DataFrame:
+    """ν̇ (``du`` … ``dr``) by SG differentiation of the body velocities present."""
+    out = log.copy()
+    cols = [c for c in VELOCITY if c in out]
+    for c in cols:
+        out["d" + c] = np.nan
+    for name, idx in experiments(out):
+        t = out.loc[idx, "t"].to_numpy(np.float64)
+        dt = float(np.median(np.diff(t)))
+        window = savgol_window(window_s, 1.0 / dt, order)
+        for c in cols:
+            out.loc[idx, "d" + c] = savgol_derivative(
+                out.loc[idx, c].to_numpy(np.float64),
+                dt,
+                window,
+                order,
+                where=f"experiment {name!r}",
+            )
+    if report is not None and cols:
+        report.add(
+            "derive accelerations",
+            f"d{', d'.join(cols)} by Savitzky-Golay (order {order}, {window_s:g} s window)",
+            columns=["d" + c for c in cols],
+        )
+    return out
+
+
+# --- filtering and cleaning -------------------------------------------------------------------
+
+
+def lowpass(
+    log: pd.DataFrame,
+    columns: list[str],
+    cutoff: float,
+    order: int = 4,
+    report: CleaningReport | None = None,
+) -> pd.DataFrame:
+    """Zero-phase Butterworth low-pass (forward-backward, no delay) per experiment."""
+    out = log.copy()
+    for name, idx in experiments(out):
+        t = out.loc[idx, "t"].to_numpy(np.float64)
+        rate = sample_rate(t)
+        if cutoff >= rate / 2:
+            raise NnidInputError(
+                f"cut-off {cutoff} Hz is not below the Nyquist rate {rate / 2:g} Hz",
+                field="lowpass.cutoff",
+            )
+        b, a = butter(order, cutoff, fs=rate)
+        need = 3 * max(len(a), len(b))
+        if len(t) <= need:
+            raise NnidInputError(
+                f"experiment {name!r} has {len(t)} samples, too few for the "
+                f"low-pass filter ({need} needed)",
+                field="lowpass",
+            )
+        for c in columns:
+            out.loc[idx, c] = filtfilt(b, a, out.loc[idx, c].to_numpy(np.float64))
+    if report is not None:
+        report.add(
+            "low-pass",
+            f"{', '.join(columns)}: zero-phase Butterworth order {order}, {cutoff:g} Hz",
+            columns=columns,
+        )
+    return out
+
+
+def detect_jumps(
+    y: np.ndarray, kernel: int = 7, threshold: float = 6.0, min_jump: float = 0.0
+) -> np.ndarray:
+    """Samples that jump away from a running median by more than ``threshold`` robust standard
+    deviations (and ``min_jump``): motion-capture occlusions and glitches (Weiss V.A.2)."""
+    resid = y - medfilt(y, kernel)
+    sigma = 1.4826 * np.median(np.abs(resid - np.median(resid))) + 1e-12
+    return (np.abs(resid) > threshold * sigma) & (np.abs(resid) > min_jump)
+
+
+def repair_jumps(
+    log: pd.DataFrame,
+    columns: list[str],
+    kernel: int = 7,
+    threshold: float = 6.0,
+    min_jump: float = 0.0,
+    report: CleaningReport | None = None,
+) -> pd.DataFrame:
+    """Replace detected jumps by linear interpolation from their neighbours, and report them."""
+    out = log.copy()
+    total = 0
+    for _, idx in experiments(out):
+        t = out.loc[idx, "t"].to_numpy(np.float64)
+        for c in columns:
+            y = out.loc[idx, c].to_numpy(np.float64)
+            bad = detect_jumps(y, kernel, threshold, min_jump)
+            if bad.any() and (~bad).sum() >= 2:
+                y[bad] = np.interp(t[bad], t[~bad], y[~bad])
+                out.loc[idx, c] = y
+                total += int(bad.sum())
+    if report is not None:
+        report.add(
+            "jumps",
+            f"{total} samples in {', '.join(columns)} jumped more than {threshold:g} "
+            "robust σ from a running median (occlusion or glitch) and were interpolated",
+            columns=columns,
+        )
+    return out
+
+
+# --- sensor biases ----------------------------------------------------------------------------
+
+
+def estimate_accelerometer_bias(
+    t: np.ndarray, velocity: np.ndarray, accel: np.ndarray
+) -> np.ndarray:
+    """Constant accelerometer bias b from velocity (DVL) and acceleration (McCarter eqs 2.84-2.85).
+
+    v(t) = v(t₀) + ∫(a − b) dτ, so v(t) − ∫a dτ = v(t₀) − b (t − t₀): least squares per axis.
+    """
+    integral = cumulative_trapezoid(accel, t, axis=0, initial=0.0)
+    design = np.stack([np.ones_like(t), -(t - t[0])], 1)
+    coef, *_ = np.linalg.lstsq(design, velocity - integral, rcond=None)
+    return coef[1]
+
+
+def estimate_gyro_bias(t: np.ndarray, angles: np.ndarray, gyro: np.ndarray) -> np.ndarray:
+    """Constant gyro bias b from attitude and rates (McCarter eqs 2.86-2.87).
+
+    Θ(t) = Θ(t₀) + ∫ T_Θ(Θ) (ω − b) dτ; with T_Θ evaluated on the measured attitude this is
+    linear in Θ(t₀) and b, solved by least squares over all samples and axes.
+    """
+    phi, theta = angles[:, 0], angles[:, 1]
+    s, c, tt = np.sin(phi), np.cos(phi), np.tan(theta)
+    sec = 1.0 / np.cos(theta)
+    tmat = np.stack(
+        [
+            np.stack([np.ones_like(phi), s * tt, c * tt], -1),
+            np.stack([np.zeros_like(phi), c, -s], -1),
+            np.stack([np.zeros_like(phi), s * sec, c * sec], -1),
+        ],
+        -2,
+    )
+    rate_integral = cumulative_trapezoid(np.einsum("nij,nj->ni", tmat, gyro), t, axis=0, initial=0)
+    t_integral = cumulative_trapezoid(tmat, t, axis=0, initial=0)  # ∫ T_Θ dτ, [N, 3, 3]
+    n = t.size
+    design = np.zeros((3 * n, 6))
+    design[:, :3] = np.tile(np.eye(3), (n, 1))
+    design[:, 3:] = -t_integral.reshape(3 * n, 3)
+    target = (np.unwrap(angles, axis=0) - rate_integral).reshape(3 * n)
+    coef, *_ = np.linalg.lstsq(design, target, rcond=None)
+    return coef[3:]
+
+
+# --- the pipeline -----------------------------------------------------------------------------
+
+
+class PreprocessConfig(BaseModel):
+    """What preprocessing does to a log; everything off unless asked."""
+
+    model_config = ConfigDict(extra="forbid")
+    rate: float | None = Field(None, gt=0)
+    gap: float | None = Field(None, gt=0)
+    unwrap: bool = True
+    jumps: list[str] = Field(default_factory=list)
+    jump_threshold: float = Field(6.0, gt=0)
+    lowpass: list[str] = Field(default_factory=list)
+    cutoff: float = Field(5.0, gt=0)
+    savgol_window: float = Field(0.5, gt=0)
+    savgol_order: int = Field(4, ge=1, le=8)
+    velocities: Literal["keep", "derive", "replace"] = "keep"
+    accelerations: bool = False
+
+
+def preprocess(
+    log: pd.DataFrame, cfg: PreprocessConfig, report: CleaningReport | None = None
+) -> tuple[pd.DataFrame, CleaningReport]:
+    """Run the configured steps in order; return the log and the report."""
+    report = report or CleaningReport()
+    if cfg.rate:
+        log = resample_log(log, cfg.rate, cfg.gap, report)
+    if cfg.unwrap:
+        log = unwrap_angles(log, report)
+    if cfg.jumps:
+        log = repair_jumps(log, cfg.jumps, threshold=cfg.jump_threshold, report=report)
+    if cfg.lowpass:
+        log = lowpass(log, cfg.lowpass, cfg.cutoff, report=report)
+    if cfg.velocities != "keep":
+        log = derive_velocities(
+            log, cfg.savgol_window, cfg.savgol_order, report, overwrite=cfg.velocities == "replace"
+        )
+    if cfg.accelerations and not all(c in log for c in ACCELERATION):
+        log = derive_accelerations(log, cfg.savgol_window, cfg.savgol_order, report)
+    return log, report
