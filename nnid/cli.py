@@ -80,6 +80,64 @@ def simulate(
     )
 
 
+@app.command()
+@_input_errors
+def inspect(
+    log_path: Path = typer.Argument(..., metavar="LOG", help="Log file or data folder."),
+    columns: Path | None = typer.Option(
+        None, "--columns", help="Reader config (column map TOML) for logs not in nnid's format."
+    ),
+    out_dir: Path | None = typer.Option(
+        None, "--out", help="Also write summary.json and the cleaning report here."
+    ),
+) -> None:
+    """Show what a log holds: columns, rate, duration, experiments, gaps, derivable signals and
+    the excitation of each DOF."""
+    import json
+
+    from rich.table import Table
+
+    from nnid.datasets.inspect import summarize
+    from nnid.datasets.readers import load_log
+
+    log, report = load_log(log_path, columns)
+    info = summarize(log)
+    cols = info["columns"]
+    out.print(
+        f"[bold]{log_path}[/]: {info['samples']} samples, {info['duration_s']:.1f} s, "
+        f"{len(info['experiments'])} experiments, about {info['rate_hz']:.3g} Hz"
+    )
+    for group in ("pose", "velocity", "acceleration", "inputs", "other"):
+        out.print(f"  {group:13s} {', '.join(cols[group]) or '-'}")
+    out.print(f"  derivable     {', '.join(info['derivable']) or '-'}")
+    gaps = info["gaps"]
+    out.print(
+        f"  gaps          {len(gaps)}"
+        + (f" (longest {max(g['length_s'] for g in gaps):.3g} s)" if gaps else "")
+    )
+    table = Table(title="excitation per DOF")
+    for head in ("DOF", "velocity std", "force std", "force active"):
+        table.add_column(head)
+    for dof, e in info["excitation"].items():
+        table.add_row(
+            dof,
+            *(
+                f"{e[k]:.3g}" if k in e else "-"
+                for k in ("velocity_std", "force_std", "force_active_share")
+            ),
+        )
+    out.print(table)
+    for step in report.steps:
+        out.print(
+            f"  cleaning: {step.step}: {step.detail}"
+            + (f" ({step.rows_removed} rows removed)" if step.rows_removed else "")
+        )
+    if out_dir is not None:
+        out_dir.mkdir(parents=True, exist_ok=True)
+        (out_dir / "summary.json").write_text(json.dumps(info, indent=2))
+        report.write(out_dir)
+
+
 def _not_yet(name: str) -> None:
     err.print(f"nnid {name}: not implemented yet", highlight=False, soft_wrap=True)
     raise typer.Exit(2)

@@ -6,7 +6,8 @@ name = "liu-bluerov1-2016"
 root = "../../../shared/data/liu-bluerov1-2016"   # relative to this file; --data overrides
 rate = 50.0                   # Hz: resample every source onto one time base
 gap = 0.5                     # s: a longer gap splits an experiment instead of being bridged
-experiment = "run"            # column naming the run; "file" = the file stem; absent = one run
+experiment = "run"            # column naming the run; "file" = the file stem; absent = one run;
+                              # a list of columns joins their values with "/" ("test/AddWeight_0")
 include = "^(all|yaw)_"       # optional regex on experiment names (exclude likewise)
 drop_nonfinite = false        # true: drop NaN/inf rows and report the count; false: error
 vehicle = "bluerov1_liu.toml" # optional vehicle file, relative to this file
@@ -15,6 +16,9 @@ vehicle = "bluerov1_liu.toml" # optional vehicle file, relative to this file
 file = "thrusters.csv.gz"     # a path or glob under root (or a bag topic, an ArduPilot message)
 time = "t_unix_s"             # time column
 time_scale = 1.0              # to seconds (1e-9 for nanoseconds)
+row_clock = 20.0              # optional, Hz: t = row number within the experiment / row_clock,
+                              # for a time column too coarse to use (an hhmmss clock); time is
+                              # then still read but only the row order counts
 method = "hold"               # "hold" (zero-order, commands sent on change) or "linear"
 frame = "ned_frd"             # or "enu_flu": converted to NED/FRD after renaming
 quaternion = []               # [w, x, y, z] source columns -> phi theta psi
@@ -63,6 +67,7 @@ class Source(_Strict):
     file: str
     time: str
     time_scale: float = Field(1.0, gt=0)
+    row_clock: float | None = Field(None, gt=0)
     method: Literal["hold", "linear"] = "linear"
     frame: Literal["ned_frd", "enu_flu"] = "ned_frd"
     quaternion: list[str] = Field(default_factory=list)
@@ -89,7 +94,7 @@ class ColumnMap(_Strict):
     root: str | None = None
     rate: float | None = Field(None, gt=0)
     gap: float | None = Field(None, gt=0)
-    experiment: str | None = None
+    experiment: str | list[str] | None = None
     include: str | None = None
     exclude: str | None = None
     drop_nonfinite: bool = False
@@ -102,6 +107,13 @@ class ColumnMap(_Strict):
         if pattern is not None:
             re.compile(pattern)
         return pattern
+
+    @field_validator("experiment")
+    @classmethod
+    def _experiment(cls, experiment: str | list[str] | None) -> str | list[str] | None:
+        if isinstance(experiment, list) and (not experiment or "file" in experiment):
+            raise ValueError('a list names one or more columns (not "file")')
+        return experiment
 
     def keeps(self, experiment: str) -> bool:
         if self.include and not re.search(self.include, experiment):

@@ -37,6 +37,8 @@ def validate_log(
     """
     if "t" not in df.columns:
         raise NnidInputError("required column 't' (time in seconds) is missing", source=source)
+    if len(df) == 0:
+        raise NnidInputError("the log has no rows", source=source)
     motion = [c for c in (*POSE, *VELOCITY) if c in df.columns]
     if not motion:
         raise NnidInputError(

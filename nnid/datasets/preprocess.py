@@ -19,7 +19,7 @@ import numpy as np
 import pandas as pd
 from pydantic import BaseModel, ConfigDict, Field
 from scipy.integrate import cumulative_trapezoid
-from scipy.signal import butter, filtfilt, medfilt, savgol_coeffs, savgol_filter
+from scipy.signal import butter, filtfilt, savgol_coeffs, savgol_filter
 
 from nnid.datasets.cleaning import CleaningReport
 from nnid.datasets.log import ACCELERATION, ANGLES, POSE, VELOCITY, input_columns
@@ -268,11 +268,22 @@ def lowpass(
 def detect_jumps(
     y: np.ndarray, kernel: int = 7, threshold: float = 6.0, min_jump: float = 0.0
 ) -> np.ndarray:
-    """Samples that jump away from a running median by more than ``threshold`` robust standard
-    deviations (and ``min_jump``): motion-capture occlusions and glitches (Weiss V.A.2)."""
-    resid = y - medfilt(y, kernel)
+    """Samples that jump away from the median of their neighbours (the sample itself left
+    out) by more than ``threshold`` robust standard deviations and ``min_jump``: motion-capture
+    occlusions and glitches (Weiss V.A.2)."""
+    half = kernel // 2
+    padded = np.pad(np.asarray(y, dtype=np.float64), half, mode="edge")
+    windows = np.lib.stride_tricks.sliding_window_view(padded, 2 * half + 1)
+    neighbours = np.delete(windows, half, axis=1)
+    resid = y - np.median(neighbours, axis=1)
     sigma = 1.4826 * np.median(np.abs(resid - np.median(resid))) + 1e-12
-    return (np.abs(resid) > threshold * sigma) & (np.abs(resid) > min_jump)
+    size = np.abs(resid)
+    # a big jump also nudges its neighbours' reference; keep only samples that carry at least
+    # half the largest residual around them (a multi-frame occlusion keeps all its frames)
+    local_max = np.max(
+        np.lib.stride_tricks.sliding_window_view(np.pad(size, half, mode="edge"), kernel), axis=1
+    )
+    return (size > threshold * sigma) & (size > min_jump) & (size >= 0.5 * local_max)
 
 
 def repair_jumps(
@@ -289,7 +300,7 @@ def repair_jumps(
     for _, idx in experiments(out):
         t = out.loc[idx, "t"].to_numpy(np.float64)
         for c in columns:
-            y = out.loc[idx, c].to_numpy(np.float64)
+            y = out.loc[idx, c].to_numpy(np.float64, copy=True)
             bad = detect_jumps(y, kernel, threshold, min_jump)
             if bad.any() and (~bad).sum() >= 2:
                 y[bad] = np.interp(t[bad], t[~bad], y[~bad])

@@ -1,4 +1,5 @@
-"""Measured logs in: tables (CSV, Parquet) through a column map, onto one time base.
+"""Measured logs in: tables (CSV, Parquet), ROS bags and ArduPilot logs through a column map,
+onto one time base.
 
 Every reader (this one, ROS bags, ArduPilot logs) produces raw source tables; ``assemble`` maps
 their columns (names, units, frames, quaternions), resamples them onto a uniform time base per
@@ -91,14 +92,19 @@ def map_source(
     raw: pd.DataFrame,
     source: Source,
     origin: str,
-    experiment: str | None,
+    experiment: str | list[str] | None,
     drop_nonfinite: bool,
     report: CleaningReport,
 ) -> pd.DataFrame:
-    """Rename and convert one source table: columns ``t``, ``experiment`` and the mapped ones."""
+    """Rename and convert one source table: columns ``t``, ``experiment`` and the mapped ones.
+
+    ``experiment`` is a column, a list of columns (values joined with "/"), "file" (the file
+    stem) or None (one run).
+    """
     needed = [source.time, *source.quaternion, *(s.source for s in source.specs().values())]
-    if experiment and experiment != "file":
-        needed.append(experiment)
+    keys = [experiment] if isinstance(experiment, str) else list(experiment or [])
+    keys = [] if keys == ["file"] else keys
+    needed += keys
     for col in needed:
         if col not in raw.columns:
             raise NnidInputError(
@@ -106,7 +112,14 @@ def map_source(
                 f"{', '.join(map(str, raw.columns[:20]))}",
                 source=origin,
             )
-    numeric = [c for c in needed if c != experiment]
+    numeric = [c for c in needed if c not in keys]
+    if source.row_clock:  # counted before any row is dropped: a dropped row leaves a gap
+        rows = (
+            raw.groupby(keys, sort=False, dropna=False).cumcount().to_numpy(np.float64)
+            if keys
+            else np.arange(len(raw), dtype=np.float64)
+        )
+        clock = pd.Series(rows / source.row_clock, index=raw.index)
     values = raw[numeric].apply(pd.to_numeric, errors="coerce")
     bad = ~np.isfinite(values.to_numpy(dtype=np.float64))
     if bad.any():
@@ -128,11 +141,14 @@ def map_source(
         )
         raw, values = raw[keep], values[keep]
     out = pd.DataFrame(index=raw.index)
-    out["t"] = values[source.time].to_numpy(dtype=np.float64) * source.time_scale
+    if source.row_clock:
+        out["t"] = clock.loc[raw.index].to_numpy()
+    else:
+        out["t"] = values[source.time].to_numpy(dtype=np.float64) * source.time_scale
     if experiment == "file":
         out["experiment"] = Path(origin).name.split(".")[0]
-    elif experiment:
-        out["experiment"] = raw[experiment].astype(str).to_numpy()
+    elif keys:
+        out["experiment"] = raw[keys].astype(str).agg("/".join, axis=1).to_numpy()
     else:
         out["experiment"] = "0"
     for name, spec in source.specs().items():
@@ -150,8 +166,18 @@ def _grid(start: float, stop: float, rate: float) -> np.ndarray:
     return start + np.arange(int(np.floor((stop - start) * rate + 1e-9)) + 1) / rate
 
 
-def _resample(t_src: np.ndarray, values: np.ndarray, grid: np.ndarray, method: str):
-    """Values on ``grid`` and the mask of grid points each source sample pair supports."""
+def _resample(
+    t_src: np.ndarray,
+    values: np.ndarray,
+    grid: np.ndarray,
+    method: str,
+    circular: np.ndarray | None = None,
+):
+    """Values on ``grid`` and the mask of grid points each source sample pair supports.
+
+    Columns flagged in ``circular`` (angles) are interpolated unwrapped and wrapped back to
+    [-π, π), so a step across ±π is not interpolated through zero.
+    """
     order = np.argsort(t_src, kind="stable")
     t_src, values = t_src[order], values[order]
     t_src, first = np.unique(t_src, return_index=True)  # duplicated stamps: keep the first
@@ -160,7 +186,10 @@ def _resample(t_src: np.ndarray, values: np.ndarray, grid: np.ndarray, method: s
     if method == "hold":
         out = values[np.clip(idx, 0, len(t_src) - 1)]
     else:
+        wrap = np.zeros(values.shape[1], bool) if circular is None else circular
+        values = np.where(wrap, np.unwrap(values, axis=0), values)
         out = np.stack([np.interp(grid, t_src, values[:, k]) for k in range(values.shape[1])], 1)
+        out = np.where(wrap, (out + np.pi) % (2 * np.pi) - np.pi, out)
     return out, t_src
 
 
@@ -198,7 +227,11 @@ def assemble(
         for source, df in parts:
             names = [c for c in df.columns if c not in ("t", "experiment")]
             values, t_src = _resample(
-                df["t"].to_numpy(), df[names].to_numpy(np.float64), grid, source.method
+                df["t"].to_numpy(),
+                df[names].to_numpy(np.float64),
+                grid,
+                source.method,
+                np.isin(names, ANGLES),
             )
             columns.update(dict(zip(names, values.T, strict=True)))
             if cmap.gap and source.method == "linear":
@@ -237,11 +270,10 @@ def _natural(name: str):
     return [int(s) if s.isdigit() else s for s in re.split(r"(\d+)", name)]
 
 
-def read_mapped(
-    cmap: ColumnMap, root: Path, report: CleaningReport | None = None
-) -> tuple[pd.DataFrame, CleaningReport]:
-    """Read every source of a column map under ``root`` and assemble the log."""
-    report = report or CleaningReport(source=cmap.name)
+def read_table_sources(
+    cmap: ColumnMap, root: Path, report: CleaningReport
+) -> list[tuple[Source, pd.DataFrame]]:
+    """Every source of a column map read from the tables under ``root``, mapped, not assembled."""
     tables = []
     for i, source in enumerate(cmap.sources):
         files = sorted(glob.glob(str(root / source.file)), key=_natural)
@@ -259,7 +291,27 @@ def read_mapped(
         report.add(
             "read", f"{source.file}: {sum(len(f) for f in frames)} rows from {len(files)} files"
         )
-    return assemble(tables, cmap, report), report
+    return tables
+
+
+def read_mapped(
+    cmap: ColumnMap, root: Path, report: CleaningReport | None = None
+) -> tuple[pd.DataFrame, CleaningReport]:
+    """Read every source of a column map under ``root`` and assemble the log."""
+    report = report or CleaningReport(source=cmap.name)
+    return assemble(read_table_sources(cmap, root, report), cmap, report), report
+
+
+def _log_reader(path: Path):
+    """The source reader for a bag or an ArduPilot log at ``path``, else None (a table)."""
+    from nnid.datasets.ardupilot import is_ardupilot_log, read_ardupilot_sources
+    from nnid.datasets.rosbag import is_bag, read_bag_sources
+
+    if is_bag(path):
+        return "ROS bag", "topics", read_bag_sources
+    if is_ardupilot_log(path):
+        return "ArduPilot log", "message types", read_ardupilot_sources
+    return None
 
 
 def load_log(
@@ -268,9 +320,23 @@ def load_log(
     """A log file in the contract, or any table/folder read through a column map.
 
     ``columns`` is the reader config (``--columns MAP.toml``); with it, ``path`` is the data
-    root or file the config's sources are found under. Returns the validated log and the
-    cleaning report.
+    root or file the config's sources are found under. A ROS bag (``.bag``, ``.db3``, ``.mcap``
+    or a ROS 2 bag folder) or an ArduPilot log (``.bin``, ``.tlog``) needs the config, whose
+    sources name topics or message types. Returns the validated log and the cleaning report.
     """
+    special = _log_reader(Path(path))
+    if special is not None:
+        kind, what, read_sources = special
+        if columns is None:
+            raise NnidInputError(
+                f"a {kind} needs a reader config (--columns MAP.toml) naming the {what} to read "
+                "and the log columns they become",
+                source=str(path),
+            )
+        cmap = load_column_map(columns)
+        report = CleaningReport(source=str(path))
+        df = assemble(read_sources(path, cmap, report), cmap, report)
+        return validate_log(df, source=f"{path} (through {columns})"), report
     if columns is None:
         report = CleaningReport(source=str(path))
         df = read_table(path)

@@ -1,0 +1,160 @@
+"""ROS 1 and ROS 2 bags in, through the ``rosbags`` package (the ``ros`` extra).
+
+With a bag, each ``[[sources]]`` entry of the reader config names a TOPIC in ``file``
+(``file = "/imu/data"``). Every message of that topic becomes one row whose columns are the
+message's fields as dotted paths, with
+
+- nested messages flattened: ``angular_velocity.x``, ``pose.pose.position.x``;
+- times and durations (``builtin_interfaces/Time``, ROS 1 ``time``) as float seconds:
+  ``header.stamp``;
+- arrays expanded element by element: ``data.0``, ``data.1``, ``channels.0.values.2``
+  (arrays longer than :data:`MAX_ARRAY` elements, such as images, are left out);
+- ``t_recv``: the time the recorder received the message (s, the bag's own timestamp).
+
+The raw table then goes through :func:`nnid.datasets.readers.map_source` like any table, so the
+units, frames and quaternions of the column map apply unchanged. The experiment is the bag's
+stem (``run_3.bag`` -> ``run_3``) unless the column map names an experiment column.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from nnid.datasets.cleaning import CleaningReport
+from nnid.datasets.column_map import ColumnMap, Source
+from nnid.errors import NnidInputError
+
+MAX_ARRAY = 256
+"""Arrays with more elements than this are not expanded into columns."""
+
+BAG_SUFFIXES = (".bag", ".db3", ".mcap")
+_TIME_TYPES = ("builtin_interfaces/msg/Time", "builtin_interfaces/msg/Duration")
+_MISSING = "reading ROS bags needs the 'ros' extra: pip install 'nnid[ros]'"
+
+
+def is_bag(path: str | Path) -> bool:
+    """A ROS 1 ``.bag``, a ROS 2 ``.db3``/``.mcap`` file, or a ROS 2 bag folder."""
+    path = Path(path)
+    if path.is_dir():
+        return (path / "metadata.yaml").is_file()
+    return path.suffix.lower() in BAG_SUFFIXES
+
+
+def _any_reader(path: Path) -> Any:
+    """rosbags' AnyReader class, or the NnidInputError that says how to install it."""
+    try:
+        from rosbags.highlevel import AnyReader
+    except ImportError:
+        raise NnidInputError(_MISSING, source=str(path)) from None
+    return AnyReader
+
+
+def _default_typestore() -> Any:
+    """Message definitions for ROS 2 bags that do not carry their own."""
+    from rosbags.typesys import Stores, get_typestore
+
+    return get_typestore(getattr(Stores, "LATEST", Stores.ROS2_HUMBLE))
+
+
+def flatten_message(msg: Any, prefix: str = "", out: dict[str, Any] | None = None) -> dict:
+    """One deserialized message as ``{dotted.field.path: value}`` (see the module docstring)."""
+    out = {} if out is None else out
+    if getattr(msg, "__msgtype__", None) in _TIME_TYPES:
+        out[prefix.rstrip(".")] = msg.sec + msg.nanosec * 1e-9
+        return out
+    if dataclasses.is_dataclass(msg):
+        for f in dataclasses.fields(msg):
+            if not f.name.startswith("__"):
+                flatten_message(getattr(msg, f.name), f"{prefix}{f.name}.", out)
+        return out
+    name = prefix.rstrip(".")
+    if isinstance(msg, np.ndarray) and msg.dtype.kind in "biuf":
+        if msg.size <= MAX_ARRAY:
+            out.update({f"{prefix}{i}": v for i, v in enumerate(msg.ravel().tolist())})
+        return out
+    if isinstance(msg, np.ndarray | list | tuple):
+        if len(msg) <= MAX_ARRAY:
+            for i, item in enumerate(msg):
+                flatten_message(item, f"{prefix}{i}.", out)
+        return out
+    if isinstance(msg, np.generic):
+        msg = msg.item()
+    out[name] = msg
+    return out
+
+
+def _read_topics(path: Path, topics: list[str]) -> dict[str, list[dict[str, Any]]]:
+    """Flattened rows of every message on ``topics``; NnidInputError for unreadable bags."""
+    any_reader = _any_reader(path)
+    rows: dict[str, list[dict[str, Any]]] = {t: [] for t in topics}
+    try:
+        with any_reader([path], default_typestore=_default_typestore()) as reader:
+            present = sorted({c.topic for c in reader.connections})
+            missing = [t for t in topics if t not in present]
+            if missing:
+                raise NnidInputError(
+                    f"topic '{missing[0]}' is not in the bag; its topics are "
+                    f"{', '.join(present) or '(none)'}",
+                    source=str(path),
+                )
+            wanted = [c for c in reader.connections if c.topic in rows]
+            for conn, stamp, data in reader.messages(connections=wanted):
+                row = flatten_message(reader.deserialize(data, conn.msgtype))
+                row["t_recv"] = stamp * 1e-9
+                rows[conn.topic].append(row)
+    except NnidInputError:
+        raise
+    except Exception as err:  # rosbags raises many types for truncated or corrupt bags
+        hint = (
+            "; a ROS 1 bag whose recording was cut short can be repaired with 'rosbag reindex'"
+            if path.suffix.lower() == ".bag"
+            else ""
+        )
+        raise NnidInputError(
+            f"cannot be read as a ROS bag ({type(err).__name__}: {err}){hint}", source=str(path)
+        ) from None
+    return rows
+
+
+def read_bag_sources(
+    path: str | Path, cmap: ColumnMap, report: CleaningReport
+) -> list[tuple[Source, pd.DataFrame]]:
+    """Each source of ``cmap`` read from the bag at ``path`` and mapped by ``map_source``.
+
+    ``source.file`` is a topic name. Returns ``(source, mapped table)`` pairs ready for
+    :func:`nnid.datasets.readers.assemble`.
+    """
+    from nnid.datasets.readers import map_source
+
+    path = Path(path)
+    if not path.exists():
+        raise NnidInputError("file not found", source=str(path))
+    rows = _read_topics(path, list(dict.fromkeys(s.file for s in cmap.sources)))
+    stem = path.name if path.is_dir() else path.stem
+    by_stem = cmap.experiment in (None, "file")
+    tables = []
+    for i, source in enumerate(cmap.sources):
+        origin = f"{path}:{source.file}"
+        if not rows[source.file]:
+            raise NnidInputError(
+                f"topic '{source.file}' has no messages", source=str(path), field=f"sources.{i}"
+            )
+        raw = pd.DataFrame(rows[source.file])
+        mapped = map_source(
+            raw,
+            source,
+            origin,
+            None if by_stem else cmap.experiment,
+            cmap.drop_nonfinite,
+            report,
+        )
+        if by_stem:
+            mapped["experiment"] = stem
+        report.add("read", f"{origin}: {len(raw)} messages")
+        tables.append((source, mapped))
+    return tables

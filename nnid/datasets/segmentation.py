@@ -1,0 +1,130 @@
+"""Transient / steady-state labels and a sampler that weighs them equally (Weiss V.B).
+
+Weiss found that a network trained on a log that is mostly steady state misses the transients.
+The rule that labels a sample *transient*, per DOF and experiment:
+
+1. the body acceleration a_k: Savitzky-Golay derivative of the velocity (``window_s``, cubic),
+   or the logged ``d<v>`` when there is no velocity column;
+2. its noise level n_k: the velocity's white-noise level (robust spread of the velocity about
+   its SG fit) times the filter's noise gain sqrt(Σcₖ²) (filter theory), or, for logged
+   accelerations, the robust spread of their first differences / sqrt(2);
+3. its manoeuvre scale s_k: the 99th percentile of |a_k|;
+4. a sample is transient when any DOF with s_k > 3 n_k has |a_k| > max(rel · s_k, 3 n_k)
+   (rel = 0.1 by default), and the labels are dilated by ``hold`` seconds so the tail of each
+   manoeuvre counts with it.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+from scipy.ndimage import binary_dilation
+from scipy.signal import savgol_filter
+
+from nnid.datasets.log import VELOCITY
+from nnid.datasets.preprocess import (
+    experiments,
+    savgol_derivative,
+    savgol_noise_gain,
+    savgol_window,
+)
+
+
+def _robust_sigma(x: np.ndarray) -> float:
+    return float(1.4826 * np.median(np.abs(x - np.median(x))))
+
+
+def accelerations_with_noise(
+    log: pd.DataFrame, window_s: float = 1.0, order: int = 3
+) -> tuple[pd.DataFrame, dict[str, float]]:
+    """Body accelerations per DOF present, and the noise level of each (see module rule)."""
+    acc, noise = {}, {}
+    for c in VELOCITY:
+        if c in log:
+            col, sig = np.empty(len(log)), []
+            for name, idx in experiments(log):
+                pos = log.index.get_indexer(idx)
+                v = log[c].to_numpy(np.float64)[pos]
+                dt = float(np.median(np.diff(log["t"].to_numpy(np.float64)[pos])))
+                w = savgol_window(window_s, 1.0 / dt, order)
+                col[pos] = savgol_derivative(v, dt, w, order, where=f"experiment {name!r}")
+                sigma_v = _robust_sigma(v - savgol_filter(v, w, order, mode="interp"))
+                sig.append(sigma_v * savgol_noise_gain(w, order, dt))
+            acc[c], noise[c] = col, float(np.median(sig))
+        elif "d" + c in log:
+            a = log["d" + c].to_numpy(np.float64)
+            acc[c], noise[c] = a, _robust_sigma(np.diff(a)) / np.sqrt(2)
+    if not acc:
+        raise ValueError("labelling transients needs body velocities or accelerations")
+    return pd.DataFrame(acc, index=log.index), noise
+
+
+def label_transients(
+    log: pd.DataFrame, rel: float = 0.1, hold: float = 0.5, window_s: float = 1.0
+) -> pd.Series:
+    """Boolean Series, True where the sample is transient (rule in the module docstring)."""
+    acc, noise = accelerations_with_noise(log, window_s)
+    labels = np.zeros(len(log), dtype=bool)
+    for c in acc.columns:
+        a = np.abs(acc[c].to_numpy())
+        scale = np.percentile(a, 99)
+        if scale <= 3 * noise[c]:
+            continue  # a DOF that never moves beyond its noise
+        labels |= a > max(rel * scale, 3 * noise[c])
+    out = np.zeros_like(labels)
+    for _, idx in experiments(log):
+        pos = log.index.get_indexer(idx)
+        t = log["t"].to_numpy(np.float64)[pos]
+        steps = max(0, round(hold / float(np.median(np.diff(t)))))
+        seg = labels[pos]
+        out[pos] = binary_dilation(seg, iterations=steps) if steps and seg.any() else seg
+    return pd.Series(out, index=log.index, name="transient")
+
+
+class BalancedSampler:
+    """Draws training samples (window ends) so that transient and steady-state samples carry
+    equal total weight; any trainer can use it. Deterministic for a seed.
+
+    ``window`` is the history a sample needs (NARX delays): the first ``window − 1`` samples of
+    each experiment are not eligible. With ``balance=False`` every eligible sample weighs the
+    same (the raw log).
+    """
+
+    def __init__(
+        self,
+        labels: pd.Series | np.ndarray,
+        experiment: np.ndarray | None = None,
+        window: int = 1,
+        balance: bool = True,
+        seed: int = 0,
+    ) -> None:
+        self.labels = np.asarray(labels, dtype=bool)
+        n = self.labels.size
+        experiment = np.zeros(n) if experiment is None else np.asarray(experiment)
+        eligible = np.ones(n, dtype=bool)
+        starts = np.flatnonzero(np.r_[True, experiment[1:] != experiment[:-1]])
+        for s in starts:
+            eligible[s : s + window - 1] = False
+        self.eligible = eligible
+        self.balance = balance
+        self.seed = seed
+
+    def weights(self) -> np.ndarray:
+        """Per-sample probability; transient and steady each sum to 0.5 when both exist."""
+        w = self.eligible.astype(float)
+        if self.balance:
+            trans, steady = self.eligible & self.labels, self.eligible & ~self.labels
+            if trans.any() and steady.any():
+                w[trans] = 0.5 / trans.sum()
+                w[steady] = 0.5 / steady.sum()
+        return w / w.sum()
+
+    def sample(self, n: int, epoch: int = 0) -> np.ndarray:
+        """``n`` sample indices drawn with replacement (a new, reproducible draw per epoch)."""
+        rng = np.random.default_rng([self.seed, epoch])
+        return rng.choice(self.labels.size, size=n, replace=True, p=self.weights())
+
+    def transient_share(self, indices: np.ndarray | None = None) -> float:
+        """Share of transient samples among ``indices`` (or among eligible samples)."""
+        idx = np.flatnonzero(self.eligible) if indices is None else np.asarray(indices)
+        return float(self.labels[idx].mean())

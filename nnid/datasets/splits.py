@@ -1,0 +1,93 @@
+"""Train / validation / test splits that never leak across time.
+
+By experiment (whole runs go to one part) or in contiguous blocks within each experiment
+(70/15/15 by default, MATLAB's divideblock). Random samples across time are never used for
+validation: neighbouring samples of a log are strongly correlated, so a random split would
+report training error as validation error. A split records what went where.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import pandas as pd
+
+from nnid.datasets.preprocess import experiments
+from nnid.errors import NnidInputError
+
+PARTS = ("train", "validation", "test")
+
+
+@dataclass
+class Split:
+    train: pd.DataFrame
+    validation: pd.DataFrame
+    test: pd.DataFrame
+    record: dict = field(default_factory=dict)
+
+    def __getitem__(self, part: str) -> pd.DataFrame:
+        return getattr(self, part)
+
+
+def split_log(
+    log: pd.DataFrame,
+    by: str = "block",
+    fractions: tuple[float, float, float] = (0.7, 0.15, 0.15),
+    assignment: dict[str, list[str]] | None = None,
+) -> Split:
+    """Split a log. ``by="block"``: each experiment is cut into contiguous train, validation and
+    test blocks. ``by="experiment"``: whole experiments, either as ``assignment``
+    (``{"train": [...], "validation": [...], "test": [...]}``) or in order of appearance until
+    each part holds its fraction of the samples."""
+    if len(fractions) != 3 or min(fractions) < 0 or not np.isclose(sum(fractions), 1.0):
+        raise NnidInputError(
+            "split fractions must be three non-negative numbers summing to 1", field="fractions"
+        )
+    parts: dict[str, list[pd.DataFrame]] = {p: [] for p in PARTS}
+    record: dict = {"by": by, "fractions": list(fractions), "parts": {p: [] for p in PARTS}}
+    groups = experiments(log)
+    if by == "block":
+        for name, idx in groups:
+            part = log.loc[idx]
+            n = len(part)
+            cuts = np.round(np.cumsum(fractions)[:2] * n).astype(int)
+            for p, (a, b) in zip(
+                PARTS, [(0, cuts[0]), (cuts[0], cuts[1]), (cuts[1], n)], strict=True
+            ):
+                if b > a:
+                    parts[p].append(part.iloc[a:b])
+                    record["parts"][p].append({"experiment": name, "rows": [int(a), int(b)]})
+    elif by == "experiment":
+        names = [name for name, _ in groups]
+        if assignment is not None:
+            unknown = sorted(set().union(*assignment.values()) - set(names))
+            if unknown:
+                raise NnidInputError(
+                    f"experiments {unknown} are not in the log", field="assignment"
+                )
+            chosen = {p: assignment.get(p, []) for p in PARTS}
+        else:
+            if len(names) < 2:
+                raise NnidInputError(
+                    "splitting by experiment needs at least two experiments; use by='block'",
+                    field="by",
+                )
+            sizes = np.array([len(idx) for _, idx in groups], dtype=float)
+            edges = np.cumsum(fractions)[:2] * sizes.sum()
+            centre = np.cumsum(sizes) - sizes / 2
+            which = np.searchsorted(edges, centre)
+            chosen = {
+                p: [n for n, w in zip(names, which, strict=True) if w == k]
+                for k, p in enumerate(PARTS)
+            }
+        index = dict(groups)
+        for p in PARTS:
+            for name in chosen[p]:
+                parts[p].append(log.loc[index[name]])
+                record["parts"][p].append({"experiment": name, "rows": [0, len(index[name])]})
+    else:
+        raise NnidInputError(f"unknown split '{by}'; expected 'block' or 'experiment'", field="by")
+    frames = {p: (pd.concat(v) if v else log.iloc[0:0]) for p, v in parts.items()}
+    record["samples"] = {p: len(f) for p, f in frames.items()}
+    return Split(frames["train"], frames["validation"], frames["test"], record)

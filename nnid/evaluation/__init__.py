@@ -1,0 +1,1 @@
+"""Metrics, prediction modes and data diagnostics shared by every model."""

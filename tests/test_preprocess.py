@@ -1,0 +1,136 @@
+"""Preprocessing against analytic trajectories and filter theory."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from nnid.datasets.cleaning import CleaningReport
+from nnid.datasets.excitation import Multisine
+from nnid.datasets.measurement import Measurement
+from nnid.datasets.preprocess import (
+    derive_velocities,
+    detect_jumps,
+    estimate_accelerometer_bias,
+    estimate_gyro_bias,
+    lowpass,
+    repair_jumps,
+    resample_log,
+    savgol_derivative,
+    savgol_noise_gain,
+    savgol_window,
+    unwrap_angles,
+)
+from nnid.datasets.simulator import simulate
+from nnid.errors import NnidInputError
+from nnid.vehicle import load_vehicle
+
+
+@pytest.mark.parametrize(
+    "rate, window, sigma, period",
+    [(3.3, 21, 0.01, 26.0), (100.0, 51, 0.001, 10.0)],  # Caccia IV-D: 21 points at 3.3 Hz
+)
+def test_savgol_velocity_error_matches_filter_theory(rate, window, sigma, period):
+    """Error of the SG derivative of a noisy analytic pose = sqrt(bias² + (σ·sqrt(Σcₖ²))²):
+    the bias from the noise-free signal, the noise from the filter's coefficient energy."""
+    rng = np.random.default_rng(0)
+    t = np.arange(0, 2000, 1 / rate)
+    w = 2 * np.pi / period
+    x, dx = 0.8 * np.sin(w * t) + 0.01 * t, 0.8 * w * np.cos(w * t) + 0.01
+    dt = 1 / rate
+    clean = savgol_derivative(x, dt, window, 4)
+    inner = slice(window, -window)
+    bias = np.sqrt(np.mean((clean - dx)[inner] ** 2))
+    noisy = savgol_derivative(x + rng.normal(0, sigma, t.size), dt, window, 4)
+    err = np.sqrt(np.mean((noisy - dx)[inner] ** 2))
+    predicted = np.sqrt(bias**2 + (sigma * savgol_noise_gain(window, 4, dt)) ** 2)
+    assert err == pytest.approx(predicted, rel=0.05)
+    assert err < 0.05 * 0.8 * w  # a few percent of the speed, as Caccia reports (< 3 %)
+
+
+def _six_dof_log(measurement, seconds=60.0):
+    t = np.arange(0, seconds, 0.01)
+    amps = [30, 20, 20, 3, 0, 3]
+    columns = []
+    for k, a in enumerate(amps):
+        sig = Multisine(channel="X", amplitude=max(a, 1), f_min=0.05 + 0.01 * k, f_max=0.5, n=5,
+                        duration=seconds)(t)  # fmt: skip
+        columns.append(sig if a else 0 * t)
+    inputs = np.stack(columns, 1)
+    return simulate(load_vehicle("seamor"), inputs, 0.01, measurement=measurement)
+
+
+def test_body_velocities_from_noisy_mocap_pose():
+    """ν = J⁻¹(η) η̇ from 100 Hz pose with 1 mm / 2 mrad noise: each DOF within the noise the
+    SG filter predicts (rotations keep the norm, so the prediction carries over)."""
+    sigma_p, sigma_a = 0.001, 0.002
+    log = _six_dof_log(Measurement(kind="mocap", position_noise=sigma_p, angle_noise=sigma_a,
+                                   truth=True))  # fmt: skip
+    report = CleaningReport()
+    out = derive_velocities(log, 0.5, 4, report)
+    gain = savgol_noise_gain(savgol_window(0.5, 100, 4), 4, 0.01)
+    for c, sigma in zip("uvwpqr", [sigma_p] * 3 + [sigma_a] * 3, strict=True):
+        err = (out[c] - out["true_" + c]).to_numpy()[60:-60]
+        assert np.sqrt(np.mean(err**2)) < 1.3 * sigma * gain, c
+    assert report.steps[-1].columns == list("uvwpqr")
+
+
+def test_bias_estimation_recovers_injected_biases():
+    """McCarter eqs 2.84-2.87: constant accelerometer and gyro biases within 5 %."""
+    log = _six_dof_log(Measurement(kind="none"), seconds=120)
+    t = log["t"].to_numpy()
+    acc_bias, gyro_bias = np.array([0.05, -0.03, 0.02]), np.array([0.01, -0.02, 0.015])
+    rng = np.random.default_rng(1)
+    vel = log[["u", "v", "w"]].to_numpy() + rng.normal(0, 0.005, (t.size, 3))  # DVL noise
+    acc = log[["du", "dv", "dw"]].to_numpy() + acc_bias + rng.normal(0, 0.02, (t.size, 3))
+    gyro = log[["p", "q", "r"]].to_numpy() + gyro_bias + rng.normal(0, 0.002, (t.size, 3))
+    att = log[["phi", "theta", "psi"]].to_numpy() + rng.normal(0, 0.002, (t.size, 3))
+    assert np.allclose(estimate_accelerometer_bias(t, vel, acc), acc_bias, rtol=0.05)
+    assert np.allclose(estimate_gyro_bias(t, att, gyro), gyro_bias, rtol=0.05)
+
+
+def test_resample_splits_at_gaps_and_holds_inputs():
+    t = np.r_[np.arange(0, 5, 0.013), np.arange(8, 12, 0.013)]
+    log = pd.DataFrame({"t": t, "u": t * 2.0, "tau_X": np.floor(t)})
+    report = CleaningReport()
+    out = resample_log(log, 20.0, gap=1.0, report=report)
+    assert list(dict.fromkeys(out["experiment"])) == ["None#0", "None#1"]
+    first = out[out["experiment"] == "None#0"]
+    assert np.allclose(np.diff(first["t"]), 0.05)
+    assert np.allclose(first["u"], first["t"] * 2.0)  # linear signals interpolate exactly
+    assert set(np.unique(first["tau_X"])) <= set(range(6))  # inputs are held, never blended
+    assert "split in 2" in report.steps[0].detail
+
+
+def test_unwrap_and_degree_guard():
+    psi = np.angle(np.exp(1j * np.linspace(0, 20, 500)))
+    log = pd.DataFrame({"t": np.arange(500) * 0.1, "psi": psi})
+    out = unwrap_angles(log)
+    assert np.allclose(out["psi"], np.linspace(0, 20, 500))
+
+
+def test_lowpass_is_zero_phase_and_rejects_short_logs():
+    t = np.arange(0, 20, 0.01)
+    slow = np.sin(2 * np.pi * 0.2 * t)
+    noisy = slow + 0.2 * np.sin(2 * np.pi * 30 * t)
+    out = lowpass(pd.DataFrame({"t": t, "u": noisy}), ["u"], cutoff=2.0)
+    assert np.abs(out["u"] - slow)[200:-200].max() < 0.01  # no delay, no ripple
+    with pytest.raises(NnidInputError, match="too few for the low-pass"):
+        lowpass(pd.DataFrame({"t": t[:10], "u": noisy[:10]}), ["u"], cutoff=2.0)
+    with pytest.raises(NnidInputError, match="too few for the Savitzky-Golay"):
+        savgol_derivative(noisy[:11], 0.01, 21, 4)
+
+
+def test_occlusion_jumps_are_found_and_repaired():
+    rng = np.random.default_rng(3)
+    t = np.arange(0, 30, 0.01)
+    x = np.sin(0.5 * t) + rng.normal(0, 0.001, t.size)
+    jumped = x.copy()
+    spikes = [500, 1200, 2500]
+    jumped[spikes] += [0.3, -0.5, 0.2]  # the tracker swaps markers for a frame
+    assert set(np.flatnonzero(detect_jumps(jumped))) == set(spikes)
+    report = CleaningReport()
+    fixed = repair_jumps(pd.DataFrame({"t": t, "x": jumped}), ["x"], report=report)
+    assert np.abs(fixed["x"] - x).max() < 0.01
+    assert report.steps[0].detail.startswith("3 samples")

@@ -1,0 +1,209 @@
+"""Tables through a column map, `nnid inspect`, and bad input: one error naming file, column
+and row, exit code 2; property-based tests of the CSV reader."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+from typer.testing import CliRunner
+
+from nnid.cli import app
+from nnid.datasets.log import validate_log
+from nnid.datasets.readers import (
+    euler_from_rotation,
+    load_log,
+    rotation_from_euler,
+    rotation_from_quaternion,
+)
+from nnid.errors import NnidInputError
+
+runner = CliRunner()
+
+
+def _write_map(path, body):
+    path.write_text(body)
+    return path
+
+
+def _sensor_tables(root):
+    t = np.arange(0, 10, 0.013) + 1.6e9
+    nav = pd.DataFrame({"run": "r1", "time": t, "yaw_deg": np.degrees(0.1 * (t - t[0])),
+                        "depth": 0.5 + 0.01 * (t - t[0])})  # fmt: skip
+    nav.to_csv(root / "nav.csv", index=False)
+    tc = t[0] + np.array([0.0, 2.5, 5.1, 7.0])
+    pd.DataFrame({"run": "r1", "time": tc, "pwm": [1500, 1700, 1300, 1500]}).to_csv(
+        root / "cmd.csv", index=False
+    )
+
+
+MAP = """
+rate = 20.0
+gap = 0.5
+experiment = "run"
+[[sources]]
+file = "nav.csv"
+time = "time"
+columns = { psi = { from = "yaw_deg", unit = "deg" }, z = "depth" }
+[[sources]]
+file = "cmd.csv"
+time = "time"
+method = "hold"
+columns = { cmd_1 = { from = "pwm", offset = -1500, scale = 0.0025 } }
+"""
+
+
+def test_multi_rate_sources_onto_one_time_base(tmp_path):
+    _sensor_tables(tmp_path)
+    log, report = load_log(tmp_path, _write_map(tmp_path / "map.toml", MAP))
+    assert np.allclose(np.diff(log["t"]), 0.05) and log["t"].iloc[0] == 0
+    assert np.allclose(log["psi"], 0.1 * log["t"], atol=1e-9)  # degrees became radians
+    assert np.allclose(log["z"], 0.5 + 0.01 * log["t"])
+
+    def held(t):
+        return log["cmd_1"].to_numpy()[np.argmin(np.abs(log["t"].to_numpy() - t))]
+
+    assert held(2.45) == 0.0 and held(2.5) == 0.5 and held(5.15) == -0.5  # zero-order hold
+    assert log["t"].iloc[-1] == pytest.approx(9.99, abs=0.05)  # the last command holds on
+    assert any(s.step == "resample" for s in report.steps)
+
+
+def test_gap_splits_instead_of_bridging(tmp_path):
+    _sensor_tables(tmp_path)
+    nav = pd.read_csv(tmp_path / "nav.csv")
+    nav = nav[(nav["time"] - nav["time"].iloc[0] < 3) | (nav["time"] - nav["time"].iloc[0] > 4)]
+    nav.to_csv(tmp_path / "nav.csv", index=False)
+    log, report = load_log(tmp_path, _write_map(tmp_path / "map.toml", MAP))
+    assert list(dict.fromkeys(log["experiment"])) == ["r1#0", "r1#1"]
+    assert any(s.step == "split at gaps" and s.rows_removed > 0 for s in report.steps)
+
+
+def test_enu_flu_and_quaternions(tmp_path):
+    """A vehicle heading north-east in ENU (yaw 45° from east = 45° from north) with FLU body
+    velocities: NED/FRD gives ψ = 45°, x = y, z = −up, v = −v_FLU."""
+    n = 50
+    yaw_enu = np.pi / 4
+    q = [math.cos(yaw_enu / 2), 0.0, 0.0, math.sin(yaw_enu / 2)]
+    df = pd.DataFrame({"t": np.arange(n) * 0.1, "px": 1.0, "py": 1.0, "pz": -2.0,
+                       "qw": q[0], "qx": q[1], "qy": q[2], "qz": q[3],
+                       "vx": 0.3, "vy": 0.1, "vz": 0.05, "f": 1.0})  # fmt: skip
+    df.to_csv(tmp_path / "odom.csv", index=False)
+    cmap = """
+[[sources]]
+file = "odom.csv"
+time = "t"
+frame = "enu_flu"
+quaternion = ["qw", "qx", "qy", "qz"]
+columns = { x = "px", y = "py", z = "pz", u = "vx", v = "vy", w = "vz", tau_X = "f" }
+"""
+    log, _ = load_log(tmp_path, _write_map(tmp_path / "map.toml", cmap))
+    row = log.iloc[0]
+    assert (row["x"], row["y"], row["z"]) == pytest.approx((1.0, 1.0, 2.0))
+    assert (row["phi"], row["theta"], row["psi"]) == pytest.approx((0.0, 0.0, np.pi / 4))
+    assert (row["u"], row["v"], row["w"]) == pytest.approx((0.3, -0.1, -0.05))
+
+
+def test_quaternion_euler_round_trip(rng):
+    angles = np.stack([rng.uniform(-3, 3, 200), rng.uniform(-1.5, 1.5, 200),
+                       rng.uniform(-3, 3, 200)], 1)  # fmt: skip
+    rot = rotation_from_euler(angles)
+    assert np.allclose(euler_from_rotation(rot), angles, atol=1e-9)
+    # rotation about z by a quaternion matches the Euler yaw
+    q = np.array([math.cos(0.3), 0, 0, math.sin(0.3)])
+    assert np.allclose(rotation_from_quaternion(q), rotation_from_euler(np.array([0, 0, 0.6])))
+
+
+def test_nan_rows_error_or_dropped_with_count(tmp_path):
+    _sensor_tables(tmp_path)
+    nav = pd.read_csv(tmp_path / "nav.csv")
+    nav.loc[[10, 20, 21], "depth"] = np.nan
+    nav.to_csv(tmp_path / "nav.csv", index=False)
+    with pytest.raises(NnidInputError) as info:
+        load_log(tmp_path, _write_map(tmp_path / "map.toml", MAP))
+    msg = str(info.value)
+    assert "nav.csv" in msg and "column 'depth'" in msg and "row 10" in msg and "3 rows" in msg
+    log, report = load_log(
+        tmp_path, _write_map(tmp_path / "map2.toml", "drop_nonfinite = true\n" + MAP)
+    )
+    dropped = [s for s in report.steps if s.step == "drop non-finite"]
+    assert dropped and dropped[0].rows_removed == 3 and np.isfinite(log["z"]).all()
+
+
+BAD = """t,x,y,z,phi,theta,psi,tau_X
+0.0,0,0,0,0,0,0,1
+0.1,0,0,0,0,0,0,1
+0.2,0,0,0,0,0,0,1
+"""
+
+
+@pytest.mark.parametrize(
+    "text, words",
+    [
+        (BAD.replace("t,x", "time,x"), "required column 't'"),
+        (BAD.replace("0.2,0", "0.1,0"), "column 't', row 2"),
+        (BAD.replace("0.1,0,0,0,0,0", "0.1,0,nan,0,0,0"), "column 'y', row 1"),
+        (BAD.replace("0.2,0,0,0,0,0,0", "0.2,0,0,0,0,0,170"), "looks like degrees"),
+        (BAD[:-8], "row 2"),  # truncated mid-row: the short row is named
+    ],
+)
+def test_inspect_bad_logs_exit_2_with_one_line(tmp_path, text, words):
+    path = tmp_path / "run.csv"
+    path.write_text(text)
+    result = runner.invoke(app, ["inspect", str(path)])
+    assert result.exit_code == 2, result.output
+    assert words in result.output and "run.csv" in result.output
+    assert len(result.output.strip().splitlines()) == 1
+
+
+def test_inspect_reports_and_writes_summary(tmp_path):
+    _sensor_tables(tmp_path)
+    cmap = _write_map(tmp_path / "map.toml", MAP)
+    result = runner.invoke(app, ["inspect", str(tmp_path), "--columns", str(cmap), "--out",
+                                 str(tmp_path / "o")])  # fmt: skip
+    assert result.exit_code == 0, result.output
+    assert "1 experiments" in result.output and "20 Hz" in result.output
+    assert "p, q, r" not in result.output  # no roll/pitch: rates are not derivable
+    assert (tmp_path / "o" / "summary.json").exists() and (tmp_path / "o" / "cleaning.md").exists()
+    bad = _write_map(tmp_path / "bad.toml", MAP.replace('"depth"', '"depthh"'))
+    res = runner.invoke(app, ["inspect", str(tmp_path), "--columns", str(bad)])
+    assert res.exit_code == 2 and "'depthh'" in res.output and "nav.csv" in res.output
+
+
+def test_short_log_for_filter_window_is_a_clear_error(tmp_path):
+    from nnid.datasets.preprocess import derive_velocities
+
+    log = pd.DataFrame({"t": np.arange(5) * 0.01, "phi": 0.0, "theta": 0.0, "psi": 0.0,
+                        "tau_X": 0.0})  # fmt: skip
+    with pytest.raises(NnidInputError, match="too few for the Savitzky-Golay window"):
+        derive_velocities(log, window_s=0.5)
+
+
+# property-based: random malformed tables give a valid log or the documented error, never else
+_cell = st.one_of(
+    st.floats(allow_nan=True, allow_infinity=True, width=32),
+    st.integers(-10, 10),
+    st.sampled_from(["", "abc", "1e400", "-", "nan", " 3 "]),
+)
+_columns = st.lists(st.sampled_from(["t", "x", "u", "psi", "tau_X", "cmd_a", "experiment", "junk"]),
+                    min_size=1, max_size=6, unique=True)  # fmt: skip
+
+
+@settings(
+    max_examples=150, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+)
+@given(columns=_columns, rows=st.lists(st.lists(_cell, min_size=6, max_size=6), max_size=8))
+def test_csv_reader_returns_valid_log_or_documented_error(tmp_path, columns, rows):
+    frame = pd.DataFrame([r[: len(columns)] for r in rows], columns=columns)
+    path = tmp_path / "random.csv"
+    frame.to_csv(path, index=False)
+    try:
+        log, _ = load_log(path)
+    except NnidInputError as err:
+        assert "random.csv" in str(err)
+        return
+    assert validate_log(log, "again") is log
+    assert "t" in log and len(log) == len(rows)

@@ -1,0 +1,102 @@
+"""Transient labels, the balanced sampler (Weiss V.B), splits and persistence of excitation."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from nnid.config import Experiment
+from nnid.datasets.measurement import Measurement
+from nnid.datasets.segmentation import BalancedSampler, label_transients
+from nnid.datasets.simulator import experiment_inputs, simulate
+from nnid.datasets.splits import split_log
+from nnid.errors import NnidInputError
+from nnid.evaluation.persistence import excitation_report
+from nnid.vehicle import load_vehicle
+
+
+@pytest.fixture(scope="module")
+def steady_heavy_log():
+    """Seamor surge and yaw steps held 40 s each: mostly steady state, as Weiss's tank runs."""
+    veh = load_vehicle("seamor")
+    exp = Experiment(name="steps", signals=[
+        {"kind": "stairs", "channel": "X", "levels": [20, 40, -20, 0], "hold": 40.0},
+        {"kind": "stairs", "channel": "N", "levels": [0, 2, -2, 0], "hold": 40.0}])  # fmt: skip
+    inputs = experiment_inputs(exp, ("X", "Y", "Z", "K", "M", "N"), 0.05)
+    log = simulate(veh, inputs, 0.05, substeps=2, measurement=Measurement(kind="dvl_imu"), seed=2)
+    log["experiment"] = "steps"
+    return log
+
+
+def test_transient_labels_follow_the_steps(steady_heavy_log):
+    lab = label_transients(steady_heavy_log)
+    t = steady_heavy_log["t"].to_numpy()
+    assert lab[(t > 40.0) & (t < 41.0)].all()  # right after the second step
+    assert not lab[(t > 70.0) & (t < 79.0)].any()  # settled at constant speed
+    assert 0.05 < lab.mean() < 0.45  # a steady-state-heavy log
+
+
+def test_balanced_sampler_gives_half_transients_and_is_deterministic(steady_heavy_log):
+    lab = label_transients(steady_heavy_log)
+    raw = BalancedSampler(lab, steady_heavy_log["experiment"].to_numpy(), window=4, balance=False)
+    bal = BalancedSampler(lab, steady_heavy_log["experiment"].to_numpy(), window=4, seed=7)
+    raw_share = raw.transient_share(raw.sample(40_000))
+    share = bal.transient_share(bal.sample(40_000))
+    assert abs(share - 0.5) <= 0.02
+    assert abs(raw_share - lab.mean()) < 0.02 and raw_share < 0.45
+    assert np.array_equal(bal.sample(500), BalancedSampler(lab, window=4, seed=7).sample(500))
+    assert not np.array_equal(bal.sample(500, epoch=0), bal.sample(500, epoch=1))
+    w = bal.weights()
+    assert w[~bal.eligible].sum() == 0 and np.isclose(w[lab.to_numpy()].sum(), 0.5)
+
+
+def _two_run_log():
+    a = pd.DataFrame({"t": np.arange(100) * 0.1, "u": np.arange(100.0), "tau_X": 1.0})
+    b = a.copy()
+    a["experiment"], b["experiment"] = "a", "b"
+    c = a.iloc[:50].copy()
+    c["experiment"] = "c"
+    return pd.concat([a, b, c], ignore_index=True)
+
+
+def test_block_split_is_contiguous_per_experiment():
+    log = _two_run_log()
+    split = split_log(log, "block")
+    for name, n in (("a", 100), ("c", 50)):
+        parts = [split[p][split[p]["experiment"] == name]["u"].to_numpy() for p in
+                 ("train", "validation", "test")]  # fmt: skip
+        joined = np.concatenate(parts)
+        assert np.array_equal(joined, np.arange(float(n)))  # nothing lost, order kept
+        assert len(parts[0]) == round(0.7 * n) and parts[0].max() < parts[1].min()
+    assert split.record["parts"]["validation"][0] == {"experiment": "a", "rows": [70, 85]}
+
+
+def test_experiment_split_keeps_runs_whole():
+    log = _two_run_log()
+    split = split_log(log, "experiment", assignment={"train": ["a", "b"], "test": ["c"]})
+    assert set(split.train["experiment"]) == {"a", "b"} and set(split.test["experiment"]) == {"c"}
+    assert len(split.validation) == 0 and split.record["samples"]["train"] == 200
+    with pytest.raises(NnidInputError, match="not in the log"):
+        split_log(log, "experiment", assignment={"train": ["zz"]})
+    auto = split_log(log, "experiment")
+    for p in ("train", "validation", "test"):
+        for name in set(auto[p]["experiment"]):
+            assert len(auto[p][auto[p]["experiment"] == name]) in (100, 50)
+
+
+def test_persistence_of_excitation_names_unexcited_parameters():
+    """Only surge excited, yaw parameters asked for: the report names them (Weiss eqs 95-98)."""
+    rng = np.random.default_rng(0)
+    u = rng.normal(size=500)
+    phi = np.stack([u * np.abs(u), u, np.zeros(500), np.zeros(500)], 1)
+    names = ["X:u*abs(u)", "X_udot", "N:r*abs(r)", "N_rdot"]
+    rep = excitation_report(phi, names, groups={"surge": names[:2], "yaw": names[2:]})
+    assert rep.unexcited == ["N:r*abs(r)", "N_rdot"] and not rep.persistent
+    assert rep.rank == 2 and rep.group_min_singular["yaw"] == 0.0
+    assert rep.group_min_singular["surge"] > 0.1
+    assert "N:r*abs(r)" in rep.warnings[0]
+    collinear = excitation_report(np.stack([u, 2 * u, u**2], 1), ["a", "b", "c"])
+    assert collinear.collinear == ["a", "b"] and collinear.rank == 2
+    good = excitation_report(np.stack([u, u**2, np.sin(u)], 1), ["a", "b", "c"])
+    assert good.persistent and np.isfinite(good.condition) and not good.warnings
