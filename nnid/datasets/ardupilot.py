@@ -136,7 +136,15 @@ def _captured(buf: io.StringIO) -> Iterator[None]:
 
 def _read_types(path: Path, names: list[str]) -> tuple[dict[str, list[dict]], list[str]]:
     """Rows of every wanted message type and what pymavlink wrote to stdout/stderr."""
-    wanted = {n: (_INSTANCE.match(n) or _INSTANCE.match(f"{n}[*]")) for n in names}
+    wanted = {}
+    for n in names:
+        match = _INSTANCE.match(n) or _INSTANCE.match(f"{n}[*]")
+        if match is None:
+            raise NnidInputError(
+                f"'{n}' is not a message type; write e.g. 'ATTITUDE', 'RCOU' or 'IMU[0]'",
+                source=str(path),
+            )
+        wanted[n] = match
     types = {m["name"] for m in wanted.values()}
     tlog = path.suffix.lower() == ".tlog"
     chatter = io.StringIO()
@@ -183,6 +191,12 @@ def _read_types(path: Path, names: list[str]) -> tuple[dict[str, list[dict]], li
             raise NnidInputError(
                 f"message type '{name}' has several instances ({', '.join(seen)}); "
                 f"name one, e.g. '{name}[{seen[0]}]'",
+                source=str(path),
+            )
+        if match["instance"] != "*" and not rows[name]:
+            raise NnidInputError(
+                f"message type '{match['name']}' has no instance {match['instance']}; "
+                + (f"its instances are {', '.join(seen)}" if seen else "it has no instances"),
                 source=str(path),
             )
     return rows, [line for line in chatter.getvalue().splitlines() if line.strip()]

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import glob
 import re
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -221,13 +222,14 @@ def assemble(
         if stop <= start:
             report.add("skip experiment", f"'{exp}': the sources do not overlap in time", 0)
             continue
-        grid = _grid(start, stop, rate)
+        # relative times: a grid built on UNIX epochs (~1.7e9 s) jitters by ~1e-7 s
+        grid = _grid(0.0, stop - start, rate)
         columns: dict[str, np.ndarray] = {}
         valid = np.ones(grid.size, dtype=bool)
         for source, df in parts:
             names = [c for c in df.columns if c not in ("t", "experiment")]
             values, t_src = _resample(
-                df["t"].to_numpy(),
+                df["t"].to_numpy() - start,
                 df[names].to_numpy(np.float64),
                 grid,
                 source.method,
@@ -302,7 +304,9 @@ def read_mapped(
     return assemble(read_table_sources(cmap, root, report), cmap, report), report
 
 
-def _log_reader(path: Path):
+def _log_reader(
+    path: Path,
+) -> tuple[str, str, Callable[[Path, ColumnMap, CleaningReport], list]] | None:
     """The source reader for a bag or an ArduPilot log at ``path``, else None (a table)."""
     from nnid.datasets.ardupilot import is_ardupilot_log, read_ardupilot_sources
     from nnid.datasets.rosbag import is_bag, read_bag_sources

@@ -1,0 +1,274 @@
+"""The Fossen model written linear in its unknown parameters (Weiss eqs 47-53, 99-108).
+
+With the rigid body known, the equation of motion M ν̇ + C(ν)ν + D(ν)ν + g(η) = τ_eff + b is
+linear in the added-mass derivatives, the damping coefficients of any basis term, the
+installation coefficients η (Caccia eq. 3), a constant external force b, weight, buoyancy and
+the centres of gravity and buoyancy (one of each pair of a product unknown). So
+
+    R(θ) = M ν̇ − (τ_eff + b − C ν + τ_D − g) = R(0) + Φ θ = 0   ⇒   Φ θ = −R(0) = y,
+
+and every regressor column is φ_k = R(e_k) − R(0), evaluated with the physics package itself:
+no term is derived by hand here. Which parameters are unknown and which DOF equations are used
+makes the decoupled per-DOF forms (Weiss 99-104), pitch through surge-heave coupling (105-108)
+and the full coupled 6-DOF regression.
+
+Parameter names follow the vehicle file: ``X_udot``, ``"X:u*abs(u)"``, ``eta.w.neg``,
+``external_bias.u``, ``weight``, ``buoyancy``, ``r_g.z``, ``r_b.z``.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+import torch
+
+from nnid.datasets.log import ANGLES, POSE, TAU, VELOCITY
+from nnid.models.damping_library import canonical_term
+from nnid.physics.added_mass import DOFS, FORCES, added_mass_matrix, parse_added_mass_key
+from nnid.physics.damping import DampingTerms, parse_coefficient_key
+from nnid.physics.fossen import FossenModel
+from nnid.physics.thrusters import Actuation, apply_installation
+
+_AXES = "xyz"
+
+
+def canonical_parameter(name: str) -> str:
+    """Validate a parameter name and return its canonical spelling."""
+    if re.fullmatch(r"[XYZKMN]_[uvwpqr]dot", name):
+        parse_added_mass_key(name)
+        return name
+    if ":" in name:
+        force, term = parse_coefficient_key(name)
+        return f"{force}:{term}"
+    if re.fullmatch(r"eta\.[uvwpqr]\.(pos|neg)", name):
+        return name
+    if re.fullmatch(r"external_bias\.[uvwpqr]", name) or name in ("weight", "buoyancy"):
+        return name
+    if re.fullmatch(r"r_[gb]\.[xyz]", name):
+        return name
+    raise ValueError(
+        f"unknown parameter '{name}'; expected an added-mass derivative ('X_udot'), a damping "
+        "coefficient ('X:u*abs(u)'), 'eta.<dof>.<pos|neg>', 'external_bias.<dof>', 'weight', "
+        "'buoyancy', 'r_g.<x|y|z>' or 'r_b.<x|y|z>'"
+    )
+
+
+@dataclass
+class Regression:
+    """Φ θ = y stacked sample-major over the chosen DOF equations."""
+
+    phi: np.ndarray  # [N * len(dofs), P]
+    y: np.ndarray  # [N * len(dofs)]
+    names: list[str]
+    dofs: tuple[str, ...]
+    n_samples: int
+
+    def dof_rows(self, dof: str) -> np.ndarray:
+        """Row indices of one DOF's equation."""
+        k = self.dofs.index(dof)
+        return np.arange(self.n_samples) * len(self.dofs) + k
+
+
+@dataclass
+class Parts:
+    """The numbers that define a plant for the regression and the simulator."""
+
+    mass: float
+    inertia: np.ndarray
+    r_g: np.ndarray
+    r_b: np.ndarray
+    weight: float
+    buoyancy: float
+    added_mass: dict[str, float]
+    damping: dict[str, float]
+    eta_pos: np.ndarray
+    eta_neg: np.ndarray
+    bias: np.ndarray
+    u_c: float = 0.0
+
+    def copy(self) -> Parts:
+        return Parts(
+            self.mass,
+            self.inertia.copy(),
+            self.r_g.copy(),
+            self.r_b.copy(),
+            self.weight,
+            self.buoyancy,
+            dict(self.added_mass),
+            dict(self.damping),
+            self.eta_pos.copy(),
+            self.eta_neg.copy(),
+            self.bias.copy(),
+            self.u_c,
+        )
+
+    @classmethod
+    def from_vehicle(cls, vehicle) -> Parts:
+        damping = DampingTerms.from_spec(
+            vehicle.damping.model, vehicle.damping.coefficients, vehicle.damping.u_c
+        ).as_dict()
+        pos, neg = vehicle.installation_vectors()
+        return cls(
+            vehicle.mass,
+            vehicle.inertia_matrix().astype(float),
+            np.array(vehicle.r_g, float),
+            np.array(vehicle.r_b, float),
+            float(vehicle.weight),
+            float(vehicle.buoyancy),
+            dict(vehicle.added_mass),
+            damping,
+            pos,
+            neg,
+            np.array(vehicle.external_bias, float),
+            vehicle.damping.u_c,
+        )
+
+    def set(self, name: str, value: float) -> None:
+        """Set one parameter by its name (see :func:`canonical_parameter`)."""
+        if name.endswith("dot") and "_" in name and ":" not in name:
+            self.added_mass[name] = value
+        elif ":" in name:
+            self.damping[name] = value
+        elif name.startswith("eta."):
+            _, dof, sign = name.split(".")
+            (self.eta_pos if sign == "pos" else self.eta_neg)[DOFS.index(dof)] = value
+        elif name.startswith("external_bias."):
+            self.bias[DOFS.index(name.split(".")[1])] = value
+        elif name in ("weight", "buoyancy"):
+            setattr(self, name, value)
+        else:
+            (self.r_g if name.startswith("r_g") else self.r_b)[_AXES.index(name[-1])] = value
+
+    def get(self, name: str) -> float:
+        if name.endswith("dot") and ":" not in name:
+            return float(self.added_mass.get(name, 0.0))
+        if ":" in name:
+            return float(self.damping.get(name, 0.0))
+        if name.startswith("eta."):
+            _, dof, sign = name.split(".")
+            return float((self.eta_pos if sign == "pos" else self.eta_neg)[DOFS.index(dof)])
+        if name.startswith("external_bias."):
+            return float(self.bias[DOFS.index(name.split(".")[1])])
+        if name in ("weight", "buoyancy"):
+            return float(getattr(self, name))
+        return float((self.r_g if name.startswith("r_g") else self.r_b)[_AXES.index(name[-1])])
+
+    def model(self) -> FossenModel:
+        """The Fossen model of these parts (installation and bias: see :meth:`applied`)."""
+        terms = tuple(dict.fromkeys(parse_coefficient_key(k)[1] for k in self.damping))
+        coef = torch.zeros(6, len(terms), dtype=torch.float64)
+        for key, value in self.damping.items():
+            force, term = parse_coefficient_key(key)
+            coef[FORCES.index(force), terms.index(term)] = value
+        return FossenModel(
+            self.mass,
+            self.inertia,
+            added_mass_matrix(self.added_mass),
+            DampingTerms(terms, coef, u_c=self.u_c),
+            self.weight,
+            self.buoyancy,
+            self.r_g,
+            self.r_b,
+            external_bias=self.bias,
+        )
+
+    def applied(self, tau_nominal: np.ndarray) -> np.ndarray:
+        """τ_eff = η(sign) τ per DOF (Caccia eq. 3)."""
+        return apply_installation(tau_nominal, self.eta_pos, self.eta_neg)
+
+
+def log_arrays(log: pd.DataFrame, vehicle) -> dict[str, np.ndarray]:
+    """η, ν, ν̇ and nominal τ from a log (missing pose components are zero; velocities and
+    accelerations must be present: derive them with :mod:`nnid.datasets.preprocess`)."""
+    n = len(log)
+    eta = np.zeros((n, 6))
+    for k, c in enumerate(POSE):
+        if c in log:
+            eta[:, k] = log[c].to_numpy(np.float64)
+    nu = np.zeros((n, 6))
+    nu_dot = np.zeros((n, 6))
+    for k, c in enumerate(VELOCITY):
+        if c in log:
+            nu[:, k] = log[c].to_numpy(np.float64)
+        if "d" + c in log:
+            nu_dot[:, k] = log["d" + c].to_numpy(np.float64)
+    if all(c in log for c in TAU):
+        tau = log[list(TAU)].to_numpy(np.float64)
+    else:
+        act = Actuation(vehicle)
+        cols = [f"cmd_{c}" for c in act.channels]
+        missing = [c for c in cols if c not in log]
+        if missing:
+            raise ValueError(f"the log has neither tau_X..tau_N nor the commands {missing}")
+        tau = act.nominal(log[cols].to_numpy(np.float64))
+    return {
+        "eta": eta,
+        "nu": nu,
+        "nu_dot": nu_dot,
+        "tau": tau,
+        "angles_known": np.array(all(a in log for a in ANGLES)),
+    }
+
+
+class ParametricFossen:
+    """The regression structure: a vehicle, the unknown parameters and the DOF equations used."""
+
+    def __init__(self, vehicle, unknowns: Sequence[str], dofs: Sequence[str] = DOFS) -> None:
+        self.vehicle = vehicle
+        self.names = [canonical_parameter(n) for n in unknowns]
+        if len(set(self.names)) != len(self.names):
+            raise ValueError("unknown parameters must be unique")
+        self.dofs = tuple(dofs)
+        for d in self.dofs:
+            if d not in DOFS:
+                raise ValueError(f"'{d}' is not a DOF; expected u v w p q r")
+        if {"weight", "buoyancy"} & set(self.names):
+            pair = {"weight": "r_g.", "buoyancy": "r_b."}
+            for n in self.names:
+                for w, r in pair.items():
+                    if w in self.names and n.startswith(r):
+                        raise ValueError(
+                            f"'{w}' and '{n}' multiply each other: identify their "
+                            "moment instead, or fix one of them"
+                        )
+        self.base = Parts.from_vehicle(vehicle)
+        for name in self.names:  # unknowns start from zero in R(0)
+            self.base.set(name, 0.0)
+
+    def parts(self, theta: Sequence[float] | dict) -> Parts:
+        """The vehicle's parts with the unknowns set to ``theta``."""
+        values = theta if isinstance(theta, dict) else dict(zip(self.names, theta, strict=True))
+        out = self.base.copy()
+        for name, value in values.items():
+            out.set(name, float(value))
+        return out
+
+    def equation_residual(self, parts: Parts, data: dict[str, np.ndarray]) -> np.ndarray:
+        """R = M ν̇ − (τ_eff + b − C ν + τ_D − g) per sample ``[N, 6]``."""
+        model = parts.model()
+        with torch.no_grad():
+            eta, nu = torch.as_tensor(data["eta"]), torch.as_tensor(data["nu"])
+            nu_dot = torch.as_tensor(data["nu_dot"])
+            tau = torch.as_tensor(parts.applied(data["tau"]))
+            lhs = nu_dot @ model.mass_matrix().T
+            return (lhs - model.net_force(eta, nu, tau)).numpy()
+
+    def regression(self, data: dict[str, np.ndarray]) -> Regression:
+        """Φ θ = y over the chosen DOF equations; φ_k = R(e_k) − R(0), y = −R(0)."""
+        rows = [DOFS.index(d) for d in self.dofs]
+        r0 = self.equation_residual(self.base, data)
+        cols = []
+        for name in self.names:
+            unit = self.base.copy()
+            unit.set(name, 1.0)
+            cols.append((self.equation_residual(unit, data) - r0)[:, rows].reshape(-1))
+        n = r0.shape[0]
+        phi = np.stack(cols, 1) if cols else np.zeros((n * len(rows), 0))
+        return Regression(phi, -r0[:, rows].reshape(-1), list(self.names), self.dofs, n)
+
+    def term_names(self) -> list[str]:
+        return [canonical_term(n.split(":")[1]) for n in self.names if ":" in n]

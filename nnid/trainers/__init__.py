@@ -1,0 +1,1 @@
+"""Estimators: least squares with uncertainty, recursive estimators, Caccia's procedure, ..."""
