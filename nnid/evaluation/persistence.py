@@ -32,33 +32,50 @@ class ExcitationReport:
 
 
 def excitation_report(
-    phi: np.ndarray, names: list[str], groups: dict[str, list[str]] | None = None, tol: float = 1e-6
+    phi: np.ndarray,
+    names: list[str],
+    groups: dict[str, list[str]] | None = None,
+    tol: float = 1e-6,
 ) -> ExcitationReport:
     """Diagnose the regressor ``phi`` ``[N, P]`` whose columns belong to parameters ``names``."""
     phi = np.asarray(phi, dtype=np.float64)
     if phi.ndim != 2 or phi.shape[1] != len(names):
         raise ValueError("phi must be [N, len(names)]")
-    n, p = phi.shape
-    rms = np.sqrt(np.mean(phi**2, axis=0))
+    return excitation_from_gram(phi.T @ phi, phi.shape[0], names, groups, tol)
+
+
+def excitation_from_gram(
+    gram: np.ndarray,
+    n: int,
+    names: list[str],
+    groups: dict[str, list[str]] | None = None,
+    tol: float = 1e-6,
+) -> ExcitationReport:
+    """The same report from ΦᵀΦ (cheap for long logs): singular values of the unit-RMS-scaled
+    regressor are the square roots of the eigenvalues of its scaled Gram matrix."""
+    p = len(names)
+    rms = np.sqrt(np.clip(np.diag(gram), 0.0, None) / max(n, 1))
     scale = rms.max() if rms.size and rms.max() > 0 else 1.0
-    unexcited = [names[j] for j in range(p) if rms[j] <= tol * scale]
     live = rms > tol * scale
-    normed = np.where(live, phi / np.where(live, rms, 1.0), 0.0) / np.sqrt(max(n, 1))
-    sv = np.linalg.svd(normed, compute_uv=False) if p else np.array([])
-    rank = int(np.sum(sv > tol * (sv[0] if sv.size else 1.0)))
-    condition = float((sv[0] / sv[-1]) ** 2) if sv.size and sv[-1] > 0 else float("inf")
+    unexcited = [names[j] for j in range(p) if not live[j]]
+    d = np.where(live, 1.0 / np.where(live, rms, 1.0), 0.0)
+    normed = gram * np.outer(d, d) / max(n, 1)
+    eig, vec = np.linalg.eigh(normed) if p else (np.array([]), np.zeros((0, 0)))
+    sv = np.sqrt(np.clip(eig[::-1], 0.0, None))
+    vec = vec[:, ::-1]
+    rank = int(np.sum(sv > np.sqrt(tol) * (sv[0] if sv.size else 1.0)))
+    condition = float((sv[0] / sv[p - 1]) ** 2) if p and sv[p - 1] > 0 else float("inf")
     collinear: list[str] = []
-    if live.sum() > 1:
-        _, s_live, vt = np.linalg.svd(normed[:, live], full_matrices=False)
-        live_names = [nm for nm, keep in zip(names, live, strict=True) if keep]
-        for k in np.flatnonzero(s_live < np.sqrt(tol) * s_live[0]):
-            collinear += [live_names[j] for j in np.flatnonzero(np.abs(vt[k]) > 0.3)]
-        collinear = sorted(set(collinear), key=live_names.index)
+    n_live = int(live.sum())
+    for k in range(n_live):
+        if sv[k] < np.sqrt(tol) * sv[0]:
+            collinear += [names[j] for j in np.flatnonzero(live & (np.abs(vec[:, k]) > 0.3))]
+    collinear = sorted(set(collinear), key=names.index)
     group_min = {}
     for g, members in (groups or {}).items():
         cols = [names.index(m) for m in members]
-        s = np.linalg.svd(normed[:, cols], compute_uv=False)
-        group_min[g] = float(s.min()) if s.size else 0.0
+        sub = np.linalg.eigvalsh(normed[np.ix_(cols, cols)])
+        group_min[g] = float(np.sqrt(max(sub.min(), 0.0))) if sub.size else 0.0
     warnings = []
     if unexcited:
         warnings.append(f"not excited by this data (zero regressor): {', '.join(unexcited)}")
@@ -69,5 +86,5 @@ def excitation_report(
     if rank < p and not warnings:
         warnings.append(f"the regressor has rank {rank} < {p} parameters")
     return ExcitationReport(
-        n, p, rank, condition, [float(s) for s in sv], group_min, unexcited, collinear, warnings
+        n, p, rank, condition, [float(x) for x in sv], group_min, unexcited, collinear, warnings
     )

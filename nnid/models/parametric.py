@@ -25,6 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 import torch
+from scipy.signal import lfilter, lfilter_zi
 
 from nnid.datasets.log import ANGLES, POSE, TAU, VELOCITY
 from nnid.models.damping_library import canonical_term
@@ -157,8 +158,9 @@ class Parts:
             return float(getattr(self, name))
         return float((self.r_g if name.startswith("r_g") else self.r_b)[_AXES.index(name[-1])])
 
-    def model(self) -> FossenModel:
-        """The Fossen model of these parts (installation and bias: see :meth:`applied`)."""
+    def model(self, check: bool = True) -> FossenModel:
+        """The Fossen model of these parts (installation: see :meth:`applied`). ``check=False``
+        skips the positive-definite test, for the unit probes of the regression."""
         terms = tuple(dict.fromkeys(parse_coefficient_key(k)[1] for k in self.damping))
         coef = torch.zeros(6, len(terms), dtype=torch.float64)
         for key, value in self.damping.items():
@@ -174,6 +176,7 @@ class Parts:
             self.r_g,
             self.r_b,
             external_bias=self.bias,
+            check=check,
         )
 
     def applied(self, tau_nominal: np.ndarray) -> np.ndarray:
@@ -211,6 +214,10 @@ def log_arrays(log: pd.DataFrame, vehicle) -> dict[str, np.ndarray]:
         "nu_dot": nu_dot,
         "tau": tau,
         "angles_known": np.array(all(a in log for a in ANGLES)),
+        "t": log["t"].to_numpy(np.float64),
+        "experiment": (
+            pd.factorize(log["experiment"])[0] if "experiment" in log else np.zeros(n, dtype=int)
+        ),
     }
 
 
@@ -247,28 +254,72 @@ class ParametricFossen:
             out.set(name, float(value))
         return out
 
-    def equation_residual(self, parts: Parts, data: dict[str, np.ndarray]) -> np.ndarray:
-        """R = M ν̇ − (τ_eff + b − C ν + τ_D − g) per sample ``[N, 6]``."""
-        model = parts.model()
+    def equation_residual(
+        self, parts: Parts, data: dict[str, np.ndarray], filter_lambda: float | None = None
+    ) -> np.ndarray:
+        """R = M ν̇ − (τ_eff + b − C ν + τ_D − g) per sample ``[N, 6]``.
+
+        With ``filter_lambda`` = λ both sides pass through F(s) = λ/(s + λ) and M F[ν̇] is
+        computed as M sF(s)[ν] from the velocity: the filtered-regressor form of Weiss eqs
+        86-92, which needs no differentiated (noisy) acceleration.
+        """
+        model = parts.model(check=False)
         with torch.no_grad():
             eta, nu = torch.as_tensor(data["eta"]), torch.as_tensor(data["nu"])
-            nu_dot = torch.as_tensor(data["nu_dot"])
             tau = torch.as_tensor(parts.applied(data["tau"]))
-            lhs = nu_dot @ model.mass_matrix().T
-            return (lhs - model.net_force(eta, nu, tau)).numpy()
+            net = model.net_force(eta, nu, tau).numpy()
+            mass = model.mass_matrix().numpy()
+        if filter_lambda is None:
+            return data["nu_dot"] @ mass.T - net
+        nu_dot_f = _filter(data, data["nu"], filter_lambda, derivative=True)
+        return nu_dot_f @ mass.T - _filter(data, net, filter_lambda)
 
-    def regression(self, data: dict[str, np.ndarray]) -> Regression:
-        """Φ θ = y over the chosen DOF equations; φ_k = R(e_k) − R(0), y = −R(0)."""
+    def regression(
+        self, data: dict[str, np.ndarray], filter_lambda: float | None = None
+    ) -> Regression:
+        """Φ θ = y over the chosen DOF equations; φ_k = R(e_k) − R(0), y = −R(0).
+
+        With ``filter_lambda`` the filtered form is used (see :meth:`equation_residual`) and
+        the first 3/λ seconds of each experiment, where the filters settle, are left out.
+        """
         rows = [DOFS.index(d) for d in self.dofs]
-        r0 = self.equation_residual(self.base, data)
+        r0 = self.equation_residual(self.base, data, filter_lambda)
+        keep = np.ones(r0.shape[0], dtype=bool)
+        if filter_lambda is not None:
+            keep = _settled(data, 3.0 / filter_lambda)
         cols = []
         for name in self.names:
             unit = self.base.copy()
             unit.set(name, 1.0)
-            cols.append((self.equation_residual(unit, data) - r0)[:, rows].reshape(-1))
-        n = r0.shape[0]
+            col = self.equation_residual(unit, data, filter_lambda) - r0
+            cols.append(col[keep][:, rows].reshape(-1))
+        n = int(keep.sum())
         phi = np.stack(cols, 1) if cols else np.zeros((n * len(rows), 0))
-        return Regression(phi, -r0[:, rows].reshape(-1), list(self.names), self.dofs, n)
+        return Regression(phi, -r0[keep][:, rows].reshape(-1), list(self.names), self.dofs, n)
 
     def term_names(self) -> list[str]:
         return [canonical_term(n.split(":")[1]) for n in self.names if ":" in n]
+
+
+def _filter(data: dict[str, np.ndarray], x: np.ndarray, lam: float, derivative: bool = False):
+    """F(s) = λ/(s + λ) (or s F(s) for the derivative) per experiment, discretised by the
+    bilinear transform so that the two stay consistent; started in steady state."""
+    out = np.empty_like(x)
+    for k in np.unique(data["experiment"]):
+        idx = np.flatnonzero(data["experiment"] == k)
+        dt = float(np.median(np.diff(data["t"][idx]))) if idx.size > 1 else 1.0
+        c = lam * dt / 2.0
+        a = np.array([1.0 + c, -(1.0 - c)])
+        b = lam * np.array([1.0, -1.0]) if derivative else np.array([c, c])
+        zi = lfilter_zi(b, a)
+        seg = x[idx]
+        out[idx] = lfilter(b, a, seg, axis=0, zi=zi[:, None] * seg[:1])[0]
+    return out
+
+
+def _settled(data: dict[str, np.ndarray], seconds: float) -> np.ndarray:
+    keep = np.ones(data["t"].size, dtype=bool)
+    for k in np.unique(data["experiment"]):
+        idx = np.flatnonzero(data["experiment"] == k)
+        keep[idx] = data["t"][idx] - data["t"][idx[0]] >= seconds
+    return keep

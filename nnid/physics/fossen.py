@@ -69,6 +69,7 @@ class FossenModel:
         current=(0.0, 0.0, 0.0),
         external_bias=(0.0,) * 6,
         actuator_lag: float = 0.0,
+        check: bool = True,
     ) -> None:
         self.mass = _t(mass)
         self.inertia = _t(inertia)
@@ -83,8 +84,8 @@ class FossenModel:
         self.current = _t(current)
         self.external_bias = _t(external_bias)
         self.actuator_lag = float(actuator_lag)
-        eig = torch.linalg.eigvalsh(0.5 * (self.mass_matrix() + self.mass_matrix().T)).min()
-        if not eig > 0:
+        mass_matrix = self.mass_matrix().detach()
+        if check and not torch.linalg.eigvalsh(0.5 * (mass_matrix + mass_matrix.T)).min() > 0:
             raise ValueError(
                 "M = M_RB + M_A is not positive definite; check mass, inertia and added mass "
                 "(diagonal added-mass derivatives are negative in Fossen's convention)"
