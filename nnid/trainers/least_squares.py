@@ -98,13 +98,28 @@ class LeastSquares:
     """Batch (weighted) least squares on a :class:`Regression`.
 
     ``weighting="feasible"`` (default) reweights each DOF equation by 1/σ̂²_dof from a first
-    ordinary fit; ``"none"`` is ordinary least squares.
+    ordinary fit; ``"none"`` is ordinary least squares. ``filter_lambda`` (rad/s) uses the
+    filtered-regressor form (Weiss eqs 86-92) instead of differentiated accelerations.
+    ``correlated`` (default) widens the covariance by the residuals' integrated
+    autocorrelation time: filtered and smoothed logs have far fewer independent samples than
+    rows, and the textbook formula would report uncertainties that are too small.
     """
 
-    def __init__(self, weighting: str = "feasible") -> None:
+    def __init__(
+        self,
+        weighting: str = "feasible",
+        filter_lambda: float | None = None,
+        correlated: bool = True,
+    ) -> None:
         if weighting not in ("feasible", "none"):
             raise ValueError("weighting is 'feasible' or 'none'")
         self.weighting = weighting
+        self.filter_lambda = filter_lambda
+        self.correlated = correlated
+
+    def fit(self, structure, data: dict) -> Estimate:
+        """Build the regression (filtered if ``filter_lambda``) and solve it."""
+        return self.solve(structure.regression(data, self.filter_lambda))
 
     def solve(self, reg: Regression) -> Estimate:
         est = solve_least_squares(reg.phi, reg.y, names=reg.names)
@@ -118,6 +133,8 @@ class LeastSquares:
                 est = solve_least_squares(reg.phi, reg.y, w, reg.names)
             dof_sigma2 = self._dof_variances(reg, est.theta)
         est.dof_sigma2 = dof_sigma2
+        if self.correlated:
+            est.cov = est.cov * correlation_time(reg, est.theta)
         return est
 
     @staticmethod
@@ -129,3 +146,24 @@ class LeastSquares:
             r = reg.y[rows] - reg.phi[rows] @ th
             out[d] = float(r @ r / max(rows.size - 1, 1))
         return out
+
+
+def correlation_time(reg: Regression, theta: np.ndarray, max_lag: int = 5000) -> float:
+    """Integrated autocorrelation time 1 + 2 Σ ρ_k of the residual, per DOF equation (summed
+    until ρ first drops below 0.05), averaged over DOFs weighted by their rows: the factor by
+    which correlated samples shrink the effective sample size."""
+    th = np.nan_to_num(theta)
+    taus = []
+    for d in reg.dofs:
+        r = reg.y[reg.dof_rows(d)] - reg.phi[reg.dof_rows(d)] @ th
+        r = r - r.mean()
+        n = r.size
+        if n < 3 or not np.any(r):
+            continue
+        spec = np.fft.rfft(r, 2 * n)
+        acf = np.fft.irfft(spec * np.conj(spec))[: min(n, max_lag)]
+        acf = acf / acf[0]
+        below = np.flatnonzero(acf < 0.05)
+        cut = below[0] if below.size else acf.size
+        taus.append(1.0 + 2.0 * float(np.sum(acf[1:cut])))
+    return max(float(np.mean(taus)), 1.0) if taus else 1.0

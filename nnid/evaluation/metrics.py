@@ -1,0 +1,59 @@
+"""Error measures shared by every model.
+
+NRMSE is the RMSE over the standard deviation of the measured signal (MATLAB's fit % is
+100 (1 − NRMSE)); a warm-up window (delay states, the start of a free run) is excluded from
+every score. ``total`` is the mean over the DOFs that the data excites.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from nnid.datasets.preprocess import experiments
+
+
+def warmup_mask(log: pd.DataFrame, warmup_s: float = 0.0, warmup_samples: int = 0) -> np.ndarray:
+    """True where a sample is scored: after the warm-up at the start of each experiment."""
+    keep = np.ones(len(log), dtype=bool)
+    t = log["t"].to_numpy(np.float64)
+    for _, idx in experiments(log):
+        pos = log.index.get_indexer(idx)
+        keep[pos[:warmup_samples]] = False
+        keep[pos] &= t[pos] - t[pos[0]] >= warmup_s
+    return keep
+
+
+def nrmse(measured: np.ndarray, predicted: np.ndarray) -> float:
+    """RMSE / std(measured); NaN where the measured signal does not vary."""
+    measured, predicted = np.asarray(measured, float), np.asarray(predicted, float)
+    std = float(np.std(measured))
+    if std == 0 or measured.size == 0:
+        return float("nan")
+    return float(np.sqrt(np.mean((predicted - measured) ** 2)) / std)
+
+
+def rmse(measured: np.ndarray, predicted: np.ndarray) -> float:
+    return float(np.sqrt(np.mean((np.asarray(predicted) - np.asarray(measured)) ** 2)))
+
+
+def per_dof(
+    measured: pd.DataFrame,
+    predicted: pd.DataFrame,
+    columns: list[str],
+    mask: np.ndarray,
+    metric=nrmse,
+) -> dict[str, float]:
+    """The metric per column over the scored samples, and ``total``: their mean."""
+    out = {c: metric(measured[c].to_numpy()[mask], predicted[c].to_numpy()[mask]) for c in columns}
+    finite = [v for v in out.values() if np.isfinite(v)]
+    out["total"] = float(np.mean(finite)) if finite else float("nan")
+    return out
+
+
+def excited_dofs(log: pd.DataFrame, columns: list[str], rel: float = 1e-3) -> list[str]:
+    """Velocity columns that move: std above ``rel`` of the largest linear/angular std."""
+    stds = {c: float(log[c].std()) for c in columns if c in log}
+    lin = max([stds.get(c, 0.0) for c in "uvw"] + [0.0])
+    ang = max([stds.get(c, 0.0) for c in "pqr"] + [0.0])
+    return [c for c, s in stds.items() if s > rel * (lin if c in "uvw" else ang) and s > 0]
