@@ -144,9 +144,50 @@ def _not_yet(name: str) -> None:
 
 
 @app.command()
-def train(config: Path = typer.Argument(...)) -> None:
-    """Fit one model (not implemented yet)."""
-    _not_yet("train")
+@_input_errors
+def train(
+    config: Path = typer.Argument(..., help="TOML train config (see configs/)."),
+    out_dir: Path = typer.Option(..., "--out", help="Output folder for model, metrics, report."),
+    data: str | None = typer.Option(None, "--data", help="Log to fit; overrides the config's."),
+    vehicle: str | None = typer.Option(
+        None, "--vehicle", help="Preset name or vehicle TOML; overrides the config's."
+    ),
+    columns: str | None = typer.Option(
+        None, "--columns", help="Reader config for a log not in nnid's format."
+    ),
+) -> None:
+    """Fit one model on the training split and score it on held-out data: writes
+    model.json, metrics.json, report.md and the cleaning report to --out."""
+    import json
+
+    from nnid.config import TrainConfig, load_config
+    from nnid.pipeline import run_train
+    from nnid.reports.train_report import train_markdown
+    from nnid.vehicle import load_vehicle
+
+    cfg = load_config(config, TrainConfig)
+    if cfg.trainer == "caccia":
+        from nnid.trainers.caccia import run_caccia_config
+
+        with err.status("Caccia two-step identification"):
+            result = run_caccia_config(config, vehicle)
+    else:
+        veh = load_vehicle(vehicle or cfg.vehicle)
+        try:
+            with err.status(f"fitting the Fossen model ({cfg.trainer})"):
+                result = run_train(cfg, config, veh, data, columns)
+        except NnidInputError as exc:
+            raise exc.with_source(str(config)) from None
+    out_dir.mkdir(parents=True, exist_ok=True)
+    result.model.save(out_dir / "model.json")
+    (out_dir / "metrics.json").write_text(json.dumps(result.metrics, indent=2))
+    (out_dir / "report.md").write_text(train_markdown(result.metrics))
+    result.report.write(out_dir)
+    val = result.metrics["validation"].get("free_run_nrmse", {})
+    out.print(
+        f"wrote {out_dir}/: model.json, metrics.json, report.md "
+        f"(validation free-run NRMSE total {val.get('total', float('nan')):.3g})"
+    )
 
 
 @app.command()

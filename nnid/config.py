@@ -92,3 +92,58 @@ class SimulateConfig(_Strict):
 def load_config(path: str | Path, model: type[BaseModel] = SimulateConfig) -> BaseModel:
     """Read and validate a TOML config; raise NnidInputError naming the file and field."""
     return validated(model, read_toml(path), str(path))
+
+
+class DataSpec(_Strict):
+    """Where the log comes from: a file (``log``, optionally through a reader config
+    ``columns``), or a simulate config (``simulate``) run on the fly. Paths are relative to
+    the config file."""
+
+    log: str | None = None
+    columns: str | None = None
+    simulate: str | None = None
+    experiments: list[str] | None = None
+
+
+class FossenSpec(_Strict):
+    """Which parameters are unknown and which DOF equations identify them. ``unknowns`` may
+    use the shortcuts ``added_mass`` (diagonal derivatives of the DOFs) and ``damping`` (the
+    vehicle's damping-model terms of the DOFs' forces)."""
+
+    unknowns: list[str] = Field(default_factory=lambda: ["added_mass", "damping"])
+    dofs: list[str] = Field(default_factory=lambda: ["u", "v", "w", "p", "q", "r"])
+
+
+class SequenceStep(_Strict):
+    """One step of a decoupled identification sequence (Weiss eqs 99-108)."""
+
+    experiments: list[str] = Field(min_length=1)
+    dofs: list[str] = Field(min_length=1)
+    unknowns: list[str] = Field(min_length=1)
+
+
+class SplitSpec(_Strict):
+    by: Literal["experiment", "block"] = "block"
+    fractions: list[float] = Field(default_factory=lambda: [0.7, 0.15, 0.15])
+    train: list[str] | None = None
+    validation: list[str] | None = None
+    test: list[str] | None = None
+
+
+class TrainConfig(_Strict):
+    """``nnid train``: one model, one trainer, a split, and what to report."""
+
+    model: Literal["fossen"] = "fossen"
+    trainer: Literal["ls", "rls", "gradient", "ukf", "caccia"] = "ls"
+    vehicle: str
+    data: DataSpec
+    fossen: FossenSpec = Field(default_factory=FossenSpec)
+    options: dict[str, float | str | bool] = Field(default_factory=dict)
+    savgol_window: float = Field(1.0, gt=0)
+    savgol_order: int = Field(4, ge=2, le=8)
+    split: SplitSpec = Field(default_factory=SplitSpec)
+    warmup_s: float = Field(1.0, ge=0)
+    reference: dict[str, float] = Field(default_factory=dict)
+    reference_label: str = "reference"
+    nondimensional_speed: float | None = Field(None, gt=0)
+    sequence: Literal["weiss"] | list[SequenceStep] | None = None

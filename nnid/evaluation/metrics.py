@@ -51,8 +51,10 @@ def per_dof(
     return out
 
 
-def excited_dofs(log: pd.DataFrame, columns: list[str], rel: float = 1e-3) -> list[str]:
-    """Velocity columns that move: std above ``rel`` of the largest linear/angular std."""
+def excited_dofs(log: pd.DataFrame, columns: list[str], rel: float = 0.1) -> list[str]:
+    """Velocity columns the data excites: std above ``rel`` of the largest linear (u v w) or
+    angular (p q r) std. A DOF that only trembles through coupling is not scored: its NRMSE
+    would divide by its own noise."""
     stds = {c: float(log[c].std()) for c in columns if c in log}
     lin = max([stds.get(c, 0.0) for c in "uvw"] + [0.0])
     ang = max([stds.get(c, 0.0) for c in "pqr"] + [0.0])

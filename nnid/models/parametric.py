@@ -208,6 +208,10 @@ def log_arrays(log: pd.DataFrame, vehicle) -> dict[str, np.ndarray]:
         if missing:
             raise ValueError(f"the log has neither tau_X..tau_N nor the commands {missing}")
         tau = act.nominal(log[cols].to_numpy(np.float64))
+    if "experiment" in log:
+        codes, names = pd.factorize(log["experiment"])
+    else:
+        codes, names = np.zeros(n, dtype=int), ["0"]
     return {
         "eta": eta,
         "nu": nu,
@@ -215,9 +219,8 @@ def log_arrays(log: pd.DataFrame, vehicle) -> dict[str, np.ndarray]:
         "tau": tau,
         "angles_known": np.array(all(a in log for a in ANGLES)),
         "t": log["t"].to_numpy(np.float64),
-        "experiment": (
-            pd.factorize(log["experiment"])[0] if "experiment" in log else np.zeros(n, dtype=int)
-        ),
+        "experiment": codes,
+        "experiment_names": np.asarray(names, dtype=object),
     }
 
 

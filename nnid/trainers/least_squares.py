@@ -34,6 +34,7 @@ class Estimate:
     n_obs: int
     excitation: ExcitationReport | None = None
     dof_sigma2: dict[str, float] = field(default_factory=dict)
+    history: np.ndarray | None = None  # θ after each sample [n_samples, P] (recursive trainers)
 
     @property
     def stderr(self) -> np.ndarray:

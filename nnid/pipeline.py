@@ -1,0 +1,246 @@
+"""End-to-end runs of the documented workflows, for the CLI: load or simulate the data, split
+it, fit, and score on held-out data. Returns data; the CLI writes files and talks to people."""
+
+from __future__ import annotations
+
+import time
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from nnid.config import SimulateConfig, TrainConfig, load_config
+from nnid.datasets.cleaning import CleaningReport
+from nnid.datasets.log import VELOCITY
+from nnid.datasets.readers import load_log
+from nnid.datasets.simulator import simulate_config
+from nnid.datasets.splits import split_log
+from nnid.errors import NnidInputError
+from nnid.evaluation.metrics import excited_dofs, per_dof, rmse, warmup_mask
+from nnid.physics.added_mass import DOFS, FORCES
+
+TRAINERS = ("ls", "rls", "gradient", "ukf", "caccia")
+
+
+def resolve(base: Path, path: str) -> Path:
+    p = Path(path)
+    return p if p.is_absolute() or p.exists() else base / p
+
+
+def load_data(
+    cfg: TrainConfig,
+    config_path: Path,
+    data_override: str | None = None,
+    columns_override: str | None = None,
+) -> tuple[pd.DataFrame, CleaningReport]:
+    """The training log: ``--data`` or the config's file, or its simulation."""
+    base = config_path.parent
+    if data_override or cfg.data.log:
+        path = data_override or str(resolve(base, cfg.data.log))
+        cols = columns_override or (
+            str(resolve(base, cfg.data.columns)) if cfg.data.columns else None
+        )
+        log, report = load_log(path, cols)
+    elif cfg.data.simulate:
+        sim_path = resolve(base, cfg.data.simulate)
+        sim = load_config(sim_path, SimulateConfig)
+        from nnid.vehicle import load_vehicle
+
+        log = simulate_config(sim, load_vehicle(sim.vehicle))
+        report = CleaningReport(source=str(sim_path))
+        report.add("simulate", f"{len(log)} samples from {sim_path}")
+    else:
+        raise NnidInputError("give data.log or data.simulate (or --data)", field="data")
+    if cfg.data.experiments:
+        log = log[log["experiment"].isin(cfg.data.experiments)].reset_index(drop=True)
+    return log, report
+
+
+def expand_unknowns(spec: list[str], dofs: list[str], vehicle) -> list[str]:
+    """Expand the ``added_mass`` / ``damping`` shortcuts for the chosen DOFs."""
+    from nnid.physics.damping import DampingTerms
+
+    out: list[str] = []
+    forces = {FORCES[DOFS.index(d)] for d in dofs}
+    for item in spec:
+        if item == "added_mass":
+            out += [f"{FORCES[DOFS.index(d)]}_{d}dot" for d in dofs]
+        elif item == "damping":
+            terms = DampingTerms.from_spec(vehicle.damping.model, vehicle.damping.coefficients)
+            out += [k for k in terms.as_dict() if k.split(":")[0] in forces]
+        else:
+            out.append(item)
+    return list(dict.fromkeys(out))
+
+
+def make_trainer(cfg: TrainConfig):
+    """The configured trainer; with a ``sequence`` it runs each step of it (Weiss 99-108)."""
+    base = _base_trainer(cfg)
+    if cfg.sequence is None:
+        return base
+    from nnid.trainers.sequence import WEISS_STEPS, DecoupledSequence, Step
+
+    steps = (
+        WEISS_STEPS if cfg.sequence == "weiss" else [Step(**s.model_dump()) for s in cfg.sequence]
+    )
+    return DecoupledSequence(steps, base)
+
+
+def sequence_unknowns(cfg: TrainConfig) -> tuple[list[str], list[str]] | None:
+    """Unknowns and DOFs of a sequence config (the union over its steps)."""
+    if cfg.sequence is None:
+        return None
+    from nnid.trainers.sequence import WEISS_STEPS
+
+    steps = WEISS_STEPS if cfg.sequence == "weiss" else cfg.sequence
+    unknowns = list(dict.fromkeys(n for s in steps for n in s.unknowns))
+    dofs = list(dict.fromkeys(d for s in steps for d in s.dofs))
+    return unknowns, dofs
+
+
+def _base_trainer(cfg: TrainConfig):
+    opts = dict(cfg.options)
+    if cfg.trainer == "ls":
+        from nnid.trainers.least_squares import LeastSquares
+
+        return LeastSquares(**opts)
+    if cfg.trainer in ("rls", "gradient"):
+        from nnid.trainers import recursive
+
+        cls = (
+            recursive.RecursiveLeastSquares if cfg.trainer == "rls" else recursive.GradientEstimator
+        )
+        return cls(**opts)
+    if cfg.trainer == "ukf":
+        from nnid.trainers.ukf import UnscentedKalman
+
+        return UnscentedKalman(**opts)
+    raise NnidInputError(f"trainer '{cfg.trainer}' runs through its own config", field="trainer")
+
+
+@dataclass
+class TrainResult:
+    model: object
+    metrics: dict
+    report: CleaningReport
+    split: object
+
+
+def run_train(
+    cfg: TrainConfig,
+    config_path: Path,
+    vehicle,
+    data_override: str | None = None,
+    columns_override: str | None = None,
+) -> TrainResult:
+    """Fit the configured model on the training split; score it on the validation split."""
+    from nnid.models.parametric import ParametricModel
+
+    start = time.perf_counter()
+    log, report = load_data(cfg, config_path, data_override, columns_override)
+    s = cfg.split
+    assignment = None
+    if s.by == "experiment" and (s.train or s.validation or s.test):
+        names = list(dict.fromkeys(log["experiment"]))
+        held = set((s.validation or []) + (s.test or []))
+        assignment = {
+            "train": s.train or [n for n in names if n not in held],
+            "validation": s.validation or [],
+            "test": s.test or [],
+        }
+    split = split_log(log, s.by, tuple(s.fractions), assignment)
+    if len(split.validation) == 0:
+        raise NnidInputError(
+            "the validation split is empty: hold out an experiment or a block", field="split"
+        )
+    unknowns = expand_unknowns(cfg.fossen.unknowns, cfg.fossen.dofs, vehicle)
+    dofs = cfg.fossen.dofs
+    if cfg.sequence is not None:
+        unknowns, dofs = sequence_unknowns(cfg)
+    model = ParametricModel(
+        vehicle, unknowns, dofs, make_trainer(cfg), cfg.savgol_window, cfg.savgol_order
+    )
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        model.fit(split.train)
+    for step in model.report_.steps:
+        report.add(step.step, "training split: " + step.detail, step.rows_removed, step.columns)
+    metrics = {
+        "model": "fossen",
+        "trainer": cfg.trainer,
+        "vehicle": vehicle.name,
+        "params": _params(model, cfg),
+        "train": _scores(model, split.train, cfg, free_run=False),
+        "validation": _scores(model, split.validation, cfg, free_run=True),
+        "warnings": [str(w.message) for w in caught],
+        "split": split.record,
+        "warmup_s": cfg.warmup_s,
+    }
+    if cfg.reference:
+        metrics["reference"] = {"label": cfg.reference_label, "values": cfg.reference}
+    if cfg.nondimensional_speed:
+        metrics["nondimensional"] = _nondimensional(model, vehicle, cfg.nondimensional_speed)
+    metrics["seconds"] = time.perf_counter() - start
+    return TrainResult(model, metrics, report, split)
+
+
+def _params(model, cfg: TrainConfig) -> dict:
+    """Estimates with standard error, percentile error, significance, and the value the
+    vehicle file declares for the parameter (the truth of a simulation, a prior otherwise)."""
+    from nnid.models.parametric import Parts
+
+    declared = Parts.from_vehicle(model.vehicle)
+    est = model.estimate_
+    out = {}
+    for name, v, s, pe in zip(est.names, est.theta, est.stderr, est.percentile_error, strict=True):
+        out[name] = {
+            "value": float(v) if np.isfinite(v) else None,
+            "stderr": float(s) if np.isfinite(s) else None,
+            "percentile_error": float(pe) if np.isfinite(pe) else None,
+            "significant": bool(np.isfinite(pe) and pe <= 100 / 1.96),
+            "vehicle_file": declared.get(name),
+        }
+    return out
+
+
+def _scores(model, log: pd.DataFrame, cfg: TrainConfig, free_run: bool) -> dict:
+    # derived velocities/accelerations are computed once; later calls find them in the log
+    prepared, _ = model.prepare(log)
+    dofs = [d for d in excited_dofs(prepared, list(VELOCITY)) if d in model.dofs]
+    mask = warmup_mask(prepared, cfg.warmup_s, warmup_samples=1)
+    one = model.predict(prepared, "one_step")
+    out = {"one_step_nrmse": per_dof(prepared, one, dofs, mask)}
+    if free_run:
+        free = model.predict(prepared, "free_run")
+        out["free_run_nrmse"] = per_dof(prepared, free, dofs, mask)
+    resid = model.residual(prepared)
+    forces = [FORCES[DOFS.index(d)] for d in dofs]
+    out["force_rmse"] = {
+        d: rmse(np.zeros(mask.sum()), resid[f].to_numpy()[mask])
+        for d, f in zip(dofs, forces, strict=True)
+    }
+    out["samples"] = int(mask.sum())
+    return out
+
+
+def _nondimensional(model, vehicle, speed: float) -> dict:
+    from nnid.physics.nondimensional import added_mass_scale, damping_scale
+
+    out = {"speed": speed, "length": vehicle.length, "params": {}}
+    for name, entry in model.params.items():
+        if entry["value"] is None:
+            continue
+        if name.endswith("dot") and ":" not in name:
+            scale = added_mass_scale(name, vehicle.rho, vehicle.length)
+        elif ":" in name:
+            scale = damping_scale(name, vehicle.rho, vehicle.length, speed)
+        else:
+            continue
+        se = entry["stderr"]
+        out["params"][name + "'"] = {
+            "value": entry["value"] / scale,
+            "stderr": None if se is None else se / scale,
+        }
+    return out

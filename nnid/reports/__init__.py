@@ -1,0 +1,1 @@
+"""Human-readable reports (Markdown and HTML) next to the JSON outputs."""

@@ -1,0 +1,884 @@
+"""Caccia, Indiveri & Veruggio (2000): two-step identification of one uncoupled DOF ξ.
+
+The 1-DOF model (Caccia eq. 3) is m_ξ ξ̇ = −k_ξ ξ − k_ξ|ξ| ξ|ξ| + η_ξ(μ) φⁿ_ξ + ν_ξ with Caccia's
+positive drag coefficients, m_ξ the inertia *including* added mass, φⁿ the nominal force from the
+thrust curves and allocation, η the installation coefficient of the thrust mapping mode μ and
+the sign of φⁿ, and ν a disturbance whose mean ν̄ is identified.
+
+**Step 1, steady state (eqs 7-10; heave: eq. 20).** At steady state eq. 3 is the algebraic
+relation 0 = −k ξ − k₂ ξ|ξ| + η φⁿ + ν̄ (eq. 7). Every plateau of constant nominal input gives one
+row of y = Hθ (eqs 8-9): reference rows (η ≡ 1, open-water direction of the reference mode)
+``[ξ, ξ|ξ|, −1, −i, 0…]`` with y = φⁿ; rows of any other mode/direction group g
+``[ξ, ξ|ξ|, −1, −i, …, −φⁿ (column of η_g), …]`` with y = 0; θ = [k, k₂, ν̄, Δν, η_g…] (eq. 10).
+The ``−i`` column is Caccia's eq.-20 extension for experiments i = 0, 1, … with a different
+weight each (ΔW per experiment); it is present only when the log has several settings.
+θ̂, σ̂ and the percentile error 100 σ̂/|θ̂| follow eqs 11-12 through
+:func:`nnid.trainers.least_squares.solve_least_squares`; a parameter above 51.02 % is
+statistically insignificant at 95 % (L279). By default (``weighting="speed"``) the rows are
+weighted by 1/(k_L σ_ξ*)², σ_ξ* the standard error of the plateau's steady speed and
+k_L = k + 2k₂|ξ*| from a first ordinary fit (a speed error δξ moves row j by k_L δξ): a short,
+slow plateau then counts less than a long, fast one, and σ̂ from eq. 12 (now a scale factor)
+stays honest when the plateaus differ that much; ``weighting="none"`` is Caccia's ordinary LS.
+
+Plateau rule (the paper only says steady-state runs were used, Fig. 4): within each experiment
+the log is cut where the nominal force φⁿ_ξ changes (constant input = equal to within 1e-9 of
+its scale). In each constant-input segment the position χ (depth for heave) is differentiated
+twice by a Savitzky-Golay filter fitted *inside the segment only* (``settle_window`` s, order
+``settle_order``), so that no window straddles a step; the segment's settled part is its longest
+run of consecutive samples with |χ̈| ≤ ``settle_accel`` (default 2e-3 m/s², about four times
+the SG acceleration noise of a 2-cm, 10-Hz depth-meter with the 10-s window), and it counts when
+that run lasts at least ``min_plateau`` s. Plateaus that never settle are dropped;
+:attr:`CacciaTwoStep.plateaus_` lists those used. The steady speed ξ* is estimated from the
+position by least squares, as Caccia did (Fig. 5, L111): by default (``speed="asymptote"``) as
+the slope of χ(t) = c + ξ* t + A e^{−(t−t₀)/τ} fitted over the settled run (τ on a grid), i.e.
+with the tail of the first-order approach to steady state modelled. A heavy open-frame vehicle
+near zero speed settles slowly (ROMEO heave: t_c = m_w/k_L up to 1150/45 ≈ 26 s) while a depth
+record pins the slope to ~1e-4 m/s, so an unmodelled residual transient would bias k and W by
+several reported σ. ``speed="slope"`` is Caccia's plain LS slope of χ over the run (weights its
+middle most), ``"mean"`` the mean SG velocity over it.
+
+**Step 2, inertia (eqs 13-19).** A d-optimal sinusoid φⁿ = φ̂ + Δφ sin(ω_opt t) (eq. 15),
+ω_opt = 1/(√3 t_c), t_c = m_ξ/k_L, k_L = k + 2 k₂ |ξ*| (eqs 13-14), is designed from the step-1
+drag and a prior inertia (:meth:`CacciaTwoStep.design_sinusoid`, using
+:class:`nnid.datasets.excitation.DOptimalSine`). Eq. 3 integrated over the run is linear in
+θ = [m_ξ, m_ξ ξ₀ + k χ₀, b] (eqs 16-19): y_k = ϕ_k − k χ_k − k₂ I_k, H row = [ξ_k, −1, −t_k] with
+ϕ = ∫ η φⁿ (exact for the zero-order-hold input), χ the position, I = ∫ ξ|ξ| and ξ from the
+SG-filtered position; b absorbs ν̄ (weight − buoyancy for heave) and integration bias (L169).
+ξ is a regressor, so its noise attenuates m̂_ξ by about σ²_noise/var(ξ) (errors in variables):
+the default SG (5 s, order 4; Caccia used 4-6 s, L321/L327) keeps that below 1 % for a 2-cm
+depth record while leaving the sinusoid undistorted.
+With ``correlated=True`` (default) σ̂ of this step is widened by the residual's integrated
+autocorrelation time (:func:`nnid.trainers.least_squares.correlation_time`): eq. 11 assumes
+white residuals, and an integrated equation driven by SG velocities has strongly correlated
+ones; ``correlated=False`` is Caccia's plain eq. 11. σ̂(m_ξ) is conditional on the step-1 drag,
+as in the paper.
+
+**Output names** (:meth:`CacciaTwoStep.fit_logs`) follow the vehicle file, with Fossen signs:
+``"Z:w" = −k_w``, ``"Z:w*abs(w)" = −k_w|w|`` (negative = drag), ``"eta.w.neg"`` (installation
+coefficient of upward thrust; ``eta.<dof>.<mode>.<pos|neg>`` when several modes are given),
+``"Z_wdot" = −(m_w − m)``, and for the restoring/disturbance terms
+``"weight_minus_buoyancy"`` = Caccia's W (W − B of experiment 0, force along +z = down, the
+Fossen restoring force −g₃ at zero attitude) and ``"delta_weight"`` = ΔW per experiment. For the
+other DOFs the mean disturbance is ``"external_bias.<dof>"`` and its step ``"delta_bias.<dof>"``.
+The Caccia-signed estimates are kept in :attr:`CacciaTwoStep.steady_` and
+:attr:`CacciaTwoStep.inertia_`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+import pandas as pd
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+from scipy.integrate import cumulative_trapezoid
+from scipy.signal import savgol_filter
+
+from nnid.config import SimulateConfig
+from nnid.datasets.excitation import DOptimalSine
+from nnid.datasets.measurement import Measurement
+from nnid.datasets.preprocess import savgol_window
+from nnid.datasets.simulator import simulate, simulate_config
+from nnid.errors import NnidInputError
+from nnid.models.parametric import Regression, log_arrays
+from nnid.physics.added_mass import DOFS, FORCES
+from nnid.physics.thrusters import Actuation
+from nnid.trainers.least_squares import Estimate, correlation_time, solve_least_squares
+
+POSITION_OF = {"u": "x", "v": "y", "w": "z", "p": "phi", "q": "theta", "r": "psi"}
+"""The position χ integrated from each DOF's velocity (level attitude, Caccia's 1-D trials)."""
+
+
+# --- step 1: plateaus and the steady-state regression ------------------------------------------
+
+
+@dataclass
+class Plateau:
+    """One steady-state run: constant nominal input ``force`` and its settled ``speed``."""
+
+    experiment: str
+    setting: int  # Caccia's i in eq. 20 (weight setting / experiment index)
+    mode: str  # thrust mapping mode label ("" = the only one)
+    force: float  # nominal φⁿ_ξ
+    speed: float  # steady ξ*
+    speed_std: float  # standard error of the LS slope (white position noise)
+    start: float  # settled run [start, end] in s
+    end: float
+    n: int
+
+    @property
+    def direction(self) -> str:
+        """'pos' for φⁿ ≥ 0, 'neg' otherwise (the sign the installation coefficient uses)."""
+        return "pos" if self.force >= 0 else "neg"
+
+
+def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """[start, stop) of the runs of True in ``mask``."""
+    edges = np.diff(np.r_[0, mask.astype(np.int8), 0])
+    return list(zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1), strict=True))
+
+
+def _asymptote(t: np.ndarray, x: np.ndarray, f_crit: float = 3.0) -> tuple[float, float]:
+    """Steady speed and its standard error from the position over a settled run: the slope of
+    χ = c + ξ* t + A exp(−(t − t₀)/τ) fitted by LS (τ on a grid up to half the run), i.e. the
+    asymptote of a first-order approach to steady state, when the exponential tail is
+    significant (F statistic of its two parameters above ``f_crit``, ≈ 95 %); else the plain
+    LS slope of c + ξ* t."""
+    tc = t - t[0]
+    n, span = tc.size, float(tc[-1])
+    h0 = np.stack([np.ones_like(tc), tc], 1)
+    coef0, *_ = np.linalg.lstsq(h0, x, rcond=None)
+    r0 = x - h0 @ coef0
+    rss0 = float(r0 @ r0)
+    best = (rss0, coef0, h0)
+    for tau in np.geomspace(max(span / 200, 1e-3), span / 2, 40):
+        h = np.stack([np.ones_like(tc), tc, np.exp(-tc / tau)], 1)
+        coef, *_ = np.linalg.lstsq(h, x, rcond=None)
+        r = x - h @ coef
+        if float(r @ r) < best[0]:
+            best = (float(r @ r), coef, h)
+    rss, coef, h = best
+    if h.shape[1] == 3 and (rss0 - rss) / 2 / max(rss / max(n - 4, 1), 1e-300) <= f_crit:
+        rss, coef, h = rss0, coef0, h0
+    cov = rss / max(n - h.shape[1] - (h.shape[1] == 3), 1) * np.linalg.inv(h.T @ h)
+    return float(coef[1]), float(np.sqrt(cov[1, 1]))
+
+
+def find_plateaus(
+    t: np.ndarray,
+    position: np.ndarray,
+    force: np.ndarray,
+    experiment: np.ndarray,
+    names: Sequence[str] | None = None,
+    settings: Sequence[int] | None = None,
+    modes: np.ndarray | None = None,
+    settle_window: float = 10.0,
+    settle_order: int = 2,
+    settle_accel: float = 2e-3,
+    min_plateau: float = 10.0,
+    speed: Literal["slope", "mean", "asymptote"] = "asymptote",
+) -> list[Plateau]:
+    """Steady-state plateaus of constant nominal input (rule in the module docstring).
+
+    ``experiment`` holds integer codes 0, 1, … (``names`` their labels); the weight setting of
+    code c is ``settings[c]`` (default c, Caccia's experiment number i); ``modes`` labels each
+    sample with its thrust mapping mode.
+    """
+    t = np.asarray(t, np.float64)
+    position = np.asarray(position, np.float64)
+    force = np.asarray(force, np.float64)
+    experiment = np.asarray(experiment)
+    scale = max(float(np.max(np.abs(force))), 1e-12)
+    mode_labels = np.full(t.size, "", dtype=object) if modes is None else np.asarray(modes)
+    plateaus: list[Plateau] = []
+    for code in pd.unique(experiment):
+        idx = np.flatnonzero(experiment == code)
+        te, xe, fe, me = t[idx], position[idx], force[idx], mode_labels[idx]
+        dt = float(np.median(np.diff(te)))
+        change = np.r_[True, (np.abs(np.diff(fe)) > 1e-9 * scale) | (me[1:] != me[:-1])]
+        starts = np.flatnonzero(change)
+        stops = np.r_[starts[1:], te.size]
+        window = savgol_window(settle_window, 1.0 / dt, settle_order)
+        for a, b in zip(starts, stops, strict=True):
+            if (b - a) * dt < min_plateau or b - a <= window:
+                continue
+            seg_t, seg_x = te[a:b], xe[a:b]
+            acc = savgol_filter(seg_x, window, settle_order, deriv=2, delta=dt, mode="interp")
+            runs = _runs(np.abs(acc) <= settle_accel)
+            if not runs:
+                continue
+            r0, r1 = max(runs, key=lambda r: r[1] - r[0])
+            if (r1 - r0) * dt < min_plateau:
+                continue
+            tt, xx = seg_t[r0:r1], seg_x[r0:r1]
+            tc = tt - tt.mean()
+            slope = float(tc @ (xx - xx.mean()) / (tc @ tc))
+            resid = xx - xx.mean() - slope * tc
+            slope_std = float(np.sqrt(resid @ resid / max(tt.size - 2, 1) / (tc @ tc)))
+            if speed == "mean":
+                vel = savgol_filter(seg_x, window, settle_order, deriv=1, delta=dt, mode="interp")
+                value = float(vel[r0:r1].mean())
+            elif speed == "asymptote":
+                value, slope_std = _asymptote(tt, xx)
+            else:
+                value = slope
+            c = int(code)
+            plateaus.append(
+                Plateau(
+                    experiment=str(names[c]) if names is not None else str(c),
+                    setting=int(settings[c]) if settings is not None else c,
+                    mode=str(me[a]),
+                    force=float(fe[a]),
+                    speed=value,
+                    speed_std=slope_std,
+                    start=float(tt[0]),
+                    end=float(tt[-1]),
+                    n=int(tt.size),
+                )
+            )
+    return plateaus
+
+
+def caccia_names(dof: str) -> tuple[str, str, str, str]:
+    """Caccia-signed step-1 names: k_ξ, k_ξ|ξ|, ν̄ (W for heave), Δν (ΔW for heave)."""
+    if dof == "w":
+        return "k_w", "k_w|w|", "W", "delta_W"
+    return f"k_{dof}", f"k_{dof}|{dof}|", f"nu_{dof}", f"delta_nu_{dof}"
+
+
+def eta_name(dof: str, mode: str, direction: str) -> str:
+    """``eta.<dof>.<pos|neg>`` (vehicle-file name), or ``eta.<dof>.<mode>.<pos|neg>``."""
+    return f"eta.{dof}.{direction}" if not mode else f"eta.{dof}.{mode}.{direction}"
+
+
+def steady_state_regression(
+    plateaus: Sequence[Plateau],
+    dof: str = "w",
+    reference: Sequence[tuple[str, str]] = (("", "pos"),),
+    force_eta_one: bool = False,
+    terms: Sequence[str] = ("linear", "quadratic"),
+    disturbance: bool = True,
+) -> tuple[np.ndarray, np.ndarray, list[str]]:
+    """H, y and Caccia-signed names of eqs 8-10 (eq. 20 for heave with several settings).
+
+    ``reference`` lists the (mode, direction) groups with η ≡ 1 (open water; eq. 20: downward
+    heave thrust); each other group present gets its own η column. ``force_eta_one`` makes
+    every group a reference (η = 1 everywhere, Caccia Fig. 6). ``terms`` picks the drag terms
+    (``"linear"`` ξ, ``"quadratic"`` ξ|ξ|); ``disturbance`` the ν̄ column (and Δν when the
+    plateaus come from several settings).
+    """
+    if not plateaus:
+        raise NnidInputError("no steady-state plateau was found in the log", field="steady_state")
+    bad = set(terms) - {"linear", "quadratic"}
+    if bad or not terms:
+        raise ValueError(f"terms are 'linear' and/or 'quadratic', got {list(terms)}")
+    k1, k2, nu, dnu = caccia_names(dof)
+    xi = np.array([p.speed for p in plateaus])
+    phi = np.array([p.force for p in plateaus])
+    setting = np.array([p.setting for p in plateaus], np.float64)
+    cols, names = [], []
+    if "linear" in terms:
+        cols.append(xi)
+        names.append(k1)
+    if "quadratic" in terms:
+        cols.append(xi * np.abs(xi))
+        names.append(k2)
+    if disturbance:
+        cols.append(-np.ones_like(xi))
+        names.append(nu)
+        if np.unique(setting).size > 1:
+            cols.append(-setting)
+            names.append(dnu)
+    refs = {tuple(r) for r in reference}
+    groups = [(p.mode, p.direction) for p in plateaus]
+    is_ref = np.array(
+        [force_eta_one or g in refs or p.force == 0 for g, p in zip(groups, plateaus, strict=True)]
+    )
+    y = np.where(is_ref, phi, 0.0)
+    for g in dict.fromkeys(g for g, r in zip(groups, is_ref, strict=True) if not r):
+        member = np.array([gg == g and not r for gg, r in zip(groups, is_ref, strict=True)])
+        cols.append(np.where(member, -phi, 0.0))
+        names.append(eta_name(dof, *g))
+    return np.stack(cols, 1), y, names
+
+
+# --- step 2: the integrated regression -------------------------------------------------------
+
+
+def integrated_regression(
+    t: np.ndarray,
+    position: np.ndarray,
+    force: np.ndarray,
+    k_linear: float,
+    k_quadratic: float,
+    eta_pos: float = 1.0,
+    eta_neg: float = 1.0,
+    velocity_window: float = 5.0,
+    velocity_order: int = 4,
+) -> tuple[np.ndarray, np.ndarray, list[str]]:
+    """H and y of Caccia eqs 16-19 for one run (θ = [m_ξ, m_ξ ξ₀ + k χ₀, b]).
+
+    ξ is the SG derivative of the position, I = ∫ ξ|ξ| (trapezoid), ϕ = ∫ η φⁿ summed exactly
+    for a zero-order-hold input (sample k held over [t_k, t_k+1)). The position is taken
+    relative to its first sample (χ₀ is absorbed in the second parameter anyway).
+    """
+    t = np.asarray(t, np.float64) - float(t[0])
+    chi = np.asarray(position, np.float64) - float(position[0])
+    force = np.asarray(force, np.float64)
+    dt = float(np.median(np.diff(t)))
+    window = savgol_window(velocity_window, 1.0 / dt, velocity_order)
+    if chi.size <= window:
+        raise NnidInputError(
+            f"the sinusoid run has {chi.size} samples, too few for the Savitzky-Golay window "
+            f"of {window}",
+            field="sinusoid",
+        )
+    xi = savgol_filter(chi, window, velocity_order, deriv=1, delta=dt, mode="interp")
+    effective = np.where(force >= 0, eta_pos * force, eta_neg * force)
+    varphi = np.r_[0.0, np.cumsum(effective[:-1] * np.diff(t))]
+    integral = cumulative_trapezoid(xi * np.abs(xi), t, initial=0.0)
+    y = varphi - k_linear * chi - k_quadratic * integral
+    h = np.stack([xi, -np.ones_like(t), -t], 1)
+    return h, y, ["m", "m*xi0+k*chi0", "b"]
+
+
+# --- inputs for a force profile --------------------------------------------------------------
+
+
+def force_to_commands(vehicle, dof: str, force: np.ndarray) -> np.ndarray:
+    """Inputs ``[N, n_channels]`` that produce the nominal generalized force ``force`` in ``dof``
+    (zero elsewhere): minimum-norm thrusts B# e_ξ φ (Caccia L211, the "all" modes of Table I),
+    then each thrust curve inverted numerically (monotone curves). A vehicle without
+    thrusters takes the force itself."""
+    act = Actuation(vehicle)
+    force = np.asarray(force, np.float64)
+    k = DOFS.index(dof)
+    if not act.thrusters:
+        out = np.zeros((force.size, 6))
+        out[:, k] = force
+        return out
+    share = np.linalg.pinv(act.matrix)[:, k]  # thrust per unit force, [n_thrusters]
+    out = np.zeros((force.size, len(act.channels)))
+    for j, (thruster, curve) in enumerate(zip(act.thrusters, act.curves, strict=True)):
+        if abs(share[j]) < 1e-12:
+            continue
+        lo = -1e3 if thruster.cmd_min is None else thruster.cmd_min
+        hi = 1e3 if thruster.cmd_max is None else thruster.cmd_max
+        grid = np.linspace(lo, hi, 200_001)
+        thrust = curve(grid)
+        if np.any(np.diff(thrust) < 0):
+            raise ValueError(f"thrust curve of '{thruster.name}' is not monotone")
+        out[:, j] = np.interp(share[j] * force, thrust, grid)
+    return out
+
+
+# --- the trainer -----------------------------------------------------------------------------
+
+
+def _combine(parts: Sequence[Estimate], names: Sequence[str] | None = None) -> Estimate:
+    """Block-diagonal union of estimates (the steps' covariances are not cross-correlated)."""
+    theta = np.concatenate([p.theta for p in parts])
+    cov = np.zeros((theta.size, theta.size))
+    k = 0
+    for p in parts:
+        n = p.theta.size
+        cov[k : k + n, k : k + n] = p.cov
+        k += n
+    return Estimate(
+        list(names) if names is not None else [n for p in parts for n in p.names],
+        theta,
+        cov,
+        parts[0].sigma2,
+        sum(p.n_obs for p in parts),
+    )
+
+
+class CacciaTwoStep:
+    """Caccia's two-step identification of one DOF (module docstring; eqs 7-20).
+
+    Use :meth:`fit_logs` with the steady-state campaign log and the sinusoid log, or the
+    steps one by one: :meth:`fit_steady`, :meth:`design_sinusoid`, :meth:`fit_inertia`. The
+    trainer protocol :meth:`fit` takes a structure with a ``vehicle`` and the arrays of
+    :func:`nnid.models.parametric.log_arrays` (``{"steady": …, "sinusoid": …}``); the unknowns
+    are Caccia's fixed set, not the structure's, because the procedure identifies exactly
+    them (drag, restoring/disturbance, installation, then inertia) from two dedicated runs.
+
+    Parameters: ``dof`` (u v w p q r); ``reference`` the (mode, direction) groups with η ≡ 1
+    (default downward/positive thrust of the only mode, eq. 20); ``mode_column`` a log
+    column naming each sample's thrust mapping mode; ``force_eta_one`` fixes η = 1 for every
+    direction (Caccia Fig. 6); ``terms`` the drag terms; ``settings`` maps experiment names to
+    Caccia's weight-setting index i (default: order of appearance, 0, 1, …); the plateau rule
+    (``settle_window`` s, ``settle_order``, ``settle_accel`` in units of the position per s²,
+    ``min_plateau`` s, ``speed``); ``weighting`` of the step-1 rows; the step-2 SG velocity (``velocity_window`` s,
+    ``velocity_order``) and ``correlated``.
+    """
+
+    def __init__(
+        self,
+        dof: str = "w",
+        reference: Sequence[tuple[str, str]] = (("", "pos"),),
+        mode_column: str | None = None,
+        force_eta_one: bool = False,
+        terms: Sequence[str] = ("linear", "quadratic"),
+        settings: Mapping[str, int] | None = None,
+        settle_window: float = 10.0,
+        settle_order: int = 2,
+        settle_accel: float = 2e-3,
+        min_plateau: float = 10.0,
+        speed: Literal["slope", "mean", "asymptote"] = "asymptote",
+        velocity_window: float = 5.0,
+        velocity_order: int = 4,
+        correlated: bool = True,
+        weighting: Literal["none", "speed"] = "speed",
+    ) -> None:
+        if dof not in DOFS:
+            raise ValueError(f"'{dof}' is not a DOF; expected one of {' '.join(DOFS)}")
+        self.dof = dof
+        self.reference = tuple(tuple(r) for r in reference)
+        self.mode_column = mode_column
+        self.force_eta_one = force_eta_one
+        self.terms = tuple(terms)
+        self.settings = dict(settings) if settings is not None else None
+        self.settle_window = settle_window
+        self.settle_order = settle_order
+        self.settle_accel = settle_accel
+        self.min_plateau = min_plateau
+        self.speed = speed
+        self.velocity_window = velocity_window
+        self.velocity_order = velocity_order
+        self.correlated = correlated
+        self.weighting = weighting
+        self.plateaus_: list[Plateau] = []
+        self.steady_: Estimate | None = None
+        self.inertia_: Estimate | None = None
+        self.estimate_: Estimate | None = None
+
+    # -- names ----------------------------------------------------------------------------------
+    @property
+    def force_name(self) -> str:
+        return FORCES[DOFS.index(self.dof)]
+
+    def vehicle_names(self, names: Sequence[str]) -> list[str]:
+        """Caccia-signed step-1 names -> vehicle-file names (module docstring)."""
+        k1, k2, nu, dnu = caccia_names(self.dof)
+        f, d = self.force_name, self.dof
+        heave = d == "w"
+        table = {
+            k1: f"{f}:{d}",
+            k2: f"{f}:{d}*abs({d})",
+            nu: "weight_minus_buoyancy" if heave else f"external_bias.{d}",
+            dnu: "delta_weight" if heave else f"delta_bias.{d}",
+        }
+        return [table.get(n, n) for n in names]
+
+    def to_vehicle_signs(self, est: Estimate) -> Estimate:
+        """Caccia's positive k -> Fossen coefficients −k (covariance transformed alike)."""
+        k1, k2, _, _ = caccia_names(self.dof)
+        sign = np.array([-1.0 if n in (k1, k2) else 1.0 for n in est.names])
+        return Estimate(
+            self.vehicle_names(est.names),
+            est.theta * sign,
+            est.cov * np.outer(sign, sign),
+            est.sigma2,
+            est.n_obs,
+            est.excitation,
+        )
+
+    def _caccia_value(self, name: str, default: float = 0.0) -> float:
+        if self.steady_ is None:
+            raise RuntimeError("fit the steady-state step first")
+        if name in self.steady_.names:
+            return float(self.steady_.theta[self.steady_.names.index(name)])
+        return default
+
+    def eta(self, direction: str, mode: str = "") -> float:
+        """Identified (or reference, 1) installation coefficient of a mode and direction."""
+        return self._caccia_value(eta_name(self.dof, mode, direction), 1.0)
+
+    # -- step 1 ---------------------------------------------------------------------------------
+    def steady_arrays(
+        self,
+        t: np.ndarray,
+        position: np.ndarray,
+        force: np.ndarray,
+        experiment: np.ndarray,
+        names: Sequence[str] | None = None,
+        modes: np.ndarray | None = None,
+    ) -> Estimate:
+        """Step 1 on arrays (position χ, nominal force φⁿ_ξ, experiment codes 0, 1, …).
+        Returns the Caccia-signed estimate (also in :attr:`steady_`)."""
+        settings = None
+        if self.settings is not None:
+            if names is None:
+                raise ValueError("settings by experiment name need the experiment names")
+            missing = [n for n in names if n not in self.settings]
+            if missing:
+                raise NnidInputError(
+                    f"no weight setting for experiments {missing}", field="steady_state.settings"
+                )
+            settings = [self.settings[n] for n in names]
+        self.plateaus_ = find_plateaus(
+            t,
+            position,
+            force,
+            experiment,
+            names,
+            settings,
+            modes,
+            self.settle_window,
+            self.settle_order,
+            self.settle_accel,
+            self.min_plateau,
+            self.speed,
+        )
+        h, y, pnames = steady_state_regression(
+            self.plateaus_, self.dof, self.reference, self.force_eta_one, self.terms
+        )
+        est = solve_least_squares(h, y, names=pnames)
+        if self.weighting == "speed":
+            est = solve_least_squares(h, y, self._row_weights(est), pnames)
+        self.steady_ = est
+        return self.steady_
+
+    def fit_steady(self, log: pd.DataFrame, vehicle) -> Estimate:
+        """Step 1 (eqs 7-10, 20) on the steady-state campaign log; Caccia-signed estimate."""
+        arrays = self._log_arrays(log, vehicle)
+        modes = None
+        if self.mode_column is not None:
+            if self.mode_column not in log:
+                raise NnidInputError("mode column missing from the log", field=self.mode_column)
+            modes = log[self.mode_column].astype(str).to_numpy()
+        return self._steady_from(arrays, modes)
+
+    def _steady_from(self, arrays: Mapping[str, Any], modes: np.ndarray | None) -> Estimate:
+        k = DOFS.index(self.dof)
+        names = arrays.get("experiment_names")
+        return self.steady_arrays(
+            arrays["t"],
+            arrays["eta"][:, k],
+            arrays["tau"][:, k],
+            arrays["experiment"],
+            names,
+            modes,
+        )
+
+    def _log_arrays(self, log: pd.DataFrame, vehicle) -> dict[str, Any]:
+        column = POSITION_OF[self.dof]
+        if column not in log:
+            raise NnidInputError(
+                f"Caccia's procedure needs the position '{column}' of DOF '{self.dof}' "
+                "(velocities are estimated from it)",
+                field=column,
+            )
+        arrays = log_arrays(log, vehicle)
+        arrays["experiment_names"] = (
+            list(pd.unique(log["experiment"])) if "experiment" in log else ["0"]
+        )
+        return arrays
+
+    def _row_weights(self, first: Estimate) -> np.ndarray:
+        """1 / var of each eq.-7 row from its speed's standard error: a speed error δξ moves
+        the row by k_L δξ, k_L = k + 2 k₂|ξ| from the first (ordinary) fit."""
+        k1, k2, _, _ = caccia_names(self.dof)
+        th = dict(zip(first.names, np.nan_to_num(first.theta), strict=True))
+        xi = np.array([p.speed for p in self.plateaus_])
+        sd = np.array([p.speed_std for p in self.plateaus_])
+        k_l = np.abs(th.get(k1, 0.0) + 2 * th.get(k2, 0.0) * np.abs(xi))
+        var = (k_l * sd) ** 2
+        return 1.0 / np.maximum(var, 1e-6 * max(float(np.median(var)), 1e-300))
+
+    def residuals(self) -> np.ndarray:
+        """Step-1 residuals y − Hθ̂ of eq. 7 per plateau, in force units (N for heave)."""
+        if self.steady_ is None:
+            raise RuntimeError("fit the steady-state step first")
+        h, y, _ = steady_state_regression(
+            self.plateaus_, self.dof, self.reference, self.force_eta_one, self.terms
+        )
+        return y - h @ np.nan_to_num(self.steady_.theta)
+
+    # -- design ---------------------------------------------------------------------------------
+    def design_sinusoid(
+        self,
+        offset: float,
+        amplitude: float,
+        prior_inertia: float,
+        duration: float,
+        start: float = 0.0,
+    ) -> DOptimalSine:
+        """Caccia eqs 13-15 with the step-1 drag: the d-optimal sinusoid on the force channel,
+        ω_opt = 1/(√3 t_c) for the prior inertia (Caccia: m_air × (1.1 … 2), L153)."""
+        k1, k2, _, _ = caccia_names(self.dof)
+        eta = self.eta("pos" if offset >= 0 else "neg")
+        return DOptimalSine(
+            channel=self.force_name,
+            start=start,
+            offset=offset,
+            amplitude=amplitude,
+            inertia=prior_inertia,
+            k_linear=max(self._caccia_value(k1), 0.0),
+            k_quadratic=max(self._caccia_value(k2), 0.0),
+            eta=eta,
+            duration=duration,
+        )
+
+    # -- step 2 ---------------------------------------------------------------------------------
+    def inertia_arrays(self, t: np.ndarray, position: np.ndarray, force: np.ndarray) -> Estimate:
+        """Step 2 (eqs 16-19) on one run; Caccia's θ = [m_ξ, m_ξ ξ₀ + k χ₀, b] (also in
+        :attr:`inertia_`)."""
+        k1, k2, _, _ = caccia_names(self.dof)
+        h, y, names = integrated_regression(
+            t,
+            position,
+            force,
+            self._caccia_value(k1),
+            self._caccia_value(k2),
+            self.eta("pos"),
+            self.eta("neg"),
+            self.velocity_window,
+            self.velocity_order,
+        )
+        est = solve_least_squares(h, y, names=names)
+        if self.correlated:
+            reg = Regression(h, y, names, (self.dof,), y.size)
+            est.cov = est.cov * correlation_time(reg, est.theta)
+        self.inertia_ = est
+        return est
+
+    def fit_inertia(self, log: pd.DataFrame, vehicle) -> Estimate:
+        """Step 2 on the sinusoid log (one experiment); Caccia-signed estimate."""
+        return self._inertia_from(self._log_arrays(log, vehicle))
+
+    def _inertia_from(self, arrays: Mapping[str, Any]) -> Estimate:
+        k = DOFS.index(self.dof)
+        codes = np.asarray(arrays["experiment"])
+        if np.unique(codes).size > 1:
+            raise NnidInputError("the sinusoid log must hold one experiment", field="sinusoid")
+        return self.inertia_arrays(arrays["t"], arrays["eta"][:, k], arrays["tau"][:, k])
+
+    # -- both -----------------------------------------------------------------------------------
+    def rigid_inertia(self, vehicle) -> float:
+        """Rigid-body mass (u v w) or moment of inertia (p q r) of the vehicle file."""
+        k = DOFS.index(self.dof)
+        return float(vehicle.mass) if k < 3 else float(vehicle.inertia_matrix()[k - 3, k - 3])
+
+    def fit_logs(
+        self, steady: pd.DataFrame, vehicle, sinusoid: pd.DataFrame | None = None
+    ) -> Estimate:
+        """Both steps; the estimate in vehicle-file names and Fossen signs (module docstring),
+        the added mass ``"Z_wdot" = −(m_ξ − m)`` last when a sinusoid log is given."""
+        self.fit_steady(steady, vehicle)
+        if sinusoid is not None:
+            self.fit_inertia(sinusoid, vehicle)
+        return self._finish(vehicle)
+
+    def fit(self, structure, data: Mapping[str, Any]) -> Estimate:
+        """Trainer protocol: ``structure.vehicle`` and ``data`` = ``{"steady": log_arrays(…),
+        "sinusoid": log_arrays(…)}`` (sinusoid optional), or the steady arrays alone. The
+        arrays' pose column of the DOF must be the measured position. Mode labels, if any,
+        come as ``data["steady"]["mode"]``."""
+        vehicle = structure.vehicle
+        steady = data["steady"] if "steady" in data else data
+        self._steady_from(steady, steady.get("mode"))
+        if "sinusoid" in data and data["sinusoid"] is not None:
+            self._inertia_from(data["sinusoid"])
+        return self._finish(vehicle)
+
+    def _finish(self, vehicle) -> Estimate:
+        assert self.steady_ is not None
+        parts = [self.to_vehicle_signs(self.steady_)]
+        if self.inertia_ is not None:
+            m = self.inertia_
+            added = f"{self.force_name}_{self.dof}dot"
+            rigid = self.rigid_inertia(vehicle)
+            parts.append(
+                Estimate(
+                    [added],
+                    np.array([-(m.theta[0] - rigid)]),
+                    m.cov[:1, :1].copy(),
+                    m.sigma2,
+                    m.n_obs,
+                )
+            )
+        self.estimate_ = _combine(parts)
+        self.estimate_.dof_sigma2 = {"steady_state": self.steady_.sigma2}
+        if self.inertia_ is not None:
+            self.estimate_.dof_sigma2["inertia"] = self.inertia_.sigma2
+        return self.estimate_
+
+    def describe(self) -> str:
+        """The estimate with σ̂ and percentile errors (51.02 % rule flagged)."""
+        if self.estimate_ is None:
+            return "not fitted"
+        est = self.estimate_
+        lines = [
+            f"Caccia two-step identification of DOF '{self.dof}' ({len(self.plateaus_)} plateaus):"
+        ]
+        for name, v, s, pe, ok in zip(
+            est.names, est.theta, est.stderr, est.percentile_error, est.significant, strict=True
+        ):
+            flag = "" if ok else "  (insignificant at 95 %, > 51.02 %)"
+            lines.append(f"  {name:>22s} = {v:.6g} ± {s:.2g} ({pe:.1f} %){flag}")
+        if self.inertia_ is not None:
+            m, s = self.inertia_.theta[0], self.inertia_.stderr[0]
+            lines.append(f"  {'m_' + self.dof + ' (total)':>22s} = {m:.6g} ± {s:.2g}")
+        return "\n".join(lines)
+
+
+# --- the config -----------------------------------------------------------------------------
+
+
+class SinusoidSpec(BaseModel):
+    """The d-optimal sinusoid run (Caccia eqs 13-15) on the DOF's force channel."""
+
+    model_config = ConfigDict(extra="forbid")
+    offset: float
+    amplitude: float = Field(gt=0)
+    prior_inertia: float | None = Field(None, gt=0)
+    prior_added_fraction: float = Field(0.5, ge=0.1, le=1.0)
+    duration: float = Field(gt=0)
+    seed: int = 1000
+    measurement: Measurement | None = None
+
+    @model_validator(mode="after")
+    def _no_inversion(self) -> SinusoidSpec:
+        if self.amplitude > abs(self.offset):
+            raise ValueError("amplitude must not exceed |offset|: the thrust would reverse")
+        return self
+
+
+class SteadySpec(BaseModel):
+    """Step-1 options (see :class:`CacciaTwoStep`)."""
+
+    model_config = ConfigDict(extra="forbid")
+    reference: list[tuple[str, Literal["pos", "neg"]]] = Field(
+        default_factory=lambda: [("", "pos")]
+    )
+    force_eta_one: bool = False
+    terms: list[Literal["linear", "quadratic"]] = Field(
+        default_factory=lambda: ["linear", "quadratic"]
+    )
+    settings: dict[str, int] | None = None
+    settle_window: float = Field(10.0, gt=0)
+    settle_order: int = Field(2, ge=1, le=6)
+    settle_accel: float = Field(2e-3, gt=0)
+    min_plateau: float = Field(10.0, gt=0)
+    speed: Literal["slope", "mean", "asymptote"] = "asymptote"
+    weighting: Literal["none", "speed"] = "speed"
+
+
+class CacciaConfig(BaseModel):
+    """``configs/romeo_heave_caccia.toml`` (fields documented at the top of that file)."""
+
+    model_config = ConfigDict(extra="forbid")
+    kind: Literal["caccia"] = "caccia"
+    vehicle: str
+    dof: Literal["u", "v", "w", "p", "q", "r"] = "w"
+    campaign: str | SimulateConfig
+    campaign_seed: int | None = None
+    steady_state: SteadySpec = Field(default_factory=SteadySpec)
+    sinusoid: SinusoidSpec
+    velocity_window: float = Field(5.0, gt=0)
+    velocity_order: int = Field(4, ge=2, le=8)
+    correlated: bool = True
+
+    def trainer(self) -> CacciaTwoStep:
+        s = self.steady_state
+        return CacciaTwoStep(
+            dof=self.dof,
+            reference=[tuple(r) for r in s.reference],
+            force_eta_one=s.force_eta_one,
+            terms=s.terms,
+            settings=s.settings,
+            settle_window=s.settle_window,
+            settle_order=s.settle_order,
+            settle_accel=s.settle_accel,
+            min_plateau=s.min_plateau,
+            speed=s.speed,
+            weighting=s.weighting,
+            velocity_window=self.velocity_window,
+            velocity_order=self.velocity_order,
+            correlated=self.correlated,
+        )
+
+
+def load_caccia_config(path: str | Path) -> tuple[CacciaConfig, SimulateConfig]:
+    """The Caccia config and its campaign (a path is relative to the config file)."""
+    from nnid.config import load_config
+    from nnid.validation import read_toml, validated
+
+    path = Path(path)
+    cfg = validated(CacciaConfig, read_toml(path), str(path))
+    campaign = cfg.campaign
+    if isinstance(campaign, str):
+        campaign = load_config(path.parent / campaign)
+    if cfg.campaign_seed is not None:
+        campaign = campaign.model_copy(update={"seed": cfg.campaign_seed})
+    if campaign.vehicle != cfg.vehicle:
+        raise NnidInputError(
+            f"the campaign flies '{campaign.vehicle}', the config names '{cfg.vehicle}'",
+            source=str(path),
+            field="campaign",
+        )
+    return cfg, campaign
+
+
+@dataclass
+class CacciaRun:
+    """What :func:`run_caccia` made: the estimate, the trainer, the logs and the design."""
+
+    estimate: Estimate
+    trainer: CacciaTwoStep
+    steady_log: pd.DataFrame
+    sinusoid_log: pd.DataFrame
+    design: DOptimalSine
+
+
+def run_caccia(path: str | Path, vehicle=None) -> CacciaRun:
+    """Simulate the campaign, fit step 1, design and simulate the d-optimal sinusoid from the
+    step-1 drag, fit step 2 (the flow of Caccia section III)."""
+    from nnid.vehicle import load_vehicle
+
+    cfg, campaign = load_caccia_config(path)
+    vehicle = vehicle or load_vehicle(cfg.vehicle)
+    trainer = cfg.trainer()
+    steady_log = simulate_config(campaign, vehicle)
+    trainer.fit_steady(steady_log, vehicle)
+    spec = cfg.sinusoid
+    prior = spec.prior_inertia or trainer.rigid_inertia(vehicle) * (1 + spec.prior_added_fraction)
+    design = trainer.design_sinusoid(spec.offset, spec.amplitude, prior, spec.duration)
+    sinusoid_log = simulate_sinusoid(
+        vehicle,
+        design,
+        cfg.dof,
+        campaign.dt,
+        substeps=campaign.substeps,
+        measurement=spec.measurement or campaign.measurement,
+        seed=spec.seed,
+        effects=[(e.name, e.value) for e in campaign.effects],
+    )
+    trainer.fit_inertia(sinusoid_log, vehicle)
+    return CacciaRun(trainer._finish(vehicle), trainer, steady_log, sinusoid_log, design)
+
+
+def simulate_sinusoid(
+    vehicle,
+    design: DOptimalSine,
+    dof: str,
+    dt: float,
+    substeps: int = 10,
+    measurement: Measurement | None = None,
+    seed: int = 0,
+    effects: Sequence[tuple[str, float]] = (),
+) -> pd.DataFrame:
+    """A log of the d-optimal sinusoid run: the force profile through :func:`force_to_commands`."""
+    t = np.arange(round(design.end() / dt)) * dt  # every sample inside the sinusoid
+    inputs = force_to_commands(vehicle, dof, design(t))
+    return simulate(
+        vehicle,
+        inputs,
+        dt,
+        effects=effects,
+        substeps=substeps,
+        measurement=measurement,
+        seed=seed,
+        experiment="sinusoid",
+    )
+
+
+__all__ = [
+    "POSITION_OF",
+    "CacciaConfig",
+    "CacciaRun",
+    "CacciaTwoStep",
+    "Plateau",
+    "find_plateaus",
+    "force_to_commands",
+    "integrated_regression",
+    "load_caccia_config",
+    "run_caccia",
+    "simulate_sinusoid",
+    "steady_state_regression",
+]

@@ -1,0 +1,269 @@
+"""Recursive estimators on a :class:`Regression`: RLS with forgetting and the gradient estimator.
+
+Both walk the rows of Φ θ = y in time order and keep θ after every sample in
+``Estimate.history`` ``[n_samples, P]`` (row i is regression sample i: log sample i, or with
+``filter_lambda`` the i-th sample after the filters have settled).
+
+- :class:`RecursiveLeastSquares`: Weiss eqs 52-53 with exponential forgetting λ (memory
+  1/(1 − λ) samples). The rows of one sample (one per DOF equation) are processed one by one as
+  scalar updates, with the forgetting applied once per sample. With unit measurement weight this
+  is exactly the block update K = P Φᵢᵀ(λI + Φᵢ P Φᵢᵀ)⁻¹ of the whole sample, without a matrix
+  inverse.
+- :class:`GradientEstimator`: Weiss eqs 62-65, θ̇ = −p₀ φ e = Γ φ (y − φᵀθ), discretised by
+  forward Euler over the sample interval (optionally normalised). Its sensitivity to noise is
+  eq 70: the disturbance d enters θ̇ directly through Γ φ d.
+
+The inner loops are compiled with numba (machine code cached on disk).
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+
+import numpy as np
+from numba import njit
+
+from nnid.models.parametric import Regression
+from nnid.trainers.least_squares import Estimate
+
+
+@njit(cache=True)
+def _rls(phi, y, m, lam, trace_max, theta, p_mat, history):  # pragma: no cover - compiled
+    """RLS over samples of ``m`` rows (Weiss eqs 52-53 with forgetting λ), in place on θ, P."""
+    n_par = phi.shape[1]
+    g = np.empty(n_par)
+    for i in range(history.shape[0]):
+        if lam < 1.0:
+            tr = 0.0
+            for a in range(n_par):
+                tr += p_mat[a, a]
+            if tr < trace_max:  # forgetting suspended while P is large (windup guard)
+                inv_lam = 1.0 / lam
+                for a in range(n_par):
+                    for b in range(n_par):
+                        p_mat[a, b] *= inv_lam
+        for k in range(m):
+            row = i * m + k
+            ok = math.isfinite(y[row])
+            for a in range(n_par):
+                ok = ok and math.isfinite(phi[row, a])
+            if not ok:
+                continue
+            denom = 1.0
+            err = y[row]
+            for a in range(n_par):
+                s = 0.0
+                for b in range(n_par):
+                    s += p_mat[a, b] * phi[row, b]
+                g[a] = s
+            for a in range(n_par):
+                denom += phi[row, a] * g[a]
+                err -= phi[row, a] * theta[a]
+            inv = 1.0 / denom
+            for a in range(n_par):
+                theta[a] += g[a] * inv * err
+            for a in range(n_par):
+                ga = g[a] * inv
+                for b in range(a, n_par):
+                    v = p_mat[a, b] - ga * g[b]
+                    p_mat[a, b] = v
+                    p_mat[b, a] = v
+        for a in range(n_par):
+            history[i, a] = theta[a]
+
+
+@njit(cache=True)
+def _gradient(phi, y, m, step, gamma, normalized, theta, history):  # pragma: no cover
+    """θᵢ = θᵢ₋₁ + Δt Γ Σₖ φₖ (yₖ − φₖᵀθᵢ₋₁) over the ``m`` rows of sample i (Weiss eq 65),
+    divided by 1 + Σₖ φₖᵀΓφₖ when ``normalized``."""
+    n_par = phi.shape[1]
+    grad = np.empty(n_par)
+    for i in range(history.shape[0]):
+        for a in range(n_par):
+            grad[a] = 0.0
+        norm = 1.0
+        for k in range(m):
+            row = i * m + k
+            ok = math.isfinite(y[row])
+            for a in range(n_par):
+                ok = ok and math.isfinite(phi[row, a])
+            if not ok:
+                continue
+            err = y[row]
+            for a in range(n_par):
+                err -= phi[row, a] * theta[a]
+            for a in range(n_par):
+                grad[a] += phi[row, a] * err
+            if normalized:
+                for a in range(n_par):
+                    s = 0.0
+                    for b in range(n_par):
+                        s += gamma[a, b] * phi[row, b]
+                    norm += phi[row, a] * s
+        for a in range(n_par):
+            s = 0.0
+            for b in range(n_par):
+                s += gamma[a, b] * grad[b]
+            theta[a] += step * s / norm
+        for a in range(n_par):
+            history[i, a] = theta[a]
+
+
+def _initial(theta0, n_par: int) -> np.ndarray:
+    if theta0 is None:
+        return np.zeros(n_par)
+    theta = np.array(theta0, dtype=np.float64).reshape(-1)
+    if theta.size != n_par:
+        raise ValueError(f"theta0 has {theta.size} values; the regression has {n_par} unknowns")
+    return theta
+
+
+def _residual_stats(reg: Regression, theta: np.ndarray, first: int) -> tuple[float, int, dict]:
+    """σ̂² = rᵀr/(n − P) over the rows of samples ``first``…end with the final θ, the row
+    count and σ̂² per DOF equation."""
+    m = len(reg.dofs)
+    rows = slice(first * m, reg.n_samples * m)
+    r = reg.y[rows] - reg.phi[rows] @ np.nan_to_num(theta)
+    r = np.where(np.isfinite(r), r, 0.0)
+    n = r.size
+    sigma2 = float(r @ r / max(n - theta.size, 1))
+    per_dof = {}
+    for k, d in enumerate(reg.dofs):
+        rk = r[k::m]
+        per_dof[d] = float(rk @ rk / max(rk.size - 1, 1))
+    return sigma2, n, per_dof
+
+
+class RecursiveLeastSquares:
+    """Recursive least squares with exponential forgetting (Weiss eqs 52-53).
+
+    Per sample: P ← P/λ, then for each DOF row φ of the sample K = Pφ/(1 + φᵀPφ),
+    θ ← θ + K(y − φᵀθ), P ← P − Kφᵀ P. ``forgetting`` λ ∈ (0, 1] weights a sample k samples old
+    by λᵏ: the memory is 1/(1 − λ) samples (λ = 1: ordinary RLS, converging to batch least
+    squares). ``p0`` is the initial P = p₀ I (large: an uninformative start at ``theta0``,
+    default zero). Forgetting is suspended while trace(P) ≥ P·p₀, so directions the data stops
+    exciting do not wind up. ``filter_lambda`` (rad/s) uses the filtered regressors of Weiss
+    eqs 85-92. The covariance is σ̂² P with σ̂² from the residuals of the final θ over the last
+    window of ⌈1/(1 − λ)⌉ samples (the whole run for λ = 1).
+    """
+
+    def __init__(
+        self,
+        forgetting: float = 1.0,
+        p0: float = 1e6,
+        filter_lambda: float | None = None,
+        theta0: np.ndarray | None = None,
+    ) -> None:
+        if not 0.0 < forgetting <= 1.0:
+            raise ValueError("forgetting must be in (0, 1]")
+        if p0 <= 0:
+            raise ValueError("p0 must be positive")
+        self.forgetting = float(forgetting)
+        self.p0 = float(p0)
+        self.filter_lambda = filter_lambda
+        self.theta0 = theta0
+
+    @property
+    def memory(self) -> float:
+        """Effective memory 1/(1 − λ) in samples (infinite for λ = 1)."""
+        return math.inf if self.forgetting == 1.0 else 1.0 / (1.0 - self.forgetting)
+
+    def fit(self, structure, data: dict) -> Estimate:
+        """Build the regression (filtered if ``filter_lambda``) and run RLS over it."""
+        return self.solve(structure.regression(data, self.filter_lambda))
+
+    def solve(self, reg: Regression) -> Estimate:
+        n_par = len(reg.names)
+        m = len(reg.dofs)
+        phi = np.ascontiguousarray(reg.phi, dtype=np.float64)
+        y = np.ascontiguousarray(reg.y, dtype=np.float64)
+        theta = _initial(self.theta0, n_par)
+        p_mat = np.eye(n_par) * self.p0
+        history = np.empty((reg.n_samples, n_par))
+        _rls(phi, y, m, self.forgetting, n_par * self.p0, theta, p_mat, history)
+        window = reg.n_samples if self.forgetting == 1.0 else math.ceil(self.memory)
+        first = max(reg.n_samples - window, 0)
+        sigma2, n_obs, per_dof = _residual_stats(reg, theta, first)
+        return Estimate(
+            list(reg.names),
+            theta,
+            sigma2 * p_mat,
+            sigma2,
+            n_obs,
+            dof_sigma2=per_dof,
+            history=history,
+        )
+
+
+class GradientEstimator:
+    """The gradient estimator of Weiss eqs 62-65: θ̇ = −p₀ ∂(eᵀe)/∂θ ∝ Γ φ (y − φᵀθ).
+
+    ``gain`` is Γ: a scalar p₀, a vector (diagonal Γ) or a matrix. The law is discretised by
+    forward Euler over the sample interval Δt (from the log's ``t`` in :meth:`fit`, else ``dt``,
+    else 1: a gain per sample); it is stable while Δt Γ ΦᵢᵀΦᵢ stays below 2. With
+    ``normalized`` the step is divided by 1 + Σ φᵀΓφ (normalised gradient), which bounds it.
+    There is no covariance: ``cov`` is NaN and σ̂² comes from the final θ over the whole run.
+    """
+
+    def __init__(
+        self,
+        gain: float | np.ndarray,
+        normalized: bool = False,
+        filter_lambda: float | None = None,
+        theta0: np.ndarray | None = None,
+        dt: float | None = None,
+    ) -> None:
+        self.gain = gain
+        self.normalized = bool(normalized)
+        self.filter_lambda = filter_lambda
+        self.theta0 = theta0
+        self.dt = dt
+
+    def _gamma(self, n_par: int) -> np.ndarray:
+        g = np.asarray(self.gain, dtype=np.float64)
+        if g.ndim == 0:
+            return np.eye(n_par) * float(g)
+        if g.ndim == 1 and g.size == n_par:
+            return np.diag(g)
+        if g.shape == (n_par, n_par):
+            return np.ascontiguousarray(g)
+        raise ValueError(f"gain must be a scalar, [{n_par}] or [{n_par}, {n_par}]")
+
+    def fit(self, structure, data: dict) -> Estimate:
+        """Build the regression and run the gradient law with Δt from the log's time stamps."""
+        t = np.asarray(data["t"], dtype=np.float64)
+        dt = self.dt or (float(np.median(np.diff(t))) if t.size > 1 else None)
+        return self.solve(structure.regression(data, self.filter_lambda), dt)
+
+    def solve(self, reg: Regression, dt: float | None = None) -> Estimate:
+        n_par = len(reg.names)
+        step = float(dt or self.dt or 1.0)
+        theta = _initial(self.theta0, n_par)
+        history = np.empty((reg.n_samples, n_par))
+        _gradient(
+            np.ascontiguousarray(reg.phi, dtype=np.float64),
+            np.ascontiguousarray(reg.y, dtype=np.float64),
+            len(reg.dofs),
+            step,
+            self._gamma(n_par),
+            self.normalized,
+            theta,
+            history,
+        )
+        if not np.isfinite(theta).all():
+            warnings.warn(
+                "the gradient estimator diverged: lower the gain or use normalized=True",
+                RuntimeWarning,
+                stacklevel=2,
+            )
+        sigma2, n_obs, per_dof = _residual_stats(reg, theta, 0)
+        return Estimate(
+            list(reg.names),
+            theta,
+            np.full((n_par, n_par), np.nan),
+            sigma2,
+            n_obs,
+            dof_sigma2=per_dof,
+            history=history,
+        )

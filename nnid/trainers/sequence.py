@@ -1,0 +1,90 @@
+"""Weiss's decoupled identification sequence (Weiss eqs 99-108, section V.A).
+
+Each step fits a few parameters from one DOF's equation on the runs that excite that DOF
+alone (surge, sway, heave, roll, yaw), then plugs the estimates back in; pitch, which the
+vehicle cannot drive, comes last from the coupled surge-heave run (eqs 105-108), fitted
+together with surge and heave on their runs: the Munk moment (Z_ẇ − X_u̇) u w drives pitch
+there, so their errors would otherwise land in M_q̇. A later step may refit a parameter. Fitting each
+equation on its own run keeps the errors of one DOF out of the others (a coupled fit lets the
+gyroscopic terms of C_A carry roll and pitch errors into yaw).
+
+The covariance is block-diagonal over the steps: it does not carry the uncertainty of the
+plugged-in values forward (they are far better determined than the parameters they feed).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from nnid.models.parametric import ParametricFossen
+from nnid.trainers.least_squares import Estimate, LeastSquares
+
+
+@dataclass
+class Step:
+    experiments: Sequence[str]
+    dofs: Sequence[str]
+    unknowns: Sequence[str]
+
+
+WEISS_STEPS = (
+    Step(["surge"], ["u"], ["X_udot", "X:u*abs(u)"]),
+    Step(["sway"], ["v"], ["Y_vdot", "Y:v*abs(v)"]),
+    Step(["heave"], ["w"], ["Z_wdot", "Z:w*abs(w)"]),
+    Step(["roll"], ["p"], ["K_pdot", "K:p*abs(p)"]),
+    Step(["yaw"], ["r"], ["N_rdot", "N:r*abs(r)"]),
+    Step(
+        ["surge", "heave", "surge-heave"],
+        ["u", "w", "q"],
+        ["X_udot", "X:u*abs(u)", "Z_wdot", "Z:w*abs(w)", "M_qdot", "M:q*abs(q)"],
+    ),
+)
+"""The sequence for Weiss's quadratic model (eqs 99-108) on the runs of
+:class:`nnid.datasets.excitation.WeissSequence`."""
+
+
+def _subset(data: dict[str, np.ndarray], names: Sequence[str]) -> dict[str, np.ndarray]:
+    known = list(data["experiment_names"])
+    missing = [n for n in names if n not in known]
+    if missing:
+        raise ValueError(f"the log has no experiments {missing}; it has {known}")
+    codes = [known.index(n) for n in names]
+    rows = np.isin(data["experiment"], codes)
+    return {
+        k: (v[rows] if isinstance(v, np.ndarray) and v.shape[:1] == rows.shape else v)
+        for k, v in data.items()
+    }
+
+
+class DecoupledSequence:
+    """Trainer: run the steps in order with ``trainer`` (least squares by default)."""
+
+    def __init__(self, steps: Sequence[Step] = WEISS_STEPS, trainer=None) -> None:
+        self.steps = list(steps)
+        self.trainer = trainer or LeastSquares()
+        self.filter_lambda = getattr(self.trainer, "filter_lambda", None)
+
+    def fit(self, structure: ParametricFossen, data: dict[str, np.ndarray]) -> Estimate:
+        names = list(structure.names)
+        theta = np.full(len(names), np.nan)
+        cov = np.full((len(names), len(names)), np.nan)
+        found: dict[str, float] = {}
+        n_obs = 0
+        for step in self.steps:
+            sub = ParametricFossen(structure.vehicle, step.unknowns, step.dofs)
+            for name, value in found.items():
+                if name not in sub.names:  # an unknown of this step is refitted from zero
+                    sub.base.set(name, value)
+            est = self.trainer.fit(sub, _subset(data, step.experiments))
+            idx = [names.index(n) for n in sub.names]
+            theta[idx] = est.theta
+            cov[np.ix_(idx, idx)] = est.cov
+            found.update(zip(sub.names, est.theta, strict=True))
+            n_obs += est.n_obs
+        left = [n for n, v in zip(names, theta, strict=True) if not np.isfinite(v)]
+        if left:
+            raise ValueError(f"no step of the sequence identifies {left}")
+        return Estimate(names, theta, cov, float("nan"), n_obs)

@@ -1,0 +1,143 @@
+"""Parametric identification of the Fossen model (issue: Weiss Table 3 reproduced and beaten)."""
+
+from __future__ import annotations
+
+import json
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from nnid.cli import app
+from nnid.config import load_config
+from nnid.datasets.simulator import simulate_config
+from nnid.models.parametric import ParametricFossen, ParametricModel, log_arrays
+from nnid.trainers.least_squares import ExcitationWarning, LeastSquares
+from nnid.trainers.sequence import DecoupledSequence
+from nnid.vehicle import load_vehicle
+
+ROOT = Path(__file__).resolve().parents[1]
+TABLE3 = ["X_udot", "X:u*abs(u)", "Y_vdot", "Y:v*abs(v)", "Z_wdot", "Z:w*abs(w)", "K_pdot",
+          "K:p*abs(p)", "N_rdot", "N:r*abs(r)", "M_qdot", "M:q*abs(q)"]  # fmt: skip
+# Weiss (2013) Table 3, estimated column: pitch off by 3.7-3.8 % (z_B undeclared)
+WEISS_ESTIMATE = {"M_qdot": -82.363, "M:q*abs(q)": -58.77}
+
+
+@pytest.fixture(scope="module")
+def seamor():
+    return load_vehicle("seamor")
+
+
+def _truth(vehicle):
+    values = {**vehicle.added_mass, **vehicle.damping.coefficients}
+    return np.array([values[n] for n in TABLE3])
+
+
+def test_table3_exact_without_noise(seamor):
+    """Exact states and accelerations: all twelve coefficients within 0.1 % (Weiss got 0 %)."""
+    cfg = load_config(ROOT / "configs/seamor_sequence.toml")
+    cfg.measurement.kind = "none"
+    log = simulate_config(cfg, seamor)
+    coupled = ParametricModel(seamor, TABLE3, trainer=LeastSquares()).fit(log)
+    assert np.allclose(coupled.estimate_.theta, _truth(seamor), rtol=1e-3)
+    seq = ParametricModel(seamor, TABLE3, trainer=DecoupledSequence()).fit(log)
+    assert np.allclose(seq.estimate_.theta, _truth(seamor), rtol=1e-3)
+
+
+@pytest.mark.parametrize("seed", [0, 3])
+def test_table3_with_1cm_mocap_noise_and_savgol(seamor, seed):
+    """1 cm motion-capture noise at 100 Hz, Savitzky-Golay velocities, filtered regressors and
+    Weiss's decoupled sequence: all twelve within 3 %, and the pitch pair (which Weiss missed
+    by 3.7 % and 3.8 %) closer to the truth than Weiss's estimates."""
+    cfg = load_config(ROOT / "configs/seamor_sequence_mocap1cm.toml")
+    cfg.seed = seed
+    log = simulate_config(cfg, seamor)
+    model = ParametricModel(seamor, TABLE3, trainer=DecoupledSequence(
+        trainer=LeastSquares(filter_lambda=1.0)), savgol_window=1.0).fit(log)  # fmt: skip
+    theta, truth = model.estimate_.theta, _truth(seamor)
+    assert np.all(np.abs(theta / truth - 1) < 0.03), dict(
+        zip(TABLE3, theta / truth - 1, strict=True)
+    )
+    for name, weiss in WEISS_ESTIMATE.items():
+        k = TABLE3.index(name)
+        assert abs(theta[k] - truth[k]) < abs(weiss - truth[k])
+
+
+def test_unexcited_parameters_are_named(seamor):
+    """Only the surge run, yaw parameters asked for: a warning that names them, and NaN
+    instead of a garbage number (Weiss eqs 95-98)."""
+    cfg = load_config(ROOT / "configs/seamor_sequence.toml")
+    cfg.measurement.kind = "none"
+    log = simulate_config(cfg, seamor)
+    surge = log[log["experiment"] == "surge"]
+    data = log_arrays(surge, seamor)
+    reg = ParametricFossen(seamor, ["X_udot", "X:u*abs(u)", "N_rdot", "N:r*abs(r)"],
+                           ["u", "r"]).regression(data)  # fmt: skip
+    with pytest.warns(ExcitationWarning, match=r"N_rdot, N:r\*abs\(r\)"):
+        est = LeastSquares().solve(reg)
+    assert np.isnan(est.theta[2:]).all() and np.allclose(est.theta[:2], _truth(seamor)[:2])
+
+
+def test_irrelevant_parameter_is_insignificant(seamor):
+    """Caccia's 51.02 % rule: a linear surge term on quadratic-only data is insignificant, the
+    quadratic one is not."""
+    rng = np.random.default_rng(0)
+    cfg = load_config(ROOT / "configs/seamor_sequence.toml")
+    cfg.measurement.kind = "none"
+    log = simulate_config(cfg, seamor)
+    surge = log[log["experiment"] == "surge"].copy()
+    surge["du"] += rng.normal(0, 0.05, len(surge))
+    model = ParametricModel(seamor, ["X_udot", "X:u*abs(u)", "X:u"], ["u"]).fit(surge)
+    sig = dict(zip(model.estimate_.names, model.estimate_.significant, strict=True))
+    assert sig == {"X_udot": True, "X:u*abs(u)": True, "X:u": False}
+
+
+def test_save_load_and_prediction_modes(seamor, tmp_path):
+    cfg = load_config(ROOT / "configs/seamor_sequence.toml")
+    cfg.measurement.kind = "none"
+    log = simulate_config(cfg, seamor)
+    model = ParametricModel(seamor, TABLE3).fit(log[log["experiment"] != "sway-yaw"])
+    model.save(tmp_path / "m.json")
+    back = ParametricModel.load(tmp_path / "m.json")
+    assert np.array_equal(back.estimate_.theta, model.estimate_.theta)
+    val = log[log["experiment"] == "sway-yaw"]
+    free = back.predict(val, "free_run")
+    assert np.abs(free["r"] - val["r"]).max() < 1e-3  # exact model: free run tracks the truth
+    k5 = back.predict(val, 5)
+    assert np.abs(k5["v"] - val["v"]).max() < 1e-6
+    assert np.abs(back.residual(val).to_numpy()).max() < 1e-6
+    assert "X:u*abs(u)" in back.describe()
+
+
+def test_nnid_train_writes_contract_metrics(tmp_path):
+    out = tmp_path / "run"
+    result = CliRunner().invoke(
+        app, ["train", str(ROOT / "configs/seamor_ls.toml"), "--out", str(out)]
+    )
+    assert result.exit_code == 0, result.output
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["model"] == "fossen" and metrics["trainer"] == "ls"
+    assert set(metrics["params"]) == set(TABLE3)
+    for p in metrics["params"].values():
+        assert p["stderr"] > 0 and abs(p["value"] / p["vehicle_file"] - 1) < 0.03
+    val = metrics["validation"]
+    assert {"free_run_nrmse", "one_step_nrmse"} <= set(val)
+    assert val["free_run_nrmse"]["total"] < 0.1 and set(val["free_run_nrmse"]) >= {"u", "v", "r"}
+    held = {e["experiment"] for e in metrics["split"]["parts"]["validation"]}
+    trained = {e["experiment"] for e in metrics["split"]["parts"]["train"]}
+    assert held == {"surge-sway-yaw"} and not held & trained
+    assert "M_qdot'" in metrics["nondimensional"]["params"]
+    assert (out / "report.md").read_text().count("Weiss (2013) Table 3 estimate") == 1
+    assert ParametricModel.load(out / "model.json").params["X_udot"]["value"] < 0
+
+
+def test_train_rejects_bad_config(tmp_path):
+    bad = tmp_path / "bad.toml"
+    bad.write_text(
+        'model = "fossen"\ntrainer = "magic"\nvehicle = "seamor"\n[data]\nlog = "x.csv"\n'
+    )
+    result = CliRunner().invoke(app, ["train", str(bad), "--out", str(tmp_path / "o")])
+    assert result.exit_code == 2 and "'trainer'" in result.output
+    warnings.simplefilter("default")

@@ -1,0 +1,156 @@
+"""The augmented-state UKF (issue 4) and the observability of its formulation (Weiss V.D)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from nnid.datasets.measurement import Measurement
+from nnid.datasets.simulator import simulate
+from nnid.models.parametric import ParametricFossen, log_arrays
+from nnid.trainers.ukf import (
+    UnscentedKalman,
+    _Process,
+    observability_rank,
+    transition_jacobians,
+)
+from nnid.vehicle import load_vehicle
+
+NAMES = ["X_udot", "X:u*abs(u)", "N_rdot", "N:r*abs(r)"]
+TRUTH = np.array([-27.08, -61.117, -0.154, -1.772])  # seamor.toml (Weiss Table 3)
+DT = 0.05
+EXACT = Measurement(kind="none")
+NOISY = Measurement(kind="dvl_imu")  # σ 0.005 m/s DVL, 0.002 rad/s gyro
+
+
+@pytest.fixture(scope="module")
+def seamor():
+    return load_vehicle("seamor")
+
+
+def _steps(rng: np.random.Generator, n: int, amp: float, hold: tuple[float, float]):
+    """Held random levels in [−amp, amp] for hold ∈ [lo, hi] s: sign-changing, multi-level."""
+    out, k = np.zeros(n), 0
+    while k < n:
+        h = int(rng.uniform(*hold) / DT)
+        out[k : k + h] = rng.uniform(-amp, amp)
+        k += h
+    return out
+
+
+def _surge_yaw(n: int, seed: int = 1) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    inputs = np.zeros((n, 6))
+    inputs[:, 0] = _steps(rng, n, 15.0, (2.0, 5.0))  # X (N)
+    inputs[:, 5] = _steps(rng, n, 0.8, (1.0, 3.0))  # N (N m)
+    return inputs
+
+
+def _data(vehicle, inputs, measurement, **kw) -> dict[str, np.ndarray]:
+    return log_arrays(simulate(vehicle, inputs, DT, measurement=measurement, **kw), vehicle)
+
+
+def _structure(vehicle) -> ParametricFossen:
+    return ParametricFossen(vehicle, NAMES, dofs=("u", "r"))
+
+
+def test_process_is_the_physics_model(seamor):
+    """The affine combination of parameter probes equals structure.parts(θ).model() + RK4."""
+    data = _data(seamor, _surge_yaw(40), EXACT)
+    proc = _Process(_structure(seamor), data)
+    rng = np.random.default_rng(0)
+    x = np.concatenate([data["nu"][20][[0, 5]], TRUTH])[None] * rng.uniform(0.5, 1.5, (5, 6))
+    a, b = proc.step(x, 20, DT), proc.step_direct(x, 20, DT)
+    np.testing.assert_allclose(a, b, rtol=1e-10, atol=1e-12)
+
+
+def test_ukf_identifies_surge_and_yaw(seamor):
+    """120 s of noisy DVL/gyro surge + yaw: each parameter within 5 % and inside ±2σ."""
+    data = _data(seamor, _surge_yaw(2400), NOISY, seed=3)
+    ukf = UnscentedKalman(process_noise=1e-4, theta0=0.5 * TRUTH)
+    est = ukf.fit(_structure(seamor), data)
+    rel = np.abs(est.theta - TRUTH) / np.abs(TRUTH)
+    assert np.all(rel < 0.05), rel
+    assert np.all(np.abs(est.theta - TRUTH) < 2.0 * est.stderr), (est.theta, est.stderr)
+    assert est.names == NAMES and est.cov.shape == (4, 4)
+    assert 0.5 < est.sigma2 < 1.5  # normalised innovation squared per DOF: consistent filter
+    assert est.history is not None and est.history.shape == (2400, 4)
+    hist = ukf.history_
+    assert hist["theta_std"].shape == (2400, 4) and hist["nu"].shape == (2400, 2)
+    # the uncertainty shrinks by orders of magnitude from the prior (100 % of 0.5 θ)
+    assert np.all(hist["theta_std"][-1] < 0.02 * hist["theta_std"][0])
+
+
+def test_observability_full_when_excited(seamor):
+    data = _data(seamor, _surge_yaw(600), EXACT)
+    obs = observability_rank(_structure(seamor), data, TRUTH, measurement_noise=[0.005, 0.002])
+    assert obs.n_states == 6 and obs.rank == 6 and obs.deficiency == 0
+    assert obs.singular_values[-1] > 1e-3 * obs.singular_values[0]
+
+
+def test_observability_at_rest_loses_every_parameter(seamor):
+    """Zero input from rest: ν stays 0, no parameter moves the output; rank n_ν = 2."""
+    data = _data(seamor, np.zeros((600, 6)), EXACT)
+    obs = observability_rank(_structure(seamor), data, TRUTH, measurement_noise=[0.005, 0.002])
+    assert obs.rank == 2 and obs.deficiency == 4
+    assert np.all(obs.singular_values[2:] < 1e-12 * obs.singular_values[0])
+
+
+def test_observability_at_trim_loses_added_mass(seamor):
+    """Constant surge force in steady state (Weiss's frozen-point situation): ν̇ = 0 hides
+    X_udot, and with r = N = 0 the yaw pair is invisible too: only X_u|u| is left."""
+    inputs = np.zeros((600, 6))
+    inputs[:, 0] = 10.0
+    u_ss = np.sqrt(10.0 / -TRUTH[1])
+    data = _data(seamor, inputs, EXACT, x0=[0.0] * 6 + [u_ss, 0, 0, 0, 0, 0])
+    obs = observability_rank(_structure(seamor), data, TRUTH, measurement_noise=[0.005, 0.002])
+    assert obs.rank == 3 and obs.deficiency == 3
+
+
+def test_weiss_frozen_point_test_is_deficient_even_when_excited(seamor):
+    """Weiss eq 135-136: [H; HΦ; HΦ²] with Φ frozen at one sample has rank 2 < 3 for the
+    surge state [u, X_udot, X_u|u|] at every sample of an exciting run; the same run's
+    trajectory observability matrix has full rank 3."""
+    structure = ParametricFossen(seamor, NAMES[:2], dofs=("u",))
+    data = _data(seamor, _surge_yaw(200), EXACT)
+    theta = TRUTH[:2]
+    h = np.array([[1.0, 0.0, 0.0]])
+    for phi in transition_jacobians(structure, data, theta)[::20]:
+        frozen = np.concatenate([h, h @ phi, h @ phi @ phi]) * np.r_[1.0, np.abs(theta)]
+        sv = np.linalg.svd(frozen, compute_uv=False)
+        assert sv[-1] < 1e-7 * sv[0]
+    obs = observability_rank(structure, data, theta, measurement_noise=0.005)
+    assert obs.rank == 3
+
+
+def test_ratio_parameters_need_sign_changing_input(seamor):
+    """η⁺ with X_udot and X_u|u| under a positive-only pure surge force: u̇ = (η⁺X +
+    X_u|u| u|u|)/(m − X_udot) is unchanged by scaling (η⁺, X_u|u|, m − X_udot) together; the
+    rank drops by exactly one however rich the levels. A force of both signs (η⁻ known), or
+    yaw motion whose Coriolis force m v r (known gain) enters the surge equation, fixes the
+    scale."""
+    structure = ParametricFossen(seamor, ["eta.u.pos", *NAMES[:2]], dofs=("u",))
+    theta = [1.0, *TRUTH[:2]]
+    both = _surge_yaw(600)
+    positive = np.zeros_like(both)
+    positive[:, 0] = np.abs(both[:, 0])
+    with_yaw = positive.copy()
+    with_yaw[:, 5] = both[:, 5]
+    obs = observability_rank(structure, _data(seamor, positive, EXACT), theta, 0, None, 1e-7, 0.005)
+    assert obs.n_states == 4 and obs.deficiency == 1
+    for inputs in (both * [1, 0, 0, 0, 0, 0], with_yaw):
+        obs = observability_rank(
+            structure, _data(seamor, inputs, EXACT), theta, 0, None, 1e-7, 0.005
+        )
+        assert obs.deficiency == 0
+
+
+def test_window_must_stay_in_one_experiment(seamor):
+    data = _data(seamor, np.zeros((20, 6)), EXACT)
+    data["experiment"] = np.r_[np.zeros(10, int), np.ones(10, int)]
+    with pytest.raises(ValueError, match="more than one experiment"):
+        observability_rank(_structure(seamor), data, TRUTH)
+    obs = observability_rank(
+        _structure(seamor), data, TRUTH, start=10, length=10, measurement_noise=[0.005, 0.002]
+    )
+    assert obs.rank == 2
