@@ -163,15 +163,16 @@ def train(
     from nnid.config import TrainConfig, load_config
     from nnid.pipeline import run_train
     from nnid.reports.train_report import train_markdown
+    from nnid.validation import read_toml
     from nnid.vehicle import load_vehicle
 
-    cfg = load_config(config, TrainConfig)
-    if cfg.trainer == "caccia":
-        from nnid.trainers.caccia import run_caccia_config
+    if read_toml(config).get("kind") == "caccia":
+        from nnid.pipeline import run_caccia_train
 
         with err.status("Caccia two-step identification"):
-            result = run_caccia_config(config, vehicle)
+            result = run_caccia_train(config, vehicle)
     else:
+        cfg = load_config(config, TrainConfig)
         veh = load_vehicle(vehicle or cfg.vehicle)
         try:
             with err.status(f"fitting the Fossen model ({cfg.trainer})"):

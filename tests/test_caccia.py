@@ -121,6 +121,10 @@ def test_forced_eta_overestimates_weight(setup, fitted):
     w_forced = est.theta[est.names.index("W")]
     assert w_forced - w_true > 3 * est.stderr[est.names.index("W")]
     assert w_forced > trainer.steady_.theta[2]
+    dw_forced = est.theta[est.names.index("delta_W")]
+    true = truth(campaign, vehicle)
+    for i in range(5):  # every weight setting comes out heavier than it was
+        assert w_forced + i * dw_forced > true["W"] + i * true["delta_W"]
     rms_forced = np.sqrt(np.mean(forced.residuals() ** 2))  # N, eq.-7 rows
     rms_free = np.sqrt(np.mean(trainer.residuals() ** 2))
     assert rms_forced > 10 * rms_free
@@ -129,7 +133,7 @@ def test_forced_eta_overestimates_weight(setup, fitted):
 def test_inertia_from_doptimal_sinusoid(setup, fitted):
     """Eqs 13-19: the sinusoid is designed from the step-1 drag and m_w = m − Z_wdot comes back
     within 2σ and 10 %."""
-    cfg, _, vehicle, _ = setup
+    _, _, vehicle, _ = setup
     trainer, est, design, sine = fitted
     k1, k2 = trainer.steady_.theta[:2]
     k_l = k1 + 2 * k2 * (-k1 + np.sqrt(k1**2 + 4 * k2 * design.offset)) / (2 * k2)

@@ -19,8 +19,20 @@ from nnid.trainers.sequence import DecoupledSequence
 from nnid.vehicle import load_vehicle
 
 ROOT = Path(__file__).resolve().parents[1]
-TABLE3 = ["X_udot", "X:u*abs(u)", "Y_vdot", "Y:v*abs(v)", "Z_wdot", "Z:w*abs(w)", "K_pdot",
-          "K:p*abs(p)", "N_rdot", "N:r*abs(r)", "M_qdot", "M:q*abs(q)"]  # fmt: skip
+TABLE3 = [
+    "X_udot",
+    "X:u*abs(u)",
+    "Y_vdot",
+    "Y:v*abs(v)",
+    "Z_wdot",
+    "Z:w*abs(w)",
+    "K_pdot",
+    "K:p*abs(p)",
+    "N_rdot",
+    "N:r*abs(r)",
+    "M_qdot",
+    "M:q*abs(q)",
+]
 # Weiss (2013) Table 3, estimated column: pitch off by 3.7-3.8 % (z_B undeclared)
 WEISS_ESTIMATE = {"M_qdot": -82.363, "M:q*abs(q)": -58.77}
 
@@ -54,8 +66,12 @@ def test_table3_with_1cm_mocap_noise_and_savgol(seamor, seed):
     cfg = load_config(ROOT / "configs/seamor_sequence_mocap1cm.toml")
     cfg.seed = seed
     log = simulate_config(cfg, seamor)
-    model = ParametricModel(seamor, TABLE3, trainer=DecoupledSequence(
-        trainer=LeastSquares(filter_lambda=1.0)), savgol_window=1.0).fit(log)  # fmt: skip
+    model = ParametricModel(
+        seamor,
+        TABLE3,
+        trainer=DecoupledSequence(trainer=LeastSquares(filter_lambda=1.0)),
+        savgol_window=1.0,
+    ).fit(log)
     theta, truth = model.estimate_.theta, _truth(seamor)
     assert np.all(np.abs(theta / truth - 1) < 0.03), dict(
         zip(TABLE3, theta / truth - 1, strict=True)
@@ -73,8 +89,9 @@ def test_unexcited_parameters_are_named(seamor):
     log = simulate_config(cfg, seamor)
     surge = log[log["experiment"] == "surge"]
     data = log_arrays(surge, seamor)
-    reg = ParametricFossen(seamor, ["X_udot", "X:u*abs(u)", "N_rdot", "N:r*abs(r)"],
-                           ["u", "r"]).regression(data)  # fmt: skip
+    reg = ParametricFossen(
+        seamor, ["X_udot", "X:u*abs(u)", "N_rdot", "N:r*abs(r)"], ["u", "r"]
+    ).regression(data)
     with pytest.warns(ExcitationWarning, match=r"N_rdot, N:r\*abs\(r\)"):
         est = LeastSquares().solve(reg)
     assert np.isnan(est.theta[2:]).all() and np.allclose(est.theta[:2], _truth(seamor)[:2])
@@ -141,3 +158,20 @@ def test_train_rejects_bad_config(tmp_path):
     result = CliRunner().invoke(app, ["train", str(bad), "--out", str(tmp_path / "o")])
     assert result.exit_code == 2 and "'trainer'" in result.output
     warnings.simplefilter("default")
+
+
+def test_nnid_train_runs_caccia_two_step(tmp_path):
+    """`nnid train configs/romeo_heave_caccia.toml`: the Table II parameters and the inertia,
+    scored on a held-out PRBS run neither step saw."""
+    out = tmp_path / "caccia"
+    result = CliRunner().invoke(
+        app, ["train", str(ROOT / "configs/romeo_heave_caccia.toml"), "--out", str(out)]
+    )
+    assert result.exit_code == 0, result.output
+    metrics = json.loads((out / "metrics.json").read_text())
+    p = metrics["params"]
+    assert abs(p["eta.w.neg"]["value"] - 0.56) < 0.01  # Caccia Table II
+    assert p["Z:w*abs(w)"]["value"] < 0 and p["Z_wdot"]["value"] < 0
+    assert metrics["split"]["validation"] == ["validation_prbs"]
+    assert metrics["validation"]["free_run_nrmse"]["w"] < 0.2
+    assert ParametricModel.load(out / "model.json").params["eta.w.neg"]["value"] > 0.5

@@ -104,7 +104,7 @@ class Plateau:
     mode: str  # thrust mapping mode label ("" = the only one)
     force: float  # nominal φⁿ_ξ
     speed: float  # steady ξ*
-    speed_std: float  # standard error of the LS slope (white position noise)
+    speed_std: float  # standard error of the steady speed (LS fit, white position noise)
     start: float  # settled run [start, end] in s
     end: float
     n: int
@@ -392,8 +392,8 @@ class CacciaTwoStep:
     direction (Caccia Fig. 6); ``terms`` the drag terms; ``settings`` maps experiment names to
     Caccia's weight-setting index i (default: order of appearance, 0, 1, …); the plateau rule
     (``settle_window`` s, ``settle_order``, ``settle_accel`` in units of the position per s²,
-    ``min_plateau`` s, ``speed``); ``weighting`` of the step-1 rows; the step-2 SG velocity (``velocity_window`` s,
-    ``velocity_order``) and ``correlated``.
+    ``min_plateau`` s, ``speed``); ``weighting`` of the step-1 rows; the step-2 SG velocity
+    (``velocity_window`` s, ``velocity_order``) and ``correlated``.
     """
 
     def __init__(
