@@ -175,3 +175,68 @@ def test_nnid_train_runs_caccia_two_step(tmp_path):
     assert metrics["split"]["validation"] == ["validation_prbs"]
     assert metrics["validation"]["free_run_nrmse"]["w"] < 0.2
     assert ParametricModel.load(out / "model.json").params["eta.w.neg"]["value"] > 0.5
+
+
+@pytest.mark.parametrize(
+    "trainer, options",
+    [
+        ("rls", "forgetting = 1.0\n"),
+        ("gradient", "gain = 50.0\nnormalized = true\n"),
+        ("ukf", ""),
+    ],
+)
+def test_nnid_train_recursive_and_kalman_trainers(tmp_path, trainer, options):
+    """The online estimators run through the same CLI and metrics contract."""
+    cfg = tmp_path / "t.toml"
+    sim = (
+        (ROOT / "configs/seamor_sequence.toml")
+        .read_text()
+        .replace('kind = "mocap"', 'kind = "none"')
+    )
+    (tmp_path / "sim.toml").write_text(sim.replace("truth = true", "truth = false"))
+    cfg.write_text(f'''model = "fossen"
+trainer = "{trainer}"
+vehicle = "seamor"
+[data]
+simulate = "sim.toml"
+experiments = ["surge", "surge-sway"]
+[fossen]
+unknowns = ["X_udot", "X:u*abs(u)"]
+dofs = ["u"]
+[options]
+{options}[split]
+by = "experiment"
+validation = ["surge-sway"]
+''')
+    result = CliRunner().invoke(app, ["train", str(cfg), "--out", str(tmp_path / "o")])
+    assert result.exit_code == 0, result.output
+    metrics = json.loads((tmp_path / "o" / "metrics.json").read_text())
+    x = metrics["params"]["X:u*abs(u)"]["value"]
+    tol = 0.02 if trainer != "gradient" else 0.2
+    assert abs(x / -61.117 - 1) < tol, x
+    assert np.isfinite(metrics["validation"]["free_run_nrmse"]["u"])
+
+
+@pytest.mark.parametrize("lam", [None, 1.0])
+def test_damping_columns_equal_the_physics_probe(seamor, rng, lam):
+    """The one-shot damping columns equal R(e_k) − R(0) from the physics, filtered or not."""
+    n = 400
+    data = {
+        "eta": rng.normal(size=(n, 6)) * 0.2,
+        "nu": rng.normal(size=(n, 6)),
+        "nu_dot": rng.normal(size=(n, 6)),
+        "tau": rng.normal(size=(n, 6)),
+        "t": np.arange(n) * 0.01,
+        "experiment": np.zeros(n, dtype=int),
+    }
+    names = ["N:v*abs(r)", "X:u*u*(eta-1)", "M:q*V", "Y_vdot"]
+    structure = ParametricFossen(seamor, names)
+    fast = structure.regression(data, lam)
+    r0 = structure.equation_residual(structure.base, data, lam)
+    for k, name in enumerate(names[:3]):
+        unit = structure.base.copy()
+        unit.set(name, 1.0)
+        probe = structure.equation_residual(unit, data, lam) - r0
+        if lam is not None:
+            probe = probe[np.arange(n) * 0.01 >= 3.0]
+        assert np.allclose(fast.phi[:, k], probe.reshape(-1), atol=1e-12)

@@ -28,7 +28,7 @@ import torch
 from scipy.signal import lfilter, lfilter_zi
 
 from nnid.datasets.log import ANGLES, POSE, TAU, VELOCITY
-from nnid.models.damping_library import canonical_term
+from nnid.models.damping_library import canonical_term, evaluate_terms, term_codes
 from nnid.physics.added_mass import DOFS, FORCES, added_mass_matrix, parse_added_mass_key
 from nnid.physics.damping import DampingTerms, parse_coefficient_key
 from nnid.physics.fossen import FossenModel
@@ -290,15 +290,39 @@ class ParametricFossen:
         keep = np.ones(r0.shape[0], dtype=bool)
         if filter_lambda is not None:
             keep = _settled(data, 3.0 / filter_lambda)
+        damping = self._damping_columns(data, filter_lambda)
         cols = []
         for name in self.names:
-            unit = self.base.copy()
-            unit.set(name, 1.0)
-            col = self.equation_residual(unit, data, filter_lambda) - r0
+            if name in damping:
+                col = damping[name]
+            else:
+                unit = self.base.copy()
+                unit.set(name, 1.0)
+                col = self.equation_residual(unit, data, filter_lambda) - r0
             cols.append(col[keep][:, rows].reshape(-1))
         n = int(keep.sum())
         phi = np.stack(cols, 1) if cols else np.zeros((n * len(rows), 0))
         return Regression(phi, -r0[keep][:, rows].reshape(-1), list(self.names), self.dofs, n)
+
+    def _damping_columns(
+        self, data: dict[str, np.ndarray], filter_lambda: float | None
+    ) -> dict[str, np.ndarray]:
+        """Columns of the damping unknowns in one evaluation of the basis library: R holds
+        −τ_D = −Θ ξ(ν), so coefficient "F:term" has −ξ_term(ν) in row F and zero elsewhere
+        (the same number R(e_k) − R(0) gives, without one physics call per term)."""
+        names = [n for n in self.names if ":" in n]
+        if not names:
+            return {}
+        split = [parse_coefficient_key(n) for n in names]
+        xi = evaluate_terms(data["nu"], term_codes([t for _, t in split]), self.base.u_c)
+        if filter_lambda is not None:
+            xi = _filter(data, xi, filter_lambda)
+        out = {}
+        for k, (name, (force, _)) in enumerate(zip(names, split, strict=True)):
+            col = np.zeros((xi.shape[0], 6))
+            col[:, FORCES.index(force)] = -xi[:, k]
+            out[name] = col
+        return out
 
     def term_names(self) -> list[str]:
         return [canonical_term(n.split(":")[1]) for n in self.names if ":" in n]

@@ -50,6 +50,8 @@ def train_markdown(metrics: dict) -> str:
         lines.append(row)
     for part in ("train", "validation"):
         scores = metrics.get(part, {})
+        if not any(k in scores for k in ("free_run_nrmse", "one_step_nrmse", "force_rmse")):
+            continue
         lines += [
             "",
             f"## Errors on the {part} split ({scores.get('samples', '?')} samples, "
