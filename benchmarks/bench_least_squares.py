@@ -12,7 +12,7 @@ import datetime
 import time
 
 import numpy as np
-from bench_simulation import best_of, machine
+from common import best_of, machine
 
 from nnid.datasets.excitation import Multisine
 from nnid.datasets.simulator import simulate

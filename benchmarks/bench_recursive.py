@@ -10,12 +10,11 @@ also checks that the compiled row-by-row update gives the same θ.
 from __future__ import annotations
 
 import datetime
-import os
-import platform
 import time
 
 import numba
 import numpy as np
+from common import best_of, machine
 
 from nnid.models.parametric import Regression
 from nnid.trainers.recursive import RecursiveLeastSquares
@@ -38,28 +37,6 @@ def numpy_rls(phi: np.ndarray, y: np.ndarray, m: int, lam: float, p0: float) -> 
     return theta
 
 
-def best_of(fn, repeats: int = 3) -> float:
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return min(times)
-
-
-def machine() -> str:
-    cpu = "unknown CPU"
-    try:
-        with open("/proc/cpuinfo") as fh:
-            cpu = next(line.split(":", 1)[1].strip() for line in fh if "model name" in line)
-    except (OSError, StopIteration):
-        pass
-    return (
-        f"{cpu}, {os.cpu_count()} cores, Python {platform.python_version()}, "
-        f"numpy {np.__version__}, numba {numba.__version__}"
-    )
-
-
 def main() -> None:
     rng = np.random.default_rng(0)
     truth = rng.normal(0, 10, N_PAR)
@@ -78,7 +55,7 @@ def main() -> None:
     baseline = time.perf_counter() - t0
 
     rate, rate_np = N_SAMPLES / compiled, N_SAMPLES / baseline
-    print(f"machine: {machine()}")
+    print(f"machine: {machine(numpy=np.__version__, numba=numba.__version__)}")
     print(f"date: {datetime.date.today().isoformat()}")
     print(f"problem: {N_SAMPLES:,} samples x {N_ROWS} rows, {N_PAR} parameters, λ = {LAMBDA}")
     print(f"first call (numba compile or cache load): {first:.2f} s")

@@ -10,37 +10,16 @@ from __future__ import annotations
 
 import datetime
 import os
-import platform
-import time
 
 import numpy as np
 import torch
+from common import best_of, machine
 
 from nnid.datasets.simulator import integrate
 from nnid.physics import compiled
 from nnid.physics.fossen import FossenModel
 from nnid.physics.integrate import rk4
 from nnid.vehicle import load_vehicle
-
-
-def best_of(fn, repeats=3):
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return min(times)
-
-
-def machine() -> str:
-    cpu = "unknown CPU"
-    try:
-        with open("/proc/cpuinfo") as fh:
-            cpu = next(line.split(":", 1)[1].strip() for line in fh if "model name" in line)
-    except (OSError, StopIteration):
-        pass
-    python = platform.python_version()
-    return f"{cpu}, {os.cpu_count()} cores, Python {python}, torch {torch.__version__}"
 
 
 def main() -> None:
@@ -70,7 +49,7 @@ def main() -> None:
     ref = rk4(model.rhs, torch.as_tensor(x0), tau_t, dt).numpy()
     agree = float(np.abs(check - ref).max())
 
-    print(f"machine: {machine()}")
+    print(f"machine: {machine(torch=torch.__version__)}")
     print(f"date: {datetime.date.today().isoformat()}")
     print(f"single 60,000 steps, compiled RK4: {single:.3f} s (target <= 2 s)")
     print(
