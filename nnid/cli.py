@@ -138,6 +138,13 @@ def inspect(
         report.write(out_dir)
 
 
+def _vehicle_path(name: str, config: Path, resolve) -> str:
+    """A preset name as it is; a path relative to the config file (or to the working folder)."""
+    from nnid.vehicle import PRESETS
+
+    return name if name in PRESETS else str(resolve(config.parent, name))
+
+
 def _not_yet(name: str) -> None:
     err.print(f"nnid {name}: not implemented yet", highlight=False, soft_wrap=True)
     raise typer.Exit(2)
@@ -172,8 +179,10 @@ def train(
         with err.status("Caccia two-step identification"):
             result = run_caccia_train(config, vehicle)
     else:
+        from nnid.pipeline import resolve
+
         cfg = load_config(config, TrainConfig)
-        veh = load_vehicle(vehicle or cfg.vehicle)
+        veh = load_vehicle(vehicle or _vehicle_path(cfg.vehicle, config, resolve))
         try:
             with err.status(f"fitting the Fossen model ({cfg.trainer})"):
                 result = run_train(cfg, config, veh, data, columns)

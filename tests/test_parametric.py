@@ -240,3 +240,17 @@ def test_damping_columns_equal_the_physics_probe(seamor, rng, lam):
         if lam is not None:
             probe = probe[np.arange(n) * 0.01 >= 3.0]
         assert np.allclose(fast.phi[:, k], probe.reshape(-1), atol=1e-12)
+
+
+def test_non_physical_mass_matrix_warns(seamor):
+    """A heave mass the data cannot determine: the fit warns instead of simulating nonsense."""
+    from nnid.models.parametric import PhysicsWarning
+
+    cfg = load_config(ROOT / "configs/seamor_sequence.toml")
+    cfg.measurement.kind = "none"
+    log = simulate_config(cfg, seamor)
+    surge = log[log["experiment"] == "surge"].copy()
+    surge["tau_Z"] = 5.0 * np.sin(surge["t"])
+    surge["dw"] = -surge["tau_Z"] / 10.0  # accelerating against the force: a negative mass
+    with pytest.warns(PhysicsWarning, match="not positive definite"):
+        ParametricModel(seamor, ["Z_wdot"], ["w"]).fit(surge)

@@ -54,8 +54,14 @@ def _six_dof_log(measurement, seconds=60.0):
     amps = [30, 20, 20, 3, 0, 3]
     columns = []
     for k, a in enumerate(amps):
-        sig = Multisine(channel="X", amplitude=max(a, 1), f_min=0.05 + 0.01 * k, f_max=0.5, n=5,
-                        duration=seconds)(t)  # fmt: skip
+        sig = Multisine(
+            channel="X",
+            amplitude=max(a, 1),
+            f_min=0.05 + 0.01 * k,
+            f_max=0.5,
+            n=5,
+            duration=seconds,
+        )(t)
         columns.append(sig if a else 0 * t)
     inputs = np.stack(columns, 1)
     return simulate(load_vehicle("seamor"), inputs, 0.01, measurement=measurement)
@@ -65,8 +71,9 @@ def test_body_velocities_from_noisy_mocap_pose():
     """ν = J⁻¹(η) η̇ from 100 Hz pose with 1 mm / 2 mrad noise: each DOF within the noise the
     SG filter predicts (rotations keep the norm, so the prediction carries over)."""
     sigma_p, sigma_a = 0.001, 0.002
-    log = _six_dof_log(Measurement(kind="mocap", position_noise=sigma_p, angle_noise=sigma_a,
-                                   truth=True))  # fmt: skip
+    log = _six_dof_log(
+        Measurement(kind="mocap", position_noise=sigma_p, angle_noise=sigma_a, truth=True)
+    )
     report = CleaningReport()
     out = derive_velocities(log, 0.5, 4, report)
     gain = savgol_noise_gain(savgol_window(0.5, 100, 4), 4, 0.01)
@@ -134,3 +141,17 @@ def test_occlusion_jumps_are_found_and_repaired():
     fixed = repair_jumps(pd.DataFrame({"t": t, "x": jumped}), ["x"], report=report)
     assert np.abs(fixed["x"] - x).max() < 0.01
     assert report.steps[0].detail.startswith("3 samples")
+
+
+def test_heave_rate_from_depth_stays_bounded_when_tilted():
+    """w ≈ ż/(cos θ cos φ) without x, y: near 90° of pitch the divisor is held at 0.5, and the
+    report counts the samples where w is only a bound."""
+    t = np.arange(0, 10, 0.01)
+    theta = np.clip(0.3 * t, 0, 1.5)  # pitches up to 86°
+    log = pd.DataFrame({"t": t, "z": 0.1 * t, "phi": 0.0, "theta": theta, "psi": 0.0, "tau_Z": 0.0})
+    report = CleaningReport()
+    out = derive_velocities(log, 0.5, 4, report)
+    assert np.abs(out["w"]).max() <= 0.1 / 0.5 + 1e-6
+    level = t < 1.0
+    assert np.allclose(out["w"][level], 0.1 / np.cos(theta[level]), rtol=1e-3)
+    assert "tilted beyond 60°" in report.steps[-1].detail

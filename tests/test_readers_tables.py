@@ -207,3 +207,13 @@ def test_csv_reader_returns_valid_log_or_documented_error(tmp_path, columns, row
         return
     assert validate_log(log, "again") is log
     assert "t" in log and len(log) == len(rows)
+
+
+def test_stale_commands_are_not_held_past_the_timeout(tmp_path):
+    """Commands that stop while the measurements go on: with hold_timeout the run ends that
+    long after the last command, and the report says so."""
+    _sensor_tables(tmp_path)
+    timed = MAP.replace('method = "hold"', 'method = "hold"\nhold_timeout = 0.5')
+    log, report = load_log(tmp_path, _write_map(tmp_path / "map.toml", timed))
+    assert log["t"].iloc[-1] == pytest.approx(7.0 + 0.5, abs=0.05)  # last command at 7.0 s
+    assert any(s.step == "cut stale hold" for s in report.steps)

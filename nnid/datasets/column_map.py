@@ -20,6 +20,7 @@ row_clock = 20.0              # optional, Hz: t = row number within the experime
                               # for a time column too coarse to use (an hhmmss clock); time is
                               # then still read but only the row order counts
 method = "hold"               # "hold" (zero-order, commands sent on change) or "linear"
+hold_timeout = 0.5            # optional: a held value is stale this long after the last one
 frame = "ned_frd"             # or "enu_flu": converted to NED/FRD after renaming
 quaternion = []               # [w, x, y, z] source columns -> phi theta psi
 [sources.columns]             # log column = source column, or a table
@@ -69,6 +70,7 @@ class Source(_Strict):
     time_scale: float = Field(1.0, gt=0)
     row_clock: float | None = Field(None, gt=0)
     method: Literal["hold", "linear"] = "linear"
+    hold_timeout: float | None = Field(None, gt=0)
     frame: Literal["ned_frd", "enu_flu"] = "ned_frd"
     quaternion: list[str] = Field(default_factory=list)
     columns: dict[str, str | ColumnSpec] = Field(default_factory=dict)

@@ -151,6 +151,7 @@ def derive_velocities(
         raise NnidInputError("deriving body velocities needs phi, theta and psi", field="phi")
     out = unwrap_angles(log)
     new = {c: np.full(len(out), np.nan) for c in VELOCITY}
+    tilted = 0
     for name, idx in experiments(out):
         t = out.loc[idx, "t"].to_numpy(np.float64)
         dt = float(np.median(np.diff(t)))
@@ -178,16 +179,21 @@ def derive_velocities(
             for k, c in enumerate(("u", "v", "w")):
                 new[c][pos] = body[:, k]
         elif "z" in have:
-            new["w"][pos] = rates["z"] / (np.cos(theta) * np.cos(phi))
+            # ż = −sθ u + cθsφ v + cθcφ w: w ≈ ż/(cθcφ) holds only near level; the divisor
+            # is kept at 0.5 or more (60° of tilt) so that it cannot blow up
+            tilt = np.cos(theta) * np.cos(phi)
+            tilted += int(np.sum(np.abs(tilt) < 0.5))
+            new["w"][pos] = rates["z"] / np.copysign(np.maximum(np.abs(tilt), 0.5), tilt)
     made = []
     for c, values in new.items():
         if np.isfinite(values).all() and (overwrite or c not in out):
             out[c] = values
             made.append(c)
     if report is not None and made:
-        approx = (
-            " (w from depth rate, assuming u = v = 0)" if "w" in made and "x" not in have else ""
-        )
+        approx = ""
+        if "w" in made and "x" not in have:
+            approx = f" (w from depth rate, assuming u = v = 0; {tilted} samples tilted beyond "
+            approx += "60°, where it is only a bound)"
         report.add(
             "derive velocities",
             f"{', '.join(made)} from pose by Savitzky-Golay "

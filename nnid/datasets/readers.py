@@ -221,6 +221,17 @@ def assemble(
         # sources bound the end of the window
         linear = [df for s, df in parts if s.method == "linear"] or [df for _, df in parts]
         stop = min(df["t"].max() for df in linear)
+        # ... unless the commands stop while the run goes on: a stale command is not held
+        for s, df in parts:
+            if s.method == "hold" and s.hold_timeout is not None:
+                last = float(df["t"].max()) + s.hold_timeout
+                if last < stop:
+                    report.add(
+                        "cut stale hold",
+                        f"'{exp}': {s.file} ends {stop - last:.2f} s "
+                        f"before the run (+{s.hold_timeout} s timeout): run cut there",
+                    )
+                    stop = last
         rate = cmap.rate or 1.0 / float(np.median(np.diff(np.sort(parts[0][1]["t"].to_numpy()))))
         if stop <= start:
             report.add("skip experiment", f"'{exp}': the sources do not overlap in time", 0)

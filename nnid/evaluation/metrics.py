@@ -27,14 +27,18 @@ def warmup_mask(log: pd.DataFrame, warmup_s: float = 0.0, warmup_samples: int = 
 def nrmse(measured: np.ndarray, predicted: np.ndarray) -> float:
     """RMSE / std(measured); NaN where the measured signal does not vary."""
     measured, predicted = np.asarray(measured, float), np.asarray(predicted, float)
-    std = float(np.std(measured))
+    ok = np.isfinite(measured) & np.isfinite(predicted)
+    measured, predicted = measured[ok], predicted[ok]
+    std = float(np.std(measured)) if measured.size else 0.0
     if std == 0 or measured.size == 0:
         return float("nan")
     return float(np.sqrt(np.mean((predicted - measured) ** 2)) / std)
 
 
 def rmse(measured: np.ndarray, predicted: np.ndarray) -> float:
-    return float(np.sqrt(np.mean((np.asarray(predicted) - np.asarray(measured)) ** 2)))
+    err = np.asarray(predicted, float) - np.asarray(measured, float)
+    err = err[np.isfinite(err)]
+    return float(np.sqrt(np.mean(err**2))) if err.size else float("nan")
 
 
 def per_dof(

@@ -21,7 +21,7 @@ def measured_states(log: pd.DataFrame) -> np.ndarray:
     for k, c in enumerate((*POSE, *VELOCITY)):
         if c in log:
             x[:, k] = log[c].to_numpy(np.float64)
-    return x
+    return np.nan_to_num(x)  # an undefined component (w of a tumbling vehicle) starts at zero
 
 
 def predict_states(

@@ -37,6 +37,10 @@ from nnid.physics.thrusters import Actuation, apply_installation
 _AXES = "xyz"
 
 
+class PhysicsWarning(UserWarning):
+    """An estimate that no physical vehicle can have."""
+
+
 def canonical_parameter(name: str) -> str:
     """Validate a parameter name and return its canonical spelling."""
     if re.fullmatch(r"[XYZKMN]_[uvwpqr]dot", name):
@@ -403,6 +407,17 @@ class ParametricModel:
         _, data = self.prepare(log)
         self.estimate_ = trainer.fit(self.structure_, data)
         self.parts_ = self.structure_.parts(np.nan_to_num(self.estimate_.theta))
+        mass = self.parts_.model(check=False).mass_matrix().numpy()
+        if np.linalg.eigvalsh(0.5 * (mass + mass.T)).min() <= 0:
+            import warnings
+
+            warnings.warn(
+                "the identified mass matrix M = M_RB + M_A is not positive definite (an added "
+                "mass outweighs the rigid body): the data do not determine the inertia, and "
+                "simulations of this model are meaningless",
+                PhysicsWarning,
+                stacklevel=2,
+            )
         return self
 
     @property

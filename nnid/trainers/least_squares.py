@@ -68,6 +68,10 @@ def solve_least_squares(
     """Weighted least squares with covariance, through the normal equations of the
     column-scaled regressor (fast on long logs; the excitation check guards conditioning).
     Unexcited parameters get NaN and a warning that names them."""
+    finite = np.isfinite(y) & np.isfinite(phi).all(1)
+    if not finite.all():  # rows with an undefined signal (e.g. w of a tumbling vehicle)
+        phi, y = phi[finite], y[finite]
+        weights = None if weights is None else np.asarray(weights)[finite]
     n, p = phi.shape
     names = names or [f"theta{k}" for k in range(p)]
     if weights is None:
@@ -145,7 +149,8 @@ class LeastSquares:
         for d in reg.dofs:
             rows = reg.dof_rows(d)
             r = reg.y[rows] - reg.phi[rows] @ th
-            out[d] = float(r @ r / max(rows.size - 1, 1))
+            r = r[np.isfinite(r)]
+            out[d] = float(r @ r / max(r.size - 1, 1))
         return out
 
 
@@ -157,7 +162,8 @@ def correlation_time(reg: Regression, theta: np.ndarray, max_lag: int = 5000) ->
     taus = []
     for d in reg.dofs:
         r = reg.y[reg.dof_rows(d)] - reg.phi[reg.dof_rows(d)] @ th
-        r = r - r.mean()
+        r = r[np.isfinite(r)]
+        r = r - r.mean() if r.size else r
         n = r.size
         if n < 3 or not np.any(r):
             continue
