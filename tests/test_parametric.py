@@ -254,3 +254,19 @@ def test_non_physical_mass_matrix_warns(seamor):
     surge["dw"] = -surge["tau_Z"] / 10.0  # accelerating against the force: a negative mass
     with pytest.warns(PhysicsWarning, match="not positive definite"):
         ParametricModel(seamor, ["Z_wdot"], ["w"]).fit(surge)
+
+
+def test_residual_force_is_the_true_damping_force(seamor):
+    """McCarter eq. 4.4 on noise-free data: M ν̇ + C(ν)ν + g(η) − τ is exactly Θ ξ(ν)."""
+    import torch
+
+    from nnid.physics.fossen import FossenModel
+
+    cfg = load_config(ROOT / "configs/seamor_sequence.toml")
+    cfg.measurement.kind = "none"
+    log = simulate_config(cfg, seamor)
+    run = log[log["experiment"] == "surge-sway-heave"]
+    data = log_arrays(run, seamor)
+    measured = ParametricFossen(seamor, []).damping_force(data)
+    truth = FossenModel.from_vehicle(seamor).damping_force(torch.as_tensor(data["nu"])).numpy()
+    assert np.allclose(measured, truth, atol=1e-8) and np.abs(truth).max() > 1.0

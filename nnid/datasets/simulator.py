@@ -174,10 +174,14 @@ def _closed_loop(model, actuation, autopilot, state, inputs, dt, substeps, integ
     commanded = inputs.copy()
     states = np.empty((n, state.size))
     states[0] = state
+    form = model.feature_form() if integrator == "rk4" else None  # once, not per sample
     for k in range(n - 1):
         commanded[k] = inputs[k] + autopilot.force(states[k])
         applied = actuation.applied(commanded[k : k + 1])
-        states[k + 1] = integrate(model, states[k], applied, dt, substeps, integrator)[-1]
+        if form is not None:
+            states[k + 1] = compiled.integrate_rk4(form, states[k], applied, dt, substeps)[-1]
+        else:
+            states[k + 1] = integrate(model, states[k], applied, dt, substeps, integrator)[-1]
         if not np.isfinite(states[k + 1]).all():
             states[k + 2 :] = np.nan
             break

@@ -308,6 +308,14 @@ class ParametricFossen:
         phi = np.stack(cols, 1) if cols else np.zeros((n * len(rows), 0))
         return Regression(phi, -r0[keep][:, rows].reshape(-1), list(self.names), self.dofs, n)
 
+    def damping_force(self, data: dict[str, np.ndarray]) -> np.ndarray:
+        """McCarter's residual force τ̄ = M ν̇ + C(ν)ν + g(η) − τ (eq. 4.4, his g on the other
+        side): the viscous force the log shows once everything else the model knows is taken
+        out, ``[N, 6]``. Damping unknowns and declared damping are both left out of it."""
+        parts = self.base.copy()
+        parts.damping = {}
+        return -self.equation_residual(parts, data)
+
     def _damping_columns(
         self, data: dict[str, np.ndarray], filter_lambda: float | None
     ) -> dict[str, np.ndarray]:
