@@ -314,7 +314,7 @@ class ParametricFossen:
         out, ``[N, 6]``. Damping unknowns and declared damping are both left out of it."""
         parts = self.base.copy()
         parts.damping = {}
-        return -self.equation_residual(parts, data)
+        return self.equation_residual(parts, data)
 
     def _damping_columns(
         self, data: dict[str, np.ndarray], filter_lambda: float | None
