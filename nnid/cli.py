@@ -201,9 +201,53 @@ def train(
 
 
 @app.command()
-def compare(config: Path = typer.Argument(...)) -> None:
-    """Fit several models and write a comparison report (not implemented yet)."""
-    _not_yet("compare")
+@_input_errors
+def compare(
+    config: Path = typer.Argument(..., help="TOML compare config (see configs/)."),
+    out_dir: Path = typer.Option(..., "--out", help="Output folder for the report."),
+    data: str | None = typer.Option(None, "--data", help="Log to use; overrides the config's."),
+    vehicle: str | None = typer.Option(
+        None, "--vehicle", help="Preset name or vehicle TOML; overrides the config's."
+    ),
+    columns: str | None = typer.Option(
+        None, "--columns", help="Reader config for a log not in nnid's format."
+    ),
+) -> None:
+    """Fit the named damping models and SINDy on the training split and compare them on the
+    validation split: writes comparison.json, report.html and report.md to --out."""
+    import json
+
+    from nnid.config import CompareConfig, load_config
+    from nnid.pipeline import resolve, run_compare
+    from nnid.reports.compare_report import html_page, markdown
+    from nnid.vehicle import load_vehicle
+
+    cfg = load_config(config, CompareConfig)
+    veh = load_vehicle(vehicle or _vehicle_path(cfg.vehicle, config, resolve))
+    try:
+        with Progress(console=err, transient=True) as bar:
+            task = bar.add_task("fitting damping models", total=len(cfg.models) + 1)
+            result = run_compare(
+                cfg,
+                config,
+                veh,
+                data,
+                columns,
+                progress=lambda d, n: bar.update(task, completed=d, total=n),
+            )
+    except NnidInputError as exc:
+        raise exc.with_source(str(config)) from None
+    out_dir.mkdir(parents=True, exist_ok=True)
+    (out_dir / "comparison.json").write_text(json.dumps(result.comparison, indent=2))
+    (out_dir / "report.html").write_text(
+        html_page(result.comparison, result.t, result.measured, result.predicted)
+    )
+    (out_dir / "report.md").write_text(markdown(result.comparison))
+    result.report.write(out_dir)
+    out.print(
+        f"wrote {out_dir}/: comparison.json, report.html, report.md. "
+        + result.comparison["summary"]
+    )
 
 
 @app.command()

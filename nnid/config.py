@@ -147,3 +147,38 @@ class TrainConfig(_Strict):
     reference_label: str = "reference"
     nondimensional_speed: float | None = Field(None, gt=0)
     sequence: Literal["weiss"] | list[SequenceStep] | None = None
+
+
+class SindySpec(_Strict):
+    """The SINDy fit of ``nnid compare``: optimizer and the thresholds of its path."""
+
+    optimizer: Literal["stlsq", "sr3", "ensemble"] = "stlsq"
+    thresholds: list[float] | None = None
+    selection: Literal["validation", "aic", "bic"] = "validation"
+
+
+class CompareConfig(_Strict):
+    """``nnid compare``: named damping models (masks of the basis library) and a SINDy model
+    fitted on one split, compared on held-out data (McCarter ch. 5)."""
+
+    kind: Literal["compare"] = "compare"
+    vehicle: str
+    data: DataSpec
+    models: list[str] = Field(
+        default_factory=lambda: [
+            "mcfarland",
+            "pitch_yaw",
+            "gertler_hagen",
+            "linear",
+            "coe",
+            "prestero",
+            "uncoupled",
+            "fossen",
+        ]
+    )
+    sindy: SindySpec | bool = True  # false: named models only
+    split: SplitSpec = Field(default_factory=SplitSpec)
+    savgol_window: float = Field(1.0, gt=0)
+    savgol_order: int = Field(4, ge=2, le=8)
+    warmup_s: float = Field(2.0, ge=0)
+    horizon_s: float = Field(2.0, gt=0)

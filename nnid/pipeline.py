@@ -11,7 +11,14 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from nnid.config import DataSpec, FossenSpec, SimulateConfig, TrainConfig, load_config
+from nnid.config import (
+    DataSpec,
+    FossenSpec,
+    SimulateConfig,
+    SindySpec,
+    TrainConfig,
+    load_config,
+)
 from nnid.datasets.cleaning import CleaningReport
 from nnid.datasets.log import VELOCITY
 from nnid.datasets.readers import load_log
@@ -128,6 +135,20 @@ class TrainResult:
     split: object
 
 
+def make_split(log: pd.DataFrame, s) -> object:
+    """The split a config asks for: named experiments (the rest trains) or fractions."""
+    assignment = None
+    if s.by == "experiment" and (s.train or s.validation or s.test):
+        names = list(dict.fromkeys(log["experiment"]))
+        held = set((s.validation or []) + (s.test or []))
+        assignment = {
+            "train": s.train or [n for n in names if n not in held],
+            "validation": s.validation or [],
+            "test": s.test or [],
+        }
+    return split_log(log, s.by, tuple(s.fractions), assignment)
+
+
 def run_train(
     cfg: TrainConfig,
     config_path: Path,
@@ -140,17 +161,7 @@ def run_train(
 
     start = time.perf_counter()
     log, report = load_data(cfg, config_path, data_override, columns_override)
-    s = cfg.split
-    assignment = None
-    if s.by == "experiment" and (s.train or s.validation or s.test):
-        names = list(dict.fromkeys(log["experiment"]))
-        held = set((s.validation or []) + (s.test or []))
-        assignment = {
-            "train": s.train or [n for n in names if n not in held],
-            "validation": s.validation or [],
-            "test": s.test or [],
-        }
-    split = split_log(log, s.by, tuple(s.fractions), assignment)
+    split = make_split(log, cfg.split)
     if len(split.validation) == 0:
         raise NnidInputError(
             "the validation split is empty: hold out an experiment or a block", field="split"
@@ -338,3 +349,203 @@ def run_caccia_train(config_path: Path, vehicle_override: str | None = None) -> 
         f"{len(run.sinusoid_log)}, validation {len(val_log)}",
     )
     return TrainResult(model, metrics, report, None)
+
+
+def _without_damping(vehicle):
+    """The vehicle with its declared damping removed: every compared model starts from none."""
+    out = vehicle.model_copy(deep=True)
+    out.damping.model = None
+    out.damping.coefficients = {}
+    return out
+
+
+def _force_rms(tau: np.ndarray) -> float:
+    tau = tau[np.isfinite(tau).all(1)]
+    return float(np.sqrt(np.mean(tau**2))) if tau.size else float("nan")
+
+
+@dataclass
+class CompareResult:
+    comparison: dict
+    t: np.ndarray
+    measured: np.ndarray
+    predicted: dict
+    report: CleaningReport
+
+
+def run_compare(
+    cfg,
+    config_path: Path,
+    vehicle,
+    data_override: str | None = None,
+    columns_override: str | None = None,
+    progress=None,
+) -> CompareResult:
+    """Fit each named damping model (masked least squares, McCarter eq. 4.20) and SINDy on the
+    training split, and score them on the validation split: force error J and J/J0 (eq. 4.25)
+    and the velocity error of each model flown inside the Fossen simulator."""
+    from nnid.models.damping_library import mask_terms
+    from nnid.models.parametric import ParametricModel
+    from nnid.trainers.least_squares import LeastSquares
+
+    start = time.perf_counter()
+    log, report = load_data(cfg, config_path, data_override, columns_override)
+    split = make_split(log, cfg.split)
+    if len(split.validation) == 0:
+        raise NnidInputError(
+            "the validation split is empty: hold out an experiment or a block", field="split"
+        )
+    bare = _without_damping(vehicle)
+    probe = ParametricModel(bare, [], DOFS, None, cfg.savgol_window, cfg.savgol_order)
+    train_log, train_data = probe.prepare(split.train)
+    val_log, val_data = probe.prepare(split.validation)
+    from nnid.models.parametric import ParametricFossen
+
+    structure = ParametricFossen(bare, [])
+    tau_train = structure.damping_force(train_data)
+    tau_val = structure.damping_force(val_data)
+    mask_val = warmup_mask(val_log, cfg.warmup_s, warmup_samples=1)
+    mask_train = warmup_mask(train_log, cfg.warmup_s, warmup_samples=1)
+    j0_train, j0_val = _force_rms(tau_train[mask_train]), _force_rms(tau_val[mask_val])
+    dt = float(np.median(np.diff(val_log["t"].to_numpy())))
+    horizon = max(1, round(cfg.horizon_s / dt))
+    dofs = excited_dofs(val_log, list(VELOCITY))
+    rows, predicted, coefficients = [], {}, {}
+    fits = [
+        (name, [f"{f}:{t}" for f, terms in mask_terms(name).items() for t in terms])
+        for name in cfg.models
+    ]
+    for i, (name, unknowns) in enumerate(fits):
+        model = ParametricModel(
+            bare,
+            unknowns,
+            DOFS,
+            LeastSquares(weighting="none"),
+            cfg.savgol_window,
+            cfg.savgol_order,
+        )
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            model.fit(train_log)
+        rows.append(
+            _score_fit(
+                name,
+                model.parts_,
+                len(unknowns),
+                structure,
+                train_data,
+                val_data,
+                tau_train,
+                tau_val,
+                mask_train,
+                mask_val,
+                j0_train,
+                j0_val,
+                val_log,
+                dofs,
+                horizon,
+            )
+        )
+        predicted[name] = tau_val - structure.equation_residual(model.parts_, val_data)
+        coefficients[name] = {
+            k: v["value"] for k, v in model.params.items() if v["value"] is not None
+        }
+        if progress:
+            progress(i + 1, len(fits) + bool(cfg.sindy))
+    sindy_path = []
+    spec = SindySpec() if cfg.sindy is True else cfg.sindy
+    if spec:
+        from nnid.trainers.sindy import SindyDamping
+
+        sindy = SindyDamping(
+            optimizer=spec.optimizer,
+            thresholds=spec.thresholds,
+            selection=spec.selection,
+        )
+        sindy.fit_arrays(
+            train_data["nu"][mask_train],
+            tau_train[mask_train],
+            val_data["nu"][mask_val],
+            tau_val[mask_val],
+        )
+        parts = structure.base.copy()
+        parts.damping = dict(sindy.coefficients_)
+        rows.append(
+            _score_fit(
+                "sindy",
+                parts,
+                sindy.n_params_,
+                structure,
+                train_data,
+                val_data,
+                tau_train,
+                tau_val,
+                mask_train,
+                mask_val,
+                j0_train,
+                j0_val,
+                val_log,
+                dofs,
+                horizon,
+            )
+        )
+        predicted["sindy"] = tau_val - structure.equation_residual(parts, val_data)
+        coefficients["sindy"] = dict(sindy.coefficients_)
+        sindy_path = sindy.path_
+        if progress:
+            progress(len(fits) + 1, len(fits) + 1)
+    best = min(rows, key=lambda r: r["validation"]["J"])
+    comparison = {
+        "vehicle": vehicle.name,
+        "models": rows,
+        "sindy_path": sindy_path,
+        "coefficients": coefficients,
+        "train": [e["experiment"] for e in split.record["parts"]["train"]],
+        "validation": [e["experiment"] for e in split.record["parts"]["validation"]],
+        "train_J0": j0_train,
+        "validation_J0": j0_val,
+        "warmup_s": cfg.warmup_s,
+        "horizon_s": horizon * dt,
+        "summary": f"Lowest validation force error: {best['name']} ({best['n_params']} terms, "
+        f"J/J0 = {best['validation']['J_over_J0']:.3g}).",
+        "seconds": time.perf_counter() - start,
+    }
+    t = val_log["t"].to_numpy()
+    return CompareResult(comparison, t, tau_val, predicted, report)
+
+
+def _score_fit(
+    name,
+    parts,
+    n_params,
+    structure,
+    train_data,
+    val_data,
+    tau_train,
+    tau_val,
+    mask_train,
+    mask_val,
+    j0_train,
+    j0_val,
+    val_log,
+    dofs,
+    horizon,
+) -> dict:
+    from nnid.evaluation.prediction import predict_states
+
+    r_train = structure.equation_residual(parts, train_data)[mask_train]
+    r_val = structure.equation_residual(parts, val_data)[mask_val]
+    j_train, j_val = _force_rms(r_train), _force_rms(r_val)
+    scores = {}
+    for mode, key in (("free_run", "free_run_nrmse"), (horizon, "k_step_nrmse")):
+        with np.errstate(all="ignore"):
+            pred = predict_states(parts, val_log, val_data["tau"], mode)
+            vals = per_dof(val_log, pred, dofs, mask_val)
+        # a simulation that leaves the physical range has diverged: no number, a flag
+        scores[key] = {k: (v if np.isfinite(v) and v < 1e3 else None) for k, v in vals.items()}
+    return {
+        "name": name,
+        "n_params": int(n_params),
+        "train": {"J": j_train, "J_over_J0": j_train / j0_train},
+        "validation": {"J": j_val, "J_over_J0": j_val / j0_val, **scores},
+    }
