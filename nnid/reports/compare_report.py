@@ -110,7 +110,14 @@ def _html_table(head: list[str], rows: list[list[str]]) -> str:
     return f"<table><thead><tr>{h}</tr></thead><tbody>{body}</tbody></table>"
 
 
-def force_figure(t: np.ndarray, measured: np.ndarray, predicted: dict[str, np.ndarray]) -> str:
+def force_figure(
+    t: np.ndarray, measured: np.ndarray, predicted: dict[str, np.ndarray], window_s: float = 60.0
+) -> str:
+    """Measured and predicted force per DOF over the first ``window_s`` of validation (a
+    longer stretch turns nine overlaid models into a blur)."""
+    keep = t - t[0] <= window_s
+    t, measured = t[keep], measured[keep]
+    predicted = {k: v[keep] for k, v in predicted.items()}
     fig, axes = new_figure(6, 1, 10.0, 1.6)
     for k, ax in enumerate(axes[:, 0]):
         ax.plot(t, measured[:, k], color="black", lw=1.2, label="measured τ̄")
@@ -177,7 +184,7 @@ training on {html.escape(", ".join(comparison.get("train", [])))}, validation on
 {html.escape(", ".join(comparison.get("validation", [])))}.</p>
 <h2>Error against complexity</h2>
 <img alt="validation J/J0 against the number of terms" src="{complexity_figure(comparison)}">
-<h2>Validation force series</h2>
+<h2>Validation force series (first 60 s)</h2>
 <img alt="measured and predicted viscous force per DOF" src="{forces}">
 {velocity}
 <h2>Coefficients</h2>
