@@ -155,6 +155,7 @@ class SindySpec(_Strict):
     optimizer: Literal["stlsq", "sr3", "ensemble"] = "stlsq"
     thresholds: list[float] | None = None
     selection: Literal["validation", "aic", "bic"] = "validation"
+    tolerance: float = Field(0.05, ge=0)
 
 
 class CompareConfig(_Strict):
@@ -182,3 +183,5 @@ class CompareConfig(_Strict):
     savgol_order: int = Field(4, ge=2, le=8)
     warmup_s: float = Field(2.0, ge=0)
     horizon_s: float = Field(2.0, gt=0)
+    filter_lambda: float | None = Field(None, gt=0)
+    zoh_midpoint: bool = False

@@ -359,11 +359,6 @@ def _without_damping(vehicle):
     return out
 
 
-def _force_rms(tau: np.ndarray) -> float:
-    tau = tau[np.isfinite(tau).all(1)]
-    return float(np.sqrt(np.mean(tau**2))) if tau.size else float("nan")
-
-
 @dataclass
 class CompareResult:
     comparison: dict
@@ -384,9 +379,14 @@ def run_compare(
     """Fit each named damping model (masked least squares, McCarter eq. 4.20) and SINDy on the
     training split, and score them on the validation split: force error J and J/J0 (eq. 4.25)
     and the velocity error of each model flown inside the Fossen simulator."""
-    from nnid.models.damping_library import mask_terms
-    from nnid.models.parametric import ParametricModel
-    from nnid.trainers.least_squares import LeastSquares
+    from nnid.models.damping_library import LIBRARY, BasisLibrary
+    from nnid.models.parametric import ParametricFossen, ParametricModel
+    from nnid.trainers.synthesis import (
+        force_error,
+        mask_matrix,
+        masked_least_squares,
+        synthesis_data,
+    )
 
     start = time.perf_counter()
     log, report = load_data(cfg, config_path, data_override, columns_override)
@@ -396,104 +396,73 @@ def run_compare(
             "the validation split is empty: hold out an experiment or a block", field="split"
         )
     bare = _without_damping(vehicle)
+    library = BasisLibrary(LIBRARY, vehicle.damping.u_c or 0.0)
+    form = {
+        "savgol_window": cfg.savgol_window,
+        "savgol_order": cfg.savgol_order,
+        "filter_lambda": cfg.filter_lambda,
+        "zoh_midpoint": cfg.zoh_midpoint,
+    }
+    xi_train, tau_train = synthesis_data(bare, split.train, library, **form)
+    xi_val, tau_val = synthesis_data(bare, split.validation, library, **form)
     probe = ParametricModel(bare, [], DOFS, None, cfg.savgol_window, cfg.savgol_order)
-    train_log, train_data = probe.prepare(split.train)
     val_log, val_data = probe.prepare(split.validation)
-    from nnid.models.parametric import ParametricFossen
-
-    structure = ParametricFossen(bare, [])
-    tau_train = structure.damping_force(train_data)
-    tau_val = structure.damping_force(val_data)
     mask_val = warmup_mask(val_log, cfg.warmup_s, warmup_samples=1)
-    mask_train = warmup_mask(train_log, cfg.warmup_s, warmup_samples=1)
-    j0_train, j0_val = _force_rms(tau_train[mask_train]), _force_rms(tau_val[mask_val])
+    base = ParametricFossen(bare, []).base
+    _, j0_train = force_error(tau_train, 0 * tau_train)
+    _, j0_val = force_error(tau_val[mask_val], 0 * tau_val[mask_val])
     dt = float(np.median(np.diff(val_log["t"].to_numpy())))
     horizon = max(1, round(cfg.horizon_s / dt))
     dofs = excited_dofs(val_log, list(VELOCITY))
     rows, predicted, coefficients = [], {}, {}
-    fits = [
-        (name, [f"{f}:{t}" for f, terms in mask_terms(name).items() for t in terms])
-        for name in cfg.models
-    ]
-    for i, (name, unknowns) in enumerate(fits):
-        model = ParametricModel(
-            bare,
-            unknowns,
-            DOFS,
-            LeastSquares(weighting="none"),
-            cfg.savgol_window,
-            cfg.savgol_order,
-        )
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            model.fit(train_log)
+    total = len(cfg.models) + bool(cfg.sindy)
+
+    def add(name: str, coef: np.ndarray, n_params: int) -> None:
+        """Score one fitted coefficient matrix K [6, 132] over the library."""
+        parts = base.copy()
+        nonzero = zip(*np.nonzero(coef), strict=True)
+        parts.damping = {f"{FORCES[f]}:{LIBRARY[j]}": float(coef[f, j]) for f, j in nonzero}
+        j_train, _ = force_error(tau_train, xi_train @ coef.T)
+        j_val, _ = force_error(tau_val[mask_val], (xi_val @ coef.T)[mask_val])
+        velocity = _velocity_scores(parts, val_log, val_data, dofs, mask_val, horizon)
         rows.append(
-            _score_fit(
-                name,
-                model.parts_,
-                len(unknowns),
-                structure,
-                train_data,
-                val_data,
-                tau_train,
-                tau_val,
-                mask_train,
-                mask_val,
-                j0_train,
-                j0_val,
-                val_log,
-                dofs,
-                horizon,
-            )
+            {
+                "name": name,
+                "n_params": int(n_params),
+                "train": {"J": j_train, "J_over_J0": j_train / j0_train},
+                "validation": {"J": j_val, "J_over_J0": j_val / j0_val, **velocity},
+            }
         )
-        predicted[name] = tau_val - structure.equation_residual(model.parts_, val_data)
-        coefficients[name] = {
-            k: v["value"] for k, v in model.params.items() if v["value"] is not None
-        }
+        predicted[name] = xi_val @ coef.T
+        coefficients[name] = parts.damping
         if progress:
-            progress(i + 1, len(fits) + bool(cfg.sindy))
+            progress(len(rows), total)
+
+    for name in cfg.models:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # aliased terms (u > 0) warn: McCarter Table E.10
+            fit = masked_least_squares(xi_train, tau_train, mask_matrix(name, LIBRARY), LIBRARY)
+        add(name, fit.coefficients, int(fit.mask.sum()))
     sindy_path = []
     spec = SindySpec() if cfg.sindy is True else cfg.sindy
     if spec:
         from nnid.trainers.sindy import SindyDamping
 
         sindy = SindyDamping(
+            bare,
             optimizer=spec.optimizer,
             thresholds=spec.thresholds,
             selection=spec.selection,
+            tolerance=spec.tolerance,
         )
-        sindy.fit_arrays(
-            train_data["nu"][mask_train],
-            tau_train[mask_train],
-            val_data["nu"][mask_val],
-            tau_val[mask_val],
-        )
-        parts = structure.base.copy()
-        parts.damping = dict(sindy.coefficients_)
-        rows.append(
-            _score_fit(
-                "sindy",
-                parts,
-                sindy.n_params_,
-                structure,
-                train_data,
-                val_data,
-                tau_train,
-                tau_val,
-                mask_train,
-                mask_val,
-                j0_train,
-                j0_val,
-                val_log,
-                dofs,
-                horizon,
-            )
-        )
-        predicted["sindy"] = tau_val - structure.equation_residual(parts, val_data)
-        coefficients["sindy"] = dict(sindy.coefficients_)
-        sindy_path = sindy.path_
-        if progress:
-            progress(len(fits) + 1, len(fits) + 1)
+        ok_t = np.isfinite(xi_train).all(1) & np.isfinite(tau_train).all(1)
+        ok_v = mask_val & np.isfinite(xi_val).all(1) & np.isfinite(tau_val).all(1)
+        sindy.fit_features(xi_train[ok_t], tau_train[ok_t], xi_val[ok_v], tau_val[ok_v], LIBRARY)
+        add("sindy", sindy.coef_, sindy.n_params)
+        j0 = j0_val**2  # the path's J is a mean-square ratio per force; report RMS like J
+        sindy_path = [
+            {**p, "validation_J": float(np.sqrt(p["validation_J"] * j0))} for p in sindy.path_
+        ]
     best = min(rows, key=lambda r: r["validation"]["J"])
     comparison = {
         "vehicle": vehicle.name,
@@ -506,46 +475,24 @@ def run_compare(
         "validation_J0": j0_val,
         "warmup_s": cfg.warmup_s,
         "horizon_s": horizon * dt,
-        "summary": f"Lowest validation force error: {best['name']} ({best['n_params']} terms, "
-        f"J/J0 = {best['validation']['J_over_J0']:.3g}).",
+        "summary": (
+            f"Lowest validation force error: {best['name']} ({best['n_params']} terms, "
+            f"J/J0 = {best['validation']['J_over_J0']:.3g})."
+        ),
         "seconds": time.perf_counter() - start,
     }
-    t = val_log["t"].to_numpy()
-    return CompareResult(comparison, t, tau_val, predicted, report)
+    return CompareResult(comparison, val_log["t"].to_numpy(), tau_val, predicted, report)
 
 
-def _score_fit(
-    name,
-    parts,
-    n_params,
-    structure,
-    train_data,
-    val_data,
-    tau_train,
-    tau_val,
-    mask_train,
-    mask_val,
-    j0_train,
-    j0_val,
-    val_log,
-    dofs,
-    horizon,
-) -> dict:
+def _velocity_scores(parts, val_log, val_data, dofs, mask_val, horizon) -> dict:
+    """Free-run and k-step velocity NRMSE of a plant; a run that leaves the physical range
+    has diverged: no number (None)."""
     from nnid.evaluation.prediction import predict_states
 
-    r_train = structure.equation_residual(parts, train_data)[mask_train]
-    r_val = structure.equation_residual(parts, val_data)[mask_val]
-    j_train, j_val = _force_rms(r_train), _force_rms(r_val)
     scores = {}
     for mode, key in (("free_run", "free_run_nrmse"), (horizon, "k_step_nrmse")):
         with np.errstate(all="ignore"):
             pred = predict_states(parts, val_log, val_data["tau"], mode)
             vals = per_dof(val_log, pred, dofs, mask_val)
-        # a simulation that leaves the physical range has diverged: no number, a flag
         scores[key] = {k: (v if np.isfinite(v) and v < 1e3 else None) for k, v in vals.items()}
-    return {
-        "name": name,
-        "n_params": int(n_params),
-        "train": {"J": j_train, "J_over_J0": j_train / j0_train},
-        "validation": {"J": j_val, "J_over_J0": j_val / j0_val, **scores},
-    }
+    return scores

@@ -128,7 +128,30 @@ def evaluate_terms(nu, codes, u_c: float = 0.0):
     if isinstance(a, torch.Tensor):
         idx = torch.as_tensor(np.asarray(codes), dtype=torch.long, device=a.device)
         return a[..., idx].prod(-1)
-    return a[..., np.asarray(codes)].prod(-1)
+    codes = np.asarray(codes)
+    if a.size // len(ATOMS) < _COLUMNWISE_MIN_SAMPLES:
+        return a[..., codes].prod(-1)
+    return _evaluate_columnwise(a, codes)
+
+
+# Above this many samples the terms are built one column at a time (no [N, K, 3] gather).
+_COLUMNWISE_MIN_SAMPLES = 4096
+
+
+def _evaluate_columnwise(a: np.ndarray, codes: np.ndarray) -> np.ndarray:
+    """Terms ``[..., K]`` from atoms ``[..., 18]``: each column is the product of its (at most
+    three) atom rows, written in place into a column-major result; unit factors are skipped."""
+    lead = a.shape[:-1]
+    at = np.ascontiguousarray(a.reshape(-1, a.shape[-1]).T)  # [18, N], rows contiguous
+    out = np.empty((codes.shape[0], at.shape[1]))
+    for k, (i, j, m) in enumerate(codes):
+        if j == ONE:
+            out[k] = at[i]
+            continue
+        np.multiply(at[i], at[j], out=out[k])
+        if m != ONE:
+            out[k] *= at[m]
+    return out.T.reshape(*lead, codes.shape[0])
 
 
 class BasisLibrary:

@@ -1,0 +1,404 @@
+"""Sparse identification of the viscous force (SINDy) over McCarter's basis library.
+
+pysindy does the sparse regression; nnid supplies the candidate functions. Two modes:
+
+``mode="residual"`` (default)
+    regress McCarter's residual force τ̄ = M ν̇ + C(ν)ν + g(η) − τ (eq. 4.4, see
+    :meth:`nnid.models.parametric.ParametricFossen.damping_force`) on ξ(ν): τ̄ ≈ Θ ξ(ν), one
+    sparse coefficient row per force ``X Y Z K M N``. The coefficients are the damping
+    coefficients ``"F:term"`` of a vehicle file.
+``mode="control"``
+    SINDy with control on the accelerations: ν̇ ≈ Ξ [ξ(ν), τ], the controls entering linearly
+    (pysindy's convention of appending u to x before the library). Rigid-body, added-mass and
+    Coriolis effects are absorbed by the coefficients (the Coriolis products are library terms);
+    restoring forces are not in the library, so this mode suits trimmed, level runs.
+
+The regression is compressed before it reaches pysindy. With the columns of Θ scaled to unit
+RMS and each output to unit RMS, G = ΘᵀΘ/N = V Λ Vᵀ and R = Λ^½ Vᵀ, b = Λ^-½ VᵀΘᵀy/N satisfy
+‖R ξ − b‖² = ‖Θ ξ − y‖²/N − const for every ξ, so pysindy's optimizers (STLSQ, SR3, library
+ensembling) solve exactly the full problem on a K × K system: the fit costs one Gram product
+whatever the log length. A threshold is therefore dimensionless: a term is dropped when a
+unit-RMS change of it moves the force by less than ``threshold`` times the force's RMS.
+
+The sparsity level is chosen along a path of thresholds by validation error (the sparsest model
+whose validation J is within ``tolerance`` of the best), or by AIC / BIC on the training fit.
+J is the mean over outputs of the normalised mean squared error MSE_F / mean(y_F²).
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Sequence
+
+import numpy as np
+import pandas as pd
+import pysindy as ps
+from pysindy.feature_library.base import BaseFeatureLibrary, x_sequence_or_item
+from pysindy.utils import AxesArray, comprehend_axes
+
+from nnid.models.damping_library import LIBRARY, BasisLibrary, evaluate_terms
+from nnid.physics.added_mass import DOFS, FORCES
+
+OPTIMIZERS = ("stlsq", "sr3", "ensemble")
+SELECTIONS = ("validation", "aic", "bic")
+MODES = ("residual", "control")
+_EIG_FLOOR = 1e-13  # relative eigenvalue floor of the compressed Gram
+
+
+class BasisFeatureLibrary(BaseFeatureLibrary):
+    """nnid's basis library as a pysindy feature library.
+
+    The first six inputs are the body velocities ``u v w p q r``; they give the basis terms,
+    evaluated by nnid's vectorised :func:`~nnid.models.damping_library.evaluate_terms`. Any
+    further inputs (the controls pysindy appends in SINDy with control) pass through linearly.
+    Feature names are the canonical term names, then the control names.
+    """
+
+    def __init__(self, terms: Sequence[str] | None = None, u_c: float = 0.0) -> None:
+        self.terms = terms
+        self.u_c = u_c
+
+    @property
+    def basis(self) -> BasisLibrary:
+        """The underlying nnid library (canonical term names and codes)."""
+        return BasisLibrary(self.terms, self.u_c)
+
+    @x_sequence_or_item
+    def fit(self, x_full, y=None) -> BasisFeatureLibrary:
+        """Record the input and output sizes."""
+        n = x_full[0].shape[x_full[0].ax_coord]
+        if n < 6:
+            raise ValueError(f"the basis library needs the six velocities; got {n} inputs")
+        self._basis = self.basis
+        self.n_features_in_ = n
+        self.n_output_features_ = len(self._basis) + n - 6
+        return self
+
+    @x_sequence_or_item
+    def transform(self, x_full):
+        """``[..., 6 + n_u]`` -> ``[..., K + n_u]``: basis terms of ν, then the controls."""
+        out = []
+        for x in x_full:
+            arr = np.asarray(x, dtype=np.float64)
+            if arr.shape[-1] != self.n_features_in_:
+                raise ValueError("x shape does not match training shape")
+            xp = evaluate_terms(arr[..., :6], self._basis.codes, self.u_c)
+            if arr.shape[-1] > 6:
+                xp = np.concatenate([xp, arr[..., 6:]], axis=-1)
+            out.append(AxesArray(xp, comprehend_axes(xp)))
+        return out
+
+    def get_feature_names(self, input_features: Sequence[str] | None = None) -> list[str]:
+        """Canonical term names (``u*abs(u)`` …), then the names of the extra inputs."""
+        n = getattr(self, "n_features_in_", 6)
+        if input_features is None:
+            input_features = [*DOFS, *(f"u{k}" for k in range(n - 6))]
+        return [*self.basis.terms, *list(input_features)[6:n]]
+
+
+def make_optimizer(
+    kind: str,
+    threshold: float,
+    alpha: float = 1e-8,
+    max_iter: int = 20,
+    n_models: int = 10,
+    n_candidates_to_drop: int = 5,
+    seed: int = 0,
+) -> ps.optimizers.BaseOptimizer:
+    """A pysindy optimizer whose hard threshold on (scaled) coefficients is ``threshold``.
+
+    ``sr3`` uses the L0 regulariser with weight λ = threshold²/2 (its proximal step zeroes
+    coefficients below √(2λν) = threshold at ν = 1); ``ensemble`` is library ensembling of STLSQ
+    (``n_models`` fits each without ``n_candidates_to_drop`` random candidate terms, median
+    coefficients). pysindy's own unbiasing is off: :func:`debias` refits each support by a
+    minimum-norm least squares, which stays stable on the rank-deficient compressed system (the
+    library has exactly collinear terms, e.g. every ``(eta-1)`` term when u_c = 0).
+    """
+    if kind == "stlsq":
+        return ps.STLSQ(threshold=threshold, alpha=alpha, max_iter=max_iter, unbias=False)
+    if kind == "sr3":
+        return ps.SR3(
+            reg_weight_lam=threshold**2 / 2,
+            regularizer="L0",
+            relax_coeff_nu=1.0,
+            max_iter=max(max_iter, 100),
+            unbias=False,
+        )
+    if kind == "ensemble":
+        np.random.seed(seed)  # noqa: NPY002 (pysindy draws its ensembles from the global one)
+        return ps.EnsembleOptimizer(
+            opt=ps.STLSQ(threshold=threshold, alpha=alpha, max_iter=max_iter, unbias=False),
+            bagging=False,
+            library_ensemble=True,
+            n_models=n_models,
+            n_candidates_to_drop=n_candidates_to_drop,
+        )
+    raise ValueError(f"unknown optimizer '{kind}'; expected one of {', '.join(OPTIMIZERS)}")
+
+
+def compress(theta: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    """``(R, b, c)`` with ‖R ξ − b‖² + c = ‖Θ ξ − y‖²/N summed over outputs (``R`` ``[r, K]``,
+    ``b`` ``[r, m]``), from one eigendecomposition of the Gram matrix."""
+    n = theta.shape[0]
+    gram = theta.T @ theta / n
+    rhs = theta.T @ y / n
+    lam, vec = np.linalg.eigh(gram)
+    keep = lam > _EIG_FLOOR * max(lam.max(), 1e-300)
+    lam, vec = lam[keep], vec[:, keep]
+    root = np.sqrt(lam)
+    r = root[:, None] * vec.T
+    b = (vec.T @ rhs) / root[:, None]
+    c = float(np.sum(y * y) / n - np.sum(b * b))
+    return r, b, c
+
+
+def debias(r: np.ndarray, b: np.ndarray, coef: np.ndarray) -> np.ndarray:
+    """Least squares refit of each output on the support the optimizer chose ``[m, K]``."""
+    out = np.zeros_like(coef)
+    for i in range(coef.shape[0]):
+        support = np.flatnonzero(coef[i])
+        if support.size:
+            rs = r[:, support]
+            sol = np.linalg.pinv(rs.T @ rs, rcond=1e-12, hermitian=True) @ (rs.T @ b[:, i])
+            out[i, support] = np.where(sol == 0.0, 1e-300, sol)  # keep the support
+    return out
+
+
+def nmse(y: np.ndarray, pred: np.ndarray) -> np.ndarray:
+    """Per-output normalised MSE: mean((y − ŷ)²) / mean(y²)."""
+    ms = np.maximum(np.mean(y * y, axis=0), 1e-300)
+    return np.mean((y - pred) ** 2, axis=0) / ms
+
+
+class SindyDamping:
+    """Sparse viscous-force identification with pysindy over the basis library.
+
+    ``SindyDamping(vehicle).fit(train_log, validation_log)``: ``path_`` lists every threshold
+    tried (``threshold``, ``n_terms``, ``train_J``, ``validation_J``, ``aic``, ``bic``),
+    ``selected_`` is the chosen entry, ``coefficients_`` the chosen model as ``{"F:term": value}``
+    (mode ``"control"``: ``{"du:term": value}`` and ``{"du:tau_X": value}``), ``n_params`` its
+    number of nonzero coefficients. Without ``validation_log`` the last ``holdout`` fraction of
+    each experiment validates. With ``per_output`` (default) and validation selection each
+    output picks its own row, greedily sparsest while the mean validation J stays within
+    ``tolerance`` of the best, so ``selected_`` may mix thresholds. Velocities and
+    accelerations missing from a log are derived as in
+    :class:`~nnid.models.parametric.ParametricModel` (Savitzky-Golay).
+    """
+
+    def __init__(
+        self,
+        vehicle,
+        optimizer: str = "stlsq",
+        thresholds: Sequence[float] | None = None,
+        selection: str = "validation",
+        tolerance: float = 0.05,
+        mode: str = "residual",
+        terms: Sequence[str] | None = None,
+        alpha: float = 1e-8,
+        holdout: float = 0.2,
+        per_output: bool = True,
+        savgol_window: float = 1.0,
+        savgol_order: int = 4,
+        seed: int = 0,
+    ) -> None:
+        if optimizer not in OPTIMIZERS:
+            raise ValueError(f"optimizer is one of {', '.join(OPTIMIZERS)}")
+        if selection not in SELECTIONS:
+            raise ValueError(f"selection is one of {', '.join(SELECTIONS)}")
+        if mode not in MODES:
+            raise ValueError(f"mode is one of {', '.join(MODES)}")
+        self.vehicle = vehicle
+        self.optimizer = optimizer
+        self.thresholds = (
+            np.logspace(-3, 0, 41) if thresholds is None else np.asarray(thresholds, float)
+        )
+        self.selection = selection
+        self.tolerance = tolerance
+        self.mode = mode
+        self.terms = tuple(LIBRARY if terms is None else terms)
+        self.alpha = alpha
+        self.holdout = holdout
+        self.per_output = per_output
+        self.savgol_window = savgol_window
+        self.savgol_order = savgol_order
+        self.seed = seed
+
+    # -- data -----------------------------------------------------------------------------------
+    def arrays(self, log: pd.DataFrame) -> tuple[np.ndarray, np.ndarray]:
+        """Library inputs ``x`` (ν, and τ in control mode) and targets ``y`` (τ̄ or ν̇) of a
+        log, non-finite rows dropped."""
+        from nnid.models.parametric import ParametricFossen, ParametricModel
+
+        _, data = ParametricModel(
+            self.vehicle, [], savgol_window=self.savgol_window, savgol_order=self.savgol_order
+        ).prepare(log)
+        if self.mode == "residual":
+            x = data["nu"]
+            y = ParametricFossen(self.vehicle, []).damping_force(data)
+        else:
+            x = np.concatenate([data["nu"], data["tau"]], axis=1)
+            y = data["nu_dot"]
+        ok = np.isfinite(x).all(1) & np.isfinite(y).all(1)
+        return x[ok], y[ok]
+
+    def _split(self, log: pd.DataFrame) -> tuple[pd.DataFrame, pd.DataFrame]:
+        groups = log.groupby("experiment", sort=False) if "experiment" in log else [(0, log)]
+        train, val = [], []
+        for _, g in groups:
+            cut = round(len(g) * (1.0 - self.holdout))
+            train.append(g.iloc[:cut])
+            val.append(g.iloc[cut:])
+        return pd.concat(train), pd.concat(val)
+
+    @property
+    def output_names(self) -> list[str]:
+        return list(FORCES) if self.mode == "residual" else [f"d{d}" for d in DOFS]
+
+    # -- fitting --------------------------------------------------------------------------------
+    def fit(self, train_log: pd.DataFrame, validation_log: pd.DataFrame | None = None):
+        """Fit the threshold path on ``train_log`` and select a model (see the class doc)."""
+        if validation_log is None:
+            train_log, validation_log = self._split(train_log)
+        x, y = self.arrays(train_log)
+        xv, yv = self.arrays(validation_log)
+        return self.fit_arrays(x, y, xv, yv)
+
+    def fit_arrays(
+        self,
+        x: np.ndarray,
+        y: np.ndarray,
+        x_val: np.ndarray | None = None,
+        y_val: np.ndarray | None = None,
+    ) -> SindyDamping:
+        """The path and selection on arrays: ``x`` ``[N, 6 (+6)]`` library inputs, ``y``
+        ``[N, 6]`` targets (validation arrays optional unless ``selection="validation"``)."""
+        self.library_ = BasisFeatureLibrary(self.terms, self.vehicle.damping.u_c)
+        theta = np.asarray(self.library_.fit_transform(x))
+        theta_val = None if x_val is None else np.asarray(self.library_.transform(x_val))
+        self.feature_names_ = self.library_.get_feature_names(
+            [*DOFS, *(f"tau_{f}" for f in FORCES)]
+        )
+        return self.fit_features(theta, y, theta_val, y_val)
+
+    def fit_features(
+        self,
+        theta: np.ndarray,
+        y: np.ndarray,
+        theta_val: np.ndarray | None = None,
+        y_val: np.ndarray | None = None,
+        names: Sequence[str] | None = None,
+    ) -> SindyDamping:
+        """The path and selection on evaluated library features ``theta`` ``[N, K]`` (e.g.
+        the filtered ξ of :func:`nnid.trainers.synthesis.synthesis_data`), named ``names``."""
+        if theta_val is None and self.selection == "validation":
+            raise ValueError("selection='validation' needs validation data")
+        if names is not None:
+            self.feature_names_ = list(names)
+        n = theta.shape[0]
+        col = np.sqrt(np.mean(theta * theta, axis=0))
+        col[col == 0] = 1.0
+        out = np.sqrt(np.mean(y * y, axis=0))
+        out[out == 0] = 1.0
+        r, b, _ = compress(theta / col, y / out)
+        path = []
+        coefs = []
+        val_out = []
+        ms_y = np.maximum(np.mean(y * y, axis=0), 1e-300)
+        for thr in self.thresholds:
+            opt = make_optimizer(self.optimizer, float(thr), self.alpha, seed=self.seed)
+            with warnings.catch_warnings():  # "all coefficients eliminated" at large thresholds
+                warnings.simplefilter("ignore", UserWarning)
+                opt.fit(r, b)
+            scaled = debias(r, b, np.asarray(opt.coef_).reshape(y.shape[1], -1))
+            coef = scaled * out[:, None] / col[None, :]  # [m, K]
+            train_err = nmse(y, theta @ coef.T)
+            k = int(np.count_nonzero(coef))
+            log_mse = float(np.sum(n * np.log(np.maximum(train_err * ms_y, 1e-300))))
+            entry = {
+                "threshold": float(thr),
+                "n_terms": k,
+                "train_J": float(train_err.mean()),
+                "validation_J": (
+                    float(nmse(y_val, theta_val @ coef.T).mean())
+                    if theta_val is not None
+                    else float("nan")
+                ),
+                "aic": log_mse + 2.0 * k,
+                "bic": log_mse + k * float(np.log(n * y.shape[1])),
+            }
+            path.append(entry)
+            coefs.append(coef)
+            if theta_val is not None:
+                val_out.append(nmse(y_val, theta_val @ coef.T))
+        self.path_ = path
+        best = self._select(path)
+        self.selected_ = dict(path[best])
+        self.coef_ = coefs[best]
+        if self.per_output and self.selection == "validation":
+            self.coef_ = self._select_per_output(np.array(coefs), np.array(val_out))
+            self.selected_ = {
+                "threshold": None,
+                "n_terms": int(np.count_nonzero(self.coef_)),
+                "train_J": float(nmse(y, theta @ self.coef_.T).mean()),
+                "validation_J": float(nmse(y_val, theta_val @ self.coef_.T).mean()),
+            }
+        names = self.feature_names_
+        self.coefficients_ = {
+            f"{force}:{names[j]}": float(self.coef_[i, j])
+            for i, force in enumerate(self.output_names)
+            for j in np.flatnonzero(self.coef_[i])
+        }
+        return self
+
+    def _select_per_output(self, coefs: np.ndarray, val: np.ndarray) -> np.ndarray:
+        """Rows per output (the outputs are separate regressions; J is their mean): start from
+        each output's best validation row and, while the mean stays within ``tolerance`` of
+        that best J, greedily take the sparser row that costs the least J per term saved."""
+        m = coefs.shape[1]
+        k = np.count_nonzero(coefs, axis=2)  # [T, m]
+        pick = [int(np.nanargmin(val[:, i])) for i in range(m)]
+        budget = (1.0 + self.tolerance) * float(np.mean([val[pick[i], i] for i in range(m)]))
+        while True:
+            total = float(np.mean([val[pick[i], i] for i in range(m)]))
+            best, best_rate = None, np.inf
+            for i in range(m):
+                for j in range(val.shape[0]):
+                    saved = k[pick[i], i] - k[j, i]
+                    extra = (val[j, i] - val[pick[i], i]) / m
+                    if saved > 0 and total + extra <= budget and extra / saved < best_rate:
+                        best, best_rate = (i, j), extra / saved
+            if best is None:
+                break
+            pick[best[0]] = best[1]
+        return np.stack([coefs[pick[i], i] for i in range(m)])
+
+    def _select(self, path: list[dict]) -> int:
+        if self.selection in ("aic", "bic"):
+            return int(np.argmin([p[self.selection] for p in path]))
+        val = np.array([p["validation_J"] for p in path])
+        ok = np.flatnonzero(val <= (1.0 + self.tolerance) * np.nanmin(val))
+        return int(min(ok, key=lambda i: (path[i]["n_terms"], val[i])))
+
+    # -- use ------------------------------------------------------------------------------------
+    @property
+    def n_params(self) -> int:
+        """Nonzero coefficients of the selected model."""
+        return int(np.count_nonzero(self.coef_))
+
+    def selected_terms(self) -> set[str]:
+        """The selected ``"F:term"`` keys."""
+        return set(self.coefficients_)
+
+    def predict_arrays(self, x: np.ndarray) -> np.ndarray:
+        """The model's output (τ_D or ν̇) ``[N, 6]`` for library inputs ``x``."""
+        return np.asarray(self.library_.transform(x)) @ self.coef_.T
+
+    def predict(self, log: pd.DataFrame) -> pd.DataFrame:
+        """The model's output on a log, one column per output (``X`` … or ``du`` …)."""
+        x, _ = self.arrays(log)
+        return pd.DataFrame(self.predict_arrays(x), columns=self.output_names)
+
+    def score(self, log: pd.DataFrame) -> float:
+        """J on a log (mean normalised MSE over the six outputs)."""
+        x, y = self.arrays(log)
+        return float(nmse(y, self.predict_arrays(x)).mean())

@@ -1,0 +1,380 @@
+"""Viscous-model synthesis from a log (McCarter ch. 4, eqs 4.4-4.27).
+
+The residual force (McCarter eq. 4.4)
+
+    τ̄(k) = M ν̇(k) + C(ν(k)) ν(k) − g(η(k)) − τ_U(k)
+
+is what the log shows of the viscous force once the rigid body, added mass, restoring forces and
+the actuation are taken out; a viscous model K ξ(ν) (eq. 4.6) is then fitted to it. With a mask
+(McCarter's M_k, eq. 4.15) choosing which of the basis terms each force ``X Y Z K M N`` uses, the
+stacked problem (eqs 4.16-4.20)
+
+    σ̃ = Ξ κ − σ̄,   Ξ = (I_6 ⊗ ξ_*ᵀ) M_kᵀ,   κ = M_k vec(Kᵀ)
+
+is block diagonal, so it separates into one least-squares problem per force (eq. 4.22). The
+alternative costs of eqs 4.23-4.27 (MAE, MSE, RMS and McCarter's "MAD", the sum over axes of the
+median absolute residual) are minimised by Nelder-Mead started from the least-squares solution.
+Every one of them is a sum (or a monotone function of a sum) of per-force terms, so minimising
+force by force gives the joint minimum while keeping each simplex small: Nelder-Mead over all
+216 McFarland coefficients at once would take hundreds of thousands of evaluations and rarely
+converges; per force it is 36 parameters at most (still slow: use it on small masks).
+
+The model error is McCarter's eq. 4.25, J = RMS of the force residual over all six axes, and J0
+the RMS of the force series itself (J at κ = 0), both also available per force.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+import pandas as pd
+from scipy.optimize import minimize
+
+from nnid.datasets.log import input_columns
+from nnid.datasets.preprocess import experiments
+from nnid.models.damping_library import LIBRARY, BasisLibrary, canonical_term, mask_terms
+from nnid.models.parametric import (
+    ParametricFossen,
+    ParametricModel,
+    Regression,
+    _filter,
+    _settled,
+)
+from nnid.physics.added_mass import FORCES
+from nnid.trainers.least_squares import LeastSquares
+
+Loss = Literal["mae", "mse", "rms", "mad"]
+LOSSES: tuple[str, ...] = ("mae", "mse", "rms", "mad")
+MaskSpec = str | Mapping[str, Sequence[str]] | np.ndarray
+
+
+def residual_force(
+    vehicle,
+    log: pd.DataFrame,
+    savgol_window: float = 1.0,
+    savgol_order: int = 4,
+    filter_lambda: float | None = None,
+    zoh_midpoint: bool = False,
+) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """McCarter's residual force τ̄ (eq. 4.4) ``[N, 6]`` and the log's arrays (η, ν, ν̇, τ).
+
+    Velocities and accelerations missing from the log are derived by Savitzky-Golay exactly as
+    :meth:`ParametricModel.prepare` does and τ̄ is :meth:`ParametricFossen.damping_force` (the
+    vehicle's declared damping is left out of it). With ``filter_lambda`` = λ it is instead the
+    filtered residual F[τ̄], F(s) = λ/(s + λ), with M F[ν̇] computed as M sF(s)[ν] (the
+    filtered-regressor form of :meth:`ParametricFossen.equation_residual`): no differentiated
+    acceleration, and the regressors must then be filtered alike (:func:`synthesis_data`). The
+    first 3/λ s of each experiment, where the filters settle, are NaN.
+
+    ``zoh_midpoint`` takes the inputs as held over each sample (zero-order hold, as logged
+    commands are) and uses at t_k the mean (τ_{k−1} + τ_k)/2 of the force held before and after
+    it, which is what a smoothed or filtered acceleration at t_k sees; without it a fast
+    autopilot's held force leaves a half-sample lag that biases the damping by several %.
+    """
+    if zoh_midpoint:
+        log = zoh_midpoint_inputs(log)
+    trainer = LeastSquares(filter_lambda=filter_lambda)
+    prep = ParametricModel(
+        vehicle, [], trainer=trainer, savgol_window=savgol_window, savgol_order=savgol_order
+    )
+    _, data = prep.prepare(log)
+    structure = ParametricFossen(vehicle, [])
+    if filter_lambda is None:
+        return structure.damping_force(data), data
+    parts = structure.base.copy()
+    parts.damping = {}
+    tau_bar = structure.equation_residual(parts, data, filter_lambda)
+    tau_bar[~_settled(data, 3.0 / filter_lambda)] = np.nan
+    return tau_bar, data
+
+
+def zoh_midpoint_inputs(log: pd.DataFrame) -> pd.DataFrame:
+    """The log with every input column replaced, per experiment, by the mean of consecutive
+    samples (the first sample kept): the force a zero-order-held input applies around t_k."""
+    cols = input_columns(log)
+    out = log.copy()
+    for _, idx in experiments(out):
+        x = out.loc[idx, cols].to_numpy(np.float64)
+        y = x.copy()
+        y[1:] = 0.5 * (x[1:] + x[:-1])
+        out.loc[idx, cols] = y
+    return out
+
+
+def synthesis_data(
+    vehicle,
+    log: pd.DataFrame,
+    library: BasisLibrary,
+    savgol_window: float = 1.0,
+    savgol_order: int = 4,
+    filter_lambda: float | None = None,
+    zoh_midpoint: bool = False,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The basis terms ξ(ν) ``[N, n_terms]`` and τ̄ ``[N, 6]`` of a log, both through F(s)
+    when ``filter_lambda`` is given, so that τ̄ = K ξ holds on either form (eq. 4.6)."""
+    tau_bar, data = residual_force(
+        vehicle, log, savgol_window, savgol_order, filter_lambda, zoh_midpoint
+    )
+    xi = library(data["nu"])
+    if filter_lambda is not None:
+        xi = _filter(data, xi, filter_lambda)
+        xi[~np.isfinite(tau_bar).all(1)] = np.nan
+    return xi, tau_bar
+
+
+def mask_matrix(mask: MaskSpec, terms: Sequence[str]) -> np.ndarray:
+    """McCarter's mask M_k (eq. 4.15) as a boolean ``[6, len(terms)]`` (row = force X..N).
+
+    ``mask`` is a named model (:func:`mask_terms`), a ``{force: terms}`` mapping or already a
+    boolean array."""
+    if isinstance(mask, np.ndarray):
+        out = np.asarray(mask, dtype=bool)
+        if out.shape != (6, len(terms)):
+            raise ValueError(f"mask must have shape (6, {len(terms)}), got {out.shape}")
+        return out
+    spec = mask_terms(mask) if isinstance(mask, str) else mask
+    index = {canonical_term(t): j for j, t in enumerate(terms)}
+    out = np.zeros((6, len(terms)), dtype=bool)
+    for force, names in spec.items():
+        for name in names:
+            term = canonical_term(name)
+            if term not in index:
+                raise ValueError(f"mask term '{name}' of force {force} is not among the terms")
+            out[FORCES.index(force), index[term]] = True
+    return out
+
+
+def mask_term_list(mask: str | Mapping[str, Sequence[str]]) -> list[str]:
+    """The terms a mask uses, in McCarter's basis order (C.7), others after."""
+    spec = mask_terms(mask) if isinstance(mask, str) else mask
+    used = {canonical_term(t) for names in spec.values() for t in names}
+    ordered = [t for t in LIBRARY if t in used]
+    return ordered + sorted(used - set(ordered))
+
+
+@dataclass
+class SynthesisFit:
+    """A fitted coefficient matrix K ``[6, n_terms]`` (zero off the mask) with its standard
+    errors (NaN off the mask and for Nelder-Mead fits) and the mask itself."""
+
+    coefficients: np.ndarray
+    stderr: np.ndarray
+    mask: np.ndarray
+
+    def predict(self, xi: np.ndarray) -> np.ndarray:
+        """τ̂ = K ξ(ν) per sample ``[N, 6]`` (eq. 4.6)."""
+        return xi @ self.coefficients.T
+
+    @property
+    def kappa(self) -> np.ndarray:
+        """κ = M_k vec(Kᵀ) (eq. 4.19): the masked coefficients, force-major."""
+        return self.coefficients[self.mask]
+
+
+def masked_least_squares(
+    xi: np.ndarray,
+    tau_bar: np.ndarray,
+    mask: np.ndarray,
+    terms: Sequence[str] | None = None,
+) -> SynthesisFit:
+    """Least squares of the synthesis model σ̃ = Ξ κ − σ̄ (eqs 4.20, 4.22), one force at a time
+    (Ξ is block diagonal). ``xi`` ``[N, n_terms]``, ``tau_bar`` ``[N, 6]``, ``mask`` boolean
+    ``[6, n_terms]``; ``terms`` only names the coefficients in warnings. Standard errors come
+    from :class:`LeastSquares` (widened for the residual's autocorrelation, as smoothed
+    accelerations make neighbouring samples dependent).
+    """
+    mask = np.asarray(mask, dtype=bool)
+    k = np.zeros(mask.shape)
+    se = np.full(mask.shape, np.nan)
+    solver = LeastSquares(weighting="none")
+    for f in range(6):
+        cols = np.flatnonzero(mask[f])
+        if cols.size == 0:
+            continue
+        names = [f"{FORCES[f]}:{terms[j] if terms is not None else j}" for j in cols]
+        reg = Regression(xi[:, cols], tau_bar[:, f], names, ("u",), tau_bar.shape[0])
+        est = solver.solve(reg)
+        k[f, cols] = np.nan_to_num(est.theta)
+        se[f, cols] = est.stderr
+    return SynthesisFit(k, se, mask)
+
+
+def loss_value(residual: np.ndarray, loss: Loss) -> float:
+    """McCarter's costs on a residual ``[N]`` or ``[N, 6]``: MAE (eq. 4.23), MSE (4.24), RMS
+    (4.25) and "MAD" (4.26-4.27: the per-axis median of |τ̃| summed over the axes)."""
+    r = np.asarray(residual, dtype=np.float64)
+    if loss == "mae":
+        return float(np.mean(np.abs(r)))
+    if loss == "mse":
+        return float(np.mean(r * r))
+    if loss == "rms":
+        return float(np.sqrt(np.mean(r * r)))
+    if loss == "mad":
+        r2 = r.reshape(r.shape[0], -1)
+        return float(np.sum(np.median(np.abs(r2), axis=0)))
+    raise ValueError(f"unknown loss '{loss}'; expected one of {', '.join(LOSSES)}")
+
+
+def nelder_mead(
+    xi: np.ndarray,
+    tau_bar: np.ndarray,
+    mask: np.ndarray,
+    loss: Loss,
+    start: SynthesisFit | None = None,
+    forces: Sequence[str] = FORCES,
+    max_iter_per_param: int = 400,
+    tol: float = 1e-9,
+) -> SynthesisFit:
+    """Minimise an eq. 4.23-4.27 cost by Nelder-Mead, force by force, from the least-squares
+    solution (or ``start``). Each cost is a sum (or monotone in a sum) of per-force costs, so
+    the per-force minima are the joint minimum. The search runs in coordinates where a unit step
+    of a coefficient changes its force by one RMS unit of the force series, with an initial
+    simplex of 10 % of that scale. Slow: the budget grows with the parameters per force
+    (``max_iter_per_param``), so keep it to small masks or to the ``forces`` of interest."""
+    if loss not in LOSSES:
+        raise ValueError(f"unknown loss '{loss}'; expected one of {', '.join(LOSSES)}")
+    mask = np.asarray(mask, dtype=bool)
+    base = start if start is not None else masked_least_squares(xi, tau_bar, mask)
+    k = base.coefficients.copy()
+    for force in forces:
+        f = FORCES.index(force)
+        cols = np.flatnonzero(mask[f])
+        if cols.size == 0:
+            continue
+        y = tau_bar[:, f]
+        ok = np.isfinite(y) & np.isfinite(xi[:, cols]).all(1)
+        a, y = xi[ok][:, cols], y[ok]
+        col_rms = np.sqrt(np.mean(a * a, axis=0))
+        col_rms[col_rms == 0] = 1.0
+        y_rms = float(np.sqrt(np.mean(y * y))) or 1.0
+        scale = col_rms / y_rms  # θ_scaled = θ * scale: a unit step = one RMS unit of force
+        a_s = a / col_rms * y_rms
+
+        def cost(theta_s: np.ndarray, a_s=a_s, y=y) -> float:
+            return loss_value(a_s @ theta_s - y, loss)
+
+        x0 = k[f, cols] * scale
+        simplex = np.vstack([x0, x0 + 0.1 * np.eye(cols.size)])
+        res = minimize(
+            cost,
+            x0,
+            method="Nelder-Mead",
+            options={
+                "initial_simplex": simplex,
+                "maxiter": max_iter_per_param * cols.size,
+                "maxfev": 2 * max_iter_per_param * cols.size,
+                "xatol": tol,
+                "fatol": tol * y_rms,
+                "adaptive": cols.size > 5,
+            },
+        )
+        k[f, cols] = res.x / scale
+    return SynthesisFit(k, np.full(mask.shape, np.nan), mask)
+
+
+def force_error(
+    tau_bar: np.ndarray, tau_hat: np.ndarray, per_force: bool = False
+) -> tuple[float, float] | tuple[np.ndarray, np.ndarray]:
+    """(J, J0) of McCarter eq. 4.25: J the RMS of the force residual τ̂ − τ̄, J0 the RMS of the
+    force series τ̄ (J at κ = 0). Combined over the six axes as McCarter does (forces and
+    moments in one number) or, with ``per_force``, one pair per axis ``[6]``. Samples with a
+    non-finite value are left out."""
+    tau_bar = np.asarray(tau_bar, dtype=np.float64)
+    res = np.asarray(tau_hat, dtype=np.float64) - tau_bar
+    ok = np.isfinite(res).all(1)
+    res, tau_bar = res[ok], tau_bar[ok]
+    if per_force:
+        return np.sqrt(np.mean(res * res, 0)), np.sqrt(np.mean(tau_bar * tau_bar, 0))
+    return float(np.sqrt(np.mean(res * res))), float(np.sqrt(np.mean(tau_bar * tau_bar)))
+
+
+class SynthesisModel:
+    """A masked viscous model K ξ(ν) fitted to McCarter's τ̄ (scikit-learn style).
+
+    ``SynthesisModel(vehicle, mask="mcfarland", method="ls")`` then ``fit(log)``; ``method`` is
+    ``"ls"`` (eq. 4.22) or a Nelder-Mead cost ``"mae" | "mse" | "rms" | "mad"`` (eqs 4.23-4.27,
+    started from least squares). ``predict_force(log)`` is K ξ(ν) per sample, ``error(log)`` is
+    (J, J0) of eq. 4.25, ``params`` holds ``{"F:term": {"value", "stderr"}}``.
+    ``filter_lambda`` and ``zoh_midpoint`` choose the form of τ̄ (see :func:`residual_force`):
+    Savitzky-Golay accelerations by default; the filtered form with the zero-order-hold
+    midpoint is the unbiased choice for logs of held inputs under a fast autopilot.
+    """
+
+    def __init__(
+        self,
+        vehicle,
+        mask: str | Mapping[str, Sequence[str]] = "mcfarland",
+        method: Literal["ls", "mae", "mse", "rms", "mad"] = "ls",
+        savgol_window: float = 1.0,
+        savgol_order: int = 4,
+        filter_lambda: float | None = None,
+        zoh_midpoint: bool = False,
+    ) -> None:
+        if method != "ls" and method not in LOSSES:
+            raise ValueError(f"method is 'ls' or one of {', '.join(LOSSES)}, not '{method}'")
+        self.vehicle = vehicle
+        self.mask = mask
+        self.method = method
+        self.savgol_window = savgol_window
+        self.savgol_order = savgol_order
+        self.filter_lambda = filter_lambda
+        self.zoh_midpoint = zoh_midpoint
+        self.terms = mask_term_list(mask)
+        self.library = BasisLibrary(self.terms, vehicle.damping.u_c or 0.0)
+
+    def _xi_tau(self, log: pd.DataFrame) -> tuple[np.ndarray, np.ndarray]:
+        return synthesis_data(
+            self.vehicle,
+            log,
+            self.library,
+            self.savgol_window,
+            self.savgol_order,
+            self.filter_lambda,
+            self.zoh_midpoint,
+        )
+
+    def fit(self, log: pd.DataFrame) -> SynthesisModel:
+        xi, tau_bar = self._xi_tau(log)
+        mask = mask_matrix(self.mask, self.terms)
+        fit = masked_least_squares(xi, tau_bar, mask, self.terms)
+        if self.method != "ls":
+            fit = nelder_mead(xi, tau_bar, mask, self.method, start=fit)
+        self.fit_ = fit
+        return self
+
+    def predict_force(self, log: pd.DataFrame) -> pd.DataFrame:
+        """τ̂ = K ξ(ν) (eq. 4.6) per sample, columns X Y Z K M N."""
+        _, data = ParametricModel(
+            self.vehicle, [], savgol_window=self.savgol_window, savgol_order=self.savgol_order
+        ).prepare(log)
+        tau_hat = self.fit_.predict(self.library(data["nu"]))
+        return pd.DataFrame(tau_hat, columns=list(FORCES), index=log.index)
+
+    def error(
+        self, log: pd.DataFrame, per_force: bool = False
+    ) -> tuple[float, float] | tuple[np.ndarray, np.ndarray]:
+        """(J, J0) of eq. 4.25 on a log (see :func:`force_error`)."""
+        xi, tau_bar = self._xi_tau(log)
+        return force_error(tau_bar, self.fit_.predict(xi), per_force)
+
+    def coefficient_matrix(self) -> np.ndarray:
+        """K ``[6, len(terms)]`` (zero off the mask)."""
+        return self.fit_.coefficients.copy()
+
+    @property
+    def params(self) -> dict[str, dict[str, float | None]]:
+        out: dict[str, dict[str, float | None]] = {}
+        for f, j in zip(*np.nonzero(self.fit_.mask), strict=True):
+            s = self.fit_.stderr[f, j]
+            out[f"{FORCES[f]}:{self.terms[j]}"] = {
+                "value": float(self.fit_.coefficients[f, j]),
+                "stderr": float(s) if np.isfinite(s) else None,
+            }
+        return out
+
+    @property
+    def n_params(self) -> int:
+        return int(np.count_nonzero(mask_matrix(self.mask, self.terms)))

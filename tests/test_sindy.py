@@ -1,0 +1,101 @@
+"""SINDy over the basis library (issue 5): exact recovery on seamor, sparsity vs McFarland."""
+
+from __future__ import annotations
+
+import itertools
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from nnid.config import load_config
+from nnid.datasets.simulator import simulate_config
+from nnid.models.damping_library import BasisLibrary, mask_terms
+from nnid.trainers.least_squares import solve_least_squares
+from nnid.trainers.sindy import BasisFeatureLibrary, SindyDamping, nmse
+from nnid.vehicle import load_vehicle
+
+ROOT = Path(__file__).resolve().parents[1]
+WEISS = {"X:u*abs(u)", "Y:v*abs(v)", "Z:w*abs(w)", "K:p*abs(p)", "M:q*abs(q)", "N:r*abs(r)"}
+
+
+@pytest.fixture(scope="module")
+def seamor_log():
+    cfg = load_config(ROOT / "configs/seamor_sequence.toml")
+    cfg.measurement.kind = "none"
+    return simulate_config(cfg, load_vehicle("seamor"))
+
+
+@pytest.fixture(scope="module")
+def vt690():
+    cfg = load_config(ROOT / "configs/vt690_truth.toml")
+    vehicle = load_vehicle(cfg.vehicle)
+    log = simulate_config(cfg, vehicle)
+    return vehicle, log[log["experiment"] != "cruise_1.5"], log[log["experiment"] == "cruise_1.5"]
+
+
+def test_feature_library_names_and_values(rng):
+    nu = rng.normal(size=(50, 6))
+    lib = BasisFeatureLibrary().fit(nu)
+    names = lib.get_feature_names()
+    assert len(names) == 132 and names[0] == "u" and "u*abs(u)" in names
+    assert np.allclose(np.asarray(lib.transform(nu)), BasisLibrary()(nu))
+    ctl = BasisFeatureLibrary(["u*abs(u)"]).fit(np.hstack([nu, nu]))
+    assert ctl.get_feature_names([*"uvwpqr", *"ABCDEF"]) == ["u*abs(u)", *"ABCDEF"]
+
+
+@pytest.mark.parametrize("optimizer", ["stlsq", "sr3"])
+def test_seamor_selects_exactly_weiss_quadratic_terms(seamor_log, optimizer):
+    model = SindyDamping(load_vehicle("seamor"), optimizer=optimizer).fit(seamor_log)
+    assert model.selected_terms() == WEISS
+    assert model.n_params == 6
+    truth = load_vehicle("seamor").damping.coefficients
+    for key in WEISS:
+        assert model.coefficients_[key] == pytest.approx(truth[key], rel=1e-3)
+
+
+def test_seamor_ensemble_and_information_criteria(seamor_log):
+    vehicle = load_vehicle("seamor")
+    thresholds = np.logspace(-2, 0, 9)
+    ens = SindyDamping(vehicle, optimizer="ensemble", thresholds=thresholds).fit(seamor_log)
+    assert ens.selected_terms() == WEISS
+    bic = SindyDamping(vehicle, selection="bic", thresholds=thresholds).fit(seamor_log)
+    assert bic.selected_terms() == WEISS
+
+
+def test_path_is_monotone_ish(vt690):
+    vehicle, train, val = vt690
+    model = SindyDamping(vehicle).fit(train, val)
+    n = [p["n_terms"] for p in model.path_]
+    assert n[0] > 300 and n[-1] == 0
+    assert all(b <= a + 5 for a, b in itertools.pairwise(n))  # fewer at larger thresholds
+    assert {"threshold", "n_terms", "train_J", "validation_J", "aic"} <= set(model.path_[0])
+
+
+def _mcfarland_validation_j(model: SindyDamping, train, val) -> float:
+    x, y = model.arrays(train)
+    xv, yv = model.arrays(val)
+    masks = mask_terms("mcfarland")
+    pred = np.zeros_like(yv)
+    for i, force in enumerate("XYZKMN"):
+        lib = BasisLibrary(masks[force])
+        est = solve_least_squares(lib(x), y[:, i], check=False)
+        pred[:, i] = lib(xv) @ np.nan_to_num(est.theta)
+    return float(nmse(yv, pred).mean())
+
+
+def test_vt690_sparser_than_mcfarland_within_10_percent(vt690):
+    """What holds today: fewer terms than McFarland's 216 at a validation J within 10 %."""
+    vehicle, train, val = vt690
+    model = SindyDamping(vehicle).fit(train, val)
+    reference = _mcfarland_validation_j(model, train, val)
+    assert model.score(val) <= 1.10 * reference
+    assert model.n_params < 216
+
+
+def test_control_mode_fits_accelerations(seamor_log):
+    """Runs end to end; seamor's restoring moments (angles) are outside the library, so this
+    only checks that the control mode explains most of ν̇, not an accuracy."""
+    model = SindyDamping(load_vehicle("seamor"), mode="control").fit(seamor_log)
+    assert model.selected_["validation_J"] < 0.5
+    assert any(k.endswith("tau_X") for k in model.coefficients_)

@@ -1,0 +1,156 @@
+"""Viscous-model synthesis (McCarter ch. 4-5): residual force, masked least squares, Nelder-Mead.
+
+The reproduction: configs/vt690_truth.toml flies the VT 690 with McFarland's Appendix E damping
+(216 coefficients) as truth, under a PD autopilot, with DVL/gyro/AHRS noise. Trained on cruise_1.0
+and cruise_1.8 and validated on cruise_1.5 (McCarter: "similar maneuvers at different forward
+speeds"), the McFarland fit recovers the coefficient matrix and the uncoupled models leave at
+least three times its validation error J/J0 (eq. 4.25), as in McCarter's Table 5.1.
+
+τ̄ is taken in the filtered form (F(s) = λ/(s + λ), λ = 2 rad/s, on both sides) with the logged
+zero-order-held force averaged over consecutive samples. With Savitzky-Golay accelerations (1 s,
+order 4) the same log gives about 6 % coefficient error even without any noise: the smoothed
+acceleration and the held, autopilot-driven force are not simultaneous. u > 0 throughout, which
+the McFarland basis tolerates (no two a*abs(b) terms coincide for u > 0); it is McCarter's low
+excitation, not the sign of u, that the config's larger manoeuvres fix.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from nnid.config import load_config
+from nnid.datasets.simulator import simulate_config
+from nnid.models.damping_library import BasisLibrary
+from nnid.models.damping_masks import MASK_TERM_COUNTS, MASKS
+from nnid.physics.added_mass import FORCES
+from nnid.trainers.synthesis import (
+    SynthesisModel,
+    force_error,
+    mask_matrix,
+    mask_term_list,
+    masked_least_squares,
+    nelder_mead,
+    residual_force,
+)
+from nnid.vehicle import load_vehicle
+
+ROOT = Path(__file__).resolve().parents[1]
+TRAIN = ("cruise_1.0", "cruise_1.8")
+VALIDATION = ("cruise_1.5",)
+FORM = {"filter_lambda": 2.0, "zoh_midpoint": True}
+
+
+@pytest.fixture(scope="module")
+def vt690():
+    return load_vehicle("vt690")
+
+
+@pytest.fixture(scope="module")
+def campaign(vt690) -> tuple[pd.DataFrame, pd.DataFrame]:
+    log = simulate_config(load_config(ROOT / "configs/vt690_truth.toml"), vt690)
+    train = log[log["experiment"].isin(TRAIN)].reset_index(drop=True)
+    val = log[log["experiment"].isin(VALIDATION)].reset_index(drop=True)
+    return train, val
+
+
+@pytest.fixture(scope="module")
+def mcfarland(vt690, campaign) -> SynthesisModel:
+    return SynthesisModel(vt690, "mcfarland", **FORM).fit(campaign[0])
+
+
+def _truth(vehicle, terms: list[str]) -> np.ndarray:
+    k = np.zeros((6, len(terms)))
+    for key, value in vehicle.damping.coefficients.items():
+        force, term = key.split(":")
+        k[FORCES.index(force), terms.index(term)] = value
+    return k
+
+
+def test_mask_matrix_counts():
+    for name in MASKS:
+        terms = mask_term_list(name)
+        assert mask_matrix(name, terms).sum() == MASK_TERM_COUNTS[name]
+
+
+def test_mcfarland_recovers_appendix_e(vt690, mcfarland):
+    """216 coefficients within 5 % (relative Frobenius error of K); got 1.4 %."""
+    truth = _truth(vt690, mcfarland.terms)
+    assert mcfarland.n_params == 216
+    err = np.linalg.norm(mcfarland.coefficient_matrix() - truth) / np.linalg.norm(truth)
+    assert err < 0.05, err
+    assert set(mcfarland.params) == set(vt690.damping.coefficients)
+
+
+@pytest.mark.filterwarnings("ignore::nnid.trainers.least_squares.ExcitationWarning")
+def test_uncoupled_models_three_times_worse(vt690, campaign, mcfarland):
+    """Table 5.1 analogue: validation J/J0 of Fossen and Uncoupled >= 3x McFarland's
+    (got 0.203 McFarland, 0.727 Uncoupled, 0.742 Fossen, at DVL/gyro noise that puts McFarland
+    near McCarter's measured J/J0). With u > 0 Uncoupled's X terms u,
+    abs(u), u*u, u*abs(u) alias pairwise (McCarter's Table E.10 drops two of them) and warn."""
+    train, val = campaign
+    j, j0 = mcfarland.error(val)
+    ratio = j / j0
+    assert ratio < 0.3
+    for name in ("fossen", "uncoupled"):
+        jm, j0m = SynthesisModel(vt690, name, **FORM).fit(train).error(val)
+        assert j0m == pytest.approx(j0)
+        assert jm / j0m >= 3 * ratio, (name, jm / j0m, ratio)
+
+
+# -- Nelder-Mead on eqs 4.23-4.27, on a small mask ------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def fossen_problem(campaign):
+    """ξ of the ``fossen`` mask on the logged ν (every 10th sample) and a τ̄ it explains."""
+    nu = campaign[0][["u", "v", "w", "p", "q", "r"]].to_numpy()[::10]
+    terms = mask_term_list("fossen")
+    xi = BasisLibrary(terms)(nu)
+    mask = mask_matrix("fossen", terms)
+    rng = np.random.default_rng(3)
+    k = np.where(mask, -rng.uniform(5.0, 50.0, mask.shape), 0.0)
+    tau = xi @ k.T
+    tau += 0.02 * tau.std(0) * rng.standard_normal(tau.shape)
+    return xi, tau, mask, k
+
+
+def test_nelder_mead_losses_match_least_squares_on_clean_data(fossen_problem):
+    xi, tau, mask, k = fossen_problem
+    ls = masked_least_squares(xi, tau, mask)
+    j_ls, j0 = force_error(tau, ls.predict(xi))
+    assert j_ls < 0.05 * j0
+    for loss in ("mae", "mse", "rms", "mad"):
+        fit = nelder_mead(xi, tau, mask, loss, start=ls)
+        j, _ = force_error(tau, fit.predict(xi))
+        assert np.isfinite(j)
+        assert j <= 1.05 * j_ls, (loss, j, j_ls)
+        # the medians of MAD (eqs 4.26-4.27) are the least efficient: 2.5 % here, LS 0.5 %
+        assert np.linalg.norm(fit.coefficients - k) / np.linalg.norm(k) < 0.05, loss
+
+
+def test_mae_more_robust_than_least_squares_to_outliers(fossen_problem):
+    xi, tau, mask, k = fossen_problem
+    rng = np.random.default_rng(5)
+    bad = tau.copy()
+    rows = rng.choice(bad.shape[0], bad.shape[0] // 50, replace=False)  # 2 % outliers
+    bad[rows] += 20.0 * tau.std(0) * rng.choice([-1.0, 1.0], (rows.size, 6))
+    bad[rows] = np.abs(bad[rows])  # one-sided, so they bias rather than average out
+    ls = masked_least_squares(xi, bad, mask)
+    mae = nelder_mead(xi, bad, mask, "mae", start=ls)
+    err_ls = np.linalg.norm(ls.coefficients - k) / np.linalg.norm(k)
+    err_mae = np.linalg.norm(mae.coefficients - k) / np.linalg.norm(k)
+    assert err_mae < 0.5 * err_ls, (err_mae, err_ls)
+
+
+def test_residual_force_shape_and_form(vt690, campaign):
+    val = campaign[1]
+    tau_sg, data = residual_force(vt690, val)
+    tau_f, _ = residual_force(vt690, val, filter_lambda=2.0)
+    assert tau_sg.shape == tau_f.shape == (len(val), 6)
+    assert np.isfinite(tau_sg).all()
+    assert np.isnan(tau_f[: int(1.5 / 0.05) - 1]).all()  # filter settling, 3/λ s
+    assert data["nu"].shape == (len(val), 6)
