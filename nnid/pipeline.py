@@ -136,7 +136,8 @@ class TrainResult:
 
 
 def make_split(log: pd.DataFrame, s) -> object:
-    """The split a config asks for: named experiments (the rest trains) or fractions."""
+    """The split a config asks for: named experiments (the rest trains) or fractions. A split
+    with nothing to validate on is an error: scores on training data are not validation."""
     assignment = None
     if s.by == "experiment" and (s.train or s.validation or s.test):
         names = list(dict.fromkeys(log["experiment"]))
@@ -146,7 +147,12 @@ def make_split(log: pd.DataFrame, s) -> object:
             "validation": s.validation or [],
             "test": s.test or [],
         }
-    return split_log(log, s.by, tuple(s.fractions), assignment)
+    split = split_log(log, s.by, tuple(s.fractions), assignment)
+    if len(split.validation) == 0:
+        raise NnidInputError(
+            "the validation split is empty: hold out an experiment or a block", field="split"
+        )
+    return split
 
 
 def run_train(
@@ -162,10 +168,6 @@ def run_train(
     start = time.perf_counter()
     log, report = load_data(cfg, config_path, data_override, columns_override)
     split = make_split(log, cfg.split)
-    if len(split.validation) == 0:
-        raise NnidInputError(
-            "the validation split is empty: hold out an experiment or a block", field="split"
-        )
     unknowns = expand_unknowns(cfg.fossen.unknowns, cfg.fossen.dofs, vehicle)
     dofs = cfg.fossen.dofs
     if cfg.sequence is not None:
@@ -391,10 +393,6 @@ def run_compare(
     start = time.perf_counter()
     log, report = load_data(cfg, config_path, data_override, columns_override)
     split = make_split(log, cfg.split)
-    if len(split.validation) == 0:
-        raise NnidInputError(
-            "the validation split is empty: hold out an experiment or a block", field="split"
-        )
     bare = _without_damping(vehicle)
     library = BasisLibrary(LIBRARY, vehicle.damping.u_c or 0.0)
     form = {
