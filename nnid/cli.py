@@ -164,7 +164,8 @@ def train(
     ),
 ) -> None:
     """Fit one model on the training split and score it on held-out data: writes
-    model.json, metrics.json, report.md and the cleaning report to --out."""
+    model.json (a NARX: narx.pt and narx.json), metrics.json, report.md and the cleaning
+    report to --out."""
     import json
 
     from nnid.config import TrainConfig, load_config
@@ -178,10 +179,21 @@ def train(
 
         with err.status("Caccia two-step identification"):
             result = run_caccia_train(config, vehicle)
+    elif read_toml(config).get("model") == "narx":
+        from nnid.pipeline import run_narx_train
+
+        cfg = load_config(config, TrainConfig)
+        try:
+            with err.status(f"training the NARX network ({cfg.trainer})"):
+                result = run_narx_train(cfg, config, data, columns)
+        except NnidInputError as exc:
+            raise exc.with_source(str(config)) from None
     else:
         from nnid.pipeline import resolve
 
         cfg = load_config(config, TrainConfig)
+        if not (vehicle or cfg.vehicle):
+            raise NnidInputError("give a vehicle (config or --vehicle)", field="vehicle")
         veh = load_vehicle(vehicle or _vehicle_path(cfg.vehicle, config, resolve))
         try:
             with err.status(f"fitting the Fossen model ({cfg.trainer})"):
@@ -189,7 +201,10 @@ def train(
         except NnidInputError as exc:
             raise exc.with_source(str(config)) from None
     out_dir.mkdir(parents=True, exist_ok=True)
-    result.model.save(out_dir / "model.json")
+    if result.metrics["model"] == "narx":
+        result.model.save(out_dir)  # narx.pt (state dict) + narx.json
+    else:
+        result.model.save(out_dir / "model.json")
     (out_dir / "metrics.json").write_text(json.dumps(result.metrics, indent=2))
     (out_dir / "report.md").write_text(train_markdown(result.metrics))
     result.report.write(out_dir)

@@ -130,12 +130,35 @@ class SplitSpec(_Strict):
     test: list[str] | None = None
 
 
+class NarxSpec(_Strict):
+    """The NARX network of ``model = "narx"`` (Weiss IV.A.2, V.B; :mod:`nnid.models.narx`):
+    named input and output columns, delays (a count n means 1..n), hidden tanh layers, the
+    training budget, and optional light white noise (``noise``: standard deviation as a
+    fraction of each column's, seeded by ``seed``) added to inputs and outputs, as Weiss did."""
+
+    inputs: list[str] = Field(min_length=1)
+    outputs: list[str] = Field(min_length=1)
+    input_delays: int | list[int] = 2
+    output_delays: int | list[int] = 2
+    hidden: list[int] = Field(default_factory=lambda: [10])
+    balanced: bool = True
+    seed: int = 0
+    epochs: int = Field(200, ge=1)
+    lr: float = Field(1e-2, gt=0)
+    multi_step: int = Field(1, ge=1)
+    simulation_epochs: int = Field(0, ge=0)
+    simulation_window: int = Field(200, ge=2)
+    lm_samples: int = Field(4000, ge=10)
+    noise: float = Field(0.0, ge=0)
+
+
 class TrainConfig(_Strict):
     """``nnid train``: one model, one trainer, a split, and what to report."""
 
-    model: Literal["fossen"] = "fossen"
-    trainer: Literal["ls", "rls", "gradient", "ukf", "caccia"] = "ls"
-    vehicle: str
+    model: Literal["fossen", "narx"] = "fossen"
+    trainer: Literal["ls", "rls", "gradient", "ukf", "caccia", "lm", "adam"] = "ls"
+    vehicle: str = ""
+    narx: NarxSpec | None = None
     data: DataSpec
     fossen: FossenSpec = Field(default_factory=FossenSpec)
     options: dict[str, float | str | bool] = Field(default_factory=dict)

@@ -494,3 +494,119 @@ def _velocity_scores(parts, val_log, val_data, dofs, mask_val, horizon) -> dict:
             vals = per_dof(val_log, pred, dofs, mask_val)
         scores[key] = {k: (v if np.isfinite(v) and v < 1e3 else None) for k, v in vals.items()}
     return scores
+
+
+def run_narx_train(
+    cfg: TrainConfig,
+    config_path: Path,
+    data_override: str | None = None,
+    columns_override: str | None = None,
+) -> TrainResult:
+    """``model = "narx"``: fit a NARX network (Weiss IV.A.2, V.B) with Levenberg-Marquardt or
+    Adam on the training split, early-stop on the validation split, and score one-step and
+    free-run NRMSE on validation (and test, when the split holds one), delay states and
+    ``warmup_s`` excluded. Missing velocity outputs are derived from the pose."""
+    from nnid.models.narx import NarxModel
+
+    spec = cfg.narx
+    if spec is None:
+        raise NnidInputError("model = 'narx' needs a [narx] table", field="narx")
+    if cfg.trainer not in ("lm", "adam"):
+        raise NnidInputError("a NARX trains with trainer = 'lm' or 'adam'", field="trainer")
+    start = time.perf_counter()
+    log, report = load_data(cfg, config_path, data_override, columns_override)
+    if any(c not in log for c in spec.outputs) and all(a in log for a in ("phi", "theta", "psi")):
+        from nnid.datasets.preprocess import derive_velocities
+
+        log = derive_velocities(log, cfg.savgol_window, cfg.savgol_order, report)
+    if spec.noise > 0:
+        rng = np.random.default_rng(spec.seed)
+        log = log.copy()
+        for c in spec.inputs + spec.outputs:
+            if c in log:
+                log[c] = log[c] + rng.normal(0.0, spec.noise * float(log[c].std()), len(log))
+        report.add(
+            "noise", f"white noise of {spec.noise:g} × std added to {spec.inputs + spec.outputs}"
+        )
+    split = make_split(log, cfg.split)
+    if cfg.trainer == "lm":
+        from nnid.trainers.levenberg_marquardt import LevenbergMarquardt
+
+        trainer = LevenbergMarquardt(max_epochs=spec.epochs, jacobian="samples")
+    else:
+        from nnid.trainers.adam import Adam
+
+        trainer = Adam(lr=spec.lr, max_epochs=spec.epochs)
+    model = NarxModel(
+        spec.inputs,
+        spec.outputs,
+        spec.input_delays,
+        spec.output_delays,
+        hidden=spec.hidden,
+        trainer=trainer,
+        balanced=spec.balanced,
+        seed=spec.seed,
+        multi_step=spec.multi_step,
+        simulation_epochs=spec.simulation_epochs,
+        simulation_window=spec.simulation_window,
+        lm_samples=spec.lm_samples,
+    )
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        model.fit(split.train, validation_log=split.validation)
+    metrics = {
+        "model": "narx",
+        "trainer": cfg.trainer,
+        "vehicle": cfg.vehicle or None,
+        "params": {
+            "n_params": {"value": float(model.n_params), "stderr": None},
+            **{
+                f"layer_{i}_size": {"value": float(n), "stderr": None}
+                for i, n in enumerate(model.layer_sizes())
+            },
+        },
+        "network": {
+            "layers": model.layer_sizes(),
+            "n_params": model.n_params,
+            "inputs": model.inputs,
+            "outputs": model.outputs,
+            "input_delays": model.input_delays,
+            "output_delays": model.output_delays,
+            "note": (
+                "a network has no physical parameters: 'params' lists its size (weights and "
+                "biases, and the layer sizes: regressor, hidden tanh nodes, linear outputs); "
+                "the weights are in narx.pt"
+            ),
+        },
+        "balanced": model.balanced,
+        "transient_share_of_training_draws": model.transient_share_,
+        "simulation_finetune": model.finetune_,
+        "train": _narx_scores(model, split.train, cfg, free_run=False),
+        "validation": _narx_scores(model, split.validation, cfg, free_run=True),
+        "warnings": [str(w.message) for w in caught],
+        "split": split.record,
+        "warmup_s": cfg.warmup_s,
+        "warmup_samples": model.warmup,
+    }
+    if len(split.test):
+        metrics["test"] = _narx_scores(model, split.test, cfg, free_run=True)
+    metrics["seconds"] = time.perf_counter() - start
+    return TrainResult(model, metrics, report, split)
+
+
+def _narx_scores(model, log: pd.DataFrame, cfg: TrainConfig, free_run: bool) -> dict:
+    """One-step (and free-run) NRMSE per output; delay states and ``warmup_s`` excluded."""
+    mask = warmup_mask(log, cfg.warmup_s, warmup_samples=model.warmup)
+    cols = model.outputs
+    vel = [c for c in cols if c in VELOCITY]
+    if vel:  # vehicle outputs: score the excited DOFs only; generic outputs: all of them
+        cols = [c for c in excited_dofs(log, vel)] + [c for c in cols if c not in VELOCITY]
+    out = {
+        "samples": int(mask.sum()),
+        "one_step_nrmse": per_dof(log, model.predict(log, "one_step"), cols, mask),
+    }
+    if free_run:
+        free = model.predict(log, "free_run")
+        out["free_run_nrmse"] = per_dof(log, free, cols, mask)
+        out["free_run_rmse"] = per_dof(log, free, cols, mask, metric=rmse)
+    return out

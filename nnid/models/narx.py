@@ -1,0 +1,533 @@
+"""NARX network: nonlinear autoregressive model with exogenous inputs (Weiss section IV.A.2, V.B).
+
+The model is Weiss's regression y(k) = f(φ(k)) with the regressor φ(k) of past outputs and
+inputs (eqs 54-61 write the linear-in-θ case y = φᵀθ; a NARX replaces φᵀθ by a small network):
+
+    φ(k) = [y(k − d_y) for d_y in output_delays] ++ [u(k − d_u) for d_u in input_delays]
+    y(k) = y(k − 1) + s_Δ · W₂ tanh(W₁ φ(k) + b₁) + b₂      (``delta=True``, default)
+    y(k) = W₂ tanh(W₁ φ(k) + b₁) + b₂                        (``delta=False``, MATLAB's form)
+
+in normalised units (inputs and outputs standardised on the training data; the statistics are
+buffers of the network, saved with it). Inputs are any named columns (generalized forces
+``tau_*``, thruster commands ``cmd_*``, or the input of a generic table); outputs are any named
+columns (body velocities u v w r ...).
+
+* **Series-parallel** (open-loop, teacher-forced) training on one-step targets, or on a
+  ``multi_step`` horizon (closed loop over K steps from measured delay states).
+* **Parallel** (closed-loop) free run: the network fed its own outputs; a lean numpy loop on a
+  preallocated buffer (input contributions of the first layer precomputed in one matmul).
+* **Simulation-error fine-tuning** (``simulation_epochs``): after one-step training, Adam on the
+  output error of free runs over windows (back-propagation through the closed loop), kept only
+  if it lowers the free-run error on the validation data (``finetune_`` records both).
+* **Multi-experiment**: a delay vector never reaches across an experiment boundary; the first
+  ``warmup`` samples of each experiment (the delay states) are never predicted nor scored.
+* **Balanced sampling** (Weiss V.B: a net trained mostly on steady state misses the
+  transients): training samples drawn by :class:`nnid.datasets.segmentation.BalancedSampler`.
+"""
+
+from __future__ import annotations
+
+import json
+import warnings
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+import torch
+from torch import nn
+from torch.func import functional_call
+
+from nnid.datasets.log import VELOCITY
+from nnid.datasets.preprocess import experiments
+from nnid.datasets.segmentation import BalancedSampler, label_transients
+from nnid.datasets.splits import split_log
+from nnid.errors import NnidInputError
+from nnid.evaluation.metrics import nrmse
+
+DTYPE = torch.float64
+
+
+def _delays(d: int | Sequence[int], minimum: int, what: str) -> list[int]:
+    """An int n means delays 1..n (MATLAB's ``1:n``); a list is taken as given."""
+    out = list(range(1, int(d) + 1)) if isinstance(d, int) else sorted({int(x) for x in d})
+    if not out or min(out) < minimum:
+        raise NnidInputError(f"{what} must be a positive count or a list of delays ≥ {minimum}")
+    return out
+
+
+class NarxNet(nn.Module):
+    """The MLP (tanh hidden layers, linear output) and the normalisation buffers."""
+
+    def __init__(self, n_in: int, n_out: int, n_u: int, hidden: Sequence[int]) -> None:
+        super().__init__()
+        layers: list[nn.Module] = []
+        prev = n_in
+        for h in hidden:
+            layers += [nn.Linear(prev, h), nn.Tanh()]
+            prev = h
+        layers.append(nn.Linear(prev, n_out))
+        self.mlp = nn.Sequential(*layers).to(DTYPE)
+        for name, n in (("u_mean", n_u), ("y_mean", n_out)):
+            self.register_buffer(name, torch.zeros(n, dtype=DTYPE))
+        for name, n in (("u_std", n_u), ("y_std", n_out), ("d_scale", n_out)):
+            self.register_buffer(name, torch.ones(n, dtype=DTYPE))
+
+    def forward(self, phi: torch.Tensor) -> torch.Tensor:
+        return self.mlp(phi)
+
+
+class NarxModel:
+    """NARX model, sklearn-style: ``fit(log, validation_log=None)``, ``predict(log, mode)``,
+    ``save(dir)`` / ``load(dir)`` (state dict + JSON config, no pickle).
+
+    ``trainer``: an :class:`nnid.trainers.adam.Adam` (default) or a
+    ``LevenbergMarquardt`` (any object with ``fit(module, residual, train_batches,
+    val_batches)``). Without a ``validation_log`` the log is divided into contiguous blocks
+    (``division="block"``, ``fractions`` 70/15/15, MATLAB's divideblock; the test block is left
+    unused) or at random (``division="random"``: warns, neighbouring samples are correlated).
+    """
+
+    def __init__(
+        self,
+        inputs: Sequence[str],
+        outputs: Sequence[str],
+        input_delays: int | Sequence[int] = 2,
+        output_delays: int | Sequence[int] = 2,
+        hidden: Sequence[int] = (10,),
+        trainer: Any = None,
+        balanced: bool = True,
+        seed: int = 0,
+        delta: bool = True,
+        multi_step: int = 1,
+        simulation_epochs: int = 0,
+        simulation_window: int = 200,
+        simulation_lr: float = 1e-3,
+        division: str = "block",
+        fractions: Sequence[float] = (0.7, 0.15, 0.15),
+        batch_size: int = 256,
+        samples_per_epoch: int | None = None,
+        lm_samples: int = 4000,
+    ) -> None:
+        self.inputs, self.outputs = list(inputs), list(outputs)
+        self.input_delays = _delays(input_delays, 0, "input_delays")
+        self.output_delays = _delays(output_delays, 1, "output_delays")
+        self.hidden = tuple(int(h) for h in hidden)
+        self.trainer = trainer
+        self.balanced, self.seed, self.delta = bool(balanced), int(seed), bool(delta)
+        self.multi_step = int(multi_step)
+        self.simulation_epochs = int(simulation_epochs)
+        self.simulation_window = int(simulation_window)
+        self.simulation_lr = float(simulation_lr)
+        if division not in ("block", "random"):
+            raise NnidInputError("division is 'block' or 'random'", field="division")
+        self.division, self.fractions = division, tuple(float(f) for f in fractions)
+        self.batch_size, self.samples_per_epoch = int(batch_size), samples_per_epoch
+        self.lm_samples = int(lm_samples)
+        self.dy = max(self.output_delays)
+        #: the delay states: samples at the start of each experiment neither predicted nor scored
+        self.warmup = max(self.dy, max(self.input_delays))
+        self.net_ = NarxNet(self._n_features(), len(self.outputs), len(self.inputs), self.hidden)
+
+    # -- configuration ---------------------------------------------------------------------------
+    def _n_features(self) -> int:
+        return len(self.output_delays) * len(self.outputs) + len(self.input_delays) * len(
+            self.inputs
+        )
+
+    def config(self) -> dict:
+        """The JSON-serialisable constructor arguments (the trainer by name)."""
+        return {
+            "inputs": self.inputs,
+            "outputs": self.outputs,
+            "input_delays": self.input_delays,
+            "output_delays": self.output_delays,
+            "hidden": list(self.hidden),
+            "trainer": type(self.trainer).__name__ if self.trainer is not None else "Adam",
+            "balanced": self.balanced,
+            "seed": self.seed,
+            "delta": self.delta,
+            "multi_step": self.multi_step,
+            "simulation_epochs": self.simulation_epochs,
+            "simulation_window": self.simulation_window,
+            "division": self.division,
+            "fractions": list(self.fractions),
+        }
+
+    def layer_sizes(self) -> list[int]:
+        """Regressor length, hidden sizes, outputs."""
+        return [self._n_features(), *self.hidden, len(self.outputs)]
+
+    @property
+    def n_params(self) -> int:
+        return sum(p.numel() for p in self.net_.parameters())
+
+    def save(self, folder: str | Path) -> Path:
+        """``narx.pt`` (the state dict, weights and normalisation) and ``narx.json``."""
+        folder = Path(folder)
+        folder.mkdir(parents=True, exist_ok=True)
+        torch.save(self.net_.state_dict(), folder / "narx.pt")
+        (folder / "narx.json").write_text(json.dumps(self.config(), indent=2))
+        return folder
+
+    @classmethod
+    def load(cls, folder: str | Path) -> NarxModel:
+        """Rebuild from ``narx.json`` and load ``narx.pt`` with ``weights_only=True``."""
+        folder = Path(folder)
+        cfg = json.loads((folder / "narx.json").read_text())
+        cfg.pop("trainer", None)
+        model = cls(**cfg)
+        state = torch.load(folder / "narx.pt", weights_only=True)
+        model.net_.load_state_dict(state)
+        return model
+
+    # -- data ------------------------------------------------------------------------------------
+    def _check(self, log: pd.DataFrame) -> None:
+        missing = [c for c in self.inputs + self.outputs if c not in log]
+        if missing:
+            raise NnidInputError(f"the log has no column(s) {missing}", field="narx")
+
+    def _segments(self, log: pd.DataFrame) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+        """(positions, normalised outputs, normalised inputs) per experiment."""
+        net = self.net_
+        y = (log[self.outputs].to_numpy(np.float64) - net.y_mean.numpy()) / net.y_std.numpy()
+        u = (log[self.inputs].to_numpy(np.float64) - net.u_mean.numpy()) / net.u_std.numpy()
+        out = []
+        for _, idx in experiments(log):
+            pos = log.index.get_indexer(idx)
+            out.append((pos, y[pos], u[pos]))
+        return out
+
+    def _u_features(self, u: np.ndarray) -> np.ndarray:
+        """[u(k − d) for d in input_delays] per row k of one experiment (zeros before warm-up)."""
+        n, p = u.shape
+        out = np.zeros((n, len(self.input_delays) * p))
+        for j, d in enumerate(self.input_delays):
+            out[self.warmup :, j * p : (j + 1) * p] = u[self.warmup - d : n - d]
+        return out
+
+    def _y_features(self, y: np.ndarray) -> np.ndarray:
+        n, m = y.shape
+        out = np.zeros((n, len(self.output_delays) * m))
+        for j, d in enumerate(self.output_delays):
+            out[self.warmup :, j * m : (j + 1) * m] = y[self.warmup - d : n - d]
+        return out
+
+    def _fit_normalisation(self, log: pd.DataFrame) -> None:
+        net = self.net_
+        y = log[self.outputs].to_numpy(np.float64)
+        u = log[self.inputs].to_numpy(np.float64)
+        y_std, u_std = y.std(0), u.std(0)
+        net.y_mean.copy_(torch.as_tensor(y.mean(0)))
+        net.y_std.copy_(torch.as_tensor(np.where(y_std > 0, y_std, 1.0)))
+        net.u_mean.copy_(torch.as_tensor(u.mean(0)))
+        net.u_std.copy_(torch.as_tensor(np.where(u_std > 0, u_std, 1.0)))
+        diffs = [np.diff(yn, axis=0) for _, yn, _ in self._segments(log) if len(yn) > 1]
+        d = np.concatenate(diffs).std(0) if diffs else np.ones(len(self.outputs))
+        net.d_scale.copy_(
+            torch.as_tensor(np.where(d > 0, d, 1.0) if self.delta else np.ones_like(d))
+        )
+
+    def _table(self, log: pd.DataFrame) -> dict[str, torch.Tensor]:
+        """Row-aligned tensors of a log: features, one-step targets, normalised outputs."""
+        phi_y, phi_u, y_all, code = [], [], [], []
+        for k, (_, yn, un) in enumerate(self._segments(log)):
+            phi_y.append(self._y_features(yn))
+            phi_u.append(self._u_features(un))
+            y_all.append(yn)
+            code.append(np.full(len(yn), k))
+        y = torch.as_tensor(np.concatenate(y_all))
+        py = torch.as_tensor(np.concatenate(phi_y))
+        prev = py[:, (self._last_delay_slot()) * y.shape[1] :][:, : y.shape[1]]
+        tgt = (y - prev) / self.net_.d_scale if self.delta else y
+        return {
+            "phi": torch.cat([py, torch.as_tensor(np.concatenate(phi_u))], 1),
+            "target": tgt,
+            "y": y,
+            "code": torch.as_tensor(np.concatenate(code)),
+        }
+
+    def _last_delay_slot(self) -> int:
+        if 1 not in self.output_delays:
+            raise NnidInputError("delta=True needs output delay 1", field="output_delays")
+        return self.output_delays.index(1)
+
+    def _labels(self, log: pd.DataFrame) -> np.ndarray:
+        """Transient labels from the outputs (the rule of nnid.datasets.segmentation)."""
+        tmp = pd.DataFrame(
+            {VELOCITY[i]: log[c].to_numpy(np.float64) for i, c in enumerate(self.outputs[:6])}
+        )
+        tmp["t"] = log["t"].to_numpy(np.float64) if "t" in log else np.arange(len(log), dtype=float)
+        if "experiment" in log:
+            tmp["experiment"] = log["experiment"].to_numpy()
+        return label_transients(tmp).to_numpy()
+
+    # -- torch pieces ----------------------------------------------------------------------------
+    def _params(self) -> dict[str, torch.Tensor]:
+        return dict(self.net_.named_parameters())
+
+    def _rollout(
+        self, params: dict[str, torch.Tensor], hist: torch.Tensor, uf: torch.Tensor
+    ) -> torch.Tensor:
+        """Closed loop over T steps: ``hist`` [B, dy, m] measured delay states (oldest first),
+        ``uf`` [B, T, F_u] input features; returns normalised outputs [B, T, m]."""
+        keys = [f"mlp.{i}" for i, mod in enumerate(self.net_.mlp) if isinstance(mod, nn.Linear)]
+        ws = [(params[k + ".weight"], params[k + ".bias"]) for k in keys]
+        m, n_y = hist.shape[2], len(self.output_delays) * hist.shape[2]
+        w1, b1 = ws[0]
+        w1y = [w1[:, j * m : (j + 1) * m].T for j in range(len(self.output_delays))]
+        zu = uf @ w1[:, n_y:].T + b1  # the inputs' share of the first layer, all steps at once
+        scale = self.net_.d_scale if self.delta else torch.ones_like(self.net_.d_scale)
+        wo, bo = ws[-1][0].T * scale, ws[-1][1] * scale
+        hs = list(hist.unbind(1))
+        outs = []
+        for t in range(uf.shape[1]):
+            a = zu[:, t]
+            for j, d in enumerate(self.output_delays):
+                a = a + hs[-d] @ w1y[j]
+            h = torch.tanh(a)
+            for w, b in ws[1:-1]:
+                h = torch.tanh(h @ w.T + b)
+            o = h @ wo + bo
+            y = hs[-1] + o if self.delta else o
+            hs.append(y)
+            outs.append(y)
+        return torch.stack(outs, 1)
+
+    def _windows(self, table: dict[str, torch.Tensor], ends: torch.Tensor, length: int):
+        """Rows, delay-state history and input features of windows ending at ``ends``."""
+        rows = ends[:, None] - length + 1 + torch.arange(length)
+        starts = rows[:, 0]
+        hist = table["y"][starts[:, None] - self.dy + torch.arange(self.dy)]
+        n_y = len(self.output_delays) * len(self.outputs)
+        return rows, hist, table["phi"][rows][:, :, n_y:]
+
+    # -- training --------------------------------------------------------------------------------
+    def fit(self, log: pd.DataFrame, validation_log: pd.DataFrame | None = None) -> NarxModel:
+        """Normalise, train one-step (or ``multi_step``) on the training data, early-stop on
+        the validation data, then optionally fine-tune on simulation error."""
+        from nnid.trainers.adam import Adam
+        from nnid.trainers.levenberg_marquardt import LevenbergMarquardt
+
+        self._check(log)
+        torch.manual_seed(self.seed)
+        self.net_ = NarxNet(self._n_features(), len(self.outputs), len(self.inputs), self.hidden)
+        random_rows = None
+        if validation_log is None and self.division == "block":
+            split = split_log(log, "block", self.fractions)
+            log, validation_log = split.train, split.validation
+            self.division_ = split.record
+        elif validation_log is None:
+            warnings.warn(
+                "random division puts neighbouring, strongly correlated samples in training and "
+                "validation: the validation error is optimistic",
+                stacklevel=2,
+            )
+            self.division_ = {"by": "random", "fractions": list(self.fractions)}
+            random_rows = np.random.default_rng(self.seed).random(len(log))
+        else:
+            self._check(validation_log)
+            self.division_ = {"by": "given"}
+        self._fit_normalisation(log)
+        tab = self._table(log)
+        horizon = max(1, self.multi_step)
+        sampler = BalancedSampler(
+            self._labels(log),
+            tab["code"].numpy(),
+            window=self.warmup + horizon,
+            balance=self.balanced,
+            seed=self.seed,
+        )
+        if random_rows is not None:
+            val_rows = sampler.eligible & (random_rows >= self.fractions[0])
+            sampler.eligible &= random_rows < self.fractions[0]
+            vtab, v_idx = tab, np.flatnonzero(val_rows)
+        else:
+            vtab = self._table(validation_log)
+            v_idx = np.flatnonzero(self._eligible(vtab["code"].numpy(), horizon))
+        self.transient_share_ = sampler.transient_share(sampler.sample(20000))
+        n_eligible = int(sampler.eligible.sum())
+        trainer = self.trainer if self.trainer is not None else Adam()
+        residual = self._one_step_residual if horizon == 1 else self._window_residual
+        v_batches = [
+            self._batch(vtab, torch.as_tensor(c), horizon)
+            for c in np.array_split(v_idx, max(1, len(v_idx) // 4096))
+            if len(c)
+        ]
+        if isinstance(trainer, LevenbergMarquardt):  # full batch: one fixed balanced draw
+            n = min(n_eligible, max(1, self.lm_samples // horizon))
+            train_b: Any = [self._batch(tab, torch.as_tensor(sampler.sample(n, 0)), horizon)]
+        else:
+            draw = self._epoch_batches(sampler, n_eligible, horizon)
+
+            def train_b(epoch: int) -> list:
+                return [self._batch(tab, idx, horizon) for idx in draw(epoch)]
+
+        self.history_ = trainer.fit(self.net_, residual, train_b, v_batches)
+        self.finetune_ = None
+        if self.simulation_epochs > 0:
+            self._simulation_finetune(tab, sampler, validation_log if random_rows is None else None)
+        return self
+
+    def _batch(self, table: dict[str, torch.Tensor], idx: torch.Tensor, horizon: int) -> tuple:
+        """Tensors of a batch, sample-major: (φ, target) one-step, or windows ending at
+        ``idx``: (delay states, input features, measured outputs)."""
+        if horizon == 1:
+            return table["phi"][idx], table["target"][idx]
+        rows, hist, uf = self._windows(table, idx, horizon)
+        return hist, uf, table["y"][rows]
+
+    def _one_step_residual(self, params: dict[str, torch.Tensor], batch: tuple) -> torch.Tensor:
+        phi, target = batch
+        return (functional_call(self.net_, params, (phi,)) - target).reshape(-1)
+
+    def _window_residual(self, params: dict[str, torch.Tensor], batch: tuple) -> torch.Tensor:
+        hist, uf, y = batch
+        return (self._rollout(params, hist, uf) - y).reshape(-1)
+
+    def _eligible(self, code: np.ndarray, horizon: int) -> np.ndarray:
+        keep = np.ones(code.size, dtype=bool)
+        starts = np.flatnonzero(np.r_[True, code[1:] != code[:-1]])
+        for s in starts:
+            keep[s : s + self.warmup + horizon - 1] = False
+        return keep
+
+    def _epoch_batches(self, sampler: BalancedSampler, n_eligible: int, horizon: int):
+        per_epoch = self.samples_per_epoch or n_eligible
+        per_epoch = max(1, per_epoch // horizon)
+        bs = max(1, self.batch_size // horizon) if horizon > 1 else self.batch_size
+
+        def batches(epoch: int) -> list[torch.Tensor]:
+            idx = torch.as_tensor(sampler.sample(per_epoch, epoch))
+            return list(idx.split(bs))
+
+        return batches
+
+    def _simulation_finetune(self, tab, sampler, validation_log) -> None:
+        """Output-error training: Adam on free runs over windows of ``simulation_window``
+        samples from measured delay states (back-propagation through the closed loop); kept
+        only if the validation free-run error falls."""
+        from nnid.trainers.adam import Adam
+
+        length = self.simulation_window
+        before = self.score(validation_log)["total"] if validation_log is not None else None
+        state = {k: v.clone() for k, v in self.net_.state_dict().items()}
+        win = BalancedSampler(
+            sampler.labels,
+            tab["code"].numpy(),
+            window=self.warmup + length,
+            balance=self.balanced,
+            seed=self.seed + 1,
+        )
+        win.eligible &= sampler.eligible
+        if not win.eligible.any():
+            return
+        val = None
+        if validation_log is not None:
+            vtab = self._table(validation_log)
+            ok = np.flatnonzero(self._eligible(vtab["code"].numpy(), length))
+            if ok.size:
+                ends = torch.as_tensor(ok[:: max(1, length // 2)][:64])
+                val = [self._batch(vtab, ends, length)]
+
+        def batches(epoch: int) -> list:
+            ends = torch.as_tensor(win.sample(128, 1000 + epoch))
+            return [self._batch(tab, b, length) for b in ends.split(32)]
+
+        trainer = Adam(lr=self.simulation_lr, max_epochs=self.simulation_epochs, max_fail=8)
+        hist = trainer.fit(self.net_, self._window_residual, batches, val)
+        after = self.score(validation_log)["total"] if validation_log is not None else None
+        kept = before is None or (np.isfinite(after) and after < before)
+        if not kept:
+            self.net_.load_state_dict(state)
+        self.finetune_ = {
+            "validation_free_run_nrmse_before": before,
+            "validation_free_run_nrmse_after": after,
+            "kept": bool(kept),
+            "epochs": len(hist.train),
+        }
+
+    # -- prediction ------------------------------------------------------------------------------
+    def predict(self, log: pd.DataFrame, mode: str | int = "one_step") -> pd.DataFrame:
+        """Predicted outputs (columns ``outputs``, the log's index): ``"one_step"`` (measured
+        delay states), ``"free_run"`` (closed loop from the measured warm-up of each
+        experiment) or an int k (k steps closed loop from measured states k samples back).
+        The warm-up rows of each experiment (and the first k − 1 after it) are NaN."""
+        self._check(log)
+        m = len(self.outputs)
+        out = np.full((len(log), m), np.nan)
+        mean, std = self.net_.y_mean.numpy(), self.net_.y_std.numpy()
+        with torch.no_grad():
+            for pos, yn, un in self._segments(log):
+                n = len(yn)
+                if n <= self.warmup:
+                    continue
+                if mode == "one_step":
+                    phi = np.concatenate([self._y_features(yn), self._u_features(un)], 1)
+                    o = self.net_(torch.as_tensor(phi[self.warmup :])).numpy()
+                    pred = (
+                        yn[self.warmup - 1 : n - 1] + o * self.net_.d_scale.numpy()
+                        if self.delta
+                        else o
+                    )
+                    out[pos[self.warmup :]] = pred * std + mean
+                elif mode == "free_run":
+                    pred = self._free_run(
+                        yn[self.warmup - self.dy : self.warmup], self._u_features(un)[self.warmup :]
+                    )
+                    out[pos[self.warmup :]] = pred * std + mean
+                else:
+                    k = int(mode)
+                    if k < 1:
+                        raise NnidInputError("k-step prediction needs k ≥ 1", field="mode")
+                    tab = {
+                        "y": torch.as_tensor(yn),
+                        "phi": torch.as_tensor(
+                            np.concatenate([self._y_features(yn), self._u_features(un)], 1)
+                        ),
+                    }
+                    ends = torch.arange(self.warmup + k - 1, n)
+                    if len(ends) == 0:
+                        continue
+                    _rows, hist, uf = self._windows(tab, ends, k)
+                    pred = self._rollout(self._params(), hist, uf)[:, -1].numpy()
+                    out[pos[ends.numpy()]] = pred * std + mean
+        return pd.DataFrame(out, index=log.index, columns=self.outputs)
+
+    def _free_run(self, init: np.ndarray, uf: np.ndarray) -> np.ndarray:
+        """The closed loop in numpy: the first layer's input part for all steps in one matmul,
+        then per step one dense matmul on a contiguous slice of the output buffer."""
+        lin = [mod for mod in self.net_.mlp if isinstance(mod, nn.Linear)]
+        w1 = lin[0].weight.detach().numpy()
+        b1 = lin[0].bias.detach().numpy()
+        m, dy = len(self.outputs), self.dy
+        n_y = len(self.output_delays) * m
+        dense = np.zeros((w1.shape[0], dy * m))
+        for j, d in enumerate(self.output_delays):  # slice row dy − d holds y(k − d)
+            dense[:, (dy - d) * m : (dy - d + 1) * m] = w1[:, j * m : (j + 1) * m]
+        zu = uf @ w1[:, n_y:].T + b1
+        mids = [(x.weight.detach().numpy(), x.bias.detach().numpy()) for x in lin[1:-1]]
+        scale = self.net_.d_scale.numpy() if self.delta else np.ones(m)
+        wo = lin[-1].weight.detach().numpy() * scale[:, None]
+        bo = lin[-1].bias.detach().numpy() * scale
+        n = len(zu)
+        buf = np.empty((dy + n, m))
+        buf[:dy] = init
+        flat = buf.reshape(-1)
+        tanh, dot = np.tanh, np.dot
+        for k in range(n):
+            h = tanh(zu[k] + dot(dense, flat[k * m : (k + dy) * m]))
+            for w, b in mids:
+                h = tanh(dot(w, h) + b)
+            o = dot(wo, h) + bo
+            buf[dy + k] = buf[dy + k - 1] + o if self.delta else o
+        return buf[dy:]
+
+    def score(self, log: pd.DataFrame, mode: str | int = "free_run") -> dict[str, float]:
+        """NRMSE per output and ``total`` (their mean), warm-up excluded (NaN rows)."""
+        pred = self.predict(log, mode)
+        out = {c: nrmse(log[c].to_numpy(), pred[c].to_numpy()) for c in self.outputs}
+        finite = [v for v in out.values() if np.isfinite(v)]
+        out["total"] = float(np.mean(finite)) if finite else float("nan")
+        return out

@@ -1,0 +1,204 @@
+"""Levenberg-Marquardt trainer (issue 6): scipy agreement, physics fit, early stop, chunking."""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pytest
+import torch
+from scipy.optimize import least_squares
+from torch.func import functional_call
+
+from nnid.trainers.levenberg_marquardt import LevenbergMarquardt
+
+
+def _mlp(sizes: list[int], seed: int) -> torch.nn.Sequential:
+    torch.manual_seed(seed)
+    layers: list[torch.nn.Module] = []
+    for a, b in itertools.pairwise(sizes):
+        layers += [torch.nn.Linear(a, b), torch.nn.Tanh()]
+    return torch.nn.Sequential(*layers[:-1]).double()
+
+
+def _regression_residual(net: torch.nn.Module):
+    def residual(params: dict[str, torch.Tensor], batch) -> torch.Tensor:
+        x, y = batch
+        return (functional_call(net, params, (x,)) - y).reshape(-1)
+
+    return residual
+
+
+def _flat(net: torch.nn.Module) -> np.ndarray:
+    return torch.cat([p.detach().reshape(-1) for p in net.parameters()]).numpy().copy()
+
+
+@pytest.mark.parametrize("mode", ["forward", "samples"])
+def test_agrees_with_scipy_lm(mode: str) -> None:
+    teacher = _mlp([1, 3, 1], seed=1)
+    with torch.no_grad():  # distinct, unsaturated units: a well-conditioned minimum
+        teacher[0].weight.copy_(torch.tensor([[1.5], [-2.0], [0.7]]))
+        teacher[0].bias.copy_(torch.tensor([0.5, -0.3, 1.0]))
+        teacher[2].weight.copy_(torch.tensor([[1.0, 0.8, -1.2]]))
+        teacher[2].bias.copy_(torch.tensor([0.1]))
+    gen = torch.Generator().manual_seed(0)
+    x = torch.linspace(-3, 3, 200, dtype=torch.float64).unsqueeze(1)
+    with torch.no_grad():
+        y = teacher(x) + 0.01 * torch.randn(x.shape, generator=gen, dtype=torch.float64)
+    net = _mlp([1, 3, 1], seed=1)
+    net.load_state_dict(teacher.state_dict())
+    with torch.no_grad():  # same start for both solvers
+        for p in net.parameters():
+            p.add_(0.3 * torch.randn(p.shape, generator=gen, dtype=torch.float64))
+    theta0 = _flat(net)
+    residual = _regression_residual(net)
+    names = [k for k, _ in net.named_parameters()]
+    shapes = [p.shape for p in net.parameters()]
+
+    def fun(th: np.ndarray) -> np.ndarray:
+        t = torch.from_numpy(th)
+        params, o = {}, 0
+        for k, s in zip(names, shapes, strict=True):
+            params[k] = t[o : o + s.numel()].reshape(s)
+            o += s.numel()
+        with torch.no_grad():
+            return residual(params, (x, y)).numpy()
+
+    ref = least_squares(fun, theta0, method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15)
+    hist = LevenbergMarquardt(min_grad=1e-13, jacobian=mode).fit(net, residual, [(x, y)])
+    theta = _flat(net)
+    assert hist.stop_reason in ("min_grad", "mu_max")
+    cost = 0.5 * float(np.sum(fun(theta) ** 2))
+    assert cost == pytest.approx(ref.cost, rel=1e-9)
+    np.testing.assert_allclose(theta, ref.x, rtol=1e-5, atol=1e-6)
+    assert hist.train_mse[-1] < hist.train_mse[0]
+
+
+class _Surge(torch.nn.Module):
+    """u̇ = (F − k u|u|)/m with unknown k and m (a physics model, not a network)."""
+
+    def __init__(self, k: float, m: float) -> None:
+        super().__init__()
+        self.k = torch.nn.Parameter(torch.tensor(k, dtype=torch.float64))
+        self.m = torch.nn.Parameter(torch.tensor(m, dtype=torch.float64))
+
+    def forward(self, force: torch.Tensor, u0: torch.Tensor, dt: float) -> torch.Tensor:
+        def f(u: torch.Tensor, fk: torch.Tensor) -> torch.Tensor:
+            return (fk - self.k * u * u.abs()) / self.m
+
+        u, out = u0, [u0]
+        for i in range(force.shape[0] - 1):  # RK4 with zero-order-hold force
+            fk = force[i]
+            k1 = f(u, fk)
+            k2 = f(u + 0.5 * dt * k1, fk)
+            k3 = f(u + 0.5 * dt * k2, fk)
+            k4 = f(u + dt * k3, fk)
+            u = u + dt / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
+            out.append(u)
+        return torch.stack(out)
+
+
+def test_physics_parameter_fit_through_rk4() -> None:
+    dt = 0.1
+    t = torch.arange(300, dtype=torch.float64) * dt
+    force = 40 * torch.sin(0.3 * t) + 25 * torch.sin(1.1 * t + 0.4)
+    truth = _Surge(k=20.0, m=50.0)
+    with torch.no_grad():
+        u_meas = truth(force, torch.tensor(0.0, dtype=torch.float64), dt)
+    model = _Surge(k=8.0, m=90.0)
+
+    def residual(params: dict[str, torch.Tensor], batch) -> torch.Tensor:
+        f, u = batch
+        return functional_call(model, params, (f, u[0], dt)) - u
+
+    hist = LevenbergMarquardt(min_grad=1e-14).fit(model, residual, [(force, u_meas)])
+    assert float(model.k) == pytest.approx(20.0, rel=1e-6)
+    assert float(model.m) == pytest.approx(50.0, rel=1e-6)
+    assert hist.train_mse[-1] < 1e-12
+
+
+def test_validation_early_stop_restores_best() -> None:
+    gen = torch.Generator().manual_seed(3)
+    x = torch.rand(12, 1, generator=gen, dtype=torch.float64) * 4 - 2
+    y = torch.sin(x) + 0.3 * torch.randn(x.shape, generator=gen, dtype=torch.float64)
+    xv = torch.linspace(-2, 2, 50, dtype=torch.float64).unsqueeze(1)
+    yv = torch.sin(xv)
+    net = _mlp([1, 15, 1], seed=0)
+    residual = _regression_residual(net)
+    hist = LevenbergMarquardt(max_epochs=500).fit(net, residual, [(x, y)], [(xv, yv)])
+    assert hist.stop_reason == "validation"
+    best = int(np.nanargmin(hist.val_mse))
+    assert hist.best_epoch == best
+    assert hist.epochs - best >= 6
+    assert all(np.diff(hist.val_mse[best:]) >= 0)
+    with torch.no_grad():
+        val_now = float(torch.mean((net(xv) - yv) ** 2))
+    assert val_now == pytest.approx(hist.val_mse[best], rel=1e-12)
+    assert hist.train_mse[-1] < hist.train_mse[best]
+
+
+def _one_step(mode: str, budget_mb: float, net: torch.nn.Module, batches) -> tuple:
+    state = {k: v.clone() for k, v in net.state_dict().items()}
+    lm = LevenbergMarquardt(max_epochs=1, jacobian=mode, memory_budget_mb=budget_mb)
+    residual = _regression_residual(net)
+    ne = lm.normal_equations(net, residual, batches)
+    hist = lm.fit(net, residual, batches)
+    theta = _flat(net)
+    net.load_state_dict(state)
+    return ne, theta, hist
+
+
+@pytest.mark.parametrize("mode", ["forward", "samples"])
+def test_chunking_gives_the_same_step(mode: str) -> None:
+    net = _mlp([3, 8, 2], seed=2)
+    gen = torch.Generator().manual_seed(1)
+    x = torch.randn(400, 3, generator=gen, dtype=torch.float64)
+    y = torch.stack([torch.sin(x[:, 0]) * x[:, 1], torch.cos(x[:, 2])], 1)
+    batches = [(x[:250], y[:250]), (x[250:], y[250:])]
+    p = sum(q.numel() for q in net.parameters())
+    ne_full, th_full, h_full = _one_step(mode, 256.0, net, batches)
+    tiny = 500 * 7 * 8 / 2**20  # 7 columns of 500 rows, or 500/p rows of p columns
+    ne_chunk, th_chunk, h_chunk = _one_step(mode, tiny, net, batches)
+    assert h_full.peak_jacobian_elements == 500 * p
+    assert h_chunk.peak_jacobian_elements <= 500 * 7
+    torch.testing.assert_close(ne_chunk.jtj, ne_full.jtj, rtol=1e-12, atol=1e-12)
+    torch.testing.assert_close(ne_chunk.jtr, ne_full.jtr, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(th_chunk, th_full, rtol=1e-10, atol=1e-12)
+    assert h_chunk.train_mse == pytest.approx(h_full.train_mse, rel=1e-12)
+
+
+def test_modes_agree_and_float32_module() -> None:
+    net = _mlp([2, 6, 1], seed=4)
+    gen = torch.Generator().manual_seed(2)
+    x = torch.randn(200, 2, generator=gen, dtype=torch.float64)
+    y = (x[:, :1] * x[:, 1:]).tanh()
+    ne_f, th_f, _ = _one_step("forward", 256.0, net, [(x, y)])
+    ne_s, th_s, _ = _one_step("samples", 256.0, net, [(x, y)])
+    torch.testing.assert_close(ne_f.jtj, ne_s.jtj, rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(th_f, th_s, rtol=1e-8, atol=1e-10)
+    net32 = net.float()
+    residual = _regression_residual(net32)
+    hist = LevenbergMarquardt(max_epochs=20).fit(net32, residual, [(x.float(), y.float())])
+    assert next(net32.parameters()).dtype == torch.float32
+    assert hist.train_mse[-1] < hist.train_mse[0]
+
+
+@pytest.mark.parametrize("mode", ["forward", "samples"])
+def test_large_jacobian_never_materialised(mode: str) -> None:
+    net = _mlp([4, 16, 16, 2], seed=5)
+    p = sum(q.numel() for q in net.parameters())
+    n_samples = 20_000  # J would be 40,000 × 386 = 118 MiB
+    gen = torch.Generator().manual_seed(5)
+    x = torch.randn(n_samples, 4, generator=gen, dtype=torch.float64)
+    y = torch.stack([x[:, 0] * x[:, 1], torch.sin(x[:, 2] + x[:, 3])], 1)
+    budget_mb = 4.0
+    lm = LevenbergMarquardt(max_epochs=2, jacobian=mode, memory_budget_mb=budget_mb)
+    hist = lm.fit(net, _regression_residual(net), [(x, y)])
+    budget_elements = int(budget_mb * 2**20) // 8
+    n = 2 * n_samples
+    assert hist.peak_jacobian_elements <= budget_elements < n * p
+    if mode == "samples":
+        assert hist.peak_jacobian_rows <= budget_elements // p
+    else:
+        assert hist.peak_jacobian_elements <= n * (budget_elements // n)
+    assert hist.train_mse[-1] < hist.train_mse[0]
