@@ -1,0 +1,145 @@
+"""Free-run test RMSE of NARX models on nonlinearbenchmark.org systems (issue 6).
+
+Data and standard splits: ``../shared/data/nlbench-*/SOURCE.md`` via
+:func:`nnid.datasets.load_benchmark`. Each model is trained on the standard training split only
+(that split is also the validation data for early stopping; no test data is seen in training),
+then run in free run (parallel mode) over each test split. The NARX delay states are the measured
+outputs of the first ``max(delays)`` samples, which lie inside the benchmark's warm-up; the RMSE
+is taken over the samples after the warm-up (``Benchmark.warmup``: 50 for cascaded tanks and
+silverbox, 20 for EMPS), in the benchmark's units.
+
+Run: ``python benchmarks/bench_nlbench.py [cascaded_tanks silverbox emps]``.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from datetime import date
+from pathlib import Path
+
+import numpy as np
+import torch
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from common import machine
+
+from nnid.datasets.benchmarks import load_benchmark
+from nnid.models.narx import NarxModel
+from nnid.trainers.levenberg_marquardt import LevenbergMarquardt
+
+ROOT = Path(__file__).resolve().parents[1].parent / "shared" / "data"
+
+#: per benchmark: NARX settings, test splits, unit scale and name
+SETTINGS = {
+    "cascaded_tanks": {
+        "narx": {
+            "input_delays": 3,
+            "output_delays": 2,
+            "hidden": (5,),
+            "simulation_epochs": 100,
+            "simulation_window": 400,
+            "simulation_lr": 1e-2,
+        },
+        "lm_epochs": 100,
+        "lm_samples": 4000,
+        "seeds": (0, 1, 2),
+        "tests": ["test"],
+        "scale": 1.0,
+        "unit": "V",
+    },
+    "silverbox": {
+        "narx": {
+            "input_delays": 4,
+            "output_delays": 4,
+            "hidden": (10,),
+            "simulation_epochs": 20,
+            "simulation_window": 200,
+            "simulation_lr": 5e-3,
+        },
+        "lm_epochs": 50,
+        "lm_samples": 8000,
+        "seeds": (0,),
+        "tests": ["test_multisine", "test_arrow_full"],
+        "scale": 1e3,
+        "unit": "mV",
+    },
+    "emps": {
+        "narx": {
+            "input_delays": 2,
+            "output_delays": 2,
+            "hidden": (10,),
+            "delta": False,
+            "simulation_epochs": 20,
+            "simulation_window": 200,
+            "simulation_lr": 5e-3,
+        },
+        "lm_epochs": 50,
+        "lm_samples": 8000,
+        "seeds": (0,),
+        "tests": ["test"],
+        "scale": 1.0,
+        "unit": "m",
+    },
+}
+
+
+def free_run_rmse(model: NarxModel, log, output: str, warmup: int) -> float:
+    """RMSE of the free run over the samples after the benchmark's warm-up."""
+    if model.warmup > warmup:
+        raise ValueError("the NARX delay states do not fit in the benchmark's warm-up")
+    pred = model.predict(log, "free_run")[output].to_numpy()[warmup:]
+    meas = log[output].to_numpy()[warmup:]
+    return float(np.sqrt(np.mean((pred - meas) ** 2)))
+
+
+def run(name: str, seed: int = 0) -> dict:
+    cfg = SETTINGS[name]
+    bench = load_benchmark(name, ROOT)
+    train = bench.splits["train"]
+    model = NarxModel(
+        bench.inputs,
+        bench.outputs[:1],
+        balanced=False,  # generic table: no vehicle transients to balance
+        seed=seed,
+        lm_samples=cfg["lm_samples"],
+        trainer=LevenbergMarquardt(max_epochs=cfg["lm_epochs"], jacobian="samples"),
+        **cfg["narx"],
+    )
+    t0 = time.perf_counter()
+    model.fit(train, train)
+    fit_s = time.perf_counter() - t0
+    out = bench.outputs[0]
+    res = {
+        "train": free_run_rmse(model, train, out, bench.warmup) * cfg["scale"],
+        "fit_s": fit_s,
+        "finetune": model.finetune_,
+    }
+    for split in cfg["tests"]:
+        res[split] = free_run_rmse(model, bench.splits[split], out, bench.warmup) * cfg["scale"]
+    res["warmup"], res["unit"] = bench.warmup, cfg["unit"]
+    return res
+
+
+def main(names: list[str]) -> None:
+    versions = machine(torch=torch.__version__, numpy=np.__version__)
+    print(f"Machine: {versions}. Date: {date.today()}")
+    for name in names:
+        for seed in SETTINGS[name]["seeds"]:
+            t0 = time.perf_counter()
+            res = run(name, seed)
+            wall = time.perf_counter() - t0
+            unit = res.pop("unit")
+            rmses = {
+                k: round(v, 4) for k, v in res.items() if isinstance(v, float) and k != "fit_s"
+            }
+            print(
+                f"{name} seed {seed}: free-run RMSE ({unit}, warm-up {res['warmup']} excluded) "
+                f"{rmses}; fit {res['fit_s']:.1f} s, total {wall:.1f} s; "
+                f"finetune {res['finetune']}",
+                flush=True,
+            )
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:] or list(SETTINGS))
