@@ -29,6 +29,17 @@ from nnid.trainers.least_squares import Estimate
 
 
 @njit(cache=True)
+def _row_finite(phi, y, row):  # pragma: no cover - compiled
+    """True when the row's target and regressors are all finite (others are skipped)."""
+    if not math.isfinite(y[row]):
+        return False
+    for a in range(phi.shape[1]):
+        if not math.isfinite(phi[row, a]):
+            return False
+    return True
+
+
+@njit(cache=True)
 def _rls(phi, y, m, lam, trace_max, theta, p_mat, history):  # pragma: no cover - compiled
     """RLS over samples of ``m`` rows (Weiss eqs 52-53 with forgetting λ), in place on θ, P."""
     n_par = phi.shape[1]
@@ -45,10 +56,7 @@ def _rls(phi, y, m, lam, trace_max, theta, p_mat, history):  # pragma: no cover 
                         p_mat[a, b] *= inv_lam
         for k in range(m):
             row = i * m + k
-            ok = math.isfinite(y[row])
-            for a in range(n_par):
-                ok = ok and math.isfinite(phi[row, a])
-            if not ok:
+            if not _row_finite(phi, y, row):
                 continue
             denom = 1.0
             err = y[row]
@@ -85,10 +93,7 @@ def _gradient(phi, y, m, step, gamma, normalized, theta, history):  # pragma: no
         norm = 1.0
         for k in range(m):
             row = i * m + k
-            ok = math.isfinite(y[row])
-            for a in range(n_par):
-                ok = ok and math.isfinite(phi[row, a])
-            if not ok:
+            if not _row_finite(phi, y, row):
                 continue
             err = y[row]
             for a in range(n_par):
