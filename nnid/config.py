@@ -172,6 +172,24 @@ class TrainConfig(_Strict):
     sequence: Literal["weiss"] | list[SequenceStep] | None = None
 
 
+class LoopConfig(_Strict):
+    """``nnid loop CONFIG``: the residual loop on a log (``--data``/``--vehicle`` override)."""
+
+    kind: Literal["loop"] = "loop"
+    vehicle: str = ""
+    data: DataSpec = Field(default_factory=DataSpec)
+    dofs: list[Literal["u", "v", "w", "p", "q", "r"]] | None = None
+    validation: list[str] | None = None  # experiments held out; default the last 30 %
+    validation_fraction: float = Field(0.3, gt=0, lt=1)
+    max_effects: int = Field(3, ge=0)
+    alpha: float = Field(0.01, gt=0, lt=0.5)
+    coupled: bool = True
+    filter_lambda: float | None = Field(1.0, gt=0)
+    savgol_window: float = Field(1.0, gt=0)
+    savgol_order: int = Field(4, ge=2, le=8)
+    warmup_s: float = Field(2.0, ge=0)
+
+
 class SindySpec(_Strict):
     """The SINDy fit of ``nnid compare``: optimizer and the thresholds of its path."""
 

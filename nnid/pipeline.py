@@ -14,6 +14,7 @@ import pandas as pd
 from nnid.config import (
     DataSpec,
     FossenSpec,
+    LoopConfig,
     SimulateConfig,
     SindySpec,
     TrainConfig,
@@ -37,7 +38,7 @@ def resolve(base: Path, path: str) -> Path:
 
 
 def load_data(
-    cfg: TrainConfig,
+    cfg: TrainConfig | LoopConfig,
     config_path: Path,
     data_override: str | None = None,
     columns_override: str | None = None,

@@ -14,6 +14,7 @@ import torch
 from nnid.config import Experiment, SimulateConfig, load_config
 from nnid.datasets.measurement import Measurement
 from nnid.datasets.simulator import experiment_inputs, simulate, simulate_config
+from nnid.errors import NnidInputError
 from nnid.models.narx import NarxModel
 from nnid.trainers.adam import Adam
 from nnid.trainers.levenberg_marquardt import LevenbergMarquardt
@@ -216,3 +217,51 @@ def test_multi_step_loss_trains_and_free_runs(seamor):
     free = model.score(surge, "free_run")["u"]
     assert np.isfinite(free) and free < 0.45
     assert model.score(surge, 5)["u"] < 0.05
+
+
+def _tank(n: int, gain: float, seed: int) -> pd.DataFrame:
+    """A first-order tank whose level sensor saturates at 1.0 (an overflow)."""
+    rng = np.random.default_rng(seed)
+    u = np.repeat(rng.uniform(0.0, gain, n // 20 + 1), 20)[:n]
+    y = np.zeros(n)
+    for k in range(1, n):
+        y[k] = min(0.9 * y[k - 1] + 0.1 * u[k - 1] + 0.05 * np.sin(3 * u[k - 1]), 1.0)
+    return pd.DataFrame({"t": np.arange(n, dtype=float), "u": u, "y": y})
+
+
+def test_output_bounds_clamp_every_mode_and_survive_save_load(tmp_path):
+    # inputs twice the training range drive the unbounded free run above the 1.0 ceiling
+    train, wild = _tank(600, 1.3, 0), _tank(400, 2.6, 1)
+    lm = LevenbergMarquardt(max_epochs=20, jacobian="samples")
+    kw = dict(hidden=(3,), trainer=lm, balanced=False, lm_samples=500)
+    free = NarxModel(["u"], ["y"], 2, 2, **kw).fit(train, train)
+    assert free.predict(wild, "free_run")["y"].max() > 1.05
+    lm = LevenbergMarquardt(max_epochs=20, jacobian="samples")
+    kw["trainer"] = lm
+    model = NarxModel(["u"], ["y"], 2, 2, output_bounds=[[None, "train"]], **kw)
+    model.fit(train, train)
+    assert model.bounds_ == [[None, float(train["y"].max())]]
+    for mode in ("one_step", "free_run", 5):
+        assert model.predict(wild, mode)["y"].max() <= train["y"].max() + 1e-12
+    model.save(tmp_path)
+    cfg = json.loads((tmp_path / "narx.json").read_text())
+    assert cfg["output_bounds"] == [[None, float(train["y"].max())]]
+    back = NarxModel.load(tmp_path)
+    pd.testing.assert_frame_equal(model.predict(wild, "free_run"), back.predict(wild, "free_run"))
+    with pytest.raises(NnidInputError):
+        NarxModel(["u"], ["y"], output_bounds=[[1.0, 0.0]])
+
+
+def test_simulation_error_levenberg_marquardt_lowers_free_run_error():
+    # one-step LM (5 epochs), then LM on the output error of whole-record free runs
+    train = _tank(400, 1.3, 2)
+    kw = dict(hidden=(3,), balanced=False, lm_samples=400, output_bounds="train")
+    model = NarxModel(
+        ["u"], ["y"], 2, 2, trainer=LevenbergMarquardt(max_epochs=5, jacobian="samples"),
+        simulation_epochs=10, simulation_window=10_000, simulation_trainer="lm", **kw,
+    )  # fmt: skip
+    model.fit(train, train)
+    ft = model.finetune_
+    assert ft["kept"] and ft["epochs"] >= 1
+    assert ft["validation_free_run_nrmse_after"] < 0.8 * ft["validation_free_run_nrmse_before"]
+    assert model.score(train)["y"] == pytest.approx(ft["validation_free_run_nrmse_after"])

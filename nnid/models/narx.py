@@ -23,6 +23,11 @@ columns (body velocities u v w r ...).
   ``warmup`` samples of each experiment (the delay states) are never predicted nor scored.
 * **Balanced sampling** (Weiss V.B: a net trained mostly on steady state misses the
   transients): training samples drawn by :class:`nnid.datasets.segmentation.BalancedSampler`.
+* **Output bounds** (``output_bounds``, off by default): predicted outputs clamped to a range
+  (a saturating sensor, an overflowing tank) in every prediction mode and inside the closed
+  loop of simulation-error training, so a free run cannot leave the range the plant can reach.
+* **Levenberg-Marquardt on simulation error** (``simulation_trainer="lm"``): the fine-tuning
+  on deterministic windows (or whole experiments) with forward-mode Jacobians of the closed loop.
 """
 
 from __future__ import annotations
@@ -47,6 +52,37 @@ from nnid.errors import NnidInputError
 from nnid.evaluation.metrics import nrmse
 
 DTYPE = torch.float64
+
+
+Bound = float | str | None
+#: ``output_bounds``: None (no clamp), "train" (the training range of every output) or one
+#: [low, high] per output, each a number in the output's units, None (open) or "train"
+OutputBounds = str | Sequence[Sequence[Bound]] | None
+
+
+def _check_bounds(bounds: OutputBounds, n_out: int) -> OutputBounds:
+    """Validate an ``output_bounds`` specification; returns it as lists (JSON-ready)."""
+    if bounds is None:
+        return None
+    if isinstance(bounds, str):
+        if bounds != "train":
+            raise NnidInputError(
+                "output_bounds is None, 'train' or [low, high] per output", field="output_bounds"
+            )
+        return bounds
+    out = [list(b) for b in bounds]
+    if len(out) != n_out or any(len(b) != 2 for b in out):
+        raise NnidInputError(
+            "output_bounds needs one [low, high] per output", field="output_bounds"
+        )
+    for pair in out:
+        for i, v in enumerate(pair):
+            if v is not None and v != "train":
+                pair[i] = float(v)
+        lo, hi = pair
+        if isinstance(lo, float) and isinstance(hi, float) and not lo < hi:
+            raise NnidInputError("output_bounds: low must be below high", field="output_bounds")
+    return out
 
 
 def _delays(d: int | Sequence[int], minimum: int, what: str) -> list[int]:
@@ -87,6 +123,21 @@ class NarxModel:
     val_batches)``). Without a ``validation_log`` the log is divided into contiguous blocks
     (``division="block"``, ``fractions`` 70/15/15, MATLAB's divideblock; the test block is left
     unused) or at random (``division="random"``: warns, neighbouring samples are correlated).
+
+    Options added for issue 6 (defaults keep the earlier behaviour):
+
+    * ``output_bounds``: None (default, no clamp), ``"train"`` (each output's training range)
+      or one ``[low, high]`` per output in its units, each a number, None (open) or
+      ``"train"``. Predictions are clamped in every mode and inside the closed loop of the
+      simulation-error training; ``"train"`` entries are resolved at ``fit`` (``bounds_``)
+      and saved resolved in ``narx.json``.
+    * ``simulation_trainer``: ``"adam"`` (default: random windows) or ``"lm"``
+      (Levenberg-Marquardt, forward-mode Jacobians, on fixed windows ending at each
+      experiment's last sample and every ``simulation_window // 2`` before; windows longer
+      than the shortest experiment are cut to it, so a large ``simulation_window`` trains on
+      whole experiments).
+    * ``simulation_max_fail``: validation failures before the simulation training stops (8).
+    * ``simulation_l2``: λ of a λ‖θ‖² penalty on the LM simulation-error sum of squares (0).
     """
 
     def __init__(
@@ -109,6 +160,10 @@ class NarxModel:
         batch_size: int = 256,
         samples_per_epoch: int | None = None,
         lm_samples: int = 4000,
+        output_bounds: OutputBounds = None,
+        simulation_trainer: str = "adam",
+        simulation_max_fail: int = 8,
+        simulation_l2: float = 0.0,
     ) -> None:
         self.inputs, self.outputs = list(inputs), list(outputs)
         self.input_delays = _delays(input_delays, 0, "input_delays")
@@ -125,6 +180,15 @@ class NarxModel:
         self.division, self.fractions = division, tuple(float(f) for f in fractions)
         self.batch_size, self.samples_per_epoch = int(batch_size), samples_per_epoch
         self.lm_samples = int(lm_samples)
+        self.output_bounds = _check_bounds(output_bounds, len(self.outputs))
+        if simulation_trainer not in ("adam", "lm"):
+            raise NnidInputError("simulation_trainer is 'adam' or 'lm'", field="simulation_trainer")
+        self.simulation_trainer = simulation_trainer
+        self.simulation_max_fail = int(simulation_max_fail)
+        self.simulation_l2 = float(simulation_l2)
+        #: the bounds in the outputs' units, [low, high] per output (None: open), once resolved
+        self.bounds_: list[list[float | None]] | None = None
+        self._resolve_bounds(None)
         self.dy = max(self.output_delays)
         #: the delay states: samples at the start of each experiment neither predicted nor scored
         self.warmup = max(self.dy, max(self.input_delays))
@@ -153,7 +217,47 @@ class NarxModel:
             "simulation_window": self.simulation_window,
             "division": self.division,
             "fractions": list(self.fractions),
+            "simulation_lr": self.simulation_lr,
+            "simulation_trainer": self.simulation_trainer,
+            "simulation_max_fail": self.simulation_max_fail,
+            "simulation_l2": self.simulation_l2,
+            "output_bounds": self.bounds_ if self.bounds_ is not None else self.output_bounds,
         }
+
+    def _resolve_bounds(self, log: pd.DataFrame | None) -> None:
+        """Set ``bounds_`` from ``output_bounds``; ``"train"`` entries take the training
+        minimum (low) or maximum (high) of ``log`` and stay unresolved while ``log`` is None."""
+        spec = self.output_bounds
+        if spec is None:
+            self.bounds_ = None
+            return
+        pairs = [["train", "train"] for _ in self.outputs] if spec == "train" else spec
+        out: list[list[float | None]] = []
+        for c, pair in zip(self.outputs, pairs, strict=True):
+            row: list[float | None] = []
+            for i, v in enumerate(pair):
+                if v == "train":
+                    if log is None:
+                        self.bounds_ = None
+                        return
+                    col = log[c].to_numpy(np.float64)
+                    v = float(np.nanmin(col) if i == 0 else np.nanmax(col))
+                row.append(v)
+            out.append(row)
+        self.bounds_ = out
+
+    def _norm_bounds(self) -> tuple[torch.Tensor, torch.Tensor] | None:
+        """The resolved bounds in normalised units (±inf where open), or None."""
+        if self.bounds_ is None:
+            return None
+        net = self.net_
+        lo = torch.tensor([-np.inf if b[0] is None else b[0] for b in self.bounds_], dtype=DTYPE)
+        hi = torch.tensor([np.inf if b[1] is None else b[1] for b in self.bounds_], dtype=DTYPE)
+        return (lo - net.y_mean) / net.y_std, (hi - net.y_mean) / net.y_std
+
+    def _norm_bounds_np(self) -> tuple[np.ndarray, np.ndarray] | None:
+        nb = self._norm_bounds()
+        return None if nb is None else (nb[0].numpy(), nb[1].numpy())
 
     def layer_sizes(self) -> list[int]:
         """Regressor length, hidden sizes, outputs."""
@@ -280,6 +384,7 @@ class NarxModel:
         zu = uf @ w1[:, n_y:].T + b1  # the inputs' share of the first layer, all steps at once
         scale = self.net_.d_scale if self.delta else torch.ones_like(self.net_.d_scale)
         wo, bo = ws[-1][0].T * scale, ws[-1][1] * scale
+        lo, hi = self._norm_bounds() or (None, None)
         hs = list(hist.unbind(1))
         outs = []
         for t in range(uf.shape[1]):
@@ -291,6 +396,8 @@ class NarxModel:
                 h = torch.tanh(h @ w.T + b)
             o = h @ wo + bo
             y = hs[-1] + o if self.delta else o
+            if lo is not None:
+                y = torch.clamp(y, lo, hi)
             hs.append(y)
             outs.append(y)
         return torch.stack(outs, 1)
@@ -330,6 +437,7 @@ class NarxModel:
             self._check(validation_log)
             self.division_ = {"by": "given"}
         self._fit_normalisation(log)
+        self._resolve_bounds(log)
         tab = self._table(log)
         horizon = max(1, self.multi_step)
         sampler = BalancedSampler(
@@ -386,6 +494,13 @@ class NarxModel:
         hist, uf, y = batch
         return (self._rollout(params, hist, uf) - y).reshape(-1)
 
+    def _regularised_window_residual(
+        self, params: dict[str, torch.Tensor], batch: tuple
+    ) -> torch.Tensor:
+        """The window residual and √λ θ: λ‖θ‖² (``simulation_l2``) added to the sum of squares."""
+        theta = torch.cat([p.reshape(-1) for p in params.values()])
+        return torch.cat([self._window_residual(params, batch), self.simulation_l2**0.5 * theta])
+
     def _eligible(self, code: np.ndarray, horizon: int) -> np.ndarray:
         keep = np.ones(code.size, dtype=bool)
         starts = np.flatnonzero(np.r_[True, code[1:] != code[:-1]])
@@ -405,14 +520,69 @@ class NarxModel:
         return batches
 
     def _simulation_finetune(self, tab, sampler, validation_log) -> None:
-        """Output-error training: Adam on free runs over windows of ``simulation_window``
-        samples from measured delay states (back-propagation through the closed loop); kept
-        only if the validation free-run error falls."""
+        """Output-error training on free runs over windows of ``simulation_window`` samples
+        from measured delay states: Adam on random windows (back-propagation through the
+        closed loop) or, with ``simulation_trainer="lm"``, Levenberg-Marquardt on fixed
+        windows; kept only if the validation free-run error falls."""
+        before = self.score(validation_log)["total"] if validation_log is not None else None
+        state = {k: v.clone() for k, v in self.net_.state_dict().items()}
+        if self.simulation_trainer == "lm":
+            epochs = self._simulation_lm(tab, sampler, validation_log)
+        else:
+            epochs = self._simulation_adam(tab, sampler, validation_log)
+        if epochs is None:
+            return
+        after = self.score(validation_log)["total"] if validation_log is not None else None
+        kept = before is None or (np.isfinite(after) and after < before)
+        if not kept:
+            self.net_.load_state_dict(state)
+        self.finetune_ = {
+            "validation_free_run_nrmse_before": before,
+            "validation_free_run_nrmse_after": after,
+            "kept": bool(kept),
+            "epochs": epochs,
+        }
+
+    def _fixed_windows(self, table: dict[str, torch.Tensor], length: int) -> tuple | None:
+        """Windows of ``length`` samples (shortened to the shortest experiment after its
+        warm-up) ending at the last sample of each experiment and every ``length // 2``
+        samples before it, as one batch; None when no experiment is longer than the warm-up."""
+        code = table["code"].numpy()
+        starts = np.flatnonzero(np.r_[True, code[1:] != code[:-1]])
+        stops = np.r_[starts[1:], code.size]
+        spans = stops - starts - self.warmup
+        if spans.max() < 1:
+            return None
+        length = int(min(length, spans[spans >= 1].min()))
+        ends: list[int] = []
+        for s, e in zip(starts, stops, strict=True):
+            first = s + self.warmup + length - 1  # the earliest end whose delay states exist
+            ends += list(range(e - 1, first - 1, -max(1, length // 2)))
+        return self._batch(table, torch.as_tensor(sorted(ends)), length)
+
+    def _simulation_lm(self, tab, sampler, validation_log) -> int | None:
+        from nnid.trainers.levenberg_marquardt import LevenbergMarquardt
+
+        train = self._fixed_windows(tab, self.simulation_window)
+        if train is None:
+            return None
+        val = None
+        if validation_log is not None:
+            vb = self._fixed_windows(self._table(validation_log), self.simulation_window)
+            val = [vb] if vb is not None else None
+        trainer = LevenbergMarquardt(
+            max_epochs=self.simulation_epochs, max_fail=self.simulation_max_fail
+        )
+        residual = self._window_residual
+        if self.simulation_l2 > 0:
+            residual = self._regularised_window_residual
+        hist = trainer.fit(self.net_, residual, [train], val)
+        return hist.epochs
+
+    def _simulation_adam(self, tab, sampler, validation_log) -> int | None:
         from nnid.trainers.adam import Adam
 
         length = self.simulation_window
-        before = self.score(validation_log)["total"] if validation_log is not None else None
-        state = {k: v.clone() for k, v in self.net_.state_dict().items()}
         win = BalancedSampler(
             sampler.labels,
             tab["code"].numpy(),
@@ -422,7 +592,7 @@ class NarxModel:
         )
         win.eligible &= sampler.eligible
         if not win.eligible.any():
-            return
+            return None
         val = None
         if validation_log is not None:
             vtab = self._table(validation_log)
@@ -435,18 +605,13 @@ class NarxModel:
             ends = torch.as_tensor(win.sample(128, 1000 + epoch))
             return [self._batch(tab, b, length) for b in ends.split(32)]
 
-        trainer = Adam(lr=self.simulation_lr, max_epochs=self.simulation_epochs, max_fail=8)
+        trainer = Adam(
+            lr=self.simulation_lr,
+            max_epochs=self.simulation_epochs,
+            max_fail=self.simulation_max_fail,
+        )
         hist = trainer.fit(self.net_, self._window_residual, batches, val)
-        after = self.score(validation_log)["total"] if validation_log is not None else None
-        kept = before is None or (np.isfinite(after) and after < before)
-        if not kept:
-            self.net_.load_state_dict(state)
-        self.finetune_ = {
-            "validation_free_run_nrmse_before": before,
-            "validation_free_run_nrmse_after": after,
-            "kept": bool(kept),
-            "epochs": len(hist.train),
-        }
+        return len(hist.train)
 
     # -- prediction ------------------------------------------------------------------------------
     def predict(self, log: pd.DataFrame, mode: str | int = "one_step") -> pd.DataFrame:
@@ -471,6 +636,9 @@ class NarxModel:
                         if self.delta
                         else o
                     )
+                    nb = self._norm_bounds_np()
+                    if nb is not None:
+                        pred = np.clip(pred, nb[0], nb[1])
                     out[pos[self.warmup :]] = pred * std + mean
                 elif mode == "free_run":
                     pred = self._free_run(
@@ -511,6 +679,7 @@ class NarxModel:
         scale = self.net_.d_scale.numpy() if self.delta else np.ones(m)
         wo = lin[-1].weight.detach().numpy() * scale[:, None]
         bo = lin[-1].bias.detach().numpy() * scale
+        nb = self._norm_bounds_np()
         n = len(zu)
         buf = np.empty((dy + n, m))
         buf[:dy] = init
@@ -522,6 +691,8 @@ class NarxModel:
                 h = tanh(dot(w, h) + b)
             o = dot(wo, h) + bo
             buf[dy + k] = buf[dy + k - 1] + o if self.delta else o
+            if nb is not None:
+                np.clip(buf[dy + k], nb[0], nb[1], out=buf[dy + k])
         return buf[dy:]
 
     def score(self, log: pd.DataFrame, mode: str | int = "free_run") -> dict[str, float]:

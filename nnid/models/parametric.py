@@ -94,6 +94,7 @@ class Parts:
     eta_neg: np.ndarray
     bias: np.ndarray
     u_c: float = 0.0
+    current: np.ndarray | None = None  # steady water current, NED (m/s)
 
     def copy(self) -> Parts:
         return Parts(
@@ -109,6 +110,7 @@ class Parts:
             self.eta_neg.copy(),
             self.bias.copy(),
             self.u_c,
+            None if self.current is None else self.current.copy(),
         )
 
     @classmethod
@@ -130,6 +132,7 @@ class Parts:
             neg,
             np.array(vehicle.external_bias, float),
             vehicle.damping.u_c,
+            np.array(vehicle.current, float),
         )
 
     def set(self, name: str, value: float) -> None:
@@ -180,6 +183,7 @@ class Parts:
             self.r_g,
             self.r_b,
             external_bias=self.bias,
+            current=(0.0, 0.0, 0.0) if self.current is None else self.current,
             check=check,
         )
 
@@ -226,6 +230,41 @@ def log_arrays(log: pd.DataFrame, vehicle) -> dict[str, np.ndarray]:
         "experiment": codes,
         "experiment_names": np.asarray(names, dtype=object),
     }
+
+
+def relative_velocity(parts: Parts, data: dict[str, np.ndarray]) -> np.ndarray:
+    """ν_r = ν − ν_c(η), the velocity through the water that damping acts on (Fossen 2011
+    eq. 10.1); ν itself in still water."""
+    if parts.current is None or not np.any(parts.current):
+        return data["nu"]
+    with torch.no_grad():
+        nu_c = parts.model(check=False).current_body(torch.as_tensor(data["eta"])).numpy()
+    return data["nu"] - nu_c
+
+
+def vehicle_with(vehicle, values: dict[str, float]):
+    """A copy of ``vehicle`` with parameters (names of :func:`canonical_parameter`) set to
+    ``values``: an identified vehicle file. Raises ValueError where a value is not physical
+    (an installation coefficient outside (0, 2])."""
+    out = vehicle.model_dump()
+    for name, value in values.items():
+        name, value = canonical_parameter(name), float(value)
+        if ":" in name:
+            force, term = parse_coefficient_key(name)
+            coefs = out["damping"]["coefficients"]
+            key = next((k for k in coefs if parse_coefficient_key(k) == (force, term)), name)
+            coefs[key] = value
+        elif name.endswith("dot"):
+            out["added_mass"][name] = value
+        elif name.startswith("eta."):
+            out["installation"][name[4:]] = value
+        elif name.startswith("external_bias."):
+            out["external_bias"][DOFS.index(name.split(".")[1])] = value
+        elif name in ("weight", "buoyancy"):
+            out[name] = value
+        else:
+            out[name[:3]][_AXES.index(name[-1])] = value
+    return type(vehicle).model_validate(out)
 
 
 class ParametricFossen:
@@ -278,8 +317,8 @@ class ParametricFossen:
             mass = model.mass_matrix().numpy()
         if filter_lambda is None:
             return data["nu_dot"] @ mass.T - net
-        nu_dot_f = _filter(data, data["nu"], filter_lambda, derivative=True)
-        return nu_dot_f @ mass.T - _filter(data, net, filter_lambda)
+        nu_dot_f = filter_signal(data, data["nu"], filter_lambda, derivative=True)
+        return nu_dot_f @ mass.T - filter_signal(data, net, filter_lambda)
 
     def regression(
         self, data: dict[str, np.ndarray], filter_lambda: float | None = None
@@ -293,7 +332,7 @@ class ParametricFossen:
         r0 = self.equation_residual(self.base, data, filter_lambda)
         keep = np.ones(r0.shape[0], dtype=bool)
         if filter_lambda is not None:
-            keep = _settled(data, 3.0 / filter_lambda)
+            keep = settled_rows(data, 3.0 / filter_lambda)
         damping = self._damping_columns(data, filter_lambda)
         cols = []
         for name in self.names:
@@ -326,9 +365,10 @@ class ParametricFossen:
         if not names:
             return {}
         split = [parse_coefficient_key(n) for n in names]
-        xi = evaluate_terms(data["nu"], term_codes([t for _, t in split]), self.base.u_c)
+        nu = relative_velocity(self.base, data)
+        xi = evaluate_terms(nu, term_codes([t for _, t in split]), self.base.u_c)
         if filter_lambda is not None:
-            xi = _filter(data, xi, filter_lambda)
+            xi = filter_signal(data, xi, filter_lambda)
         out = {}
         for k, (name, (force, _)) in enumerate(zip(names, split, strict=True)):
             col = np.zeros((xi.shape[0], 6))
@@ -340,7 +380,7 @@ class ParametricFossen:
         return [canonical_term(n.split(":")[1]) for n in self.names if ":" in n]
 
 
-def _filter(data: dict[str, np.ndarray], x: np.ndarray, lam: float, derivative: bool = False):
+def filter_signal(data: dict[str, np.ndarray], x: np.ndarray, lam: float, derivative: bool = False):
     """F(s) = λ/(s + λ) (or s F(s) for the derivative) per experiment, discretised by the
     bilinear transform so that the two stay consistent; started in steady state."""
     out = np.empty_like(x)
@@ -356,7 +396,7 @@ def _filter(data: dict[str, np.ndarray], x: np.ndarray, lam: float, derivative: 
     return out
 
 
-def _settled(data: dict[str, np.ndarray], seconds: float) -> np.ndarray:
+def settled_rows(data: dict[str, np.ndarray], seconds: float) -> np.ndarray:
     keep = np.ones(data["t"].size, dtype=bool)
     for k in np.unique(data["experiment"]):
         idx = np.flatnonzero(data["experiment"] == k)

@@ -144,6 +144,15 @@ class FossenModel:
 
     def net_force(self, eta: Tensor, nu: Tensor, tau: Tensor) -> Tensor:
         """M ν̇: everything on the right-hand side of the equation of motion."""
+        if not bool(torch.any(self.current != 0)) and not self.current.requires_grad:
+            # still water: ν_r = ν (skips a rotation per sample on long logs)
+            return (
+                tau
+                + self.external_bias
+                - self.coriolis_force(nu)
+                + self.damping_force(nu)
+                - self.restoring_force(eta)
+            )
         nu_c = self.current_body(eta)
         nu_r = nu - nu_c
         nu_c_dot = torch.cat(

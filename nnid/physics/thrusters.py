@@ -85,10 +85,14 @@ class Actuation:
             self.curves = []
             self.matrix = np.eye(6)
 
-    def nominal(self, inputs: np.ndarray) -> np.ndarray:
+    def nominal(self, inputs: np.ndarray, deadband: bool = False) -> np.ndarray:
         """Nominal generalized force ``[N, 6]`` for inputs ``[N, n_channels]``: what a vehicle
-        file that knows only the thrust curves and geometry predicts."""
-        return self._force(np.asarray(inputs, dtype=np.float64), ideal=True)
+        file that knows only the thrust curves and geometry predicts (with ``deadband``, the
+        vehicle's deadband applied to the inputs first; never the installation)."""
+        inputs = np.asarray(inputs, dtype=np.float64)
+        if deadband:
+            inputs = apply_deadband(inputs, self.deadband)
+        return self._force(inputs, ideal=True)
 
     def applied(self, inputs: np.ndarray) -> np.ndarray:
         """Generalized force the vehicle feels: deadband and installation coefficients applied."""

@@ -102,7 +102,7 @@ def markdown(comparison: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _html_table(head: list[str], rows: list[list[str]]) -> str:
+def html_table(head: list[str], rows: list[list[str]]) -> str:
     h = "".join(f"<th>{html.escape(c)}</th>" for c in head)
     body = "".join(
         "<tr>" + "".join(f"<td>{html.escape(c)}</td>" for c in r) + "</tr>" for r in rows
@@ -157,7 +157,7 @@ def html_page(
     """The self-contained HTML report."""
     velocity = "".join(
         f"<h2>{html.escape(title.format(h=comparison.get('horizon_s', 0.0)))}</h2>"
-        + _html_table(*velocity_rows(comparison, key))
+        + html_table(*velocity_rows(comparison, key))
         for key, title in VELOCITY_TABLES
     )
     coef_blocks = []
@@ -165,7 +165,7 @@ def html_page(
         crow = [[k, _f(v, 5)] for k, v in sorted(coefs.items())]
         coef_blocks.append(
             f"<details><summary>{html.escape(name)} ({len(crow)} coefficients)"
-            f"</summary>{_html_table(['coefficient', 'value'], crow)}</details>"
+            f"</summary>{html_table(['coefficient', 'value'], crow)}</details>"
         )
     title = f"Damping model comparison: {comparison.get('vehicle', '')}"
     forces = force_figure(t, measured, predicted)
@@ -178,7 +178,7 @@ text-align:right}}th{{background:#eee}}td:first-child{{text-align:left}}img{{max
 <h1>{html.escape(title)}</h1>
 <p>{html.escape(comparison.get("summary", ""))}</p>
 <h2>Force error (McCarter Tables 5.1/5.2 for this data)</h2>
-{_html_table(HEAD, table_rows(comparison))}
+{html_table(HEAD, table_rows(comparison))}
 <p>J is the RMS error of the viscous force (McCarter eq. 4.25), J0 the RMS of the force series;
 training on {html.escape(", ".join(comparison.get("train", [])))}, validation on
 {html.escape(", ".join(comparison.get("validation", [])))}.</p>

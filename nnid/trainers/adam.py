@@ -23,11 +23,17 @@ Batches = Sequence[Any] | Callable[[int], Iterable[Any]]
 
 @dataclass
 class AdamHistory:
-    """Per-epoch training and validation mean-square residuals, and why training stopped."""
+    """Per-epoch training and validation mean-square residuals, and why training stopped.
+
+    ``time[k]`` is the wall time in seconds from the start of ``fit`` to the end of epoch k's
+    validation (cumulative, like ``LMHistory.time``); ``seconds`` is the whole ``fit``,
+    restoring the best state included.
+    """
 
     train: list[float] = field(default_factory=list)
     validation: list[float] = field(default_factory=list)
     lr: list[float] = field(default_factory=list)
+    time: list[float] = field(default_factory=list)
     best_epoch: int = -1
     stop: str = "max_epochs"
     seconds: float = 0.0
@@ -37,7 +43,8 @@ class Adam:
     """Adam with ``schedule`` ("cosine" annealing to ``lr_min`` or "plateau": halve the rate
     after ``plateau`` epochs without validation improvement), gradient-norm clipping at
     ``clip`` and early stopping after ``max_fail`` epochs without validation improvement
-    (MATLAB's max_fail); the best validation state is restored."""
+    (MATLAB's max_fail); the best validation state is restored. ``max_seconds`` (MATLAB's
+    ``time``; default no limit) stops after the first epoch that ends past that wall time."""
 
     def __init__(
         self,
@@ -49,6 +56,7 @@ class Adam:
         clip: float | None = 1.0,
         max_fail: int = 20,
         weight_decay: float = 0.0,
+        max_seconds: float | None = None,
     ) -> None:
         self.lr = lr
         self.max_epochs = max_epochs
@@ -58,6 +66,7 @@ class Adam:
         self.clip = clip
         self.max_fail = max_fail
         self.weight_decay = weight_decay
+        self.max_seconds = max_seconds
 
     def _rate(self, epoch: int, current: float, since_best: int) -> float:
         if self.schedule == "cosine":
@@ -107,6 +116,7 @@ class Adam:
                     rs = [residual(params, b) for b in val_batches]
                 score = float(sum((r**2).sum() for r in rs) / sum(r.numel() for r in rs))
                 hist.validation.append(score)
+            hist.time.append(time.perf_counter() - start)
             if not math.isfinite(score):
                 hist.stop = "non-finite loss"
                 break
@@ -118,6 +128,9 @@ class Adam:
                 if val_batches and since_best >= self.max_fail:
                     hist.stop = "validation failures"
                     break
+            if self.max_seconds is not None and hist.time[-1] >= self.max_seconds:
+                hist.stop = "max_seconds"
+                break
         if best_state is not None:
             module.load_state_dict(best_state)
         hist.seconds = time.perf_counter() - start

@@ -40,8 +40,8 @@ from nnid.models.parametric import (
     ParametricFossen,
     ParametricModel,
     Regression,
-    _filter,
-    _settled,
+    filter_signal,
+    settled_rows,
 )
 from nnid.physics.added_mass import FORCES
 from nnid.trainers.least_squares import LeastSquares
@@ -87,21 +87,26 @@ def residual_force(
     parts = structure.base.copy()
     parts.damping = {}
     tau_bar = structure.equation_residual(parts, data, filter_lambda)
-    tau_bar[~_settled(data, 3.0 / filter_lambda)] = np.nan
+    tau_bar[~settled_rows(data, 3.0 / filter_lambda)] = np.nan
     return tau_bar, data
 
 
 def zoh_midpoint_inputs(log: pd.DataFrame) -> pd.DataFrame:
-    """The log with every input column replaced, per experiment, by the mean of consecutive
-    samples (the first sample kept): the force a zero-order-held input applies around t_k."""
+    """The log with every input column replaced by :func:`zoh_midpoint` of it."""
     cols = input_columns(log)
     out = log.copy()
-    for _, idx in experiments(out):
-        x = out.loc[idx, cols].to_numpy(np.float64)
-        y = x.copy()
-        y[1:] = 0.5 * (x[1:] + x[:-1])
-        out.loc[idx, cols] = y
+    out[cols] = zoh_midpoint(out[cols].to_numpy(np.float64), log)
     return out
+
+
+def zoh_midpoint(x: np.ndarray, log: pd.DataFrame) -> np.ndarray:
+    """Per experiment, the mean of consecutive samples (the first kept): the force a
+    zero-order-held input applies around t_k, which a smoothed acceleration at t_k sees."""
+    y = np.array(x, dtype=np.float64, copy=True)
+    for _, idx in experiments(log):
+        pos = log.index.get_indexer(idx)
+        y[pos[1:]] = 0.5 * (x[pos[1:]] + x[pos[:-1]])
+    return y
 
 
 def synthesis_data(
@@ -120,7 +125,7 @@ def synthesis_data(
     )
     xi = library(data["nu"])
     if filter_lambda is not None:
-        xi = _filter(data, xi, filter_lambda)
+        xi = filter_signal(data, xi, filter_lambda)
         xi[~np.isfinite(tau_bar).all(1)] = np.nan
     return xi, tau_bar
 

@@ -1,0 +1,511 @@
+"""Diagnosis: which missing effect explains the residual, how sure we are, and the loop.
+
+For the model at its current fit (the baseline first: the vehicle file with its damping
+structure re-identified), every candidate effect is added in turn and the model refitted by
+weighted least squares; the candidate is scored by
+
+- the drop of the *training* weighted residual sum of squares, tested with an F-test whose
+  degrees of freedom are shrunk by the residual's integrated autocorrelation time (smoothed
+  and filtered logs have far fewer independent samples than rows), at ``alpha`` divided by
+  the number of candidates tested (Bonferroni: hundreds of coupled terms are tried);
+- Caccia's percentile error of the new parameter, 100 σ/|θ| ≤ 51 % (Caccia eq. 12, L135);
+- the drop of the *held-out* force residual, total and in the DOF it explains most: a
+  candidate must improve held-out error by at least ``min_improvement``, not only fit noise.
+
+Linear-in-parameter candidates are screened all at once: adding column φ to a regression
+whose residual e is orthogonal to the baseline columns Φ_b gives, in closed form (Frisch-Waugh),
+θ = −φᵀWe / (φᵀWφ − bᵀA⁻¹b) with A = Φ_bᵀWΦ_b, b = Φ_bᵀWφ, and the refitted baseline moves by
+−A⁻¹b θ. Current, actuator lag and deadband enter nonlinearly: their value is found by a
+bounded one-dimensional search with the baseline refitted at each step (variable projection).
+The best admissible candidate is added, the model refitted, and the search repeated until
+nothing significant is left. pysindy's STLSQ over all linear candidates at once gives a second
+opinion.
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass, field
+
+import numpy as np
+import pandas as pd
+from scipy.optimize import minimize_scalar
+from scipy.stats import f as f_dist
+
+from nnid.datasets.log import VELOCITY
+from nnid.evaluation.metrics import excited_dofs, nrmse, rmse, warmup_mask
+from nnid.evaluation.prediction import predict_states
+from nnid.loop.effects import Candidate, nominal_forces
+from nnid.models.damping_library import evaluate_terms, term_codes
+from nnid.models.parametric import (
+    ParametricFossen,
+    Parts,
+    filter_signal,
+    log_arrays,
+    relative_velocity,
+    settled_rows,
+    vehicle_with,
+)
+from nnid.physics.added_mass import DOFS, FORCES
+from nnid.physics.damping import parse_coefficient_key
+from nnid.trainers.least_squares import ExcitationWarning, solve_least_squares
+from nnid.trainers.sindy import compress
+from nnid.trainers.synthesis import zoh_midpoint
+
+INSIGNIFICANT_PERCENT = 100.0 / 1.96
+_CHUNK = 64
+
+
+@dataclass
+class Fit:
+    """The model at one step of the loop: the vehicle with every fitted value written in."""
+
+    vehicle: object
+    unknowns: list[str]
+    theta: np.ndarray
+    stderr: np.ndarray
+    phi: np.ndarray  # [N, 6, P] training columns of the unknowns
+    phi_val: np.ndarray  # [N_val, 6, P]
+    e: np.ndarray  # [N, 6] training equation residual
+    e_val: np.ndarray  # [N_val, 6]
+    rss: float  # weighted training residual sum of squares
+
+
+@dataclass
+class Scored:
+    """A candidate after its refit: the row of the candidate table."""
+
+    candidate: Candidate
+    value: float
+    stderr: float
+    p_value: float
+    f_stat: float
+    improvement: float  # held-out weighted force residual, fraction removed
+    dof_improvement: dict[str, float]
+    percentile_error: float
+    admissible: bool = False
+    reason: str = ""
+    refit: dict[str, float] = field(default_factory=dict)  # baseline unknowns after the refit
+    free_run: tuple[float | None, float | None] | None = None  # held-out total, before/after
+
+    @property
+    def name(self) -> str:
+        return self.candidate.name
+
+    def as_dict(self) -> dict:
+        return {
+            "effect": self.name,
+            "meaning": self.candidate.meaning,
+            "params": {"value": self.value},
+            "stderr": {"value": self.stderr if np.isfinite(self.stderr) else None},
+            "significance": self.p_value,
+            "f_statistic": self.f_stat,
+            "percentile_error": self.percentile_error
+            if np.isfinite(self.percentile_error)
+            else None,
+            "improvement": self.improvement,
+            "improvement_per_dof": self.dof_improvement,
+            "free_run_nrmse": None
+            if self.free_run is None
+            else {"before": self.free_run[0], "after": self.free_run[1]},
+            "admissible": self.admissible,
+            "reason": self.reason,
+        }
+
+
+@dataclass
+class Step:
+    """One pass of the loop: the ranked candidates and what was added."""
+
+    ranked: list[Scored]
+    added: Scored | None
+    sindy: list[str]
+
+
+class Workspace:
+    """Training and held-out arrays of a log, and the fixed per-DOF weights of the loop."""
+
+    def __init__(
+        self,
+        train: pd.DataFrame,
+        val: pd.DataFrame,
+        vehicle,
+        filter_lambda: float | None = 1.0,
+        zoh_midpoint: bool = True,
+    ) -> None:
+        self.train, self.val = train, val
+        self.filter_lambda = filter_lambda
+        self.zoh_midpoint = zoh_midpoint
+        self.data = log_arrays(train, vehicle)
+        self.data_val = log_arrays(val, vehicle)
+        self.weights: np.ndarray | None = None
+        self.tau_corr = 1.0
+        self._cache: dict[tuple, dict[str, np.ndarray]] = {}
+
+    def arrays(self, vehicle, part: str = "train") -> dict[str, np.ndarray]:
+        """The arrays with the nominal forces recomputed for ``vehicle`` (its lag, deadband)."""
+        log, data = (self.train, self.data) if part == "train" else (self.val, self.data_val)
+        out = dict(data)
+        out["tau"] = nominal_forces(log, vehicle)
+        if self.zoh_midpoint and vehicle.actuator_lag == 0:
+            # a held input steps at each sample; a lagged force is continuous, seen as it is
+            out["tau"] = zoh_midpoint(out["tau"], log)
+        return out
+
+    def columns(self, vehicle, names: list[str], part: str) -> np.ndarray:
+        """Regressor columns [N, 6, P] of parameters at ``vehicle``, cached: a column of a
+        parameter the model is affine in depends only on the data, the current, the lag and
+        the deadband, so later passes reuse it."""
+        key = (part, tuple(vehicle.current), vehicle.actuator_lag, vehicle.deadband)
+        cache = self._cache.setdefault(key, {})
+        missing = [n for n in names if n not in cache]
+        if missing:
+            cols, _ = _columns(vehicle, missing, self.arrays(vehicle, part), self.filter_lambda)
+            cache.update({n: cols[:, :, k] for k, n in enumerate(missing)})
+        return np.stack([cache[n] for n in names], 2)
+
+    def filtered(self, x: np.ndarray, data: dict[str, np.ndarray]) -> np.ndarray:
+        """A regressor column block [N, ...] in the form the regression uses: filtered by
+        F(s) and cut to the settled rows when ``filter_lambda`` is set."""
+        if self.filter_lambda is None:
+            return x
+        keep = settled_rows(data, 3.0 / self.filter_lambda)
+        return filter_signal(data, x, self.filter_lambda)[keep]
+
+
+def _columns(
+    vehicle, names: list[str], data: dict, filter_lambda: float | None
+) -> tuple[np.ndarray, np.ndarray]:
+    """(Φ [N, 6, P], R(0) [N, 6]) of the unknowns ``names`` at ``vehicle``."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        reg = ParametricFossen(vehicle, names).regression(data, filter_lambda)
+    n = reg.n_samples
+    return reg.phi.reshape(n, 6, len(names)), -reg.y.reshape(n, 6)
+
+
+def _wss(x: np.ndarray, w: np.ndarray) -> float:
+    """Σ_d w_d Σ_n x[n, d]² over finite samples."""
+    return float(np.nansum(x**2 * w))
+
+
+def refit(ws: Workspace, vehicle, unknowns: list[str], held_out: bool = True) -> Fit:
+    """Weighted least squares of ``unknowns`` at ``vehicle``; the weights are fixed by the
+    first (baseline) fit: 1/σ̂²_dof of its ordinary-least-squares residual. Without
+    ``held_out`` the held-out arrays are left empty (for searches that need only the RSS)."""
+    data = ws.arrays(vehicle)
+    phi, r0 = _columns(vehicle, unknowns, data, ws.filter_lambda)
+    n, p = r0.shape[0], len(unknowns)
+    if held_out:
+        phi_v, r0_v = _columns(vehicle, unknowns, ws.arrays(vehicle, "val"), ws.filter_lambda)
+    else:
+        phi_v, r0_v = np.zeros((0, 6, p)), np.zeros((0, 6))
+    a_mat, y = phi.reshape(n * 6, p), -r0.reshape(-1)
+    if ws.weights is None:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", ExcitationWarning)
+            est = solve_least_squares(a_mat, y, names=unknowns)
+        e = (a_mat @ np.nan_to_num(est.theta) - y).reshape(n, 6)
+        var = np.nanvar(e, axis=0)
+        ws.weights = 1.0 / np.where(var > 0, var, 1.0)
+    w_rows = np.tile(ws.weights, n)
+    est = solve_least_squares(a_mat, y, w_rows, names=unknowns)
+    theta = np.nan_to_num(est.theta)
+    e = (a_mat @ theta - y).reshape(n, 6)
+    e_val = (phi_v.reshape(-1, p) @ theta + r0_v.reshape(-1)).reshape(-1, 6)
+    fitted = vehicle_with(vehicle, dict(zip(unknowns, theta, strict=True)))
+    return Fit(fitted, list(unknowns), theta, est.stderr, phi, phi_v, e, e_val, _wss(e, ws.weights))
+
+
+def correlation_time(e: np.ndarray, dofs: tuple[str, ...] = DOFS, max_lag: int = 2000) -> float:
+    """Integrated autocorrelation time 1 + 2 Σ ρ_k (summed until ρ first drops below 0.05),
+    averaged over the DOF equations: how many rows one independent sample is worth."""
+    taus = []
+    for d in [DOFS.index(x) for x in dofs]:
+        r = e[:, d][np.isfinite(e[:, d])]
+        if r.size < 3 or not np.any(r):
+            continue
+        r = r - r.mean()
+        spec = np.fft.rfft(r, 2 * r.size)
+        acf = np.fft.irfft(spec * np.conj(spec))[: min(r.size, max_lag)]
+        acf = acf / acf[0]
+        below = np.flatnonzero(acf < 0.05)
+        cut = below[0] if below.size else acf.size
+        taus.append(1.0 + 2.0 * float(np.sum(acf[1:cut])))
+    return max(float(np.mean(taus)), 1.0) if taus else 1.0
+
+
+def screen(
+    ws: Workspace, fit: Fit, cands: list[Candidate], cols: np.ndarray, cols_val: np.ndarray
+) -> list[Scored]:
+    """Score linear candidates whose columns at the current fit are ``cols`` [N, 6, K] (and
+    ``cols_val``): the exact joint refit of each with the fit's unknowns, in closed form."""
+    w = ws.weights
+    n, _, p = fit.phi.shape
+    a_mat = np.einsum("ndp,d,ndq->pq", fit.phi, w, fit.phi)
+    a_inv = np.linalg.pinv(a_mat, hermitian=True)
+    s = np.einsum("ndk,d,nd->k", cols, w, np.nan_to_num(fit.e))
+    b = np.einsum("ndp,d,ndk->pk", fit.phi, w, cols)
+    q = np.einsum("ndk,d,ndk->k", cols, w, cols)
+    bb = a_inv @ b
+    denom = q - np.einsum("pk,pk->k", b, bb)
+    ok = denom > 1e-9 * np.maximum(q, 1e-300)
+    denom = np.where(ok, denom, np.inf)
+    theta = -s / denom
+    drss = s**2 / denom
+    dof_resid = n * 6 - p - 1
+    sigma2 = np.maximum(fit.rss - drss, 1e-300) / max(dof_resid, 1)
+    f_stat = drss / (sigma2 * ws.tau_corr)
+    n_eff = max(n * 6 / ws.tau_corr - p - 1, 1.0)
+    p_val = f_dist.sf(f_stat, 1, n_eff)
+    se = np.sqrt(sigma2 * ws.tau_corr / denom)
+    # held-out residual after the joint refit: e_v + θ (c_v − Φ_b,v A⁻¹ b)
+    delta = cols_val - np.einsum("ndp,pk->ndk", fit.phi_val, bb)
+    e_new = np.nan_to_num(fit.e_val)[:, :, None] + theta[None, None, :] * delta
+    before = np.nansum(fit.e_val**2, axis=0)  # [6]
+    after = np.sum(e_new**2, axis=0)  # [6, K]
+    total = 1.0 - (w @ after) / float(w @ before)
+    per_dof = 1.0 - after / np.where(before > 0, before, np.inf)[:, None]
+    out = []
+    for k, cand in enumerate(cands):
+        if not ok[k]:
+            continue
+        scale = cand.value_scale(fit.vehicle)
+        value = cand.value(float(theta[k]), fit.vehicle)
+        err = float(se[k] * abs(scale))
+        refit_values = dict(zip(fit.unknowns, fit.theta - bb[:, k] * theta[k], strict=True))
+        out.append(
+            Scored(
+                cand,
+                value,
+                err,
+                float(p_val[k]),
+                float(f_stat[k]),
+                float(total[k]),
+                {d: float(per_dof[i, k]) for i, d in enumerate(DOFS)},
+                float(100 * se[k] / abs(theta[k])) if theta[k] != 0 else float("inf"),
+                refit=refit_values,
+            )
+        )
+    return out
+
+
+def _damping_chunk(cands: list[Candidate], data: dict, vehicle) -> np.ndarray:
+    """Columns [N, 6, K] of damping candidates: R holds −τ_D, so "F:term" is −ξ_term(ν_r) in
+    row F."""
+    split = [parse_coefficient_key(c.parameter) for c in cands]
+    nu_r = relative_velocity(Parts.from_vehicle(vehicle), data)
+    xi = evaluate_terms(nu_r, term_codes([t for _, t in split]), vehicle.damping.u_c)
+    cols = np.zeros((xi.shape[0], 6, len(cands)))
+    for k, (force, _) in enumerate(split):
+        cols[:, FORCES.index(force), k] = -xi[:, k]
+    return cols
+
+
+def screen_linear(ws: Workspace, fit: Fit, cands: list[Candidate]) -> list[Scored]:
+    """All linear candidates, damping ones from one basis evaluation, in chunks."""
+    data, data_val = ws.arrays(fit.vehicle), ws.arrays(fit.vehicle, "val")
+    damping = [c for c in cands if ":" in c.parameter]
+    other = [c for c in cands if ":" not in c.parameter]
+    out: list[Scored] = []
+    for start in range(0, len(damping), _CHUNK):
+        chunk = damping[start : start + _CHUNK]
+        cols = ws.filtered(_damping_chunk(chunk, data, fit.vehicle), data)
+        cols_v = ws.filtered(_damping_chunk(chunk, data_val, fit.vehicle), data_val)
+        out += screen(ws, fit, chunk, cols, cols_v)
+    if other:
+        names = [c.parameter for c in other]
+        cols = ws.columns(fit.vehicle, names, "train")
+        cols_v = ws.columns(fit.vehicle, names, "val")
+        out += screen(ws, fit, other, cols, cols_v)
+    return out
+
+
+def _sensitivity(ws: Workspace, vehicle, cand: Candidate, a: float, b: float) -> list[np.ndarray]:
+    """dR/dv of the effect between values ``a`` and ``b`` with everything else held:
+    columns [N, 6, 1] on the training and held-out parts."""
+    cols = []
+    for part in ("train", "val"):
+        r = []
+        for v in (a, b):
+            veh = cand.augment(vehicle, v)
+            _, r0 = _columns(veh, [], ws.arrays(veh, part), ws.filter_lambda)
+            r.append(r0)
+        cols.append(((r[1] - r[0]) / (b - a))[:, :, None])
+    return cols
+
+
+def search_nonlinear(
+    ws: Workspace, fit: Fit, cand: Candidate, prescreen_p: float = 1e-3
+) -> Scored | None:
+    """Bounded 1-D search of the effect value with the fit's unknowns refitted at each step;
+    its standard error from the linearised column at the optimum (variable projection).
+
+    The search is run only if the effect, linearised at its current value, already explains a
+    significant part of the residual (``prescreen_p``); otherwise the linearised score is
+    returned: the search costs dozens of refits, the pre-screen two residual evaluations."""
+    lo, hi = cand.bounds
+    v0 = cand.current_value(fit.vehicle)
+    h = 0.02 * (hi - lo)
+    a, b = (v0 - h / 2, v0 + h / 2) if lo < v0 - h / 2 else (v0, v0 + h)
+    pre = screen(ws, fit, [cand], *_sensitivity(ws, fit.vehicle, cand, a, b))
+    if not pre or pre[0].p_value > prescreen_p:
+        for s in pre:
+            s.value = v0 + (s.value if np.isfinite(s.value) else 0.0)
+        return pre[0] if pre else None
+
+    def model_at(value: float):
+        return cand.augment(fit.vehicle, value)
+
+    def rss(value: float) -> float:
+        try:
+            return refit(ws, model_at(value), fit.unknowns, held_out=False).rss
+        except ValueError:
+            return np.inf
+
+    res = minimize_scalar(
+        rss, bounds=(lo, hi), method="bounded", options={"xatol": 1e-3 * (hi - lo), "maxiter": 30}
+    )
+    value = float(res.x)
+    best = refit(ws, model_at(value), fit.unknowns)
+    if not best.rss < fit.rss:
+        return None
+    h = 1e-3 * (hi - lo)
+    lo_v, hi_v = max(value - h, lo), min(value + h, hi)
+    if hi_v <= lo_v:
+        return None
+    fitted = vehicle_with(fit.vehicle, dict(zip(best.unknowns, best.theta, strict=True)))
+    col = _sensitivity(ws, fitted, cand, lo_v, hi_v)
+    # score the linearised column at the optimum, then put the exact numbers back in
+    scored = screen(ws, best, [cand], col[0], col[1])
+    drss = fit.rss - best.rss
+    dof_resid = best.e.size - len(best.unknowns) - 1
+    sigma2 = best.rss / max(dof_resid, 1)
+    f_stat = drss / (sigma2 * ws.tau_corr)
+    n_eff = max(best.e.size / ws.tau_corr - len(best.unknowns) - 1, 1.0)
+    before = np.nansum(fit.e_val**2, axis=0)
+    after = np.nansum(best.e_val**2, axis=0)
+    w = ws.weights
+    se = scored[0].stderr if scored else float("nan")
+    return Scored(
+        cand,
+        value,
+        se,
+        float(f_dist.sf(f_stat, 1, n_eff)),
+        float(f_stat),
+        float(1.0 - (w @ after) / (w @ before)),
+        {
+            d: float(1.0 - after[i] / before[i]) if before[i] > 0 else 0.0
+            for i, d in enumerate(DOFS)
+            if d in ws.dofs
+        },
+        float(100 * se / abs(value)) if value != 0 else float("inf"),
+        refit=dict(zip(best.unknowns, best.theta, strict=True)),
+    )
+
+
+def sindy_opinion(
+    ws: Workspace, fit: Fit, scored: list[Scored], share: float = 0.01, top: int = 40
+) -> list[str]:
+    """pysindy STLSQ over the strongest linear candidates at once (columns made orthogonal to
+    the fit's unknowns and scaled to unit weighted norm): the effects it keeps. The threshold
+    asks a term to explain ``share`` of the weighted training residual on its own."""
+    import pysindy as ps
+
+    lin = sorted((s for s in scored if s.candidate.linear), key=lambda s: -s.improvement)[:top]
+    if not lin:
+        return []
+    data = ws.arrays(fit.vehicle)
+    damping = [s.candidate for s in lin if ":" in s.candidate.parameter]
+    other = [s.candidate for s in lin if ":" not in s.candidate.parameter]
+    blocks, order = [], []
+    if damping:
+        blocks.append(ws.filtered(_damping_chunk(damping, data, fit.vehicle), data))
+        order += damping
+    if other:
+        blocks.append(ws.columns(fit.vehicle, [c.parameter for c in other], "train"))
+        order += other
+    cols = np.concatenate(blocks, 2)
+    sw = np.sqrt(ws.weights)
+    n, _, p = fit.phi.shape
+    x = (cols * sw[None, :, None]).reshape(n * 6, -1)
+    base = (fit.phi * sw[None, :, None]).reshape(n * 6, p)
+    target = -(np.nan_to_num(fit.e) * sw).reshape(-1)
+    x = x - base @ np.linalg.lstsq(base, x, rcond=None)[0]
+    norms = np.linalg.norm(x, axis=0)
+    x = x / np.where(norms > 0, norms, 1.0)
+    # ‖Rξ − b‖² differs from ‖xξ − y‖²/N by a constant: the same solutions, k rows not N
+    r, b, _ = compress(x, target[:, None])
+    threshold = np.sqrt(share) * np.linalg.norm(target)
+    opt = ps.STLSQ(threshold=threshold, alpha=0.0, max_iter=20)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)  # "eliminated all coefficients" is an answer
+        opt.fit(r, b)
+    coef = np.ravel(opt.coef_)
+    return [c.name for c, v in zip(order, coef, strict=True) if v != 0]
+
+
+def free_run_errors(vehicle, log: pd.DataFrame, warmup_s: float) -> dict[str, float | None]:
+    """Free-run velocity NRMSE on ``log`` per excited DOF, and their mean ``total``."""
+    return _velocity_errors(vehicle, log, "free_run", warmup_s)
+
+
+def one_step_errors(vehicle, log: pd.DataFrame, warmup_s: float) -> dict[str, float | None]:
+    return _velocity_errors(vehicle, log, "one_step", warmup_s)
+
+
+def _velocity_errors(vehicle, log, mode, warmup_s):
+    dofs = excited_dofs(log, [c for c in VELOCITY if c in log])
+    with np.errstate(all="ignore"):
+        pred = predict_states(Parts.from_vehicle(vehicle), log, nominal_forces(log, vehicle), mode)
+    mask = warmup_mask(log, warmup_s)
+    out: dict[str, float | None] = {}
+    for d in dofs:
+        value = nrmse(log[d].to_numpy()[mask], pred[d].to_numpy()[mask])
+        diverged = not np.isfinite(pred[d].to_numpy()[mask]).all()
+        out[d] = None if diverged or not np.isfinite(value) else value
+    finite = [v for v in out.values() if v is not None]
+    out["total"] = float(np.mean(finite)) if finite and len(finite) == len(dofs) else None
+    return out
+
+
+def force_residual(ws: Workspace, vehicle, part: str = "val") -> np.ndarray:
+    """R = M ν̇ − (τ_eff + b − Cν + τ_D − g) per sample ``[N, 6]`` with Savitzky-Golay
+    accelerations, unfiltered: McCarter's τ̄ (eq. 4.4) minus the model's damping."""
+    data = ws.arrays(vehicle, part)
+    _, r0 = _columns(vehicle, [], data, None)
+    return r0
+
+
+def force_rmse(ws: Workspace, vehicle) -> dict[str, float]:
+    """Held-out force residual RMS per DOF (N, N m); ``total``: the mean over the DOFs with
+    an input of the RMS divided by the RMS of that input force (forces and moments differ in
+    units, so only the ratios can be averaged)."""
+    r = force_residual(ws, vehicle)
+    out = {d: rmse(np.zeros(len(r)), r[:, i]) for i, d in enumerate(DOFS) if d in ws.dofs}
+    tau = ws.arrays(vehicle, "val")["tau"]
+    rel = [
+        out[d] / rmse(np.zeros(len(tau)), tau[:, i])
+        for i, d in enumerate(DOFS)
+        if d in ws.dofs and np.any(tau[:, i])
+    ]
+    out["total"] = float(np.mean(rel)) if rel else float("nan")
+    return out
+
+
+__all__ = [
+    "Fit",
+    "Scored",
+    "Step",
+    "Workspace",
+    "correlation_time",
+    "force_residual",
+    "force_rmse",
+    "free_run_errors",
+    "one_step_errors",
+    "refit",
+    "screen",
+    "screen_linear",
+    "search_nonlinear",
+    "sindy_opinion",
+]

@@ -1,0 +1,344 @@
+"""The residual loop as an estimator: baseline, diagnose, augment, refit, before and after.
+
+``ResidualLoop(vehicle).fit(log)`` splits the log (whole experiments held out when there are
+three or more, else the last block of each), derives velocities and accelerations where they
+are missing (Savitzky-Golay), fits the baseline (the vehicle file with its damping structure
+re-identified), then repeats: rank every candidate effect by how much of the held-out residual
+it explains when added and refitted (:mod:`nnid.loop.diagnose`), add the best admissible one,
+refit; until none is significant or ``max_effects`` are in. Errors before and after are
+measured on the held-out part only: free-run and one-step velocity NRMSE per DOF, and the
+force residual RMS per DOF (McCarter eq. 4.4 minus the model's damping).
+"""
+
+from __future__ import annotations
+
+import time
+import warnings
+
+import numpy as np
+import pandas as pd
+
+from nnid.datasets.log import ANGLES
+from nnid.datasets.splits import split_log
+from nnid.loop.diagnose import (
+    Fit,
+    Scored,
+    Step,
+    Workspace,
+    correlation_time,
+    force_residual,
+    force_rmse,
+    free_run_errors,
+    one_step_errors,
+    refit,
+    screen_linear,
+    search_nonlinear,
+    sindy_opinion,
+)
+from nnid.loop.effects import candidates, input_channels, nominal_forces
+from nnid.loop.residuals import correlation_analysis
+from nnid.models.parametric import Parts, vehicle_with
+from nnid.physics.added_mass import DOFS, FORCES
+
+
+class ResidualLoop:
+    """Find effects the vehicle file lacks in a log, add them, and report before and after.
+
+    Parameters: ``alpha`` family-wise significance of the F-test (Bonferroni over the
+    candidates tested), ``min_improvement`` the fraction of held-out residual a candidate must
+    remove in the DOF it explains most, ``max_effects`` how many effects at most,
+    ``validation`` the held-out fraction, ``coupled`` whether coupled damping terms of the
+    basis library are candidates, ``warmup_s`` excluded from every free-run score.
+    """
+
+    def __init__(
+        self,
+        vehicle,
+        alpha: float = 0.01,
+        min_improvement: float = 0.005,
+        max_effects: int = 3,
+        validation: float = 0.3,
+        coupled: bool = True,
+        nonlinear: bool = True,
+        savgol_window: float = 1.0,
+        savgol_order: int = 4,
+        warmup_s: float = 2.0,
+        min_free_run_gain: float = 0.05,
+        filter_lambda: float | None = 1.0,
+        zoh_midpoint: bool = True,
+        free_run_checks: int = 10,
+        report_candidates: int = 100,
+        dofs: tuple[str, ...] | None = None,
+        validation_experiments: list[str] | None = None,
+    ) -> None:
+        self.vehicle = vehicle
+        self.alpha = alpha
+        self.min_improvement = min_improvement
+        self.max_effects = max_effects
+        self.validation = validation
+        self.coupled = coupled
+        self.nonlinear = nonlinear
+        self.savgol_window = savgol_window
+        self.savgol_order = savgol_order
+        self.warmup_s = warmup_s
+        self.min_free_run_gain = min_free_run_gain
+        self.filter_lambda = filter_lambda
+        self.zoh_midpoint = zoh_midpoint
+        self.free_run_checks = free_run_checks
+        self.report_candidates = report_candidates
+        self.dofs = dofs
+        self.validation_experiments = validation_experiments
+
+    # -- data -----------------------------------------------------------------------------------
+    def _prepare(self, log: pd.DataFrame) -> pd.DataFrame:
+        from nnid.datasets.cleaning import CleaningReport
+        from nnid.datasets.preprocess import derive_accelerations, derive_velocities
+
+        self.cleaning_ = CleaningReport(source="loop data")
+        if any(d not in log for d in DOFS) and all(a in log for a in ANGLES):
+            log = derive_velocities(log, self.savgol_window, self.savgol_order, self.cleaning_)
+        if any("d" + d not in log for d in DOFS):
+            log = derive_accelerations(log, self.savgol_window, self.savgol_order, self.cleaning_)
+        return log
+
+    def _split(self, log: pd.DataFrame) -> tuple[pd.DataFrame, pd.DataFrame]:
+        frac = (1.0 - self.validation, self.validation, 0.0)
+        if self.validation_experiments:
+            names = list(dict.fromkeys(log["experiment"])) if "experiment" in log else []
+            unknown = [n for n in self.validation_experiments if n not in names]
+            if unknown:
+                raise ValueError(f"validation experiments not in the log: {', '.join(unknown)}")
+            held = self.validation_experiments
+            assignment = {
+                "train": [n for n in names if n not in held],
+                "validation": list(held),
+                "test": [],
+            }
+            split = split_log(log, "experiment", frac, assignment)
+            self.split_ = split.record
+            return split.train, split.validation
+        n_exp = log["experiment"].nunique() if "experiment" in log else 1
+        split = split_log(log, "experiment" if n_exp >= 3 else "block", frac)
+        if len(split.validation) == 0 or len(split.train) == 0:
+            split = split_log(log, "block", frac)
+        self.split_ = split.record
+        return split.train, split.validation
+
+    # -- the loop -------------------------------------------------------------------------------
+    def fit(self, log: pd.DataFrame, progress=None) -> ResidualLoop:
+        """Run the loop on ``log``; ``progress(message)`` is called as each pass starts."""
+        start = time.perf_counter()
+        say = progress or (lambda message: None)
+        say("fitting the baseline")
+        input_channels(log, self.vehicle)  # a clear error before any work
+        log = self._prepare(log)
+        train, val = self._split(log)
+        self.dofs_ = tuple(self.dofs) if self.dofs else tuple(d for d in DOFS if d in log)
+        if not self.dofs_:
+            raise ValueError("the log has no body velocity u v w p q r, and no pose to derive one")
+        ws = Workspace(train, val, self.vehicle, self.filter_lambda, self.zoh_midpoint, self.dofs_)
+        unknowns = list(Parts.from_vehicle(self.vehicle).damping)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            fit = refit(ws, self.vehicle, unknowns)
+        self.warnings_ = [str(w.message) for w in caught]
+        ws.tau_corr = correlation_time(fit.e, self.dofs_)
+        self.baseline_ = fit
+        self.steps_: list[Step] = []
+        added: list[Scored] = []
+        pool = [
+            c
+            for c in candidates(self.vehicle, train, self.coupled)
+            if set(c.dofs) & set(self.dofs_)
+        ]
+        while len(added) < self.max_effects:
+            say(f"pass {len(added) + 1}: testing {len(pool)} candidate effects")
+            step = self._step(ws, fit, pool, added)
+            self.steps_.append(step)
+            if step.added is None:
+                break
+            added.append(step.added)
+            fit = self._augment(ws, fit, step.added)
+            pool = [c for c in pool if c.name != step.added.candidate.name]
+        self.fit_ = fit
+        self.added_ = added
+        self.before_ = self._errors(ws, self.baseline_)
+        self.after_ = self._errors(ws, fit)
+        self.residuals_before_ = self._correlations(ws, self.baseline_)
+        self.residuals_after_ = self._correlations(ws, fit)
+        self.workspace_ = ws
+        self.seconds_ = time.perf_counter() - start
+        return self
+
+    def _step(self, ws: Workspace, fit: Fit, pool, added) -> Step:
+        known = set(fit.unknowns)
+        linear = [c for c in pool if c.linear and c.parameter not in known]
+        scored = screen_linear(ws, fit, linear)
+        if self.nonlinear:
+            for cand in pool:
+                if not cand.linear:
+                    s = search_nonlinear(ws, fit, cand)
+                    if s is not None:
+                        scored.append(s)
+        tested = max(len(linear) + sum(not c.linear for c in pool), 1)
+        for s in scored:
+            self._judge(s, tested, fit)
+        scored.sort(key=lambda s: -s.improvement)
+        try:
+            sindy = sindy_opinion(ws, fit, scored)
+        except Exception as exc:  # a second opinion must not stop the loop
+            sindy = [f"(pysindy failed: {exc})"]
+        chosen = self._free_run_gate(ws, fit, [s for s in scored if s.admissible])
+        return Step(scored, chosen, sindy)
+
+    def _free_run_gate(self, ws: Workspace, fit: Fit, admissible: list[Scored]) -> Scored | None:
+        """The best-ranked admissible candidate that also improves the held-out free run.
+
+        A column built from measured accelerations or velocities carries their noise, and so
+        does the residual: such a candidate "explains" held-out noise (errors in variables)
+        while its simulation gets worse. The free run, driven by the inputs alone, cannot be
+        fooled that way."""
+        before = free_run_errors(fit.vehicle, ws.val, self.warmup_s)["total"]
+        for s in admissible[: self.free_run_checks]:
+            try:
+                vehicle = s.candidate.augment(vehicle_with(fit.vehicle, s.refit), s.value)
+            except ValueError:
+                continue
+            after = free_run_errors(vehicle, ws.val, self.warmup_s)["total"]
+            s.free_run = (before, after)
+            if after is not None and (
+                before is None or after < before * (1 - self.min_free_run_gain)
+            ):
+                s.reason = "added"
+                return s
+            s.admissible = False
+            s.reason = f"held-out free run does not improve ({_fmt(before)} -> {_fmt(after)})"
+        return None
+
+    def _judge(self, s: Scored, tested: int, fit: Fit) -> None:
+        """Admissible: significant after Bonferroni, a significant parameter (Caccia), a
+        held-out improvement, and a vehicle that stays physical."""
+        best_dof = max(s.dof_improvement.values(), default=0.0)
+        if s.candidate.kind == "restoring_offset":
+            gain = s.dof_improvement
+            dof = "p" if gain.get("p", -np.inf) >= gain.get("q", -np.inf) else "q"
+            s.candidate = s.candidate.renamed(f"restoring_offset.{FORCES[DOFS.index(dof)]}")
+        if not s.p_value < self.alpha / tested:
+            s.reason = f"not significant (p = {s.p_value:.2g} ≥ {self.alpha / tested:.2g})"
+        elif not s.percentile_error <= 100.0 / 1.96:
+            s.reason = f"parameter uncertain ({s.percentile_error:.0f} % > 51 %)"
+        elif not (best_dof >= self.min_improvement and s.improvement > 0):
+            s.reason = (
+                f"held-out residual falls by {100 * best_dof:.1f} % at most "
+                f"(< {100 * self.min_improvement:.0f} %)"
+            )
+        else:
+            try:
+                s.candidate.augment(fit.vehicle, s.value)
+            except ValueError as exc:
+                s.reason = f"not physical: {str(exc).splitlines()[0]}"
+                return
+            s.admissible = True
+            s.reason = "passes the tests; ranked below the one added"
+
+    def _augment(self, ws: Workspace, fit: Fit, s: Scored) -> Fit:
+        """Add the effect, make its parameter an unknown (linear ones), refit everything."""
+        vehicle = vehicle_with(fit.vehicle, s.refit)
+        vehicle = s.candidate.augment(vehicle, s.value)
+        unknowns = list(fit.unknowns)
+        if s.candidate.linear:
+            unknowns.append(s.candidate.parameter)
+        return refit(ws, vehicle, unknowns)
+
+    # -- scores ---------------------------------------------------------------------------------
+    def _errors(self, ws: Workspace, fit: Fit) -> dict:
+        """Held-out errors of a fit: velocity NRMSE (free run, one step), force residual RMS."""
+        return {
+            "free_run_nrmse": free_run_errors(fit.vehicle, ws.val, self.warmup_s),
+            "one_step_nrmse": one_step_errors(fit.vehicle, ws.val, self.warmup_s),
+            "force_rmse": force_rmse(ws, fit.vehicle),
+        }
+
+    def _correlations(self, ws: Workspace, fit: Fit) -> dict:
+        """MATLAB ``resid`` analysis of the held-out force residual against the input forces."""
+        r = force_residual(ws, fit.vehicle)
+        tau = nominal_forces(ws.val, fit.vehicle)
+        inputs = {f"tau_{f}": tau[:, i] for i, f in enumerate(FORCES) if np.any(tau[:, i])}
+        exp = ws.data_val["experiment"]
+        return {
+            d: correlation_analysis(r[:, i], inputs, exp)
+            for i, d in enumerate(DOFS)
+            if d in self.dofs_
+        }
+
+    # -- outputs --------------------------------------------------------------------------------
+    def free_runs(self) -> tuple[np.ndarray, pd.DataFrame, pd.DataFrame, pd.DataFrame, list[str]]:
+        """Held-out time, measured velocities, baseline and final free runs, excited DOFs."""
+        from nnid.evaluation.metrics import excited_dofs
+        from nnid.evaluation.prediction import predict_states
+
+        val = self.workspace_.val
+        runs = []
+        for fit in (self.baseline_, self.fit_):
+            tau = nominal_forces(val, fit.vehicle)
+            with np.errstate(all="ignore"):
+                runs.append(predict_states(Parts.from_vehicle(fit.vehicle), val, tau, "free_run"))
+        dofs = excited_dofs(val, [d for d in DOFS if d in val])
+        return val["t"].to_numpy(), val, runs[0], runs[1], dofs
+
+    @property
+    def added(self) -> list[str]:
+        return [s.name for s in self.added_]
+
+    def as_dict(self) -> dict:
+        """``loop.json`` (ARCHITECTURE.md): baseline, before, ranked candidates, added, after."""
+        first = self.steps_[0] if self.steps_ else Step([], None, [])
+        return {
+            "vehicle": self.vehicle.name,
+            "baseline": f"{self.vehicle.name}: vehicle file, damping structure refitted "
+            f"({len(self.baseline_.unknowns)} coefficients)",
+            "before": self.before_,
+            "candidates": [s.as_dict() for s in first.ranked[: self.report_candidates]],
+            "candidates_tested": len(first.ranked),
+            "added": self.added,
+            "after": self.after_,
+            "steps": [
+                {
+                    "added": None if st.added is None else st.added.as_dict(),
+                    "top": [s.as_dict() for s in st.ranked[:10]],
+                    "sindy": st.sindy,
+                }
+                for st in self.steps_
+            ],
+            "baseline_params": {
+                n: {"value": float(v), "stderr": float(s) if np.isfinite(s) else None}
+                for n, v, s in zip(
+                    self.baseline_.unknowns,
+                    self.baseline_.theta,
+                    self.baseline_.stderr,
+                    strict=True,
+                )
+            },
+            "residual_analysis": {
+                "before": {d: c.as_dict() for d, c in self.residuals_before_.items()},
+                "after": {d: c.as_dict() for d, c in self.residuals_after_.items()},
+            },
+            "settings": {
+                "alpha": self.alpha,
+                "max_effects": self.max_effects,
+                "autocorrelation_time": self.workspace_.tau_corr,
+                "split": self.split_,
+                "warmup_s": self.warmup_s,
+                "dofs": list(self.dofs_),
+                "min_improvement": self.min_improvement,
+                "min_free_run_gain": self.min_free_run_gain,
+                "filter_lambda": self.filter_lambda,
+                "zoh_midpoint": self.zoh_midpoint,
+            },
+            "warnings": self.warnings_,
+            "seconds": self.seconds_,
+        }
+
+
+def _fmt(x: float | None) -> str:
+    return "diverged" if x is None else f"{x:.3f}"

@@ -1,0 +1,311 @@
+"""The report of ``nnid loop``: what the residual showed, what was added and why, and the
+held-out errors before and after, in sentences a person can repeat.
+
+One self-contained HTML page (figures embedded) and a Markdown twin with the same tables.
+"""
+
+from __future__ import annotations
+
+import html
+import math
+
+import numpy as np
+
+from nnid.physics.effects import parse_effect
+from nnid.reports.compare_report import html_table
+from nnid.reports.figures import figure_uri, new_figure
+
+DOFS = ("u", "v", "w", "p", "q", "r")
+DOF_WORD = {"u": "surge", "v": "sway", "w": "heave", "p": "roll", "q": "pitch", "r": "yaw"}
+_DIRECTION = {
+    ("u", "pos"): "Forward surge thrust",
+    ("u", "neg"): "Reverse surge thrust",
+    ("v", "pos"): "Starboard sway thrust",
+    ("v", "neg"): "Port sway thrust",
+    ("w", "pos"): "Downward heave thrust",
+    ("w", "neg"): "Upward heave thrust",
+}
+
+
+def _f(x, digits: int = 3) -> str:
+    if x is None or (isinstance(x, float) and not math.isfinite(x)):
+        return "-"
+    return f"{x:.{digits}g}"
+
+
+def unit(effect: str) -> str:
+    """SI unit of an effect's value."""
+    kind, args = parse_effect(effect)
+    angular = bool(args) and args[0] in ("p", "q", "r")
+    return {
+        "linear_damping": "N m s/rad" if angular else "N s/m",
+        "quadratic_damping": "N m s²/rad²" if angular else "N s²/m²",
+        "coupled_damping": "SI",
+        "thruster_installation": "× nominal",
+        "buoyancy_offset": "N",
+        "restoring_offset": "m",
+        "current": "m/s",
+        "external_bias": "N m" if angular else "N",
+        "actuator_lag": "s",
+        "thruster_deadband": "input units",
+        "added_mass": "kg m²" if angular else "kg",
+    }[kind]
+
+
+def effect_sentence(candidate: dict) -> str:
+    """'Upward heave thrust is 57 % ± 2 % of nominal' and the like."""
+    name, value = candidate["effect"], candidate["params"]["value"]
+    se = candidate["stderr"]["value"]
+    kind, args = parse_effect(name)
+    pm = f" ± {_f(se, 2)}" if se is not None else ""
+    if kind == "thruster_installation":
+        what = _DIRECTION.get(
+            (args[0], args[1]),
+            f"{'Positive' if args[1] == 'pos' else 'Negative'} {DOF_WORD[args[0]]} moment",
+        )
+        pm = f" ± {100 * se:.0f} %" if se is not None else ""
+        return f"{what} is {100 * value:.0f} %{pm} of nominal"
+    if kind == "buoyancy_offset":
+        return f"The vehicle is {_f(value)}{pm} N heavier in water than declared (W − B)"
+    if kind == "restoring_offset":
+        cm = f" ± {100 * se:.1g}" if se is not None else ""
+        return f"The centre of gravity sits {100 * value:.2g}{cm} cm lower than declared"
+    if kind == "current":
+        return f"A steady current of {_f(value)}{pm} m/s flows along NED {args[0]}"
+    if kind == "actuator_lag":
+        return f"The thrusters lag their commands with a time constant of {_f(value)}{pm} s"
+    meaning = candidate["meaning"][0].upper() + candidate["meaning"][1:]
+    return f"{meaning}: {name} = {_f(value)}{pm} {unit(name)}"
+
+
+def summary(result: dict) -> list[str]:
+    """One sentence per added effect with its effect on the held-out free run, or the plain
+    statement that nothing significant was found."""
+    before, after = result["before"]["free_run_nrmse"], result["after"]["free_run_nrmse"]
+    if not result["added"]:
+        return [
+            "No significant effect: no candidate passed the F-test, the parameter test and "
+            "the held-out checks, so the vehicle file explains this log as well as the data "
+            f"can tell (held-out free-run NRMSE {_f(before.get('total'))})."
+        ]
+    lines = []
+    for step in result["steps"]:
+        added = step["added"]
+        if added is None:
+            continue
+        gains = {
+            d: (before.get(d), after.get(d))
+            for d in DOFS
+            if before.get(d) is not None and after.get(d) is not None
+        }
+        dof = max(gains, key=lambda d: gains[d][0] - gains[d][1]) if gains else None
+        cut = (
+            f"; with it the {DOF_WORD[dof]} free-run error on held-out data fell from "
+            f"{_f(gains[dof][0])} to {_f(gains[dof][1])} (NRMSE)"
+            if dof
+            else ""
+        )
+        lines.append(effect_sentence(added) + cut + ".")
+    lines.append(
+        f"Total held-out free-run NRMSE: {_f(before.get('total'))} before, "
+        f"{_f(after.get('total'))} after ({', '.join(result['added'])} added)."
+    )
+    return lines
+
+
+CANDIDATE_HEAD = ["effect", "value", "± s.e.", "unit", "p (F-test)", "held-out gain", "verdict"]
+
+
+def candidate_rows(candidates: list[dict], top: int = 15) -> list[list[str]]:
+    rows = []
+    for c in candidates[:top]:
+        se = c["stderr"]["value"]
+        rows.append(
+            [
+                c["effect"],
+                _f(c["params"]["value"], 4),
+                _f(se, 2),
+                unit(c["effect"]),
+                _f(c["significance"], 2),
+                f"{100 * c['improvement']:.1f} %",
+                c["reason"],
+            ]
+        )
+    return rows
+
+
+def error_rows(result: dict) -> tuple[list[str], list[list[str]]]:
+    head = ["held-out error", *DOFS, "total"]
+    rows = []
+    for key, label in (
+        ("free_run_nrmse", "free-run velocity NRMSE"),
+        ("one_step_nrmse", "one-step velocity NRMSE"),
+        ("force_rmse", "force residual RMS (N, N m; total relative)"),
+    ):
+        for when in ("before", "after"):
+            vals = result[when][key]
+            rows.append(
+                [f"{label}, {when}"]
+                + [_f(vals.get(d)) if d in vals else "" for d in DOFS]
+                + [_f(vals.get("total"))]
+            )
+    return head, rows
+
+
+def markdown(result: dict) -> str:
+    def table(head, rows):
+        out = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+        out += ["| " + " | ".join(r) + " |" for r in rows]
+        return "\n".join(out)
+
+    lines = [f"# Residual loop: {result.get('vehicle', '')}", ""]
+    lines += [f"- {s}" for s in summary(result)]
+    lines += ["", f"Baseline: {result['baseline']}.", "", "## Errors on held-out data", ""]
+    lines += [table(*error_rows(result)), ""]
+    for k, step in enumerate(result["steps"], 1):
+        lines += [f"## Pass {k}: candidates (best first)", ""]
+        lines += [table(CANDIDATE_HEAD, candidate_rows(step["top"])), ""]
+        if step["sindy"]:
+            lines += [f"pysindy STLSQ second opinion: {', '.join(step['sindy'])}.", ""]
+        else:
+            lines += ["pysindy STLSQ second opinion: no term kept.", ""]
+    lines += [
+        "Significance: F-test of the refit against the model without the effect, degrees of "
+        "freedom shrunk by the residual's autocorrelation time "
+        f"({_f(result['settings']['autocorrelation_time'])} samples), Bonferroni-corrected "
+        f"(α = {result['settings']['alpha']}); a candidate must also be a significant parameter "
+        "(Caccia's percentile error ≤ 51 %), lower the held-out force residual and lower the "
+        "held-out free-run error.",
+        "",
+    ]
+    return "\n".join(lines)
+
+
+def correlation_figure(analysis: dict, title: str) -> str:
+    """Residual autocorrelation per DOF and the largest cross-correlation with an input,
+    with the 99 % band (MATLAB ``resid``)."""
+    fig, axes = new_figure(6, 2, 10.0, 1.3)
+    for k, d in enumerate(DOFS):
+        c = analysis[d]
+        ax = axes[k, 0]
+        lags = np.arange(c.auto.size)
+        ax.bar(lags, c.auto, width=0.6, color="C0")
+        ax.axhspan(-c.band, c.band, color="0.85")
+        ax.set_ylabel(d)
+        ax2 = axes[k, 1]
+        if c.cross:
+            name = max(c.cross, key=lambda n: np.abs(c.cross[n]).max())
+            ax2.bar(c.lags, c.cross[name], width=0.6, color="C1", label=name)
+            ax2.legend(fontsize=7, loc="upper right")
+        ax2.axhspan(-c.band, c.band, color="0.85")
+    axes[0, 0].set_title(f"autocorrelation ({title})", fontsize=9)
+    axes[0, 1].set_title("cross-correlation with the strongest input", fontsize=9)
+    axes[-1, 0].set_xlabel("lag [samples]")
+    axes[-1, 1].set_xlabel("lag [samples]")
+    return figure_uri(fig)
+
+
+def free_run_figure(t, measured, before, after, dofs, window_s: float = 60.0) -> str:
+    """Held-out velocities: measured, baseline and augmented free runs (first ``window_s``)."""
+    keep = t - t[0] <= window_s
+    fig, axes = new_figure(len(dofs), 1, 10.0, 1.5)
+    for k, d in enumerate(dofs):
+        ax = axes[k, 0]
+        ax.plot(t[keep], measured[d][keep], color="black", lw=1.0, label="measured")
+        ax.plot(t[keep], before[d][keep], lw=0.9, label="baseline")
+        ax.plot(t[keep], after[d][keep], lw=0.9, label="with added effects")
+        ax.set_ylabel(d)
+    axes[0, 0].legend(ncol=3, fontsize=7, loc="upper right")
+    axes[-1, 0].set_xlabel("t [s]")
+    return figure_uri(fig)
+
+
+def html_page(result: dict, loop, figures: dict[str, str]) -> str:
+    """The self-contained HTML report (``figures``: data URIs by name)."""
+    title = f"Residual loop: {result.get('vehicle', '')}"
+    steps = []
+    for k, step in enumerate(result["steps"], 1):
+        added = step["added"]
+        verdict = (
+            f"Added <b>{html.escape(added['effect'])}</b>: {html.escape(effect_sentence(added))}."
+            if added
+            else "Nothing admissible: the loop stops here."
+        )
+        sindy = ", ".join(step["sindy"]) or "no term kept"
+        steps.append(
+            f"<h3>Pass {k}</h3><p>{verdict}</p>"
+            + html_table(CANDIDATE_HEAD, candidate_rows(step["top"]))
+            + f"<p>pysindy STLSQ over the strongest linear candidates: {html.escape(sindy)}.</p>"
+        )
+    imgs = "".join(
+        f"<h2>{html.escape(name)}</h2><img alt='{html.escape(name)}' src='{uri}'>"
+        for name, uri in figures.items()
+    )
+    return f"""<!DOCTYPE html>
+<html lang="en"><head><meta charset="utf-8"><title>{html.escape(title)}</title>
+<style>body{{font-family:sans-serif;max-width:1100px;margin:2em auto;color:#222}}
+table{{border-collapse:collapse;margin:1em 0}}td,th{{border:1px solid #bbb;padding:3px 8px;
+text-align:right}}th{{background:#eee}}td:first-child{{text-align:left}}img{{max-width:100%}}
+</style></head><body>
+<h1>{html.escape(title)}</h1>
+<ul>{"".join(f"<li>{html.escape(s)}</li>" for s in summary(result))}</ul>
+<p>Baseline: {html.escape(result["baseline"])}. Held-out data:
+{html.escape(_split_text(result))}.</p>
+<h2>Errors on held-out data, before and after</h2>
+{html_table(*error_rows(result))}
+<h2>Candidates</h2>
+{"".join(steps)}
+<p>Significance is the p-value of an F-test of the refit against the model without the effect,
+its degrees of freedom shrunk by the residual's autocorrelation time
+({_f(result["settings"]["autocorrelation_time"])} samples) and Bonferroni-corrected
+(α = {result["settings"]["alpha"]}). A candidate is added only if its parameter is significant
+(Caccia's percentile error ≤ 51 %), it lowers the held-out force residual, and it lowers the
+held-out free-run error by at least {100 * result["settings"]["min_free_run_gain"]:.0f} %.</p>
+{imgs}
+</body></html>
+"""
+
+
+def _split_text(result: dict) -> str:
+    split = result["settings"].get("split", {})
+    parts = split.get("parts", {}).get("validation", [])
+    names = sorted({str(p.get("experiment")) for p in parts})
+    return f"{split.get('by', '?')} split, validation on {', '.join(names) or '-'}"
+
+
+def write_loop_report(loop, out_dir) -> list[str]:
+    """Write ``loop.json``, ``report.html`` and ``report.md`` of a fitted
+    :class:`nnid.loop.residual_loop.ResidualLoop` to ``out_dir``; the summary sentences."""
+    import json
+    from pathlib import Path
+
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    result = loop.as_dict()
+    (out_dir / "loop.json").write_text(json.dumps(_finite(result), indent=2, allow_nan=False))
+    t, measured, before, after, dofs = loop.free_runs()
+    figures = {
+        "Held-out free run, first 60 s of each validation experiment": free_run_figure(
+            t, measured, before, after, dofs
+        ),
+        "Residual analysis before (held-out force residual)": correlation_figure(
+            loop.residuals_before_, "baseline"
+        ),
+        "Residual analysis after": correlation_figure(loop.residuals_after_, "augmented"),
+    }
+    (out_dir / "report.html").write_text(html_page(result, loop, figures))
+    (out_dir / "report.md").write_text(markdown(result))
+    return summary(result)
+
+
+def _finite(x):
+    """JSON-ready: NumPy scalars as Python numbers, NaN and infinities as null."""
+    if isinstance(x, dict):
+        return {str(k): _finite(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_finite(v) for v in x]
+    if isinstance(x, np.generic):
+        x = x.item()
+    if isinstance(x, float) and not math.isfinite(x):
+        return None
+    return x
