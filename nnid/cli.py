@@ -334,6 +334,8 @@ def _run_loop(log, veh, out_dir: Path, source: str = "", **settings) -> None:
             raise NnidInputError(str(exc), source=source or None) from None
         bar.update(task, description="writing the report")
         lines = write_loop_report(fitted, out_dir)
+    for warning in fitted.warnings_:
+        err.print(f"warning: {warning}", highlight=False, soft_wrap=True)
     for line in lines:
         out.print(line, highlight=False, soft_wrap=True)
     out.print(f"wrote {out_dir}/: loop.json, report.html, report.md", highlight=False)

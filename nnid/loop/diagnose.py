@@ -132,8 +132,11 @@ class Workspace:
         vehicle,
         filter_lambda: float | None = 1.0,
         zoh_midpoint: bool = True,
+        dofs: tuple[str, ...] = DOFS,
     ) -> None:
         self.train, self.val = train, val
+        self.dofs = tuple(dofs)
+        self.mask = np.array([d in self.dofs for d in DOFS], dtype=float)
         self.filter_lambda = filter_lambda
         self.zoh_midpoint = zoh_midpoint
         self.data = log_arrays(train, vehicle)
@@ -201,13 +204,13 @@ def refit(ws: Workspace, vehicle, unknowns: list[str], held_out: bool = True) ->
     else:
         phi_v, r0_v = np.zeros((0, 6, p)), np.zeros((0, 6))
     a_mat, y = phi.reshape(n * 6, p), -r0.reshape(-1)
-    if ws.weights is None:
+    if ws.weights is None:  # DOF equations the log does not measure get weight zero
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", ExcitationWarning)
-            est = solve_least_squares(a_mat, y, names=unknowns)
+            est = solve_least_squares(a_mat, y, np.tile(ws.mask, n), names=unknowns)
         e = (a_mat @ np.nan_to_num(est.theta) - y).reshape(n, 6)
         var = np.nanvar(e, axis=0)
-        ws.weights = 1.0 / np.where(var > 0, var, 1.0)
+        ws.weights = ws.mask / np.where(var > 0, var, 1.0)
     w_rows = np.tile(ws.weights, n)
     est = solve_least_squares(a_mat, y, w_rows, names=unknowns)
     theta = np.nan_to_num(est.theta)
@@ -253,10 +256,10 @@ def screen(
     denom = np.where(ok, denom, np.inf)
     theta = -s / denom
     drss = s**2 / denom
-    dof_resid = n * 6 - p - 1
-    sigma2 = np.maximum(fit.rss - drss, 1e-300) / max(dof_resid, 1)
+    rows = n * len(ws.dofs)
+    sigma2 = np.maximum(fit.rss - drss, 1e-300) / max(rows - p - 1, 1)
     f_stat = drss / (sigma2 * ws.tau_corr)
-    n_eff = max(n * 6 / ws.tau_corr - p - 1, 1.0)
+    n_eff = max(rows / ws.tau_corr - p - 1, 1.0)
     p_val = f_dist.sf(f_stat, 1, n_eff)
     se = np.sqrt(sigma2 * ws.tau_corr / denom)
     # held-out residual after the joint refit: e_v + θ (c_v − Φ_b,v A⁻¹ b)
@@ -282,7 +285,7 @@ def screen(
                 float(p_val[k]),
                 float(f_stat[k]),
                 float(total[k]),
-                {d: float(per_dof[i, k]) for i, d in enumerate(DOFS)},
+                {d: float(per_dof[i, k]) for i, d in enumerate(DOFS) if d in ws.dofs},
                 float(100 * se[k] / abs(theta[k])) if theta[k] != 0 else float("inf"),
                 refit=refit_values,
             )
@@ -379,10 +382,10 @@ def search_nonlinear(
     # score the linearised column at the optimum, then put the exact numbers back in
     scored = screen(ws, best, [cand], col[0], col[1])
     drss = fit.rss - best.rss
-    dof_resid = best.e.size - len(best.unknowns) - 1
-    sigma2 = best.rss / max(dof_resid, 1)
+    rows = best.e.shape[0] * len(ws.dofs)
+    sigma2 = best.rss / max(rows - len(best.unknowns) - 1, 1)
     f_stat = drss / (sigma2 * ws.tau_corr)
-    n_eff = max(best.e.size / ws.tau_corr - len(best.unknowns) - 1, 1.0)
+    n_eff = max(rows / ws.tau_corr - len(best.unknowns) - 1, 1.0)
     before = np.nansum(fit.e_val**2, axis=0)
     after = np.nansum(best.e_val**2, axis=0)
     w = ws.weights
@@ -445,19 +448,42 @@ def sindy_opinion(
     return [c.name for c, v in zip(order, coef, strict=True) if v != 0]
 
 
-def free_run_errors(vehicle, log: pd.DataFrame, warmup_s: float) -> dict[str, float | None]:
-    """Free-run velocity NRMSE on ``log`` per excited DOF, and their mean ``total``."""
-    return _velocity_errors(vehicle, log, "free_run", warmup_s)
+def free_run_errors(
+    vehicle, log: pd.DataFrame, warmup_s: float, dofs: tuple[str, ...] = DOFS
+) -> dict[str, float | None]:
+    """Free-run velocity NRMSE on ``log`` per excited DOF of ``dofs``, and their mean
+    ``total`` (None where the simulation diverged)."""
+    return _velocity_errors(vehicle, log, "free_run", warmup_s, dofs)
 
 
-def one_step_errors(vehicle, log: pd.DataFrame, warmup_s: float) -> dict[str, float | None]:
-    return _velocity_errors(vehicle, log, "one_step", warmup_s)
+def one_step_errors(
+    vehicle, log: pd.DataFrame, warmup_s: float, dofs: tuple[str, ...] = DOFS
+) -> dict[str, float | None]:
+    """One-step-ahead velocity NRMSE, as :func:`free_run_errors`."""
+    return _velocity_errors(vehicle, log, "one_step", warmup_s, dofs)
 
 
-def _velocity_errors(vehicle, log, mode, warmup_s):
-    dofs = excited_dofs(log, [c for c in VELOCITY if c in log])
+def simulation_forces(log: pd.DataFrame, vehicle, dofs: tuple[str, ...]) -> np.ndarray:
+    """The nominal forces a simulation for the analysed ``dofs`` is driven by: the forces of
+    the other DOFs are removed, since their velocities are not analysed (often not measured)
+    and the vehicle file need not predict them (with B = W and the centres on one vertical,
+    nothing else drives them, and the rotational equations are exact)."""
+    tau = nominal_forces(log, vehicle)
+    tau[:, [k for k, d in enumerate(DOFS) if d not in dofs]] = 0.0
+    return tau
+
+
+def predict(vehicle, log: pd.DataFrame, mode, dofs: tuple[str, ...] = DOFS) -> pd.DataFrame:
+    """Predicted states of ``vehicle`` on ``log`` (:func:`predict_states`, forces of the DOFs
+    outside ``dofs`` removed)."""
     with np.errstate(all="ignore"):
-        pred = predict_states(Parts.from_vehicle(vehicle), log, nominal_forces(log, vehicle), mode)
+        tau = simulation_forces(log, vehicle, dofs)
+        return predict_states(Parts.from_vehicle(vehicle), log, tau, mode)
+
+
+def _velocity_errors(vehicle, log, mode, warmup_s, dofs):
+    pred = predict(vehicle, log, mode, dofs)
+    dofs = excited_dofs(log, [c for c in VELOCITY if c in log and c in dofs])
     mask = warmup_mask(log, warmup_s)
     out: dict[str, float | None] = {}
     for d in dofs:
@@ -503,6 +529,7 @@ __all__ = [
     "force_rmse",
     "free_run_errors",
     "one_step_errors",
+    "predict",
     "refit",
     "screen",
     "screen_linear",

@@ -30,6 +30,7 @@ from nnid.loop.diagnose import (
     force_rmse,
     free_run_errors,
     one_step_errors,
+    predict,
     refit,
     screen_linear,
     search_nonlinear,
@@ -126,9 +127,17 @@ class ResidualLoop:
 
     # -- the loop -------------------------------------------------------------------------------
     def fit(self, log: pd.DataFrame, progress=None) -> ResidualLoop:
-        """Run the loop on ``log``; ``progress(message)`` is called as each pass starts."""
+        """Run the loop on ``log``; ``progress(message)`` is called as each pass starts.
+        Warnings raised on the way (unexcited parameters, ...) are kept in ``warnings_``."""
         start = time.perf_counter()
-        say = progress or (lambda message: None)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            self._fit(log, progress or (lambda message: None))
+        self.warnings_ = list(dict.fromkeys(str(w.message) for w in caught))
+        self.seconds_ = time.perf_counter() - start
+        return self
+
+    def _fit(self, log: pd.DataFrame, say) -> None:
         say("fitting the baseline")
         input_channels(log, self.vehicle)  # a clear error before any work
         log = self._prepare(log)
@@ -137,11 +146,9 @@ class ResidualLoop:
         if not self.dofs_:
             raise ValueError("the log has no body velocity u v w p q r, and no pose to derive one")
         ws = Workspace(train, val, self.vehicle, self.filter_lambda, self.zoh_midpoint, self.dofs_)
-        unknowns = list(Parts.from_vehicle(self.vehicle).damping)
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always")
-            fit = refit(ws, self.vehicle, unknowns)
-        self.warnings_ = [str(w.message) for w in caught]
+        used = {FORCES[DOFS.index(d)] for d in self.dofs_}
+        unknowns = [k for k in Parts.from_vehicle(self.vehicle).damping if k.split(":")[0] in used]
+        fit = refit(ws, self.vehicle, unknowns)
         ws.tau_corr = correlation_time(fit.e, self.dofs_)
         self.baseline_ = fit
         self.steps_: list[Step] = []
@@ -167,8 +174,6 @@ class ResidualLoop:
         self.residuals_before_ = self._correlations(ws, self.baseline_)
         self.residuals_after_ = self._correlations(ws, fit)
         self.workspace_ = ws
-        self.seconds_ = time.perf_counter() - start
-        return self
 
     def _step(self, ws: Workspace, fit: Fit, pool, added) -> Step:
         known = set(fit.unknowns)
@@ -198,13 +203,13 @@ class ResidualLoop:
         does the residual: such a candidate "explains" held-out noise (errors in variables)
         while its simulation gets worse. The free run, driven by the inputs alone, cannot be
         fooled that way."""
-        before = free_run_errors(fit.vehicle, ws.val, self.warmup_s)["total"]
+        before = free_run_errors(fit.vehicle, ws.val, self.warmup_s, self.dofs_)["total"]
         for s in admissible[: self.free_run_checks]:
             try:
                 vehicle = s.candidate.augment(vehicle_with(fit.vehicle, s.refit), s.value)
             except ValueError:
                 continue
-            after = free_run_errors(vehicle, ws.val, self.warmup_s)["total"]
+            after = free_run_errors(vehicle, ws.val, self.warmup_s, self.dofs_)["total"]
             s.free_run = (before, after)
             if after is not None and (
                 before is None or after < before * (1 - self.min_free_run_gain)
@@ -254,8 +259,8 @@ class ResidualLoop:
     def _errors(self, ws: Workspace, fit: Fit) -> dict:
         """Held-out errors of a fit: velocity NRMSE (free run, one step), force residual RMS."""
         return {
-            "free_run_nrmse": free_run_errors(fit.vehicle, ws.val, self.warmup_s),
-            "one_step_nrmse": one_step_errors(fit.vehicle, ws.val, self.warmup_s),
+            "free_run_nrmse": free_run_errors(fit.vehicle, ws.val, self.warmup_s, self.dofs_),
+            "one_step_nrmse": one_step_errors(fit.vehicle, ws.val, self.warmup_s, self.dofs_),
             "force_rmse": force_rmse(ws, fit.vehicle),
         }
 
@@ -275,15 +280,12 @@ class ResidualLoop:
     def free_runs(self) -> tuple[np.ndarray, pd.DataFrame, pd.DataFrame, pd.DataFrame, list[str]]:
         """Held-out time, measured velocities, baseline and final free runs, excited DOFs."""
         from nnid.evaluation.metrics import excited_dofs
-        from nnid.evaluation.prediction import predict_states
 
         val = self.workspace_.val
-        runs = []
-        for fit in (self.baseline_, self.fit_):
-            tau = nominal_forces(val, fit.vehicle)
-            with np.errstate(all="ignore"):
-                runs.append(predict_states(Parts.from_vehicle(fit.vehicle), val, tau, "free_run"))
-        dofs = excited_dofs(val, [d for d in DOFS if d in val])
+        runs = [
+            predict(fit.vehicle, val, "free_run", self.dofs_) for fit in (self.baseline_, self.fit_)
+        ]
+        dofs = excited_dofs(val, [d for d in self.dofs_ if d in val])
         return val["t"].to_numpy(), val, runs[0], runs[1], dofs
 
     @property

@@ -83,11 +83,20 @@ def summary(result: dict) -> list[str]:
     statement that nothing significant was found."""
     before, after = result["before"]["free_run_nrmse"], result["after"]["free_run_nrmse"]
     if not result["added"]:
-        return [
-            "No significant effect: no candidate passed the F-test, the parameter test and "
-            "the held-out checks, so the vehicle file explains this log as well as the data "
-            f"can tell (held-out free-run NRMSE {_f(before.get('total'))})."
+        total = before.get("total")
+        lines = [
+            "No significant effect: no candidate of the effect vocabulary passed the F-test, "
+            "the parameter test and the held-out checks "
+            f"(held-out free-run NRMSE {_f(total)})."
         ]
+        if total is None or total > 0.5:
+            lines.append(
+                "The baseline's free run does not follow the held-out data, so the model misses "
+                "something none of the candidates captures (or the free run cannot judge here: "
+                "see the candidate table for effects that were significant but did not improve "
+                "it)."
+            )
+        return lines
     lines = []
     for step in result["steps"]:
         added = step["added"]
@@ -184,8 +193,9 @@ def markdown(result: dict) -> str:
 def correlation_figure(analysis: dict, title: str) -> str:
     """Residual autocorrelation per DOF and the largest cross-correlation with an input,
     with the 99 % band (MATLAB ``resid``)."""
-    fig, axes = new_figure(6, 2, 10.0, 1.3)
-    for k, d in enumerate(DOFS):
+    dofs = [d for d in DOFS if d in analysis]
+    fig, axes = new_figure(len(dofs), 2, 10.0, 1.3)
+    for k, d in enumerate(dofs):
         c = analysis[d]
         ax = axes[k, 0]
         lags = np.arange(c.auto.size)
