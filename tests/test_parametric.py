@@ -230,16 +230,22 @@ def test_damping_columns_equal_the_physics_probe(seamor, rng, lam):
         "experiment": np.zeros(n, dtype=int),
     }
     names = ["N:v*abs(r)", "X:u*u*(eta-1)", "M:q*V", "Y_vdot"]
-    structure = ParametricFossen(seamor, names)
+    _assert_columns_equal_the_probe(seamor, names, data, lam, check=3)
+
+
+def _assert_columns_equal_the_probe(vehicle, names, data, lam, check=None):
+    """The regression's columns equal R(e_k) − R(0) from the physics (the first ``check``)."""
+    structure = ParametricFossen(vehicle, names)
     fast = structure.regression(data, lam)
     r0 = structure.equation_residual(structure.base, data, lam)
-    for k, name in enumerate(names[:3]):
+    for k, name in enumerate(names[:check]):
         unit = structure.base.copy()
         unit.set(name, 1.0)
         probe = structure.equation_residual(unit, data, lam) - r0
         if lam is not None:
-            probe = probe[np.arange(n) * 0.01 >= 3.0]
+            probe = probe[data["t"] >= 3.0]
         assert np.allclose(fast.phi[:, k], probe.reshape(-1), atol=1e-12)
+    return fast
 
 
 def test_non_physical_mass_matrix_warns(seamor):
@@ -270,3 +276,27 @@ def test_residual_force_is_the_true_damping_force(seamor):
     measured = ParametricFossen(seamor, []).damping_force(data)
     truth = FossenModel.from_vehicle(seamor).damping_force(torch.as_tensor(data["nu"])).numpy()
     assert np.allclose(measured, truth, atol=1e-8) and np.abs(truth).max() > 1.0
+
+
+@pytest.mark.parametrize("lam", [None, 1.0])
+def test_damping_columns_act_on_the_velocity_through_the_water(seamor, rng, lam):
+    """With a declared current the one-shot damping columns use ν_r = ν − ν_c(η), exactly as
+    the physics probe R(e_k) − R(0) does (they used ν before, biasing every damping fit of a
+    vehicle in a current)."""
+    from nnid.physics.effects import apply_effect
+
+    vehicle = apply_effect(seamor, "current.x", 0.3)
+    n = 400
+    data = {
+        "eta": rng.normal(size=(n, 6)) * 0.5,
+        "nu": rng.normal(size=(n, 6)) * 0.4,
+        "nu_dot": rng.normal(size=(n, 6)),
+        "tau": rng.normal(size=(n, 6)),
+        "t": np.arange(n) * 0.01,
+        "experiment": np.zeros(n, dtype=int),
+    }
+    names = ["X:u*abs(u)", "Y:v*abs(v)", "N:v*abs(r)"]
+    fast = _assert_columns_equal_the_probe(vehicle, names, data, lam)
+    # and the still-water column differs: the test would catch the old shortcut
+    still = ParametricFossen(seamor, names).regression(data, lam)
+    assert not np.allclose(fast.phi[:, 0], still.phi[:, 0])

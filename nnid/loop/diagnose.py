@@ -87,6 +87,12 @@ class Scored:
     reason: str = ""
     refit: dict[str, float] = field(default_factory=dict)  # baseline unknowns after the refit
     free_run: tuple[float | None, float | None] | None = None  # held-out total, before/after
+    # for :func:`rescore`: the F-test's pieces and how to rebuild the training residual
+    drss: float = 0.0
+    sigma2: float = 1.0
+    delta: float = 0.0  # parameter change θ
+    shift: np.ndarray | None = None  # A⁻¹ b: how the fit's unknowns move with θ
+    residual: np.ndarray | None = None  # training residual after (nonlinear candidates)
 
     @property
     def name(self) -> str:
@@ -288,6 +294,10 @@ def screen(
                 {d: float(per_dof[i, k]) for i, d in enumerate(DOFS) if d in ws.dofs},
                 float(100 * se[k] / abs(theta[k])) if theta[k] != 0 else float("inf"),
                 refit=refit_values,
+                drss=float(drss[k]),
+                sigma2=float(sigma2[k]),
+                delta=float(theta[k]),
+                shift=bb[:, k].copy(),
             )
         )
     return out
@@ -404,7 +414,44 @@ def search_nonlinear(
         },
         float(100 * se / abs(value)) if value != 0 else float("inf"),
         refit=dict(zip(best.unknowns, best.theta, strict=True)),
+        drss=float(drss),
+        sigma2=float(sigma2),
+        residual=best.e,
     )
+
+
+def rescore(ws: Workspace, fit: Fit, scored: list[Scored]) -> None:
+    """Redo the F-test of ``scored`` with the autocorrelation time of each candidate's own
+    residual (the model *with* the effect): the baseline's residual, dominated by a missing
+    effect, is correlated over whole experiments, and its autocorrelation time would make
+    every test of that very effect look insignificant."""
+    linear = [s for s in scored if s.candidate.linear]
+    cols: dict[str, np.ndarray] = {}
+    if linear:
+        data = ws.arrays(fit.vehicle)
+        damping = [s.candidate for s in linear if ":" in s.candidate.parameter]
+        other = [s.candidate for s in linear if ":" not in s.candidate.parameter]
+        if damping:
+            block = ws.filtered(_damping_chunk(damping, data, fit.vehicle), data)
+            cols.update({c.name: block[:, :, k] for k, c in enumerate(damping)})
+        if other:
+            block = ws.columns(fit.vehicle, [c.parameter for c in other], "train")
+            cols.update({c.name: block[:, :, k] for k, c in enumerate(other)})
+    n, _, p = fit.phi.shape
+    rows = n * len(ws.dofs)
+    for s in scored:
+        if s.residual is not None:
+            e_new = s.residual
+        elif s.candidate.name in cols:
+            col = cols[s.candidate.name] - fit.phi @ s.shift
+            e_new = np.nan_to_num(fit.e) + s.delta * col
+        else:
+            continue
+        tau = correlation_time(e_new, ws.dofs)
+        s.f_stat = s.drss / (s.sigma2 * tau)
+        s.p_value = float(f_dist.sf(s.f_stat, 1, max(rows / tau - p - 1, 1.0)))
+        s.stderr *= float(np.sqrt(tau / ws.tau_corr))
+        s.percentile_error *= float(np.sqrt(tau / ws.tau_corr))
 
 
 def sindy_opinion(
@@ -531,6 +578,7 @@ __all__ = [
     "one_step_errors",
     "predict",
     "refit",
+    "rescore",
     "screen",
     "screen_linear",
     "search_nonlinear",

@@ -32,6 +32,7 @@ from nnid.loop.diagnose import (
     one_step_errors,
     predict,
     refit,
+    rescore,
     screen_linear,
     search_nonlinear,
     sindy_opinion,
@@ -71,6 +72,7 @@ class ResidualLoop:
         report_candidates: int = 100,
         dofs: tuple[str, ...] | None = None,
         validation_experiments: list[str] | None = None,
+        rescore_top: int = 30,
     ) -> None:
         self.vehicle = vehicle
         self.alpha = alpha
@@ -89,6 +91,7 @@ class ResidualLoop:
         self.report_candidates = report_candidates
         self.dofs = dofs
         self.validation_experiments = validation_experiments
+        self.rescore_top = rescore_top
 
     # -- data -----------------------------------------------------------------------------------
     def _prepare(self, log: pd.DataFrame) -> pd.DataFrame:
@@ -160,7 +163,7 @@ class ResidualLoop:
         ]
         while len(added) < self.max_effects:
             say(f"pass {len(added) + 1}: testing {len(pool)} candidate effects")
-            step = self._step(ws, fit, pool, added)
+            step = self._step(ws, fit, pool)
             self.steps_.append(step)
             if step.added is None:
                 break
@@ -175,7 +178,7 @@ class ResidualLoop:
         self.residuals_after_ = self._correlations(ws, fit)
         self.workspace_ = ws
 
-    def _step(self, ws: Workspace, fit: Fit, pool, added) -> Step:
+    def _step(self, ws: Workspace, fit: Fit, pool) -> Step:
         known = set(fit.unknowns)
         linear = [c for c in pool if c.linear and c.parameter not in known]
         scored = screen_linear(ws, fit, linear)
@@ -186,6 +189,8 @@ class ResidualLoop:
                     if s is not None:
                         scored.append(s)
         tested = max(len(linear) + sum(not c.linear for c in pool), 1)
+        scored.sort(key=lambda s: -s.improvement)
+        rescore(ws, fit, scored[: self.rescore_top])
         for s in scored:
             self._judge(s, tested, fit)
         scored.sort(key=lambda s: -s.improvement)

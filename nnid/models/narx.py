@@ -28,6 +28,9 @@ columns (body velocities u v w r ...).
   loop of simulation-error training, so a free run cannot leave the range the plant can reach.
 * **Levenberg-Marquardt on simulation error** (``simulation_trainer="lm"``): the fine-tuning
   on deterministic windows (or whole experiments) with forward-mode Jacobians of the closed loop.
+* **Output transform** (``output_transform="sqrt"``, off by default): the regressor also holds
+  √max(y(k − d_y), 0) of every lagged output (in the output's units, then standardised), e.g.
+  Torricelli's outflow of a tank; still a NARX, the transform applied inside the closed loop.
 """
 
 from __future__ import annotations
@@ -85,6 +88,10 @@ def _check_bounds(bounds: OutputBounds, n_out: int) -> OutputBounds:
     return out
 
 
+#: ``output_transform`` values: extra regressors computed from each lagged output
+OUTPUT_TRANSFORMS = (None, "sqrt")
+
+
 def _delays(d: int | Sequence[int], minimum: int, what: str) -> list[int]:
     """An int n means delays 1..n (MATLAB's ``1:n``); a list is taken as given."""
     out = list(range(1, int(d) + 1)) if isinstance(d, int) else sorted({int(x) for x in d})
@@ -96,7 +103,9 @@ def _delays(d: int | Sequence[int], minimum: int, what: str) -> list[int]:
 class NarxNet(nn.Module):
     """The MLP (tanh hidden layers, linear output) and the normalisation buffers."""
 
-    def __init__(self, n_in: int, n_out: int, n_u: int, hidden: Sequence[int]) -> None:
+    def __init__(
+        self, n_in: int, n_out: int, n_u: int, hidden: Sequence[int], n_s: int = 0
+    ) -> None:
         super().__init__()
         layers: list[nn.Module] = []
         prev = n_in
@@ -109,6 +118,9 @@ class NarxNet(nn.Module):
             self.register_buffer(name, torch.zeros(n, dtype=DTYPE))
         for name, n in (("u_std", n_u), ("y_std", n_out), ("d_scale", n_out)):
             self.register_buffer(name, torch.ones(n, dtype=DTYPE))
+        if n_s:  # standardisation of the transformed outputs (only with an output_transform)
+            self.register_buffer("s_mean", torch.zeros(n_s, dtype=DTYPE))
+            self.register_buffer("s_std", torch.ones(n_s, dtype=DTYPE))
 
     def forward(self, phi: torch.Tensor) -> torch.Tensor:
         return self.mlp(phi)
@@ -138,6 +150,8 @@ class NarxModel:
       whole experiments).
     * ``simulation_max_fail``: validation failures before the simulation training stops (8).
     * ``simulation_l2``: λ of a λ‖θ‖² penalty on the LM simulation-error sum of squares (0).
+    * ``output_transform``: None (default) or ``"sqrt"``: √max(y, 0) of every lagged output
+      (output units, standardised on the training data) appended to the output regressors.
     """
 
     def __init__(
@@ -164,6 +178,7 @@ class NarxModel:
         simulation_trainer: str = "adam",
         simulation_max_fail: int = 8,
         simulation_l2: float = 0.0,
+        output_transform: str | None = None,
     ) -> None:
         self.inputs, self.outputs = list(inputs), list(outputs)
         self.input_delays = _delays(input_delays, 0, "input_delays")
@@ -186,19 +201,41 @@ class NarxModel:
         self.simulation_trainer = simulation_trainer
         self.simulation_max_fail = int(simulation_max_fail)
         self.simulation_l2 = float(simulation_l2)
+        if output_transform not in OUTPUT_TRANSFORMS:
+            raise NnidInputError("output_transform is None or 'sqrt'", field="output_transform")
+        self.output_transform = output_transform
         #: the bounds in the outputs' units, [low, high] per output (None: open), once resolved
         self.bounds_: list[list[float | None]] | None = None
         self._resolve_bounds(None)
         self.dy = max(self.output_delays)
         #: the delay states: samples at the start of each experiment neither predicted nor scored
         self.warmup = max(self.dy, max(self.input_delays))
-        self.net_ = NarxNet(self._n_features(), len(self.outputs), len(self.inputs), self.hidden)
+        self.net_ = self._new_net()
 
     # -- configuration ---------------------------------------------------------------------------
+    def _new_net(self) -> NarxNet:
+        n_s = len(self.outputs) if self.output_transform else 0
+        return NarxNet(self._n_features(), len(self.outputs), len(self.inputs), self.hidden, n_s)
+
+    def _n_y_features(self) -> int:
+        """Regressors from lagged outputs: the outputs, then their transforms (if any)."""
+        n = len(self.output_delays) * len(self.outputs)
+        return 2 * n if self.output_transform else n
+
     def _n_features(self) -> int:
-        return len(self.output_delays) * len(self.outputs) + len(self.input_delays) * len(
-            self.inputs
-        )
+        return self._n_y_features() + len(self.input_delays) * len(self.inputs)
+
+    def _transform_np(self, yn: np.ndarray) -> np.ndarray:
+        """Standardised √max(y, 0) of normalised outputs ``yn`` (numpy)."""
+        net = self.net_
+        y = yn * net.y_std.numpy() + net.y_mean.numpy()
+        return (np.sqrt(np.maximum(y, 0.0)) - net.s_mean.numpy()) / net.s_std.numpy()
+
+    def _transform_t(self, yn: torch.Tensor) -> torch.Tensor:
+        """Standardised √max(y, 0) of normalised outputs ``yn`` (torch, differentiable)."""
+        net = self.net_
+        y = yn * net.y_std + net.y_mean
+        return (torch.sqrt(torch.clamp(y, min=1e-12)) - net.s_mean) / net.s_std
 
     def config(self) -> dict:
         """The JSON-serialisable constructor arguments (the trainer by name)."""
@@ -222,6 +259,7 @@ class NarxModel:
             "simulation_max_fail": self.simulation_max_fail,
             "simulation_l2": self.simulation_l2,
             "output_bounds": self.bounds_ if self.bounds_ is not None else self.output_bounds,
+            "output_transform": self.output_transform,
         }
 
     def _resolve_bounds(self, log: pd.DataFrame | None) -> None:
@@ -312,10 +350,15 @@ class NarxModel:
         return out
 
     def _y_features(self, y: np.ndarray) -> np.ndarray:
+        """[y(k − d)] per output delay, then (``output_transform``) the transformed lags."""
         n, m = y.shape
-        out = np.zeros((n, len(self.output_delays) * m))
-        for j, d in enumerate(self.output_delays):
-            out[self.warmup :, j * m : (j + 1) * m] = y[self.warmup - d : n - d]
+        blocks = [y, self._transform_np(y)] if self.output_transform else [y]
+        out = np.zeros((n, len(self.output_delays) * m * len(blocks)))
+        col = 0
+        for src in blocks:
+            for d in self.output_delays:
+                out[self.warmup :, col : col + m] = src[self.warmup - d : n - d]
+                col += m
         return out
 
     def _fit_normalisation(self, log: pd.DataFrame) -> None:
@@ -332,6 +375,11 @@ class NarxModel:
         net.d_scale.copy_(
             torch.as_tensor(np.where(d > 0, d, 1.0) if self.delta else np.ones_like(d))
         )
+        if self.output_transform:
+            s = np.sqrt(np.maximum(y, 0.0))
+            s_std = s.std(0)
+            net.s_mean.copy_(torch.as_tensor(s.mean(0)))
+            net.s_std.copy_(torch.as_tensor(np.where(s_std > 0, s_std, 1.0)))
 
     def _table(self, log: pd.DataFrame) -> dict[str, torch.Tensor]:
         """Row-aligned tensors of a log: features, one-step targets, normalised outputs."""
@@ -378,9 +426,12 @@ class NarxModel:
         ``uf`` [B, T, F_u] input features; returns normalised outputs [B, T, m]."""
         keys = [f"mlp.{i}" for i, mod in enumerate(self.net_.mlp) if isinstance(mod, nn.Linear)]
         ws = [(params[k + ".weight"], params[k + ".bias"]) for k in keys]
-        m, n_y = hist.shape[2], len(self.output_delays) * hist.shape[2]
+        m, n_y = hist.shape[2], self._n_y_features()
         w1, b1 = ws[0]
-        w1y = [w1[:, j * m : (j + 1) * m].T for j in range(len(self.output_delays))]
+        n_d = len(self.output_delays)
+        w1y = [w1[:, j * m : (j + 1) * m].T for j in range(n_d)]
+        w1s = [w1[:, (n_d + j) * m : (n_d + j + 1) * m].T for j in range(n_d)]
+        transform = self._transform_t if self.output_transform else None
         zu = uf @ w1[:, n_y:].T + b1  # the inputs' share of the first layer, all steps at once
         scale = self.net_.d_scale if self.delta else torch.ones_like(self.net_.d_scale)
         wo, bo = ws[-1][0].T * scale, ws[-1][1] * scale
@@ -391,6 +442,8 @@ class NarxModel:
             a = zu[:, t]
             for j, d in enumerate(self.output_delays):
                 a = a + hs[-d] @ w1y[j]
+                if transform is not None:
+                    a = a + transform(hs[-d]) @ w1s[j]
             h = torch.tanh(a)
             for w, b in ws[1:-1]:
                 h = torch.tanh(h @ w.T + b)
@@ -407,8 +460,7 @@ class NarxModel:
         rows = ends[:, None] - length + 1 + torch.arange(length)
         starts = rows[:, 0]
         hist = table["y"][starts[:, None] - self.dy + torch.arange(self.dy)]
-        n_y = len(self.output_delays) * len(self.outputs)
-        return rows, hist, table["phi"][rows][:, :, n_y:]
+        return rows, hist, table["phi"][rows][:, :, self._n_y_features() :]
 
     # -- training --------------------------------------------------------------------------------
     def fit(self, log: pd.DataFrame, validation_log: pd.DataFrame | None = None) -> NarxModel:
@@ -419,7 +471,7 @@ class NarxModel:
 
         self._check(log)
         torch.manual_seed(self.seed)
-        self.net_ = NarxNet(self._n_features(), len(self.outputs), len(self.inputs), self.hidden)
+        self.net_ = self._new_net()
         random_rows = None
         if validation_log is None and self.division == "block":
             split = split_log(log, "block", self.fractions)
@@ -670,10 +722,15 @@ class NarxModel:
         w1 = lin[0].weight.detach().numpy()
         b1 = lin[0].bias.detach().numpy()
         m, dy = len(self.outputs), self.dy
-        n_y = len(self.output_delays) * m
+        n_y, n_d = self._n_y_features(), len(self.output_delays)
         dense = np.zeros((w1.shape[0], dy * m))
+        dense_s = np.zeros((w1.shape[0], dy * m)) if self.output_transform else None
         for j, d in enumerate(self.output_delays):  # slice row dy − d holds y(k − d)
             dense[:, (dy - d) * m : (dy - d + 1) * m] = w1[:, j * m : (j + 1) * m]
+            if dense_s is not None:
+                dense_s[:, (dy - d) * m : (dy - d + 1) * m] = w1[
+                    :, (n_d + j) * m : (n_d + j + 1) * m
+                ]
         zu = uf @ w1[:, n_y:].T + b1
         mids = [(x.weight.detach().numpy(), x.bias.detach().numpy()) for x in lin[1:-1]]
         scale = self.net_.d_scale.numpy() if self.delta else np.ones(m)
@@ -685,8 +742,13 @@ class NarxModel:
         buf[:dy] = init
         flat = buf.reshape(-1)
         tanh, dot = np.tanh, np.dot
+        transform = self._transform_np if dense_s is not None else None
         for k in range(n):
-            h = tanh(zu[k] + dot(dense, flat[k * m : (k + dy) * m]))
+            past = flat[k * m : (k + dy) * m]
+            a = zu[k] + dot(dense, past)
+            if transform is not None:
+                a += dot(dense_s, transform(past.reshape(dy, m)).reshape(-1))
+            h = tanh(a)
             for w, b in mids:
                 h = tanh(dot(w, h) + b)
             o = dot(wo, h) + bo

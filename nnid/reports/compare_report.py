@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-from nnid.reports.figures import figure_uri, new_figure
+from nnid.reports.figures import figure_uri, new_figure, page_head
 
 FORCES = ("X", "Y", "Z", "K", "M", "N")
 
@@ -169,14 +169,9 @@ def html_page(
         )
     title = f"Damping model comparison: {comparison.get('vehicle', '')}"
     forces = force_figure(t, measured, predicted)
-    return f"""<!DOCTYPE html>
-<html lang="en"><head><meta charset="utf-8"><title>{html.escape(title)}</title>
-<style>body{{font-family:sans-serif;max-width:1100px;margin:2em auto;color:#222}}
-table{{border-collapse:collapse;margin:1em 0}}td,th{{border:1px solid #bbb;padding:3px 8px;
-text-align:right}}th{{background:#eee}}td:first-child{{text-align:left}}img{{max-width:100%}}
-</style></head><body>
-<h1>{html.escape(title)}</h1>
-<p>{html.escape(comparison.get("summary", ""))}</p>
+    return (
+        page_head(title)
+        + f"""<p>{html.escape(comparison.get("summary", ""))}</p>
 <h2>Force error (McCarter Tables 5.1/5.2 for this data)</h2>
 {html_table(HEAD, table_rows(comparison))}
 <p>J is the RMS error of the viscous force (McCarter eq. 4.25), J0 the RMS of the force series;
@@ -198,3 +193,4 @@ window.addEventListener("load", function () {{
 </script>
 </body></html>
 """
+    )

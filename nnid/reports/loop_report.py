@@ -13,7 +13,7 @@ import numpy as np
 
 from nnid.physics.effects import parse_effect
 from nnid.reports.compare_report import html_table
-from nnid.reports.figures import figure_uri, new_figure
+from nnid.reports.figures import figure_uri, new_figure, page_head
 
 DOFS = ("u", "v", "w", "p", "q", "r")
 DOF_WORD = {"u": "surge", "v": "sway", "w": "heave", "p": "roll", "q": "pitch", "r": "yaw"}
@@ -230,7 +230,7 @@ def free_run_figure(t, measured, before, after, dofs, window_s: float = 60.0) ->
     return figure_uri(fig)
 
 
-def html_page(result: dict, loop, figures: dict[str, str]) -> str:
+def html_page(result: dict, figures: dict[str, str]) -> str:
     """The self-contained HTML report (``figures``: data URIs by name)."""
     title = f"Residual loop: {result.get('vehicle', '')}"
     steps = []
@@ -251,14 +251,9 @@ def html_page(result: dict, loop, figures: dict[str, str]) -> str:
         f"<h2>{html.escape(name)}</h2><img alt='{html.escape(name)}' src='{uri}'>"
         for name, uri in figures.items()
     )
-    return f"""<!DOCTYPE html>
-<html lang="en"><head><meta charset="utf-8"><title>{html.escape(title)}</title>
-<style>body{{font-family:sans-serif;max-width:1100px;margin:2em auto;color:#222}}
-table{{border-collapse:collapse;margin:1em 0}}td,th{{border:1px solid #bbb;padding:3px 8px;
-text-align:right}}th{{background:#eee}}td:first-child{{text-align:left}}img{{max-width:100%}}
-</style></head><body>
-<h1>{html.escape(title)}</h1>
-<ul>{"".join(f"<li>{html.escape(s)}</li>" for s in summary(result))}</ul>
+    return (
+        page_head(title)
+        + f"""<ul>{"".join(f"<li>{html.escape(s)}</li>" for s in summary(result))}</ul>
 <p>Baseline: {html.escape(result["baseline"])}. Held-out data:
 {html.escape(_split_text(result))}.</p>
 <h2>Errors on held-out data, before and after</h2>
@@ -274,6 +269,7 @@ held-out free-run error by at least {100 * result["settings"]["min_free_run_gain
 {imgs}
 </body></html>
 """
+    )
 
 
 def _split_text(result: dict) -> str:
@@ -303,7 +299,7 @@ def write_loop_report(loop, out_dir) -> list[str]:
         ),
         "Residual analysis after": correlation_figure(loop.residuals_after_, "augmented"),
     }
-    (out_dir / "report.html").write_text(html_page(result, loop, figures))
+    (out_dir / "report.html").write_text(html_page(result, figures))
     (out_dir / "report.md").write_text(markdown(result))
     return summary(result)
 
