@@ -10,11 +10,11 @@ user would run without the loop), so the ratio says what the diagnosis costs on 
 from __future__ import annotations
 
 import datetime
+import os
 import time
 import warnings
 from importlib import resources
 
-import numpy as np
 import pysindy
 import torch
 from common import machine
@@ -33,7 +33,7 @@ def main() -> None:
     warnings.simplefilter("ignore")
     vehicle = load_vehicle(str(resources.files("nnid.demo_data").joinpath("minirov.toml")))
     print(f"machine: {machine(torch=torch.__version__, pysindy=pysindy.__version__)}")
-    print(f"date: {datetime.date.today()}")
+    print(f"date: {datetime.date.today()}, load average before: {os.getloadavg()[0]:.1f}")
     print("| injected effect | samples | baseline LS fit [s] | whole loop [s] | ratio | added |")
     print("|---|---|---|---|---|---|")
     for effect, value in CASES:
@@ -59,7 +59,6 @@ def main() -> None:
             f"| {effect or 'none'} | {len(log)} | {base:.2f} | {whole:.1f} | "
             f"{whole / base:.0f}× | {added} |"
         )
-    np.random.default_rng(0)
 
 
 if __name__ == "__main__":

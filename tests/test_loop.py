@@ -120,6 +120,10 @@ CASES = [
     ("minirov", "coupled_damping.N:u*v", -5.0, 0.4, None),
     ("seamor", "coupled_damping.N:v", -1.0, 0.4, None),
     ("seamor", "actuator_lag", 0.3, 0.4, None),
+    # beyond the seven kinds the issue names
+    ("seamor", "thruster_deadband", 3.0, 0.4, None),
+    ("minirov", "external_bias.v", 4.0, 0.4, None),
+    ("seamor", "added_mass.w", -30.0, 0.4, None),
 ]
 
 

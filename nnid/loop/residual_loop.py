@@ -17,6 +17,7 @@ import warnings
 
 import numpy as np
 import pandas as pd
+import torch
 
 from nnid.datasets.log import ANGLES
 from nnid.datasets.splits import split_log
@@ -133,9 +134,16 @@ class ResidualLoop:
         """Run the loop on ``log``; ``progress(message)`` is called as each pass starts.
         Warnings raised on the way (unexcited parameters, ...) are kept in ``warnings_``."""
         start = time.perf_counter()
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always")
-            self._fit(log, progress or (lambda message: None))
+        threads = torch.get_num_threads()
+        # element-wise physics on ~10⁴ rows: torch's threads cost more than they give, and
+        # far more on a loaded machine (6× per call measured on 2 busy cores)
+        torch.set_num_threads(1)
+        try:
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always")
+                self._fit(log, progress or (lambda message: None))
+        finally:
+            torch.set_num_threads(threads)
         self.warnings_ = list(dict.fromkeys(str(w.message) for w in caught))
         self.seconds_ = time.perf_counter() - start
         return self

@@ -742,12 +742,16 @@ class NarxModel:
         buf[:dy] = init
         flat = buf.reshape(-1)
         tanh, dot = np.tanh, np.dot
-        transform = self._transform_np if dense_s is not None else None
+        if dense_s is not None:  # √ transform constants, tiled over the dy delay rows
+            net = self.net_
+            t_std, t_mean = np.tile(net.y_std.numpy(), dy), np.tile(net.y_mean.numpy(), dy)
+            s_mean, s_std = np.tile(net.s_mean.numpy(), dy), np.tile(net.s_std.numpy(), dy)
+        sqrt, maximum = np.sqrt, np.maximum
         for k in range(n):
             past = flat[k * m : (k + dy) * m]
             a = zu[k] + dot(dense, past)
-            if transform is not None:
-                a += dot(dense_s, transform(past.reshape(dy, m)).reshape(-1))
+            if dense_s is not None:
+                a += dot(dense_s, (sqrt(maximum(past * t_std + t_mean, 0.0)) - s_mean) / s_std)
             h = tanh(a)
             for w, b in mids:
                 h = tanh(dot(w, h) + b)
