@@ -10,7 +10,8 @@ silverbox, 20 for EMPS), in the benchmark's units.
 
 Cascaded tanks: the predicted level is clamped at the training maximum (the 10 V overflow), the
 network is fine-tuned by Levenberg-Marquardt on the simulation error of the whole estimation
-record, and the test score is also given for the median of the seeds' free runs (``ensemble``).
+record, and the test score is also given for the ensemble of the seeds: the pointwise mean of
+their free-run trajectories (``ensemble``, chosen on the holdout below; the median is printed too).
 ``--holdout`` reproduces the selection protocol instead: train on the first 768 samples of the
 estimation record, early-stop and score on its tail (samples 718-1023, the first 50 as warm-up);
 the test record is not used.
@@ -53,7 +54,7 @@ SETTINGS = {
         "lm_epochs": 100,
         "lm_samples": 4000,
         "seeds": tuple(range(8)),
-        "ensemble": "median",
+        "ensemble": "mean",  # of the free runs; chosen on --holdout (mean 0.35, median 0.40 V)
         "holdout": 768,  # --holdout: train on samples 0-767, validate on the tail
         "tests": ["test"],
         "scale": 1.0,
@@ -178,9 +179,10 @@ def main(names: list[str], holdout: bool = False) -> None:
                 stack = np.stack([p for p, _ in pms])
                 med = float(np.sqrt(np.mean((np.median(stack, 0) - meas) ** 2))) * scale
                 mean = float(np.sqrt(np.mean((stack.mean(0) - meas) ** 2))) * scale
+                chosen = mean if SETTINGS[name]["ensemble"] == "mean" else med
                 print(
-                    f"{name} {split}: ensemble of {len(pms)} seeds, free-run RMSE of the median "
-                    f"{med:.4f}, of the mean {mean:.4f} {unit}",
+                    f"{name} {split}: ensemble ({SETTINGS[name]['ensemble']}) of {len(pms)} seeds' "
+                    f"free runs: RMSE {chosen:.4f} {unit} (mean {mean:.4f}, median {med:.4f})",
                     flush=True,
                 )
 

@@ -265,3 +265,28 @@ def test_simulation_error_levenberg_marquardt_lowers_free_run_error():
     assert ft["kept"] and ft["epochs"] >= 1
     assert ft["validation_free_run_nrmse_after"] < 0.8 * ft["validation_free_run_nrmse_before"]
     assert model.score(train)["y"] == pytest.approx(ft["validation_free_run_nrmse_after"])
+
+
+def test_sqrt_output_transform_grows_regressor_runs_closed_loop_and_survives_save_load(tmp_path):
+    # Torricelli-style √level regressors: one extra regressor per lagged output, the numpy free
+    # run and the torch closed loop agree, and the buffers and option round-trip through disk
+    train = _tank(300, 1.3, 3)
+    train["y"] += 0.2
+    kw = dict(hidden=(3,), balanced=False, lm_samples=300)
+    plain = NarxModel(["u"], ["y"], 2, 2, **kw)
+    model = NarxModel(["u"], ["y"], 2, 2, output_transform="sqrt", **kw)
+    assert model.layer_sizes()[0] == plain.layer_sizes()[0] + 2
+    model.trainer = LevenbergMarquardt(max_epochs=5, jacobian="samples")
+    model.fit(train, train)
+    s = np.sqrt(train["y"].to_numpy())
+    assert float(model.net_.s_mean) == pytest.approx(s.mean())
+    free = model.predict(train, "free_run")["y"].to_numpy()
+    closed = model.predict(train, len(train) - 2)["y"].to_numpy()
+    assert closed[-1] == pytest.approx(free[-1], rel=1e-9)
+    assert model.score(train, "one_step")["y"] < 0.2
+    model.save(tmp_path)
+    assert json.loads((tmp_path / "narx.json").read_text())["output_transform"] == "sqrt"
+    back = NarxModel.load(tmp_path)
+    pd.testing.assert_frame_equal(model.predict(train, "free_run"), back.predict(train, "free_run"))
+    with pytest.raises(NnidInputError):
+        NarxModel(["u"], ["y"], output_transform="log")

@@ -437,13 +437,14 @@ class NarxModel:
         wo, bo = ws[-1][0].T * scale, ws[-1][1] * scale
         lo, hi = self._norm_bounds() or (None, None)
         hs = list(hist.unbind(1))
+        ss = [transform(x) for x in hs] if transform is not None else []  # once per sample
         outs = []
         for t in range(uf.shape[1]):
             a = zu[:, t]
             for j, d in enumerate(self.output_delays):
                 a = a + hs[-d] @ w1y[j]
                 if transform is not None:
-                    a = a + transform(hs[-d]) @ w1s[j]
+                    a = a + ss[-d] @ w1s[j]
             h = torch.tanh(a)
             for w, b in ws[1:-1]:
                 h = torch.tanh(h @ w.T + b)
@@ -452,6 +453,8 @@ class NarxModel:
             if lo is not None:
                 y = torch.clamp(y, lo, hi)
             hs.append(y)
+            if transform is not None:
+                ss.append(transform(y))
             outs.append(y)
         return torch.stack(outs, 1)
 
