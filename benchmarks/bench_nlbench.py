@@ -44,7 +44,9 @@ SETTINGS = {
         "narx": {
             "input_delays": 3,
             "output_delays": 2,
-            "hidden": (5,),
+            "hidden": (
+                4,
+            ),  # chosen on --holdout (ensemble: 3 nodes 0.31, 4 0.28, 5 0.35, 7 0.67 V)
             "simulation_epochs": 100,
             "simulation_window": 2000,  # longer than the record: the whole record, one window
             "simulation_trainer": "lm",
@@ -54,7 +56,7 @@ SETTINGS = {
         "lm_epochs": 100,
         "lm_samples": 4000,
         "seeds": tuple(range(8)),
-        "ensemble": "mean",  # of the free runs; chosen on --holdout (mean 0.35, median 0.40 V)
+        "ensemble": "mean",  # of the free runs, not the median: --holdout, 5 nodes 0.35 vs 0.40 V
         "holdout": 768,  # --holdout: train on samples 0-767, validate on the tail
         "tests": ["test"],
         "scale": 1.0,

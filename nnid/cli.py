@@ -315,6 +315,7 @@ def loop(
         validation=cfg.validation_fraction,
         dofs=tuple(cfg.dofs) if cfg.dofs else None,
         validation_experiments=cfg.validation,
+        gate_horizon_s=cfg.gate_horizon_s,
     )
     _run_loop(log, veh, out_dir, source=data or str(config or ""), **settings)
     report.write(out_dir)

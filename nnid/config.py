@@ -188,6 +188,7 @@ class LoopConfig(_Strict):
     savgol_window: float = Field(1.0, gt=0)
     savgol_order: int = Field(4, ge=2, le=8)
     warmup_s: float = Field(2.0, ge=0)
+    gate_horizon_s: float | None = Field(None, gt=0)  # None: the gate is the free run
 
 
 class SindySpec(_Strict):

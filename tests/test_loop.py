@@ -228,8 +228,8 @@ def test_cli_loop_config_on_the_rotational_dofs_only(tmp_path):
     ]
     pd.concat(runs, ignore_index=True).to_parquet(tmp_path / "log.parquet")
     (tmp_path / "loop.toml").write_text(
-        'kind = "loop"\nvehicle = "seamor"\ndofs = ["p", "q", "r"]\n'
-        'validation = ["run3", "run4"]\nmax_effects = 1\n[data]\nlog = "log.parquet"\n'
+        'kind = "loop"\nvehicle = "seamor"\ndofs = ["p", "q", "r"]\ngate_horizon_s = 2.0\n'
+        'validation = ["run3", "run4"]\nmax_effects = 2\n[data]\nlog = "log.parquet"\n'
     )
     res = CliRunner().invoke(app, ["loop", str(tmp_path / "loop.toml"), "--out", str(tmp_path)])
     assert res.exit_code == 0, res.output
@@ -240,6 +240,11 @@ def test_cli_loop_config_on_the_rotational_dofs_only(tmp_path):
     assert held == {"run3", "run4"}
     assert result["added"] and result["added"][0].startswith("restoring_offset.")
     assert result["candidates"][0]["params"]["value"] == pytest.approx(0.02, rel=0.1)
+    # the gate was the 2 s-ahead simulation the config asked for, not the free run
+    assert result["settings"]["gate_horizon_s"] == 2.0
+    gate = result["steps"][0]["added"]["gate_nrmse"]
+    assert gate["before"] < result["before"]["free_run_nrmse"]["total"]
+    assert gate["after"] < gate["before"]
 
 
 def test_loop_finds_caccias_upward_thrust_loss_through_the_thrusters():

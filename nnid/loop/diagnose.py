@@ -86,7 +86,7 @@ class Scored:
     admissible: bool = False
     reason: str = ""
     refit: dict[str, float] = field(default_factory=dict)  # baseline unknowns after the refit
-    free_run: tuple[float | None, float | None] | None = None  # held-out total, before/after
+    gate: tuple[float | None, float | None] | None = None  # held-out simulation NRMSE before/after
     # for :func:`rescore`: the F-test's pieces and how to rebuild the training residual
     drss: float = 0.0
     sigma2: float = 1.0
@@ -111,9 +111,9 @@ class Scored:
             else None,
             "improvement": self.improvement,
             "improvement_per_dof": self.dof_improvement,
-            "free_run_nrmse": None
-            if self.free_run is None
-            else {"before": self.free_run[0], "after": self.free_run[1]},
+            "gate_nrmse": None
+            if self.gate is None
+            else {"before": self.gate[0], "after": self.gate[1]},
             "admissible": self.admissible,
             "reason": self.reason,
         }
@@ -500,14 +500,14 @@ def free_run_errors(
 ) -> dict[str, float | None]:
     """Free-run velocity NRMSE on ``log`` per excited DOF of ``dofs``, and their mean
     ``total`` (None where the simulation diverged)."""
-    return _velocity_errors(vehicle, log, "free_run", warmup_s, dofs)
+    return velocity_errors(vehicle, log, "free_run", warmup_s, dofs)
 
 
 def one_step_errors(
     vehicle, log: pd.DataFrame, warmup_s: float, dofs: tuple[str, ...] = DOFS
 ) -> dict[str, float | None]:
     """One-step-ahead velocity NRMSE, as :func:`free_run_errors`."""
-    return _velocity_errors(vehicle, log, "one_step", warmup_s, dofs)
+    return velocity_errors(vehicle, log, "one_step", warmup_s, dofs)
 
 
 def simulation_forces(log: pd.DataFrame, vehicle, dofs: tuple[str, ...]) -> np.ndarray:
@@ -528,7 +528,11 @@ def predict(vehicle, log: pd.DataFrame, mode, dofs: tuple[str, ...] = DOFS) -> p
         return predict_states(Parts.from_vehicle(vehicle), log, tau, mode)
 
 
-def _velocity_errors(vehicle, log, mode, warmup_s, dofs):
+def velocity_errors(
+    vehicle, log: pd.DataFrame, mode, warmup_s: float, dofs: tuple[str, ...] = DOFS
+) -> dict[str, float | None]:
+    """Velocity NRMSE per excited DOF of ``dofs`` for a prediction ``mode`` ("free_run",
+    "one_step" or k steps), and the mean ``total``; None where the simulation diverged."""
     pred = predict(vehicle, log, mode, dofs)
     dofs = excited_dofs(log, [c for c in VELOCITY if c in log and c in dofs])
     mask = warmup_mask(log, warmup_s)
@@ -583,4 +587,5 @@ __all__ = [
     "screen_linear",
     "search_nonlinear",
     "sindy_opinion",
+    "velocity_errors",
 ]

@@ -37,6 +37,7 @@ from nnid.loop.diagnose import (
     screen_linear,
     search_nonlinear,
     sindy_opinion,
+    velocity_errors,
 )
 from nnid.loop.effects import candidates, input_channels, nominal_forces
 from nnid.loop.residuals import correlation_analysis
@@ -74,6 +75,7 @@ class ResidualLoop:
         dofs: tuple[str, ...] | None = None,
         validation_experiments: list[str] | None = None,
         rescore_top: int = 30,
+        gate_horizon_s: float | None = None,
     ) -> None:
         self.vehicle = vehicle
         self.alpha = alpha
@@ -93,6 +95,7 @@ class ResidualLoop:
         self.dofs = dofs
         self.validation_experiments = validation_experiments
         self.rescore_top = rescore_top
+        self.gate_horizon_s = gate_horizon_s
 
     # -- data -----------------------------------------------------------------------------------
     def _prepare(self, log: pd.DataFrame) -> pd.DataFrame:
@@ -216,22 +219,32 @@ class ResidualLoop:
         does the residual: such a candidate "explains" held-out noise (errors in variables)
         while its simulation gets worse. The free run, driven by the inputs alone, cannot be
         fooled that way."""
-        before = free_run_errors(fit.vehicle, ws.val, self.warmup_s, self.dofs_)["total"]
+        before = self._simulation_error(ws, fit.vehicle)
+        what = "free run" if self.gate_horizon_s is None else f"{self.gate_horizon_s:g} s-ahead"
         for s in admissible[: self.free_run_checks]:
             try:
                 vehicle = s.candidate.augment(vehicle_with(fit.vehicle, s.refit), s.value)
             except ValueError:
                 continue
-            after = free_run_errors(vehicle, ws.val, self.warmup_s, self.dofs_)["total"]
-            s.free_run = (before, after)
+            after = self._simulation_error(ws, vehicle)
+            s.gate = (before, after)
             if after is not None and (
                 before is None or after < before * (1 - self.min_free_run_gain)
             ):
                 s.reason = "added"
                 return s
             s.admissible = False
-            s.reason = f"held-out free run does not improve ({_fmt(before)} -> {_fmt(after)})"
+            s.reason = f"held-out {what} error does not improve ({_fmt(before)} -> {_fmt(after)})"
         return None
+
+    def _simulation_error(self, ws: Workspace, vehicle) -> float | None:
+        """Held-out velocity NRMSE (mean over the analysed DOFs) of the gate's simulation:
+        free run, or restarted from the measured state every ``gate_horizon_s``."""
+        if self.gate_horizon_s is None:
+            return free_run_errors(vehicle, ws.val, self.warmup_s, self.dofs_)["total"]
+        dt = float(np.median(np.diff(ws.val["t"].to_numpy())))
+        k = max(round(self.gate_horizon_s / dt), 1)
+        return velocity_errors(vehicle, ws.val, k, self.warmup_s, self.dofs_)["total"]
 
     def _judge(self, s: Scored, tested: int, fit: Fit) -> None:
         """Admissible: significant after Bonferroni, a significant parameter (Caccia), a
@@ -344,6 +357,7 @@ class ResidualLoop:
                 "autocorrelation_time": self.workspace_.tau_corr,
                 "split": self.split_,
                 "warmup_s": self.warmup_s,
+                "gate_horizon_s": self.gate_horizon_s,
                 "dofs": list(self.dofs_),
                 "min_improvement": self.min_improvement,
                 "min_free_run_gain": self.min_free_run_gain,
