@@ -154,8 +154,9 @@ def test_loop_finds_the_injected_effect(vehicle, effect, value, speed, drop):
     assert result["candidates"][0]["improvement"] >= result["candidates"][1]["improvement"]
 
 
-def test_no_undeclared_effect_gives_no_effect_in_19_of_20_seeds():
-    veh = load_vehicle("seamor")
+@pytest.mark.parametrize("vehicle", ["seamor", "minirov"])
+def test_no_undeclared_effect_gives_no_effect_in_19_of_20_seeds(vehicle):
+    veh = load_vehicle(MINIROV if vehicle == "minirov" else vehicle)
     added = []
     for seed in range(20):
         log = effect_log(veh, duration=180, dt=0.05, n_experiments=3, seed=100 + seed)
