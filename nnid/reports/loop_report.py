@@ -216,8 +216,11 @@ def correlation_figure(analysis: dict, title: str) -> str:
 
 
 def free_run_figure(t, measured, before, after, dofs, window_s: float = 60.0) -> str:
-    """Held-out velocities: measured, baseline and augmented free runs (first ``window_s``)."""
+    """Held-out velocities: measured, baseline and augmented free runs over the first
+    ``window_s`` of the first held-out experiment."""
     keep = t - t[0] <= window_s
+    if "experiment" in measured:
+        keep &= (measured["experiment"] == measured["experiment"].iloc[0]).to_numpy()
     fig, axes = new_figure(len(dofs), 1, 10.0, 1.5)
     for k, d in enumerate(dofs):
         ax = axes[k, 0]
@@ -291,7 +294,7 @@ def write_loop_report(loop, out_dir) -> list[str]:
     (out_dir / "loop.json").write_text(json.dumps(_finite(result), indent=2, allow_nan=False))
     t, measured, before, after, dofs = loop.free_runs()
     figures = {
-        "Held-out free run, first 60 s of each validation experiment": free_run_figure(
+        "Held-out free run, first 60 s of the first validation experiment": free_run_figure(
             t, measured, before, after, dofs
         ),
         "Residual analysis before (held-out force residual)": correlation_figure(
