@@ -52,7 +52,11 @@ class ResidualLoop:
     candidates tested), ``min_improvement`` the fraction of held-out residual a candidate must
     remove in the DOF it explains most, ``max_effects`` how many effects at most,
     ``validation`` the held-out fraction, ``coupled`` whether coupled damping terms of the
-    basis library are candidates, ``warmup_s`` excluded from every free-run score.
+    basis library are candidates, ``warmup_s`` excluded from every free-run score,
+    ``min_gate_gain`` the fraction by which a candidate must lower the held-out simulation
+    error (free run, or ``gate_horizon_s`` ahead) of the ``gate_checks`` best ranked, ``dofs``
+    the DOF equations analysed (default: those with a velocity in the log),
+    ``validation_experiments`` the held-out runs by name.
     """
 
     def __init__(
@@ -67,10 +71,10 @@ class ResidualLoop:
         savgol_window: float = 1.0,
         savgol_order: int = 4,
         warmup_s: float = 2.0,
-        min_free_run_gain: float = 0.05,
+        min_gate_gain: float = 0.05,
         filter_lambda: float | None = 1.0,
         zoh_midpoint: bool = True,
-        free_run_checks: int = 10,
+        gate_checks: int = 10,
         report_candidates: int = 100,
         dofs: tuple[str, ...] | None = None,
         validation_experiments: list[str] | None = None,
@@ -87,10 +91,10 @@ class ResidualLoop:
         self.savgol_window = savgol_window
         self.savgol_order = savgol_order
         self.warmup_s = warmup_s
-        self.min_free_run_gain = min_free_run_gain
+        self.min_gate_gain = min_gate_gain
         self.filter_lambda = filter_lambda
         self.zoh_midpoint = zoh_midpoint
-        self.free_run_checks = free_run_checks
+        self.gate_checks = gate_checks
         self.report_candidates = report_candidates
         self.dofs = dofs
         self.validation_experiments = validation_experiments
@@ -204,16 +208,16 @@ class ResidualLoop:
         rescore(ws, fit, scored[: self.rescore_top])
         for s in scored:
             self._judge(s, tested, fit)
-        scored.sort(key=lambda s: -s.improvement)
         try:
             sindy = sindy_opinion(ws, fit, scored)
         except Exception as exc:  # a second opinion must not stop the loop
             sindy = [f"(pysindy failed: {exc})"]
-        chosen = self._free_run_gate(ws, fit, [s for s in scored if s.admissible])
+        chosen = self._simulation_gate(ws, fit, [s for s in scored if s.admissible])
         return Step(scored, chosen, sindy)
 
-    def _free_run_gate(self, ws: Workspace, fit: Fit, admissible: list[Scored]) -> Scored | None:
-        """The best-ranked admissible candidate that also improves the held-out free run.
+    def _simulation_gate(self, ws: Workspace, fit: Fit, admissible: list[Scored]) -> Scored | None:
+        """The best-ranked admissible candidate that also improves the held-out simulation
+        (free run, or k steps ahead with ``gate_horizon_s``).
 
         A column built from measured accelerations or velocities carries their noise, and so
         does the residual: such a candidate "explains" held-out noise (errors in variables)
@@ -221,16 +225,14 @@ class ResidualLoop:
         fooled that way."""
         before = self._simulation_error(ws, fit.vehicle)
         what = "free run" if self.gate_horizon_s is None else f"{self.gate_horizon_s:g} s-ahead"
-        for s in admissible[: self.free_run_checks]:
+        for s in admissible[: self.gate_checks]:
             try:
                 vehicle = s.candidate.augment(vehicle_with(fit.vehicle, s.refit), s.value)
             except ValueError:
                 continue
             after = self._simulation_error(ws, vehicle)
             s.gate = (before, after)
-            if after is not None and (
-                before is None or after < before * (1 - self.min_free_run_gain)
-            ):
+            if after is not None and (before is None or after < before * (1 - self.min_gate_gain)):
                 s.reason = "added"
                 return s
             s.admissible = False
@@ -360,7 +362,7 @@ class ResidualLoop:
                 "gate_horizon_s": self.gate_horizon_s,
                 "dofs": list(self.dofs_),
                 "min_improvement": self.min_improvement,
-                "min_free_run_gain": self.min_free_run_gain,
+                "min_gate_gain": self.min_gate_gain,
                 "filter_lambda": self.filter_lambda,
                 "zoh_midpoint": self.zoh_midpoint,
             },

@@ -268,7 +268,7 @@ its degrees of freedom shrunk by the residual's autocorrelation time
 ({_f(result["settings"]["autocorrelation_time"])} samples) and Bonferroni-corrected
 (α = {result["settings"]["alpha"]}). A candidate is added only if its parameter is significant
 (Caccia's percentile error ≤ 51 %), it lowers the held-out force residual, and it lowers the
-held-out free-run error by at least {100 * result["settings"]["min_free_run_gain"]:.0f} %.</p>
+held-out free-run error by at least {100 * result["settings"]["min_gate_gain"]:.0f} %.</p>
 {imgs}
 </body></html>
 """
