@@ -455,7 +455,12 @@ def rescore(ws: Workspace, fit: Fit, scored: list[Scored]) -> None:
 
 
 def sindy_opinion(
-    ws: Workspace, fit: Fit, scored: list[Scored], share: float = 0.01, top: int = 40
+    ws: Workspace,
+    fit: Fit,
+    scored: list[Scored],
+    share: float = 0.05,
+    top: int = 40,
+    ridge: float = 0.1,
 ) -> list[str]:
     """pysindy STLSQ over the strongest linear candidates at once (columns made orthogonal to
     the fit's unknowns and scaled to unit weighted norm): the effects it keeps. The threshold
@@ -487,7 +492,9 @@ def sindy_opinion(
     # ‖Rξ − b‖² differs from ‖xξ − y‖²/N by a constant: the same solutions, k rows not N
     r, b, _ = compress(x, target[:, None])
     threshold = np.sqrt(share) * np.linalg.norm(target)
-    opt = ps.STLSQ(threshold=threshold, alpha=0.0, max_iter=20)
+    # a ridge of 0.1 (on unit-norm columns) keeps near-copies of one column (the library
+    # holds many: w|w|, w V, |w| Vw, ...) from surviving as huge opposite coefficients
+    opt = ps.STLSQ(threshold=threshold, alpha=ridge / target.size, max_iter=20)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)  # "eliminated all coefficients" is an answer
         opt.fit(r, b)

@@ -184,7 +184,7 @@ def markdown(result: dict) -> str:
         f"({_f(result['settings']['autocorrelation_time'])} samples), Bonferroni-corrected "
         f"(α = {result['settings']['alpha']}); a candidate must also be a significant parameter "
         "(Caccia's percentile error ≤ 51 %), lower the held-out force residual and lower the "
-        "held-out free-run error.",
+        f"held-out {_gate_text(result)} error.",
         "",
     ]
     return "\n".join(lines)
@@ -268,11 +268,17 @@ its degrees of freedom shrunk by the residual's autocorrelation time
 ({_f(result["settings"]["autocorrelation_time"])} samples) and Bonferroni-corrected
 (α = {result["settings"]["alpha"]}). A candidate is added only if its parameter is significant
 (Caccia's percentile error ≤ 51 %), it lowers the held-out force residual, and it lowers the
-held-out free-run error by at least {100 * result["settings"]["min_gate_gain"]:.0f} %.</p>
+held-out {_gate_text(result)} error by at least
+{100 * result["settings"]["min_gate_gain"]:.0f} %.</p>
 {imgs}
 </body></html>
 """
     )
+
+
+def _gate_text(result: dict) -> str:
+    horizon = result["settings"].get("gate_horizon_s")
+    return "free-run" if horizon is None else f"{horizon:g} s-ahead simulation"
 
 
 def _split_text(result: dict) -> str:
