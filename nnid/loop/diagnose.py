@@ -126,6 +126,7 @@ class Step:
     ranked: list[Scored]
     added: Scored | None
     sindy: list[str]
+    fit: Fit | None = None  # the refitted model with ``added`` in it
 
 
 class Workspace:

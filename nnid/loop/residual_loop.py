@@ -183,7 +183,7 @@ class ResidualLoop:
             if step.added is None:
                 break
             added.append(step.added)
-            fit = self._augment(ws, fit, step.added)
+            fit = step.fit
             pool = [c for c in pool if c.name != step.added.candidate.name]
         self.fit_ = fit
         self.added_ = added
@@ -212,10 +212,12 @@ class ResidualLoop:
             sindy = sindy_opinion(ws, fit, scored)
         except Exception as exc:  # a second opinion must not stop the loop
             sindy = [f"(pysindy failed: {exc})"]
-        chosen = self._simulation_gate(ws, fit, [s for s in scored if s.admissible])
-        return Step(scored, chosen, sindy)
+        chosen, augmented = self._simulation_gate(ws, fit, [s for s in scored if s.admissible])
+        return Step(scored, chosen, sindy, augmented)
 
-    def _simulation_gate(self, ws: Workspace, fit: Fit, admissible: list[Scored]) -> Scored | None:
+    def _simulation_gate(
+        self, ws: Workspace, fit: Fit, admissible: list[Scored]
+    ) -> tuple[Scored | None, Fit | None]:
         """The best-ranked admissible candidate that also improves the held-out simulation
         (free run, or k steps ahead with ``gate_horizon_s``).
 
@@ -233,11 +235,17 @@ class ResidualLoop:
             after = self._simulation_error(ws, vehicle)
             s.gate = (before, after)
             if after is not None and (before is None or after < before * (1 - self.min_gate_gain)):
+                try:
+                    augmented = self._augment(ws, fit, s)
+                except ValueError as exc:  # the joint refit left the physical range
+                    s.admissible = False
+                    s.reason = f"refit not physical: {str(exc).splitlines()[0]}"
+                    continue
                 s.reason = "added"
-                return s
+                return s, augmented
             s.admissible = False
             s.reason = f"held-out {what} error does not improve ({_fmt(before)} -> {_fmt(after)})"
-        return None
+        return None, None
 
     def _simulation_error(self, ws: Workspace, vehicle) -> float | None:
         """Held-out velocity NRMSE (mean over the analysed DOFs) of the gate's simulation:
