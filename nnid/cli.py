@@ -331,8 +331,8 @@ def _run_loop(log, veh, out_dir: Path, source: str = "", **settings) -> None:
             fitted = ResidualLoop(veh, **settings).fit(
                 log, progress=lambda m: bar.update(task, description=m)
             )
-        except ValueError as exc:
-            raise NnidInputError(str(exc), source=source or None) from None
+        except NnidInputError as exc:
+            raise exc.with_source(source) if source else exc from None
         bar.update(task, description="writing the report")
         lines = write_loop_report(fitted, out_dir)
     for warning in fitted.warnings_:

@@ -36,6 +36,7 @@ from scipy.signal import lfilter
 
 from nnid.datasets.log import TAU
 from nnid.datasets.preprocess import experiments
+from nnid.errors import NnidInputError
 from nnid.models.damping_library import LIBRARY, canonical_term
 from nnid.physics.added_mass import DOFS, FORCES
 from nnid.physics.damping import parse_coefficient_key
@@ -199,8 +200,8 @@ def candidates(vehicle, log: pd.DataFrame, coupled: bool = True) -> list[Candida
 
 def input_channels(log: pd.DataFrame, vehicle) -> tuple[np.ndarray, bool]:
     """The logged inputs and whether they are forces: ``tau_X`` … ``tau_N`` when all six are
-    there, else the thruster commands ``cmd_<thruster>`` of the vehicle. Raises ValueError
-    naming the missing columns."""
+    there, else the thruster commands ``cmd_<thruster>`` of the vehicle. Raises
+    :class:`NnidInputError` naming the missing columns."""
     if all(c in log for c in TAU):
         return log[list(TAU)].to_numpy(np.float64), True
     if vehicle.thrusters:
@@ -209,13 +210,13 @@ def input_channels(log: pd.DataFrame, vehicle) -> tuple[np.ndarray, bool]:
         if not missing:
             return log[cols].to_numpy(np.float64), False
         present = [c for c in TAU if c in log]
-        raise ValueError(
+        raise NnidInputError(
             f"the log lacks the thruster commands {', '.join(missing)} of vehicle "
             f"'{vehicle.name}'"
             + (f" and has only {', '.join(present)} of the six forces" if present else "")
         )
     missing = [c for c in TAU if c not in log]
-    raise ValueError(
+    raise NnidInputError(
         f"the log lacks the input columns {', '.join(missing)}: vehicle '{vehicle.name}' has "
         "no thrusters, so all six generalized forces tau_X … tau_N are needed"
     )

@@ -21,6 +21,7 @@ import torch
 
 from nnid.datasets.log import ANGLES
 from nnid.datasets.splits import split_log
+from nnid.errors import NnidInputError
 from nnid.loop.diagnose import (
     Fit,
     Scored,
@@ -119,7 +120,10 @@ class ResidualLoop:
             names = list(dict.fromkeys(log["experiment"])) if "experiment" in log else []
             unknown = [n for n in self.validation_experiments if n not in names]
             if unknown:
-                raise ValueError(f"validation experiments not in the log: {', '.join(unknown)}")
+                raise NnidInputError(
+                    f"validation experiments not in the log: {', '.join(unknown)}",
+                    field="validation",
+                )
             held = self.validation_experiments
             assignment = {
                 "train": [n for n in names if n not in held],
@@ -162,7 +166,9 @@ class ResidualLoop:
         train, val = self._split(log)
         self.dofs_ = tuple(self.dofs) if self.dofs else tuple(d for d in DOFS if d in log)
         if not self.dofs_:
-            raise ValueError("the log has no body velocity u v w p q r, and no pose to derive one")
+            raise NnidInputError(
+                "the log has no body velocity u v w p q r, and no pose to derive one"
+            )
         ws = Workspace(train, val, self.vehicle, self.filter_lambda, self.zoh_midpoint, self.dofs_)
         used = {FORCES[DOFS.index(d)] for d in self.dofs_}
         unknowns = [k for k in Parts.from_vehicle(self.vehicle).damping if k.split(":")[0] in used]
