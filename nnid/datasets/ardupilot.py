@@ -113,6 +113,12 @@ def _boot_time(raw: pd.DataFrame) -> pd.Series | None:
     return None
 
 
+def _add_boot_time(raw: pd.DataFrame) -> None:
+    """``t_boot``: seconds since boot, where the message type carries a boot clock."""
+    if (boot := _boot_time(raw)) is not None:
+        raw["t_boot"] = boot
+
+
 @contextlib.contextmanager
 def _captured(buf: io.StringIO) -> Iterator[None]:
     """Keep what pymavlink prints in ``buf``: Python's streams and file descriptor 2, where its
@@ -210,7 +216,7 @@ def read_ardupilot_sources(
     ``source.file`` is a message type, optionally with an instance (``IMU[1]``). Returns
     ``(source, mapped table)`` pairs ready for :func:`nnid.datasets.readers.assemble`.
     """
-    from nnid.datasets.readers import map_source
+    from nnid.datasets.readers import map_message_sources
 
     path = Path(path)
     if not path.is_file():
@@ -229,24 +235,12 @@ def read_ardupilot_sources(
         report.add(
             "reader warnings", f"{path}: pymavlink said '{chatter[0]}' ({len(chatter)} lines)"
         )
-    by_stem = cmap.experiment in (None, "file")
-    tables = []
-    for i, source in enumerate(cmap.sources):
-        origin = f"{path}:{source.file}"
-        if not rows[source.file]:
-            raise NnidInputError(
-                f"message '{source.file}' has no complete messages in the log",
-                source=str(path),
-                field=f"sources.{i}.file",
-            )
-        raw = pd.DataFrame(rows[source.file])
-        if (boot := _boot_time(raw)) is not None:
-            raw["t_boot"] = boot
-        mapped = map_source(
-            raw, source, origin, None if by_stem else cmap.experiment, cmap.drop_nonfinite, report
-        )
-        if by_stem:
-            mapped["experiment"] = path.stem
-        report.add("read", f"{origin}: {len(raw)} messages")
-        tables.append((source, mapped))
-    return tables
+    return map_message_sources(
+        rows,
+        cmap,
+        path,
+        path.stem,
+        report,
+        "message '{}' has no complete messages in the log",
+        _add_boot_time,
+    )

@@ -89,6 +89,40 @@ def _to_ned_frd(out: pd.DataFrame) -> None:
         out[list(ANGLES)] = euler_from_rotation(_ENU_NED @ rot @ _FLU_FRD)
 
 
+def map_message_sources(
+    rows: dict[str, list],
+    cmap: ColumnMap,
+    path: Path,
+    stem: str,
+    report: CleaningReport,
+    empty: str,
+    prepare=None,
+) -> list[tuple[Source, pd.DataFrame]]:
+    """The sources of a message log (ROS bag topics, ArduPilot message types) through
+    :func:`map_source`: ``rows[source.file]`` holds the decoded messages of each; a source with
+    none is an error whose text is ``empty`` formatted with its name; ``prepare(raw)`` may add
+    derived columns first. The experiment is ``stem`` unless the column map names one."""
+    by_stem = cmap.experiment in (None, "file")
+    tables = []
+    for i, source in enumerate(cmap.sources):
+        origin = f"{path}:{source.file}"
+        if not rows[source.file]:
+            raise NnidInputError(
+                empty.format(source.file), source=str(path), field=f"sources.{i}.file"
+            )
+        raw = pd.DataFrame(rows[source.file])
+        if prepare is not None:
+            prepare(raw)
+        mapped = map_source(
+            raw, source, origin, None if by_stem else cmap.experiment, cmap.drop_nonfinite, report
+        )
+        if by_stem:
+            mapped["experiment"] = stem
+        report.add("read", f"{origin}: {len(raw)} messages")
+        tables.append((source, mapped))
+    return tables
+
+
 def map_source(
     raw: pd.DataFrame,
     source: Source,

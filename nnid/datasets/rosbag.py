@@ -129,32 +129,11 @@ def read_bag_sources(
     ``source.file`` is a topic name. Returns ``(source, mapped table)`` pairs ready for
     :func:`nnid.datasets.readers.assemble`.
     """
-    from nnid.datasets.readers import map_source
+    from nnid.datasets.readers import map_message_sources
 
     path = Path(path)
     if not path.exists():
         raise NnidInputError("file not found", source=str(path))
     rows = _read_topics(path, list(dict.fromkeys(s.file for s in cmap.sources)))
     stem = path.name if path.is_dir() else path.stem
-    by_stem = cmap.experiment in (None, "file")
-    tables = []
-    for i, source in enumerate(cmap.sources):
-        origin = f"{path}:{source.file}"
-        if not rows[source.file]:
-            raise NnidInputError(
-                f"topic '{source.file}' has no messages", source=str(path), field=f"sources.{i}"
-            )
-        raw = pd.DataFrame(rows[source.file])
-        mapped = map_source(
-            raw,
-            source,
-            origin,
-            None if by_stem else cmap.experiment,
-            cmap.drop_nonfinite,
-            report,
-        )
-        if by_stem:
-            mapped["experiment"] = stem
-        report.add("read", f"{origin}: {len(raw)} messages")
-        tables.append((source, mapped))
-    return tables
+    return map_message_sources(rows, cmap, path, stem, report, "topic '{}' has no messages")
