@@ -44,6 +44,7 @@ import torch
 
 from benchmarks.common import machine
 from nnid.config import SimulateConfig, load_config
+from nnid.datasets.measurement import relative_noise
 from nnid.datasets.simulator import simulate_config
 from nnid.models.narx import NarxModel
 from nnid.trainers.adam import Adam
@@ -71,11 +72,8 @@ Trace = tuple[list[float], list[float]]  # (seconds, validation MSE) at the end 
 def data(case: str):
     cfg = load_config(ROOT / "configs/seamor_sequence.toml", SimulateConfig)
     log = simulate_config(cfg, load_vehicle(cfg.vehicle))
-    rng = np.random.default_rng(0)
-    for c in "uvwr":
-        log[c] = log["true_" + c] + rng.normal(0, 0.01 * log["true_" + c].std(), len(log))
-    for c in FORCES:
-        log[c] = log[c] + rng.normal(0, 0.01 * log[c].std(), len(log))
+    sources = {c: "true_" + c for c in "uvwr"} | {c: c for c in FORCES}
+    relative_noise(log, sources, 0.01, np.random.default_rng(0))
 
     def runs(names):
         return log[log["experiment"].isin(names)].reset_index(drop=True)

@@ -12,7 +12,7 @@ import pytest
 import torch
 
 from nnid.config import Experiment, SimulateConfig, load_config
-from nnid.datasets.measurement import Measurement
+from nnid.datasets.measurement import Measurement, relative_noise
 from nnid.datasets.simulator import experiment_inputs, simulate, simulate_config
 from nnid.errors import NnidInputError
 from nnid.models.narx import NarxModel
@@ -29,11 +29,8 @@ def seamor() -> pd.DataFrame:
     """Weiss's sequence; true velocities and forces with 1 % white noise (Weiss: 'low power')."""
     cfg = load_config(ROOT / "configs/seamor_sequence.toml", SimulateConfig)
     log = simulate_config(cfg, load_vehicle(cfg.vehicle))
-    rng = np.random.default_rng(0)
-    for c in "uvwr":
-        log[c] = log["true_" + c] + rng.normal(0, 0.01 * log["true_" + c].std(), len(log))
-    for c in FORCES:
-        log[c] = log[c] + rng.normal(0, 0.01 * log[c].std(), len(log))
+    sources = {c: "true_" + c for c in "uvwr"} | {c: c for c in FORCES}
+    relative_noise(log, sources, 0.01, np.random.default_rng(0))
     return log
 
 

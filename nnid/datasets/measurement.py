@@ -17,6 +17,15 @@ from pydantic import BaseModel, ConfigDict, Field
 from nnid.datasets.log import ACCELERATION, POSE, VELOCITY
 
 
+def relative_noise(log, sources: dict[str, str], fraction: float, rng: np.random.Generator) -> None:
+    """In place: ``log[column] = log[source] + white noise`` of ``fraction`` times the source's
+    standard deviation, per ``{column: source}`` in order (Weiss V.B's "low power" noise on
+    true signals; a column may be its own source)."""
+    for column, source in sources.items():
+        x = log[source]
+        log[column] = x + rng.normal(0, fraction * x.std(), len(log))
+
+
 def wrap_angle(a: np.ndarray) -> np.ndarray:
     """Wrap to [−π, π)."""
     return (np.asarray(a) + np.pi) % (2 * np.pi) - np.pi
