@@ -48,7 +48,11 @@ from nnid.models.parametric import (
 )
 from nnid.physics.added_mass import DOFS, FORCES
 from nnid.physics.damping import parse_coefficient_key
-from nnid.trainers.least_squares import ExcitationWarning, solve_least_squares
+from nnid.trainers.least_squares import (
+    ExcitationWarning,
+    autocorrelation_time,
+    solve_least_squares,
+)
 from nnid.trainers.sindy import compress
 from nnid.trainers.synthesis import zoh_midpoint
 
@@ -228,20 +232,10 @@ def refit(ws: Workspace, vehicle, unknowns: list[str], held_out: bool = True) ->
 
 
 def correlation_time(e: np.ndarray, dofs: tuple[str, ...] = DOFS, max_lag: int = 2000) -> float:
-    """Integrated autocorrelation time 1 + 2 Σ ρ_k (summed until ρ first drops below 0.05),
-    averaged over the DOF equations: how many rows one independent sample is worth."""
-    taus = []
-    for d in [DOFS.index(x) for x in dofs]:
-        r = e[:, d][np.isfinite(e[:, d])]
-        if r.size < 3 or not np.any(r):
-            continue
-        r = r - r.mean()
-        spec = np.fft.rfft(r, 2 * r.size)
-        acf = np.fft.irfft(spec * np.conj(spec))[: min(r.size, max_lag)]
-        acf = acf / acf[0]
-        below = np.flatnonzero(acf < 0.05)
-        cut = below[0] if below.size else acf.size
-        taus.append(1.0 + 2.0 * float(np.sum(acf[1:cut])))
+    """:func:`autocorrelation_time` of each analysed DOF's residual column of ``e`` [N, 6],
+    averaged: how many rows one independent sample is worth."""
+    taus = [autocorrelation_time(e[:, DOFS.index(d)], max_lag) for d in dofs]
+    taus = [t for t in taus if t is not None]
     return max(float(np.mean(taus)), 1.0) if taus else 1.0
 
 

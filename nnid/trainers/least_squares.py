@@ -154,23 +154,30 @@ class LeastSquares:
         return out
 
 
+def autocorrelation_time(r: np.ndarray, max_lag: int = 5000) -> float | None:
+    """Integrated autocorrelation time 1 + 2 Σ ρ_k of one residual series (summed until ρ
+    first drops below 0.05; NaNs dropped): how many samples one independent sample is worth.
+    None for a series too short or all zero."""
+    r = r[np.isfinite(r)]
+    r = r - r.mean() if r.size else r
+    n = r.size
+    if n < 3 or not np.any(r):
+        return None
+    spec = np.fft.rfft(r, 2 * n)
+    acf = np.fft.irfft(spec * np.conj(spec))[: min(n, max_lag)]
+    acf = acf / acf[0]
+    below = np.flatnonzero(acf < 0.05)
+    cut = below[0] if below.size else acf.size
+    return 1.0 + 2.0 * float(np.sum(acf[1:cut]))
+
+
 def correlation_time(reg: Regression, theta: np.ndarray, max_lag: int = 5000) -> float:
-    """Integrated autocorrelation time 1 + 2 Σ ρ_k of the residual, per DOF equation (summed
-    until ρ first drops below 0.05), averaged over DOFs weighted by their rows: the factor by
-    which correlated samples shrink the effective sample size."""
+    """:func:`autocorrelation_time` of the residual per DOF equation, averaged over the DOFs:
+    the factor by which correlated samples shrink the effective sample size."""
     th = np.nan_to_num(theta)
-    taus = []
-    for d in reg.dofs:
-        r = reg.y[reg.dof_rows(d)] - reg.phi[reg.dof_rows(d)] @ th
-        r = r[np.isfinite(r)]
-        r = r - r.mean() if r.size else r
-        n = r.size
-        if n < 3 or not np.any(r):
-            continue
-        spec = np.fft.rfft(r, 2 * n)
-        acf = np.fft.irfft(spec * np.conj(spec))[: min(n, max_lag)]
-        acf = acf / acf[0]
-        below = np.flatnonzero(acf < 0.05)
-        cut = below[0] if below.size else acf.size
-        taus.append(1.0 + 2.0 * float(np.sum(acf[1:cut])))
+    taus = [
+        autocorrelation_time(reg.y[reg.dof_rows(d)] - reg.phi[reg.dof_rows(d)] @ th, max_lag)
+        for d in reg.dofs
+    ]
+    taus = [t for t in taus if t is not None]
     return max(float(np.mean(taus)), 1.0) if taus else 1.0
