@@ -36,18 +36,14 @@ from nnid.datasets.log import VELOCITY
 from nnid.evaluation.metrics import excited_dofs, nrmse, rmse, warmup_mask
 from nnid.evaluation.prediction import predict_states
 from nnid.loop.effects import Candidate, nominal_forces
-from nnid.models.damping_library import evaluate_terms, term_codes
 from nnid.models.parametric import (
     ParametricFossen,
     Parts,
-    filter_signal,
     log_arrays,
-    relative_velocity,
     settled_rows,
     vehicle_with,
 )
-from nnid.physics.added_mass import DOFS, FORCES
-from nnid.physics.damping import parse_coefficient_key
+from nnid.physics.added_mass import DOFS
 from nnid.trainers.least_squares import (
     ExcitationWarning,
     autocorrelation_time,
@@ -178,13 +174,11 @@ class Workspace:
             cache.update({n: cols[:, :, k] for k, n in enumerate(missing)})
         return np.stack([cache[n] for n in names], 2)
 
-    def filtered(self, x: np.ndarray, data: dict[str, np.ndarray]) -> np.ndarray:
-        """A regressor column block [N, ...] in the form the regression uses: filtered by
-        F(s) and cut to the settled rows when ``filter_lambda`` is set."""
+    def settled(self, data: dict[str, np.ndarray]) -> np.ndarray:
+        """The rows the regression keeps: all, or those after the filters settle."""
         if self.filter_lambda is None:
-            return x
-        keep = settled_rows(data, 3.0 / self.filter_lambda)
-        return filter_signal(data, x, self.filter_lambda)[keep]
+            return np.ones(data["t"].size, dtype=bool)
+        return settled_rows(data, 3.0 / self.filter_lambda)
 
 
 def _columns(
@@ -298,16 +292,12 @@ def screen(
     return out
 
 
-def _damping_chunk(cands: list[Candidate], data: dict, vehicle) -> np.ndarray:
-    """Columns [N, 6, K] of damping candidates: R holds −τ_D, so "F:term" is −ξ_term(ν_r) in
-    row F."""
-    split = [parse_coefficient_key(c.parameter) for c in cands]
-    nu_r = relative_velocity(Parts.from_vehicle(vehicle), data)
-    xi = evaluate_terms(nu_r, term_codes([t for _, t in split]), vehicle.damping.u_c)
-    cols = np.zeros((xi.shape[0], 6, len(cands)))
-    for k, (force, _) in enumerate(split):
-        cols[:, FORCES.index(force), k] = -xi[:, k]
-    return cols
+def _damping_block(ws: Workspace, vehicle, cands: list[Candidate], data: dict) -> np.ndarray:
+    """Columns [N, 6, K] of damping candidates, built by the regression's own one-shot
+    damping columns (−ξ_term(ν_r) in row F) and cut to its rows."""
+    structure = ParametricFossen(vehicle, [c.parameter for c in cands])
+    cols = structure.damping_columns(data, ws.filter_lambda)
+    return np.stack([cols[n] for n in structure.names], 2)[ws.settled(data)]
 
 
 def screen_linear(ws: Workspace, fit: Fit, cands: list[Candidate]) -> list[Scored]:
@@ -318,8 +308,8 @@ def screen_linear(ws: Workspace, fit: Fit, cands: list[Candidate]) -> list[Score
     out: list[Scored] = []
     for start in range(0, len(damping), _CHUNK):
         chunk = damping[start : start + _CHUNK]
-        cols = ws.filtered(_damping_chunk(chunk, data, fit.vehicle), data)
-        cols_v = ws.filtered(_damping_chunk(chunk, data_val, fit.vehicle), data_val)
+        cols = _damping_block(ws, fit.vehicle, chunk, data)
+        cols_v = _damping_block(ws, fit.vehicle, chunk, data_val)
         out += screen(ws, fit, chunk, cols, cols_v)
     if other:
         names = [c.parameter for c in other]
@@ -427,7 +417,7 @@ def rescore(ws: Workspace, fit: Fit, scored: list[Scored]) -> None:
         damping = [s.candidate for s in linear if ":" in s.candidate.parameter]
         other = [s.candidate for s in linear if ":" not in s.candidate.parameter]
         if damping:
-            block = ws.filtered(_damping_chunk(damping, data, fit.vehicle), data)
+            block = _damping_block(ws, fit.vehicle, damping, data)
             cols.update({c.name: block[:, :, k] for k, c in enumerate(damping)})
         if other:
             block = ws.columns(fit.vehicle, [c.parameter for c in other], "train")
@@ -470,7 +460,7 @@ def sindy_opinion(
     other = [s.candidate for s in lin if ":" not in s.candidate.parameter]
     blocks, order = [], []
     if damping:
-        blocks.append(ws.filtered(_damping_chunk(damping, data, fit.vehicle), data))
+        blocks.append(_damping_block(ws, fit.vehicle, damping, data))
         order += damping
     if other:
         blocks.append(ws.columns(fit.vehicle, [c.parameter for c in other], "train"))

@@ -333,7 +333,7 @@ class ParametricFossen:
         keep = np.ones(r0.shape[0], dtype=bool)
         if filter_lambda is not None:
             keep = settled_rows(data, 3.0 / filter_lambda)
-        damping = self._damping_columns(data, filter_lambda)
+        damping = self.damping_columns(data, filter_lambda)
         cols = []
         for name in self.names:
             if name in damping:
@@ -355,8 +355,8 @@ class ParametricFossen:
         parts.damping = {}
         return self.equation_residual(parts, data)
 
-    def _damping_columns(
-        self, data: dict[str, np.ndarray], filter_lambda: float | None
+    def damping_columns(
+        self, data: dict[str, np.ndarray], filter_lambda: float | None = None
     ) -> dict[str, np.ndarray]:
         """Columns of the damping unknowns in one evaluation of the basis library: R holds
         −τ_D = −Θ ξ(ν), so coefficient "F:term" has −ξ_term(ν) in row F and zero elsewhere
