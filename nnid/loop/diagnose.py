@@ -151,16 +151,19 @@ class Workspace:
         self.weights: np.ndarray | None = None
         self.tau_corr = 1.0
         self._cache: dict[tuple, dict[str, np.ndarray]] = {}
+        self._tau: dict[tuple, np.ndarray] = {}
 
     def arrays(self, vehicle, part: str = "train") -> dict[str, np.ndarray]:
         """The arrays with the nominal forces recomputed for ``vehicle`` (its lag, deadband)."""
         log, data = (self.train, self.data) if part == "train" else (self.val, self.data_val)
-        out = dict(data)
-        out["tau"] = nominal_forces(log, vehicle)
-        if self.zoh_midpoint and vehicle.actuator_lag == 0:
-            # a held input steps at each sample; a lagged force is continuous, seen as it is
-            out["tau"] = zoh_midpoint(out["tau"], log)
-        return out
+        key = (part, vehicle.actuator_lag, vehicle.deadband)
+        if key not in self._tau:  # the searches refit many times at one lag and deadband
+            tau = nominal_forces(log, vehicle)
+            if self.zoh_midpoint and vehicle.actuator_lag == 0:
+                # a held input steps at each sample; a lagged force is continuous, seen as it is
+                tau = zoh_midpoint(tau, log)
+            self._tau[key] = tau
+        return {**data, "tau": self._tau[key]}
 
     def columns(self, vehicle, names: list[str], part: str) -> np.ndarray:
         """Regressor columns [N, 6, P] of parameters at ``vehicle``, cached: a column of a
@@ -487,21 +490,6 @@ def sindy_opinion(
     return [c.name for c, v in zip(order, coef, strict=True) if v != 0]
 
 
-def free_run_errors(
-    vehicle, log: pd.DataFrame, warmup_s: float, dofs: tuple[str, ...] = DOFS
-) -> dict[str, float | None]:
-    """Free-run velocity NRMSE on ``log`` per excited DOF of ``dofs``, and their mean
-    ``total`` (None where the simulation diverged)."""
-    return velocity_errors(vehicle, log, "free_run", warmup_s, dofs)
-
-
-def one_step_errors(
-    vehicle, log: pd.DataFrame, warmup_s: float, dofs: tuple[str, ...] = DOFS
-) -> dict[str, float | None]:
-    """One-step-ahead velocity NRMSE, as :func:`free_run_errors`."""
-    return velocity_errors(vehicle, log, "one_step", warmup_s, dofs)
-
-
 def simulation_forces(log: pd.DataFrame, vehicle, dofs: tuple[str, ...]) -> np.ndarray:
     """The nominal forces a simulation for the analysed ``dofs`` is driven by: the forces of
     the other DOFs are removed, since their velocities are not analysed (often not measured)
@@ -546,17 +534,16 @@ def force_residual(ws: Workspace, vehicle, part: str = "val") -> np.ndarray:
     return r0
 
 
-def force_rmse(ws: Workspace, vehicle) -> dict[str, float]:
-    """Held-out force residual RMS per DOF (N, N m); ``total``: the mean over the DOFs with
-    an input of the RMS divided by the RMS of that input force (forces and moments differ in
-    units, so only the ratios can be averaged)."""
-    r = force_residual(ws, vehicle)
-    out = {d: rmse(np.zeros(len(r)), r[:, i]) for i, d in enumerate(DOFS) if d in ws.dofs}
-    tau = ws.arrays(vehicle, "val")["tau"]
+def force_rmse(r: np.ndarray, tau: np.ndarray, dofs: tuple[str, ...]) -> dict[str, float]:
+    """Force residual RMS per DOF of ``dofs`` (N, N m) for the residual ``r`` of the input
+    forces ``tau``; ``total``: the mean over the DOFs with an input of the RMS divided by the
+    RMS of that input force (forces and moments differ in units, so only the ratios can be
+    averaged)."""
+    out = {d: rmse(np.zeros(len(r)), r[:, i]) for i, d in enumerate(DOFS) if d in dofs}
     rel = [
         out[d] / rmse(np.zeros(len(tau)), tau[:, i])
         for i, d in enumerate(DOFS)
-        if d in ws.dofs and np.any(tau[:, i])
+        if d in dofs and np.any(tau[:, i])
     ]
     out["total"] = float(np.mean(rel)) if rel else float("nan")
     return out
@@ -570,8 +557,6 @@ __all__ = [
     "correlation_time",
     "force_residual",
     "force_rmse",
-    "free_run_errors",
-    "one_step_errors",
     "predict",
     "refit",
     "rescore",

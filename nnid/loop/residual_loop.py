@@ -30,8 +30,6 @@ from nnid.loop.diagnose import (
     correlation_time,
     force_residual,
     force_rmse,
-    free_run_errors,
-    one_step_errors,
     predict,
     refit,
     rescore,
@@ -193,10 +191,8 @@ class ResidualLoop:
             pool = [c for c in pool if c.name != step.added.candidate.name]
         self.fit_ = fit
         self.added_ = added
-        self.before_ = self._errors(ws, self.baseline_)
-        self.after_ = self._errors(ws, fit)
-        self.residuals_before_ = self._correlations(ws, self.baseline_)
-        self.residuals_after_ = self._correlations(ws, fit)
+        self.before_, self.residuals_before_ = self._scores(ws, self.baseline_)
+        self.after_, self.residuals_after_ = self._scores(ws, fit)
         self.workspace_ = ws
 
     def _step(self, ws: Workspace, fit: Fit, pool) -> Step:
@@ -257,7 +253,7 @@ class ResidualLoop:
         """Held-out velocity NRMSE (mean over the analysed DOFs) of the gate's simulation:
         free run, or restarted from the measured state every ``gate_horizon_s``."""
         if self.gate_horizon_s is None:
-            return free_run_errors(vehicle, ws.val, self.warmup_s, self.dofs_)["total"]
+            return velocity_errors(vehicle, ws.val, "free_run", self.warmup_s, self.dofs_)["total"]
         dt = float(np.median(np.diff(ws.val["t"].to_numpy())))
         k = max(round(self.gate_horizon_s / dt), 1)
         return velocity_errors(vehicle, ws.val, k, self.warmup_s, self.dofs_)["total"]
@@ -298,25 +294,23 @@ class ResidualLoop:
         return refit(ws, vehicle, unknowns)
 
     # -- scores ---------------------------------------------------------------------------------
-    def _errors(self, ws: Workspace, fit: Fit) -> dict:
-        """Held-out errors of a fit: velocity NRMSE (free run, one step), force residual RMS."""
-        return {
-            "free_run_nrmse": free_run_errors(fit.vehicle, ws.val, self.warmup_s, self.dofs_),
-            "one_step_nrmse": one_step_errors(fit.vehicle, ws.val, self.warmup_s, self.dofs_),
-            "force_rmse": force_rmse(ws, fit.vehicle),
-        }
-
-    def _correlations(self, ws: Workspace, fit: Fit) -> dict:
-        """MATLAB ``resid`` analysis of the held-out force residual against the input forces."""
+    def _scores(self, ws: Workspace, fit: Fit) -> tuple[dict, dict]:
+        """Held-out errors of a fit (velocity NRMSE in free run and one step, force residual
+        RMS) and MATLAB ``resid`` analysis of its force residual against the input forces."""
+        val, dofs = ws.val, self.dofs_
         r = force_residual(ws, fit.vehicle)
-        tau = nominal_forces(ws.val, fit.vehicle)
+        errors = {
+            "free_run_nrmse": velocity_errors(fit.vehicle, val, "free_run", self.warmup_s, dofs),
+            "one_step_nrmse": velocity_errors(fit.vehicle, val, "one_step", self.warmup_s, dofs),
+            "force_rmse": force_rmse(r, ws.arrays(fit.vehicle, "val")["tau"], dofs),
+        }
+        tau = nominal_forces(val, fit.vehicle)
         inputs = {f"tau_{f}": tau[:, i] for i, f in enumerate(FORCES) if np.any(tau[:, i])}
         exp = ws.data_val["experiment"]
-        return {
-            d: correlation_analysis(r[:, i], inputs, exp)
-            for i, d in enumerate(DOFS)
-            if d in self.dofs_
+        analysis = {
+            d: correlation_analysis(r[:, i], inputs, exp) for i, d in enumerate(DOFS) if d in dofs
         }
+        return errors, analysis
 
     # -- outputs --------------------------------------------------------------------------------
     def free_runs(self) -> tuple[np.ndarray, pd.DataFrame, pd.DataFrame, pd.DataFrame, list[str]]:
