@@ -17,7 +17,6 @@ import warnings
 
 import numpy as np
 import pandas as pd
-import torch
 
 from nnid.datasets.log import ANGLES
 from nnid.datasets.splits import split_log
@@ -42,6 +41,7 @@ from nnid.loop.effects import candidates, input_channels, nominal_forces
 from nnid.loop.residuals import correlation_analysis
 from nnid.models.parametric import Parts, vehicle_with
 from nnid.physics.added_mass import DOFS, FORCES
+from nnid.threads import torch_threads
 
 
 class ResidualLoop:
@@ -143,16 +143,9 @@ class ResidualLoop:
         """Run the loop on ``log``; ``progress(message)`` is called as each pass starts.
         Warnings raised on the way (unexcited parameters, ...) are kept in ``warnings_``."""
         start = time.perf_counter()
-        threads = torch.get_num_threads()
-        # element-wise physics on ~10⁴ rows: torch's threads cost more than they give, and
-        # far more on a loaded machine (6× per call measured on 2 busy cores)
-        torch.set_num_threads(1)
-        try:
-            with warnings.catch_warnings(record=True) as caught:
-                warnings.simplefilter("always")
-                self._fit(log, progress or (lambda message: None))
-        finally:
-            torch.set_num_threads(threads)
+        with torch_threads(1), warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            self._fit(log, progress or (lambda message: None))
         self.warnings_ = list(dict.fromkeys(str(w.message) for w in caught))
         self.seconds_ = time.perf_counter() - start
         return self

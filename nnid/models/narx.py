@@ -53,39 +53,9 @@ from nnid.datasets.segmentation import BalancedSampler, label_transients
 from nnid.datasets.splits import split_log
 from nnid.errors import NnidInputError
 from nnid.evaluation.metrics import nrmse
+from nnid.models.bounds import OutputBounds, bound_arrays, check_bounds, resolve_bounds
 
 DTYPE = torch.float64
-
-
-Bound = float | str | None
-#: ``output_bounds``: None (no clamp), "train" (the training range of every output) or one
-#: [low, high] per output, each a number in the output's units, None (open) or "train"
-OutputBounds = str | Sequence[Sequence[Bound]] | None
-
-
-def _check_bounds(bounds: OutputBounds, n_out: int) -> OutputBounds:
-    """Validate an ``output_bounds`` specification; returns it as lists (JSON-ready)."""
-    if bounds is None:
-        return None
-    if isinstance(bounds, str):
-        if bounds != "train":
-            raise NnidInputError(
-                "output_bounds is None, 'train' or [low, high] per output", field="output_bounds"
-            )
-        return bounds
-    out = [list(b) for b in bounds]
-    if len(out) != n_out or any(len(b) != 2 for b in out):
-        raise NnidInputError(
-            "output_bounds needs one [low, high] per output", field="output_bounds"
-        )
-    for pair in out:
-        for i, v in enumerate(pair):
-            if v is not None and v != "train":
-                pair[i] = float(v)
-        lo, hi = pair
-        if isinstance(lo, float) and isinstance(hi, float) and not lo < hi:
-            raise NnidInputError("output_bounds: low must be below high", field="output_bounds")
-    return out
 
 
 #: ``output_transform`` values: extra regressors computed from each lagged output
@@ -195,7 +165,7 @@ class NarxModel:
         self.division, self.fractions = division, tuple(float(f) for f in fractions)
         self.batch_size, self.samples_per_epoch = int(batch_size), samples_per_epoch
         self.lm_samples = int(lm_samples)
-        self.output_bounds = _check_bounds(output_bounds, len(self.outputs))
+        self.output_bounds = check_bounds(output_bounds, len(self.outputs))
         if simulation_trainer not in ("adam", "lm"):
             raise NnidInputError("simulation_trainer is 'adam' or 'lm'", field="simulation_trainer")
         self.simulation_trainer = simulation_trainer
@@ -205,8 +175,7 @@ class NarxModel:
             raise NnidInputError("output_transform is None or 'sqrt'", field="output_transform")
         self.output_transform = output_transform
         #: the bounds in the outputs' units, [low, high] per output (None: open), once resolved
-        self.bounds_: list[list[float | None]] | None = None
-        self._resolve_bounds(None)
+        self.bounds_ = resolve_bounds(self.output_bounds, self.outputs, None)
         self.dy = max(self.output_delays)
         #: the delay states: samples at the start of each experiment neither predicted nor scored
         self.warmup = max(self.dy, max(self.input_delays))
@@ -262,36 +231,12 @@ class NarxModel:
             "output_transform": self.output_transform,
         }
 
-    def _resolve_bounds(self, log: pd.DataFrame | None) -> None:
-        """Set ``bounds_`` from ``output_bounds``; ``"train"`` entries take the training
-        minimum (low) or maximum (high) of ``log`` and stay unresolved while ``log`` is None."""
-        spec = self.output_bounds
-        if spec is None:
-            self.bounds_ = None
-            return
-        pairs = [["train", "train"] for _ in self.outputs] if spec == "train" else spec
-        out: list[list[float | None]] = []
-        for c, pair in zip(self.outputs, pairs, strict=True):
-            row: list[float | None] = []
-            for i, v in enumerate(pair):
-                if v == "train":
-                    if log is None:
-                        self.bounds_ = None
-                        return
-                    col = log[c].to_numpy(np.float64)
-                    v = float(np.nanmin(col) if i == 0 else np.nanmax(col))
-                row.append(v)
-            out.append(row)
-        self.bounds_ = out
-
     def _norm_bounds(self) -> tuple[torch.Tensor, torch.Tensor] | None:
         """The resolved bounds in normalised units (±inf where open), or None."""
         if self.bounds_ is None:
             return None
         net = self.net_
-        lo = torch.tensor([-np.inf if b[0] is None else b[0] for b in self.bounds_], dtype=DTYPE)
-        hi = torch.tensor([np.inf if b[1] is None else b[1] for b in self.bounds_], dtype=DTYPE)
-        return (lo - net.y_mean) / net.y_std, (hi - net.y_mean) / net.y_std
+        return bound_arrays(self.bounds_, net.y_mean, net.y_std)
 
     def _norm_bounds_np(self) -> tuple[np.ndarray, np.ndarray] | None:
         nb = self._norm_bounds()
@@ -492,7 +437,7 @@ class NarxModel:
             self._check(validation_log)
             self.division_ = {"by": "given"}
         self._fit_normalisation(log)
-        self._resolve_bounds(log)
+        self.bounds_ = resolve_bounds(self.output_bounds, self.outputs, log)
         tab = self._table(log)
         horizon = max(1, self.multi_step)
         sampler = BalancedSampler(

@@ -1,0 +1,487 @@
+"""Continuous-time neural state-space model: ẋ = f_θ(x, u), y = the first states.
+
+The state-space counterpart of the NARX network (Weiss IV.A.2): where a NARX maps past outputs
+and inputs to the next output, this model keeps a state x of ``len(outputs)`` measured states
+(the outputs, normalised) and ``hidden_states`` unmeasured ones, and learns the vector field
+
+    ẋ_i = W₂,ᵢ tanh(W₁,ᵢ [x, u]_{S_i} + b₁,ᵢ) + b₂,ᵢ        i = 1..n_x
+
+with one tanh hidden layer per state derivative that sees only the variables its row S_i of
+``structure`` allows (e.g. a cascade: the upper tank's level does not depend on the lower
+one's). Time runs in samples (the log must be uniformly sampled within each experiment); the
+input is held over each sample (zero-order hold) and the ODE is integrated by the shared RK4
+(:func:`nnid.physics.integrate.rk4`). This is the model class of the published 0.33 V neural
+continuous-time result on Cascaded Tanks quoted in issue 6 (Forgione & Piga 2021).
+
+Training is simulation-error (output-error) only: the free run of each training window from its
+initial state, which is estimated with the network (all states of every window are free
+parameters, the measured ones starting at the measurement). The trainer is any object with
+``fit(module, residual, train_batches, val_batches)``: Levenberg-Marquardt by default (forward-
+mode Jacobians of the whole simulated window), or Adam. Early stopping uses held-out windows
+whose initial states are estimated from their first ``warmup`` samples only (with the network
+held fixed), exactly as at prediction time; the samples after the warm-up are the validation
+error. Training runs in stages of growing window length (``windows``; multiple shooting with
+continuity links between neighbouring windows); early stopping applies to the last stage, the
+earlier ones being the pre-training that makes the long simulation error tractable. Prediction
+estimates each experiment's initial state the same way, then runs free; the warm-up samples are
+never scored.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+import torch
+from torch import nn
+from torch.func import functional_call
+
+from nnid.datasets.preprocess import experiments
+from nnid.datasets.splits import split_log
+from nnid.errors import NnidInputError
+from nnid.evaluation.metrics import nrmse
+from nnid.models.bounds import OutputBounds, bound_arrays, check_bounds, resolve_bounds
+from nnid.physics.integrate import rk4
+from nnid.threads import torch_threads
+
+DTYPE = torch.float64
+#: derivatives are learned per sample and scaled down, so a small network starts slow
+_RATE = 0.1
+#: relative spread of sampling intervals accepted as uniform
+_DT_TOLERANCE = 0.01
+
+
+def _structure_mask(structure: Sequence[Sequence[Any]] | None, n_x: int, n_u: int) -> np.ndarray:
+    """The n_x × (n_x + n_u) boolean mask: row i = what ẋ_i depends on (states, then inputs)."""
+    if structure is None:
+        return np.ones((n_x, n_x + n_u), dtype=bool)
+    mask = np.asarray(structure, dtype=float)
+    if mask.shape != (n_x, n_x + n_u) or not np.isin(mask, (0.0, 1.0)).all():
+        raise NnidInputError(
+            f"structure must be {n_x} rows (one per state derivative) of {n_x + n_u} zeros or "
+            "ones (the states, measured first, then the inputs)",
+            field="structure",
+        )
+    if not mask.any(axis=1).all():
+        raise NnidInputError("every state derivative must depend on something", field="structure")
+    return mask.astype(bool)
+
+
+class StateSpaceNet(nn.Module):
+    """The vector field f_θ (masked block network) and the normalisation buffers.
+
+    ``forward(x0, u)`` integrates from ``x0`` [B, n_x] under normalised inputs ``u`` [N, B, n_u]
+    and returns the states at the N sample times [N, B, n_x] (x(0) first).
+    """
+
+    def __init__(
+        self, n_x: int, n_y: int, n_u: int, hidden: int, mask: np.ndarray, substeps: int = 1
+    ) -> None:
+        super().__init__()
+        self.n_x, self.n_y, self.n_u, self.hidden, self.substeps = n_x, n_y, n_u, hidden, substeps
+        n_h = n_x * hidden
+        m1 = torch.as_tensor(np.repeat(mask, hidden, axis=0), dtype=DTYPE)
+        m2 = torch.kron(torch.eye(n_x, dtype=DTYPE), torch.ones(1, hidden, dtype=DTYPE))
+        self.register_buffer("mask1", m1)
+        self.register_buffer("mask2", m2)
+        fan_in = m1.sum(1).clamp(min=1.0)
+        self.w1 = nn.Parameter(
+            (torch.rand(n_h, n_x + n_u, dtype=DTYPE) * 2 - 1) / fan_in.sqrt()[:, None]
+        )
+        self.b1 = nn.Parameter((torch.rand(n_h, dtype=DTYPE) * 2 - 1) / fan_in.sqrt())
+        # a small output layer: the initial model is nearly constant, so early free runs stay finite
+        self.w2 = nn.Parameter(torch.randn(n_x, n_h, dtype=DTYPE) * 1e-2)
+        self.b2 = nn.Parameter(torch.zeros(n_x, dtype=DTYPE))
+        for name, n in (("u_mean", n_u), ("y_mean", n_y), ("hidden_init", n_x - n_y)):
+            self.register_buffer(name, torch.zeros(n, dtype=DTYPE))
+        for name, n in (("u_std", n_u), ("y_std", n_y)):
+            self.register_buffer(name, torch.ones(n, dtype=DTYPE))
+
+    def forward(self, x0: torch.Tensor, u: torch.Tensor) -> torch.Tensor:
+        w1 = self.w1 * self.mask1
+        w1x = w1[:, : self.n_x].T
+        zu = u @ w1[:, self.n_x :].T + self.b1  # the inputs' share of the hidden layer, all steps
+        w2 = (self.w2 * self.mask2).T * _RATE
+        b2 = self.b2 * _RATE
+
+        def f(x: torch.Tensor, z: torch.Tensor) -> torch.Tensor:
+            return torch.tanh(x @ w1x + z) @ w2 + b2
+
+        return rk4(f, x0, zu, 1.0, self.substeps)[:-1]
+
+
+@dataclass
+class _Windows:
+    """Training windows: inputs [L, B, n_u] and outputs [L, B, n_y] (normalised), where each
+    starts (experiment number, sample) and the experiments' lengths."""
+
+    u: torch.Tensor
+    y: torch.Tensor
+    where: list[tuple[int, int]]
+    lengths: list[int]
+    #: (window b, sample i, window b'): window b' starts at sample i of window b
+    links: torch.Tensor
+
+
+class _Fit(nn.Module):
+    """What a trainer sees: the network and the free initial states of the windows."""
+
+    def __init__(self, net: StateSpaceNet, x0: torch.Tensor, x0_val: torch.Tensor | None) -> None:
+        super().__init__()
+        self.net = net
+        self.x0 = nn.Parameter(x0)
+        self.x0_val = nn.Parameter(x0_val) if x0_val is not None else None
+
+
+class NeuralStateSpace:
+    """Continuous-time neural state-space model, sklearn-style: ``fit(log, validation_log=None)``,
+    ``predict(log)`` (free run), ``score(log)``, ``save(dir)`` / ``load(dir)`` (state dict +
+    JSON config, no pickle).
+
+    Args:
+        inputs, outputs: column names; the outputs are the first (measured) states.
+        hidden_states: unmeasured states after the measured ones.
+        hidden: tanh units per state derivative.
+        structure: None (every derivative sees every state and input) or n_x rows of
+            n_x + n_u zeros/ones (states, measured first, then inputs).
+        substeps: RK4 steps per sample.
+        warmup: samples at the start of each experiment used to estimate the initial state and
+            never scored.
+        windows: training stages, one window length in samples each (None: whole
+            experiments); every window has its own free initial state. Each stage starts from
+            the previous one's weights and simulated states: short windows first make the
+            simulation error easier to minimise (multiple shooting), longer ones then fit the
+            long-horizon behaviour.
+        trainer: an object with ``fit(module, residual, train_batches, val_batches)``;
+            default ``LevenbergMarquardt(max_epochs=100)``.
+        output_bounds: clamp of the predicted outputs (:mod:`nnid.models.bounds`).
+        fractions: contiguous train/validation/test blocks when no ``validation_log`` is given
+            (MATLAB's divideblock; the test block is left unused).
+        state_epochs: Levenberg-Marquardt epochs of the initial-state estimate at prediction.
+        continuity: weight of the multiple-shooting links (the state simulated to a window's
+            last sample minus the next window's initial state, every state, normalised units)
+            in the sum of squares; they tie the hidden states of neighbouring windows together.
+        seed: seeds the initial weights.
+    """
+
+    def __init__(
+        self,
+        inputs: Sequence[str],
+        outputs: Sequence[str],
+        hidden_states: int = 1,
+        hidden: int = 16,
+        structure: Sequence[Sequence[Any]] | None = None,
+        substeps: int = 1,
+        warmup: int = 10,
+        windows: Sequence[int | None] = (None,),
+        trainer: Any = None,
+        output_bounds: OutputBounds = None,
+        fractions: Sequence[float] = (0.7, 0.15, 0.15),
+        state_epochs: int = 50,
+        continuity: float = 1.0,
+        seed: int = 0,
+    ) -> None:
+        self.inputs, self.outputs = list(inputs), list(outputs)
+        if not self.outputs:
+            raise NnidInputError("a state-space model needs at least one output", field="outputs")
+        if hidden_states < 0 or hidden < 1 or substeps < 1 or warmup < 1:
+            raise NnidInputError(
+                "hidden_states ≥ 0, hidden ≥ 1, substeps ≥ 1 and warmup ≥ 1 are required",
+                field="neural_state_space",
+            )
+        self.windows = [None if w is None else int(w) for w in windows]
+        if not self.windows or any(w is not None and w <= warmup for w in self.windows):
+            raise NnidInputError(
+                "windows: one or more lengths (None: whole experiments), each longer than warmup",
+                field="windows",
+            )
+        self.hidden_states, self.hidden = int(hidden_states), int(hidden)
+        self.n_x = len(self.outputs) + self.hidden_states
+        self.structure = None if structure is None else [[int(v) for v in r] for r in structure]
+        self._mask = _structure_mask(self.structure, self.n_x, len(self.inputs))
+        self.substeps, self.warmup = int(substeps), int(warmup)
+        self.trainer = trainer
+        self.output_bounds = check_bounds(output_bounds, len(self.outputs))
+        self.bounds_ = resolve_bounds(self.output_bounds, self.outputs, None)
+        self.fractions = tuple(float(f) for f in fractions)
+        self.state_epochs, self.seed = int(state_epochs), int(seed)
+        self.continuity = float(continuity)
+        self.net_ = self._new_net()
+
+    def _new_net(self) -> StateSpaceNet:
+        n_y, n_u = len(self.outputs), len(self.inputs)
+        return StateSpaceNet(self.n_x, n_y, n_u, self.hidden, self._mask, self.substeps)
+
+    def config(self) -> dict:
+        """The JSON-serialisable constructor arguments (the trainer by name)."""
+        return {
+            "inputs": self.inputs,
+            "outputs": self.outputs,
+            "hidden_states": self.hidden_states,
+            "hidden": self.hidden,
+            "structure": self.structure,
+            "substeps": self.substeps,
+            "warmup": self.warmup,
+            "windows": self.windows,
+            "trainer": type(self.trainer).__name__ if self.trainer else "LevenbergMarquardt",
+            "output_bounds": self.bounds_ if self.bounds_ is not None else self.output_bounds,
+            "fractions": list(self.fractions),
+            "state_epochs": self.state_epochs,
+            "continuity": self.continuity,
+            "seed": self.seed,
+        }
+
+    @property
+    def n_params(self) -> int:
+        """Free network weights (the masked-out ones are not counted)."""
+        net = self.net_
+        return int(net.mask1.sum() + net.n_x * net.hidden + net.mask2.sum() + net.n_x)
+
+    def save(self, folder: str | Path) -> Path:
+        """``nss.pt`` (the state dict: weights, normalisation) and ``nss.json``."""
+        folder = Path(folder)
+        folder.mkdir(parents=True, exist_ok=True)
+        torch.save(self.net_.state_dict(), folder / "nss.pt")
+        (folder / "nss.json").write_text(json.dumps(self.config(), indent=2))
+        return folder
+
+    @classmethod
+    def load(cls, folder: str | Path) -> NeuralStateSpace:
+        """Rebuild from ``nss.json`` and load ``nss.pt`` with ``weights_only=True``."""
+        folder = Path(folder)
+        cfg = json.loads((folder / "nss.json").read_text())
+        cfg.pop("trainer", None)
+        model = cls(**cfg)
+        model.net_.load_state_dict(torch.load(folder / "nss.pt", weights_only=True))
+        return model
+
+    # -- data ------------------------------------------------------------------------------------
+    def _check(self, log: pd.DataFrame, name: str = "log") -> None:
+        missing = [c for c in self.inputs + self.outputs if c not in log]
+        if missing:
+            raise NnidInputError(f"the {name} has no column(s) {missing}", field="columns")
+        bad = [
+            c for c in self.inputs + self.outputs if not np.isfinite(log[c].to_numpy(float)).all()
+        ]
+        if bad:
+            raise NnidInputError(
+                f"the {name} has missing or infinite values in {bad}", field="columns"
+            )
+        if "t" in log:
+            for exp, idx in experiments(log):
+                dt = np.diff(log.loc[idx, "t"].to_numpy(np.float64))
+                if dt.size and (dt.min() <= 0 or np.ptp(dt) > _DT_TOLERANCE * np.median(dt)):
+                    where = f" (experiment {exp})" if exp is not None else ""
+                    raise NnidInputError(
+                        f"column t of the {name}{where} is not uniformly sampled: the state-space "
+                        "model counts time in samples; resample the log first",
+                        field="t",
+                    )
+
+    def _segments(self, log: pd.DataFrame) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+        """(positions, normalised outputs, normalised inputs) per experiment."""
+        net = self.net_
+        y = (log[self.outputs].to_numpy(np.float64) - net.y_mean.numpy()) / net.y_std.numpy()
+        u = (log[self.inputs].to_numpy(np.float64) - net.u_mean.numpy()) / net.u_std.numpy()
+        out = []
+        for _, idx in experiments(log):
+            pos = log.index.get_indexer(idx)
+            out.append((pos, y[pos], u[pos]))
+        return out
+
+    def _fit_normalisation(self, log: pd.DataFrame) -> None:
+        net = self.net_
+        for cols, mean, std in (
+            (self.outputs, net.y_mean, net.y_std),
+            (self.inputs, net.u_mean, net.u_std),
+        ):
+            v = log[cols].to_numpy(np.float64)
+            s = v.std(0)
+            mean.copy_(torch.as_tensor(v.mean(0)))
+            std.copy_(torch.as_tensor(np.where(s > 0, s, 1.0)))
+
+    def _windows(self, log: pd.DataFrame, length: int | None) -> _Windows:
+        """Windows of ``length`` samples (None: the shortest experiment) starting at each
+        experiment's start and every ``length − 1`` samples after (a window's last sample is
+        the next one's first), the last one ending at the experiment's end (overlapping more if
+        need be, so no sample is left out)."""
+        segs = [s for s in self._segments(log) if len(s[1]) > self.warmup]
+        if not segs:
+            raise NnidInputError(
+                f"no experiment is longer than the warm-up ({self.warmup} samples)", field="warmup"
+            )
+        shortest = min(len(s[1]) for s in segs)
+        length = shortest if length is None else min(length, shortest)
+        us, ys, where, links = [], [], [], []
+        for j, (_, yn, un) in enumerate(segs):
+            n = len(yn)
+            starts = sorted({*range(0, n - length + 1, max(1, length - 1)), n - length})
+            for k, s in enumerate(starts):
+                if k:  # the previous window must reach this start: multiple-shooting link
+                    links.append((len(where) - 1, s - starts[k - 1], len(where)))
+                us.append(un[s : s + length])
+                ys.append(yn[s : s + length])
+                where.append((j, s))
+        u, y = torch.as_tensor(np.stack(us, 1)), torch.as_tensor(np.stack(ys, 1))
+        return _Windows(
+            u, y, where, [len(s[1]) for s in segs], torch.as_tensor(links).reshape(-1, 3)
+        )
+
+    def _initial_states(self, y: torch.Tensor) -> torch.Tensor:
+        """Start of the estimate: the measured states at their first sample, the hidden ones
+        at ``hidden_init`` (the mean of the fitted training initial states)."""
+        hidden = self.net_.hidden_init.expand(y.shape[1], -1)
+        return torch.cat([y[0], hidden], 1).clone()
+
+    def _track(self, win: _Windows, x0: torch.Tensor) -> list[np.ndarray]:
+        """Per experiment, the states simulated from the fitted initial states of its windows
+        (a later window overwrites the overlap): where the next stage's windows start."""
+        with torch.no_grad():
+            states = self.net_(x0, win.u).numpy()
+        tracks = [np.zeros((n, self.n_x)) for n in win.lengths]
+        for b, (j, s) in enumerate(win.where):
+            tracks[j][s : s + states.shape[0]] = states[:, b]
+        return tracks
+
+    def _starts(self, win: _Windows, tracks: list[np.ndarray] | None) -> torch.Tensor:
+        if tracks is None:
+            return self._initial_states(win.y)
+        return torch.as_tensor(np.stack([tracks[j][s] for j, s in win.where]))
+
+    # -- torch pieces ----------------------------------------------------------------------------
+    def _outputs(self, states: torch.Tensor) -> torch.Tensor:
+        y = states[..., : len(self.outputs)]
+        if self.bounds_ is None:
+            return y
+        lo, hi = bound_arrays(self.bounds_, self.net_.y_mean, self.net_.y_std)
+        return torch.clamp(y, lo, hi)
+
+    def _simulate(self, params: dict[str, torch.Tensor], x0: torch.Tensor, u: torch.Tensor):
+        return self._outputs(functional_call(self.net_, params, (x0, u)))
+
+    def _residual(self, params: dict[str, torch.Tensor], batch: tuple) -> torch.Tensor:
+        """Training windows (``"fit"``: whole window), held-out windows' warm-ups with the
+        network held fixed (``"state"``: their initial states only) and after it (``"val"``)."""
+        kind, u, y, links = batch
+        net = {k[4:]: v for k, v in params.items() if k.startswith("net.")}
+        if kind == "fit":
+            x0 = params["x0"]
+            states = functional_call(self.net_, net, (x0, u))
+            fit = self._outputs(states) - y
+            if not len(links) or self.continuity == 0:
+                return fit.reshape(-1)
+            gap = states[links[:, 1], links[:, 0]] - x0[links[:, 2]]
+            return torch.cat([fit.reshape(-1), self.continuity**0.5 * gap.reshape(-1)])
+        if kind == "state":
+            fixed = {k: v.detach() for k, v in net.items()}
+            w = self.warmup
+            return (self._simulate(fixed, params["x0_val"], u[:w]) - y[:w]).reshape(-1)
+        return (self._simulate(net, params["x0_val"], u) - y)[self.warmup :].reshape(-1)
+
+    # -- training --------------------------------------------------------------------------------
+    def fit(
+        self, log: pd.DataFrame, validation_log: pd.DataFrame | None = None
+    ) -> NeuralStateSpace:
+        """Normalise on the training data, then minimise the simulation error of the training
+        windows over the weights and the windows' initial states; early stopping on the
+        held-out windows (the ``validation_log``, or the validation block of ``log``)."""
+        with torch_threads(1):
+            return self._fit(log, validation_log)
+
+    def _fit(self, log: pd.DataFrame, validation_log: pd.DataFrame | None) -> NeuralStateSpace:
+        from nnid.trainers.levenberg_marquardt import LevenbergMarquardt
+
+        self._check(log)
+        torch.manual_seed(self.seed)
+        self.net_ = self._new_net()
+        if validation_log is None:
+            split = split_log(log, "block", self.fractions)  # type: ignore[arg-type]
+            log, validation_log = split.train, split.validation
+            self.division_ = split.record
+        else:
+            self._check(validation_log, "validation log")
+            self.division_ = {"by": "given"}
+        self._fit_normalisation(log)
+        self.bounds_ = resolve_bounds(self.output_bounds, self.outputs, log)
+        trainer = self.trainer if self.trainer is not None else LevenbergMarquardt(max_epochs=100)
+        held_out = validation_log is not None and len(validation_log) > self.warmup
+        tracks = val_tracks = None
+        self.history_ = []
+        for i, length in enumerate(self.windows):
+            win = self._windows(log, length)
+            val = self._windows(validation_log, length) if held_out else None  # type: ignore[arg-type]
+            fit = _Fit(
+                self.net_,
+                self._starts(win, tracks),
+                None if val is None else self._starts(val, val_tracks),
+            )
+            train_batches = [("fit", win.u, win.y, win.links)]
+            if val is not None:
+                train_batches.append(("state", val.u, val.y, None))
+            last = i == len(self.windows) - 1
+            checks = [("val", val.u, val.y, None)] if val is not None and last else None
+            self.history_.append(trainer.fit(fit, self._residual, train_batches, checks))
+            tracks = self._track(win, fit.x0.detach())
+            if val is not None:
+                val_tracks = self._track(val, fit.x0_val.detach())
+        with torch.no_grad():
+            if self.hidden_states:
+                x0 = torch.as_tensor(np.concatenate(tracks))  # type: ignore[arg-type]
+                self.net_.hidden_init.copy_(x0[:, len(self.outputs) :].mean(0))
+        return self
+
+    # -- prediction ------------------------------------------------------------------------------
+    def initial_state(self, y: np.ndarray, u: np.ndarray) -> torch.Tensor:
+        """The state at the first sample, estimated from the first ``warmup`` normalised outputs
+        ``y`` and inputs ``u`` by Levenberg-Marquardt with the network fixed."""
+        from nnid.trainers.levenberg_marquardt import LevenbergMarquardt
+
+        w = self.warmup
+        ut = torch.as_tensor(u[:w])[:, None]
+        yt = torch.as_tensor(y[:w])[:, None]
+        holder = nn.Module()
+        holder.x0 = nn.Parameter(self._initial_states(yt))
+        fixed = {k: v.detach() for k, v in self.net_.named_parameters()}
+
+        def residual(params: dict[str, torch.Tensor], batch: Any) -> torch.Tensor:
+            return (self._simulate(fixed, params["x0"], ut) - yt).reshape(-1)
+
+        LevenbergMarquardt(max_epochs=self.state_epochs).fit(holder, residual, [None])
+        return holder.x0.detach()
+
+    def predict(self, log: pd.DataFrame, mode: str = "free_run") -> pd.DataFrame:
+        """Free-run outputs (columns ``outputs``, the log's index) of every experiment from the
+        initial state estimated on its warm-up; the warm-up rows are NaN."""
+        with torch_threads(1):
+            return self._predict(log, mode)
+
+    def _predict(self, log: pd.DataFrame, mode: str) -> pd.DataFrame:
+        if mode != "free_run":
+            raise NnidInputError(
+                "a state-space model predicts in free run only (mode='free_run')", field="mode"
+            )
+        self._check(log)
+        out = np.full((len(log), len(self.outputs)), np.nan)
+        mean, std = self.net_.y_mean.numpy(), self.net_.y_std.numpy()
+        params = dict(self.net_.named_parameters())
+        for pos, yn, un in self._segments(log):
+            if len(yn) <= self.warmup:
+                continue
+            x0 = self.initial_state(yn, un)
+            with torch.no_grad():
+                pred = self._simulate(params, x0, torch.as_tensor(un)[:, None])[:, 0].numpy()
+            out[pos[self.warmup :]] = pred[self.warmup :] * std + mean
+        return pd.DataFrame(out, index=log.index, columns=self.outputs)
+
+    def score(self, log: pd.DataFrame) -> dict[str, float]:
+        """Free-run NRMSE per output and ``total`` (their mean), warm-up excluded."""
+        pred = self.predict(log)
+        out = {c: nrmse(log[c].to_numpy(), pred[c].to_numpy()) for c in self.outputs}
+        finite = [v for v in out.values() if np.isfinite(v)]
+        out["total"] = float(np.mean(finite)) if finite else float("nan")
+        return out
