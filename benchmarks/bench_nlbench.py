@@ -16,7 +16,13 @@ their free-run trajectories (``ensemble``, chosen on the holdout below; the medi
 estimation record, early-stop and score on its tail (samples 718-1023, the first 50 as warm-up);
 the test record is not used.
 
-Run: ``python benchmarks/bench_nlbench.py [--holdout] [cascaded_tanks silverbox emps]``.
+``cascaded_tanks_nss``: the same benchmark with the continuous-time neural state-space model
+(:mod:`nnid.models.neural_state_space`): trained by LM on the simulation error of the whole
+estimation record (windows 64, 256, then the whole record), the initial state of the test record
+estimated on its warm-up; not run by default.
+
+Run: ``python benchmarks/bench_nlbench.py [--holdout] [cascaded_tanks silverbox emps
+cascaded_tanks_nss]``.
 """
 
 from __future__ import annotations

@@ -164,8 +164,8 @@ def train(
     ),
 ) -> None:
     """Fit one model on the training split and score it on held-out data: writes
-    model.json (a NARX: narx.pt and narx.json), metrics.json, report.md and the cleaning
-    report to --out."""
+    model.json (a NARX: narx.pt and narx.json; a neural state-space model: nss.pt and
+    nss.json), metrics.json, report.md and the cleaning report to --out."""
     import json
 
     from nnid.config import TrainConfig, load_config
@@ -188,6 +188,15 @@ def train(
                 result = run_narx_train(cfg, config, data, columns)
         except NnidInputError as exc:
             raise exc.with_source(str(config)) from None
+    elif read_toml(config).get("model") == "state_space":
+        from nnid.pipeline import run_state_space_train
+
+        cfg = load_config(config, TrainConfig)
+        try:
+            with err.status(f"training the neural state-space model ({cfg.trainer})"):
+                result = run_state_space_train(cfg, config, data, columns)
+        except NnidInputError as exc:
+            raise exc.with_source(str(config)) from None
     else:
         from nnid.pipeline import resolve
 
@@ -201,8 +210,8 @@ def train(
         except NnidInputError as exc:
             raise exc.with_source(str(config)) from None
     out_dir.mkdir(parents=True, exist_ok=True)
-    if result.metrics["model"] == "narx":
-        result.model.save(out_dir)  # narx.pt (state dict) + narx.json
+    if result.metrics["model"] in ("narx", "state_space"):
+        result.model.save(out_dir)  # narx.pt / nss.pt (state dict) + narx.json / nss.json
     else:
         result.model.save(out_dir / "model.json")
     (out_dir / "metrics.json").write_text(json.dumps(result.metrics, indent=2))

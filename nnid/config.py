@@ -97,8 +97,11 @@ def load_config(path: str | Path, model: type[BaseModel] = SimulateConfig) -> Ba
 class DataSpec(_Strict):
     """Where the log comes from: a file (``log``, optionally through a reader config
     ``columns``), or a simulate config (``simulate``) run on the fly. Paths are relative to
-    the config file."""
+    the config file. ``kind = "table"``: the file is a generic input-output table (``t``,
+    optional ``experiment``, the model's named columns), not a vehicle log; for the
+    input-output models (NARX, neural state space)."""
 
+    kind: Literal["vehicle", "table"] = "vehicle"
     log: str | None = None
     columns: str | None = None
     simulate: str | None = None
@@ -152,13 +155,38 @@ class NarxSpec(_Strict):
     noise: float = Field(0.0, ge=0)
 
 
+class StateSpaceSpec(_Strict):
+    """The continuous-time neural state-space model of ``model = "state_space"``
+    (:mod:`nnid.models.neural_state_space`): the outputs are the first states, ``hidden_states``
+    more are unmeasured; ``structure`` (optional) is one row of 0/1 per state derivative over
+    the states then the inputs; ``windows`` are the training stages' window lengths in samples
+    (0: whole experiments); ``warmup`` samples estimate each run's initial state and are never
+    scored; ``epochs`` per stage; ``output_bounds``: "train" or one [low, high] per output,
+    each a number, "train" or "open"."""
+
+    inputs: list[str] = Field(min_length=1)
+    outputs: list[str] = Field(min_length=1)
+    hidden_states: int = Field(1, ge=0)
+    hidden: int = Field(16, ge=1)
+    structure: list[list[int]] | None = None
+    windows: list[int] = Field(default_factory=lambda: [0], min_length=1)
+    warmup: int = Field(10, ge=1)
+    substeps: int = Field(1, ge=1)
+    epochs: int = Field(30, ge=1)
+    lr: float = Field(1e-2, gt=0)
+    continuity: float = Field(1.0, ge=0)
+    output_bounds: str | list[list[float | str]] | None = None
+    seed: int = 0
+
+
 class TrainConfig(_Strict):
     """``nnid train``: one model, one trainer, a split, and what to report."""
 
-    model: Literal["fossen", "narx"] = "fossen"
+    model: Literal["fossen", "narx", "state_space"] = "fossen"
     trainer: Literal["ls", "rls", "gradient", "ukf", "caccia", "lm", "adam"] = "ls"
     vehicle: str = ""
     narx: NarxSpec | None = None
+    state_space: StateSpaceSpec | None = None
     data: DataSpec
     fossen: FossenSpec = Field(default_factory=FossenSpec)
     options: dict[str, float | str | bool] = Field(default_factory=dict)

@@ -45,6 +45,8 @@ def load_data(
 ) -> tuple[pd.DataFrame, CleaningReport]:
     """The training log: ``--data`` or the config's file, or its simulation."""
     base = config_path.parent
+    if cfg.data.kind == "table":
+        return _load_table(cfg, base, data_override)
     if data_override or cfg.data.log:
         path = data_override or str(resolve(base, cfg.data.log))
         cols = columns_override or (
@@ -61,6 +63,31 @@ def load_data(
         report.add("simulate", f"{len(log)} samples from {sim_path}")
     else:
         raise NnidInputError("give data.log or data.simulate (or --data)", field="data")
+    if cfg.data.experiments:
+        log = log[log["experiment"].isin(cfg.data.experiments)].reset_index(drop=True)
+    return log, report
+
+
+def _load_table(
+    cfg: TrainConfig | LoopConfig, base: Path, data_override: str | None
+) -> tuple[pd.DataFrame, CleaningReport]:
+    """A generic input-output table (``[data] kind = "table"``) checked for the columns of the
+    config's input-output model."""
+    from nnid.datasets.log import validate_table
+    from nnid.datasets.readers import read_table
+
+    spec = getattr(cfg, "narx", None) or getattr(cfg, "state_space", None)
+    if spec is None:
+        raise NnidInputError(
+            'data kind = "table" is for the input-output models (narx, state_space)',
+            field="data.kind",
+        )
+    if not (data_override or cfg.data.log):
+        raise NnidInputError('data kind = "table" needs data.log (or --data)', field="data")
+    path = data_override or str(resolve(base, cfg.data.log))
+    log = validate_table(read_table(path), [*spec.inputs, *spec.outputs], source=path)
+    report = CleaningReport(source=path)
+    report.add("read", f"{len(log)} rows, a generic input-output table")
     if cfg.data.experiments:
         log = log[log["experiment"].isin(cfg.data.experiments)].reset_index(drop=True)
     return log, report
@@ -582,30 +609,119 @@ def run_narx_train(
         "balanced": model.balanced,
         "transient_share_of_training_draws": model.transient_share_,
         "simulation_finetune": model.finetune_,
-        "train": _narx_scores(model, split.train, cfg, free_run=False),
-        "validation": _narx_scores(model, split.validation, cfg, free_run=True),
+        "train": _io_scores(model, split.train, cfg, free_run=False),
+        "validation": _io_scores(model, split.validation, cfg),
         "warnings": [str(w.message) for w in caught],
         "split": split.record,
         "warmup_s": cfg.warmup_s,
         "warmup_samples": model.warmup,
     }
     if len(split.test):
-        metrics["test"] = _narx_scores(model, split.test, cfg, free_run=True)
+        metrics["test"] = _io_scores(model, split.test, cfg)
     metrics["seconds"] = time.perf_counter() - start
     return TrainResult(model, metrics, report, split)
 
 
-def _narx_scores(model, log: pd.DataFrame, cfg: TrainConfig, free_run: bool) -> dict:
-    """One-step (and free-run) NRMSE per output; delay states and ``warmup_s`` excluded."""
+def run_state_space_train(
+    cfg: TrainConfig,
+    config_path: Path,
+    data_override: str | None = None,
+    columns_override: str | None = None,
+) -> TrainResult:
+    """``model = "state_space"``: fit a continuous-time neural state-space model on the
+    simulation error of the training split (Levenberg-Marquardt or Adam, staged windows),
+    early-stop on the validation split, and score free-run NRMSE on validation (and test), each
+    run's initial state estimated on its first ``warmup`` samples, which are not scored."""
+    from nnid.models.neural_state_space import NeuralStateSpace
+
+    spec = cfg.state_space
+    if spec is None:
+        raise NnidInputError(
+            "model = 'state_space' needs a [state_space] table", field="state_space"
+        )
+    if cfg.trainer not in ("lm", "adam"):
+        raise NnidInputError(
+            "a state-space model trains with trainer = 'lm' or 'adam'", field="trainer"
+        )
+    start = time.perf_counter()
+    log, report = load_data(cfg, config_path, data_override, columns_override)
+    split = make_split(log, cfg.split)
+    if cfg.trainer == "lm":
+        from nnid.trainers.levenberg_marquardt import LevenbergMarquardt
+
+        trainer = LevenbergMarquardt(max_epochs=spec.epochs)
+    else:
+        from nnid.trainers.adam import Adam
+
+        trainer = Adam(lr=spec.lr, max_epochs=spec.epochs)
+    bounds = spec.output_bounds
+    if isinstance(bounds, list):
+        bounds = [[None if v == "open" else v for v in pair] for pair in bounds]
+    model = NeuralStateSpace(
+        spec.inputs,
+        spec.outputs,
+        hidden_states=spec.hidden_states,
+        hidden=spec.hidden,
+        structure=spec.structure,
+        substeps=spec.substeps,
+        warmup=spec.warmup,
+        windows=[w or None for w in spec.windows],
+        trainer=trainer,
+        output_bounds=bounds,
+        continuity=spec.continuity,
+        seed=spec.seed,
+    )
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        model.fit(split.train, validation_log=split.validation)
+    metrics = {
+        "model": "state_space",
+        "trainer": cfg.trainer,
+        "vehicle": cfg.vehicle or None,
+        "params": {"n_params": {"value": float(model.n_params), "stderr": None}},
+        "network": {
+            "n_params": model.n_params,
+            "states": model.n_x,
+            "hidden_states": model.hidden_states,
+            "hidden_units_per_derivative": model.hidden,
+            "structure": model.structure,
+            "inputs": model.inputs,
+            "outputs": model.outputs,
+            "note": (
+                "a network has no physical parameters: 'params' lists its size; the weights "
+                "are in nss.pt"
+            ),
+        },
+        "stages": [
+            {"window": w, "epochs": h.epochs if hasattr(h, "epochs") else len(h.train)}
+            for w, h in zip(model.windows, model.history_, strict=True)
+        ],
+        "train": _io_scores(model, split.train, cfg, one_step=False),
+        "validation": _io_scores(model, split.validation, cfg, one_step=False),
+        "warnings": [str(w.message) for w in caught],
+        "split": split.record,
+        "warmup_s": cfg.warmup_s,
+        "warmup_samples": model.warmup,
+    }
+    if len(split.test):
+        metrics["test"] = _io_scores(model, split.test, cfg, one_step=False)
+    metrics["seconds"] = time.perf_counter() - start
+    return TrainResult(model, metrics, report, split)
+
+
+def _io_scores(
+    model, log: pd.DataFrame, cfg: TrainConfig, free_run: bool = True, one_step: bool = True
+) -> dict:
+    """One-step and/or free-run NRMSE per output of an input-output model (NARX, neural
+    state space); its warm-up samples and ``warmup_s`` excluded."""
     mask = warmup_mask(log, cfg.warmup_s, warmup_samples=model.warmup)
     cols = model.outputs
     vel = [c for c in cols if c in VELOCITY]
     if vel:  # vehicle outputs: score the excited DOFs only; generic outputs: all of them
         cols = [c for c in excited_dofs(log, vel)] + [c for c in cols if c not in VELOCITY]
-    out = {
-        "samples": int(mask.sum()),
-        "one_step_nrmse": per_dof(log, model.predict(log, "one_step"), cols, mask),
-    }
+    out: dict = {"samples": int(mask.sum())}
+    if one_step:
+        out["one_step_nrmse"] = per_dof(log, model.predict(log, "one_step"), cols, mask)
     if free_run:
         free = model.predict(log, "free_run")
         out["free_run_nrmse"] = per_dof(log, free, cols, mask)

@@ -53,8 +53,27 @@ def validate_log(
             "cmd_<name>",
             source=source,
         )
-    numeric = ["t", *motion, *[c for c in ACCELERATION if c in df.columns], *inputs]
-    for col in numeric:
+    _check_finite(
+        df, ["t", *motion, *[c for c in ACCELERATION if c in df.columns], *inputs], source
+    )
+    _check_time(df, source)
+    for col in ANGLES:
+        if col in df.columns:
+            peak = float(np.abs(df[col].to_numpy(dtype=np.float64)).max())
+            if peak > 2 * math.pi + 1e-6:
+                row = int(np.abs(df[col].to_numpy(dtype=np.float64)).argmax())
+                raise NnidInputError(
+                    f"angle of {peak:.4g} looks like degrees; angles must be in radians",
+                    source=source,
+                    field=col,
+                    row=row,
+                )
+    return df
+
+
+def _check_finite(df: pd.DataFrame, columns: list[str], source: str) -> None:
+    """Every value of ``columns`` a finite number; else the first bad row, named."""
+    for col in columns:
         values = pd.to_numeric(df[col], errors="coerce").to_numpy(dtype=np.float64)
         bad = ~np.isfinite(values)
         if bad.any():
@@ -66,6 +85,10 @@ def validate_log(
                 field=col,
                 row=row,
             )
+
+
+def _check_time(df: pd.DataFrame, source: str) -> None:
+    """``t`` strictly increasing within each experiment; else the first bad row, named."""
     groups = df.groupby("experiment", sort=False).indices if "experiment" in df else {None: None}
     t_all = df["t"].to_numpy(dtype=np.float64)
     for name, idx in groups.items():
@@ -83,17 +106,19 @@ def validate_log(
                 field="t",
                 row=row,
             )
-    for col in ANGLES:
-        if col in df.columns:
-            peak = float(np.abs(df[col].to_numpy(dtype=np.float64)).max())
-            if peak > 2 * math.pi + 1e-6:
-                row = int(np.abs(df[col].to_numpy(dtype=np.float64)).argmax())
-                raise NnidInputError(
-                    f"angle of {peak:.4g} looks like degrees; angles must be in radians",
-                    source=source,
-                    field=col,
-                    row=row,
-                )
+
+
+def validate_table(df: pd.DataFrame, columns: list[str], source: str = "<table>") -> pd.DataFrame:
+    """Check a generic input-output table (a benchmark, a plant that is not a vehicle): a time
+    column ``t`` strictly increasing within each experiment and the named ``columns`` present
+    and finite. Returns it unchanged; other columns are kept and ignored."""
+    missing = [c for c in ["t", *columns] if c not in df.columns]
+    if missing:
+        raise NnidInputError(f"the table has no column(s) {missing}", source=source)
+    if len(df) == 0:
+        raise NnidInputError("the table has no rows", source=source)
+    _check_finite(df, ["t", *columns], source)
+    _check_time(df, source)
     return df
 
 
