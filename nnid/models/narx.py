@@ -35,10 +35,8 @@ columns (body velocities u v w r ...).
 
 from __future__ import annotations
 
-import json
 import warnings
 from collections.abc import Sequence
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -48,12 +46,11 @@ from torch import nn
 from torch.func import functional_call
 
 from nnid.datasets.log import VELOCITY
-from nnid.datasets.preprocess import experiments
 from nnid.datasets.segmentation import BalancedSampler, label_transients
 from nnid.datasets.splits import split_log
 from nnid.errors import NnidInputError
-from nnid.evaluation.metrics import nrmse
 from nnid.models.bounds import OutputBounds, bound_arrays, check_bounds, resolve_bounds
+from nnid.models.io_model import InputOutputModel
 
 DTYPE = torch.float64
 
@@ -96,7 +93,7 @@ class NarxNet(nn.Module):
         return self.mlp(phi)
 
 
-class NarxModel:
+class NarxModel(InputOutputModel):
     """NARX model, sklearn-style: ``fit(log, validation_log=None)``, ``predict(log, mode)``,
     ``save(dir)`` / ``load(dir)`` (state dict + JSON config, no pickle).
 
@@ -123,6 +120,8 @@ class NarxModel:
     * ``output_transform``: None (default) or ``"sqrt"``: √max(y, 0) of every lagged output
       (output units, standardised on the training data) appended to the output regressors.
     """
+
+    stem = "narx"
 
     def __init__(
         self,
@@ -250,41 +249,11 @@ class NarxModel:
     def n_params(self) -> int:
         return sum(p.numel() for p in self.net_.parameters())
 
-    def save(self, folder: str | Path) -> Path:
-        """``narx.pt`` (the state dict, weights and normalisation) and ``narx.json``."""
-        folder = Path(folder)
-        folder.mkdir(parents=True, exist_ok=True)
-        torch.save(self.net_.state_dict(), folder / "narx.pt")
-        (folder / "narx.json").write_text(json.dumps(self.config(), indent=2))
-        return folder
-
-    @classmethod
-    def load(cls, folder: str | Path) -> NarxModel:
-        """Rebuild from ``narx.json`` and load ``narx.pt`` with ``weights_only=True``."""
-        folder = Path(folder)
-        cfg = json.loads((folder / "narx.json").read_text())
-        cfg.pop("trainer", None)
-        model = cls(**cfg)
-        state = torch.load(folder / "narx.pt", weights_only=True)
-        model.net_.load_state_dict(state)
-        return model
-
     # -- data ------------------------------------------------------------------------------------
     def _check(self, log: pd.DataFrame) -> None:
         missing = [c for c in self.inputs + self.outputs if c not in log]
         if missing:
             raise NnidInputError(f"the log has no column(s) {missing}", field="narx")
-
-    def _segments(self, log: pd.DataFrame) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
-        """(positions, normalised outputs, normalised inputs) per experiment."""
-        net = self.net_
-        y = (log[self.outputs].to_numpy(np.float64) - net.y_mean.numpy()) / net.y_std.numpy()
-        u = (log[self.inputs].to_numpy(np.float64) - net.u_mean.numpy()) / net.u_std.numpy()
-        out = []
-        for _, idx in experiments(log):
-            pos = log.index.get_indexer(idx)
-            out.append((pos, y[pos], u[pos]))
-        return out
 
     def _u_features(self, u: np.ndarray) -> np.ndarray:
         """[u(k − d) for d in input_delays] per row k of one experiment (zeros before warm-up)."""
@@ -307,14 +276,10 @@ class NarxModel:
         return out
 
     def _fit_normalisation(self, log: pd.DataFrame) -> None:
+        """Standardisation, the scale of the Δ targets and of the transformed outputs."""
         net = self.net_
+        self._standardise(log)
         y = log[self.outputs].to_numpy(np.float64)
-        u = log[self.inputs].to_numpy(np.float64)
-        y_std, u_std = y.std(0), u.std(0)
-        net.y_mean.copy_(torch.as_tensor(y.mean(0)))
-        net.y_std.copy_(torch.as_tensor(np.where(y_std > 0, y_std, 1.0)))
-        net.u_mean.copy_(torch.as_tensor(u.mean(0)))
-        net.u_std.copy_(torch.as_tensor(np.where(u_std > 0, u_std, 1.0)))
         diffs = [np.diff(yn, axis=0) for _, yn, _ in self._segments(log) if len(yn) > 1]
         d = np.concatenate(diffs).std(0) if diffs else np.ones(len(self.outputs))
         net.d_scale.copy_(
@@ -708,11 +673,3 @@ class NarxModel:
             if nb is not None:
                 np.clip(buf[dy + k], nb[0], nb[1], out=buf[dy + k])
         return buf[dy:]
-
-    def score(self, log: pd.DataFrame, mode: str | int = "free_run") -> dict[str, float]:
-        """NRMSE per output and ``total`` (their mean), warm-up excluded (NaN rows)."""
-        pred = self.predict(log, mode)
-        out = {c: nrmse(log[c].to_numpy(), pred[c].to_numpy()) for c in self.outputs}
-        finite = [v for v in out.values() if np.isfinite(v)]
-        out["total"] = float(np.mean(finite)) if finite else float("nan")
-        return out

@@ -29,10 +29,8 @@ never scored.
 
 from __future__ import annotations
 
-import json
 from collections.abc import Sequence
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -44,8 +42,8 @@ from torch.func import functional_call
 from nnid.datasets.preprocess import experiments
 from nnid.datasets.splits import split_log
 from nnid.errors import NnidInputError
-from nnid.evaluation.metrics import nrmse
 from nnid.models.bounds import OutputBounds, bound_arrays, check_bounds, resolve_bounds
+from nnid.models.io_model import InputOutputModel
 from nnid.physics.integrate import rk4
 from nnid.threads import torch_threads
 
@@ -138,7 +136,7 @@ class _Fit(nn.Module):
         self.x0_val = nn.Parameter(x0_val) if x0_val is not None else None
 
 
-class NeuralStateSpace:
+class NeuralStateSpace(InputOutputModel):
     """Continuous-time neural state-space model, sklearn-style: ``fit(log, validation_log=None)``,
     ``predict(log)`` (free run), ``score(log)``, ``save(dir)`` / ``load(dir)`` (state dict +
     JSON config, no pickle).
@@ -168,6 +166,8 @@ class NeuralStateSpace:
             in the sum of squares; they tie the hidden states of neighbouring windows together.
         seed: seeds the initial weights.
     """
+
+    stem = "nss"
 
     def __init__(
         self,
@@ -242,24 +242,6 @@ class NeuralStateSpace:
         net = self.net_
         return int(net.mask1.sum() + net.n_x * net.hidden + net.mask2.sum() + net.n_x)
 
-    def save(self, folder: str | Path) -> Path:
-        """``nss.pt`` (the state dict: weights, normalisation) and ``nss.json``."""
-        folder = Path(folder)
-        folder.mkdir(parents=True, exist_ok=True)
-        torch.save(self.net_.state_dict(), folder / "nss.pt")
-        (folder / "nss.json").write_text(json.dumps(self.config(), indent=2))
-        return folder
-
-    @classmethod
-    def load(cls, folder: str | Path) -> NeuralStateSpace:
-        """Rebuild from ``nss.json`` and load ``nss.pt`` with ``weights_only=True``."""
-        folder = Path(folder)
-        cfg = json.loads((folder / "nss.json").read_text())
-        cfg.pop("trainer", None)
-        model = cls(**cfg)
-        model.net_.load_state_dict(torch.load(folder / "nss.pt", weights_only=True))
-        return model
-
     # -- data ------------------------------------------------------------------------------------
     def _check(self, log: pd.DataFrame, name: str = "log") -> None:
         missing = [c for c in self.inputs + self.outputs if c not in log]
@@ -282,28 +264,6 @@ class NeuralStateSpace:
                         "model counts time in samples; resample the log first",
                         field="t",
                     )
-
-    def _segments(self, log: pd.DataFrame) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
-        """(positions, normalised outputs, normalised inputs) per experiment."""
-        net = self.net_
-        y = (log[self.outputs].to_numpy(np.float64) - net.y_mean.numpy()) / net.y_std.numpy()
-        u = (log[self.inputs].to_numpy(np.float64) - net.u_mean.numpy()) / net.u_std.numpy()
-        out = []
-        for _, idx in experiments(log):
-            pos = log.index.get_indexer(idx)
-            out.append((pos, y[pos], u[pos]))
-        return out
-
-    def _fit_normalisation(self, log: pd.DataFrame) -> None:
-        net = self.net_
-        for cols, mean, std in (
-            (self.outputs, net.y_mean, net.y_std),
-            (self.inputs, net.u_mean, net.u_std),
-        ):
-            v = log[cols].to_numpy(np.float64)
-            s = v.std(0)
-            mean.copy_(torch.as_tensor(v.mean(0)))
-            std.copy_(torch.as_tensor(np.where(s > 0, s, 1.0)))
 
     def _windows(self, log: pd.DataFrame, length: int | None) -> _Windows:
         """Windows of ``length`` samples (None: the shortest experiment) starting at each
@@ -406,7 +366,7 @@ class NeuralStateSpace:
         else:
             self._check(validation_log, "validation log")
             self.division_ = {"by": "given"}
-        self._fit_normalisation(log)
+        self._standardise(log)
         self.bounds_ = resolve_bounds(self.output_bounds, self.outputs, log)
         trainer = self.trainer if self.trainer is not None else LevenbergMarquardt(max_epochs=100)
         held_out = validation_log is not None and len(validation_log) > self.warmup
@@ -477,11 +437,3 @@ class NeuralStateSpace:
                 pred = self._simulate(params, x0, torch.as_tensor(un)[:, None])[:, 0].numpy()
             out[pos[self.warmup :]] = pred[self.warmup :] * std + mean
         return pd.DataFrame(out, index=log.index, columns=self.outputs)
-
-    def score(self, log: pd.DataFrame) -> dict[str, float]:
-        """Free-run NRMSE per output and ``total`` (their mean), warm-up excluded."""
-        pred = self.predict(log)
-        out = {c: nrmse(log[c].to_numpy(), pred[c].to_numpy()) for c in self.outputs}
-        finite = [v for v in out.values() if np.isfinite(v)]
-        out["total"] = float(np.mean(finite)) if finite else float("nan")
-        return out
