@@ -230,3 +230,25 @@ def test_cli_table_data_names_the_missing_column_and_the_bad_row(tmp_path):
     args = ["train", str(cfg), "--data", str(tmp_path / "back.csv"), "--out", str(tmp_path / "o")]
     done = runner.invoke(app, args)
     assert done.exit_code == 2 and "row 7" in done.output and "decreasing" in done.output
+
+
+def test_cli_table_data_trains_a_narx_too(tmp_path):
+    from typer.testing import CliRunner
+
+    from nnid.cli import app
+
+    runs = [_tanks(200, s, 1.0 + s, 1.0).assign(experiment=f"run{s}") for s in range(3)]
+    pd.concat(runs).to_csv(tmp_path / "tanks.csv", index=False)
+    cfg = tmp_path / "narx.toml"
+    cfg.write_text(
+        'model = "narx"\ntrainer = "lm"\nwarmup_s = 0.0\n'
+        '[data]\nkind = "table"\nlog = "tanks.csv"\n'
+        '[split]\nby = "experiment"\nvalidation = ["run2"]\n'
+        '[narx]\ninputs = ["pump"]\noutputs = ["level"]\nhidden = [4]\nepochs = 20\n'
+        "balanced = false\n"
+    )
+    done = CliRunner().invoke(app, ["train", str(cfg), "--out", str(tmp_path / "out")])
+    assert done.exit_code == 0, done.output
+    m = json.loads((tmp_path / "out/metrics.json").read_text())
+    assert m["model"] == "narx" and m["validation"]["samples"] == 200 - 2
+    assert m["validation"]["one_step_nrmse"]["total"] < 0.1  # one step ahead on a smooth level
