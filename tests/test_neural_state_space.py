@@ -252,3 +252,17 @@ def test_cli_table_data_trains_a_narx_too(tmp_path):
     m = json.loads((tmp_path / "out/metrics.json").read_text())
     assert m["model"] == "narx" and m["validation"]["samples"] == 200 - 2
     assert m["validation"]["one_step_nrmse"]["total"] < 0.1  # one step ahead on a smooth level
+
+
+def test_adam_trains_the_same_model():
+    # the trainer is pluggable: Adam on the same windows and residual lowers the held-out
+    # free-run error from that of the untrained model (measured 0.95 -> 0.16 with 150 epochs)
+    from nnid.trainers.adam import Adam
+
+    train, test = _tanks(400, 0, 1.0, 1.0, noise=0.01), _tanks(300, 7, 0.2, 3.0)
+    kw = dict(hidden=8, structure=CASCADE, warmup=20, windows=(40, None), fractions=(0.8, 0.2, 0))
+    untrained = NeuralStateSpace(["pump"], ["level"], trainer=Adam(max_epochs=1, lr=1e-9), **kw)
+    before = untrained.fit(train).score(test)["level"]
+    model = NeuralStateSpace(["pump"], ["level"], trainer=Adam(lr=1e-2, max_epochs=150), **kw)
+    after = model.fit(train).score(test)["level"]
+    assert after < 0.5 * before and after < 0.3

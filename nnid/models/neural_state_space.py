@@ -294,7 +294,7 @@ class NeuralStateSpace(InputOutputModel):
 
     def _initial_states(self, y: torch.Tensor) -> torch.Tensor:
         """Start of the estimate: the measured states at their first sample, the hidden ones
-        at ``hidden_init`` (the mean of the fitted training initial states)."""
+        at ``hidden_init`` (their mean over the simulated training record; 0 before a fit)."""
         hidden = self.net_.hidden_init.expand(y.shape[1], -1)
         return torch.cat([y[0], hidden], 1).clone()
 
