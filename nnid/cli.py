@@ -179,22 +179,17 @@ def train(
 
         with err.status("Caccia two-step identification"):
             result = run_caccia_train(config, vehicle)
-    elif read_toml(config).get("model") == "narx":
-        from nnid.pipeline import run_narx_train
+    elif read_toml(config).get("model") in ("narx", "state_space"):
+        from nnid.pipeline import run_narx_train, run_state_space_train
 
         cfg = load_config(config, TrainConfig)
+        run, what = {
+            "narx": (run_narx_train, "the NARX network"),
+            "state_space": (run_state_space_train, "the neural state-space model"),
+        }[cfg.model]
         try:
-            with err.status(f"training the NARX network ({cfg.trainer})"):
-                result = run_narx_train(cfg, config, data, columns)
-        except NnidInputError as exc:
-            raise exc.with_source(str(config)) from None
-    elif read_toml(config).get("model") == "state_space":
-        from nnid.pipeline import run_state_space_train
-
-        cfg = load_config(config, TrainConfig)
-        try:
-            with err.status(f"training the neural state-space model ({cfg.trainer})"):
-                result = run_state_space_train(cfg, config, data, columns)
+            with err.status(f"training {what} ({cfg.trainer})"):
+                result = run(cfg, config, data, columns)
         except NnidInputError as exc:
             raise exc.with_source(str(config)) from None
     else:
