@@ -108,7 +108,7 @@ class StateSpaceNet(nn.Module):
         b2 = self.b2 * _RATE
 
         def f(x: torch.Tensor, z: torch.Tensor) -> torch.Tensor:
-            return torch.tanh(x @ w1x + z) @ w2 + b2
+            return torch.addmm(b2, torch.tanh(torch.addmm(z, x, w1x)), w2)
 
         return rk4(f, x0, zu, 1.0, self.substeps)[:-1]
 
