@@ -137,7 +137,10 @@ class NarxSpec(_Strict):
     """The NARX network of ``model = "narx"`` (Weiss IV.A.2, V.B; :mod:`nnid.models.narx`):
     named input and output columns, delays (a count n means 1..n), hidden tanh layers, the
     training budget, and optional light white noise (``noise``: standard deviation as a
-    fraction of each column's, seeded by ``seed``) added to inputs and outputs, as Weiss did."""
+    fraction of each column's, seeded by ``seed``) added to inputs and outputs, as Weiss did.
+    The remaining keys are :class:`nnid.models.narx.NarxModel`'s options of the same names;
+    ``output_bounds`` is "train" or one [low, high] per output, each a number, "train" or
+    "open"."""
 
     inputs: list[str] = Field(min_length=1)
     outputs: list[str] = Field(min_length=1)
@@ -153,6 +156,13 @@ class NarxSpec(_Strict):
     simulation_window: int = Field(200, ge=2)
     lm_samples: int = Field(4000, ge=10)
     noise: float = Field(0.0, ge=0)
+    simulation_lr: float = Field(1e-3, gt=0)
+    simulation_trainer: Literal["adam", "lm"] = "adam"
+    simulation_max_fail: int = Field(8, ge=1)
+    simulation_l2: float = Field(0.0, ge=0)
+    delta: bool = True
+    output_transform: Literal["sqrt"] | None = None
+    output_bounds: str | list[list[float | str]] | None = None
 
 
 class StateSpaceSpec(_Strict):

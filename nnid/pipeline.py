@@ -524,6 +524,13 @@ def _velocity_scores(parts, val_log, val_data, dofs, mask_val, horizon) -> dict:
     return scores
 
 
+def _bounds_spec(bounds: str | list | None):
+    """A config's ``output_bounds`` for the models: TOML has no null, so "open" stands for None."""
+    if isinstance(bounds, list):
+        return [[None if v == "open" else v for v in pair] for pair in bounds]
+    return bounds
+
+
 def run_narx_train(
     cfg: TrainConfig,
     config_path: Path,
@@ -578,6 +585,13 @@ def run_narx_train(
         simulation_epochs=spec.simulation_epochs,
         simulation_window=spec.simulation_window,
         lm_samples=spec.lm_samples,
+        simulation_lr=spec.simulation_lr,
+        simulation_trainer=spec.simulation_trainer,
+        simulation_max_fail=spec.simulation_max_fail,
+        simulation_l2=spec.simulation_l2,
+        delta=spec.delta,
+        output_transform=spec.output_transform,
+        output_bounds=_bounds_spec(spec.output_bounds),
     )
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
@@ -654,9 +668,6 @@ def run_state_space_train(
         from nnid.trainers.adam import Adam
 
         trainer = Adam(lr=spec.lr, max_epochs=spec.epochs)
-    bounds = spec.output_bounds
-    if isinstance(bounds, list):
-        bounds = [[None if v == "open" else v for v in pair] for pair in bounds]
     model = NeuralStateSpace(
         spec.inputs,
         spec.outputs,
@@ -667,7 +678,7 @@ def run_state_space_train(
         warmup=spec.warmup,
         windows=[w or None for w in spec.windows],
         trainer=trainer,
-        output_bounds=bounds,
+        output_bounds=_bounds_spec(spec.output_bounds),
         continuity=spec.continuity,
         seed=spec.seed,
     )

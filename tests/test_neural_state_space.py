@@ -245,13 +245,19 @@ def test_cli_table_data_trains_a_narx_too(tmp_path):
         '[data]\nkind = "table"\nlog = "tanks.csv"\n'
         '[split]\nby = "experiment"\nvalidation = ["run2"]\n'
         '[narx]\ninputs = ["pump"]\noutputs = ["level"]\nhidden = [4]\nepochs = 20\n'
-        "balanced = false\n"
+        'balanced = false\nsimulation_epochs = 3\nsimulation_trainer = "lm"\n'
+        'simulation_window = 100\noutput_bounds = [["open", "train"]]\n'
     )
     done = CliRunner().invoke(app, ["train", str(cfg), "--out", str(tmp_path / "out")])
     assert done.exit_code == 0, done.output
     m = json.loads((tmp_path / "out/metrics.json").read_text())
     assert m["model"] == "narx" and m["validation"]["samples"] == 200 - 2
     assert m["validation"]["one_step_nrmse"]["total"] < 0.1  # one step ahead on a smooth level
+    saved = json.loads((tmp_path / "out/narx.json").read_text())  # the benchmark options pass
+    top = max(runs[0]["level"].max(), runs[1]["level"].max())  # the training runs' maximum
+    assert saved["simulation_trainer"] == "lm" and saved["output_bounds"][0][0] is None
+    assert saved["output_bounds"][0][1] == pytest.approx(top, rel=1e-12)
+    assert m["simulation_finetune"]["epochs"] >= 1
 
 
 def test_adam_trains_the_same_model():
