@@ -524,6 +524,27 @@ def _velocity_scores(parts, val_log, val_data, dofs, mask_val, horizon) -> dict:
     return scores
 
 
+def _io_trainer(name: str, epochs: int, lr: float, jacobian: str):
+    """The trainer of an input-output model: ``"lm"`` (trainlm defaults, Jacobians by
+    ``jacobian``: "samples" for one-step residuals, "forward" for simulated ones) or
+    ``"adam"``."""
+    if name == "lm":
+        from nnid.trainers.levenberg_marquardt import LevenbergMarquardt
+
+        return LevenbergMarquardt(max_epochs=epochs, jacobian=jacobian)
+    from nnid.trainers.adam import Adam
+
+    return Adam(lr=lr, max_epochs=epochs)
+
+
+def _fit_io_model(model, split) -> list[str]:
+    """Fit on the training split, early-stop on the validation split; the warnings raised."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        model.fit(split.train, validation_log=split.validation)
+    return [str(w.message) for w in caught]
+
+
 def _bounds_spec(bounds: str | list | None):
     """A config's ``output_bounds`` for the models: TOML has no null, so "open" stands for None."""
     if isinstance(bounds, list):
@@ -564,14 +585,7 @@ def run_narx_train(
             "noise", f"white noise of {spec.noise:g} × std added to {spec.inputs + spec.outputs}"
         )
     split = make_split(log, cfg.split)
-    if cfg.trainer == "lm":
-        from nnid.trainers.levenberg_marquardt import LevenbergMarquardt
-
-        trainer = LevenbergMarquardt(max_epochs=spec.epochs, jacobian="samples")
-    else:
-        from nnid.trainers.adam import Adam
-
-        trainer = Adam(lr=spec.lr, max_epochs=spec.epochs)
+    trainer = _io_trainer(cfg.trainer, spec.epochs, spec.lr, jacobian="samples")
     model = NarxModel(
         spec.inputs,
         spec.outputs,
@@ -593,9 +607,7 @@ def run_narx_train(
         output_transform=spec.output_transform,
         output_bounds=_bounds_spec(spec.output_bounds),
     )
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        model.fit(split.train, validation_log=split.validation)
+    caught = _fit_io_model(model, split)
     metrics = {
         "model": "narx",
         "trainer": cfg.trainer,
@@ -625,7 +637,7 @@ def run_narx_train(
         "simulation_finetune": model.finetune_,
         "train": _io_scores(model, split.train, cfg, free_run=False),
         "validation": _io_scores(model, split.validation, cfg),
-        "warnings": [str(w.message) for w in caught],
+        "warnings": caught,
         "split": split.record,
         "warmup_s": cfg.warmup_s,
         "warmup_samples": model.warmup,
@@ -660,14 +672,7 @@ def run_state_space_train(
     start = time.perf_counter()
     log, report = load_data(cfg, config_path, data_override, columns_override)
     split = make_split(log, cfg.split)
-    if cfg.trainer == "lm":
-        from nnid.trainers.levenberg_marquardt import LevenbergMarquardt
-
-        trainer = LevenbergMarquardt(max_epochs=spec.epochs)
-    else:
-        from nnid.trainers.adam import Adam
-
-        trainer = Adam(lr=spec.lr, max_epochs=spec.epochs)
+    trainer = _io_trainer(cfg.trainer, spec.epochs, spec.lr, jacobian="forward")
     model = NeuralStateSpace(
         spec.inputs,
         spec.outputs,
@@ -682,9 +687,7 @@ def run_state_space_train(
         continuity=spec.continuity,
         seed=spec.seed,
     )
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        model.fit(split.train, validation_log=split.validation)
+    caught = _fit_io_model(model, split)
     metrics = {
         "model": "state_space",
         "trainer": cfg.trainer,
@@ -709,7 +712,7 @@ def run_state_space_train(
         ],
         "train": _io_scores(model, split.train, cfg, one_step=False),
         "validation": _io_scores(model, split.validation, cfg, one_step=False),
-        "warnings": [str(w.message) for w in caught],
+        "warnings": caught,
         "split": split.record,
         "warmup_s": cfg.warmup_s,
         "warmup_samples": model.warmup,

@@ -108,17 +108,23 @@ def _check_time(df: pd.DataFrame, source: str) -> None:
             )
 
 
-def validate_table(df: pd.DataFrame, columns: list[str], source: str = "<table>") -> pd.DataFrame:
+def validate_table(
+    df: pd.DataFrame, columns: list[str], source: str = "<table>", require_time: bool = True
+) -> pd.DataFrame:
     """Check a generic input-output table (a benchmark, a plant that is not a vehicle): a time
-    column ``t`` strictly increasing within each experiment and the named ``columns`` present
-    and finite. Returns it unchanged; other columns are kept and ignored."""
-    missing = [c for c in ["t", *columns] if c not in df.columns]
+    column ``t`` strictly increasing within each experiment (``require_time=False``: only if
+    there is one) and the named ``columns`` present and finite. Returns it unchanged; other
+    columns are kept and ignored."""
+    timed = require_time or "t" in df.columns
+    needed = ["t", *columns] if timed else list(columns)
+    missing = [c for c in needed if c not in df.columns]
     if missing:
         raise NnidInputError(f"the table has no column(s) {missing}", source=source)
     if len(df) == 0:
         raise NnidInputError("the table has no rows", source=source)
-    _check_finite(df, ["t", *columns], source)
-    _check_time(df, source)
+    _check_finite(df, needed, source)
+    if timed:
+        _check_time(df, source)
     return df
 
 

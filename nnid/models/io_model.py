@@ -5,6 +5,7 @@ experiment segments, scores, and saving as a state dict plus a JSON config (no p
 from __future__ import annotations
 
 import json
+from abc import ABC, abstractmethod
 from pathlib import Path
 from typing import Any
 
@@ -16,7 +17,7 @@ from nnid.datasets.preprocess import experiments
 from nnid.evaluation.metrics import nrmse
 
 
-class InputOutputModel:
+class InputOutputModel(ABC):
     """Base of a model with ``inputs``, ``outputs``, a network ``net_`` holding the buffers
     ``u_mean u_std y_mean y_std``, ``config()`` (its constructor arguments) and ``predict``."""
 
@@ -26,11 +27,13 @@ class InputOutputModel:
     outputs: list[str]
     net_: Any
 
+    @abstractmethod
     def config(self) -> dict:
-        raise NotImplementedError
+        """The JSON-serialisable constructor arguments."""
 
+    @abstractmethod
     def predict(self, log: pd.DataFrame, mode: Any = "free_run") -> pd.DataFrame:
-        raise NotImplementedError
+        """Predicted outputs (columns ``outputs``, the log's index), warm-up rows NaN."""
 
     def save(self, folder: str | Path) -> Path:
         """``<stem>.pt`` (the state dict: weights, normalisation) and ``<stem>.json``."""

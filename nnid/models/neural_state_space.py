@@ -39,6 +39,7 @@ import torch
 from torch import nn
 from torch.func import functional_call
 
+from nnid.datasets.log import validate_table
 from nnid.datasets.preprocess import experiments
 from nnid.datasets.splits import split_log
 from nnid.errors import NnidInputError
@@ -244,20 +245,12 @@ class NeuralStateSpace(InputOutputModel):
 
     # -- data ------------------------------------------------------------------------------------
     def _check(self, log: pd.DataFrame, name: str = "log") -> None:
-        missing = [c for c in self.inputs + self.outputs if c not in log]
-        if missing:
-            raise NnidInputError(f"the {name} has no column(s) {missing}", field="columns")
-        bad = [
-            c for c in self.inputs + self.outputs if not np.isfinite(log[c].to_numpy(float)).all()
-        ]
-        if bad:
-            raise NnidInputError(
-                f"the {name} has missing or infinite values in {bad}", field="columns"
-            )
+        """The model's columns present and finite, and (with a ``t``) uniform sampling."""
+        validate_table(log, self.inputs + self.outputs, source=name, require_time=False)
         if "t" in log:
             for exp, idx in experiments(log):
                 dt = np.diff(log.loc[idx, "t"].to_numpy(np.float64))
-                if dt.size and (dt.min() <= 0 or np.ptp(dt) > _DT_TOLERANCE * np.median(dt)):
+                if dt.size and np.ptp(dt) > _DT_TOLERANCE * np.median(dt):
                     where = f" (experiment {exp})" if exp is not None else ""
                     raise NnidInputError(
                         f"column t of the {name}{where} is not uniformly sampled: the state-space "
