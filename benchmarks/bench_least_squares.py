@@ -14,9 +14,10 @@ import time
 import numpy as np
 from common import best_of, machine
 
+from nnid.datasets.arrays import log_arrays
 from nnid.datasets.excitation import Multisine
 from nnid.datasets.simulator import simulate
-from nnid.models.parametric import ParametricFossen, log_arrays
+from nnid.models.parametric import ParametricFossen
 from nnid.trainers.least_squares import LeastSquares
 from nnid.vehicle import load_vehicle
 

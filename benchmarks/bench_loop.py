@@ -22,7 +22,8 @@ from common import machine
 from nnid.datasets.measurement import Measurement
 from nnid.loop.residual_loop import ResidualLoop
 from nnid.loop.scenarios import effect_log
-from nnid.models.parametric import ParametricModel, Parts
+from nnid.models.parametric import ParametricModel
+from nnid.physics.parts import Parts
 from nnid.trainers.least_squares import LeastSquares
 from nnid.vehicle import load_vehicle
 

@@ -14,8 +14,8 @@ about 1 is persistence, since the network predicts the change of u v w r).
 Target levels are validation errors that LM and the tuned Adam both reach, per seed: L* is the
 worse of the two best errors of that seed (LM's, and the best over the Adam grid), and the other
 levels are 1/4, 1/2 and 3/4 of the way from 1 (≈ persistence) to L*. Time to a level is the
-first epoch end at or below it, from each trainer's own history (``LMHistory.time``,
-``AdamHistory.time``: the ``fit`` clock, data preparation excluded). A short fit of each trainer
+first epoch end at or below it, from each trainer's own history (``History.time``
+of each: the ``fit`` clock, data preparation excluded). A short fit of each trainer
 is run first so that one-off costs (``torch.func`` set-up, about 1 s) are not charged to the
 first seed. Adam is scored twice: the best grid setting for each seed and level (an oracle, the
 most favourable case for Adam) and the one setting with the lowest median time to L*.
@@ -93,14 +93,14 @@ def net(case: str, trainer, seed: int, **kw) -> NarxModel:
 def lm_trace(case: str, seed: int, train, val, max_epochs: int = 1000) -> Trace:
     lm = LevenbergMarquardt(max_epochs=max_epochs, jacobian="samples")
     model = net(case, lm, seed, lm_samples=SAMPLES)
-    model.fit(train, validation_log=val)
-    return model.history_.time, model.history_.val_mse
+    model.fit(train, validation=val)
+    return model.history_.time, model.history_.validation
 
 
 def adam_trace(case, seed, lr, batch, cap, train, val, epochs=10**9) -> Trace:
     adam = Adam(lr=lr, max_epochs=epochs, schedule="constant", max_fail=10**6, max_seconds=cap)
     model = net(case, adam, seed, batch_size=batch, samples_per_epoch=STEPS_PER_EPOCH * batch)
-    model.fit(train, validation_log=val)
+    model.fit(train, validation=val)
     return model.history_.time, model.history_.validation
 
 

@@ -127,7 +127,7 @@ SETTINGS = {
 
 def free_run_rmse(model: NarxModel | NeuralStateSpace, log, output: str, warmup: int) -> float:
     """RMSE of the free run over the samples after the benchmark's warm-up."""
-    if model.warmup > warmup:
+    if model.warmup_samples_ > warmup:
         raise ValueError("the NARX delay states do not fit in the benchmark's warm-up")
     pred = model.predict(log, "free_run")[output].to_numpy()[warmup:]
     meas = log[output].to_numpy()[warmup:]
@@ -152,7 +152,7 @@ def make_model(name: str, bench, seed: int):
         balanced=False,  # generic table: no vehicle transients to balance
         seed=seed,
         lm_samples=cfg["lm_samples"],
-        trainer=LevenbergMarquardt(max_epochs=cfg["lm_epochs"], jacobian="samples"),
+        trainer=LevenbergMarquardt(max_epochs=cfg["lm_epochs"]),
         **cfg["narx"],
     )
 

@@ -16,8 +16,8 @@ import numba
 import numpy as np
 from common import best_of, machine
 
-from nnid.models.parametric import Regression
 from nnid.trainers.recursive import RecursiveLeastSquares
+from nnid.trainers.regression import Regression
 
 N_SAMPLES, N_ROWS, N_PAR, LAMBDA, P0 = 100_000, 6, 12, 0.999, 1e6
 

@@ -13,9 +13,8 @@ import numpy as np
 import pysindy as ps
 from common import best_of, machine
 
-from nnid.models.damping_library import BasisLibrary
-from nnid.trainers.sindy import SindyDamping
-from nnid.vehicle import load_vehicle
+from nnid.physics.damping_library import BasisLibrary
+from nnid.trainers.sindy import SparsePath
 
 
 def main() -> None:
@@ -28,14 +27,13 @@ def main() -> None:
         truth[i, lib.index(term)] = -50.0
     truth[5, lib.index("r*abs(r)")] = -5.0
     y = lib(nu) @ truth.T + rng.normal(0, 0.01, (n, 6))
-    vehicle = load_vehicle("seamor")
     print(f"machine: {machine(numpy=np.__version__, pysindy=ps.__version__)}")
     print(f"date: {datetime.date.today().isoformat()}")
     t_lib = best_of(lambda: lib(nu))
-    one = SindyDamping(vehicle, thresholds=[0.05], selection="aic")
-    t_fit = best_of(lambda: one.fit_arrays(nu, y))
-    path = SindyDamping(vehicle, selection="aic")
-    t_path = best_of(lambda: path.fit_arrays(nu, y), repeats=1)
+    one = SparsePath(thresholds=[0.05], selection="aic")
+    t_fit = best_of(lambda: one.fit(lib(nu), y))
+    path = SparsePath(selection="aic")
+    t_path = best_of(lambda: path.fit(lib(nu), y), repeats=1)
 
     def default_pipeline() -> ps.SINDy:
         model = ps.SINDy(feature_library=ps.PolynomialLibrary(degree=2), optimizer=ps.STLSQ())
@@ -45,11 +43,11 @@ def main() -> None:
     print(f"library evaluation, 132 terms x {n} samples: {t_lib:.3f} s (target < 0.2 s)")
     print(
         f"nnid SINDy fit, one threshold, 6 outputs: {t_fit:.3f} s (target < 2 s), "
-        f"{one.n_params} terms"
+        f"{int(np.count_nonzero(one.coef_))} terms"
     )
     print(
-        f"nnid SINDy path, {len(path.thresholds)} thresholds + selection: {t_path:.3f} s, "
-        f"{path.n_params} terms"
+        f"nnid SINDy path, {len(path.path_)} thresholds + selection: {t_path:.3f} s, "
+        f"{int(np.count_nonzero(path.coef_))} terms"
     )
     print(f"pysindy default (PolynomialLibrary deg 2, 28 terms, STLSQ): {t_ps:.3f} s")
 

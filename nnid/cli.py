@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import functools
 import sys
+from contextlib import contextmanager
 from pathlib import Path
 
 import typer
@@ -64,11 +65,8 @@ def simulate(
     if out_path.suffix not in (".csv", ".parquet"):
         raise NnidInputError("output must end in .csv or .parquet", source=str(out_path))
     try:
-        with Progress(console=err, transient=True) as bar:
-            task = bar.add_task("simulating", total=len(cfg.all_experiments()))
-            log = simulate_config(
-                cfg, veh, progress=lambda done, total: bar.update(task, completed=done)
-            )
+        with _bar("simulating") as progress:
+            log = simulate_config(cfg, veh, progress=progress)
     except NnidInputError as exc:
         raise exc.with_source(str(config)) from None
     validate_log(log, source=str(out_path))
@@ -138,16 +136,32 @@ def inspect(
         report.write(out_dir)
 
 
-def _vehicle_path(name: str, config: Path, resolve) -> str:
-    """A preset name as it is; a path relative to the config file (or to the working folder)."""
-    from nnid.vehicle import PRESETS
-
-    return name if name in PRESETS else str(resolve(config.parent, name))
-
-
 def _not_yet(name: str) -> None:
     err.print(f"nnid {name}: not implemented yet", highlight=False, soft_wrap=True)
     raise typer.Exit(2)
+
+
+@contextmanager
+def _bar(description: str):
+    """A live progress bar on stderr; yields the callback ``(done, total, message)`` that
+    trainers, models and the loop call."""
+    with Progress(console=err, transient=True) as bar:
+        task = bar.add_task(description, total=None)
+
+        def update(done: int, total: int | None, message: str) -> None:
+            bar.update(task, completed=done, total=total, description=message or description)
+
+        yield update
+
+
+def _check_out(out_dir: Path) -> None:
+    """An output folder that can be written: refused before any work starts."""
+    if out_dir.exists() and not out_dir.is_dir():
+        raise NnidInputError("exists and is not a folder", source=str(out_dir), field="--out")
+
+
+def _fmt(x) -> str:
+    return "diverged" if x is None else f"{x:.3g}"
 
 
 @app.command()
@@ -155,68 +169,41 @@ def _not_yet(name: str) -> None:
 def train(
     config: Path = typer.Argument(..., help="TOML train config (see configs/)."),
     out_dir: Path = typer.Option(..., "--out", help="Output folder for model, metrics, report."),
-    data: str | None = typer.Option(None, "--data", help="Log to fit; overrides the config's."),
+    data: str | None = typer.Option(None, "--data", help="Log to fit; replaces the config's."),
     vehicle: str | None = typer.Option(
-        None, "--vehicle", help="Preset name or vehicle TOML; overrides the config's."
+        None, "--vehicle", help="Preset name or vehicle TOML; replaces the config's."
     ),
     columns: str | None = typer.Option(
         None, "--columns", help="Reader config for a log not in nnid's format."
     ),
 ) -> None:
-    """Fit one model on the training split and score it on held-out data: writes
-    model.json (a NARX: narx.pt and narx.json; a neural state-space model: nss.pt and
-    nss.json), metrics.json, report.md and the cleaning report to --out."""
-    import json
-
+    """Fit one model on the training split and score it on held-out data: writes the model
+    (model.json, and tensors.pt for networks; load it with nnid.load_model), metrics.json,
+    report.md and the cleaning report to --out."""
     from nnid.config import TrainConfig, load_config
     from nnid.pipeline import run_train
     from nnid.reports.train_report import train_markdown
-    from nnid.validation import read_toml
-    from nnid.vehicle import load_vehicle
+    from nnid.serialization import write_json, write_text
 
-    if read_toml(config).get("kind") == "caccia":
-        from nnid.pipeline import run_caccia_train
-
-        with err.status("Caccia two-step identification"):
-            result = run_caccia_train(config, vehicle)
-    elif read_toml(config).get("model") in ("narx", "state_space"):
-        from nnid.pipeline import run_narx_train, run_state_space_train
-
-        cfg = load_config(config, TrainConfig)
-        run, what = {
-            "narx": (run_narx_train, "the NARX network"),
-            "state_space": (run_state_space_train, "the neural state-space model"),
-        }[cfg.model]
-        try:
-            with err.status(f"training {what} ({cfg.trainer})"):
-                result = run(cfg, config, data, columns)
-        except NnidInputError as exc:
-            raise exc.with_source(str(config)) from None
-    else:
-        from nnid.pipeline import resolve
-
-        cfg = load_config(config, TrainConfig)
-        if not (vehicle or cfg.vehicle):
-            raise NnidInputError("give a vehicle (config or --vehicle)", field="vehicle")
-        veh = load_vehicle(vehicle or _vehicle_path(cfg.vehicle, config, resolve))
-        try:
-            with err.status(f"fitting the Fossen model ({cfg.trainer})"):
-                result = run_train(cfg, config, veh, data, columns)
-        except NnidInputError as exc:
-            raise exc.with_source(str(config)) from None
+    cfg = load_config(config, TrainConfig)
+    _check_out(out_dir)
+    try:
+        with _bar(f"training a {cfg.model.kind} model") as progress:
+            result = run_train(cfg, config, data, vehicle, columns, progress=progress)
+    except NnidInputError as exc:
+        raise exc.with_source(str(config)) from None
     out_dir.mkdir(parents=True, exist_ok=True)
-    if result.metrics["model"] in ("narx", "state_space"):
-        result.model.save(out_dir)  # narx.pt / nss.pt (state dict) + narx.json / nss.json
-    else:
-        result.model.save(out_dir / "model.json")
-    (out_dir / "metrics.json").write_text(json.dumps(result.metrics, indent=2))
-    (out_dir / "report.md").write_text(train_markdown(result.metrics))
+    result.model.save(out_dir)
+    write_json(out_dir / "metrics.json", result.metrics)
+    write_text(out_dir / "report.md", train_markdown(result.metrics))
     result.report.write(out_dir)
     val = result.metrics["validation"].get("free_run_nrmse", {})
     out.print(
         f"wrote {out_dir}/: model.json, metrics.json, report.md "
-        f"(validation free-run NRMSE total {val.get('total', float('nan')):.3g})"
+        f"(validation free-run NRMSE total {_fmt(val.get('total'))})"
     )
+    for warning in result.metrics["warnings"]:
+        err.print(f"warning: {warning}", highlight=False, soft_wrap=True)
 
 
 @app.command()
@@ -224,48 +211,37 @@ def train(
 def compare(
     config: Path = typer.Argument(..., help="TOML compare config (see configs/)."),
     out_dir: Path = typer.Option(..., "--out", help="Output folder for the report."),
-    data: str | None = typer.Option(None, "--data", help="Log to use; overrides the config's."),
+    data: str | None = typer.Option(None, "--data", help="Log to use; replaces the config's."),
     vehicle: str | None = typer.Option(
-        None, "--vehicle", help="Preset name or vehicle TOML; overrides the config's."
+        None, "--vehicle", help="Preset name or vehicle TOML; replaces the config's."
     ),
     columns: str | None = typer.Option(
         None, "--columns", help="Reader config for a log not in nnid's format."
     ),
 ) -> None:
-    """Fit the named damping models and SINDy on the training split and compare them on the
-    validation split: writes comparison.json, report.html and report.md to --out."""
-    import json
-
+    """Fit the config's [[models]] (any kinds) on one split and compare them on the same
+    held-out experiments: writes comparison.json, report.html and report.md to --out."""
     from nnid.config import CompareConfig, load_config
-    from nnid.pipeline import resolve, run_compare
+    from nnid.pipeline import run_compare
     from nnid.reports.compare_report import html_page, markdown
-    from nnid.vehicle import load_vehicle
+    from nnid.serialization import write_json, write_text
 
     cfg = load_config(config, CompareConfig)
-    veh = load_vehicle(vehicle or _vehicle_path(cfg.vehicle, config, resolve))
+    _check_out(out_dir)
     try:
-        with Progress(console=err, transient=True) as bar:
-            task = bar.add_task("fitting damping models", total=len(cfg.models) + 1)
-            result = run_compare(
-                cfg,
-                config,
-                veh,
-                data,
-                columns,
-                progress=lambda d, n: bar.update(task, completed=d, total=n),
-            )
+        with _bar("comparing models") as progress:
+            result = run_compare(cfg, config, data, vehicle, columns, progress=progress)
     except NnidInputError as exc:
         raise exc.with_source(str(config)) from None
     out_dir.mkdir(parents=True, exist_ok=True)
-    (out_dir / "comparison.json").write_text(json.dumps(result.comparison, indent=2))
-    (out_dir / "report.html").write_text(
-        html_page(result.comparison, result.t, result.measured, result.predicted)
-    )
-    (out_dir / "report.md").write_text(markdown(result.comparison))
+    write_json(out_dir / "comparison.json", result.comparison)
+    write_text(out_dir / "report.html", html_page(result))
+    write_text(out_dir / "report.md", markdown(result.comparison))
     result.report.write(out_dir)
     out.print(
         f"wrote {out_dir}/: comparison.json, report.html, report.md. "
-        + result.comparison["summary"]
+        + result.comparison["summary"],
+        highlight=False,
     )
 
 
@@ -292,8 +268,7 @@ def loop(
     add it, refit, repeat; writes loop.json, report.html and report.md to --out, with the
     held-out errors before and after ("no significant effect" when there is none)."""
     from nnid.config import LoopConfig, load_config
-    from nnid.pipeline import load_data, resolve
-    from nnid.vehicle import load_vehicle
+    from nnid.pipeline import load_inputs
 
     cfg = load_config(config, LoopConfig) if config else LoopConfig()
     where = config or Path("loop.toml")
@@ -303,11 +278,12 @@ def loop(
         )
     if not (data or cfg.data.log or cfg.data.simulate):
         raise NnidInputError("give a log (--data or the config's data.log)", field="data")
-    veh = load_vehicle(vehicle or _vehicle_path(cfg.vehicle, where, resolve))
+    _check_out(out_dir)
     try:
-        log, report = load_data(cfg, where, data, columns)
+        inputs = load_inputs(cfg, where, [], data, vehicle, columns)
     except NnidInputError as exc:
         raise exc.with_source(str(config)) if config else exc from None
+    log, report, veh = inputs.log, inputs.report, inputs.vehicle
     settings = dict(
         max_effects=cfg.max_effects if max_effects is None else max_effects,
         alpha=cfg.alpha if alpha is None else alpha,
@@ -329,15 +305,12 @@ def _run_loop(log, veh, out_dir: Path, source: str = "", **settings) -> None:
     from nnid.loop.residual_loop import ResidualLoop
     from nnid.reports.loop_report import write_loop_report
 
-    with Progress(console=err, transient=True) as bar:
-        task = bar.add_task("residual loop", total=None)
+    with _bar("residual loop") as progress:
         try:
-            fitted = ResidualLoop(veh, **settings).fit(
-                log, progress=lambda m: bar.update(task, description=m)
-            )
+            fitted = ResidualLoop(veh, **settings).fit(log, progress=progress)
         except NnidInputError as exc:
             raise exc.with_source(source) if source else exc from None
-        bar.update(task, description="writing the report")
+        progress(0, None, "writing the report")
         lines = write_loop_report(fitted, out_dir)
     for warning in fitted.warnings_:
         err.print(f"warning: {warning}", highlight=False, soft_wrap=True)

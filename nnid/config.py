@@ -1,14 +1,21 @@
 """Pydantic models of the TOML configs the CLI runs, and their loader.
 
-A bad config is one :class:`NnidInputError` naming the file and the field (dotted path).
+Every command's config has a ``kind`` ("simulate", "train", "compare", "loop"); a model is a
+table whose ``kind`` names the model ("fossen", "caccia", "synthesis", "sindy", "narx",
+"state_space") and whose other keys are that model's constructor arguments (one option model
+per kind, each building its model with ``from_config``); a trainer is a table whose ``kind``
+names it ("ls", "rls", "gradient", "ukf", "lm", "adam") with that trainer's arguments, or just
+the name. Unknown keys are refused, damping masks and DOFs are literals, effect names are
+checked against the vocabulary. A bad config is one :class:`NnidInputError` naming the file
+and the key (dotted path), raised before any data is loaded or simulated.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 from nnid.datasets.excitation import (
     PRBS,
@@ -22,23 +29,39 @@ from nnid.datasets.excitation import (
 )
 from nnid.datasets.measurement import Measurement
 from nnid.datasets.simulator import Autopilot
+from nnid.errors import NnidInputError
+from nnid.physics.damping_masks import MASKS
 from nnid.physics.effects import parse_effect
 from nnid.validation import read_toml, validated
 
 Signal = Annotated[
     Step | Stairs | Chirp | Multisine | PRBS | Sine | DOptimalSine, Field(discriminator="kind")
 ]
+Dof = Literal["u", "v", "w", "p", "q", "r"]
+Force = Literal["X", "Y", "Z", "K", "M", "N"]
+MaskName = Literal[tuple(MASKS)]  # type: ignore[valid-type]
+PositiveFloat = Annotated[float, Field(gt=0, allow_inf_nan=False)]
+Number = Annotated[float, Field(allow_inf_nan=False)]
+ALL_DOFS: list[Dof] = ["u", "v", "w", "p", "q", "r"]
 
 
 class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
+
+
+def _kind_shorthand(value: Any) -> Any:
+    """``trainer = "lm"`` stands for ``[trainer] kind = "lm"``."""
+    return {"kind": value} if isinstance(value, str) else value
+
+
+# -- simulate ------------------------------------------------------------------------------------
 
 
 class Effect(_Strict):
     """An injected effect by its vocabulary name (see :mod:`nnid.physics.effects`)."""
 
     name: str
-    value: float
+    value: Number
 
     @field_validator("name")
     @classmethod
@@ -51,8 +74,8 @@ class Experiment(_Strict):
     """One run: signals summed per channel, from rest unless ``x0`` (η, or η and ν) is given."""
 
     name: str
-    duration: float | None = Field(None, gt=0)
-    x0: list[float] | None = None
+    duration: PositiveFloat | None = None
+    x0: list[Number] | None = None
     signals: list[Signal] = Field(default_factory=list)
     effects: list[Effect] = Field(default_factory=list)
 
@@ -73,7 +96,7 @@ class SimulateConfig(_Strict):
 
     kind: Literal["simulate"] = "simulate"
     vehicle: str
-    dt: float = Field(0.01, gt=0)
+    dt: PositiveFloat = 0.01
     substeps: int = Field(1, ge=1)
     integrator: Literal["rk4", "adaptive", "torch"] = "rk4"
     seed: int = 0
@@ -89,179 +112,515 @@ class SimulateConfig(_Strict):
         return [*self.experiments, *(Experiment.model_validate(e) for e in extra)]
 
 
-def load_config(path: str | Path, model: type[BaseModel] = SimulateConfig) -> BaseModel:
-    """Read and validate a TOML config; raise NnidInputError naming the file and field."""
-    return validated(model, read_toml(path), str(path))
+# -- data ----------------------------------------------------------------------------------------
 
 
-class DataSpec(_Strict):
-    """Where the log comes from: a file (``log``, optionally through a reader config
-    ``columns``), or a simulate config (``simulate``) run on the fly. Paths are relative to
-    the config file. ``kind = "table"``: the file is a generic input-output table (``t``,
-    optional ``experiment``, the model's named columns), not a vehicle log; for the
-    input-output models (NARX, neural state space)."""
+class _DataCommon(_Strict):
+    """What every data source shares: the experiments to keep, the Savitzky-Golay filter
+    (``savgol_window`` s, ``savgol_order``) that derives the velocities a log lacks from its
+    pose (once, before the split: every model is fitted and scored on the same velocities),
+    and light white noise on logged signals (``noise``: standard deviation as a fraction of
+    each column's, on ``noise_columns``, default the inputs and velocities; seeded by
+    ``noise_seed``; Weiss V.B)."""
 
-    kind: Literal["vehicle", "table"] = "vehicle"
+    experiments: list[str] | None = None
+    noise: float = Field(0.0, ge=0, allow_inf_nan=False)
+    noise_columns: list[str] | None = None
+    noise_seed: int = 0
+    savgol_window: PositiveFloat = 1.0
+    savgol_order: int = Field(4, ge=2, le=8)
+
+
+class VehicleData(_DataCommon):
+    """A vehicle log: a file (``log``, through a reader config ``columns`` if it is not in
+    nnid's format) or a simulate config run on the fly (``simulate``). Paths are relative to
+    the config file; ``--data`` and ``--columns`` override them."""
+
+    kind: Literal["vehicle"] = "vehicle"
     log: str | None = None
     columns: str | None = None
     simulate: str | None = None
-    experiments: list[str] | None = None
 
 
-class FossenSpec(_Strict):
-    """Which parameters are unknown and which DOF equations identify them. ``unknowns`` may
-    use the shortcuts ``added_mass`` (diagonal derivatives of the DOFs) and ``damping`` (the
-    vehicle's damping-model terms of the DOFs' forces)."""
+class TableData(_DataCommon):
+    """A generic input-output table (``t``, optional ``experiment``, the model's named columns),
+    not a vehicle log: for the input-output models (NARX, neural state space)."""
 
-    unknowns: list[str] = Field(default_factory=lambda: ["added_mass", "damping"])
-    dofs: list[str] = Field(default_factory=lambda: ["u", "v", "w", "p", "q", "r"])
+    kind: Literal["table"]
+    log: str | None = None
+
+
+class SinusoidSpec(_Strict):
+    """Caccia's d-optimal sinusoid run φⁿ = offset + amplitude sin(ω_opt t) (eqs 13-15) on the
+    DOF's force channel, designed from step 1 of the campaign: ``prior_inertia`` (kg, or
+    kg m²; default the rigid inertia × (1 + ``prior_added_fraction``), Caccia's range 0.1-1,
+    L153), ``duration`` s, the noise ``seed`` and an optional ``measurement``."""
+
+    offset: Number
+    amplitude: PositiveFloat
+    prior_inertia: PositiveFloat | None = None
+    prior_added_fraction: float = Field(0.5, ge=0.1, le=1.0)
+    duration: PositiveFloat
+    seed: int = 1000
+    measurement: Measurement | None = None
+
+    @model_validator(mode="after")
+    def _no_inversion(self) -> SinusoidSpec:
+        if self.amplitude > abs(self.offset):
+            raise ValueError("amplitude must not exceed |offset|: the thrust would reverse")
+        return self
+
+
+class ValidationRunSpec(_Strict):
+    """A held-out PRBS run on the identified DOF (``experiment`` names it), from the campaign's
+    plant with fresh noise: amplitude ``fraction`` × the largest of |offset|, the sinusoid's
+    amplitude and the campaign's RMS force, switching every ``hold`` s."""
+
+    experiment: str = "validation_prbs"
+    duration: PositiveFloat = 120.0
+    hold: PositiveFloat = 8.0
+    fraction: PositiveFloat = 0.6
+    seed: int = 5
+
+
+class CacciaCampaignData(_DataCommon):
+    """Caccia's campaign simulated end to end (section III): the steady-state campaign
+    (``campaign``, a simulate config; ``campaign_seed`` replaces its noise seed), then the
+    d-optimal ``sinusoid`` designed from step 1 of the model's procedure and flown, then an
+    optional held-out ``validation`` run. One log; its experiments are the campaign's,
+    ``sinusoid`` and the validation run's."""
+
+    kind: Literal["caccia_campaign"]
+    campaign: str
+    campaign_seed: int | None = None
+    sinusoid: SinusoidSpec
+    validation: ValidationRunSpec | None = Field(default_factory=ValidationRunSpec)
+
+
+DataSpec = Annotated[VehicleData | TableData | CacciaCampaignData, Field(discriminator="kind")]
+
+
+def _data_kind(value: Any) -> Any:
+    """A ``[data]`` table without ``kind`` is a vehicle log."""
+    if isinstance(value, dict) and "kind" not in value:
+        return {**value, "kind": "vehicle"}
+    return value
+
+
+class SplitSpec(_Strict):
+    """Train / validation / test: whole ``experiment``s (named, or by ``fractions`` of the
+    samples in order) or contiguous ``block``s of each experiment (MATLAB's divideblock)."""
+
+    by: Literal["experiment", "block"] = "block"
+    fractions: list[Annotated[float, Field(ge=0, le=1)]] = Field(
+        default_factory=lambda: [0.7, 0.15, 0.15], min_length=3, max_length=3
+    )
+    train: list[str] | None = None
+    validation: list[str] | None = None
+    test: list[str] | None = None
+
+
+# -- trainers ------------------------------------------------------------------------------------
+
+
+class _Trainer(_Strict):
+    def build(self):
+        """The trainer these options describe."""
+        from nnid.models.base import trainer_class
+
+        return trainer_class(self.kind)(**self.model_dump(exclude={"kind"}))  # type: ignore[attr-defined]
+
+
+class LeastSquaresSpec(_Trainer):
+    """Batch least squares with covariance (:class:`nnid.trainers.least_squares.LeastSquares`)."""
+
+    kind: Literal["ls"]
+    weighting: Literal["feasible", "none"] = "feasible"
+    filter_lambda: PositiveFloat | None = None
+    correlated: bool = True
+
+
+class RecursiveSpec(_Trainer):
+    """Recursive least squares with forgetting (Weiss eqs 52-53)."""
+
+    kind: Literal["rls"]
+    forgetting: float = Field(1.0, gt=0, le=1)
+    p0: PositiveFloat = 1e6
+    filter_lambda: PositiveFloat | None = None
+    theta0: list[Number] | None = None
+
+
+class GradientSpec(_Trainer):
+    """Weiss's gradient estimator (eqs 62-65)."""
+
+    kind: Literal["gradient"]
+    gain: PositiveFloat | list[PositiveFloat] | list[list[Number]] = 1.0
+    normalized: bool = False
+    filter_lambda: PositiveFloat | None = None
+    theta0: list[Number] | None = None
+    dt: PositiveFloat | None = None
+
+
+class KalmanSpec(_Trainer):
+    """The augmented-state unscented Kalman filter (Weiss eqs 77-84)."""
+
+    kind: Literal["ukf"]
+    process_noise: PositiveFloat | list[PositiveFloat] = 1e-3
+    measurement_noise: PositiveFloat | list[PositiveFloat] | None = None
+    parameter_noise: float = Field(1e-4, ge=0, allow_inf_nan=False)
+    theta0: list[Number] | None = None
+    theta0_std: list[PositiveFloat] | None = None
+    min_std: PositiveFloat = 1e-3
+    alpha: PositiveFloat = 0.1
+    beta: Number = 2.0
+    kappa: Number = 0.0
+    check: bool = True
+
+
+class LevenbergMarquardtSpec(_Trainer):
+    """Levenberg-Marquardt (MATLAB's trainlm defaults; Weiss eqs 54-61)."""
+
+    kind: Literal["lm"]
+    mu: PositiveFloat = 1e-3
+    mu_dec: float = Field(0.1, gt=0, lt=1)
+    mu_inc: float = Field(10.0, gt=1, allow_inf_nan=False)
+    mu_max: PositiveFloat = 1e10
+    max_epochs: int = Field(1000, ge=1)
+    max_fail: int = Field(6, ge=1)
+    min_grad: float = Field(1e-7, ge=0, allow_inf_nan=False)
+    goal: float = Field(0.0, ge=0, allow_inf_nan=False)
+    memory_budget_mb: PositiveFloat = 256.0
+    jacobian: Literal["auto", "forward", "samples"] = "auto"
+
+
+class AdamSpec(_Trainer):
+    """Adam with a learning-rate schedule and early stopping."""
+
+    kind: Literal["adam"]
+    lr: PositiveFloat = 1e-2
+    max_epochs: int = Field(200, ge=1)
+    schedule: Literal["cosine", "plateau", "constant"] = "cosine"
+    lr_min: float = Field(1e-4, ge=0, allow_inf_nan=False)
+    plateau: int = Field(5, ge=1)
+    clip: PositiveFloat | None = 1.0
+    max_fail: int = Field(20, ge=1)
+    weight_decay: float = Field(0.0, ge=0, allow_inf_nan=False)
+    max_seconds: PositiveFloat | None = None
+
+
+RegressionTrainer = Annotated[
+    LeastSquaresSpec | RecursiveSpec | GradientSpec | KalmanSpec, Field(discriminator="kind")
+]
+NetworkTrainer = Annotated[LevenbergMarquardtSpec | AdamSpec, Field(discriminator="kind")]
+
+
+# -- models --------------------------------------------------------------------------------------
+
+
+class _Model(_Strict):
+    """A model table: ``kind`` and the model's constructor arguments; ``name`` labels it in a
+    comparison (default: its kind)."""
+
+    name: str | None = None
+
+    @field_validator("trainer", mode="before", check_fields=False)
+    @classmethod
+    def _trainer_name(cls, value: Any) -> Any:
+        return _kind_shorthand(value)
+
+    def build(self, vehicle=None):
+        """The (unfitted) model: ``from_config`` of its class."""
+        from nnid.models.base import model_class
+
+        return model_class(self.kind).from_config(self, vehicle)  # type: ignore[attr-defined]
+
+    def label(self) -> str:
+        return self.name or self.kind  # type: ignore[attr-defined]
+
+    def arguments(self) -> dict[str, Any]:
+        """The constructor arguments (the trainer built, ``name`` and ``kind`` left out)."""
+        args = self.model_dump(exclude={"kind", "name", "trainer"})
+        trainer = getattr(self, "trainer", None)
+        if trainer is not None:
+            args["trainer"] = trainer.build()
+        return args
 
 
 class SequenceStep(_Strict):
     """One step of a decoupled identification sequence (Weiss eqs 99-108)."""
 
     experiments: list[str] = Field(min_length=1)
-    dofs: list[str] = Field(min_length=1)
+    dofs: list[Dof] = Field(min_length=1)
     unknowns: list[str] = Field(min_length=1)
 
 
-class SplitSpec(_Strict):
-    by: Literal["experiment", "block"] = "block"
-    fractions: list[float] = Field(default_factory=lambda: [0.7, 0.15, 0.15])
-    train: list[str] | None = None
-    validation: list[str] | None = None
-    test: list[str] | None = None
+class FossenModelSpec(_Model):
+    """The parametric Fossen model (:class:`nnid.models.parametric.ParametricModel`): which
+    parameters are unknown (``added_mass`` and ``damping`` are shortcuts for the DOFs'
+    diagonal added mass and the vehicle's damping terms), from which DOF equations, with which
+    trainer; ``sequence`` runs Weiss's decoupled sequence instead."""
+
+    kind: Literal["fossen"] = "fossen"
+    unknowns: list[str] = Field(default_factory=lambda: ["added_mass", "damping"])
+    dofs: list[Dof] = Field(default_factory=lambda: list(ALL_DOFS), min_length=1)
+    sequence: Literal["weiss"] | list[SequenceStep] | None = None
+    savgol_window: PositiveFloat = 1.0
+    savgol_order: int = Field(4, ge=2, le=8)
+    trainer: RegressionTrainer | None = None
+
+    @field_validator("unknowns")
+    @classmethod
+    def _names(cls, unknowns: list[str]) -> list[str]:
+        from nnid.models.parametric import canonical_parameter
+
+        for name in unknowns:
+            if name not in ("added_mass", "damping"):
+                canonical_parameter(name)
+        return unknowns
 
 
-class NarxSpec(_Strict):
-    """The NARX network of ``model = "narx"`` (Weiss IV.A.2, V.B; :mod:`nnid.models.narx`):
-    named input and output columns, delays (a count n means 1..n), hidden tanh layers, the
-    training budget, and optional light white noise (``noise``: standard deviation as a
-    fraction of each column's, seeded by ``seed``) added to inputs and outputs, as Weiss did.
-    The remaining keys are :class:`nnid.models.narx.NarxModel`'s options of the same names;
-    ``output_bounds`` is "train" or one [low, high] per output, each a number, "train" or
-    "open"."""
+class CacciaModelSpec(_Model):
+    """Caccia's two-step model of one DOF (:class:`nnid.models.caccia.CacciaModel`)."""
 
+    kind: Literal["caccia"]
+    dof: Dof = "w"
+    sinusoid_experiment: str = "sinusoid"
+    reference: list[tuple[str, Literal["pos", "neg"]]] = Field(
+        default_factory=lambda: [("", "pos")]
+    )
+    mode_column: str | None = None
+    force_eta_one: bool = False
+    terms: list[Literal["linear", "quadratic"]] = Field(
+        default_factory=lambda: ["linear", "quadratic"], min_length=1
+    )
+    settings: dict[str, int] | None = None
+    settle_window: PositiveFloat = 10.0
+    settle_order: int = Field(2, ge=1, le=6)
+    settle_accel: PositiveFloat = 2e-3
+    min_plateau: PositiveFloat = 10.0
+    speed: Literal["slope", "mean", "asymptote"] = "asymptote"
+    velocity_window: PositiveFloat = 5.0
+    velocity_order: int = Field(4, ge=2, le=8)
+    correlated: bool = True
+    weighting: Literal["none", "speed"] = "speed"
+
+
+class SynthesisModelSpec(_Model):
+    """A named damping model of the basis library fitted to McCarter's τ̄
+    (:class:`nnid.models.synthesis.SynthesisModel`)."""
+
+    kind: Literal["synthesis"]
+    mask: MaskName | dict[Force, list[str]] = "mcfarland"
+    method: Literal["ls", "mae", "mse", "rms", "mad"] = "ls"
+    savgol_window: PositiveFloat = 1.0
+    savgol_order: int = Field(4, ge=2, le=8)
+    filter_lambda: PositiveFloat | None = None
+    zoh_midpoint: bool = False
+
+
+class SindyModelSpec(_Model):
+    """SINDy over the basis library (:class:`nnid.models.sindy.SindyDamping`)."""
+
+    kind: Literal["sindy"]
+    optimizer: Literal["stlsq", "sr3", "ensemble"] = "stlsq"
+    thresholds: list[PositiveFloat] | None = None
+    selection: Literal["validation", "aic", "bic"] = "validation"
+    tolerance: float = Field(0.05, ge=0, allow_inf_nan=False)
+    mode: Literal["residual", "control"] = "residual"
+    terms: list[str] | None = None
+    alpha: float = Field(1e-8, ge=0, allow_inf_nan=False)
+    holdout: float = Field(0.2, gt=0, lt=1)
+    per_output: bool = True
+    savgol_window: PositiveFloat = 1.0
+    savgol_order: int = Field(4, ge=2, le=8)
+    filter_lambda: PositiveFloat | None = None
+    zoh_midpoint: bool = False
+    seed: int = 0
+
+
+Bound = float | Literal["train", "open"]
+
+
+def _bounds(value: Any) -> Any:
+    """TOML has no null: "open" stands for an open bound."""
+    if isinstance(value, list):
+        return [[None if v == "open" else v for v in pair] for pair in value]
+    return value
+
+
+class NarxModelSpec(_Model):
+    """A NARX network (:class:`nnid.models.narx.NarxModel`; Weiss IV.A.2, V.B): named input
+    and output columns, delays (a count n means 1..n), hidden tanh layers, balanced sampling,
+    optional simulation-error fine-tuning and output bounds ("train" or one [low, high] per
+    output, each a number, "train" or "open")."""
+
+    kind: Literal["narx"]
     inputs: list[str] = Field(min_length=1)
     outputs: list[str] = Field(min_length=1)
-    input_delays: int | list[int] = 2
-    output_delays: int | list[int] = 2
-    hidden: list[int] = Field(default_factory=lambda: [10])
+    input_delays: Annotated[int, Field(ge=1)] | list[Annotated[int, Field(ge=0)]] = 2
+    output_delays: Annotated[int, Field(ge=1)] | list[Annotated[int, Field(ge=1)]] = 2
+    hidden: list[Annotated[int, Field(ge=1)]] = Field(default_factory=lambda: [10])
     balanced: bool = True
     seed: int = 0
-    epochs: int = Field(200, ge=1)
-    lr: float = Field(1e-2, gt=0)
+    delta: bool = True
     multi_step: int = Field(1, ge=1)
     simulation_epochs: int = Field(0, ge=0)
     simulation_window: int = Field(200, ge=2)
+    simulation_lr: PositiveFloat = 1e-3
+    batch_size: int = Field(256, ge=1)
+    samples_per_epoch: int | None = Field(None, ge=1)
     lm_samples: int = Field(4000, ge=10)
-    noise: float = Field(0.0, ge=0)
-    simulation_lr: float = Field(1e-3, gt=0)
+    output_bounds: Literal["train"] | list[list[Bound]] | None = None
     simulation_trainer: Literal["adam", "lm"] = "adam"
     simulation_max_fail: int = Field(8, ge=1)
-    simulation_l2: float = Field(0.0, ge=0)
-    delta: bool = True
+    simulation_l2: float = Field(0.0, ge=0, allow_inf_nan=False)
     output_transform: Literal["sqrt"] | None = None
-    output_bounds: str | list[list[float | str]] | None = None
+    trainer: NetworkTrainer | None = None
+
+    def arguments(self) -> dict[str, Any]:
+        args = super().arguments()
+        args["output_bounds"] = _bounds(args["output_bounds"])
+        return args
 
 
-class StateSpaceSpec(_Strict):
-    """The continuous-time neural state-space model of ``model = "state_space"``
-    (:mod:`nnid.models.neural_state_space`): the outputs are the first states, ``hidden_states``
-    more are unmeasured; ``structure`` (optional) is one row of 0/1 per state derivative over
-    the states then the inputs; ``windows`` are the training stages' window lengths in samples
-    (0: whole experiments); ``warmup`` samples estimate each run's initial state and are never
-    scored; ``epochs`` per stage; ``output_bounds``: "train" or one [low, high] per output,
-    each a number, "train" or "open"."""
+class StateSpaceModelSpec(_Model):
+    """A continuous-time neural state-space model (:class:`nnid.models.neural_state_space.
+    NeuralStateSpace`): the outputs are the first states, ``hidden_states`` more are
+    unmeasured; ``structure`` (optional) is one row of 0/1 per state derivative over the states
+    then the inputs; ``windows`` are the training stages' window lengths in samples (0: whole
+    experiments); ``warmup`` samples estimate each run's initial state and are never scored."""
 
+    kind: Literal["state_space"]
     inputs: list[str] = Field(min_length=1)
     outputs: list[str] = Field(min_length=1)
     hidden_states: int = Field(1, ge=0)
     hidden: int = Field(16, ge=1)
-    structure: list[list[int]] | None = None
-    windows: list[int] = Field(default_factory=lambda: [0], min_length=1)
-    warmup: int = Field(10, ge=1)
+    structure: list[list[Literal[0, 1]]] | None = None
     substeps: int = Field(1, ge=1)
-    epochs: int = Field(30, ge=1)
-    lr: float = Field(1e-2, gt=0)
-    continuity: float = Field(1.0, ge=0)
-    output_bounds: str | list[list[float | str]] | None = None
+    warmup: int = Field(10, ge=1)
+    windows: list[Annotated[int, Field(ge=0)]] = Field(default_factory=lambda: [0], min_length=1)
+    state_epochs: int = Field(50, ge=1)
+    continuity: float = Field(1.0, ge=0, allow_inf_nan=False)
+    output_bounds: Literal["train"] | list[list[Bound]] | None = None
     seed: int = 0
+    trainer: NetworkTrainer | None = None
+
+    def arguments(self) -> dict[str, Any]:
+        args = super().arguments()
+        args["output_bounds"] = _bounds(args["output_bounds"])
+        args["windows"] = [w or None for w in args["windows"]]
+        return args
 
 
-class TrainConfig(_Strict):
-    """``nnid train``: one model, one trainer, a split, and what to report."""
+ModelSpec = Annotated[
+    FossenModelSpec
+    | CacciaModelSpec
+    | SynthesisModelSpec
+    | SindyModelSpec
+    | NarxModelSpec
+    | StateSpaceModelSpec,
+    Field(discriminator="kind"),
+]
+PHYSICS_KINDS = ("fossen", "caccia", "synthesis", "sindy")
 
-    model: Literal["fossen", "narx", "state_space"] = "fossen"
-    trainer: Literal["ls", "rls", "gradient", "ukf", "caccia", "lm", "adam"] = "ls"
+
+# -- commands ------------------------------------------------------------------------------------
+
+
+class _Command(_Strict):
+    @field_validator("data", mode="before", check_fields=False)
+    @classmethod
+    def _data(cls, value: Any) -> Any:
+        return _data_kind(value)
+
+
+class TrainConfig(_Command):
+    """``nnid train``: one model on one split, scored on the held-out parts."""
+
+    kind: Literal["train"] = "train"
     vehicle: str = ""
-    narx: NarxSpec | None = None
-    state_space: StateSpaceSpec | None = None
-    data: DataSpec
-    fossen: FossenSpec = Field(default_factory=FossenSpec)
-    options: dict[str, float | str | bool] = Field(default_factory=dict)
-    savgol_window: float = Field(1.0, gt=0)
-    savgol_order: int = Field(4, ge=2, le=8)
+    data: DataSpec | None = None
+    model: ModelSpec = Field(default_factory=FossenModelSpec)
     split: SplitSpec = Field(default_factory=SplitSpec)
-    warmup_s: float = Field(1.0, ge=0)
+    warmup_s: float = Field(1.0, ge=0, allow_inf_nan=False)
+    k_step_s: PositiveFloat | None = None
     reference: dict[str, float] = Field(default_factory=dict)
     reference_label: str = "reference"
-    nondimensional_speed: float | None = Field(None, gt=0)
-    sequence: Literal["weiss"] | list[SequenceStep] | None = None
+    nondimensional_speed: PositiveFloat | None = None
+
+    @field_validator("model", mode="before")
+    @classmethod
+    def _model(cls, value: Any) -> Any:
+        return _kind_shorthand(value)
 
 
-class LoopConfig(_Strict):
+class CompareConfig(_Command):
+    """``nnid compare``: models of any kinds fitted on one split and compared on the same
+    held-out experiments (test when the split has one, else validation)."""
+
+    kind: Literal["compare"] = "compare"
+    vehicle: str = ""
+    data: DataSpec | None = None
+    models: list[ModelSpec] = Field(min_length=1)
+    split: SplitSpec = Field(default_factory=SplitSpec)
+    warmup_s: float = Field(2.0, ge=0, allow_inf_nan=False)
+    k_step_s: PositiveFloat = 2.0
+    replay_autopilot: bool = True
+
+    @field_validator("models", mode="before")
+    @classmethod
+    def _models(cls, value: Any) -> Any:
+        return [_kind_shorthand(v) for v in value] if isinstance(value, list) else value
+
+    @field_validator("models")
+    @classmethod
+    def _unique(cls, models: list) -> list:
+        names = [m.label() for m in models]
+        twice = sorted({n for n in names if names.count(n) > 1})
+        if twice:
+            raise ValueError(f"model names must differ (give each a 'name'): {', '.join(twice)}")
+        return models
+
+
+class LoopConfig(_Command):
     """``nnid loop CONFIG``: the residual loop on a log (``--data``/``--vehicle`` override)."""
 
     kind: Literal["loop"] = "loop"
     vehicle: str = ""
-    data: DataSpec = Field(default_factory=DataSpec)
-    dofs: list[Literal["u", "v", "w", "p", "q", "r"]] | None = None
+    data: VehicleData = Field(default_factory=VehicleData)
+    dofs: list[Dof] | None = None
     validation: list[str] | None = None  # experiments held out; default the last 30 %
     validation_fraction: float = Field(0.3, gt=0, lt=1)
     max_effects: int = Field(3, ge=0)
     alpha: float = Field(0.01, gt=0, lt=0.5)
     coupled: bool = True
-    filter_lambda: float | None = Field(1.0, gt=0)
-    savgol_window: float = Field(1.0, gt=0)
+    filter_lambda: PositiveFloat | None = 1.0
+    savgol_window: PositiveFloat = 1.0
     savgol_order: int = Field(4, ge=2, le=8)
-    warmup_s: float = Field(2.0, ge=0)
-    gate_horizon_s: float | None = Field(None, gt=0)  # None: the gate is the free run
+    warmup_s: float = Field(2.0, ge=0, allow_inf_nan=False)
+    gate_horizon_s: PositiveFloat | None = None  # None: the gate is the free run
 
 
-class SindySpec(_Strict):
-    """The SINDy fit of ``nnid compare``: optimizer and the thresholds of its path."""
+COMMANDS: dict[str, type[BaseModel]] = {
+    "simulate": SimulateConfig,
+    "train": TrainConfig,
+    "compare": CompareConfig,
+    "loop": LoopConfig,
+}
 
-    optimizer: Literal["stlsq", "sr3", "ensemble"] = "stlsq"
-    thresholds: list[float] | None = None
-    selection: Literal["validation", "aic", "bic"] = "validation"
-    tolerance: float = Field(0.05, ge=0)
 
-
-class CompareConfig(_Strict):
-    """``nnid compare``: named damping models (masks of the basis library) and a SINDy model
-    fitted on one split, compared on held-out data (McCarter ch. 5)."""
-
-    kind: Literal["compare"] = "compare"
-    vehicle: str
-    data: DataSpec
-    models: list[str] = Field(
-        default_factory=lambda: [
-            "mcfarland",
-            "pitch_yaw",
-            "gertler_hagen",
-            "linear",
-            "coe",
-            "prestero",
-            "uncoupled",
-            "fossen",
-        ]
-    )
-    sindy: SindySpec | bool = True  # false: named models only
-    split: SplitSpec = Field(default_factory=SplitSpec)
-    savgol_window: float = Field(1.0, gt=0)
-    savgol_order: int = Field(4, ge=2, le=8)
-    warmup_s: float = Field(2.0, ge=0)
-    horizon_s: float = Field(2.0, gt=0)
-    filter_lambda: float | None = Field(None, gt=0)
-    zoh_midpoint: bool = False
+def load_config(path: str | Path, model: type[BaseModel] = SimulateConfig) -> BaseModel:
+    """Read and validate a TOML config; raise NnidInputError naming the file and field. A
+    config written for another command is refused with that command's name."""
+    data = read_toml(path)
+    expected = next((k for k, m in COMMANDS.items() if m is model), None)
+    kind = data.get("kind")
+    if expected is not None and isinstance(kind, str) and kind != expected:
+        hint = f"`nnid {kind}`" if kind in COMMANDS else "another tool"
+        raise NnidInputError(
+            f"this is a '{kind}' config (for {hint}); `nnid {expected}` needs a "
+            f"'{expected}' config",
+            source=str(path),
+            field="kind",
+        )
+    return validated(model, data, str(path))

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -11,6 +12,8 @@ from pydantic import BaseModel, ValidationError
 from nnid.errors import NnidInputError
 
 Model = TypeVar("Model", bound=BaseModel)
+#: keys whose value selects the variant of a table (pydantic puts that value in error paths)
+_TAGS = ("kind", "model")
 
 
 def read_toml(path: str | Path) -> dict[str, Any]:
@@ -20,8 +23,46 @@ def read_toml(path: str | Path) -> dict[str, Any]:
             return tomllib.load(fh)
     except FileNotFoundError:
         raise NnidInputError("file not found", source=str(path)) from None
+    except IsADirectoryError:
+        raise NnidInputError("is a folder, not a TOML file", source=str(path)) from None
+    except UnicodeDecodeError:
+        raise NnidInputError("is not a text file (TOML expected)", source=str(path)) from None
     except tomllib.TOMLDecodeError as err:
         raise NnidInputError(f"not valid TOML ({err})", source=str(path)) from None
+
+
+def field_path(loc: tuple, data: Any) -> str:
+    """The dotted path of an error location as the user wrote it: pydantic's own steps (the
+    tag of a tagged union, the member type of a plain union, validator names) are dropped by
+    walking the input along the location."""
+    out: list[str] = []
+    node = data
+    for i, step in enumerate(loc):
+        if isinstance(node, dict):
+            following = loc[i + 1] if i + 1 < len(loc) else None
+            if step in node:
+                out.append(str(step))
+                node = node[step]
+            elif any(node.get(t) == step for t in _TAGS) or following in node:
+                continue  # the union's tag (written, or a default): not a key of the file
+            else:
+                if not str(step).startswith("function-"):
+                    out.append(str(step))  # a missing key, named
+                break
+        elif isinstance(node, list) and isinstance(step, int) and 0 <= step < len(node):
+            out.append(str(step))
+            node = node[step]
+        else:
+            break  # a leaf: what follows is pydantic's name of a union member
+    return ".".join(out)
+
+
+def _show(value: Any) -> str:
+    """A value as the user wrote it (short)."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return str(value)
+    text = repr(value)
+    return text if len(text) <= 60 else text[:57] + "..."
 
 
 def validated(model: type[Model], data: dict[str, Any], source: str) -> Model:
@@ -31,10 +72,22 @@ def validated(model: type[Model], data: dict[str, Any], source: str) -> Model:
         return model.model_validate(data)
     except ValidationError as err:
         first = err.errors()[0]
-        field = ".".join(str(p) for p in first["loc"] if not str(p).startswith("function-"))
+        field = field_path(tuple(first["loc"]), data)
         msg = first["msg"].removeprefix("Value error, ")
         if first["type"] == "missing":
             msg = "is required but missing"
         elif first["type"] == "extra_forbidden":
-            msg = "is not a known field of this file"
+            msg = "is not a known field here"
+        elif first["type"] == "union_tag_invalid":
+            ctx = first.get("ctx", {})
+            field = ".".join(filter(None, [field, str(ctx.get("discriminator", "")).strip("'")]))
+            msg = f"'{ctx.get('tag')}' is not one of {ctx.get('expected_tags')}"
+        elif first["type"] == "union_tag_not_found":
+            ctx = first.get("ctx", {})
+            field = ".".join(filter(None, [field, str(ctx.get("discriminator", "")).strip("'")]))
+            msg = "is required but missing"
+        elif first["type"] == "finite_number":
+            msg = f"must be a finite number, not {_show(first.get('input'))}"
+        elif not isinstance(first.get("input"), (dict, list, type(None))):
+            msg = f"{msg} (got {_show(first['input'])})"
         raise NnidInputError(msg, source=source, field=field) from None

@@ -17,7 +17,8 @@ import tomllib
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 from nnid.errors import NnidInputError
-from nnid.physics.added_mass import DOFS, parse_added_mass_key
+from nnid.physics.added_mass import parse_added_mass_key
+from nnid.physics.dofs import DOFS
 from nnid.validation import read_toml, validated
 
 PRESETS = ("seamor", "vlbv300", "romeo", "vt690")
@@ -82,7 +83,7 @@ class Damping(_Strict):
     @field_validator("model")
     @classmethod
     def _known(cls, name: str | None) -> str | None:
-        from nnid.models.damping_library import mask_terms
+        from nnid.physics.damping_library import mask_terms
 
         if name is not None:
             mask_terms(name)

@@ -1,6 +1,9 @@
-"""Adam trainer: per-epoch wall-time stamps and the wall-time cap."""
+"""Adam trainer: one History (start and per-epoch entries), the wall-time cap, the learning-rate
+schedules of torch.optim.lr_scheduler, and the progress callback."""
 
 from __future__ import annotations
+
+import math
 
 import torch
 from torch.func import functional_call
@@ -9,8 +12,8 @@ from nnid.trainers.adam import Adam
 
 
 def _problem():
-    torch.manual_seed(0)
-    x = torch.randn(64, 3)
+    gen = torch.Generator().manual_seed(0)
+    x = torch.randn(64, 3, generator=gen)
     y = x @ torch.tensor([[1.0], [-2.0], [0.5]])
     module = torch.nn.Linear(3, 1)
 
@@ -21,20 +24,44 @@ def _problem():
     return module, residual, [(x[:32], y[:32]), (x[32:], y[32:])], [(x, y)]
 
 
-def test_history_time_is_cumulative_per_epoch():
+def test_history_has_the_start_and_each_epoch_with_cumulative_time():
     module, residual, train, val = _problem()
     hist = Adam(lr=0.05, max_epochs=5).fit(module, residual, train, val)
-    assert hist.stop == "max_epochs"
-    assert len(hist.time) == len(hist.train) == len(hist.validation) == 5
+    assert hist.stop_reason == "max_epochs" and hist.epochs == 5
+    assert len(hist.time) == len(hist.train) == len(hist.validation) == 6  # start + 5
     assert all(0 < a < b for a, b in zip(hist.time, hist.time[1:], strict=False))
-    assert hist.time[-1] <= hist.seconds
+    assert hist.validation[hist.best_epoch] == min(hist.validation)
+    assert hist.train[-1] < hist.train[0]
 
 
 def test_max_seconds_stops_after_the_first_epoch_past_the_cap():
     module, residual, train, val = _problem()
     hist = Adam(lr=0.05, max_epochs=1000, max_seconds=0.0).fit(module, residual, train, val)
-    assert hist.stop == "max_seconds"
-    assert len(hist.train) == len(hist.time) == 1
+    assert hist.stop_reason == "max_seconds" and hist.epochs == 1
     # without validation batches the cap applies too
     hist = Adam(lr=0.05, max_epochs=1000, max_seconds=0.0).fit(module, residual, train)
-    assert hist.stop == "max_seconds" and len(hist.time) == 1
+    assert hist.stop_reason == "max_seconds" and hist.epochs == 1 and hist.validation == []
+
+
+def test_cosine_schedule_is_the_closed_form_and_plateau_halves():
+    module, residual, train, val = _problem()
+    hist = Adam(lr=0.1, lr_min=0.001, max_epochs=9).fit(module, residual, train, val)
+    expected = [0.001 + 0.5 * 0.099 * (1 + math.cos(math.pi * e / 8)) for e in range(9)]
+    assert all(
+        math.isclose(a, b, rel_tol=1e-9) for a, b in zip(hist.extra["lr"], expected, strict=True)
+    )
+    # a validation loss that never improves (a constant): the rate halves every 2 epochs
+    module, residual, train, _ = _problem()
+    flat = [(torch.zeros(4, 3), torch.zeros(4, 1) + 1e3)]
+    hist = Adam(lr=0.08, schedule="plateau", plateau=2, max_fail=100, max_epochs=7).fit(
+        module, lambda p, b: residual(p, b) * 0 + 1.0, train, flat
+    )
+    assert hist.extra["lr"] == [0.08, 0.08, 0.04, 0.04, 0.02, 0.02, 0.01]
+
+
+def test_progress_reports_every_epoch():
+    module, residual, train, val = _problem()
+    calls = []
+    Adam(max_epochs=3).fit(module, residual, train, val, progress=lambda *a: calls.append(a))
+    assert [(d, t) for d, t, _ in calls] == [(1, 3), (2, 3), (3, 3)]
+    assert all("validation" in m for *_, m in calls)

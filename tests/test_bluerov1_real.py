@@ -44,7 +44,7 @@ def _script():
 @pytest.fixture(scope="module")
 def study():
     from nnid.config import SplitSpec
-    from nnid.models.parametric import Parts
+    from nnid.physics.parts import Parts
 
     script = _script()
     cfg, vehicle = script.setup()

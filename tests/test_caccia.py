@@ -6,17 +6,21 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 
+from nnid import load_model
+from nnid.config import SimulateConfig, TrainConfig, load_config
+from nnid.datasets.arrays import log_arrays
 from nnid.datasets.simulator import simulate_config
-from nnid.models.parametric import ParametricFossen, log_arrays
+from nnid.models.caccia import CacciaModel
+from nnid.models.parametric import ParametricFossen
 from nnid.physics.effects import apply_effect
 from nnid.physics.thrusters import Actuation
 from nnid.trainers.caccia import (
     CacciaTwoStep,
     Plateau,
     force_to_commands,
-    load_caccia_config,
     simulate_sinusoid,
     steady_state_regression,
 )
@@ -33,7 +37,8 @@ CAMPAIGN_SEED = 700
 
 @pytest.fixture(scope="module")
 def setup():
-    cfg, campaign = load_caccia_config(CONFIG)
+    cfg = load_config(CONFIG, TrainConfig)
+    campaign = load_config(CONFIG.parent / cfg.data.campaign, SimulateConfig)
     campaign = campaign.model_copy(update={"seed": CAMPAIGN_SEED})
     vehicle = load_vehicle(cfg.vehicle)
     log = simulate_config(campaign, vehicle)
@@ -43,9 +48,9 @@ def setup():
 @pytest.fixture(scope="module")
 def fitted(setup):
     cfg, campaign, vehicle, log = setup
-    trainer = cfg.trainer()
+    trainer = cfg.model.build(vehicle).trainer()
     trainer.fit_steady(log, vehicle)
-    spec = cfg.sinusoid
+    spec = cfg.data.sinusoid
     prior = trainer.rigid_inertia(vehicle) * (1 + spec.prior_added_fraction)
     design = trainer.design_sinusoid(spec.offset, spec.amplitude, prior, spec.duration)
     sine = simulate_sinusoid(
@@ -201,3 +206,21 @@ def test_force_to_commands_round_trip(setup):
     tau = Actuation(vehicle).nominal(force_to_commands(vehicle, "w", force))
     np.testing.assert_allclose(tau[:, 2], force, atol=1e-3)
     np.testing.assert_allclose(np.delete(tau, 2, axis=1), 0.0, atol=1e-9)
+
+
+def test_caccia_model_fits_one_log_and_keeps_weight_minus_buoyancy(setup, fitted, tmp_path):
+    """The model protocol on the campaign and the sinusoid as one log: the same estimate as the
+    procedure, predictions of the identified one-DOF plant, and W − B through a save and load
+    (its buoyancy offset is part of the plant)."""
+    _, _, vehicle, log = setup
+    _, est, _, sine = fitted
+    model = CacciaModel(vehicle).fit(pd.concat([log, sine], ignore_index=True))
+    assert model.estimate_.names == est.names
+    np.testing.assert_allclose(model.estimate_.theta, est.theta, rtol=1e-10)
+    wb = model.params["weight_minus_buoyancy"]["value"]
+    assert model.parts_.weight - model.parts_.buoyancy == pytest.approx(wb)
+    model.save(tmp_path)
+    back = load_model(tmp_path)
+    assert back.params == model.params
+    pd.testing.assert_frame_equal(back.predict(sine), model.predict(sine))
+    assert list(model.residual(sine).columns) == ["Z"]

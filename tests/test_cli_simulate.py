@@ -135,7 +135,7 @@ def test_bad_vehicle_file_exits_2_naming_the_field(tmp_path, case):
 BAD_CONFIGS = {
     "unknown signal kind": (
         CONFIG.replace('kind = "step"', 'kind = "wiggle"'),
-        "experiments.0.signals.0",
+        "experiments.0.signals.0.kind",
     ),
     "negative dt": (CONFIG.replace("dt = 0.05", "dt = -0.05"), "dt"),
     "unknown channel": (

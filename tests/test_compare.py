@@ -1,4 +1,5 @@
-"""`nnid compare`: McCarter's Table 5.1 for simulated VT 690 data, and a report that renders."""
+"""`nnid compare`: every model family side by side (issue 12), McCarter's Table 5.1 for
+simulated VT 690 data with the autopilot replayed, and reports that render."""
 
 from __future__ import annotations
 
@@ -8,21 +9,30 @@ import shutil
 import subprocess
 from pathlib import Path
 
+import numpy as np
 import pytest
+from PIL import Image
 from typer.testing import CliRunner
 
 from nnid.cli import app
 
 ROOT = Path(__file__).resolve().parents[1]
+CONTRACT_VALIDATION = {"one_step_nrmse", "k_step_nrmse", "free_run_nrmse"}
 
 
-@pytest.fixture(scope="module")
-def compared(tmp_path_factory):
-    tmp = tmp_path_factory.mktemp("compare")
-    cfg = (ROOT / "configs/vt690_compare.toml").read_text()
-    cfg = cfg.replace(
-        'simulate = "vt690_truth.toml"', f'simulate = "{ROOT}/configs/vt690_truth.toml"'
-    )
+def _strict(path: Path) -> dict:
+    def refuse(token: str):
+        raise AssertionError(f"{path} is not strict JSON: {token}")
+
+    return json.loads(path.read_text(), parse_constant=refuse)
+
+
+def _run(tmp_path_factory, name: str, edits: dict[str, str]) -> Path:
+    tmp = tmp_path_factory.mktemp(name)
+    cfg = (ROOT / f"configs/{name}.toml").read_text()
+    for old, new in edits.items():
+        assert old in cfg, old
+        cfg = cfg.replace(old, new)
     (tmp / "c.toml").write_text(cfg)
     out = tmp / "out"
     result = CliRunner().invoke(app, ["compare", str(tmp / "c.toml"), "--out", str(out)])
@@ -30,51 +40,158 @@ def compared(tmp_path_factory):
     return out
 
 
+@pytest.fixture(scope="module")
+def compared(tmp_path_factory):
+    sim = 'simulate = "vt690_truth.toml"'
+    return _run(
+        tmp_path_factory,
+        "vt690_compare",
+        {sim: f'simulate = "{ROOT}/configs/vt690_truth.toml"'},
+    )
+
+
+@pytest.fixture(scope="module")
+def families(tmp_path_factory):
+    """configs/seamor_families.toml with smaller training budgets (the shipped config's
+    numbers are in the closing note of issue 12)."""
+    return _run(
+        tmp_path_factory,
+        "seamor_families",
+        {
+            'simulate = "seamor_sequence.toml"': (
+                f'simulate = "{ROOT}/configs/seamor_sequence.toml"'
+            ),
+            '{ kind = "lm", max_epochs = 100 }': '{ kind = "lm", max_epochs = 15 }',
+            '{ kind = "adam", max_epochs = 40, lr = 0.01 }': (
+                '{ kind = "adam", max_epochs = 4, lr = 0.01 }'
+            ),
+            '{ kind = "adam", max_epochs = 60, lr = 0.01 }': (
+                '{ kind = "adam", max_epochs = 3, lr = 0.01 }'
+            ),
+        },
+    )
+
+
+def _check_contract(comp: dict) -> None:
+    assert comp["schema_version"] == 1 and comp["k_step_s"] > 0
+    names = [m["name"] for m in comp["models"]]
+    assert sorted(comp["ranking"]) == sorted(names)
+    for m in comp["models"]:
+        assert {"name", "kind", "n_params", "seconds", "train", "validation"} <= set(m)
+        assert m["seconds"] > 0 and m["n_params"] > 0
+        assert CONTRACT_VALIDATION <= set(m["validation"])
+        for key in CONTRACT_VALIDATION:
+            scores = m["validation"][key]
+            assert "total" in scores
+            diverged = m["validation"].get(
+                "diverged" if key == "free_run_nrmse" else key.replace("nrmse", "diverged")
+            )
+            for dof, value in scores.items():
+                if dof == "total":
+                    continue
+                # a score is a number, or null with the DOF listed as diverged, never both
+                assert (value is None) == (dof in diverged), (m["name"], key, dof)
+            if any(v is None for d, v in scores.items() if d != "total"):
+                assert scores["total"] is None  # never an average that hides a divergence
+        if m["kind"] in ("synthesis", "sindy", "fossen"):
+            assert {"J", "J_over_J0"} <= set(m["train"]) and "J_over_J0" in m["validation"]
+        else:
+            assert m["train"] == {}  # no force equation, no J
+
+
 def test_comparison_json_and_table_5_1(compared):
     """Uncoupled models have validation J/J0 at least three times McFarland's (Table 5.1)."""
-    comp = json.loads((compared / "comparison.json").read_text())
+    comp = _strict(compared / "comparison.json")
+    _check_contract(comp)
     models = {m["name"]: m for m in comp["models"]}
-    for m in comp["models"]:
-        assert {"name", "n_params", "train", "validation"} <= set(m)
-        assert {"J", "J_over_J0"} <= set(m["train"]) and "free_run_nrmse" in m["validation"]
+    assert {m["kind"] for m in comp["models"]} == {"synthesis", "sindy"}
     assert models["mcfarland"]["n_params"] == 216
     mc = models["mcfarland"]["validation"]["J_over_J0"]
     for name in ("fossen", "uncoupled"):
         assert models[name]["validation"]["J_over_J0"] >= 3 * mc
-    assert comp["validation"] == ["cruise_1.5"]
+    assert comp["validation"] == ["cruise_1.5"] and comp["held_out"] == "validation"
+
+
+def test_autopilot_is_replayed_and_the_true_structure_ranks_first(compared):
+    """The log was flown under the simulator's PD autopilot on an open-loop unstable hull: the
+    free runs are flown under it too, so McFarland's model (the truth's structure) simulates the
+    held-out run, and it ranks first."""
+    comp = _strict(compared / "comparison.json")
+    assert comp["autopilot_replay"] is True
+    mc = next(m for m in comp["models"] if m["name"] == "mcfarland")["validation"]
+    assert set(mc["closed_loop"]) == {"k_step", "free_run"}
+    assert mc["free_run_nrmse"]["total"] < 0.3 and mc["diverged"] == {}
+    assert comp["ranking"][0] == "mcfarland"
+    assert "autopilot" in comp["summary"] and comp["summary"].startswith("Use mcfarland")
 
 
 def test_sindy_is_sparse_and_as_good_as_mcfarland(compared):
     """SINDy over the whole 132-term library finds a model with at most 40 % of McFarland's
-    216 terms whose validation J is within 10 % of McFarland's (issue 5; McCarter Table 5.1
-    leaves the question open)."""
-    comp = json.loads((compared / "comparison.json").read_text())
+    216 terms whose validation J is within 10 % of McFarland's (McCarter Table 5.1 leaves the
+    question open)."""
+    comp = _strict(compared / "comparison.json")
     models = {m["name"]: m for m in comp["models"]}
     assert models["sindy"]["n_params"] <= 0.4 * 216
     assert models["sindy"]["validation"]["J"] <= 1.10 * models["mcfarland"]["validation"]["J"]
-    path = comp["sindy_path"]
-    terms = [p["n_terms"] for p in path]
+    terms = [p["n_terms"] for p in models["sindy"]["sindy_path"]]
     assert terms[0] > 216 and terms[-1] == 0  # from dense to empty along the thresholds
+    assert models["sindy"]["validation_used_for"] == "model selection"
 
 
-def test_markdown_twin_holds_the_same_table(compared):
-    md = (compared / "report.md").read_text()
-    page = (compared / "report.html").read_text()
-    md_rows = [
-        line.split("|")[1:-1]
-        for line in md.splitlines()
-        if line.startswith("| mcfarland") or line.startswith("| fossen")
-    ]
-    first_table = page.split("</table>")[0]
-    for cells in md_rows[:2]:
-        name = cells[0].strip()
-        row = re.search(rf"<tr><td>{name}</td>(.*?)</tr>", first_table).group(1)
-        html_cells = re.findall(r"<td>(.*?)</td>", row)
-        assert [c.strip() for c in cells[1:]] == html_cells
+def _html_tables(page: str) -> list[list[list[str]]]:
+    tables = []
+    for body in re.findall(r"<table>(.*?)</table>", page, re.S):
+        rows = re.findall(r"<tr>(.*?)</tr>", body, re.S)
+        tables.append([re.findall(r"<t[hd]>(.*?)</t[hd]>", r) for r in rows])
+    return tables
+
+
+def _markdown_tables(text: str) -> list[list[list[str]]]:
+    tables, current = [], []
+    for line in text.splitlines():
+        if line.startswith("|"):
+            if not set(line) <= set("|-"):
+                current.append([c.strip() for c in line.strip("|").split("|")])
+        elif current:
+            tables.append(current)
+            current = []
+    return tables + ([current] if current else [])
+
+
+@pytest.mark.parametrize("which", ["compared", "families"])
+def test_markdown_twin_holds_the_same_tables(which, request):
+    out = request.getfixturevalue(which)
+    page = (out / "report.html").read_text()
+    md = _markdown_tables((out / "report.md").read_text())
+    html_tables = _html_tables(page.replace("&#x27;", "'").replace("&amp;", "&"))
+    assert md and md == html_tables[: len(md)]
     assert "data:image/png;base64," in page and "http" not in page.split("<body>")[1]
 
 
-def test_report_renders_in_headless_chromium(compared, tmp_path):
+def test_families_rank_four_model_kinds_on_one_held_out_run(families):
+    """Fossen least squares, SINDy, NARX (LM and Adam) and the neural state-space model fitted
+    on the same split and scored on the surge-sway run none of them saw."""
+    comp = _strict(families / "comparison.json")
+    _check_contract(comp)
+    kinds = {m["kind"] for m in comp["models"]}
+    assert kinds == {"fossen", "sindy", "narx", "state_space"}
+    assert comp["held_out"] == "test" and comp["test"] == ["surge-sway"]
+    assert comp["validation"] == ["surge-sway-yaw"] and "surge-sway" not in comp["train"]
+    for m in comp["models"]:
+        assert {"free_run_nrmse", "k_step_nrmse", "one_step_nrmse"} <= set(m["test"])
+        expected = {"narx": "early stopping", "state_space": "early stopping"}
+        assert m["validation_used_for"] == expected.get(
+            m["kind"], "model selection" if m["kind"] == "sindy" else None
+        )
+    best = comp["ranking"][0]
+    assert comp["summary"].startswith(f"Use {best} ")
+    free = [m["test"]["free_run_nrmse"]["total"] for m in comp["models"]]
+    ranked = {m["name"]: m["test"]["free_run_nrmse"]["total"] for m in comp["models"]}
+    measured = [ranked[n] for n in comp["ranking"] if ranked[n] is not None]
+    assert measured == sorted(measured) and min(v for v in free if v is not None) == ranked[best]
+
+
+def _chromium(tmp_path: Path, page: Path, dump: bool) -> subprocess.CompletedProcess:
     browser = shutil.which("chromium") or shutil.which("chromium-browser")
     if browser is None:
         pytest.skip("Chromium is not installed (Debian package 'chromium'; .ci/run installs it)")
@@ -89,11 +206,29 @@ def test_report_renders_in_headless_chromium(compared, tmp_path):
         "--disable-sync",
         f"--user-data-dir={tmp_path / 'profile'}",
         "--virtual-time-budget=5000",
-        "--dump-dom",
-        (compared / "report.html").as_uri(),
+        *(
+            ["--dump-dom"]
+            if dump
+            else ["--window-size=1200,2400", f"--screenshot={tmp_path}/s.png"]
+        ),
+        page.as_uri(),
     ]
-    done = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+    done = subprocess.run(cmd, capture_output=True, text=True, timeout=120, cwd=tmp_path)
     assert done.returncode == 0, done.stderr[-2000:]
-    dom = done.stdout
+    return done
+
+
+@pytest.mark.parametrize("which", ["compared", "families"])
+def test_report_renders_in_headless_chromium(which, request, tmp_path):
+    out = request.getfixturevalue(which)
+    dom = _chromium(tmp_path, out / "report.html", dump=True).stdout
     assert 'data-images-ok="yes"' in dom  # every embedded figure decoded and laid out
-    assert "Force error (McCarter Tables 5.1/5.2 for this data)" in dom and "mcfarland" in dom
+    assert "Ranking" in dom and "Free runs on the held-out data" in dom
+    if which == "compared":
+        assert "Force error (McCarter Tables 5.1/5.2 for this data)" in dom
+    _chromium(tmp_path, out / "report.html", dump=False)
+    shot = np.asarray(Image.open(tmp_path / "s.png").convert("L"), dtype=float)
+    assert shot.shape == (2400, 1200)
+    # a rendered page, not a blank one: text and plot lines make dark pixels in many rows
+    dark_rows = (shot < 100).any(axis=1).mean()
+    assert dark_rows > 0.3, dark_rows

@@ -6,15 +6,15 @@ import numpy as np
 import pytest
 import torch
 
-from nnid.models.damping_library import (
+from nnid.physics.damping import DampingTerms
+from nnid.physics.damping_library import (
     LIBRARY,
     BasisLibrary,
     canonical_term,
     mask_terms,
     parse_term,
 )
-from nnid.models.damping_masks import MASK_TERM_COUNTS, MASKS
-from nnid.physics.damping import DampingTerms
+from nnid.physics.damping_masks import MASK_TERM_COUNTS, MASKS
 
 
 def test_library_has_mccarters_132_terms_in_groups():

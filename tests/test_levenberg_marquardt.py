@@ -67,11 +67,16 @@ def test_agrees_with_scipy_lm(mode: str) -> None:
     ref = least_squares(fun, theta0, method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15)
     hist = LevenbergMarquardt(min_grad=1e-13, jacobian=mode).fit(net, residual, [(x, y)])
     theta = _flat(net)
+    # At the optimum no step lowers the SSE any more: μ grows to μ_max within an epoch or two.
+    # Trials are judged against the SSE computed by the same code path: comparing with the
+    # normal equations' SSE (per-sample vmap in "samples" mode, rounding ~1e-17 apart) once
+    # accepted null steps until the 1000-epoch cap, on some CPUs and not others.
     assert hist.stop_reason in ("min_grad", "mu_max")
+    assert hist.epochs < 200
     cost = 0.5 * float(np.sum(fun(theta) ** 2))
     assert cost == pytest.approx(ref.cost, rel=1e-9)
     np.testing.assert_allclose(theta, ref.x, rtol=1e-5, atol=1e-6)
-    assert hist.train_mse[-1] < hist.train_mse[0]
+    assert hist.train[-1] < hist.train[0]
 
 
 class _Surge(torch.nn.Module):
@@ -114,7 +119,7 @@ def test_physics_parameter_fit_through_rk4() -> None:
     hist = LevenbergMarquardt(min_grad=1e-14).fit(model, residual, [(force, u_meas)])
     assert float(model.k) == pytest.approx(20.0, rel=1e-6)
     assert float(model.m) == pytest.approx(50.0, rel=1e-6)
-    assert hist.train_mse[-1] < 1e-12
+    assert hist.train[-1] < 1e-12
 
 
 def test_validation_early_stop_restores_best() -> None:
@@ -127,14 +132,14 @@ def test_validation_early_stop_restores_best() -> None:
     residual = _regression_residual(net)
     hist = LevenbergMarquardt(max_epochs=500).fit(net, residual, [(x, y)], [(xv, yv)])
     assert hist.stop_reason == "validation"
-    best = int(np.nanargmin(hist.val_mse))
+    best = int(np.nanargmin(hist.validation))
     assert hist.best_epoch == best
     assert hist.epochs - best >= 6
-    assert all(np.diff(hist.val_mse[best:]) >= 0)
+    assert all(np.diff(hist.validation[best:]) >= 0)
     with torch.no_grad():
         val_now = float(torch.mean((net(xv) - yv) ** 2))
-    assert val_now == pytest.approx(hist.val_mse[best], rel=1e-12)
-    assert hist.train_mse[-1] < hist.train_mse[best]
+    assert val_now == pytest.approx(hist.validation[best], rel=1e-12)
+    assert hist.train[-1] < hist.train[best]
 
 
 def _one_step(mode: str, budget_mb: float, net: torch.nn.Module, batches) -> tuple:
@@ -159,12 +164,12 @@ def test_chunking_gives_the_same_step(mode: str) -> None:
     ne_full, th_full, h_full = _one_step(mode, 256.0, net, batches)
     tiny = 500 * 7 * 8 / 2**20  # 7 columns of 500 rows, or 500/p rows of p columns
     ne_chunk, th_chunk, h_chunk = _one_step(mode, tiny, net, batches)
-    assert h_full.peak_jacobian_elements == 500 * p
-    assert h_chunk.peak_jacobian_elements <= 500 * 7
+    assert h_full.info["peak_jacobian_elements"] == 500 * p
+    assert h_chunk.info["peak_jacobian_elements"] <= 500 * 7
     torch.testing.assert_close(ne_chunk.jtj, ne_full.jtj, rtol=1e-12, atol=1e-12)
     torch.testing.assert_close(ne_chunk.jtr, ne_full.jtr, rtol=1e-12, atol=1e-12)
     np.testing.assert_allclose(th_chunk, th_full, rtol=1e-10, atol=1e-12)
-    assert h_chunk.train_mse == pytest.approx(h_full.train_mse, rel=1e-12)
+    assert h_chunk.train == pytest.approx(h_full.train, rel=1e-12)
 
 
 def test_modes_agree_and_float32_module() -> None:
@@ -180,7 +185,7 @@ def test_modes_agree_and_float32_module() -> None:
     residual = _regression_residual(net32)
     hist = LevenbergMarquardt(max_epochs=20).fit(net32, residual, [(x.float(), y.float())])
     assert next(net32.parameters()).dtype == torch.float32
-    assert hist.train_mse[-1] < hist.train_mse[0]
+    assert hist.train[-1] < hist.train[0]
 
 
 @pytest.mark.parametrize("mode", ["forward", "samples"])
@@ -196,9 +201,9 @@ def test_large_jacobian_never_materialised(mode: str) -> None:
     hist = lm.fit(net, _regression_residual(net), [(x, y)])
     budget_elements = int(budget_mb * 2**20) // 8
     n = 2 * n_samples
-    assert hist.peak_jacobian_elements <= budget_elements < n * p
+    assert hist.info["peak_jacobian_elements"] <= budget_elements < n * p
     if mode == "samples":
-        assert hist.peak_jacobian_rows <= budget_elements // p
+        assert hist.info["peak_jacobian_rows"] <= budget_elements // p
     else:
-        assert hist.peak_jacobian_elements <= n * (budget_elements // n)
-    assert hist.train_mse[-1] < hist.train_mse[0]
+        assert hist.info["peak_jacobian_elements"] <= n * (budget_elements // n)
+    assert hist.train[-1] < hist.train[0]

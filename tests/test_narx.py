@@ -11,6 +11,7 @@ import pandas as pd
 import pytest
 import torch
 
+from nnid import load_model
 from nnid.config import Experiment, SimulateConfig, load_config
 from nnid.datasets.measurement import Measurement, relative_noise
 from nnid.datasets.simulator import experiment_inputs, simulate, simulate_config
@@ -63,7 +64,7 @@ def test_coupled_four_output_network_predicts_unseen_surge_sway(seamor):
     )
     lm = LevenbergMarquardt(max_epochs=30, jacobian="samples")
     model = NarxModel(FORCES, list("uvwr"), 4, 4, hidden=(10,), trainer=lm, lm_samples=3000)
-    model.fit(train, validation_log=_runs(seamor, "sway-heave"))
+    model.fit(train, validation=_runs(seamor, "sway-heave"))
     score = model.score(_runs(seamor, "surge-sway"), "free_run")
     assert score["u"] < 0.6
 
@@ -78,7 +79,7 @@ def test_ten_nodes_overfit_noisy_single_dof_more_than_three(seamor):
     for h in (3, 10):
         lm = LevenbergMarquardt(max_epochs=60, max_fail=10_000, jacobian="samples")
         m = NarxModel(["tau_X"], ["u"], 2, 2, hidden=(h,), trainer=lm, lm_samples=1000).fit(sub)
-        gaps[h] = m.history_.val_mse[-1] - m.history_.train_mse[-1]
+        gaps[h] = m.history_.validation[-1] - m.history_.train[-1]
     assert gaps[10] > gaps[3]
 
 
@@ -95,7 +96,7 @@ def test_save_load_round_trip_weights_only(seamor, tmp_path, monkeypatch):
         return real(*args, **kwargs)
 
     monkeypatch.setattr(torch, "load", spy)
-    back = NarxModel.load(tmp_path)
+    back = load_model(tmp_path)
     assert calls == [True]
     for mode in ("one_step", "free_run", 5):
         pd.testing.assert_frame_equal(model.predict(surge, mode), back.predict(surge, mode))
@@ -103,8 +104,8 @@ def test_save_load_round_trip_weights_only(seamor, tmp_path, monkeypatch):
 
 def test_no_delay_vector_crosses_an_experiment_boundary(seamor):
     two = _runs(seamor, "surge", "sway")
-    model = NarxModel(["tau_X", "tau_Y"], ["u", "v"], 3, 2, hidden=(4,))
-    model._fit_normalisation(two)
+    model = NarxModel(["tau_X", "tau_Y"], ["u", "v"], 3, 2, hidden=(4,), trainer=Adam(max_epochs=1))
+    model.fit(two, two)
     base = model.predict(two, "free_run")
     changed = two.copy()
     first = changed["experiment"] == "surge"
@@ -113,17 +114,17 @@ def test_no_delay_vector_crosses_an_experiment_boundary(seamor):
     second = ~first.to_numpy()
     pd.testing.assert_frame_equal(base[second], other[second])
     for _, part in two.groupby("experiment", sort=False):
-        assert base.loc[part.index[: model.warmup]].isna().all().all()
+        assert base.loc[part.index[: model.warmup_samples_]].isna().all().all()
     table = model._table(two)
     starts = np.flatnonzero(np.r_[True, np.diff(table["code"].numpy()) != 0])
     for s in starts:  # the delay states of each experiment carry no regressor
-        assert (table["phi"][s : s + model.warmup] == 0).all()
+        assert (table["phi"][s : s + model.warmup_samples_] == 0).all()
 
 
 def test_cli_train_narx_adam_writes_contract_metrics(tmp_path):
     text = (ROOT / "configs/seamor_narx_adam.toml").read_text()
     text = text.replace('"seamor_sequence.toml"', f'"{ROOT / "configs/seamor_sequence.toml"}"')
-    text = text.replace("epochs = 40", "epochs = 1")
+    text = text.replace("max_epochs = 40", "max_epochs = 1")
     cfg = tmp_path / "narx.toml"
     cfg.write_text(text)
     out = tmp_path / "out"
@@ -134,12 +135,13 @@ def test_cli_train_narx_adam_writes_contract_metrics(tmp_path):
     done = CliRunner().invoke(app, ["train", str(cfg), "--out", str(out)])
     assert done.exit_code == 0, done.output
     m = json.loads((out / "metrics.json").read_text())
-    assert m["model"] == "narx" and m["trainer"] == "adam" and m["balanced"] is True
+    assert m["model"] == "narx" and m["trainer"] == "adam" and m["settings"]["balanced"] is True
     assert m["params"]["n_params"]["value"] == 374
     for key in ("free_run_nrmse", "one_step_nrmse"):
         assert np.isfinite(m["validation"][key]["total"])
     assert m["seconds"] > 0
-    assert (out / "narx.pt").exists() and (out / "narx.json").exists()
+    assert (out / "tensors.pt").exists() and (out / "model.json").exists()
+    assert m["validation_used_for"] == "early stopping"
 
 
 def _surge_stairs(levels: list[float], hold: float, seed: int, name: str) -> pd.DataFrame:
@@ -191,7 +193,7 @@ def test_random_division_warns_and_is_recorded(seamor):
     with pytest.warns(UserWarning, match="random division"):
         model.fit(surge)
     assert model.division_ == {"by": "random", "fractions": [0.7, 0.15, 0.15]}
-    assert np.isfinite(model.history_.val_mse).all() and len(model.history_.val_mse) > 0
+    assert np.isfinite(model.history_.validation).all() and len(model.history_.validation) > 0
     block = NarxModel(["tau_X"], ["u"], 2, 2, hidden=(3,), trainer=lm)
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # the default block division does not warn
@@ -209,7 +211,7 @@ def test_multi_step_loss_trains_and_free_runs(seamor):
         samples_per_epoch=2000, batch_size=64,
     )  # fmt: skip
     model.fit(surge)
-    assert len(model.history_.train) == 10
+    assert model.history_.epochs == 10 and len(model.history_.train) == 11  # start, 10 epochs
     assert model.history_.train[-1] < model.history_.train[0]
     free = model.score(surge, "free_run")["u"]
     assert np.isfinite(free) and free < 0.45
@@ -241,12 +243,12 @@ def test_output_bounds_clamp_every_mode_and_survive_save_load(tmp_path):
     for mode in ("one_step", "free_run", 5):
         assert model.predict(wild, mode)["y"].max() <= train["y"].max() + 1e-12
     model.save(tmp_path)
-    cfg = json.loads((tmp_path / "narx.json").read_text())
-    assert cfg["output_bounds"] == [[None, float(train["y"].max())]]
-    back = NarxModel.load(tmp_path)
+    saved = json.loads((tmp_path / "model.json").read_text())
+    assert saved["state"]["bounds"] == [[None, float(train["y"].max())]]
+    back = load_model(tmp_path)
     pd.testing.assert_frame_equal(model.predict(wild, "free_run"), back.predict(wild, "free_run"))
     with pytest.raises(NnidInputError):
-        NarxModel(["u"], ["y"], output_bounds=[[1.0, 0.0]])
+        NarxModel(["u"], ["y"], output_bounds=[[1.0, 0.0]]).fit(train)
 
 
 def test_simulation_error_levenberg_marquardt_lowers_free_run_error():
@@ -270,11 +272,10 @@ def test_sqrt_output_transform_grows_regressor_runs_closed_loop_and_survives_sav
     train = _tank(300, 1.3, 3)
     train["y"] += 0.2
     kw = dict(hidden=(3,), balanced=False, lm_samples=300)
-    plain = NarxModel(["u"], ["y"], 2, 2, **kw)
-    model = NarxModel(["u"], ["y"], 2, 2, output_transform="sqrt", **kw)
+    kw["trainer"] = LevenbergMarquardt(max_epochs=5, jacobian="samples")
+    plain = NarxModel(["u"], ["y"], 2, 2, **kw).fit(train, train)
+    model = NarxModel(["u"], ["y"], 2, 2, output_transform="sqrt", **kw).fit(train, train)
     assert model.layer_sizes()[0] == plain.layer_sizes()[0] + 2
-    model.trainer = LevenbergMarquardt(max_epochs=5, jacobian="samples")
-    model.fit(train, train)
     s = np.sqrt(train["y"].to_numpy())
     assert float(model.net_.s_mean) == pytest.approx(s.mean())
     free = model.predict(train, "free_run")["y"].to_numpy()
@@ -282,8 +283,10 @@ def test_sqrt_output_transform_grows_regressor_runs_closed_loop_and_survives_sav
     assert closed[-1] == pytest.approx(free[-1], rel=1e-9)
     assert model.score(train, "one_step")["y"] < 0.2
     model.save(tmp_path)
-    assert json.loads((tmp_path / "narx.json").read_text())["output_transform"] == "sqrt"
-    back = NarxModel.load(tmp_path)
+    assert (
+        json.loads((tmp_path / "model.json").read_text())["settings"]["output_transform"] == "sqrt"
+    )
+    back = load_model(tmp_path)
     pd.testing.assert_frame_equal(model.predict(train, "free_run"), back.predict(train, "free_run"))
     with pytest.raises(NnidInputError):
-        NarxModel(["u"], ["y"], output_transform="log")
+        NarxModel(["u"], ["y"], output_transform="log").fit(train)

@@ -8,8 +8,10 @@ import numpy as np
 import pandas as pd
 import pytest
 import torch
+from sklearn.exceptions import NotFittedError
 from torch.func import jacrev
 
+from nnid import load_model
 from nnid.errors import NnidInputError
 from nnid.models.neural_state_space import NeuralStateSpace
 from nnid.trainers.levenberg_marquardt import LevenbergMarquardt
@@ -81,8 +83,8 @@ def test_early_stopping_on_held_out_windows_restores_best(fitted):
     model, _ = fitted
     assert len(model.history_) == 2  # the 40-sample stage, then whole windows
     hist = model.history_[-1]
-    assert np.isfinite(hist.val_mse).all()
-    assert min(hist.val_mse) == pytest.approx(hist.val_mse[hist.best_epoch])
+    assert np.isfinite(hist.validation).all()
+    assert min(hist.validation) == pytest.approx(hist.validation[hist.best_epoch])
 
 
 def test_structure_cuts_dependencies(fitted):
@@ -106,7 +108,7 @@ def test_validation_warmup_estimates_states_only(fitted):
     params = {"net." + k: v.detach() for k, v in model.net_.named_parameters()}
     params["x0"] = torch.zeros(1, 2, dtype=torch.float64)
     params["x0_val"] = torch.tensor([[0.5, 0.1]], dtype=torch.float64)
-    jac = jacrev(model._residual)(params, ("state", u, y, None))
+    jac = jacrev(model._shooting_residual)(params, ("state", u, y, None))
     assert all(float(jac[k].abs().max()) == 0.0 for k in params if k.startswith("net."))
     assert float(jac["x0_val"].abs().max()) > 0.0
 
@@ -115,10 +117,24 @@ def test_save_load_round_trip(fitted, tmp_path):
     model, _ = fitted
     test = _tanks(120, 3, 1.5, 0.5)
     model.save(tmp_path)
-    cfg = json.loads((tmp_path / "nss.json").read_text())
+    cfg = json.loads((tmp_path / "model.json").read_text())["settings"]
     assert cfg["structure"] == CASCADE and cfg["hidden_states"] == 1
-    again = NeuralStateSpace.load(tmp_path)
+    again = load_model(tmp_path)
     np.testing.assert_allclose(again.predict(test), model.predict(test), rtol=1e-10)
+
+
+def test_k_step_prediction_restarts_from_the_measured_level(fitted):
+    # k steps ahead from the measured level (the hidden upper level from the free run): one
+    # step is far closer than the free run, ten steps in between, and k = 1 is one step
+    model, _ = fitted
+    test = _tanks(300, 7, 0.2, 3.0)
+    one, free = model.score(test, "one_step")["level"], model.score(test)["level"]
+    ten = model.score(test, 10)["level"]
+    assert one < ten < free and one < 0.5 * free
+    pd.testing.assert_frame_equal(model.predict(test, 1), model.predict(test, "one_step"))
+    ahead = model.predict(test, 10)["level"].to_numpy()
+    assert np.isnan(ahead[: model.warmup_samples_ + 9]).all()
+    assert np.isfinite(ahead[model.warmup_samples_ + 9 :]).all()
 
 
 def test_output_bounds_clamp_the_free_run():
@@ -153,15 +169,17 @@ def test_bad_input_is_named():
     with pytest.raises(NnidInputError, match="level"):
         model.fit(holes)
     with pytest.raises(NnidInputError, match="structure"):
-        NeuralStateSpace(["pump"], ["level"], structure=[[1, 1]])
-    with pytest.raises(NnidInputError, match="free run"):
-        model.predict(log, mode="one_step")
+        NeuralStateSpace(["pump"], ["level"], structure=[[1, 1]]).fit(log)
+    with pytest.raises(NotFittedError, match="not fitted"):
+        NeuralStateSpace(["pump"], ["level"]).predict(log)
 
 
 def test_shooting_windows_cover_every_sample_and_link_neighbours():
     # 100 samples in windows of 30: starts 0, 29, 58 (a window's last sample is the next one's
     # first) and 70 (the last window ends at the end); links say where each next window starts
     model = NeuralStateSpace(["pump"], ["level"], warmup=5)
+    model._configure()
+    model.net_ = model._new_net()
     win = model._windows(_tanks(100, 0, 1.0, 1.0), 30)
     assert [s for _, s in win.where] == [0, 29, 58, 70]
     assert win.links.tolist() == [[0, 29, 1], [1, 29, 2], [2, 12, 3]]
@@ -181,12 +199,13 @@ def test_cli_train_state_space_writes_contract_metrics(tmp_path):
     pd.concat(runs).to_csv(tmp_path / "tanks.csv", index=False)
     cfg = tmp_path / "tanks.toml"
     cfg.write_text(
-        'model = "state_space"\ntrainer = "lm"\nwarmup_s = 0.0\n'
+        "warmup_s = 0.0\n"
         '[data]\nkind = "table"\nlog = "tanks.csv"\n'
         '[split]\nby = "experiment"\nvalidation = ["run2"]\ntest = ["run3"]\n'
-        '[state_space]\ninputs = ["pump"]\noutputs = ["level"]\nhidden = 8\n'
-        "structure = [[1, 1, 0], [0, 1, 1]]\nwindows = [40, 0]\nwarmup = 15\nepochs = 15\n"
+        '[model]\nkind = "state_space"\ninputs = ["pump"]\noutputs = ["level"]\nhidden = 8\n'
+        "structure = [[1, 1, 0], [0, 1, 1]]\nwindows = [40, 0]\nwarmup = 15\n"
         'output_bounds = [["open", "train"]]\n'
+        '[model.trainer]\nkind = "lm"\nmax_epochs = 15\n'
     )
     runner = CliRunner()
     done = runner.invoke(app, ["train", str(cfg), "--out", str(tmp_path / "out")])
@@ -194,20 +213,21 @@ def test_cli_train_state_space_writes_contract_metrics(tmp_path):
     m = json.loads((tmp_path / "out/metrics.json").read_text())
     assert m["model"] == "state_space" and m["trainer"] == "lm"
     assert m["params"]["n_params"]["value"] == 4 * 8 + 16 + 16 + 2
-    assert [s["window"] for s in m["stages"]] == [40, None]
-    assert m["warmup_samples"] == 15 and m["validation"]["samples"] == 240 - 15
+    assert [s["window"] for s in m["describe"]["stages"]] == [40, None]
+    assert m["validation"]["samples"] == 240 - 15
     # measured 0.037 on validation, 0.040 on test
     assert (
         m["validation"]["free_run_nrmse"]["total"] < 0.1
         and m["test"]["free_run_nrmse"]["total"] < 0.1
     )
-    assert "one_step_nrmse" not in m["test"]
-    again = NeuralStateSpace.load(tmp_path / "out")
-    assert again.bounds_[0][0] is None and again.windows == [40, None]
-    # a config without its table: one clear error, exit 2
-    cfg.write_text(cfg.read_text().split("[state_space]")[0])
+    # the one-step error restarts from the measured level: far below the free run's
+    assert m["test"]["one_step_nrmse"]["total"] < m["test"]["free_run_nrmse"]["total"]
+    again = load_model(tmp_path / "out")
+    assert again.bounds_[0][0] is None and again.windows_ == [40, None]
+    # a model table without its outputs: one clear error naming the key, exit 2
+    cfg.write_text(cfg.read_text().replace('outputs = ["level"]\n', ""))
     bad = runner.invoke(app, ["train", str(cfg), "--out", str(tmp_path / "bad")])
-    assert bad.exit_code == 2 and "state_space" in bad.output
+    assert bad.exit_code == 2 and "'model.outputs'" in bad.output
 
 
 def test_cli_table_data_names_the_missing_column_and_the_bad_row(tmp_path):
@@ -221,8 +241,8 @@ def test_cli_table_data_names_the_missing_column_and_the_bad_row(tmp_path):
     log.to_csv(tmp_path / "back.csv", index=False)
     cfg = tmp_path / "t.toml"
     cfg.write_text(
-        'model = "state_space"\ntrainer = "lm"\n[data]\nkind = "table"\nlog = "nopump.csv"\n'
-        '[state_space]\ninputs = ["pump"]\noutputs = ["level"]\n'
+        '[data]\nkind = "table"\nlog = "nopump.csv"\n'
+        '[model]\nkind = "state_space"\ninputs = ["pump"]\noutputs = ["level"]\n'
     )
     runner = CliRunner()
     done = runner.invoke(app, ["train", str(cfg), "--out", str(tmp_path / "o")])
@@ -241,23 +261,26 @@ def test_cli_table_data_trains_a_narx_too(tmp_path):
     pd.concat(runs).to_csv(tmp_path / "tanks.csv", index=False)
     cfg = tmp_path / "narx.toml"
     cfg.write_text(
-        'model = "narx"\ntrainer = "lm"\nwarmup_s = 0.0\n'
+        "warmup_s = 0.0\n"
         '[data]\nkind = "table"\nlog = "tanks.csv"\n'
         '[split]\nby = "experiment"\nvalidation = ["run2"]\n'
-        '[narx]\ninputs = ["pump"]\noutputs = ["level"]\nhidden = [4]\nepochs = 20\n'
+        '[model]\nkind = "narx"\ninputs = ["pump"]\noutputs = ["level"]\nhidden = [4]\n'
         'balanced = false\nsimulation_epochs = 3\nsimulation_trainer = "lm"\n'
         'simulation_window = 100\noutput_bounds = [["open", "train"]]\n'
+        '[model.trainer]\nkind = "lm"\nmax_epochs = 20\n'
     )
     done = CliRunner().invoke(app, ["train", str(cfg), "--out", str(tmp_path / "out")])
     assert done.exit_code == 0, done.output
     m = json.loads((tmp_path / "out/metrics.json").read_text())
     assert m["model"] == "narx" and m["validation"]["samples"] == 200 - 2
     assert m["validation"]["one_step_nrmse"]["total"] < 0.1  # one step ahead on a smooth level
-    saved = json.loads((tmp_path / "out/narx.json").read_text())  # the benchmark options pass
+    saved = json.loads((tmp_path / "out/model.json").read_text())  # the options pass
     top = max(runs[0]["level"].max(), runs[1]["level"].max())  # the training runs' maximum
-    assert saved["simulation_trainer"] == "lm" and saved["output_bounds"][0][0] is None
-    assert saved["output_bounds"][0][1] == pytest.approx(top, rel=1e-12)
-    assert m["simulation_finetune"]["epochs"] >= 1
+    assert saved["settings"]["simulation_trainer"] == "lm"
+    assert saved["settings"]["output_bounds"] == [[None, "train"]]
+    assert saved["state"]["bounds"][0][0] is None
+    assert saved["state"]["bounds"][0][1] == pytest.approx(top, rel=1e-12)
+    assert m["describe"]["simulation_finetune"]["epochs"] >= 1
 
 
 def test_adam_trains_the_same_model():

@@ -10,10 +10,12 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
+from nnid import load_model
 from nnid.cli import app
 from nnid.config import load_config
+from nnid.datasets.arrays import log_arrays
 from nnid.datasets.simulator import simulate_config
-from nnid.models.parametric import ParametricFossen, ParametricModel, log_arrays
+from nnid.models.parametric import ParametricFossen, ParametricModel
 from nnid.trainers.least_squares import ExcitationWarning, LeastSquares
 from nnid.trainers.sequence import DecoupledSequence
 from nnid.vehicle import load_vehicle
@@ -116,8 +118,8 @@ def test_save_load_and_prediction_modes(seamor, tmp_path):
     cfg.measurement.kind = "none"
     log = simulate_config(cfg, seamor)
     model = ParametricModel(seamor, TABLE3).fit(log[log["experiment"] != "sway-yaw"])
-    model.save(tmp_path / "m.json")
-    back = ParametricModel.load(tmp_path / "m.json")
+    model.save(tmp_path / "m")
+    back = load_model(tmp_path / "m")
     assert np.array_equal(back.estimate_.theta, model.estimate_.theta)
     val = log[log["experiment"] == "sway-yaw"]
     free = back.predict(val, "free_run")
@@ -125,7 +127,7 @@ def test_save_load_and_prediction_modes(seamor, tmp_path):
     k5 = back.predict(val, 5)
     assert np.abs(k5["v"] - val["v"]).max() < 1e-6
     assert np.abs(back.residual(val).to_numpy()).max() < 1e-6
-    assert "X:u*abs(u)" in back.describe()
+    assert "X:u*abs(u)" in back.describe()["params"]
 
 
 def test_nnid_train_writes_contract_metrics(tmp_path):
@@ -135,7 +137,7 @@ def test_nnid_train_writes_contract_metrics(tmp_path):
     )
     assert result.exit_code == 0, result.output
     metrics = json.loads((out / "metrics.json").read_text())
-    assert metrics["model"] == "fossen" and metrics["trainer"] == "ls"
+    assert metrics["model"] == "fossen" and metrics["trainer"] == "ls (decoupled sequence)"
     assert set(metrics["params"]) == set(TABLE3)
     for p in metrics["params"].values():
         assert p["stderr"] > 0 and abs(p["value"] / p["vehicle_file"] - 1) < 0.03
@@ -147,16 +149,17 @@ def test_nnid_train_writes_contract_metrics(tmp_path):
     assert held == {"surge-sway-yaw"} and not held & trained
     assert "M_qdot'" in metrics["nondimensional"]["params"]
     assert (out / "report.md").read_text().count("Weiss (2013) Table 3 estimate") == 1
-    assert ParametricModel.load(out / "model.json").params["X_udot"]["value"] < 0
+    assert load_model(out).params["X_udot"]["value"] < 0
 
 
 def test_train_rejects_bad_config(tmp_path):
     bad = tmp_path / "bad.toml"
     bad.write_text(
-        'model = "fossen"\ntrainer = "magic"\nvehicle = "seamor"\n[data]\nlog = "x.csv"\n'
+        'vehicle = "seamor"\n[model]\nkind = "fossen"\n[model.trainer]\nkind = "magic"\n'
+        '[data]\nlog = "x.csv"\n'
     )
     result = CliRunner().invoke(app, ["train", str(bad), "--out", str(tmp_path / "o")])
-    assert result.exit_code == 2 and "'trainer'" in result.output
+    assert result.exit_code == 2 and "'model.trainer.kind'" in result.output
     warnings.simplefilter("default")
 
 
@@ -172,9 +175,13 @@ def test_nnid_train_runs_caccia_two_step(tmp_path):
     p = metrics["params"]
     assert abs(p["eta.w.neg"]["value"] - 0.56) < 0.01  # Caccia Table II
     assert p["Z:w*abs(w)"]["value"] < 0 and p["Z_wdot"]["value"] < 0
-    assert metrics["split"]["validation"] == ["validation_prbs"]
+    held = [e["experiment"] for e in metrics["split"]["parts"]["validation"]]
+    assert held == ["validation_prbs"]
     assert metrics["validation"]["free_run_nrmse"]["w"] < 0.2
-    assert ParametricModel.load(out / "model.json").params["eta.w.neg"]["value"] > 0.5
+    back = load_model(out)
+    assert back.params["eta.w.neg"]["value"] > 0.5
+    wb = {k: v for k, v in p["weight_minus_buoyancy"].items() if k != "vehicle_file"}
+    assert back.params["weight_minus_buoyancy"] == wb  # kept on save
 
 
 @pytest.mark.parametrize(
@@ -194,16 +201,16 @@ def test_nnid_train_recursive_and_kalman_trainers(tmp_path, trainer, options):
         .replace('kind = "mocap"', 'kind = "none"')
     )
     (tmp_path / "sim.toml").write_text(sim.replace("truth = true", "truth = false"))
-    cfg.write_text(f'''model = "fossen"
-trainer = "{trainer}"
-vehicle = "seamor"
+    cfg.write_text(f'''vehicle = "seamor"
 [data]
 simulate = "sim.toml"
 experiments = ["surge", "surge-sway"]
-[fossen]
+[model]
+kind = "fossen"
 unknowns = ["X_udot", "X:u*abs(u)"]
 dofs = ["u"]
-[options]
+[model.trainer]
+kind = "{trainer}"
 {options}[split]
 by = "experiment"
 validation = ["surge-sway"]

@@ -14,12 +14,12 @@ from typer.testing import CliRunner
 
 from nnid.cli import app
 from nnid.datasets.log import validate_log
-from nnid.datasets.readers import (
+from nnid.datasets.mapping import (
     euler_from_rotation,
-    load_log,
     rotation_from_euler,
     rotation_from_quaternion,
 )
+from nnid.datasets.readers import load_log
 from nnid.errors import NnidInputError
 
 runner = CliRunner()

@@ -6,12 +6,14 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from nnid.datasets.arrays import log_arrays
 from nnid.datasets.excitation import PRBS, Multisine
 from nnid.datasets.log import POSE, VELOCITY
 from nnid.datasets.simulator import simulate
-from nnid.models.parametric import ParametricFossen, ParametricModel, Regression, log_arrays
+from nnid.models.parametric import ParametricFossen, ParametricModel
 from nnid.trainers.least_squares import LeastSquares
 from nnid.trainers.recursive import GradientEstimator, RecursiveLeastSquares
+from nnid.trainers.regression import Regression
 from nnid.vehicle import load_vehicle
 
 DT = 0.05  # 20 Hz
@@ -174,8 +176,8 @@ def test_filtered_regressors_and_bad_arguments(seamor):
     ).fit(log)
     assert model.params["X:u*abs(u)"]["value"] == pytest.approx(X_UU, rel=0.01)
     assert model.estimate_.history.shape[0] < len(log)  # the settling time is left out
-    with pytest.raises(ValueError):
-        RecursiveLeastSquares(forgetting=1.5)
+    with pytest.raises(ValueError, match="forgetting"):
+        RecursiveLeastSquares(forgetting=1.5).solve(_surge_regression(seamor, log.assign(du=0)))
     with pytest.raises(ValueError):
         GradientEstimator(gain=[1.0, 2.0, 3.0]).solve(_surge_regression(seamor, log.assign(du=0)))
     with pytest.warns(RuntimeWarning, match="diverged"):

@@ -5,9 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from nnid.datasets.arrays import log_arrays
 from nnid.datasets.measurement import Measurement
 from nnid.datasets.simulator import simulate
-from nnid.models.parametric import ParametricFossen, log_arrays
+from nnid.models.parametric import ParametricFossen
 from nnid.trainers.ukf import (
     UnscentedKalman,
     _Process,

@@ -82,44 +82,48 @@ def commanded_ends(cfg) -> dict[str, float]:
 
 def load_runs(cfg) -> tuple[pd.DataFrame, pd.DataFrame, dict[str, float]]:
     """The config's runs as read, and cut at their last command."""
-    from nnid.pipeline import load_data
+    from nnid.datasets.readers import load_log
 
-    full, _ = load_data(cfg, CONFIG)
+    full, _ = load_log(CONFIG.parent / cfg.data.log, CONFIG.parent / cfg.data.columns)
+    full = full[full["experiment"].isin(cfg.data.experiments)].reset_index(drop=True)
     ends = commanded_ends(cfg)
     keep = full["t"].to_numpy() <= full["experiment"].map(ends).to_numpy() + 1e-9
     return full, full[keep].reset_index(drop=True), ends
 
 
 def fit(cfg, vehicle, log: pd.DataFrame | None = None, **update):
-    """``run_train`` on the config (``update`` replaces fields), on ``log`` if given (through a
-    temporary Parquet file outside the repository)."""
-    from nnid.config import DataSpec
+    """``run_train`` on the config (``update`` replaces fields of its model), on ``log`` if
+    given (through a temporary Parquet file outside the repository)."""
+    from nnid.config import VehicleData
     from nnid.pipeline import run_train
 
-    cfg = cfg.model_copy(update=update)
+    cfg = cfg.model_copy(update={"model": cfg.model.model_copy(update=update)})
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         if log is None:
-            return run_train(cfg, CONFIG, vehicle)
+            return run_train(cfg, CONFIG)
         with tempfile.TemporaryDirectory() as tmp:
             path = Path(tmp) / "runs.parquet"
             log.to_parquet(path)
-            return run_train(
-                cfg.model_copy(update={"data": DataSpec(log=str(path))}), CONFIG, vehicle
+            data = VehicleData(
+                log=str(path),
+                savgol_window=cfg.data.savgol_window,
+                savgol_order=cfg.data.savgol_order,
             )
+            return run_train(cfg.model_copy(update={"data": data}), CONFIG)
 
 
 def driven(log: pd.DataFrame, vehicle) -> list[str]:
     """The rotational DOFs whose input moment varies in this run."""
-    from nnid.models.parametric import log_arrays
+    from nnid.datasets.arrays import log_arrays
 
     tau = log_arrays(log, vehicle)["tau"]
     return [d for k, d in zip((3, 4, 5), "pqr", strict=True) if np.std(tau[:, k]) > 1e-9]
 
 
 def predict(parts, log: pd.DataFrame, vehicle, mode, zero: tuple[int, ...]) -> pd.DataFrame:
+    from nnid.datasets.arrays import log_arrays
     from nnid.evaluation.prediction import predict_states
-    from nnid.models.parametric import log_arrays
 
     tau = log_arrays(log, vehicle)["tau"].copy()
     tau[:, list(zero)] = 0.0
@@ -163,7 +167,9 @@ def score_heave(models: dict, runs: pd.DataFrame, vehicle, cfg) -> list[dict]:
     for name, g in runs.groupby("experiment", sort=False):
         if not short(name).startswith("yaw"):
             continue
-        g = derive_velocities(g.reset_index(drop=True), cfg.savgol_window, cfg.savgol_order)
+        g = derive_velocities(
+            g.reset_index(drop=True), cfg.data.savgol_window, cfg.data.savgol_order
+        )
         mask = warmup_mask(g, cfg.warmup_s, warmup_samples=1)
         y = g["w"].to_numpy()[mask]
         for mode in MODES:
@@ -212,7 +218,7 @@ def data_table(cfg, full, cut, ends) -> str:
 
 
 def param_table(res, res_full, vehicle) -> str:
-    from nnid.models.parametric import Parts
+    from nnid.physics.parts import Parts
 
     thesis = Parts.from_vehicle(vehicle)
     p, pf = res.metrics["params"], res_full.metrics["params"]
@@ -287,9 +293,10 @@ def summary_table(rows: list[dict], runs: list[str]) -> str:
 def equation_table(models: dict, runs: pd.DataFrame, vehicle, cfg) -> str:
     """RMS of the filtered equation error (the quantity least squares minimises), N m, per
     held-out run and driven DOF, after the filters settle (3/λ s)."""
-    from nnid.models.parametric import ParametricFossen, log_arrays
+    from nnid.datasets.arrays import log_arrays
+    from nnid.models.parametric import ParametricFossen
 
-    lam = float(cfg.options["filter_lambda"])
+    lam = float(cfg.model.trainer.filter_lambda)
     structure = ParametricFossen(vehicle, [], ("p", "q", "r"))
     lines = [
         "| run | DOF | " + " | ".join(f"{m} (N m)" for m in models) + " |",
@@ -312,13 +319,14 @@ def lambda_table(cfg, vehicle, cut) -> str:
     val = cut[cut.experiment.isin(cfg.split.validation)]
     lines = ["| λ (rad/s) | mean 1 s-ahead NRMSE on the validation runs |", "|---|---|"]
     for lam in LAMBDAS:
-        res = fit(cfg, vehicle, cut, options={**cfg.options, "filter_lambda": lam})
+        trainer = cfg.model.trainer.model_copy(update={"filter_lambda": lam})
+        res = fit(cfg, vehicle, cut, trainer=trainer)
         rows = [
             r
             for r in score_runs({"identified": res.model.parts_}, val, vehicle, cfg.warmup_s)
             if r["mode"] == 50
         ]
-        chosen = " (chosen)" if lam == cfg.options.get("filter_lambda") else ""
+        chosen = " (chosen)" if lam == cfg.model.trainer.filter_lambda else ""
         lines.append(f"| {lam:g}{chosen} | {np.mean([r['identified'] for r in rows]):.3f} |")
     return "\n".join(lines)
 
@@ -336,7 +344,7 @@ def data_facts(cfg, full, cut) -> str:
     step = raw.groupby(cmap.experiment)[source.time].diff().dropna()
     level = cut[cut.experiment.map(short).str.startswith("yaw")]
     tumbling = cut[~cut.experiment.map(short).str.startswith("yaw")]
-    w = derive_velocities(tumbling, cfg.savgol_window, cfg.savgol_order)["w"]
+    w = derive_velocities(tumbling, cfg.data.savgol_window, cfg.data.savgol_order)["w"]
     return (
         f"Thruster command messages: median interval {step.median():.3f} s "
         f"(95th percentile {step.quantile(0.95):.3f} s) over the {raw[cmap.experiment].nunique()} "
@@ -392,7 +400,7 @@ def coupled_note(res) -> str:
 
 
 def build() -> str:
-    from nnid.models.parametric import Parts
+    from nnid.physics.parts import Parts
 
     cfg, vehicle = setup()
     full, cut, ends = load_runs(cfg)

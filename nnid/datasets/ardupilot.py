@@ -23,7 +23,7 @@ as ``name.0``, ``name.1``... Each row also has
 
 Use ``time = "t_boot"`` for the autopilot's clock (one clock for every message type), or
 ``time = "t_recv"``. The experiment is the log's file stem unless the column map names an
-experiment column. Each table then goes through :func:`nnid.datasets.readers.map_source`.
+experiment column. Each table then goes through :func:`nnid.datasets.mapping.map_source`.
 """
 
 from __future__ import annotations
@@ -42,6 +42,7 @@ import pandas as pd
 
 from nnid.datasets.cleaning import CleaningReport
 from nnid.datasets.column_map import ColumnMap, Source
+from nnid.datasets.mapping import map_message_sources
 from nnid.errors import NnidInputError
 
 ARDUPILOT_SUFFIXES = (".bin", ".tlog")
@@ -216,8 +217,6 @@ def read_ardupilot_sources(
     ``source.file`` is a message type, optionally with an instance (``IMU[1]``). Returns
     ``(source, mapped table)`` pairs ready for :func:`nnid.datasets.readers.assemble`.
     """
-    from nnid.datasets.readers import map_message_sources
-
     path = Path(path)
     if not path.is_file():
         raise NnidInputError("file not found", source=str(path))

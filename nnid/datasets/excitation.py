@@ -15,7 +15,7 @@ from typing import Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-FORCE_CHANNELS = ("X", "Y", "Z", "K", "M", "N")
+from nnid.physics.dofs import FORCES
 
 
 class _Signal(BaseModel):
@@ -265,8 +265,8 @@ class WeissSequence(BaseModel):
     @model_validator(mode="after")
     def _channels(self) -> WeissSequence:
         for ch in self.amplitudes:
-            if ch not in FORCE_CHANNELS:
-                raise ValueError(f"amplitudes: '{ch}' is not one of {', '.join(FORCE_CHANNELS)}")
+            if ch not in FORCES:
+                raise ValueError(f"amplitudes: '{ch}' is not one of {', '.join(FORCES)}")
         for combo in self.coupled:
             missing = [c for c in combo if c not in self.amplitudes]
             if missing:
@@ -276,7 +276,7 @@ class WeissSequence(BaseModel):
     def experiments(self) -> list[dict]:
         """Experiment definitions (``nnid.config.Experiment`` fields) in Weiss's order."""
         runs = []
-        for ch in ("X", "Y", "Z", "K", "M", "N"):
+        for ch in FORCES:
             if ch in self.amplitudes:
                 runs.append(self._run(_DOF_NAMES[ch], ch))
         for combo in self.coupled:

@@ -14,11 +14,12 @@ import numpy as np
 import pandas as pd
 
 from nnid.errors import NnidInputError
+from nnid.physics.dofs import DOFS, FORCES
 
 POSE = ("x", "y", "z", "phi", "theta", "psi")
-VELOCITY = ("u", "v", "w", "p", "q", "r")
+VELOCITY = DOFS  # velocity columns are named after their DOF
 ACCELERATION = tuple(f"d{s}" for s in VELOCITY)
-TAU = ("tau_X", "tau_Y", "tau_Z", "tau_K", "tau_M", "tau_N")
+TAU = tuple(f"tau_{f}" for f in FORCES)
 ANGLES = ("phi", "theta", "psi")
 
 

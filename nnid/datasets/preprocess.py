@@ -20,9 +20,11 @@ import pandas as pd
 from pydantic import BaseModel, ConfigDict, Field
 from scipy.integrate import cumulative_trapezoid
 from scipy.signal import butter, filtfilt, savgol_coeffs, savgol_filter
+from scipy.stats import median_abs_deviation
 
 from nnid.datasets.cleaning import CleaningReport
 from nnid.datasets.log import ACCELERATION, ANGLES, POSE, VELOCITY, input_columns
+from nnid.datasets.mapping import rotation_from_euler
 from nnid.errors import NnidInputError
 
 
@@ -131,6 +133,18 @@ def savgol_noise_gain(window: int, order: int, dt: float, deriv: int = 1) -> flo
     return float(np.sqrt(np.sum(savgol_coeffs(window, order, deriv=deriv, delta=dt) ** 2)))
 
 
+def _euler_rates(angles: np.ndarray, inverse: bool = False) -> np.ndarray:
+    """T_Θ, or T_Θ⁻¹ with ``inverse``, of angles ``[..., 3]`` (:mod:`nnid.physics.kinematics`)."""
+    # imported here: reading and cleaning a log does not load torch otherwise
+    import torch
+
+    from nnid.physics.kinematics import euler_rate_matrix, euler_rate_matrix_inverse
+
+    rate_matrix = euler_rate_matrix_inverse if inverse else euler_rate_matrix
+    # a copy: pandas hands out read-only arrays, which torch warns about
+    return rate_matrix(torch.as_tensor(np.array(angles, dtype=np.float64))).numpy()
+
+
 def derive_velocities(
     log: pd.DataFrame,
     window_s: float = 0.5,
@@ -144,8 +158,6 @@ def derive_velocities(
     attitude but no x, y: also w ≈ ż / (cos θ cos φ), exact when u = v = 0 and reported as an
     approximation. Existing velocity columns are kept unless ``overwrite``.
     """
-    from nnid.datasets.readers import rotation_from_euler
-
     have = [c for c in POSE if c in log]
     if not all(a in have for a in ANGLES):
         raise NnidInputError("deriving body velocities needs phi, theta and psi", field="phi")
@@ -170,9 +182,10 @@ def derive_velocities(
         phi, theta = angles[:, 0], angles[:, 1]
         dphi, dth, dpsi = rates["phi"], rates["theta"], rates["psi"]
         pos = np.flatnonzero(np.isin(out.index, idx))
-        new["p"][pos] = dphi - np.sin(theta) * dpsi
-        new["q"][pos] = np.cos(phi) * dth + np.cos(theta) * np.sin(phi) * dpsi
-        new["r"][pos] = -np.sin(phi) * dth + np.cos(theta) * np.cos(phi) * dpsi
+        body_rates = np.einsum(
+            "nij,nj->ni", _euler_rates(angles, inverse=True), np.stack([dphi, dth, dpsi], 1)
+        )
+        new["p"][pos], new["q"][pos], new["r"][pos] = body_rates.T
         if all(c in have for c in ("x", "y", "z")):
             ned = np.stack([rates["x"], rates["y"], rates["z"]], 1)
             body = np.einsum("nji,nj->ni", rotation_from_euler(angles), ned)  # J₁ᵀ ṗ
@@ -282,7 +295,7 @@ def detect_jumps(
     windows = np.lib.stride_tricks.sliding_window_view(padded, 2 * half + 1)
     neighbours = np.delete(windows, half, axis=1)
     resid = y - np.median(neighbours, axis=1)
-    sigma = 1.4826 * np.median(np.abs(resid - np.median(resid))) + 1e-12
+    sigma = median_abs_deviation(resid, scale="normal") + 1e-12
     size = np.abs(resid)
     # a big jump also nudges its neighbours' reference; keep only samples that carry at least
     # half the largest residual around them (a multi-frame occlusion keeps all its frames)
@@ -322,6 +335,27 @@ def repair_jumps(
     return out
 
 
+# --- held inputs ------------------------------------------------------------------------------
+
+
+def zoh_midpoint_inputs(log: pd.DataFrame) -> pd.DataFrame:
+    """The log with every input column replaced by :func:`zoh_midpoint` of it."""
+    cols = input_columns(log)
+    out = log.copy()
+    out[cols] = zoh_midpoint(out[cols].to_numpy(np.float64), log)
+    return out
+
+
+def zoh_midpoint(x: np.ndarray, log: pd.DataFrame) -> np.ndarray:
+    """Per experiment, the mean of consecutive samples (the first kept): the force a
+    zero-order-held input applies around t_k, which a smoothed acceleration at t_k sees."""
+    y = np.array(x, dtype=np.float64, copy=True)
+    for _, idx in experiments(log):
+        pos = log.index.get_indexer(idx)
+        y[pos[1:]] = 0.5 * (x[pos[1:]] + x[pos[:-1]])
+    return y
+
+
 # --- sensor biases ----------------------------------------------------------------------------
 
 
@@ -344,17 +378,7 @@ def estimate_gyro_bias(t: np.ndarray, angles: np.ndarray, gyro: np.ndarray) -> n
     Θ(t) = Θ(t₀) + ∫ T_Θ(Θ) (ω − b) dτ; with T_Θ evaluated on the measured attitude this is
     linear in Θ(t₀) and b, solved by least squares over all samples and axes.
     """
-    phi, theta = angles[:, 0], angles[:, 1]
-    s, c, tt = np.sin(phi), np.cos(phi), np.tan(theta)
-    sec = 1.0 / np.cos(theta)
-    tmat = np.stack(
-        [
-            np.stack([np.ones_like(phi), s * tt, c * tt], -1),
-            np.stack([np.zeros_like(phi), c, -s], -1),
-            np.stack([np.zeros_like(phi), s * sec, c * sec], -1),
-        ],
-        -2,
-    )
+    tmat = _euler_rates(angles)
     rate_integral = cumulative_trapezoid(np.einsum("nij,nj->ni", tmat, gyro), t, axis=0, initial=0)
     t_integral = cumulative_trapezoid(tmat, t, axis=0, initial=0)  # ∫ T_Θ dτ, [N, 3, 3]
     n = t.size

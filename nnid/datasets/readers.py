@@ -1,10 +1,11 @@
 """Measured logs in: tables (CSV, Parquet), ROS bags and ArduPilot logs through a column map,
 onto one time base.
 
-Every reader (this one, ROS bags, ArduPilot logs) produces raw source tables; ``assemble`` maps
-their columns (names, units, frames, quaternions), resamples them onto a uniform time base per
-experiment (zero-order hold for commands, linear interpolation for measurements) and splits
-experiments at gaps instead of bridging them. Everything it does goes into the cleaning report.
+Every reader (this one, ROS bags, ArduPilot logs) produces raw source tables and maps their
+columns (names, units, frames, quaternions) through :mod:`nnid.datasets.mapping`; ``assemble``
+resamples them onto a uniform time base per experiment (zero-order hold for commands, linear
+interpolation for measurements) and splits experiments at gaps instead of bridging them.
+Everything it does goes into the cleaning report.
 """
 
 from __future__ import annotations
@@ -17,14 +18,13 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from nnid.datasets.ardupilot import is_ardupilot_log, read_ardupilot_sources
 from nnid.datasets.cleaning import CleaningReport
 from nnid.datasets.column_map import ColumnMap, Source, load_column_map
 from nnid.datasets.log import ANGLES, validate_log
+from nnid.datasets.mapping import map_source
+from nnid.datasets.rosbag import is_bag, read_bag_sources
 from nnid.errors import NnidInputError
-
-# ENU -> NED for world vectors, FLU -> FRD for body vectors (both are their own inverse).
-_ENU_NED = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
-_FLU_FRD = np.diag([1.0, -1.0, -1.0])
 
 
 def read_table(path: str | Path) -> pd.DataFrame:
@@ -43,161 +43,6 @@ def read_table(path: str | Path) -> pd.DataFrame:
     raise NnidInputError(
         "unknown table format; expected .csv, .csv.gz or .parquet", source=str(path)
     )
-
-
-def euler_from_rotation(rot: np.ndarray) -> np.ndarray:
-    """zyx Euler angles (φ, θ, ψ) of rotation matrices ``[..., 3, 3]`` (inverse of J₁)."""
-    phi = np.arctan2(rot[..., 2, 1], rot[..., 2, 2])
-    theta = -np.arcsin(np.clip(rot[..., 2, 0], -1.0, 1.0))
-    psi = np.arctan2(rot[..., 1, 0], rot[..., 0, 0])
-    return np.stack([phi, theta, psi], -1)
-
-
-def rotation_from_quaternion(q: np.ndarray) -> np.ndarray:
-    """Rotation matrices of unit quaternions ``[..., 4]`` (w, x, y, z), normalised first."""
-    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
-    w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
-    return np.stack(
-        [
-            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
-            np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
-            np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
-        ],
-        -2,
-    )
-
-
-def rotation_from_euler(angles: np.ndarray) -> np.ndarray:
-    """J₁(Θ) in NumPy (same convention as :func:`nnid.physics.kinematics.rotation_matrix`)."""
-    import torch
-
-    from nnid.physics.kinematics import rotation_matrix
-
-    return rotation_matrix(torch.tensor(np.asarray(angles, dtype=np.float64))).numpy()
-
-
-def _to_ned_frd(out: pd.DataFrame) -> None:
-    """Convert the standard columns present from ENU world / FLU body to NED / FRD in place."""
-    for group in (("x", "y", "z"),):
-        if all(c in out for c in group):
-            out[list(group)] = out[list(group)].to_numpy() @ _ENU_NED.T
-    for group in (("u", "v", "w"), ("p", "q", "r"), ("du", "dv", "dw"), ("dp", "dq", "dr")):
-        if all(c in out for c in group):
-            out[list(group)] = out[list(group)].to_numpy() @ _FLU_FRD.T
-    if all(c in out for c in ANGLES):
-        rot = rotation_from_euler(out[list(ANGLES)].to_numpy())
-        out[list(ANGLES)] = euler_from_rotation(_ENU_NED @ rot @ _FLU_FRD)
-
-
-def map_message_sources(
-    rows: dict[str, list],
-    cmap: ColumnMap,
-    path: Path,
-    stem: str,
-    report: CleaningReport,
-    empty: str,
-    prepare=None,
-) -> list[tuple[Source, pd.DataFrame]]:
-    """The sources of a message log (ROS bag topics, ArduPilot message types) through
-    :func:`map_source`: ``rows[source.file]`` holds the decoded messages of each; a source with
-    none is an error whose text is ``empty`` formatted with its name; ``prepare(raw)`` may add
-    derived columns first. The experiment is ``stem`` unless the column map names one."""
-    by_stem = cmap.experiment in (None, "file")
-    tables = []
-    for i, source in enumerate(cmap.sources):
-        origin = f"{path}:{source.file}"
-        if not rows[source.file]:
-            raise NnidInputError(
-                empty.format(source.file), source=str(path), field=f"sources.{i}.file"
-            )
-        raw = pd.DataFrame(rows[source.file])
-        if prepare is not None:
-            prepare(raw)
-        mapped = map_source(
-            raw, source, origin, None if by_stem else cmap.experiment, cmap.drop_nonfinite, report
-        )
-        if by_stem:
-            mapped["experiment"] = stem
-        report.add("read", f"{origin}: {len(raw)} messages")
-        tables.append((source, mapped))
-    return tables
-
-
-def map_source(
-    raw: pd.DataFrame,
-    source: Source,
-    origin: str,
-    experiment: str | list[str] | None,
-    drop_nonfinite: bool,
-    report: CleaningReport,
-) -> pd.DataFrame:
-    """Rename and convert one source table: columns ``t``, ``experiment`` and the mapped ones.
-
-    ``experiment`` is a column, a list of columns (values joined with "/"), "file" (the file
-    stem) or None (one run).
-    """
-    needed = [source.time, *source.quaternion, *(s.source for s in source.specs().values())]
-    keys = [experiment] if isinstance(experiment, str) else list(experiment or [])
-    keys = [] if keys == ["file"] else keys
-    needed += keys
-    for col in needed:
-        if col not in raw.columns:
-            raise NnidInputError(
-                f"column '{col}' named in the reader config is missing; the file has "
-                f"{', '.join(map(str, raw.columns[:20]))}",
-                source=origin,
-            )
-    numeric = [c for c in needed if c not in keys]
-    if source.row_clock:  # counted before any row is dropped: a dropped row leaves a gap
-        rows = (
-            raw.groupby(keys, sort=False, dropna=False).cumcount().to_numpy(np.float64)
-            if keys
-            else np.arange(len(raw), dtype=np.float64)
-        )
-        clock = pd.Series(rows / source.row_clock, index=raw.index)
-    values = raw[numeric].apply(pd.to_numeric, errors="coerce")
-    bad = ~np.isfinite(values.to_numpy(dtype=np.float64))
-    if bad.any():
-        rows, cols = np.nonzero(bad)
-        if not drop_nonfinite:
-            raise NnidInputError(
-                f"value {raw[numeric[cols[0]]].iloc[rows[0]]!r} is not a finite number "
-                f"({int(bad.any(1).sum())} rows have one; set drop_nonfinite = true in the reader "
-                "config to drop them)",
-                source=origin,
-                field=numeric[cols[0]],
-                row=int(rows[0]),
-            )
-        keep = ~bad.any(1)
-        report.add(
-            "drop non-finite",
-            f"{origin}: rows with NaN/inf in {sorted({numeric[c] for c in cols})}",
-            int((~keep).sum()),
-        )
-        raw, values = raw[keep], values[keep]
-    out = pd.DataFrame(index=raw.index)
-    if source.row_clock:
-        out["t"] = clock.loc[raw.index].to_numpy()
-    else:
-        out["t"] = values[source.time].to_numpy(dtype=np.float64) * source.time_scale
-    if experiment == "file":
-        out["experiment"] = Path(origin).name.split(".")[0]
-    elif keys:
-        ident = raw[keys[0]].astype(str)
-        for key in keys[1:]:  # vectorised: a row-wise join is slow on a million rows
-            ident = ident + "/" + raw[key].astype(str)
-        out["experiment"] = ident.to_numpy()
-    else:
-        out["experiment"] = "0"
-    for name, spec in source.specs().items():
-        out[name] = (values[spec.source].to_numpy(dtype=np.float64) + spec.offset) * spec.factor()
-    if source.quaternion:
-        rot = rotation_from_quaternion(values[source.quaternion].to_numpy(dtype=np.float64))
-        out["phi"], out["theta"], out["psi"] = euler_from_rotation(rot).T
-    if source.frame == "enu_flu":
-        _to_ned_frd(out)
-        report.add("frame", f"{origin}: ENU/FLU converted to NED/FRD")
-    return out.reset_index(drop=True)
 
 
 def _grid(start: float, stop: float, rate: float) -> np.ndarray:
@@ -356,9 +201,6 @@ def _log_reader(
     path: Path,
 ) -> tuple[str, str, Callable[[Path, ColumnMap, CleaningReport], list]] | None:
     """The source reader for a bag or an ArduPilot log at ``path``, else None (a table)."""
-    from nnid.datasets.ardupilot import is_ardupilot_log, read_ardupilot_sources
-    from nnid.datasets.rosbag import is_bag, read_bag_sources
-
     if is_bag(path):
         return "ROS bag", "topics", read_bag_sources
     if is_ardupilot_log(path):

@@ -11,7 +11,7 @@ message's fields as dotted paths, with
   (arrays longer than :data:`MAX_ARRAY` elements, such as images, are left out);
 - ``t_recv``: the time the recorder received the message (s, the bag's own timestamp).
 
-The raw table then goes through :func:`nnid.datasets.readers.map_source` like any table, so the
+The raw table then goes through :func:`nnid.datasets.mapping.map_source` like any table, so the
 units, frames and quaternions of the column map apply unchanged. The experiment is the bag's
 stem (``run_3.bag`` -> ``run_3``) unless the column map names an experiment column.
 """
@@ -27,6 +27,7 @@ import pandas as pd
 
 from nnid.datasets.cleaning import CleaningReport
 from nnid.datasets.column_map import ColumnMap, Source
+from nnid.datasets.mapping import map_message_sources
 from nnid.errors import NnidInputError
 
 MAX_ARRAY = 256
@@ -129,8 +130,6 @@ def read_bag_sources(
     ``source.file`` is a topic name. Returns ``(source, mapped table)`` pairs ready for
     :func:`nnid.datasets.readers.assemble`.
     """
-    from nnid.datasets.readers import map_message_sources
-
     path = Path(path)
     if not path.exists():
         raise NnidInputError("file not found", source=str(path))

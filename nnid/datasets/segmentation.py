@@ -20,6 +20,7 @@ import numpy as np
 import pandas as pd
 from scipy.ndimage import binary_dilation
 from scipy.signal import savgol_filter
+from scipy.stats import median_abs_deviation
 
 from nnid.datasets.log import VELOCITY
 from nnid.datasets.preprocess import (
@@ -28,10 +29,6 @@ from nnid.datasets.preprocess import (
     savgol_noise_gain,
     savgol_window,
 )
-
-
-def _robust_sigma(x: np.ndarray) -> float:
-    return float(1.4826 * np.median(np.abs(x - np.median(x))))
 
 
 def accelerations_with_noise(
@@ -48,12 +45,14 @@ def accelerations_with_noise(
                 dt = float(np.median(np.diff(log["t"].to_numpy(np.float64)[pos])))
                 w = savgol_window(window_s, 1.0 / dt, order)
                 col[pos] = savgol_derivative(v, dt, w, order, where=f"experiment {name!r}")
-                sigma_v = _robust_sigma(v - savgol_filter(v, w, order, mode="interp"))
+                resid = v - savgol_filter(v, w, order, mode="interp")
+                sigma_v = median_abs_deviation(resid, scale="normal")
                 sig.append(sigma_v * savgol_noise_gain(w, order, dt))
             acc[c], noise[c] = col, float(np.median(sig))
         elif "d" + c in log:
             a = log["d" + c].to_numpy(np.float64)
-            acc[c], noise[c] = a, _robust_sigma(np.diff(a)) / np.sqrt(2)
+            acc[c] = a
+            noise[c] = float(median_abs_deviation(np.diff(a), scale="normal") / np.sqrt(2))
     if not acc:
         raise ValueError("labelling transients needs body velocities or accelerations")
     return pd.DataFrame(acc, index=log.index), noise

@@ -23,6 +23,7 @@ from nnid.datasets.log import TAU
 from nnid.datasets.measurement import Measurement, wrap_angle
 from nnid.errors import NnidInputError
 from nnid.physics import compiled
+from nnid.physics.dofs import FORCES
 from nnid.physics.effects import apply_effect
 from nnid.physics.fossen import FossenModel
 from nnid.physics.integrate import rk4
@@ -44,9 +45,10 @@ class Autopilot(BaseModel):
     reference: list[float] = Field(default_factory=lambda: [0.0] * 6, min_length=6, max_length=6)
 
     def force(self, state: np.ndarray) -> np.ndarray:
-        error = state[0:6] - np.asarray(self.reference)
-        error[3:6] = wrap_angle(error[3:6])
-        return -np.asarray(self.kp) * error - np.asarray(self.kd) * state[6:12]
+        """The feedback force ``[..., 6]`` for states ``[..., 12]`` (η then ν)."""
+        error = state[..., 0:6] - np.asarray(self.reference)
+        error[..., 3:6] = wrap_angle(error[..., 3:6])
+        return -np.asarray(self.kp) * error - np.asarray(self.kd) * state[..., 6:12]
 
 
 def plant(vehicle, effects: Iterable[tuple[str, float]] = ()):
@@ -214,7 +216,7 @@ def experiment_inputs(
 
 def simulate_config(config, vehicle, progress=None) -> pd.DataFrame:
     """Run every experiment of a :class:`nnid.config.SimulateConfig`; one log, ``experiment``
-    separating the runs. ``progress(done, total)`` is called after each experiment."""
+    separating the runs. ``progress(done, total, message)`` is called after each experiment."""
     experiments = config.all_experiments()
     channels = Actuation(vehicle).channels
     logs = []
@@ -237,5 +239,28 @@ def simulate_config(config, vehicle, progress=None) -> pd.DataFrame:
             )
         )
         if progress:
-            progress(i + 1, len(experiments))
+            progress(i + 1, len(experiments), f"simulated {exp.name}")
     return pd.concat(logs, ignore_index=True)
+
+
+def open_loop_inputs(config, log: pd.DataFrame) -> pd.DataFrame:
+    """The open-loop part (``tau_X … tau_N``) of the inputs a simulate config flew under its
+    autopilot, on the log's index: each experiment's signals regenerated (the log records
+    them plus the autopilot's feedback). Experiments of the log that the config does not
+    define are an error."""
+    out = pd.DataFrame(np.nan, index=log.index, columns=list(TAU))
+    names = log["experiment"] if "experiment" in log else pd.Series("", index=log.index)
+    runs = {e.name: e for e in config.all_experiments()}
+    for name in pd.unique(names):
+        if name not in runs:
+            raise NnidInputError(
+                f"experiment {name!r} is not one of the simulate config's", field="experiments"
+            )
+        rows = log.index[(names == name).to_numpy()]
+        inputs = experiment_inputs(runs[name], FORCES, config.dt)
+        if len(inputs) < len(rows):
+            raise NnidInputError(
+                f"experiment {name!r} has more rows than its simulation", field="experiments"
+            )
+        out.loc[rows] = inputs[: len(rows)]
+    return out

@@ -32,25 +32,22 @@ import pandas as pd
 from scipy.optimize import minimize_scalar
 from scipy.stats import f as f_dist
 
+from nnid.datasets.arrays import log_arrays
 from nnid.datasets.log import VELOCITY
+from nnid.datasets.preprocess import zoh_midpoint
 from nnid.evaluation.metrics import excited_dofs, nrmse, rmse, warmup_mask
 from nnid.evaluation.prediction import predict_states
 from nnid.loop.effects import Candidate, nominal_forces
-from nnid.models.parametric import (
-    ParametricFossen,
-    Parts,
-    log_arrays,
-    settled_rows,
-    vehicle_with,
-)
-from nnid.physics.added_mass import DOFS
+from nnid.models.parametric import ParametricFossen, filter_settled, vehicle_with
+from nnid.physics.dofs import DOFS
+from nnid.physics.parts import Parts
 from nnid.trainers.least_squares import (
     ExcitationWarning,
-    autocorrelation_time,
+    correlation_time,
+    dof_variances,
     solve_least_squares,
 )
 from nnid.trainers.sindy import compress
-from nnid.trainers.synthesis import zoh_midpoint
 
 INSIGNIFICANT_PERCENT = 100.0 / 1.96
 _CHUNK = 64
@@ -181,15 +178,14 @@ class Workspace:
         """The rows the regression keeps: all, or those after the filters settle."""
         if self.filter_lambda is None:
             return np.ones(data["t"].size, dtype=bool)
-        return settled_rows(data, 3.0 / self.filter_lambda)
+        return filter_settled(data, self.filter_lambda)
 
 
 def _columns(
     vehicle, names: list[str], data: dict, filter_lambda: float | None
 ) -> tuple[np.ndarray, np.ndarray]:
     """(Φ [N, 6, P], R(0) [N, 6]) of the unknowns ``names`` at ``vehicle``."""
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)
+    with np.errstate(invalid="ignore", over="ignore", divide="ignore"):  # rows of NaN (gaps)
         reg = ParametricFossen(vehicle, names).regression(data, filter_lambda)
     n = reg.n_samples
     return reg.phi.reshape(n, 6, len(names)), -reg.y.reshape(n, 6)
@@ -216,8 +212,7 @@ def refit(ws: Workspace, vehicle, unknowns: list[str], held_out: bool = True) ->
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", ExcitationWarning)
             est = solve_least_squares(a_mat, y, np.tile(ws.mask, n), names=unknowns)
-        e = (a_mat @ np.nan_to_num(est.theta) - y).reshape(n, 6)
-        var = np.nanvar(e, axis=0)
+        var = dof_variances((a_mat @ np.nan_to_num(est.theta) - y).reshape(n, 6))
         ws.weights = ws.mask / np.where(var > 0, var, 1.0)
     w_rows = np.tile(ws.weights, n)
     est = solve_least_squares(a_mat, y, w_rows, names=unknowns)
@@ -228,12 +223,10 @@ def refit(ws: Workspace, vehicle, unknowns: list[str], held_out: bool = True) ->
     return Fit(fitted, list(unknowns), theta, est.stderr, phi, phi_v, e, e_val, _wss(e, ws.weights))
 
 
-def correlation_time(e: np.ndarray, dofs: tuple[str, ...] = DOFS, max_lag: int = 2000) -> float:
-    """:func:`autocorrelation_time` of each analysed DOF's residual column of ``e`` [N, 6],
-    averaged: how many rows one independent sample is worth."""
-    taus = [autocorrelation_time(e[:, DOFS.index(d)], max_lag) for d in dofs]
-    taus = [t for t in taus if t is not None]
-    return max(float(np.mean(taus)), 1.0) if taus else 1.0
+def residual_correlation_time(e: np.ndarray, dofs: tuple[str, ...] = DOFS) -> float:
+    """The correlation time of the analysed DOFs' residual columns of ``e`` [N, 6] (lags up to
+    2000 samples): how many rows one independent sample is worth."""
+    return correlation_time(e[:, [DOFS.index(d) for d in dofs]], max_lag=2000)
 
 
 def screen(
@@ -435,7 +428,7 @@ def rescore(ws: Workspace, fit: Fit, scored: list[Scored]) -> None:
             e_new = np.nan_to_num(fit.e) + s.delta * col
         else:
             continue
-        tau = correlation_time(e_new, ws.dofs)
+        tau = residual_correlation_time(e_new, ws.dofs)
         s.f_stat = s.drss / (s.sigma2 * tau)
         s.p_value = float(f_dist.sf(s.f_stat, 1, max(rows / tau - p - 1, 1.0)))
         s.stderr *= float(np.sqrt(tau / ws.tau_corr))
@@ -484,7 +477,8 @@ def sindy_opinion(
     # holds many: w|w|, w V, |w| Vw, ...) from surviving as huge opposite coefficients
     opt = ps.STLSQ(threshold=threshold, alpha=ridge / target.size, max_iter=20)
     with warnings.catch_warnings():
-        warnings.simplefilter("ignore", UserWarning)  # "eliminated all coefficients" is an answer
+        # "eliminated all coefficients" is an answer, not a fault
+        warnings.filterwarnings("ignore", message=".*eliminated all coefficients.*")
         opt.fit(r, b)
     coef = np.ravel(opt.coef_)
     return [c.name for c, v in zip(order, coef, strict=True) if v != 0]
@@ -554,12 +548,12 @@ __all__ = [
     "Scored",
     "Step",
     "Workspace",
-    "correlation_time",
     "force_residual",
     "force_rmse",
     "predict",
     "refit",
     "rescore",
+    "residual_correlation_time",
     "screen",
     "screen_linear",
     "search_nonlinear",

@@ -37,9 +37,9 @@ from scipy.signal import lfilter
 from nnid.datasets.log import TAU
 from nnid.datasets.preprocess import experiments
 from nnid.errors import NnidInputError
-from nnid.models.damping_library import LIBRARY, canonical_term
-from nnid.physics.added_mass import DOFS, FORCES
 from nnid.physics.damping import parse_coefficient_key
+from nnid.physics.damping_library import LIBRARY, canonical_term
+from nnid.physics.dofs import DOFS, FORCES
 from nnid.physics.effects import apply_effect
 from nnid.physics.thrusters import Actuation, apply_deadband
 
@@ -120,7 +120,7 @@ class Candidate:
 
 
 def _declared_damping(vehicle) -> set[tuple[str, str]]:
-    from nnid.models.parametric import Parts
+    from nnid.physics.parts import Parts
 
     return {parse_coefficient_key(k) for k in Parts.from_vehicle(vehicle).damping}
 

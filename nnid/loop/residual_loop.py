@@ -26,12 +26,12 @@ from nnid.loop.diagnose import (
     Scored,
     Step,
     Workspace,
-    correlation_time,
     force_residual,
     force_rmse,
     predict,
     refit,
     rescore,
+    residual_correlation_time,
     screen_linear,
     search_nonlinear,
     sindy_opinion,
@@ -39,9 +39,11 @@ from nnid.loop.diagnose import (
 )
 from nnid.loop.effects import candidates, input_channels, nominal_forces
 from nnid.loop.residuals import correlation_analysis
-from nnid.models.parametric import Parts, vehicle_with
-from nnid.physics.added_mass import DOFS, FORCES
+from nnid.models.parametric import vehicle_with
+from nnid.physics.dofs import DOFS, FORCES
+from nnid.physics.parts import Parts
 from nnid.threads import torch_threads
+from nnid.trainers.history import Progress, silent
 
 
 class ResidualLoop:
@@ -139,13 +141,20 @@ class ResidualLoop:
         return split.train, split.validation
 
     # -- the loop -------------------------------------------------------------------------------
-    def fit(self, log: pd.DataFrame, progress=None) -> ResidualLoop:
-        """Run the loop on ``log``; ``progress(message)`` is called as each pass starts.
-        Warnings raised on the way (unexcited parameters, ...) are kept in ``warnings_``."""
+    def fit(self, log: pd.DataFrame, progress: Progress | None = None) -> ResidualLoop:
+        """Run the loop on ``log``; ``progress(pass, passes, message)`` is called as each pass
+        starts. Warnings raised on the way (unexcited parameters, ...) are kept in
+        ``warnings_``."""
         start = time.perf_counter()
+        report = progress or silent
+        total = self.max_effects + 1
+
+        def say(message: str, done: int = 0) -> None:
+            report(done, total, message)
+
         with torch_threads(1), warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
-            self._fit(log, progress or (lambda message: None))
+            self._fit(log, say)
         self.warnings_ = list(dict.fromkeys(str(w.message) for w in caught))
         self.seconds_ = time.perf_counter() - start
         return self
@@ -164,7 +173,7 @@ class ResidualLoop:
         used = {FORCES[DOFS.index(d)] for d in self.dofs_}
         unknowns = [k for k in Parts.from_vehicle(self.vehicle).damping if k.split(":")[0] in used]
         fit = refit(ws, self.vehicle, unknowns)
-        ws.tau_corr = correlation_time(fit.e, self.dofs_)
+        ws.tau_corr = residual_correlation_time(fit.e, self.dofs_)
         self.baseline_ = fit
         self.steps_: list[Step] = []
         added: list[Scored] = []
@@ -174,7 +183,7 @@ class ResidualLoop:
             if set(c.dofs) & set(self.dofs_)
         ]
         while len(added) < self.max_effects:
-            say(f"pass {len(added) + 1}: testing {len(pool)} candidate effects")
+            say(f"pass {len(added) + 1}: testing {len(pool)} candidate effects", len(added))
             step = self._step(ws, fit, pool)
             self.steps_.append(step)
             if step.added is None:

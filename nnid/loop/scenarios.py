@@ -18,9 +18,9 @@ import pandas as pd
 
 from nnid.datasets.measurement import Measurement
 from nnid.datasets.simulator import simulate
-from nnid.models.parametric import Parts
-from nnid.physics.added_mass import DOFS, FORCES
 from nnid.physics.damping import parse_coefficient_key
+from nnid.physics.dofs import DOFS, FORCES
+from nnid.physics.parts import Parts
 
 
 def force_amplitudes(vehicle, speed: float) -> np.ndarray:

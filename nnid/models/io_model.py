@@ -1,64 +1,77 @@
 """What the input-output models (NARX, neural state space) share: named input and output
 columns standardised on the training data (buffers of the network, saved with it), per-
-experiment segments, scores, and saving as a state dict plus a JSON config (no pickle)."""
+experiment segments, a free-run error for early decisions, and their learned state as the
+network's state dict (``tensors.pt``, loaded with ``weights_only=True``) plus JSON."""
 
 from __future__ import annotations
 
-import json
-from abc import ABC, abstractmethod
-from pathlib import Path
+from abc import abstractmethod
 from typing import Any
 
 import numpy as np
 import pandas as pd
 import torch
+from torch import nn
 
+from nnid.datasets.log import validate_table
 from nnid.datasets.preprocess import experiments
-from nnid.evaluation.metrics import nrmse
+from nnid.evaluation.evaluate import score_prediction
+from nnid.evaluation.metrics import warmup_mask
+from nnid.models.base import NnidModel
+
+DTYPE = torch.float64
 
 
-class InputOutputModel(ABC):
-    """Base of a model with ``inputs``, ``outputs``, a network ``net_`` holding the buffers
-    ``u_mean u_std y_mean y_std``, ``config()`` (its constructor arguments) and ``predict``."""
+def init_linear(layer: nn.Linear, generator: torch.Generator) -> nn.Linear:
+    """``layer.reset_parameters()`` drawn from ``generator`` instead of torch's global one:
+    weights and biases U(−1/√fan_in, 1/√fan_in), as kaiming_uniform(a=√5) gives."""
+    nn.init.kaiming_uniform_(layer.weight, a=5**0.5, generator=generator)
+    fan_in = layer.weight.shape[1]
+    bound = 1.0 / fan_in**0.5 if fan_in > 0 else 0.0
+    nn.init.uniform_(layer.bias, -bound, bound, generator=generator)
+    return layer
 
-    #: file names: ``<stem>.pt`` (state dict) and ``<stem>.json`` (config)
-    stem = "model"
-    inputs: list[str]
-    outputs: list[str]
+
+def seeded_linear(n_in: int, n_out: int, generator: torch.Generator) -> nn.Linear:
+    """An ``nn.Linear`` initialised from ``generator`` (built uninitialised first, so torch's
+    global generator is never drawn from)."""
+    layer = nn.utils.skip_init(nn.Linear, n_in, n_out, dtype=torch.float32)
+    return init_linear(layer, generator)
+
+
+class InputOutputModel(NnidModel):
+    """Base of a model of named ``inputs`` and ``outputs`` columns with a network ``net_``
+    holding the buffers ``u_mean u_std y_mean y_std``.
+
+    Subclasses implement ``_configure`` (the settings in working form: ``inputs_``,
+    ``outputs_``, ``targets_``, ``warmup_samples_`` and what else the network's shape needs;
+    called by ``fit`` and on load), ``_new_net(generator)``, ``_fit``, ``_predict``, and
+    ``_learned`` / ``_set_learned`` for the JSON part of their state.
+    """
+
     net_: Any
 
     @abstractmethod
-    def config(self) -> dict:
-        """The JSON-serialisable constructor arguments."""
+    def _configure(self) -> None: ...
 
     @abstractmethod
-    def predict(self, log: pd.DataFrame, mode: Any = "free_run") -> pd.DataFrame:
-        """Predicted outputs (columns ``outputs``, the log's index), warm-up rows NaN."""
+    def _new_net(self, generator: torch.Generator | None = None) -> nn.Module: ...
 
-    def save(self, folder: str | Path) -> Path:
-        """``<stem>.pt`` (the state dict: weights, normalisation) and ``<stem>.json``."""
-        folder = Path(folder)
-        folder.mkdir(parents=True, exist_ok=True)
-        torch.save(self.net_.state_dict(), folder / f"{self.stem}.pt")
-        (folder / f"{self.stem}.json").write_text(json.dumps(self.config(), indent=2))
-        return folder
+    def _generator(self) -> torch.Generator:
+        """The local generator of the initial weights (``seed``): the user's global torch
+        generator is neither seeded nor drawn from."""
+        return torch.Generator().manual_seed(int(self.seed))
 
-    @classmethod
-    def load(cls, folder: str | Path):
-        """Rebuild from ``<stem>.json`` and load ``<stem>.pt`` with ``weights_only=True``."""
-        folder = Path(folder)
-        cfg = json.loads((folder / f"{cls.stem}.json").read_text())
-        cfg.pop("trainer", None)
-        model = cls(**cfg)
-        model.net_.load_state_dict(torch.load(folder / f"{cls.stem}.pt", weights_only=True))
-        return model
+    def _check(self, log: pd.DataFrame, name: str = "log") -> None:
+        """The model's columns present and finite."""
+        validate_table(log, [*self.inputs_, *self.outputs_], source=name, require_time=False)
 
     def _standardise(self, log: pd.DataFrame) -> None:
         """Means and standard deviations (1 where a column is constant) of the training data."""
         net = self.net_
         for cols, mean, std in (
-            (self.outputs, net.y_mean, net.y_std),
-            (self.inputs, net.u_mean, net.u_std),
+            (self.outputs_, net.y_mean, net.y_std),
+            (self.inputs_, net.u_mean, net.u_std),
         ):
             v = log[cols].to_numpy(np.float64)
             s = v.std(0)
@@ -68,18 +81,37 @@ class InputOutputModel(ABC):
     def _segments(self, log: pd.DataFrame) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
         """(positions, normalised outputs, normalised inputs) per experiment."""
         net = self.net_
-        y = (log[self.outputs].to_numpy(np.float64) - net.y_mean.numpy()) / net.y_std.numpy()
-        u = (log[self.inputs].to_numpy(np.float64) - net.u_mean.numpy()) / net.u_std.numpy()
+        y = (log[self.outputs_].to_numpy(np.float64) - net.y_mean.numpy()) / net.y_std.numpy()
+        u = (log[self.inputs_].to_numpy(np.float64) - net.u_mean.numpy()) / net.u_std.numpy()
         out = []
         for _, idx in experiments(log):
             pos = log.index.get_indexer(idx)
             out.append((pos, y[pos], u[pos]))
         return out
 
-    def score(self, log: pd.DataFrame, mode: Any = "free_run") -> dict[str, float]:
-        """NRMSE per output and ``total`` (their mean), warm-up excluded (NaN rows)."""
-        pred = self.predict(log, mode)
-        out = {c: nrmse(log[c].to_numpy(), pred[c].to_numpy()) for c in self.outputs}
-        finite = [v for v in out.values() if np.isfinite(v)]
-        out["total"] = float(np.mean(finite)) if finite else float("nan")
-        return out
+    def free_run_error(self, log: pd.DataFrame) -> float:
+        """Mean free-run NRMSE over the outputs (warm-up excluded); infinite when the free run
+        diverges: the number early decisions (keep a fine-tuning or not) compare."""
+        pred = self._predict(log, "free_run").set_axis(log.index)
+        mask = warmup_mask(log, 0.0, self.warmup_samples_)
+        nrmse, _, _ = score_prediction(log, pred, self.outputs_, mask)
+        return np.inf if nrmse["total"] is None else float(nrmse["total"])
+
+    def _n_params(self) -> int:
+        return sum(p.numel() for p in self.net_.parameters())
+
+    def _state(self) -> tuple[dict, dict[str, torch.Tensor]]:
+        return self._learned(), dict(self.net_.state_dict())
+
+    def _restore(self, state: dict, tensors: dict[str, torch.Tensor]) -> None:
+        self._configure()
+        self.net_ = self._new_net()
+        self.net_.load_state_dict(tensors)
+        self._set_learned(state)
+
+    @abstractmethod
+    def _learned(self) -> dict:
+        """What ``fit`` learned besides the network, JSON-ready."""
+
+    @abstractmethod
+    def _set_learned(self, state: dict) -> None: ...

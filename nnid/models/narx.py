@@ -42,6 +42,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 import torch
+from sklearn.base import clone
 from torch import nn
 from torch.func import functional_call
 
@@ -50,10 +51,8 @@ from nnid.datasets.segmentation import BalancedSampler, label_transients
 from nnid.datasets.splits import split_log
 from nnid.errors import NnidInputError
 from nnid.models.bounds import OutputBounds, bound_arrays, check_bounds, resolve_bounds
-from nnid.models.io_model import InputOutputModel
-
-DTYPE = torch.float64
-
+from nnid.models.io_model import DTYPE, InputOutputModel, seeded_linear
+from nnid.trainers.history import Progress, staged
 
 #: ``output_transform`` values: extra regressors computed from each lagged output
 OUTPUT_TRANSFORMS = (None, "sqrt")
@@ -71,15 +70,22 @@ class NarxNet(nn.Module):
     """The MLP (tanh hidden layers, linear output) and the normalisation buffers."""
 
     def __init__(
-        self, n_in: int, n_out: int, n_u: int, hidden: Sequence[int], n_s: int = 0
+        self,
+        n_in: int,
+        n_out: int,
+        n_u: int,
+        hidden: Sequence[int],
+        n_s: int = 0,
+        generator: torch.Generator | None = None,
     ) -> None:
         super().__init__()
+        gen = generator if generator is not None else torch.Generator()
         layers: list[nn.Module] = []
         prev = n_in
         for h in hidden:
-            layers += [nn.Linear(prev, h), nn.Tanh()]
+            layers += [seeded_linear(prev, h, gen), nn.Tanh()]
             prev = h
-        layers.append(nn.Linear(prev, n_out))
+        layers.append(seeded_linear(prev, n_out, gen))
         self.mlp = nn.Sequential(*layers).to(DTYPE)
         for name, n in (("u_mean", n_u), ("y_mean", n_out)):
             self.register_buffer(name, torch.zeros(n, dtype=DTYPE))
@@ -94,34 +100,31 @@ class NarxNet(nn.Module):
 
 
 class NarxModel(InputOutputModel):
-    """NARX model, sklearn-style: ``fit(log, validation_log=None)``, ``predict(log, mode)``,
-    ``save(dir)`` / ``load(dir)`` (state dict + JSON config, no pickle).
+    """NARX model (Weiss IV.A.2, V.B), a scikit-learn estimator behind the model protocol.
 
     ``trainer``: an :class:`nnid.trainers.adam.Adam` (default) or a
-    ``LevenbergMarquardt`` (any object with ``fit(module, residual, train_batches,
-    val_batches)``). Without a ``validation_log`` the log is divided into contiguous blocks
-    (``division="block"``, ``fractions`` 70/15/15, MATLAB's divideblock; the test block is left
-    unused) or at random (``division="random"``: warns, neighbouring samples are correlated).
+    :class:`~nnid.trainers.levenberg_marquardt.LevenbergMarquardt` (one-step training; full
+    batch for LM). Without a ``validation`` log the training log is divided into contiguous
+    blocks (``division="block"``, ``fractions`` 70/15/15, MATLAB's divideblock; the test block
+    is left unused) or at random (``division="random"``: warns, neighbouring samples are
+    correlated). ``seed`` seeds the initial weights and the sampling (local generators).
 
-    Options added for issue 6 (defaults keep the earlier behaviour):
-
-    * ``output_bounds``: None (default, no clamp), ``"train"`` (each output's training range)
-      or one ``[low, high]`` per output in its units, each a number, None (open) or
-      ``"train"``. Predictions are clamped in every mode and inside the closed loop of the
-      simulation-error training; ``"train"`` entries are resolved at ``fit`` (``bounds_``)
-      and saved resolved in ``narx.json``.
-    * ``simulation_trainer``: ``"adam"`` (default: random windows) or ``"lm"``
-      (Levenberg-Marquardt, forward-mode Jacobians, on fixed windows ending at each
-      experiment's last sample and every ``simulation_window // 2`` before; windows longer
-      than the shortest experiment are cut to it, so a large ``simulation_window`` trains on
-      whole experiments).
-    * ``simulation_max_fail``: validation failures before the simulation training stops (8).
-    * ``simulation_l2``: λ of a λ‖θ‖² penalty on the LM simulation-error sum of squares (0).
-    * ``output_transform``: None (default) or ``"sqrt"``: √max(y, 0) of every lagged output
-      (output units, standardised on the training data) appended to the output regressors.
+    * ``output_bounds``: None (no clamp), ``"train"`` (each output's training range) or one
+      ``[low, high]`` per output in its units, each a number, None (open) or ``"train"``.
+      Predictions are clamped in every mode and inside the closed loop of the simulation-error
+      training; ``"train"`` entries are resolved at ``fit`` (``bounds_``).
+    * ``simulation_epochs`` > 0: after one-step training, fine-tune on the simulation error of
+      windows of ``simulation_window`` samples with ``simulation_trainer`` ``"adam"`` (random
+      windows, ``simulation_lr``) or ``"lm"`` (fixed windows ending at each experiment's last
+      sample and every ``simulation_window // 2`` before, forward-mode Jacobians; windows
+      longer than the shortest experiment are cut to it); kept only if the validation free-run
+      error falls (``finetune_``). ``simulation_max_fail``: validation failures before it stops;
+      ``simulation_l2``: λ of a λ‖θ‖² penalty on the LM simulation-error sum of squares.
+    * ``output_transform``: None or ``"sqrt"``: √max(y, 0) of every lagged output (output
+      units, standardised on the training data) appended to the output regressors.
     """
 
-    stem = "narx"
+    kind = "narx"
 
     def __init__(
         self,
@@ -149,49 +152,63 @@ class NarxModel(InputOutputModel):
         simulation_l2: float = 0.0,
         output_transform: str | None = None,
     ) -> None:
-        self.inputs, self.outputs = list(inputs), list(outputs)
-        self.input_delays = _delays(input_delays, 0, "input_delays")
-        self.output_delays = _delays(output_delays, 1, "output_delays")
-        self.hidden = tuple(int(h) for h in hidden)
+        self.inputs = inputs
+        self.outputs = outputs
+        self.input_delays = input_delays
+        self.output_delays = output_delays
+        self.hidden = hidden
         self.trainer = trainer
-        self.balanced, self.seed, self.delta = bool(balanced), int(seed), bool(delta)
-        self.multi_step = int(multi_step)
-        self.simulation_epochs = int(simulation_epochs)
-        self.simulation_window = int(simulation_window)
-        self.simulation_lr = float(simulation_lr)
-        if division not in ("block", "random"):
-            raise NnidInputError("division is 'block' or 'random'", field="division")
-        self.division, self.fractions = division, tuple(float(f) for f in fractions)
-        self.batch_size, self.samples_per_epoch = int(batch_size), samples_per_epoch
-        self.lm_samples = int(lm_samples)
-        self.output_bounds = check_bounds(output_bounds, len(self.outputs))
-        if simulation_trainer not in ("adam", "lm"):
-            raise NnidInputError("simulation_trainer is 'adam' or 'lm'", field="simulation_trainer")
+        self.balanced = balanced
+        self.seed = seed
+        self.delta = delta
+        self.multi_step = multi_step
+        self.simulation_epochs = simulation_epochs
+        self.simulation_window = simulation_window
+        self.simulation_lr = simulation_lr
+        self.division = division
+        self.fractions = fractions
+        self.batch_size = batch_size
+        self.samples_per_epoch = samples_per_epoch
+        self.lm_samples = lm_samples
+        self.output_bounds = output_bounds
         self.simulation_trainer = simulation_trainer
-        self.simulation_max_fail = int(simulation_max_fail)
-        self.simulation_l2 = float(simulation_l2)
-        if output_transform not in OUTPUT_TRANSFORMS:
-            raise NnidInputError("output_transform is None or 'sqrt'", field="output_transform")
+        self.simulation_max_fail = simulation_max_fail
+        self.simulation_l2 = simulation_l2
         self.output_transform = output_transform
-        #: the bounds in the outputs' units, [low, high] per output (None: open), once resolved
-        self.bounds_ = resolve_bounds(self.output_bounds, self.outputs, None)
-        self.dy = max(self.output_delays)
+
+    def _configure(self) -> None:
+        """The settings in working form, checked (by ``fit`` and on load)."""
+        if self.division not in ("block", "random"):
+            raise NnidInputError("division is 'block' or 'random'", field="division")
+        if self.simulation_trainer not in ("adam", "lm"):
+            raise NnidInputError("simulation_trainer is 'adam' or 'lm'", field="simulation_trainer")
+        if self.output_transform not in OUTPUT_TRANSFORMS:
+            raise NnidInputError("output_transform is None or 'sqrt'", field="output_transform")
+        if not self.inputs or not self.outputs:
+            raise NnidInputError("a NARX needs at least one input and one output", field="outputs")
+        self.inputs_, self.outputs_ = list(self.inputs), list(self.outputs)
+        self.targets_ = list(self.outputs_)
+        self.input_delays_ = _delays(self.input_delays, 0, "input_delays")
+        self.output_delays_ = _delays(self.output_delays, 1, "output_delays")
+        self.hidden_ = tuple(int(h) for h in self.hidden)
+        self.output_bounds_ = check_bounds(self.output_bounds, len(self.outputs_))
+        self.dy_ = max(self.output_delays_)
         #: the delay states: samples at the start of each experiment neither predicted nor scored
-        self.warmup = max(self.dy, max(self.input_delays))
-        self.net_ = self._new_net()
+        self.warmup_samples_ = max(self.dy_, max(self.input_delays_))
 
     # -- configuration ---------------------------------------------------------------------------
-    def _new_net(self) -> NarxNet:
-        n_s = len(self.outputs) if self.output_transform else 0
-        return NarxNet(self._n_features(), len(self.outputs), len(self.inputs), self.hidden, n_s)
+    def _new_net(self, generator: torch.Generator | None = None) -> NarxNet:
+        n_s = len(self.outputs_) if self.output_transform else 0
+        n_u = len(self.inputs_)
+        return NarxNet(self._n_features(), len(self.outputs_), n_u, self.hidden_, n_s, generator)
 
     def _n_y_features(self) -> int:
         """Regressors from lagged outputs: the outputs, then their transforms (if any)."""
-        n = len(self.output_delays) * len(self.outputs)
+        n = len(self.output_delays_) * len(self.outputs_)
         return 2 * n if self.output_transform else n
 
     def _n_features(self) -> int:
-        return self._n_y_features() + len(self.input_delays) * len(self.inputs)
+        return self._n_y_features() + len(self.input_delays_) * len(self.inputs_)
 
     def _transform_np(self, yn: np.ndarray) -> np.ndarray:
         """Standardised √max(y, 0) of normalised outputs ``yn`` (numpy)."""
@@ -204,31 +221,6 @@ class NarxModel(InputOutputModel):
         net = self.net_
         y = yn * net.y_std + net.y_mean
         return (torch.sqrt(torch.clamp(y, min=1e-12)) - net.s_mean) / net.s_std
-
-    def config(self) -> dict:
-        """The JSON-serialisable constructor arguments (the trainer by name)."""
-        return {
-            "inputs": self.inputs,
-            "outputs": self.outputs,
-            "input_delays": self.input_delays,
-            "output_delays": self.output_delays,
-            "hidden": list(self.hidden),
-            "trainer": type(self.trainer).__name__ if self.trainer is not None else "Adam",
-            "balanced": self.balanced,
-            "seed": self.seed,
-            "delta": self.delta,
-            "multi_step": self.multi_step,
-            "simulation_epochs": self.simulation_epochs,
-            "simulation_window": self.simulation_window,
-            "division": self.division,
-            "fractions": list(self.fractions),
-            "simulation_lr": self.simulation_lr,
-            "simulation_trainer": self.simulation_trainer,
-            "simulation_max_fail": self.simulation_max_fail,
-            "simulation_l2": self.simulation_l2,
-            "output_bounds": self.bounds_ if self.bounds_ is not None else self.output_bounds,
-            "output_transform": self.output_transform,
-        }
 
     def _norm_bounds(self) -> tuple[torch.Tensor, torch.Tensor] | None:
         """The resolved bounds in normalised units (±inf where open), or None."""
@@ -243,35 +235,65 @@ class NarxModel(InputOutputModel):
 
     def layer_sizes(self) -> list[int]:
         """Regressor length, hidden sizes, outputs."""
-        return [self._n_features(), *self.hidden, len(self.outputs)]
+        return [self._n_features(), *self.hidden_, len(self.outputs_)]
 
-    @property
-    def n_params(self) -> int:
-        return sum(p.numel() for p in self.net_.parameters())
+    # -- protocol --------------------------------------------------------------------------------
+    def _params(self) -> dict[str, dict[str, float | None]]:
+        """A network has no physical parameters: its size (weights and biases) and the layer
+        sizes (regressor, hidden tanh nodes, linear outputs); the weights are the tensors."""
+        return {
+            "n_params": {"value": float(self._n_params()), "stderr": None},
+            **{
+                f"layer_{i}_size": {"value": float(n), "stderr": None}
+                for i, n in enumerate(self.layer_sizes())
+            },
+        }
+
+    def describe(self) -> dict:
+        return {
+            **super().describe(),
+            "inputs": self.inputs_,
+            "input_delays": self.input_delays_,
+            "output_delays": self.output_delays_,
+            "layers": self.layer_sizes(),
+            **self._learned(),
+        }
+
+    def _learned(self) -> dict:
+        history = getattr(self, "history_", None)
+        return {
+            "bounds": self.bounds_,
+            "division": self.division_,
+            "transient_share_of_training_draws": self.transient_share_,
+            "simulation_finetune": self.finetune_,
+            "history": history.as_dict() if hasattr(history, "as_dict") else history,
+        }
+
+    def _set_learned(self, state: dict) -> None:
+        self.bounds_ = state["bounds"]
+        self.division_ = state["division"]
+        self.transient_share_ = state["transient_share_of_training_draws"]
+        self.finetune_ = state["simulation_finetune"]
+        self.history_ = state["history"]
 
     # -- data ------------------------------------------------------------------------------------
-    def _check(self, log: pd.DataFrame) -> None:
-        missing = [c for c in self.inputs + self.outputs if c not in log]
-        if missing:
-            raise NnidInputError(f"the log has no column(s) {missing}", field="narx")
-
     def _u_features(self, u: np.ndarray) -> np.ndarray:
         """[u(k − d) for d in input_delays] per row k of one experiment (zeros before warm-up)."""
         n, p = u.shape
-        out = np.zeros((n, len(self.input_delays) * p))
-        for j, d in enumerate(self.input_delays):
-            out[self.warmup :, j * p : (j + 1) * p] = u[self.warmup - d : n - d]
+        out = np.zeros((n, len(self.input_delays_) * p))
+        for j, d in enumerate(self.input_delays_):
+            out[self.warmup_samples_ :, j * p : (j + 1) * p] = u[self.warmup_samples_ - d : n - d]
         return out
 
     def _y_features(self, y: np.ndarray) -> np.ndarray:
         """[y(k − d)] per output delay, then (``output_transform``) the transformed lags."""
         n, m = y.shape
         blocks = [y, self._transform_np(y)] if self.output_transform else [y]
-        out = np.zeros((n, len(self.output_delays) * m * len(blocks)))
+        out = np.zeros((n, len(self.output_delays_) * m * len(blocks)))
         col = 0
         for src in blocks:
-            for d in self.output_delays:
-                out[self.warmup :, col : col + m] = src[self.warmup - d : n - d]
+            for d in self.output_delays_:
+                out[self.warmup_samples_ :, col : col + m] = src[self.warmup_samples_ - d : n - d]
                 col += m
         return out
 
@@ -279,9 +301,9 @@ class NarxModel(InputOutputModel):
         """Standardisation, the scale of the Δ targets and of the transformed outputs."""
         net = self.net_
         self._standardise(log)
-        y = log[self.outputs].to_numpy(np.float64)
+        y = log[self.outputs_].to_numpy(np.float64)
         diffs = [np.diff(yn, axis=0) for _, yn, _ in self._segments(log) if len(yn) > 1]
-        d = np.concatenate(diffs).std(0) if diffs else np.ones(len(self.outputs))
+        d = np.concatenate(diffs).std(0) if diffs else np.ones(len(self.outputs_))
         net.d_scale.copy_(
             torch.as_tensor(np.where(d > 0, d, 1.0) if self.delta else np.ones_like(d))
         )
@@ -311,14 +333,14 @@ class NarxModel(InputOutputModel):
         }
 
     def _last_delay_slot(self) -> int:
-        if 1 not in self.output_delays:
+        if 1 not in self.output_delays_:
             raise NnidInputError("delta=True needs output delay 1", field="output_delays")
-        return self.output_delays.index(1)
+        return self.output_delays_.index(1)
 
     def _labels(self, log: pd.DataFrame) -> np.ndarray:
         """Transient labels from the outputs (the rule of nnid.datasets.segmentation)."""
         tmp = pd.DataFrame(
-            {VELOCITY[i]: log[c].to_numpy(np.float64) for i, c in enumerate(self.outputs[:6])}
+            {VELOCITY[i]: log[c].to_numpy(np.float64) for i, c in enumerate(self.outputs_[:6])}
         )
         tmp["t"] = log["t"].to_numpy(np.float64) if "t" in log else np.arange(len(log), dtype=float)
         if "experiment" in log:
@@ -326,7 +348,7 @@ class NarxModel(InputOutputModel):
         return label_transients(tmp).to_numpy()
 
     # -- torch pieces ----------------------------------------------------------------------------
-    def _params(self) -> dict[str, torch.Tensor]:
+    def _weights(self) -> dict[str, torch.Tensor]:
         return dict(self.net_.named_parameters())
 
     def _rollout(
@@ -338,7 +360,7 @@ class NarxModel(InputOutputModel):
         ws = [(params[k + ".weight"], params[k + ".bias"]) for k in keys]
         m, n_y = hist.shape[2], self._n_y_features()
         w1, b1 = ws[0]
-        n_d = len(self.output_delays)
+        n_d = len(self.output_delays_)
         w1y = [w1[:, j * m : (j + 1) * m].T for j in range(n_d)]
         w1s = [w1[:, (n_d + j) * m : (n_d + j + 1) * m].T for j in range(n_d)]
         transform = self._transform_t if self.output_transform else None
@@ -351,7 +373,7 @@ class NarxModel(InputOutputModel):
         outs = []
         for t in range(uf.shape[1]):
             a = zu[:, t]
-            for j, d in enumerate(self.output_delays):
+            for j, d in enumerate(self.output_delays_):
                 a = a + hs[-d] @ w1y[j]
                 if transform is not None:
                     a = a + ss[-d] @ w1s[j]
@@ -372,19 +394,21 @@ class NarxModel(InputOutputModel):
         """Rows, delay-state history and input features of windows ending at ``ends``."""
         rows = ends[:, None] - length + 1 + torch.arange(length)
         starts = rows[:, 0]
-        hist = table["y"][starts[:, None] - self.dy + torch.arange(self.dy)]
+        hist = table["y"][starts[:, None] - self.dy_ + torch.arange(self.dy_)]
         return rows, hist, table["phi"][rows][:, :, self._n_y_features() :]
 
     # -- training --------------------------------------------------------------------------------
-    def fit(self, log: pd.DataFrame, validation_log: pd.DataFrame | None = None) -> NarxModel:
+    def _fit(
+        self, log: pd.DataFrame, validation_log: pd.DataFrame | None, progress: Progress
+    ) -> None:
         """Normalise, train one-step (or ``multi_step``) on the training data, early-stop on
         the validation data, then optionally fine-tune on simulation error."""
         from nnid.trainers.adam import Adam
         from nnid.trainers.levenberg_marquardt import LevenbergMarquardt
 
+        self._configure()
         self._check(log)
-        torch.manual_seed(self.seed)
-        self.net_ = self._new_net()
+        self.net_ = self._new_net(self._generator())
         random_rows = None
         if validation_log is None and self.division == "block":
             split = split_log(log, "block", self.fractions)
@@ -399,16 +423,16 @@ class NarxModel(InputOutputModel):
             self.division_ = {"by": "random", "fractions": list(self.fractions)}
             random_rows = np.random.default_rng(self.seed).random(len(log))
         else:
-            self._check(validation_log)
+            self._check(validation_log, "validation log")
             self.division_ = {"by": "given"}
         self._fit_normalisation(log)
-        self.bounds_ = resolve_bounds(self.output_bounds, self.outputs, log)
+        self.bounds_ = resolve_bounds(self.output_bounds_, self.outputs_, log)
         tab = self._table(log)
-        horizon = max(1, self.multi_step)
+        horizon = max(1, int(self.multi_step))
         sampler = BalancedSampler(
             self._labels(log),
             tab["code"].numpy(),
-            window=self.warmup + horizon,
+            window=self.warmup_samples_ + horizon,
             balance=self.balanced,
             seed=self.seed,
         )
@@ -421,7 +445,8 @@ class NarxModel(InputOutputModel):
             v_idx = np.flatnonzero(self._eligible(vtab["code"].numpy(), horizon))
         self.transient_share_ = sampler.transient_share(sampler.sample(20000))
         n_eligible = int(sampler.eligible.sum())
-        trainer = self.trainer if self.trainer is not None else Adam()
+        trainer = clone(self.trainer, safe=False) if self.trainer is not None else Adam()
+        self.trainer_ = trainer
         residual = self._one_step_residual if horizon == 1 else self._window_residual
         v_batches = [
             self._batch(vtab, torch.as_tensor(c), horizon)
@@ -437,11 +462,16 @@ class NarxModel(InputOutputModel):
             def train_b(epoch: int) -> list:
                 return [self._batch(tab, idx, horizon) for idx in draw(epoch)]
 
-        self.history_ = trainer.fit(self.net_, residual, train_b, v_batches)
+        stage = "one-step" if horizon == 1 else f"{horizon}-step"
+        # every sample (or window) of a batch is its own residual block: LM's "samples" mode
+        extra = {"separable": True} if isinstance(trainer, LevenbergMarquardt) else {}
+        self.history_ = trainer.fit(
+            self.net_, residual, train_b, v_batches, progress=staged(progress, stage), **extra
+        )
         self.finetune_ = None
         if self.simulation_epochs > 0:
-            self._simulation_finetune(tab, sampler, validation_log if random_rows is None else None)
-        return self
+            held_out = validation_log if random_rows is None else None
+            self._simulation_finetune(tab, sampler, held_out, staged(progress, "simulation"))
 
     def _batch(self, table: dict[str, torch.Tensor], idx: torch.Tensor, horizon: int) -> tuple:
         """Tensors of a batch, sample-major: (φ, target) one-step, or windows ending at
@@ -470,7 +500,7 @@ class NarxModel(InputOutputModel):
         keep = np.ones(code.size, dtype=bool)
         starts = np.flatnonzero(np.r_[True, code[1:] != code[:-1]])
         for s in starts:
-            keep[s : s + self.warmup + horizon - 1] = False
+            keep[s : s + self.warmup_samples_ + horizon - 1] = False
         return keep
 
     def _epoch_batches(self, sampler: BalancedSampler, n_eligible: int, horizon: int):
@@ -484,20 +514,21 @@ class NarxModel(InputOutputModel):
 
         return batches
 
-    def _simulation_finetune(self, tab, sampler, validation_log) -> None:
+    def _simulation_finetune(self, tab, sampler, validation_log, progress: Progress) -> None:
         """Output-error training on free runs over windows of ``simulation_window`` samples
         from measured delay states: Adam on random windows (back-propagation through the
         closed loop) or, with ``simulation_trainer="lm"``, Levenberg-Marquardt on fixed
         windows; kept only if the validation free-run error falls."""
-        before = self.score(validation_log)["total"] if validation_log is not None else None
+        held_out = validation_log is not None
+        before = self.free_run_error(validation_log) if held_out else None
         state = {k: v.clone() for k, v in self.net_.state_dict().items()}
         if self.simulation_trainer == "lm":
-            epochs = self._simulation_lm(tab, sampler, validation_log)
+            epochs = self._simulation_lm(tab, sampler, validation_log, progress)
         else:
-            epochs = self._simulation_adam(tab, sampler, validation_log)
+            epochs = self._simulation_adam(tab, sampler, validation_log, progress)
         if epochs is None:
             return
-        after = self.score(validation_log)["total"] if validation_log is not None else None
+        after = self.free_run_error(validation_log) if held_out else None
         kept = before is None or (np.isfinite(after) and after < before)
         if not kept:
             self.net_.load_state_dict(state)
@@ -515,17 +546,19 @@ class NarxModel(InputOutputModel):
         code = table["code"].numpy()
         starts = np.flatnonzero(np.r_[True, code[1:] != code[:-1]])
         stops = np.r_[starts[1:], code.size]
-        spans = stops - starts - self.warmup
+        spans = stops - starts - self.warmup_samples_
         if spans.max() < 1:
             return None
         length = int(min(length, spans[spans >= 1].min()))
         ends: list[int] = []
         for s, e in zip(starts, stops, strict=True):
-            first = s + self.warmup + length - 1  # the earliest end whose delay states exist
+            first = (
+                s + self.warmup_samples_ + length - 1
+            )  # the earliest end whose delay states exist
             ends += list(range(e - 1, first - 1, -max(1, length // 2)))
         return self._batch(table, torch.as_tensor(sorted(ends)), length)
 
-    def _simulation_lm(self, tab, sampler, validation_log) -> int | None:
+    def _simulation_lm(self, tab, sampler, validation_log, progress: Progress) -> int | None:
         from nnid.trainers.levenberg_marquardt import LevenbergMarquardt
 
         train = self._fixed_windows(tab, self.simulation_window)
@@ -536,22 +569,22 @@ class NarxModel(InputOutputModel):
             vb = self._fixed_windows(self._table(validation_log), self.simulation_window)
             val = [vb] if vb is not None else None
         trainer = LevenbergMarquardt(
-            max_epochs=self.simulation_epochs, max_fail=self.simulation_max_fail
+            max_epochs=int(self.simulation_epochs), max_fail=int(self.simulation_max_fail)
         )
         residual = self._window_residual
         if self.simulation_l2 > 0:
             residual = self._regularised_window_residual
-        hist = trainer.fit(self.net_, residual, [train], val)
+        hist = trainer.fit(self.net_, residual, [train], val, progress=progress)
         return hist.epochs
 
-    def _simulation_adam(self, tab, sampler, validation_log) -> int | None:
+    def _simulation_adam(self, tab, sampler, validation_log, progress: Progress) -> int | None:
         from nnid.trainers.adam import Adam
 
         length = self.simulation_window
         win = BalancedSampler(
             sampler.labels,
             tab["code"].numpy(),
-            window=self.warmup + length,
+            window=self.warmup_samples_ + length,
             balance=self.balanced,
             seed=self.seed + 1,
         )
@@ -575,41 +608,42 @@ class NarxModel(InputOutputModel):
             max_epochs=self.simulation_epochs,
             max_fail=self.simulation_max_fail,
         )
-        hist = trainer.fit(self.net_, self._window_residual, batches, val)
-        return len(hist.train)
+        hist = trainer.fit(self.net_, self._window_residual, batches, val, progress=progress)
+        return hist.epochs
 
     # -- prediction ------------------------------------------------------------------------------
-    def predict(self, log: pd.DataFrame, mode: str | int = "one_step") -> pd.DataFrame:
+    def _predict(self, log: pd.DataFrame, mode: str | int) -> pd.DataFrame:
         """Predicted outputs (columns ``outputs``, the log's index): ``"one_step"`` (measured
         delay states), ``"free_run"`` (closed loop from the measured warm-up of each
         experiment) or an int k (k steps closed loop from measured states k samples back).
         The warm-up rows of each experiment (and the first k − 1 after it) are NaN."""
         self._check(log)
-        m = len(self.outputs)
+        m = len(self.outputs_)
         out = np.full((len(log), m), np.nan)
         mean, std = self.net_.y_mean.numpy(), self.net_.y_std.numpy()
         with torch.no_grad():
             for pos, yn, un in self._segments(log):
                 n = len(yn)
-                if n <= self.warmup:
+                if n <= self.warmup_samples_:
                     continue
                 if mode == "one_step":
                     phi = np.concatenate([self._y_features(yn), self._u_features(un)], 1)
-                    o = self.net_(torch.as_tensor(phi[self.warmup :])).numpy()
+                    o = self.net_(torch.as_tensor(phi[self.warmup_samples_ :])).numpy()
                     pred = (
-                        yn[self.warmup - 1 : n - 1] + o * self.net_.d_scale.numpy()
+                        yn[self.warmup_samples_ - 1 : n - 1] + o * self.net_.d_scale.numpy()
                         if self.delta
                         else o
                     )
                     nb = self._norm_bounds_np()
                     if nb is not None:
                         pred = np.clip(pred, nb[0], nb[1])
-                    out[pos[self.warmup :]] = pred * std + mean
+                    out[pos[self.warmup_samples_ :]] = pred * std + mean
                 elif mode == "free_run":
                     pred = self._free_run(
-                        yn[self.warmup - self.dy : self.warmup], self._u_features(un)[self.warmup :]
+                        yn[self.warmup_samples_ - self.dy_ : self.warmup_samples_],
+                        self._u_features(un)[self.warmup_samples_ :],
                     )
-                    out[pos[self.warmup :]] = pred * std + mean
+                    out[pos[self.warmup_samples_ :]] = pred * std + mean
                 else:
                     k = int(mode)
                     if k < 1:
@@ -620,13 +654,13 @@ class NarxModel(InputOutputModel):
                             np.concatenate([self._y_features(yn), self._u_features(un)], 1)
                         ),
                     }
-                    ends = torch.arange(self.warmup + k - 1, n)
+                    ends = torch.arange(self.warmup_samples_ + k - 1, n)
                     if len(ends) == 0:
                         continue
                     _rows, hist, uf = self._windows(tab, ends, k)
-                    pred = self._rollout(self._params(), hist, uf)[:, -1].numpy()
+                    pred = self._rollout(self._weights(), hist, uf)[:, -1].numpy()
                     out[pos[ends.numpy()]] = pred * std + mean
-        return pd.DataFrame(out, index=log.index, columns=self.outputs)
+        return pd.DataFrame(out, index=log.index, columns=self.outputs_)
 
     def _free_run(self, init: np.ndarray, uf: np.ndarray) -> np.ndarray:
         """The closed loop in numpy: the first layer's input part for all steps in one matmul,
@@ -634,11 +668,11 @@ class NarxModel(InputOutputModel):
         lin = [mod for mod in self.net_.mlp if isinstance(mod, nn.Linear)]
         w1 = lin[0].weight.detach().numpy()
         b1 = lin[0].bias.detach().numpy()
-        m, dy = len(self.outputs), self.dy
-        n_y, n_d = self._n_y_features(), len(self.output_delays)
+        m, dy = len(self.outputs_), self.dy_
+        n_y, n_d = self._n_y_features(), len(self.output_delays_)
         dense = np.zeros((w1.shape[0], dy * m))
         dense_s = np.zeros((w1.shape[0], dy * m)) if self.output_transform else None
-        for j, d in enumerate(self.output_delays):  # slice row dy − d holds y(k − d)
+        for j, d in enumerate(self.output_delays_):  # slice row dy − d holds y(k − d)
             dense[:, (dy - d) * m : (dy - d + 1) * m] = w1[:, j * m : (j + 1) * m]
             if dense_s is not None:
                 dense_s[:, (dy - d) * m : (dy - d + 1) * m] = w1[

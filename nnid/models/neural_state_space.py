@@ -36,19 +36,20 @@ from typing import Any
 import numpy as np
 import pandas as pd
 import torch
+from sklearn.base import clone
 from torch import nn
 from torch.func import functional_call
 
-from nnid.datasets.log import validate_table
 from nnid.datasets.preprocess import experiments
 from nnid.datasets.splits import split_log
 from nnid.errors import NnidInputError
+from nnid.evaluation.prediction import mode_steps
 from nnid.models.bounds import OutputBounds, bound_arrays, check_bounds, resolve_bounds
-from nnid.models.io_model import InputOutputModel
+from nnid.models.io_model import DTYPE, InputOutputModel
 from nnid.physics.integrate import rk4
 from nnid.threads import torch_threads
+from nnid.trainers.history import Progress, staged
 
-DTYPE = torch.float64
 #: derivatives are learned per sample and scaled down, so a small network starts slow
 _RATE = 0.1
 #: relative spread of sampling intervals accepted as uniform
@@ -79,9 +80,17 @@ class StateSpaceNet(nn.Module):
     """
 
     def __init__(
-        self, n_x: int, n_y: int, n_u: int, hidden: int, mask: np.ndarray, substeps: int = 1
+        self,
+        n_x: int,
+        n_y: int,
+        n_u: int,
+        hidden: int,
+        mask: np.ndarray,
+        substeps: int = 1,
+        generator: torch.Generator | None = None,
     ) -> None:
         super().__init__()
+        gen = generator if generator is not None else torch.Generator()
         self.n_x, self.n_y, self.n_u, self.hidden, self.substeps = n_x, n_y, n_u, hidden, substeps
         n_h = n_x * hidden
         m1 = torch.as_tensor(np.repeat(mask, hidden, axis=0), dtype=DTYPE)
@@ -90,11 +99,14 @@ class StateSpaceNet(nn.Module):
         self.register_buffer("mask2", m2)
         fan_in = m1.sum(1).clamp(min=1.0)
         self.w1 = nn.Parameter(
-            (torch.rand(n_h, n_x + n_u, dtype=DTYPE) * 2 - 1) / fan_in.sqrt()[:, None]
+            (torch.rand(n_h, n_x + n_u, dtype=DTYPE, generator=gen) * 2 - 1)
+            / fan_in.sqrt()[:, None]
         )
-        self.b1 = nn.Parameter((torch.rand(n_h, dtype=DTYPE) * 2 - 1) / fan_in.sqrt())
+        self.b1 = nn.Parameter(
+            (torch.rand(n_h, dtype=DTYPE, generator=gen) * 2 - 1) / fan_in.sqrt()
+        )
         # a small output layer: the initial model is nearly constant, so early free runs stay finite
-        self.w2 = nn.Parameter(torch.randn(n_x, n_h, dtype=DTYPE) * 1e-2)
+        self.w2 = nn.Parameter(torch.randn(n_x, n_h, dtype=DTYPE, generator=gen) * 1e-2)
         self.b2 = nn.Parameter(torch.zeros(n_x, dtype=DTYPE))
         for name, n in (("u_mean", n_u), ("y_mean", n_y), ("hidden_init", n_x - n_y)):
             self.register_buffer(name, torch.zeros(n, dtype=DTYPE))
@@ -138,9 +150,11 @@ class _Fit(nn.Module):
 
 
 class NeuralStateSpace(InputOutputModel):
-    """Continuous-time neural state-space model, sklearn-style: ``fit(log, validation_log=None)``,
-    ``predict(log)`` (free run), ``score(log)``, ``save(dir)`` / ``load(dir)`` (state dict +
-    JSON config, no pickle).
+    """Continuous-time neural state-space model, a scikit-learn estimator behind the model
+    protocol. ``predict(log, mode)``: free run from the initial state estimated on each
+    experiment's warm-up; one step or k steps ahead from the measured outputs at each start,
+    the hidden states taken from that free run (an open-loop observer for what is not
+    measured).
 
     Args:
         inputs, outputs: column names; the outputs are the first (measured) states.
@@ -168,7 +182,7 @@ class NeuralStateSpace(InputOutputModel):
         seed: seeds the initial weights.
     """
 
-    stem = "nss"
+    kind = "state_space"
 
     def __init__(
         self,
@@ -187,66 +201,86 @@ class NeuralStateSpace(InputOutputModel):
         continuity: float = 1.0,
         seed: int = 0,
     ) -> None:
-        self.inputs, self.outputs = list(inputs), list(outputs)
+        self.inputs = inputs
+        self.outputs = outputs
+        self.hidden_states = hidden_states
+        self.hidden = hidden
+        self.structure = structure
+        self.substeps = substeps
+        self.warmup = warmup
+        self.windows = windows
+        self.trainer = trainer
+        self.output_bounds = output_bounds
+        self.fractions = fractions
+        self.state_epochs = state_epochs
+        self.continuity = continuity
+        self.seed = seed
+
+    def _configure(self) -> None:
+        """The settings in working form, checked (by ``fit`` and on load)."""
         if not self.outputs:
             raise NnidInputError("a state-space model needs at least one output", field="outputs")
-        if hidden_states < 0 or hidden < 1 or substeps < 1 or warmup < 1:
+        if self.hidden_states < 0 or self.hidden < 1 or self.substeps < 1 or self.warmup < 1:
             raise NnidInputError(
                 "hidden_states ≥ 0, hidden ≥ 1, substeps ≥ 1 and warmup ≥ 1 are required",
-                field="neural_state_space",
+                field="state_space",
             )
-        self.windows = [None if w is None else int(w) for w in windows]
-        if not self.windows or any(w is not None and w <= warmup for w in self.windows):
+        windows = [None if w is None else int(w) for w in self.windows]
+        if not windows or any(w is not None and w <= self.warmup for w in windows):
             raise NnidInputError(
                 "windows: one or more lengths (None: whole experiments), each longer than warmup",
                 field="windows",
             )
-        self.hidden_states, self.hidden = int(hidden_states), int(hidden)
-        self.n_x = len(self.outputs) + self.hidden_states
-        self.structure = None if structure is None else [[int(v) for v in r] for r in structure]
-        self._mask = _structure_mask(self.structure, self.n_x, len(self.inputs))
-        self.substeps, self.warmup = int(substeps), int(warmup)
-        self.trainer = trainer
-        self.output_bounds = check_bounds(output_bounds, len(self.outputs))
-        self.bounds_ = resolve_bounds(self.output_bounds, self.outputs, None)
-        self.fractions = tuple(float(f) for f in fractions)
-        self.state_epochs, self.seed = int(state_epochs), int(seed)
-        self.continuity = float(continuity)
-        self.net_ = self._new_net()
+        self.windows_ = windows
+        self.inputs_, self.outputs_ = list(self.inputs), list(self.outputs)
+        self.targets_ = list(self.outputs_)
+        self.warmup_samples_ = int(self.warmup)
+        self.n_x_ = len(self.outputs_) + int(self.hidden_states)
+        self.mask_ = _structure_mask(self.structure, self.n_x_, len(self.inputs_))
+        self.output_bounds_ = check_bounds(self.output_bounds, len(self.outputs_))
 
-    def _new_net(self) -> StateSpaceNet:
-        n_y, n_u = len(self.outputs), len(self.inputs)
-        return StateSpaceNet(self.n_x, n_y, n_u, self.hidden, self._mask, self.substeps)
+    def _new_net(self, generator: torch.Generator | None = None) -> StateSpaceNet:
+        n_y, n_u = len(self.outputs_), len(self.inputs_)
+        return StateSpaceNet(
+            self.n_x_, n_y, n_u, int(self.hidden), self.mask_, int(self.substeps), generator
+        )
 
-    def config(self) -> dict:
-        """The JSON-serialisable constructor arguments (the trainer by name)."""
-        return {
-            "inputs": self.inputs,
-            "outputs": self.outputs,
-            "hidden_states": self.hidden_states,
-            "hidden": self.hidden,
-            "structure": self.structure,
-            "substeps": self.substeps,
-            "warmup": self.warmup,
-            "windows": self.windows,
-            "trainer": type(self.trainer).__name__ if self.trainer else "LevenbergMarquardt",
-            "output_bounds": self.bounds_ if self.bounds_ is not None else self.output_bounds,
-            "fractions": list(self.fractions),
-            "state_epochs": self.state_epochs,
-            "continuity": self.continuity,
-            "seed": self.seed,
-        }
-
-    @property
-    def n_params(self) -> int:
+    def _n_params(self) -> int:
         """Free network weights (the masked-out ones are not counted)."""
         net = self.net_
         return int(net.mask1.sum() + net.n_x * net.hidden + net.mask2.sum() + net.n_x)
 
+    def _params(self) -> dict[str, dict[str, float | None]]:
+        """A network has no physical parameters: its size; the weights are the tensors."""
+        return {"n_params": {"value": float(self._n_params()), "stderr": None}}
+
+    def describe(self) -> dict:
+        return {
+            **super().describe(),
+            "inputs": self.inputs_,
+            "states": self.n_x_,
+            "hidden_states": int(self.hidden_states),
+            "hidden_units_per_derivative": int(self.hidden),
+            "structure": self.structure,
+            **self._learned(),
+        }
+
+    def _learned(self) -> dict:
+        return {
+            "bounds": self.bounds_,
+            "division": self.division_,
+            "stages": self.stages_,
+        }
+
+    def _set_learned(self, state: dict) -> None:
+        self.bounds_ = state["bounds"]
+        self.division_ = state["division"]
+        self.stages_ = state["stages"]
+
     # -- data ------------------------------------------------------------------------------------
     def _check(self, log: pd.DataFrame, name: str = "log") -> None:
         """The model's columns present and finite, and (with a ``t``) uniform sampling."""
-        validate_table(log, self.inputs + self.outputs, source=name, require_time=False)
+        super()._check(log, name)
         if "t" in log:
             for exp, idx in experiments(log):
                 dt = np.diff(log.loc[idx, "t"].to_numpy(np.float64))
@@ -263,10 +297,11 @@ class NeuralStateSpace(InputOutputModel):
         experiment's start and every ``length − 1`` samples after (a window's last sample is
         the next one's first), the last one ending at the experiment's end (overlapping more if
         need be, so no sample is left out)."""
-        segs = [s for s in self._segments(log) if len(s[1]) > self.warmup]
+        segs = [s for s in self._segments(log) if len(s[1]) > self.warmup_samples_]
         if not segs:
             raise NnidInputError(
-                f"no experiment is longer than the warm-up ({self.warmup} samples)", field="warmup"
+                f"no experiment is longer than the warm-up ({self.warmup_samples_} samples)",
+                field="warmup",
             )
         shortest = min(len(s[1]) for s in segs)
         length = shortest if length is None else min(length, shortest)
@@ -296,7 +331,7 @@ class NeuralStateSpace(InputOutputModel):
         (a later window overwrites the overlap): where the next stage's windows start."""
         with torch.no_grad():
             states = self.net_(x0, win.u).numpy()
-        tracks = [np.zeros((n, self.n_x)) for n in win.lengths]
+        tracks = [np.zeros((n, self.n_x_)) for n in win.lengths]
         for b, (j, s) in enumerate(win.where):
             tracks[j][s : s + states.shape[0]] = states[:, b]
         return tracks
@@ -308,7 +343,7 @@ class NeuralStateSpace(InputOutputModel):
 
     # -- torch pieces ----------------------------------------------------------------------------
     def _outputs(self, states: torch.Tensor) -> torch.Tensor:
-        y = states[..., : len(self.outputs)]
+        y = states[..., : len(self.outputs_)]
         if self.bounds_ is None:
             return y
         lo, hi = bound_arrays(self.bounds_, self.net_.y_mean, self.net_.y_std)
@@ -317,7 +352,7 @@ class NeuralStateSpace(InputOutputModel):
     def _simulate(self, params: dict[str, torch.Tensor], x0: torch.Tensor, u: torch.Tensor):
         return self._outputs(functional_call(self.net_, params, (x0, u)))
 
-    def _residual(self, params: dict[str, torch.Tensor], batch: tuple) -> torch.Tensor:
+    def _shooting_residual(self, params: dict[str, torch.Tensor], batch: tuple) -> torch.Tensor:
         """Training windows (``"fit"``: whole window), held-out windows' warm-ups with the
         network held fixed (``"state"``: their initial states only) and after it (``"val"``)."""
         kind, u, y, links = batch
@@ -332,26 +367,28 @@ class NeuralStateSpace(InputOutputModel):
             return torch.cat([fit.reshape(-1), self.continuity**0.5 * gap.reshape(-1)])
         if kind == "state":
             fixed = {k: v.detach() for k, v in net.items()}
-            w = self.warmup
+            w = self.warmup_samples_
             return (self._simulate(fixed, params["x0_val"], u[:w]) - y[:w]).reshape(-1)
-        return (self._simulate(net, params["x0_val"], u) - y)[self.warmup :].reshape(-1)
+        return (self._simulate(net, params["x0_val"], u) - y)[self.warmup_samples_ :].reshape(-1)
 
     # -- training --------------------------------------------------------------------------------
-    def fit(
-        self, log: pd.DataFrame, validation_log: pd.DataFrame | None = None
-    ) -> NeuralStateSpace:
+    def _fit(
+        self, log: pd.DataFrame, validation_log: pd.DataFrame | None, progress: Progress
+    ) -> None:
         """Normalise on the training data, then minimise the simulation error of the training
         windows over the weights and the windows' initial states; early stopping on the
         held-out windows (the ``validation_log``, or the validation block of ``log``)."""
         with torch_threads(1):
-            return self._fit(log, validation_log)
+            self._fit_stages(log, validation_log, progress)
 
-    def _fit(self, log: pd.DataFrame, validation_log: pd.DataFrame | None) -> NeuralStateSpace:
+    def _fit_stages(
+        self, log: pd.DataFrame, validation_log: pd.DataFrame | None, progress: Progress
+    ) -> None:
         from nnid.trainers.levenberg_marquardt import LevenbergMarquardt
 
+        self._configure()
         self._check(log)
-        torch.manual_seed(self.seed)
-        self.net_ = self._new_net()
+        self.net_ = self._new_net(self._generator())
         if validation_log is None:
             split = split_log(log, "block", self.fractions)  # type: ignore[arg-type]
             log, validation_log = split.train, split.validation
@@ -360,12 +397,17 @@ class NeuralStateSpace(InputOutputModel):
             self._check(validation_log, "validation log")
             self.division_ = {"by": "given"}
         self._standardise(log)
-        self.bounds_ = resolve_bounds(self.output_bounds, self.outputs, log)
-        trainer = self.trainer if self.trainer is not None else LevenbergMarquardt(max_epochs=100)
-        held_out = validation_log is not None and len(validation_log) > self.warmup
+        self.bounds_ = resolve_bounds(self.output_bounds_, self.outputs_, log)
+        trainer = (
+            clone(self.trainer, safe=False)
+            if self.trainer is not None
+            else LevenbergMarquardt(max_epochs=100)
+        )
+        self.trainer_ = trainer
+        held_out = validation_log is not None and len(validation_log) > self.warmup_samples_
         tracks = val_tracks = None
         self.history_ = []
-        for i, length in enumerate(self.windows):
+        for i, length in enumerate(self.windows_):
             win = self._windows(log, length)
             val = self._windows(validation_log, length) if held_out else None  # type: ignore[arg-type]
             fit = _Fit(
@@ -376,17 +418,28 @@ class NeuralStateSpace(InputOutputModel):
             train_batches = [("fit", win.u, win.y, win.links)]
             if val is not None:
                 train_batches.append(("state", val.u, val.y, None))
-            last = i == len(self.windows) - 1
+            last = i == len(self.windows_) - 1
             checks = [("val", val.u, val.y, None)] if val is not None and last else None
-            self.history_.append(trainer.fit(fit, self._residual, train_batches, checks))
+            stage = f"stage {i + 1}/{len(self.windows_)} (window {length or 'whole runs'})"
+            self.history_.append(
+                trainer.fit(
+                    fit,
+                    self._shooting_residual,
+                    train_batches,
+                    checks,
+                    progress=staged(progress, stage),
+                )
+            )
             tracks = self._track(win, fit.x0.detach())
             if val is not None:
                 val_tracks = self._track(val, fit.x0_val.detach())
+        self.stages_ = [
+            {"window": w, **h.as_dict()} for w, h in zip(self.windows_, self.history_, strict=True)
+        ]
         with torch.no_grad():
             if self.hidden_states:
                 x0 = torch.as_tensor(np.concatenate(tracks))  # type: ignore[arg-type]
-                self.net_.hidden_init.copy_(x0[:, len(self.outputs) :].mean(0))
-        return self
+                self.net_.hidden_init.copy_(x0[:, len(self.outputs_) :].mean(0))
 
     # -- prediction ------------------------------------------------------------------------------
     def initial_state(self, y: np.ndarray, u: np.ndarray) -> torch.Tensor:
@@ -394,7 +447,7 @@ class NeuralStateSpace(InputOutputModel):
         ``y`` and inputs ``u`` by Levenberg-Marquardt with the network fixed."""
         from nnid.trainers.levenberg_marquardt import LevenbergMarquardt
 
-        w = self.warmup
+        w = self.warmup_samples_
         ut = torch.as_tensor(u[:w])[:, None]
         yt = torch.as_tensor(y[:w])[:, None]
         holder = nn.Module()
@@ -404,29 +457,40 @@ class NeuralStateSpace(InputOutputModel):
         def residual(params: dict[str, torch.Tensor], batch: Any) -> torch.Tensor:
             return (self._simulate(fixed, params["x0"], ut) - yt).reshape(-1)
 
-        LevenbergMarquardt(max_epochs=self.state_epochs).fit(holder, residual, [None])
+        LevenbergMarquardt(max_epochs=int(self.state_epochs)).fit(holder, residual, [None])
         return holder.x0.detach()
 
-    def predict(self, log: pd.DataFrame, mode: str = "free_run") -> pd.DataFrame:
-        """Free-run outputs (columns ``outputs``, the log's index) of every experiment from the
-        initial state estimated on its warm-up; the warm-up rows are NaN."""
+    def _predict(self, log: pd.DataFrame, mode: str | int) -> pd.DataFrame:
+        """Free run from the initial state estimated on each experiment's warm-up; k steps
+        ahead (one step: k = 1) from the measured outputs at each start, with the hidden states
+        of that free run. Rows before ``warmup + k − 1`` of each experiment are NaN."""
         with torch_threads(1):
-            return self._predict(log, mode)
+            return self._predict_outputs(log, mode)
 
-    def _predict(self, log: pd.DataFrame, mode: str) -> pd.DataFrame:
-        if mode != "free_run":
-            raise NnidInputError(
-                "a state-space model predicts in free run only (mode='free_run')", field="mode"
-            )
+    def _predict_outputs(self, log: pd.DataFrame, mode: str | int) -> pd.DataFrame:
         self._check(log)
-        out = np.full((len(log), len(self.outputs)), np.nan)
+        out = np.full((len(log), len(self.outputs_)), np.nan)
         mean, std = self.net_.y_mean.numpy(), self.net_.y_std.numpy()
         params = dict(self.net_.named_parameters())
+        n_y, w = len(self.outputs_), self.warmup_samples_
+        k = mode_steps(mode)
         for pos, yn, un in self._segments(log):
-            if len(yn) <= self.warmup:
+            n = len(yn)
+            if n <= w:
                 continue
             x0 = self.initial_state(yn, un)
+            u = torch.as_tensor(un)
             with torch.no_grad():
-                pred = self._simulate(params, x0, torch.as_tensor(un)[:, None])[:, 0].numpy()
-            out[pos[self.warmup :]] = pred[self.warmup :] * std + mean
-        return pd.DataFrame(out, index=log.index, columns=self.outputs)
+                states = functional_call(self.net_, params, (x0, u[:, None]))[:, 0]
+                if mode == "free_run":
+                    pred = self._outputs(states).numpy()
+                    out[pos[w:]] = pred[w:] * std + mean
+                    continue
+                starts = torch.arange(w - 1, n - k)
+                if starts.numel() == 0:
+                    continue
+                x_start = torch.cat([torch.as_tensor(yn)[starts], states[starts, n_y:]], 1)
+                inputs = u[starts[None, :] + torch.arange(k + 1)[:, None]]  # [k + 1, B, n_u]
+                ahead = functional_call(self.net_, params, (x_start, inputs))[-1]
+                out[pos[starts.numpy() + k]] = self._outputs(ahead).numpy() * std + mean
+        return pd.DataFrame(out, index=log.index, columns=self.outputs_)

@@ -19,20 +19,37 @@ Parameter names follow the vehicle file: ``X_udot``, ``"X:u*abs(u)"``, ``eta.w.n
 from __future__ import annotations
 
 import re
+import warnings
 from collections.abc import Sequence
-from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
 import torch
 from scipy.signal import lfilter, lfilter_zi
+from sklearn.base import clone
+from sklearn.utils.validation import check_is_fitted
 
-from nnid.datasets.log import ANGLES, POSE, TAU, VELOCITY
-from nnid.models.damping_library import canonical_term, evaluate_terms, term_codes
-from nnid.physics.added_mass import DOFS, FORCES, added_mass_matrix, parse_added_mass_key
-from nnid.physics.damping import DampingTerms, parse_coefficient_key
-from nnid.physics.fossen import FossenModel
-from nnid.physics.thrusters import Actuation, apply_installation
+from nnid.datasets.arrays import log_arrays
+from nnid.datasets.cleaning import CleaningReport
+from nnid.datasets.log import ANGLES, POSE, VELOCITY
+from nnid.errors import NnidInputError
+from nnid.evaluation.prediction import (
+    Replay,
+    blank_initial,
+    check_mode,
+    mode_steps,
+    predict_closed_loop,
+    predict_states,
+    substeps_for,
+)
+from nnid.models.base import NOT_FITTED, NnidModel, check_log
+from nnid.physics.added_mass import parse_added_mass_key
+from nnid.physics.damping import parse_coefficient_key
+from nnid.physics.damping_library import canonical_term, evaluate_terms, term_codes
+from nnid.physics.dofs import DOFS, FORCES
+from nnid.physics.parts import Parts, relative_velocity
+from nnid.trainers.history import Progress
+from nnid.trainers.regression import Regression
 
 _AXES = "xyz"
 
@@ -55,191 +72,12 @@ def canonical_parameter(name: str) -> str:
         return name
     if re.fullmatch(r"r_[gb]\.[xyz]", name):
         return name
-    raise ValueError(
+    raise NnidInputError(
         f"unknown parameter '{name}'; expected an added-mass derivative ('X_udot'), a damping "
         "coefficient ('X:u*abs(u)'), 'eta.<dof>.<pos|neg>', 'external_bias.<dof>', 'weight', "
-        "'buoyancy', 'r_g.<x|y|z>' or 'r_b.<x|y|z>'"
+        "'buoyancy', 'r_g.<x|y|z>' or 'r_b.<x|y|z>'",
+        field="unknowns",
     )
-
-
-@dataclass
-class Regression:
-    """Φ θ = y stacked sample-major over the chosen DOF equations."""
-
-    phi: np.ndarray  # [N * len(dofs), P]
-    y: np.ndarray  # [N * len(dofs)]
-    names: list[str]
-    dofs: tuple[str, ...]
-    n_samples: int
-
-    def dof_rows(self, dof: str) -> np.ndarray:
-        """Row indices of one DOF's equation."""
-        k = self.dofs.index(dof)
-        return np.arange(self.n_samples) * len(self.dofs) + k
-
-
-@dataclass
-class Parts:
-    """The numbers that define a plant for the regression and the simulator."""
-
-    mass: float
-    inertia: np.ndarray
-    r_g: np.ndarray
-    r_b: np.ndarray
-    weight: float
-    buoyancy: float
-    added_mass: dict[str, float]
-    damping: dict[str, float]
-    eta_pos: np.ndarray
-    eta_neg: np.ndarray
-    bias: np.ndarray
-    u_c: float = 0.0
-    current: np.ndarray | None = None  # steady water current, NED (m/s)
-
-    def copy(self) -> Parts:
-        return Parts(
-            self.mass,
-            self.inertia.copy(),
-            self.r_g.copy(),
-            self.r_b.copy(),
-            self.weight,
-            self.buoyancy,
-            dict(self.added_mass),
-            dict(self.damping),
-            self.eta_pos.copy(),
-            self.eta_neg.copy(),
-            self.bias.copy(),
-            self.u_c,
-            None if self.current is None else self.current.copy(),
-        )
-
-    @classmethod
-    def from_vehicle(cls, vehicle) -> Parts:
-        damping = DampingTerms.from_spec(
-            vehicle.damping.model, vehicle.damping.coefficients, vehicle.damping.u_c
-        ).as_dict()
-        pos, neg = vehicle.installation_vectors()
-        return cls(
-            vehicle.mass,
-            vehicle.inertia_matrix().astype(float),
-            np.array(vehicle.r_g, float),
-            np.array(vehicle.r_b, float),
-            float(vehicle.weight),
-            float(vehicle.buoyancy),
-            dict(vehicle.added_mass),
-            damping,
-            pos,
-            neg,
-            np.array(vehicle.external_bias, float),
-            vehicle.damping.u_c,
-            np.array(vehicle.current, float),
-        )
-
-    def set(self, name: str, value: float) -> None:
-        """Set one parameter by its name (see :func:`canonical_parameter`)."""
-        if name.endswith("dot") and "_" in name and ":" not in name:
-            self.added_mass[name] = value
-        elif ":" in name:
-            self.damping[name] = value
-        elif name.startswith("eta."):
-            _, dof, sign = name.split(".")
-            (self.eta_pos if sign == "pos" else self.eta_neg)[DOFS.index(dof)] = value
-        elif name.startswith("external_bias."):
-            self.bias[DOFS.index(name.split(".")[1])] = value
-        elif name in ("weight", "buoyancy"):
-            setattr(self, name, value)
-        else:
-            (self.r_g if name.startswith("r_g") else self.r_b)[_AXES.index(name[-1])] = value
-
-    def get(self, name: str) -> float:
-        if name.endswith("dot") and ":" not in name:
-            return float(self.added_mass.get(name, 0.0))
-        if ":" in name:
-            return float(self.damping.get(name, 0.0))
-        if name.startswith("eta."):
-            _, dof, sign = name.split(".")
-            return float((self.eta_pos if sign == "pos" else self.eta_neg)[DOFS.index(dof)])
-        if name.startswith("external_bias."):
-            return float(self.bias[DOFS.index(name.split(".")[1])])
-        if name in ("weight", "buoyancy"):
-            return float(getattr(self, name))
-        return float((self.r_g if name.startswith("r_g") else self.r_b)[_AXES.index(name[-1])])
-
-    def model(self, check: bool = True) -> FossenModel:
-        """The Fossen model of these parts (installation: see :meth:`applied`). ``check=False``
-        skips the positive-definite test, for the unit probes of the regression."""
-        terms = tuple(dict.fromkeys(parse_coefficient_key(k)[1] for k in self.damping))
-        coef = torch.zeros(6, len(terms), dtype=torch.float64)
-        for key, value in self.damping.items():
-            force, term = parse_coefficient_key(key)
-            coef[FORCES.index(force), terms.index(term)] = value
-        return FossenModel(
-            self.mass,
-            self.inertia,
-            added_mass_matrix(self.added_mass),
-            DampingTerms(terms, coef, u_c=self.u_c),
-            self.weight,
-            self.buoyancy,
-            self.r_g,
-            self.r_b,
-            external_bias=self.bias,
-            current=(0.0, 0.0, 0.0) if self.current is None else self.current,
-            check=check,
-        )
-
-    def applied(self, tau_nominal: np.ndarray) -> np.ndarray:
-        """τ_eff = η(sign) τ per DOF (Caccia eq. 3)."""
-        return apply_installation(tau_nominal, self.eta_pos, self.eta_neg)
-
-
-def log_arrays(log: pd.DataFrame, vehicle) -> dict[str, np.ndarray]:
-    """η, ν, ν̇ and nominal τ from a log (missing pose components are zero; velocities and
-    accelerations must be present: derive them with :mod:`nnid.datasets.preprocess`)."""
-    n = len(log)
-    eta = np.zeros((n, 6))
-    for k, c in enumerate(POSE):
-        if c in log:
-            eta[:, k] = log[c].to_numpy(np.float64)
-    nu = np.zeros((n, 6))
-    nu_dot = np.zeros((n, 6))
-    for k, c in enumerate(VELOCITY):
-        if c in log:
-            nu[:, k] = log[c].to_numpy(np.float64)
-        if "d" + c in log:
-            nu_dot[:, k] = log["d" + c].to_numpy(np.float64)
-    if all(c in log for c in TAU):
-        tau = log[list(TAU)].to_numpy(np.float64)
-    else:
-        act = Actuation(vehicle)
-        cols = [f"cmd_{c}" for c in act.channels]
-        missing = [c for c in cols if c not in log]
-        if missing:
-            raise ValueError(f"the log has neither tau_X..tau_N nor the commands {missing}")
-        tau = act.nominal(log[cols].to_numpy(np.float64))
-    if "experiment" in log:
-        codes, names = pd.factorize(log["experiment"])
-    else:
-        codes, names = np.zeros(n, dtype=int), ["0"]
-    return {
-        "eta": eta,
-        "nu": nu,
-        "nu_dot": nu_dot,
-        "tau": tau,
-        "angles_known": np.array(all(a in log for a in ANGLES)),
-        "t": log["t"].to_numpy(np.float64),
-        "experiment": codes,
-        "experiment_names": np.asarray(names, dtype=object),
-    }
-
-
-def relative_velocity(parts: Parts, data: dict[str, np.ndarray]) -> np.ndarray:
-    """ν_r = ν − ν_c(η), the velocity through the water that damping acts on (Fossen 2011
-    eq. 10.1); ν itself in still water."""
-    if parts.current is None or not np.any(parts.current):
-        return data["nu"]
-    with torch.no_grad():
-        nu_c = parts.model(check=False).current_body(torch.as_tensor(data["eta"])).numpy()
-    return data["nu"] - nu_c
 
 
 def vehicle_with(vehicle, values: dict[str, float]):
@@ -274,19 +112,20 @@ class ParametricFossen:
         self.vehicle = vehicle
         self.names = [canonical_parameter(n) for n in unknowns]
         if len(set(self.names)) != len(self.names):
-            raise ValueError("unknown parameters must be unique")
+            raise NnidInputError("unknown parameters must be unique", field="unknowns")
         self.dofs = tuple(dofs)
         for d in self.dofs:
             if d not in DOFS:
-                raise ValueError(f"'{d}' is not a DOF; expected u v w p q r")
+                raise NnidInputError(f"'{d}' is not a DOF; expected u v w p q r", field="dofs")
         if {"weight", "buoyancy"} & set(self.names):
             pair = {"weight": "r_g.", "buoyancy": "r_b."}
             for n in self.names:
                 for w, r in pair.items():
                     if w in self.names and n.startswith(r):
-                        raise ValueError(
+                        raise NnidInputError(
                             f"'{w}' and '{n}' multiply each other: identify their "
-                            "moment instead, or fix one of them"
+                            "moment instead, or fix one of them",
+                            field="unknowns",
                         )
         self.base = Parts.from_vehicle(vehicle)
         for name in self.names:  # unknowns start from zero in R(0)
@@ -332,7 +171,7 @@ class ParametricFossen:
         r0 = self.equation_residual(self.base, data, filter_lambda)
         keep = np.ones(r0.shape[0], dtype=bool)
         if filter_lambda is not None:
-            keep = settled_rows(data, 3.0 / filter_lambda)
+            keep = filter_settled(data, filter_lambda)
         damping = self.damping_columns(data, filter_lambda)
         cols = []
         for name in self.names:
@@ -376,6 +215,18 @@ class ParametricFossen:
             out[name] = col
         return out
 
+    def restricted(
+        self, unknowns: Sequence[str], dofs: Sequence[str], known: dict[str, float]
+    ) -> ParametricFossen:
+        """The structure of a step of a decoupled sequence: ``unknowns`` from the ``dofs``
+        equations, with the ``known`` values of earlier steps plugged in (a parameter that is
+        unknown again is refitted from zero)."""
+        sub = ParametricFossen(self.vehicle, unknowns, dofs)
+        for name, value in known.items():
+            if name not in sub.names:
+                sub.base.set(name, value)
+        return sub
+
     def term_names(self) -> list[str]:
         return [canonical_term(n.split(":")[1]) for n in self.names if ":" in n]
 
@@ -397,6 +248,7 @@ def filter_signal(data: dict[str, np.ndarray], x: np.ndarray, lam: float, deriva
 
 
 def settled_rows(data: dict[str, np.ndarray], seconds: float) -> np.ndarray:
+    """True for the samples at least ``seconds`` after the start of their experiment."""
     keep = np.ones(data["t"].size, dtype=bool)
     for k in np.unique(data["experiment"]):
         idx = np.flatnonzero(data["experiment"] == k)
@@ -404,151 +256,192 @@ def settled_rows(data: dict[str, np.ndarray], seconds: float) -> np.ndarray:
     return keep
 
 
-class ParametricModel:
-    """The parametric Fossen model as an estimator (scikit-learn style).
+def filter_settled(data: dict[str, np.ndarray], lam: float) -> np.ndarray:
+    """The samples where F(s) = λ/(s + λ) has settled: 3/λ s after each experiment starts
+    (a step response is then within e⁻³ ≈ 5 % of its end value)."""
+    return settled_rows(data, 3.0 / lam)
 
-    ``ParametricModel(vehicle, unknowns, trainer=LeastSquares())`` then ``fit(log)``: the
-    trainer estimates the unknowns from the log; ``params`` holds value and standard error,
-    ``predict(log, mode)`` simulates one step, k steps or free run, ``residual(log)`` is the
-    force residual per DOF (McCarter eq. 4.4 minus the model), ``save``/``load`` use JSON.
-    Velocities (and accelerations, unless the trainer filters) are derived from pose by
-    Savitzky-Golay when the log lacks them; the cleaning report is ``report_``.
-    """
 
-    def __init__(
-        self,
-        vehicle,
-        unknowns: Sequence[str],
-        dofs: Sequence[str] = DOFS,
-        trainer=None,
-        savgol_window: float = 1.0,
-        savgol_order: int = 4,
-    ) -> None:
-        self.vehicle = vehicle
-        self.unknowns = list(unknowns)
-        self.dofs = tuple(dofs)
-        self.trainer = trainer
-        self.savgol_window = savgol_window
-        self.savgol_order = savgol_order
+def expand_unknowns(spec: Sequence[str], dofs: Sequence[str], vehicle) -> list[str]:
+    """The unknowns of a fit with the shortcuts expanded: ``added_mass`` (the diagonal
+    derivatives of ``dofs``) and ``damping`` (the vehicle's damping-model terms of their
+    forces)."""
+    out: list[str] = []
+    forces = {FORCES[DOFS.index(d)] for d in dofs}
+    for item in spec:
+        if item == "added_mass":
+            out += [f"{FORCES[DOFS.index(d)]}_{d}dot" for d in dofs]
+        elif item == "damping":
+            out += [k for k in Parts.from_vehicle(vehicle).damping if k.split(":")[0] in forces]
+        else:
+            out.append(item)
+    return list(dict.fromkeys(out))
 
-    # -- data ---------------------------------------------------------------------------------
-    def prepare(self, log: pd.DataFrame) -> tuple[pd.DataFrame, dict[str, np.ndarray]]:
-        """The log with derived velocities/accelerations where missing, and its arrays."""
-        from nnid.datasets.cleaning import CleaningReport
-        from nnid.datasets.preprocess import derive_accelerations, derive_velocities
 
-        report = CleaningReport(source="fit data")
-        needs_acc = getattr(self.trainer, "filter_lambda", None) is None
-        if any(d not in log for d in self.dofs) and all(a in log for a in ANGLES):
-            log = derive_velocities(log, self.savgol_window, self.savgol_order, report)
-        if needs_acc and any("d" + d not in log for d in self.dofs):
-            log = derive_accelerations(log, self.savgol_window, self.savgol_order, report)
-        self.report_ = report
+def prepare_motion(
+    log: pd.DataFrame,
+    dofs: Sequence[str],
+    savgol_window: float,
+    savgol_order: int,
+    accelerations: bool,
+    report: CleaningReport | None = None,
+) -> pd.DataFrame:
+    """The log with the velocities of ``dofs`` derived from the pose where it lacks them, and
+    (``accelerations``) their accelerations, both by Savitzky-Golay; each step reported."""
+    from nnid.datasets.preprocess import derive_accelerations, derive_velocities
+
+    if any(d not in log for d in dofs) and all(a in log for a in ANGLES):
+        log = derive_velocities(log, savgol_window, savgol_order, report)
+    if accelerations and any("d" + d not in log for d in dofs):
+        log = derive_accelerations(log, savgol_window, savgol_order, report)
+    return log
+
+
+class FossenPlant(NnidModel):
+    """A model whose fitted state is one Fossen plant (``parts_``): it predicts by simulating
+    that plant (compiled RK4 from the measured state, in steps of at most
+    :data:`~nnid.evaluation.prediction.MAX_STEP`: one step, k steps or free run, or in closed
+    loop under the autopilot a log was flown with), and its residual is the Fossen
+    equation error R = M ν̇ − (τ_eff + b − C ν + τ_D − g) of the fitted DOFs (Weiss eq. 11).
+
+    Subclasses store ``vehicle``, ``savgol_window`` and ``savgol_order`` and set ``parts_``,
+    ``structure_`` (a :class:`ParametricFossen` whose base has the fitted terms at zero) and
+    ``dofs_`` in ``_fit``."""
+
+    has_force_equation = True
+
+    def _data(
+        self, log: pd.DataFrame, accelerations: bool, report: CleaningReport | None = None
+    ) -> tuple[pd.DataFrame, dict[str, np.ndarray]]:
+        dofs = getattr(self, "dofs_", DOFS)
+        log = prepare_motion(
+            log, dofs, self.savgol_window, self.savgol_order, accelerations, report
+        )
         return log, log_arrays(log, self.vehicle)
 
-    # -- estimator protocol ---------------------------------------------------------------------
-    def fit(self, log: pd.DataFrame) -> ParametricModel:
-        from nnid.trainers.least_squares import LeastSquares
+    def _set_outputs(self, dofs: Sequence[str]) -> None:
+        self.dofs_ = tuple(dofs)
+        self.outputs_ = [*POSE, *VELOCITY]
+        self.targets_ = list(self.dofs_)
+        self.warmup_samples_ = 1
 
-        trainer = self.trainer if self.trainer is not None else LeastSquares()
-        self.structure_ = ParametricFossen(self.vehicle, self.unknowns, self.dofs)
-        _, data = self.prepare(log)
-        self.estimate_ = trainer.fit(self.structure_, data)
-        self.parts_ = self.structure_.parts(np.nan_to_num(self.estimate_.theta))
+    def _predict(self, log: pd.DataFrame, mode: str | int) -> pd.DataFrame:
+        log, data = self._data(log, accelerations=False)
+        pred = predict_states(self.parts_, log, data["tau"], mode, substeps_for(log))
+        return blank_initial(pred, log, self.warmup_samples_ + mode_steps(mode) - 1)
+
+    def closed_loop(
+        self, log: pd.DataFrame, replay: Replay, mode: str | int = "free_run"
+    ) -> pd.DataFrame:
+        """The prediction flown under ``replay``'s autopilot (its open-loop inputs plus the
+        autopilot's feedback on the simulated state), as the log was flown: free run, or k
+        steps ahead from every measured state."""
+        check_is_fitted(self, msg=NOT_FITTED)
+        mode = check_mode(mode)
+        log, _ = self._data(check_log(log), accelerations=False)
+        pred = predict_closed_loop(self.parts_, log, replay, mode, substeps_for(log))
+        return blank_initial(pred, log, self.warmup_samples_ + mode_steps(mode) - 1)
+
+    def _forces(self) -> list[str]:
+        return [FORCES[DOFS.index(d)] for d in self.dofs_]
+
+    def _equation(self, log: pd.DataFrame, parts: Parts) -> pd.DataFrame:
+        log, data = self._data(log, accelerations=True)
+        r = self.structure_.equation_residual(parts, data)
+        cols = self._forces()
+        return pd.DataFrame(r[:, [FORCES.index(f) for f in cols]], columns=cols, index=log.index)
+
+    def _residual(self, log: pd.DataFrame) -> pd.DataFrame:
+        """R(θ̂): the force the fitted model leaves unexplained, per fitted DOF equation."""
+        return self._equation(log, self.parts_)
+
+    def _force_series(self, log: pd.DataFrame) -> pd.DataFrame:
+        """R(0): the force the fitted terms explain (the regression's target, −y)."""
+        return self._equation(log, self.structure_.base)
+
+    def _check_mass(self) -> None:
         mass = self.parts_.model(check=False).mass_matrix().numpy()
         if np.linalg.eigvalsh(0.5 * (mass + mass.T)).min() <= 0:
-            import warnings
-
             warnings.warn(
                 "the identified mass matrix M = M_RB + M_A is not positive definite (an added "
                 "mass outweighs the rigid body): the data do not determine the inertia, and "
                 "simulations of this model are meaningless",
                 PhysicsWarning,
-                stacklevel=2,
+                stacklevel=3,
             )
-        return self
 
-    @property
-    def params(self) -> dict[str, dict[str, float | None]]:
+
+class ParametricModel(FossenPlant):
+    """The parametric Fossen model as an estimator (Weiss eqs 47-53, 99-108).
+
+    ``ParametricModel(vehicle, unknowns, dofs, trainer=LeastSquares())`` then ``fit(log)``: the
+    trainer (least squares, RLS, the gradient estimator or the UKF) estimates the ``unknowns``
+    from the ``dofs`` equations; ``unknowns`` may use the shortcuts ``added_mass`` and
+    ``damping`` (:func:`expand_unknowns`). ``sequence`` ("weiss" or a list of steps with
+    ``experiments``, ``dofs`` and ``unknowns``) runs Weiss's decoupled sequence (eqs 99-108)
+    with that trainer; the unknowns and DOFs are then the union of its steps'. Velocities (and
+    accelerations, unless the trainer filters) are derived from the pose by Savitzky-Golay
+    (``savgol_window`` s, ``savgol_order``) where the log lacks them; what was derived is in
+    ``report_``. ``params`` holds each estimate with its standard error, Caccia's percentile
+    error and the 51.02 % significance flag.
+    """
+
+    kind = "fossen"
+
+    def __init__(
+        self,
+        vehicle,
+        unknowns: Sequence[str] = ("added_mass", "damping"),
+        dofs: Sequence[str] = DOFS,
+        trainer=None,
+        sequence: str | Sequence | None = None,
+        savgol_window: float = 1.0,
+        savgol_order: int = 4,
+    ) -> None:
+        self.vehicle = vehicle
+        self.unknowns = unknowns
+        self.dofs = dofs
+        self.trainer = trainer
+        self.sequence = sequence
+        self.savgol_window = savgol_window
+        self.savgol_order = savgol_order
+
+    def _fit(self, log: pd.DataFrame, validation, progress: Progress) -> None:
+        from nnid.trainers.least_squares import LeastSquares
+        from nnid.trainers.sequence import DecoupledSequence, sequence_steps
+
+        trainer = clone(self.trainer, safe=False) if self.trainer is not None else LeastSquares()
+        if self.sequence is not None:
+            steps = sequence_steps(self.sequence)
+            unknowns = list(dict.fromkeys(n for s in steps for n in s.unknowns))
+            dofs = list(dict.fromkeys(d for s in steps for d in s.dofs))
+            trainer = DecoupledSequence(steps, trainer)
+        else:
+            dofs = list(self.dofs)
+            unknowns = expand_unknowns(self.unknowns, dofs, self.vehicle)
+        self.structure_ = ParametricFossen(self.vehicle, unknowns, dofs)
+        self._set_outputs(dofs)
+        self.report_ = CleaningReport(source="fit data")
+        needs_acc = getattr(trainer, "filter_lambda", None) is None
+        _, data = self._data(log, accelerations=needs_acc, report=self.report_)
+        self.estimate_ = trainer.fit(self.structure_, data, progress=progress)
+        self.trainer_ = trainer
+        self.parts_ = self.structure_.parts(np.nan_to_num(self.estimate_.theta))
+        self._check_mass()
+
+    def _params(self) -> dict[str, dict[str, float | None]]:
         return self.estimate_.as_dict()
 
-    def predict(self, log: pd.DataFrame, mode="free_run") -> pd.DataFrame:
-        from nnid.evaluation.prediction import predict_states
+    def describe(self) -> dict:
+        return {**super().describe(), "vehicle": self.vehicle.name, "dofs": list(self.dofs_)}
 
-        log, data = self.prepare(log)
-        return predict_states(self.parts_, log, data["tau"], mode)
+    def _state(self) -> tuple[dict, dict]:
+        return {"dofs": list(self.dofs_), **self.estimate_.as_state()}, {}
 
-    def residual(self, log: pd.DataFrame) -> pd.DataFrame:
-        """R(θ̂) = M ν̇ − (τ_eff + b − Cν + τ_D − g): the force the model leaves unexplained."""
-        log, data = self.prepare(log)
-        if not all("d" + d in log for d in self.dofs):
-            from nnid.datasets.preprocess import derive_accelerations
-
-            data["nu_dot"] = log_arrays(
-                derive_accelerations(log, self.savgol_window, self.savgol_order), self.vehicle
-            )["nu_dot"]
-        r = self.structure_.equation_residual(self.parts_, data)
-        return pd.DataFrame(r, columns=list(FORCES), index=log.index)
-
-    def describe(self) -> str:
-        lines = [
-            f"Fossen model of '{self.vehicle.name}', {len(self.unknowns)} parameters "
-            f"identified from the {', '.join(self.dofs)} equations:"
-        ]
-        est = self.estimate_
-        for name, v, s, pe in zip(
-            est.names, est.theta, est.stderr, est.percentile_error, strict=True
-        ):
-            flag = "" if pe <= 100 / 1.96 else "  (insignificant at 95 %)"
-            lines.append(f"  {name:>14s} = {v:.6g} ± {s:.2g}{flag}")
-        return "\n".join(lines)
-
-    # -- persistence ----------------------------------------------------------------------------
-    def save(self, path) -> None:
-        import json
-        from pathlib import Path
-
-        est = self.estimate_
-        payload = {
-            "kind": "fossen",
-            "vehicle": self.vehicle.model_dump(),
-            "unknowns": self.unknowns,
-            "dofs": list(self.dofs),
-            "savgol": [self.savgol_window, self.savgol_order],
-            "theta": [None if not np.isfinite(v) else float(v) for v in est.theta],
-            "cov": np.where(np.isfinite(est.cov), est.cov, 0.0).tolist(),
-            "sigma2": est.sigma2,
-            "n_obs": est.n_obs,
-        }
-        Path(path).write_text(json.dumps(payload, indent=1))
-
-    @classmethod
-    def load(cls, path) -> ParametricModel:
-        """Rebuild from JSON (no code is executed)."""
-        import json
-        from pathlib import Path
-
+    def _restore(self, state: dict, tensors: dict) -> None:
         from nnid.trainers.least_squares import Estimate
-        from nnid.vehicle import vehicle_from_dict
 
-        payload = json.loads(Path(path).read_text())
-        if payload.get("kind") != "fossen":
-            raise ValueError(f"{path} is not a saved Fossen model")
-        model = cls(
-            vehicle_from_dict(payload["vehicle"], str(path)),
-            payload["unknowns"],
-            payload["dofs"],
-            None,
-            *payload["savgol"],
-        )
-        theta = np.array([np.nan if v is None else v for v in payload["theta"]], dtype=float)
-        model.structure_ = ParametricFossen(model.vehicle, model.unknowns, model.dofs)
-        model.estimate_ = Estimate(
-            model.structure_.names,
-            theta,
-            np.array(payload["cov"]),
-            payload["sigma2"],
-            payload["n_obs"],
-        )
-        model.parts_ = model.structure_.parts(np.nan_to_num(theta))
-        return model
+        self._set_outputs(state["dofs"])
+        self.estimate_ = Estimate.from_state(state)
+        self.structure_ = ParametricFossen(self.vehicle, self.estimate_.names, self.dofs_)
+        self.parts_ = self.structure_.parts(np.nan_to_num(self.estimate_.theta))

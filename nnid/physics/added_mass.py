@@ -13,10 +13,9 @@ from collections.abc import Mapping
 import torch
 from torch import Tensor
 
+from nnid.physics.dofs import DOFS, FORCES
 from nnid.physics.kinematics import skew
 
-FORCES = ("X", "Y", "Z", "K", "M", "N")
-DOFS = ("u", "v", "w", "p", "q", "r")
 _KEY = re.compile(r"^([XYZKMN])_([uvwpqr])dot$")
 
 

@@ -45,7 +45,7 @@ def _rhs(x, tau, m_inv, q_rb, q_a, g_mat, theta, codes, ma, bias, cur, u_c, lag,
     nur[1] -= cv
     nur[2] -= cw
     ncd0, ncd1, ncd2 = cv * r - cw * q, cw * p - cu * r, cu * q - cv * p
-    # atoms of the basis library at ν_r (nnid.models.damping_library.ATOMS order)
+    # atoms of the basis library at ν_r (nnid.physics.damping_library.ATOMS order)
     at = scratch[2]
     for i in range(6):
         at[i] = nur[i]

@@ -13,14 +13,14 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from nnid.models.damping_library import (
+from nnid.physics.damping_library import (
     LIBRARY,
     canonical_term,
     evaluate_terms,
     mask_terms,
     term_codes,
 )
-from nnid.physics.added_mass import FORCES
+from nnid.physics.dofs import FORCES
 
 
 def parse_coefficient_key(key: str) -> tuple[str, str]:

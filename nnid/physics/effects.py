@@ -24,8 +24,8 @@ from __future__ import annotations
 
 import re
 
-from nnid.physics.added_mass import DOFS, FORCES
 from nnid.physics.damping import parse_coefficient_key
+from nnid.physics.dofs import DOFS, FORCES
 
 _D = "[uvwpqr]"
 EFFECT_PATTERNS = {

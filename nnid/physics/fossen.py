@@ -17,9 +17,9 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from nnid.models.damping_library import ONE
 from nnid.physics.added_mass import added_mass_coriolis_force, added_mass_matrix
 from nnid.physics.damping import DampingTerms
+from nnid.physics.damping_library import ONE
 from nnid.physics.kinematics import eta_dot, rotation_matrix
 from nnid.physics.restoring import restoring_force
 from nnid.physics.rigid_body import rigid_body_coriolis_force, rigid_body_mass_matrix

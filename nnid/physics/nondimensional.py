@@ -11,9 +11,9 @@ X_u|u|' = X_u|u| / (½ρL²), X_u' = X_u / (½ρUL²), X_u̇' = X_u̇ / (½ρL³
 
 from __future__ import annotations
 
-from nnid.models.damping_library import ATOMS, parse_term
 from nnid.physics.added_mass import parse_added_mass_key
 from nnid.physics.damping import parse_coefficient_key
+from nnid.physics.damping_library import ATOMS, parse_term
 
 WATER_VISCOSITY = 1.1e-3
 """Dynamic viscosity of water, Pa s, as Weiss uses in eq. 126."""

@@ -16,6 +16,8 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from nnid.physics.dofs import FORCES
+
 
 @dataclass(frozen=True)
 class ThrustCurve:
@@ -81,7 +83,7 @@ class Actuation:
                 [t.position for t in self.thrusters], [t.direction for t in self.thrusters]
             ).numpy()
         else:
-            self.channels = ("X", "Y", "Z", "K", "M", "N")
+            self.channels = FORCES
             self.curves = []
             self.matrix = np.eye(6)
 

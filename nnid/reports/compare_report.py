@@ -1,196 +1,353 @@
-"""The report of ``nnid compare``: McCarter's Tables 5.1/5.2 for the user's data, force series,
-error against complexity with the SINDy path, coefficients, and free-run velocity errors.
+"""The report of ``nnid compare``: models of every family ranked on the same held-out data.
 
 One self-contained HTML page (figures embedded, no scripts from elsewhere) and a Markdown twin
-with the same tables for terminals and pull requests.
+with the same tables for terminals and pull requests: the ranking with the sentence that says
+which model to use, velocity NRMSE per DOF in each prediction mode, each model's free run
+overlaid on every held-out experiment (one figure per DOF), and for the models with a force
+equation McCarter's Tables 5.1/5.2 for this data (J and J/J₀, eq. 4.25), error against
+complexity, the force series and the coefficients.
 """
 
 from __future__ import annotations
 
 import html
 import math
+from typing import Any
 
 import numpy as np
+import pandas as pd
 
-from nnid.reports.figures import figure_uri, new_figure, page_head
+from nnid.datasets.preprocess import experiments
+from nnid.physics.dofs import FORCES
+from nnid.reports.figures import (
+    IMAGES_CHECK,
+    definitions,
+    figure_uri,
+    html_table,
+    markdown_table,
+    new_figure,
+    page_head,
+)
 
-FORCES = ("X", "Y", "Z", "K", "M", "N")
+UNITS = {"u": "m/s", "v": "m/s", "w": "m/s", "p": "rad/s", "q": "rad/s", "r": "rad/s"}
+FORCE_UNITS = {"X": "N", "Y": "N", "Z": "N", "K": "N m", "M": "N m", "N": "N m"}
+MODES = (
+    ("free_run_nrmse", "Free-run velocity NRMSE"),
+    ("k_step_nrmse", "{h} s-ahead velocity NRMSE"),
+    ("one_step_nrmse", "One-step velocity NRMSE"),
+)
 
 
-def _f(x, digits: int = 4) -> str:
+def _f(x: Any, digits: int = 4) -> str:
     if x is None or (isinstance(x, float) and not math.isfinite(x)):
         return "-"
     return f"{x:.{digits}g}"
 
 
-def table_rows(comparison: dict) -> list[list[str]]:
-    """Rows of the Table 5.1/5.2 analogue: model, n̄, J and J/J0 on train and validation."""
+def _held(row: dict, comparison: dict) -> dict:
+    return row.get(comparison.get("held_out", "validation"), {})
+
+
+def _total(row: dict, comparison: dict, key: str) -> str:
+    part = _held(row, comparison)
+    if key not in part:
+        return "-"
+    value = part[key].get("total")
+    return _f(value, 3) if value is not None else "diverged"
+
+
+def ranking_rows(comparison: dict) -> tuple[list[str], list[list[str]]]:
+    """The ranking: one row per model, best first."""
+    by_name = {m["name"]: m for m in comparison["models"]}
+    head = [
+        "rank",
+        "model",
+        "kind",
+        "trainer",
+        "parameters",
+        "fit s",
+        "free-run NRMSE",
+        "k-step NRMSE",
+        "one-step NRMSE",
+        "J/J0",
+        "validation used for",
+    ]
     rows = []
-    for m in sorted(comparison["models"], key=lambda m: -m["n_params"]):
+    for k, name in enumerate(comparison["ranking"], 1):
+        m = by_name[name]
+        held = _held(m, comparison)
+        rows.append(
+            [
+                str(k),
+                name,
+                m["kind"],
+                str(m.get("trainer") or "-"),
+                str(m["n_params"]),
+                _f(m["seconds"], 3),
+                _total(m, comparison, "free_run_nrmse"),
+                _total(m, comparison, "k_step_nrmse"),
+                _total(m, comparison, "one_step_nrmse"),
+                _f(held.get("J_over_J0"), 3),
+                m.get("validation_used_for") or "-",
+            ]
+        )
+    return head, rows
+
+
+def column_terms(comparison: dict) -> dict[str, str]:
+    """What each column of the ranking means."""
+    part = comparison.get("held_out", "validation")
+    k = comparison.get("k_step_s")
+    return {
+        "parameters": "number of fitted parameters (network weights for NARX and state-space "
+        "models)",
+        "fit s": "wall time of the fit in seconds",
+        "free-run NRMSE": f"RMSE of the velocity simulated from the {part} run's initial state "
+        "and its inputs alone, over the standard deviation of the measured velocity, mean over "
+        "the excited DOFs; 'diverged' where the simulation left the physical range",
+        "k-step NRMSE": (
+            f"the same error for predictions {_f(k, 3)} s ahead, restarted from the measured "
+            "state at every sample"
+            if k
+            else "not computed"
+        ),
+        "one-step NRMSE": "the same error one sample ahead",
+        "J/J0": "McCarter's force error (eq. 4.25): RMS of the force residual over RMS of the "
+        "force the model's fitted terms explain (the viscous force τ̄ of eq. 4.4 for damping "
+        "models, the regression's target for a Fossen fit); only for models with a force "
+        "equation",
+        "validation used for": "what the model did with the validation run while fitting "
+        "(early stopping or model selection): its validation scores are then not independent",
+    }
+
+
+def dof_rows(comparison: dict, key: str) -> tuple[list[str], list[list[str]]]:
+    """One prediction mode's NRMSE per DOF of each model on the held-out data."""
+    dofs: list[str] = []
+    for m in comparison["models"]:
+        for d in _held(m, comparison).get(key, {}):
+            if d != "total" and d not in dofs:
+                dofs.append(d)
+    rows = []
+    for name in comparison["ranking"]:
+        m = next(x for x in comparison["models"] if x["name"] == name)
+        vals = _held(m, comparison).get(key, {})
+        cells = [_f(vals.get(d), 3) if vals.get(d) is not None else "diverged" for d in dofs]
+        rows.append([name, *cells, _total(m, comparison, key)])
+    return ["model", *dofs, "total"], rows
+
+
+HEAD = ["model", "n̄", "train J", "train J/J0", "validation J", "validation J/J0"]
+
+
+def table_rows(comparison: dict) -> list[list[str]]:
+    """Rows of the Table 5.1/5.2 analogue for the damping models (their force series is the
+    same τ̄): n̄ terms, J and J/J₀ on train and validation."""
+    rows = []
+    force = [
+        m for m in comparison["models"] if m["kind"] in ("synthesis", "sindy") and "J" in m["train"]
+    ]
+    for m in sorted(force, key=lambda m: -m["n_params"]):
         rows.append(
             [
                 m["name"],
                 str(m["n_params"]),
                 _f(m["train"]["J"]),
                 _f(m["train"]["J_over_J0"]),
-                _f(m["validation"]["J"]),
-                _f(m["validation"]["J_over_J0"]),
+                _f(m["validation"].get("J")),
+                _f(m["validation"].get("J_over_J0")),
             ]
         )
     return rows
 
 
-HEAD = ["model", "n̄", "train J", "train J/J0", "validation J", "validation J/J0"]
-VELOCITY_TABLES = (
-    ("free_run_nrmse", "Free-run velocity NRMSE on validation (inside the Fossen simulator)"),
-    ("k_step_nrmse", "{h:.3g} s-ahead velocity NRMSE on validation (inside the Fossen simulator)"),
-)
-
-
-def velocity_rows(comparison: dict, key: str) -> tuple[list[str], list[list[str]]]:
-    """Velocity NRMSE per DOF of each model (``free_run_nrmse`` or ``k_step_nrmse``); a run
-    that left the physical range is "diverged"."""
-    dofs: list[str] = []
-    for m in comparison["models"]:
-        for d in m["validation"].get(key, {}):
-            if d not in dofs:
-                dofs.append(d)
-    rows = []
-    for m in comparison["models"]:
-        vals = m["validation"].get(key, {})
-        cells = [_f(vals[d], 3) if vals.get(d) is not None else "diverged" for d in dofs]
-        rows.append([m["name"], *cells])
-    return ["model", *dofs], rows
+def _tables(comparison: dict) -> list[tuple[str, list[str], list[list[str]]]]:
+    """(title, head, rows) of every table, in page order (HTML and Markdown share them)."""
+    part = comparison.get("held_out", "validation")
+    h = _f(comparison.get("k_step_s"), 3)
+    out = [("Ranking", *ranking_rows(comparison))]
+    for key, title in MODES:
+        head, rows = dof_rows(comparison, key)
+        if len(head) > 2:
+            out.append((f"{title.format(h=h)} per DOF ({part} data)", head, rows))
+    if table_rows(comparison):
+        out.append(
+            ("Force error (McCarter Tables 5.1/5.2 for this data)", HEAD, table_rows(comparison))
+        )
+    return out
 
 
 def markdown(comparison: dict) -> str:
     """The Markdown twin: the same tables as the HTML page."""
     lines = [
-        f"# Damping model comparison: {comparison.get('vehicle', '')}",
+        f"# Model comparison: {comparison.get('vehicle') or ''}",
         "",
-        comparison.get("summary", ""),
+        comparison["summary"],
         "",
-        "## Force error (McCarter Tables 5.1/5.2 for this data)",
-        "",
-        "| " + " | ".join(HEAD) + " |",
-        "|" + "---|" * len(HEAD),
     ]
-    lines += ["| " + " | ".join(r) + " |" for r in table_rows(comparison)]
-    for key, title in VELOCITY_TABLES:
-        head, rows = velocity_rows(comparison, key)
-        if len(head) > 1:
-            lines += [
-                "",
-                f"## {title.format(h=comparison.get('horizon_s', 0.0))}",
-                "",
-                "| " + " | ".join(head) + " |",
-                "|" + "---|" * len(head),
-            ]
-            lines += ["| " + " | ".join(r) + " |" for r in rows]
-    path = comparison.get("sindy_path") or []
-    if path:
-        lines += ["", "## SINDy path", "", "| threshold | terms | validation J |", "|---|---|---|"]
-        lines += [
-            f"| {_f(p.get('threshold'))} | {p['n_terms']} | {_f(p.get('validation_J'))} |"
-            for p in path
-        ]
-    lines += [
-        "",
-        f"Training: {', '.join(comparison.get('train', []))}; validation: "
-        f"{', '.join(comparison.get('validation', []))}.",
-    ]
+    lines += [_data_text(comparison), ""]
+    for title, head, rows in _tables(comparison):
+        lines += [f"## {title}", "", *markdown_table(head, rows), ""]
+    lines += ["Columns:", ""]
+    lines += [f"- **{k}**: {v}" for k, v in column_terms(comparison).items()]
     return "\n".join(lines) + "\n"
 
 
-def html_table(head: list[str], rows: list[list[str]]) -> str:
-    h = "".join(f"<th>{html.escape(c)}</th>" for c in head)
-    body = "".join(
-        "<tr>" + "".join(f"<td>{html.escape(c)}</td>" for c in r) + "</tr>" for r in rows
+def _data_text(comparison: dict) -> str:
+    text = (
+        f"Trained on {', '.join(comparison['train'])}; validation on "
+        f"{', '.join(comparison['validation'])}"
     )
-    return f"<table><thead><tr>{h}</tr></thead><tbody>{body}</tbody></table>"
+    if comparison.get("test"):
+        text += f"; test on {', '.join(comparison['test'])} (the ranking uses the test run)"
+    text += f". The first {comparison['warmup_s']:g} s of every run are not scored."
+    if comparison.get("autopilot_replay"):
+        held = comparison.get("held_out", "validation")
+        flown = [m["name"] for m in comparison["models"] if m.get(held, {}).get("closed_loop")]
+        open_loop = [m["name"] for m in comparison["models"] if m["name"] not in flown]
+        text += (
+            " The log was flown under the simulator's autopilot; the free runs and k-step "
+            "predictions of " + (", ".join(flown) or "no model") + " are flown under the same "
+            "autopilot (its open-loop inputs replayed, its feedback computed on the model's own "
+            "state), so they compare like with like with the log."
+        )
+        if open_loop:
+            text += f" {', '.join(open_loop)} cannot fly under it and run open loop."
+    return text
+
+
+def free_run_figures(
+    held: pd.DataFrame, free_runs: dict[str, pd.DataFrame], dofs: list[str]
+) -> list[tuple[str, str]]:
+    """Per held-out experiment and DOF, the measured velocity and every model's free run."""
+    out = []
+    t_all = held["t"].to_numpy(np.float64)
+    for name, idx in experiments(held):
+        pos = held.index.get_indexer(idx)
+        t = t_all[pos] - t_all[pos[0]]
+        for d in dofs:
+            fig, axes = new_figure(1, 1, 10.0, 3.2)
+            ax = axes[0, 0]
+            y = held[d].to_numpy(np.float64)[pos]
+            ax.plot(t, y, color="black", lw=1.4, label="measured")
+            span = np.nanmax(y) - np.nanmin(y)
+            for model, pred in free_runs.items():
+                if d not in pred:
+                    continue
+                p = pred[d].to_numpy(np.float64)[pos]
+                ax.plot(
+                    t, np.clip(p, np.nanmin(y) - span, np.nanmax(y) + span), lw=0.9, label=model
+                )
+            ax.set_ylim(np.nanmin(y) - 0.6 * span, np.nanmax(y) + 0.6 * span)
+            ax.set_xlabel("time since the start of the run [s]")
+            ax.set_ylabel(f"{d} [{UNITS.get(d, '')}]")
+            ax.tick_params(labelsize=8)
+            ax.legend(ncol=4, fontsize=7, loc="upper left", bbox_to_anchor=(0.0, -0.22))
+            label = f"{name}: {d}" if name is not None else d
+            out.append((f"Free run, {label}", figure_uri(fig)))
+    return out
 
 
 def force_figure(
-    t: np.ndarray, measured: np.ndarray, predicted: dict[str, np.ndarray], window_s: float = 60.0
+    measured: pd.DataFrame, forces: dict[str, pd.DataFrame], t: np.ndarray, window_s: float = 60.0
 ) -> str:
-    """Measured and predicted force per DOF over the first ``window_s`` of validation (a
-    longer stretch turns nine overlaid models into a blur)."""
+    """Measured and predicted viscous force per DOF over the first ``window_s`` of the held-out
+    data (a longer stretch turns many overlaid models into a blur)."""
     keep = t - t[0] <= window_s
-    t, measured = t[keep], measured[keep]
-    predicted = {k: v[keep] for k, v in predicted.items()}
-    fig, axes = new_figure(6, 1, 10.0, 1.6)
+    fig, axes = new_figure(6, 1, 10.0, 1.7)
     for k, ax in enumerate(axes[:, 0]):
-        ax.plot(t, measured[:, k], color="black", lw=1.2, label="measured τ̄")
-        for name, series in predicted.items():
-            ax.plot(t, series[:, k], lw=0.8, label=name)
-        ax.set_ylabel(FORCES[k])
-    axes[0, 0].legend(ncol=4, fontsize=7, loc="upper right")
+        f = FORCES[k]
+        ax.plot(t[keep], measured[f].to_numpy()[keep], color="black", lw=1.2, label="measured τ̄")
+        for name, series in forces.items():
+            ax.plot(t[keep], series[f].to_numpy()[keep], lw=0.8, label=name)
+        ax.set_ylabel(f"{f} [{FORCE_UNITS[f]}]")
+        ax.tick_params(labelsize=8)
+    axes[0, 0].legend(ncol=5, fontsize=7, loc="lower left", bbox_to_anchor=(0.0, 1.02))
     axes[-1, 0].set_xlabel("t [s]")
     return figure_uri(fig)
 
 
 def complexity_figure(comparison: dict) -> str:
+    """Validation J/J₀ against the number of terms, with the SINDy path."""
     fig, axes = new_figure(1, 1, 7.0, 4.0)
     ax = axes[0, 0]
     for m in comparison["models"]:
-        ax.scatter(m["n_params"], m["validation"]["J_over_J0"], zorder=3)
-        ax.annotate(m["name"], (m["n_params"], m["validation"]["J_over_J0"]), fontsize=8)
-    path = comparison.get("sindy_path") or []
-    if path:
-        j0 = comparison.get("validation_J0", 1.0)
-        pts = sorted(
-            (p["n_terms"], p["validation_J"] / j0)
-            for p in path
-            if p.get("validation_J") is not None
-        )
-        ax.plot([p[0] for p in pts], [p[1] for p in pts], "--", color="gray", label="SINDy path")
-        ax.legend()
+        ratio = m["validation"].get("J_over_J0")
+        if ratio is None or m["kind"] not in ("synthesis", "sindy"):
+            continue
+        ax.scatter(m["n_params"], ratio, zorder=3)
+        ax.annotate(m["name"], (m["n_params"], ratio), fontsize=8)
+        path = m.get("sindy_path") or []
+        j0 = m["validation"].get("J0")
+        if path and j0:
+            pts = sorted(
+                (p["n_terms"], np.sqrt(p["validation_J"]) * 1.0)
+                for p in path
+                if p.get("validation_J") is not None
+            )
+            ax.plot(
+                [p[0] for p in pts],
+                [p[1] for p in pts],
+                "--",
+                color="gray",
+                label=f"{m['name']} path (√ of normalised MSE)",
+            )
+            ax.legend(fontsize=8)
     ax.set_xlabel("number of terms n̄")
     ax.set_ylabel("validation J / J0")
     ax.set_xscale("symlog")
     return figure_uri(fig)
 
 
-def html_page(
-    comparison: dict, t: np.ndarray, measured: np.ndarray, predicted: dict[str, np.ndarray]
-) -> str:
-    """The self-contained HTML report."""
-    velocity = "".join(
-        f"<h2>{html.escape(title.format(h=comparison.get('horizon_s', 0.0)))}</h2>"
-        + html_table(*velocity_rows(comparison, key))
-        for key, title in VELOCITY_TABLES
+def html_page(result) -> str:
+    """The self-contained HTML report of a :class:`nnid.pipeline.CompareResult`."""
+    comparison = result.comparison
+    title = f"Model comparison: {comparison.get('vehicle') or ''}"
+    tables = _tables(comparison)
+    parts = [
+        page_head(title),
+        f"<p><b>{html.escape(comparison['summary'])}</b></p>",
+        f"<p>{html.escape(_data_text(comparison))}</p>",
+    ]
+    title0, head0, rows0 = tables[0]
+    parts += [f"<h2>{html.escape(title0)}</h2>", html_table(head0, rows0)]
+    parts += [definitions(column_terms(comparison))]
+    for t, head, rows in tables[1:]:
+        parts += [f"<h2>{html.escape(t)}</h2>", html_table(head, rows)]
+    held = result.held_out
+    dofs = sorted(
+        {d for m in comparison["models"] for d in _held(m, comparison).get("free_run_nrmse", {})}
+        - {"total"},
+        key=lambda d: "uvwpqr".index(d) if d in "uvwpqr" else 10,
     )
+    figures = free_run_figures(held, result.free_runs, [d for d in dofs if d in held])
+    parts.append("<h2>Free runs on the held-out data</h2>")
+    parts += [
+        f"<h3>{html.escape(name)}</h3><img alt='{html.escape(name)}' src='{uri}'>"
+        for name, uri in figures
+    ]
+    if result.forces:
+        parts += [
+            "<h2>Force error against complexity</h2>",
+            f"<img alt='validation J/J0 against the number of terms' "
+            f"src='{complexity_figure(comparison)}'>",
+            "<h2>Held-out force series (first 60 s)</h2>",
+            f"<img alt='measured and predicted viscous force per DOF' "
+            f"src='{force_figure(result.measured_force, result.forces, held['t'].to_numpy())}'>",
+            "<p>J is the RMS error of the viscous force (McCarter eq. 4.25), J0 the RMS of the "
+            "force series τ̄ the damping model must explain (eq. 4.4).</p>",
+        ]
     coef_blocks = []
-    for name, coefs in comparison.get("coefficients", {}).items():
+    for m in comparison["models"]:
+        coefs = m.get("coefficients")
+        if not coefs:
+            continue
         crow = [[k, _f(v, 5)] for k, v in sorted(coefs.items())]
         coef_blocks.append(
-            f"<details><summary>{html.escape(name)} ({len(crow)} coefficients)"
+            f"<details><summary>{html.escape(m['name'])} ({len(crow)} coefficients)"
             f"</summary>{html_table(['coefficient', 'value'], crow)}</details>"
         )
-    title = f"Damping model comparison: {comparison.get('vehicle', '')}"
-    forces = force_figure(t, measured, predicted)
-    return (
-        page_head(title)
-        + f"""<p>{html.escape(comparison.get("summary", ""))}</p>
-<h2>Force error (McCarter Tables 5.1/5.2 for this data)</h2>
-{html_table(HEAD, table_rows(comparison))}
-<p>J is the RMS error of the viscous force (McCarter eq. 4.25), J0 the RMS of the force series;
-training on {html.escape(", ".join(comparison.get("train", [])))}, validation on
-{html.escape(", ".join(comparison.get("validation", [])))}.</p>
-<h2>Error against complexity</h2>
-<img alt="validation J/J0 against the number of terms" src="{complexity_figure(comparison)}">
-<h2>Validation force series (first 60 s)</h2>
-<img alt="measured and predicted viscous force per DOF" src="{forces}">
-{velocity}
-<h2>Coefficients</h2>
-{"".join(coef_blocks)}
-<script>
-window.addEventListener("load", function () {{
-  var ok = Array.prototype.every.call(document.images, function (i) {{
-    return i.complete && i.naturalWidth > 0; }});
-  document.body.setAttribute("data-images-ok", ok ? "yes" : "no");
-}});
-</script>
-</body></html>
-"""
-    )
+    if coef_blocks:
+        parts += ["<h2>Coefficients</h2>", *coef_blocks]
+    parts += [IMAGES_CHECK, "</body></html>\n"]
+    return "\n".join(parts)

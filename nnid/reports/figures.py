@@ -1,27 +1,32 @@
 """Figures as self-contained data URIs and the page head of the HTML reports, so a report is
-one file readable without a server."""
+one file readable without a server.
+
+Figures are :class:`matplotlib.figure.Figure` objects rendered straight to PNG: no pyplot
+state machine and no backend switch, so writing a report leaves the user's matplotlib setup
+(and any figure they have open) untouched.
+"""
 
 from __future__ import annotations
 
 import base64
+import html
 import io
 
-import matplotlib
-
-matplotlib.use("Agg")  # reports are written headless
-import matplotlib.pyplot as plt
+from matplotlib.figure import Figure
 
 
-def figure_uri(fig) -> str:
-    """PNG data URI of a matplotlib figure (the figure is closed)."""
+def figure_uri(fig: Figure) -> str:
+    """PNG data URI of a figure."""
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=110, bbox_inches="tight")
-    plt.close(fig)
     return "data:image/png;base64," + base64.b64encode(buf.getvalue()).decode("ascii")
 
 
 def new_figure(rows: int = 1, cols: int = 1, width: float = 9.0, height: float = 3.0):
-    return plt.subplots(rows, cols, figsize=(width, height * rows), squeeze=False)
+    """A figure and its axes grid ``[rows, cols]`` (``height`` per row), laid out so tick
+    labels of one panel never run into the next."""
+    fig = Figure(figsize=(width, height * rows), layout="constrained")
+    return fig, fig.subplots(rows, cols, squeeze=False)
 
 
 PAGE_HEAD = """<!DOCTYPE html>
@@ -29,13 +34,47 @@ PAGE_HEAD = """<!DOCTYPE html>
 <style>body{{font-family:sans-serif;max-width:1100px;margin:2em auto;color:#222}}
 table{{border-collapse:collapse;margin:1em 0}}td,th{{border:1px solid #bbb;padding:3px 8px;
 text-align:right}}th{{background:#eee}}td:first-child{{text-align:left}}img{{max-width:100%}}
+dl.columns dt{{font-weight:bold;float:left;clear:left;width:12em}}dl.columns dd{{margin-left:13em}}
 </style></head><body>
 <h1>{title}</h1>
 """
 
+IMAGES_CHECK = """<script>
+window.addEventListener("load", function () {
+  var ok = Array.prototype.every.call(document.images, function (i) {
+    return i.complete && i.naturalWidth > 0; });
+  document.body.setAttribute("data-images-ok", ok ? "yes" : "no");
+});
+</script>
+"""
+"""Sets ``data-images-ok`` on the body once every embedded figure decoded (checked by the
+report tests in headless Chromium)."""
+
 
 def page_head(title: str) -> str:
     """The start of a self-contained report page: doctype, style and the title heading."""
-    import html
-
     return PAGE_HEAD.format(title=html.escape(title))
+
+
+def html_table(head: list[str], rows: list[list[str]]) -> str:
+    """An HTML table of text cells (escaped)."""
+    h = "".join(f"<th>{html.escape(c)}</th>" for c in head)
+    body = "".join(
+        "<tr>" + "".join(f"<td>{html.escape(c)}</td>" for c in r) + "</tr>" for r in rows
+    )
+    return f"<table><thead><tr>{h}</tr></thead><tbody>{body}</tbody></table>"
+
+
+def markdown_table(head: list[str], rows: list[list[str]]) -> list[str]:
+    """The same table in Markdown, one line per row."""
+    return [
+        "| " + " | ".join(head) + " |",
+        "|" + "---|" * len(head),
+        *("| " + " | ".join(r) + " |" for r in rows),
+    ]
+
+
+def definitions(terms: dict[str, str]) -> str:
+    """An HTML definition list of table columns."""
+    items = "".join(f"<dt>{html.escape(k)}</dt><dd>{html.escape(v)}</dd>" for k, v in terms.items())
+    return f'<dl class="columns">{items}</dl>'

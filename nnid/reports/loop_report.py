@@ -11,11 +11,11 @@ import math
 
 import numpy as np
 
+from nnid.physics.dofs import DOFS
 from nnid.physics.effects import parse_effect
-from nnid.reports.compare_report import html_table
-from nnid.reports.figures import figure_uri, new_figure, page_head
+from nnid.reports.figures import figure_uri, html_table, new_figure, page_head
+from nnid.serialization import write_json, write_text
 
-DOFS = ("u", "v", "w", "p", "q", "r")
 DOF_WORD = {"u": "surge", "v": "sway", "w": "heave", "p": "roll", "q": "pitch", "r": "yaw"}
 _DIRECTION = {
     ("u", "pos"): "Forward surge thrust",
@@ -291,13 +291,11 @@ def _split_text(result: dict) -> str:
 def write_loop_report(loop, out_dir) -> list[str]:
     """Write ``loop.json``, ``report.html`` and ``report.md`` of a fitted
     :class:`nnid.loop.residual_loop.ResidualLoop` to ``out_dir``; the summary sentences."""
-    import json
     from pathlib import Path
 
     out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
     result = loop.as_dict()
-    (out_dir / "loop.json").write_text(json.dumps(_finite(result), indent=2, allow_nan=False))
+    write_json(out_dir / "loop.json", result)
     t, measured, before, after, dofs = loop.free_runs()
     figures = {
         "Held-out free run, first 60 s of the first validation experiment": free_run_figure(
@@ -308,19 +306,6 @@ def write_loop_report(loop, out_dir) -> list[str]:
         ),
         "Residual analysis after": correlation_figure(loop.residuals_after_, "augmented"),
     }
-    (out_dir / "report.html").write_text(html_page(result, figures))
-    (out_dir / "report.md").write_text(markdown(result))
+    write_text(out_dir / "report.html", html_page(result, figures))
+    write_text(out_dir / "report.md", markdown(result))
     return summary(result)
-
-
-def _finite(x):
-    """JSON-ready: NumPy scalars as Python numbers, NaN and infinities as null."""
-    if isinstance(x, dict):
-        return {str(k): _finite(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_finite(v) for v in x]
-    if isinstance(x, np.generic):
-        x = x.item()
-    if isinstance(x, float) and not math.isfinite(x):
-        return None
-    return x

@@ -1,8 +1,18 @@
-"""The short report of ``nnid train``: parameters with uncertainty and held-out errors."""
+"""The short report of ``nnid train``: parameters with uncertainty and held-out errors, for a
+model of any kind (the Markdown twin of ``metrics.json``)."""
 
 from __future__ import annotations
 
 import math
+
+from nnid.reports.figures import markdown_table
+
+ERROR_KEYS = (
+    ("free_run_nrmse", "free-run NRMSE"),
+    ("k_step_nrmse", "k-step NRMSE"),
+    ("one_step_nrmse", "one-step NRMSE"),
+    ("force_rmse", "force residual RMS (N, N m)"),
+)
 
 
 def _fmt(x, digits: int = 5) -> str:
@@ -17,51 +27,72 @@ def _rel(value, ref) -> str:
     return f"{(value / ref - 1) * 100:.3g} %"
 
 
-def train_markdown(metrics: dict) -> str:
-    """Markdown for a metrics.json of a Fossen fit."""
+def _params_table(metrics: dict) -> list[str]:
+    params = metrics["params"]
+    physical = any("percentile_error" in p or "vehicle_file" in p for p in params.values())
     ref = metrics.get("reference", {})
     ref_values = ref.get("values", {})
+    head = ["parameter", "estimate", "std. error"]
+    if physical:
+        head += ["percentile error", "significant (95 %)", "vehicle file", "estimate / file − 1"]
+    if ref_values:
+        head += [ref.get("label", "reference"), "estimate / reference − 1"]
+    rows = []
+    for name, p in params.items():
+        row = [f"`{name}`", _fmt(p["value"]), _fmt(p["stderr"], 2)]
+        if physical:
+            pe = p.get("percentile_error")
+            row += [
+                f"{_fmt(pe, 3)} %" if pe is not None else "-",
+                "yes" if p.get("significant") else "no",
+                _fmt(p.get("vehicle_file")),
+                _rel(p["value"], p.get("vehicle_file")),
+            ]
+        if ref_values:
+            r = ref_values.get(name)
+            row += [_fmt(r), _rel(p["value"], r)]
+        rows.append(row)
+    return markdown_table(head, rows)
+
+
+def train_markdown(metrics: dict) -> str:
+    """Markdown for a ``metrics.json`` of any model kind."""
     lines = [
-        f"# {metrics['model']} model of '{metrics.get('vehicle', '?')}' ({metrics['trainer']})",
+        f"# {metrics['model']} model"
+        + (f" of '{metrics['vehicle']}'" if metrics.get("vehicle") else "")
+        + f" ({metrics.get('trainer') or '-'})",
+        "",
+        f"{metrics.get('n_params', len(metrics['params']))} parameters.",
         "",
         "## Parameters",
         "",
+        *_params_table(metrics),
     ]
-    head = (
-        "| parameter | estimate | std. error | percentile error | significant (95 %) | "
-        "vehicle file | estimate / file − 1 |"
-    )
-    sep = "|---|---|---|---|---|---|---|"
-    if ref_values:
-        head += f" {ref.get('label', 'reference')} | estimate / reference − 1 |"
-        sep += "---|---|"
-    lines += [head, sep]
-    for name, p in metrics["params"].items():
-        pe = p.get("percentile_error")
-        row = (
-            f"| `{name}` | {_fmt(p['value'])} | {_fmt(p['stderr'], 2)} | "
-            f"{_fmt(pe, 3)}{' %' if pe is not None else ''} | "
-            f"{'yes' if p.get('significant') else 'no'} | {_fmt(p.get('vehicle_file'))} | "
-            f"{_rel(p['value'], p.get('vehicle_file'))} |"
-        )
-        if ref_values:
-            r = ref_values.get(name)
-            row += f" {_fmt(r)} | {_rel(p['value'], r)} |"
-        lines.append(row)
-    for part in ("train", "validation"):
-        scores = metrics.get(part, {})
-        if not any(k in scores for k in ("free_run_nrmse", "one_step_nrmse", "force_rmse")):
+    used = metrics.get("validation_used_for")
+    for part in ("train", "validation", "test"):
+        scores = metrics.get(part)
+        if not scores:
             continue
+        note = f"; used for {used} while fitting" if part == "validation" and used else ""
         lines += [
             "",
-            f"## Errors on the {part} split ({scores.get('samples', '?')} samples, "
-            f"first {metrics.get('warmup_s', 0)} s of each run excluded)",
+            f"## Errors on the {part} split ({scores.get('samples', '?')} samples scored, "
+            f"the first {metrics.get('warmup_s', 0)} s of each run excluded{note})",
             "",
         ]
-        for key in ("free_run_nrmse", "one_step_nrmse", "force_rmse"):
+        for key, label in ERROR_KEYS:
             if key in scores:
                 vals = scores[key]
-                lines.append(f"- {key}: " + ", ".join(f"{k} {_fmt(v, 3)}" for k, v in vals.items()))
+                cells = ", ".join(
+                    f"{k} {_fmt(v, 3) if v is not None else 'diverged'}" for k, v in vals.items()
+                )
+                lines.append(f"- {label}: {cells}")
+        if scores.get("J") is not None:
+            lines.append(f"- J = {_fmt(scores['J'], 4)}, J/J0 = {_fmt(scores['J_over_J0'], 3)}")
+        for key in ("diverged", "k_step_diverged", "one_step_diverged"):
+            if scores.get(key):
+                when = ", ".join(f"{d} at t = {t:.4g} s" for d, t in scores[key].items())
+                lines.append(f"- **{key.replace('_', ' ')}**: {when}")
     if metrics.get("warnings"):
         lines += ["", "## Warnings", ""] + [f"- {w}" for w in metrics["warnings"]]
     nd = metrics.get("nondimensional")
@@ -71,5 +102,5 @@ def train_markdown(metrics: dict) -> str:
             f"- `{k}` = {_fmt(v['value'])} ± {_fmt(v['stderr'], 2)}"
             for k, v in nd["params"].items()
         ]
-    lines += ["", f"Fitted in {metrics['seconds']:.1f} s."]
+    lines += ["", f"Fitted and scored in {metrics['seconds']:.1f} s."]
     return "\n".join(lines) + "\n"

@@ -11,40 +11,29 @@ from __future__ import annotations
 
 import copy
 import math
+import time
 from collections.abc import Callable, Iterable, Sequence
-from dataclasses import dataclass, field
 from typing import Any, Literal
 
 import torch
+from sklearn.base import BaseEstimator
+
+from nnid.trainers.history import History, Progress, silent
 
 Residual = Callable[[dict[str, torch.Tensor], Any], torch.Tensor]
 Batches = Sequence[Any] | Callable[[int], Iterable[Any]]
 
 
-@dataclass
-class AdamHistory:
-    """Per-epoch training and validation mean-square residuals, and why training stopped.
+class Adam(BaseEstimator):
+    """Adam with a learning-rate schedule from :mod:`torch.optim.lr_scheduler` (``"cosine"``:
+    cosine annealing to ``lr_min`` over ``max_epochs``; ``"plateau"``: halve the rate after
+    ``plateau`` epochs without validation improvement, not below ``lr_min``; ``"constant"``),
+    gradient-norm clipping at ``clip`` and early stopping after ``max_fail`` epochs without
+    validation improvement (MATLAB's max_fail); the best validation state is restored (the start
+    included). ``max_seconds`` (MATLAB's ``time``; default no limit) stops after the first epoch
+    that ends past that wall time."""
 
-    ``time[k]`` is the wall time in seconds from the start of ``fit`` to the end of epoch k's
-    validation (cumulative, like ``LMHistory.time``); ``seconds`` is the whole ``fit``,
-    restoring the best state included.
-    """
-
-    train: list[float] = field(default_factory=list)
-    validation: list[float] = field(default_factory=list)
-    lr: list[float] = field(default_factory=list)
-    time: list[float] = field(default_factory=list)
-    best_epoch: int = -1
-    stop: str = "max_epochs"
-    seconds: float = 0.0
-
-
-class Adam:
-    """Adam with ``schedule`` ("cosine" annealing to ``lr_min`` or "plateau": halve the rate
-    after ``plateau`` epochs without validation improvement), gradient-norm clipping at
-    ``clip`` and early stopping after ``max_fail`` epochs without validation improvement
-    (MATLAB's max_fail); the best validation state is restored. ``max_seconds`` (MATLAB's
-    ``time``; default no limit) stops after the first epoch that ends past that wall time."""
+    kind = "adam"
 
     def __init__(
         self,
@@ -68,13 +57,24 @@ class Adam:
         self.weight_decay = weight_decay
         self.max_seconds = max_seconds
 
-    def _rate(self, epoch: int, current: float, since_best: int) -> float:
+    def _scheduler(self, opt: torch.optim.Optimizer):
+        sched = torch.optim.lr_scheduler
         if self.schedule == "cosine":
-            frac = epoch / max(1, self.max_epochs - 1)
-            return self.lr_min + 0.5 * (self.lr - self.lr_min) * (1 + math.cos(math.pi * frac))
-        if self.schedule == "plateau" and since_best > 0 and since_best % self.plateau == 0:
-            return max(self.lr_min, current * 0.5)
-        return current
+            return sched.CosineAnnealingLR(
+                opt, T_max=max(1, self.max_epochs - 1), eta_min=self.lr_min
+            )
+        if self.schedule == "plateau":
+            # threshold 0: any improvement on the best resets the count, as early stopping's does
+            return sched.ReduceLROnPlateau(
+                opt,
+                factor=0.5,
+                patience=max(self.plateau - 1, 0),
+                threshold=0.0,
+                min_lr=self.lr_min,
+            )
+        if self.schedule == "constant":
+            return None
+        raise ValueError(f"schedule is 'cosine', 'plateau' or 'constant', not {self.schedule!r}")
 
     def fit(
         self,
@@ -82,20 +82,35 @@ class Adam:
         residual: Residual,
         train_batches: Batches,
         val_batches: Sequence[Any] | None = None,
-    ) -> AdamHistory:
+        progress: Progress | None = None,
+    ) -> History:
         """Minimise mean(residual²) over ``train_batches`` (a list, or a callable giving the
-        batches of an epoch, for resampling); stop early on ``val_batches``."""
-        import time
-
+        batches of an epoch, for resampling); stop early on ``val_batches``. ``progress(epoch,
+        max_epochs, message)`` is called after every epoch; ``extra["lr"]`` holds the rate each
+        epoch trained with."""
         start = time.perf_counter()
+        report = progress or silent
         params = {k: p for k, p in module.named_parameters() if p.requires_grad}
         opt = torch.optim.Adam(params.values(), lr=self.lr, weight_decay=self.weight_decay)
-        hist = AdamHistory()
-        best, best_state, since_best, rate = math.inf, None, 0, self.lr
+        scheduler = self._scheduler(opt)
+        hist = History()
+
+        def mean_square(batches: Iterable[Any]) -> float:
+            with torch.no_grad():
+                rs = [residual(params, b) for b in batches]
+            return float(sum((r**2).sum() for r in rs) / max(sum(r.numel() for r in rs), 1))
+
+        first = train_batches(0) if callable(train_batches) else train_batches
+        score = mean_square(val_batches) if val_batches else None
+        hist.record(mean_square(first), score, time.perf_counter() - start)
+        best = score if score is not None else hist.train[0]
+        if isinstance(scheduler, torch.optim.lr_scheduler.ReduceLROnPlateau):
+            scheduler.step(best)  # the start counts, as it does for early stopping
+        best_state = copy.deepcopy(module.state_dict())
+        since_best = 0
+        hist.stop_reason = "max_epochs"
         for epoch in range(self.max_epochs):
-            rate = self._rate(epoch, rate, since_best)
-            for g in opt.param_groups:
-                g["lr"] = rate
+            rate = opt.param_groups[0]["lr"]
             batches = train_batches(epoch) if callable(train_batches) else train_batches
             total, count = 0.0, 0
             for batch in batches:
@@ -108,30 +123,33 @@ class Adam:
                 opt.step()
                 total += float(loss.detach()) * r.numel()
                 count += r.numel()
-            hist.train.append(total / max(count, 1))
-            hist.lr.append(rate)
-            score = hist.train[-1]
-            if val_batches:
-                with torch.no_grad():
-                    rs = [residual(params, b) for b in val_batches]
-                score = float(sum((r**2).sum() for r in rs) / sum(r.numel() for r in rs))
-                hist.validation.append(score)
-            hist.time.append(time.perf_counter() - start)
-            if not math.isfinite(score):
-                hist.stop = "non-finite loss"
+            train = total / max(count, 1)
+            score = mean_square(val_batches) if val_batches else None
+            hist.record(train, score, time.perf_counter() - start, lr=rate)
+            value = score if score is not None else train
+            report(
+                epoch + 1,
+                self.max_epochs,
+                f"Adam epoch {epoch + 1}: train MSE {train:.4g}"
+                + (f", validation {score:.4g}" if score is not None else ""),
+            )
+            if not math.isfinite(value):
+                hist.stop_reason = "non-finite loss"
                 break
-            if score < best:
-                best, since_best, hist.best_epoch = score, 0, epoch
+            if value < best:
+                best, since_best, hist.best_epoch = value, 0, epoch + 1
                 best_state = copy.deepcopy(module.state_dict())
             else:
                 since_best += 1
                 if val_batches and since_best >= self.max_fail:
-                    hist.stop = "validation failures"
+                    hist.stop_reason = "validation"
                     break
+            if isinstance(scheduler, torch.optim.lr_scheduler.ReduceLROnPlateau):
+                scheduler.step(value)
+            elif scheduler is not None:
+                scheduler.step()
             if self.max_seconds is not None and hist.time[-1] >= self.max_seconds:
-                hist.stop = "max_seconds"
+                hist.stop_reason = "max_seconds"
                 break
-        if best_state is not None:
-            module.load_state_dict(best_state)
-        hist.seconds = time.perf_counter() - start
+        module.load_state_dict(best_state)
         return hist

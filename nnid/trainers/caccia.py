@@ -68,25 +68,24 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
 import pandas as pd
-from pydantic import BaseModel, ConfigDict, Field, model_validator
 from scipy.integrate import cumulative_trapezoid
 from scipy.signal import savgol_filter
 
-from nnid.config import SimulateConfig
-from nnid.datasets.excitation import DOptimalSine
+from nnid.datasets.arrays import log_arrays
+from nnid.datasets.excitation import PRBS, DOptimalSine
 from nnid.datasets.measurement import Measurement
 from nnid.datasets.preprocess import savgol_window
 from nnid.datasets.simulator import simulate, simulate_config
 from nnid.errors import NnidInputError
-from nnid.models.parametric import Regression, log_arrays
-from nnid.physics.added_mass import DOFS, FORCES
+from nnid.physics.dofs import DOFS, FORCES
 from nnid.physics.thrusters import Actuation
+from nnid.trainers.history import Progress, silent
 from nnid.trainers.least_squares import Estimate, correlation_time, solve_least_squares
+from nnid.trainers.regression import Regression
 
 POSITION_OF = {"u": "x", "v": "y", "w": "z", "p": "phi", "q": "theta", "r": "psi"}
 """The position χ integrated from each DOF's velocity (level attitude, Caccia's 1-D trials)."""
@@ -396,6 +395,8 @@ class CacciaTwoStep:
     (``velocity_window`` s, ``velocity_order``) and ``correlated``.
     """
 
+    kind = "caccia"
+
     def __init__(
         self,
         dof: str = "w",
@@ -623,7 +624,7 @@ class CacciaTwoStep:
         est = solve_least_squares(h, y, names=names)
         if self.correlated:
             reg = Regression(h, y, names, (self.dof,), y.size)
-            est.cov = est.cov * correlation_time(reg, est.theta)
+            est.cov = est.cov * correlation_time(reg.residuals(est.theta))
         self.inertia_ = est
         return est
 
@@ -654,7 +655,7 @@ class CacciaTwoStep:
             self.fit_inertia(sinusoid, vehicle)
         return self._finish(vehicle)
 
-    def fit(self, structure, data: Mapping[str, Any]) -> Estimate:
+    def fit(self, structure, data: Mapping[str, Any], progress: Progress | None = None) -> Estimate:
         """Trainer protocol: ``structure.vehicle`` and ``data`` = ``{"steady": log_arrays(…),
         "sinusoid": log_arrays(…)}`` (sinusoid optional), or the steady arrays alone. The
         arrays' pose column of the DOF must be the measured position. Mode labels, if any,
@@ -664,6 +665,7 @@ class CacciaTwoStep:
         self._steady_from(steady, steady.get("mode"))
         if "sinusoid" in data and data["sinusoid"] is not None:
             self._inertia_from(data["sinusoid"])
+        (progress or silent)(1, 1, "Caccia two-step")
         return self._finish(vehicle)
 
     def _finish(self, vehicle) -> Estimate:
@@ -707,140 +709,60 @@ class CacciaTwoStep:
         return "\n".join(lines)
 
 
-# --- the config -----------------------------------------------------------------------------
+# --- the campaign ---------------------------------------------------------------------------
 
 
-class SinusoidSpec(BaseModel):
-    """The d-optimal sinusoid run (Caccia eqs 13-15) on the DOF's force channel."""
-
-    model_config = ConfigDict(extra="forbid")
-    offset: float
-    amplitude: float = Field(gt=0)
-    prior_inertia: float | None = Field(None, gt=0)
-    prior_added_fraction: float = Field(0.5, ge=0.1, le=1.0)
-    duration: float = Field(gt=0)
-    seed: int = 1000
-    measurement: Measurement | None = None
-
-    @model_validator(mode="after")
-    def _no_inversion(self) -> SinusoidSpec:
-        if self.amplitude > abs(self.offset):
-            raise ValueError("amplitude must not exceed |offset|: the thrust would reverse")
-        return self
-
-
-class SteadySpec(BaseModel):
-    """Step-1 options (see :class:`CacciaTwoStep`)."""
-
-    model_config = ConfigDict(extra="forbid")
-    reference: list[tuple[str, Literal["pos", "neg"]]] = Field(
-        default_factory=lambda: [("", "pos")]
-    )
-    force_eta_one: bool = False
-    terms: list[Literal["linear", "quadratic"]] = Field(
-        default_factory=lambda: ["linear", "quadratic"]
-    )
-    settings: dict[str, int] | None = None
-    settle_window: float = Field(10.0, gt=0)
-    settle_order: int = Field(2, ge=1, le=6)
-    settle_accel: float = Field(2e-3, gt=0)
-    min_plateau: float = Field(10.0, gt=0)
-    speed: Literal["slope", "mean", "asymptote"] = "asymptote"
-    weighting: Literal["none", "speed"] = "speed"
-
-
-class CacciaConfig(BaseModel):
-    """``configs/romeo_heave_caccia.toml`` (fields documented at the top of that file)."""
-
-    model_config = ConfigDict(extra="forbid")
-    kind: Literal["caccia"] = "caccia"
-    vehicle: str
-    dof: Literal["u", "v", "w", "p", "q", "r"] = "w"
-    campaign: str | SimulateConfig
-    campaign_seed: int | None = None
-    steady_state: SteadySpec = Field(default_factory=SteadySpec)
-    sinusoid: SinusoidSpec
-    velocity_window: float = Field(5.0, gt=0)
-    velocity_order: int = Field(4, ge=2, le=8)
-    correlated: bool = True
-
-    def trainer(self) -> CacciaTwoStep:
-        s = self.steady_state
-        return CacciaTwoStep(
-            dof=self.dof,
-            reference=[tuple(r) for r in s.reference],
-            force_eta_one=s.force_eta_one,
-            terms=s.terms,
-            settings=s.settings,
-            settle_window=s.settle_window,
-            settle_order=s.settle_order,
-            settle_accel=s.settle_accel,
-            min_plateau=s.min_plateau,
-            speed=s.speed,
-            weighting=s.weighting,
-            velocity_window=self.velocity_window,
-            velocity_order=self.velocity_order,
-            correlated=self.correlated,
-        )
-
-
-def load_caccia_config(path: str | Path) -> tuple[CacciaConfig, SimulateConfig]:
-    """The Caccia config and its campaign (a path is relative to the config file)."""
-    from nnid.config import load_config
-    from nnid.validation import read_toml, validated
-
-    path = Path(path)
-    cfg = validated(CacciaConfig, read_toml(path), str(path))
-    campaign = cfg.campaign
-    if isinstance(campaign, str):
-        campaign = load_config(path.parent / campaign)
-    if cfg.campaign_seed is not None:
-        campaign = campaign.model_copy(update={"seed": cfg.campaign_seed})
-    if campaign.vehicle != cfg.vehicle:
-        raise NnidInputError(
-            f"the campaign flies '{campaign.vehicle}', the config names '{cfg.vehicle}'",
-            source=str(path),
-            field="campaign",
-        )
-    return cfg, campaign
-
-
-@dataclass
-class CacciaRun:
-    """What :func:`run_caccia` made: the estimate, the trainer, the logs and the design."""
-
-    estimate: Estimate
-    trainer: CacciaTwoStep
-    steady_log: pd.DataFrame
-    sinusoid_log: pd.DataFrame
-    design: DOptimalSine
-
-
-def run_caccia(path: str | Path, vehicle=None) -> CacciaRun:
-    """Simulate the campaign, fit step 1, design and simulate the d-optimal sinusoid from the
-    step-1 drag, fit step 2 (the flow of Caccia section III)."""
-    from nnid.vehicle import load_vehicle
-
-    cfg, campaign = load_caccia_config(path)
-    vehicle = vehicle or load_vehicle(cfg.vehicle)
-    trainer = cfg.trainer()
+def caccia_campaign(
+    campaign, vehicle, trainer: CacciaTwoStep, sinusoid, validation=None
+) -> tuple[pd.DataFrame, DOptimalSine]:
+    """Caccia's campaign flown end to end (section III), as one log: the steady-state runs of
+    ``campaign`` (a :class:`nnid.config.SimulateConfig`), step 1 fitted on them, the d-optimal
+    sinusoid designed from that drag (``sinusoid``: offset, amplitude, prior inertia or added
+    fraction, duration, seed, measurement) and flown (experiment "sinusoid"), and with
+    ``validation`` a held-out PRBS run on the same DOF (fresh noise; its experiment name,
+    duration, hold, amplitude fraction and seed). Returns the log and the design."""
     steady_log = simulate_config(campaign, vehicle)
     trainer.fit_steady(steady_log, vehicle)
-    spec = cfg.sinusoid
-    prior = spec.prior_inertia or trainer.rigid_inertia(vehicle) * (1 + spec.prior_added_fraction)
-    design = trainer.design_sinusoid(spec.offset, spec.amplitude, prior, spec.duration)
+    prior = sinusoid.prior_inertia or trainer.rigid_inertia(vehicle) * (
+        1 + sinusoid.prior_added_fraction
+    )
+    design = trainer.design_sinusoid(sinusoid.offset, sinusoid.amplitude, prior, sinusoid.duration)
+    effects = [(e.name, e.value) for e in campaign.effects]
     sinusoid_log = simulate_sinusoid(
         vehicle,
         design,
-        cfg.dof,
+        trainer.dof,
         campaign.dt,
         substeps=campaign.substeps,
-        measurement=spec.measurement or campaign.measurement,
-        seed=spec.seed,
-        effects=[(e.name, e.value) for e in campaign.effects],
+        measurement=sinusoid.measurement or campaign.measurement,
+        seed=sinusoid.seed,
+        effects=effects,
     )
-    trainer.fit_inertia(sinusoid_log, vehicle)
-    return CacciaRun(trainer._finish(vehicle), trainer, steady_log, sinusoid_log, design)
+    logs = [steady_log, sinusoid_log]
+    if validation is not None:
+        t = np.arange(0.0, validation.duration, campaign.dt)
+        rms_force = float(np.std(steady_log.filter(like="cmd_").to_numpy())) or 1.0
+        amp = validation.fraction * max(abs(sinusoid.offset), sinusoid.amplitude, rms_force)
+        prbs = PRBS(
+            channel="X",
+            amplitude=amp,
+            hold=validation.hold,
+            duration=t[-1] + campaign.dt,
+            seed=validation.seed,
+        )
+        logs.append(
+            simulate(
+                vehicle,
+                force_to_commands(vehicle, trainer.dof, prbs(t)),
+                campaign.dt,
+                substeps=campaign.substeps,
+                effects=effects,
+                measurement=campaign.measurement,
+                seed=campaign.seed + 999,
+                experiment=validation.experiment,
+            )
+        )
+    return pd.concat(logs, ignore_index=True), design
 
 
 def simulate_sinusoid(
@@ -870,15 +792,12 @@ def simulate_sinusoid(
 
 __all__ = [
     "POSITION_OF",
-    "CacciaConfig",
-    "CacciaRun",
     "CacciaTwoStep",
     "Plateau",
+    "caccia_campaign",
     "find_plateaus",
     "force_to_commands",
     "integrated_regression",
-    "load_caccia_config",
-    "run_caccia",
     "simulate_sinusoid",
     "steady_state_regression",
 ]

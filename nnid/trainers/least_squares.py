@@ -11,12 +11,17 @@ Rank-deficient or unexcited regressions warn and name the parameters (Weiss eqs 
 from __future__ import annotations
 
 import warnings
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
+from sklearn.base import BaseEstimator
 
+from nnid.errors import NnidInputError
 from nnid.evaluation.persistence import ExcitationReport, excitation_from_gram
-from nnid.models.parametric import Regression
+from nnid.serialization import json_float
+from nnid.trainers.history import Progress, silent
+from nnid.trainers.regression import Regression
 
 INSIGNIFICANT_PERCENT = 100.0 / 1.96  # 51.02 %, Caccia (L279)
 
@@ -50,12 +55,55 @@ class Estimate:
     def significant(self) -> np.ndarray:
         return self.percentile_error <= INSIGNIFICANT_PERCENT
 
-    def as_dict(self) -> dict[str, dict[str, float | None]]:
-        """``{name: {"value": θ, "stderr": σ}}`` (σ None where it is not finite)."""
+    def as_state(self) -> dict:
+        """The estimate as JSON-ready data (NaN becomes null on writing; see
+        :meth:`from_state`)."""
         return {
-            n: {"value": float(v), "stderr": float(s) if np.isfinite(s) else None}
-            for n, v, s in zip(self.names, self.theta, self.stderr, strict=True)
+            "names": list(self.names),
+            "theta": self.theta,
+            "cov": self.cov,
+            "sigma2": self.sigma2,
+            "n_obs": self.n_obs,
+            "dof_sigma2": self.dof_sigma2,
         }
+
+    @classmethod
+    def from_state(cls, state: dict) -> Estimate:
+        """Inverse of :meth:`as_state` after a JSON round trip (null is NaN again)."""
+        names = list(state["names"])
+        return cls(
+            names,
+            np.array(state["theta"], dtype=float),
+            np.array(state["cov"], dtype=float).reshape(len(names), len(names)),
+            json_float(state["sigma2"]),
+            int(state["n_obs"]),
+            dof_sigma2={k: json_float(v) for k, v in state["dof_sigma2"].items()},
+        )
+
+    def as_dict(self) -> dict[str, dict[str, float | bool | None]]:
+        """``{name: {"value": θ, "stderr": σ, "percentile_error": 100 σ/|θ| (%),
+        "significant": bool}}``; a number that is not finite (an unidentified parameter) is
+        None."""
+        return {
+            n: {
+                "value": _finite(v),
+                "stderr": _finite(s),
+                "percentile_error": _finite(pe),
+                "significant": bool(ok),
+            }
+            for n, v, s, pe, ok in zip(
+                self.names,
+                self.theta,
+                self.stderr,
+                self.percentile_error,
+                self.significant,
+                strict=True,
+            )
+        }
+
+
+def _finite(x: float) -> float | None:
+    return float(x) if np.isfinite(x) else None
 
 
 def solve_least_squares(
@@ -99,7 +147,7 @@ def solve_least_squares(
     return Estimate(names, theta, cov, sigma2, n, report)
 
 
-class LeastSquares:
+class LeastSquares(BaseEstimator):
     """Batch (weighted) least squares on a :class:`Regression`.
 
     ``weighting="feasible"`` (default) reweights each DOF equation by 1/σ̂²_dof from a first
@@ -110,23 +158,27 @@ class LeastSquares:
     rows, and the textbook formula would report uncertainties that are too small.
     """
 
+    kind = "ls"
+
     def __init__(
         self,
         weighting: str = "feasible",
         filter_lambda: float | None = None,
         correlated: bool = True,
     ) -> None:
-        if weighting not in ("feasible", "none"):
-            raise ValueError("weighting is 'feasible' or 'none'")
         self.weighting = weighting
         self.filter_lambda = filter_lambda
         self.correlated = correlated
 
-    def fit(self, structure, data: dict) -> Estimate:
+    def fit(self, structure, data: dict, progress: Progress | None = None) -> Estimate:
         """Build the regression (filtered if ``filter_lambda``) and solve it."""
-        return self.solve(structure.regression(data, self.filter_lambda))
+        est = self.solve(structure.regression(data, self.filter_lambda))
+        (progress or silent)(1, 1, "least squares")
+        return est
 
     def solve(self, reg: Regression) -> Estimate:
+        if self.weighting not in ("feasible", "none"):
+            raise NnidInputError("weighting is 'feasible' or 'none'", field="weighting")
         est = solve_least_squares(reg.phi, reg.y, names=reg.names)
         dof_sigma2 = self._dof_variances(reg, est.theta)
         if self.weighting == "feasible" and len(reg.dofs) > 1:
@@ -139,19 +191,22 @@ class LeastSquares:
             dof_sigma2 = self._dof_variances(reg, est.theta)
         est.dof_sigma2 = dof_sigma2
         if self.correlated:
-            est.cov = est.cov * correlation_time(reg, est.theta)
+            est.cov = est.cov * correlation_time(reg.residuals(est.theta))
         return est
 
     @staticmethod
     def _dof_variances(reg: Regression, theta: np.ndarray) -> dict[str, float]:
-        th = np.nan_to_num(theta)
-        out = {}
-        for d in reg.dofs:
-            rows = reg.dof_rows(d)
-            r = reg.y[rows] - reg.phi[rows] @ th
-            r = r[np.isfinite(r)]
-            out[d] = float(r @ r / max(r.size - 1, 1))
-        return out
+        return dict(zip(reg.dofs, dof_variances(reg.residuals(theta)).tolist(), strict=True))
+
+
+def dof_variances(residuals: Sequence[np.ndarray] | np.ndarray) -> np.ndarray:
+    """The variance of each DOF equation's residual (finite samples; the columns of a 2-D
+    array, or one series per equation): the first pass of the feasible weighting, whose second
+    pass weights each equation by 1/σ̂² so that forces (N) and moments (N m) count on equal
+    statistical footing. Centred: a missing effect that biases one equation's residual is not
+    taken for noise there."""
+    series = residuals.T if isinstance(residuals, np.ndarray) and residuals.ndim == 2 else residuals
+    return np.asarray([float(np.nanvar(np.asarray(r, dtype=np.float64))) for r in series])
 
 
 def autocorrelation_time(r: np.ndarray, max_lag: int = 5000) -> float | None:
@@ -171,13 +226,11 @@ def autocorrelation_time(r: np.ndarray, max_lag: int = 5000) -> float | None:
     return 1.0 + 2.0 * float(np.sum(acf[1:cut]))
 
 
-def correlation_time(reg: Regression, theta: np.ndarray, max_lag: int = 5000) -> float:
-    """:func:`autocorrelation_time` of the residual per DOF equation, averaged over the DOFs:
-    the factor by which correlated samples shrink the effective sample size."""
-    th = np.nan_to_num(theta)
-    taus = [
-        autocorrelation_time(reg.y[reg.dof_rows(d)] - reg.phi[reg.dof_rows(d)] @ th, max_lag)
-        for d in reg.dofs
-    ]
+def correlation_time(residuals: np.ndarray | Sequence[np.ndarray], max_lag: int = 5000) -> float:
+    """:func:`autocorrelation_time` of each residual series (the columns of a 2-D array, or a
+    sequence of series: one per DOF equation), averaged (at least 1): the factor by which
+    correlated samples shrink the effective sample size."""
+    series = residuals.T if isinstance(residuals, np.ndarray) and residuals.ndim == 2 else residuals
+    taus = [autocorrelation_time(np.asarray(r, dtype=np.float64), max_lag) for r in series]
     taus = [t for t in taus if t is not None]
     return max(float(np.mean(taus)), 1.0) if taus else 1.0

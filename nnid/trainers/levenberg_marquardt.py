@@ -19,8 +19,9 @@ parameters are those of the best validation error.
 
 Jacobians come from :mod:`torch.func`; there are two modes:
 
-- ``jacobian="forward"`` (default, always valid): forward-mode products J v for a block of unit
-  tangents at a time (``vmap`` over ``jvp``). It works for any residual, including ones that
+- ``jacobian="forward"`` (always valid; what ``"auto"`` uses unless told otherwise):
+  forward-mode products J v for a block of unit tangents at a time (``vmap`` over ``jvp``).
+  It works for any residual, including ones that
   couple all rows (a simulated trajectory integrated with RK4, a parallel NARX simulation).
   When the whole n × P Jacobian of a batch fits the memory budget it is formed and JᵀJ is one
   matrix product. Otherwise the columns are taken in blocks J_a of width c (n·c ≤ budget) and
@@ -45,45 +46,22 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import torch
+from sklearn.base import BaseEstimator
 from torch.func import jacrev, jvp, vjp, vmap
 
-__all__ = ["LMHistory", "LevenbergMarquardt", "NormalEquations"]
+from nnid.errors import NnidInputError
+from nnid.trainers.history import History, Progress, silent
+
+__all__ = ["LevenbergMarquardt", "NormalEquations"]
 
 Residual = Callable[[dict[str, torch.Tensor], Any], torch.Tensor]
 
 _MU_FLOOR = 1e-20  # trainlm: ``if mu < 1e-20, mu = 1e-20``
 _CACHE_ROWS = 8192  # samples mode: row chunks above this are no faster (cache), only larger
-
-
-@dataclass
-class LMHistory:
-    """Per-epoch record of a :meth:`LevenbergMarquardt.fit` run.
-
-    Entry 0 of each per-epoch list is the starting point; entry k is after epoch k.
-    ``gradient[k]`` is ‖∇ MSE‖ = 2‖Jᵀr‖/N at the parameters of entry k (one shorter than the
-    others when the run stopped without a last Jacobian pass). ``time`` is the cumulative wall
-    time in seconds. ``peak_jacobian_rows`` and
-    ``peak_jacobian_elements`` are the largest Jacobian block held at once (rows × columns).
-    """
-
-    train_mse: list[float] = field(default_factory=list)
-    val_mse: list[float] = field(default_factory=list)
-    mu: list[float] = field(default_factory=list)
-    gradient: list[float] = field(default_factory=list)
-    time: list[float] = field(default_factory=list)
-    stop_reason: str = ""
-    best_epoch: int = 0
-    peak_jacobian_rows: int = 0
-    peak_jacobian_elements: int = 0
-
-    @property
-    def epochs(self) -> int:
-        """Number of epochs run (accepted or not)."""
-        return len(self.train_mse) - 1
 
 
 @dataclass
@@ -120,7 +98,7 @@ def _leading_len(batch: Any) -> int:
 # --------------------------------------------------------------------------- trainer
 
 
-class LevenbergMarquardt:
+class LevenbergMarquardt(BaseEstimator):
     """Levenberg-Marquardt (``trainlm``) for a module's parameters and a residual function.
 
     Args:
@@ -134,9 +112,12 @@ class LevenbergMarquardt:
         min_grad: stop when ‖∇ MSE‖ = 2‖Jᵀr‖/N falls below this (trainlm ``min_grad`` = 1e-7).
         goal: stop when the training MSE is at or below this (trainlm ``goal`` = 0).
         memory_budget_mb: the largest Jacobian block (float64) held at once, in MiB.
-        jacobian: ``"forward"`` (any residual) or ``"samples"`` (residual separable by sample;
-            see the module docstring).
+        jacobian: ``"forward"`` (any residual), ``"samples"`` (residual separable by sample;
+            see the module docstring) or ``"auto"`` (default: "samples" when the caller of
+            :meth:`fit` says the residual is separable, else "forward").
     """
+
+    kind = "lm"
 
     def __init__(
         self,
@@ -149,14 +130,8 @@ class LevenbergMarquardt:
         min_grad: float = 1e-7,
         goal: float = 0.0,
         memory_budget_mb: float = 256.0,
-        jacobian: str = "forward",
+        jacobian: str = "auto",
     ) -> None:
-        if jacobian not in ("forward", "samples"):
-            raise ValueError(f"jacobian must be 'forward' or 'samples', got {jacobian!r}")
-        if not (0.0 < mu_dec < 1.0 < mu_inc):
-            raise ValueError("need 0 < mu_dec < 1 < mu_inc")
-        if memory_budget_mb <= 0:
-            raise ValueError("memory_budget_mb must be positive")
         self.mu = mu
         self.mu_dec = mu_dec
         self.mu_inc = mu_inc
@@ -167,6 +142,7 @@ class LevenbergMarquardt:
         self.goal = goal
         self.memory_budget_mb = memory_budget_mb
         self.jacobian = jacobian
+        self._mode = "forward"
         self._peak_rows = 0
         self._peak_elements = 0
         self._rows: dict[int, int] = {}
@@ -235,7 +211,7 @@ class LevenbergMarquardt:
         jtr = torch.zeros(p, dtype=torch.float64)
         sse, n = 0.0, 0
         for b in batches:
-            if self.jacobian == "forward":
+            if self._mode == "forward":
                 s, k = self._accumulate_forward(residual, theta, layout, b, jtj, jtr)
             else:
                 s, k = self._accumulate_samples(residual, theta, layout, b, jtj, jtr)
@@ -340,28 +316,48 @@ class LevenbergMarquardt:
         residual: Residual,
         train_batches: Sequence[Any],
         val_batches: Sequence[Any] | None = None,
-    ) -> LMHistory:
-        """Train ``module``'s parameters in place; returns the per-epoch history.
+        progress: Progress | None = None,
+        separable: bool = False,
+    ) -> History:
+        """Train ``module``'s parameters in place; returns the per-epoch :class:`History`
+        (``extra``: ``mu`` per entry, ``gradient`` ‖∇ MSE‖ = 2‖Jᵀr‖/N per Jacobian pass;
+        ``info``: the largest Jacobian block held, rows and elements).
 
         ``residual(params, batch)`` returns the 1-D residual of one batch, computed with
         ``torch.func.functional_call(module, params, ...)`` on a parameter dict shaped like
         ``dict(module.named_parameters())``. Stops at ``max_epochs``, ``goal``, gradient below
         ``min_grad``, μ > ``mu_max`` or ``max_fail`` consecutive validation increases; with
         validation batches the best-validation parameters are written back (as trainlm).
+        ``progress(epoch, max_epochs, message)`` is called after every epoch. ``separable``
+        tells ``jacobian="auto"`` that the residual is separable by sample (then "samples"
+        mode, else "forward").
         """
+        if self.jacobian not in ("auto", "forward", "samples"):
+            raise NnidInputError(
+                f"jacobian is 'auto', 'forward' or 'samples', not {self.jacobian!r}",
+                field="jacobian",
+            )
+        if not (0.0 < self.mu_dec < 1.0 < self.mu_inc):
+            raise NnidInputError("need 0 < mu_dec < 1 < mu_inc", field="mu_dec")
+        if self.memory_budget_mb <= 0:
+            raise NnidInputError("memory_budget_mb must be positive", field="memory_budget_mb")
+        self._mode = (
+            self.jacobian if self.jacobian != "auto" else ("samples" if separable else "forward")
+        )
         t0 = time.perf_counter()
+        report = progress or silent
         self._rows = {}
         self._peak_rows = 0
         self._peak_elements = 0
         layout = self._layout(module)
         theta = self._flatten(module)
-        hist = LMHistory()
+        hist = History()
         mu = self.mu
         use_val = bool(val_batches)
 
-        def val_mse(th: torch.Tensor) -> float:
+        def val_mse(th: torch.Tensor) -> float | None:
             if not use_val:
-                return math.nan
+                return None
             s, k = self._sse(residual, th, layout, val_batches)  # type: ignore[arg-type]
             return s / max(k, 1)
 
@@ -371,6 +367,11 @@ class LevenbergMarquardt:
         epoch = 0
         stop = ""
         mse = math.nan
+        # A trial is judged against the SSE of the current point computed by the same code path
+        # (``_sse``): the normal equations' SSE comes from another path (per-sample vmap in
+        # "samples" mode) whose rounding differs by ~1e-17, and comparing across the two once
+        # accepted null steps forever at the optimum, a stall that depended on the CPU's kernels.
+        sse, _ = self._sse(residual, theta, layout, train_batches)
         while True:
             # Stopping criteria (trainlm's); those that need no Jacobian are tested first.
             if epoch > 0 and mse <= self.goal:
@@ -385,14 +386,11 @@ class LevenbergMarquardt:
                 break
             ne = self._normal_equations(residual, theta, layout, train_batches)
             n = max(ne.n, 1)
-            mse = ne.sse / n
+            mse = sse / n  # the SSE that trials are judged against
             grad = 2.0 * float(torch.linalg.vector_norm(ne.jtr)) / n
             if epoch == 0:
-                hist.train_mse.append(mse)
-                hist.val_mse.append(best_val)
-                hist.mu.append(mu)
-                hist.time.append(time.perf_counter() - t0)
-            hist.gradient.append(grad)
+                hist.record(mse, best_val, time.perf_counter() - t0, mu=mu)
+            hist.extra.setdefault("gradient", []).append(grad)
             if mse <= self.goal:
                 stop = "goal"
             elif grad < self.min_grad:
@@ -406,31 +404,37 @@ class LevenbergMarquardt:
                 if delta is not None:
                     trial = theta + delta
                     sse2, _ = self._sse(residual, trial, layout, train_batches)
-                    if math.isfinite(sse2) and sse2 < ne.sse:
-                        theta = trial
+                    if math.isfinite(sse2) and sse2 < sse:
+                        theta, sse = trial, sse2
                         mse = sse2 / n
                         mu = max(mu * self.mu_dec, _MU_FLOOR)
                         accepted = True
                         break
                 mu *= self.mu_inc
             epoch += 1
-            v = val_mse(theta) if accepted else hist.val_mse[-1]
+            v = val_mse(theta) if accepted else (hist.validation[-1] if use_val else None)
             if use_val and accepted:
                 if v < best_val:
                     best_val, best_theta, fails = v, theta.clone(), 0
                     hist.best_epoch = epoch
                 elif v > best_val:
                     fails += 1
-            hist.train_mse.append(mse)
-            hist.val_mse.append(v)
-            hist.mu.append(mu)
-            hist.time.append(time.perf_counter() - t0)
+            hist.record(mse, v, time.perf_counter() - t0, mu=mu)
+            report(
+                epoch,
+                self.max_epochs,
+                f"LM epoch {epoch}: train MSE {mse:.4g}"
+                + (f", validation {v:.4g}" if v is not None else "")
+                + f", mu {mu:.1e}",
+            )
         if use_val:
             theta = best_theta
         else:
             hist.best_epoch = hist.epochs
         self._write_back(module, theta)
         hist.stop_reason = stop
-        hist.peak_jacobian_rows = self._peak_rows
-        hist.peak_jacobian_elements = self._peak_elements
+        hist.info = {
+            "peak_jacobian_rows": self._peak_rows,
+            "peak_jacobian_elements": self._peak_elements,
+        }
         return hist

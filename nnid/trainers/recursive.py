@@ -18,14 +18,18 @@ The inner loops are compiled with numba (machine code cached on disk).
 
 from __future__ import annotations
 
+import itertools
 import math
 import warnings
 
 import numpy as np
 from numba import njit
+from sklearn.base import BaseEstimator
 
-from nnid.models.parametric import Regression
+from nnid.errors import NnidInputError
+from nnid.trainers.history import Progress, silent
 from nnid.trainers.least_squares import Estimate
+from nnid.trainers.regression import Regression
 
 
 @njit(cache=True)
@@ -120,7 +124,10 @@ def _initial(theta0, n_par: int) -> np.ndarray:
         return np.zeros(n_par)
     theta = np.array(theta0, dtype=np.float64).reshape(-1)
     if theta.size != n_par:
-        raise ValueError(f"theta0 has {theta.size} values; the regression has {n_par} unknowns")
+        raise NnidInputError(
+            f"theta0 has {theta.size} values; the regression has {n_par} unknowns",
+            field="theta0",
+        )
     return theta
 
 
@@ -140,7 +147,14 @@ def _residual_stats(reg: Regression, theta: np.ndarray, first: int) -> tuple[flo
     return sigma2, n, per_dof
 
 
-class RecursiveLeastSquares:
+def _chunks(n: int, parts: int = 20) -> list[tuple[int, int]]:
+    """Sample ranges for progress reports: the compiled loops run range by range, carrying
+    their state, so the result is the same as one pass."""
+    edges = np.unique(np.linspace(0, n, parts + 1).astype(int))
+    return list(itertools.pairwise(int(e) for e in edges))
+
+
+class RecursiveLeastSquares(BaseEstimator):
     """Recursive least squares with exponential forgetting (Weiss eqs 52-53).
 
     Per sample: P ← P/λ, then for each DOF row φ of the sample K = Pφ/(1 + φᵀPφ),
@@ -153,6 +167,8 @@ class RecursiveLeastSquares:
     window of ⌈1/(1 − λ)⌉ samples (the whole run for λ = 1).
     """
 
+    kind = "rls"
+
     def __init__(
         self,
         forgetting: float = 1.0,
@@ -160,12 +176,8 @@ class RecursiveLeastSquares:
         filter_lambda: float | None = None,
         theta0: np.ndarray | None = None,
     ) -> None:
-        if not 0.0 < forgetting <= 1.0:
-            raise ValueError("forgetting must be in (0, 1]")
-        if p0 <= 0:
-            raise ValueError("p0 must be positive")
-        self.forgetting = float(forgetting)
-        self.p0 = float(p0)
+        self.forgetting = forgetting
+        self.p0 = p0
         self.filter_lambda = filter_lambda
         self.theta0 = theta0
 
@@ -174,19 +186,29 @@ class RecursiveLeastSquares:
         """Effective memory 1/(1 − λ) in samples (infinite for λ = 1)."""
         return math.inf if self.forgetting == 1.0 else 1.0 / (1.0 - self.forgetting)
 
-    def fit(self, structure, data: dict) -> Estimate:
+    def fit(self, structure, data: dict, progress: Progress | None = None) -> Estimate:
         """Build the regression (filtered if ``filter_lambda``) and run RLS over it."""
-        return self.solve(structure.regression(data, self.filter_lambda))
+        return self.solve(structure.regression(data, self.filter_lambda), progress)
 
-    def solve(self, reg: Regression) -> Estimate:
+    def solve(self, reg: Regression, progress: Progress | None = None) -> Estimate:
+        if not 0.0 < self.forgetting <= 1.0:
+            raise NnidInputError("forgetting must be in (0, 1]", field="forgetting")
+        if self.p0 <= 0:
+            raise NnidInputError("p0 must be positive", field="p0")
+        report = progress or silent
         n_par = len(reg.names)
         m = len(reg.dofs)
         phi = np.ascontiguousarray(reg.phi, dtype=np.float64)
         y = np.ascontiguousarray(reg.y, dtype=np.float64)
         theta = _initial(self.theta0, n_par)
-        p_mat = np.eye(n_par) * self.p0
+        p_mat = np.eye(n_par) * float(self.p0)
         history = np.empty((reg.n_samples, n_par))
-        _rls(phi, y, m, self.forgetting, n_par * self.p0, theta, p_mat, history)
+        for a, b in _chunks(reg.n_samples):
+            lam, trace_max = float(self.forgetting), n_par * float(self.p0)
+            _rls(
+                phi[a * m : b * m], y[a * m : b * m], m, lam, trace_max, theta, p_mat, history[a:b]
+            )
+            report(int(b), reg.n_samples, "recursive least squares")
         window = reg.n_samples if self.forgetting == 1.0 else math.ceil(self.memory)
         first = max(reg.n_samples - window, 0)
         sigma2, n_obs, per_dof = _residual_stats(reg, theta, first)
@@ -201,7 +223,7 @@ class RecursiveLeastSquares:
         )
 
 
-class GradientEstimator:
+class GradientEstimator(BaseEstimator):
     """The gradient estimator of Weiss eqs 62-65: θ̇ = −p₀ ∂(eᵀe)/∂θ ∝ Γ φ (y − φᵀθ).
 
     ``gain`` is Γ: a scalar p₀, a vector (diagonal Γ) or a matrix. The law is discretised by
@@ -211,16 +233,18 @@ class GradientEstimator:
     There is no covariance: ``cov`` is NaN and σ̂² comes from the final θ over the whole run.
     """
 
+    kind = "gradient"
+
     def __init__(
         self,
-        gain: float | np.ndarray,
+        gain: float | np.ndarray = 1.0,
         normalized: bool = False,
         filter_lambda: float | None = None,
         theta0: np.ndarray | None = None,
         dt: float | None = None,
     ) -> None:
         self.gain = gain
-        self.normalized = bool(normalized)
+        self.normalized = normalized
         self.filter_lambda = filter_lambda
         self.theta0 = theta0
         self.dt = dt
@@ -233,29 +257,40 @@ class GradientEstimator:
             return np.diag(g)
         if g.shape == (n_par, n_par):
             return np.ascontiguousarray(g)
-        raise ValueError(f"gain must be a scalar, [{n_par}] or [{n_par}, {n_par}]")
+        raise NnidInputError(
+            f"gain must be a scalar, [{n_par}] or [{n_par}, {n_par}]", field="gain"
+        )
 
-    def fit(self, structure, data: dict) -> Estimate:
+    def fit(self, structure, data: dict, progress: Progress | None = None) -> Estimate:
         """Build the regression and run the gradient law with Δt from the log's time stamps."""
         t = np.asarray(data["t"], dtype=np.float64)
         dt = self.dt or (float(np.median(np.diff(t))) if t.size > 1 else None)
-        return self.solve(structure.regression(data, self.filter_lambda), dt)
+        return self.solve(structure.regression(data, self.filter_lambda), dt, progress)
 
-    def solve(self, reg: Regression, dt: float | None = None) -> Estimate:
+    def solve(
+        self, reg: Regression, dt: float | None = None, progress: Progress | None = None
+    ) -> Estimate:
+        report = progress or silent
         n_par = len(reg.names)
+        m = len(reg.dofs)
         step = float(dt or self.dt or 1.0)
         theta = _initial(self.theta0, n_par)
         history = np.empty((reg.n_samples, n_par))
-        _gradient(
-            np.ascontiguousarray(reg.phi, dtype=np.float64),
-            np.ascontiguousarray(reg.y, dtype=np.float64),
-            len(reg.dofs),
-            step,
-            self._gamma(n_par),
-            self.normalized,
-            theta,
-            history,
-        )
+        phi = np.ascontiguousarray(reg.phi, dtype=np.float64)
+        y = np.ascontiguousarray(reg.y, dtype=np.float64)
+        gamma = self._gamma(n_par)
+        for a, b in _chunks(reg.n_samples):
+            _gradient(
+                phi[a * m : b * m],
+                y[a * m : b * m],
+                m,
+                step,
+                gamma,
+                bool(self.normalized),
+                theta,
+                history[a:b],
+            )
+            report(int(b), reg.n_samples, "gradient estimator")
         if not np.isfinite(theta).all():
             warnings.warn(
                 "the gradient estimator diverged: lower the gain or use normalized=True",

@@ -14,12 +14,13 @@ plugged-in values forward (they are far better determined than the parameters th
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
-from nnid.models.parametric import ParametricFossen
+from nnid.errors import NnidInputError
+from nnid.trainers.history import Progress, silent
 from nnid.trainers.least_squares import Estimate, LeastSquares
 
 
@@ -50,7 +51,9 @@ def _subset(data: dict[str, np.ndarray], names: Sequence[str]) -> dict[str, np.n
     known = list(data["experiment_names"])
     missing = [n for n in names if n not in known]
     if missing:
-        raise ValueError(f"the log has no experiments {missing}; it has {known}")
+        raise NnidInputError(
+            f"the log has no experiments {missing} (it has {known})", field="sequence"
+        )
     codes = [known.index(n) for n in names]
     rows = np.isin(data["experiment"], codes)
     return {
@@ -59,26 +62,45 @@ def _subset(data: dict[str, np.ndarray], names: Sequence[str]) -> dict[str, np.n
     }
 
 
+def sequence_steps(sequence: str | Sequence[Step | Mapping]) -> list[Step]:
+    """The steps of a sequence: ``"weiss"`` (:data:`WEISS_STEPS`) or a list of steps, each a
+    :class:`Step` or a mapping with its fields."""
+    if isinstance(sequence, str):
+        if sequence != "weiss":
+            raise NnidInputError(
+                f"sequence '{sequence}': expected 'weiss' or a list of steps", field="sequence"
+            )
+        return list(WEISS_STEPS)
+    return [s if isinstance(s, Step) else Step(**s) for s in sequence]
+
+
 class DecoupledSequence:
-    """Trainer: run the steps in order with ``trainer`` (least squares by default)."""
+    """Trainer: run the steps in order with ``trainer`` (least squares by default). The
+    structure it fits must offer ``restricted(unknowns, dofs, known)``: the structure of one
+    step with the earlier steps' estimates plugged in."""
 
     def __init__(self, steps: Sequence[Step] = WEISS_STEPS, trainer=None) -> None:
         self.steps = list(steps)
         self.trainer = trainer or LeastSquares()
         self.filter_lambda = getattr(self.trainer, "filter_lambda", None)
 
-    def fit(self, structure: ParametricFossen, data: dict[str, np.ndarray]) -> Estimate:
+    @property
+    def kind(self) -> str:
+        return f"{getattr(self.trainer, 'kind', type(self.trainer).__name__)} (decoupled sequence)"
+
+    def fit(
+        self, structure, data: dict[str, np.ndarray], progress: Progress | None = None
+    ) -> Estimate:
         names = list(structure.names)
         theta = np.full(len(names), np.nan)
         cov = np.full((len(names), len(names)), np.nan)
         found: dict[str, float] = {}
         n_obs = 0
-        for step in self.steps:
-            sub = ParametricFossen(structure.vehicle, step.unknowns, step.dofs)
-            for name, value in found.items():
-                if name not in sub.names:  # an unknown of this step is refitted from zero
-                    sub.base.set(name, value)
+        report = progress or silent
+        for k, step in enumerate(self.steps):
+            sub = structure.restricted(step.unknowns, step.dofs, found)
             est = self.trainer.fit(sub, _subset(data, step.experiments))
+            report(k + 1, len(self.steps), f"sequence step {k + 1}: {', '.join(step.dofs)}")
             idx = [names.index(n) for n in sub.names]
             theta[idx] = est.theta
             cov[np.ix_(idx, idx)] = est.cov
@@ -86,5 +108,5 @@ class DecoupledSequence:
             n_obs += est.n_obs
         left = [n for n, v in zip(names, theta, strict=True) if not np.isfinite(v)]
         if left:
-            raise ValueError(f"no step of the sequence identifies {left}")
+            raise NnidInputError(f"no step of the sequence identifies {left}", field="sequence")
         return Estimate(names, theta, cov, float("nan"), n_obs)

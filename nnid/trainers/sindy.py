@@ -28,16 +28,18 @@ J is the mean over outputs of the normalised mean squared error MSE_F / mean(y_F
 from __future__ import annotations
 
 import warnings
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 
 import numpy as np
-import pandas as pd
 import pysindy as ps
 from pysindy.feature_library.base import BaseFeatureLibrary, x_sequence_or_item
 from pysindy.utils import AxesArray, comprehend_axes
+from sklearn.base import BaseEstimator
 
-from nnid.models.damping_library import LIBRARY, BasisLibrary, evaluate_terms
-from nnid.physics.added_mass import DOFS, FORCES
+from nnid.errors import NnidInputError
+from nnid.physics.damping_library import BasisLibrary, evaluate_terms
+from nnid.physics.dofs import DOFS
 
 OPTIMIZERS = ("stlsq", "sr3", "ensemble")
 SELECTIONS = ("validation", "aic", "bic")
@@ -49,7 +51,7 @@ class BasisFeatureLibrary(BaseFeatureLibrary):
     """nnid's basis library as a pysindy feature library.
 
     The first six inputs are the body velocities ``u v w p q r``; they give the basis terms,
-    evaluated by nnid's vectorised :func:`~nnid.models.damping_library.evaluate_terms`. Any
+    evaluated by nnid's vectorised :func:`~nnid.physics.damping_library.evaluate_terms`. Any
     further inputs (the controls pysindy appends in SINDy with control) pass through linearly.
     Feature names are the canonical term names, then the control names.
     """
@@ -124,8 +126,7 @@ def make_optimizer(
             max_iter=max(max_iter, 100),
             unbias=False,
         )
-    if kind == "ensemble":
-        np.random.seed(seed)  # noqa: NPY002 (pysindy draws its ensembles from the global one)
+    if kind == "ensemble":  # its random draws: see :func:`numpy_global_state`
         return ps.EnsembleOptimizer(
             opt=ps.STLSQ(threshold=threshold, alpha=alpha, max_iter=max_iter, unbias=False),
             bagging=False,
@@ -170,130 +171,70 @@ def nmse(y: np.ndarray, pred: np.ndarray) -> np.ndarray:
     return np.mean((y - pred) ** 2, axis=0) / ms
 
 
-class SindyDamping:
-    """Sparse viscous-force identification with pysindy over the basis library.
+@contextmanager
+def numpy_global_state(seed: int) -> Iterator[None]:
+    """Run the block with NumPy's global generator seeded by ``seed``, then put back the state
+    the caller had. pysindy's ensembles draw from the global generator and take no generator
+    of their own; this keeps them reproducible without changing the user's random stream."""
+    saved = np.random.get_state()  # noqa: NPY002 (pysindy draws from the global generator)
+    np.random.set_state(np.random.RandomState(seed).get_state())  # noqa: NPY002
+    try:
+        yield
+    finally:
+        np.random.set_state(saved)  # noqa: NPY002
 
-    ``SindyDamping(vehicle).fit(train_log, validation_log)``: ``path_`` lists every threshold
-    tried (``threshold``, ``n_terms``, ``train_J``, ``validation_J``, ``aic``, ``bic``),
-    ``selected_`` is the chosen entry, ``coefficients_`` the chosen model as ``{"F:term": value}``
-    (mode ``"control"``: ``{"du:term": value}`` and ``{"du:tau_X": value}``), ``n_params`` its
-    number of nonzero coefficients. Without ``validation_log`` the last ``holdout`` fraction of
-    each experiment validates. With ``per_output`` (default) and validation selection each
-    output picks its own row, greedily sparsest while the mean validation J stays within
-    ``tolerance`` of the best, so ``selected_`` may mix thresholds. Velocities and
-    accelerations missing from a log are derived as in
-    :class:`~nnid.models.parametric.ParametricModel` (Savitzky-Golay).
+
+class SparsePath(BaseEstimator):
+    """The SINDy path: pysindy's optimizer at each threshold on the compressed regression
+    (module docstring), each support debiased, and a model chosen along the path.
+
+    ``fit(theta, y, theta_val, y_val)`` on evaluated features ``theta`` ``[N, K]`` and targets
+    ``y`` ``[N, m]``: ``path_`` lists every threshold tried (``threshold``, ``n_terms``,
+    ``train_J``, ``validation_J``, ``aic``, ``bic``), ``selected_`` the chosen entry and
+    ``coef_`` ``[m, K]`` its coefficients. ``selection`` is "validation" (the sparsest model
+    whose validation J is within ``tolerance`` of the best; with ``per_output`` each output
+    picks its own row, greedily sparsest while the mean validation J stays within ``tolerance``
+    of the best, so ``selected_`` may mix thresholds), "aic" or "bic". J is the mean over
+    outputs of the normalised MSE.
     """
 
     def __init__(
         self,
-        vehicle,
         optimizer: str = "stlsq",
         thresholds: Sequence[float] | None = None,
         selection: str = "validation",
         tolerance: float = 0.05,
-        mode: str = "residual",
-        terms: Sequence[str] | None = None,
         alpha: float = 1e-8,
-        holdout: float = 0.2,
         per_output: bool = True,
-        savgol_window: float = 1.0,
-        savgol_order: int = 4,
         seed: int = 0,
     ) -> None:
-        if optimizer not in OPTIMIZERS:
-            raise ValueError(f"optimizer is one of {', '.join(OPTIMIZERS)}")
-        if selection not in SELECTIONS:
-            raise ValueError(f"selection is one of {', '.join(SELECTIONS)}")
-        if mode not in MODES:
-            raise ValueError(f"mode is one of {', '.join(MODES)}")
-        self.vehicle = vehicle
         self.optimizer = optimizer
-        self.thresholds = (
-            np.logspace(-3, 0, 41) if thresholds is None else np.asarray(thresholds, float)
-        )
+        self.thresholds = thresholds
         self.selection = selection
         self.tolerance = tolerance
-        self.mode = mode
-        self.terms = tuple(LIBRARY if terms is None else terms)
         self.alpha = alpha
-        self.holdout = holdout
         self.per_output = per_output
-        self.savgol_window = savgol_window
-        self.savgol_order = savgol_order
         self.seed = seed
 
-    # -- data -----------------------------------------------------------------------------------
-    def arrays(self, log: pd.DataFrame) -> tuple[np.ndarray, np.ndarray]:
-        """Library inputs ``x`` (ν, and τ in control mode) and targets ``y`` (τ̄ or ν̇) of a
-        log, non-finite rows dropped."""
-        from nnid.models.parametric import ParametricFossen, ParametricModel
-
-        _, data = ParametricModel(
-            self.vehicle, [], savgol_window=self.savgol_window, savgol_order=self.savgol_order
-        ).prepare(log)
-        if self.mode == "residual":
-            x = data["nu"]
-            y = ParametricFossen(self.vehicle, []).damping_force(data)
-        else:
-            x = np.concatenate([data["nu"], data["tau"]], axis=1)
-            y = data["nu_dot"]
-        ok = np.isfinite(x).all(1) & np.isfinite(y).all(1)
-        return x[ok], y[ok]
-
-    def _split(self, log: pd.DataFrame) -> tuple[pd.DataFrame, pd.DataFrame]:
-        groups = log.groupby("experiment", sort=False) if "experiment" in log else [(0, log)]
-        train, val = [], []
-        for _, g in groups:
-            cut = round(len(g) * (1.0 - self.holdout))
-            train.append(g.iloc[:cut])
-            val.append(g.iloc[cut:])
-        return pd.concat(train), pd.concat(val)
-
-    @property
-    def output_names(self) -> list[str]:
-        return list(FORCES) if self.mode == "residual" else [f"d{d}" for d in DOFS]
-
-    # -- fitting --------------------------------------------------------------------------------
-    def fit(self, train_log: pd.DataFrame, validation_log: pd.DataFrame | None = None):
-        """Fit the threshold path on ``train_log`` and select a model (see the class doc)."""
-        if validation_log is None:
-            train_log, validation_log = self._split(train_log)
-        x, y = self.arrays(train_log)
-        xv, yv = self.arrays(validation_log)
-        return self.fit_arrays(x, y, xv, yv)
-
-    def fit_arrays(
-        self,
-        x: np.ndarray,
-        y: np.ndarray,
-        x_val: np.ndarray | None = None,
-        y_val: np.ndarray | None = None,
-    ) -> SindyDamping:
-        """The path and selection on arrays: ``x`` ``[N, 6 (+6)]`` library inputs, ``y``
-        ``[N, 6]`` targets (validation arrays optional unless ``selection="validation"``)."""
-        self.library_ = BasisFeatureLibrary(self.terms, self.vehicle.damping.u_c)
-        theta = np.asarray(self.library_.fit_transform(x))
-        theta_val = None if x_val is None else np.asarray(self.library_.transform(x_val))
-        self.feature_names_ = self.library_.get_feature_names(
-            [*DOFS, *(f"tau_{f}" for f in FORCES)]
-        )
-        return self.fit_features(theta, y, theta_val, y_val)
-
-    def fit_features(
+    def fit(
         self,
         theta: np.ndarray,
         y: np.ndarray,
         theta_val: np.ndarray | None = None,
         y_val: np.ndarray | None = None,
-        names: Sequence[str] | None = None,
-    ) -> SindyDamping:
-        """The path and selection on evaluated library features ``theta`` ``[N, K]`` (e.g.
-        the filtered ξ of :func:`nnid.trainers.synthesis.synthesis_data`), named ``names``."""
+    ) -> SparsePath:
+        """The path and the selection (class docstring)."""
+        if self.optimizer not in OPTIMIZERS:
+            raise NnidInputError(f"optimizer is one of {', '.join(OPTIMIZERS)}", field="optimizer")
+        if self.selection not in SELECTIONS:
+            raise NnidInputError(f"selection is one of {', '.join(SELECTIONS)}", field="selection")
         if theta_val is None and self.selection == "validation":
-            raise ValueError("selection='validation' needs validation data")
-        if names is not None:
-            self.feature_names_ = list(names)
+            raise NnidInputError("selection='validation' needs validation data", field="selection")
+        thresholds = (
+            np.logspace(-3, 0, 41)
+            if self.thresholds is None
+            else np.asarray(self.thresholds, dtype=float)
+        )
         n = theta.shape[0]
         col = np.sqrt(np.mean(theta * theta, axis=0))
         col[col == 0] = 1.0
@@ -304,10 +245,11 @@ class SindyDamping:
         coefs = []
         val_out = []
         ms_y = np.maximum(np.mean(y * y, axis=0), 1e-300)
-        for thr in self.thresholds:
+        for thr in thresholds:
             opt = make_optimizer(self.optimizer, float(thr), self.alpha, seed=self.seed)
-            with warnings.catch_warnings():  # "all coefficients eliminated" at large thresholds
-                warnings.simplefilter("ignore", UserWarning)
+            with warnings.catch_warnings(), numpy_global_state(self.seed):
+                # "all coefficients eliminated" at large thresholds is an answer, not a fault
+                warnings.filterwarnings("ignore", message=".*eliminated all coefficients.*")
                 opt.fit(r, b)
             scaled = debias(r, b, np.asarray(opt.coef_).reshape(y.shape[1], -1))
             coef = scaled * out[:, None] / col[None, :]  # [m, K]
@@ -342,12 +284,6 @@ class SindyDamping:
                 "train_J": float(nmse(y, theta @ self.coef_.T).mean()),
                 "validation_J": float(nmse(y_val, theta_val @ self.coef_.T).mean()),
             }
-        names = self.feature_names_
-        self.coefficients_ = {
-            f"{force}:{names[j]}": float(self.coef_[i, j])
-            for i, force in enumerate(self.output_names)
-            for j in np.flatnonzero(self.coef_[i])
-        }
         return self
 
     def _select_per_output(self, coefs: np.ndarray, val: np.ndarray) -> np.ndarray:
@@ -378,27 +314,3 @@ class SindyDamping:
         val = np.array([p["validation_J"] for p in path])
         ok = np.flatnonzero(val <= (1.0 + self.tolerance) * np.nanmin(val))
         return int(min(ok, key=lambda i: (path[i]["n_terms"], val[i])))
-
-    # -- use ------------------------------------------------------------------------------------
-    @property
-    def n_params(self) -> int:
-        """Nonzero coefficients of the selected model."""
-        return int(np.count_nonzero(self.coef_))
-
-    def selected_terms(self) -> set[str]:
-        """The selected ``"F:term"`` keys."""
-        return set(self.coefficients_)
-
-    def predict_arrays(self, x: np.ndarray) -> np.ndarray:
-        """The model's output (τ_D or ν̇) ``[N, 6]`` for library inputs ``x``."""
-        return np.asarray(self.library_.transform(x)) @ self.coef_.T
-
-    def predict(self, log: pd.DataFrame) -> pd.DataFrame:
-        """The model's output on a log, one column per output (``X`` … or ``du`` …)."""
-        x, _ = self.arrays(log)
-        return pd.DataFrame(self.predict_arrays(x), columns=self.output_names)
-
-    def score(self, log: pd.DataFrame) -> float:
-        """J on a log (mean normalised MSE over the six outputs)."""
-        x, y = self.arrays(log)
-        return float(nmse(y, self.predict_arrays(x)).mean())

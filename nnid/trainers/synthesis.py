@@ -1,4 +1,4 @@
-"""Viscous-model synthesis from a log (McCarter ch. 4, eqs 4.4-4.27).
+"""Viscous-model synthesis (McCarter ch. 4, eqs 4.4-4.27): the fitting algorithms.
 
 The residual force (McCarter eq. 4.4)
 
@@ -20,7 +20,8 @@ force by force gives the joint minimum while keeping each simplex small: Nelder-
 converges; per force it is 36 parameters at most (still slow: use it on small masks).
 
 The model error is McCarter's eq. 4.25, J = RMS of the force residual over all six axes, and J0
-the RMS of the force series itself (J at κ = 0), both also available per force.
+the RMS of the force series itself (J at κ = 0), both also available per force. The model that
+computes τ̄ and ξ(ν) from a log and uses these fits is :class:`nnid.models.synthesis.SynthesisModel`.
 """
 
 from __future__ import annotations
@@ -30,104 +31,16 @@ from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
-import pandas as pd
 from scipy.optimize import minimize
 
-from nnid.datasets.log import input_columns
-from nnid.datasets.preprocess import experiments
-from nnid.models.damping_library import LIBRARY, BasisLibrary, canonical_term, mask_terms
-from nnid.models.parametric import (
-    ParametricFossen,
-    ParametricModel,
-    Regression,
-    filter_signal,
-    settled_rows,
-)
-from nnid.physics.added_mass import FORCES
+from nnid.physics.damping_library import LIBRARY, canonical_term, mask_terms
+from nnid.physics.dofs import FORCES
 from nnid.trainers.least_squares import LeastSquares
+from nnid.trainers.regression import Regression
 
 Loss = Literal["mae", "mse", "rms", "mad"]
 LOSSES: tuple[str, ...] = ("mae", "mse", "rms", "mad")
 MaskSpec = str | Mapping[str, Sequence[str]] | np.ndarray
-
-
-def residual_force(
-    vehicle,
-    log: pd.DataFrame,
-    savgol_window: float = 1.0,
-    savgol_order: int = 4,
-    filter_lambda: float | None = None,
-    zoh_midpoint: bool = False,
-) -> tuple[np.ndarray, dict[str, np.ndarray]]:
-    """McCarter's residual force τ̄ (eq. 4.4) ``[N, 6]`` and the log's arrays (η, ν, ν̇, τ).
-
-    Velocities and accelerations missing from the log are derived by Savitzky-Golay exactly as
-    :meth:`ParametricModel.prepare` does and τ̄ is :meth:`ParametricFossen.damping_force` (the
-    vehicle's declared damping is left out of it). With ``filter_lambda`` = λ it is instead the
-    filtered residual F[τ̄], F(s) = λ/(s + λ), with M F[ν̇] computed as M sF(s)[ν] (the
-    filtered-regressor form of :meth:`ParametricFossen.equation_residual`): no differentiated
-    acceleration, and the regressors must then be filtered alike (:func:`synthesis_data`). The
-    first 3/λ s of each experiment, where the filters settle, are NaN.
-
-    ``zoh_midpoint`` takes the inputs as held over each sample (zero-order hold, as logged
-    commands are) and uses at t_k the mean (τ_{k−1} + τ_k)/2 of the force held before and after
-    it, which is what a smoothed or filtered acceleration at t_k sees; without it a fast
-    autopilot's held force leaves a half-sample lag that biases the damping by several %.
-    """
-    if zoh_midpoint:
-        log = zoh_midpoint_inputs(log)
-    trainer = LeastSquares(filter_lambda=filter_lambda)
-    prep = ParametricModel(
-        vehicle, [], trainer=trainer, savgol_window=savgol_window, savgol_order=savgol_order
-    )
-    _, data = prep.prepare(log)
-    structure = ParametricFossen(vehicle, [])
-    if filter_lambda is None:
-        return structure.damping_force(data), data
-    parts = structure.base.copy()
-    parts.damping = {}
-    tau_bar = structure.equation_residual(parts, data, filter_lambda)
-    tau_bar[~settled_rows(data, 3.0 / filter_lambda)] = np.nan
-    return tau_bar, data
-
-
-def zoh_midpoint_inputs(log: pd.DataFrame) -> pd.DataFrame:
-    """The log with every input column replaced by :func:`zoh_midpoint` of it."""
-    cols = input_columns(log)
-    out = log.copy()
-    out[cols] = zoh_midpoint(out[cols].to_numpy(np.float64), log)
-    return out
-
-
-def zoh_midpoint(x: np.ndarray, log: pd.DataFrame) -> np.ndarray:
-    """Per experiment, the mean of consecutive samples (the first kept): the force a
-    zero-order-held input applies around t_k, which a smoothed acceleration at t_k sees."""
-    y = np.array(x, dtype=np.float64, copy=True)
-    for _, idx in experiments(log):
-        pos = log.index.get_indexer(idx)
-        y[pos[1:]] = 0.5 * (x[pos[1:]] + x[pos[:-1]])
-    return y
-
-
-def synthesis_data(
-    vehicle,
-    log: pd.DataFrame,
-    library: BasisLibrary,
-    savgol_window: float = 1.0,
-    savgol_order: int = 4,
-    filter_lambda: float | None = None,
-    zoh_midpoint: bool = False,
-) -> tuple[np.ndarray, np.ndarray]:
-    """The basis terms ξ(ν) ``[N, n_terms]`` and τ̄ ``[N, 6]`` of a log, both through F(s)
-    when ``filter_lambda`` is given, so that τ̄ = K ξ holds on either form (eq. 4.6)."""
-    tau_bar, data = residual_force(
-        vehicle, log, savgol_window, savgol_order, filter_lambda, zoh_midpoint
-    )
-    xi = library(data["nu"])
-    if filter_lambda is not None:
-        xi = filter_signal(data, xi, filter_lambda)
-        xi[~np.isfinite(tau_bar).all(1)] = np.nan
-    return xi, tau_bar
 
 
 def mask_matrix(mask: MaskSpec, terms: Sequence[str]) -> np.ndarray:
@@ -294,92 +207,3 @@ def force_error(
     if per_force:
         return np.sqrt(np.mean(res * res, 0)), np.sqrt(np.mean(tau_bar * tau_bar, 0))
     return float(np.sqrt(np.mean(res * res))), float(np.sqrt(np.mean(tau_bar * tau_bar)))
-
-
-class SynthesisModel:
-    """A masked viscous model K ξ(ν) fitted to McCarter's τ̄ (scikit-learn style).
-
-    ``SynthesisModel(vehicle, mask="mcfarland", method="ls")`` then ``fit(log)``; ``method`` is
-    ``"ls"`` (eq. 4.22) or a Nelder-Mead cost ``"mae" | "mse" | "rms" | "mad"`` (eqs 4.23-4.27,
-    started from least squares). ``predict_force(log)`` is K ξ(ν) per sample, ``error(log)`` is
-    (J, J0) of eq. 4.25, ``params`` holds ``{"F:term": {"value", "stderr"}}``.
-    ``filter_lambda`` and ``zoh_midpoint`` choose the form of τ̄ (see :func:`residual_force`):
-    Savitzky-Golay accelerations by default; the filtered form with the zero-order-hold
-    midpoint is the unbiased choice for logs of held inputs under a fast autopilot.
-    """
-
-    def __init__(
-        self,
-        vehicle,
-        mask: str | Mapping[str, Sequence[str]] = "mcfarland",
-        method: Literal["ls", "mae", "mse", "rms", "mad"] = "ls",
-        savgol_window: float = 1.0,
-        savgol_order: int = 4,
-        filter_lambda: float | None = None,
-        zoh_midpoint: bool = False,
-    ) -> None:
-        if method != "ls" and method not in LOSSES:
-            raise ValueError(f"method is 'ls' or one of {', '.join(LOSSES)}, not '{method}'")
-        self.vehicle = vehicle
-        self.mask = mask
-        self.method = method
-        self.savgol_window = savgol_window
-        self.savgol_order = savgol_order
-        self.filter_lambda = filter_lambda
-        self.zoh_midpoint = zoh_midpoint
-        self.terms = mask_term_list(mask)
-        self.library = BasisLibrary(self.terms, vehicle.damping.u_c or 0.0)
-
-    def _xi_tau(self, log: pd.DataFrame) -> tuple[np.ndarray, np.ndarray]:
-        return synthesis_data(
-            self.vehicle,
-            log,
-            self.library,
-            self.savgol_window,
-            self.savgol_order,
-            self.filter_lambda,
-            self.zoh_midpoint,
-        )
-
-    def fit(self, log: pd.DataFrame) -> SynthesisModel:
-        xi, tau_bar = self._xi_tau(log)
-        mask = mask_matrix(self.mask, self.terms)
-        fit = masked_least_squares(xi, tau_bar, mask, self.terms)
-        if self.method != "ls":
-            fit = nelder_mead(xi, tau_bar, mask, self.method, start=fit)
-        self.fit_ = fit
-        return self
-
-    def predict_force(self, log: pd.DataFrame) -> pd.DataFrame:
-        """τ̂ = K ξ(ν) (eq. 4.6) per sample, columns X Y Z K M N."""
-        _, data = ParametricModel(
-            self.vehicle, [], savgol_window=self.savgol_window, savgol_order=self.savgol_order
-        ).prepare(log)
-        tau_hat = self.fit_.predict(self.library(data["nu"]))
-        return pd.DataFrame(tau_hat, columns=list(FORCES), index=log.index)
-
-    def error(
-        self, log: pd.DataFrame, per_force: bool = False
-    ) -> tuple[float, float] | tuple[np.ndarray, np.ndarray]:
-        """(J, J0) of eq. 4.25 on a log (see :func:`force_error`)."""
-        xi, tau_bar = self._xi_tau(log)
-        return force_error(tau_bar, self.fit_.predict(xi), per_force)
-
-    def coefficient_matrix(self) -> np.ndarray:
-        """K ``[6, len(terms)]`` (zero off the mask)."""
-        return self.fit_.coefficients.copy()
-
-    @property
-    def params(self) -> dict[str, dict[str, float | None]]:
-        out: dict[str, dict[str, float | None]] = {}
-        for f, j in zip(*np.nonzero(self.fit_.mask), strict=True):
-            s = self.fit_.stderr[f, j]
-            out[f"{FORCES[f]}:{self.terms[j]}"] = {
-                "value": float(self.fit_.coefficients[f, j]),
-                "stderr": float(s) if np.isfinite(s) else None,
-            }
-        return out
-
-    @property
-    def n_params(self) -> int:
-        return int(np.count_nonzero(mask_matrix(self.mask, self.terms)))

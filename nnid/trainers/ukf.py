@@ -54,11 +54,14 @@ from dataclasses import dataclass
 
 import numpy as np
 import torch
+from scipy.stats import median_abs_deviation
+from sklearn.base import BaseEstimator
 
 from nnid.physics import compiled
-from nnid.physics.added_mass import DOFS
+from nnid.physics.dofs import DOFS
 from nnid.physics.fossen import FeatureForm
 from nnid.physics.integrate import rk4
+from nnid.trainers.history import Progress, silent
 from nnid.trainers.least_squares import Estimate
 
 _AFFINE = ("q_rb", "q_a", "g_mat", "theta", "added_mass", "bias")
@@ -205,8 +208,7 @@ def noise_level(data: dict[str, np.ndarray], dofs: Sequence[str]) -> np.ndarray:
     if nu.shape[0] < 4:
         return np.full(len(idx), 1e-3)
     d2 = np.diff(nu, 2, axis=0)
-    mad = np.median(np.abs(d2 - np.median(d2, 0)), 0)
-    return np.maximum(1.4826 * mad / np.sqrt(6.0), 1e-6)
+    return np.maximum(median_abs_deviation(d2, axis=0, scale="normal") / np.sqrt(6.0), 1e-6)
 
 
 @dataclass
@@ -304,7 +306,7 @@ def observability_rank(
     return Observability(rank, sv, n, [*structure.dofs, *structure.names])
 
 
-class UnscentedKalman:
+class UnscentedKalman(BaseEstimator):
     """Unscented Kalman filter on the augmented state [ν_d, θ] (Weiss eqs 77-84, with sigma
     points instead of the Jacobians of eq 79).
 
@@ -316,6 +318,8 @@ class UnscentedKalman:
     ``kappa``: the scaled unscented transform. After :meth:`fit`, ``history_`` holds per sample
     ``t``, ``theta``, ``theta_std``, ``nu`` (filtered ν_d) and ``innovation`` (eq 81).
     """
+
+    kind = "ukf"
 
     def __init__(
         self,
@@ -349,14 +353,18 @@ class UnscentedKalman:
         wc[0] = wm[0] + 1.0 - self.alpha**2 + self.beta
         return wm, wc, float(np.sqrt(n + lam))
 
-    def fit(self, structure, data: dict[str, np.ndarray]) -> Estimate:
-        """Run the filter over the log; θ̂ and its covariance block at the last sample."""
+    def fit(
+        self, structure, data: dict[str, np.ndarray], progress: Progress | None = None
+    ) -> Estimate:
+        """Run the filter over the log; θ̂ and its covariance block at the last sample.
+        ``progress(sample, samples, message)`` is called every 1000 samples."""
+        report = progress or silent
         proc = _Process(structure, data)
         n_v, n_p = proc.n_v, proc.n_p
         n = n_v + n_p
         names = list(structure.names)
         if self.theta0 is None:
-            from nnid.models.parametric import Parts
+            from nnid.physics.parts import Parts
 
             vehicle_parts = Parts.from_vehicle(structure.vehicle)
             theta0 = np.array([vehicle_parts.get(nm) for nm in names], dtype=np.float64)
@@ -408,6 +416,8 @@ class UnscentedKalman:
                 hist_innov[k] = innov
                 nis.append(float(innov @ np.linalg.solve(s, innov)))
             fresh = False
+            if k % 1000 == 999:
+                report(k + 1, n_samples, "unscented Kalman filter")
             p = 0.5 * (p + p.T)
             hist_theta[k], hist_nu[k] = x[n_v:], x[:n_v]
             hist_std[k] = np.sqrt(np.clip(np.diag(p)[n_v:], 0.0, None))

@@ -19,10 +19,11 @@ from functools import lru_cache
 import numpy as np
 import torch
 
-VELOCITIES = ("u", "v", "w", "p", "q", "r")
+from nnid.physics.dofs import DOFS
+
 ATOMS = (
-    *VELOCITIES,
-    *(f"abs({s})" for s in VELOCITIES),
+    *DOFS,
+    *(f"abs({s})" for s in DOFS),
     "U",
     "V",
     "Vv",
@@ -38,7 +39,7 @@ _TINY = 1e-30
 
 
 def _library_names() -> tuple[str, ...]:
-    s = VELOCITIES
+    s = DOFS
     names = list(s)  # C.1
     names += [f"abs({a})" for a in s]  # C.2
     pairs = [f"{s[i]}*{s[j]}" for i in range(6) for j in range(i, 6)]
@@ -180,7 +181,7 @@ class BasisLibrary:
 
 def mask_terms(name: str) -> dict[str, tuple[str, ...]]:
     """The terms of a named model per force ``X Y Z K M N`` (McCarter App. D; Weiss eq. 45)."""
-    from nnid.models.damping_masks import MASKS
+    from nnid.physics.damping_masks import MASKS
 
     if name not in MASKS:
         raise ValueError(f"unknown damping model '{name}'; expected one of {sorted(MASKS)}")

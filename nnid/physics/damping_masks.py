@@ -7,7 +7,7 @@ against the fitted coefficients of Appendix E (Tables E.1-E.11). The masked leas
 synthesis that uses these masks is McCarter eqs 4.15-4.21.
 
 ``MASKS[model][force]`` is the tuple of canonical basis-term names (McCarter Appendix C, eqs
-C.1-C.7, spelled as in ``nnid.models.damping_library.LIBRARY``) that appear in the equation of
+C.1-C.7, spelled as in ``nnid.physics.damping_library.LIBRARY``) that appear in the equation of
 that force ``X Y Z K M N``. Terms are listed in the order of the basis vector C.7, not in the
 order McCarter prints them. Each named model gives force = sum(coefficient * term) per axis.
 
@@ -19,8 +19,10 @@ is Weiss eq. 45 (diagonal quadratic drag), 6 terms by construction.
 
 from __future__ import annotations
 
+from nnid.physics.dofs import DOFS, FORCES
+
 # The 36 sign-preserving quadratics a*abs(b) of basis block C.4, in C.4 order.
-_SIGN_PRESERVING = tuple(f"{a}*abs({b})" for a in "uvwpqr" for b in "uvwpqr")
+_SIGN_PRESERVING = tuple(f"{a}*abs({b})" for a in DOFS for b in DOFS)
 
 # fmt: off
 MASKS: dict[str, dict[str, tuple[str, ...]]] = {
@@ -92,12 +94,12 @@ MASKS: dict[str, dict[str, tuple[str, ...]]] = {
     },
     # Linear (McCarter sec. 3.2.4, eqs 3.32-3.33; Appendix D Table D.5; Table E.7): full 6x6 K_nu.
     # Per force 6 x 6 = 36 = Table 5.1 n.
-    "linear": {force: ("u", "v", "w", "p", "q", "r") for force in "XYZKMN"},
+    "linear": {force: DOFS for force in FORCES},
     # McFarland & Whitcomb (McCarter sec. 3.2.5, eq. 3.34; Appendix D Tables D.1-D.2; Tables
     # E.1-E.3): all 36 sign-preserving quadratics a*abs(b) (basis block C.4) in every force. Eq.
     # 3.34 prints K diag(nu)|nu| (a 6-vector); the 6x36 coefficient matrix shows it means K (nu kron
     # |nu|). Per force 36 x 6 = 216 = Table 5.1 n.
-    "mcfarland": {force: _SIGN_PRESERVING for force in "XYZKMN"},
+    "mcfarland": {force: _SIGN_PRESERVING for force in FORCES},
     # Uncoupled (McCarter sec. 3.2.6, eqs 3.35-3.40; Appendix D Table D.8; Table E.10): a, a*a,
     # abs(a), a*abs(a) with a the velocity of the force axis. 4 x 6 = 24 = Tables 5.1/5.2 n. NOTE:
     # the Fig. 5.14 caption says n = 22 and Table E.10 lists 22 coefficients, omitting X_u and

@@ -1,0 +1,185 @@
+"""Raw source tables through the column map: columns renamed and scaled to SI units, time in
+seconds, quaternions turned into zyx Euler angles and ENU/FLU frames into NED/FRD.
+
+Every reader (tables in :mod:`nnid.datasets.readers`, ROS bags, ArduPilot logs) maps its raw
+tables here; :func:`nnid.datasets.readers.assemble` then puts them onto one time base. The
+attitude conversions go through scipy's ``Rotation``.
+"""
+
+from __future__ import annotations
+
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+from scipy.spatial.transform import Rotation
+
+from nnid.datasets.cleaning import CleaningReport
+from nnid.datasets.column_map import ColumnMap, Source
+from nnid.datasets.log import ANGLES
+from nnid.errors import NnidInputError
+
+# ENU -> NED for world vectors, FLU -> FRD for body vectors (both are their own inverse).
+_ENU_NED = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
+_FLU_FRD = np.diag([1.0, -1.0, -1.0])
+
+
+def euler_from_rotation(rot: np.ndarray) -> np.ndarray:
+    """zyx Euler angles (φ, θ, ψ) of rotation matrices ``[..., 3, 3]`` (inverse of J₁), with
+    φ and ψ in (−π, π] and θ in [−π/2, π/2]. Within about 1e-7 rad of θ = ±π/2 (gimbal lock),
+    where only ψ ∓ φ is defined, φ = 0."""
+    rot = np.asarray(rot, dtype=np.float64)
+    ok = np.isfinite(rot).all((-2, -1))  # NaN rows (a zero quaternion) stay NaN, not an error
+    angles = np.full(rot.shape[:-1], np.nan)
+    with warnings.catch_warnings():
+        # scipy warns on every call that holds a gimbal-locked matrix; the docstring says it
+        warnings.filterwarnings("ignore", "Gimbal lock detected", UserWarning)
+        angles[ok] = Rotation.from_matrix(rot[ok]).as_euler("ZYX")[..., ::-1]
+    # scipy's range is [−π, π]; the half-open (−π, π] of atan2 is the one the logs use
+    return np.where(angles == -np.pi, np.pi, angles)
+
+
+def rotation_from_quaternion(q: np.ndarray) -> np.ndarray:
+    """Rotation matrices of unit quaternions ``[..., 4]`` (w, x, y, z), normalised first; a zero
+    or non-finite quaternion gives a NaN matrix."""
+    q = np.asarray(q, dtype=np.float64)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        q = q / np.linalg.norm(q, axis=-1, keepdims=True)
+    ok = np.isfinite(q).all(-1)
+    out = np.full((*q.shape[:-1], 3, 3), np.nan)
+    # scipy refuses a zero quaternion (a sensor not yet initialised): its rows stay NaN, so one
+    # bad message does not stop the whole log
+    out[ok] = Rotation.from_quat(q[ok], scalar_first=True).as_matrix()
+    return out
+
+
+def rotation_from_euler(angles: np.ndarray) -> np.ndarray:
+    """J₁(Θ) = R_z(ψ) R_y(θ) R_x(φ) of angles ``[..., 3]`` = (φ, θ, ψ), as ``[..., 3, 3]``
+    (the convention of :func:`nnid.physics.kinematics.rotation_matrix`)."""
+    angles = np.asarray(angles, dtype=np.float64)
+    return Rotation.from_euler("ZYX", angles[..., ::-1]).as_matrix()
+
+
+def _to_ned_frd(out: pd.DataFrame) -> None:
+    """Convert the standard columns present from ENU world / FLU body to NED / FRD in place."""
+    for group in (("x", "y", "z"),):
+        if all(c in out for c in group):
+            out[list(group)] = out[list(group)].to_numpy() @ _ENU_NED.T
+    for group in (("u", "v", "w"), ("p", "q", "r"), ("du", "dv", "dw"), ("dp", "dq", "dr")):
+        if all(c in out for c in group):
+            out[list(group)] = out[list(group)].to_numpy() @ _FLU_FRD.T
+    if all(c in out for c in ANGLES):
+        rot = rotation_from_euler(out[list(ANGLES)].to_numpy())
+        out[list(ANGLES)] = euler_from_rotation(_ENU_NED @ rot @ _FLU_FRD)
+
+
+def map_message_sources(
+    rows: dict[str, list],
+    cmap: ColumnMap,
+    path: Path,
+    stem: str,
+    report: CleaningReport,
+    empty: str,
+    prepare=None,
+) -> list[tuple[Source, pd.DataFrame]]:
+    """The sources of a message log (ROS bag topics, ArduPilot message types) through
+    :func:`map_source`: ``rows[source.file]`` holds the decoded messages of each; a source with
+    none is an error whose text is ``empty`` formatted with its name; ``prepare(raw)`` may add
+    derived columns first. The experiment is ``stem`` unless the column map names one."""
+    by_stem = cmap.experiment in (None, "file")
+    tables = []
+    for i, source in enumerate(cmap.sources):
+        origin = f"{path}:{source.file}"
+        if not rows[source.file]:
+            raise NnidInputError(
+                empty.format(source.file), source=str(path), field=f"sources.{i}.file"
+            )
+        raw = pd.DataFrame(rows[source.file])
+        if prepare is not None:
+            prepare(raw)
+        mapped = map_source(
+            raw, source, origin, None if by_stem else cmap.experiment, cmap.drop_nonfinite, report
+        )
+        if by_stem:
+            mapped["experiment"] = stem
+        report.add("read", f"{origin}: {len(raw)} messages")
+        tables.append((source, mapped))
+    return tables
+
+
+def map_source(
+    raw: pd.DataFrame,
+    source: Source,
+    origin: str,
+    experiment: str | list[str] | None,
+    drop_nonfinite: bool,
+    report: CleaningReport,
+) -> pd.DataFrame:
+    """Rename and convert one source table: columns ``t``, ``experiment`` and the mapped ones.
+
+    ``experiment`` is a column, a list of columns (values joined with "/"), "file" (the file
+    stem) or None (one run).
+    """
+    needed = [source.time, *source.quaternion, *(s.source for s in source.specs().values())]
+    keys = [experiment] if isinstance(experiment, str) else list(experiment or [])
+    keys = [] if keys == ["file"] else keys
+    needed += keys
+    for col in needed:
+        if col not in raw.columns:
+            raise NnidInputError(
+                f"column '{col}' named in the reader config is missing; the file has "
+                f"{', '.join(map(str, raw.columns[:20]))}",
+                source=origin,
+            )
+    numeric = [c for c in needed if c not in keys]
+    if source.row_clock:  # counted before any row is dropped: a dropped row leaves a gap
+        rows = (
+            raw.groupby(keys, sort=False, dropna=False).cumcount().to_numpy(np.float64)
+            if keys
+            else np.arange(len(raw), dtype=np.float64)
+        )
+        clock = pd.Series(rows / source.row_clock, index=raw.index)
+    values = raw[numeric].apply(pd.to_numeric, errors="coerce")
+    bad = ~np.isfinite(values.to_numpy(dtype=np.float64))
+    if bad.any():
+        rows, cols = np.nonzero(bad)
+        if not drop_nonfinite:
+            raise NnidInputError(
+                f"value {raw[numeric[cols[0]]].iloc[rows[0]]!r} is not a finite number "
+                f"({int(bad.any(1).sum())} rows have one; set drop_nonfinite = true in the reader "
+                "config to drop them)",
+                source=origin,
+                field=numeric[cols[0]],
+                row=int(rows[0]),
+            )
+        keep = ~bad.any(1)
+        report.add(
+            "drop non-finite",
+            f"{origin}: rows with NaN/inf in {sorted({numeric[c] for c in cols})}",
+            int((~keep).sum()),
+        )
+        raw, values = raw[keep], values[keep]
+    out = pd.DataFrame(index=raw.index)
+    if source.row_clock:
+        out["t"] = clock.loc[raw.index].to_numpy()
+    else:
+        out["t"] = values[source.time].to_numpy(dtype=np.float64) * source.time_scale
+    if experiment == "file":
+        out["experiment"] = Path(origin).name.split(".")[0]
+    elif keys:
+        ident = raw[keys[0]].astype(str)
+        for key in keys[1:]:  # vectorised: a row-wise join is slow on a million rows
+            ident = ident + "/" + raw[key].astype(str)
+        out["experiment"] = ident.to_numpy()
+    else:
+        out["experiment"] = "0"
+    for name, spec in source.specs().items():
+        out[name] = (values[spec.source].to_numpy(dtype=np.float64) + spec.offset) * spec.factor()
+    if source.quaternion:
+        rot = rotation_from_quaternion(values[source.quaternion].to_numpy(dtype=np.float64))
+        out["phi"], out["theta"], out["psi"] = euler_from_rotation(rot).T
+    if source.frame == "enu_flu":
+        _to_ned_frd(out)
+        report.add("frame", f"{origin}: ENU/FLU converted to NED/FRD")
+    return out.reset_index(drop=True)

@@ -1,0 +1,152 @@
+"""One scoring of any fitted model on a log: every number of every JSON output comes from here.
+
+:func:`evaluate` predicts in each requested mode (one step, k steps, free run) and scores the
+model's target columns with one rule set (ARCHITECTURE.md "JSON outputs"):
+
+- NRMSE per column = RMSE / std of the measured signal over the scored samples; ``total`` is
+  the mean over the columns the data excites (velocity DOFs that barely move are not scored:
+  their NRMSE would divide by their own noise);
+- scored samples exclude, in each experiment, the model's initial conditions (its
+  ``warmup_samples_`` and the k − 1 further samples a k-step prediction needs) and the first
+  ``warmup_s`` seconds;
+- a prediction that leaves the physical range (non-finite, or more than
+  :data:`DIVERGENCE_FACTOR` measured ranges outside the measured range) has diverged: that
+  column scores ``None`` and is listed with the time it left, and ``total`` is ``None`` too,
+  never an average that hides it;
+- models with a force equation also get McCarter's J (RMS force residual, eq. 4.25), J₀ (RMS of
+  the force series) and their ratio, and the force RMSE per DOF.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from nnid.datasets.log import VELOCITY
+from nnid.evaluation.metrics import excited_dofs, warmup_mask
+from nnid.evaluation.prediction import check_mode, mode_steps
+from nnid.physics.dofs import DOFS, FORCES
+
+#: a prediction further than this many measured ranges outside the measured range has diverged
+DIVERGENCE_FACTOR = 10.0
+MODE_KEYS = {"one_step": "one_step_nrmse", "k_step": "k_step_nrmse", "free_run": "free_run_nrmse"}
+
+
+def target_columns(model, log: pd.DataFrame) -> list[str]:
+    """The columns a model is scored on in ``log``: its targets present in the log; vehicle
+    velocities only where the data excites them."""
+    targets = [c for c in model.targets_ if c in log]
+    vel = [c for c in targets if c in VELOCITY]
+    excited = set(excited_dofs(log, vel)) if vel else set()
+    return [c for c in targets if c not in VELOCITY or c in excited]
+
+
+def scored_rows(log: pd.DataFrame, warmup_s: float, initial: int) -> np.ndarray:
+    """True where a sample is scored: after ``initial`` samples and ``warmup_s`` seconds of its
+    experiment."""
+    return warmup_mask(log, warmup_s, warmup_samples=initial)
+
+
+def score_prediction(
+    log: pd.DataFrame, predicted: pd.DataFrame, columns: Sequence[str], mask: np.ndarray
+) -> tuple[dict[str, float | None], dict[str, float | None], dict[str, float]]:
+    """(NRMSE per column and ``total``, RMSE per column and ``total``, ``{column: t}`` of the
+    columns that diverged)."""
+    t = log["t"].to_numpy(np.float64)
+    nrmse: dict[str, float | None] = {}
+    rmse: dict[str, float | None] = {}
+    diverged: dict[str, float] = {}
+    for c in columns:
+        y = log[c].to_numpy(np.float64)[mask]
+        p = predicted[c].to_numpy(np.float64)[mask]
+        ok = np.isfinite(y)
+        y, p, tc = y[ok], p[ok], t[mask][ok]
+        if y.size == 0:
+            nrmse[c] = rmse[c] = None
+            continue
+        lo, hi = float(y.min()), float(y.max())
+        span = DIVERGENCE_FACTOR * max(hi - lo, 1e-12)
+        bad = ~np.isfinite(p) | (p < lo - span) | (p > hi + span)
+        if bad.any():
+            diverged[c] = float(tc[np.flatnonzero(bad)[0]])
+            nrmse[c] = rmse[c] = None
+            continue
+        err = float(np.sqrt(np.mean((p - y) ** 2)))
+        std = float(np.std(y))
+        rmse[c] = err
+        nrmse[c] = err / std if std > 0 else None
+    for out in (nrmse, rmse):
+        vals = [out[c] for c in columns]
+        out["total"] = float(np.mean(vals)) if vals and all(v is not None for v in vals) else None
+    return nrmse, rmse, diverged
+
+
+def force_scores(model, log: pd.DataFrame, mask: np.ndarray) -> dict[str, Any]:
+    """McCarter's J (RMS force residual over the equation's axes, eq. 4.25), J₀ (RMS of the
+    force series) and J/J₀, and the force RMSE per DOF, over the scored samples."""
+    resid = model.residual(log)
+    series = model.force_series(log)
+    cols = [f for f in FORCES if f in resid.columns]
+    r = resid[cols].to_numpy(np.float64)[mask]
+    s = series[cols].to_numpy(np.float64)[mask]
+    r, s = r[np.isfinite(r).all(1)], s[np.isfinite(s).all(1)]
+    j = float(np.sqrt(np.mean(r * r))) if r.size else None
+    j0 = float(np.sqrt(np.mean(s * s))) if s.size else None
+    per_dof = {
+        DOFS[FORCES.index(f)]: (float(np.sqrt(np.mean(r[:, k] ** 2))) if r.size else None)
+        for k, f in enumerate(cols)
+    }
+    return {
+        "J": j,
+        "J0": j0,
+        "J_over_J0": j / j0 if j is not None and j0 else None,
+        "force_rmse": per_dof,
+    }
+
+
+def evaluate(
+    model,
+    log: pd.DataFrame,
+    modes: Sequence[str] = ("one_step", "free_run"),
+    k_step: int | None = None,
+    warmup_s: float = 0.0,
+    autopilot=None,
+    predictions: dict[str, pd.DataFrame] | None = None,
+) -> dict[str, Any]:
+    """Scores of a fitted model on ``log`` (module docstring). ``modes`` among "one_step",
+    "k_step" (``k_step`` samples ahead) and "free_run"; ``autopilot`` (a
+    :class:`nnid.evaluation.prediction.Replay` of the autopilot the log was flown under) flies
+    the free run and the k-step predictions of models that can fly in closed loop (physics
+    models) under it, so an open-loop unstable plant is compared as it was flown; the modes
+    flown so are listed under ``closed_loop``. ``predictions``, when given, receives each
+    mode's predicted DataFrame (for figures)."""
+    columns = target_columns(model, log)
+    out: dict[str, Any] = {"columns": columns}
+    base = scored_rows(log, warmup_s, model.warmup_samples_)
+    out["samples"] = int(base.sum())
+    for name in modes:
+        if name == "k_step":
+            if k_step is None:
+                raise ValueError("mode 'k_step' needs k_step (samples ahead)")
+            mode: str | int = check_mode(k_step)
+            out["k_step"] = int(k_step)
+        else:
+            mode = check_mode(name)
+        closed = name != "one_step" and autopilot is not None and hasattr(model, "parts_")
+        pred = model.closed_loop(log, autopilot, mode) if closed else model.predict(log, mode)
+        if predictions is not None:
+            predictions[name] = pred
+        mask = scored_rows(log, warmup_s, model.warmup_samples_ + mode_steps(mode) - 1)
+        nrmse, rmse, diverged = score_prediction(log, pred, columns, mask)
+        out[MODE_KEYS[name]] = nrmse
+        out[MODE_KEYS[name].replace("nrmse", "rmse")] = rmse
+        key = "diverged" if name == "free_run" else f"{name}_diverged"
+        out[key] = diverged
+        if closed:
+            out.setdefault("closed_loop", []).append(name)
+    if model.has_force_equation:
+        out.update(force_scores(model, log, base))
+    return out

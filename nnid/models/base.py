@@ -1,0 +1,356 @@
+"""The model protocol every nnid model speaks (ARCHITECTURE.md, "The model protocol").
+
+A model is a scikit-learn estimator (:class:`sklearn.base.BaseEstimator`): the constructor only
+stores its arguments, so ``get_params``, ``set_params`` and :func:`sklearn.base.clone` work;
+what ``fit`` learns ends in ``_``. As pysindy's ``BaseOptimizer.fit`` wraps an abstract
+``_reduce``, :meth:`NnidModel.fit` checks the input once and calls the model's own ``_fit``;
+``predict``, ``residual``, ``params``, ``describe`` and ``save`` first check that the model was
+fitted (scikit-learn's ``check_is_fitted``), so a model used too early raises one clear error.
+
+- ``fit(log, validation=None, progress=None) -> self``; ``progress(done, total, message)``.
+- ``predict(log, mode="free_run")``: ``"one_step"``, ``"free_run"`` or an int k (k steps
+  ahead); a DataFrame on the log's index with the model's output columns ``outputs_``. The
+  first ``warmup_samples_ + k − 1`` rows of each experiment (k = 1 for one step and free run)
+  are initial conditions, not predictions, and are NaN.
+- ``residual(log)``: the equation error (a generalized force for physics models, columns
+  ``X Y Z K M N``; the one-step output error otherwise), on the log's index.
+- ``params`` (``{name: {"value", "stderr"}}``) and ``describe()`` (a JSON-ready summary).
+- ``save(dir)`` and :func:`load_model`: ``model.json`` (kind, schema version, constructor
+  settings, learned scalars; strict JSON) and ``tensors.pt`` (loaded with
+  ``weights_only=True``): no code runs on load, and a round trip predicts identically.
+"""
+
+from __future__ import annotations
+
+import importlib
+import inspect
+import math
+import time
+from abc import ABC, abstractmethod
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any, ClassVar
+
+import numpy as np
+import pandas as pd
+import torch
+from sklearn.base import BaseEstimator
+from sklearn.utils.validation import check_is_fitted
+
+from nnid.errors import NnidInputError
+from nnid.evaluation.prediction import check_mode
+from nnid.serialization import SCHEMA_VERSION, read_json, write_json
+from nnid.trainers.history import Progress, silent
+
+#: model kind -> "module:Class", imported when first needed (torch-heavy modules stay unloaded
+#: until a model of theirs is used)
+MODEL_KINDS: dict[str, str] = {
+    "fossen": "nnid.models.parametric:ParametricModel",
+    "caccia": "nnid.models.caccia:CacciaModel",
+    "synthesis": "nnid.models.synthesis:SynthesisModel",
+    "sindy": "nnid.models.sindy:SindyDamping",
+    "narx": "nnid.models.narx:NarxModel",
+    "state_space": "nnid.models.neural_state_space:NeuralStateSpace",
+}
+#: trainer kind -> "module:Class" (trainers are scikit-learn estimators too)
+TRAINER_KINDS: dict[str, str] = {
+    "ls": "nnid.trainers.least_squares:LeastSquares",
+    "rls": "nnid.trainers.recursive:RecursiveLeastSquares",
+    "gradient": "nnid.trainers.recursive:GradientEstimator",
+    "ukf": "nnid.trainers.ukf:UnscentedKalman",
+    "lm": "nnid.trainers.levenberg_marquardt:LevenbergMarquardt",
+    "adam": "nnid.trainers.adam:Adam",
+}
+MODEL_FILE = "model.json"
+TENSOR_FILE = "tensors.pt"
+NOT_FITTED = (
+    "this %(name)s is not fitted yet: call fit(log) first, or load a saved model with "
+    "nnid.load_model(dir)"
+)
+
+
+def resolve(kinds: Mapping[str, str], kind: str, what: str) -> type:
+    """The class registered under ``kind``."""
+    if kind not in kinds:
+        raise NnidInputError(f"unknown {what} '{kind}'; expected one of {', '.join(kinds)}")
+    module, name = kinds[kind].split(":")
+    return getattr(importlib.import_module(module), name)
+
+
+def model_class(kind: str) -> type[NnidModel]:
+    """The model class of a kind ("fossen", "narx", ...)."""
+    return resolve(MODEL_KINDS, kind, "model kind")
+
+
+def trainer_class(kind: str) -> type:
+    """The trainer class of a kind ("ls", "lm", ...)."""
+    return resolve(TRAINER_KINDS, kind, "trainer")
+
+
+def check_log(log: Any, name: str = "log") -> pd.DataFrame:
+    """The log of a fit or prediction: a DataFrame with rows."""
+    if not isinstance(log, pd.DataFrame):
+        raise NnidInputError(f"the {name} must be a pandas DataFrame, not {type(log).__name__}")
+    if len(log) == 0:
+        raise NnidInputError(f"the {name} has no rows")
+    return log
+
+
+# -- settings as JSON ----------------------------------------------------------------------------
+
+
+def encode_setting(value: Any) -> Any:
+    """A constructor argument as JSON: a vehicle as its file's fields, a trainer as its kind
+    and parameters, arrays as lists (tagged so :func:`decode_setting` rebuilds them)."""
+    from nnid.vehicle import Vehicle
+
+    if isinstance(value, Vehicle):
+        return {"$vehicle": value.model_dump(mode="json")}
+    if isinstance(value, BaseEstimator) and getattr(value, "kind", None) in TRAINER_KINDS:
+        return {"$trainer": value.kind, "params": encode_setting(value.get_params(deep=False))}
+    if isinstance(value, np.ndarray):
+        return {"$array": value.tolist()}
+    if isinstance(value, Mapping):
+        return {str(k): encode_setting(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [encode_setting(v) for v in value]
+    if isinstance(value, float) and not math.isfinite(value):
+        return {"$float": repr(value)}
+    if value is None or isinstance(value, (bool, int, float, str)):
+        return value
+    if isinstance(value, (np.integer, np.floating, np.bool_)):
+        return value.item()
+    raise TypeError(f"cannot save a setting of type {type(value).__name__}")
+
+
+def decode_setting(value: Any, source: str = "") -> Any:
+    """Inverse of :func:`encode_setting` (no code runs: tags name data, not classes)."""
+    if isinstance(value, list):
+        return [decode_setting(v, source) for v in value]
+    if not isinstance(value, dict):
+        return value
+    if "$vehicle" in value:
+        from nnid.vehicle import vehicle_from_dict
+
+        return vehicle_from_dict(value["$vehicle"], source)
+    if "$trainer" in value:
+        return trainer_class(value["$trainer"])(**decode_setting(value["params"], source))
+    if "$array" in value:
+        return np.asarray(value["$array"], dtype=float)
+    if "$float" in value:
+        return float(value["$float"])
+    return {k: decode_setting(v, source) for k, v in value.items()}
+
+
+# -- the protocol --------------------------------------------------------------------------------
+
+
+class NnidModel(BaseEstimator, ABC):
+    """Base of every nnid model (see the module docstring for the protocol).
+
+    Subclasses set ``kind`` (their key in :data:`MODEL_KINDS`), store every constructor
+    argument unchanged, and implement ``_fit``, ``_predict``, ``_residual``, ``_params``,
+    ``_state`` and ``_restore``. A model with a force equation (``has_force_equation``)
+    also implements ``_force_series``: the force its fitted terms explain, for McCarter's
+    J₀ (eq. 4.25).
+    """
+
+    kind: ClassVar[str] = ""
+    #: whether ``residual`` is a generalized force (columns X..N) with a J₀ series
+    has_force_equation: ClassVar[bool] = False
+
+    @classmethod
+    def from_config(cls, spec, vehicle=None) -> NnidModel:
+        """The model a validated config table describes (:mod:`nnid.config`); physics models
+        take the ``vehicle`` whose unknowns they identify."""
+        args = spec.arguments()
+        if "vehicle" in inspect.signature(cls.__init__).parameters:
+            if vehicle is None:
+                raise NnidInputError(
+                    f"a {cls.kind} model needs a vehicle (the config's 'vehicle' or --vehicle)",
+                    field="vehicle",
+                )
+            args["vehicle"] = vehicle
+        return cls(**args)
+
+    # -- fitting --------------------------------------------------------------------------------
+    def fit(
+        self,
+        log: pd.DataFrame,
+        validation: pd.DataFrame | None = None,
+        progress: Progress | None = None,
+    ) -> NnidModel:
+        """Fit on ``log``; ``validation`` (held-out experiments) is used for early stopping or
+        model selection where the model has such a choice; ``progress(done, total, message)``
+        is called as the fit goes. Returns the model."""
+        log = check_log(log, "training log")
+        if validation is not None:
+            validation = check_log(validation, "validation log")
+        for name in [k for k in vars(self) if k.endswith("_") and not k.startswith("__")]:
+            delattr(self, name)  # a refit starts from nothing learned
+        start = time.perf_counter()
+        self._fit(log, validation, progress or silent)
+        self.fit_seconds_ = time.perf_counter() - start
+        return self
+
+    @abstractmethod
+    def _fit(self, log: pd.DataFrame, validation: pd.DataFrame | None, progress: Progress):
+        """Learn from ``log``; set ``outputs_`` (the columns ``predict`` returns),
+        ``targets_`` (those compared with measurements) and ``warmup_samples_`` (initial
+        conditions per experiment: 1 for a state-space plant, the largest delay of a NARX)."""
+
+    # -- use ------------------------------------------------------------------------------------
+    def predict(self, log: pd.DataFrame, mode: str | int = "free_run") -> pd.DataFrame:
+        """Predicted outputs on the log's index (see the module docstring for ``mode``)."""
+        check_is_fitted(self, msg=NOT_FITTED)
+        mode = check_mode(mode)
+        log = check_log(log)
+        out = self._predict(log, mode)
+        return out.set_axis(log.index)
+
+    @abstractmethod
+    def _predict(self, log: pd.DataFrame, mode: str | int) -> pd.DataFrame:
+        """Predicted ``outputs_`` per row of ``log``; initial conditions NaN."""
+
+    def score(
+        self, log: pd.DataFrame, mode: str | int = "free_run", warmup_s: float = 0.0
+    ) -> dict[str, float | None]:
+        """NRMSE per target column and ``total`` in one prediction mode, by the rules of
+        :func:`nnid.evaluation.evaluate.evaluate` (warm-up excluded, None where the prediction
+        diverged)."""
+        from nnid.evaluation.evaluate import evaluate
+
+        mode = check_mode(mode)
+        name = mode if isinstance(mode, str) else "k_step"
+        k = mode if isinstance(mode, int) else None
+        result = evaluate(self, log, (name,), k, warmup_s)
+        return result[
+            {"one_step": "one_step_nrmse", "free_run": "free_run_nrmse"}.get(name, "k_step_nrmse")
+        ]
+
+    def residual(self, log: pd.DataFrame) -> pd.DataFrame:
+        """The model's equation error on the log's index: measured minus modelled (a
+        generalized force ``X … N`` for physics models, the one-step output error else)."""
+        check_is_fitted(self, msg=NOT_FITTED)
+        return self._residual(check_log(log)).set_axis(log.index)
+
+    def _residual(self, log: pd.DataFrame) -> pd.DataFrame:
+        """Default: the one-step output error, measured minus predicted."""
+        pred = self._predict(log, "one_step")
+        return log[pred.columns].astype(float) - pred.set_axis(log.index)
+
+    def force_series(self, log: pd.DataFrame) -> pd.DataFrame:
+        """What the model's fitted terms must explain, columns ``X … N`` (the residual at zero
+        parameters; McCarter's τ̄, eq. 4.4, for damping models): J = RMS(residual) and
+        J₀ = RMS(this) (eq. 4.25). Only for models with a force equation."""
+        if not self.has_force_equation:
+            raise TypeError(f"a {self.kind} model has no force equation")
+        check_is_fitted(self, msg=NOT_FITTED)
+        return self._force_series(check_log(log)).set_axis(log.index)
+
+    @property
+    def params(self) -> dict[str, dict[str, float | None]]:
+        """Identified parameters ``{name: {"value": θ, "stderr": σ or None}}``; names follow
+        the vehicle file for physics models."""
+        check_is_fitted(self, msg=NOT_FITTED)
+        return self._params()
+
+    @abstractmethod
+    def _params(self) -> dict[str, dict[str, float | None]]: ...
+
+    @property
+    def n_params(self) -> int:
+        """Number of fitted parameters."""
+        check_is_fitted(self, msg=NOT_FITTED)
+        return self._n_params()
+
+    def _n_params(self) -> int:
+        return len(self._params())
+
+    def trainer_name(self) -> str | None:
+        """What fitted the model: the kind of its trainer (``trainer_`` after a fit)."""
+        trainer = getattr(self, "trainer_", None) or getattr(self, "trainer", None)
+        return None if trainer is None else getattr(trainer, "kind", type(trainer).__name__)
+
+    def describe(self) -> dict:
+        """A JSON-ready summary: kind, trainer, outputs, parameter count and values, fit time."""
+        check_is_fitted(self, msg=NOT_FITTED)
+        return {
+            "kind": self.kind,
+            "trainer": self.trainer_name(),
+            "outputs": list(self.outputs_),
+            "n_params": self.n_params,
+            "params": self.params,
+            "fit_seconds": getattr(self, "fit_seconds_", None),
+        }
+
+    # -- persistence ----------------------------------------------------------------------------
+    def save(self, folder: str | Path) -> Path:
+        """Write ``model.json`` and, where the model has tensors, ``tensors.pt`` into
+        ``folder``; :func:`load_model` reads them back."""
+        check_is_fitted(self, msg=NOT_FITTED)
+        folder = Path(folder)
+        folder.mkdir(parents=True, exist_ok=True)
+        state, tensors = self._state()
+        payload = {
+            "kind": self.kind,
+            "nnid_version": _version(),
+            "settings": encode_setting(self.get_params(deep=False)),
+            "outputs": list(self.outputs_),
+            "targets": list(self.targets_),
+            "warmup_samples": int(self.warmup_samples_),
+            "state": state,
+        }
+        if tensors:
+            torch.save(tensors, folder / TENSOR_FILE)
+        write_json(folder / MODEL_FILE, payload)
+        return folder
+
+    @abstractmethod
+    def _state(self) -> tuple[dict, dict[str, torch.Tensor]]:
+        """What ``fit`` learned: JSON-ready scalars, and tensors by name."""
+
+    @abstractmethod
+    def _restore(self, state: dict, tensors: dict[str, torch.Tensor]) -> None:
+        """Set the learned attributes from what :meth:`_state` returned."""
+
+
+def load_model(folder: str | Path) -> NnidModel:
+    """Load any saved nnid model from its folder (``model.json`` names its kind); tensors are
+    read with ``weights_only=True``, so loading runs no code from the files."""
+    folder = Path(folder)
+    path = folder / MODEL_FILE if folder.is_dir() else folder
+    if not path.exists():
+        raise NnidInputError(f"no saved model here (expected {MODEL_FILE})", source=str(folder))
+    try:
+        payload = read_json(path)
+    except ValueError as exc:
+        raise NnidInputError(f"not a valid model file ({exc})", source=str(path)) from None
+    if not isinstance(payload, dict) or "kind" not in payload:
+        raise NnidInputError("not an nnid model file (no 'kind')", source=str(path))
+    version = payload.get("schema_version")
+    if not isinstance(version, int) or version > SCHEMA_VERSION:
+        raise NnidInputError(
+            f"schema_version {version!r}: this nnid reads model files up to version "
+            f"{SCHEMA_VERSION}",
+            source=str(path),
+            field="schema_version",
+        )
+    cls = model_class(payload["kind"])
+    model = cls(**decode_setting(payload["settings"], str(path)))
+    tensor_path = path.parent / TENSOR_FILE
+    tensors = torch.load(tensor_path, weights_only=True) if tensor_path.exists() else {}
+    model.outputs_ = list(payload["outputs"])
+    model.targets_ = list(payload["targets"])
+    model.warmup_samples_ = int(payload["warmup_samples"])
+    model._restore(payload["state"], tensors)
+    return model
+
+
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("nnid")
+    except PackageNotFoundError:  # running from a source tree that is not installed
+        return "unknown"

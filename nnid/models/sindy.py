@@ -1,0 +1,266 @@
+"""Sparse identification of the viscous force (SINDy) over McCarter's basis library.
+
+pysindy does the sparse regression (:class:`nnid.trainers.sindy.SparsePath`); this model supplies
+the candidate functions and the targets. Two modes:
+
+``mode="residual"`` (default)
+    regress McCarter's residual force τ̄ = M ν̇ + C(ν)ν + g(η) − τ (eq. 4.4, see
+    :func:`nnid.models.synthesis.residual_force`) on ξ(ν): τ̄ ≈ Θ ξ(ν), one sparse coefficient
+    row per force ``X Y Z K M N``. The coefficients are the damping coefficients ``"F:term"`` of
+    a vehicle file; the model predicts by flying the vehicle with that damping (a
+    :class:`~nnid.models.synthesis.DampingModel`), and ``filter_lambda``/``zoh_midpoint`` choose
+    the form of τ̄ as for the synthesis models.
+``mode="control"``
+    SINDy with control on the accelerations: ν̇ ≈ Ξ [ξ(ν), τ], the controls entering linearly
+    (pysindy's convention of appending u to x before the library). Rigid-body, added-mass and
+    Coriolis effects are absorbed by the coefficients (the Coriolis products are library terms);
+    restoring forces are not in the library, so this mode suits trimmed, level runs. It predicts
+    the velocities by integrating ν̇ = Ξ [ξ(ν), τ] (RK4, the input held over each sample); its
+    residual is the acceleration error.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+import pandas as pd
+import torch
+
+from nnid.datasets.arrays import log_arrays
+from nnid.datasets.log import VELOCITY
+from nnid.datasets.preprocess import experiments
+from nnid.errors import NnidInputError
+from nnid.evaluation.prediction import blank_initial, mode_steps
+from nnid.models.parametric import prepare_motion
+from nnid.models.synthesis import DampingModel
+from nnid.physics.damping_library import LIBRARY, BasisLibrary
+from nnid.physics.dofs import DOFS, FORCES
+from nnid.physics.integrate import rk4
+from nnid.trainers.history import Progress
+from nnid.trainers.sindy import MODES, BasisFeatureLibrary, SparsePath, nmse
+
+ACCELERATION_OUTPUTS = tuple(f"d{d}" for d in DOFS)
+
+
+class SindyDamping(DampingModel):
+    """Sparse viscous-force identification with pysindy over the basis library.
+
+    ``SindyDamping(vehicle).fit(log, validation)``: the threshold path is fitted on ``log`` and
+    a model chosen on ``validation`` (without one, on the last ``holdout`` fraction of each
+    experiment): see :class:`nnid.trainers.sindy.SparsePath` for ``optimizer``,
+    ``thresholds``, ``selection``, ``tolerance``, ``alpha``, ``per_output`` and ``seed``.
+    ``path_`` lists every threshold tried, ``selected_`` the chosen entry, ``coefficients_``
+    the model as ``{"F:term": value}`` (mode ``"control"``: ``{"du:term": value}`` and
+    ``{"du:tau_X": value}``). Velocities and accelerations missing from a log are derived by
+    Savitzky-Golay (``savgol_window`` s, ``savgol_order``).
+    """
+
+    kind = "sindy"
+
+    def __init__(
+        self,
+        vehicle,
+        optimizer: str = "stlsq",
+        thresholds: Sequence[float] | None = None,
+        selection: str = "validation",
+        tolerance: float = 0.05,
+        mode: str = "residual",
+        terms: Sequence[str] | None = None,
+        alpha: float = 1e-8,
+        holdout: float = 0.2,
+        per_output: bool = True,
+        savgol_window: float = 1.0,
+        savgol_order: int = 4,
+        filter_lambda: float | None = None,
+        zoh_midpoint: bool = False,
+        seed: int = 0,
+    ) -> None:
+        self.vehicle = vehicle
+        self.optimizer = optimizer
+        self.thresholds = thresholds
+        self.selection = selection
+        self.tolerance = tolerance
+        self.mode = mode
+        self.terms = terms
+        self.alpha = alpha
+        self.holdout = holdout
+        self.per_output = per_output
+        self.savgol_window = savgol_window
+        self.savgol_order = savgol_order
+        self.filter_lambda = filter_lambda
+        self.zoh_midpoint = zoh_midpoint
+        self.seed = seed
+
+    @property
+    def has_force_equation(self) -> bool:  # type: ignore[override]
+        """Residual mode regresses a force; control mode an acceleration."""
+        return self.mode == "residual"
+
+    # -- data -----------------------------------------------------------------------------------
+    def _terms(self) -> list[str]:
+        return list(LIBRARY if self.terms is None else self.terms)
+
+    def features(self, log: pd.DataFrame) -> tuple[np.ndarray, np.ndarray]:
+        """Evaluated library ``[N, K]`` (with the six controls appended in control mode) and
+        targets ``[N, 6]`` (τ̄, or ν̇ in control mode), row-aligned with the log (NaN where a
+        value is undefined)."""
+        if self.mode == "residual":
+            return self._xi_tau(log, self._terms())
+        log = prepare_motion(log, DOFS, self.savgol_window, self.savgol_order, True)
+        data = log_arrays(log, self.vehicle)
+        library = BasisLibrary(self._terms(), self.vehicle.damping.u_c or 0.0)
+        return np.concatenate([library(data["nu"]), data["tau"]], axis=1), data["nu_dot"]
+
+    def arrays(self, log: pd.DataFrame) -> tuple[np.ndarray, np.ndarray]:
+        """Library inputs ``x`` (ν, and τ in control mode) and targets ``y`` (τ̄ or ν̇) of a
+        log, rows with an undefined value dropped (for regressions outside the model)."""
+        if self.mode == "residual":
+            y, data = self.tau_bar(log)
+            x = data["nu"]
+        else:
+            log = prepare_motion(log, DOFS, self.savgol_window, self.savgol_order, True)
+            data = log_arrays(log, self.vehicle)
+            x, y = np.concatenate([data["nu"], data["tau"]], axis=1), data["nu_dot"]
+        ok = np.isfinite(x).all(1) & np.isfinite(y).all(1)
+        return x[ok], y[ok]
+
+    def _split(self, log: pd.DataFrame) -> tuple[pd.DataFrame, pd.DataFrame]:
+        train, val = [], []
+        for _, idx in experiments(log):
+            g = log.loc[idx]
+            cut = round(len(g) * (1.0 - self.holdout))
+            train.append(g.iloc[:cut])
+            val.append(g.iloc[cut:])
+        return pd.concat(train), pd.concat(val)
+
+    @property
+    def output_names(self) -> list[str]:
+        """Names of the regression's outputs: forces, or accelerations in control mode."""
+        return list(FORCES) if self.mode == "residual" else list(ACCELERATION_OUTPUTS)
+
+    # -- fitting --------------------------------------------------------------------------------
+    def _fit(self, log: pd.DataFrame, validation, progress: Progress) -> None:
+        if self.mode not in MODES:
+            raise NnidInputError(f"mode is one of {', '.join(MODES)}", field="mode")
+        if validation is None:
+            log, validation = self._split(log)
+        theta, y = self.features(log)
+        theta_v, y_v = self.features(validation)
+        ok = np.isfinite(theta).all(1) & np.isfinite(y).all(1)
+        ok_v = np.isfinite(theta_v).all(1) & np.isfinite(y_v).all(1)
+        path = SparsePath(
+            self.optimizer,
+            self.thresholds,
+            self.selection,
+            self.tolerance,
+            self.alpha,
+            self.per_output,
+            self.seed,
+        ).fit(theta[ok], y[ok], theta_v[ok_v], y_v[ok_v])
+        progress(1, 1, f"SINDy path of {len(path.path_)} thresholds")
+        self.path_ = path.path_
+        self.selected_ = path.selected_
+        terms = self._terms()
+        names = terms + (list(f"tau_{f}" for f in FORCES) if self.mode == "control" else [])
+        self.feature_names_ = names
+        self.coefficients_ = {
+            f"{out}:{names[j]}": float(path.coef_[i, j])
+            for i, out in enumerate(self.output_names)
+            for j in np.flatnonzero(path.coef_[i])
+        }
+        self._set_model(terms, path.coef_)
+
+    def _set_model(self, terms: list[str], coef: np.ndarray) -> None:
+        if self.mode == "residual":
+            self._set_damping(terms, coef, np.full(coef.shape, np.nan))
+            return
+        self.terms_ = list(terms)
+        self.coef_ = np.asarray(coef, dtype=np.float64)
+        self.stderr_ = np.full(self.coef_.shape, np.nan)
+        self.dofs_ = DOFS
+        self.outputs_ = list(VELOCITY)
+        self.targets_ = list(VELOCITY)
+        self.warmup_samples_ = 1
+
+    def trainer_name(self) -> str:
+        return f"pysindy {self.optimizer}"
+
+    # -- use ------------------------------------------------------------------------------------
+    def selected_terms(self) -> set[str]:
+        """The selected ``"F:term"`` keys."""
+        return set(self.coefficients_)
+
+    def _n_params(self) -> int:
+        return int(np.count_nonzero(self.coef_))
+
+    def _params(self) -> dict[str, dict[str, float | None]]:
+        if self.mode == "residual":
+            return super()._params()
+        return {k: {"value": v, "stderr": None} for k, v in self.coefficients_.items()}
+
+    def predict_arrays(self, x: np.ndarray) -> np.ndarray:
+        """The model's output (τ_D or ν̇) ``[N, 6]`` for library inputs ``x`` ``[N, 6 (+6)]``."""
+        library = BasisFeatureLibrary(self.terms_, self.vehicle.damping.u_c).fit(x)
+        return np.asarray(library.transform(x)) @ self.coef_.T
+
+    def regression_error(self, log: pd.DataFrame) -> float:
+        """The path's J on a log: the mean normalised MSE of the regression's six outputs."""
+        x, y = self.arrays(log)
+        return float(nmse(y, self.predict_arrays(x)).mean())
+
+    def _accelerations(self, nu: torch.Tensor, tau: torch.Tensor) -> torch.Tensor:
+        """ν̇ = Ξ [ξ(ν), τ] of control mode (torch, batched)."""
+        library = BasisLibrary(self.terms_, self.vehicle.damping.u_c or 0.0)
+        coef = torch.as_tensor(self.coef_)
+        return torch.cat([library(nu), tau], -1) @ coef.T
+
+    def _predict(self, log: pd.DataFrame, mode: str | int) -> pd.DataFrame:
+        if self.mode == "residual":
+            return super()._predict(log, mode)
+        log = prepare_motion(log, DOFS, self.savgol_window, self.savgol_order, False)
+        data = log_arrays(log, self.vehicle)
+        out = np.full((len(log), 6), np.nan)
+        k = mode_steps(mode)
+        for _, idx in experiments(log):
+            pos = log.index.get_indexer(idx)
+            dt = float(np.median(np.diff(log["t"].to_numpy(np.float64)[pos])))
+            nu = torch.as_tensor(data["nu"][pos])
+            tau = torch.as_tensor(data["tau"][pos])
+            with torch.no_grad():
+                if mode == "free_run":
+                    run = rk4(self._accelerations, nu[:1], tau[:-1, None], dt)
+                    out[pos] = run[:, 0].numpy()
+                elif pos.size > k:
+                    n = pos.size - k
+                    windows = torch.stack([tau[j : j + n] for j in range(k)], 0)
+                    out[pos[k:]] = rk4(self._accelerations, nu[:n], windows, dt)[-1].numpy()
+        pred = pd.DataFrame(out, columns=list(VELOCITY), index=log.index)
+        return blank_initial(pred, log, self.warmup_samples_ + k - 1)
+
+    def _residual(self, log: pd.DataFrame) -> pd.DataFrame:
+        """τ̄ − Θ ξ(ν) (residual mode), or ν̇ − Ξ [ξ(ν), τ] (control mode, columns du … dr)."""
+        if self.mode == "residual":
+            return super()._residual(log)
+        theta, y = self.features(log)
+        return pd.DataFrame(
+            y - theta @ self.coef_.T, columns=list(ACCELERATION_OUTPUTS), index=log.index
+        )
+
+    def _state(self) -> tuple[dict, dict]:
+        state, tensors = super()._state()
+        return {
+            **state,
+            "coefficients": self.coefficients_,
+            "path": self.path_,
+            "selected": self.selected_,
+            "feature_names": self.feature_names_,
+        }, tensors
+
+    def _restore(self, state: dict, tensors: dict) -> None:
+        coef = np.array(state["coef"], dtype=float).reshape(6, -1)
+        self._set_model(list(state["terms"]), coef)
+        self.coefficients_ = dict(state["coefficients"])
+        self.path_ = list(state["path"])
+        self.selected_ = dict(state["selected"])
+        self.feature_names_ = list(state["feature_names"])

@@ -1,0 +1,252 @@
+"""McCarter's viscous-model synthesis as models (ch. 4, eqs 4.4-4.27).
+
+The residual force τ̄ = M ν̇ + C(ν)ν − g(η) − τ (eq. 4.4) is the viscous force a log shows once
+the rigid body, added mass, restoring forces and actuation are taken out; a damping model
+K ξ(ν) over the basis library (eq. 4.6) is fitted to it. :class:`DampingModel` is what every
+such model shares: its residual is τ̄ − K ξ(ν) (McCarter's force error, so J and J₀ of eq. 4.25
+come from the protocol's ``residual`` and ``force_series``), and it predicts by flying the
+vehicle file with its damping replaced by K inside the Fossen simulator.
+:class:`SynthesisModel` fits a named mask by least squares (eq. 4.22) or Nelder-Mead on the
+costs of eqs 4.23-4.27 (:mod:`nnid.trainers.synthesis`); :class:`nnid.models.sindy.SindyDamping`
+chooses the terms by sparse regression.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Literal
+
+import numpy as np
+import pandas as pd
+
+from nnid.datasets.arrays import log_arrays
+from nnid.datasets.preprocess import zoh_midpoint_inputs
+from nnid.errors import NnidInputError
+from nnid.models.parametric import (
+    FossenPlant,
+    ParametricFossen,
+    filter_settled,
+    filter_signal,
+    prepare_motion,
+)
+from nnid.physics.damping_library import BasisLibrary
+from nnid.physics.dofs import DOFS, FORCES
+from nnid.physics.parts import Parts
+from nnid.trainers.history import Progress
+from nnid.trainers.synthesis import (
+    LOSSES,
+    force_error,
+    mask_matrix,
+    mask_term_list,
+    masked_least_squares,
+    nelder_mead,
+)
+
+
+def residual_force(
+    vehicle,
+    log: pd.DataFrame,
+    savgol_window: float = 1.0,
+    savgol_order: int = 4,
+    filter_lambda: float | None = None,
+    zoh_midpoint: bool = False,
+) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """McCarter's residual force τ̄ (eq. 4.4) ``[N, 6]`` and the log's arrays (η, ν, ν̇, τ).
+
+    Velocities and accelerations missing from the log are derived by Savitzky-Golay
+    (:func:`nnid.models.parametric.prepare_motion`) and τ̄ is
+    :meth:`ParametricFossen.damping_force` (the
+    vehicle's declared damping is left out of it). With ``filter_lambda`` = λ it is instead the
+    filtered residual F[τ̄], F(s) = λ/(s + λ), with M F[ν̇] computed as M sF(s)[ν] (the
+    filtered-regressor form of :meth:`ParametricFossen.equation_residual`): no differentiated
+    acceleration, and the regressors must then be filtered alike (:func:`synthesis_data`). The
+    first 3/λ s of each experiment, where the filters settle, are NaN.
+
+    ``zoh_midpoint`` takes the inputs as held over each sample (zero-order hold, as logged
+    commands are) and uses at t_k the mean (τ_{k−1} + τ_k)/2 of the force held before and after
+    it, which is what a smoothed or filtered acceleration at t_k sees; without it a fast
+    autopilot's held force leaves a half-sample lag that biases the damping by several %.
+    """
+    if zoh_midpoint:
+        log = zoh_midpoint_inputs(log)
+    log = prepare_motion(log, DOFS, savgol_window, savgol_order, filter_lambda is None)
+    data = log_arrays(log, vehicle)
+    structure = ParametricFossen(vehicle, [])
+    if filter_lambda is None:
+        return structure.damping_force(data), data
+    parts = structure.base.copy()
+    parts.damping = {}
+    tau_bar = structure.equation_residual(parts, data, filter_lambda)
+    tau_bar[~filter_settled(data, filter_lambda)] = np.nan
+    return tau_bar, data
+
+
+def synthesis_data(
+    vehicle,
+    log: pd.DataFrame,
+    library: BasisLibrary,
+    savgol_window: float = 1.0,
+    savgol_order: int = 4,
+    filter_lambda: float | None = None,
+    zoh_midpoint: bool = False,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The basis terms ξ(ν) ``[N, n_terms]`` and τ̄ ``[N, 6]`` of a log, both through F(s)
+    when ``filter_lambda`` is given, so that τ̄ = K ξ holds on either form (eq. 4.6)."""
+    tau_bar, data = residual_force(
+        vehicle, log, savgol_window, savgol_order, filter_lambda, zoh_midpoint
+    )
+    xi = library(data["nu"])
+    if filter_lambda is not None:
+        xi = filter_signal(data, xi, filter_lambda)
+        xi[~np.isfinite(tau_bar).all(1)] = np.nan
+    return xi, tau_bar
+
+
+class DampingModel(FossenPlant):
+    """A viscous damping model K ξ(ν) over basis terms, fitted to McCarter's τ̄.
+
+    Subclasses store ``vehicle``, ``savgol_window``, ``savgol_order``, ``filter_lambda`` and
+    ``zoh_midpoint`` (the form of τ̄, :func:`residual_force`) and call :meth:`_set_damping`
+    with the fitted terms, coefficient matrix and standard errors."""
+
+    def _xi_tau(self, log: pd.DataFrame, terms: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
+        library = BasisLibrary(terms, self.vehicle.damping.u_c or 0.0)
+        return synthesis_data(
+            self.vehicle,
+            log,
+            library,
+            self.savgol_window,
+            self.savgol_order,
+            self.filter_lambda,
+            self.zoh_midpoint,
+        )
+
+    def _set_damping(self, terms: Sequence[str], coef: np.ndarray, stderr: np.ndarray) -> None:
+        """The fitted state: K ``[6, len(terms)]`` and its standard errors (NaN where none),
+        and the plant (the vehicle file with its damping replaced by K)."""
+        self.terms_ = list(terms)
+        self.coef_ = np.asarray(coef, dtype=np.float64)
+        self.stderr_ = np.asarray(stderr, dtype=np.float64)
+        self.parts_ = Parts.from_vehicle(self.vehicle)
+        self.parts_.damping = {
+            f"{FORCES[f]}:{self.terms_[j]}": float(self.coef_[f, j])
+            for f, j in zip(*np.nonzero(self.coef_), strict=True)
+        }
+        self._set_outputs(DOFS)
+
+    def _residual(self, log: pd.DataFrame) -> pd.DataFrame:
+        """τ̄ − K ξ(ν) (McCarter's σ̃, eq. 4.20), NaN where τ̄ is undefined (filter settling)."""
+        xi, tau_bar = self._xi_tau(log, self.terms_)
+        return pd.DataFrame(tau_bar - xi @ self.coef_.T, columns=list(FORCES), index=log.index)
+
+    def tau_bar(self, log: pd.DataFrame) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        """McCarter's τ̄ in this model's form, and the log's arrays (:func:`residual_force`)."""
+        return residual_force(
+            self.vehicle,
+            log,
+            self.savgol_window,
+            self.savgol_order,
+            self.filter_lambda,
+            self.zoh_midpoint,
+        )
+
+    def _force_series(self, log: pd.DataFrame) -> pd.DataFrame:
+        """τ̄ (eq. 4.4): what the damping model must explain."""
+        return pd.DataFrame(self.tau_bar(log)[0], columns=list(FORCES), index=log.index)
+
+    def predict_force(self, log: pd.DataFrame) -> pd.DataFrame:
+        """τ̂ = K ξ(ν) (eq. 4.6) per sample, columns X Y Z K M N, on the log's index."""
+        xi, _ = self._xi_tau(log, self.terms_)
+        return pd.DataFrame(xi @ self.coef_.T, columns=list(FORCES), index=log.index)
+
+    def error(self, log: pd.DataFrame, per_force: bool = False):
+        """(J, J₀) of eq. 4.25 on a log (see :func:`nnid.trainers.synthesis.force_error`)."""
+        xi, tau_bar = self._xi_tau(log, self.terms_)
+        return force_error(tau_bar, xi @ self.coef_.T, per_force)
+
+    def coefficient_matrix(self) -> np.ndarray:
+        """K ``[6, len(terms_)]`` (zero off the structure)."""
+        return self.coef_.copy()
+
+    def _params(self) -> dict[str, dict[str, float | None]]:
+        out: dict[str, dict[str, float | None]] = {}
+        for f, j in zip(*np.nonzero(self._structure()), strict=True):
+            s = self.stderr_[f, j]
+            out[f"{FORCES[f]}:{self.terms_[j]}"] = {
+                "value": float(self.coef_[f, j]),
+                "stderr": float(s) if np.isfinite(s) else None,
+            }
+        return out
+
+    def _structure(self) -> np.ndarray:
+        """Which entries of K are parameters of the model."""
+        return self.coef_ != 0
+
+    def _state(self) -> tuple[dict, dict]:
+        return {"terms": self.terms_, "coef": self.coef_, "stderr": self.stderr_}, {}
+
+    def _restore(self, state: dict, tensors: dict) -> None:
+        self._set_damping(
+            state["terms"],
+            np.array(state["coef"], dtype=float).reshape(6, -1),
+            np.array(state["stderr"], dtype=float).reshape(6, -1),
+        )
+
+
+class SynthesisModel(DampingModel):
+    """A masked viscous model K ξ(ν) fitted to McCarter's τ̄.
+
+    ``SynthesisModel(vehicle, mask="mcfarland", method="ls")`` then ``fit(log)``; ``mask`` is a
+    named model of the basis library (McCarter's M_k, eq. 4.15) or ``{force: [terms]}``;
+    ``method`` is ``"ls"`` (eq. 4.22) or a Nelder-Mead cost ``"mae" | "mse" | "rms" | "mad"``
+    (eqs 4.23-4.27, started from least squares). ``params`` holds ``{"F:term": {"value",
+    "stderr"}}`` (standard errors from least squares only). ``filter_lambda`` and
+    ``zoh_midpoint`` choose the form of τ̄ (:func:`residual_force`): Savitzky-Golay
+    accelerations by default; the filtered form with the zero-order-hold midpoint is the
+    unbiased choice for logs of held inputs under a fast autopilot.
+    """
+
+    kind = "synthesis"
+
+    def __init__(
+        self,
+        vehicle,
+        mask: str | Mapping[str, Sequence[str]] = "mcfarland",
+        method: Literal["ls", "mae", "mse", "rms", "mad"] = "ls",
+        savgol_window: float = 1.0,
+        savgol_order: int = 4,
+        filter_lambda: float | None = None,
+        zoh_midpoint: bool = False,
+    ) -> None:
+        self.vehicle = vehicle
+        self.mask = mask
+        self.method = method
+        self.savgol_window = savgol_window
+        self.savgol_order = savgol_order
+        self.filter_lambda = filter_lambda
+        self.zoh_midpoint = zoh_midpoint
+
+    def _fit(self, log: pd.DataFrame, validation, progress: Progress) -> None:
+        if self.method != "ls" and self.method not in LOSSES:
+            raise NnidInputError(
+                f"method is 'ls' or one of {', '.join(LOSSES)}, not '{self.method}'",
+                field="method",
+            )
+        try:
+            terms = mask_term_list(self.mask)
+            mask = mask_matrix(self.mask, terms)
+        except ValueError as exc:  # an unknown model name or term
+            raise NnidInputError(str(exc), field="mask") from None
+        xi, tau_bar = self._xi_tau(log, terms)
+        fit = masked_least_squares(xi, tau_bar, mask, terms)
+        progress(1, 2 if self.method != "ls" else 1, "masked least squares")
+        if self.method != "ls":
+            fit = nelder_mead(xi, tau_bar, mask, self.method, start=fit)
+            progress(2, 2, f"Nelder-Mead on {self.method}")
+        self._set_damping(terms, fit.coefficients, fit.stderr)
+
+    def _structure(self) -> np.ndarray:
+        return mask_matrix(self.mask, self.terms_)
+
+    def trainer_name(self) -> str:
+        return "masked least squares" if self.method == "ls" else f"Nelder-Mead ({self.method})"

@@ -1,0 +1,87 @@
+"""Strict JSON for every file nnid writes (ARCHITECTURE.md "JSON outputs").
+
+Every JSON output is strict: no NaN or Infinity (an unmeasured or undefined number is ``null``),
+NumPy scalars and arrays become plain numbers and lists, and each file carries
+``schema_version``. Writing goes through a temporary file and a rename, so a failed run never
+leaves half a file behind.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import tempfile
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+#: the version of every JSON contract nnid writes (model.json, metrics.json, comparison.json,
+#: loop.json); raised when a required key changes meaning or disappears
+SCHEMA_VERSION = 1
+
+
+def jsonable(value: Any) -> Any:
+    """``value`` as plain JSON types: non-finite floats become None, NumPy scalars Python
+    numbers, arrays and tuples lists, mapping keys strings."""
+    if value is None or isinstance(value, (bool, str)):
+        return value
+    if isinstance(value, (int, np.integer)) and not isinstance(value, np.bool_):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        v = float(value)
+        return v if math.isfinite(v) else None
+    if isinstance(value, np.bool_):
+        return bool(value)
+    if isinstance(value, np.ndarray):
+        return jsonable(value.tolist())
+    if isinstance(value, Mapping):
+        return {str(k): jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple, set, frozenset)):
+        return [jsonable(v) for v in value]
+    if isinstance(value, Path):
+        return str(value)
+    raise TypeError(f"{type(value).__name__} is not JSON-serialisable")
+
+
+def json_float(value: float | None) -> float:
+    """A number read from strict JSON: null (an undefined number) is NaN again."""
+    return float("nan") if value is None else float(value)
+
+
+def dumps(value: Any, indent: int | None = 2) -> str:
+    """Strict JSON text of ``value`` (see :func:`jsonable`)."""
+    return json.dumps(jsonable(value), indent=indent, allow_nan=False)
+
+
+def write_json(path: str | Path, value: Any, versioned: bool = True) -> Path:
+    """Write ``value`` as strict JSON, atomically; a mapping gets ``schema_version`` first."""
+    if versioned and isinstance(value, Mapping):
+        value = {"schema_version": SCHEMA_VERSION, **value}
+    return write_text(path, dumps(value) + "\n")
+
+
+def write_text(path: str | Path, text: str) -> Path:
+    """Write ``text`` through a temporary file in the same folder and a rename."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            fh.write(text)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return path
+
+
+def read_json(path: str | Path) -> Any:
+    """Parse a JSON file (NaN and Infinity refused: nnid never writes them)."""
+
+    def refuse(token: str) -> Any:
+        raise ValueError(f"{path}: '{token}' is not strict JSON")
+
+    return json.loads(Path(path).read_text(encoding="utf-8"), parse_constant=refuse)

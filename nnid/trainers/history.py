@@ -1,0 +1,84 @@
+"""What every iterative trainer records and reports: one ``History`` and one progress callback.
+
+``History`` is the per-epoch record of a fit (Levenberg-Marquardt, Adam): entry 0 of ``train``,
+``validation`` and ``time`` is the starting point, entry k the state after epoch k; why it
+stopped; which epoch was kept. Trainer-specific series (LM's damping μ and gradient norm,
+Adam's learning rate) go in ``extra``.
+
+``Progress`` is the one callback signature for every long fit: ``progress(done, total,
+message)`` (``total`` may be None when unknown). Trainers, models and the residual loop call
+it; the CLI draws it as a bar.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+Progress = Callable[[int, "int | None", str], None]
+
+
+def silent(done: int, total: int | None, message: str) -> None:
+    """The progress callback that reports nothing."""
+
+
+def staged(progress: Progress | None, stage: str) -> Progress:
+    """``progress`` with every message prefixed by ``stage`` (a fit in several stages)."""
+    report = progress or silent
+
+    def call(done: int, total: int | None, message: str) -> None:
+        report(done, total, f"{stage}: {message}" if message else stage)
+
+    return call
+
+
+@dataclass
+class History:
+    """Per-epoch record of an iterative fit.
+
+    ``train[k]`` and ``validation[k]`` are the mean-square residuals after epoch k (k = 0: the
+    start); ``validation`` is empty without validation data. ``time[k]`` is the cumulative wall
+    time in seconds at entry k. ``best_epoch`` is the epoch whose parameters were kept (the best
+    validation error when there is validation data, else the last). ``extra`` holds per-epoch
+    series of one trainer (``mu``, ``gradient``, ``lr``) and ``info`` scalar facts (the largest
+    Jacobian block held, ...).
+    """
+
+    train: list[float] = field(default_factory=list)
+    validation: list[float] = field(default_factory=list)
+    time: list[float] = field(default_factory=list)
+    stop_reason: str = ""
+    best_epoch: int = 0
+    extra: dict[str, list[float]] = field(default_factory=dict)
+    info: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def epochs(self) -> int:
+        """Epochs run (accepted or not); the start is not an epoch."""
+        return max(len(self.train) - 1, 0)
+
+    @property
+    def seconds(self) -> float:
+        return self.time[-1] if self.time else 0.0
+
+    def record(self, train: float, validation: float | None, seconds: float, **extra) -> None:
+        """Append one entry (the start or an epoch)."""
+        self.train.append(float(train))
+        if validation is not None:
+            self.validation.append(float(validation))
+        self.time.append(float(seconds))
+        for key, value in extra.items():
+            self.extra.setdefault(key, []).append(float(value))
+
+    def as_dict(self) -> dict:
+        """A JSON-ready summary (the series and the stop)."""
+        return {
+            "epochs": self.epochs,
+            "stop_reason": self.stop_reason,
+            "best_epoch": self.best_epoch,
+            "train": list(self.train),
+            "validation": list(self.validation),
+            "seconds": self.seconds,
+            **{k: list(v) for k, v in self.extra.items()},
+            **self.info,
+        }

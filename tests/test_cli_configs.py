@@ -1,0 +1,265 @@
+"""Malformed configs (issue 12): each one is refused with exit code 2 and one line that names
+the file and the key, with no traceback, before any data is loaded or simulated."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+import nnid.datasets.simulator as simulator
+from nnid.cli import app
+
+ROOT = Path(__file__).resolve().parents[1]
+
+SIM = """kind = "simulate"
+vehicle = "seamor"
+dt = 0.05
+[[experiments]]
+name = "a"
+signals = [{ kind = "step", channel = "X", amplitude = 10.0 }]
+duration = 5.0
+[[experiments]]
+name = "b"
+signals = [{ kind = "step", channel = "Y", amplitude = 10.0 }]
+duration = 5.0
+"""
+
+TRAIN = """kind = "train"
+vehicle = "seamor"
+warmup_s = 1.0
+[data]
+simulate = "sim.toml"
+[split]
+by = "experiment"
+validation = ["b"]
+[model]
+kind = "fossen"
+dofs = ["u", "v"]
+unknowns = ["added_mass", "damping"]
+[model.trainer]
+kind = "ls"
+"""
+
+NARX = """kind = "train"
+[data]
+simulate = "sim.toml"
+[model]
+kind = "narx"
+inputs = ["tau_X"]
+outputs = ["u"]
+[model.trainer]
+kind = "lm"
+"""
+
+COMPARE = """kind = "compare"
+vehicle = "seamor"
+[data]
+simulate = "sim.toml"
+[split]
+by = "experiment"
+validation = ["b"]
+[[models]]
+kind = "synthesis"
+mask = "fossen"
+[[models]]
+kind = "fossen"
+"""
+
+LOOP = """kind = "loop"
+vehicle = "seamor"
+max_effects = 2
+[data]
+simulate = "sim.toml"
+"""
+
+# (command, base config, (old, new) edit, key the message must name; None: the file only)
+CASES = [
+    ("train", TRAIN, ("unknowns =", "unknown ="), "model.unknown"),
+    (
+        "train",
+        TRAIN,
+        ('kind = "ls"', 'kind = "ls"\nfilter_lamda = 1.0'),
+        "model.trainer.filter_lamda",
+    ),
+    ("train", TRAIN, ('kind = "fossen"', 'kind = "synthesis"\nmask = "mcfarlane"'), "model.mask"),
+    ("train", TRAIN, ("warmup_s = 1.0", 'warmup_s = "one"'), "warmup_s"),
+    ("train", TRAIN, ("warmup_s = 1.0", "warmup_s = -1.0"), "warmup_s"),
+    ("train", TRAIN, ("warmup_s = 1.0", "warmup_s = nan"), "warmup_s"),
+    ("train", TRAIN, ("warmup_s = 1.0", "k_step_s = inf"), "k_step_s"),
+    (
+        "train",
+        TRAIN,
+        ('[model.trainer]\nkind = "ls"', '[model.trainer]\nkind = "lm"'),
+        "model.trainer.kind",
+    ),
+    (
+        "train",
+        NARX,
+        ('[model.trainer]\nkind = "lm"', '[model.trainer]\nkind = "rls"'),
+        "model.trainer.kind",
+    ),
+    ("train", TRAIN, ('kind = "fossen"', 'kind = "gaussian_process"'), "model.kind"),
+    ("train", TRAIN, ("warmup_s = 1.0", "warmup_s = 1.0\nepochs = 3"), "epochs"),
+    ("train", TRAIN, ('"added_mass", "damping"', '"X_uddot"'), "model.unknowns"),
+    ("train", TRAIN, ('dofs = ["u", "v"]', 'dofs = ["u", "x"]'), "model.dofs.1"),
+    ("train", TRAIN, ('simulate = "sim.toml"', 'log = "nowhere.csv"'), "data.log"),
+    ("train", TRAIN, ('simulate = "sim.toml"', 'simulate = "nowhere.toml"'), "data.simulate"),
+    (
+        "train",
+        TRAIN,
+        ('simulate = "sim.toml"', 'log = "sim.toml"\ncolumns = "no.toml"'),
+        "data.columns",
+    ),
+    ("train", TRAIN, ('kind = "train"', 'kind = "compare"'), "kind"),
+    ("train", SIM, ("", ""), "kind"),
+    ("train", TRAIN, ("[data]\nsimulate", '[data]\nkind = "video"\nsimulate'), "data.kind"),
+    ("train", TRAIN, ('by = "experiment"', "fractions = [0.5, 0.5]"), "split.fractions"),
+    ("train", NARX, ('outputs = ["u"]\n', ""), "model.outputs"),
+    (
+        "train",
+        NARX,
+        ('kind = "narx"', 'kind = "state_space"\nstructure = [[1, 2]]'),
+        "model.structure.0.1",
+    ),
+    ("train", TRAIN, ('[model.trainer]\nkind = "ls"', 'trainer = "sgd"'), "model.trainer.kind"),
+    ("train", TRAIN, ('dofs = ["u", "v"]', 'sequence = "weis"'), "model.sequence"),
+    (
+        "train",
+        TRAIN,
+        (
+            'kind = "fossen"\ndofs = ["u", "v"]\nunknowns = ["added_mass", "damping"]\n'
+            '[model.trainer]\nkind = "ls"',
+            'kind = "caccia"\ndof = "z"',
+        ),
+        "model.dof",
+    ),
+    (
+        "train",
+        NARX,
+        ('outputs = ["u"]', 'outputs = ["u"]\noutput_bounds = "maybe"'),
+        "model.output_bounds",
+    ),
+    ("train", NARX, ('kind = "lm"', 'kind = "lm"\nmu_dec = 2.0'), "model.trainer.mu_dec"),
+    ("train", NARX, ('kind = "lm"', 'kind = "adam"\nschedule = "step"'), "model.trainer.schedule"),
+    ("train", TRAIN, ("[split]", "[split]\nvalidation = 3"), None),
+    ("train", TRAIN, ("warmup_s = 1.0", "warmup_s = [1.0"), None),
+    (
+        "train",
+        TRAIN,
+        ('[data]\nsimulate = "sim.toml"', '[data]\nsimulate = "sim.toml"\nnoise = -0.1'),
+        "data.noise",
+    ),
+    (
+        "compare",
+        COMPARE,
+        (
+            '[[models]]\nkind = "synthesis"\nmask = "fossen"\n[[models]]\nkind = "fossen"\n',
+            "models = []\n",
+        ),
+        "models",
+    ),
+    ("compare", COMPARE, ('kind = "fossen"', 'kind = "synthesis"'), "models"),
+    ("compare", COMPARE, ('mask = "fossen"', 'mask = "fosen"'), "models.0.mask"),
+    ("compare", COMPARE, ('vehicle = "seamor"', 'vehicle = "seamor"\nk_step_s = 0.0'), "k_step_s"),
+    ("compare", TRAIN, ("", ""), "kind"),
+    (
+        "compare",
+        COMPARE,
+        ('kind = "fossen"', 'kind = "fossen"\ntrainer = { kind = "adam" }'),
+        "models.1.trainer.kind",
+    ),
+    ("loop", LOOP, ("max_effects = 2", "max_effect = 2"), "max_effect"),
+    ("loop", LOOP, ("max_effects = 2", 'dofs = ["u", "z"]'), "dofs.1"),
+    ("loop", TRAIN, ("", ""), "kind"),
+    ("loop", LOOP, ("max_effects = 2", "alpha = 0.9"), "alpha"),
+    (
+        "simulate",
+        SIM,
+        ("dt = 0.05", 'dt = 0.05\neffects = [{ name = "buoyancy_ofset", value = 1.0 }]'),
+        "effects.0.name",
+    ),
+    (
+        "simulate",
+        SIM,
+        ('kind = "step", channel = "X"', 'kind = "ramp", channel = "X"'),
+        "experiments.0.signals.0.kind",
+    ),
+    ("simulate", LOOP, ("", ""), "kind"),
+    ("simulate", SIM, ("dt = 0.05", "dt = 0.0"), "dt"),
+]
+
+
+def _args(command: str, cfg: Path, tmp_path: Path) -> list[str]:
+    out = tmp_path / ("o.csv" if command == "simulate" else "out")
+    if command == "loop":
+        return ["loop", str(cfg), "--out", str(out)]
+    return [command, str(cfg), "--out", str(out)]
+
+
+@pytest.fixture
+def no_simulation(monkeypatch):
+    """Any simulation during these runs fails the test: configs are checked first."""
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("a malformed config must be refused before any simulation")
+
+    monkeypatch.setattr(simulator, "simulate_config", refuse)
+    monkeypatch.setattr(simulator, "simulate", refuse)
+
+
+@pytest.mark.parametrize(("command", "base", "edit", "key"), CASES)
+def test_malformed_config_is_one_line_naming_file_and_key(
+    command, base, edit, key, tmp_path, no_simulation
+):
+    (tmp_path / "sim.toml").write_text(SIM)
+    old, new = edit
+    assert old in base
+    cfg = tmp_path / "bad.toml"
+    cfg.write_text(base.replace(old, new, 1) if old else base)
+    result = CliRunner().invoke(app, _args(command, cfg, tmp_path))
+    text = result.output.strip()
+    assert result.exit_code == 2, text
+    assert "Traceback" not in text and text.count("\n") == 0, text
+    assert text.startswith("error: ") and str(cfg) in text, text
+    if key is not None:
+        assert f"field '{key}'" in text, text
+
+
+def test_there_are_at_least_25_cases():
+    assert len(CASES) >= 25
+    assert {c[0] for c in CASES} == {"train", "compare", "loop", "simulate"}
+
+
+def test_missing_config_file_and_folder_as_config(tmp_path):
+    for path in (tmp_path / "absent.toml", tmp_path):
+        result = CliRunner().invoke(app, ["train", str(path), "--out", str(tmp_path / "o")])
+        assert result.exit_code == 2 and str(path) in result.output
+        assert result.output.strip().count("\n") == 0
+
+
+def test_a_config_without_data_runs_with_data_and_vehicle_given(tmp_path):
+    """'One config serves any log': a train config with no [data] section and no vehicle
+    runs on --data LOG --vehicle VEH; without --data it says what to give."""
+    (tmp_path / "sim.toml").write_text(SIM)
+    log = tmp_path / "log.csv"
+    done = CliRunner().invoke(app, ["simulate", str(tmp_path / "sim.toml"), "--out", str(log)])
+    assert done.exit_code == 0, done.output
+    cfg = tmp_path / "any.toml"
+    cfg.write_text(
+        'kind = "train"\n[split]\nby = "experiment"\nvalidation = ["b"]\n'
+        '[model]\nkind = "fossen"\ndofs = ["u", "v"]\n'
+    )
+    out = tmp_path / "out"
+    run = CliRunner().invoke(
+        app, ["train", str(cfg), "--data", str(log), "--vehicle", "seamor", "--out", str(out)]
+    )
+    assert run.exit_code == 0, run.output
+    assert (out / "metrics.json").exists() and (out / "model.json").exists()
+    missing = CliRunner().invoke(app, ["train", str(cfg), "--out", str(tmp_path / "o2")])
+    assert missing.exit_code == 2 and "field 'data'" in missing.output
+    novehicle = CliRunner().invoke(
+        app, ["train", str(cfg), "--data", str(log), "--out", str(tmp_path / "o3")]
+    )
+    assert novehicle.exit_code == 2 and "field 'vehicle'" in novehicle.output

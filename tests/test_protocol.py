@@ -1,0 +1,259 @@
+"""The model protocol (issue 12, ARCHITECTURE.md "The model protocol"): every model kind runs
+through the same checks on a small log of a vehicle that is not a preset.
+
+Fit; predict in one-step, k-step and free-run modes on the log's index; residual; save ->
+``nnid.load_model`` -> identical predictions; strict-JSON ``params`` and ``describe``; a clear
+error before ``fit``; identical refits; no process-wide state changed (torch's and NumPy's
+global generators, torch's thread count, matplotlib's backend, the warning filters); and
+scikit-learn's ``get_params``/``set_params``/``clone``.
+"""
+
+from __future__ import annotations
+
+import json
+import warnings
+from importlib import resources
+
+import matplotlib
+import numpy as np
+import pandas as pd
+import pytest
+import torch
+from sklearn.base import clone
+from sklearn.exceptions import NotFittedError
+
+from nnid import load_model
+from nnid.datasets.simulator import simulate
+from nnid.loop.scenarios import effect_log
+from nnid.models.base import MODEL_KINDS, model_class
+from nnid.models.caccia import CacciaModel
+from nnid.models.narx import NarxModel
+from nnid.models.neural_state_space import NeuralStateSpace
+from nnid.models.parametric import ParametricModel
+from nnid.models.sindy import SindyDamping
+from nnid.models.synthesis import SynthesisModel
+from nnid.serialization import read_json
+from nnid.trainers.adam import Adam
+from nnid.trainers.least_squares import LeastSquares
+from nnid.trainers.levenberg_marquardt import LevenbergMarquardt
+from nnid.vehicle import load_vehicle
+
+MINIROV = resources.files("nnid.demo_data").joinpath("minirov.toml")
+K = 3  # the k of the k-step mode checked
+
+
+@pytest.fixture(scope="module")
+def minirov():
+    return load_vehicle(str(MINIROV))
+
+
+@pytest.fixture(scope="module")
+def runs(minirov) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """Three 30 s runs at 20 Hz, every DOF excited (DVL, gyro, depth, attitude): two to fit,
+    one held out."""
+    log = effect_log(minirov, duration=90.0, n_experiments=3, seed=4)
+    return log[log["experiment"] != "run2"], log[log["experiment"] == "run2"]
+
+
+@pytest.fixture(scope="module")
+def heave_campaign(minirov) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """Caccia's campaign for the minirov's heave: constant-force plateaus both ways and a
+    sinusoid run (exact measurements), and a held-out sinusoid at another offset."""
+    dt = 0.1
+
+    def run(force: np.ndarray, name: str) -> pd.DataFrame:
+        inputs = np.zeros((force.size, 6))
+        inputs[:, 2] = force
+        return simulate(minirov, inputs, dt, substeps=5, experiment=name)
+
+    levels = np.repeat([15.0, -15.0, 30.0, -30.0, 45.0, -45.0], 300)
+    t = np.arange(600) * dt
+    train = pd.concat(
+        [run(levels, "steady"), run(30.0 + 20.0 * np.sin(1.2 * t), "sinusoid")],
+        ignore_index=True,
+    )
+    return train, run(25.0 + 15.0 * np.sin(0.8 * t), "held_out")
+
+
+BUILDERS = {
+    "fossen": lambda v: ParametricModel(
+        v, ["added_mass", "damping"], trainer=LeastSquares(filter_lambda=1.0)
+    ),
+    "caccia": lambda v: CacciaModel(v, dof="w"),
+    "synthesis": lambda v: SynthesisModel(v, mask="fossen", filter_lambda=1.0),
+    "sindy": lambda v: SindyDamping(v, thresholds=[0.01, 0.05, 0.2], filter_lambda=1.0),
+    "narx": lambda v: NarxModel(
+        ["tau_X", "tau_Z", "tau_N"],
+        ["u", "w", "r"],
+        2,
+        2,
+        hidden=(4,),
+        trainer=LevenbergMarquardt(max_epochs=4),
+        lm_samples=400,
+        seed=3,
+    ),
+    "state_space": lambda v: NeuralStateSpace(
+        ["tau_X", "tau_Z"],
+        ["u", "w"],
+        hidden_states=1,
+        hidden=4,
+        warmup=5,
+        windows=(20,),
+        trainer=Adam(max_epochs=3, lr=0.01),
+        seed=3,
+    ),
+}
+
+
+def test_every_registered_kind_is_checked():
+    assert set(BUILDERS) == set(MODEL_KINDS)
+    for kind in MODEL_KINDS:
+        assert model_class(kind).kind == kind
+
+
+def _data(kind, runs, heave_campaign):
+    return heave_campaign if kind == "caccia" else runs
+
+
+def _global_state() -> tuple:
+    return (
+        torch.initial_seed(),
+        torch.get_rng_state().clone(),
+        np.random.get_state()[1].copy(),  # noqa: NPY002 (the user's global generator)
+        torch.get_num_threads(),
+        matplotlib.get_backend(),
+        list(warnings.filters),
+    )
+
+
+@pytest.fixture(scope="module")
+def fitted(minirov, runs, heave_campaign):
+    """Each kind fitted; the global state before and after its fit. A first round of fits
+    runs before: third-party modules imported lazily on first use (torch's sympy, ...) may
+    add warning filters of their own when imported, which is not nnid changing state."""
+    for kind, build in BUILDERS.items():
+        build(minirov).fit(*_data(kind, runs, heave_campaign))
+    out = {}
+    for kind, build in BUILDERS.items():
+        train, val = _data(kind, runs, heave_campaign)
+        before = _global_state()
+        model = build(minirov).fit(train, val)
+        out[kind] = (model, before, _global_state())
+    return out
+
+
+@pytest.mark.parametrize("kind", list(BUILDERS))
+def test_predict_modes_on_the_logs_index(kind, fitted, runs, heave_campaign):
+    model, *_ = fitted[kind]
+    _, val = _data(kind, runs, heave_campaign)
+    val = val.set_axis(np.arange(len(val)) * 3 + 7)  # any index: predictions follow it
+    for mode, steps in (("one_step", 1), (K, K), ("free_run", 1)):
+        pred = model.predict(val, mode)
+        assert pred.index.equals(val.index) and list(pred.columns) == model.outputs_
+        first = model.warmup_samples_ + steps - 1  # initial conditions, not predictions
+        targets = pred[model.targets_].to_numpy()
+        assert np.isnan(targets[:first]).all()
+        assert np.isfinite(targets[first:]).all(), (kind, mode)
+    residual = model.residual(val)
+    assert residual.index.equals(val.index) and len(residual.columns) >= 1
+    with pytest.raises(ValueError, match="prediction mode"):
+        model.predict(val, 0)
+
+
+@pytest.mark.parametrize("kind", list(BUILDERS))
+def test_save_load_reproduces_predictions(kind, fitted, runs, heave_campaign, tmp_path):
+    model, *_ = fitted[kind]
+    _, val = _data(kind, runs, heave_campaign)
+    model.save(tmp_path)
+    saved = read_json(tmp_path / "model.json")  # strict: NaN or Infinity would raise
+    assert saved["kind"] == kind and saved["schema_version"] == 1
+    back = load_model(tmp_path)
+    assert type(back) is type(model)
+    for mode in ("one_step", K, "free_run"):
+        np.testing.assert_allclose(
+            back.predict(val, mode).to_numpy(), model.predict(val, mode).to_numpy(), rtol=1e-12
+        )
+    pd.testing.assert_frame_equal(back.residual(val), model.residual(val))
+    assert back.params == model.params
+
+
+@pytest.mark.parametrize("kind", list(BUILDERS))
+def test_params_and_describe_are_strict_json(kind, fitted):
+    model, *_ = fitted[kind]
+    for part in (model.params, model.describe()):
+        json.dumps(part, allow_nan=False)  # raises on NaN, infinity or a non-JSON type
+    for entry in model.params.values():
+        assert {"value", "stderr"} <= set(entry)
+    assert model.describe()["kind"] == kind and model.n_params >= 1
+
+
+@pytest.mark.parametrize("kind", list(BUILDERS))
+def test_use_before_fit_is_one_clear_error(kind, minirov, runs, tmp_path):
+    model = BUILDERS[kind](minirov)
+    _, val = runs
+    for use in (
+        lambda: model.predict(val),
+        lambda: model.residual(val),
+        lambda: model.params,
+        lambda: model.describe(),
+        lambda: model.save(tmp_path),
+    ):
+        with pytest.raises(NotFittedError, match="not fitted yet: call fit"):
+            use()
+
+
+@pytest.mark.parametrize("kind", list(BUILDERS))
+def test_refit_with_the_same_seed_is_identical(kind, fitted, minirov, runs, heave_campaign):
+    model, *_ = fitted[kind]
+    train, val = _data(kind, runs, heave_campaign)
+    again = clone(model).fit(train, val)
+    np.testing.assert_array_equal(
+        again.predict(val, "free_run").to_numpy(), model.predict(val, "free_run").to_numpy()
+    )
+
+
+@pytest.mark.parametrize("kind", list(BUILDERS))
+def test_fit_leaves_process_wide_state_alone(kind, fitted):
+    _, before, after = fitted[kind]
+    seed0, rng0, np0, threads0, backend0, filters0 = before
+    seed1, rng1, np1, threads1, backend1, filters1 = after
+    assert seed1 == seed0 and torch.equal(rng1, rng0)  # torch's global generator: untouched
+    assert np.array_equal(np1, np0)  # NumPy's global generator: untouched
+    assert threads1 == threads0 and backend1 == backend0
+    assert filters1 == filters0
+
+
+@pytest.mark.parametrize("kind", list(BUILDERS))
+def test_scikit_learn_params_round_trip(kind, minirov):
+    model = BUILDERS[kind](minirov)
+    params = model.get_params(deep=False)
+    assert set(params) <= set(model.__init__.__code__.co_varnames)
+    twin = clone(model)
+    assert type(twin) is type(model) and twin.get_params(deep=False).keys() == params.keys()
+    if "seed" in params:
+        assert twin.set_params(seed=11).seed == 11 and model.seed != 11
+    if "trainer" in params and params["trainer"] is not None:
+        deep = model.get_params(deep=True)
+        assert any(k.startswith("trainer__") for k in deep)
+
+
+def test_unidentified_parameter_stderr_stays_null_after_a_round_trip(minirov, runs, tmp_path):
+    """A parameter the data cannot excite (a roll-pitch cross added mass on runs that hold the
+    vehicle level enough, asked for on purpose) is NaN, reported null, and still null after
+    save and load: never a made-up 0."""
+    train, _ = runs
+    level = train.assign(p=0.0, q=0.0, dp=0.0, dq=0.0)
+    with pytest.warns(UserWarning, match="K_qdot"):
+        model = ParametricModel(minirov, ["X_udot", "K_qdot"], ["u", "p"]).fit(level)
+    assert model.params["K_qdot"]["stderr"] is None and model.params["K_qdot"]["value"] is None
+    model.save(tmp_path)
+    saved = json.loads((tmp_path / "model.json").read_text())
+    assert saved["state"]["theta"][1] is None
+    back = load_model(tmp_path)
+    assert back.params["K_qdot"] == {
+        "value": None,
+        "stderr": None,
+        "percentile_error": None,
+        "significant": False,
+    }
+    assert back.params["X_udot"] == model.params["X_udot"]
