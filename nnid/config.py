@@ -31,18 +31,18 @@ from nnid.datasets.measurement import Measurement
 from nnid.datasets.simulator import Autopilot
 from nnid.errors import NnidInputError
 from nnid.physics.damping_masks import MASKS
+from nnid.physics.dofs import DOFS, FORCES
 from nnid.physics.effects import parse_effect
 from nnid.validation import read_toml, validated
 
 Signal = Annotated[
     Step | Stairs | Chirp | Multisine | PRBS | Sine | DOptimalSine, Field(discriminator="kind")
 ]
-Dof = Literal["u", "v", "w", "p", "q", "r"]
-Force = Literal["X", "Y", "Z", "K", "M", "N"]
+Dof = Literal[DOFS]  # type: ignore[valid-type]
+Force = Literal[FORCES]  # type: ignore[valid-type]
 MaskName = Literal[tuple(MASKS)]  # type: ignore[valid-type]
 PositiveFloat = Annotated[float, Field(gt=0, allow_inf_nan=False)]
 Number = Annotated[float, Field(allow_inf_nan=False)]
-ALL_DOFS: list[Dof] = ["u", "v", "w", "p", "q", "r"]
 
 
 class _Strict(BaseModel):
@@ -362,7 +362,7 @@ class FossenModelSpec(_Model):
 
     kind: Literal["fossen"] = "fossen"
     unknowns: list[str] = Field(default_factory=lambda: ["added_mass", "damping"])
-    dofs: list[Dof] = Field(default_factory=lambda: list(ALL_DOFS), min_length=1)
+    dofs: list[Dof] = Field(default_factory=lambda: list(DOFS), min_length=1)
     sequence: Literal["weiss"] | list[SequenceStep] | None = None
     savgol_window: PositiveFloat = 1.0
     savgol_order: int = Field(4, ge=2, le=8)

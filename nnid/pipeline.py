@@ -105,6 +105,13 @@ def load_inputs(
     physics = any(m.kind in PHYSICS_KINDS for m in models)
     name = vehicle or cfg.vehicle
     veh = vehicle_for(name, config_path) if name else None
+    simulated = data is None and bool(getattr(spec, "simulate", None))
+    if physics and veh is None and not simulated:  # said before any data is read
+        raise NnidInputError(
+            "a physics model needs a vehicle: the config's 'vehicle' or --vehicle",
+            source=str(config_path),
+            field="vehicle",
+        )
     sim = None
     if isinstance(spec, TableData):
         if physics:
@@ -140,12 +147,6 @@ def load_inputs(
     else:
         raise NnidInputError(
             "give data.log, data.simulate (or --data)", source=str(config_path), field="data"
-        )
-    if physics and inputs.vehicle is None:
-        raise NnidInputError(
-            "a physics model needs a vehicle: the config's 'vehicle' or --vehicle",
-            source=str(config_path),
-            field="vehicle",
         )
     if spec.experiments:
         known = set(inputs.log["experiment"]) if "experiment" in inputs.log else set()
@@ -262,12 +263,6 @@ def make_split(log: pd.DataFrame, s, source: str = "") -> Split:
 
 #: models whose force series is McCarter's τ̄ (eq. 4.4): their forces share one plot and table
 DAMPING_KINDS = ("synthesis", "sindy")
-#: what a model does with the validation split during its fit (reported beside its scores)
-VALIDATION_USE = {
-    "narx": "early stopping",
-    "state_space": "early stopping",
-    "sindy": "model selection",
-}
 
 
 def fit_model(model, split: Split, progress: Progress) -> list[str]:
@@ -350,7 +345,7 @@ def run_train(
         "settings": encode_setting(model.get_params(deep=False)),
         "train": score(model, split.train, cfg, k, replay),
         "validation": score(model, split.validation, cfg, k, replay),
-        "validation_used_for": VALIDATION_USE.get(model.kind),
+        "validation_used_for": model.validation_use,
         "describe": {key: v for key, v in description.items() if key != "params"},
         "warnings": caught,
         "split": split.record,
@@ -459,7 +454,7 @@ def run_compare(
             "trainer": model.trainer_name(),
             "n_params": model.n_params,
             "seconds": seconds,
-            "validation_used_for": VALIDATION_USE.get(model.kind),
+            "validation_used_for": model.validation_use,
             "warnings": caught,
         }
         if model.has_force_equation:

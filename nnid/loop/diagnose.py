@@ -49,7 +49,6 @@ from nnid.trainers.least_squares import (
 )
 from nnid.trainers.sindy import compress
 
-INSIGNIFICANT_PERCENT = 100.0 / 1.96
 _CHUNK = 64
 
 

@@ -44,6 +44,7 @@ from nnid.physics.dofs import DOFS, FORCES
 from nnid.physics.parts import Parts
 from nnid.threads import torch_threads
 from nnid.trainers.history import Progress, silent
+from nnid.trainers.least_squares import significant
 
 
 class ResidualLoop:
@@ -270,7 +271,7 @@ class ResidualLoop:
             s.candidate = s.candidate.renamed(f"restoring_offset.{FORCES[DOFS.index(dof)]}")
         if not s.p_value < self.alpha / tested:
             s.reason = f"not significant (p = {s.p_value:.2g} ≥ {self.alpha / tested:.2g})"
-        elif not s.percentile_error <= 100.0 / 1.96:
+        elif not significant(s.percentile_error):
             s.reason = f"parameter uncertain ({s.percentile_error:.0f} % > 51 %)"
         elif not (best_dof >= self.min_improvement and s.improvement > 0):
             s.reason = (

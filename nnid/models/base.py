@@ -158,6 +158,9 @@ class NnidModel(BaseEstimator, ABC):
     kind: ClassVar[str] = ""
     #: whether ``residual`` is a generalized force (columns X..N) with a J₀ series
     has_force_equation: ClassVar[bool] = False
+    #: what ``fit`` does with a validation log ("early stopping", "model selection"), if
+    #: anything: scores on that log are then not independent of the fit
+    validation_use: ClassVar[str | None] = None
 
     @classmethod
     def from_config(cls, spec, vehicle=None) -> NnidModel:

@@ -125,6 +125,7 @@ class NarxModel(InputOutputModel):
     """
 
     kind = "narx"
+    validation_use = "early stopping"
 
     def __init__(
         self,

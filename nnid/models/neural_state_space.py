@@ -183,6 +183,7 @@ class NeuralStateSpace(InputOutputModel):
     """
 
     kind = "state_space"
+    validation_use = "early stopping"
 
     def __init__(
         self,

@@ -93,6 +93,11 @@ class SindyDamping(DampingModel):
         self.seed = seed
 
     @property
+    def validation_use(self) -> str | None:  # type: ignore[override]
+        """The threshold is chosen on the validation log (with ``selection="validation"``)."""
+        return "model selection" if self.selection == "validation" else None
+
+    @property
     def has_force_equation(self) -> bool:  # type: ignore[override]
         """Residual mode regresses a force; control mode an acceleration."""
         return self.mode == "residual"

@@ -26,6 +26,12 @@ from nnid.trainers.regression import Regression
 INSIGNIFICANT_PERCENT = 100.0 / 1.96  # 51.02 %, Caccia (L279)
 
 
+def significant(percentile_error: float | np.ndarray) -> bool | np.ndarray:
+    """Caccia's rule (L279): a parameter whose percentile error 100 σ̂/|θ̂| is at most 51.02 %
+    (= 100/1.96) is significant at 95 % (a two-sided z-test of θ = 0); NaN is not."""
+    return np.asarray(percentile_error) <= INSIGNIFICANT_PERCENT
+
+
 class ExcitationWarning(UserWarning):
     """The data does not excite every parameter asked for."""
 
@@ -53,7 +59,7 @@ class Estimate:
 
     @property
     def significant(self) -> np.ndarray:
-        return self.percentile_error <= INSIGNIFICANT_PERCENT
+        return significant(self.percentile_error)
 
     def as_state(self) -> dict:
         """The estimate as JSON-ready data (NaN becomes null on writing; see
