@@ -10,7 +10,7 @@ from nnid.errors import NnidInputError
 if TYPE_CHECKING:
     from nnid.models.base import NnidModel
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"
 __all__ = ["NnidInputError", "__version__", "load_model"]
 
 

@@ -601,6 +601,23 @@ class LoopConfig(_Command):
     gate_horizon_s: PositiveFloat | None = None  # None: the gate is the free run
 
 
+#: keys of the earlier config format, with what replaced them
+LEGACY_KEYS: dict[str, dict[str, str]] = {
+    "train": {
+        "narx": 'the network is a [model] table with kind = "narx"',
+        "state_space": 'the network is a [model] table with kind = "state_space"',
+        "fossen": 'unknowns and dofs go in a [model] table with kind = "fossen"',
+        "options": "trainer options go in [model.trainer] with the trainer's kind",
+        "trainer": "the trainer is [model.trainer] (or trainer = NAME inside [model])",
+        "sequence": "sequence is a key of the [model] table",
+        "savgol_window": "[data] savgol_window derives velocities, [model] its accelerations",
+    },
+    "compare": {
+        "sindy": 'SINDy is one of the [[models]], kind = "sindy"',
+        "horizon_s": "the k-step horizon is k_step_s",
+        "filter_lambda": "filter_lambda is a key of each damping model in [[models]]",
+    },
+}
 COMMANDS: dict[str, type[BaseModel]] = {
     "simulate": SimulateConfig,
     "train": TrainConfig,
@@ -623,4 +640,11 @@ def load_config(path: str | Path, model: type[BaseModel] = SimulateConfig) -> Ba
             source=str(path),
             field="kind",
         )
+    for key, hint in LEGACY_KEYS.get(expected or "", {}).items():
+        if key in data:
+            raise NnidInputError(
+                f"is a key of the config format before nnid 0.2: {hint} (see README, Configs)",
+                source=str(path),
+                field=key,
+            )
     return validated(model, data, str(path))

@@ -227,6 +227,14 @@ def test_malformed_config_is_one_line_naming_file_and_key(
         assert f"field '{key}'" in text, text
 
 
+def test_a_config_of_the_earlier_format_says_what_replaced_the_key(tmp_path, no_simulation):
+    cfg = tmp_path / "old.toml"
+    cfg.write_text('model = "narx"\ntrainer = "lm"\n[narx]\ninputs = ["tau_X"]\noutputs = ["u"]\n')
+    result = CliRunner().invoke(app, ["train", str(cfg), "--out", str(tmp_path / "o")])
+    assert result.exit_code == 2 and "field 'narx'" in result.output
+    assert 'kind = "narx"' in result.output and result.output.strip().count("\n") == 0
+
+
 def test_there_are_at_least_25_cases():
     assert len(CASES) >= 25
     assert {c[0] for c in CASES} == {"train", "compare", "loop", "simulate"}
