@@ -179,10 +179,10 @@ def train(
 ) -> None:
     """Fit one model on the training split and score it on held-out data: writes the model
     (model.json, and tensors.pt for networks; load it with nnid.load_model), metrics.json,
-    report.md and the cleaning report to --out."""
+    report.md, report.html and the cleaning report to --out."""
     from nnid.config import TrainConfig, load_config
     from nnid.pipeline import run_train
-    from nnid.reports.train_report import train_markdown
+    from nnid.reports.train_report import train_html, train_markdown
     from nnid.serialization import write_json, write_text
 
     cfg = load_config(config, TrainConfig)
@@ -196,12 +196,15 @@ def train(
     result.model.save(out_dir)
     write_json(out_dir / "metrics.json", result.metrics)
     write_text(out_dir / "report.md", train_markdown(result.metrics))
+    write_text(out_dir / "report.html", train_html(result.metrics, result.figures))
     result.report.write(out_dir)
-    val = result.metrics["validation"].get("free_run_nrmse", {})
-    out.print(
-        f"wrote {out_dir}/: model.json, metrics.json, report.md "
-        f"(validation free-run NRMSE total {_fmt(val.get('total'))})"
-    )
+    held = "test" if "test" in result.metrics else "validation"
+    free = result.metrics[held].get("free_run_nrmse", {})
+    line = f"{held} free-run NRMSE total {_fmt(free.get('total'))}"
+    base = result.metrics.get("baseline", {}).get(held, {}).get("free_run_nrmse", {})
+    if base:
+        line += f"; physics only {_fmt(base.get('total'))}"
+    out.print(f"wrote {out_dir}/: model.json, metrics.json, report.md, report.html ({line})")
     for warning in result.metrics["warnings"]:
         err.print(f"warning: {warning}", highlight=False, soft_wrap=True)
 
@@ -263,6 +266,12 @@ def loop(
     alpha: float | None = typer.Option(
         None, "--alpha", min=1e-12, max=0.5, help="Family-wise significance of the F-test."
     ),
+    hybrid: Path | None = typer.Option(
+        None,
+        "--hybrid",
+        help="Folder of a trained hybrid (nnid train configs/hybrid.toml) of this vehicle: "
+        "its learned force, named in the effect vocabulary, as a second opinion.",
+    ),
 ) -> None:
     """Residual loop: fit the vehicle file to the log, find the effect the residual points to,
     add it, refit, repeat; writes loop.json, report.html and report.md to --out, with the
@@ -279,6 +288,7 @@ def loop(
     if not (data or cfg.data.log or cfg.data.simulate):
         raise NnidInputError("give a log (--data or the config's data.log)", field="data")
     _check_out(out_dir)
+    second = _hybrid_model(hybrid) if hybrid is not None else None
     try:
         inputs = load_inputs(cfg, where, [], data, vehicle, columns)
     except NnidInputError as exc:
@@ -296,9 +306,25 @@ def loop(
         dofs=tuple(cfg.dofs) if cfg.dofs else None,
         validation_experiments=cfg.validation,
         gate_horizon_s=cfg.gate_horizon_s,
+        second_opinion=second,
     )
     _run_loop(log, veh, out_dir, source=data or str(config or ""), **settings)
     report.write(out_dir)
+
+
+def _hybrid_model(folder: Path):
+    """A saved hybrid model, or one clear error."""
+    from nnid.models.base import load_model
+
+    model = load_model(folder)
+    if model.kind != "hybrid":
+        raise NnidInputError(
+            f"is a saved '{model.kind}' model; --hybrid takes a hybrid "
+            "(nnid train configs/hybrid.toml)",
+            source=str(folder),
+            field="--hybrid",
+        )
+    return model
 
 
 def _run_loop(log, veh, out_dir: Path, source: str = "", **settings) -> None:

@@ -2,12 +2,12 @@
 
 Every command's config has a ``kind`` ("simulate", "train", "compare", "loop"); a model is a
 table whose ``kind`` names the model ("fossen", "caccia", "synthesis", "sindy", "narx",
-"state_space") and whose other keys are that model's constructor arguments (one option model
-per kind, each building its model with ``from_config``); a trainer is a table whose ``kind``
-names it ("ls", "rls", "gradient", "ukf", "lm", "adam") with that trainer's arguments, or just
-the name. Unknown keys are refused, damping masks and DOFs are literals, effect names are
-checked against the vocabulary. A bad config is one :class:`NnidInputError` naming the file
-and the key (dotted path), raised before any data is loaded or simulated.
+"state_space", "hybrid") and whose other keys are that model's constructor arguments (one
+option model per kind, each building its model with ``from_config``); a trainer is a table
+whose ``kind`` names it ("ls", "rls", "gradient", "ukf", "lm", "adam") with that trainer's
+arguments, or just the name. Unknown keys are refused, damping masks and DOFs are literals,
+effect names are checked against the vocabulary. A bad config is one :class:`NnidInputError`
+naming the file and the key (dotted path), raised before any data is loaded or simulated.
 """
 
 from __future__ import annotations
@@ -209,9 +209,11 @@ def _data_kind(value: Any) -> Any:
 
 class SplitSpec(_Strict):
     """Train / validation / test: whole ``experiment``s (named, or by ``fractions`` of the
-    samples in order) or contiguous ``block``s of each experiment (MATLAB's divideblock)."""
+    samples in order), contiguous ``block``s of each experiment (MATLAB's divideblock), or
+    ``auto``: whole experiments when every part with a fraction gets at least one, else blocks
+    (the residual loop's rule: a config that runs on any log)."""
 
-    by: Literal["experiment", "block"] = "block"
+    by: Literal["experiment", "block", "auto"] = "block"
     fractions: list[Annotated[float, Field(ge=0, le=1)]] = Field(
         default_factory=lambda: [0.7, 0.15, 0.15], min_length=3, max_length=3
     )
@@ -306,6 +308,7 @@ class AdamSpec(_Trainer):
     max_fail: int = Field(20, ge=1)
     weight_decay: float = Field(0.0, ge=0, allow_inf_nan=False)
     max_seconds: PositiveFloat | None = None
+    average: float | None = Field(None, gt=0, lt=1)
 
 
 RegressionTrainer = Annotated[
@@ -354,19 +357,15 @@ class SequenceStep(_Strict):
     unknowns: list[str] = Field(min_length=1)
 
 
-class FossenModelSpec(_Model):
-    """The parametric Fossen model (:class:`nnid.models.parametric.ParametricModel`): which
-    parameters are unknown (``added_mass`` and ``damping`` are shortcuts for the DOFs'
-    diagonal added mass and the vehicle's damping terms), from which DOF equations, with which
-    trainer; ``sequence`` runs Weiss's decoupled sequence instead."""
+class _PhysicsModel(_Model):
+    """A model with a parametric Fossen fit: unknown parameters (``added_mass`` and
+    ``damping`` are shortcuts for the DOFs' diagonal added mass and the vehicle's damping
+    terms) identified from the ``dofs`` equations."""
 
-    kind: Literal["fossen"] = "fossen"
     unknowns: list[str] = Field(default_factory=lambda: ["added_mass", "damping"])
     dofs: list[Dof] = Field(default_factory=lambda: list(DOFS), min_length=1)
-    sequence: Literal["weiss"] | list[SequenceStep] | None = None
     savgol_window: PositiveFloat = 1.0
     savgol_order: int = Field(4, ge=2, le=8)
-    trainer: RegressionTrainer | None = None
 
     @field_validator("unknowns")
     @classmethod
@@ -377,6 +376,17 @@ class FossenModelSpec(_Model):
             if name not in ("added_mass", "damping"):
                 canonical_parameter(name)
         return unknowns
+
+
+class FossenModelSpec(_PhysicsModel):
+    """The parametric Fossen model (:class:`nnid.models.parametric.ParametricModel`): which
+    parameters are unknown, from which DOF equations, with which trainer; ``sequence`` runs
+    Weiss's decoupled sequence instead."""
+
+    kind: Literal["fossen"] = "fossen"
+    sequence: Literal["weiss"] | list[SequenceStep] | None = None
+    zoh_midpoint: bool = False
+    trainer: RegressionTrainer | None = None
 
 
 class CacciaModelSpec(_Model):
@@ -512,16 +522,56 @@ class StateSpaceModelSpec(_Model):
         return args
 
 
+class HybridModelSpec(_PhysicsModel):
+    """A neural-ODE hybrid (:class:`nnid.models.hybrid.HybridModel`): the parametric Fossen
+    fit (``unknowns``, ``dofs``, ``physics_trainer``) plus a network (``hidden`` tanh layers)
+    that learns the force the physics misses, trained by multiple shooting over ``segments``
+    (seconds, one stage each) with ``trainer`` (Adam or LM) and early stopping on held-out
+    free runs."""
+
+    kind: Literal["hybrid"]
+    physics: Literal["frozen", "joint"] = "frozen"
+    level: Literal["force", "acceleration"] = "force"
+    physics_trainer: RegressionTrainer | None = None
+    hidden: list[Annotated[int, Field(ge=1)]] = Field(default_factory=lambda: [32, 32])
+    memory: list[PositiveFloat] = Field(default_factory=lambda: [0.25, 1.0])
+    force_penalty: float = Field(1e-3, ge=0, allow_inf_nan=False)
+    prior: PositiveFloat = 0.1
+    prior_weight: float = Field(1e-2, ge=0, allow_inf_nan=False)
+    segments: list[PositiveFloat] = Field(default_factory=lambda: [0.5, 1.0, 2.0], min_length=1)
+    batch_segments: int = Field(256, ge=1)
+    balance: bool = True
+    validation_window: PositiveFloat | None = 5.0
+    method: Literal["auto", "rk4", "dopri5", "nnid_rk4"] = "auto"
+    adjoint: bool = False
+    zoh_midpoint: bool = True
+    seed: int = 0
+    trainer: NetworkTrainer | None = None
+
+    @field_validator("physics_trainer", mode="before")
+    @classmethod
+    def _physics_trainer_name(cls, value: Any) -> Any:
+        return _kind_shorthand(value)
+
+    def arguments(self) -> dict[str, Any]:
+        args = super().arguments()
+        del args["physics_trainer"]
+        if self.physics_trainer is not None:
+            args["physics_trainer"] = self.physics_trainer.build()
+        return args
+
+
 ModelSpec = Annotated[
     FossenModelSpec
     | CacciaModelSpec
     | SynthesisModelSpec
     | SindyModelSpec
     | NarxModelSpec
-    | StateSpaceModelSpec,
+    | StateSpaceModelSpec
+    | HybridModelSpec,
     Field(discriminator="kind"),
 ]
-PHYSICS_KINDS = ("fossen", "caccia", "synthesis", "sindy")
+PHYSICS_KINDS = ("fossen", "caccia", "synthesis", "sindy", "hybrid")
 
 
 # -- commands ------------------------------------------------------------------------------------

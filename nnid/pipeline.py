@@ -25,7 +25,7 @@ from nnid.config import (
 )
 from nnid.datasets.cleaning import CleaningReport
 from nnid.datasets.log import VELOCITY, input_columns
-from nnid.datasets.splits import Split, split_log
+from nnid.datasets.splits import PARTS, Split, split_log
 from nnid.errors import NnidInputError
 from nnid.evaluation.evaluate import evaluate
 from nnid.evaluation.prediction import Replay
@@ -245,7 +245,10 @@ def make_split(log: pd.DataFrame, s, source: str = "") -> Split:
             "test": s.test or [],
         }
     try:
-        split = split_log(log, s.by, tuple(s.fractions), assignment)
+        if s.by == "auto":
+            split = _auto_split(log, tuple(s.fractions))
+        else:
+            split = split_log(log, s.by, tuple(s.fractions), assignment)
     except NnidInputError as exc:
         raise NnidInputError(exc.message, source=source, field=f"split.{exc.field}") from None
     if len(split.train) == 0:
@@ -256,6 +259,19 @@ def make_split(log: pd.DataFrame, s, source: str = "") -> Split:
             source=source,
             field="split",
         )
+    return split
+
+
+def _auto_split(log: pd.DataFrame, fractions: tuple[float, float, float]) -> Split:
+    """Whole experiments when each part with a fraction gets one, else blocks."""
+    n = log["experiment"].nunique() if "experiment" in log else 1
+    if n >= 2:
+        split = split_log(log, "experiment", fractions)
+        if all(len(split[p]) for p, f in zip(PARTS, fractions, strict=True) if f):
+            split.record["requested"] = "auto"
+            return split
+    split = split_log(log, "block", fractions)
+    split.record["requested"] = "auto"
     return split
 
 
@@ -313,6 +329,7 @@ class TrainResult:
     metrics: dict
     report: CleaningReport
     split: Split
+    figures: dict = field(default_factory=dict)  # data of the report's figures
 
 
 def run_train(
@@ -352,8 +369,20 @@ def run_train(
         "warmup_s": cfg.warmup_s,
         "k_step_s": cfg.k_step_s,
     }
-    if len(split.test):
+    parts = [p for p in ("validation", "test") if len(split[p])]
+    if "test" in parts:
         metrics["test"] = score(model, split.test, cfg, k, replay)
+    base = model.baseline()
+    if base is not None:
+        metrics["baseline"] = {
+            "model": base.kind,
+            "trainer": base.trainer_name(),
+            "n_params": base.n_params,
+            **{p: score(base, split[p], cfg, k, replay) for p in parts},
+        }
+    figures: dict[str, Any] = {}
+    if model.kind == "hybrid":
+        metrics["correction"] = _correction(model, split, parts, figures)
     if cfg.reference:
         metrics["reference"] = {"label": cfg.reference_label, "values": cfg.reference}
     if cfg.nondimensional_speed:
@@ -361,7 +390,25 @@ def run_train(
             model.params, inputs.vehicle, cfg.nondimensional_speed
         )
     metrics["seconds"] = time.perf_counter() - start
-    return TrainResult(model, metrics, inputs.report, split)
+    return TrainResult(model, metrics, inputs.report, split, figures)
+
+
+def _correction(model, split: Split, parts: list[str], figures: dict) -> dict:
+    """What a hybrid's network learned: its force against the physics' damping force on each
+    split, and its dominant terms named in the effect vocabulary (on the training split)."""
+    from nnid.loop.explain import explain
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        explanation = explain(model, split.train)
+    held = split[parts[-1]]
+    figures["correction"] = (held, model.correction(held))
+    figures["baseline_free_run"] = model.baseline().predict(held)
+    figures["free_run"] = model.predict(held)
+    return {
+        "share_of_damping_force": {p: model.correction_share(split[p]) for p in ("train", *parts)},
+        "explanation": explanation.as_dict(),
+    }
 
 
 def _params(model, vehicle) -> dict:

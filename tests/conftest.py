@@ -1,8 +1,15 @@
 from __future__ import annotations
 
+import os
+import shutil
+import subprocess
+from pathlib import Path
+
 import numpy as np
 import pytest
 import torch
+from PIL import Image
+from threadpoolctl import threadpool_limits
 
 from nnid.vehicle import vehicle_from_dict
 
@@ -38,3 +45,67 @@ def vehicle_factory():
 
 
 torch.set_default_dtype(torch.float64)
+
+
+def _chromium(tmp_path: Path, page: Path, dump: bool) -> subprocess.CompletedProcess:
+    """Headless Chromium on a report page: its DOM after scripts ran (``dump``), or a
+    1200 × 2400 screenshot ``tmp_path/s.png``. Skips where Chromium is not installed."""
+    browser = shutil.which("chromium") or shutil.which("chromium-browser")
+    if browser is None:
+        pytest.skip("Chromium is not installed (Debian package 'chromium'; .ci/run installs it)")
+    cmd = [
+        browser,
+        "--headless",
+        "--no-sandbox",
+        "--disable-gpu",
+        "--no-first-run",
+        "--disable-background-networking",
+        "--disable-component-update",
+        "--disable-sync",
+        f"--user-data-dir={tmp_path / 'profile'}",
+        "--virtual-time-budget=5000",
+        *(
+            ["--dump-dom"]
+            if dump
+            else ["--window-size=1200,2400", f"--screenshot={tmp_path}/s.png"]
+        ),
+        page.as_uri(),
+    ]
+    done = subprocess.run(cmd, capture_output=True, text=True, timeout=120, cwd=tmp_path)
+    assert done.returncode == 0, done.stderr[-2000:]
+    return done
+
+
+@pytest.fixture
+def chromium():
+    """:func:`_chromium`: render a report page in headless Chromium."""
+    return _chromium
+
+
+def assert_rendered(screenshot: Path) -> None:
+    """A :func:`_chromium` screenshot shows a page, not a blank one: text and plot lines make
+    dark pixels in many rows."""
+    shot = np.asarray(Image.open(screenshot).convert("L"), dtype=float)
+    assert shot.shape == (2400, 1200)
+    dark_rows = (shot < 100).any(axis=1).mean()
+    assert dark_rows > 0.3, dark_rows
+
+
+@pytest.hookimpl(tryfirst=True)  # before xdist reads the groups into the node ids
+def pytest_collection_modifyitems(config, items):
+    """Under pytest-xdist's ``--dist loadgroup`` (the README's test command), keep each test
+    module on one worker, so that its module-scoped fixtures (a fitted comparison, a trained
+    hybrid) are computed once; a test that names its own ``xdist_group`` (the hybrid's
+    scenarios, one group per simulated log) is placed by that group instead."""
+    for item in items:
+        if item.get_closest_marker("xdist_group") is None:
+            item.add_marker(pytest.mark.xdist_group(item.module.__name__))
+
+
+def pytest_configure(config):
+    """Under pytest-xdist, one thread per worker for torch and BLAS: two workers on two cores
+    with two threads each would oversubscribe them (busy-waiting BLAS threads). A test
+    setting, never the library's: nnid itself leaves process-wide thread counts alone."""
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        torch.set_num_threads(1)
+        threadpool_limits(1)

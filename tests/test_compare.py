@@ -5,13 +5,10 @@ from __future__ import annotations
 
 import json
 import re
-import shutil
-import subprocess
 from pathlib import Path
 
-import numpy as np
 import pytest
-from PIL import Image
+from conftest import assert_rendered
 from typer.testing import CliRunner
 
 from nnid.cli import app
@@ -68,6 +65,9 @@ def families(tmp_path_factory):
             '{ kind = "adam", max_epochs = 60, lr = 0.01 }': (
                 '{ kind = "adam", max_epochs = 3, lr = 0.01 }'
             ),
+            '{ kind = "adam", max_epochs = 40, lr = 0.01, max_fail = 10 }': (
+                '{ kind = "adam", max_epochs = 2, lr = 0.01 }'
+            ),
         },
     )
 
@@ -93,7 +93,7 @@ def _check_contract(comp: dict) -> None:
                 assert (value is None) == (dof in diverged), (m["name"], key, dof)
             if any(v is None for d, v in scores.items() if d != "total"):
                 assert scores["total"] is None  # never an average that hides a divergence
-        if m["kind"] in ("synthesis", "sindy", "fossen"):
+        if m["kind"] in ("synthesis", "sindy", "fossen", "hybrid"):
             assert {"J", "J_over_J0"} <= set(m["train"]) and "J_over_J0" in m["validation"]
         else:
             assert m["train"] == {}  # no force equation, no J
@@ -169,17 +169,18 @@ def test_markdown_twin_holds_the_same_tables(which, request):
 
 
 def test_families_rank_four_model_kinds_on_one_held_out_run(families):
-    """Fossen least squares, SINDy, NARX (LM and Adam) and the neural state-space model fitted
-    on the same split and scored on the surge-sway run none of them saw."""
+    """Fossen least squares, SINDy, NARX (LM and Adam), the neural state-space model and the
+    neural-ODE hybrid fitted on the same split and scored on the surge-sway run none of them
+    saw."""
     comp = _strict(families / "comparison.json")
     _check_contract(comp)
     kinds = {m["kind"] for m in comp["models"]}
-    assert kinds == {"fossen", "sindy", "narx", "state_space"}
+    assert kinds == {"fossen", "sindy", "narx", "state_space", "hybrid"}
     assert comp["held_out"] == "test" and comp["test"] == ["surge-sway"]
     assert comp["validation"] == ["surge-sway-yaw"] and "surge-sway" not in comp["train"]
     for m in comp["models"]:
         assert {"free_run_nrmse", "k_step_nrmse", "one_step_nrmse"} <= set(m["test"])
-        expected = {"narx": "early stopping", "state_space": "early stopping"}
+        expected = dict.fromkeys(("narx", "state_space", "hybrid"), "early stopping")
         assert m["validation_used_for"] == expected.get(
             m["kind"], "model selection" if m["kind"] == "sindy" else None
         )
@@ -191,44 +192,13 @@ def test_families_rank_four_model_kinds_on_one_held_out_run(families):
     assert measured == sorted(measured) and min(v for v in free if v is not None) == ranked[best]
 
 
-def _chromium(tmp_path: Path, page: Path, dump: bool) -> subprocess.CompletedProcess:
-    browser = shutil.which("chromium") or shutil.which("chromium-browser")
-    if browser is None:
-        pytest.skip("Chromium is not installed (Debian package 'chromium'; .ci/run installs it)")
-    cmd = [
-        browser,
-        "--headless",
-        "--no-sandbox",
-        "--disable-gpu",
-        "--no-first-run",
-        "--disable-background-networking",
-        "--disable-component-update",
-        "--disable-sync",
-        f"--user-data-dir={tmp_path / 'profile'}",
-        "--virtual-time-budget=5000",
-        *(
-            ["--dump-dom"]
-            if dump
-            else ["--window-size=1200,2400", f"--screenshot={tmp_path}/s.png"]
-        ),
-        page.as_uri(),
-    ]
-    done = subprocess.run(cmd, capture_output=True, text=True, timeout=120, cwd=tmp_path)
-    assert done.returncode == 0, done.stderr[-2000:]
-    return done
-
-
 @pytest.mark.parametrize("which", ["compared", "families"])
-def test_report_renders_in_headless_chromium(which, request, tmp_path):
+def test_report_renders_in_headless_chromium(which, request, tmp_path, chromium):
     out = request.getfixturevalue(which)
-    dom = _chromium(tmp_path, out / "report.html", dump=True).stdout
+    dom = chromium(tmp_path, out / "report.html", dump=True).stdout
     assert 'data-images-ok="yes"' in dom  # every embedded figure decoded and laid out
     assert "Ranking" in dom and "Free runs on the held-out data" in dom
     if which == "compared":
         assert "Force error (McCarter Tables 5.1/5.2 for this data)" in dom
-    _chromium(tmp_path, out / "report.html", dump=False)
-    shot = np.asarray(Image.open(tmp_path / "s.png").convert("L"), dtype=float)
-    assert shot.shape == (2400, 1200)
-    # a rendered page, not a blank one: text and plot lines make dark pixels in many rows
-    dark_rows = (shot < 100).any(axis=1).mean()
-    assert dark_rows > 0.3, dark_rows
+    chromium(tmp_path, out / "report.html", dump=False)
+    assert_rendered(tmp_path / "s.png")

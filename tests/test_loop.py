@@ -17,7 +17,8 @@ import pandas as pd
 import pytest
 
 from nnid.datasets.measurement import Measurement
-from nnid.loop.effects import Candidate, candidates, first_order_lag
+from nnid.datasets.preprocess import first_order_lag
+from nnid.loop.effects import Candidate, candidates
 from nnid.loop.residual_loop import ResidualLoop
 from nnid.loop.residuals import correlation_analysis
 from nnid.loop.scenarios import effect_log

@@ -27,6 +27,7 @@ from nnid.datasets.simulator import simulate
 from nnid.loop.scenarios import effect_log
 from nnid.models.base import MODEL_KINDS, model_class
 from nnid.models.caccia import CacciaModel
+from nnid.models.hybrid import HybridModel
 from nnid.models.narx import NarxModel
 from nnid.models.neural_state_space import NeuralStateSpace
 from nnid.models.parametric import ParametricModel
@@ -99,6 +100,15 @@ BUILDERS = {
         hidden=4,
         warmup=5,
         windows=(20,),
+        trainer=Adam(max_epochs=3, lr=0.01),
+        seed=3,
+    ),
+    "hybrid": lambda v: HybridModel(
+        v,
+        physics="joint",
+        hidden=(6,),
+        segments=(0.5,),
+        validation_window=5.0,
         trainer=Adam(max_epochs=3, lr=0.01),
         seed=3,
     ),
@@ -207,8 +217,14 @@ def test_refit_with_the_same_seed_is_identical(kind, fitted, minirov, runs, heav
     model, *_ = fitted[kind]
     train, val = _data(kind, runs, heave_campaign)
     again = clone(model).fit(train, val)
-    np.testing.assert_array_equal(
-        again.predict(val, "free_run").to_numpy(), model.predict(val, "free_run").to_numpy()
+    # Same seed, same numbers to rounding: torch's MKL BLAS may pick kernels by buffer
+    # alignment (no conditional numerical reproducibility), so a refit in the same process can
+    # differ in the last bits (5e-15 seen in a NARX under pytest-xdist), never more
+    np.testing.assert_allclose(
+        again.predict(val, "free_run").to_numpy(),
+        model.predict(val, "free_run").to_numpy(),
+        rtol=1e-10,
+        atol=1e-13,
     )
 
 

@@ -439,16 +439,22 @@ def build() -> str:
     return "\n\n".join(out) + "\n"
 
 
-def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--write", action="store_true", help=f"replace the tables in {DOC}")
+def regenerate(make, doc: Path, description: str, argv: list[str] | None = None) -> None:
+    """Print the tables ``make()`` returns and, with ``--write``, put them between the
+    generated markers of ``doc`` (the command line of every docs script)."""
+    parser = argparse.ArgumentParser(description=description.splitlines()[0])
+    parser.add_argument("--write", action="store_true", help=f"replace the tables in {doc}")
     args = parser.parse_args(argv)
-    text = build()
+    text = make()
     sys.stdout.write(text)
     if args.write:
-        doc = DOC.read_text()
-        a, b = doc.index(BEGIN) + len(BEGIN), doc.index(END)
-        DOC.write_text(doc[:a] + "\n" + text + doc[b:])
+        page = doc.read_text()
+        a, b = page.index(BEGIN) + len(BEGIN), page.index(END)
+        doc.write_text(page[:a] + "\n" + text + page[b:])
+
+
+def main(argv: list[str] | None = None) -> None:
+    regenerate(build, DOC, __doc__, argv)
 
 
 if __name__ == "__main__":

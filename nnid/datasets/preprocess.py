@@ -19,7 +19,7 @@ import numpy as np
 import pandas as pd
 from pydantic import BaseModel, ConfigDict, Field
 from scipy.integrate import cumulative_trapezoid
-from scipy.signal import butter, filtfilt, savgol_coeffs, savgol_filter
+from scipy.signal import butter, filtfilt, lfilter, savgol_coeffs, savgol_filter
 from scipy.stats import median_abs_deviation
 
 from nnid.datasets.cleaning import CleaningReport
@@ -40,6 +40,24 @@ def sample_rate(t: np.ndarray) -> float:
 
 
 # --- time base -------------------------------------------------------------------------------
+
+
+#: relative spread of sampling intervals accepted as uniform
+UNIFORM_TOLERANCE = 0.01
+
+
+def check_uniform(log: pd.DataFrame, what: str, name: str = "log") -> None:
+    """Raise unless every experiment of ``log`` is uniformly sampled (intervals within 1 % of
+    their median): models that count time in samples (``what``) need it."""
+    for exp, idx in experiments(log):
+        dt = np.diff(log.loc[idx, "t"].to_numpy(np.float64))
+        if dt.size and np.ptp(dt) > UNIFORM_TOLERANCE * np.median(dt):
+            where = f" (experiment {exp})" if exp is not None else ""
+            raise NnidInputError(
+                f"column t of the {name}{where} is not uniformly sampled: {what} counts time "
+                "in samples; resample the log first",
+                field="t",
+            )
 
 
 def resample_log(
@@ -357,6 +375,22 @@ def zoh_midpoint(x: np.ndarray, log: pd.DataFrame) -> np.ndarray:
 
 
 # --- sensor biases ----------------------------------------------------------------------------
+
+
+def first_order_lag(tau: np.ndarray, log: pd.DataFrame, time_constant: float) -> np.ndarray:
+    """a_{k+1} = e^{−Δt/T} a_k + (1 − e^{−Δt/T}) τ_k per experiment, from a_0 = τ_0: the
+    state of T ȧ + a = τ at the sample times when τ is held between samples."""
+    if time_constant <= 0:
+        return tau
+    out = np.empty_like(tau)
+    t = log["t"].to_numpy(np.float64)
+    for _, idx in experiments(log):
+        pos = log.index.get_indexer(idx)
+        dt = float(np.median(np.diff(t[pos]))) if pos.size > 1 else 1.0
+        a = np.exp(-dt / time_constant)
+        # zi = τ_0 starts the filter at rest on the first input
+        out[pos] = lfilter([0.0, 1.0 - a], [1.0, -a], tau[pos], axis=0, zi=tau[pos][:1])[0]
+    return out
 
 
 def estimate_accelerometer_bias(

@@ -119,10 +119,10 @@ def evaluate(
     """Scores of a fitted model on ``log`` (module docstring). ``modes`` among "one_step",
     "k_step" (``k_step`` samples ahead) and "free_run"; ``autopilot`` (a
     :class:`nnid.evaluation.prediction.Replay` of the autopilot the log was flown under) flies
-    the free run and the k-step predictions of models that can fly in closed loop (physics
-    models) under it, so an open-loop unstable plant is compared as it was flown; the modes
-    flown so are listed under ``closed_loop``. ``predictions``, when given, receives each
-    mode's predicted DataFrame (for figures)."""
+    the free run and the k-step predictions of models that can fly in closed loop (those with
+    a ``closed_loop`` method: physics models and hybrids) under it, so an open-loop unstable
+    plant is compared as it was flown; the modes flown so are listed under ``closed_loop``.
+    ``predictions``, when given, receives each mode's predicted DataFrame (for figures)."""
     columns = target_columns(model, log)
     out: dict[str, Any] = {"columns": columns}
     base = scored_rows(log, warmup_s, model.warmup_samples_)
@@ -135,7 +135,11 @@ def evaluate(
             out["k_step"] = int(k_step)
         else:
             mode = check_mode(name)
-        closed = name != "one_step" and autopilot is not None and hasattr(model, "parts_")
+        closed = (
+            name != "one_step"
+            and autopilot is not None
+            and callable(getattr(model, "closed_loop", None))
+        )
         pred = model.closed_loop(log, autopilot, mode) if closed else model.predict(log, mode)
         if predictions is not None:
             predictions[name] = pred

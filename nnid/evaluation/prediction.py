@@ -7,6 +7,7 @@ the compiled RK4 integrates from measured states. Missing state components start
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -111,16 +112,20 @@ class Replay:
     open_loop: pd.DataFrame
 
 
-def predict_closed_loop(
-    parts, log: pd.DataFrame, replay: Replay, mode: str | int = "free_run", substeps: int = 1
+#: a model flown in closed loop: (number of windows, dt) -> step(states [B, 12], command [B, 6])
+#: -> states one sample later; a new step per experiment, so it can keep its own memory
+Stepper = Callable[[int, float], Callable[[np.ndarray, np.ndarray], np.ndarray]]
+
+
+def fly_closed_loop(
+    log: pd.DataFrame, replay: Replay, stepper: Stepper, mode: str | int = "free_run"
 ) -> pd.DataFrame:
-    """A physics model flown under ``replay``'s autopilot: each sample the commanded force is
-    the open-loop input plus the autopilot's feedback on the *simulated* state, held over the
+    """A model flown under ``replay``'s autopilot: each sample the commanded force is the
+    open-loop input plus the autopilot's feedback on the *simulated* state, held over the
     sample (as :func:`nnid.datasets.simulator.simulate` flew the log). ``mode`` "free_run"
     flies each experiment from its first measured state; k (or "one_step", k = 1) flies k
     samples from every measured state, all windows at once. Rows not predicted keep the
     measurement (the caller blanks them)."""
-    form = parts.model(check=False).feature_form()
     x = measured_states(log)
     out = x.copy()
     tau_open = replay.open_loop.loc[log.index, list(TAU)].to_numpy(np.float64)
@@ -134,11 +139,10 @@ def predict_closed_loop(
             starts, steps = pos[: max(pos.size - k, 0)], k
         if starts.size == 0:
             continue
+        step = stepper(starts.size, dt)
         state = x[starts].copy()
         for j in range(steps):
-            command = tau_open[starts + j] + replay.autopilot.force(state)
-            applied = parts.applied(command)[:, None, :]
-            state = compiled.integrate_rk4(form, state, applied, dt, substeps)[:, -1]
+            state = step(state, tau_open[starts + j] + replay.autopilot.force(state))
             if mode == "free_run":
                 out[starts + j + 1] = state
                 if not np.isfinite(state).all():
@@ -147,3 +151,20 @@ def predict_closed_loop(
         if mode != "free_run":
             out[starts + k] = state
     return pd.DataFrame(out, columns=[*POSE, *VELOCITY], index=log.index)
+
+
+def predict_closed_loop(
+    parts, log: pd.DataFrame, replay: Replay, mode: str | int = "free_run", substeps: int = 1
+) -> pd.DataFrame:
+    """A physics model (:class:`nnid.physics.parts.Parts`) flown under ``replay``'s
+    autopilot (:func:`fly_closed_loop`), by the compiled RK4."""
+    form = parts.model(check=False).feature_form()
+
+    def stepper(_: int, dt: float):
+        def step(state: np.ndarray, command: np.ndarray) -> np.ndarray:
+            applied = parts.applied(command)[:, None, :]
+            return compiled.integrate_rk4(form, state, applied, dt, substeps)[:, -1]
+
+        return step
+
+    return fly_closed_loop(log, replay, stepper, mode)

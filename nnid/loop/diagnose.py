@@ -287,7 +287,7 @@ def screen(
     return out
 
 
-def _damping_block(ws: Workspace, vehicle, cands: list[Candidate], data: dict) -> np.ndarray:
+def damping_block(ws: Workspace, vehicle, cands: list[Candidate], data: dict) -> np.ndarray:
     """Columns [N, 6, K] of damping candidates, built by the regression's own one-shot
     damping columns (−ξ_term(ν_r) in row F) and cut to its rows."""
     structure = ParametricFossen(vehicle, [c.parameter for c in cands])
@@ -303,8 +303,8 @@ def screen_linear(ws: Workspace, fit: Fit, cands: list[Candidate]) -> list[Score
     out: list[Scored] = []
     for start in range(0, len(damping), _CHUNK):
         chunk = damping[start : start + _CHUNK]
-        cols = _damping_block(ws, fit.vehicle, chunk, data)
-        cols_v = _damping_block(ws, fit.vehicle, chunk, data_val)
+        cols = damping_block(ws, fit.vehicle, chunk, data)
+        cols_v = damping_block(ws, fit.vehicle, chunk, data_val)
         out += screen(ws, fit, chunk, cols, cols_v)
     if other:
         names = [c.parameter for c in other]
@@ -314,7 +314,7 @@ def screen_linear(ws: Workspace, fit: Fit, cands: list[Candidate]) -> list[Score
     return out
 
 
-def _sensitivity(ws: Workspace, vehicle, cand: Candidate, a: float, b: float) -> list[np.ndarray]:
+def sensitivity(ws: Workspace, vehicle, cand: Candidate, a: float, b: float) -> list[np.ndarray]:
     """dR/dv of the effect between values ``a`` and ``b`` with everything else held:
     columns [N, 6, 1] on the training and held-out parts."""
     cols = []
@@ -341,7 +341,7 @@ def search_nonlinear(
     v0 = cand.current_value(fit.vehicle)
     h = 0.02 * (hi - lo)
     a, b = (v0 - h / 2, v0 + h / 2) if lo < v0 - h / 2 else (v0, v0 + h)
-    pre = screen(ws, fit, [cand], *_sensitivity(ws, fit.vehicle, cand, a, b))
+    pre = screen(ws, fit, [cand], *sensitivity(ws, fit.vehicle, cand, a, b))
     if not pre or pre[0].p_value > prescreen_p:
         for s in pre:
             s.value = v0 + (s.value if np.isfinite(s.value) else 0.0)
@@ -368,7 +368,7 @@ def search_nonlinear(
     if hi_v <= lo_v:
         return None
     fitted = vehicle_with(fit.vehicle, dict(zip(best.unknowns, best.theta, strict=True)))
-    col = _sensitivity(ws, fitted, cand, lo_v, hi_v)
+    col = sensitivity(ws, fitted, cand, lo_v, hi_v)
     # score the linearised column at the optimum, then put the exact numbers back in
     scored = screen(ws, best, [cand], col[0], col[1])
     drss = fit.rss - best.rss
@@ -412,7 +412,7 @@ def rescore(ws: Workspace, fit: Fit, scored: list[Scored]) -> None:
         damping = [s.candidate for s in linear if ":" in s.candidate.parameter]
         other = [s.candidate for s in linear if ":" not in s.candidate.parameter]
         if damping:
-            block = _damping_block(ws, fit.vehicle, damping, data)
+            block = damping_block(ws, fit.vehicle, damping, data)
             cols.update({c.name: block[:, :, k] for k, c in enumerate(damping)})
         if other:
             block = ws.columns(fit.vehicle, [c.parameter for c in other], "train")
@@ -455,7 +455,7 @@ def sindy_opinion(
     other = [s.candidate for s in lin if ":" not in s.candidate.parameter]
     blocks, order = [], []
     if damping:
-        blocks.append(_damping_block(ws, fit.vehicle, damping, data))
+        blocks.append(damping_block(ws, fit.vehicle, damping, data))
         order += damping
     if other:
         blocks.append(ws.columns(fit.vehicle, [c.parameter for c in other], "train"))
@@ -547,6 +547,7 @@ __all__ = [
     "Scored",
     "Step",
     "Workspace",
+    "damping_block",
     "force_residual",
     "force_rmse",
     "predict",
@@ -556,6 +557,7 @@ __all__ = [
     "screen",
     "screen_linear",
     "search_nonlinear",
+    "sensitivity",
     "sindy_opinion",
     "velocity_errors",
 ]

@@ -32,10 +32,9 @@ from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
-from scipy.signal import lfilter
 
 from nnid.datasets.log import TAU
-from nnid.datasets.preprocess import experiments
+from nnid.datasets.preprocess import first_order_lag
 from nnid.errors import NnidInputError
 from nnid.physics.damping import parse_coefficient_key
 from nnid.physics.damping_library import LIBRARY, canonical_term
@@ -232,19 +231,3 @@ def nominal_forces(log: pd.DataFrame, vehicle) -> np.ndarray:
     else:
         tau = Actuation(vehicle).nominal(inputs, deadband=True)
     return first_order_lag(tau, log, vehicle.actuator_lag)
-
-
-def first_order_lag(tau: np.ndarray, log: pd.DataFrame, time_constant: float) -> np.ndarray:
-    """a_{k+1} = e^{−Δt/T} a_k + (1 − e^{−Δt/T}) τ_k per experiment, from a_0 = τ_0: the
-    state of T ȧ + a = τ at the sample times when τ is held between samples."""
-    if time_constant <= 0:
-        return tau
-    out = np.empty_like(tau)
-    t = log["t"].to_numpy(np.float64)
-    for _, idx in experiments(log):
-        pos = log.index.get_indexer(idx)
-        dt = float(np.median(np.diff(t[pos]))) if pos.size > 1 else 1.0
-        a = np.exp(-dt / time_constant)
-        # zi = τ_0 starts the filter at rest on the first input
-        out[pos] = lfilter([0.0, 1.0 - a], [1.0, -a], tau[pos], axis=0, zi=tau[pos][:1])[0]
-    return out

@@ -58,7 +58,10 @@ class ResidualLoop:
     ``min_gate_gain`` the fraction by which a candidate must lower the held-out simulation
     error (free run, or ``gate_horizon_s`` ahead) of the ``gate_checks`` best ranked, ``dofs``
     the DOF equations analysed (default: those with a velocity in the log),
-    ``validation_experiments`` the held-out runs by name.
+    ``validation_experiments`` the held-out runs by name, ``second_opinion`` a fitted
+    :class:`nnid.models.hybrid.HybridModel` of this vehicle whose learned force, named in the
+    effect vocabulary on the training part (:func:`nnid.loop.explain.explain`), is reported
+    beside the loop's own diagnosis.
     """
 
     def __init__(
@@ -82,6 +85,7 @@ class ResidualLoop:
         validation_experiments: list[str] | None = None,
         rescore_top: int = 30,
         gate_horizon_s: float | None = None,
+        second_opinion=None,
     ) -> None:
         self.vehicle = vehicle
         self.alpha = alpha
@@ -102,6 +106,7 @@ class ResidualLoop:
         self.validation_experiments = validation_experiments
         self.rescore_top = rescore_top
         self.gate_horizon_s = gate_horizon_s
+        self.second_opinion = second_opinion
 
     # -- data -----------------------------------------------------------------------------------
     def _prepare(self, log: pd.DataFrame) -> pd.DataFrame:
@@ -197,6 +202,12 @@ class ResidualLoop:
         self.before_, self.residuals_before_ = self._scores(ws, self.baseline_)
         self.after_, self.residuals_after_ = self._scores(ws, fit)
         self.workspace_ = ws
+        self.hybrid_opinion_ = None
+        if self.second_opinion is not None:
+            from nnid.loop.explain import explain
+
+            say("asking the hybrid what its network learned", len(added))
+            self.hybrid_opinion_ = explain(self.second_opinion, train).as_dict()
 
     def _step(self, ws: Workspace, fit: Fit, pool) -> Step:
         known = set(fit.unknowns)
@@ -377,6 +388,7 @@ class ResidualLoop:
                 "filter_lambda": self.filter_lambda,
                 "zoh_midpoint": self.zoh_midpoint,
             },
+            "hybrid_opinion": self.hybrid_opinion_,
             "warnings": self.warnings_,
             "seconds": self.seconds_,
         }

@@ -15,6 +15,8 @@ fitted (scikit-learn's ``check_is_fitted``), so a model used too early raises on
 - ``residual(log)``: the equation error (a generalized force for physics models, columns
   ``X Y Z K M N``; the one-step output error otherwise), on the log's index.
 - ``params`` (``{name: {"value", "stderr"}}``) and ``describe()`` (a JSON-ready summary).
+- ``baseline()``: the simpler fitted model this one builds on (a hybrid's physics), or None;
+  reports score it beside the model on the same data.
 - ``save(dir)`` and :func:`load_model`: ``model.json`` (kind, schema version, constructor
   settings, learned scalars; strict JSON) and ``tensors.pt`` (loaded with
   ``weights_only=True``): no code runs on load, and a round trip predicts identically.
@@ -51,6 +53,7 @@ MODEL_KINDS: dict[str, str] = {
     "sindy": "nnid.models.sindy:SindyDamping",
     "narx": "nnid.models.narx:NarxModel",
     "state_space": "nnid.models.neural_state_space:NeuralStateSpace",
+    "hybrid": "nnid.models.hybrid:HybridModel",
 }
 #: trainer kind -> "module:Class" (trainers are scikit-learn estimators too)
 TRAINER_KINDS: dict[str, str] = {
@@ -250,6 +253,12 @@ class NnidModel(BaseEstimator, ABC):
             raise TypeError(f"a {self.kind} model has no force equation")
         check_is_fitted(self, msg=NOT_FITTED)
         return self._force_series(check_log(log)).set_axis(log.index)
+
+    def baseline(self) -> NnidModel | None:
+        """The simpler fitted model this one builds on (a hybrid's physics-only fit), scored
+        beside it on the same data; None for most models."""
+        check_is_fitted(self, msg=NOT_FITTED)
+        return None
 
     @property
     def params(self) -> dict[str, dict[str, float | None]]:

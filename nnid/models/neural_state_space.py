@@ -10,8 +10,12 @@ with one tanh hidden layer per state derivative that sees only the variables its
 ``structure`` allows (e.g. a cascade: the upper tank's level does not depend on the lower
 one's). Time runs in samples (the log must be uniformly sampled within each experiment); the
 input is held over each sample (zero-order hold) and the ODE is integrated by the shared RK4
-(:func:`nnid.physics.integrate.rk4`). This is the model class of the published 0.33 V neural
-continuous-time result on Cascaded Tanks quoted in issue 6 (Forgione & Piga 2021).
+(:func:`nnid.physics.integrate.rk4`), not torchdiffeq: its default trainer is
+Levenberg-Marquardt, whose forward-mode Jacobians torchdiffeq's fixed-grid ``perturb`` cannot
+pass through, and on this small vector field the own RK4 is also the faster
+(``benchmarks/bench_hybrid.py speed``; :mod:`nnid.physics.odeint` says why). This is the
+model class of the published 0.33 V neural continuous-time result on Cascaded Tanks quoted in
+issue 6 (Forgione & Piga 2021).
 
 Training is simulation-error (output-error) only: the free run of each training window from its
 initial state, which is estimated with the network (all states of every window are free
@@ -40,7 +44,7 @@ from sklearn.base import clone
 from torch import nn
 from torch.func import functional_call
 
-from nnid.datasets.preprocess import experiments
+from nnid.datasets.preprocess import check_uniform
 from nnid.datasets.splits import split_log
 from nnid.errors import NnidInputError
 from nnid.evaluation.prediction import mode_steps
@@ -52,8 +56,6 @@ from nnid.trainers.history import Progress, staged
 
 #: derivatives are learned per sample and scaled down, so a small network starts slow
 _RATE = 0.1
-#: relative spread of sampling intervals accepted as uniform
-_DT_TOLERANCE = 0.01
 
 
 def _structure_mask(structure: Sequence[Sequence[Any]] | None, n_x: int, n_u: int) -> np.ndarray:
@@ -283,15 +285,7 @@ class NeuralStateSpace(InputOutputModel):
         """The model's columns present and finite, and (with a ``t``) uniform sampling."""
         super()._check(log, name)
         if "t" in log:
-            for exp, idx in experiments(log):
-                dt = np.diff(log.loc[idx, "t"].to_numpy(np.float64))
-                if dt.size and np.ptp(dt) > _DT_TOLERANCE * np.median(dt):
-                    where = f" (experiment {exp})" if exp is not None else ""
-                    raise NnidInputError(
-                        f"column t of the {name}{where} is not uniformly sampled: the state-space "
-                        "model counts time in samples; resample the log first",
-                        field="t",
-                    )
+            check_uniform(log, "the state-space model", name)
 
     def _windows(self, log: pd.DataFrame, length: int | None) -> _Windows:
         """Windows of ``length`` samples (None: the shortest experiment) starting at each

@@ -12,6 +12,7 @@ where ν_c = [J₁(η)ᵀ v_c; 0] so that ν̇_c = [ν_c,lin × ω; 0], and b is
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 import torch
@@ -51,6 +52,22 @@ class FeatureForm:
     current: np.ndarray
     u_c: float
     lag: float
+
+
+class TorchForm(NamedTuple):
+    """:class:`FeatureForm` as tensors (they may require grad); evaluated by
+    :mod:`nnid.physics.form`."""
+
+    m_inv: Tensor
+    q_rb: Tensor
+    q_a: Tensor
+    g_mat: Tensor
+    theta: Tensor
+    codes: Tensor
+    added_mass: Tensor
+    bias: Tensor
+    current: Tensor
+    u_c: float
 
 
 class FossenModel:
@@ -187,44 +204,66 @@ class FossenModel:
         m = 0.5 * (m + m.T)
         return 0.5 * ((nu @ m) * nu).sum(-1)
 
+    def form(self) -> TorchForm:
+        """The right-hand side in feature form as tensors that keep their autograd graph
+        (joint training of physics parameters differentiates through it); see
+        :class:`FeatureForm`. Polarisation: the 21 monomial coefficients of a quadratic h(ν)
+        are h(e_i) for i = j and h(e_i + e_j) − h(e_i) − h(e_j) otherwise."""
+        eye = torch.eye(6, dtype=torch.float64)
+        probes = torch.stack([eye[i] if i == j else eye[i] + eye[j] for i, j in PAIRS])
+        diag_i = torch.as_tensor([i for i, j in PAIRS if i != j])
+        diag_j = torch.as_tensor([j for i, j in PAIRS if i != j])
+        mixed = torch.as_tensor([k for k, (i, j) in enumerate(PAIRS) if i != j])
+
+        def polarise(h) -> Tensor:
+            out = h(probes)  # [21, 6]
+            units = h(eye)  # [6, 6]
+            fix = torch.zeros_like(out).index_add(0, mixed, units[diag_i] + units[diag_j])
+            return (out - fix).T
+
+        q_rb = polarise(lambda n: rigid_body_coriolis_force(self.mass, self.r_g, self.inertia, n))
+        q_a = polarise(lambda n: added_mass_coriolis_force(self.added_mass, n))
+        gen = torch.Generator().manual_seed(0)
+        angles = (torch.rand(16, 2, generator=gen, dtype=torch.float64) - 0.5) * 3.0
+        eta = torch.zeros(16, 6, dtype=torch.float64)
+        eta[:, 3:5] = angles
+        phi, th = angles[:, 0], angles[:, 1]
+        s = torch.stack(
+            [torch.sin(th), torch.cos(th) * torch.sin(phi), torch.cos(th) * torch.cos(phi)], -1
+        )
+        g_mat = torch.linalg.lstsq(s, self.restoring_force(eta)).solution.T
+        theta = self.damping.coefficients
+        codes = torch.as_tensor(self.damping.codes, dtype=torch.long).reshape(-1, 3)
+        if not self.damping.terms:
+            theta = torch.zeros(6, 1, dtype=torch.float64)
+            codes = torch.full((1, 3), ONE, dtype=torch.long)
+        return TorchForm(
+            m_inv=torch.linalg.inv(self.mass_matrix()),
+            q_rb=q_rb,
+            q_a=q_a,
+            g_mat=g_mat,
+            theta=theta,
+            codes=codes,
+            added_mass=self.added_mass,
+            bias=self.external_bias,
+            current=self.current,
+            u_c=self.damping.u_c,
+        )
+
     def feature_form(self) -> FeatureForm:
         """The right-hand side as arrays for compiled kernels (see :class:`FeatureForm`)."""
         with torch.no_grad():
-            eye = torch.eye(6, dtype=torch.float64)
-            probes = [eye[i] if i == j else eye[i] + eye[j] for i, j in PAIRS]
-
-            def polarise(h) -> np.ndarray:
-                out = torch.stack([h(p) for p in probes], -1)
-                diag = {i: h(eye[i]) for i in range(6)}
-                for k, (i, j) in enumerate(PAIRS):
-                    if i != j:
-                        out[:, k] -= diag[i] + diag[j]
-                return out.numpy()
-
-            q_rb = polarise(
-                lambda n: rigid_body_coriolis_force(self.mass, self.r_g, self.inertia, n)
-            )
-            q_a = polarise(lambda n: added_mass_coriolis_force(self.added_mass, n))
-            gen = torch.Generator().manual_seed(0)
-            angles = (torch.rand(16, 2, generator=gen, dtype=torch.float64) - 0.5) * 3.0
-            eta = torch.zeros(16, 6, dtype=torch.float64)
-            eta[:, 3:5] = angles
-            phi, th = angles[:, 0], angles[:, 1]
-            s = torch.stack(
-                [torch.sin(th), torch.cos(th) * torch.sin(phi), torch.cos(th) * torch.cos(phi)], -1
-            )
-            g_mat = torch.linalg.lstsq(s, self.restoring_force(eta)).solution.T.numpy()
-            theta, codes = self.damping.numpy()
+            form = self.form()
             return FeatureForm(
-                m_inv=torch.linalg.inv(self.mass_matrix()).numpy(),
-                q_rb=np.ascontiguousarray(q_rb),
-                q_a=np.ascontiguousarray(q_a),
-                g_mat=np.ascontiguousarray(g_mat),
-                theta=np.ascontiguousarray(theta) if theta.size else np.zeros((6, 1)),
-                codes=codes if len(codes) else np.full((1, 3), ONE, dtype=np.int64),
-                added_mass=self.added_mass.numpy().copy(),
-                bias=self.external_bias.numpy().copy(),
-                current=self.current.numpy().copy(),
-                u_c=self.damping.u_c,
+                m_inv=form.m_inv.numpy().copy(),
+                q_rb=np.ascontiguousarray(form.q_rb.numpy()),
+                q_a=np.ascontiguousarray(form.q_a.numpy()),
+                g_mat=np.ascontiguousarray(form.g_mat.numpy()),
+                theta=np.ascontiguousarray(form.theta.numpy().astype(np.float64)),
+                codes=form.codes.numpy().astype(np.int64),
+                added_mass=form.added_mass.numpy().copy(),
+                bias=form.bias.numpy().copy(),
+                current=form.current.numpy().copy(),
+                u_c=form.u_c,
                 lag=self.actuator_lag,
             )

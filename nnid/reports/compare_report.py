@@ -20,7 +20,9 @@ import pandas as pd
 from nnid.datasets.preprocess import experiments
 from nnid.physics.dofs import FORCES
 from nnid.reports.figures import (
+    FORCE_UNITS,
     IMAGES_CHECK,
+    UNITS,
     definitions,
     figure_uri,
     html_table,
@@ -29,8 +31,6 @@ from nnid.reports.figures import (
     page_head,
 )
 
-UNITS = {"u": "m/s", "v": "m/s", "w": "m/s", "p": "rad/s", "q": "rad/s", "r": "rad/s"}
-FORCE_UNITS = {"X": "N", "Y": "N", "Z": "N", "K": "N m", "M": "N m", "N": "N m"}
 MODES = (
     ("free_run_nrmse", "Free-run velocity NRMSE"),
     ("k_step_nrmse", "{h} s-ahead velocity NRMSE"),

@@ -14,6 +14,9 @@ import io
 
 from matplotlib.figure import Figure
 
+UNITS = {"u": "m/s", "v": "m/s", "w": "m/s", "p": "rad/s", "q": "rad/s", "r": "rad/s"}
+FORCE_UNITS = {"X": "N", "Y": "N", "Z": "N", "K": "N m", "M": "N m", "N": "N m"}
+
 
 def figure_uri(fig: Figure) -> str:
     """PNG data URI of a figure."""

@@ -178,6 +178,9 @@ def markdown(result: dict) -> str:
             lines += [f"pysindy STLSQ second opinion: {', '.join(step['sindy'])}.", ""]
         else:
             lines += ["pysindy STLSQ second opinion: no term kept.", ""]
+    opinion = hybrid_opinion(result)
+    if opinion:
+        lines += ["## Second opinion: what a trained hybrid's network learned", "", opinion, ""]
     lines += [
         "Significance: F-test of the refit against the model without the effect, degrees of "
         "freedom shrunk by the residual's autocorrelation time "
@@ -263,6 +266,7 @@ def html_page(result: dict, figures: dict[str, str]) -> str:
 {html_table(*error_rows(result))}
 <h2>Candidates</h2>
 {"".join(steps)}
+{_opinion_html(result)}
 <p>Significance is the p-value of an F-test of the refit against the model without the effect,
 its degrees of freedom shrunk by the residual's autocorrelation time
 ({_f(result["settings"]["autocorrelation_time"])} samples) and Bonferroni-corrected
@@ -274,6 +278,43 @@ held-out {_gate_text(result)} error by at least
 </body></html>
 """
     )
+
+
+def hybrid_opinion(result: dict) -> str:
+    """One paragraph on the hybrid's learned force, named in the vocabulary, and whether it
+    agrees with what the loop added ("" without a hybrid)."""
+    opinion = result.get("hybrid_opinion")
+    if not opinion:
+        return ""
+    terms = opinion["terms"][:3]
+    if not terms:
+        return (
+            "The hybrid's network force is not explained by any single effect of the "
+            "vocabulary (no term kept by the sparse regression)."
+        )
+    named = "; ".join(
+        f"{t['effect']} ({t['meaning']}, {100 * t['share']:.0f} % of its force)" for t in terms
+    )
+    added = set(result.get("added", []))
+    agree = [t["effect"] for t in terms if t["effect"] in added]
+    verdict = (
+        f"It agrees with the loop on {', '.join(agree)}."
+        if agree
+        else "None of them is an effect the loop added."
+        if added
+        else "The loop added nothing."
+    )
+    return (
+        f"The hybrid's network force is mostly: {named}; together the terms it keeps explain "
+        f"{100 * opinion['explained']:.0f} % of it. {verdict}"
+    )
+
+
+def _opinion_html(result: dict) -> str:
+    text = hybrid_opinion(result)
+    if not text:
+        return ""
+    return f"<h2>Second opinion: a trained hybrid</h2><p>{html.escape(text)}</p>"
 
 
 def _gate_text(result: dict) -> str:
@@ -308,4 +349,4 @@ def write_loop_report(loop, out_dir) -> list[str]:
     }
     write_text(out_dir / "report.html", html_page(result, figures))
     write_text(out_dir / "report.md", markdown(result))
-    return summary(result)
+    return summary(result) + ([hybrid_opinion(result)] if result.get("hybrid_opinion") else [])

@@ -1,11 +1,33 @@
-"""The short report of ``nnid train``: parameters with uncertainty and held-out errors, for a
-model of any kind (the Markdown twin of ``metrics.json``)."""
+"""The report of ``nnid train``: parameters with uncertainty and held-out errors, for a model
+of any kind, as Markdown (the twin of ``metrics.json``) and as one self-contained HTML page.
+For a hybrid the page also shows the physics-only baseline on the same split, the learned
+correction force against the states and inputs it depends on most, the free runs of both on a
+held-out experiment, and the dominant terms of the correction named in the effect
+vocabulary."""
 
 from __future__ import annotations
 
+import html
 import math
+from typing import Any
 
-from nnid.reports.figures import markdown_table
+import numpy as np
+import pandas as pd
+
+from nnid.datasets.log import TAU, VELOCITY
+from nnid.datasets.preprocess import experiments
+from nnid.physics.dofs import DOFS, FORCES
+from nnid.reports.figures import (
+    FORCE_UNITS,
+    IMAGES_CHECK,
+    UNITS,
+    definitions,
+    figure_uri,
+    html_table,
+    markdown_table,
+    new_figure,
+    page_head,
+)
 
 ERROR_KEYS = (
     ("free_run_nrmse", "free-run NRMSE"),
@@ -27,7 +49,7 @@ def _rel(value, ref) -> str:
     return f"{(value / ref - 1) * 100:.3g} %"
 
 
-def _params_table(metrics: dict) -> list[str]:
+def _params_table(metrics: dict) -> tuple[list[str], list[list[str]]]:
     params = metrics["params"]
     physical = any("percentile_error" in p or "vehicle_file" in p for p in params.values())
     ref = metrics.get("reference", {})
@@ -52,7 +74,7 @@ def _params_table(metrics: dict) -> list[str]:
             r = ref_values.get(name)
             row += [_fmt(r), _rel(p["value"], r)]
         rows.append(row)
-    return markdown_table(head, rows)
+    return head, rows
 
 
 def train_markdown(metrics: dict) -> str:
@@ -66,7 +88,7 @@ def train_markdown(metrics: dict) -> str:
         "",
         "## Parameters",
         "",
-        *_params_table(metrics),
+        *markdown_table(*_params_table(metrics)),
     ]
     used = metrics.get("validation_used_for")
     for part in ("train", "validation", "test"):
@@ -93,6 +115,27 @@ def train_markdown(metrics: dict) -> str:
             if scores.get(key):
                 when = ", ".join(f"{d} at t = {t:.4g} s" for d, t in scores[key].items())
                 lines.append(f"- **{key.replace('_', ' ')}**: {when}")
+    if metrics.get("baseline"):
+        lines += [
+            "",
+            "## Against the physics-only baseline",
+            "",
+            *markdown_table(*_baseline(metrics)),
+        ]
+    if metrics.get("correction"):
+        head, rows, explained = _terms(metrics)
+        lines += [
+            "",
+            "## What the network learned",
+            "",
+            f"Dominant terms of the learned force (together they explain {explained} of it):",
+            "",
+            *markdown_table(head, rows),
+            "",
+            "Network force over the physics' damping force (RMS ratio per DOF):",
+            "",
+            *markdown_table(*_shares(metrics)),
+        ]
     if metrics.get("warnings"):
         lines += ["", "## Warnings", ""] + [f"- {w}" for w in metrics["warnings"]]
     nd = metrics.get("nondimensional")
@@ -104,3 +147,204 @@ def train_markdown(metrics: dict) -> str:
         ]
     lines += ["", f"Fitted and scored in {metrics['seconds']:.1f} s."]
     return "\n".join(lines) + "\n"
+
+
+# -- tables shared by the Markdown and the HTML --------------------------------------------------
+
+
+def _baseline(metrics: dict) -> tuple[list[str], list[list[str]]]:
+    """Free-run, k-step and one-step NRMSE totals of the model and its baseline per held-out
+    split, and the ratio model / baseline of the free run."""
+    head = ["split", "model", "free-run NRMSE", "k-step NRMSE", "one-step NRMSE", "ratio"]
+    base = metrics["baseline"]
+    rows = []
+    for part in ("validation", "test"):
+        if part not in base:
+            continue
+        free = metrics[part].get("free_run_nrmse", {}).get("total")
+        ref = base[part].get("free_run_nrmse", {}).get("total")
+        for name, scores in ((metrics["model"], metrics[part]), (base["model"], base[part])):
+            rows.append(
+                [
+                    part,
+                    name,
+                    *(
+                        _fmt(scores.get(k, {}).get("total"), 3)
+                        if scores.get(k, {}).get("total") is not None
+                        else ("diverged" if k in scores else "-")
+                        for k in ("free_run_nrmse", "k_step_nrmse", "one_step_nrmse")
+                    ),
+                    _fmt(free / ref, 3) if scores is metrics[part] and free and ref else "",
+                ]
+            )
+    return head, rows
+
+
+def _terms(metrics: dict) -> tuple[list[str], list[list[str]], str]:
+    expl = metrics["correction"]["explanation"]
+    head = ["term", "meaning", "value", "share of the learned force"]
+    rows = [
+        [f"`{t['effect']}`", t["meaning"], _fmt(t["value"], 3), f"{100 * t['share']:.1f} %"]
+        for t in expl["terms"]
+    ] or [["-", "no term explains a share of the learned force on its own", "-", "-"]]
+    return head, rows, f"{100 * expl['explained']:.0f} %"
+
+
+def _shares(metrics: dict) -> tuple[list[str], list[list[str]]]:
+    shares = metrics["correction"]["share_of_damping_force"]
+    dofs = [d for d in DOFS if any(d in v for v in shares.values())]
+    head = ["split", *dofs, "max"]
+    rows = [
+        [part, *(_fmt(v.get(d), 2) for d in dofs), _fmt(v.get("max"), 2)]
+        for part, v in shares.items()
+    ]
+    return head, rows
+
+
+# -- HTML ----------------------------------------------------------------------------------------
+
+
+def train_html(metrics: dict, figures: dict[str, Any] | None = None) -> str:
+    """The train report as one self-contained HTML page (figures embedded)."""
+    figures = figures or {}
+    title = f"{metrics['model']} model" + (
+        f" of '{metrics['vehicle']}'" if metrics.get("vehicle") else ""
+    )
+    out = [page_head(title)]
+    out.append(
+        f"<p>Trainer: {html.escape(str(metrics.get('trainer') or '-'))}; "
+        f"{metrics.get('n_params', '?')} parameters; fitted and scored in "
+        f"{metrics['seconds']:.1f} s.</p>"
+    )
+    used = metrics.get("validation_used_for")
+    if used:
+        out.append(
+            f"<p>The validation split was used for {html.escape(used)} while fitting: its "
+            "scores are not independent of the fit"
+            + (", the test split's are." if metrics.get("test") else ".")
+            + "</p>"
+        )
+    out.append("<h2>Velocity NRMSE per split</h2>")
+    out.append(html_table(*_errors(metrics)))
+    out.append(
+        definitions(
+            {
+                "NRMSE": "RMS error over the standard deviation of the measured signal, "
+                "warm-up excluded (0 is perfect, 1 is as good as predicting the mean)",
+                "free run": "simulated from the first measured state of each experiment "
+                "with the logged inputs only",
+                "one step": "one sample ahead from every measured state",
+            }
+        )
+    )
+    if metrics.get("baseline"):
+        out.append("<h2>Against the physics-only baseline (same split)</h2>")
+        out.append(html_table(*_baseline(metrics)))
+        out.append(
+            definitions({"ratio": "the model's free-run NRMSE over the baseline's (< 1: better)"})
+        )
+    if "free_run" in figures:
+        out.append("<h2>Free run on a held-out experiment</h2>")
+        out.append(_img(_free_run_figure(figures)))
+    if metrics.get("correction"):
+        head, rows, explained = _terms(metrics)
+        out.append("<h2>What the network learned</h2>")
+        out.append(
+            "<p>The learned force at the measured states and inputs, regressed on the effect "
+            "vocabulary's columns and McCarter's basis library (sparse regression); the terms "
+            f"it keeps explain {explained} of it together.</p>"
+        )
+        out.append(html_table(head, rows))
+        out.append(
+            definitions(
+                {
+                    "value": "the term's size in the vocabulary's units (a damping "
+                    "coefficient, a current in m/s, an installation ratio, ...)",
+                    "share": "the term's part of the learned force's weighted sum of squares",
+                }
+            )
+        )
+        out.append("<h3>Network force over the physics' damping force (RMS, per DOF)</h3>")
+        out.append(html_table(*_shares(metrics)))
+        if "correction" in figures:
+            out.append("<h3>Learned force against the states and inputs it follows most</h3>")
+            out.append(_img(_correction_figure(*figures["correction"])))
+    head, rows = _params_table(metrics)
+    out.append("<h2>Parameters</h2>")
+    out.append(html_table(head, rows))
+    if metrics.get("warnings"):
+        out.append("<h2>Warnings</h2><ul>")
+        out += [f"<li>{html.escape(w)}</li>" for w in metrics["warnings"]]
+        out.append("</ul>")
+    out.append(IMAGES_CHECK + "</body></html>")
+    return "\n".join(out)
+
+
+def _img(uri: str) -> str:
+    return f'<p><img src="{uri}" alt="figure"></p>'
+
+
+def _errors(metrics: dict) -> tuple[list[str], list[list[str]]]:
+    head = ["split", "mode", *DOFS, "total"]
+    rows = []
+    for part in ("train", "validation", "test"):
+        scores = metrics.get(part) or {}
+        for key, label in ERROR_KEYS[:3]:
+            if key not in scores:
+                continue
+            vals = scores[key]
+            cells = [
+                _fmt(vals[d], 3) if vals.get(d) is not None else ("diverged" if d in vals else "-")
+                for d in (*DOFS, "total")
+            ]
+            rows.append([part, label, *cells])
+    return head, rows
+
+
+def _free_run_figure(figures: dict) -> str:
+    held, _ = figures["correction"]
+    hybrid, physics = figures["free_run"], figures["baseline_free_run"]
+    name, idx = experiments(held)[0]
+    cols = [c for c in VELOCITY if c in held and hybrid[c].notna().any()]
+    fig, axes = new_figure(len(cols), 1, width=9.0, height=1.8)
+    t = held.loc[idx, "t"].to_numpy()
+    for ax, c in zip(axes[:, 0], cols, strict=True):
+        ax.plot(t, held.loc[idx, c], color="0.6", lw=1.2, label="measured")
+        ax.plot(t, physics.loc[idx, c], color="tab:orange", lw=0.9, label="physics only")
+        ax.plot(t, hybrid.loc[idx, c], color="tab:blue", lw=0.9, label="hybrid")
+        ax.set_ylabel(f"{c} [{UNITS[c]}]")
+    axes[0, 0].set_title(f"experiment {name}" if name is not None else "held-out data")
+    axes[0, 0].legend(loc="upper right", fontsize=8, ncols=3)
+    axes[-1, 0].set_xlabel("t [s]")
+    return figure_uri(fig)
+
+
+#: what the correction may depend on, with the unit of each
+_FEATURES = {
+    **{c: UNITS[c] for c in VELOCITY},
+    **{c: FORCE_UNITS[c[4:]] for c in TAU},
+    "phi": "rad",
+    "theta": "rad",
+    "psi": "rad",
+}
+
+
+def _correction_figure(log: pd.DataFrame, force: pd.DataFrame, per_dof: int = 4) -> str:
+    """One row per corrected DOF: the learned force against the ``per_dof`` features it
+    correlates with most (scatter of up to 3000 samples)."""
+    cols = [f for f in FORCES if force[f].abs().max() > 0]
+    feats = [c for c in _FEATURES if c in log and log[c].std() > 0]
+    pick = np.unique(np.linspace(0, len(log) - 1, min(len(log), 3000)).round().astype(int))
+    fig, axes = new_figure(len(cols), per_dof, width=11.0, height=2.2)
+    for row, f in zip(axes, cols, strict=True):
+        y = force[f].to_numpy()
+        corr = {c: abs(np.corrcoef(log[c].to_numpy(), y)[0, 1]) for c in feats}
+        best = sorted(feats, key=lambda c: -np.nan_to_num(corr[c]))[:per_dof]
+        for ax, c in zip(row, best, strict=False):
+            ax.scatter(log[c].to_numpy()[pick], y[pick], s=2, alpha=0.4, color="tab:blue")
+            ax.set_xlabel(f"{c} [{_FEATURES[c]}]")
+            ax.set_title(f"|r| = {corr[c]:.2f}", fontsize=8)
+        row[0].set_ylabel(f"learned {f} [{FORCE_UNITS[f]}]")
+        for ax in row[len(best) :]:
+            ax.set_visible(False)
+    return figure_uri(fig)

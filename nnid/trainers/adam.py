@@ -31,7 +31,10 @@ class Adam(BaseEstimator):
     gradient-norm clipping at ``clip`` and early stopping after ``max_fail`` epochs without
     validation improvement (MATLAB's max_fail); the best validation state is restored (the start
     included). ``max_seconds`` (MATLAB's ``time``; default no limit) stops after the first epoch
-    that ends past that wall time."""
+    that ends past that wall time. ``average`` (a decay, e.g. 0.95; default off) keeps an
+    exponential moving average of the weights over the optimiser steps (Polyak averaging): it is
+    what validation scores and what is kept, a smoother path than the last step's weights when
+    minibatch gradients are noisy."""
 
     kind = "adam"
 
@@ -46,6 +49,7 @@ class Adam(BaseEstimator):
         max_fail: int = 20,
         weight_decay: float = 0.0,
         max_seconds: float | None = None,
+        average: float | None = None,
     ) -> None:
         self.lr = lr
         self.max_epochs = max_epochs
@@ -56,6 +60,7 @@ class Adam(BaseEstimator):
         self.max_fail = max_fail
         self.weight_decay = weight_decay
         self.max_seconds = max_seconds
+        self.average = average
 
     def _scheduler(self, opt: torch.optim.Optimizer):
         sched = torch.optim.lr_scheduler
@@ -95,18 +100,34 @@ class Adam(BaseEstimator):
         scheduler = self._scheduler(opt)
         hist = History()
 
-        def mean_square(batches: Iterable[Any]) -> float:
+        avg = None
+        if self.average is not None:
+            if not 0.0 < self.average < 1.0:
+                raise ValueError(f"average is a decay in (0, 1), not {self.average}")
+            avg = {k: p.detach().clone() for k, p in params.items()}
+
+        def kept() -> dict[str, torch.Tensor]:
+            """The weights validation judges and the fit keeps: the average, or the last."""
+            return params if avg is None else avg
+
+        def state() -> dict[str, torch.Tensor]:
+            out = copy.deepcopy(module.state_dict())
+            if avg is not None:
+                out.update({k: v.clone() for k, v in avg.items()})
+            return out
+
+        def mean_square(batches: Iterable[Any], weights: dict[str, torch.Tensor]) -> float:
             with torch.no_grad():
-                rs = [residual(params, b) for b in batches]
+                rs = [residual(weights, b) for b in batches]
             return float(sum((r**2).sum() for r in rs) / max(sum(r.numel() for r in rs), 1))
 
         first = train_batches(0) if callable(train_batches) else train_batches
-        score = mean_square(val_batches) if val_batches else None
-        hist.record(mean_square(first), score, time.perf_counter() - start)
+        score = mean_square(val_batches, params) if val_batches else None
+        hist.record(mean_square(first, params), score, time.perf_counter() - start)
         best = score if score is not None else hist.train[0]
         if isinstance(scheduler, torch.optim.lr_scheduler.ReduceLROnPlateau):
             scheduler.step(best)  # the start counts, as it does for early stopping
-        best_state = copy.deepcopy(module.state_dict())
+        best_state = state()
         since_best = 0
         hist.stop_reason = "max_epochs"
         for epoch in range(self.max_epochs):
@@ -121,10 +142,14 @@ class Adam(BaseEstimator):
                 if self.clip is not None:
                     torch.nn.utils.clip_grad_norm_(params.values(), self.clip)
                 opt.step()
+                if avg is not None:
+                    with torch.no_grad():
+                        for k, p in params.items():
+                            avg[k].lerp_(p.detach(), 1.0 - self.average)
                 total += float(loss.detach()) * r.numel()
                 count += r.numel()
             train = total / max(count, 1)
-            score = mean_square(val_batches) if val_batches else None
+            score = mean_square(val_batches, kept()) if val_batches else None
             hist.record(train, score, time.perf_counter() - start, lr=rate)
             value = score if score is not None else train
             report(
@@ -138,7 +163,7 @@ class Adam(BaseEstimator):
                 break
             if value < best:
                 best, since_best, hist.best_epoch = value, 0, epoch + 1
-                best_state = copy.deepcopy(module.state_dict())
+                best_state = state()
             else:
                 since_best += 1
                 if val_batches and since_best >= self.max_fail:
