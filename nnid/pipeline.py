@@ -398,9 +398,11 @@ def _correction(model, split: Split, parts: list[str], figures: dict) -> dict:
     split, and its dominant terms named in the effect vocabulary (on the training split)."""
     from nnid.loop.explain import explain
 
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
         explanation = explain(model, split.train)
+    # kept in metrics.json beside the terms they qualify, not dropped and not printed twice
+    explanation.notes.extend(dict.fromkeys(str(w.message) for w in caught))
     held = split[parts[-1]]
     figures["correction"] = (held, model.correction(held))
     figures["baseline_free_run"] = model.baseline().predict(held)
