@@ -194,6 +194,8 @@ def train(
         raise exc.with_source(str(config)) from None
     out_dir.mkdir(parents=True, exist_ok=True)
     result.model.save(out_dir)
+    if result.monitor is not None:
+        result.monitor.save(out_dir)
     write_json(out_dir / "metrics.json", result.metrics)
     write_text(out_dir / "report.md", train_markdown(result.metrics))
     write_text(out_dir / "report.html", train_html(result.metrics, result.figures))
@@ -346,9 +348,61 @@ def _run_loop(log, veh, out_dir: Path, source: str = "", **settings) -> None:
 
 
 @app.command()
-def detect() -> None:
-    """Fault detection from residuals (not implemented yet)."""
-    _not_yet("detect")
+@_input_errors
+def detect(
+    model_dir: Path = typer.Option(
+        ..., "--model", help="Folder of a detection model (nnid train configs/detect_fossen.toml)."
+    ),
+    data: str = typer.Option(..., "--data", help="The log to watch; '-' reads CSV from stdin."),
+    out_dir: Path = typer.Option(..., "--out", help="Output folder: alarms.csv, detect.json, report."),
+    columns: str | None = typer.Option(
+        None, "--columns", help="Reader config for a log not in nnid's format."
+    ),
+    follow: bool = typer.Option(
+        False, "--follow", help="Read a growing CSV (or stdin) and print each alarm as it happens."
+    ),
+    window: float | None = typer.Option(
+        None, "--window", min=0.5, help="Seconds after an alarm used to isolate it."
+    ),
+) -> None:
+    """Fault detection: watch a log with a calibrated residual monitor; each alarm says whether a
+    thruster lost thrust (which one, its remaining efficiency), an external force appeared, or
+    the vehicle changed (the effect, e.g. buoyancy_offset, with its size)."""
+    from nnid.fault.detect import detect as run_detect
+    from nnid.fault.monitor import ResidualMonitor
+    from nnid.reports.detect_report import write_detect_outputs
+
+    _check_out(out_dir)
+    if not model_dir.is_dir():
+        raise NnidInputError("no such folder", source=str(model_dir), field="--model")
+    monitor = ResidualMonitor.load(model_dir)
+    window_s = window or _window_of(model_dir)
+    if follow:
+        from nnid.fault.follow import follow_csv
+
+        result = follow_csv(monitor, data, window_s, lambda line: out.print(line, highlight=False))
+    else:
+        from nnid.datasets.readers import load_log
+
+        if not Path(data).exists():
+            raise NnidInputError("no such file or folder", source=data, field="--data")
+        log, _ = load_log(data, columns)
+        with _bar("detecting") as progress:
+            progress(0, None, "running the monitor")
+            result = run_detect(monitor, log, window_s)
+    lines = write_detect_outputs(monitor, result, out_dir, source=data)
+    for line in lines:
+        out.print(line, highlight=False, soft_wrap=True)
+
+
+def _window_of(model_dir: Path) -> float:
+    """The isolation window a detection model was trained with (metrics.json), else 10 s."""
+    from nnid.serialization import read_json
+
+    path = model_dir / "metrics.json"
+    if path.is_file():
+        return float(read_json(path).get("detect", {}).get("settings", {}).get("window_s", 10.0))
+    return 10.0
 
 
 DEMO_LOG = "demo_minirov_heave.parquet"

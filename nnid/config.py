@@ -584,6 +584,19 @@ class _Command(_Strict):
         return _data_kind(value)
 
 
+class DetectSpec(_Strict):
+    """``[detect]`` of a train config: calibrate a residual monitor
+    (:class:`nnid.fault.monitor.ResidualMonitor`) on the validation part of the healthy log
+    (never on the data the model was fitted on) and measure its false alarms on the test part;
+    ``nnid detect --model DIR`` then works from the output folder alone."""
+
+    false_alarm_per_hour: PositiveFloat = 0.01
+    time_constant_s: PositiveFloat = 0.25
+    allowance: PositiveFloat = 1.0
+    rearm_s: PositiveFloat = 5.0
+    window_s: PositiveFloat = 10.0
+
+
 class TrainConfig(_Command):
     """``nnid train``: one model on one split, scored on the held-out parts."""
 
@@ -597,6 +610,7 @@ class TrainConfig(_Command):
     reference: dict[str, float] = Field(default_factory=dict)
     reference_label: str = "reference"
     nondimensional_speed: PositiveFloat | None = None
+    detect: DetectSpec | None = None
 
     @field_validator("model", mode="before")
     @classmethod

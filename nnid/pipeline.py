@@ -330,6 +330,7 @@ class TrainResult:
     report: CleaningReport
     split: Split
     figures: dict = field(default_factory=dict)  # data of the report's figures
+    monitor: Any = None  # the calibrated fault monitor of a config with [detect]
 
 
 def run_train(
@@ -389,8 +390,33 @@ def run_train(
         metrics["nondimensional"] = _nondimensional(
             model.params, inputs.vehicle, cfg.nondimensional_speed
         )
+    monitor = None
+    if cfg.detect is not None:
+        monitor, metrics["detect"] = _calibrate_monitor(model, split, cfg.detect)
     metrics["seconds"] = time.perf_counter() - start
-    return TrainResult(model, metrics, inputs.report, split, figures)
+    return TrainResult(model, metrics, inputs.report, split, figures, monitor)
+
+
+def _calibrate_monitor(model, split: Split, spec) -> tuple[Any, dict]:
+    """A residual monitor calibrated on the validation part, its false alarms measured on the
+    test part (when the split has one)."""
+    from nnid.fault.monitor import ResidualMonitor
+
+    if len(split.validation) == 0:
+        raise NnidInputError(
+            "[detect] calibrates on the validation part: give the split a validation fraction",
+            field="split.fractions",
+        )
+    settings = spec.model_dump(exclude={"window_s"})
+    monitor = ResidualMonitor(model, **settings).fit(split.validation)
+    out: dict[str, Any] = {
+        "settings": spec.model_dump(),
+        "thresholds": monitor.thresholds_,
+        "calibration": monitor.calibration_,
+    }
+    if len(split.test):
+        out["test_false_alarms"] = monitor.false_alarms(split.test)
+    return monitor, out
 
 
 def _correction(model, split: Split, parts: list[str], figures: dict) -> dict:

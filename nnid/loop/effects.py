@@ -54,6 +54,7 @@ _MEANING = {
     "actuator_lag": "thrusters answer commands with a first-order lag",
     "thruster_deadband": "small commands give no thrust (deadband)",
     "added_mass": "the added mass in {0} is wrong",
+    "thruster_loss": "thruster {0} gives less thrust than nominal",
 }
 _DOF_WORD = {"u": "surge", "v": "sway", "w": "heave", "p": "roll", "q": "pitch", "r": "yaw"}
 

@@ -16,7 +16,7 @@ from numba import njit, prange
 from nnid.physics.fossen import FeatureForm
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")  # inlined: a call costs as much as the evaluation
 def _rhs(x, tau, m_inv, q_rb, q_a, g_mat, theta, codes, ma, bias, cur, u_c, lag, out, scratch):
     phi, th, psi = x[3], x[4], x[5]
     cf, sf = math.cos(phi), math.sin(phi)

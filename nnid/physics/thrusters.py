@@ -100,17 +100,19 @@ class Actuation:
         """Generalized force the vehicle feels: deadband and installation coefficients applied."""
         return self._force(np.asarray(inputs, dtype=np.float64), ideal=False)
 
+    def thrusts(self, inputs: np.ndarray) -> np.ndarray:
+        """Thrust of each thruster ``[N, n]`` [N] for commands ``[N, n]``: each command clipped
+        to its thruster's range, then through its curve (no deadband, no installation)."""
+        inputs = np.asarray(inputs, dtype=np.float64)
+        cols = []
+        for k, (thruster, curve) in enumerate(zip(self.thrusters, self.curves, strict=True)):
+            lo = -np.inf if thruster.cmd_min is None else thruster.cmd_min
+            hi = np.inf if thruster.cmd_max is None else thruster.cmd_max
+            cols.append(curve(np.clip(inputs[:, k], lo, hi)))
+        return np.stack(cols, -1) if cols else np.zeros((inputs.shape[0], 0))
+
     def _force(self, inputs: np.ndarray, ideal: bool) -> np.ndarray:
         if not ideal:
             inputs = apply_deadband(inputs, self.deadband)
-        if self.thrusters:
-            cols = []
-            for k, (thruster, curve) in enumerate(zip(self.thrusters, self.curves, strict=True)):
-                lo = -np.inf if thruster.cmd_min is None else thruster.cmd_min
-                hi = np.inf if thruster.cmd_max is None else thruster.cmd_max
-                cmd = np.clip(inputs[:, k], lo, hi)
-                cols.append(curve(cmd))
-            tau = np.stack(cols, -1) @ self.matrix.T
-        else:
-            tau = inputs
+        tau = self.thrusts(inputs) @ self.matrix.T if self.thrusters else inputs
         return tau if ideal else apply_installation(tau, self.eta_pos, self.eta_neg)

@@ -1,0 +1,189 @@
+"""Fault scenarios in the simulator: a thruster-driven vehicle flown as real ROVs fly, under an
+attitude-stabilising controller, with a fault from a given time.
+
+The controller tracks piecewise-constant random set-points of surge, sway, heave and yaw speed
+(a velocity P loop) and holds roll and pitch level (a PD loop). Its demanded wrench goes through
+the pseudo-inverse of the allocation matrix (:func:`nnid.physics.thrusters.allocation_matrix`),
+each thrust is clipped to what its thruster can give and turned back into a command through the
+inverse of its curve; the log records those commands as ``cmd_<thruster>``, as a real ROV's log
+records its ESC commands, never the thrust the vehicle felt. The plant is the vehicle file (with
+the scenario's effects) and is integrated by the compiled RK4 of the physics package.
+
+Faults (:class:`Fault`), active from ``t``:
+
+- ``thruster``: thruster ``thruster`` keeps ``efficiency`` (0 to 1) of its thrust (a damaged
+  propeller, 0 for a stopped thruster);
+- ``external``: a constant body-frame force and moment ``force`` (N, N m; a tether snag, a
+  collision);
+- ``effect``: an effect of the vocabulary with its value (:func:`nnid.physics.effects.apply_effect`;
+  ``buoyancy_offset`` for a payload whose weight exceeds its buoyancy).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+import pandas as pd
+import torch
+
+from nnid.datasets.measurement import Measurement, wrap_angle
+from nnid.errors import NnidInputError
+from nnid.physics import compiled
+from nnid.physics.effects import apply_effect
+from nnid.physics.fossen import FossenModel
+from nnid.physics.thrusters import Actuation, apply_installation
+
+
+@dataclass(frozen=True)
+class Fault:
+    """One fault from time ``t`` (s); see the module docstring for the kinds."""
+
+    kind: Literal["thruster", "external", "effect"]
+    t: float
+    thruster: str | None = None
+    efficiency: float = 1.0
+    force: tuple[float, ...] = (0.0,) * 6
+    effect: str | None = None
+    value: float = 0.0
+
+
+@dataclass(frozen=True)
+class Controller:
+    """The pilot: random speed set-points held ``hold`` seconds (uniform), at most ``speed``
+    (u, v, w in m/s, r in rad/s), tracked with gains ``k_speed`` (N s/m, N m s); roll and pitch
+    held level with ``k_att`` (N m/rad) and ``k_rate`` (N m s/rad)."""
+
+    speed: tuple[float, float, float, float] = (0.4, 0.25, 0.2, 0.3)
+    hold: tuple[float, float] = (2.0, 6.0)
+    k_speed: tuple[float, float, float, float] = (40.0, 40.0, 40.0, 3.0)
+    k_att: tuple[float, float] = (8.0, 8.0)
+    k_rate: tuple[float, float] = (2.0, 2.0)
+
+    def schedule(self, duration: float, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+        """Set-point switching times and values ``[K, 4]``."""
+        times, values, t = [], [], 0.0
+        while t < duration:
+            times.append(t)
+            values.append(rng.uniform(-1, 1, 4) * np.asarray(self.speed))
+            t += rng.uniform(*self.hold)
+        return np.asarray(times), np.asarray(values)
+
+    def wrench(self, state: np.ndarray, ref: np.ndarray) -> np.ndarray:
+        """Demanded generalized force ``[6]`` at ``state`` (η then ν) for set-point ``ref``."""
+        nu = state[6:12]
+        tau = np.zeros(6)
+        k = np.asarray(self.k_speed)
+        tau[[0, 1, 2, 5]] = k * (ref - nu[[0, 1, 2, 5]])
+        att = wrap_angle(state[3:5])
+        tau[3:5] = -np.asarray(self.k_att) * att - np.asarray(self.k_rate) * nu[3:5]
+        return tau
+
+
+class _Allocator:
+    """Wrench -> commands: pseudo-inverse allocation, thrust saturation, inverse curves."""
+
+    def __init__(self, actuation: Actuation) -> None:
+        self.pinv = np.linalg.pinv(actuation.matrix)
+        self.grids = []
+        for thruster in actuation.thrusters:
+            lo = -1.0 if thruster.cmd_min is None else thruster.cmd_min
+            hi = 1.0 if thruster.cmd_max is None else thruster.cmd_max
+            cmd = np.linspace(lo, hi, 2001)
+            thrust = actuation.curves[len(self.grids)](cmd)
+            if np.any(np.diff(thrust) < 0):
+                raise NnidInputError(
+                    f"thruster '{thruster.name}': the fault simulator needs a thrust curve that "
+                    "grows with the command",
+                    field="thrusters",
+                )
+            self.grids.append((thrust, cmd))
+
+    def commands(self, wrench: np.ndarray) -> np.ndarray:
+        force = self.pinv @ wrench
+        out = np.empty(force.size)
+        for i, (thrust, cmd) in enumerate(self.grids):
+            out[i] = np.interp(np.clip(force[i], thrust[0], thrust[-1]), thrust, cmd)
+        return out
+
+
+def simulate_faults(
+    vehicle,
+    duration: float,
+    dt: float = 0.05,
+    *,
+    faults: Sequence[Fault] = (),
+    controller: Controller | None = None,
+    measurement: Measurement | None = None,
+    seed: int = 0,
+    experiment: str | None = None,
+) -> pd.DataFrame:
+    """One experiment of ``duration`` seconds flown under ``controller`` with ``faults``; the
+    log (log contract) has ``cmd_<thruster>`` inputs and the ``measurement``'s columns (default:
+    DVL, gyro, attitude and depth with noise)."""
+    if not vehicle.thrusters:
+        raise NnidInputError("fault scenarios need a vehicle with [[thrusters]]", field="thrusters")
+    controller = controller or Controller()
+    measurement = measurement or Measurement(kind="dvl_imu")
+    rng = np.random.default_rng(seed)
+    names = [t.name for t in vehicle.thrusters]
+    n = int(round(duration / dt)) + 1
+    switch, refs = controller.schedule(duration, rng)
+    efficiency = np.ones((n, len(names)))
+    external = np.zeros((n, 6))
+    phase = np.zeros(n, dtype=int)  # which plant: 0 healthy, 1 with the effects
+    effect_vehicle = vehicle
+    t = np.arange(n) * dt
+    for fault in faults:
+        on = t >= fault.t
+        if fault.kind == "thruster":
+            if fault.thruster not in names:
+                raise NnidInputError(
+                    f"no thruster '{fault.thruster}'; the vehicle has {', '.join(names)}",
+                    field="faults.thruster",
+                )
+            efficiency[on, names.index(fault.thruster)] = fault.efficiency
+        elif fault.kind == "external":
+            external[on] += np.asarray(fault.force, dtype=np.float64)
+        else:
+            effect_vehicle = apply_effect(effect_vehicle, fault.effect, fault.value)
+            phase[on] = 1
+    plants = [vehicle, effect_vehicle]
+    models = [FossenModel.from_vehicle(v) for v in plants]
+    forms = [m.feature_form() for m in models]
+    actuation = [Actuation(v) for v in plants]
+    allocator = _Allocator(actuation[0])
+    state = np.zeros(models[0].state_size)
+    states = np.empty((n, state.size))
+    commands = np.empty((n, len(names)))
+    applied = np.empty((n, 6))
+    for k in range(n):
+        states[k] = state
+        ref = refs[np.searchsorted(switch, t[k], side="right") - 1]
+        commands[k] = allocator.commands(controller.wrench(state, ref))
+        act = actuation[phase[k]]
+        thrust = act.thrusts(commands[k : k + 1]) * efficiency[k]
+        tau = apply_installation(thrust @ act.matrix.T, act.eta_pos, act.eta_neg)[0]
+        applied[k] = tau + external[k]
+        if k + 1 < n:
+            state = compiled.integrate_rk4(forms[phase[k]], state, applied[k : k + 1], dt)[-1]
+            if not np.isfinite(state).all():
+                raise NnidInputError(
+                    f"the fault simulation diverged at t = {t[k]:.2f} s", field="faults"
+                )
+    xdot = np.empty((n, 6))
+    with torch.no_grad():
+        for p, model in enumerate(models):
+            rows = phase == p
+            if rows.any():
+                xdot[rows] = model.rhs(
+                    torch.as_tensor(states[rows]), torch.as_tensor(applied[rows])
+                ).numpy()[:, 6:12]
+    columns: dict[str, np.ndarray] = {"t": t}
+    if experiment is not None:
+        columns["experiment"] = np.full(n, experiment, dtype=object)
+    columns.update(measurement.columns(states, xdot, rng))
+    columns.update({f"cmd_{c}": commands[:, i] for i, c in enumerate(names)})
+    return pd.DataFrame(columns)

@@ -1,0 +1,155 @@
+"""``nnid detect --follow``: a growing CSV (or stdin) watched one row at a time.
+
+Rows go through :class:`nnid.fault.monitor.Stream` as they arrive; an alarm is announced at once
+and isolated when the window after it has arrived (or at the end of the input). The log needs the
+body velocities and attitude as columns (a live monitor cannot smooth over the future) and the
+inputs of the model's vehicle.
+"""
+
+from __future__ import annotations
+
+import csv
+import sys
+import time
+from collections.abc import Callable
+
+import numpy as np
+
+from nnid.datasets.log import POSE, VELOCITY
+from nnid.errors import NnidInputError
+from nnid.fault.detect import DetectResult, alarm_record
+from nnid.fault.monitor import ResidualMonitor, Trace
+from nnid.physics.dofs import FORCES
+
+
+def _rows(source: str, idle_s: float):
+    """Rows of a CSV as lists of strings; a file is followed until it stops growing for
+    ``idle_s`` seconds, stdin until it closes."""
+    handle = sys.stdin if source == "-" else open(source, newline="")  # noqa: SIM115
+    try:
+        buffer, quiet = "", 0.0
+        while True:
+            line = handle.readline()
+            if not line:
+                if source == "-" or quiet >= idle_s:
+                    break
+                time.sleep(0.1)
+                quiet += 0.1
+                continue
+            quiet = 0.0
+            buffer += line
+            if not buffer.endswith("\n"):
+                continue  # a row still being written
+            yield next(csv.reader([buffer]))
+            buffer = ""
+        if buffer.strip():
+            yield next(csv.reader([buffer]))
+    finally:
+        if handle is not sys.stdin:
+            handle.close()
+
+
+def follow_csv(
+    monitor: ResidualMonitor,
+    source: str,
+    window_s: float,
+    say: Callable[[str], None],
+    idle_s: float = 3.0,
+) -> DetectResult:
+    """Watch ``source`` row by row; ``say`` gets one line per alarm and per isolation."""
+    start = time.perf_counter()
+    rows = _rows(source, idle_s)
+    header = next(rows, None)
+    where = "stdin" if source == "-" else source
+    if header is None:
+        raise NnidInputError("is empty: expected a CSV header", source=where)
+    inputs = [f"cmd_{c}" for c in monitor.channels_]
+    if monitor.channels_ == list(FORCES):
+        inputs = [f"tau_{c}" for c in FORCES]
+    needed = ["t", *VELOCITY, "phi", "theta", *inputs]
+    missing = [c for c in needed if c not in header]
+    if missing:
+        raise NnidInputError(
+            f"--follow needs the columns {', '.join(missing)} (body velocities and attitude as "
+            "measured, and the model's inputs)",
+            source=where,
+        )
+    col = {c: header.index(c) for c in header}
+    state_cols = [col.get(c) for c in (*POSE, *VELOCITY)]
+    input_cols = [col[c] for c in inputs]
+    exp_col = col.get("experiment")
+    stream = monitor.stream()
+    x, u = np.zeros(12), np.zeros(len(inputs))
+    ts, xs, us, vals, codes, names = [], [], [], [], [], []
+    pending: list[int] = []
+    alarm_rows: list[int] = []
+    alarms: list[dict] = []
+    current = None
+
+    def isolate(k: int) -> None:
+        data = _arrays(ts, xs, us, codes, names)
+        trace = Trace(data["t"], np.array(names, dtype=object)[data["experiment"]],
+                      np.array(vals), np.zeros(len(ts), dtype=bool))  # fmt: skip
+        record = alarm_record(monitor, data, trace, k, window_s)
+        alarms.append(record)
+        say(describe_alarm(record))
+
+    for n, row in enumerate(rows, start=2):
+        try:
+            t = float(row[col["t"]])
+            for i, c in enumerate(state_cols):
+                x[i] = 0.0 if c is None else float(row[c])
+            for i, c in enumerate(input_cols):
+                u[i] = float(row[c])
+        except (ValueError, IndexError):
+            raise NnidInputError(f"row {n} is not numbers in every column", source=where) from None
+        name = row[exp_col] if exp_col is not None else ""
+        if name != current:
+            stream.reset()
+            current = name
+            names.append(name)
+        code = stream.update(t, x, u)
+        ts.append(t)
+        xs.append(x.copy())
+        us.append(u.copy())
+        vals.append(stream.values.copy())
+        codes.append(len(names) - 1)
+        if code == 1:
+            pending.append(len(ts) - 1)
+            alarm_rows.append(len(ts) - 1)
+            say(f"ALARM t = {t:.2f} s{f' ({name})' if name else ''}: isolating over {window_s} s")
+        while pending and (t - ts[pending[0]] >= window_s or codes[pending[0]] != codes[-1]):
+            isolate(pending.pop(0))
+    for k in pending:
+        isolate(k)
+    if not ts:
+        raise NnidInputError("has a header and no rows", source=where)
+    data = _arrays(ts, xs, us, codes, names)
+    trace = Trace(data["t"], np.array(names, dtype=object)[data["experiment"]], np.array(vals),
+                  np.isin(np.arange(len(ts)), alarm_rows))  # fmt: skip
+    return DetectResult(trace, alarms, time.perf_counter() - start)
+
+
+def _arrays(ts, xs, us, codes, names) -> dict:
+    return {
+        "t": np.array(ts),
+        "x": np.array(xs),
+        "inputs": np.array(us),
+        "experiment": np.array(codes),
+        "experiment_names": np.array(names, dtype=object),
+    }
+
+
+def describe_alarm(a: dict) -> str:
+    """One line a person reads for an alarm record."""
+    where = f"t = {a['t']:.2f} s" + (f" ({a['experiment']})" if a.get("experiment") else "")
+    if a["kind"] == "thruster_loss":
+        what = (
+            f"thruster {a['thruster']} gives {100 * a['efficiency']:.0f} % of its thrust "
+            f"(95 % interval {100 * a['efficiency_low']:.0f}-{100 * a['efficiency_high']:.0f} %)"
+        )
+    elif a["effect"]:
+        what = f"{a['meaning']}: {a['effect']} = {a['value']:.3g} ± {a['stderr']:.2g}"
+    else:
+        what = a["meaning"] or "a change no hypothesis explains"
+    return f"{where}: {a['kind']}: {what}; confidence {a['confidence']:.2f}"

@@ -1,0 +1,386 @@
+"""The streaming residual monitor: a trained physics model's equation error, whitened by the
+healthy residual covariance, watched by an EWMA (fast changes) and a χ² CUSUM (slow drifts),
+with thresholds set for a target false-alarm rate per hour on healthy data.
+
+``ResidualMonitor(model).fit(healthy_log)`` calibrates: the mean μ and covariance Σ of the
+healthy residual (z = L⁻¹(r − μ), Σ = L Lᵀ over the model's DOF equations), the covariance of the
+EWMA of z measured on the healthy data itself (so the residual's autocorrelation is accounted
+for, not assumed away), and the two thresholds by a generalized Pareto fit to the excursion
+peaks (:mod:`nnid.fault.thresholds`). ``run(log)`` processes whole logs; ``stream()`` gives a
+:class:`Stream` that takes one sample at a time with identical results, through the same
+compiled update (:mod:`nnid.fault.kernel`) and buffers allocated once.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from nnid.datasets.arrays import log_arrays
+from nnid.errors import NnidInputError
+from nnid.fault import kernel
+from nnid.fault.thresholds import rate_interval, rate_threshold
+from nnid.physics.compiled import _args
+from nnid.physics.dofs import DOFS, FORCES
+from nnid.physics.thrusters import Actuation
+from nnid.serialization import read_json, write_json
+
+MONITOR_FILE = "monitor.json"
+TRACE_COLUMNS = [
+    *(f"r_{f}" for f in FORCES),
+    *(f"z_{f}" for f in FORCES),
+    *(f"ewma_{f}" for f in FORCES),
+    "T",
+    "g",
+]
+_KINDS = {"poly": kernel.CURVE_POLY, "signed_quadratic": kernel.CURVE_QUADRATIC}
+
+
+def physics_of(model):
+    """The fitted Fossen plant a monitor watches: the model itself, or a hybrid's physics."""
+    from nnid.models.parametric import FossenPlant
+
+    plant = model if isinstance(model, FossenPlant) else model.baseline()
+    if not isinstance(plant, FossenPlant):
+        raise NnidInputError(
+            f"fault detection watches the equation error of a physics model; a '{model.kind}' "
+            "model has none (train one with configs/detect_fossen.toml)",
+            field="model",
+        )
+    return plant
+
+
+def pack_actuation(vehicle, parts) -> tuple:
+    """The inputs-to-force map as the kernel's arrays: thrust curves, ranges, allocation and the
+    model's installation coefficients (or the identity for logs of generalized forces)."""
+    act = Actuation(vehicle)
+    n = len(act.channels)
+    width = max([2, *(len(c.cmd) for c in act.curves), *(len(c.coeffs) for c in act.curves)])
+    kinds = np.full(n, kernel.CURVE_FORCE, dtype=np.int64)
+    coeffs = np.zeros((n, width))
+    tab_cmd, tab_thrust = np.zeros((n, width)), np.zeros((n, width))
+    n_tab = np.zeros(n, dtype=np.int64)
+    lo, hi = np.full(n, -np.inf), np.full(n, np.inf)
+    for i, (thruster, curve) in enumerate(zip(act.thrusters, act.curves, strict=True)):
+        if curve.kind == "table":
+            kinds[i], n_tab[i] = kernel.CURVE_TABLE, len(curve.cmd)
+            tab_cmd[i, : n_tab[i]], tab_thrust[i, : n_tab[i]] = curve.cmd, curve.thrust
+        else:
+            kinds[i] = _KINDS[curve.kind]
+            values = curve.coeffs if curve.kind == "poly" else (curve.k,)
+            coeffs[i, : len(values)] = values
+        lo[i] = -np.inf if thruster.cmd_min is None else thruster.cmd_min
+        hi[i] = np.inf if thruster.cmd_max is None else thruster.cmd_max
+    return (
+        kinds,
+        coeffs,
+        tab_cmd,
+        tab_thrust,
+        n_tab,
+        lo,
+        hi,
+        np.ascontiguousarray(act.matrix, dtype=np.float64),
+        np.asarray(parts.eta_pos, dtype=np.float64),
+        np.asarray(parts.eta_neg, dtype=np.float64),
+        float(vehicle.deadband),
+    )
+
+
+def monitor_inputs(log: pd.DataFrame, plant) -> dict[str, np.ndarray]:
+    """Time, state [N, 12] (velocities derived from the pose where the log lacks them, by the
+    model's Savitzky-Golay setting) and input channels [N, n] of a log."""
+    from nnid.loop.effects import input_channels
+    from nnid.models.parametric import prepare_motion
+
+    log = prepare_motion(log, plant.dofs_, plant.savgol_window, plant.savgol_order, False)
+    data = log_arrays(log, plant.vehicle)
+    inputs, _ = input_channels(log, plant.vehicle)
+    return {
+        "t": data["t"],
+        "x": np.ascontiguousarray(np.concatenate([data["eta"], data["nu"]], 1)),
+        "inputs": np.ascontiguousarray(inputs),
+        "experiment": data["experiment"],
+        "experiment_names": data["experiment_names"],
+    }
+
+
+@dataclass
+class Trace:
+    """What :meth:`ResidualMonitor.run` saw: per sample the residual r (force units), the
+    whitened z, the EWMA, the statistics T and g, and where alarms started."""
+
+    t: np.ndarray
+    experiment: np.ndarray
+    values: np.ndarray  # [N, 20] in TRACE_COLUMNS order
+    alarm: np.ndarray  # [N] bool: a new alarm starts here
+
+    def frame(self) -> pd.DataFrame:
+        out = pd.DataFrame(self.values, columns=TRACE_COLUMNS)
+        out.insert(0, "experiment", self.experiment)
+        out.insert(0, "t", self.t)
+        out["alarm"] = self.alarm
+        return out
+
+
+class ResidualMonitor:
+    """Detect a change of a vehicle from its model's equation error (see the module docstring).
+
+    Parameters: ``model`` a fitted nnid model with a force equation (or a hybrid, watched
+    through its physics), ``false_alarm_per_hour`` the target rate (split between the EWMA and
+    the CUSUM), ``time_constant_s`` of the EWMA, ``allowance`` the CUSUM's drift allowance in
+    units of the residual's dimension (it grows when the whitened residual power exceeds
+    (1 + allowance) times its healthy mean), ``rearm_s`` how long both statistics must stay
+    below their thresholds before a new alarm can start.
+    """
+
+    def __init__(
+        self,
+        model,
+        false_alarm_per_hour: float = 0.01,
+        time_constant_s: float = 0.5,
+        allowance: float = 1.0,
+        rearm_s: float = 5.0,
+    ) -> None:
+        self.model = model
+        self.false_alarm_per_hour = false_alarm_per_hour
+        self.time_constant_s = time_constant_s
+        self.allowance = allowance
+        self.rearm_s = rearm_s
+
+    # -- the compiled pieces --------------------------------------------------------------------
+    def _setup(self) -> None:
+        plant = physics_of(self.model)
+        self.plant_ = plant
+        model = plant.parts_.model(check=False)
+        self.form_ = _args(model.feature_form())
+        if self.form_[-1] > 0:
+            raise NnidInputError(
+                "the monitor's model has an actuator lag; fit one without (its state would be "
+                "the unmeasured thrust)",
+                field="model",
+            )
+        self.mass_ = np.ascontiguousarray(model.mass_matrix().numpy())
+        self.mask_ = np.array([d in plant.dofs_ for d in DOFS], dtype=np.float64)
+        self.act_ = pack_actuation(plant.vehicle, plant.parts_)
+        self.channels_ = list(Actuation(plant.vehicle).channels)
+
+    def _buffers(self, n_channels: int) -> dict[str, np.ndarray]:
+        return {
+            "prev": np.zeros(13 + n_channels),
+            "st": np.zeros(kernel.STATE_SIZE),
+            "work": np.zeros((4, max(18, n_channels))),
+            "scratch": np.zeros((4, 18)),
+        }
+
+    def _cfg(self, thresholds: tuple[float, float]) -> np.ndarray:
+        cfg = np.zeros(kernel.CFG_SIZE)
+        cfg[kernel.TAU] = self.time_constant_s
+        cfg[kernel.DIM] = float(self.mask_.sum())
+        cfg[kernel.ALLOWANCE] = self.allowance * cfg[kernel.DIM]
+        cfg[kernel.H_EWMA], cfg[kernel.H_CUSUM] = thresholds
+        cfg[kernel.REARM] = self.rearm_s
+        return cfg
+
+    def _pass(self, data, mu, whiten, s_inv, thresholds) -> Trace:
+        cfg = self._cfg(thresholds)
+        n = data["t"].size
+        out = np.empty((n, 21))
+        for code in np.unique(data["experiment"]):
+            rows = np.flatnonzero(data["experiment"] == code)
+            buf = self._buffers(data["inputs"].shape[1])
+            out[rows] = kernel.run(
+                data["t"][rows],
+                data["x"][rows],
+                data["inputs"][rows],
+                buf["prev"],
+                buf["st"],
+                cfg,
+                self.form_,
+                self.mass_,
+                self.mask_,
+                self.act_,
+                mu,
+                whiten,
+                s_inv,
+                np.empty((rows.size, 21)),
+                buf["work"],
+                buf["scratch"],
+            )
+        names = data["experiment_names"][data["experiment"]]
+        return Trace(data["t"], names, out[:, :20], out[:, 20] == 1)
+
+    # -- calibration ----------------------------------------------------------------------------
+    def fit(self, healthy: pd.DataFrame) -> ResidualMonitor:
+        """Calibrate on a healthy log (one or more experiments, none with a fault)."""
+        self._setup()
+        data = monitor_inputs(healthy, self.plant_)
+        active = self.mask_ > 0
+        eye, none = np.eye(6), (math.inf, math.inf)
+        raw = self._pass(data, np.zeros(6), eye, np.zeros((6, 6)), none).values[:, 0:6]
+        raw = raw[np.isfinite(raw).all(1)]
+        if raw.shape[0] < 100:
+            raise NnidInputError(
+                f"the healthy log gives {raw.shape[0]} residual samples; the monitor needs at "
+                "least 100 to calibrate",
+                field="data",
+            )
+        mu = np.where(active, raw.mean(0), 0.0)
+        cov = np.cov(raw[:, active].T).reshape(int(active.sum()), -1)
+        whiten = np.zeros((6, 6))
+        whiten[np.ix_(active, active)] = np.linalg.inv(np.linalg.cholesky(cov))
+        z = self._pass(data, mu, whiten, np.eye(6), none).values
+        ewma = z[np.isfinite(z[:, 12]), 12:18][:, active]
+        s_inv = np.zeros((6, 6))
+        s_inv[np.ix_(active, active)] = np.linalg.inv(np.cov(ewma.T).reshape(len(ewma.T), -1))
+        self.mu_, self.whiten_, self.s_inv_ = mu, whiten, s_inv
+        self.sigma_ = np.sqrt(_variances(cov, active))  # per DOF, for the isolation's weights
+        trace = self._pass(data, mu, whiten, s_inv, none)
+        hours = _hours(data)
+        dt = float(np.median(np.diff(data["t"])))
+        gap = max(int(round(self.rearm_s / dt)), 1)
+        series = {name: [] for name in ("T", "g")}
+        for code in np.unique(data["experiment"]):
+            rows = data["experiment"] == code
+            series["T"].append(trace.values[rows, 18])
+            series["g"].append(trace.values[rows, 19])
+        half = self.false_alarm_per_hour / 2
+        self.thresholds_ = {
+            "ewma": rate_threshold(series["T"], hours, half, gap),
+            "cusum": rate_threshold(series["g"], hours, half, gap),
+        }
+        self.correlation_time_ = _correlation_time(trace.values[:, 6:12][:, active])
+        self.calibration_ = {
+            "hours": hours,
+            "samples": int(raw.shape[0]),
+            "experiments": [str(e) for e in data["experiment_names"]],
+            "dt": dt,
+        }
+        return self
+
+    @property
+    def threshold_values(self) -> tuple[float, float]:
+        return self.thresholds_["ewma"]["value"], self.thresholds_["cusum"]["value"]
+
+    # -- detection ------------------------------------------------------------------------------
+    def run(self, log: pd.DataFrame) -> Trace:
+        """The monitor over a whole log (each experiment from a fresh state)."""
+        data = monitor_inputs(log, self.plant_)
+        return self._pass(data, self.mu_, self.whiten_, self.s_inv_, self.threshold_values)
+
+    def stream(self) -> Stream:
+        """A one-sample-at-a-time monitor with this calibration."""
+        return Stream(self)
+
+    def false_alarms(self, log: pd.DataFrame, confidence: float = 0.95) -> dict:
+        """Alarms on a healthy log as a rate per hour with its exact Poisson interval."""
+        trace = self.run(log)
+        hours = _hours({"t": trace.t, "experiment": pd.factorize(trace.experiment)[0]})
+        count = int(trace.alarm.sum())
+        lo, hi = rate_interval(count, hours, confidence)
+        return {
+            "alarms": count,
+            "hours": hours,
+            "rate_per_hour": count / hours,
+            "interval": [lo, hi],
+            "confidence": confidence,
+        }
+
+    # -- persistence ----------------------------------------------------------------------------
+    def save(self, folder: str | Path) -> Path:
+        """``monitor.json`` beside the saved model (strict JSON, no code)."""
+        path = Path(folder) / MONITOR_FILE
+        write_json(
+            path,
+            {
+                "settings": {
+                    "false_alarm_per_hour": self.false_alarm_per_hour,
+                    "time_constant_s": self.time_constant_s,
+                    "allowance": self.allowance,
+                    "rearm_s": self.rearm_s,
+                },
+                "mu": self.mu_.tolist(),
+                "whiten": self.whiten_.tolist(),
+                "s_inv": self.s_inv_.tolist(),
+                "sigma": self.sigma_.tolist(),
+                "thresholds": self.thresholds_,
+                "correlation_time": self.correlation_time_,
+                "calibration": self.calibration_,
+            },
+        )
+        return path
+
+    @classmethod
+    def load(cls, folder: str | Path, model=None) -> ResidualMonitor:
+        """The monitor saved in ``folder`` with its model (loaded from there unless given)."""
+        from nnid.models.base import load_model
+
+        folder = Path(folder)
+        path = folder / MONITOR_FILE
+        if not path.is_file():
+            raise NnidInputError(
+                "has no monitor.json: train a detection model with configs/detect_fossen.toml",
+                source=str(folder),
+                field="--model",
+            )
+        state = read_json(path)
+        out = cls(model if model is not None else load_model(folder), **state["settings"])
+        out._setup()
+        out.mu_ = np.asarray(state["mu"], dtype=np.float64)
+        out.whiten_ = np.asarray(state["whiten"], dtype=np.float64)
+        out.s_inv_ = np.asarray(state["s_inv"], dtype=np.float64)
+        out.sigma_ = np.asarray(state["sigma"], dtype=np.float64)
+        out.thresholds_ = state["thresholds"]
+        out.correlation_time_ = float(state["correlation_time"])
+        out.calibration_ = state["calibration"]
+        return out
+
+
+class Stream:
+    """One sample at a time: ``update(t, x, inputs)`` with the state x = (η, ν) [12] and the
+    input channels held from t; returns 1 when an alarm starts, 0 otherwise, −1 while there is
+    no residual. ``values`` holds the last sample's r, z, EWMA, T and g (TRACE_COLUMNS). Every
+    buffer is allocated here, none per sample."""
+
+    def __init__(self, monitor: ResidualMonitor) -> None:
+        m = monitor
+        self._buf = m._buffers(len(m.channels_))
+        self._cfg = m._cfg(m.threshold_values)
+        self._fixed = (m.form_, m.mass_, m.mask_, m.act_, m.mu_, m.whiten_, m.s_inv_)
+        self.values = np.full(20, np.nan)
+
+    def update(self, t: float, x: np.ndarray, inputs: np.ndarray) -> int:
+        form, mass, mask, act, mu, whiten, s_inv = self._fixed
+        b = self._buf
+        return kernel.update(t, x, inputs, b["prev"], b["st"], self._cfg, form, mass, mask, act,
+                             mu, whiten, s_inv, self.values, b["work"], b["scratch"])  # fmt: skip
+
+    def reset(self) -> None:
+        """Forget the past (a new experiment)."""
+        for buf in self._buf.values():
+            buf.fill(0.0)
+        self.values.fill(np.nan)
+
+
+def _hours(data: dict) -> float:
+    total = 0.0
+    for code in np.unique(data["experiment"]):
+        t = data["t"][data["experiment"] == code]
+        total += float(t[-1] - t[0]) if t.size > 1 else 0.0
+    return max(total, 1e-9) / 3600.0
+
+
+def _variances(cov: np.ndarray, active: np.ndarray) -> np.ndarray:
+    out = np.zeros(6)
+    out[active] = np.diag(cov)
+    return out
+
+
+def _correlation_time(z: np.ndarray) -> float:
+    from nnid.trainers.least_squares import correlation_time
+
+    z = z[np.isfinite(z).all(1)]
+    return float(correlation_time(z, max_lag=200)) if len(z) > 10 else 1.0

@@ -1,0 +1,144 @@
+"""``nnid detect`` outputs: alarms.csv, detect.json and report.html (residual traces with the
+thresholds and alarms, and the isolation evidence of each alarm)."""
+
+from __future__ import annotations
+
+import html
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from nnid.fault.detect import ALARM_FIELDS, DetectResult
+from nnid.fault.follow import describe_alarm
+from nnid.physics.dofs import DOFS, FORCES
+from nnid.reports.figures import (
+    IMAGES_CHECK,
+    definitions,
+    figure_uri,
+    html_table,
+    new_figure,
+    page_head,
+)
+from nnid.serialization import write_json, write_text
+
+_UNITS = {"X": "N", "Y": "N", "Z": "N", "K": "N m", "M": "N m", "N": "N m"}
+
+
+def detect_json(monitor, result: DetectResult) -> dict:
+    """The ``detect.json`` contract: alarms, thresholds, calibrated false-alarm rate."""
+    h_t, h_g = monitor.threshold_values
+    return {
+        "alarms": result.alarms,
+        "threshold": {
+            "ewma": h_t,
+            "cusum": h_g,
+            "ewma_fit": monitor.thresholds_["ewma"],
+            "cusum_fit": monitor.thresholds_["cusum"],
+        },
+        "false_alarm_rate_per_hour": monitor.false_alarm_per_hour,
+        "calibration": monitor.calibration_,
+        "samples": int(result.trace.t.size),
+        "seconds": result.seconds,
+    }
+
+
+def write_detect_outputs(monitor, result: DetectResult, out_dir: Path, source: str = "") -> list[str]:
+    """Write the three outputs; return the lines the CLI prints."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    rows = [{k: a.get(k) for k in ALARM_FIELDS} for a in result.alarms]
+    write_text(out_dir / "alarms.csv", pd.DataFrame(rows, columns=ALARM_FIELDS).to_csv(index=False))
+    write_json(out_dir / "detect.json", detect_json(monitor, result))
+    write_text(out_dir / "report.html", detect_html(monitor, result, source))
+    hours = monitor.calibration_["hours"]
+    lines = [
+        f"{len(result.alarms)} alarm(s) in {result.trace.t.size} samples "
+        f"(target false-alarm rate {monitor.false_alarm_per_hour:g} per hour, calibrated on "
+        f"{60 * hours:.0f} min of healthy data)",
+        *(describe_alarm(a) for a in result.alarms),
+        f"wrote {out_dir}/: alarms.csv, detect.json, report.html",
+    ]
+    return lines
+
+
+def detect_html(monitor, result: DetectResult, source: str = "") -> str:
+    """The detect report as one self-contained page."""
+    trace = result.trace
+    h_t, h_g = monitor.threshold_values
+    out = [page_head("fault detection" + (f": {source}" if source else ""))]
+    cal = monitor.calibration_
+    out.append(
+        f"<p>Residual monitor of a '{html.escape(monitor.plant_.kind)}' model of "
+        f"'{html.escape(monitor.plant_.vehicle.name)}', calibrated on "
+        f"{60 * cal['hours']:.1f} min of healthy data ({cal['samples']} samples); thresholds set "
+        f"for {monitor.false_alarm_per_hour:g} false alarms per hour by a "
+        f"{html.escape(monitor.thresholds_['ewma']['method'])} fit. "
+        f"{len(result.alarms)} alarm(s) in {trace.t.size} samples.</p>"
+    )
+    if result.alarms:
+        out.append("<h2>Alarms</h2>")
+        head = ["experiment", "t [s]", "kind", "thruster", "efficiency (95 %)", "effect",
+                "value ± s.e.", "severity", "confidence"]  # fmt: skip
+        body = []
+        for a in result.alarms:
+            eff = (
+                f"{a['efficiency']:.2f} ({a['efficiency_low']:.2f}-{a['efficiency_high']:.2f})"
+                if a["efficiency"] is not None
+                else "-"
+            )
+            val = f"{a['value']:.3g} ± {a['stderr']:.2g}" if a["value"] is not None else "-"
+            body.append([a["experiment"], f"{a['t']:.2f}", a["kind"], a["thruster"] or "-", eff,
+                         a["effect"] or "-", val, f"{a['severity']:.2f}",
+                         f"{a['confidence']:.2f}"])  # fmt: skip
+        out.append(html_table(head, body))
+        out.append("<ul>" + "".join(f"<li>{html.escape(describe_alarm(a))}</li>"
+                                    for a in result.alarms) + "</ul>")  # fmt: skip
+        out.append(
+            definitions(
+                {
+                    "efficiency": "the thruster's remaining fraction of nominal thrust",
+                    "effect": "the change named in nnid's effect vocabulary",
+                    "severity": "peak of the monitor statistic over its threshold after the alarm",
+                    "confidence": "posterior weight of the named hypothesis and of those the "
+                    "data cannot tell from it",
+                }
+            )
+        )
+        out.append("<h2>Isolation evidence</h2>")
+        for a in result.alarms:
+            rows = [[h["hypothesis"], f"{h['posterior']:.3g}"] for h in a.get("alternatives", [])]
+            out.append(
+                f"<p>t = {a['t']:.2f} s: {html.escape(a['meaning'])} (explains "
+                f"{100 * (a.get('explained') or 0):.0f} % of the whitened residual after the "
+                "alarm); the next hypotheses:</p>"
+            )
+            out.append(html_table(["hypothesis", "posterior"], rows))
+    else:
+        out.append("<p><b>No alarm</b>: the residual stayed within its healthy range.</p>")
+    out.append("<h2>Residual and statistics</h2>")
+    out.append(f'<img alt="residual traces" src="{figure_uri(_figure(monitor, trace, h_t, h_g))}">')
+    out.append(IMAGES_CHECK + "</body></html>")
+    return "\n".join(out)
+
+
+def _figure(monitor, trace, h_t: float, h_g: float):
+    dofs = [f for f, d in zip(FORCES, DOFS, strict=True) if d in monitor.plant_.dofs_]
+    fig, axes = new_figure(len(dofs) + 1, 1, height=1.6)
+    x = np.arange(trace.t.size)
+    t = trace.t if trace.experiment.size and len(set(trace.experiment)) == 1 else x
+    label = "t [s]" if t is trace.t else "sample"
+    ax = axes[0, 0]
+    ax.plot(t, trace.values[:, 18] / h_t, lw=0.8, label="EWMA statistic / threshold")
+    ax.plot(t, trace.values[:, 19] / h_g, lw=0.8, label="CUSUM / threshold")
+    ax.axhline(1.0, color="k", ls="--", lw=0.8)
+    ax.set_ylabel("statistic / threshold")
+    ax.legend(loc="upper left", fontsize=7)
+    for k in np.flatnonzero(trace.alarm):
+        for row in axes[:, 0]:
+            row.axvline(t[k], color="tab:red", lw=1.0)
+    for i, force in enumerate(dofs):
+        ax = axes[i + 1, 0]
+        ax.plot(t, trace.values[:, FORCES.index(force)], lw=0.6)
+        ax.set_ylabel(f"r_{force} [{_UNITS[force]}]")
+    axes[-1, 0].set_xlabel(label)
+    return fig
