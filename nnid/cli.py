@@ -136,11 +136,6 @@ def inspect(
         report.write(out_dir)
 
 
-def _not_yet(name: str) -> None:
-    err.print(f"nnid {name}: not implemented yet", highlight=False, soft_wrap=True)
-    raise typer.Exit(2)
-
-
 @contextmanager
 def _bar(description: str):
     """A live progress bar on stderr; yields the callback ``(done, total, message)`` that
@@ -354,7 +349,9 @@ def detect(
         ..., "--model", help="Folder of a detection model (nnid train configs/detect_fossen.toml)."
     ),
     data: str = typer.Option(..., "--data", help="The log to watch; '-' reads CSV from stdin."),
-    out_dir: Path = typer.Option(..., "--out", help="Output folder: alarms.csv, detect.json, report."),
+    out_dir: Path = typer.Option(
+        ..., "--out", help="Output folder: alarms.csv, detect.json, report."
+    ),
     columns: str | None = typer.Option(
         None, "--columns", help="Reader config for a log not in nnid's format."
     ),

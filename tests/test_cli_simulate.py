@@ -158,11 +158,11 @@ def test_bad_config_exits_2_naming_the_field(tmp_path, case):
     assert len(result.output.strip().splitlines()) == 1
 
 
-def test_unknown_preset_and_stub_commands(tmp_path):
+def test_unknown_preset_and_missing_options(tmp_path):
     cfg = _write(tmp_path, "sim.toml", CONFIG.format(vehicle="nautilus"))
     result = runner.invoke(app, ["simulate", str(cfg), "--out", str(tmp_path / "x.csv")])
     assert result.exit_code == 2 and "neither a preset" in result.output
     res = runner.invoke(app, ["detect"])
-    assert res.exit_code == 2 and "not implemented yet" in res.output
+    assert res.exit_code == 2 and "--model" in res.output
     res = runner.invoke(app, ["loop", "--out", str(tmp_path / "o")])  # neither log nor vehicle
     assert res.exit_code == 2 and "give a vehicle" in res.output

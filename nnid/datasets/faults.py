@@ -129,7 +129,7 @@ def simulate_faults(
     measurement = measurement or Measurement(kind="dvl_imu")
     rng = np.random.default_rng(seed)
     names = [t.name for t in vehicle.thrusters]
-    n = int(round(duration / dt)) + 1
+    n = round(duration / dt) + 1
     switch, refs = controller.schedule(duration, rng)
     efficiency = np.ones((n, len(names)))
     external = np.zeros((n, 6))

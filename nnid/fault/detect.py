@@ -28,7 +28,9 @@ class DetectResult:
     seconds: float
 
 
-def alarm_record(monitor: ResidualMonitor, data: dict, trace: Trace, k: int, window_s: float) -> dict:
+def alarm_record(
+    monitor: ResidualMonitor, data: dict, trace: Trace, k: int, window_s: float
+) -> dict:
     """The alarm that starts at row ``k``, isolated on [t_k, t_k + window_s]. The window starts
     at the alarm, never before: the change began at or before the alarm, and healthy samples
     before its onset would bias the size of the change toward zero."""

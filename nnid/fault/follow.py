@@ -25,7 +25,7 @@ from nnid.physics.dofs import FORCES
 def _rows(source: str, idle_s: float):
     """Rows of a CSV as lists of strings; a file is followed until it stops growing for
     ``idle_s`` seconds, stdin until it closes."""
-    handle = sys.stdin if source == "-" else open(source, newline="")  # noqa: SIM115
+    handle = sys.stdin if source == "-" else open(source, newline="")
     try:
         buffer, quiet = "", 0.0
         while True:

@@ -65,7 +65,7 @@ def fitted_vehicle(plant):
     values = {k: v["value"] for k, v in plant.params.items() if v.get("value") is not None}
     try:
         return vehicle_with(plant.vehicle, values)
-    except Exception:  # noqa: BLE001 - names of another model kind: the file as declared
+    except Exception:
         return plant.vehicle
 
 
@@ -180,4 +180,3 @@ def _kind(s) -> str:
     if s.candidate.kind == "thruster_loss":
         return "thruster_loss"
     return "external_force" if s.candidate.kind == "external_bias" else "model_change"
-

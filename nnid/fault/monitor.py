@@ -44,7 +44,9 @@ def physics_of(model):
     """The fitted Fossen plant a monitor watches: the model itself, or a hybrid's physics."""
     from nnid.models.parametric import FossenPlant
 
-    plant = model if isinstance(model, FossenPlant) else model.baseline()
+    if isinstance(model, FossenPlant):
+        return model
+    plant = model.baseline() if getattr(model, "kind", None) == "hybrid" else None
     if not isinstance(plant, FossenPlant):
         raise NnidInputError(
             f"fault detection watches the equation error of a physics model; a '{model.kind}' "
@@ -241,7 +243,7 @@ class ResidualMonitor:
         trace = self._pass(data, mu, whiten, s_inv, none)
         hours = _hours(data)
         dt = float(np.median(np.diff(data["t"])))
-        gap = max(int(round(self.rearm_s / dt)), 1)
+        gap = max(round(self.rearm_s / dt), 1)
         series = {name: [] for name in ("T", "g")}
         for code in np.unique(data["experiment"]):
             rows = data["experiment"] == code

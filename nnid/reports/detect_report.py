@@ -43,7 +43,9 @@ def detect_json(monitor, result: DetectResult) -> dict:
     }
 
 
-def write_detect_outputs(monitor, result: DetectResult, out_dir: Path, source: str = "") -> list[str]:
+def write_detect_outputs(
+    monitor, result: DetectResult, out_dir: Path, source: str = ""
+) -> list[str]:
     """Write the three outputs; return the lines the CLI prints."""
     out_dir.mkdir(parents=True, exist_ok=True)
     rows = [{k: a.get(k) for k in ALARM_FIELDS} for a in result.alarms]

@@ -1,0 +1,231 @@
+"""Fault detection (issue 16): the compiled residual, calibrated thresholds, streaming equal to
+batch, isolation and estimation on the simulated 8-thruster vehicle, and the CLI.
+
+The vehicle is configs/vehicles/octorov_sim.toml flown by the simulator's controller
+(:mod:`nnid.datasets.faults`): faults injected at t = 20 s must be detected, named and sized;
+healthy held-out runs must not alarm.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from conftest import assert_rendered
+from numba import njit
+from typer.testing import CliRunner
+
+from nnid.cli import app
+from nnid.datasets.faults import Fault, simulate_faults
+from nnid.datasets.measurement import Measurement
+from nnid.errors import NnidInputError
+from nnid.fault import kernel
+from nnid.fault.detect import detect
+from nnid.fault.monitor import ResidualMonitor, monitor_inputs, pack_actuation
+from nnid.fault.thresholds import rate_interval, rate_threshold
+from nnid.models.parametric import ParametricModel
+from nnid.physics.parts import Parts
+from nnid.physics.thrusters import Actuation
+from nnid.trainers.least_squares import LeastSquares
+from nnid.vehicle import load_vehicle
+
+REPO = Path(__file__).resolve().parents[1]
+OCTO = REPO / "configs" / "vehicles" / "octorov_sim.toml"
+FAULT_T = 20.0
+
+
+@pytest.fixture(scope="module")
+def vehicle():
+    return load_vehicle(OCTO)
+
+
+@pytest.fixture(scope="module")
+def monitor(vehicle):
+    """Fossen model fitted on 4 healthy minutes, monitor calibrated on 6 others."""
+    logs = [simulate_faults(vehicle, 120, seed=s, experiment=f"h{s}") for s in range(5)]
+    model = ParametricModel(
+        vehicle, ["added_mass", "damping"], trainer=LeastSquares(filter_lambda=1.0),
+        zoh_midpoint=True,
+    ).fit(pd.concat(logs[:2], ignore_index=True))  # fmt: skip
+    return ResidualMonitor(model).fit(pd.concat(logs[2:], ignore_index=True))
+
+
+@njit
+def _kernel_force(cmds, act, n):
+    out = np.empty((cmds.shape[0], 6))
+    work = np.zeros((4, max(18, n)))
+    for k in range(cmds.shape[0]):
+        kernel._force(cmds[k], 0, n, act, work)
+        out[k] = work[2, :6]
+    return out
+
+
+@pytest.mark.parametrize("name", ["octorov", "vlbv300", "bluerov1"])
+def test_compiled_thrust_equals_the_actuation(name, rng):
+    """Signed-quadratic, polynomial (Weiss eq. 10) and table curves with ranges and deadband:
+    the kernel's force is the physics package's, to rounding."""
+    path = {
+        "octorov": OCTO,
+        "vlbv300": REPO / "nnid" / "presets" / "vlbv300.toml",
+        "bluerov1": REPO / "configs" / "vehicles" / "bluerov1_liu.toml",
+    }[name]
+    veh = load_vehicle(path).model_copy(update={"deadband": 0.05})
+    act = Actuation(veh)
+    cmds = rng.uniform(-1.3, 1.3, (500, len(act.channels)))
+    got = _kernel_force(cmds, pack_actuation(veh, Parts.from_vehicle(veh)), len(act.channels))
+    np.testing.assert_allclose(got, act.nominal(cmds, deadband=True), rtol=1e-12, atol=1e-12)
+
+
+def test_residual_is_the_missing_force(vehicle):
+    """Noise-free log, exact model: the midpoint equation error R = M ν̇ − (τ − Cν − Dν − g)
+    (Weiss eq. 11) is ~0 before an external force appears and is that force after it."""
+    force = np.array([-12.0, 5.0, 0.0, 0.0, 0.0, 0.8])
+    log = simulate_faults(vehicle, 30, faults=[Fault("external", 15.0, force=tuple(force))],
+                          measurement=Measurement(kind="none"), seed=3)  # fmt: skip
+    exact = ParametricModel(vehicle, ["external_bias.u"]).fit(log[log["t"] < 15])
+    assert abs(exact.params["external_bias.u"]["value"]) < 1e-3
+    mon = ResidualMonitor(exact)
+    mon._setup()
+    data = monitor_inputs(log, exact)
+    r = mon._pass(data, np.zeros(6), np.eye(6), np.eye(6), (np.inf, np.inf)).values[:, :6]
+    before, after = r[1:290], r[310:]
+    scale = np.abs(Actuation(vehicle).nominal(log.filter(like="cmd_").to_numpy())).max(0)
+    assert (np.abs(before).max(0) < 0.01 * scale + 1e-3).all()
+    np.testing.assert_allclose(np.median(after, 0), force, atol=1e-3)
+
+
+def test_stream_equals_batch_bit_for_bit(vehicle, monitor):
+    fault = Fault("thruster", 12.0, thruster="v2", efficiency=0.3)
+    log = simulate_faults(vehicle, 30, faults=[fault], seed=5)
+    trace = monitor.run(log)
+    data = monitor_inputs(log, monitor.plant_)
+    stream = monitor.stream()
+    values, codes = [], []
+    for k in range(len(log)):
+        codes.append(stream.update(data["t"][k], data["x"][k], data["inputs"][k]))
+        values.append(stream.values.copy())
+    np.testing.assert_array_equal(np.array(values), trace.values)
+    assert np.array_equal(np.array(codes) == 1, trace.alarm) and trace.alarm.sum() == 1
+
+
+@pytest.mark.parametrize("efficiency", [0.3, 0.0])
+def test_thruster_loss_detected_named_and_sized(vehicle, monitor, efficiency):
+    """Every thruster of the 8, at 30 % and at 0 % of its thrust: detected within 1 s of the
+    fault, or of the lost thrust reaching 2 N where the thruster was idle until then (an
+    unused thruster cannot show its loss), named, and its efficiency within 0.1."""
+    act = Actuation(vehicle)
+    named, sized = 0, 0
+    for i, name in enumerate(act.channels):
+        fault = Fault("thruster", FAULT_T, thruster=name, efficiency=efficiency)
+        log = simulate_faults(vehicle, 35, faults=[fault], seed=100 + 10 * i + int(10 * efficiency))
+        alarms = detect(monitor, log).alarms
+        assert len(alarms) == 1, (name, alarms)
+        a = alarms[0]
+        lost = (1 - efficiency) * np.abs(act.thrusts(log.filter(like="cmd_").to_numpy())[:, i])
+        visible = log["t"][(log["t"] >= FAULT_T) & (lost >= 2.0)].min()  # NaN: never
+        deadline = (visible if np.isfinite(visible) else FAULT_T) + 1.0
+        assert FAULT_T <= a["t"] <= deadline, (name, a["t"], visible)
+        named += a["kind"] == "thruster_loss" and a["thruster"] == name
+        sized += a["efficiency"] is not None and abs(a["efficiency"] - efficiency) <= 0.1
+    assert named == 8 and sized == 8
+
+
+def test_external_force_is_not_blamed_on_a_thruster(vehicle, monitor):
+    fault = Fault("external", FAULT_T, force=(-15, 0, 0, 0, 0, 0))
+    log = simulate_faults(vehicle, 35, faults=[fault], seed=23)
+    (a,) = detect(monitor, log).alarms
+    assert a["kind"] == "external_force" and a["thruster"] is None
+    assert a["effect"] == "external_bias.u" and a["value"] == pytest.approx(-15.0, rel=0.1)
+
+
+@pytest.mark.parametrize("value", [10.0, -6.0])
+def test_buoyancy_change_is_named_with_its_size(vehicle, monitor, value):
+    fault = Fault("effect", FAULT_T, effect="buoyancy_offset", value=value)
+    log = simulate_faults(vehicle, 35, faults=[fault], seed=24)
+    (a,) = detect(monitor, log).alarms
+    assert a["kind"] == "model_change" and a["effect"] == "buoyancy_offset"
+    assert a["value"] == pytest.approx(value, rel=0.2) and 0.5 < a["confidence"] <= 1.0
+
+
+def test_no_false_alarm_on_healthy_held_out_runs(vehicle, monitor):
+    healthy = pd.concat([simulate_faults(vehicle, 300, seed=s, experiment=f"t{s}")
+                         for s in (50, 51)], ignore_index=True)  # fmt: skip
+    fa = monitor.false_alarms(healthy)
+    assert fa["alarms"] == 0 and fa["hours"] == pytest.approx(600 / 3600, rel=1e-3)
+    assert fa["interval"][0] == 0 and fa["interval"][1] == pytest.approx(3.689 * 6, rel=1e-3)
+
+
+def test_rate_threshold_extrapolates_an_exponential_tail(rng):
+    """i.i.d. Exp(1) at 10 Hz: the level crossed once per hour is ln(36000) = 10.49; the fit
+    sees 100 h of data but only its top 5 %."""
+    series = [rng.exponential(size=360_000) for _ in range(10)]
+    out = rate_threshold(series, hours=100.0, rate_per_hour=1.0, gap=1)
+    assert out["value"] == pytest.approx(np.log(36_000), rel=0.05)
+    assert rate_threshold([np.ones(50)], 1.0, 1.0, 1)["method"].startswith("2 x")
+
+
+def test_rate_interval_is_garwood():
+    assert rate_interval(0, 1.0) == pytest.approx((0.0, 3.6889), rel=1e-4)
+    lo, hi = rate_interval(10, 2.0)
+    assert lo == pytest.approx(4.7954 / 2, rel=1e-4) and hi == pytest.approx(18.3904 / 2, rel=1e-4)
+
+
+def test_a_model_without_force_equation_is_refused(vehicle):
+    from nnid.models.narx import NarxModel
+
+    narx = NarxModel(inputs=["cmd_h1"], outputs=["u"])
+    with pytest.raises(NnidInputError, match="equation error of a physics model"):
+        ResidualMonitor(narx).fit(pd.DataFrame({"t": [0.0]}))
+
+
+def test_cli_train_detect_and_follow(vehicle, tmp_path, chromium):
+    healthy = pd.concat([simulate_faults(vehicle, 100, seed=s, experiment=f"h{s}")
+                         for s in range(5)], ignore_index=True)  # fmt: skip
+    healthy.to_csv(tmp_path / "healthy.csv", index=False)
+    fault_h3 = Fault("thruster", FAULT_T, thruster="h3", efficiency=0.3)
+    faulty = simulate_faults(vehicle, 40, seed=61, faults=[fault_h3])
+    faulty.to_csv(tmp_path / "fault.csv", index=False)
+    runner = CliRunner()
+    model = tmp_path / "model"
+    config = str(REPO / "configs" / "detect_fossen.toml")
+    data, fault = str(tmp_path / "healthy.csv"), str(tmp_path / "fault.csv")
+    res = runner.invoke(
+        app, ["train", config, "--data", data, "--vehicle", str(OCTO), "--out", str(model)]
+    )
+    assert res.exit_code == 0, res.output
+    metrics = json.loads((model / "metrics.json").read_text())
+    assert metrics["detect"]["test_false_alarms"]["alarms"] == 0
+    assert (model / "monitor.json").is_file()
+    out = tmp_path / "det"
+    res = runner.invoke(app, ["detect", "--model", str(model), "--data", fault, "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    report = json.loads((out / "detect.json").read_text())
+    assert set(report) >= {"alarms", "threshold", "false_alarm_rate_per_hour", "samples", "seconds"}
+    (a,) = report["alarms"]
+    assert (a["kind"], a["thruster"], a["effect"]) == ("thruster_loss", "h3", None)
+    assert abs(a["efficiency"] - 0.3) <= 0.1 and a["severity"] > 1 and a["confidence"] > 0.5
+    rows = pd.read_csv(out / "alarms.csv")
+    assert rows["thruster"].tolist() == ["h3"]
+    followed = tmp_path / "follow"
+    args = ["detect", "--model", str(model), "--data", fault, "--out", str(followed), "--follow"]
+    res = runner.invoke(app, args)
+    assert res.exit_code == 0, res.output
+    assert res.output.index("ALARM t = ") < res.output.index("thruster h3 gives")
+    (b,) = json.loads((followed / "detect.json").read_text())["alarms"]
+    assert {k: b[k] for k in ("t", "thruster", "efficiency")} == {
+        k: a[k] for k in ("t", "thruster", "efficiency")
+    }
+    dom = chromium(tmp_path, out / "report.html", dump=True).stdout
+    assert 'data-images-ok="yes"' in dom and "Isolation evidence" in dom
+    chromium(tmp_path, out / "report.html", dump=False)
+    assert_rendered(tmp_path / "s.png")
+    # bad input: a folder without a monitor, a missing log
+    args = ["detect", "--model", str(tmp_path), "--data", fault, "--out", str(tmp_path / "x")]
+    res = runner.invoke(app, args)
+    assert res.exit_code == 2 and "monitor.json" in res.output
+    nope = str(tmp_path / "nope.csv")
+    res = runner.invoke(app, ["detect", "--model", str(model), "--data", nope, "--out", "y"])
+    assert res.exit_code == 2 and "nope.csv" in res.output
