@@ -141,6 +141,15 @@ def test_external_force_is_not_blamed_on_a_thruster(vehicle, monitor):
     assert a["effect"] == "external_bias.u" and a["value"] == pytest.approx(-15.0, rel=0.1)
 
 
+def test_a_snag_in_two_dofs_is_one_external_wrench(vehicle, monitor):
+    """A tether pulling off the centre: force and moment at once, one hypothesis with both."""
+    fault = Fault("external", FAULT_T, force=(-8, 0, 0, 0, 0, 1.5))
+    (a,) = detect(monitor, simulate_faults(vehicle, 35, faults=[fault], seed=25)).alarms
+    assert a["kind"] == "external_force" and a["thruster"] is None
+    assert a["wrench"]["u"]["value"] == pytest.approx(-8.0, rel=0.1)
+    assert a["wrench"]["r"]["value"] == pytest.approx(1.5, rel=0.1)
+
+
 @pytest.mark.parametrize("value", [10.0, -6.0])
 def test_buoyancy_change_is_named_with_its_size(vehicle, monitor, value):
     fault = Fault("effect", FAULT_T, effect="buoyancy_offset", value=value)

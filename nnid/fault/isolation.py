@@ -12,7 +12,10 @@ bᵢ fᵢ and its remaining efficiency is 1 − s.
 Kinds: ``thruster_loss`` (a thruster), ``external_force`` (``external_bias.<dof>``: a constant
 force such as a tether snag) and ``model_change`` (any other effect: ``buoyancy_offset`` for a
 payload, ``added_mass.<dof>``, damping). A thruster's signature follows its command, an external
-force is constant in the body frame, a buoyancy change follows the attitude. Hypotheses whose
+force is constant in the body frame, a buoyancy change follows the attitude; a constant external
+force in several DOFs at once (a tether pulling at a point off the centre) is one more
+hypothesis, the external_bias columns of all DOFs together, weighed against the one-parameter
+hypotheses by its penalised likelihood (BIC). Hypotheses whose
 whitened columns are nearly parallel on the window cannot be told apart by the data; among them
 the physically likelier is named (a thruster, then a buoyancy change: a vertical constant force on
 a level vehicle is a ballast change more often than a tether pulling down), and the confidence is
@@ -41,7 +44,8 @@ SIGNIFICANCE = 0.01
 @dataclass
 class Diagnosis:
     """What changed: ``kind``, the ``thruster`` and its ``efficiency`` (with a 95 % interval),
-    or the ``effect`` with its ``value`` and ``stderr``; ``confidence`` the posterior weight of
+    or the ``effect`` with its ``value`` and ``stderr`` (and, for a constant external force in
+    several DOFs, every component in ``wrench``); ``confidence`` the posterior weight (BIC) of
     the named hypothesis and those the data cannot tell from it; ``alternatives`` the next
     ones."""
 
@@ -57,6 +61,7 @@ class Diagnosis:
     p_value: float | None = None
     meaning: str = ""
     alternatives: list[dict] = field(default_factory=list)
+    wrench: dict[str, dict[str, float]] | None = None  # components of a constant external force
 
 
 def fitted_vehicle(plant):
@@ -137,11 +142,21 @@ def isolate(monitor, data: dict, residual: np.ndarray, rows: np.ndarray) -> Diag
         return Diagnosis("model_change", meaning="no hypothesis has a signature on this window")
     scored.sort(key=lambda s: -s.drss)
     index = {c.name: k for k, c in enumerate(cands)}
-    white = cols * np.sqrt(weights)[None, :, None]
-    logl = np.array([s.drss for s in scored]) / (2 * ws.tau_corr)
-    post = np.exp(logl - logl.max())
+    # penalised log-likelihood (BIC): one parameter each, and the constant external wrench,
+    # whose columns (the external_bias.<dof> of every DOF watched) fit jointly what they fit
+    # one by one: they have disjoint rows and the weights are per DOF
+    penalty = 0.5 * np.log(max(rows.size * len(plant.dofs_) / ws.tau_corr, 2.0))
+    logl = np.array([s.drss for s in scored]) / (2 * ws.tau_corr) - penalty
+    parts = [s for s in scored if s.candidate.kind == "external_bias"]
+    wrench_logl = sum(s.drss for s in parts) / (2 * ws.tau_corr) - len(parts) * penalty
+    top = max(logl.max(), wrench_logl)
+    post = np.exp(np.r_[logl, wrench_logl] - top)
     post /= post.sum()
+    if len(parts) > 1 and wrench_logl > logl.max():
+        return _wrench(parts, float(post[-1]), rss, scored, post)
+    post = post[:-1]
     best = scored[0]
+    white = cols * np.sqrt(weights)[None, :, None]
     b = white[:, :, index[best.name]].ravel()
     group = []
     for k, s in enumerate(scored):
@@ -174,6 +189,36 @@ def isolate(monitor, data: dict, residual: np.ndarray, rows: np.ndarray) -> Diag
     else:
         out.effect, out.value, out.stderr = s.name, float(s.value), float(s.stderr)
     return out
+
+
+def _wrench(parts: list, posterior: float, rss: float, scored: list, post: np.ndarray) -> Diagnosis:
+    """A constant external force and moment in several DOFs: named by its largest component,
+    every significant component in ``wrench``."""
+    main = max(parts, key=lambda s: s.drss)
+    return Diagnosis(
+        "external_force",
+        effect=main.name,
+        value=float(main.value),
+        stderr=float(main.stderr),
+        confidence=posterior,
+        explained=float(sum(s.drss for s in parts) / rss) if rss > 0 else 0.0,
+        p_value=float(main.p_value),
+        meaning="a constant external force and moment (tether, collision): "
+        + ", ".join(
+            f"{s.name.split('.')[1]} {s.value:.3g} ± {s.stderr:.2g}"
+            for s in parts
+            if s.p_value <= SIGNIFICANCE
+        ),
+        wrench={
+            s.name.split(".")[1]: {"value": float(s.value), "stderr": float(s.stderr)}
+            for s in parts
+            if s.p_value <= SIGNIFICANCE
+        },
+        alternatives=[
+            {"hypothesis": s.name, "posterior": float(p)}
+            for s, p in zip(scored, post, strict=False)
+        ][:5],
+    )
 
 
 def _kind(s) -> str:

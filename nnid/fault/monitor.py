@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from itertools import pairwise
 from pathlib import Path
 
 import numpy as np
@@ -188,16 +189,19 @@ class ResidualMonitor:
         return cfg
 
     def _pass(self, data, mu, whiten, s_inv, thresholds) -> Trace:
+        """The compiled update over every row; each run of rows of one experiment starts from
+        a fresh state (slices of the arrays, no copies: the pass is memory-bound)."""
         cfg = self._cfg(thresholds)
         n = data["t"].size
         out = np.empty((n, 21))
-        for code in np.unique(data["experiment"]):
-            rows = np.flatnonzero(data["experiment"] == code)
+        codes = data["experiment"]
+        starts = np.r_[0, np.flatnonzero(np.diff(codes)) + 1, n]
+        for a, b in pairwise(starts):
             buf = self._buffers(data["inputs"].shape[1])
-            out[rows] = kernel.run(
-                data["t"][rows],
-                data["x"][rows],
-                data["inputs"][rows],
+            kernel.run(
+                data["t"][a:b],
+                data["x"][a:b],
+                data["inputs"][a:b],
                 buf["prev"],
                 buf["st"],
                 cfg,
@@ -208,11 +212,11 @@ class ResidualMonitor:
                 mu,
                 whiten,
                 s_inv,
-                np.empty((rows.size, 21)),
+                out[a:b],
                 buf["work"],
                 buf["scratch"],
             )
-        names = data["experiment_names"][data["experiment"]]
+        names = data["experiment_names"][codes]
         return Trace(data["t"], names, out[:, :20], out[:, 20] == 1)
 
     # -- calibration ----------------------------------------------------------------------------

@@ -1,0 +1,195 @@
+"""Fault detection (issue 16): speed of the monitor and its accuracy on simulated faults.
+
+Run by hand: ``python benchmarks/bench_detect.py speed`` and ``... scenarios``.
+
+speed: the per-sample streaming update (median and 99th percentile over 20,000 samples,
+in-process, after compilation; targets 50 µs and 200 µs) and whole logs in batch mode (target
+1,000,000 samples/s), against a baseline in the same run: the same update written with NumPy and
+the physics package's own objects (Actuation, the compiled right-hand side called from Python).
+
+scenarios: the 8-thruster simulated vehicle (configs/vehicles/octorov_sim.toml) under its
+controller; the model and monitor as configs/detect_fossen.toml makes them (least squares on
+2 × 5 min of healthy flight, monitor calibrated on 3 × 5 min); faults at t = 20 s of 40-s runs:
+every thruster at 30 % and 0 % over 5 seeds, external forces, buoyancy changes; and one hour
+of healthy held-out flight for the false-alarm rate.
+"""
+
+from __future__ import annotations
+
+import datetime
+import sys
+import time
+from pathlib import Path
+
+import numba
+import numpy as np
+import pandas as pd
+from common import machine
+
+from nnid.datasets.faults import Fault, simulate_faults
+from nnid.fault.detect import detect
+from nnid.fault.monitor import ResidualMonitor, monitor_inputs
+from nnid.models.parametric import ParametricModel
+from nnid.physics import compiled
+from nnid.physics.thrusters import Actuation
+from nnid.trainers.least_squares import LeastSquares
+from nnid.vehicle import load_vehicle
+
+VEHICLE = Path(__file__).resolve().parents[1] / "configs" / "vehicles" / "octorov_sim.toml"
+
+
+def trained(vehicle) -> ResidualMonitor:
+    logs = [simulate_faults(vehicle, 300, seed=s, experiment=f"h{s}") for s in range(5)]
+    model = ParametricModel(
+        vehicle,
+        ["added_mass", "damping"],
+        trainer=LeastSquares(filter_lambda=1.0),
+        zoh_midpoint=True,
+    ).fit(pd.concat(logs[:2], ignore_index=True))
+    return ResidualMonitor(model).fit(pd.concat(logs[2:], ignore_index=True))
+
+
+def numpy_update(mon, form, act, state, t, x, u):
+    """The baseline: one sample with NumPy and the physics package's objects."""
+    if state.get("prev") is not None:
+        t0, x0, u0 = state["prev"]
+        dt = t - t0
+        mid = 0.5 * (x0 + x)
+        tau = mon.plant_.parts_.applied(act.nominal(u0[None]))[0]
+        xdot = compiled.rhs(form, mid, tau)
+        r = mon.mass_ @ ((x[6:12] - x0[6:12]) / dt - xdot[6:12]) * mon.mask_
+        z = mon.whiten_ @ (r - mon.mu_)
+        lam = 1 - np.exp(-dt / mon.time_constant_s)
+        state["ewma"] = (1 - lam) * state["ewma"] + lam * z
+        state["T"] = state["ewma"] @ mon.s_inv_ @ state["ewma"]
+    state["prev"] = (t, x.copy(), u.copy())
+
+
+def speed() -> None:
+    vehicle = load_vehicle(VEHICLE)
+    mon = trained(vehicle)
+    log = pd.concat(
+        [simulate_faults(vehicle, 600, seed=20 + s, experiment=f"b{s}") for s in range(2)],
+        ignore_index=True,
+    )
+    data = monitor_inputs(log, mon.plant_)
+    stream = mon.stream()
+    n = 20_000
+    times = np.empty(n)
+    for k in range(n):
+        a = time.perf_counter_ns()
+        stream.update(data["t"][k], data["x"][k], data["inputs"][k])
+        times[k] = time.perf_counter_ns() - a
+    form = mon.plant_.parts_.model(check=False).feature_form()
+    act = Actuation(mon.plant_.vehicle)
+    state = {"ewma": np.zeros(6)}
+    base = np.empty(2000)
+    for k in range(base.size):
+        a = time.perf_counter_ns()
+        numpy_update(mon, form, act, state, data["t"][k], data["x"][k], data["inputs"][k])
+        base[k] = time.perf_counter_ns() - a
+    big = pd.concat([log] * 10, ignore_index=True)
+    big["experiment"] = np.repeat([f"e{i}" for i in range(20)], len(log) // 2)
+    big_data = monitor_inputs(big, mon.plant_)
+    cfg = mon.threshold_values
+    kernel_s = min(
+        _timed(lambda: mon._pass(big_data, mon.mu_, mon.whiten_, mon.s_inv_, cfg)) for _ in range(3)
+    )
+    whole_s = min(_timed(lambda: mon.run(big)) for _ in range(2))
+    print(f"machine: {machine(numba=numba.__version__)}; date {datetime.date.today()}")
+    print(f"per-sample update: median {np.median(times) / 1e3:.2f} us, 99th percentile "
+          f"{np.percentile(times, 99) / 1e3:.2f} us (target 50 / 200 us)")  # fmt: skip
+    print(f"NumPy baseline: median {np.median(base) / 1e3:.1f} us "
+          f"({np.median(base) / np.median(times):.0f}x the compiled update)")  # fmt: skip
+    print(f"batch, arrays in memory: {len(big) / kernel_s:,.0f} samples/s over {len(big):,} "
+          f"samples; from the DataFrame (velocities read, inputs mapped): "
+          f"{len(big) / whole_s:,.0f} samples/s (target 1,000,000)")  # fmt: skip
+    print(f"NumPy baseline as samples/s: {1e9 / np.median(base):,.0f}")
+
+
+def _timed(fn) -> float:
+    t0 = time.perf_counter()
+    fn()
+    return time.perf_counter() - t0
+
+
+def scenarios() -> None:
+    vehicle = load_vehicle(VEHICLE)
+    t0 = time.perf_counter()
+    mon = trained(vehicle)
+    print(f"machine: {machine(numba=numba.__version__)}; date {datetime.date.today()}")
+    print(f"thresholds {mon.threshold_values}, calibrated on {mon.calibration_['hours']:.3f} h")
+    act = Actuation(vehicle)
+    rows = []
+    for seed in range(5):
+        for eff in (0.3, 0.0):
+            for i, name in enumerate(act.channels):
+                fault = Fault("thruster", 20.0, thruster=name, efficiency=eff)
+                log = simulate_faults(vehicle, 40, faults=[fault], seed=1000 + 100 * seed + i)
+                alarms = [a for a in detect(mon, log).alarms if a["t"] >= 20.0]
+                early = [a for a in detect(mon, log).alarms if a["t"] < 20.0]
+                a = alarms[0] if alarms else {}
+                lost = (1 - eff) * np.abs(act.thrusts(log.filter(like="cmd_").to_numpy())[:, i])
+                visible = log["t"][(log["t"] >= 20.0) & (lost >= 2.0)].min()
+                rows.append(
+                    {
+                        "seed": seed,
+                        "thruster": name,
+                        "truth": eff,
+                        "alarm_t": a.get("t"),
+                        "early_alarms": len(early),
+                        "visible_t": visible,
+                        "named": a.get("thruster") == name,
+                        "efficiency": a.get("efficiency"),
+                        "in_interval": a.get("efficiency") is not None
+                        and a["efficiency_low"] - 1e-9 <= eff <= a["efficiency_high"] + 1e-9,
+                    }
+                )
+    df = pd.DataFrame(rows)
+    delay = df["alarm_t"] - 20.0
+    deadline = df["visible_t"].where(df["visible_t"].notna(), 20.0) + 1.0
+    err = (df["efficiency"] - df["truth"]).abs()
+    print(f"thruster faults: {len(df)} runs (8 thrusters x 2 sizes x 5 seeds)")
+    print(f"  detected: {df['alarm_t'].notna().mean():.3f}; named right: {df['named'].mean():.3f}")
+    print(f"  delay after the fault: median {delay.median():.2f} s, within 1 s "
+          f"{(delay <= 1.0).mean():.3f}, max {delay.max():.2f} s")  # fmt: skip
+    print(f"  within 1 s of the fault or of the lost thrust reaching 2 N: "
+          f"{(df['alarm_t'] <= deadline).mean():.3f}")  # fmt: skip
+    inside = df["in_interval"].mean()
+    print(f"  efficiency error: median {err.median():.3f}, max {err.max():.3f}, within 0.1 "
+          f"{(err <= 0.1).mean():.3f}; truth in the 95 % interval {inside:.3f}")  # fmt: skip
+    print(f"  alarms before the fault: {df['early_alarms'].sum()}")
+    others = [
+        ("tether pull -15 N surge", Fault("external", 20.0, force=(-15, 0, 0, 0, 0, 0))),
+        ("side push 10 N sway", Fault("external", 20.0, force=(0, 10, 0, 0, 0, 0))),
+        ("snag -8 N + 1.5 N m yaw", Fault("external", 20.0, force=(-8, 0, 0, 0, 0, 1.5))),
+        ("payload 10 N heavy", Fault("effect", 20.0, effect="buoyancy_offset", value=10.0)),
+        ("float 6 N light", Fault("effect", 20.0, effect="buoyancy_offset", value=-6.0)),
+        ("payload 4 N heavy", Fault("effect", 20.0, effect="buoyancy_offset", value=4.0)),
+    ]
+    for label, fault in others:
+        for seed in (1, 2, 3):
+            log = simulate_faults(vehicle, 40, faults=[fault], seed=2000 + seed)
+            alarms = [a for a in detect(mon, log).alarms if a["t"] >= 20.0]
+            a = alarms[0] if alarms else None
+            if a is None:
+                print(f"  {label} seed {seed}: no alarm")
+                continue
+            size = a["value"] if a["value"] is not None else a["efficiency"]
+            what = a["effect"] or a["thruster"]
+            print(f"  {label} seed {seed}: t {a['t']:.2f} s, {a['kind']}, {what} = {size:.3g}, "
+                  f"confidence {a['confidence']:.2f}")  # fmt: skip
+    healthy = pd.concat(
+        [simulate_faults(vehicle, 600, seed=5000 + s, experiment=f"q{s}") for s in range(6)],
+        ignore_index=True,
+    )
+    fa = mon.false_alarms(healthy)
+    lo, hi = fa["interval"]
+    print(f"healthy held-out: {fa['alarms']} alarms in {fa['hours']:.2f} h; rate "
+          f"{fa['rate_per_hour']:.3g}/h, 95 % interval {lo:.3g}-{hi:.3g}/h "
+          f"(target {mon.false_alarm_per_hour:g}/h)")  # fmt: skip
+    print(f"total {time.perf_counter() - t0:.0f} s")
+
+
+if __name__ == "__main__":
+    {"speed": speed, "scenarios": scenarios}[sys.argv[1] if len(sys.argv) > 1 else "speed"]()
