@@ -1,6 +1,7 @@
 """Real faults: the residual monitor on the Haizhe AUV fault set (issue 16).
 
-Run by hand: ``python benchmarks/bench_haizhe_faults.py`` (needs ../shared/data/haizhe-auv-fault-2021).
+Run by hand: ``python benchmarks/bench_haizhe_faults.py``; it reads
+../shared/data/haizhe-auv-fault-2021.
 
 Protocol (unsupervised): the Fossen model of configs/vehicles/haizhe.toml (heave, roll, pitch and
 yaw equations; damping, thrust gain, buoyancy, constant moments and the centre of gravity fitted;
