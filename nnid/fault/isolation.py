@@ -29,6 +29,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pandas as pd
+from scipy.stats import f as f_dist
 
 from nnid.datasets.log import POSE, TAU, VELOCITY
 from nnid.loop.diagnose import Fit, screen
@@ -153,7 +154,7 @@ def isolate(monitor, data: dict, residual: np.ndarray, rows: np.ndarray) -> Diag
     post = np.exp(np.r_[logl, wrench_logl] - top)
     post /= post.sum()
     if len(parts) > 1 and wrench_logl > logl.max():
-        return _wrench(parts, float(post[-1]), rss, scored, post)
+        return _wrench(parts, ws, rows.size, rss, scored, post)
     post = post[:-1]
     best = scored[0]
     white = cols * np.sqrt(weights)[None, :, None]
@@ -191,29 +192,33 @@ def isolate(monitor, data: dict, residual: np.ndarray, rows: np.ndarray) -> Diag
     return out
 
 
-def _wrench(parts: list, posterior: float, rss: float, scored: list, post: np.ndarray) -> Diagnosis:
-    """A constant external force and moment in several DOFs: named by its largest component,
-    every significant component in ``wrench``."""
+def _wrench(parts: list, ws, rows: int, rss: float, scored: list, post: np.ndarray) -> Diagnosis:
+    """A constant external force and moment in several DOFs, fitted jointly: the residual
+    variance is the joint fit's (each part's own screen saw the others' force as noise); named
+    by its largest component, every significant component in ``wrench``."""
+    drss = sum(s.drss for s in parts)
+    n = rows * len(ws.dofs)
+    sigma2 = max(rss - drss, 1e-300) / max(n - len(parts), 1)
+    n_eff = max(n / ws.tau_corr - len(parts), 1.0)
+    comps = {}
+    for s in parts:
+        se = s.stderr * np.sqrt(sigma2 / s.sigma2)
+        p_value = float(f_dist.sf((s.value / se) ** 2, 1, n_eff)) if se > 0 else 0.0
+        if p_value <= SIGNIFICANCE:
+            comps[s.name.split(".")[1]] = {"value": float(s.value), "stderr": float(se)}
     main = max(parts, key=lambda s: s.drss)
+    dof = main.name.split(".")[1]
     return Diagnosis(
         "external_force",
         effect=main.name,
         value=float(main.value),
-        stderr=float(main.stderr),
-        confidence=posterior,
-        explained=float(sum(s.drss for s in parts) / rss) if rss > 0 else 0.0,
+        stderr=comps.get(dof, {"stderr": float(main.stderr)})["stderr"],
+        confidence=float(post[-1]),
+        explained=float(drss / rss) if rss > 0 else 0.0,
         p_value=float(main.p_value),
         meaning="a constant external force and moment (tether, collision): "
-        + ", ".join(
-            f"{s.name.split('.')[1]} {s.value:.3g} ± {s.stderr:.2g}"
-            for s in parts
-            if s.p_value <= SIGNIFICANCE
-        ),
-        wrench={
-            s.name.split(".")[1]: {"value": float(s.value), "stderr": float(s.stderr)}
-            for s in parts
-            if s.p_value <= SIGNIFICANCE
-        },
+        + ", ".join(f"{d} {c['value']:.3g} ± {c['stderr']:.2g}" for d, c in comps.items()),
+        wrench=comps,
         alternatives=[
             {"hypothesis": s.name, "posterior": float(p)}
             for s, p in zip(scored, post, strict=False)
