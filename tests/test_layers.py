@@ -17,6 +17,7 @@ ALLOWED = {
     "evaluation": {"physics", "datasets"},
     "trainers": {"physics", "datasets", "evaluation"},
     "models": {"physics", "datasets", "evaluation", "trainers"},
+    "fault": {"physics", "datasets", "evaluation", "trainers", "models", "loop"},
 }
 
 
