@@ -166,6 +166,8 @@ def scenarios() -> None:
         ("payload 10 N heavy", Fault("effect", 20.0, effect="buoyancy_offset", value=10.0)),
         ("float 6 N light", Fault("effect", 20.0, effect="buoyancy_offset", value=-6.0)),
         ("payload 4 N heavy", Fault("effect", 20.0, effect="buoyancy_offset", value=4.0)),
+        ("payload 2 kg, 4 N lift (W-B +15.6 N)", Fault("payload", 20.0, mass=2.0, value=4.0)),
+        ("payload 3 kg, 25 N lift (W-B +4.4 N)", Fault("payload", 20.0, mass=3.0, value=25.0)),
     ]
     for label, fault in others:
         for seed in (1, 2, 3):

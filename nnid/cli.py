@@ -374,22 +374,31 @@ def detect(
         raise NnidInputError("no such folder", source=str(model_dir), field="--model")
     monitor = ResidualMonitor.load(model_dir)
     window_s = window or _window_of(model_dir)
-    if follow:
-        from nnid.fault.follow import follow_csv
+    if data != "-" and not Path(data).exists():
+        raise NnidInputError("no such file or folder", source=data, field="--data")
+    if data == "-" and not follow:
+        raise NnidInputError("'-' (standard input) is read with --follow", field="--data")
+    try:
+        if follow:
+            from nnid.fault.follow import follow_csv
 
-        result = follow_csv(monitor, data, window_s, lambda line: out.print(line, highlight=False))
-    else:
-        from nnid.datasets.readers import load_log
+            result = follow_csv(monitor, data, window_s, _say)
+        else:
+            from nnid.datasets.readers import load_log
 
-        if not Path(data).exists():
-            raise NnidInputError("no such file or folder", source=data, field="--data")
-        log, _ = load_log(data, columns)
-        with _bar("detecting") as progress:
-            progress(0, None, "running the monitor")
-            result = run_detect(monitor, log, window_s)
+            log, _ = load_log(data, columns)
+            with _bar("detecting") as progress:
+                progress(0, None, "running the monitor")
+                result = run_detect(monitor, log, window_s)
+    except NnidInputError as exc:
+        raise exc.with_source(data) from None
     lines = write_detect_outputs(monitor, result, out_dir, source=data)
     for line in lines:
         out.print(line, highlight=False, soft_wrap=True)
+
+
+def _say(line: str) -> None:
+    out.print(line, highlight=False, soft_wrap=True)
 
 
 def _window_of(model_dir: Path) -> float:

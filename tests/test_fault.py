@@ -16,6 +16,7 @@ import pandas as pd
 import pytest
 from conftest import assert_rendered
 from numba import njit
+from sklearn.exceptions import NotFittedError
 from typer.testing import CliRunner
 
 from nnid.cli import app
@@ -146,8 +147,8 @@ def test_a_snag_in_two_dofs_is_one_external_wrench(vehicle, monitor):
     fault = Fault("external", FAULT_T, force=(-8, 0, 0, 0, 0, 1.5))
     (a,) = detect(monitor, simulate_faults(vehicle, 35, faults=[fault], seed=25)).alarms
     assert a["kind"] == "external_force" and a["thruster"] is None
-    assert a["wrench"]["u"]["value"] == pytest.approx(-8.0, rel=0.1)
-    assert a["wrench"]["r"]["value"] == pytest.approx(1.5, rel=0.1)
+    assert a["components"]["external_bias.u"]["value"] == pytest.approx(-8.0, rel=0.1)
+    assert a["components"]["external_bias.r"]["value"] == pytest.approx(1.5, rel=0.1)
 
 
 @pytest.mark.parametrize("value", [10.0, -6.0])
@@ -157,6 +158,15 @@ def test_buoyancy_change_is_named_with_its_size(vehicle, monitor, value):
     (a,) = detect(monitor, log).alarms
     assert a["kind"] == "model_change" and a["effect"] == "buoyancy_offset"
     assert a["value"] == pytest.approx(value, rel=0.2) and 0.5 < a["confidence"] <= 1.0
+
+
+def test_a_payload_is_named_by_its_weight_minus_buoyancy(vehicle, monitor):
+    """2 kg at the centre of gravity with 4 N of lift: W − B grows by 2 g − 4 = 15.6 N; the
+    added inertia is too small to resolve in 15 s and is not claimed."""
+    fault = Fault("payload", FAULT_T, mass=2.0, value=4.0)
+    (a,) = detect(monitor, simulate_faults(vehicle, 35, faults=[fault], seed=26)).alarms
+    assert a["kind"] == "model_change" and a["effect"] == "buoyancy_offset"
+    assert a["value"] == pytest.approx(2.0 * vehicle.g - 4.0, rel=0.2)
 
 
 def test_no_false_alarm_on_healthy_held_out_runs(vehicle, monitor):
@@ -182,12 +192,14 @@ def test_rate_interval_is_garwood():
     assert lo == pytest.approx(4.7954 / 2, rel=1e-4) and hi == pytest.approx(18.3904 / 2, rel=1e-4)
 
 
-def test_a_model_without_force_equation_is_refused(vehicle):
+def test_a_model_without_force_equation_or_an_uncalibrated_monitor_is_refused(vehicle):
     from nnid.models.narx import NarxModel
 
     narx = NarxModel(inputs=["cmd_h1"], outputs=["u"])
     with pytest.raises(NnidInputError, match="equation error of a physics model"):
         ResidualMonitor(narx).fit(pd.DataFrame({"t": [0.0]}))
+    with pytest.raises(NotFittedError, match="not calibrated yet"):
+        ResidualMonitor(ParametricModel(vehicle)).stream()
 
 
 def test_cli_train_detect_and_follow(vehicle, tmp_path, chromium):
@@ -227,6 +239,11 @@ def test_cli_train_detect_and_follow(vehicle, tmp_path, chromium):
     assert {k: b[k] for k in ("t", "thruster", "efficiency")} == {
         k: a[k] for k in ("t", "thruster", "efficiency")
     }
+    args = ["detect", "--model", str(model), "--data", "-", "--out", str(tmp_path / "stdin")]
+    res = runner.invoke(app, [*args, "--follow"], input=(tmp_path / "fault.csv").read_text())
+    assert res.exit_code == 0 and "thruster h3 gives" in res.output, res.output
+    res = runner.invoke(app, args)
+    assert res.exit_code == 2 and "--follow" in res.output
     dom = chromium(tmp_path, out / "report.html", dump=True).stdout
     assert 'data-images-ok="yes"' in dom and "Isolation evidence" in dom
     chromium(tmp_path, out / "report.html", dump=False)

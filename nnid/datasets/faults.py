@@ -16,7 +16,9 @@ Faults (:class:`Fault`), active from ``t``:
 - ``external``: a constant body-frame force and moment ``force`` (N, N m; a tether snag, a
   collision);
 - ``effect``: an effect of the vocabulary with its value (:func:`nnid.physics.effects.apply_effect`;
-  ``buoyancy_offset`` for a payload whose weight exceeds its buoyancy).
+  ``buoyancy_offset`` for a change of ballast);
+- ``payload``: ``mass`` kilograms added at the centre of gravity (weight and inertia grow)
+  with ``value`` newtons of buoyancy (the payload's displaced water).
 """
 
 from __future__ import annotations
@@ -41,13 +43,14 @@ from nnid.physics.thrusters import Actuation, apply_installation
 class Fault:
     """One fault from time ``t`` (s); see the module docstring for the kinds."""
 
-    kind: Literal["thruster", "external", "effect"]
+    kind: Literal["thruster", "external", "effect", "payload"]
     t: float
     thruster: str | None = None
     efficiency: float = 1.0
     force: tuple[float, ...] = (0.0,) * 6
     effect: str | None = None
     value: float = 0.0
+    mass: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -109,6 +112,20 @@ class _Allocator:
         return out
 
 
+def _with_payload(vehicle, mass: float, buoyancy: float):
+    """The vehicle carrying ``mass`` kg at its centre of gravity with ``buoyancy`` N of lift:
+    mass and weight grow, the rotational inertia by the payload's share (a compact payload
+    adds little), the buoyancy by its displaced water."""
+    data = vehicle.model_dump()
+    scale = (vehicle.mass + mass) / vehicle.mass
+    data["mass"] = vehicle.mass + mass
+    data["weight"] = vehicle.weight + mass * vehicle.g
+    data["buoyancy"] = vehicle.buoyancy + buoyancy
+    inertia = np.asarray(vehicle.inertia_matrix())
+    data["inertia"] = (inertia * (1 + 0.2 * (scale - 1))).tolist()
+    return type(vehicle).model_validate(data)
+
+
 def simulate_faults(
     vehicle,
     duration: float,
@@ -147,6 +164,9 @@ def simulate_faults(
             efficiency[on, names.index(fault.thruster)] = fault.efficiency
         elif fault.kind == "external":
             external[on] += np.asarray(fault.force, dtype=np.float64)
+        elif fault.kind == "payload":
+            effect_vehicle = _with_payload(effect_vehicle, fault.mass, fault.value)
+            phase[on] = 1
         else:
             effect_vehicle = apply_effect(effect_vehicle, fault.effect, fault.value)
             phase[on] = 1

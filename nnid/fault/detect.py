@@ -59,7 +59,7 @@ def alarm_record(
         "explained": diag.explained,
         "p_value": diag.p_value,
         "alternatives": diag.alternatives,
-        "wrench": diag.wrench,
+        "components": diag.components,
     }
 
 

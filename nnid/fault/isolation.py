@@ -12,14 +12,15 @@ bᵢ fᵢ and its remaining efficiency is 1 − s.
 Kinds: ``thruster_loss`` (a thruster), ``external_force`` (``external_bias.<dof>``: a constant
 force such as a tether snag) and ``model_change`` (any other effect: ``buoyancy_offset`` for a
 payload, ``added_mass.<dof>``, damping). A thruster's signature follows its command, an external
-force is constant in the body frame, a buoyancy change follows the attitude; a constant external
-force in several DOFs at once (a tether pulling at a point off the centre) is one more
-hypothesis, the external_bias columns of all DOFs together, weighed against the one-parameter
-hypotheses by its penalised likelihood (BIC). Hypotheses whose
-whitened columns are nearly parallel on the window cannot be told apart by the data; among them
-the physically likelier is named (a thruster, then a buoyancy change: a vertical constant force on
-a level vehicle is a ballast change more often than a tether pulling down), and the confidence is
-the posterior weight of the whole group, so it says how sure the *group* is.
+force is constant in the body frame, a buoyancy change follows the attitude. Two hypotheses of
+several parameters join the one-parameter ones, weighed by penalised likelihood (BIC): a
+constant external force and moment in every DOF watched (a tether pulling at a point off the
+centre), and a payload (its weight minus buoyancy with its mass in the translational added
+masses). Hypotheses whose whitened columns are nearly parallel on the window cannot be told
+apart by the data; among them the physically likelier is named (a thruster, then a buoyancy
+change: a vertical constant force on a level vehicle is a ballast change more often than a
+tether pulling down), and the confidence is the posterior weight of the whole group, so it says
+how sure the *group* is.
 """
 
 from __future__ import annotations
@@ -32,6 +33,7 @@ import pandas as pd
 from scipy.stats import f as f_dist
 
 from nnid.datasets.log import POSE, TAU, VELOCITY
+from nnid.datasets.preprocess import savgol_derivative, savgol_window
 from nnid.loop.diagnose import Fit, screen
 from nnid.loop.effects import Candidate, candidates
 from nnid.models.parametric import ParametricFossen, vehicle_with
@@ -45,10 +47,10 @@ SIGNIFICANCE = 0.01
 @dataclass
 class Diagnosis:
     """What changed: ``kind``, the ``thruster`` and its ``efficiency`` (with a 95 % interval),
-    or the ``effect`` with its ``value`` and ``stderr`` (and, for a constant external force in
-    several DOFs, every component in ``wrench``); ``confidence`` the posterior weight (BIC) of
-    the named hypothesis and those the data cannot tell from it; ``alternatives`` the next
-    ones."""
+    or the ``effect`` with its ``value`` and ``stderr`` (and, for a hypothesis of several
+    parameters, every significant one in ``components``); ``confidence`` the posterior weight
+    (BIC) of the named hypothesis and those the data cannot tell from it; ``alternatives`` the
+    next ones."""
 
     kind: str
     thruster: str | None = None
@@ -62,7 +64,7 @@ class Diagnosis:
     p_value: float | None = None
     meaning: str = ""
     alternatives: list[dict] = field(default_factory=list)
-    wrench: dict[str, dict[str, float]] | None = None  # components of a constant external force
+    components: dict[str, dict[str, float]] | None = None  # of a joint hypothesis
 
 
 def fitted_vehicle(plant):
@@ -75,26 +77,37 @@ def fitted_vehicle(plant):
         return plant.vehicle
 
 
-def midpoint_data(data: dict, rows: np.ndarray, vehicle) -> tuple[dict, pd.DataFrame]:
+def midpoint_data(
+    data: dict, rows: np.ndarray, vehicle, savgol: tuple[float, int] = (0.5, 2)
+) -> tuple[dict, pd.DataFrame]:
     """The arrays of the intervals ending at ``rows`` as the regression sees them: pose and
-    velocity at the midpoint, acceleration the difference quotient, the force of the commands
-    held over the interval (the monitor's residual is this equation's error)."""
+    velocity at the midpoint, the force of the commands held over the interval, and the
+    acceleration by a Savitzky-Golay derivative (``savgol``: window in seconds, order). Not the
+    difference quotient the residual is made of: a column built from the same noisy
+    difference would "explain" the residual's own noise (errors in variables; an added-mass
+    column then comes out near the vehicle's whole mass on a healthy window)."""
     x, x0 = data["x"][rows], data["x"][rows - 1]
     mid = 0.5 * (x + x0)
     step = x[:, 3:6] - x0[:, 3:6]
     step -= 2 * np.pi * np.floor((step + np.pi) / (2 * np.pi))
     mid[:, 3:6] = x0[:, 3:6] + 0.5 * step
-    dt = (data["t"][rows] - data["t"][rows - 1])[:, None]
+    span = np.arange(rows[0] - 1, rows[-1] + 1)
+    t = data["t"][span]
+    dt = float(np.median(np.diff(t)))
+    window = min(savgol_window(savgol[0], 1.0 / dt, savgol[1]), span.size - (1 - span.size % 2))
+    vel = data["x"][span, 6:12]
+    acc = np.column_stack([savgol_derivative(vel[:, j], dt, window, savgol[1]) for j in range(6)])
+    at = rows - span[0]
     act = Actuation(vehicle)
     inputs = data["inputs"][rows - 1]
     tau = act.nominal(inputs) if act.thrusters else inputs
     arrays = {
         "eta": mid[:, 0:6],
         "nu": mid[:, 6:12],
-        "nu_dot": (x[:, 6:12] - x0[:, 6:12]) / dt,
+        "nu_dot": 0.5 * (acc[at] + acc[at - 1]),
         "tau": tau,
         "angles_known": np.array(True),
-        "t": data["t"][rows] - 0.5 * dt[:, 0],
+        "t": 0.5 * (data["t"][rows] + data["t"][rows - 1]),
         "experiment": np.zeros(rows.size, dtype=int),
         "experiment_names": np.array(["window"], dtype=object),
     }
@@ -111,7 +124,7 @@ def isolate(monitor, data: dict, residual: np.ndarray, rows: np.ndarray) -> Diag
     if rows.size < 10:
         return Diagnosis("model_change", meaning="too few samples after the alarm to isolate")
     vehicle = fitted_vehicle(plant)
-    arrays, frame = midpoint_data(data, rows, vehicle)
+    arrays, frame = midpoint_data(data, rows, vehicle, (plant.savgol_window, 2))
     e = residual[rows] - monitor.mu_
     # the thrusters themselves stand for thrust changes; a DOF's installation coefficient
     # would only be a coarser copy of them
@@ -143,19 +156,25 @@ def isolate(monitor, data: dict, residual: np.ndarray, rows: np.ndarray) -> Diag
         return Diagnosis("model_change", meaning="no hypothesis has a signature on this window")
     scored.sort(key=lambda s: -s.drss)
     index = {c.name: k for k, c in enumerate(cands)}
-    # penalised log-likelihood (BIC): one parameter each, and the constant external wrench,
-    # whose columns (the external_bias.<dof> of every DOF watched) fit jointly what they fit
-    # one by one: they have disjoint rows and the weights are per DOF
+    # penalised log-likelihood (BIC) of the one-parameter hypotheses and of the two joint ones
     penalty = 0.5 * np.log(max(rows.size * len(plant.dofs_) / ws.tau_corr, 2.0))
     logl = np.array([s.drss for s in scored]) / (2 * ws.tau_corr) - penalty
-    parts = [s for s in scored if s.candidate.kind == "external_bias"]
-    wrench_logl = sum(s.drss for s in parts) / (2 * ws.tau_corr) - len(parts) * penalty
-    top = max(logl.max(), wrench_logl)
-    post = np.exp(np.r_[logl, wrench_logl] - top)
+    wrench = [f"external_bias.{d}" for d in plant.dofs_]
+    payload = ["buoyancy_offset", *(f"added_mass.{d}" for d in "uvw")]
+    joint = [_joint("external_force", wrench, cands, cols, e, ws, penalty)]
+    joint = [j for j in [*joint, _joint("model_change", payload, cands, cols, e, ws, penalty)] if j]
+    post = np.exp(
+        np.r_[logl, [j.logl for j in joint]] - max([logl.max(), *(j.logl for j in joint)])
+    )
     post /= post.sum()
-    if len(parts) > 1 and wrench_logl > logl.max():
-        return _wrench(parts, ws, rows.size, rss, scored, post)
-    post = post[:-1]
+    alternatives = [
+        {"hypothesis": s.name, "posterior": float(q)}
+        for s, q in zip(scored, post[: len(scored)], strict=True)
+    ]
+    if joint and max(j.logl for j in joint) > logl.max():
+        k = int(np.argmax([j.logl for j in joint]))
+        return joint[k].diagnosis(float(post[len(scored) + k]), rss, vehicle, alternatives[:5])
+    post = post[: len(scored)]
     best = scored[0]
     white = cols * np.sqrt(weights)[None, :, None]
     b = white[:, :, index[best.name]].ravel()
@@ -192,38 +211,84 @@ def isolate(monitor, data: dict, residual: np.ndarray, rows: np.ndarray) -> Diag
     return out
 
 
-def _wrench(parts: list, ws, rows: int, rss: float, scored: list, post: np.ndarray) -> Diagnosis:
-    """A constant external force and moment in several DOFs, fitted jointly: the residual
-    variance is the joint fit's (each part's own screen saw the others' force as noise); named
-    by its largest component, every significant component in ``wrench``."""
-    drss = sum(s.drss for s in parts)
-    n = rows * len(ws.dofs)
-    sigma2 = max(rss - drss, 1e-300) / max(n - len(parts), 1)
-    n_eff = max(n / ws.tau_corr - len(parts), 1.0)
-    comps = {}
-    for s in parts:
-        se = s.stderr * np.sqrt(sigma2 / s.sigma2)
-        p_value = float(f_dist.sf((s.value / se) ** 2, 1, n_eff)) if se > 0 else 0.0
-        if p_value <= SIGNIFICANCE:
-            comps[s.name.split(".")[1]] = {"value": float(s.value), "stderr": float(se)}
-    main = max(parts, key=lambda s: s.drss)
-    dof = main.name.split(".")[1]
-    return Diagnosis(
-        "external_force",
-        effect=main.name,
-        value=float(main.value),
-        stderr=comps.get(dof, {"stderr": float(main.stderr)})["stderr"],
-        confidence=float(post[-1]),
-        explained=float(drss / rss) if rss > 0 else 0.0,
-        p_value=float(main.p_value),
-        meaning="a constant external force and moment (tether, collision): "
-        + ", ".join(f"{d} {c['value']:.3g} ± {c['stderr']:.2g}" for d, c in comps.items()),
-        wrench=comps,
-        alternatives=[
-            {"hypothesis": s.name, "posterior": float(p)}
-            for s, p in zip(scored, post, strict=False)
-        ][:5],
-    )
+@dataclass
+class _Joint:
+    """A hypothesis of several parameters fitted together: a constant external force and
+    moment (``external_force``: the external_bias of every DOF watched), or a changed vehicle
+    (``model_change``: a payload's weight minus buoyancy with its mass in the translational
+    added masses)."""
+
+    kind: str
+    members: list  # the candidates
+    theta: np.ndarray
+    stderr: np.ndarray
+    p_values: np.ndarray
+    drss: float
+    logl: float
+
+    def diagnosis(self, posterior: float, rss: float, vehicle, alternatives: list) -> Diagnosis:
+        values = [c.value(float(t), vehicle) for c, t in zip(self.members, self.theta, strict=True)]
+        ses = [
+            float(se * abs(c.value_scale(vehicle)))
+            for c, se in zip(self.members, self.stderr, strict=True)
+        ]
+        keep = [k for k, p in enumerate(self.p_values) if p <= SIGNIFICANCE]
+        names = [c.name for c in self.members]
+        main = (
+            names.index("buoyancy_offset")
+            if "buoyancy_offset" in names
+            else max(keep or [0], key=lambda k: abs(self.theta[k]) / max(self.stderr[k], 1e-300))
+        )
+        components = {self.members[k].name: {"value": values[k], "stderr": ses[k]} for k in keep}
+        what = (
+            "a constant external force and moment (tether, collision)"
+            if self.kind == "external_force"
+            else "the vehicle changed (payload: weight, buoyancy and mass)"
+        )
+        return Diagnosis(
+            self.kind,
+            effect=self.members[main].name,
+            value=values[main],
+            stderr=ses[main],
+            confidence=posterior,
+            explained=self.drss / rss if rss > 0 else 0.0,
+            p_value=float(self.p_values[main]),
+            meaning=what
+            + ": "
+            + ", ".join(f"{n} {c['value']:.3g} ± {c['stderr']:.2g}" for n, c in components.items()),
+            components=components,
+            alternatives=alternatives,
+        )
+
+
+def _joint(
+    kind: str, names: list[str], cands: list, cols: np.ndarray, e: np.ndarray, ws, penalty: float
+) -> _Joint | None:
+    """Weighted least squares of the residual on the columns of ``names`` together (those of
+    them that are candidates; None when fewer than two are)."""
+    pick = [k for k, c in enumerate(cands) if c.name in names]
+    if len(pick) < 2:
+        return None
+    w = np.sqrt(ws.weights)
+    a = (cols[:, :, pick] * w[None, :, None]).reshape(-1, len(pick))
+    y = -(e * w[None, :]).ravel()
+    keep = np.abs(a).sum(0) > 0
+    if keep.sum() < 2:
+        return None
+    pick = [k for k, ok in zip(pick, keep, strict=True) if ok]
+    a = a[:, keep]
+    theta, *_ = np.linalg.lstsq(a, y, rcond=None)
+    resid = y - a @ theta
+    drss = float(y @ y - resid @ resid)
+    n = e.shape[0] * len(ws.dofs)
+    sigma2 = float(resid @ resid) / max(n - len(pick), 1)
+    cov = sigma2 * ws.tau_corr * np.linalg.pinv(a.T @ a)
+    se = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    n_eff = max(n / ws.tau_corr - len(pick), 1.0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        p_values = f_dist.sf(np.where(se > 0, (theta / se) ** 2, np.inf), 1, n_eff)
+    logl = drss / (2 * ws.tau_corr) - len(pick) * penalty
+    return _Joint(kind, [cands[k] for k in pick], theta, se, p_values, drss, logl)
 
 
 def _kind(s) -> str:

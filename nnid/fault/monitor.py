@@ -20,6 +20,8 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from sklearn.base import BaseEstimator
+from sklearn.utils.validation import check_is_fitted
 
 from nnid.datasets.arrays import log_arrays
 from nnid.errors import NnidInputError
@@ -38,6 +40,10 @@ TRACE_COLUMNS = [
     "T",
     "g",
 ]
+UNCALIBRATED = (
+    "this monitor is not calibrated yet: call fit(healthy_log) first, or load one with "
+    "ResidualMonitor.load(dir)"
+)
 _KINDS = {"poly": kernel.CURVE_POLY, "signed_quadratic": kernel.CURVE_QUADRATIC}
 
 
@@ -129,7 +135,7 @@ class Trace:
         return out
 
 
-class ResidualMonitor:
+class ResidualMonitor(BaseEstimator):
     """Detect a change of a vehicle from its model's equation error (see the module docstring).
 
     Parameters: ``model`` a fitted nnid model with a force equation (or a hybrid, watched
@@ -156,7 +162,10 @@ class ResidualMonitor:
 
     # -- the compiled pieces --------------------------------------------------------------------
     def _setup(self) -> None:
+        from nnid.models.base import NOT_FITTED
+
         plant = physics_of(self.model)
+        check_is_fitted(plant, msg=NOT_FITTED)
         self.plant_ = plant
         model = plant.parts_.model(check=False)
         self.form_ = _args(model.feature_form())
@@ -236,6 +245,13 @@ class ResidualMonitor:
             )
         mu = np.where(active, raw.mean(0), 0.0)
         cov = np.cov(raw[:, active].T).reshape(int(active.sum()), -1)
+        if np.any(np.diag(cov) <= 0):
+            quiet = [d for d, v in zip(np.array(DOFS)[active], np.diag(cov), strict=True) if v <= 0]
+            raise NnidInputError(
+                f"the healthy residual has no variance in {', '.join(quiet)} (noise-free data?): "
+                "the monitor cannot normalise it",
+                field="data",
+            )
         whiten = np.zeros((6, 6))
         whiten[np.ix_(active, active)] = np.linalg.inv(np.linalg.cholesky(cov))
         z = self._pass(data, mu, whiten, np.eye(6), none).values
@@ -274,11 +290,13 @@ class ResidualMonitor:
     # -- detection ------------------------------------------------------------------------------
     def run(self, log: pd.DataFrame) -> Trace:
         """The monitor over a whole log (each experiment from a fresh state)."""
+        check_is_fitted(self, "thresholds_", msg=UNCALIBRATED)
         data = monitor_inputs(log, self.plant_)
         return self._pass(data, self.mu_, self.whiten_, self.s_inv_, self.threshold_values)
 
     def stream(self) -> Stream:
         """A one-sample-at-a-time monitor with this calibration."""
+        check_is_fitted(self, "thresholds_", msg=UNCALIBRATED)
         return Stream(self)
 
     def false_alarms(self, log: pd.DataFrame, confidence: float = 0.95) -> dict:
@@ -356,9 +374,16 @@ class Stream:
         self._buf = m._buffers(len(m.channels_))
         self._cfg = m._cfg(m.threshold_values)
         self._fixed = (m.form_, m.mass_, m.mask_, m.act_, m.mu_, m.whiten_, m.s_inv_)
+        self._n = len(m.channels_)
         self.values = np.full(20, np.nan)
 
     def update(self, t: float, x: np.ndarray, inputs: np.ndarray) -> int:
+        # the compiled update does not check bounds: the shapes are checked here, once a call
+        if x.ndim != 1 or x.size != 12 or inputs.size != self._n or x.dtype != np.float64:
+            raise NnidInputError(
+                f"update(t, x, inputs) takes x as 12 float64 values (η then ν) and "
+                f"{self._n} inputs; got x {x.shape} {x.dtype}, inputs {inputs.shape}"
+            )
         form, mass, mask, act, mu, whiten, s_inv = self._fixed
         b = self._buf
         return kernel.update(t, x, inputs, b["prev"], b["st"], self._cfg, form, mass, mask, act,
