@@ -121,6 +121,36 @@ def _integrate(
         states[step + 1] = x
 
 
+#: below this many RK4 steps in a batch, threads cost more than they save (a parallel launch is
+#: tens of microseconds; a closed-loop replay makes one call per sample)
+PARALLEL_MIN_STEPS = 20_000
+
+
+@njit(cache=True)
+def _integrate_serial(
+    x0, tau, dt, substeps, m_inv, q_rb, q_a, g_mat, theta, codes, ma, bias, cur, u_c, lag, states
+):
+    for b in range(x0.shape[0]):
+        _integrate(
+            x0[b],
+            tau[b],
+            dt,
+            substeps,
+            m_inv,
+            q_rb,
+            q_a,
+            g_mat,
+            theta,
+            codes,
+            ma,
+            bias,
+            cur,
+            u_c,
+            lag,
+            states[b],
+        )
+
+
 @njit(cache=True, parallel=True)
 def _integrate_batch(
     x0, tau, dt, substeps, m_inv, q_rb, q_a, g_mat, theta, codes, ma, bias, cur, u_c, lag, states
@@ -176,7 +206,8 @@ def integrate_rk4(
     """Fixed-step RK4 with ``substeps`` per sample, τ held over each sample (zero-order hold).
 
     ``x0`` is ``[n]`` or ``[B, n]``, ``tau`` ``[N, 6]`` or ``[B, N, 6]``; returns the states at
-    the N+1 sample times, ``[N+1, n]`` or ``[B, N+1, n]``. Batches run in parallel threads.
+    the N+1 sample times, ``[N+1, n]`` or ``[B, N+1, n]``. Batches of at least
+    :data:`PARALLEL_MIN_STEPS` steps run in parallel threads (the same numbers either way).
     """
     x0 = np.ascontiguousarray(x0, dtype=np.float64)
     tau = np.ascontiguousarray(tau, dtype=np.float64)
@@ -185,5 +216,7 @@ def integrate_rk4(
         _integrate(x0, tau, float(dt), int(substeps), *_args(form), states)
         return states
     states = np.empty((x0.shape[0], tau.shape[1] + 1, x0.shape[1]))
-    _integrate_batch(x0, tau, float(dt), int(substeps), *_args(form), states)
+    small = x0.shape[0] * tau.shape[1] * substeps < PARALLEL_MIN_STEPS
+    kernel = _integrate_serial if small else _integrate_batch
+    kernel(x0, tau, float(dt), int(substeps), *_args(form), states)
     return states
