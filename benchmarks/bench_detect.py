@@ -96,6 +96,10 @@ def speed() -> None:
         _timed(lambda: mon._pass(big_data, mon.mu_, mon.whiten_, mon.s_inv_, cfg)) for _ in range(3)
     )
     whole_s = min(_timed(lambda: mon.run(big)) for _ in range(2))
+    one = {**big_data, "experiment": np.zeros_like(big_data["experiment"])}
+    one_s = min(
+        _timed(lambda: mon._pass(one, mon.mu_, mon.whiten_, mon.s_inv_, cfg)) for _ in range(3)
+    )
     print(f"machine: {machine(numba=numba.__version__)}; date {datetime.date.today()}")
     print(f"per-sample update: median {np.median(times) / 1e3:.2f} us, 99th percentile "
           f"{np.percentile(times, 99) / 1e3:.2f} us (target 50 / 200 us)")  # fmt: skip
@@ -104,6 +108,7 @@ def speed() -> None:
     print(f"batch, arrays in memory: {len(big) / kernel_s:,.0f} samples/s over {len(big):,} "
           f"samples; from the DataFrame (velocities read, inputs mapped): "
           f"{len(big) / whole_s:,.0f} samples/s (target 1,000,000)")  # fmt: skip
+    print(f"one experiment of {len(big):,} samples (one thread): {len(big) / one_s:,.0f} samples/s")
     print(f"NumPy baseline as samples/s: {1e9 / np.median(base):,.0f}")
 
 

@@ -28,6 +28,7 @@ from sklearn.metrics import roc_auc_score
 
 from nnid.datasets.readers import load_log
 from nnid.fault.detect import alarm_record
+from nnid.fault.isolation import isolate
 from nnid.fault.monitor import ResidualMonitor, monitor_inputs
 from nnid.models.parametric import ParametricModel
 from nnid.trainers.least_squares import LeastSquares
@@ -87,6 +88,17 @@ def main() -> None:
     for k in np.flatnonzero(trace.alarm):
         a = alarm_record(monitor, arrays, trace, int(k), 5.0)
         named[runs.loc[a["experiment"], "label"]][a["effect"] or a["thruster"] or a["kind"]] += 1
+    # the diagnosis of every run, alarm or not: what the isolation names on the run after its
+    # first 2 s (the surface exit), as if an alarm had been raised there
+    diagnosed: dict[str, Counter] = {c: Counter() for c in sorted(set(lab))}
+    for name in score.index:
+        rows = np.flatnonzero(
+            (trace.experiment == name) & (trace.t >= trace.t[trace.experiment == name].min() + 2.0)
+        )
+        if rows.size < 20:
+            continue
+        d = isolate(monitor, arrays, trace.values[:, 0:6], rows)
+        diagnosed[lab[name]][d.effect or d.thruster or d.kind] += 1
     normal_fa = float((score[lab == "Normal"] > 1).mean())
     print(f"Normal test runs with an alarm: {normal_fa:.3f} ({(lab == 'Normal').sum()} runs)")
     print(
@@ -108,6 +120,11 @@ def main() -> None:
         "mean battery voltage": g["voltage"].mean(),
     }
     test_runs = runs.index[runs["split"] == "test"]
+    print("| class | what the isolation names on each whole run (2 s on), most frequent first |")
+    print("|---|---|")
+    for c in sorted(set(lab)):
+        top = ", ".join(f"{k} ×{n}" for k, n in diagnosed[c].most_common(4))
+        print(f"| {c} | {top} |")
     print("| per-run summary | " + " | ".join(sorted(set(lab) - {"Normal"})) + " |")
     print("|---|" + "---|" * (len(set(lab)) - 1))
     for name, s in summaries.items():

@@ -22,7 +22,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from nnid.physics.compiled import _rhs
 
@@ -208,4 +208,20 @@ def run(ts, xs, cmds, prev, st, cfg, form, mass, mask, act, mu, whiten, s_inv, o
             row[i] = np.nan
         row[20] = _update(ts[k], xs[k], cmds[k], prev, st, cfg, form, mass, mask, act, mu,
                           whiten, s_inv, row, work, scratch)  # fmt: skip
+    return out
+
+
+@njit(cache=True, parallel=True)
+def run_blocks(starts, ts, xs, cmds, cfg, form, mass, mask, act, mu, whiten, s_inv, out):
+    """:func:`run` over the row blocks [starts[j], starts[j + 1]) (the experiments), each from a
+    fresh state, the blocks in parallel threads (each block's numbers are :func:`run`'s)."""
+    n_ch = cmds.shape[1]
+    for j in prange(starts.shape[0] - 1):
+        a, b = starts[j], starts[j + 1]
+        prev = np.zeros(13 + n_ch)
+        st = np.zeros(STATE_SIZE)
+        work = np.zeros((4, max(18, n_ch)))
+        scratch = np.zeros((4, 18))
+        run(ts[a:b], xs[a:b], cmds[a:b], prev, st, cfg, form, mass, mask, act, mu, whiten,
+            s_inv, out[a:b], work, scratch)  # fmt: skip
     return out

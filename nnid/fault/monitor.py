@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from itertools import pairwise
 from pathlib import Path
 
 import numpy as np
@@ -199,32 +198,27 @@ class ResidualMonitor(BaseEstimator):
 
     def _pass(self, data, mu, whiten, s_inv, thresholds) -> Trace:
         """The compiled update over every row; each run of rows of one experiment starts from
-        a fresh state (slices of the arrays, no copies: the pass is memory-bound)."""
+        a fresh state, the experiments in parallel threads (slices of the arrays, no copies:
+        the pass is memory-bound)."""
         cfg = self._cfg(thresholds)
         n = data["t"].size
-        out = np.empty((n, 21))
         codes = data["experiment"]
-        starts = np.r_[0, np.flatnonzero(np.diff(codes)) + 1, n]
-        for a, b in pairwise(starts):
-            buf = self._buffers(data["inputs"].shape[1])
-            kernel.run(
-                data["t"][a:b],
-                data["x"][a:b],
-                data["inputs"][a:b],
-                buf["prev"],
-                buf["st"],
-                cfg,
-                self.form_,
-                self.mass_,
-                self.mask_,
-                self.act_,
-                mu,
-                whiten,
-                s_inv,
-                out[a:b],
-                buf["work"],
-                buf["scratch"],
-            )
+        starts = np.r_[0, np.flatnonzero(np.diff(codes)) + 1, n].astype(np.int64)
+        out = kernel.run_blocks(
+            starts,
+            data["t"],
+            data["x"],
+            data["inputs"],
+            cfg,
+            self.form_,
+            self.mass_,
+            self.mask_,
+            self.act_,
+            mu,
+            whiten,
+            s_inv,
+            np.empty((n, 21)),
+        )
         names = data["experiment_names"][codes]
         return Trace(data["t"], names, out[:, :20], out[:, 20] == 1)
 
