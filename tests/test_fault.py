@@ -25,6 +25,7 @@ from nnid.datasets.measurement import Measurement
 from nnid.errors import NnidInputError
 from nnid.fault import kernel
 from nnid.fault.detect import detect
+from nnid.fault.follow import follow_csv
 from nnid.fault.monitor import ResidualMonitor, monitor_inputs, pack_actuation
 from nnid.fault.thresholds import rate_interval, rate_threshold
 from nnid.models.parametric import ParametricModel
@@ -239,6 +240,12 @@ def test_cli_train_detect_and_follow(vehicle, tmp_path, chromium):
     assert {k: b[k] for k in ("t", "thruster", "efficiency")} == {
         k: a[k] for k in ("t", "thruster", "efficiency")
     }
+    # a long watch keeps a bounded history: the same alarm with only the last rows kept
+    kept = follow_csv(ResidualMonitor.load(model), fault, 10.0, lambda line: None, keep_rows=150)
+    assert 150 <= kept.trace.t.size <= 300 and kept.trace.t[-1] == faulty["t"].iloc[-1]
+    assert [(x["t"], x["thruster"], x["efficiency"]) for x in kept.alarms] == [
+        (b["t"], b["thruster"], b["efficiency"])
+    ]
     args = ["detect", "--model", str(model), "--data", "-", "--out", str(tmp_path / "stdin")]
     res = runner.invoke(app, [*args, "--follow"], input=(tmp_path / "fault.csv").read_text())
     assert res.exit_code == 0 and "thruster h3 gives" in res.output, res.output

@@ -55,8 +55,11 @@ def follow_csv(
     window_s: float,
     say: Callable[[str], None],
     idle_s: float = 3.0,
+    keep_rows: int = 100_000,
 ) -> DetectResult:
-    """Watch ``source`` row by row; ``say`` gets one line per alarm and per isolation."""
+    """Watch ``source`` row by row; ``say`` gets one line per alarm and per isolation. The
+    last ``keep_rows`` to twice as many samples are kept (for isolation and the report's
+    traces), so a monitor left running does not grow without bound; every alarm is kept."""
     start = time.perf_counter()
     rows = _rows(source, idle_s)
     header = next(rows, None)
@@ -81,16 +84,17 @@ def follow_csv(
     stream = monitor.stream()
     x, u = np.zeros(12), np.zeros(len(inputs))
     ts, xs, us, vals, codes, names = [], [], [], [], [], []
-    pending: list[int] = []
+    pending: list[int] = []  # row numbers counted from the first row ever read
     alarm_rows: list[int] = []
     alarms: list[dict] = []
     current = None
+    dropped = 0  # rows forgotten from the front of the buffers
 
     def isolate(k: int) -> None:
         data = _arrays(ts, xs, us, codes, names)
         trace = Trace(data["t"], np.array(names, dtype=object)[data["experiment"]],
                       np.array(vals), np.zeros(len(ts), dtype=bool))  # fmt: skip
-        record = alarm_record(monitor, data, trace, k, window_s)
+        record = alarm_record(monitor, data, trace, k - dropped, window_s)
         alarms.append(record)
         say(describe_alarm(record))
 
@@ -114,19 +118,27 @@ def follow_csv(
         us.append(u.copy())
         vals.append(stream.values.copy())
         codes.append(len(names) - 1)
+        row_no = dropped + len(ts) - 1
         if code == 1:
-            pending.append(len(ts) - 1)
-            alarm_rows.append(len(ts) - 1)
+            pending.append(row_no)
+            alarm_rows.append(row_no)
             say(f"ALARM t = {t:.2f} s{f' ({name})' if name else ''}: isolating over {window_s} s")
-        while pending and (t - ts[pending[0]] >= window_s or codes[pending[0]] != codes[-1]):
+        while pending and (
+            t - ts[pending[0] - dropped] >= window_s or codes[pending[0] - dropped] != codes[-1]
+        ):
             isolate(pending.pop(0))
+        if len(ts) > 2 * keep_rows and not pending:  # forget the older half, in one step
+            cut = len(ts) - keep_rows
+            for buf in (ts, xs, us, vals, codes):
+                del buf[:cut]
+            dropped += cut
     for k in pending:
         isolate(k)
     if not ts:
         raise NnidInputError("has a header and no rows", source=where)
     data = _arrays(ts, xs, us, codes, names)
     trace = Trace(data["t"], np.array(names, dtype=object)[data["experiment"]], np.array(vals),
-                  np.isin(np.arange(len(ts)), alarm_rows))  # fmt: skip
+                  np.isin(np.arange(len(ts)) + dropped, alarm_rows))  # fmt: skip
     return DetectResult(trace, alarms, time.perf_counter() - start)
 
 
