@@ -26,7 +26,7 @@ from nnid.datasets.arrays import log_arrays
 from nnid.errors import NnidInputError
 from nnid.fault import kernel
 from nnid.fault.thresholds import rate_interval, rate_threshold
-from nnid.physics.compiled import _args
+from nnid.physics.compiled import form_args
 from nnid.physics.dofs import DOFS, FORCES
 from nnid.physics.thrusters import Actuation
 from nnid.serialization import read_json, write_json
@@ -167,7 +167,7 @@ class ResidualMonitor(BaseEstimator):
         check_is_fitted(plant, msg=NOT_FITTED)
         self.plant_ = plant
         model = plant.parts_.model(check=False)
-        self.form_ = _args(model.feature_form())
+        self.form_ = form_args(model.feature_form())
         if self.form_[-1] > 0:
             raise NnidInputError(
                 "the monitor's model has an actuator lag; fit one without (its state would be "

@@ -176,7 +176,8 @@ def _integrate_batch(
         )
 
 
-def _args(form: FeatureForm) -> tuple:
+def form_args(form: FeatureForm) -> tuple:
+    """The form as the compiled kernels take it: a tuple of arrays and scalars."""
     return (
         form.m_inv,
         form.q_rb,
@@ -196,7 +197,7 @@ def rhs(form: FeatureForm, x: np.ndarray, tau: np.ndarray) -> np.ndarray:
     """ẋ at one state (for tests and adaptive integrators)."""
     x = np.ascontiguousarray(x, dtype=np.float64)
     out = np.empty_like(x)
-    _rhs(x, np.ascontiguousarray(tau, dtype=np.float64), *_args(form), out, np.empty((4, 18)))
+    _rhs(x, np.ascontiguousarray(tau, dtype=np.float64), *form_args(form), out, np.empty((4, 18)))
     return out
 
 
@@ -213,10 +214,10 @@ def integrate_rk4(
     tau = np.ascontiguousarray(tau, dtype=np.float64)
     if x0.ndim == 1:
         states = np.empty((tau.shape[0] + 1, x0.shape[0]))
-        _integrate(x0, tau, float(dt), int(substeps), *_args(form), states)
+        _integrate(x0, tau, float(dt), int(substeps), *form_args(form), states)
         return states
     states = np.empty((x0.shape[0], tau.shape[1] + 1, x0.shape[1]))
     small = x0.shape[0] * tau.shape[1] * substeps < PARALLEL_MIN_STEPS
     kernel = _integrate_serial if small else _integrate_batch
-    kernel(x0, tau, float(dt), int(substeps), *_args(form), states)
+    kernel(x0, tau, float(dt), int(substeps), *form_args(form), states)
     return states
