@@ -35,7 +35,8 @@ from scipy.stats import f as f_dist
 from nnid.datasets.arrays import log_arrays
 from nnid.datasets.log import VELOCITY
 from nnid.datasets.preprocess import zoh_midpoint
-from nnid.evaluation.metrics import excited_dofs, nrmse, rmse, warmup_mask
+from nnid.evaluation.evaluate import score_prediction
+from nnid.evaluation.metrics import excited_dofs, rmse, warmup_mask
 from nnid.evaluation.prediction import predict_states
 from nnid.loop.effects import Candidate, nominal_forces
 from nnid.models.parametric import ParametricFossen, filter_settled, vehicle_with
@@ -501,22 +502,24 @@ def predict(vehicle, log: pd.DataFrame, mode, dofs: tuple[str, ...] = DOFS) -> p
         return predict_states(Parts.from_vehicle(vehicle), log, tau, mode)
 
 
+def velocity_scores(
+    vehicle, log: pd.DataFrame, mode, warmup_s: float, dofs: tuple[str, ...] = DOFS
+) -> tuple[dict[str, float | None], dict[str, float]]:
+    """Velocity NRMSE per excited DOF of ``dofs`` for a prediction ``mode`` ("free_run",
+    "one_step" or k steps) and the mean ``total``, scored by the one rule of
+    :func:`nnid.evaluation.evaluate.score_prediction`: None where the prediction diverged (not
+    finite, or far outside the measured range), listed with the time it left."""
+    pred = predict(vehicle, log, mode, dofs)
+    cols = excited_dofs(log, [c for c in VELOCITY if c in log and c in dofs])
+    nrmse_, _, diverged = score_prediction(log, pred, cols, warmup_mask(log, warmup_s))
+    return nrmse_, diverged
+
+
 def velocity_errors(
     vehicle, log: pd.DataFrame, mode, warmup_s: float, dofs: tuple[str, ...] = DOFS
 ) -> dict[str, float | None]:
-    """Velocity NRMSE per excited DOF of ``dofs`` for a prediction ``mode`` ("free_run",
-    "one_step" or k steps), and the mean ``total``; None where the simulation diverged."""
-    pred = predict(vehicle, log, mode, dofs)
-    dofs = excited_dofs(log, [c for c in VELOCITY if c in log and c in dofs])
-    mask = warmup_mask(log, warmup_s)
-    out: dict[str, float | None] = {}
-    for d in dofs:
-        value = nrmse(log[d].to_numpy()[mask], pred[d].to_numpy()[mask])
-        diverged = not np.isfinite(pred[d].to_numpy()[mask]).all()
-        out[d] = None if diverged or not np.isfinite(value) else value
-    finite = [v for v in out.values() if v is not None]
-    out["total"] = float(np.mean(finite)) if finite and len(finite) == len(dofs) else None
-    return out
+    """The NRMSE part of :func:`velocity_scores`."""
+    return velocity_scores(vehicle, log, mode, warmup_s, dofs)[0]
 
 
 def force_residual(ws: Workspace, vehicle, part: str = "val") -> np.ndarray:

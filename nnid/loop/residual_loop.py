@@ -36,6 +36,7 @@ from nnid.loop.diagnose import (
     search_nonlinear,
     sindy_opinion,
     velocity_errors,
+    velocity_scores,
 )
 from nnid.loop.effects import candidates, input_channels, nominal_forces
 from nnid.loop.residuals import correlation_analysis
@@ -45,6 +46,11 @@ from nnid.physics.parts import Parts
 from nnid.threads import torch_threads
 from nnid.trainers.history import Progress, silent
 from nnid.trainers.least_squares import significant
+
+#: the gate's horizon where the free run diverges, and the k-step error reported (seconds)
+FALLBACK_S = 1.0
+#: an effect whose one-step held-out error is this many times the fit's is never added
+MAX_WORSENING = 10.0
 
 
 class ResidualLoop:
@@ -182,6 +188,7 @@ class ResidualLoop:
         ws.tau_corr = residual_correlation_time(fit.e, self.dofs_)
         self.baseline_ = fit
         self.steps_: list[Step] = []
+        self.gates_: list[str | None] = []  # the simulation each pass's gate compared
         added: list[Scored] = []
         pool = [
             c
@@ -231,46 +238,91 @@ class ResidualLoop:
         chosen, augmented = self._simulation_gate(ws, fit, [s for s in scored if s.admissible])
         return Step(scored, chosen, sindy, augmented)
 
+    def _gate_modes(self, ws: Workspace) -> list[tuple[str, str | int]]:
+        """The held-out simulations the gate may compare, first choice first: the free run (or
+        ``gate_horizon_s`` ahead), then :data:`FALLBACK_S` ahead, then one step. The first one
+        in which the current fit does not diverge is used, for the fit and every candidate
+        alike: a diverged error is never compared with a finite one."""
+        dt = float(np.median(np.diff(ws.val["t"].to_numpy())))
+        modes: list[tuple[str, str | int]] = []
+        if self.gate_horizon_s is None:
+            modes.append(("free run", "free_run"))
+        else:
+            modes.append(
+                (f"{self.gate_horizon_s:g} s ahead", max(round(self.gate_horizon_s / dt), 1))
+            )
+        k = max(round(FALLBACK_S / dt), 1)
+        if all(m != k for _, m in modes):
+            modes.append((f"{FALLBACK_S:g} s ahead", k))
+        return [*modes, ("one step", "one_step")]
+
     def _simulation_gate(
         self, ws: Workspace, fit: Fit, admissible: list[Scored]
     ) -> tuple[Scored | None, Fit | None]:
         """The best-ranked admissible candidate that also improves the held-out simulation
-        (free run, or k steps ahead with ``gate_horizon_s``).
+        (free run, or k steps ahead with ``gate_horizon_s``; where the fit's free run diverges,
+        the first horizon at which it does not, for every candidate alike) and does not make
+        the one-step error worse by more than :data:`MAX_WORSENING` times.
 
         A column built from measured accelerations or velocities carries their noise, and so
         does the residual: such a candidate "explains" held-out noise (errors in variables)
         while its simulation gets worse. The free run, driven by the inputs alone, cannot be
         fooled that way."""
-        before = self._simulation_error(ws, fit.vehicle)
-        what = "free run" if self.gate_horizon_s is None else f"{self.gate_horizon_s:g} s-ahead"
+        modes = self._gate_modes(ws)
+        before, what, mode = None, "", "free_run"
+        for label, m in modes:
+            what, mode = label, m
+            before = self._simulation_error(ws, fit.vehicle, mode)
+            if before is not None:
+                break
+        self.gates_.append(what if before is not None else None)
+        if before is None:
+            for s in admissible:
+                s.admissible = False
+                s.reason = (
+                    "the held-out simulation diverges even one step ahead: nothing to compare"
+                )
+            return None, None
+        one_step = None
         for s in admissible[: self.gate_checks]:
             try:
                 vehicle = s.candidate.augment(vehicle_with(fit.vehicle, s.refit), s.value)
             except ValueError:
                 continue
-            after = self._simulation_error(ws, vehicle)
+            after = self._simulation_error(ws, vehicle, mode)
             s.gate = (before, after)
-            if after is not None and (before is None or after < before * (1 - self.min_gate_gain)):
+            # the free run (or the set horizon) must gain min_gate_gain; a shorter fallback
+            # horizon, dominated by noise, must only not get worse: the held-out force residual
+            # has already judged the improvement
+            gain = self.min_gate_gain if what == modes[0][0] else 0.0
+            if after is not None and after < before * (1 - gain):
+                if one_step is None:
+                    one_step = self._simulation_error(ws, fit.vehicle, "one_step")
+                worse = self._simulation_error(ws, vehicle, "one_step")
+                if one_step is not None and (
+                    worse is None or worse > MAX_WORSENING * max(one_step, 1e-12)
+                ):
+                    s.admissible = False
+                    s.reason = (
+                        f"held-out one-step error grows from {_fmt(one_step)} to {_fmt(worse)}"
+                    )
+                    continue
                 try:
                     augmented = self._augment(ws, fit, s)
                 except ValueError as exc:  # the joint refit left the physical range
                     s.admissible = False
                     s.reason = f"refit not physical: {str(exc).splitlines()[0]}"
                     continue
-                s.reason = "added"
+                s.reason = "added" if what == "free run" else f"added (judged {what})"
                 return s, augmented
             s.admissible = False
             s.reason = f"held-out {what} error does not improve ({_fmt(before)} -> {_fmt(after)})"
         return None, None
 
-    def _simulation_error(self, ws: Workspace, vehicle) -> float | None:
-        """Held-out velocity NRMSE (mean over the analysed DOFs) of the gate's simulation:
-        free run, or restarted from the measured state every ``gate_horizon_s``."""
-        if self.gate_horizon_s is None:
-            return velocity_errors(vehicle, ws.val, "free_run", self.warmup_s, self.dofs_)["total"]
-        dt = float(np.median(np.diff(ws.val["t"].to_numpy())))
-        k = max(round(self.gate_horizon_s / dt), 1)
-        return velocity_errors(vehicle, ws.val, k, self.warmup_s, self.dofs_)["total"]
+    def _simulation_error(self, ws: Workspace, vehicle, mode: str | int) -> float | None:
+        """Held-out velocity NRMSE (mean over the analysed DOFs) of a simulation ``mode``;
+        None where it diverges."""
+        return velocity_errors(vehicle, ws.val, mode, self.warmup_s, self.dofs_)["total"]
 
     def _judge(self, s: Scored, tested: int, fit: Fit) -> None:
         """Admissible: significant after Bonferroni, a significant parameter (Caccia), a
@@ -313,8 +365,12 @@ class ResidualLoop:
         RMS) and MATLAB ``resid`` analysis of its force residual against the input forces."""
         val, dofs = ws.val, self.dofs_
         r = force_residual(ws, fit.vehicle)
+        free, diverged = velocity_scores(fit.vehicle, val, "free_run", self.warmup_s, dofs)
+        k = max(round(FALLBACK_S / float(np.median(np.diff(val["t"].to_numpy())))), 1)
         errors = {
-            "free_run_nrmse": velocity_errors(fit.vehicle, val, "free_run", self.warmup_s, dofs),
+            "free_run_nrmse": free,
+            "diverged": diverged,
+            "k_step_nrmse": velocity_errors(fit.vehicle, val, k, self.warmup_s, dofs),
             "one_step_nrmse": velocity_errors(fit.vehicle, val, "one_step", self.warmup_s, dofs),
             "force_rmse": force_rmse(r, ws.arrays(fit.vehicle, "val")["tau"], dofs),
         }
@@ -356,11 +412,12 @@ class ResidualLoop:
             "after": self.after_,
             "steps": [
                 {
+                    "gate": gate,
                     "added": None if st.added is None else st.added.as_dict(),
                     "top": [s.as_dict() for s in st.ranked[:10]],
                     "sindy": st.sindy,
                 }
-                for st in self.steps_
+                for st, gate in zip(self.steps_, self.gates_, strict=True)
             ],
             "baseline_params": {
                 n: {"value": float(v), "stderr": float(s) if np.isfinite(s) else None}
@@ -382,6 +439,7 @@ class ResidualLoop:
                 "split": self.split_,
                 "warmup_s": self.warmup_s,
                 "gate_horizon_s": self.gate_horizon_s,
+                "k_step_s": FALLBACK_S,
                 "dofs": list(self.dofs_),
                 "min_improvement": self.min_improvement,
                 "min_gate_gain": self.min_gate_gain,

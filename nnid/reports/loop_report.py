@@ -78,16 +78,52 @@ def effect_sentence(candidate: dict) -> str:
     return f"{meaning}: {name} = {_f(value)}{pm} {unit(name)}"
 
 
+def _diverged_text(errors: dict) -> str:
+    """'in u, w from t = 12.3 s' for the free run's diverged DOFs (the earliest time)."""
+    gone = errors.get("diverged", {})
+    return f"in {', '.join(gone)} from t = {min(gone.values()):.1f} s" if gone else ""
+
+
+def _like_for_like(result: dict) -> tuple[str, str, dict, dict]:
+    """(name, key, before, after) of the held-out error to compare: the free run where
+    neither fit diverges, else the k-step error, else the one-step error."""
+    k_s = result["settings"].get("k_step_s", 1.0)
+    for name, key in (
+        ("free-run", "free_run_nrmse"),
+        (f"{k_s:g} s-ahead", "k_step_nrmse"),
+        ("one-step", "one_step_nrmse"),
+    ):
+        before, after = result["before"].get(key, {}), result["after"].get(key, {})
+        if before.get("total") is not None and after.get("total") is not None:
+            return name, key, before, after
+    return (
+        "one-step",
+        "one_step_nrmse",
+        result["before"]["one_step_nrmse"],
+        result["after"]["one_step_nrmse"],
+    )
+
+
 def summary(result: dict) -> list[str]:
-    """One sentence per added effect with its effect on the held-out free run, or the plain
-    statement that nothing significant was found."""
-    before, after = result["before"]["free_run_nrmse"], result["after"]["free_run_nrmse"]
+    """One sentence per added effect with its effect on the held-out error, or the plain
+    statement that nothing significant was found. Where a free run diverges that is said, and
+    before and after are compared on the first horizon at which neither diverges."""
+    name, _, before, after = _like_for_like(result)
+    diverged = [
+        f"the {who} held-out free run diverges ({_diverged_text(result[when])})"
+        for when, who in (("before", "baseline's"), ("after", "final model's"))
+        if result[when]["free_run_nrmse"].get("total") is None
+    ]
     if not result["added"]:
-        total = before.get("total")
+        total = result["before"]["free_run_nrmse"].get("total")
         lines = [
             "No significant effect: no candidate of the effect vocabulary passed the F-test, "
             "the parameter test and the held-out checks "
-            f"(held-out free-run NRMSE {_f(total)})."
+            + (
+                f"(held-out free-run NRMSE {_f(total)})."
+                if total is not None
+                else f"(held-out {name} NRMSE {_f(before.get('total'))}; {diverged[0]})."
+            )
         ]
         if total is None or total > 0.5:
             lines.append(
@@ -109,14 +145,20 @@ def summary(result: dict) -> list[str]:
         }
         dof = max(gains, key=lambda d: gains[d][0] - gains[d][1]) if gains else None
         cut = (
-            f"; with it the {DOF_WORD[dof]} free-run error on held-out data fell from "
+            f"; with it the {DOF_WORD[dof]} {name} error on held-out data "
+            f"{'fell' if gains[dof][1] < gains[dof][0] else 'went'} from "
             f"{_f(gains[dof][0])} to {_f(gains[dof][1])} (NRMSE)"
             if dof
             else ""
         )
         lines.append(effect_sentence(added) + cut + ".")
+    if diverged:
+        lines.append(
+            "Before and after are compared on the "
+            f"{name} error because " + " and ".join(diverged) + "."
+        )
     lines.append(
-        f"Total held-out free-run NRMSE: {_f(before.get('total'))} before, "
+        f"Total held-out {name} NRMSE: {_f(before.get('total'))} before, "
         f"{_f(after.get('total'))} after ({', '.join(result['added'])} added)."
     )
     return lines
@@ -146,17 +188,22 @@ def candidate_rows(candidates: list[dict], top: int = 15) -> list[list[str]]:
 def error_rows(result: dict) -> tuple[list[str], list[list[str]]]:
     head = ["held-out error", *DOFS, "total"]
     rows = []
+    k_s = result["settings"].get("k_step_s", 1.0)
     for key, label in (
         ("free_run_nrmse", "free-run velocity NRMSE"),
+        ("k_step_nrmse", f"{k_s:g} s-ahead velocity NRMSE"),
         ("one_step_nrmse", "one-step velocity NRMSE"),
         ("force_rmse", "force residual RMS (N, N m; total relative)"),
     ):
         for when in ("before", "after"):
+            if key not in result[when]:
+                continue
             vals = result[when][key]
+            gone = result[when].get("diverged", {}) if key == "free_run_nrmse" else {}
             rows.append(
                 [f"{label}, {when}"]
-                + [_f(vals.get(d)) if d in vals else "" for d in DOFS]
-                + [_f(vals.get("total"))]
+                + ["diverged" if d in gone else _f(vals.get(d)) if d in vals else "" for d in DOFS]
+                + ["diverged" if gone else _f(vals.get("total"))]
             )
     return head, rows
 
