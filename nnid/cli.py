@@ -28,6 +28,27 @@ err = Console(stderr=True)
 out = Console()
 
 
+def _show_version(value: bool) -> None:
+    if value:
+        from nnid import __version__
+
+        out.print(f"nnid {__version__}", highlight=False)
+        raise typer.Exit()
+
+
+@app.callback()
+def main_options(
+    version: bool = typer.Option(
+        False,
+        "--version",
+        callback=_show_version,
+        is_eager=True,
+        help="Print nnid's version and exit.",
+    ),
+) -> None:
+    """Identify underwater-vehicle dynamics from logged data."""
+
+
 def _input_errors(fn):
     """Turn bad input into one clear line and exit code 2 (no traceback)."""
 

@@ -158,6 +158,18 @@ def test_bad_config_exits_2_naming_the_field(tmp_path, case):
     assert len(result.output.strip().splitlines()) == 1
 
 
+def test_version():
+    from nnid import __version__
+
+    res = runner.invoke(app, ["--version"])
+    assert res.exit_code == 0 and res.output.strip() == f"nnid {__version__}"
+
+
+def test_inspect_on_a_folder_asks_for_a_reader_config(tmp_path):
+    res = runner.invoke(app, ["inspect", str(tmp_path)])
+    assert res.exit_code == 2 and "--columns" in res.output and str(tmp_path) in res.output
+
+
 def test_unknown_preset_and_missing_options(tmp_path):
     cfg = _write(tmp_path, "sim.toml", CONFIG.format(vehicle="nautilus"))
     result = runner.invoke(app, ["simulate", str(cfg), "--out", str(tmp_path / "x.csv")])

@@ -40,6 +40,12 @@ def read_table(path: str | Path) -> pd.DataFrame:
             return pd.read_csv(path)
     except Exception as err:  # pandas/pyarrow raise many types for truncated or corrupt files
         raise NnidInputError(f"cannot be read as a table ({err})", source=str(path)) from None
+    if path.is_dir():
+        raise NnidInputError(
+            "is a folder: read a dataset folder with a reader config, --columns MAP "
+            "(configs/readers/*.toml; the file names and columns are described there)",
+            source=str(path),
+        )
     raise NnidInputError(
         "unknown table format; expected .csv, .csv.gz or .parquet", source=str(path)
     )

@@ -14,8 +14,8 @@ input is held over each sample (zero-order hold) and the ODE is integrated by th
 Levenberg-Marquardt, whose forward-mode Jacobians torchdiffeq's fixed-grid ``perturb`` cannot
 pass through, and on this small vector field the own RK4 is also the faster
 (``benchmarks/bench_hybrid.py speed``; :mod:`nnid.physics.odeint` says why). This is the
-model class of the published 0.33 V neural continuous-time result on Cascaded Tanks quoted in
-issue 6 (Forgione & Piga 2021).
+model class of the published 0.33 V neural continuous-time result on Cascaded Tanks
+(Forgione & Piga 2021).
 
 Training is simulation-error (output-error) only: the free run of each training window from its
 initial state, which is estimated with the network (all states of every window are free

@@ -1,4 +1,4 @@
-"""Online augmented-state estimation: an unscented Kalman filter on [ν, θ] (issue 4).
+"""Online augmented-state estimation: an unscented Kalman filter on [ν, θ].
 
 Weiss (2013) sets up the Bayes filter (eqs 71-76), its Gaussian/nonlinear form x_{i+1} =
 f(x_i, u_i, ω_i), z_i = h(x_i, v_i) (eqs 77-78) and the extended Kalman filter (Jacobians eq 79,
