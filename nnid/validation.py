@@ -16,6 +16,20 @@ Model = TypeVar("Model", bound=BaseModel)
 _TAGS = ("kind", "model")
 
 
+def shown(value: Any) -> str:
+    """A value as an error message shows it: numbers plainly ("12.5", "inf"), a missing one as
+    "empty (NaN)", text in quotes; never a type name such as ``np.float64(nan)``."""
+    if isinstance(value, bool):
+        return str(value)
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        return repr(str(value))
+    if isinstance(value, str):
+        return repr(value)
+    return "empty (NaN)" if math.isnan(number) else f"{number:g}"
+
+
 def read_toml(path: str | Path) -> dict[str, Any]:
     """Parse a TOML file; a missing or malformed file is an NnidInputError naming it."""
     try:

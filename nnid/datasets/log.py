@@ -15,6 +15,7 @@ import pandas as pd
 
 from nnid.errors import NnidInputError
 from nnid.physics.dofs import DOFS, FORCES
+from nnid.validation import shown
 
 POSE = ("x", "y", "z", "phi", "theta", "psi")
 VELOCITY = DOFS  # velocity columns are named after their DOF
@@ -80,7 +81,7 @@ def _check_finite(df: pd.DataFrame, columns: list[str], source: str) -> None:
         if bad.any():
             row = int(np.flatnonzero(bad)[0])
             raise NnidInputError(
-                f"value {df[col].iloc[row]!r} is not a finite number "
+                f"value {shown(df[col].iloc[row])} is not a finite number "
                 f"({int(bad.sum())} such rows in this column)",
                 source=source,
                 field=col,
@@ -101,7 +102,7 @@ def _check_time(df: pd.DataFrame, source: str) -> None:
             what = "duplicated" if dt[k] == 0 else "decreasing"
             exp = "" if name is None else f" in experiment {name!r}"
             raise NnidInputError(
-                f"time is {what}{exp} ({t[k]!r} then {t[k + 1]!r}); t must be strictly "
+                f"time is {what}{exp} ({shown(t[k])} then {shown(t[k + 1])}); t must be strictly "
                 "increasing within an experiment",
                 source=source,
                 field="t",

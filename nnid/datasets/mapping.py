@@ -19,6 +19,7 @@ from nnid.datasets.cleaning import CleaningReport
 from nnid.datasets.column_map import ColumnMap, Source
 from nnid.datasets.log import ANGLES
 from nnid.errors import NnidInputError
+from nnid.validation import shown
 
 # ENU -> NED for world vectors, FLU -> FRD for body vectors (both are their own inverse).
 _ENU_NED = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
@@ -146,7 +147,7 @@ def map_source(
         rows, cols = np.nonzero(bad)
         if not drop_nonfinite:
             raise NnidInputError(
-                f"value {raw[numeric[cols[0]]].iloc[rows[0]]!r} is not a finite number "
+                f"value {shown(raw[numeric[cols[0]]].iloc[rows[0]])} is not a finite number "
                 f"({int(bad.any(1).sum())} rows have one; set drop_nonfinite = true in the reader "
                 "config to drop them)",
                 source=origin,
