@@ -111,6 +111,10 @@ def test_stream_equals_batch_bit_for_bit(vehicle, monitor):
         values.append(stream.values.copy())
     np.testing.assert_array_equal(np.array(values), trace.values)
     assert np.array_equal(np.array(codes) == 1, trace.alarm) and trace.alarm.sum() == 1
+    # forces logged beside the commands change nothing: the monitor reads the commands it maps
+    tau = Actuation(vehicle).nominal(log.filter(like="cmd_").to_numpy())
+    both = log.assign(**{f"tau_{f}": tau[:, i] for i, f in enumerate("XYZKMN")})
+    np.testing.assert_array_equal(monitor.run(both).values, trace.values)
 
 
 @pytest.mark.parametrize("efficiency", [0.3, 0.0])

@@ -12,9 +12,10 @@ from nnid.errors import NnidInputError
 from nnid.physics.thrusters import Actuation
 
 
-def log_arrays(log: pd.DataFrame, vehicle) -> dict[str, np.ndarray]:
-    """η, ν, ν̇ and nominal τ from a log (missing pose components are zero; velocities and
-    accelerations must be present: derive them with :mod:`nnid.datasets.preprocess`)."""
+def motion_arrays(log: pd.DataFrame) -> dict[str, np.ndarray]:
+    """η, ν, ν̇, time and experiment codes from a log (missing pose components are zero;
+    velocities and accelerations must be present: derive them with
+    :mod:`nnid.datasets.preprocess`)."""
     n = len(log)
     eta = np.zeros((n, 6))
     for k, c in enumerate(POSE):
@@ -27,6 +28,24 @@ def log_arrays(log: pd.DataFrame, vehicle) -> dict[str, np.ndarray]:
             nu[:, k] = log[c].to_numpy(np.float64)
         if "d" + c in log:
             nu_dot[:, k] = log["d" + c].to_numpy(np.float64)
+    if "experiment" in log:
+        codes, names = pd.factorize(log["experiment"])
+    else:
+        codes, names = np.zeros(n, dtype=int), ["0"]
+    return {
+        "eta": eta,
+        "nu": nu,
+        "nu_dot": nu_dot,
+        "angles_known": np.array(all(a in log for a in ANGLES)),
+        "t": log["t"].to_numpy(np.float64),
+        "experiment": codes,
+        "experiment_names": np.asarray(names, dtype=object),
+    }
+
+
+def log_arrays(log: pd.DataFrame, vehicle) -> dict[str, np.ndarray]:
+    """:func:`motion_arrays` and the nominal τ (from ``tau_*`` or through the vehicle's
+    thrusters from ``cmd_*``)."""
     if all(c in log for c in TAU):
         tau = log[list(TAU)].to_numpy(np.float64)
     else:
@@ -40,17 +59,4 @@ def log_arrays(log: pd.DataFrame, vehicle) -> dict[str, np.ndarray]:
                 field=missing[0],
             )
         tau = act.nominal(log[cols].to_numpy(np.float64))
-    if "experiment" in log:
-        codes, names = pd.factorize(log["experiment"])
-    else:
-        codes, names = np.zeros(n, dtype=int), ["0"]
-    return {
-        "eta": eta,
-        "nu": nu,
-        "nu_dot": nu_dot,
-        "tau": tau,
-        "angles_known": np.array(all(a in log for a in ANGLES)),
-        "t": log["t"].to_numpy(np.float64),
-        "experiment": codes,
-        "experiment_names": np.asarray(names, dtype=object),
-    }
+    return {**motion_arrays(log), "tau": tau}

@@ -18,8 +18,7 @@ import numpy as np
 from nnid.datasets.log import POSE, VELOCITY
 from nnid.errors import NnidInputError
 from nnid.fault.detect import DetectResult, alarm_record
-from nnid.fault.monitor import ResidualMonitor, Trace
-from nnid.physics.dofs import FORCES
+from nnid.fault.monitor import ResidualMonitor, Trace, input_columns
 
 
 def _rows(source: str, idle_s: float):
@@ -66,9 +65,7 @@ def follow_csv(
     where = "stdin" if source == "-" else source
     if header is None:
         raise NnidInputError("is empty: expected a CSV header", source=where)
-    inputs = [f"cmd_{c}" for c in monitor.channels_]
-    if monitor.channels_ == list(FORCES):
-        inputs = [f"tau_{c}" for c in FORCES]
+    inputs = input_columns(monitor.channels_)
     needed = ["t", *VELOCITY, "phi", "theta", *inputs]
     missing = [c for c in needed if c not in header]
     if missing:

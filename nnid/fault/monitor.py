@@ -22,7 +22,7 @@ import pandas as pd
 from sklearn.base import BaseEstimator
 from sklearn.utils.validation import check_is_fitted
 
-from nnid.datasets.arrays import log_arrays
+from nnid.datasets.arrays import motion_arrays
 from nnid.errors import NnidInputError
 from nnid.fault import kernel
 from nnid.fault.thresholds import rate_interval, rate_threshold
@@ -98,19 +98,32 @@ def pack_actuation(vehicle, parts) -> tuple:
     )
 
 
+def input_columns(channels: list[str]) -> list[str]:
+    """The log columns of a monitor's input channels: ``cmd_<thruster>`` for a vehicle with
+    thrusters, ``tau_X`` … ``tau_N`` for one without (the channels the kernel maps)."""
+    if channels == list(FORCES):
+        return [f"tau_{c}" for c in FORCES]
+    return [f"cmd_{c}" for c in channels]
+
+
 def monitor_inputs(log: pd.DataFrame, plant) -> dict[str, np.ndarray]:
     """Time, state [N, 12] (velocities derived from the pose where the log lacks them, by the
-    model's Savitzky-Golay setting) and input channels [N, n] of a log."""
-    from nnid.loop.effects import input_channels
+    model's Savitzky-Golay setting) and the input channels [N, n] the kernel maps to forces."""
     from nnid.models.parametric import prepare_motion
 
+    cols = input_columns(list(Actuation(plant.vehicle).channels))
+    missing = [c for c in cols if c not in log]
+    if missing:
+        raise NnidInputError(
+            f"the log lacks the inputs {', '.join(missing)} of vehicle '{plant.vehicle.name}'",
+            field=missing[0],
+        )
     log = prepare_motion(log, plant.dofs_, plant.savgol_window, plant.savgol_order, False)
-    data = log_arrays(log, plant.vehicle)
-    inputs, _ = input_channels(log, plant.vehicle)
+    data = motion_arrays(log)
     return {
         "t": data["t"],
         "x": np.ascontiguousarray(np.concatenate([data["eta"], data["nu"]], 1)),
-        "inputs": np.ascontiguousarray(inputs),
+        "inputs": np.ascontiguousarray(log[cols].to_numpy(np.float64)),
         "experiment": data["experiment"],
         "experiment_names": data["experiment_names"],
     }
