@@ -13,6 +13,7 @@ from nnid.fault.detect import ALARM_FIELDS, DetectResult
 from nnid.fault.follow import describe_alarm
 from nnid.physics.dofs import DOFS, FORCES
 from nnid.reports.figures import (
+    FORCE_UNITS,
     IMAGES_CHECK,
     definitions,
     figure_uri,
@@ -21,8 +22,6 @@ from nnid.reports.figures import (
     page_head,
 )
 from nnid.serialization import write_json, write_text
-
-_UNITS = {"X": "N", "Y": "N", "Z": "N", "K": "N m", "M": "N m", "N": "N m"}
 
 
 def detect_json(monitor, result: DetectResult) -> dict:
@@ -141,6 +140,6 @@ def _figure(monitor, trace, h_t: float, h_g: float):
     for i, force in enumerate(dofs):
         ax = axes[i + 1, 0]
         ax.plot(t, trace.values[:, FORCES.index(force)], lw=0.6)
-        ax.set_ylabel(f"r_{force} [{_UNITS[force]}]")
+        ax.set_ylabel(f"r_{force} [{FORCE_UNITS[force]}]")
     axes[-1, 0].set_xlabel(label)
     return fig
