@@ -393,12 +393,12 @@ def detect(
     _check_out(out_dir)
     if not model_dir.is_dir():
         raise NnidInputError("no such folder", source=str(model_dir), field="--model")
-    monitor = ResidualMonitor.load(model_dir)
-    window_s = window or _window_of(model_dir)
     if data != "-" and not Path(data).exists():
         raise NnidInputError("no such file or folder", source=data, field="--data")
     if data == "-" and not follow:
         raise NnidInputError("'-' (standard input) is read with --follow", field="--data")
+    monitor = ResidualMonitor.load(model_dir)
+    window_s = window or _window_of(model_dir)
     try:
         if follow:
             from nnid.fault.follow import follow_csv
