@@ -6,7 +6,12 @@ Bad input ends with one line on stderr and exit code 2; nothing else here does n
 from __future__ import annotations
 
 import functools
+import os
+import shutil
 import sys
+import tempfile
+import uuid
+import warnings
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -54,11 +59,20 @@ def _input_errors(fn):
 
     @functools.wraps(fn)
     def wrapper(*args, **kwargs):
-        try:
-            return fn(*args, **kwargs)
-        except NnidInputError as exc:
-            err.print(f"[bold red]error:[/] {escape(str(exc))}", highlight=False, soft_wrap=True)
-            raise typer.Exit(2) from None
+        # the application, not the library, decides how warnings reach a person: one plain
+        # line each, once, after the command's own output
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            try:
+                return fn(*args, **kwargs)
+            except NnidInputError as exc:
+                err.print(
+                    f"[bold red]error:[/] {escape(str(exc))}", highlight=False, soft_wrap=True
+                )
+                raise typer.Exit(2) from None
+            finally:
+                for message in dict.fromkeys(str(w.message) for w in caught):
+                    err.print(f"warning: {escape(message)}", highlight=False, soft_wrap=True)
 
     return wrapper
 
@@ -85,6 +99,9 @@ def simulate(
     veh = load_vehicle(vehicle or cfg.vehicle)
     if out_path.suffix not in (".csv", ".parquet"):
         raise NnidInputError("output must end in .csv or .parquet", source=str(out_path))
+    if out_path.is_dir():
+        raise NnidInputError("is a folder; give a file name", source=str(out_path), field="--out")
+    _check_out(out_path.parent)
     try:
         with _bar("simulating") as progress:
             log = simulate_config(cfg, veh, progress=progress)
@@ -119,6 +136,8 @@ def inspect(
     from nnid.datasets.inspect import summarize
     from nnid.datasets.readers import load_log
 
+    if out_dir is not None:
+        _check_out(out_dir)
     log, report = load_log(log_path, columns)
     info = summarize(log)
     cols = info["columns"]
@@ -134,6 +153,14 @@ def inspect(
         f"  gaps          {len(gaps)}"
         + (f" (longest {max(g['length_s'] for g in gaps):.3g} s)" if gaps else "")
     )
+    missing = info["missing"]
+    if missing["count"]:
+        cols = sorted({c for g in missing["gaps"] for c in g["columns"]}, key=list(log).index)
+        out.print(
+            f"  missing       {missing['count']} gaps in {', '.join(cols)} "
+            f"({missing['samples']} samples, {missing['seconds']:.3g} s, longest "
+            f"{missing['longest_s']:.3g} s): bridged from the pose or masked where used"
+        )
     table = Table(title="excitation per DOF")
     for head in ("DOF", "velocity std", "force std", "force active"):
         table.add_column(head)
@@ -152,9 +179,9 @@ def inspect(
             + (f" ({step.rows_removed} rows removed)" if step.rows_removed else "")
         )
     if out_dir is not None:
-        out_dir.mkdir(parents=True, exist_ok=True)
-        (out_dir / "summary.json").write_text(json.dumps(info, indent=2))
-        report.write(out_dir)
+        with _staged(out_dir) as stage:
+            (stage / "summary.json").write_text(json.dumps(info, indent=2))
+            report.write(stage)
 
 
 @contextmanager
@@ -171,9 +198,43 @@ def _bar(description: str):
 
 
 def _check_out(out_dir: Path) -> None:
-    """An output folder that can be written: refused before any work starts."""
+    """An output folder that can be written: refused before any work starts (a file, a place
+    such as /proc, a folder without write permission)."""
     if out_dir.exists() and not out_dir.is_dir():
         raise NnidInputError("exists and is not a folder", source=str(out_dir), field="--out")
+    base = next(p for p in (out_dir.absolute(), *out_dir.absolute().parents) if p.exists())
+    if not base.is_dir():
+        raise NnidInputError(f"{base} is not a folder", source=str(out_dir), field="--out")
+    try:  # the only sure test of writability is to write
+        tempfile.TemporaryDirectory(dir=base).cleanup()
+    except OSError as exc:
+        raise NnidInputError(
+            f"cannot be written ({exc.strerror or exc})", source=str(out_dir), field="--out"
+        ) from None
+
+
+@contextmanager
+def _staged(out_dir: Path):
+    """Yield a hidden sibling folder to write the outputs into; only once every file is
+    written are they moved into ``out_dir``, so a run that fails half way leaves nothing that
+    poses as its result (and an earlier result in ``out_dir`` untouched)."""
+    where = out_dir.absolute()
+    where.parent.mkdir(parents=True, exist_ok=True)
+    # os.mkdir, not mkdtemp: the folder keeps the user's umask once it is renamed into place
+    stage = where.parent / f".{where.name}-{os.getpid()}-{uuid.uuid4().hex[:8]}"
+    stage.mkdir()
+    try:
+        yield stage
+        if not out_dir.exists():
+            stage.rename(out_dir)
+            return
+        for item in stage.iterdir():
+            target = out_dir / item.name
+            if target.is_dir() and not target.is_symlink():
+                shutil.rmtree(target)
+            os.replace(item, target)
+    finally:
+        shutil.rmtree(stage, ignore_errors=True)
 
 
 def _fmt(x) -> str:
@@ -208,14 +269,14 @@ def train(
             result = run_train(cfg, config, data, vehicle, columns, progress=progress)
     except NnidInputError as exc:
         raise exc.with_source(str(config)) from None
-    out_dir.mkdir(parents=True, exist_ok=True)
-    result.model.save(out_dir)
-    if result.monitor is not None:
-        result.monitor.save(out_dir)
-    write_json(out_dir / "metrics.json", result.metrics)
-    write_text(out_dir / "report.md", train_markdown(result.metrics))
-    write_text(out_dir / "report.html", train_html(result.metrics, result.figures))
-    result.report.write(out_dir)
+    with _staged(out_dir) as stage:
+        result.model.save(stage)
+        if result.monitor is not None:
+            result.monitor.save(stage)
+        write_json(stage / "metrics.json", result.metrics)
+        write_text(stage / "report.md", train_markdown(result.metrics))
+        write_text(stage / "report.html", train_html(result.metrics, result.figures))
+        result.report.write(stage)
     held = "test" if "test" in result.metrics else "validation"
     free = result.metrics[held].get("free_run_nrmse", {})
     line = f"{held} free-run NRMSE total {_fmt(free.get('total'))}"
@@ -254,11 +315,11 @@ def compare(
             result = run_compare(cfg, config, data, vehicle, columns, progress=progress)
     except NnidInputError as exc:
         raise exc.with_source(str(config)) from None
-    out_dir.mkdir(parents=True, exist_ok=True)
-    write_json(out_dir / "comparison.json", result.comparison)
-    write_text(out_dir / "report.html", html_page(result))
-    write_text(out_dir / "report.md", markdown(result.comparison))
-    result.report.write(out_dir)
+    with _staged(out_dir) as stage:
+        write_json(stage / "comparison.json", result.comparison)
+        write_text(stage / "report.html", html_page(result))
+        write_text(stage / "report.md", markdown(result.comparison))
+        result.report.write(stage)
     out.print(
         f"wrote {out_dir}/: comparison.json, report.html, report.md. "
         + result.comparison["summary"],
@@ -326,8 +387,8 @@ def loop(
         gate_horizon_s=cfg.gate_horizon_s,
         second_opinion=second,
     )
-    _run_loop(log, veh, out_dir, source=data or str(config or ""), **settings)
-    report.write(out_dir)
+    source, where = data or str(config or ""), str(config or "")
+    _run_loop(log, veh, out_dir, source=source, cleaning=report, config=where, **settings)
 
 
 def _hybrid_model(folder: Path):
@@ -345,7 +406,13 @@ def _hybrid_model(folder: Path):
     return model
 
 
-def _run_loop(log, veh, out_dir: Path, source: str = "", **settings) -> None:
+#: loop settings a config (or an option) sets: an error about one names the config
+LOOP_SETTINGS = ("validation", "dofs", "alpha", "max_effects", "warmup_s", "gate_horizon_s")
+
+
+def _run_loop(
+    log, veh, out_dir: Path, source: str = "", cleaning=None, config: str = "", **settings
+) -> None:
     from nnid.loop.residual_loop import ResidualLoop
     from nnid.reports.loop_report import write_loop_report
 
@@ -353,9 +420,13 @@ def _run_loop(log, veh, out_dir: Path, source: str = "", **settings) -> None:
         try:
             fitted = ResidualLoop(veh, **settings).fit(log, progress=progress)
         except NnidInputError as exc:
-            raise exc.with_source(source) if source else exc from None
+            named = config if config and exc.field in LOOP_SETTINGS else source
+            raise exc.with_source(named) if named else exc from None
         progress(0, None, "writing the report")
-        lines = write_loop_report(fitted, out_dir)
+        with _staged(out_dir) as stage:
+            lines = write_loop_report(fitted, stage)
+            if cleaning is not None:
+                cleaning.write(stage)
     for warning in fitted.warnings_:
         err.print(f"warning: {warning}", highlight=False, soft_wrap=True)
     for line in lines:
@@ -413,7 +484,8 @@ def detect(
                 result = run_detect(monitor, log, window_s)
     except NnidInputError as exc:
         raise exc.with_source(data) from None
-    lines = write_detect_outputs(monitor, result, out_dir, source=data)
+    with _staged(out_dir) as stage:
+        lines = write_detect_outputs(monitor, result, stage, source=data)
     for line in lines:
         out.print(line, highlight=False, soft_wrap=True)
 
@@ -448,6 +520,7 @@ def demo(
     from nnid.datasets.readers import load_log
     from nnid.vehicle import load_vehicle
 
+    _check_out(out_dir)
     root = resources.files("nnid.demo_data")
     with resources.as_file(root.joinpath(DEMO_LOG)) as path:
         log, _ = load_log(str(path))

@@ -24,7 +24,8 @@ from nnid.config import (
     load_config,
 )
 from nnid.datasets.cleaning import CleaningReport
-from nnid.datasets.log import VELOCITY, input_columns
+from nnid.datasets.gaps import mask_gaps
+from nnid.datasets.log import ACCELERATION, POSE, VELOCITY, input_columns
 from nnid.datasets.splits import PARTS, Split, split_log
 from nnid.errors import NnidInputError
 from nnid.evaluation.evaluate import evaluate
@@ -213,11 +214,13 @@ def _prepare(log: pd.DataFrame, spec, report: CleaningReport) -> pd.DataFrame:
     """Velocities derived from the pose where the log lacks them (every model is fitted and
     scored on the same measured velocities), then light white noise (``spec.noise``), each
     step reported."""
+    from nnid.datasets.gaps import bridge_from_pose
     from nnid.datasets.measurement import relative_noise
     from nnid.datasets.preprocess import derive_velocities
 
     if any(c not in log for c in VELOCITY) and all(a in log for a in ("phi", "theta", "psi")):
         log = derive_velocities(log, spec.savgol_window, spec.savgol_order, report)
+    log = bridge_from_pose(log, spec.savgol_window, spec.savgol_order, report=report)
     if spec.noise > 0:
         noisy = spec.noise_columns or [*input_columns(log), *VELOCITY]
         cols = [c for c in noisy if c in log]
@@ -228,9 +231,13 @@ def _prepare(log: pd.DataFrame, spec, report: CleaningReport) -> pd.DataFrame:
     return log
 
 
-def make_split(log: pd.DataFrame, s, source: str = "") -> Split:
+def make_split(
+    log: pd.DataFrame, s, source: str = "", report: CleaningReport | None = None
+) -> Split:
     """The split a config asks for: named experiments (the rest trains) or fractions. A split
-    with nothing to validate on is an error: scores on training data are not validation."""
+    with nothing to validate on is an error: scores on training data are not validation.
+    Motion gaps are masked in each part after the split, so they never move it
+    (:func:`nnid.datasets.gaps.mask_gaps`, reported in ``report``)."""
     assignment = None
     if s.by == "experiment" and (s.train or s.validation or s.test):
         if "experiment" not in log:
@@ -251,6 +258,9 @@ def make_split(log: pd.DataFrame, s, source: str = "") -> Split:
             split = split_log(log, s.by, tuple(s.fractions), assignment)
     except NnidInputError as exc:
         raise NnidInputError(exc.message, source=source, field=f"split.{exc.field}") from None
+    motion = [c for c in (*POSE, *VELOCITY, *ACCELERATION) if c in log]
+    parts = mask_gaps([split.train, split.validation, split.test], motion, report)
+    split = Split(*parts, split.record)
     if len(split.train) == 0:
         raise NnidInputError("the training split is empty", source=source, field="split")
     if len(split.validation) == 0:
@@ -345,7 +355,7 @@ def run_train(
     start = time.perf_counter()
     source = str(config_path)
     inputs = load_inputs(cfg, config_path, [cfg.model], data, vehicle, columns)
-    split = make_split(inputs.log, cfg.split, source)
+    split = make_split(inputs.log, cfg.split, source, inputs.report)
     model = cfg.model.build(inputs.vehicle)
     caught = fit_model(model, split, progress or silent)
     if hasattr(model, "report_"):
@@ -510,7 +520,7 @@ def run_compare(
     report = progress or silent
     source = str(config_path)
     inputs = load_inputs(cfg, config_path, list(cfg.models), data, vehicle, columns)
-    split = make_split(inputs.log, cfg.split, source)
+    split = make_split(inputs.log, cfg.split, source, inputs.report)
     held_name = "test" if len(split.test) else "validation"
     held = split[held_name]
     k = k_steps(held, cfg.k_step_s)

@@ -18,6 +18,8 @@ from typing import Any
 
 import numpy as np
 
+from nnid.errors import NnidInputError
+
 #: the version of every JSON contract nnid writes (model.json, metrics.json, comparison.json,
 #: loop.json); raised when a required key changes meaning or disappears
 SCHEMA_VERSION = 1
@@ -82,6 +84,9 @@ def read_json(path: str | Path) -> Any:
     """Parse a JSON file (NaN and Infinity refused: nnid never writes them)."""
 
     def refuse(token: str) -> Any:
-        raise ValueError(f"{path}: '{token}' is not strict JSON")
+        raise ValueError(f"'{token}' is not strict JSON")
 
-    return json.loads(Path(path).read_text(encoding="utf-8"), parse_constant=refuse)
+    try:
+        return json.loads(Path(path).read_text(encoding="utf-8"), parse_constant=refuse)
+    except (ValueError, UnicodeDecodeError) as exc:  # JSONDecodeError is a ValueError
+        raise NnidInputError(f"is not valid JSON ({exc})", source=str(path)) from None

@@ -28,7 +28,18 @@ Vec6 = Annotated[list[float], Field(min_length=6, max_length=6)]
 
 
 class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=False)
+    # NaN or inf in a vehicle file is a typo, never a value: refused, naming the field
+    model_config = ConfigDict(extra="forbid", frozen=False, allow_inf_nan=False)
+
+
+#: beyond these a value is a unit slip or a typo, not a vehicle (the largest AUVs weigh tens of
+#: tonnes and measure tens of metres)
+MAX_MASS = 1e6  # kg
+MAX_OFFSET = 100.0  # m, a position on the vehicle
+MAX_COEFFICIENT = 1e9  # any added-mass or damping coefficient, SI
+Offset = Annotated[
+    list[Annotated[float, Field(ge=-MAX_OFFSET, le=MAX_OFFSET)]], Field(min_length=3, max_length=3)
+]
 
 
 class PolyCurve(_Strict):
@@ -60,7 +71,7 @@ Curve = Annotated[PolyCurve | SignedQuadraticCurve | TableCurve, Field(discrimin
 
 class Thruster(_Strict):
     name: str = Field(pattern=r"^[A-Za-z0-9_]+$")
-    position: Vec3
+    position: Offset
     direction: Vec3
     curve: Curve
     cmd_min: float | None = None
@@ -94,9 +105,15 @@ class Damping(_Strict):
     def _keys(cls, coefficients: dict[str, float]) -> dict[str, float]:
         from nnid.physics.damping import parse_coefficient_key
 
-        for key in coefficients:
+        for key, value in coefficients.items():
             parse_coefficient_key(key)
+            _not_absurd(key, value)
         return coefficients
+
+
+def _not_absurd(key: str, value: float) -> None:
+    if abs(value) > MAX_COEFFICIENT:
+        raise ValueError(f"'{key}' = {value:g} is beyond {MAX_COEFFICIENT:g}: a unit slip?")
 
 
 class Vehicle(_Strict):
@@ -104,20 +121,22 @@ class Vehicle(_Strict):
 
     name: str
     description: str = ""
-    rho: float = Field(1000.0, gt=0)
-    g: float = Field(9.81, gt=0)
-    length: float | None = Field(None, gt=0)
-    mass: float = Field(gt=0)
-    weight: float | None = Field(None, gt=0)
-    buoyancy: float | None = Field(None, ge=0)
+    rho: float = Field(1000.0, ge=500, le=2000)  # kg/m³: water is 1000-1030
+    g: float = Field(9.81, ge=9.0, le=10.5)
+    length: float | None = Field(None, gt=0, le=MAX_OFFSET)
+    mass: float = Field(gt=0, le=MAX_MASS)
+    weight: float | None = Field(None, gt=0, le=MAX_MASS * 10.5)
+    buoyancy: float | None = Field(None, ge=0, le=MAX_MASS * 10.5)
     inertia: Vec3 | Annotated[list[Vec3], Field(min_length=3, max_length=3)]
-    r_g: Vec3 = Field(default_factory=lambda: [0.0, 0.0, 0.0])
-    r_b: Vec3 = Field(default_factory=lambda: [0.0, 0.0, 0.0])
+    r_g: Offset = Field(default_factory=lambda: [0.0, 0.0, 0.0])
+    r_b: Offset = Field(default_factory=lambda: [0.0, 0.0, 0.0])
     added_mass: dict[str, float] = Field(default_factory=dict)
     damping: Damping = Field(default_factory=Damping)
     installation: dict[str, float] = Field(default_factory=dict)
     thrusters: list[Thruster] = Field(default_factory=list)
-    current: Vec3 = Field(default_factory=lambda: [0.0, 0.0, 0.0])
+    current: Annotated[
+        list[Annotated[float, Field(ge=-10, le=10)]], Field(min_length=3, max_length=3)
+    ] = Field(default_factory=lambda: [0.0, 0.0, 0.0])  # m/s
     external_bias: Vec6 = Field(default_factory=lambda: [0.0] * 6)
     actuator_lag: float = Field(0.0, ge=0)
     deadband: float = Field(0.0, ge=0)
@@ -136,15 +155,19 @@ class Vehicle(_Strict):
         tensor = np.diag(inertia) if np.ndim(inertia) == 1 else np.asarray(inertia, float)
         if not np.allclose(tensor, tensor.T, atol=1e-9 * max(1.0, np.abs(tensor).max())):
             raise ValueError("the inertia tensor must be symmetric")
-        if np.linalg.eigvalsh(tensor).min() <= 0:
+        eigenvalues = np.linalg.eigvalsh(tensor)
+        if eigenvalues.min() <= 0:
             raise ValueError("the inertia tensor must be positive definite (all Ix, Iy, Iz > 0)")
+        if eigenvalues.max() > MAX_COEFFICIENT:
+            raise ValueError(f"inertia above {MAX_COEFFICIENT:g} kg m² is not a vehicle")
         return inertia
 
     @field_validator("added_mass")
     @classmethod
     def _added_mass_keys(cls, added_mass: dict[str, float]) -> dict[str, float]:
-        for key in added_mass:
+        for key, value in added_mass.items():
             parse_added_mass_key(key)
+            _not_absurd(key, value)
         return added_mass
 
     @field_validator("installation")

@@ -35,6 +35,10 @@ def test_valid_log_passes_untouched():
     assert validate_log(df, "a.csv") is df
 
 
+def _set(column: str, row: int, value):
+    return lambda d: d.assign(**{column: d[column].where(d.index != row, value)})
+
+
 @pytest.mark.parametrize(
     "mutate, column, row, words",
     [
@@ -43,7 +47,9 @@ def test_valid_log_passes_untouched():
         (lambda d: d.drop(columns="tau_X"), None, None, "no input columns"),
         (lambda d: d.assign(t=d["t"].where(d.index != 7, d["t"][6])), "t", 7, "duplicated"),
         (lambda d: d.assign(t=d["t"].where(d.index != 9, 0.05)), "t", 9, "decreasing"),
-        (lambda d: d.assign(u=d["u"].where(d.index != 4, np.nan)), "u", 4, "empty (NaN) is not"),
+        # an empty input cell is refused; an empty motion cell is a gap (tests/test_gaps.py)
+        (_set("tau_X", 4, np.nan), "tau_X", 4, "empty (NaN) is not"),
+        (lambda d: d.assign(u=d["u"].where(d.index != 5, -np.inf)), "u", 5, "-inf is"),
         (lambda d: d.assign(tau_X=d["tau_X"].where(d.index != 3, np.inf)), "tau_X", 3, "inf is"),
         (lambda d: d.assign(psi=d["psi"] * 180), "psi", 19, "degrees"),
     ],

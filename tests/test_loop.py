@@ -152,18 +152,97 @@ def test_loop_finds_the_injected_effect(vehicle, effect, value, speed, drop):
     assert after <= 0.5 * before, (before, after)
     result = loop.as_dict()
     assert result["added"][0] == first.name
+    assert result["unexplained"] == {}, result["unexplained"]  # the vocabulary explained it
     assert result["candidates"][0]["improvement"] >= result["candidates"][1]["improvement"]
 
 
 @pytest.mark.parametrize("vehicle", ["seamor", "minirov"])
 def test_no_undeclared_effect_gives_no_effect_in_19_of_20_seeds(vehicle):
     veh = load_vehicle(MINIROV if vehicle == "minirov" else vehicle)
-    added = []
+    added, unexplained = [], []
     for seed in range(20):
         log = effect_log(veh, duration=180, dt=0.05, n_experiments=3, seed=100 + seed)
         loop = ResidualLoop(veh, max_effects=1).fit(log)
         added.append(loop.added)
+        unexplained.append(loop.as_dict()["unexplained"])
     assert sum(bool(a) for a in added) <= 1, added
+    assert sum(bool(u) for u in unexplained) <= 1, unexplained  # a clean log: noise only
+
+
+DVL = Measurement(kind="dvl_imu", velocity_noise=0.005)
+
+
+def _dropouts(log: pd.DataFrame, share: float, rng: np.random.Generator) -> pd.DataFrame:
+    """The DVL's u v w emptied in bursts of 0.2-2 s until ``share`` of the samples is gone;
+    depth, attitude and the gyro go on."""
+    missing = np.zeros(len(log), dtype=bool)
+    while missing.mean() < share:
+        n = round(rng.uniform(0.2, 2.0) / 0.05)
+        start = rng.integers(0, len(log) - n)
+        missing[start : start + n] = True
+    out = log.copy()
+    out.loc[missing, ["u", "v", "w"]] = np.nan
+    return out
+
+
+def test_velocity_dropouts_give_the_same_diagnosis_and_are_reported():
+    from nnid.reports.loop_report import summary
+
+    veh = load_vehicle(MINIROV)
+    effect = ("thruster_installation.u.pos", 0.7)
+    log = effect_log(veh, [effect], duration=180, n_experiments=3, seed=11, measurement=DVL)
+    complete = ResidualLoop(veh, max_effects=2).fit(log)
+    gappy = ResidualLoop(veh, max_effects=2).fit(_dropouts(log, 0.05, np.random.default_rng(0)))
+    assert gappy.added == complete.added == [effect[0]]
+    a, b = complete.added_[0], gappy.added_[0]
+    assert abs(a.value - b.value) < 2 * np.hypot(a.stderr, b.stderr)
+    result = gappy.as_dict()
+    gaps = result["data"]["gaps"]
+    assert gaps["samples"] >= 0.05 * len(log) and 0.2 <= gaps["longest_s"] <= 2.1
+    # no pose x, y: nothing to bridge u v w from, so every gap is masked and counted
+    assert result["data"]["rows_masked"] >= gaps["samples"]
+    assert summary(result)[0].startswith(f"The log misses motion data in {gaps['count']} gaps")
+    assert complete.as_dict()["data"]["gaps"]["count"] == 0
+
+
+def _tug(t, forces):  # a tether pulling sideways every 9 s
+    out = np.zeros_like(forces)
+    out[:, 1] = 6.0 * np.sin(2 * np.pi * t / 9.0)
+    return out
+
+
+def _payload_drop(t, forces):  # 5 N of ballast lost halfway through each run
+    out = np.zeros_like(forces)
+    out[:, 2] = np.where(t > t[-1] / 2, 5.0, 0.0)
+    return out
+
+
+def _thrust_distortion(t, forces):  # a surge thrust curve that is not a scaled copy
+    out = np.zeros_like(forces)
+    x = forces[:, 0]
+    out[:, 0] = 0.6 * x * np.abs(x) / np.abs(x).max()
+    return out
+
+
+@pytest.mark.parametrize(
+    ("disturbance", "dof"), [(_tug, "v"), (_payload_drop, "w"), (_thrust_distortion, "u")]
+)
+def test_an_effect_outside_the_vocabulary_is_reported_as_unexplained(disturbance, dof):
+    """Forces that act on the plant but that no vocabulary effect describes: the loop must say
+    that structure remains in that DOF (naming its correlates), whatever it added."""
+    from nnid.reports.loop_report import summary
+
+    veh = load_vehicle(MINIROV)
+    log = effect_log(
+        veh, duration=180, n_experiments=3, seed=1, measurement=DVL, unlogged=disturbance
+    )
+    result = ResidualLoop(veh, max_effects=2).fit(log).as_dict()
+    assert dof in result["unexplained"], result["unexplained"]
+    assert "outside the vocabulary" in result["unexplained"][dof]
+    assert result["unexplained_correlates"][dof][0]["correlation"] ** 2 > 0.06
+    lines = summary(result)
+    said = [line for line in lines if "outside the vocabulary" in line]
+    assert said and (not result["added"] or said[0].startswith("The added effects explain part"))
 
 
 def test_a_diverged_baseline_is_said_and_compared_like_for_like():

@@ -145,7 +145,8 @@ BAD = """t,x,y,z,phi,theta,psi,tau_X
     [
         (BAD.replace("t,x", "time,x"), "required column 't'"),
         (BAD.replace("0.2,0", "0.1,0"), "column 't', row 2"),
-        (BAD.replace("0.1,0,0,0,0,0", "0.1,0,nan,0,0,0"), "column 'y', row 1"),
+        (BAD.replace("0.1,0,0,0,0,0", "0.1,0,inf,0,0,0"), "column 'y', row 1"),
+        (BAD.replace("0.1,0,0,0,0,0", "0.1,0,north,0,0,0"), "column 'y', row 1"),
         (BAD.replace("0.2,0,0,0,0,0,0", "0.2,0,0,0,0,0,170"), "looks like degrees"),
         (BAD[:-8], "row 2"),  # truncated mid-row: the short row is named
     ],

@@ -1,4 +1,5 @@
-"""What a log holds: columns, rate, duration, experiments, gaps, derivable signals and how much
+"""What a log holds: columns, rate, duration, experiments, gaps in time and empty motion cells
+(:mod:`nnid.datasets.gaps`), derivable signals and how much
 each DOF is excited. Used by ``nnid inspect``; returns data, prints nothing."""
 
 from __future__ import annotations
@@ -6,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
+from nnid.datasets.gaps import find_gaps, gaps_record
 from nnid.datasets.log import ACCELERATION, ANGLES, POSE, VELOCITY, input_columns
 from nnid.datasets.preprocess import experiments
 
@@ -61,6 +63,7 @@ def summarize(log: pd.DataFrame) -> dict:
         "duration_s": float(sum(e["duration_s"] for e in exp_rows)),
         "experiments": exp_rows,
         "gaps": gaps,
+        "missing": gaps_record(find_gaps(log)),
         "derivable": derivable,
         "excitation": excitation,
     }

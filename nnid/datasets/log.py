@@ -8,6 +8,8 @@ Columns: ``t`` (s, strictly increasing within an experiment), optional ``experim
 from __future__ import annotations
 
 import math
+import os
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -55,15 +57,26 @@ def validate_log(
             "cmd_<name>",
             source=source,
         )
-    _check_finite(
-        df, ["t", *motion, *[c for c in ACCELERATION if c in df.columns], *inputs], source
-    )
+    accelerations = [c for c in ACCELERATION if c in df.columns]
+    _check_finite(df, ["t", *inputs], source)
+    # an empty motion cell is a gap (a DVL dropout), bridged or masked downstream
+    # (nnid.datasets.gaps); anything else that is not a finite number is refused
+    _check_finite(df, [*motion, *accelerations], source, gaps=True)
+    _check_experiments(df, source)
     _check_time(df, source)
+    _check_time_unit(df, source)
+    if inputs and all(np.all(pd.to_numeric(df[c], errors="coerce") == 0) for c in inputs):
+        warnings.warn(
+            f"{source}: every input column ({', '.join(inputs)}) is zero throughout: only free "
+            "motion (decay, restoring) can be identified from this log",
+            stacklevel=2,
+        )
     for col in ANGLES:
         if col in df.columns:
-            peak = float(np.abs(df[col].to_numpy(dtype=np.float64)).max())
+            size = np.abs(df[col].to_numpy(dtype=np.float64))
+            peak = float(np.nanmax(size))
             if peak > 2 * math.pi + 1e-6:
-                row = int(np.abs(df[col].to_numpy(dtype=np.float64)).argmax())
+                row = int(np.nanargmax(size))
                 raise NnidInputError(
                     f"angle of {peak:.4g} looks like degrees; angles must be in radians",
                     source=source,
@@ -73,11 +86,19 @@ def validate_log(
     return df
 
 
-def _check_finite(df: pd.DataFrame, columns: list[str], source: str) -> None:
-    """Every value of ``columns`` a finite number; else the first bad row, named."""
+def _check_finite(df: pd.DataFrame, columns: list[str], source: str, gaps: bool = False) -> None:
+    """Every value of ``columns`` a finite number (``gaps``: or an empty cell, though never a
+    whole column of them); else the first bad row, named."""
     for col in columns:
         values = pd.to_numeric(df[col], errors="coerce").to_numpy(dtype=np.float64)
         bad = ~np.isfinite(values)
+        if gaps:
+            empty = df[col].isna().to_numpy()
+            if empty.all():
+                raise NnidInputError(
+                    "the column is empty: no sample has a value", source=source, field=col
+                )
+            bad &= ~empty
         if bad.any():
             row = int(np.flatnonzero(bad)[0])
             raise NnidInputError(
@@ -87,6 +108,45 @@ def _check_finite(df: pd.DataFrame, columns: list[str], source: str) -> None:
                 field=col,
                 row=row,
             )
+
+
+def _check_experiments(df: pd.DataFrame, source: str) -> None:
+    """Every row labelled when there is an ``experiment`` column: an empty label would drop the
+    row from every per-experiment step without a word."""
+    if "experiment" not in df:
+        return
+    label = df["experiment"]
+    empty = label.isna().to_numpy() | (label.astype(str).str.strip() == "").to_numpy()
+    if empty.any():
+        rows = np.flatnonzero(empty)
+        raise NnidInputError(
+            f"{rows.size} rows have an empty experiment label (rows {shown(rows[0])}"
+            + (f" to {shown(rows[-1])}" if rows.size > 1 else "")
+            + "): label every row, or remove the column for a single run",
+            source=source,
+            field="experiment",
+            row=int(rows[0]),
+        )
+
+
+def _check_time_unit(df: pd.DataFrame, source: str) -> None:
+    """Time in seconds: a median step of 5 to 1000 on whole numbers looks like milliseconds,
+    one of 10⁵ or more like micro- or nanoseconds."""
+    t = df["t"].to_numpy(dtype=np.float64)
+    if t.size < 3:
+        return
+    step = float(np.median(np.abs(np.diff(t))))
+    unit = None
+    if step >= 1e5:
+        unit = "nanoseconds (divide by 1e9) or microseconds (by 1e6)"
+    elif 5 <= step <= 1000 and np.all(t == np.round(t)):
+        unit = "milliseconds (divide by 1000)"
+    if unit:
+        raise NnidInputError(
+            f"time steps by {shown(step)} (median): this looks like {unit}; t must be seconds",
+            source=source,
+            field="t",
+        )
 
 
 def _check_time(df: pd.DataFrame, source: str) -> None:
@@ -154,11 +214,17 @@ def read_log(path: str | Path) -> pd.DataFrame:
 def write_log(df: pd.DataFrame, path: str | Path) -> Path:
     """Write a log as CSV or Parquet, chosen by the suffix."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    if path.suffix == ".parquet":
-        df.to_parquet(path, index=False)
-    elif path.suffix == ".csv":
-        df.to_csv(path, index=False)
-    else:
+    if path.suffix not in (".parquet", ".csv"):
         raise NnidInputError("output must end in .csv or .parquet", source=str(path))
+    path.parent.mkdir(parents=True, exist_ok=True)
+    # written beside and renamed: a failed write never leaves a truncated log at ``path``
+    part = path.with_name(f".{path.name}.part")
+    try:
+        if path.suffix == ".parquet":
+            df.to_parquet(part, index=False)
+        else:
+            df.to_csv(part, index=False)
+        os.replace(part, path)
+    finally:
+        part.unlink(missing_ok=True)
     return path

@@ -138,12 +138,23 @@ def savgol_derivative(
             f"Savitzky-Golay window {window} must be odd and larger than the order {order}",
             field="savgol.window",
         )
+    y = np.asarray(y, dtype=np.float64)
     if len(y) < window:
         raise NnidInputError(
             f"{len(y)} samples are too few for the Savitzky-Golay window of {window} samples",
             field=where,
         )
-    return savgol_filter(y, window, order, deriv=deriv, delta=dt, mode="interp")
+    missing = np.isnan(y)
+    if not missing.any():
+        return savgol_filter(y, window, order, deriv=deriv, delta=dt, mode="interp")
+    # a gap (nnid.datasets.gaps): each stretch between gaps on its own, never across one;
+    # a stretch shorter than the window has no estimate
+    out = np.full_like(y, np.nan)
+    edges = np.diff(np.concatenate([[1], missing.astype(np.int8), [1]]))
+    for a, b in zip(np.flatnonzero(edges == -1), np.flatnonzero(edges == 1), strict=True):
+        if b - a >= window:
+            out[a:b] = savgol_filter(y[a:b], window, order, deriv=deriv, delta=dt, mode="interp")
+    return out
 
 
 def savgol_noise_gain(window: int, order: int, dt: float, deriv: int = 1) -> float:
@@ -217,7 +228,7 @@ def derive_velocities(
             new["w"][pos] = rates["z"] / np.copysign(np.maximum(np.abs(tilt), 0.5), tilt)
     made = []
     for c, values in new.items():
-        if np.isfinite(values).all() and (overwrite or c not in out):
+        if np.isfinite(values).any() and (overwrite or c not in out):
             out[c] = values
             made.append(c)
     if report is not None and made:

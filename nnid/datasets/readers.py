@@ -11,6 +11,7 @@ Everything it does goes into the cleaning report.
 from __future__ import annotations
 
 import glob
+import gzip
 import re
 from collections.abc import Callable
 from pathlib import Path
@@ -37,7 +38,7 @@ def read_table(path: str | Path) -> pd.DataFrame:
         if name.endswith(".parquet"):
             return pd.read_parquet(path)
         if name.endswith((".csv", ".csv.gz", ".txt")):
-            return pd.read_csv(path)
+            return pd.read_csv(path, **_csv_dialect(path))
     except Exception as err:  # pandas/pyarrow raise many types for truncated or corrupt files
         raise NnidInputError(f"cannot be read as a table ({err})", source=str(path)) from None
     if path.is_dir():
@@ -49,6 +50,23 @@ def read_table(path: str | Path) -> pd.DataFrame:
     raise NnidInputError(
         "unknown table format; expected .csv, .csv.gz or .parquet", source=str(path)
     )
+
+
+def _csv_dialect(path: Path) -> dict:
+    """The separator (comma, semicolon or tab) of a CSV from its header line, and the decimal
+    comma that a semicolon-separated file from a European locale uses."""
+    opener = gzip.open if path.name.lower().endswith(".gz") else open
+    try:
+        with opener(path, "rt", errors="replace") as f:
+            head = [f.readline(), f.readline()]
+    except (OSError, EOFError):
+        return {}  # pandas says what is wrong with the file
+    counts = {sep: head[0].count(sep) for sep in (",", ";", "\t")}
+    sep = max(counts, key=counts.get)
+    if counts[sep] == 0 or sep == ",":
+        return {}
+    decimal = "," if sep == ";" and "," in head[1] else "."
+    return {"sep": sep, "decimal": decimal}
 
 
 def _grid(start: float, stop: float, rate: float) -> np.ndarray:

@@ -358,15 +358,25 @@ class ResidualMonitor(BaseEstimator):
                 field="--model",
             )
         state = read_json(path)
-        out = cls(model if model is not None else load_model(folder), **state["settings"])
-        out._setup()
-        out.mu_ = np.asarray(state["mu"], dtype=np.float64)
-        out.whiten_ = np.asarray(state["whiten"], dtype=np.float64)
-        out.s_inv_ = np.asarray(state["s_inv"], dtype=np.float64)
-        out.sigma_ = np.asarray(state["sigma"], dtype=np.float64)
-        out.thresholds_ = state["thresholds"]
-        out.correlation_time_ = float(state["correlation_time"])
-        out.calibration_ = state["calibration"]
+        try:
+            out = cls(model if model is not None else load_model(folder), **state["settings"])
+            out._setup()
+            out.mu_ = np.asarray(state["mu"], dtype=np.float64)
+            out.whiten_ = np.asarray(state["whiten"], dtype=np.float64)
+            out.s_inv_ = np.asarray(state["s_inv"], dtype=np.float64)
+            out.sigma_ = np.asarray(state["sigma"], dtype=np.float64)
+            out.thresholds_ = state["thresholds"]
+            out.correlation_time_ = float(state["correlation_time"])
+            out.calibration_ = state["calibration"]
+        except (KeyError, TypeError, ValueError) as exc:
+            raise NnidInputError(
+                f"is not a monitor nnid wrote ({type(exc).__name__}: {exc})", source=str(path)
+            ) from None
+        # the compiled kernel does not check bounds: a file with other shapes is refused here
+        k = out.mu_.shape[0] if out.mu_.ndim == 1 else -1
+        square = (out.whiten_, out.s_inv_)
+        if k < 1 or any(a.shape != (k, k) for a in square) or out.sigma_.shape != (k,):
+            raise NnidInputError("holds arrays of inconsistent shapes", source=str(path))
         return out
 
 

@@ -38,7 +38,7 @@ from nnid.datasets.preprocess import first_order_lag
 from nnid.errors import NnidInputError
 from nnid.physics.damping import parse_coefficient_key
 from nnid.physics.damping_library import LIBRARY, canonical_term
-from nnid.physics.dofs import DOFS, FORCES
+from nnid.physics.dofs import DOF_WORD, DOFS, FORCES
 from nnid.physics.effects import apply_effect
 from nnid.physics.thrusters import Actuation, apply_deadband
 
@@ -56,7 +56,6 @@ _MEANING = {
     "added_mass": "the added mass in {0} is wrong",
     "thruster_loss": "thruster {0} gives less thrust than nominal",
 }
-_DOF_WORD = {"u": "surge", "v": "sway", "w": "heave", "p": "roll", "q": "pitch", "r": "yaw"}
 
 
 @dataclass(frozen=True)
@@ -77,9 +76,9 @@ class Candidate:
     @property
     def meaning(self) -> str:
         args = self.name.split(".", 1)[1].split(".") if "." in self.name else []
-        args = [_DOF_WORD.get(a, a) for a in args]
+        args = [DOF_WORD.get(a, a) for a in args]
         if self.kind == "thruster_installation":
-            args = [_DOF_WORD[self.name.split(".")[1]].capitalize(), args[1]]
+            args = [DOF_WORD[self.name.split(".")[1]].capitalize(), args[1]]
             args[1] = "positive" if args[1] == "pos" else "negative"
         return _MEANING[self.kind].format(*args)
 

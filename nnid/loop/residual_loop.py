@@ -18,6 +18,7 @@ import warnings
 import numpy as np
 import pandas as pd
 
+from nnid.datasets.gaps import mask_gaps
 from nnid.datasets.log import ANGLES
 from nnid.datasets.splits import split_log
 from nnid.errors import NnidInputError
@@ -40,8 +41,9 @@ from nnid.loop.diagnose import (
 )
 from nnid.loop.effects import candidates, input_channels, nominal_forces
 from nnid.loop.residuals import correlation_analysis
+from nnid.loop.unexplained import as_records, describe, unexplained_structure
 from nnid.models.parametric import vehicle_with
-from nnid.physics.dofs import DOFS, FORCES
+from nnid.physics.dofs import DOF_WORD, DOFS, FORCES
 from nnid.physics.parts import Parts
 from nnid.threads import torch_threads
 from nnid.trainers.history import Progress, silent
@@ -67,7 +69,8 @@ class ResidualLoop:
     ``validation_experiments`` the held-out runs by name, ``second_opinion`` a fitted
     :class:`nnid.models.hybrid.HybridModel` of this vehicle whose learned force, named in the
     effect vocabulary on the training part (:func:`nnid.loop.explain.explain`), is reported
-    beside the loop's own diagnosis.
+    beside the loop's own diagnosis. ``max_bridge_s``: velocity gaps up to this long are
+    bridged from the pose where it allows; the others are masked (:mod:`nnid.datasets.gaps`).
     """
 
     def __init__(
@@ -92,6 +95,7 @@ class ResidualLoop:
         rescore_top: int = 30,
         gate_horizon_s: float | None = None,
         second_opinion=None,
+        max_bridge_s: float = 2.0,
     ) -> None:
         self.vehicle = vehicle
         self.alpha = alpha
@@ -113,15 +117,21 @@ class ResidualLoop:
         self.rescore_top = rescore_top
         self.gate_horizon_s = gate_horizon_s
         self.second_opinion = second_opinion
+        self.max_bridge_s = max_bridge_s
 
     # -- data -----------------------------------------------------------------------------------
     def _prepare(self, log: pd.DataFrame) -> pd.DataFrame:
         from nnid.datasets.cleaning import CleaningReport
+        from nnid.datasets.gaps import bridge_from_pose, find_gaps, gaps_record
         from nnid.datasets.preprocess import derive_accelerations, derive_velocities
 
         self.cleaning_ = CleaningReport(source="loop data")
+        self.gaps_ = gaps_record(find_gaps(log))
         if any(d not in log for d in DOFS) and all(a in log for a in ANGLES):
             log = derive_velocities(log, self.savgol_window, self.savgol_order, self.cleaning_)
+        log = bridge_from_pose(
+            log, self.savgol_window, self.savgol_order, self.max_bridge_s, self.cleaning_
+        )
         if any("d" + d not in log for d in DOFS):
             log = derive_accelerations(log, self.savgol_window, self.savgol_order, self.cleaning_)
         return log
@@ -142,6 +152,10 @@ class ResidualLoop:
                 "validation": list(held),
                 "test": [],
             }
+            if not assignment["train"]:
+                raise NnidInputError(
+                    "every experiment is held out: nothing is left to fit on", field="validation"
+                )
             split = split_log(log, "experiment", frac, assignment)
             self.split_ = split.record
             return split.train, split.validation
@@ -176,6 +190,9 @@ class ResidualLoop:
         input_channels(log, self.vehicle)  # a clear error before any work
         log = self._prepare(log)
         train, val = self._split(log)
+        # split first, on whole runs as if complete, so that gaps never move the split
+        needed = [c for c in (*DOFS, *(f"d{d}" for d in DOFS), *ANGLES) if c in log]
+        train, val = mask_gaps([train, val], needed, self.cleaning_)
         self.dofs_ = tuple(self.dofs) if self.dofs else tuple(d for d in DOFS if d in log)
         if not self.dofs_:
             raise NnidInputError(
@@ -209,6 +226,7 @@ class ResidualLoop:
         self.before_, self.residuals_before_ = self._scores(ws, self.baseline_)
         self.after_, self.residuals_after_ = self._scores(ws, fit)
         self.workspace_ = ws
+        self.unexplained_ = self._unexplained(ws, fit)
         self.hybrid_opinion_ = None
         if self.second_opinion is not None:
             from nnid.loop.explain import explain
@@ -382,6 +400,36 @@ class ResidualLoop:
         }
         return errors, analysis
 
+    def _unexplained(self, ws: Workspace, fit: Fit) -> dict[str, list]:
+        """Per analysed DOF, the structure left in the final fit's held-out force residual that
+        noise cannot explain (:mod:`nnid.loop.unexplained`); empty lists where there is none."""
+        from nnid.datasets.preprocess import savgol_window
+
+        r = force_residual(ws, fit.vehicle)
+        data = ws.data_val
+        dt = float(np.median(np.diff(data["t"])))
+        derived = any(s.step == "derive accelerations" for s in self.cleaning_.steps)
+        # the SG derivative's span sets how far measurement noise alone correlates
+        window = savgol_window(self.savgol_window, 1.0 / dt, self.savgol_order) if derived else 1
+        tau = nominal_forces(ws.val, fit.vehicle)
+        inputs = {f"tau_{f}": tau[:, i] for i, f in enumerate(FORCES) if np.any(tau[:, i])}
+        velocities = {d: data["nu"][:, i] for i, d in enumerate(DOFS) if d in ws.val}
+        return {
+            d: unexplained_structure(
+                r[:, i],
+                inputs,
+                velocities,
+                data["experiment"],
+                dt,
+                window,
+                self.savgol_order,
+                self.alpha,
+                force_rms=float(np.sqrt(np.mean(tau[:, i] ** 2))),
+            )
+            for i, d in enumerate(DOFS)
+            if d in self.dofs_
+        }
+
     # -- outputs --------------------------------------------------------------------------------
     def free_runs(self) -> tuple[np.ndarray, pd.DataFrame, pd.DataFrame, pd.DataFrame, list[str]]:
         """Held-out time, measured velocities, baseline and final free runs, excited DOFs."""
@@ -445,6 +493,15 @@ class ResidualLoop:
                 "min_gate_gain": self.min_gate_gain,
                 "filter_lambda": self.filter_lambda,
                 "zoh_midpoint": self.zoh_midpoint,
+            },
+            "unexplained": {
+                d: describe(DOF_WORD[d], found) for d, found in self.unexplained_.items() if found
+            },
+            "unexplained_correlates": {d: as_records(f) for d, f in self.unexplained_.items()},
+            "data": {
+                "gaps": self.gaps_,
+                "cleaning": self.cleaning_.to_dict()["steps"],
+                "rows_masked": self.cleaning_.rows_removed,
             },
             "hybrid_opinion": self.hybrid_opinion_,
             "warnings": self.warnings_,

@@ -11,7 +11,7 @@ DVL/IMU-like by default, so the loop must derive accelerations.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 import pandas as pd
@@ -71,10 +71,13 @@ def effect_log(
     speed: float | Sequence[float] = 0.4,
     seed: int = 0,
     measurement: Measurement | None = None,
+    unlogged: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None,
 ) -> pd.DataFrame:
     """A log of ``n_experiments`` runs sharing ``duration`` seconds, all DOFs excited, with
     ``effects`` injected into the plant (:func:`nnid.physics.effects.apply_effect`). A list
-    of ``speed`` cycles over the experiments (slow and fast runs in one campaign)."""
+    of ``speed`` cycles over the experiments (slow and fast runs in one campaign).
+    ``unlogged(t, forces)`` ``[n, 6]``: a force that acts on the plant but is not in the log
+    (an effect outside the vocabulary: a tether's tug, a thruster's distortion)."""
     if vehicle.thrusters:
         raise ValueError("effect_log drives generalized forces; use a vehicle without thrusters")
     rng = np.random.default_rng(seed)
@@ -85,15 +88,17 @@ def effect_log(
     for i in range(n_experiments):
         amp = force_amplitudes(vehicle, float(speeds[i % len(speeds)]))
         forces = multisine_forces(n, dt, amp, rng)
-        logs.append(
-            simulate(
-                vehicle,
-                forces,
-                dt,
-                effects=effects,
-                measurement=measurement,
-                seed=seed * 1000 + i,
-                experiment=f"run{i}",
-            )
+        acting = forces if unlogged is None else forces + unlogged(np.arange(n) * dt, forces)
+        log = simulate(
+            vehicle,
+            acting,
+            dt,
+            effects=effects,
+            measurement=measurement,
+            seed=seed * 1000 + i,
+            experiment=f"run{i}",
         )
+        if unlogged is not None:
+            log[[f"tau_{f}" for f in FORCES]] = forces
+        logs.append(log)
     return pd.concat(logs, ignore_index=True)

@@ -8,3 +8,5 @@ from __future__ import annotations
 
 DOFS = ("u", "v", "w", "p", "q", "r")
 FORCES = ("X", "Y", "Z", "K", "M", "N")
+#: each DOF in words, as reports and messages name it
+DOF_WORD = dict(zip(DOFS, ("surge", "sway", "heave", "roll", "pitch", "yaw"), strict=True))

@@ -11,12 +11,11 @@ import math
 
 import numpy as np
 
-from nnid.physics.dofs import DOFS
+from nnid.physics.dofs import DOF_WORD, DOFS
 from nnid.physics.effects import parse_effect
 from nnid.reports.figures import figure_uri, html_table, new_figure, page_head
 from nnid.serialization import write_json, write_text
 
-DOF_WORD = {"u": "surge", "v": "sway", "w": "heave", "p": "roll", "q": "pitch", "r": "yaw"}
 _DIRECTION = {
     ("u", "pos"): "Forward surge thrust",
     ("u", "neg"): "Reverse surge thrust",
@@ -104,11 +103,47 @@ def _like_for_like(result: dict) -> tuple[str, str, dict, dict]:
     )
 
 
+#: the cleaning steps that say what became of the gaps (nnid.datasets.gaps)
+GAP_STEPS = ("bridge velocity gaps", "mask gaps")
+
+
 def summary(result: dict) -> list[str]:
     """One sentence per added effect with its effect on the held-out error, or the plain
     statement that nothing significant was found. Where a free run diverges that is said, and
     before and after are compared on the first horizon at which neither diverges."""
     name, _, before, after = _like_for_like(result)
+    lines = _gaps_line(result.get("data", {})) + _verdict(result, name, before, after)
+    rest = _unexplained_lines(result)
+    # the total stays last; what remains unexplained is said before it
+    return lines[:-1] + rest + lines[-1:] if result["added"] else lines + rest
+
+
+def _unexplained_lines(result: dict) -> list[str]:
+    """Structure no effect of the vocabulary explains, per DOF, in a sentence each."""
+    found = result.get("unexplained", {})
+    if not found:
+        return []
+    lead = (
+        "The added effects explain part of the held-out residual, not all of it: "
+        if result["added"]
+        else ""
+    )
+    return [f"{lead}{text[0].upper()}{text[1:]}." for text in found.values()]
+
+
+def _gaps_line(data: dict) -> list[str]:
+    """What was missing from the log and what became of it, or nothing for a complete log."""
+    gaps = data.get("gaps", {})
+    if not gaps.get("count"):
+        return []
+    steps = [s for s in data.get("cleaning", []) if s["step"] in GAP_STEPS]
+    return [
+        f"The log misses motion data in {gaps['count']} gaps ({gaps['seconds']:.3g} s, longest "
+        f"{gaps['longest_s']:.3g} s): " + "; ".join(s["detail"] for s in steps) + "."
+    ]
+
+
+def _verdict(result: dict, name: str, before: dict, after: dict) -> list[str]:
     diverged = [
         f"the {who} held-out free run diverges ({_diverged_text(result[when])})"
         for when, who in (("before", "baseline's"), ("after", "final model's"))

@@ -1,0 +1,174 @@
+"""Missing motion samples: a DVL that drops out in bursts while the pose and gyro go on.
+
+An empty cell in a pose or velocity column is a gap, never a number. Gaps are handled in two
+ways, each written to the cleaning report with counts, seconds and the longest gap:
+
+- **bridged** from the pose, as the log contract derives velocities (Savitzky-Golay rates and
+  ν = J⁻¹(η) η̇, Weiss eq. 17): p q r wherever the attitude is complete, u v w wherever the
+  whole pose is, for gaps up to ``max_bridge_s``;
+- **masked** otherwise: the rows are taken out of regressions and scores and the run is cut
+  into segments at them (``<experiment>#<k>``), each simulated from its own measured start, so
+  a free run never integrates across time nobody measured.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+import pandas as pd
+
+from nnid.datasets.cleaning import CleaningReport
+from nnid.datasets.log import ACCELERATION, ANGLES, POSE, VELOCITY
+from nnid.datasets.preprocess import derive_velocities, experiments
+
+#: a segment left between two gaps shorter than this many samples is masked with them
+MIN_SEGMENT = 3
+
+
+@dataclass
+class Gap:
+    """One run of consecutive rows with a missing cell in ``columns``."""
+
+    experiment: str | None
+    t: float  # time of the first missing sample, s
+    length_s: float  # from the last sample before to the first sample after
+    rows: int
+    columns: list[str]
+
+
+def _runs(missing: np.ndarray) -> list[tuple[int, int]]:
+    """[start, stop) of each run of True."""
+    edges = np.diff(np.concatenate([[0], missing.astype(np.int8), [0]]))
+    return list(zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1), strict=True))
+
+
+def _gap_runs(part: pd.DataFrame, columns: list[str]):
+    """(Gap, first row, stop row) of each gap of one experiment, rows by position."""
+    missing = part[columns].isna().to_numpy()
+    t = part["t"].to_numpy(np.float64)
+    name = part["experiment"].iloc[0] if "experiment" in part else None
+    for a, b in _runs(missing.any(axis=1)):
+        t0 = t[a - 1] if a > 0 else t[a]
+        t1 = t[b] if b < t.size else t[b - 1]
+        cols = [c for c, m in zip(columns, missing[a:b].any(axis=0), strict=True) if m]
+        gap = Gap(
+            None if name is None else str(name), float(t[a]), float(t1 - t0), int(b - a), cols
+        )
+        yield gap, a, b
+
+
+def find_gaps(log: pd.DataFrame, columns: list[str] | None = None) -> list[Gap]:
+    """The gaps (runs of rows with an empty cell in ``columns``; default: pose and velocity)
+    of each experiment."""
+    columns = [c for c in (columns or [*POSE, *VELOCITY]) if c in log]
+    if not columns:
+        return []
+    return [g for _, idx in experiments(log) for g, _, _ in _gap_runs(log.loc[idx], columns)]
+
+
+def _summary(gaps: list[Gap]) -> str:
+    seconds = sum(g.length_s for g in gaps)
+    longest = max((g.length_s for g in gaps), default=0.0)
+    order = [*POSE, *VELOCITY, *ACCELERATION]
+    cols = sorted(
+        {c for g in gaps for c in g.columns},
+        key=lambda c: (c not in order, order.index(c) if c in order else c),
+    )
+    return (
+        f"{len(gaps)} gaps in {', '.join(cols)} ({sum(g.rows for g in gaps)} samples, "
+        f"{seconds:.3g} s in total, longest {longest:.3g} s)"
+    )
+
+
+def bridge_from_pose(
+    log: pd.DataFrame,
+    window_s: float = 0.5,
+    order: int = 4,
+    max_bridge_s: float = 2.0,
+    report: CleaningReport | None = None,
+) -> pd.DataFrame:
+    """Fill empty velocity cells from the pose where it allows (module docstring): p q r from a
+    complete attitude, u v w from a complete pose, in gaps up to ``max_bridge_s``."""
+    velocity = [c for c in VELOCITY if c in log]
+    if not velocity or not log[velocity].isna().any().any() or not all(a in log for a in ANGLES):
+        return log
+    out = log.copy()
+    bridged: list[Gap] = []
+    for _, idx in experiments(log):
+        part = log.loc[idx]
+        pose = [c for c in POSE if c in part]
+        complete = [c for c in pose if part[c].notna().all()]
+        if not all(a in complete for a in ANGLES):
+            continue
+        # derive_velocities sees no velocity column, so it makes each one the pose gives; w
+        # from depth alone assumes u = v = 0, an approximation a bridge must not use
+        derived = derive_velocities(part[["t", *complete]], window_s, order)
+        can = [c for c in ("p", "q", "r") if c in velocity]
+        if all(c in complete for c in ("x", "y", "z")):
+            can += [c for c in ("u", "v", "w") if c in velocity]
+        for gap, a, b in _gap_runs(part, velocity):
+            cols = [c for c in gap.columns if c in can]
+            if gap.length_s > max_bridge_s or not cols:
+                continue
+            rows = part.index[a:b]
+            for c in cols:
+                out.loc[rows, c] = out.loc[rows, c].fillna(derived.loc[rows, c])
+            bridged.append(Gap(gap.experiment, gap.t, gap.length_s, gap.rows, cols))
+    if report is not None and bridged:
+        report.add(
+            "bridge velocity gaps",
+            f"{_summary(bridged)} bridged from the pose by Savitzky-Golay "
+            f"(order {order}, {window_s:g} s window) and J⁻¹(η)",
+            columns=sorted({c for g in bridged for c in g.columns}, key=VELOCITY.index),
+        )
+    return out
+
+
+def mask_gaps(
+    parts: list[pd.DataFrame], columns: list[str], report: CleaningReport | None = None
+) -> list[pd.DataFrame]:
+    """Take the rows with an empty cell in ``columns`` out of each part of one log (e.g. its
+    training and held-out parts) and cut each run at them into segments ``<experiment>#<k>``
+    (module docstring), reported once. Parts without gaps are returned as they are."""
+    out, gaps, short = [], [], 0
+    for log in parts:
+        cols = [c for c in columns if c in log]
+        missing = log[cols].isna().any(axis=1).to_numpy() if cols else np.zeros(len(log), bool)
+        if not missing.any():
+            out.append(log)
+            continue
+        gaps += find_gaps(log, cols)
+        keep = ~missing
+        label = np.empty(len(log), dtype=object)
+        for name, idx in experiments(log):
+            pos = np.flatnonzero(log.index.isin(idx))
+            runs = _runs(keep[pos])
+            for k, (a, b) in enumerate(runs, start=1):
+                if b - a < MIN_SEGMENT:
+                    keep[pos[a:b]] = False
+                    short += b - a
+                base = "run" if name is None else str(name)
+                label[pos[a:b]] = base if len(runs) == 1 else f"{base}#{k}"
+        out.append(log.assign(experiment=label)[keep].reset_index(drop=True))
+    if report is not None and gaps:
+        extra = f"; {short} samples between gaps too short to use" if short else ""
+        report.add(
+            "mask gaps",
+            f"{_summary(gaps)} masked (out of regressions and scores; runs cut into segments "
+            f"at them, each simulated from its own start{extra})",
+            rows_removed=sum(len(a) - len(b) for a, b in zip(parts, out, strict=True)),
+            columns=sorted({c for g in gaps for c in g.columns}),
+        )
+    return out
+
+
+def gaps_record(gaps: list[Gap]) -> dict:
+    """JSON-ready: counts, seconds, longest and each gap."""
+    return {
+        "count": len(gaps),
+        "samples": int(sum(g.rows for g in gaps)),
+        "seconds": float(sum(g.length_s for g in gaps)),
+        "longest_s": float(max((g.length_s for g in gaps), default=0.0)),
+        "gaps": [asdict(g) for g in gaps],
+    }

@@ -1,0 +1,392 @@
+"""A corpus of malformed input through every command of the CLI.
+
+Each case writes one broken file (a log, a vehicle file, a config, an output path, a model
+folder) and runs the command in-process. Every case must end in exit code 2 with exactly one
+``error:`` line that names the file and the field, column or row, and no traceback: meaningless
+input is never accepted and never crashes.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from typer.testing import CliRunner
+
+from nnid.cli import app
+
+REPO = Path(__file__).resolve().parents[1]
+MINIROV = str(resources.files("nnid.demo_data").joinpath("minirov.toml"))
+OCTO = str(REPO / "configs" / "vehicles" / "octorov_sim.toml")
+TRAIN = str(REPO / "configs" / "fossen_ls.toml")
+COMPARE = str(REPO / "configs" / "seamor_families.toml")
+
+
+def _demo_log() -> pd.DataFrame:
+    root = resources.files("nnid.demo_data")
+    log = pd.read_parquet(root.joinpath("demo_minirov_heave.parquet"))
+    return log[log["experiment"].isin(["run0", "run1", "run2"])].reset_index(drop=True)
+
+
+# -- log mutations: (name, what the error must name, mutate(df, input column) -> df | bytes) ----
+def _set(col: str, row: int, value):
+    def mutate(df: pd.DataFrame, inp: str) -> pd.DataFrame:
+        name = inp if col == "INPUT" else col
+        out = df.astype({name: object})
+        out.loc[row, name] = value
+        return out
+
+    return mutate
+
+
+LOG_CASES: list[tuple[str, str, Callable]] = [
+    ("no time column", "'t'", lambda df, i: df.drop(columns="t")),
+    ("text in time", "'t'", _set("t", 5, "noon")),
+    ("empty time cell", "'t'", _set("t", 7, np.nan)),
+    ("infinite time", "'t'", _set("t", 9, np.inf)),
+    (
+        "duplicated time",
+        "'t'",
+        lambda df, i: df.assign(t=df["t"].where(df.index != 11, df["t"][10])),
+    ),
+    ("decreasing time", "'t'", lambda df, i: df.assign(t=df["t"].where(df.index != 12, -1.0))),
+    ("time in milliseconds", "'t'", lambda df, i: df.assign(t=(df["t"] * 1000).round())),
+    ("time in nanoseconds", "'t'", lambda df, i: df.assign(t=(df["t"] * 1e9).round())),
+    ("empty experiment label", "'experiment'", _set("experiment", 20, np.nan)),
+    ("blank experiment label", "'experiment'", _set("experiment", 21, " ")),
+    ("text in an input", "INPUT", _set("INPUT", 30, "full")),
+    ("infinite input", "INPUT", _set("INPUT", 31, np.inf)),
+    ("empty input cell", "INPUT", _set("INPUT", 32, np.nan)),
+    ("text in a velocity", "'u'", _set("u", 40, "fast")),
+    ("infinite velocity", "'u'", _set("u", 41, -np.inf)),
+    ("velocity column all empty", "'u'", lambda df, i: df.assign(u=np.nan)),
+    ("angle in degrees", "'psi'", lambda df, i: df.assign(psi=np.degrees(df["psi"]) + 200)),
+    ("text in an angle", "'phi'", _set("phi", 50, "level")),
+    (
+        "no motion columns",
+        "motion",
+        lambda df, i: df[["t", *[c for c in df if c.startswith(("tau_", "cmd_"))]]],
+    ),
+    (
+        "no input columns",
+        "input",
+        lambda df, i: df.drop(columns=[c for c in df if c.startswith(("tau_", "cmd_"))]),
+    ),
+    ("header only", "no rows", lambda df, i: df.iloc[:0]),
+    ("empty file", "", lambda df, i: b""),
+    ("binary garbage", "", lambda df, i: bytes(range(256)) * 8),
+    ("one garbled line", "", lambda df, i: b"t,u\n0.0,1,2,3,4\n"),
+]
+LOG_SUFFIX = {"empty file": ".csv", "binary garbage": ".parquet"}
+
+
+@dataclass
+class Case:
+    id: str
+    args: Callable[[Path, dict], list[str]]
+    names: tuple[str, ...]  # what the error line must contain (the file first)
+
+
+def _write_log(tmp: Path, name: str, content) -> Path:
+    path = tmp / f"{name.replace(' ', '_')}{LOG_SUFFIX.get(name, '.csv')}"
+    if isinstance(content, bytes):
+        path.write_bytes(content)
+    else:
+        content.to_csv(path, index=False)
+    return path
+
+
+SIMULATE = str(REPO / "configs" / "seamor_sequence.toml")
+
+
+def _command(command: str, tmp: Path, fx: dict, *, data=None, vehicle=MINIROV, out=None,
+             config=None, model=None) -> list[str]:  # fmt: skip
+    """The arguments of ``command`` with good inputs except those given."""
+    target = str(out if out is not None else fx["out"])
+    if command == "demo":
+        return ["demo", "--out", target]
+    if command == "simulate":
+        return ["simulate", config or SIMULATE, "--vehicle", str(vehicle), "--out", target]
+    if command == "detect":
+        data = data or _write_log(tmp, "octo", fx["octo_log"])
+        model = model or fx["monitor"]
+        return ["detect", "--model", str(model), "--data", str(data), "--out", target]
+    data = str(data or _write_log(tmp, "good", fx["demo_log"]))
+    if command == "inspect":
+        return ["inspect", data, *(["--out", target] if out is not None else [])]
+    config = str(config or {"train": TRAIN, "compare": COMPARE, "loop": ""}[command])
+    return [command, *([config] if config else []), "--data", data, "--vehicle", str(vehicle),
+            "--out", target]  # fmt: skip
+
+
+def _log_cases() -> list[Case]:
+    cases = []
+    for command in ("inspect", "loop", "train", "compare", "detect"):
+        for name, field, _ in LOG_CASES:
+
+            def args(tmp, fx, name=name, command=command):
+                base = fx["octo_log"] if command == "detect" else fx["demo_log"]
+                inp = next(c for c in base if c.startswith(("tau_", "cmd_")))
+                mutate = {n: m for n, _, m in LOG_CASES}[name]
+                return _command(command, tmp, fx, data=_write_log(tmp, name, mutate(base, inp)))
+
+            cases.append(Case(f"{command}: {name}", args, ("LOG", field)))
+    return cases
+
+
+# -- vehicle files -------------------------------------------------------------------------------
+GOOD_VEHICLE = """name = "probe"
+mass = 11.5
+inertia = [0.16, 0.16, 0.16]
+r_g = [0.0, 0.0, 0.02]
+[added_mass]
+X_udot = -5.5
+[damping.coefficients]
+"X:u" = -4.0
+"""
+VEHICLE_CASES = [
+    ("mass nan", "mass", ("mass = 11.5", "mass = nan")),
+    ("mass inf", "mass", ("mass = 11.5", "mass = inf")),
+    ("mass negative", "mass", ("mass = 11.5", "mass = -3")),
+    ("mass in grams", "mass", ("mass = 11.5", "mass = 11500000")),
+    ("r_g nan", "r_g", ("r_g = [0.0, 0.0, 0.02]", "r_g = [0.0, nan, 0.02]")),
+    ("r_g absurd", "r_g", ("r_g = [0.0, 0.0, 0.02]", "r_g = [0.0, 0.0, 2000.0]")),
+    ("r_g two values", "r_g", ("r_g = [0.0, 0.0, 0.02]", "r_g = [0.0, 0.02]")),
+    ("inertia negative", "inertia", ("[0.16, 0.16, 0.16]", "[0.16, -0.16, 0.16]")),
+    ("inertia inf", "inertia", ("[0.16, 0.16, 0.16]", "[0.16, inf, 0.16]")),
+    ("unknown key", "masss", ("mass = 11.5", "mass = 11.5\nmasss = 2")),
+    ("added mass key", "added_mass", ("X_udot", "X_uddot")),
+    ("added mass nan", "X_udot", ("X_udot = -5.5", "X_udot = nan")),
+    ("damping nan", "X:u", ('"X:u" = -4.0', '"X:u" = nan')),
+    ("damping absurd", "X:u", ('"X:u" = -4.0', '"X:u" = -4e12')),
+    ("damping bad key", "coefficients", ('"X:u"', '"X:speed"')),
+    ("rho absurd", "rho", ("mass = 11.5", "mass = 11.5\nrho = 1.2")),
+    ("toml syntax", "", ("mass = 11.5", "mass = = 11.5")),
+    ("text mass", "mass", ("mass = 11.5", 'mass = "heavy"')),
+]
+
+
+def _vehicle_cases() -> list[Case]:
+    cases = []
+    for command in ("loop", "train", "simulate"):
+        for name, field, (old, new) in VEHICLE_CASES:
+
+            def args(tmp, fx, name=name, old=old, new=new, command=command):
+                path = tmp / f"{name.replace(' ', '_')}.toml"
+                path.write_text(GOOD_VEHICLE.replace(old, new))
+                return _command(command, tmp, fx, vehicle=path,
+                                out=tmp / "sim.csv" if command == "simulate" else None)  # fmt: skip
+
+            cases.append(Case(f"{command} vehicle: {name}", args, ("VEHICLE", field)))
+    return cases
+
+
+# -- configs ---------------------------------------------------------------------------------
+TRAIN_TEXT = (REPO / "configs" / "fossen_ls.toml").read_text()
+CONFIG_CASES = [
+    ("train", "unknown key", "warmup", ("warmup_s = 2.0", "warmup = 2.0")),
+    ("train", "nan setting", "warmup_s", ("warmup_s = 2.0", "warmup_s = nan")),
+    ("train", "negative setting", "warmup_s", ("warmup_s = 2.0", "warmup_s = -2.0")),
+    ("train", "fractions not summing to 1", "fractions", ("[0.6, 0.2, 0.2]", "[0.6, 0.6, 0.2]")),
+    ("train", "everything validation", "split", ("[0.6, 0.2, 0.2]", "[0.0, 1.0, 0.0]")),
+    ("train", "unknown model kind", "kind", ('kind = "fossen"', 'kind = "fosen"')),
+    ("train", "unknown trainer", "trainer", ('kind = "ls"', 'kind = "lsq"')),
+    ("train", "unknown unknowns", "unknowns", ('"added_mass", "damping"', '"added_mass", "drag"')),
+    ("train", "wrong kind of config", "kind", ('kind = "train"', 'kind = "compare"')),
+    ("train", "toml syntax", "", ("warmup_s = 2.0", "warmup_s = 2.0.0")),
+    (
+        "train",
+        "validation experiments unknown",
+        "validation",
+        ('by = "auto"', 'by = "experiment"\nvalidation = ["dive9"]'),
+    ),
+    (
+        "train",
+        "every experiment held out",
+        "split",
+        ('by = "auto"', 'by = "experiment"\nvalidation = ["run0", "run1", "run2"]'),
+    ),
+    ("loop", "unknown dof", "dofs", None),
+    ("loop", "held-out run not in log", "validation", None),
+    ("loop", "unknown key", "alhpa", None),
+    ("loop", "nan alpha", "alpha", None),
+    ("loop", "every run held out", "validation", None),
+]
+LOOP_TEXT = {
+    "unknown dof": 'kind = "loop"\ndofs = ["u", "x"]\n',
+    "held-out run not in log": 'kind = "loop"\nvalidation = ["dive9"]\n',
+    "unknown key": 'kind = "loop"\nalhpa = 0.01\n',
+    "nan alpha": 'kind = "loop"\nalpha = nan\n',
+    "every run held out": 'kind = "loop"\nvalidation = ["run0", "run1", "run2"]\n',
+}
+
+
+def _config_cases() -> list[Case]:
+    cases = []
+    for command, name, field, change in CONFIG_CASES:
+
+        def args(tmp, fx, command=command, name=name, change=change):
+            path = tmp / f"{name.replace(' ', '_')}.toml"
+            text = TRAIN_TEXT.replace(*change) if change else LOOP_TEXT[name]
+            path.write_text(text)
+            return _command(command, tmp, fx, config=path)
+
+        cases.append(Case(f"{command} config: {name}", args, ("CONFIG", field)))
+    return cases
+
+
+# -- output paths and model folders ------------------------------------------------------------
+def _out_cases() -> list[Case]:
+    cases = []
+    for where in ("a file", "/proc", "below a file"):
+
+        def out(tmp, where=where):
+            if where == "a file":
+                (tmp / "taken").write_text("x")
+                return tmp / "taken"
+            if where == "below a file":
+                (tmp / "taken").write_text("x")
+                return tmp / "taken" / "out"
+            return Path("/proc/nnid-out")
+
+        for command in ("train", "compare", "loop", "detect", "demo", "inspect", "simulate"):
+
+            def args(tmp, fx, command=command, out=out, where=where):
+                target = out(tmp)
+                if command == "simulate" and where != "a file":
+                    target = target / "x.csv"
+                return _command(command, tmp, fx, out=target)
+
+            cases.append(Case(f"{command} --out {where}", args, ("OUT",)))
+    model_cases = {
+        "no such model folder": lambda tmp: tmp / "nothing",
+        "folder without a monitor": lambda tmp: tmp,
+        "corrupt monitor.json": lambda tmp: _corrupt_monitor(tmp),
+    }
+    for name, folder in model_cases.items():
+
+        def args(tmp, fx, folder=folder):
+            return _command("detect", tmp, fx, model=folder(tmp), out=tmp / "o")
+
+        cases.append(Case(f"detect --model: {name}", args, ("MODEL",)))
+    return cases
+
+
+def _corrupt_monitor(tmp: Path) -> Path:
+    folder = tmp / "broken_model"
+    folder.mkdir()
+    (folder / "monitor.json").write_text('{"kind": "residual_monitor", "mu": [1, 2')
+    return folder
+
+
+CASES = [*_log_cases(), *_vehicle_cases(), *_config_cases(), *_out_cases()]
+
+
+@pytest.fixture(scope="module")
+def fixtures(tmp_path_factory):
+    """A good minirov log, a good octorov log and a calibrated monitor for it."""
+    from nnid.datasets.faults import simulate_faults
+    from nnid.fault.monitor import ResidualMonitor
+    from nnid.models.parametric import ParametricModel
+    from nnid.trainers.least_squares import LeastSquares
+    from nnid.vehicle import load_vehicle
+
+    tmp = tmp_path_factory.mktemp("corpus")
+    octo = load_vehicle(OCTO)
+    logs = [simulate_faults(octo, 40, seed=s, experiment=f"h{s}") for s in range(3)]
+    model = ParametricModel(
+        octo, ["added_mass", "damping"], trainer=LeastSquares(filter_lambda=1.0), zoh_midpoint=True
+    ).fit(logs[0])
+    monitor = ResidualMonitor(model).fit(pd.concat(logs[1:], ignore_index=True))
+    model.save(tmp / "monitor")
+    monitor.save(tmp / "monitor")
+    return {
+        "demo_log": _demo_log(),
+        "octo_log": logs[2].iloc[:400].reset_index(drop=True),
+        "monitor": tmp / "monitor",
+        "out": tmp / "never_written",
+    }
+
+
+def test_the_corpus_is_large_and_covers_every_command():
+    commands = {c.id.split()[0].rstrip(":") for c in CASES}
+    assert len(CASES) >= 150
+    assert commands >= {"simulate", "inspect", "train", "compare", "loop", "detect", "demo"}
+
+
+@pytest.mark.parametrize("case", CASES, ids=[c.id for c in CASES])
+def test_bad_input_is_refused_in_one_line_naming_the_file_and_field(case, fixtures, tmp_path):
+    args = case.args(tmp_path, fixtures)
+    result = CliRunner().invoke(app, args)
+    output = result.output
+    assert "Traceback" not in output and not isinstance(result.exception, Exception | None)
+    assert result.exit_code == 2, output
+    errors = [line for line in output.splitlines() if line.startswith("error:")]
+    assert len(errors) == 1, output
+    line = errors[0]
+    kind, *fields = case.names
+    if kind == "LOG":
+        named = [a for a in args if a.endswith((".csv", ".parquet"))][-1]
+        assert Path(named).name in line, line
+    elif kind == "VEHICLE":
+        assert ".toml" in line, line
+    elif kind == "CONFIG":
+        assert Path(args[1]).name in line, line
+    elif kind == "OUT":
+        assert "--out" in line or "nnid-out" in line or "taken" in line, line
+    elif kind == "MODEL":
+        assert "--model" in line or "monitor" in line, line
+    for field in fields:
+        if field == "INPUT":
+            field = "tau_" if not args[0] == "detect" else "cmd_"
+        assert field.lower() in line.lower(), line
+    assert not fixtures["out"].exists()  # nothing written by a refused run
+
+
+# -- property-based: the vehicle-file loader ---------------------------------------------------
+_value = st.one_of(
+    st.floats(allow_nan=True, allow_infinity=True),
+    st.floats(min_value=-1e12, max_value=1e12),
+    st.sampled_from(["", "heavy", None, [], [1.0]]),
+)
+_FIELDS = ("mass", "rho", "g", "length", "buoyancy", "actuator_lag", "deadband")
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    field=st.sampled_from([*_FIELDS, "r_g", "r_b", "inertia", "added_mass", "damping"]),
+    value=_value,
+    index=st.integers(0, 2),
+)
+def test_vehicle_loader_gives_a_vehicle_or_names_the_field(field, value, index):
+    """Any value in any field: a valid vehicle (every number finite and within the physical
+    bounds), or the input error naming that field; never another exception."""
+    from nnid.errors import NnidInputError
+    from nnid.vehicle import MAX_MASS, vehicle_from_dict
+
+    data = {"name": "probe", "mass": 11.5, "inertia": [0.2, 0.2, 0.3]}
+    if field in ("r_g", "r_b", "inertia"):
+        vector = [0.0, 0.0, 0.0] if field != "inertia" else [0.2, 0.2, 0.3]
+        vector[index] = value
+        data[field] = vector
+    elif field == "added_mass":
+        data[field] = {"X_udot": value}
+    elif field == "damping":
+        data[field] = {"coefficients": {"X:u": value}}
+    else:
+        data[field] = value
+    try:
+        vehicle = vehicle_from_dict(data, source="probe.toml")
+    except NnidInputError as err:
+        assert "probe.toml" in str(err) and field in str(err), str(err)
+        return
+    numbers = [vehicle.mass, vehicle.rho, vehicle.g, *vehicle.r_g, *vehicle.r_b]
+    numbers += list(vehicle.added_mass.values()) + list(vehicle.damping.coefficients.values())
+    assert all(np.isfinite(numbers)) and 0 < vehicle.mass <= MAX_MASS

@@ -1,0 +1,116 @@
+"""Empty motion cells (a DVL that drops out in bursts): accepted as gaps, bridged from the pose
+where it allows, masked otherwise, and every one of them reported."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from nnid.datasets.cleaning import CleaningReport
+from nnid.datasets.gaps import bridge_from_pose, find_gaps, mask_gaps
+from nnid.datasets.log import validate_log
+from nnid.errors import NnidInputError
+
+
+def _mocap_log(n: int = 400, dt: float = 0.05) -> pd.DataFrame:
+    """A level vehicle turning slowly: pose and its exact body velocities."""
+    t = np.arange(n) * dt
+    psi = 0.3 * np.sin(0.5 * t)
+    r = 0.15 * np.cos(0.5 * t)
+    u_body = 0.2 + 0.05 * np.sin(0.7 * t)
+    # integrate the NED position of u along psi (v = w = 0), exactly enough for SG rates
+    x = np.concatenate([[0.0], np.cumsum(u_body[:-1] * np.cos(psi[:-1]) * dt)])
+    y = np.concatenate([[0.0], np.cumsum(u_body[:-1] * np.sin(psi[:-1]) * dt)])
+    zeros = np.zeros(n)
+    return pd.DataFrame(
+        {
+            "t": t,
+            "x": x,
+            "y": y,
+            "z": zeros + 2.0,
+            "phi": zeros,
+            "theta": zeros,
+            "psi": psi,
+            "u": u_body,
+            "v": zeros,
+            "w": zeros,
+            "p": zeros,
+            "q": zeros,
+            "r": r,
+            "tau_X": np.sin(t),
+        }
+    )
+
+
+def test_empty_velocity_cells_are_gaps_but_text_and_inf_are_refused():
+    log = _mocap_log()
+    log.loc[10:19, ["u", "v", "w"]] = np.nan
+    assert validate_log(log) is log
+    for bad, what in ((np.inf, "inf"), ("fast", "'fast'")):
+        broken = log.astype({"u": object})
+        broken.loc[30, "u"] = bad
+        with pytest.raises(NnidInputError) as err:
+            validate_log(broken, source="dive.csv")
+        assert err.value.field == "u" and err.value.row == 30 and what in str(err.value)
+    empty = log.assign(v=np.nan)
+    with pytest.raises(NnidInputError, match="empty") as err:
+        validate_log(empty, source="dive.csv")
+    assert err.value.field == "v"
+    inputs = log.copy()
+    inputs.loc[5, "tau_X"] = np.nan  # an input is never a gap
+    with pytest.raises(NnidInputError) as err:
+        validate_log(inputs)
+    assert err.value.field == "tau_X" and err.value.row == 5
+
+
+def test_gaps_are_found_with_their_length_and_columns():
+    log = _mocap_log()
+    log.loc[100:119, ["u", "v", "w"]] = np.nan  # 20 samples: 21 intervals between measurements
+    log.loc[300:301, "r"] = np.nan
+    gaps = find_gaps(log)
+    assert [(g.rows, g.columns) for g in gaps] == [(20, ["u", "v", "w"]), (2, ["r"])]
+    assert gaps[0].t == pytest.approx(5.0)
+    assert gaps[0].length_s == pytest.approx(21 * 0.05)
+
+
+def test_velocity_gaps_are_bridged_from_the_pose_and_long_ones_are_left():
+    truth = _mocap_log()
+    log = truth.copy()
+    log.loc[100:119, ["u", "v", "w", "r"]] = np.nan  # 1 s
+    log.loc[200:279, ["u", "v", "w"]] = np.nan  # 4 s: beyond max_bridge_s
+    report = CleaningReport()
+    out = bridge_from_pose(log, max_bridge_s=2.0, report=report)
+    gap = slice(100, 119)
+    for c in ("u", "v", "w", "r"):
+        assert out.loc[gap, c].notna().all()
+        assert np.abs(out.loc[gap, c] - truth.loc[gap, c]).max() < 2e-3, c
+    assert out.loc[200:279, "u"].isna().all()
+    assert (
+        out.drop(index=range(100, 120)).fillna(0).equals(log.drop(index=range(100, 120)).fillna(0))
+    )
+    (step,) = report.steps
+    assert step.step == "bridge velocity gaps" and "1 gaps" in step.detail
+
+
+def test_attitude_alone_bridges_rates_but_not_translations():
+    log = _mocap_log().drop(columns=["x", "y"])
+    log.loc[100:119, ["u", "v", "w", "r"]] = np.nan
+    out = bridge_from_pose(log)
+    assert out.loc[100:119, "r"].notna().all()
+    assert out.loc[100:119, ["u", "v", "w"]].isna().all().all()
+
+
+def test_masking_cuts_runs_into_segments_and_reports_every_row():
+    log = _mocap_log().assign(experiment="dive1")
+    log.loc[100:119, "u"] = np.nan
+    log.loc[121:122, "u"] = np.nan  # leaves a single sample between two gaps
+    train, held = log.iloc[:250], log.iloc[250:]
+    report = CleaningReport()
+    masked_train, masked_held = mask_gaps([train, held], ["u", "r"], report)
+    assert masked_held is held  # no gap there
+    assert list(dict.fromkeys(masked_train["experiment"])) == ["dive1#1", "dive1#3"]
+    assert masked_train["u"].notna().all()
+    (step,) = report.steps
+    assert step.rows_removed == 250 - len(masked_train) == 23  # 22 empty, 1 stranded
+    assert "too short" in step.detail
