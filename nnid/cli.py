@@ -345,6 +345,15 @@ def loop(
     alpha: float | None = typer.Option(
         None, "--alpha", min=1e-12, max=0.5, help="Family-wise significance of the F-test."
     ),
+    dofs: str | None = typer.Option(
+        None, "--dofs", help="DOFs to analyse, comma-separated (e.g. p,q,r); default: all logged."
+    ),
+    validation: str | None = typer.Option(
+        None, "--validation", help="Experiments held out, comma-separated; default: the last 30 %."
+    ),
+    exclude: str | None = typer.Option(
+        None, "--exclude", help="Experiments left out (e.g. replays), comma-separated."
+    ),
     hybrid: Path | None = typer.Option(
         None,
         "--hybrid",
@@ -373,6 +382,7 @@ def loop(
     except NnidInputError as exc:
         raise exc.with_source(str(config)) if config else exc from None
     log, report, veh = inputs.log, inputs.report, inputs.vehicle
+    log = _exclude(log, _names(exclude), report)
     settings = dict(
         max_effects=cfg.max_effects if max_effects is None else max_effects,
         alpha=cfg.alpha if alpha is None else alpha,
@@ -382,13 +392,51 @@ def loop(
         savgol_order=cfg.savgol_order,
         warmup_s=cfg.warmup_s,
         validation=cfg.validation_fraction,
-        dofs=tuple(cfg.dofs) if cfg.dofs else None,
-        validation_experiments=cfg.validation,
+        dofs=_dofs(dofs) or (tuple(cfg.dofs) if cfg.dofs else None),
+        validation_experiments=_names(validation) or cfg.validation,
         gate_horizon_s=cfg.gate_horizon_s,
         second_opinion=second,
     )
     source, where = data or str(config or ""), str(config or "")
     _run_loop(log, veh, out_dir, source=source, cleaning=report, config=where, **settings)
+
+
+def _names(text: str | None) -> list[str]:
+    """A comma-separated option as a list (empty for None)."""
+    return [n.strip() for n in (text or "").split(",") if n.strip()]
+
+
+def _dofs(text: str | None) -> tuple[str, ...] | None:
+    from nnid.physics.dofs import DOFS
+
+    names = _names(text)
+    unknown = [d for d in names if d not in DOFS]
+    if unknown:
+        raise NnidInputError(
+            f"unknown DOF {', '.join(unknown)}; expected some of {' '.join(DOFS)}", field="--dofs"
+        )
+    return tuple(names) or None
+
+
+def _exclude(log, names: list[str], report):
+    """The log without the named experiments (a name may be a replay group of the reader
+    config, ``replays[0]``: all its copies), reported; an unknown name is an error."""
+    from nnid.datasets.log import REPLAY_GROUP
+
+    if not names:
+        return log
+    if REPLAY_GROUP in log:
+        groups = log.groupby(REPLAY_GROUP, sort=False)["experiment"].unique()
+        names = [e for n in names for e in (groups[n] if n in groups else [n])]
+    known = set(log["experiment"]) if "experiment" in log else set()
+    unknown = [n for n in names if n not in known]
+    if unknown:
+        raise NnidInputError(
+            f"experiments {', '.join(unknown)} are not in the log", field="--exclude"
+        )
+    keep = ~log["experiment"].isin(names)
+    report.add("exclude", f"left out {', '.join(names)} (--exclude)", int((~keep).sum()))
+    return log[keep].reset_index(drop=True)
 
 
 def _hybrid_model(folder: Path):

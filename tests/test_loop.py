@@ -376,3 +376,32 @@ def test_loop_finds_caccias_upward_thrust_loss_through_the_thrusters():
     assert loop.added == ["thruster_installation.w.neg"]
     assert loop.added_[0].value == pytest.approx(0.56, rel=0.05)
     assert loop.after_["free_run_nrmse"]["w"] < 0.5 * loop.before_["free_run_nrmse"]["w"]
+
+
+def test_cli_loop_options_choose_dofs_held_out_and_excluded_runs(tmp_path):
+    """The on-your-data form without a config: --dofs, --validation and --exclude."""
+    from typer.testing import CliRunner
+
+    from nnid.cli import app
+
+    veh = load_vehicle(MINIROV)
+    log = effect_log(veh, duration=120, n_experiments=4, seed=5, measurement=DVL)
+    path = tmp_path / "log.csv"
+    log.to_csv(path, index=False)
+    runner = CliRunner()
+    args = ["loop", "--data", str(path), "--vehicle", MINIROV, "--max-effects", "0"]
+    res = runner.invoke(
+        app, [*args, "--dofs", "w,r", "--validation", "run2", "--exclude", "run1", "--out",
+              str(tmp_path / "o")],
+    )  # fmt: skip
+    assert res.exit_code == 0, res.output
+    result = json.loads((tmp_path / "o" / "loop.json").read_text())
+    parts = result["settings"]["split"]["parts"]
+    assert result["settings"]["dofs"] == ["w", "r"]
+    assert [p["experiment"] for p in parts["validation"]] == ["run2"]
+    assert [p["experiment"] for p in parts["train"]] == ["run0", "run3"]
+    assert "left out run1" in (tmp_path / "o" / "cleaning.md").read_text()
+    for bad, name in (("--dofs", "w,x"), ("--exclude", "run9"), ("--validation", "run9")):
+        res = runner.invoke(app, [*args, bad, name, "--out", str(tmp_path / "bad")])
+        assert res.exit_code == 2 and name.split(",")[-1] in res.output, res.output
+        assert not (tmp_path / "bad").exists()

@@ -100,3 +100,30 @@ def test_persistence_of_excitation_names_unexcited_parameters():
     assert collinear.collinear == ["a", "b"] and collinear.rank == 2
     good = excitation_report(np.stack([u, u**2, np.sin(u)], 1), ["a", "b", "c"])
     assert good.persistent and np.isfinite(good.condition) and not good.warnings
+
+
+def test_replays_of_one_run_stay_on_one_side_of_a_split():
+    """Copies of one run (a replay group the reader config declares) are one unit: a default
+    split never puts two of them on different sides, and an explicit one that does is refused."""
+    from nnid.datasets.log import REPLAY_GROUP
+    from nnid.errors import NnidInputError
+
+    names = ["a", "copy1", "copy2", "copy3", "b", "c"]
+    log = pd.DataFrame({"t": np.tile(np.arange(100) * 0.1, 6), "experiment": np.repeat(names, 100)})
+    log[REPLAY_GROUP] = log["experiment"].map(lambda e: "replays[0]" if "copy" in e else None)
+    for fractions in [(0.5, 0.5, 0.0), (0.4, 0.3, 0.3), (0.7, 0.3, 0.0)]:
+        split = split_log(log, "experiment", fractions)
+        sides = {
+            p
+            for p in ("train", "validation", "test")
+            if split[p]["experiment"].str.startswith("copy").any()
+        }
+        assert len(sides) == 1, (fractions, split.record["parts"])
+    plain = split_log(log.drop(columns=REPLAY_GROUP), "experiment", (0.5, 0.5, 0.0))
+    assert {"copy2", "copy3"} & set(
+        plain.validation["experiment"]
+    )  # the groups made the difference
+    with pytest.raises(NnidInputError, match="copies of one run"):
+        split_log(
+            log, "experiment", (0.5, 0.5, 0.0), {"train": ["a", "copy1"], "validation": ["copy2"]}
+        )

@@ -101,6 +101,9 @@ class ColumnMap(_Strict):
     exclude: str | None = None
     drop_nonfinite: bool = False
     vehicle: str | None = None
+    # regexes on experiment names, one per group of runs that are copies (replays) of one
+    # run: a split keeps each group on one side
+    replays: list[str] = Field(default_factory=list)
     sources: list[Source] = Field(min_length=1)
 
     @field_validator("include", "exclude")
@@ -109,6 +112,20 @@ class ColumnMap(_Strict):
         if pattern is not None:
             re.compile(pattern)
         return pattern
+
+    @field_validator("replays")
+    @classmethod
+    def _regexes(cls, patterns: list[str]) -> list[str]:
+        for pattern in patterns:
+            re.compile(pattern)
+        return patterns
+
+    def replay_group(self, experiment: str) -> str | None:
+        """The replay group of an experiment (``replays[i]``), or None."""
+        for i, pattern in enumerate(self.replays):
+            if re.search(pattern, experiment):
+                return f"replays[{i}]"
+        return None
 
     @field_validator("experiment")
     @classmethod

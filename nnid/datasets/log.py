@@ -24,6 +24,8 @@ VELOCITY = DOFS  # velocity columns are named after their DOF
 ACCELERATION = tuple(f"d{s}" for s in VELOCITY)
 TAU = tuple(f"tau_{f}" for f in FORCES)
 ANGLES = ("phi", "theta", "psi")
+#: optional column: the replay group of a run (copies of one run, declared by the reader config)
+REPLAY_GROUP = "replay_group"
 
 
 def input_columns(df: pd.DataFrame) -> list[str]:

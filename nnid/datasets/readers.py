@@ -22,7 +22,7 @@ import pandas as pd
 from nnid.datasets.ardupilot import is_ardupilot_log, read_ardupilot_sources
 from nnid.datasets.cleaning import CleaningReport
 from nnid.datasets.column_map import ColumnMap, Source, load_column_map
-from nnid.datasets.log import ANGLES, validate_log
+from nnid.datasets.log import ANGLES, REPLAY_GROUP, validate_log
 from nnid.datasets.mapping import map_source
 from nnid.datasets.rosbag import is_bag, read_bag_sources
 from nnid.errors import NnidInputError
@@ -177,7 +177,19 @@ def assemble(
         )
     if not pieces:
         raise NnidInputError("no experiment left after selection and alignment", source=cmap.name)
-    return pd.concat(pieces, ignore_index=True)
+    log = pd.concat(pieces, ignore_index=True)
+    if cmap.replays:
+        runs = list(dict.fromkeys(log["experiment"]))
+        group = {e: cmap.replay_group(str(e).split("#")[0]) for e in runs}
+        log[REPLAY_GROUP] = log["experiment"].map(group)
+        for label in dict.fromkeys(g for g in group.values() if g):
+            members = [e for e in runs if group[e] == label]
+            report.add(
+                "replay group",
+                f"{label}: {len(members)} experiments are copies of one run "
+                f"({', '.join(members)}); a split keeps them on one side",
+            )
+    return log
 
 
 def _runs(mask: np.ndarray) -> list[tuple[int, int]]:

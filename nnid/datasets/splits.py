@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
+from nnid.datasets.log import REPLAY_GROUP
 from nnid.datasets.preprocess import experiments
 from nnid.errors import NnidInputError
 
@@ -67,20 +68,23 @@ def split_log(
                     f"experiments {unknown} are not in the log", field="assignment"
                 )
             chosen = {p: assignment.get(p, []) for p in PARTS}
+            _check_replays(log, chosen)
         else:
             if len(names) < 2:
                 raise NnidInputError(
                     "splitting by experiment needs at least two experiments; use by='block'",
                     field="by",
                 )
-            sizes = np.array([len(idx) for _, idx in groups], dtype=float)
+            # a replay group (copies of one run) is one unit: never on both sides
+            unit = _units(log, names)
+            units = list(dict.fromkeys(unit.values()))
+            sizes = np.array(
+                [sum(len(idx) for n, idx in groups if unit[n] == u) for u in units], dtype=float
+            )
             edges = np.cumsum(fractions)[:2] * sizes.sum()
             centre = np.cumsum(sizes) - sizes / 2
-            which = np.searchsorted(edges, centre)
-            chosen = {
-                p: [n for n, w in zip(names, which, strict=True) if w == k]
-                for k, p in enumerate(PARTS)
-            }
+            part_of = dict(zip(units, np.searchsorted(edges, centre), strict=True))
+            chosen = {p: [n for n in names if part_of[unit[n]] == k] for k, p in enumerate(PARTS)}
         index = dict(groups)
         for p in PARTS:
             for name in chosen[p]:
@@ -91,3 +95,27 @@ def split_log(
     frames = {p: (pd.concat(v) if v else log.iloc[0:0]) for p, v in parts.items()}
     record["samples"] = {p: len(f) for p, f in frames.items()}
     return Split(frames["train"], frames["validation"], frames["test"], record)
+
+
+def _units(log: pd.DataFrame, names: list) -> dict:
+    """Experiment -> the unit a split assigns whole: its replay group, else itself."""
+    if REPLAY_GROUP not in log:
+        return {n: n for n in names}
+    group = log.groupby("experiment", sort=False)[REPLAY_GROUP].first()
+    return {n: group.get(n) if isinstance(group.get(n), str) else n for n in names}
+
+
+def _check_replays(log: pd.DataFrame, chosen: dict[str, list]) -> None:
+    """An explicit split that puts copies of one run on both sides is refused."""
+    names = [n for p in PARTS for n in chosen[p]]
+    unit = _units(log, names)
+    side = {}
+    for p in PARTS:
+        for n in chosen[p]:
+            if unit[n] != n and side.setdefault(unit[n], (p, n))[0] != p:
+                other = side[unit[n]]
+                raise NnidInputError(
+                    f"'{n}' ({p}) and '{other[1]}' ({other[0]}) are copies of one run "
+                    f"({unit[n]} of the reader config): hold out the whole group or exclude it",
+                    field=p,
+                )
