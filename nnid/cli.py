@@ -143,7 +143,8 @@ def inspect(
     cols = info["columns"]
     out.print(
         f"[bold]{log_path}[/]: {info['samples']} samples, {info['duration_s']:.1f} s, "
-        f"{len(info['experiments'])} experiments, about {info['rate_hz']:.3g} Hz"
+        f"{len(info['experiments'])} experiments, about {info['rate_hz']:.3g} Hz",
+        soft_wrap=True,
     )
     for group in ("pose", "velocity", "acceleration", "inputs", "other"):
         out.print(f"  {group:13s} {', '.join(cols[group]) or '-'}")
@@ -173,11 +174,8 @@ def inspect(
             ),
         )
     out.print(table)
-    for step in report.steps:
-        out.print(
-            f"  cleaning: {step.step}: {step.detail}"
-            + (f" ({step.rows_removed} rows removed)" if step.rows_removed else "")
-        )
+    for line in report.summary():
+        out.print(f"  cleaning: {line}", highlight=False, soft_wrap=True)
     if out_dir is not None:
         with _staged(out_dir) as stage:
             (stage / "summary.json").write_text(json.dumps(info, indent=2))

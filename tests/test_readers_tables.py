@@ -218,3 +218,23 @@ def test_stale_commands_are_not_held_past_the_timeout(tmp_path):
     log, report = load_log(tmp_path, _write_map(tmp_path / "map.toml", timed))
     assert log["t"].iloc[-1] == pytest.approx(7.0 + 0.5, abs=0.05)  # last command at 7.0 s
     assert any(s.step == "cut stale hold" for s in report.steps)
+
+
+def test_repeated_cleaning_steps_are_summarised_with_counts_and_ranges():
+    """A step repeated for every run of a 1,000-run set is one line with the run count and the
+    range of each number (inspect prints these; the JSON keeps each run's line)."""
+    from nnid.datasets.cleaning import CleaningReport
+
+    report = CleaningReport()
+    report.add("read", "5000 rows from 3 files")
+    for i in range(1000):
+        report.add("resample", f"'run{i}': {100 + i % 50} samples at 20 Hz (nav.csv: linear)")
+        report.add("drop", f"'run{i}': duplicate times", rows_removed=1 + i % 4)
+    report.add("skip experiment", "'odd': not every source has data")
+    assert report.summary() == [
+        "read: 5000 rows from 3 files",
+        "resample in 1000 runs: 100-149 samples at 20 Hz (nav.csv: linear)",
+        "drop in 1000 runs: duplicate times (2500 rows removed)",
+        "skip experiment: 'odd': not every source has data",
+    ]
+    assert len(report.to_dict()["steps"]) == 2002

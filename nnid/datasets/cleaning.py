@@ -7,8 +7,12 @@ Readers and preprocessing append to it; it is returned with the log and written 
 from __future__ import annotations
 
 import json
+import re
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
+
+_QUOTED = re.compile(r"'[^']*'")
+_NUMBER = re.compile(r"(?<![\w.])-?\d+(?:\.\d+)?(?:e[-+]?\d+)?")
 
 
 @dataclass
@@ -30,6 +34,31 @@ class CleaningReport:
     @property
     def rows_removed(self) -> int:
         return sum(s.rows_removed for s in self.steps)
+
+    def summary(self, repeated: int = 3) -> list[str]:
+        """One line per step, except that a step repeated for more than ``repeated`` runs
+        with the same wording becomes one line with the run count and the range of each
+        number in it (the per-run detail stays in :meth:`to_dict`)."""
+        groups: dict[tuple[str, str], list[tuple[Step, list[float]]]] = {}
+        for s in self.steps:
+            template = _NUMBER.sub("#", _QUOTED.sub("'…'", s.detail))
+            values = [float(v) for v in _NUMBER.findall(_QUOTED.sub("", s.detail))]
+            groups.setdefault((s.step, template), []).append((s, values))
+        lines = []
+        for (step, template), members in groups.items():
+            removed = sum(m.rows_removed for m, _ in members)
+            tail = f" ({removed} rows removed)" if removed else ""
+            if len(members) <= repeated:
+                lines += [f"{step}: {m.detail}" + (f" ({m.rows_removed} rows removed)"
+                          if m.rows_removed else "") for m, _ in members]  # fmt: skip
+                continue
+            columns = list(zip(*(v for _, v in members), strict=False))
+            text = template.replace("'…': ", "").replace("'…'", "each")
+            for values in columns:
+                lo, hi = min(values), max(values)
+                text = text.replace("#", f"{lo:g}" if lo == hi else f"{lo:g}-{hi:g}", 1)
+            lines.append(f"{step} in {len(members)} runs: {text}{tail}")
+        return lines
 
     def to_dict(self) -> dict:
         return {
