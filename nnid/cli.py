@@ -550,6 +550,63 @@ def _window_of(model_dir: Path) -> float:
     return 10.0
 
 
+@app.command()
+@_input_errors
+def vehicle(
+    out_path: Path = typer.Option(..., "--out", help="The vehicle file to write (.toml)."),
+    preset: str | None = typer.Option(
+        None, "--preset", help="Start from a preset (e.g. bluerov2_heavy), with its citations."
+    ),
+    mass: float | None = typer.Option(None, "--mass", help="Mass in air, kg."),
+    size: str | None = typer.Option(
+        None, "--size", help="LENGTHxWIDTHxHEIGHT in m, e.g. 0.46x0.58x0.25."
+    ),
+    layout: str = typer.Option(
+        "heavy8", "--layout", help="Thrusters: heavy8 (BlueROV2 Heavy) or none."
+    ),
+    name: str | None = typer.Option(None, "--name", help="Vehicle name; default the file's stem."),
+) -> None:
+    """Write a starter vehicle file for your own ROV: a preset's, or one estimated from its mass,
+    size and thruster layout (every estimate marked; the identification refits them)."""
+    from nnid.vehicle import vehicle_from_dict
+    from nnid.vehicle_starter import preset_text, starter_text
+
+    if out_path.suffix != ".toml":
+        raise NnidInputError(
+            "the vehicle file must end in .toml", source=str(out_path), field="--out"
+        )
+    if out_path.exists():
+        raise NnidInputError("exists: choose another name (nothing is overwritten)",
+                             source=str(out_path), field="--out")  # fmt: skip
+    _check_out(out_path.parent)
+    if (preset is None) == (mass is None and size is None):
+        raise NnidInputError("give either --preset or --mass and --size", field="--preset")
+    if preset is not None:
+        text = preset_text(preset)
+    else:
+        if mass is None or size is None:
+            raise NnidInputError(
+                "give both --mass and --size", field="--mass" if mass is None else "--size"
+            )
+        try:
+            dims = tuple(float(x) for x in size.lower().split("x"))
+        except ValueError:
+            dims = ()
+        if len(dims) != 3:
+            raise NnidInputError(f"'{size}': expected LENGTHxWIDTHxHEIGHT in m", field="--size")
+        text = starter_text(name or out_path.stem, mass, dims, layout)
+    import tomllib
+
+    vehicle_from_dict(tomllib.loads(text), source=str(out_path))  # what is written loads back
+    out_path.parent.mkdir(parents=True, exist_ok=True)
+    out_path.write_text(text)
+    out.print(
+        f"wrote {out_path}: edit what it marks ASSUMED or ESTIMATE (docs/vehicle_file.md)",
+        highlight=False,
+        soft_wrap=True,
+    )
+
+
 DEMO_LOG = "demo_minirov_heave.parquet"
 
 

@@ -21,7 +21,7 @@ from nnid.physics.added_mass import parse_added_mass_key
 from nnid.physics.dofs import DOFS
 from nnid.validation import read_toml, validated
 
-PRESETS = ("seamor", "vlbv300", "romeo", "vt690")
+PRESETS = ("seamor", "vlbv300", "romeo", "vt690", "bluerov2_heavy")
 
 Vec3 = Annotated[list[float], Field(min_length=3, max_length=3)]
 Vec6 = Annotated[list[float], Field(min_length=6, max_length=6)]

@@ -22,8 +22,8 @@ def presets():
     return {name: load_vehicle(name) for name in ("seamor", "vlbv300", "romeo", "vt690")}
 
 
-def test_all_four_presets_are_listed():
-    assert set(PRESETS) == {"seamor", "vlbv300", "romeo", "vt690"}
+def test_all_presets_are_listed():
+    assert set(PRESETS) == {"seamor", "vlbv300", "romeo", "vt690", "bluerov2_heavy"}
 
 
 # --------------------------------------------------------------------------------------------
@@ -273,3 +273,124 @@ def test_vt690_mcfarland_has_all_216_terms(presets):
     assert len(damping.coefficients) == 216
     expected_keys = {f"{f}:{a}*abs({b})" for f in FORCES for a in VELS for b in VELS}
     assert set(damping.coefficients) == expected_keys
+
+
+# --------------------------------------------------------------------------------------------
+# BlueROV2 Heavy: von Benzon et al. 2022 (nnid/presets/bluerov2_heavy.toml)
+def test_bluerov2_heavy_allocation_is_von_benzons_matrix():
+    """The 6 x 8 allocation from the preset's thruster geometry equals the paper's T."""
+    import torch
+
+    from nnid.physics.thrusters import allocation_matrix
+
+    veh = load_vehicle("bluerov2_heavy")
+    pos = torch.tensor([t.position for t in veh.thrusters], dtype=torch.float64)
+    direction = torch.tensor([t.direction for t in veh.thrusters], dtype=torch.float64)
+    b = allocation_matrix(pos, direction).numpy()
+    c, h, a = 0.7071, 0.06, 0.1888
+    paper = np.array([
+        [c, c, -c, -c, 0, 0, 0, 0],
+        [-c, c, -c, c, 0, 0, 0, 0],
+        [0, 0, 0, 0, -1, 1, 1, -1],
+        [h, -h, h, -h, -0.218, -0.218, 0.218, 0.218],
+        [h, h, -h, -h, 0.12, -0.12, 0.12, -0.12],
+        [-a, a, a, -a, 0, 0, 0, 0],
+    ])  # fmt: skip
+    np.testing.assert_allclose(b, paper, atol=1e-3)
+    assert np.linalg.matrix_rank(b) == 6  # every DOF can be actuated
+
+
+def test_bluerov2_heavy_full_ascent_reaches_the_analytic_steady_speed():
+    """Full ascent on the four vertical T200s (two pushing with 51.48 N, two reversed with 39.91
+    N: no roll or pitch moment) against von Benzon's heave damping and the 0.985 N by which the
+    weight exceeds the buoyancy: 190 w² + 33 |w| = 2 (51.48 + 39.91) − (W − B)."""
+    from nnid.datasets.simulator import simulate
+
+    veh = load_vehicle("bluerov2_heavy")
+    cmd = np.zeros((400, 8))
+    cmd[:, [4, 7]], cmd[:, [5, 6]] = 1.0, -1.0  # t5, t8 thrust up; t6, t7 are mounted reversed
+    log = simulate(veh, cmd, 0.05)
+    lift = 2 * (51.48 + 39.91) - (veh.weight - veh.buoyancy)
+    steady = (-33.0 + np.sqrt(33.0**2 + 4 * 190.0 * lift)) / (2 * 190.0)
+    assert -log["w"].iloc[-1] == pytest.approx(steady, rel=1e-3)
+    for dof in ("u", "v", "p", "q", "r"):
+        assert abs(log[dof].iloc[-1]) < 1e-9, dof
+
+
+def _fields(model) -> set[str]:
+    """Every key a pydantic model of the vehicle file accepts, nested models included."""
+    import typing
+
+    from pydantic import BaseModel
+
+    keys = set()
+    for name, field in model.model_fields.items():
+        keys.add(name)
+        for arg in [field.annotation, *typing.get_args(field.annotation)]:
+            for inner in [arg, *typing.get_args(arg)]:
+                if isinstance(inner, type) and issubclass(inner, BaseModel):
+                    keys |= _fields(inner)
+    return keys
+
+
+def test_every_key_of_the_vehicle_file_is_documented():
+    """docs/vehicle_file.md names (as `key`) every key the loader accepts, and an example of
+    each thrust-curve kind that loads."""
+    import re
+    from pathlib import Path
+
+    import tomllib
+
+    from nnid.vehicle import PolyCurve, SignedQuadraticCurve, TableCurve, Thruster, Vehicle
+
+    text = (Path(__file__).parents[1] / "docs" / "vehicle_file.md").read_text()
+    documented = set(re.findall(r"`([a-z_]+)`", text))
+    keys = _fields(Vehicle) | _fields(Thruster) | {"coeffs", "k", "cmd", "thrust", "kind"}
+    assert keys - documented == set()
+    curves = re.findall(r"```toml\n(curve = .*?)\n```", text)
+    kinds = {tomllib.loads(c)["curve"]["kind"] for c in curves}
+    assert kinds == {"poly", "signed_quadratic", "table"}
+    for c in curves:
+        model = {"poly": PolyCurve, "signed_quadratic": SignedQuadraticCurve, "table": TableCurve}
+        model[tomllib.loads(c)["curve"]["kind"]].model_validate(tomllib.loads(c)["curve"])
+
+
+def test_starter_vehicle_files_load_and_scale(tmp_path):
+    """`nnid vehicle`: a preset's file and an estimate from mass and size, both loading back;
+    the estimate's inertia is the cuboid's and its thrusters the Heavy layout scaled."""
+    from typer.testing import CliRunner
+
+    from nnid.cli import app
+    from nnid.physics.rigid_body import cuboid_inertia
+
+    runner = CliRunner()
+    res = runner.invoke(
+        app, ["vehicle", "--preset", "bluerov2_heavy", "--out", str(tmp_path / "h.toml")]
+    )
+    assert res.exit_code == 0, res.output
+    assert load_vehicle(tmp_path / "h.toml") == load_vehicle("bluerov2_heavy")
+    out = tmp_path / "mine.toml"
+    res = runner.invoke(
+        app, ["vehicle", "--mass", "20", "--size", "0.914x1.15x0.508", "--out", str(out)]
+    )
+    assert res.exit_code == 0, res.output
+    mine, ref = load_vehicle(out), load_vehicle("bluerov2_heavy")
+    assert mine.name == "mine" and mine.mass == 20
+    np.testing.assert_allclose(mine.inertia, cuboid_inertia(20, 0.914, 1.15, 0.508), rtol=1e-3)
+    np.testing.assert_allclose(
+        mine.thrusters[0].position, 2 * np.array(ref.thrusters[0].position), rtol=1e-3
+    )
+    # twice the size: four times the frontal area, four times the quadratic surge drag
+    assert mine.damping.coefficients["X:u*abs(u)"] == pytest.approx(4 * -141.0, rel=1e-3)
+    for args, option in [
+        (["--mass", "20"], "--size"),
+        (["--mass", "20", "--size", "1x2"], "--size"),
+        (["--mass", "-3", "--size", "1x1x1"], "--mass"),
+        (["--preset", "nautilus"], "--preset"),
+        (["--mass", "20", "--size", "1x1x1", "--layout", "quad"], "--layout"),
+    ]:
+        res = runner.invoke(app, ["vehicle", *args, "--out", str(tmp_path / "bad.toml")])
+        assert res.exit_code == 2 and option in res.output, res.output
+        assert not (tmp_path / "bad.toml").exists()
+    res = runner.invoke(app, ["vehicle", "--preset", "seamor", "--out", str(out)])
+    assert res.exit_code == 2 and "exists" in res.output  # nothing is overwritten

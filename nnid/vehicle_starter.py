@@ -1,0 +1,114 @@
+"""A starter vehicle file for one's own ROV: from a preset, or from mass, size and a layout.
+
+What is measured (mass, size) is used as it is; the rest is an estimate that the identification
+refits, and the file says so line by line: inertia of a solid cuboid (Weiss eqs 32-34), added
+mass and damping scaled from the BlueROV2 Heavy of von Benzon et al. 2022 (added mass with the
+mass, drag with the frontal areas, rotational terms with area times arm), thrusters in the
+Heavy's layout scaled to the size. The output is TOML that :func:`nnid.vehicle.load_vehicle`
+reads; the damping keys it declares are the structure ``nnid loop`` and ``nnid train`` refit.
+"""
+
+from __future__ import annotations
+
+from importlib import resources
+
+from nnid.errors import NnidInputError
+from nnid.physics.dofs import DOFS, FORCES
+from nnid.physics.rigid_body import cuboid_inertia
+from nnid.vehicle import PRESETS, load_vehicle
+
+#: thruster layouts a starter file can have
+LAYOUTS = ("heavy8", "none")
+REFERENCE = "bluerov2_heavy"
+
+
+def preset_text(name: str) -> str:
+    """The preset's own file, comments and citations included."""
+    if name not in PRESETS:
+        raise NnidInputError(
+            f"unknown preset; expected one of {', '.join(PRESETS)}", field="--preset"
+        )
+    return resources.files("nnid.presets").joinpath(f"{name}.toml").read_text()
+
+
+def _vector(values) -> str:
+    return "[" + ", ".join(f"{v:.4g}" for v in values) + "]"
+
+
+def starter_text(
+    name: str, mass: float, size: tuple[float, float, float], layout: str = "heavy8"
+) -> str:
+    """A commented vehicle file for a vehicle of ``mass`` (kg) and ``size`` (length, width,
+    height in m) with thrusters in ``layout`` (module docstring)."""
+    length, width, height = size
+    if not 0 < mass <= 1e4:
+        raise NnidInputError(f"mass {mass:g} kg: expected 0 < mass <= 10000", field="--mass")
+    if min(size) <= 0 or max(size) > 20:
+        raise NnidInputError("sizes must lie in (0, 20] m: LENGTHxWIDTHxHEIGHT", field="--size")
+    if layout not in LAYOUTS:
+        raise NnidInputError(
+            f"unknown layout; expected one of {', '.join(LAYOUTS)}", field="--layout"
+        )
+    ref = load_vehicle(REFERENCE)
+    ref_size = (0.457, 0.575, 0.254)  # BlueROV2 Heavy, Blue Robotics
+    scale = [s / r for s, r in zip(size, ref_size, strict=True)]
+    # frontal areas (surge: width x height, sway: length x height, heave: length x width);
+    # rotations: the area swept times its arm (roll: sway face x width, pitch: heave face x
+    # length, yaw: sway face x length)
+    area = [scale[1] * scale[2], scale[0] * scale[2], scale[0] * scale[1]]
+    arm = [area[1] * scale[1], area[2] * scale[0], area[1] * scale[0]]
+    mass_ratio = mass / ref.mass
+    weight = mass * 9.81
+    lines = [
+        f"# Starter vehicle file for '{name}', written by `nnid vehicle`: EDIT IT. Measured:",
+        f"# mass {mass:g} kg and size {length:g} x {width:g} x {height:g} m. Everything else is",
+        "# an ESTIMATE (see each line) that `nnid loop` / `nnid train` refit or test; what stays",
+        "# wrong shows up as an effect in the loop report. Fossen conventions: FRD body frame,",
+        "# NED world, SI units; diagonal derivatives negative (force = coefficient * term).",
+        "# Format of every key: docs/vehicle_file.md.",
+        f'name = "{name}"',
+        'description = "starter file from mass and size (estimates: refit before trusting)"',
+        "rho = 1000.0                  # kg/m^3: 1025 in sea water",
+        f"length = {length:g}",
+        f"mass = {mass:g}",
+        f"buoyancy = {weight:.4g}            # N, ASSUMED neutral: weigh it (W - B is identified)",
+        f"inertia = {_vector(cuboid_inertia(mass, length, width, height))}"
+        "   # kg m^2, solid cuboid (Weiss eqs 32-34): ESTIMATE",
+        "r_g = [0.0, 0.0, 0.02]        # m, ASSUMED 2 cm below the origin (the loop tests it)",
+        "r_b = [0.0, 0.0, 0.0]",
+        "",
+        f"[added_mass]                  # ESTIMATE: {REFERENCE} (von Benzon 2022) x mass ratio",
+    ]
+    for dof, force in zip(DOFS, FORCES, strict=True):
+        key = f"{force}_{dof}dot"
+        lines.append(f"{key} = {ref.added_mass[key] * mass_ratio:.4g}")
+    lines += [
+        "",
+        f"[damping.coefficients]        # ESTIMATE: {REFERENCE} scaled by frontal area (x arm for",
+        "                              # rotations); the keys are the structure that is refitted",
+    ]
+    for i, (dof, force) in enumerate(zip(DOFS, FORCES, strict=True)):
+        factor = area[i] if i < 3 else arm[i - 3]
+        linear = ref.damping.coefficients.get(f"{force}:{dof}", 0.0)
+        quad = ref.damping.coefficients[f"{force}:{dof}*abs({dof})"]
+        lines.append(f'"{force}:{dof}" = {min(linear * factor, -1e-3):.4g}')
+        lines.append(f'"{force}:{dof}*abs({dof})" = {quad * factor:.4g}')
+    if layout == "heavy8":
+        lines += [
+            "",
+            f"# Thrusters: the {REFERENCE} layout scaled to this size, T200 curves: CHECK the",
+            "# positions, directions, names and the command scale of your vehicle.",
+        ]
+        for t in ref.thrusters:
+            pos = [p * s for p, s in zip(t.position, scale, strict=True)]
+            curve = t.curve
+            lines += [
+                "",
+                "[[thrusters]]",
+                f'name = "{t.name}"',
+                f"position = {_vector(pos)}",
+                f"direction = {_vector(t.direction)}",
+                f'curve = {{ kind = "table", cmd = {_vector(curve.cmd)}, '
+                f"thrust = {_vector(curve.thrust)} }}",
+            ]
+    return "\n".join(lines) + "\n"
