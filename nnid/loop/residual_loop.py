@@ -202,6 +202,7 @@ class ResidualLoop:
         used = {FORCES[DOFS.index(d)] for d in self.dofs_}
         unknowns = [k for k in Parts.from_vehicle(self.vehicle).damping if k.split(":")[0] in used]
         fit = refit(ws, self.vehicle, unknowns)
+        _warn_unphysical_damping(fit)
         ws.tau_corr = residual_correlation_time(fit.e, self.dofs_)
         self.baseline_ = fit
         self.steps_: list[Step] = []
@@ -507,6 +508,21 @@ class ResidualLoop:
             "warnings": self.warnings_,
             "seconds": self.seconds_,
         }
+
+
+def _warn_unphysical_damping(fit: Fit) -> None:
+    """A refitted diagonal damping coefficient with the sign of a thrust: said, since a model
+    with it gains energy in free run (the log does not determine that coefficient)."""
+    for key, value, se in zip(fit.unknowns, fit.theta, fit.stderr, strict=True):
+        force, _, term = key.partition(":")
+        dof = DOFS[FORCES.index(force)] if force in FORCES else None
+        if term in (dof, f"{dof}*abs({dof})") and value > 0:
+            warnings.warn(
+                f"the baseline's refitted {key} = {value:.3g} ± {se:.2g} has the sign of a "
+                "thrust, not of a drag: the log does not determine it (weak or one-sided "
+                "excitation, contact), and a free run of this model can gain energy",
+                stacklevel=2,
+            )
 
 
 def _fmt(x: float | None) -> str:

@@ -64,11 +64,17 @@ def effect_sentence(candidate: dict) -> str:
         )
         pm = f" ± {100 * se:.0f} %" if se is not None else ""
         return f"{what} is {100 * value:.0f} %{pm} of nominal"
+    # plain words: a size and a direction, never "-2 cm lower"
     if kind == "buoyancy_offset":
-        return f"The vehicle is {_f(value)}{pm} N heavier in water than declared (W − B)"
+        side = "heavier" if value >= 0 else "lighter"
+        return f"In water the vehicle is {_f(abs(value))}{pm} N {side} than declared (W − B)"
     if kind == "restoring_offset":
-        cm = f" ± {100 * se:.1g}" if se is not None else ""
-        return f"The centre of gravity sits {100 * value:.2g}{cm} cm lower than declared"
+        cm = f" (± {100 * se:.1g})" if se is not None else ""
+        side = "lower" if value >= 0 else "higher"
+        return (
+            f"The centre of gravity is {100 * abs(value):.2g} cm{cm} {side} than the vehicle "
+            "file says"
+        )
     if kind == "current":
         return f"A steady current of {_f(value)}{pm} m/s flows along NED {args[0]}"
     if kind == "actuator_lag":
@@ -179,13 +185,22 @@ def _verdict(result: dict, name: str, before: dict, after: dict) -> list[str]:
             if before.get(d) is not None and after.get(d) is not None
         }
         dof = max(gains, key=lambda d: gains[d][0] - gains[d][1]) if gains else None
-        cut = (
-            f"; with it the {DOF_WORD[dof]} {name} error on held-out data "
-            f"{'fell' if gains[dof][1] < gains[dof][0] else 'went'} from "
-            f"{_f(gains[dof][0])} to {_f(gains[dof][1])} (NRMSE)"
-            if dof
-            else ""
-        )
+        gate = added.get("gate_nrmse") or {}
+        if len(result["added"]) > 1 and gate.get("after") is not None:
+            # several effects: each is credited with what its own pass measured, not with
+            # the whole before/after (that is the total line's)
+            cut = (
+                f"; adding it moved the held-out {step['gate']} error from "
+                f"{_f(gate['before'])} to {_f(gate['after'])} (NRMSE, all DOFs)"
+            )
+        elif dof:
+            cut = (
+                f"; with it the {DOF_WORD[dof]} {name} error on held-out data "
+                f"{'fell' if gains[dof][1] < gains[dof][0] else 'went'} from "
+                f"{_f(gains[dof][0])} to {_f(gains[dof][1])} (NRMSE)"
+            )
+        else:
+            cut = ""
         lines.append(effect_sentence(added) + cut + ".")
     if diverged:
         lines.append(
