@@ -8,12 +8,12 @@ water current (NED), a constant external force, a first-order actuator lag and a
 from __future__ import annotations
 
 import math
+import tomllib
 from importlib import resources
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
 import numpy as np
-import tomllib
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 from nnid.errors import NnidInputError

@@ -337,9 +337,8 @@ def test_every_key_of_the_vehicle_file_is_documented():
     """docs/vehicle_file.md names (as `key`) every key the loader accepts, and an example of
     each thrust-curve kind that loads."""
     import re
-    from pathlib import Path
-
     import tomllib
+    from pathlib import Path
 
     from nnid.vehicle import PolyCurve, SignedQuadraticCurve, TableCurve, Thruster, Vehicle
 
