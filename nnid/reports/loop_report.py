@@ -13,7 +13,7 @@ import numpy as np
 
 from nnid.physics.dofs import DOF_WORD, DOFS
 from nnid.physics.effects import parse_effect
-from nnid.reports.figures import figure_uri, html_table, new_figure, page_head
+from nnid.reports.figures import UNITS, figure_uri, html_table, new_figure, page_head
 from nnid.serialization import write_json, write_text
 
 _DIRECTION = {
@@ -215,6 +215,13 @@ def _verdict(result: dict, name: str, before: dict, after: dict) -> list[str]:
 
 
 CANDIDATE_HEAD = ["effect", "value", "± s.e.", "unit", "p (F-test)", "held-out gain", "verdict"]
+#: what each column of the candidate table means, printed under every table
+CANDIDATE_COLUMNS = (
+    "Columns: effect, the vocabulary name; value ± s.e., its refitted size with the standard "
+    "error; p (F-test), the significance of adding it; held-out gain, the share of the held-out "
+    "force residual (weighted sum of squares over the analysed DOFs) that the refit with it "
+    "removes; verdict, why it was added or not."
+)
 
 
 def candidate_rows(candidates: list[dict], top: int = 15) -> list[list[str]]:
@@ -270,7 +277,7 @@ def markdown(result: dict) -> str:
     lines += [table(*error_rows(result)), ""]
     for k, step in enumerate(result["steps"], 1):
         lines += [f"## Pass {k}: candidates (best first)", ""]
-        lines += [table(CANDIDATE_HEAD, candidate_rows(step["top"])), ""]
+        lines += [table(CANDIDATE_HEAD, candidate_rows(step["top"])), "", CANDIDATE_COLUMNS, ""]
         if step["sindy"]:
             lines += [f"pysindy STLSQ second opinion: {', '.join(step['sindy'])}.", ""]
         else:
@@ -299,16 +306,18 @@ def correlation_figure(analysis: dict, title: str) -> str:
         c = analysis[d]
         ax = axes[k, 0]
         lags = np.arange(c.auto.size)
-        ax.bar(lags, c.auto, width=0.6, color="C0")
-        ax.axhspan(-c.band, c.band, color="0.85")
-        ax.set_ylabel(d)
+        # the band is drawn behind the bars it bounds, so every bar stays visible
+        ax.axhspan(-c.band, c.band, color="0.85", zorder=0, label="99 % band of white noise")
+        ax.bar(lags, c.auto, width=0.6, color="C0", zorder=2)
+        ax.set_ylabel(f"{d}: correlation [-]")
         ax2 = axes[k, 1]
+        ax2.axhspan(-c.band, c.band, color="0.85", zorder=0)
         if c.cross:
             name = max(c.cross, key=lambda n: np.abs(c.cross[n]).max())
-            ax2.bar(c.lags, c.cross[name], width=0.6, color="C1", label=name)
+            ax2.bar(c.lags, c.cross[name], width=0.6, color="C1", label=name, zorder=2)
             ax2.legend(fontsize=7, loc="upper right")
-        ax2.axhspan(-c.band, c.band, color="0.85")
-    axes[0, 0].set_title(f"autocorrelation ({title})", fontsize=9)
+    axes[0, 0].legend(fontsize=7, loc="upper right")
+    axes[0, 0].set_title(f"autocorrelation of the force residual ({title})", fontsize=9)
     axes[0, 1].set_title("cross-correlation with the strongest input", fontsize=9)
     axes[-1, 0].set_xlabel("lag [samples]")
     axes[-1, 1].set_xlabel("lag [samples]")
@@ -327,7 +336,7 @@ def free_run_figure(t, measured, before, after, dofs, window_s: float = 60.0) ->
         ax.plot(t[keep], measured[d][keep], color="black", lw=1.0, label="measured")
         ax.plot(t[keep], before[d][keep], lw=0.9, label="baseline")
         ax.plot(t[keep], after[d][keep], lw=0.9, label="with added effects")
-        ax.set_ylabel(d)
+        ax.set_ylabel(f"{d} [{UNITS[d]}]")
     axes[0, 0].legend(ncol=3, fontsize=7, loc="upper right")
     axes[-1, 0].set_xlabel("t [s]")
     return figure_uri(fig)
@@ -348,6 +357,7 @@ def html_page(result: dict, figures: dict[str, str]) -> str:
         steps.append(
             f"<h3>Pass {k}</h3><p>{verdict}</p>"
             + html_table(CANDIDATE_HEAD, candidate_rows(step["top"]))
+            + f"<p class='note'>{html.escape(CANDIDATE_COLUMNS)}</p>"
             + f"<p>pysindy STLSQ over the strongest linear candidates: {html.escape(sindy)}.</p>"
         )
     imgs = "".join(
