@@ -223,7 +223,12 @@ def test_liu_open_loop_runs(liu_open):
     # 3.9 s before the bag ends while the vehicle coasts, and a stale command is not held
     assert _durations(log).between(7.0, 79.5).all()
     assert _durations(log).sum() == pytest.approx(954, abs=2)
-    assert set(log.columns) == LIU_COLUMNS
+    assert set(log.columns) == LIU_COLUMNS | {"replay_group"}
+    # the eight replays of one run (card) form the reader config's one replay group
+    group = log.groupby("experiment")["replay_group"].first()
+    replays = group[group.notna()].index
+    assert (group.dropna() == "replays[0]").all() and len(replays) == 8
+    assert all(n.startswith(("all_1_", "resample_")) for n in replays)
     cmds = log[[f"cmd_{k}" for k in range(1, 7)]]
     assert cmds.min().min() >= -1.0 and cmds.max().max() <= 1.0
     assert log["acc_z"][log["experiment"].str.startswith("yaw_")].mean() == pytest.approx(
@@ -420,30 +425,3 @@ def test_haizhe_subset_through_read_mapped():
     )
     log, _ = read_mapped(cmap, _shared("haizhe-auv-fault-2021"))
     assert log["experiment"].nunique() == 245
-
-
-def test_readme_loop_line_on_the_liu_runs_without_a_config(tmp_path):
-    """README's on-your-data form on a real dataset: options instead of a config, the replay
-    group kept out, real held-out numbers."""
-    import json
-
-    from typer.testing import CliRunner
-
-    from nnid.cli import app
-
-    root = _shared("liu-bluerov1-2016")
-    out = tmp_path / "liu"
-    args = ["loop", "--data", str(root), "--columns", str(READERS / "liu_bluerov1_openloop.toml"),
-            "--vehicle", str(REPO / "configs" / "vehicles" / "bluerov1_liu.toml"), "--dofs", "r",
-            "--exclude", "replays[0]", "--max-effects", "1", "--out", str(out)]  # fmt: skip
-    res = CliRunner().invoke(app, args)
-    assert res.exit_code == 0, res.output
-    result = json.loads((out / "loop.json").read_text())
-    held = [p["experiment"] for p in result["settings"]["split"]["parts"]["validation"]]
-    trained = [p["experiment"] for p in result["settings"]["split"]["parts"]["train"]]
-    assert (
-        held and trained and not any(e.startswith(("all_1_", "resample_")) for e in held + trained)
-    )
-    yaw = result["before"]["free_run_nrmse"]["r"]
-    assert yaw is not None and 0.05 < yaw < 1.0  # measured: about 0.45 on these runs
-    assert "replays[0]: 8 experiments" in (out / "cleaning.md").read_text()
