@@ -522,9 +522,16 @@ def detect(
 
             result = follow_csv(monitor, data, window_s, _say)
         else:
+            from nnid.datasets.gaps import mask_gaps
+            from nnid.datasets.log import POSE, VELOCITY
             from nnid.datasets.readers import load_log
 
-            log, _ = load_log(data, columns)
+            log, report = load_log(data, columns)
+            # a gap in the motion data is no residual: the monitor restarts after it
+            log = mask_gaps([log], [*POSE, *VELOCITY], report)[0]
+            for step in report.steps:
+                if step.step == "mask gaps":
+                    _say(f"{step.step}: {step.detail}")
             with _bar("detecting") as progress:
                 progress(0, None, "running the monitor")
                 result = run_detect(monitor, log, window_s)

@@ -235,6 +235,15 @@ def test_cli_train_detect_and_follow(vehicle, tmp_path, chromium):
     assert abs(a["efficiency"] - 0.3) <= 0.1 and a["severity"] > 1 and a["confidence"] > 0.5
     rows = pd.read_csv(out / "alarms.csv")
     assert rows["thruster"].tolist() == ["h3"]
+    # a DVL dropout before the fault: masked (said), and the same alarm after it
+    gappy = faulty.copy()
+    gappy.loc[(gappy["t"] > 5.0) & (gappy["t"] < 6.0), ["u", "v", "w"]] = np.nan
+    gappy.to_csv(tmp_path / "gappy.csv", index=False)
+    args = ["detect", "--model", str(model), "--data", str(tmp_path / "gappy.csv")]
+    res = runner.invoke(app, [*args, "--out", str(tmp_path / "gap")])
+    assert res.exit_code == 0 and "mask gaps: 1 gaps in u, v, w" in res.output, res.output
+    (g,) = json.loads((tmp_path / "gap" / "detect.json").read_text())["alarms"]
+    assert g["thruster"] == "h3" and abs(g["t"] - a["t"]) < 0.5
     followed = tmp_path / "follow"
     args = ["detect", "--model", str(model), "--data", fault, "--out", str(followed), "--follow"]
     res = runner.invoke(app, args)
