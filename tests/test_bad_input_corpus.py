@@ -140,6 +140,12 @@ def _log_cases() -> list[Case]:
                 return _command(command, tmp, fx, data=_write_log(tmp, name, mutate(base, inp)))
 
             cases.append(Case(f"{command}: {name}", args, ("LOG", field)))
+
+    def short(tmp, fx):  # one 3 s run: its held-out part is shorter than the warm-up
+        log = fx["demo_log"][fx["demo_log"]["experiment"] == "run0"].head(60)
+        return _command("loop", tmp, fx, data=_write_log(tmp, "too short", log))
+
+    cases.append(Case("loop: too short for the warm-up", short, ("LOG", "warmup_s")))
     return cases
 
 

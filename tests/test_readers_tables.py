@@ -238,3 +238,18 @@ def test_repeated_cleaning_steps_are_summarised_with_counts_and_ranges():
         "skip experiment: 'odd': not every source has data",
     ]
     assert len(report.to_dict()["steps"]) == 2002
+
+
+@pytest.mark.parametrize(
+    ("sep", "decimal"),
+    [(";", ","), ("\t", "."), (";", ".")],
+    ids=["semicolon-comma", "tab", "semicolon"],
+)
+def test_semicolon_and_tab_separated_csv_are_read(tmp_path, sep, decimal):
+    """A CSV written by a spreadsheet in a European locale (';' and a decimal comma) or as TSV
+    is read as the same log, not refused as one column."""
+    frame = pd.DataFrame({"t": [0.0, 0.1, 0.2], "u": [0.5, 0.25, -0.125], "tau_X": [1.5, 2.0, 2.5]})
+    path = tmp_path / "log.csv"
+    frame.to_csv(path, sep=sep, decimal=decimal, index=False)
+    log, _ = load_log(path)
+    pd.testing.assert_frame_equal(log[["t", "u", "tau_X"]], frame)

@@ -201,6 +201,7 @@ class ResidualLoop:
         ws = Workspace(train, val, self.vehicle, self.filter_lambda, self.zoh_midpoint, self.dofs_)
         used = {FORCES[DOFS.index(d)] for d in self.dofs_}
         unknowns = [k for k in Parts.from_vehicle(self.vehicle).damping if k.split(":")[0] in used]
+        self._check_lengths(train, val, len(unknowns))
         fit = refit(ws, self.vehicle, unknowns)
         _warn_unphysical_damping(fit)
         ws.tau_corr = residual_correlation_time(fit.e, self.dofs_)
@@ -234,6 +235,29 @@ class ResidualLoop:
 
             say("asking the hybrid what its network learned", len(added))
             self.hybrid_opinion_ = explain(self.second_opinion, train).as_dict()
+
+    def _check_lengths(self, train: pd.DataFrame, val: pd.DataFrame, unknowns: int) -> None:
+        """A log too short for what is asked of it is refused, naming the setting: no held-out
+        run longer than the warm-up and one scored second, or fewer training rows than ten per
+        coefficient to fit."""
+        durations = [
+            float(part["t"].iloc[-1] - part["t"].iloc[0])
+            for _, part in val.groupby("experiment", sort=False)
+        ] if "experiment" in val else [float(val["t"].iloc[-1] - val["t"].iloc[0])]  # fmt: skip
+        if max(durations, default=0.0) <= self.warmup_s + FALLBACK_S:
+            raise NnidInputError(
+                f"the longest held-out run is {max(durations, default=0.0):.3g} s: no longer "
+                f"than the warm-up ({self.warmup_s:g} s) plus {FALLBACK_S:g} s to score; give a "
+                "longer log or more experiments, or a shorter warmup_s",
+                field="warmup_s",
+            )
+        if len(train) * len(self.dofs_) < 10 * max(unknowns, 1):
+            raise NnidInputError(
+                f"{len(train)} training samples for {unknowns} damping coefficients in "
+                f"{len(self.dofs_)} DOFs: fewer than ten equations per coefficient; give a "
+                "longer log or hold out less (validation)",
+                field="validation",
+            )
 
     def _step(self, ws: Workspace, fit: Fit, pool) -> Step:
         known = set(fit.unknowns)
