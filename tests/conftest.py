@@ -110,18 +110,18 @@ def pytest_collection_modifyitems(config, items):
 #: seconds each long test group takes on one worker of the 2-core CI machine (measured
 #: 2026-11-24, --durations); only the order matters, not the values
 GROUP_SECONDS = {
-    "hybrid-current.y": 190,
     "test_compare": 150,
     "test_loop": 150,
-    "hybrid-external_bias.u": 105,
-    "test_tutorials": 90,
-    "hybrid-actuator_lag": 78,
-    "hybrid-coupled_damping.N:u*v": 76,
-    "hybrid-thruster_installation.w.neg": 67,
+    "hybrid-external_bias.u": 85,
+    "test_tutorials": 75,
+    "hybrid-thruster_installation.w.neg": 73,
     "test_hybrid": 60,
+    "hybrid-current.y": 50,
+    "hybrid-actuator_lag": 47,
     "test_fault": 45,
     "test_bad_input_corpus": 40,
-    "hybrid-none": 35,
+    "hybrid-coupled_damping.N:u*v": 40,
+    "hybrid-none": 22,
 }
 
 
