@@ -6,11 +6,7 @@ Bad input ends with one line on stderr and exit code 2; nothing else here does n
 from __future__ import annotations
 
 import functools
-import os
-import shutil
 import sys
-import tempfile
-import uuid
 import warnings
 from contextlib import contextmanager
 from pathlib import Path
@@ -21,6 +17,8 @@ from rich.markup import escape
 from rich.progress import Progress
 
 from nnid.errors import NnidInputError
+from nnid.runs import check_out as _check_out
+from nnid.runs import staged as _staged
 
 app = typer.Typer(
     name="nnid",
@@ -195,48 +193,16 @@ def _bar(description: str):
         yield update
 
 
-def _check_out(out_dir: Path) -> None:
-    """An output folder that can be written: refused before any work starts (a file, a place
-    such as /proc, a folder without write permission)."""
-    if out_dir.exists() and not out_dir.is_dir():
-        raise NnidInputError("exists and is not a folder", source=str(out_dir), field="--out")
-    base = next(p for p in (out_dir.absolute(), *out_dir.absolute().parents) if p.exists())
-    if not base.is_dir():
-        raise NnidInputError(f"{base} is not a folder", source=str(out_dir), field="--out")
-    try:  # the only sure test of writability is to write
-        tempfile.TemporaryDirectory(dir=base).cleanup()
-    except OSError as exc:
-        raise NnidInputError(
-            f"cannot be written ({exc.strerror or exc})", source=str(out_dir), field="--out"
-        ) from None
-
-
-@contextmanager
-def _staged(out_dir: Path):
-    """Yield a hidden sibling folder to write the outputs into; only once every file is
-    written are they moved into ``out_dir``, so a run that fails half way leaves nothing that
-    poses as its result (and an earlier result in ``out_dir`` untouched)."""
-    where = out_dir.absolute()
-    where.parent.mkdir(parents=True, exist_ok=True)
-    # os.mkdir, not mkdtemp: the folder keeps the user's umask once it is renamed into place
-    stage = where.parent / f".{where.name}-{os.getpid()}-{uuid.uuid4().hex[:8]}"
-    stage.mkdir()
-    try:
-        yield stage
-        if not out_dir.exists():
-            stage.rename(out_dir)
-            return
-        for item in stage.iterdir():
-            target = out_dir / item.name
-            if target.is_dir() and not target.is_symlink():
-                shutil.rmtree(target)
-            os.replace(item, target)
-    finally:
-        shutil.rmtree(stage, ignore_errors=True)
-
-
 def _fmt(x) -> str:
     return "diverged" if x is None else f"{x:.3g}"
+
+
+def _print(outcome) -> None:
+    """A run's warnings on stderr, its sentences on stdout."""
+    for warning in outcome.warnings:
+        err.print(f"warning: {warning}", highlight=False, soft_wrap=True)
+    for line in outcome.lines:
+        out.print(line, highlight=False, soft_wrap=True)
 
 
 @app.command()
@@ -256,33 +222,15 @@ def train(
     (model.json, and tensors.pt for networks; load it with nnid.load_model), metrics.json,
     report.md, report.html and the cleaning report to --out."""
     from nnid.config import TrainConfig, load_config
-    from nnid.pipeline import run_train
-    from nnid.reports.train_report import train_html, train_markdown
-    from nnid.serialization import write_json, write_text
+    from nnid.runs import train_run
 
     cfg = load_config(config, TrainConfig)
     _check_out(out_dir)
-    try:
-        with _bar(f"training a {cfg.model.kind} model") as progress:
-            result = run_train(cfg, config, data, vehicle, columns, progress=progress)
-    except NnidInputError as exc:
-        raise exc.with_source(str(config)) from None
-    with _staged(out_dir) as stage:
-        result.model.save(stage)
-        if result.monitor is not None:
-            result.monitor.save(stage)
-        write_json(stage / "metrics.json", result.metrics)
-        write_text(stage / "report.md", train_markdown(result.metrics))
-        write_text(stage / "report.html", train_html(result.metrics, result.figures))
-        result.report.write(stage)
-    held = "test" if "test" in result.metrics else "validation"
-    free = result.metrics[held].get("free_run_nrmse", {})
-    line = f"{held} free-run NRMSE total {_fmt(free.get('total'))}"
-    base = result.metrics.get("baseline", {}).get(held, {}).get("free_run_nrmse", {})
-    if base:
-        line += f"; physics only {_fmt(base.get('total'))}"
-    out.print(f"wrote {out_dir}/: model.json, metrics.json, report.md, report.html ({line})")
-    for warning in result.metrics["warnings"]:
+    with _bar(f"training a {cfg.model.kind} model") as progress:
+        outcome = train_run(cfg, config, out_dir, data, vehicle, columns, progress=progress)
+    for line in outcome.lines:
+        out.print(line)
+    for warning in outcome.warnings:
         err.print(f"warning: {warning}", highlight=False, soft_wrap=True)
 
 
@@ -302,27 +250,13 @@ def compare(
     """Fit the config's [[models]] (any kinds) on one split and compare them on the same
     held-out experiments: writes comparison.json, report.html and report.md to --out."""
     from nnid.config import CompareConfig, load_config
-    from nnid.pipeline import run_compare
-    from nnid.reports.compare_report import html_page, markdown
-    from nnid.serialization import write_json, write_text
+    from nnid.runs import compare_run
 
     cfg = load_config(config, CompareConfig)
     _check_out(out_dir)
-    try:
-        with _bar("comparing models") as progress:
-            result = run_compare(cfg, config, data, vehicle, columns, progress=progress)
-    except NnidInputError as exc:
-        raise exc.with_source(str(config)) from None
-    with _staged(out_dir) as stage:
-        write_json(stage / "comparison.json", result.comparison)
-        write_text(stage / "report.html", html_page(result))
-        write_text(stage / "report.md", markdown(result.comparison))
-        result.report.write(stage)
-    out.print(
-        f"wrote {out_dir}/: comparison.json, report.html, report.md. "
-        + result.comparison["summary"],
-        highlight=False,
-    )
+    with _bar("comparing models") as progress:
+        outcome = compare_run(cfg, config, out_dir, data, vehicle, columns, progress=progress)
+    _print(outcome)
 
 
 @app.command()
@@ -363,121 +297,17 @@ def loop(
     add it, refit, repeat; writes loop.json, report.html and report.md to --out, with the
     held-out errors before and after ("no significant effect" when there is none)."""
     from nnid.config import LoopConfig, load_config
-    from nnid.pipeline import load_inputs
+    from nnid.runs import loop_run
 
     cfg = load_config(config, LoopConfig) if config else LoopConfig()
-    where = config or Path("loop.toml")
-    if not (vehicle or cfg.vehicle):
-        raise NnidInputError(
-            "give a vehicle (--vehicle or the config's 'vehicle')", field="vehicle"
-        )
-    if not (data or cfg.data.log or cfg.data.simulate):
-        raise NnidInputError("give a log (--data or the config's data.log)", field="data")
     _check_out(out_dir)
-    second = _hybrid_model(hybrid) if hybrid is not None else None
-    try:
-        inputs = load_inputs(cfg, where, [], data, vehicle, columns)
-    except NnidInputError as exc:
-        raise exc.with_source(str(config)) if config else exc from None
-    log, report, veh = inputs.log, inputs.report, inputs.vehicle
-    log = _exclude(log, _names(exclude), report)
-    settings = dict(
-        max_effects=cfg.max_effects if max_effects is None else max_effects,
-        alpha=cfg.alpha if alpha is None else alpha,
-        coupled=cfg.coupled,
-        filter_lambda=cfg.filter_lambda,
-        savgol_window=cfg.savgol_window,
-        savgol_order=cfg.savgol_order,
-        warmup_s=cfg.warmup_s,
-        validation=cfg.validation_fraction,
-        dofs=_dofs(dofs) or (tuple(cfg.dofs) if cfg.dofs else None),
-        validation_experiments=_names(validation) or cfg.validation,
-        gate_horizon_s=cfg.gate_horizon_s,
-        second_opinion=second,
-    )
-    source, where = data or str(config or ""), str(config or "")
-    _run_loop(log, veh, out_dir, source=source, cleaning=report, config=where, **settings)
-
-
-def _names(text: str | None) -> list[str]:
-    """A comma-separated option as a list (empty for None)."""
-    return [n.strip() for n in (text or "").split(",") if n.strip()]
-
-
-def _dofs(text: str | None) -> tuple[str, ...] | None:
-    from nnid.physics.dofs import DOFS
-
-    names = _names(text)
-    unknown = [d for d in names if d not in DOFS]
-    if unknown:
-        raise NnidInputError(
-            f"unknown DOF {', '.join(unknown)}; expected some of {' '.join(DOFS)}", field="--dofs"
-        )
-    return tuple(names) or None
-
-
-def _exclude(log, names: list[str], report):
-    """The log without the named experiments (a name may be a replay group of the reader
-    config, ``replays[0]``: all its copies), reported; an unknown name is an error."""
-    from nnid.datasets.log import REPLAY_GROUP
-
-    if not names:
-        return log
-    if REPLAY_GROUP in log:
-        groups = log.groupby(REPLAY_GROUP, sort=False)["experiment"].unique()
-        names = [e for n in names for e in (groups[n] if n in groups else [n])]
-    known = set(log["experiment"]) if "experiment" in log else set()
-    unknown = [n for n in names if n not in known]
-    if unknown:
-        raise NnidInputError(
-            f"experiments {', '.join(unknown)} are not in the log", field="--exclude"
-        )
-    keep = ~log["experiment"].isin(names)
-    report.add("exclude", f"left out {', '.join(names)} (--exclude)", int((~keep).sum()))
-    return log[keep].reset_index(drop=True)
-
-
-def _hybrid_model(folder: Path):
-    """A saved hybrid model, or one clear error."""
-    from nnid.models.base import load_model
-
-    model = load_model(folder)
-    if model.kind != "hybrid":
-        raise NnidInputError(
-            f"is a saved '{model.kind}' model; --hybrid takes a hybrid "
-            "(nnid train configs/hybrid.toml)",
-            source=str(folder),
-            field="--hybrid",
-        )
-    return model
-
-
-#: loop settings a config (or an option) sets: an error about one names the config
-LOOP_SETTINGS = ("validation", "dofs", "alpha", "max_effects", "warmup_s", "gate_horizon_s")
-
-
-def _run_loop(
-    log, veh, out_dir: Path, source: str = "", cleaning=None, config: str = "", **settings
-) -> None:
-    from nnid.loop.residual_loop import ResidualLoop
-    from nnid.reports.loop_report import write_loop_report
-
     with _bar("residual loop") as progress:
-        try:
-            fitted = ResidualLoop(veh, **settings).fit(log, progress=progress)
-        except NnidInputError as exc:
-            named = config if config and exc.field in LOOP_SETTINGS else source
-            raise exc.with_source(named) if named else exc from None
-        progress(0, None, "writing the report")
-        with _staged(out_dir) as stage:
-            lines = write_loop_report(fitted, stage)
-            if cleaning is not None:
-                cleaning.write(stage)
-    for warning in fitted.warnings_:
-        err.print(f"warning: {warning}", highlight=False, soft_wrap=True)
-    for line in lines:
-        out.print(line, highlight=False, soft_wrap=True)
-    out.print(f"wrote {out_dir}/: loop.json, report.html, report.md", highlight=False)
+        outcome = loop_run(
+            cfg, config, out_dir, data, vehicle, columns,
+            max_effects=max_effects, alpha=alpha, dofs=dofs, validation=validation,
+            exclude=exclude, hybrid=hybrid, progress=progress,
+        )  # fmt: skip
+    _print(outcome)
 
 
 @app.command()
@@ -503,58 +333,34 @@ def detect(
     """Fault detection: watch a log with a calibrated residual monitor; each alarm says whether a
     thruster lost thrust (which one, its remaining efficiency), an external force appeared, or
     the vehicle changed (the effect, e.g. buoyancy_offset, with its size)."""
-    from nnid.fault.detect import detect as run_detect
-    from nnid.fault.monitor import ResidualMonitor
-    from nnid.reports.detect_report import write_detect_outputs
+    from nnid.runs import check_detect_inputs, detect_run, detection_window
 
     _check_out(out_dir)
-    if not model_dir.is_dir():
-        raise NnidInputError("no such folder", source=str(model_dir), field="--model")
-    if data != "-" and not Path(data).exists():
-        raise NnidInputError("no such file or folder", source=data, field="--data")
-    if data == "-" and not follow:
-        raise NnidInputError("'-' (standard input) is read with --follow", field="--data")
-    monitor = ResidualMonitor.load(model_dir)
-    window_s = window or _window_of(model_dir)
-    try:
-        if follow:
-            from nnid.fault.follow import follow_csv
+    check_detect_inputs(model_dir, data, follow)
+    if follow:
+        from nnid.fault.follow import follow_csv
+        from nnid.fault.monitor import ResidualMonitor
 
+        monitor = ResidualMonitor.load(model_dir)
+        window_s = window or detection_window(model_dir)
+        try:
             result = follow_csv(monitor, data, window_s, _say)
-        else:
-            from nnid.datasets.gaps import mask_gaps
-            from nnid.datasets.log import POSE, VELOCITY
-            from nnid.datasets.readers import load_log
+        except NnidInputError as exc:
+            raise exc.with_source(data) from None
+        from nnid.reports.detect_report import write_detect_outputs
 
-            log, report = load_log(data, columns)
-            # a gap in the motion data is no residual: the monitor restarts after it
-            log = mask_gaps([log], [*POSE, *VELOCITY], report)[0]
-            for step in report.steps:
-                if step.step == "mask gaps":
-                    _say(f"{step.step}: {step.detail}")
-            with _bar("detecting") as progress:
-                progress(0, None, "running the monitor")
-                result = run_detect(monitor, log, window_s)
-    except NnidInputError as exc:
-        raise exc.with_source(data) from None
-    with _staged(out_dir) as stage:
-        lines = write_detect_outputs(monitor, result, stage, source=data)
-    for line in lines:
-        out.print(line, highlight=False, soft_wrap=True)
+        with _staged(out_dir) as stage:
+            lines = write_detect_outputs(monitor, result, stage, source=data)
+        for line in lines:
+            _say(line)
+        return
+    with _bar("detecting") as progress:
+        outcome = detect_run(model_dir, data, out_dir, columns, window, progress=progress)
+    _print(outcome)
 
 
 def _say(line: str) -> None:
     out.print(line, highlight=False, soft_wrap=True)
-
-
-def _window_of(model_dir: Path) -> float:
-    """The isolation window a detection model was trained with (metrics.json), else 10 s."""
-    from nnid.serialization import read_json
-
-    path = model_dir / "metrics.json"
-    if path.is_file():
-        return float(read_json(path).get("detect", {}).get("settings", {}).get("window_s", 10.0))
-    return 10.0
 
 
 @app.command()
@@ -614,6 +420,47 @@ def vehicle(
     )
 
 
+@app.command()
+@_input_errors
+def batch(
+    manifest: Path = typer.Argument(..., help="TOML manifest: command, data, vehicle, config."),
+    out_dir: Path = typer.Option(..., "--out", help="Output folder: one folder per task, summary."),
+    address: str | None = typer.Option(
+        None, "--address", help="Ray cluster ('auto' or an address); default local processes."
+    ),
+    workers: int | None = typer.Option(
+        None, "--workers", min=1, help="Local worker processes; default one per core."
+    ),
+) -> None:
+    """Run many train/loop/detect/compare tasks (logs x vehicles x configs) and write one
+    summary: summary.parquet, summary.csv, summary.json and report.html. Tasks finished by an
+    earlier run into the same --out are not run again; a failed task is a 'failed' row and the
+    others go on (exit code 1 when any failed)."""
+    from nnid.scale.batch import run_tasks, write_summary
+    from nnid.scale.engines import engine_for
+    from nnid.scale.manifest import expand
+
+    tasks = expand(manifest)
+    _check_out(out_dir)
+    engine = engine_for(address, workers)
+    with _bar(f"{len(tasks)} {tasks[0].command} tasks") as progress:
+        result = run_tasks(tasks, out_dir, engine, progress=progress)
+    write_summary(result, out_dir)
+    failed = result.failed
+    out.print(
+        f"{len(tasks)} tasks on the {result.engine} engine: {len(tasks) - len(failed)} ok "
+        f"({result.reused} finished earlier), {len(failed)} failed, {result.seconds:.1f} s; "
+        f"wrote {out_dir}/summary.csv, summary.parquet, summary.json, report.html",
+        highlight=False,
+        soft_wrap=True,
+    )
+    for row in failed:
+        err.print(f"failed: {row['id']} ({row['data']}): {escape(str(row['error']))}",
+                  highlight=False, soft_wrap=True)  # fmt: skip
+    if failed:
+        raise typer.Exit(1)
+
+
 DEMO_LOG = "demo_minirov_heave.parquet"
 
 
@@ -628,6 +475,7 @@ def demo(
     from importlib import resources
 
     from nnid.datasets.readers import load_log
+    from nnid.runs import residual_loop_run
     from nnid.vehicle import load_vehicle
 
     _check_out(out_dir)
@@ -641,7 +489,9 @@ def demo(
         "injected that its vehicle file does not declare)",
         highlight=False,
     )
-    _run_loop(log, veh, out_dir)
+    with _bar("residual loop") as progress:
+        outcome = residual_loop_run(log, veh, out_dir, progress=progress)
+    _print(outcome)
     out.print(f"open {out_dir.resolve() / 'report.html'}", highlight=False)
 
 

@@ -690,10 +690,36 @@ COMMANDS: dict[str, type[BaseModel]] = {
 }
 
 
-def load_config(path: str | Path, model: type[BaseModel] = SimulateConfig) -> BaseModel:
+def set_option(data: dict[str, Any], path: str, value: Any, source: str = "") -> None:
+    """Set the dotted option ``path`` (``model.hidden``, ``model.trainer.lr``) of a config's
+    data in place; a table on the way that is not there is made, a value on the way is an
+    error naming the path."""
+    *tables, key = path.split(".")
+    node = data
+    for i, name in enumerate(tables):
+        child = node.get(name, {})
+        if isinstance(child, str) and name in ("model", "trainer"):  # shorthand: kind only
+            child = {"kind": child}
+        if not isinstance(child, dict):
+            raise NnidInputError(
+                f"'{'.'.join(tables[: i + 1])}' is a value, not a table", source=source, field=path
+            )
+        node[name] = child
+        node = child
+    node[key] = value
+
+
+def load_config(
+    path: str | Path,
+    model: type[BaseModel] = SimulateConfig,
+    overrides: dict[str, Any] | None = None,
+) -> BaseModel:
     """Read and validate a TOML config; raise NnidInputError naming the file and field. A
-    config written for another command is refused with that command's name."""
+    config written for another command is refused with that command's name. ``overrides``
+    set dotted option paths first (a sweep's trial)."""
     data = read_toml(path)
+    for option, value in (overrides or {}).items():
+        set_option(data, option, value, str(path))
     expected = next((k for k, m in COMMANDS.items() if m is model), None)
     kind = data.get("kind")
     if expected is not None and isinstance(kind, str) and kind != expected:

@@ -1,0 +1,410 @@
+"""Each command's whole run as one library call: read, fit, score and write the outputs to a
+folder, atomically. The CLI (one run, a person watching) and :mod:`nnid.scale` (many runs on
+workers) both call these, so a task of ``nnid batch`` writes exactly what the command writes.
+
+Every function returns an :class:`Outcome`: the sentences the CLI prints, the warnings, and a
+flat ``headline`` of the run's scores for a summary table. Nothing here prints.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import tempfile
+import uuid
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from nnid.errors import NnidInputError
+from nnid.trainers.history import Progress, silent
+
+
+@dataclass
+class Outcome:
+    """What a run says: ``lines`` for a person, ``warnings``, and ``headline`` scores (flat,
+    JSON-ready: numbers, strings, None) for one row of a summary."""
+
+    lines: list[str] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
+    headline: dict[str, Any] = field(default_factory=dict)
+
+
+# -- output folders ------------------------------------------------------------------------------
+
+
+def check_out(out_dir: Path) -> None:
+    """An output folder that can be written: refused before any work starts (a file, a place
+    such as /proc, a folder without write permission)."""
+    out_dir = Path(out_dir)
+    if out_dir.exists() and not out_dir.is_dir():
+        raise NnidInputError("exists and is not a folder", source=str(out_dir), field="--out")
+    base = next(p for p in (out_dir.absolute(), *out_dir.absolute().parents) if p.exists())
+    if not base.is_dir():
+        raise NnidInputError(f"{base} is not a folder", source=str(out_dir), field="--out")
+    try:  # the only sure test of writability is to write
+        tempfile.TemporaryDirectory(dir=base).cleanup()
+    except OSError as exc:
+        raise NnidInputError(
+            f"cannot be written ({exc.strerror or exc})", source=str(out_dir), field="--out"
+        ) from None
+
+
+@contextmanager
+def staged(out_dir: Path) -> Iterator[Path]:
+    """Yield a hidden sibling folder to write the outputs into; only once every file is
+    written are they moved into ``out_dir``, so a run that fails half way leaves nothing that
+    poses as its result (and an earlier result in ``out_dir`` untouched)."""
+    out_dir = Path(out_dir)
+    where = out_dir.absolute()
+    where.parent.mkdir(parents=True, exist_ok=True)
+    # os.mkdir, not mkdtemp: the folder keeps the user's umask once it is renamed into place
+    stage = where.parent / f".{where.name}-{os.getpid()}-{uuid.uuid4().hex[:8]}"
+    stage.mkdir()
+    try:
+        yield stage
+        if not out_dir.exists():
+            stage.rename(out_dir)
+            return
+        for item in stage.iterdir():
+            target = out_dir / item.name
+            if target.is_dir() and not target.is_symlink():
+                shutil.rmtree(target)
+            os.replace(item, target)
+    finally:
+        shutil.rmtree(stage, ignore_errors=True)
+
+
+def _fmt(x) -> str:
+    return "diverged" if x is None else f"{x:.3g}"
+
+
+def _total(scores: dict, key: str) -> float | None:
+    return scores.get(key, {}).get("total")
+
+
+# -- train ---------------------------------------------------------------------------------------
+
+
+def train_run(
+    cfg,
+    config_path: Path,
+    out_dir: Path,
+    data: str | None = None,
+    vehicle: str | None = None,
+    columns: str | None = None,
+    progress: Progress | None = None,
+) -> Outcome:
+    """``nnid train``: fit the configured model, score it on the held-out parts, write the
+    model (``model.json``, ``tensors.pt``), ``metrics.json``, the reports and the cleaning
+    report to ``out_dir``."""
+    from nnid.pipeline import run_train
+    from nnid.reports.train_report import train_html, train_markdown
+    from nnid.serialization import write_json, write_text
+
+    try:
+        result = run_train(cfg, config_path, data, vehicle, columns, progress=progress)
+    except NnidInputError as exc:
+        raise exc.with_source(str(config_path)) from None
+    with staged(out_dir) as stage:
+        result.model.save(stage)
+        if result.monitor is not None:
+            result.monitor.save(stage)
+        write_json(stage / "metrics.json", result.metrics)
+        write_text(stage / "report.md", train_markdown(result.metrics))
+        write_text(stage / "report.html", train_html(result.metrics, result.figures))
+        result.report.write(stage)
+    metrics = result.metrics
+    held = "test" if "test" in metrics else "validation"
+    free = metrics[held].get("free_run_nrmse", {})
+    line = f"{held} free-run NRMSE total {_fmt(free.get('total'))}"
+    base = metrics.get("baseline", {}).get(held, {}).get("free_run_nrmse", {})
+    if base:
+        line += f"; physics only {_fmt(base.get('total'))}"
+    headline: dict[str, Any] = {
+        "model": metrics["model"],
+        "trainer": metrics["trainer"],
+        "vehicle_name": metrics.get("vehicle"),
+        "n_params": metrics["n_params"],
+        "held_out": held,
+        "free_run_nrmse": free.get("total"),
+        "one_step_nrmse": _total(metrics[held], "one_step_nrmse"),
+        "diverged": ", ".join(metrics[held].get("diverged", {})) or None,
+    }
+    for name, p in metrics["params"].items():
+        headline[f"param:{name}"] = p.get("value")
+        headline[f"stderr:{name}"] = p.get("stderr")
+    return Outcome(
+        [f"wrote {out_dir}/: model.json, metrics.json, report.md, report.html ({line})"],
+        list(metrics["warnings"]),
+        headline,
+    )
+
+
+# -- compare -------------------------------------------------------------------------------------
+
+
+def compare_run(
+    cfg,
+    config_path: Path,
+    out_dir: Path,
+    data: str | None = None,
+    vehicle: str | None = None,
+    columns: str | None = None,
+    progress: Progress | None = None,
+) -> Outcome:
+    """``nnid compare``: fit the config's models on one split, compare them on the same
+    held-out runs; ``comparison.json`` and the reports."""
+    from nnid.pipeline import run_compare
+    from nnid.reports.compare_report import html_page, markdown
+    from nnid.serialization import write_json, write_text
+
+    try:
+        result = run_compare(cfg, config_path, data, vehicle, columns, progress=progress)
+    except NnidInputError as exc:
+        raise exc.with_source(str(config_path)) from None
+    with staged(out_dir) as stage:
+        write_json(stage / "comparison.json", result.comparison)
+        write_text(stage / "report.html", html_page(result))
+        write_text(stage / "report.md", markdown(result.comparison))
+        result.report.write(stage)
+    comparison = result.comparison
+    ranking = comparison.get("ranking", [])
+    headline: dict[str, Any] = {"best": ranking[0] if ranking else None}
+    for row in comparison["models"]:
+        held = row.get("test") or row.get("validation") or {}
+        headline[f"free_run_nrmse:{row['name']}"] = _total(held, "free_run_nrmse")
+    return Outcome(
+        [f"wrote {out_dir}/: comparison.json, report.html, report.md. " + comparison["summary"]],
+        [],
+        headline,
+    )
+
+
+# -- loop ----------------------------------------------------------------------------------------
+
+#: loop settings a config (or an option) sets: an error about one names the config
+LOOP_SETTINGS = ("validation", "dofs", "alpha", "max_effects", "warmup_s", "gate_horizon_s")
+
+
+def names(text: str | None) -> list[str]:
+    """A comma-separated option as a list (empty for None)."""
+    return [n.strip() for n in (text or "").split(",") if n.strip()]
+
+
+def dofs_option(text: str | None) -> tuple[str, ...] | None:
+    """``--dofs u,w``: checked DOF names, or None for all logged."""
+    from nnid.physics.dofs import DOFS
+
+    given = names(text)
+    unknown = [d for d in given if d not in DOFS]
+    if unknown:
+        raise NnidInputError(
+            f"unknown DOF {', '.join(unknown)}; expected some of {' '.join(DOFS)}", field="--dofs"
+        )
+    return tuple(given) or None
+
+
+def exclude_experiments(log, excluded: list[str], report):
+    """The log without the named experiments (a name may be a replay group of the reader
+    config, ``replays[0]``: all its copies), reported; an unknown name is an error."""
+    from nnid.datasets.log import REPLAY_GROUP
+
+    if not excluded:
+        return log
+    if REPLAY_GROUP in log:
+        groups = log.groupby(REPLAY_GROUP, sort=False)["experiment"].unique()
+        excluded = [e for n in excluded for e in (groups[n] if n in groups else [n])]
+    known = set(log["experiment"]) if "experiment" in log else set()
+    unknown = [n for n in excluded if n not in known]
+    if unknown:
+        raise NnidInputError(
+            f"experiments {', '.join(unknown)} are not in the log", field="--exclude"
+        )
+    keep = ~log["experiment"].isin(excluded)
+    report.add("exclude", f"left out {', '.join(excluded)} (--exclude)", int((~keep).sum()))
+    return log[keep].reset_index(drop=True)
+
+
+def hybrid_model(folder: Path):
+    """A saved hybrid model, or one clear error."""
+    from nnid.models.base import load_model
+
+    model = load_model(folder)
+    if model.kind != "hybrid":
+        raise NnidInputError(
+            f"is a saved '{model.kind}' model; --hybrid takes a hybrid "
+            "(nnid train configs/hybrid.toml)",
+            source=str(folder),
+            field="--hybrid",
+        )
+    return model
+
+
+def loop_run(
+    cfg,
+    config_path: Path | None,
+    out_dir: Path,
+    data: str | None = None,
+    vehicle: str | None = None,
+    columns: str | None = None,
+    *,
+    max_effects: int | None = None,
+    alpha: float | None = None,
+    dofs: str | None = None,
+    validation: str | None = None,
+    exclude: str | None = None,
+    hybrid: Path | None = None,
+    progress: Progress | None = None,
+) -> Outcome:
+    """``nnid loop``: the residual loop of a log and a vehicle file (a
+    :class:`nnid.config.LoopConfig`; the keyword options override it as the CLI's do)."""
+    from nnid.pipeline import load_inputs
+
+    where = config_path or Path("loop.toml")
+    if not (vehicle or cfg.vehicle):
+        raise NnidInputError(
+            "give a vehicle (--vehicle or the config's 'vehicle')", field="vehicle"
+        )
+    if not (data or cfg.data.log or cfg.data.simulate):
+        raise NnidInputError("give a log (--data or the config's data.log)", field="data")
+    second = hybrid_model(hybrid) if hybrid is not None else None
+    try:
+        inputs = load_inputs(cfg, where, [], data, vehicle, columns)
+    except NnidInputError as exc:
+        raise exc.with_source(str(config_path)) if config_path else exc from None
+    log = exclude_experiments(inputs.log, names(exclude), inputs.report)
+    settings = dict(
+        max_effects=cfg.max_effects if max_effects is None else max_effects,
+        alpha=cfg.alpha if alpha is None else alpha,
+        coupled=cfg.coupled,
+        filter_lambda=cfg.filter_lambda,
+        savgol_window=cfg.savgol_window,
+        savgol_order=cfg.savgol_order,
+        warmup_s=cfg.warmup_s,
+        validation=cfg.validation_fraction,
+        dofs=dofs_option(dofs) or (tuple(cfg.dofs) if cfg.dofs else None),
+        validation_experiments=names(validation) or cfg.validation,
+        gate_horizon_s=cfg.gate_horizon_s,
+        second_opinion=second,
+    )
+    source, named = data or str(config_path or ""), str(config_path or "")
+    return residual_loop_run(
+        log, inputs.vehicle, out_dir, source, inputs.report, named, progress, **settings
+    )
+
+
+def residual_loop_run(
+    log,
+    veh,
+    out_dir: Path,
+    source: str = "",
+    cleaning=None,
+    config: str = "",
+    progress: Progress | None = None,
+    **settings,
+) -> Outcome:
+    """The residual loop on a loaded log: ``loop.json``, the reports and the cleaning report
+    written to ``out_dir`` (:class:`nnid.loop.residual_loop.ResidualLoop`)."""
+    from nnid.loop.residual_loop import ResidualLoop
+    from nnid.reports.loop_report import write_loop_report
+
+    progress = progress or silent
+    try:
+        fitted = ResidualLoop(veh, **settings).fit(log, progress=progress)
+    except NnidInputError as exc:
+        named = config if config and exc.field in LOOP_SETTINGS else source
+        raise exc.with_source(named) if named else exc from None
+    progress(0, None, "writing the report")
+    with staged(out_dir) as stage:
+        lines = write_loop_report(fitted, stage)
+        if cleaning is not None:
+            cleaning.write(stage)
+    result = fitted.as_dict()
+    headline: dict[str, Any] = {
+        "vehicle_name": result["vehicle"],
+        "added": "; ".join(result["added"]) or None,
+        "before_free_run_nrmse": _total(result["before"], "free_run_nrmse"),
+        "after_free_run_nrmse": _total(result["after"], "free_run_nrmse"),
+        "before_force_rmse": _total(result["before"], "force_rmse"),
+        "after_force_rmse": _total(result["after"], "force_rmse"),
+        "diverged": ", ".join(result["before"].get("diverged", {})) or None,
+        "unexplained": "; ".join(f"{d}: {s}" for d, s in result["unexplained"].items()) or None,
+    }
+    for step in result["steps"]:
+        added = step["added"]
+        if added:  # the size of each added effect (an efficiency, a force, ...)
+            headline[f"param:{added['effect']}"] = added["params"].get("value")
+            headline[f"stderr:{added['effect']}"] = added["stderr"].get("value")
+    return Outcome(
+        [*lines, f"wrote {out_dir}/: loop.json, report.html, report.md"],
+        list(fitted.warnings_),
+        headline,
+    )
+
+
+# -- detect --------------------------------------------------------------------------------------
+
+
+def detection_window(model_dir: Path) -> float:
+    """The isolation window a detection model was trained with (metrics.json), else 10 s."""
+    from nnid.serialization import read_json
+
+    path = Path(model_dir) / "metrics.json"
+    if path.is_file():
+        return float(read_json(path).get("detect", {}).get("settings", {}).get("window_s", 10.0))
+    return 10.0
+
+
+def check_detect_inputs(model_dir: Path, data: str, follow: bool = False) -> None:
+    """A detection model folder and a log that exist: checked before the model is loaded."""
+    if not Path(model_dir).is_dir():
+        raise NnidInputError("no such folder", source=str(model_dir), field="--model")
+    if data != "-" and not Path(data).exists():
+        raise NnidInputError("no such file or folder", source=data, field="--data")
+    if data == "-" and not follow:
+        raise NnidInputError("'-' (standard input) is read with --follow", field="--data")
+
+
+def detect_run(
+    model_dir: Path,
+    data: str,
+    out_dir: Path,
+    columns: str | None = None,
+    window: float | None = None,
+    progress: Progress | None = None,
+) -> Outcome:
+    """``nnid detect`` on a whole log: ``alarms.csv``, ``detect.json`` and the report."""
+    from nnid.datasets.gaps import mask_gaps
+    from nnid.datasets.log import POSE, VELOCITY
+    from nnid.datasets.readers import load_log
+    from nnid.fault.detect import detect
+    from nnid.fault.monitor import ResidualMonitor
+    from nnid.reports.detect_report import write_detect_outputs
+
+    check_detect_inputs(model_dir, data)
+    monitor = ResidualMonitor.load(model_dir)
+    window_s = window or detection_window(model_dir)
+    lines: list[str] = []
+    try:
+        log, report = load_log(data, columns)
+        # a gap in the motion data is no residual: the monitor restarts after it
+        log = mask_gaps([log], [*POSE, *VELOCITY], report)[0]
+        lines += [f"{s.step}: {s.detail}" for s in report.steps if s.step == "mask gaps"]
+        (progress or silent)(0, None, "running the monitor")
+        result = detect(monitor, log, window_s)
+    except NnidInputError as exc:
+        raise exc.with_source(data) from None
+    with staged(out_dir) as stage:
+        lines += write_detect_outputs(monitor, result, stage, source=data)
+    alarms = result.alarms
+    headline: dict[str, Any] = {
+        "alarms": len(alarms),
+        "first_alarm_t": alarms[0]["t"] if alarms else None,
+        "alarm_kinds": "; ".join(dict.fromkeys(a["kind"] for a in alarms)) or None,
+        "effects": "; ".join(dict.fromkeys(a["effect"] for a in alarms if a.get("effect"))) or None,
+        "samples": int(result.trace.t.size),
+    }
+    return Outcome(lines, [], headline)

@@ -1,0 +1,226 @@
+"""Where tasks run: in this process, on local worker processes, or on a Ray cluster.
+
+Every engine has ``slots`` (how many tasks run at once) and ``run(tasks, out_root)``, which
+yields each task's row as it finishes (:func:`nnid.scale.task.run_task`). Fan-out is the job
+of ``concurrent.futures`` and Ray; nothing here schedules by itself.
+
+- :class:`SerialEngine`: one task after another in this process (the baseline, and debugging).
+- :class:`LocalEngine`: ``ProcessPoolExecutor`` with the *spawn* context (no fork of a process
+  that holds torch or numba threads), one torch/BLAS/numba thread per worker. A worker that
+  dies (killed, out of memory, a segfault) breaks the whole pool in ``concurrent.futures``;
+  the tasks it was running are found by their start markers, each is re-run alone in a fresh
+  one-worker pool, and the one that kills that worker too becomes a ``failed`` row. The
+  tasks that were only waiting run on in a new pool.
+- :class:`RayEngine`: ``ray.remote`` tasks of one CPU each, no retries (a task that kills its
+  worker is reported, not re-run behind the user's back), results gathered with ``ray.wait``
+  as they finish. Tasks carry paths, so each worker reads its log itself: the logs and the
+  output folder must be on storage every node sees (one machine, NFS, a shared volume).
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+from collections.abc import Iterator
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
+from multiprocessing import get_context
+from pathlib import Path
+from typing import Any
+
+from nnid.scale.manifest import Task
+
+#: folder (inside the output folder) of the markers of tasks running on local workers
+RUNNING = ".running"
+#: the error of a task whose worker process died under it
+DIED = "its worker process died while running it (killed, out of memory or crashed)"
+
+
+def failed_row(task: Task, error: str) -> dict[str, Any]:
+    """The row of a task that ended without returning one (its worker died)."""
+    return {"id": task.id, **task.inputs(), "status": "failed", "error": error,
+            "seconds": None, "worker": None}  # fmt: skip
+
+
+class SerialEngine:
+    """Every task in this process, one after another."""
+
+    name = "serial"
+    slots = 1
+
+    def run(self, tasks: list[Task], out_root: str | Path) -> Iterator[dict[str, Any]]:
+        from nnid.scale.task import run_task
+
+        for task in tasks:
+            yield run_task(task, out_root)
+
+
+def _pin_worker() -> None:
+    """Initializer of a local worker process: one thread for torch, BLAS and numba (the
+    worker's own process, so process-wide settings are its to make)."""
+    for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
+        os.environ[var] = "1"
+    import torch
+
+    torch.set_num_threads(1)
+
+
+def _marked_run(task: Task, out_root: str) -> dict[str, Any]:
+    """:func:`run_task` with a start marker that outlives a worker killed mid-task."""
+    from nnid.scale.task import run_task
+
+    marker = Path(out_root) / RUNNING / task.id
+    marker.parent.mkdir(parents=True, exist_ok=True)
+    marker.write_text(str(os.getpid()))
+    try:
+        return run_task(task, out_root)
+    finally:
+        marker.unlink(missing_ok=True)
+
+
+class LocalEngine:
+    """Local worker processes (``concurrent.futures``, spawn context); ``workers`` defaults
+    to the number of cores."""
+
+    name = "local"
+
+    def __init__(self, workers: int | None = None) -> None:
+        self.workers = workers
+
+    @property
+    def slots(self) -> int:
+        return self.workers or os.cpu_count() or 1
+
+    def _pool(
+        self, tasks: list[Task], out_root: str, workers: int
+    ) -> Iterator[dict[str, Any] | list[Task]]:
+        """Rows as tasks finish; if the pool breaks, a last item: the unfinished tasks."""
+        ctx = get_context("spawn")
+        with ProcessPoolExecutor(workers, mp_context=ctx, initializer=_pin_worker) as pool:
+            futures = {pool.submit(_marked_run, t, out_root): t for t in tasks}
+            while futures:
+                done, _ = wait(futures, return_when=FIRST_COMPLETED)
+                broken = []
+                for future in done:
+                    task = futures.pop(future)
+                    error = future.exception()
+                    if isinstance(error, BrokenProcessPool):
+                        broken.append(task)
+                    elif error is not None:  # run_task catches its own: a pickling failure
+                        yield failed_row(task, f"{type(error).__name__}: {error}")
+                    else:
+                        yield future.result()
+                if broken:
+                    yield broken + list(futures.values())
+                    return
+
+    def run(self, tasks: list[Task], out_root: str | Path) -> Iterator[dict[str, Any]]:
+        out_root = str(out_root)
+        marks = Path(out_root) / RUNNING
+        shutil.rmtree(marks, ignore_errors=True)
+        pending = list(tasks)
+        while pending:
+            unfinished: list[Task] = []
+            for item in self._pool(pending, out_root, min(self.slots, len(pending))):
+                if isinstance(item, list):
+                    unfinished = item
+                else:
+                    yield item
+            if not unfinished:
+                break
+            running = {p.name for p in marks.iterdir()} if marks.is_dir() else set()
+            suspects = [t for t in unfinished if t.id in running] or unfinished
+            pending = [t for t in unfinished if t not in suspects]
+            shutil.rmtree(marks, ignore_errors=True)
+            for task in suspects:  # alone, so a second death names its task
+                for item in self._pool([task], out_root, 1):
+                    yield failed_row(task, DIED) if isinstance(item, list) else item
+                shutil.rmtree(marks, ignore_errors=True)
+        shutil.rmtree(marks, ignore_errors=True)
+
+
+class RayEngine:
+    """Ray tasks of one CPU each on the cluster at ``address`` (``"auto"``, ``"ray://..."``
+    or ``"host:port"``); ``None`` starts a local Ray (``num_cpus`` CPUs). A Ray already
+    initialised in this process is used as it is and left running."""
+
+    name = "ray"
+
+    def __init__(self, address: str | None = "auto", num_cpus: int | None = None) -> None:
+        self.address = address
+        self.num_cpus = num_cpus
+
+    @property
+    def slots(self) -> int:
+        import ray
+
+        return int(ray.cluster_resources().get("CPU", 1)) if ray.is_initialized() else 1
+
+    def run(self, tasks: list[Task], out_root: str | Path) -> Iterator[dict[str, Any]]:
+        ray = _import_ray()
+        own = not ray.is_initialized()
+        if own:
+            ray.init(
+                address=self.address,
+                num_cpus=self.num_cpus if self.address is None else None,
+                include_dashboard=False,
+                log_to_driver=False,
+                configure_logging=False,
+            )
+        try:
+            remote = ray.remote(num_cpus=1, max_retries=0)(_ray_task)
+            refs = {remote.remote(t, str(out_root)): t for t in tasks}
+            while refs:
+                done, _ = ray.wait(list(refs), num_returns=1)
+                for ref in done:
+                    task = refs.pop(ref)
+                    try:
+                        yield ray.get(ref)
+                    except ray.exceptions.RayError as exc:
+                        yield failed_row(task, _ray_error(exc))
+        finally:
+            if own:
+                ray.shutdown()
+            shutil.rmtree(Path(out_root) / RUNNING, ignore_errors=True)
+
+
+def _ray_task(task: Task, out_root: str) -> dict[str, Any]:
+    """A task on a Ray worker; the row names the node it ran on."""
+    import ray
+
+    row = _marked_run(task, out_root)
+    row["node"] = ray.get_runtime_context().get_node_id()[:12]
+    return row
+
+
+def _ray_error(exc: Exception) -> str:
+    """One line for a Ray failure: a dead worker said as such."""
+    import ray
+
+    if isinstance(exc, ray.exceptions.WorkerCrashedError | ray.exceptions.NodeDiedError):
+        return DIED
+    first = str(exc).strip().splitlines()
+    return f"{type(exc).__name__}: {first[0] if first else ''}"
+
+
+def _import_ray():
+    from nnid.errors import NnidInputError
+
+    try:
+        import ray
+    except ImportError:
+        raise NnidInputError(
+            "Ray is not installed: pip install 'nnid[ray]' (or leave out --address to run on "
+            "local processes)",
+            field="--address",
+        ) from None
+    return ray
+
+
+def engine_for(address: str | None, workers: int | None = None):
+    """The engine a command line asks for: local processes without ``address``, else Ray at
+    ``address`` (``auto`` or a Ray address)."""
+    if address is None:
+        return LocalEngine(workers)
+    _import_ray()
+    return RayEngine(address)

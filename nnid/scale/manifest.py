@@ -1,0 +1,202 @@
+"""The ``nnid batch`` manifest and the tasks it expands into (ARCHITECTURE.md, "The batch
+manifest").
+
+A manifest is TOML, paths relative to its own folder::
+
+    command = "loop"                 # train | loop | detect | compare
+    data = ["dives/*.csv"]           # paths or globs (sorted), each one task's log
+    vehicle = "minirov.toml"         # a preset or a path, or a list of them
+    config = "loop.toml"             # optional where the command has defaults; or a list
+    pair = "product"                 # product (every log x vehicle x config) or zip
+
+A task is one run of the command on one log with one vehicle, config (and, for ``detect``, one
+detection model). Its id is stable: the log's stem and a hash of the *contents* of every input
+(log, vehicle file, config, reader config, detection model), the command, its options and
+nnid's version, so renaming a file keeps the result and editing one re-runs it.
+"""
+
+from __future__ import annotations
+
+import glob
+import hashlib
+import itertools
+import json
+import re
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, field_validator
+
+from nnid.errors import NnidInputError
+from nnid.validation import read_toml, validated
+
+COMMANDS = ("train", "loop", "detect", "compare")
+
+
+class Manifest(BaseModel):
+    """The validated manifest (paths as written; :func:`expand` resolves them)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    command: Literal[COMMANDS]  # type: ignore[valid-type]
+    data: list[str] = Field(min_length=1)
+    vehicle: list[str] = Field(default_factory=list)
+    config: list[str] = Field(default_factory=list)
+    model: list[str] = Field(default_factory=list)  # detect: folders of detection models
+    columns: str | None = None  # one reader config for every log
+    pair: Literal["product", "zip"] = "product"
+    options: dict[str, Any] = Field(default_factory=dict)  # loop: dofs, alpha, max_effects...
+
+    @field_validator("data", "vehicle", "config", "model", mode="before")
+    @classmethod
+    def _listed(cls, value: Any) -> Any:
+        return [value] if isinstance(value, str) else value
+
+    @field_validator("options")
+    @classmethod
+    def _options(cls, value: dict[str, Any]) -> dict[str, Any]:
+        known = {"max_effects", "alpha", "dofs", "validation", "exclude", "window"}
+        unknown = sorted(set(value) - known)
+        if unknown:
+            raise ValueError(f"unknown option {', '.join(unknown)}; known: {', '.join(known)}")
+        return value
+
+
+@dataclass(frozen=True)
+class Task:
+    """One run: ``command`` on the log ``data`` (absolute paths; ``vehicle`` may be a preset
+    name). ``overrides`` are dotted config paths set on top of the config (a sweep's trial)."""
+
+    command: str
+    data: str
+    vehicle: str | None = None
+    config: str | None = None
+    model: str | None = None
+    columns: str | None = None
+    options: dict[str, Any] = field(default_factory=dict)
+    overrides: dict[str, Any] = field(default_factory=dict)
+    id: str = ""
+
+    def inputs(self) -> dict[str, Any]:
+        """The task's inputs as a summary row's columns."""
+        row = {k: v for k, v in asdict(self).items() if k not in ("options", "overrides", "id")}
+        row["options"] = json.dumps(self.options, sort_keys=True) if self.options else None
+        row["overrides"] = json.dumps(self.overrides, sort_keys=True) if self.overrides else None
+        return row
+
+
+def _digest(path: str | None, h) -> None:
+    """Feed ``path``'s contents (a file, or every file of a folder in sorted order) to ``h``;
+    a name that is no path (a preset) is fed as its name."""
+    if path is None:
+        h.update(b"\0none")
+        return
+    p = Path(path)
+    if not p.exists():
+        h.update(b"\0name:" + path.encode())
+        return
+    files = sorted(q for q in p.rglob("*") if q.is_file()) if p.is_dir() else [p]
+    for q in files:
+        h.update(b"\0file:" + (str(q.relative_to(p)) if p.is_dir() else "").encode())
+        with open(q, "rb") as fh:
+            for block in iter(lambda: fh.read(1 << 20), b""):
+                h.update(block)
+
+
+def task_id(task: Task) -> str:
+    """``<log stem>-<12 hex>``: the hash of the inputs' contents, the settings and nnid's
+    version (see the module docstring)."""
+    from nnid import __version__
+
+    h = hashlib.sha256()
+    settings = {
+        "nnid": __version__,
+        "command": task.command,
+        "options": task.options,
+        "overrides": task.overrides,
+    }
+    h.update(json.dumps(settings, sort_keys=True, default=str).encode())
+    for path in (task.data, task.vehicle, task.config, task.model, task.columns):
+        _digest(path, h)
+    stem = re.sub(r"[^A-Za-z0-9_.-]+", "_", Path(task.data).stem)[:40] or "log"
+    return f"{stem}-{h.hexdigest()[:12]}"
+
+
+def with_id(task: Task) -> Task:
+    """The task with its id set."""
+    return Task(**{**asdict(task), "id": task_id(task)})
+
+
+def _paths(patterns: list[str], base: Path, key: str, source: str) -> list[str]:
+    """Each pattern resolved against ``base``: a glob's matches (sorted), or the one path,
+    which must exist."""
+    out: list[str] = []
+    for pattern in patterns:
+        full = pattern if Path(pattern).is_absolute() else str(base / pattern)
+        if glob.has_magic(pattern):
+            found = sorted(glob.glob(full, recursive=True))
+            if not found:
+                raise NnidInputError(f"'{pattern}' matches no file", source=source, field=key)
+            out += [str(Path(f).resolve()) for f in found]
+        elif Path(full).exists():
+            out.append(str(Path(full).resolve()))
+        else:
+            raise NnidInputError(f"'{pattern}': no such file or folder", source=source, field=key)
+    return out
+
+
+def _vehicles(names: list[str], base: Path, source: str) -> list[str]:
+    from nnid.vehicle import PRESETS
+
+    return [n if n in PRESETS else _paths([n], base, "vehicle", source)[0] for n in names]
+
+
+def load_manifest(path: str | Path) -> Manifest:
+    """Read and validate a manifest; one NnidInputError naming the file and the key."""
+    return validated(Manifest, read_toml(path), str(path))
+
+
+def expand(path: str | Path) -> list[Task]:
+    """The manifest's tasks in a stable order, with their ids; every path is checked before
+    any work (a missing file or a glob that matches nothing is refused, naming the key).
+    Identical tasks (same id) are kept once."""
+    source = str(path)
+    spec = load_manifest(path)
+    base = Path(path).resolve().parent
+    logs = _paths(spec.data, base, "data", source)
+    vehicles = _vehicles(spec.vehicle, base, source)
+    configs = _paths(spec.config, base, "config", source)
+    models = _paths(spec.model, base, "model", source)
+    columns = _paths([spec.columns], base, "columns", source)[0] if spec.columns else None
+    needs = {"train": ("config",), "compare": ("config",), "detect": ("model",), "loop": ()}
+    for key in needs[spec.command]:
+        if not {"config": configs, "model": models}[key]:
+            raise NnidInputError(f"'{spec.command}' tasks need a {key}", source=source, field=key)
+    if spec.command == "loop" and not (vehicles or configs):
+        raise NnidInputError("'loop' tasks need a vehicle (or a config that names one)",
+                             source=source, field="vehicle")  # fmt: skip
+    axes = [logs, vehicles or [None], configs or [None], models or [None]]
+    if spec.pair == "zip":
+        longest = max(len(a) for a in axes)
+        uneven = [
+            k
+            for k, a in zip(("data", "vehicle", "config", "model"), axes, strict=True)
+            if len(a) not in (1, longest)
+        ]
+        if uneven:
+            raise NnidInputError(
+                f"pair = 'zip' needs lists of one length (or of one item); {uneven[0]} has "
+                f"{len(axes[['data', 'vehicle', 'config', 'model'].index(uneven[0])])}, "
+                f"another {longest}",
+                source=source,
+                field=uneven[0],
+            )
+        combos = zip(*(a * longest if len(a) == 1 else a for a in axes), strict=True)
+    else:
+        combos = itertools.product(*axes)
+    tasks: dict[str, Task] = {}
+    for log, veh, cfg, model in combos:
+        task = with_id(Task(spec.command, log, veh, cfg, model, columns, dict(spec.options)))
+        tasks.setdefault(task.id, task)
+    return list(tasks.values())

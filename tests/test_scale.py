@@ -1,0 +1,260 @@
+"""Fan-out (nnid.scale): manifests and task ids, the local engine, Ray (a local instance and a
+two-node cluster on this machine), failures that become rows, resuming, and `nnid batch`.
+
+The logs are short simulated dives of the made-up 'minirov' with a weak upward heave thrust
+whose size differs per dive, so each task's answer is known (the loop must find it)."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import signal
+import threading
+import time
+from pathlib import Path
+
+import pandas as pd
+import pytest
+from typer.testing import CliRunner
+
+from nnid.cli import app
+from nnid.errors import NnidInputError
+from nnid.scale.batch import run_tasks, write_summary
+from nnid.scale.engines import RUNNING, LocalEngine, RayEngine, SerialEngine
+from nnid.scale.manifest import expand, task_id
+
+MINIROV = Path(__file__).resolve().parents[1] / "nnid" / "demo_data" / "minirov.toml"
+ETA = (0.6, 0.7, 0.8)  # the true upward heave efficiency of each dive
+
+
+@pytest.fixture(scope="module")
+def fleet(tmp_path_factory) -> Path:
+    """Three dives (one per ETA), a malformed log, a longer dive whose worker gets killed,
+    and a manifest over them all."""
+    from nnid.loop.scenarios import effect_log
+    from nnid.vehicle import load_vehicle
+
+    root = tmp_path_factory.mktemp("fleet")
+    shutil.copy(MINIROV, root / "minirov.toml")
+    vehicle = load_vehicle(MINIROV)
+    for i, eta in enumerate(ETA):
+        log = effect_log(vehicle, [("thruster_installation.w.neg", eta)], duration=160,
+                         n_experiments=4, speed=(0.15, 0.4), seed=i)  # fmt: skip
+        log.to_csv(root / f"dive{i}.csv", index=False)
+    long = effect_log(vehicle, [("thruster_installation.w.neg", 0.5)], duration=480,
+                      n_experiments=4, speed=(0.15, 0.4), seed=9)  # fmt: skip
+    long.to_csv(root / "killed.csv", index=False)
+    (root / "broken.csv").write_text("t,u,v\n0,1,2\n0.1,x,3\n")
+    (root / "manifest.toml").write_text(
+        'command = "loop"\nvehicle = "minirov.toml"\n'
+        'data = ["dive*.csv", "broken.csv", "killed.csv"]\n'
+    )
+    return root
+
+
+def _killer(out: Path, target: str, stop: threading.Event) -> threading.Thread:
+    """Kill (SIGKILL) every worker process that starts the task ``target``: a task that
+    takes its worker down each time it runs, as an out-of-memory kill would."""
+
+    def watch() -> None:
+        marker = out / RUNNING / target
+        while not stop.is_set():
+            try:
+                os.kill(int(marker.read_text()), signal.SIGKILL)
+                marker.unlink(missing_ok=True)
+            except (FileNotFoundError, ValueError, ProcessLookupError):
+                pass
+            time.sleep(0.02)
+
+    thread = threading.Thread(target=watch, daemon=True)
+    thread.start()
+    return thread
+
+
+def _run(engine, fleet: Path, out: Path, kill: bool = True):
+    tasks = expand(fleet / "manifest.toml")
+    target = next(t.id for t in tasks if t.data.endswith("killed.csv"))
+    stop = threading.Event()
+    if kill:
+        _killer(out, target, stop)
+    try:
+        return tasks, run_tasks(tasks, out, engine)
+    finally:
+        stop.set()
+
+
+def _loop_json(folder: Path) -> dict:
+    data = json.loads((folder / "loop.json").read_text())
+    data.pop("seconds")  # wall time, the one field that is not a result
+    return data
+
+
+@pytest.fixture(scope="module")
+def serial(fleet, tmp_path_factory):
+    """The three good dives run one after another in this process: the reference."""
+    tasks = [t for t in expand(fleet / "manifest.toml") if "dive" in t.data]
+    out = tmp_path_factory.mktemp("serial")
+    return out, run_tasks(tasks, out, SerialEngine())
+
+
+def _check_rows(result, serial_out: Path, out: Path) -> None:
+    by = {Path(r["data"]).name: r for r in result.rows}
+    for i, eta in enumerate(ETA):
+        row = by[f"dive{i}.csv"]
+        assert row["status"] == "ok", row["error"]
+        assert row["added"] == "thruster_installation.w.neg"
+        value, se = (
+            row["param:thruster_installation.w.neg"],
+            row["stderr:thruster_installation.w.neg"],
+        )
+        assert abs(value - eta) < max(4 * se, 0.02), (value, se, eta)
+        assert row["after_free_run_nrmse"] < row["before_free_run_nrmse"]
+        # the same task gives the same numbers on every engine, bit for bit
+        assert _loop_json(out / row["id"]) == _loop_json(serial_out / row["id"])
+    broken = by["broken.csv"]
+    assert broken["status"] == "failed" and "broken.csv" in broken["error"]
+    assert "no input columns" in broken["error"]
+    killed = by["killed.csv"]
+    assert killed["status"] == "failed" and "worker process died" in killed["error"]
+    assert not (out / broken["id"]).exists() and not (out / killed["id"]).exists()
+
+
+def test_manifest_ids_and_pairing(fleet, tmp_path) -> None:
+    tasks = expand(fleet / "manifest.toml")
+    assert [Path(t.data).name for t in tasks] == [
+        "dive0.csv", "dive1.csv", "dive2.csv", "broken.csv", "killed.csv"
+    ]  # fmt: skip
+    assert len({t.id for t in tasks}) == len(tasks)
+    assert [t.id for t in expand(fleet / "manifest.toml")] == [t.id for t in tasks]  # stable
+    # the id hashes contents: a renamed copy keeps the hash, an edited log gets a new one
+    shutil.copy(fleet / "dive0.csv", tmp_path / "renamed.csv")
+    shutil.copy(fleet / "minirov.toml", tmp_path / "minirov.toml")
+    (tmp_path / "m.toml").write_text(
+        'command = "loop"\nvehicle = "minirov.toml"\ndata = ["renamed.csv"]\n'
+    )
+    copy = expand(tmp_path / "m.toml")[0]
+    assert copy.id.split("-")[-1] == tasks[0].id.split("-")[-1]
+    (tmp_path / "renamed.csv").write_text(
+        (fleet / "dive0.csv").read_text().replace("0.1", "0.2", 1)
+    )
+    assert task_id(copy) != copy.id
+    # product and zip over two vehicles
+    (tmp_path / "p.toml").write_text(
+        'command = "loop"\nvehicle = ["minirov.toml", "bluerov2_heavy"]\n'
+        'data = ["renamed.csv", "minirov.toml"]\n'
+    )
+    assert len(expand(tmp_path / "p.toml")) == 4
+    (tmp_path / "z.toml").write_text((tmp_path / "p.toml").read_text() + 'pair = "zip"\n')
+    zipped = expand(tmp_path / "z.toml")
+    assert [(Path(t.data).name, Path(t.vehicle).name) for t in zipped] == [
+        ("renamed.csv", "minirov.toml"), ("minirov.toml", "bluerov2_heavy")
+    ]  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    ("text", "field", "words"),
+    [
+        ('command = "loop"\nvehicle = "minirov.toml"\ndata = ["nothere*.csv"]\n', "data",
+         "matches no file"),
+        ('command = "loop"\nvehicle = "minirov.toml"\ndata = ["gone.csv"]\n', "data",
+         "no such file"),
+        ('command = "fit"\ndata = ["dive0.csv"]\n', "command", "train"),
+        ('command = "train"\nvehicle = "minirov.toml"\ndata = ["dive0.csv"]\n', "config",
+         "need a config"),
+        ('command = "loop"\ndata = ["dive0.csv"]\n', "vehicle", "need a vehicle"),
+        ('command = "loop"\nvehicle = "minirov.toml"\ndata = ["dive*.csv"]\npair = "zip"\n'
+         'config = ["a.toml", "b.toml"]\n', "config", "no such file"),
+        ('command = "loop"\nvehicle = ["minirov.toml", "minirov.toml"]\ndata = ["dive*.csv"]\n'
+         'pair = "zip"\n', "vehicle", "one length"),
+        ('command = "loop"\nvehicle = "minirov.toml"\ndata = ["dive0.csv"]\n'
+         "options = {speed = 1}\n", "options", "unknown option"),
+    ],
+)  # fmt: skip
+def test_bad_manifest_is_refused_naming_the_key(fleet, tmp_path, text, field, words) -> None:
+    path = fleet / f"bad-{abs(hash(text))}.toml"
+    path.write_text(text)
+    try:
+        with pytest.raises(NnidInputError) as info:
+            expand(path)
+    finally:
+        path.unlink()
+    assert info.value.field == field and str(path) in str(info.value)
+    assert words in str(info.value)
+
+
+def test_local_engine_failures_resume_and_identical_results(fleet, serial, tmp_path) -> None:
+    serial_out, reference = serial
+    assert all(r["status"] == "ok" for r in reference.rows)
+    out = tmp_path / "local"
+    tasks, result = _run(LocalEngine(2), fleet, out)
+    _check_rows(result, serial_out, out)
+    assert result.engine == "local" and result.reused == 0
+    assert len({r["worker"] for r in result.rows if r["status"] == "ok"}) >= 2  # in parallel
+    write_summary(result, out)
+    table = pd.read_parquet(out / "summary.parquet")
+    assert list(table["id"]) == [t.id for t in tasks]  # manifest order, nothing lost
+    assert list(table["status"]) == ["ok", "ok", "ok", "failed", "failed"]
+    assert pd.read_csv(out / "summary.csv")["error"].notna().sum() == 2
+    summary = json.loads((out / "summary.json").read_text())
+    assert (summary["ok"], summary["failed"], summary["engine"]) == (3, 2, "local")
+    # a second run does only the two failed tasks (the kill is over: that one now succeeds)
+    _, again = _run(LocalEngine(2), fleet, out, kill=False)
+    assert again.reused == 3
+    assert [r["reused"] for r in again.rows] == [True, True, True, False, False]
+    assert [r["status"] for r in again.rows] == ["ok", "ok", "ok", "failed", "ok"]
+
+
+def test_batch_cli_exit_codes_and_report(fleet, tmp_path) -> None:
+    runner = CliRunner()
+    out = tmp_path / "cli"
+    (fleet / "good.toml").write_text(
+        'command = "loop"\nvehicle = "minirov.toml"\ndata = ["dive0.csv", "broken.csv"]\n'
+    )
+    res = runner.invoke(app, ["batch", str(fleet / "good.toml"), "--out", str(out),
+                              "--workers", "1"])  # fmt: skip
+    assert res.exit_code == 1, res.output  # one task failed
+    assert "1 ok" in res.output and "1 failed" in res.output
+    page = (out / "report.html").read_text()
+    assert "Failed tasks" in page and "Vehicle minirov" in page and "<img" in page
+    res = runner.invoke(app, ["batch", str(fleet / "nothere.toml"), "--out", str(out)])
+    assert res.exit_code == 2 and "nothere.toml" in res.output
+    res = runner.invoke(app, ["batch", str(fleet / "good.toml"), "--out", str(fleet / "dive0.csv")])
+    assert res.exit_code == 2 and "not a folder" in res.output
+
+
+ray = pytest.importorskip("ray", reason="Ray is an extra: pip install 'nnid[ray]'")
+
+
+def test_ray_local_instance(fleet, serial, tmp_path) -> None:
+    serial_out, _ = serial
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False, configure_logging=False)
+    try:
+        out = tmp_path / "ray"
+        _, result = _run(RayEngine(), fleet, out)
+        assert result.engine == "ray" and result.slots == 2
+        _check_rows(result, serial_out, out)
+    finally:
+        ray.shutdown()
+
+
+def test_ray_two_node_cluster(fleet, serial, tmp_path) -> None:
+    from ray.cluster_utils import Cluster
+
+    serial_out, _ = serial
+    cluster = Cluster(initialize_head=True, head_node_args={"num_cpus": 1})
+    cluster.add_node(num_cpus=1)
+    cluster.wait_for_nodes()
+    try:
+        out = tmp_path / "cluster"
+        _, result = _run(RayEngine(cluster.address), fleet, out, kill=False)
+        rows = [r for r in result.rows if r["status"] == "ok"]
+        assert len(rows) == 4
+        assert len({r["node"] for r in rows}) == 2  # both nodes worked
+        by = {Path(r["data"]).name: r for r in rows}
+        for i in range(len(ETA)):
+            row = by[f"dive{i}.csv"]
+            assert _loop_json(out / row["id"]) == _loop_json(serial_out / row["id"])
+    finally:
+        ray.shutdown()
+        cluster.shutdown()
