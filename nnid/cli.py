@@ -187,7 +187,7 @@ def _bar(description: str):
     with Progress(console=err, transient=True) as bar:
         task = bar.add_task(description, total=None)
 
-        def update(done: int, total: int | None, message: str) -> None:
+        def update(done: int, total: int | None, message: str, **scores: float) -> None:
             bar.update(task, completed=done, total=total, description=message or description)
 
         yield update
@@ -458,6 +458,53 @@ def batch(
         err.print(f"failed: {row['id']} ({row['data']}): {escape(str(row['error']))}",
                   highlight=False, soft_wrap=True)  # fmt: skip
     if failed:
+        raise typer.Exit(1)
+
+
+@app.command()
+@_input_errors
+def sweep(
+    config: Path = typer.Argument(..., help="TOML train config with a [sweep] table."),
+    out_dir: Path = typer.Option(..., "--out", help="Output folder: trials, settings, best.toml."),
+    data: str | None = typer.Option(None, "--data", help="Log to fit; replaces the config's."),
+    vehicle: str | None = typer.Option(
+        None, "--vehicle", help="Preset name or vehicle TOML; replaces the config's."
+    ),
+    columns: str | None = typer.Option(
+        None, "--columns", help="Reader config for a log not in nnid's format."
+    ),
+    address: str | None = typer.Option(
+        None, "--address", help="Ray cluster ('auto' or an address); default local processes."
+    ),
+    workers: int | None = typer.Option(
+        None, "--workers", min=1, help="Local worker processes; default one per core."
+    ),
+) -> None:
+    """Search a train config's settings and seeds ([sweep]: grid, random draws, seeds), each
+    trial scored on the validation experiments: writes settings.csv (ranked), best.toml (the
+    chosen setting as a ready config), summary.* (one row per trial) and report.html."""
+    from nnid.scale.engines import LocalEngine, engine_for
+    from nnid.scale.sweep import run_sweep, run_sweep_tune, trials
+
+    _, tasks = trials(config, data, vehicle, columns)  # a bad [sweep] is refused before work
+    _check_out(out_dir)
+    with _bar(f"{len(tasks)} trials") as progress:
+        if address is None:
+            engine = LocalEngine(workers)
+            result, ranked = run_sweep(config, out_dir, engine, data, vehicle, columns, progress)
+        else:
+            engine_for(address)  # Ray installed, or one clear error
+            result, ranked = run_sweep_tune(
+                config, out_dir, address, data, vehicle, columns, progress
+            )
+    out.print(result.extra["sweep"]["summary"], highlight=False, soft_wrap=True)
+    written = "settings.csv, best.toml" if ranked[0].mean is not None else "settings.csv"
+    out.print(f"wrote {out_dir}/: {written}, summary.csv, report.html ({len(result.failed)} "
+              "trials failed)", highlight=False, soft_wrap=True)  # fmt: skip
+    for row in result.failed:
+        err.print(f"failed: {row['id']}: {escape(str(row['error']))}",
+                  highlight=False, soft_wrap=True)  # fmt: skip
+    if ranked[0].mean is None:
         raise typer.Exit(1)
 
 

@@ -597,6 +597,38 @@ class DetectSpec(_Strict):
     window_s: PositiveFloat = 10.0
 
 
+class SweepSpec(_Strict):
+    """``[sweep]`` of a train config, read by ``nnid sweep``: option paths (dotted, as in the
+    config: ``model.hidden``, ``model.trainer.lr``) searched on a grid (every combination)
+    and/or by ``samples`` random draws from lists of choices, each setting fitted once per
+    seed (set at ``seed_option``); settings are ranked by the mean over seeds of the
+    validation part's ``metric`` (total over the excited DOFs), never by the test part."""
+
+    grid: dict[str, list[Any]] = Field(default_factory=dict)
+    random: dict[str, list[Any]] = Field(default_factory=dict)
+    samples: int = Field(0, ge=0)
+    seed: int = 0  # of the random draws
+    seeds: list[int] = Field(default_factory=list)
+    seed_option: str = "model.seed"
+    metric: Literal["free_run_nrmse", "one_step_nrmse", "k_step_nrmse"] = "free_run_nrmse"
+    # on Ray (--address): Ray Tune's ASHA stops trials whose per-epoch validation objective
+    # trails the others' at a rung (grace_epochs, then every reduction_factor × more epochs)
+    early_stopping: bool = True
+    grace_epochs: int = Field(10, ge=1)
+    reduction_factor: int = Field(3, ge=2)
+
+    @model_validator(mode="after")
+    def _searches(self) -> SweepSpec:
+        if not (self.grid or self.random or self.seeds):
+            raise ValueError("give a grid, random choices or seeds to search")
+        if bool(self.random) != bool(self.samples):
+            raise ValueError("random choices and samples (how many draws) go together")
+        empty = [k for k, v in {**self.grid, **self.random}.items() if not v]
+        if empty:
+            raise ValueError(f"no values to try for {', '.join(empty)}")
+        return self
+
+
 class TrainConfig(_Command):
     """``nnid train``: one model on one split, scored on the held-out parts."""
 
@@ -611,6 +643,7 @@ class TrainConfig(_Command):
     reference_label: str = "reference"
     nondimensional_speed: PositiveFloat | None = None
     detect: DetectSpec | None = None
+    sweep: SweepSpec | None = None  # read by nnid sweep; nnid train fits the config as written
 
     @field_validator("model", mode="before")
     @classmethod

@@ -133,6 +133,8 @@ def train_run(
         "one_step_nrmse": _total(metrics[held], "one_step_nrmse"),
         "diverged": ", ".join(metrics[held].get("diverged", {})) or None,
     }
+    for key in ("free_run_nrmse", "one_step_nrmse", "k_step_nrmse"):  # what a sweep ranks by
+        headline[f"validation_{key}"] = _total(metrics["validation"], key)
     for name, p in metrics["params"].items():
         headline[f"param:{name}"] = p.get("value")
         headline[f"stderr:{name}"] = p.get("stderr")

@@ -21,3 +21,17 @@ def torch_threads(n: int = 1) -> Iterator[None]:
         yield
     finally:
         torch.set_num_threads(before)
+
+
+@contextmanager
+def numba_threads(n: int = 1) -> Iterator[None]:
+    """Run the block with at most ``n`` numba threads for parallel kernels, then restore the
+    previous count (numba keeps the count per calling thread)."""
+    import numba
+
+    before = numba.get_num_threads()
+    numba.set_num_threads(max(1, min(n, numba.config.NUMBA_NUM_THREADS)))
+    try:
+        yield
+    finally:
+        numba.set_num_threads(before)

@@ -62,6 +62,11 @@ def test_cosine_schedule_is_the_closed_form_and_plateau_halves():
 def test_progress_reports_every_epoch():
     module, residual, train, val = _problem()
     calls = []
-    Adam(max_epochs=3).fit(module, residual, train, val, progress=lambda *a: calls.append(a))
-    assert [(d, t) for d, t, _ in calls] == [(1, 3), (2, 3), (3, 3)]
-    assert all("validation" in m for *_, m in calls)
+    hist = Adam(max_epochs=3).fit(
+        module, residual, train, val, progress=lambda *a, **k: calls.append((a, k))
+    )
+    assert [(d, t) for (d, t, _), _ in calls] == [(1, 3), (2, 3), (3, 3)]
+    assert all("validation" in m for (*_, m), _ in calls)
+    # the epoch's scores as keywords, for a tuner (nnid sweep on Ray Tune)
+    assert [k["validation"] for _, k in calls] == hist.validation[1:]
+    assert [k["train"] for _, k in calls] == hist.train[1:]

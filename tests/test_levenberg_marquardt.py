@@ -207,3 +207,18 @@ def test_large_jacobian_never_materialised(mode: str) -> None:
     else:
         assert hist.info["peak_jacobian_elements"] <= n * (budget_elements // n)
     assert hist.train[-1] < hist.train[0]
+
+
+def test_progress_reports_each_epochs_scores() -> None:
+    """Every epoch's train and validation MSE reach the progress callback as keywords (what
+    nnid sweep's ASHA scheduler reads), equal to the History's record."""
+    net = _mlp([1, 3, 1], seed=0)
+    x = torch.linspace(-2, 2, 60, dtype=torch.float64).unsqueeze(1)
+    calls: list[tuple] = []
+    hist = LevenbergMarquardt(max_epochs=6).fit(
+        net, _regression_residual(net), [(x[::2], torch.sin(x[::2]))],
+        [(x[1::2], torch.sin(x[1::2]))], progress=lambda *a, **k: calls.append((a, k)),
+    )  # fmt: skip
+    assert [a[0] for a, _ in calls] == list(range(1, hist.epochs + 1))
+    assert [k["train"] for _, k in calls] == hist.train[1:]
+    assert [k["validation"] for _, k in calls] == hist.validation[1:]

@@ -89,7 +89,7 @@ class Task:
 def _digest(path: str | None, h) -> None:
     """Feed ``path``'s contents (a file, or every file of a folder in sorted order) to ``h``;
     a name that is no path (a preset) is fed as its name."""
-    if path is None:
+    if not path:
         h.update(b"\0none")
         return
     p = Path(path)
@@ -119,7 +119,8 @@ def task_id(task: Task) -> str:
     h.update(json.dumps(settings, sort_keys=True, default=str).encode())
     for path in (task.data, task.vehicle, task.config, task.model, task.columns):
         _digest(path, h)
-    stem = re.sub(r"[^A-Za-z0-9_.-]+", "_", Path(task.data).stem)[:40] or "log"
+    named = task.data or task.config or "task"  # a sweep's trial may use its config's data
+    stem = re.sub(r"[^A-Za-z0-9_.-]+", "_", Path(named).stem)[:40] or "task"
     return f"{stem}-{h.hexdigest()[:12]}"
 
 

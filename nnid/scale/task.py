@@ -6,9 +6,11 @@ a subprocess. It writes its outputs to ``<out>/<task id>/`` atomically and, last
 (its row): a folder with ``task.json`` is a finished task, which a re-run skips. A task that
 fails writes nothing there; its row says ``failed`` with the error, and the other tasks go on.
 
-Every task runs with one torch thread and one BLAS thread, restored afterwards: tasks run side
-by side on the cores, and a result must not depend on how many shared the machine (the same
-task gives the same numbers serially, on local workers and on Ray).
+Every task runs with one torch, BLAS and numba thread, restored afterwards: tasks run side by
+side on the cores, and a result must not depend on how many shared the machine. A parallel
+kernel's last bit can depend on its thread count (measured: a k-step NRMSE one ulp apart), so
+the same single thread everywhere is what makes a task give the same numbers serially, on
+local workers and on Ray.
 """
 
 from __future__ import annotations
@@ -23,12 +25,13 @@ from typing import Any
 
 from nnid.errors import NnidInputError
 from nnid.scale.manifest import Task
+from nnid.trainers.history import Progress
 
 #: the file that marks a finished task inside its folder
 TASK_FILE = "task.json"
 
 
-def _run(task: Task, out_dir: Path):
+def _run(task: Task, out_dir: Path, progress: Progress | None = None):
     """The task's command through :mod:`nnid.runs`; its Outcome."""
     from nnid import runs
     from nnid.config import CompareConfig, LoopConfig, TrainConfig, load_config
@@ -36,10 +39,12 @@ def _run(task: Task, out_dir: Path):
     config = Path(task.config) if task.config else None
     if task.command == "train":
         cfg = load_config(config, TrainConfig, task.overrides)
-        return runs.train_run(cfg, config, out_dir, task.data, task.vehicle, task.columns)
+        return runs.train_run(cfg, config, out_dir, task.data or None, task.vehicle,
+                              task.columns, progress)  # fmt: skip
     if task.command == "compare":
         cfg = load_config(config, CompareConfig, task.overrides)
-        return runs.compare_run(cfg, config, out_dir, task.data, task.vehicle, task.columns)
+        return runs.compare_run(cfg, config, out_dir, task.data or None, task.vehicle,
+                                task.columns, progress)  # fmt: skip
     if task.command == "loop":
         cfg = load_config(config, LoopConfig, task.overrides) if config else LoopConfig()
         options = dict(task.options)
@@ -50,17 +55,19 @@ def _run(task: Task, out_dir: Path):
         return runs.loop_run(cfg, config, out_dir, task.data, task.vehicle, task.columns, **options)
     if task.command == "detect":
         window = task.options.get("window")
-        return runs.detect_run(Path(task.model), task.data, out_dir, task.columns, window)
+        return runs.detect_run(Path(task.model), task.data, out_dir, task.columns, window,
+                               progress)  # fmt: skip
     raise NnidInputError(f"unknown command '{task.command}'", field="command")
 
 
-def run_task(task: Task, out_root: str | Path) -> dict[str, Any]:
+def run_task(task: Task, out_root: str | Path, progress: Progress | None = None) -> dict[str, Any]:
     """Run ``task`` and return its row: the inputs, ``status`` (``ok`` or ``failed``),
-    ``error``, the headline scores, ``seconds``, ``worker`` and ``warnings``."""
+    ``error``, the headline scores, ``seconds``, ``worker`` and ``warnings``. ``progress``
+    receives the fit's progress (and its trainers' per-epoch scores)."""
     from threadpoolctl import threadpool_limits
 
     from nnid.serialization import jsonable, write_json
-    from nnid.threads import torch_threads
+    from nnid.threads import numba_threads, torch_threads
 
     out_dir = Path(out_root) / task.id
     row: dict[str, Any] = {"id": task.id, **task.inputs(), "status": "ok", "error": None}
@@ -70,9 +77,10 @@ def run_task(task: Task, out_root: str | Path) -> dict[str, Any]:
             warnings.catch_warnings(record=True) as caught,
             torch_threads(1),
             threadpool_limits(1),
+            numba_threads(1),
         ):
             warnings.simplefilter("always")
-            outcome = _run(task, out_dir)
+            outcome = _run(task, out_dir, progress)
         row["warnings"] = list(
             dict.fromkeys([*outcome.warnings, *(str(w.message) for w in caught)])
         )

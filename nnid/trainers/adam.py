@@ -157,6 +157,8 @@ class Adam(BaseEstimator):
                 self.max_epochs,
                 f"Adam epoch {epoch + 1}: train MSE {train:.4g}"
                 + (f", validation {score:.4g}" if score is not None else ""),
+                train=train,
+                **({} if score is None else {"validation": score}),
             )
             if not math.isfinite(value):
                 hist.stop_reason = "non-finite loss"

@@ -6,8 +6,11 @@ stopped; which epoch was kept. Trainer-specific series (LM's damping μ and grad
 Adam's learning rate) go in ``extra``.
 
 ``Progress`` is the one callback signature for every long fit: ``progress(done, total,
-message)`` (``total`` may be None when unknown). Trainers, models and the residual loop call
-it; the CLI draws it as a bar.
+message, **scores)`` (``total`` may be None when unknown). Trainers, models and the residual
+loop call it; the CLI draws it as a bar. Trainers that score every epoch (Levenberg-Marquardt,
+Adam) pass the epoch's mean-square objective as ``train=`` and, with validation data,
+``validation=``: ``nnid sweep`` on Ray Tune reads them so that its ASHA scheduler can stop poor
+trials early. Every callback accepts the keywords and may ignore them.
 """
 
 from __future__ import annotations
@@ -15,10 +18,10 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-Progress = Callable[[int, "int | None", str], None]
+Progress = Callable[..., None]  # (done: int, total: int | None, message: str, **scores)
 
 
-def silent(done: int, total: int | None, message: str) -> None:
+def silent(done: int, total: int | None, message: str, **scores: float) -> None:
     """The progress callback that reports nothing."""
 
 
@@ -26,8 +29,8 @@ def staged(progress: Progress | None, stage: str) -> Progress:
     """``progress`` with every message prefixed by ``stage`` (a fit in several stages)."""
     report = progress or silent
 
-    def call(done: int, total: int | None, message: str) -> None:
-        report(done, total, f"{stage}: {message}" if message else stage)
+    def call(done: int, total: int | None, message: str, **scores: float) -> None:
+        report(done, total, f"{stage}: {message}" if message else stage, **scores)
 
     return call
 

@@ -426,6 +426,8 @@ class LevenbergMarquardt(BaseEstimator):
                 f"LM epoch {epoch}: train MSE {mse:.4g}"
                 + (f", validation {v:.4g}" if v is not None else "")
                 + f", mu {mu:.1e}",
+                train=mse,
+                **({} if v is None else {"validation": v}),
             )
         if use_val:
             theta = best_theta

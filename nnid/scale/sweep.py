@@ -1,0 +1,324 @@
+"""``nnid sweep``: a search over a train config's settings and seeds (its ``[sweep]`` table,
+:class:`nnid.config.SweepSpec`), each trial a train task on an engine, scored on held-out data.
+
+A *setting* is one assignment of the searched options; a *trial* is a setting with one seed.
+Settings are ranked by the mean over their seeds of the validation part's score (the split's
+validation experiments; the test part, where the split has one, is reported for the chosen
+setting and never used to choose). A setting with a diverged or failed seed ranks after every
+setting whose seeds all gave a score, and says so: a missing score is not averaged away.
+
+Outputs: the trial tasks' folders, ``summary.*`` (one row per trial), ``settings.csv`` (one row
+per setting, ranked) and ``best.toml``, the config with the chosen setting written in (and the
+``[sweep]`` table removed), ready for ``nnid train``.
+"""
+
+from __future__ import annotations
+
+import itertools
+import json
+import math
+import statistics
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from nnid.config import SweepSpec, TrainConfig, load_config, set_option
+from nnid.errors import NnidInputError
+from nnid.scale.batch import BatchResult, run_tasks
+from nnid.scale.manifest import Task, with_id
+from nnid.trainers.history import Progress
+from nnid.validation import read_toml
+
+
+def settings(spec: SweepSpec) -> list[dict[str, Any]]:
+    """The settings to try: the grid's combinations, each with ``samples`` random draws from
+    the random choices (a local generator seeded by ``spec.seed``); duplicates kept once."""
+    keys = sorted(spec.grid)
+    grid = [dict(zip(keys, values, strict=True))
+            for values in itertools.product(*(spec.grid[k] for k in keys))] or [{}]  # fmt: skip
+    rng = np.random.default_rng(spec.seed)
+    draws = [
+        {k: spec.random[k][int(rng.integers(len(spec.random[k])))] for k in sorted(spec.random)}
+        for _ in range(spec.samples)
+    ] or [{}]
+    out: dict[str, dict[str, Any]] = {}
+    for g, d in itertools.product(grid, draws):
+        setting = {**g, **d}
+        out.setdefault(json.dumps(setting, sort_keys=True), setting)
+    return list(out.values())
+
+
+def trials(
+    config: Path, data: str | None = None, vehicle: str | None = None, columns: str | None = None
+) -> tuple[SweepSpec, list[Task]]:
+    """The sweep of a train config and its trial tasks; every setting is validated as a
+    config before any work (a bad option path is refused, naming it)."""
+    cfg = load_config(config, TrainConfig)
+    if cfg.sweep is None:
+        raise NnidInputError("has no [sweep] table (see docs/scale.md)", source=str(config),
+                             field="sweep")  # fmt: skip
+    spec = cfg.sweep
+    seeds = spec.seeds or [None]
+    tasks = []
+    for setting in settings(spec):
+        for seed in seeds:
+            overrides = {**setting, **({} if seed is None else {spec.seed_option: seed})}
+            load_config(config, TrainConfig, overrides)  # refused here, before any fit
+            task = Task("train", str(Path(data).resolve()) if data else "", vehicle,
+                        str(Path(config).resolve()), None, columns, {}, overrides)  # fmt: skip
+            tasks.append(with_id(task))
+    return spec, tasks
+
+
+@dataclass
+class Ranked:
+    """One setting's scores over its seeds."""
+
+    setting: dict[str, Any]
+    scores: list[float | None]
+    rows: list[dict]
+
+    @property
+    def complete(self) -> bool:
+        return all(s is not None for s in self.scores)
+
+    @property
+    def mean(self) -> float | None:
+        finite = [s for s in self.scores if s is not None]
+        return statistics.fmean(finite) if finite else None
+
+
+def rank(spec: SweepSpec, tasks: list[Task], rows: list[dict]) -> list[Ranked]:
+    """Settings best first: complete ones by their mean validation score, then the ones with a
+    missing score (diverged or failed seeds) by the mean of what they have."""
+    seed_key = spec.seed_option
+    groups: dict[str, Ranked] = {}
+    for task, row in zip(tasks, rows, strict=True):
+        setting = {k: v for k, v in task.overrides.items() if k != seed_key or not spec.seeds}
+        key = json.dumps(setting, sort_keys=True)
+        score = row.get(f"validation_{spec.metric}") if row["status"] == "ok" else None
+        score = None if score is None or not math.isfinite(score) else score
+        groups.setdefault(key, Ranked(setting, [], [])).scores.append(score)
+        groups[key].rows.append(row)
+    return sorted(
+        groups.values(),
+        key=lambda r: (not r.complete, r.mean is None, r.mean if r.mean is not None else 0.0),
+    )
+
+
+def best_config_text(config: Path, setting: dict[str, Any]) -> str:
+    """The config with ``setting`` written in and its ``[sweep]`` table removed."""
+    import tomli_w
+
+    data = read_toml(config)
+    data.pop("sweep", None)
+    for option, value in setting.items():
+        set_option(data, option, value, str(config))
+    return f"# chosen by nnid sweep from {Path(config).name}\n" + tomli_w.dumps(data)
+
+
+def run_sweep(
+    config: Path,
+    out_dir: Path,
+    engine,
+    data: str | None = None,
+    vehicle: str | None = None,
+    columns: str | None = None,
+    progress: Progress | None = None,
+) -> tuple[BatchResult, list[Ranked]]:
+    """Run every trial on ``engine``, rank the settings, write ``settings.csv`` and
+    ``best.toml`` beside the batch summary (:func:`nnid.scale.batch.write_summary`)."""
+    from nnid.scale.batch import write_summary
+
+    spec, tasks = trials(config, data, vehicle, columns)
+    result = run_tasks(tasks, out_dir, engine, progress=progress)
+    ranked = _write_sweep(spec, config, tasks, result, Path(out_dir))
+    write_summary(result, out_dir, title="nnid sweep")
+    return result, ranked
+
+
+def _write_sweep(
+    spec: SweepSpec, config: Path, tasks: list[Task], result: BatchResult, out_dir: Path
+) -> list[Ranked]:
+    """Rank the settings; write ``settings.csv`` and ``best.toml``; the sweep's record in
+    ``result.extra``."""
+    from nnid.serialization import write_text
+
+    ranked = rank(spec, tasks, result.rows)
+    table = pd.DataFrame(
+        [
+            {
+                **{f"option:{k}": v for k, v in r.setting.items()},
+                f"validation_{spec.metric}_mean": r.mean,
+                "seeds_scored": sum(s is not None for s in r.scores),
+                "seeds": len(r.scores),
+                "scores": json.dumps(r.scores),
+                "test_free_run_nrmse": json.dumps([_test_score(row) for row in r.rows]),
+            }
+            for r in ranked
+        ]
+    )
+    write_text(Path(out_dir) / "settings.csv", table.to_csv(index=False))
+    best = ranked[0]
+    if best.mean is not None:
+        write_text(Path(out_dir) / "best.toml", best_config_text(config, best.setting))
+    result.extra["sweep"] = {
+        "metric": f"validation {spec.metric} (total), mean over seeds",
+        "settings": len(ranked),
+        "trials": len(tasks),
+        "best": {"settings": best.setting, "mean": best.mean, "scores": best.scores},
+        "summary": _summary(spec, ranked),
+    }
+    return ranked
+
+
+def _test_score(row: dict) -> float | None:
+    """The trial's test free-run NRMSE (reported, never used to choose); None without a test
+    part."""
+    return row.get("free_run_nrmse") if row.get("held_out") == "test" else None
+
+
+def _summary(spec: SweepSpec, ranked: list[Ranked]) -> str:
+    best = ranked[0]
+    if best.mean is None:
+        return f"No setting gave a validation {spec.metric}: every trial failed or diverged."
+    text = (
+        f"Best of {len(ranked)} settings: {json.dumps(best.setting)} with validation "
+        f"{spec.metric} {best.mean:.4g} (mean of {len(best.scores)} seeds: "
+        + ", ".join("no score" if s is None else f"{s:.4g}" for s in best.scores)
+        + ")."
+    )
+    if not best.complete:
+        text += " Every setting had a seed without a score; this one is ranked on the rest."
+    return text
+
+
+# -- Ray Tune ------------------------------------------------------------------------------------
+
+
+def _tune_trial(params: dict, tasks: list[Task], out_root: str) -> None:
+    """One trial inside Ray Tune: the train task, its trainers' per-epoch validation objective
+    reported to Tune (ASHA's rungs), the validation score last."""
+    from ray import tune
+
+    from nnid.scale.task import run_task
+
+    task = tasks[params["trial"]]
+    last: dict[str, float] = {}
+
+    def report(done: int, total: int | None, message: str, **scores: float) -> None:
+        if "validation" in scores and math.isfinite(scores["validation"]):
+            last["validation"] = scores["validation"]
+            tune.report({"objective": scores["validation"]})
+
+    row = run_task(task, out_root, progress=report)
+    tune.report({"objective": last.get("validation", math.inf), "finished": 1.0,
+                 "status_ok": float(row["status"] == "ok")})  # fmt: skip
+
+
+def run_sweep_tune(
+    config: Path,
+    out_dir: Path,
+    address: str | None,
+    data: str | None = None,
+    vehicle: str | None = None,
+    columns: str | None = None,
+    progress: Progress | None = None,
+    num_cpus: int | None = None,
+) -> tuple[BatchResult, list[Ranked]]:
+    """:func:`run_sweep` on Ray Tune, one CPU per trial, with ASHA early stopping
+    (``[sweep] early_stopping``): a stopped trial is a ``stopped`` row that says at which
+    epoch, and its setting is ranked on the seeds that finished."""
+    import threading
+    import time
+
+    import ray
+    from ray import tune
+    from ray.tune.schedulers import ASHAScheduler, FIFOScheduler
+
+    from nnid.scale.batch import write_summary
+    from nnid.scale.task import finished
+
+    spec, tasks = trials(config, data, vehicle, columns)
+    out_dir = Path(out_dir).absolute()
+    out_dir.mkdir(parents=True, exist_ok=True)
+    own = not ray.is_initialized()
+    if own:
+        ray.init(address=address, num_cpus=num_cpus if address is None else None,
+                 include_dashboard=False, log_to_driver=False, configure_logging=False)  # fmt: skip
+    start = time.perf_counter()
+    scheduler = (
+        ASHAScheduler(
+            time_attr="training_iteration",
+            max_t=1_000_000,  # trials end by themselves (their own epochs and early stop)
+            grace_period=spec.grace_epochs,
+            reduction_factor=spec.reduction_factor,
+        )
+        if spec.early_stopping
+        else FIFOScheduler()
+    )
+    trainable = tune.with_resources(
+        tune.with_parameters(_tune_trial, tasks=tasks, out_root=str(out_dir)), {"cpu": 1}
+    )
+    tuner = tune.Tuner(
+        trainable,
+        param_space={"trial": tune.grid_search(list(range(len(tasks))))},
+        tune_config=tune.TuneConfig(metric="objective", mode="min", scheduler=scheduler),
+        run_config=tune.RunConfig(storage_path=str(out_dir / ".tune"), name="sweep", verbose=0),
+    )
+    box: dict[str, Any] = {}
+    thread = threading.Thread(target=lambda: box.setdefault("grid", tuner.fit()))
+    thread.start()
+    while thread.is_alive():  # progress: the trials whose outputs are written
+        done = sum(finished(t, out_dir) is not None for t in tasks)
+        (progress or _silent)(done, len(tasks), f"{done} of {len(tasks)} trials finished")
+        thread.join(1.0)
+    try:
+        rows = []
+        for i, result in enumerate(sorted(box["grid"], key=lambda r: r.config["trial"])):
+            task = tasks[result.config["trial"]]
+            assert i == result.config["trial"]
+            rows.append(_tune_row(task, result, out_dir))
+    finally:
+        if own:
+            ray.shutdown()
+    batch = BatchResult(rows, "ray tune" + (" (ASHA)" if spec.early_stopping else ""),
+                        0, time.perf_counter() - start, len(tasks))  # fmt: skip
+    ranked = _write_sweep(spec, config, tasks, batch, out_dir)
+    stopped = [r for r in rows if r["status"] == "stopped"]
+    batch.extra["sweep"]["early_stopping"] = {
+        "scheduler": "ASHA" if spec.early_stopping else None,
+        "stopped": len(stopped),
+        "epochs_run": sum(r.get("epochs") or 0 for r in rows),
+    }
+    write_summary(batch, out_dir, title="nnid sweep")
+    return batch, ranked
+
+
+def _silent(*args: Any, **kwargs: Any) -> None:
+    """No progress to report."""
+
+
+def _tune_row(task: Task, result, out_dir: Path) -> dict[str, Any]:
+    """A Tune trial's row: the task's own row when it finished, else why not."""
+    from nnid.scale.engines import failed_row
+    from nnid.scale.task import finished
+
+    metrics = result.metrics or {}
+    epochs = metrics.get("training_iteration")
+    row = finished(task, out_dir)
+    if row is not None:
+        return {**row, "epochs": epochs, "reused": False}
+    if result.error is not None:
+        return {**failed_row(task, str(result.error).strip().splitlines()[0]), "epochs": epochs}
+    if not metrics.get("finished"):
+        row = failed_row(
+            task,
+            f"stopped early by ASHA after {epochs} epochs (validation objective "
+            f"{metrics.get('objective', float('nan')):.4g})",
+        )
+        return {**row, "status": "stopped", "epochs": epochs}
+    return {**failed_row(task, "the fit failed (see the trial's error)"), "epochs": epochs}
