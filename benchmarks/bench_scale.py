@@ -1,6 +1,7 @@
 """Fan-out of the residual loop (nnid.scale): 16 loop tasks on 16 simulated 10-minute logs,
-one process (serial engine) against local worker processes and a local Ray instance, in one
-run; every task's loop.json compared across the engines (all fields but the wall time).
+one process (one worker, one task after another) against local worker processes and a local
+Ray instance, in one run; every task's loop.json compared across the engines (all fields but
+the wall time).
 
     python benchmarks/bench_scale.py [--tasks 16] [--minutes 10] [--workers 2] [--no-ray]
 
@@ -21,7 +22,7 @@ from common import machine
 
 from nnid.loop.scenarios import effect_log
 from nnid.scale.batch import run_tasks
-from nnid.scale.engines import LocalEngine, RayEngine, SerialEngine
+from nnid.scale.engines import LocalEngine, RayEngine
 from nnid.scale.manifest import expand
 from nnid.vehicle import load_vehicle
 
@@ -49,6 +50,33 @@ def results(out: Path, rows: list[dict]) -> dict[str, dict]:
         data.pop("seconds")
         found[row["id"]] = data
     return found
+
+
+def _differ(a, b, path: str = "") -> list[str]:
+    """The paths at which two JSON values differ."""
+    if isinstance(a, dict) and isinstance(b, dict):
+        return [p for k in sorted(set(a) | set(b), key=str)
+                for p in _differ(a.get(k), b.get(k), f"{path}/{k}")]  # fmt: skip
+    if isinstance(a, list) and isinstance(b, list) and len(a) == len(b):
+        return [p for i, (x, y) in enumerate(zip(a, b, strict=True))
+                for p in _differ(x, y, f"{path}[{i}]")]  # fmt: skip
+    return [] if a == b else [f"{path}: {a!r} != {b!r}"]
+
+
+def _relative(a, b) -> float:
+    """The largest relative difference between the numbers of two JSON values (inf where
+    anything else differs)."""
+    if isinstance(a, dict) and isinstance(b, dict):
+        if set(a) != set(b):
+            return float("inf")
+        return max((_relative(a[k], b[k]) for k in a), default=0.0)
+    if isinstance(a, list) and isinstance(b, list):
+        if len(a) != len(b):
+            return float("inf")
+        return max((_relative(x, y) for x, y in zip(a, b, strict=True)), default=0.0)
+    if isinstance(a, float) and isinstance(b, float):
+        return abs(a - b) / max(abs(a), abs(b)) if a != b else 0.0
+    return 0.0 if a == b else float("inf")
 
 
 def measure(name: str, engine, tasks, out: Path) -> dict:
@@ -79,7 +107,7 @@ def main() -> None:
         root = Path(tmp)
         manifest = make_fleet(root, args.tasks, args.minutes)
         tasks = expand(manifest)
-        runs = [measure("serial (one process)", SerialEngine(), tasks, root / "serial")]
+        runs = [measure("one process", LocalEngine(1), tasks, root / "serial")]
         runs.append(measure("local", LocalEngine(args.workers), tasks, root / "local"))
         if not args.no_ray:
             import ray
@@ -99,7 +127,14 @@ def main() -> None:
         for run, folder in zip(runs, ("serial", "local", "ray"), strict=False):
             run["speedup_vs_serial"] = base / run["wall_s"]
             run["wall_vs_local"] = run["wall_s"] / local
-            run["identical_loop_json"] = results(root / folder, run.pop("_rows")) == reference
+            found = results(root / folder, run.pop("_rows"))
+            run["identical_loop_json"] = found == reference
+            run["max_relative_difference"] = max(
+                (_relative(found[i], reference[i]) for i in reference), default=0.0
+            )
+            run["differences"] = [
+                f"{i}: {p}" for i in reference for p in _differ(found[i], reference[i])
+            ][:10]
         import nnid
 
         print(

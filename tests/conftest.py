@@ -112,6 +112,7 @@ def pytest_collection_modifyitems(config, items):
 GROUP_SECONDS = {
     "test_compare": 150,
     "test_loop": 150,
+    "test_scale": 110,
     "hybrid-external_bias.u": 85,
     "test_tutorials": 75,
     "hybrid-thruster_installation.w.neg": 73,

@@ -6,7 +6,9 @@ whose size differs per dive, so each task's answer is known (the loop must find 
 
 from __future__ import annotations
 
+import importlib.util
 import json
+import math
 import os
 import shutil
 import signal
@@ -90,12 +92,34 @@ def _loop_json(folder: Path) -> dict:
     return data
 
 
+def _same(a, b, path: str = "") -> list[str]:
+    """Where two loop.json differ: any text, count, list length or key, or a number by more
+    than 1e-12 relative. Most runs agree to the bit; a last-bit difference was seen now and
+    then between two runs on the *same* engine (not threads, hash seeds or task order: see
+    docs/scale.md), so the bit is not what is held here."""
+    if isinstance(a, dict) and isinstance(b, dict):
+        if set(a) != set(b):
+            return [f"{path}: keys {sorted(set(a) ^ set(b))}"]
+        return [d for k in a for d in _same(a[k], b[k], f"{path}/{k}")]
+    if isinstance(a, list) and isinstance(b, list):
+        if len(a) != len(b):
+            return [f"{path}: length {len(a)} != {len(b)}"]
+        return [
+            d
+            for i, (x, y) in enumerate(zip(a, b, strict=True))
+            for d in _same(x, y, f"{path}[{i}]")
+        ]
+    if isinstance(a, float) and isinstance(b, float):
+        return [] if math.isclose(a, b, rel_tol=1e-12, abs_tol=1e-300) else [f"{path}: {a} != {b}"]
+    return [] if a == b and type(a) is type(b) else [f"{path}: {a!r} != {b!r}"]
+
+
 @pytest.fixture(scope="module")
 def serial(fleet, tmp_path_factory):
-    """The three good dives run one after another in this process: the reference."""
+    """The three good dives run one after another in one worker process: the reference."""
     tasks = [t for t in expand(fleet / "manifest.toml") if "dive" in t.data]
     out = tmp_path_factory.mktemp("serial")
-    return out, run_tasks(tasks, out, SerialEngine())
+    return out, run_tasks(tasks, out, LocalEngine(1))
 
 
 def _check_rows(result, serial_out: Path, out: Path) -> None:
@@ -110,8 +134,8 @@ def _check_rows(result, serial_out: Path, out: Path) -> None:
         )
         assert abs(value - eta) < max(4 * se, 0.02), (value, se, eta)
         assert row["after_free_run_nrmse"] < row["before_free_run_nrmse"]
-        # the same task gives the same numbers on every engine, bit for bit
-        assert _loop_json(out / row["id"]) == _loop_json(serial_out / row["id"])
+        # the same task gives the same result on every engine
+        assert _same(_loop_json(out / row["id"]), _loop_json(serial_out / row["id"])) == []
     broken = by["broken.csv"]
     assert broken["status"] == "failed" and "broken.csv" in broken["error"]
     assert "no input columns" in broken["error"]
@@ -205,6 +229,26 @@ def test_local_engine_failures_resume_and_identical_results(fleet, serial, tmp_p
     assert [r["status"] for r in again.rows] == ["ok", "ok", "ok", "failed", "ok"]
 
 
+def test_serial_engine_leaves_the_process_as_it_found_it(fleet, tmp_path) -> None:
+    """The in-process engine pins one thread per library for its task and restores them."""
+    import numba
+    import torch
+    from threadpoolctl import threadpool_info
+
+    task = next(t for t in expand(fleet / "manifest.toml") if t.data.endswith("broken.csv"))
+
+    def state():  # the thread pools loaded so far (a task may load one more)
+        pools = {p["filepath"]: p["num_threads"] for p in threadpool_info()}
+        return torch.get_num_threads(), numba.get_num_threads(), pools
+
+    torch_n, numba_n, pools = state()
+    rows = list(SerialEngine().run([task], tmp_path))
+    assert rows[0]["status"] == "failed" and "broken.csv" in rows[0]["error"]
+    after = state()
+    assert (after[0], after[1]) == (torch_n, numba_n)
+    assert {k: after[2][k] for k in pools} == pools
+
+
 def test_batch_cli_exit_codes_and_report(fleet, tmp_path) -> None:
     runner = CliRunner()
     out = tmp_path / "cli"
@@ -223,10 +267,15 @@ def test_batch_cli_exit_codes_and_report(fleet, tmp_path) -> None:
     assert res.exit_code == 2 and "not a folder" in res.output
 
 
-ray = pytest.importorskip("ray", reason="Ray is an extra: pip install 'nnid[ray]'")
+needs_ray = pytest.mark.skipif(
+    importlib.util.find_spec("ray") is None, reason="Ray is an extra: pip install 'nnid[ray]'"
+)
 
 
+@needs_ray
 def test_ray_local_instance(fleet, serial, tmp_path) -> None:
+    import ray
+
     serial_out, _ = serial
     ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False, configure_logging=False)
     try:
@@ -238,7 +287,9 @@ def test_ray_local_instance(fleet, serial, tmp_path) -> None:
         ray.shutdown()
 
 
+@needs_ray
 def test_ray_two_node_cluster(fleet, serial, tmp_path) -> None:
+    import ray
     from ray.cluster_utils import Cluster
 
     serial_out, _ = serial
@@ -254,7 +305,135 @@ def test_ray_two_node_cluster(fleet, serial, tmp_path) -> None:
         by = {Path(r["data"]).name: r for r in rows}
         for i in range(len(ETA)):
             row = by[f"dive{i}.csv"]
-            assert _loop_json(out / row["id"]) == _loop_json(serial_out / row["id"])
+            assert _same(_loop_json(out / row["id"]), _loop_json(serial_out / row["id"])) == []
     finally:
         ray.shutdown()
         cluster.shutdown()
+
+
+SWEEP = """kind = "train"
+warmup_s = 1.0
+
+[split]
+by = "experiment"
+validation = ["run5"]
+test = ["run6", "run7"]
+
+[model]
+kind = "narx"
+inputs = ["tau_X", "tau_Z"]
+outputs = ["u", "w"]
+input_delays = 2
+output_delays = 2
+hidden = [3]
+
+[model.trainer]
+kind = "adam"
+max_epochs = 6
+lr = 0.01
+
+[sweep]
+grid = { "model.hidden" = [[2], [6]] }
+seeds = [0, 1]
+grace_epochs = 2
+reduction_factor = 2
+"""
+
+
+@pytest.fixture(scope="module")
+def sweep_inputs(tmp_path_factory) -> tuple[Path, Path]:
+    """A small NARX sweep (2 settings x 2 seeds) on the demo log."""
+    root = tmp_path_factory.mktemp("sweep")
+    demo = Path(__file__).resolve().parents[1] / "nnid" / "demo_data"
+    pd.read_parquet(demo / "demo_minirov_heave.parquet").to_csv(root / "demo.csv", index=False)
+    (root / "narx.toml").write_text(SWEEP)
+    return root / "narx.toml", root / "demo.csv"
+
+
+def test_sweep_ranks_on_validation_and_writes_a_ready_config(sweep_inputs, tmp_path) -> None:
+    from nnid.config import TrainConfig, load_config
+    from nnid.scale.sweep import run_sweep
+
+    config, data = sweep_inputs
+    out = tmp_path / "sweep"
+    result, ranked = run_sweep(config, out, LocalEngine(2), data=str(data))
+    assert len(result.rows) == 4 and not result.failed
+    assert {r["overrides"] for r in result.rows} == {
+        json.dumps({"model.hidden": h, "model.seed": s}, sort_keys=True)
+        for h in ([2], [6]) for s in (0, 1)
+    }  # fmt: skip
+    # each trial's score is its own metrics.json validation free-run total, and settings are
+    # ranked by the mean over seeds of that (the test part is never used to choose)
+    means = {}
+    for row in result.rows:
+        metrics = json.loads((out / row["id"] / "metrics.json").read_text())
+        assert row["validation_free_run_nrmse"] == metrics["validation"]["free_run_nrmse"]["total"]
+        hidden = json.loads(row["overrides"])["model.hidden"][0]
+        means.setdefault(hidden, []).append(row["validation_free_run_nrmse"])
+    order = sorted(means, key=lambda h: sum(means[h]) / 2)
+    assert [r.setting["model.hidden"][0] for r in ranked] == order
+    table = pd.read_csv(out / "settings.csv")
+    assert list(table["option:model.hidden"]) == [f"[{h}]" for h in order]
+    best = load_config(out / "best.toml", TrainConfig)
+    assert best.model.hidden == [order[0]] and best.sweep is None
+    assert result.extra["sweep"]["summary"].startswith("Best of 2 settings")
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["sweep"]["best"]["settings"] == ranked[0].setting
+
+
+def test_sweep_missing_scores_rank_last_and_bad_options_are_refused(sweep_inputs, tmp_path):
+    from nnid.config import SweepSpec
+    from nnid.scale.manifest import Task
+    from nnid.scale.sweep import rank, trials
+
+    spec = SweepSpec(grid={"model.hidden": [[2], [6]]}, seeds=[0, 1])
+    tasks = [Task("train", "", overrides={"model.hidden": [h], "model.seed": s})
+             for h in (2, 6) for s in (0, 1)]  # fmt: skip
+    scores = [0.10, None, 0.30, 0.40]  # hidden 2 has a diverged seed: it ranks after hidden 6
+    rows = [{"status": "ok", "validation_free_run_nrmse": s} for s in scores]
+    ranked = rank(spec, tasks, rows)
+    assert [r.setting for r in ranked] == [{"model.hidden": [6]}, {"model.hidden": [2]}]
+    assert ranked[0].mean == pytest.approx(0.35) and not ranked[1].complete
+    config, _ = sweep_inputs
+    bad = tmp_path / "bad.toml"
+    bad.write_text(config.read_text().replace('"model.hidden"', '"model.hiddn"'))
+    with pytest.raises(NnidInputError) as info:
+        trials(bad)
+    assert "hiddn" in str(info.value) and str(bad) in str(info.value)
+    bad.write_text(config.read_text().split("[sweep]")[0])
+    with pytest.raises(NnidInputError, match="no \\[sweep\\] table"):
+        trials(bad)
+
+
+@needs_ray
+def test_sweep_on_ray_tune_with_asha(sweep_inputs, tmp_path) -> None:
+    """The same sweep through Ray Tune: ASHA reads the trainers' per-epoch validation
+    objective; a trial it stops is a 'stopped' row that says when, never a score."""
+    import ray
+
+    from nnid.scale.sweep import run_sweep_tune
+
+    config, data = sweep_inputs
+    out = tmp_path / "tune"
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False, configure_logging=False)
+    try:
+        result, ranked = run_sweep_tune(config, out, None, data=str(data))
+    finally:
+        ray.shutdown()
+    assert result.engine == "ray tune (ASHA)" and len(result.rows) == 4
+    statuses = {r["status"] for r in result.rows}
+    assert statuses <= {"ok", "stopped"} and "ok" in statuses
+    for row in result.rows:
+        assert row["epochs"] >= 2  # the grace period: every trial reached the first rung
+        if row["status"] == "stopped":
+            assert "stopped early by ASHA" in row["error"]
+            assert not (out / row["id"] / "metrics.json").exists()
+        else:
+            metrics = json.loads((out / row["id"] / "metrics.json").read_text())
+            assert (
+                row["validation_free_run_nrmse"] == metrics["validation"]["free_run_nrmse"]["total"]
+            )
+    early = result.extra["sweep"]["early_stopping"]
+    assert early["stopped"] == sum(r["status"] == "stopped" for r in result.rows)
+    assert (out / "settings.csv").is_file() and (out / "report.html").is_file()
+    assert ranked[0].mean is not None and (out / "best.toml").is_file()

@@ -19,6 +19,7 @@ model's target columns with one rule set (ARCHITECTURE.md "JSON outputs"):
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from typing import Any
 
@@ -26,7 +27,7 @@ import numpy as np
 import pandas as pd
 
 from nnid.datasets.log import VELOCITY
-from nnid.evaluation.metrics import excited_dofs, warmup_mask
+from nnid.evaluation.metrics import exact_mean, exact_std, excited_dofs, warmup_mask
 from nnid.evaluation.prediction import check_mode, mode_steps
 from nnid.physics.dofs import DOFS, FORCES
 
@@ -74,13 +75,13 @@ def score_prediction(
             diverged[c] = float(tc[np.flatnonzero(bad)[0]])
             nrmse[c] = rmse[c] = None
             continue
-        err = float(np.sqrt(np.mean((p - y) ** 2)))
-        std = float(np.std(y))
+        err = math.sqrt(exact_mean((p - y) ** 2))
+        std = exact_std(y)
         rmse[c] = err
         nrmse[c] = err / std if std > 0 else None
     for out in (nrmse, rmse):
         vals = [out[c] for c in columns]
-        out["total"] = float(np.mean(vals)) if vals and all(v is not None for v in vals) else None
+        out["total"] = exact_mean(vals) if vals and all(v is not None for v in vals) else None
     return nrmse, rmse, diverged
 
 
@@ -93,10 +94,10 @@ def force_scores(model, log: pd.DataFrame, mask: np.ndarray) -> dict[str, Any]:
     r = resid[cols].to_numpy(np.float64)[mask]
     s = series[cols].to_numpy(np.float64)[mask]
     r, s = r[np.isfinite(r).all(1)], s[np.isfinite(s).all(1)]
-    j = float(np.sqrt(np.mean(r * r))) if r.size else None
-    j0 = float(np.sqrt(np.mean(s * s))) if s.size else None
+    j = math.sqrt(exact_mean(r * r)) if r.size else None
+    j0 = math.sqrt(exact_mean(s * s)) if s.size else None
     per_dof = {
-        DOFS[FORCES.index(f)]: (float(np.sqrt(np.mean(r[:, k] ** 2))) if r.size else None)
+        DOFS[FORCES.index(f)]: (math.sqrt(exact_mean(r[:, k] ** 2)) if r.size else None)
         for k, f in enumerate(cols)
     }
     return {

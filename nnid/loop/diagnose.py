@@ -36,7 +36,7 @@ from nnid.datasets.arrays import log_arrays
 from nnid.datasets.log import VELOCITY
 from nnid.datasets.preprocess import zoh_midpoint
 from nnid.evaluation.evaluate import score_prediction
-from nnid.evaluation.metrics import excited_dofs, rmse, warmup_mask
+from nnid.evaluation.metrics import exact_mean, excited_dofs, rmse, warmup_mask
 from nnid.evaluation.prediction import predict_states
 from nnid.loop.effects import Candidate, nominal_forces
 from nnid.models.parametric import ParametricFossen, filter_settled, vehicle_with
@@ -541,7 +541,7 @@ def force_rmse(r: np.ndarray, tau: np.ndarray, dofs: tuple[str, ...]) -> dict[st
         for i, d in enumerate(DOFS)
         if d in dofs and np.any(tau[:, i])
     ]
-    out["total"] = float(np.mean(rel)) if rel else float("nan")
+    out["total"] = exact_mean(rel) if rel else float("nan")
     return out
 
 

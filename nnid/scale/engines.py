@@ -4,14 +4,18 @@ Every engine has ``slots`` (how many tasks run at once) and ``run(tasks, out_roo
 yields each task's row as it finishes (:func:`nnid.scale.task.run_task`). Fan-out is the job
 of ``concurrent.futures`` and Ray; nothing here schedules by itself.
 
-- :class:`SerialEngine`: one task after another in this process (the baseline, and debugging).
+- :class:`SerialEngine`: one task after another in this process (debugging): its threads are
+  pinned at run time, so its numbers may differ from the workers' in the last bit.
 - :class:`LocalEngine`: ``ProcessPoolExecutor`` with the *spawn* context (no fork of a process
-  that holds torch or numba threads), one torch/BLAS/numba thread per worker. A worker that
-  dies (killed, out of memory, a segfault) breaks the whole pool in ``concurrent.futures``;
+  that holds torch or numba threads), each worker started with one thread for OpenMP,
+  OpenBLAS, MKL, numba and torch (:data:`ONE_THREAD`); ``LocalEngine(1)`` is "one process".
+  A worker that dies (killed, out of memory, a segfault) breaks the whole pool in
+  ``concurrent.futures``;
   the tasks it was running are found by their start markers, each is re-run alone in a fresh
   one-worker pool, and the one that kills that worker too becomes a ``failed`` row. The
   tasks that were only waiting run on in a new pool.
-- :class:`RayEngine`: ``ray.remote`` tasks of one CPU each, no retries (a task that kills its
+- :class:`RayEngine`: ``ray.remote`` tasks of one CPU each, their workers started with the
+  same one-thread environment (a Ray ``runtime_env``), no retries (a task that kills its
   worker is reported, not re-run behind the user's back), results gathered with ``ray.wait``
   as they finish. Tasks carry paths, so each worker reads its log itself: the logs and the
   output folder must be on storage every node sees (one machine, NFS, a shared volume).
@@ -24,6 +28,7 @@ import shutil
 from collections.abc import Iterator
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
+from contextlib import contextmanager
 from multiprocessing import get_context
 from pathlib import Path
 from typing import Any
@@ -55,11 +60,37 @@ class SerialEngine:
             yield run_task(task, out_root)
 
 
+#: the environment every worker process starts with: one thread for OpenMP, OpenBLAS, MKL and
+#: numba, read by those libraries when they load. Pinning them later, at run time, leaves
+#: results that differ in the last bit from process to process (measured on loop tasks), so
+#: the workers are *started* with it
+ONE_THREAD = {
+    "OMP_NUM_THREADS": "1",
+    "OPENBLAS_NUM_THREADS": "1",
+    "MKL_NUM_THREADS": "1",
+    "NUMBA_NUM_THREADS": "1",
+}
+
+
+@contextmanager
+def _child_environment(values: dict[str, str]) -> Iterator[None]:
+    """``values`` in ``os.environ`` while worker processes are started (they inherit it),
+    then the previous values back."""
+    before = {k: os.environ.get(k) for k in values}
+    os.environ.update(values)
+    try:
+        yield
+    finally:
+        for k, v in before.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+
+
 def _pin_worker() -> None:
-    """Initializer of a local worker process: one thread for torch, BLAS and numba (the
-    worker's own process, so process-wide settings are its to make)."""
-    for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
-        os.environ[var] = "1"
+    """Initializer of a local worker process: torch's own thread count (the worker's own
+    process, so process-wide settings are its to make)."""
     import torch
 
     torch.set_num_threads(1)
@@ -97,7 +128,9 @@ class LocalEngine:
         """Rows as tasks finish; if the pool breaks, a last item: the unfinished tasks."""
         ctx = get_context("spawn")
         with ProcessPoolExecutor(workers, mp_context=ctx, initializer=_pin_worker) as pool:
-            futures = {pool.submit(_marked_run, t, out_root): t for t in tasks}
+            # the pool starts its processes as tasks are submitted: all of them here
+            with _child_environment(ONE_THREAD):
+                futures = {pool.submit(_marked_run, t, out_root): t for t in tasks}
             while futures:
                 done, _ = wait(futures, return_when=FIRST_COMPLETED)
                 broken = []
@@ -168,7 +201,9 @@ class RayEngine:
                 configure_logging=False,
             )
         try:
-            remote = ray.remote(num_cpus=1, max_retries=0)(_ray_task)
+            remote = ray.remote(num_cpus=1, max_retries=0, runtime_env={"env_vars": ONE_THREAD})(
+                _ray_task
+            )
             refs = {remote.remote(t, str(out_root)): t for t in tasks}
             while refs:
                 done, _ = ray.wait(list(refs), num_returns=1)
