@@ -32,8 +32,8 @@ ETA = (0.6, 0.7, 0.8)  # the true upward heave efficiency of each dive
 
 @pytest.fixture(scope="module")
 def fleet(tmp_path_factory) -> Path:
-    """Three dives (one per ETA), a malformed log, a longer dive whose worker gets killed,
-    and a manifest over them all."""
+    """Three dives (one per ETA), seven more, a malformed log and a longer dive whose worker
+    gets killed; manifest.toml (the three, the malformed, the killed) and fleet12.toml (all)."""
     from nnid.loop.scenarios import effect_log
     from nnid.vehicle import load_vehicle
 
@@ -44,6 +44,10 @@ def fleet(tmp_path_factory) -> Path:
         log = effect_log(vehicle, [("thruster_installation.w.neg", eta)], duration=160,
                          n_experiments=4, speed=(0.15, 0.4), seed=i)  # fmt: skip
         log.to_csv(root / f"dive{i}.csv", index=False)
+    for i in range(7):  # more dives, for the issue's "10 good tasks" on local processes
+        log = effect_log(vehicle, [("thruster_installation.w.neg", 0.65)], duration=160,
+                         n_experiments=4, speed=(0.15, 0.4), seed=10 + i)  # fmt: skip
+        log.to_csv(root / f"more{i}.csv", index=False)
     long = effect_log(vehicle, [("thruster_installation.w.neg", 0.5)], duration=480,
                       n_experiments=4, speed=(0.15, 0.4), seed=9)  # fmt: skip
     long.to_csv(root / "killed.csv", index=False)
@@ -51,6 +55,10 @@ def fleet(tmp_path_factory) -> Path:
     (root / "manifest.toml").write_text(
         'command = "loop"\nvehicle = "minirov.toml"\n'
         'data = ["dive*.csv", "broken.csv", "killed.csv"]\n'
+    )
+    (root / "fleet12.toml").write_text(
+        'command = "loop"\nvehicle = "minirov.toml"\n'
+        'data = ["dive*.csv", "more*.csv", "broken.csv", "killed.csv"]\n'
     )
     return root
 
@@ -74,8 +82,8 @@ def _killer(out: Path, target: str, stop: threading.Event) -> threading.Thread:
     return thread
 
 
-def _run(engine, fleet: Path, out: Path, kill: bool = True):
-    tasks = expand(fleet / "manifest.toml")
+def _run(engine, fleet: Path, out: Path, kill: bool = True, manifest: str = "manifest.toml"):
+    tasks = expand(fleet / manifest)
     target = next(t.id for t in tasks if t.data.endswith("killed.csv"))
     stop = threading.Event()
     if kill:
@@ -211,22 +219,25 @@ def test_local_engine_failures_resume_and_identical_results(fleet, serial, tmp_p
     serial_out, reference = serial
     assert all(r["status"] == "ok" for r in reference.rows)
     out = tmp_path / "local"
-    tasks, result = _run(LocalEngine(2), fleet, out)
+    tasks, result = _run(LocalEngine(2), fleet, out, manifest="fleet12.toml")
     _check_rows(result, serial_out, out)
     assert result.engine == "local" and result.reused == 0
     assert len({r["worker"] for r in result.rows if r["status"] == "ok"}) >= 2  # in parallel
+    for row in result.rows[3:10]:  # the seven more dives: 0.65 of nominal heave thrust
+        assert row["status"] == "ok" and row["added"] == "thruster_installation.w.neg"
+        assert abs(row["param:thruster_installation.w.neg"] - 0.65) < 0.05
     write_summary(result, out)
     table = pd.read_parquet(out / "summary.parquet")
     assert list(table["id"]) == [t.id for t in tasks]  # manifest order, nothing lost
-    assert list(table["status"]) == ["ok", "ok", "ok", "failed", "failed"]
+    assert list(table["status"]) == ["ok"] * 10 + ["failed", "failed"]
     assert pd.read_csv(out / "summary.csv")["error"].notna().sum() == 2
     summary = json.loads((out / "summary.json").read_text())
-    assert (summary["ok"], summary["failed"], summary["engine"]) == (3, 2, "local")
+    assert (summary["ok"], summary["failed"], summary["engine"]) == (10, 2, "local")
     # a second run does only the two failed tasks (the kill is over: that one now succeeds)
-    _, again = _run(LocalEngine(2), fleet, out, kill=False)
-    assert again.reused == 3
-    assert [r["reused"] for r in again.rows] == [True, True, True, False, False]
-    assert [r["status"] for r in again.rows] == ["ok", "ok", "ok", "failed", "ok"]
+    _, again = _run(LocalEngine(2), fleet, out, kill=False, manifest="fleet12.toml")
+    assert again.reused == 10
+    assert [r["reused"] for r in again.rows] == [True] * 10 + [False, False]
+    assert [r["status"] for r in again.rows] == ["ok"] * 10 + ["failed", "ok"]
 
 
 def test_serial_engine_leaves_the_process_as_it_found_it(fleet, tmp_path) -> None:
