@@ -27,11 +27,10 @@ def warmup_mask(log: pd.DataFrame, warmup_s: float = 0.0, warmup_samples: int = 
 
 
 def exact_mean(x) -> float:
-    """The mean by an exactly rounded sum (:func:`math.fsum`); NaN for no values. NumPy's SIMD
-    reductions group terms by the array's memory alignment, so the same score could differ in
-    its last bit from one process to another (measured: one task run on two worker processes);
-    scores are reductions over 10³-10⁵ samples, where an exact sum costs well under a
-    millisecond."""
+    """The mean by an exactly rounded sum (:func:`math.fsum`); NaN for no values. A score then
+    depends on the values alone, not on how a reduction groups them (NumPy's grouping follows
+    the array's length, layout and SIMD kernel), so runs of one task on different workers agree
+    wherever their predictions do. Scores reduce 10³-10⁵ samples: well under a millisecond."""
     values = np.asarray(x, dtype=np.float64).ravel()
     return math.fsum(values) / values.size if values.size else float("nan")
 

@@ -7,10 +7,9 @@ a subprocess. It writes its outputs to ``<out>/<task id>/`` atomically and, last
 fails writes nothing there; its row says ``failed`` with the error, and the other tasks go on.
 
 Every task runs with one torch, BLAS and numba thread, restored afterwards: tasks run side by
-side on the cores, and a result must not depend on how many shared the machine. A parallel
-kernel's last bit can depend on its thread count (measured: a k-step NRMSE one ulp apart), so
-the same single thread everywhere is what makes a task give the same numbers serially, on
-local workers and on Ray.
+side on the cores. The engines' worker processes are also *started* with one thread per library
+(:data:`nnid.scale.engines.ONE_THREAD`); results then agree across engines to the last few bits
+(docs/scale.md says why not always to the bit).
 """
 
 from __future__ import annotations
