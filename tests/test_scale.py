@@ -390,6 +390,8 @@ def test_sweep_ranks_on_validation_and_writes_a_ready_config(sweep_inputs, tmp_p
     assert result.extra["sweep"]["summary"].startswith("Best of 2 settings")
     summary = json.loads((out / "summary.json").read_text())
     assert summary["sweep"]["best"]["settings"] == ranked[0].setting
+    page = (out / "report.html").read_text()  # every trial on the page, with its seed
+    assert page.count("<td>model.hidden = [") == 4 and "never used to choose" in page
 
 
 def test_sweep_missing_scores_rank_last_and_bad_options_are_refused(sweep_inputs, tmp_path):

@@ -8,6 +8,7 @@ every failed task with its error. Numbers come from the task rows (``summary.jso
 from __future__ import annotations
 
 import html
+import json
 from pathlib import Path
 from typing import Any
 
@@ -48,10 +49,12 @@ def parameter_figure(rows: list[dict]) -> str | None:
     """Each identified parameter over the vehicle's logs, ± one standard error; None when
     the tasks identified none."""
     names: dict[str, int] = {}
-    for row in rows:
+    for row in rows:  # identified values: those with a standard error (not a network's sizes)
         for key, value in row.items():
             if key.startswith("param:") and value is not None:
-                names[key[6:]] = names.get(key[6:], 0) + 1
+                se = row.get(f"stderr:{key[6:]}")
+                if se is not None and np.isfinite(se):
+                    names[key[6:]] = names.get(key[6:], 0) + 1
     chosen = sorted(names, key=lambda n: -names[n])[:MAX_PARAMS]
     if not chosen:
         return None
@@ -136,16 +139,39 @@ TABLES = {"loop": _loop_table, "train": _train_table, "detect": _detect_table,
           "compare": _compare_table}  # fmt: skip
 
 
-def _sweep(extra: dict) -> list[str]:
-    sweep = extra.get("sweep")
-    if not sweep:
-        return []
-    best = sweep.get("best")
+def _sweep(result) -> list[str]:
+    """The sweep's verdict, every trial, and the validation score of each setting's seeds."""
+    sweep = result.extra["sweep"]
     out = ["<h2>Sweep</h2>", f"<p>{html.escape(sweep.get('summary', ''))}</p>"]
-    if best:
-        out.append(
-            html_table(["option", "value"], [[k, str(v)] for k, v in best["settings"].items()])
-        )
+    metric = sweep["metric"].split()[1]  # "validation free_run_nrmse (total), ..."
+    body, scores = [], {}
+    for row in result.rows:
+        setting = json.loads(row.get("overrides") or "{}")
+        seed = setting.pop(sweep.get("seed_option", "model.seed"), None)
+        label = ", ".join(f"{k} = {v}" for k, v in setting.items()) or "as configured"
+        value = row.get(f"validation_{metric}") if row["status"] == "ok" else None
+        scores.setdefault(label, []).append(value)
+        test = row.get("free_run_nrmse") if row.get("held_out") == "test" else None
+        body.append([label, _f(seed), row["status"], _f(value, 4), _f(test, 4),
+                     str(row.get("error") or "")])  # fmt: skip
+    head = ["setting", "seed", "status", f"validation {metric}", "test free-run NRMSE", "note"]
+    out.append(html_table(head, body))
+    out.append(definitions({
+        f"validation {metric}": "total over the excited outputs on the validation part: what "
+        "the settings are ranked by (mean over seeds)",
+        "test free-run NRMSE": "reported, never used to choose",
+    }))  # fmt: skip
+    fig, axes = new_figure(1, 1, width=8.0, height=3.2)
+    ax = axes[0, 0]
+    for i, values in enumerate(scores.values()):
+        finite = [v for v in values if v is not None]
+        ax.plot([i] * len(finite), finite, "o", alpha=0.7)
+        if len(finite) < len(values):
+            ax.annotate(f"{len(values) - len(finite)} without a score", (i, ax.get_ylim()[1]),
+                        fontsize=7, ha="center", va="top")  # fmt: skip
+    ax.set_xticks(range(len(scores)), list(scores), rotation=20, ha="right", fontsize=8)
+    ax.set_ylabel(f"validation {metric} (-)")
+    out.append(f'<img src="{figure_uri(fig)}" alt="validation score per setting">')
     return out
 
 
@@ -159,8 +185,11 @@ def batch_html(result, title: str = "nnid batch") -> str:
         f"{len(result.failed)} failed, {result.reused} finished by an earlier run; "
         f"{result.seconds:.1f} s wall time.</p>"
     )
-    out += _sweep(result.extra)
     out += _failed(result)
+    if "sweep" in result.extra:
+        out += _sweep(result)
+        out.append("</body></html>")
+        return "\n".join(out)
     by_vehicle: dict[str, list[dict]] = {}
     for row in rows:
         by_vehicle.setdefault(_vehicle(row), []).append(row)

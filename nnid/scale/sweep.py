@@ -167,6 +167,7 @@ def _write_sweep(
         write_text(Path(out_dir) / "best.toml", best_config_text(config, best.setting))
     result.extra["sweep"] = {
         "metric": f"validation {spec.metric} (total), mean over seeds",
+        "seed_option": spec.seed_option,
         "settings": len(ranked),
         "trials": len(tasks),
         "best": {"settings": best.setting, "mean": best.mean, "scores": best.scores},
