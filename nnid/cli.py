@@ -6,6 +6,7 @@ Bad input ends with one line on stderr and exit code 2; nothing else here does n
 from __future__ import annotations
 
 import functools
+import os
 import sys
 import warnings
 from contextlib import contextmanager
@@ -426,7 +427,10 @@ def batch(
     manifest: Path = typer.Argument(..., help="TOML manifest: command, data, vehicle, config."),
     out_dir: Path = typer.Option(..., "--out", help="Output folder: one folder per task, summary."),
     address: str | None = typer.Option(
-        None, "--address", help="Ray cluster ('auto' or an address); default local processes."
+        None,
+        "--address",
+        help="Ray: 'auto' (this machine's cluster), 'local' (a new one here) or an address; "
+        "default local processes.",
     ),
     workers: int | None = typer.Option(
         None, "--workers", min=1, help="Local worker processes; default one per core."
@@ -474,7 +478,10 @@ def sweep(
         None, "--columns", help="Reader config for a log not in nnid's format."
     ),
     address: str | None = typer.Option(
-        None, "--address", help="Ray cluster ('auto' or an address); default local processes."
+        None,
+        "--address",
+        help="Ray: 'auto' (this machine's cluster), 'local' (a new one here) or an address; "
+        "default local processes.",
     ),
     workers: int | None = typer.Option(
         None, "--workers", min=1, help="Local worker processes; default one per core."
@@ -494,6 +501,9 @@ def sweep(
             result, ranked = run_sweep(config, out_dir, engine, data, vehicle, columns, progress)
         else:
             engine_for(address)  # Ray installed, or one clear error
+            # Tune's own console tables would interleave with the progress bar: the
+            # command's outputs are its report and this summary
+            os.environ.setdefault("RAY_AIR_NEW_OUTPUT", "0")
             result, ranked = run_sweep_tune(
                 config, out_dir, address, data, vehicle, columns, progress
             )

@@ -450,3 +450,13 @@ def test_sweep_on_ray_tune_with_asha(sweep_inputs, tmp_path) -> None:
     assert early["stopped"] == sum(r["status"] == "stopped" for r in result.rows)
     assert (out / "settings.csv").is_file() and (out / "report.html").is_file()
     assert ranked[0].mean is not None and (out / "best.toml").is_file()
+
+
+def test_sweep_cli_refuses_a_config_without_a_sweep(sweep_inputs, tmp_path) -> None:
+    config, data = sweep_inputs
+    plain = tmp_path / "plain.toml"
+    plain.write_text(config.read_text().split("[sweep]")[0])
+    res = CliRunner().invoke(app, ["sweep", str(plain), "--data", str(data), "--out",
+                                   str(tmp_path / "o")])  # fmt: skip
+    assert res.exit_code == 2 and "no [sweep] table" in res.output and "plain.toml" in res.output
+    assert not (tmp_path / "o").exists()  # refused before any work
