@@ -460,3 +460,15 @@ def test_sweep_cli_refuses_a_config_without_a_sweep(sweep_inputs, tmp_path) -> N
                                    str(tmp_path / "o")])  # fmt: skip
     assert res.exit_code == 2 and "no [sweep] table" in res.output and "plain.toml" in res.output
     assert not (tmp_path / "o").exists()  # refused before any work
+
+
+@pytest.mark.parametrize(
+    ("name", "unit"),
+    [("X_udot", "kg"), ("K_pdot", "kg m²"), ("X_qdot", "kg m"), ("X:u", "N / (m/s)"),
+     ("N:v*abs(r)", "N m / (m/s · rad/s)"), ("thruster_installation.w.neg", "× nominal"),
+     ("buoyancy_offset", "N")],
+)  # fmt: skip
+def test_fleet_report_axes_carry_the_parameters_units(name, unit) -> None:
+    from nnid.reports.batch_report import _unit
+
+    assert _unit(name) == unit

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import html
 import json
+import re
 from pathlib import Path
 from typing import Any
 
@@ -35,13 +36,26 @@ def _vehicle(row: dict) -> str:
 
 
 def _unit(name: str) -> str:
-    """The unit of an effect's size; vehicle-file parameters are in SI (their key says
-    which)."""
+    """The SI unit of a parameter: an added mass ``X_udot`` (kg, kg m, kg m²), a damping
+    coefficient ``"X:u*abs(u)"`` (the force's unit over the basis term's), or an effect's size
+    (:func:`nnid.reports.loop_report.unit`)."""
+    from nnid.physics.dofs import DOFS, FORCES
+    from nnid.reports.figures import FORCE_UNITS, UNITS
     from nnid.reports.loop_report import unit
 
+    added = re.fullmatch(r"([XYZKMN])_([uvwpqr])dot", name)
+    if added:
+        moment, angular = added[1] in "KMN", added[2] in "pqr"
+        return {(False, False): "kg", (True, True): "kg m²"}.get((moment, angular), "kg m")
+    force, _, term = name.partition(":")
+    if force in FORCES and term:
+        factors = [UNITS[v] for v in re.findall(r"[uvwpqr]", term) if v in DOFS]
+        if len(factors) == len(re.findall(r"[A-Za-z_]+", term.replace("abs", ""))):
+            return f"{FORCE_UNITS[force]} / ({' · '.join(factors)})"
+        return "SI"  # a term of McCarter's nondimensional quantities
     try:
         return unit(name)
-    except (KeyError, ValueError):
+    except ValueError:
         return "SI"
 
 
