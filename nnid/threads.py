@@ -26,12 +26,19 @@ def torch_threads(n: int = 1) -> Iterator[None]:
 @contextmanager
 def numba_threads(n: int = 1) -> Iterator[None]:
     """Run the block with at most ``n`` numba threads for parallel kernels, then restore the
-    previous count (numba keeps the count per calling thread)."""
+    previous count (numba keeps the count per calling thread).
+
+    With numba's OpenMP threading layer, ``numba.set_num_threads`` also resets the OpenMP
+    thread count that torch reads (measured: torch's count went from 1 to 2), so torch's count
+    is put back after each change."""
     import numba
 
     before = numba.get_num_threads()
+    torch_before = torch.get_num_threads()
     numba.set_num_threads(max(1, min(n, numba.config.NUMBA_NUM_THREADS)))
+    torch.set_num_threads(torch_before)
     try:
         yield
     finally:
         numba.set_num_threads(before)
+        torch.set_num_threads(torch_before)

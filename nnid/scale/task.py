@@ -75,7 +75,7 @@ def run_task(task: Task, out_root: str | Path, progress: Progress | None = None)
         with (
             warnings.catch_warnings(record=True) as caught,
             torch_threads(1),
-            threadpool_limits(1),
+            threadpool_limits(1, user_api="blas"),  # OpenMP: torch_threads and numba_threads
             numba_threads(1),
         ):
             warnings.simplefilter("always")
