@@ -194,10 +194,6 @@ def _bar(description: str):
         yield update
 
 
-def _fmt(x) -> str:
-    return "diverged" if x is None else f"{x:.3g}"
-
-
 def _print(outcome) -> None:
     """A run's warnings on stderr, its sentences on stdout."""
     for warning in outcome.warnings:
@@ -334,25 +330,11 @@ def detect(
     """Fault detection: watch a log with a calibrated residual monitor; each alarm says whether a
     thruster lost thrust (which one, its remaining efficiency), an external force appeared, or
     the vehicle changed (the effect, e.g. buoyancy_offset, with its size)."""
-    from nnid.runs import check_detect_inputs, detect_run, detection_window
+    from nnid.runs import detect_run, follow_run
 
     _check_out(out_dir)
-    check_detect_inputs(model_dir, data, follow)
     if follow:
-        from nnid.fault.follow import follow_csv
-        from nnid.fault.monitor import ResidualMonitor
-
-        monitor = ResidualMonitor.load(model_dir)
-        window_s = window or detection_window(model_dir)
-        try:
-            result = follow_csv(monitor, data, window_s, _say)
-        except NnidInputError as exc:
-            raise exc.with_source(data) from None
-        from nnid.reports.detect_report import write_detect_outputs
-
-        with _staged(out_dir) as stage:
-            lines = write_detect_outputs(monitor, result, stage, source=data)
-        for line in lines:
+        for line in follow_run(model_dir, data, out_dir, window, _say):
             _say(line)
         return
     with _bar("detecting") as progress:

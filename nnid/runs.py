@@ -370,6 +370,30 @@ def check_detect_inputs(model_dir: Path, data: str, follow: bool = False) -> Non
         raise NnidInputError("'-' (standard input) is read with --follow", field="--data")
 
 
+def _monitor(model_dir: Path, window: float | None):
+    """The saved residual monitor and the isolation window to use (``window``, else the
+    model's own)."""
+    from nnid.fault.monitor import ResidualMonitor
+
+    return ResidualMonitor.load(model_dir), window or detection_window(model_dir)
+
+
+def follow_run(model_dir: Path, data: str, out_dir: Path, window: float | None, say) -> list[str]:
+    """``nnid detect --follow``: watch a growing CSV (or ``-``, standard input), ``say`` each
+    alarm as it happens; the outputs written when the log ends; their sentences returned."""
+    from nnid.fault.follow import follow_csv
+    from nnid.reports.detect_report import write_detect_outputs
+
+    check_detect_inputs(model_dir, data, follow=True)
+    monitor, window_s = _monitor(model_dir, window)
+    try:
+        result = follow_csv(monitor, data, window_s, say)
+    except NnidInputError as exc:
+        raise exc.with_source(data) from None
+    with staged(out_dir) as stage:
+        return write_detect_outputs(monitor, result, stage, source=data)
+
+
 def detect_run(
     model_dir: Path,
     data: str,
@@ -383,12 +407,10 @@ def detect_run(
     from nnid.datasets.log import POSE, VELOCITY
     from nnid.datasets.readers import load_log
     from nnid.fault.detect import detect
-    from nnid.fault.monitor import ResidualMonitor
     from nnid.reports.detect_report import write_detect_outputs
 
     check_detect_inputs(model_dir, data)
-    monitor = ResidualMonitor.load(model_dir)
-    window_s = window or detection_window(model_dir)
+    monitor, window_s = _monitor(model_dir, window)
     lines: list[str] = []
     try:
         log, report = load_log(data, columns)

@@ -10,7 +10,6 @@ inputs, ``status``, ``error``, headline scores, ``seconds``, ``worker``), ``summ
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -51,7 +50,6 @@ def run_tasks(
     engine,
     progress: Progress | None = None,
     resume: bool = True,
-    on_row: Callable[[dict[str, Any]], None] | None = None,
 ) -> BatchResult:
     """Run ``tasks`` on ``engine`` (:mod:`nnid.scale.engines`); with ``resume`` a task whose
     folder holds a finished ``task.json`` of the same id is not run again."""
@@ -69,18 +67,16 @@ def run_tasks(
     todo = [t for t in tasks if t.id not in rows]
     ok = reused
     failed = 0
-    slots = engine.slots if todo else 1
-    progress(ok, len(tasks), counts_message(ok, 0, min(slots, len(todo)), reused))
+    progress(ok, len(tasks), counts_message(ok, 0, min(engine.slots, len(todo)), reused))
     for row in engine.run(todo, out_root):
         row["reused"] = False
         rows[row["id"]] = row
         ok += row["status"] == "ok"
         failed += row["status"] != "ok"
-        if on_row is not None:
-            on_row(row)
-        running = min(slots, len(tasks) - ok - failed)
+        running = min(engine.slots, len(tasks) - ok - failed)  # known once the engine runs
         progress(ok + failed, len(tasks), counts_message(ok, failed, running, reused))
     ordered = [rows[t.id] for t in tasks]
+    slots = engine.slots if todo else 1
     return BatchResult(ordered, engine.name, reused, time.perf_counter() - start, slots)
 
 

@@ -182,9 +182,12 @@ class RayEngine:
     def __init__(self, address: str | None = "auto", num_cpus: int | None = None) -> None:
         self.address = address
         self.num_cpus = num_cpus
+        self._cpus: int | None = None  # the cluster's CPUs, read when a run starts
 
     @property
     def slots(self) -> int:
+        if self._cpus is not None:
+            return self._cpus
         import ray
 
         return int(ray.cluster_resources().get("CPU", 1)) if ray.is_initialized() else 1
@@ -200,6 +203,7 @@ class RayEngine:
                 log_to_driver=False,
                 configure_logging=False,
             )
+        self._cpus = int(ray.cluster_resources().get("CPU", 1))
         try:
             remote = ray.remote(num_cpus=1, max_retries=0, runtime_env={"env_vars": ONE_THREAD})(
                 _ray_task

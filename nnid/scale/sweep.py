@@ -29,7 +29,7 @@ from nnid.config import SweepSpec, TrainConfig, load_config, set_option
 from nnid.errors import NnidInputError
 from nnid.scale.batch import BatchResult, run_tasks
 from nnid.scale.manifest import Task, with_id
-from nnid.trainers.history import Progress
+from nnid.trainers.history import Progress, silent
 from nnid.validation import read_toml
 
 
@@ -217,7 +217,7 @@ def _tune_trial(params: dict, tasks: list[Task], out_root: str) -> None:
 
     row = run_task(task, out_root, progress=report)
     tune.report({"objective": last.get("validation", math.inf), "finished": 1.0,
-                 "status_ok": float(row["status"] == "ok")})  # fmt: skip
+                 "error": row["error"] or ""})  # fmt: skip
 
 
 def run_sweep_tune(
@@ -270,37 +270,30 @@ def run_sweep_tune(
         tune_config=tune.TuneConfig(metric="objective", mode="min", scheduler=scheduler),
         run_config=tune.RunConfig(storage_path=str(out_dir / ".tune"), name="sweep", verbose=0),
     )
+    cpus = int(ray.cluster_resources().get("CPU", 1))
     box: dict[str, Any] = {}
     thread = threading.Thread(target=lambda: box.setdefault("grid", tuner.fit()))
     thread.start()
     while thread.is_alive():  # progress: the trials whose outputs are written
         done = sum(finished(t, out_dir) is not None for t in tasks)
-        (progress or _silent)(done, len(tasks), f"{done} of {len(tasks)} trials finished")
+        (progress or silent)(done, len(tasks), f"{done} of {len(tasks)} trials finished")
         thread.join(1.0)
     try:
-        rows = []
-        for i, result in enumerate(sorted(box["grid"], key=lambda r: r.config["trial"])):
-            task = tasks[result.config["trial"]]
-            assert i == result.config["trial"]
-            rows.append(_tune_row(task, result, out_dir))
+        trial_results = sorted(box["grid"], key=lambda r: r.config["trial"])
+        rows = [_tune_row(tasks[r.config["trial"]], r, out_dir) for r in trial_results]
     finally:
         if own:
             ray.shutdown()
     batch = BatchResult(rows, "ray tune" + (" (ASHA)" if spec.early_stopping else ""),
-                        0, time.perf_counter() - start, len(tasks))  # fmt: skip
+                        0, time.perf_counter() - start, cpus)  # fmt: skip
     ranked = _write_sweep(spec, config, tasks, batch, out_dir)
-    stopped = [r for r in rows if r["status"] == "stopped"]
     batch.extra["sweep"]["early_stopping"] = {
         "scheduler": "ASHA" if spec.early_stopping else None,
-        "stopped": len(stopped),
+        "stopped": sum(r["status"] == "stopped" for r in rows),
         "epochs_run": sum(r.get("epochs") or 0 for r in rows),
     }
     write_summary(batch, out_dir, title="nnid sweep")
     return batch, ranked
-
-
-def _silent(*args: Any, **kwargs: Any) -> None:
-    """No progress to report."""
 
 
 def _tune_row(task: Task, result, out_dir: Path) -> dict[str, Any]:
@@ -322,4 +315,4 @@ def _tune_row(task: Task, result, out_dir: Path) -> dict[str, Any]:
             f"{metrics.get('objective', float('nan')):.4g})",
         )
         return {**row, "status": "stopped", "epochs": epochs}
-    return {**failed_row(task, "the fit failed (see the trial's error)"), "epochs": epochs}
+    return {**failed_row(task, metrics.get("error") or "the fit failed"), "epochs": epochs}

@@ -51,7 +51,8 @@ def _run(task: Task, out_dir: Path, progress: Progress | None = None):
         for key in ("dofs", "validation", "exclude"):  # lists in TOML, text on the CLI
             if isinstance(options.get(key), list):
                 options[key] = ",".join(options[key])
-        return runs.loop_run(cfg, config, out_dir, task.data, task.vehicle, task.columns, **options)
+        return runs.loop_run(cfg, config, out_dir, task.data or None, task.vehicle,
+                             task.columns, progress=progress, **options)  # fmt: skip
     if task.command == "detect":
         window = task.options.get("window")
         return runs.detect_run(Path(task.model), task.data, out_dir, task.columns, window,
