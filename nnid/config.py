@@ -475,7 +475,7 @@ class NarxModelSpec(_Model):
     delta: bool = True
     multi_step: int = Field(1, ge=1)
     simulation_epochs: int = Field(0, ge=0)
-    simulation_window: int = Field(200, ge=2)
+    simulation_window: Annotated[int, Field(ge=2)] | list[Annotated[int, Field(ge=2)]] = 200
     simulation_lr: PositiveFloat = 1e-3
     batch_size: int = Field(256, ge=1)
     samples_per_epoch: int | None = Field(None, ge=1)

@@ -39,12 +39,31 @@ def _runs(log: pd.DataFrame, *names: str) -> pd.DataFrame:
     return log[log["experiment"].isin(names)].reset_index(drop=True)
 
 
+def _held_out_surge() -> pd.DataFrame:
+    """A 100 Hz surge run of other stair levels (within the sequence's ±30 N), 1 % noise."""
+    levels = [25.0, -15.0, 28.0, 5.0, -28.0, 15.0, -8.0, 0.0]
+    exp = Experiment(name="held", signals=[{"kind": "stairs", "channel": "X", "levels": levels,
+                                            "hold": 8.0}])  # fmt: skip
+    log = simulate(load_vehicle("seamor"), experiment_inputs(exp, tuple("XYZKMN"), 0.01), 0.01,
+                   seed=3)  # fmt: skip
+    log["experiment"] = "held"
+    relative_noise(log, {"u": "u", "tau_X": "tau_X"}, 0.01, np.random.default_rng(1))
+    return log
+
+
 def test_surge_three_nodes_two_delays_follows_free_run(seamor):
-    # measured 0.045 (LM, 100 epochs); the bound leaves room for BLAS and seed differences
-    surge = _runs(seamor, "surge")
-    lm = LevenbergMarquardt(max_epochs=60, jacobian="samples")
-    model = NarxModel(["tau_X"], ["u"], 2, 2, hidden=(3,), trainer=lm, seed=0).fit(surge)
-    assert model.score(surge, "free_run")["u"] < 0.10
+    # Weiss's 3-node, 2-delay surge net: one-step LM, then LM on the free-run error of windows
+    # (100, 500 samples, then the whole run), early-stopped on the block division's validation
+    # part; scored in free run on a surge run of other levels it never saw. Measured over seeds
+    # 0-4: 0.031, 0.012, 0.071, 0.015, 0.012 (seed 2 starts from a diverging one-step net).
+    surge, held = _runs(seamor, "surge"), _held_out_surge()
+    model = NarxModel(
+        ["tau_X"], ["u"], 2, 2, hidden=(3,), seed=1,
+        trainer=LevenbergMarquardt(max_epochs=60, jacobian="samples"),
+        simulation_epochs=30, simulation_trainer="lm", simulation_window=[100, 500, 5000],
+    ).fit(surge)  # fmt: skip
+    assert model.finetune_["kept"]
+    assert model.score(held, "free_run")["u"] < 0.05
 
 
 def test_coupled_four_output_network_predicts_unseen_surge_sway(seamor):
@@ -123,8 +142,10 @@ def test_no_delay_vector_crosses_an_experiment_boundary(seamor):
 
 def test_cli_train_narx_adam_writes_contract_metrics(tmp_path):
     text = (ROOT / "configs/seamor_narx_adam.toml").read_text()
-    text = text.replace('"seamor_sequence.toml"', f'"{ROOT / "configs/seamor_sequence.toml"}"')
+    sim = ROOT / "configs/seamor_sequence_narx.toml"
+    text = text.replace('"seamor_sequence_narx.toml"', f'"{sim}"')
     text = text.replace("max_epochs = 40", "max_epochs = 1")
+    text = text.replace("simulation_epochs = 30", "simulation_epochs = 1")
     cfg = tmp_path / "narx.toml"
     cfg.write_text(text)
     out = tmp_path / "out"
@@ -142,6 +163,10 @@ def test_cli_train_narx_adam_writes_contract_metrics(tmp_path):
     assert m["seconds"] > 0
     assert (out / "tensors.pt").exists() and (out / "model.json").exists()
     assert m["validation_used_for"] == "early stopping"
+    ft = m["describe"]["simulation_finetune"]  # the free-run stage ran and was judged
+    assert ft["epochs"] == 1 and np.isfinite(ft["validation_free_run_nrmse_before"])
+    held = {p: [e["experiment"] for e in m["split"]["parts"][p]] for p in ("validation", "test")}
+    assert held == {"validation": ["surge-sway-yaw-b"], "test": ["surge-sway-b"]}
 
 
 def _surge_stairs(levels: list[float], hold: float, seed: int, name: str) -> pd.DataFrame:
@@ -290,3 +315,73 @@ def test_sqrt_output_transform_grows_regressor_runs_closed_loop_and_survives_sav
     pd.testing.assert_frame_equal(model.predict(train, "free_run"), back.predict(train, "free_run"))
     with pytest.raises(NnidInputError):
         NarxModel(["u"], ["y"], output_transform="log").fit(train)
+
+
+def _two_output_plant(n: int = 600) -> pd.DataFrame:
+    """Two coupled first-order outputs, the second offset so that √y is defined."""
+    rng = np.random.default_rng(0)
+    u = np.repeat(rng.standard_normal((n // 15 + 1, 2)), 15, axis=0)[:n]
+    y = np.zeros((n, 2))
+    for k in range(1, n):
+        y[k] = 0.9 * y[k - 1] + 0.1 * np.tanh(u[k - 1] + y[k - 1, ::-1])
+    return pd.DataFrame(
+        {"t": 0.1 * np.arange(n), "a": u[:, 0], "b": u[:, 1], "y1": y[:, 0], "y2": y[:, 1] + 1}
+    )
+
+
+@pytest.mark.parametrize("transform", [None, "sqrt"])
+@pytest.mark.parametrize("bounds", [None, [[None, 0.05], [None, None]]])
+def test_sensitivity_recursion_equals_forward_mode_through_the_closed_loop(transform, bounds):
+    # The supplied Jacobian of the simulation error (local Jacobians + linear recursion in
+    # time, in blocks under a tiny budget) against forward-mode products through the closed
+    # loop: two hidden layers, delays 1 and 3 (a gap), a clamp that binds, the √ regressors.
+    log = _two_output_plant()
+    model = NarxModel(
+        ["a", "b"], ["y1", "y2"], 2, [1, 3], hidden=(5, 3), output_bounds=bounds,
+        output_transform=transform, trainer=LevenbergMarquardt(max_epochs=3),
+    ).fit(log)  # fmt: skip
+    batch = model._fixed_windows(model._table(log), 150)
+    if bounds is not None:
+        sim = model._rollout(model._weights(), batch[0], batch[1]).detach()
+        hi = float(model._norm_bounds()[1][0])
+        assert (sim[..., 0] >= hi).any() and (sim[..., 0] < hi).any()  # the clamp binds
+    forward = LevenbergMarquardt(jacobian="forward").normal_equations(
+        model.net_, model._window_residual, [batch]
+    )
+    lm = LevenbergMarquardt(memory_budget_mb=0.05)  # blocks of ≈ 6,500 elements
+    supplied = lm.normal_equations(
+        model.net_, model._window_residual, [batch], jacobian_rows=model._simulation_rows
+    )
+    assert lm._mode == "supplied" and 0 < lm._peak_elements <= 0.05 * 2**20 / 8
+    torch.testing.assert_close(supplied.jtj, forward.jtj, rtol=1e-11, atol=1e-9)
+    torch.testing.assert_close(supplied.jtr, forward.jtr, rtol=1e-11, atol=1e-9)
+    assert supplied.sse == pytest.approx(forward.sse, rel=1e-12)
+
+
+def test_simulation_windows_grow_in_stages_and_stop_on_the_whole_validation_run():
+    # windows of 10, then 60 samples; each stage early-stopped on the whole free run of the
+    # validation record, whose MSE (normalised units) is what the progress reports
+    train, val = _tank(400, 1.3, 2), _tank(300, 1.3, 3)
+    seen: list[tuple[str, float]] = []
+
+    def progress(epoch, total, message, **scores):
+        if message.startswith("simulation"):
+            seen.append((message.split(":")[1].strip(), scores["validation"]))
+
+    model = NarxModel(
+        ["u"], ["y"], 2, 2, hidden=(3,), balanced=False, lm_samples=300,
+        trainer=LevenbergMarquardt(max_epochs=5, jacobian="samples"),
+        simulation_epochs=4, simulation_window=[10, 60], simulation_trainer="lm",
+    )  # fmt: skip
+    model.fit(train, val, progress=progress)
+    stages = [s for s, _ in seen]
+    assert stages[0] == "10 samples" and stages[-1] == "60 samples"
+    assert stages == sorted(stages, key=lambda s: int(s.split()[0]))  # short windows first
+    assert model.finetune_["epochs"] == len(seen)
+    (batch,) = model._whole_runs(model._table(val))
+    assert batch[2].shape[1] == len(val) - model.warmup_samples_  # the whole run, one window
+    mse = float((model._window_residual(model._weights(), batch) ** 2).mean())
+    assert model.finetune_["kept"]
+    assert mse <= min(v for _, v in seen) * (1 + 1e-12)  # each stage keeps its best epoch
+    with pytest.raises(NnidInputError, match="simulation_window"):
+        NarxModel(["u"], ["y"], simulation_window=[1, 50], simulation_epochs=1).fit(train)

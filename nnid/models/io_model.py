@@ -15,7 +15,7 @@ from torch import nn
 
 from nnid.datasets.log import validate_table
 from nnid.datasets.preprocess import experiments
-from nnid.evaluation.evaluate import score_prediction
+from nnid.evaluation.evaluate import score_prediction, target_columns
 from nnid.evaluation.metrics import warmup_mask
 from nnid.models.base import NnidModel
 
@@ -90,11 +90,12 @@ class InputOutputModel(NnidModel):
         return out
 
     def free_run_error(self, log: pd.DataFrame) -> float:
-        """Mean free-run NRMSE over the outputs (warm-up excluded); infinite when the free run
-        diverges: the number early decisions (keep a fine-tuning or not) compare."""
+        """Mean free-run NRMSE over the outputs the log excites (warm-up excluded; the columns
+        of the reported scores, :func:`target_columns`); infinite when the free run diverges:
+        the number early decisions (keep a fine-tuning or not) compare."""
         pred = self._predict(log, "free_run").set_axis(log.index)
         mask = warmup_mask(log, 0.0, self.warmup_samples_)
-        nrmse, _, _ = score_prediction(log, pred, self.outputs_, mask)
+        nrmse, _, _ = score_prediction(log, pred, target_columns(self, log), mask)
         return np.inf if nrmse["total"] is None else float(nrmse["total"])
 
     def _n_params(self) -> int:

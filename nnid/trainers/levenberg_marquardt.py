@@ -11,7 +11,12 @@ and solves the damped system of MATLAB's ``trainlm``
     (JᵀJ + μ I) δ = −Jᵀr.
 
 A trial step θ + δ is accepted when the training SSE decreases (then μ ← μ·μ_dec), otherwise
-μ ← μ·μ_inc and the system is solved again with the same Jacobian, until μ > μ_max. Defaults are
+μ ← μ·μ_inc and the system is solved again with the same Jacobian, until μ > μ_max.
+``damping="nielsen"`` replaces trainlm's fixed factors by Nielsen's gain-ratio rule (Nielsen
+1999; Madsen, Nielsen & Tingleff 2004, eq. 2.21): with ρ the ratio of the SSE's actual to its
+predicted decrease, δᵀ(μδ − Jᵀr), an accepted step sets μ ← μ·max(1/3, 1 − (2ρ − 1)³) and
+ν ← 2, a rejected one μ ← μ·ν, ν ← 2ν: μ falls fast where the Gauss-Newton model is good and
+barely moves where it is poor, instead of swinging by 10× each way. Defaults are
 those documented for ``trainlm``: μ = 0.001, μ_dec = 0.1, μ_inc = 10, μ_max = 1e10,
 epochs = 1000, max_fail = 6 validation checks, min_grad = 1e-7, goal = 0. As in ``trainlm`` μ is
 floored at 1e-20 after a decrease, and when validation batches are given the returned
@@ -36,6 +41,11 @@ Jacobians come from :mod:`torch.func`; there are two modes:
   ``budget / (8 P)`` rows (and at most 8192 rows, beyond which chunks only cost memory), whose
   JᵀJ and Jᵀr are added into the P × P system. This is much cheaper than forward mode for
   networks with many samples.
+- ``jacobian_rows`` given to :meth:`fit` (mode ``"supplied"``, what ``"auto"`` then uses): the
+  caller computes the rows of J itself, in blocks within the budget, where it knows a cheaper
+  formulation than forward mode, e.g. the sensitivity recursion of a recurrent simulation
+  (:meth:`nnid.models.narx.NarxModel._simulation_rows`): one batched pass of per-step local
+  Jacobians, then a linear recursion in time, instead of one closed-loop pass per parameter.
 
 The same trainer fits nonlinear physics parameters: any ``nn.Module`` whose parameters are the
 unknowns and a residual that computes model − measurement with ``functional_call``.
@@ -45,7 +55,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -59,6 +69,10 @@ from nnid.trainers.history import History, Progress, silent
 __all__ = ["LevenbergMarquardt", "NormalEquations"]
 
 Residual = Callable[[dict[str, torch.Tensor], Any], torch.Tensor]
+#: ``jacobian_rows(params, batch, budget_elements)`` yields (J block [rows, P], residual [rows])
+JacobianRows = Callable[
+    [dict[str, torch.Tensor], Any, int], Iterable[tuple[torch.Tensor, torch.Tensor]]
+]
 
 _MU_FLOOR = 1e-20  # trainlm: ``if mu < 1e-20, mu = 1e-20``
 _CACHE_ROWS = 8192  # samples mode: row chunks above this are no faster (cache), only larger
@@ -113,8 +127,14 @@ class LevenbergMarquardt(BaseEstimator):
         goal: stop when the training MSE is at or below this (trainlm ``goal`` = 0).
         memory_budget_mb: the largest Jacobian block (float64) held at once, in MiB.
         jacobian: ``"forward"`` (any residual), ``"samples"`` (residual separable by sample;
-            see the module docstring) or ``"auto"`` (default: "samples" when the caller of
-            :meth:`fit` says the residual is separable, else "forward").
+            see the module docstring) or ``"auto"`` (default: the caller's ``jacobian_rows``
+            when :meth:`fit` is given them, else "samples" when the caller says the residual
+            is separable, else "forward").
+        damping: ``"trainlm"`` (μ·μ_dec after an accepted step, μ·μ_inc after a rejected one)
+            or ``"nielsen"`` (the gain-ratio rule of the module docstring; μ_dec and μ_inc
+            unused).
+        l2: λ of a penalty λ‖θ‖² added to the sum of squares (Tikhonov / weight decay: the
+            rows √λ θ appended to the residual, √λ I to the Jacobian; default 0).
     """
 
     kind = "lm"
@@ -131,6 +151,8 @@ class LevenbergMarquardt(BaseEstimator):
         goal: float = 0.0,
         memory_budget_mb: float = 256.0,
         jacobian: str = "auto",
+        damping: str = "trainlm",
+        l2: float = 0.0,
     ) -> None:
         self.mu = mu
         self.mu_dec = mu_dec
@@ -142,7 +164,10 @@ class LevenbergMarquardt(BaseEstimator):
         self.goal = goal
         self.memory_budget_mb = memory_budget_mb
         self.jacobian = jacobian
+        self.damping = damping
+        self.l2 = l2
         self._mode = "forward"
+        self._rows_fn: JacobianRows | None = None
         self._peak_rows = 0
         self._peak_elements = 0
         self._rows: dict[int, int] = {}
@@ -193,15 +218,39 @@ class LevenbergMarquardt(BaseEstimator):
                 r = residual(params, b).reshape(-1).to(torch.float64)
                 sse += float(r @ r)
                 n += r.numel()
-        return sse, n
+        return sse + self._penalty(theta), n
+
+    def _penalty(self, theta: torch.Tensor) -> float:
+        return self.l2 * float(theta @ theta) if self.l2 > 0 else 0.0
 
     def normal_equations(
-        self, module: torch.nn.Module, residual: Residual, batches: Sequence[Any]
+        self,
+        module: torch.nn.Module,
+        residual: Residual,
+        batches: Sequence[Any],
+        separable: bool = False,
+        jacobian_rows: JacobianRows | None = None,
     ) -> NormalEquations:
-        """JᵀJ, Jᵀr and SSE over ``batches`` at the module's current parameters (float64)."""
+        """JᵀJ, Jᵀr and SSE over ``batches`` at the module's current parameters (float64),
+        in the mode :meth:`fit` would use with the same arguments."""
+        self._select_mode(separable, jacobian_rows)
         return self._normal_equations(
             residual, self._flatten(module), self._layout(module), batches
         )
+
+    def _select_mode(self, separable: bool, jacobian_rows: JacobianRows | None) -> None:
+        if self.jacobian not in ("auto", "forward", "samples"):
+            raise NnidInputError(
+                f"jacobian is 'auto', 'forward' or 'samples', not {self.jacobian!r}",
+                field="jacobian",
+            )
+        self._rows_fn = jacobian_rows
+        if self.jacobian != "auto":
+            self._mode = self.jacobian
+        elif jacobian_rows is not None:
+            self._mode = "supplied"
+        else:
+            self._mode = "samples" if separable else "forward"
 
     def _normal_equations(
         self, residual: Residual, theta: torch.Tensor, layout: list, batches: Sequence[Any]
@@ -213,11 +262,31 @@ class LevenbergMarquardt(BaseEstimator):
         for b in batches:
             if self._mode == "forward":
                 s, k = self._accumulate_forward(residual, theta, layout, b, jtj, jtr)
+            elif self._mode == "supplied":
+                s, k = self._accumulate_supplied(theta, layout, b, jtj, jtr)
             else:
                 s, k = self._accumulate_samples(residual, theta, layout, b, jtj, jtr)
             sse += s
             n += k
+        if self.l2 > 0:
+            jtj.diagonal().add_(self.l2)
+            jtr += self.l2 * theta
+            sse += self._penalty(theta)
         return NormalEquations(jtj, jtr, sse, n)
+
+    def _accumulate_supplied(self, theta, layout, batch, jtj, jtr) -> tuple[float, int]:
+        """Jacobian rows computed by the caller (``jacobian_rows``), block by block."""
+        params = {k: v.detach() for k, v in self._unflatten(theta, layout).items()}
+        sse, n = 0.0, 0
+        for jac, r in self._rows_fn(params, batch, self._budget_elements):  # type: ignore[misc]
+            jac = jac.detach().to(torch.float64)
+            r64 = r.detach().reshape(-1).to(torch.float64)
+            self._note(jac.shape[0], jac.shape[1])
+            jtj += jac.T @ jac
+            jtr += jac.T @ r64
+            sse += float(r64 @ r64)
+            n += r64.numel()
+        return sse, n
 
     def _accumulate_forward(self, residual, theta, layout, batch, jtj, jtr) -> tuple[float, int]:
         """Forward-mode Jacobian of one batch, in column blocks within the budget."""
@@ -318,6 +387,7 @@ class LevenbergMarquardt(BaseEstimator):
         val_batches: Sequence[Any] | None = None,
         progress: Progress | None = None,
         separable: bool = False,
+        jacobian_rows: JacobianRows | None = None,
     ) -> History:
         """Train ``module``'s parameters in place; returns the per-epoch :class:`History`
         (``extra``: ``mu`` per entry, ``gradient`` ‖∇ MSE‖ = 2‖Jᵀr‖/N per Jacobian pass;
@@ -330,20 +400,22 @@ class LevenbergMarquardt(BaseEstimator):
         validation batches the best-validation parameters are written back (as trainlm).
         ``progress(epoch, max_epochs, message)`` is called after every epoch. ``separable``
         tells ``jacobian="auto"`` that the residual is separable by sample (then "samples"
-        mode, else "forward").
+        mode, else "forward"); ``jacobian_rows(params, batch, budget_elements)``, when given,
+        yields the Jacobian's rows of a batch with their residuals in blocks of at most
+        ``budget_elements`` (then "supplied" mode under "auto"; it must agree with
+        ``residual``, which still judges the trial steps).
         """
-        if self.jacobian not in ("auto", "forward", "samples"):
-            raise NnidInputError(
-                f"jacobian is 'auto', 'forward' or 'samples', not {self.jacobian!r}",
-                field="jacobian",
-            )
+        self._select_mode(separable, jacobian_rows)
         if not (0.0 < self.mu_dec < 1.0 < self.mu_inc):
             raise NnidInputError("need 0 < mu_dec < 1 < mu_inc", field="mu_dec")
         if self.memory_budget_mb <= 0:
             raise NnidInputError("memory_budget_mb must be positive", field="memory_budget_mb")
-        self._mode = (
-            self.jacobian if self.jacobian != "auto" else ("samples" if separable else "forward")
-        )
+        if self.l2 < 0:
+            raise NnidInputError("l2 must be at least 0", field="l2")
+        if self.damping not in ("trainlm", "nielsen"):
+            raise NnidInputError("damping is 'trainlm' or 'nielsen'", field="damping")
+        nielsen = self.damping == "nielsen"
+        nu = 2.0
         t0 = time.perf_counter()
         report = progress or silent
         self._rows = {}
@@ -405,12 +477,21 @@ class LevenbergMarquardt(BaseEstimator):
                     trial = theta + delta
                     sse2, _ = self._sse(residual, trial, layout, train_batches)
                     if math.isfinite(sse2) and sse2 < sse:
+                        predicted = float(delta @ (mu * delta - ne.jtr))
+                        rho = (sse - sse2) / predicted if predicted > 0 else 1.0
                         theta, sse = trial, sse2
                         mse = sse2 / n
-                        mu = max(mu * self.mu_dec, _MU_FLOOR)
+                        if nielsen:
+                            mu, nu = mu * max(1 / 3, 1 - (2 * rho - 1) ** 3), 2.0
+                        else:
+                            mu = mu * self.mu_dec
+                        mu = max(mu, _MU_FLOOR)
                         accepted = True
                         break
-                mu *= self.mu_inc
+                if nielsen:
+                    mu, nu = mu * nu, 2 * nu
+                else:
+                    mu *= self.mu_inc
             epoch += 1
             v = val_mse(theta) if accepted else (hist.validation[-1] if use_val else None)
             if use_val and accepted:
