@@ -98,13 +98,17 @@ SETTINGS = {
             "input_delays": 4,
             "output_delays": 4,
             "hidden": (10,),
-            "simulation_epochs": 20,
-            "simulation_window": 200,
-            "simulation_lr": 5e-3,
+            # chosen on --holdout (RMSE on the last 20 % of the training split, seed 0): LM on
+            # windows of 100, then 500 samples 0.592 mV; Adam on windows of 200 (lr 5e-3, 20
+            # epochs, the earlier setting) 5.82 mV
+            "simulation_epochs": 30,
+            "simulation_trainer": "lm",
+            "simulation_window": [100, 500],
         },
         "lm_epochs": 50,
         "lm_samples": 8000,
         "seeds": (0,),
+        "holdout": 52_049,  # --holdout: the first 80 % of the training split, as bench_peers
         "tests": ["test_multisine", "test_arrow_full"],
         "scale": 1e3,
         "unit": "mV",

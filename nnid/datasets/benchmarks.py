@@ -181,7 +181,7 @@ def _cascaded_tanks(folder: Path) -> Benchmark:
         warmup=50,
         source=str(folder),
         notes="u = pump voltage (V), y = lower-tank level sensor (V, overflow saturates at 10 V); "
-        "RMSE in V. n_init = 50 per SOURCE.md (nonlinear-benchmarks itself uses 5).",
+        "RMSE in V. n_init = 50 per SOURCE.md (nonlinear-benchmarks 1.0.1 too; 1.0.0 had 5).",
     )
 
 
