@@ -293,6 +293,8 @@ class LevenbergMarquardtSpec(_Trainer):
     goal: float = Field(0.0, ge=0, allow_inf_nan=False)
     memory_budget_mb: PositiveFloat = 256.0
     jacobian: Literal["auto", "forward", "samples"] = "auto"
+    damping: Literal["trainlm", "nielsen"] = "trainlm"
+    l2: float = Field(0.0, ge=0, allow_inf_nan=False)
 
 
 class AdamSpec(_Trainer):

@@ -247,7 +247,13 @@ def test_l2_penalty_is_the_residual_with_sqrt_lambda_theta_rows() -> None:
         torch.testing.assert_close(ne.jtr, ref.jtr, rtol=1e-11, atol=1e-11)
         assert ne.sse == pytest.approx(ref.sse, rel=1e-12)
     heavy = _mlp([2, 5, 1], seed=3)
-    LevenbergMarquardt(max_epochs=30, l2=100.0).fit(heavy, _regression_residual(heavy), [(x, y)])
+    fit = _regression_residual(heavy)
+    hist = LevenbergMarquardt(max_epochs=30, l2=100.0).fit(heavy, fit, [(x, y)], [(x, y)])
+    with torch.no_grad():
+        plain = float((fit(dict(heavy.named_parameters()), (x, y)) ** 2).mean())
+    # validation scores the data alone; the training SSE carries the penalty
+    assert hist.validation[hist.best_epoch] == pytest.approx(plain, rel=1e-12)
+    assert hist.train[hist.best_epoch] > plain
     light = _mlp([2, 5, 1], seed=3)
     LevenbergMarquardt(max_epochs=30).fit(light, _regression_residual(light), [(x, y)])
     shrunk = np.linalg.norm(_flat(heavy)) < 0.5 * np.linalg.norm(_flat(light))

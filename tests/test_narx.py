@@ -380,7 +380,8 @@ def test_simulation_windows_grow_in_stages_and_stop_on_the_whole_validation_run(
     assert model.finetune_["epochs"] == len(seen)
     (batch,) = model._whole_runs(model._table(val))
     assert batch[2].shape[1] == len(val) - model.warmup_samples_  # the whole run, one window
-    mse = float((model._window_residual(model._weights(), batch) ** 2).mean())
+    with torch.no_grad():
+        mse = float((model._window_residual(model._weights(), batch) ** 2).mean())
     assert model.finetune_["kept"]
     assert mse <= min(v for _, v in seen) * (1 + 1e-12)  # each stage keeps its best epoch
     with pytest.raises(NnidInputError, match="simulation_window"):

@@ -209,8 +209,16 @@ class LevenbergMarquardt(BaseEstimator):
 
     # ------------------------------------------------------------------ evaluation
 
-    def _sse(self, residual: Residual, theta: torch.Tensor, layout: list, batches: Sequence[Any]):
-        """(SSE, number of residuals) over ``batches`` at ``theta`` (no autograd)."""
+    def _sse(
+        self,
+        residual: Residual,
+        theta: torch.Tensor,
+        layout: list,
+        batches: Sequence[Any],
+        penalised: bool = True,
+    ):
+        """(SSE, number of residuals) over ``batches`` at ``theta`` (no autograd); with the
+        λ‖θ‖² penalty unless ``penalised`` is False (validation scores the data alone)."""
         params = self._unflatten(theta, layout)
         sse, n = 0.0, 0
         with torch.no_grad():
@@ -218,7 +226,7 @@ class LevenbergMarquardt(BaseEstimator):
                 r = residual(params, b).reshape(-1).to(torch.float64)
                 sse += float(r @ r)
                 n += r.numel()
-        return sse + self._penalty(theta), n
+        return sse + (self._penalty(theta) if penalised else 0.0), n
 
     def _penalty(self, theta: torch.Tensor) -> float:
         return self.l2 * float(theta @ theta) if self.l2 > 0 else 0.0
@@ -430,7 +438,7 @@ class LevenbergMarquardt(BaseEstimator):
         def val_mse(th: torch.Tensor) -> float | None:
             if not use_val:
                 return None
-            s, k = self._sse(residual, th, layout, val_batches)  # type: ignore[arg-type]
+            s, k = self._sse(residual, th, layout, val_batches, penalised=False)  # type: ignore[arg-type]
             return s / max(k, 1)
 
         best_val = val_mse(theta)
