@@ -627,23 +627,19 @@ class NarxModel(InputOutputModel):
 
     def _simulation_finetune(self, tab, sampler, validation_log, progress: Progress) -> None:
         """Output-error training on free runs over windows of ``simulation_window`` samples
-        from measured delay states: Adam on random windows (back-propagation through the
-        closed loop) or, with ``simulation_trainer="lm"``, Levenberg-Marquardt on fixed
-        windows; kept only if the validation free-run error falls."""
+        (each length in turn) from measured delay states: Adam on random windows
+        (back-propagation through the closed loop) or, with ``simulation_trainer="lm"``,
+        Levenberg-Marquardt on fixed windows; kept only if the validation free-run error
+        falls."""
         held_out = validation_log is not None
         before = self.free_run_error(validation_log) if held_out else None
         state = {k: v.clone() for k, v in self.net_.state_dict().items()}
+        train = self._simulation_lm if self.simulation_trainer == "lm" else self._simulation_adam
+        stages = len(self.simulation_windows_) > 1
         epochs = None
         for length in self.simulation_windows_:  # short windows first: a smoother objective
-            stage = (
-                staged(progress, f"{length} samples")
-                if len(self.simulation_windows_) > 1
-                else progress
-            )
-            train = (
-                self._simulation_lm if self.simulation_trainer == "lm" else self._simulation_adam
-            )
-            done = train(tab, sampler, validation_log, stage, length)
+            report = staged(progress, f"{length} samples") if stages else progress
+            done = train(tab, sampler, validation_log, report, length)
             if done is not None:
                 epochs = (epochs or 0) + done
         if epochs is None:
