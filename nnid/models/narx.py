@@ -32,8 +32,8 @@ columns (body velocities u v w r ...).
 * **Levenberg-Marquardt on simulation error** (``simulation_trainer="lm"``): on deterministic
   windows, the Jacobian of the closed loop by its sensitivity recursion
   (:meth:`NarxModel._simulation_rows`): written-out local Jacobians of every step in one
-  batched pass, then a linear recursion in time (about 1.3× a one-step LM iteration on as many
-  rows, where forward mode, one closed-loop pass per parameter, costs about 20×;
+  batched pass, then a linear recursion in time (about 2× a one-step LM iteration on as many
+  rows, where forward mode, one closed-loop pass per parameter, costs 16-25×;
   ``benchmarks/bench_narx_simulation.py``).
 * **Output transform** (``output_transform="sqrt"``, off by default): the regressor also holds
   √max(y(k − d_y), 0) of every lagged output (in the output's units, then standardised), e.g.
