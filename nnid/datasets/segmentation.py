@@ -80,6 +80,14 @@ def label_transients(
     return pd.Series(out, index=log.index, name="transient")
 
 
+def run_bounds(codes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """First index and one-past-last index of each contiguous run of equal codes (the
+    experiments of a log, in order)."""
+    codes = np.asarray(codes)
+    starts = np.flatnonzero(np.r_[True, codes[1:] != codes[:-1]])
+    return starts, np.r_[starts[1:], codes.size]
+
+
 class BalancedSampler:
     """Draws training samples (window ends) so that transient and steady-state samples carry
     equal total weight; any trainer can use it. Deterministic for a seed.
@@ -101,7 +109,7 @@ class BalancedSampler:
         n = self.labels.size
         experiment = np.zeros(n) if experiment is None else np.asarray(experiment)
         eligible = np.ones(n, dtype=bool)
-        starts = np.flatnonzero(np.r_[True, experiment[1:] != experiment[:-1]])
+        starts, _ = run_bounds(experiment)
         for s in starts:
             eligible[s : s + window - 1] = False
         self.eligible = eligible

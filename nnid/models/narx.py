@@ -54,7 +54,7 @@ from torch import nn
 from torch.func import functional_call
 
 from nnid.datasets.log import VELOCITY
-from nnid.datasets.segmentation import BalancedSampler, label_transients
+from nnid.datasets.segmentation import BalancedSampler, label_transients, run_bounds
 from nnid.datasets.splits import split_log
 from nnid.errors import NnidInputError
 from nnid.models.bounds import OutputBounds, bound_arrays, check_bounds, resolve_bounds
@@ -609,8 +609,7 @@ class NarxModel(InputOutputModel):
 
     def _eligible(self, code: np.ndarray, horizon: int) -> np.ndarray:
         keep = np.ones(code.size, dtype=bool)
-        starts = np.flatnonzero(np.r_[True, code[1:] != code[:-1]])
-        for s in starts:
+        for s in run_bounds(code)[0]:
             keep[s : s + self.warmup_samples_ + horizon - 1] = False
         return keep
 
@@ -635,11 +634,12 @@ class NarxModel(InputOutputModel):
         before = self.free_run_error(validation_log) if held_out else None
         state = {k: v.clone() for k, v in self.net_.state_dict().items()}
         train = self._simulation_lm if self.simulation_trainer == "lm" else self._simulation_adam
+        val = self._whole_runs(self._table(validation_log)) if held_out else None
         stages = len(self.simulation_windows_) > 1
         epochs = None
         for length in self.simulation_windows_:  # short windows first: a smoother objective
             report = staged(progress, f"{length} samples") if stages else progress
-            done = train(tab, sampler, validation_log, report, length)
+            done = train(tab, sampler, val, report, length)
             if done is not None:
                 epochs = (epochs or 0) + done
         if epochs is None:
@@ -659,9 +659,7 @@ class NarxModel(InputOutputModel):
         """Windows of ``length`` samples (shortened to the shortest experiment after its
         warm-up) ending at the last sample of each experiment and every ``length // 2``
         samples before it, as one batch; None when no experiment is longer than the warm-up."""
-        code = table["code"].numpy()
-        starts = np.flatnonzero(np.r_[True, code[1:] != code[:-1]])
-        stops = np.r_[starts[1:], code.size]
+        starts, stops = run_bounds(table["code"].numpy())
         spans = stops - starts - self.warmup_samples_
         if spans.max() < 1:
             return None
@@ -677,9 +675,7 @@ class NarxModel(InputOutputModel):
     def _whole_runs(self, table: dict[str, torch.Tensor]) -> list[tuple] | None:
         """One batch per experiment: its free run from the measured delay states to its end
         (what the reported free-run scores measure, in normalised units)."""
-        code = table["code"].numpy()
-        starts = np.flatnonzero(np.r_[True, code[1:] != code[:-1]])
-        stops = np.r_[starts[1:], code.size]
+        starts, stops = run_bounds(table["code"].numpy())
         runs = [
             self._batch(table, torch.as_tensor([e - 1]), int(e - s - self.warmup_samples_))
             for s, e in zip(starts, stops, strict=True)
@@ -687,15 +683,12 @@ class NarxModel(InputOutputModel):
         ]
         return runs or None
 
-    def _simulation_lm(
-        self, tab, sampler, validation_log, progress: Progress, length: int
-    ) -> int | None:
+    def _simulation_lm(self, tab, sampler, val, progress: Progress, length: int) -> int | None:
         from nnid.trainers.levenberg_marquardt import LevenbergMarquardt
 
         train = self._fixed_windows(tab, length)
         if train is None:
             return None
-        val = self._whole_runs(self._table(validation_log)) if validation_log is not None else None
         trainer = LevenbergMarquardt(
             max_epochs=int(self.simulation_epochs),
             max_fail=int(self.simulation_max_fail),
@@ -711,9 +704,7 @@ class NarxModel(InputOutputModel):
         )
         return hist.epochs
 
-    def _simulation_adam(
-        self, tab, sampler, validation_log, progress: Progress, length: int
-    ) -> int | None:
+    def _simulation_adam(self, tab, sampler, val, progress: Progress, length: int) -> int | None:
         from nnid.trainers.adam import Adam
 
         win = BalancedSampler(
@@ -726,7 +717,6 @@ class NarxModel(InputOutputModel):
         win.eligible &= sampler.eligible
         if not win.eligible.any():
             return None
-        val = self._whole_runs(self._table(validation_log)) if validation_log is not None else None
 
         def batches(epoch: int) -> list:
             ends = torch.as_tensor(win.sample(128, 1000 + epoch))
