@@ -477,7 +477,7 @@ class NarxModelSpec(_Model):
     delta: bool = True
     multi_step: int = Field(1, ge=1)
     simulation_epochs: int = Field(0, ge=0)
-    simulation_window: Annotated[int, Field(ge=2)] | list[Annotated[int, Field(ge=2)]] = 200
+    simulation_window: int | list[int] = 200
     simulation_lr: PositiveFloat = 1e-3
     batch_size: int = Field(256, ge=1)
     samples_per_epoch: int | None = Field(None, ge=1)
@@ -488,6 +488,14 @@ class NarxModelSpec(_Model):
     simulation_l2: float = Field(0.0, ge=0, allow_inf_nan=False)
     output_transform: Literal["sqrt"] | None = None
     trainer: NetworkTrainer | None = None
+
+    @field_validator("simulation_window")
+    @classmethod
+    def _windows(cls, window: int | list[int]) -> int | list[int]:
+        lengths = window if isinstance(window, list) else [window]
+        if not lengths or min(lengths) < 2:
+            raise ValueError("a window length of at least 2 samples, or a list of them")
+        return window
 
     def arguments(self) -> dict[str, Any]:
         args = super().arguments()

@@ -386,3 +386,14 @@ def test_simulation_windows_grow_in_stages_and_stop_on_the_whole_validation_run(
     assert mse <= min(v for _, v in seen) * (1 + 1e-12)  # each stage keeps its best epoch
     with pytest.raises(NnidInputError, match="simulation_window"):
         NarxModel(["u"], ["y"], simulation_window=[1, 50], simulation_epochs=1).fit(train)
+
+
+@pytest.mark.parametrize("window", [1, [100, 1], []])
+def test_config_refuses_a_simulation_window_below_two_samples(window):
+    from nnid.config import TrainConfig
+
+    with pytest.raises(NnidInputError) as err:
+        load_config(ROOT / "configs/seamor_narx_lm.toml", TrainConfig,
+                    {"model.simulation_window": window})  # fmt: skip
+    assert err.value.field == "model.simulation_window"
+    assert "at least 2 samples" in str(err.value)
