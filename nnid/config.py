@@ -18,6 +18,7 @@ from typing import Annotated, Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 from nnid.datasets.excitation import (
+    APRBS,
     PRBS,
     Chirp,
     DOptimalSine,
@@ -36,7 +37,8 @@ from nnid.physics.effects import parse_effect
 from nnid.validation import read_toml, validated
 
 Signal = Annotated[
-    Step | Stairs | Chirp | Multisine | PRBS | Sine | DOptimalSine, Field(discriminator="kind")
+    Step | Stairs | Chirp | Multisine | PRBS | APRBS | Sine | DOptimalSine,
+    Field(discriminator="kind"),
 ]
 Dof = Literal[DOFS]  # type: ignore[valid-type]
 Force = Literal[FORCES]  # type: ignore[valid-type]
@@ -486,7 +488,8 @@ class NarxModelSpec(_Model):
     simulation_trainer: Literal["adam", "lm"] = "adam"
     simulation_max_fail: int = Field(8, ge=1)
     simulation_l2: float = Field(0.0, ge=0, allow_inf_nan=False)
-    output_transform: Literal["sqrt"] | None = None
+    output_transform: Literal["sqrt", "products", "fossen"] | None = None
+    rest_equilibrium: bool = False
     trainer: NetworkTrainer | None = None
 
     @field_validator("simulation_window")

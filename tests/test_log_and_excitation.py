@@ -9,6 +9,7 @@ import pandas as pd
 import pytest
 
 from nnid.datasets.excitation import (
+    APRBS,
     PRBS,
     Chirp,
     DOptimalSine,
@@ -89,6 +90,28 @@ def test_prbs_is_maximum_length():
     sig = PRBS(channel="X", amplitude=2.0, hold=0.5, duration=10.0, offset=1.0)
     x = sig(np.arange(0, 12, 0.01))
     assert set(np.unique(x[:1000])) == {-1.0, 3.0} and (x[1000:] == 0).all()
+
+
+def test_aprbs_levels_and_holds_cover_the_range():
+    """APRBS: each level held between hold_min and hold_max, levels spread over offset ±
+    amplitude (not two values, as PRBS), the same draw for the same seed, zero after the run."""
+    sig = APRBS(channel="X", amplitude=30.0, hold_min=2.0, hold_max=8.0, duration=400.0, offset=5.0)
+    t = np.arange(0, 410, 0.01)
+    x = sig(t)
+    on = t < 400.0
+    assert (x[~on] == 0).all()
+    assert (x[on] >= -25.0).all() and (x[on] <= 35.0).all()
+    change = np.flatnonzero(np.diff(x[on]) != 0) + 1
+    holds = np.diff(t[change])
+    assert holds.min() >= 2.0 - 0.011 and holds.max() <= 8.0 + 0.011
+    assert 400 / 8.0 <= change.size + 1 <= 400 / 2.0 + 1
+    levels = x[on][np.r_[0, change]]
+    assert np.unique(levels).size == levels.size  # amplitude-modulated: no repeated level
+    assert np.histogram(levels, bins=4, range=(-25.0, 35.0))[0].min() >= 5  # whole range seen
+    assert np.array_equal(x, APRBS(**sig.model_dump())(t))
+    assert not np.array_equal(x, APRBS(**{**sig.model_dump(), "seed": 1})(t))
+    with pytest.raises(ValueError, match="hold_max must be at least hold_min"):
+        APRBS(channel="X", amplitude=1.0, hold_min=3.0, hold_max=2.0, duration=10.0)
 
 
 def test_multisine_peak_and_spectrum():

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import warnings
 from pathlib import Path
 
@@ -144,8 +145,8 @@ def test_cli_train_narx_adam_writes_contract_metrics(tmp_path):
     text = (ROOT / "configs/seamor_narx_adam.toml").read_text()
     sim = ROOT / "configs/seamor_sequence_narx.toml"
     text = text.replace('"seamor_sequence_narx.toml"', f'"{sim}"')
-    text = text.replace("max_epochs = 40", "max_epochs = 1")
-    text = text.replace("simulation_epochs = 30", "simulation_epochs = 1")
+    text = re.sub(r"(?m)^max_epochs = \d+", "max_epochs = 1", text)
+    text = re.sub(r"(?m)^simulation_epochs = \d+", "simulation_epochs = 1", text)
     cfg = tmp_path / "narx.toml"
     cfg.write_text(text)
     out = tmp_path / "out"
@@ -157,7 +158,8 @@ def test_cli_train_narx_adam_writes_contract_metrics(tmp_path):
     assert done.exit_code == 0, done.output
     m = json.loads((out / "metrics.json").read_text())
     assert m["model"] == "narx" and m["trainer"] == "adam" and m["settings"]["balanced"] is True
-    assert m["params"]["n_params"]["value"] == 374
+    # 4 lags × (4 outputs + their 10 products) + 4 lags × 4 forces → 10 tanh → 4
+    assert m["params"]["n_params"]["value"] == (4 * (4 + 10) + 4 * 4) * 10 + 10 + 10 * 4 + 4
     for key in ("free_run_nrmse", "one_step_nrmse"):
         assert np.isfinite(m["validation"][key]["total"])
     assert m["seconds"] > 0
@@ -317,6 +319,74 @@ def test_sqrt_output_transform_grows_regressor_runs_closed_loop_and_survives_sav
         NarxModel(["u"], ["y"], output_transform="log").fit(train)
 
 
+@pytest.mark.parametrize("transform", ["products", "fossen"])
+def test_products_transform_holds_each_lags_bilinear_terms_in_the_closed_loop(transform, tmp_path):
+    # y_i y_j (i ≤ j) of each lag's standardised outputs: 3 per lag for two outputs, and for
+    # "fossen" then y_i|y_i| in the outputs' units (2 more); the standardisation fitted on the
+    # training data, the numpy free run equal to the torch closed loop, and the option and
+    # buffers round-tripping through disk
+    log = _two_output_plant()
+    log["y2"] -= 1.0  # both outputs change sign: y|y| is not y²
+    kw = dict(hidden=(4,), balanced=False, trainer=LevenbergMarquardt(max_epochs=3))
+    model = NarxModel(["a", "b"], ["y1", "y2"], 2, 2, output_transform=transform, **kw)
+    model.fit(log, log)  # the whole log is the training data: the statistics below are its own
+    plain = NarxModel(["a", "b"], ["y1", "y2"], 2, 2, **kw).fit(log, log)
+    y = log[["y1", "y2"]].to_numpy()
+    yn = (y - model.net_.y_mean.numpy()) / model.net_.y_std.numpy()
+    raw = np.stack([yn[:, 0] ** 2, yn[:, 0] * yn[:, 1], yn[:, 1] ** 2], 1)
+    if transform == "fossen":
+        assert (y < 0).any(0).all() and (y > 0).any(0).all()
+        raw = np.concatenate([raw, y * np.abs(y)], 1)
+    n_s = raw.shape[1]
+    assert model.layer_sizes()[0] == plain.layer_sizes()[0] + 2 * n_s
+    np.testing.assert_allclose(model.net_.s_mean.numpy(), raw.mean(0), rtol=1e-12)
+    np.testing.assert_allclose(model.net_.s_std.numpy(), raw.std(0), rtol=1e-12)
+    table = model._table(log)
+    k = 40  # regressor row k holds the transforms of y(k − 1) and y(k − 2) after the outputs
+    lag1 = (
+        table["phi"][k, 4 : 4 + n_s].numpy() * model.net_.s_std.numpy() + model.net_.s_mean.numpy()
+    )
+    np.testing.assert_allclose(lag1, raw[k - 1], rtol=1e-10)
+    free = model.predict(log, "free_run")
+    closed = model.predict(log, len(log) - 2)
+    np.testing.assert_allclose(closed.iloc[-1], free.iloc[-1], rtol=1e-9)
+    model.save(tmp_path)
+    settings = json.loads((tmp_path / "model.json").read_text())["settings"]
+    assert settings["output_transform"] == transform
+    pd.testing.assert_frame_equal(free, load_model(tmp_path).predict(log, "free_run"))
+
+
+def test_rest_equilibrium_keeps_a_vehicle_at_rest_exactly(tmp_path):
+    # Fossen's model at ν = 0 and τ = 0 (neutral buoyancy) has ν̇ = 0: with rest_equilibrium the
+    # Δ increment at zero outputs and inputs (in their units) is zero to the last bit in every
+    # prediction path (one-step net, torch closed loop, numpy free run, after a save and load),
+    # where the same net without it drifts; the increment away from rest is the net's.
+    log = _two_output_plant()
+    log["y2"] -= 1.0
+    kw = dict(hidden=(6,), output_transform="fossen", trainer=LevenbergMarquardt(max_epochs=5))
+    pinned = NarxModel(["a", "b"], ["y1", "y2"], 2, 2, rest_equilibrium=True, **kw).fit(log, log)
+    free = NarxModel(["a", "b"], ["y1", "y2"], 2, 2, **kw).fit(log, log)
+    still = pd.DataFrame({"t": 0.1 * np.arange(200), "a": 0.0, "b": 0.0, "y1": 0.0, "y2": 0.0})
+    for mode in ("free_run", 50, "one_step"):
+        out = pinned.predict(still, mode).dropna().to_numpy()
+        assert len(out) > 100 and (out == 0.0).all(), mode
+    drift = free.predict(still, "free_run").dropna().to_numpy()
+    assert np.abs(drift).max() > 1e-4
+    phi = pinned._table(still)["phi"][10:11]
+    assert float(pinned.net_(phi).detach().abs().max()) == 0.0
+    moved = pinned.predict(log, "free_run").dropna()
+    assert np.abs(moved.to_numpy()).max() > 0.1  # not a net pinned everywhere
+    pinned.save(tmp_path)
+    loaded = load_model(tmp_path)
+    assert loaded.rest_equilibrium is True
+    pd.testing.assert_frame_equal(
+        loaded.predict(still, "free_run"), pinned.predict(still, "free_run")
+    )
+    pd.testing.assert_frame_equal(loaded.predict(log, "free_run"), pinned.predict(log, "free_run"))
+    with pytest.raises(NnidInputError, match=r"rest_equilibrium .* needs delta=True"):
+        NarxModel(["a"], ["y1"], rest_equilibrium=True, delta=False).fit(log)
+
+
 def _two_output_plant(n: int = 600) -> pd.DataFrame:
     """Two coupled first-order outputs, the second offset so that √y is defined."""
     rng = np.random.default_rng(0)
@@ -329,16 +399,21 @@ def _two_output_plant(n: int = 600) -> pd.DataFrame:
     )
 
 
-@pytest.mark.parametrize("transform", [None, "sqrt"])
+@pytest.mark.parametrize(
+    "transform, rest",
+    [(None, False), ("sqrt", False), ("products", False), ("fossen", False), ("fossen", True)],
+)
 @pytest.mark.parametrize("bounds", [None, [[None, 0.05], [None, None]]])
-def test_sensitivity_recursion_equals_forward_mode_through_the_closed_loop(transform, bounds):
+def test_sensitivity_recursion_equals_forward_mode_through_the_closed_loop(transform, rest, bounds):
     # The supplied Jacobian of the simulation error (local Jacobians + linear recursion in
     # time, in blocks under a tiny budget) against forward-mode products through the closed
-    # loop: two hidden layers, delays 1 and 3 (a gap), a clamp that binds, the √ regressors.
+    # loop: two hidden layers, delays 1 and 3 (a gap), a clamp that binds, the √, product or
+    # Fossen regressors, the increment pinned to zero at rest.
     log = _two_output_plant()
     model = NarxModel(
         ["a", "b"], ["y1", "y2"], 2, [1, 3], hidden=(5, 3), output_bounds=bounds,
-        output_transform=transform, trainer=LevenbergMarquardt(max_epochs=3),
+        output_transform=transform, rest_equilibrium=rest,
+        trainer=LevenbergMarquardt(max_epochs=3),
     ).fit(log)  # fmt: skip
     batch = model._fixed_windows(model._table(log), 150)
     if bounds is not None:

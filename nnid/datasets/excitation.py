@@ -3,7 +3,8 @@
 Each signal is a small pydantic model (so configs validate it) with ``__call__(t) -> array``.
 ``channel`` names a generalized force (``X Y Z K M N``) or a thruster (its command). Signals on
 the same channel add up. Steps and stairs, chirp, multisine (Schroeder phases), PRBS (maximum
-length shift register), Caccia's d-optimal sinusoid (eqs 13-15) and Weiss's identification
+length shift register), APRBS (random levels on random holds, for nonlinear black-box models),
+Caccia's d-optimal sinusoid (eqs 13-15) and Weiss's identification
 sequence (section V.B) are provided.
 """
 
@@ -155,6 +156,48 @@ class PRBS(_Signal):
         chips = mls(self.order, self.seed)
         k = np.floor((t - self.start) / self.hold).astype(int) % chips.size
         x = self.offset + self.amplitude * chips[k]
+        return np.where(self.window(t, self.duration), x, 0.0)
+
+
+class APRBS(_Signal):
+    """Amplitude-modulated PRBS: levels drawn uniformly on ``offset ± amplitude``, each held a
+    time drawn uniformly on [``hold_min``, ``hold_max``] s, from a seeded generator.
+
+    A binary PRBS shows a nonlinear model two levels only; a black-box model (NARX, neural
+    state space) must see the whole operating range and, on several channels at once, the
+    combinations of inputs it will meet (Nelles, *Nonlinear System Identification*, 2nd ed.,
+    section 19.7). Holds at least as long as the slowest time constant show the steady states.
+    """
+
+    kind: Literal["aprbs"] = "aprbs"
+    amplitude: float = Field(gt=0)
+    hold_min: float = Field(gt=0)
+    hold_max: float = Field(gt=0)
+    duration: float = Field(gt=0)
+    seed: int = 0
+    offset: float = 0.0
+
+    @model_validator(mode="after")
+    def _holds(self) -> APRBS:
+        if self.hold_max < self.hold_min:
+            raise ValueError("hold_max must be at least hold_min")
+        return self
+
+    def end(self) -> float:
+        return self.start + self.duration
+
+    def switches(self) -> tuple[np.ndarray, np.ndarray]:
+        """Switching times (from ``start``) and the level held from each."""
+        rng = np.random.default_rng(self.seed)
+        n = math.ceil(self.duration / self.hold_min) + 1
+        times = np.concatenate([[0.0], np.cumsum(rng.uniform(self.hold_min, self.hold_max, n))])
+        levels = self.offset + self.amplitude * rng.uniform(-1.0, 1.0, times.size)
+        return times, levels
+
+    def __call__(self, t: np.ndarray) -> np.ndarray:
+        times, levels = self.switches()
+        k = np.searchsorted(times, t - self.start, side="right") - 1
+        x = levels[np.clip(k, 0, levels.size - 1)]
         return np.where(self.window(t, self.duration), x, 0.0)
 
 

@@ -35,9 +35,18 @@ columns (body velocities u v w r ...).
   batched pass, then a linear recursion in time (about 2× a one-step LM iteration on as many
   rows, where forward mode, one closed-loop pass per parameter, costs 16-25×;
   ``benchmarks/bench_narx_simulation.py``).
-* **Output transform** (``output_transform="sqrt"``, off by default): the regressor also holds
-  √max(y(k − d_y), 0) of every lagged output (in the output's units, then standardised), e.g.
-  Torricelli's outflow of a tank; still a NARX, the transform applied inside the closed loop.
+* **Output transform** (off by default): extra regressors computed from every lagged output,
+  standardised, inside the closed loop too; still a NARX. ``"sqrt"``: √max(y(k − d_y), 0) of
+  each output (in its units), e.g. Torricelli's outflow of a tank. ``"products"``: the
+  products y_i y_j (i ≤ j, of the standardised outputs) of each lag, the bilinear terms of the
+  Coriolis, centripetal and Munk forces (Fossen's C(ν)ν, Weiss eqs 17-18) that a small tanh
+  layer otherwise has to approximate. ``"fossen"``: those products and y_i|y_i| (in the
+  outputs' units), the quadratic damping terms (Weiss eq. 45): with them one explicit Euler
+  step of the Fossen model is linear in the regressor, and the network only has to learn it.
+* **Rest equilibrium** (``rest_equilibrium``, off by default, Δ form only): the increment is
+  W₂ (tanh(W₁φ + b₁) − tanh(W₁φ_rest + b₁)), zero at φ_rest, the regressor of zero outputs and
+  inputs in their units: a neutrally buoyant vehicle at rest with its thrusters off stays at
+  rest exactly, where an unconstrained net creeps (b₂ cancels and stays untrained).
 """
 
 from __future__ import annotations
@@ -62,7 +71,12 @@ from nnid.models.io_model import DTYPE, InputOutputModel, seeded_linear
 from nnid.trainers.history import Progress, staged
 
 #: ``output_transform`` values: extra regressors computed from each lagged output
-OUTPUT_TRANSFORMS = (None, "sqrt")
+OUTPUT_TRANSFORMS = (None, "sqrt", "products", "fossen")
+
+
+def _pairs(m: int) -> tuple[np.ndarray, np.ndarray]:
+    """Index pairs (i, j), i ≤ j, of the ``products`` transform of m outputs."""
+    return np.triu_indices(m)
 
 
 def _delays(d: int | Sequence[int], minimum: int, what: str) -> list[int]:
@@ -84,6 +98,7 @@ class NarxNet(nn.Module):
         hidden: Sequence[int],
         n_s: int = 0,
         generator: torch.Generator | None = None,
+        rest: bool = False,
     ) -> None:
         super().__init__()
         gen = generator if generator is not None else torch.Generator()
@@ -101,8 +116,13 @@ class NarxNet(nn.Module):
         if n_s:  # standardisation of the transformed outputs (only with an output_transform)
             self.register_buffer("s_mean", torch.zeros(n_s, dtype=DTYPE))
             self.register_buffer("s_std", torch.ones(n_s, dtype=DTYPE))
+        self.rest = rest
+        if rest:  # the regressor of the vehicle at rest (zero outputs and inputs, in their units)
+            self.register_buffer("phi_rest", torch.zeros(n_in, dtype=DTYPE))
 
     def forward(self, phi: torch.Tensor) -> torch.Tensor:
+        if self.rest:  # the increment is zero at rest: W_o (h(φ) − h(φ_rest)), b_o cancels
+            return self.mlp(phi) - self.mlp(self.phi_rest)
         return self.mlp(phi)
 
 
@@ -129,8 +149,11 @@ class NarxModel(InputOutputModel):
       the whole free runs of the validation experiments and kept only if the validation
       free-run error falls (``finetune_``). ``simulation_max_fail``: validation failures
       before a stage stops; ``simulation_l2``: λ of a λ‖θ‖² penalty on the LM sum of squares.
-    * ``output_transform``: None or ``"sqrt"``: √max(y, 0) of every lagged output (output
-      units, standardised on the training data) appended to the output regressors.
+    * ``output_transform``: None, ``"sqrt"`` (√max(y, 0) of every lagged output, output
+      units), ``"products"`` (y_i y_j, i ≤ j, of every lag's standardised outputs) or
+      ``"fossen"`` (those products, then y_i|y_i| in output units), each standardised on the
+      training data and appended to the output regressors.
+    * ``rest_equilibrium``: the Δ increment pinned to zero at zero outputs and inputs.
     """
 
     kind = "narx"
@@ -161,6 +184,7 @@ class NarxModel(InputOutputModel):
         simulation_max_fail: int = 8,
         simulation_l2: float = 0.0,
         output_transform: str | None = None,
+        rest_equilibrium: bool = False,
     ) -> None:
         self.inputs = inputs
         self.outputs = outputs
@@ -185,6 +209,7 @@ class NarxModel(InputOutputModel):
         self.simulation_max_fail = simulation_max_fail
         self.simulation_l2 = simulation_l2
         self.output_transform = output_transform
+        self.rest_equilibrium = rest_equilibrium
 
     def _configure(self) -> None:
         """The settings in working form, checked (by ``fit`` and on load)."""
@@ -193,7 +218,14 @@ class NarxModel(InputOutputModel):
         if self.simulation_trainer not in ("adam", "lm"):
             raise NnidInputError("simulation_trainer is 'adam' or 'lm'", field="simulation_trainer")
         if self.output_transform not in OUTPUT_TRANSFORMS:
-            raise NnidInputError("output_transform is None or 'sqrt'", field="output_transform")
+            raise NnidInputError(
+                "output_transform is None, 'sqrt', 'products' or 'fossen'", field="output_transform"
+            )
+        if self.rest_equilibrium and not self.delta:
+            raise NnidInputError(
+                "rest_equilibrium makes the Δ increment zero at rest: it needs delta=True",
+                field="rest_equilibrium",
+            )
         if not self.inputs or not self.outputs:
             raise NnidInputError("a NARX needs at least one input and one output", field="outputs")
         self.inputs_, self.outputs_ = list(self.inputs), list(self.outputs)
@@ -216,29 +248,66 @@ class NarxModel(InputOutputModel):
 
     # -- configuration ---------------------------------------------------------------------------
     def _new_net(self, generator: torch.Generator | None = None) -> NarxNet:
-        n_s = len(self.outputs_) if self.output_transform else 0
         n_u = len(self.inputs_)
-        return NarxNet(self._n_features(), len(self.outputs_), n_u, self.hidden_, n_s, generator)
+        return NarxNet(
+            self._n_features(),
+            len(self.outputs_),
+            n_u,
+            self.hidden_,
+            self._n_s(),
+            generator,
+            rest=bool(self.rest_equilibrium),
+        )
+
+    def _n_s(self) -> int:
+        """Transformed regressors per lag (0 without an ``output_transform``)."""
+        m = len(self.outputs_)
+        pairs = m * (m + 1) // 2
+        return {None: 0, "sqrt": m, "products": pairs, "fossen": pairs + m}[self.output_transform]
 
     def _n_y_features(self) -> int:
         """Regressors from lagged outputs: the outputs, then their transforms (if any)."""
-        n = len(self.output_delays_) * len(self.outputs_)
-        return 2 * n if self.output_transform else n
+        return len(self.output_delays_) * (len(self.outputs_) + self._n_s())
 
     def _n_features(self) -> int:
         return self._n_y_features() + len(self.input_delays_) * len(self.inputs_)
 
-    def _transform_np(self, yn: np.ndarray) -> np.ndarray:
-        """Standardised √max(y, 0) of normalised outputs ``yn`` (numpy)."""
-        net = self.net_
-        y = yn * net.y_std.numpy() + net.y_mean.numpy()
-        return (np.sqrt(np.maximum(y, 0.0)) - net.s_mean.numpy()) / net.s_std.numpy()
+    def _raw_transform(self, yn: torch.Tensor) -> torch.Tensor:
+        """The transform of normalised outputs ``yn`` [..., m] before its standardisation."""
+        y = yn * self.net_.y_std + self.net_.y_mean
+        if self.output_transform in ("products", "fossen"):
+            i, j = _pairs(yn.shape[-1])
+            out = yn[..., i] * yn[..., j]
+            return torch.cat([out, y * y.abs()], -1) if self.output_transform == "fossen" else out
+        return torch.sqrt(torch.clamp(y, min=1e-12))
 
     def _transform_t(self, yn: torch.Tensor) -> torch.Tensor:
-        """Standardised √max(y, 0) of normalised outputs ``yn`` (torch, differentiable)."""
+        """The standardised transform of normalised outputs ``yn`` (torch, differentiable)."""
+        return (self._raw_transform(yn) - self.net_.s_mean) / self.net_.s_std
+
+    def _transform_np(self, yn: np.ndarray) -> np.ndarray:
+        """:meth:`_transform_t` on numpy arrays."""
+        return self._transform_t(torch.as_tensor(yn)).numpy()
+
+    def _transform_jacobian(self, yn: torch.Tensor) -> torch.Tensor:
+        """∂(standardised transform)/∂yn [N, n_s, m] at normalised outputs ``yn`` [N, m]."""
+        n, m = yn.shape
         net = self.net_
-        y = yn * net.y_std + net.y_mean
-        return (torch.sqrt(torch.clamp(y, min=1e-12)) - net.s_mean) / net.s_std
+        y_real = yn * net.y_std + net.y_mean
+        if self.output_transform in ("products", "fossen"):  # ∂(y_i y_j)/∂y_k = δ_ik y_j + …
+            i, j = _pairs(m)
+            out = torch.zeros(n, self._n_s(), m, dtype=yn.dtype)
+            rows = torch.arange(len(i))
+            out[:, rows, torch.as_tensor(i)] += yn[:, j]
+            out[:, rows, torch.as_tensor(j)] += yn[:, i]
+            if self.output_transform == "fossen":  # ∂(y|y|)/∂yn = 2|y| σ_y
+                out[:, len(i) :] = torch.diag_embed(2 * y_real.abs() * net.y_std)
+            return out / net.s_std[:, None]
+        # d/dy of (√max(y·σ + μ, ε) − μ_s)/σ_s
+        root = torch.sqrt(torch.clamp(y_real, min=1e-12))
+        return torch.diag_embed(
+            torch.where(y_real > 1e-12, net.y_std / (2 * root * net.s_std), 0.0)
+        )
 
     def _norm_bounds(self) -> tuple[torch.Tensor, torch.Tensor] | None:
         """The resolved bounds in normalised units (±inf where open), or None."""
@@ -305,14 +374,15 @@ class NarxModel(InputOutputModel):
 
     def _y_features(self, y: np.ndarray) -> np.ndarray:
         """[y(k − d)] per output delay, then (``output_transform``) the transformed lags."""
-        n, m = y.shape
+        n = len(y)
         blocks = [y, self._transform_np(y)] if self.output_transform else [y]
-        out = np.zeros((n, len(self.output_delays_) * m * len(blocks)))
+        out = np.zeros((n, self._n_y_features()))
         col = 0
         for src in blocks:
+            w = src.shape[1]
             for d in self.output_delays_:
-                out[self.warmup_samples_ :, col : col + m] = src[self.warmup_samples_ - d : n - d]
-                col += m
+                out[self.warmup_samples_ :, col : col + w] = src[self.warmup_samples_ - d : n - d]
+                col += w
         return out
 
     def _fit_normalisation(self, log: pd.DataFrame) -> None:
@@ -326,10 +396,31 @@ class NarxModel(InputOutputModel):
             torch.as_tensor(np.where(d > 0, d, 1.0) if self.delta else np.ones_like(d))
         )
         if self.output_transform:
-            s = np.sqrt(np.maximum(y, 0.0))
+            yn = (y - net.y_mean.numpy()) / net.y_std.numpy()
+            s = self._raw_transform(torch.as_tensor(yn)).numpy()
             s_std = s.std(0)
             net.s_mean.copy_(torch.as_tensor(s.mean(0)))
             net.s_std.copy_(torch.as_tensor(np.where(s_std > 0, s_std, 1.0)))
+        if self.rest_equilibrium:
+            net.phi_rest.copy_(self._rest_features())
+
+    def _rest_features(self) -> torch.Tensor:
+        """The regressor of zero outputs and zero inputs (in their units), laid out as
+        :meth:`_y_features` then :meth:`_u_features` lay out a row."""
+        net = self.net_
+        yn = -net.y_mean / net.y_std
+        blocks = [yn.repeat(len(self.output_delays_))]
+        if self.output_transform:
+            blocks.append(self._transform_t(yn).repeat(len(self.output_delays_)))
+        blocks.append((-net.u_mean / net.u_std).repeat(len(self.input_delays_)))
+        return torch.cat(blocks)
+
+    def _rest_hidden(self, ws: list[tuple[torch.Tensor, torch.Tensor]]) -> torch.Tensor:
+        """The last hidden layer's activation at rest for weights ``ws`` ([(W, b)] per layer)."""
+        h = self.net_.phi_rest
+        for w, b in ws[:-1]:
+            h = torch.tanh(h @ w.T + b)
+        return h
 
     def _table(self, log: pd.DataFrame) -> dict[str, torch.Tensor]:
         """Row-aligned tensors of a log: features, one-step targets, normalised outputs."""
@@ -379,12 +470,15 @@ class NarxModel(InputOutputModel):
         m, n_y = hist.shape[2], self._n_y_features()
         w1, b1 = ws[0]
         n_d = len(self.output_delays_)
+        n_s = self._n_s()
         w1y = [w1[:, j * m : (j + 1) * m].T for j in range(n_d)]
-        w1s = [w1[:, (n_d + j) * m : (n_d + j + 1) * m].T for j in range(n_d)]
+        w1s = [w1[:, n_d * m + j * n_s : n_d * m + (j + 1) * n_s].T for j in range(n_d)]
         transform = self._transform_t if self.output_transform else None
         zu = uf @ w1[:, n_y:].T + b1  # the inputs' share of the first layer, all steps at once
         scale = self.net_.d_scale if self.delta else torch.ones_like(self.net_.d_scale)
         wo, bo = ws[-1][0].T * scale, ws[-1][1] * scale
+        if self.rest_equilibrium:  # o = W_o (h − h_rest): the output bias cancels
+            bo = -self._rest_hidden(ws) @ wo
         lo, hi = self._norm_bounds() or (None, None)
         hs = list(hist.unbind(1))
         ss = [transform(x) for x in hs] if transform is not None else []  # once per sample
@@ -521,33 +615,39 @@ class NarxModel(InputOutputModel):
         lags = [states[:, dy - d] for d in self.output_delays_]
         blocks = lags + ([self._transform_t(x) for x in lags] if self.output_transform else [])
         acts = [torch.cat([*blocks, uf], 1)]
+        rest = self.rest_equilibrium
+        if rest:  # one more row, the regressor at rest, whose output every step subtracts
+            acts[0] = torch.cat([acts[0], self.net_.phi_rest[None]])
+        rows = len(acts[0])
         for w, b in ws[:-1]:
             acts.append(torch.tanh(acts[-1] @ w.T + b))
         scale = self.net_.d_scale if self.delta else torch.ones_like(self.net_.d_scale)
         w_out, b_out = ws[-1]
         y = acts[-1] @ (w_out.T * scale) + b_out * scale
+        if rest:
+            y = y[:n] - y[n]
         if self.delta:
             y = y + states[:, -1]
         # back-propagate the m outputs at once: g = ∂o/∂(pre-activation of the layer)
-        g = torch.diag_embed(scale.expand(n, m))
+        g = torch.diag_embed(scale.expand(rows, m))
         per_layer: list[list[torch.Tensor]] = []
         for i in range(len(ws) - 1, -1, -1):
             w, a_in = ws[i][0], acts[i]
-            per_layer.append([(g[..., None] * a_in[:, None, None, :]).reshape(n, m, -1), g])
+            per_layer.append([(g[..., None] * a_in[:, None, None, :]).reshape(rows, m, -1), g])
             g_in = g @ w
             if i > 0:
                 g = g_in * (1 - a_in**2)[:, None, :]
         d_theta = torch.cat([t for pair in reversed(per_layer) for t in pair], 2)
+        if rest:
+            d_theta = d_theta[:n] - d_theta[n]
+            g_in = g_in[:n]
         d_hist = torch.zeros(n, m, dy, m, dtype=states.dtype)
-        n_d = len(self.output_delays_)
-        net = self.net_
+        n_d, n_s = len(self.output_delays_), self._n_s()
         for j, d in enumerate(self.output_delays_):
             d_hist[:, :, dy - d] += g_in[:, :, j * m : (j + 1) * m]
-            if self.output_transform:  # d/dy of (√max(y·σ + μ, ε) − μ_s)/σ_s
-                y_real = lags[j] * net.y_std + net.y_mean
-                root = torch.sqrt(torch.clamp(y_real, min=1e-12))
-                dt = torch.where(y_real > 1e-12, net.y_std / (2 * root * net.s_std), 0.0)
-                d_hist[:, :, dy - d] += g_in[:, :, (n_d + j) * m : (n_d + j + 1) * m] * dt[:, None]
+            if self.output_transform:  # through the transformed regressors of this lag
+                g_s = g_in[:, :, n_d * m + j * n_s : n_d * m + (j + 1) * n_s]
+                d_hist[:, :, dy - d] += g_s @ self._transform_jacobian(lags[j])
         if self.delta:
             d_hist[:, :, dy - 1] += torch.eye(m, dtype=states.dtype)
         bounds = self._norm_bounds()
@@ -781,6 +881,33 @@ class NarxModel(InputOutputModel):
                     out[pos[ends.numpy()]] = pred * std + mean
         return pd.DataFrame(out, index=log.index, columns=self.outputs_)
 
+    def _transform_delays_np(self):
+        """The standardised transform of the flat delay buffer [dy·m] → [dy·n_s], for the numpy
+        free run (constants tiled once; :meth:`_transform_t` per step would cost more)."""
+        net, dy, m = self.net_, self.dy_, len(self.outputs_)
+        s_mean, s_std = np.tile(net.s_mean.numpy(), dy), np.tile(net.s_std.numpy(), dy)
+        y_std, y_mean = net.y_std.numpy(), net.y_mean.numpy()
+        if self.output_transform in ("products", "fossen"):
+            i, j = _pairs(m)
+            squares = self.output_transform == "fossen"
+
+            def products(past: np.ndarray) -> np.ndarray:
+                rows = past.reshape(dy, m)
+                out = rows[:, i] * rows[:, j]
+                if squares:
+                    real = rows * y_std + y_mean
+                    out = np.concatenate([out, real * np.abs(real)], 1)
+                return (out.reshape(-1) - s_mean) / s_std
+
+            return products
+        t_std, t_mean = np.tile(y_std, dy), np.tile(y_mean, dy)
+        sqrt, maximum = np.sqrt, np.maximum
+
+        def roots(past: np.ndarray) -> np.ndarray:
+            return (sqrt(maximum(past * t_std + t_mean, 0.0)) - s_mean) / s_std
+
+        return roots
+
     def _free_run(self, init: np.ndarray, uf: np.ndarray) -> np.ndarray:
         """The closed loop in numpy: the first layer's input part for all steps in one matmul,
         then per step one dense matmul on a contiguous slice of the output buffer."""
@@ -789,35 +916,36 @@ class NarxModel(InputOutputModel):
         b1 = lin[0].bias.detach().numpy()
         m, dy = len(self.outputs_), self.dy_
         n_y, n_d = self._n_y_features(), len(self.output_delays_)
+        n_s = self._n_s()
         dense = np.zeros((w1.shape[0], dy * m))
-        dense_s = np.zeros((w1.shape[0], dy * m)) if self.output_transform else None
+        dense_s = np.zeros((w1.shape[0], dy * n_s)) if self.output_transform else None
         for j, d in enumerate(self.output_delays_):  # slice row dy − d holds y(k − d)
             dense[:, (dy - d) * m : (dy - d + 1) * m] = w1[:, j * m : (j + 1) * m]
             if dense_s is not None:
-                dense_s[:, (dy - d) * m : (dy - d + 1) * m] = w1[
-                    :, (n_d + j) * m : (n_d + j + 1) * m
+                dense_s[:, (dy - d) * n_s : (dy - d + 1) * n_s] = w1[
+                    :, n_d * m + j * n_s : n_d * m + (j + 1) * n_s
                 ]
         zu = uf @ w1[:, n_y:].T + b1
         mids = [(x.weight.detach().numpy(), x.bias.detach().numpy()) for x in lin[1:-1]]
         scale = self.net_.d_scale.numpy() if self.delta else np.ones(m)
         wo = lin[-1].weight.detach().numpy() * scale[:, None]
         bo = lin[-1].bias.detach().numpy() * scale
+        if self.rest_equilibrium:  # o = W_o (h − h_rest)
+            with torch.no_grad():
+                ws = [(x.weight, x.bias) for x in lin]
+                bo = -(wo @ self._rest_hidden(ws).numpy())
         nb = self._norm_bounds_np()
         n = len(zu)
         buf = np.empty((dy + n, m))
         buf[:dy] = init
         flat = buf.reshape(-1)
         tanh, dot = np.tanh, np.dot
-        if dense_s is not None:  # √ transform constants, tiled over the dy delay rows
-            net = self.net_
-            t_std, t_mean = np.tile(net.y_std.numpy(), dy), np.tile(net.y_mean.numpy(), dy)
-            s_mean, s_std = np.tile(net.s_mean.numpy(), dy), np.tile(net.s_std.numpy(), dy)
-        sqrt, maximum = np.sqrt, np.maximum
+        transform = self._transform_delays_np() if dense_s is not None else None
         for k in range(n):
             past = flat[k * m : (k + dy) * m]
             a = zu[k] + dot(dense, past)
-            if dense_s is not None:
-                a += dot(dense_s, (sqrt(maximum(past * t_std + t_mean, 0.0)) - s_mean) / s_std)
+            if transform is not None:
+                a += dot(dense_s, transform(past))
             h = tanh(a)
             for w, b in mids:
                 h = tanh(dot(w, h) + b)
