@@ -13,7 +13,11 @@ same 10,000 rows, measured in the same run. Three ways to the simulation Jacobia
   (what the trainer did before), timed on 2 of the 20 windows and scaled (it is linear in
   the windows), unless ``--forward-all``.
 
+``--transform fossen --rest`` times the same iteration for the network of the shipped
+config (the Fossen regressors and the rest equilibrium: 934 parameters).
+
 Run:  PYTHONPATH=. python benchmarks/bench_narx_simulation.py [--threads N]
+      [--transform products|fossen] [--rest]
 """
 
 from __future__ import annotations
@@ -49,10 +53,19 @@ def main() -> None:
     ap.add_argument("--threads", type=int, default=torch.get_num_threads())
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--forward-all", action="store_true")
+    ap.add_argument("--transform", choices=["products", "fossen"], default=None)
+    ap.add_argument("--rest", action="store_true", help="rest_equilibrium")
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
     train, _ = data("coupled")
-    model = net("coupled", LevenbergMarquardt(max_epochs=5), 0, lm_samples=4000)
+    model = net(
+        "coupled",
+        LevenbergMarquardt(max_epochs=5),
+        0,
+        lm_samples=4000,
+        output_transform=args.transform,
+        rest_equilibrium=args.rest,
+    )
     model.fit(train)
     tab = model._table(train)
     code = tab["code"].numpy()

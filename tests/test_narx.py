@@ -158,8 +158,8 @@ def test_cli_train_narx_adam_writes_contract_metrics(tmp_path):
     assert done.exit_code == 0, done.output
     m = json.loads((out / "metrics.json").read_text())
     assert m["model"] == "narx" and m["trainer"] == "adam" and m["settings"]["balanced"] is True
-    # 4 lags × (4 outputs + their 10 products) + 4 lags × 4 forces → 10 tanh → 4
-    assert m["params"]["n_params"]["value"] == (4 * (4 + 10) + 4 * 4) * 10 + 10 + 10 * 4 + 4
+    # 4 lags × (4 outputs + their 10 products + 4 y|y|) + 4 lags × 4 forces → 10 tanh → 4
+    assert m["params"]["n_params"]["value"] == (4 * (4 + 10 + 4) + 4 * 4) * 10 + 10 + 10 * 4 + 4
     for key in ("free_run_nrmse", "one_step_nrmse"):
         assert np.isfinite(m["validation"][key]["total"])
     assert m["seconds"] > 0
