@@ -606,9 +606,9 @@ class NarxModel(InputOutputModel):
     ) -> tuple[torch.Tensor, torch.Tensor]:
         """Jacobians of one closed-loop step for a batch of N steps: delay states ``states``
         [N, dy, m] (oldest first), input features ``uf`` [N, F_u] → (∂y/∂θ [N, m, P],
-        ∂y/∂states [N, m, dy, m]) of the next normalised output (Δ form, √ transform and
-        clamp included), written out for the tanh MLP: batched matrix products where
-        ``vmap(jacrev(...))`` over the steps costs several times more."""
+        ∂y/∂states [N, m, dy, m]) of the next normalised output (Δ form, output transform, rest
+        equilibrium and clamp included), written out for the tanh MLP: batched matrix products
+        where ``vmap(jacrev(...))`` over the steps costs several times more."""
         keys = [f"mlp.{i}" for i, mod in enumerate(self.net_.mlp) if isinstance(mod, nn.Linear)]
         ws = [(params[k + ".weight"], params[k + ".bias"]) for k in keys]
         n, dy, m = states.shape
