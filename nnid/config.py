@@ -500,6 +500,12 @@ class NarxModelSpec(_Model):
             raise ValueError("a window length of at least 2 samples, or a list of them")
         return window
 
+    @model_validator(mode="after")
+    def _rest_needs_delta(self) -> NarxModelSpec:
+        if self.rest_equilibrium and not self.delta:
+            raise ValueError("rest_equilibrium pins the Δ increment at rest: it needs delta = true")
+        return self
+
     def arguments(self) -> dict[str, Any]:
         args = super().arguments()
         args["output_bounds"] = _bounds(args["output_bounds"])

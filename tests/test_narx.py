@@ -472,3 +472,27 @@ def test_config_refuses_a_simulation_window_below_two_samples(window):
                     {"model.simulation_window": window})  # fmt: skip
     assert err.value.field == "model.simulation_window"
     assert "at least 2 samples" in str(err.value)
+
+
+def test_config_refuses_rest_equilibrium_without_the_delta_form(tmp_path):
+    # refused when the config is read, before any data is simulated or loaded, naming the field
+    from nnid.config import TrainConfig
+
+    with pytest.raises(NnidInputError) as err:
+        load_config(ROOT / "configs/seamor_narx_lm.toml", TrainConfig, {"model.delta": False})
+    assert "rest_equilibrium" in str(err.value) and "delta = true" in str(err.value)
+    out = tmp_path / "out"
+    text = (
+        (ROOT / "configs/seamor_narx_lm.toml")
+        .read_text()
+        .replace("rest_equilibrium = true", "rest_equilibrium = true\ndelta = false")
+    )
+    cfg = tmp_path / "bad.toml"
+    cfg.write_text(text)
+    from typer.testing import CliRunner
+
+    from nnid.cli import app
+
+    done = CliRunner().invoke(app, ["train", str(cfg), "--out", str(out)])
+    assert done.exit_code == 2 and "rest_equilibrium" in done.output
+    assert "Traceback" not in done.output and not out.exists()
