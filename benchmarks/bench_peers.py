@@ -70,7 +70,8 @@ nnid: :func:`nnid_rows`, the NARX and the neural state-space model as
 ``benchmarks/bench_nlbench.py`` sets them for the nlbench cases (its ``SETTINGS`` and
 ``run``; the test error of several seeds is their ensemble where the setting has one, else
 the median); for Seamor the NARX of ``configs/seamor_narx_lm.toml`` fitted through the library
-as ``nnid train`` does (:data:`SEAMOR_NNID_CONFIGS`; a state-space config can be added there).
+as ``nnid train`` does (:data:`SEAMOR_NNID_CONFIGS`; a state-space config can be added there):
+once per seed for a single-net config, once for an ensemble config (its own seeds).
 
 Run: ``python benchmarks/bench_peers.py [cascaded_tanks silverbox seamor] [--seeds 0,1,2]
 [--quick] [--only sysidentpy|nnid] [--max-gb 10] [--json PATH]`` (``--quick``: two FROLS
@@ -917,8 +918,11 @@ def _nnid_seamor(case: Case, seeds: tuple[int, ...]) -> list[dict]:
     for model_name, path in SEAMOR_NNID_CONFIGS.items():
         per: dict[str, list] = {"validation": [], "test": []}
         times, mems = [], []
-        for seed in seeds:
-            cfg = load_config(path, TrainConfig, overrides={"model.seed": seed})
+        # an ensemble config is one model (its own seeds); a single net is fitted per seed
+        ensemble = load_config(path, TrainConfig).model.kind == "ensemble"
+        for seed in [None] if ensemble else seeds:
+            overrides = {} if seed is None else {"model.seed": seed}
+            cfg = load_config(path, TrainConfig, overrides=overrides)
             model = cfg.model.build(inputs.vehicle)
             with PeakMemory() as mem:
                 t0 = time.perf_counter()
@@ -937,14 +941,20 @@ def _nnid_seamor(case: Case, seeds: tuple[int, ...]) -> list[dict]:
                     }
                 )
             print(
-                f"  nnid {model_name} seed {seed}: validation {_fmt(per['validation'][-1])}, "
+                f"  nnid {model_name} {'ensemble' if seed is None else f'seed {seed}'}: "
+                f"validation {_fmt(per['validation'][-1])}, "
                 f"test {_fmt(per['test'][-1])}, fit {times[-1]:.1f} s",
                 flush=True,
             )
+        net = cfg.model.member if ensemble else cfg.model
         setting = (
-            f"{Path(path).name}: {cfg.model.kind}, delays {cfg.model.input_delays}/"
-            f"{cfg.model.output_delays}, hidden {tuple(cfg.model.hidden)}"
+            f"{Path(path).name}: {cfg.model.kind}, delays {net.input_delays}/"
+            f"{net.output_delays}, hidden {tuple(net.hidden)}"
         )
+        if ensemble:
+            note = f"{cfg.model.combine} of seeds {cfg.model.seeds}; validation = early stopping"
+        else:
+            note = f"median over {len(seeds)} seed(s); validation = early stopping"
         row = _row(
             case,
             "nnid",
@@ -952,8 +962,8 @@ def _nnid_seamor(case: Case, seeds: tuple[int, ...]) -> list[dict]:
             setting,
             fit_s=float(np.median(times)),
             peak_mb=_max(mems),
-            seeds=list(seeds),
-            note=f"median over {len(seeds)} seed(s); validation = early stopping",
+            seeds=list(cfg.model.seeds if ensemble else seeds),
+            note=note,
         )
         for part, scores in per.items():
             entry = {

@@ -2,7 +2,8 @@
 
 Every command's config has a ``kind`` ("simulate", "train", "compare", "loop"); a model is a
 table whose ``kind`` names the model ("fossen", "caccia", "synthesis", "sindy", "narx",
-"state_space", "hybrid") and whose other keys are that model's constructor arguments (one
+"state_space", "hybrid", "ensemble": a seed ensemble of another model table, ``[model.member]``)
+and whose other keys are that model's constructor arguments (one
 option model per kind, each building its model with ``from_config``); a trainer is a table
 whose ``kind`` names it ("ls", "rls", "gradient", "ukf", "lm", "adam") with that trainer's
 arguments, or just the name. Unknown keys are refused, damping masks and DOFs are literals,
@@ -580,6 +581,37 @@ class HybridModelSpec(_PhysicsModel):
         return args
 
 
+SeededModelSpec = Annotated[
+    NarxModelSpec | StateSpaceModelSpec | HybridModelSpec, Field(discriminator="kind")
+]
+
+
+class EnsembleModelSpec(_Model):
+    """A seed ensemble (:class:`nnid.models.ensemble.EnsembleModel`): the ``[model.member]``
+    table (a narx, state_space or hybrid model, without its own ``seed``) fitted once per
+    seed in ``seeds``, predicting the pointwise ``combine`` of the members; with
+    ``drop_diverged`` a member whose validation free run diverges is left out; ``n_jobs``
+    members are fitted at once, each in its own process."""
+
+    kind: Literal["ensemble"]
+    member: SeededModelSpec
+    seeds: list[int] = Field(default_factory=lambda: [0, 1, 2], min_length=2)
+    combine: Literal["mean", "median"] = "mean"
+    drop_diverged: bool = True
+    n_jobs: int = Field(1, ge=1)
+
+    @model_validator(mode="after")
+    def _seeds(self) -> EnsembleModelSpec:
+        if len(set(self.seeds)) != len(self.seeds):
+            raise ValueError("the ensemble's seeds must differ")
+        if "seed" in self.member.model_fields_set:
+            raise ValueError("the members' seeds are the ensemble's 'seeds', not member.seed")
+        return self
+
+    def arguments(self) -> dict[str, Any]:
+        return self.model_dump(include={"seeds", "combine", "drop_diverged", "n_jobs"})
+
+
 ModelSpec = Annotated[
     FossenModelSpec
     | CacciaModelSpec
@@ -587,7 +619,8 @@ ModelSpec = Annotated[
     | SindyModelSpec
     | NarxModelSpec
     | StateSpaceModelSpec
-    | HybridModelSpec,
+    | HybridModelSpec
+    | EnsembleModelSpec,
     Field(discriminator="kind"),
 ]
 PHYSICS_KINDS = ("fossen", "caccia", "synthesis", "sindy", "hybrid")

@@ -101,6 +101,7 @@ def load_inputs(
     """The log of a train or compare run (``--data``/``--columns`` replace the config's file,
     ``--vehicle`` its vehicle), with velocities derived and noise added where asked."""
     check_paths(cfg, config_path, data, columns)
+    models = [m.member if m.kind == "ensemble" else m for m in models]  # the data its members need
     spec = cfg.data if cfg.data is not None else VehicleData()
     base = config_path.parent
     physics = any(m.kind in PHYSICS_KINDS for m in models)
@@ -391,6 +392,11 @@ def run_train(
             "n_params": base.n_params,
             **{p: score(base, split[p], cfg, k, replay) for p in parts},
         }
+    if model.kind == "ensemble":  # the spread behind the combined prediction, per member
+        metrics["members"] = [
+            {"seed": seed, **{p: score(member, split[p], cfg, k, replay) for p in parts}}
+            for seed, member in zip(model.member_seeds_, model.members_, strict=True)
+        ]
     figures: dict[str, Any] = {}
     if model.kind == "hybrid":
         metrics["correction"] = _correction(model, split, parts, figures)

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import re
 import warnings
 from pathlib import Path
 
@@ -139,36 +138,6 @@ def test_no_delay_vector_crosses_an_experiment_boundary(seamor):
     starts = np.flatnonzero(np.r_[True, np.diff(table["code"].numpy()) != 0])
     for s in starts:  # the delay states of each experiment carry no regressor
         assert (table["phi"][s : s + model.warmup_samples_] == 0).all()
-
-
-def test_cli_train_narx_adam_writes_contract_metrics(tmp_path):
-    text = (ROOT / "configs/seamor_narx_adam.toml").read_text()
-    sim = ROOT / "configs/seamor_sequence_narx.toml"
-    text = text.replace('"seamor_sequence_narx.toml"', f'"{sim}"')
-    text = re.sub(r"(?m)^max_epochs = \d+", "max_epochs = 1", text)
-    text = re.sub(r"(?m)^simulation_epochs = \d+", "simulation_epochs = 1", text)
-    cfg = tmp_path / "narx.toml"
-    cfg.write_text(text)
-    out = tmp_path / "out"
-    from typer.testing import CliRunner
-
-    from nnid.cli import app
-
-    done = CliRunner().invoke(app, ["train", str(cfg), "--out", str(out)])
-    assert done.exit_code == 0, done.output
-    m = json.loads((out / "metrics.json").read_text())
-    assert m["model"] == "narx" and m["trainer"] == "adam" and m["settings"]["balanced"] is True
-    # 4 lags × (4 outputs + their 10 products + 4 y|y|) + 4 lags × 4 forces → 10 tanh → 4
-    assert m["params"]["n_params"]["value"] == (4 * (4 + 10 + 4) + 4 * 4) * 10 + 10 + 10 * 4 + 4
-    for key in ("free_run_nrmse", "one_step_nrmse"):
-        assert np.isfinite(m["validation"][key]["total"])
-    assert m["seconds"] > 0
-    assert (out / "tensors.pt").exists() and (out / "model.json").exists()
-    assert m["validation_used_for"] == "early stopping"
-    ft = m["describe"]["simulation_finetune"]  # the free-run stage ran and was judged
-    assert ft["epochs"] == 1 and np.isfinite(ft["validation_free_run_nrmse_before"])
-    held = {p: [e["experiment"] for e in m["split"]["parts"][p]] for p in ("validation", "test")}
-    assert held == {"validation": ["surge-sway-yaw-b"], "test": ["surge-sway-b"]}
 
 
 def _surge_stairs(levels: list[float], hold: float, seed: int, name: str) -> pd.DataFrame:
@@ -496,3 +465,40 @@ def test_config_refuses_rest_equilibrium_without_the_delta_form(tmp_path):
     done = CliRunner().invoke(app, ["train", str(cfg), "--out", str(out)])
     assert done.exit_code == 2 and "rest_equilibrium" in done.output
     assert "Traceback" not in done.output and not out.exists()
+
+
+def test_adam_free_run_stage_passes_every_window_once_an_epoch_in_a_seeded_order(monkeypatch):
+    # Adam's free-run stage trains on LM's windows (each run's last sample and every half
+    # window before it): every window once an epoch, the order drawn per epoch from the seed
+    train, val = _tank(400, 1.3, 2), _tank(300, 1.3, 3)
+    train["experiment"] = np.where(np.arange(400) < 170, "a", "b")
+    epochs: list[list[torch.Tensor]] = []
+
+    def fit(self, net, residual, batches, validation, progress=None):
+        from nnid.trainers.history import History
+
+        epochs.extend([batches(0), batches(1), batches(0)])
+        return History(train=[1.0, 1.0])
+
+    monkeypatch.setattr(Adam, "fit", fit)
+    kw = dict(hidden=(3,), balanced=False, lm_samples=300, simulation_trainer="adam")
+    model = NarxModel(
+        ["u"], ["y"], 2, 2, trainer=LevenbergMarquardt(max_epochs=2, jacobian="samples"),
+        simulation_epochs=1, simulation_window=20, seed=4, **kw,
+    )  # fmt: skip
+    monkeypatch.setattr(NarxModel, "free_run_error", lambda self, log: 1.0)
+    model.fit(train, val)
+
+    def keys(hist, uf, y):  # one window: its delay states, inputs and outputs together
+        return [tuple(torch.cat([h.flatten(), u.flatten(), w.flatten()]).tolist())
+                for h, u, w in zip(hist, uf, y, strict=True)]  # fmt: skip
+
+    key = keys(*model._fixed_windows(model._table(train), 20))
+    assert len(key) == (170 - 2 - 20) // 10 + 1 + (230 - 2 - 20) // 10 + 1  # both runs' windows
+    orders = []
+    for batches in epochs:
+        assert max(len(b[0]) for b in batches) == 32
+        seen = [k for b in batches for k in keys(*b)]
+        assert sorted(seen) == sorted(key)  # each window exactly once, with its own states
+        orders.append(seen)
+    assert orders[0] == orders[2] and orders[0] != orders[1]

@@ -27,6 +27,7 @@ from nnid.datasets.simulator import simulate
 from nnid.loop.scenarios import effect_log
 from nnid.models.base import MODEL_KINDS, model_class
 from nnid.models.caccia import CacciaModel
+from nnid.models.ensemble import EnsembleModel
 from nnid.models.hybrid import HybridModel
 from nnid.models.narx import NarxModel
 from nnid.models.neural_state_space import NeuralStateSpace
@@ -111,6 +112,10 @@ BUILDERS = {
         validation_window=5.0,
         trainer=Adam(max_epochs=3, lr=0.01),
         seed=3,
+    ),
+    "ensemble": lambda v: EnsembleModel(
+        NarxModel(["tau_X", "tau_Z"], ["u", "w"], 2, 2, hidden=(3,), trainer=Adam(max_epochs=2)),
+        seeds=(3, 4),
     ),
 }
 

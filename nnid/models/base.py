@@ -54,6 +54,7 @@ MODEL_KINDS: dict[str, str] = {
     "narx": "nnid.models.narx:NarxModel",
     "state_space": "nnid.models.neural_state_space:NeuralStateSpace",
     "hybrid": "nnid.models.hybrid:HybridModel",
+    "ensemble": "nnid.models.ensemble:EnsembleModel",
 }
 #: trainer kind -> "module:Class" (trainers are scikit-learn estimators too)
 TRAINER_KINDS: dict[str, str] = {
@@ -103,14 +104,17 @@ def check_log(log: Any, name: str = "log") -> pd.DataFrame:
 
 
 def encode_setting(value: Any) -> Any:
-    """A constructor argument as JSON: a vehicle as its file's fields, a trainer as its kind
-    and parameters, arrays as lists (tagged so :func:`decode_setting` rebuilds them)."""
+    """A constructor argument as JSON: a vehicle as its file's fields, a trainer or an
+    (unfitted) model as its kind and parameters, arrays as lists (tagged so
+    :func:`decode_setting` rebuilds them)."""
     from nnid.vehicle import Vehicle
 
     if isinstance(value, Vehicle):
         return {"$vehicle": value.model_dump(mode="json")}
     if isinstance(value, BaseEstimator) and getattr(value, "kind", None) in TRAINER_KINDS:
         return {"$trainer": value.kind, "params": encode_setting(value.get_params(deep=False))}
+    if isinstance(value, NnidModel):  # an ensemble's member
+        return {"$model": value.kind, "params": encode_setting(value.get_params(deep=False))}
     if isinstance(value, np.ndarray):
         return {"$array": value.tolist()}
     if isinstance(value, Mapping):
@@ -138,6 +142,8 @@ def decode_setting(value: Any, source: str = "") -> Any:
         return vehicle_from_dict(value["$vehicle"], source)
     if "$trainer" in value:
         return trainer_class(value["$trainer"])(**decode_setting(value["params"], source))
+    if "$model" in value:
+        return model_class(value["$model"])(**decode_setting(value["params"], source))
     if "$array" in value:
         return np.asarray(value["$array"], dtype=float)
     if "$float" in value:

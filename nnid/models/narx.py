@@ -142,10 +142,10 @@ class NarxModel(InputOutputModel):
       training; ``"train"`` entries are resolved at ``fit`` (``bounds_``).
     * ``simulation_epochs`` > 0: after one-step training, train on the simulation error of
       windows of ``simulation_window`` samples (a length, or a list of lengths trained in
-      turn, each for up to ``simulation_epochs``) with ``simulation_trainer`` ``"adam"``
-      (random windows, ``simulation_lr``) or ``"lm"`` (fixed windows ending at each
-      experiment's last sample and every half window before, sensitivity-recursion
-      Jacobians; windows longer than the shortest experiment are cut to it); early-stopped on
+      turn, each for up to ``simulation_epochs``) ending at each experiment's last sample and
+      every half window before, with ``simulation_trainer`` ``"adam"`` (every window once an
+      epoch in a seeded random order, ``simulation_lr``) or ``"lm"`` (sensitivity-recursion
+      Jacobians); windows longer than the shortest experiment are cut to it); early-stopped on
       the whole free runs of the validation experiments and kept only if the validation
       free-run error falls (``finetune_``). ``simulation_max_fail``: validation failures
       before a stage stops; ``simulation_l2``: λ of a λ‖θ‖² penalty on the LM sum of squares.
@@ -726,9 +726,9 @@ class NarxModel(InputOutputModel):
 
     def _simulation_finetune(self, tab, sampler, validation_log, progress: Progress) -> None:
         """Output-error training on free runs over windows of ``simulation_window`` samples
-        (each length in turn) from measured delay states: Adam on random windows
-        (back-propagation through the closed loop) or, with ``simulation_trainer="lm"``,
-        Levenberg-Marquardt on fixed windows; kept only if the validation free-run error
+        (each length in turn) from measured delay states: Adam (back-propagation through the
+        closed loop) or, with ``simulation_trainer="lm"``, Levenberg-Marquardt, on the same
+        fixed windows; kept only if the validation free-run error
         falls."""
         held_out = validation_log is not None
         before = self.free_run_error(validation_log) if held_out else None
@@ -805,22 +805,21 @@ class NarxModel(InputOutputModel):
         return hist.epochs
 
     def _simulation_adam(self, tab, sampler, val, progress: Progress, length: int) -> int | None:
+        """Adam on the windows of the LM stage (:meth:`_fixed_windows`): every window once an
+        epoch, in an order drawn per epoch from ``seed``, 32 a step (back-propagation through
+        the closed loop). On the Seamor net 128 balanced random windows an epoch never moved
+        a good one-step start; a pass over every run does (benchmarks/RESULTS.md)."""
         from nnid.trainers.adam import Adam
 
-        win = BalancedSampler(
-            sampler.labels,
-            tab["code"].numpy(),
-            window=self.warmup_samples_ + length,
-            balance=self.balanced,
-            seed=self.seed + 1,
-        )
-        win.eligible &= sampler.eligible
-        if not win.eligible.any():
+        windows = self._fixed_windows(tab, length)
+        if windows is None:
             return None
+        n = windows[0].shape[0]
 
         def batches(epoch: int) -> list:
-            ends = torch.as_tensor(win.sample(128, 1000 + epoch))
-            return [self._batch(tab, b, length) for b in ends.split(32)]
+            gen = torch.Generator().manual_seed(int(self.seed) * 100_003 + epoch)
+            order = torch.randperm(n, generator=gen)
+            return [tuple(x[idx] for x in windows) for idx in order.split(32)]
 
         trainer = Adam(
             lr=self.simulation_lr,

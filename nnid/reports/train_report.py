@@ -122,6 +122,13 @@ def train_markdown(metrics: dict) -> str:
             "",
             *markdown_table(*_baseline(metrics)),
         ]
+    if metrics.get("members"):
+        lines += [
+            "",
+            "## Ensemble members (free-run NRMSE of each seed alone)",
+            "",
+            *markdown_table(*_members(metrics)),
+        ]
     if metrics.get("correction"):
         head, rows, explained = _terms(metrics)
         lines += [
@@ -177,6 +184,21 @@ def _baseline(metrics: dict) -> tuple[list[str], list[list[str]]]:
                     _fmt(free / ref, 3) if scores is metrics[part] and free and ref else "",
                 ]
             )
+    return head, rows
+
+
+def _members(metrics: dict) -> tuple[list[str], list[list[str]]]:
+    """An ensemble's members: free-run NRMSE per output and total per held-out split."""
+    parts = [p for p in ("validation", "test") if p in metrics["members"][0]]
+    cols = list(metrics["members"][0][parts[0]]["free_run_nrmse"]) if parts else []
+    head = ["seed", *(f"{p} {c}" for p in parts for c in cols)]
+    rows = []
+    for member in metrics["members"]:
+        cells = []
+        for p in parts:
+            vals = member[p]["free_run_nrmse"]
+            cells += [_fmt(vals.get(c), 3) if vals.get(c) is not None else "diverged" for c in cols]
+        rows.append([str(member["seed"]), *cells])
     return head, rows
 
 
@@ -243,6 +265,9 @@ def train_html(metrics: dict, figures: dict[str, Any] | None = None) -> str:
         out.append(
             definitions({"ratio": "the model's free-run NRMSE over the baseline's (< 1: better)"})
         )
+    if metrics.get("members"):
+        out.append("<h2>Ensemble members (free-run NRMSE of each seed alone)</h2>")
+        out.append(html_table(*_members(metrics)))
     if "free_run" in figures:
         out.append("<h2>Free run on a held-out experiment</h2>")
         out.append(_img(_free_run_figure(figures)))

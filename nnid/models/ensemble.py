@@ -1,0 +1,219 @@
+"""A seed ensemble: copies of one model fitted with different seeds, predicting together.
+
+A network fitted from different random starts lands in different minima whose free runs err
+in different ways; the pointwise mean of their predictions is the simplest regulariser that
+uses no more data (the rule of ``benchmarks/bench_nlbench.py`` on Cascaded Tanks, and of
+``configs/seamor_narx_*.toml``). The selection rule is fixed in the settings, never chosen on
+a test record: every seed in ``seeds`` is a member, combined by ``combine`` ("mean" or
+"median", pointwise per output and sample), except that with ``drop_diverged`` a member whose
+free run on the validation log diverges is left out (said in ``dropped_``; never all of them).
+
+Members are independent fits: ``n_jobs`` > 1 fits them in that many worker processes
+(joblib's loky backend, which caps each worker's OpenMP threads at its share of the cores;
+the calling process's state is untouched). A member's result does not depend on where it
+was fitted beyond the last bits that a thread count changes.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+import pandas as pd
+import torch
+from sklearn.base import clone
+
+from nnid.errors import NnidInputError
+from nnid.models.base import NnidModel
+from nnid.trainers.history import Progress, staged
+
+COMBINE = ("mean", "median")
+
+
+class EnsembleModel(NnidModel):
+    """The pointwise ``combine`` of the predictions of ``model`` fitted once per seed.
+
+    ``model``: an unfitted nnid model with a ``seed`` setting (NARX, state space, hybrid);
+    ``seeds``: the members' seeds (at least two). ``members_`` are the fitted copies,
+    ``member_validation_`` their validation free-run NRMSE (total; None where it diverged or
+    there was no validation log). Members are fitted one after the other with the same
+    training and validation logs, one after the other or (``n_jobs``) in worker processes,
+    whose progress is then reported per finished member.
+    """
+
+    kind = "ensemble"
+
+    def __init__(
+        self,
+        model: NnidModel,
+        seeds: Sequence[int] = (0, 1, 2),
+        combine: str = "mean",
+        drop_diverged: bool = True,
+        n_jobs: int = 1,
+    ) -> None:
+        self.model = model
+        self.seeds = seeds
+        self.combine = combine
+        self.drop_diverged = drop_diverged
+        self.n_jobs = n_jobs
+
+    @classmethod
+    def from_config(cls, spec, vehicle=None) -> EnsembleModel:
+        """The ensemble of an ``[model]`` table of kind "ensemble": its ``[model.member]``
+        built as its own table would be."""
+        return cls(model=spec.member.build(vehicle), **spec.arguments())
+
+    @property
+    def validation_use(self) -> str | None:  # type: ignore[override]
+        own = "dropping diverged members" if self.drop_diverged else None
+        uses = [u for u in (getattr(self.model, "validation_use", None), own) if u]
+        return ", ".join(uses) or None
+
+    def _check_settings(self) -> list[int]:
+        if not isinstance(self.model, NnidModel) or "seed" not in self.model.get_params():
+            raise NnidInputError(
+                "an ensemble's model is an nnid model with a seed "
+                "(narx, state_space, hybrid, sindy)",
+                field="model",
+            )
+        if self.combine not in COMBINE:
+            raise NnidInputError("combine is 'mean' or 'median'", field="combine")
+        seeds = [int(s) for s in self.seeds]
+        if len(seeds) < 2 or len(set(seeds)) != len(seeds):
+            raise NnidInputError("an ensemble needs at least two different seeds", field="seeds")
+        return seeds
+
+    def _fit(self, log: pd.DataFrame, validation: pd.DataFrame | None, progress: Progress):
+        seeds = self._check_settings()
+        jobs = max(1, min(int(self.n_jobs), len(seeds)))
+        templates = [clone(self.model).set_params(seed=seed) for seed in seeds]
+        if jobs == 1:
+            fitted = [
+                _fit_member(m, log, validation, staged(progress, f"member {i + 1}/{len(seeds)}"))
+                for i, m in enumerate(templates)
+            ]
+        else:
+            from joblib import Parallel, delayed
+
+            runs = Parallel(n_jobs=jobs, backend="loky", return_as="generator")(
+                delayed(_fit_member)(m, log, validation) for m in templates
+            )
+            fitted = []
+            for i, result in enumerate(runs):
+                fitted.append(result)
+                progress(i + 1, len(seeds), "members fitted")
+        members = [m for m, _ in fitted]
+        scores = [v for _, v in fitted]
+        dropped = []
+        if self.drop_diverged and validation is not None:
+            dropped = [s for s, v in zip(seeds, scores, strict=True) if v is None]
+            if len(dropped) == len(seeds):
+                dropped = []  # nothing left to predict with: keep all, their scores say why
+        keep = [k for k, s in enumerate(seeds) if s not in dropped]
+        self.members_ = [members[k] for k in keep]
+        self.member_seeds_ = [seeds[k] for k in keep]
+        self.member_validation_ = [scores[k] for k in keep]
+        self.dropped_ = dropped
+        self._take_shape()
+
+    def _take_shape(self) -> None:
+        first = self.members_[0]
+        self.outputs_ = list(first.outputs_)
+        self.targets_ = list(first.targets_)
+        self.warmup_samples_ = max(int(m.warmup_samples_) for m in self.members_)
+
+    def _predict(self, log: pd.DataFrame, mode: str | int) -> pd.DataFrame:
+        preds = np.stack(
+            [m.predict(log, mode)[self.outputs_].to_numpy(np.float64) for m in self.members_]
+        )
+        with np.errstate(all="ignore"):  # a member's NaN warm-up rows stay NaN
+            combined = preds.mean(0) if self.combine == "mean" else np.median(preds, 0)
+        return pd.DataFrame(combined, columns=self.outputs_, index=log.index)
+
+    def _params(self) -> dict[str, dict[str, float | None]]:
+        """The members' weights and biases together and the member count."""
+        return {
+            "n_members": {"value": float(len(self.members_)), "stderr": None},
+            "n_params": {"value": float(self._n_params()), "stderr": None},
+        }
+
+    def _n_params(self) -> int:
+        return sum(m.n_params for m in self.members_)
+
+    def trainer_name(self) -> str | None:
+        return self.members_[0].trainer_name() if hasattr(self, "members_") else None
+
+    def describe(self) -> dict:
+        return {
+            **super().describe(),
+            "combine": self.combine,
+            "member_seeds": self.member_seeds_,
+            "member_validation_free_run_nrmse": self.member_validation_,
+            "dropped_seeds_diverged_on_validation": self.dropped_,
+            "members": [
+                {k: v for k, v in m.describe().items() if k != "params"} for m in self.members_
+            ],
+        }
+
+    # -- persistence: each member's JSON state in model.json, its tensors prefixed by index ----
+    def _state(self) -> tuple[dict, dict[str, torch.Tensor]]:
+        states, tensors = [], {}
+        for i, m in enumerate(self.members_):
+            state, own = m._state()
+            states.append(
+                {
+                    "state": state,
+                    "outputs": list(m.outputs_),
+                    "targets": list(m.targets_),
+                    "warmup_samples": int(m.warmup_samples_),
+                    "fit_seconds": getattr(m, "fit_seconds_", None),
+                }
+            )
+            tensors.update({f"member{i}.{k}": v for k, v in own.items()})
+        learned = {
+            "members": states,
+            "member_seeds": self.member_seeds_,
+            "member_validation": self.member_validation_,
+            "dropped": self.dropped_,
+        }
+        return learned, tensors
+
+    def _restore(self, state: dict, tensors: dict[str, torch.Tensor]) -> None:
+        self.member_seeds_ = [int(s) for s in state["member_seeds"]]
+        self.member_validation_ = list(state["member_validation"])
+        self.dropped_ = list(state["dropped"])
+        self.members_ = []
+        for i, (seed, saved) in enumerate(zip(self.member_seeds_, state["members"], strict=True)):
+            member = clone(self.model).set_params(seed=seed)
+            prefix = f"member{i}."
+            own = {k[len(prefix) :]: v for k, v in tensors.items() if k.startswith(prefix)}
+            member.outputs_ = list(saved["outputs"])
+            member.targets_ = list(saved["targets"])
+            member.warmup_samples_ = int(saved["warmup_samples"])
+            member._restore(saved["state"], own)
+            if saved.get("fit_seconds") is not None:
+                member.fit_seconds_ = float(saved["fit_seconds"])
+            self.members_.append(member)
+        self._take_shape()
+
+
+def _fit_member(
+    member: NnidModel,
+    log: pd.DataFrame,
+    validation: pd.DataFrame | None,
+    progress: Progress | None = None,
+) -> tuple[NnidModel, float | None]:
+    """One member fitted, and its validation free-run NRMSE (a function of its own so that a
+    worker process can run it)."""
+    member.fit(log, validation, progress)
+    return member, _free_run_total(member, validation)
+
+
+def _free_run_total(model: NnidModel, log: pd.DataFrame | None) -> float | None:
+    """The model's total free-run NRMSE on ``log``, only the warm-up samples unscored (None
+    without a log or where it diverged)."""
+    if log is None:
+        return None
+    with np.errstate(all="ignore"):
+        total = model.score(log, "free_run")["total"]
+    return None if total is None else float(total)

@@ -1,0 +1,199 @@
+"""Seed ensembles (issue 14, "ensembles with a documented selection rule"): the pointwise
+combination of members fitted once per seed, the members that diverge on the validation run
+left out, the config table and ``nnid train`` with the members' spread in ``metrics.json``."""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from typer.testing import CliRunner
+
+from nnid import load_model
+from nnid.cli import app
+from nnid.config import TrainConfig, load_config
+from nnid.errors import NnidInputError
+from nnid.models.base import NnidModel
+from nnid.models.ensemble import EnsembleModel
+from nnid.models.narx import NarxModel
+from nnid.trainers.levenberg_marquardt import LevenbergMarquardt
+
+ROOT = Path(__file__).resolve().parents[1]
+SIM = ROOT / "configs/seamor_sequence_narx.toml"
+
+
+class Offset(NnidModel):
+    """A stand-in member: predicts the measured ``y`` plus its seed (1e9 for seed 99, which
+    the divergence rule of the scores catches)."""
+
+    kind = "offset"
+
+    def __init__(self, seed: int = 0) -> None:
+        self.seed = seed
+
+    def _fit(self, log, validation, progress):
+        self.outputs_ = self.targets_ = ["y"]
+        self.warmup_samples_ = 1
+        self.offset_ = 1e9 if self.seed == 99 else float(self.seed)
+
+    def _predict(self, log, mode):
+        out = log[["y"]].astype(float) + self.offset_
+        out.iloc[0] = np.nan
+        return out
+
+    def _params(self):
+        return {"offset": {"value": self.offset_, "stderr": None}}
+
+    def _state(self):
+        return {"offset": self.offset_}, {}
+
+    def _restore(self, state, tensors):
+        self.offset_ = state["offset"]
+
+
+@pytest.fixture
+def log() -> pd.DataFrame:
+    t = np.arange(200) * 0.1
+    return pd.DataFrame({"t": t, "y": np.sin(t)})
+
+
+@pytest.mark.parametrize(("combine", "shift"), [("mean", 2.0), ("median", 1.0)])
+def test_members_combine_pointwise(log, combine, shift):
+    model = EnsembleModel(Offset(), seeds=(0, 1, 5), combine=combine).fit(log)
+    pred = model.predict(log)
+    assert np.isnan(pred["y"].iloc[0])
+    np.testing.assert_allclose(pred["y"].iloc[1:], log["y"].iloc[1:] + shift)
+    assert [m.offset_ for m in model.members_] == [0.0, 1.0, 5.0]
+    assert model.member_validation_ == [None, None, None]  # no validation log: not scored
+
+
+def test_a_member_diverging_on_validation_is_dropped_and_said(log):
+    model = EnsembleModel(Offset(), seeds=(0, 99, 2)).fit(log, log)
+    assert model.member_seeds_ == [0, 2] and model.dropped_ == [99]
+    np.testing.assert_allclose(model.predict(log)["y"].iloc[1:], log["y"].iloc[1:] + 1.0)
+    # the validation free-run NRMSE of a constant offset c is c / std(y) (warm-up unscored)
+    std = log["y"].iloc[1:].std(ddof=0)
+    np.testing.assert_allclose(model.member_validation_, [0.0, 2.0 / std], atol=1e-12)
+    assert model.describe()["dropped_seeds_diverged_on_validation"] == [99]
+    assert "dropping diverged members" in model.validation_use
+    kept = EnsembleModel(Offset(), seeds=(0, 99), drop_diverged=False).fit(log, log)
+    assert kept.member_seeds_ == [0, 99] and kept.member_validation_[1] is None
+    assert kept.validation_use is None
+
+
+def test_all_members_diverging_keeps_them_all(log):
+    model = EnsembleModel(Offset(), seeds=(99, 100)).fit(log, log)
+    assert model.member_seeds_ == [99, 100] and model.dropped_ == []
+
+
+@pytest.mark.parametrize(
+    ("kw", "match"),
+    [
+        ({"seeds": (1,)}, "at least two different seeds"),
+        ({"seeds": (1, 1)}, "at least two different seeds"),
+        ({"combine": "max"}, "combine"),
+    ],
+)
+def test_bad_settings_are_one_clear_error(log, kw, match):
+    with pytest.raises(NnidInputError, match=match):
+        EnsembleModel(Offset(), **kw).fit(log)
+
+
+def test_a_member_without_a_seed_is_refused(log):
+    from nnid.models.parametric import ParametricModel
+    from nnid.vehicle import load_vehicle
+
+    with pytest.raises(NnidInputError, match="with a seed"):
+        EnsembleModel(ParametricModel(load_vehicle("seamor"))).fit(log)
+
+
+def _config(tmp_path: Path, text: str) -> Path:
+    cfg = tmp_path / "ensemble.toml"
+    cfg.write_text(text.replace('"seamor_sequence_narx.toml"', f'"{SIM}"'))
+    return cfg
+
+
+@pytest.mark.parametrize(
+    ("extra", "seeds", "match"),
+    [("seed = 3", "[0, 1]", "member.seed"), ("", "[2, 2]", "seeds must differ")],
+)
+def test_config_refuses_member_seed_and_repeated_seeds(tmp_path, extra, seeds, match):
+    text = (ROOT / "configs/seamor_narx_adam.toml").read_text()
+    text = text.replace("seeds = [0, 1, 2]", f"seeds = {seeds}")
+    cfg = _config(tmp_path, text.replace("[model.member]\n", f"[model.member]\n{extra}\n"))
+    with pytest.raises(NnidInputError, match=match):
+        load_config(cfg, TrainConfig)
+    done = CliRunner().invoke(app, ["train", str(cfg), "--out", str(tmp_path / "out")])
+    assert done.exit_code == 2 and not (tmp_path / "out").exists()
+
+
+def test_cli_train_shipped_adam_ensemble_reports_every_member(tmp_path):
+    # configs/seamor_narx_adam.toml with two members fitted in two processes, one epoch a stage
+    text = (ROOT / "configs/seamor_narx_adam.toml").read_text()
+    text = re.sub(r"(?m)^max_epochs = \d+", "max_epochs = 1", text)
+    text = re.sub(r"(?m)^simulation_epochs = \d+", "simulation_epochs = 1", text)
+    cfg = _config(tmp_path, text.replace("seeds = [0, 1, 2]", "seeds = [0, 1]"))
+    out = tmp_path / "out"
+    done = CliRunner().invoke(app, ["train", str(cfg), "--out", str(out)])
+    assert done.exit_code == 0, done.output
+    m = json.loads((out / "metrics.json").read_text())
+    assert m["model"] == "ensemble" and m["trainer"] == "adam"
+    member = m["settings"]["model"]
+    assert member["$model"] == "narx" and member["params"]["balanced"] is True
+    assert m["settings"]["seeds"] == [0, 1] and m["settings"]["n_jobs"] == 3
+    # 4 lags × (4 outputs + their 10 products + 4 y|y|) + 4 lags × 4 forces → 10 tanh → 4
+    one = (4 * (4 + 10 + 4) + 4 * 4) * 10 + 10 + 10 * 4 + 4
+    assert m["n_params"] == 2 * one
+    assert m["validation_used_for"] == "early stopping, dropping diverged members"
+    for part in ("validation", "test"):
+        for key in ("free_run_nrmse", "one_step_nrmse"):
+            assert np.isfinite(m[part][key]["total"])
+    held = {p: [e["experiment"] for e in m["split"]["parts"][p]] for p in ("validation", "test")}
+    assert held == {"validation": ["surge-sway-yaw-b"], "test": ["surge-sway-b"]}
+    assert m["describe"]["member_seeds"] == [0, 1]
+    for described in m["describe"]["members"]:  # each member's free-run stage ran and was judged
+        ft = described["simulation_finetune"]
+        assert ft["epochs"] == 1 and np.isfinite(ft["validation_free_run_nrmse_before"])
+    assert [r["seed"] for r in m["members"]] == [0, 1]
+    seed_totals = [r["test"]["free_run_nrmse"]["total"] for r in m["members"]]
+    assert seed_totals[0] != seed_totals[1]  # the seeds are different nets
+    assert "## Ensemble members" in (out / "report.md").read_text()
+    # the saved ensemble predicts the mean of its members, each as it would alone
+    model = load_model(out)
+    assert isinstance(model.members_[0], NarxModel) and model.member_seeds_ == [0, 1]
+    assert [mb.seed for mb in model.members_] == [0, 1]
+    cfg_obj = load_config(cfg, TrainConfig)
+    from nnid.pipeline import load_inputs, make_split
+
+    inputs = load_inputs(cfg_obj, cfg, [cfg_obj.model])
+    test = make_split(inputs.log, cfg_obj.split, str(cfg), inputs.report).test
+    preds = [mb.predict(test).to_numpy() for mb in model.members_]
+    np.testing.assert_allclose(model.predict(test).to_numpy(), np.mean(preds, 0), rtol=1e-12)
+    scored = model.score(test, "free_run", warmup_s=m["warmup_s"])
+    np.testing.assert_allclose(scored["total"], m["test"]["free_run_nrmse"]["total"], rtol=1e-9)
+    alone = [mb.score(test, "free_run", warmup_s=m["warmup_s"])["total"] for mb in model.members_]
+    np.testing.assert_allclose(alone, seed_totals, rtol=1e-9)
+
+
+def test_members_fitted_in_worker_processes_match_the_sequential_fit():
+    rng = np.random.default_rng(0)
+    u = np.repeat(rng.uniform(-1, 1, 40), 15)
+    y = np.zeros(u.size)
+    for k in range(1, u.size):
+        y[k] = 0.9 * y[k - 1] + 0.1 * np.tanh(2 * u[k - 1])
+    log = pd.DataFrame({"t": np.arange(u.size) * 0.1, "u": u, "y": y})
+    train, val = log.iloc[:400], log.iloc[400:].reset_index(drop=True)
+    lm = LevenbergMarquardt(max_epochs=5, jacobian="samples")
+    member = NarxModel(["u"], ["y"], hidden=(3,), trainer=lm, balanced=False, lm_samples=300)
+    one = EnsembleModel(member, seeds=(0, 1, 2)).fit(train, val)
+    calls = []
+    two = EnsembleModel(member, seeds=(0, 1, 2), n_jobs=2)
+    two.fit(train, val, progress=lambda done, total, msg, **kw: calls.append((done, total)))
+    assert calls == [(1, 3), (2, 3), (3, 3)]
+    assert two.member_seeds_ == [0, 1, 2]
+    np.testing.assert_allclose(two.member_validation_, one.member_validation_, rtol=1e-6)
+    np.testing.assert_allclose(two.predict(val), one.predict(val), rtol=1e-6, atol=1e-9)
