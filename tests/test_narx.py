@@ -438,8 +438,8 @@ def test_config_refuses_a_simulation_window_below_two_samples(window):
 
     with pytest.raises(NnidInputError) as err:
         load_config(ROOT / "configs/seamor_narx_lm.toml", TrainConfig,
-                    {"model.simulation_window": window})  # fmt: skip
-    assert err.value.field == "model.simulation_window"
+                    {"model.member.simulation_window": window})  # fmt: skip
+    assert err.value.field == "model.member.simulation_window"
     assert "at least 2 samples" in str(err.value)
 
 
@@ -448,7 +448,9 @@ def test_config_refuses_rest_equilibrium_without_the_delta_form(tmp_path):
     from nnid.config import TrainConfig
 
     with pytest.raises(NnidInputError) as err:
-        load_config(ROOT / "configs/seamor_narx_lm.toml", TrainConfig, {"model.delta": False})
+        load_config(
+            ROOT / "configs/seamor_narx_lm.toml", TrainConfig, {"model.member.delta": False}
+        )
     assert "rest_equilibrium" in str(err.value) and "delta = true" in str(err.value)
     out = tmp_path / "out"
     text = (

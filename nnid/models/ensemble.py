@@ -33,12 +33,13 @@ COMBINE = ("mean", "median")
 class EnsembleModel(NnidModel):
     """The pointwise ``combine`` of the predictions of ``model`` fitted once per seed.
 
-    ``model``: an unfitted nnid model with a ``seed`` setting (NARX, state space, hybrid);
+    ``model``: an unfitted nnid model with a ``seed`` setting (NARX, state space, hybrid,
+    SINDy; a config's ``[model.member]`` is one of the first three);
     ``seeds``: the members' seeds (at least two). ``members_`` are the fitted copies,
     ``member_validation_`` their validation free-run NRMSE (total; None where it diverged or
-    there was no validation log). Members are fitted one after the other with the same
-    training and validation logs, one after the other or (``n_jobs``) in worker processes,
-    whose progress is then reported per finished member.
+    there was no validation log). Members are fitted on the same training and validation
+    logs, one after the other or (``n_jobs``) in worker processes, whose progress is then
+    reported per finished member.
     """
 
     kind = "ensemble"

@@ -145,7 +145,7 @@ class NarxModel(InputOutputModel):
       turn, each for up to ``simulation_epochs``) ending at each experiment's last sample and
       every half window before, with ``simulation_trainer`` ``"adam"`` (every window once an
       epoch in a seeded random order, ``simulation_lr``) or ``"lm"`` (sensitivity-recursion
-      Jacobians); windows longer than the shortest experiment are cut to it); early-stopped on
+      Jacobians); windows longer than the shortest experiment are cut to it; early-stopped on
       the whole free runs of the validation experiments and kept only if the validation
       free-run error falls (``finetune_``). ``simulation_max_fail``: validation failures
       before a stage stops; ``simulation_l2``: λ of a λ‖θ‖² penalty on the LM sum of squares.
