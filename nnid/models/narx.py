@@ -583,7 +583,7 @@ class NarxModel(InputOutputModel):
         self.finetune_ = None
         if self.simulation_epochs > 0:
             held_out = validation_log if random_rows is None else None
-            self._simulation_finetune(tab, sampler, held_out, staged(progress, "simulation"))
+            self._simulation_finetune(tab, held_out, staged(progress, "simulation"))
 
     def _batch(self, table: dict[str, torch.Tensor], idx: torch.Tensor, horizon: int) -> tuple:
         """Tensors of a batch, sample-major: (φ, target) one-step, or windows ending at
@@ -724,7 +724,7 @@ class NarxModel(InputOutputModel):
 
         return batches
 
-    def _simulation_finetune(self, tab, sampler, validation_log, progress: Progress) -> None:
+    def _simulation_finetune(self, tab, validation_log, progress: Progress) -> None:
         """Output-error training on free runs over windows of ``simulation_window`` samples
         (each length in turn) from measured delay states: Adam (back-propagation through the
         closed loop) or, with ``simulation_trainer="lm"``, Levenberg-Marquardt, on the same
@@ -739,7 +739,7 @@ class NarxModel(InputOutputModel):
         epochs = None
         for length in self.simulation_windows_:  # short windows first: a smoother objective
             report = staged(progress, f"{length} samples") if stages else progress
-            done = train(tab, sampler, val, report, length)
+            done = train(tab, val, report, length)
             if done is not None:
                 epochs = (epochs or 0) + done
         if epochs is None:
@@ -783,7 +783,7 @@ class NarxModel(InputOutputModel):
         ]
         return runs or None
 
-    def _simulation_lm(self, tab, sampler, val, progress: Progress, length: int) -> int | None:
+    def _simulation_lm(self, tab, val, progress: Progress, length: int) -> int | None:
         from nnid.trainers.levenberg_marquardt import LevenbergMarquardt
 
         train = self._fixed_windows(tab, length)
@@ -804,7 +804,7 @@ class NarxModel(InputOutputModel):
         )
         return hist.epochs
 
-    def _simulation_adam(self, tab, sampler, val, progress: Progress, length: int) -> int | None:
+    def _simulation_adam(self, tab, val, progress: Progress, length: int) -> int | None:
         """Adam on the windows of the LM stage (:meth:`_fixed_windows`): every window once an
         epoch, in an order drawn per epoch from ``seed``, 32 a step (back-propagation through
         the closed loop). On the Seamor net 128 balanced random windows an epoch never moved
