@@ -309,15 +309,12 @@ class NnidModel(BaseEstimator, ABC):
         check_is_fitted(self, msg=NOT_FITTED)
         folder = Path(folder)
         folder.mkdir(parents=True, exist_ok=True)
-        state, tensors = self._state()
+        learned, tensors = learned_state(self)
         payload = {
             "kind": self.kind,
             "nnid_version": _version(),
             "settings": encode_setting(self.get_params(deep=False)),
-            "outputs": list(self.outputs_),
-            "targets": list(self.targets_),
-            "warmup_samples": int(self.warmup_samples_),
-            "state": state,
+            **learned,
         }
         if tensors:
             torch.save(tensors, folder / TENSOR_FILE)
@@ -358,10 +355,28 @@ def load_model(folder: str | Path) -> NnidModel:
     model = cls(**decode_setting(payload["settings"], str(path)))
     tensor_path = path.parent / TENSOR_FILE
     tensors = torch.load(tensor_path, weights_only=True) if tensor_path.exists() else {}
-    model.outputs_ = list(payload["outputs"])
-    model.targets_ = list(payload["targets"])
-    model.warmup_samples_ = int(payload["warmup_samples"])
-    model._restore(payload["state"], tensors)
+    return restore_learned(model, payload, tensors)
+
+
+def learned_state(model: NnidModel) -> tuple[dict, dict[str, torch.Tensor]]:
+    """What a fitted model learned, as saved: the JSON part (output columns, targets, warm-up
+    samples and the model's own ``state``) and its tensors by name."""
+    state, tensors = model._state()
+    learned = {
+        "outputs": list(model.outputs_),
+        "targets": list(model.targets_),
+        "warmup_samples": int(model.warmup_samples_),
+        "state": state,
+    }
+    return learned, tensors
+
+
+def restore_learned(model: NnidModel, learned: dict, tensors: dict[str, torch.Tensor]):
+    """Inverse of :func:`learned_state` on an unfitted model built from its settings."""
+    model.outputs_ = list(learned["outputs"])
+    model.targets_ = list(learned["targets"])
+    model.warmup_samples_ = int(learned["warmup_samples"])
+    model._restore(learned["state"], tensors)
     return model
 
 

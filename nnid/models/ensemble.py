@@ -24,7 +24,7 @@ import torch
 from sklearn.base import clone
 
 from nnid.errors import NnidInputError
-from nnid.models.base import NnidModel
+from nnid.models.base import NnidModel, learned_state, restore_learned
 from nnid.trainers.history import Progress, staged
 
 COMBINE = ("mean", "median")
@@ -160,16 +160,8 @@ class EnsembleModel(NnidModel):
     def _state(self) -> tuple[dict, dict[str, torch.Tensor]]:
         states, tensors = [], {}
         for i, m in enumerate(self.members_):
-            state, own = m._state()
-            states.append(
-                {
-                    "state": state,
-                    "outputs": list(m.outputs_),
-                    "targets": list(m.targets_),
-                    "warmup_samples": int(m.warmup_samples_),
-                    "fit_seconds": getattr(m, "fit_seconds_", None),
-                }
-            )
+            learned, own = learned_state(m)
+            states.append({**learned, "fit_seconds": getattr(m, "fit_seconds_", None)})
             tensors.update({f"member{i}.{k}": v for k, v in own.items()})
         learned = {
             "members": states,
@@ -185,13 +177,9 @@ class EnsembleModel(NnidModel):
         self.dropped_ = list(state["dropped"])
         self.members_ = []
         for i, (seed, saved) in enumerate(zip(self.member_seeds_, state["members"], strict=True)):
-            member = clone(self.model).set_params(seed=seed)
             prefix = f"member{i}."
             own = {k[len(prefix) :]: v for k, v in tensors.items() if k.startswith(prefix)}
-            member.outputs_ = list(saved["outputs"])
-            member.targets_ = list(saved["targets"])
-            member.warmup_samples_ = int(saved["warmup_samples"])
-            member._restore(saved["state"], own)
+            member = restore_learned(clone(self.model).set_params(seed=seed), saved, own)
             if saved.get("fit_seconds") is not None:
                 member.fit_seconds_ = float(saved["fit_seconds"])
             self.members_.append(member)
