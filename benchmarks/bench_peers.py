@@ -265,10 +265,11 @@ def _seamor_case() -> Case:
     split = make_split(inputs.log, cfg.split, str(SEAMOR_CONFIG), inputs.report)
     dt = float(np.median(np.diff(split.train["t"].to_numpy())))
     parts = {p: split[p].reset_index(drop=True) for p in ("train", "validation", "test")}
+    net = cfg.model.member if cfg.model.kind == "ensemble" else cfg.model
     return Case(
         name="seamor",
-        inputs=list(cfg.model.inputs),
-        outputs=list(cfg.model.outputs),
+        inputs=list(net.inputs),
+        outputs=list(net.outputs),
         train=parts["train"],
         fit_part=parts["train"],
         validation=parts["validation"],

@@ -87,6 +87,10 @@ def _delays(d: int | Sequence[int], minimum: int, what: str) -> list[int]:
     return out
 
 
+def _finite_or_none(x: float | None) -> float | None:
+    return None if x is None or not np.isfinite(x) else float(x)
+
+
 class NarxNet(nn.Module):
     """The MLP (tanh hidden layers, linear output) and the normalisation buffers."""
 
@@ -748,9 +752,12 @@ class NarxModel(InputOutputModel):
         kept = before is None or (np.isfinite(after) and after < before)
         if not kept:
             self.net_.load_state_dict(state)
+        # a diverged free run has no NRMSE: said as such, not as a missing (null) score
         self.finetune_ = {
-            "validation_free_run_nrmse_before": before,
-            "validation_free_run_nrmse_after": after,
+            "validation_free_run_nrmse_before": _finite_or_none(before),
+            "validation_free_run_nrmse_after": _finite_or_none(after),
+            "validation_free_run_diverged_before": bool(before is not None and np.isinf(before)),
+            "validation_free_run_diverged_after": bool(after is not None and np.isinf(after)),
             "kept": bool(kept),
             "epochs": epochs,
         }
