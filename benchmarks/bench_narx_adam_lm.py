@@ -34,7 +34,9 @@ validation runs' whole free run (MSE in normalised units). Levels are geometric 
 the start's validation MSE and L*. Surge case: validated on a surge run of other levels.
 ``--data shipped`` (coupled case, simulation objective): the training and validation runs of
 ``configs/seamor_narx_lm.toml`` as ``nnid train`` builds them (Weiss's sequence, the APRBS runs,
-validation surge-sway-yaw-b) instead of the 10 sequence runs above.
+validation surge-sway-yaw-b) instead of the 10 sequence runs above. ``--transform fossen``
+gives both networks the Fossen regressors (``NarxModel(output_transform=...)``), as the shipped
+Seamor configs and the surge test use them.
 
 Run:  PYTHONPATH=. python benchmarks/bench_narx_adam_lm.py [--case coupled|surge|all]
 (about 13 min for the coupled case, 4 min for the surge case, on 1 core); ``--save t.json``
@@ -100,7 +102,7 @@ def net(case: str, trainer, seed: int, **kw) -> NarxModel:
     c = CASES[case]
     d = c["delays"]
     return NarxModel(c["inputs"], c["outputs"], d, d, hidden=(c["hidden"],), trainer=trainer,
-                     seed=seed, **kw)  # fmt: skip
+                     seed=seed, output_transform=c.get("transform"), **kw)  # fmt: skip
 
 
 def lm_trace(case: str, seed: int, train, val, max_epochs: int = 1000) -> Trace:
@@ -297,7 +299,11 @@ def report(res: dict) -> None:
             "validation"
         )
     load0, load1 = res["load"]
-    print(f"### {h} nodes, {d} delays, {names} → {' '.join(c['outputs'])} ({n_par} parameters)\n")
+    extra = f', `output_transform = "{c["transform"]}"`' if c.get("transform") else ""
+    print(
+        f"### {h} nodes, {d} delays, {names} → {' '.join(c['outputs'])}{extra} "
+        f"({n_par} parameters)\n"
+    )
     what = (
         f"free-run MSE of the whole validation runs (normalised units); windows of "
         f"{res.get('window')} samples, every {res.get('every')}th of those starting each half "
@@ -383,7 +389,15 @@ def main() -> None:
         default="sequence",
         help="coupled simulation case: the 10 sequence runs or the shipped config's",
     )
+    ap.add_argument(
+        "--transform",
+        choices=["products", "fossen"],
+        help="the networks' output_transform (default: none, Weiss's plain regressors)",
+    )
     args = ap.parse_args()
+    transform = json.loads(args.load.read_text()).get("transform") if args.load else args.transform
+    for c in CASES.values():  # this process's networks, for training and for the report
+        c["transform"] = transform
     torch.set_num_threads(args.threads)
     torch.manual_seed(0)
     sim = args.objective == "simulation"
@@ -395,7 +409,8 @@ def main() -> None:
         saved = json.loads(args.load.read_text())
     else:
         cases = list(CASES) if args.case == "all" else [args.case]
-        saved = {"threads": args.threads, "date": str(datetime.date.today()), "cases": []}
+        saved = {"threads": args.threads, "date": str(datetime.date.today()), "cases": [],
+                 "transform": args.transform}  # fmt: skip
         for case in cases:
             if sim:
                 cap = args.cap or SIM_CAP[case]
