@@ -101,8 +101,9 @@ def data(case: str):
 def net(case: str, trainer, seed: int, **kw) -> NarxModel:
     c = CASES[case]
     d = c["delays"]
+    kw.setdefault("output_transform", c.get("transform"))  # --transform, unless given here
     return NarxModel(c["inputs"], c["outputs"], d, d, hidden=(c["hidden"],), trainer=trainer,
-                     seed=seed, output_transform=c.get("transform"), **kw)  # fmt: skip
+                     seed=seed, **kw)  # fmt: skip
 
 
 def lm_trace(case: str, seed: int, train, val, max_epochs: int = 1000) -> Trace:

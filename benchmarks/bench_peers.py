@@ -952,8 +952,11 @@ def _nnid_seamor(case: Case, seeds: tuple[int, ...]) -> list[dict]:
             f"{Path(path).name}: {cfg.model.kind}, delays {net.input_delays}/"
             f"{net.output_delays}, hidden {tuple(net.hidden)}"
         )
+        workers = ensemble and cfg.model.n_jobs > 1
         if ensemble:
             note = f"{cfg.model.combine} of seeds {cfg.model.seeds}; validation = early stopping"
+            if workers:  # PeakMemory reads this process only
+                note += "; members fitted in worker processes: peak memory not measured"
         else:
             note = f"median over {len(seeds)} seed(s); validation = early stopping"
         row = _row(
@@ -966,6 +969,8 @@ def _nnid_seamor(case: Case, seeds: tuple[int, ...]) -> list[dict]:
             seeds=list(cfg.model.seeds if ensemble else seeds),
             note=note,
         )
+        if workers:
+            row["peak_mb"] = None
         for part, scores in per.items():
             entry = {
                 "value": _median([x["value"] for x in scores]),

@@ -51,6 +51,7 @@ columns (body velocities u v w r ...).
 
 from __future__ import annotations
 
+import functools
 import warnings
 from collections.abc import Iterator, Sequence
 from typing import Any
@@ -68,15 +69,26 @@ from nnid.datasets.splits import split_log
 from nnid.errors import NnidInputError
 from nnid.models.bounds import OutputBounds, bound_arrays, check_bounds, resolve_bounds
 from nnid.models.io_model import DTYPE, InputOutputModel, seeded_linear
+from nnid.serialization import jsonable
 from nnid.trainers.history import Progress, staged
 
 #: ``output_transform`` values: extra regressors computed from each lagged output
 OUTPUT_TRANSFORMS = (None, "sqrt", "products", "fossen")
 
 
+@functools.cache
 def _pairs(m: int) -> tuple[np.ndarray, np.ndarray]:
-    """Index pairs (i, j), i ≤ j, of the ``products`` transform of m outputs."""
-    return np.triu_indices(m)
+    """Index pairs (i, j), i ≤ j, of the ``products`` transform of m outputs (cached: the
+    closed loop asks once per simulated step)."""
+    i, j = np.triu_indices(m)
+    i.flags.writeable = j.flags.writeable = False
+    return i, j
+
+
+@functools.cache
+def _pairs_t(m: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """:func:`_pairs` as index tensors (numpy indices are converted on every use)."""
+    return tuple(torch.as_tensor(x.copy()) for x in _pairs(m))
 
 
 def _delays(d: int | Sequence[int], minimum: int, what: str) -> list[int]:
@@ -85,10 +97,6 @@ def _delays(d: int | Sequence[int], minimum: int, what: str) -> list[int]:
     if not out or min(out) < minimum:
         raise NnidInputError(f"{what} must be a positive count or a list of delays ≥ {minimum}")
     return out
-
-
-def _finite_or_none(x: float | None) -> float | None:
-    return None if x is None or not np.isfinite(x) else float(x)
 
 
 class NarxNet(nn.Module):
@@ -280,7 +288,7 @@ class NarxModel(InputOutputModel):
         """The transform of normalised outputs ``yn`` [..., m] before its standardisation."""
         y = yn * self.net_.y_std + self.net_.y_mean
         if self.output_transform in ("products", "fossen"):
-            i, j = _pairs(yn.shape[-1])
+            i, j = _pairs_t(yn.shape[-1])
             out = yn[..., i] * yn[..., j]
             return torch.cat([out, y * y.abs()], -1) if self.output_transform == "fossen" else out
         return torch.sqrt(torch.clamp(y, min=1e-12))
@@ -299,11 +307,11 @@ class NarxModel(InputOutputModel):
         net = self.net_
         y_real = yn * net.y_std + net.y_mean
         if self.output_transform in ("products", "fossen"):  # ∂(y_i y_j)/∂y_k = δ_ik y_j + …
-            i, j = _pairs(m)
+            i, j = _pairs_t(m)
             out = torch.zeros(n, self._n_s(), m, dtype=yn.dtype)
             rows = torch.arange(len(i))
-            out[:, rows, torch.as_tensor(i)] += yn[:, j]
-            out[:, rows, torch.as_tensor(j)] += yn[:, i]
+            out[:, rows, i] += yn[:, j]
+            out[:, rows, j] += yn[:, i]
             if self.output_transform == "fossen":  # ∂(y|y|)/∂yn = 2|y| σ_y
                 out[:, len(i) :] = torch.diag_embed(2 * y_real.abs() * net.y_std)
             return out / net.s_std[:, None]
@@ -754,8 +762,8 @@ class NarxModel(InputOutputModel):
             self.net_.load_state_dict(state)
         # a diverged free run has no NRMSE: said as such, not as a missing (null) score
         self.finetune_ = {
-            "validation_free_run_nrmse_before": _finite_or_none(before),
-            "validation_free_run_nrmse_after": _finite_or_none(after),
+            "validation_free_run_nrmse_before": jsonable(before),
+            "validation_free_run_nrmse_after": jsonable(after),
             "validation_free_run_diverged_before": bool(before is not None and np.isinf(before)),
             "validation_free_run_diverged_after": bool(after is not None and np.isinf(after)),
             "kept": bool(kept),
