@@ -175,8 +175,9 @@ def test_cli_train_shipped_adam_ensemble_reports_every_member(tmp_path):
     np.testing.assert_allclose(model.predict(test).to_numpy(), np.mean(preds, 0), rtol=1e-12)
     # A free run of this net amplifies last-bit differences: in one CI run the score below came
     # out 2.5e-7 (relative) off metrics.json, where a fresh process scoring the same saved files
-    # gives metrics.json's value to the last bit (cause not found: not the torch, BLAS or numba
-    # thread count, nor load). 1e-6 still fails on any wrong member, weight or combination.
+    # gives metrics.json's value to the last bit (cause not found; not reproduced with 1 or 2
+    # torch, BLAS or numba threads, nor under load). 1e-6 still catches a wrong member, weight
+    # or combination.
     scored = model.score(test, "free_run", warmup_s=m["warmup_s"])
     np.testing.assert_allclose(scored["total"], m["test"]["free_run_nrmse"]["total"], rtol=1e-6)
     alone = [mb.score(test, "free_run", warmup_s=m["warmup_s"])["total"] for mb in model.members_]
