@@ -265,7 +265,7 @@ def _seamor_case() -> Case:
     split = make_split(inputs.log, cfg.split, str(SEAMOR_CONFIG), inputs.report)
     dt = float(np.median(np.diff(split.train["t"].to_numpy())))
     parts = {p: split[p].reset_index(drop=True) for p in ("train", "validation", "test")}
-    net = cfg.model.member if cfg.model.kind == "ensemble" else cfg.model
+    net = cfg.model.fitted
     return Case(
         name="seamor",
         inputs=list(net.inputs),
@@ -947,7 +947,7 @@ def _nnid_seamor(case: Case, seeds: tuple[int, ...]) -> list[dict]:
                 f"test {_fmt(per['test'][-1])}, fit {times[-1]:.1f} s",
                 flush=True,
             )
-        net = cfg.model.member if ensemble else cfg.model
+        net = cfg.model.fitted
         setting = (
             f"{Path(path).name}: {cfg.model.kind}, delays {net.input_delays}/"
             f"{net.output_delays}, hidden {tuple(net.hidden)}"
@@ -965,12 +965,10 @@ def _nnid_seamor(case: Case, seeds: tuple[int, ...]) -> list[dict]:
             model_name,
             setting,
             fit_s=float(np.median(times)),
-            peak_mb=_max(mems),
+            peak_mb=None if workers else _max(mems),
             seeds=list(cfg.model.seeds if ensemble else seeds),
             note=note,
         )
-        if workers:
-            row["peak_mb"] = None
         for part, scores in per.items():
             entry = {
                 "value": _median([x["value"] for x in scores]),

@@ -336,6 +336,11 @@ class _Model(_Strict):
     def _trainer_name(cls, value: Any) -> Any:
         return _kind_shorthand(value)
 
+    @property
+    def fitted(self) -> _Model:
+        """The table of the model fitted to the data: this one (an ensemble's: its member)."""
+        return self
+
     def build(self, vehicle=None):
         """The (unfitted) model: ``from_config`` of its class."""
         from nnid.models.base import model_class
@@ -607,6 +612,10 @@ class EnsembleModelSpec(_Model):
         if "seed" in self.member.model_fields_set:
             raise ValueError("the members' seeds are the ensemble's 'seeds', not member.seed")
         return self
+
+    @property
+    def fitted(self) -> _Model:
+        return self.member
 
     def arguments(self) -> dict[str, Any]:
         return self.model_dump(include={"seeds", "combine", "drop_diverged", "n_jobs"})

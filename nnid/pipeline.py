@@ -101,7 +101,7 @@ def load_inputs(
     """The log of a train or compare run (``--data``/``--columns`` replace the config's file,
     ``--vehicle`` its vehicle), with velocities derived and noise added where asked."""
     check_paths(cfg, config_path, data, columns)
-    models = [m.member if m.kind == "ensemble" else m for m in models]  # the data its members need
+    models = [m.fitted for m in models]  # an ensemble needs the data its members need
     spec = cfg.data if cfg.data is not None else VehicleData()
     base = config_path.parent
     physics = any(m.kind in PHYSICS_KINDS for m in models)
