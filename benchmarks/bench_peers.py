@@ -903,7 +903,7 @@ def _nnid_label(cfg: dict) -> str:
     if s.get("simulation_epochs"):
         text += (
             f", then {s.get('simulation_trainer', 'adam')} on the free-run error of windows "
-            f"{s.get('simulation_window')}"
+            f"{s.get('simulation_window')}, {s['simulation_epochs']} epochs each"
         )
     return text
 
