@@ -214,6 +214,13 @@ def sim_traces(case, seed, grid, cap, window, every, train, val) -> list[dict]:
     return out
 
 
+def _not_improving(lm_best: float, adam_best: float, start: float) -> str:
+    """Which trainer never goes below the start's validation MSE."""
+    if lm_best >= start and adam_best >= start:
+        return "neither trainer ever"
+    return "LM never" if lm_best >= start else "Adam never"
+
+
 def fmt_t(t: float) -> str:
     return f"{t:.3g} s" if math.isfinite(t) else "never"
 
@@ -262,7 +269,7 @@ def report(res: dict) -> None:
     adam_best = {s: min(best(adam[s, lr, b]) for lr, b in grid) for s in seeds}
     top = {s: max(lm_best[s], adam_best[s]) for s in seeds}
     sim = res.get("objective") == "simulation"
-    stuck: list[int] = []  # seeds where neither trainer improves on the start: nothing to time
+    stuck: list[int] = []  # seeds where a trainer never improves on the start: L* is the start
     if sim:  # geometric from the shared start's validation MSE to L*
         v0 = {s: lm[s][1][0] for s in seeds}
         level = {(s, f): v0[s] ** (1 - f) * top[s] ** f for s in seeds for f in FRACTIONS}
@@ -360,9 +367,10 @@ def report(res: dict) -> None:
         )
     if stuck:
         print(
-            f"\nSeeds {', '.join(map(str, stuck))}: neither trainer improves on the start's "
-            "validation MSE (their levels are the start's, their times the first epoch's end); "
-            "left out of the medians below."
+            "\nSeeds "
+            + "; ".join(f"{s}: {_not_improving(lm_best[s], adam_best[s], v0[s])}" for s in stuck)
+            + " improves on the start's validation MSE (L* is then the start's, every time to it "
+            "the first epoch's end); left out of the medians below."
         )
     print("\n| level | median Adam / LM, best Adam per seed | median Adam / LM, chosen setting |")
     print("|---|---|---|")
