@@ -189,16 +189,23 @@ def sim_start(case: str, seed: int, train, val, window: int, every: int):
     return model, {k: v.clone() for k, v in model.net_.state_dict().items()}, windows, runs
 
 
-def sim_traces(case, seed, grid, cap, window, every, train, val) -> list[dict]:
-    """LM and every Adam setting from the same start; (seconds, validation MSE) per epoch."""
+def sim_traces(case, seed, grid, cap, window, every, train, val, lm_subset=1) -> list[dict]:
+    """LM and every Adam setting from the same start; (seconds, validation MSE) per epoch.
+    ``lm_subset`` k > 1: each LM epoch on a fresh seeded draw of 1/k of the windows."""
     model, start, windows, runs = sim_start(case, seed, train, val, window, every)
     out = []
+    n = windows[0].shape[0]
+
+    def lm_batches(epoch: int) -> list:
+        gen = torch.Generator().manual_seed(seed * 100_003 + epoch)
+        idx = torch.randperm(n, generator=gen)[: max(1, n // lm_subset)]
+        return [tuple(x[idx] for x in windows)]
+
     lm = LevenbergMarquardt(max_epochs=SIM_LM_EPOCHS[case], max_fail=10**6)
     model.net_.load_state_dict(start)
-    h = lm.fit(model.net_, model._window_residual, [windows], runs,
-               jacobian_rows=model._simulation_rows)  # fmt: skip
+    h = lm.fit(model.net_, model._window_residual, lm_batches if lm_subset > 1 else [windows],
+               runs, jacobian_rows=model._simulation_rows)  # fmt: skip
     out.append({"seed": seed, "trainer": "lm", "trace": (h.time, h.validation)})
-    n = windows[0].shape[0]
     for lr, b in grid:
         order = torch.Generator().manual_seed(seed)
 
@@ -244,12 +251,14 @@ def train_case(case: str, seeds: range, cap: float, grid: list[tuple[float, int]
     return {"case": case, "cap": cap, "load": [load0, os.getloadavg()[0]], "runs": runs}
 
 
-def train_sim_case(case, seeds, cap, grid, window: int, every: int, source: str) -> dict:
+def train_sim_case(
+    case, seeds, cap, grid, window: int, every: int, source: str, lm_subset: int = 1
+) -> dict:
     load0 = os.getloadavg()[0]
     train, val = sim_data(case, window, source)
     runs = []
     for s in seeds:
-        runs += sim_traces(case, s, grid, cap, window, every, train, val)
+        runs += sim_traces(case, s, grid, cap, window, every, train, val, lm_subset)
     return {"case": case, "cap": cap, "load": [load0, os.getloadavg()[0]], "runs": runs,
             "objective": "simulation", "window": window, "every": every,
             "data": source}  # fmt: skip
@@ -367,10 +376,14 @@ def report(res: dict) -> None:
         )
     if stuck:
         print(
-            "\nSeeds "
-            + "; ".join(f"{s}: {_not_improving(lm_best[s], adam_best[s], v0[s])}" for s in stuck)
-            + " improves on the start's validation MSE (L* is then the start's, every time to it "
-            "the first epoch's end); left out of the medians below."
+            "\n"
+            + " ".join(
+                f"Seed {s}: {_not_improving(lm_best[s], adam_best[s], v0[s])} improves on the "
+                "start's validation MSE."
+                for s in stuck
+            )
+            + " L* is then the start's, every time to it the first epoch's end; left out of the "
+            "medians below."
         )
     print("\n| level | median Adam / LM, best Adam per seed | median Adam / LM, chosen setting |")
     print("|---|---|---|")
@@ -403,6 +416,12 @@ def main() -> None:
         choices=["products", "fossen"],
         help="the networks' output_transform (default: none, Weiss's plain regressors)",
     )
+    ap.add_argument(
+        "--lm-subset",
+        type=int,
+        default=1,
+        help="simulation objective: each LM epoch on a fresh draw of 1/k of the windows",
+    )
     args = ap.parse_args()
     transform = json.loads(args.load.read_text()).get("transform") if args.load else args.transform
     for c in CASES.values():  # this process's networks, for training and for the report
@@ -419,13 +438,20 @@ def main() -> None:
     else:
         cases = list(CASES) if args.case == "all" else [args.case]
         saved = {"threads": args.threads, "date": str(datetime.date.today()), "cases": [],
-                 "transform": args.transform}  # fmt: skip
+                 "transform": args.transform, "lm_subset": args.lm_subset}  # fmt: skip
         for case in cases:
             if sim:
                 cap = args.cap or SIM_CAP[case]
                 saved["cases"].append(
                     train_sim_case(
-                        case, range(args.seeds), cap, grid, args.window, args.every, args.data
+                        case,
+                        range(args.seeds),
+                        cap,
+                        grid,
+                        args.window,
+                        args.every,
+                        args.data,
+                        args.lm_subset,
                     )
                 )
                 continue
@@ -442,12 +468,14 @@ def main() -> None:
     lrs = sorted({r["lr"] for c in saved["cases"] for r in c["runs"] if "lr" in r})
     bs = sorted({r["batch"] for c in saved["cases"] for r in c["runs"] if "batch" in r})
     if objective == "simulation":
+        k = saved.get("lm_subset", 1)
+        drawn = f", each epoch on a fresh draw of 1/{k} of the windows" if k > 1 else ""
         print(
             "Start: per seed, LM on the one-step error (trainlm defaults, early-stopped on the "
             "validation runs). Then LM (sensitivity-recursion Jacobian, trainlm's μ rule, "
-            "no early stop) and Adam (constant rate, clipping at 1, no early stop, a wall-time "
-            "cap; shuffled mini-batches of windows) on the same windows' output error; grid lr "
-            f"∈ {{{', '.join(f'{x:g}' for x in lrs)}}} × windows per step ∈ "
+            f"no early stop{drawn}) and Adam (constant rate, clipping at 1, no early stop, a "
+            "wall-time cap; shuffled mini-batches of windows) on the same windows' output error; "
+            f"grid lr ∈ {{{', '.join(f'{x:g}' for x in lrs)}}} × windows per step ∈ "
             f"{{{', '.join(map(str, bs))}}}. Times from each trainer's history (`fit` clock). "
             "Levels, per seed: L* is the worse of LM's and the grid's best Adam's best "
             "validation MSE; 1/4, 1/2, 3/4: geometric steps from the start's MSE to L*.\n"

@@ -258,3 +258,51 @@ def test_l2_penalty_is_the_residual_with_sqrt_lambda_theta_rows() -> None:
     LevenbergMarquardt(max_epochs=30).fit(light, _regression_residual(light), [(x, y)])
     shrunk = np.linalg.norm(_flat(heavy)) < 0.5 * np.linalg.norm(_flat(light))
     assert shrunk  # the penalty shrinks the weights
+
+
+def test_batches_drawn_per_epoch_judge_that_epochs_steps() -> None:
+    # Noise-free data of a network of the same shape: every subset of samples shares the
+    # minimum, so LM on a fresh quarter of the samples each epoch must reach it on all of them.
+    teacher = _mlp([1, 3, 1], seed=1)
+    with torch.no_grad():
+        teacher[0].weight.copy_(torch.tensor([[1.5], [-2.0], [0.7]]))
+        teacher[0].bias.copy_(torch.tensor([0.5, -0.3, 1.0]))
+        teacher[2].weight.copy_(torch.tensor([[1.0, 0.8, -1.2]]))
+        teacher[2].bias.copy_(torch.tensor([0.1]))
+    x = torch.linspace(-3, 3, 200, dtype=torch.float64).unsqueeze(1)
+    with torch.no_grad():
+        y = teacher(x)
+    net = _mlp([1, 3, 1], seed=1)
+    net.load_state_dict(teacher.state_dict())
+    gen = torch.Generator().manual_seed(0)
+    with torch.no_grad():
+        for p in net.parameters():
+            p.add_(0.3 * torch.randn(p.shape, generator=gen, dtype=torch.float64))
+    start = {k: v.clone() for k, v in net.state_dict().items()}
+    residual = _regression_residual(net)
+    calls: list[int] = []
+
+    def draw(epoch: int) -> list:
+        calls.append(epoch)
+        idx = torch.randperm(200, generator=torch.Generator().manual_seed(epoch))[:50]
+        return [(x[idx], y[idx])]
+
+    # one epoch: the same step as LM on that epoch's batches given as fixed batches
+    LevenbergMarquardt(max_epochs=1).fit(net, residual, draw)
+    one_drawn = _flat(net)
+    net.load_state_dict(start)
+    LevenbergMarquardt(max_epochs=1).fit(net, residual, draw(0))
+    np.testing.assert_array_equal(one_drawn, _flat(net))
+
+    net.load_state_dict(start)
+    calls.clear()
+    hist = LevenbergMarquardt(max_epochs=60, min_grad=0.0).fit(net, residual, draw)
+    assert calls == list(range(hist.epochs))  # each epoch's draw, once, in order
+    with torch.no_grad():
+        full = float(torch.mean((net(x) - y) ** 2))
+        first = float(torch.mean((teacher(x) - functional_call(teacher, start, (x,))) ** 2))
+    assert full < 1e-12 * first
+    # the reported training error is that of the epoch's own draw
+    ((xb, yb),) = draw(hist.epochs - 1)
+    with torch.no_grad():
+        assert hist.train[-1] == pytest.approx(float(torch.mean((net(xb) - yb) ** 2)), rel=1e-9)

@@ -47,6 +47,12 @@ Jacobians come from :mod:`torch.func`; there are two modes:
   (:meth:`nnid.models.narx.NarxModel._simulation_rows`): one batched pass of per-step local
   Jacobians, then a linear recursion in time, instead of one closed-loop pass per parameter.
 
+``train_batches`` may also be a function of the epoch that returns that epoch's batches (as
+Adam's are drawn): each epoch's normal equations, trial steps and reported training error are
+then those of its own batches, a subsampled Gauss-Newton method. Where JᵀJ dominates an epoch
+(a large network on many simulation windows: its cost grows as rows × P²), a subset of the
+rows per epoch buys proportionally cheaper iterations.
+
 The same trainer fits nonlinear physics parameters: any ``nn.Module`` whose parameters are the
 unknowns and a residual that computes model − measurement with ``functional_call``.
 """
@@ -391,7 +397,7 @@ class LevenbergMarquardt(BaseEstimator):
         self,
         module: torch.nn.Module,
         residual: Residual,
-        train_batches: Sequence[Any],
+        train_batches: Sequence[Any] | Callable[[int], Sequence[Any]],
         val_batches: Sequence[Any] | None = None,
         progress: Progress | None = None,
         separable: bool = False,
@@ -411,7 +417,8 @@ class LevenbergMarquardt(BaseEstimator):
         mode, else "forward"); ``jacobian_rows(params, batch, budget_elements)``, when given,
         yields the Jacobian's rows of a batch with their residuals in blocks of at most
         ``budget_elements`` (then "supplied" mode under "auto"; it must agree with
-        ``residual``, which still judges the trial steps).
+        ``residual``, which still judges the trial steps). ``train_batches(epoch)``, when a
+        function, draws each epoch's batches (module docstring).
         """
         self._select_mode(separable, jacobian_rows)
         if not (0.0 < self.mu_dec < 1.0 < self.mu_inc):
@@ -451,7 +458,9 @@ class LevenbergMarquardt(BaseEstimator):
         # (``_sse``): the normal equations' SSE comes from another path (per-sample vmap in
         # "samples" mode) whose rounding differs by ~1e-17, and comparing across the two once
         # accepted null steps forever at the optimum, a stall that depended on the CPU's kernels.
-        sse, _ = self._sse(residual, theta, layout, train_batches)
+        drawn = callable(train_batches)
+        batches = train_batches(0) if drawn else train_batches
+        sse, _ = self._sse(residual, theta, layout, batches)
         while True:
             # Stopping criteria (trainlm's); those that need no Jacobian are tested first.
             if epoch > 0 and mse <= self.goal:
@@ -464,7 +473,10 @@ class LevenbergMarquardt(BaseEstimator):
                 stop = "validation"
             if stop:
                 break
-            ne = self._normal_equations(residual, theta, layout, train_batches)
+            if drawn and epoch > 0:  # this epoch's batches: the point's SSE on them
+                batches = train_batches(epoch)
+                sse, _ = self._sse(residual, theta, layout, batches)
+            ne = self._normal_equations(residual, theta, layout, batches)
             n = max(ne.n, 1)
             mse = sse / n  # the SSE that trials are judged against
             grad = 2.0 * float(torch.linalg.vector_norm(ne.jtr)) / n
@@ -483,7 +495,7 @@ class LevenbergMarquardt(BaseEstimator):
                 delta = self._solve(ne.jtj, ne.jtr, mu)
                 if delta is not None:
                     trial = theta + delta
-                    sse2, _ = self._sse(residual, trial, layout, train_batches)
+                    sse2, _ = self._sse(residual, trial, layout, batches)
                     if math.isfinite(sse2) and sse2 < sse:
                         predicted = float(delta @ (mu * delta - ne.jtr))
                         rho = (sse - sse2) / predicted if predicted > 0 else 1.0
