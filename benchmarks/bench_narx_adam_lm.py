@@ -423,6 +423,8 @@ def main() -> None:
         help="simulation objective: each LM epoch on a fresh draw of 1/k of the windows",
     )
     args = ap.parse_args()
+    if args.lm_subset < 1:
+        ap.error("--lm-subset is a positive integer k (1/k of the windows an LM epoch)")
     transform = json.loads(args.load.read_text()).get("transform") if args.load else args.transform
     for c in CASES.values():  # this process's networks, for training and for the report
         c["transform"] = transform

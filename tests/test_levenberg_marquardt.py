@@ -21,6 +21,17 @@ def _mlp(sizes: list[int], seed: int) -> torch.nn.Sequential:
     return torch.nn.Sequential(*layers[:-1]).double()
 
 
+def _teacher() -> torch.nn.Sequential:
+    """A 1-3-1 tanh network with distinct, unsaturated units: a well-conditioned minimum."""
+    teacher = _mlp([1, 3, 1], seed=1)
+    with torch.no_grad():
+        teacher[0].weight.copy_(torch.tensor([[1.5], [-2.0], [0.7]]))
+        teacher[0].bias.copy_(torch.tensor([0.5, -0.3, 1.0]))
+        teacher[2].weight.copy_(torch.tensor([[1.0, 0.8, -1.2]]))
+        teacher[2].bias.copy_(torch.tensor([0.1]))
+    return teacher
+
+
 def _regression_residual(net: torch.nn.Module):
     def residual(params: dict[str, torch.Tensor], batch) -> torch.Tensor:
         x, y = batch
@@ -37,12 +48,7 @@ def _flat(net: torch.nn.Module) -> np.ndarray:
     ("mode", "damping"), [("forward", "trainlm"), ("samples", "trainlm"), ("samples", "nielsen")]
 )
 def test_agrees_with_scipy_lm(mode: str, damping: str) -> None:
-    teacher = _mlp([1, 3, 1], seed=1)
-    with torch.no_grad():  # distinct, unsaturated units: a well-conditioned minimum
-        teacher[0].weight.copy_(torch.tensor([[1.5], [-2.0], [0.7]]))
-        teacher[0].bias.copy_(torch.tensor([0.5, -0.3, 1.0]))
-        teacher[2].weight.copy_(torch.tensor([[1.0, 0.8, -1.2]]))
-        teacher[2].bias.copy_(torch.tensor([0.1]))
+    teacher = _teacher()
     gen = torch.Generator().manual_seed(0)
     x = torch.linspace(-3, 3, 200, dtype=torch.float64).unsqueeze(1)
     with torch.no_grad():
@@ -263,12 +269,7 @@ def test_l2_penalty_is_the_residual_with_sqrt_lambda_theta_rows() -> None:
 def test_batches_drawn_per_epoch_judge_that_epochs_steps() -> None:
     # Noise-free data of a network of the same shape: every subset of samples shares the
     # minimum, so LM on a fresh quarter of the samples each epoch must reach it on all of them.
-    teacher = _mlp([1, 3, 1], seed=1)
-    with torch.no_grad():
-        teacher[0].weight.copy_(torch.tensor([[1.5], [-2.0], [0.7]]))
-        teacher[0].bias.copy_(torch.tensor([0.5, -0.3, 1.0]))
-        teacher[2].weight.copy_(torch.tensor([[1.0, 0.8, -1.2]]))
-        teacher[2].bias.copy_(torch.tensor([0.1]))
+    teacher = _teacher()
     x = torch.linspace(-3, 3, 200, dtype=torch.float64).unsqueeze(1)
     with torch.no_grad():
         y = teacher(x)

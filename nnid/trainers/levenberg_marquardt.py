@@ -51,7 +51,9 @@ Jacobians come from :mod:`torch.func`; there are two modes:
 Adam's are drawn): each epoch's normal equations, trial steps and reported training error are
 then those of its own batches, a subsampled Gauss-Newton method. Where JᵀJ dominates an epoch
 (a large network on many simulation windows: its cost grows as rows × P²), a subset of the
-rows per epoch buys proportionally cheaper iterations.
+rows per epoch buys proportionally cheaper iterations, at a price: each step is judged on one
+draw only (on the Seamor four-output net a quarter of the windows made epochs 3.7× cheaper and
+stopped at far higher validation errors; ``benchmarks/RESULTS.md``).
 
 The same trainer fits nonlinear physics parameters: any ``nn.Module`` whose parameters are the
 unknowns and a residual that computes model − measurement with ``functional_call``.
