@@ -32,6 +32,16 @@ def _teacher() -> torch.nn.Sequential:
     return teacher
 
 
+def _perturbed(teacher: torch.nn.Sequential, gen: torch.Generator) -> torch.nn.Sequential:
+    """A copy of ``teacher`` with N(0, 0.3²) added to every weight, drawn from ``gen``."""
+    net = _mlp([1, 3, 1], seed=1)
+    net.load_state_dict(teacher.state_dict())
+    with torch.no_grad():
+        for p in net.parameters():
+            p.add_(0.3 * torch.randn(p.shape, generator=gen, dtype=torch.float64))
+    return net
+
+
 def _regression_residual(net: torch.nn.Module):
     def residual(params: dict[str, torch.Tensor], batch) -> torch.Tensor:
         x, y = batch
@@ -53,11 +63,7 @@ def test_agrees_with_scipy_lm(mode: str, damping: str) -> None:
     x = torch.linspace(-3, 3, 200, dtype=torch.float64).unsqueeze(1)
     with torch.no_grad():
         y = teacher(x) + 0.01 * torch.randn(x.shape, generator=gen, dtype=torch.float64)
-    net = _mlp([1, 3, 1], seed=1)
-    net.load_state_dict(teacher.state_dict())
-    with torch.no_grad():  # same start for both solvers
-        for p in net.parameters():
-            p.add_(0.3 * torch.randn(p.shape, generator=gen, dtype=torch.float64))
+    net = _perturbed(teacher, gen)  # same start for both solvers
     theta0 = _flat(net)
     residual = _regression_residual(net)
     names = [k for k, _ in net.named_parameters()]
@@ -273,12 +279,7 @@ def test_batches_drawn_per_epoch_judge_that_epochs_steps() -> None:
     x = torch.linspace(-3, 3, 200, dtype=torch.float64).unsqueeze(1)
     with torch.no_grad():
         y = teacher(x)
-    net = _mlp([1, 3, 1], seed=1)
-    net.load_state_dict(teacher.state_dict())
-    gen = torch.Generator().manual_seed(0)
-    with torch.no_grad():
-        for p in net.parameters():
-            p.add_(0.3 * torch.randn(p.shape, generator=gen, dtype=torch.float64))
+    net = _perturbed(teacher, torch.Generator().manual_seed(0))
     start = {k: v.clone() for k, v in net.state_dict().items()}
     residual = _regression_residual(net)
     calls: list[int] = []
