@@ -250,14 +250,16 @@ def test_cli_train_detect_and_follow(vehicle, tmp_path, chromium):
     assert res.exit_code == 0, res.output
     assert res.output.index("ALARM t = ") < res.output.index("thruster h3 gives")
     (b,) = json.loads((followed / "detect.json").read_text())["alarms"]
-    assert {k: b[k] for k in ("t", "thruster", "efficiency")} == {
-        k: a[k] for k in ("t", "thruster", "efficiency")
-    }
+    # the same alarm: time and thruster exactly, the efficiency to rounding (CI once saw 4 ulp
+    # between the full and the bounded history, not reproduced here over BLAS and torch thread
+    # counts 1-4 nor over shifted array alignments)
+    same = pytest.approx(a["efficiency"], rel=1e-12, abs=0)
+    assert (b["t"], b["thruster"], b["efficiency"]) == (a["t"], a["thruster"], same)
     # a long watch keeps a bounded history: the same alarm with only the last rows kept
     kept = follow_csv(ResidualMonitor.load(model), fault, 10.0, lambda line: None, keep_rows=150)
     assert 150 <= kept.trace.t.size <= 300 and kept.trace.t[-1] == faulty["t"].iloc[-1]
     assert [(x["t"], x["thruster"], x["efficiency"]) for x in kept.alarms] == [
-        (b["t"], b["thruster"], b["efficiency"])
+        (a["t"], a["thruster"], same)
     ]
     args = ["detect", "--model", str(model), "--data", "-", "--out", str(tmp_path / "stdin")]
     res = runner.invoke(app, [*args, "--follow"], input=(tmp_path / "fault.csv").read_text())
