@@ -31,7 +31,10 @@ same fixed windows (``--window`` samples from measured delay states, every ``--e
 window of ``NarxModel._fixed_windows``, which start every half window; Adam takes them in
 shuffled mini-batches of ``batch`` windows), and are scored after every epoch on the
 validation runs' whole free run (MSE in normalised units). Levels are geometric between
-the start's validation MSE and L*. Surge case: validated on a surge run of other levels.
+the start's validation MSE and L*; where only one trainer ever improves on the start, L* is
+its best, the other's times are "never" and the seed counts as the first's win (ratio 0 or ∞);
+a level neither reaches is left out of the medians. Surge case: validated on a surge run of
+other levels.
 ``--data shipped`` (coupled case, simulation objective): the training and validation runs of
 ``configs/seamor_narx_lm.toml`` as ``nnid train`` builds them (Weiss's sequence, the APRBS runs,
 validation surge-sway-yaw-b) instead of the 10 sequence runs above. ``--transform fossen``
@@ -228,11 +231,19 @@ def _not_improving(lm_best: float, adam_best: float, start: float) -> str:
     return "LM never" if lm_best >= start else "Adam never"
 
 
+def _median_ratio(ratios) -> float:
+    """Median of Adam / LM time ratios; a level neither reaches (∞ / ∞) is no race: left out."""
+    kept = [r for r in ratios if not math.isnan(r)]
+    return statistics.median(kept) if kept else math.nan
+
+
 def fmt_t(t: float) -> str:
     return f"{t:.3g} s" if math.isfinite(t) else "never"
 
 
 def fmt_r(r: float) -> str:
+    if math.isnan(r):
+        return "neither"
     return f"{r:.2f}×" if math.isfinite(r) else "∞"
 
 
@@ -278,11 +289,15 @@ def report(res: dict) -> None:
     adam_best = {s: min(best(adam[s, lr, b]) for lr, b in grid) for s in seeds}
     top = {s: max(lm_best[s], adam_best[s]) for s in seeds}
     sim = res.get("objective") == "simulation"
-    stuck: list[int] = []  # seeds where a trainer never improves on the start: L* is the start
+    stuck: list[int] = []  # seeds where neither trainer improves on the start: nothing to time
+    one_sided: list[int] = []  # seeds where only one trainer improves: the other never arrives
     if sim:  # geometric from the shared start's validation MSE to L*
         v0 = {s: lm[s][1][0] for s in seeds}
+        one_sided = [s for s in seeds if (lm_best[s] < v0[s]) != (adam_best[s] < v0[s])]
+        stuck = [s for s in seeds if top[s] >= v0[s] and s not in one_sided]
+        for s in one_sided:  # the improving trainer's best: a win it earned, counted
+            top[s] = min(lm_best[s], adam_best[s])
         level = {(s, f): v0[s] ** (1 - f) * top[s] ** f for s in seeds for f in FRACTIONS}
-        stuck = [s for s in seeds if top[s] >= v0[s]]
     else:
         level = {(s, f): 1 - f * (1 - top[s]) for s in seeds for f in FRACTIONS}
     t_lm = {(s, f): time_to(level[s, f], lm[s]) for s in seeds for f in FRACTIONS}
@@ -367,23 +382,27 @@ def report(res: dict) -> None:
                 f"({g[0]:g}, {g[1]}) | {fmt_r(o / a)} | {fmt_t(x)} | {fmt_r(x / a)} |"
             )
         timed = [i for i, s in enumerate(seeds) if s in timed_seeds]
-        summary.append(
-            (
-                f,
-                statistics.median(r_or[i] for i in timed),
-                statistics.median(r_fx[i] for i in timed),
-            )
-        )
-    if stuck:
+        summary.append((f, _median_ratio(r_or[i] for i in timed),
+                        _median_ratio(r_fx[i] for i in timed)))  # fmt: skip
+    if one_sided:
         print(
             "\n"
             + " ".join(
                 f"Seed {s}: {_not_improving(lm_best[s], adam_best[s], v0[s])} improves on the "
                 "start's validation MSE."
+                for s in one_sided
+            )
+            + " L* is then the other trainer's best, which the first never reaches: counted in "
+            "the medians below as a win of the other (ratio 0 or ∞)."
+        )
+    if stuck:
+        print(
+            "\n"
+            + " ".join(
+                f"Seed {s}: neither trainer ever improves on the start's validation MSE."
                 for s in stuck
             )
-            + " L* is then the start's, every time to it the first epoch's end; left out of the "
-            "medians below."
+            + " Nothing to time: left out of the medians below."
         )
     print("\n| level | median Adam / LM, best Adam per seed | median Adam / LM, chosen setting |")
     print("|---|---|---|")
@@ -480,7 +499,8 @@ def main() -> None:
             f"grid lr ∈ {{{', '.join(f'{x:g}' for x in lrs)}}} × windows per step ∈ "
             f"{{{', '.join(map(str, bs))}}}. Times from each trainer's history (`fit` clock). "
             "Levels, per seed: L* is the worse of LM's and the grid's best Adam's best "
-            "validation MSE; 1/4, 1/2, 3/4: geometric steps from the start's MSE to L*.\n"
+            "validation MSE (where only one of them improves on the start, its best); 1/4, 1/2, "
+            "3/4: geometric steps from the start's MSE to L*.\n"
         )
         for res in saved["cases"]:
             report(res)
