@@ -192,22 +192,26 @@ def sim_start(case: str, seed: int, train, val, window: int, every: int):
     return model, {k: v.clone() for k, v in model.net_.state_dict().items()}, windows, runs
 
 
-def sim_traces(case, seed, grid, cap, window, every, train, val, lm_subset=1) -> list[dict]:
+def sim_traces(
+    case, seed, grid, cap, window, every, train, val, lm_subset=1, lm_curvature=1
+) -> list[dict]:
     """LM and every Adam setting from the same start; (seconds, validation MSE) per epoch.
-    ``lm_subset`` k > 1: each LM epoch on a fresh seeded draw of 1/k of the windows."""
+    ``lm_subset`` k > 1: each LM epoch on a fresh seeded draw of 1/k of the windows;
+    ``lm_curvature`` k > 1: only its JᵀJ from such a draw, the gradient and SSE from all."""
     model, start, windows, runs = sim_start(case, seed, train, val, window, every)
     out = []
     n = windows[0].shape[0]
 
     def lm_batches(epoch: int) -> list:
         gen = torch.Generator().manual_seed(seed * 100_003 + epoch)
-        idx = torch.randperm(n, generator=gen)[: max(1, n // lm_subset)]
+        idx = torch.randperm(n, generator=gen)[: max(1, n // max(lm_subset, lm_curvature))]
         return [tuple(x[idx] for x in windows)]
 
     lm = LevenbergMarquardt(max_epochs=SIM_LM_EPOCHS[case], max_fail=10**6)
     model.net_.load_state_dict(start)
     h = lm.fit(model.net_, model._window_residual, lm_batches if lm_subset > 1 else [windows],
-               runs, jacobian_rows=model._simulation_rows)  # fmt: skip
+               runs, jacobian_rows=model._simulation_rows,
+               curvature_batches=lm_batches if lm_curvature > 1 else None)  # fmt: skip
     out.append({"seed": seed, "trainer": "lm", "trace": (h.time, h.validation)})
     for lr, b in grid:
         order = torch.Generator().manual_seed(seed)
@@ -263,13 +267,14 @@ def train_case(case: str, seeds: range, cap: float, grid: list[tuple[float, int]
 
 
 def train_sim_case(
-    case, seeds, cap, grid, window: int, every: int, source: str, lm_subset: int = 1
-) -> dict:
+    case, seeds, cap, grid, window: int, every: int, source: str, lm_subset: int = 1,
+    lm_curvature: int = 1,
+) -> dict:  # fmt: skip
     load0 = os.getloadavg()[0]
     train, val = sim_data(case, window, source)
     runs = []
     for s in seeds:
-        runs += sim_traces(case, s, grid, cap, window, every, train, val, lm_subset)
+        runs += sim_traces(case, s, grid, cap, window, every, train, val, lm_subset, lm_curvature)
     return {"case": case, "cap": cap, "load": [load0, os.getloadavg()[0]], "runs": runs,
             "objective": "simulation", "window": window, "every": every,
             "data": source}  # fmt: skip
@@ -441,9 +446,18 @@ def main() -> None:
         default=1,
         help="simulation objective: each LM epoch on a fresh draw of 1/k of the windows",
     )
+    ap.add_argument(
+        "--lm-curvature",
+        type=int,
+        default=1,
+        help="simulation objective: each LM epoch's JᵀJ from a fresh draw of 1/k of the windows "
+        "(gradient and trial SSE from all)",
+    )
     args = ap.parse_args()
-    if args.lm_subset < 1:
-        ap.error("--lm-subset is a positive integer k (1/k of the windows an LM epoch)")
+    if args.lm_subset < 1 or args.lm_curvature < 1:
+        ap.error("--lm-subset and --lm-curvature are positive integers k (1/k of the windows)")
+    if args.lm_subset > 1 and args.lm_curvature > 1:
+        ap.error("--lm-subset and --lm-curvature are two ways to draw: give one")
     transform = json.loads(args.load.read_text()).get("transform") if args.load else args.transform
     for c in CASES.values():  # this process's networks, for training and for the report
         c["transform"] = transform
@@ -459,7 +473,8 @@ def main() -> None:
     else:
         cases = list(CASES) if args.case == "all" else [args.case]
         saved = {"threads": args.threads, "date": str(datetime.date.today()), "cases": [],
-                 "transform": args.transform, "lm_subset": args.lm_subset}  # fmt: skip
+                 "transform": args.transform, "lm_subset": args.lm_subset,
+                 "lm_curvature": args.lm_curvature}  # fmt: skip
         for case in cases:
             if sim:
                 cap = args.cap or SIM_CAP[case]
@@ -473,6 +488,7 @@ def main() -> None:
                         args.every,
                         args.data,
                         args.lm_subset,
+                        args.lm_curvature,
                     )
                 )
                 continue
@@ -491,6 +507,12 @@ def main() -> None:
     if objective == "simulation":
         k = saved.get("lm_subset", 1)
         drawn = f", each epoch on a fresh draw of 1/{k} of the windows" if k > 1 else ""
+        c = saved.get("lm_curvature", 1)
+        if c > 1:
+            drawn = (
+                f", each epoch's JᵀJ from a fresh draw of 1/{c} of the windows scaled to all, "
+                "its gradient Jᵀr (reverse mode) and trial SSE from every window"
+            )
         print(
             "Start: per seed, LM on the one-step error (trainlm defaults, early-stopped on the "
             "validation runs). Then LM (sensitivity-recursion Jacobian, trainlm's μ rule, "

@@ -308,3 +308,47 @@ def test_batches_drawn_per_epoch_judge_that_epochs_steps() -> None:
     ((xb, yb),) = draw(hist.epochs - 1)
     with torch.no_grad():
         assert hist.train[-1] == pytest.approx(float(torch.mean((net(xb) - yb) ** 2)), rel=1e-9)
+
+
+def test_curvature_from_a_subset_keeps_every_samples_gradient_and_error() -> None:
+    # Subsampled curvature: JᵀJ from the drawn samples, scaled to all; the gradient and the SSE
+    # that judges a step from every sample. Noise-free teacher data, so the minimum is shared.
+    teacher = _teacher()
+    x = torch.linspace(-3, 3, 200, dtype=torch.float64).unsqueeze(1)
+    with torch.no_grad():
+        y = teacher(x)
+    net = _perturbed(teacher, torch.Generator().manual_seed(0))
+    start = {k: v.clone() for k, v in net.state_dict().items()}
+    residual = _regression_residual(net)
+
+    def quarter(epoch: int) -> list:
+        idx = torch.randperm(200, generator=torch.Generator().manual_seed(epoch))[:50]
+        return [(x[idx], y[idx])]
+
+    # curvature from every sample: plain LM's step (the reverse-mode gradient is its Jᵀr), with
+    # the λ‖θ‖² rows added once, not scaled
+    LevenbergMarquardt(max_epochs=1, l2=0.3).fit(
+        net, residual, [(x, y)], curvature_batches=lambda e: [(x, y)]
+    )
+    whole = _flat(net)
+    net.load_state_dict(start)
+    LevenbergMarquardt(max_epochs=1, l2=0.3).fit(net, residual, [(x, y)])
+    np.testing.assert_allclose(whole, _flat(net), rtol=1e-10, atol=1e-12)
+    # a quarter's curvature: the same gradient as plain LM, a different step
+    net.load_state_dict(start)
+    plain = LevenbergMarquardt(max_epochs=1).fit(net, residual, [(x, y)])
+    plain_step = _flat(net)
+    net.load_state_dict(start)
+    sub = LevenbergMarquardt(max_epochs=1).fit(net, residual, [(x, y)], curvature_batches=quarter)
+    assert sub.extra["gradient"][0] == pytest.approx(plain.extra["gradient"][0], rel=1e-10)
+    assert np.abs(_flat(net) - plain_step).max() > 1e-6
+    # it converges on every sample, and reports the error of every sample
+    net.load_state_dict(start)
+    hist = LevenbergMarquardt(max_epochs=60, min_grad=0.0).fit(
+        net, residual, [(x, y)], curvature_batches=quarter
+    )
+    with torch.no_grad():
+        full = float(torch.mean((net(x) - y) ** 2))
+        first = float(torch.mean((teacher(x) - functional_call(teacher, start, (x,))) ** 2))
+    assert full < 1e-12 * first
+    assert hist.train[-1] == pytest.approx(full, rel=1e-9, abs=1e-30)

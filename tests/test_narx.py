@@ -496,6 +496,12 @@ def test_config_refuses_rest_equilibrium_without_the_delta_form(tmp_path):
     assert "Traceback" not in done.output and not out.exists()
 
 
+def _window_keys(hist, uf, y) -> list[tuple]:
+    """One key per window: its delay states, inputs and outputs together."""
+    return [tuple(torch.cat([h.flatten(), u.flatten(), w.flatten()]).tolist())
+            for h, u, w in zip(hist, uf, y, strict=True)]  # fmt: skip
+
+
 def test_adam_free_run_stage_passes_every_window_once_an_epoch_in_a_seeded_order(monkeypatch):
     # Adam's free-run stage trains on LM's windows (each run's last sample and every half
     # window before it): every window once an epoch, the order drawn per epoch from the seed
@@ -518,16 +524,61 @@ def test_adam_free_run_stage_passes_every_window_once_an_epoch_in_a_seeded_order
     monkeypatch.setattr(NarxModel, "free_run_error", lambda self, log: 1.0)
     model.fit(train, val)
 
-    def keys(hist, uf, y):  # one window: its delay states, inputs and outputs together
-        return [tuple(torch.cat([h.flatten(), u.flatten(), w.flatten()]).tolist())
-                for h, u, w in zip(hist, uf, y, strict=True)]  # fmt: skip
-
-    key = keys(*model._fixed_windows(model._table(train), 20))
+    key = _window_keys(*model._fixed_windows(model._table(train), 20))
     assert len(key) == (170 - 2 - 20) // 10 + 1 + (230 - 2 - 20) // 10 + 1  # both runs' windows
     orders = []
     for batches in epochs:
         assert max(len(b[0]) for b in batches) == 32
-        seen = [k for b in batches for k in keys(*b)]
+        seen = [k for b in batches for k in _window_keys(*b)]
         assert sorted(seen) == sorted(key)  # each window exactly once, with its own states
         orders.append(seen)
     assert orders[0] == orders[2] and orders[0] != orders[1]
+
+
+def test_lm_free_run_stage_with_subsampled_curvature_draws_its_share_per_epoch(monkeypatch):
+    # simulation_curvature 0.5: each LM epoch's JᵀJ from half the windows, drawn per epoch from
+    # the seed; the stage still lowers the validation free-run error
+    train, val = _tank(400, 1.3, 2), _tank(300, 1.3, 3)
+    draws: list[tuple[int, list[tuple]]] = []
+    original = LevenbergMarquardt.fit
+
+    def spy(self, net, residual, batches, *args, curvature_batches=None, **kw):
+        if curvature_batches is not None:
+            assert len(batches) == 1  # the gradient and the trial SSE: every window
+
+            def recorded(epoch):
+                out = curvature_batches(epoch)
+                draws.append((epoch, out))
+                return out
+
+            return original(self, net, residual, batches, *args, curvature_batches=recorded, **kw)
+        return original(self, net, residual, batches, *args, **kw)
+
+    monkeypatch.setattr(LevenbergMarquardt, "fit", spy)
+    model = NarxModel(
+        ["u"], ["y"], 2, 2, hidden=(3,), balanced=False, lm_samples=300, seed=5,
+        trainer=LevenbergMarquardt(max_epochs=5, jacobian="samples"), simulation_epochs=6,
+        simulation_window=20, simulation_trainer="lm", simulation_curvature=0.5,
+    )  # fmt: skip
+    model.fit(train, val)
+    ft = model.finetune_
+    assert (
+        ft["kept"]
+        and ft["validation_free_run_nrmse_after"] < ft["validation_free_run_nrmse_before"]
+    )
+    windows = model._fixed_windows(model._table(train), 20)
+    n = windows[0].shape[0]
+    assert [e for e, _ in draws] == list(range(len(draws))) and len(draws) >= 2
+
+    rows = {k: i for i, k in enumerate(_window_keys(*windows))}
+    assert len(rows) == n
+    picked = []
+    for _, (batch,) in draws:
+        idx = [rows[k] for k in _window_keys(*batch)]  # whole windows of the training set
+        assert len(set(idx)) == len(idx) == round(0.5 * n)
+        picked.append(sorted(idx))
+    assert picked[0] != picked[1]
+    assert picked[0] == sorted(model._epoch_order(n, 0)[: round(0.5 * n)].tolist())
+    for bad in (0.0, 1.5):
+        with pytest.raises(NnidInputError, match="simulation_curvature"):
+            NarxModel(["u"], ["y"], simulation_curvature=bad).fit(train)

@@ -160,7 +160,10 @@ class NarxModel(InputOutputModel):
       Jacobians); windows longer than the shortest experiment are cut to it; early-stopped on
       the whole free runs of the validation experiments and kept only if the validation
       free-run error falls (``finetune_``). ``simulation_max_fail``: validation failures
-      before a stage stops; ``simulation_l2``: λ of a λ‖θ‖² penalty on the LM sum of squares.
+      before a stage stops; ``simulation_l2``: λ of a λ‖θ‖² penalty on the LM sum of squares;
+      ``simulation_curvature`` < 1: each LM epoch's JᵀJ from that share of the windows, drawn
+      per epoch from ``seed`` (subsampled curvature; the gradient and the SSE that judges a
+      step stay those of every window).
     * ``output_transform``: None, ``"sqrt"`` (√max(y, 0) of every lagged output, output
       units), ``"products"`` (y_i y_j, i ≤ j, of every lag's standardised outputs) or
       ``"fossen"`` (those products, then y_i|y_i| in output units), each standardised on the
@@ -195,6 +198,7 @@ class NarxModel(InputOutputModel):
         simulation_trainer: str = "adam",
         simulation_max_fail: int = 8,
         simulation_l2: float = 0.0,
+        simulation_curvature: float = 1.0,
         output_transform: str | None = None,
         rest_equilibrium: bool = False,
     ) -> None:
@@ -220,6 +224,7 @@ class NarxModel(InputOutputModel):
         self.simulation_trainer = simulation_trainer
         self.simulation_max_fail = simulation_max_fail
         self.simulation_l2 = simulation_l2
+        self.simulation_curvature = simulation_curvature
         self.output_transform = output_transform
         self.rest_equilibrium = rest_equilibrium
 
@@ -232,6 +237,12 @@ class NarxModel(InputOutputModel):
         if self.output_transform not in OUTPUT_TRANSFORMS:
             raise NnidInputError(
                 "output_transform is None, 'sqrt', 'products' or 'fossen'", field="output_transform"
+            )
+        if not 0.0 < float(self.simulation_curvature) <= 1.0:
+            raise NnidInputError(
+                "simulation_curvature is the share of the windows in (0, 1] whose JᵀJ stands for "
+                "all in an LM epoch",
+                field="simulation_curvature",
             )
         if self.rest_equilibrium and not self.delta:
             raise NnidInputError(
@@ -798,6 +809,11 @@ class NarxModel(InputOutputModel):
         ]
         return runs or None
 
+    def _epoch_order(self, n: int, epoch: int) -> torch.Tensor:
+        """A permutation of ``n`` windows for ``epoch``, drawn from ``seed`` (local generator)."""
+        gen = torch.Generator().manual_seed(int(self.seed) * 100_003 + epoch)
+        return torch.randperm(n, generator=gen)
+
     def _simulation_lm(self, tab, val, progress: Progress, length: int) -> int | None:
         from nnid.trainers.levenberg_marquardt import LevenbergMarquardt
 
@@ -809,6 +825,13 @@ class NarxModel(InputOutputModel):
             max_fail=int(self.simulation_max_fail),
             l2=float(self.simulation_l2),
         )
+        n = train[0].shape[0]
+        share = float(self.simulation_curvature)
+
+        def curvature(epoch: int) -> list:
+            idx = self._epoch_order(n, epoch)[: max(1, round(share * n))]
+            return [tuple(x[idx] for x in train)]
+
         hist = trainer.fit(
             self.net_,
             self._window_residual,
@@ -816,6 +839,7 @@ class NarxModel(InputOutputModel):
             val,
             progress=progress,
             jacobian_rows=self._simulation_rows,
+            curvature_batches=curvature if share < 1.0 else None,
         )
         return hist.epochs
 
@@ -832,8 +856,7 @@ class NarxModel(InputOutputModel):
         n = windows[0].shape[0]
 
         def batches(epoch: int) -> list:
-            gen = torch.Generator().manual_seed(int(self.seed) * 100_003 + epoch)
-            order = torch.randperm(n, generator=gen)
+            order = self._epoch_order(n, epoch)
             return [tuple(x[idx] for x in windows) for idx in order.split(32)]
 
         trainer = Adam(

@@ -55,6 +55,15 @@ rows per epoch buys proportionally cheaper iterations, at a price: each step is 
 draw only (on the Seamor four-output net a quarter of the windows made epochs 3.7× cheaper and
 stopped at far higher validation errors; ``benchmarks/RESULTS.md``).
 
+``curvature_batches`` given to :meth:`fit` keeps the rows that judge a step and draws only the
+curvature (subsampled Gauss-Newton curvature; Byrd, Chin, Neveitt & Nocedal 2011, "On the use
+of stochastic Hessian information in optimization methods for machine learning"): each
+epoch's JᵀJ from that epoch's curvature batches, scaled by the ratio of rows, while Jᵀr comes
+from every training batch by one reverse-mode pass (no Jacobian rows) and every trial step is
+accepted or rejected on the SSE of all of them. The gradient, the descent test and the
+reported error stay exact; only the step's metric is estimated, so the step is a descent
+direction of the whole objective for any μ.
+
 The same trainer fits nonlinear physics parameters: any ``nn.Module`` whose parameters are the
 unknowns and a residual that computes model − measurement with ``functional_call``.
 """
@@ -269,7 +278,12 @@ class LevenbergMarquardt(BaseEstimator):
             self._mode = "samples" if separable else "forward"
 
     def _normal_equations(
-        self, residual: Residual, theta: torch.Tensor, layout: list, batches: Sequence[Any]
+        self,
+        residual: Residual,
+        theta: torch.Tensor,
+        layout: list,
+        batches: Sequence[Any],
+        penalised: bool = True,
     ) -> NormalEquations:
         p = theta.numel()
         jtj = torch.zeros(p, p, dtype=torch.float64)
@@ -284,11 +298,46 @@ class LevenbergMarquardt(BaseEstimator):
                 s, k = self._accumulate_samples(residual, theta, layout, b, jtj, jtr)
             sse += s
             n += k
+        ne = NormalEquations(jtj, jtr, sse, n)
+        return self._penalise(ne, theta) if penalised else ne
+
+    def _penalise(self, ne: NormalEquations, theta: torch.Tensor) -> NormalEquations:
+        """The λ‖θ‖² rows added to a system of the data alone."""
         if self.l2 > 0:
-            jtj.diagonal().add_(self.l2)
-            jtr += self.l2 * theta
-            sse += self._penalty(theta)
-        return NormalEquations(jtj, jtr, sse, n)
+            ne.jtj.diagonal().add_(self.l2)
+            ne.jtr += self.l2 * theta
+            ne.sse += self._penalty(theta)
+        return ne
+
+    def _subsampled_equations(
+        self,
+        residual: Residual,
+        theta: torch.Tensor,
+        layout: list,
+        batches: Sequence[Any],
+        curvature: Sequence[Any],
+    ) -> NormalEquations:
+        """JᵀJ from the ``curvature`` batches, scaled to the rows of ``batches``; Jᵀr and the
+        SSE from every batch by reverse mode (one backward pass a batch, no Jacobian)."""
+        sub = self._normal_equations(residual, theta, layout, curvature, penalised=False)
+        params = {
+            k: v.detach().clone().requires_grad_(True)
+            for k, v in self._unflatten(theta, layout).items()
+        }
+        grads = [torch.zeros_like(v) for v in params.values()]
+        sse, n = 0.0, 0
+        for b in batches:
+            r = residual(params, b).reshape(-1)
+            parts = torch.autograd.grad(0.5 * (r @ r), list(params.values()), allow_unused=True)
+            for g, d in zip(grads, parts, strict=True):
+                if d is not None:
+                    g += d.detach()
+            r64 = r.detach().to(torch.float64)
+            sse += float(r64 @ r64)
+            n += r64.numel()
+        jtr = torch.cat([g.reshape(-1).to(torch.float64) for g in grads])
+        jtj = sub.jtj * (n / max(sub.n, 1))
+        return self._penalise(NormalEquations(jtj, jtr, sse, n), theta)
 
     def _accumulate_supplied(self, theta, layout, batch, jtj, jtr) -> tuple[float, int]:
         """Jacobian rows computed by the caller (``jacobian_rows``), block by block."""
@@ -404,6 +453,7 @@ class LevenbergMarquardt(BaseEstimator):
         progress: Progress | None = None,
         separable: bool = False,
         jacobian_rows: JacobianRows | None = None,
+        curvature_batches: Callable[[int], Sequence[Any]] | None = None,
     ) -> History:
         """Train ``module``'s parameters in place; returns the per-epoch :class:`History`
         (``extra``: ``mu`` per entry, ``gradient`` ‖∇ MSE‖ = 2‖Jᵀr‖/N per Jacobian pass;
@@ -420,7 +470,10 @@ class LevenbergMarquardt(BaseEstimator):
         yields the Jacobian's rows of a batch with their residuals in blocks of at most
         ``budget_elements`` (then "supplied" mode under "auto"; it must agree with
         ``residual``, which still judges the trial steps). ``train_batches(epoch)``, when a
-        function, draws each epoch's batches (module docstring).
+        function, draws each epoch's batches (module docstring). ``curvature_batches(epoch)``,
+        when given, returns the batches (a subset of the training data) whose JᵀJ, scaled to
+        the training rows, stands for the whole one in that epoch, while the gradient Jᵀr and
+        the trial steps' SSE stay those of every training batch (module docstring).
         """
         self._select_mode(separable, jacobian_rows)
         if not (0.0 < self.mu_dec < 1.0 < self.mu_inc):
@@ -478,7 +531,12 @@ class LevenbergMarquardt(BaseEstimator):
             if drawn and epoch > 0:  # this epoch's batches: the point's SSE on them
                 batches = train_batches(epoch)
                 sse, _ = self._sse(residual, theta, layout, batches)
-            ne = self._normal_equations(residual, theta, layout, batches)
+            if curvature_batches is None:
+                ne = self._normal_equations(residual, theta, layout, batches)
+            else:
+                ne = self._subsampled_equations(
+                    residual, theta, layout, batches, curvature_batches(epoch)
+                )
             n = max(ne.n, 1)
             mse = sse / n  # the SSE that trials are judged against
             grad = 2.0 * float(torch.linalg.vector_norm(ne.jtr)) / n
