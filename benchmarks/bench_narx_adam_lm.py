@@ -39,7 +39,9 @@ other levels.
 ``configs/seamor_narx_lm.toml`` as ``nnid train`` builds them (Weiss's sequence, the APRBS runs,
 validation surge-sway-yaw-b) instead of the 10 sequence runs above. ``--transform fossen``
 gives both networks the Fossen regressors (``NarxModel(output_transform=...)``), as the shipped
-Seamor configs and the surge test use them.
+Seamor configs and the surge test use them. ``--lm-subset k``: each LM epoch on a fresh
+seeded draw of 1/k of the windows; ``--lm-curvature k``: only each epoch's JᵀJ from such a
+draw (scaled to all), the gradient and the SSE judging a step from every window.
 
 Run:  PYTHONPATH=. python benchmarks/bench_narx_adam_lm.py [--case coupled|surge|all]
 (about 13 min for the coupled case, 4 min for the surge case, on 1 core); ``--save t.json``

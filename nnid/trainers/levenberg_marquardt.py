@@ -62,7 +62,8 @@ epoch's JᵀJ from that epoch's curvature batches, scaled by the ratio of rows, 
 from every training batch by one reverse-mode pass (no Jacobian rows) and every trial step is
 accepted or rejected on the SSE of all of them. The gradient, the descent test and the
 reported error stay exact; only the step's metric is estimated, so the step is a descent
-direction of the whole objective for any μ.
+direction of the whole objective for any μ. The backward pass holds one training batch's
+autograd graph at a time (not bounded by ``memory_budget_mb``, which bounds Jacobian blocks).
 
 The same trainer fits nonlinear physics parameters: any ``nn.Module`` whose parameters are the
 unknowns and a residual that computes model − measurement with ``functional_call``.
