@@ -42,6 +42,23 @@ def _perturbed(teacher: torch.nn.Sequential, gen: torch.Generator) -> torch.nn.S
     return net
 
 
+def _teacher_problem() -> tuple:
+    """Noise-free data of :func:`_teacher` on 200 points, and a perturbed copy of it (seed 0)
+    with its starting weights: (teacher, x, y, net, start)."""
+    teacher = _teacher()
+    x = torch.linspace(-3, 3, 200, dtype=torch.float64).unsqueeze(1)
+    with torch.no_grad():
+        y = teacher(x)
+    net = _perturbed(teacher, torch.Generator().manual_seed(0))
+    return teacher, x, y, net, {k: v.clone() for k, v in net.state_dict().items()}
+
+
+def _quarter(x: torch.Tensor, y: torch.Tensor, epoch: int) -> list:
+    """A quarter of the samples, drawn for ``epoch``: one batch."""
+    idx = torch.randperm(len(x), generator=torch.Generator().manual_seed(epoch))[: len(x) // 4]
+    return [(x[idx], y[idx])]
+
+
 def _regression_residual(net: torch.nn.Module):
     def residual(params: dict[str, torch.Tensor], batch) -> torch.Tensor:
         x, y = batch
@@ -275,19 +292,13 @@ def test_l2_penalty_is_the_residual_with_sqrt_lambda_theta_rows() -> None:
 def test_batches_drawn_per_epoch_judge_that_epochs_steps() -> None:
     # Noise-free data of a network of the same shape: every subset of samples shares the
     # minimum, so LM on a fresh quarter of the samples each epoch must reach it on all of them.
-    teacher = _teacher()
-    x = torch.linspace(-3, 3, 200, dtype=torch.float64).unsqueeze(1)
-    with torch.no_grad():
-        y = teacher(x)
-    net = _perturbed(teacher, torch.Generator().manual_seed(0))
-    start = {k: v.clone() for k, v in net.state_dict().items()}
+    teacher, x, y, net, start = _teacher_problem()
     residual = _regression_residual(net)
     calls: list[int] = []
 
     def draw(epoch: int) -> list:
         calls.append(epoch)
-        idx = torch.randperm(200, generator=torch.Generator().manual_seed(epoch))[:50]
-        return [(x[idx], y[idx])]
+        return _quarter(x, y, epoch)
 
     # one epoch: the same step as LM on that epoch's batches given as fixed batches
     LevenbergMarquardt(max_epochs=1).fit(net, residual, draw)
@@ -313,17 +324,11 @@ def test_batches_drawn_per_epoch_judge_that_epochs_steps() -> None:
 def test_curvature_from_a_subset_keeps_every_samples_gradient_and_error() -> None:
     # Subsampled curvature: JᵀJ from the drawn samples, scaled to all; the gradient and the SSE
     # that judges a step from every sample. Noise-free teacher data, so the minimum is shared.
-    teacher = _teacher()
-    x = torch.linspace(-3, 3, 200, dtype=torch.float64).unsqueeze(1)
-    with torch.no_grad():
-        y = teacher(x)
-    net = _perturbed(teacher, torch.Generator().manual_seed(0))
-    start = {k: v.clone() for k, v in net.state_dict().items()}
+    teacher, x, y, net, start = _teacher_problem()
     residual = _regression_residual(net)
 
     def quarter(epoch: int) -> list:
-        idx = torch.randperm(200, generator=torch.Generator().manual_seed(epoch))[:50]
-        return [(x[idx], y[idx])]
+        return _quarter(x, y, epoch)
 
     # curvature from every sample: plain LM's step (the reverse-mode gradient is its Jᵀr), with
     # the λ‖θ‖² rows added once, not scaled
