@@ -231,9 +231,7 @@ def sim_traces(
 
 
 def _not_improving(lm_best: float, adam_best: float, start: float) -> str:
-    """Which trainer never goes below the start's validation MSE."""
-    if lm_best >= start and adam_best >= start:
-        return "neither trainer ever"
+    """Which of the two trainers never goes below the start's validation MSE (one does)."""
     return "LM never" if lm_best >= start else "Adam never"
 
 
