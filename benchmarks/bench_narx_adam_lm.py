@@ -204,9 +204,8 @@ def sim_traces(
     out = []
     n = windows[0].shape[0]
 
-    def lm_batches(epoch: int) -> list:
-        gen = torch.Generator().manual_seed(seed * 100_003 + epoch)
-        idx = torch.randperm(n, generator=gen)[: max(1, n // max(lm_subset, lm_curvature))]
+    def lm_batches(epoch: int) -> list:  # the draws of NarxModel's own LM stage (its seed)
+        idx = model._epoch_order(n, epoch)[: max(1, n // max(lm_subset, lm_curvature))]
         return [tuple(x[idx] for x in windows)]
 
     lm = LevenbergMarquardt(max_epochs=SIM_LM_EPOCHS[case], max_fail=10**6)
