@@ -46,7 +46,7 @@ Data, splits and warm-ups.
 Selection. No setting sees the test data. FROLS: a small grid (:data:`FROLS_GRID`, least
 squares; polynomial degree, lags, model size by AIC or by ``err_tol``) scored on a validation
 part: the tail of the training split for the nlbench cases (tanks: train on samples 0-767,
-validate on 718-1023 with the first 50 as warm-up, as ``bench_nlbench.py --holdout``; silverbox:
+validate on 718-1023 (50 warm-up), the tail fold of ``bench_nlbench.py --holdout``; silverbox:
 train on the first 80 %, validate on the rest with the 50 samples before it as warm-up), the
 config's validation run for Seamor. The setting with the lowest validation error (a diverged
 free run never wins) is refitted on the whole training split (nlbench; for Seamor the
@@ -905,6 +905,8 @@ def _nnid_label(cfg: dict) -> str:
             f", then {s.get('simulation_trainer', 'adam')} on the free-run error of windows "
             f"{s.get('simulation_window')}, {s['simulation_epochs']} epochs each"
         )
+        if s.get("simulation_l2"):
+            text += f", penalty {s['simulation_l2']:g} ‖θ‖²"
     return text
 
 

@@ -30,7 +30,7 @@ from nnid.scale.sweep import run_sweep, run_sweep_tune
 REPO = Path(__file__).resolve().parents[1]
 CONFIG = REPO / "configs" / "cascaded_tanks_narx_sweep.toml"
 DATA = REPO.parent / "shared" / "data"
-HOLDOUT = 768  # benchmarks/bench_nlbench.py --holdout: train on Est 0-767
+HOLDOUT = 768  # the tail fold of benchmarks/bench_nlbench.py --holdout: train on Est 0-767
 
 
 def make_table(folder: Path) -> Path:
