@@ -177,28 +177,29 @@ def make_model(name: str, bench, seed: int):
     )
 
 
+def holdout_parts(train, cut: int, warmup: int, fold: str) -> tuple:
+    """(fitted part, held-out part) of a training record for one ``--holdout`` fold: "tail"
+    fits the first ``cut`` samples and holds out the rest, "head" fits the last ``cut`` and
+    holds out the first ones; the held-out part starts with ``warmup`` samples of the fitted
+    part's neighbourhood, its warm-up (delay states)."""
+    n = len(train)
+    if fold == "tail":
+        fit, held = train.iloc[:cut], train.iloc[cut - warmup :]
+    else:
+        fit, held = train.iloc[n - cut :], train.iloc[: n - cut + warmup]
+    return fit.reset_index(drop=True), held.reset_index(drop=True)
+
+
 def run(name: str, seed: int = 0, fold: str | None = None) -> dict:
     """Fit one seed; free-run RMSE on the training and test splits (``fold`` "tail" or
     "head": on that end of the training split instead, the model trained on the rest)."""
     cfg = SETTINGS[name]
     bench = load_benchmark(name.removesuffix("_nss"), ROOT)
     train = bench.splits["train"]
-    validation = train
     tests = {split: bench.splits[split] for split in cfg["tests"]}
-    if fold is not None:
-        # the protocol of the test run with one end of the estimation record as its test
-        # record: the fit's validation is its own training record, so the held-out end is
-        # never seen (early stopping or keeping a stage on it would choose on the record that
-        # scores the choice)
-        cut, n = cfg["holdout"], len(train)
-        if fold == "tail":  # train on the first `cut` samples, score the rest
-            held = train.iloc[cut - bench.warmup :]
-            train = train.iloc[:cut]
-        else:  # "head": train on the last `cut` samples, score the first n - cut
-            held = train.iloc[: n - cut + bench.warmup]
-            train = train.iloc[n - cut :]
-        tests = {f"holdout_{fold}": held.reset_index(drop=True)}
-        train = validation = train.reset_index(drop=True)
+    if fold is not None:  # the test run's protocol with one end of the record as its test
+        train, held = holdout_parts(train, cfg["holdout"], bench.warmup, fold)
+        tests = {f"holdout_{fold}": held}
     model = make_model(name, bench, seed)
     if isinstance(model, NeuralStateSpace):
         torch.set_num_threads(1)  # small element-wise ops: a second thread only adds overhead
@@ -206,7 +207,9 @@ def run(name: str, seed: int = 0, fold: str | None = None) -> dict:
     if isinstance(model, NeuralStateSpace):
         model.fit(train)  # fixed epochs on the whole training record; the tail stays unseen
     else:
-        model.fit(train, validation)
+        # the fit's validation is its own training record: a held-out end is never seen (early
+        # stopping or keeping a stage on it would choose on the record that scores the choice)
+        model.fit(train, train)
     fit_s = time.perf_counter() - t0
     out = bench.outputs[0]
     res = {

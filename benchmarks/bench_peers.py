@@ -239,15 +239,18 @@ def load_case(name: str) -> Case:
     cfg = NLBENCH[name]
     bench = load_benchmark(name, ROOT)
     train = bench.splits["train"]
+    from bench_nlbench import holdout_parts
+
     cut = cfg["holdout"]
     cut = cut if isinstance(cut, int) else int(len(train) * cut)
+    fit_part, validation = holdout_parts(train, cut, bench.warmup, "tail")
     return Case(
         name=name,
         inputs=list(bench.inputs),
         outputs=list(bench.outputs[:1]),
         train=train,
-        fit_part=train.iloc[:cut].reset_index(drop=True),
-        validation=train.iloc[cut - bench.warmup :].reset_index(drop=True),
+        fit_part=fit_part,
+        validation=validation,
         tests={s: bench.splits[s] for s in cfg["tests"]},
         warmup=bench.warmup,
         unit=cfg["unit"],

@@ -20,6 +20,7 @@ import time
 from pathlib import Path
 
 import pandas as pd
+from bench_nlbench import holdout_parts
 from common import machine
 
 from nnid.config import TrainConfig, load_config
@@ -36,12 +37,8 @@ HOLDOUT = 768  # the tail fold of benchmarks/bench_nlbench.py --holdout: train o
 def make_table(folder: Path) -> Path:
     """Est head (training), Est tail with 50 warm-up samples (validation), Val (test)."""
     bench = load_benchmark("cascaded_tanks", DATA)
-    est, val = bench.splits["train"], bench.splits["test"]
-    parts = {
-        "est_head": est.iloc[:HOLDOUT],
-        "est_tail": est.iloc[HOLDOUT - bench.warmup :],
-        "val": val,
-    }
+    head, tail = holdout_parts(bench.splits["train"], HOLDOUT, bench.warmup, "tail")
+    parts = {"est_head": head, "est_tail": tail, "val": bench.splits["test"]}
     table = pd.concat([p.assign(experiment=name) for name, p in parts.items()], ignore_index=True)
     path = folder / "cascaded_tanks.csv"
     table.to_csv(path, index=False)
