@@ -153,7 +153,7 @@ def test_cli_train_shipped_adam_ensemble_reports_every_member(tmp_path):
         for key in ("free_run_nrmse", "one_step_nrmse"):
             assert np.isfinite(m[part][key]["total"])
     held = {p: [e["experiment"] for e in m["split"]["parts"][p]] for p in ("validation", "test")}
-    assert held == {"validation": ["surge-sway-yaw-b"], "test": ["surge-sway-b"]}
+    assert held == {"validation": ["surge-sway-yaw-b", "surge-sway-c"], "test": ["surge-sway-b"]}
     assert m["describe"]["member_seeds"] == [0, 1]
     for described in m["describe"]["members"]:  # each member's free-run stage ran and was judged
         ft = described["simulation_finetune"]
