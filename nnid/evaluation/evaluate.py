@@ -13,6 +13,9 @@ model's target columns with one rule set (ARCHITECTURE.md "JSON outputs"):
   :data:`DIVERGENCE_FACTOR` measured ranges outside the measured range) has diverged: that
   column scores ``None`` and is listed with the time it left, and ``total`` is ``None`` too,
   never an average that hides it;
+- a split of several experiments also gets each experiment's free-run NRMSE scored on its own
+  (``free_run_nrmse_per_experiment``): the pooled NRMSE divides by the spread of all the runs,
+  which can hide a run that fails on an output it barely moves;
 - models with a force equation also get McCarter's J (RMS force residual, eq. 4.25), J₀ (RMS of
   the force series) and their ratio, and the force RMSE per DOF.
 """
@@ -27,6 +30,7 @@ import numpy as np
 import pandas as pd
 
 from nnid.datasets.log import VELOCITY
+from nnid.datasets.preprocess import experiments
 from nnid.evaluation.metrics import exact_mean, exact_std, excited_dofs, warmup_mask
 from nnid.evaluation.prediction import check_mode, mode_steps
 from nnid.physics.dofs import DOFS, FORCES
@@ -83,6 +87,23 @@ def score_prediction(
         vals = [out[c] for c in columns]
         out["total"] = exact_mean(vals) if vals and all(v is not None for v in vals) else None
     return nrmse, rmse, diverged
+
+
+def per_experiment(
+    model, log: pd.DataFrame, predicted: pd.DataFrame, mask: np.ndarray
+) -> dict[str, dict[str, float | None]]:
+    """The free-run NRMSE of each experiment of a split on its own (its excited columns, its
+    std, its range for divergence), as if scored alone: a split's pooled NRMSE divides by the
+    spread of all its runs, so a run that barely moves an output can fail on it unseen."""
+    out = {}
+    for name, idx in experiments(log):
+        pos = log.index.get_indexer(idx)
+        run = log.iloc[pos]
+        nrmse, _, _ = score_prediction(
+            run, predicted.iloc[pos], target_columns(model, run), mask[pos]
+        )
+        out[str(name)] = nrmse
+    return out
 
 
 def force_scores(model, log: pd.DataFrame, mask: np.ndarray) -> dict[str, Any]:
@@ -150,6 +171,8 @@ def evaluate(
         out[MODE_KEYS[name].replace("nrmse", "rmse")] = rmse
         key = "diverged" if name == "free_run" else f"{name}_diverged"
         out[key] = diverged
+        if name == "free_run" and len(experiments(log)) > 1:
+            out["free_run_nrmse_per_experiment"] = per_experiment(model, log, pred, mask)
         if closed:
             out.setdefault("closed_loop", []).append(name)
     if model.has_force_equation:

@@ -122,6 +122,9 @@ def train_markdown(metrics: dict) -> str:
             "",
             *markdown_table(*_baseline(metrics)),
         ]
+    runs = _runs(metrics)
+    if runs[1]:
+        lines += ["", f"## {RUNS_TITLE}", "", *markdown_table(*runs)]
     if metrics.get("members"):
         lines += [
             "",
@@ -184,6 +187,20 @@ def _baseline(metrics: dict) -> tuple[list[str], list[list[str]]]:
                     _fmt(free / ref, 3) if scores is metrics[part] and free and ref else "",
                 ]
             )
+    return head, rows
+
+
+RUNS_TITLE = "Free-run NRMSE of each held-out run on its own"
+
+
+def _runs(metrics: dict) -> tuple[list[str], list[list[str]]]:
+    """Each run of a held-out split of several runs, scored alone (its own std): the split's
+    pooled NRMSE can hide a run that fails on an output it barely moves."""
+    head = ["split", "run", *DOFS, "total"]
+    rows = []
+    for part in ("validation", "test"):
+        per = (metrics.get(part) or {}).get("free_run_nrmse_per_experiment") or {}
+        rows += [[part, run, *_dof_cells(vals)] for run, vals in per.items()]
     return head, rows
 
 
@@ -265,6 +282,10 @@ def train_html(metrics: dict, figures: dict[str, Any] | None = None) -> str:
         out.append(
             definitions({"ratio": "the model's free-run NRMSE over the baseline's (< 1: better)"})
         )
+    runs = _runs(metrics)
+    if runs[1]:
+        out.append(f"<h2>{RUNS_TITLE}</h2>")
+        out.append(html_table(*runs))
     if metrics.get("members"):
         out.append("<h2>Ensemble members (free-run NRMSE of each seed alone)</h2>")
         out.append(html_table(*_members(metrics)))
@@ -317,13 +338,16 @@ def _errors(metrics: dict) -> tuple[list[str], list[list[str]]]:
         for key, label in ERROR_KEYS[:3]:
             if key not in scores:
                 continue
-            vals = scores[key]
-            cells = [
-                _fmt(vals[d], 3) if vals.get(d) is not None else ("diverged" if d in vals else "-")
-                for d in (*DOFS, "total")
-            ]
-            rows.append([part, label, *cells])
+            rows.append([part, label, *_dof_cells(scores[key])])
     return head, rows
+
+
+def _dof_cells(vals: dict) -> list[str]:
+    """One cell per DOF and the total: the score, "diverged", or "-" where not scored."""
+    return [
+        _fmt(vals[d], 3) if vals.get(d) is not None else ("diverged" if d in vals else "-")
+        for d in (*DOFS, "total")
+    ]
 
 
 def _free_run_figure(figures: dict) -> str:
