@@ -190,7 +190,7 @@ def sim_start(case: str, seed: int, train, val, window: int, every: int):
     model.fit(train, validation=val)
     hist, uf, y = model._fixed_windows(model._table(train), window)
     windows = (hist[::every], uf[::every], y[::every])
-    runs = model._whole_runs(model._table(val))
+    runs = model._whole_runs(model._table(val), val)
     return model, {k: v.clone() for k, v in model.net_.state_dict().items()}, windows, runs
 
 

@@ -122,6 +122,32 @@ def test_save_load_round_trip_weights_only(seamor, tmp_path, monkeypatch):
         pd.testing.assert_frame_equal(model.predict(surge, mode), back.predict(surge, mode))
 
 
+def test_free_run_stages_judge_each_validation_run_by_its_own_nrmse(seamor):
+    # The measure that early-stops and keeps the free-run stages is the mean over validation
+    # runs and outputs of each run's squared free-run NRMSE as the reports score it alone
+    # (its own std; an output the run barely moves not scored): the surge run's v, the sway
+    # run's u.
+    from nnid.evaluation.evaluate import per_experiment, scored_rows
+
+    two = _runs(seamor, "surge", "sway")
+    model = NarxModel(["tau_X", "tau_Y"], ["u", "v"], 3, 2, hidden=(4,), trainer=Adam(max_epochs=1))
+    model.fit(two, two)
+    runs = model._whole_runs(model._table(two), two)
+    measure = model._mean_square(runs)
+
+    pred = model.predict(two, "free_run")
+    scores = per_experiment(model, two, pred, scored_rows(two, 0.0, model.warmup_samples_))
+    assert set(scores["surge"]) == {"u", "total"} and set(scores["sway"]) == {"v", "total"}
+    lengths = {n: len(g) - model.warmup_samples_ for n, g in two.groupby("experiment")}
+    expected = sum(
+        lengths[n] * sum(v**2 for c, v in s.items() if c != "total") for n, s in scores.items()
+    ) / (2 * sum(lengths.values()))
+    assert measure == pytest.approx(expected, rel=1e-9)
+    with torch.no_grad():  # the training-std measure weighs the runs otherwise
+        plain = torch.cat([model._window_residual(model._weights(), b[:3]) for b in runs])
+    assert float((plain**2).mean()) != pytest.approx(measure, rel=0.05)
+
+
 def test_no_delay_vector_crosses_an_experiment_boundary(seamor):
     two = _runs(seamor, "surge", "sway")
     model = NarxModel(["tau_X", "tau_Y"], ["u", "v"], 3, 2, hidden=(4,), trainer=Adam(max_epochs=1))
@@ -423,7 +449,7 @@ def test_simulation_windows_grow_in_stages_and_stop_on_the_whole_validation_run(
     assert stages[0] == "10 samples" and stages[-1] == "60 samples"
     assert stages == sorted(stages, key=lambda s: int(s.split()[0]))  # short windows first
     assert model.finetune_["epochs"] == len(seen)
-    (batch,) = model._whole_runs(model._table(val))
+    (batch,) = model._whole_runs(model._table(val), val)
     assert batch[2].shape[1] == len(val) - model.warmup_samples_  # the whole run, one window
     with torch.no_grad():
         mse = float((model._window_residual(model._weights(), batch) ** 2).mean())

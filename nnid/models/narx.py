@@ -20,8 +20,9 @@ columns (body velocities u v w r ...).
   (one-step) initialisation, LM or Adam on the output error of free runs over windows cut
   from every training experiment, each started from measured delay states; windows may grow
   in stages (``simulation_window=[64, 256, 2000]``: short windows first, a smoother objective);
-  early-stopped on the validation runs' whole free run, and kept only if it lowers the
-  validation free-run error (``finetune_`` records both).
+  early-stopped on the validation runs' whole free runs, and kept only if it lowers the
+  same measure: the mean over validation runs and the outputs each excites of its squared
+  free-run NRMSE (``finetune_`` records it and the pooled NRMSE, before and after).
 * **Multi-experiment**: a delay vector never reaches across an experiment boundary; the first
   ``warmup`` samples of each experiment (the delay states) are never predicted nor scored.
 * **Balanced sampling** (Weiss V.B: a net trained mostly on steady state misses the
@@ -64,9 +65,11 @@ from torch import nn
 from torch.func import functional_call
 
 from nnid.datasets.log import VELOCITY
+from nnid.datasets.preprocess import experiments
 from nnid.datasets.segmentation import BalancedSampler, label_transients, run_bounds
 from nnid.datasets.splits import split_log
 from nnid.errors import NnidInputError
+from nnid.evaluation.evaluate import target_columns
 from nnid.models.bounds import OutputBounds, bound_arrays, check_bounds, resolve_bounds
 from nnid.models.io_model import DTYPE, InputOutputModel, seeded_linear
 from nnid.serialization import jsonable
@@ -158,12 +161,12 @@ class NarxModel(InputOutputModel):
       every half window before, with ``simulation_trainer`` ``"adam"`` (every window once an
       epoch in a seeded random order, ``simulation_lr``) or ``"lm"`` (sensitivity-recursion
       Jacobians); windows longer than the shortest experiment are cut to it; early-stopped on
-      the whole free runs of the validation experiments and kept only if the validation
-      free-run error falls (``finetune_``). ``simulation_max_fail``: validation failures
-      before a stage stops; ``simulation_l2``: λ of a λ‖θ‖² penalty on the LM sum of squares;
-      ``simulation_curvature`` < 1: each LM epoch's JᵀJ from that share of the windows, drawn
-      per epoch from ``seed`` (subsampled curvature; the gradient and the SSE that judges a
-      step stay those of every window).
+      the whole free runs of the validation experiments and kept only if that measure (each
+      run's squared free-run NRMSE, averaged) falls (``finetune_``). ``simulation_max_fail``:
+      validation failures before a stage stops; ``simulation_l2``: λ of a λ‖θ‖² penalty on
+      the LM sum of squares; ``simulation_curvature`` < 1: each LM epoch's JᵀJ from that
+      share of the windows, drawn per epoch from ``seed`` (subsampled curvature; the gradient
+      and the SSE that judges a step stay those of every window).
     * ``output_transform``: None, ``"sqrt"`` (√max(y, 0) of every lagged output, output
       units), ``"products"`` (y_i y_j, i ≤ j, of every lag's standardised outputs) or
       ``"fossen"`` (those products, then y_i|y_i| in output units), each standardised on the
@@ -621,8 +624,11 @@ class NarxModel(InputOutputModel):
         return (functional_call(self.net_, params, (phi,)) - target).reshape(-1)
 
     def _window_residual(self, params: dict[str, torch.Tensor], batch: tuple) -> torch.Tensor:
-        hist, uf, y = batch
-        return (self._rollout(params, hist, uf) - y).reshape(-1)
+        """Free-run error of a batch of windows; a validation run's batch also carries each
+        output's weight (:meth:`_whole_runs`)."""
+        hist, uf, y, *weight = batch
+        err = self._rollout(params, hist, uf) - y
+        return (err * weight[0] if weight else err).reshape(-1)
 
     def _local_jacobians(
         self, params: dict[str, torch.Tensor], states: torch.Tensor, uf: torch.Tensor
@@ -751,13 +757,13 @@ class NarxModel(InputOutputModel):
         """Output-error training on free runs over windows of ``simulation_window`` samples
         (each length in turn) from measured delay states: Adam (back-propagation through the
         closed loop) or, with ``simulation_trainer="lm"``, Levenberg-Marquardt, on the same
-        fixed windows; kept only if the validation free-run error
-        falls."""
+        fixed windows; kept only if the measure each stage early-stopped on falls."""
         held_out = validation_log is not None
+        val = self._whole_runs(self._table(validation_log), validation_log) if held_out else None
         before = self.free_run_error(validation_log) if held_out else None
+        measure_before = self._mean_square(val) if val else None
         state = {k: v.clone() for k, v in self.net_.state_dict().items()}
         train = self._simulation_lm if self.simulation_trainer == "lm" else self._simulation_adam
-        val = self._whole_runs(self._table(validation_log)) if held_out else None
         stages = len(self.simulation_windows_) > 1
         epochs = None
         for length in self.simulation_windows_:  # short windows first: a smoother objective
@@ -768,7 +774,9 @@ class NarxModel(InputOutputModel):
         if epochs is None:
             return
         after = self.free_run_error(validation_log) if held_out else None
-        kept = before is None or (np.isfinite(after) and after < before)
+        measure_after = self._mean_square(val) if val else None
+        # judged on the measure each stage early-stopped on, not on the pooled NRMSE
+        kept = measure_before is None or measure_after < measure_before
         if not kept:
             self.net_.load_state_dict(state)
         # a diverged free run has no NRMSE: said as such, not as a missing (null) score
@@ -777,6 +785,8 @@ class NarxModel(InputOutputModel):
             "validation_free_run_nrmse_after": jsonable(after),
             "validation_free_run_diverged_before": bool(before is not None and np.isinf(before)),
             "validation_free_run_diverged_after": bool(after is not None and np.isinf(after)),
+            "validation_mean_squared_nrmse_before": jsonable(measure_before),
+            "validation_mean_squared_nrmse_after": jsonable(measure_after),
             "kept": bool(kept),
             "epochs": epochs,
         }
@@ -798,16 +808,37 @@ class NarxModel(InputOutputModel):
             ends += list(range(e - 1, first - 1, -max(1, length // 2)))
         return self._batch(table, torch.as_tensor(sorted(ends)), length)
 
-    def _whole_runs(self, table: dict[str, torch.Tensor]) -> list[tuple] | None:
-        """One batch per experiment: its free run from the measured delay states to its end
-        (what the reported free-run scores measure, in normalised units)."""
+    def _whole_runs(self, table: dict[str, torch.Tensor], log: pd.DataFrame) -> list[tuple] | None:
+        """One batch per experiment of ``log`` (``table``: its tensors): its free run from the
+        measured delay states to its end, and each output's weight, 1 / the output's std over
+        the run where the run excites it (:func:`target_columns`), else 0. The mean square of
+        the weighted error (:meth:`_mean_square`) is then the mean over outputs and runs (each
+        as long as it is) of each run's squared free-run NRMSE, the score the reports give
+        each run (``free_run_nrmse_per_experiment``): one measure for early stopping and for
+        keeping the stages. Weighted by the training std instead, a run that barely moves an
+        output (the yaw the Munk moment alone drives) barely counts."""
         starts, stops = run_bounds(table["code"].numpy())
-        runs = [
-            self._batch(table, torch.as_tensor([e - 1]), int(e - s - self.warmup_samples_))
-            for s, e in zip(starts, stops, strict=True)
-            if e - s > self.warmup_samples_
-        ]
+        runs = []
+        for (_, idx), s, e in zip(experiments(log), starts, stops, strict=True):
+            if e - s <= self.warmup_samples_:
+                continue
+            hist, uf, y = self._batch(
+                table, torch.as_tensor([e - 1]), int(e - s - self.warmup_samples_)
+            )
+            run = log.iloc[log.index.get_indexer(idx)]
+            scored = torch.tensor([c in target_columns(self, run) for c in self.outputs_])
+            std = y[0].std(0, correction=0)
+            weight = torch.where(scored & (std > 0), 1.0 / std.clamp_min(1e-300), 0.0)
+            runs.append((hist, uf, y, weight))
         return runs or None
+
+    def _mean_square(self, runs: list[tuple]) -> float:
+        """Mean square of the weighted free-run error over ``runs`` (:meth:`_whole_runs`), as
+        the trainers' early stopping computes it; infinite when not finite."""
+        with torch.no_grad():
+            r = torch.cat([self._window_residual(self._weights(), b) for b in runs])
+        value = float(r @ r) / max(r.numel(), 1)
+        return value if np.isfinite(value) else np.inf
 
     def _epoch_order(self, n: int, epoch: int) -> torch.Tensor:
         """A permutation of ``n`` windows for ``epoch``, drawn from ``seed`` (local generator)."""
