@@ -30,14 +30,15 @@ shared by both trainers; then LM (sensitivity-recursion Jacobians, ``max_fail`` 
 same fixed windows (``--window`` samples from measured delay states, every ``--every``-th
 window of ``NarxModel._fixed_windows``, which start every half window; Adam takes them in
 shuffled mini-batches of ``batch`` windows), and are scored after every epoch on the
-validation runs' whole free run (MSE in normalised units). Levels are geometric between
-the start's validation MSE and L*; where only one trainer ever improves on the start, L* is
-its best, the other's times are "never" and the seed counts as the first's win (ratio 0 or ∞);
-a level neither reaches is left out of the medians. Surge case: validated on a surge run of
-other levels.
+validation runs' whole free run (the measure the NARX's free-run stages stop on: each run's
+outputs over that run's std, an output the run does not excite left out). Levels are
+geometric between the start's validation MSE and L*; where only one trainer ever improves on
+the start, L* is its best, the other's times are "never" and the seed counts as the first's
+win (ratio 0 or ∞); a level neither reaches is left out of the medians. Surge case: validated
+on a surge run of other levels.
 ``--data shipped`` (coupled case, simulation objective): the training and validation runs of
 ``configs/seamor_narx_lm.toml`` as ``nnid train`` builds them (Weiss's sequence, the APRBS runs,
-validation surge-sway-yaw-b) instead of the 10 sequence runs above. ``--transform fossen``
+its validation runs) instead of the 10 sequence runs above. ``--transform fossen``
 gives both networks the Fossen regressors (``NarxModel(output_transform=...)``), as the shipped
 Seamor configs and the surge test use them. ``--lm-subset k``: each LM epoch on a fresh
 seeded draw of 1/k of the windows; ``--lm-curvature k``: only each epoch's JᵀJ from such a
@@ -331,8 +332,8 @@ def report(res: dict) -> None:
     )
     if res.get("data") == "shipped":
         data_text = (
-            f"the runs of {SHIPPED.relative_to(ROOT)} (sequence and APRBS), surge-sway-yaw-b for "
-            "validation"
+            f"the runs of {SHIPPED.relative_to(ROOT)} (sequence and APRBS), its validation runs "
+            "for validation"
         )
     load0, load1 = res["load"]
     extra = f', `output_transform = "{c["transform"]}"`' if c.get("transform") else ""
@@ -341,7 +342,8 @@ def report(res: dict) -> None:
         f"({n_par} parameters)\n"
     )
     what = (
-        f"free-run MSE of the whole validation runs (normalised units); windows of "
+        f"free-run MSE of the whole validation runs (each run's outputs over that run's std, "
+        f"outputs it does not excite left out); windows of "
         f"{res.get('window')} samples, every {res.get('every')}th of those starting each half "
         "window; start: the shared one-step LM initialisation"
         if sim
