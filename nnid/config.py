@@ -495,6 +495,7 @@ class NarxModelSpec(_Model):
     simulation_max_fail: int = Field(8, ge=1)
     simulation_l2: float = Field(0.0, ge=0, allow_inf_nan=False)
     simulation_curvature: float = Field(1.0, gt=0, le=1)
+    simulation_run_floor: float | None = Field(None, gt=0, le=1)
     output_transform: Literal["sqrt", "products", "fossen"] | None = None
     rest_equilibrium: bool = False
     trainer: NetworkTrainer | None = None

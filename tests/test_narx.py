@@ -429,6 +429,44 @@ def test_sensitivity_recursion_equals_forward_mode_through_the_closed_loop(trans
     assert supplied.sse == pytest.approx(forward.sse, rel=1e-12)
 
 
+def test_run_floor_scores_each_training_window_in_its_own_runs_std():
+    # simulation_run_floor: a training window's error is in its own run's std of each output
+    # (floored at that share of the training std), as the validation runs are scored, so a
+    # run that moves an output little (the yaw the Munk moment alone drives) is fitted as
+    # closely as one that moves it much; the sensitivity rows carry the same weights.
+    plant = _two_output_plant(900)
+    plant["y2"] = 1 + (plant["y2"] - 1) * np.repeat([1.0, 0.2, 0.01], 300)  # y2 small, then ~0
+    plant["experiment"] = np.repeat(["big", "small", "still"], 300)
+    kw = dict(hidden=(4,), trainer=LevenbergMarquardt(max_epochs=2), simulation_run_floor=0.05)
+    model = NarxModel(["a", "b"], ["y1", "y2"], 2, 2, **kw).fit(plant)
+    tab = model._table(plant)
+    hist, uf, y, weight = model._fixed_windows(tab, 40)
+    err = (model._rollout(model._weights(), hist, uf) - y).detach() * model.net_.y_std
+    weighted = model._window_residual(model._weights(), (hist, uf, y, weight)).detach()
+    runs = plant.groupby("experiment", sort=False)
+    std = {n: g[["y1", "y2"]].to_numpy().std(0) for n, g in runs}
+    train_std = model.net_.y_std.numpy()
+    n_run = [len(range(299, model.warmup_samples_ + 39 - 1, -20)) for _ in range(3)]
+    own = np.concatenate([np.tile(np.maximum(std[n], 0.05 * train_std), (k, 1))
+                          for n, k in zip(std, n_run, strict=True)])  # fmt: skip
+    assert weight.shape == (sum(n_run), 1, 2)
+    expected = (err / torch.as_tensor(own)[:, None, :]).reshape(-1)
+    torch.testing.assert_close(weighted, expected, rtol=1e-10, atol=1e-12)
+    assert float(weight[-1, 0, 1]) == pytest.approx(1 / 0.05)  # the still run's y2: the floor
+    batch = (hist, uf, y, weight)
+    forward = LevenbergMarquardt(jacobian="forward").normal_equations(
+        model.net_, model._window_residual, [batch]
+    )
+    supplied = LevenbergMarquardt().normal_equations(
+        model.net_, model._window_residual, [batch], jacobian_rows=model._simulation_rows
+    )
+    torch.testing.assert_close(supplied.jtj, forward.jtj, rtol=1e-11, atol=1e-9)
+    torch.testing.assert_close(supplied.jtr, forward.jtr, rtol=1e-11, atol=1e-9)
+    for bad in (0.0, 1.5):
+        with pytest.raises(NnidInputError, match="simulation_run_floor"):
+            NarxModel(["a"], ["y1"], simulation_run_floor=bad).fit(plant)
+
+
 def test_simulation_windows_grow_in_stages_and_stop_on_the_whole_validation_run():
     # windows of 10, then 60 samples; each stage early-stopped on the whole free run of the
     # validation record, whose MSE (normalised units) is what the progress reports

@@ -22,7 +22,8 @@ columns (body velocities u v w r ...).
   in stages (``simulation_window=[64, 256, 2000]``: short windows first, a smoother objective);
   early-stopped on the validation runs' whole free runs, and kept only if it lowers the
   same measure: the mean over validation runs and the outputs each excites of its squared
-  free-run NRMSE (``finetune_`` records it and the pooled NRMSE, before and after).
+  free-run NRMSE (``finetune_`` records it and the pooled NRMSE, before and after); with
+  ``simulation_run_floor`` the training windows' errors are in their own run's std too.
 * **Multi-experiment**: a delay vector never reaches across an experiment boundary; the first
   ``warmup`` samples of each experiment (the delay states) are never predicted nor scored.
 * **Balanced sampling** (Weiss V.B: a net trained mostly on steady state misses the
@@ -166,7 +167,12 @@ class NarxModel(InputOutputModel):
       validation failures before a stage stops; ``simulation_l2``: λ of a λ‖θ‖² penalty on
       the LM sum of squares; ``simulation_curvature`` < 1: each LM epoch's JᵀJ from that
       share of the windows, drawn per epoch from ``seed`` (subsampled curvature; the gradient
-      and the SSE that judges a step stay those of every window).
+      and the SSE that judges a step stay those of every window). ``simulation_run_floor``
+      (None: every window's error in the training std of each output): each training run's
+      error in that run's own std of each output, floored at this share of the training std
+      (an output the run leaves at its noise is not blown up), the units the validation runs
+      are judged in, so a run that moves an output little is fitted as closely as one that
+      moves it much.
     * ``output_transform``: None, ``"sqrt"`` (√max(y, 0) of every lagged output, output
       units), ``"products"`` (y_i y_j, i ≤ j, of every lag's standardised outputs) or
       ``"fossen"`` (those products, then y_i|y_i| in output units), each standardised on the
@@ -202,6 +208,7 @@ class NarxModel(InputOutputModel):
         simulation_max_fail: int = 8,
         simulation_l2: float = 0.0,
         simulation_curvature: float = 1.0,
+        simulation_run_floor: float | None = None,
         output_transform: str | None = None,
         rest_equilibrium: bool = False,
     ) -> None:
@@ -228,6 +235,7 @@ class NarxModel(InputOutputModel):
         self.simulation_max_fail = simulation_max_fail
         self.simulation_l2 = simulation_l2
         self.simulation_curvature = simulation_curvature
+        self.simulation_run_floor = simulation_run_floor
         self.output_transform = output_transform
         self.rest_equilibrium = rest_equilibrium
 
@@ -246,6 +254,13 @@ class NarxModel(InputOutputModel):
                 "simulation_curvature is the share of the windows in (0, 1] whose JᵀJ stands for "
                 "all in an LM epoch",
                 field="simulation_curvature",
+            )
+        floor = self.simulation_run_floor
+        if floor is not None and not 0.0 < float(floor) <= 1.0:
+            raise NnidInputError(
+                "simulation_run_floor is None or the share in (0, 1] of an output's training "
+                "std below which a run's own std is not taken",
+                field="simulation_run_floor",
             )
         if self.rest_equilibrium and not self.delta:
             raise NnidInputError(
@@ -625,7 +640,8 @@ class NarxModel(InputOutputModel):
 
     def _window_residual(self, params: dict[str, torch.Tensor], batch: tuple) -> torch.Tensor:
         """Free-run error of a batch of windows; a validation run's batch also carries each
-        output's weight (:meth:`_whole_runs`)."""
+        output's weight (:meth:`_whole_runs`), and so do the training windows with
+        ``simulation_run_floor`` (:meth:`_fixed_windows`)."""
         hist, uf, y, *weight = batch
         err = self._rollout(params, hist, uf) - y
         return (err * weight[0] if weight else err).reshape(-1)
@@ -701,7 +717,7 @@ class NarxModel(InputOutputModel):
         by step: about the cost of one-step training, where forward mode repeats the closed
         loop once per parameter.
         """
-        hist, uf, y = batch
+        hist, uf, y, *weight = batch
         b_all, t_all, m = y.shape
         dy = hist.shape[1]
         p = sum(v.numel() for v in params.values())
@@ -731,10 +747,10 @@ class NarxModel(InputOutputModel):
                         "bidj,bdjp->bip", d_hist[:, t], sens[:, t : t + dy]
                     )
                 carry = sens[:, k:].clone()
-                yield (
-                    sens[:, dy:].reshape(-1, p),
-                    (sim[sl, t0:t1] - y[sl, t0:t1]).reshape(-1),
-                )
+                rows, err = sens[:, dy:], sim[sl, t0:t1] - y[sl, t0:t1]
+                if weight:  # the residual's weights (:meth:`_fixed_windows`), [B, 1, m]
+                    rows, err = rows * weight[0][sl, :, :, None], err * weight[0][sl]
+                yield rows.reshape(-1, p), err.reshape(-1)
 
     def _eligible(self, code: np.ndarray, horizon: int) -> np.ndarray:
         keep = np.ones(code.size, dtype=bool)
@@ -794,19 +810,28 @@ class NarxModel(InputOutputModel):
     def _fixed_windows(self, table: dict[str, torch.Tensor], length: int) -> tuple | None:
         """Windows of ``length`` samples (shortened to the shortest experiment after its
         warm-up) ending at the last sample of each experiment and every ``length // 2``
-        samples before it, as one batch; None when no experiment is longer than the warm-up."""
+        samples before it, as one batch; None when no experiment is longer than the warm-up.
+        With ``simulation_run_floor`` the batch also carries each window's output weights
+        [B, 1, m]: 1 / its run's std of each output (normalised units), floored."""
         starts, stops = run_bounds(table["code"].numpy())
         spans = stops - starts - self.warmup_samples_
         if spans.max() < 1:
             return None
         length = int(min(length, spans[spans >= 1].min()))
         ends: list[int] = []
+        weights: list[torch.Tensor] = []
+        floor = self.simulation_run_floor
         for s, e in zip(starts, stops, strict=True):
             first = (
                 s + self.warmup_samples_ + length - 1
             )  # the earliest end whose delay states exist
-            ends += list(range(e - 1, first - 1, -max(1, length // 2)))
-        return self._batch(table, torch.as_tensor(sorted(ends)), length)
+            run_ends = list(range(e - 1, first - 1, -max(1, length // 2)))[::-1]
+            ends += run_ends
+            if floor is not None:  # the run's std in training stds, floored: noise-only outputs
+                std = table["y"][s:e].std(0, correction=0).clamp_min(float(floor))
+                weights.append((1.0 / std).expand(len(run_ends), 1, -1))
+        batch = self._batch(table, torch.as_tensor(ends), length)
+        return (*batch, torch.cat(weights)) if floor is not None else batch
 
     def _whole_runs(self, table: dict[str, torch.Tensor], log: pd.DataFrame) -> list[tuple] | None:
         """One batch per experiment of ``log`` (``table``: its tensors): its free run from the
