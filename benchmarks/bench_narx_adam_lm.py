@@ -196,11 +196,13 @@ def sim_start(case: str, seed: int, train, val, window: int, every: int):
 
 
 def sim_traces(
-    case, seed, grid, cap, window, every, train, val, lm_subset=1, lm_curvature=1
+    case, seed, grid, cap, window, every, train, val, lm_subset=1, lm_curvature=1, lm_tau=None
 ) -> list[dict]:
     """LM and every Adam setting from the same start; (seconds, validation MSE) per epoch.
     ``lm_subset`` k > 1: each LM epoch on a fresh seeded draw of 1/k of the windows;
-    ``lm_curvature`` k > 1: only its JᵀJ from such a draw, the gradient and SSE from all."""
+    ``lm_curvature`` k > 1: only its JᵀJ from such a draw, the gradient and SSE from all;
+    ``lm_tau``: LM's starting μ is τ · max diag(JᵀJ) of its first system (Madsen, Nielsen &
+    Tingleff 2004, section 3.2), not trainlm's 10⁻³ (that system built once more, untimed)."""
     model, start, windows, runs = sim_start(case, seed, train, val, window, every)
     out = []
     n = windows[0].shape[0]
@@ -209,8 +211,16 @@ def sim_traces(
         idx = model._epoch_order(n, epoch)[: max(1, n // max(lm_subset, lm_curvature))]
         return [tuple(x[idx] for x in windows)]
 
-    lm = LevenbergMarquardt(max_epochs=SIM_LM_EPOCHS[case], max_fail=10**6)
+    mu = 1e-3
     model.net_.load_state_dict(start)
+    if lm_tau is not None:
+        first = lm_batches(0) if max(lm_subset, lm_curvature) > 1 else [windows]
+        ne = LevenbergMarquardt().normal_equations(
+            model.net_, model._window_residual, first, jacobian_rows=model._simulation_rows
+        )
+        k = max(lm_subset, lm_curvature)  # a draw of 1/k of the windows stands for all
+        mu = lm_tau * float(ne.jtj.diagonal().max()) * k
+    lm = LevenbergMarquardt(max_epochs=SIM_LM_EPOCHS[case], max_fail=10**6, mu=mu)
     h = lm.fit(model.net_, model._window_residual, lm_batches if lm_subset > 1 else [windows],
                runs, jacobian_rows=model._simulation_rows,
                curvature_batches=lm_batches if lm_curvature > 1 else None)  # fmt: skip
@@ -268,13 +278,15 @@ def train_case(case: str, seeds: range, cap: float, grid: list[tuple[float, int]
 
 def train_sim_case(
     case, seeds, cap, grid, window: int, every: int, source: str, lm_subset: int = 1,
-    lm_curvature: int = 1,
+    lm_curvature: int = 1, lm_tau: float | None = None,
 ) -> dict:  # fmt: skip
     load0 = os.getloadavg()[0]
     train, val = sim_data(case, window, source)
     runs = []
     for s in seeds:
-        runs += sim_traces(case, s, grid, cap, window, every, train, val, lm_subset, lm_curvature)
+        runs += sim_traces(
+            case, s, grid, cap, window, every, train, val, lm_subset, lm_curvature, lm_tau
+        )
     return {"case": case, "cap": cap, "load": [load0, os.getloadavg()[0]], "runs": runs,
             "objective": "simulation", "window": window, "every": every,
             "data": source}  # fmt: skip
@@ -454,6 +466,12 @@ def main() -> None:
         help="simulation objective: each LM epoch's JᵀJ from a fresh draw of 1/k of the windows "
         "(gradient and trial SSE from all)",
     )
+    ap.add_argument(
+        "--lm-tau",
+        type=float,
+        help="simulation objective: LM's starting mu = tau * max diag(JᵀJ) of its first system "
+        "(default: trainlm's 1e-3)",
+    )
     args = ap.parse_args()
     if args.lm_subset < 1 or args.lm_curvature < 1:
         ap.error("--lm-subset and --lm-curvature are positive integers k (1/k of the windows)")
@@ -475,7 +493,7 @@ def main() -> None:
         cases = list(CASES) if args.case == "all" else [args.case]
         saved = {"threads": args.threads, "date": str(datetime.date.today()), "cases": [],
                  "transform": args.transform, "lm_subset": args.lm_subset,
-                 "lm_curvature": args.lm_curvature}  # fmt: skip
+                 "lm_curvature": args.lm_curvature, "lm_tau": args.lm_tau}  # fmt: skip
         for case in cases:
             if sim:
                 cap = args.cap or SIM_CAP[case]
@@ -490,6 +508,7 @@ def main() -> None:
                         args.data,
                         args.lm_subset,
                         args.lm_curvature,
+                        args.lm_tau,
                     )
                 )
                 continue
@@ -513,6 +532,10 @@ def main() -> None:
             drawn = (
                 f", each epoch's JᵀJ from a fresh draw of 1/{c} of the windows scaled to all, "
                 "its gradient Jᵀr (reverse mode) and trial SSE from every window"
+            )
+        if saved.get("lm_tau") is not None:
+            drawn += (
+                f", starting μ {saved['lm_tau']:g} × the largest diagonal entry of its first JᵀJ"
             )
         print(
             "Start: per seed, LM on the one-step error (trainlm defaults, early-stopped on the "
