@@ -850,7 +850,7 @@ class NarxModel(InputOutputModel):
             hist, uf, y = self._batch(
                 table, torch.as_tensor([e - 1]), int(e - s - self.warmup_samples_)
             )
-            excited = set(target_columns(self, log.iloc[log.index.get_indexer(idx)]))
+            excited = set(target_columns(self, log.loc[idx]))
             scored = torch.tensor([c in excited for c in self.outputs_])
             std = y[0].std(0, correction=0)
             weight = torch.where(scored & (std > 0), 1.0 / std.clamp_min(1e-300), 0.0)
