@@ -42,7 +42,9 @@ its validation runs) instead of the 10 sequence runs above. ``--transform fossen
 gives both networks the Fossen regressors (``NarxModel(output_transform=...)``), as the shipped
 Seamor configs and the surge test use them. ``--lm-subset k``: each LM epoch on a fresh
 seeded draw of 1/k of the windows; ``--lm-curvature k``: only each epoch's JᵀJ from such a
-draw (scaled to all), the gradient and the SSE judging a step from every window.
+draw (scaled to all), the gradient and the SSE judging a step from every window. ``--lm-geodesic``:
+LM's steps with geodesic acceleration (``LevenbergMarquardt(geodesic=True)``); ``--seed-list``
+runs the seeds given instead of 0 .. ``--seeds`` − 1.
 
 Run:  PYTHONPATH=. python benchmarks/bench_narx_adam_lm.py [--case coupled|surge|all]
 (about 13 min for the coupled case, 4 min for the surge case, on 1 core); ``--save t.json``
@@ -58,6 +60,7 @@ import json
 import math
 import os
 import statistics
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -189,20 +192,22 @@ def sim_start(case: str, seed: int, train, val, window: int, every: int):
     """The shared initialisation (one-step LM) and the batches of the simulation objective."""
     model = net(case, LevenbergMarquardt(jacobian="samples"), seed, lm_samples=SAMPLES)
     model.fit(train, validation=val)
-    hist, uf, y = model._fixed_windows(model._table(train), window)
-    windows = (hist[::every], uf[::every], y[::every])
+    # (delay states, inputs, targets), and the runs' weights when the net has a run floor
+    windows = tuple(x[::every] for x in model._fixed_windows(model._table(train), window))
     runs = model._whole_runs(model._table(val), val)
     return model, {k: v.clone() for k, v in model.net_.state_dict().items()}, windows, runs
 
 
 def sim_traces(
-    case, seed, grid, cap, window, every, train, val, lm_subset=1, lm_curvature=1, lm_tau=None
-) -> list[dict]:
+    case, seed, grid, cap, window, every, train, val, lm_subset=1, lm_curvature=1, lm_tau=None,
+    lm_geodesic=False,
+) -> list[dict]:  # fmt: skip
     """LM and every Adam setting from the same start; (seconds, validation MSE) per epoch.
     ``lm_subset`` k > 1: each LM epoch on a fresh seeded draw of 1/k of the windows;
     ``lm_curvature`` k > 1: only its JᵀJ from such a draw, the gradient and SSE from all;
     ``lm_tau``: LM's starting μ is τ · max diag(JᵀJ) of its first system (Madsen, Nielsen &
-    Tingleff 2004, section 3.2), not trainlm's 10⁻³ (that system built once more, untimed)."""
+    Tingleff 2004, section 3.2), not trainlm's 10⁻³ (that system built once more, untimed);
+    ``lm_geodesic``: LM's steps with Transtrum & Sethna's geodesic acceleration."""
     model, start, windows, runs = sim_start(case, seed, train, val, window, every)
     out = []
     n = windows[0].shape[0]
@@ -220,7 +225,9 @@ def sim_traces(
         )
         k = max(lm_subset, lm_curvature)  # a draw of 1/k of the windows stands for all
         mu = lm_tau * float(ne.jtj.diagonal().max()) * k
-    lm = LevenbergMarquardt(max_epochs=SIM_LM_EPOCHS[case], max_fail=10**6, mu=mu)
+    lm = LevenbergMarquardt(
+        max_epochs=SIM_LM_EPOCHS[case], max_fail=10**6, mu=mu, geodesic=lm_geodesic
+    )
     h = lm.fit(model.net_, model._window_residual, lm_batches if lm_subset > 1 else [windows],
                runs, jacobian_rows=model._simulation_rows,
                curvature_batches=lm_batches if lm_curvature > 1 else None)  # fmt: skip
@@ -261,7 +268,7 @@ def fmt_r(r: float) -> str:
     return f"{r:.2f}×" if math.isfinite(r) else "∞"
 
 
-def train_case(case: str, seeds: range, cap: float, grid: list[tuple[float, int]]) -> dict:
+def train_case(case: str, seeds: Sequence[int], cap: float, grid: list[tuple[float, int]]) -> dict:
     """LM and the Adam grid on one case; the histories and the load average around them."""
     load0 = os.getloadavg()[0]
     train, val = data(case)
@@ -278,15 +285,16 @@ def train_case(case: str, seeds: range, cap: float, grid: list[tuple[float, int]
 
 def train_sim_case(
     case, seeds, cap, grid, window: int, every: int, source: str, lm_subset: int = 1,
-    lm_curvature: int = 1, lm_tau: float | None = None,
+    lm_curvature: int = 1, lm_tau: float | None = None, lm_geodesic: bool = False,
 ) -> dict:  # fmt: skip
     load0 = os.getloadavg()[0]
     train, val = sim_data(case, window, source)
     runs = []
     for s in seeds:
         runs += sim_traces(
-            case, s, grid, cap, window, every, train, val, lm_subset, lm_curvature, lm_tau
-        )
+            case, s, grid, cap, window, every, train, val, lm_subset, lm_curvature, lm_tau,
+            lm_geodesic,
+        )  # fmt: skip
     return {"case": case, "cap": cap, "load": [load0, os.getloadavg()[0]], "runs": runs,
             "objective": "simulation", "window": window, "every": every,
             "data": source}  # fmt: skip
@@ -432,7 +440,8 @@ def report(res: dict) -> None:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--case", choices=[*CASES, "all"], default="all")
-    ap.add_argument("--seeds", type=int, default=5)
+    ap.add_argument("--seeds", type=int, default=5, help="seeds 0 .. n-1")
+    ap.add_argument("--seed-list", type=int, nargs="+", help="these seeds instead of --seeds")
     ap.add_argument("--cap", type=float, help="Adam wall-time cap per run, s (case default)")
     ap.add_argument("--threads", type=int, default=1, help="torch threads (1: robust to load)")
     ap.add_argument("--lr", type=float, nargs="+", default=list(LRS))
@@ -472,7 +481,13 @@ def main() -> None:
         help="simulation objective: LM's starting mu = tau * max diag(JᵀJ) of its first system "
         "(default: trainlm's 1e-3)",
     )
+    ap.add_argument(
+        "--lm-geodesic",
+        action="store_true",
+        help="simulation objective: LM's steps with geodesic acceleration (Transtrum & Sethna)",
+    )
     args = ap.parse_args()
+    seeds = args.seed_list or range(args.seeds)
     if args.lm_subset < 1 or args.lm_curvature < 1:
         ap.error("--lm-subset and --lm-curvature are positive integers k (1/k of the windows)")
     if args.lm_subset > 1 and args.lm_curvature > 1:
@@ -493,14 +508,15 @@ def main() -> None:
         cases = list(CASES) if args.case == "all" else [args.case]
         saved = {"threads": args.threads, "date": str(datetime.date.today()), "cases": [],
                  "transform": args.transform, "lm_subset": args.lm_subset,
-                 "lm_curvature": args.lm_curvature, "lm_tau": args.lm_tau}  # fmt: skip
+                 "lm_curvature": args.lm_curvature, "lm_tau": args.lm_tau,
+                 "lm_geodesic": args.lm_geodesic}  # fmt: skip
         for case in cases:
             if sim:
                 cap = args.cap or SIM_CAP[case]
                 saved["cases"].append(
                     train_sim_case(
                         case,
-                        range(args.seeds),
+                        seeds,
                         cap,
                         grid,
                         args.window,
@@ -509,11 +525,12 @@ def main() -> None:
                         args.lm_subset,
                         args.lm_curvature,
                         args.lm_tau,
+                        args.lm_geodesic,
                     )
                 )
                 continue
             cap = args.cap or CASES[case]["cap"]
-            saved["cases"].append(train_case(case, range(args.seeds), cap, grid))
+            saved["cases"].append(train_case(case, seeds, cap, grid))
         if args.save:
             args.save.write_text(json.dumps(saved))
     objective = saved["cases"][0].get("objective", "one-step") if saved["cases"] else ""
@@ -533,6 +550,8 @@ def main() -> None:
                 f", each epoch's JᵀJ from a fresh draw of 1/{c} of the windows scaled to all, "
                 "its gradient Jᵀr (reverse mode) and trial SSE from every window"
             )
+        if saved.get("lm_geodesic"):
+            drawn += ", geodesic acceleration (Transtrum & Sethna 2012, ratio 0.75)"
         if saved.get("lm_tau") is not None:
             drawn += (
                 f", starting μ {saved['lm_tau']:g} × the largest diagonal entry of its first JᵀJ"

@@ -298,6 +298,8 @@ class LevenbergMarquardtSpec(_Trainer):
     jacobian: Literal["auto", "forward", "samples"] = "auto"
     damping: Literal["trainlm", "nielsen"] = "trainlm"
     l2: float = Field(0.0, ge=0, allow_inf_nan=False)
+    geodesic: bool = False
+    geodesic_ratio: PositiveFloat = 0.75
 
 
 class AdamSpec(_Trainer):

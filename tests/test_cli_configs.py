@@ -142,6 +142,12 @@ CASES = [
         "model.output_bounds",
     ),
     ("train", NARX, ('kind = "lm"', 'kind = "lm"\nmu_dec = 2.0'), "model.trainer.mu_dec"),
+    (
+        "train",
+        NARX,
+        ('kind = "lm"', 'kind = "lm"\ngeodesic = true\ngeodesic_ratio = 0'),
+        "model.trainer.geodesic_ratio",
+    ),
     ("train", NARX, ('kind = "lm"', 'kind = "adam"\nschedule = "step"'), "model.trainer.schedule"),
     ("train", TRAIN, ("[split]", "[split]\nvalidation = 3"), None),
     ("train", TRAIN, ("warmup_s = 1.0", "warmup_s = [1.0"), None),
