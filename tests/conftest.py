@@ -108,23 +108,21 @@ def pytest_collection_modifyitems(config, items):
 
 
 #: seconds each long test group takes on one worker of the 2-core CI machine (measured
-#: 2026-11-26, --durations: the sum of its slowest tests); only the order matters
+#: 2026-11-24, --durations); only the order matters, not the values
 GROUP_SECONDS = {
-    "test_scale": 450,
-    "test_compare": 200,
-    "test_loop": 110,
-    "hybrid-external_bias.u": 95,
-    "test_tutorials": 90,
-    "hybrid-thruster_installation.w.neg": 85,
-    "hybrid-actuator_lag": 75,
-    "hybrid-coupled_damping.N:u*v": 68,
-    "hybrid-current.y": 65,
+    "test_compare": 150,
+    "test_loop": 150,
+    "test_scale": 110,
+    "hybrid-external_bias.u": 85,
+    "test_tutorials": 75,
+    "hybrid-thruster_installation.w.neg": 73,
     "test_hybrid": 60,
-    "test_ensemble": 60,
+    "hybrid-current.y": 50,
+    "hybrid-actuator_lag": 47,
     "test_fault": 45,
     "test_bad_input_corpus": 40,
-    "hybrid-none": 31,
-    "test_narx": 30,
+    "hybrid-coupled_damping.N:u*v": 40,
+    "hybrid-none": 22,
 }
 
 
@@ -132,11 +130,6 @@ def pytest_configure(config):
     """Under pytest-xdist, one thread per worker for torch and BLAS: two workers on two cores
     with two threads each would oversubscribe them (busy-waiting BLAS threads). A test
     setting, never the library's: nnid itself leaves process-wide thread counts alone."""
-    # pytest-xdist >= 3.7 re-sorts loadgroup's groups by their number of tests unless told not
-    # to: the long one-test groups (the hybrid scenarios) then ran last, one worker idling
-    # for minutes; the order of pytest_collection_modifyitems (longest first) is the one to keep
-    if hasattr(config.option, "loadscopereorder"):
-        config.option.loadscopereorder = False
     if os.environ.get("PYTEST_XDIST_WORKER"):
         torch.set_num_threads(1)
         threadpool_limits(1)
