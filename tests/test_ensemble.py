@@ -111,6 +111,14 @@ def test_a_member_without_a_seed_is_refused(log):
         EnsembleModel(ParametricModel(load_vehicle("seamor"))).fit(log)
 
 
+def _with_seeds(text: str, seeds: str) -> str:
+    """The config text with its ensemble's seeds line replaced; a config that lost the line
+    fails here instead of leaving the test to run on the shipped seeds."""
+    text, count = re.subn(r"(?m)^seeds = \[[^\]]*\]", f"seeds = {seeds}", text)
+    assert count == 1
+    return text
+
+
 def _config(tmp_path: Path, text: str) -> Path:
     cfg = tmp_path / "ensemble.toml"
     cfg.write_text(text.replace('"seamor_sequence_narx.toml"', f'"{SIM}"'))
@@ -123,7 +131,7 @@ def _config(tmp_path: Path, text: str) -> Path:
 )
 def test_config_refuses_member_seed_and_repeated_seeds(tmp_path, extra, seeds, match):
     text = (ROOT / "configs/seamor_narx_adam.toml").read_text()
-    text = re.sub(r"(?m)^seeds = \[[^\]]*\]", f"seeds = {seeds}", text)
+    text = _with_seeds(text, seeds)
     cfg = _config(tmp_path, text.replace("[model.member]\n", f"[model.member]\n{extra}\n"))
     with pytest.raises(NnidInputError, match=match):
         load_config(cfg, TrainConfig)
@@ -136,7 +144,7 @@ def test_cli_train_shipped_adam_ensemble_reports_every_member(tmp_path):
     text = (ROOT / "configs/seamor_narx_adam.toml").read_text()
     text = re.sub(r"(?m)^max_epochs = \d+", "max_epochs = 1", text)
     text = re.sub(r"(?m)^simulation_epochs = \d+", "simulation_epochs = 1", text)
-    cfg = _config(tmp_path, re.sub(r"(?m)^seeds = \[[^\]]*\]", "seeds = [0, 1]", text))
+    cfg = _config(tmp_path, _with_seeds(text, "[0, 1]"))
     out = tmp_path / "out"
     done = CliRunner().invoke(app, ["train", str(cfg), "--out", str(out)])
     assert done.exit_code == 0, done.output
