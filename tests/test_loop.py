@@ -65,6 +65,39 @@ def test_correlation_analysis_finds_structure_and_the_input_lag(rng):
     assert abs(apart.auto[1]) < 0.05
 
 
+@pytest.mark.parametrize("n_dofs", [1, 6])
+def test_correlation_grid_keeps_every_label_inside_the_figure(rng, n_dofs):
+    """The report's correlation grid has fixed margins (no layout engine): every panel's
+    tick labels, axis labels, title and legend must still lie inside the figure and out of
+    the other panels, from one DOF to six."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    from nnid.reports import loop_report
+
+    built = []
+    real_uri = loop_report.figure_uri
+    loop_report.figure_uri = lambda fig: built.append(fig) or real_uri(fig)
+    try:
+        e, u = rng.normal(size=(2, 5_000))
+        c = correlation_analysis(e + 0.5 * np.roll(u, 3), {"tau_Z": u, "tau_N": -u})
+        uri = loop_report.correlation_figure(dict.fromkeys("uvwpqr"[:n_dofs], c), "baseline")
+    finally:
+        loop_report.figure_uri = real_uri
+    assert uri.startswith("data:image/png;base64,")
+    (fig,) = built
+    assert fig.get_layout_engine() is None  # the fixed margins, not the constrained layout
+    renderer = FigureCanvasAgg(fig).get_renderer()
+    page = fig.bbox
+    boxes = [ax.get_tightbbox(renderer) for ax in fig.axes]
+    for ax, box in zip(fig.axes, boxes, strict=True):
+        assert box.x0 >= page.x0 and box.x1 <= page.x1, (ax.get_ylabel(), box, page)
+        assert box.y0 >= page.y0 and box.y1 <= page.y1, (ax.get_title(), box, page)
+    panels = [ax.get_window_extent(renderer) for ax in fig.axes]
+    for i, box in enumerate(boxes):  # a panel's labels never reach into another panel
+        for j, panel in enumerate(panels):
+            assert i == j or not box.overlaps(panel), (i, j)
+
+
 # -- candidates ------------------------------------------------------------------------------------
 def test_first_order_lag_is_exact_for_held_inputs():
     log = pd.DataFrame({"t": np.arange(400) * 0.05})

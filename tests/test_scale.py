@@ -32,8 +32,8 @@ ETA = (0.6, 0.7, 0.8)  # the true upward heave efficiency of each dive
 
 @pytest.fixture(scope="module")
 def fleet(tmp_path_factory) -> Path:
-    """Three dives (one per ETA), seven more, a malformed log and a longer dive whose worker
-    gets killed; manifest.toml (the three, the malformed, the killed) and fleet12.toml (all)."""
+    """Three dives (one per ETA), seven more, a malformed log and a dive whose worker gets
+    killed; manifest.toml (the three, the malformed, the killed) and fleet12.toml (all)."""
     from nnid.loop.scenarios import effect_log
     from nnid.vehicle import load_vehicle
 
@@ -48,9 +48,11 @@ def fleet(tmp_path_factory) -> Path:
         log = effect_log(vehicle, [("thruster_installation.w.neg", 0.65)], duration=160,
                          n_experiments=4, speed=(0.15, 0.4), seed=10 + i)  # fmt: skip
         log.to_csv(root / f"more{i}.csv", index=False)
-    long = effect_log(vehicle, [("thruster_installation.w.neg", 0.5)], duration=480,
-                      n_experiments=4, speed=(0.15, 0.4), seed=9)  # fmt: skip
-    long.to_csv(root / "killed.csv", index=False)
+    # killed on its first start in every run that kills (the killer polls every 20 ms, a
+    # dive's loop takes seconds), so it need not be longer than the others
+    killed = effect_log(vehicle, [("thruster_installation.w.neg", 0.5)], duration=160,
+                        n_experiments=4, speed=(0.15, 0.4), seed=9)  # fmt: skip
+    killed.to_csv(root / "killed.csv", index=False)
     (root / "broken.csv").write_text("t,u,v\n0,1,2\n0.1,x,3\n")
     (root / "manifest.toml").write_text(
         'command = "loop"\nvehicle = "minirov.toml"\n'

@@ -19,16 +19,40 @@ FORCE_UNITS = {"X": "N", "Y": "N", "Z": "N", "K": "N m", "M": "N m", "N": "N m"}
 
 
 def figure_uri(fig: Figure) -> str:
-    """PNG data URI of a figure."""
+    """PNG data URI of a figure (cropped to what it draws, unless its margins are fixed)."""
     buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=110, bbox_inches="tight")
+    tight = "tight" if fig.get_layout_engine() is not None else None
+    fig.savefig(buf, format="png", dpi=110, bbox_inches=tight)
     return "data:image/png;base64," + base64.b64encode(buf.getvalue()).decode("ascii")
 
 
-def new_figure(rows: int = 1, cols: int = 1, width: float = 9.0, height: float = 3.0):
+#: inches kept around the panels of a ``fixed`` figure: tick labels and an axis label on the
+#: left and below, a title above; between rows, a fraction of a panel's height
+FIXED_MARGINS_IN = dict(left=0.85, right=0.2, top=0.35, bottom=0.5)
+FIXED_HSPACE = 0.35
+
+
+def new_figure(
+    rows: int = 1, cols: int = 1, width: float = 9.0, height: float = 3.0, fixed: bool = False
+):
     """A figure and its axes grid ``[rows, cols]`` (``height`` per row), laid out so tick
-    labels of one panel never run into the next."""
-    fig = Figure(figsize=(width, height * rows), layout="constrained")
+    labels of one panel never run into the next. ``fixed``: :data:`FIXED_MARGINS_IN` instead of
+    matplotlib's constrained layout, for a grid of small panels whose labels are known to
+    fit; it draws in about half the time (the loop report's correlation grid, twelve panels
+    drawn twice in every ``nnid loop``)."""
+    if fixed:
+        fig = Figure(figsize=(width, height * rows))
+        m = FIXED_MARGINS_IN
+        fig.subplots_adjust(
+            left=m["left"] / width,
+            right=1.0 - m["right"] / width,
+            top=1.0 - m["top"] / (height * rows),
+            bottom=m["bottom"] / (height * rows),
+            hspace=FIXED_HSPACE,
+            wspace=0.15,
+        )
+    else:
+        fig = Figure(figsize=(width, height * rows), layout="constrained")
     return fig, fig.subplots(rows, cols, squeeze=False)
 
 
