@@ -66,7 +66,7 @@ def test_correlation_analysis_finds_structure_and_the_input_lag(rng):
 
 
 @pytest.mark.parametrize("n_dofs", [1, 6])
-def test_correlation_grid_keeps_every_label_inside_the_figure(rng, n_dofs):
+def test_correlation_grid_keeps_every_label_inside_the_figure(rng, monkeypatch, n_dofs):
     """The report's correlation grid has fixed margins (no layout engine): every panel's
     tick labels, axis labels, title and legend must still lie inside the figure and out of
     the other panels, from one DOF to six."""
@@ -76,13 +76,10 @@ def test_correlation_grid_keeps_every_label_inside_the_figure(rng, n_dofs):
 
     built = []
     real_uri = loop_report.figure_uri
-    loop_report.figure_uri = lambda fig: built.append(fig) or real_uri(fig)
-    try:
-        e, u = rng.normal(size=(2, 5_000))
-        c = correlation_analysis(e + 0.5 * np.roll(u, 3), {"tau_Z": u, "tau_N": -u})
-        uri = loop_report.correlation_figure(dict.fromkeys("uvwpqr"[:n_dofs], c), "baseline")
-    finally:
-        loop_report.figure_uri = real_uri
+    monkeypatch.setattr(loop_report, "figure_uri", lambda fig: built.append(fig) or real_uri(fig))
+    e, u = rng.normal(size=(2, 5_000))
+    c = correlation_analysis(e + 0.5 * np.roll(u, 3), {"tau_Z": u, "tau_N": -u})
+    uri = loop_report.correlation_figure(dict.fromkeys("uvwpqr"[:n_dofs], c), "baseline")
     assert uri.startswith("data:image/png;base64,")
     (fig,) = built
     assert fig.get_layout_engine() is None  # the fixed margins, not the constrained layout

@@ -48,8 +48,8 @@ def fleet(tmp_path_factory) -> Path:
         log = effect_log(vehicle, [("thruster_installation.w.neg", 0.65)], duration=160,
                          n_experiments=4, speed=(0.15, 0.4), seed=10 + i)  # fmt: skip
         log.to_csv(root / f"more{i}.csv", index=False)
-    # killed on its first start in every run that kills (the killer polls every 20 ms, a
-    # dive's loop takes seconds), so it need not be longer than the others
+    # killed as soon as a worker starts it (the killer polls every 20 ms, a dive's loop takes
+    # seconds), so it need not be longer than the others
     killed = effect_log(vehicle, [("thruster_installation.w.neg", 0.5)], duration=160,
                         n_experiments=4, speed=(0.15, 0.4), seed=9)  # fmt: skip
     killed.to_csv(root / "killed.csv", index=False)
