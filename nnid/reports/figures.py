@@ -27,9 +27,10 @@ def figure_uri(fig: Figure) -> str:
 
 
 #: inches kept around the panels of a ``fixed`` figure: tick labels and an axis label on the
-#: left and below, a title above; between rows, a fraction of a panel's height
+#: left and below, a title above
 FIXED_MARGINS_IN = dict(left=0.85, right=0.2, top=0.35, bottom=0.5)
-FIXED_HSPACE = 0.35
+#: gaps between the panels of a ``fixed`` figure, fractions of a panel's height and width
+FIXED_GAPS = dict(hspace=0.35, wspace=0.15)
 
 
 def new_figure(
@@ -48,8 +49,7 @@ def new_figure(
             right=1.0 - m["right"] / width,
             top=1.0 - m["top"] / (height * rows),
             bottom=m["bottom"] / (height * rows),
-            hspace=FIXED_HSPACE,
-            wspace=0.15,
+            **FIXED_GAPS,
         )
     else:
         fig = Figure(figsize=(width, height * rows), layout="constrained")
