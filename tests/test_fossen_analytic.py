@@ -2,12 +2,20 @@
 
 from __future__ import annotations
 
+from importlib import resources
+
 import numpy as np
+import pandas as pd
 import torch
 
-from nnid.datasets.simulator import integrate
+from nnid.datasets.log import TAU
+from nnid.datasets.simulator import Autopilot, integrate
+from nnid.evaluation.prediction import Replay, fly_closed_loop, predict_closed_loop
+from nnid.loop.scenarios import effect_log
 from nnid.physics import compiled
 from nnid.physics.fossen import FossenModel
+from nnid.physics.parts import Parts
+from nnid.physics.thrusters import apply_deadband, apply_installation
 from nnid.vehicle import load_vehicle
 
 
@@ -139,6 +147,103 @@ def test_batched_equals_single(vehicle_factory, rng):
     batch = compiled.integrate_rk4(form, x0, tau, 0.01, 2)
     for b in range(3):
         assert np.array_equal(batch[b], compiled.integrate_rk4(form, x0[b], tau[b], 0.01, 2))
+
+
+def _stepped(form, pilot, eta_pos, eta_neg, x0, tau_open, dt, substeps, deadband=0.0):
+    """The closed-loop flight stepped from Python, one compiled RK4 call per sample."""
+    states, commands = [np.asarray(x0, float)], []
+    for j in range(tau_open.shape[0]):
+        command = tau_open[j] + pilot.force(states[-1])
+        applied = apply_installation(apply_deadband(command, deadband), eta_pos, eta_neg)
+        commands.append(command)
+        states.append(compiled.integrate_rk4(form, states[-1], applied[None], dt, substeps)[-1])
+        if not np.isfinite(states[-1]).all():
+            break
+    return np.array(states), np.array(commands)
+
+
+def test_compiled_pd_flight_is_the_flight_stepped_from_python(rng):
+    """fly_pd (the PD autopilot, deadband and installation inside the compiled loop) gives the
+    bits of the per-sample Python loop: commands, states, heading errors wrapped across ±π,
+    one window or many in parallel threads."""
+    form = FossenModel.from_vehicle(load_vehicle("vt690")).feature_form()
+    pilot = Autopilot(
+        kp=[0, 0, 40, 5, 60, 30], kd=[0, 0, 60, 1.5, 80, 80], reference=[0, 0, 2, 0, 0, 3.1]
+    )
+    eta_pos = np.array([1.0, 1.0, 0.9, 1.0, 1.1, 0.8])
+    eta_neg = np.array([0.7, 1.0, 1.0, 0.95, 0.9, 1.2])
+    tau = np.column_stack([np.full(300, 11.0), rng.normal(0, 3, (300, 5))])
+    x0 = [0, 0, 2, 0, 0, -3.1, 1.5, 0, 0, 0, 0, 0]  # ψ_ref − ψ crosses π: the error wraps
+    want, commands = _stepped(form, pilot, eta_pos, eta_neg, x0, tau[:-1], 0.05, 5, 0.5)
+    assert np.ptp(want[:, 5]) > 0.05  # it turns, through the wrap
+    got, record = compiled.fly_pd(
+        form,
+        np.array([x0], float),
+        tau,
+        np.zeros(1, int),
+        299,
+        0.05,
+        pilot.pilot(eta_pos, eta_neg),
+        0.5,
+        5,
+        record=True,
+    )
+    assert np.array_equal(got[0], want) and np.array_equal(record[0], commands)
+    # many windows, from states along the flight (the parallel kernel)
+    starts = np.arange(0, 280, 2)
+    windows, _ = compiled.fly_pd(
+        form, want[starts], tau, starts, 20, 0.05, pilot.pilot(eta_pos, eta_neg), 0.5, 8
+    )
+    assert starts.size * 20 * 8 >= compiled.PARALLEL_MIN_STEPS
+    for b in (0, 57, starts.size - 1):
+        s = starts[b]
+        ref, _ = _stepped(form, pilot, eta_pos, eta_neg, want[s], tau[s : s + 20], 0.05, 8, 0.5)
+        assert np.array_equal(windows[b], ref)
+
+
+def test_compiled_pd_flight_stops_where_the_flight_diverges():
+    """Without feedback the bare VT 690 hull diverges: the compiled flight keeps the first
+    non-finite state as the Python loop computes it, and every later state is NaN."""
+    form = FossenModel.from_vehicle(load_vehicle("vt690")).feature_form()
+    pilot = Autopilot()
+    ones = np.ones(6)
+    tau = np.tile([11.0, 0, 0, 0, 0, 0], (2000, 1))
+    x0 = [0, 0, 2, 0, 0, 0, 1.5, 0, 0, 0, 0.01, 0]
+    want, commands = _stepped(form, pilot, ones, ones, x0, tau, 0.05, 1)
+    stop = len(want) - 1
+    assert stop < 2000 and not np.isfinite(want[-1]).all()
+    got, record = compiled.fly_pd(
+        form, np.array([x0], float), tau, np.zeros(1, int), 2000, 0.05,
+        pilot.pilot(ones, ones), record=True,
+    )  # fmt: skip
+    assert np.array_equal(got[0, : stop + 1], want, equal_nan=True)
+    assert np.isnan(got[0, stop + 1 :]).all()
+    assert np.array_equal(record[0, :stop], commands[:stop])
+
+
+def test_physics_prediction_under_an_autopilot_is_the_stepped_one():
+    """predict_closed_loop (one compiled flight per experiment, or per window for k steps)
+    predicts what fly_closed_loop predicts stepping the compiled RK4 once per sample."""
+    vehicle = load_vehicle(str(resources.files("nnid.demo_data").joinpath("minirov.toml")))
+    log = effect_log(vehicle, duration=30.0, n_experiments=2, seed=3)
+    parts = Parts.from_vehicle(vehicle)
+    parts.eta_pos[2], parts.eta_neg[5] = 0.8, 1.2
+    form = parts.model(check=False).feature_form()
+    replay = Replay(Autopilot(kp=[0, 0, 20, 0, 0, 0.5], kd=[20, 20, 20, 0.1, 0.1, 0.2]),
+                    log[list(TAU)])  # fmt: skip
+
+    def stepper(_: int, dt: float):
+        def step(state, command):
+            return compiled.integrate_rk4(form, state, parts.applied(command)[:, None], dt, 2)[
+                :, -1
+            ]
+
+        return step
+
+    for mode in ("free_run", 1, 4):
+        got = predict_closed_loop(parts, log, replay, mode, substeps=2)
+        pd.testing.assert_frame_equal(got, fly_closed_loop(log, replay, stepper, mode))
+        assert not np.allclose(got["z"], log["z"])  # it predicts, not copies
 
 
 def test_rhs_is_differentiable_in_the_parameters(vehicle_factory):

@@ -50,6 +50,11 @@ class Autopilot(BaseModel):
         error[..., 3:6] = wrap_angle(error[..., 3:6])
         return -np.asarray(self.kp) * error - np.asarray(self.kd) * state[..., 6:12]
 
+    def pilot(self, eta_pos: np.ndarray, eta_neg: np.ndarray) -> np.ndarray:
+        """The autopilot and the installation coefficients it flies through, as
+        :func:`nnid.physics.compiled.fly_pd` takes them: ``[5, 6]`` k_p, k_d, η_ref, η⁺, η⁻."""
+        return np.vstack([self.kp, self.kd, self.reference, eta_pos, eta_neg]).astype(float)
+
 
 def plant(vehicle, effects: Iterable[tuple[str, float]] = ()):
     """The vehicle with the injected effects applied, in order."""
@@ -171,22 +176,38 @@ def simulate(
 
 
 def _closed_loop(model, actuation, autopilot, state, inputs, dt, substeps, integrator):
-    """Step the plant one sample at a time, adding the autopilot's held feedback force."""
+    """Step the plant one sample at a time, adding the autopilot's held feedback force (the
+    RK4 in one compiled loop, :func:`nnid.physics.compiled.fly_pd`)."""
     n = inputs.shape[0]
     commanded = inputs.copy()
-    states = np.empty((n, state.size))
-    states[0] = state
-    form = model.feature_form() if integrator == "rk4" else None  # once, not per sample
-    for k in range(n - 1):
-        commanded[k] = inputs[k] + autopilot.force(states[k])
-        applied = actuation.applied(commanded[k : k + 1])
-        if form is not None:
-            states[k + 1] = compiled.integrate_rk4(form, states[k], applied, dt, substeps)[-1]
-        else:
+    if integrator == "rk4":
+        pilot = autopilot.pilot(actuation.eta_pos, actuation.eta_neg)
+        flown, record = compiled.fly_pd(
+            model.feature_form(),
+            state,
+            inputs,
+            np.zeros(1, int),
+            n - 1,
+            dt,
+            pilot,
+            actuation.deadband,
+            substeps,
+            True,
+        )
+        states = flown[0]
+        bad = np.flatnonzero(~np.isfinite(states).all(1))
+        done = n - 1 if bad.size == 0 else int(bad[0])  # commands flown before the divergence
+        commanded[:done] = record[0, :done]
+    else:
+        states = np.empty((n, state.size))
+        states[0] = state
+        for k in range(n - 1):
+            commanded[k] = inputs[k] + autopilot.force(states[k])
+            applied = actuation.applied(commanded[k : k + 1])
             states[k + 1] = integrate(model, states[k], applied, dt, substeps, integrator)[-1]
-        if not np.isfinite(states[k + 1]).all():
-            states[k + 2 :] = np.nan
-            break
+            if not np.isfinite(states[k + 1]).all():
+                states[k + 2 :] = np.nan
+                break
     commanded[-1] = inputs[-1] + autopilot.force(states[-1])
     return commanded, actuation.applied(commanded), states
 

@@ -116,6 +116,10 @@ class Replay:
 #: -> states one sample later; a new step per experiment, so it can keep its own memory
 Stepper = Callable[[int, float], Callable[[np.ndarray, np.ndarray], np.ndarray]]
 
+#: a whole closed-loop flight: (states [B, 12], open-loop input [M, 6], window starts [B] in
+#: it, steps, dt) -> states [B, steps + 1, 12]; a window that turns non-finite may stop there
+Flight = Callable[[np.ndarray, np.ndarray, np.ndarray, int, float], np.ndarray]
+
 
 def fly_closed_loop(
     log: pd.DataFrame, replay: Replay, stepper: Stepper, mode: str | int = "free_run"
@@ -126,6 +130,39 @@ def fly_closed_loop(
     flies each experiment from its first measured state; k (or "one_step", k = 1) flies k
     samples from every measured state, all windows at once. Rows not predicted keep the
     measurement (the caller blanks them)."""
+
+    def flight(x0, tau_open, starts, steps, dt):
+        step = stepper(starts.size, dt)
+        states = np.full((starts.size, steps + 1, x0.shape[1]), np.nan)
+        states[:, 0] = state = x0
+        for j in range(steps):
+            state = step(state, tau_open[starts + j] + replay.autopilot.force(state))
+            states[:, j + 1] = state
+            if mode == "free_run" and not np.isfinite(state).all():
+                break
+        return states
+
+    return _fly(log, replay, flight, mode)
+
+
+def predict_closed_loop(
+    parts, log: pd.DataFrame, replay: Replay, mode: str | int = "free_run", substeps: int = 1
+) -> pd.DataFrame:
+    """A physics model (:class:`nnid.physics.parts.Parts`) flown under ``replay``'s
+    autopilot as :func:`fly_closed_loop` flies a stepper, in one compiled loop
+    (:func:`nnid.physics.compiled.fly_pd`; the same numbers)."""
+    form = parts.model(check=False).feature_form()
+    pilot = replay.autopilot.pilot(parts.eta_pos, parts.eta_neg)
+
+    def flight(x0, tau_open, starts, steps, dt):
+        return compiled.fly_pd(form, x0, tau_open, starts, steps, dt, pilot, None, substeps)[0]
+
+    return _fly(log, replay, flight, mode)
+
+
+def _fly(log: pd.DataFrame, replay: Replay, flight: Flight, mode: str | int) -> pd.DataFrame:
+    """Each experiment of ``log`` flown by ``flight`` from its measured states: a free run
+    from the first (NaN from its first non-finite state on), or k samples from every one."""
     x = measured_states(log)
     out = x.copy()
     tau_open = replay.open_loop.loc[log.index, list(TAU)].to_numpy(np.float64)
@@ -134,37 +171,12 @@ def fly_closed_loop(
         pos = log.index.get_indexer(idx)
         dt = float(np.median(np.diff(log["t"].to_numpy(np.float64)[pos])))
         if mode == "free_run":
-            starts, steps = pos[:1], pos.size - 1
-        else:
-            starts, steps = pos[: max(pos.size - k, 0)], k
-        if starts.size == 0:
-            continue
-        step = stepper(starts.size, dt)
-        state = x[starts].copy()
-        for j in range(steps):
-            state = step(state, tau_open[starts + j] + replay.autopilot.force(state))
-            if mode == "free_run":
-                out[starts + j + 1] = state
-                if not np.isfinite(state).all():
-                    out[pos[j + 1 :]] = np.nan
-                    break
-        if mode != "free_run":
-            out[starts + k] = state
+            flown = flight(x[pos[:1]], tau_open, pos[:1], pos.size - 1, dt)[0]
+            bad = np.flatnonzero(~np.isfinite(flown).all(1))
+            if bad.size:
+                flown[bad[0] :] = np.nan
+            out[pos[1:]] = flown[1:]
+        elif pos.size > k:
+            starts = pos[: pos.size - k]
+            out[starts + k] = flight(x[starts], tau_open, starts, k, dt)[:, -1]
     return pd.DataFrame(out, columns=[*POSE, *VELOCITY], index=log.index)
-
-
-def predict_closed_loop(
-    parts, log: pd.DataFrame, replay: Replay, mode: str | int = "free_run", substeps: int = 1
-) -> pd.DataFrame:
-    """A physics model (:class:`nnid.physics.parts.Parts`) flown under ``replay``'s
-    autopilot (:func:`fly_closed_loop`), by the compiled RK4."""
-    form = parts.model(check=False).feature_form()
-
-    def stepper(_: int, dt: float):
-        def step(state: np.ndarray, command: np.ndarray) -> np.ndarray:
-            applied = parts.applied(command)[:, None, :]
-            return compiled.integrate_rk4(form, state, applied, dt, substeps)[:, -1]
-
-        return step
-
-    return fly_closed_loop(log, replay, stepper, mode)
