@@ -290,23 +290,6 @@ def _fly(
             return
 
 
-@njit(cache=True)
-def _fly_serial(x0, tau_open, starts, dt, substeps, pilot, deadband, form, states, commanded):
-    for b in range(x0.shape[0]):
-        _fly(
-            x0[b],
-            tau_open,
-            starts[b],
-            dt,
-            substeps,
-            pilot,
-            deadband,
-            *form,
-            states[b],
-            commanded[b],
-        )
-
-
 @njit(cache=True, parallel=True)
 def _fly_batch(x0, tau_open, starts, dt, substeps, pilot, deadband, form, states, commanded):
     for b in prange(x0.shape[0]):
@@ -345,7 +328,9 @@ def fly_pd(
     Returns the states ``[B, steps + 1, n]``, and with ``record`` the commanded forces
     ``[B, steps, 6]`` (before deadband and installation). A window whose state turns
     non-finite stops there: that state is kept and every later one is NaN (commands not flown
-    are left zero). Many windows run in parallel threads (the same numbers either way)."""
+    are left zero). Windows run in parallel threads (the same numbers either way); one kernel
+    for any number of them, since a flight is one call, not one per sample, and each compiled
+    variant costs seconds of compilation on a cold cache."""
     x0 = np.ascontiguousarray(np.atleast_2d(x0), dtype=np.float64)
     tau_open = np.ascontiguousarray(tau_open, dtype=np.float64)
     starts = np.ascontiguousarray(starts, dtype=np.int64)
@@ -358,10 +343,8 @@ def fly_pd(
         raise ValueError("each window needs tau_open rows starts[b] … starts[b] + steps − 1")
     states = np.empty((x0.shape[0], steps + 1, x0.shape[1]))
     commanded = np.zeros((x0.shape[0], steps if record else 0, 6))
-    small = x0.shape[0] * steps * substeps < PARALLEL_MIN_STEPS
-    kernel = _fly_serial if small else _fly_batch
     width = -1.0 if deadband is None else float(deadband)
-    kernel(
+    _fly_batch(
         x0,
         tau_open,
         starts,
