@@ -126,7 +126,7 @@ def _integrate(
 
 
 #: below this many RK4 steps in a batch, threads cost more than they save (a parallel launch is
-#: tens of microseconds; a closed-loop replay makes one call per sample)
+#: tens of microseconds; a caller that steps one sample at a time makes one call per sample)
 PARALLEL_MIN_STEPS = 20_000
 
 
@@ -228,28 +228,7 @@ def integrate_rk4(
 
 
 @njit(cache=True)
-def _fly(
-    x0,
-    tau_open,
-    start,
-    dt,
-    substeps,
-    pilot,
-    deadband,
-    m_inv,
-    q_rb,
-    q_a,
-    g_mat,
-    theta,
-    codes,
-    ma,
-    bias,
-    cur,
-    u_c,
-    lag,
-    states,
-    commanded,
-):
+def _fly(x0, tau_open, start, dt, substeps, pilot, deadband, form, states, commanded):
     # the numpy operations of Autopilot.force, apply_deadband and apply_installation, in their
     # order, so that the compiled flight gives the bits of the per-sample one
     kp, kd, ref, eta_pos, eta_neg = pilot[0], pilot[1], pilot[2], pilot[3], pilot[4]
@@ -267,24 +246,7 @@ def _fly(
             if abs(c) <= deadband:
                 c = 0.0
             held[0, i] = eta_pos[i] * c if c >= 0 else eta_neg[i] * c
-        _integrate(
-            x,
-            held,
-            dt,
-            substeps,
-            m_inv,
-            q_rb,
-            q_a,
-            g_mat,
-            theta,
-            codes,
-            ma,
-            bias,
-            cur,
-            u_c,
-            lag,
-            states[j : j + 2],
-        )
+        _integrate(x, held, dt, substeps, *form, states[j : j + 2])
         if not np.isfinite(states[j + 1]).all():
             states[j + 2 :] = np.nan
             return
@@ -293,18 +255,8 @@ def _fly(
 @njit(cache=True, parallel=True)
 def _fly_batch(x0, tau_open, starts, dt, substeps, pilot, deadband, form, states, commanded):
     for b in prange(x0.shape[0]):
-        _fly(
-            x0[b],
-            tau_open,
-            starts[b],
-            dt,
-            substeps,
-            pilot,
-            deadband,
-            *form,
-            states[b],
-            commanded[b],
-        )
+        _fly(x0[b], tau_open, starts[b], dt, substeps, pilot, deadband, form, states[b],
+             commanded[b])  # fmt: skip
 
 
 def fly_pd(
