@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import functools
 import os
-import sys
+import signal
 import warnings
 from contextlib import contextmanager
 from pathlib import Path
@@ -534,5 +534,18 @@ def demo(
     out.print(f"open {out_dir.resolve() / 'report.html'}", highlight=False)
 
 
-def main() -> None:  # pragma: no cover - console entry
-    sys.exit(app())
+def _exit_on_sigterm(signum: int, frame) -> None:
+    raise SystemExit(128 + signum)
+
+
+def main() -> None:
+    """The ``nnid`` console entry: the app, with SIGTERM unwinding like Ctrl-C.
+
+    A SIGTERM's default kills only this process: an ensemble's worker processes (joblib's
+    loky) would go on training as orphans for minutes. Raised as SystemExit, it unwinds the
+    fit and the executor's shutdown ends them. Only where SIGTERM still has its default (a
+    parent that set it to be ignored keeps it so), and only here, in the application's entry:
+    the library leaves signals alone."""
+    if signal.getsignal(signal.SIGTERM) is signal.SIG_DFL:
+        signal.signal(signal.SIGTERM, _exit_on_sigterm)
+    app()

@@ -5,7 +5,12 @@ left out, the config table and ``nnid train`` with the members' spread in ``metr
 from __future__ import annotations
 
 import json
+import os
 import re
+import signal
+import subprocess
+import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -210,3 +215,85 @@ def test_members_fitted_in_worker_processes_match_the_sequential_fit():
     assert two.member_seeds_ == [0, 1, 2]
     np.testing.assert_allclose(two.member_validation_, one.member_validation_, rtol=1e-6)
     np.testing.assert_allclose(two.predict(val), one.predict(val), rtol=1e-6, atol=1e-9)
+
+
+def _children(pid: int) -> list[int]:
+    """The pids whose parent is ``pid`` (Linux /proc)."""
+    found = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:  # the process ended while the folder was read
+            continue
+        if int(fields[1]) == pid:
+            found.append(int(stat.parent.name))
+    return found
+
+
+def _cmdline(pid: int) -> str:
+    try:
+        return Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode()
+    except OSError:
+        return ""
+
+
+def _alive(pid: int) -> bool:
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return False
+    return state != "Z"
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads /proc (Linux)")
+def test_sigterm_to_the_cli_ends_the_ensemble_workers(tmp_path):
+    # the console entry turns SIGTERM into SystemExit: an ensemble's loky workers, mid-fit,
+    # end with the command instead of training on as orphans (by default SIGTERM kills only
+    # the parent)
+    (tmp_path / "sim.toml").write_text(
+        'kind = "simulate"\nvehicle = "seamor"\ndt = 0.05\n'
+        + "".join(
+            f'[[experiments]]\nname = "{n}"\nduration = 60.0\nsignals = [{{ kind = "aprbs", '
+            f'channel = "X", amplitude = 20.0, hold_min = 1.0, hold_max = 4.0, '
+            f"duration = 60.0, seed = {k} }}]\n"
+            for k, n in enumerate(("a", "b"))
+        )
+    )
+    (tmp_path / "train.toml").write_text(
+        'kind = "train"\n[data]\nsimulate = "sim.toml"\n[split]\nby = "experiment"\n'
+        'validation = ["b"]\n[model]\nkind = "ensemble"\nseeds = [0, 1]\nn_jobs = 2\n'
+        '[model.member]\nkind = "narx"\ninputs = ["tau_X"]\noutputs = ["u"]\nhidden = [4]\n'
+        '[model.member.trainer]\nkind = "adam"\nmax_epochs = 1000000\n'
+    )
+    cmd = [sys.executable, "-c", "from nnid.cli import main; main()", "train"]
+    stderr = tmp_path / "stderr.txt"
+    with stderr.open("w") as sink:
+        proc = subprocess.Popen(
+            [*cmd, str(tmp_path / "train.toml"), "--out", str(tmp_path / "out")],
+            stdout=subprocess.DEVNULL,
+            stderr=sink,
+        )
+    workers: list[int] = []
+    try:
+        deadline = time.monotonic() + 240
+        while time.monotonic() < deadline and proc.poll() is None:
+            # loky's workers and its resource tracker: the workers run the fits
+            workers = [p for p in _children(proc.pid) if "loky" in _cmdline(p)]
+            if len([p for p in workers if "popen_loky" in _cmdline(p)]) == 2:
+                break
+            time.sleep(0.5)
+        assert proc.poll() is None, stderr.read_text()
+        assert len([p for p in workers if "popen_loky" in _cmdline(p)]) == 2
+        time.sleep(2.0)  # into the fits
+        proc.send_signal(signal.SIGTERM)
+        code = proc.wait(timeout=60)
+        deadline = time.monotonic() + 30
+        while time.monotonic() < deadline and any(_alive(p) for p in workers):
+            time.sleep(0.5)
+        assert not any(_alive(p) for p in workers)
+        assert code == 128 + signal.SIGTERM
+    finally:
+        for pid in [proc.pid, *workers]:
+            if _alive(pid):
+                os.kill(pid, signal.SIGKILL)
+    assert not (tmp_path / "out" / "metrics.json").exists()
