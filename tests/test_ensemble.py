@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+from conftest import child_pids, cmdline, is_alive
 from typer.testing import CliRunner
 
 from nnid import load_model
@@ -217,34 +218,6 @@ def test_members_fitted_in_worker_processes_match_the_sequential_fit():
     np.testing.assert_allclose(two.predict(val), one.predict(val), rtol=1e-6, atol=1e-9)
 
 
-def _children(pid: int) -> list[int]:
-    """The pids whose parent is ``pid`` (Linux /proc)."""
-    found = []
-    for stat in Path("/proc").glob("[0-9]*/stat"):
-        try:
-            fields = stat.read_text().rsplit(")", 1)[1].split()
-        except OSError:  # the process ended while the folder was read
-            continue
-        if int(fields[1]) == pid:
-            found.append(int(stat.parent.name))
-    return found
-
-
-def _cmdline(pid: int) -> str:
-    try:
-        return Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode()
-    except OSError:
-        return ""
-
-
-def _alive(pid: int) -> bool:
-    try:
-        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
-    except OSError:
-        return False
-    return state != "Z"
-
-
 @pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads /proc (Linux)")
 def test_sigterm_to_the_cli_ends_the_ensemble_workers(tmp_path):
     # the console entry turns SIGTERM into SystemExit: an ensemble's loky workers, mid-fit,
@@ -278,22 +251,22 @@ def test_sigterm_to_the_cli_ends_the_ensemble_workers(tmp_path):
         deadline = time.monotonic() + 240
         while time.monotonic() < deadline and proc.poll() is None:
             # loky's workers and its resource tracker: the workers run the fits
-            workers = [p for p in _children(proc.pid) if "loky" in _cmdline(p)]
-            if len([p for p in workers if "popen_loky" in _cmdline(p)]) == 2:
+            workers = [p for p in child_pids(proc.pid) if "loky" in cmdline(p)]
+            if len([p for p in workers if "popen_loky" in cmdline(p)]) == 2:
                 break
             time.sleep(0.5)
         assert proc.poll() is None, stderr.read_text()
-        assert len([p for p in workers if "popen_loky" in _cmdline(p)]) == 2
+        assert len([p for p in workers if "popen_loky" in cmdline(p)]) == 2
         time.sleep(2.0)  # into the fits
         proc.send_signal(signal.SIGTERM)
         code = proc.wait(timeout=60)
         deadline = time.monotonic() + 30
-        while time.monotonic() < deadline and any(_alive(p) for p in workers):
+        while time.monotonic() < deadline and any(is_alive(p) for p in workers):
             time.sleep(0.5)
-        assert not any(_alive(p) for p in workers)
+        assert not any(is_alive(p) for p in workers)
         assert code == 128 + signal.SIGTERM
     finally:
         for pid in [proc.pid, *workers]:
-            if _alive(pid):
+            if is_alive(pid):
                 os.kill(pid, signal.SIGKILL)
     assert not (tmp_path / "out" / "metrics.json").exists()

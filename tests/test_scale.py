@@ -12,12 +12,15 @@ import math
 import os
 import shutil
 import signal
+import subprocess
+import sys
 import threading
 import time
 from pathlib import Path
 
 import pandas as pd
 import pytest
+from conftest import child_pids, cmdline, is_alive
 from typer.testing import CliRunner
 
 from nnid.cli import app
@@ -283,6 +286,45 @@ def test_batch_cli_exit_codes_and_report(fleet, tmp_path) -> None:
     assert res.exit_code == 2 and "nothere.toml" in res.output
     res = runner.invoke(app, ["batch", str(fleet / "good.toml"), "--out", str(fleet / "dive0.csv")])
     assert res.exit_code == 2 and "not a folder" in res.output
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads /proc (Linux)")
+def test_sigterm_to_batch_ends_its_workers_and_runs_nothing_more(fleet, tmp_path) -> None:
+    # the console entry turns SIGTERM into SystemExit; the local engine then cancels the
+    # queued tasks and ends the running ones' workers (a plain pool shutdown would wait for
+    # all twelve dives to run first)
+    out = tmp_path / "batch"
+    cmd = [sys.executable, "-c", "from nnid.cli import main; main()", "batch"]
+    with (tmp_path / "stderr.txt").open("w") as sink:
+        proc = subprocess.Popen(
+            [*cmd, str(fleet / "fleet12.toml"), "--out", str(out), "--workers", "2"],
+            stdout=subprocess.DEVNULL,
+            stderr=sink,
+        )
+    workers: list[int] = []
+    try:
+        deadline = time.monotonic() + 240
+        while time.monotonic() < deadline and proc.poll() is None:
+            if (out / RUNNING).is_dir() and any((out / RUNNING).iterdir()):
+                break  # a worker has started a dive
+            time.sleep(0.05)
+        assert proc.poll() is None, (tmp_path / "stderr.txt").read_text()
+        workers = [p for p in child_pids(proc.pid) if "multiprocessing" in cmdline(p)]
+        assert workers
+        proc.send_signal(signal.SIGTERM)
+        code = proc.wait(timeout=120)
+        deadline = time.monotonic() + 30
+        while time.monotonic() < deadline and any(is_alive(p) for p in workers):
+            time.sleep(0.5)
+        assert not any(is_alive(p) for p in workers)
+        assert code == 128 + signal.SIGTERM
+    finally:
+        for pid in [proc.pid, *workers]:
+            if is_alive(pid):
+                os.kill(pid, signal.SIGKILL)
+    finished = [d for d in out.iterdir() if (d / "loop.json").is_file()]
+    assert len(finished) < 11, finished  # eleven good dives: the queue was not run out
+    assert not (out / "summary.json").exists()
 
 
 needs_ray = pytest.mark.skipif(

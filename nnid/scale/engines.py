@@ -109,6 +109,20 @@ def _marked_run(task: Task, out_root: str) -> dict[str, Any]:
         marker.unlink(missing_ok=True)
 
 
+def _end_workers(pool: ProcessPoolExecutor) -> None:
+    """Cancel a pool's queued tasks and end its worker processes now."""
+    terminate = getattr(pool, "terminate_workers", None)  # Python 3.14
+    if terminate is not None:
+        terminate()
+        return
+    # before 3.14 the pool names its processes only in a private attribute, which its
+    # shutdown clears: taken first
+    processes = list((getattr(pool, "_processes", None) or {}).values())
+    pool.shutdown(wait=False, cancel_futures=True)
+    for process in processes:
+        process.terminate()
+
+
 class LocalEngine:
     """Local worker processes (``concurrent.futures``, spawn context); ``workers`` defaults
     to the number of cores."""
@@ -127,7 +141,8 @@ class LocalEngine:
     ) -> Iterator[dict[str, Any] | list[Task]]:
         """Rows as tasks finish; if the pool breaks, a last item: the unfinished tasks."""
         ctx = get_context("spawn")
-        with ProcessPoolExecutor(workers, mp_context=ctx, initializer=_pin_worker) as pool:
+        pool = ProcessPoolExecutor(workers, mp_context=ctx, initializer=_pin_worker)
+        try:
             # the pool starts its processes as tasks are submitted: all of them here
             with _child_environment(ONE_THREAD):
                 futures = {pool.submit(_marked_run, t, out_root): t for t in tasks}
@@ -146,6 +161,13 @@ class LocalEngine:
                 if broken:
                     yield broken + list(futures.values())
                     return
+        except BaseException:
+            # interrupted (Ctrl-C, the CLI's SIGTERM, a caller that stops reading the rows):
+            # a plain shutdown would wait for every queued task to run
+            _end_workers(pool)
+            raise
+        finally:
+            pool.shutdown(wait=True)
 
     def run(self, tasks: list[Task], out_root: str | Path) -> Iterator[dict[str, Any]]:
         out_root = str(out_root)
