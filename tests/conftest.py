@@ -2,7 +2,11 @@ from __future__ import annotations
 
 import os
 import shutil
+import signal
 import subprocess
+import sys
+import time
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -163,3 +167,33 @@ def is_alive(pid: int) -> bool:
     except OSError:
         return False
     return state != "Z"
+
+
+def stop_cli(
+    args: list[str], workers_of: Callable[[int], list[int]], stderr: Path
+) -> tuple[int, list[int]]:
+    """Run ``nnid *args`` through the console entry in a subprocess; once ``workers_of(pid)``
+    names the worker processes to watch, let it work 2 s and send it SIGTERM. Returns its exit
+    code and the workers still alive 30 s after it ended (every process it left is killed
+    afterwards)."""
+    cmd = [sys.executable, "-c", "from nnid.cli import main; main()", *args]
+    with stderr.open("w") as sink:
+        proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=sink)
+    workers: list[int] = []
+    try:
+        deadline = time.monotonic() + 240
+        while not workers and time.monotonic() < deadline and proc.poll() is None:
+            time.sleep(0.05)
+            workers = workers_of(proc.pid)
+        assert proc.poll() is None and workers, stderr.read_text()
+        time.sleep(2.0)  # into the work
+        proc.send_signal(signal.SIGTERM)
+        code = proc.wait(timeout=120)
+        deadline = time.monotonic() + 30
+        while time.monotonic() < deadline and any(is_alive(p) for p in workers):
+            time.sleep(0.5)
+        return code, [p for p in workers if is_alive(p)]
+    finally:
+        for pid in [proc.pid, *workers]:
+            if is_alive(pid):
+                os.kill(pid, signal.SIGKILL)

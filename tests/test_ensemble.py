@@ -5,18 +5,14 @@ left out, the config table and ``nnid train`` with the members' spread in ``metr
 from __future__ import annotations
 
 import json
-import os
 import re
 import signal
-import subprocess
-import sys
-import time
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
-from conftest import child_pids, cmdline, is_alive
+from conftest import child_pids, cmdline, stop_cli
 from typer.testing import CliRunner
 
 from nnid import load_model
@@ -238,35 +234,14 @@ def test_sigterm_to_the_cli_ends_the_ensemble_workers(tmp_path):
         '[model.member]\nkind = "narx"\ninputs = ["tau_X"]\noutputs = ["u"]\nhidden = [4]\n'
         '[model.member.trainer]\nkind = "adam"\nmax_epochs = 1000000\n'
     )
-    cmd = [sys.executable, "-c", "from nnid.cli import main; main()", "train"]
-    stderr = tmp_path / "stderr.txt"
-    with stderr.open("w") as sink:
-        proc = subprocess.Popen(
-            [*cmd, str(tmp_path / "train.toml"), "--out", str(tmp_path / "out")],
-            stdout=subprocess.DEVNULL,
-            stderr=sink,
-        )
-    workers: list[int] = []
-    try:
-        deadline = time.monotonic() + 240
-        while time.monotonic() < deadline and proc.poll() is None:
-            # loky's workers and its resource tracker: the workers run the fits
-            workers = [p for p in child_pids(proc.pid) if "loky" in cmdline(p)]
-            if len([p for p in workers if "popen_loky" in cmdline(p)]) == 2:
-                break
-            time.sleep(0.5)
-        assert proc.poll() is None, stderr.read_text()
-        assert len([p for p in workers if "popen_loky" in cmdline(p)]) == 2
-        time.sleep(2.0)  # into the fits
-        proc.send_signal(signal.SIGTERM)
-        code = proc.wait(timeout=60)
-        deadline = time.monotonic() + 30
-        while time.monotonic() < deadline and any(is_alive(p) for p in workers):
-            time.sleep(0.5)
-        assert not any(is_alive(p) for p in workers)
-        assert code == 128 + signal.SIGTERM
-    finally:
-        for pid in [proc.pid, *workers]:
-            if is_alive(pid):
-                os.kill(pid, signal.SIGKILL)
+
+    def loky_workers(pid: int) -> list[int]:
+        """Both of loky's workers once they run (and its resource tracker)."""
+        found = [p for p in child_pids(pid) if "loky" in cmdline(p)]
+        return found if sum("popen_loky" in cmdline(p) for p in found) == 2 else []
+
+    args = ["train", str(tmp_path / "train.toml"), "--out", str(tmp_path / "out")]
+    code, alive = stop_cli(args, loky_workers, tmp_path / "stderr.txt")
+    assert alive == []
+    assert code == 128 + signal.SIGTERM
     assert not (tmp_path / "out" / "metrics.json").exists()

@@ -12,15 +12,13 @@ import math
 import os
 import shutil
 import signal
-import subprocess
-import sys
 import threading
 import time
 from pathlib import Path
 
 import pandas as pd
 import pytest
-from conftest import child_pids, cmdline, is_alive
+from conftest import child_pids, cmdline, stop_cli
 from typer.testing import CliRunner
 
 from nnid.cli import app
@@ -294,34 +292,17 @@ def test_sigterm_to_batch_ends_its_workers_and_runs_nothing_more(fleet, tmp_path
     # queued tasks and ends the running ones' workers (a plain pool shutdown would wait for
     # all twelve dives to run first)
     out = tmp_path / "batch"
-    cmd = [sys.executable, "-c", "from nnid.cli import main; main()", "batch"]
-    with (tmp_path / "stderr.txt").open("w") as sink:
-        proc = subprocess.Popen(
-            [*cmd, str(fleet / "fleet12.toml"), "--out", str(out), "--workers", "2"],
-            stdout=subprocess.DEVNULL,
-            stderr=sink,
-        )
-    workers: list[int] = []
-    try:
-        deadline = time.monotonic() + 240
-        while time.monotonic() < deadline and proc.poll() is None:
-            if (out / RUNNING).is_dir() and any((out / RUNNING).iterdir()):
-                break  # a worker has started a dive
-            time.sleep(0.05)
-        assert proc.poll() is None, (tmp_path / "stderr.txt").read_text()
-        workers = [p for p in child_pids(proc.pid) if "multiprocessing" in cmdline(p)]
-        assert workers
-        proc.send_signal(signal.SIGTERM)
-        code = proc.wait(timeout=120)
-        deadline = time.monotonic() + 30
-        while time.monotonic() < deadline and any(is_alive(p) for p in workers):
-            time.sleep(0.5)
-        assert not any(is_alive(p) for p in workers)
-        assert code == 128 + signal.SIGTERM
-    finally:
-        for pid in [proc.pid, *workers]:
-            if is_alive(pid):
-                os.kill(pid, signal.SIGKILL)
+
+    def pool_workers(pid: int) -> list[int]:
+        """The pool's processes once a worker has started a dive."""
+        if not ((out / RUNNING).is_dir() and any((out / RUNNING).iterdir())):
+            return []
+        return [p for p in child_pids(pid) if "multiprocessing" in cmdline(p)]
+
+    args = ["batch", str(fleet / "fleet12.toml"), "--out", str(out), "--workers", "2"]
+    code, alive = stop_cli(args, pool_workers, tmp_path / "stderr.txt")
+    assert alive == []
+    assert code == 128 + signal.SIGTERM
     finished = [d for d in out.iterdir() if (d / "loop.json").is_file()]
     assert len(finished) < 11, finished  # eleven good dives: the queue was not run out
     assert not (out / "summary.json").exists()
