@@ -543,9 +543,10 @@ def main() -> None:
 
     A SIGTERM's default kills only this process: an ensemble's worker processes (joblib's
     loky) would go on training as orphans for minutes. Raised as SystemExit, it unwinds the
-    fit and the executor's shutdown ends them. Only where SIGTERM still has its default (a
-    parent that set it to be ignored keeps it so), and only here, in the application's entry:
-    the library leaves signals alone."""
+    fit and the executor's shutdown ends them (``nnid batch``'s local pool cancels its queue
+    and ends its workers the same way; a Ray driver has Ray's own handler). Only where
+    SIGTERM still has its default (a parent that set it to be ignored keeps it so), and only
+    here, in the application's entry: the library leaves signals alone."""
     if signal.getsignal(signal.SIGTERM) is signal.SIG_DFL:
         signal.signal(signal.SIGTERM, _exit_on_sigterm)
     app()
