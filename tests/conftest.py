@@ -139,6 +139,10 @@ def pytest_configure(config):
         threadpool_limits(1)
 
 
+#: the process helpers below read /proc
+needs_proc = pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads /proc (Linux)")
+
+
 def child_pids(pid: int) -> list[int]:
     """The pids whose parent is ``pid`` (Linux /proc)."""
     found = []

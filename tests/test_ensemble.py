@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-from conftest import child_pids, cmdline, stop_cli
+from conftest import child_pids, cmdline, needs_proc, stop_cli
 from typer.testing import CliRunner
 
 from nnid import load_model
@@ -214,7 +214,7 @@ def test_members_fitted_in_worker_processes_match_the_sequential_fit():
     np.testing.assert_allclose(two.predict(val), one.predict(val), rtol=1e-6, atol=1e-9)
 
 
-@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads /proc (Linux)")
+@needs_proc
 def test_sigterm_to_the_cli_ends_the_ensemble_workers(tmp_path):
     # the console entry turns SIGTERM into SystemExit: an ensemble's loky workers, mid-fit,
     # end with the command instead of training on as orphans (by default SIGTERM kills only

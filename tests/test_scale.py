@@ -18,7 +18,7 @@ from pathlib import Path
 
 import pandas as pd
 import pytest
-from conftest import child_pids, cmdline, stop_cli
+from conftest import child_pids, cmdline, needs_proc, stop_cli
 from typer.testing import CliRunner
 
 from nnid.cli import app
@@ -286,7 +286,7 @@ def test_batch_cli_exit_codes_and_report(fleet, tmp_path) -> None:
     assert res.exit_code == 2 and "not a folder" in res.output
 
 
-@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads /proc (Linux)")
+@needs_proc
 def test_sigterm_to_batch_ends_its_workers_and_runs_nothing_more(fleet, tmp_path) -> None:
     # the console entry turns SIGTERM into SystemExit; the local engine then cancels the
     # queued tasks and ends the running ones' workers (a plain pool shutdown would wait for
