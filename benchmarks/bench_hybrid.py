@@ -1,6 +1,7 @@
 """Neural-ODE hybrid: training speed, and the scenarios of issue 15. Run by hand:
 
     python benchmarks/bench_hybrid.py speed        # one epoch, torchdiffeq against nnid's RK4
+    python benchmarks/bench_hybrid.py free_run     # predictions: compiled kernel against torch
     python benchmarks/bench_hybrid.py scenarios [SEED ...]  # hybrid vs physics vs NARX per effect
 
 ``speed``: one training epoch over 10 minutes of 100 Hz data (minirov, every DOF excited) cut
@@ -9,6 +10,14 @@ target under 5 s on the 2-core reference machine; the same epoch with nnid's own
 in place of torchdiffeq's, same model, same run (the ratio is what torchdiffeq's generality
 costs); and the neural state-space model's vector field integrated both ways (why it keeps its
 own RK4).
+
+``free_run``: the hybrid's predictions without gradients (what early stopping scores every
+epoch and what ``predict`` returns), through the compiled kernel
+(:mod:`nnid.models.hybrid_kernel`) against the torchdiffeq integration of the same vector field
+(the baseline, same model and run): 5-s windows of a held-out part as early stopping flies them,
+whole experiments of a 300-s log, and k-step predictions (k = 1 s) of every sample; the
+default network with random weights (the untrained one's last layer is zero), in a current.
+The same numbers either way (the largest difference is printed).
 
 ``scenarios``: for each effect kind of the loop (installation loss, coupled damping, actuator
 lag, tether pull, current) and a clean log, seeds 11-13: ``configs/hybrid.toml`` against
@@ -29,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from common import machine
+from common import best_of, machine
 
 REPO = Path(__file__).resolve().parents[1]
 MINIROV = str(resources.files("nnid.demo_data").joinpath("minirov.toml"))
@@ -107,6 +116,62 @@ def _time(fn) -> float:
     return time.perf_counter() - t
 
 
+def free_run() -> None:
+    from nnid.evaluation.prediction import measured_states
+    from nnid.loop.scenarios import effect_log
+    from nnid.models.hybrid import HybridModel
+    from nnid.trainers.adam import Adam
+    from nnid.vehicle import load_vehicle
+
+    veh = load_vehicle(MINIROV)
+    log = effect_log(veh, [("current.y", 0.15)], duration=300.0, dt=0.05, seed=11)
+    model = HybridModel(veh, trainer=Adam(max_epochs=0), segments=(0.5,)).fit(log)
+    dyn = model.dynamics_
+    gen = torch.Generator().manual_seed(1)
+    with torch.no_grad():
+        for p in dyn.net.parameters():
+            p.add_(0.1 * torch.randn(p.shape, generator=gen, dtype=p.dtype))
+    prepared, data = model._data(log, accelerations=False)
+    channels = model._channels(prepared, data["tau"])
+    states = measured_states(prepared)
+    first = prepared["experiment"].to_numpy() == prepared["experiment"].iloc[0]
+    held = np.flatnonzero(first)  # one experiment as the held-out part
+    starts = held[: held.size - 100 : 100]
+    x0, windows = (
+        torch.as_tensor(states[starts]),
+        torch.as_tensor(channels[starts[:, None] + np.arange(100)]),
+    )
+    torch_run = type(dyn).free_run
+
+    def torch_path(self, x0, inputs, dt, substeps=1, params=None, arrays=None):
+        with torch.no_grad():
+            return self(x0, inputs, dt, substeps)
+
+    cases = {
+        f"early-stopping windows ({starts.size} x 5 s)": lambda: dyn.free_run(x0, windows, 0.05),
+        f"free run of {log['experiment'].nunique()} experiments (300 s)": lambda: model.predict(
+            log, "free_run"
+        ),
+        f"k-step (k = 20) of {len(log)} samples": lambda: model.predict(log, 20),
+    }
+    print("| prediction | torch (s) | compiled (s) | torch / compiled | max difference |")
+    print("|---|---|---|---|---|")
+    for name, fn in cases.items():
+        fast = fn()  # compiles on a cold cache
+        t_fast = best_of(fn)
+        type(dyn).free_run = torch_path
+        try:
+            slow = fn()
+            t_slow = best_of(fn)
+        finally:
+            type(dyn).free_run = torch_run
+        a = fast.numpy() if isinstance(fast, torch.Tensor) else fast.to_numpy()
+        b = slow.numpy() if isinstance(slow, torch.Tensor) else slow.to_numpy()
+        diff = float(np.nanmax(np.abs(a - b)))
+        print(f"| {name} | {t_slow:.3f} | {t_fast:.4f} | {t_slow / t_fast:.1f} | {diff:.1e} |")
+    print(f"\n{machine(torch=torch.__version__)}; {datetime.date.today()}")
+
+
 SCENARIOS = {
     "none": (0.0, 300.0),
     "thruster_installation.w.neg": (0.6, 300.0),
@@ -174,5 +239,7 @@ if __name__ == "__main__":
     what = sys.argv[1] if len(sys.argv) > 1 else "speed"
     if what == "scenarios":
         scenarios(tuple(int(s) for s in sys.argv[2:]) or (11, 12, 13))
+    elif what == "free_run":
+        free_run()
     else:
         speed()

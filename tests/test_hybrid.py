@@ -14,9 +14,12 @@ import json
 from importlib import resources
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import pytest
+import torch
 from conftest import assert_rendered
+from torch.func import functional_call
 from typer.testing import CliRunner
 
 from nnid import load_model
@@ -24,7 +27,7 @@ from nnid.cli import app
 from nnid.config import TrainConfig, load_config
 from nnid.datasets.log import TAU, write_log
 from nnid.datasets.simulator import Autopilot
-from nnid.evaluation.prediction import Replay
+from nnid.evaluation.prediction import Replay, measured_states
 from nnid.loop.scenarios import effect_log
 from nnid.models.hybrid import HybridModel
 from nnid.pipeline import run_train
@@ -147,6 +150,51 @@ def test_untrained_hybrid_is_its_physics(minirov):
         assert err.max() < 1e-4, err
     pd.testing.assert_frame_equal(model.residual(log), physics.residual(log))
     assert float(model.correction(log).abs().to_numpy().max()) == 0.0
+
+
+@pytest.mark.parametrize(
+    ("level", "method", "physics"),
+    [("force", "rk4", "frozen"), ("acceleration", "nnid_rk4", "joint")],
+)
+def test_compiled_free_run_is_the_torch_integration(minirov, level, method, physics):
+    """The kernel that scores held-out free runs and predicts (nnid.models.hybrid_kernel) is
+    the torch vector field integrated by the same rule (torchdiffeq's 3/8-rule rk4, nnid's
+    classic one): random network weights and physics changes δ, a current (ν_r ≠ ν), 5-s
+    windows from measured states; equal to rounding, also at weights given as a dictionary
+    (what early stopping scores)."""
+    log = effect_log(minirov, duration=60.0, n_experiments=2, seed=5)
+    model = HybridModel(
+        minirov, level=level, method=method, physics=physics, trainer=Adam(max_epochs=0),
+        segments=(0.5,),
+    ).fit(log)  # fmt: skip
+    dyn = model.dynamics_
+    g = torch.Generator().manual_seed(1)
+    with torch.no_grad():
+        for p in dyn.parameters():
+            p.add_(0.3 * torch.randn(p.shape, generator=g, dtype=p.dtype))
+        dyn.physics.current.copy_(torch.tensor([0.1, -0.2, 0.05], dtype=torch.float64))
+    dyn.physics.forget()
+    assert not dyn.physics.field().still and dyn.compiled
+    assert (len(dyn.physics.joint) > 0) == (physics == "joint")
+    prepared, data = model._data(log, accelerations=False)
+    channels = model._channels(prepared, data["tau"])
+    starts = np.arange(0, 1000, 50)
+    x0 = torch.as_tensor(measured_states(prepared)[starts])
+    inputs = torch.as_tensor(channels[starts[:, None] + np.arange(100)[None, :]])
+    params = {
+        k: v + 0.1 * torch.randn(v.shape, generator=g, dtype=v.dtype)
+        for k, v in dyn.named_parameters()
+        if v.requires_grad
+    }
+    with torch.no_grad():
+        reference = [dyn(x0, inputs, 0.05), functional_call(dyn, params, (x0, inputs, 0.05))]
+    compiled = [dyn.free_run(x0, inputs, 0.05), dyn.free_run(x0, inputs, 0.05, params=params)]
+    for a, b in zip(reference, compiled, strict=True):
+        assert a.shape == b.shape == (101, starts.size, 12)
+        spread = (a - a[0]).abs().amax((0, 1))  # how far each state moved in 5 s
+        assert float(spread[6:].min()) > 0.01  # the network and the current act
+        assert float(((a - b).abs().amax((0, 1)) / spread.clamp(min=1e-9)).max()) < 1e-9
+    assert float((reference[0] - reference[1]).abs().max()) > 1e-3  # the dictionary was used
 
 
 def test_joint_training_keeps_complete_physics_near_the_fit(minirov):

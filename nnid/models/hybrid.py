@@ -51,6 +51,7 @@ from nnid.evaluation.prediction import (
     mode_steps,
 )
 from nnid.models.base import NOT_FITTED, check_log
+from nnid.models.hybrid_kernel import NetArrays, free_run
 from nnid.models.io_model import seeded_linear
 from nnid.models.parametric import FossenPlant, ParametricModel
 from nnid.physics.added_mass import parse_added_mass_key
@@ -58,7 +59,7 @@ from nnid.physics.damping import DampingTerms, parse_coefficient_key
 from nnid.physics.dofs import DOFS, FORCES
 from nnid.physics.form import Field, ned_axes, trig
 from nnid.physics.form import eta_dot as form_eta_dot
-from nnid.physics.fossen import FossenModel
+from nnid.physics.fossen import FeatureForm, FossenModel
 from nnid.physics.odeint import METHODS, SampledInput, integrate
 from nnid.physics.parts import Parts
 from nnid.threads import torch_threads
@@ -70,6 +71,8 @@ DTYPE = torch.float64
 _STATE_FEATURES = 15
 #: rows of predictions integrated at once (k-step windows of long logs)
 _CHUNK = 4096
+#: the compiled kernel's rule for each fixed-step method (torchdiffeq's rk4 is the 3/8 rule)
+_RULES = {"rk4": "3/8", "nnid_rk4": "classic"}
 
 
 class HybridPhysics(nn.Module):
@@ -112,6 +115,7 @@ class HybridPhysics(nn.Module):
         self.delta = nn.Parameter(torch.zeros(len(self.joint), dtype=DTYPE))
         self.delta.requires_grad_(bool(self.joint))
         self._fields: dict[bool, Field] = {}
+        self._form: FeatureForm | None = None
 
     def values(self) -> dict[str, float]:
         """The jointly trained parameters at their current values (vehicle-file names)."""
@@ -121,14 +125,15 @@ class HybridPhysics(nn.Module):
             d = self.coefficients[self.rows_d, self.cols_d] + self.scale_d * self.delta[n_a:]
         return dict(zip(self.joint, [*a.tolist(), *d.tolist()], strict=True))
 
-    def fossen(self) -> FossenModel:
-        """The Fossen model at the current parameters."""
+    def fossen(self, delta: Tensor | None = None) -> FossenModel:
+        """The Fossen model at the current parameters (or at the changes ``delta``)."""
+        delta = self.delta if delta is None else delta
         n_a = self.rows_a.numel()
         added_mass = self.added_mass.index_put(
-            (self.rows_a, self.cols_a), -self.scale_a * self.delta[:n_a], accumulate=True
+            (self.rows_a, self.cols_a), -self.scale_a * delta[:n_a], accumulate=True
         )
         coefficients = self.coefficients.index_put(
-            (self.rows_d, self.cols_d), self.scale_d * self.delta[n_a:], accumulate=True
+            (self.rows_d, self.cols_d), self.scale_d * delta[n_a:], accumulate=True
         )
         return FossenModel(
             self.mass,
@@ -153,6 +158,20 @@ class HybridPhysics(nn.Module):
             with torch.no_grad():
                 self._fields[positions] = Field(self.fossen().form(), positions)
         return self._fields[positions]
+
+    def feature_form(self, delta: Tensor | None = None) -> FeatureForm:
+        """The physics at the current parameters (or at ``delta``) as arrays for the compiled
+        kernel (built once while the physics is frozen)."""
+        if self.joint:
+            return self.fossen(delta).feature_form()
+        if self._form is None:
+            self._form = self.fossen().feature_form()
+        return self._form
+
+    def forget(self) -> None:
+        """Drop the cached right-hand sides (after the parameters were loaded anew)."""
+        self._fields.clear()
+        self._form = None
 
 
 def _scale(fit: Tensor) -> Tensor:
@@ -241,6 +260,64 @@ class HybridDynamics(nn.Module):
 
         return f
 
+    def arrays(self, params: dict[str, Tensor] | None = None) -> tuple[FeatureForm, NetArrays]:
+        """The physics and the network at ``params`` (a :func:`functional_call` dictionary;
+        default and for what it leaves out: the module's own) as the compiled kernel takes
+        them."""
+        given = params or {}
+        with torch.no_grad():
+            delta = given.get("physics.delta", self.physics.delta)
+            blocks = []
+            for i, layer in enumerate(self.net.layers):
+                if isinstance(layer, nn.Linear):
+                    for name in ("weight", "bias"):
+                        value = given.get(f"net.layers.{i}.{name}", getattr(layer, name))
+                        blocks.append(value.detach().reshape(-1))
+            sizes = [layer.in_features for layer in self.net.layers if isinstance(layer, nn.Linear)]
+            net = NetArrays(
+                torch.cat(blocks).numpy().astype(np.float64),
+                np.array([*sizes, 6], dtype=np.int64),
+                self.net.nu_scale.numpy().copy(),
+                (self.net.out_scale * self.net.dof_mask).numpy().copy(),
+            )
+            return self.physics.feature_form(delta), net
+
+    @property
+    def compiled(self) -> bool:
+        """Whether free runs without gradients take the compiled kernel (the fixed-step
+        methods; ``dopri5`` stays on torchdiffeq)."""
+        return self.method in _RULES
+
+    def free_run(
+        self,
+        x0: Tensor,
+        inputs: Tensor,
+        dt: float,
+        substeps: int = 1,
+        params: dict[str, Tensor] | None = None,
+        arrays: tuple[FeatureForm, NetArrays] | None = None,
+    ) -> Tensor:
+        """:meth:`forward` without gradients, through the compiled kernel
+        (:mod:`nnid.models.hybrid_kernel`) where :attr:`compiled`; the states at ``params``
+        (or at the ready ``arrays`` of :meth:`arrays`)."""
+        if not self.compiled:
+            with torch.no_grad():
+                if params is None:
+                    return self(x0, inputs, dt, substeps)
+                return functional_call(self, params, (x0, inputs, dt, substeps))
+        form, net = arrays if arrays is not None else self.arrays(params)
+        states = free_run(
+            form,
+            net,
+            x0.detach().numpy(),
+            inputs.detach().numpy(),
+            dt,
+            substeps,
+            _RULES[self.method],
+            self.level,
+        )
+        return torch.as_tensor(states)
+
     def forward(
         self, x0: Tensor, inputs: Tensor, dt: float, substeps: int = 1, positions: bool = True
     ) -> Tensor:
@@ -274,7 +351,11 @@ class _Problem:
         self.index = [6 + DOFS.index(d) for d in model.scored_]
         self.scale = torch.as_tensor([model.velocity_scale_[d] for d in model.scored_])
 
-    def simulate(self, params: dict[str, Tensor], x0: Tensor, inputs: Tensor) -> Tensor:
+    def simulate(
+        self, params: dict[str, Tensor], x0: Tensor, inputs: Tensor, train: bool = True
+    ) -> Tensor:
+        if not train:  # a held-out score: no gradient, the compiled kernel
+            return self.module.free_run(x0, inputs, self.dt, self.substeps, params)
         # positions do not feed back into the dynamics: the fit leaves them out
         return functional_call(self.module, params, (x0, inputs, self.dt, self.substeps, False))
 
@@ -542,12 +623,18 @@ class HybridModel(FossenPlant):
             net.out_scale.copy_(torch.as_tensor(scale))
 
     # -- prediction ------------------------------------------------------------------------------
-    def _simulate(self, x0: np.ndarray, channels: np.ndarray, dt: float) -> np.ndarray:
-        """States ``[L + 1, B, 12]`` from ``x0`` ``[B, 12]`` under ``channels`` ``[B, L, m]``."""
-        with torch.no_grad():
-            states = self.dynamics_(
-                torch.as_tensor(x0), torch.as_tensor(channels), dt, power_of_two_substeps(dt)
-            )
+    def _simulate(
+        self, x0: np.ndarray, channels: np.ndarray, dt: float, arrays: tuple | None = None
+    ) -> np.ndarray:
+        """States ``[L + 1, B, 12]`` from ``x0`` ``[B, 12]`` under ``channels`` ``[B, L, m]``
+        (``arrays``: the kernel's, when the caller steps many times)."""
+        states = self.dynamics_.free_run(
+            torch.as_tensor(x0),
+            torch.as_tensor(channels),
+            dt,
+            power_of_two_substeps(dt),
+            arrays=arrays,
+        )
         return states.numpy()
 
     def _predict(self, log: pd.DataFrame, mode: str | int) -> pd.DataFrame:
@@ -589,6 +676,8 @@ class HybridModel(FossenPlant):
         mode = check_mode(mode)
         log, _ = self._data(check_log(log), accelerations=False)
 
+        arrays = self.dynamics_.arrays() if self.dynamics_.compiled else None
+
         def stepper(_: int, dt: float):
             lag: dict[float, np.ndarray] = {}  # the memory filters' states, from the first command
 
@@ -599,7 +688,8 @@ class HybridModel(FossenPlant):
                     prev = lag.get(t, command)
                     chans.append((command - prev) / self.input_scale_)
                     lag[t] = a * prev + (1 - a) * command
-                return self._simulate(state, np.concatenate(chans, 1)[:, None, :], dt)[-1]
+                chans = np.concatenate(chans, 1)[:, None, :]
+                return self._simulate(state, chans, dt, arrays)[-1]
 
             return step
 
@@ -709,7 +799,7 @@ class HybridModel(FossenPlant):
         self.stages_ = state["stages"]
         self.dynamics_ = self._new_dynamics()
         self.dynamics_.load_state_dict(tensors)
-        self.dynamics_.physics._fields.clear()
+        self.dynamics_.physics.forget()
 
 
 __all__ = ["CorrectionNet", "HybridDynamics", "HybridModel", "HybridPhysics"]

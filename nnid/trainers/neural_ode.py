@@ -72,9 +72,12 @@ class ShootingProblem(Protocol):
 
     module: nn.Module
 
-    def simulate(self, params: dict[str, Tensor], x0: Tensor, inputs: Tensor) -> Tensor:
+    def simulate(
+        self, params: dict[str, Tensor], x0: Tensor, inputs: Tensor, train: bool = True
+    ) -> Tensor:
         """States at samples 0..L ``[L + 1, B, n]`` from ``x0`` ``[B, n]`` under
-        ``inputs`` ``[B, L, m]``."""
+        ``inputs`` ``[B, L, m]``; ``train=False`` (a held-out score, never differentiated):
+        the problem may take a faster path without gradients."""
         ...
 
     def outputs(self, states: Tensor) -> Tensor:
@@ -132,7 +135,7 @@ def take(batch: Batch, index: Tensor) -> Batch:
 def residual(problem: ShootingProblem, params: dict[str, Tensor], batch: Batch) -> Tensor:
     """The simulation error of a batch's segments (normalised outputs, weighted rows), then
     the problem's penalty rows on training batches."""
-    states = problem.simulate(params, batch.x0, batch.inputs)
+    states = problem.simulate(params, batch.x0, batch.inputs, batch.train)
     err = problem.outputs(states[1:]) - batch.targets
     if batch.weight is not None:
         err = err * batch.weight[None, :, None]

@@ -1,0 +1,202 @@
+"""The neural-ODE hybrid's free run, compiled: the Fossen kernel plus the correction network.
+
+Why a second evaluator of the hybrid: a free run steps a small state through time, so through
+torchdiffeq every right-hand-side evaluation costs its ~100 tensor operations' overhead
+(~0.8 ms, whatever the batch), and a held-out free run of a 5-s window at 20 Hz is 400 of them
+in sequence. Early stopping does that every epoch and scoring does it for every prediction:
+about 40 % of a hybrid's training time was spent there (profiled on a 300-s log, 115 s in all).
+Here the same vector field costs microseconds: the physics is
+:func:`nnid.physics.compiled._rhs` on the model's :class:`~nnid.physics.fossen.FeatureForm`
+(one implementation of Weiss eqs 11-31, the one the monitor and the simulator use), and the
+network (:class:`nnid.models.hybrid.CorrectionNet`, tanh layers) is written out on its weights.
+Gradients still go through the torch path (:class:`nnid.models.hybrid.HybridDynamics`); tests
+hold the two equal.
+
+The steps are those of the torch path, so the numbers agree to rounding: torchdiffeq's ``rk4``
+is the 3/8-rule Runge-Kutta (``rule="3/8"``), nnid's ``nnid_rk4`` the classic one
+(``rule="classic"``); both hold each input over its sample. At force level the network's
+force joins the applied force (M⁻¹(τ + f_θ + …) = the physics' ν̇ + M⁻¹f_θ, by linearity), at
+acceleration level its output adds to ν̇. The RK4 steps are written here again around this
+field rather than shared with :mod:`nnid.physics.compiled` through a function argument: numba
+compiles a step per field, and the 3/8 rule exists only here.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit, prange
+
+from nnid.physics.compiled import PARALLEL_MIN_STEPS, _rhs, form_args
+from nnid.physics.fossen import FeatureForm
+
+RULES = {"classic": 0, "3/8": 1}
+
+
+class NetArrays(NamedTuple):
+    """A :class:`~nnid.models.hybrid.CorrectionNet` as arrays: every layer's weight ``[out,
+    in]`` (row-major) then bias, one after the other in ``flat``; the layer widths ``sizes``
+    (inputs first, 6 last); the velocity scale of its inputs and its per-DOF output scale
+    (``out_scale`` times the DOF mask)."""
+
+    flat: np.ndarray
+    sizes: np.ndarray
+    nu_scale: np.ndarray
+    out_scale: np.ndarray
+
+
+@njit(cache=True, inline="always")
+def _mlp(feats, flat, sizes, a, b):
+    src = feats
+    off = 0
+    last = sizes.shape[0] - 2
+    for layer in range(last + 1):
+        n_in, n_out = sizes[layer], sizes[layer + 1]
+        dst = a if layer % 2 == 0 else b
+        bias = off + n_out * n_in
+        for o in range(n_out):
+            acc = flat[bias + o]
+            row = off + o * n_in
+            for i in range(n_in):
+                acc += flat[row + i] * src[i]
+            dst[o] = math.tanh(acc) if layer < last else acc
+        off = bias + n_out
+        src = dst
+    return src
+
+
+@njit(cache=True)
+def _field(x, u, form, net, force_level, out, scratch, feats, a, b):
+    flat, sizes, nu_scale, out_scale = net
+    m_inv, q_rb, q_a, g_mat, theta, codes, ma, bias, cur, u_c, lag = form
+    _rhs(x, u, m_inv, q_rb, q_a, g_mat, theta, codes, ma, bias, cur, u_c, lag, out, scratch)
+    nur = scratch[1]  # ν_r, as _rhs left it
+    sf, cf = math.sin(x[3]), math.cos(x[3])
+    st, ct = math.sin(x[4]), math.cos(x[4])
+    sp, cp = math.sin(x[5]), math.cos(x[5])
+    for i in range(6):
+        feats[i] = nur[i] / nu_scale[i]
+    # the entries of R(Θ), row-major (nnid.physics.form.ned_axes)
+    feats[6] = cp * ct
+    feats[7] = cp * st * sf - sp * cf
+    feats[8] = cp * st * cf + sp * sf
+    feats[9] = sp * ct
+    feats[10] = sp * st * sf + cp * cf
+    feats[11] = sp * st * cf - cp * sf
+    feats[12] = -st
+    feats[13] = ct * sf
+    feats[14] = ct * cf
+    for i in range(6, u.shape[0]):
+        feats[9 + i] = u[i]
+    y = _mlp(feats, flat, sizes, a, b)
+    for i in range(6):
+        if force_level:
+            acc = 0.0
+            for j in range(6):
+                acc += m_inv[i, j] * (y[j] * out_scale[j])
+            out[6 + i] += acc
+        else:
+            out[6 + i] += y[i] * out_scale[i]
+
+
+@njit(cache=True)
+def _window(x0, inputs, dt, substeps, rule, form, net, force_level, states):
+    n = x0.shape[0]
+    h = dt / substeps
+    width = 1
+    for k in range(net[1].shape[0]):
+        width = max(width, net[1][k])
+    scratch = np.empty((4, 18))
+    feats = np.empty(net[1][0])
+    a, b = np.empty(width), np.empty(width)
+    k1, k2, k3, k4 = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
+    tmp = np.empty(n)
+    x = x0.copy()
+    states[0] = x
+    for step in range(inputs.shape[0]):
+        u = inputs[step]
+        for _ in range(substeps):
+            _field(x, u, form, net, force_level, k1, scratch, feats, a, b)
+            if rule == 0:
+                for i in range(n):
+                    tmp[i] = x[i] + 0.5 * h * k1[i]
+                _field(tmp, u, form, net, force_level, k2, scratch, feats, a, b)
+                for i in range(n):
+                    tmp[i] = x[i] + 0.5 * h * k2[i]
+                _field(tmp, u, form, net, force_level, k3, scratch, feats, a, b)
+                for i in range(n):
+                    tmp[i] = x[i] + h * k3[i]
+                _field(tmp, u, form, net, force_level, k4, scratch, feats, a, b)
+                for i in range(n):
+                    x[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
+            else:  # the 3/8 rule, as torchdiffeq's rk4_alt_step_func
+                for i in range(n):
+                    tmp[i] = x[i] + h * k1[i] / 3.0
+                _field(tmp, u, form, net, force_level, k2, scratch, feats, a, b)
+                for i in range(n):
+                    tmp[i] = x[i] + h * (k2[i] - k1[i] / 3.0)
+                _field(tmp, u, form, net, force_level, k3, scratch, feats, a, b)
+                for i in range(n):
+                    tmp[i] = x[i] + h * (k1[i] - k2[i] + k3[i])
+                _field(tmp, u, form, net, force_level, k4, scratch, feats, a, b)
+                for i in range(n):
+                    x[i] += (k1[i] + 3.0 * (k2[i] + k3[i]) + k4[i]) * h * 0.125
+        states[step + 1] = x
+
+
+@njit(cache=True)
+def _serial(x0, inputs, dt, substeps, rule, form, net, force_level, states):
+    for w in range(x0.shape[0]):
+        _window(x0[w], inputs[w], dt, substeps, rule, form, net, force_level, states[w])
+
+
+@njit(cache=True, parallel=True)
+def _parallel(x0, inputs, dt, substeps, rule, form, net, force_level, states):
+    for w in prange(x0.shape[0]):
+        _window(x0[w], inputs[w], dt, substeps, rule, form, net, force_level, states[w])
+
+
+def free_run(
+    form: FeatureForm,
+    net: NetArrays,
+    x0: np.ndarray,
+    inputs: np.ndarray,
+    dt: float,
+    substeps: int = 1,
+    rule: str = "3/8",
+    level: str = "force",
+) -> np.ndarray:
+    """States ``[L + 1, B, 12]`` (η, ν) of the hybrid from ``x0`` ``[B, 12]`` under held
+    inputs ``[B, L, m]`` (the applied forces τ_eff, then the network's input channels), with
+    ``substeps`` RK4 steps of ``rule`` per sample. Batches of at least
+    :data:`~nnid.physics.compiled.PARALLEL_MIN_STEPS` steps run in parallel threads (the
+    same numbers either way)."""
+    if form.lag > 0:
+        raise ValueError("the hybrid's physics has no actuator-lag states")
+    x0 = np.ascontiguousarray(x0, dtype=np.float64)
+    inputs = np.ascontiguousarray(inputs, dtype=np.float64)
+    n_feats = int(net.sizes[0])
+    if x0.ndim != 2 or x0.shape[1] != 12 or inputs.ndim != 3 or inputs.shape[0] != x0.shape[0]:
+        raise ValueError("x0 is [B, 12] and inputs [B, L, m]")
+    if inputs.shape[2] + 9 != n_feats:
+        raise ValueError(f"the network takes {n_feats - 15} input channels after τ_eff")
+    states = np.empty((x0.shape[0], inputs.shape[1] + 1, 12))
+    small = x0.shape[0] * inputs.shape[1] * substeps < PARALLEL_MIN_STEPS
+    kernel = _serial if small else _parallel
+    kernel(
+        x0,
+        inputs,
+        float(dt),
+        int(substeps),
+        RULES[rule],
+        form_args(form),
+        tuple(net),
+        level == "force",
+        states,
+    )
+    return states.transpose(1, 0, 2)
+
+
+__all__ = ["RULES", "NetArrays", "free_run"]
