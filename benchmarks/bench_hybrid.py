@@ -169,6 +169,38 @@ def free_run() -> None:
         b = slow.numpy() if isinstance(slow, torch.Tensor) else slow.to_numpy()
         diff = float(np.nanmax(np.abs(a - b)))
         print(f"| {name} | {t_slow:.3f} | {t_fast:.4f} | {t_slow / t_fast:.1f} | {diff:.1e} |")
+    # a whole `nnid train configs/hybrid.toml` of a test scenario (tests/test_hybrid.py's
+    # patience of 15): early stopping scores every epoch, then the metrics' predictions
+    from nnid.config import TrainConfig, load_config
+    from nnid.datasets.log import write_log
+    from nnid.pipeline import run_train
+
+    scenario = effect_log(veh, [("external_bias.u", -4.0)], duration=300.0, dt=0.05, seed=11)
+    config = REPO / "configs" / "hybrid.toml"
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "log.parquet"
+        write_log(scenario, path)
+        runs = {}
+        for name in ("compiled", "torch"):
+            cfg = load_config(config, TrainConfig)
+            cfg.model.trainer.max_fail = 15
+            if name == "torch":
+                type(dyn).free_run = torch_path
+            try:
+                start = time.perf_counter()
+                res = run_train(cfg, config, str(path), MINIROV)
+                runs[name] = (time.perf_counter() - start, res.metrics)
+            finally:
+                type(dyn).free_run = torch_run
+    (t_fast, fast), (t_slow, slow) = runs["compiled"], runs["torch"]
+    stage = [m["describe"]["stages"][0] if "describe" in m else {} for m in (fast, slow)]
+    print(
+        f"| nnid train configs/hybrid.toml (tether scenario, 300 s) | {t_slow:.1f} | "
+        f"{t_fast:.1f} | {t_slow / t_fast:.2f} | test free run "
+        f"{slow['test']['free_run_nrmse']['total']:.6f} / "
+        f"{fast['test']['free_run_nrmse']['total']:.6f} |"
+    )
+    print(f"epochs / best epoch: {[(s.get('epochs'), s.get('best_epoch')) for s in stage]}")
     print(f"\n{machine(torch=torch.__version__)}; {datetime.date.today()}")
 
 
