@@ -153,19 +153,19 @@ def test_untrained_hybrid_is_its_physics(minirov):
 
 
 @pytest.mark.parametrize(
-    ("level", "method", "physics"),
-    [("force", "rk4", "frozen"), ("acceleration", "nnid_rk4", "joint")],
+    ("level", "method", "physics", "hidden"),
+    [("force", "rk4", "frozen", (32, 32)), ("acceleration", "nnid_rk4", "joint", (3, 5, 7))],
 )
-def test_compiled_free_run_is_the_torch_integration(minirov, level, method, physics):
+def test_compiled_free_run_is_the_torch_integration(minirov, level, method, physics, hidden):
     """The kernel that scores held-out free runs and predicts (nnid.models.hybrid_kernel) is
     the torch vector field integrated by the same rule (torchdiffeq's 3/8-rule rk4, nnid's
     classic one): random network weights and physics changes δ, a current (ν_r ≠ ν), 5-s
-    windows from measured states; equal to rounding, also at weights given as a dictionary
-    (what early stopping scores)."""
+    windows from measured states, an even and an odd number of layers; equal to rounding,
+    also at weights given as a dictionary (what early stopping scores)."""
     log = effect_log(minirov, duration=60.0, n_experiments=2, seed=5)
     model = HybridModel(
-        minirov, level=level, method=method, physics=physics, trainer=Adam(max_epochs=0),
-        segments=(0.5,),
+        minirov, level=level, method=method, physics=physics, hidden=hidden,
+        trainer=Adam(max_epochs=0), segments=(0.5,),
     ).fit(log)  # fmt: skip
     dyn = model.dynamics_
     g = torch.Generator().manual_seed(1)
