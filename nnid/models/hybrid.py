@@ -624,7 +624,11 @@ class HybridModel(FossenPlant):
 
     # -- prediction ------------------------------------------------------------------------------
     def _simulate(
-        self, x0: np.ndarray, channels: np.ndarray, dt: float, arrays: tuple | None = None
+        self,
+        x0: np.ndarray,
+        channels: np.ndarray,
+        dt: float,
+        arrays: tuple[FeatureForm, NetArrays] | None = None,
     ) -> np.ndarray:
         """States ``[L + 1, B, 12]`` from ``x0`` ``[B, 12]`` under ``channels`` ``[B, L, m]``
         (``arrays``: the kernel's, when the caller steps many times)."""
