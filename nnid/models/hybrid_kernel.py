@@ -72,22 +72,12 @@ def _field(x, u, form, net, force_level, out, scratch, feats, a, b):
     flat, sizes, nu_scale, out_scale = net
     m_inv, q_rb, q_a, g_mat, theta, codes, ma, bias, cur, u_c, lag = form
     _rhs(x, u, m_inv, q_rb, q_a, g_mat, theta, codes, ma, bias, cur, u_c, lag, out, scratch)
-    nur = scratch[1]  # ν_r, as _rhs left it
-    sf, cf = math.sin(x[3]), math.cos(x[3])
-    st, ct = math.sin(x[4]), math.cos(x[4])
-    sp, cp = math.sin(x[5]), math.cos(x[5])
+    # ν_r, and the entries of R(Θ) row-major (nnid.physics.form.ned_axes), as _rhs left them
+    nur, rot = scratch[1], scratch[0]
     for i in range(6):
         feats[i] = nur[i] / nu_scale[i]
-    # the entries of R(Θ), row-major (nnid.physics.form.ned_axes)
-    feats[6] = cp * ct
-    feats[7] = cp * st * sf - sp * cf
-    feats[8] = cp * st * cf + sp * sf
-    feats[9] = sp * ct
-    feats[10] = sp * st * sf + cp * cf
-    feats[11] = sp * st * cf - cp * sf
-    feats[12] = -st
-    feats[13] = ct * sf
-    feats[14] = ct * cf
+    for i in range(9):
+        feats[6 + i] = rot[6 + i]
     for i in range(6, u.shape[0]):
         feats[9 + i] = u[i]
     y = _mlp(feats, flat, sizes, a, b)

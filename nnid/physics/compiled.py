@@ -22,6 +22,8 @@ from nnid.physics.fossen import FeatureForm
 
 @njit(cache=True, inline="always")  # inlined: a call costs as much as the evaluation
 def _rhs(x, tau, m_inv, q_rb, q_a, g_mat, theta, codes, ma, bias, cur, u_c, lag, out, scratch):
+    # scratch [4, 18]: ν then R(Θ) row-major [0, 0:15], ν_r [1, 0:6], the atoms [2], the
+    # forces [3]; a caller may read ν_r and R(Θ) after the call (the hybrid's network features)
     phi, th, psi = x[3], x[4], x[5]
     cf, sf = math.cos(phi), math.sin(phi)
     ct, st = math.cos(th), math.sin(th)
@@ -45,6 +47,9 @@ def _rhs(x, tau, m_inv, q_rb, q_a, g_mat, theta, codes, ma, bias, cur, u_c, lag,
     for i in range(6):
         nu[i] = x[6 + i]
         nur[i] = x[6 + i]
+    nu[6], nu[7], nu[8] = r00, r01, r02
+    nu[9], nu[10], nu[11] = r10, r11, r12
+    nu[12], nu[13], nu[14] = r20, r21, r22
     nur[0] -= cu
     nur[1] -= cv
     nur[2] -= cw
