@@ -313,7 +313,18 @@ needs_ray = pytest.mark.skipif(
 )
 
 
+@pytest.fixture
+def ray_at_normal_priority(monkeypatch):
+    """Ray starts its worker processes at nice 15 (its ``worker_niceness``), so that its own
+    services stay responsive; beside another pytest-xdist worker at nice 0 they got a sliver
+    of a core, and a sweep that takes 21 s alone took 84 s beside one busy process (33 s at
+    nice 0). The raylet reads the setting from its environment when it starts; a test
+    setting, not the library's (a user's Ray keeps its own)."""
+    monkeypatch.setenv("RAY_worker_niceness", "0")
+
+
 @needs_ray
+@pytest.mark.usefixtures("ray_at_normal_priority")
 def test_ray_local_instance(fleet, serial, tmp_path) -> None:
     import ray
 
@@ -329,6 +340,7 @@ def test_ray_local_instance(fleet, serial, tmp_path) -> None:
 
 
 @needs_ray
+@pytest.mark.usefixtures("ray_at_normal_priority")
 def test_ray_two_node_cluster(fleet, serial, tmp_path) -> None:
     import ray
     from ray.cluster_utils import Cluster
@@ -449,6 +461,7 @@ def test_sweep_missing_scores_rank_last_and_bad_options_are_refused(sweep_inputs
 
 
 @needs_ray
+@pytest.mark.usefixtures("ray_at_normal_priority")
 def test_sweep_on_ray_tune_with_asha(sweep_inputs, tmp_path) -> None:
     """The same sweep through Ray Tune: ASHA reads the trainers' per-epoch validation
     objective; a trial it stops is a 'stopped' row that says when, never a score."""

@@ -236,11 +236,17 @@ def screen(
     ``cols_val``): the exact joint refit of each with the fit's unknowns, in closed form."""
     w = ws.weights
     n, _, p = fit.phi.shape
-    a_mat = np.einsum("ndp,d,ndq->pq", fit.phi, w, fit.phi)
+    # the weighted sums over samples and DOFs as matrix products on rows (n, d): BLAS, where
+    # a three-operand einsum loops over every index (a sixth of a loop's time)
+    phi = fit.phi.reshape(-1, p)
+    c = cols.reshape(len(phi), -1)
+    w_rows = np.tile(w, n)
+    w_phi = phi * w_rows[:, None]
+    a_mat = w_phi.T @ phi
     a_inv = np.linalg.pinv(a_mat, hermitian=True)
-    s = np.einsum("ndk,d,nd->k", cols, w, np.nan_to_num(fit.e))
-    b = np.einsum("ndp,d,ndk->pk", fit.phi, w, cols)
-    q = np.einsum("ndk,d,ndk->k", cols, w, cols)
+    s = (w_rows * np.nan_to_num(fit.e).reshape(-1)) @ c
+    b = w_phi.T @ c
+    q = w_rows @ (c * c)
     bb = a_inv @ b
     denom = q - np.einsum("pk,pk->k", b, bb)
     ok = denom > 1e-9 * np.maximum(q, 1e-300)
@@ -254,7 +260,7 @@ def screen(
     p_val = f_dist.sf(f_stat, 1, n_eff)
     se = np.sqrt(sigma2 * ws.tau_corr / denom)
     # held-out residual after the joint refit: e_v + θ (c_v − Φ_b,v A⁻¹ b)
-    delta = cols_val - np.einsum("ndp,pk->ndk", fit.phi_val, bb)
+    delta = cols_val - fit.phi_val @ bb
     e_new = np.nan_to_num(fit.e_val)[:, :, None] + theta[None, None, :] * delta
     before = np.nansum(fit.e_val**2, axis=0)  # [6]
     after = np.sum(e_new**2, axis=0)  # [6, K]
