@@ -355,7 +355,7 @@ def test_products_transform_holds_each_lags_bilinear_terms_in_the_closed_loop(tr
 def test_rest_equilibrium_keeps_a_vehicle_at_rest_exactly(tmp_path):
     # Fossen's model at ν = 0 and τ = 0 (neutral buoyancy) has ν̇ = 0: with rest_equilibrium the
     # Δ increment at zero outputs and inputs (in their units) is zero to the last bit in every
-    # prediction path (one-step net, torch closed loop, numpy free run, after a save and load),
+    # prediction path (one-step net, torch closed loop, compiled free run, after a save and load),
     # where the same net without it drifts; the increment away from rest is the net's.
     log = _two_output_plant()
     log["y2"] -= 1.0
@@ -427,6 +427,40 @@ def test_sensitivity_recursion_equals_forward_mode_through_the_closed_loop(trans
     torch.testing.assert_close(supplied.jtj, forward.jtj, rtol=1e-11, atol=1e-9)
     torch.testing.assert_close(supplied.jtr, forward.jtr, rtol=1e-11, atol=1e-9)
     assert supplied.sse == pytest.approx(forward.sse, rel=1e-12)
+
+
+@pytest.mark.parametrize(
+    "transform, rest, bounds, delta",
+    [
+        (None, False, None, False),
+        ("sqrt", False, None, True),
+        ("products", False, [[None, 0.05], [None, None]], True),
+        ("fossen", True, [[None, 0.05], [0.9, None]], True),
+    ],
+)
+def test_compiled_free_run_is_the_torch_rollout(transform, rest, bounds, delta):
+    # predict's free run (nnid.models.narx_kernel) against the closed loop training
+    # differentiates (NarxModel._rollout) over each whole run: two hidden layers, delays 1
+    # and 3 (a gap), the direct and the increment form, each output transform, a clamp that
+    # binds, the increment pinned to zero at rest
+    log = _two_output_plant()
+    log["experiment"] = np.repeat(["one", "two"], 300)
+    model = NarxModel(
+        ["a", "b"], ["y1", "y2"], 2, [1, 3], hidden=(5, 3), output_bounds=bounds, delta=delta,
+        output_transform=transform, rest_equilibrium=rest,
+        trainer=LevenbergMarquardt(max_epochs=3),
+    ).fit(log)  # fmt: skip
+    compiled = model.predict(log, "free_run")
+    net = model.net_
+    for (hist, uf, _y, _w), (_, run) in zip(
+        model._whole_runs(model._table(log), log), log.groupby("experiment"), strict=True
+    ):
+        with torch.no_grad():
+            torch_run = model._rollout(model._weights(), hist, uf)[0] * net.y_std + net.y_mean
+        ours = compiled.loc[run.index[model.warmup_samples_ :]].to_numpy()
+        np.testing.assert_allclose(ours, torch_run.numpy(), rtol=1e-12, atol=1e-12)
+        if bounds is not None:
+            assert (ours[:, 0] == 0.05).any() and (ours[:, 0] < 0.05).any()  # the clamp binds
 
 
 def test_run_floor_scores_each_training_window_in_its_own_runs_std():

@@ -71,6 +71,7 @@ from nnid.datasets.segmentation import BalancedSampler, label_transients, run_bo
 from nnid.datasets.splits import split_log
 from nnid.errors import NnidInputError
 from nnid.evaluation.evaluate import target_columns
+from nnid.models import narx_kernel
 from nnid.models.bounds import OutputBounds, bound_arrays, check_bounds, resolve_bounds
 from nnid.models.io_model import DTYPE, InputOutputModel, seeded_linear
 from nnid.serialization import jsonable
@@ -974,36 +975,8 @@ class NarxModel(InputOutputModel):
                     out[pos[ends.numpy()]] = pred * std + mean
         return pd.DataFrame(out, index=log.index, columns=self.outputs_)
 
-    def _transform_delays_np(self):
-        """The standardised transform of the flat delay buffer [dy·m] → [dy·n_s], for the numpy
-        free run (constants tiled once; :meth:`_transform_t` per step would cost more)."""
-        net, dy, m = self.net_, self.dy_, len(self.outputs_)
-        s_mean, s_std = np.tile(net.s_mean.numpy(), dy), np.tile(net.s_std.numpy(), dy)
-        y_std, y_mean = net.y_std.numpy(), net.y_mean.numpy()
-        if self.output_transform in ("products", "fossen"):
-            i, j = _pairs(m)
-            squares = self.output_transform == "fossen"
-
-            def products(past: np.ndarray) -> np.ndarray:
-                rows = past.reshape(dy, m)
-                out = rows[:, i] * rows[:, j]
-                if squares:
-                    real = rows * y_std + y_mean
-                    out = np.concatenate([out, real * np.abs(real)], 1)
-                return (out.reshape(-1) - s_mean) / s_std
-
-            return products
-        t_std, t_mean = np.tile(y_std, dy), np.tile(y_mean, dy)
-        sqrt, maximum = np.sqrt, np.maximum
-
-        def roots(past: np.ndarray) -> np.ndarray:
-            return (sqrt(maximum(past * t_std + t_mean, 0.0)) - s_mean) / s_std
-
-        return roots
-
     def _free_run(self, init: np.ndarray, uf: np.ndarray) -> np.ndarray:
-        """The closed loop in numpy: the first layer's input part for all steps in one matmul,
-        then per step one dense matmul on a contiguous slice of the output buffer."""
+        """The closed loop, compiled (:mod:`nnid.models.narx_kernel`)."""
         lin = [mod for mod in self.net_.mlp if isinstance(mod, nn.Linear)]
         w1 = lin[0].weight.detach().numpy()
         b1 = lin[0].bias.detach().numpy()
@@ -1012,38 +985,30 @@ class NarxModel(InputOutputModel):
         n_s = self._n_s()
         dense = np.zeros((w1.shape[0], dy * m))
         dense_s = np.zeros((w1.shape[0], dy * n_s)) if self.output_transform else None
-        for j, d in enumerate(self.output_delays_):  # slice row dy − d holds y(k − d)
+        for j, d in enumerate(self.output_delays_):  # slot dy − d holds y(k − d)
             dense[:, (dy - d) * m : (dy - d + 1) * m] = w1[:, j * m : (j + 1) * m]
             if dense_s is not None:
                 dense_s[:, (dy - d) * n_s : (dy - d + 1) * n_s] = w1[
                     :, n_d * m + j * n_s : n_d * m + (j + 1) * n_s
                 ]
-        zu = uf @ w1[:, n_y:].T + b1
         mids = [(x.weight.detach().numpy(), x.bias.detach().numpy()) for x in lin[1:-1]]
         scale = self.net_.d_scale.numpy() if self.delta else np.ones(m)
         wo = lin[-1].weight.detach().numpy() * scale[:, None]
         bo = lin[-1].bias.detach().numpy() * scale
-        if self.rest_equilibrium:  # o = W_o (h − h_rest)
-            with torch.no_grad():
-                ws = [(x.weight, x.bias) for x in lin]
-                bo = -(wo @ self._rest_hidden(ws).numpy())
-        nb = self._norm_bounds_np()
-        n = len(zu)
-        buf = np.empty((dy + n, m))
-        buf[:dy] = init
-        flat = buf.reshape(-1)
-        tanh, dot = np.tanh, np.dot
-        transform = self._transform_delays_np() if dense_s is not None else None
-        for k in range(n):
-            past = flat[k * m : (k + dy) * m]
-            a = zu[k] + dot(dense, past)
-            if transform is not None:
-                a += dot(dense_s, transform(past))
-            h = tanh(a)
-            for w, b in mids:
-                h = tanh(dot(w, h) + b)
-            o = dot(wo, h) + bo
-            buf[dy + k] = buf[dy + k - 1] + o if self.delta else o
-            if nb is not None:
-                np.clip(buf[dy + k], nb[0], nb[1], out=buf[dy + k])
-        return buf[dy:]
+        net = self.net_
+        rest = None
+        if self.rest_equilibrium:  # o = W_o (h − h_rest): the output bias cancels
+            phi_rest = net.phi_rest.numpy()
+            rest, bo = (phi_rest[:m], phi_rest[n_y:]), np.zeros(m)
+        none = np.zeros(0)
+        scales = (
+            net.y_std.numpy(),
+            net.y_mean.numpy(),
+            net.s_mean.numpy() if n_s else none,
+            net.s_std.numpy() if n_s else none,
+        )
+        first = (w1[:, n_y:], b1, dense, dense_s)
+        return narx_kernel.free_run(
+            init, uf, first, self.output_transform, scales, [*mids, (wo, bo)], self.delta,
+            self._norm_bounds_np(), rest,
+        )  # fmt: skip
