@@ -544,6 +544,56 @@ class NarxModel(InputOutputModel):
             outs.append(y)
         return torch.stack(outs, 1)
 
+    def _simulate(
+        self, params: dict[str, torch.Tensor], hist: torch.Tensor, uf: torch.Tensor
+    ) -> torch.Tensor:
+        """:meth:`_rollout`; where no gradient is being recorded (predictions, the LM steps'
+        trial errors, validation, the states of the sensitivity recursion), through the
+        compiled kernel (:mod:`nnid.models.narx_kernel`; the same numbers to rounding)."""
+        if torch.is_grad_enabled():
+            return self._rollout(params, hist, uf)
+        return torch.as_tensor(self._compiled_rollout(params, hist.numpy(), uf.numpy()))
+
+    def _compiled_rollout(
+        self, params: dict[str, torch.Tensor], hist: np.ndarray, uf: np.ndarray
+    ) -> np.ndarray:
+        """:meth:`_rollout` at ``params`` through :func:`nnid.models.narx_kernel.free_run`."""
+        keys = [f"mlp.{i}" for i, mod in enumerate(self.net_.mlp) if isinstance(mod, nn.Linear)]
+        ws = [
+            (params[k + ".weight"].detach().numpy(), params[k + ".bias"].detach().numpy())
+            for k in keys
+        ]
+        w1, b1 = ws[0]
+        m, dy = len(self.outputs_), self.dy_
+        n_y, n_d, n_s = self._n_y_features(), len(self.output_delays_), self._n_s()
+        dense = np.zeros((w1.shape[0], dy * m))
+        dense_s = np.zeros((w1.shape[0], dy * n_s)) if self.output_transform else None
+        for j, d in enumerate(self.output_delays_):  # slot dy − d holds y(k − d)
+            dense[:, (dy - d) * m : (dy - d + 1) * m] = w1[:, j * m : (j + 1) * m]
+            if dense_s is not None:
+                dense_s[:, (dy - d) * n_s : (dy - d + 1) * n_s] = w1[
+                    :, n_d * m + j * n_s : n_d * m + (j + 1) * n_s
+                ]
+        net = self.net_
+        scale = net.d_scale.numpy() if self.delta else np.ones(m)
+        wo, bo = ws[-1][0] * scale[:, None], ws[-1][1] * scale
+        rest = None
+        if self.rest_equilibrium:  # o = W_o (h − h_rest): the output bias cancels
+            phi_rest = net.phi_rest.numpy()
+            rest, bo = (phi_rest[:m], phi_rest[n_y:]), np.zeros(m)
+        none = np.zeros(0)
+        scales = (
+            net.y_std.numpy(),
+            net.y_mean.numpy(),
+            net.s_mean.numpy() if n_s else none,
+            net.s_std.numpy() if n_s else none,
+        )
+        first = (w1[:, n_y:], b1, dense, dense_s)
+        return narx_kernel.free_run(
+            hist, uf, first, self.output_transform, scales, [*ws[1:-1], (wo, bo)], self.delta,
+            self._norm_bounds_np(), rest,
+        )  # fmt: skip
+
     def _windows(self, table: dict[str, torch.Tensor], ends: torch.Tensor, length: int):
         """Rows, delay-state history and input features of windows ending at ``ends``."""
         rows = ends[:, None] - length + 1 + torch.arange(length)
@@ -644,7 +694,7 @@ class NarxModel(InputOutputModel):
         output's weight (:meth:`_whole_runs`), and so do the training windows with
         ``simulation_run_floor`` (:meth:`_fixed_windows`)."""
         hist, uf, y, *weight = batch
-        err = self._rollout(params, hist, uf) - y
+        err = self._simulate(params, hist, uf) - y
         return (err * weight[0] if weight else err).reshape(-1)
 
     def _local_jacobians(
@@ -723,7 +773,7 @@ class NarxModel(InputOutputModel):
         dy = hist.shape[1]
         p = sum(v.numel() for v in params.values())
         with torch.no_grad():
-            sim = self._rollout(params, hist, uf)
+            sim = self._simulate(params, hist, uf)
         group = max(1, min(b_all, budget // (m * p)))  # windows at a time
         for b0 in range(0, b_all, group):
             sl = slice(b0, b0 + group)
@@ -952,10 +1002,9 @@ class NarxModel(InputOutputModel):
                         pred = np.clip(pred, nb[0], nb[1])
                     out[pos[self.warmup_samples_ :]] = pred * std + mean
                 elif mode == "free_run":
-                    pred = self._free_run(
-                        yn[self.warmup_samples_ - self.dy_ : self.warmup_samples_],
-                        self._u_features(un)[self.warmup_samples_ :],
-                    )
+                    hist = yn[None, self.warmup_samples_ - self.dy_ : self.warmup_samples_]
+                    uf = self._u_features(un)[None, self.warmup_samples_ :]
+                    pred = self._compiled_rollout(self._weights(), hist, uf)[0]
                     out[pos[self.warmup_samples_ :]] = pred * std + mean
                 else:
                     k = int(mode)
@@ -971,44 +1020,6 @@ class NarxModel(InputOutputModel):
                     if len(ends) == 0:
                         continue
                     _rows, hist, uf = self._windows(tab, ends, k)
-                    pred = self._rollout(self._weights(), hist, uf)[:, -1].numpy()
+                    pred = self._simulate(self._weights(), hist, uf)[:, -1].numpy()
                     out[pos[ends.numpy()]] = pred * std + mean
         return pd.DataFrame(out, index=log.index, columns=self.outputs_)
-
-    def _free_run(self, init: np.ndarray, uf: np.ndarray) -> np.ndarray:
-        """The closed loop, compiled (:mod:`nnid.models.narx_kernel`)."""
-        lin = [mod for mod in self.net_.mlp if isinstance(mod, nn.Linear)]
-        w1 = lin[0].weight.detach().numpy()
-        b1 = lin[0].bias.detach().numpy()
-        m, dy = len(self.outputs_), self.dy_
-        n_y, n_d = self._n_y_features(), len(self.output_delays_)
-        n_s = self._n_s()
-        dense = np.zeros((w1.shape[0], dy * m))
-        dense_s = np.zeros((w1.shape[0], dy * n_s)) if self.output_transform else None
-        for j, d in enumerate(self.output_delays_):  # slot dy − d holds y(k − d)
-            dense[:, (dy - d) * m : (dy - d + 1) * m] = w1[:, j * m : (j + 1) * m]
-            if dense_s is not None:
-                dense_s[:, (dy - d) * n_s : (dy - d + 1) * n_s] = w1[
-                    :, n_d * m + j * n_s : n_d * m + (j + 1) * n_s
-                ]
-        mids = [(x.weight.detach().numpy(), x.bias.detach().numpy()) for x in lin[1:-1]]
-        scale = self.net_.d_scale.numpy() if self.delta else np.ones(m)
-        wo = lin[-1].weight.detach().numpy() * scale[:, None]
-        bo = lin[-1].bias.detach().numpy() * scale
-        net = self.net_
-        rest = None
-        if self.rest_equilibrium:  # o = W_o (h − h_rest): the output bias cancels
-            phi_rest = net.phi_rest.numpy()
-            rest, bo = (phi_rest[:m], phi_rest[n_y:]), np.zeros(m)
-        none = np.zeros(0)
-        scales = (
-            net.y_std.numpy(),
-            net.y_mean.numpy(),
-            net.s_mean.numpy() if n_s else none,
-            net.s_std.numpy() if n_s else none,
-        )
-        first = (w1[:, n_y:], b1, dense, dense_s)
-        return narx_kernel.free_run(
-            init, uf, first, self.output_transform, scales, [*mids, (wo, bo)], self.delta,
-            self._norm_bounds_np(), rest,
-        )  # fmt: skip

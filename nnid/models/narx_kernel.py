@@ -103,8 +103,21 @@ def _run(buf, tbuf, uf, w1u, b1, dense, dense_s, code, pi, pj, y_std, y_mean, s_
             _transform(buf[k + dy], code, pi, pj, y_std, y_mean, s_mean, s_std, tbuf[k + dy])
 
 
+@njit(cache=True)
+def _runs(hist, uf, out, w1u, b1, dense, dense_s, code, pi, pj, y_std, y_mean, s_mean, s_std,
+          flat, sizes, delta, lo, hi, rest, y_rest, u_rest):  # fmt: skip
+    dy, n = hist.shape[1], uf.shape[1]
+    buf = np.empty((dy + n, hist.shape[2]))
+    tbuf = np.zeros((dy + n, dense_s.shape[1] // dy))
+    for w in range(hist.shape[0]):
+        buf[:dy] = hist[w]
+        _run(buf, tbuf, uf[w], w1u, b1, dense, dense_s, code, pi, pj, y_std, y_mean, s_mean,
+             s_std, flat, sizes, delta, lo, hi, rest, y_rest, u_rest)  # fmt: skip
+        out[w] = buf[dy:]
+
+
 def free_run(
-    init: np.ndarray,
+    hist: np.ndarray,
     uf: np.ndarray,
     first: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None],
     transform: str | None,
@@ -114,33 +127,30 @@ def free_run(
     bounds: tuple[np.ndarray, np.ndarray] | None,
     rest: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> np.ndarray:
-    """Normalised outputs ``[n, m]`` of the closed loop from the delay states ``init``
-    ``[dy, m]`` (oldest first) under the input regressors ``uf`` ``[n, F_u]``. ``first``:
-    the first layer as (W_u ``[H, F_u]``, b ``[H]``, W_y ``[H, dy·m]``, W_s ``[H, dy·n_s]``
-    or None): its weights on the inputs, its bias, and its weights on the delay buffer and on
-    the buffer's transform, slot dy − d for delay d (zero where a delay is not a regressor);
-    ``scales``: (y_std, y_mean, s_mean, s_std); ``layers``: [(W, b)] of the layers after the
-    first, tanh then a linear output (its increment scale folded in); ``bounds``: normalised
-    (lo, hi) or None; ``rest``: the normalised outputs and input regressor at rest, whose
-    output is subtracted from every step's (``rest_equilibrium``: exactly zero at rest)."""
+    """Normalised outputs ``[B, T, m]`` of B closed loops, each from its delay states
+    ``hist[b]`` ``[dy, m]`` (oldest first) under its input regressors ``uf[b]`` ``[T, F_u]``.
+    ``first``: the first layer as (W_u ``[H, F_u]``, b ``[H]``, W_y ``[H, dy·m]``, W_s
+    ``[H, dy·n_s]`` or None): its weights on the inputs, its bias, and its weights on the
+    delay buffer and on the buffer's transform, slot dy − d for delay d (zero where a delay is
+    not a regressor); ``scales``: (y_std, y_mean, s_mean, s_std); ``layers``: [(W, b)] of the
+    layers after the first, tanh then a linear output (its increment scale folded in);
+    ``bounds``: normalised (lo, hi) or None; ``rest``: the normalised outputs and input
+    regressor at rest, whose output is subtracted from every step's (``rest_equilibrium``:
+    exactly zero at rest)."""
     w1u, b1, dense, dense_s = first
     n_out = layers[-1][0].shape[0]
-    dy = init.shape[0]
-    n_s = dense_s.shape[1] // dy if dense_s is not None else 0
-    buf = np.empty((dy + uf.shape[0], n_out))
-    buf[:dy] = init
-    tbuf = np.zeros((dy + uf.shape[0], n_s))
+    out = np.empty((hist.shape[0], uf.shape[1], n_out))
     pi, pj = np.triu_indices(n_out)
     lo, hi = bounds or (np.full(n_out, -np.inf), np.full(n_out, np.inf))
-    y_rest, u_rest = rest or (np.zeros(n_out), np.zeros(uf.shape[1]))
+    y_rest, u_rest = rest or (np.zeros(n_out), np.zeros(uf.shape[2]))
 
     def f64(x):
         return np.ascontiguousarray(x, dtype=np.float64)
 
-    _run(
-        buf,
-        tbuf,
+    _runs(
+        f64(hist),
         f64(uf),
+        out,
         f64(w1u),
         f64(b1),
         f64(dense),
@@ -158,7 +168,7 @@ def free_run(
         f64(y_rest),
         f64(u_rest),
     )
-    return buf[dy:]
+    return out
 
 
 __all__ = ["TRANSFORMS", "free_run"]
