@@ -235,11 +235,11 @@ def screen(
     """Score linear candidates whose columns at the current fit are ``cols`` [N, 6, K] (and
     ``cols_val``): the exact joint refit of each with the fit's unknowns, in closed form."""
     w = ws.weights
-    n, _, p = fit.phi.shape
+    n, n_dof, p = fit.phi.shape
     # the weighted sums over samples and DOFs as matrix products on rows (n, d): BLAS, where
-    # a three-operand einsum loops over every index (a sixth of a loop's time)
-    phi = fit.phi.reshape(-1, p)
-    c = cols.reshape(len(phi), -1)
+    # a three-operand einsum loops over every index (a sixth of a loop's time); p may be 0
+    phi = fit.phi.reshape(n * n_dof, p)
+    c = cols.reshape(n * n_dof, cols.shape[2])
     w_rows = np.tile(w, n)
     w_phi = phi * w_rows[:, None]
     a_mat = w_phi.T @ phi
