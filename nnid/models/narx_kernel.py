@@ -2,14 +2,17 @@
 
 Why a second evaluator of the NARX: a free run feeds each output back as a regressor of the
 next step, so it is a loop of one small matrix-vector product per layer and step, and in numpy
-each step paid ~36 µs of call overhead whatever the network's size: scoring the ensemble of
-``configs/seamor_narx_adam.toml`` (two members, one epoch a stage) spent 13 of its 45 s in
-352,000 such steps. Here a step of that network costs about a microsecond. The first layer
-is written out on the delay buffer (the inputs' share of it, the same for every run, comes
-precomputed for all steps at once), the output transform of each new output is computed once
-and kept beside it, and the layers after the first are
-:func:`nnid.models.hybrid_kernel._mlp`. Gradients (training) go through the torch rollout,
-:meth:`nnid.models.narx.NarxModel._rollout`; tests hold the two equal.
+each step paid its calls' overhead whatever the network's size: 5.5 µs a step for the 10-node,
+4-output net, 18 µs with the Fossen regressors of ``configs/seamor_narx_*.toml`` (the ensemble
+test of that config spent about a quarter of its time there). Here the same steps cost 0.8 and
+1.2 µs (``benchmarks/bench_narx.py``). The first layer is written out on the inputs and the
+delay buffer, the output transform of each new output is computed once and kept beside it, and
+the layers after the first are :func:`nnid.models.hybrid_kernel._mlp`. With
+``rest_equilibrium`` the output at rest is computed by the same arithmetic as every step and
+subtracted, so that the increment at rest is exactly zero. Every closed loop run without
+gradients goes through here: predictions, and the trial errors, validation runs and
+trajectories of Levenberg-Marquardt on the simulation error. Gradients (training) go through
+the torch rollout, :meth:`nnid.models.narx.NarxModel._rollout`; tests hold the two equal.
 """
 
 from __future__ import annotations
