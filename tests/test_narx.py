@@ -461,6 +461,14 @@ def test_compiled_free_run_is_the_torch_rollout(transform, rest, bounds, delta):
         np.testing.assert_allclose(ours, torch_run.numpy(), rtol=1e-12, atol=1e-12)
         if bounds is not None:
             assert (ours[:, 0] == 0.05).any() and (ours[:, 0] < 0.05).any()  # the clamp binds
+    # a batch of windows, as LM's trial errors and k-step predictions run them: without
+    # gradients NarxModel._simulate takes the kernel, with them the torch rollout
+    hist, uf, _y = model._fixed_windows(model._table(log), 40)
+    with torch.no_grad():
+        batched = model._simulate(model._weights(), hist, uf)
+    assert hist.shape[0] > 10
+    torch.testing.assert_close(batched, model._simulate(model._weights(), hist, uf).detach(),
+                               rtol=1e-12, atol=1e-12)  # fmt: skip
 
 
 def test_run_floor_scores_each_training_window_in_its_own_runs_std():
