@@ -69,25 +69,10 @@ def _first(k, buf, tbuf, u, w1u, b1, dense, dense_s, out):
 
 @njit(cache=True)
 def _run(buf, tbuf, uf, w1u, b1, dense, dense_s, code, pi, pj, y_std, y_mean, s_mean, s_std,
-         flat, sizes, delta, lo, hi, rest, y_rest, u_rest):  # fmt: skip
+         flat, sizes, delta, lo, hi, o_rest, h1, a, b):  # fmt: skip
     n = uf.shape[0]
     dy = buf.shape[0] - n
     m = buf.shape[1]
-    width = 1
-    for k in range(sizes.shape[0]):
-        width = max(width, sizes[k])
-    h1 = np.empty(b1.shape[0])
-    a, b = np.empty(width), np.empty(width)
-    o_rest = np.zeros(m)
-    if rest:  # the output at rest, by the same arithmetic as every step: zero increment there
-        rbuf = np.empty((dy, m))
-        rtbuf = np.zeros((dy, tbuf.shape[1]))
-        for r in range(dy):
-            rbuf[r] = y_rest
-            if code:
-                _transform(rbuf[r], code, pi, pj, y_std, y_mean, s_mean, s_std, rtbuf[r])
-        _first(0, rbuf, rtbuf, u_rest, w1u, b1, dense, dense_s, h1)
-        o_rest[:] = _mlp(h1, flat, sizes, a, b)[:m]
     if code:
         for r in range(dy):
             _transform(buf[r], code, pi, pj, y_std, y_mean, s_mean, s_std, tbuf[r])
@@ -109,13 +94,29 @@ def _run(buf, tbuf, uf, w1u, b1, dense, dense_s, code, pi, pj, y_std, y_mean, s_
 @njit(cache=True)
 def _runs(hist, uf, out, w1u, b1, dense, dense_s, code, pi, pj, y_std, y_mean, s_mean, s_std,
           flat, sizes, delta, lo, hi, rest, y_rest, u_rest):  # fmt: skip
-    dy, n = hist.shape[1], uf.shape[1]
-    buf = np.empty((dy + n, hist.shape[2]))
-    tbuf = np.zeros((dy + n, dense_s.shape[1] // dy))
+    dy, n, m = hist.shape[1], uf.shape[1], hist.shape[2]
+    n_s = dense_s.shape[1] // dy
+    width = 1
+    for k in range(sizes.shape[0]):
+        width = max(width, sizes[k])
+    h1 = np.empty(b1.shape[0])
+    a, b = np.empty(width), np.empty(width)
+    o_rest = np.zeros(m)
+    if rest:  # the output at rest, by the same arithmetic as every step: zero increment there
+        rbuf = np.empty((dy, m))
+        rtbuf = np.zeros((dy, n_s))
+        for r in range(dy):
+            rbuf[r] = y_rest
+            if code:
+                _transform(rbuf[r], code, pi, pj, y_std, y_mean, s_mean, s_std, rtbuf[r])
+        _first(0, rbuf, rtbuf, u_rest, w1u, b1, dense, dense_s, h1)
+        o_rest[:] = _mlp(h1, flat, sizes, a, b)[:m]
+    buf = np.empty((dy + n, m))
+    tbuf = np.zeros((dy + n, n_s))
     for w in range(hist.shape[0]):
         buf[:dy] = hist[w]
         _run(buf, tbuf, uf[w], w1u, b1, dense, dense_s, code, pi, pj, y_std, y_mean, s_mean,
-             s_std, flat, sizes, delta, lo, hi, rest, y_rest, u_rest)  # fmt: skip
+             s_std, flat, sizes, delta, lo, hi, o_rest, h1, a, b)  # fmt: skip
         out[w] = buf[dy:]
 
 
