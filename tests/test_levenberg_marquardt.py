@@ -12,7 +12,8 @@ from torch.func import functional_call
 
 from nnid.config import LevenbergMarquardtSpec
 from nnid.errors import NnidInputError
-from nnid.trainers.levenberg_marquardt import LevenbergMarquardt
+from nnid.threads import torch_threads
+from nnid.trainers.levenberg_marquardt import LevenbergMarquardt, add_gram
 
 
 def _mlp(sizes: list[int], seed: int) -> torch.nn.Sequential:
@@ -422,3 +423,19 @@ def test_geodesic_ratio_must_be_positive() -> None:
         LevenbergMarquardt(geodesic=True, geodesic_ratio=0.0).fit(
             _Point([0.0, 0.0]), lambda p, b: p["t"] - 1.0, [None]
         )
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+def test_add_gram_accumulates_the_normal_equations_block_by_block(threads):
+    # JᵀJ and Jᵀr (Weiss eqs 54-61) added block by block into the same system equal those of
+    # the stacked rows, on either path (numpy's BLAS with one torch thread, torch's with more)
+    rng = np.random.default_rng(0)
+    jac = torch.as_tensor(rng.standard_normal((700, 37)))
+    r = torch.as_tensor(rng.standard_normal(700))
+    jtj = torch.full((37, 37), 2.0, dtype=torch.float64)  # what earlier blocks left there
+    jtr = torch.full((37,), -1.0, dtype=torch.float64)
+    with torch_threads(threads):
+        add_gram(jtj, jtr, jac[:300], r[:300])
+        add_gram(jtj, jtr, jac[300:].T.contiguous().T, r[300:])  # column-major rows too
+    np.testing.assert_allclose(jtj.numpy(), 2.0 + jac.numpy().T @ jac.numpy(), atol=1e-10)
+    np.testing.assert_allclose(jtr.numpy(), -1.0 + jac.numpy().T @ r.numpy(), atol=1e-10)

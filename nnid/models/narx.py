@@ -139,7 +139,12 @@ class NarxNet(nn.Module):
 
     def forward(self, phi: torch.Tensor) -> torch.Tensor:
         if self.rest:  # the increment is zero at rest: W_o (h(φ) − h(φ_rest)), b_o cancels
-            return self.mlp(phi) - self.mlp(self.phi_rest)
+            # φ_rest as one more row of the same product: a row equal to it then gives its
+            # output to the bit (a lone vector takes another BLAS routine, summing in another
+            # order, and left one-step increments of ~1e-16 at rest)
+            lead = phi.shape[:-1]
+            out = self.mlp(torch.cat([phi.reshape(-1, phi.shape[-1]), self.phi_rest[None]]))
+            return (out[:-1] - out[-1]).reshape(*lead, -1)
         return self.mlp(phi)
 
 
@@ -698,13 +703,19 @@ class NarxModel(InputOutputModel):
         return (err * weight[0] if weight else err).reshape(-1)
 
     def _local_jacobians(
-        self, params: dict[str, torch.Tensor], states: torch.Tensor, uf: torch.Tensor
+        self,
+        params: dict[str, torch.Tensor],
+        states: torch.Tensor,
+        uf: torch.Tensor,
+        out: torch.Tensor | None = None,
     ) -> tuple[torch.Tensor, torch.Tensor]:
         """Jacobians of one closed-loop step for a batch of N steps: delay states ``states``
         [N, dy, m] (oldest first), input features ``uf`` [N, F_u] → (∂y/∂θ [N, m, P],
         ∂y/∂states [N, m, dy, m]) of the next normalised output (Δ form, output transform, rest
         equilibrium and clamp included), written out for the tanh MLP: batched matrix products
-        where ``vmap(jacrev(...))`` over the steps costs several times more."""
+        where ``vmap(jacrev(...))`` over the steps costs several times more. ∂y/∂θ is written
+        into ``out`` (any tensor of N · m · P elements viewed as [..., m, P], e.g. a strided
+        slice of the caller's buffer) when given, the largest array here, without a copy."""
         keys = [f"mlp.{i}" for i, mod in enumerate(self.net_.mlp) if isinstance(mod, nn.Linear)]
         ws = [(params[k + ".weight"], params[k + ".bias"]) for k in keys]
         n, dy, m = states.shape
@@ -726,16 +737,21 @@ class NarxModel(InputOutputModel):
             y = y + states[:, -1]
         # back-propagate the m outputs at once: g = ∂o/∂(pre-activation of the layer)
         g = torch.diag_embed(scale.expand(rows, m))
-        per_layer: list[list[torch.Tensor]] = []
+        p = sum(w.numel() + b.numel() for w, b in ws)
+        d_theta = torch.empty(n, m, p, dtype=states.dtype) if out is None else out
+        end = p  # the layers come last to first, each layer's columns (weight, bias) before
         for i in range(len(ws) - 1, -1, -1):
             w, a_in = ws[i][0], acts[i]
-            per_layer.append([(g[..., None] * a_in[:, None, None, :]).reshape(rows, m, -1), g])
+            for block in (g, (g[..., None] * a_in[:, None, None, :]).reshape(rows, m, -1)):
+                if rest:
+                    block = block[:n] - block[n]
+                cols = d_theta[..., end - block.shape[-1] : end]
+                cols.copy_(block.reshape(cols.shape))
+                end -= block.shape[-1]
             g_in = g @ w
             if i > 0:
                 g = g_in * (1 - a_in**2)[:, None, :]
-        d_theta = torch.cat([t for pair in reversed(per_layer) for t in pair], 2)
         if rest:
-            d_theta = d_theta[:n] - d_theta[n]
             g_in = g_in[:n]
         d_hist = torch.zeros(n, m, dy, m, dtype=states.dtype)
         n_d, n_s = len(self.output_delays_), self._n_s()
@@ -749,7 +765,7 @@ class NarxModel(InputOutputModel):
         bounds = self._norm_bounds()
         if bounds is not None:  # a clamped output does not move with θ or the states
             free = ((y >= bounds[0]) & (y <= bounds[1])).to(states.dtype)
-            d_theta = d_theta * free[:, :, None]
+            d_theta.mul_(free.reshape(*d_theta.shape[:-1], 1))
             d_hist = d_hist * free[:, :, None, None]
         return d_theta, d_hist
 
@@ -766,7 +782,8 @@ class NarxModel(InputOutputModel):
         so the local Jacobians of every step (taken along the simulated trajectory) come from
         one batched pass (:meth:`_local_jacobians`), and only the linear recursion runs step
         by step: about the cost of one-step training, where forward mode repeats the closed
-        loop once per parameter.
+        loop once per parameter. A block may be a view of a buffer the next block overwrites:
+        use it before drawing the next.
         """
         hist, uf, y, *weight = batch
         b_all, t_all, m = y.shape
@@ -781,27 +798,29 @@ class NarxModel(InputOutputModel):
             states = z.unfold(1, dy, 1).transpose(2, 3)  # [B, T + 1, dy, m], oldest first
             nb = z.shape[0]
             span = max(1, budget // (nb * m * p))  # steps at a time
-            carry = torch.zeros(nb, dy, m, p, dtype=y.dtype)
+            # [B, dy + span, m, P]: the carried S (zero on the measured states), then the
+            # block's ∂f/∂θ, written in place and growing into S; one buffer for every block
+            sens = torch.zeros(nb, dy + span, m, p, dtype=y.dtype)
             for t0 in range(0, t_all, span):
                 t1 = min(t_all, t0 + span)
                 k = t1 - t0
-                d_theta, d_hist = self._local_jacobians(
+                block = sens[:, : dy + k]
+                _, d_hist = self._local_jacobians(
                     params,
                     states[:, t0:t1].reshape(-1, dy, m),
                     uf[sl, t0:t1].reshape(nb * k, -1),
+                    out=block[:, dy:],
                 )
-                # [B, dy + k, m, P]: the carried S, then ∂f/∂θ growing into S in place
-                sens = torch.cat([carry, d_theta.reshape(nb, k, m, p)], 1)
                 d_hist = d_hist.reshape(nb, k, m, dy, m)
                 for t in range(k):
-                    sens[:, dy + t] += torch.einsum(
-                        "bidj,bdjp->bip", d_hist[:, t], sens[:, t : t + dy]
+                    block[:, dy + t] += torch.einsum(
+                        "bidj,bdjp->bip", d_hist[:, t], block[:, t : t + dy]
                     )
-                carry = sens[:, k:].clone()
-                rows, err = sens[:, dy:], sim[sl, t0:t1] - y[sl, t0:t1]
+                rows, err = block[:, dy:], sim[sl, t0:t1] - y[sl, t0:t1]
                 if weight:  # the residual's weights (:meth:`_fixed_windows`), [B, 1, m]
                     rows, err = rows * weight[0][sl, :, :, None], err * weight[0][sl]
                 yield rows.reshape(-1, p), err.reshape(-1)
+                sens[:, :dy] = block[:, k:].clone()  # the next block's carry
 
     def _eligible(self, code: np.ndarray, horizon: int) -> np.ndarray:
         keep = np.ones(code.size, dtype=bool)

@@ -117,6 +117,28 @@ class NormalEquations:
 # --------------------------------------------------------------------------- batch pytrees
 
 
+def add_gram(jtj: torch.Tensor, jtr: torch.Tensor, jac: torch.Tensor, r: torch.Tensor) -> None:
+    """``jtj += JᵀJ`` and ``jtr += Jᵀr`` in place for the rows ``jac`` [n, P] and residuals
+    ``r`` [n] (float64; Weiss eqs 54-61).
+
+    JᵀJ is what an LM epoch costs on a large network (rows × P²). With one torch thread (every
+    worker process nnid starts: ensemble members, batch tasks) the product goes through numpy,
+    which hands ``Aᵀ @ A`` of one buffer to OpenBLAS's symmetric rank-k update: on the AMD EPYC
+    of the CI machine 0.98 s for 40,000 × 934 rows against 2.0 s through torch's MKL (one
+    thread each; ``benchmarks/RESULTS.md``). With more torch threads it stays in torch: a
+    multi-threaded OpenBLAS call between torch's parallel operations leaves its threads
+    spinning for the cores torch wants next (one LM iteration of ``benchmarks/bench_lm.py``
+    0.27 → 0.39-0.47 s on two cores)."""
+    if torch.get_num_threads() > 1:
+        jtj += jac.T @ jac
+        jtr += jac.T @ r
+        return
+    a = jac.detach().numpy()
+    gram = jtj.numpy()
+    gram += a.T @ a
+    jtr.numpy()[:] += a.T @ r.detach().numpy()
+
+
 def _tree_map(fn: Callable[[torch.Tensor], Any], batch: Any) -> Any:
     if isinstance(batch, torch.Tensor):
         return fn(batch)
@@ -385,8 +407,7 @@ class LevenbergMarquardt(BaseEstimator):
             jac = jac.detach().to(torch.float64)
             r64 = r.detach().reshape(-1).to(torch.float64)
             self._note(jac.shape[0], jac.shape[1])
-            jtj += jac.T @ jac
-            jtr += jac.T @ r64
+            add_gram(jtj, jtr, jac, r64)
             sse += float(r64 @ r64)
             n += r64.numel()
         return sse, n
@@ -417,8 +438,7 @@ class LevenbergMarquardt(BaseEstimator):
         if width >= p:
             jac = vmap(tangent)(eye).to(torch.float64)  # [P, n] = Jᵀ
             self._note(n, p)
-            jtj += jac @ jac.T
-            jtr += jac @ r64
+            add_gram(jtj, jtr, jac.T, r64)
         else:
             for a in range(0, p, width):
                 block = vmap(tangent)(eye[a : a + width]).detach()  # [c, n] = J_aᵀ
@@ -459,8 +479,7 @@ class LevenbergMarquardt(BaseEstimator):
             ).to(torch.float64)
             r64 = r.detach().reshape(-1).to(torch.float64)
             self._note(jac.shape[0], p)
-            jtj += jac.T @ jac
-            jtr += jac.T @ r64
+            add_gram(jtj, jtr, jac, r64)
             sse += float(r64 @ r64)
             n += r64.numel()
             del jac
