@@ -739,7 +739,7 @@ class NarxModel(InputOutputModel):
         g = torch.diag_embed(scale.expand(rows, m))
         p = sum(w.numel() + b.numel() for w, b in ws)
         d_theta = torch.empty(n, m, p, dtype=states.dtype) if out is None else out
-        end = p  # the layers come last to first, each layer's columns (weight, bias) before
+        end = p  # columns layer by layer, each its weight then its bias: filled from the end
         for i in range(len(ws) - 1, -1, -1):
             w, a_in = ws[i][0], acts[i]
             for block in (g, (g[..., None] * a_in[:, None, None, :]).reshape(rows, m, -1)):
