@@ -12,6 +12,7 @@ from nnid.config import load_config
 from nnid.datasets.simulator import simulate_config
 from nnid.models.sindy import SindyDamping
 from nnid.physics.damping_library import BasisLibrary, mask_terms
+from nnid.physics.fossen import FossenModel
 from nnid.trainers.least_squares import solve_least_squares
 from nnid.trainers.sindy import BasisFeatureLibrary, nmse
 from nnid.vehicle import load_vehicle
@@ -95,8 +96,18 @@ def test_vt690_sparser_than_mcfarland_within_10_percent(vt690):
 
 
 def test_control_mode_fits_accelerations(seamor_log):
-    """Runs end to end; seamor's restoring moments (angles) are outside the library, so this
-    only checks that the control mode explains most of ν̇, not an accuracy."""
-    model = SindyDamping(load_vehicle("seamor"), mode="control").fit(seamor_log)
-    assert model.selected_["validation_J"] < 0.5
-    assert any(k.endswith("tau_X") for k in model.coefficients_)
+    """ν̇ = M⁻¹(τ − C(ν)ν − D(ν)ν − g(η)) (Fossen's model): on the Seamor, whose M is diagonal,
+    the control coefficient of τ_X in u̇ is 1/M₁₁ and of τ_Y in v̇ 1/M₂₂, and the holdout's
+    u̇ v̇ w ṙ are explained. The restoring moments of ṗ and q̇ are functions of the angles,
+    outside the library (the documented limit of this mode): those two stay unexplained,
+    whatever their validation error happens to be (it moves with the data's last bits, so the
+    mean over the six outputs is no measure of this mode)."""
+    vehicle = load_vehicle("seamor")
+    model = SindyDamping(vehicle, mode="control").fit(seamor_log)
+    m_inv = np.linalg.inv(FossenModel.from_vehicle(vehicle).mass_matrix().detach().numpy())
+    assert model.coefficients_["du:tau_X"] == pytest.approx(m_inv[0, 0], rel=0.01)
+    assert model.coefficients_["dv:tau_Y"] == pytest.approx(m_inv[1, 1], rel=0.01)
+    nmse_v = model.selected_["validation_nmse"]
+    assert nmse_v["du"] < 0.01 and nmse_v["dv"] < 0.01
+    assert nmse_v["dw"] < 0.1 and nmse_v["dr"] < 0.1
+    assert nmse_v["dp"] > 0.5 and nmse_v["dq"] > 0.5

@@ -50,10 +50,11 @@ class SindyDamping(DampingModel):
     a model chosen on ``validation`` (without one, on the last ``holdout`` fraction of each
     experiment): see :class:`nnid.trainers.sindy.SparsePath` for ``optimizer``,
     ``thresholds``, ``selection``, ``tolerance``, ``alpha``, ``per_output`` and ``seed``.
-    ``path_`` lists every threshold tried, ``selected_`` the chosen entry, ``coefficients_``
-    the model as ``{"F:term": value}`` (mode ``"control"``: ``{"du:term": value}`` and
-    ``{"du:tau_X": value}``). Velocities and accelerations missing from a log are derived by
-    Savitzky-Golay (``savgol_window`` s, ``savgol_order``).
+    ``path_`` lists every threshold tried, ``selected_`` the chosen entry (its
+    ``validation_nmse`` per output: ``{"X": …}``, or ``{"du": …}`` in control mode),
+    ``coefficients_`` the model as ``{"F:term": value}`` (mode ``"control"``:
+    ``{"du:term": value}`` and ``{"du:tau_X": value}``). Velocities and accelerations missing
+    from a log are derived by Savitzky-Golay (``savgol_window`` s, ``savgol_order``).
     """
 
     kind = "sindy"
@@ -166,6 +167,10 @@ class SindyDamping(DampingModel):
         progress(1, 1, f"SINDy path of {len(path.path_)} thresholds")
         self.path_ = path.path_
         self.selected_ = path.selected_
+        if "validation_nmse" in self.selected_:
+            self.selected_["validation_nmse"] = dict(
+                zip(self.output_names, self.selected_["validation_nmse"], strict=True)
+            )
         terms = self._terms()
         names = terms + (list(f"tau_{f}" for f in FORCES) if self.mode == "control" else [])
         self.feature_names_ = names

@@ -231,7 +231,10 @@ class FossenModel:
         s = torch.stack(
             [torch.sin(th), torch.cos(th) * torch.sin(phi), torch.cos(th) * torch.cos(phi)], -1
         )
-        g_mat = torch.linalg.lstsq(s, self.restoring_force(eta)).solution.T
+        # g(η) is linear in s: G from the normal equations of 16 attitudes. Not lstsq: MKL's
+        # least squares gave last bits that changed with the buffers' memory (1.8e-15 in a
+        # third of repeated calls), so predictions of one model differed between calls
+        g_mat = torch.linalg.solve(s.T @ s, s.T @ self.restoring_force(eta)).T
         theta = self.damping.coefficients
         codes = torch.as_tensor(self.damping.codes, dtype=torch.long).reshape(-1, 3)
         if not self.damping.terms:

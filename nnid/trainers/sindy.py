@@ -190,8 +190,9 @@ class SparsePath(BaseEstimator):
 
     ``fit(theta, y, theta_val, y_val)`` on evaluated features ``theta`` ``[N, K]`` and targets
     ``y`` ``[N, m]``: ``path_`` lists every threshold tried (``threshold``, ``n_terms``,
-    ``train_J``, ``validation_J``, ``aic``, ``bic``), ``selected_`` the chosen entry and
-    ``coef_`` ``[m, K]`` its coefficients. ``selection`` is "validation" (the sparsest model
+    ``train_J``, ``validation_J``, ``aic``, ``bic``), ``selected_`` the chosen entry (with
+    validation data also ``validation_nmse``, each output's normalised MSE) and ``coef_``
+    ``[m, K]`` its coefficients. ``selection`` is "validation" (the sparsest model
     whose validation J is within ``tolerance`` of the best; with ``per_output`` each output
     picks its own row, greedily sparsest while the mean validation J stays within ``tolerance``
     of the best, so ``selected_`` may mix thresholds), "aic" or "bic". J is the mean over
@@ -284,6 +285,11 @@ class SparsePath(BaseEstimator):
                 "train_J": float(nmse(y, theta @ self.coef_.T).mean()),
                 "validation_J": float(nmse(y_val, theta_val @ self.coef_.T).mean()),
             }
+        if theta_val is not None:
+            # the mean J can hide one output the library cannot explain: each output's own
+            self.selected_["validation_nmse"] = [
+                float(v) for v in nmse(y_val, theta_val @ self.coef_.T)
+            ]
         return self
 
     def _select_per_output(self, coefs: np.ndarray, val: np.ndarray) -> np.ndarray:
