@@ -285,6 +285,7 @@ def test_simulation_error_levenberg_marquardt_lowers_free_run_error():
     model.fit(train, train)
     ft = model.finetune_
     assert ft["kept"] and ft["epochs"] >= 1
+    assert ft["windows"] == [len(train) - model.warmup_samples_]  # 10,000 asked: the whole run
     assert ft["validation_free_run_nrmse_after"] < 0.8 * ft["validation_free_run_nrmse_before"]
     assert model.score(train)["y"] == pytest.approx(ft["validation_free_run_nrmse_after"])
 
@@ -529,6 +530,7 @@ def test_simulation_windows_grow_in_stages_and_stop_on_the_whole_validation_run(
     assert stages[0] == "10 samples" and stages[-1] == "60 samples"
     assert stages == sorted(stages, key=lambda s: int(s.split()[0]))  # short windows first
     assert model.finetune_["epochs"] == len(seen)
+    assert model.finetune_["windows"] == [10, 60]
     (batch,) = model._whole_runs(model._table(val), val)
     assert batch[2].shape[1] == len(val) - model.warmup_samples_  # the whole run, one window
     with torch.no_grad():

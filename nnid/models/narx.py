@@ -167,7 +167,8 @@ class NarxModel(InputOutputModel):
       turn, each for up to ``simulation_epochs``) ending at each experiment's last sample and
       every half window before, with ``simulation_trainer`` ``"adam"`` (every window once an
       epoch in a seeded random order, ``simulation_lr``) or ``"lm"`` (sensitivity-recursion
-      Jacobians); windows longer than the shortest experiment are cut to it; early-stopped on
+      Jacobians); windows longer than the shortest experiment are cut to it (``finetune_``
+      ``["windows"]``: the lengths trained); early-stopped on
       the whole free runs of the validation experiments and kept only if that measure (each
       run's squared free-run NRMSE, averaged) falls (``finetune_``). ``simulation_max_fail``:
       validation failures before a stage stops; ``simulation_l2``: λ of a λ‖θ‖² penalty on
@@ -875,7 +876,21 @@ class NarxModel(InputOutputModel):
             "validation_mean_squared_nrmse_after": jsonable(measure_after),
             "kept": bool(kept),
             "epochs": epochs,
+            # the window lengths trained, as cut to the shortest run (not the ones asked for)
+            "windows": [
+                n for n in (self._window_length(tab, w) for w in self.simulation_windows_) if n
+            ],
         }
+
+    def _window_length(self, table: dict[str, torch.Tensor], length: int) -> int | None:
+        """``length`` cut to the shortest experiment of ``table`` after its warm-up (a window
+        longer than every run means "whole runs"); None when no experiment is longer than
+        the warm-up."""
+        starts, stops = run_bounds(table["code"].numpy())
+        spans = stops - starts - self.warmup_samples_
+        if spans.max() < 1:
+            return None
+        return int(min(length, spans[spans >= 1].min()))
 
     def _fixed_windows(self, table: dict[str, torch.Tensor], length: int) -> tuple | None:
         """Windows of ``length`` samples (shortened to the shortest experiment after its
@@ -883,11 +898,10 @@ class NarxModel(InputOutputModel):
         samples before it, as one batch; None when no experiment is longer than the warm-up.
         With ``simulation_run_floor`` the batch also carries each window's output weights
         [B, 1, m]: 1 / its run's std of each output (normalised units), floored."""
-        starts, stops = run_bounds(table["code"].numpy())
-        spans = stops - starts - self.warmup_samples_
-        if spans.max() < 1:
+        length = self._window_length(table, length)
+        if length is None:
             return None
-        length = int(min(length, spans[spans >= 1].min()))
+        starts, stops = run_bounds(table["code"].numpy())
         ends: list[int] = []
         weights: list[torch.Tensor] = []
         floor = self.simulation_run_floor
