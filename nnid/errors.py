@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Container
+
 
 class NnidInputError(ValueError):
     """Bad input (a file, a field, a column or a row) with a message a person can act on.
@@ -30,6 +32,17 @@ class NnidInputError(ValueError):
             where.append(f"row {row}")
         prefix = ", ".join(where) + ": " if where else ""
         super().__init__(prefix + message)
+
+    def within(self, section: str, keys: Container[str]) -> NnidInputError:
+        """The same error with its field named under ``section`` of a config (a model's
+        ``output_bounds`` is ``model.output_bounds`` of a train config), if it names one of
+        the section's ``keys`` (not a column, nor a key of a part below, such as a
+        trainer's) and no file yet."""
+        if self.source is not None or self.row is not None or self.field is None:
+            return self
+        if self.field.split(".")[0] not in keys:
+            return self
+        return NnidInputError(self.message, field=f"{section}.{self.field}")
 
     def with_source(self, source: str) -> NnidInputError:
         """The same error, naming ``source`` if it named no file yet."""

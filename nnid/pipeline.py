@@ -358,7 +358,10 @@ def run_train(
     inputs = load_inputs(cfg, config_path, [cfg.model], data, vehicle, columns)
     split = make_split(inputs.log, cfg.split, source, inputs.report)
     model = cfg.model.build(inputs.vehicle)
-    caught = fit_model(model, split, progress or silent)
+    try:  # the model's own refusals, named where the config sets the field
+        caught = fit_model(model, split, progress or silent)
+    except NnidInputError as exc:
+        raise exc.within("model", type(cfg.model).model_fields) from None
     if hasattr(model, "report_"):
         for step in model.report_.steps:
             inputs.report.add(step.step, "training split: " + step.detail, step.rows_removed)
@@ -537,7 +540,10 @@ def run_compare(
         report(i, len(cfg.models), f"fitting {name}")
         model = spec.build(inputs.vehicle)
         t0 = time.perf_counter()
-        caught = fit_model(model, split, staged(progress, name))
+        try:
+            caught = fit_model(model, split, staged(progress, name))
+        except NnidInputError as exc:
+            raise exc.within(f"models.{i}", type(spec).model_fields) from None
         seconds = time.perf_counter() - t0
         row: dict[str, Any] = {
             "name": name,

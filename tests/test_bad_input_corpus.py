@@ -221,6 +221,11 @@ CONFIG_CASES = [
         "split",
         ('by = "auto"', 'by = "experiment"\nvalidation = ["run0", "run1", "run2"]'),
     ),
+    # refused by the model at fit, named where the config sets it
+    ("train", "narx input not in the log", "model.inputs", None),
+    ("train", "narx bounds upside down", "model.output_bounds", None),
+    ("train", "ensemble member output not in the log", "model.member.outputs", None),
+    ("compare", "second model input not in the log", "models.1.inputs", None),
     ("loop", "unknown dof", "dofs", None),
     ("loop", "held-out run not in log", "validation", None),
     ("loop", "unknown key", "alhpa", None),
@@ -236,13 +241,32 @@ LOOP_TEXT = {
 }
 
 
+_NARX = 'kind = "narx"\ninputs = ["tau_Z"]\noutputs = ["w"]\n'
+#: the model sections after TRAIN_TEXT's split (compare: its Fossen fit, then a bad model)
+MODEL_TEXT = {
+    "narx input not in the log": f"[model]\n{_NARX.replace('tau_Z', 'tau_Q')}",
+    "narx bounds upside down": f"[model]\n{_NARX}output_bounds = [[1.0, 0.0]]\n",
+    "ensemble member output not in the log": (
+        '[model]\nkind = "ensemble"\nseeds = [0, 1]\n[model.member]\n'
+        + _NARX.replace('["w"]', '["heave"]')
+    ),
+    "second model input not in the log": (
+        f"[[models]]{TRAIN_TEXT.split('[model]')[1]}[[models]]\n{_NARX.replace('tau_Z', 'tau_Q')}"
+    ),
+}
+
+
 def _config_cases() -> list[Case]:
     cases = []
     for command, name, field, change in CONFIG_CASES:
 
         def args(tmp, fx, command=command, name=name, change=change):
             path = tmp / f"{name.replace(' ', '_')}.toml"
-            text = TRAIN_TEXT.replace(*change) if change else LOOP_TEXT[name]
+            if name in MODEL_TEXT:
+                head = TRAIN_TEXT.split("[model]")[0]
+                text = head.replace('kind = "train"', f'kind = "{command}"') + MODEL_TEXT[name]
+            else:
+                text = TRAIN_TEXT.replace(*change) if change else LOOP_TEXT[name]
             path.write_text(text)
             return _command(command, tmp, fx, config=path)
 

@@ -44,7 +44,7 @@ def check_bounds(bounds: OutputBounds, n_out: int) -> OutputBounds:
                 pair[i] = float(v)
         lo, hi = pair
         if isinstance(lo, float) and isinstance(hi, float) and not lo < hi:
-            raise NnidInputError("output_bounds: low must be below high", field="output_bounds")
+            raise NnidInputError("low must be below high", field="output_bounds")
     return out
 
 

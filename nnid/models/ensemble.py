@@ -88,21 +88,10 @@ class EnsembleModel(NnidModel):
         seeds = self._check_settings()
         jobs = max(1, min(int(self.n_jobs), len(seeds)))
         templates = [clone(self.model).set_params(seed=seed) for seed in seeds]
-        if jobs == 1:
-            fitted = [
-                _fit_member(m, log, validation, staged(progress, f"member {i + 1}/{len(seeds)}"))
-                for i, m in enumerate(templates)
-            ]
-        else:
-            from joblib import Parallel, delayed
-
-            runs = Parallel(n_jobs=jobs, backend="loky", return_as="generator")(
-                delayed(_fit_member)(m, log, validation) for m in templates
-            )
-            fitted = []
-            for i, result in enumerate(runs):
-                fitted.append(result)
-                progress(i + 1, len(seeds), "members fitted")
+        try:
+            fitted = self._fit_members(templates, log, validation, jobs, progress)
+        except NnidInputError as exc:
+            raise exc.within("member", self.model.get_params()) from None
         members = [m for m, _ in fitted]
         scores = [v for _, v in fitted]
         dropped = []
@@ -116,6 +105,26 @@ class EnsembleModel(NnidModel):
         self.member_validation_ = [scores[k] for k in keep]
         self.dropped_ = dropped
         self._take_shape()
+
+    @staticmethod
+    def _fit_members(templates, log, validation, jobs: int, progress: Progress) -> list[tuple]:
+        """(member, validation free-run NRMSE) of each template, in ``jobs`` processes."""
+        n = len(templates)
+        if jobs == 1:
+            return [
+                _fit_member(m, log, validation, staged(progress, f"member {i + 1}/{n}"))
+                for i, m in enumerate(templates)
+            ]
+        from joblib import Parallel, delayed
+
+        runs = Parallel(n_jobs=jobs, backend="loky", return_as="generator")(
+            delayed(_fit_member)(m, log, validation) for m in templates
+        )
+        fitted = []
+        for i, result in enumerate(runs):
+            fitted.append(result)
+            progress(i + 1, n, "members fitted")
+        return fitted
 
     def _take_shape(self) -> None:
         first = self.members_[0]

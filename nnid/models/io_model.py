@@ -15,6 +15,7 @@ from torch import nn
 
 from nnid.datasets.log import validate_table
 from nnid.datasets.preprocess import experiments
+from nnid.errors import NnidInputError
 from nnid.evaluation.evaluate import score_prediction, target_columns
 from nnid.evaluation.metrics import warmup_mask
 from nnid.models.base import NnidModel
@@ -63,7 +64,15 @@ class InputOutputModel(NnidModel):
         return torch.Generator().manual_seed(int(self.seed))
 
     def _check(self, log: pd.DataFrame, name: str = "log") -> None:
-        """The model's columns present and finite."""
+        """The model's columns present (a missing one named under ``inputs`` or ``outputs``,
+        beside the columns there are) and finite."""
+        for role, columns in (("inputs", self.inputs_), ("outputs", self.outputs_)):
+            missing = [c for c in columns if c not in log.columns]
+            if missing:
+                raise NnidInputError(
+                    f"the {name} has no column(s) {missing}; it has {list(log.columns)}",
+                    field=role,
+                )
         validate_table(log, [*self.inputs_, *self.outputs_], source=name, require_time=False)
 
     def _standardise(self, log: pd.DataFrame) -> None:

@@ -530,7 +530,9 @@ class CacciaTwoStep:
         modes = None
         if self.mode_column is not None:
             if self.mode_column not in log:
-                raise NnidInputError("mode column missing from the log", field=self.mode_column)
+                raise NnidInputError(
+                    f"the log has no mode column '{self.mode_column}'", source="log"
+                )
             modes = log[self.mode_column].astype(str).to_numpy()
         return self._steady_from(arrays, modes)
 
@@ -550,9 +552,9 @@ class CacciaTwoStep:
         column = POSITION_OF[self.dof]
         if column not in log:
             raise NnidInputError(
-                f"Caccia's procedure needs the position '{column}' of DOF '{self.dof}' "
-                "(velocities are estimated from it)",
-                field=column,
+                f"the log has no column '{column}': Caccia's procedure needs the position of "
+                f"DOF '{self.dof}' (velocities are estimated from it)",
+                source="log",
             )
         arrays = log_arrays(log, vehicle)
         arrays["experiment_names"] = (
