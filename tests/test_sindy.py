@@ -98,7 +98,7 @@ def test_vt690_sparser_than_mcfarland_within_10_percent(vt690):
 def test_control_mode_fits_accelerations(seamor_log):
     """ν̇ = M⁻¹(τ − C(ν)ν − D(ν)ν − g(η)) (Fossen's model): on the Seamor, whose M is diagonal,
     the control coefficient of τ_X in u̇ is 1/M₁₁ and of τ_Y in v̇ 1/M₂₂, and the holdout's
-    u̇ v̇ w ṙ are explained. The restoring moments of ṗ and q̇ are functions of the angles,
+    u̇ v̇ ẇ ṙ are explained. The restoring moments of ṗ and q̇ are functions of the angles,
     outside the library (the documented limit of this mode): those two stay unexplained,
     whatever their validation error happens to be (it moves with the data's last bits, so the
     mean over the six outputs is no measure of this mode)."""
