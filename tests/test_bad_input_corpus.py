@@ -82,6 +82,11 @@ LOG_CASES: list[tuple[str, str, Callable]] = [
         lambda df, i: df.drop(columns=[c for c in df if c.startswith(("tau_", "cmd_"))]),
     ),
     ("header only", "no rows", lambda df, i: df.iloc[:0]),
+    (
+        "a column named twice",
+        "'u'",
+        lambda df, i: df.to_csv(index=False).replace(",v,", ",u,", 1).encode(),
+    ),
     ("empty file", "", lambda df, i: b""),
     ("binary garbage", "", lambda df, i: bytes(range(256)) * 8),
     ("one garbled line", "", lambda df, i: b"t,u\n0.0,1,2,3,4\n"),

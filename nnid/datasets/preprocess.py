@@ -141,8 +141,8 @@ def savgol_derivative(
     y = np.asarray(y, dtype=np.float64)
     if len(y) < window:
         raise NnidInputError(
-            f"{len(y)} samples are too few for the Savitzky-Golay window of {window} samples",
-            field=where,
+            f"{where} has {len(y)} samples, too few for the Savitzky-Golay window of {window} "
+            "samples (velocities and accelerations are derived with it)"
         )
     missing = np.isnan(y)
     if not missing.any():
