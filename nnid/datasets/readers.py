@@ -39,24 +39,13 @@ def read_table(path: str | Path) -> pd.DataFrame:
             return pd.read_parquet(path)
         if name.endswith((".csv", ".csv.gz", ".txt")):
             dialect = _csv_dialect(path)
-            table = pd.read_csv(path, **dialect)
             header = pd.read_csv(path, header=None, nrows=1, dtype=str, **dialect).iloc[0]
+            _refuse_repeated_names(header, path)
+            return pd.read_csv(path, **dialect)
+    except NnidInputError:
+        raise
     except Exception as err:  # pandas/pyarrow raise many types for truncated or corrupt files
         raise NnidInputError(f"cannot be read as a table ({err})", source=str(path)) from None
-    if name.endswith((".csv", ".csv.gz", ".txt")):
-        # pandas renames a repeated name ('u', 'u.1'): one of the two would be used unseen
-        seen: dict[str, int] = {}
-        for k, column in enumerate(header, start=1):
-            if pd.isna(column):  # an empty name (a trailing separator): pandas's "Unnamed: k"
-                continue
-            if column in seen:
-                raise NnidInputError(
-                    f"the header names column '{column}' twice (columns {seen[column]} and "
-                    f"{k}): which one is meant is ambiguous; keep one",
-                    source=str(path),
-                )
-            seen[column] = k
-        return table
     if path.is_dir():
         raise NnidInputError(
             "is a folder: read a dataset folder with a reader config, --columns MAP "
@@ -66,6 +55,23 @@ def read_table(path: str | Path) -> pd.DataFrame:
     raise NnidInputError(
         "unknown table format; expected .csv, .csv.gz or .parquet", source=str(path)
     )
+
+
+def _refuse_repeated_names(header: pd.Series, path: Path) -> None:
+    """A CSV header that names a column twice is refused: pandas would rename the second
+    ('u', 'u.1') and one of the two would be used unseen. Empty names (a trailing separator,
+    pandas's "Unnamed: k") are not names."""
+    seen: dict[str, int] = {}
+    for k, column in enumerate(header, start=1):
+        if pd.isna(column):
+            continue
+        if column in seen:
+            raise NnidInputError(
+                f"the header names column '{column}' twice (columns {seen[column]} and {k}): "
+                "which one is meant is ambiguous; keep one",
+                source=str(path),
+            )
+        seen[column] = k
 
 
 def _csv_dialect(path: Path) -> dict:
