@@ -60,6 +60,8 @@ LOG_CASES: list[tuple[str, str, Callable]] = [
     ),
     ("decreasing time", "'t'", lambda df, i: df.assign(t=df["t"].where(df.index != 12, -1.0))),
     ("time in milliseconds", "'t'", lambda df, i: df.assign(t=(df["t"] * 1000).round())),
+    # milliseconds computed in floating point: whole numbers but for the last bits
+    ("time in float milliseconds", "'t'", lambda df, i: df.assign(t=df["t"] * 1000 + 1e-9)),
     ("time in nanoseconds", "'t'", lambda df, i: df.assign(t=(df["t"] * 1e9).round())),
     ("empty experiment label", "'experiment'", _set("experiment", 20, np.nan)),
     ("blank experiment label", "'experiment'", _set("experiment", 21, " ")),

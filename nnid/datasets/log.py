@@ -132,8 +132,9 @@ def _check_experiments(df: pd.DataFrame, source: str) -> None:
 
 
 def _check_time_unit(df: pd.DataFrame, source: str) -> None:
-    """Time in seconds: a median step of 5 to 1000 on whole numbers looks like milliseconds,
-    one of 10⁵ or more like micro- or nanoseconds."""
+    """Time in seconds: a median step of 5 to 1000 on whole numbers (to 1e-6: milliseconds
+    computed in floating point, 50.000000000007) looks like milliseconds, one of 10⁵ or more
+    like micro- or nanoseconds."""
     t = df["t"].to_numpy(dtype=np.float64)
     if t.size < 3:
         return
@@ -141,7 +142,7 @@ def _check_time_unit(df: pd.DataFrame, source: str) -> None:
     unit = None
     if step >= 1e5:
         unit = "nanoseconds (divide by 1e9) or microseconds (by 1e6)"
-    elif 5 <= step <= 1000 and np.all(t == np.round(t)):
+    elif 5 <= step <= 1000 and np.all(np.abs(t - np.round(t)) <= 1e-6):
         unit = "milliseconds (divide by 1000)"
     if unit:
         raise NnidInputError(
