@@ -52,11 +52,12 @@ def log_arrays(log: pd.DataFrame, vehicle) -> dict[str, np.ndarray]:
         act = Actuation(vehicle)
         cols = [f"cmd_{c}" for c in act.channels]
         missing = [c for c in cols if c not in log]
-        if missing:
+        if missing:  # a log's columns, not a setting: no config field to name
+            present = [c for c in TAU if c in log]
             raise NnidInputError(
-                f"the log has neither the generalized forces tau_X..tau_N nor the thruster "
-                f"commands {missing} of this vehicle",
-                field=missing[0],
+                "the log has neither the six generalized forces tau_X … tau_N"
+                + (f" (only {', '.join(present)})" if present else "")
+                + f" nor the commands {', '.join(missing)} of vehicle '{vehicle.name}'"
             )
         tau = act.nominal(log[cols].to_numpy(np.float64))
     return {**motion_arrays(log), "tau": tau}
