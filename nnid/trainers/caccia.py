@@ -530,9 +530,7 @@ class CacciaTwoStep:
         modes = None
         if self.mode_column is not None:
             if self.mode_column not in log:
-                raise NnidInputError(
-                    f"the log has no mode column '{self.mode_column}'", source="log"
-                )
+                raise NnidInputError(f"no mode column '{self.mode_column}'", source="log")
             modes = log[self.mode_column].astype(str).to_numpy()
         return self._steady_from(arrays, modes)
 
@@ -552,7 +550,7 @@ class CacciaTwoStep:
         column = POSITION_OF[self.dof]
         if column not in log:
             raise NnidInputError(
-                f"the log has no column '{column}': Caccia's procedure needs the position of "
+                f"no column '{column}': Caccia's procedure needs the position of "
                 f"DOF '{self.dof}' (velocities are estimated from it)",
                 source="log",
             )
