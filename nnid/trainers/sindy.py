@@ -277,19 +277,19 @@ class SparsePath(BaseEstimator):
         best = self._select(path)
         self.selected_ = dict(path[best])
         self.coef_ = coefs[best]
+        val_nmse = val_out[best] if theta_val is not None else None
         if self.per_output and self.selection == "validation":
             self.coef_ = self._select_per_output(np.array(coefs), np.array(val_out))
+            val_nmse = nmse(y_val, theta_val @ self.coef_.T)
             self.selected_ = {
                 "threshold": None,
                 "n_terms": int(np.count_nonzero(self.coef_)),
                 "train_J": float(nmse(y, theta @ self.coef_.T).mean()),
-                "validation_J": float(nmse(y_val, theta_val @ self.coef_.T).mean()),
+                "validation_J": float(val_nmse.mean()),
             }
-        if theta_val is not None:
+        if val_nmse is not None:
             # the mean J can hide one output the library cannot explain: each output's own
-            self.selected_["validation_nmse"] = [
-                float(v) for v in nmse(y_val, theta_val @ self.coef_.T)
-            ]
+            self.selected_["validation_nmse"] = [float(v) for v in val_nmse]
         return self
 
     def _select_per_output(self, coefs: np.ndarray, val: np.ndarray) -> np.ndarray:
