@@ -292,12 +292,16 @@ def _auto_split(log: pd.DataFrame, fractions: tuple[float, float, float]) -> Spl
 DAMPING_KINDS = ("synthesis", "sindy")
 
 
-def fit_model(model, split: Split, progress: Progress) -> list[str]:
+def fit_model(model, split: Split, progress: Progress, section: str, spec) -> list[str]:
     """Fit on the training split (validation for early stopping or selection); the warnings
-    raised, each once."""
+    raised, each once. The model's own refusals are named where the config sets the field:
+    under ``section`` (``model``, ``models.2``) when it is a key of the config table ``spec``."""
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        model.fit(split.train, split.validation, progress=progress)
+        try:
+            model.fit(split.train, split.validation, progress=progress)
+        except NnidInputError as exc:
+            raise exc.within(section, type(spec).model_fields) from None
     return list(dict.fromkeys(str(w.message) for w in caught))
 
 
@@ -358,10 +362,7 @@ def run_train(
     inputs = load_inputs(cfg, config_path, [cfg.model], data, vehicle, columns)
     split = make_split(inputs.log, cfg.split, source, inputs.report)
     model = cfg.model.build(inputs.vehicle)
-    try:  # the model's own refusals, named where the config sets the field
-        caught = fit_model(model, split, progress or silent)
-    except NnidInputError as exc:
-        raise exc.within("model", type(cfg.model).model_fields) from None
+    caught = fit_model(model, split, progress or silent, "model", cfg.model)
     if hasattr(model, "report_"):
         for step in model.report_.steps:
             inputs.report.add(step.step, "training split: " + step.detail, step.rows_removed)
@@ -540,10 +541,7 @@ def run_compare(
         report(i, len(cfg.models), f"fitting {name}")
         model = spec.build(inputs.vehicle)
         t0 = time.perf_counter()
-        try:
-            caught = fit_model(model, split, staged(progress, name))
-        except NnidInputError as exc:
-            raise exc.within(f"models.{i}", type(spec).model_fields) from None
+        caught = fit_model(model, split, staged(progress, name), f"models.{i}", spec)
         seconds = time.perf_counter() - t0
         row: dict[str, Any] = {
             "name": name,
