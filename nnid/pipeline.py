@@ -135,6 +135,13 @@ def load_inputs(
         path = data or str(resolve(base, spec.log))
         cols = columns or (str(resolve(base, spec.columns)) if spec.columns else None)
         inputs = Inputs(*load_log(path, cols), veh)
+        if physics and veh is not None:  # the inputs the vehicle reads, said against the log
+            from nnid.datasets.arrays import logged_inputs
+
+            try:
+                logged_inputs(inputs.log, veh)
+            except NnidInputError as err:
+                raise err.with_source(path) from None
     elif getattr(spec, "simulate", None):
         from nnid.datasets.simulator import simulate_config
         from nnid.vehicle import load_vehicle

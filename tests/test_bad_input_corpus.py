@@ -8,6 +8,7 @@ input is never accepted and never crashes.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 from dataclasses import dataclass
 from importlib import resources
@@ -153,6 +154,21 @@ def _log_cases() -> list[Case]:
         return _command("loop", tmp, fx, data=_write_log(tmp, "too short", log))
 
     cases.append(Case("loop: too short for the warm-up", short, ("LOG", "warmup_s")))
+
+    # the minirov has no thrusters, so no commands: cmd_X … cmd_N are not its inputs, and
+    # every command reading the inputs says so the same way (one reading of the log contract)
+    def commands(tmp, fx, command):
+        log = fx["demo_log"].rename(columns=lambda c: c.replace("tau_", "cmd_"))
+        return _command(command, tmp, fx, data=_write_log(tmp, "commands", log))
+
+    for command in ("loop", "train", "compare"):
+        cases.append(
+            Case(
+                f"{command}: forces logged as commands of a vehicle without thrusters",
+                functools.partial(commands, command=command),
+                ("LOG", "no thrusters", "tau_X"),
+            )
+        )
     return cases
 
 
@@ -205,6 +221,7 @@ def _vehicle_cases() -> list[Case]:
 
 # -- configs ---------------------------------------------------------------------------------
 TRAIN_TEXT = (REPO / "configs" / "fossen_ls.toml").read_text()
+_STEP = 'sequence = [{ experiments = ["%s"], dofs = ["w"], unknowns = ["%s"] }]\nzoh_midpoint'
 CONFIG_CASES = [
     ("train", "unknown key", "warmup", ("warmup_s = 2.0", "warmup = 2.0")),
     ("train", "nan setting", "warmup_s", ("warmup_s = 2.0", "warmup_s = nan")),
@@ -233,6 +250,19 @@ CONFIG_CASES = [
     ("train", "narx bounds upside down", "model.output_bounds", None),
     ("train", "ensemble member output not in the log", "model.member.outputs", None),
     ("compare", "second model input not in the log", "models.1.inputs", None),
+    # a sequence step's experiments and unknowns: the step's, not the model's own `unknowns`
+    (
+        "train",
+        "sequence step on a missing run",
+        "model.sequence",
+        ("zoh_midpoint", _STEP % ("dive9", "Z_wdot")),
+    ),
+    (
+        "train",
+        "sequence step's unknowns a shortcut",
+        "model.sequence",
+        ("zoh_midpoint", _STEP % ("run0", "added_mass")),
+    ),
     ("loop", "unknown dof", "dofs", None),
     ("loop", "held-out run not in log", "validation", None),
     ("loop", "unknown key", "alhpa", None),

@@ -43,21 +43,35 @@ def motion_arrays(log: pd.DataFrame) -> dict[str, np.ndarray]:
     }
 
 
+def logged_inputs(log: pd.DataFrame, vehicle) -> tuple[np.ndarray, bool]:
+    """The log's inputs and whether they are forces: ``tau_X`` … ``tau_N`` when all six are
+    there, else the thruster commands ``cmd_<thruster>`` of the vehicle (ARCHITECTURE.md, the
+    log). A vehicle without thrusters has no commands, so its logs need the six forces. Raises
+    :class:`NnidInputError` naming the missing columns and the forces the log has."""
+    if all(c in log for c in TAU):
+        return log[list(TAU)].to_numpy(np.float64), True
+    present = [c for c in TAU if c in log]
+    only = f" (only {', '.join(present)})" if present else ""
+    # a log's columns, not a setting: no config field to name
+    if not vehicle.thrusters:
+        raise NnidInputError(
+            f"the log lacks the input columns {', '.join(c for c in TAU if c not in log)}: "
+            f"vehicle '{vehicle.name}' has no thrusters, so all six generalized forces "
+            "tau_X … tau_N are needed"
+        )
+    cols = [f"cmd_{c}" for c in Actuation(vehicle).channels]
+    missing = [c for c in cols if c not in log]
+    if missing:
+        raise NnidInputError(
+            f"the log has neither the six generalized forces tau_X … tau_N{only} nor the "
+            f"commands {', '.join(missing)} of vehicle '{vehicle.name}'"
+        )
+    return log[cols].to_numpy(np.float64), False
+
+
 def log_arrays(log: pd.DataFrame, vehicle) -> dict[str, np.ndarray]:
     """:func:`motion_arrays` and the nominal τ (from ``tau_*`` or through the vehicle's
-    thrusters from ``cmd_*``)."""
-    if all(c in log for c in TAU):
-        tau = log[list(TAU)].to_numpy(np.float64)
-    else:
-        act = Actuation(vehicle)
-        cols = [f"cmd_{c}" for c in act.channels]
-        missing = [c for c in cols if c not in log]
-        if missing:  # a log's columns, not a setting: no config field to name
-            present = [c for c in TAU if c in log]
-            raise NnidInputError(
-                "the log has neither the six generalized forces tau_X … tau_N"
-                + (f" (only {', '.join(present)})" if present else "")
-                + f" nor the commands {', '.join(missing)} of vehicle '{vehicle.name}'"
-            )
-        tau = act.nominal(log[cols].to_numpy(np.float64))
+    thrusters from ``cmd_*``, :func:`logged_inputs`)."""
+    inputs, forces = logged_inputs(log, vehicle)
+    tau = inputs if forces else Actuation(vehicle).nominal(inputs)
     return {**motion_arrays(log), "tau": tau}

@@ -33,9 +33,8 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from nnid.datasets.log import TAU
+from nnid.datasets.arrays import logged_inputs
 from nnid.datasets.preprocess import first_order_lag
-from nnid.errors import NnidInputError
 from nnid.physics.damping import parse_coefficient_key
 from nnid.physics.damping_library import LIBRARY, canonical_term
 from nnid.physics.dofs import DOF_WORD, DOFS, FORCES
@@ -191,41 +190,17 @@ def candidates(vehicle, log: pd.DataFrame, coupled: bool = True) -> list[Candida
             out.append(Candidate(f"current.{axis}", "current", bounds=(-2 * top, 2 * top)))
     slowest = 100 * float(np.median(np.diff(log["t"].to_numpy())))  # 100 samples
     out.append(Candidate("actuator_lag", "actuator_lag", bounds=(0.0, max(slowest, 0.5))))
-    width = float(np.nanmax(np.abs(input_channels(log, vehicle)[0]))) if len(log) else 0.0
+    width = float(np.nanmax(np.abs(logged_inputs(log, vehicle)[0]))) if len(log) else 0.0
     if width > 0:
         out.append(Candidate("thruster_deadband", "thruster_deadband", bounds=(0.0, 0.5 * width)))
     return out
-
-
-def input_channels(log: pd.DataFrame, vehicle) -> tuple[np.ndarray, bool]:
-    """The logged inputs and whether they are forces: ``tau_X`` … ``tau_N`` when all six are
-    there, else the thruster commands ``cmd_<thruster>`` of the vehicle. Raises
-    :class:`NnidInputError` naming the missing columns."""
-    if all(c in log for c in TAU):
-        return log[list(TAU)].to_numpy(np.float64), True
-    if vehicle.thrusters:
-        cols = [f"cmd_{c}" for c in Actuation(vehicle).channels]
-        missing = [c for c in cols if c not in log]
-        if not missing:
-            return log[cols].to_numpy(np.float64), False
-        present = [c for c in TAU if c in log]
-        raise NnidInputError(
-            f"the log lacks the thruster commands {', '.join(missing)} of vehicle "
-            f"'{vehicle.name}'"
-            + (f" and has only {', '.join(present)} of the six forces" if present else "")
-        )
-    missing = [c for c in TAU if c not in log]
-    raise NnidInputError(
-        f"the log lacks the input columns {', '.join(missing)}: vehicle '{vehicle.name}' has "
-        "no thrusters, so all six generalized forces tau_X … tau_N are needed"
-    )
 
 
 def nominal_forces(log: pd.DataFrame, vehicle) -> np.ndarray:
     """The nominal generalized force the vehicle receives ``[N, 6]``: deadband on the inputs,
     thrust curves and allocation, then the first-order actuator lag of the vehicle (exact for
     inputs held between samples); installation coefficients are left to the model."""
-    inputs, forces = input_channels(log, vehicle)
+    inputs, forces = logged_inputs(log, vehicle)
     if forces:
         tau = apply_deadband(inputs, vehicle.deadband)
     else:

@@ -18,6 +18,7 @@ import warnings
 import numpy as np
 import pandas as pd
 
+from nnid.datasets.arrays import logged_inputs
 from nnid.datasets.gaps import mask_gaps
 from nnid.datasets.log import ANGLES
 from nnid.datasets.splits import split_log
@@ -39,7 +40,7 @@ from nnid.loop.diagnose import (
     velocity_errors,
     velocity_scores,
 )
-from nnid.loop.effects import candidates, input_channels, nominal_forces
+from nnid.loop.effects import candidates, nominal_forces
 from nnid.loop.residuals import correlation_analysis
 from nnid.loop.unexplained import as_records, describe, unexplained_structure
 from nnid.models.parametric import vehicle_with
@@ -187,7 +188,7 @@ class ResidualLoop:
 
     def _fit(self, log: pd.DataFrame, say) -> None:
         say("fitting the baseline")
-        input_channels(log, self.vehicle)  # a clear error before any work
+        logged_inputs(log, self.vehicle)  # a clear error before any work
         log = self._prepare(log)
         train, val = self._split(log)
         # split first, on whole runs as if complete, so that gaps never move the split

@@ -437,7 +437,12 @@ class ParametricModel(FossenPlant):
         else:
             dofs = list(self.dofs)
             unknowns = expand_unknowns(self.unknowns, dofs, self.vehicle)
-        self.structure_ = ParametricFossen(self.vehicle, unknowns, dofs)
+        try:
+            self.structure_ = ParametricFossen(self.vehicle, unknowns, dofs)
+        except NnidInputError as exc:  # with a sequence, the unknowns are its steps'
+            if self.sequence is None or exc.field != "unknowns":
+                raise
+            raise NnidInputError(f"a step's unknowns: {exc.message}", field="sequence") from None
         self._set_outputs(dofs)
         self.report_ = CleaningReport(source="fit data")
         needs_acc = getattr(trainer, "filter_lambda", None) is None

@@ -98,8 +98,12 @@ class DecoupledSequence:
         n_obs = 0
         report = progress or silent
         for k, step in enumerate(self.steps):
-            sub = structure.restricted(step.unknowns, step.dofs, found)
-            est = self.trainer.fit(sub, _subset(data, step.experiments))
+            try:
+                sub = structure.restricted(step.unknowns, step.dofs, found)
+                subset = _subset(data, step.experiments)
+            except NnidInputError as exc:  # the step's own field, not the model's
+                raise NnidInputError(f"step {k + 1}: {exc.message}", field="sequence") from None
+            est = self.trainer.fit(sub, subset)
             report(k + 1, len(self.steps), f"sequence step {k + 1}: {', '.join(step.dofs)}")
             idx = [names.index(n) for n in sub.names]
             theta[idx] = est.theta
