@@ -221,7 +221,9 @@ def _vehicle_cases() -> list[Case]:
 
 # -- configs ---------------------------------------------------------------------------------
 TRAIN_TEXT = (REPO / "configs" / "fossen_ls.toml").read_text()
-_STEP = 'sequence = [{ experiments = ["%s"], dofs = ["w"], unknowns = ["%s"] }]\nzoh_midpoint'
+#: one sequence step (its run, its unknown) put before TRAIN_TEXT's zoh_midpoint line
+_STEP = 'sequence = [{ experiments = ["%s"], dofs = ["w"], unknowns = ["%s"] }]\n'
+_STEP += "zoh_midpoint = true"
 CONFIG_CASES = [
     ("train", "unknown key", "warmup", ("warmup_s = 2.0", "warmup = 2.0")),
     ("train", "nan setting", "warmup_s", ("warmup_s = 2.0", "warmup_s = nan")),
@@ -255,13 +257,13 @@ CONFIG_CASES = [
         "train",
         "sequence step on a missing run",
         "model.sequence",
-        ("zoh_midpoint", _STEP % ("dive9", "Z_wdot")),
+        ("zoh_midpoint = true", _STEP % ("dive9", "Z_wdot")),
     ),
     (
         "train",
         "sequence step's unknowns a shortcut",
         "model.sequence",
-        ("zoh_midpoint", _STEP % ("run0", "added_mass")),
+        ("zoh_midpoint = true", _STEP % ("run0", "added_mass")),
     ),
     ("loop", "unknown dof", "dofs", None),
     ("loop", "held-out run not in log", "validation", None),

@@ -50,8 +50,6 @@ def logged_inputs(log: pd.DataFrame, vehicle) -> tuple[np.ndarray, bool]:
     :class:`NnidInputError` naming the missing columns and the forces the log has."""
     if all(c in log for c in TAU):
         return log[list(TAU)].to_numpy(np.float64), True
-    present = [c for c in TAU if c in log]
-    only = f" (only {', '.join(present)})" if present else ""
     # a log's columns, not a setting: no config field to name
     if not vehicle.thrusters:
         raise NnidInputError(
@@ -62,9 +60,11 @@ def logged_inputs(log: pd.DataFrame, vehicle) -> tuple[np.ndarray, bool]:
     cols = [f"cmd_{c}" for c in Actuation(vehicle).channels]
     missing = [c for c in cols if c not in log]
     if missing:
+        present = [c for c in TAU if c in log]
         raise NnidInputError(
-            f"the log has neither the six generalized forces tau_X … tau_N{only} nor the "
-            f"commands {', '.join(missing)} of vehicle '{vehicle.name}'"
+            "the log has neither the six generalized forces tau_X … tau_N"
+            + (f" (only {', '.join(present)})" if present else "")
+            + f" nor the commands {', '.join(missing)} of vehicle '{vehicle.name}'"
         )
     return log[cols].to_numpy(np.float64), False
 
