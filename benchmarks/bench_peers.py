@@ -939,7 +939,7 @@ def _nnid_seamor(case: Case, seeds: tuple[int, ...]) -> list[dict]:
             model = cfg.model.build(inputs.vehicle)
             with PeakMemory() as mem:
                 t0 = time.perf_counter()
-                fit_model(model, split, silent)
+                fit_model(model, split, silent, "model", cfg.model)
                 times.append(time.perf_counter() - t0)
             mems.append(mem.mb)
             for part in per:
@@ -1104,6 +1104,12 @@ def main(argv: list[str] | None = None) -> list[dict]:
     )
     print(f"Machine: {versions}. Date: {date.today()}. torch threads: {torch.get_num_threads()}.")
     rows: list[dict] = []
+
+    def save() -> None:  # after every toolkit's rows, so a late failure keeps what was measured
+        if args.json:
+            header = {"machine": versions, "date": str(date.today()), "argv": argv or sys.argv[1:]}
+            args.json.write_text(json.dumps(_jsonable({**header, "rows": rows}), indent=1))
+
     for name in args.cases or CASES:
         case = load_case(name)
         if "official" in case.notes:
@@ -1116,13 +1122,13 @@ def main(argv: list[str] | None = None) -> list[dict]:
             print(f"{name}: {case.notes}", flush=True)
         if args.only != "nnid":
             rows += sysidentpy_rows(case, args.quick, seeds or NARXNN_SEEDS, args.max_gb)
+            save()
         if args.only != "sysidentpy":
             rows += nnid_rows(case, seeds, args.quick)
+            save()
     print()
     print(table(rows))
     if args.json:
-        header = {"machine": versions, "date": str(date.today()), "argv": argv or sys.argv[1:]}
-        args.json.write_text(json.dumps(_jsonable({**header, "rows": rows}), indent=1))
         print(f"\nwrote {args.json}")
     return rows
 
