@@ -231,7 +231,8 @@ def sim_traces(
     h = lm.fit(model.net_, model._window_residual, lm_batches if lm_subset > 1 else [windows],
                runs, jacobian_rows=model._simulation_rows,
                curvature_batches=lm_batches if lm_curvature > 1 else None)  # fmt: skip
-    out.append({"seed": seed, "trainer": "lm", "trace": (h.time, h.validation)})
+    out.append({"seed": seed, "trainer": "lm", "trace": (h.time, h.validation),
+                "stop": h.stop_reason})  # fmt: skip
     for lr, b in grid:
         order = torch.Generator().manual_seed(seed)
 
@@ -305,6 +306,7 @@ def report(res: dict) -> None:
     case, cap = res["case"], res["cap"]
     c = CASES[case]
     lm = {r["seed"]: r["trace"] for r in res["runs"] if r["trainer"] == "lm"}
+    stops = {r["seed"]: r.get("stop") for r in res["runs"] if r["trainer"] == "lm"}
     adam = {
         (r["seed"], r["lr"], r["batch"]): r["trace"] for r in res["runs"] if r["trainer"] == "adam"
     }
@@ -386,7 +388,7 @@ def report(res: dict) -> None:
     print("|---|---|---|---|---|")
     for s in seeds:
         n_ep = len(lm[s][0]) - 1
-        whole = fmt_t(lm[s][0][-1])
+        whole = fmt_t(lm[s][0][-1]) + (f"; stop: {stops[s]}" if stops[s] else "")
         print(f"| {s} | {lm_best[s]:.4g} | {n_ep} ({whole}) | {adam_best[s]:.4g} | {top[s]:.4g} |")
     fl, fb = fixed
     print(
