@@ -532,6 +532,12 @@ def test_simulation_windows_grow_in_stages_and_stop_on_the_whole_validation_run(
     assert stages == sorted(stages, key=lambda s: int(s.split()[0]))  # short windows first
     assert model.finetune_["epochs"] == len(seen)
     assert model.finetune_["windows"] == [10, 60]
+    # each stage's stop reason, in the trainer's words: a stage ran out of epochs exactly when
+    # it says so, and any other stop is one of LM's own
+    for stage, stop in zip(("10 samples", "60 samples"), model.finetune_["stops"], strict=True):
+        ran = stages.count(stage)
+        assert (stop == "max_epochs") == (ran == 4), (stage, stop, ran)
+        assert stop in {"max_epochs", "validation", "mu_max", "min_grad", "goal"}
     (batch,) = model._whole_runs(model._table(val), val)
     assert batch[2].shape[1] == len(val) - model.warmup_samples_  # the whole run, one window
     with torch.no_grad():

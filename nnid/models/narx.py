@@ -75,7 +75,7 @@ from nnid.models import narx_kernel
 from nnid.models.bounds import OutputBounds, bound_arrays, check_bounds, resolve_bounds
 from nnid.models.io_model import DTYPE, InputOutputModel, seeded_linear
 from nnid.serialization import jsonable
-from nnid.trainers.history import Progress, staged
+from nnid.trainers.history import History, Progress, staged
 
 #: ``output_transform`` values: extra regressors computed from each lagged output
 OUTPUT_TRANSFORMS = (None, "sqrt", "products", "fossen")
@@ -168,7 +168,7 @@ class NarxModel(InputOutputModel):
       every half window before, with ``simulation_trainer`` ``"adam"`` (every window once an
       epoch in a seeded random order, ``simulation_lr``) or ``"lm"`` (sensitivity-recursion
       Jacobians); windows longer than the shortest experiment are cut to it (``finetune_``
-      ``["windows"]``: the lengths trained); early-stopped on
+      ``["windows"]``: the lengths trained; ``["stops"]``: why each stage ended); early-stopped on
       the whole free runs of the validation experiments and kept only if that measure (each
       run's squared free-run NRMSE, averaged) falls (``finetune_``). ``simulation_max_fail``:
       validation failures before a stage stops; ``simulation_l2``: λ of a λ‖θ‖² penalty on
@@ -852,13 +852,13 @@ class NarxModel(InputOutputModel):
         state = {k: v.clone() for k, v in self.net_.state_dict().items()}
         train = self._simulation_lm if self.simulation_trainer == "lm" else self._simulation_adam
         stages = len(self.simulation_windows_) > 1
-        epochs = None
+        hists = []
         for length in self.simulation_windows_:  # short windows first: a smoother objective
             report = staged(progress, f"{length} samples") if stages else progress
-            done = train(tab, val, report, length)
-            if done is not None:
-                epochs = (epochs or 0) + done
-        if epochs is None:
+            hist = train(tab, val, report, length)
+            if hist is not None:
+                hists.append(hist)
+        if not hists:
             return
         after = self.free_run_error(validation_log) if held_out else None
         measure_after = self._mean_square(val) if val else None
@@ -875,7 +875,10 @@ class NarxModel(InputOutputModel):
             "validation_mean_squared_nrmse_before": jsonable(measure_before),
             "validation_mean_squared_nrmse_after": jsonable(measure_after),
             "kept": bool(kept),
-            "epochs": epochs,
+            "epochs": sum(h.epochs for h in hists),
+            # why each stage ended (trainer's words: "validation", "max_epochs", "mu_max", ...),
+            # so a stage that stalled is not read as one that converged
+            "stops": [h.stop_reason for h in hists],
             # the window lengths trained, as cut to the shortest run (not the ones asked for)
             "windows": [
                 n for n in (self._window_length(tab, w) for w in self.simulation_windows_) if n
@@ -954,7 +957,7 @@ class NarxModel(InputOutputModel):
         gen = torch.Generator().manual_seed(int(self.seed) * 100_003 + epoch)
         return torch.randperm(n, generator=gen)
 
-    def _simulation_lm(self, tab, val, progress: Progress, length: int) -> int | None:
+    def _simulation_lm(self, tab, val, progress: Progress, length: int) -> History | None:
         from nnid.trainers.levenberg_marquardt import LevenbergMarquardt
 
         train = self._fixed_windows(tab, length)
@@ -972,7 +975,7 @@ class NarxModel(InputOutputModel):
             idx = self._epoch_order(n, epoch)[: max(1, round(share * n))]
             return [tuple(x[idx] for x in train)]
 
-        hist = trainer.fit(
+        return trainer.fit(
             self.net_,
             self._window_residual,
             [train],
@@ -981,9 +984,8 @@ class NarxModel(InputOutputModel):
             jacobian_rows=self._simulation_rows,
             curvature_batches=curvature if share < 1.0 else None,
         )
-        return hist.epochs
 
-    def _simulation_adam(self, tab, val, progress: Progress, length: int) -> int | None:
+    def _simulation_adam(self, tab, val, progress: Progress, length: int) -> History | None:
         """Adam on the windows of the LM stage (:meth:`_fixed_windows`): every window once an
         epoch, in an order drawn per epoch from ``seed``, 32 a step (back-propagation through
         the closed loop). On the Seamor net 128 balanced random windows an epoch never moved
@@ -1004,8 +1006,7 @@ class NarxModel(InputOutputModel):
             max_epochs=self.simulation_epochs,
             max_fail=self.simulation_max_fail,
         )
-        hist = trainer.fit(self.net_, self._window_residual, batches, val, progress=progress)
-        return hist.epochs
+        return trainer.fit(self.net_, self._window_residual, batches, val, progress=progress)
 
     # -- prediction ------------------------------------------------------------------------------
     def _predict(self, log: pd.DataFrame, mode: str | int) -> pd.DataFrame:
