@@ -18,6 +18,21 @@ from threadpoolctl import threadpool_limits
 from nnid.vehicle import vehicle_from_dict
 
 
+def load_script(path: Path, monkeypatch: pytest.MonkeyPatch):
+    """A script file (a benchmark, a docs example) as a module. Its ``sys.modules`` entry (its
+    dataclasses look their module up there) and the ``sys.path`` entries it adds (its lazy
+    imports of sibling scripts need them) last until ``monkeypatch`` is undone, so a test
+    leaves no trace in the process."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location(path.stem, path)
+    module = importlib.util.module_from_spec(spec)
+    monkeypatch.setattr(sys, "path", list(sys.path))
+    monkeypatch.setitem(sys.modules, path.stem, module)
+    spec.loader.exec_module(module)
+    return module
+
+
 @pytest.fixture
 def rng() -> np.random.Generator:
     return np.random.default_rng(12345)

@@ -8,12 +8,11 @@ holds its scores to the ``metrics.json`` scores of the same config.
 
 from __future__ import annotations
 
-import importlib.util
 import math
-import sys
 from pathlib import Path
 
 import pytest
+from conftest import load_script
 
 from nnid.config import TrainConfig, load_config
 from nnid.pipeline import run_train
@@ -57,24 +56,11 @@ max_epochs = 5
 """
 
 
-def _bench_peers(monkeypatch):
-    """The script as a module; the ``sys.path`` entry it adds and its ``sys.modules`` entry
-    (its dataclasses look their module up there) are undone after the test."""
-    monkeypatch.setattr(sys, "path", list(sys.path))
-    spec = importlib.util.spec_from_file_location(
-        "bench_peers", ROOT / "benchmarks" / "bench_peers.py"
-    )
-    module = importlib.util.module_from_spec(spec)
-    monkeypatch.setitem(sys.modules, "bench_peers", module)
-    spec.loader.exec_module(module)
-    return module
-
-
 def test_nnid_seamor_rows_score_as_nnid_train(tmp_path, monkeypatch) -> None:
     (tmp_path / "sim.toml").write_text(SIM)
     config = tmp_path / "narx.toml"
     config.write_text(NARX)
-    bench = _bench_peers(monkeypatch)
+    bench = load_script(ROOT / "benchmarks" / "bench_peers.py", monkeypatch)
     monkeypatch.setattr(bench, "SEAMOR_CONFIG", config)
     monkeypatch.setattr(bench, "SEAMOR_NNID_CONFIGS", {"NARX (LM)": config})
     case = bench.load_case("seamor")

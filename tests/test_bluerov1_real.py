@@ -9,11 +9,11 @@ persistence, and yaw no worse than the thesis model. Skips when ../shared/data i
 
 from __future__ import annotations
 
-import importlib.util
 from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import load_script
 
 REPO = Path(__file__).parents[1]
 DATA = REPO.parent / "shared" / "data" / "liu-bluerov1-2016"
@@ -34,30 +34,26 @@ TRAIN = [
 HELD = ["all_5_2016-04-18-15-06-44", "yaw_5_2016-04-18-13-56-59"]
 
 
-def _script():
-    spec = importlib.util.spec_from_file_location("bluerov1_identification", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
 @pytest.fixture(scope="module")
 def study():
     from nnid.config import SplitSpec
     from nnid.physics.parts import Parts
 
-    script = _script()
-    cfg, vehicle = script.setup()
-    cfg = cfg.model_copy(
-        update={
-            "data": cfg.data.model_copy(update={"experiments": TRAIN + HELD}),
-            "split": SplitSpec(by="experiment", train=TRAIN, validation=HELD[:1], test=HELD[1:]),
-        }
-    )
-    full, cut, ends = script.load_runs(cfg)
-    result = script.fit(cfg, vehicle, cut)
-    models = {"identified": result.model.parts_, "thesis": Parts.from_vehicle(vehicle)}
-    rows = script.score_runs(models, cut[cut.experiment.isin(HELD)], vehicle, cfg.warmup_s)
+    with pytest.MonkeyPatch.context() as mp:
+        script = load_script(SCRIPT, mp)
+        cfg, vehicle = script.setup()
+        cfg = cfg.model_copy(
+            update={
+                "data": cfg.data.model_copy(update={"experiments": TRAIN + HELD}),
+                "split": SplitSpec(
+                    by="experiment", train=TRAIN, validation=HELD[:1], test=HELD[1:]
+                ),
+            }
+        )
+        full, cut, ends = script.load_runs(cfg)
+        result = script.fit(cfg, vehicle, cut)
+        models = {"identified": result.model.parts_, "thesis": Parts.from_vehicle(vehicle)}
+        rows = script.score_runs(models, cut[cut.experiment.isin(HELD)], vehicle, cfg.warmup_s)
     return {"full": full, "ends": ends, "result": result, "vehicle": vehicle, "rows": rows}
 
 
