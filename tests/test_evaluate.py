@@ -9,7 +9,14 @@ import pytest
 
 from nnid.evaluation.evaluate import evaluate
 from nnid.models.base import NnidModel
-from nnid.reports.train_report import RUNS_TITLE, train_html, train_markdown
+from nnid.reports.train_report import (
+    RUNS_TITLE,
+    STOP_WORDS,
+    TRAINING_TITLE,
+    _training,
+    train_html,
+    train_markdown,
+)
 
 
 class Shifted(NnidModel):
@@ -72,3 +79,48 @@ def test_the_train_report_lists_each_held_out_run(runs):
     assert "| validation | big |" in section
     page = train_html({**metrics, "n_params": 0})
     assert RUNS_TITLE in page and "<td>small</td>" in page
+
+
+def test_the_train_report_says_which_stage_stalled_diverged_or_was_undone():
+    # an ensemble of two NARX members (one's free-run stage stalled on LM's μ and was undone)
+    # beside a neural state-space model's windows and a hybrid's segments: every stage is a
+    # row, and a stop that is not convergence reads as such
+    first = {
+        "history": {"epochs": 100, "stop_reason": "max_epochs"},
+        "simulation_finetune": {
+            "windows": [100, 500], "stops": ["validation", "mu_max"],
+            "stage_epochs": [9, 2], "epochs": 11, "kept": False,
+        },
+    }  # fmt: skip
+    second = {"history": {"epochs": 40, "stop_reason": "validation"}, "simulation_finetune": None}
+    ensemble = {"describe": {"member_seeds": [3, 7], "members": [first, second]}}
+    head, rows = _training(ensemble)
+    assert head == ["member", "stage", "epochs", "how it ended"]
+    assert rows == [
+        ["seed 3", "one-step", "100", STOP_WORDS["max_epochs"]],
+        ["seed 3", "free run, 100-sample windows", "9", STOP_WORDS["validation"]],
+        ["seed 3", "free run, 500-sample windows", "2", STOP_WORDS["mu_max"]],
+        ["seed 3", "free run", "11", "undone: validation error did not fall"],
+        ["seed 7", "one-step", "40", STOP_WORDS["validation"]],
+    ]
+    assert "stalled" in STOP_WORDS["mu_max"] and "diverged" in STOP_WORDS["non-finite loss"]
+    staged = {
+        "describe": {
+            "stages": [
+                {"window": 64, "epochs": 30, "stop_reason": "max_epochs"},
+                {"window": None, "epochs": 3, "stop_reason": "non-finite loss"},
+                {"segment_s": 2.0, "epochs": 12, "stop_reason": "validation"},
+            ]
+        }
+    }
+    head, rows = _training(staged)
+    assert head == ["stage", "epochs", "how it ended"]
+    assert [r[:2] for r in rows] == [["window 64", "30"], ["window whole runs", "3"],
+                                     ["segments of 2.0 s", "12"]]  # fmt: skip
+    assert rows[1][2] == STOP_WORDS["non-finite loss"]
+    text = train_markdown({"model": "nss", "params": {}, "seconds": 0.0, **staged})
+    assert f"## {TRAINING_TITLE}" in text and "| window whole runs | 3 | diverged" in text
+    page = train_html({"model": "nss", "params": {}, "seconds": 0.0, "n_params": 0, **staged})
+    assert TRAINING_TITLE in page and "<td>window whole runs</td>" in page
+    # a model with no iterative stages (least squares) gets no section
+    assert TRAINING_TITLE not in train_markdown({"model": "ls", "params": {}, "seconds": 0.0})

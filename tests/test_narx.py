@@ -17,6 +17,7 @@ from nnid.datasets.measurement import Measurement, relative_noise
 from nnid.datasets.simulator import experiment_inputs, simulate, simulate_config
 from nnid.errors import NnidInputError
 from nnid.models.narx import NarxModel
+from nnid.reports.train_report import STOP_WORDS, TRAINING_TITLE, train_markdown
 from nnid.trainers.adam import Adam
 from nnid.trainers.levenberg_marquardt import LevenbergMarquardt
 from nnid.vehicle import load_vehicle
@@ -530,7 +531,8 @@ def test_simulation_windows_grow_in_stages_and_stop_on_the_whole_validation_run(
     stages = [s for s, _ in seen]
     assert stages[0] == "10 samples" and stages[-1] == "60 samples"
     assert stages == sorted(stages, key=lambda s: int(s.split()[0]))  # short windows first
-    assert model.finetune_["epochs"] == len(seen)
+    assert model.finetune_["epochs"] == len(seen) == sum(model.finetune_["stage_epochs"])
+    assert model.finetune_["stage_epochs"] == [stages.count(f"{w} samples") for w in (10, 60)]
     assert model.finetune_["windows"] == [10, 60]
     # each stage's stop reason, in the trainer's words: a stage ran out of epochs exactly when
     # it says so, and any other stop is one of LM's own
@@ -538,6 +540,17 @@ def test_simulation_windows_grow_in_stages_and_stop_on_the_whole_validation_run(
         ran = stages.count(stage)
         assert (stop == "max_epochs") == (ran == 4), (stage, stop, ran)
         assert stop in {"max_epochs", "validation", "mu_max", "min_grad", "goal"}
+    # the train report says how each stage ended, in words, the one-step stage first
+    report = train_markdown(
+        {"model": "narx", "params": {}, "seconds": 0.0, "describe": model.describe()}
+    )
+    rows = report[report.index(TRAINING_TITLE) :].splitlines()[4:7]
+    expected = [("one-step", model.history_.epochs, model.history_.stop_reason)] + [
+        (f"free run, {w}-sample windows", stages.count(f"{w} samples"), stop)
+        for w, stop in zip((10, 60), model.finetune_["stops"], strict=True)
+    ]
+    for row, (stage, ran, stop) in zip(rows, expected, strict=True):
+        assert row == f"| {stage} | {ran} | {STOP_WORDS[stop]} |", row
     (batch,) = model._whole_runs(model._table(val), val)
     assert batch[2].shape[1] == len(val) - model.warmup_samples_  # the whole run, one window
     with torch.no_grad():

@@ -168,9 +168,10 @@ class NarxModel(InputOutputModel):
       every half window before, with ``simulation_trainer`` ``"adam"`` (every window once an
       epoch in a seeded random order, ``simulation_lr``) or ``"lm"`` (sensitivity-recursion
       Jacobians); windows longer than the shortest experiment are cut to it (``finetune_``
-      ``["windows"]``: the lengths trained; ``["stops"]``: why each stage ended); early-stopped on
-      the whole free runs of the validation experiments and kept only if that measure (each
-      run's squared free-run NRMSE, averaged) falls (``finetune_``). ``simulation_max_fail``:
+      ``["windows"]``: the lengths trained; ``["stops"]``, ``["stage_epochs"]``: why each stage
+      ended, after how many epochs); early-stopped on the whole free runs of the validation
+      experiments and kept only if that measure (each run's squared free-run NRMSE, averaged)
+      falls (``finetune_``). ``simulation_max_fail``:
       validation failures before a stage stops; ``simulation_l2``: λ of a λ‖θ‖² penalty on
       the LM sum of squares; ``simulation_curvature`` < 1: each LM epoch's JᵀJ from that
       share of the windows, drawn per epoch from ``seed`` (subsampled curvature; the gradient
@@ -879,6 +880,7 @@ class NarxModel(InputOutputModel):
             # why each stage ended (trainer's words: "validation", "max_epochs", "mu_max", ...),
             # so a stage that stalled is not read as one that converged
             "stops": [h.stop_reason for h in hists],
+            "stage_epochs": [h.epochs for h in hists],
             # the window lengths trained, as cut to the shortest run (not the ones asked for)
             "windows": [
                 n for n in (self._window_length(tab, w) for w in self.simulation_windows_) if n
