@@ -31,6 +31,7 @@ from nnid.errors import NnidInputError
 from nnid.evaluation.evaluate import evaluate
 from nnid.evaluation.prediction import Replay
 from nnid.models.base import encode_setting
+from nnid.reports.stops import training_stages
 from nnid.trainers.history import Progress, silent, staged
 
 
@@ -558,6 +559,9 @@ def run_compare(
             "seconds": seconds,
             "validation_used_for": model.validation_use,
             "warnings": caught,
+            # how each stage ended: a model whose fit stalled or ran out of epochs is not
+            # ranked as if it had converged without the page saying so
+            "training": training_stages(model.describe()),
         }
         if model.has_force_equation:
             train_force = evaluate(model, split.train, (), None, cfg.warmup_s)

@@ -12,6 +12,7 @@ from conftest import assert_rendered
 from typer.testing import CliRunner
 
 from nnid.cli import app
+from nnid.reports.stops import STOP_WORDS, TRAINING_TITLE
 
 ROOT = Path(__file__).resolve().parents[1]
 CONTRACT_VALIDATION = {"one_step_nrmse", "k_step_nrmse", "free_run_nrmse"}
@@ -184,6 +185,24 @@ def test_families_rank_four_model_kinds_on_one_held_out_run(families):
         assert m["validation_used_for"] == expected.get(
             m["kind"], "model selection" if m["kind"] == "sindy" else None
         )
+    # how each fit ended, per model: the one-solve fits have no stage, the iterative ones one
+    # entry per stage, each epoch count within the (test-shortened) budget of the config
+    stages = {m["name"]: m["training"] for m in comp["models"]}
+    assert stages["fossen_ls"] == [] and stages["sindy"] == []
+    assert [s["stage"] for s in stages["narx_lm"]] == ["one-step"]
+    assert 0 < stages["narx_lm"][0]["epochs"] <= 15 and stages["narx_adam"][0]["epochs"] <= 4
+    assert [s["stage"] for s in stages["state_space"]] == ["window 100"]
+    assert [s["stage"] for s in stages["hybrid"]] == ["segments of 0.5 s"]
+    for name, entries in stages.items():
+        for s in entries:
+            assert s["stop"] in STOP_WORDS and s["member"] is None, (name, s)
+    md = (families / "report.md").read_text()
+    table = md[md.index(f"## {TRAINING_TITLE}") :].split("\n\n")[1].splitlines()[2:]
+    assert [row.split(" | ")[0].strip("| ") for row in table] == [
+        n for n, entries in stages.items() for _ in entries
+    ]
+    narx_row = table[0]
+    assert narx_row.endswith(f"| {STOP_WORDS[stages['narx_lm'][0]['stop']]} |")
     best = comp["ranking"][0]
     assert comp["summary"].startswith(f"Use {best} ")
     free = [m["test"]["free_run_nrmse"]["total"] for m in comp["models"]]

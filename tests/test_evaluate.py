@@ -9,14 +9,8 @@ import pytest
 
 from nnid.evaluation.evaluate import evaluate
 from nnid.models.base import NnidModel
-from nnid.reports.train_report import (
-    RUNS_TITLE,
-    STOP_WORDS,
-    TRAINING_TITLE,
-    _training,
-    train_html,
-    train_markdown,
-)
+from nnid.reports.stops import STOP_WORDS, TRAINING_TITLE, UNDONE
+from nnid.reports.train_report import RUNS_TITLE, _training, train_html, train_markdown
 
 
 class Shifted(NnidModel):
@@ -100,7 +94,7 @@ def test_the_train_report_says_which_stage_stalled_diverged_or_was_undone():
         ["seed 3", "one-step", "100", STOP_WORDS["max_epochs"]],
         ["seed 3", "free run, 100-sample windows", "9", STOP_WORDS["validation"]],
         ["seed 3", "free run, 500-sample windows", "2", STOP_WORDS["mu_max"]],
-        ["seed 3", "free run", "11", "undone: validation error did not fall"],
+        ["seed 3", "free run", "11", UNDONE],
         ["seed 7", "one-step", "40", STOP_WORDS["validation"]],
     ]
     assert "stalled" in STOP_WORDS["mu_max"] and "diverged" in STOP_WORDS["non-finite loss"]

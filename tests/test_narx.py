@@ -17,7 +17,8 @@ from nnid.datasets.measurement import Measurement, relative_noise
 from nnid.datasets.simulator import experiment_inputs, simulate, simulate_config
 from nnid.errors import NnidInputError
 from nnid.models.narx import NarxModel
-from nnid.reports.train_report import STOP_WORDS, TRAINING_TITLE, train_markdown
+from nnid.reports.stops import STOP_WORDS, TRAINING_TITLE
+from nnid.reports.train_report import train_markdown
 from nnid.trainers.adam import Adam
 from nnid.trainers.levenberg_marquardt import LevenbergMarquardt
 from nnid.vehicle import load_vehicle

@@ -30,6 +30,7 @@ from nnid.reports.figures import (
     new_figure,
     page_head,
 )
+from nnid.reports.stops import TRAINING_TITLE, stage_cells
 
 MODES = (
     ("free_run_nrmse", "Free-run velocity NRMSE"),
@@ -174,6 +175,13 @@ def _tables(comparison: dict) -> list[tuple[str, list[str], list[list[str]]]]:
         out.append(
             ("Force error (McCarter Tables 5.1/5.2 for this data)", HEAD, table_rows(comparison))
         )
+    stages = [
+        [m["name"] + ("" if s["member"] is None else f" (seed {s['member']})"), *stage_cells(s)]
+        for m in comparison["models"]
+        for s in m.get("training", [])
+    ]
+    if stages:
+        out.append((TRAINING_TITLE, ["model", "stage", "epochs", "how it ended"], stages))
     return out
 
 

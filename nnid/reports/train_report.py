@@ -28,6 +28,7 @@ from nnid.reports.figures import (
     new_figure,
     page_head,
 )
+from nnid.reports.stops import TRAINING_TITLE, stage_cells, training_stages
 
 ERROR_KEYS = (
     ("free_run_nrmse", "free-run NRMSE"),
@@ -222,69 +223,14 @@ def _members(metrics: dict) -> tuple[list[str], list[list[str]]]:
     return head, rows
 
 
-#: a trainer's stop reason in words: whether the stage ended on a criterion of convergence,
-#: on a budget, or because it could not go on (a stalled or diverged stage is said plainly)
-STOP_WORDS = {
-    "validation": "early-stopped: the validation error stopped falling",
-    "goal": "reached the error goal",
-    "min_grad": "converged: gradient below its minimum",
-    "max_epochs": "ran out of epochs (no stop criterion met)",
-    "max_seconds": "ran out of time (no stop criterion met)",
-    "mu_max": "stalled: LM found no step that lowers the error (μ past its maximum)",
-    "non-finite loss": "diverged: the loss became non-finite",
-}
-
-TRAINING_TITLE = "How each training stage ended"
-
-
-def _stages(describe: dict) -> list[tuple[str, int | None, str]]:
-    """(stage, epochs, stop reason) of one fitted model from its ``describe`` entry: a NARX's
-    one-step stage and free-run stages, the windows of a neural state-space model, the
-    segments of a hybrid."""
-    out: list[tuple[str, int | None, str]] = []
-    history = describe.get("history")
-    if isinstance(history, dict):
-        out.append(("one-step", history.get("epochs"), history.get("stop_reason", "")))
-    finetune = describe.get("simulation_finetune") or {}
-    stops = finetune.get("stops", [])
-    epochs = finetune.get("stage_epochs") or [None] * len(stops)  # a model saved before them
-    for window, ran, stop in zip(finetune.get("windows", []), epochs, stops, strict=False):
-        out.append((f"free run, {window}-sample windows", ran, stop))
-    if finetune and not finetune.get("kept", True):
-        out.append(("free run", finetune.get("epochs"), "undone: validation error did not fall"))
-    for stage in describe.get("stages") or []:
-        if "window" in stage:
-            name = f"window {stage['window'] or 'whole runs'}"
-        else:
-            name = f"segments of {stage.get('segment_s')} s"
-        out.append((name, stage.get("epochs"), stage.get("stop_reason", "")))
-    return out
-
-
 def _training(metrics: dict) -> tuple[list[str], list[list[str]]]:
     """Why each training stage of the model (each ensemble member) ended, in words."""
-    describe = metrics.get("describe") or {}
-    models = [("", describe)]
-    if describe.get("members"):
-        models = [
-            (f"seed {seed}", member)
-            for seed, member in zip(describe["member_seeds"], describe["members"], strict=True)
-        ]
-    head = (
-        ["member", "stage", "epochs", "how it ended"]
-        if models[0][0]
-        else ["stage", "epochs", "how it ended"]
-    )
-    rows = []
-    for label, member in models:
-        for stage, epochs, stop in _stages(member):
-            cells = [
-                stage,
-                "-" if epochs is None else str(epochs),
-                STOP_WORDS.get(stop, stop or "-"),
-            ]
-            rows.append([label, *cells] if label else cells)
-    return head, rows
+    stages = training_stages(metrics.get("describe") or {})
+    members = any(s["member"] is not None for s in stages)
+    head = ["stage", "epochs", "how it ended"]
+    if members:
+        return ["member", *head], [[f"seed {s['member']}", *stage_cells(s)] for s in stages]
+    return head, [stage_cells(s) for s in stages]
 
 
 def _terms(metrics: dict) -> tuple[list[str], list[list[str]], str]:
