@@ -1,5 +1,6 @@
 """Scores of a split of several runs: each run's free-run NRMSE on its own beside the pooled one
-(``nnid.evaluation.evaluate``), and the train report's table of them."""
+(``nnid.evaluation.evaluate``), and the train report's tables: those scores, and how each
+training stage ended."""
 
 from __future__ import annotations
 

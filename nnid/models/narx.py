@@ -171,11 +171,11 @@ class NarxModel(InputOutputModel):
       ``["windows"]``: the lengths trained; ``["stops"]``, ``["stage_epochs"]``: why each stage
       ended, after how many epochs); early-stopped on the whole free runs of the validation
       experiments and kept only if that measure (each run's squared free-run NRMSE, averaged)
-      falls (``finetune_``). ``simulation_max_fail``:
-      validation failures before a stage stops; ``simulation_l2``: λ of a λ‖θ‖² penalty on
-      the LM sum of squares; ``simulation_curvature`` < 1: each LM epoch's JᵀJ from that
-      share of the windows, drawn per epoch from ``seed`` (subsampled curvature; the gradient
-      and the SSE that judges a step stay those of every window). ``simulation_run_floor``
+      falls (``finetune_``). ``simulation_max_fail``: validation failures before a stage
+      stops; ``simulation_l2``: λ of a λ‖θ‖² penalty on the LM sum of squares;
+      ``simulation_curvature`` < 1: each LM epoch's JᵀJ from that share of the windows, drawn
+      per epoch from ``seed`` (subsampled curvature; the gradient and the SSE that judges a
+      step stay those of every window). ``simulation_run_floor``
       (None: every window's error in the training std of each output): each training run's
       error in that run's own std of each output, floored at this share of the training std
       (an output the run leaves at its noise is not blown up), the units the validation runs
