@@ -66,6 +66,8 @@ def field_path(loc: tuple, data: Any) -> str:
         elif isinstance(node, list) and isinstance(step, int) and 0 <= step < len(node):
             out.append(str(step))
             node = node[step]
+        elif isinstance(node, list) and isinstance(step, str):
+            continue  # the union member a list matched ("list[...]"): its index follows
         else:
             break  # a leaf: what follows is pydantic's name of a union member
     return ".".join(out)
@@ -85,8 +87,18 @@ def validated(model: type[Model], data: dict[str, Any], source: str) -> Model:
     try:
         return model.model_validate(data)
     except ValidationError as err:
-        first = err.errors()[0]
+        errors = err.errors()
+        first = errors[0]
         field = field_path(tuple(first["loc"]), data)
+        if isinstance(first.get("input"), (dict, list)) and first["type"].endswith("_type"):
+            # a plain union (a number or a list of them) reports each member's error in turn;
+            # the member the value's type fits reaches into the value, and its error is the
+            # one that says what is wrong (an element, named by its index)
+            for other in errors[1:]:
+                path = field_path(tuple(other["loc"]), data)
+                if path.startswith(field + "."):
+                    first, field = other, path
+                    break
         msg = first["msg"].removeprefix("Value error, ")
         if first["type"] == "missing":
             msg = "is required but missing"

@@ -250,6 +250,8 @@ CONFIG_CASES = [
     # refused by the model at fit, named where the config sets it
     ("train", "narx input not in the log", "model.inputs", None),
     ("train", "narx bounds upside down", "model.output_bounds", None),
+    # a list where a number or a list is allowed: the element is named, not "a valid integer"
+    ("train", "narx delay list with a negative delay", "model.input_delays.1", None),
     ("train", "ensemble member output not in the log", "model.member.outputs", None),
     ("compare", "second model input not in the log", "models.1.inputs", None),
     # a sequence step's experiments and unknowns: the step's, not the model's own `unknowns`
@@ -285,6 +287,7 @@ _NARX = 'kind = "narx"\ninputs = ["tau_Z"]\noutputs = ["w"]\n'
 MODEL_TEXT = {
     "narx input not in the log": f"[model]\n{_NARX.replace('tau_Z', 'tau_Q')}",
     "narx bounds upside down": f"[model]\n{_NARX}output_bounds = [[1.0, 0.0]]\n",
+    "narx delay list with a negative delay": f"[model]\n{_NARX}input_delays = [0, -1]\n",
     "ensemble member output not in the log": (
         '[model]\nkind = "ensemble"\nseeds = [0, 1]\n[model.member]\n'
         + _NARX.replace('["w"]', '["heave"]')
