@@ -28,7 +28,7 @@ def _own_stages(describe: dict) -> list[dict]:
     history = describe.get("history")
     if isinstance(history, dict):
         out.append(
-            {"stage": "one-step", "epochs": history.get("epochs"), "stop": history["stop_reason"]}
+            {"stage": "one-step", "epochs": history["epochs"], "stop": history["stop_reason"]}
         )
     finetune = describe.get("simulation_finetune") or {}
     stops = finetune.get("stops", [])
@@ -42,7 +42,7 @@ def _own_stages(describe: dict) -> list[dict]:
             name = f"window {stage['window'] or 'whole runs'}"
         else:
             name = f"segments of {stage.get('segment_s')} s"
-        out.append({"stage": name, "epochs": stage.get("epochs"), "stop": stage["stop_reason"]})
+        out.append({"stage": name, "epochs": stage["epochs"], "stop": stage["stop_reason"]})
     return out
 
 
