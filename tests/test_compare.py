@@ -12,7 +12,7 @@ from conftest import assert_rendered
 from typer.testing import CliRunner
 
 from nnid.cli import app
-from nnid.reports.stops import STOP_WORDS, TRAINING_TITLE
+from nnid.reports.stops import STOP_WORDS, TRAINING_TITLE, stage_cells
 
 ROOT = Path(__file__).resolve().parents[1]
 CONTRACT_VALIDATION = {"one_step_nrmse", "k_step_nrmse", "free_run_nrmse"}
@@ -196,13 +196,15 @@ def test_families_rank_four_model_kinds_on_one_held_out_run(families):
     for name, entries in stages.items():
         for s in entries:
             assert s["stop"] in STOP_WORDS and s["member"] is None, (name, s)
+            assert 0 <= s["kept"] <= s["epochs"], (name, s)  # the epoch each stage kept
     md = (families / "report.md").read_text()
     table = md[md.index(f"## {TRAINING_TITLE}") :].split("\n\n")[1].splitlines()[2:]
     assert [row.split(" | ")[0].strip("| ") for row in table] == [
         n for n, entries in stages.items() for _ in entries
     ]
     narx_row = table[0]
-    assert narx_row.endswith(f"| {STOP_WORDS[stages['narx_lm'][0]['stop']]} |")
+    assert narx_row == "| " + " | ".join(["narx_lm", *stage_cells(stages["narx_lm"][0])]) + " |"
+    assert STOP_WORDS[stages["narx_lm"][0]["stop"]] in narx_row
     best = comp["ranking"][0]
     assert comp["summary"].startswith(f"Use {best} ")
     free = [m["test"]["free_run_nrmse"]["total"] for m in comp["models"]]

@@ -10,7 +10,7 @@ import pytest
 
 from nnid.evaluation.evaluate import evaluate
 from nnid.models.base import NnidModel
-from nnid.reports.stops import STOP_WORDS, TRAINING_TITLE, UNDONE
+from nnid.reports.stops import DROPPED, STILL_FALLING, STOP_WORDS, TRAINING_TITLE, UNDONE
 from nnid.reports.train_report import RUNS_TITLE, _training, train_html, train_markdown
 
 
@@ -78,43 +78,58 @@ def test_the_train_report_lists_each_held_out_run(runs):
 
 def test_the_train_report_says_which_stage_stalled_diverged_or_was_undone():
     # an ensemble of two NARX members (one's free-run stage stalled on LM's μ and was undone)
-    # beside a neural state-space model's windows and a hybrid's segments: every stage is a
-    # row, and a stop that is not convergence reads as such
+    # and a third dropped for a diverged validation free run, beside a neural state-space
+    # model's windows and a hybrid's segments: every stage is a row, a stop that is not
+    # convergence reads as such, and a stage that spent its budget says whether it was still
+    # improving at the end (kept epoch = last) or had levelled off
     first = {
-        "history": {"epochs": 100, "stop_reason": "max_epochs"},
+        "history": {"epochs": 100, "stop_reason": "max_epochs", "best_epoch": 100},
         "simulation_finetune": {
             "windows": [100, 500], "stops": ["validation", "mu_max"],
-            "stage_epochs": [9, 2], "epochs": 11, "kept": False,
+            "stage_epochs": [9, 2], "stage_best_epochs": [3, 1], "epochs": 11, "kept": False,
         },
     }  # fmt: skip
-    second = {"history": {"epochs": 40, "stop_reason": "validation"}, "simulation_finetune": None}
-    ensemble = {"describe": {"member_seeds": [3, 7], "members": [first, second]}}
+    second = {
+        "history": {"epochs": 40, "stop_reason": "max_epochs", "best_epoch": 31},
+        "simulation_finetune": None,
+    }
+    ensemble = {
+        "describe": {
+            "member_seeds": [3, 7], "members": [first, second],
+            "dropped_seeds_diverged_on_validation": [5],
+        }
+    }  # fmt: skip
     head, rows = _training(ensemble)
-    assert head == ["member", "stage", "epochs", "how it ended"]
+    assert head == ["member", "stage", "epochs", "kept epoch", "how it ended"]
     assert rows == [
-        ["seed 3", "one-step", "100", STOP_WORDS["max_epochs"]],
-        ["seed 3", "free run, 100-sample windows", "9", STOP_WORDS["validation"]],
-        ["seed 3", "free run, 500-sample windows", "2", STOP_WORDS["mu_max"]],
-        ["seed 3", "free run", "11", UNDONE],
-        ["seed 7", "one-step", "40", STOP_WORDS["validation"]],
+        ["seed 3", "one-step", "100", "100", STOP_WORDS["max_epochs"] + STILL_FALLING],
+        ["seed 3", "free run, 100-sample windows", "9", "3", STOP_WORDS["validation"]],
+        ["seed 3", "free run, 500-sample windows", "2", "1", STOP_WORDS["mu_max"]],
+        ["seed 3", "free run", "11", "0", UNDONE],
+        ["seed 7", "one-step", "40", "31", STOP_WORDS["max_epochs"]],
+        ["seed 5", "whole fit", "-", "-", DROPPED],
     ]
     assert "stalled" in STOP_WORDS["mu_max"] and "diverged" in STOP_WORDS["non-finite loss"]
+    # a model saved before the kept epochs were recorded: a dash, not a guess
+    old = {"history": {"epochs": 8, "stop_reason": "max_epochs"}, "simulation_finetune": None}
+    assert _training({"describe": old})[1] == [["one-step", "8", "-", STOP_WORDS["max_epochs"]]]
     staged = {
         "describe": {
             "stages": [
-                {"window": 64, "epochs": 30, "stop_reason": "max_epochs"},
-                {"window": None, "epochs": 3, "stop_reason": "non-finite loss"},
+                {"window": 64, "epochs": 30, "stop_reason": "max_epochs", "best_epoch": 30},
+                {"window": None, "epochs": 3, "stop_reason": "non-finite loss", "best_epoch": 2},
                 {"segment_s": 2.0, "epochs": 12, "stop_reason": "validation"},
             ]
         }
     }
     head, rows = _training(staged)
-    assert head == ["stage", "epochs", "how it ended"]
-    assert [r[:2] for r in rows] == [["window 64", "30"], ["window whole runs", "3"],
-                                     ["segments of 2.0 s", "12"]]  # fmt: skip
-    assert rows[1][2] == STOP_WORDS["non-finite loss"]
+    assert head == ["stage", "epochs", "kept epoch", "how it ended"]
+    assert [r[:3] for r in rows] == [["window 64", "30", "30"], ["window whole runs", "3", "2"],
+                                     ["segments of 2.0 s", "12", "-"]]  # fmt: skip
+    assert rows[0][3] == STOP_WORDS["max_epochs"] + STILL_FALLING
+    assert rows[1][3] == STOP_WORDS["non-finite loss"]
     text = train_markdown({"model": "nss", "params": {}, "seconds": 0.0, **staged})
-    assert f"## {TRAINING_TITLE}" in text and "| window whole runs | 3 | diverged" in text
+    assert f"## {TRAINING_TITLE}" in text and "| window whole runs | 3 | 2 | diverged" in text
     page = train_html({"model": "nss", "params": {}, "seconds": 0.0, "n_params": 0, **staged})
     assert TRAINING_TITLE in page and "<td>window whole runs</td>" in page
     # a model with no iterative stages (least squares) gets no section

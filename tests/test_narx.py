@@ -541,17 +541,25 @@ def test_simulation_windows_grow_in_stages_and_stop_on_the_whole_validation_run(
         ran = stages.count(stage)
         assert (stop == "max_epochs") == (ran == 4), (stage, stop, ran)
         assert stop in {"max_epochs", "validation", "mu_max", "min_grad", "goal"}
+    # each stage's kept epoch is the one of its best validation free run (0: none beat the start)
+    for w, best in zip((10, 60), model.finetune_["stage_best_epochs"], strict=True):
+        scores = [v for s, v in seen if s == f"{w} samples"]
+        assert 0 <= best <= len(scores)
+        assert best == 0 or scores[best - 1] == min(scores), (w, best, scores)
     # the train report says how each stage ended, in words, the one-step stage first
     report = train_markdown(
         {"model": "narx", "params": {}, "seconds": 0.0, "describe": model.describe()}
     )
     rows = report[report.index(TRAINING_TITLE) :].splitlines()[4:7]
-    expected = [("one-step", model.history_.epochs, model.history_.stop_reason)] + [
-        (f"free run, {w}-sample windows", stages.count(f"{w} samples"), stop)
-        for w, stop in zip((10, 60), model.finetune_["stops"], strict=True)
+    hist = model.history_
+    expected = [("one-step", hist.epochs, hist.best_epoch, hist.stop_reason)] + [
+        (f"free run, {w}-sample windows", stages.count(f"{w} samples"), best, stop)
+        for w, best, stop in zip(
+            (10, 60), model.finetune_["stage_best_epochs"], model.finetune_["stops"], strict=True
+        )
     ]
-    for row, (stage, ran, stop) in zip(rows, expected, strict=True):
-        assert row == f"| {stage} | {ran} | {STOP_WORDS[stop]} |", row
+    for row, (stage, ran, best, stop) in zip(rows, expected, strict=True):
+        assert row.startswith(f"| {stage} | {ran} | {best} | {STOP_WORDS[stop]}"), row
     (batch,) = model._whole_runs(model._table(val), val)
     assert batch[2].shape[1] == len(val) - model.warmup_samples_  # the whole run, one window
     with torch.no_grad():

@@ -881,6 +881,7 @@ class NarxModel(InputOutputModel):
             # so a stage that stalled is not read as one that converged
             "stops": [h.stop_reason for h in hists],
             "stage_epochs": [h.epochs for h in hists],
+            "stage_best_epochs": [h.best_epoch for h in hists],  # the epoch each stage kept
             # the window lengths trained, as cut to the shortest run (not the ones asked for)
             "windows": [
                 n for n in (self._window_length(tab, w) for w in self.simulation_windows_) if n

@@ -30,6 +30,7 @@ from nnid.reports.figures import (
     new_figure,
     page_head,
 )
+from nnid.reports.stops import HEAD as STOP_HEAD
 from nnid.reports.stops import TRAINING_TITLE, stage_cells
 
 MODES = (
@@ -181,7 +182,7 @@ def _tables(comparison: dict) -> list[tuple[str, list[str], list[list[str]]]]:
         for s in m.get("training", [])
     ]
     if stages:
-        out.append((TRAINING_TITLE, ["model", "stage", "epochs", "how it ended"], stages))
+        out.append((TRAINING_TITLE, ["model", "stage", *STOP_HEAD], stages))
     return out
 
 

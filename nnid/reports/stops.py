@@ -20,6 +20,14 @@ TRAINING_TITLE = "How each training stage ended"
 
 UNDONE = "undone: validation error did not fall"
 
+DROPPED = "dropped from the ensemble: its validation free run diverged"
+
+#: appended to a budget stop whose kept epoch is its last: the error still fell at the end
+STILL_FALLING = "; still improving at its last epoch"
+
+#: the columns of the stop table after the stage's name
+HEAD = ["epochs", "kept epoch", "how it ended"]
+
 
 def _own_stages(describe: dict) -> list[dict]:
     """A NARX's one-step stage and free-run stages, the windows of a neural state-space
@@ -27,40 +35,56 @@ def _own_stages(describe: dict) -> list[dict]:
     out: list[dict] = []
     history = describe.get("history")
     if isinstance(history, dict):
-        out.append(
-            {"stage": "one-step", "epochs": history["epochs"], "stop": history["stop_reason"]}
-        )
+        out.append(_stage("one-step", history["epochs"], history.get("best_epoch"),
+                          history["stop_reason"]))  # fmt: skip
     finetune = describe.get("simulation_finetune") or {}
     stops = finetune.get("stops", [])
-    epochs = finetune.get("stage_epochs") or [None] * len(stops)  # a model saved before them
-    for window, ran, stop in zip(finetune.get("windows", []), epochs, stops, strict=False):
-        out.append({"stage": f"free run, {window}-sample windows", "epochs": ran, "stop": stop})
+    # a model saved before the per-stage epochs (or the kept ones) were recorded has none
+    epochs = finetune.get("stage_epochs") or [None] * len(stops)
+    kept = finetune.get("stage_best_epochs") or [None] * len(stops)
+    for window, ran, best, stop in zip(finetune.get("windows", []), epochs, kept, stops,
+                                       strict=False):  # fmt: skip
+        out.append(_stage(f"free run, {window}-sample windows", ran, best, stop))
     if finetune and not finetune.get("kept", True):
-        out.append({"stage": "free run", "epochs": finetune.get("epochs"), "stop": UNDONE})
+        out.append(_stage("free run", finetune.get("epochs"), 0, UNDONE))
     for stage in describe.get("stages") or []:
         if "window" in stage:
             name = f"window {stage['window'] or 'whole runs'}"
         else:
             name = f"segments of {stage.get('segment_s')} s"
-        out.append({"stage": name, "epochs": stage["epochs"], "stop": stage["stop_reason"]})
+        out.append(_stage(name, stage["epochs"], stage.get("best_epoch"), stage["stop_reason"]))
     return out
+
+
+def _stage(name: str, epochs: int | None, kept: int | None, stop: str) -> dict:
+    return {"stage": name, "epochs": epochs, "kept": kept, "stop": stop}
 
 
 def training_stages(describe: dict) -> list[dict]:
     """Every training stage of a fitted model (of each member of an ensemble, ``member`` its
-    seed) as ``{"member", "stage", "epochs", "stop"}``, ``stop`` in the trainer's words."""
+    seed) as ``{"member", "stage", "epochs", "kept", "stop"}``: ``kept`` the epoch whose
+    parameters the stage kept (0: its start), ``stop`` in the trainer's words. An ensemble's
+    members dropped for a diverged validation free run are rows too, after the kept ones."""
     if describe.get("members"):
         pairs = zip(describe["member_seeds"], describe["members"], strict=True)
-        return [{"member": seed, **s} for seed, m in pairs for s in _own_stages(m)]
+        rows = [{"member": seed, **s} for seed, m in pairs for s in _own_stages(m)]
+        dropped = describe.get("dropped_seeds_diverged_on_validation") or []
+        return rows + [{"member": seed, **_stage("whole fit", None, None, DROPPED)}
+                       for seed in dropped]  # fmt: skip
     return [{"member": None, **s} for s in _own_stages(describe)]
 
 
 def stage_cells(stage: dict) -> list[str]:
-    """[stage, epochs, how it ended] of one entry of :func:`training_stages`."""
-    epochs = stage["epochs"]
-    stop = stage["stop"]
+    """[stage, epochs, kept epoch, how it ended] of one entry of :func:`training_stages`; a
+    stage that spent its budget says whether its error still fell at the end (kept epoch =
+    the last), so a budget too small is told from a stage that had levelled off."""
+    epochs, kept, stop = stage["epochs"], stage.get("kept"), stage["stop"]
+    words = STOP_WORDS.get(stop, stop or "-")
+    if stop in ("max_epochs", "max_seconds") and epochs and kept == epochs:
+        words += STILL_FALLING
     return [
         stage["stage"],
         "-" if epochs is None else str(epochs),
-        STOP_WORDS.get(stop, stop or "-"),
+        "-" if kept is None else str(kept),
+        words,
     ]

@@ -28,6 +28,7 @@ from nnid.reports.figures import (
     new_figure,
     page_head,
 )
+from nnid.reports.stops import HEAD as STOP_HEAD
 from nnid.reports.stops import TRAINING_TITLE, stage_cells, training_stages
 
 ERROR_KEYS = (
@@ -227,7 +228,7 @@ def _training(metrics: dict) -> tuple[list[str], list[list[str]]]:
     """Why each training stage of the model (each ensemble member) ended, in words."""
     stages = training_stages(metrics.get("describe") or {})
     members = any(s["member"] is not None for s in stages)
-    head = ["stage", "epochs", "how it ended"]
+    head = ["stage", *STOP_HEAD]
     if members:
         return ["member", *head], [[f"seed {s['member']}", *stage_cells(s)] for s in stages]
     return head, [stage_cells(s) for s in stages]
