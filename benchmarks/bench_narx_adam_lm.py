@@ -28,7 +28,7 @@ Per seed, one series-parallel LM initialisation (trainlm defaults on the one-ste
 shared by both trainers; then LM (sensitivity-recursion Jacobians, ``max_fail`` off) and Adam
 (constant rate, clipping at 1, no early stopping, capped) minimise the output error of the
 same fixed windows (``--window`` samples from measured delay states, every ``--every``-th
-window of ``NarxModel._fixed_windows``, which start every half window; Adam takes them in
+window of ``NarxModel.simulation_objective``, which start every half window; Adam takes them in
 shuffled mini-batches of ``batch`` windows), and are scored after every epoch on the
 validation runs' whole free run (the measure the NARX's free-run stages stop on: each run's
 outputs over that run's std, an output the run does not excite left out). Levels are
@@ -115,10 +115,14 @@ def net(case: str, trainer, seed: int, **kw) -> NarxModel:
                      seed=seed, **kw)  # fmt: skip
 
 
-def lm_trace(case: str, seed: int, train, val, max_epochs: int = 1000) -> Trace:
+def lm_fit(case: str, seed: int, train, val, max_epochs: int = 1000) -> NarxModel:
     lm = LevenbergMarquardt(max_epochs=max_epochs, jacobian="samples")
     model = net(case, lm, seed, lm_samples=SAMPLES)
-    model.fit(train, validation=val)
+    return model.fit(train, validation=val)
+
+
+def lm_trace(case: str, seed: int, train, val, max_epochs: int = 1000) -> Trace:
+    model = lm_fit(case, seed, train, val, max_epochs)
     return model.history_.time, model.history_.validation
 
 
@@ -192,10 +196,10 @@ def sim_start(case: str, seed: int, train, val, window: int, every: int):
     """The shared initialisation (one-step LM) and the batches of the simulation objective."""
     model = net(case, LevenbergMarquardt(jacobian="samples"), seed, lm_samples=SAMPLES)
     model.fit(train, validation=val)
+    obj = model.simulation_objective(train, window, val)  # the model's own free-run stage's
     # (delay states, inputs, targets), and the runs' weights when the net has a run floor
-    windows = tuple(x[::every] for x in model._fixed_windows(model._table(train), window))
-    runs = model._whole_runs(model._table(val), val)
-    return model, {k: v.clone() for k, v in model.net_.state_dict().items()}, windows, runs
+    windows = tuple(x[::every] for x in obj.windows)
+    return model, {k: v.clone() for k, v in obj.module.state_dict().items()}, windows, obj
 
 
 def sim_traces(
@@ -208,31 +212,32 @@ def sim_traces(
     ``lm_tau``: LM's starting μ is τ · max diag(JᵀJ) of its first system (Madsen, Nielsen &
     Tingleff 2004, section 3.2), not trainlm's 10⁻³ (that system built once more, untimed);
     ``lm_geodesic``: LM's steps with Transtrum & Sethna's geodesic acceleration."""
-    model, start, windows, runs = sim_start(case, seed, train, val, window, every)
+    model, start, windows, obj = sim_start(case, seed, train, val, window, every)
+    runs = obj.validation
     out = []
     n = windows[0].shape[0]
 
     def lm_batches(epoch: int) -> list:  # the draws of NarxModel's own LM stage (its seed)
-        idx = model._epoch_order(n, epoch)[: max(1, n // max(lm_subset, lm_curvature))]
+        idx = obj.order(n, epoch)[: max(1, n // max(lm_subset, lm_curvature))]
         return [tuple(x[idx] for x in windows)]
 
     mu = 1e-3
-    model.net_.load_state_dict(start)
+    obj.module.load_state_dict(start)
     if lm_tau is not None:
         first = lm_batches(0) if max(lm_subset, lm_curvature) > 1 else [windows]
         ne = LevenbergMarquardt().normal_equations(
-            model.net_, model._window_residual, first, jacobian_rows=model._simulation_rows
+            obj.module, obj.residual, first, jacobian_rows=obj.jacobian_rows
         )
         k = max(lm_subset, lm_curvature)  # a draw of 1/k of the windows stands for all
         mu = lm_tau * float(ne.jtj.diagonal().max()) * k
     lm = LevenbergMarquardt(
         max_epochs=SIM_LM_EPOCHS[case], max_fail=10**6, mu=mu, geodesic=lm_geodesic
     )
-    h = lm.fit(model.net_, model._window_residual, lm_batches if lm_subset > 1 else [windows],
-               runs, jacobian_rows=model._simulation_rows,
+    h = lm.fit(obj.module, obj.residual, lm_batches if lm_subset > 1 else [windows],
+               runs, jacobian_rows=obj.jacobian_rows,
                curvature_batches=lm_batches if lm_curvature > 1 else None)  # fmt: skip
     out.append({"seed": seed, "trainer": "lm", "trace": (h.time, h.validation),
-                "stop": h.stop_reason})  # fmt: skip
+                "stop": h.stop_reason, "n_params": model.n_params})  # fmt: skip
     for lr, b in grid:
         order = torch.Generator().manual_seed(seed)
 
@@ -240,9 +245,9 @@ def sim_traces(
             idx = torch.randperm(n, generator=order)
             return [tuple(x[i] for x in windows) for i in idx.split(b)]
 
-        model.net_.load_state_dict(start)
+        obj.module.load_state_dict(start)
         adam = Adam(lr=lr, max_epochs=10**9, schedule="constant", max_fail=10**6, max_seconds=cap)
-        h = adam.fit(model.net_, model._window_residual, batches, runs)
+        h = adam.fit(obj.module, obj.residual, batches, runs)
         out.append({"seed": seed, "trainer": "adam", "lr": lr, "batch": b,
                     "trace": (h.time, h.validation)})  # fmt: skip
     return out
@@ -273,7 +278,7 @@ def train_case(case: str, seeds: Sequence[int], cap: float, grid: list[tuple[flo
     """LM and the Adam grid on one case; the histories and the load average around them."""
     load0 = os.getloadavg()[0]
     train, val = data(case)
-    lm_trace(case, 0, train, val, max_epochs=2)  # warm-up, not timed
+    n_params = lm_fit(case, 0, train, val, max_epochs=2).n_params  # warm-up, not timed
     adam_trace(case, 0, 1e-2, 256, math.inf, train, val, epochs=2)
     runs = []
     for s in seeds:  # interleaved, so that load changes hit both trainers alike
@@ -281,7 +286,8 @@ def train_case(case: str, seeds: Sequence[int], cap: float, grid: list[tuple[flo
         for lr, b in grid:
             tr = adam_trace(case, s, lr, b, cap, train, val)
             runs.append({"seed": s, "trainer": "adam", "lr": lr, "batch": b, "trace": tr})
-    return {"case": case, "cap": cap, "load": [load0, os.getloadavg()[0]], "runs": runs}
+    return {"case": case, "cap": cap, "load": [load0, os.getloadavg()[0]], "runs": runs,
+            "n_params": n_params}  # fmt: skip
 
 
 def train_sim_case(
@@ -297,8 +303,8 @@ def train_sim_case(
             lm_geodesic,
         )  # fmt: skip
     return {"case": case, "cap": cap, "load": [load0, os.getloadavg()[0]], "runs": runs,
-            "objective": "simulation", "window": window, "every": every,
-            "data": source}  # fmt: skip
+            "n_params": runs[0]["n_params"], "objective": "simulation", "window": window,
+            "every": every, "data": source}  # fmt: skip
 
 
 def report(res: dict) -> None:
@@ -342,9 +348,7 @@ def report(res: dict) -> None:
     fixed = min(grid, key=lambda g: med[g])
 
     d, h = c["delays"], c["hidden"]
-    shape = net(case, None, 0)
-    shape._configure()
-    n_par = sum(p.numel() for p in shape._new_net().parameters())
+    n_par = res["n_params"]  # of a fitted net (weights and biases)
     names = " ".join(x.removeprefix("tau_") for x in c["inputs"])
     data_text = (
         "the surge run, validation on "

@@ -10,6 +10,7 @@ import numpy as np
 import pandas as pd
 import pytest
 import torch
+from sklearn.exceptions import NotFittedError
 
 from nnid import load_model
 from nnid.config import Experiment, SimulateConfig, load_config
@@ -719,3 +720,46 @@ def test_lm_free_run_stage_with_subsampled_curvature_draws_its_share_per_epoch(m
     for bad in (0.0, 1.5):
         with pytest.raises(NnidInputError, match="simulation_curvature"):
             NarxModel(["u"], ["y"], simulation_curvature=bad).fit(train)
+
+
+def test_simulation_objective_is_the_one_the_free_run_stage_trained():
+    # The public objective (for a trainer of one's own: benchmarks/bench_narx_adam_lm.py) is the
+    # stage's own: its validation measure is the one the stage was kept on, and its windows end
+    # at each experiment's last sample and every half window before it, in measured outputs.
+    a, b = _tank(300, 1.3, 4), _tank(200, 1.3, 5)
+    train = pd.concat([a.assign(experiment="a"), b.assign(experiment="b")], ignore_index=True)
+    val = _tank(250, 1.3, 6).assign(experiment="v")
+    model = NarxModel(
+        ["u"], ["y"], 2, 2, hidden=(3,), balanced=False, lm_samples=300,
+        trainer=LevenbergMarquardt(max_epochs=5, jacobian="samples"),
+        simulation_epochs=3, simulation_window=40, simulation_trainer="lm",
+    )  # fmt: skip
+    with pytest.raises(NotFittedError, match="not fitted"):
+        model.simulation_objective(train, 40)
+    model.fit(train, val)
+    obj = model.simulation_objective(train, 40, val)
+    assert obj.module is model.net_
+    with torch.no_grad():
+        r = torch.cat(
+            [obj.residual(dict(obj.module.named_parameters()), v) for v in obj.validation]
+        )
+    measure = float(r @ r) / r.numel()
+    tune = model.finetune_
+    kept = tune["validation_mean_squared_nrmse_after" if tune["kept"] else
+                "validation_mean_squared_nrmse_before"]  # fmt: skip
+    assert measure == pytest.approx(kept, rel=1e-12)
+    hist, uf, y = obj.windows
+    assert y.shape[1] == 40 and hist.shape[1:] == (2, 1) and uf.shape[:2] == y.shape[:2]
+    # windows end every 20 samples back from each run's end, none before the delay states
+    per_run = [(300 - 2 - 40) // 20 + 1, (200 - 2 - 40) // 20 + 1]
+    assert y.shape[0] == sum(per_run)
+    std, mean = model.net_.y_std.numpy(), model.net_.y_mean.numpy()
+    last = [per_run[0] - 1, sum(per_run) - 1]  # each run's windows, earliest first
+    for k, run in zip(last, (a, b), strict=True):
+        np.testing.assert_allclose(y[k, :, 0].numpy() * std + mean, run["y"].to_numpy()[-40:])
+    assert sorted(obj.order(5, 0).tolist()) == list(range(5))
+    assert obj.order(5, 1).tolist() == model.simulation_objective(train, 40).order(5, 1).tolist()
+    with pytest.raises(NnidInputError, match="window"):
+        model.simulation_objective(train, 1)
+    with pytest.raises(NnidInputError, match="warm-up"):
+        model.simulation_objective(train.iloc[:2], 40)

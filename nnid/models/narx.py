@@ -55,13 +55,15 @@ from __future__ import annotations
 
 import functools
 import warnings
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 import pandas as pd
 import torch
 from sklearn.base import clone
+from sklearn.utils.validation import check_is_fitted
 from torch import nn
 from torch.func import functional_call
 
@@ -72,6 +74,7 @@ from nnid.datasets.splits import split_log
 from nnid.errors import NnidInputError
 from nnid.evaluation.evaluate import target_columns
 from nnid.models import narx_kernel
+from nnid.models.base import NOT_FITTED
 from nnid.models.bounds import OutputBounds, bound_arrays, check_bounds, resolve_bounds
 from nnid.models.io_model import DTYPE, InputOutputModel, seeded_linear
 from nnid.serialization import jsonable
@@ -94,6 +97,33 @@ def _pairs(m: int) -> tuple[np.ndarray, np.ndarray]:
 def _pairs_t(m: int) -> tuple[torch.Tensor, torch.Tensor]:
     """:func:`_pairs` as index tensors (numpy indices are converted on every use)."""
     return tuple(torch.as_tensor(x.copy()) for x in _pairs(m))
+
+
+@dataclass(frozen=True)
+class SimulationObjective:
+    """The simulation-error (free-run) objective of a NARX network, in the form the trainers
+    take (:meth:`nnid.trainers.levenberg_marquardt.LevenbergMarquardt.fit`,
+    :meth:`nnid.trainers.adam.Adam.fit`): what :meth:`NarxModel.simulation_objective` returns,
+    so that a study of training (``benchmarks/bench_narx_adam_lm.py``) runs the model's own
+    objective with a trainer of its own.
+
+    ``module``: the network, trained in place. ``windows``: one batch of every training window
+    (delay states [B, dy, m], input features [B, L, ·], measured outputs [B, L, m] and, with
+    ``simulation_run_floor``, output weights [B, 1, m]); index each tensor alike to take a
+    subset. ``residual(params, batch)``: the flat (weighted) free-run error of a batch of
+    windows or of validation runs. ``jacobian_rows``: its Jacobian by the sensitivity
+    recursion (LM's ``jacobian_rows``). ``validation``: one batch per validation run, its
+    whole free run weighted by 1 / each excited output's std over the run, so the mean square
+    is the early-stopping measure of the model's own stages (None without a validation log).
+    ``order(n, epoch)``: the seeded permutation of n windows the model's stages use at that
+    epoch."""
+
+    module: nn.Module
+    windows: tuple[torch.Tensor, ...]
+    residual: Callable[[dict[str, torch.Tensor], tuple], torch.Tensor]
+    jacobian_rows: Callable[..., Iterator[tuple[torch.Tensor, torch.Tensor]]]
+    validation: list[tuple] | None
+    order: Callable[[int, int], torch.Tensor]
 
 
 def _delays(d: int | Sequence[int], minimum: int, what: str) -> list[int]:
@@ -960,31 +990,65 @@ class NarxModel(InputOutputModel):
         gen = torch.Generator().manual_seed(int(self.seed) * 100_003 + epoch)
         return torch.randperm(n, generator=gen)
 
+    def simulation_objective(
+        self, log: pd.DataFrame, window: int, validation: pd.DataFrame | None = None
+    ) -> SimulationObjective:
+        """The simulation-error objective the free-run stages train (:class:`SimulationObjective`)
+        on ``log``'s windows of ``window`` samples (cut to its shortest experiment after the
+        warm-up; ending at each experiment's last sample and every half window before it),
+        early-stopped on ``validation``'s whole free runs; at the fitted network's
+        normalisation. Raises when no experiment of ``log`` is longer than the warm-up."""
+        check_is_fitted(self, msg=NOT_FITTED)
+        if int(window) < 2:
+            raise NnidInputError("window is a length ≥ 2 (samples)", field="window")
+        self._check(log)
+        val = None
+        if validation is not None:
+            self._check(validation)
+            val = self._whole_runs(self._table(validation), validation)
+        obj = self._objective(self._table(log), val, int(window))
+        if obj is None:
+            raise NnidInputError(
+                f"no experiment is longer than the warm-up ({self.warmup_samples_} samples)",
+                field="window",
+            )
+        return obj
+
+    def _objective(self, tab, val: list[tuple] | None, length: int) -> SimulationObjective | None:
+        windows = self._fixed_windows(tab, length)
+        if windows is None:
+            return None
+        return SimulationObjective(
+            self.net_, windows, self._window_residual, self._simulation_rows, val,
+            self._epoch_order,
+        )  # fmt: skip
+
     def _simulation_lm(self, tab, val, progress: Progress, length: int) -> History | None:
         from nnid.trainers.levenberg_marquardt import LevenbergMarquardt
 
-        train = self._fixed_windows(tab, length)
-        if train is None:
+        obj = self._objective(tab, val, length)
+        if obj is None:
             return None
         trainer = LevenbergMarquardt(
             max_epochs=int(self.simulation_epochs),
             max_fail=int(self.simulation_max_fail),
             l2=float(self.simulation_l2),
         )
+        train = obj.windows
         n = train[0].shape[0]
         share = float(self.simulation_curvature)
 
         def curvature(epoch: int) -> list:
-            idx = self._epoch_order(n, epoch)[: max(1, round(share * n))]
+            idx = obj.order(n, epoch)[: max(1, round(share * n))]
             return [tuple(x[idx] for x in train)]
 
         return trainer.fit(
-            self.net_,
-            self._window_residual,
+            obj.module,
+            obj.residual,
             [train],
-            val,
+            obj.validation,
             progress=progress,
-            jacobian_rows=self._simulation_rows,
+            jacobian_rows=obj.jacobian_rows,
             curvature_batches=curvature if share < 1.0 else None,
         )
 
@@ -995,21 +1059,20 @@ class NarxModel(InputOutputModel):
         a good one-step start; a pass over every run does (benchmarks/RESULTS.md)."""
         from nnid.trainers.adam import Adam
 
-        windows = self._fixed_windows(tab, length)
-        if windows is None:
+        obj = self._objective(tab, val, length)
+        if obj is None:
             return None
-        n = windows[0].shape[0]
+        n = obj.windows[0].shape[0]
 
         def batches(epoch: int) -> list:
-            order = self._epoch_order(n, epoch)
-            return [tuple(x[idx] for x in windows) for idx in order.split(32)]
+            return [tuple(x[idx] for x in obj.windows) for idx in obj.order(n, epoch).split(32)]
 
         trainer = Adam(
             lr=self.simulation_lr,
             max_epochs=self.simulation_epochs,
             max_fail=self.simulation_max_fail,
         )
-        return trainer.fit(self.net_, self._window_residual, batches, val, progress=progress)
+        return trainer.fit(obj.module, obj.residual, batches, obj.validation, progress=progress)
 
     # -- prediction ------------------------------------------------------------------------------
     def _predict(self, log: pd.DataFrame, mode: str | int) -> pd.DataFrame:
