@@ -27,7 +27,7 @@ Data, splits and warm-ups.
   delay states are the measured outputs of the first ``max_lag`` samples, inside the warm-up.
 - ``seamor``: the data of ``configs/seamor_narx_lm.toml`` exactly as ``nnid train`` builds them
   (:func:`nnid.pipeline.load_inputs`, :func:`nnid.pipeline.make_split`: the simulated Seamor runs
-  with 1 % noise, split by experiment into the config's test run, validation run and training runs;
+  with 1 % noise, split by experiment into the config's test run, validation runs and training runs;
   the run names are printed and saved with the rows). Inputs tau_X tau_Y tau_Z tau_N, outputs u v w
   r. Score = free-run NRMSE per output (RMSE / std of the measured output,
   :func:`nnid.evaluation.evaluate.score_prediction`, the function behind ``metrics.json``) over the
@@ -39,9 +39,9 @@ Data, splits and warm-ups.
   outputs). Each run checks the co-simulation against SysIdentPy's ``model.predict`` with the other
   outputs fed measured (``cosim_check``: the largest difference over the std of the output plus the
   size of the prediction, so that a diverging run is compared relatively). SysIdentPy takes one
-  record: the training runs are concatenated, so the ``max_lag`` rows after each junction (≤ 4 × 11
-  of 57,612 with the current config) have lagged values from the end of the previous run (each run
-  starts at rest).
+  record: the training runs are concatenated, so the ``max_lag`` rows after each junction (≤ 4 × 21
+  of 147,622 with the current config's 22 training runs) have lagged values from the end of the
+  previous run (each run starts at rest).
 
 Selection. No setting sees the test data. FROLS: a small grid (:data:`FROLS_GRID`, least
 squares; polynomial degree, lags, model size by AIC or by ``err_tol``) scored on a validation
@@ -70,8 +70,9 @@ accept are set after construction (:func:`make_narxnn`).
 nnid: :func:`nnid_rows`, the NARX and the neural state-space model as
 ``benchmarks/bench_nlbench.py`` sets them for the nlbench cases (its ``SETTINGS`` and
 ``run``; the test error of several seeds is their ensemble where the setting has one, else
-the median); for Seamor the NARX of ``configs/seamor_narx_lm.toml`` fitted through the library
-as ``nnid train`` does (:data:`SEAMOR_NNID_CONFIGS`; a state-space config can be added there):
+the median); for Seamor the NARX of ``configs/seamor_narx_lm.toml`` and of
+``configs/seamor_narx_adam.toml`` fitted through the library as ``nnid train`` does
+(:data:`SEAMOR_NNID_CONFIGS`; a state-space config can be added there):
 once per seed for a single-net config, once for an ensemble config (its own seeds).
 
 Run: ``python benchmarks/bench_peers.py [cascaded_tanks silverbox seamor] [--seeds 0,1,2]

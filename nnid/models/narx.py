@@ -14,8 +14,9 @@ columns (body velocities u v w r ...).
 
 * **Series-parallel** (open-loop, teacher-forced) training on one-step targets, or on a
   ``multi_step`` horizon (closed loop over K steps from measured delay states).
-* **Parallel** (closed-loop) free run: the network fed its own outputs; a lean numpy loop on a
-  preallocated buffer (input contributions of the first layer precomputed in one matmul).
+* **Parallel** (closed-loop) free run: the network fed its own outputs; without gradients
+  through the compiled kernel :func:`nnid.models.narx_kernel.free_run` (input contributions of
+  the first layer precomputed in one matmul), with gradients through torch.
 * **Simulation-error (parallel) training** (``simulation_epochs``): after the series-parallel
   (one-step) initialisation, LM or Adam on the output error of free runs over windows cut
   from every training experiment, each started from measured delay states; windows may grow
@@ -34,9 +35,10 @@ columns (body velocities u v w r ...).
 * **Levenberg-Marquardt on simulation error** (``simulation_trainer="lm"``): on deterministic
   windows, the Jacobian of the closed loop by its sensitivity recursion
   (:meth:`NarxModel._simulation_rows`): written-out local Jacobians of every step in one
-  batched pass, then a linear recursion in time (about 2× a one-step LM iteration on as many
-  rows, where forward mode, one closed-loop pass per parameter, costs 16-25×;
-  ``benchmarks/bench_narx_simulation.py``).
+  batched pass, then a linear recursion in time (1.1-2.6× a one-step LM iteration on as many
+  rows, where forward mode, one closed-loop pass per parameter, costs 15-38×;
+  ``benchmarks/bench_narx_simulation.py``). :meth:`NarxModel.simulation_objective` hands the
+  same objective to a trainer of one's own.
 * **Output transform** (off by default): extra regressors computed from every lagged output,
   standardised, inside the closed loop too; still a NARX. ``"sqrt"``: √max(y(k − d_y), 0) of
   each output (in its units), e.g. Torricelli's outflow of a tank. ``"products"``: the
