@@ -439,3 +439,22 @@ def test_add_gram_accumulates_the_normal_equations_block_by_block(threads):
         add_gram(jtj, jtr, jac[300:].T.contiguous().T, r[300:])  # column-major rows too
     np.testing.assert_allclose(jtj.numpy(), 2.0 + jac.numpy().T @ jac.numpy(), atol=1e-10)
     np.testing.assert_allclose(jtr.numpy(), -1.0 + jac.numpy().T @ r.numpy(), atol=1e-10)
+
+
+def test_without_validation_the_kept_epoch_is_the_last_accepted_step() -> None:
+    # A linear least-squares problem: LM reaches the minimum in a few steps, then every step
+    # is rejected (no lower SSE exists) until μ passes its maximum. The parameters kept are
+    # those of the last accepted step, and best_epoch says which epoch that was, not the last
+    # epoch run (the train report reads a budget stop at best_epoch = epochs as "still
+    # improving").
+    gen = torch.Generator().manual_seed(0)
+    x = torch.rand(40, 1, generator=gen, dtype=torch.float64)
+    y = 3 * x - 1 + 0.1 * torch.randn(x.shape, generator=gen, dtype=torch.float64)
+    net = torch.nn.Linear(1, 1).double()
+    residual = _regression_residual(net)
+    hist = LevenbergMarquardt(max_epochs=40, min_grad=0.0, mu_max=1e6).fit(net, residual, [(x, y)])
+    mu = hist.extra["mu"]
+    accepted = [k for k in range(1, len(mu)) if mu[k] < mu[k - 1]]
+    assert accepted and hist.best_epoch == accepted[-1] < hist.epochs
+    assert hist.train[hist.best_epoch] == min(hist.train)
+    assert hist.stop_reason in {"mu_max", "max_epochs"}

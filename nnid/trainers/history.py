@@ -42,7 +42,8 @@ class History:
     ``train[k]`` and ``validation[k]`` are the mean-square residuals after epoch k (k = 0: the
     start); ``validation`` is empty without validation data. ``time[k]`` is the cumulative wall
     time in seconds at entry k. ``best_epoch`` is the epoch whose parameters were kept (the best
-    validation error when there is validation data, else the last). ``extra`` holds per-epoch
+    validation error when there is validation data, else the lowest training error; for LM
+    its last accepted step, since a rejected one changes nothing). ``extra`` holds per-epoch
     series of one trainer (``mu``, ``gradient``, ``lr``) and ``info`` scalar facts (the largest
     Jacobian block held, ...).
     """

@@ -579,6 +579,7 @@ class LevenbergMarquardt(BaseEstimator):
         best_theta = theta.clone()
         fails = 0
         epoch = 0
+        last_accepted = 0  # without validation, the epoch whose parameters are kept
         stop = ""
         mse = math.nan
         # A trial is judged against the SSE of the current point computed by the same code path
@@ -650,6 +651,8 @@ class LevenbergMarquardt(BaseEstimator):
                 else:
                     mu *= self.mu_inc
             epoch += 1
+            if accepted:
+                last_accepted = epoch
             v = val_mse(theta) if accepted else (hist.validation[-1] if use_val else None)
             if use_val and accepted:
                 if v < best_val:
@@ -669,8 +672,8 @@ class LevenbergMarquardt(BaseEstimator):
             )
         if use_val:
             theta = best_theta
-        else:
-            hist.best_epoch = hist.epochs
+        else:  # a rejected step leaves θ as it was: the last accepted one is what is kept
+            hist.best_epoch = last_accepted
         self._write_back(module, theta)
         hist.stop_reason = stop
         hist.info = {
