@@ -348,7 +348,7 @@ def report(res: dict) -> None:
     fixed = min(grid, key=lambda g: med[g])
 
     d, h = c["delays"], c["hidden"]
-    n_par = res["n_params"]  # of a fitted net (weights and biases)
+    n_par = res.get("n_params")  # of a fitted net; histories saved before it was recorded: none
     names = " ".join(x.removeprefix("tau_") for x in c["inputs"])
     data_text = (
         "the surge run, validation on "
@@ -364,8 +364,9 @@ def report(res: dict) -> None:
     load0, load1 = res["load"]
     extra = f', `output_transform = "{c["transform"]}"`' if c.get("transform") else ""
     print(
-        f"### {h} nodes, {d} delays, {names} → {' '.join(c['outputs'])}{extra} "
-        f"({n_par} parameters)\n"
+        f"### {h} nodes, {d} delays, {names} → {' '.join(c['outputs'])}{extra}"
+        + (f" ({n_par} parameters)" if n_par is not None else "")
+        + "\n"
     )
     what = (
         f"free-run MSE of the whole validation runs (each run's outputs over that run's std, "
