@@ -759,7 +759,9 @@ def test_simulation_objective_is_the_one_the_free_run_stage_trained():
         np.testing.assert_allclose(y[k, :, 0].numpy() * std + mean, run["y"].to_numpy()[-40:])
     assert sorted(obj.order(5, 0).tolist()) == list(range(5))
     assert obj.order(5, 1).tolist() == model.simulation_objective(train, 40).order(5, 1).tolist()
-    with pytest.raises(NnidInputError, match="window"):
-        model.simulation_objective(train, 1)
+    for bad in (1, 2.5, "40", True):  # never truncated or parsed: a whole number of samples
+        with pytest.raises(NnidInputError, match="window is a whole number"):
+            model.simulation_objective(train, bad)
+    assert model.simulation_objective(train, np.int64(40)).windows[0].shape == obj.windows[0].shape
     with pytest.raises(NnidInputError, match="warm-up"):
         model.simulation_objective(train.iloc[:2], 40)

@@ -56,6 +56,7 @@ columns (body velocities u v w r ...).
 from __future__ import annotations
 
 import functools
+import numbers
 import warnings
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
@@ -1001,8 +1002,11 @@ class NarxModel(InputOutputModel):
         early-stopped on ``validation``'s whole free runs; at the fitted network's
         normalisation. Raises when no experiment of ``log`` is longer than the warm-up."""
         check_is_fitted(self, msg=NOT_FITTED)
-        if int(window) < 2:
-            raise NnidInputError("window is a length ≥ 2 (samples)", field="window")
+        # a whole number of samples, never truncated: 2.5 would silently train 2-sample windows
+        if isinstance(window, bool) or not isinstance(window, numbers.Integral) or window < 2:
+            raise NnidInputError(
+                f"window is a whole number of samples ≥ 2, got {window!r}", field="window"
+            )
         self._check(log)
         val = None
         if validation is not None:
