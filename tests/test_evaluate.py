@@ -85,8 +85,11 @@ def test_the_train_report_says_which_stage_stalled_diverged_or_was_undone():
     first = {
         "history": {"epochs": 100, "stop_reason": "max_epochs", "best_epoch": 100},
         "simulation_finetune": {
-            "windows": [100, 500], "stops": ["validation", "mu_max"],
-            "stage_epochs": [9, 2], "stage_best_epochs": [3, 1], "epochs": 11, "kept": False,
+            "stages": [
+                {"window": 100, "epochs": 9, "best_epoch": 3, "stop_reason": "validation"},
+                {"window": 500, "epochs": 2, "best_epoch": 1, "stop_reason": "mu_max"},
+            ],
+            "epochs": 11, "kept": False,
         },
     }  # fmt: skip
     second = {

@@ -289,7 +289,8 @@ def test_simulation_error_levenberg_marquardt_lowers_free_run_error():
     model.fit(train, train)
     ft = model.finetune_
     assert ft["kept"] and ft["epochs"] >= 1
-    assert ft["windows"] == [len(train) - model.warmup_samples_]  # 10,000 asked: the whole run
+    # 10,000 asked: the whole run
+    assert [s["window"] for s in ft["stages"]] == [len(train) - model.warmup_samples_]
     assert ft["validation_free_run_nrmse_after"] < 0.8 * ft["validation_free_run_nrmse_before"]
     assert model.score(train)["y"] == pytest.approx(ft["validation_free_run_nrmse_after"])
 
@@ -514,7 +515,7 @@ def test_run_floor_scores_each_training_window_in_its_own_runs_std():
             NarxModel(["a"], ["y1"], simulation_run_floor=bad).fit(plant)
 
 
-def test_simulation_windows_grow_in_stages_and_stop_on_the_whole_validation_run():
+def test_simulation_windows_grow_in_stages_and_stop_on_the_whole_validation_run(tmp_path):
     # windows of 10, then 60 samples; each stage early-stopped on the whole free run of the
     # validation record, whose MSE (normalised units) is what the progress reports
     train, val = _tank(400, 1.3, 2), _tank(300, 1.3, 3)
@@ -533,18 +534,21 @@ def test_simulation_windows_grow_in_stages_and_stop_on_the_whole_validation_run(
     stages = [s for s, _ in seen]
     assert stages[0] == "10 samples" and stages[-1] == "60 samples"
     assert stages == sorted(stages, key=lambda s: int(s.split()[0]))  # short windows first
-    assert model.finetune_["epochs"] == len(seen) == sum(model.finetune_["stage_epochs"])
-    assert model.finetune_["stage_epochs"] == [stages.count(f"{w} samples") for w in (10, 60)]
-    assert model.finetune_["windows"] == [10, 60]
+    records = model.finetune_["stages"]  # one History record per window length
+    assert [s["window"] for s in records] == [10, 60]
+    assert model.finetune_["epochs"] == len(seen) == sum(s["epochs"] for s in records)
+    assert [s["epochs"] for s in records] == [stages.count(f"{w} samples") for w in (10, 60)]
     # each stage's stop reason, in the trainer's words: a stage ran out of epochs exactly when
     # it says so, and any other stop is one of LM's own
-    for stage, stop in zip(("10 samples", "60 samples"), model.finetune_["stops"], strict=True):
-        ran = stages.count(stage)
+    for stage, record in zip(("10 samples", "60 samples"), records, strict=True):
+        ran, stop = stages.count(stage), record["stop_reason"]
         assert (stop == "max_epochs") == (ran == 4), (stage, stop, ran)
         assert stop in {"max_epochs", "validation", "mu_max", "min_grad", "goal"}
-    # each stage's kept epoch is the one of its best validation free run (0: none beat the start)
-    for w, best in zip((10, 60), model.finetune_["stage_best_epochs"], strict=True):
-        scores = [v for s, v in seen if s == f"{w} samples"]
+    # each stage's kept epoch is the one of its best validation free run (0: none beat the
+    # start), and its per-epoch validation errors are the ones the progress callback saw
+    for w, record in zip((10, 60), records, strict=True):
+        scores, best = [v for s, v in seen if s == f"{w} samples"], record["best_epoch"]
+        assert record["validation"][1:] == pytest.approx(scores, rel=1e-12)
         assert 0 <= best <= len(scores)
         assert best == 0 or scores[best - 1] == min(scores), (w, best, scores)
     # the train report says how each stage ended, in words, the one-step stage first
@@ -554,13 +558,32 @@ def test_simulation_windows_grow_in_stages_and_stop_on_the_whole_validation_run(
     rows = report[report.index(TRAINING_TITLE) :].splitlines()[4:7]
     hist = model.history_
     expected = [("one-step", hist.epochs, hist.best_epoch, hist.stop_reason)] + [
-        (f"free run, {w}-sample windows", stages.count(f"{w} samples"), best, stop)
-        for w, best, stop in zip(
-            (10, 60), model.finetune_["stage_best_epochs"], model.finetune_["stops"], strict=True
-        )
-    ]
+        (f"free run, {w}-sample windows", stages.count(f"{w} samples"), s["best_epoch"],
+         s["stop_reason"])
+        for w, s in zip((10, 60), records, strict=True)
+    ]  # fmt: skip
     for row, (stage, ran, best, stop) in zip(rows, expected, strict=True):
         assert row.startswith(f"| {stage} | {ran} | {best} | {STOP_WORDS[stop]}"), row
+    # a model saved before the stages were one list (per-stage parallel lists, the oldest
+    # without the epochs) loads into today's shape, and its report leaves unknowns a dash
+    model.save(tmp_path)
+    saved = json.loads((tmp_path / "model.json").read_text())
+    old = {k: v for k, v in saved["state"]["simulation_finetune"].items() if k != "stages"}
+    old |= {"windows": [10, 60], "stops": [s["stop_reason"] for s in records]}
+    saved["state"]["simulation_finetune"] = old
+    (tmp_path / "model.json").write_text(json.dumps(saved))
+    back = load_model(tmp_path).finetune_
+    assert back["stages"] == [
+        {"window": w, "stop_reason": s["stop_reason"]}
+        for w, s in zip((10, 60), records, strict=True)
+    ]
+    assert (back["epochs"], back["kept"]) == (model.finetune_["epochs"], True)
+    rows = train_markdown(
+        {"model": "narx", "params": {}, "seconds": 0.0,
+         "describe": {"simulation_finetune": back}}
+    )  # fmt: skip
+    for w, s in zip((10, 60), records, strict=True):
+        assert f"| free run, {w}-sample windows | - | - | {STOP_WORDS[s['stop_reason']]}" in rows
     (batch,) = model._whole_runs(model._table(val), val)
     assert batch[2].shape[1] == len(val) - model.warmup_samples_  # the whole run, one window
     with torch.no_grad():

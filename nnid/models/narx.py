@@ -181,6 +181,27 @@ class NarxNet(nn.Module):
         return self.mlp(phi)
 
 
+def _finetune_as_stages(finetune: dict | None) -> dict | None:
+    """``finetune_`` as saved, in today's shape: a record saved before the free-run stages were
+    one ``stages`` list (2026-11-28) kept them as parallel lists (``windows``, ``stops``, and
+    from later saves ``stage_epochs``, ``stage_best_epochs``); they become that list, an entry
+    the record never held left out rather than guessed."""
+    if not finetune or "stages" in finetune:
+        return finetune
+    old = dict(finetune)
+    stops = old.pop("stops", [])
+    columns = {
+        "window": old.pop("windows", []),
+        "epochs": old.pop("stage_epochs", None),
+        "best_epoch": old.pop("stage_best_epochs", None),
+    }
+    old["stages"] = [
+        {"stop_reason": stop, **{k: v[i] for k, v in columns.items() if v and i < len(v)}}
+        for i, stop in enumerate(stops)
+    ]
+    return old
+
+
 class NarxModel(InputOutputModel):
     """NARX model (Weiss IV.A.2, V.B), a scikit-learn estimator behind the model protocol.
 
@@ -201,8 +222,8 @@ class NarxModel(InputOutputModel):
       every half window before, with ``simulation_trainer`` ``"adam"`` (every window once an
       epoch in a seeded random order, ``simulation_lr``) or ``"lm"`` (sensitivity-recursion
       Jacobians); windows longer than the shortest experiment are cut to it (``finetune_``
-      ``["windows"]``: the lengths trained; ``["stops"]``, ``["stage_epochs"]``: why each stage
-      ended, after how many epochs); early-stopped on the whole free runs of the validation
+      ``["stages"]``: per window length trained, its :meth:`History.as_dict` record, why it
+      ended and the epoch it kept); early-stopped on the whole free runs of the validation
       experiments and kept only if that measure (each run's squared free-run NRMSE, averaged)
       falls (``finetune_``). ``simulation_max_fail``: validation failures before a stage
       stops; ``simulation_l2``: λ of a λ‖θ‖² penalty on the LM sum of squares;
@@ -442,7 +463,7 @@ class NarxModel(InputOutputModel):
         self.bounds_ = state["bounds"]
         self.division_ = state["division"]
         self.transient_share_ = state["transient_share_of_training_draws"]
-        self.finetune_ = state["simulation_finetune"]
+        self.finetune_ = _finetune_as_stages(state["simulation_finetune"])
         self.history_ = state["history"]
 
     # -- data ------------------------------------------------------------------------------------
@@ -885,14 +906,16 @@ class NarxModel(InputOutputModel):
         measure_before = self._mean_square(val) if val else None
         state = {k: v.clone() for k, v in self.net_.state_dict().items()}
         train = self._simulation_lm if self.simulation_trainer == "lm" else self._simulation_adam
-        stages = len(self.simulation_windows_) > 1
-        hists = []
+        several = len(self.simulation_windows_) > 1
+        stages = []
         for length in self.simulation_windows_:  # short windows first: a smoother objective
-            report = staged(progress, f"{length} samples") if stages else progress
+            report = staged(progress, f"{length} samples") if several else progress
             hist = train(tab, val, report, length)
             if hist is not None:
-                hists.append(hist)
-        if not hists:
+                # the window length trained, as cut to the shortest run (not the one asked for)
+                window = self._window_length(tab, length)
+                stages.append(jsonable({"window": window, **hist.as_dict()}))
+        if not stages:
             return
         after = self.free_run_error(validation_log) if held_out else None
         measure_after = self._mean_square(val) if val else None
@@ -909,16 +932,12 @@ class NarxModel(InputOutputModel):
             "validation_mean_squared_nrmse_before": jsonable(measure_before),
             "validation_mean_squared_nrmse_after": jsonable(measure_after),
             "kept": bool(kept),
-            "epochs": sum(h.epochs for h in hists),
-            # why each stage ended (trainer's words: "validation", "max_epochs", "mu_max", ...),
-            # so a stage that stalled is not read as one that converged
-            "stops": [h.stop_reason for h in hists],
-            "stage_epochs": [h.epochs for h in hists],
-            "stage_best_epochs": [h.best_epoch for h in hists],  # the epoch each stage kept
-            # the window lengths trained, as cut to the shortest run (not the ones asked for)
-            "windows": [
-                n for n in (self._window_length(tab, w) for w in self.simulation_windows_) if n
-            ],
+            "epochs": sum(s["epochs"] for s in stages),
+            # one History record per window length, as the state-space model's and the
+            # hybrid's ``stages``: why each ended (the trainer's words: "validation",
+            # "max_epochs", "mu_max", ...; a stall is not read as a convergence), the epoch it
+            # kept, and its per-epoch errors
+            "stages": stages,
         }
 
     def _window_length(self, table: dict[str, torch.Tensor], length: int) -> int | None:

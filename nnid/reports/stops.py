@@ -38,13 +38,10 @@ def _own_stages(describe: dict) -> list[dict]:
         out.append(_stage("one-step", history["epochs"], history.get("best_epoch"),
                           history["stop_reason"]))  # fmt: skip
     finetune = describe.get("simulation_finetune") or {}
-    stops = finetune.get("stops", [])
-    # a model saved before the per-stage epochs (or the kept ones) were recorded has none
-    epochs = finetune.get("stage_epochs") or [None] * len(stops)
-    kept = finetune.get("stage_best_epochs") or [None] * len(stops)
-    for window, ran, best, stop in zip(finetune.get("windows", []), epochs, kept, stops,
-                                       strict=False):  # fmt: skip
-        out.append(_stage(f"free run, {window}-sample windows", ran, best, stop))
+    for stage in finetune.get("stages", []):
+        # a model saved before the per-stage epochs (or the kept ones) were recorded has none
+        out.append(_stage(f"free run, {stage.get('window')}-sample windows", stage.get("epochs"),
+                          stage.get("best_epoch"), stage["stop_reason"]))  # fmt: skip
     if finetune and not finetune.get("kept", True):
         out.append(_stage("free run", finetune.get("epochs"), 0, UNDONE))
     for stage in describe.get("stages") or []:
