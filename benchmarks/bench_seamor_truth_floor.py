@@ -1,0 +1,77 @@
+"""What the Seamor simulator's own model scores on the NARX configs' held-out runs (issue 14,
+round 23): the floor the free-run protocol puts under any model of these data.
+
+Builds the data of ``configs/seamor_narx_lm.toml`` (the noisy motion-capture log, 1 % white
+noise on forces and velocities) and flies the ``seamor`` preset, the vehicle that simulated
+the log (Weiss Table 3 truth), over the validation and test runs: a free run from each run's
+first sample driven by the logged forces, scored as ``metrics.json`` scores a run (the
+free-run NRMSE of u, v and r after the config's warm-up, over the run's own std). Three
+starts: the measured state (what every model gets), the true state (``true_*`` columns), and
+the true state with only the velocities u, v, w measured.
+
+Run: ``python benchmarks/bench_seamor_truth_floor.py`` (about a minute, most of it simulating
+the log).
+"""
+
+from __future__ import annotations
+
+from datetime import date
+from pathlib import Path
+
+import numpy as np
+from common import machine
+
+from nnid.config import TrainConfig, load_config
+from nnid.evaluation.prediction import predict_states
+from nnid.physics.parts import Parts
+from nnid.pipeline import load_inputs, make_split
+from nnid.vehicle import load_vehicle
+
+CONFIG = Path(__file__).resolve().parents[1] / "configs" / "seamor_narx_lm.toml"
+STATE = ["x", "y", "z", "phi", "theta", "psi", "u", "v", "w", "p", "q", "r"]
+SCORED = ["u", "v", "r"]
+
+
+def free_run_nrmse(parts: Parts, run, start: dict[str, float], warmup_s: float) -> list[float]:
+    """NRMSE of u, v, r of the free run from ``start`` (the first row's state), after the
+    warm-up, each over the run's own std of the measured output."""
+    run = run.copy()
+    first = run.index[0]
+    for name, value in start.items():
+        run.loc[first, name] = value
+    tau = run[[f"tau_{f}" for f in "XYZKMN"]].to_numpy(np.float64)
+    pred = predict_states(parts, run, tau, "free_run")
+    t = run["t"].to_numpy()
+    keep = t - t[0] >= warmup_s
+    out = []
+    for name in SCORED:
+        meas = run[name].to_numpy()[keep]
+        out.append(float(np.sqrt(np.mean((pred[name].to_numpy()[keep] - meas) ** 2)) / meas.std()))
+    return out
+
+
+def main() -> None:
+    cfg = load_config(CONFIG, TrainConfig)
+    inputs = load_inputs(cfg, CONFIG, [cfg.model])
+    split = make_split(inputs.log, cfg.split, str(CONFIG), inputs.report)
+    parts = Parts.from_vehicle(load_vehicle("seamor"))
+    print(f"Machine: {machine()}. Date: {date.today()}. Config: {CONFIG.name}")
+    print("| run | start | u | v | r |\n|---|---|---|---|---|")
+    for part in ("validation", "test"):
+        log = getattr(split, part)
+        for name, run in log.groupby("experiment", sort=False):
+            row0 = run.iloc[0]
+            true = {s: float(row0[f"true_{s}"]) for s in STATE}
+            starts = {
+                "measured": {},
+                "true": true,
+                "true, u v w measured": {**true, **{s: float(row0[s]) for s in "uvw"}},
+            }
+            for label, start in starts.items():
+                scores = free_run_nrmse(parts, run, start, float(cfg.warmup_s))
+                cells = " | ".join(f"{s:.3f}" for s in scores)
+                print(f"| {name} ({part}) | {label} | {cells} |", flush=True)
+
+
+if __name__ == "__main__":
+    main()
