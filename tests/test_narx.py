@@ -584,6 +584,12 @@ def test_simulation_windows_grow_in_stages_and_stop_on_the_whole_validation_run(
     )  # fmt: skip
     for w, s in zip((10, 60), records, strict=True):
         assert f"| free run, {w}-sample windows | - | - | {STOP_WORDS[s['stop_reason']]}" in rows
+    # the later parallel lists held each stage's epochs and kept epoch: those come back too
+    old |= {"stage_epochs": [s["epochs"] for s in records],
+            "stage_best_epochs": [s["best_epoch"] for s in records]}  # fmt: skip
+    (tmp_path / "model.json").write_text(json.dumps(saved))
+    keys = ("window", "epochs", "best_epoch", "stop_reason")
+    assert load_model(tmp_path).finetune_["stages"] == [{k: s[k] for k in keys} for s in records]
     (batch,) = model._whole_runs(model._table(val), val)
     assert batch[2].shape[1] == len(val) - model.warmup_samples_  # the whole run, one window
     with torch.no_grad():
