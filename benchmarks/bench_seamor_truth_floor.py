@@ -22,6 +22,7 @@ import numpy as np
 from common import machine
 
 from nnid.config import TrainConfig, load_config
+from nnid.evaluation.evaluate import score_prediction, scored_rows
 from nnid.evaluation.prediction import predict_states
 from nnid.physics.parts import Parts
 from nnid.pipeline import load_inputs, make_split
@@ -32,22 +33,20 @@ STATE = ["x", "y", "z", "phi", "theta", "psi", "u", "v", "w", "p", "q", "r"]
 SCORED = ["u", "v", "r"]
 
 
-def free_run_nrmse(parts: Parts, run, start: dict[str, float], warmup_s: float) -> list[float]:
+def free_run_nrmse(
+    parts: Parts, run, start: dict[str, float], warmup_s: float
+) -> dict[str, float | None]:
     """NRMSE of u, v, r of the free run from ``start`` (the first row's state), after the
-    warm-up, each over the run's own std of the measured output."""
+    warm-up, each over the run's own std of the measured output, by ``score_prediction`` (the
+    scoring behind ``metrics.json``: None for an output whose free run diverged)."""
     run = run.copy()
     first = run.index[0]
     for name, value in start.items():
         run.loc[first, name] = value
     tau = run[[f"tau_{f}" for f in "XYZKMN"]].to_numpy(np.float64)
     pred = predict_states(parts, run, tau, "free_run")
-    t = run["t"].to_numpy()
-    keep = t - t[0] >= warmup_s
-    out = []
-    for name in SCORED:
-        meas = run[name].to_numpy()[keep]
-        out.append(float(np.sqrt(np.mean((pred[name].to_numpy()[keep] - meas) ** 2)) / meas.std()))
-    return out
+    nrmse, _, _ = score_prediction(run, pred, SCORED, scored_rows(run, warmup_s, 1))
+    return nrmse
 
 
 def main() -> None:
@@ -69,7 +68,9 @@ def main() -> None:
             }
             for label, start in starts.items():
                 scores = free_run_nrmse(parts, run, start, float(cfg.warmup_s))
-                cells = " | ".join(f"{s:.3f}" for s in scores)
+                cells = " | ".join(
+                    "diverged" if scores[s] is None else f"{scores[s]:.3f}" for s in SCORED
+                )
                 print(f"| {name} ({part}) | {label} | {cells} |", flush=True)
 
 
