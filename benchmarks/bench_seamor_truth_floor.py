@@ -10,11 +10,13 @@ starts: the measured state (what every model gets), the true state (``true_*`` c
 the true state with only the velocities u, v, w measured.
 
 Run: ``python benchmarks/bench_seamor_truth_floor.py`` (about a minute, most of it simulating
-the log).
+the log); ``--all-runs`` scores the training runs too (among them the sequence's surge-sway and
+surge-sway-yaw, the issue's own held-out runs before the configs moved them into training).
 """
 
 from __future__ import annotations
 
+import argparse
 from datetime import date
 from pathlib import Path
 
@@ -50,13 +52,16 @@ def free_run_nrmse(
 
 
 def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--all-runs", action="store_true", help="score the training runs too")
+    args = parser.parse_args()
     cfg = load_config(CONFIG, TrainConfig)
     inputs = load_inputs(cfg, CONFIG, [cfg.model])
     split = make_split(inputs.log, cfg.split, str(CONFIG), inputs.report)
     parts = Parts.from_vehicle(load_vehicle("seamor"))
     print(f"Machine: {machine()}. Date: {date.today()}. Config: {CONFIG.name}")
     print("| run | start | u | v | r |\n|---|---|---|---|---|")
-    for part in ("validation", "test"):
+    for part in ("validation", "test", *(["train"] if args.all_runs else [])):
         log = getattr(split, part)
         for name, run in log.groupby("experiment", sort=False):
             row0 = run.iloc[0]
