@@ -165,6 +165,21 @@ def test_version():
     assert res.exit_code == 0 and res.output.strip() == f"nnid {__version__}"
 
 
+@pytest.mark.parametrize(("command", "words"), [("compare", "config's [[models]]"),
+                                              ("sweep", "with a [sweep] table")])  # fmt: skip
+def test_help_keeps_the_toml_tables_and_rewraps_docstrings(command, words, monkeypatch):
+    """Help text is Markdown, not Rich markup: a TOML table name in brackets is text, and a
+    docstring's line breaks do not break a sentence that fits on one line."""
+    monkeypatch.setenv("COLUMNS", "140")  # Rich's width: every summary fits on one row
+    res = runner.invoke(app, [command, "--help"])
+    assert res.exit_code == 0
+    flat = " ".join(" ".join(line.strip(" │").split()) for line in res.output.splitlines())
+    assert words in flat, res.output
+    listing = runner.invoke(app, ["--help"]).output
+    row = next(row for row in listing.splitlines() if " inspect " in row)
+    assert "derivable signals and the excitation of each DOF" in " ".join(row.split()), listing
+
+
 def test_inspect_on_a_folder_asks_for_a_reader_config(tmp_path):
     res = runner.invoke(app, ["inspect", str(tmp_path)])
     assert res.exit_code == 2 and "--columns" in res.output and str(tmp_path) in res.output
