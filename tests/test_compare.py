@@ -39,9 +39,9 @@ def _run(tmp_path_factory, name: str, edits: dict[str, str]) -> Path:
 
 
 #: shorter k-step horizons than the shipped configs': a k-step prediction starts at every
-#: held-out sample, so its cost goes with the horizon (the VT 690's closed-loop flights were
-#: half of this module's time, 2026-11-28); nothing here asserts a k-step value, only that
-#: every model has one
+#: held-out sample, so its cost goes with the horizon (the k-step closed-loop flights were half
+#: of the VT 690 comparison's time, 27 of 57 s, 2026-11-28); nothing here asserts a k-step
+#: value, only that every model has one
 K_STEP_SHORT = {
     "vt690_compare": {"k_step_s = 2.0": "k_step_s = 0.2"},
     "seamor_families": {"k_step_s = 1.0": "k_step_s = 0.1"},
