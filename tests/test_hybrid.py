@@ -43,7 +43,10 @@ SCENARIOS = {
     "thruster_installation.w.neg": (0.6, 300.0),  # upward heave thrust at 60 % of nominal
     "coupled_damping.N:u*v": (-5.0, 300.0),  # an undeclared coupled damping term
     "actuator_lag": (0.3, 300.0),  # thrusters follow their commands with a 0.3 s lag
-    "external_bias.u": (-4.0, 300.0),  # a tether pulling aft with 4 N
+    # a tether pulling aft with 4 N; 200 s are enough for it (test/physics error ratio 0.150,
+    # against 0.120 with 300 s and the 0.5 asked; 2026-11-28), where the lag and the heave
+    # thrust loss need 300 s (0.627 and 0.516 with 200 s)
+    "external_bias.u": (-4.0, 200.0),
     # a steady current turns with the heading: the training runs must cover the headings the
     # held-out ones fly (a network cannot extrapolate to headings it never saw)
     "current.y": (0.15, 600.0),
