@@ -153,12 +153,30 @@ GROUP_SECONDS = {
 
 
 def pytest_configure(config):
-    """Under pytest-xdist, one thread per worker for torch and BLAS: two workers on two cores
-    with two threads each would oversubscribe them (busy-waiting BLAS threads). A test
-    setting, never the library's: nnid itself leaves process-wide thread counts alone."""
+    """Under pytest-xdist, one thread per worker for numba, torch and BLAS: two workers on two
+    cores with two threads each would oversubscribe them (busy-waiting OpenMP and BLAS
+    threads; a comparison that takes 31 s with one numba thread beside a busy core took 36 s
+    with two, 2026-11-28). Numba first: starting its OpenMP layer resets the count torch
+    reads. A test setting, never the library's: nnid itself leaves process-wide thread counts
+    alone (a test that needs numba's threads asks for them: :func:`all_numba_threads`)."""
     if os.environ.get("PYTEST_XDIST_WORKER"):
+        import numba
+
+        numba.set_num_threads(1)
         torch.set_num_threads(1)
         threadpool_limits(1)
+
+
+@pytest.fixture
+def all_numba_threads():
+    """Every numba thread the machine has for the test (the xdist workers run with one), so
+    that a parallel kernel really runs in threads; restored afterwards."""
+    import numba
+
+    from nnid.threads import numba_threads
+
+    with numba_threads(numba.config.NUMBA_NUM_THREADS):
+        yield numba.get_num_threads()
 
 
 #: the process helpers below read /proc

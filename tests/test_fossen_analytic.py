@@ -162,7 +162,7 @@ def _stepped(form, pilot, eta_pos, eta_neg, x0, tau_open, dt, substeps, deadband
     return np.array(states), np.array(commands)
 
 
-def test_compiled_pd_flight_is_the_flight_stepped_from_python(rng):
+def test_compiled_pd_flight_is_the_flight_stepped_from_python(rng, all_numba_threads):
     """fly_pd (the PD autopilot, deadband and installation inside the compiled loop) gives the
     bits of the per-sample Python loop: commands, states, heading errors wrapped across ±π,
     one window or many (in parallel threads)."""

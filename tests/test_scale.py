@@ -245,11 +245,17 @@ def test_local_engine_failures_resume_and_identical_results(fleet, serial, tmp_p
     assert [r["status"] for r in again.rows] == ["ok"] * 10 + ["failed", "ok"]
 
 
-def test_serial_engine_leaves_the_process_as_it_found_it(fleet, tmp_path) -> None:
-    """The in-process engine pins one thread per library for its task and restores them."""
+def test_serial_engine_leaves_the_process_as_it_found_it(
+    fleet, tmp_path, all_numba_threads
+) -> None:
+    """The in-process engine pins one thread per library for its task and restores them
+    (started from more than one thread each where the machine has them: the xdist workers
+    run with one, which the engine's pinning could not be told from)."""
     import numba
     import torch
     from threadpoolctl import threadpool_info
+
+    from nnid.threads import torch_threads
 
     task = next(t for t in expand(fleet / "manifest.toml") if t.data.endswith("broken.csv"))
 
@@ -260,10 +266,11 @@ def test_serial_engine_leaves_the_process_as_it_found_it(fleet, tmp_path) -> Non
         pools = {p["filepath"]: p["num_threads"] for p in threadpool_info()}
         return torch.get_num_threads(), numba_n, pools
 
-    torch_n, numba_n, pools = state()
-    rows = list(SerialEngine().run([task], tmp_path))
+    with torch_threads(all_numba_threads):
+        torch_n, numba_n, pools = state()
+        rows = list(SerialEngine().run([task], tmp_path))
+        after = state()
     assert rows[0]["status"] == "failed" and "broken.csv" in rows[0]["error"]
-    after = state()
     assert (after[0], after[1]) == (torch_n, numba_n)
     assert {k: after[2][k] for k in pools} == pools
 
