@@ -24,6 +24,7 @@ import numpy as np
 from common import machine
 
 from nnid.config import TrainConfig, load_config
+from nnid.datasets.log import POSE, TAU, VELOCITY
 from nnid.evaluation.evaluate import score_prediction, scored_rows
 from nnid.evaluation.prediction import predict_states
 from nnid.physics.parts import Parts
@@ -31,7 +32,7 @@ from nnid.pipeline import load_inputs, make_split
 from nnid.vehicle import load_vehicle
 
 CONFIG = Path(__file__).resolve().parents[1] / "configs" / "seamor_narx_lm.toml"
-STATE = ["x", "y", "z", "phi", "theta", "psi", "u", "v", "w", "p", "q", "r"]
+STATE = POSE + VELOCITY
 SCORED = ["u", "v", "r"]
 
 
@@ -45,7 +46,7 @@ def free_run_nrmse(
     first = run.index[0]
     for name, value in start.items():
         run.loc[first, name] = value
-    tau = run[[f"tau_{f}" for f in "XYZKMN"]].to_numpy(np.float64)
+    tau = run[list(TAU)].to_numpy(np.float64)
     pred = predict_states(parts, run, tau, "free_run")
     nrmse, _, _ = score_prediction(run, pred, SCORED, scored_rows(run, warmup_s, 1))
     return nrmse
