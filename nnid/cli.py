@@ -29,8 +29,11 @@ app = typer.Typer(
     pretty_exceptions_enable=False,
     rich_markup_mode="markdown",
 )
-err = Console(stderr=True)
-out = Console()
+# plain text unless a print asks for markup: paths, experiment names and messages go out as
+# they are ("runs[lm]/" would lose "[lm]" as a style tag), and never broken at the console's
+# width (80 columns in a pipe), so a path a person copies stays whole
+err = Console(stderr=True, soft_wrap=True, markup=False)
+out = Console(soft_wrap=True, markup=False)
 
 
 def _show_version(value: bool) -> None:
@@ -66,13 +69,11 @@ def _input_errors(fn):
             try:
                 return fn(*args, **kwargs)
             except NnidInputError as exc:
-                err.print(
-                    f"[bold red]error:[/] {escape(str(exc))}", highlight=False, soft_wrap=True
-                )
+                err.print(f"[bold red]error:[/] {escape(str(exc))}", highlight=False, markup=True)
                 raise typer.Exit(2) from None
             finally:
                 for message in dict.fromkeys(str(w.message) for w in caught):
-                    err.print(f"warning: {escape(message)}", highlight=False, soft_wrap=True)
+                    err.print(f"warning: {message}", highlight=False)
 
     return wrapper
 
@@ -142,9 +143,10 @@ def inspect(
     info = summarize(log)
     cols = info["columns"]
     out.print(
-        f"[bold]{log_path}[/]: {info['samples']} samples, {info['duration_s']:.1f} s, "
-        f"{len(info['experiments'])} experiments, about {info['rate_hz']:.3g} Hz",
-        soft_wrap=True,
+        f"[bold]{escape(str(log_path))}[/]: {info['samples']} samples, "
+        f"{info['duration_s']:.1f} s, {len(info['experiments'])} experiments, "
+        f"about {info['rate_hz']:.3g} Hz",
+        markup=True,
     )
     for group in ("pose", "velocity", "acceleration", "inputs", "other"):
         out.print(f"  {group:13s} {', '.join(cols[group]) or '-'}")
@@ -175,7 +177,7 @@ def inspect(
         )
     out.print(table)
     for line in report.summary():
-        out.print(f"  cleaning: {line}", highlight=False, soft_wrap=True)
+        out.print(f"  cleaning: {line}", highlight=False)
     if out_dir is not None:
         with _staged(out_dir) as stage:
             (stage / "summary.json").write_text(json.dumps(info, indent=2))
@@ -198,9 +200,9 @@ def _bar(description: str):
 def _print(outcome) -> None:
     """A run's warnings on stderr, its sentences on stdout."""
     for warning in outcome.warnings:
-        err.print(f"warning: {warning}", highlight=False, soft_wrap=True)
+        err.print(f"warning: {warning}", highlight=False)
     for line in outcome.lines:
-        out.print(line, highlight=False, soft_wrap=True)
+        out.print(line, highlight=False)
 
 
 @app.command()
@@ -226,10 +228,7 @@ def train(
     _check_out(out_dir)
     with _bar(f"training a {cfg.model.kind} model") as progress:
         outcome = train_run(cfg, config, out_dir, data, vehicle, columns, progress=progress)
-    for line in outcome.lines:
-        out.print(line)
-    for warning in outcome.warnings:
-        err.print(f"warning: {warning}", highlight=False, soft_wrap=True)
+    _print(outcome)
 
 
 @app.command()
@@ -344,7 +343,7 @@ def detect(
 
 
 def _say(line: str) -> None:
-    out.print(line, highlight=False, soft_wrap=True)
+    out.print(line, highlight=False)
 
 
 @app.command()
@@ -400,7 +399,6 @@ def vehicle(
     out.print(
         f"wrote {out_path}: edit what it marks ASSUMED or ESTIMATE (docs/vehicle_file.md)",
         highlight=False,
-        soft_wrap=True,
     )
 
 
@@ -439,11 +437,9 @@ def batch(
         f"({result.reused} finished earlier), {len(failed)} failed, {result.seconds:.1f} s; "
         f"wrote {out_dir}/summary.csv, summary.parquet, summary.json, report.html",
         highlight=False,
-        soft_wrap=True,
     )
     for row in failed:
-        err.print(f"failed: {row['id']} ({row['data']}): {escape(str(row['error']))}",
-                  highlight=False, soft_wrap=True)  # fmt: skip
+        err.print(f"failed: {row['id']} ({row['data']}): {row['error']}", highlight=False)
     if failed:
         raise typer.Exit(1)
 
@@ -490,13 +486,15 @@ def sweep(
             result, ranked = run_sweep_tune(
                 config, out_dir, address, data, vehicle, columns, progress
             )
-    out.print(result.extra["sweep"]["summary"], highlight=False, soft_wrap=True)
+    out.print(result.extra["sweep"]["summary"], highlight=False)
     written = "settings.csv, best.toml" if ranked[0].mean is not None else "settings.csv"
-    out.print(f"wrote {out_dir}/: {written}, summary.csv, report.html ({len(result.failed)} "
-              "trials failed)", highlight=False, soft_wrap=True)  # fmt: skip
+    out.print(
+        f"wrote {out_dir}/: {written}, summary.csv, report.html ({len(result.failed)} "
+        "trials failed)",
+        highlight=False,
+    )
     for row in result.failed:
-        err.print(f"failed: {row['id']}: {escape(str(row['error']))}",
-                  highlight=False, soft_wrap=True)  # fmt: skip
+        err.print(f"failed: {row['id']}: {row['error']}", highlight=False)
     if ranked[0].mean is None:
         raise typer.Exit(1)
 

@@ -265,12 +265,15 @@ def test_a_config_without_data_runs_with_data_and_vehicle_given(tmp_path):
         'kind = "train"\n[split]\nby = "experiment"\nvalidation = ["b"]\n'
         '[model]\nkind = "fossen"\ndofs = ["u", "v"]\n'
     )
-    out = tmp_path / "out"
+    # a folder name longer than a terminal line and with a bracket: the "wrote" line keeps it
+    # whole (not wrapped at the console's width, "[lm]" not read as a style tag)
+    out = tmp_path / ("out[lm]_" + "x" * 90)
     run = CliRunner().invoke(
         app, ["train", str(cfg), "--data", str(log), "--vehicle", "seamor", "--out", str(out)]
     )
     assert run.exit_code == 0, run.output
     assert (out / "metrics.json").exists() and (out / "model.json").exists()
+    assert any(f"wrote {out}/" in line for line in run.output.splitlines()), run.output
     missing = CliRunner().invoke(app, ["train", str(cfg), "--out", str(tmp_path / "o2")])
     assert missing.exit_code == 2 and "field 'data'" in missing.output
     novehicle = CliRunner().invoke(
