@@ -852,24 +852,26 @@ def nnid_rows(case: Case, seeds: tuple[int, ...] | None = None, quick: bool = Fa
         use = tuple(seeds) if seeds is not None else tuple(cfg["seeds"])
         if quick:
             use = use[:1]
+        pairs = nl.members(name, use)  # every seed once per variant of the setting
         per: dict[str, list] = {s: [] for s in case.tests}
         preds: dict[str, list] = {s: [] for s in case.tests}
         times, mems, trains = [], [], []
-        for seed in use:
+        for seed, variant in pairs:
             with PeakMemory() as mem:
-                res = nl.run(name, seed)
+                res = nl.run(name, seed, variant=variant)
             times.append(res["fit_s"])
             mems.append(mem.mb)
             trains.append(res["train"])
             for split in case.tests:
                 per[split].append(res[split])
                 preds[split].append(res["pred"][split])
+            var = f" variant {variant}" if "variants" in cfg else ""
             print(
-                f"  nnid {model} seed {seed}: test "
+                f"  nnid {model} seed {seed}{var}: test "
                 f"{ {s: _r(per[s][-1]) for s in per} }, fit {res['fit_s']:.1f} s",
                 flush=True,
             )
-        ens = cfg.get("ensemble") if len(use) > 1 else None
+        ens = cfg.get("ensemble") if len(pairs) > 1 else None
         row = _row(
             case,
             "nnid",
@@ -891,9 +893,9 @@ def nnid_rows(case: Case, seeds: tuple[int, ...] | None = None, quick: bool = Fa
                 entry["ensemble"] = ens
             row["test"][split] = entry
         row["note"] += (
-            f"; test = {ens} of the {len(use)} seeds' free runs"
+            f"; test = {ens} of the {len(pairs)} members' free runs"
             if ens
-            else f"; test = median over {len(use)} seed(s)"
+            else f"; test = median over {len(pairs)} member(s)"
         )
         rows.append(row)
     return rows
@@ -918,6 +920,8 @@ def _nnid_label(cfg: dict) -> str:
         )
         if s.get("simulation_l2"):
             text += f", penalty {s['simulation_l2']:g} ‖θ‖²"
+    for v in cfg.get("variants", ())[1:]:
+        text += f"; each seed again with {', '.join(f'{k} {x}' for k, x in v.items())}"
     return text
 
 

@@ -496,6 +496,7 @@ class NarxModelSpec(_Model):
     simulation_trainer: Literal["adam", "lm"] = "adam"
     simulation_max_fail: int = Field(8, ge=1)
     simulation_l2: float = Field(0.0, ge=0, allow_inf_nan=False)
+    simulation_l2_center: Literal["zero", "one_step"] = "zero"
     simulation_curvature: float = Field(1.0, gt=0, le=1)
     simulation_run_floor: float | None = Field(None, gt=0, le=1)
     output_transform: Literal["sqrt", "products", "fossen"] | None = None

@@ -120,6 +120,12 @@ CASES = [
     (
         "train",
         NARX,
+        ('outputs = ["u"]', 'outputs = ["u"]\nsimulation_l2_center = "start"'),
+        "model.simulation_l2_center",
+    ),
+    (
+        "train",
+        NARX,
         ('kind = "narx"', 'kind = "state_space"\nstructure = [[1, 2]]'),
         "model.structure.0.1",
     ),

@@ -298,6 +298,37 @@ def test_l2_penalty_is_the_residual_with_sqrt_lambda_theta_rows() -> None:
     assert shrunk  # the penalty shrinks the weights
 
 
+def test_l2_center_pulls_toward_its_point_not_toward_zero() -> None:
+    # A linear model: LM with λ‖θ − θ_c‖² reaches the closed form (AᵀA + λI)⁻¹(Aᵀb + λθ_c);
+    # centred on the least-squares solution the penalty leaves it where it is (no shrinkage)
+    gen = torch.Generator().manual_seed(5)
+    x = torch.randn(80, 3, generator=gen, dtype=torch.float64)
+    y = x @ torch.tensor([[2.0], [-1.0], [0.5]], dtype=torch.float64) + 3.0
+    y += 0.1 * torch.randn(80, 1, generator=gen, dtype=torch.float64)
+    a = np.hstack([x.numpy(), np.ones((80, 1))])  # weight, then bias: parameters() order
+    lam, center = 20.0, np.array([1.0, 1.0, 1.0, -1.0])
+    expected = np.linalg.solve(a.T @ a + lam * np.eye(4), a.T @ y.numpy()[:, 0] + lam * center)
+    least_squares = np.linalg.lstsq(a, y.numpy()[:, 0], rcond=None)[0]
+    for c, want in ((center, expected), (least_squares, least_squares), (None, None)):
+        net = torch.nn.Linear(3, 1).double()
+        with torch.no_grad():
+            net.weight.zero_()
+            net.bias.zero_()
+        LevenbergMarquardt(max_epochs=50, l2=lam, l2_center=c, min_grad=0.0).fit(
+            net, _regression_residual(net), [(x, y)]
+        )
+        if c is None:  # plain weight decay: pulled toward zero, away from the data's fit
+            want = np.linalg.solve(a.T @ a + lam * np.eye(4), a.T @ y.numpy()[:, 0])
+            assert np.linalg.norm(want) < np.linalg.norm(least_squares)
+        np.testing.assert_allclose(_flat(net), want, rtol=1e-9, atol=1e-9)
+    assert np.abs(expected - least_squares).max() > 0.1  # the centre mattered
+    with pytest.raises(NnidInputError, match="l2_center must hold 4 finite values") as info:
+        LevenbergMarquardt(l2=1.0, l2_center=[0.0, 0.0]).fit(
+            net, _regression_residual(net), [(x, y)]
+        )
+    assert info.value.field == "l2_center"
+
+
 def test_batches_drawn_per_epoch_judge_that_epochs_steps() -> None:
     # Noise-free data of a network of the same shape: every subset of samples shares the
     # minimum, so LM on a fresh quarter of the samples each epoch must reach it on all of them.

@@ -600,6 +600,40 @@ def test_simulation_windows_grow_in_stages_and_stop_on_the_whole_validation_run(
         NarxModel(["u"], ["y"], simulation_window=[1, 50], simulation_epochs=1).fit(train)
 
 
+def test_simulation_l2_centre_is_the_one_step_fit_in_every_stage(monkeypatch):
+    # simulation_l2_center="one_step": each free-run stage's LM penalty pulls toward the
+    # weights the one-step stage ended with, not toward the previous stage's result or zero
+    train, val = _tank(400, 1.3, 2), _tank(300, 1.3, 3)
+    real_fit = LevenbergMarquardt.fit
+    stages: list[tuple] = []
+
+    def recording_fit(self, module, *args, **kwargs):
+        if self.l2 > 0:  # the free-run stages (the one-step trainer has no penalty)
+            stages.append((self.l2_center, LevenbergMarquardt._flatten(module)))
+        return real_fit(self, module, *args, **kwargs)
+
+    monkeypatch.setattr(LevenbergMarquardt, "fit", recording_fit)
+    for center in ("one_step", "zero"):
+        stages.clear()
+        NarxModel(
+            ["u"], ["y"], 2, 2, hidden=(3,), balanced=False, lm_samples=300,
+            trainer=LevenbergMarquardt(max_epochs=5, jacobian="samples"),
+            simulation_epochs=4, simulation_window=[10, 60], simulation_trainer="lm",
+            simulation_l2=1e-3, simulation_l2_center=center,
+        ).fit(train, val)  # fmt: skip
+        assert len(stages) == 2
+        (c1, start1), (c2, start2) = stages
+        if center == "zero":
+            assert c1 is None and c2 is None
+            continue
+        torch.testing.assert_close(c1, start1, rtol=0, atol=0)  # the one-step fit
+        torch.testing.assert_close(c2, c1, rtol=0, atol=0)  # the same centre in stage two
+        assert not torch.equal(start2, start1)  # which started where stage one ended
+    with pytest.raises(NnidInputError) as err:
+        NarxModel(["u"], ["y"], simulation_l2_center="start").fit(train)
+    assert err.value.field == "simulation_l2_center"
+
+
 def test_a_diverged_one_step_free_run_is_flagged_not_left_as_a_missing_score(monkeypatch):
     # The one-step net's validation free run diverges (its NRMSE infinite): the record says
     # "diverged" beside a null NRMSE, the simulation stage is kept on its finite result, and

@@ -226,7 +226,9 @@ class NarxModel(InputOutputModel):
       ended and the epoch it kept); early-stopped on the whole free runs of the validation
       experiments and kept only if that measure (each run's squared free-run NRMSE, averaged)
       falls (``finetune_``). ``simulation_max_fail``: validation failures before a stage
-      stops; ``simulation_l2``: λ of a λ‖θ‖² penalty on the LM sum of squares;
+      stops; ``simulation_l2``: λ of a λ‖θ − θ_c‖² penalty on the LM sum of squares, θ_c
+      zero or, with ``simulation_l2_center="one_step"``, the one-step fit's weights (decay
+      toward the series-parallel solution, which does not shrink its gains);
       ``simulation_curvature`` < 1: each LM epoch's JᵀJ from that share of the windows, drawn
       per epoch from ``seed`` (subsampled curvature; the gradient and the SSE that judges a
       step stay those of every window). ``simulation_run_floor``
@@ -269,6 +271,7 @@ class NarxModel(InputOutputModel):
         simulation_trainer: str = "adam",
         simulation_max_fail: int = 8,
         simulation_l2: float = 0.0,
+        simulation_l2_center: str = "zero",
         simulation_curvature: float = 1.0,
         simulation_run_floor: float | None = None,
         output_transform: str | None = None,
@@ -296,6 +299,7 @@ class NarxModel(InputOutputModel):
         self.simulation_trainer = simulation_trainer
         self.simulation_max_fail = simulation_max_fail
         self.simulation_l2 = simulation_l2
+        self.simulation_l2_center = simulation_l2_center
         self.simulation_curvature = simulation_curvature
         self.simulation_run_floor = simulation_run_floor
         self.output_transform = output_transform
@@ -307,6 +311,10 @@ class NarxModel(InputOutputModel):
             raise NnidInputError("division is 'block' or 'random'", field="division")
         if self.simulation_trainer not in ("adam", "lm"):
             raise NnidInputError("simulation_trainer is 'adam' or 'lm'", field="simulation_trainer")
+        if self.simulation_l2_center not in ("zero", "one_step"):
+            raise NnidInputError(
+                "simulation_l2_center is 'zero' or 'one_step'", field="simulation_l2_center"
+            )
         if self.output_transform not in OUTPUT_TRANSFORMS:
             raise NnidInputError(
                 "output_transform is None, 'sqrt', 'products' or 'fossen'", field="output_transform"
@@ -905,7 +913,18 @@ class NarxModel(InputOutputModel):
         before = self.free_run_error(validation_log) if held_out else None
         measure_before = self._mean_square(val) if val else None
         state = {k: v.clone() for k, v in self.net_.state_dict().items()}
-        train = self._simulation_lm if self.simulation_trainer == "lm" else self._simulation_adam
+        train = self._simulation_adam
+        if self.simulation_trainer == "lm":
+            from nnid.trainers.levenberg_marquardt import LevenbergMarquardt
+
+            # every stage's penalty pulls toward the same point: the one-step fit, not the
+            # previous stage's result
+            center = (
+                LevenbergMarquardt._flatten(self.net_)
+                if self.simulation_l2_center == "one_step"
+                else None
+            )
+            train = functools.partial(self._simulation_lm, center=center)
         several = len(self.simulation_windows_) > 1
         stages = []
         for length in self.simulation_windows_:  # short windows first: a smoother objective
@@ -1048,7 +1067,9 @@ class NarxModel(InputOutputModel):
             self._epoch_order,
         )  # fmt: skip
 
-    def _simulation_lm(self, tab, val, progress: Progress, length: int) -> History | None:
+    def _simulation_lm(
+        self, tab, val, progress: Progress, length: int, center: torch.Tensor | None = None
+    ) -> History | None:
         from nnid.trainers.levenberg_marquardt import LevenbergMarquardt
 
         obj = self._objective(tab, val, length)
@@ -1058,6 +1079,7 @@ class NarxModel(InputOutputModel):
             max_epochs=int(self.simulation_epochs),
             max_fail=int(self.simulation_max_fail),
             l2=float(self.simulation_l2),
+            l2_center=center,
         )
         train = obj.windows
         n = train[0].shape[0]

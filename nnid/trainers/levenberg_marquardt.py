@@ -181,8 +181,11 @@ class LevenbergMarquardt(BaseEstimator):
         damping: ``"trainlm"`` (μ·μ_dec after an accepted step, μ·μ_inc after a rejected one)
             or ``"nielsen"`` (the gain-ratio rule of the module docstring; μ_dec and μ_inc
             unused).
-        l2: λ of a penalty λ‖θ‖² added to the sum of squares (Tikhonov / weight decay: the
-            rows √λ θ appended to the residual, √λ I to the Jacobian; default 0).
+        l2: λ of a penalty λ‖θ − θ_c‖² added to the sum of squares (Tikhonov / weight decay:
+            the rows √λ (θ − θ_c) appended to the residual, √λ I to the Jacobian; default 0).
+        l2_center: θ_c, the flat parameter vector the penalty pulls toward, in the order of
+            ``module.parameters()`` (default None: the origin, plain weight decay); e.g. an
+            earlier fit whose gains the penalty should not shrink.
         geodesic: add geodesic acceleration to each trial step (module docstring; default
             False, trainlm's step).
         geodesic_ratio: the largest 2‖a‖/‖δ‖ a geodesic trial may have (Transtrum & Sethna's
@@ -205,6 +208,7 @@ class LevenbergMarquardt(BaseEstimator):
         jacobian: str = "auto",
         damping: str = "trainlm",
         l2: float = 0.0,
+        l2_center: Sequence[float] | torch.Tensor | None = None,
         geodesic: bool = False,
         geodesic_ratio: float = 0.75,
     ) -> None:
@@ -220,6 +224,7 @@ class LevenbergMarquardt(BaseEstimator):
         self.jacobian = jacobian
         self.damping = damping
         self.l2 = l2
+        self.l2_center = l2_center
         self.geodesic = geodesic
         self.geodesic_ratio = geodesic_ratio
         self._mode = "forward"
@@ -227,6 +232,7 @@ class LevenbergMarquardt(BaseEstimator):
         self._peak_rows = 0
         self._peak_elements = 0
         self._rows: dict[int, int] = {}
+        self._center: torch.Tensor | None = None
 
     # ------------------------------------------------------------------ parameters
 
@@ -274,7 +280,7 @@ class LevenbergMarquardt(BaseEstimator):
         penalised: bool = True,
     ):
         """(SSE, number of residuals) over ``batches`` at ``theta`` (no autograd); with the
-        λ‖θ‖² penalty unless ``penalised`` is False (validation scores the data alone)."""
+        λ‖θ − θ_c‖² penalty unless ``penalised`` is False (validation scores the data alone)."""
         params = self._unflatten(theta, layout)
         sse, n = 0.0, 0
         with torch.no_grad():
@@ -284,15 +290,34 @@ class LevenbergMarquardt(BaseEstimator):
                 n += r.numel()
         return sse + (self._penalty(theta) if penalised else 0.0), n
 
+    def _checked_center(self, n: int) -> torch.Tensor | None:
+        """``l2_center`` as a float64 vector of the module's ``n`` parameters."""
+        if self.l2_center is None:
+            return None
+        center = torch.as_tensor(self.l2_center, dtype=torch.float64).detach().reshape(-1)
+        if center.numel() != n or not bool(torch.isfinite(center).all()):
+            raise NnidInputError(
+                f"l2_center must hold {n} finite values, one per parameter (got {center.numel()})",
+                field="l2_center",
+            )
+        return center.clone()
+
+    def _offset(self, theta: torch.Tensor) -> torch.Tensor:
+        """θ − θ_c, what the penalty squares (θ itself without a centre)."""
+        return theta if self._center is None else theta - self._center
+
     def _penalty(self, theta: torch.Tensor) -> float:
-        return self.l2 * float(theta @ theta) if self.l2 > 0 else 0.0
+        if self.l2 <= 0:
+            return 0.0
+        d = self._offset(theta)
+        return self.l2 * float(d @ d)
 
     def _curvature_pull(
         self, residual: Residual, theta: torch.Tensor, layout: list, batches: Sequence[Any],
         delta: torch.Tensor,
     ) -> torch.Tensor:  # fmt: skip
         """Jᵀ r_δδ over ``batches``: r_δδ = d²/dt² r(θ + tδ) at t = 0 (Transtrum & Sethna
-        2012), by forward mode over forward mode, pulled back by one vjp. The λ‖θ‖²
+        2012), by forward mode over forward mode, pulled back by one vjp. The λ‖θ − θ_c‖²
         rows are linear in θ: their r_δδ is zero."""
         out = torch.zeros_like(theta)
         for b in batches:
@@ -319,9 +344,9 @@ class LevenbergMarquardt(BaseEstimator):
         """JᵀJ, Jᵀr and SSE over ``batches`` at the module's current parameters (float64),
         in the mode :meth:`fit` would use with the same arguments."""
         self._select_mode(separable, jacobian_rows)
-        return self._normal_equations(
-            residual, self._flatten(module), self._layout(module), batches
-        )
+        theta = self._flatten(module)
+        self._center = self._checked_center(theta.numel())
+        return self._normal_equations(residual, theta, self._layout(module), batches)
 
     def _select_mode(self, separable: bool, jacobian_rows: JacobianRows | None) -> None:
         if self.jacobian not in ("auto", "forward", "samples"):
@@ -362,10 +387,10 @@ class LevenbergMarquardt(BaseEstimator):
         return self._penalise(ne, theta) if penalised else ne
 
     def _penalise(self, ne: NormalEquations, theta: torch.Tensor) -> NormalEquations:
-        """The λ‖θ‖² rows added to a system of the data alone."""
+        """The λ‖θ − θ_c‖² rows added to a system of the data alone."""
         if self.l2 > 0:
             ne.jtj.diagonal().add_(self.l2)
-            ne.jtr += self.l2 * theta
+            ne.jtr += self.l2 * self._offset(theta)
             ne.sse += self._penalty(theta)
         return ne
 
@@ -565,6 +590,7 @@ class LevenbergMarquardt(BaseEstimator):
         self._peak_elements = 0
         layout = self._layout(module)
         theta = self._flatten(module)
+        self._center = self._checked_center(theta.numel())
         hist = History()
         mu = self.mu
         use_val = bool(val_batches)
