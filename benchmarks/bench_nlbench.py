@@ -78,7 +78,7 @@ SETTINGS = {
         },
         # each seed twice: as above, and with the decay λ‖θ − θ₁‖² toward the one-step fit θ₁
         # (λ 0.1; alone 0.278 against 0.279, λ 0.01 0.326, 0.3 0.395, 1 0.467); the 16 members
-        # 0.258 (2026-11-28, the rule: below 0.265, 5 % under the 8 members of the first)
+        # 0.258 (2026-11-28; the rule: below 0.265 V, 5 % under the first variant's 0.279 V)
         "variants": ({}, {"simulation_l2": 0.1, "simulation_l2_center": "one_step"}),
         "lm_epochs": 100,
         "lm_samples": 4000,
