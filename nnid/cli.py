@@ -202,7 +202,12 @@ def _print(outcome) -> None:
     for warning in outcome.warnings:
         err.print(f"warning: {warning}", highlight=False)
     for line in outcome.lines:
-        out.print(line, highlight=False)
+        _say(line)
+
+
+def _say(line: str) -> None:
+    """One sentence for a person on stdout (plain text, no highlighting)."""
+    out.print(line, highlight=False)
 
 
 @app.command()
@@ -340,10 +345,6 @@ def detect(
     with _bar("detecting") as progress:
         outcome = detect_run(model_dir, data, out_dir, columns, window, progress=progress)
     _print(outcome)
-
-
-def _say(line: str) -> None:
-    out.print(line, highlight=False)
 
 
 @app.command()

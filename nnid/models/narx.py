@@ -69,6 +69,7 @@ from sklearn.base import clone
 from sklearn.utils.validation import check_is_fitted
 from torch import nn
 from torch.func import functional_call
+from torch.nn.utils import parameters_to_vector
 
 from nnid.datasets.log import VELOCITY
 from nnid.datasets.preprocess import experiments
@@ -915,12 +916,10 @@ class NarxModel(InputOutputModel):
         state = {k: v.clone() for k, v in self.net_.state_dict().items()}
         train = self._simulation_adam
         if self.simulation_trainer == "lm":
-            from nnid.trainers.levenberg_marquardt import LevenbergMarquardt
-
             # every stage's penalty pulls toward the same point: the one-step fit, not the
             # previous stage's result
             center = (
-                LevenbergMarquardt._flatten(self.net_)
+                parameters_to_vector(self.net_.parameters()).detach()
                 if self.simulation_l2_center == "one_step"
                 else None
             )
