@@ -35,13 +35,10 @@ def _own_stages(describe: dict) -> list[dict]:
     out: list[dict] = []
     history = describe.get("history")
     if isinstance(history, dict):
-        out.append(_stage("one-step", history["epochs"], history.get("best_epoch"),
-                          history["stop_reason"]))  # fmt: skip
+        out.append(_recorded("one-step", history))
     finetune = describe.get("simulation_finetune") or {}
     for stage in finetune.get("stages", []):
-        # a model saved before the per-stage epochs (or the kept ones) were recorded has none
-        out.append(_stage(f"free run, {stage.get('window')}-sample windows", stage.get("epochs"),
-                          stage.get("best_epoch"), stage["stop_reason"]))  # fmt: skip
+        out.append(_recorded(f"free run, {stage.get('window')}-sample windows", stage))
     if finetune and not finetune.get("kept", True):
         out.append(_stage("free run", finetune.get("epochs"), 0, UNDONE))
     for stage in describe.get("stages") or []:
@@ -49,12 +46,18 @@ def _own_stages(describe: dict) -> list[dict]:
             name = f"window {stage['window'] or 'whole runs'}"
         else:
             name = f"segments of {stage.get('segment_s')} s"
-        out.append(_stage(name, stage["epochs"], stage.get("best_epoch"), stage["stop_reason"]))
+        out.append(_recorded(name, stage))
     return out
 
 
 def _stage(name: str, epochs: int | None, kept: int | None, stop: str) -> dict:
     return {"stage": name, "epochs": epochs, "kept": kept, "stop": stop}
+
+
+def _recorded(name: str, record: dict) -> dict:
+    """A stage from a trainer's history record; a model saved before the per-stage epochs (or
+    the kept ones) were recorded has none, and its cells say so ("-")."""
+    return _stage(name, record.get("epochs"), record.get("best_epoch"), record["stop_reason"])
 
 
 def training_stages(describe: dict) -> list[dict]:
