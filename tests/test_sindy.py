@@ -111,3 +111,19 @@ def test_control_mode_fits_accelerations(seamor_log):
     assert nmse_v["du"] < 0.01 and nmse_v["dv"] < 0.01
     assert nmse_v["dw"] < 0.1 and nmse_v["dr"] < 0.1
     assert nmse_v["dp"] > 0.5 and nmse_v["dq"] > 0.5
+
+
+def test_validation_too_short_for_the_filter_is_named(vt690):
+    """A validation run shorter than the filter's settling (3/λ) leaves no sample to select
+    on: one clear error naming filter_lambda, not an empty selection deep in the path."""
+    from nnid.errors import NnidInputError
+
+    vehicle, train, val = vt690
+    rate = 1.0 / float(np.median(np.diff(val["t"])))
+    short = val.iloc[: int(2.0 * rate)]  # 2 s against the filter's 3 s
+    model = SindyDamping(vehicle, filter_lambda=1.0, thresholds=[0.1])
+    with pytest.raises(NnidInputError, match="validation data leave no sample") as err:
+        model.fit(train, short)
+    assert err.value.field == "filter_lambda" and "3/λ = 3 s" in str(err.value)
+    # the same run with a filter that settles within it is fitted
+    assert SindyDamping(vehicle, filter_lambda=2.0, thresholds=[0.1]).fit(train, short).coef_.size

@@ -141,6 +141,11 @@ class SindyDamping(DampingModel):
         return pd.concat(train), pd.concat(val)
 
     @property
+    def filtered(self) -> bool:
+        """Only residual mode filters; control mode regresses Savitzky-Golay accelerations."""
+        return self.mode == "residual" and self.filter_lambda is not None
+
+    @property
     def output_names(self) -> list[str]:
         """Names of the regression's outputs: forces, or accelerations in control mode."""
         return list(FORCES) if self.mode == "residual" else list(ACCELERATION_OUTPUTS)
@@ -153,8 +158,8 @@ class SindyDamping(DampingModel):
             log, validation = self._split(log)
         theta, y = self.features(log)
         theta_v, y_v = self.features(validation)
-        ok = np.isfinite(theta).all(1) & np.isfinite(y).all(1)
-        ok_v = np.isfinite(theta_v).all(1) & np.isfinite(y_v).all(1)
+        ok = self._defined(log, theta, y, "training")
+        ok_v = self._defined(validation, theta_v, y_v, "validation")
         path = SparsePath(
             self.optimizer,
             self.thresholds,

@@ -20,7 +20,7 @@ import numpy as np
 import pandas as pd
 
 from nnid.datasets.arrays import log_arrays
-from nnid.datasets.preprocess import zoh_midpoint_inputs
+from nnid.datasets.preprocess import experiments, zoh_midpoint_inputs
 from nnid.errors import NnidInputError
 from nnid.models.parametric import (
     FossenPlant,
@@ -119,6 +119,39 @@ class DampingModel(FossenPlant):
             self.savgol_order,
             self.filter_lambda,
             self.zoh_midpoint,
+        )
+
+    @property
+    def filtered(self) -> bool:
+        """Whether the regression's rows go through F(s) = λ/(s + λ) (``filter_lambda``)."""
+        return self.filter_lambda is not None
+
+    def _defined(
+        self, log: pd.DataFrame, theta: np.ndarray, y: np.ndarray, what: str
+    ) -> np.ndarray:
+        """The rows of a regression on ``log`` (``what``: "training" or "validation") where
+        every feature and target is defined; none is a clear error, not an empty fit: the
+        Savitzky-Golay window, or the filter's first 3/λ s, take each experiment's ends."""
+        ok = np.isfinite(theta).all(1) & np.isfinite(y).all(1)
+        if ok.any():
+            return ok
+        longest = max(
+            (float(np.ptp(log.loc[idx, "t"])) for _, idx in experiments(log)), default=0.0
+        )
+        if self.filtered:
+            field = "filter_lambda"
+            settle = 3.0 / self.filter_lambda
+            cause = f"the filter λ/(s + λ) settles over the first 3/λ = {settle:g} s"
+            knob = "a larger filter_lambda"
+        else:
+            field = "savgol_window"
+            cause = f"the Savitzky-Golay window ({self.savgol_window:g} s) takes its two ends"
+            knob = "a shorter savgol_window"
+        raise NnidInputError(
+            f"the {what} data leave no sample with every term and target defined: their longest "
+            f"experiment lasts {longest:.3g} s, and {cause} of each; give longer {what} "
+            f"experiments or {knob}",
+            field=field,
         )
 
     def _set_damping(self, terms: Sequence[str], coef: np.ndarray, stderr: np.ndarray) -> None:
@@ -238,6 +271,7 @@ class SynthesisModel(DampingModel):
         except ValueError as exc:  # an unknown model name or term
             raise NnidInputError(str(exc), field="mask") from None
         xi, tau_bar = self._xi_tau(log, terms)
+        self._defined(log, xi, tau_bar, "training")
         fit = masked_least_squares(xi, tau_bar, mask, terms)
         progress(1, 2 if self.method != "ls" else 1, "masked least squares")
         if self.method != "ls":
