@@ -26,6 +26,7 @@ from nnid.config import (
 from nnid.datasets.cleaning import CleaningReport
 from nnid.datasets.gaps import mask_gaps
 from nnid.datasets.log import ACCELERATION, POSE, VELOCITY, input_columns
+from nnid.datasets.preprocess import experiments
 from nnid.datasets.splits import PARTS, Split, split_log
 from nnid.errors import NnidInputError
 from nnid.evaluation.evaluate import evaluate
@@ -278,6 +279,21 @@ def make_split(
             source=source,
             field="split",
         )
+    for part, name in (
+        (split.train, "training"),
+        (split.validation, "validation"),
+        (split.test, "test"),
+    ):
+        for exp, idx in experiments(part):
+            if len(idx) < 2:  # no sample period: nothing to fit or score on it
+                raise NnidInputError(
+                    f"the {name} split holds a single sample of "
+                    f"{'the log' if exp is None else f'experiment {exp!r}'}: each piece needs at "
+                    "least two; the log is too short for these fractions, so give a longer log "
+                    "or other fractions",
+                    source=source,
+                    field="split",
+                )
     return split
 
 

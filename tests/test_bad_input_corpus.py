@@ -66,6 +66,8 @@ LOG_CASES: list[tuple[str, str, Callable]] = [
     ("time in nanoseconds", "'t'", lambda df, i: df.assign(t=(df["t"] * 1e9).round())),
     ("empty experiment label", "'experiment'", _set("experiment", 20, np.nan)),
     ("blank experiment label", "'experiment'", _set("experiment", 21, " ")),
+    # a stray label makes an experiment of one sample: no sample period to derive or fit with
+    ("a one-sample experiment", "'experiment'", _set("experiment", 22, "stray")),
     ("text in an input", "INPUT", _set("INPUT", 30, "full")),
     ("infinite input", "INPUT", _set("INPUT", 31, np.inf)),
     ("empty input cell", "INPUT", _set("INPUT", 32, np.nan)),
@@ -154,6 +156,14 @@ def _log_cases() -> list[Case]:
         return _command("loop", tmp, fx, data=_write_log(tmp, "too short", log))
 
     cases.append(Case("loop: too short for the warm-up", short, ("LOG", "warmup_s")))
+
+    def two_samples(tmp, fx):  # the split leaves one sample in a part
+        log = fx["demo_log"].head(2)
+        return _command("train", tmp, fx, data=_write_log(tmp, "two samples", log))
+
+    cases.append(
+        Case("train: a log too short for the split", two_samples, ("CONFIG", "split", "single"))
+    )
 
     # the minirov has no thrusters, so no commands: cmd_X … cmd_N are not its inputs, and
     # every command reading the inputs says so the same way (one reading of the log contract)

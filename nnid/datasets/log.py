@@ -153,11 +153,22 @@ def _check_time_unit(df: pd.DataFrame, source: str) -> None:
 
 
 def _check_time(df: pd.DataFrame, source: str) -> None:
-    """``t`` strictly increasing within each experiment; else the first bad row, named."""
+    """``t`` strictly increasing within each experiment, and each experiment at least two
+    samples long (one sample has no sample period: nothing can be derived or fitted from it);
+    else the first bad row, named."""
     groups = df.groupby("experiment", sort=False).indices if "experiment" in df else {None: None}
     t_all = df["t"].to_numpy(dtype=np.float64)
     for name, idx in groups.items():
         t = t_all if idx is None else t_all[idx]
+        if t.size < 2:
+            exp = "the log" if name is None else f"experiment {name!r}"
+            raise NnidInputError(
+                f"{exp} has a single sample: an experiment needs at least two (its sample "
+                "period), so label this row with its neighbours' experiment or remove it",
+                source=source,
+                field="experiment" if name is not None else "t",
+                row=0 if idx is None else int(idx[0]),
+            )
         dt = np.diff(t)
         if dt.size and (dt <= 0).any():
             k = int(np.flatnonzero(dt <= 0)[0])
