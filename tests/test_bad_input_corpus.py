@@ -92,11 +92,17 @@ LOG_CASES: list[tuple[str, str, Callable]] = [
         "'u'",
         lambda df, i: df.to_csv(index=False).replace(",v,", ",u,", 1).encode(),
     ),
+    # a parquet column of strings: every number readable, every later step meets text
+    ("numbers stored as text", "'u'", lambda df, i: df.assign(u=df["u"].astype(str))),
     ("empty file", "", lambda df, i: b""),
     ("binary garbage", "", lambda df, i: bytes(range(256)) * 8),
     ("one garbled line", "", lambda df, i: b"t,u\n0.0,1,2,3,4\n"),
 ]
-LOG_SUFFIX = {"empty file": ".csv", "binary garbage": ".parquet"}
+LOG_SUFFIX = {
+    "empty file": ".csv",
+    "binary garbage": ".parquet",
+    "numbers stored as text": ".parquet",
+}
 
 
 @dataclass
@@ -110,6 +116,8 @@ def _write_log(tmp: Path, name: str, content) -> Path:
     path = tmp / f"{name.replace(' ', '_')}{LOG_SUFFIX.get(name, '.csv')}"
     if isinstance(content, bytes):
         path.write_bytes(content)
+    elif path.suffix == ".parquet":
+        content.to_parquet(path, index=False)
     else:
         content.to_csv(path, index=False)
     return path

@@ -110,6 +110,19 @@ def _check_finite(df: pd.DataFrame, columns: list[str], source: str, gaps: bool 
                 field=col,
                 row=row,
             )
+        if not pd.api.types.is_numeric_dtype(df[col]):
+            # numbers stored as text (a parquet column of strings) read as numbers above, but
+            # every later step would meet strings: refused, not converted behind the user's back
+            text = df[col].map(lambda v: isinstance(v, str)).to_numpy()
+            if text.any():
+                row = int(np.flatnonzero(text)[0])
+                raise NnidInputError(
+                    f"the column holds numbers stored as text ({shown(df[col].iloc[row])}, "
+                    f"{int(text.sum())} such rows): store it as a numeric column",
+                    source=source,
+                    field=col,
+                    row=row,
+                )
 
 
 def _check_experiments(df: pd.DataFrame, source: str) -> None:
