@@ -73,6 +73,7 @@ LOG_CASES: list[tuple[str, str, Callable]] = [
     ("empty input cell", "INPUT", _set("INPUT", 32, np.nan)),
     ("text in a velocity", "'u'", _set("u", 40, "fast")),
     ("infinite velocity", "'u'", _set("u", 41, -np.inf)),
+    ("a corrupt velocity sample", "'u'", _set("u", 42, 1e30)),
     ("velocity column all empty", "'u'", lambda df, i: df.assign(u=np.nan)),
     ("angle in degrees", "'psi'", lambda df, i: df.assign(psi=np.degrees(df["psi"]) + 200)),
     ("text in an angle", "'phi'", _set("phi", 50, "level")),
@@ -164,6 +165,26 @@ def _log_cases() -> list[Case]:
         return _command("loop", tmp, fx, data=_write_log(tmp, "too short", log))
 
     cases.append(Case("loop: too short for the warm-up", short, ("LOG", "warmup_s")))
+
+    def huge_effect(tmp, fx):  # an injected effect no vehicle survives: named, not a traceback
+        path = tmp / "huge_effect.toml"
+        text = (
+            Path(SIMULATE)
+            .read_text()
+            .replace(
+                "seed = 0\n", 'seed = 0\neffects = [{ name = "buoyancy_offset", value = 1e9 }]\n', 1
+            )
+        )
+        path.write_text(text)
+        return _command("simulate", tmp, fx, config=str(path), out=tmp / "sim.csv")
+
+    cases.append(
+        Case(
+            "simulate: an effect too large for the vehicle",
+            huge_effect,
+            ("CONFIG", "buoyancy_offset", "buoyancy"),
+        )
+    )
 
     def two_samples(tmp, fx):  # the split leaves one sample in a part
         log = fx["demo_log"].head(2)

@@ -24,6 +24,8 @@ VELOCITY = DOFS  # velocity columns are named after their DOF
 ACCELERATION = tuple(f"d{s}" for s in VELOCITY)
 TAU = tuple(f"tau_{f}" for f in FORCES)
 ANGLES = ("phi", "theta", "psi")
+#: the largest |velocity| a log may hold, m/s or rad/s (a bound on corrupt data, not physics)
+MAX_SPEED = 100.0
 #: optional column: the replay group of a run (copies of one run, declared by the reader config)
 REPLAY_GROUP = "replay_group"
 
@@ -73,6 +75,21 @@ def validate_log(
             "motion (decay, restoring) can be identified from this log",
             stacklevel=2,
         )
+    for col in VELOCITY:
+        # a unit slip (mm/s) or a corrupt sample, caught here rather than as an absurd effect
+        # estimate far downstream; the fastest underwater vehicles stay far below this
+        if col in df.columns:
+            size = np.abs(df[col].to_numpy(dtype=np.float64))
+            if np.nanmax(size) > MAX_SPEED:
+                row = int(np.nanargmax(size))
+                unit = "m/s" if col in "uvw" else "rad/s"
+                raise NnidInputError(
+                    f"{shown(df[col].iloc[row])} {unit} is not a speed an underwater vehicle "
+                    f"reaches (over {MAX_SPEED:g}); velocities must be in m/s and rad/s",
+                    source=source,
+                    field=col,
+                    row=row,
+                )
     for col in ANGLES:
         if col in df.columns:
             size = np.abs(df[col].to_numpy(dtype=np.float64))

@@ -24,8 +24,10 @@ from __future__ import annotations
 
 import re
 
+from nnid.errors import NnidInputError
 from nnid.physics.damping import parse_coefficient_key
 from nnid.physics.dofs import DOFS, FORCES
+from nnid.validation import validated
 
 _D = "[uvwpqr]"
 EFFECT_PATTERNS = {
@@ -95,4 +97,9 @@ def apply_effect(vehicle, name: str, value: float):
         dof = args[0]
         key = f"{FORCES[DOFS.index(dof)]}_{dof}dot"
         out.added_mass[key] = out.added_mass.get(key, 0.0) + value
-    return type(vehicle).model_validate(out.model_dump())
+    try:
+        return validated(type(vehicle), out.model_dump(), "")
+    except NnidInputError as exc:  # an effect too large for a physical vehicle, said as such
+        raise NnidInputError(
+            f"effect {name} = {value:g} leaves no valid vehicle: '{exc.field}' {exc.message}",
+        ) from None
