@@ -86,7 +86,7 @@ def simulate(
     vehicle: str | None = typer.Option(
         None, "--vehicle", help="Preset name or vehicle TOML; overrides the config's."
     ),
-    seed: int | None = typer.Option(None, "--seed", help="Overrides the config's seed."),
+    seed: int | None = typer.Option(None, "--seed", min=0, help="Overrides the config's seed."),
 ) -> None:
     """Make a synthetic log from a vehicle, an excitation and optional injected effects."""
     from nnid.config import SimulateConfig, load_config

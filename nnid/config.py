@@ -16,7 +16,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic import BaseModel, ConfigDict, Field, Strict, field_validator, model_validator
 
 from nnid.datasets.excitation import (
     APRBS,
@@ -46,10 +46,13 @@ Force = Literal[FORCES]  # type: ignore[valid-type]
 MaskName = Literal[tuple(MASKS)]  # type: ignore[valid-type]
 PositiveFloat = Annotated[float, Field(gt=0, allow_inf_nan=False)]
 Number = Annotated[float, Field(allow_inf_nan=False)]
+#: a random seed: numpy's generators take no negative one
+Seed = Annotated[int, Field(ge=0)]
 
 
 class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
+    # strict: a TOML string or boolean where a number belongs is refused, never coerced
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False, strict=True)
 
 
 def _kind_shorthand(value: Any) -> Any:
@@ -102,12 +105,30 @@ class SimulateConfig(_Strict):
     dt: PositiveFloat = 0.01
     substeps: int = Field(1, ge=1)
     integrator: Literal["rk4", "adaptive", "torch"] = "rk4"
-    seed: int = 0
+    seed: Seed = 0
     effects: list[Effect] = Field(default_factory=list)
     measurement: Measurement = Field(default_factory=Measurement)
     experiments: list[Experiment] = Field(default_factory=list)
     sequence: WeissSequence | None = None
     autopilot: Autopilot | None = None
+
+    @model_validator(mode="after")
+    def _runs(self) -> SimulateConfig:
+        # checked here, where the config can be named: the log it writes would carry a blank
+        # or repeated experiment label, or a run of one sample, and be refused as that file
+        seen: set[str] = set()
+        for exp in self.all_experiments():
+            if not exp.name.strip():
+                raise ValueError("every experiment needs a name (experiments.name is empty)")
+            if exp.name in seen:
+                raise ValueError(f"experiment name {exp.name!r} is used twice")
+            seen.add(exp.name)
+            if round(exp.end() / self.dt) < 1:  # the simulator logs round(end / dt) + 1
+                raise ValueError(
+                    f"experiment {exp.name!r} lasts {exp.end():g} s, under one step dt = "
+                    f"{self.dt:g} s: it would log a single sample"
+                )
+        return self
 
     def all_experiments(self) -> list[Experiment]:
         """The explicit experiments followed by those of the sequence."""
@@ -129,7 +150,7 @@ class _DataCommon(_Strict):
     experiments: list[str] | None = None
     noise: float = Field(0.0, ge=0, allow_inf_nan=False)
     noise_columns: list[str] | None = None
-    noise_seed: int = 0
+    noise_seed: Seed = 0
     savgol_window: PositiveFloat = 1.0
     savgol_order: int = Field(4, ge=2, le=8)
 
@@ -164,7 +185,7 @@ class SinusoidSpec(_Strict):
     prior_inertia: PositiveFloat | None = None
     prior_added_fraction: float = Field(0.5, ge=0.1, le=1.0)
     duration: PositiveFloat
-    seed: int = 1000
+    seed: Seed = 1000
     measurement: Measurement | None = None
 
     @model_validator(mode="after")
@@ -183,7 +204,7 @@ class ValidationRunSpec(_Strict):
     duration: PositiveFloat = 120.0
     hold: PositiveFloat = 8.0
     fraction: PositiveFloat = 0.6
-    seed: int = 5
+    seed: Seed = 5
 
 
 class CacciaCampaignData(_DataCommon):
@@ -195,7 +216,7 @@ class CacciaCampaignData(_DataCommon):
 
     kind: Literal["caccia_campaign"]
     campaign: str
-    campaign_seed: int | None = None
+    campaign_seed: Seed | None = None
     sinusoid: SinusoidSpec
     validation: ValidationRunSpec | None = Field(default_factory=ValidationRunSpec)
 
@@ -407,7 +428,8 @@ class CacciaModelSpec(_Model):
     kind: Literal["caccia"]
     dof: Dof = "w"
     sinusoid_experiment: str = "sinusoid"
-    reference: list[tuple[str, Literal["pos", "neg"]]] = Field(
+    # a TOML pair is a list: the one field of a strict config that takes it as a tuple
+    reference: list[Annotated[tuple[str, Literal["pos", "neg"]], Strict(False)]] = Field(
         default_factory=lambda: [("", "pos")]
     )
     mode_column: str | None = None
@@ -457,7 +479,7 @@ class SindyModelSpec(_Model):
     savgol_order: int = Field(4, ge=2, le=8)
     filter_lambda: PositiveFloat | None = None
     zoh_midpoint: bool = False
-    seed: int = 0
+    seed: Seed = 0
 
 
 Bound = float | Literal["train", "open"]
@@ -483,7 +505,7 @@ class NarxModelSpec(_Model):
     output_delays: Annotated[int, Field(ge=1)] | list[Annotated[int, Field(ge=1)]] = 2
     hidden: list[Annotated[int, Field(ge=1)]] = Field(default_factory=lambda: [10])
     balanced: bool = True
-    seed: int = 0
+    seed: Seed = 0
     delta: bool = True
     multi_step: int = Field(1, ge=1)
     simulation_epochs: int = Field(0, ge=0)
@@ -542,7 +564,7 @@ class StateSpaceModelSpec(_Model):
     state_epochs: int = Field(50, ge=1)
     continuity: float = Field(1.0, ge=0, allow_inf_nan=False)
     output_bounds: Literal["train"] | list[list[Bound]] | None = None
-    seed: int = 0
+    seed: Seed = 0
     trainer: NetworkTrainer | None = None
 
     def arguments(self) -> dict[str, Any]:
@@ -575,7 +597,7 @@ class HybridModelSpec(_PhysicsModel):
     method: Literal["auto", "rk4", "dopri5", "nnid_rk4"] = "auto"
     adjoint: bool = False
     zoh_midpoint: bool = True
-    seed: int = 0
+    seed: Seed = 0
     trainer: NetworkTrainer | None = None
 
     @field_validator("physics_trainer", mode="before")
@@ -605,7 +627,7 @@ class EnsembleModelSpec(_Model):
 
     kind: Literal["ensemble"]
     member: SeededModelSpec
-    seeds: list[int] = Field(default_factory=lambda: [0, 1, 2], min_length=2)
+    seeds: list[Seed] = Field(default_factory=lambda: [0, 1, 2], min_length=2)
     combine: Literal["mean", "median"] = "mean"
     drop_diverged: bool = True
     n_jobs: int = Field(1, ge=1)
@@ -673,8 +695,8 @@ class SweepSpec(_Strict):
     grid: dict[str, list[Any]] = Field(default_factory=dict)
     random: dict[str, list[Any]] = Field(default_factory=dict)
     samples: int = Field(0, ge=0)
-    seed: int = 0  # of the random draws
-    seeds: list[int] = Field(default_factory=list)
+    seed: Seed = 0  # of the random draws
+    seeds: list[Seed] = Field(default_factory=list)
     seed_option: str = "model.seed"
     metric: Literal["free_run_nrmse", "one_step_nrmse", "k_step_nrmse"] = "free_run_nrmse"
     # on Ray (--address): Ray Tune's ASHA stops trials whose per-epoch validation objective

@@ -29,7 +29,8 @@ Vec6 = Annotated[list[float], Field(min_length=6, max_length=6)]
 
 class _Strict(BaseModel):
     # NaN or inf in a vehicle file is a typo, never a value: refused, naming the field
-    model_config = ConfigDict(extra="forbid", frozen=False, allow_inf_nan=False)
+    # strict: "11.5" or true for a mass is refused, never coerced to 11.5 or 1 kg
+    model_config = ConfigDict(extra="forbid", frozen=False, allow_inf_nan=False, strict=True)
 
 
 #: beyond these a value is a unit slip or a typo, not a vehicle (the largest AUVs weigh tens of

@@ -186,6 +186,26 @@ def _log_cases() -> list[Case]:
         )
     )
 
+    simulate_cases = {  # the config named, with the field or the experiment
+        "negative seed": ("seed", ("seed = 0\n", "seed = -1\n")),
+        "an experiment named twice": (
+            "used twice",
+            (
+                "[sequence]",
+                '[[experiments]]\nname = "e1"\nduration = 1.0\n[[experiments]]\n'
+                'name = "e1"\nduration = 1.0\n\n[sequence]',
+            ),
+        ),
+    }
+    for name, (field, change) in simulate_cases.items():
+
+        def sim(tmp, fx, name=name, change=change):
+            path = tmp / f"{name.replace(' ', '_')}.toml"
+            path.write_text(Path(SIMULATE).read_text().replace(*change, 1))
+            return _command("simulate", tmp, fx, config=str(path), out=tmp / "sim.csv")
+
+        cases.append(Case(f"simulate: {name}", sim, ("CONFIG", field)))
+
     def two_samples(tmp, fx):  # the split leaves one sample in a part
         log = fx["demo_log"].head(2)
         return _command("train", tmp, fx, data=_write_log(tmp, "two samples", log))
@@ -240,6 +260,9 @@ VEHICLE_CASES = [
     ("rho absurd", "rho", ("mass = 11.5", "mass = 11.5\nrho = 1.2")),
     ("toml syntax", "", ("mass = 11.5", "mass = = 11.5")),
     ("text mass", "mass", ("mass = 11.5", 'mass = "heavy"')),
+    # a number written as text, or a boolean, is refused, never coerced (true was 1 kg)
+    ("number as text", "mass", ("mass = 11.5", 'mass = "11.5"')),
+    ("boolean mass", "mass", ("mass = 11.5", "mass = true")),
 ]
 
 
@@ -267,6 +290,8 @@ CONFIG_CASES = [
     ("train", "unknown key", "warmup", ("warmup_s = 2.0", "warmup = 2.0")),
     ("train", "nan setting", "warmup_s", ("warmup_s = 2.0", "warmup_s = nan")),
     ("train", "negative setting", "warmup_s", ("warmup_s = 2.0", "warmup_s = -2.0")),
+    ("train", "number as text", "warmup_s", ("warmup_s = 2.0", 'warmup_s = "2.0"')),
+    ("train", "boolean for a number", "warmup_s", ("warmup_s = 2.0", "warmup_s = true")),
     ("train", "fractions not summing to 1", "fractions", ("[0.6, 0.2, 0.2]", "[0.6, 0.6, 0.2]")),
     ("train", "everything validation", "split", ("[0.6, 0.2, 0.2]", "[0.0, 1.0, 0.0]")),
     ("train", "unknown model kind", "kind", ('kind = "fossen"', 'kind = "fosen"')),
