@@ -382,7 +382,7 @@ def follow_run(model_dir: Path, data: str, out_dir: Path, window: float | None, 
     """``nnid detect --follow``: watch a growing CSV (or ``-``, standard input), ``say`` each
     alarm as it happens; the outputs written when the log ends; their sentences returned."""
     from nnid.fault.follow import follow_csv
-    from nnid.reports.detect_report import write_detect_outputs
+    from nnid.reports.detect_report import OUTPUTS, write_detect_outputs
 
     check_detect_inputs(model_dir, data, follow=True)
     monitor, window_s = _monitor(model_dir, window)
@@ -391,7 +391,8 @@ def follow_run(model_dir: Path, data: str, out_dir: Path, window: float | None, 
     except NnidInputError as exc:
         raise exc.with_source(data) from None
     with staged(out_dir) as stage:
-        return write_detect_outputs(monitor, result, stage, source=data)
+        lines = write_detect_outputs(monitor, result, stage, source=data)
+    return [*lines, f"wrote {out_dir}/: {OUTPUTS}"]
 
 
 def detect_run(
@@ -407,7 +408,7 @@ def detect_run(
     from nnid.datasets.log import POSE, VELOCITY
     from nnid.datasets.readers import load_log
     from nnid.fault.detect import detect
-    from nnid.reports.detect_report import write_detect_outputs
+    from nnid.reports.detect_report import OUTPUTS, write_detect_outputs
 
     check_detect_inputs(model_dir, data)
     monitor, window_s = _monitor(model_dir, window)
@@ -423,6 +424,7 @@ def detect_run(
         raise exc.with_source(data) from None
     with staged(out_dir) as stage:
         lines += write_detect_outputs(monitor, result, stage, source=data)
+    lines.append(f"wrote {out_dir}/: {OUTPUTS}")
     alarms = result.alarms
     headline: dict[str, Any] = {
         "alarms": len(alarms),

@@ -228,6 +228,8 @@ def test_cli_train_detect_and_follow(vehicle, tmp_path, chromium):
     out = tmp_path / "det"
     res = runner.invoke(app, ["detect", "--model", str(model), "--data", fault, "--out", str(out)])
     assert res.exit_code == 0, res.output
+    # the folder the user asked for, not the staging folder the files were written in first
+    assert f"wrote {out}/: alarms.csv" in res.output.replace("\n", ""), res.output
     report = json.loads((out / "detect.json").read_text())
     assert set(report) >= {"alarms", "threshold", "false_alarm_rate_per_hour", "samples", "seconds"}
     (a,) = report["alarms"]
@@ -247,7 +249,7 @@ def test_cli_train_detect_and_follow(vehicle, tmp_path, chromium):
     followed = tmp_path / "follow"
     args = ["detect", "--model", str(model), "--data", fault, "--out", str(followed), "--follow"]
     res = runner.invoke(app, args)
-    assert res.exit_code == 0, res.output
+    assert res.exit_code == 0 and f"wrote {followed}/: alarms.csv" in res.output, res.output
     assert res.output.index("ALARM t = ") < res.output.index("thruster h3 gives")
     (b,) = json.loads((followed / "detect.json").read_text())["alarms"]
     # the same alarm: time and thruster exactly, the efficiency to rounding (CI once saw 4 ulp

@@ -42,10 +42,16 @@ def detect_json(monitor, result: DetectResult) -> dict:
     }
 
 
+#: the files of a detect run, as the CLI lists them
+OUTPUTS = "alarms.csv, detect.json, report.html"
+
+
 def write_detect_outputs(
     monitor, result: DetectResult, out_dir: Path, source: str = ""
 ) -> list[str]:
-    """Write the three outputs; return the lines the CLI prints."""
+    """Write the three outputs (:data:`OUTPUTS`) to ``out_dir``; return the lines the CLI
+    prints about the alarms (the caller says where it wrote: ``out_dir`` may be a staging
+    folder)."""
     out_dir.mkdir(parents=True, exist_ok=True)
     rows = [{k: a.get(k) for k in ALARM_FIELDS} for a in result.alarms]
     write_text(out_dir / "alarms.csv", pd.DataFrame(rows, columns=ALARM_FIELDS).to_csv(index=False))
@@ -57,7 +63,6 @@ def write_detect_outputs(
         f"(target false-alarm rate {monitor.false_alarm_per_hour:g} per hour, calibrated on "
         f"{60 * hours:.0f} min of healthy data)",
         *(describe_alarm(a) for a in result.alarms),
-        f"wrote {out_dir}/: alarms.csv, detect.json, report.html",
     ]
     return lines
 
