@@ -58,11 +58,22 @@ class Inputs:
     notes: dict = field(default_factory=dict)
 
 
-def vehicle_for(name: str, config_path: Path):
-    """A preset by name, or a vehicle file (relative to the config's folder)."""
+def vehicle_for(name: str, config_path: Path, key: str = "vehicle"):
+    """A preset by name, or a vehicle file (relative to the config's folder); one that does
+    not exist is said against ``key``: the config's ``vehicle``, or ``--vehicle``."""
     from nnid.vehicle import PRESETS, load_vehicle
 
-    return load_vehicle(name if name in PRESETS else resolve(config_path.parent, name))
+    if name in PRESETS:
+        return load_vehicle(name)
+    path = resolve(config_path.parent, name)
+    if not path.exists():
+        where = f" (looked for {path})" if key == "vehicle" else ""
+        raise NnidInputError(
+            f"{name!r} is neither a preset ({', '.join(PRESETS)}) nor an existing file{where}",
+            source=str(config_path) if key == "vehicle" else None,
+            field=key,
+        )
+    return load_vehicle(path)
 
 
 def _check_file(path: Path, source: Path, key: str) -> None:
@@ -108,7 +119,7 @@ def load_inputs(
     base = config_path.parent
     physics = any(m.kind in PHYSICS_KINDS for m in models)
     name = vehicle or cfg.vehicle
-    veh = vehicle_for(name, config_path) if name else None
+    veh = vehicle_for(name, config_path, "--vehicle" if vehicle else "vehicle") if name else None
     simulated = data is None and bool(getattr(spec, "simulate", None))
     if physics and veh is None and not simulated:  # said before any data is read
         raise NnidInputError(
@@ -146,11 +157,10 @@ def load_inputs(
                 raise err.with_source(path) from None
     elif getattr(spec, "simulate", None):
         from nnid.datasets.simulator import simulate_config
-        from nnid.vehicle import load_vehicle
 
         sim_path = resolve(base, spec.simulate)
         sim = load_config(sim_path, SimulateConfig)
-        plant = load_vehicle(sim.vehicle)
+        plant = vehicle_for(sim.vehicle, sim_path)
         report = CleaningReport(source=str(sim_path))
         log = simulate_config(sim, plant)
         report.add("simulate", f"{len(log)} samples from {sim_path}")

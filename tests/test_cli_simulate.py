@@ -193,3 +193,19 @@ def test_unknown_preset_and_missing_options(tmp_path):
     assert res.exit_code == 2 and "--model" in res.output
     res = runner.invoke(app, ["loop", "--out", str(tmp_path / "o")])  # neither log nor vehicle
     assert res.exit_code == 2 and "give a vehicle" in res.output
+
+
+def test_config_vehicle_file_is_relative_to_the_config(tmp_path, monkeypatch):
+    """`vehicle = "boat.toml"` in a config in another folder is that folder's file (as for
+    train and loop), whatever the working directory; a missing one names the config's key."""
+    (tmp_path / "cfg").mkdir()
+    preset = ROOT / "nnid" / "presets" / "seamor.toml"
+    _write(tmp_path / "cfg", "boat.toml", preset.read_text())
+    cfg = _write(tmp_path / "cfg", "sim.toml", CONFIG.format(vehicle="boat.toml"))
+    monkeypatch.chdir(tmp_path)
+    res = runner.invoke(app, ["simulate", "cfg/sim.toml", "--out", str(tmp_path / "x.csv")])
+    assert res.exit_code == 0 and "of 'seamor'" in res.output, res.output
+    cfg.write_text(CONFIG.format(vehicle="raft.toml"))
+    res = runner.invoke(app, ["simulate", "cfg/sim.toml", "--out", str(tmp_path / "y.csv")])
+    assert res.exit_code == 2 and "sim.toml, field 'vehicle'" in res.output, res.output
+    assert "raft.toml" in res.output and not (tmp_path / "y.csv").exists()
