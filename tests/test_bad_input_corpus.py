@@ -206,6 +206,22 @@ def _log_cases() -> list[Case]:
 
         cases.append(Case(f"simulate: {name}", sim, ("CONFIG", field)))
 
+    def stray_command(tmp, fx, command, follow=False):  # a thruster the vehicle does not have
+        log = fx["octo_log"].assign(cmd_v5=0.0)
+        data = _write_log(tmp, "stray command", log)
+        vehicle = {} if command == "detect" else {"vehicle": OCTO}
+        args = _command(command, tmp, fx, data=data, **vehicle)
+        return [*args, "--follow"] if follow else args
+
+    for command, follow in (("detect", False), ("detect", True), ("loop", False), ("train", False)):
+        cases.append(
+            Case(
+                f"{command}{' --follow' if follow else ''}: a command no thruster takes",
+                functools.partial(stray_command, command=command, follow=follow),
+                ("LOG", "cmd_v5", "no thruster"),
+            )
+        )
+
     def two_samples(tmp, fx):  # the split leaves one sample in a part
         log = fx["demo_log"].head(2)
         return _command("train", tmp, fx, data=_write_log(tmp, "two samples", log))

@@ -4,6 +4,8 @@ and experiment codes."""
 
 from __future__ import annotations
 
+from collections.abc import Iterable
+
 import numpy as np
 import pandas as pd
 
@@ -43,6 +45,19 @@ def motion_arrays(log: pd.DataFrame) -> dict[str, np.ndarray]:
     }
 
 
+def check_commands(columns: Iterable[str], cols: list[str], vehicle_name: str) -> None:
+    """Every ``cmd_*`` column of a log (``columns``) is one of the vehicle's thrusters
+    (``cols``): a thruster the vehicle file lacks would be left out of τ without a word."""
+    extra = [c for c in columns if str(c).startswith("cmd_") and c not in cols]
+    if extra:
+        raise NnidInputError(
+            f"the log's commands {', '.join(extra)} drive no thruster of vehicle "
+            f"'{vehicle_name}' (its commands: {', '.join(cols)}): add the thruster to the "
+            "vehicle file, or drop the column if it is not a thruster's",
+            field=extra[0],
+        )
+
+
 def logged_inputs(log: pd.DataFrame, vehicle) -> tuple[np.ndarray, bool]:
     """The log's inputs and whether they are forces: ``tau_X`` … ``tau_N`` when all six are
     there, else the thruster commands ``cmd_<thruster>`` of the vehicle (ARCHITECTURE.md, the
@@ -58,6 +73,7 @@ def logged_inputs(log: pd.DataFrame, vehicle) -> tuple[np.ndarray, bool]:
             "tau_X … tau_N are needed"
         )
     cols = [f"cmd_{c}" for c in Actuation(vehicle).channels]
+    check_commands(log.columns, cols, vehicle.name)
     missing = [c for c in cols if c not in log]
     if missing:
         present = [c for c in TAU if c in log]

@@ -15,6 +15,7 @@ from collections.abc import Callable
 
 import numpy as np
 
+from nnid.datasets.arrays import check_commands
 from nnid.datasets.log import POSE, VELOCITY
 from nnid.errors import NnidInputError
 from nnid.fault.detect import DetectResult, alarm_record
@@ -74,6 +75,11 @@ def follow_csv(
             "measured, and the model's inputs)",
             source=where,
         )
+    if monitor.plant_.vehicle.thrusters:
+        try:
+            check_commands(header, inputs, monitor.plant_.vehicle.name)
+        except NnidInputError as exc:
+            raise exc.with_source(where) from None
     col = {c: header.index(c) for c in header}
     state_cols = [col.get(c) for c in (*POSE, *VELOCITY)]
     input_cols = [col[c] for c in inputs]

@@ -22,7 +22,7 @@ import pandas as pd
 from sklearn.base import BaseEstimator
 from sklearn.utils.validation import check_is_fitted
 
-from nnid.datasets.arrays import motion_arrays
+from nnid.datasets.arrays import check_commands, motion_arrays
 from nnid.errors import NnidInputError
 from nnid.fault import kernel
 from nnid.fault.thresholds import rate_interval, rate_threshold
@@ -112,6 +112,8 @@ def monitor_inputs(log: pd.DataFrame, plant) -> dict[str, np.ndarray]:
     from nnid.models.parametric import prepare_motion
 
     cols = input_columns(list(Actuation(plant.vehicle).channels))
+    if plant.vehicle.thrusters:
+        check_commands(log.columns, cols, plant.vehicle.name)
     missing = [c for c in cols if c not in log]
     if missing:
         raise NnidInputError(
