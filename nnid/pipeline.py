@@ -252,10 +252,15 @@ def _prepare(log: pd.DataFrame, spec, report: CleaningReport) -> pd.DataFrame:
 
 
 def make_split(
-    log: pd.DataFrame, s, source: str = "", report: CleaningReport | None = None
+    log: pd.DataFrame,
+    s,
+    source: str = "",
+    report: CleaningReport | None = None,
+    warmup_s: float = 0.0,
 ) -> Split:
     """The split a config asks for: named experiments (the rest trains) or fractions. A split
-    with nothing to validate on is an error: scores on training data are not validation.
+    with nothing to validate on is an error: scores on training data are not validation; so
+    is one whose held-out runs are all no longer than the scores' warm-up ``warmup_s``.
     Motion gaps are masked in each part after the split, so they never move it
     (:func:`nnid.datasets.gaps.mask_gaps`, reported in ``report``)."""
     assignment = None
@@ -304,6 +309,16 @@ def make_split(
                     source=source,
                     field="split",
                 )
+        spans = [float(np.ptp(part.loc[idx, "t"])) for _, idx in experiments(part)]
+        if name != "training" and spans and max(spans) <= warmup_s:
+            # every scored run would be all warm-up: no score, not a "diverged" one
+            raise NnidInputError(
+                f"the longest {name} run is {max(spans):.3g} s, no longer than the warm-up "
+                f"({warmup_s:g} s): nothing would be scored; give a shorter warmup_s, or a "
+                "longer log or split",
+                source=source,
+                field="warmup_s",
+            )
     return split
 
 
@@ -394,7 +409,7 @@ def run_train(
     start = time.perf_counter()
     source = str(config_path)
     inputs = load_inputs(cfg, config_path, [cfg.model], data, vehicle, columns)
-    split = make_split(inputs.log, cfg.split, source, inputs.report)
+    split = make_split(inputs.log, cfg.split, source, inputs.report, cfg.warmup_s)
     model = cfg.model.build(inputs.vehicle)
     caught = fit_model(model, split, progress or silent, "model", cfg.model)
     if hasattr(model, "report_"):
@@ -564,7 +579,7 @@ def run_compare(
     report = progress or silent
     source = str(config_path)
     inputs = load_inputs(cfg, config_path, list(cfg.models), data, vehicle, columns)
-    split = make_split(inputs.log, cfg.split, source, inputs.report)
+    split = make_split(inputs.log, cfg.split, source, inputs.report, cfg.warmup_s)
     held_name = "test" if len(split.test) else "validation"
     held = split[held_name]
     k = k_steps(held, cfg.k_step_s)

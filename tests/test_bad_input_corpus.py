@@ -307,6 +307,8 @@ CONFIG_CASES = [
     ("train", "nan setting", "warmup_s", ("warmup_s = 2.0", "warmup_s = nan")),
     ("train", "negative setting", "warmup_s", ("warmup_s = 2.0", "warmup_s = -2.0")),
     ("train", "number as text", "warmup_s", ("warmup_s = 2.0", 'warmup_s = "2.0"')),
+    # every held-out run all warm-up: no score at all, once reported as "diverged"
+    ("train", "warm-up longer than every run", "warmup_s", ("warmup_s = 2.0", "warmup_s = 1e9")),
     ("train", "boolean for a number", "warmup_s", ("warmup_s = 2.0", "warmup_s = true")),
     ("train", "fractions not summing to 1", "fractions", ("[0.6, 0.2, 0.2]", "[0.6, 0.6, 0.2]")),
     ("train", "everything validation", "split", ("[0.6, 0.2, 0.2]", "[0.0, 1.0, 0.0]")),
