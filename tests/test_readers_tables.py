@@ -107,6 +107,22 @@ columns = { x = "px", y = "py", z = "pz", u = "vx", v = "vy", w = "vz", tau_X = 
     assert (row["u"], row["v"], row["w"]) == pytest.approx((0.3, -0.1, -0.05))
 
 
+def test_one_source_column_feeds_two_targets(tmp_path):
+    """A column mapped twice, each with its own scale (one force logged once, fed to two
+    axes), is read once and converted for each: it was a 2-D selection and a traceback."""
+    n = 40
+    df = pd.DataFrame({"t": np.arange(n) * 0.1, "depth": 1.0, "f": np.linspace(0, 1, n)})
+    df.to_csv(tmp_path / "log.csv", index=False)
+    cmap = """
+[[sources]]
+file = "log.csv"
+time = "t"
+columns = { z = "depth", tau_X = "f", tau_Y = { from = "f", scale = -2.0 } }
+"""
+    log, _ = load_log(tmp_path, _write_map(tmp_path / "map.toml", cmap))
+    assert np.allclose(log["tau_X"], df["f"]) and np.allclose(log["tau_Y"], -2.0 * df["f"])
+
+
 def test_quaternion_euler_round_trip(rng):
     angles = np.stack([rng.uniform(-3, 3, 200), rng.uniform(-1.5, 1.5, 200),
                        rng.uniform(-3, 3, 200)], 1)  # fmt: skip

@@ -125,7 +125,8 @@ def map_source(
     needed = [source.time, *source.quaternion, *(s.source for s in source.specs().values())]
     keys = [experiment] if isinstance(experiment, str) else list(experiment or [])
     keys = [] if keys == ["file"] else keys
-    needed += keys
+    # one source column may feed several targets (each its own offset and scale): read once
+    needed = list(dict.fromkeys(needed + keys))
     for col in needed:
         if col not in raw.columns:
             raise NnidInputError(
