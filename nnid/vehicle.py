@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 import tomllib
+import warnings
 from importlib import resources
 from pathlib import Path
 from typing import Annotated, Any, Literal
@@ -78,6 +79,12 @@ class Thruster(_Strict):
     cmd_min: float | None = None
     cmd_max: float | None = None
 
+    @model_validator(mode="after")
+    def _range(self) -> Thruster:
+        if self.cmd_min is not None and self.cmd_max is not None and self.cmd_min >= self.cmd_max:
+            raise ValueError(f"cmd_min ({self.cmd_min:g}) must be below cmd_max ({self.cmd_max:g})")
+        return self
+
     @field_validator("direction")
     @classmethod
     def _unit(cls, d: list[float]) -> list[float]:
@@ -120,7 +127,7 @@ def _not_absurd(key: str, value: float) -> None:
 class Vehicle(_Strict):
     """A validated vehicle file."""
 
-    name: str
+    name: str = Field(pattern=r"\S")  # reports and saved models are labelled with it
     description: str = ""
     rho: float = Field(1000.0, ge=500, le=2000)  # kg/m³: water is 1000-1030
     g: float = Field(9.81, ge=9.0, le=10.5)
@@ -185,8 +192,9 @@ class Vehicle(_Strict):
     @model_validator(mode="after")
     def _unique_thrusters(self) -> Vehicle:
         names = [t.name for t in self.thrusters]
-        if len(set(names)) != len(names):
-            raise ValueError("thruster names must be unique")
+        twice = sorted({n for n in names if names.count(n) > 1})
+        if twice:
+            raise ValueError(f"thruster names must be unique: {', '.join(twice)} appear twice")
         return self
 
     def inertia_matrix(self) -> np.ndarray:
@@ -202,8 +210,42 @@ class Vehicle(_Strict):
 
 
 def vehicle_from_dict(data: dict[str, Any], source: str = "<vehicle>") -> Vehicle:
-    """Validate a parsed vehicle file; raise NnidInputError naming the file and the field."""
-    return validated(Vehicle, data, source)
+    """Validate a parsed vehicle file; raise NnidInputError naming the file and the field, and
+    warn of a diagonal added mass or damping of the wrong sign (:func:`sign_slips`)."""
+    vehicle = validated(Vehicle, data, source)
+    for slip in sign_slips(vehicle):
+        warnings.warn(f"{source}: {slip}", stacklevel=2)
+    return vehicle
+
+
+def sign_slips(vehicle: Vehicle) -> list[str]:
+    """Diagonal hydrodynamic derivatives of the sign that adds energy, in the SNAME notation
+    the vehicle file uses (Fossen: M_A = −[X_u̇ …], D = −[X_u …]): a positive X_udot makes the
+    added mass negative; a positive "X:u" or "X:u*abs(u)" where the X row has only its own
+    DOF's terms pushes the vehicle faster the faster it goes. A coupled row may hold a positive
+    diagonal term that its cross terms outweigh (McCarter's VT690, K_{p|p|} = +0.421), so it is
+    not flagged. Warnings, not errors: a fitted weak term may come out slightly positive."""
+    from nnid.physics.damping import parse_coefficient_key
+    from nnid.physics.dofs import FORCES
+
+    out = []
+    for key, value in vehicle.added_mass.items():
+        row, col = parse_added_mass_key(key)
+        if row == col and value > 0:
+            out.append(f"added mass {key} = {value:g} > 0 makes the added mass negative")
+    rows: dict[str, list[tuple[str, str, float]]] = {}
+    for key, value in vehicle.damping.coefficients.items():
+        force, term = parse_coefficient_key(key)
+        rows.setdefault(force, []).append((key, term, value))
+    for force, terms in rows.items():
+        dof = DOFS[FORCES.index(force)]
+        if all(term in (dof, f"{dof}*abs({dof})") for _, term, _ in terms):
+            out += [
+                f"damping '{key}' = {value:g} > 0 feeds energy into {dof} (damping is < 0)"
+                for key, _, value in terms
+                if value > 0
+            ]
+    return out
 
 
 def load_vehicle(name_or_path: str | Path) -> Vehicle:

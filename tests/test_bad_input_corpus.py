@@ -9,6 +9,7 @@ input is never accepted and never crashes.
 from __future__ import annotations
 
 import functools
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
 from importlib import resources
@@ -257,6 +258,14 @@ X_udot = -5.5
 [damping.coefficients]
 "X:u" = -4.0
 """
+_THRUSTER = """[[thrusters]]
+name = "h1"
+position = [0.1, 0.1, 0.0]
+direction = [1.0, 0.0, 0.0]
+cmd_min = -1.0
+cmd_max = 1.0
+curve = { kind = "signed_quadratic", k = 40.0 }
+"""
 VEHICLE_CASES = [
     ("mass nan", "mass", ("mass = 11.5", "mass = nan")),
     ("mass inf", "mass", ("mass = 11.5", "mass = inf")),
@@ -278,6 +287,17 @@ VEHICLE_CASES = [
     ("text mass", "mass", ("mass = 11.5", 'mass = "heavy"')),
     # a number written as text, or a boolean, is refused, never coerced (true was 1 kg)
     ("number as text", "mass", ("mass = 11.5", 'mass = "11.5"')),
+    ("empty name", "name", ('name = "probe"', 'name = " "')),
+    (
+        "command range upside down",
+        "cmd_min",
+        ('"X:u" = -4.0', '"X:u" = -4.0\n' + _THRUSTER.replace("cmd_min = -1.0", "cmd_min = 1.0")),
+    ),
+    (
+        "thruster named twice",
+        "h1 appear twice",
+        ('"X:u" = -4.0', '"X:u" = -4.0\n' + _THRUSTER + _THRUSTER),
+    ),
     ("boolean mass", "mass", ("mass = 11.5", "mass = true")),
 ]
 
@@ -546,3 +566,29 @@ def test_vehicle_loader_gives_a_vehicle_or_names_the_field(field, value, index):
     numbers = [vehicle.mass, vehicle.rho, vehicle.g, *vehicle.r_g, *vehicle.r_b]
     numbers += list(vehicle.added_mass.values()) + list(vehicle.damping.coefficients.values())
     assert all(np.isfinite(numbers)) and 0 < vehicle.mass <= MAX_MASS
+
+
+def test_a_diagonal_derivative_of_the_energy_adding_sign_is_warned_of():
+    """SNAME signs (Fossen: M_A = −[X_u̇ …], D = −[X_u …]): a positive X_udot, or a positive
+    diagonal damping in a row with nothing else, is said once naming the file; a coupled row's
+    positive diagonal term (McCarter's VT690 K_{p|p|} = +0.421) is not, nor a sound file."""
+    from nnid.vehicle import load_vehicle, vehicle_from_dict
+
+    base = {"name": "probe", "mass": 11.5, "inertia": [0.2, 0.2, 0.3]}
+    slipped = {
+        **base,
+        "added_mass": {"X_udot": 5.5, "Y_vdot": -5.0},
+        "damping": {"coefficients": {"X:u": 4.0, "Y:v": -4.0, "N:r*abs(r)": 0.5}},
+    }
+    with pytest.warns(UserWarning) as caught:
+        vehicle_from_dict(slipped, source="probe.toml")
+    said = [str(w.message) for w in caught]
+    assert len(said) == 3 and all(m.startswith("probe.toml: ") for m in said), said
+    text = " | ".join(said)
+    assert all(p in text for p in ("X_udot = 5.5", "'X:u' = 4", "'N:r*abs(r)' = 0.5")), said
+    coupled = {**base, "damping": {"coefficients": {"K:p*abs(p)": 0.4, "K:p*abs(u)": -0.4}}}
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        vehicle_from_dict(coupled, source="probe.toml")
+        vehicle_from_dict({**base, "added_mass": {"X_udot": -5.5}}, source="probe.toml")
+        load_vehicle("vt690")
