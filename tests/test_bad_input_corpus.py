@@ -207,6 +207,22 @@ def _log_cases() -> list[Case]:
 
         cases.append(Case(f"simulate: {name}", sim, ("CONFIG", field)))
 
+    # --follow reads row by row, not through the log reader: the row checks it repeats, with
+    # the same column and row numbers
+    follow_cases = ("text in time", "duplicated time", "decreasing time", "text in a velocity",
+                    "infinite input", "empty input cell")  # fmt: skip
+    for name in follow_cases:
+
+        def followed(tmp, fx, name=name):
+            base = fx["octo_log"]
+            inp = next(c for c in base if c.startswith("cmd_"))
+            mutate = {n: m for n, _, m in LOG_CASES}[name]
+            data = _write_log(tmp, name, mutate(base, inp))
+            return [*_command("detect", tmp, fx, data=data), "--follow"]
+
+        field = {n: f for n, f, _ in LOG_CASES}[name]
+        cases.append(Case(f"detect --follow: {name}", followed, ("LOG", field, "row ")))
+
     def stray_command(tmp, fx, command, follow=False):  # a thruster the vehicle does not have
         log = fx["octo_log"].assign(cmd_v5=0.0)
         data = _write_log(tmp, "stray command", log)

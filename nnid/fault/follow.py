@@ -20,6 +20,7 @@ from nnid.datasets.log import POSE, VELOCITY
 from nnid.errors import NnidInputError
 from nnid.fault.detect import DetectResult, alarm_record
 from nnid.fault.monitor import ResidualMonitor, Trace, input_columns
+from nnid.validation import shown
 
 
 def _rows(source: str, idle_s: float):
@@ -47,6 +48,28 @@ def _rows(source: str, idle_s: float):
     finally:
         if handle is not sys.stdin:
             handle.close()
+
+
+def _numbers(row: list[str], read: list[tuple[str, int]], n: int, where: str) -> dict:
+    """The named cells of one streamed row as finite numbers; else the first bad cell, named by
+    its column and row (an empty motion cell too: a stream has no gap bridging)."""
+    out = {}
+    for name, i in read:
+        cell = row[i] if i < len(row) else ""
+        try:
+            value = float(cell)
+        except ValueError:
+            value = np.nan
+        if not np.isfinite(value):
+            raise NnidInputError(
+                f"value {shown(cell)} is not a finite number (--follow needs one in every "
+                "column it reads)",
+                source=where,
+                field=name,
+                row=n,
+            )
+        out[name] = value
+    return out
 
 
 def follow_csv(
@@ -101,20 +124,33 @@ def follow_csv(
         alarms.append(record)
         say(describe_alarm(record))
 
-    for n, row in enumerate(rows, start=2):
-        try:
-            t = float(row[col["t"]])
-            for i, c in enumerate(state_cols):
-                x[i] = 0.0 if c is None else float(row[c])
-            for i, c in enumerate(input_cols):
-                u[i] = float(row[c])
-        except (ValueError, IndexError):
-            raise NnidInputError(f"row {n} is not numbers in every column", source=where) from None
+    read = [("t", col["t"])] + [
+        (c, i)
+        for c, i in zip((*POSE, *VELOCITY, *inputs), (*state_cols, *input_cols), strict=True)
+        if i is not None
+    ]
+    last_t = -np.inf
+    for n, row in enumerate(rows):  # n: the data row from 0, as the whole-log reader counts
+        values = _numbers(row, read, n, where)
+        t = values["t"]
+        x[:] = [values.get(c, 0.0) for c in (*POSE, *VELOCITY)]
+        u[:] = [values[c] for c in inputs]
         name = row[exp_col] if exp_col is not None else ""
         if name != current:
             stream.reset()
             current = name
             names.append(name)
+        elif t <= last_t:  # the whole-log reader refuses it too (nnid.datasets.log)
+            what = "duplicated" if t == last_t else "decreasing"
+            raise NnidInputError(
+                f"time is {what}{f' in experiment {name!r}' if exp_col is not None else ''} "
+                f"({shown(last_t)} then {shown(t)}); t must be strictly increasing within an "
+                "experiment",
+                source=where,
+                field="t",
+                row=n,
+            )
+        last_t = t
         code = stream.update(t, x, u)
         ts.append(t)
         xs.append(x.copy())
