@@ -235,6 +235,22 @@ def test_velocity_dropouts_give_the_same_diagnosis_and_are_reported():
     assert complete.as_dict()["data"]["gaps"]["count"] == 0
 
 
+def test_a_gap_no_step_touched_is_said_as_such():
+    """A gap in a column the analysis neither bridges nor masks (depth, with velocities logged)
+    is said with its column, not as an empty list (": .")."""
+    from nnid.reports.loop_report import _gaps_line
+
+    data = {
+        "gaps": {"count": 1, "seconds": 0.1, "longest_s": 0.1,
+                 "gaps": [{"experiment": "run0", "t": 2.0, "columns": ["z"]}]},
+        "cleaning": [{"step": "derive accelerations", "detail": "du ... dr"}],
+    }  # fmt: skip
+    (line,) = _gaps_line(data)
+    assert line.endswith("left as they are in z: no step bridged or masked them."), line
+    data["cleaning"].append({"step": "mask gaps", "detail": "1 gaps in z masked"})
+    assert _gaps_line(data)[0].endswith("(0.1 s, longest 0.1 s): 1 gaps in z masked.")
+
+
 def _tug(t, forces):  # a tether pulling sideways every 9 s
     out = np.zeros_like(forces)
     out[:, 1] = 6.0 * np.sin(2 * np.pi * t / 9.0)

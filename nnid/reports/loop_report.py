@@ -143,9 +143,14 @@ def _gaps_line(data: dict) -> list[str]:
     if not gaps.get("count"):
         return []
     steps = [s for s in data.get("cleaning", []) if s["step"] in GAP_STEPS]
+    if steps:
+        fate = "; ".join(s["detail"] for s in steps)
+    else:  # a gap in a column no step of this analysis reads (z with velocities logged)
+        columns = sorted({c for g in gaps.get("gaps", []) for c in g.get("columns", [])})
+        fate = f"left as they are in {', '.join(columns)}: no step bridged or masked them"
     return [
         f"The log misses motion data in {gaps['count']} gaps ({gaps['seconds']:.3g} s, longest "
-        f"{gaps['longest_s']:.3g} s): " + "; ".join(s["detail"] for s in steps) + "."
+        f"{gaps['longest_s']:.3g} s): {fate}."
     ]
 
 
