@@ -226,6 +226,11 @@ def exclude_experiments(log, excluded: list[str], report):
             f"experiments {', '.join(unknown)} are not in the log", field="--exclude"
         )
     keep = ~log["experiment"].isin(excluded)
+    if not keep.any():
+        raise NnidInputError(
+            f"leaves no experiment to analyse (the log has {', '.join(sorted(map(str, known)))})",
+            field="--exclude",
+        )
     report.add("exclude", f"left out {', '.join(excluded)} (--exclude)", int((~keep).sum()))
     return log[keep].reset_index(drop=True)
 
