@@ -77,6 +77,14 @@ def staged(out_dir: Path) -> Iterator[Path]:
         shutil.rmtree(stage, ignore_errors=True)
 
 
+def lost_rows(report) -> list[str]:
+    """The cleaning steps that bridged, masked or removed rows, a line each for the console:
+    a run says what it filled in or left out, not only in its cleaning report file."""
+    from nnid.datasets.gaps import GAP_STEPS
+
+    return [f"{s.step}: {s.detail}" for s in report.steps if s.rows_removed or s.step in GAP_STEPS]
+
+
 def _fmt(x) -> str:
     return "diverged" if x is None else f"{x:.3g}"
 
@@ -139,7 +147,10 @@ def train_run(
         headline[f"param:{name}"] = p.get("value")
         headline[f"stderr:{name}"] = p.get("stderr")
     return Outcome(
-        [f"wrote {out_dir}/: model.json, metrics.json, report.md, report.html ({line})"],
+        [
+            *lost_rows(result.report),
+            f"wrote {out_dir}/: model.json, metrics.json, report.md, report.html ({line})",
+        ],
         list(metrics["warnings"]),
         headline,
     )
@@ -179,7 +190,10 @@ def compare_run(
         held = row.get("test") or row.get("validation") or {}
         headline[f"free_run_nrmse:{row['name']}"] = _total(held, "free_run_nrmse")
     return Outcome(
-        [f"wrote {out_dir}/: comparison.json, report.html, report.md. " + comparison["summary"]],
+        [
+            *lost_rows(result.report),
+            f"wrote {out_dir}/: comparison.json, report.html, report.md. " + comparison["summary"],
+        ],
         [],
         headline,
     )
@@ -422,7 +436,7 @@ def detect_run(
         log, report = load_log(data, columns)
         # a gap in the motion data is no residual: the monitor restarts after it
         log = mask_gaps([log], [*POSE, *VELOCITY], report)[0]
-        lines += [f"{s.step}: {s.detail}" for s in report.steps if s.step == "mask gaps"]
+        lines += lost_rows(report)
         (progress or silent)(0, None, "running the monitor")
         result = detect(monitor, log, window_s)
     except NnidInputError as exc:

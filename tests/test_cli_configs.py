@@ -280,6 +280,17 @@ def test_a_config_without_data_runs_with_data_and_vehicle_given(tmp_path):
     assert run.exit_code == 0, run.output
     assert (out / "metrics.json").exists() and (out / "model.json").exists()
     assert any(f"wrote {out}/" in line for line in run.output.splitlines()), run.output
+    assert "gaps" not in run.output  # a complete log: nothing filled in or left out, nothing said
+    # a velocity sample missing: bridged from the pose, and the console says so (it was said
+    # only in cleaning.md)
+    import pandas as pd
+
+    gappy = pd.read_csv(log)
+    gappy.loc[40, "u"] = float("nan")
+    gappy.to_csv(tmp_path / "gappy.csv", index=False)
+    args = ["train", str(cfg), "--data", str(tmp_path / "gappy.csv"), "--vehicle", "seamor"]
+    run = CliRunner().invoke(app, [*args, "--out", str(tmp_path / "o4")])
+    assert run.exit_code == 0 and "bridge velocity gaps: 1 gaps in u" in run.output, run.output
     missing = CliRunner().invoke(app, ["train", str(cfg), "--out", str(tmp_path / "o2")])
     assert missing.exit_code == 2 and "field 'data'" in missing.output
     novehicle = CliRunner().invoke(

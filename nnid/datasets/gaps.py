@@ -24,6 +24,9 @@ from nnid.datasets.preprocess import derive_velocities, experiments
 
 #: a segment left between two gaps shorter than this many samples is masked with them
 MIN_SEGMENT = 3
+#: the cleaning steps that say what became of the gaps (bridged from the pose, or masked)
+BRIDGE_STEP, MASK_STEP = "bridge velocity gaps", "mask gaps"
+GAP_STEPS = (BRIDGE_STEP, MASK_STEP)
 
 
 @dataclass
@@ -117,7 +120,7 @@ def bridge_from_pose(
             bridged.append(Gap(gap.experiment, gap.t, gap.length_s, gap.rows, cols))
     if report is not None and bridged:
         report.add(
-            "bridge velocity gaps",
+            BRIDGE_STEP,
             f"{_summary(bridged)} bridged from the pose by Savitzky-Golay "
             f"(order {order}, {window_s:g} s window) and J⁻¹(η)",
             columns=sorted({c for g in bridged for c in g.columns}, key=VELOCITY.index),
@@ -154,7 +157,7 @@ def mask_gaps(
     if report is not None and gaps:
         extra = f"; {short} samples between gaps too short to use" if short else ""
         report.add(
-            "mask gaps",
+            MASK_STEP,
             f"{_summary(gaps)} masked (out of regressions and scores; runs cut into segments "
             f"at them, each simulated from its own start{extra})",
             rows_removed=sum(len(a) - len(b) for a, b in zip(parts, out, strict=True)),

@@ -11,6 +11,7 @@ import math
 
 import numpy as np
 
+from nnid.datasets.gaps import GAP_STEPS
 from nnid.physics.dofs import DOF_WORD, DOFS
 from nnid.physics.effects import parse_effect
 from nnid.reports.figures import UNITS, figure_uri, html_table, new_figure, page_head
@@ -107,10 +108,6 @@ def _like_for_like(result: dict) -> tuple[str, str, dict, dict]:
         result["before"]["one_step_nrmse"],
         result["after"]["one_step_nrmse"],
     )
-
-
-#: the cleaning steps that say what became of the gaps (nnid.datasets.gaps)
-GAP_STEPS = ("bridge velocity gaps", "mask gaps")
 
 
 def summary(result: dict) -> list[str]:
