@@ -191,10 +191,15 @@ def _check_time(df: pd.DataFrame, source: str) -> None:
     for name, idx in groups.items():
         t = t_all if idx is None else t_all[idx]
         if t.size < 2:
+            fix = (
+                "give a longer log"
+                if name is None
+                else "label this row with its neighbours' experiment, or remove it"
+            )
             exp = "the log" if name is None else f"experiment {name!r}"
             raise NnidInputError(
                 f"{exp} has a single sample: an experiment needs at least two (its sample "
-                "period), so label this row with its neighbours' experiment or remove it",
+                f"period); {fix}",
                 source=source,
                 field="experiment" if name is not None else "t",
                 row=0 if idx is None else int(idx[0]),

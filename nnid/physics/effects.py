@@ -101,5 +101,7 @@ def apply_effect(vehicle, name: str, value: float):
         return validated(type(vehicle), out.model_dump(), "")
     except NnidInputError as exc:  # an effect too large for a physical vehicle, said as such
         raise NnidInputError(
-            f"effect {name} = {value:g} leaves no valid vehicle: '{exc.field}' {exc.message}",
+            f"effect {name} = {value:g} leaves no valid vehicle: "
+            + (f"'{exc.field}' " if exc.field else "")
+            + exc.message,
         ) from None
