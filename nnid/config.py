@@ -773,8 +773,9 @@ class LoopConfig(_Command):
     kind: Literal["loop"] = "loop"
     vehicle: str = ""
     data: VehicleData = Field(default_factory=VehicleData)
-    dofs: list[Dof] | None = None
-    validation: list[str] | None = None  # experiments held out; default the last 30 %
+    # given, a list names something: [] is an error, not "all" (leave the key out for all)
+    dofs: Annotated[list[Dof], Field(min_length=1)] | None = None
+    validation: Annotated[list[str], Field(min_length=1)] | None = None  # default: the last 30 %
     validation_fraction: float = Field(0.3, gt=0, lt=1)
     max_effects: int = Field(3, ge=0)
     alpha: float = Field(0.01, gt=0, lt=0.5)

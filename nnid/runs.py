@@ -205,16 +205,22 @@ def compare_run(
 LOOP_SETTINGS = ("validation", "dofs", "alpha", "max_effects", "warmup_s", "gate_horizon_s")
 
 
-def names(text: str | None) -> list[str]:
-    """A comma-separated option as a list (empty for None)."""
-    return [n.strip() for n in (text or "").split(",") if n.strip()]
+def names(text: str | None, option: str = "") -> list[str]:
+    """A comma-separated option as a list, each name once (empty for None); an option given
+    with no name in it (``--dofs ,``) is an error, not "all"."""
+    out = list(dict.fromkeys(n.strip() for n in (text or "").split(",") if n.strip()))
+    if text is not None and not out:
+        raise NnidInputError(
+            f"names nothing ({text!r}); leave the option out for all", field=option
+        )
+    return out
 
 
 def dofs_option(text: str | None) -> tuple[str, ...] | None:
     """``--dofs u,w``: checked DOF names, or None for all logged."""
     from nnid.physics.dofs import DOFS
 
-    given = names(text)
+    given = names(text, "--dofs")
     unknown = [d for d in given if d not in DOFS]
     if unknown:
         raise NnidInputError(
@@ -296,7 +302,7 @@ def loop_run(
         inputs = load_inputs(cfg, where, [], data, vehicle, columns)
     except NnidInputError as exc:
         raise exc.with_source(str(config_path)) if config_path else exc from None
-    log = exclude_experiments(inputs.log, names(exclude), inputs.report)
+    log = exclude_experiments(inputs.log, names(exclude, "--exclude"), inputs.report)
     settings = dict(
         max_effects=cfg.max_effects if max_effects is None else max_effects,
         alpha=cfg.alpha if alpha is None else alpha,
@@ -307,7 +313,7 @@ def loop_run(
         warmup_s=cfg.warmup_s,
         validation=cfg.validation_fraction,
         dofs=dofs_option(dofs) or (tuple(cfg.dofs) if cfg.dofs else None),
-        validation_experiments=names(validation) or cfg.validation,
+        validation_experiments=names(validation, "--validation") or cfg.validation,
         gate_horizon_s=cfg.gate_horizon_s,
         second_opinion=second,
     )

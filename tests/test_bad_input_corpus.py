@@ -390,6 +390,7 @@ CONFIG_CASES = [
     ("loop", "unknown key", "alhpa", None),
     ("loop", "nan alpha", "alpha", None),
     ("loop", "every run held out", "validation", None),
+    ("loop", "empty dofs", "dofs", None),
 ]
 LOOP_TEXT = {
     "unknown dof": 'kind = "loop"\ndofs = ["u", "x"]\n',
@@ -397,6 +398,7 @@ LOOP_TEXT = {
     "unknown key": 'kind = "loop"\nalhpa = 0.01\n',
     "nan alpha": 'kind = "loop"\nalpha = nan\n',
     "every run held out": 'kind = "loop"\nvalidation = ["run0", "run1", "run2"]\n',
+    "empty dofs": 'kind = "loop"\ndofs = []\n',  # [] is not "all": leave the key out for all
 }
 
 

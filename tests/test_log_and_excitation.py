@@ -53,6 +53,10 @@ def _set(column: str, row: int, value):
         (lambda d: d.assign(u=d["u"].where(d.index != 5, -np.inf)), "u", 5, "-inf is"),
         (lambda d: d.assign(tau_X=d["tau_X"].where(d.index != 3, np.inf)), "tau_X", 3, "inf is"),
         (lambda d: d.assign(psi=d["psi"] * 180), "psi", 19, "degrees"),
+        # beyond any vehicle: a unit slip (mm/s) or a corrupt sample, not data to fit
+        (lambda d: d.assign(u=d["u"] * 1000), "u", 16, "m/s is not a speed"),
+        (_set("tau_X", 8, 1e300), "tau_X", 8, "N is not a force"),
+        (lambda d: d.assign(experiment=["a"] * 19 + ["b"]), "experiment", 19, "single sample"),
     ],
 )
 def test_bad_logs_name_file_column_row(mutate, column, row, words):

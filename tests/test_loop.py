@@ -451,6 +451,9 @@ def test_cli_loop_options_choose_dofs_held_out_and_excluded_runs(tmp_path):
         res = runner.invoke(app, [*args, bad, name, "--out", str(tmp_path / "bad")])
         assert res.exit_code == 2 and name.split(",")[-1] in res.output, res.output
         assert not (tmp_path / "bad").exists()
+    # an option that names nothing is refused, not read as "all"
+    res = runner.invoke(app, [*args, "--dofs", ",", "--out", str(tmp_path / "x")])
+    assert res.exit_code == 2 and "'--dofs': names nothing" in res.output, res.output
     # every run left out: said against --exclude, not as a held-out run of 0 s against warmup_s
     res = runner.invoke(
         app, [*args, "--exclude", "run0,run1,run2,run3", "--out", str(tmp_path / "x")]

@@ -26,6 +26,8 @@ TAU = tuple(f"tau_{f}" for f in FORCES)
 ANGLES = ("phi", "theta", "psi")
 #: the largest |velocity| a log may hold, m/s or rad/s (a bound on corrupt data, not physics)
 MAX_SPEED = 100.0
+#: the largest |generalized force| a log may hold, N or N m (ten meganewtons: no thruster's)
+MAX_FORCE = 1e7
 #: optional column: the replay group of a run (copies of one run, declared by the reader config)
 REPLAY_GROUP = "replay_group"
 
@@ -75,17 +77,18 @@ def validate_log(
             "motion (decay, restoring) can be identified from this log",
             stacklevel=2,
         )
-    for col in VELOCITY:
-        # a unit slip (mm/s) or a corrupt sample, caught here rather than as an absurd effect
-        # estimate far downstream; the fastest underwater vehicles stay far below this
+    # a unit slip (mm/s) or a corrupt sample, caught here rather than as an absurd estimate or
+    # an overflow far downstream; real vehicles stay far below these bounds
+    bounds = [(c, MAX_SPEED, "a speed", "m/s" if c in "uvw" else "rad/s") for c in VELOCITY]
+    bounds += [(c, MAX_FORCE, "a force", "N" if c in TAU[:3] else "N m") for c in TAU]
+    for col, bound, what, unit in bounds:
         if col in df.columns:
             size = np.abs(df[col].to_numpy(dtype=np.float64))
-            if np.nanmax(size) > MAX_SPEED:
+            if np.nanmax(size) > bound:
                 row = int(np.nanargmax(size))
-                unit = "m/s" if col in "uvw" else "rad/s"
                 raise NnidInputError(
-                    f"{shown(df[col].iloc[row])} {unit} is not a speed an underwater vehicle "
-                    f"reaches (over {MAX_SPEED:g}); velocities must be in m/s and rad/s",
+                    f"{shown(df[col].iloc[row])} {unit} is not {what} an underwater vehicle "
+                    f"meets (over {bound:g}); the log must be in SI units",
                     source=source,
                     field=col,
                     row=row,
