@@ -17,6 +17,7 @@ from typing import Annotated, Any, Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
+from nnid.datasets.log import MAX_FORCE  # a constant external force obeys the log's bound
 from nnid.errors import NnidInputError
 from nnid.physics.added_mass import parse_added_mass_key
 from nnid.physics.dofs import DOFS
@@ -39,6 +40,7 @@ class _Strict(BaseModel):
 MAX_MASS = 1e6  # kg
 MAX_OFFSET = 100.0  # m, a position on the vehicle
 MAX_COEFFICIENT = 1e9  # any added-mass or damping coefficient, SI
+MAX_LAG = 60.0  # s, a thruster's first-order lag: longer is no thruster
 Offset = Annotated[
     list[Annotated[float, Field(ge=-MAX_OFFSET, le=MAX_OFFSET)]], Field(min_length=3, max_length=3)
 ]
@@ -145,8 +147,11 @@ class Vehicle(_Strict):
     current: Annotated[
         list[Annotated[float, Field(ge=-10, le=10)]], Field(min_length=3, max_length=3)
     ] = Field(default_factory=lambda: [0.0, 0.0, 0.0])  # m/s
-    external_bias: Vec6 = Field(default_factory=lambda: [0.0] * 6)
-    actuator_lag: float = Field(0.0, ge=0)
+    external_bias: Annotated[
+        list[Annotated[float, Field(ge=-MAX_FORCE, le=MAX_FORCE)]],
+        Field(min_length=6, max_length=6),
+    ] = Field(default_factory=lambda: [0.0] * 6)  # N, N m
+    actuator_lag: float = Field(0.0, ge=0, le=MAX_LAG)  # s
     deadband: float = Field(0.0, ge=0)
 
     @model_validator(mode="after")
@@ -213,6 +218,13 @@ def vehicle_from_dict(data: dict[str, Any], source: str = "<vehicle>") -> Vehicl
     """Validate a parsed vehicle file; raise NnidInputError naming the file and the field, and
     warn of a diagonal added mass or damping of the wrong sign (:func:`sign_slips`)."""
     vehicle = validated(Vehicle, data, source)
+    if abs(vehicle.weight - vehicle.mass * vehicle.g) > 0.1 * vehicle.mass * vehicle.g:
+        warnings.warn(
+            f"{source}: weight {vehicle.weight:g} N is not mass × g = "
+            f"{vehicle.mass * vehicle.g:g} N (a weight in kg, or the weight in water? "
+            "buoyancy is its own key)",
+            stacklevel=2,
+        )
     for slip in sign_slips(vehicle):
         warnings.warn(f"{source}: {slip}", stacklevel=2)
     return vehicle

@@ -304,6 +304,12 @@ VEHICLE_CASES = [
     # a number written as text, or a boolean, is refused, never coerced (true was 1 kg)
     ("number as text", "mass", ("mass = 11.5", 'mass = "11.5"')),
     ("empty name", "name", ('name = "probe"', 'name = " "')),
+    ("actuator lag absurd", "actuator_lag", ("mass = 11.5", "mass = 11.5\nactuator_lag = 1e9")),
+    (
+        "external bias absurd",
+        "external_bias",
+        ("mass = 11.5", "mass = 11.5\nexternal_bias = [1e12, 0, 0, 0, 0, 0]"),
+    ),
     (
         "command range upside down",
         "cmd_min",
@@ -586,7 +592,7 @@ def test_vehicle_loader_gives_a_vehicle_or_names_the_field(field, value, index):
     assert all(np.isfinite(numbers)) and 0 < vehicle.mass <= MAX_MASS
 
 
-def test_a_diagonal_derivative_of_the_energy_adding_sign_is_warned_of():
+def test_a_derivative_of_the_energy_adding_sign_or_a_weight_in_kg_is_warned_of():
     """SNAME signs (Fossen: M_A = −[X_u̇ …], D = −[X_u …]): a positive X_udot, or a positive
     diagonal damping in a row with nothing else, is said once naming the file; a coupled row's
     positive diagonal term (McCarter's VT690 K_{p|p|} = +0.421) is not, nor a sound file."""
@@ -604,9 +610,12 @@ def test_a_diagonal_derivative_of_the_energy_adding_sign_is_warned_of():
     assert len(said) == 3 and all(m.startswith("probe.toml: ") for m in said), said
     text = " | ".join(said)
     assert all(p in text for p in ("X_udot = 5.5", "'X:u' = 4", "'N:r*abs(r)' = 0.5")), said
+    with pytest.warns(UserWarning, match=r"probe.toml: weight 11.5 N is not mass × g"):
+        vehicle_from_dict({**base, "weight": 11.5}, source="probe.toml")  # kg written as N
     coupled = {**base, "damping": {"coefficients": {"K:p*abs(p)": 0.4, "K:p*abs(u)": -0.4}}}
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         vehicle_from_dict(coupled, source="probe.toml")
         vehicle_from_dict({**base, "added_mass": {"X_udot": -5.5}}, source="probe.toml")
+        vehicle_from_dict({**base, "weight": 11.5 * 9.81}, source="probe.toml")
         load_vehicle("vt690")
