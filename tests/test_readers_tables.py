@@ -123,6 +123,14 @@ columns = { z = "depth", tau_X = "f", tau_Y = { from = "f", scale = -2.0 } }
     assert np.allclose(log["tau_X"], df["f"]) and np.allclose(log["tau_Y"], -2.0 * df["f"])
 
 
+def test_a_source_matching_no_file_names_the_reader_config(tmp_path):
+    """The error names the reader config's file, where 'sources.0.file' is, not its name."""
+    cmap = _write_map(tmp_path / "map.toml", 'name = "probe"\n' + MAP.replace("nav.csv", "x*.csv"))
+    with pytest.raises(NnidInputError) as err:
+        load_log(tmp_path, cmap)
+    assert str(err.value).startswith(f"{cmap}, field 'sources.0.file': no file matches 'x*.csv'")
+
+
 def test_quaternion_euler_round_trip(rng):
     angles = np.stack([rng.uniform(-3, 3, 200), rng.uniform(-1.5, 1.5, 200),
                        rng.uniform(-3, 3, 200)], 1)  # fmt: skip

@@ -13,7 +13,8 @@ from __future__ import annotations
 import glob
 import gzip
 import re
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -287,7 +288,8 @@ def load_log(
             )
         cmap = load_column_map(columns)
         report = CleaningReport(source=str(path))
-        df = assemble(read_sources(path, cmap, report), cmap, report)
+        with _config_named(cmap, columns):
+            df = assemble(read_sources(path, cmap, report), cmap, report)
         return validate_log(df, source=f"{path} (through {columns})"), report
     if columns is None:
         report = CleaningReport(source=str(path))
@@ -301,5 +303,20 @@ def load_log(
             update={"sources": [s.model_copy(update={"file": root.name}) for s in cmap.sources]}
         )
         root = root.parent
-    df, report = read_mapped(cmap, root)
+    with _config_named(cmap, columns):
+        df, report = read_mapped(cmap, root)
     return validate_log(df, source=f"{path} (through {columns})"), report
+
+
+@contextmanager
+def _config_named(cmap: ColumnMap, columns: str | Path) -> Iterator[None]:
+    """An error the reading says against the reader config (by its ``name``) names the
+    config's file, where the field it names can be found."""
+    try:
+        yield
+    except NnidInputError as exc:
+        if exc.source != cmap.name:
+            raise
+        raise NnidInputError(
+            exc.message, source=str(columns), field=exc.field, row=exc.row
+        ) from None
