@@ -41,6 +41,7 @@ MAX_MASS = 1e6  # kg
 MAX_OFFSET = 100.0  # m, a position on the vehicle
 MAX_COEFFICIENT = 1e9  # any added-mass or damping coefficient, SI
 MAX_LAG = 60.0  # s, a thruster's first-order lag: longer is no thruster
+MAX_CURRENT = 10.0  # m/s, a water current (the fastest tidal races run at about 5)
 Offset = Annotated[
     list[Annotated[float, Field(ge=-MAX_OFFSET, le=MAX_OFFSET)]], Field(min_length=3, max_length=3)
 ]
@@ -145,7 +146,8 @@ class Vehicle(_Strict):
     installation: dict[str, float] = Field(default_factory=dict)
     thrusters: list[Thruster] = Field(default_factory=list)
     current: Annotated[
-        list[Annotated[float, Field(ge=-10, le=10)]], Field(min_length=3, max_length=3)
+        list[Annotated[float, Field(ge=-MAX_CURRENT, le=MAX_CURRENT)]],
+        Field(min_length=3, max_length=3),
     ] = Field(default_factory=lambda: [0.0, 0.0, 0.0])  # m/s
     external_bias: Annotated[
         list[Annotated[float, Field(ge=-MAX_FORCE, le=MAX_FORCE)]],

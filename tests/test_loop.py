@@ -459,3 +459,19 @@ def test_cli_loop_options_choose_dofs_held_out_and_excluded_runs(tmp_path):
         app, [*args, "--exclude", "run0,run1,run2,run3", "--out", str(tmp_path / "x")]
     )
     assert res.exit_code == 2 and "'--exclude': leaves no experiment" in res.output, res.output
+
+
+def test_search_intervals_stay_where_a_vehicle_file_may_hold_the_value():
+    """A fast vehicle (8 m/s) logged at 1 Hz: the current is searched within the vehicle
+    file's ±10 m/s and the actuator lag within its 60 s, so no trial vehicle is refused."""
+    from nnid.vehicle import MAX_CURRENT, MAX_LAG
+
+    veh = load_vehicle(MINIROV)
+    log = effect_log(veh, duration=30, n_experiments=1, seed=3).iloc[::20].reset_index(drop=True)
+    log["u"] = 8.0 * np.sin(0.1 * log["t"])
+    found = {c.name: c.bounds for c in candidates(veh, log)}
+    assert np.median(np.diff(log["t"])) == pytest.approx(1.0)
+    assert found["current.x"] == (-MAX_CURRENT, MAX_CURRENT)
+    assert found["actuator_lag"] == (0.0, MAX_LAG)
+    for name in ("current.x", "actuator_lag"):
+        Candidate(name, name.split(".")[0], bounds=found[name]).augment(veh, found[name][1])

@@ -40,6 +40,7 @@ from nnid.physics.damping_library import LIBRARY, canonical_term
 from nnid.physics.dofs import DOF_WORD, DOFS, FORCES
 from nnid.physics.effects import apply_effect
 from nnid.physics.thrusters import Actuation, apply_deadband
+from nnid.vehicle import MAX_CURRENT, MAX_LAG
 
 _MEANING = {
     "linear_damping": "linear (skin-friction) damping in {0}, missing from the model",
@@ -187,9 +188,12 @@ def candidates(vehicle, log: pd.DataFrame, coupled: bool = True) -> list[Candida
     top = max([*speeds, 0.0])
     for axis, speed in zip("xyz", speeds, strict=True):
         if top > 0 and speed > 0.1 * top:
-            out.append(Candidate(f"current.{axis}", "current", bounds=(-2 * top, 2 * top)))
+            # searched only where a vehicle file may hold the value (nnid.vehicle's bounds)
+            reach = min(2 * top, MAX_CURRENT)
+            out.append(Candidate(f"current.{axis}", "current", bounds=(-reach, reach)))
     slowest = 100 * float(np.median(np.diff(log["t"].to_numpy())))  # 100 samples
-    out.append(Candidate("actuator_lag", "actuator_lag", bounds=(0.0, max(slowest, 0.5))))
+    lag = min(max(slowest, 0.5), MAX_LAG)
+    out.append(Candidate("actuator_lag", "actuator_lag", bounds=(0.0, lag)))
     width = float(np.nanmax(np.abs(logged_inputs(log, vehicle)[0]))) if len(log) else 0.0
     if width > 0:
         out.append(Candidate("thruster_deadband", "thruster_deadband", bounds=(0.0, 0.5 * width)))
