@@ -53,10 +53,14 @@ def check_out(out_dir: Path) -> None:
 
 
 @contextmanager
-def staged(out_dir: Path) -> Iterator[Path]:
+def staged(out_dir: Path, supersedes: tuple[str, ...] = ()) -> Iterator[Path]:
     """Yield a hidden sibling folder to write the outputs into; only once every file is
     written are they moved into ``out_dir``, so a run that fails half way leaves nothing that
-    poses as its result (and an earlier result in ``out_dir`` untouched)."""
+    poses as its result (and an earlier result in ``out_dir`` untouched). ``supersedes``: the
+    files an earlier run of this command may have left that this run replaces; one it did not
+    write is removed (an old ``monitor.json`` must not pair with a new model). A file where
+    ``out_dir`` holds a folder of that name, or a folder where it holds a file, is refused
+    before anything moves: it is the user's, not an earlier result."""
     out_dir = Path(out_dir)
     where = out_dir.absolute()
     where.parent.mkdir(parents=True, exist_ok=True)
@@ -68,7 +72,23 @@ def staged(out_dir: Path) -> Iterator[Path]:
         if not out_dir.exists():
             stage.rename(out_dir)
             return
-        for item in stage.iterdir():
+        items = list(stage.iterdir())
+        for item in items:
+            target = out_dir / item.name
+            if target.exists() and target.is_dir() != item.is_dir():
+                kind = "folder" if target.is_dir() else "file"
+                raise NnidInputError(
+                    f"{target} is a {kind} of yours where this run writes its "
+                    f"{'folder' if item.is_dir() else 'file'} {item.name}: move it, or choose "
+                    "another --out",
+                    field="--out",
+                )
+        written = {item.name for item in items}
+        for name in supersedes:
+            stale = out_dir / name
+            if name not in written and stale.is_file():
+                stale.unlink()
+        for item in items:
             target = out_dir / item.name
             if target.is_dir() and not target.is_symlink():
                 shutil.rmtree(target)
@@ -116,7 +136,10 @@ def train_run(
         result = run_train(cfg, config_path, data, vehicle, columns, progress=progress)
     except NnidInputError as exc:
         raise exc.with_source(str(config_path)) from None
-    with staged(out_dir) as stage:
+    from nnid.fault.monitor import MONITOR_FILE
+    from nnid.models.base import MODEL_FILE, TENSOR_FILE
+
+    with staged(out_dir, supersedes=(MODEL_FILE, TENSOR_FILE, MONITOR_FILE)) as stage:
         result.model.save(stage)
         if result.monitor is not None:
             result.monitor.save(stage)

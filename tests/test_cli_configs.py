@@ -297,3 +297,28 @@ def test_a_config_without_data_runs_with_data_and_vehicle_given(tmp_path):
         app, ["train", str(cfg), "--data", str(log), "--out", str(tmp_path / "o3")]
     )
     assert novehicle.exit_code == 2 and "field 'vehicle'" in novehicle.output
+
+
+def test_a_run_into_an_earlier_out_folder_leaves_no_stale_result_and_keeps_yours(tmp_path):
+    """`staged`: an earlier run's monitor.json or tensors.pt that this run does not write is
+    removed (detect would pair an old monitor with the new model); the user's other files
+    stay; a folder of the user's where the run writes a file is refused, nothing moved."""
+    from nnid.errors import NnidInputError
+    from nnid.runs import staged
+
+    out = tmp_path / "out"
+    out.mkdir()
+    for name in ("monitor.json", "tensors.pt", "notes.txt"):
+        (out / name).write_text("earlier")
+    with staged(out, supersedes=("model.json", "tensors.pt", "monitor.json")) as stage:
+        (stage / "model.json").write_text("new")
+    assert sorted(p.name for p in out.iterdir()) == ["model.json", "notes.txt"]
+    (out / "report.md").mkdir()
+    (out / "report.md" / "mine.txt").write_text("keep")
+    with pytest.raises(NnidInputError, match=r"report\.md is a folder of yours"):
+        with staged(out) as stage:
+            (stage / "report.md").write_text("new")
+            (stage / "model.json").write_text("newer")
+    assert (out / "report.md" / "mine.txt").read_text() == "keep"
+    assert (out / "model.json").read_text() == "new"
+    assert not list(tmp_path.glob(".out-*"))  # the stage is gone
