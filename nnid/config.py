@@ -714,6 +714,13 @@ class SweepSpec(_Strict):
         empty = [k for k, v in {**self.grid, **self.random}.items() if not v]
         if empty:
             raise ValueError(f"no values to try for {', '.join(empty)}")
+        if len(set(self.seeds)) != len(self.seeds):  # a seed twice would count its score twice
+            raise ValueError(f"seeds must differ: {self.seeds}")
+        if self.seeds and self.seed_option in {**self.grid, **self.random}:
+            # each trial's seed comes from seeds: a grid on it would be overwritten unsaid
+            raise ValueError(
+                f"{self.seed_option} is set by seeds; search it in seeds or in the grid, not both"
+            )
         return self
 
 

@@ -465,6 +465,13 @@ def test_sweep_missing_scores_rank_last_and_bad_options_are_refused(sweep_inputs
     bad.write_text(config.read_text().split("[sweep]")[0])
     with pytest.raises(NnidInputError, match="no \\[sweep\\] table"):
         trials(bad)
+    # a seed twice would count its score twice; a grid on the seed would be overwritten
+    from pydantic import ValidationError
+
+    with pytest.raises(ValidationError, match="seeds must differ"):
+        SweepSpec(grid={"model.hidden": [[2]]}, seeds=[1, 1])
+    with pytest.raises(ValidationError, match="set by seeds"):
+        SweepSpec(grid={"model.seed": [0, 1]}, seeds=[0, 1])
 
 
 @needs_ray
