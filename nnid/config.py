@@ -16,7 +16,15 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, Strict, field_validator, model_validator
+from pydantic import (
+    AfterValidator,
+    BaseModel,
+    ConfigDict,
+    Field,
+    Strict,
+    field_validator,
+    model_validator,
+)
 
 from nnid.datasets.excitation import (
     APRBS,
@@ -492,15 +500,44 @@ def _bounds(value: Any) -> Any:
     return value
 
 
-class NarxModelSpec(_Model):
+def _columns(names: list[str]) -> list[str]:
+    """Log columns a network reads or predicts: each once, and data, not the time or the run
+    label."""
+    twice = sorted({n for n in names if names.count(n) > 1})
+    if twice:
+        raise ValueError(f"{', '.join(twice)} named twice")
+    if {"t", "experiment"} & set(names):
+        raise ValueError("'t' and 'experiment' label the samples; they are not signals")
+    return names
+
+
+#: the input or output columns of an input-output model (:func:`_columns`)
+Columns = Annotated[list[str], Field(min_length=1), AfterValidator(_columns)]
+
+
+class _InputOutput(_Model):
+    """What the input-output models share: an output is never also an input (the model would
+    read the measured answer, in free run too)."""
+
+    inputs: Columns
+    outputs: Columns
+
+    @model_validator(mode="after")
+    def _disjoint(self) -> _InputOutput:
+        both = [c for c in self.outputs if c in self.inputs]
+        if both:
+            raise ValueError(f"{', '.join(both)} is an output and an input: the model would "
+                             "read the measured answer")  # fmt: skip
+        return self
+
+
+class NarxModelSpec(_InputOutput):
     """A NARX network (:class:`nnid.models.narx.NarxModel`; Weiss IV.A.2, V.B): named input
     and output columns, delays (a count n means 1..n), hidden tanh layers, balanced sampling,
     optional simulation-error fine-tuning and output bounds ("train" or one [low, high] per
     output, each a number, "train" or "open")."""
 
     kind: Literal["narx"]
-    inputs: list[str] = Field(min_length=1)
-    outputs: list[str] = Field(min_length=1)
     input_delays: Annotated[int, Field(ge=1)] | list[Annotated[int, Field(ge=0)]] = 2
     output_delays: Annotated[int, Field(ge=1)] | list[Annotated[int, Field(ge=1)]] = 2
     hidden: list[Annotated[int, Field(ge=1)]] = Field(default_factory=lambda: [10])
@@ -545,7 +582,7 @@ class NarxModelSpec(_Model):
         return args
 
 
-class StateSpaceModelSpec(_Model):
+class StateSpaceModelSpec(_InputOutput):
     """A continuous-time neural state-space model (:class:`nnid.models.neural_state_space.
     NeuralStateSpace`): the outputs are the first states, ``hidden_states`` more are
     unmeasured; ``structure`` (optional) is one row of 0/1 per state derivative over the states
@@ -553,8 +590,6 @@ class StateSpaceModelSpec(_Model):
     experiments); ``warmup`` samples estimate each run's initial state and are never scored."""
 
     kind: Literal["state_space"]
-    inputs: list[str] = Field(min_length=1)
-    outputs: list[str] = Field(min_length=1)
     hidden_states: int = Field(1, ge=0)
     hidden: int = Field(16, ge=1)
     structure: list[list[Literal[0, 1]]] | None = None

@@ -374,6 +374,8 @@ CONFIG_CASES = [
     # refused by the model at fit, named where the config sets it
     ("train", "narx input not in the log", "model.inputs", None),
     ("train", "narx bounds upside down", "model.output_bounds", None),
+    ("train", "narx output also an input", "model", None),
+    ("train", "narx input named twice", "model.inputs", None),
     # a list where a number or a list is allowed: the element is named, not "a valid integer"
     ("train", "narx delay list with a negative delay", "model.input_delays.1", None),
     ("train", "ensemble member output not in the log", "model.member.outputs", None),
@@ -413,6 +415,9 @@ _NARX = 'kind = "narx"\ninputs = ["tau_Z"]\noutputs = ["w"]\n'
 MODEL_TEXT = {
     "narx input not in the log": f"[model]\n{_NARX.replace('tau_Z', 'tau_Q')}",
     "narx bounds upside down": f"[model]\n{_NARX}output_bounds = [[1.0, 0.0]]\n",
+    # the model would read the measured answer, in free run too
+    "narx output also an input": "[model]\n" + _NARX.replace('["tau_Z"]', '["tau_Z", "w"]'),
+    "narx input named twice": "[model]\n" + _NARX.replace('["tau_Z"]', '["tau_Z", "tau_Z"]'),
     "narx delay list with a negative delay": f"[model]\n{_NARX}input_delays = [0, -1]\n",
     "ensemble member output not in the log": (
         '[model]\nkind = "ensemble"\nseeds = [0, 1]\n[model.member]\n'
