@@ -475,11 +475,11 @@ class SindyModelSpec(_Model):
 
     kind: Literal["sindy"]
     optimizer: Literal["stlsq", "sr3", "ensemble"] = "stlsq"
-    thresholds: list[PositiveFloat] | None = None
+    thresholds: Annotated[list[PositiveFloat], Field(min_length=1)] | None = None
     selection: Literal["validation", "aic", "bic"] = "validation"
     tolerance: float = Field(0.05, ge=0, allow_inf_nan=False)
     mode: Literal["residual", "control"] = "residual"
-    terms: list[str] | None = None
+    terms: Annotated[list[str], Field(min_length=1)] | None = None
     alpha: float = Field(1e-8, ge=0, allow_inf_nan=False)
     holdout: float = Field(0.2, gt=0, lt=1)
     per_output: bool = True
@@ -488,6 +488,19 @@ class SindyModelSpec(_Model):
     filter_lambda: PositiveFloat | None = None
     zoh_midpoint: bool = False
     seed: Seed = 0
+
+    @field_validator("terms")
+    @classmethod
+    def _terms(cls, terms: list[str] | None) -> list[str] | None:
+        # said here, where the config names the field, not at fit time in the library
+        from nnid.physics.damping_library import canonical_term
+
+        if terms is not None:
+            spelled = [canonical_term(t) for t in terms]
+            twice = sorted({t for t in spelled if spelled.count(t) > 1})
+            if twice:
+                raise ValueError(f"{', '.join(twice)} named twice")
+        return terms
 
 
 Bound = float | Literal["train", "open"]
