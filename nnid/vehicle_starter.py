@@ -10,6 +10,7 @@ reads; the damping keys it declares are the structure ``nnid loop`` and ``nnid t
 
 from __future__ import annotations
 
+import json
 from importlib import resources
 
 from nnid.errors import NnidInputError
@@ -60,13 +61,14 @@ def starter_text(
     mass_ratio = mass / ref.mass
     weight = mass * 9.81
     lines = [
-        f"# Starter vehicle file for '{name}', written by `nnid vehicle`: EDIT IT. Measured:",
+        f"# Starter vehicle file for {_toml_string(name)}, written by `nnid vehicle`: EDIT IT. "
+        "Measured:",
         f"# mass {mass:g} kg and size {length:g} x {width:g} x {height:g} m. Everything else is",
         "# an ESTIMATE (see each line) that `nnid loop` / `nnid train` refit or test; what stays",
         "# wrong shows up as an effect in the loop report. Fossen conventions: FRD body frame,",
         "# NED world, SI units; diagonal derivatives negative (force = coefficient * term).",
         "# Format of every key: docs/vehicle_file.md.",
-        f'name = "{name}"',
+        f"name = {_toml_string(name)}",
         'description = "starter file from mass and size (estimates: refit before trusting)"',
         "rho = 1000.0                  # kg/m^3: 1025 in sea water",
         f"length = {length:g}",
@@ -105,10 +107,16 @@ def starter_text(
             lines += [
                 "",
                 "[[thrusters]]",
-                f'name = "{t.name}"',
+                f"name = {_toml_string(t.name)}",
                 f"position = {_vector(pos)}",
                 f"direction = {_vector(t.direction)}",
                 f'curve = {{ kind = "table", cmd = {_vector(curve.cmd)}, '
                 f"thrust = {_vector(curve.thrust)} }}",
             ]
     return "\n".join(lines) + "\n"
+
+
+def _toml_string(text: str) -> str:
+    """``text`` as a TOML basic string: JSON's escapes (quote, backslash, newline, \\uXXXX)
+    are TOML's too; DEL, which JSON leaves bare and TOML forbids, escaped as well."""
+    return json.dumps(text).replace("\x7f", "\\u007f")

@@ -393,3 +393,9 @@ def test_starter_vehicle_files_load_and_scale(tmp_path):
         assert not (tmp_path / "bad.toml").exists()
     res = runner.invoke(app, ["vehicle", "--preset", "seamor", "--out", str(out)])
     assert res.exit_code == 2 and "exists" in res.output  # nothing is overwritten
+    # a name with TOML's special characters is written escaped and reads back as given
+    for k, name in enumerate(['a"b', "a\\b", "a\nb", "x\x7fy"]):
+        named = tmp_path / f"named{k}.toml"
+        args = ["vehicle", "--mass", "20", "--size", "1x1x0.5", "--name", name, "--out", str(named)]
+        assert runner.invoke(app, args).exit_code == 0
+        assert load_vehicle(named).name == name
