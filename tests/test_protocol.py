@@ -193,6 +193,34 @@ def test_save_load_reproduces_predictions(kind, fitted, runs, heave_campaign, tm
 
 
 @pytest.mark.parametrize("kind", list(BUILDERS))
+def test_a_damaged_saved_model_is_one_input_error_naming_the_file(kind, fitted, tmp_path):
+    """A model.json edited by hand (a key gone, a setting unknown) or a tensors.pt cut short
+    is an NnidInputError naming the file, never a KeyError or an unpickling error."""
+    from nnid.errors import NnidInputError
+
+    model, *_ = fitted[kind]
+    model.save(tmp_path)
+    good = read_json(tmp_path / "model.json")
+    damage = {
+        "no settings": lambda p: p.pop("settings"),
+        "unknown setting": lambda p: p["settings"].update(bogus=1),
+        "no state": lambda p: p.pop("state"),
+        "warm-up as text": lambda p: p.update(warmup_samples="two"),
+    }
+    for edit in damage.values():
+        broken = json.loads(json.dumps(good))
+        edit(broken)
+        (tmp_path / "model.json").write_text(json.dumps(broken))
+        with pytest.raises(NnidInputError, match=r"model\.json: damaged"):
+            load_model(tmp_path)
+    if (tmp_path / "tensors.pt").exists():
+        (tmp_path / "model.json").write_text(json.dumps(good))
+        (tmp_path / "tensors.pt").write_bytes(b"cut sh")
+        with pytest.raises(NnidInputError, match=r"tensors\.pt: damaged"):
+            load_model(tmp_path)
+
+
+@pytest.mark.parametrize("kind", list(BUILDERS))
 def test_params_and_describe_are_strict_json(kind, fitted):
     model, *_ = fitted[kind]
     for part in (model.params, model.describe()):

@@ -27,6 +27,7 @@ from __future__ import annotations
 import importlib
 import inspect
 import math
+import pickle
 import time
 from abc import ABC, abstractmethod
 from collections.abc import Mapping
@@ -351,11 +352,27 @@ def load_model(folder: str | Path) -> NnidModel:
             source=str(path),
             field="schema_version",
         )
-    cls = model_class(payload["kind"])
-    model = cls(**decode_setting(payload["settings"], str(path)))
+    # a file edited by hand or cut short fails somewhere inside a model's own restore; every
+    # such failure is said against the file, as one input error, at this one boundary
     tensor_path = path.parent / TENSOR_FILE
-    tensors = torch.load(tensor_path, weights_only=True) if tensor_path.exists() else {}
-    return restore_learned(model, payload, tensors)
+    try:
+        tensors = torch.load(tensor_path, weights_only=True) if tensor_path.exists() else {}
+    except (pickle.UnpicklingError, EOFError, RuntimeError, ValueError) as exc:
+        raise NnidInputError(_damaged(exc), source=str(tensor_path)) from None
+    try:
+        cls = model_class(payload["kind"])
+        model = cls(**decode_setting(payload["settings"], str(path)))
+        return restore_learned(model, payload, tensors)
+    except NnidInputError as exc:
+        raise exc.with_source(str(path)) from None
+    except (KeyError, TypeError, ValueError, RuntimeError, AttributeError, IndexError) as exc:
+        missing = "" if tensor_path.exists() else f"; its {TENSOR_FILE} is missing"
+        raise NnidInputError(_damaged(exc) + missing, source=str(path)) from None
+
+
+def _damaged(exc: Exception) -> str:
+    what = f"no {exc}" if isinstance(exc, KeyError) else f"{type(exc).__name__}: {exc}"
+    return f"damaged, or not written by this nnid ({what.splitlines()[0]})"
 
 
 def learned_state(model: NnidModel) -> tuple[dict, dict[str, torch.Tensor]]:
