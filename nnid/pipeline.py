@@ -688,13 +688,20 @@ def summary(rows: list[dict], ranking: list[str], part: str, replay: bool) -> st
     loop = " flown under the log's autopilot" if replay else ""
     if free is None:
         k = _total(best, part, "k_step_nrmse")
-        what = f"k-step NRMSE {k:.3g}" if k is not None else "no measured error"
+        one = _total(best, part, "one_step_nrmse")
+        lead = f"Every free run{loop} diverged on the {part} data"
+        if k is None and one is None:  # nothing was measured: no model is ranked first
+            return (
+                f"{lead}, and no other error was measured: none of these models simulates this log."
+            )
+        what = f"k-step NRMSE ({k:.3g})" if k is not None else f"one-step NRMSE ({one:.3g})"
         return (
-            f"Every free run{loop} diverged on the {part} data; {best['name']} ({best['kind']}, "
-            f"{best['n_params']} parameters) has the lowest {what}: none of these models "
-            "simulates this log."
+            f"{lead}; {best['name']} ({best['kind']}, {best['n_params']} parameters) has the "
+            f"lowest {what}: none of these models simulates this log."
         )
-    others = [by_name[n] for n in ranking[1:] if _total(by_name[n], part, "free_run_nrmse")]
+    others = [
+        by_name[n] for n in ranking[1:] if _total(by_name[n], part, "free_run_nrmse") is not None
+    ]
     sentence = (
         f"Use {best['name']} ({best['kind']}, {best['n_params']} parameters): the lowest "
         f"free-run NRMSE{loop} on the {part} data ({free:.3g}"

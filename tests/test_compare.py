@@ -234,3 +234,24 @@ def test_report_renders_in_headless_chromium(which, request, tmp_path, chromium)
         assert "Force error (McCarter Tables 5.1/5.2 for this data)" in dom
     chromium(tmp_path, out / "report.html", dump=False)
     assert_rendered(tmp_path / "s.png")
+
+
+def test_the_summary_never_ranks_on_an_error_that_was_not_measured():
+    """Every free run diverged: the sentence names the error the ranking used (k-step, else
+    one-step), and when none was measured it names no model as the lowest."""
+    from nnid.pipeline import rank, summary
+
+    def row(name, free=None, k=None, one=None):
+        scores = {"free_run_nrmse": {"total": free}, "k_step_nrmse": {"total": k},
+                  "one_step_nrmse": {"total": one}}  # fmt: skip
+        return {"name": name, "kind": "narx", "n_params": 3, "test": scores}
+
+    rows = [row("a", one=0.4), row("b", one=0.2)]
+    text = summary(rows, rank(rows, "test"), "test", False)
+    assert "b (narx, 3 parameters) has the lowest one-step NRMSE (0.2)" in text, text
+    rows = [row("a"), row("b")]
+    text = summary(rows, rank(rows, "test"), "test", False)
+    assert "no other error was measured" in text and "lowest" not in text, text
+    rows = [row("a", free=0.0), row("b", free=0.3)]  # a perfect score is a score
+    text = summary(rows, rank(rows, "test"), "test", False)
+    assert "(0, against 0.3 for b)" in text, text
