@@ -338,3 +338,23 @@ def test_solver_options_and_the_acceleration_level(minirov):
     assert accel.describe()["level"] == "acceleration"
     force = accel.correction(log)
     assert list(force.columns) == list("XYZKMN") and float(force.abs().to_numpy().max()) > 0
+
+
+def test_a_network_that_learned_no_force_still_gets_its_report(tmp_path):
+    """Two Adam epochs leave the correction at zero: the run writes its model and a report
+    that says there is nothing to plot (a figure of 0 rows crashed it, the fit was lost)."""
+    root = resources.files("nnid.demo_data")
+    log = pd.read_parquet(root.joinpath("demo_minirov_heave.parquet"))
+    log = log[log["experiment"].isin(["run0", "run1", "run2"])].groupby("experiment").head(300)
+    log.to_csv(tmp_path / "log.csv", index=False)
+    cfg = tmp_path / "hybrid.toml"
+    cfg.write_text(
+        'kind = "train"\nwarmup_s = 2.0\n[split]\nby = "experiment"\ntrain = ["run0"]\n'
+        'validation = ["run1"]\ntest = ["run2"]\n[model]\nkind = "hybrid"\ndofs = ["w"]\n'
+        'hidden = [4]\n[model.trainer]\nkind = "adam"\nmax_epochs = 2\n'
+    )
+    args = ["train", str(cfg), "--data", str(tmp_path / "log.csv"), "--vehicle", MINIROV]
+    res = CliRunner().invoke(app, [*args, "--out", str(tmp_path / "out")])
+    assert res.exit_code == 0, res.output
+    page = (tmp_path / "out" / "report.html").read_text()
+    assert "force is zero on every sample: nothing to plot" in page

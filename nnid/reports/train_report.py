@@ -333,7 +333,11 @@ def train_html(metrics: dict, figures: dict[str, Any] | None = None) -> str:
         out.append(html_table(*_shares(metrics)))
         if "correction" in figures:
             out.append("<h3>Learned force against the states and inputs it follows most</h3>")
-            out.append(_img(_correction_figure(*figures["correction"])))
+            log, force = figures["correction"]
+            if any(force[f].abs().max() > 0 for f in FORCES):
+                out.append(_img(_correction_figure(log, force)))
+            else:  # a network that learned nothing has no force to plot (a figure of 0 rows)
+                out.append("<p>The network's force is zero on every sample: nothing to plot.</p>")
     head, rows = _params_table(metrics)
     out.append("<h2>Parameters</h2>")
     out.append(html_table(head, rows))
