@@ -376,6 +376,7 @@ CONFIG_CASES = [
     ("train", "narx bounds upside down", "model.output_bounds", None),
     ("train", "narx output also an input", "model", None),
     ("train", "narx input named twice", "model.inputs", None),
+    ("train", "narx delay beyond every run", "model.input_delays", None),
     ("train", "sindy term not of the library", "model.terms", None),
     ("train", "sindy without thresholds", "model.thresholds", None),
     # a list where a number or a list is allowed: the element is named, not "a valid integer"
@@ -420,6 +421,7 @@ MODEL_TEXT = {
     # the model would read the measured answer, in free run too
     "narx output also an input": "[model]\n" + _NARX.replace('["tau_Z"]', '["tau_Z", "w"]'),
     "narx input named twice": "[model]\n" + _NARX.replace('["tau_Z"]', '["tau_Z", "tau_Z"]'),
+    "narx delay beyond every run": f"[model]\n{_NARX}input_delays = 5000\n",
     "sindy term not of the library": '[model]\nkind = "sindy"\nterms = ["u*banana"]\n',
     "sindy without thresholds": '[model]\nkind = "sindy"\nthresholds = []\n',
     "narx delay list with a negative delay": f"[model]\n{_NARX}input_delays = [0, -1]\n",

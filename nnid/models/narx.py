@@ -682,6 +682,14 @@ class NarxModel(InputOutputModel):
 
         self._configure()
         self._check(log)
+        longest = max(len(idx) for _, idx in experiments(log))
+        if longest <= self.warmup_samples_:  # no sample has all its delayed regressors
+            deepest = "input_delays" if max(self.input_delays_) >= self.dy_ else "output_delays"
+            raise NnidInputError(
+                f"the longest training run has {longest} samples, no more than the deepest "
+                f"delay ({self.warmup_samples_}): no sample has every delayed regressor",
+                field=deepest,
+            )
         self.net_ = self._new_net(self._generator())
         random_rows = None
         if validation_log is None and self.division == "block":
