@@ -496,10 +496,7 @@ class SindyModelSpec(_Model):
         from nnid.physics.damping_library import canonical_term
 
         if terms is not None:
-            spelled = [canonical_term(t) for t in terms]
-            twice = sorted({t for t in spelled if spelled.count(t) > 1})
-            if twice:
-                raise ValueError(f"{', '.join(twice)} named twice")
+            _once([canonical_term(t) for t in terms])
         return terms
 
 
@@ -513,12 +510,18 @@ def _bounds(value: Any) -> Any:
     return value
 
 
-def _columns(names: list[str]) -> list[str]:
-    """Log columns a network reads or predicts: each once, and data, not the time or the run
-    label."""
+def _once(names: list[str]) -> list[str]:
+    """``names``, or an error naming those given more than once."""
     twice = sorted({n for n in names if names.count(n) > 1})
     if twice:
         raise ValueError(f"{', '.join(twice)} named twice")
+    return names
+
+
+def _columns(names: list[str]) -> list[str]:
+    """Log columns a network reads or predicts: each once, and data, not the time or the run
+    label."""
+    _once(names)
     if {"t", "experiment"} & set(names):
         raise ValueError("'t' and 'experiment' label the samples; they are not signals")
     return names
