@@ -121,28 +121,24 @@ def _check_finite(df: pd.DataFrame, columns: list[str], source: str, gaps: bool 
                     "the column is empty: no sample has a value", source=source, field=col
                 )
             bad &= ~empty
-        if bad.any():
-            row = int(np.flatnonzero(bad)[0])
-            raise NnidInputError(
-                f"value {shown(df[col].iloc[row])} is not a finite number "
-                f"({int(bad.sum())} such rows in this column)",
-                source=source,
-                field=col,
-                row=row,
-            )
+        _refuse_rows(df, col, bad, source, "is not a finite number")
         if not pd.api.types.is_numeric_dtype(df[col]):
             # numbers stored as text (a parquet column of strings) read as numbers above, but
             # every later step would meet strings: refused, not converted behind the user's back
             text = df[col].map(lambda v: isinstance(v, str)).to_numpy()
-            if text.any():
-                row = int(np.flatnonzero(text)[0])
-                raise NnidInputError(
-                    f"the column holds numbers stored as text ({shown(df[col].iloc[row])}, "
-                    f"{int(text.sum())} such rows): store it as a numeric column",
-                    source=source,
-                    field=col,
-                    row=row,
-                )
+            _refuse_rows(df, col, text, source, "is text: store the column as numbers")
+
+
+def _refuse_rows(df: pd.DataFrame, col: str, bad: np.ndarray, source: str, why: str) -> None:
+    """An error naming the first row ``bad`` flags in ``col`` and how many it flags."""
+    if bad.any():
+        row = int(np.flatnonzero(bad)[0])
+        raise NnidInputError(
+            f"value {shown(df[col].iloc[row])} {why} ({int(bad.sum())} such rows in this column)",
+            source=source,
+            field=col,
+            row=row,
+        )
 
 
 def _check_experiments(df: pd.DataFrame, source: str) -> None:
