@@ -374,7 +374,7 @@ CONFIG_CASES = [
     # refused by the model at fit, named where the config sets it
     ("train", "narx input not in the log", "model.inputs", None),
     ("train", "narx bounds upside down", "model.output_bounds", None),
-    ("train", "narx output also an input", "model", None),
+    ("train", "narx output also an input", "w is an output and an input", None),
     ("train", "narx input named twice", "model.inputs", None),
     ("train", "narx delay beyond every run", "model.input_delays", None),
     ("train", "sindy term not of the library", "model.terms", None),
