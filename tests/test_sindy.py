@@ -125,5 +125,6 @@ def test_validation_too_short_for_the_filter_is_named(vt690):
     with pytest.raises(NnidInputError, match="validation data leave no sample") as err:
         model.fit(train, short)
     assert err.value.field == "filter_lambda" and "3/λ = 3 s" in str(err.value)
-    # the same run with a filter that settles within it is fitted
-    assert SindyDamping(vehicle, filter_lambda=2.0, thresholds=[0.1]).fit(train, short).coef_.size
+    # the same run with a filter that settles within it (1.5 s) is selected on
+    fitted = SindyDamping(vehicle, filter_lambda=2.0, thresholds=[0.1]).fit(train, short)
+    assert np.isfinite(fitted.selected_["validation_J"])
