@@ -477,17 +477,31 @@ def _out_cases() -> list[Case]:
 
             cases.append(Case(f"{command} --out {where}", args, ("OUT",)))
     model_cases = {
-        "no such model folder": lambda tmp: tmp / "nothing",
-        "folder without a monitor": lambda tmp: tmp,
-        "corrupt monitor.json": lambda tmp: _corrupt_monitor(tmp),
+        "no such model folder": lambda tmp, fx: tmp / "nothing",
+        "folder without a monitor": lambda tmp, fx: tmp,
+        "corrupt monitor.json": lambda tmp, fx: _corrupt_monitor(tmp),
+        # said against model.json itself, not wrapped as a fault of monitor.json
+        "model.json naming no vehicle": lambda tmp, fx: _damaged_model(tmp, fx["monitor"]),
     }
     for name, folder in model_cases.items():
 
         def args(tmp, fx, folder=folder):
-            return _command("detect", tmp, fx, model=folder(tmp), out=tmp / "o")
+            return _command("detect", tmp, fx, model=folder(tmp, fx), out=tmp / "o")
 
         cases.append(Case(f"detect --model: {name}", args, ("MODEL",)))
     return cases
+
+
+def _damaged_model(tmp: Path, good: Path) -> Path:
+    import json
+    import shutil
+
+    folder = tmp / "damaged_model"
+    shutil.copytree(good, folder)
+    payload = json.loads((folder / "model.json").read_text())
+    payload["settings"]["vehicle"] = "zzz"
+    (folder / "model.json").write_text(json.dumps(payload))
+    return folder
 
 
 def _corrupt_monitor(tmp: Path) -> Path:
@@ -553,7 +567,9 @@ def test_bad_input_is_refused_in_one_line_naming_the_file_and_field(case, fixtur
     elif kind == "OUT":
         assert "--out" in line or "nnid-out" in line or "taken" in line, line
     elif kind == "MODEL":
-        assert "--model" in line or "monitor" in line, line
+        assert "--model" in line or "monitor" in line or "model.json: damaged" in line, line
+        # a fault of model.json is said against it, not wrapped as one of monitor.json
+        assert not ("model.json: damaged" in line and "is not a monitor" in line), line
     for field in fields:
         if field == "INPUT":
             field = "tau_" if not args[0] == "detect" else "cmd_"

@@ -360,8 +360,10 @@ class ResidualMonitor(BaseEstimator):
                 field="--model",
             )
         state = read_json(path)
+        # the model's own errors name model.json: loaded outside the monitor's error wrapping
+        model = model if model is not None else load_model(folder)
         try:
-            out = cls(model if model is not None else load_model(folder), **state["settings"])
+            out = cls(model, **state["settings"])
             out._setup()
             out.mu_ = np.asarray(state["mu"], dtype=np.float64)
             out.whiten_ = np.asarray(state["whiten"], dtype=np.float64)

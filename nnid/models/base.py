@@ -366,7 +366,9 @@ def load_model(folder: str | Path) -> NnidModel:
     except NnidInputError as exc:
         raise exc.with_source(str(path)) from None
     except (KeyError, TypeError, ValueError, RuntimeError, AttributeError, IndexError) as exc:
-        missing = "" if tensor_path.exists() else f"; its {TENSOR_FILE} is missing"
+        # a network without its tensors fails in load_state_dict, a RuntimeError
+        gone = isinstance(exc, RuntimeError) and not tensor_path.exists()
+        missing = f"; its {TENSOR_FILE} is missing" if gone else ""
         raise NnidInputError(_damaged(exc) + missing, source=str(path)) from None
 
 
