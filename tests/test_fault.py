@@ -230,6 +230,9 @@ def test_cli_train_detect_and_follow(vehicle, tmp_path, chromium):
     assert res.exit_code == 0, res.output
     # the folder the user asked for, not the staging folder the files were written in first
     assert f"wrote {out}/: alarms.csv" in res.output.replace("\n", ""), res.output
+    # the calibration's length to a tenth of a minute, as the page gives it (30 s was "0 min")
+    hours = json.loads((model / "monitor.json").read_text())["calibration"]["hours"]
+    assert f"calibrated on {60 * hours:.1f} min of healthy data" in res.output, res.output
     report = json.loads((out / "detect.json").read_text())
     assert set(report) >= {"alarms", "threshold", "false_alarm_rate_per_hour", "samples", "seconds"}
     (a,) = report["alarms"]

@@ -61,7 +61,7 @@ def write_detect_outputs(
     lines = [
         f"{len(result.alarms)} alarm(s) in {result.trace.t.size} samples "
         f"(target false-alarm rate {monitor.false_alarm_per_hour:g} per hour, calibrated on "
-        f"{60 * hours:.0f} min of healthy data)",
+        f"{60 * hours:.1f} min of healthy data)",  # as the page says it: 0.5, not "0 min"
         *(describe_alarm(a) for a in result.alarms),
     ]
     return lines
