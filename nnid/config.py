@@ -43,7 +43,7 @@ from nnid.errors import NnidInputError
 from nnid.physics.damping_masks import MASKS
 from nnid.physics.dofs import DOFS, FORCES
 from nnid.physics.effects import parse_effect
-from nnid.validation import read_toml, validated
+from nnid.validation import read_toml, repeated, validated
 
 Signal = Annotated[
     Step | Stairs | Chirp | Multisine | PRBS | APRBS | Sine | DOptimalSine,
@@ -56,6 +56,14 @@ PositiveFloat = Annotated[float, Field(gt=0, allow_inf_nan=False)]
 Number = Annotated[float, Field(allow_inf_nan=False)]
 #: a random seed: numpy's generators take no negative one
 Seed = Annotated[int, Field(ge=0)]
+
+
+def _once(names: list[str]) -> list[str]:
+    """``names``, or an error naming those given more than once."""
+    twice = repeated(names)
+    if twice:
+        raise ValueError(f"{', '.join(twice)} named twice")
+    return names
 
 
 class _Strict(BaseModel):
@@ -510,14 +518,6 @@ def _bounds(value: Any) -> Any:
     return value
 
 
-def _once(names: list[str]) -> list[str]:
-    """``names``, or an error naming those given more than once."""
-    twice = sorted({n for n in names if names.count(n) > 1})
-    if twice:
-        raise ValueError(f"{', '.join(twice)} named twice")
-    return names
-
-
 def _columns(names: list[str]) -> list[str]:
     """Log columns a network reads or predicts: each once, and data, not the time or the run
     label."""
@@ -818,8 +818,7 @@ class CompareConfig(_Command):
     @field_validator("models")
     @classmethod
     def _unique(cls, models: list) -> list:
-        names = [m.label() for m in models]
-        twice = sorted({n for n in names if names.count(n) > 1})
+        twice = repeated([m.label() for m in models])
         if twice:
             raise ValueError(f"model names must differ (give each a 'name'): {', '.join(twice)}")
         return models

@@ -30,6 +30,11 @@ def shown(value: Any) -> str:
     return "empty (NaN)" if math.isnan(number) else f"{number:g}"
 
 
+def repeated(names: list[str]) -> list[str]:
+    """The names a list gives more than once, sorted (for an error that names them)."""
+    return sorted({n for n in names if names.count(n) > 1})
+
+
 def read_toml(path: str | Path) -> dict[str, Any]:
     """Parse a TOML file; a missing or malformed file is an NnidInputError naming it."""
     try:

@@ -21,7 +21,7 @@ from nnid.datasets.log import MAX_FORCE  # a constant external force obeys the l
 from nnid.errors import NnidInputError
 from nnid.physics.added_mass import parse_added_mass_key
 from nnid.physics.dofs import DOFS
-from nnid.validation import read_toml, validated
+from nnid.validation import read_toml, repeated, validated
 
 PRESETS = ("seamor", "vlbv300", "romeo", "vt690", "bluerov2_heavy")
 
@@ -199,7 +199,7 @@ class Vehicle(_Strict):
     @model_validator(mode="after")
     def _unique_thrusters(self) -> Vehicle:
         names = [t.name for t in self.thrusters]
-        twice = sorted({n for n in names if names.count(n) > 1})
+        twice = repeated(names)
         if twice:
             raise ValueError(f"thruster names must be unique: {', '.join(twice)} appear twice")
         return self
