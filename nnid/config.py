@@ -19,7 +19,6 @@ from typing import Annotated, Any, Literal
 from pydantic import (
     AfterValidator,
     BaseModel,
-    ConfigDict,
     Field,
     Strict,
     field_validator,
@@ -43,7 +42,7 @@ from nnid.errors import NnidInputError
 from nnid.physics.damping_masks import MASKS
 from nnid.physics.dofs import DOFS, FORCES
 from nnid.physics.effects import parse_effect
-from nnid.validation import read_toml, repeated, validated
+from nnid.validation import StrictModel, read_toml, repeated, validated
 
 Signal = Annotated[
     Step | Stairs | Chirp | Multisine | PRBS | APRBS | Sine | DOptimalSine,
@@ -66,11 +65,6 @@ def _once(names: list[str]) -> list[str]:
     return names
 
 
-class _Strict(BaseModel):
-    # strict: a TOML string or boolean where a number belongs is refused, never coerced
-    model_config = ConfigDict(extra="forbid", allow_inf_nan=False, strict=True)
-
-
 def _kind_shorthand(value: Any) -> Any:
     """``trainer = "lm"`` stands for ``[trainer] kind = "lm"``."""
     return {"kind": value} if isinstance(value, str) else value
@@ -79,7 +73,7 @@ def _kind_shorthand(value: Any) -> Any:
 # -- simulate ------------------------------------------------------------------------------------
 
 
-class Effect(_Strict):
+class Effect(StrictModel):
     """An injected effect by its vocabulary name (see :mod:`nnid.physics.effects`)."""
 
     name: str
@@ -92,7 +86,7 @@ class Effect(_Strict):
         return name
 
 
-class Experiment(_Strict):
+class Experiment(StrictModel):
     """One run: signals summed per channel, from rest unless ``x0`` (η, or η and ν) is given."""
 
     name: str
@@ -113,7 +107,7 @@ class Experiment(_Strict):
         return self.duration if self.duration is not None else max(ends, default=0.0)
 
 
-class SimulateConfig(_Strict):
+class SimulateConfig(StrictModel):
     """``nnid simulate``: a vehicle, experiments or a sequence, injected effects, sensors."""
 
     kind: Literal["simulate"] = "simulate"
@@ -155,7 +149,7 @@ class SimulateConfig(_Strict):
 # -- data ----------------------------------------------------------------------------------------
 
 
-class _DataCommon(_Strict):
+class _DataCommon(StrictModel):
     """What every data source shares: the experiments to keep, the Savitzky-Golay filter
     (``savgol_window`` s, ``savgol_order``) that derives the velocities a log lacks from its
     pose (once, before the split: every model is fitted and scored on the same velocities),
@@ -190,7 +184,7 @@ class TableData(_DataCommon):
     log: str | None = None
 
 
-class SinusoidSpec(_Strict):
+class SinusoidSpec(StrictModel):
     """Caccia's d-optimal sinusoid run φⁿ = offset + amplitude sin(ω_opt t) (eqs 13-15) on the
     DOF's force channel, designed from step 1 of the campaign: ``prior_inertia`` (kg, or
     kg m²; default the rigid inertia × (1 + ``prior_added_fraction``), Caccia's range 0.1-1,
@@ -211,7 +205,7 @@ class SinusoidSpec(_Strict):
         return self
 
 
-class ValidationRunSpec(_Strict):
+class ValidationRunSpec(StrictModel):
     """A held-out PRBS run on the identified DOF (``experiment`` names it), from the campaign's
     plant with fresh noise: amplitude ``fraction`` × the largest of |offset|, the sinusoid's
     amplitude and the campaign's RMS force, switching every ``hold`` s."""
@@ -247,7 +241,7 @@ def _data_kind(value: Any) -> Any:
     return value
 
 
-class SplitSpec(_Strict):
+class SplitSpec(StrictModel):
     """Train / validation / test: whole ``experiment``s (named, or by ``fractions`` of the
     samples in order), contiguous ``block``s of each experiment (MATLAB's divideblock), or
     ``auto``: whole experiments when every part with a fraction gets at least one, else blocks
@@ -265,7 +259,7 @@ class SplitSpec(_Strict):
 # -- trainers ------------------------------------------------------------------------------------
 
 
-class _Trainer(_Strict):
+class _Trainer(StrictModel):
     def build(self):
         """The trainer these options describe."""
         from nnid.models.base import trainer_class
@@ -364,7 +358,7 @@ NetworkTrainer = Annotated[LevenbergMarquardtSpec | AdamSpec, Field(discriminato
 # -- models --------------------------------------------------------------------------------------
 
 
-class _Model(_Strict):
+class _Model(StrictModel):
     """A model table: ``kind`` and the model's constructor arguments; ``name`` labels it in a
     comparison (default: its kind)."""
 
@@ -398,7 +392,7 @@ class _Model(_Strict):
         return args
 
 
-class SequenceStep(_Strict):
+class SequenceStep(StrictModel):
     """One step of a decoupled identification sequence (Weiss eqs 99-108)."""
 
     experiments: list[str] = Field(min_length=1)
@@ -716,14 +710,14 @@ PHYSICS_KINDS = ("fossen", "caccia", "synthesis", "sindy", "hybrid")
 # -- commands ------------------------------------------------------------------------------------
 
 
-class _Command(_Strict):
+class _Command(StrictModel):
     @field_validator("data", mode="before", check_fields=False)
     @classmethod
     def _data(cls, value: Any) -> Any:
         return _data_kind(value)
 
 
-class DetectSpec(_Strict):
+class DetectSpec(StrictModel):
     """``[detect]`` of a train config: calibrate a residual monitor
     (:class:`nnid.fault.monitor.ResidualMonitor`) on the validation part of the healthy log
     (never on the data the model was fitted on) and measure its false alarms on the test part;
@@ -736,7 +730,7 @@ class DetectSpec(_Strict):
     window_s: PositiveFloat = 10.0
 
 
-class SweepSpec(_Strict):
+class SweepSpec(StrictModel):
     """``[sweep]`` of a train config, read by ``nnid sweep``: option paths (dotted, as in the
     config: ``model.hidden``, ``model.trainer.lr``) searched on a grid (every combination)
     and/or by ``samples`` random draws from lists of choices, each setting fitted once per

@@ -7,13 +7,21 @@ import tomllib
 from pathlib import Path
 from typing import Any, TypeVar
 
-from pydantic import BaseModel, ValidationError
+from pydantic import BaseModel, ConfigDict, ValidationError
 
 from nnid.errors import NnidInputError
 
 Model = TypeVar("Model", bound=BaseModel)
 #: keys whose value selects the variant of a table (pydantic puts that value in error paths)
 _TAGS = ("kind", "model")
+
+
+class StrictModel(BaseModel):
+    """The base of every user-written table (config, vehicle file, batch manifest): an unknown
+    key is refused, NaN or inf is refused, and a value of the wrong type is refused, never
+    coerced (a TOML ``true`` or ``"11.5"`` where a number belongs is a typo, not 1 or 11.5)."""
+
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False, strict=True)
 
 
 def shown(value: Any) -> str:

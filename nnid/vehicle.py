@@ -15,24 +15,18 @@ from pathlib import Path
 from typing import Annotated, Any, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic import Field, field_validator, model_validator
 
 from nnid.datasets.log import MAX_FORCE  # a constant external force obeys the log's bound
 from nnid.errors import NnidInputError
 from nnid.physics.added_mass import parse_added_mass_key
 from nnid.physics.dofs import DOFS
-from nnid.validation import read_toml, repeated, validated
+from nnid.validation import StrictModel, read_toml, repeated, validated
 
 PRESETS = ("seamor", "vlbv300", "romeo", "vt690", "bluerov2_heavy")
 
 Vec3 = Annotated[list[float], Field(min_length=3, max_length=3)]
 Vec6 = Annotated[list[float], Field(min_length=6, max_length=6)]
-
-
-class _Strict(BaseModel):
-    # NaN or inf in a vehicle file is a typo, never a value: refused, naming the field
-    # strict: "11.5" or true for a mass is refused, never coerced to 11.5 or 1 kg
-    model_config = ConfigDict(extra="forbid", frozen=False, allow_inf_nan=False, strict=True)
 
 
 #: beyond these a value is a unit slip or a typo, not a vehicle (the largest AUVs weigh tens of
@@ -47,17 +41,17 @@ Offset = Annotated[
 ]
 
 
-class PolyCurve(_Strict):
+class PolyCurve(StrictModel):
     kind: Literal["poly"]
     coeffs: list[float] = Field(min_length=1)
 
 
-class SignedQuadraticCurve(_Strict):
+class SignedQuadraticCurve(StrictModel):
     kind: Literal["signed_quadratic"]
     k: float
 
 
-class TableCurve(_Strict):
+class TableCurve(StrictModel):
     kind: Literal["table"]
     cmd: list[float] = Field(min_length=2)
     thrust: list[float] = Field(min_length=2)
@@ -74,7 +68,7 @@ class TableCurve(_Strict):
 Curve = Annotated[PolyCurve | SignedQuadraticCurve | TableCurve, Field(discriminator="kind")]
 
 
-class Thruster(_Strict):
+class Thruster(StrictModel):
     name: str = Field(pattern=r"^[A-Za-z0-9_]+$")
     position: Offset
     direction: Vec3
@@ -97,7 +91,7 @@ class Thruster(_Strict):
         return [x / norm for x in d]
 
 
-class Damping(_Strict):
+class Damping(StrictModel):
     model: str | None = None
     u_c: float = 0.0
     coefficients: dict[str, float] = Field(default_factory=dict)
@@ -127,7 +121,7 @@ def _not_absurd(key: str, value: float) -> None:
         raise ValueError(f"'{key}' = {value:g} is beyond {MAX_COEFFICIENT:g}: a unit slip?")
 
 
-class Vehicle(_Strict):
+class Vehicle(StrictModel):
     """A validated vehicle file."""
 
     name: str = Field(pattern=r"\S")  # reports and saved models are labelled with it

@@ -205,7 +205,21 @@ def test_manifest_ids_and_pairing(fleet, tmp_path) -> None:
         ('command = "loop"\nvehicle = ["minirov.toml", "minirov.toml"]\ndata = ["dive*.csv"]\n'
          'pair = "zip"\n', "vehicle", "one length"),
         ('command = "loop"\nvehicle = "minirov.toml"\ndata = ["dive0.csv"]\n'
-         "options = {speed = 1}\n", "options", "unknown option"),
+         "options = {speed = 1}\n", "options.speed", "not a known field"),
+        # an option of another command: loop dropped a window, a train task passed dofs on
+        ('command = "loop"\nvehicle = "minirov.toml"\ndata = ["dive0.csv"]\n'
+         "options = {window = 5.0}\n", "options", "'window' does not apply to 'loop'"),
+        ('command = "train"\nconfig = "minirov.toml"\ndata = ["dive0.csv"]\n'
+         'options = {dofs = ["w"]}\n', "options", "'dofs' does not apply to 'train'"),
+        # the CLI's bounds and types
+        ('command = "detect"\nmodel = "minirov.toml"\ndata = ["dive0.csv"]\n'
+         'options = {window = "wide"}\n', "options.window", "valid number"),
+        ('command = "detect"\nmodel = "minirov.toml"\ndata = ["dive0.csv"]\n'
+         "options = {window = -5}\n", "options.window", "greater than or equal to 0.5"),
+        ('command = "loop"\nvehicle = "minirov.toml"\ndata = ["dive0.csv"]\n'
+         "options = {alpha = 0.9}\n", "options.alpha", "less than or equal to 0.5"),
+        ('command = "loop"\nvehicle = "minirov.toml"\ndata = ["dive0.csv"]\n'
+         "options = {max_effects = true}\n", "options.max_effects", "valid integer"),
     ],
 )  # fmt: skip
 def test_bad_manifest_is_refused_naming_the_key(fleet, tmp_path, text, field, words) -> None:

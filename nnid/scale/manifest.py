@@ -26,18 +26,37 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator
+from pydantic import Field, ValidationInfo, field_validator
 
 from nnid.errors import NnidInputError
-from nnid.validation import read_toml, validated
+from nnid.validation import StrictModel, read_toml, validated
 
 COMMANDS = ("train", "loop", "detect", "compare")
 
 
-class Manifest(BaseModel):
-    """The validated manifest (paths as written; :func:`expand` resolves them)."""
+class Options(StrictModel):
+    """A manifest's ``options``: the CLI options of ``nnid loop`` and ``nnid detect``, with
+    the bounds the CLI puts on them."""
 
-    model_config = ConfigDict(extra="forbid")
+    max_effects: int | None = Field(None, ge=0)
+    alpha: float | None = Field(None, ge=1e-12, le=0.5)
+    dofs: str | list[str] | None = None
+    validation: str | list[str] | None = None
+    exclude: str | list[str] | None = None
+    window: float | None = Field(None, ge=0.5)
+
+
+#: the options each command takes (train and compare take theirs from the config)
+TAKES = {
+    "train": (),
+    "compare": (),
+    "loop": ("max_effects", "alpha", "dofs", "validation", "exclude"),
+    "detect": ("window",),
+}
+
+
+class Manifest(StrictModel):
+    """The validated manifest (paths as written; :func:`expand` resolves them)."""
 
     command: Literal[COMMANDS]  # type: ignore[valid-type]
     data: list[str] = Field(min_length=1)
@@ -46,7 +65,7 @@ class Manifest(BaseModel):
     model: list[str] = Field(default_factory=list)  # detect: folders of detection models
     columns: str | None = None  # one reader config for every log
     pair: Literal["product", "zip"] = "product"
-    options: dict[str, Any] = Field(default_factory=dict)  # loop: dofs, alpha, max_effects...
+    options: Options = Field(default_factory=Options)  # loop: dofs, alpha...; detect: window
 
     @field_validator("data", "vehicle", "config", "model", mode="before")
     @classmethod
@@ -55,11 +74,18 @@ class Manifest(BaseModel):
 
     @field_validator("options")
     @classmethod
-    def _options(cls, value: dict[str, Any]) -> dict[str, Any]:
-        known = {"max_effects", "alpha", "dofs", "validation", "exclude", "window"}
-        unknown = sorted(set(value) - known)
-        if unknown:
-            raise ValueError(f"unknown option {', '.join(unknown)}; known: {', '.join(known)}")
+    def _options_apply(cls, value: Options, info: ValidationInfo) -> Options:
+        # an option the command does not take would be dropped (loop's window) or fail
+        # inside every task without naming the manifest
+        command = info.data.get("command")
+        if command is None:  # the command itself was refused: that error is the one to give
+            return value
+        stray = sorted(set(value.model_fields_set) - set(TAKES[command]))
+        if stray:
+            takes = ", ".join(TAKES[command]) or "none (their config sets them)"
+            raise ValueError(
+                f"'{stray[0]}' does not apply to '{command}' tasks; the options they take: {takes}"
+            )
         return value
 
 
@@ -198,6 +224,7 @@ def expand(path: str | Path) -> list[Task]:
         combos = itertools.product(*axes)
     tasks: dict[str, Task] = {}
     for log, veh, cfg, model in combos:
-        task = with_id(Task(spec.command, log, veh, cfg, model, columns, dict(spec.options)))
+        options = spec.options.model_dump(exclude_unset=True)
+        task = with_id(Task(spec.command, log, veh, cfg, model, columns, options))
         tasks.setdefault(task.id, task)
     return list(tasks.values())

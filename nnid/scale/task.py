@@ -47,7 +47,6 @@ def _run(task: Task, out_dir: Path, progress: Progress | None = None):
     if task.command == "loop":
         cfg = load_config(config, LoopConfig, task.overrides) if config else LoopConfig()
         options = dict(task.options)
-        options.pop("window", None)
         for key in ("dofs", "validation", "exclude"):  # lists in TOML, text on the CLI
             if isinstance(options.get(key), list):
                 options[key] = ",".join(options[key])
