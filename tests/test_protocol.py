@@ -11,6 +11,7 @@ scikit-learn's ``get_params``/``set_params``/``clone``.
 from __future__ import annotations
 
 import json
+import re
 import warnings
 from importlib import resources
 
@@ -206,6 +207,9 @@ def test_a_damaged_saved_model_is_one_input_error_naming_the_file(kind, fitted, 
         "unknown setting": lambda p: p["settings"].update(bogus=1),
         "no state": lambda p: p.pop("state"),
         "warm-up as text": lambda p: p.update(warmup_samples="two"),
+        # values of the right type that no fit writes: they loaded and predicted
+        "negative warm-up": lambda p: p.update(warmup_samples=-5),
+        "fractional warm-up": lambda p: p.update(warmup_samples=2.5),
     }
     for edit in damage.values():
         broken = json.loads(json.dumps(good))
@@ -217,6 +221,17 @@ def test_a_damaged_saved_model_is_one_input_error_naming_the_file(kind, fitted, 
         (tmp_path / "model.json").write_text(json.dumps(good))
         (tmp_path / "tensors.pt").write_bytes(b"cut sh")
         with pytest.raises(NnidInputError, match=r"tensors\.pt: damaged"):
+            load_model(tmp_path)
+        model.save(tmp_path)
+        tensors = torch.load(tmp_path / "tensors.pt", weights_only=True)
+        name = next(k for k, v in tensors.items() if v.is_floating_point())
+        tensors[name] = tensors[name].clone().fill_(float("nan"))
+        torch.save(tensors, tmp_path / "tensors.pt")
+        with pytest.raises(NnidInputError, match=rf"tensors\.pt: '{re.escape(name)}' holds NaN"):
+            load_model(tmp_path)
+    for version in (0, 2):
+        (tmp_path / "model.json").write_text(json.dumps({**good, "schema_version": version}))
+        with pytest.raises(NnidInputError, match="versions 1 to 1"):
             load_model(tmp_path)
 
 

@@ -345,9 +345,9 @@ def load_model(folder: str | Path) -> NnidModel:
     if not isinstance(payload, dict) or "kind" not in payload:
         raise NnidInputError("not an nnid model file (no 'kind')", source=str(path))
     version = payload.get("schema_version")
-    if not isinstance(version, int) or version > SCHEMA_VERSION:
+    if not isinstance(version, int) or not 1 <= version <= SCHEMA_VERSION:
         raise NnidInputError(
-            f"schema_version {version!r}: this nnid reads model files up to version "
+            f"schema_version {version!r}: this nnid reads model files of versions 1 to "
             f"{SCHEMA_VERSION}",
             source=str(path),
             field="schema_version",
@@ -359,6 +359,15 @@ def load_model(folder: str | Path) -> NnidModel:
         tensors = torch.load(tensor_path, weights_only=True) if tensor_path.exists() else {}
     except (pickle.UnpicklingError, EOFError, RuntimeError, ValueError) as exc:
         raise NnidInputError(_damaged(exc), source=str(tensor_path)) from None
+    if not isinstance(tensors, dict):
+        raise NnidInputError(_damaged(TypeError("no tensors by name")), source=str(tensor_path))
+    # a NaN weight loads and predicts NaN everywhere: a damaged file, said at loading
+    broken = [k for k, v in tensors.items() if torch.is_tensor(v) and not v.isfinite().all()]
+    if broken:
+        raise NnidInputError(
+            f"'{broken[0]}' holds NaN or infinite values: the file is damaged",
+            source=str(tensor_path),
+        )
     try:
         cls = model_class(payload["kind"])
         model = cls(**decode_setting(payload["settings"], str(path)))
@@ -392,9 +401,12 @@ def learned_state(model: NnidModel) -> tuple[dict, dict[str, torch.Tensor]]:
 
 def restore_learned(model: NnidModel, learned: dict, tensors: dict[str, torch.Tensor]):
     """Inverse of :func:`learned_state` on an unfitted model built from its settings."""
+    warmup = learned["warmup_samples"]
+    if not isinstance(warmup, int) or isinstance(warmup, bool) or warmup < 0:
+        raise ValueError(f"warmup_samples must be a whole number, 0 or more, not {warmup!r}")
     model.outputs_ = list(learned["outputs"])
     model.targets_ = list(learned["targets"])
-    model.warmup_samples_ = int(learned["warmup_samples"])
+    model.warmup_samples_ = warmup
     model._restore(learned["state"], tensors)
     return model
 
