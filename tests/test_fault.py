@@ -197,6 +197,27 @@ def test_rate_interval_is_garwood():
     assert lo == pytest.approx(4.7954 / 2, rel=1e-4) and hi == pytest.approx(18.3904 / 2, rel=1e-4)
 
 
+def test_a_short_healthy_record_is_said_to_leave_the_false_alarm_rate_uncontrolled(
+    vehicle, monitor, tmp_path
+):
+    """Under 20 excursion peaks the thresholds fall back to 2 x the healthy maximum: the fit
+    warns, and detect's lines and page say the target rate is not held."""
+    from nnid.reports.detect_report import write_detect_outputs
+
+    # about two CUSUM peaks a minute here: 18 healthy minutes fit both rates, 6 do not
+    long = [simulate_faults(vehicle, 120, seed=s, experiment=f"h{s}") for s in range(10, 19)]
+    assert ResidualMonitor(monitor.plant_).fit(pd.concat(long)).threshold_caveat() is None
+    assert "12 EWMA and 9 CUSUM excursion peak(s)" in monitor.threshold_caveat()
+    short = simulate_faults(vehicle, 25, seed=7, experiment="short")
+    with pytest.warns(UserWarning, match="fewer than the 20 a rate fit needs") as caught:
+        small = ResidualMonitor(monitor.plant_).fit(short)
+    assert "2 x healthy maximum" in small.thresholds_["ewma"]["method"]
+    assert "0.4 min" in str(caught[0].message)
+    lines = write_detect_outputs(small, detect(small, short), tmp_path)
+    assert lines[-1].startswith("note: the healthy record (0.4 min)")
+    assert "is not controlled" in (tmp_path / "report.html").read_text()
+
+
 def test_a_model_without_force_equation_or_an_uncalibrated_monitor_is_refused(vehicle):
     from nnid.models.narx import NarxModel
 

@@ -64,6 +64,9 @@ def write_detect_outputs(
         f"{60 * hours:.1f} min of healthy data)",  # as the page says it: 0.5, not "0 min"
         *(describe_alarm(a) for a in result.alarms),
     ]
+    caveat = monitor.threshold_caveat()
+    if caveat:
+        lines.append(f"note: {caveat}")
     return lines
 
 
@@ -81,6 +84,9 @@ def detect_html(monitor, result: DetectResult, source: str = "") -> str:
         f"{html.escape(monitor.thresholds_['ewma']['method'])} fit. "
         f"{len(result.alarms)} alarm(s) in {trace.t.size} samples.</p>"
     )
+    caveat = monitor.threshold_caveat()
+    if caveat:
+        out.append(f"<p><b>Note</b>: {html.escape(caveat)}.</p>")
     if result.alarms:
         out.append("<h2>Alarms</h2>")
         head = ["experiment", "t [s]", "kind", "thruster", "efficiency (95 %)", "effect",
