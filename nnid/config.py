@@ -65,6 +65,11 @@ def _once(names: list[str]) -> list[str]:
     return names
 
 
+#: a list of names, or DOFs, each given once (``dofs = ["u", "u"]`` is a typo, not a weight)
+Names = Annotated[list[str], AfterValidator(_once)]
+Dofs = Annotated[list[Dof], Field(min_length=1), AfterValidator(_once)]
+
+
 def _kind_shorthand(value: Any) -> Any:
     """``trainer = "lm"`` stands for ``[trainer] kind = "lm"``."""
     return {"kind": value} if isinstance(value, str) else value
@@ -157,9 +162,9 @@ class _DataCommon(StrictModel):
     each column's, on ``noise_columns``, default the inputs and velocities; seeded by
     ``noise_seed``; Weiss V.B)."""
 
-    experiments: list[str] | None = None
+    experiments: Names | None = None
     noise: float = Field(0.0, ge=0, allow_inf_nan=False)
-    noise_columns: list[str] | None = None
+    noise_columns: Names | None = None
     noise_seed: Seed = 0
     savgol_window: PositiveFloat = 1.0
     savgol_order: int = Field(4, ge=2, le=8)
@@ -251,9 +256,9 @@ class SplitSpec(StrictModel):
     fractions: list[Annotated[float, Field(ge=0, le=1)]] = Field(
         default_factory=lambda: [0.7, 0.15, 0.15], min_length=3, max_length=3
     )
-    train: list[str] | None = None
-    validation: list[str] | None = None
-    test: list[str] | None = None
+    train: Names | None = None
+    validation: Names | None = None
+    test: Names | None = None
 
 
 # -- trainers ------------------------------------------------------------------------------------
@@ -348,6 +353,14 @@ class AdamSpec(_Trainer):
     max_seconds: PositiveFloat | None = None
     average: float | None = Field(None, gt=0, lt=1)
 
+    @model_validator(mode="after")
+    def _floor_below_rate(self) -> AdamSpec:
+        # the schedule anneals from lr down to lr_min: a floor given above it is a typo (the
+        # default floor, 1e-4, only stops the annealing of a smaller lr: the trainer's rule)
+        if "lr_min" in self.model_fields_set and self.lr_min > self.lr:
+            raise ValueError(f"lr_min ({self.lr_min:g}) must not exceed lr ({self.lr:g})")
+        return self
+
 
 RegressionTrainer = Annotated[
     LeastSquaresSpec | RecursiveSpec | GradientSpec | KalmanSpec, Field(discriminator="kind")
@@ -395,9 +408,9 @@ class _Model(StrictModel):
 class SequenceStep(StrictModel):
     """One step of a decoupled identification sequence (Weiss eqs 99-108)."""
 
-    experiments: list[str] = Field(min_length=1)
-    dofs: list[Dof] = Field(min_length=1)
-    unknowns: list[str] = Field(min_length=1)
+    experiments: Annotated[Names, Field(min_length=1)]
+    dofs: Dofs
+    unknowns: Annotated[Names, Field(min_length=1)]
 
 
 class _PhysicsModel(_Model):
@@ -405,8 +418,8 @@ class _PhysicsModel(_Model):
     ``damping`` are shortcuts for the DOFs' diagonal added mass and the vehicle's damping
     terms) identified from the ``dofs`` equations."""
 
-    unknowns: list[str] = Field(default_factory=lambda: ["added_mass", "damping"])
-    dofs: list[Dof] = Field(default_factory=lambda: list(DOFS), min_length=1)
+    unknowns: Names = Field(default_factory=lambda: ["added_mass", "damping"])
+    dofs: Dofs = Field(default_factory=lambda: list(DOFS))
     savgol_window: PositiveFloat = 1.0
     savgol_order: int = Field(4, ge=2, le=8)
 
@@ -470,6 +483,22 @@ class SynthesisModelSpec(_Model):
     savgol_order: int = Field(4, ge=2, le=8)
     filter_lambda: PositiveFloat | None = None
     zoh_midpoint: bool = False
+
+    @field_validator("mask")
+    @classmethod
+    def _mask(cls, mask: str | dict[str, list[str]]) -> str | dict[str, list[str]]:
+        # said here, where the config names the field, not at fit time in the library
+        from nnid.physics.damping_library import canonical_term
+
+        if isinstance(mask, dict):
+            if not any(mask.values()):
+                raise ValueError("a mask of no terms fits nothing: name a model or give terms")
+            for force, names in mask.items():
+                try:
+                    _once([canonical_term(t) for t in names])
+                except ValueError as exc:
+                    raise ValueError(f"{force}: {exc}") from None
+        return mask
 
 
 class SindyModelSpec(_Model):
@@ -825,8 +854,8 @@ class LoopConfig(_Command):
     vehicle: str = ""
     data: VehicleData = Field(default_factory=VehicleData)
     # given, a list names something: [] is an error, not "all" (leave the key out for all)
-    dofs: Annotated[list[Dof], Field(min_length=1)] | None = None
-    validation: Annotated[list[str], Field(min_length=1)] | None = None  # default: the last 30 %
+    dofs: Dofs | None = None
+    validation: Annotated[Names, Field(min_length=1)] | None = None  # default: the last 30 %
     validation_fraction: float = Field(0.3, gt=0, lt=1)
     max_effects: int = Field(3, ge=0)
     alpha: float = Field(0.01, gt=0, lt=0.5)

@@ -103,10 +103,12 @@ def validated(model: type[Model], data: dict[str, Any], source: str) -> Model:
         errors = err.errors()
         first = errors[0]
         field = field_path(tuple(first["loc"]), data)
-        if isinstance(first.get("input"), (dict, list)) and first["type"].endswith("_type"):
-            # a plain union (a number or a list of them) reports each member's error in turn;
-            # the member the value's type fits reaches into the value, and its error is the
-            # one that says what is wrong (an element, named by its index)
+        whole = first["type"].endswith("_type") or first["type"] == "literal_error"
+        if isinstance(first.get("input"), (dict, list)) and whole:
+            # a plain union (a number or a list of them; "train" or a list of bounds) reports
+            # each member's error in turn; the member the value's type fits reaches into the
+            # value, and its error is the one that says what is wrong (an element, named by
+            # its index)
             for other in errors[1:]:
                 path = field_path(tuple(other["loc"]), data)
                 if path.startswith(field + "."):

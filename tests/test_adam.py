@@ -57,6 +57,10 @@ def test_cosine_schedule_is_the_closed_form_and_plateau_halves():
         module, lambda p, b: residual(p, b) * 0 + 1.0, train, flat
     )
     assert hist.extra["lr"] == [0.08, 0.08, 0.04, 0.04, 0.02, 0.02, 0.01]
+    # a rate under the default floor (1e-4) stays put; the cosine rose to the floor before
+    module, residual, train, val = _problem()
+    hist = Adam(lr=5e-5, max_epochs=5).fit(module, residual, train, val)
+    assert hist.extra["lr"] == [5e-5] * 5
 
 
 def test_progress_reports_every_epoch():

@@ -357,6 +357,13 @@ CONFIG_CASES = [
     ("train", "unknown model kind", "kind", ('kind = "fossen"', 'kind = "fosen"')),
     ("train", "unknown trainer", "trainer", ('kind = "ls"', 'kind = "lsq"')),
     ("train", "unknown unknowns", "unknowns", ('"added_mass", "damping"', '"added_mass", "drag"')),
+    # a name given twice is a typo, not a weight
+    (
+        "train",
+        "unknowns named twice",
+        "unknowns",
+        ('"added_mass", "damping"', '"damping", "damping"'),
+    ),
     ("train", "wrong kind of config", "kind", ('kind = "train"', 'kind = "compare"')),
     ("train", "toml syntax", "", ("warmup_s = 2.0", "warmup_s = 2.0.0")),
     (
@@ -379,6 +386,11 @@ CONFIG_CASES = [
     ("train", "narx delay beyond every run", "model.input_delays", None),
     ("train", "sindy term not of the library", "model.terms", None),
     ("train", "sindy without thresholds", "model.thresholds", None),
+    ("train", "narx bound not a number", "model.output_bounds.0.0", None),
+    ("train", "adam floor above its rate", "model.trainer", None),
+    ("train", "synthesis mask of no terms", "model.mask", None),
+    ("train", "synthesis mask term twice", "model.mask", None),
+    ("train", "fossen dofs named twice", "model.dofs", None),
     # a list where a number or a list is allowed: the element is named, not "a valid integer"
     ("train", "narx delay list with a negative delay", "model.input_delays.1", None),
     ("train", "ensemble member output not in the log", "model.member.outputs", None),
@@ -402,6 +414,7 @@ CONFIG_CASES = [
     ("loop", "nan alpha", "alpha", None),
     ("loop", "every run held out", "validation", None),
     ("loop", "empty dofs", "dofs", None),
+    ("loop", "dofs named twice", "dofs", None),
 ]
 LOOP_TEXT = {
     "unknown dof": 'kind = "loop"\ndofs = ["u", "x"]\n',
@@ -410,6 +423,7 @@ LOOP_TEXT = {
     "nan alpha": 'kind = "loop"\nalpha = nan\n',
     "every run held out": 'kind = "loop"\nvalidation = ["run0", "run1", "run2"]\n',
     "empty dofs": 'kind = "loop"\ndofs = []\n',  # [] is not "all": leave the key out for all
+    "dofs named twice": 'kind = "loop"\ndofs = ["w", "w"]\n',
 }
 
 
@@ -425,6 +439,14 @@ MODEL_TEXT = {
     "sindy term not of the library": '[model]\nkind = "sindy"\nterms = ["u*banana"]\n',
     "sindy without thresholds": '[model]\nkind = "sindy"\nthresholds = []\n',
     "narx delay list with a negative delay": f"[model]\n{_NARX}input_delays = [0, -1]\n",
+    # a NaN bound was said as "Input should be 'train'"
+    "narx bound not a number": f"[model]\n{_NARX}output_bounds = [[nan, 1.0]]\n",
+    "adam floor above its rate": (
+        f'[model]\n{_NARX}trainer = {{ kind = "adam", lr = 1e-3, lr_min = 1e-2 }}\n'
+    ),
+    "synthesis mask of no terms": '[model]\nkind = "synthesis"\nmask = { Z = [] }\n',
+    "synthesis mask term twice": '[model]\nkind = "synthesis"\nmask = { Z = ["w", "w"] }\n',
+    "fossen dofs named twice": '[model]\nkind = "fossen"\ndofs = ["w", "w"]\n',
     "ensemble member output not in the log": (
         '[model]\nkind = "ensemble"\nseeds = [0, 1]\n[model.member]\n'
         + _NARX.replace('["w"]', '["heave"]')

@@ -27,7 +27,8 @@ Batches = Sequence[Any] | Callable[[int], Iterable[Any]]
 class Adam(BaseEstimator):
     """Adam with a learning-rate schedule from :mod:`torch.optim.lr_scheduler` (``"cosine"``:
     cosine annealing to ``lr_min`` over ``max_epochs``; ``"plateau"``: halve the rate after
-    ``plateau`` epochs without validation improvement, not below ``lr_min``; ``"constant"``),
+    ``plateau`` epochs without validation improvement, not below ``lr_min``; ``"constant"``;
+    an ``lr_min`` above ``lr`` keeps ``lr``),
     gradient-norm clipping at ``clip`` and early stopping after ``max_fail`` epochs without
     validation improvement (MATLAB's max_fail); the best validation state is restored (the start
     included). ``max_seconds`` (MATLAB's ``time``; default no limit) stops after the first epoch
@@ -64,10 +65,10 @@ class Adam(BaseEstimator):
 
     def _scheduler(self, opt: torch.optim.Optimizer):
         sched = torch.optim.lr_scheduler
+        # a schedule lowers the rate: the default floor never lifts a smaller lr above itself
+        floor = min(self.lr_min, self.lr)
         if self.schedule == "cosine":
-            return sched.CosineAnnealingLR(
-                opt, T_max=max(1, self.max_epochs - 1), eta_min=self.lr_min
-            )
+            return sched.CosineAnnealingLR(opt, T_max=max(1, self.max_epochs - 1), eta_min=floor)
         if self.schedule == "plateau":
             # threshold 0: any improvement on the best resets the count, as early stopping's does
             return sched.ReduceLROnPlateau(
@@ -75,7 +76,7 @@ class Adam(BaseEstimator):
                 factor=0.5,
                 patience=max(self.plateau - 1, 0),
                 threshold=0.0,
-                min_lr=self.lr_min,
+                min_lr=floor,
             )
         if self.schedule == "constant":
             return None
