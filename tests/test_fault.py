@@ -9,6 +9,7 @@ healthy held-out runs must not alarm.
 from __future__ import annotations
 
 import json
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -216,6 +217,24 @@ def test_a_short_healthy_record_is_said_to_leave_the_false_alarm_rate_uncontroll
     lines = write_detect_outputs(small, detect(small, short), tmp_path)
     assert lines[-1].startswith("note: the healthy record (0.4 min)")
     assert "is not controlled" in (tmp_path / "report.html").read_text()
+
+
+def test_commands_far_beyond_their_range_are_said(vehicle, monitor):
+    """The thrust curve saturates a command at its bound; PWM microseconds against the vehicle
+    file's ±1 would fly the log at full thrust without a word: the monitor and the fit warn."""
+    from nnid.datasets.arrays import log_arrays
+
+    log = simulate_faults(vehicle, 10, seed=9)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # commands within their range: not a word
+        monitor.run(log)
+        log_arrays(log, vehicle)
+    pwm = log.assign(**{c: 1500 + 400 * log[c] for c in log if c.startswith("cmd_")})
+    said = r"cmd_\w+ reaches 1\d{3}, far beyond thruster \w+'s range \[-1, 1\] in 100% of"
+    with pytest.warns(UserWarning, match=said):
+        monitor.run(pwm)
+    with pytest.warns(UserWarning, match=said):
+        log_arrays(pwm, vehicle)
 
 
 def test_a_model_without_force_equation_or_an_uncalibrated_monitor_is_refused(vehicle):

@@ -4,6 +4,7 @@ and experiment codes."""
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Iterable
 
 import numpy as np
@@ -58,6 +59,29 @@ def check_commands(columns: Iterable[str], cols: list[str], vehicle_name: str) -
         )
 
 
+def warn_far_beyond_range(log: pd.DataFrame, vehicle) -> None:
+    """Warn of a thruster command further beyond its ``cmd_min``/``cmd_max`` than the range is
+    wide. The thrust curve saturates a command at its bound, by design; one that far out is a
+    unit slip (PWM microseconds against ±1), and saturating it would fly the log at full
+    thrust without a word."""
+    for thruster in vehicle.thrusters:
+        col = f"cmd_{thruster.name}"
+        if col not in log or thruster.cmd_min is None or thruster.cmd_max is None:
+            continue
+        lo, hi = thruster.cmd_min, thruster.cmd_max
+        values = log[col].to_numpy(np.float64)
+        beyond = (values > hi + (hi - lo)) | (values < lo - (hi - lo))
+        if beyond.any():
+            worst = values[beyond][np.argmax(np.abs(values[beyond]))]
+            warnings.warn(
+                f"{col} reaches {worst:.4g}, far beyond thruster {thruster.name}'s range "
+                f"[{lo:g}, {hi:g}] in {beyond.mean():.0%} of the samples; the thrust curve "
+                "saturates it at the bound: are the commands in the vehicle file's units "
+                "(not PWM microseconds against ±1)?",
+                stacklevel=3,
+            )
+
+
 def logged_inputs(log: pd.DataFrame, vehicle) -> tuple[np.ndarray, bool]:
     """The log's inputs and whether they are forces: ``tau_X`` … ``tau_N`` when all six are
     there, else the thruster commands ``cmd_<thruster>`` of the vehicle (ARCHITECTURE.md, the
@@ -82,6 +106,7 @@ def logged_inputs(log: pd.DataFrame, vehicle) -> tuple[np.ndarray, bool]:
             + (f" (only {', '.join(present)})" if present else "")
             + f" nor the commands {', '.join(missing)} of vehicle '{vehicle.name}'"
         )
+    warn_far_beyond_range(log, vehicle)
     return log[cols].to_numpy(np.float64), False
 
 

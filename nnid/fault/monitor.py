@@ -23,7 +23,7 @@ import pandas as pd
 from sklearn.base import BaseEstimator
 from sklearn.utils.validation import check_is_fitted
 
-from nnid.datasets.arrays import check_commands, motion_arrays
+from nnid.datasets.arrays import check_commands, motion_arrays, warn_far_beyond_range
 from nnid.errors import NnidInputError
 from nnid.fault import kernel
 from nnid.fault.thresholds import MIN_PEAKS, rate_interval, rate_threshold
@@ -121,6 +121,7 @@ def monitor_inputs(log: pd.DataFrame, plant) -> dict[str, np.ndarray]:
             f"the log lacks the inputs {', '.join(missing)} of vehicle '{plant.vehicle.name}'",
             field=missing[0],
         )
+    warn_far_beyond_range(log, plant.vehicle)
     log = prepare_motion(log, plant.dofs_, plant.savgol_window, plant.savgol_order, False)
     data = motion_arrays(log)
     return {
