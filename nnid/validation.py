@@ -70,8 +70,10 @@ def field_path(loc: tuple, data: Any) -> str:
             if step in node:
                 out.append(str(step))
                 node = node[step]
-            elif any(node.get(t) == step for t in _TAGS) or following in node:
-                continue  # the union's tag (written, or a default): not a key of the file
+            elif any(node.get(t) == step for t in _TAGS) or following is not None:
+                # the union's tag (written, or a default) or member name: not a key of the
+                # file (a missing or unknown key is always an error's last step)
+                continue
             else:
                 if not str(step).startswith("function-"):
                     out.append(str(step))  # a missing key, named
@@ -105,10 +107,13 @@ def validated(model: type[Model], data: dict[str, Any], source: str) -> Model:
         field = field_path(tuple(first["loc"]), data)
         whole = first["type"].endswith("_type") or first["type"] == "literal_error"
         if isinstance(first.get("input"), (dict, list)) and whole:
-            # a plain union (a number or a list of them; "train" or a list of bounds) reports
-            # each member's error in turn; the member the value's type fits reaches into the
-            # value, and its error is the one that says what is wrong (an element, named by
-            # its index)
+            # a plain union (a number or a list of them; "train" or a list of bounds; a column
+            # name or a table) reports each member's error in turn; the member the value's type
+            # fits reaches into the value, and its error is the one that says what is wrong
+            # (an element, named by its index, or a key)
+            loc = tuple(first["loc"])
+            if isinstance(first["input"], dict) and loc and loc[-1] not in first["input"]:
+                field = field_path(loc[:-1], data)  # the last step names the member, no key
             for other in errors[1:]:
                 path = field_path(tuple(other["loc"]), data)
                 if path.startswith(field + "."):

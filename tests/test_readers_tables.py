@@ -131,6 +131,26 @@ def test_a_source_matching_no_file_names_the_reader_config(tmp_path):
     assert str(err.value).startswith(f"{cmap}, field 'sources.0.file': no file matches 'x*.csv'")
 
 
+@pytest.mark.parametrize(
+    ("column", "said"),
+    [
+        # NaN filled the column, text and true were coerced to 2.0 and 1.0
+        ('{ from = "f", offset = nan }', "'sources.0.columns.tau_X.offset': must be a finite"),
+        ('{ from = "f", scale = "2" }', "'sources.0.columns.tau_X.scale': Input should be a va"),
+        ('{ from = "f", scale = true }', "'sources.0.columns.tau_X.scale': Input should be a va"),
+        # the union's member name ("str", "ColumnSpec") was said as a key of the file
+        ("{ offset = 1.0 }", "'sources.0.columns.tau_X.from': is required but missing"),
+        ('{ from = "f", unit = "furlong" }', "'sources.0.columns.tau_X.unit': unknown unit"),
+    ],
+)
+def test_a_column_spec_of_the_wrong_type_is_refused_naming_its_key(tmp_path, column, said):
+    cmap = f'[[sources]]\nfile = "log.csv"\ntime = "t"\ncolumns = {{ tau_X = {column} }}\n'
+    path = _write_map(tmp_path / "map.toml", cmap)
+    with pytest.raises(NnidInputError) as err:
+        load_log(tmp_path, path)
+    assert str(err.value).startswith(f"{path}, field {said}")
+
+
 def test_quaternion_euler_round_trip(rng):
     angles = np.stack([rng.uniform(-3, 3, 200), rng.uniform(-1.5, 1.5, 200),
                        rng.uniform(-3, 3, 200)], 1)  # fmt: skip

@@ -35,17 +35,15 @@ import re
 from pathlib import Path
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator
+from pydantic import Field, field_validator
+
+from nnid.validation import StrictModel
 
 UNITS = {"rad": 1.0, "deg": 0.017453292519943295, "rad/s": 1.0, "deg/s": 0.017453292519943295,
          "m": 1.0, "cm": 0.01, "mm": 0.001, "s": 1.0, "ms": 0.001}  # fmt: skip
 
 
-class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid")
-
-
-class ColumnSpec(_Strict):
+class ColumnSpec(StrictModel):
     """value = (source + offset) * scale, then converted from ``unit`` to SI."""
 
     source: str = Field(alias="from")
@@ -64,7 +62,7 @@ class ColumnSpec(_Strict):
         return self.scale * (UNITS[self.unit] if self.unit else 1.0)
 
 
-class Source(_Strict):
+class Source(StrictModel):
     file: str
     time: str
     time_scale: float = Field(1.0, gt=0)
@@ -89,7 +87,7 @@ class Source(_Strict):
         }
 
 
-class ColumnMap(_Strict):
+class ColumnMap(StrictModel):
     """A validated reader config."""
 
     name: str = "log"
