@@ -76,6 +76,24 @@ def vehicle_for(name: str, config_path: Path, key: str = "vehicle"):
     return load_vehicle(path)
 
 
+def reader_config(cfg, config_path: Path, columns: str | None) -> str | None:
+    """The reader config a vehicle log is read through: ``--columns``, else the config's
+    ``data.columns`` (relative to the config's folder), with ``--data`` too."""
+    if columns:
+        return columns
+    named = getattr(cfg.data, "columns", None) if cfg.data is not None else None
+    return str(resolve(config_path.parent, named)) if named else None
+
+
+def reader_vehicle(columns: str):
+    """The vehicle a reader config names (its ``vehicle``, relative to its own folder), or
+    None: the vehicle of a run that names none, as the reader config documents."""
+    from nnid.datasets.column_map import load_column_map
+
+    name = load_column_map(columns).vehicle
+    return vehicle_for(name, Path(columns)) if name else None
+
+
 def _check_file(path: Path, source: Path, key: str) -> None:
     if not path.exists():
         raise NnidInputError(f"no such file or folder: {path}", source=str(source), field=key)
@@ -120,6 +138,9 @@ def load_inputs(
     physics = any(m.kind in PHYSICS_KINDS for m in models)
     name = vehicle or cfg.vehicle
     veh = vehicle_for(name, config_path, "--vehicle" if vehicle else "vehicle") if name else None
+    reader = reader_config(cfg, config_path, columns)
+    if veh is None and reader is not None:
+        veh = reader_vehicle(reader)
     simulated = data is None and bool(getattr(spec, "simulate", None))
     if physics and veh is None and not simulated:  # said before any data is read
         raise NnidInputError(
@@ -146,8 +167,7 @@ def load_inputs(
         from nnid.datasets.readers import load_log
 
         path = data or str(resolve(base, spec.log))
-        cols = columns or (str(resolve(base, spec.columns)) if spec.columns else None)
-        inputs = Inputs(*load_log(path, cols), veh)
+        inputs = Inputs(*load_log(path, reader), veh)
         if physics and veh is not None:  # the inputs the vehicle reads, said against the log
             from nnid.datasets.arrays import logged_inputs
 

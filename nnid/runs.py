@@ -311,12 +311,15 @@ def loop_run(
 ) -> Outcome:
     """``nnid loop``: the residual loop of a log and a vehicle file (a
     :class:`nnid.config.LoopConfig`; the keyword options override it as the CLI's do)."""
-    from nnid.pipeline import load_inputs
+    from nnid.datasets.column_map import load_column_map
+    from nnid.pipeline import load_inputs, reader_config
 
     where = config_path or Path("loop.toml")
-    if not (vehicle or cfg.vehicle):
+    reader = reader_config(cfg, where, columns)
+    if not (vehicle or cfg.vehicle or (reader and load_column_map(reader).vehicle)):
         raise NnidInputError(
-            "give a vehicle (--vehicle or the config's 'vehicle')", field="vehicle"
+            "give a vehicle (--vehicle, the config's 'vehicle' or the reader config's)",
+            field="vehicle",
         )
     if not (data or cfg.data.log or cfg.data.simulate):
         raise NnidInputError("give a log (--data or the config's data.log)", field="data")

@@ -297,6 +297,18 @@ def test_a_config_without_data_runs_with_data_and_vehicle_given(tmp_path):
         app, ["train", str(cfg), "--data", str(log), "--out", str(tmp_path / "o3")]
     )
     assert novehicle.exit_code == 2 and "field 'vehicle'" in novehicle.output
+    # the vehicle a reader config names (its documented `vehicle` key was read by nothing)
+    header = [c for c in pd.read_csv(log, nrows=0).columns if c not in ("t", "experiment")]
+    body = (
+        'experiment = "experiment"\n[[sources]]\nfile = "log.csv"\ntime = "t"\n[sources.columns]\n'
+    )
+    body += "".join(f'{c} = "{c}"\n' for c in header)
+    for vehicle, code in (("seamor", 0), ("nothere.toml", 2)):
+        (tmp_path / "map.toml").write_text(f'vehicle = "{vehicle}"\n' + body)
+        args = ["train", str(cfg), "--data", str(log), "--columns", str(tmp_path / "map.toml")]
+        run = CliRunner().invoke(app, [*args, "--out", str(tmp_path / f"o5{code}")])
+        assert run.exit_code == code, run.output
+    assert f"{tmp_path / 'map.toml'}, field 'vehicle': 'nothere.toml'" in run.output
 
 
 def test_a_run_into_an_earlier_out_folder_leaves_no_stale_result_and_keeps_yours(tmp_path):

@@ -68,6 +68,19 @@ def test_bad_logs_name_file_column_row(mutate, column, row, words):
         assert f"column '{column}'" in msg and f"row {row}" in msg
 
 
+def test_unwrapped_radians_past_two_pi_are_told_from_degrees_by_the_rate():
+    """A yaw past 2π after whole turns (a filter's, or nnid's own simulator with no
+    measurement model) was refused as degrees; the yaw rate r tells the two apart."""
+    t = np.arange(400) * 0.1
+    turns = pd.DataFrame({"t": t, "psi": 0.5 * t, "r": np.full(t.size, 0.5), "tau_N": 1.0})
+    assert validate_log(turns, "turns.csv") is turns  # 20 rad, turning at the logged 0.5 rad/s
+    with pytest.raises(NnidInputError, match="'psi', row 399: angle of 1143 looks like degrees"):
+        validate_log(turns.assign(psi=np.degrees(turns["psi"])), "turns.csv")
+    # without r nothing tells them apart: refused, saying what would
+    with pytest.raises(NnidInputError, match="read where the log also has the angle's rate"):
+        validate_log(turns.drop(columns="r"), "turns.csv")
+
+
 def test_time_restarts_per_experiment_are_fine(tmp_path):
     a, b = _log(), _log()
     a["experiment"], b["experiment"] = "a", "b"

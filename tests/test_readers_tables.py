@@ -4,6 +4,7 @@ and row, exit code 2; property-based tests of the CSV reader."""
 from __future__ import annotations
 
 import math
+import re
 
 import numpy as np
 import pandas as pd
@@ -149,6 +150,125 @@ def test_a_column_spec_of_the_wrong_type_is_refused_naming_its_key(tmp_path, col
     with pytest.raises(NnidInputError) as err:
         load_log(tmp_path, path)
     assert str(err.value).startswith(f"{path}, field {said}")
+
+
+def _edit_nav(root, edit):
+    _sensor_tables(root)
+    nav = pd.read_csv(root / "nav.csv")
+    edit(nav).to_csv(root / "nav.csv", index=False)
+
+
+@pytest.mark.parametrize(
+    ("case", "said"),
+    [
+        # the resampler wrapped degrees into [-π, π): 100° read as 100 rad, wrapped, unseen
+        (
+            lambda m, n: (m.replace('{ from = "yaw_deg", unit = "deg" }', '"yaw_deg"'), n),
+            "field 'yaw_deg': reaches 57.28, which looks like degrees for psi: set unit",
+        ),
+        # a 10-s recording became 10,000 s
+        (
+            lambda m, n: (m, n.assign(time=n["time"] * 1000)),
+            "field 'time': time steps by 13 (median): this looks like milliseconds",
+        ),
+        # the samples of a reset were sorted in between the others
+        (
+            lambda m, n: (m, n.assign(time=np.where(n.index >= 400, n["time"] - 5.0, n["time"]))),
+            "column 'time', row 400: time goes back by 4.987 s in experiment 'r1': two runs",
+        ),
+        # two runs of one file without their experiment column: one run's samples dropped as
+        # repeated stamps
+        (
+            lambda m, n: (m, pd.concat([n, n.assign(depth=1)]).sort_values("time", kind="stable")),
+            "770 of the 1540 samples of experiment 'r1' repeat a time stamp",
+        ),
+        (lambda m, n: (m, n.iloc[:0]), "nav.csv: has no rows"),
+        (lambda m, n: (m.replace("rate = 20.0", "rate = 2e6"), n), "field 'rate': 2e+06 Hz"),
+        (
+            lambda m, n: (m, n.assign(run=n["run"].where(n.index != 9))),
+            "column 'run', row 9: 1 rows have an empty experiment label",
+        ),
+    ],
+)
+def test_a_source_clock_or_angle_in_the_wrong_unit_is_refused(tmp_path, case, said):
+    """What the resampling would have hidden is said against the source file and column."""
+    captured = {}
+
+    def edit(nav):
+        captured["map"], out = case(MAP, nav)
+        return out
+
+    _edit_nav(tmp_path, edit)
+    with pytest.raises(NnidInputError) as err:
+        load_log(tmp_path, _write_map(tmp_path / "map.toml", captured["map"]))
+    assert said in str(err.value)
+
+
+def test_a_few_repeated_or_late_stamps_are_repaired_and_said(tmp_path):
+    """A stamp repeated now and then is kept once, a sample a little late is sorted in: both
+    in the cleaning report, with the rows dropped counted."""
+
+    def jitter(nav):
+        t = nav["time"].to_numpy().copy()
+        t[[50, 51]] = t[[51, 50]]  # one pair out of order
+        t[100] = t[99]  # one repeated stamp
+        return nav.assign(time=t)
+
+    _edit_nav(tmp_path, jitter)
+    log, report = load_log(tmp_path, _write_map(tmp_path / "map.toml", MAP))
+    steps = {s.step: s for s in report.steps}
+    assert steps["repeated stamps"].rows_removed == 1
+    assert "1 samples out of time order, sorted" in steps["sort"].detail
+    assert np.allclose(log["psi"], 0.1 * log["t"], atol=2e-3)
+
+
+@pytest.mark.parametrize(
+    ("columns", "said"),
+    [
+        ('U = "vx"', "'U' is no log column; did you mean 'u'?"),
+        ('tau_n = "vx"', "'tau_n' is no log column; did you mean 'tau_N'?"),
+        ('experiment = "vx"', "'experiment' comes from the source's 'time'"),
+        ('z = { from = "vx", unit = "deg" }', "z in 'deg': z takes m, cm, mm"),
+        ('u = { from = "vx", unit = "mm" }', "u in 'mm': u takes m/s, cm/s, mm/s"),
+    ],
+)
+def test_a_column_target_that_is_a_typo_or_in_the_wrong_unit_is_refused(tmp_path, columns, said):
+    """A misspelt target was kept as an extra column and the log's own one was missing."""
+    cmap = f'[[sources]]\nfile = "log.csv"\ntime = "t"\ncolumns = {{ {columns} }}\n'
+    with pytest.raises(NnidInputError, match=re.escape(said)):
+        load_log(tmp_path, _write_map(tmp_path / "map.toml", cmap))
+
+
+def test_two_sources_of_one_column_and_a_bad_pattern_are_refused(tmp_path):
+    twice = MAP.replace("columns = { cmd_1", 'columns = { z = "pwm", cmd_1')
+    with pytest.raises(NnidInputError, match="sources 0 and 1 both give 'z': map it from one"):
+        load_log(tmp_path, _write_map(tmp_path / "map.toml", twice))
+    # re.error is no ValueError: it was a traceback
+    bad = 'include = "(r1"\n' + MAP
+    with pytest.raises(NnidInputError, match="field 'include': '\\(r1' is not a regular"):
+        load_log(tmp_path, _write_map(tmp_path / "map.toml", bad))
+
+
+def test_speeds_in_millimetres_per_second_are_converted(tmp_path):
+    df = pd.DataFrame({"t": np.arange(40) * 0.1, "vx": 250.0, "depth": 1.0, "f": 1.0})
+    df.to_csv(tmp_path / "log.csv", index=False)
+    cmap = """
+[[sources]]
+file = "log.csv"
+time = "t"
+columns = { u = { from = "vx", unit = "mm/s" }, z = "depth", tau_X = "f" }
+"""
+    log, _ = load_log(tmp_path, _write_map(tmp_path / "map.toml", cmap))
+    assert np.allclose(log["u"], 0.25)
+
+
+def test_a_csv_header_with_spaces_after_the_commas_keeps_its_columns(tmp_path):
+    """'t, experiment, u' read as ' experiment' and ' u': runs merged, velocity gone."""
+    rows = ["t, experiment, u, tau_X"] + [f"{0.1 * k:.1f}, r{k // 20}, 0.1, 1.0" for k in range(40)]
+    (tmp_path / "log.csv").write_text("\n".join(rows) + "\n")
+    log, _ = load_log(tmp_path / "log.csv")
+    assert list(log.columns) == ["t", "experiment", "u", "tau_X"]
+    assert sorted(set(log["experiment"])) == ["r0", "r1"]
 
 
 def test_quaternion_euler_round_trip(rng):

@@ -26,21 +26,43 @@ quaternion = []               # [w, x, y, z] source columns -> phi theta psi
 [sources.columns]             # log column = source column, or a table
 cmd_1 = { from = "pwm_1", offset = -1500.0, scale = 0.0025 }   # (pwm - 1500) / 400
 psi = { from = "yaw", unit = "deg" }       # value = (x + offset) * scale, then the unit
+u = { from = "vx", unit = "mm/s" }         # units: rad deg rad/s deg/s m cm mm m/s cm/s mm/s
+                                           # s ms, each checked against the pose or velocity
 ```
 """
 
 from __future__ import annotations
 
+import difflib
 import re
 from pathlib import Path
 from typing import Literal
 
 from pydantic import Field, field_validator
 
+from nnid.datasets.log import ACCELERATION, ANGLES, POSE, TAU, VELOCITY
 from nnid.validation import StrictModel
 
 UNITS = {"rad": 1.0, "deg": 0.017453292519943295, "rad/s": 1.0, "deg/s": 0.017453292519943295,
-         "m": 1.0, "cm": 0.01, "mm": 0.001, "s": 1.0, "ms": 0.001}  # fmt: skip
+         "m": 1.0, "cm": 0.01, "mm": 0.001, "m/s": 1.0, "cm/s": 0.01, "mm/s": 0.001,
+         "s": 1.0, "ms": 0.001}  # fmt: skip
+#: the units each pose and velocity column of the log may be converted from
+TARGET_UNITS = {
+    **dict.fromkeys(("x", "y", "z"), ("m", "cm", "mm")),
+    **dict.fromkeys(("phi", "theta", "psi"), ("rad", "deg")),
+    **dict.fromkeys(("u", "v", "w"), ("m/s", "cm/s", "mm/s")),
+    **dict.fromkeys(("p", "q", "r"), ("rad/s", "deg/s")),
+}
+#: the log's own column names (ARCHITECTURE.md, the log); ``cmd_<thruster>`` besides
+CONTRACT = (*POSE, *VELOCITY, *ACCELERATION, *TAU)
+
+
+def _pattern(pattern: str) -> str:
+    try:
+        re.compile(pattern)
+    except re.error as exc:  # not a ValueError: pydantic would let it through as a traceback
+        raise ValueError(f"{pattern!r} is not a regular expression ({exc})") from None
+    return pattern
 
 
 class ColumnSpec(StrictModel):
@@ -80,6 +102,29 @@ class Source(StrictModel):
             raise ValueError("quaternion names four columns: w, x, y, z")
         return q
 
+    @field_validator("columns")
+    @classmethod
+    def _targets(cls, columns: dict[str, str | ColumnSpec]) -> dict[str, str | ColumnSpec]:
+        for name, spec in columns.items():
+            if name in ("t", "experiment"):
+                raise ValueError(f"'{name}' comes from the source's 'time' or the config's "
+                                 "'experiment', not from columns")  # fmt: skip
+            near = difflib.get_close_matches(name, CONTRACT, n=1, cutoff=0.8)
+            typo = [c for c in CONTRACT if c.lower() == name.lower()] or near
+            if name not in CONTRACT and not name.startswith("cmd_") and typo:
+                # kept as an extra column, the log's own column would be missing unseen
+                raise ValueError(f"'{name}' is no log column; did you mean '{typo[0]}'?")
+            unit = spec.unit if isinstance(spec, ColumnSpec) else None
+            if unit and name in TARGET_UNITS and unit not in TARGET_UNITS[name]:
+                raise ValueError(
+                    f"{name} in {unit!r}: {name} takes {', '.join(TARGET_UNITS[name])}"
+                )
+        return columns
+
+    def targets(self) -> list[str]:
+        """The log columns this source gives (the quaternion's three angles among them)."""
+        return [*self.columns, *(ANGLES if self.quaternion else ())]
+
     def specs(self) -> dict[str, ColumnSpec]:
         return {
             name: ColumnSpec.model_validate({"from": spec}) if isinstance(spec, str) else spec
@@ -107,16 +152,29 @@ class ColumnMap(StrictModel):
     @field_validator("include", "exclude")
     @classmethod
     def _regex(cls, pattern: str | None) -> str | None:
-        if pattern is not None:
-            re.compile(pattern)
-        return pattern
+        return None if pattern is None else _pattern(pattern)
 
     @field_validator("replays")
     @classmethod
     def _regexes(cls, patterns: list[str]) -> list[str]:
-        for pattern in patterns:
-            re.compile(pattern)
-        return patterns
+        return [_pattern(p) for p in patterns]
+
+    @field_validator("sources")
+    @classmethod
+    def _one_source_each(cls, sources: list[Source]) -> list[Source]:
+        # two sources of one column: the later one won at assembly, without a word
+        seen: dict[str, int] = {}
+        for i, source in enumerate(sources):
+            for name in source.targets():
+                if name in seen:
+                    which = (
+                        f"source {i} gives '{name}' from its columns and its quaternion"
+                        if seen[name] == i
+                        else f"sources {seen[name]} and {i} both give '{name}'"
+                    )
+                    raise ValueError(f"{which}: map it from one")
+                seen[name] = i
+        return sources
 
     def replay_group(self, experiment: str) -> str | None:
         """The replay group of an experiment (``replays[i]``), or None."""

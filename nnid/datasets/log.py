@@ -94,18 +94,50 @@ def validate_log(
                     row=row,
                 )
     for col in ANGLES:
-        if col in df.columns:
+        if col in df.columns and looks_like_degrees(df, col):
             size = np.abs(df[col].to_numpy(dtype=np.float64))
-            peak = float(np.nanmax(size))
-            if peak > 2 * math.pi + 1e-6:
-                row = int(np.nanargmax(size))
-                raise NnidInputError(
-                    f"angle of {peak:.4g} looks like degrees; angles must be in radians",
-                    source=source,
-                    field=col,
-                    row=row,
-                )
+            raise NnidInputError(
+                f"angle of {np.nanmax(size):.4g} looks like degrees; angles must be in radians"
+                + ("" if RATE_OF[col] in df else UNWRAPPED),
+                source=source,
+                field=col,
+                row=int(np.nanargmax(size)),
+            )
     return df
+
+
+#: the body rate each Euler angle turns with when roll and pitch are small
+RATE_OF = {"phi": "p", "theta": "q", "psi": "r"}
+UNWRAPPED = (
+    " (unwrapped radians past ±2π are read where the log also has the angle's rate, p, q or r, "
+    "to tell them from degrees)"
+)
+
+
+def looks_like_degrees(df: pd.DataFrame, col: str) -> bool:
+    """Whether angle column ``col`` of ``df`` (``t``, optional ``experiment``) holds degrees:
+    values past ±2π, and, where the log has the angle's body rate (:data:`RATE_OF`), an angle
+    that changes about 57 times faster than that rate says, not as fast (unwrapped radians:
+    a yaw past 2π after a full turn, as a filter or nnid's simulator writes it)."""
+    angle = df[col].to_numpy(dtype=np.float64)
+    if not np.nanmax(np.abs(angle)) > 2 * math.pi + 1e-6:
+        return False
+    rate = RATE_OF[col]
+    if rate not in df:
+        return True
+    t = df["t"].to_numpy(dtype=np.float64)
+    same = np.ones(len(df) - 1, bool)
+    if "experiment" in df:
+        label = df["experiment"].to_numpy()
+        same = label[1:] == label[:-1]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        slope = np.abs(np.diff(angle) / np.diff(t))
+    turning = np.abs(df[rate].to_numpy(dtype=np.float64)[1:])
+    moving = same & np.isfinite(slope) & (turning > 1e-3)
+    if moving.sum() < 10:  # too little turning to tell: the plain reading
+        return True
+    # the median ignores the few wrap jumps (2π or 360) and noisy steps
+    return bool(np.median(slope[moving]) > 5.0 * np.median(turning[moving]))
 
 
 def _check_finite(df: pd.DataFrame, columns: list[str], source: str, gaps: bool = False) -> None:
@@ -164,21 +196,24 @@ def _check_time_unit(df: pd.DataFrame, source: str) -> None:
     """Time in seconds: a median step of 5 to 1000 on whole numbers (to 1e-6: milliseconds
     computed in floating point, 50.000000000007) looks like milliseconds, one of 10⁵ or more
     like micro- or nanoseconds."""
-    t = df["t"].to_numpy(dtype=np.float64)
+    slip = time_unit_slip(df["t"].to_numpy(dtype=np.float64))
+    if slip:
+        raise NnidInputError(f"{slip}; t must be seconds", source=source, field="t")
+
+
+def time_unit_slip(t: np.ndarray) -> str | None:
+    """What a time column meant as seconds looks like when it steps as another unit does
+    (:func:`_check_time_unit`'s rule), or None."""
     if t.size < 3:
-        return
+        return None
     step = float(np.median(np.abs(np.diff(t))))
-    unit = None
     if step >= 1e5:
         unit = "nanoseconds (divide by 1e9) or microseconds (by 1e6)"
     elif 5 <= step <= 1000 and np.all(np.abs(t - np.round(t)) <= 1e-6):
         unit = "milliseconds (divide by 1000)"
-    if unit:
-        raise NnidInputError(
-            f"time steps by {shown(step)} (median): this looks like {unit}; t must be seconds",
-            source=source,
-            field="t",
-        )
+    else:
+        return None
+    return f"time steps by {shown(step)} (median): this looks like {unit}"
 
 
 def _check_time(df: pd.DataFrame, source: str) -> None:

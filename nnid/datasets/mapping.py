@@ -17,7 +17,7 @@ from scipy.spatial.transform import Rotation
 
 from nnid.datasets.cleaning import CleaningReport
 from nnid.datasets.column_map import ColumnMap, Source
-from nnid.datasets.log import ANGLES
+from nnid.datasets.log import ANGLES, looks_like_degrees, time_unit_slip
 from nnid.errors import NnidInputError
 from nnid.validation import shown
 
@@ -122,6 +122,8 @@ def map_source(
     ``experiment`` is a column, a list of columns (values joined with "/"), "file" (the file
     stem) or None (one run).
     """
+    if raw.empty:  # a header and no data: nothing to align, said here and not as a traceback
+        raise NnidInputError("has no rows", source=origin)
     needed = [source.time, *source.quaternion, *(s.source for s in source.specs().values())]
     keys = [experiment] if isinstance(experiment, str) else list(experiment or [])
     keys = [] if keys == ["file"] else keys
@@ -170,14 +172,35 @@ def map_source(
     if experiment == "file":
         out["experiment"] = Path(origin).name.split(".")[0]
     elif keys:
+        empty = raw[keys].isna().any(axis=1).to_numpy()
+        if empty.any():  # a row of no run would be dropped from every run without a word
+            row = int(np.flatnonzero(empty)[0])
+            raise NnidInputError(
+                f"{int(empty.sum())} rows have an empty experiment label: label every row",
+                source=origin,
+                field=next(k for k in keys if pd.isna(raw[k].iloc[row])),
+                row=int(raw.index[row]),
+            )
         ident = raw[keys[0]].astype(str)
         for key in keys[1:]:  # vectorised: a row-wise join is slow on a million rows
             ident = ident + "/" + raw[key].astype(str)
         out["experiment"] = ident.to_numpy()
     else:
         out["experiment"] = "0"
-    for name, spec in source.specs().items():
+    specs = source.specs()
+    for name, spec in specs.items():
         out[name] = (values[spec.source].to_numpy(dtype=np.float64) + spec.offset) * spec.factor()
+    for col in ANGLES:
+        # before the frame conversion and the resampling, which wrap angles to ±π: degrees
+        # wrapped as radians would pass every later check
+        if col in specs and looks_like_degrees(out, col):
+            raise NnidInputError(
+                f"reaches {np.nanmax(np.abs(out[col])):.4g}, which looks like degrees for {col}: "
+                f'set unit = "deg" for {col} in the reader config',
+                source=origin,
+                field=specs[col].source,
+            )
+    check_clock(out, origin, "row_clock" if source.row_clock else source.time, report)
     if source.quaternion:
         rot = rotation_from_quaternion(values[source.quaternion].to_numpy(dtype=np.float64))
         out["phi"], out["theta"], out["psi"] = euler_from_rotation(rot).T
@@ -185,3 +208,53 @@ def map_source(
         _to_ned_frd(out)
         report.add("frame", f"{origin}: ENU/FLU converted to NED/FRD")
     return out.reset_index(drop=True)
+
+
+#: the share of a run's samples that may repeat a time stamp before the source is refused:
+#: beyond it, runs of a file without its experiment column are being merged
+MAX_REPEATED = 0.1
+
+
+def check_clock(out: pd.DataFrame, origin: str, time: str, report: CleaningReport) -> None:
+    """A source's clock, per experiment: in seconds (milliseconds are a missing
+    ``time_scale``), never reset (two runs in one file without their experiment column), a
+    few repeated stamps at most (kept once at resampling) and a few samples out of order at
+    most (sorted); what is repaired is said in the cleaning report."""
+    t_all = out["t"].to_numpy(dtype=np.float64)
+    for exp, idx in out.groupby("experiment", sort=False).indices.items():
+        t = t_all[idx]
+        slip = time_unit_slip(np.sort(t))
+        if slip:
+            fix = "a row_clock in Hz" if time == "row_clock" else "time_scale (0.001 for ms)"
+            raise NnidInputError(
+                f"{slip}: set {fix} in the reader config",
+                source=origin,
+                field=time,
+            )
+        step = np.diff(t)
+        forward = step[step > 0]
+        typical = float(np.median(forward)) if forward.size else 0.0
+        reset = np.flatnonzero(step < -10 * typical)
+        if reset.size:
+            k = int(reset[0])
+            raise NnidInputError(
+                f"time goes back by {t[k] - t[k + 1]:.4g} s in experiment '{exp}': two runs in "
+                "one file? name the column that tells them apart (experiment = ...)",
+                source=origin,
+                field=time,
+                row=int(out.index[idx[k + 1]]),
+            )
+        repeated = t.size - np.unique(t).size
+        if repeated > MAX_REPEATED * t.size:
+            raise NnidInputError(
+                f"{repeated} of the {t.size} samples of experiment '{exp}' repeat a time stamp: "
+                "several runs in one file? name the column that tells them apart "
+                "(experiment = ...)",
+                source=origin,
+                field=time,
+            )
+        if repeated:
+            report.add("repeated stamps", f"{origin}: '{exp}': first of each kept", repeated)
+        late = int((step < 0).sum())
+        if late:
+            report.add("sort", f"{origin}: '{exp}': {late} samples out of time order, sorted")

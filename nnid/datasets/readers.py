@@ -28,6 +28,10 @@ from nnid.datasets.mapping import map_source
 from nnid.datasets.rosbag import is_bag, read_bag_sources
 from nnid.errors import NnidInputError
 
+#: the most samples one run of an assembled log may have (a rate in the wrong unit, or a
+#: grid that would fill the memory)
+MAX_SAMPLES = 1e7
+
 
 def read_table(path: str | Path) -> pd.DataFrame:
     """A CSV (optionally gzipped) or Parquet file; unreadable files are an NnidInputError."""
@@ -40,9 +44,12 @@ def read_table(path: str | Path) -> pd.DataFrame:
             return pd.read_parquet(path)
         if name.endswith((".csv", ".csv.gz", ".txt")):
             dialect = _csv_dialect(path)
+            # "t, experiment, x": a space after the separator is not part of the name
+            dialect["skipinitialspace"] = True
             header = pd.read_csv(path, header=None, nrows=1, dtype=str, **dialect).iloc[0]
-            _refuse_repeated_names(header, path)
-            return pd.read_csv(path, **dialect)
+            _refuse_repeated_names(header.str.strip(), path)
+            table = pd.read_csv(path, **dialect)
+            return table.rename(columns=lambda c: c.strip() if isinstance(c, str) else c)
     except NnidInputError:
         raise
     except Exception as err:  # pandas/pyarrow raise many types for truncated or corrupt files
@@ -108,9 +115,9 @@ def _resample(
     Columns flagged in ``circular`` (angles) are interpolated unwrapped and wrapped back to
     [-π, π), so a step across ±π is not interpolated through zero.
     """
-    order = np.argsort(t_src, kind="stable")
+    order = np.argsort(t_src, kind="stable")  # out of order, repeated: said at mapping
     t_src, values = t_src[order], values[order]
-    t_src, first = np.unique(t_src, return_index=True)  # duplicated stamps: keep the first
+    t_src, first = np.unique(t_src, return_index=True)  # a repeated stamp: keep the first
     values = values[first]
     idx = np.searchsorted(t_src, grid, side="right") - 1
     if method == "hold":
@@ -140,7 +147,12 @@ def assemble(
         parts = [(s, df[df["experiment"] == exp]) for s, df in tables]
         parts = [(s, df) for s, df in parts if len(df)]
         if len(parts) < len(tables):
-            report.add("skip experiment", f"'{exp}': not every source has data", 0)
+            lacking = [s.file for s, df in tables if not (df["experiment"] == exp).any()]
+            report.add(
+                "skip experiment",
+                f"'{exp}': no data in {', '.join(lacking)}",
+                sum(len(df) for _, df in parts),
+            )
             continue
         start = max(df["t"].min() for _, df in parts)
         # a command logged on change holds until the next one: only measured (linear)
@@ -160,8 +172,20 @@ def assemble(
                     stop = last
         rate = cmap.rate or 1.0 / float(np.median(np.diff(np.sort(parts[0][1]["t"].to_numpy()))))
         if stop <= start:
-            report.add("skip experiment", f"'{exp}': the sources do not overlap in time", 0)
+            report.add(
+                "skip experiment",
+                f"'{exp}': the sources do not overlap in time",
+                sum(len(df) for _, df in parts),
+            )
             continue
+        samples = (stop - start) * rate
+        if samples > MAX_SAMPLES:
+            raise NnidInputError(
+                f"{rate:g} Hz over the {stop - start:.4g} s of '{exp}' is {samples:.3g} samples, "
+                f"more than the {MAX_SAMPLES:.0e} a run may hold: is rate in Hz?",
+                source=cmap.name,
+                field="rate",
+            )
         # relative times: a grid built on UNIX epochs (~1.7e9 s) jitters by ~1e-7 s
         grid = _grid(0.0, stop - start, rate)
         columns: dict[str, np.ndarray] = {}
@@ -181,6 +205,12 @@ def assemble(
                 for g in gaps:
                     valid &= ~((grid > t_src[g]) & (grid < t_src[g + 1]))
         segments = _runs(valid)
+        if not segments:
+            report.add(
+                "skip experiment",
+                f"'{exp}': {stop - start:.3g} s at {rate:g} Hz is under two samples",
+                sum(len(df) for _, df in parts),
+            )
         if len(segments) > 1:
             report.add(
                 "split at gaps",
@@ -199,7 +229,12 @@ def assemble(
             f"({', '.join(f'{s.file}: {s.method}' for s, _ in parts)})",
         )
     if not pieces:
-        raise NnidInputError("no experiment left after selection and alignment", source=cmap.name)
+        why = [s.detail for s in report.steps if s.step in ("select", "skip experiment")]
+        shown_why = "; ".join(why[:3]) + ("; ..." if len(why) > 3 else "")
+        raise NnidInputError(
+            "no experiment left after selection and alignment" + (f" ({shown_why})" if why else ""),
+            source=cmap.name,
+        )
     log = pd.concat(pieces, ignore_index=True)
     if cmap.replays:
         runs = list(dict.fromkeys(log["experiment"]))
