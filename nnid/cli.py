@@ -87,6 +87,7 @@ def simulate(
         None, "--vehicle", help="Preset name or vehicle TOML; overrides the config's."
     ),
     seed: int | None = typer.Option(None, "--seed", min=0, help="Overrides the config's seed."),
+    force: bool = typer.Option(False, "--force", help="Replace an existing --out file."),
 ) -> None:
     """Make a synthetic log from a vehicle, an excitation and optional injected effects."""
     from nnid.config import SimulateConfig, load_config
@@ -103,6 +104,11 @@ def simulate(
         raise NnidInputError("output must end in .csv or .parquet", source=str(out_path))
     if out_path.is_dir():
         raise NnidInputError("is a folder; give a file name", source=str(out_path), field="--out")
+    if out_path.exists() and not force:  # a measured log of that name would be lost
+        raise NnidInputError(
+            "exists: give --force to replace it, or another name", source=str(out_path),
+            field="--out",
+        )  # fmt: skip
     _check_out(out_path.parent)
     try:
         with _bar("simulating") as progress:

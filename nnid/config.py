@@ -13,6 +13,7 @@ naming the file and the key (dotted path), raised before any data is loaded or s
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
@@ -105,6 +106,8 @@ class Experiment(StrictModel):
     def _x0(cls, x0: list[float] | None) -> list[float] | None:
         if x0 is not None and len(x0) not in (6, 12):
             raise ValueError("x0 has 6 (pose) or 12 (pose and velocity) values")
+        if x0 is not None and max(abs(a) for a in x0[3:6]) > 2 * math.pi:
+            raise ValueError("x0's angles (its 4th to 6th values) are radians, within ±2π")
         return x0
 
     def end(self) -> float:
@@ -118,7 +121,7 @@ class SimulateConfig(StrictModel):
     kind: Literal["simulate"] = "simulate"
     vehicle: str
     dt: PositiveFloat = 0.01
-    substeps: int = Field(1, ge=1)
+    substeps: int = Field(1, ge=1, le=1000)
     integrator: Literal["rk4", "adaptive", "torch"] = "rk4"
     seed: Seed = 0
     effects: list[Effect] = Field(default_factory=list)
@@ -131,6 +134,10 @@ class SimulateConfig(StrictModel):
     def _runs(self) -> SimulateConfig:
         # checked here, where the config can be named: the log it writes would carry a blank
         # or repeated experiment label, or a run of one sample, and be refused as that file
+        from nnid.datasets.log import MAX_RUN_SAMPLES
+
+        if not self.all_experiments():
+            raise ValueError("nothing to simulate: give [[experiments]] or a [sequence]")
         seen: set[str] = set()
         for exp in self.all_experiments():
             if not exp.name.strip():
@@ -142,6 +149,12 @@ class SimulateConfig(StrictModel):
                 raise ValueError(
                     f"experiment {exp.name!r} lasts {exp.end():g} s, under one step dt = "
                     f"{self.dt:g} s: it would log a single sample"
+                )
+            if exp.end() / self.dt > MAX_RUN_SAMPLES:
+                raise ValueError(
+                    f"experiment {exp.name!r} lasts {exp.end():g} s: {exp.end() / self.dt:.3g} "
+                    f"steps of dt = {self.dt:g} s, more than the {MAX_RUN_SAMPLES:.0e} a run may "
+                    "hold (is dt in seconds?)"
                 )
         return self
 

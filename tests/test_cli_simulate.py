@@ -144,6 +144,43 @@ BAD_CONFIGS = {
     ),
     "unknown effect": (CONFIG + '[[effects]]\nname = "gremlins"\nvalue = 1.0\n', "effects.0.name"),
     "missing vehicle": (CONFIG.replace('vehicle = "{vehicle}"', ""), "vehicle"),
+    # said as "the simulation diverged", or coerced (true was 1 N)
+    "nan amplitude": (
+        CONFIG.replace("amplitude = 10.0", "amplitude = nan"),
+        "experiments.0.signals.0.amplitude",
+    ),
+    "amplitude true": (
+        CONFIG.replace("amplitude = 10.0", "amplitude = true"),
+        "experiments.0.signals.0.amplitude",
+    ),
+    "noise as text": (
+        CONFIG + '[measurement]\nkind = "mocap"\nposition_noise = "0.01"\n',
+        "measurement.position_noise",
+    ),
+    # tracebacks
+    "two velocity biases": (
+        CONFIG + '[measurement]\nkind = "dvl_imu"\nvelocity_bias = [0.1, 0.0]\n',
+        "measurement.velocity_bias",
+    ),
+    "nothing to simulate": (CONFIG.split("[[experiments]]")[0], "nothing to simulate"),
+    "an effect no vehicle has": (
+        CONFIG + '[[effects]]\nname = "added_mass.u"\nvalue = 1e6\n',
+        "effects",
+    ),
+    "aprbs seed negative": (
+        CONFIG.replace(
+            'kind = "step", channel = "X", amplitude = 10.0, duration = 5.0',
+            'kind = "aprbs", channel = "X", amplitude = 10.0, hold_min = 0.5, hold_max = 1.0, '
+            "duration = 5.0, seed = -1",
+        ),
+        "experiments.0.signals.0.seed",
+    ),
+    # out of memory, killed
+    "dt in nanoseconds": (CONFIG.replace("dt = 0.05", "dt = 1e-9"), "is dt in seconds?"),
+    "an angle of x0 in degrees": (
+        CONFIG.replace('name = "surge"', 'name = "surge"\nx0 = [0, 0, 0, 0, 0, 180]'),
+        "experiments.0.x0",
+    ),
 }
 
 
@@ -154,8 +191,28 @@ def test_bad_config_exits_2_naming_the_field(tmp_path, case):
     cfg = _write(tmp_path, "sim.toml", text.format(vehicle=veh))
     result = runner.invoke(app, ["simulate", str(cfg), "--out", str(tmp_path / "x.csv")])
     assert result.exit_code == 2, result.output
-    assert f"'{field}'" in result.output and "sim.toml" in result.output
+    assert (f"'{field}'" if "." in field or " " not in field else field) in result.output
+    assert "sim.toml" in result.output
     assert len(result.output.strip().splitlines()) == 1
+
+
+def test_a_sequence_of_forces_on_a_thruster_vehicle_names_the_sequence(tmp_path):
+    """It named 'experiments.0.signals.0.channel', a key the config does not have."""
+    args = ["simulate", str(ROOT / "configs/seamor_sequence.toml"), "--vehicle", "bluerov2_heavy"]
+    result = runner.invoke(app, [*args, "--out", str(tmp_path / "x.csv")])
+    assert result.exit_code == 2
+    assert "field 'sequence': the sequence drives the forces X, Y, Z, K, M, N" in result.output
+
+
+def test_an_existing_out_file_is_replaced_only_with_force(tmp_path):
+    veh = _write(tmp_path, "box.toml", GOOD_VEHICLE)
+    cfg = _write(tmp_path, "sim.toml", CONFIG.format(vehicle=veh))
+    log = _write(tmp_path, "measured.csv", "a measured log\n")
+    result = runner.invoke(app, ["simulate", str(cfg), "--out", str(log)])
+    assert result.exit_code == 2 and "give --force to replace it" in result.output
+    assert log.read_text() == "a measured log\n"
+    result = runner.invoke(app, ["simulate", str(cfg), "--out", str(log), "--force"])
+    assert result.exit_code == 0 and read_log(log)["experiment"].iloc[0] == "surge"
 
 
 def test_version():

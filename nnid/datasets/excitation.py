@@ -14,13 +14,13 @@ import math
 from typing import Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import Field, model_validator
 
 from nnid.physics.dofs import FORCES
+from nnid.validation import StrictModel
 
 
-class _Signal(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+class _Signal(StrictModel):
     channel: str
     start: float = Field(0.0, ge=0)
 
@@ -90,7 +90,7 @@ class Multisine(_Signal):
     amplitude: float
     f_min: float = Field(gt=0)
     f_max: float = Field(gt=0)
-    n: int = Field(8, ge=1)
+    n: int = Field(8, ge=1, le=1000)
     duration: float = Field(gt=0)
 
     @model_validator(mode="after")
@@ -146,7 +146,7 @@ class PRBS(_Signal):
     hold: float = Field(gt=0)
     duration: float = Field(gt=0)
     order: int = Field(7, ge=3, le=16)
-    seed: int = 1
+    seed: int = Field(1, ge=0)
     offset: float = 0.0
 
     def end(self) -> float:
@@ -174,13 +174,17 @@ class APRBS(_Signal):
     hold_min: float = Field(gt=0)
     hold_max: float = Field(gt=0)
     duration: float = Field(gt=0)
-    seed: int = 0
+    seed: int = Field(0, ge=0)
     offset: float = 0.0
 
     @model_validator(mode="after")
     def _holds(self) -> APRBS:
         if self.hold_max < self.hold_min:
             raise ValueError("hold_max must be at least hold_min")
+        if self.duration / self.hold_min > 1e7:  # one level drawn per hold: memory, not a run
+            raise ValueError(
+                f"{self.duration:g} s in holds of {self.hold_min:g} s is over 1e7 levels"
+            )
         return self
 
     def end(self) -> float:
@@ -284,7 +288,7 @@ _DOF_NAMES = {"X": "surge", "Y": "sway", "Z": "heave", "K": "roll", "M": "pitch"
 _WEISS_COUPLED = ("XY", "XZ", "XN", "YZ", "YN", "ZN", "XYZ", "XYN")
 
 
-class WeissSequence(BaseModel):
+class WeissSequence(StrictModel):
     """Weiss's identification sequence (section V.A-V.B, conclusions): stair-step runs in the
     decoupled DOFs surge, sway, heave, roll, yaw, in that order, then the coupled pairs and
     triples surge-sway, surge-heave, surge-yaw, sway-heave, sway-yaw, heave-yaw,
@@ -296,12 +300,11 @@ class WeissSequence(BaseModel):
     second and third DOF switch on slower clocks so that their inputs are not collinear.
     """
 
-    model_config = ConfigDict(extra="forbid")
     kind: Literal["weiss"] = "weiss"
     amplitudes: dict[str, float] = Field(
         default_factory=lambda: {"X": 30.0, "Y": 30.0, "Z": 30.0, "K": 4.0, "N": 4.0}
     )
-    levels: list[float] = Field(default_factory=lambda: [0.3, 0.65, 1.0, -0.5, -1.0])
+    levels: list[float] = Field(default_factory=lambda: [0.3, 0.65, 1.0, -0.5, -1.0], min_length=1)
     hold: float = Field(8.0, gt=0)
     coupled: list[str] = Field(default_factory=lambda: list(_WEISS_COUPLED))
 

@@ -28,6 +28,9 @@ ANGLES = ("phi", "theta", "psi")
 MAX_SPEED = 100.0
 #: the largest |generalized force| a log may hold, N or N m (ten meganewtons: no thruster's)
 MAX_FORCE = 1e7
+#: the most samples one run of a log may have: a rate or step in the wrong unit, not a run
+#: (ten million: 28 hours at 100 Hz), refused before it fills the memory
+MAX_RUN_SAMPLES = 10_000_000
 #: optional column: the replay group of a run (copies of one run, declared by the reader config)
 REPLAY_GROUP = "replay_group"
 

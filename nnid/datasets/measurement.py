@@ -12,9 +12,10 @@ from __future__ import annotations
 from typing import Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import Field
 
 from nnid.datasets.log import ACCELERATION, POSE, VELOCITY
+from nnid.validation import StrictModel
 
 
 def relative_noise(log, sources: dict[str, str], fraction: float, rng: np.random.Generator) -> None:
@@ -31,17 +32,20 @@ def wrap_angle(a: np.ndarray) -> np.ndarray:
     return (np.asarray(a) + np.pi) % (2 * np.pi) - np.pi
 
 
-class Measurement(BaseModel):
+class Measurement(StrictModel):
     """Noise levels are standard deviations in SI units; biases are constant per run."""
 
-    model_config = ConfigDict(extra="forbid")
     kind: Literal["none", "mocap", "dvl_imu"] = "none"
     position_noise: float = Field(0.001, ge=0)
     angle_noise: float = Field(0.002, ge=0)
     velocity_noise: float = Field(0.005, ge=0)
-    velocity_bias: list[float] = Field(default_factory=lambda: [0.0, 0.0, 0.0])
+    velocity_bias: list[float] = Field(
+        default_factory=lambda: [0.0, 0.0, 0.0], min_length=3, max_length=3
+    )
     gyro_noise: float = Field(0.002, ge=0)
-    gyro_bias: list[float] = Field(default_factory=lambda: [0.0, 0.0, 0.0])
+    gyro_bias: list[float] = Field(
+        default_factory=lambda: [0.0, 0.0, 0.0], min_length=3, max_length=3
+    )
     depth_noise: float = Field(0.01, ge=0)
     attitude_noise: float = Field(0.005, ge=0)
     truth: bool = False

@@ -23,14 +23,10 @@ import pandas as pd
 from nnid.datasets.ardupilot import is_ardupilot_log, read_ardupilot_sources
 from nnid.datasets.cleaning import CleaningReport
 from nnid.datasets.column_map import ColumnMap, Source, load_column_map
-from nnid.datasets.log import ANGLES, REPLAY_GROUP, validate_log
+from nnid.datasets.log import ANGLES, MAX_RUN_SAMPLES, REPLAY_GROUP, validate_log
 from nnid.datasets.mapping import map_source
 from nnid.datasets.rosbag import is_bag, read_bag_sources
 from nnid.errors import NnidInputError
-
-#: the most samples one run of an assembled log may have (a rate in the wrong unit, or a
-#: grid that would fill the memory)
-MAX_SAMPLES = 1e7
 
 
 def read_table(path: str | Path) -> pd.DataFrame:
@@ -179,10 +175,10 @@ def assemble(
             )
             continue
         samples = (stop - start) * rate
-        if samples > MAX_SAMPLES:
+        if samples > MAX_RUN_SAMPLES:
             raise NnidInputError(
                 f"{rate:g} Hz over the {stop - start:.4g} s of '{exp}' is {samples:.3g} samples, "
-                f"more than the {MAX_SAMPLES:.0e} a run may hold: is rate in Hz?",
+                f"more than the {MAX_RUN_SAMPLES:.0e} a run may hold: is rate in Hz?",
                 source=cmap.name,
                 field="rate",
             )

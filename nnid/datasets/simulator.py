@@ -16,7 +16,7 @@ from collections.abc import Iterable, Sequence
 import numpy as np
 import pandas as pd
 import torch
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import Field
 from scipy.integrate import solve_ivp
 
 from nnid.datasets.log import TAU
@@ -28,18 +28,18 @@ from nnid.physics.effects import apply_effect
 from nnid.physics.fossen import FossenModel
 from nnid.physics.integrate import rk4
 from nnid.physics.thrusters import Actuation
+from nnid.validation import StrictModel
 
 INTEGRATORS = ("rk4", "adaptive", "torch")
 
 
-class Autopilot(BaseModel):
+class Autopilot(StrictModel):
     """A digital PD autopilot on generalized forces, evaluated once per sample and held:
     τ_fb = −k_p (η − η_ref) − k_d ν per DOF (heading error wrapped to ±π). DOFs with k_p = k_d = 0
     are left free. Open-loop-unstable vehicles (an AUV without its fin controller, McCarter
     ch. 5) fly under it; the log records the total commanded force, feedback included.
     """
 
-    model_config = ConfigDict(extra="forbid")
     kp: list[float] = Field(default_factory=lambda: [0.0] * 6, min_length=6, max_length=6)
     kd: list[float] = Field(default_factory=lambda: [0.0] * 6, min_length=6, max_length=6)
     reference: list[float] = Field(default_factory=lambda: [0.0] * 6, min_length=6, max_length=6)
@@ -134,7 +134,10 @@ def simulate(
             f"inputs have {inputs.shape[1]} channels; the vehicle has {len(actuation.channels)} "
             f"({', '.join(actuation.channels)})"
         )
-    model = FossenModel.from_vehicle(truth)
+    try:
+        model = FossenModel.from_vehicle(truth)
+    except ValueError as exc:  # an injected effect no vehicle can have (a negative mass)
+        raise NnidInputError(str(exc), field="effects" if effects else None) from None
     state = np.zeros(model.state_size)
     if x0 is not None:
         state[: len(x0)] = np.asarray(x0, dtype=np.float64)
@@ -213,9 +216,10 @@ def _closed_loop(model, actuation, autopilot, state, inputs, dt, substeps, integ
 
 
 def experiment_inputs(
-    experiment, channels: Sequence[str], dt: float, where: str = ""
+    experiment, channels: Sequence[str], dt: float, where: str | None = ""
 ) -> np.ndarray:
-    """Inputs ``[N, len(channels)]`` of a config experiment: its signals summed per channel."""
+    """Inputs ``[N, len(channels)]`` of a config experiment: its signals summed per channel;
+    ``where`` prefixes the fields an error names (None: a run of the config's ``sequence``)."""
     end = experiment.end()
     if end <= 0:
         raise NnidInputError(
@@ -226,6 +230,12 @@ def experiment_inputs(
     inputs = np.zeros((t.size, len(channels)))
     for j, signal in enumerate(experiment.signals):
         if signal.channel not in channels:
+            if where is None:
+                raise NnidInputError(
+                    f"the sequence drives the forces {', '.join(FORCES)}: a vehicle without "
+                    f"thrusters takes them; this one takes {', '.join(channels)}",
+                    field="sequence",
+                )
             raise NnidInputError(
                 f"'{signal.channel}' is not an input of this vehicle; expected one of "
                 f"{', '.join(channels)}",
@@ -242,7 +252,9 @@ def simulate_config(config, vehicle, progress=None) -> pd.DataFrame:
     channels = Actuation(vehicle).channels
     logs = []
     for i, exp in enumerate(experiments):
-        inputs = experiment_inputs(exp, channels, config.dt, where=f"experiments.{i}.")
+        # the sequence's runs follow the explicit ones: their fields are the sequence's
+        where = f"experiments.{i}." if i < len(config.experiments) else None
+        inputs = experiment_inputs(exp, channels, config.dt, where=where)
         effects = [(e.name, e.value) for e in (*config.effects, *exp.effects)]
         logs.append(
             simulate(
