@@ -46,14 +46,22 @@ def repeated(names: list[str]) -> list[str]:
 def read_toml(path: str | Path) -> dict[str, Any]:
     """Parse a TOML file; a missing or malformed file is an NnidInputError naming it."""
     try:
-        with open(path, "rb") as fh:
-            return tomllib.load(fh)
+        raw = Path(path).read_bytes()
     except FileNotFoundError:
         raise NnidInputError("file not found", source=str(path)) from None
     except IsADirectoryError:
         raise NnidInputError("is a folder, not a TOML file", source=str(path)) from None
-    except UnicodeDecodeError:
-        raise NnidInputError("is not a text file (TOML expected)", source=str(path)) from None
+    try:
+        # utf-8-sig: the byte-order mark an editor on Windows writes is no TOML error
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError as err:
+        line = raw[: err.start].count(b"\n") + 1
+        raise NnidInputError(
+            f"is not UTF-8 text at line {line} (byte {err.start}): save it as UTF-8",
+            source=str(path),
+        ) from None
+    try:
+        return tomllib.loads(text)
     except tomllib.TOMLDecodeError as err:
         raise NnidInputError(f"not valid TOML ({err})", source=str(path)) from None
 

@@ -117,6 +117,20 @@ BAD_VEHICLES = {
 }
 
 
+def test_a_toml_file_with_a_byte_order_mark_is_read_and_latin_1_is_located(tmp_path):
+    """Notepad's UTF-8 BOM was "not valid TOML (at line 1, column 1)"; a Latin-1 'é' in a
+    comment was "not a text file", with no line."""
+    veh = tmp_path / "bom.toml"
+    veh.write_bytes(b"\xef\xbb\xbf" + GOOD_VEHICLE.encode())
+    cfg = _write(tmp_path, "sim.toml", CONFIG.format(vehicle=veh))
+    result = runner.invoke(app, ["simulate", str(cfg), "--out", str(tmp_path / "x.csv")])
+    assert result.exit_code == 0, result.output
+    veh.write_bytes(("# r\u00e9glage\n" + GOOD_VEHICLE).encode("latin-1"))
+    result = runner.invoke(app, ["simulate", str(cfg), "--out", str(tmp_path / "y.csv")])
+    assert result.exit_code == 2
+    assert "bom.toml: is not UTF-8 text at line 1 (byte 3): save it as UTF-8" in result.output
+
+
 @pytest.mark.parametrize("case", sorted(BAD_VEHICLES))
 def test_bad_vehicle_file_exits_2_naming_the_field(tmp_path, case):
     text, field, words = BAD_VEHICLES[case]
