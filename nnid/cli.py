@@ -345,6 +345,12 @@ def detect(
     from nnid.runs import detect_run, follow_run
 
     _check_out(out_dir)
+    if follow and columns is not None:  # a stream is read as nnid's CSV, row by row
+        raise NnidInputError(
+            "--follow reads a CSV in nnid's columns; a reader config applies to a whole log "
+            "(drop --follow)",
+            field="--columns",
+        )
     if follow:
         for line in follow_run(model_dir, data, out_dir, window, _say):
             _say(line)

@@ -419,6 +419,11 @@ def check_detect_inputs(model_dir: Path, data: str, follow: bool = False) -> Non
         raise NnidInputError("no such file or folder", source=data, field="--data")
     if data == "-" and not follow:
         raise NnidInputError("'-' (standard input) is read with --follow", field="--data")
+    if follow and Path(data).is_dir():
+        raise NnidInputError(
+            "is a folder: --follow reads one growing CSV file (or '-')", source=data,
+            field="--data",
+        )  # fmt: skip
 
 
 def _monitor(model_dir: Path, window: float | None):

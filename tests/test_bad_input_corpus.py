@@ -668,3 +668,24 @@ def test_a_derivative_of_the_energy_adding_sign_or_a_weight_in_kg_is_warned_of()
         vehicle_from_dict({**base, "added_mass": {"X_udot": -5.5}}, source="probe.toml")
         vehicle_from_dict({**base, "weight": 11.5 * 9.81}, source="probe.toml")
         load_vehicle("vt690")
+
+
+@pytest.mark.parametrize(
+    ("extra", "said"),
+    [
+        # an IsADirectoryError traceback
+        (["--data", "FOLDER"], "is a folder: --follow reads one growing CSV file"),
+        # the reader config was ignored without a word, even a missing one
+        (["--columns", "nothere.toml"], "field '--columns': --follow reads a CSV in nnid's"),
+    ],
+)
+def test_detect_follow_refuses_a_folder_and_a_reader_config(fixtures, tmp_path, extra, said):
+    args = _command("detect", tmp_path, fixtures)
+    if extra[0] == "--data":
+        args[args.index("--data") + 1] = str(tmp_path)
+    else:
+        args += extra
+    result = CliRunner().invoke(app, [*args, "--follow"])
+    assert result.exit_code == 2 and "Traceback" not in result.output
+    errors = [line for line in result.output.splitlines() if line.startswith("error:")]
+    assert len(errors) == 1 and said in errors[0], result.output
