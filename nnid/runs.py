@@ -328,6 +328,14 @@ def loop_run(
         inputs = load_inputs(cfg, where, [], data, vehicle, columns)
     except NnidInputError as exc:
         raise exc.with_source(str(config_path)) if config_path else exc from None
+    if second is not None and second.vehicle.name != inputs.vehicle.name:
+        # its learned force is of another vehicle: read as this one's missing effect, it misleads
+        raise NnidInputError(
+            f"was trained for vehicle '{second.vehicle.name}'; this loop runs "
+            f"'{inputs.vehicle.name}'",
+            source=str(hybrid),
+            field="--hybrid",
+        )
     log = exclude_experiments(inputs.log, names(exclude, "--exclude"), inputs.report)
     settings = dict(
         max_effects=cfg.max_effects if max_effects is None else max_effects,

@@ -269,6 +269,18 @@ def test_loop_takes_the_trained_hybrid_as_a_second_opinion(runs, tmp_path):
     named = [t["effect"] for t in result["hybrid_opinion"]["terms"][:3]]
     assert effect in named, named
     assert f"It agrees with the loop on {effect}" in (tmp_path / "loop" / "report.md").read_text()
+    # a hybrid of another vehicle was read as this one's missing force without a word
+    other = CliRunner().invoke(
+        app,
+        [
+            "loop", "--data", str(log), "--vehicle", "seamor", "--hybrid", str(tmp_path / "hybrid"),
+            "--out", str(tmp_path / "loop2"),
+        ],
+    )  # fmt: skip
+    assert other.exit_code == 2
+    assert "field '--hybrid': was trained for vehicle 'minirov'; this loop runs 'seamor'" in (
+        other.output
+    )
 
 
 def test_cli_train_writes_contract_metrics_and_a_report_that_renders(minirov, tmp_path, chromium):
