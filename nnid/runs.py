@@ -336,7 +336,20 @@ def loop_run(
             source=str(hybrid),
             field="--hybrid",
         )
-    log = exclude_experiments(inputs.log, names(exclude, "--exclude"), inputs.report)
+    left_out = names(exclude, "--exclude")
+    log = exclude_experiments(inputs.log, left_out, inputs.report)
+    held = names(validation, "--validation") or cfg.validation
+    if held:  # said against the option or key that names them, not against the log
+        key = "--validation" if validation else "validation"
+        known = set(log["experiment"]) if "experiment" in log else set()
+        for name in held:
+            if name not in known:
+                why = "is left out by --exclude" if name in left_out else "is not in the log"
+                raise NnidInputError(
+                    f"experiment {name!r} {why}",
+                    source=str(config_path) if key == "validation" and config_path else None,
+                    field=key,
+                )
     settings = dict(
         max_effects=cfg.max_effects if max_effects is None else max_effects,
         alpha=cfg.alpha if alpha is None else alpha,
@@ -347,7 +360,7 @@ def loop_run(
         warmup_s=cfg.warmup_s,
         validation=cfg.validation_fraction,
         dofs=dofs_option(dofs) or (tuple(cfg.dofs) if cfg.dofs else None),
-        validation_experiments=names(validation, "--validation") or cfg.validation,
+        validation_experiments=held,
         gate_horizon_s=cfg.gate_horizon_s,
         second_opinion=second,
     )

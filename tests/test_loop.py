@@ -459,6 +459,14 @@ def test_cli_loop_options_choose_dofs_held_out_and_excluded_runs(tmp_path):
         app, [*args, "--exclude", "run0,run1,run2,run3", "--out", str(tmp_path / "x")]
     )
     assert res.exit_code == 2 and "'--exclude': leaves no experiment" in res.output, res.output
+    # a held-out run that --exclude left out, and one not in the log: said against the option
+    # (they were "validation experiments not in the log", against the log file)
+    for held, why in (("run1", "is left out by --exclude"), ("run9", "is not in the log")):
+        res = runner.invoke(
+            app, [*args, "--exclude", "run1", "--validation", held, "--out", str(tmp_path / "x")]
+        )
+        said = f"error: field '--validation': experiment '{held}' {why}"
+        assert res.exit_code == 2 and said in res.output, res.output
 
 
 def test_search_intervals_stay_where_a_vehicle_file_may_hold_the_value():
