@@ -44,8 +44,16 @@ def starter_text(
     length, width, height = size
     if not 0 < mass <= 1e4:
         raise NnidInputError(f"mass {mass:g} kg: expected 0 < mass <= 10000", field="--mass")
-    if min(size) <= 0 or max(size) > 20:
+    if not all(0 < s <= 20 for s in size):  # NaN fails too
         raise NnidInputError("sizes must lie in (0, 20] m: LENGTHxWIDTHxHEIGHT", field="--size")
+    if mass / 1000.0 > length * width * height:
+        # the file assumes a neutral vehicle: it cannot displace more water than its box
+        raise NnidInputError(
+            f"a neutral vehicle of {mass:g} kg displaces {mass / 1000:.3g} m^3 of water, more "
+            f"than its {length * width * height:.3g} m^3 box: is the mass in kg and the size "
+            "in m?",
+            field="--mass",
+        )
     if layout not in LAYOUTS:
         raise NnidInputError(
             f"unknown layout; expected one of {', '.join(LAYOUTS)}", field="--layout"

@@ -387,6 +387,10 @@ def test_starter_vehicle_files_load_and_scale(tmp_path):
         (["--mass", "-3", "--size", "1x1x1"], "--mass"),
         (["--preset", "nautilus"], "--preset"),
         (["--mass", "20", "--size", "1x1x1", "--layout", "quad"], "--layout"),
+        # named as the file's 'length', which was not written yet
+        (["--mass", "20", "--size", "nanx0.58x0.25"], "--size"),
+        # grams: 2500 kg in a 9-litre box, written as a neutral vehicle
+        (["--mass", "2500", "--size", "0.3x0.2x0.15"], "--mass': a neutral vehicle of 2500 kg"),
     ]:
         res = runner.invoke(app, ["vehicle", *args, "--out", str(tmp_path / "bad.toml")])
         assert res.exit_code == 2 and option in res.output, res.output
