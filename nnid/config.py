@@ -138,8 +138,22 @@ class SimulateConfig(StrictModel):
 
         if not self.all_experiments():
             raise ValueError("nothing to simulate: give [[experiments]] or a [sequence]")
+        twice = repeated([e.name for e in self.effects])
+        if twice:  # applied twice, or the last one kept: either way not what was written
+            raise ValueError(f"effects: {', '.join(twice)} given twice")
+        nyquist = 0.5 / self.dt
         seen: set[str] = set()
         for exp in self.all_experiments():
+            twice = repeated([e.name for e in (*self.effects, *exp.effects)])
+            if twice:
+                raise ValueError(f"experiment {exp.name!r}: effect {', '.join(twice)} given twice")
+            for signal in exp.signals:
+                top = max(getattr(signal, k, 0.0) for k in ("f0", "f1", "f_max", "frequency"))
+                if top >= nyquist:  # sampled at dt it would alias to a slower signal, unseen
+                    raise ValueError(
+                        f"experiment {exp.name!r}: its {signal.kind} reaches {top:g} Hz, at or "
+                        f"above the {nyquist:g} Hz that dt = {self.dt:g} s can carry"
+                    )
             if not exp.name.strip():
                 raise ValueError("every experiment needs a name (experiments.name is empty)")
             if exp.name in seen:

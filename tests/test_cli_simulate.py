@@ -191,6 +191,23 @@ BAD_CONFIGS = {
     ),
     # out of memory, killed
     "dt in nanoseconds": (CONFIG.replace("dt = 0.05", "dt = 1e-9"), "is dt in seconds?"),
+    # accepted without a word: aliased, applied twice, ignored
+    "a chirp past nyquist": (
+        CONFIG.replace(
+            'kind = "step", channel = "X", amplitude = 10.0, duration = 5.0',
+            'kind = "chirp", channel = "X", amplitude = 10.0, f0 = 0.1, f1 = 50.0, duration = 5.0',
+        ),
+        "reaches 50 Hz, at or above the 10 Hz",
+    ),
+    "an effect twice": (
+        CONFIG + '[[effects]]\nname = "buoyancy_offset"\nvalue = 1.0\n'
+        '[[effects]]\nname = "buoyancy_offset"\nvalue = 2.0\n',
+        "buoyancy_offset given twice",
+    ),
+    "a noise the sensor does not have": (
+        CONFIG + '[measurement]\nkind = "mocap"\nvelocity_noise = 0.1\n',
+        "does not use velocity_noise",
+    ),
     "an angle of x0 in degrees": (
         CONFIG.replace('name = "surge"', 'name = "surge"\nx0 = [0, 0, 0, 0, 0, 180]'),
         "experiments.0.x0",

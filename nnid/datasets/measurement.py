@@ -12,7 +12,7 @@ from __future__ import annotations
 from typing import Literal
 
 import numpy as np
-from pydantic import Field
+from pydantic import Field, model_validator
 
 from nnid.datasets.log import ACCELERATION, POSE, VELOCITY
 from nnid.validation import StrictModel
@@ -32,6 +32,15 @@ def wrap_angle(a: np.ndarray) -> np.ndarray:
     return (np.asarray(a) + np.pi) % (2 * np.pi) - np.pi
 
 
+#: the noise fields each kind of measurement reads
+USES = {
+    "none": (),
+    "mocap": ("position_noise", "angle_noise"),
+    "dvl_imu": ("velocity_noise", "velocity_bias", "gyro_noise", "gyro_bias", "depth_noise",
+                "attitude_noise"),
+}  # fmt: skip
+
+
 class Measurement(StrictModel):
     """Noise levels are standard deviations in SI units; biases are constant per run."""
 
@@ -49,6 +58,15 @@ class Measurement(StrictModel):
     depth_noise: float = Field(0.01, ge=0)
     attitude_noise: float = Field(0.005, ge=0)
     truth: bool = False
+
+    @model_validator(mode="after")
+    def _used(self) -> Measurement:
+        # a noise level of another kind's sensors would be ignored without a word
+        stray = sorted(set(self.model_fields_set) - {"kind", "truth", *USES[self.kind]})
+        if stray:
+            uses = ", ".join(USES[self.kind]) or "no noise"
+            raise ValueError(f"kind {self.kind!r} does not use {', '.join(stray)} (it uses {uses})")
+        return self
 
     def columns(
         self, states: np.ndarray, accelerations: np.ndarray, rng: np.random.Generator
