@@ -370,3 +370,19 @@ def test_a_network_that_learned_no_force_still_gets_its_report(tmp_path):
     assert res.exit_code == 0, res.output
     page = (tmp_path / "out" / "report.html").read_text()
     assert "force is zero on every sample: nothing to plot" in page
+
+
+@pytest.mark.parametrize("field", ["segments", "validation_window"])
+def test_a_segment_or_window_under_one_sample_is_refused(minirov, field):
+    """A segment of 1e-6 s at dt = 0.05 s was trained as one sample without a word."""
+    from nnid.errors import NnidInputError
+    from nnid.trainers.adam import Adam
+
+    log = effect_log(minirov, duration=20.0, n_experiments=2, dt=0.05, seed=3)
+    first = log["experiment"] == log["experiment"].iloc[0]
+    settings = {"segments": (1.0,), "validation_window": 5.0, field: 1e-6}
+    if field == "segments":
+        settings["segments"] = (1e-6,)
+    model = HybridModel(minirov, trainer=Adam(max_epochs=1), hidden=(4,), **settings)
+    with pytest.raises(NnidInputError, match=rf"field '{field}': 1e-06 s is under one sample"):
+        model.fit(log[first], log[~first])

@@ -184,11 +184,14 @@ class MultipleShooting(BaseEstimator):
             return Adam(lr=3e-3, max_epochs=60, max_fail=10)
         return clone(self.optimizer, safe=False)
 
-    def steps(self, seconds: float | None, dt: float, longest: int) -> int:
-        """Samples of ``seconds`` (at least 1; None or longer than the data: ``longest``)."""
+    def steps(self, seconds: float | None, dt: float, longest: int, field: str = "segments") -> int:
+        """Samples of ``seconds`` (None or longer than the data: ``longest``); under one
+        sample is refused, naming ``field``: it was trained as one sample without a word."""
         if seconds is None:
             return longest
-        return int(min(max(1, round(seconds / dt)), longest))
+        if round(seconds / dt) < 1:
+            raise NnidInputError(f"{seconds:g} s is under one sample (dt = {dt:g} s)", field=field)
+        return int(min(round(seconds / dt), longest))
 
     def fit(
         self,
@@ -204,7 +207,8 @@ class MultipleShooting(BaseEstimator):
         longest = max(len(r) for r in runs) - 1
         val_batches = None
         if validation:
-            val_len = self.steps(self.validation_window, dt, min(len(r) for r in validation) - 1)
+            shortest = min(len(r) for r in validation) - 1
+            val_len = self.steps(self.validation_window, dt, shortest, "validation_window")
             if val_len >= 1:
                 where = cut_segments(validation, val_len)
                 val_batches = [make_batch(validation, where, val_len, train=False)]
