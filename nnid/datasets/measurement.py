@@ -34,7 +34,7 @@ def wrap_angle(a: np.ndarray) -> np.ndarray:
 
 #: the noise fields each kind of measurement reads
 USES = {
-    "none": (),
+    "none": (),  # the truth: every level is left unread
     "mocap": ("position_noise", "angle_noise"),
     "dvl_imu": ("velocity_noise", "velocity_bias", "gyro_noise", "gyro_bias", "depth_noise",
                 "attitude_noise"),
@@ -61,10 +61,11 @@ class Measurement(StrictModel):
 
     @model_validator(mode="after")
     def _used(self) -> Measurement:
-        # a noise level of another kind's sensors would be ignored without a word
+        # a noise level of the other kind's sensors would be ignored without a word; "none"
+        # keeps its levels unread (switching a noisy config to the truth is one edit)
         stray = sorted(set(self.model_fields_set) - {"kind", "truth", *USES[self.kind]})
-        if stray:
-            uses = ", ".join(USES[self.kind]) or "no noise"
+        if stray and self.kind != "none":
+            uses = ", ".join(USES[self.kind])
             raise ValueError(f"kind {self.kind!r} does not use {', '.join(stray)} (it uses {uses})")
         return self
 
