@@ -148,7 +148,7 @@ class SimulateConfig(StrictModel):
             if twice:
                 raise ValueError(f"experiment {exp.name!r}: effect {', '.join(twice)} given twice")
             for signal in exp.signals:
-                top = max(getattr(signal, k, 0.0) for k in ("f0", "f1", "f_max", "frequency"))
+                top = signal.top_frequency()
                 if top >= nyquist:  # sampled at dt it would alias to a slower signal, unseen
                     raise ValueError(
                         f"experiment {exp.name!r}: its {signal.kind} reaches {top:g} Hz, at or "

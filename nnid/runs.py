@@ -342,9 +342,10 @@ def loop_run(
     if held:  # said against the option or key that names them, not against the log
         key = "--validation" if validation else "validation"
         known = set(log["experiment"]) if "experiment" in log else set()
+        logged = set(inputs.log["experiment"]) if "experiment" in inputs.log else set()
         for name in held:
-            if name not in known:
-                why = "is left out by --exclude" if name in left_out else "is not in the log"
+            if name not in known:  # --exclude may name a replay group: its runs are gone too
+                why = "is left out by --exclude" if name in logged else "is not in the log"
                 raise NnidInputError(
                     f"experiment {name!r} {why}",
                     source=str(config_path) if key == "validation" and config_path else None,

@@ -79,6 +79,15 @@ def test_unwrapped_radians_past_two_pi_are_told_from_degrees_by_the_rate():
     # without r nothing tells them apart: refused, saying what would
     with pytest.raises(NnidInputError, match="read where the log also has the angle's rate"):
         validate_log(turns.drop(columns="r"), "turns.csv")
+    degrees = np.degrees(turns["psi"])
+    for name, wrong in (
+        # a compass held between its 1-Hz updates: no change between most samples
+        ("held", turns.assign(psi=degrees.groupby(np.arange(t.size) // 10).transform("first"))),
+        # the rate in deg/s too: the angle keeps pace with it, but no ROV turns at 29 rad/s
+        ("both in degrees", turns.assign(psi=degrees, r=np.degrees(turns["r"]))),
+    ):
+        with pytest.raises(NnidInputError, match="looks like degrees"):
+            validate_log(wrong, f"{name}.csv")
 
 
 def test_time_restarts_per_experiment_are_fine(tmp_path):

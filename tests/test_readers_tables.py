@@ -169,18 +169,14 @@ def _edit_nav(root, edit):
         # a 10-s recording became 10,000 s
         (
             lambda m, n: (m, n.assign(time=n["time"] * 1000)),
-            "field 'time': time steps by 13 (median): this looks like milliseconds",
+            "field 'sources.0.time_scale': source 'nav.csv': time steps by 13 (median): this "
+            "looks like milliseconds",
         ),
         # the samples of a reset were sorted in between the others
         (
             lambda m, n: (m, n.assign(time=np.where(n.index >= 400, n["time"] - 5.0, n["time"]))),
-            "column 'time', row 400: time goes back by 4.987 s in experiment 'r1': two runs",
-        ),
-        # two runs of one file without their experiment column: one run's samples dropped as
-        # repeated stamps
-        (
-            lambda m, n: (m, pd.concat([n, n.assign(depth=1)]).sort_values("time", kind="stable")),
-            "770 of the 1540 samples of experiment 'r1' repeat a time stamp",
+            "column 'time', row 400: time goes back by 4.987 s in experiment 'r1' and 370 of "
+            "its 770 samples stay behind: two runs in one file?",
         ),
         (lambda m, n: (m, n.iloc[:0]), "nav.csv: has no rows"),
         (lambda m, n: (m.replace("rate = 20.0", "rate = 2e6"), n), "field 'rate': 2e+06 Hz"),
@@ -218,8 +214,21 @@ def test_a_few_repeated_or_late_stamps_are_repaired_and_said(tmp_path):
     log, report = load_log(tmp_path, _write_map(tmp_path / "map.toml", MAP))
     steps = {s.step: s for s in report.steps}
     assert steps["repeated stamps"].rows_removed == 1
-    assert "1 samples out of time order, sorted" in steps["sort"].detail
+    assert "1 late samples sorted in" in steps["sort"].detail
     assert np.allclose(log["psi"], 0.1 * log["t"], atol=2e-3)
+    # many repeated stamps (two runs of one file, sorted; or stamps coarser than the samples):
+    # the first of each kept, as before, but said with the count and what it may be
+    _edit_nav(tmp_path, lambda n: pd.concat([n, n.assign(depth=1)]).sort_values("time"))
+    _, report = load_log(tmp_path, _write_map(tmp_path / "map.toml", MAP))
+    said = next(s for s in report.steps if s.step == "repeated stamps")
+    assert said.rows_removed == 770 and "770 of 1540 samples repeat a stamp" in said.detail
+    assert "runs merged (experiment)?" in said.detail
+    # commands logged on change every 2.5 s in whole seconds: a hold source's steps are its
+    # commands', not a clock in milliseconds
+    _edit_nav(tmp_path, lambda n: n)
+    cmd = pd.read_csv(tmp_path / "cmd.csv")
+    cmd.assign(time=cmd["time"].round()).to_csv(tmp_path / "cmd.csv", index=False)
+    assert len(load_log(tmp_path, _write_map(tmp_path / "map.toml", MAP))[0]) > 100
 
 
 @pytest.mark.parametrize(
@@ -228,6 +237,7 @@ def test_a_few_repeated_or_late_stamps_are_repaired_and_said(tmp_path):
         ('U = "vx"', "'U' is no log column; did you mean 'u'?"),
         ('tau_n = "vx"', "'tau_n' is no log column; did you mean 'tau_N'?"),
         ('experiment = "vx"', "'experiment' comes from the source's 'time'"),
+        # columns of the user's own that resemble the log's are kept: theta_d, tau_X2
         ('z = { from = "vx", unit = "deg" }', "z in 'deg': z takes m, cm, mm"),
         ('u = { from = "vx", unit = "mm" }', "u in 'mm': u takes m/s, cm/s, mm/s"),
     ],
@@ -417,3 +427,34 @@ def test_semicolon_and_tab_separated_csv_are_read(tmp_path, sep, decimal):
     frame.to_csv(path, sep=sep, decimal=decimal, index=False)
     log, _ = load_log(path)
     pd.testing.assert_frame_equal(log[["t", "u", "tau_X"]], frame)
+
+
+def test_extra_columns_that_resemble_the_logs_own_are_kept(tmp_path):
+    df = pd.DataFrame({"t": np.arange(40) * 0.1, "a": 0.1, "b": 0.2, "depth": 1.0, "f": 1.0})
+    df.to_csv(tmp_path / "log.csv", index=False)
+    cmap = """
+[[sources]]
+file = "log.csv"
+time = "t"
+columns = { theta_d = "a", tau_X2 = "b", z = "depth", tau_X = "f" }
+"""
+    log, _ = load_log(tmp_path, _write_map(tmp_path / "map.toml", cmap))
+    assert {"theta_d", "tau_X2"} <= set(log.columns)
+
+
+def test_a_unit_given_is_believed_and_a_source_emptied_by_drop_nonfinite_is_said(tmp_path):
+    """Unwrapped radians with unit = "rad" are read (the degrees guess is for no unit); a
+    source left with no row by drop_nonfinite was a reduction traceback."""
+    t = np.arange(200) * 0.1
+    df = pd.DataFrame({"t": t, "yaw": 0.5 * t, "f": 1.0, "u": 0.1})
+    df.to_csv(tmp_path / "log.csv", index=False)
+    head = '[[sources]]\nfile = "log.csv"\ntime = "t"\n'
+    cmap = head + 'columns = { psi = { from = "yaw", unit = "rad" }, u = "u", tau_X = "f" }\n'
+    log, _ = load_log(tmp_path, _write_map(tmp_path / "map.toml", cmap))
+    assert np.allclose(np.unwrap(log["psi"]), 0.5 * log["t"])
+    with pytest.raises(NnidInputError, match='or unit = "rad" for unwrapped radians'):
+        load_log(tmp_path, _write_map(tmp_path / "map.toml", cmap.replace(', unit = "rad"', "")))
+    df.assign(u=np.nan).to_csv(tmp_path / "log.csv", index=False)
+    empty = "drop_nonfinite = true\n" + cmap
+    with pytest.raises(NnidInputError, match="no row is left once the non-finite ones are dropped"):
+        load_log(tmp_path, _write_map(tmp_path / "map.toml", empty))

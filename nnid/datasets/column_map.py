@@ -33,7 +33,6 @@ u = { from = "vx", unit = "mm/s" }         # units: rad deg rad/s deg/s m cm mm 
 
 from __future__ import annotations
 
-import difflib
 import re
 from pathlib import Path
 from typing import Literal
@@ -109,8 +108,8 @@ class Source(StrictModel):
             if name in ("t", "experiment"):
                 raise ValueError(f"'{name}' comes from the source's 'time' or the config's "
                                  "'experiment', not from columns")  # fmt: skip
-            near = difflib.get_close_matches(name, CONTRACT, n=1, cutoff=0.8)
-            typo = [c for c in CONTRACT if c.lower() == name.lower()] or near
+            # a case slip only: "theta_d" or "tau_X2" are columns of the user's own
+            typo = [c for c in CONTRACT if c.lower() == name.lower()]
             if name not in CONTRACT and not name.startswith("cmd_") and typo:
                 # kept as an extra column, the log's own column would be missing unseen
                 raise ValueError(f"'{name}' is no log column; did you mean '{typo[0]}'?")

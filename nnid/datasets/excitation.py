@@ -27,6 +27,11 @@ class _Signal(StrictModel):
     def window(self, t: np.ndarray, duration: float) -> np.ndarray:
         return (t >= self.start) & (t < self.start + duration)
 
+    def top_frequency(self) -> float:
+        """The highest frequency the signal is made of, Hz (0 for steps and sequences: their
+        edges are sampled as they fall)."""
+        return 0.0
+
 
 class Step(_Signal):
     """A step of ``amplitude`` from ``start`` for ``duration`` seconds (held forever if absent)."""
@@ -74,6 +79,9 @@ class Chirp(_Signal):
     def end(self) -> float:
         return self.start + self.duration
 
+    def top_frequency(self) -> float:
+        return max(self.f0, self.f1)
+
     def __call__(self, t: np.ndarray) -> np.ndarray:
         tau = t - self.start
         phase = 2 * math.pi * (self.f0 * tau + (self.f1 - self.f0) * tau**2 / (2 * self.duration))
@@ -101,6 +109,9 @@ class Multisine(_Signal):
 
     def end(self) -> float:
         return self.start + self.duration
+
+    def top_frequency(self) -> float:
+        return self.f_max
 
     def __call__(self, t: np.ndarray) -> np.ndarray:
         freqs = np.linspace(self.f_min, self.f_max, self.n)
@@ -217,6 +228,9 @@ class Sine(_Signal):
     def end(self) -> float:
         return self.start + self.duration
 
+    def top_frequency(self) -> float:
+        return self.frequency
+
     def __call__(self, t: np.ndarray) -> np.ndarray:
         x = self.offset + self.amplitude * np.sin(2 * math.pi * self.frequency * (t - self.start))
         return np.where(self.window(t, self.duration), x, 0.0)
@@ -276,6 +290,9 @@ class DOptimalSine(_Signal):
 
     def end(self) -> float:
         return self.start + self.duration
+
+    def top_frequency(self) -> float:
+        return self.frequency() / (2 * math.pi)
 
     def __call__(self, t: np.ndarray) -> np.ndarray:
         x = self.offset + self.amplitude * np.sin(self.frequency() * (t - self.start))

@@ -119,28 +119,35 @@ UNWRAPPED = (
 
 def looks_like_degrees(df: pd.DataFrame, col: str) -> bool:
     """Whether angle column ``col`` of ``df`` (``t``, optional ``experiment``) holds degrees:
-    values past ±2π, and, where the log has the angle's body rate (:data:`RATE_OF`), an angle
-    that changes about 57 times faster than that rate says, not as fast (unwrapped radians:
-    a yaw past 2π after a full turn, as a filter or nnid's simulator writes it)."""
+    values past ±2π, unless the log's body rate of that angle (:data:`RATE_OF`) says they are
+    unwrapped radians (a yaw past 2π after a full turn, as a filter or nnid's simulator
+    writes it): over windows of about a second where the rate turned the vehicle by more
+    than 0.05 rad, the angle changed as much, not 57 times as much, and the rate itself
+    reads as rad/s (under π rad/s, not a log whose rates are in deg/s too)."""
     angle = df[col].to_numpy(dtype=np.float64)
-    if not np.nanmax(np.abs(angle)) > 2 * math.pi + 1e-6:
+    if not angle.size or not np.nanmax(np.abs(angle)) > 2 * math.pi + 1e-6:
         return False
     rate = RATE_OF[col]
     if rate not in df:
         return True
     t = df["t"].to_numpy(dtype=np.float64)
-    same = np.ones(len(df) - 1, bool)
-    if "experiment" in df:
-        label = df["experiment"].to_numpy()
-        same = label[1:] == label[:-1]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        slope = np.abs(np.diff(angle) / np.diff(t))
-    turning = np.abs(df[rate].to_numpy(dtype=np.float64)[1:])
-    moving = same & np.isfinite(slope) & (turning > 1e-3)
-    if moving.sum() < 10:  # too little turning to tell: the plain reading
+    r = df[rate].to_numpy(dtype=np.float64)
+    label = df["experiment"].to_numpy() if "experiment" in df else np.zeros(len(df))
+    # windows of about a second: a held or quantised heading moves between its samples
+    step = np.nanmedian(np.diff(t)) if t.size > 1 else np.nan
+    lag = max(1, round(1.0 / step)) if np.isfinite(step) and step > 0 else 1
+    if t.size <= lag:
         return True
-    # the median ignores the few wrap jumps (2π or 360) and noisy steps
-    return bool(np.median(slope[moving]) > 5.0 * np.median(turning[moving]))
+    turned = np.concatenate([[0.0], np.cumsum(0.5 * (r[1:] + r[:-1]) * np.diff(t))])
+    d_angle = np.abs(angle[lag:] - angle[:-lag])
+    d_turn = np.abs(turned[lag:] - turned[:-lag])
+    use = (label[lag:] == label[:-lag]) & np.isfinite(d_angle) & (d_turn > 0.05)
+    if use.sum() < 5:  # too little turning to tell: the plain reading
+        return True
+    # the median ignores the few windows across a wrap (2π or 360)
+    if np.median(d_angle[use] / d_turn[use]) > 5.0:
+        return True
+    return bool(np.nanpercentile(np.abs(r), 99) > math.pi)
 
 
 def _check_finite(df: pd.DataFrame, columns: list[str], source: str, gaps: bool = False) -> None:
@@ -181,8 +188,7 @@ def _check_experiments(df: pd.DataFrame, source: str) -> None:
     row from every per-experiment step without a word."""
     if "experiment" not in df:
         return
-    label = df["experiment"]
-    empty = label.isna().to_numpy() | (label.astype(str).str.strip() == "").to_numpy()
+    empty = blank_labels(df["experiment"])
     if empty.any():
         rows = np.flatnonzero(empty)
         raise NnidInputError(
@@ -193,6 +199,11 @@ def _check_experiments(df: pd.DataFrame, source: str) -> None:
             field="experiment",
             row=int(rows[0]),
         )
+
+
+def blank_labels(label: pd.Series) -> np.ndarray:
+    """Where an experiment label is empty or blank (a row that belongs to no run)."""
+    return label.isna().to_numpy() | (label.astype(str).str.strip() == "").to_numpy()
 
 
 def _check_time_unit(df: pd.DataFrame, source: str) -> None:

@@ -17,7 +17,7 @@ from scipy.spatial.transform import Rotation
 
 from nnid.datasets.cleaning import CleaningReport
 from nnid.datasets.column_map import ColumnMap, Source
-from nnid.datasets.log import ANGLES, looks_like_degrees, time_unit_slip
+from nnid.datasets.log import ANGLES, blank_labels, looks_like_degrees
 from nnid.errors import NnidInputError
 from nnid.validation import shown
 
@@ -164,6 +164,10 @@ def map_source(
             int((~keep).sum()),
         )
         raw, values = raw[keep], values[keep]
+        if raw.empty:
+            raise NnidInputError(
+                "no row is left once the non-finite ones are dropped", source=origin
+            )
     out = pd.DataFrame(index=raw.index)
     if source.row_clock:
         out["t"] = clock.loc[raw.index].to_numpy()
@@ -172,15 +176,16 @@ def map_source(
     if experiment == "file":
         out["experiment"] = Path(origin).name.split(".")[0]
     elif keys:
-        empty = raw[keys].isna().any(axis=1).to_numpy()
-        if empty.any():  # a row of no run would be dropped from every run without a word
-            row = int(np.flatnonzero(empty)[0])
-            raise NnidInputError(
-                f"{int(empty.sum())} rows have an empty experiment label: label every row",
-                source=origin,
-                field=next(k for k in keys if pd.isna(raw[k].iloc[row])),
-                row=int(raw.index[row]),
-            )
+        for key in keys:  # a row of no run would be dropped from every run without a word
+            empty = blank_labels(raw[key])
+            if empty.any():
+                row = int(np.flatnonzero(empty)[0])
+                raise NnidInputError(
+                    f"{int(empty.sum())} rows have an empty experiment label: label every row",
+                    source=origin,
+                    field=key,
+                    row=int(raw.index[row]),
+                )
         ident = raw[keys[0]].astype(str)
         for key in keys[1:]:  # vectorised: a row-wise join is slow on a million rows
             ident = ident + "/" + raw[key].astype(str)
@@ -192,11 +197,12 @@ def map_source(
         out[name] = (values[spec.source].to_numpy(dtype=np.float64) + spec.offset) * spec.factor()
     for col in ANGLES:
         # before the frame conversion and the resampling, which wrap angles to ±π: degrees
-        # wrapped as radians would pass every later check
-        if col in specs and looks_like_degrees(out, col):
+        # wrapped as radians would pass every later check; a unit given is the user's word
+        if col in specs and specs[col].unit is None and looks_like_degrees(out, col):
             raise NnidInputError(
                 f"reaches {np.nanmax(np.abs(out[col])):.4g}, which looks like degrees for {col}: "
-                f'set unit = "deg" for {col} in the reader config',
+                f'set unit = "deg" for {col} in the reader config (or unit = "rad" for '
+                "unwrapped radians)",
                 source=origin,
                 field=specs[col].source,
             )
@@ -210,51 +216,42 @@ def map_source(
     return out.reset_index(drop=True)
 
 
-#: the share of a run's samples that may repeat a time stamp before the source is refused:
-#: beyond it, runs of a file without its experiment column are being merged
-MAX_REPEATED = 0.1
+#: the share of a run's samples that may sit behind an earlier stamp before the source is
+#: refused as a clock reset (two runs of one file without their experiment column); a few late
+#: messages are sorted in
+RESET_SHARE = 0.1
 
 
 def check_clock(out: pd.DataFrame, origin: str, time: str, report: CleaningReport) -> None:
-    """A source's clock, per experiment: in seconds (milliseconds are a missing
-    ``time_scale``), never reset (two runs in one file without their experiment column), a
-    few repeated stamps at most (kept once at resampling) and a few samples out of order at
-    most (sorted); what is repaired is said in the cleaning report."""
+    """A source's clock, per experiment: never reset (many samples behind an earlier stamp:
+    two runs of one file without their experiment column), refused; a few late samples
+    (sorted in) and repeated stamps (the first of each kept) said in the cleaning report."""
     t_all = out["t"].to_numpy(dtype=np.float64)
     for exp, idx in out.groupby("experiment", sort=False).indices.items():
         t = t_all[idx]
-        slip = time_unit_slip(np.sort(t))
-        if slip:
-            fix = "a row_clock in Hz" if time == "row_clock" else "time_scale (0.001 for ms)"
+        behind = t < np.maximum.accumulate(t)
+        if behind.sum() > RESET_SHARE * t.size:
+            k = int(np.flatnonzero(behind)[0])
             raise NnidInputError(
-                f"{slip}: set {fix} in the reader config",
+                f"time goes back by {t[:k].max() - t[k]:.4g} s in experiment '{exp}' and "
+                f"{int(behind.sum())} of its {t.size} samples stay behind: two runs in one "
+                "file? name the column that tells them apart (experiment = ...)",
                 source=origin,
                 field=time,
+                row=int(out.index[idx[k]]),
             )
-        step = np.diff(t)
-        forward = step[step > 0]
-        typical = float(np.median(forward)) if forward.size else 0.0
-        reset = np.flatnonzero(step < -10 * typical)
-        if reset.size:
-            k = int(reset[0])
-            raise NnidInputError(
-                f"time goes back by {t[k] - t[k + 1]:.4g} s in experiment '{exp}': two runs in "
-                "one file? name the column that tells them apart (experiment = ...)",
-                source=origin,
-                field=time,
-                row=int(out.index[idx[k + 1]]),
-            )
+        if behind.any():
+            report.add("sort", f"{origin}: '{exp}': {int(behind.sum())} late samples sorted in")
         repeated = t.size - np.unique(t).size
-        if repeated > MAX_REPEATED * t.size:
-            raise NnidInputError(
-                f"{repeated} of the {t.size} samples of experiment '{exp}' repeat a time stamp: "
-                "several runs in one file? name the column that tells them apart "
-                "(experiment = ...)",
-                source=origin,
-                field=time,
-            )
         if repeated:
-            report.add("repeated stamps", f"{origin}: '{exp}': first of each kept", repeated)
-        late = int((step < 0).sum())
-        if late:
-            report.add("sort", f"{origin}: '{exp}': {late} samples out of time order, sorted")
+            hint = (
+                "; stamps coarser than the samples (row_clock) or runs merged (experiment)?"
+                if repeated > RESET_SHARE * t.size
+                else ""
+            )
+            report.add(
+                "repeated stamps",
+                f"{origin}: '{exp}': {repeated} of {t.size} samples repeat a stamp, the first "
+                f"of each kept{hint}",
+                repeated,
+            )

@@ -23,7 +23,7 @@ import pandas as pd
 from nnid.datasets.ardupilot import is_ardupilot_log, read_ardupilot_sources
 from nnid.datasets.cleaning import CleaningReport
 from nnid.datasets.column_map import ColumnMap, Source, load_column_map
-from nnid.datasets.log import ANGLES, MAX_RUN_SAMPLES, REPLAY_GROUP, validate_log
+from nnid.datasets.log import ANGLES, MAX_RUN_SAMPLES, REPLAY_GROUP, time_unit_slip, validate_log
 from nnid.datasets.mapping import map_source
 from nnid.datasets.rosbag import is_bag, read_bag_sources
 from nnid.errors import NnidInputError
@@ -166,11 +166,15 @@ def assemble(
                         f"before the run (+{s.hold_timeout} s timeout): run cut there",
                     )
                     stop = last
-        rate = cmap.rate or 1.0 / float(np.median(np.diff(np.sort(parts[0][1]["t"].to_numpy()))))
+        step = _clock(parts, cmap, exp)
+        rate = cmap.rate or 1.0 / step
         if stop <= start:
+            spans = ", ".join(
+                f"{s.file} {df['t'].min():.6g}-{df['t'].max():.6g} s" for s, df in parts
+            )
             report.add(
                 "skip experiment",
-                f"'{exp}': the sources do not overlap in time",
+                f"'{exp}': the sources do not overlap in time ({spans})",
                 sum(len(df) for _, df in parts),
             )
             continue
@@ -202,11 +206,13 @@ def assemble(
                     valid &= ~((grid > t_src[g]) & (grid < t_src[g + 1]))
         segments = _runs(valid)
         if not segments:
-            report.add(
-                "skip experiment",
-                f"'{exp}': {stop - start:.3g} s at {rate:g} Hz is under two samples",
-                sum(len(df) for _, df in parts),
+            why = (
+                f"{stop - start:.3g} s at {rate:g} Hz is under two samples"
+                if grid.size < 2
+                else f"every sample falls in a gap longer than gap = {cmap.gap:g} s"
             )
+            report.add("skip experiment", f"'{exp}': {why}", sum(len(df) for _, df in parts))
+            continue
         if len(segments) > 1:
             report.add(
                 "split at gaps",
@@ -244,6 +250,33 @@ def assemble(
                 f"({', '.join(members)}); a split keeps them on one side",
             )
     return log
+
+
+def _clock(parts: list[tuple[Source, pd.DataFrame]], cmap: ColumnMap, exp: str) -> float:
+    """The sample period of an experiment's fastest measured source (the time base when the
+    config gives no ``rate``), its clock checked for seconds: milliseconds without a
+    ``time_scale`` would make a run a thousand times longer. Commands logged on change and
+    row clocks are not judged: their steps are the commands' or the config's."""
+    timed = [(s, df) for s, df in parts if s.method == "linear" and not s.row_clock]
+    steps = []
+    for s, df in timed or parts:
+        t = np.unique(df["t"].to_numpy())
+        steps.append((float(np.median(np.diff(t))) if t.size > 1 else np.inf, s, t))
+    step, source, t = min(steps, key=lambda x: x[0])
+    if not np.isfinite(step):
+        raise NnidInputError(
+            f"no source of '{exp}' has two distinct time stamps: give rate", source=cmap.name,
+            field="rate",
+        )  # fmt: skip
+    slip = time_unit_slip(t) if timed else None
+    if slip:
+        i = cmap.sources.index(source)
+        raise NnidInputError(
+            f"source '{source.file}': {slip}: set its time_scale (0.001 for milliseconds)",
+            source=cmap.name,
+            field=f"sources.{i}.time_scale",
+        )
+    return step
 
 
 def _runs(mask: np.ndarray) -> list[tuple[int, int]]:

@@ -224,7 +224,7 @@ def experiment_inputs(
     if end <= 0:
         raise NnidInputError(
             "the experiment has no duration: give 'duration' or signals that end",
-            field=f"{where}duration",
+            field="sequence" if where is None else f"{where}duration",
         )
     t = np.arange(round(end / dt) + 1) * dt
     inputs = np.zeros((t.size, len(channels)))
