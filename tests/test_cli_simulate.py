@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import pandas as pd
@@ -297,3 +298,18 @@ def test_config_vehicle_file_is_relative_to_the_config(tmp_path, monkeypatch):
     res = runner.invoke(app, ["simulate", "cfg/sim.toml", "--out", str(tmp_path / "y.csv")])
     assert res.exit_code == 2 and "sim.toml, field 'vehicle'" in res.output, res.output
     assert "raft.toml" in res.output and not (tmp_path / "y.csv").exists()
+
+
+def test_a_doptimal_sine_is_checked_against_nyquist_in_hz():
+    """Its frequency is computed (rad/s, from the model): the Nyquist check took the method
+    for a number and raised a TypeError on every d-optimal config."""
+    from nnid.config import SimulateConfig
+
+    signal = {"kind": "doptimal_sine", "channel": "X", "offset": 10.0, "amplitude": 5.0,
+              "inertia": 50.0, "k_linear": 5.0, "duration": 20.0}  # fmt: skip
+    cfg = {"vehicle": "seamor", "experiments": [{"name": "a", "signals": [signal]}]}
+    sine = SimulateConfig.model_validate(cfg).experiments[0].signals[0]
+    assert sine.top_frequency() == pytest.approx(sine.frequency() / (2 * math.pi))
+    stiff = {**signal, "inertia": 1e-6, "k_linear": 1e3}  # ω far above π / dt
+    with pytest.raises(ValueError, match="its doptimal_sine reaches"):
+        SimulateConfig.model_validate({**cfg, "experiments": [{"name": "a", "signals": [stiff]}]})
