@@ -4,7 +4,8 @@ become which log columns, in which units and frames, and the common time base.
 ```toml
 name = "liu-bluerov1-2016"
 root = "../../../shared/data/liu-bluerov1-2016"   # relative to this file; --data overrides
-rate = 50.0                   # Hz: resample every source onto one time base
+rate = 50.0                   # Hz: resample every source onto one time base (absent: the
+                              # median step of the fastest measured, "linear", source)
 gap = 0.5                     # s: a longer gap splits an experiment instead of being bridged
 experiment = "run"            # column naming the run; "file" = the file stem; absent = one run;
                               # a list of columns joins their values with "/" ("test/AddWeight_0")

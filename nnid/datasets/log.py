@@ -138,7 +138,9 @@ def looks_like_degrees(df: pd.DataFrame, col: str) -> bool:
     lag = max(1, round(1.0 / step)) if np.isfinite(step) and step > 0 else 1
     if t.size <= lag:
         return True
-    turned = np.concatenate([[0.0], np.cumsum(0.5 * (r[1:] + r[:-1]) * np.diff(t))])
+    # a gap in r (a dropout) adds no turning instead of making every later window NaN
+    rate_dt = np.nan_to_num(0.5 * (r[1:] + r[:-1]) * np.diff(t))
+    turned = np.concatenate([[0.0], np.cumsum(rate_dt)])
     d_angle = np.abs(angle[lag:] - angle[:-lag])
     d_turn = np.abs(turned[lag:] - turned[:-lag])
     use = (label[lag:] == label[:-lag]) & np.isfinite(d_angle) & (d_turn > 0.05)
