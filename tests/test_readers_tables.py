@@ -182,7 +182,7 @@ def _edit_nav(root, edit):
         (lambda m, n: (m.replace("rate = 20.0", "rate = 2e6"), n), "field 'rate': 2e+06 Hz"),
         (
             lambda m, n: (m, n.assign(run=n["run"].where(n.index != 9))),
-            "column 'run', row 9: 1 rows have an empty experiment label",
+            "column 'run', row 9: value empty (NaN) is no experiment label (1 such rows",
         ),
     ],
 )

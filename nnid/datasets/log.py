@@ -165,23 +165,26 @@ def _check_finite(df: pd.DataFrame, columns: list[str], source: str, gaps: bool 
                     "the column is empty: no sample has a value", source=source, field=col
                 )
             bad &= ~empty
-        _refuse_rows(df, col, bad, source, "is not a finite number")
+        refuse_rows(df, col, bad, source, "is not a finite number")
         if not pd.api.types.is_numeric_dtype(df[col]):
             # numbers stored as text (a parquet column of strings) read as numbers above, but
             # every later step would meet strings: refused, not converted behind the user's back
             text = df[col].map(lambda v: isinstance(v, str)).to_numpy()
-            _refuse_rows(df, col, text, source, "is text: store the column as numbers")
+            refuse_rows(df, col, text, source, "is text: store the column as numbers")
 
 
-def _refuse_rows(df: pd.DataFrame, col: str, bad: np.ndarray, source: str, why: str) -> None:
-    """An error naming the first row ``bad`` flags in ``col`` and how many it flags."""
+def refuse_rows(
+    df: pd.DataFrame, col: str, bad: np.ndarray, source: str, why: str, labels: bool = False
+) -> None:
+    """An error naming the first row ``bad`` flags in ``col`` and how many it flags: its
+    position, or with ``labels`` its index label (the file's row once rows were dropped)."""
     if bad.any():
         row = int(np.flatnonzero(bad)[0])
         raise NnidInputError(
             f"value {shown(df[col].iloc[row])} {why} ({int(bad.sum())} such rows in this column)",
             source=source,
             field=col,
-            row=row,
+            row=int(df.index[row]) if labels else row,
         )
 
 

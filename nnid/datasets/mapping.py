@@ -17,7 +17,7 @@ from scipy.spatial.transform import Rotation
 
 from nnid.datasets.cleaning import CleaningReport
 from nnid.datasets.column_map import ColumnMap, Source
-from nnid.datasets.log import ANGLES, blank_labels, looks_like_degrees
+from nnid.datasets.log import ANGLES, blank_labels, looks_like_degrees, refuse_rows
 from nnid.errors import NnidInputError
 from nnid.validation import shown
 
@@ -178,14 +178,7 @@ def map_source(
     elif keys:
         for key in keys:  # a row of no run would be dropped from every run without a word
             empty = blank_labels(raw[key])
-            if empty.any():
-                row = int(np.flatnonzero(empty)[0])
-                raise NnidInputError(
-                    f"{int(empty.sum())} rows have an empty experiment label: label every row",
-                    source=origin,
-                    field=key,
-                    row=int(raw.index[row]),
-                )
+            refuse_rows(raw, key, empty, origin, "is no experiment label", labels=True)
         ident = raw[keys[0]].astype(str)
         for key in keys[1:]:  # vectorised: a row-wise join is slow on a million rows
             ident = ident + "/" + raw[key].astype(str)
