@@ -145,11 +145,17 @@ def test_a_source_matching_no_file_names_the_reader_config(tmp_path):
     ],
 )
 def test_a_column_spec_of_the_wrong_type_is_refused_naming_its_key(tmp_path, column, said):
-    cmap = f'[[sources]]\nfile = "log.csv"\ntime = "t"\ncolumns = {{ tau_X = {column} }}\n'
-    path = _write_map(tmp_path / "map.toml", cmap)
+    path, error = _refused_columns(tmp_path, f"tau_X = {column}")
+    assert error.startswith(f"{path}, field {said}")
+
+
+def _refused_columns(root, columns: str):
+    """The reader config of one source with ``columns``, and the error that loading it gives."""
+    cmap = f'[[sources]]\nfile = "log.csv"\ntime = "t"\ncolumns = {{ {columns} }}\n'
+    path = _write_map(root / "map.toml", cmap)
     with pytest.raises(NnidInputError) as err:
-        load_log(tmp_path, path)
-    assert str(err.value).startswith(f"{path}, field {said}")
+        load_log(root, path)
+    return path, str(err.value)
 
 
 def _edit_nav(root, edit):
@@ -237,16 +243,14 @@ def test_a_few_repeated_or_late_stamps_are_repaired_and_said(tmp_path):
         ('U = "vx"', "'U' is no log column; did you mean 'u'?"),
         ('tau_n = "vx"', "'tau_n' is no log column; did you mean 'tau_N'?"),
         ('experiment = "vx"', "'experiment' comes from the source's 'time'"),
-        # columns of the user's own that resemble the log's are kept: theta_d, tau_X2
         ('z = { from = "vx", unit = "deg" }', "z in 'deg': z takes m, cm, mm"),
         ('u = { from = "vx", unit = "mm" }', "u in 'mm': u takes m/s, cm/s, mm/s"),
     ],
 )
 def test_a_column_target_that_is_a_typo_or_in_the_wrong_unit_is_refused(tmp_path, columns, said):
-    """A misspelt target was kept as an extra column and the log's own one was missing."""
-    cmap = f'[[sources]]\nfile = "log.csv"\ntime = "t"\ncolumns = {{ {columns} }}\n'
-    with pytest.raises(NnidInputError, match=re.escape(said)):
-        load_log(tmp_path, _write_map(tmp_path / "map.toml", cmap))
+    """A misspelt target was kept as an extra column and the log's own one was missing
+    (columns of the user's own that only resemble the log's are kept: the test below)."""
+    assert re.search(re.escape(said), _refused_columns(tmp_path, columns)[1])
 
 
 def test_two_sources_of_one_column_and_a_bad_pattern_are_refused(tmp_path):
