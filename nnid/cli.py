@@ -562,4 +562,29 @@ def main() -> None:
     here, in the application's entry: the library leaves signals alone."""
     if signal.getsignal(signal.SIGTERM) is signal.SIG_DFL:
         signal.signal(signal.SIGTERM, _exit_on_sigterm)
-    app()
+    try:
+        code = app(standalone_mode=False)
+    except typer.TyperException as exc:
+        raise SystemExit(_usage_error(exc)) from None
+    except typer.Abort:
+        err.print("aborted", highlight=False)
+        raise SystemExit(1) from None
+    # not standalone, typer returns an Exit's code (``_input_errors``' 2, Ctrl-C's 130)
+    raise SystemExit(code if isinstance(code, int) else 0)
+
+
+def _usage_error(exc: typer.TyperException) -> int:
+    """Say a command-line parse error (an unknown option, a value of the wrong type) in one
+    line, as ``_input_errors`` says bad input, not in typer's five-line box; its exit code.
+
+    ``typer.TyperException`` is the public base of typer's parse errors (typer vendors click
+    privately, so click's own classes are not the ones raised)."""
+    message = exc.format_message()
+    ctx = getattr(exc, "ctx", None)
+    # a bare ``nnid`` has printed its help already and carries no message to add
+    if message and type(exc).__name__ != "NoArgsIsHelpError":
+        hint = f" (see '{ctx.command_path} --help')" if ctx is not None else ""
+        err.print(
+            f"[bold red]error:[/] {escape(message)}{escape(hint)}", highlight=False, markup=True
+        )
+    return exc.exit_code

@@ -313,3 +313,24 @@ def test_a_doptimal_sine_is_checked_against_nyquist_in_hz():
     stiff = {**signal, "inertia": 1e-6, "k_linear": 1e3}  # ω far above π / dt
     with pytest.raises(ValueError, match="its doptimal_sine reaches"):
         SimulateConfig.model_validate({**cfg, "experiments": [{"name": "a", "signals": [stiff]}]})
+
+
+@pytest.mark.parametrize(("args", "words"), [
+    (["train", "--bogus"], "No such option: --bogus"),
+    (["detect", "--window", "5s", "a.csv"], "Invalid value for '--window'"),
+    (["bogus"], "No such command 'bogus'"),
+])  # fmt: skip
+def test_a_command_line_parse_error_is_one_line_and_exit_2(args, words):
+    """Through the console entry (``main``), as a person runs it: an unknown option, a value of
+    the wrong type or an unknown command is one ``error:`` line naming it and the command's
+    help, not typer's five-line box; a bare ``nnid`` still prints the help."""
+    import subprocess
+    import sys
+
+    cmd = [sys.executable, "-c", "from nnid.cli import main; main()"]
+    res = subprocess.run([*cmd, *args], capture_output=True, text=True, timeout=120)
+    lines = res.stderr.strip().splitlines()
+    assert res.returncode == 2 and len(lines) == 1, res.stderr
+    assert lines[0].startswith("error: ") and words in lines[0] and "--help" in lines[0]
+    bare = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+    assert bare.returncode == 2 and "Commands" in bare.stdout + bare.stderr
