@@ -10,6 +10,7 @@ from nnid.datasets.cleaning import CleaningReport
 from nnid.datasets.excitation import Multisine
 from nnid.datasets.measurement import Measurement
 from nnid.datasets.preprocess import (
+    derive_accelerations,
     derive_velocities,
     detect_jumps,
     estimate_accelerometer_bias,
@@ -155,3 +156,19 @@ def test_heave_rate_from_depth_stays_bounded_when_tilted():
     level = t < 1.0
     assert np.allclose(out["w"][level], 0.1 / np.cos(theta[level]), rtol=1e-3)
     assert "tilted beyond 60°" in report.steps[-1].detail
+
+
+def test_a_savgol_window_too_short_for_its_order_is_widened_with_a_warning():
+    """0.4 s at 5 Hz is 2 samples, too few for a quartic (6): the derivative uses 7 samples,
+    and the setting's name says so; a window that fits, or no name (an internal default), is
+    silent."""
+    import warnings
+
+    t = np.arange(100) * 0.2
+    log = pd.DataFrame({"t": t, "u": np.sin(t), "experiment": "a"})
+    with pytest.warns(UserWarning, match=r"savgol_window = 0.4 s is 2 samples at 5 Hz.*7 samples"):
+        derive_accelerations(log, window_s=0.4, order=4)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        derive_accelerations(log, window_s=2.0, order=4)
+        assert savgol_window(0.5, 5.0, 4) == 7

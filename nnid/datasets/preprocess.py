@@ -13,6 +13,7 @@
 
 from __future__ import annotations
 
+import warnings
 from typing import Literal
 
 import numpy as np
@@ -123,10 +124,23 @@ def unwrap_angles(log: pd.DataFrame, report: CleaningReport | None = None) -> pd
 # --- Savitzky-Golay ---------------------------------------------------------------------------
 
 
-def savgol_window(seconds: float, rate: float, order: int) -> int:
-    """An odd window (samples) of about ``seconds`` that a polynomial of ``order`` fits."""
-    n = max(round(seconds * rate), order + 2)
-    return n if n % 2 else n + 1
+def savgol_window(seconds: float, rate: float, order: int, name: str | None = None) -> int:
+    """An odd window (samples) of about ``seconds`` that a polynomial of ``order`` fits.
+
+    Fewer samples than ``order + 2`` are widened to that many; where ``seconds`` is a user's
+    setting, ``name`` names it in a warning, as the smoothing is then wider than asked (an
+    internal default at a low rate is widened without one)."""
+    asked = round(seconds * rate)
+    n = max(asked, order + 2)
+    n = n if n % 2 else n + 1
+    if asked < order + 2 and name is not None:
+        warnings.warn(
+            f"{name} = {seconds:g} s is {asked} samples at {rate:g} Hz, too few for a "
+            f"Savitzky-Golay polynomial of order {order}: widened to {n} samples "
+            f"({n / rate:.3g} s)",
+            stacklevel=2,
+        )
+    return n
 
 
 def savgol_derivative(
@@ -196,7 +210,7 @@ def derive_velocities(
     for name, idx in experiments(out):
         t = out.loc[idx, "t"].to_numpy(np.float64)
         dt = float(np.median(np.diff(t)))
-        window = savgol_window(window_s, 1.0 / dt, order)
+        window = savgol_window(window_s, 1.0 / dt, order, "savgol_window")
         rates = {
             c: savgol_derivative(
                 out.loc[idx, c].to_numpy(np.float64),
@@ -256,7 +270,7 @@ def derive_accelerations(
     for name, idx in experiments(out):
         t = out.loc[idx, "t"].to_numpy(np.float64)
         dt = float(np.median(np.diff(t)))
-        window = savgol_window(window_s, 1.0 / dt, order)
+        window = savgol_window(window_s, 1.0 / dt, order, "savgol_window")
         for c in cols:
             out.loc[idx, "d" + c] = savgol_derivative(
                 out.loc[idx, c].to_numpy(np.float64),

@@ -180,7 +180,7 @@ def find_plateaus(
         change = np.r_[True, (np.abs(np.diff(fe)) > 1e-9 * scale) | (me[1:] != me[:-1])]
         starts = np.flatnonzero(change)
         stops = np.r_[starts[1:], te.size]
-        window = savgol_window(settle_window, 1.0 / dt, settle_order)
+        window = savgol_window(settle_window, 1.0 / dt, settle_order, "settle_window")
         for a, b in zip(starts, stops, strict=True):
             if (b - a) * dt < min_plateau or b - a <= window:
                 continue
@@ -308,7 +308,7 @@ def integrated_regression(
     chi = np.asarray(position, np.float64) - float(position[0])
     force = np.asarray(force, np.float64)
     dt = float(np.median(np.diff(t)))
-    window = savgol_window(velocity_window, 1.0 / dt, velocity_order)
+    window = savgol_window(velocity_window, 1.0 / dt, velocity_order, "velocity_window")
     if chi.size <= window:
         raise NnidInputError(
             f"the sinusoid run has {chi.size} samples, too few for the Savitzky-Golay window "
