@@ -63,6 +63,39 @@ def test_each_run_is_scored_as_alone_and_the_pooled_score_hides_the_failing_one(
     assert scores["free_run_nrmse"]["y"] < 0.2 < 10 < per["small"]["y"]
 
 
+class RunsAway(Shifted):
+    """Shifted, but 5 off in run "small": 25 times that run's range, a tenth of the split's."""
+
+    kind = "runs_away"
+
+    def _predict(self, log, mode):
+        out = super()._predict(log, mode)
+        out.loc[log["experiment"] == "small", "y"] += 5.0
+        return out
+
+
+def test_a_run_that_diverges_on_its_own_range_is_not_averaged_into_the_pooled_score(runs):
+    """Pooled, run small's miss of 5 is inside the split's range (±10) and would score a
+    finite NRMSE; on small's own range (±0.1) it left the physical range: the pooled column
+    and total are None and the run is named, in every mode, as ARCHITECTURE's JSON rule says
+    of a diverged free run."""
+    from nnid.evaluation.evaluate import score_prediction
+
+    model = RunsAway().fit(runs)
+    scores = evaluate(model, runs, ("one_step", "free_run"), warmup_s=1.0)
+    pred = model.predict(runs, "free_run")
+    mask = np.arange(len(runs)) % 300 >= 10  # after each run's first second
+    assert score_prediction(runs, pred, ["y"], mask)[0]["total"] is not None  # pooled alone
+    assert scores["free_run_nrmse"] == {"y": None, "total": None}
+    assert scores["free_run_rmse"]["total"] is None and "y" in scores["diverged"]
+    assert list(scores["diverged_per_experiment"]) == ["small"]
+    assert scores["free_run_nrmse_per_experiment"]["big"]["total"] is not None
+    assert scores["one_step_nrmse"]["total"] is None and "y" in scores["one_step_diverged"]
+    healthy = evaluate(Shifted().fit(runs), runs, ("free_run",), warmup_s=1.0)
+    assert healthy["free_run_nrmse"]["total"] is not None and not healthy["diverged"]
+    assert "diverged_per_experiment" not in healthy
+
+
 def test_the_train_report_lists_each_held_out_run(runs):
     model = Shifted().fit(runs)
     held = evaluate(model, runs, ("free_run",), warmup_s=1.0)

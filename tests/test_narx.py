@@ -131,7 +131,7 @@ def test_free_run_stages_judge_each_validation_run_by_its_own_nrmse(seamor):
     # runs and outputs of each run's squared free-run NRMSE as the reports score it alone
     # (its own std; an output the run barely moves not scored): the surge run's v, the sway
     # run's u.
-    from nnid.evaluation.evaluate import per_experiment, scored_rows
+    from nnid.evaluation.evaluate import score_runs, scored_rows, target_columns
 
     two = _runs(seamor, "surge", "sway")
     model = NarxModel(["tau_X", "tau_Y"], ["u", "v"], 3, 2, hidden=(4,), trainer=Adam(max_epochs=1))
@@ -140,7 +140,8 @@ def test_free_run_stages_judge_each_validation_run_by_its_own_nrmse(seamor):
     measure = model._mean_square(runs)
 
     pred = model.predict(two, "free_run")
-    scores = per_experiment(model, two, pred, scored_rows(two, 0.0, model.warmup_samples_))
+    mask = scored_rows(two, 0.0, model.warmup_samples_)
+    scores, _ = score_runs(two, pred, mask, lambda run: target_columns(model, run))
     assert set(scores["surge"]) == {"u", "total"} and set(scores["sway"]) == {"v", "total"}
     lengths = {n: len(g) - model.warmup_samples_ for n, g in two.groupby("experiment")}
     expected = sum(

@@ -15,7 +15,10 @@ model's target columns with one rule set (ARCHITECTURE.md "JSON outputs"):
   never an average that hides it;
 - a split of several experiments also gets each experiment's free-run NRMSE scored on its own
   (``free_run_nrmse_per_experiment``): the pooled NRMSE divides by the spread of all the runs,
-  which can hide a run that fails on an output it barely moves;
+  which can hide a run that fails on an output it barely moves; a run whose free run leaves
+  its own range is listed in ``diverged_per_experiment``, and in every mode a column that
+  diverged in one run has diverged in the pooled scores too (:func:`score_split`), so the
+  pooled ``total`` that summaries, sweeps and the loop read never averages a diverged run;
 - models with a force equation also get McCarter's J (RMS force residual, eq. 4.25), J₀ (RMS of
   the force series) and their ratio, and the force RMSE per DOF.
 """
@@ -23,7 +26,7 @@ model's target columns with one rule set (ARCHITECTURE.md "JSON outputs"):
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
@@ -89,21 +92,50 @@ def score_prediction(
     return nrmse, rmse, diverged
 
 
-def per_experiment(
-    model, log: pd.DataFrame, predicted: pd.DataFrame, mask: np.ndarray
-) -> dict[str, dict[str, float | None]]:
-    """The free-run NRMSE of each experiment of a split on its own (its excited columns, its
-    std, its range for divergence), as if scored alone: a split's pooled NRMSE divides by the
-    spread of all its runs, so a run that barely moves an output can fail on it unseen."""
-    out = {}
+def score_runs(
+    log: pd.DataFrame,
+    predicted: pd.DataFrame,
+    mask: np.ndarray,
+    columns_of: Callable[[pd.DataFrame], list[str]],
+) -> tuple[dict[str, dict[str, float | None]], dict[str, dict[str, float]]]:
+    """Each experiment of a split scored on its own (the columns ``columns_of`` gives for it,
+    its std, its range for divergence), as if scored alone: a split's pooled NRMSE divides by
+    the spread of all its runs, so a run that barely moves an output can fail on it unseen.
+    Returns the NRMSE of each run and ``{run: {column: t}}`` of the runs that diverged."""
+    out, diverged = {}, {}
     for name, idx in experiments(log):
         pos = log.index.get_indexer(idx)
         run = log.iloc[pos]
-        nrmse, _, _ = score_prediction(
-            run, predicted.iloc[pos], target_columns(model, run), mask[pos]
-        )
+        nrmse, _, left = score_prediction(run, predicted.iloc[pos], columns_of(run), mask[pos])
         out[str(name)] = nrmse
-    return out
+        if left:
+            diverged[str(name)] = left
+    return out, diverged
+
+
+def score_split(
+    log: pd.DataFrame,
+    predicted: pd.DataFrame,
+    columns: Sequence[str],
+    mask: np.ndarray,
+    columns_of: Callable[[pd.DataFrame], list[str]],
+) -> tuple[dict, dict, dict[str, float], dict[str, dict], dict[str, dict[str, float]]]:
+    """:func:`score_prediction` over a split, and :func:`score_runs` of its experiments when it
+    has several: a column that diverged in one run (left that run's own range) has diverged in
+    the pooled scores too (``None``, listed with the time it left, ``total`` ``None``), however
+    small the pooled score the other runs' spread divides it into. Returns the pooled NRMSE,
+    RMSE and diverged columns, and each run's NRMSE and diverged columns."""
+    nrmse, rmse, diverged = score_prediction(log, predicted, columns, mask)
+    if len(experiments(log)) < 2:
+        return nrmse, rmse, diverged, {}, {}
+    runs, left = score_runs(log, predicted, mask, columns_of)
+    for cols in left.values():
+        for c, t in cols.items():
+            diverged.setdefault(c, t)
+            nrmse[c] = rmse[c] = None
+    if left:
+        nrmse["total"] = rmse["total"] = None
+    return nrmse, rmse, diverged, runs, left
 
 
 def force_scores(model, log: pd.DataFrame, mask: np.ndarray) -> dict[str, Any]:
@@ -166,13 +198,17 @@ def evaluate(
         if predictions is not None:
             predictions[name] = pred
         mask = scored_rows(log, warmup_s, model.warmup_samples_ + mode_steps(mode) - 1)
-        nrmse, rmse, diverged = score_prediction(log, pred, columns, mask)
+        nrmse, rmse, diverged, runs, left = score_split(
+            log, pred, columns, mask, lambda run: target_columns(model, run)
+        )
         out[MODE_KEYS[name]] = nrmse
         out[MODE_KEYS[name].replace("nrmse", "rmse")] = rmse
         key = "diverged" if name == "free_run" else f"{name}_diverged"
         out[key] = diverged
-        if name == "free_run" and len(experiments(log)) > 1:
-            out["free_run_nrmse_per_experiment"] = per_experiment(model, log, pred, mask)
+        if name == "free_run" and runs:
+            out["free_run_nrmse_per_experiment"] = runs
+            if left:
+                out["diverged_per_experiment"] = left
         if closed:
             out.setdefault("closed_loop", []).append(name)
     if model.has_force_equation:

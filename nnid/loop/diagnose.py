@@ -35,7 +35,7 @@ from scipy.stats import f as f_dist
 from nnid.datasets.arrays import log_arrays
 from nnid.datasets.log import VELOCITY
 from nnid.datasets.preprocess import zoh_midpoint
-from nnid.evaluation.evaluate import score_prediction
+from nnid.evaluation.evaluate import score_split
 from nnid.evaluation.metrics import exact_mean, excited_dofs, rmse, warmup_mask
 from nnid.evaluation.prediction import predict_states
 from nnid.loop.effects import Candidate, nominal_forces
@@ -513,11 +513,14 @@ def velocity_scores(
 ) -> tuple[dict[str, float | None], dict[str, float]]:
     """Velocity NRMSE per excited DOF of ``dofs`` for a prediction ``mode`` ("free_run",
     "one_step" or k steps) and the mean ``total``, scored by the one rule of
-    :func:`nnid.evaluation.evaluate.score_prediction`: None where the prediction diverged (not
+    :func:`nnid.evaluation.evaluate.score_split`: None where the prediction diverged (not
     finite, or far outside the measured range), listed with the time it left."""
     pred = predict(vehicle, log, mode, dofs)
-    cols = excited_dofs(log, [c for c in VELOCITY if c in log and c in dofs])
-    nrmse_, _, diverged = score_prediction(log, pred, cols, warmup_mask(log, warmup_s))
+    present = [c for c in VELOCITY if c in log and c in dofs]
+    nrmse_, _, diverged, _, _ = score_split(
+        log, pred, excited_dofs(log, present), warmup_mask(log, warmup_s),
+        lambda run: excited_dofs(run, present),
+    )  # fmt: skip
     return nrmse_, diverged
 
 

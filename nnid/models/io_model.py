@@ -16,7 +16,7 @@ from torch import nn
 from nnid.datasets.log import validate_table
 from nnid.datasets.preprocess import experiments
 from nnid.errors import NnidInputError
-from nnid.evaluation.evaluate import score_prediction, target_columns
+from nnid.evaluation.evaluate import score_split, target_columns
 from nnid.evaluation.metrics import warmup_mask
 from nnid.models.base import NnidModel
 
@@ -100,11 +100,13 @@ class InputOutputModel(NnidModel):
 
     def free_run_error(self, log: pd.DataFrame) -> float:
         """Mean free-run NRMSE over the outputs the log excites (warm-up excluded; the columns
-        of the reported scores, :func:`target_columns`); infinite when the free run diverges:
-        the number early decisions (keep a fine-tuning or not) compare."""
+        of the reported scores, :func:`target_columns`); infinite when the free run diverges
+        in any run (:func:`score_split`): the number a fine-tuning reports before and after."""
         pred = self._predict(log, "free_run").set_axis(log.index)
         mask = warmup_mask(log, 0.0, self.warmup_samples_)
-        nrmse, _, _ = score_prediction(log, pred, target_columns(self, log), mask)
+        nrmse = score_split(
+            log, pred, target_columns(self, log), mask, lambda run: target_columns(self, run)
+        )[0]
         return np.inf if nrmse["total"] is None else float(nrmse["total"])
 
     def _n_params(self) -> int:
