@@ -30,6 +30,7 @@ from nnid.datasets.preprocess import experiments
 from nnid.datasets.splits import PARTS, Split, split_log
 from nnid.errors import NnidInputError
 from nnid.evaluation.evaluate import evaluate
+from nnid.evaluation.metrics import exact_mean
 from nnid.evaluation.prediction import Replay
 from nnid.models.base import encode_setting
 from nnid.reports.stops import training_stages
@@ -651,6 +652,12 @@ def run_compare(
             row[key] = value
     report(len(cfg.models), len(cfg.models), "scoring done")
     ranking = rank(rows, held_name)
+    shared = ranked_columns(rows, held_name)
+    for row in rows:
+        row["ranked_nrmse"] = {
+            mode: ranked_score(row, held_name, f"{mode}_nrmse", shared)
+            for mode in ("free_run", "k_step", "one_step")
+        }
     comparison = {
         "vehicle": getattr(inputs.vehicle, "name", None),
         "models": rows,
@@ -659,6 +666,8 @@ def run_compare(
         "warmup_s": cfg.warmup_s,
         "held_out": held_name,
         "ranking": ranking,
+        # the outputs the ranking's scores average (ranked_nrmse); none shared: not ranked
+        "ranked_on": ranked_columns(rows, held_name),
         "train": [e["experiment"] for e in split.record["parts"]["train"]],
         "validation": [e["experiment"] for e in split.record["parts"]["validation"]],
         "test": [e["experiment"] for e in split.record["parts"]["test"]],
@@ -679,18 +688,40 @@ def _coefficients(model) -> dict:
     return out
 
 
-def _total(row: dict, part: str, key: str) -> float | None:
-    return row.get(part, {}).get(key, {}).get("total")
+def ranked_columns(rows: list[dict], part: str) -> list[str]:
+    """The outputs every model is scored on in ``part``, in the first model's order: a total
+    over other outputs than another model's is not comparable with it (a NARX of w alone
+    against a Fossen model's six DOFs)."""
+    scored = [row.get(part, {}).get("columns", []) for row in rows]
+    return [c for c in scored[0] if all(c in s for s in scored[1:])] if scored else []
+
+
+def ranked_score(row: dict, part: str, key: str, columns: list[str]) -> float | None:
+    """A model's NRMSE of one mode over ``columns`` (:func:`ranked_columns`): its own
+    ``total`` where it is scored on exactly those, else their mean; None where one diverged
+    or was not measured, or none is shared."""
+    scores = row.get(part, {}).get(key)
+    if not scores or not columns:
+        return None
+    if list(row[part].get("columns", [])) == columns:
+        return scores.get("total")
+    vals = [scores.get(c) for c in columns]
+    return exact_mean(vals) if all(v is not None for v in vals) else None
 
 
 def rank(rows: list[dict], part: str) -> list[str]:
-    """Names best first: held-out free-run NRMSE; a model whose free run diverged (or was not
-    scored) after every model whose free run was measured, ordered by its k-step NRMSE."""
+    """Names best first: held-out free-run NRMSE over the outputs every model is scored on
+    (:func:`ranked_columns`); a model whose free run diverged (or was not scored) after every
+    model whose free run was measured, ordered by its k-step NRMSE. Models that share no
+    output are not ranked: their order is the config's."""
+    columns = ranked_columns(rows, part)
+    if not columns:
+        return [r["name"] for r in rows]
 
     def key(row: dict) -> tuple:
-        free = _total(row, part, "free_run_nrmse")
-        k = _total(row, part, "k_step_nrmse")
-        one = _total(row, part, "one_step_nrmse")
+        free = ranked_score(row, part, "free_run_nrmse", columns)
+        k = ranked_score(row, part, "k_step_nrmse", columns)
+        one = ranked_score(row, part, "one_step_nrmse", columns)
         if free is not None:
             return (0, free)
         if k is not None:
@@ -702,14 +733,29 @@ def rank(rows: list[dict], part: str) -> list[str]:
 
 def summary(rows: list[dict], ranking: list[str], part: str, replay: bool) -> str:
     """One sentence: which model to use and why."""
+    columns = ranked_columns(rows, part)
+    if not columns:
+        scored = "; ".join(
+            f"{r['name']}: {', '.join(r.get(part, {}).get('columns', [])) or 'none'}" for r in rows
+        )
+        return (
+            f"These models are scored on no output in common on the {part} data ({scored}): "
+            "they are not ranked; compare them output by output."
+        )
     by_name = {r["name"]: r for r in rows}
+    shared = any(list(r.get(part, {}).get("columns", [])) != columns for r in rows)
+    over = f" over the outputs every model predicts ({', '.join(columns)})" if shared else ""
+
+    def total(row: dict, key: str) -> float | None:
+        return ranked_score(row, part, key, columns)
+
     best = by_name[ranking[0]]
-    free = _total(best, part, "free_run_nrmse")
+    free = total(best, "free_run_nrmse")
     loop = " flown under the log's autopilot" if replay else ""
     if free is None:
-        k = _total(best, part, "k_step_nrmse")
-        one = _total(best, part, "one_step_nrmse")
-        lead = f"Every free run{loop} diverged on the {part} data"
+        k = total(best, "k_step_nrmse")
+        one = total(best, "one_step_nrmse")
+        lead = f"Every free run{loop} diverged on the {part} data{over}"
         if k is None and one is None:  # nothing was measured: no model is ranked first
             return (
                 f"{lead}, and no other error was measured: none of these models simulates this log."
@@ -719,17 +765,15 @@ def summary(rows: list[dict], ranking: list[str], part: str, replay: bool) -> st
             f"{lead}; {best['name']} ({best['kind']}, {best['n_params']} parameters) has the "
             f"lowest {what}: none of these models simulates this log."
         )
-    others = [
-        by_name[n] for n in ranking[1:] if _total(by_name[n], part, "free_run_nrmse") is not None
-    ]
+    others = [by_name[n] for n in ranking[1:] if total(by_name[n], "free_run_nrmse") is not None]
     sentence = (
         f"Use {best['name']} ({best['kind']}, {best['n_params']} parameters): the lowest "
-        f"free-run NRMSE{loop} on the {part} data ({free:.3g}"
+        f"free-run NRMSE{loop} on the {part} data{over} ({free:.3g}"
     )
     if others:
         nxt = others[0]
-        sentence += f", against {_total(nxt, part, 'free_run_nrmse'):.3g} for {nxt['name']}"
-    diverged = [n for n in ranking if _total(by_name[n], part, "free_run_nrmse") is None]
+        sentence += f", against {total(nxt, 'free_run_nrmse'):.3g} for {nxt['name']}"
+    diverged = [n for n in ranking if total(by_name[n], "free_run_nrmse") is None]
     sentence += ")."
     if diverged:
         sentence += f" Diverged in free run: {', '.join(diverged)}."

@@ -208,7 +208,9 @@ def compare_run(
         result.report.write(stage)
     comparison = result.comparison
     ranking = comparison.get("ranking", [])
-    headline: dict[str, Any] = {"best": ranking[0] if ranking else None}
+    # models that share no output are not ranked: none is best
+    best = ranking[0] if ranking and comparison.get("ranked_on") else None
+    headline: dict[str, Any] = {"best": best}
     for row in comparison["models"]:
         held = row.get("test") or row.get("validation") or {}
         headline[f"free_run_nrmse:{row['name']}"] = _total(held, "free_run_nrmse")

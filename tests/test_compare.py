@@ -242,8 +242,9 @@ def test_the_summary_never_ranks_on_an_error_that_was_not_measured():
     from nnid.pipeline import rank, summary
 
     def row(name, free=None, k=None, one=None):
-        scores = {"free_run_nrmse": {"total": free}, "k_step_nrmse": {"total": k},
-                  "one_step_nrmse": {"total": one}}  # fmt: skip
+        scores = {"columns": ["u"], "free_run_nrmse": {"u": free, "total": free},
+                  "k_step_nrmse": {"u": k, "total": k},
+                  "one_step_nrmse": {"u": one, "total": one}}  # fmt: skip
         return {"name": name, "kind": "narx", "n_params": 3, "test": scores}
 
     rows = [row("a", one=0.4), row("b", one=0.2)]
@@ -255,3 +256,43 @@ def test_the_summary_never_ranks_on_an_error_that_was_not_measured():
     rows = [row("a", free=0.0), row("b", free=0.3)]  # a perfect score is a score
     text = summary(rows, rank(rows, "test"), "test", False)
     assert "(0, against 0.3 for b)" in text, text
+
+
+def test_models_scored_on_different_outputs_are_ranked_on_the_shared_ones():
+    """A NARX of w alone against a Fossen model of six DOFs: each one's total averages other
+    outputs, so the ranking and its sentence use the outputs both are scored on (w, where the
+    Fossen model is better though its six-DOF total is worse); the NARX's other DOFs are not
+    scored ("-"), not "diverged"; models that share no output are not ranked."""
+    from nnid.pipeline import rank, ranked_columns, ranked_score, summary
+    from nnid.reports.compare_report import dof_rows, ranking_rows
+
+    six = {"u": 1.27, "v": 1.57, "w": 0.154, "p": 1.55, "q": 1.65, "r": 2.37, "total": 1.43}
+    fossen = {
+        "name": "fossen",
+        "kind": "fossen",
+        "n_params": 2,
+        "seconds": 1.0,
+        "test": {"columns": ["u", "v", "w", "p", "q", "r"], "free_run_nrmse": six},
+    }
+    narx = {"name": "narx_w", "kind": "narx", "n_params": 81, "seconds": 9.0,
+            "test": {"columns": ["w"], "free_run_nrmse": {"w": 0.391, "total": 0.391}}}  # fmt: skip
+    rows = [narx, fossen]
+    assert ranked_columns(rows, "test") == ["w"]
+    assert rank(rows, "test") == ["fossen", "narx_w"]
+    text = summary(rows, rank(rows, "test"), "test", False)
+    assert "over the outputs every model predicts (w) (0.154, against 0.391 for narx_w)" in text
+    for row in rows:
+        row["ranked_nrmse"] = {"free_run": ranked_score(row, "test", "free_run_nrmse", ["w"])}
+    comparison = {"models": rows, "ranking": rank(rows, "test"), "held_out": "test",
+                  "ranked_on": ["w"]}  # fmt: skip
+    _, table = ranking_rows(comparison)
+    assert [r[6] for r in table] == ["0.154", "0.391"]
+    _, per_dof = dof_rows(comparison, "free_run_nrmse")
+    assert per_dof[1] == ["narx_w", "-", "-", "0.391", "-", "-", "-", "0.391"]
+
+    narx_u = {"name": "narx_u", "kind": "narx", "n_params": 9,
+              "test": {"columns": ["u"], "free_run_nrmse": {"u": 0.1, "total": 0.1}}}  # fmt: skip
+    rows = [narx, narx_u]
+    assert ranked_columns(rows, "test") == [] and rank(rows, "test") == ["narx_w", "narx_u"]
+    text = summary(rows, rank(rows, "test"), "test", False)
+    assert "no output in common" in text and "not ranked" in text and "Use" not in text

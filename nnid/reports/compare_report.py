@@ -18,7 +18,7 @@ import numpy as np
 import pandas as pd
 
 from nnid.datasets.preprocess import experiments
-from nnid.physics.dofs import FORCES
+from nnid.physics.dofs import DOFS, FORCES
 from nnid.reports.figures import (
     FORCE_UNITS,
     IMAGES_CHECK,
@@ -58,6 +58,22 @@ def _total(row: dict, comparison: dict, key: str) -> str:
     return _f(value, 3) if value is not None else "diverged"
 
 
+def _ranked(row: dict, comparison: dict, key: str) -> str:
+    """A ranking cell: the score the ranking used, over the outputs every model is scored on
+    (``ranked_nrmse``); "-" where the mode was not scored or the models share no output."""
+    if key not in _held(row, comparison) or not comparison.get("ranked_on"):
+        return "-"
+    value = row["ranked_nrmse"][key.removesuffix("_nrmse")]
+    return _f(value, 3) if value is not None else "diverged"
+
+
+def _partial(comparison: dict) -> bool:
+    """True where some model is scored on outputs the others are not."""
+    shared = comparison.get("ranked_on", [])
+    return any(list(_held(m, comparison).get("columns", [])) != shared
+               for m in comparison["models"])  # fmt: skip
+
+
 def ranking_rows(comparison: dict) -> tuple[list[str], list[list[str]]]:
     """The ranking: one row per model, best first."""
     by_name = {m["name"]: m for m in comparison["models"]}
@@ -86,9 +102,9 @@ def ranking_rows(comparison: dict) -> tuple[list[str], list[list[str]]]:
                 str(m.get("trainer") or "-"),
                 str(m["n_params"]),
                 _f(m["seconds"], 3),
-                _total(m, comparison, "free_run_nrmse"),
-                _total(m, comparison, "k_step_nrmse"),
-                _total(m, comparison, "one_step_nrmse"),
+                _ranked(m, comparison, "free_run_nrmse"),
+                _ranked(m, comparison, "k_step_nrmse"),
+                _ranked(m, comparison, "one_step_nrmse"),
                 _f(held.get("J_over_J0"), 3),
                 m.get("validation_used_for") or "-",
             ]
@@ -100,13 +116,26 @@ def column_terms(comparison: dict) -> dict[str, str]:
     """What each column of the ranking means."""
     part = comparison.get("held_out", "validation")
     k = comparison.get("k_step_s")
+    shared = comparison.get("ranked_on", [])
+    if not shared:
+        over = (
+            "; the models share no output, so these cells are empty and the per-DOF tables "
+            "compare them"
+        )
+    elif _partial(comparison):
+        over = (
+            f", mean over the outputs every model is scored on ({', '.join(shared)}): the models "
+            "predict different outputs, and each one's other outputs are in the per-DOF tables"
+        )
+    else:
+        over = ", mean over the excited DOFs"
     return {
         "parameters": "number of fitted parameters (network weights for NARX and state-space "
         "models)",
         "fit s": "wall time of the fit in seconds",
         "free-run NRMSE": f"RMSE of the velocity simulated from the {part} run's initial state "
-        "and its inputs alone, over the standard deviation of the measured velocity, mean over "
-        "the excited DOFs; 'diverged' where the simulation left the physical range",
+        f"and its inputs alone, over the standard deviation of the measured velocity{over}; "
+        "'diverged' where the simulation left the physical range",
         "k-step NRMSE": (
             f"the same error for predictions {_f(k, 3)} s ahead, restarted from the measured "
             "state at every sample"
@@ -130,11 +159,17 @@ def dof_rows(comparison: dict, key: str) -> tuple[list[str], list[list[str]]]:
         for d in _held(m, comparison).get(key, {}):
             if d != "total" and d not in dofs:
                 dofs.append(d)
+    # u v w p q r in their order whichever model names them first; other outputs after
+    dofs.sort(key=lambda d: DOFS.index(d) if d in DOFS else len(DOFS))
     rows = []
     for name in comparison["ranking"]:
         m = next(x for x in comparison["models"] if x["name"] == name)
         vals = _held(m, comparison).get(key, {})
-        cells = [_f(vals.get(d), 3) if vals.get(d) is not None else "diverged" for d in dofs]
+        # a DOF the model does not predict (or the data does not excite) is not scored: "-"
+        cells = [
+            _f(vals[d], 3) if vals.get(d) is not None else ("diverged" if d in vals else "-")
+            for d in dofs
+        ]
         rows.append([name, *cells, _total(m, comparison, key)])
     return ["model", *dofs, "total"], rows
 
