@@ -307,3 +307,28 @@ def test_damping_columns_act_on_the_velocity_through_the_water(seamor, rng, lam)
     # and the still-water column differs: the test would catch the old shortcut
     still = ParametricFossen(seamor, names).regression(data, lam)
     assert not np.allclose(fast.phi[:, 0], still.phi[:, 0])
+
+
+def test_parameters_of_a_velocity_the_data_does_not_excite_are_not_called_significant(
+    seamor, tmp_path
+):
+    """A surge run (mocap noise) gives v and w only their noise: least squares still fits
+    Y_vdot, Z_wdot and their damping to it, with small standard errors that unit scaling
+    hides from the excitation report (Weiss eq. 95). The fit names them, reports them not
+    significant and not excited, and says so again after loading; the whole sequence, which
+    excites every DOF, names none."""
+    cfg = load_config(ROOT / "configs/seamor_sequence.toml")
+    log = simulate_config(cfg, seamor)
+    surge = log[log["experiment"] == "surge"]
+    model = ParametricModel(seamor, ["added_mass", "damping"])
+    with pytest.warns(ExcitationWarning, match=r"do not excite v, w .*Y_vdot, Z_wdot"):
+        model.fit(surge)
+    assert set(model.not_excited_) == {"Y_vdot", "Z_wdot", "Y:v*abs(v)", "Z:w*abs(w)"}
+    params = model.params
+    for name in model.not_excited_:
+        assert params[name]["significant"] is False and params[name]["excited"] is False
+    assert params["X_udot"]["significant"] and "excited" not in params["X_udot"]
+    model.save(tmp_path)
+    assert load_model(tmp_path).params == params
+    whole = ParametricModel(seamor, ["added_mass", "damping"]).fit(log)
+    assert whole.not_excited_ == {}

@@ -26,6 +26,7 @@ import numpy as np
 import pandas as pd
 import torch
 from scipy.signal import lfilter, lfilter_zi
+from scipy.stats import median_abs_deviation
 from sklearn.base import clone
 from sklearn.utils.validation import check_is_fitted
 
@@ -34,6 +35,7 @@ from nnid.datasets.cleaning import CleaningReport
 from nnid.datasets.log import ANGLES, POSE, VELOCITY
 from nnid.datasets.preprocess import zoh_midpoint
 from nnid.errors import NnidInputError
+from nnid.evaluation.metrics import excited_dofs
 from nnid.evaluation.prediction import (
     Replay,
     blank_initial,
@@ -46,7 +48,13 @@ from nnid.evaluation.prediction import (
 from nnid.models.base import NOT_FITTED, NnidModel, check_log
 from nnid.physics.added_mass import parse_added_mass_key
 from nnid.physics.damping import parse_coefficient_key
-from nnid.physics.damping_library import canonical_term, evaluate_terms, term_codes
+from nnid.physics.damping_library import (
+    ATOMS,
+    canonical_term,
+    evaluate_terms,
+    parse_term,
+    term_codes,
+)
 from nnid.physics.dofs import DOFS, FORCES
 from nnid.physics.parts import Parts, relative_velocity
 from nnid.trainers.history import Progress
@@ -279,6 +287,66 @@ def expand_unknowns(spec: Sequence[str], dofs: Sequence[str], vehicle) -> list[s
     return list(dict.fromkeys(out))
 
 
+def _factor_velocities(atom: int) -> tuple[int, ...]:
+    """The velocity DOFs (0-5) a basis-term atom depends on: u..r and abs(u)..abs(r) one each,
+    U and η all linear ones, V, Vv and Vw v and w; the unit atom none."""
+    name = ATOMS[atom]
+    if atom < 2 * len(DOFS):
+        return (atom % len(DOFS),)
+    return {"U": (0, 1, 2), "(eta-1)": (0, 1, 2), "1": ()}.get(name, (1, 2))
+
+
+def moving_dofs(nu: np.ndarray, experiment: np.ndarray) -> set[int]:
+    """The DOFs (0-5) whose velocity the data excites: the scores' relative rule
+    (:func:`nnid.evaluation.metrics.excited_dofs`), and a spread above 3 times the velocity's
+    noise, estimated from first differences (MAD / √2 per experiment, the median over them),
+    which the relative rule cannot see where a whole group (every angular rate of a surge-only
+    log) only trembles."""
+    nu = np.asarray(nu, dtype=np.float64)
+    frame = pd.DataFrame(nu, columns=list(DOFS))
+    relative = {DOFS.index(d) for d in excited_dofs(frame, list(DOFS))}
+    out = set()
+    for k in relative:
+        noise = [
+            median_abs_deviation(np.diff(v[np.isfinite(v)]), scale="normal") / np.sqrt(2.0)
+            for v in (nu[experiment == e, k] for e in pd.unique(experiment))
+            if np.isfinite(v).sum() > 2
+        ]
+        if not noise or np.nanstd(nu[:, k]) > 3.0 * float(np.median(noise)):
+            out.add(k)
+    return out
+
+
+def unexcited_unknowns(
+    names: Sequence[str], nu: np.ndarray, experiment: np.ndarray
+) -> dict[str, list[str]]:
+    """The unknowns whose regressor is a product with a velocity the data does not excite
+    (:func:`moving_dofs`): ``{name: [DOFs]}``.
+
+    A diagonal added mass ``Y_vdot`` multiplies v̇ (and v in the Coriolis terms), a damping term
+    ``Y:v*abs(v)`` its factors: where v only trembles at its noise, the column is noise, unit
+    scaling makes it look as well conditioned as any other (Weiss eq. 95 sees no defect), and
+    least squares fits it, with a small standard error, to the noise (errors in variables).
+    Off-diagonal added mass and non-motion unknowns are not judged here."""
+    moving = moving_dofs(nu, experiment)
+    out: dict[str, list[str]] = {}
+    for name in names:
+        if ":" in name:
+            factors = [_factor_velocities(a) for a in parse_term(parse_coefficient_key(name)[1])]
+        else:
+            try:
+                i, j = parse_added_mass_key(name)
+            except ValueError:
+                continue
+            if i != j:
+                continue
+            factors = [(j,)]
+        still = [f for f in factors if f and not moving.intersection(f)]
+        if still:
+            out[name] = list(dict.fromkeys(DOFS[k] for f in still for k in f))
+    return out
+
+
 def prepare_motion(
     log: pd.DataFrame,
     dofs: Sequence[str],
@@ -450,21 +518,40 @@ class ParametricModel(FossenPlant):
         self.estimate_ = trainer.fit(self.structure_, data, progress=progress)
         self.trainer_ = trainer
         self.parts_ = self.structure_.parts(np.nan_to_num(self.estimate_.theta))
+        self.not_excited_ = unexcited_unknowns(unknowns, data["nu"], data["experiment"])
+        if self.not_excited_:
+            from nnid.trainers.least_squares import ExcitationWarning
+
+            dofs_left = sorted({d for ds in self.not_excited_.values() for d in ds}, key=DOFS.index)
+            warnings.warn(
+                f"the fit data do not excite {', '.join(dofs_left)} (their velocities only "
+                "tremble at the noise): "
+                f"{', '.join(self.not_excited_)} are fitted to noise, not identified; their "
+                "standard errors do not hold and they are reported as not significant",
+                ExcitationWarning,
+                stacklevel=3,
+            )
         self._check_mass()
 
     def _params(self) -> dict[str, dict[str, float | None]]:
-        return self.estimate_.as_dict()
+        params = self.estimate_.as_dict()
+        # fitted to noise: no verdict of significance (unexcited_unknowns)
+        for name in getattr(self, "not_excited_", {}):
+            params[name] = {**params[name], "significant": False, "excited": False}
+        return params
 
     def describe(self) -> dict:
         return {**super().describe(), "vehicle": self.vehicle.name, "dofs": list(self.dofs_)}
 
     def _state(self) -> tuple[dict, dict]:
-        return {"dofs": list(self.dofs_), **self.estimate_.as_state()}, {}
+        state = {"dofs": list(self.dofs_), **self.estimate_.as_state()}
+        return {**state, "not_excited": dict(self.not_excited_)}, {}
 
     def _restore(self, state: dict, tensors: dict) -> None:
         from nnid.trainers.least_squares import Estimate
 
         self._set_outputs(state["dofs"])
         self.estimate_ = Estimate.from_state(state)
+        self.not_excited_ = {k: list(v) for k, v in state.get("not_excited", {}).items()}
         self.structure_ = ParametricFossen(self.vehicle, self.estimate_.names, self.dofs_)
         self.parts_ = self.structure_.parts(np.nan_to_num(self.estimate_.theta))
