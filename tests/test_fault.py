@@ -207,7 +207,8 @@ def test_a_short_healthy_record_is_said_to_leave_the_false_alarm_rate_uncontroll
 
     # about two CUSUM peaks a minute here: 18 healthy minutes fit both rates, 6 do not
     long = [simulate_faults(vehicle, 120, seed=s, experiment=f"h{s}") for s in range(10, 19)]
-    assert ResidualMonitor(monitor.plant_).fit(pd.concat(long)).threshold_caveat() is None
+    long_monitor = ResidualMonitor(monitor.plant_).fit(pd.concat(long))
+    assert long_monitor.threshold_caveat() is None
     assert "12 EWMA and 9 CUSUM excursion peak(s)" in monitor.threshold_caveat()
     short = simulate_faults(vehicle, 25, seed=7, experiment="short")
     with pytest.warns(UserWarning, match="fewer than the 20 a rate fit needs") as caught:
@@ -217,6 +218,15 @@ def test_a_short_healthy_record_is_said_to_leave_the_false_alarm_rate_uncontroll
     lines = write_detect_outputs(small, detect(small, short), tmp_path)
     assert lines[-1].startswith("note: the healthy record (0.4 min)")
     assert "is not controlled" in (tmp_path / "report.html").read_text()
+    said = json.loads((tmp_path / "detect.json").read_text())
+    assert said["false_alarm_rate_controlled"] is False
+    assert said["false_alarm_caveat"] == small.threshold_caveat()
+    write_detect_outputs(monitor, detect(monitor, short), tmp_path / "fitted")
+    fitted = json.loads((tmp_path / "fitted" / "detect.json").read_text())
+    assert fitted["false_alarm_rate_controlled"] is False  # the 6-minute fixture: 12 and 9
+    write_detect_outputs(long_monitor, detect(long_monitor, short), tmp_path / "long")
+    held = json.loads((tmp_path / "long" / "detect.json").read_text())
+    assert held["false_alarm_rate_controlled"] is True and held["false_alarm_caveat"] is None
 
 
 def test_commands_far_beyond_their_range_are_said(vehicle, monitor):

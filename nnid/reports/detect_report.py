@@ -25,8 +25,13 @@ from nnid.serialization import write_json, write_text
 
 
 def detect_json(monitor, result: DetectResult) -> dict:
-    """The ``detect.json`` contract: alarms, thresholds, calibrated false-alarm rate."""
+    """The ``detect.json`` contract: alarms, thresholds, the false-alarm rate the thresholds
+    were set for, and whether the calibration controls it (``false_alarm_rate_controlled``:
+    false, with the reason in ``false_alarm_caveat``, when the healthy record was too short
+    for the rate fit and the thresholds are twice its largest value: then the rate is a
+    target that was neither achieved by a fit nor measured)."""
     h_t, h_g = monitor.threshold_values
+    caveat = monitor.threshold_caveat()
     return {
         "alarms": result.alarms,
         "threshold": {
@@ -36,6 +41,8 @@ def detect_json(monitor, result: DetectResult) -> dict:
             "cusum_fit": monitor.thresholds_["cusum"],
         },
         "false_alarm_rate_per_hour": monitor.false_alarm_per_hour,
+        "false_alarm_rate_controlled": caveat is None,
+        "false_alarm_caveat": caveat,
         "calibration": monitor.calibration_,
         "samples": int(result.trace.t.size),
         "seconds": result.seconds,
