@@ -170,3 +170,20 @@ def test_the_train_report_says_which_stage_stalled_diverged_or_was_undone():
     assert TRAINING_TITLE in page and "<td>window whole runs</td>" in page
     # a model with no iterative stages (least squares) gets no section
     assert TRAINING_TITLE not in train_markdown({"model": "ls", "params": {}, "seconds": 0.0})
+
+
+def test_a_group_of_velocities_that_only_trembles_is_not_scored():
+    """Surge alone: p, q and r are white noise of 1e-3 rad/s. The relative rule (10 % of the
+    largest angular std) keeps the largest of three noises; the noise bound (3 times the
+    first-difference noise) drops all three, and keeps a slow real roll of 5 times the noise."""
+    from nnid.evaluation.metrics import excited_dofs, velocity_noise
+
+    rng = np.random.default_rng(0)
+    t = np.arange(2000) * 0.05
+    log = pd.DataFrame({"t": t, "u": 0.5 * np.sin(0.3 * t), "experiment": "surge"})
+    for c in "pqr":
+        log[c] = 1e-3 * rng.standard_normal(t.size)
+    assert velocity_noise(log, "q") == pytest.approx(1e-3, rel=0.1)
+    assert excited_dofs(log, ["u", "p", "q", "r"]) == ["u"]
+    log["p"] += 5e-3 * np.sqrt(2) * np.sin(0.5 * t)  # std 5e-3 of motion beside 1e-3 of noise
+    assert excited_dofs(log, ["u", "p", "q", "r"]) == ["u", "p"]

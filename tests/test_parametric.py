@@ -321,7 +321,7 @@ def test_parameters_of_a_velocity_the_data_does_not_excite_are_not_called_signif
     log = simulate_config(cfg, seamor)
     surge = log[log["experiment"] == "surge"]
     model = ParametricModel(seamor, ["added_mass", "damping"])
-    with pytest.warns(ExcitationWarning, match=r"do not excite v, w .*Y_vdot, Z_wdot"):
+    with pytest.warns(ExcitationWarning, match=r"do not excite v, w .*: Y_vdot, Z_wdot"):
         model.fit(surge)
     assert set(model.not_excited_) == {"Y_vdot", "Z_wdot", "Y:v*abs(v)", "Z:w*abs(w)"}
     params = model.params

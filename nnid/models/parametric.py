@@ -26,7 +26,6 @@ import numpy as np
 import pandas as pd
 import torch
 from scipy.signal import lfilter, lfilter_zi
-from scipy.stats import median_abs_deviation
 from sklearn.base import clone
 from sklearn.utils.validation import check_is_fitted
 
@@ -296,39 +295,20 @@ def _factor_velocities(atom: int) -> tuple[int, ...]:
     return {"U": (0, 1, 2), "(eta-1)": (0, 1, 2), "1": ()}.get(name, (1, 2))
 
 
-def moving_dofs(nu: np.ndarray, experiment: np.ndarray) -> set[int]:
-    """The DOFs (0-5) whose velocity the data excites: the scores' relative rule
-    (:func:`nnid.evaluation.metrics.excited_dofs`), and a spread above 3 times the velocity's
-    noise, estimated from first differences (MAD / √2 per experiment, the median over them),
-    which the relative rule cannot see where a whole group (every angular rate of a surge-only
-    log) only trembles."""
-    nu = np.asarray(nu, dtype=np.float64)
-    frame = pd.DataFrame(nu, columns=list(DOFS))
-    relative = {DOFS.index(d) for d in excited_dofs(frame, list(DOFS))}
-    out = set()
-    for k in relative:
-        noise = [
-            median_abs_deviation(np.diff(v[np.isfinite(v)]), scale="normal") / np.sqrt(2.0)
-            for v in (nu[experiment == e, k] for e in pd.unique(experiment))
-            if np.isfinite(v).sum() > 2
-        ]
-        if not noise or np.nanstd(nu[:, k]) > 3.0 * float(np.median(noise)):
-            out.add(k)
-    return out
-
-
 def unexcited_unknowns(
     names: Sequence[str], nu: np.ndarray, experiment: np.ndarray
 ) -> dict[str, list[str]]:
     """The unknowns whose regressor is a product with a velocity the data does not excite
-    (:func:`moving_dofs`): ``{name: [DOFs]}``.
+    (:func:`nnid.evaluation.metrics.excited_dofs`, the scores' rule): ``{name: [DOFs]}``.
 
     A diagonal added mass ``Y_vdot`` multiplies v̇ (and v in the Coriolis terms), a damping term
     ``Y:v*abs(v)`` its factors: where v only trembles at its noise, the column is noise, unit
     scaling makes it look as well conditioned as any other (Weiss eq. 95 sees no defect), and
     least squares fits it, with a small standard error, to the noise (errors in variables).
     Off-diagonal added mass and non-motion unknowns are not judged here."""
-    moving = moving_dofs(nu, experiment)
+    frame = pd.DataFrame(np.asarray(nu, dtype=np.float64), columns=list(DOFS))
+    frame["experiment"] = experiment
+    moving = {DOFS.index(d) for d in excited_dofs(frame, list(DOFS))}
     out: dict[str, list[str]] = {}
     for name in names:
         if ":" in name:
@@ -525,9 +505,9 @@ class ParametricModel(FossenPlant):
             dofs_left = sorted({d for ds in self.not_excited_.values() for d in ds}, key=DOFS.index)
             warnings.warn(
                 f"the fit data do not excite {', '.join(dofs_left)} (their velocities only "
-                "tremble at the noise): "
-                f"{', '.join(self.not_excited_)} are fitted to noise, not identified; their "
-                "standard errors do not hold and they are reported as not significant",
+                "tremble at the noise): these unknowns are fitted to noise, not identified, and "
+                "reported as not significant (their standard errors do not hold): "
+                f"{', '.join(self.not_excited_)}",
                 ExcitationWarning,
                 stacklevel=3,
             )
