@@ -239,6 +239,19 @@ def _log_cases() -> list[Case]:
             )
         )
 
+    def stray_command_beside_forces(tmp, fx, command):  # the forces drive; cmd_* is read by none
+        log = fx["demo_log"].assign(cmd_foo=0.0)
+        return _command(command, tmp, fx, data=_write_log(tmp, "stray command forces", log))
+
+    for command in ("loop", "train"):
+        cases.append(
+            Case(
+                f"{command}: a command beside the six forces, on a vehicle without thrusters",
+                functools.partial(stray_command_beside_forces, command=command),
+                ("LOG", "cmd_foo", "no thrusters"),
+            )
+        )
+
     def two_samples(tmp, fx):  # the split leaves one sample in a part
         log = fx["demo_log"].head(2)
         return _command("train", tmp, fx, data=_write_log(tmp, "two samples", log))

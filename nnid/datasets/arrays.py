@@ -53,8 +53,8 @@ def check_commands(columns: Iterable[str], cols: list[str], vehicle_name: str) -
     if extra:
         raise NnidInputError(
             f"the log's commands {', '.join(extra)} drive no thruster of vehicle "
-            f"'{vehicle_name}' (its commands: {', '.join(cols)}): add the thruster to the "
-            "vehicle file, or drop the column if it is not a thruster's",
+            f"'{vehicle_name}' (its commands: {', '.join(cols) or 'none, it has no thrusters'}): "
+            "add the thruster to the vehicle file, or drop the column if it is not a thruster's",
             field=extra[0],
         )
 
@@ -88,6 +88,8 @@ def logged_inputs(log: pd.DataFrame, vehicle) -> tuple[np.ndarray, bool]:
     log). A vehicle without thrusters has no commands, so its logs need the six forces. Raises
     :class:`NnidInputError` naming the missing columns and the forces the log has."""
     if all(c in log for c in TAU):
+        # the forces drive the model; a command no thruster takes would be read by nothing
+        check_commands(log.columns, [f"cmd_{t.name}" for t in vehicle.thrusters], vehicle.name)
         return log[list(TAU)].to_numpy(np.float64), True
     # a log's columns, not a setting: no config field to name
     if not vehicle.thrusters:
