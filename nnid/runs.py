@@ -129,7 +129,7 @@ def train_run(
     model (``model.json``, ``tensors.pt``), ``metrics.json``, the reports and the cleaning
     report to ``out_dir``."""
     from nnid.pipeline import run_train
-    from nnid.reports.train_report import train_html, train_markdown
+    from nnid.reports.train_report import monitor_sentence, train_html, train_markdown
     from nnid.serialization import write_json, write_text
 
     try:
@@ -169,11 +169,15 @@ def train_run(
     for name, p in metrics["params"].items():
         headline[f"param:{name}"] = p.get("value")
         headline[f"stderr:{name}"] = p.get("stderr")
+    files = "model.json, metrics.json, report.md, report.html"
+    said = [f"wrote {out_dir}/: {files} ({line})"]
+    if result.monitor is not None:
+        said = [
+            f"wrote {out_dir}/: {files}, {MONITOR_FILE} ({line})",
+            f"monitor: {monitor_sentence(metrics['detect'])}",
+        ]
     return Outcome(
-        [
-            *lost_rows(result.report),
-            f"wrote {out_dir}/: model.json, metrics.json, report.md, report.html ({line})",
-        ],
+        [*lost_rows(result.report), *said],
         list(metrics["warnings"]),
         headline,
     )

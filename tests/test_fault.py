@@ -275,6 +275,14 @@ def test_cli_train_detect_and_follow(vehicle, tmp_path, chromium):
     metrics = json.loads((model / "metrics.json").read_text())
     assert metrics["detect"]["test_false_alarms"]["alarms"] == 0
     assert (model / "monitor.json").is_file()
+    # the monitor's calibration and its measured false alarms are said, not only in the JSON
+    flat = " ".join(res.output.split())
+    hi = metrics["detect"]["test_false_alarms"]["interval"][1]
+    assert (
+        "report.html, monitor.json" in flat
+        and f"0 alarm(s), 0 per hour (95 % interval 0-{hi:.3g})" in flat
+    )
+    assert "Residual monitor (fault detection)" in (model / "report.md").read_text()
     out = tmp_path / "det"
     res = runner.invoke(app, ["detect", "--model", str(model), "--data", fault, "--out", str(out)])
     assert res.exit_code == 0, res.output

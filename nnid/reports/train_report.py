@@ -127,6 +127,8 @@ def train_markdown(metrics: dict) -> str:
     runs = _runs(metrics)
     if runs[1]:
         lines += ["", f"## {RUNS_TITLE}", "", *markdown_table(*runs)]
+    if metrics.get("detect"):
+        lines += ["", f"## {MONITOR_TITLE}", "", monitor_sentence(metrics["detect"]) + "."]
     if metrics.get("members"):
         lines += [
             "",
@@ -207,6 +209,32 @@ def _runs(metrics: dict) -> tuple[list[str], list[list[str]]]:
         per = (metrics.get(part) or {}).get("free_run_nrmse_per_experiment") or {}
         rows += [[part, run, *_dof_cells(vals)] for run, vals in per.items()]
     return head, rows
+
+
+MONITOR_TITLE = "Residual monitor (fault detection)"
+
+
+def monitor_sentence(detect: dict) -> str:
+    """What a train run's ``[detect]`` calibration gave: the thresholds, the healthy time they
+    were set on, and the alarms on the healthy test part with their exact Poisson interval
+    (or that no test part measured them)."""
+    th = detect["thresholds"]
+    cal = detect["calibration"]
+    target = detect["settings"].get("false_alarm_per_hour")
+    text = (
+        f"thresholds EWMA {_fmt(th['ewma']['value'], 3)} and CUSUM {_fmt(th['cusum']['value'], 3)}"
+        f" ({th['ewma']['method']}), for {_fmt(target, 3)} false alarms per hour, set on "
+        f"{60 * cal['hours']:.1f} min of healthy validation data"
+    )
+    test = detect.get("test_false_alarms")
+    if test is None:
+        return text + "; no test part: the false-alarm rate was not measured"
+    lo, hi = test["interval"]
+    return (
+        text + f"; on the healthy test part ({60 * test['hours']:.1f} min): {test['alarms']} "
+        f"alarm(s), {_fmt(test['rate_per_hour'], 3)} per hour "
+        f"({100 * test['confidence']:.0f} % interval {_fmt(lo, 3)}-{_fmt(hi, 3)})"
+    )
 
 
 def _members(metrics: dict) -> tuple[list[str], list[list[str]]]:
@@ -301,6 +329,9 @@ def train_html(metrics: dict, figures: dict[str, Any] | None = None) -> str:
     if runs[1]:
         out.append(f"<h2>{RUNS_TITLE}</h2>")
         out.append(html_table(*runs))
+    if metrics.get("detect"):
+        out.append(f"<h2>{MONITOR_TITLE}</h2>")
+        out.append(f"<p>{html.escape(monitor_sentence(metrics['detect']))}.</p>")
     if metrics.get("members"):
         out.append("<h2>Ensemble members (free-run NRMSE of each seed alone)</h2>")
         out.append(html_table(*_members(metrics)))
