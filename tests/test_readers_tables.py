@@ -462,3 +462,28 @@ def test_a_unit_given_is_believed_and_a_source_emptied_by_drop_nonfinite_is_said
     empty = "drop_nonfinite = true\n" + cmap
     with pytest.raises(NnidInputError, match="no row is left once the non-finite ones are dropped"):
         load_log(tmp_path, _write_map(tmp_path / "map.toml", empty))
+
+
+def test_the_reader_config_page_agrees_with_the_code(tmp_path):
+    """docs/reader_config.md: its example is a valid reader config, and its two key tables
+    list exactly the fields of a reader config and of a source (a key added to the code, or
+    one the page names that the code lacks, fails here)."""
+    from pathlib import Path
+
+    from nnid.datasets.column_map import ColumnMap, Source, load_column_map
+
+    page = (Path(__file__).resolve().parents[1] / "docs" / "reader_config.md").read_text()
+    example = re.findall(r"```toml\n(.*?)```", page, re.S)[0]
+    (tmp_path / "r.toml").write_text(example)
+    cmap = load_column_map(tmp_path / "r.toml")
+    assert [s.file for s in cmap.sources] == ["thrusters.csv", "dvl.csv", "ahrs.csv"]
+    assert cmap.sources[0].columns["cmd_t1"].scale == 0.0025
+
+    def keys(title: str) -> set[str]:
+        table = page.split(title, 1)[1].split("\n\n", 2)[1]
+        rows = [line for line in table.splitlines() if line.startswith("| `")]
+        return {k.strip("`[] ") for row in rows for k in row.split("|")[1].split(",")}
+
+    assert keys("### Top-level keys") == set(ColumnMap.model_fields) - {"sources"}
+    fields = {f.alias or n for n, f in Source.model_fields.items()}
+    assert keys("### Each `[[sources]]`") == (fields - {"columns"}) | {"sources.columns"}
