@@ -20,6 +20,7 @@ from rich.progress import Progress
 from nnid.errors import NnidInputError
 from nnid.runs import check_out as _check_out
 from nnid.runs import staged as _staged
+from nnid.warning_messages import warning_messages
 
 app = typer.Typer(
     name="nnid",
@@ -72,7 +73,7 @@ def _input_errors(fn):
                 err.print(f"[bold red]error:[/] {escape(str(exc))}", highlight=False, markup=True)
                 raise typer.Exit(2) from None
             finally:
-                for message in dict.fromkeys(str(w.message) for w in caught):
+                for message in warning_messages(caught):
                     err.print(f"warning: {message}", highlight=False)
 
     return wrapper

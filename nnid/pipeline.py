@@ -35,6 +35,7 @@ from nnid.evaluation.prediction import Replay
 from nnid.models.base import encode_setting
 from nnid.reports.stops import training_stages
 from nnid.trainers.history import Progress, silent, staged
+from nnid.warning_messages import warning_messages
 
 
 def resolve(base: Path, path: str) -> Path:
@@ -372,7 +373,7 @@ def fit_model(model, split: Split, progress: Progress, section: str, spec) -> li
             model.fit(split.train, split.validation, progress=progress)
         except NnidInputError as exc:
             raise exc.within(section, type(spec).model_fields) from None
-    return list(dict.fromkeys(str(w.message) for w in caught))
+    return warning_messages(caught)
 
 
 def k_steps(log: pd.DataFrame, seconds: float | None) -> int | None:
@@ -518,7 +519,7 @@ def _correction(model, split: Split, parts: list[str], figures: dict) -> dict:
         warnings.simplefilter("always")
         explanation = explain(model, split.train)
     # kept in metrics.json beside the terms they qualify, not dropped and not printed twice
-    explanation.notes.extend(dict.fromkeys(str(w.message) for w in caught))
+    explanation.notes.extend(warning_messages(caught))
     held = split[parts[-1]]
     figures["correction"] = (held, model.correction(held))
     figures["baseline_free_run"] = model.baseline().predict(held)

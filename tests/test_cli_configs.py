@@ -334,3 +334,24 @@ def test_a_run_into_an_earlier_out_folder_leaves_no_stale_result_and_keeps_yours
     assert (out / "report.md" / "mine.txt").read_text() == "keep"
     assert (out / "model.json").read_text() == "new"
     assert not list(tmp_path.glob(".out-*"))  # the stage is gone
+
+
+def test_another_packages_deprecation_notice_does_not_reach_the_user():
+    """torch's forward-mode AD loads its decompositions through the deprecated
+    torch.jit.script: that notice is for torch's developers and was printed to every user of
+    an LM fit. nnid's own warnings, of any category, still reach them, each once."""
+    import warnings
+
+    import nnid
+    from nnid.warning_messages import warning_messages
+
+    ours = str(Path(nnid.__file__).parent / "models" / "narx.py")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        warnings.warn_explicit("`torch.jit.script` is deprecated", DeprecationWarning,
+                               "/site-packages/torch/jit/_script.py", 1488)  # fmt: skip
+        warnings.warn_explicit("isinstance(treespec, LeafSpec)", FutureWarning, "/x/t.py", 3)
+        warnings.warn_explicit("a setting nnid retires", DeprecationWarning, ours, 1)
+        for _ in range(2):
+            warnings.warn_explicit("the excitation is poor", UserWarning, "/x/t.py", 3)
+    assert warning_messages(caught) == ["a setting nnid retires", "the excitation is poor"]

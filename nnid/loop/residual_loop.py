@@ -49,6 +49,7 @@ from nnid.physics.parts import Parts
 from nnid.threads import torch_threads
 from nnid.trainers.history import Progress, silent
 from nnid.trainers.least_squares import significant
+from nnid.warning_messages import warning_messages
 
 #: the gate's horizon where the free run diverges, and the k-step error reported (seconds)
 FALLBACK_S = 1.0
@@ -182,7 +183,7 @@ class ResidualLoop:
         with torch_threads(1), warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             self._fit(log, say)
-        self.warnings_ = list(dict.fromkeys(str(w.message) for w in caught))
+        self.warnings_ = warning_messages(caught)
         self.seconds_ = time.perf_counter() - start
         return self
 

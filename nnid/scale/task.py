@@ -25,6 +25,7 @@ from typing import Any
 from nnid.errors import NnidInputError
 from nnid.scale.manifest import Task
 from nnid.trainers.history import Progress
+from nnid.warning_messages import warning_messages
 
 #: the file that marks a finished task inside its folder
 TASK_FILE = "task.json"
@@ -80,9 +81,7 @@ def run_task(task: Task, out_root: str | Path, progress: Progress | None = None)
         ):
             warnings.simplefilter("always")
             outcome = _run(task, out_dir, progress)
-        row["warnings"] = list(
-            dict.fromkeys([*outcome.warnings, *(str(w.message) for w in caught)])
-        )
+        row["warnings"] = list(dict.fromkeys([*outcome.warnings, *warning_messages(caught)]))
         row.update(outcome.headline)
     except NnidInputError as exc:
         row.update(status="failed", error=str(exc))
