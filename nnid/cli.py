@@ -8,6 +8,7 @@ from __future__ import annotations
 import functools
 import os
 import signal
+import time
 import warnings
 from contextlib import contextmanager
 from pathlib import Path
@@ -192,10 +193,29 @@ def inspect(
             report.write(stage)
 
 
+#: seconds between progress lines where no live bar can be drawn
+HEARTBEAT_S = 30.0
+
+
 @contextmanager
 def _bar(description: str):
     """A live progress bar on stderr; yields the callback ``(done, total, message)`` that
-    trainers, models and the loop call."""
+    trainers, models and the loop call. Off a terminal (a script, a CI log, ``nohup``) a live
+    bar draws nothing, and a six-minute compare looked hung: there, one plain line at most
+    every :data:`HEARTBEAT_S` seconds, the first after that long."""
+    if not err.is_terminal:
+        start = time.monotonic()
+        last = [start]
+
+        def line(done: int, total: int | None, message: str, **scores: float) -> None:
+            now = time.monotonic()
+            if now - last[0] >= HEARTBEAT_S:
+                last[0] = now
+                count = f" ({done}/{total})" if total else ""
+                err.print(f"[{now - start:.0f} s] {message or description}{count}", highlight=False)
+
+        yield line
+        return
     with Progress(console=err, transient=True) as bar:
         task = bar.add_task(description, total=None)
 

@@ -355,3 +355,31 @@ def test_another_packages_deprecation_notice_does_not_reach_the_user():
         for _ in range(2):
             warnings.warn_explicit("the excitation is poor", UserWarning, "/x/t.py", 3)
     assert warning_messages(caught) == ["a setting nnid retires", "the excitation is poor"]
+
+
+def test_off_a_terminal_progress_is_plain_lines_every_so_often(tmp_path, monkeypatch):
+    """A live bar draws nothing into a pipe or a CI log, so a long fit looked hung: there,
+    plain "[N s] message" lines, none within the first HEARTBEAT_S seconds (a short run says
+    nothing more than before), then at most one per HEARTBEAT_S."""
+    import re
+
+    import nnid.cli
+
+    (tmp_path / "sim.toml").write_text(SIM)
+    log = tmp_path / "log.csv"
+    assert (
+        CliRunner()
+        .invoke(app, ["simulate", str(tmp_path / "sim.toml"), "--out", str(log)])
+        .exit_code
+        == 0
+    )
+    cfg = tmp_path / "any.toml"
+    cfg.write_text('kind = "train"\n[split]\nby = "experiment"\nvalidation = ["b"]\n'
+                   '[model]\nkind = "fossen"\ndofs = ["u", "v"]\n')  # fmt: skip
+    args = ["train", str(cfg), "--data", str(log), "--vehicle", "seamor"]
+    beat = re.compile(r"^\[\d+ s\] \S", re.M)
+    quiet = CliRunner().invoke(app, [*args, "--out", str(tmp_path / "a")])
+    assert quiet.exit_code == 0 and not beat.search(quiet.output), quiet.output
+    monkeypatch.setattr(nnid.cli, "HEARTBEAT_S", 0.0)
+    said = CliRunner().invoke(app, [*args, "--out", str(tmp_path / "b")])
+    assert said.exit_code == 0 and beat.search(said.output), said.output
