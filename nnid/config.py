@@ -952,10 +952,17 @@ def load_config(
     expected = next((k for k, m in COMMANDS.items() if m is model), None)
     kind = data.get("kind")
     if expected is not None and isinstance(kind, str) and kind != expected:
-        hint = f"`nnid {kind}`" if kind in COMMANDS else "another tool"
+        if kind in COMMANDS:
+            what = f"this is a '{kind}' config (for `nnid {kind}`)"
+        else:  # not a kind nnid has: say which there are (detection is a train config)
+            what = f"'{kind}' is not a config kind (kinds: {', '.join(COMMANDS)})"
+        extra = (
+            "; fault detection is a 'train' config with a [detect] table"
+            if kind == "detect"
+            else ""
+        )
         raise NnidInputError(
-            f"this is a '{kind}' config (for {hint}); `nnid {expected}` needs a "
-            f"'{expected}' config",
+            f"{what}; `nnid {expected}` needs a '{expected}' config{extra}",
             source=str(path),
             field="kind",
         )

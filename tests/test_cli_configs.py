@@ -383,3 +383,14 @@ def test_off_a_terminal_progress_is_plain_lines_every_so_often(tmp_path, monkeyp
     monkeypatch.setattr(nnid.cli, "HEARTBEAT_S", 0.0)
     said = CliRunner().invoke(app, [*args, "--out", str(tmp_path / "b")])
     assert said.exit_code == 0 and beat.search(said.output), said.output
+
+
+def test_a_config_of_no_kind_nnid_has_names_the_kinds(tmp_path, no_simulation):
+    """kind = "detect" is not a config kind (detection is a train config with [detect]); the
+    message said "for another tool"."""
+    (tmp_path / "sim.toml").write_text(SIM)
+    cfg = tmp_path / "det.toml"
+    cfg.write_text(TRAIN.replace('kind = "train"', 'kind = "detect"', 1))
+    text = CliRunner().invoke(app, _args("train", cfg, tmp_path)).output
+    assert "'detect' is not a config kind (kinds: " in text and "train" in text, text
+    assert "a 'train' config with a [detect] table" in text and "another tool" not in text

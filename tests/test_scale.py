@@ -543,3 +543,16 @@ def test_fleet_report_axes_carry_the_parameters_units(name, unit) -> None:
     from nnid.reports.batch_report import _unit
 
     assert _unit(name) == unit
+
+
+def test_the_sweep_sentence_counts_its_seeds_in_words():
+    """One seed per setting is "one seed", not "mean of 1 seeds"; two are a mean."""
+    from types import SimpleNamespace
+
+    from nnid.scale.sweep import Ranked, _summary
+
+    spec = SimpleNamespace(metric="free_run_nrmse")
+    one = _summary(spec, [Ranked({"model.hidden": [4]}, [0.25], [])])
+    assert "0.25 (one seed: 0.25)" in one and "mean of" not in one, one
+    two = _summary(spec, [Ranked({"model.hidden": [4]}, [0.25, 0.35], [])])
+    assert "0.3 (mean of 2 seeds: 0.25, 0.35)" in two, two

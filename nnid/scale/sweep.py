@@ -188,7 +188,8 @@ def _summary(spec: SweepSpec, ranked: list[Ranked]) -> str:
         return f"No setting gave a validation {spec.metric}: every trial failed or diverged."
     text = (
         f"Best of {len(ranked)} settings: {json.dumps(best.setting)} with validation "
-        f"{spec.metric} {best.mean:.4g} (mean of {len(best.scores)} seeds: "
+        f"{spec.metric} {best.mean:.4g} "
+        + (f"(mean of {len(best.scores)} seeds: " if len(best.scores) > 1 else "(one seed: ")
         + ", ".join("no score" if s is None else f"{s:.4g}" for s in best.scores)
         + ")."
     )
