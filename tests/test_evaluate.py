@@ -172,18 +172,20 @@ def test_the_train_report_says_which_stage_stalled_diverged_or_was_undone():
     assert TRAINING_TITLE not in train_markdown({"model": "ls", "params": {}, "seconds": 0.0})
 
 
-def test_a_group_of_velocities_that_only_trembles_is_not_scored():
-    """Surge alone: p, q and r are white noise of 1e-3 rad/s. The relative rule (10 % of the
-    largest angular std) keeps the largest of three noises; the noise bound (3 times the
-    first-difference noise) drops all three, and keeps a slow real roll of 5 times the noise."""
-    from nnid.evaluation.metrics import excited_dofs, velocity_noise
+def test_a_run_diverging_in_a_column_the_pooled_score_leaves_out_does_not_void_it():
+    """Run "sway" moves v slowly and its prediction of v runs away; pooled, v is not excited
+    (a tenth of the surge run's u) and not scored: the pooled total stays, the run is named."""
+    from nnid.evaluation.evaluate import score_split
 
-    rng = np.random.default_rng(0)
-    t = np.arange(2000) * 0.05
-    log = pd.DataFrame({"t": t, "u": 0.5 * np.sin(0.3 * t), "experiment": "surge"})
-    for c in "pqr":
-        log[c] = 1e-3 * rng.standard_normal(t.size)
-    assert velocity_noise(log, "q") == pytest.approx(1e-3, rel=0.1)
-    assert excited_dofs(log, ["u", "p", "q", "r"]) == ["u"]
-    log["p"] += 5e-3 * np.sqrt(2) * np.sin(0.5 * t)  # std 5e-3 of motion beside 1e-3 of noise
-    assert excited_dofs(log, ["u", "p", "q", "r"]) == ["u", "p"]
+    t = np.arange(300) * 0.1
+    surge = pd.DataFrame({"t": t, "u": np.sin(t), "v": 0.0, "experiment": "surge"})
+    sway = pd.DataFrame({"t": t, "u": 0.0, "v": 0.01 * np.sin(t), "experiment": "sway"})
+    log = pd.concat([surge, sway], ignore_index=True)
+    pred = log[["u", "v"]].copy()
+    pred.loc[log["experiment"] == "sway", "v"] += 5.0
+    mask = np.ones(len(log), bool)
+    nrmse, _, diverged, runs, left = score_split(
+        log, pred, ["u"], mask, lambda run: [c for c in "uv" if run[c].std() > 0]
+    )
+    assert nrmse == {"u": 0.0, "total": 0.0} and diverged == {}
+    assert list(left) == ["sway"] and runs["sway"]["v"] is None

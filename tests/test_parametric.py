@@ -332,3 +332,18 @@ def test_parameters_of_a_velocity_the_data_does_not_excite_are_not_called_signif
     assert load_model(tmp_path).params == params
     whole = ParametricModel(seamor, ["added_mass", "damping"]).fit(log)
     assert whole.not_excited_ == {}
+
+
+def test_a_small_real_motion_is_excitation_and_noise_alone_is_not():
+    """Signal to noise, not the scores' relative rule: v at 6 % of u's spread but 20 times its
+    noise identifies Y_vdot; w, at its noise alone, does not identify Z_wdot."""
+    from nnid.models.parametric import unexcited_unknowns
+
+    rng = np.random.default_rng(0)
+    t = np.arange(4000) * 0.05
+    nu = 1e-3 * rng.standard_normal((t.size, 6))
+    nu[:, 0] += 0.5 * np.sin(0.3 * t)
+    nu[:, 1] += 0.03 * np.sin(0.2 * t)
+    data = {"nu": nu, "experiment": np.zeros(t.size, int)}
+    names = ["X_udot", "Y_vdot", "Z_wdot", "Y:u*v", "X:u*abs(u)"]
+    assert unexcited_unknowns(names, data) == {"Z_wdot": ["w"]}

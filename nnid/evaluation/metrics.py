@@ -11,7 +11,6 @@ import math
 
 import numpy as np
 import pandas as pd
-from scipy.stats import median_abs_deviation
 
 from nnid.datasets.preprocess import experiments
 
@@ -75,27 +74,9 @@ def per_dof(
 
 def excited_dofs(log: pd.DataFrame, columns: list[str], rel: float = 0.1) -> list[str]:
     """Velocity columns the data excites: std above ``rel`` of the largest linear (u v w) or
-    angular (p q r) std, and above 3 times the column's noise (:func:`velocity_noise`). A DOF
-    that only trembles through coupling is not scored: its NRMSE would divide by its own
-    noise; the noise bound sees that where a whole group only trembles (every angular rate of
-    a surge-only run), which the relative one cannot."""
+    angular (p q r) std. A DOF that only trembles through coupling is not scored: its NRMSE
+    would divide by its own noise."""
     stds = {c: float(log[c].std()) for c in columns if c in log}
     lin = max([stds.get(c, 0.0) for c in "uvw"] + [0.0])
     ang = max([stds.get(c, 0.0) for c in "pqr"] + [0.0])
-    return [
-        c
-        for c, s in stds.items()
-        if s > rel * (lin if c in "uvw" else ang) and s > 0 and s > 3.0 * velocity_noise(log, c)
-    ]
-
-
-def velocity_noise(log: pd.DataFrame, column: str) -> float:
-    """A column's white-noise std from its first differences (MAD / √2, robust to the motion
-    between samples), per experiment, the median over them; 0 where none has three samples."""
-    noise = []
-    for _, idx in experiments(log):
-        v = log.loc[idx, column].to_numpy(np.float64)
-        v = v[np.isfinite(v)]
-        if v.size > 2:
-            noise.append(median_abs_deviation(np.diff(v), scale="normal") / math.sqrt(2.0))
-    return float(np.median(noise)) if noise else 0.0
+    return [c for c, s in stds.items() if s > rel * (lin if c in "uvw" else ang) and s > 0]

@@ -34,7 +34,6 @@ from nnid.datasets.cleaning import CleaningReport
 from nnid.datasets.log import ANGLES, POSE, VELOCITY
 from nnid.datasets.preprocess import zoh_midpoint
 from nnid.errors import NnidInputError
-from nnid.evaluation.metrics import excited_dofs
 from nnid.evaluation.prediction import (
     Replay,
     blank_initial,
@@ -295,20 +294,26 @@ def _factor_velocities(atom: int) -> tuple[int, ...]:
     return {"U": (0, 1, 2), "(eta-1)": (0, 1, 2), "1": ()}.get(name, (1, 2))
 
 
-def unexcited_unknowns(
-    names: Sequence[str], nu: np.ndarray, experiment: np.ndarray
-) -> dict[str, list[str]]:
-    """The unknowns whose regressor is a product with a velocity the data does not excite
-    (:func:`nnid.evaluation.metrics.excited_dofs`, the scores' rule): ``{name: [DOFs]}``.
+def unexcited_unknowns(names: Sequence[str], data: dict[str, np.ndarray]) -> dict[str, list[str]]:
+    """The unknowns whose regressor is a product with a velocity that stays within 3 times its
+    measurement noise over the fit data (the noise from second differences,
+    :func:`nnid.trainers.ukf.noise_level`): ``{name: [DOFs]}``.
 
     A diagonal added mass ``Y_vdot`` multiplies v̇ (and v in the Coriolis terms), a damping term
     ``Y:v*abs(v)`` its factors: where v only trembles at its noise, the column is noise, unit
     scaling makes it look as well conditioned as any other (Weiss eq. 95 sees no defect), and
     least squares fits it, with a small standard error, to the noise (errors in variables).
+    Signal to noise only: a small but real motion is excitation. Velocities differentiated
+    from the pose (Savitzky-Golay) carry smoothed, correlated noise that differences
+    underestimate, so there the check may miss an unexcited DOF; it does not flag a moving one.
     Off-diagonal added mass and non-motion unknowns are not judged here."""
-    frame = pd.DataFrame(np.asarray(nu, dtype=np.float64), columns=list(DOFS))
-    frame["experiment"] = experiment
-    moving = {DOFS.index(d) for d in excited_dofs(frame, list(DOFS))}
+    from nnid.trainers.ukf import noise_level
+
+    nu = np.asarray(data["nu"], dtype=np.float64)
+    noise = noise_level(data, DOFS)
+    spread = np.nanstd(nu, axis=0)
+    # no noise estimate (too few samples): no verdict
+    moving = {k for k in range(len(DOFS)) if not np.isfinite(noise[k]) or spread[k] > 3 * noise[k]}
     out: dict[str, list[str]] = {}
     for name in names:
         if ":" in name:
@@ -498,15 +503,16 @@ class ParametricModel(FossenPlant):
         self.estimate_ = trainer.fit(self.structure_, data, progress=progress)
         self.trainer_ = trainer
         self.parts_ = self.structure_.parts(np.nan_to_num(self.estimate_.theta))
-        self.not_excited_ = unexcited_unknowns(unknowns, data["nu"], data["experiment"])
+        self.not_excited_ = unexcited_unknowns(unknowns, data)
         if self.not_excited_:
             from nnid.trainers.least_squares import ExcitationWarning
 
             dofs_left = sorted({d for ds in self.not_excited_.values() for d in ds}, key=DOFS.index)
             warnings.warn(
-                f"the fit data do not excite {', '.join(dofs_left)} (their velocities only "
-                "tremble at the noise): these unknowns are fitted to noise, not identified, and "
-                "reported as not significant (their standard errors do not hold): "
+                f"the fit data do not excite {', '.join(dofs_left)} (their velocities stay "
+                "within 3 times their noise): these unknowns are fitted to noise, not "
+                "identified, and reported as not significant (their standard errors do not "
+                "hold): "
                 f"{', '.join(self.not_excited_)}",
                 ExcitationWarning,
                 stacklevel=3,

@@ -208,7 +208,8 @@ def noise_level(data: dict[str, np.ndarray], dofs: Sequence[str]) -> np.ndarray:
     if nu.shape[0] < 4:
         return np.full(len(idx), 1e-3)
     d2 = np.diff(nu, 2, axis=0)
-    return np.maximum(median_abs_deviation(d2, axis=0, scale="normal") / np.sqrt(6.0), 1e-6)
+    mad = median_abs_deviation(d2, axis=0, scale="normal", nan_policy="omit")
+    return np.maximum(mad / np.sqrt(6.0), 1e-6)
 
 
 @dataclass
