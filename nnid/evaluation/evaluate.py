@@ -121,19 +121,21 @@ def score_split(
     columns_of: Callable[[pd.DataFrame], list[str]],
 ) -> tuple[dict, dict, dict[str, float], dict[str, dict], dict[str, dict[str, float]]]:
     """:func:`score_prediction` over a split, and :func:`score_runs` of its experiments when it
-    has several: a column that diverged in one run (left that run's own range) has diverged in
-    the pooled scores too (``None``, listed with the time it left, ``total`` ``None``), however
-    small the pooled score the other runs' spread divides it into. Returns the pooled NRMSE,
-    RMSE and diverged columns, and each run's NRMSE and diverged columns."""
+    has several: a pooled column that diverged in one run (left that run's own range) has
+    diverged in the pooled scores too (``None``, listed with the time it left, ``total``
+    ``None``), however small the pooled score the other runs' spread divides it into.
+    Returns the pooled NRMSE, RMSE and diverged columns, and each run's NRMSE and diverged
+    columns."""
     nrmse, rmse, diverged = score_prediction(log, predicted, columns, mask)
     if len(experiments(log)) < 2:
         return nrmse, rmse, diverged, {}, {}
     runs, left = score_runs(log, predicted, mask, columns_of)
-    for cols in left.values():
-        for c, t in cols.items():
-            diverged.setdefault(c, t)
-            nrmse[c] = rmse[c] = None
-    if left:
+    # only the pooled score's own columns: a run may score one the split as a whole does not
+    folded = [(c, t) for cols in left.values() for c, t in cols.items() if c in columns]
+    for c, t in folded:
+        diverged.setdefault(c, t)
+        nrmse[c] = rmse[c] = None
+    if folded:
         nrmse["total"] = rmse["total"] = None
     return nrmse, rmse, diverged, runs, left
 
