@@ -692,8 +692,9 @@ def _coefficients(model) -> dict:
 def ranked_columns(rows: list[dict], part: str) -> list[str]:
     """The outputs every model is scored on in ``part``, in the first model's order: a total
     over other outputs than another model's is not comparable with it (a NARX of w alone
-    against a Fossen model's six DOFs)."""
-    scored = [row.get(part, {}).get("columns", []) for row in rows]
+    against a Fossen model's six DOFs). A model scored on nothing (its outputs not in the
+    log) does not empty the set: it ranks last."""
+    scored = [s for s in (row.get(part, {}).get("columns", []) for row in rows) if s]
     return [c for c in scored[0] if all(c in s for s in scored[1:])] if scored else []
 
 
@@ -704,7 +705,7 @@ def ranked_score(row: dict, part: str, key: str, columns: list[str]) -> float | 
     scores = row.get(part, {}).get(key)
     if not scores or not columns:
         return None
-    if list(row[part].get("columns", [])) == columns:
+    if set(row[part].get("columns", [])) == set(columns):
         return scores.get("total")
     vals = [scores.get(c) for c in columns]
     return exact_mean(vals) if all(v is not None for v in vals) else None
@@ -744,8 +745,8 @@ def summary(rows: list[dict], ranking: list[str], part: str, replay: bool) -> st
             "they are not ranked; compare them output by output."
         )
     by_name = {r["name"]: r for r in rows}
-    shared = any(list(r.get(part, {}).get("columns", [])) != columns for r in rows)
-    over = f" over the outputs every model predicts ({', '.join(columns)})" if shared else ""
+    shared = any(set(r.get(part, {}).get("columns", [])) != set(columns) for r in rows)
+    over = f" over the outputs every model is scored on ({', '.join(columns)})" if shared else ""
 
     def total(row: dict, key: str) -> float | None:
         return ranked_score(row, part, key, columns)

@@ -280,7 +280,7 @@ def test_models_scored_on_different_outputs_are_ranked_on_the_shared_ones():
     assert ranked_columns(rows, "test") == ["w"]
     assert rank(rows, "test") == ["fossen", "narx_w"]
     text = summary(rows, rank(rows, "test"), "test", False)
-    assert "over the outputs every model predicts (w) (0.154, against 0.391 for narx_w)" in text
+    assert "over the outputs every model is scored on (w) (0.154, against 0.391 for narx_w)" in text
     for row in rows:
         row["ranked_nrmse"] = {"free_run": ranked_score(row, "test", "free_run_nrmse", ["w"])}
     comparison = {"models": rows, "ranking": rank(rows, "test"), "held_out": "test",
@@ -296,3 +296,20 @@ def test_models_scored_on_different_outputs_are_ranked_on_the_shared_ones():
     assert ranked_columns(rows, "test") == [] and rank(rows, "test") == ["narx_w", "narx_u"]
     text = summary(rows, rank(rows, "test"), "test", False)
     assert "no output in common" in text and "not ranked" in text and "Use" not in text
+    unranked = {"models": [{**r, "seconds": 1.0, "ranked_nrmse": {}} for r in rows],
+                "ranking": rank(rows, "test"), "held_out": "test", "ranked_on": []}  # fmt: skip
+    assert [r[0] for r in ranking_rows(unranked)[1]] == ["-", "-"]
+
+    # the same outputs in another order are the same outputs; a model scored on nothing
+    # (its outputs not in the log) ranks last and leaves the others ranked
+    wu = {"name": "narx_wu", "kind": "narx", "n_params": 9, "test": {"columns": ["w", "u"],
+          "free_run_nrmse": {"w": 0.2, "u": 0.4, "total": 0.3}}}  # fmt: skip
+    uw = {"name": "fossen_uw", "kind": "fossen", "n_params": 4, "test": {"columns": ["u", "w"],
+          "free_run_nrmse": {"u": 0.1, "w": 0.3, "total": 0.2}}}  # fmt: skip
+    none = {"name": "narx_r", "kind": "narx", "n_params": 9,
+            "test": {"columns": [], "free_run_nrmse": {"total": None}}}  # fmt: skip
+    rows = [wu, uw, none]
+    assert rank(rows, "test") == ["fossen_uw", "narx_wu", "narx_r"]
+    text = summary(rows, rank(rows, "test"), "test", False)
+    assert "(0.2, against 0.3 for narx_wu)" in text and "scored on (" in text, text
+    assert "scored on (" not in summary(rows[:2], rank(rows[:2], "test"), "test", False)

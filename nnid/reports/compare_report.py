@@ -70,7 +70,7 @@ def _ranked(row: dict, comparison: dict, key: str) -> str:
 def _partial(comparison: dict) -> bool:
     """True where some model is scored on outputs the others are not."""
     shared = comparison.get("ranked_on", [])
-    return any(list(_held(m, comparison).get("columns", [])) != shared
+    return any(set(_held(m, comparison).get("columns", [])) != set(shared)
                for m in comparison["models"])  # fmt: skip
 
 
@@ -91,12 +91,13 @@ def ranking_rows(comparison: dict) -> tuple[list[str], list[list[str]]]:
         "validation used for",
     ]
     rows = []
+    ranked = bool(comparison.get("ranked_on"))
     for k, name in enumerate(comparison["ranking"], 1):
         m = by_name[name]
         held = _held(m, comparison)
         rows.append(
             [
-                str(k),
+                str(k) if ranked else "-",
                 name,
                 m["kind"],
                 str(m.get("trainer") or "-"),
