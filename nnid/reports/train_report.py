@@ -221,9 +221,12 @@ def monitor_sentence(detect: dict) -> str:
     th = detect["thresholds"]
     cal = detect["calibration"]
     target = detect["settings"].get("false_alarm_per_hour")
+    # each statistic is calibrated on its own: one may fall back where the other was fitted
+    stats = ", ".join(
+        f"{k.upper()} {_fmt(th[k]['value'], 3)} ({th[k]['method']})" for k in ("ewma", "cusum")
+    )
     text = (
-        f"thresholds EWMA {_fmt(th['ewma']['value'], 3)} and CUSUM {_fmt(th['cusum']['value'], 3)}"
-        f" ({th['ewma']['method']}), for {_fmt(target, 3)} false alarms per hour, set on "
+        f"thresholds {stats}, set for {_fmt(target, 3)} false alarms per hour on "
         f"{60 * cal['hours']:.1f} min of healthy validation data"
     )
     test = detect.get("test_false_alarms")
