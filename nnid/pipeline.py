@@ -87,6 +87,17 @@ def reader_config(cfg, config_path: Path, columns: str | None) -> str | None:
     return str(resolve(config_path.parent, named)) if named else None
 
 
+def reader_root(columns: str | None) -> str | None:
+    """The folder a reader config's ``root`` names (relative to its own folder), or None: the
+    data of a run that gives no log, as the reader config documents."""
+    if columns is None:
+        return None
+    from nnid.datasets.column_map import load_column_map
+
+    cmap = load_column_map(columns)
+    return str(cmap.resolve_root(Path(columns))) if cmap.root else None
+
+
 def reader_vehicle(columns: str):
     """The vehicle a reader config names (its ``vehicle``, relative to its own folder), or
     None: the vehicle of a run that names none, as the reader config documents."""
@@ -108,12 +119,14 @@ def check_paths(cfg, config_path: Path, data: str | None, columns: str | None) -
     if data is not None:
         if not Path(data).exists():
             raise NnidInputError("no such file or folder", source=data, field="--data")
-    elif spec is None:
-        raise NnidInputError(
-            "no data: give a [data] section or --data LOG", source=str(config_path), field="data"
-        )
     if columns is not None and not Path(columns).exists():
         raise NnidInputError("no such reader config", source=columns, field="--columns")
+    if data is None and spec is None and reader_root(columns) is None:
+        raise NnidInputError(
+            "no data: give a [data] section, --data LOG, or a reader config with a root",
+            source=str(config_path),
+            field="data",
+        )
     if spec is None:
         return
     for key in ("log", "columns", "simulate", "campaign"):
@@ -165,10 +178,11 @@ def load_inputs(
     elif isinstance(spec, CacciaCampaignData) and data is None:
         sim, log, report = _caccia_campaign(spec, config_path, models, veh)
         inputs = Inputs(log, report, veh, sim)
-    elif data or getattr(spec, "log", None):
+    elif data or getattr(spec, "log", None) or reader_root(reader):
         from nnid.datasets.readers import load_log
 
-        path = data or str(resolve(base, spec.log))
+        path = data or (str(resolve(base, spec.log)) if getattr(spec, "log", None) else None)
+        path = path or reader_root(reader)
         inputs = Inputs(*load_log(path, reader), veh)
         if physics and veh is not None:  # the inputs the vehicle reads, said against the log
             from nnid.datasets.arrays import logged_inputs

@@ -309,6 +309,15 @@ def test_a_config_without_data_runs_with_data_and_vehicle_given(tmp_path):
         run = CliRunner().invoke(app, [*args, "--out", str(tmp_path / f"o5{code}")])
         assert run.exit_code == code, run.output
     assert f"{tmp_path / 'map.toml'}, field 'vehicle': 'nothere.toml'" in run.output
+    # the folder a reader config's documented `root` names, when the run gives no log
+    (tmp_path / "sub").mkdir()
+    (tmp_path / "sub" / "map.toml").write_text('vehicle = "seamor"\nroot = ".."\n' + body)
+    args = ["train", str(cfg), "--columns", str(tmp_path / "sub" / "map.toml")]
+    run = CliRunner().invoke(app, [*args, "--out", str(tmp_path / "o6")])
+    assert run.exit_code == 0, run.output
+    (tmp_path / "sub" / "map.toml").write_text('vehicle = "seamor"\n' + body)
+    run = CliRunner().invoke(app, [*args, "--out", str(tmp_path / "o7")])
+    assert run.exit_code == 2 and "a reader config with a root" in run.output, run.output
 
 
 def test_a_run_into_an_earlier_out_folder_leaves_no_stale_result_and_keeps_yours(tmp_path):

@@ -3,7 +3,8 @@ become which log columns, in which units and frames, and the common time base.
 
 ```toml
 name = "liu-bluerov1-2016"
-root = "../../../shared/data/liu-bluerov1-2016"   # relative to this file; --data overrides
+root = "../../../shared/data/liu-bluerov1-2016"   # relative to this file; read by train,
+                              # compare and sweep when the run gives no --data or data.log
 rate = 50.0                   # Hz: resample every source onto one time base (absent: the
                               # median step of the fastest measured, "linear", source)
 gap = 0.5                     # s: a longer gap splits an experiment instead of being bridged
