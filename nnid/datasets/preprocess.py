@@ -135,7 +135,7 @@ def savgol_window(seconds: float, rate: float, order: int, name: str | None = No
     n = n if n % 2 else n + 1
     if asked < order + 2 and name is not None:
         warnings.warn(
-            f"{name} = {seconds:g} s is {asked} samples at {rate:g} Hz, too few for a "
+            f"{name} = {seconds:g} s is {asked} samples at {rate:.3g} Hz, too few for a "
             f"Savitzky-Golay polynomial of order {order}: widened to {n} samples "
             f"({n / rate:.3g} s)",
             stacklevel=2,

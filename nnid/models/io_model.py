@@ -101,7 +101,8 @@ class InputOutputModel(NnidModel):
     def free_run_error(self, log: pd.DataFrame) -> float:
         """Mean free-run NRMSE over the outputs the log excites (warm-up excluded; the columns
         of the reported scores, :func:`target_columns`); infinite when the free run diverges
-        in any run (:func:`score_split`): the number a fine-tuning reports before and after."""
+        in any run (:func:`score_split`) or no output is scored: the number a fine-tuning
+        reports before and after."""
         pred = self._predict(log, "free_run").set_axis(log.index)
         mask = warmup_mask(log, 0.0, self.warmup_samples_)
         nrmse = score_split(
