@@ -487,3 +487,24 @@ def test_the_reader_config_page_agrees_with_the_code(tmp_path):
     assert keys("### Top-level keys") == set(ColumnMap.model_fields) - {"sources"}
     fields = {f.alias or n for n, f in Source.model_fields.items()}
     assert keys("### Each `[[sources]]`") == (fields - {"columns"}) | {"sources.columns"}
+
+
+def test_a_silence_inside_a_held_source_is_said(tmp_path):
+    """hold_timeout cuts a run where its commands stop; a silence of 6 s in the middle was
+    held over without a word. It is said, with its length and the samples it covers; the
+    samples and values are as before (the command 1.0 held at t = 5 s)."""
+    t = np.arange(0, 10.01, 0.1)
+    nav = pd.DataFrame({"t": t, **{c: np.sin(t) if c == "u" else 0 * t for c in "uvwpqr"}})
+    nav.to_csv(tmp_path / "nav.csv", index=False)
+    tc = np.r_[np.arange(0, 2, 0.1), np.arange(8, 10.01, 0.1)]
+    cmd = pd.DataFrame({"t": tc, "c": np.r_[np.ones(20), np.zeros(tc.size - 20)]})
+    cmd.to_csv(tmp_path / "cmd.csv", index=False)
+    body = ('[[sources]]\nfile = "nav.csv"\ntime = "t"\n[sources.columns]\n'
+            + "".join(f'{c} = "{c}"\n' for c in "uvwpqr")
+            + '[[sources]]\nfile = "cmd.csv"\ntime = "t"\nmethod = "hold"\n'
+            'hold_timeout = 0.5\n[sources.columns]\ncmd_a = "c"\n')  # fmt: skip
+    log, report = load_log(tmp_path, _write_map(tmp_path / "map.toml", body))
+    assert len(log) == 101 and log.loc[(log["t"] - 5.0).abs() < 1e-9, "cmd_a"].item() == 1.0
+    (said,) = [s for s in report.steps if s.step == "stale hold"]
+    assert "cmd.csv is silent for up to 6.1 s" in said.detail and said.rows_removed == 0
+    assert "held over those 56 samples" in said.detail, said.detail

@@ -200,6 +200,19 @@ def assemble(
                 np.isin(names, ANGLES),
             )
             columns.update(dict(zip(names, values.T, strict=True)))
+            if source.method == "hold" and source.hold_timeout is not None:
+                # inside the run a held command is held over a silence (the end is cut
+                # above): said, with how long, as the timeout declares such values stale
+                last = np.searchsorted(t_src, grid, side="right") - 1
+                age = grid - t_src[np.clip(last, 0, None)]
+                stale = (last >= 0) & (age > source.hold_timeout)
+                if stale.any():
+                    report.add(
+                        "stale hold",
+                        f"'{exp}': {source.file} is silent for up to {age[stale].max():.3g} s "
+                        f"inside the run (hold_timeout {source.hold_timeout:g} s): its last "
+                        f"value is held over those {int(stale.sum())} samples",
+                    )
             if cmap.gap and source.method == "linear":
                 gaps = np.flatnonzero(np.diff(t_src) > cmap.gap)
                 for g in gaps:
