@@ -483,3 +483,37 @@ def test_search_intervals_stay_where_a_vehicle_file_may_hold_the_value():
     assert found["actuator_lag"] == (0.0, MAX_LAG)
     for name in ("current.x", "actuator_lag"):
         Candidate(name, name.split(".")[0], bounds=found[name]).augment(veh, found[name][1])
+
+
+def test_each_added_effect_is_reported_as_the_final_model_holds_it():
+    """Two nearly collinear effects (4 N too heavy, a 3 N downward pull): the second pass's
+    joint refit moves the first one's value by several of its pass's standard errors. The
+    report gives each effect as the final model (the one "after" is scored on) holds it, within
+    3 s.e. of the truth, the pass's own value beside it; stopped at max_effects = 1 it says so
+    and does not call what remains "outside the vocabulary"."""
+    from nnid.physics.parts import Parts
+    from nnid.reports.loop_report import markdown
+
+    veh = load_vehicle(MINIROV)
+    truth = [("buoyancy_offset", 4.0), ("external_bias.w", 3.0)]
+    log = effect_log(veh, truth, duration=240.0, dt=0.1, n_experiments=4, seed=2)
+    loop = ResidualLoop(veh, max_effects=2).fit(log)
+    result = loop.as_dict()
+    assert result["added"] == ["buoyancy_offset", "external_bias.w"]
+    assert result["stopped"] == "max_effects"
+    for step, (_, value) in zip(result["steps"], truth, strict=True):
+        added = step["added"]
+        assert added["from"] == "the final joint refit"
+        assert abs(added["params"]["value"] - value) < 3 * added["stderr"]["value"], added
+    first = result["steps"][0]["added"]
+    k = loop.fit_.unknowns.index(loop.added_[0].candidate.parameter)
+    base = Parts.from_vehicle(veh).get(loop.added_[0].candidate.parameter)
+    assert first["params"]["value"] == pytest.approx(-(loop.fit_.theta[k] - base), rel=1e-12)
+    moved = abs(first["pass_params"]["value"] - first["params"]["value"])
+    assert moved > 2 * first["stderr"]["value"]  # the pass's value is not the final one
+    one = ResidualLoop(veh, max_effects=1).fit(log).as_dict()
+    assert one["stopped"] == "max_effects"
+    text = markdown(one)
+    assert "stopped at max_effects = 1" in text and "outside the vocabulary" not in text
+    none = markdown(ResidualLoop(veh, max_effects=0).fit(log).as_dict())
+    assert "No effect was tested (max_effects = 0)" in none and "No significant" not in none

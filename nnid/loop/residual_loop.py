@@ -473,9 +473,42 @@ class ResidualLoop:
     def added(self) -> list[str]:
         return [s.name for s in self.added_]
 
+    def _final_effect(self, scored: Scored) -> dict:
+        """An added effect as the final model holds it: a linear effect's parameter is refitted
+        jointly in every later pass, so its value ± s.e. (widened by the final residual's
+        correlation time) come from the final fit, the pass's own beside them; a
+        1-D-searched effect keeps its pass's value."""
+        out = scored.as_dict()
+        param = scored.candidate.parameter
+        if param is None or param not in self.fit_.unknowns:
+            return {**out, "from": "its pass (a 1-D search, not refitted later)"}
+        k = self.fit_.unknowns.index(param)
+        base = Parts.from_vehicle(self.vehicle).get(param)
+        cand = scored.candidate
+        # widened by the final residual's own correlation time, as each pass widens its
+        # candidate's by the residual with the candidate in
+        tau = residual_correlation_time(self.fit_.e, self.dofs_)
+        se = float(self.fit_.stderr[k]) * float(np.sqrt(tau))
+        se *= abs(cand.value_scale(self.vehicle))
+        return {
+            **out,
+            "params": {"value": cand.value(float(self.fit_.theta[k]) - base, self.vehicle)},
+            "stderr": {"value": se if np.isfinite(se) else None},
+            "pass_params": out["params"],
+            "pass_stderr": out["stderr"],
+            "from": "the final joint refit",
+        }
+
+    @property
+    def stopped_at_limit(self) -> bool:
+        """True where the loop ended because ``max_effects`` were added, not because a pass
+        found nothing to add: candidates beyond were not tested."""
+        return not self.steps_ or self.steps_[-1].added is not None
+
     def as_dict(self) -> dict:
         """``loop.json`` (ARCHITECTURE.md): baseline, before, ranked candidates, added, after."""
         first = self.steps_[0] if self.steps_ else Step([], None, [])
+        widen = float(np.sqrt(self.workspace_.tau_corr))
         return {
             "vehicle": self.vehicle.name,
             "baseline": f"{self.vehicle.name}: vehicle file, damping structure refitted "
@@ -485,17 +518,19 @@ class ResidualLoop:
             "candidates_tested": len(first.ranked),
             "added": self.added,
             "after": self.after_,
+            "stopped": "max_effects" if self.stopped_at_limit else "no candidate passed",
             "steps": [
                 {
                     "gate": gate,
-                    "added": None if st.added is None else st.added.as_dict(),
+                    "added": None if st.added is None else self._final_effect(st.added),
                     "top": [s.as_dict() for s in st.ranked[:10]],
                     "sindy": st.sindy,
                 }
                 for st, gate in zip(self.steps_, self.gates_, strict=True)
             ],
+            # standard errors widened by the residual's correlation time, as the passes' are
             "baseline_params": {
-                n: {"value": float(v), "stderr": float(s) if np.isfinite(s) else None}
+                n: {"value": float(v), "stderr": float(s) * widen if np.isfinite(s) else None}
                 for n, v, s in zip(
                     self.baseline_.unknowns,
                     self.baseline_.theta,
@@ -522,7 +557,9 @@ class ResidualLoop:
                 "zoh_midpoint": self.zoh_midpoint,
             },
             "unexplained": {
-                d: describe(DOF_WORD[d], found) for d, found in self.unexplained_.items() if found
+                d: describe(DOF_WORD[d], found, self.stopped_at_limit)
+                for d, found in self.unexplained_.items()
+                if found
             },
             "unexplained_correlates": {d: as_records(f) for d, f in self.unexplained_.items()},
             "data": {

@@ -134,8 +134,10 @@ def unexplained_structure(
     return found[:top]
 
 
-def describe(dof_word: str, found: list[Correlate]) -> str:
-    """The verdict in words, naming the strongest correlates."""
+def describe(dof_word: str, found: list[Correlate], stopped_at_limit: bool = False) -> str:
+    """The verdict in words, naming the strongest correlates; ``stopped_at_limit``: the loop
+    stopped at its ``max_effects`` before testing the rest of the vocabulary, so what remains
+    may be in it."""
     parts = []
     for c in found:
         what = (
@@ -144,10 +146,13 @@ def describe(dof_word: str, found: list[Correlate]) -> str:
             else f"{c.signal.replace('*', ' × ')} at a lag of {c.lag_s:.2g} s"
         )
         parts.append(f"{what} (correlation {c.correlation:.2f}, band ±{c.band:.2f})")
-    return (
-        f"an effect outside the vocabulary remains in the held-out {dof_word} residual: it "
-        f"correlates with {'; '.join(parts)}"
+    what = (
+        "an effect remains (the loop stopped at max_effects: the rest of the vocabulary was "
+        "not tested)"
+        if stopped_at_limit
+        else "an effect outside the vocabulary remains"
     )
+    return f"{what} in the held-out {dof_word} residual: it correlates with {'; '.join(parts)}"
 
 
 def as_records(found: list[Correlate]) -> list[dict]:

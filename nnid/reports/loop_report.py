@@ -157,6 +157,10 @@ def _verdict(result: dict, name: str, before: dict, after: dict) -> list[str]:
         for when, who in (("before", "baseline's"), ("after", "final model's"))
         if result[when]["free_run_nrmse"].get("total") is None
     ]
+    limit = result.get("stopped") == "max_effects"
+    max_effects = result.get("settings", {}).get("max_effects")
+    if not result["added"] and limit:  # max_effects = 0: nothing was tested, nothing found
+        return [f"No effect was tested (max_effects = {max_effects})."]
     if not result["added"]:
         total = result["before"]["free_run_nrmse"].get("total")
         lines = [
@@ -204,6 +208,11 @@ def _verdict(result: dict, name: str, before: dict, after: dict) -> list[str]:
         else:
             cut = ""
         lines.append(effect_sentence(added) + cut + ".")
+    if limit:
+        lines.append(
+            f"The loop stopped at max_effects = {max_effects}: the rest of the vocabulary was "
+            "not tested."
+        )
     if diverged:
         lines.append(
             "Before and after are compared on the "
