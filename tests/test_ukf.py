@@ -155,3 +155,17 @@ def test_window_must_stay_in_one_experiment(seamor):
         _structure(seamor), data, TRUTH, start=10, length=10, measurement_noise=[0.005, 0.002]
     )
     assert obs.rank == 2
+
+
+def test_an_overconfident_filter_widens_its_standard_errors_and_says_so(seamor):
+    """Measurement noise declared three times too small: the innovations are far larger than the
+    filter predicts (mean normalised innovation squared per DOF ≫ 1), so its covariance is
+    overconfident. It is scaled by that statistic, as least squares scales by its residual
+    variance, and a warning says by how much; a consistent filter is left as it is."""
+    data = _data(seamor, _surge_yaw(1200), NOISY, seed=3)
+    kw = {"process_noise": 1e-4, "theta0": 0.5 * TRUTH}
+    sigma = np.asarray([0.005, 0.002]) * 0.3  # of NOISY's levels on u and r
+    with pytest.warns(UserWarning, match=r"innovations are [\d.]+ times the variance"):
+        tight = UnscentedKalman(measurement_noise=sigma, **kw).fit(_structure(seamor), data)
+    assert tight.sigma2 > 5.0
+    assert np.all(np.abs(tight.theta - TRUTH) < 3.0 * tight.stderr), (tight.theta, tight.stderr)

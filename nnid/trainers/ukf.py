@@ -49,6 +49,7 @@ test that was not.
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -452,9 +453,25 @@ class UnscentedKalman(BaseEstimator):
         }
         cov = p[n_v:, n_v:].copy()
         sigma2 = float(np.mean(nis)) / n_v if nis else float("nan")
+        if np.isfinite(sigma2) and sigma2 > NIS_TOLERANCE:
+            # innovations larger than the filter predicts: its covariance is overconfident;
+            # scaled as least squares scales by the residual variance, and said
+            warnings.warn(
+                f"the filter's innovations are {sigma2:.3g} times the variance it predicts "
+                "(normalised innovation squared per DOF, 1 for a consistent filter): its "
+                f"covariance is scaled by {sigma2:.3g}, so the standard errors widen by "
+                f"{np.sqrt(sigma2):.2g}x; the noise levels or the model structure are off",
+                UserWarning,
+                stacklevel=3,
+            )
+            cov = cov * sigma2
         return Estimate(
             names, x[n_v:].copy(), cov, sigma2, int(n_samples * n_v), history=hist_theta.copy()
         )
+
+
+#: a mean normalised innovation squared per DOF above this says the filter is overconfident
+NIS_TOLERANCE = 2.0
 
 
 def _cholesky(p: np.ndarray) -> np.ndarray:
