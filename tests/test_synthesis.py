@@ -153,3 +153,17 @@ def test_residual_force_shape_and_form(vt690, campaign):
     assert np.isfinite(tau_sg).all()
     assert np.isnan(tau_f[: int(1.5 / 0.05) - 1]).all()  # filter settling, 3/λ s
     assert data["nu"].shape == (len(val), 6)
+
+
+def test_a_nelder_mead_search_stopped_by_its_budget_is_said(fossen_problem):
+    """A search cut at its iteration limit returned its last simplex as if it were the
+    minimum: it now names the forces where it stopped; a converged search is silent."""
+    import warnings
+
+    xi, tau, mask, _ = fossen_problem
+    ls = masked_least_squares(xi, tau, mask)
+    with pytest.warns(UserWarning, match=r"stopped at its iteration limit for X"):
+        nelder_mead(xi, tau, mask, "mae", start=ls, forces=("X",), max_iter_per_param=2)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        nelder_mead(xi, tau, mask, "mse", start=ls, forces=("X",))

@@ -26,6 +26,7 @@ computes τ̄ and ξ(ν) from a log and uses these fits is :class:`nnid.models.s
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Literal
@@ -157,6 +158,7 @@ def nelder_mead(
     mask = np.asarray(mask, dtype=bool)
     base = start if start is not None else masked_least_squares(xi, tau_bar, mask)
     k = base.coefficients.copy()
+    stopped: list[str] = []
     for force in forces:
         f = FORCES.index(force)
         cols = np.flatnonzero(mask[f])
@@ -190,6 +192,16 @@ def nelder_mead(
             },
         )
         k[f, cols] = res.x / scale
+        if not res.success:
+            stopped.append(force)
+    if stopped:
+        warnings.warn(
+            f"the Nelder-Mead search of the '{loss}' cost stopped at its iteration limit for "
+            f"{', '.join(stopped)} (max_iter_per_param = {max_iter_per_param}): those "
+            "coefficients are where it stopped, not a minimum",
+            UserWarning,
+            stacklevel=2,
+        )
     return SynthesisFit(k, np.full(mask.shape, np.nan), mask)
 
 
