@@ -182,3 +182,17 @@ def test_filtered_regressors_and_bad_arguments(seamor):
         GradientEstimator(gain=[1.0, 2.0, 3.0]).solve(_surge_regression(seamor, log.assign(du=0)))
     with pytest.warns(RuntimeWarning, match="diverged"):
         GradientEstimator(gain=1e6).solve(_surge_regression(seamor, _surge_log(seamor, 0, 5)))
+
+
+def test_a_gradient_estimator_still_moving_at_the_end_of_the_data_says_so(seamor):
+    """A gain far too small for 30 s of data leaves the estimates drifting toward the truth
+    when the log ends; they were reported as estimates without a word. Gain 50 converges and
+    is silent."""
+    import warnings
+
+    reg = _surge_regression(seamor, _surge_log(seamor, 0.0, 30.0))
+    with pytest.warns(UserWarning, match=r"has not converged: X_udot, X:u\*abs\(u\)"):
+        GradientEstimator(gain=0.05).solve(reg, dt=DT)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        GradientEstimator(gain=50.0).solve(reg, dt=DT)

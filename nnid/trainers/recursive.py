@@ -154,6 +154,21 @@ def _chunks(n: int, parts: int = 20) -> list[tuple[int, int]]:
     return list(itertools.pairwise(int(e) for e in edges))
 
 
+def still_moving(
+    history: np.ndarray, names: list[str], tail: float = 0.1, rel: float = 0.05
+) -> list[str]:
+    """The parameters whose estimate changed by more than ``rel`` of its final size over the
+    last ``tail`` of the samples: a recursive law that has not converged by the data's end."""
+    n = history.shape[0]
+    if n < 10:
+        return []
+    last, earlier = history[-1], history[int((1.0 - tail) * (n - 1))]
+    change = np.abs(last - earlier)
+    return [
+        nm for nm, d, v in zip(names, change, last, strict=True) if d > rel * max(abs(v), 1e-12)
+    ]
+
+
 class RecursiveLeastSquares(BaseEstimator):
     """Recursive least squares with exponential forgetting (Weiss eqs 52-53).
 
@@ -295,6 +310,17 @@ class GradientEstimator(BaseEstimator):
             warnings.warn(
                 "the gradient estimator diverged: lower the gain or use normalized=True",
                 RuntimeWarning,
+                stacklevel=2,
+            )
+        moving = still_moving(history, list(reg.names))
+        if moving:
+            warnings.warn(
+                "the gradient estimator has not converged: "
+                + ", ".join(moving)
+                + " still moved by more than 5 % over the last tenth of the data; these values "
+                "are where the data ended, not estimates (a larger gain, normalized=True, or "
+                "a longer log)",
+                UserWarning,
                 stacklevel=2,
             )
         sigma2, n_obs, per_dof = _residual_stats(reg, theta, 0)
