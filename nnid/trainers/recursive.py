@@ -28,7 +28,7 @@ from sklearn.base import BaseEstimator
 
 from nnid.errors import NnidInputError
 from nnid.trainers.history import Progress, silent
-from nnid.trainers.least_squares import Estimate
+from nnid.trainers.least_squares import Estimate, correlation_time, dof_variances
 from nnid.trainers.regression import Regression
 
 
@@ -147,6 +147,25 @@ def _residual_stats(reg: Regression, theta: np.ndarray, first: int) -> tuple[flo
     return sigma2, n, per_dof
 
 
+def window_covariance(reg: Regression, theta: np.ndarray, first: int) -> np.ndarray:
+    """The covariance of ``theta`` as :class:`~nnid.trainers.least_squares.LeastSquares` gives
+    it, over the samples ``first``…end (the estimator's memory): each DOF equation weighted by
+    1/σ̂² of its own residual (forces in N and moments in N m do not share one variance) and
+    widened by the residuals' correlation time. σ̂² P of the recursion pools the equations'
+    variances and takes every row as independent: too small for forces, too large for moments
+    (3-24x on a minirov log), where the estimates themselves equal batch least squares."""
+    m = len(reg.dofs)
+    rows = slice(first * m, reg.n_samples * m)
+    phi, r = reg.phi[rows], reg.y[rows] - reg.phi[rows] @ np.nan_to_num(theta)
+    ok = np.isfinite(r) & np.isfinite(phi).all(1)
+    var = dof_variances(np.where(ok, r, np.nan).reshape(-1, m))
+    w = np.tile(1.0 / np.where(var > 0, var, 1.0), r.size // m) * ok
+    phi, r = np.where(ok[:, None], phi, 0.0), np.where(ok, r, 0.0)
+    sigma2 = float(w @ (r * r)) / max(int(ok.sum()) - theta.size, 1)
+    cov = np.linalg.pinv((phi * w[:, None]).T @ phi, hermitian=True) * sigma2
+    return cov * correlation_time([r[k::m] for k in range(m)])
+
+
 def _chunks(n: int, parts: int = 20) -> list[tuple[int, int]]:
     """Sample ranges for progress reports: the compiled loops run range by range, carrying
     their state, so the result is the same as one pass."""
@@ -178,8 +197,9 @@ class RecursiveLeastSquares(BaseEstimator):
     squares). ``p0`` is the initial P = p₀ I (large: an uninformative start at ``theta0``,
     default zero). Forgetting is suspended while trace(P) ≥ P·p₀, so directions the data stops
     exciting do not wind up. ``filter_lambda`` (rad/s) uses the filtered regressors of Weiss
-    eqs 85-92. The covariance is σ̂² P with σ̂² from the residuals of the final θ over the last
-    window of ⌈1/(1 − λ)⌉ samples (the whole run for λ = 1).
+    eqs 85-92. The covariance is batch least squares' at the final θ over the last window of
+    ⌈1/(1 − λ)⌉ samples (the whole run for λ = 1): :func:`window_covariance`; the recursion's
+    own P is ``p_matrix_``.
     """
 
     kind = "rls"
@@ -227,10 +247,11 @@ class RecursiveLeastSquares(BaseEstimator):
         window = reg.n_samples if self.forgetting == 1.0 else math.ceil(self.memory)
         first = max(reg.n_samples - window, 0)
         sigma2, n_obs, per_dof = _residual_stats(reg, theta, first)
+        self.p_matrix_ = p_mat  # the recursion's own P, for its checks (not a covariance)
         return Estimate(
             list(reg.names),
             theta,
-            sigma2 * p_mat,
+            window_covariance(reg, theta, first),
             sigma2,
             n_obs,
             dof_sigma2=per_dof,
