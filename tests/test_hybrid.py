@@ -127,8 +127,12 @@ def test_no_undeclared_effect_no_worse_and_a_small_network_force(runs):
 @pytest.mark.parametrize("effect", _per_log(["coupled_damping.N:u*v", "current.y"]))
 def test_the_learned_force_names_the_injected_term(effect, runs):
     hybrid, _, _ = runs(effect)
-    terms = [t["effect"] for t in hybrid.metrics["correction"]["explanation"]["terms"]]
+    explanation = hybrid.metrics["correction"]["explanation"]
+    terms = [t["effect"] for t in explanation["terms"]]
     assert effect in terms[:3], terms[:6]
+    # the kept terms' shares add up to what they explain together (coef² shares did not)
+    shares = sum(t["share"] for t in explanation["terms"])
+    assert shares == pytest.approx(explanation["explained"], abs=0.02), explanation
 
 
 def test_untrained_hybrid_is_its_physics(minirov):

@@ -11,7 +11,7 @@ re-estimates a fitted coefficient is named as doing that. If the network learned
 size δ, then f_θ ≈ −col_k δ; pysindy's STLSQ over all columns at once (scaled to unit norm, per
 DOF weighted by the RMS input force, with the loop's small ridge against near-copies of one
 column) keeps the few that explain it, and each kept term is ranked by the share of the learned
-force it explains.
+force it explains (Pratt's measure: the shares add up to what the terms explain together).
 """
 
 from __future__ import annotations
@@ -33,7 +33,8 @@ from nnid.trainers.sindy import compress
 class Term:
     """One term of the learned force: an effect of the vocabulary (or a fitted parameter of
     the physics, ``kind`` "fitted"), its size in the vocabulary's units, and the share of the
-    learned force's weighted sum of squares it explains."""
+    learned force's weighted sum of squares it explains (the terms' shares add up to
+    :attr:`Explanation.explained`; below zero: it cancels part of a correlated term)."""
 
     name: str
     kind: str
@@ -152,7 +153,10 @@ def explain(
     for k in np.flatnonzero(coef):
         cand = order[k]
         delta = float(coef[k] / norms[usable][k])
-        part = float(coef[k] ** 2 / total)
+        # Pratt's measure: coefficient times the term's projection on the force; the parts
+        # add up to the explained share even where the columns are correlated (coef² alone
+        # added to half of it), and a term that cancels part of another comes out negative
+        part = float(coef[k] * (x[:, k] @ y) / total)
         if cand.kind == "fitted":
             value, meaning = parts.get(cand.name) + delta, f"refits {cand.name} of the physics"
         else:
