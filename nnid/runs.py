@@ -151,6 +151,9 @@ def train_run(
     held = "test" if "test" in metrics else "validation"
     free = metrics[held].get("free_run_nrmse", {})
     line = f"{held} free-run NRMSE total {_fmt(free.get('total'))}"
+    used = metrics.get("validation_used_for")
+    if held == "validation" and used:  # no test part: the number shown is not independent
+        line += f", used for {used} while fitting"
     base = metrics.get("baseline", {}).get(held, {}).get("free_run_nrmse", {})
     if base:
         line += f"; physics only {_fmt(base.get('total'))}"
@@ -160,6 +163,7 @@ def train_run(
         "vehicle_name": metrics.get("vehicle"),
         "n_params": metrics["n_params"],
         "held_out": held,
+        "validation_used_for": used,
         "free_run_nrmse": free.get("total"),
         "one_step_nrmse": _total(metrics[held], "one_step_nrmse"),
         "diverged": ", ".join(metrics[held].get("diverged", {})) or None,

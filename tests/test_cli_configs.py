@@ -403,3 +403,22 @@ def test_a_config_of_no_kind_nnid_has_names_the_kinds(tmp_path, no_simulation):
     text = CliRunner().invoke(app, _args("train", cfg, tmp_path)).output
     assert "'detect' is not a config kind (kinds: " in text and "train" in text, text
     assert "a 'train' config with a [detect] table" in text and "another tool" not in text
+
+
+def test_a_validation_score_that_stopped_the_training_is_said_so_when_shown(tmp_path):
+    """With no test part the console line shows the validation score, which early stopping
+    used: it says so, and so does the batch table's "held out" cell (the reports did)."""
+    from nnid.reports.batch_report import _held_out
+
+    sim = SIM.replace('channel = "Y"', 'channel = "X"')  # both runs surge
+    (tmp_path / "sim.toml").write_text(sim)
+    cfg = tmp_path / "narx.toml"
+    cfg.write_text(NARX.replace('kind = "lm"', 'kind = "adam"\nmax_epochs = 2')
+                   + '[split]\nby = "experiment"\nvalidation = ["b"]\n')  # fmt: skip
+    run = CliRunner().invoke(app, _args("train", cfg, tmp_path))
+    assert run.exit_code == 0, run.output
+    assert "validation free-run NRMSE total" in run.output
+    assert "used for early stopping while fitting" in " ".join(run.output.split()), run.output
+    row = {"held_out": "validation", "validation_used_for": "early stopping"}
+    assert _held_out(row) == "validation (used for early stopping)"
+    assert _held_out({**row, "held_out": "test"}) == "test"

@@ -119,9 +119,14 @@ def _loop_table(rows: list[dict]) -> str:
     )
 
 
+def _held_out(row: dict) -> str:
+    held, used = str(row.get("held_out") or ""), row.get("validation_used_for")
+    return f"{held} (used for {used})" if held == "validation" and used else held
+
+
 def _train_table(rows: list[dict]) -> str:
     body = [
-        [_log(r), r["status"], str(r.get("model") or ""), str(r.get("held_out") or ""),
+        [_log(r), r["status"], str(r.get("model") or ""), _held_out(r),
          _f(r.get("free_run_nrmse")), _f(r.get("one_step_nrmse"))]
         for r in rows
     ]  # fmt: skip
@@ -129,7 +134,8 @@ def _train_table(rows: list[dict]) -> str:
         ["log", "status", "model", "held out", "free-run NRMSE", "one-step NRMSE"], body
     ) + definitions(
         {
-            "held out": "the part scored (test where the split has one, else validation)",
+            "held out": "the part scored (test where the split has one, else validation, "
+            "and then what the fit used it for: its score is not independent)",
             "free-run NRMSE": "total over the excited DOFs; '-' where the free run diverged",
         }
     )
