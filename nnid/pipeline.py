@@ -178,11 +178,13 @@ def load_inputs(
     elif isinstance(spec, CacciaCampaignData) and data is None:
         sim, log, report = _caccia_campaign(spec, config_path, models, veh)
         inputs = Inputs(log, report, veh, sim)
-    elif data or getattr(spec, "log", None) or reader_root(reader):
+    elif path := (
+        data
+        or (str(resolve(base, spec.log)) if getattr(spec, "log", None) else None)
+        or reader_root(reader)  # read only when the run gives no log
+    ):
         from nnid.datasets.readers import load_log
 
-        path = data or (str(resolve(base, spec.log)) if getattr(spec, "log", None) else None)
-        path = path or reader_root(reader)
         inputs = Inputs(*load_log(path, reader), veh)
         if physics and veh is not None:  # the inputs the vehicle reads, said against the log
             from nnid.datasets.arrays import logged_inputs
@@ -682,7 +684,7 @@ def run_compare(
         "held_out": held_name,
         "ranking": ranking,
         # the outputs the ranking's scores average (ranked_nrmse); none shared: not ranked
-        "ranked_on": ranked_columns(rows, held_name),
+        "ranked_on": shared,
         "train": [e["experiment"] for e in split.record["parts"]["train"]],
         "validation": [e["experiment"] for e in split.record["parts"]["validation"]],
         "test": [e["experiment"] for e in split.record["parts"]["test"]],

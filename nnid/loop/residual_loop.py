@@ -473,11 +473,12 @@ class ResidualLoop:
     def added(self) -> list[str]:
         return [s.name for s in self.added_]
 
-    def _final_effect(self, scored: Scored) -> dict:
+    def _final_effect(self, scored: Scored, widen: float) -> dict:
         """An added effect as the final model holds it: a linear effect's parameter is refitted
         jointly in every later pass, so its value ± s.e. (widened by the final residual's
         correlation time) come from the final fit, the pass's own beside them; a
-        1-D-searched effect keeps its pass's value."""
+        1-D-searched effect keeps its pass's value. ``widen``: √ of the final residual's
+        correlation time."""
         out = scored.as_dict()
         param = scored.candidate.parameter
         if param is None or param not in self.fit_.unknowns:
@@ -485,10 +486,7 @@ class ResidualLoop:
         k = self.fit_.unknowns.index(param)
         base = Parts.from_vehicle(self.vehicle).get(param)
         cand = scored.candidate
-        # widened by the final residual's own correlation time, as each pass widens its
-        # candidate's by the residual with the candidate in
-        tau = residual_correlation_time(self.fit_.e, self.dofs_)
-        se = float(self.fit_.stderr[k]) * float(np.sqrt(tau))
+        se = float(self.fit_.stderr[k]) * widen
         se *= abs(cand.value_scale(self.vehicle))
         return {
             **out,
@@ -509,6 +507,9 @@ class ResidualLoop:
         """``loop.json`` (ARCHITECTURE.md): baseline, before, ranked candidates, added, after."""
         first = self.steps_[0] if self.steps_ else Step([], None, [])
         widen = float(np.sqrt(self.workspace_.tau_corr))
+        # the final fit's s.e. by its own residual's correlation time, as each pass widens its
+        # candidate's by the residual with the candidate in
+        final = float(np.sqrt(residual_correlation_time(self.fit_.e, self.dofs_)))
         return {
             "vehicle": self.vehicle.name,
             "baseline": f"{self.vehicle.name}: vehicle file, damping structure refitted "
@@ -522,7 +523,7 @@ class ResidualLoop:
             "steps": [
                 {
                     "gate": gate,
-                    "added": None if st.added is None else self._final_effect(st.added),
+                    "added": None if st.added is None else self._final_effect(st.added, final),
                     "top": [s.as_dict() for s in st.ranked[:10]],
                     "sindy": st.sindy,
                 }

@@ -522,7 +522,7 @@ class ParametricModel(FossenPlant):
     def _params(self) -> dict[str, dict[str, float | None]]:
         params = self.estimate_.as_dict()
         # fitted to noise: no verdict of significance (unexcited_unknowns)
-        for name in getattr(self, "not_excited_", {}):
+        for name in self.not_excited_:
             params[name] = {**params[name], "significant": False, "excited": False}
         return params
 
