@@ -32,6 +32,7 @@ from nnid.reports.figures import (
 )
 from nnid.reports.stops import HEAD as STOP_HEAD
 from nnid.reports.stops import TRAINING_TITLE, stage_cells
+from nnid.reports.train_report import score_cell
 
 MODES = (
     ("free_run_nrmse", "Free-run velocity NRMSE"),
@@ -166,11 +167,7 @@ def dof_rows(comparison: dict, key: str) -> tuple[list[str], list[list[str]]]:
     for name in comparison["ranking"]:
         m = next(x for x in comparison["models"] if x["name"] == name)
         vals = _held(m, comparison).get(key, {})
-        # a DOF the model does not predict (or the data does not excite) is not scored: "-"
-        cells = [
-            _f(vals[d], 3) if vals.get(d) is not None else ("diverged" if d in vals else "-")
-            for d in dofs
-        ]
+        cells = [score_cell(vals, d) for d in dofs]
         rows.append([name, *cells, _total(m, comparison, key)])
     return ["model", *dofs, "total"], rows
 

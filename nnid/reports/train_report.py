@@ -399,12 +399,15 @@ def _errors(metrics: dict) -> tuple[list[str], list[list[str]]]:
     return head, rows
 
 
+def score_cell(vals: dict, key: str) -> str:
+    """One score of a per-DOF dict: the number, "diverged" (a key scored None), or "-" where
+    the key was not scored (a DOF the model does not predict or the data does not excite)."""
+    return _fmt(vals[key], 3) if vals.get(key) is not None else ("diverged" if key in vals else "-")
+
+
 def _dof_cells(vals: dict) -> list[str]:
-    """One cell per DOF and the total: the score, "diverged", or "-" where not scored."""
-    return [
-        _fmt(vals[d], 3) if vals.get(d) is not None else ("diverged" if d in vals else "-")
-        for d in (*DOFS, "total")
-    ]
+    """One cell per DOF and the total (:func:`score_cell`)."""
+    return [score_cell(vals, d) for d in (*DOFS, "total")]
 
 
 def _free_run_figure(figures: dict) -> str:
