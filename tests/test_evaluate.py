@@ -89,7 +89,10 @@ def test_a_run_that_diverges_on_its_own_range_is_not_averaged_into_the_pooled_sc
     assert scores["free_run_nrmse"] == {"y": None, "total": None}
     assert scores["free_run_rmse"]["total"] is None and "y" in scores["diverged"]
     assert list(scores["diverged_per_experiment"]) == ["small"]
-    assert scores["free_run_nrmse_per_experiment"]["big"]["total"] is not None
+    # the healthy run keeps its own score: 1 over its std, as scored alone
+    big = runs.loc[runs["experiment"] == "big", "y"].to_numpy()[10:]
+    per = scores["free_run_nrmse_per_experiment"]
+    assert per["big"]["y"] == pytest.approx(1.0 / big.std(), rel=1e-9)
     assert scores["one_step_nrmse"]["total"] is None and "y" in scores["one_step_diverged"]
     healthy = evaluate(Shifted().fit(runs), runs, ("free_run",), warmup_s=1.0)
     assert healthy["free_run_nrmse"]["total"] is not None and not healthy["diverged"]
