@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from nnid.errors import NnidInputError
+from nnid.reports.cells import score
 from nnid.trainers.history import Progress, silent
 
 
@@ -105,10 +106,6 @@ def lost_rows(report) -> list[str]:
     return [f"{s.step}: {s.detail}" for s in report.steps if s.rows_removed or s.step in GAP_STEPS]
 
 
-def _fmt(x) -> str:
-    return "diverged" if x is None else f"{x:.3g}"
-
-
 def _total(scores: dict, key: str) -> float | None:
     return scores.get(key, {}).get("total")
 
@@ -150,13 +147,13 @@ def train_run(
     metrics = result.metrics
     held = "test" if "test" in metrics else "validation"
     free = metrics[held].get("free_run_nrmse", {})
-    line = f"{held} free-run NRMSE total {_fmt(free.get('total'))}"
+    line = f"{held} free-run NRMSE total {score(free.get('total'))}"
     used = metrics.get("validation_used_for")
     if held == "validation" and used:  # no test part: the number shown is not independent
         line += f", used for {used} while fitting"
     base = metrics.get("baseline", {}).get(held, {}).get("free_run_nrmse", {})
     if base:
-        line += f"; physics only {_fmt(base.get('total'))}"
+        line += f"; physics only {score(base.get('total'))}"
     headline: dict[str, Any] = {
         "model": metrics["model"],
         "trainer": metrics["trainer"],

@@ -46,6 +46,7 @@ from nnid.loop.unexplained import as_records, describe, unexplained_structure
 from nnid.models.parametric import vehicle_with
 from nnid.physics.dofs import DOF_WORD, DOFS, FORCES
 from nnid.physics.parts import Parts
+from nnid.reports.cells import score
 from nnid.threads import torch_threads
 from nnid.trainers.history import Progress, silent
 from nnid.trainers.least_squares import significant
@@ -349,7 +350,7 @@ class ResidualLoop:
                 ):
                     s.admissible = False
                     s.reason = (
-                        f"held-out one-step error grows from {_fmt(one_step)} to {_fmt(worse)}"
+                        f"held-out one-step error grows from {score(one_step)} to {score(worse)}"
                     )
                     continue
                 try:
@@ -361,7 +362,7 @@ class ResidualLoop:
                 s.reason = "added" if what == "free run" else f"added (judged {what})"
                 return s, augmented
             s.admissible = False
-            s.reason = f"held-out {what} error does not improve ({_fmt(before)} -> {_fmt(after)})"
+            s.reason = f"held-out {what} error does not improve ({score(before)} -> {score(after)})"
         return None, None
 
     def _simulation_error(self, ws: Workspace, vehicle, mode: str | int) -> float | None:
@@ -587,7 +588,3 @@ def _warn_unphysical_damping(fit: Fit) -> None:
                 "excitation, contact), and a free run of this model can gain energy",
                 stacklevel=2,
             )
-
-
-def _fmt(x: float | None) -> str:
-    return "diverged" if x is None else f"{x:.3f}"

@@ -11,20 +11,14 @@ import html
 import json
 import re
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
+from nnid.reports.cells import number
 from nnid.reports.figures import definitions, figure_uri, html_table, new_figure, page_head
 
 #: at most this many parameters are drawn per vehicle (the ones most tasks identified)
 MAX_PARAMS = 12
-
-
-def _f(x: Any, digits: int = 3) -> str:
-    if x is None or (isinstance(x, float) and not np.isfinite(x)):
-        return "-"
-    return f"{x:.{digits}g}" if isinstance(x, float) else str(x)
 
 
 def _log(row: dict) -> str:
@@ -101,7 +95,7 @@ def _failed(result) -> list[str]:
 def _loop_table(rows: list[dict]) -> str:
     body = [
         [_log(r), r["status"], str(r.get("added") or "none") if r["status"] == "ok" else "-",
-         _f(r.get("before_free_run_nrmse")), _f(r.get("after_free_run_nrmse")),
+         number(r.get("before_free_run_nrmse")), number(r.get("after_free_run_nrmse")),
          str(r.get("diverged") or ""), str(r.get("unexplained") or "")]
         for r in rows
     ]  # fmt: skip
@@ -127,7 +121,7 @@ def _held_out(row: dict) -> str:
 def _train_table(rows: list[dict]) -> str:
     body = [
         [_log(r), r["status"], str(r.get("model") or ""), _held_out(r),
-         _f(r.get("free_run_nrmse")), _f(r.get("one_step_nrmse"))]
+         number(r.get("free_run_nrmse")), number(r.get("one_step_nrmse"))]
         for r in rows
     ]  # fmt: skip
     return html_table(
@@ -143,7 +137,7 @@ def _train_table(rows: list[dict]) -> str:
 
 def _detect_table(rows: list[dict]) -> str:
     body = [
-        [_log(r), r["status"], _f(r.get("alarms")), _f(r.get("first_alarm_t")),
+        [_log(r), r["status"], number(r.get("alarms")), number(r.get("first_alarm_t")),
          str(r.get("alarm_kinds") or ""), str(r.get("effects") or "")]
         for r in rows
     ]  # fmt: skip
@@ -172,7 +166,7 @@ def _sweep(result) -> list[str]:
         value = row.get(f"validation_{metric}") if row["status"] == "ok" else None
         scores.setdefault(label, []).append(value)
         test = row.get("free_run_nrmse") if row.get("held_out") == "test" else None
-        body.append([label, _f(seed), row["status"], _f(value, 4), _f(test, 4),
+        body.append([label, number(seed), row["status"], number(value, 4), number(test, 4),
                      str(row.get("error") or "")])  # fmt: skip
     head = ["setting", "seed", "status", f"validation {metric}", "test free-run NRMSE", "note"]
     out.append(html_table(head, body))

@@ -11,14 +11,13 @@ complexity, the force series and the coefficients.
 from __future__ import annotations
 
 import html
-import math
-from typing import Any
 
 import numpy as np
 import pandas as pd
 
 from nnid.datasets.preprocess import experiments
 from nnid.physics.dofs import DOFS, FORCES
+from nnid.reports.cells import number, score, score_cell
 from nnid.reports.figures import (
     FORCE_UNITS,
     IMAGES_CHECK,
@@ -32,19 +31,12 @@ from nnid.reports.figures import (
 )
 from nnid.reports.stops import HEAD as STOP_HEAD
 from nnid.reports.stops import TRAINING_TITLE, stage_cells
-from nnid.reports.train_report import score_cell
 
 MODES = (
     ("free_run_nrmse", "Free-run velocity NRMSE"),
     ("k_step_nrmse", "{h} s-ahead velocity NRMSE"),
     ("one_step_nrmse", "One-step velocity NRMSE"),
 )
-
-
-def _f(x: Any, digits: int = 4) -> str:
-    if x is None or (isinstance(x, float) and not math.isfinite(x)):
-        return "-"
-    return f"{x:.{digits}g}"
 
 
 def _held(row: dict, comparison: dict) -> dict:
@@ -56,7 +48,7 @@ def _total(row: dict, comparison: dict, key: str) -> str:
     if key not in part:
         return "-"
     value = part[key].get("total")
-    return _f(value, 3) if value is not None else "diverged"
+    return score(value)
 
 
 def _ranked(row: dict, comparison: dict, key: str) -> str:
@@ -65,7 +57,7 @@ def _ranked(row: dict, comparison: dict, key: str) -> str:
     if key not in _held(row, comparison) or not comparison.get("ranked_on"):
         return "-"
     value = row["ranked_nrmse"][key.removesuffix("_nrmse")]
-    return _f(value, 3) if value is not None else "diverged"
+    return score(value)
 
 
 def _partial(comparison: dict) -> bool:
@@ -103,11 +95,11 @@ def ranking_rows(comparison: dict) -> tuple[list[str], list[list[str]]]:
                 m["kind"],
                 str(m.get("trainer") or "-"),
                 str(m["n_params"]),
-                _f(m["seconds"], 3),
+                number(m["seconds"], 3),
                 _ranked(m, comparison, "free_run_nrmse"),
                 _ranked(m, comparison, "k_step_nrmse"),
                 _ranked(m, comparison, "one_step_nrmse"),
-                _f(held.get("J_over_J0"), 3),
+                number(held.get("J_over_J0"), 3),
                 m.get("validation_used_for") or "-",
             ]
         )
@@ -139,7 +131,7 @@ def column_terms(comparison: dict) -> dict[str, str]:
         f"and its inputs alone, over the standard deviation of the measured velocity{over}; "
         "'diverged' where the simulation left the physical range",
         "k-step NRMSE": (
-            f"the same error for predictions {_f(k, 3)} s ahead, restarted from the measured "
+            f"the same error for predictions {number(k, 3)} s ahead, restarted from the measured "
             "state at every sample"
             if k
             else "not computed"
@@ -187,10 +179,10 @@ def table_rows(comparison: dict) -> list[list[str]]:
             [
                 m["name"],
                 str(m["n_params"]),
-                _f(m["train"]["J"]),
-                _f(m["train"]["J_over_J0"]),
-                _f(m["validation"].get("J")),
-                _f(m["validation"].get("J_over_J0")),
+                number(m["train"]["J"], 4),
+                number(m["train"]["J_over_J0"], 4),
+                number(m["validation"].get("J"), 4),
+                number(m["validation"].get("J_over_J0"), 4),
             ]
         )
     return rows
@@ -199,7 +191,7 @@ def table_rows(comparison: dict) -> list[list[str]]:
 def _tables(comparison: dict) -> list[tuple[str, list[str], list[list[str]]]]:
     """(title, head, rows) of every table, in page order (HTML and Markdown share them)."""
     part = comparison.get("held_out", "validation")
-    h = _f(comparison.get("k_step_s"), 3)
+    h = number(comparison.get("k_step_s"), 3)
     out = [("Ranking", *ranking_rows(comparison))]
     for key, title in MODES:
         head, rows = dof_rows(comparison, key)
@@ -384,7 +376,7 @@ def html_page(result) -> str:
         coefs = m.get("coefficients")
         if not coefs:
             continue
-        crow = [[k, _f(v, 5)] for k, v in sorted(coefs.items())]
+        crow = [[k, number(v, 5)] for k, v in sorted(coefs.items())]
         coef_blocks.append(
             f"<details><summary>{html.escape(m['name'])} ({len(crow)} coefficients)"
             f"</summary>{html_table(['coefficient', 'value'], crow)}</details>"

@@ -7,13 +7,13 @@ One self-contained HTML page (figures embedded) and a Markdown twin with the sam
 from __future__ import annotations
 
 import html
-import math
 
 import numpy as np
 
 from nnid.datasets.gaps import GAP_STEPS
 from nnid.physics.dofs import DOF_WORD, DOFS
 from nnid.physics.effects import parse_effect
+from nnid.reports.cells import number
 from nnid.reports.figures import UNITS, figure_uri, html_table, new_figure, page_head
 from nnid.serialization import write_json, write_text
 
@@ -25,12 +25,6 @@ _DIRECTION = {
     ("w", "pos"): "Downward heave thrust",
     ("w", "neg"): "Upward heave thrust",
 }
-
-
-def _f(x, digits: int = 3) -> str:
-    if x is None or (isinstance(x, float) and not math.isfinite(x)):
-        return "-"
-    return f"{x:.{digits}g}"
 
 
 def unit(effect: str) -> str:
@@ -57,7 +51,7 @@ def effect_sentence(candidate: dict) -> str:
     name, value = candidate["effect"], candidate["params"]["value"]
     se = candidate["stderr"]["value"]
     kind, args = parse_effect(name)
-    pm = f" ± {_f(se, 2)}" if se is not None else ""
+    pm = f" ± {number(se, 2)}" if se is not None else ""
     if kind == "thruster_installation":
         what = _DIRECTION.get(
             (args[0], args[1]),
@@ -68,7 +62,7 @@ def effect_sentence(candidate: dict) -> str:
     # plain words: a size and a direction, never "-2 cm lower"
     if kind == "buoyancy_offset":
         side = "heavier" if value >= 0 else "lighter"
-        return f"In water the vehicle is {_f(abs(value))}{pm} N {side} than declared (W − B)"
+        return f"In water the vehicle is {number(abs(value))}{pm} N {side} than declared (W − B)"
     if kind == "restoring_offset":
         cm = f" (± {100 * se:.1g})" if se is not None else ""
         side = "lower" if value >= 0 else "higher"
@@ -77,11 +71,11 @@ def effect_sentence(candidate: dict) -> str:
             "file says"
         )
     if kind == "current":
-        return f"A steady current of {_f(value)}{pm} m/s flows along NED {args[0]}"
+        return f"A steady current of {number(value)}{pm} m/s flows along NED {args[0]}"
     if kind == "actuator_lag":
-        return f"The thrusters lag their commands with a time constant of {_f(value)}{pm} s"
+        return f"The thrusters lag their commands with a time constant of {number(value)}{pm} s"
     meaning = candidate["meaning"][0].upper() + candidate["meaning"][1:]
-    return f"{meaning}: {name} = {_f(value)}{pm} {unit(name)}"
+    return f"{meaning}: {name} = {number(value)}{pm} {unit(name)}"
 
 
 def _diverged_text(errors: dict) -> str:
@@ -167,9 +161,9 @@ def _verdict(result: dict, name: str, before: dict, after: dict) -> list[str]:
             "No significant effect: no candidate of the effect vocabulary passed the F-test, "
             "the parameter test and the held-out checks "
             + (
-                f"(held-out free-run NRMSE {_f(total)})."
+                f"(held-out free-run NRMSE {number(total)})."
                 if total is not None
-                else f"(held-out {name} NRMSE {_f(before.get('total'))}; {diverged[0]})."
+                else f"(held-out {name} NRMSE {number(before.get('total'))}; {diverged[0]})."
             )
         ]
         if total is None or total > 0.5:
@@ -197,13 +191,13 @@ def _verdict(result: dict, name: str, before: dict, after: dict) -> list[str]:
             # the whole before/after (that is the total line's)
             cut = (
                 f"; adding it moved the held-out {step['gate']} error from "
-                f"{_f(gate['before'])} to {_f(gate['after'])} (NRMSE, all DOFs)"
+                f"{number(gate['before'])} to {number(gate['after'])} (NRMSE, all DOFs)"
             )
         elif dof:
             cut = (
                 f"; with it the {DOF_WORD[dof]} {name} error on held-out data "
                 f"{'fell' if gains[dof][1] < gains[dof][0] else 'went'} from "
-                f"{_f(gains[dof][0])} to {_f(gains[dof][1])} (NRMSE)"
+                f"{number(gains[dof][0])} to {number(gains[dof][1])} (NRMSE)"
             )
         else:
             cut = ""
@@ -219,8 +213,8 @@ def _verdict(result: dict, name: str, before: dict, after: dict) -> list[str]:
             f"{name} error because " + " and ".join(diverged) + "."
         )
     lines.append(
-        f"Total held-out {name} NRMSE: {_f(before.get('total'))} before, "
-        f"{_f(after.get('total'))} after ({', '.join(result['added'])} added)."
+        f"Total held-out {name} NRMSE: {number(before.get('total'))} before, "
+        f"{number(after.get('total'))} after ({', '.join(result['added'])} added)."
     )
     return lines
 
@@ -242,10 +236,10 @@ def candidate_rows(candidates: list[dict], top: int = 15) -> list[list[str]]:
         rows.append(
             [
                 c["effect"],
-                _f(c["params"]["value"], 4),
-                _f(se, 2),
+                number(c["params"]["value"], 4),
+                number(se, 2),
                 unit(c["effect"]),
-                _f(c["significance"], 2),
+                number(c["significance"], 2),
                 f"{100 * c['improvement']:.1f} %",
                 c["reason"],
             ]
@@ -270,8 +264,11 @@ def error_rows(result: dict) -> tuple[list[str], list[list[str]]]:
             gone = result[when].get("diverged", {}) if key == "free_run_nrmse" else {}
             rows.append(
                 [f"{label}, {when}"]
-                + ["diverged" if d in gone else _f(vals.get(d)) if d in vals else "" for d in DOFS]
-                + ["diverged" if gone else _f(vals.get("total"))]
+                + [
+                    "diverged" if d in gone else number(vals.get(d)) if d in vals else ""
+                    for d in DOFS
+                ]
+                + ["diverged" if gone else number(vals.get("total"))]
             )
     return head, rows
 
@@ -299,7 +296,7 @@ def markdown(result: dict) -> str:
     lines += [
         "Significance: F-test of the refit against the model without the effect, degrees of "
         "freedom shrunk by the residual's autocorrelation time "
-        f"({_f(result['settings']['autocorrelation_time'])} samples), Bonferroni-corrected "
+        f"({number(result['settings']['autocorrelation_time'])} samples), Bonferroni-corrected "
         f"(α = {result['settings']['alpha']}); a candidate must also be a significant parameter "
         "(Caccia's percentile error ≤ 51 %), lower the held-out force residual and lower the "
         f"held-out {_gate_text(result)} error.",
@@ -392,7 +389,7 @@ def html_page(result: dict, figures: dict[str, str]) -> str:
 {_opinion_html(result)}
 <p>Significance is the p-value of an F-test of the refit against the model without the effect,
 its degrees of freedom shrunk by the residual's autocorrelation time
-({_f(result["settings"]["autocorrelation_time"])} samples) and Bonferroni-corrected
+({number(result["settings"]["autocorrelation_time"])} samples) and Bonferroni-corrected
 (α = {result["settings"]["alpha"]}). A candidate is added only if its parameter is significant
 (Caccia's percentile error ≤ 51 %), it lowers the held-out force residual, and it lowers the
 held-out {_gate_text(result)} error by at least

@@ -8,7 +8,6 @@ vocabulary."""
 from __future__ import annotations
 
 import html
-import math
 from typing import Any
 
 import numpy as np
@@ -17,6 +16,7 @@ import pandas as pd
 from nnid.datasets.log import TAU, VELOCITY
 from nnid.datasets.preprocess import experiments
 from nnid.physics.dofs import DOFS, FORCES
+from nnid.reports.cells import number, score, score_cell
 from nnid.reports.figures import (
     FORCE_UNITS,
     IMAGES_CHECK,
@@ -39,12 +39,6 @@ ERROR_KEYS = (
 )
 
 
-def _fmt(x, digits: int = 5) -> str:
-    if x is None or (isinstance(x, float) and not math.isfinite(x)):
-        return "-"
-    return f"{x:.{digits}g}"
-
-
 def _rel(value, ref) -> str:
     if value is None or ref in (None, 0):
         return "-"
@@ -63,18 +57,18 @@ def _params_table(metrics: dict) -> tuple[list[str], list[list[str]]]:
         head += [ref.get("label", "reference"), "estimate / reference − 1"]
     rows = []
     for name, p in params.items():
-        row = [f"`{name}`", _fmt(p["value"]), _fmt(p["stderr"], 2)]
+        row = [f"`{name}`", number(p["value"], 5), number(p["stderr"], 2)]
         if physical:
             pe = p.get("percentile_error")
             row += [
-                f"{_fmt(pe, 3)} %" if pe is not None else "-",
+                f"{number(pe, 3)} %" if pe is not None else "-",
                 "yes" if p.get("significant") else "no",
-                _fmt(p.get("vehicle_file")),
+                number(p.get("vehicle_file"), 5),
                 _rel(p["value"], p.get("vehicle_file")),
             ]
         if ref_values:
             r = ref_values.get(name)
-            row += [_fmt(r), _rel(p["value"], r)]
+            row += [number(r, 5), _rel(p["value"], r)]
         rows.append(row)
     return head, rows
 
@@ -107,12 +101,10 @@ def train_markdown(metrics: dict) -> str:
         for key, label in ERROR_KEYS:
             if key in scores:
                 vals = scores[key]
-                cells = ", ".join(
-                    f"{k} {_fmt(v, 3) if v is not None else 'diverged'}" for k, v in vals.items()
-                )
+                cells = ", ".join(f"{k} {score(v)}" for k, v in vals.items())
                 lines.append(f"- {label}: {cells}")
         if scores.get("J") is not None:
-            lines.append(f"- J = {_fmt(scores['J'], 4)}, J/J0 = {_fmt(scores['J_over_J0'], 3)}")
+            lines.append(f"- J = {number(scores['J'], 4)}, J/J0 = {number(scores['J_over_J0'], 3)}")
         for key in ("diverged", "k_step_diverged", "one_step_diverged"):
             if scores.get(key):
                 when = ", ".join(f"{d} at t = {t:.4g} s" for d, t in scores[key].items())
@@ -159,7 +151,7 @@ def train_markdown(metrics: dict) -> str:
     if nd:
         lines += ["", f"## Prime-system I (U = {nd['speed']} m/s, L = {nd['length']} m)", ""]
         lines += [
-            f"- `{k}` = {_fmt(v['value'])} ± {_fmt(v['stderr'], 2)}"
+            f"- `{k}` = {number(v['value'], 5)} ± {number(v['stderr'], 2)}"
             for k, v in nd["params"].items()
         ]
     lines += ["", f"Fitted and scored in {metrics['seconds']:.1f} s."]
@@ -186,12 +178,12 @@ def _baseline(metrics: dict) -> tuple[list[str], list[list[str]]]:
                     part,
                     name,
                     *(
-                        _fmt(scores.get(k, {}).get("total"), 3)
+                        number(scores.get(k, {}).get("total"), 3)
                         if scores.get(k, {}).get("total") is not None
                         else ("diverged" if k in scores else "-")
                         for k in ("free_run_nrmse", "k_step_nrmse", "one_step_nrmse")
                     ),
-                    _fmt(free / ref, 3) if scores is metrics[part] and free and ref else "",
+                    number(free / ref, 3) if scores is metrics[part] and free and ref else "",
                 ]
             )
     return head, rows
@@ -223,10 +215,10 @@ def monitor_sentence(detect: dict) -> str:
     target = detect["settings"].get("false_alarm_per_hour")
     # each statistic is calibrated on its own: one may fall back where the other was fitted
     stats = ", ".join(
-        f"{k.upper()} {_fmt(th[k]['value'], 3)} ({th[k]['method']})" for k in ("ewma", "cusum")
+        f"{k.upper()} {number(th[k]['value'], 3)} ({th[k]['method']})" for k in ("ewma", "cusum")
     )
     text = (
-        f"thresholds {stats}, set for {_fmt(target, 3)} false alarms per hour on "
+        f"thresholds {stats}, set for {number(target, 3)} false alarms per hour on "
         f"{60 * cal['hours']:.1f} min of healthy validation data"
     )
     test = detect.get("test_false_alarms")
@@ -235,8 +227,8 @@ def monitor_sentence(detect: dict) -> str:
     lo, hi = test["interval"]
     return (
         text + f"; on the healthy test part ({60 * test['hours']:.1f} min): {test['alarms']} "
-        f"alarm(s), {_fmt(test['rate_per_hour'], 3)} per hour "
-        f"({100 * test['confidence']:.0f} % interval {_fmt(lo, 3)}-{_fmt(hi, 3)})"
+        f"alarm(s), {number(test['rate_per_hour'], 3)} per hour "
+        f"({100 * test['confidence']:.0f} % interval {number(lo, 3)}-{number(hi, 3)})"
     )
 
 
@@ -250,7 +242,7 @@ def _members(metrics: dict) -> tuple[list[str], list[list[str]]]:
         cells = []
         for p in parts:
             vals = member[p]["free_run_nrmse"]
-            cells += [_fmt(vals.get(c), 3) if vals.get(c) is not None else "diverged" for c in cols]
+            cells += [score_cell(vals, c) for c in cols]
         rows.append([str(member["seed"]), *cells])
     return head, rows
 
@@ -269,7 +261,7 @@ def _terms(metrics: dict) -> tuple[list[str], list[list[str]], str]:
     expl = metrics["correction"]["explanation"]
     head = ["term", "meaning", "value", "share of the learned force"]
     rows = [
-        [f"`{t['effect']}`", t["meaning"], _fmt(t["value"], 3), f"{100 * t['share']:.1f} %"]
+        [f"`{t['effect']}`", t["meaning"], number(t["value"], 3), f"{100 * t['share']:.1f} %"]
         for t in expl["terms"]
     ] or [["-", "no term explains a share of the learned force on its own", "-", "-"]]
     return head, rows, f"{100 * expl['explained']:.0f} %"
@@ -280,7 +272,7 @@ def _shares(metrics: dict) -> tuple[list[str], list[list[str]]]:
     dofs = [d for d in DOFS if any(d in v for v in shares.values())]
     head = ["split", *dofs, "max"]
     rows = [
-        [part, *(_fmt(v.get(d), 2) for d in dofs), _fmt(v.get("max"), 2)]
+        [part, *(number(v.get(d), 2) for d in dofs), number(v.get("max"), 2)]
         for part, v in shares.items()
     ]
     return head, rows
@@ -397,12 +389,6 @@ def _errors(metrics: dict) -> tuple[list[str], list[list[str]]]:
                 continue
             rows.append([part, label, *_dof_cells(scores[key])])
     return head, rows
-
-
-def score_cell(vals: dict, key: str) -> str:
-    """One score of a per-DOF dict: the number, "diverged" (a key scored None), or "-" where
-    the key was not scored (a DOF the model does not predict or the data does not excite)."""
-    return _fmt(vals[key], 3) if vals.get(key) is not None else ("diverged" if key in vals else "-")
 
 
 def _dof_cells(vals: dict) -> list[str]:

@@ -1,0 +1,45 @@
+"""The report cells every report shares (``nnid.reports.cells``): a missing number is "-", a
+voided score "diverged", an unscored column "-", and a count is never rounded."""
+
+import math
+
+import numpy as np
+import pytest
+
+from nnid.reports.cells import number, score, score_cell
+from nnid.reports.train_report import _members
+
+
+@pytest.mark.parametrize("missing", [None, math.nan, math.inf, -math.inf, np.float32("nan")])
+def test_missing_number_is_a_dash(missing):
+    assert number(missing) == "-"
+
+
+def test_numbers_keep_their_significant_figures_and_counts_stay_whole():
+    assert number(0.0123456) == "0.0123"
+    assert number(0.0123456, 5) == "0.012346"
+    assert number(np.float32(2.5)) == "2.5"
+    # a seed or an alarm count written as 1.23e+04 would read as a measured value
+    assert number(12345) == "12345" and number(np.int64(7)) == "7"
+    assert number(True) == "True" and number("fossen") == "fossen"
+
+
+def test_a_voided_score_is_diverged_and_an_unscored_column_a_dash():
+    assert score(None) == "diverged" and score(0.04567) == "0.0457"
+    vals = {"u": 0.1, "v": None}
+    assert [score_cell(vals, k) for k in ("u", "v", "w")] == ["0.1", "diverged", "-"]
+
+
+def test_members_table_says_dash_for_a_column_a_split_does_not_score():
+    # the test run does not excite w: its w is not scored, which is not a divergence
+    member = {
+        "seed": 3,
+        "validation": {"free_run_nrmse": {"u": 0.05, "w": 0.2, "total": 0.125}},
+        "test": {"free_run_nrmse": {"u": 0.07, "total": None}},
+    }
+    head, rows = _members({"members": [member]})
+    cells = dict(zip(head, rows[0], strict=True))
+    assert cells["seed"] == "3"
+    assert cells["validation w"] == "0.2" and cells["test u"] == "0.07"
+    assert cells["test w"] == "-"
+    assert cells["test total"] == "diverged"
