@@ -340,3 +340,21 @@ def test_cli_train_detect_and_follow(vehicle, tmp_path, chromium):
     nope = str(tmp_path / "nope.csv")
     res = runner.invoke(app, ["detect", "--model", str(model), "--data", nope, "--out", "y"])
     assert res.exit_code == 2 and "nope.csv" in res.output
+
+
+def test_a_log_at_another_sampling_rate_is_refused(vehicle, monitor, tmp_path):
+    # the residual is a difference quotient and the EWMA gain depends on dt: at twice the
+    # calibration rate a healthy log raised 30 alarms per hour against a target of 0.01
+    healthy = simulate_faults(vehicle, 30, seed=52, experiment="t52")
+    calibrated = monitor.calibration_["dt"]
+    assert np.median(np.diff(healthy["t"])) == pytest.approx(calibrated)
+    assert monitor.run(healthy).t.size == len(healthy)  # the calibration rate is accepted
+    coarse = healthy.iloc[::2].reset_index(drop=True)
+    with pytest.raises(NnidInputError, match=f"calibrated at {calibrated:.4g} s") as err:
+        monitor.run(coarse)
+    assert err.value.field == "t" and f"every {2 * calibrated:.4g} s" in str(err.value)
+    path = tmp_path / "coarse.csv"
+    coarse.to_csv(path, index=False)
+    with pytest.raises(NnidInputError, match="calibrated at") as err:
+        follow_csv(monitor, str(path), 10.0, lambda line: None)
+    assert err.value.source == str(path)

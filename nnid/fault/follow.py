@@ -22,6 +22,9 @@ from nnid.fault.detect import DetectResult, alarm_record
 from nnid.fault.monitor import ResidualMonitor, Trace, input_columns
 from nnid.validation import shown
 
+#: the rows whose median interval is checked against the monitor's calibration rate
+RATE_ROWS = 11
+
 
 def _rows(source: str, idle_s: float):
     """Rows of a CSV as lists of strings; a file is followed until it stops growing for
@@ -151,6 +154,11 @@ def follow_csv(
                 row=n,
             )
         last_t = t
+        if n == RATE_ROWS:  # the rate the calibration holds at, checked once on the first rows
+            try:
+                monitor.check_rate(np.asarray(ts))
+            except NnidInputError as exc:
+                raise exc.with_source(where) from None
         code = stream.update(t, x, u)
         ts.append(t)
         xs.append(x.copy())

@@ -33,6 +33,8 @@ from nnid.physics.thrusters import Actuation
 from nnid.serialization import read_json, write_json
 
 MONITOR_FILE = "monitor.json"
+#: the relative difference of sample interval a monitored log may have from the healthy record
+RATE_TOLERANCE = 0.1
 TRACE_COLUMNS = [
     *(f"r_{f}" for f in FORCES),
     *(f"z_{f}" for f in FORCES),
@@ -322,7 +324,23 @@ class ResidualMonitor(BaseEstimator):
         """The monitor over a whole log (each experiment from a fresh state)."""
         check_is_fitted(self, "thresholds_", msg=UNCALIBRATED)
         data = monitor_inputs(log, self.plant_)
+        self.check_rate(data["t"])
         return self._pass(data, self.mu_, self.whiten_, self.s_inv_, self.threshold_values)
+
+    def check_rate(self, t: np.ndarray) -> None:
+        """Refuse a log sampled at another rate than the healthy record: the residual is a
+        difference quotient (its noise grows as 1/dt) and the EWMA's gain depends on dt, so the
+        whitening and both thresholds hold at the calibration rate only (a healthy log at twice
+        the rate raised 30 alarms per hour against a target of 0.01)."""
+        calibrated = self.calibration_.get("dt")
+        dt = float(np.median(np.diff(t))) if len(t) > 1 else math.nan
+        if calibrated and not abs(dt / calibrated - 1) <= RATE_TOLERANCE:
+            raise NnidInputError(
+                f"is sampled every {dt:.4g} s; the monitor was calibrated at {calibrated:.4g} s, "
+                "and its whitening and thresholds hold at that rate only (resample the log to "
+                "the calibration rate, or calibrate on a healthy log at this one)",
+                field="t",
+            )
 
     def stream(self) -> Stream:
         """A one-sample-at-a-time monitor with this calibration."""
