@@ -113,6 +113,20 @@ def test_a_member_without_a_seed_is_refused(log):
         EnsembleModel(ParametricModel(load_vehicle("seamor"))).fit(log)
 
 
+def test_a_member_whose_fit_ignores_its_seed_is_refused(log):
+    # STLSQ is deterministic: five seeds would be one model repeated, its terms counted five
+    # times and its spread zero; library ensembling draws its candidates with the seed
+    from nnid.models.sindy import SindyDamping
+    from nnid.vehicle import load_vehicle
+
+    vehicle = load_vehicle("seamor")
+    with pytest.raises(NnidInputError, match="does not depend on its seed") as err:
+        EnsembleModel(SindyDamping(vehicle, optimizer="stlsq")).fit(log)
+    assert err.value.field == "model"
+    drawn = EnsembleModel(SindyDamping(vehicle, optimizer="ensemble"), seeds=(0, 1))
+    assert drawn._check_settings() == [0, 1]
+
+
 def _with_seeds(text: str, seeds: str) -> str:
     """The config text with its ensemble's seeds line replaced; a config that lost the line
     fails here instead of leaving the test to run on the shipped seeds."""

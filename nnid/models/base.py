@@ -171,6 +171,9 @@ class NnidModel(BaseEstimator, ABC):
     #: what ``fit`` does with a validation log ("early stopping", "model selection"), if
     #: anything: scores on that log are then not independent of the fit
     validation_use: ClassVar[str | None] = None
+    #: whether the fit draws on ``seed`` with these settings: an ensemble of seeds of a fit
+    #: that does not is one model repeated, its parameters counted once per member
+    seeded: ClassVar[bool] = True
 
     @classmethod
     def from_config(cls, spec, vehicle=None) -> NnidModel:

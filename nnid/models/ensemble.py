@@ -77,6 +77,13 @@ class EnsembleModel(NnidModel):
                 "(narx, state_space, hybrid, sindy)",
                 field="model",
             )
+        if not self.model.seeded:
+            raise NnidInputError(
+                f"this {self.model.kind} model's fit does not depend on its seed, so every "
+                'member would be the same model (for sindy: optimizer = "ensemble", which '
+                "draws its candidate terms at random)",
+                field="model",
+            )
         if self.combine not in COMBINE:
             raise NnidInputError("combine is 'mean' or 'median'", field="combine")
         seeds = [int(s) for s in self.seeds]

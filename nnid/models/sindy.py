@@ -94,6 +94,11 @@ class SindyDamping(DampingModel):
         self.seed = seed
 
     @property
+    def seeded(self) -> bool:  # type: ignore[override]
+        """Only library ensembling draws at random; STLSQ and SR3 are deterministic."""
+        return self.optimizer == "ensemble"
+
+    @property
     def validation_use(self) -> str | None:  # type: ignore[override]
         """The threshold is chosen on the validation log (with ``selection="validation"``)."""
         return "model selection" if self.selection == "validation" else None
