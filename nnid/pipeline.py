@@ -35,15 +35,8 @@ from nnid.evaluation.prediction import Replay
 from nnid.models.base import encode_setting
 from nnid.reports.stops import training_stages
 from nnid.trainers.history import Progress, silent, staged
+from nnid.validation import resolve
 from nnid.warning_messages import warning_messages
-
-
-def resolve(base: Path, path: str) -> Path:
-    """A path as given when it exists or is absolute, else relative to ``base`` (the config's
-    folder)."""
-    p = Path(path)
-    return p if p.is_absolute() or p.exists() else base / p
-
 
 # -- inputs --------------------------------------------------------------------------------------
 

@@ -43,6 +43,13 @@ def repeated(names: list[str]) -> list[str]:
     return sorted({n for n in names if names.count(n) > 1})
 
 
+def resolve(base: Path, path: str) -> Path:
+    """A path as given when it exists or is absolute, else relative to ``base`` (the config's
+    folder)."""
+    p = Path(path)
+    return p if p.is_absolute() or p.exists() else base / p
+
+
 def read_toml(path: str | Path) -> dict[str, Any]:
     """Parse a TOML file; a missing or malformed file is an NnidInputError naming it."""
     try:

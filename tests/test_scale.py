@@ -176,6 +176,28 @@ def test_manifest_ids_and_pairing(fleet, tmp_path) -> None:
         (fleet / "dive0.csv").read_text().replace("0.1", "0.2", 1)
     )
     assert task_id(copy) != copy.id
+    # a sweep's trial names no log: the one its config names is hashed, and the vehicle that
+    # config names, and what a reader config it names names in turn
+    from nnid.scale.manifest import Task
+
+    (tmp_path / "reader.toml").write_text('vehicle = "minirov.toml"\n')
+    (tmp_path / "cfg.toml").write_text(
+        'kind = "train"\n[data]\nlog = "renamed.csv"\ncolumns = "reader.toml"\n'
+    )
+    trial = Task("train", "", config=str(tmp_path / "cfg.toml"))
+    before = task_id(trial)
+    assert task_id(trial) == before
+    (tmp_path / "renamed.csv").write_text((fleet / "dive0.csv").read_text())
+    edited_log = task_id(trial)
+    assert edited_log != before
+    vehicle = (tmp_path / "minirov.toml").read_text()
+    (tmp_path / "minirov.toml").write_text(vehicle + "\n# edited\n")
+    assert task_id(trial) != edited_log
+    # with a log of its own the config's log is not read, and not hashed
+    own = Task("train", str(fleet / "dive0.csv"), config=str(tmp_path / "cfg.toml"))
+    unread = task_id(own)
+    (tmp_path / "renamed.csv").write_text("anything")
+    assert task_id(own) == unread
     # product and zip over two vehicles
     (tmp_path / "p.toml").write_text(
         'command = "loop"\nvehicle = ["minirov.toml", "bluerov2_heavy"]\n'

@@ -11,8 +11,9 @@ A manifest is TOML, paths relative to its own folder::
 
 A task is one run of the command on one log with one vehicle, config (and, for ``detect``, one
 detection model). Its id is stable: the log's stem and a hash of the *contents* of every input
-(log, vehicle file, config, reader config, detection model), the command, its options and
-nnid's version, so renaming a file keeps the result and editing one re-runs it.
+(log, vehicle file, config, reader config, detection model, and the files a config names:
+:func:`named_inputs`), the command, its options and nnid's version, so editing any of them
+re-runs the task.
 """
 
 from __future__ import annotations
@@ -29,7 +30,7 @@ from typing import Any, Literal
 from pydantic import Field, ValidationInfo, field_validator
 
 from nnid.errors import NnidInputError
-from nnid.validation import StrictModel, read_toml, validated
+from nnid.validation import StrictModel, read_toml, resolve, validated
 
 COMMANDS = ("train", "loop", "detect", "compare")
 
@@ -130,6 +131,44 @@ def _digest(path: str | None, h) -> None:
                 h.update(block)
 
 
+#: the keys whose string value names another input (a config's vehicle and data files, a
+#: reader config's vehicle and root): what they name joins the task's hash
+NAMING_KEYS = frozenset({"vehicle", "log", "columns", "simulate", "campaign", "root"})
+#: the keys naming the data a task's own log replaces (read only when the task gives none)
+DATA_KEYS = frozenset({"log", "simulate", "campaign", "root"})
+
+
+def named_inputs(
+    path: str | None, skip: frozenset[str] = frozenset(), seen: set[Path] | None = None
+) -> list[Path]:
+    """The files and folders a TOML input names under :data:`NAMING_KEYS` but ``skip``
+    (relative to its folder, as the run reads them), and those they name in turn. A file that
+    does not parse names nothing here: the run itself says what is wrong with it."""
+    seen = set() if seen is None else seen
+    p = Path(path) if path else None
+    if p is None or p.suffix != ".toml" or not p.is_file() or p.resolve() in seen:
+        return []
+    seen.add(p.resolve())
+    try:
+        doc = read_toml(p)
+    except NnidInputError:
+        return []
+    found: list[Path] = []
+
+    def walk(node: dict) -> None:
+        for key, value in node.items():
+            if isinstance(value, dict):
+                walk(value)
+            elif key in NAMING_KEYS - skip and isinstance(value, str):
+                target = resolve(p.parent, value)
+                if target.exists():
+                    found.append(target)
+                    found.extend(named_inputs(str(target), skip, seen))
+
+    walk(doc)
+    return found
+
+
 def task_id(task: Task) -> str:
     """``<log stem>-<12 hex>``: the hash of the inputs' contents, the settings and nnid's
     version (see the module docstring)."""
@@ -145,6 +184,12 @@ def task_id(task: Task) -> str:
     h.update(json.dumps(settings, sort_keys=True, default=str).encode())
     for path in (task.data, task.vehicle, task.config, task.model, task.columns):
         _digest(path, h)
+    # what the config names (its log, vehicle, simulation): editing one re-runs the task too;
+    # a task's own log replaces the config's data, which is then neither read nor hashed
+    skip = DATA_KEYS if task.data else frozenset()
+    for config in (task.config, task.vehicle, task.columns):
+        for named in named_inputs(config, skip):
+            _digest(str(named), h)
     named = task.data or task.config or "task"  # a sweep's trial may use its config's data
     stem = re.sub(r"[^A-Za-z0-9_.-]+", "_", Path(named).stem)[:40] or "task"
     return f"{stem}-{h.hexdigest()[:12]}"
