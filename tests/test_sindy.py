@@ -128,3 +128,59 @@ def test_validation_too_short_for_the_filter_is_named(vt690):
     # the same run with a filter that settles within it (1.5 s) is selected on
     fitted = SindyDamping(vehicle, filter_lambda=2.0, thresholds=[0.1]).fit(train, short)
     assert np.isfinite(fitted.selected_["validation_J"])
+
+
+@pytest.fixture(scope="module")
+def surge_sway():
+    """Weiss's surge and sway runs (motion-capture noise) to fit, the surge-sway run to select
+    on: heave, roll and pitch are not excited, so their forces are noise to the library."""
+    cfg = load_config(ROOT / "configs/seamor_sequence.toml")
+    log = simulate_config(cfg, load_vehicle("seamor"))
+    log = log[log["experiment"].isin(["surge", "sway", "surge-sway"])].reset_index(drop=True)
+    return log[log["experiment"] != "surge-sway"], log[log["experiment"] == "surge-sway"]
+
+
+def test_unexcited_forces_keep_no_terms_and_cannot_cost_the_excited_ones(surge_sway):
+    """Z, K and M are noise here: on the path their best validation NMSE is 12-90, worse than
+    no model (1), through cancelling coefficients no threshold removed. Their mean set the
+    per-output budget, and X and Y (NMSE 0.006 on the path) were selected at 1.0, no terms.
+    The zero row is every output's candidate: the unexplained ones keep nothing and say so."""
+    from nnid.trainers.sindy import SindyWarning
+
+    vehicle = load_vehicle("seamor")
+    with pytest.warns(SindyWarning, match=r"explains nothing of Z .*, K .*, M ") as caught:
+        model = SindyDamping(vehicle).fit(*surge_sway)
+    assert "X (" not in str(caught[0].message) and "Y (" not in str(caught[0].message)
+    nmse_v = model.selected_["validation_nmse"]
+    assert nmse_v["X"] < 0.01 and nmse_v["Y"] < 0.01
+    assert nmse_v["Z"] == nmse_v["K"] == nmse_v["M"] == 1.0
+    assert not any(key[0] in "ZKM" for key in model.coefficients_)
+    # the excited forces' quadratic damping, with a standard error that covers the truth
+    truth = vehicle.damping.coefficients
+    for key in ("X:u*abs(u)", "Y:v*abs(v)"):
+        p = model.params[key]
+        assert p["stderr"] is not None and 0 < p["stderr"] < 0.01 * abs(p["value"])
+        assert abs(p["value"] - truth[key]) < 4 * p["stderr"]
+
+
+def test_a_shared_threshold_that_leaves_forces_unexplained_is_said(surge_sway):
+    from nnid.trainers.sindy import SindyWarning
+
+    with pytest.warns(SindyWarning, match="explains nothing of X .*shared with the other"):
+        SindyDamping(load_vehicle("seamor"), per_output=False).fit(*surge_sway)
+
+
+def test_collinear_selected_terms_have_no_standard_error(vt690):
+    """On the cruise runs u > 0 throughout: u*u, u*abs(u) and u*u*(eta-1) (u_c = 0) are one
+    column, and SINDy splits their sum among them. Each is then not determined on its own: it
+    is said, and its standard error is None, not the pseudo-inverse's precise-looking one."""
+    from nnid.trainers.least_squares import ExcitationWarning
+
+    vehicle, train, val = vt690
+    with pytest.warns(ExcitationWarning, match=r"collinear regressors\): X:u\*u, X:u\*abs\(u\)"):
+        model = SindyDamping(vehicle).fit(train, val)
+    params = model.params
+    tied = ("X:u*u", "X:u*abs(u)", "X:u*u*(eta-1)")
+    assert all(params[k]["stderr"] is None for k in tied)
+    alone = [k for k, p in params.items() if k.startswith("X:") and k not in tied]
+    assert alone and all(params[k]["stderr"] is not None for k in alone)

@@ -39,6 +39,7 @@ from nnid.physics.dofs import DOFS, FORCES
 from nnid.physics.integrate import rk4
 from nnid.trainers.history import Progress
 from nnid.trainers.sindy import MODES, BasisFeatureLibrary, SparsePath, nmse
+from nnid.trainers.synthesis import masked_least_squares
 
 ACCELERATION_OUTPUTS = tuple(f"d{d}" for d in DOFS)
 
@@ -173,6 +174,7 @@ class SindyDamping(DampingModel):
             self.alpha,
             self.per_output,
             self.seed,
+            self.output_names,
         ).fit(theta[ok], y[ok], theta_v[ok_v], y_v[ok_v])
         progress(1, 1, f"SINDy path of {len(path.path_)} thresholds")
         self.path_ = path.path_
@@ -189,15 +191,20 @@ class SindyDamping(DampingModel):
             for i, out in enumerate(self.output_names)
             for j in np.flatnonzero(path.coef_[i])
         }
-        self._set_model(terms, path.coef_)
+        # the debiased coefficients are the least squares of each output on its selected terms:
+        # that regression's standard errors (widened for correlated residuals), with its
+        # warnings when the support is collinear or a term unexcited. They are conditional on
+        # the support and leave out the uncertainty of the selection itself.
+        support = masked_least_squares(theta[ok], y[ok], path.coef_ != 0, names, self.output_names)
+        self._set_model(terms, path.coef_, support.stderr)
 
-    def _set_model(self, terms: list[str], coef: np.ndarray) -> None:
+    def _set_model(self, terms: list[str], coef: np.ndarray, stderr: np.ndarray) -> None:
         if self.mode == "residual":
-            self._set_damping(terms, coef, np.full(coef.shape, np.nan))
+            self._set_damping(terms, coef, stderr)
             return
         self.terms_ = list(terms)
         self.coef_ = np.asarray(coef, dtype=np.float64)
-        self.stderr_ = np.full(self.coef_.shape, np.nan)
+        self.stderr_ = np.asarray(stderr, dtype=np.float64)
         self.dofs_ = DOFS
         self.outputs_ = list(VELOCITY)
         self.targets_ = list(VELOCITY)
@@ -217,7 +224,15 @@ class SindyDamping(DampingModel):
     def _params(self) -> dict[str, dict[str, float | None]]:
         if self.mode == "residual":
             return super()._params()
-        return {k: {"value": v, "stderr": None} for k, v in self.coefficients_.items()}
+        names = self.feature_names_
+        out: dict[str, dict[str, float | None]] = {}
+        for i, j in zip(*np.nonzero(self.coef_), strict=True):
+            s = self.stderr_[i, j]
+            out[f"{self.output_names[i]}:{names[j]}"] = {
+                "value": float(self.coef_[i, j]),
+                "stderr": float(s) if np.isfinite(s) else None,
+            }
+        return out
 
     def predict_arrays(self, x: np.ndarray) -> np.ndarray:
         """The model's output (τ_D or ν̇) ``[N, 6]`` for library inputs ``x`` ``[N, 6 (+6)]``."""
@@ -279,7 +294,8 @@ class SindyDamping(DampingModel):
 
     def _restore(self, state: dict, tensors: dict) -> None:
         coef = np.array(state["coef"], dtype=float).reshape(6, -1)
-        self._set_model(list(state["terms"]), coef)
+        stderr = np.array(state.get("stderr", np.full(coef.size, np.nan)), dtype=float)
+        self._set_model(list(state["terms"]), coef, stderr.reshape(coef.shape))
         self.coefficients_ = dict(state["coefficients"])
         self.path_ = list(state["path"])
         self.selected_ = dict(state["selected"])

@@ -42,9 +42,15 @@ from nnid.physics.damping_library import BasisLibrary, evaluate_terms
 from nnid.physics.dofs import DOFS
 
 OPTIMIZERS = ("stlsq", "sr3", "ensemble")
+#: the validation NMSE from which an output counts as unexplained: that of predicting zero
+UNEXPLAINED = 1.0
 SELECTIONS = ("validation", "aic", "bic")
 MODES = ("residual", "control")
 _EIG_FLOOR = 1e-13  # relative eigenvalue floor of the compressed Gram
+
+
+class SindyWarning(UserWarning):
+    """A selected SINDy model that does not explain an output on held-out data."""
 
 
 class BasisFeatureLibrary(BaseFeatureLibrary):
@@ -195,8 +201,10 @@ class SparsePath(BaseEstimator):
     ``[m, K]`` its coefficients. ``selection`` is "validation" (the sparsest model
     whose validation J is within ``tolerance`` of the best; with ``per_output`` each output
     picks its own row, greedily sparsest while the mean validation J stays within ``tolerance``
-    of the best, so ``selected_`` may mix thresholds), "aic" or "bic". J is the mean over
-    outputs of the normalised MSE.
+    of the best, so ``selected_`` may mix thresholds; the zero row is every output's candidate
+    too), "aic" or "bic". J is the mean over outputs of the normalised MSE. Outputs the
+    selected model does not explain on the validation data (NMSE ≥ 1, that of no model) are
+    named in a :class:`SindyWarning`; ``output_names`` names them.
     """
 
     def __init__(
@@ -208,6 +216,7 @@ class SparsePath(BaseEstimator):
         alpha: float = 1e-8,
         per_output: bool = True,
         seed: int = 0,
+        output_names: Sequence[str] | None = None,
     ) -> None:
         self.optimizer = optimizer
         self.thresholds = thresholds
@@ -216,6 +225,7 @@ class SparsePath(BaseEstimator):
         self.alpha = alpha
         self.per_output = per_output
         self.seed = seed
+        self.output_names = output_names
 
     def fit(
         self,
@@ -278,7 +288,13 @@ class SparsePath(BaseEstimator):
         self.selected_ = dict(path[best])
         self.coef_ = coefs[best]
         val_nmse = val_out[best] if theta_val is not None else None
+        path_best = np.nanmin(np.array(val_out), axis=0) if theta_val is not None else None
         if self.per_output and self.selection == "validation":
+            # the zero row is every output's candidate too: a regression that predicts held-out
+            # data worse than no model at all must not keep its terms because the threshold
+            # path never reached zero (cancelling coefficients of noise outgrow any threshold)
+            coefs.append(np.zeros_like(coefs[0]))
+            val_out.append(nmse(y_val, np.zeros_like(y_val)))
             self.coef_ = self._select_per_output(np.array(coefs), np.array(val_out))
             val_nmse = nmse(y_val, theta_val @ self.coef_.T)
             self.selected_ = {
@@ -290,7 +306,32 @@ class SparsePath(BaseEstimator):
         if val_nmse is not None:
             # the mean J can hide one output the library cannot explain: each output's own
             self.selected_["validation_nmse"] = [float(v) for v in val_nmse]
+            self._warn_unexplained(val_nmse, path_best)
         return self
+
+    def _warn_unexplained(self, selected: np.ndarray, best: np.ndarray) -> None:
+        """Say which outputs the selected model does not explain on the validation data
+        (normalised MSE ≥ 1, that of predicting zero), with the best each reached on the path."""
+        names = self.output_names or [f"output {i}" for i in range(len(best))]
+        poor = [
+            f"{names[i]} (validation NMSE {selected[i]:.3g}, best on the path {best[i]:.3g})"
+            for i in np.flatnonzero(selected >= UNEXPLAINED)
+        ]
+        if poor:
+            warnings.warn(
+                "the selected SINDy model explains nothing of "
+                + ", ".join(poor)
+                + " on the validation data (an NMSE of 1 is that of no model): "
+                + (
+                    "those outputs keep no terms; the training data do not excite what they "
+                    "need, or the library lacks it"
+                    if self.per_output and self.selection == "validation"
+                    else "their terms are kept by a threshold or criterion shared with the "
+                    "other outputs (per_output=True selects each output on its own)"
+                ),
+                SindyWarning,
+                stacklevel=3,
+            )
 
     def _select_per_output(self, coefs: np.ndarray, val: np.ndarray) -> np.ndarray:
         """Rows per output (the outputs are separate regressions; J is their mean): start from

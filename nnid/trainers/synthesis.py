@@ -98,12 +98,13 @@ def masked_least_squares(
     tau_bar: np.ndarray,
     mask: np.ndarray,
     terms: Sequence[str] | None = None,
+    outputs: Sequence[str] = FORCES,
 ) -> SynthesisFit:
     """Least squares of the synthesis model σ̃ = Ξ κ − σ̄ (eqs 4.20, 4.22), one force at a time
     (Ξ is block diagonal). ``xi`` ``[N, n_terms]``, ``tau_bar`` ``[N, 6]``, ``mask`` boolean
-    ``[6, n_terms]``; ``terms`` only names the coefficients in warnings. Standard errors come
-    from :class:`LeastSquares` (widened for the residual's autocorrelation, as smoothed
-    accelerations make neighbouring samples dependent).
+    ``[6, n_terms]``; ``terms`` and ``outputs`` only name the coefficients in warnings.
+    Standard errors come from :class:`LeastSquares` (widened for the residual's
+    autocorrelation, as smoothed accelerations make neighbouring samples dependent).
     """
     mask = np.asarray(mask, dtype=bool)
     k = np.zeros(mask.shape)
@@ -113,11 +114,18 @@ def masked_least_squares(
         cols = np.flatnonzero(mask[f])
         if cols.size == 0:
             continue
-        names = [f"{FORCES[f]}:{terms[j] if terms is not None else j}" for j in cols]
+        names = [f"{outputs[f]}:{terms[j] if terms is not None else j}" for j in cols]
         reg = Regression(xi[:, cols], tau_bar[:, f], names, ("u",), tau_bar.shape[0])
         est = solver.solve(reg)
         k[f, cols] = np.nan_to_num(est.theta)
         se[f, cols] = est.stderr
+        if est.excitation is not None and est.excitation.collinear:
+            # a term of a collinear group is not determined on its own: the pseudo-inverse's
+            # covariance leaves out the undetermined direction and its s.e. would look precise
+            tied = [
+                j for j, name in zip(cols, names, strict=True) if name in est.excitation.collinear
+            ]
+            se[f, tied] = np.nan
     return SynthesisFit(k, se, mask)
 
 
