@@ -181,9 +181,13 @@ def load_inputs(
         inputs = Inputs(*load_log(path, reader), veh)
         if physics and veh is not None:  # the inputs the vehicle reads, said against the log
             from nnid.datasets.arrays import logged_inputs
+            from nnid.datasets.preprocess import check_velocities
 
             try:
                 logged_inputs(inputs.log, veh)
+                for m in models:  # the velocities the fit needs, said against the log
+                    if m.kind in PHYSICS_KINDS and getattr(m, "dofs", None):
+                        check_velocities(inputs.log.columns, m.dofs)
             except NnidInputError as err:
                 raise err.with_source(path) from None
     elif getattr(spec, "simulate", None):

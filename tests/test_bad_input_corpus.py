@@ -167,6 +167,12 @@ def _log_cases() -> list[Case]:
 
     cases.append(Case("loop: too short for the warm-up", short, ("LOG", "warmup_s")))
 
+    def no_u(tmp, fx):  # no u and no x, y, z to derive it: read as zero it was fitted as rest
+        log = fx["demo_log"].drop(columns=["u"])
+        return _command("train", tmp, fx, data=_write_log(tmp, "no u", log))
+
+    cases.append(Case("train: a velocity neither logged nor derivable", no_u, ("LOG", "'u'")))
+
     def huge_effect(tmp, fx):  # an injected effect no vehicle survives: named, not a traceback
         path = tmp / "huge_effect.toml"
         text = (

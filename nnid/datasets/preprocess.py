@@ -188,6 +188,32 @@ def _euler_rates(angles: np.ndarray, inverse: bool = False) -> np.ndarray:
     return rate_matrix(torch.as_tensor(np.array(angles, dtype=np.float64))).numpy()
 
 
+def check_velocities(columns, dofs) -> None:
+    """Refuse a log that neither has nor can derive the velocity of one of ``dofs``
+    (:func:`derive_velocities`: u, v, w from x, y, z with the attitude, w also from z with the
+    attitude, p, q, r from the attitude). Read as zero, it would be fitted and scored as a
+    vehicle at rest in that DOF."""
+    have = set(columns)
+    angles = all(a in have for a in ANGLES)
+
+    def derivable(d: str) -> bool:
+        if d in ("p", "q", "r"):
+            return angles
+        if d == "w":
+            return angles and "z" in have
+        return angles and all(c in have for c in ("x", "y", "z"))
+
+    missing = [d for d in dofs if d not in have and not derivable(d)]
+    if missing:
+        raise NnidInputError(
+            f"the log has no {', '.join(missing)} column and its pose cannot give "
+            f"{'it' if len(missing) == 1 else 'them'} (u, v from x, y, z with phi, theta, psi; "
+            "w also from z and the attitude; p, q, r from the attitude): log the velocity, or "
+            "fit only the DOFs the log has (the model's dofs)",
+            field=missing[0],
+        )
+
+
 def derive_velocities(
     log: pd.DataFrame,
     window_s: float = 0.5,

@@ -342,8 +342,13 @@ def prepare_motion(
 ) -> pd.DataFrame:
     """The log with the velocities of ``dofs`` derived from the pose where it lacks them, and
     (``accelerations``) their accelerations, both by Savitzky-Golay; each step reported."""
-    from nnid.datasets.preprocess import derive_accelerations, derive_velocities
+    from nnid.datasets.preprocess import (
+        check_velocities,
+        derive_accelerations,
+        derive_velocities,
+    )
 
+    check_velocities(log.columns, dofs)
     if any(d not in log for d in dofs) and all(a in log for a in ANGLES):
         log = derive_velocities(log, savgol_window, savgol_order, report)
     if accelerations and any("d" + d not in log for d in dofs):
@@ -367,7 +372,9 @@ class FossenPlant(NnidModel):
     def _data(
         self, log: pd.DataFrame, accelerations: bool, report: CleaningReport | None = None
     ) -> tuple[pd.DataFrame, dict[str, np.ndarray]]:
-        dofs = getattr(self, "dofs_", DOFS)
+        # while fitting, the DOFs asked for (``dofs_`` is not set yet); those outside them may
+        # be absent from the log and are then taken as zero (e.g. an attitude-only protocol)
+        dofs = getattr(self, "dofs_", None) or getattr(self, "dofs", DOFS)
         log = prepare_motion(
             log, dofs, self.savgol_window, self.savgol_order, accelerations, report
         )
