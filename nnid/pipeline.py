@@ -299,7 +299,15 @@ def make_split(
     Motion gaps are masked in each part after the split, so they never move it
     (:func:`nnid.datasets.gaps.mask_gaps`, reported in ``report``)."""
     assignment = None
-    if s.by == "experiment" and (s.train or s.validation or s.test):
+    named = [p for p in PARTS if getattr(s, p)]
+    if named and s.by != "experiment":  # they would be ignored
+        raise NnidInputError(
+            f'names experiments for {", ".join(named)}, which only by = "experiment" uses '
+            f"(by = {s.by!r} cuts every experiment by fractions)",
+            source=source,
+            field=f"split.{named[0]}",
+        )
+    if s.by == "experiment" and named:
         if "experiment" not in log:
             raise NnidInputError(
                 "the log has no 'experiment' column to split by", source=source, field="split"

@@ -391,6 +391,25 @@ CONFIG_CASES = [
         "validation",
         ('by = "auto"', 'by = "experiment"\nvalidation = ["dive9"]'),
     ),
+    # a run on both sides: the "held-out" score would be of data the fit has seen
+    (
+        "train",
+        "an experiment trained on and validated on",
+        "split.validation",
+        ('by = "auto"', 'by = "experiment"\ntrain = ["run0", "run1"]\nvalidation = ["run1"]'),
+    ),
+    (
+        "train",
+        "an experiment validated on and tested on",
+        "split.test",
+        ('by = "auto"', 'by = "experiment"\nvalidation = ["run1"]\ntest = ["run1"]'),
+    ),
+    (
+        "train",
+        "named experiments a block split ignores",
+        "split.validation",
+        ('by = "auto"', 'by = "block"\nvalidation = ["run1"]'),
+    ),
     (
         "train",
         "every experiment held out",

@@ -68,6 +68,15 @@ def split_log(
                     f"experiments {unknown} are not in the log", field="assignment"
                 )
             chosen = {p: assignment.get(p, []) for p in PARTS}
+            for k, p in enumerate(PARTS):  # a run on both sides scores a fit on its own data
+                for q in PARTS[k + 1 :]:
+                    both = [n for n in chosen[q] if n in chosen[p]]
+                    if both:
+                        raise NnidInputError(
+                            f"experiments {both} are named for both {p} and {q}: a part "
+                            "scored on runs the fit has seen is no held-out score",
+                            field=q,
+                        )
             _check_replays(log, chosen)
         else:
             if len(names) < 2:
