@@ -87,6 +87,14 @@ def read_json(path: str | Path) -> Any:
         raise ValueError(f"'{token}' is not strict JSON")
 
     try:
-        return json.loads(Path(path).read_text(encoding="utf-8"), parse_constant=refuse)
-    except (ValueError, UnicodeDecodeError) as exc:  # JSONDecodeError is a ValueError
+        text = Path(path).read_text(encoding="utf-8")
+    except UnicodeDecodeError as exc:
         raise NnidInputError(f"is not valid JSON ({exc})", source=str(path)) from None
+    except OSError as exc:  # a folder in its place, no permission
+        raise NnidInputError(f"cannot be read ({exc.strerror})", source=str(path)) from None
+    try:
+        return json.loads(text, parse_constant=refuse)
+    except ValueError as exc:  # JSONDecodeError is a ValueError
+        raise NnidInputError(f"is not valid JSON ({exc})", source=str(path)) from None
+    except RecursionError:
+        raise NnidInputError("is not valid JSON (nested too deep)", source=str(path)) from None

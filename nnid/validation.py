@@ -71,6 +71,10 @@ def read_toml(path: str | Path) -> dict[str, Any]:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as err:
         raise NnidInputError(f"not valid TOML ({err})", source=str(path)) from None
+    except ValueError as err:  # an integer beyond Python's digit limit
+        raise NnidInputError(f"not valid TOML ({err})", source=str(path)) from None
+    except RecursionError:
+        raise NnidInputError("not valid TOML (nested too deep)", source=str(path)) from None
 
 
 def field_path(loc: tuple, data: Any) -> str:

@@ -727,3 +727,48 @@ def test_detect_follow_refuses_a_folder_and_a_reader_config(fixtures, tmp_path, 
     assert result.exit_code == 2 and "Traceback" not in result.output
     errors = [line for line in result.output.splitlines() if line.startswith("error:")]
     assert len(errors) == 1 and said in errors[0], result.output
+
+
+@pytest.mark.parametrize(
+    ("text", "said"),
+    [
+        ("warmup_s = " + "9" * 5000 + "\n", "digits"),  # beyond Python's integer-string limit
+        ("zz = " + "[" * 5000 + "]" * 5000 + "\n", "nested too deep"),
+    ],
+)
+def test_a_toml_file_python_cannot_parse_is_named(tmp_path, text, said):
+    from nnid.errors import NnidInputError
+    from nnid.validation import read_toml
+
+    path = tmp_path / "bad.toml"
+    path.write_text(text)
+    with pytest.raises(NnidInputError, match=said) as err:
+        read_toml(path)
+    assert err.value.source == str(path)
+
+
+def test_a_json_file_nested_too_deep_or_a_folder_is_named(tmp_path):
+    from nnid.errors import NnidInputError
+    from nnid.serialization import read_json
+
+    deep = tmp_path / "model.json"
+    deep.write_text("[" * 100_000 + "]" * 100_000)
+    with pytest.raises(NnidInputError, match="nested too deep") as err:
+        read_json(deep)
+    assert err.value.source == str(deep)
+    folder = tmp_path / "monitor.json"
+    folder.mkdir()
+    with pytest.raises(NnidInputError, match="cannot be read") as err:
+        read_json(folder)
+    assert err.value.source == str(folder)
+
+
+def test_detect_follow_names_a_row_the_csv_reader_refuses(tmp_path):
+    from nnid.errors import NnidInputError
+    from nnid.fault.follow import _rows
+
+    path = tmp_path / "cr.csv"
+    path.write_text("t,u\n0.0,1\n0.1,2\n0.2,\rx\n0.3,4\n")
+    with pytest.raises(NnidInputError, match="is not a CSV row") as err:
+        list(_rows(str(path), 0.0))
+    assert err.value.source == str(path) and err.value.row == 2

@@ -26,12 +26,25 @@ from nnid.validation import shown
 RATE_ROWS = 11
 
 
+def _parse(line: str, source: str, count: int) -> list[str]:
+    """One CSV line as cells; a line the CSV reader refuses (a bare carriage return inside a
+    field) is named by its data row, counted as the whole-log reader counts them."""
+    try:
+        return next(csv.reader([line]))
+    except csv.Error as exc:
+        raise NnidInputError(
+            f"is not a CSV row ({exc})",
+            source="stdin" if source == "-" else source,
+            row=count - 1 if count else None,
+        ) from None
+
+
 def _rows(source: str, idle_s: float):
     """Rows of a CSV as lists of strings; a file is followed until it stops growing for
     ``idle_s`` seconds, stdin until it closes."""
     handle = sys.stdin if source == "-" else open(source, newline="")
     try:
-        buffer, quiet = "", 0.0
+        buffer, quiet, count = "", 0.0, 0
         while True:
             line = handle.readline()
             if not line:
@@ -44,10 +57,11 @@ def _rows(source: str, idle_s: float):
             buffer += line
             if not buffer.endswith("\n"):
                 continue  # a row still being written
-            yield next(csv.reader([buffer]))
+            yield _parse(buffer, source, count)
+            count += 1
             buffer = ""
         if buffer.strip():
-            yield next(csv.reader([buffer]))
+            yield _parse(buffer, source, count)
     finally:
         if handle is not sys.stdin:
             handle.close()
