@@ -76,6 +76,16 @@ LOG_CASES: list[tuple[str, str, Callable]] = [
     ("infinite velocity", "'u'", _set("u", 41, -np.inf)),
     ("a corrupt velocity sample", "'u'", _set("u", 42, 1e30)),
     ("velocity column all empty", "'u'", lambda df, i: df.assign(u=np.nan)),
+    # one spike in the pose or a logged acceleration: as bounded as a velocity or a force
+    ("a corrupt angle sample", "'phi'", _set("phi", 43, 1e30)),
+    ("a corrupt depth sample", "'z'", _set("z", 44, -1e30)),
+    (
+        "a corrupt acceleration sample",
+        "'du'",
+        lambda df, i: df.assign(du=0.0).pipe(
+            lambda d: d.assign(du=d["du"].where(d.index != 45, 1e300))
+        ),
+    ),
     ("angle in degrees", "'psi'", lambda df, i: df.assign(psi=np.degrees(df["psi"]) + 200)),
     ("text in an angle", "'phi'", _set("phi", 50, "level")),
     (

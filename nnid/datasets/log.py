@@ -28,6 +28,12 @@ ANGLES = ("phi", "theta", "psi")
 MAX_SPEED = 100.0
 #: the largest |generalized force| a log may hold, N or N m (ten meganewtons: no thruster's)
 MAX_FORCE = 1e7
+#: the largest |acceleration| a log may hold, m/s² or rad/s² (a thousand g: corrupt data)
+MAX_ACCELERATION = 1e4
+#: the largest |position| a log may hold, m (ten times a UTM northing: corrupt data)
+MAX_DISTANCE = 1e8
+#: the largest |angle| a log may hold, rad (unwrapped: some 1600 turns)
+MAX_ANGLE = 1e4
 #: the most samples one run of a log may have: a rate or step in the wrong unit, not a run
 #: (ten million: 28 hours at 100 Hz), refused before it fills the memory
 MAX_RUN_SAMPLES = 10_000_000
@@ -84,6 +90,12 @@ def validate_log(
     # an overflow far downstream; real vehicles stay far below these bounds
     bounds = [(c, MAX_SPEED, "a speed", "m/s" if c in "uvw" else "rad/s") for c in VELOCITY]
     bounds += [(c, MAX_FORCE, "a force", "N" if c in TAU[:3] else "N m") for c in TAU]
+    bounds += [
+        (c, MAX_ACCELERATION, "an acceleration", "m/s²" if c in ACCELERATION[:3] else "rad/s²")
+        for c in ACCELERATION
+    ]
+    bounds += [(c, MAX_DISTANCE, "a position", "m") for c in POSE[:3]]
+    bounds += [(c, MAX_ANGLE, "an angle", "rad") for c in ANGLES]
     for col, bound, what, unit in bounds:
         if col in df.columns:
             size = np.abs(df[col].to_numpy(dtype=np.float64))
