@@ -41,20 +41,25 @@ Offset = Annotated[
 ]
 
 
+#: a thrust-curve number beyond MAX_COEFFICIENT (N per unit of command, or N in a table) is a
+#: unit slip: the allocation, the residual and the monitor's calibration would overflow on it
+CurveNumber = Annotated[float, Field(ge=-MAX_COEFFICIENT, le=MAX_COEFFICIENT)]
+
+
 class PolyCurve(StrictModel):
     kind: Literal["poly"]
-    coeffs: list[float] = Field(min_length=1)
+    coeffs: list[CurveNumber] = Field(min_length=1)
 
 
 class SignedQuadraticCurve(StrictModel):
     kind: Literal["signed_quadratic"]
-    k: float
+    k: CurveNumber
 
 
 class TableCurve(StrictModel):
     kind: Literal["table"]
     cmd: list[float] = Field(min_length=2)
-    thrust: list[float] = Field(min_length=2)
+    thrust: list[CurveNumber] = Field(min_length=2)
 
     @model_validator(mode="after")
     def _check(self) -> TableCurve:

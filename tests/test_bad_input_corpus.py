@@ -350,6 +350,12 @@ VEHICLE_CASES = [
         ('"X:u" = -4.0', '"X:u" = -4.0\n' + _THRUSTER + _THRUSTER),
     ),
     ("boolean mass", "mass", ("mass = 11.5", "mass = true")),
+    # a thrust gain in the wrong unit: exit 0 at 1e15, a traceback in the monitor at 1e100
+    (
+        "thrust curve absurd",
+        "thrusters.0.curve.k",
+        ('"X:u" = -4.0', '"X:u" = -4.0\n' + _THRUSTER.replace("k = 40.0", "k = 1e15")),
+    ),
 ]
 
 
