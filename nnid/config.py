@@ -53,6 +53,14 @@ Dof = Literal[DOFS]  # type: ignore[valid-type]
 Force = Literal[FORCES]  # type: ignore[valid-type]
 MaskName = Literal[tuple(MASKS)]  # type: ignore[valid-type]
 PositiveFloat = Annotated[float, Field(gt=0, allow_inf_nan=False)]
+#: the longest duration a setting may name, s (eleven days: beyond any log; a larger one
+#: overflowed the sample count)
+MAX_DURATION_S = 1e6
+Duration = Annotated[float, Field(gt=0, le=MAX_DURATION_S, allow_inf_nan=False)]
+#: the widest hidden layer (a larger one is a typo that fails to allocate)
+MAX_WIDTH = 100_000
+#: the most random draws of a sweep (more is a typo that fills the memory before any trial)
+MAX_SAMPLES = 100_000
 Number = Annotated[float, Field(allow_inf_nan=False)]
 #: a random seed: numpy's generators take no negative one
 Seed = Annotated[int, Field(ge=0)]
@@ -606,7 +614,7 @@ class NarxModelSpec(_InputOutput):
     kind: Literal["narx"]
     input_delays: Annotated[int, Field(ge=1)] | list[Annotated[int, Field(ge=0)]] = 2
     output_delays: Annotated[int, Field(ge=1)] | list[Annotated[int, Field(ge=1)]] = 2
-    hidden: list[Annotated[int, Field(ge=1)]] = Field(default_factory=lambda: [10])
+    hidden: list[Annotated[int, Field(ge=1, le=MAX_WIDTH)]] = Field(default_factory=lambda: [10])
     balanced: bool = True
     seed: Seed = 0
     delta: bool = True
@@ -657,7 +665,7 @@ class StateSpaceModelSpec(_InputOutput):
 
     kind: Literal["state_space"]
     hidden_states: int = Field(1, ge=0)
-    hidden: int = Field(16, ge=1)
+    hidden: int = Field(16, ge=1, le=MAX_WIDTH)
     structure: list[list[Literal[0, 1]]] | None = None
     substeps: int = Field(1, ge=1)
     warmup: int = Field(10, ge=1)
@@ -686,15 +694,17 @@ class HybridModelSpec(_PhysicsModel):
     physics: Literal["frozen", "joint"] = "frozen"
     level: Literal["force", "acceleration"] = "force"
     physics_trainer: RegressionTrainer | None = None
-    hidden: list[Annotated[int, Field(ge=1)]] = Field(default_factory=lambda: [32, 32])
+    hidden: list[Annotated[int, Field(ge=1, le=MAX_WIDTH)]] = Field(
+        default_factory=lambda: [32, 32]
+    )
     memory: list[PositiveFloat] = Field(default_factory=lambda: [0.25, 1.0])
     force_penalty: float = Field(1e-3, ge=0, allow_inf_nan=False)
     prior: PositiveFloat = 0.1
     prior_weight: float = Field(1e-2, ge=0, allow_inf_nan=False)
-    segments: list[PositiveFloat] = Field(default_factory=lambda: [0.5, 1.0, 2.0], min_length=1)
+    segments: list[Duration] = Field(default_factory=lambda: [0.5, 1.0, 2.0], min_length=1)
     batch_segments: int = Field(256, ge=1)
     balance: bool = True
-    validation_window: PositiveFloat | None = 5.0
+    validation_window: Duration | None = 5.0
     method: Literal["auto", "rk4", "dopri5", "nnid_rk4"] = "auto"
     adjoint: bool = False
     zoh_midpoint: bool = True
@@ -795,7 +805,7 @@ class SweepSpec(StrictModel):
 
     grid: dict[str, list[Any]] = Field(default_factory=dict)
     random: dict[str, list[Any]] = Field(default_factory=dict)
-    samples: int = Field(0, ge=0)
+    samples: int = Field(0, ge=0, le=MAX_SAMPLES)
     seed: Seed = 0  # of the random draws
     seeds: list[Seed] = Field(default_factory=list)
     seed_option: str = "model.seed"
@@ -834,10 +844,11 @@ class TrainConfig(_Command):
     model: ModelSpec = Field(default_factory=FossenModelSpec)
     split: SplitSpec = Field(default_factory=SplitSpec)
     warmup_s: float = Field(1.0, ge=0, allow_inf_nan=False)
-    k_step_s: PositiveFloat | None = None
+    k_step_s: Duration | None = None
     reference: dict[str, float] = Field(default_factory=dict)
     reference_label: str = "reference"
-    nondimensional_speed: PositiveFloat | None = None
+    # m/s; below a micrometre per second its square underflows the prime-system scale
+    nondimensional_speed: Annotated[float, Field(ge=1e-6)] | None = None
     detect: DetectSpec | None = None
     sweep: SweepSpec | None = None  # read by nnid sweep; nnid train fits the config as written
 
@@ -857,7 +868,7 @@ class CompareConfig(_Command):
     models: list[ModelSpec] = Field(min_length=1)
     split: SplitSpec = Field(default_factory=SplitSpec)
     warmup_s: float = Field(2.0, ge=0, allow_inf_nan=False)
-    k_step_s: PositiveFloat = 2.0
+    k_step_s: Duration = 2.0
     replay_autopilot: bool = True
 
     @field_validator("models", mode="before")

@@ -387,6 +387,14 @@ CONFIG_CASES = [
     # every held-out run all warm-up: no score at all, once reported as "diverged"
     ("train", "warm-up longer than every run", "warmup_s", ("warmup_s = 2.0", "warmup_s = 1e9")),
     ("train", "boolean for a number", "warmup_s", ("warmup_s = 2.0", "warmup_s = true")),
+    # overflowed the sample count, or underflowed the prime-system scale: tracebacks
+    ("train", "k-step horizon of 1e308 s", "k_step_s", ("k_step_s = 1.0", "k_step_s = 1e308")),
+    (
+        "train",
+        "nondimensional speed of 1e-300",
+        "nondimensional_speed",
+        ("warmup_s = 2.0", "warmup_s = 2.0\nnondimensional_speed = 1e-300"),
+    ),
     ("train", "fractions not summing to 1", "fractions", ("[0.6, 0.2, 0.2]", "[0.6, 0.6, 0.2]")),
     ("train", "everything validation", "split", ("[0.6, 0.2, 0.2]", "[0.0, 1.0, 0.0]")),
     ("train", "unknown model kind", "kind", ('kind = "fossen"', 'kind = "fosen"')),
@@ -788,3 +796,43 @@ def test_detect_follow_names_a_row_the_csv_reader_refuses(tmp_path):
     with pytest.raises(NnidInputError, match="is not a CSV row") as err:
         list(_rows(str(path), 0.0))
     assert err.value.source == str(path) and err.value.row == 2
+
+
+@pytest.mark.parametrize(
+    ("config", "old", "new", "field"),
+    [
+        ("hybrid.toml", "segments = [", "segments = [1e308, ", "model.segments"),
+        ("seamor_narx_adam.toml", "hidden = [10]", "hidden = [2000000000]", "model.member.hidden"),
+        (
+            "seamor_narx_lm.toml",
+            "[model]",
+            '[sweep]\nrandom = { "model.member.hidden" = [[4], [8]] }\nsamples = 1000000000000\n\n'
+            "[model]",
+            "sweep.samples",
+        ),
+    ],
+)
+def test_sizes_beyond_any_log_are_refused_at_the_config(tmp_path, config, old, new, field):
+    # each was a traceback after minutes (an overflow, a 264 GB allocation, a sweep that
+    # drew 1e12 settings before its first trial)
+    from nnid.config import TrainConfig, load_config
+    from nnid.errors import NnidInputError
+
+    text = (REPO / "configs" / config).read_text()
+    assert old in text
+    path = tmp_path / config
+    path.write_text(text.replace(old, new, 1))
+    with pytest.raises(NnidInputError) as err:
+        load_config(path, TrainConfig)
+    assert err.value.field.startswith(field) and err.value.source == str(path)
+
+
+def test_a_sweep_stops_drawing_once_every_combination_is_drawn():
+    from nnid.config import SweepSpec
+    from nnid.scale.sweep import settings
+
+    spec = SweepSpec(random={"model.hidden": [[2], [4]], "model.trainer.lr": [1e-3]}, samples=50)
+    few = settings(spec)
+    assert sorted(s["model.hidden"][0] for s in few) == [2, 4]
+    # the same two settings, in the same order, however many draws are asked for
+    assert settings(spec.model_copy(update={"samples": 100_000})) == few

@@ -40,10 +40,16 @@ def settings(spec: SweepSpec) -> list[dict[str, Any]]:
     grid = [dict(zip(keys, values, strict=True))
             for values in itertools.product(*(spec.grid[k] for k in keys))] or [{}]  # fmt: skip
     rng = np.random.default_rng(spec.seed)
-    draws = [
-        {k: spec.random[k][int(rng.integers(len(spec.random[k])))] for k in sorted(spec.random)}
-        for _ in range(spec.samples)
-    ] or [{}]
+    combos = math.prod(len(v) for v in spec.random.values())
+    seen: dict[str, dict[str, Any]] = {}
+    for _ in range(spec.samples):
+        if len(seen) == combos:  # every combination drawn: more draws only repeat them
+            break
+        draw = {
+            k: spec.random[k][int(rng.integers(len(spec.random[k])))] for k in sorted(spec.random)
+        }
+        seen.setdefault(json.dumps(draw, sort_keys=True), draw)
+    draws = list(seen.values()) or [{}]
     out: dict[str, dict[str, Any]] = {}
     for g, d in itertools.product(grid, draws):
         setting = {**g, **d}

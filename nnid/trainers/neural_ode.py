@@ -187,7 +187,7 @@ class MultipleShooting(BaseEstimator):
     def steps(self, seconds: float | None, dt: float, longest: int, field: str = "segments") -> int:
         """Samples of ``seconds`` (None or longer than the data: ``longest``); under one
         sample is refused, naming ``field``: it was trained as one sample without a word."""
-        if seconds is None:
+        if seconds is None or seconds / dt >= longest:
             return longest
         if round(seconds / dt) < 1:
             raise NnidInputError(f"{seconds:g} s is under one sample (dt = {dt:g} s)", field=field)
