@@ -836,3 +836,58 @@ def test_a_sweep_stops_drawing_once_every_combination_is_drawn():
     assert sorted(s["model.hidden"][0] for s in few) == [2, 4]
     # the same two settings, in the same order, however many draws are asked for
     assert settings(spec.model_copy(update={"samples": 100_000})) == few
+
+
+@pytest.mark.parametrize(
+    ("path", "value", "field"),
+    [
+        (("thresholds", "cusum"), None, "thresholds.cusum"),  # None: the key removed
+        (("thresholds", "ewma", "value"), -1.0, "thresholds.ewma.value"),  # alarmed at once
+        (("thresholds", "ewma", "value"), "x", "thresholds.ewma.value"),
+        (("settings", "time_constant_s"), 0, "settings.time_constant_s"),
+        (("settings", "false_alarm_per_hour"), -1, "settings.false_alarm_per_hour"),
+        (("calibration",), {}, "calibration.hours"),
+    ],
+)
+def test_a_hand_edited_monitor_is_refused_naming_the_key(fixtures, tmp_path, path, value, field):
+    # each was a traceback (KeyError, TypeError) or believed (a negative threshold, a negative
+    # target rate printed as such)
+    import json
+    import shutil
+
+    from nnid.errors import NnidInputError
+    from nnid.fault.monitor import ResidualMonitor
+
+    folder = tmp_path / "monitor"
+    shutil.copytree(fixtures["monitor"], folder)
+    state = json.loads((folder / "monitor.json").read_text())
+    node = state
+    for key in path[:-1]:
+        node = node[key]
+    if value is None:
+        del node[path[-1]]
+    else:
+        node[path[-1]] = value
+    (folder / "monitor.json").write_text(json.dumps(state))
+    with pytest.raises(NnidInputError) as err:
+        ResidualMonitor.load(folder)
+    assert err.value.field == field and err.value.source == str(folder / "monitor.json")
+    ResidualMonitor.load(fixtures["monitor"])  # the file it was copied from loads
+
+
+def test_a_model_folder_whose_files_are_folders_is_refused(fixtures, tmp_path):
+    import shutil
+
+    from nnid.errors import NnidInputError
+    from nnid.models.base import load_model
+
+    for name in ("model.json", "tensors.pt"):
+        folder = tmp_path / name.split(".")[0]
+        shutil.copytree(fixtures["monitor"], folder)
+        target = folder / name
+        if target.exists():
+            target.unlink()
+        target.mkdir()
+        with pytest.raises(NnidInputError, match="cannot be read") as err:
+            load_model(folder)
+        assert err.value.source == str(target)

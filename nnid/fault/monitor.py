@@ -17,9 +17,11 @@ import math
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Annotated
 
 import numpy as np
 import pandas as pd
+from pydantic import BaseModel, ConfigDict, Field
 from sklearn.base import BaseEstimator
 from sklearn.utils.validation import check_is_fitted
 
@@ -31,6 +33,7 @@ from nnid.physics.compiled import form_args
 from nnid.physics.dofs import DOFS, FORCES
 from nnid.physics.thrusters import Actuation
 from nnid.serialization import read_json, write_json
+from nnid.validation import StrictModel, validated
 
 MONITOR_FILE = "monitor.json"
 #: the relative difference of sample interval a monitored log may have from the healthy record
@@ -399,6 +402,12 @@ class ResidualMonitor(BaseEstimator):
                 field="--model",
             )
         state = read_json(path)
+        # a hand-edited file: its numbers are believed by the compiled kernel and the report
+        checked = validated(_SavedMonitor, state, str(path)) if isinstance(state, dict) else None
+        if checked is None:
+            raise NnidInputError(
+                "is not a monitor nnid wrote (not a JSON object)", source=str(path)
+            )
         # the model's own errors name model.json: loaded outside the monitor's error wrapping
         model = model if model is not None else load_model(folder)
         try:
@@ -421,6 +430,46 @@ class ResidualMonitor(BaseEstimator):
         if k < 1 or any(a.shape != (k, k) for a in square) or out.sigma_.shape != (k,):
             raise NnidInputError("holds arrays of inconsistent shapes", source=str(path))
         return out
+
+
+_Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
+
+
+class _Settings(StrictModel):
+    false_alarm_per_hour: _Positive
+    time_constant_s: _Positive
+    allowance: _Positive
+    rearm_s: _Positive
+
+
+class _Threshold(BaseModel):
+    """A threshold as :func:`~nnid.fault.thresholds.rate_threshold` writes it (its fit's other
+    numbers pass through)."""
+
+    model_config = ConfigDict(extra="allow", allow_inf_nan=False, strict=True)
+    value: _Positive
+    peaks: int = Field(ge=0)
+
+
+class _Thresholds(StrictModel):
+    ewma: _Threshold
+    cusum: _Threshold
+
+
+class _Calibration(StrictModel):
+    hours: _Positive
+    samples: int = Field(ge=1)
+    experiments: list[str]
+    dt: _Positive
+
+
+class _SavedMonitor(BaseModel):
+    """The numbers of ``monitor.json`` that detection believes, checked on loading."""
+
+    model_config = ConfigDict(extra="allow", strict=True)
+    settings: _Settings
+    thresholds: _Thresholds
+    calibration: _Calibration
 
 
 class Stream:

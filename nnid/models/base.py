@@ -343,8 +343,8 @@ def load_model(folder: str | Path) -> NnidModel:
         raise NnidInputError(f"no saved model here (expected {MODEL_FILE})", source=str(folder))
     try:
         payload = read_json(path)
-    except ValueError as exc:
-        raise NnidInputError(f"not a valid model file ({exc})", source=str(path)) from None
+    except NnidInputError as exc:  # said against the file once, with what is wrong with it
+        raise NnidInputError(f"not a valid model file: {exc.message}", source=str(path)) from None
     if not isinstance(payload, dict) or "kind" not in payload:
         raise NnidInputError("not an nnid model file (no 'kind')", source=str(path))
     version = payload.get("schema_version")
@@ -362,6 +362,8 @@ def load_model(folder: str | Path) -> NnidModel:
         tensors = torch.load(tensor_path, weights_only=True) if tensor_path.exists() else {}
     except (pickle.UnpicklingError, EOFError, RuntimeError, ValueError) as exc:
         raise NnidInputError(_damaged(exc), source=str(tensor_path)) from None
+    except OSError as exc:  # a folder in its place, no permission
+        raise NnidInputError(f"cannot be read ({exc.strerror})", source=str(tensor_path)) from None
     if not isinstance(tensors, dict):
         raise NnidInputError(_damaged(TypeError("no tensors by name")), source=str(tensor_path))
     # a NaN weight loads and predicts NaN everywhere: a damaged file, said at loading
