@@ -389,6 +389,13 @@ CONFIG_CASES = [
     ("train", "boolean for a number", "warmup_s", ("warmup_s = 2.0", "warmup_s = true")),
     # overflowed the sample count, or underflowed the prime-system scale: tracebacks
     ("train", "k-step horizon of 1e308 s", "k_step_s", ("k_step_s = 1.0", "k_step_s = 1e308")),
+    # settles after every run: nothing fitted and exit 0, or a singular discretisation
+    (
+        "train",
+        "a filter slower than every run",
+        "filter_lambda",
+        ("filter_lambda = 1.0", "filter_lambda = 1e-6"),
+    ),
     (
         "train",
         "nondimensional speed of 1e-300",

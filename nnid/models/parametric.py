@@ -175,10 +175,21 @@ class ParametricFossen:
         the first 3/λ seconds of each experiment, where the filters settle, are left out.
         """
         rows = [DOFS.index(d) for d in self.dofs]
-        r0 = self.equation_residual(self.base, data, filter_lambda)
-        keep = np.ones(r0.shape[0], dtype=bool)
+        keep = np.ones(data["t"].size, dtype=bool)
         if filter_lambda is not None:
             keep = filter_settled(data, filter_lambda)
+            if not keep.any():  # nothing to fit (and a filter this slow is singular to discretise)
+                longest = max(
+                    float(np.ptp(data["t"][data["experiment"] == k]))
+                    for k in np.unique(data["experiment"])
+                )
+                raise NnidInputError(
+                    f"the filtered regressors settle in 3/λ = {3.0 / filter_lambda:.3g} s, "
+                    f"longer than every experiment (the longest lasts {longest:.3g} s): no "
+                    f"sample is left to fit; give filter_lambda above {3.0 / longest:.3g} rad/s",
+                    field="filter_lambda",
+                )
+        r0 = self.equation_residual(self.base, data, filter_lambda)
         damping = self.damping_columns(data, filter_lambda)
         cols = []
         for name in self.names:
