@@ -106,6 +106,8 @@ LOG_CASES: list[tuple[str, str, Callable]] = [
     ),
     # a parquet column of strings: every number readable, every later step meets text
     ("numbers stored as text", "'u'", lambda df, i: df.assign(u=df["u"].astype(str))),
+    # a parquet column of booleans: read as 1 or 0 newtons without a word
+    ("an input stored as booleans", "INPUT", lambda df, i: df.assign(**{i: df[i] > 0})),
     ("empty file", "", lambda df, i: b""),
     ("binary garbage", "", lambda df, i: bytes(range(256)) * 8),
     ("one garbled line", "", lambda df, i: b"t,u\n0.0,1,2,3,4\n"),
@@ -114,6 +116,7 @@ LOG_SUFFIX = {
     "empty file": ".csv",
     "binary garbage": ".parquet",
     "numbers stored as text": ".parquet",
+    "an input stored as booleans": ".parquet",
 }
 
 
@@ -898,3 +901,14 @@ def test_a_model_folder_whose_files_are_folders_is_refused(fixtures, tmp_path):
         with pytest.raises(NnidInputError, match="cannot be read") as err:
             load_model(folder)
         assert err.value.source == str(target)
+
+
+@pytest.mark.parametrize(("text", "said"), [("u,,w", "empty name"), ("run0,run0", "run0 twice")])
+def test_an_option_list_with_an_empty_or_repeated_name_is_refused(text, said):
+    from nnid.errors import NnidInputError
+    from nnid.runs import names
+
+    with pytest.raises(NnidInputError, match=said) as err:
+        names(text, "--validation")
+    assert err.value.field == "--validation"
+    assert names(" u , w ", "--dofs") == ["u", "w"]

@@ -168,6 +168,10 @@ def _check_finite(df: pd.DataFrame, columns: list[str], source: str, gaps: bool 
     """Every value of ``columns`` a finite number (``gaps``: or an empty cell, though never a
     whole column of them); else the first bad row, named."""
     for col in columns:
+        if pd.api.types.is_bool_dtype(df[col]):  # true/false would be read as 1/0 N or m/s
+            raise NnidInputError(
+                "holds true/false values: store the column as numbers", source=source, field=col
+            )
         values = pd.to_numeric(df[col], errors="coerce").to_numpy(dtype=np.float64)
         bad = ~np.isfinite(values)
         if gaps:
