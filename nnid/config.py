@@ -43,7 +43,7 @@ from nnid.errors import NnidInputError
 from nnid.physics.damping_masks import MASKS
 from nnid.physics.dofs import DOFS, FORCES
 from nnid.physics.effects import parse_effect
-from nnid.validation import StrictModel, read_toml, repeated, validated
+from nnid.validation import PositiveFloat, StrictModel, read_toml, repeated, validated
 
 Signal = Annotated[
     Step | Stairs | Chirp | Multisine | PRBS | APRBS | Sine | DOptimalSine,
@@ -52,7 +52,6 @@ Signal = Annotated[
 Dof = Literal[DOFS]  # type: ignore[valid-type]
 Force = Literal[FORCES]  # type: ignore[valid-type]
 MaskName = Literal[tuple(MASKS)]  # type: ignore[valid-type]
-PositiveFloat = Annotated[float, Field(gt=0, allow_inf_nan=False)]
 #: the longest duration a setting may name, s (eleven days: beyond any log; a larger one
 #: overflowed the sample count)
 MAX_DURATION_S = 1e6

@@ -129,6 +129,18 @@ def check_paths(cfg, config_path: Path, data: str | None, columns: str | None) -
         _check_file(resolve(base, value), config_path, f"data.{key}")
 
 
+def fitted_dofs(spec) -> list[str]:
+    """The DOFs whose equations a physics model's config fits: its ``dofs``, or with a
+    ``sequence`` the DOFs of its steps."""
+    sequence = getattr(spec, "sequence", None)
+    if sequence:
+        from nnid.trainers.sequence import sequence_steps
+
+        steps = sequence if isinstance(sequence, str) else [s.model_dump() for s in sequence]
+        return list(dict.fromkeys(d for s in sequence_steps(steps) for d in s.dofs))
+    return list(getattr(spec, "dofs", None) or [])
+
+
 def load_inputs(
     cfg: TrainConfig | CompareConfig,
     config_path: Path,
@@ -186,8 +198,8 @@ def load_inputs(
             try:
                 logged_inputs(inputs.log, veh)
                 for m in models:  # the velocities the fit needs, said against the log
-                    if m.kind in PHYSICS_KINDS and getattr(m, "dofs", None):
-                        check_velocities(inputs.log.columns, m.dofs)
+                    if m.kind in PHYSICS_KINDS:
+                        check_velocities(inputs.log.columns, fitted_dofs(m))
             except NnidInputError as err:
                 raise err.with_source(path) from None
     elif getattr(spec, "simulate", None):

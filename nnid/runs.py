@@ -21,6 +21,7 @@ from typing import Any
 from nnid.errors import NnidInputError
 from nnid.reports.cells import score
 from nnid.trainers.history import Progress, silent
+from nnid.validation import repeated
 
 
 @dataclass
@@ -239,15 +240,17 @@ def names(text: str | None, option: str = "") -> list[str]:
     """A comma-separated option as a list (empty for None); an option given with no name in it
     (``--dofs ,``) is an error, not "all", and so are an empty name and a name given twice
     (a typo, as in a config's lists)."""
-    given = [n.strip() for n in (text or "").split(",")]
+    if text is None:
+        return []
+    given = [n.strip() for n in text.split(",")]
     out = [n for n in given if n]
-    if text is not None and not out:
+    if not out:
         raise NnidInputError(
             f"names nothing ({text!r}); leave the option out for all", field=option
         )
     if len(out) < len(given):
         raise NnidInputError(f"has an empty name ({text!r})", field=option)
-    twice = sorted({n for n in out if out.count(n) > 1})
+    twice = repeated(out)
     if twice:
         raise NnidInputError(f"names {', '.join(twice)} twice ({text!r})", field=option)
     return out

@@ -5,15 +5,19 @@ from __future__ import annotations
 import math
 import tomllib
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Annotated, Any, TypeVar
 
-from pydantic import BaseModel, ConfigDict, ValidationError
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from nnid.errors import NnidInputError
 
 Model = TypeVar("Model", bound=BaseModel)
 #: keys whose value selects the variant of a table (pydantic puts that value in error paths)
 _TAGS = ("kind", "model")
+
+
+#: a finite number above zero (a duration, a rate, a mass)
+PositiveFloat = Annotated[float, Field(gt=0, allow_inf_nan=False)]
 
 
 class StrictModel(BaseModel):

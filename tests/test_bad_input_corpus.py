@@ -837,15 +837,29 @@ def test_sizes_beyond_any_log_are_refused_at_the_config(tmp_path, config, old, n
     assert err.value.field.startswith(field) and err.value.source == str(path)
 
 
-def test_a_sweep_stops_drawing_once_every_combination_is_drawn():
+def test_a_sweep_stops_drawing_once_every_combination_is_drawn(monkeypatch):
     from nnid.config import SweepSpec
-    from nnid.scale.sweep import settings
+    from nnid.scale import sweep
 
     spec = SweepSpec(random={"model.hidden": [[2], [4]], "model.trainer.lr": [1e-3]}, samples=50)
-    few = settings(spec)
+    few = sweep.settings(spec)
     assert sorted(s["model.hidden"][0] for s in few) == [2, 4]
-    # the same two settings, in the same order, however many draws are asked for
-    assert settings(spec.model_copy(update={"samples": 100_000})) == few
+    draws = []
+    real = np.random.default_rng
+
+    class Counting:  # the generator the sweep draws from, counting its draws
+        def __init__(self, seed):
+            self.rng = real(seed)
+
+        def integers(self, *args, **kwargs):
+            draws.append(1)
+            return self.rng.integers(*args, **kwargs)
+
+    monkeypatch.setattr(sweep.np.random, "default_rng", Counting)
+    # the same two settings, in the same order, however many draws are asked for; and the
+    # drawing stops once both are drawn (it made 2 x 100000 draws before the first trial)
+    assert sweep.settings(spec.model_copy(update={"samples": 100_000})) == few
+    assert 0 < len(draws) < 100
 
 
 @pytest.mark.parametrize(
@@ -911,4 +925,40 @@ def test_an_option_list_with_an_empty_or_repeated_name_is_refused(text, said):
     with pytest.raises(NnidInputError, match=said) as err:
         names(text, "--validation")
     assert err.value.field == "--validation"
-    assert names(" u , w ", "--dofs") == ["u", "w"]
+    assert names(" u , w ", "--dofs") == ["u", "w"] and names(None, "--dofs") == []  # not given
+
+
+def test_a_sequence_fit_needs_only_its_steps_velocities(fixtures, tmp_path):
+    # the early velocity check reads a sequence's DOFs, not the six of the default dofs
+    log = fixtures["demo_log"].drop(columns=["u", "v"])
+    data = _write_log(tmp_path, "heave only", log)
+    config = tmp_path / "seq.toml"
+    config.write_text(
+        'kind = "train"\nwarmup_s = 2.0\n[split]\nby = "experiment"\nvalidation = ["run1"]\n'
+        'test = ["run2"]\n[model]\nkind = "fossen"\ntrainer = { kind = "ls" }\n'
+        '[[model.sequence]]\nexperiments = ["run0"]\ndofs = ["w"]\n'
+        'unknowns = ["Z_wdot", "Z:w*abs(w)"]\n'
+    )
+    args = ["train", str(config), "--data", str(data), "--vehicle", MINIROV]
+    done = CliRunner().invoke(app, [*args, "--out", str(tmp_path / "out")])
+    assert done.exit_code == 0, done.output
+    args[1] = str(tmp_path / "no_u.toml")
+    Path(args[1]).write_text(config.read_text().replace('dofs = ["w"]', 'dofs = ["u", "w"]'))
+    done = CliRunner().invoke(app, [*args, "--out", str(tmp_path / "out2")])
+    assert done.exit_code == 2 and "field 'u'" in done.output, done.output
+
+
+def test_a_monitor_whose_statistic_never_rose_loads_as_it_was_saved(fixtures, tmp_path):
+    # a CUSUM that never exceeds its allowance on healthy data gets the threshold 2 x 0 = 0:
+    # written by nnid, so read back by it
+    import json
+    import shutil
+
+    from nnid.fault.monitor import ResidualMonitor
+
+    folder = tmp_path / "monitor"
+    shutil.copytree(fixtures["monitor"], folder)
+    state = json.loads((folder / "monitor.json").read_text())
+    state["thresholds"]["cusum"]["value"] = 0.0
+    (folder / "monitor.json").write_text(json.dumps(state))
+    assert ResidualMonitor.load(folder).threshold_values[1] == 0.0

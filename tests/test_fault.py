@@ -358,3 +358,23 @@ def test_a_log_at_another_sampling_rate_is_refused(vehicle, monitor, tmp_path):
     with pytest.raises(NnidInputError, match="calibrated at") as err:
         follow_csv(monitor, str(path), 10.0, lambda line: None)
     assert err.value.source == str(path)
+
+
+def test_the_rate_check_reads_an_alternating_clock_as_one_rate(vehicle, monitor):
+    # a 20 Hz clock read at uneven intervals (0.04, 0.06 s): the median of its intervals jumps
+    # between the two with one sample more or less; the trimmed mean does not
+    from nnid.fault.monitor import typical_interval
+
+    steps = np.tile([0.04, 0.06], 500)
+    for n in (999, 1000):
+        t = np.concatenate([[0.0], np.cumsum(steps[:n])])
+        assert typical_interval(t) == pytest.approx(0.05, rel=1e-3)
+    # a one-minute hole in a ten-minute record moves it by nothing
+    t = np.arange(0, 600, 0.05)
+    t[6000:] += 60.0
+    assert typical_interval(t) == pytest.approx(0.05, rel=1e-9)
+    # intervals across experiments do not count
+    assert typical_interval(np.array([0.0, 0.1, 0.2, 50.0, 50.1]), np.array([0, 0, 0, 1, 1])) == (
+        pytest.approx(0.1)
+    )
+    assert monitor.calibration_["interval"] == pytest.approx(monitor.calibration_["dt"], rel=1e-6)

@@ -18,6 +18,7 @@ def test_missing_number_is_a_dash(missing):
 def test_numbers_keep_their_significant_figures_and_counts_stay_whole():
     assert number(0.0123456) == "0.0123"
     assert number(0.0123456, 5) == "0.012346"
+    assert number(0.65, 3, fixed=True) == "0.650" and score(None, fixed=True) == "diverged"
     assert number(np.float32(2.5)) == "2.5"
     # a seed or an alarm count written as 1.23e+04 would read as a measured value
     assert number(12345) == "12345" and number(np.int64(7)) == "7"

@@ -193,6 +193,13 @@ def test_manifest_ids_and_pairing(fleet, tmp_path) -> None:
     vehicle = (tmp_path / "minirov.toml").read_text()
     (tmp_path / "minirov.toml").write_text(vehicle + "\n# edited\n")
     assert task_id(trial) != edited_log
+    # a config that names its log reads no reader config's root: not hashed either
+    (tmp_path / "reader.toml").write_text('vehicle = "minirov.toml"\nroot = "data"\n')
+    (tmp_path / "data").mkdir()
+    (tmp_path / "data" / "a.csv").write_text("t\n0\n")
+    named_log = task_id(trial)
+    (tmp_path / "data" / "a.csv").write_text("t\n1\n")
+    assert task_id(trial) == named_log
     # with a log of its own the config's log is not read, and not hashed
     own = Task("train", str(fleet / "dive0.csv"), config=str(tmp_path / "cfg.toml"))
     unread = task_id(own)

@@ -350,7 +350,8 @@ class ResidualLoop:
                 ):
                     s.admissible = False
                     s.reason = (
-                        f"held-out one-step error grows from {score(one_step)} to {score(worse)}"
+                        f"held-out one-step error grows from {score(one_step, fixed=True)} to "
+                        f"{score(worse, fixed=True)}"
                     )
                     continue
                 try:
@@ -362,7 +363,10 @@ class ResidualLoop:
                 s.reason = "added" if what == "free run" else f"added (judged {what})"
                 return s, augmented
             s.admissible = False
-            s.reason = f"held-out {what} error does not improve ({score(before)} -> {score(after)})"
+            s.reason = (
+                f"held-out {what} error does not improve "
+                f"({score(before, fixed=True)} -> {score(after, fixed=True)})"
+            )
         return None, None
 
     def _simulation_error(self, ws: Workspace, vehicle, mode: str | int) -> float | None:

@@ -136,6 +136,8 @@ def _digest(path: str | None, h) -> None:
 NAMING_KEYS = frozenset({"vehicle", "log", "columns", "simulate", "campaign", "root"})
 #: the keys naming the data a task's own log replaces (read only when the task gives none)
 DATA_KEYS = frozenset({"log", "simulate", "campaign", "root"})
+#: a reader config's data folder, replaced by a config's own log
+ROOT_KEY = frozenset({"root"})
 
 
 def named_inputs(
@@ -169,6 +171,18 @@ def named_inputs(
     return found
 
 
+def _names_data(config: str | None) -> bool:
+    """Whether a config names its data itself (``data.log``, ``simulate`` or ``campaign``): a
+    reader config's ``root`` is then not read, and not hashed."""
+    if not config or not Path(config).is_file():
+        return False
+    try:
+        data = read_toml(config).get("data")
+    except NnidInputError:
+        return False
+    return isinstance(data, dict) and any(data.get(k) for k in ("log", "simulate", "campaign"))
+
+
 def task_id(task: Task) -> str:
     """``<log stem>-<12 hex>``: the hash of the inputs' contents, the settings and nnid's
     version (see the module docstring)."""
@@ -186,7 +200,7 @@ def task_id(task: Task) -> str:
         _digest(path, h)
     # what the config names (its log, vehicle, simulation): editing one re-runs the task too;
     # a task's own log replaces the config's data, which is then neither read nor hashed
-    skip = DATA_KEYS if task.data else frozenset()
+    skip = DATA_KEYS if task.data else ROOT_KEY if _names_data(task.config) else frozenset()
     for config in (task.config, task.vehicle, task.columns):
         for named in named_inputs(config, skip):
             _digest(str(named), h)

@@ -327,7 +327,12 @@ class SparsePath(BaseEstimator):
                     "need, or the library lacks it"
                     if self.per_output and self.selection == "validation"
                     else "their terms are kept by a threshold or criterion shared with the "
-                    "other outputs (per_output=True selects each output on its own)"
+                    "other outputs"
+                    + (
+                        ""
+                        if self.per_output
+                        else " (per_output=True selects each output on its own)"
+                    )
                 ),
                 SindyWarning,
                 stacklevel=3,
