@@ -383,7 +383,7 @@ class FossenPlant(NnidModel):
     def _data(
         self, log: pd.DataFrame, accelerations: bool, report: CleaningReport | None = None
     ) -> tuple[pd.DataFrame, dict[str, np.ndarray]]:
-        # while fitting, the DOFs asked for (``dofs_`` is not set yet); those outside them may
+        # the fitted DOFs, or before a fit sets them the DOFs asked for: those outside them may
         # be absent from the log and are then taken as zero (e.g. an attitude-only protocol)
         dofs = getattr(self, "dofs_", None) or getattr(self, "dofs", DOFS)
         log = prepare_motion(
