@@ -510,7 +510,8 @@ def detect_run(
     lines: list[str] = []
     try:
         log, report = load_log(data, columns)
-        # a gap in the motion data is no residual: the monitor restarts after it
+        # a gap in the motion data gives no residual: its intervals are skipped (the EWMA and
+        # CUSUM carry their state across it)
         log = mask_gaps([log], [*POSE, *VELOCITY], report)[0]
         lines += lost_rows(report)
         (progress or silent)(0, None, "running the monitor")

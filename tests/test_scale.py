@@ -585,3 +585,18 @@ def test_the_sweep_sentence_counts_its_seeds_in_words():
     assert "0.25 (one seed: 0.25)" in one and "mean of" not in one, one
     two = _summary(spec, [Ranked({"model.hidden": [4]}, [0.25, 0.35], [])])
     assert "0.3 (mean of 2 seeds: 0.25, 0.35)" in two, two
+
+
+def test_a_sweep_ranked_on_one_step_says_when_its_best_diverges_in_free_run() -> None:
+    from nnid.config import SweepSpec
+    from nnid.scale.sweep import Ranked, _summary
+
+    rows = [
+        {"status": "ok", "validation_one_step_nrmse": 0.01, "validation_free_run_nrmse": None},
+        {"status": "ok", "validation_one_step_nrmse": 0.02, "validation_free_run_nrmse": 0.3},
+    ]
+    best = Ranked({"model.hidden": [4]}, [0.01, 0.02], rows)
+    spec = SweepSpec(metric="one_step_nrmse", grid={"model.hidden": [[4]]})
+    assert "free run diverged in 1 of 2 seeds" in _summary(spec, [best])
+    rows[0]["validation_free_run_nrmse"] = 0.2  # both seeds simulate: nothing to add
+    assert "diverged" not in _summary(spec, [best])

@@ -201,6 +201,14 @@ def _summary(spec: SweepSpec, ranked: list[Ranked]) -> str:
     )
     if not best.complete:
         text += " Every setting had a seed without a score; this one is ranked on the rest."
+    if spec.metric != "free_run_nrmse":  # a short-horizon rank can pick a model that diverges
+        ran = [r for r in best.rows if r.get("status") == "ok"]
+        gone = sum(r.get("validation_free_run_nrmse") is None for r in ran)
+        if gone:
+            text += (
+                f" Its validation free run diverged in {gone} of {len(ran)} seeds: a "
+                f"{spec.metric} ranking does not say how a setting simulates."
+            )
     return text
 
 
