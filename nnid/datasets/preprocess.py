@@ -188,22 +188,23 @@ def _euler_rates(angles: np.ndarray, inverse: bool = False) -> np.ndarray:
     return rate_matrix(torch.as_tensor(np.array(angles, dtype=np.float64))).numpy()
 
 
-def check_velocities(columns, dofs) -> None:
-    """Refuse a log that neither has nor can derive the velocity of one of ``dofs``
-    (:func:`derive_velocities`: u, v, w from x, y, z with the attitude, w also from z with the
-    attitude, p, q, r from the attitude). Read as zero, it would be fitted and scored as a
-    vehicle at rest in that DOF."""
+def derivable_velocities(columns) -> set[str]:
+    """The body velocities a pose of these columns gives (:func:`derive_velocities`): p, q, r
+    from the attitude; u, v, w from x, y, z with it; w alone from z with it."""
     have = set(columns)
-    angles = all(a in have for a in ANGLES)
+    if not all(a in have for a in ANGLES):
+        return set()
+    if all(c in have for c in ("x", "y", "z")):
+        return set(VELOCITY)
+    return {"p", "q", "r", "w"} if "z" in have else {"p", "q", "r"}
 
-    def derivable(d: str) -> bool:
-        if d in ("p", "q", "r"):
-            return angles
-        if d == "w":
-            return angles and "z" in have
-        return angles and all(c in have for c in ("x", "y", "z"))
 
-    missing = [d for d in dofs if d not in have and not derivable(d)]
+def check_velocities(columns, dofs) -> None:
+    """Refuse a log that neither has nor can derive (:func:`derivable_velocities`) the
+    velocity of one of ``dofs``. Read as zero, it would be fitted and scored as a vehicle at
+    rest in that DOF."""
+    have = set(columns) | derivable_velocities(columns)
+    missing = [d for d in dofs if d not in have]
     if missing:
         raise NnidInputError(
             f"the log has no {', '.join(missing)} column and its pose cannot give "
@@ -228,7 +229,8 @@ def derive_velocities(
     approximation. Existing velocity columns are kept unless ``overwrite``.
     """
     have = [c for c in POSE if c in log]
-    if not all(a in have for a in ANGLES):
+    derivable = derivable_velocities(have)
+    if not derivable:
         raise NnidInputError("deriving body velocities needs phi, theta and psi", field="phi")
     out = unwrap_angles(log)
     new = {c: np.full(len(out), np.nan) for c in VELOCITY}
@@ -255,12 +257,12 @@ def derive_velocities(
             "nij,nj->ni", _euler_rates(angles, inverse=True), np.stack([dphi, dth, dpsi], 1)
         )
         new["p"][pos], new["q"][pos], new["r"][pos] = body_rates.T
-        if all(c in have for c in ("x", "y", "z")):
+        if "u" in derivable:
             ned = np.stack([rates["x"], rates["y"], rates["z"]], 1)
             body = np.einsum("nji,nj->ni", rotation_from_euler(angles), ned)  # J₁ᵀ ṗ
             for k, c in enumerate(("u", "v", "w")):
                 new[c][pos] = body[:, k]
-        elif "z" in have:
+        elif "w" in derivable:
             # ż = −sθ u + cθsφ v + cθcφ w: w ≈ ż/(cθcφ) holds only near level; the divisor
             # is kept at 0.5 or more (60° of tilt) so that it cannot blow up
             tilt = np.cos(theta) * np.cos(phi)
