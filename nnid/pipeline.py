@@ -134,10 +134,10 @@ def fitted_dofs(spec) -> list[str]:
     ``sequence`` the DOFs of its steps."""
     sequence = getattr(spec, "sequence", None)
     if sequence:
-        from nnid.trainers.sequence import sequence_steps
+        from nnid.trainers.sequence import sequence_dofs, sequence_steps
 
         steps = sequence if isinstance(sequence, str) else [s.model_dump() for s in sequence]
-        return list(dict.fromkeys(d for s in sequence_steps(steps) for d in s.dofs))
+        return sequence_dofs(sequence_steps(steps))
     return list(getattr(spec, "dofs", None) or [])
 
 

@@ -497,13 +497,13 @@ class ParametricModel(FossenPlant):
 
     def _fit(self, log: pd.DataFrame, validation, progress: Progress) -> None:
         from nnid.trainers.least_squares import LeastSquares
-        from nnid.trainers.sequence import DecoupledSequence, sequence_steps
+        from nnid.trainers.sequence import DecoupledSequence, sequence_dofs, sequence_steps
 
         trainer = clone(self.trainer, safe=False) if self.trainer is not None else LeastSquares()
         if self.sequence is not None:
             steps = sequence_steps(self.sequence)
             unknowns = list(dict.fromkeys(n for s in steps for n in s.unknowns))
-            dofs = list(dict.fromkeys(d for s in steps for d in s.dofs))
+            dofs = sequence_dofs(steps)
             trainer = DecoupledSequence(steps, trainer)
         else:
             dofs = list(self.dofs)

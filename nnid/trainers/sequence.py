@@ -74,6 +74,11 @@ def sequence_steps(sequence: str | Sequence[Step | Mapping]) -> list[Step]:
     return [s if isinstance(s, Step) else Step(**s) for s in sequence]
 
 
+def sequence_dofs(steps: Sequence[Step]) -> list[str]:
+    """The DOFs whose equations a sequence's steps fit, in order, each once."""
+    return list(dict.fromkeys(d for s in steps for d in s.dofs))
+
+
 class DecoupledSequence:
     """Trainer: run the steps in order with ``trainer`` (least squares by default). The
     structure it fits must offer ``restricted(unknowns, dofs, known)``: the structure of one
