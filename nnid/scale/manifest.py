@@ -136,16 +136,16 @@ def _digest(path: str | None, h) -> None:
 NAMING_KEYS = frozenset({"vehicle", "log", "columns", "simulate", "campaign", "root"})
 #: the keys naming the data a task's own log replaces (read only when the task gives none)
 DATA_KEYS = frozenset({"log", "simulate", "campaign", "root"})
-#: a reader config's data folder, replaced by a config's own log
-ROOT_KEY = frozenset({"root"})
 
 
 def named_inputs(
     path: str | None, skip: frozenset[str] = frozenset(), seen: set[Path] | None = None
 ) -> list[Path]:
     """The files and folders a TOML input names under :data:`NAMING_KEYS` but ``skip``
-    (relative to its folder, as the run reads them), and those they name in turn. A file that
-    does not parse names nothing here: the run itself says what is wrong with it."""
+    (relative to its folder, as the run reads them), and those they name in turn; a config
+    that names its data (``data.log``, ``simulate``, ``campaign``) reads no reader config's
+    ``root``, which is then skipped. A file that does not parse names nothing here: the run
+    itself says what is wrong with it."""
     seen = set() if seen is None else seen
     p = Path(path) if path else None
     if p is None or p.suffix != ".toml" or not p.is_file() or p.resolve() in seen:
@@ -155,6 +155,9 @@ def named_inputs(
         doc = read_toml(p)
     except NnidInputError:
         return []
+    data = doc.get("data")
+    if isinstance(data, dict) and any(data.get(k) for k in ("log", "simulate", "campaign")):
+        skip = skip | {"root"}
     found: list[Path] = []
 
     def walk(node: dict) -> None:
@@ -169,18 +172,6 @@ def named_inputs(
 
     walk(doc)
     return found
-
-
-def _names_data(config: str | None) -> bool:
-    """Whether a config names its data itself (``data.log``, ``simulate`` or ``campaign``): a
-    reader config's ``root`` is then not read, and not hashed."""
-    if not config or not Path(config).is_file():
-        return False
-    try:
-        data = read_toml(config).get("data")
-    except NnidInputError:
-        return False
-    return isinstance(data, dict) and any(data.get(k) for k in ("log", "simulate", "campaign"))
 
 
 def task_id(task: Task) -> str:
@@ -200,7 +191,7 @@ def task_id(task: Task) -> str:
         _digest(path, h)
     # what the config names (its log, vehicle, simulation): editing one re-runs the task too;
     # a task's own log replaces the config's data, which is then neither read nor hashed
-    skip = DATA_KEYS if task.data else ROOT_KEY if _names_data(task.config) else frozenset()
+    skip = DATA_KEYS if task.data else frozenset()
     for config in (task.config, task.vehicle, task.columns):
         for named in named_inputs(config, skip):
             _digest(str(named), h)
