@@ -172,12 +172,11 @@ def train_run(
         headline[f"param:{name}"] = p.get("value")
         headline[f"stderr:{name}"] = p.get("stderr")
     files = "model.json, metrics.json, report.md, report.html"
+    if result.monitor is not None:
+        files += f", {MONITOR_FILE}"
     said = [f"wrote {out_dir}/: {files} ({line})"]
     if result.monitor is not None:
-        said = [
-            f"wrote {out_dir}/: {files}, {MONITOR_FILE} ({line})",
-            f"monitor: {monitor_sentence(metrics['detect'])}",
-        ]
+        said.append(f"monitor: {monitor_sentence(metrics['detect'])}")
     return Outcome(
         [*lost_rows(result.report), *said],
         list(metrics["warnings"]),

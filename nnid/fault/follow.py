@@ -22,7 +22,7 @@ from nnid.fault.detect import DetectResult, alarm_record
 from nnid.fault.monitor import ResidualMonitor, Trace, input_columns
 from nnid.validation import shown
 
-#: the rows whose median interval is checked against the monitor's calibration rate
+#: the first rows, whose typical interval is checked against the monitor's calibration rate
 RATE_ROWS = 11
 
 

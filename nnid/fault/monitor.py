@@ -405,11 +405,9 @@ class ResidualMonitor(BaseEstimator):
             )
         state = read_json(path)
         # a hand-edited file: its numbers are believed by the compiled kernel and the report
-        checked = validated(_SavedMonitor, state, str(path)) if isinstance(state, dict) else None
-        if checked is None:
-            raise NnidInputError(
-                "is not a monitor nnid wrote (not a JSON object)", source=str(path)
-            )
+        if not isinstance(state, dict):
+            raise NnidInputError("is not a monitor nnid wrote (no JSON object)", source=str(path))
+        validated(_SavedMonitor, state, str(path))
         # the model's own errors name model.json: loaded outside the monitor's error wrapping
         model = model if model is not None else load_model(folder)
         try:

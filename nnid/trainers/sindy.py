@@ -317,26 +317,23 @@ class SparsePath(BaseEstimator):
             f"{names[i]} (validation NMSE {selected[i]:.3g}, best on the path {best[i]:.3g})"
             for i in np.flatnonzero(selected >= UNEXPLAINED)
         ]
-        if poor:
-            warnings.warn(
-                "the selected SINDy model explains nothing of "
-                + ", ".join(poor)
-                + " on the validation data (an NMSE of 1 is that of no model): "
-                + (
-                    "those outputs keep no terms; the training data do not excite what they "
-                    "need, or the library lacks it"
-                    if self.per_output and self.selection == "validation"
-                    else "their terms are kept by a threshold or criterion shared with the "
-                    "other outputs"
-                    + (
-                        ""
-                        if self.per_output
-                        else " (per_output=True selects each output on its own)"
-                    )
-                ),
-                SindyWarning,
-                stacklevel=3,
+        if not poor:
+            return
+        if self.per_output and self.selection == "validation":
+            why = (
+                "those outputs keep no terms; the training data do not excite what they need, "
+                "or the library lacks it"
             )
+        else:
+            why = "their terms are kept by a threshold or criterion shared with the other outputs"
+            if not self.per_output:
+                why += " (per_output=True selects each output on its own)"
+        warnings.warn(
+            f"the selected SINDy model explains nothing of {', '.join(poor)} on the validation "
+            f"data (an NMSE of 1 is that of no model): {why}",
+            SindyWarning,
+            stacklevel=3,
+        )
 
     def _select_per_output(self, coefs: np.ndarray, val: np.ndarray) -> np.ndarray:
         """Rows per output (the outputs are separate regressions; J is their mean): start from
