@@ -17,6 +17,7 @@ from nnid.datasets.arrays import log_arrays
 from nnid.datasets.simulator import simulate_config
 from nnid.models.parametric import ParametricFossen, ParametricModel
 from nnid.trainers.least_squares import ExcitationWarning, LeastSquares
+from nnid.trainers.regression import Regression
 from nnid.trainers.sequence import DecoupledSequence
 from nnid.vehicle import load_vehicle
 
@@ -97,6 +98,39 @@ def test_unexcited_parameters_are_named(seamor):
     with pytest.warns(ExcitationWarning, match=r"N_rdot, N:r\*abs\(r\)"):
         est = LeastSquares().solve(reg)
     assert np.isnan(est.theta[2:]).all() and np.allclose(est.theta[:2], _truth(seamor)[:2])
+
+
+def test_collinear_parameters_have_no_standard_error():
+    """Two identical regressor columns: their sum is determined, each alone is not. Both are
+    named, and their standard errors are NaN (the pseudo-inverse's covariance drops the
+    undetermined direction and gave them a precise-looking one); the independent parameter
+    keeps the textbook s.e. σ/‖b‖ (Caccia eq. 12)."""
+    rng = np.random.default_rng(3)
+    a, b = rng.normal(size=(2, 2000))
+    y = 1.5 * a + 0.3 * b + 0.1 * rng.normal(size=a.size)
+    phi = np.stack([a, a, b], 1)
+    reg = Regression(phi, y, ["p", "q", "r"], ("u",), a.size)
+    with pytest.warns(ExcitationWarning, match=r"collinear regressors\): p, q"):
+        est = LeastSquares(weighting="none", correlated=False).solve(reg)
+    assert est.theta[0] + est.theta[1] == pytest.approx(1.5, abs=0.01)
+    assert np.isnan(est.stderr[:2]).all() and np.isnan(est.cov[2, :2]).all()
+    assert est.stderr[2] == pytest.approx(0.1 / np.linalg.norm(b), rel=0.05)
+    params = est.as_dict()
+    assert params["p"]["stderr"] is None and not params["p"]["significant"]
+    assert params["r"]["significant"]
+
+
+def test_exact_data_does_not_make_a_zero_parameter_significant():
+    """Noise-free data: the RSS of the normal equations is rounding, not zero. A parameter
+    whose truth is 0 (estimate ~1e-16) is not significant; the true ones are, and their
+    standard errors sit at the precision of double arithmetic."""
+    for seed in range(10):  # the sign of the rounding varies; before, half the draws failed
+        a, b, c = np.random.default_rng(seed).normal(size=(3, 1000))
+        y = 1.5 * a + 0.3 * b
+        reg = Regression(np.stack([a, b, c], 1), y, ["a", "b", "c"], ("u",), a.size)
+        est = LeastSquares(weighting="none", correlated=False).solve(reg)
+        assert list(est.significant) == [True, True, False], seed
+        assert np.all(est.stderr > 0) and np.all(est.stderr < 1e-6)
 
 
 def test_irrelevant_parameter_is_insignificant(seamor):

@@ -121,7 +121,8 @@ def solve_least_squares(
 ) -> Estimate:
     """Weighted least squares with covariance, through the normal equations of the
     column-scaled regressor (fast on long logs; the excitation check guards conditioning).
-    Unexcited parameters get NaN and a warning that names them."""
+    Unexcited parameters get NaN and a warning that names them; collinear ones keep the
+    pseudo-inverse's (minimum-norm) value, a warning, and no standard error (NaN)."""
     finite = np.isfinite(y) & np.isfinite(phi).all(1)
     if not finite.all():  # rows with an undefined signal (e.g. w of a tumbling vehicle)
         phi, y = phi[finite], y[finite]
@@ -145,11 +146,20 @@ def solve_least_squares(
     inv = np.linalg.pinv(g / np.outer(scale, scale), hermitian=True) / np.outer(scale, scale)
     theta = np.full(p, np.nan)
     theta[live] = inv @ rhs[live]
-    # rᵀWr = yᵀWy − 2θᵀΦᵀWy + θᵀΦᵀWΦθ
-    rss = max(yy - 2 * theta[live] @ rhs[live] + theta[live] @ g @ theta[live], 0.0)
+    # rᵀWr = yᵀWy − 2θᵀΦᵀWy + θᵀΦᵀWΦθ, three terms of size yᵀWy: below a few ulps of it the
+    # difference is rounding, so the RSS is floored there (on exact data σ̂ = 0 made a
+    # parameter of 1e-15 "significant")
+    rss = yy - 2 * theta[live] @ rhs[live] + theta[live] @ g @ theta[live]
+    rss = max(rss, 4 * np.finfo(np.float64).eps * yy)
     sigma2 = float(rss / max(n - int(live.sum()), 1))
     cov = np.full((p, p), np.nan)
     cov[np.ix_(live, live)] = sigma2 * inv
+    if report is not None and report.collinear:
+        # a parameter of a collinear group is not determined on its own: the pseudo-inverse's
+        # covariance leaves out the undetermined direction, so its s.e. would look precise
+        tied = np.array([nm in report.collinear for nm in names])
+        cov[tied, :] = np.nan
+        cov[:, tied] = np.nan
     return Estimate(names, theta, cov, sigma2, n, report)
 
 

@@ -118,14 +118,7 @@ def masked_least_squares(
         reg = Regression(xi[:, cols], tau_bar[:, f], names, ("u",), tau_bar.shape[0])
         est = solver.solve(reg)
         k[f, cols] = np.nan_to_num(est.theta)
-        se[f, cols] = est.stderr
-        if est.excitation is not None and est.excitation.collinear:
-            # a term of a collinear group is not determined on its own: the pseudo-inverse's
-            # covariance leaves out the undetermined direction and its s.e. would look precise
-            tied = [
-                j for j, name in zip(cols, names, strict=True) if name in est.excitation.collinear
-            ]
-            se[f, tied] = np.nan
+        se[f, cols] = est.stderr  # NaN for a term of a collinear group
     return SynthesisFit(k, se, mask)
 
 
