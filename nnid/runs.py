@@ -502,6 +502,7 @@ def detect_run(
     from nnid.datasets.log import POSE, VELOCITY
     from nnid.datasets.readers import load_log
     from nnid.fault.detect import detect
+    from nnid.fault.monitor import GAP_INTERVALS
     from nnid.reports.detect_report import OUTPUTS, write_detect_outputs
 
     check_detect_inputs(model_dir, data)
@@ -509,10 +510,18 @@ def detect_run(
     lines: list[str] = []
     try:
         log, report = load_log(data, columns)
-        # a gap in the motion data gives no residual: its intervals are skipped (the EWMA and
-        # CUSUM carry their state across it)
+        # a gap in the motion data cuts the run into segments, and the monitor restarts on
+        # each (its EWMA, CUSUM and alarm from zero)
         log = mask_gaps([log], [*POSE, *VELOCITY], report)[0]
         lines += lost_rows(report)
+        runs = log["experiment"].to_numpy() if "experiment" in log else None
+        missing = monitor.missing_samples(log["t"].to_numpy(), runs)
+        if missing:
+            lines.append(
+                f"missing samples: {missing} intervals longer than {GAP_INTERVALS:g} x the "
+                f"calibrated {monitor.interval:.4g} s got no residual (the monitor's statistics "
+                "carry across them)"
+            )
         (progress or silent)(0, None, "running the monitor")
         result = detect(monitor, log, window_s)
     except NnidInputError as exc:

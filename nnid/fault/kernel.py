@@ -28,9 +28,9 @@ from nnid.physics.compiled import _rhs
 
 CURVE_POLY, CURVE_QUADRATIC, CURVE_TABLE, CURVE_FORCE = 0, 1, 2, 3
 
-# layout of the scalar settings vector ``cfg``
-TAU, ALLOWANCE, H_EWMA, H_CUSUM, DIM, REARM = range(6)
-CFG_SIZE = 6
+# layout of the scalar settings vector ``cfg``; MAX_DT: the longest interval given a residual
+TAU, ALLOWANCE, H_EWMA, H_CUSUM, DIM, REARM, MAX_DT = range(7)
+CFG_SIZE = 7
 # layout of the state vector ``st``: flags and CUSUM, then the EWMA [EWMA:EWMA + 6]
 HAS_PREV, CUSUM, ACTIVE, QUIET, EWMA = range(5)
 STATE_SIZE = EWMA + 6
@@ -167,11 +167,14 @@ def _update(t, x, cmd, prev, st, cfg, form, mass, mask, act, mu, whiten, s_inv, 
     """One sample at time ``t``: state ``x`` [12] and commands ``cmd`` held from now.
     ``prev`` [13 + n_channels] keeps the previous sample. ``out`` ← r [0:6], z [6:12],
     EWMA [12:18], T [18], g [19]; returns 1 for a new alarm, 0 otherwise, −1 while there is no
-    residual (first sample, a time that does not increase, or a value that is not finite)."""
+    residual (first sample, a time that does not increase, an interval longer than
+    ``cfg[MAX_DT]``, or a value that is not finite). Across a long interval (samples missing)
+    the commands were not held and the difference quotient is not the acceleration, so it is
+    skipped as a value that is not finite is: the statistics carry their state across."""
     n_ch = cmd.shape[0]
     code = -1
     dt = t - prev[12 + n_ch]
-    if st[HAS_PREV] > 0.0 and dt > 0.0:
+    if st[HAS_PREV] > 0.0 and 0.0 < dt <= cfg[MAX_DT]:
         if _residual(prev, x, n_ch, dt, form, mass, mask, act, out, work, scratch):
             t_stat, g = _statistics(dt, mu, whiten, s_inv, cfg, out, st)
             out[18] = t_stat

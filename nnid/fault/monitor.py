@@ -38,6 +38,9 @@ from nnid.validation import PositiveFloat, StrictModel, validated
 MONITOR_FILE = "monitor.json"
 #: the relative difference of sample interval a monitored log may have from the healthy record
 RATE_TOLERANCE = 0.1
+#: an interval longer than this many typical intervals has samples missing: it gets no residual
+#: (one dropped sample, 2×, and a clock that alternates, 1.5×, are still scored)
+GAP_INTERVALS = 2.5
 TRACE_COLUMNS = [
     *(f"r_{f}" for f in FORCES),
     *(f"z_{f}" for f in FORCES),
@@ -209,20 +212,21 @@ class ResidualMonitor(BaseEstimator):
             "scratch": np.zeros((4, 18)),
         }
 
-    def _cfg(self, thresholds: tuple[float, float]) -> np.ndarray:
+    def _cfg(self, thresholds: tuple[float, float], interval: float) -> np.ndarray:
         cfg = np.zeros(kernel.CFG_SIZE)
         cfg[kernel.TAU] = self.time_constant_s
         cfg[kernel.DIM] = float(self.mask_.sum())
         cfg[kernel.ALLOWANCE] = self.allowance * cfg[kernel.DIM]
         cfg[kernel.H_EWMA], cfg[kernel.H_CUSUM] = thresholds
         cfg[kernel.REARM] = self.rearm_s
+        cfg[kernel.MAX_DT] = GAP_INTERVALS * interval
         return cfg
 
-    def _pass(self, data, mu, whiten, s_inv, thresholds) -> Trace:
+    def _pass(self, data, mu, whiten, s_inv, thresholds, interval: float) -> Trace:
         """The compiled update over every row; each run of rows of one experiment starts from
         a fresh state, the experiments in parallel threads (slices of the arrays, no copies:
         the pass is memory-bound)."""
-        cfg = self._cfg(thresholds)
+        cfg = self._cfg(thresholds, interval)
         n = data["t"].size
         codes = data["experiment"]
         starts = np.r_[0, np.flatnonzero(np.diff(codes)) + 1, n].astype(np.int64)
@@ -251,7 +255,8 @@ class ResidualMonitor(BaseEstimator):
         data = monitor_inputs(healthy, self.plant_)
         active = self.mask_ > 0
         eye, none = np.eye(6), (math.inf, math.inf)
-        raw = self._pass(data, np.zeros(6), eye, np.zeros((6, 6)), none).values[:, 0:6]
+        interval = typical_interval(data["t"], data["experiment"])
+        raw = self._pass(data, np.zeros(6), eye, np.zeros((6, 6)), none, interval).values[:, 0:6]
         raw = raw[np.isfinite(raw).all(1)]
         if raw.shape[0] < 100:
             raise NnidInputError(
@@ -270,13 +275,13 @@ class ResidualMonitor(BaseEstimator):
             )
         whiten = np.zeros((6, 6))
         whiten[np.ix_(active, active)] = np.linalg.inv(np.linalg.cholesky(cov))
-        z = self._pass(data, mu, whiten, np.eye(6), none).values
+        z = self._pass(data, mu, whiten, np.eye(6), none, interval).values
         ewma = z[np.isfinite(z[:, 12]), 12:18][:, active]
         s_inv = np.zeros((6, 6))
         s_inv[np.ix_(active, active)] = np.linalg.inv(np.cov(ewma.T).reshape(len(ewma.T), -1))
         self.mu_, self.whiten_, self.s_inv_ = mu, whiten, s_inv
         self.sigma_ = np.sqrt(_variances(cov, active))  # per DOF, for the isolation's weights
-        trace = self._pass(data, mu, whiten, s_inv, none)
+        trace = self._pass(data, mu, whiten, s_inv, none, interval)
         hours = _hours(data)
         dt = float(np.median(np.diff(data["t"])))
         gap = max(round(self.rearm_s / dt), 1)
@@ -296,7 +301,7 @@ class ResidualMonitor(BaseEstimator):
             "samples": int(raw.shape[0]),
             "experiments": [str(e) for e in data["experiment_names"]],
             "dt": dt,
-            "interval": typical_interval(data["t"], data["experiment"]),
+            "interval": interval,
         }
         caveat = self.threshold_caveat()
         if caveat:
@@ -329,15 +334,30 @@ class ResidualMonitor(BaseEstimator):
         check_is_fitted(self, "thresholds_", msg=UNCALIBRATED)
         data = monitor_inputs(log, self.plant_)
         self.check_rate(data["t"], data["experiment"])
-        return self._pass(data, self.mu_, self.whiten_, self.s_inv_, self.threshold_values)
+        return self._pass(
+            data, self.mu_, self.whiten_, self.s_inv_, self.threshold_values, self.interval
+        )
+
+    @property
+    def interval(self) -> float:
+        """The healthy record's typical sample interval (:func:`typical_interval`; a monitor
+        saved before it was stored has the median)."""
+        return self.calibration_.get("interval", self.calibration_.get("dt"))
+
+    def missing_samples(self, t: np.ndarray, experiment: np.ndarray | None = None) -> int:
+        """How many intervals of ``t`` (within an experiment) are longer than
+        :data:`GAP_INTERVALS` calibrated intervals: samples missing there, no residual."""
+        steps = np.diff(np.asarray(t, dtype=np.float64))
+        if experiment is not None:
+            steps = steps[np.asarray(experiment)[1:] == np.asarray(experiment)[:-1]]
+        return int(np.sum(steps > GAP_INTERVALS * self.interval))
 
     def check_rate(self, t: np.ndarray, experiment: np.ndarray | None = None) -> None:
         """Refuse a log sampled at another rate than the healthy record: the residual is a
         difference quotient (its noise grows as 1/dt) and the EWMA's gain depends on dt, so the
         whitening and both thresholds hold at the calibration rate only (a healthy log at twice
         the rate raised 30 alarms per hour against a target of 0.01)."""
-        # the typical interval of both records, on one rule (an older monitor has the median)
-        calibrated = self.calibration_.get("interval", self.calibration_.get("dt"))
+        calibrated = self.interval  # the typical interval of both records, on one rule
         dt = typical_interval(t, experiment)
         if calibrated and not abs(dt / calibrated - 1) <= RATE_TOLERANCE:
             raise NnidInputError(
@@ -479,7 +499,7 @@ class Stream:
     def __init__(self, monitor: ResidualMonitor) -> None:
         m = monitor
         self._buf = m._buffers(len(m.channels_))
-        self._cfg = m._cfg(m.threshold_values)
+        self._cfg = m._cfg(m.threshold_values, m.interval)
         self._fixed = (m.form_, m.mass_, m.mask_, m.act_, m.mu_, m.whiten_, m.s_inv_)
         self._n = len(m.channels_)
         self.values = np.full(20, np.nan)
