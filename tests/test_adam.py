@@ -74,3 +74,38 @@ def test_progress_reports_every_epoch():
     # the epoch's scores as keywords, for a tuner (nnid sweep on Ray Tune)
     assert [k["validation"] for _, k in calls] == hist.validation[1:]
     assert [k["train"] for _, k in calls] == hist.train[1:]
+
+
+def _diverged_while_poor(limit: float):
+    """The problem of :func:`_problem` with a validation residual like a free run's: NaN (the
+    run diverged) while the model's worst error exceeds ``limit``."""
+    module, residual, train, val = _problem()
+
+    def run(params, batch):
+        if batch[0] == "free":
+            r = residual(params, batch[1])
+            return r if float(r.abs().max()) < limit else torch.full_like(r, math.nan)
+        return residual(params, batch)
+
+    return module, run, train, [("free", val[0])]
+
+
+def test_a_diverged_validation_run_is_a_failure_not_the_end_of_the_fit():
+    """The validation free run diverged at the start and while the model was poor: those are
+    failures, and the first finite score is the best. A NaN validation used to end the fit
+    ("non-finite loss") with the start's weights, though training itself was sound."""
+    module, residual, train, val = _diverged_while_poor(limit=4.0)
+    start = module.weight.detach().clone()
+    hist = Adam(lr=0.1, max_epochs=200, max_fail=10).fit(module, residual, train, val)
+    assert math.isnan(hist.validation[0]) and math.isnan(hist.validation[1])
+    assert hist.stop_reason != "non-finite loss" and hist.best_epoch > 1
+    assert math.isfinite(hist.validation[hist.best_epoch])
+    assert not torch.equal(module.weight.detach(), start)
+
+
+def test_a_validation_run_that_always_diverges_stops_after_max_fail():
+    module, residual, train, val = _diverged_while_poor(limit=-1.0)
+    start = module.weight.detach().clone()
+    hist = Adam(lr=0.05, max_epochs=200, max_fail=5).fit(module, residual, train, val)
+    assert hist.stop_reason == "validation" and hist.epochs == 5 and hist.best_epoch == 0
+    assert torch.equal(module.weight.detach(), start)

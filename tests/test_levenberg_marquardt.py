@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import itertools
+import math
 
 import numpy as np
 import pytest
@@ -181,6 +182,55 @@ def test_validation_early_stop_restores_best() -> None:
         val_now = float(torch.mean((net(xv) - yv) ** 2))
     assert val_now == pytest.approx(hist.validation[best], rel=1e-12)
     assert hist.train[-1] < hist.train[best]
+
+
+def _diverged_while_poor(net: torch.nn.Module, limit: float):
+    """A residual of batches ``(x, y, free)``: for ``free`` batches it acts like a free run's,
+    NaN (the run diverged) while the model's worst error exceeds ``limit``."""
+    plain = _regression_residual(net)
+
+    def residual(params: dict[str, torch.Tensor], batch) -> torch.Tensor:
+        x, y, free = batch
+        r = plain(params, (x, y))
+        if free and float(r.abs().max()) >= limit:
+            return torch.full_like(r, float("nan"))
+        return r
+
+    return residual
+
+
+def test_a_diverged_validation_at_the_start_is_beaten_by_the_first_finite_one() -> None:
+    """The start's validation free run diverged (NaN): the first finite score is the best so
+    far. NaN compared False both ways, so the fit used to hand back its start, however far
+    training had come."""
+    x = torch.linspace(-2, 2, 40, dtype=torch.float64).unsqueeze(1)
+    y = torch.sin(x)
+    net = _mlp([1, 8, 1], seed=0)
+    start = _flat(net)
+    residual = _diverged_while_poor(net, 0.5)
+    hist = LevenbergMarquardt(max_epochs=30).fit(net, residual, [(x, y, False)], [(x, y, True)])
+    assert math.isnan(hist.validation[0])  # recorded as measured, not as a number
+    assert hist.best_epoch >= 1 and np.isfinite(hist.validation[hist.best_epoch])
+    assert not np.allclose(_flat(net), start)
+    with torch.no_grad():
+        assert float(torch.mean((net(x) - y) ** 2)) == pytest.approx(
+            hist.validation[hist.best_epoch], rel=1e-12
+        )
+
+
+def test_a_validation_run_that_always_diverges_counts_as_failures() -> None:
+    """Every validation free run diverged: each accepted epoch is a failure, so the fit stops
+    after ``max_fail`` of them and keeps the start (nothing was measured better); it used to run
+    on to μ_max or the epoch cap, counting none."""
+    x = torch.linspace(-2, 2, 40, dtype=torch.float64).unsqueeze(1)
+    y = torch.sin(x)
+    net = _mlp([1, 8, 1], seed=0)
+    start = _flat(net)
+    residual = _diverged_while_poor(net, -1.0)
+    lm = LevenbergMarquardt(max_epochs=200, max_fail=4, min_grad=0.0, goal=-1.0)
+    hist = lm.fit(net, residual, [(x, y, False)], [(x, y, True)])
+    assert hist.stop_reason == "validation" and hist.epochs == 4 and hist.best_epoch == 0
+    assert np.allclose(_flat(net), start)
 
 
 def _one_step(mode: str, budget_mb: float, net: torch.nn.Module, batches) -> tuple:

@@ -527,10 +527,15 @@ def test_sweep_on_ray_tune_with_asha(sweep_inputs, tmp_path) -> None:
     from nnid.scale.sweep import run_sweep_tune
 
     config, data = sweep_inputs
+    # ranked on the one-step score, which these one-stage trials report every epoch
+    one_step = tmp_path / "one_step.toml"
+    one_step.write_text(
+        config.read_text().replace("[sweep]\n", '[sweep]\nmetric = "one_step_nrmse"\n')
+    )
     out = tmp_path / "tune"
     ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False, configure_logging=False)
     try:
-        result, ranked = run_sweep_tune(config, out, None, data=str(data))
+        result, ranked = run_sweep_tune(one_step, out, None, data=str(data))
     finally:
         ray.shutdown()
     assert result.engine == "ray tune (ASHA)" and len(result.rows) == 4
@@ -544,12 +549,55 @@ def test_sweep_on_ray_tune_with_asha(sweep_inputs, tmp_path) -> None:
         else:
             metrics = json.loads((out / row["id"] / "metrics.json").read_text())
             assert (
-                row["validation_free_run_nrmse"] == metrics["validation"]["free_run_nrmse"]["total"]
+                row["validation_one_step_nrmse"] == metrics["validation"]["one_step_nrmse"]["total"]
             )
     early = result.extra["sweep"]["early_stopping"]
     assert early["stopped"] == sum(r["status"] == "stopped" for r in result.rows)
     assert (out / "settings.csv").is_file() and (out / "report.html").is_file()
     assert ranked[0].mean is not None and (out / "best.toml").is_file()
+
+
+@pytest.mark.parametrize(
+    ("metric", "stage"), [("free_run_nrmse", "simulation"), ("one_step_nrmse", "one-step")]
+)
+def test_tune_trials_report_one_measure_to_asha(sweep_inputs, tmp_path, monkeypatch, metric, stage):
+    """A NARX trial trains one-step, then on the free run. ASHA compares trials at equal report
+    counts, and trials switch stage at different epochs, so a trial reports only the stage
+    that measures the sweep's metric (it reported both, one-step against free run at one
+    rung), then the best of those once more: never the last epoch's."""
+    pytest.importorskip("ray")
+    from ray import tune
+
+    from nnid.scale import task as task_module
+    from nnid.scale.sweep import _tune_trial, trials
+
+    config, data = sweep_inputs
+    two_stage = tmp_path / "two_stage.toml"
+    two_stage.write_text(
+        config.read_text()
+        .replace("hidden = [3]\n", "hidden = [3]\nsimulation_epochs = 3\nsimulation_window = 50\n")
+        .replace("[sweep]\n", f'[sweep]\nmetric = "{metric}"\n')
+    )
+    spec, tasks = trials(two_stage, data=str(data))
+    seen: list[tuple[str, float]] = []
+    reported: list[dict] = []
+    run_task = task_module.run_task
+
+    def watched(task, out_root, progress):
+        def spy(done, total, message, **scores):
+            if "validation" in scores:
+                seen.append((message.split(":")[0], scores["validation"]))
+            progress(done, total, message, **scores)
+
+        return run_task(task, out_root, progress=spy)
+
+    monkeypatch.setattr(task_module, "run_task", watched)
+    monkeypatch.setattr(tune, "report", reported.append)
+    _tune_trial({"trial": 0}, tasks, str(tmp_path / "out"), spec.metric)
+    assert {s for s, _ in seen} == {"one-step", "simulation"}  # both stages ran
+    wanted = [v for s, v in seen if s == stage]
+    assert [r["objective"] for r in reported[:-1]] == wanted
+    assert reported[-1]["finished"] == 1.0 and reported[-1]["objective"] == min(wanted)
 
 
 def test_sweep_cli_refuses_a_config_without_a_sweep(sweep_inputs, tmp_path) -> None:

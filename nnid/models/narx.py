@@ -82,7 +82,7 @@ from nnid.models.base import NOT_FITTED
 from nnid.models.bounds import OutputBounds, bound_arrays, check_bounds, resolve_bounds
 from nnid.models.io_model import DTYPE, InputOutputModel, seeded_linear
 from nnid.serialization import jsonable
-from nnid.trainers.history import History, Progress, staged
+from nnid.trainers.history import History, Progress, staged, stopping_score
 
 #: ``output_transform`` values: extra regressors computed from each lagged output
 OUTPUT_TRANSFORMS = (None, "sqrt", "products", "fossen")
@@ -744,16 +744,17 @@ class NarxModel(InputOutputModel):
             def train_b(epoch: int) -> list:
                 return [self._batch(tab, idx, horizon) for idx in draw(epoch)]
 
-        stage = "one-step" if horizon == 1 else f"{horizon}-step"
+        stage, measure = ("one-step", "one_step") if horizon == 1 else (f"{horizon}-step", "k_step")
         # every sample (or window) of a batch is its own residual block: LM's "samples" mode
         extra = {"separable": True} if isinstance(trainer, LevenbergMarquardt) else {}
-        self.history_ = trainer.fit(
-            self.net_, residual, train_b, v_batches, progress=staged(progress, stage), **extra
-        )
+        report = staged(progress, stage, f"{measure}_nrmse")
+        self.history_ = trainer.fit(self.net_, residual, train_b, v_batches, report, **extra)
         self.finetune_ = None
         if self.simulation_epochs > 0:
             held_out = validation_log if random_rows is None else None
-            self._simulation_finetune(tab, held_out, staged(progress, "simulation"))
+            self._simulation_finetune(
+                tab, held_out, staged(progress, "simulation", "free_run_nrmse")
+            )
 
     def _batch(self, table: dict[str, torch.Tensor], idx: torch.Tensor, horizon: int) -> tuple:
         """Tensors of a batch, sample-major: (φ, target) one-step, or windows ending at
@@ -1030,8 +1031,7 @@ class NarxModel(InputOutputModel):
         the trainers' early stopping computes it; infinite when not finite."""
         with torch.no_grad():
             r = torch.cat([self._window_residual(self._weights(), b) for b in runs])
-        value = float(r @ r) / max(r.numel(), 1)
-        return value if np.isfinite(value) else np.inf
+        return stopping_score(float(r @ r) / max(r.numel(), 1))
 
     def _epoch_order(self, n: int, epoch: int) -> torch.Tensor:
         """A permutation of ``n`` windows for ``epoch``, drawn from ``seed`` (local generator)."""

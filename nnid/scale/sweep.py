@@ -29,7 +29,7 @@ from nnid.config import SweepSpec, TrainConfig, load_config, set_option
 from nnid.errors import NnidInputError
 from nnid.scale.batch import BatchResult, run_tasks
 from nnid.scale.manifest import Task, with_id
-from nnid.trainers.history import Progress, silent
+from nnid.trainers.history import Progress, silent, stopping_score
 from nnid.validation import read_toml
 
 
@@ -215,23 +215,32 @@ def _summary(spec: SweepSpec, ranked: list[Ranked]) -> str:
 # -- Ray Tune ------------------------------------------------------------------------------------
 
 
-def _tune_trial(params: dict, tasks: list[Task], out_root: str) -> None:
+def _tune_trial(params: dict, tasks: list[Task], out_root: str, metric: str) -> None:
     """One trial inside Ray Tune: the train task, its trainers' per-epoch validation objective
-    reported to Tune (ASHA's rungs), the validation score last."""
+    reported to Tune (ASHA's rungs), then the best of them once more as the trial ends.
+
+    ASHA compares trials at equal report counts, so every report must measure the same thing:
+    a stage that names its measure (:func:`nnid.trainers.history.staged`) is reported only
+    when that is the sweep's ``metric`` (a NARX's one-step epochs are not, under a free-run
+    metric: trials would be compared one-step against free run where their stages switch at
+    different epochs); a model that names none has one measure and is reported."""
     from ray import tune
 
     from nnid.scale.task import run_task
 
     task = tasks[params["trial"]]
-    last: dict[str, float] = {}
+    reported: list[float] = []
 
     def report(done: int, total: int | None, message: str, **scores: float) -> None:
-        if "validation" in scores and math.isfinite(scores["validation"]):
-            last["validation"] = scores["validation"]
-            tune.report({"objective": scores["validation"]})
+        named = any(k.startswith("validation_") for k in scores)
+        value = scores.get(f"validation_{metric}") if named else scores.get("validation")
+        if value is not None:  # a diverged free run is the worst score, not a skipped one
+            reported.append(stopping_score(value))
+            tune.report({"objective": reported[-1]})
 
     row = run_task(task, out_root, progress=report)
-    tune.report({"objective": last.get("validation", math.inf), "finished": 1.0,
+    # the kept epoch is the best one (the trainers restore it), not the last
+    tune.report({"objective": min(reported, default=math.inf), "finished": 1.0,
                  "error": row["error"] or ""})  # fmt: skip
 
 
@@ -277,7 +286,8 @@ def run_sweep_tune(
         else FIFOScheduler()
     )
     trainable = tune.with_resources(
-        tune.with_parameters(_tune_trial, tasks=tasks, out_root=str(out_dir)), {"cpu": 1}
+        tune.with_parameters(_tune_trial, tasks=tasks, out_root=str(out_dir), metric=spec.metric),
+        {"cpu": 1},
     )
     tuner = tune.Tuner(
         trainable,
@@ -295,7 +305,7 @@ def run_sweep_tune(
         thread.join(1.0)
     try:
         trial_results = sorted(box["grid"], key=lambda r: r.config["trial"])
-        rows = [_tune_row(tasks[r.config["trial"]], r, out_dir) for r in trial_results]
+        rows = [_tune_row(tasks[r.config["trial"]], r, out_dir, spec.metric) for r in trial_results]
     finally:
         if own:
             ray.shutdown()
@@ -307,12 +317,19 @@ def run_sweep_tune(
         "stopped": sum(r["status"] == "stopped" for r in rows),
         "epochs_run": sum(r.get("epochs") or 0 for r in rows),
     }
+    if spec.early_stopping and all((r.get("epochs") or 0) <= 1 for r in rows):
+        batch.extra["sweep"]["summary"] += (
+            f" ASHA compared no trials: no training stage reported a per-epoch validation "
+            f"{spec.metric} (a NARX without a free-run stage reports one-step scores only), so "
+            "every trial ran to its end."
+        )
     write_summary(batch, out_dir, title="nnid sweep")
     return batch, ranked
 
 
-def _tune_row(task: Task, result, out_dir: Path) -> dict[str, Any]:
-    """A Tune trial's row: the task's own row when it finished, else why not."""
+def _tune_row(task: Task, result, out_dir: Path, metric: str) -> dict[str, Any]:
+    """A Tune trial's row: the task's own row when it finished, else why not. ``epochs``
+    counts the reports ASHA saw (the epochs that measured ``metric``, and the last)."""
     from nnid.scale.engines import failed_row
     from nnid.scale.task import finished
 
@@ -326,8 +343,8 @@ def _tune_row(task: Task, result, out_dir: Path) -> dict[str, Any]:
     if not metrics.get("finished"):
         row = failed_row(
             task,
-            f"stopped early by ASHA after {epochs} epochs (validation objective "
-            f"{metrics.get('objective', float('nan')):.4g})",
+            f"stopped early by ASHA after {epochs} epochs of its validation {metric} "
+            f"(objective {metrics.get('objective', float('nan')):.4g})",
         )
         return {**row, "status": "stopped", "epochs": epochs}
     return {**failed_row(task, metrics.get("error") or "the fit failed"), "epochs": epochs}

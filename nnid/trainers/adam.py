@@ -18,7 +18,7 @@ from typing import Any, Literal
 import torch
 from sklearn.base import BaseEstimator
 
-from nnid.trainers.history import History, Progress, silent
+from nnid.trainers.history import History, Progress, silent, stopping_score
 
 Residual = Callable[[dict[str, torch.Tensor], Any], torch.Tensor]
 Batches = Sequence[Any] | Callable[[int], Iterable[Any]]
@@ -125,7 +125,7 @@ class Adam(BaseEstimator):
         first = train_batches(0) if callable(train_batches) else train_batches
         score = mean_square(val_batches, params) if val_batches else None
         hist.record(mean_square(first, params), score, time.perf_counter() - start)
-        best = score if score is not None else hist.train[0]
+        best = stopping_score(score if score is not None else hist.train[0])
         if isinstance(scheduler, torch.optim.lr_scheduler.ReduceLROnPlateau):
             scheduler.step(best)  # the start counts, as it does for early stopping
         best_state = state()
@@ -152,7 +152,9 @@ class Adam(BaseEstimator):
             train = total / max(count, 1)
             score = mean_square(val_batches, kept()) if val_batches else None
             hist.record(train, score, time.perf_counter() - start, lr=rate)
-            value = score if score is not None else train
+            # a diverged validation free run is a failure; only a non-finite training loss
+            # (the weights themselves broke) ends the fit
+            value = stopping_score(score) if score is not None else train
             report(
                 epoch + 1,
                 self.max_epochs,
@@ -161,7 +163,7 @@ class Adam(BaseEstimator):
                 train=train,
                 **({} if score is None else {"validation": score}),
             )
-            if not math.isfinite(value):
+            if not math.isfinite(train):
                 hist.stop_reason = "non-finite loss"
                 break
             if value < best:

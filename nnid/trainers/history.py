@@ -9,12 +9,15 @@ Adam's learning rate) go in ``extra``.
 message, **scores)`` (``total`` may be None when unknown). Trainers, models and the residual
 loop call it; the CLI draws it as a bar. Trainers that score every epoch (Levenberg-Marquardt,
 Adam) pass the epoch's mean-square objective as ``train=`` and, with validation data,
-``validation=``: ``nnid sweep`` on Ray Tune reads them so that its ASHA scheduler can stop poor
-trials early. Every callback accepts the keywords and may ignore them.
+``validation=``; a model whose stages measure different things (a NARX's one-step stage, then
+its free-run stage) names each stage's measure (:func:`staged`). ``nnid sweep`` on Ray Tune
+reads them so that its ASHA scheduler can stop poor trials early. Every callback accepts the
+keywords and may ignore them.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -25,11 +28,25 @@ def silent(done: int, total: int | None, message: str, **scores: float) -> None:
     """The progress callback that reports nothing."""
 
 
-def staged(progress: Progress | None, stage: str) -> Progress:
-    """``progress`` with every message prefixed by ``stage`` (a fit in several stages)."""
+def stopping_score(value: float) -> float:
+    """A validation error as early stopping compares it: a non-finite one (a free run that
+    diverged) is infinitely bad, so it counts as a failure and is never kept as the best.
+    NaN would compare False both ways and neither count nor reset."""
+    return value if math.isfinite(value) else math.inf
+
+
+def staged(progress: Progress | None, stage: str, measure: str | None = None) -> Progress:
+    """``progress`` with every message prefixed by ``stage`` (a fit in several stages).
+    ``measure`` names what the stage's ``validation=`` score measures, in the sweep's metric
+    names (``"one_step_nrmse"``, ``"k_step_nrmse"``, ``"free_run_nrmse"``; the trainer's
+    mean square, so its square on the trainer's weighting): the score is passed on a second
+    time as ``validation_<measure>=``, so that a sweep's early stopping compares one measure
+    across trials whose stages switch measure at different epochs."""
     report = progress or silent
 
     def call(done: int, total: int | None, message: str, **scores: float) -> None:
+        if measure is not None and "validation" in scores:
+            scores = {**scores, f"validation_{measure}": scores["validation"]}
         report(done, total, f"{stage}: {message}" if message else stage, **scores)
 
     return call

@@ -90,7 +90,7 @@ from sklearn.base import BaseEstimator
 from torch.func import jacrev, jvp, vjp, vmap
 
 from nnid.errors import NnidInputError
-from nnid.trainers.history import History, Progress, silent
+from nnid.trainers.history import History, Progress, silent, stopping_score
 
 __all__ = ["LevenbergMarquardt", "NormalEquations"]
 
@@ -601,7 +601,8 @@ class LevenbergMarquardt(BaseEstimator):
             s, k = self._sse(residual, th, layout, val_batches, penalised=False)  # type: ignore[arg-type]
             return s / max(k, 1)
 
-        best_val = val_mse(theta)
+        start_val = val_mse(theta)
+        best_val = None if start_val is None else stopping_score(start_val)
         best_theta = theta.clone()
         fails = 0
         epoch = 0
@@ -640,7 +641,7 @@ class LevenbergMarquardt(BaseEstimator):
             mse = sse / n  # the SSE that trials are judged against
             grad = 2.0 * float(torch.linalg.vector_norm(ne.jtr)) / n
             if epoch == 0:
-                hist.record(mse, best_val, time.perf_counter() - t0, mu=mu)
+                hist.record(mse, start_val, time.perf_counter() - t0, mu=mu)
             hist.extra.setdefault("gradient", []).append(grad)
             if mse <= self.goal:
                 stop = "goal"
@@ -681,10 +682,11 @@ class LevenbergMarquardt(BaseEstimator):
                 last_accepted = epoch
             v = val_mse(theta) if accepted else (hist.validation[-1] if use_val else None)
             if use_val and accepted:
-                if v < best_val:
-                    best_val, best_theta, fails = v, theta.clone(), 0
+                score = stopping_score(v)
+                if score < best_val:
+                    best_val, best_theta, fails = score, theta.clone(), 0
                     hist.best_epoch = epoch
-                elif v > best_val:
+                elif score > best_val or math.isinf(score):
                     fails += 1
             hist.record(mse, v, time.perf_counter() - t0, mu=mu)
             report(
