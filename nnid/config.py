@@ -770,6 +770,8 @@ ModelSpec = Annotated[
     Field(discriminator="kind"),
 ]
 PHYSICS_KINDS = ("fossen", "caccia", "synthesis", "sindy", "hybrid")
+#: models that count time in samples (delays, integration steps): they need uniform sampling
+SAMPLE_KINDS = ("narx", "state_space", "hybrid")
 
 
 # -- commands ------------------------------------------------------------------------------------

@@ -15,6 +15,7 @@ import pandas as pd
 
 from nnid.config import (
     PHYSICS_KINDS,
+    SAMPLE_KINDS,
     CacciaCampaignData,
     CompareConfig,
     SimulateConfig,
@@ -180,6 +181,7 @@ def load_inputs(
         if path is None:
             raise NnidInputError("give data.log (or --data)", source=str(config_path), field="data")
         inputs = Inputs(*_read_table(path, models))
+        _check_sampling(inputs.log, models, path)
     elif isinstance(spec, CacciaCampaignData) and data is None:
         sim, log, report = _caccia_campaign(spec, config_path, models, veh)
         inputs = Inputs(log, report, veh, sim)
@@ -191,6 +193,7 @@ def load_inputs(
         from nnid.datasets.readers import load_log
 
         inputs = Inputs(*load_log(path, reader), veh)
+        _check_sampling(inputs.log, models, path)
         if physics and veh is not None:  # the inputs the vehicle reads, said against the log
             from nnid.datasets.arrays import logged_inputs
             from nnid.datasets.preprocess import check_velocities
@@ -230,6 +233,19 @@ def load_inputs(
         inputs.report.add("experiments", f"kept {', '.join(spec.experiments)}")
     inputs.log = _prepare(inputs.log, spec, inputs.report)
     return inputs
+
+
+def _check_sampling(log: pd.DataFrame, models: list, path: str) -> None:
+    """Uniform sampling, said against the log before any fit, where a model counts time in
+    samples (the input-output models check it again themselves, naming the config)."""
+    from nnid.datasets.preprocess import check_uniform
+
+    counting = [m.kind for m in models if m.kind in SAMPLE_KINDS]
+    if counting and "t" in log:
+        try:
+            check_uniform(log, f"the {counting[0]} model")
+        except NnidInputError as err:
+            raise err.with_source(path) from None
 
 
 def _read_table(path: str, models: list) -> tuple[pd.DataFrame, CleaningReport]:

@@ -186,6 +186,24 @@ def _log_cases() -> list[Case]:
 
     cases.append(Case("train: a velocity neither logged nor derivable", no_u, ("LOG", "'u'")))
 
+    def rate_change(tmp, fx):  # a NARX counts delays in samples: 20 Hz, then 100 Hz in run1
+        log = fx["demo_log"]
+        run = log[log["experiment"] == "run1"]
+        fast = pd.DataFrame({c: np.repeat(run[c].to_numpy()[150:], 5) for c in run}).assign(
+            t=lambda d: run["t"].iloc[150] + 0.01 * np.arange(len(d))
+        )
+        log = pd.concat([log[log["experiment"] != "run1"], run.iloc[:150], fast])
+        config = tmp / "narx.toml"
+        config.write_text(
+            'kind = "train"\n[split]\nby = "experiment"\nvalidation = ["run2"]\n'
+            '[model]\nkind = "narx"\n'
+            'inputs = ["tau_Z"]\noutputs = ["w"]\n'
+        )
+        data = _write_log(tmp, "rate change", log)
+        return _command("train", tmp, fx, data=data, config=config)
+
+    cases.append(Case("train: a NARX on a run whose rate changes", rate_change, ("LOG", "'t'")))
+
     def huge_effect(tmp, fx):  # an injected effect no vehicle survives: named, not a traceback
         path = tmp / "huge_effect.toml"
         text = (

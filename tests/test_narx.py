@@ -279,6 +279,23 @@ def test_output_bounds_clamp_every_mode_and_survive_save_load(tmp_path):
         NarxModel(["u"], ["y"], output_bounds=[[1.0, 0.0]]).fit(train)
 
 
+def test_a_log_with_missing_samples_is_refused_naming_where():
+    """The delays count samples: a run with rows missing (t jumps 5 samples at t = 300) would
+    be read as one whose dynamics change there. Refused for fitting and predicting, naming the
+    interval; the same rows split into two runs are accepted."""
+    train = _tank(600, 1.3, 0)
+    holed = train.drop(index=range(301, 305)).reset_index(drop=True)
+    lm = LevenbergMarquardt(max_epochs=3, jacobian="samples")
+    kw = dict(hidden=(3,), trainer=lm, balanced=False, lm_samples=300)
+    with pytest.raises(NnidInputError, match=r"5 s from t = 300 to 305 s against 1 s") as err:
+        NarxModel(["u"], ["y"], 2, 2, **kw).fit(holed)
+    assert err.value.field == "t" and err.value.row == 301
+    split = holed.assign(experiment=np.where(holed["t"] <= 300, "a", "b"))
+    model = NarxModel(["u"], ["y"], 2, 2, **kw).fit(split)
+    with pytest.raises(NnidInputError, match="NARX"):
+        model.predict(holed, "free_run")
+
+
 def test_simulation_error_levenberg_marquardt_lowers_free_run_error():
     # one-step LM (5 epochs), then LM on the output error of whole-record free runs
     train = _tank(400, 1.3, 2)

@@ -49,15 +49,25 @@ UNIFORM_TOLERANCE = 0.01
 
 def check_uniform(log: pd.DataFrame, what: str, name: str = "log") -> None:
     """Raise unless every experiment of ``log`` is uniformly sampled (intervals within 1 % of
-    their median): models that count time in samples (``what``) need it."""
+    their median), naming the first row whose interval is not: models that count time in
+    samples (``what``) need it."""
     for exp, idx in experiments(log):
-        dt = np.diff(log.loc[idx, "t"].to_numpy(np.float64))
-        if dt.size and np.ptp(dt) > UNIFORM_TOLERANCE * np.median(dt):
+        t = log.loc[idx, "t"].to_numpy(np.float64)
+        dt = np.diff(t)
+        if not dt.size:
+            continue
+        typical = float(np.median(dt))
+        off = np.flatnonzero(np.abs(dt - typical) > UNIFORM_TOLERANCE * typical)
+        if off.size:
+            k = int(off[0])
             where = f" (experiment {exp})" if exp is not None else ""
             raise NnidInputError(
-                f"column t of the {name}{where} is not uniformly sampled: {what} counts time "
-                "in samples; resample the log first",
+                f"column t of the {name}{where} is not uniformly sampled: {dt[k]:.4g} s from "
+                f"t = {t[k]:.6g} to {t[k + 1]:.6g} s against {typical:.4g} s elsewhere, and "
+                f"{what} counts time in samples; resample the log, or split the run where "
+                "samples are missing",
                 field="t",
+                row=int(log.index.get_loc(idx[k + 1])),
             )
 
 

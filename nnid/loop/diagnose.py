@@ -363,9 +363,15 @@ def search_nonlinear(
         except ValueError:
             return np.inf
 
-    res = minimize_scalar(
-        rss, bounds=(lo, hi), method="bounded", options={"xatol": 1e-3 * (hi - lo), "maxiter": 30}
-    )
+    # a value the vehicle refuses (an installation coefficient ≤ 0 near a bound) scores inf:
+    # Brent's parabola through it is NaN, and the method then takes a golden-section step
+    with np.errstate(invalid="ignore"):
+        res = minimize_scalar(
+            rss,
+            bounds=(lo, hi),
+            method="bounded",
+            options={"xatol": 1e-3 * (hi - lo), "maxiter": 30},
+        )
     value = float(res.x)
     best = refit(ws, model_at(value), fit.unknowns)
     if not best.rss < fit.rss:

@@ -14,7 +14,7 @@ import torch
 from torch import nn
 
 from nnid.datasets.log import validate_table
-from nnid.datasets.preprocess import experiments
+from nnid.datasets.preprocess import check_uniform, experiments
 from nnid.errors import NnidInputError
 from nnid.evaluation.evaluate import score_split, target_columns
 from nnid.evaluation.metrics import warmup_mask
@@ -63,9 +63,14 @@ class InputOutputModel(NnidModel):
         generator is neither seeded nor drawn from."""
         return torch.Generator().manual_seed(int(self.seed))
 
+    #: what counts time in samples, for the uniform-sampling check's error
+    counts_samples = "the model"
+
     def _check(self, log: pd.DataFrame, name: str = "log") -> None:
         """The model's columns present (a missing one named under ``inputs`` or ``outputs``,
-        beside the columns there are) and finite."""
+        beside the columns there are) and finite, and (with a ``t``) uniform sampling: delays
+        and integration steps count samples, so a run whose rate changes would be read as one
+        whose dynamics do."""
         for role, columns in (("inputs", self.inputs_), ("outputs", self.outputs_)):
             missing = [c for c in columns if c not in log.columns]
             if missing:
@@ -74,6 +79,8 @@ class InputOutputModel(NnidModel):
                     field=role,
                 )
         validate_table(log, [*self.inputs_, *self.outputs_], source=name, require_time=False)
+        if "t" in log:
+            check_uniform(log, self.counts_samples, name)
 
     def _standardise(self, log: pd.DataFrame) -> None:
         """Means and standard deviations (1 where a column is constant) of the training data."""

@@ -246,6 +246,7 @@ class NarxModel(InputOutputModel):
     """
 
     kind = "narx"
+    counts_samples = "the NARX (its delays)"
     validation_use = "early stopping"
 
     def __init__(

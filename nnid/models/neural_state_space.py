@@ -44,7 +44,6 @@ from sklearn.base import clone
 from torch import nn
 from torch.func import functional_call
 
-from nnid.datasets.preprocess import check_uniform
 from nnid.datasets.splits import split_log
 from nnid.errors import NnidInputError
 from nnid.evaluation.prediction import mode_steps
@@ -185,6 +184,7 @@ class NeuralStateSpace(InputOutputModel):
     """
 
     kind = "state_space"
+    counts_samples = "the state-space model"
     validation_use = "early stopping"
 
     def __init__(
@@ -281,12 +281,6 @@ class NeuralStateSpace(InputOutputModel):
         self.stages_ = state["stages"]
 
     # -- data ------------------------------------------------------------------------------------
-    def _check(self, log: pd.DataFrame, name: str = "log") -> None:
-        """The model's columns present and finite, and (with a ``t``) uniform sampling."""
-        super()._check(log, name)
-        if "t" in log:
-            check_uniform(log, "the state-space model", name)
-
     def _windows(self, log: pd.DataFrame, length: int | None) -> _Windows:
         """Windows of ``length`` samples (None: the shortest experiment) starting at each
         experiment's start and every ``length − 1`` samples after (a window's last sample is
