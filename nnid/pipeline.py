@@ -34,6 +34,7 @@ from nnid.evaluation.evaluate import evaluate
 from nnid.evaluation.metrics import exact_mean
 from nnid.evaluation.prediction import Replay
 from nnid.models.base import encode_setting
+from nnid.physics.dofs import DOFS
 from nnid.reports.stops import training_stages
 from nnid.trainers.history import Progress, silent, staged
 from nnid.validation import resolve
@@ -131,14 +132,17 @@ def check_paths(cfg, config_path: Path, data: str | None, columns: str | None) -
 
 
 def fitted_dofs(spec) -> list[str]:
-    """The DOFs whose equations a physics model's config fits: its ``dofs``, or with a
-    ``sequence`` the DOFs of its steps."""
+    """The DOFs whose equations a physics model's config fits: its ``dofs``, with a
+    ``sequence`` the DOFs of its steps, and for SINDy and the named damping models all six
+    (their libraries read every velocity)."""
     sequence = getattr(spec, "sequence", None)
     if sequence:
         from nnid.trainers.sequence import sequence_dofs, sequence_steps
 
         steps = sequence if isinstance(sequence, str) else [s.model_dump() for s in sequence]
         return sequence_dofs(sequence_steps(steps))
+    if spec.kind in ("sindy", "synthesis"):
+        return list(DOFS)
     return list(getattr(spec, "dofs", None) or [])
 
 

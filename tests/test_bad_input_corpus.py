@@ -186,6 +186,14 @@ def _log_cases() -> list[Case]:
 
     cases.append(Case("train: a velocity neither logged nor derivable", no_u, ("LOG", "'u'")))
 
+    def no_u_sindy(tmp, fx):  # SINDy's library reads every velocity: said against the log too
+        config = tmp / "sindy.toml"
+        config.write_text('kind = "train"\n[split]\nby = "experiment"\n[model]\nkind = "sindy"\n')
+        log = fx["demo_log"].drop(columns=["u"])
+        return _command("train", tmp, fx, data=_write_log(tmp, "no u", log), config=config)
+
+    cases.append(Case("train: SINDy without a velocity", no_u_sindy, ("LOG", "'u'")))
+
     def rate_change(tmp, fx):  # a NARX counts delays in samples: 20 Hz, then 100 Hz in run1
         log = fx["demo_log"]
         run = log[log["experiment"] == "run1"]
