@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from nnid.errors import NnidInputError
-from nnid.reports.cells import score
+from nnid.reports.cells import score_cell
 from nnid.trainers.history import Progress, silent
 from nnid.validation import repeated
 
@@ -145,16 +145,21 @@ def train_run(
         write_text(stage / "report.md", train_markdown(result.metrics))
         write_text(stage / "report.html", train_html(result.metrics, result.figures))
         result.report.write(stage)
+    from nnid.evaluation.evaluate import diverged_columns
+
     metrics = result.metrics
     held = "test" if "test" in metrics else "validation"
     free = metrics[held].get("free_run_nrmse", {})
-    line = f"{held} free-run NRMSE total {score(free.get('total'))}"
+    went = diverged_columns(metrics[held], "free_run_nrmse")
+    line = f"{held} free-run NRMSE total {score_cell(free, 'total', went)}"
     used = metrics.get("validation_used_for")
     if held == "validation" and used:  # no test part: the number shown is not independent
         line += f", used for {used} while fitting"
-    base = metrics.get("baseline", {}).get(held, {}).get("free_run_nrmse", {})
+    base_part = metrics.get("baseline", {}).get(held, {})
+    base = base_part.get("free_run_nrmse", {})
     if base:
-        line += f"; physics only {score(base.get('total'))}"
+        went = diverged_columns(base_part, "free_run_nrmse")
+        line += f"; physics only {score_cell(base, 'total', went)}"
     headline: dict[str, Any] = {
         "model": metrics["model"],
         "trainer": metrics["trainer"],

@@ -1,5 +1,6 @@
 """The report cells every report shares (``nnid.reports.cells``): a missing number is "-", a
-voided score "diverged", an unscored column "-", and a count is never rounded."""
+voided score "diverged", a score with nothing to measure "not scored", an unscored column "-",
+and a count is never rounded."""
 
 import math
 
@@ -27,8 +28,17 @@ def test_numbers_keep_their_significant_figures_and_counts_stay_whole():
 
 def test_a_voided_score_is_diverged_and_an_unscored_column_a_dash():
     assert score(None) == "diverged" and score(0.04567) == "0.0457"
-    vals = {"u": 0.1, "v": None}
-    assert [score_cell(vals, k) for k in ("u", "v", "w")] == ["0.1", "diverged", "-"]
+    vals = {"u": 0.1, "v": None, "total": None}
+    cells = [score_cell(vals, k, {"v": 12.5}) for k in ("u", "v", "w", "total")]
+    assert cells == ["0.1", "diverged", "-", "diverged"]
+
+
+def test_a_score_nothing_was_left_to_measure_is_not_called_diverged():
+    """A None with no divergence behind it (a 70 s-ahead score on 60-s runs: no sample left
+    after the horizon; or a constant signal) was not scored. It read "diverged"."""
+    assert score(None, diverged=False) == "not scored"
+    vals = {"w": None, "total": None}
+    assert [score_cell(vals, k, {}) for k in ("w", "total")] == ["not scored", "not scored"]
 
 
 def test_members_table_says_dash_for_a_column_a_split_does_not_score():
@@ -36,7 +46,7 @@ def test_members_table_says_dash_for_a_column_a_split_does_not_score():
     member = {
         "seed": 3,
         "validation": {"free_run_nrmse": {"u": 0.05, "w": 0.2, "total": 0.125}},
-        "test": {"free_run_nrmse": {"u": 0.07, "total": None}},
+        "test": {"free_run_nrmse": {"u": 0.07, "v": None, "total": None}, "diverged": {"v": 8.0}},
     }
     head, rows = _members({"members": [member]})
     cells = dict(zip(head, rows[0], strict=True))

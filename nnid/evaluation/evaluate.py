@@ -43,6 +43,19 @@ DIVERGENCE_FACTOR = 10.0
 MODE_KEYS = {"one_step": "one_step_nrmse", "k_step": "k_step_nrmse", "free_run": "free_run_nrmse"}
 
 
+def diverged_key(mode: str) -> str:
+    """The key of a part's scores that holds the ``{column: t}`` of the columns that diverged
+    in ``mode`` (``"free_run"``, ``"k_step"``, ``"one_step"``)."""
+    return "diverged" if mode == "free_run" else f"{mode}_diverged"
+
+
+def diverged_columns(scores: dict, key: str) -> dict[str, float]:
+    """``{column: t}`` of the columns that diverged in the mode of the score ``key``
+    (``free_run_nrmse``, ``k_step_rmse``, ...) of one part's scores: a None score of a column
+    outside it was not scored (no samples after the warm-up, or a constant signal)."""
+    return scores.get(diverged_key(key.rsplit("_", 1)[0])) or {}
+
+
 def target_columns(model, log: pd.DataFrame) -> list[str]:
     """The columns a model is scored on in ``log``: its targets present in the log; vehicle
     velocities only where the data excites them."""
@@ -205,8 +218,7 @@ def evaluate(
         )
         out[MODE_KEYS[name]] = nrmse
         out[MODE_KEYS[name].replace("nrmse", "rmse")] = rmse
-        key = "diverged" if name == "free_run" else f"{name}_diverged"
-        out[key] = diverged
+        out[diverged_key(name)] = diverged
         if name == "free_run" and runs:
             out["free_run_nrmse_per_experiment"] = runs
             if left:

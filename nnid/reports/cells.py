@@ -1,5 +1,5 @@
 """Table and sentence cells shared by every report: one way to write a number that may be
-missing, and one way to write a score that may have diverged."""
+missing, and one way to write a score that may have diverged or not have been scored."""
 
 from __future__ import annotations
 
@@ -23,13 +23,21 @@ def number(x: Any, digits: int = 3, fixed: bool = False) -> str:
     return str(x)
 
 
-def score(x: float | None, digits: int = 3, fixed: bool = False) -> str:
-    """A score that was computed: the number, or "diverged" where the free run left the
-    data's range and was voided (``None``, as :mod:`nnid.evaluate` reports it)."""
-    return "diverged" if x is None else number(x, digits, fixed)
+def score(x: float | None, digits: int = 3, fixed: bool = False, diverged: bool = True) -> str:
+    """A score: the number, or for ``None`` "diverged" (``diverged``: the prediction left the
+    data's range and was voided, as :mod:`nnid.evaluation.evaluate` reports it) or "not
+    scored" (nothing to score: no samples after the warm-up and the horizon, or a constant
+    signal)."""
+    if x is None:
+        return "diverged" if diverged else "not scored"
+    return number(x, digits, fixed)
 
 
-def score_cell(vals: dict, key: str) -> str:
-    """One score of a per-DOF dict: the number, "diverged" (a key scored None), or "-" where
-    the key was not scored (a DOF the model does not predict or the data does not excite)."""
-    return score(vals[key]) if key in vals else "-"
+def score_cell(vals: dict, key: str, diverged: dict) -> str:
+    """One score of a per-DOF dict: the number; for None "diverged" where ``diverged`` (the
+    mode's ``{column: t}``, :func:`nnid.evaluation.evaluate.diverged_columns`) names the key,
+    or a total with a diverged column, else "not scored"; "-" where the key was not scored at
+    all (a DOF the model does not predict or the data does not excite)."""
+    if key not in vals:
+        return "-"
+    return score(vals[key], diverged=key in diverged or (key == "total" and bool(diverged)))

@@ -16,6 +16,7 @@ import numpy as np
 import pandas as pd
 
 from nnid.datasets.preprocess import experiments
+from nnid.evaluation.evaluate import diverged_columns
 from nnid.physics.dofs import DOFS, FORCES
 from nnid.reports.cells import number, score, score_cell
 from nnid.reports.figures import (
@@ -47,8 +48,7 @@ def _total(row: dict, comparison: dict, key: str) -> str:
     part = _held(row, comparison)
     if key not in part:
         return "-"
-    value = part[key].get("total")
-    return score(value)
+    return score_cell(part[key], "total", diverged_columns(part, key))
 
 
 def _ranked(row: dict, comparison: dict, key: str) -> str:
@@ -57,7 +57,8 @@ def _ranked(row: dict, comparison: dict, key: str) -> str:
     if key not in _held(row, comparison) or not comparison.get("ranked_on"):
         return "-"
     value = row["ranked_nrmse"][key.removesuffix("_nrmse")]
-    return score(value)
+    went = diverged_columns(_held(row, comparison), key)
+    return score(value, diverged=any(c in went for c in comparison["ranked_on"]))
 
 
 def _partial(comparison: dict) -> bool:
@@ -159,7 +160,7 @@ def dof_rows(comparison: dict, key: str) -> tuple[list[str], list[list[str]]]:
     for name in comparison["ranking"]:
         m = next(x for x in comparison["models"] if x["name"] == name)
         vals = _held(m, comparison).get(key, {})
-        cells = [score_cell(vals, d) for d in dofs]
+        cells = [score_cell(vals, d, diverged_columns(_held(m, comparison), key)) for d in dofs]
         rows.append([name, *cells, _total(m, comparison, key)])
     return ["model", *dofs, "total"], rows
 

@@ -15,8 +15,9 @@ import pandas as pd
 
 from nnid.datasets.log import TAU, VELOCITY
 from nnid.datasets.preprocess import experiments
+from nnid.evaluation.evaluate import diverged_columns
 from nnid.physics.dofs import DOFS, FORCES
-from nnid.reports.cells import number, score, score_cell
+from nnid.reports.cells import number, score_cell
 from nnid.reports.figures import (
     FORCE_UNITS,
     IMAGES_CHECK,
@@ -100,8 +101,8 @@ def train_markdown(metrics: dict) -> str:
         ]
         for key, label in ERROR_KEYS:
             if key in scores:
-                vals = scores[key]
-                cells = ", ".join(f"{k} {score(v)}" for k, v in vals.items())
+                vals, went = scores[key], diverged_columns(scores, key)
+                cells = ", ".join(f"{k} {score_cell(vals, k, went)}" for k in vals)
                 lines.append(f"- {label}: {cells}")
         if scores.get("J") is not None:
             lines.append(f"- J = {number(scores['J'], 4)}, J/J0 = {number(scores['J_over_J0'], 3)}")
@@ -178,9 +179,9 @@ def _baseline(metrics: dict) -> tuple[list[str], list[list[str]]]:
                     part,
                     name,
                     *(
-                        number(scores.get(k, {}).get("total"), 3)
-                        if scores.get(k, {}).get("total") is not None
-                        else ("diverged" if k in scores else "-")
+                        score_cell(scores[k], "total", diverged_columns(scores, k))
+                        if k in scores
+                        else "-"
                         for k in ("free_run_nrmse", "k_step_nrmse", "one_step_nrmse")
                     ),
                     number(free / ref, 3) if scores is metrics[part] and free and ref else "",
@@ -199,7 +200,8 @@ def _runs(metrics: dict) -> tuple[list[str], list[list[str]]]:
     rows = []
     for part in ("validation", "test"):
         per = (metrics.get(part) or {}).get("free_run_nrmse_per_experiment") or {}
-        rows += [[part, run, *_dof_cells(vals)] for run, vals in per.items()]
+        left = (metrics.get(part) or {}).get("diverged_per_experiment") or {}
+        rows += [[part, run, *_dof_cells(vals, left.get(run, {}))] for run, vals in per.items()]
     return head, rows
 
 
@@ -242,7 +244,8 @@ def _members(metrics: dict) -> tuple[list[str], list[list[str]]]:
         cells = []
         for p in parts:
             vals = member[p]["free_run_nrmse"]
-            cells += [score_cell(vals, c) for c in cols]
+            went = diverged_columns(member[p], "free_run_nrmse")
+            cells += [score_cell(vals, c, went) for c in cols]
         rows.append([str(member["seed"]), *cells])
     return head, rows
 
@@ -387,13 +390,13 @@ def _errors(metrics: dict) -> tuple[list[str], list[list[str]]]:
         for key, label in ERROR_KEYS[:3]:
             if key not in scores:
                 continue
-            rows.append([part, label, *_dof_cells(scores[key])])
+            rows.append([part, label, *_dof_cells(scores[key], diverged_columns(scores, key))])
     return head, rows
 
 
-def _dof_cells(vals: dict) -> list[str]:
+def _dof_cells(vals: dict, diverged: dict) -> list[str]:
     """One cell per DOF and the total (:func:`score_cell`)."""
-    return [score_cell(vals, d) for d in (*DOFS, "total")]
+    return [score_cell(vals, d, diverged) for d in (*DOFS, "total")]
 
 
 def _free_run_figure(figures: dict) -> str:
