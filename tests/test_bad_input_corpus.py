@@ -65,6 +65,15 @@ LOG_CASES: list[tuple[str, str, Callable]] = [
     # milliseconds computed in floating point: whole numbers but for the last bits
     ("time in float milliseconds", "'t'", lambda df, i: df.assign(t=df["t"] * 1000 + 1e-9)),
     ("time in nanoseconds", "'t'", lambda df, i: df.assign(t=(df["t"] * 1e9).round())),
+    # a logger's milliseconds with jitter: not whole numbers, still not seconds
+    (
+        "time in jittered milliseconds",
+        "'t'",
+        lambda df, i: df.assign(t=(df["t"] * 1000 + 0.3 * np.sin(np.arange(len(df)))).round(3)),
+    ),
+    # a contract column but for case or spaces: kept as an unknown column, w was derived
+    ("a velocity named in capitals", "'W'", lambda df, i: df.rename(columns={"w": "W"})),
+    ("an input name with a space", "INPUT", lambda df, i: df.rename(columns={i: f" {i}"})),
     ("empty experiment label", "'experiment'", _set("experiment", 20, np.nan)),
     ("blank experiment label", "'experiment'", _set("experiment", 21, " ")),
     # a stray label makes an experiment of one sample: no sample period to derive or fit with
@@ -117,6 +126,7 @@ LOG_SUFFIX = {
     "binary garbage": ".parquet",
     "numbers stored as text": ".parquet",
     "an input stored as booleans": ".parquet",
+    "an input name with a space": ".parquet",  # a CSV header's spaces are stripped on reading
 }
 
 

@@ -54,6 +54,7 @@ def validate_log(
     Raises :class:`NnidInputError` naming the file, the column and the row of the first problem.
     Nothing is dropped or repaired here.
     """
+    _check_spelling(df, source)
     if "t" not in df.columns:
         raise NnidInputError("required column 't' (time in seconds) is missing", source=source)
     if len(df) == 0:
@@ -204,6 +205,29 @@ def refuse_rows(
         )
 
 
+#: the columns the contract names exactly (cmd_<name> aside)
+CONTRACT = ("t", "experiment", REPLAY_GROUP, *POSE, *VELOCITY, *ACCELERATION, *TAU)
+
+
+def _check_spelling(df: pd.DataFrame, source: str) -> None:
+    """Refuse a column that is a contract column but for case or spaces (``W``, ``' w'``,
+    ``tau_z``, ``Experiment``, ``CMD_left``) where the contract column itself is absent: it
+    would be kept as an unknown column and the quantity derived or left out in its place."""
+    folded = {c.lower(): c for c in CONTRACT}
+    for col in map(str, df.columns):
+        key = col.strip().lower()
+        if col in CONTRACT or col.startswith("cmd_"):
+            continue
+        meant = folded.get(key) or (f"cmd_{col.strip()[4:]}" if key.startswith("cmd_") else None)
+        if meant is not None and meant not in df.columns:
+            raise NnidInputError(
+                f"column {col!r} is not a column of the log contract; did you mean {meant!r}? "
+                "(names are case-sensitive: rename the column, or map it with a reader config)",
+                source=source,
+                field=col,
+            )
+
+
 def _check_experiments(df: pd.DataFrame, source: str) -> None:
     """Every row labelled when there is an ``experiment`` column: an empty label would drop the
     row from every per-experiment step without a word."""
@@ -244,7 +268,7 @@ def time_unit_slip(t: np.ndarray) -> str | None:
     step = float(np.median(np.abs(np.diff(t))))
     if step >= 1e5:
         unit = "nanoseconds (divide by 1e9) or microseconds (by 1e6)"
-    elif 5 <= step <= 1000 and np.all(np.abs(t - np.round(t)) <= 1e-6):
+    elif 5 <= step <= 1000:  # whole or jittered: no vehicle's dynamics are sampled this slowly
         unit = "milliseconds (divide by 1000)"
     else:
         return None
