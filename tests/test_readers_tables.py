@@ -132,6 +132,41 @@ def test_a_source_matching_no_file_names_the_reader_config(tmp_path):
     assert str(err.value).startswith(f"{cmap}, field 'sources.0.file': no file matches 'x*.csv'")
 
 
+FILE_RUNS = """
+experiment = "file"
+[[sources]]
+file = "PATTERN"
+time = "t"
+columns = { z = "depth", tau_Z = "thrust" }
+"""
+
+
+def _dive(path, depth0: float) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    t = np.arange(0.0, 5.0, 0.05)
+    pd.DataFrame({"t": t, "depth": depth0 + 0.1 * t, "thrust": np.sin(t)}).to_csv(path, index=False)
+
+
+def test_each_file_is_its_own_run_and_two_files_of_one_name_are_refused(tmp_path):
+    """experiment = "file": a run is the file's name without its suffix. Cut at the first dot,
+    two days' dives were both run 'dive', and the second day's samples at the same stamps were
+    dropped; two folders' nav.csv were one run. Such a pair is now refused, naming both."""
+    for day, depth0 in (("01", 1.0), ("02", 5.0)):
+        _dive(tmp_path / f"dive.2024-05-{day}.csv", depth0)
+    cmap = _write_map(tmp_path / "map.toml", FILE_RUNS.replace("PATTERN", "dive.*.csv"))
+    log, _ = load_log(tmp_path, cmap)
+    runs = log.groupby("experiment")["z"].first()
+    assert runs.to_dict() == pytest.approx({"dive.2024-05-01": 1.0, "dive.2024-05-02": 5.0})
+    assert len(log) == 200
+    for folder in ("a", "b"):
+        _dive(tmp_path / folder / "nav.csv", 1.0)
+    cmap = _write_map(tmp_path / "map2.toml", FILE_RUNS.replace("PATTERN", "*/nav.csv"))
+    with pytest.raises(
+        NnidInputError, match=r"a/nav.csv and .*b/nav.csv, which both name run 'nav'"
+    ):
+        load_log(tmp_path, cmap)
+
+
 @pytest.mark.parametrize(
     ("column", "said"),
     [

@@ -8,8 +8,9 @@ root = "../../../shared/data/liu-bluerov1-2016"   # relative to this file; read 
 rate = 50.0                   # Hz: resample every source onto one time base (absent: the
                               # median step of the fastest measured, "linear", source)
 gap = 0.5                     # s: a longer gap splits an experiment instead of being bridged
-experiment = "run"            # column naming the run; "file" = the file stem; absent = one run;
-                              # a list of columns joins their values with "/" ("test/AddWeight_0")
+experiment = "run"            # column naming the run; "file" = each file a run (its name without
+                              # the suffix); absent = one run; a list of columns joins their values
+                              # with "/" ("test/AddWeight_0")
 include = "^(all|yaw)_"       # optional regex on experiment names (exclude likewise)
 drop_nonfinite = false        # true: drop NaN/inf rows and report the count; false: error
 vehicle = "bluerov1_liu.toml" # optional vehicle file, relative to this file

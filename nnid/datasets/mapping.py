@@ -109,6 +109,20 @@ def map_message_sources(
     return tables
 
 
+#: suffixes of a compressed table, removed with the data suffix before them
+COMPRESSION = (".gz", ".bz2", ".xz", ".zip", ".zst")
+
+
+def file_label(path: str) -> str:
+    """A file's run label under ``experiment = "file"``: its name without the data suffix
+    (``dive.2024-05-01.csv.gz`` -> ``dive.2024-05-01``; the dots before it are kept, or two days'
+    files would both be ``dive``)."""
+    name = Path(path).name
+    for suffix in COMPRESSION:
+        name = name.removesuffix(suffix)
+    return Path(name).stem or name
+
+
 def map_source(
     raw: pd.DataFrame,
     source: Source,
@@ -174,7 +188,7 @@ def map_source(
     else:
         out["t"] = values[source.time].to_numpy(dtype=np.float64) * source.time_scale
     if experiment == "file":
-        out["experiment"] = Path(origin).name.split(".")[0]
+        out["experiment"] = file_label(origin)
     elif keys:
         for key in keys:  # a row of no run would be dropped from every run without a word
             empty = blank_labels(raw[key])

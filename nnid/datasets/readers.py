@@ -24,7 +24,7 @@ from nnid.datasets.ardupilot import is_ardupilot_log, read_ardupilot_sources
 from nnid.datasets.cleaning import CleaningReport
 from nnid.datasets.column_map import ColumnMap, Source, load_column_map
 from nnid.datasets.log import ANGLES, MAX_RUN_SAMPLES, REPLAY_GROUP, time_unit_slip, validate_log
-from nnid.datasets.mapping import map_source
+from nnid.datasets.mapping import file_label, map_source
 from nnid.datasets.rosbag import is_bag, read_bag_sources
 from nnid.errors import NnidInputError
 
@@ -314,6 +314,19 @@ def read_table_sources(
                 source=cmap.name,
                 field=f"sources.{i}.file",
             )
+        if cmap.experiment == "file":  # two files of one run would be merged, samples lost
+            seen: dict[str, str] = {}
+            for f in files:
+                other = seen.setdefault(file_label(f), f)
+                if other != f:
+                    raise NnidInputError(
+                        f"'{source.file}' matches {other} and {f}, which both name run "
+                        f"'{file_label(f)}' under experiment = \"file\" (a run is the file's "
+                        "name without its suffix): give the files distinct names, or name the "
+                        "run with a column",
+                        source=cmap.name,
+                        field=f"sources.{i}.file",
+                    )
         frames = [
             map_source(read_table(f), source, f, cmap.experiment, cmap.drop_nonfinite, report)
             for f in files
