@@ -115,8 +115,14 @@ class Damping(StrictModel):
     def _keys(cls, coefficients: dict[str, float]) -> dict[str, float]:
         from nnid.physics.damping import parse_coefficient_key
 
+        seen: dict[tuple[str, str], str] = {}
         for key, value in coefficients.items():
-            parse_coefficient_key(key)
+            other = seen.setdefault(parse_coefficient_key(key), key)
+            if other != key:  # two spellings of one term: the last one read would win silently
+                raise ValueError(
+                    f"'{other}' and '{key}' are the same coefficient "
+                    f"({':'.join(parse_coefficient_key(key))}): give it once"
+                )
             _not_absurd(key, value)
         return coefficients
 

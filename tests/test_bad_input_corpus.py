@@ -366,6 +366,8 @@ VEHICLE_CASES = [
     ("damping nan", "X:u", ('"X:u" = -4.0', '"X:u" = nan')),
     ("damping absurd", "X:u", ('"X:u" = -4.0', '"X:u" = -4e12')),
     ("damping bad key", "coefficients", ('"X:u"', '"X:speed"')),
+    # one term spelt twice: the last one read won without a word (-900 over -4)
+    ("damping term twice", "X: u", ('"X:u" = -4.0', '"X:u" = -4.0\n"X: u" = -900.0')),
     ("rho absurd", "rho", ("mass = 11.5", "mass = 11.5\nrho = 1.2")),
     ("toml syntax", "", ("mass = 11.5", "mass = = 11.5")),
     ("text mass", "mass", ("mass = 11.5", 'mass = "heavy"')),
