@@ -826,6 +826,9 @@ class SweepSpec(StrictModel):
         empty = [k for k, v in {**self.grid, **self.random}.items() if not v]
         if empty:
             raise ValueError(f"no values to try for {', '.join(empty)}")
+        both = sorted(set(self.grid) & set(self.random))
+        if both:  # a random draw would overwrite the grid's value unsaid
+            raise ValueError(f"{', '.join(both)} is searched in both grid and random: choose one")
         if len(set(self.seeds)) != len(self.seeds):  # a seed twice would count its score twice
             raise ValueError(f"seeds must differ: {self.seeds}")
         if self.seeds and self.seed_option in {**self.grid, **self.random}:

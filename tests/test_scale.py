@@ -515,6 +515,9 @@ def test_sweep_missing_scores_rank_last_and_bad_options_are_refused(sweep_inputs
         SweepSpec(grid={"model.hidden": [[2]]}, seeds=[1, 1])
     with pytest.raises(ValidationError, match="set by seeds"):
         SweepSpec(grid={"model.seed": [0, 1]}, seeds=[0, 1])
+    # a random draw overwrote the grid's values: grid 1.0, 2.0 and random 1.5 tried 1.5 alone
+    with pytest.raises(ValidationError, match="warmup_s is searched in both grid and random"):
+        SweepSpec(grid={"warmup_s": [1.0, 2.0]}, random={"warmup_s": [1.5]}, samples=1)
 
 
 @needs_ray
