@@ -249,6 +249,13 @@ def test_manifest_ids_and_pairing(fleet, tmp_path) -> None:
          "options = {alpha = 0.9}\n", "options.alpha", "less than or equal to 0.5"),
         ('command = "loop"\nvehicle = "minirov.toml"\ndata = ["dive0.csv"]\n'
          "options = {max_effects = true}\n", "options.max_effects", "valid integer"),
+        # the CLI's names: failed inside every task with exit 1, naming '--dofs'
+        ('command = "loop"\nvehicle = "minirov.toml"\ndata = ["dive0.csv"]\n'
+         'options = {dofs = ["w", "x"]}\n', "options.dofs", "unknown DOF x"),
+        ('command = "loop"\nvehicle = "minirov.toml"\ndata = ["dive0.csv"]\n'
+         'options = {validation = "run0,run0"}\n', "options.validation", "run0 twice"),
+        # an empty path was the manifest's own folder: "is a folder, not a TOML file"
+        ('command = "loop"\nvehicle = ""\ndata = ["dive0.csv"]\n', "vehicle", "is empty"),
     ],
 )  # fmt: skip
 def test_bad_manifest_is_refused_naming_the_key(fleet, tmp_path, text, field, words) -> None:

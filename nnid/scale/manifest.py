@@ -46,6 +46,22 @@ class Options(StrictModel):
     exclude: str | list[str] | None = None
     window: float | None = Field(None, ge=0.5)
 
+    @field_validator("dofs", "validation", "exclude")
+    @classmethod
+    def _names(cls, value: str | list[str] | None, info: ValidationInfo):
+        """The CLI's own checks of these names (a DOF that exists, no name empty or twice),
+        said against the manifest before any task runs, not inside every task."""
+        from nnid.runs import dofs_option, names
+
+        if value is None:
+            return value
+        text = value if isinstance(value, str) else ",".join(value)
+        try:
+            dofs_option(text) if info.field_name == "dofs" else names(text)
+        except NnidInputError as err:
+            raise ValueError(err.message) from None
+        return value
+
 
 #: the options each command takes (train and compare take theirs from the config)
 TAKES = {
@@ -210,6 +226,8 @@ def _paths(patterns: list[str], base: Path, key: str, source: str) -> list[str]:
     which must exist."""
     out: list[str] = []
     for pattern in patterns:
+        if not pattern.strip():  # it would resolve to the manifest's own folder
+            raise NnidInputError("is empty: name a file or a pattern", source=source, field=key)
         full = pattern if Path(pattern).is_absolute() else str(base / pattern)
         if glob.has_magic(pattern):
             found = sorted(glob.glob(full, recursive=True))
