@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -11,7 +13,7 @@ from nnid.datasets.excitation import PRBS, Multisine
 from nnid.datasets.log import POSE, VELOCITY
 from nnid.datasets.simulator import simulate
 from nnid.models.parametric import ParametricFossen, ParametricModel
-from nnid.trainers.least_squares import LeastSquares
+from nnid.trainers.least_squares import ExcitationWarning, LeastSquares
 from nnid.trainers.recursive import GradientEstimator, RecursiveLeastSquares
 from nnid.trainers.regression import Regression
 from nnid.vehicle import load_vehicle
@@ -209,3 +211,45 @@ def test_a_gradient_estimator_still_moving_at_the_end_of_the_data_says_so(seamor
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         GradientEstimator(gain=50.0).solve(reg, dt=DT)
+
+
+def _two_regressors(n: int = 2000) -> tuple[np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(0)
+    phi = rng.normal(size=(n, 2))
+    return phi, rng.normal(scale=0.5, size=n)
+
+
+def test_rls_gives_no_standard_error_to_what_its_memory_does_not_determine():
+    """Batch least squares' excitation check over the estimator's memory. b unexcited in the
+    last half (λ = 0.99: a 100-sample memory): its θ is remembered from earlier, and its s.e.
+    read 0.0 ("significant" at 0 %); a collinear pair read ±0.002, both "significant"."""
+    phi, noise = _two_regressors()
+    phi[1000:, 1] = 0.0
+    y = phi @ np.array([2.0, -3.0]) + noise
+    reg = Regression(phi, y, ["a", "b"], ("u",), y.size)
+    with pytest.warns(ExcitationWarning, match=r"last 100 samples.*not excited.*: b"):
+        est = RecursiveLeastSquares(forgetting=0.99).solve(reg)
+    assert est.theta[1] == pytest.approx(-3.0, abs=0.2)  # remembered, and kept
+    assert np.isnan(est.stderr[1]) and not est.significant[1]
+    assert est.stderr[0] == pytest.approx(0.05, rel=0.5) and est.significant[0]
+    phi2 = np.repeat(phi[:, :1], 2, axis=1) * [1.0, 2.0]
+    y2 = phi2 @ np.array([2.0, -3.0]) + noise
+    reg2 = Regression(phi2, y2, ["a", "b"], ("u",), y2.size)
+    with pytest.warns(ExcitationWarning, match="collinear regressors"):
+        est = RecursiveLeastSquares().solve(reg2)
+    assert np.isnan(est.stderr).all() and not est.significant.any()
+
+
+def test_rls_that_has_not_converged_says_so():
+    """p₀ = 1e-5: the recursion barely moves from zero (a = 0.04 against 2.0) and reported
+    ±0.08, 24 standard errors from the truth, without a word."""
+    phi, noise = _two_regressors()
+    y = phi @ np.array([2.0, -3.0]) + noise
+    reg = Regression(phi, y, ["a", "b"], ("u",), y.size)
+    with pytest.warns(UserWarning, match="has not converged: a, b still moved"):
+        est = RecursiveLeastSquares(p0=1e-5).solve(reg)
+    assert abs(est.theta[0]) < 0.5 and np.isnan(est.stderr).all()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # the default p0 converges: nothing to say
+        est = RecursiveLeastSquares().solve(reg)
+    assert est.theta == pytest.approx([2.0, -3.0], abs=0.05) and np.isfinite(est.stderr).all()

@@ -154,13 +154,24 @@ def solve_least_squares(
     sigma2 = float(rss / max(n - int(live.sum()), 1))
     cov = np.full((p, p), np.nan)
     cov[np.ix_(live, live)] = sigma2 * inv
-    if report is not None and report.collinear:
-        # a parameter of a collinear group is not determined on its own: the pseudo-inverse's
-        # covariance leaves out the undetermined direction, so its s.e. would look precise
-        tied = np.array([nm in report.collinear for nm in names])
-        cov[tied, :] = np.nan
-        cov[:, tied] = np.nan
-    return Estimate(names, theta, cov, sigma2, n, report)
+    return Estimate(names, theta, void_undetermined(cov, names, report), sigma2, n, report)
+
+
+def void_undetermined(
+    cov: np.ndarray, names: list[str], report: ExcitationReport | None
+) -> np.ndarray:
+    """``cov`` with NaN in the rows and columns of the parameters ``report`` names unexcited
+    or collinear: a parameter of a collinear group is not determined on its own, and the
+    pseudo-inverse's covariance, which leaves out the undetermined direction, would give it a
+    precise-looking standard error."""
+    if report is None:
+        return cov
+    bad = set(report.unexcited) | set(report.collinear)
+    tied = np.array([nm in bad for nm in names], dtype=bool)
+    cov = cov.copy()
+    cov[tied, :] = np.nan
+    cov[:, tied] = np.nan
+    return cov
 
 
 class LeastSquares(BaseEstimator):

@@ -27,8 +27,15 @@ from numba import njit
 from sklearn.base import BaseEstimator
 
 from nnid.errors import NnidInputError
+from nnid.evaluation.persistence import excitation_from_gram
 from nnid.trainers.history import Progress, silent
-from nnid.trainers.least_squares import Estimate, correlation_time, dof_variances
+from nnid.trainers.least_squares import (
+    Estimate,
+    ExcitationWarning,
+    correlation_time,
+    dof_variances,
+    void_undetermined,
+)
 from nnid.trainers.regression import Regression
 
 
@@ -162,7 +169,18 @@ def window_covariance(reg: Regression, theta: np.ndarray, first: int) -> np.ndar
     w = np.tile(1.0 / np.where(var > 0, var, 1.0), r.size // m) * ok
     phi, r = np.where(ok[:, None], phi, 0.0), np.where(ok, r, 0.0)
     sigma2 = float(w @ (r * r)) / max(int(ok.sum()) - theta.size, 1)
-    cov = np.linalg.pinv((phi * w[:, None]).T @ phi, hermitian=True) * sigma2
+    gram = (phi * w[:, None]).T @ phi
+    report = excitation_from_gram(gram, int(ok.sum()), list(reg.names))
+    if report.warnings:  # θ of such a parameter is remembered from before the window, or split
+        warnings.warn(
+            f"over the estimator's memory (the last {reg.n_samples - first} samples): "
+            + "; ".join(report.warnings)
+            + ": their standard errors are not given",
+            ExcitationWarning,
+            stacklevel=3,
+        )
+    cov = np.linalg.pinv(gram, hermitian=True) * sigma2
+    cov = void_undetermined(cov, list(reg.names), report)
     return cov * correlation_time([r[k::m] for k in range(m)])
 
 
@@ -171,6 +189,20 @@ def _chunks(n: int, parts: int = 20) -> list[tuple[int, int]]:
     their state, so the result is the same as one pass."""
     edges = np.unique(np.linspace(0, n, parts + 1).astype(int))
     return list(itertools.pairwise(int(e) for e in edges))
+
+
+def warn_still_moving(history: np.ndarray, names, what: str, remedy: str) -> list[str]:
+    """Warn of the parameters :func:`still_moving` finds (``what``: the estimator's verdict,
+    ``remedy``: what to change) and return them."""
+    moving = still_moving(history, list(names))
+    if moving:
+        warnings.warn(
+            f"{what}: {', '.join(moving)} still moved by more than 5 % over the last tenth of "
+            f"the data; these values are where the data ended, not estimates ({remedy})",
+            UserWarning,
+            stacklevel=3,
+        )
+    return moving
 
 
 def still_moving(
@@ -248,10 +280,23 @@ class RecursiveLeastSquares(BaseEstimator):
         first = max(reg.n_samples - window, 0)
         sigma2, n_obs, per_dof = _residual_stats(reg, theta, first)
         self.p_matrix_ = p_mat  # the recursion's own P, for its checks (not a covariance)
+        cov = window_covariance(reg, theta, first)
+        # a window covariance around a θ the recursion has not settled on is no uncertainty
+        moving = warn_still_moving(
+            history,
+            reg.names,
+            "recursive least squares has not converged"
+            if self.forgetting == 1.0
+            else "recursive least squares is still moving (tracking a change, or not converged)",
+            "a larger p0, or a longer log; their standard errors are not given",
+        )
+        tied = np.isin(reg.names, moving)
+        cov[tied, :] = np.nan
+        cov[:, tied] = np.nan
         return Estimate(
             list(reg.names),
             theta,
-            window_covariance(reg, theta, first),
+            cov,
             sigma2,
             n_obs,
             dof_sigma2=per_dof,
@@ -333,17 +378,8 @@ class GradientEstimator(BaseEstimator):
                 RuntimeWarning,
                 stacklevel=2,
             )
-        moving = still_moving(history, list(reg.names))
-        if moving:
-            warnings.warn(
-                "the gradient estimator has not converged: "
-                + ", ".join(moving)
-                + " still moved by more than 5 % over the last tenth of the data; these values "
-                "are where the data ended, not estimates (a larger gain, normalized=True, or "
-                "a longer log)",
-                UserWarning,
-                stacklevel=2,
-            )
+        warn_still_moving(history, reg.names, "the gradient estimator has not converged",
+                          "a larger gain, normalized=True, or a longer log")  # fmt: skip
         sigma2, n_obs, per_dof = _residual_stats(reg, theta, 0)
         return Estimate(
             list(reg.names),
