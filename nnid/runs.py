@@ -218,8 +218,11 @@ def compare_run(
         result.report.write(stage)
     comparison = result.comparison
     ranking = comparison.get("ranking", [])
-    # models that share no output are not ranked: none is best
-    best = ranking[0] if ranking and comparison.get("ranked_on") else None
+    # models that share no output are not ranked, and a ranking on k-step or one-step scores
+    # (every free run diverged) names no best for the held-out free run: none is best
+    top = next((r for r in comparison["models"] if ranking and r["name"] == ranking[0]), {})
+    measured = (top.get("ranked_nrmse") or {}).get("free_run") is not None
+    best = ranking[0] if measured and comparison.get("ranked_on") else None
     headline: dict[str, Any] = {"best": best}
     for row in comparison["models"]:
         held = row.get("test") or row.get("validation") or {}

@@ -313,3 +313,40 @@ def test_models_scored_on_different_outputs_are_ranked_on_the_shared_ones():
     text = summary(rows, rank(rows, "test"), "test", False)
     assert "(0.2, against 0.3 for narx_wu)" in text and "scored on (" in text, text
     assert "scored on (" not in summary(rows[:2], rank(rows[:2], "test"), "test", False)
+
+
+def test_no_best_model_is_named_when_every_free_run_diverged(tmp_path):
+    """A vehicle whose heave damping pushes (Z:w = +40): both models' free runs diverge, and
+    the ranking falls back to their k-step scores. The batch headline's "best model (held-out
+    free run)" named one anyway; it names none now, as the summary already said."""
+    from importlib import resources
+
+    import pandas as pd
+
+    from nnid.config import CompareConfig, load_config
+    from nnid.runs import compare_run
+
+    root = resources.files("nnid.demo_data")
+    vehicle = root.joinpath("minirov.toml").read_text()
+    bad = vehicle.replace('"Z:w" = -33.0', '"Z:w" = 40.0')
+    bad = bad.replace('"Z:w*abs(w)" = -190.0', '"Z:w*abs(w)" = 0.0')
+    assert bad.count("40.0") and bad != vehicle
+    (tmp_path / "bad.toml").write_text(bad)
+    log = pd.read_parquet(root.joinpath("demo_minirov_heave.parquet"))
+    log[log["experiment"].isin(["run0", "run1", "run6", "run7"])].to_csv(
+        tmp_path / "log.csv", index=False
+    )
+    models = "".join(
+        f'[[models]]\nkind = "fossen"\nname = "{name}"\ndofs = ["w"]\nunknowns = {unknowns}\n'
+        for name, unknowns in (("file_as_is", "[]"), ("added_mass_only", '["added_mass"]'))
+    )
+    config = tmp_path / "compare.toml"
+    config.write_text(
+        'kind = "compare"\nvehicle = "bad.toml"\nk_step_s = 0.5\n[data]\nlog = "log.csv"\n'
+        '[split]\nby = "experiment"\nvalidation = ["run6"]\ntest = ["run7"]\n' + models
+    )
+    outcome = compare_run(load_config(config, CompareConfig), config, tmp_path / "out")
+    comparison = json.loads((tmp_path / "out" / "comparison.json").read_text())
+    assert all(m["ranked_nrmse"]["free_run"] is None for m in comparison["models"])
+    assert len(comparison["ranking"]) == 2 and "diverged" in comparison["summary"]
+    assert outcome.headline["best"] is None
