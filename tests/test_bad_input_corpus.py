@@ -50,6 +50,19 @@ def _set(col: str, row: int, value):
     return mutate
 
 
+def _parquet_naming_u_twice(df: pd.DataFrame) -> bytes:
+    import io
+
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    names = ["u" if c == "v" else c for c in df.columns]
+    table = pa.Table.from_arrays([pa.array(df[c]) for c in df.columns], names=names)
+    buf = io.BytesIO()
+    pq.write_table(table, buf)
+    return buf.getvalue()
+
+
 LOG_CASES: list[tuple[str, str, Callable]] = [
     ("no time column", "'t'", lambda df, i: df.drop(columns="t")),
     ("text in time", "'t'", _set("t", 5, "noon")),
@@ -113,6 +126,8 @@ LOG_CASES: list[tuple[str, str, Callable]] = [
         "'u'",
         lambda df, i: df.to_csv(index=False).replace(",v,", ",u,", 1).encode(),
     ),
+    # pyarrow's error was a 25-line schema dump
+    ("a parquet column named twice", "'u'", lambda df, i: _parquet_naming_u_twice(df)),
     # a parquet column of strings: every number readable, every later step meets text
     ("numbers stored as text", "'u'", lambda df, i: df.assign(u=df["u"].astype(str))),
     # a parquet column of booleans: read as 1 or 0 newtons without a word
@@ -127,6 +142,7 @@ LOG_SUFFIX = {
     "numbers stored as text": ".parquet",
     "an input stored as booleans": ".parquet",
     "an input name with a space": ".parquet",  # a CSV header's spaces are stripped on reading
+    "a parquet column named twice": ".parquet",
 }
 
 

@@ -147,6 +147,18 @@ def _dive(path, depth0: float) -> None:
     pd.DataFrame({"t": t, "depth": depth0 + 0.1 * t, "thrust": np.sin(t)}).to_csv(path, index=False)
 
 
+def test_run_labels_are_read_as_text(tmp_path):
+    """Labels 1 and 01 are two runs: read as numbers they were one, whose time then went
+    backwards, said as "experiment np.int64(1)"."""
+    t = np.arange(0.0, 2.0, 0.05)
+    runs = [pd.DataFrame({"experiment": label, "t": t, "z": 1.0 + t, "tau_Z": np.sin(t)})
+            for label in ("1", "01")]  # fmt: skip
+    path = tmp_path / "runs.csv"
+    pd.concat(runs).to_csv(path, index=False)
+    log, _ = load_log(str(path))
+    assert sorted(log["experiment"].unique()) == ["01", "1"]
+
+
 def test_each_file_is_its_own_run_and_two_files_of_one_name_are_refused(tmp_path):
     """experiment = "file": a run is the file's name without its suffix. Cut at the first dot,
     two days' dives were both run 'dive', and the second day's samples at the same stamps were

@@ -289,7 +289,7 @@ def _check_time(df: pd.DataFrame, source: str) -> None:
                 if name is None
                 else "label this row with its neighbours' experiment, or remove it"
             )
-            exp = "the log" if name is None else f"experiment {name!r}"
+            exp = "the log" if name is None else f"experiment {str(name)!r}"
             raise NnidInputError(
                 f"{exp} has a single sample: an experiment needs at least two (its sample "
                 f"period); {fix}",
@@ -302,7 +302,7 @@ def _check_time(df: pd.DataFrame, source: str) -> None:
             k = int(np.flatnonzero(dt <= 0)[0])
             row = k + 1 if idx is None else int(idx[k + 1])
             what = "duplicated" if dt[k] == 0 else "decreasing"
-            exp = "" if name is None else f" in experiment {name!r}"
+            exp = "" if name is None else f" in experiment {str(name)!r}"
             raise NnidInputError(
                 f"time is {what}{exp} ({shown(t[k])} then {shown(t[k + 1])}); t must be strictly "
                 "increasing within an experiment",
@@ -333,24 +333,16 @@ def validate_table(
 
 
 def read_log(path: str | Path) -> pd.DataFrame:
-    """Read a CSV or Parquet log (by suffix) and validate it."""
+    """Read a CSV or Parquet log (by suffix) as every command reads a table
+    (:func:`nnid.datasets.readers.read_table`: its dialects and header checks) and validate it."""
+    from nnid.datasets.readers import read_table  # it imports this module
+
     path = Path(path)
-    if not path.exists():
-        raise NnidInputError("file not found", source=str(path))
-    try:
-        if path.suffix == ".parquet":
-            df = pd.read_parquet(path)
-        elif path.suffix in (".csv", ".gz") or path.name.endswith(".csv.gz"):
-            df = pd.read_csv(path)
-        else:
-            raise NnidInputError(
-                "unknown log format; expected .csv, .csv.gz or .parquet", source=str(path)
-            )
-    except NnidInputError:
-        raise
-    except Exception as err:  # pandas/pyarrow raise many types for a truncated or corrupt file
-        raise NnidInputError(f"cannot be read as a log ({err})", source=str(path)) from None
-    return validate_log(df, source=str(path))
+    if path.exists() and not path.name.endswith((".parquet", ".csv", ".csv.gz")):
+        raise NnidInputError(
+            "unknown log format; expected .csv, .csv.gz or .parquet", source=str(path)
+        )
+    return validate_log(read_table(path), source=str(path))
 
 
 def write_log(df: pd.DataFrame, path: str | Path) -> Path:

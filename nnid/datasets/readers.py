@@ -37,6 +37,10 @@ def read_table(path: str | Path) -> pd.DataFrame:
     name = path.name.lower()
     try:
         if name.endswith(".parquet"):
+            import pyarrow.parquet as pq
+
+            # pyarrow reads a name given twice as one ambiguous field: a schema dump, not a line
+            _refuse_repeated_names(pd.Series(pq.read_schema(path).names), path)
             return pd.read_parquet(path)
         if name.endswith((".csv", ".csv.gz", ".txt")):
             dialect = _csv_dialect(path)
@@ -44,7 +48,8 @@ def read_table(path: str | Path) -> pd.DataFrame:
             dialect["skipinitialspace"] = True
             header = pd.read_csv(path, header=None, nrows=1, dtype=str, **dialect).iloc[0]
             _refuse_repeated_names(header.str.strip(), path)
-            table = pd.read_csv(path, **dialect)
+            # run labels are names: "01" and "1" are two runs, not one number
+            table = pd.read_csv(path, dtype={"experiment": str}, **dialect)
             return table.rename(columns=lambda c: c.strip() if isinstance(c, str) else c)
     except NnidInputError:
         raise
@@ -62,9 +67,9 @@ def read_table(path: str | Path) -> pd.DataFrame:
 
 
 def _refuse_repeated_names(header: pd.Series, path: Path) -> None:
-    """A CSV header that names a column twice is refused: pandas would rename the second
-    ('u', 'u.1') and one of the two would be used unseen. Empty names (a trailing separator,
-    pandas's "Unnamed: k") are not names."""
+    """A header that names a column twice is refused: pandas would rename the second of a CSV
+    ('u', 'u.1') and one of the two would be used unseen, pyarrow cannot read either of a
+    Parquet file's. Empty names (a trailing separator, pandas's "Unnamed: k") are not names."""
     seen: dict[str, int] = {}
     for k, column in enumerate(header, start=1):
         if pd.isna(column):
