@@ -10,7 +10,7 @@ import pytest
 from typer.testing import CliRunner
 
 from nnid.cli import app
-from nnid.datasets.log import read_log
+from nnid.datasets.readers import read_log
 
 ROOT = Path(__file__).resolve().parents[1]
 runner = CliRunner()

@@ -20,7 +20,8 @@ from nnid.datasets.excitation import (
     doptimal_frequency,
     mls,
 )
-from nnid.datasets.log import read_log, validate_log
+from nnid.datasets.log import validate_log
+from nnid.datasets.readers import read_log
 from nnid.datasets.simulator import Autopilot, simulate
 from nnid.errors import NnidInputError
 from nnid.vehicle import load_vehicle

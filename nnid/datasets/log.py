@@ -332,19 +332,6 @@ def validate_table(
     return df
 
 
-def read_log(path: str | Path) -> pd.DataFrame:
-    """Read a CSV or Parquet log (by suffix) as every command reads a table
-    (:func:`nnid.datasets.readers.read_table`: its dialects and header checks) and validate it."""
-    from nnid.datasets.readers import read_table  # it imports this module
-
-    path = Path(path)
-    if path.exists() and not path.name.endswith((".parquet", ".csv", ".csv.gz")):
-        raise NnidInputError(
-            "unknown log format; expected .csv, .csv.gz or .parquet", source=str(path)
-        )
-    return validate_log(read_table(path), source=str(path))
-
-
 def write_log(df: pd.DataFrame, path: str | Path) -> Path:
     """Write a log as CSV or Parquet, chosen by the suffix."""
     path = Path(path)

@@ -66,6 +66,17 @@ def read_table(path: str | Path) -> pd.DataFrame:
     )
 
 
+def read_log(path: str | Path) -> pd.DataFrame:
+    """Read a CSV or Parquet log (by suffix) as every command reads a table
+    (:func:`read_table`: its dialects and header checks) and validate it."""
+    path = Path(path)
+    if path.exists() and not path.name.endswith((".parquet", ".csv", ".csv.gz")):
+        raise NnidInputError(
+            "unknown log format; expected .csv, .csv.gz or .parquet", source=str(path)
+        )
+    return validate_log(read_table(path), source=str(path))
+
+
 def _refuse_repeated_names(header: pd.Series, path: Path) -> None:
     """A header that names a column twice is refused: pandas would rename the second of a CSV
     ('u', 'u.1') and one of the two would be used unseen, pyarrow cannot read either of a
