@@ -515,5 +515,8 @@ def test_each_added_effect_is_reported_as_the_final_model_holds_it():
     assert one["stopped"] == "max_effects"
     text = markdown(one)
     assert "stopped at max_effects = 1" in text and "outside the vocabulary" not in text
+    # the gate chose the effect on the held-out runs that score it: said, not implied away
+    assert "not an independent test" in text
     none = markdown(ResidualLoop(veh, max_effects=0).fit(log).as_dict())
     assert "No effect was tested (max_effects = 0)" in none and "No significant" not in none
+    assert "not an independent test" not in none

@@ -219,6 +219,13 @@ def _verdict(result: dict, name: str, before: dict, after: dict) -> list[str]:
     return lines
 
 
+#: said under the before/after table when an effect was added: the gate chose on these runs
+HELD_OUT_CHOSE = (
+    "The held-out runs also chose each added effect among the best-ranked candidates (the "
+    "simulation gate), so the error after is not an independent test of it: score the fitted "
+    "vehicle on runs the loop never saw for that."
+)
+
 CANDIDATE_HEAD = ["effect", "value", "± s.e.", "unit", "p (F-test)", "held-out gain", "verdict"]
 #: what each column of the candidate table means, printed under every table
 CANDIDATE_COLUMNS = (
@@ -283,6 +290,8 @@ def markdown(result: dict) -> str:
     lines += [f"- {s}" for s in summary(result)]
     lines += ["", f"Baseline: {result['baseline']}.", "", "## Errors on held-out data", ""]
     lines += [table(*error_rows(result)), ""]
+    if result["added"]:
+        lines += [HELD_OUT_CHOSE, ""]
     for k, step in enumerate(result["steps"], 1):
         lines += [f"## Pass {k}: candidates (best first)", ""]
         lines += [table(CANDIDATE_HEAD, candidate_rows(step["top"])), "", CANDIDATE_COLUMNS, ""]
@@ -384,6 +393,7 @@ def html_page(result: dict, figures: dict[str, str]) -> str:
 {html.escape(_split_text(result))}.</p>
 <h2>Errors on held-out data, before and after</h2>
 {html_table(*error_rows(result))}
+{f"<p>{html.escape(HELD_OUT_CHOSE)}</p>" if result["added"] else ""}
 <h2>Candidates</h2>
 {"".join(steps)}
 {_opinion_html(result)}
