@@ -658,3 +658,22 @@ def test_a_sweep_ranked_on_one_step_says_when_its_best_diverges_in_free_run() ->
     assert "free run diverged in 1 of 2 seeds" in _summary(spec, [best])
     rows[0]["validation_free_run_nrmse"] = 0.2  # both seeds simulate: nothing to add
     assert "diverged" not in _summary(spec, [best])
+
+
+def test_parameter_figure_marks_a_value_without_standard_error(monkeypatch) -> None:
+    """A parameter identified on three logs, without a standard error on the second (it is
+    not determined on its own there): drawn hollow and said in a legend, not with a zero-width
+    bar that reads as exact."""
+    from nnid.reports import batch_report
+
+    built = []
+    monkeypatch.setattr(batch_report, "figure_uri", lambda fig: built.append(fig) or "uri")
+    rows = [
+        {"data": f"dive{k}.csv", "param:Z:w": v, "stderr:Z:w": se}
+        for k, (v, se) in enumerate([(-30.0, 1.0), (-45.0, None), (-31.0, 1.5)])
+    ]
+    assert batch_report.parameter_figure(rows) == "uri"
+    ax = built[0].axes[0]
+    bars = [c for c in ax.containers if hasattr(c, "has_yerr") and c.has_yerr]
+    assert len(bars) == 1 and list(bars[0].lines[0].get_xdata()) == [0, 2]
+    assert [t.get_text() for t in ax.get_legend().get_texts()] == ["no standard error"]

@@ -74,8 +74,14 @@ def parameter_figure(rows: list[dict]) -> str | None:
     for ax, name in zip(axes.flat, chosen, strict=False):
         value = np.array([r.get(f"param:{name}") for r in rows], dtype=float)
         se = np.array([r.get(f"stderr:{name}") for r in rows], dtype=float)
-        ax.errorbar(x, value, yerr=np.where(np.isfinite(se), se, 0.0), fmt="o-", ms=3,
-                    capsize=2, lw=1)  # fmt: skip
+        known = np.isfinite(se)
+        line = ax.plot(x, value, "-", lw=1)[0]
+        ax.errorbar(x[known], value[known], yerr=se[known], fmt="o", ms=3, capsize=2,
+                    color=line.get_color())  # fmt: skip
+        if (~known & np.isfinite(value)).any():  # a zero-width bar would read as exact
+            ax.plot(x[~known], value[~known], "o", mfc="none", ms=4, color=line.get_color(),
+                    label="no standard error")  # fmt: skip
+            ax.legend(fontsize=6)
         ax.set_title(name, fontsize=9)
         ax.set_ylabel(_unit(name), fontsize=8)
         ax.set_xticks(x, labels, rotation=45, ha="right", fontsize=7)
@@ -218,7 +224,8 @@ def batch_html(result, title: str = "nnid batch") -> str:
             if uri:
                 out.append(
                     "<p>Identified values over the logs (manifest order), bars ± one standard "
-                    "error; loop tasks show the size of each effect they added.</p>"
+                    "error, hollow marks a value without one (not determined on its own); loop "
+                    "tasks show the size of each effect they added.</p>"
                     f'<img src="{uri}" alt="parameters of {html.escape(name)}">'
                 )
     out.append("</body></html>")
