@@ -173,7 +173,7 @@ def load_inputs(
             source=str(config_path),
             field="vehicle",
         )
-    sim = None
+    sim, source = None, None  # source: the log file read, which errors about it name
     if isinstance(spec, TableData):
         if physics:
             raise NnidInputError(
@@ -185,7 +185,7 @@ def load_inputs(
         if path is None:
             raise NnidInputError("give data.log (or --data)", source=str(config_path), field="data")
         inputs = Inputs(*_read_table(path, models))
-        _check_sampling(inputs.log, models, path)
+        source = path
     elif isinstance(spec, CacciaCampaignData) and data is None:
         sim, log, report = _caccia_campaign(spec, config_path, models, veh)
         inputs = Inputs(log, report, veh, sim)
@@ -197,7 +197,7 @@ def load_inputs(
         from nnid.datasets.readers import load_log
 
         inputs = Inputs(*load_log(path, reader), veh)
-        _check_sampling(inputs.log, models, path)
+        source = path
         if physics and veh is not None:  # the inputs the vehicle reads, said against the log
             from nnid.datasets.arrays import logged_inputs
             from nnid.datasets.preprocess import check_velocities
@@ -235,6 +235,8 @@ def load_inputs(
         keep = inputs.log["experiment"].isin(spec.experiments)
         inputs.log = inputs.log[keep].reset_index(drop=True)
         inputs.report.add("experiments", f"kept {', '.join(spec.experiments)}")
+    if source is not None:  # the runs kept: one left out may be sampled as it likes
+        _check_sampling(inputs.log, models, source)
     inputs.log = _prepare(inputs.log, spec, inputs.report)
     return inputs
 

@@ -84,8 +84,8 @@ LOG_CASES: list[tuple[str, str, Callable]] = [
         "'t'",
         lambda df, i: df.assign(t=(df["t"] * 1000 + 0.3 * np.sin(np.arange(len(df)))).round(3)),
     ),
-    # a contract column but for case or spaces: kept as an unknown column, w was derived
-    ("a velocity named in capitals", "'W'", lambda df, i: df.rename(columns={"w": "W"})),
+    # a contract column but for case or spaces: kept as an unknown column, phi then missing
+    ("an angle named in capitals", "'PHI'", lambda df, i: df.rename(columns={"phi": "PHI"})),
     ("an input name with a space", "INPUT", lambda df, i: df.rename(columns={i: f" {i}"})),
     ("empty experiment label", "'experiment'", _set("experiment", 20, np.nan)),
     ("blank experiment label", "'experiment'", _set("experiment", 21, " ")),
@@ -187,6 +187,24 @@ def _command(command: str, tmp: Path, fx: dict, *, data=None, vehicle=MINIROV, o
             "--out", target]  # fmt: skip
 
 
+NARX_TRAIN = (
+    'kind = "train"\n[split]\nby = "experiment"\nvalidation = ["run2"]\n'
+    '[model]\nkind = "narx"\ninputs = ["tau_Z"]\noutputs = ["w"]\n'
+)
+
+
+def _narx_on_a_rate_change(tmp: Path, log: pd.DataFrame) -> tuple[Path, Path]:
+    """A NARX config and the demo log with run1 at 20 Hz, then 100 Hz."""
+    run = log[log["experiment"] == "run1"]
+    fast = pd.DataFrame({c: np.repeat(run[c].to_numpy()[150:], 5) for c in run}).assign(
+        t=lambda d: run["t"].iloc[150] + 0.01 * np.arange(len(d))
+    )
+    log = pd.concat([log[log["experiment"] != "run1"], run.iloc[:150], fast])
+    config = tmp / "narx.toml"
+    config.write_text(NARX_TRAIN)
+    return config, _write_log(tmp, "rate change", log)
+
+
 def _log_cases() -> list[Case]:
     cases = []
     for command in ("inspect", "loop", "train", "compare", "detect"):
@@ -221,19 +239,7 @@ def _log_cases() -> list[Case]:
     cases.append(Case("train: SINDy without a velocity", no_u_sindy, ("LOG", "'u'")))
 
     def rate_change(tmp, fx):  # a NARX counts delays in samples: 20 Hz, then 100 Hz in run1
-        log = fx["demo_log"]
-        run = log[log["experiment"] == "run1"]
-        fast = pd.DataFrame({c: np.repeat(run[c].to_numpy()[150:], 5) for c in run}).assign(
-            t=lambda d: run["t"].iloc[150] + 0.01 * np.arange(len(d))
-        )
-        log = pd.concat([log[log["experiment"] != "run1"], run.iloc[:150], fast])
-        config = tmp / "narx.toml"
-        config.write_text(
-            'kind = "train"\n[split]\nby = "experiment"\nvalidation = ["run2"]\n'
-            '[model]\nkind = "narx"\n'
-            'inputs = ["tau_Z"]\noutputs = ["w"]\n'
-        )
-        data = _write_log(tmp, "rate change", log)
+        config, data = _narx_on_a_rate_change(tmp, fx["demo_log"])
         return _command("train", tmp, fx, data=data, config=config)
 
     cases.append(Case("train: a NARX on a run whose rate changes", rate_change, ("LOG", "'t'")))
@@ -1016,3 +1022,20 @@ def test_a_monitor_whose_statistic_never_rose_loads_as_it_was_saved(fixtures, tm
     state["thresholds"]["cusum"]["value"] = 0.0
     (folder / "monitor.json").write_text(json.dumps(state))
     assert ResidualMonitor.load(folder).threshold_values[1] == 0.0
+
+
+def test_a_run_the_config_leaves_out_may_be_sampled_as_it_likes(fixtures, tmp_path):
+    """The sampling check reads the runs data.experiments keeps: run1's rate change refused
+    the whole fit though the config left run1 out."""
+    config, data = _narx_on_a_rate_change(tmp_path, fixtures["demo_log"])
+    kept = NARX_TRAIN.replace(
+        'kind = "train"\n', 'kind = "train"\n[data]\nexperiments = ["run0", "run2"]\n'
+    )
+    config.write_text(kept.replace('validation = ["run2"]', 'validation = ["run2"]\ntest = []'))
+    out = tmp_path / "out"
+    result = CliRunner().invoke(app, ["train", str(config), "--data", str(data), "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    config.write_text(NARX_TRAIN)
+    out = tmp_path / "out2"
+    result = CliRunner().invoke(app, ["train", str(config), "--data", str(data), "--out", str(out)])
+    assert result.exit_code == 2 and "rate_change.csv" in result.output

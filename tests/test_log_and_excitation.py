@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import warnings
 
 import numpy as np
 import pandas as pd
@@ -35,6 +36,24 @@ def _log(n=20):
 def test_valid_log_passes_untouched():
     df = _log()
     assert validate_log(df, "a.csv") is df
+
+
+def test_a_contract_column_misspelt_is_refused_or_said():
+    """'W' for w was kept as an unknown column while w was derived from depth. Longer names
+    and names with spaces are refused; a single letter that differs only in case is said and
+    the log kept (P may be a pressure, V a battery voltage)."""
+    for wrong, meant in (("Experiment", "experiment"), ("tau_x", "tau_X"), (" u", "u")):
+        df = _log().rename(columns={"u": "w"} if meant == "u" else {})
+        df = df.rename(columns={"tau_X": wrong} if meant == "tau_X" else {})
+        df[wrong] = df.get(wrong, "run")
+        with pytest.raises(NnidInputError, match=f"did you mean '{meant}'") as err:
+            validate_log(df, "a.csv")
+        assert err.value.field == wrong
+    with pytest.warns(UserWarning, match="'P' is not a column of the log contract.*'p'"):
+        assert validate_log(_log().assign(P=1.0e5), "a.csv") is not None
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # p itself logged: P is something else, nothing to say
+        validate_log(_log().assign(p=0.0, P=1.0e5), "a.csv")
 
 
 def _set(column: str, row: int, value):

@@ -294,6 +294,9 @@ def test_a_log_with_missing_samples_is_refused_naming_where():
     model = NarxModel(["u"], ["y"], 2, 2, **kw).fit(split)
     with pytest.raises(NnidInputError, match="NARX"):
         model.predict(holed, "free_run")
+    # a 30 Hz clock stamped to the millisecond (steps 0.033 and 0.034 s) is uniform
+    stamped = train.assign(t=np.round(train["t"] / 30, 3))
+    assert model.predict(stamped, "free_run")["y"].notna().sum() > 500
 
 
 def test_simulation_error_levenberg_marquardt_lowers_free_run_error():

@@ -253,3 +253,11 @@ def test_rls_that_has_not_converged_says_so():
         warnings.simplefilter("error")  # the default p0 converges: nothing to say
         est = RecursiveLeastSquares().solve(reg)
     assert est.theta == pytest.approx([2.0, -3.0], abs=0.05) and np.isfinite(est.stderr).all()
+    # a parameter whose truth is 0 ends near 0, where any last change is a large part of it:
+    # judged against its standard error, it is settled (it lost its s.e. and was "moving")
+    zero = Regression(np.c_[phi, phi[::-1, 0]], y, ["a", "b", "c"], ("u",), y.size)
+    for forgetting in (1.0, 0.99):
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            est = RecursiveLeastSquares(forgetting=forgetting).solve(zero)
+        assert np.isfinite(est.stderr).all() and abs(est.theta[2]) < 4 * est.stderr[2]

@@ -210,22 +210,31 @@ CONTRACT = ("t", "experiment", REPLAY_GROUP, *POSE, *VELOCITY, *ACCELERATION, *T
 
 
 def _check_spelling(df: pd.DataFrame, source: str) -> None:
-    """Refuse a column that is a contract column but for case or spaces (``W``, ``' w'``,
-    ``tau_z``, ``Experiment``, ``CMD_left``) where the contract column itself is absent: it
-    would be kept as an unknown column and the quantity derived or left out in its place."""
+    """A column that is a contract column but for case or spaces, where the contract column
+    itself is absent: it would be kept as an unknown column and the quantity derived or left
+    out in its place. Refused (``' w'``, ``tau_z``, ``Experiment``, ``CMD_left``), except a
+    single letter that differs only in case, which is said: ``P`` may be a pressure and ``V`` a
+    battery voltage as well as a roll rate or a sway speed mistyped."""
     folded = {c.lower(): c for c in CONTRACT}
     for col in map(str, df.columns):
         key = col.strip().lower()
         if col in CONTRACT or col.startswith("cmd_"):
             continue
         meant = folded.get(key) or (f"cmd_{col.strip()[4:]}" if key.startswith("cmd_") else None)
-        if meant is not None and meant not in df.columns:
-            raise NnidInputError(
-                f"column {col!r} is not a column of the log contract; did you mean {meant!r}? "
-                "(names are case-sensitive: rename the column, or map it with a reader config)",
-                source=source,
-                field=col,
+        if meant is None or meant in df.columns:
+            continue
+        said = f"column {col!r} is not a column of the log contract (names are case-sensitive)"
+        if len(col) == 1:
+            warnings.warn(
+                f"{source}: {said}: it is not read; if it is {meant!r}, rename it",
+                stacklevel=3,
             )
+            continue
+        raise NnidInputError(
+            f"{said}; did you mean {meant!r}? Rename the column, or map it with a reader config",
+            source=source,
+            field=col,
+        )
 
 
 def _check_experiments(df: pd.DataFrame, source: str) -> None:
@@ -252,9 +261,9 @@ def blank_labels(label: pd.Series) -> np.ndarray:
 
 
 def _check_time_unit(df: pd.DataFrame, source: str) -> None:
-    """Time in seconds: a median step of 5 to 1000 on whole numbers (to 1e-6: milliseconds
-    computed in floating point, 50.000000000007) looks like milliseconds, one of 10⁵ or more
-    like micro- or nanoseconds."""
+    """Time in seconds: a median step of 5 to 1000 looks like milliseconds (whole, computed in
+    floating point, or a logger's jittered stamps; no vehicle's dynamics are sampled every 5 s),
+    one of 10⁵ or more like micro- or nanoseconds."""
     slip = time_unit_slip(df["t"].to_numpy(dtype=np.float64))
     if slip:
         raise NnidInputError(f"{slip}; t must be seconds", source=source, field="t")

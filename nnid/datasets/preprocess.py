@@ -43,14 +43,16 @@ def sample_rate(t: np.ndarray) -> float:
 # --- time base -------------------------------------------------------------------------------
 
 
-#: relative spread of sampling intervals accepted as uniform
-UNIFORM_TOLERANCE = 0.01
+#: how far one sampling interval may differ from the run's median interval and still be one
+#: sample: time stamps rounded to the millisecond make a 30 Hz clock step 0.033 and 0.034 s
+UNIFORM_TOLERANCE = 0.1
 
 
 def check_uniform(log: pd.DataFrame, what: str, name: str = "log") -> None:
-    """Raise unless every experiment of ``log`` is uniformly sampled (intervals within 1 % of
-    their median), naming the first row whose interval is not: models that count time in
-    samples (``what``) need it."""
+    """Raise unless every experiment of ``log`` is uniformly sampled (each interval within
+    :data:`UNIFORM_TOLERANCE` of the run's median: a longer one has samples missing, a rate
+    that changes within the run leaves the median), naming the first row that is not: models
+    that count time in samples (``what``) need it."""
     for exp, idx in experiments(log):
         t = log.loc[idx, "t"].to_numpy(np.float64)
         dt = np.diff(t)

@@ -70,7 +70,7 @@ def read_log(path: str | Path) -> pd.DataFrame:
     """Read a CSV or Parquet log (by suffix) as every command reads a table
     (:func:`read_table`: its dialects and header checks) and validate it."""
     path = Path(path)
-    if path.exists() and not path.name.endswith((".parquet", ".csv", ".csv.gz")):
+    if path.exists() and not path.name.lower().endswith((".parquet", ".csv", ".csv.gz")):
         raise NnidInputError(
             "unknown log format; expected .csv, .csv.gz or .parquet", source=str(path)
         )

@@ -154,16 +154,20 @@ def _residual_stats(reg: Regression, theta: np.ndarray, first: int) -> tuple[flo
     return sigma2, n, per_dof
 
 
-def window_covariance(reg: Regression, theta: np.ndarray, first: int) -> np.ndarray:
+def window_covariance(
+    reg: Regression, theta: np.ndarray, first: int
+) -> tuple[np.ndarray, np.ndarray]:
     """The covariance of ``theta`` as :class:`~nnid.trainers.least_squares.LeastSquares` gives
     it, over the samples ``first``…end (the estimator's memory): each DOF equation weighted by
     1/σ̂² of its own residual (forces in N and moments in N m do not share one variance) and
     widened by the residuals' correlation time. σ̂² P of the recursion pools the equations'
     variances and takes every row as independent: too small for forces, too large for moments
-    (3-24x on a minirov log), where the estimates themselves equal batch least squares."""
+    (3-24x on a minirov log), where the estimates themselves equal batch least squares. Also
+    returns the window's unweighted least-squares fit, against which θ is judged settled."""
     m = len(reg.dofs)
     rows = slice(first * m, reg.n_samples * m)
-    phi, r = reg.phi[rows], reg.y[rows] - reg.phi[rows] @ np.nan_to_num(theta)
+    phi, y = reg.phi[rows], reg.y[rows]
+    r = y - phi @ np.nan_to_num(theta)
     ok = np.isfinite(r) & np.isfinite(phi).all(1)
     var = dof_variances(np.where(ok, r, np.nan).reshape(-1, m))
     w = np.tile(1.0 / np.where(var > 0, var, 1.0), r.size // m) * ok
@@ -179,9 +183,11 @@ def window_covariance(reg: Regression, theta: np.ndarray, first: int) -> np.ndar
             ExcitationWarning,
             stacklevel=3,
         )
+    # the window's own least-squares fit, unweighted as the recursion is
+    fit = np.linalg.lstsq(phi, np.where(ok, y, 0.0), rcond=None)[0]
     cov = np.linalg.pinv(gram, hermitian=True) * sigma2
     cov = void_undetermined(cov, list(reg.names), report)
-    return cov * correlation_time([r[k::m] for k in range(m)])
+    return cov * correlation_time([r[k::m] for k in range(m)]), fit
 
 
 def _chunks(n: int, parts: int = 20) -> list[tuple[int, int]]:
@@ -191,33 +197,26 @@ def _chunks(n: int, parts: int = 20) -> list[tuple[int, int]]:
     return list(itertools.pairwise(int(e) for e in edges))
 
 
-def warn_still_moving(history: np.ndarray, names, what: str, remedy: str) -> list[str]:
-    """Warn of the parameters :func:`still_moving` finds (``what``: the estimator's verdict,
-    ``remedy``: what to change) and return them."""
-    moving = still_moving(history, list(names))
-    if moving:
-        warnings.warn(
-            f"{what}: {', '.join(moving)} still moved by more than 5 % over the last tenth of "
-            f"the data; these values are where the data ended, not estimates ({remedy})",
-            UserWarning,
-            stacklevel=3,
-        )
-    return moving
-
-
 def still_moving(
-    history: np.ndarray, names: list[str], tail: float = 0.1, rel: float = 0.05
+    history: np.ndarray,
+    names: list[str],
+    tail: float = 0.1,
+    rel: float = 0.05,
+    stderr: np.ndarray | None = None,
 ) -> list[str]:
     """The parameters whose estimate changed by more than ``rel`` of its final size over the
-    last ``tail`` of the samples: a recursive law that has not converged by the data's end."""
+    last ``tail`` of the samples: a recursive law that has not converged by the data's end.
+    With ``stderr``, a change within two standard errors is noise, not movement: a parameter
+    whose truth is 0 ends near 0, and any change is a large part of it."""
     n = history.shape[0]
     if n < 10:
         return []
     last, earlier = history[-1], history[int((1.0 - tail) * (n - 1))]
     change = np.abs(last - earlier)
-    return [
-        nm for nm, d, v in zip(names, change, last, strict=True) if d > rel * max(abs(v), 1e-12)
-    ]
+    floor = np.abs(last) * rel
+    if stderr is not None:
+        floor = np.maximum(floor, 2.0 * np.nan_to_num(stderr, nan=0.0))
+    return [nm for nm, d, f in zip(names, change, floor, strict=True) if d > max(f, 1e-12)]
 
 
 class RecursiveLeastSquares(BaseEstimator):
@@ -280,17 +279,31 @@ class RecursiveLeastSquares(BaseEstimator):
         first = max(reg.n_samples - window, 0)
         sigma2, n_obs, per_dof = _residual_stats(reg, theta, first)
         self.p_matrix_ = p_mat  # the recursion's own P, for its checks (not a covariance)
-        cov = window_covariance(reg, theta, first)
-        # a window covariance around a θ the recursion has not settled on is no uncertainty
-        moving = warn_still_moving(
-            history,
-            reg.names,
-            "recursive least squares has not converged"
-            if self.forgetting == 1.0
-            else "recursive least squares is still moving (tracking a change, or not converged)",
-            "a larger p0, or a longer log; their standard errors are not given",
-        )
-        tied = np.isin(reg.names, moving)
+        cov, fit = window_covariance(reg, theta, first)
+        # a window covariance around a θ the recursion has not settled on is no uncertainty:
+        # still moving beyond its noise at the end, or ended far from its memory's fit
+        se = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+        moving = still_moving(history, list(reg.names), stderr=se)
+        unsettled = [
+            nm
+            for nm, d, e, v in zip(reg.names, np.abs(theta - fit), se, theta, strict=True)
+            if nm in moving or (np.isfinite(e) and d > max(3.0 * e, 0.05 * abs(v)))
+        ]
+        if unsettled:
+            converging = self.forgetting == 1.0
+            warnings.warn(
+                "recursive least squares "
+                + ("has not converged" if converging else "is still moving (tracking a change?)")
+                + f": {', '.join(unsettled)} still moved beyond 5 % and two standard errors "
+                "over the last tenth of the data, or ended beyond 5 % and three standard errors "
+                "from the least-squares fit of its memory; these values are where the data "
+                "ended, not estimates ("
+                + ("a larger p0, or a longer log" if converging else "a longer memory")
+                + "), and they get no standard error",
+                UserWarning,
+                stacklevel=2,
+            )
+        tied = np.isin(reg.names, unsettled)
         cov[tied, :] = np.nan
         cov[:, tied] = np.nan
         return Estimate(
@@ -378,8 +391,17 @@ class GradientEstimator(BaseEstimator):
                 RuntimeWarning,
                 stacklevel=2,
             )
-        warn_still_moving(history, reg.names, "the gradient estimator has not converged",
-                          "a larger gain, normalized=True, or a longer log")  # fmt: skip
+        moving = still_moving(history, list(reg.names))
+        if moving:
+            warnings.warn(
+                "the gradient estimator has not converged: "
+                + ", ".join(moving)
+                + " still moved by more than 5 % over the last tenth of the data; these values "
+                "are where the data ended, not estimates (a larger gain, normalized=True, or "
+                "a longer log)",
+                UserWarning,
+                stacklevel=2,
+            )
         sigma2, n_obs, per_dof = _residual_stats(reg, theta, 0)
         return Estimate(
             list(reg.names),
