@@ -121,8 +121,9 @@ def solve_least_squares(
 ) -> Estimate:
     """Weighted least squares with covariance, through the normal equations of the
     column-scaled regressor (fast on long logs; the excitation check guards conditioning).
-    Unexcited parameters get NaN and a warning that names them; collinear ones keep the
-    pseudo-inverse's (minimum-norm) value, a warning, and no standard error (NaN)."""
+    Unexcited parameters get NaN and a warning that names them; collinear ones (the data do
+    not separate them: the excitation check's near-null directions) keep the pseudo-inverse's
+    value, a warning, and no standard error (NaN), since only their combination is measured."""
     finite = np.isfinite(y) & np.isfinite(phi).all(1)
     if not finite.all():  # rows with an undefined signal (e.g. w of a tumbling vehicle)
         phi, y = phi[finite], y[finite]
