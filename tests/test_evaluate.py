@@ -192,3 +192,17 @@ def test_a_run_diverging_in_a_column_the_pooled_score_leaves_out_does_not_void_i
     )
     assert nrmse == {"u": 0.0, "total": 0.0} and diverged == {}
     assert list(left) == ["sway"] and runs["sway"]["v"] is None
+
+
+def test_k_step_scores_say_they_are_taken_over_fewer_samples(runs):
+    """Each run's first k - 1 predictions after the warm-up need k steps of history, so the
+    k-step scores are taken over fewer samples than the free run's; the header gave only the
+    free run's count, as if both were over the same rows."""
+    model = Shifted().fit(runs)
+    held = evaluate(model, runs, ("free_run", "k_step"), k_step=15, warmup_s=1.0)
+    # per run the free run skips the first 10 samples (1 s), the k-step the first 15
+    assert held["k_step_samples"] == held["samples"] - 2 * 5
+    metrics = {"model": "shifted", "params": {}, "seconds": 0.0, "warmup_s": 1.0}
+    text = train_markdown({**metrics, "validation": held})
+    assert f"{held['samples']} samples scored" in text
+    assert f"k-step: {held['k_step_samples']} samples" in text

@@ -235,7 +235,10 @@ def _data_text(comparison: dict) -> str:
     )
     if comparison.get("test"):
         text += f"; test on {', '.join(comparison['test'])} (the ranking uses the test run)"
-    text += f". The first {comparison['warmup_s']:g} s of every run are not scored."
+    text += f". The first {comparison['warmup_s']:g} s of every run are not scored"
+    if comparison.get("k_step_samples", 1) > 1:  # k-step predictions need k steps of history
+        text += ", nor, for the k-step scores, a run's samples before its k-th"
+    text += "."
     if comparison.get("autopilot_replay"):
         held = comparison.get("held_out", "validation")
         flown = [m["name"] for m in comparison["models"] if m.get(held, {}).get("closed_loop")]

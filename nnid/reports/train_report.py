@@ -96,7 +96,8 @@ def train_markdown(metrics: dict) -> str:
         lines += [
             "",
             f"## Errors on the {part} split ({scores.get('samples', '?')} samples scored, "
-            f"the first {metrics.get('warmup_s', 0)} s of each run excluded{note})",
+            f"the first {metrics.get('warmup_s', 0)} s of each run excluded{_k_rows(scores)}"
+            f"{note})",
             "",
         ]
         for key, label in ERROR_KEYS:
@@ -160,6 +161,15 @@ def train_markdown(metrics: dict) -> str:
 
 
 # -- tables shared by the Markdown and the HTML --------------------------------------------------
+
+
+def _k_rows(scores: dict) -> str:
+    """The k-step scores' own sample count, where it differs: a k-step prediction needs k
+    samples of its run before it (and the model's own warm-up), so fewer are scored."""
+    k = scores.get("k_step_samples")
+    if k is None or k == scores.get("samples"):
+        return ""
+    return f"; k-step: {k} samples, as each needs k samples of its run before it"
 
 
 def _baseline(metrics: dict) -> tuple[list[str], list[list[str]]]:
