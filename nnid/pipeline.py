@@ -622,6 +622,7 @@ def _nondimensional(params: dict, vehicle, speed: float) -> dict:
         out["params"][name + "'"] = {
             "value": entry["value"] / scale,
             "stderr": None if se is None else se / scale,
+            "excited": entry.get("excited", True),
         }
     return out
 

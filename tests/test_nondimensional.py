@@ -207,3 +207,23 @@ def test_linear_plus_quadratic_steady_state_in_primes():
             up = (-bp - math.sqrt(bp * bp - 4 * ap * fp)) / (2 * ap)
             assert up == pytest.approx(u / speed, rel=1e-10)
             assert np.isfinite(up) and up > 0
+
+
+def test_the_prime_system_table_gives_no_error_bar_to_a_parameter_fitted_to_noise():
+    """A run without sway leaves Y_vdot fitted to noise: its prime-system value printed
+    "0.16287 ± 0.0041", a 2.5 % bar on a number with the wrong sign. It is said instead."""
+    from nnid.pipeline import _nondimensional
+    from nnid.reports.train_report import train_markdown
+    from nnid.vehicle import load_vehicle
+
+    vehicle = load_vehicle("vlbv300")
+    params = {
+        "X_udot": {"value": -10.0, "stderr": 0.1},
+        "Y_vdot": {"value": 3.0, "stderr": None, "significant": False, "excited": False},
+    }
+    nd = _nondimensional(params, vehicle, 1.0)
+    assert nd["params"]["Y_vdot'"]["excited"] is False and nd["params"]["X_udot'"]["excited"]
+    text = train_markdown({"model": "fossen", "params": {}, "seconds": 0.0, "nondimensional": nd})
+    lines = {ln.split("`")[1]: ln for ln in text.splitlines() if ln.startswith("- `")}
+    assert "±" in lines["X_udot'"] and "±" not in lines["Y_vdot'"]
+    assert "fitted to noise" in lines["Y_vdot'"]

@@ -529,8 +529,8 @@ class ParametricModel(FossenPlant):
             warnings.warn(
                 f"the fit data do not excite {', '.join(dofs_left)} (their velocities stay "
                 "within 3 times their noise): these unknowns are fitted to noise, not "
-                "identified, and reported as not significant (their standard errors do not "
-                "hold): "
+                "identified, and reported as not significant, without standard errors (theirs "
+                "would not hold): "
                 f"{', '.join(self.not_excited_)}",
                 ExcitationWarning,
                 stacklevel=3,
@@ -539,9 +539,16 @@ class ParametricModel(FossenPlant):
 
     def _params(self) -> dict[str, dict[str, float | None]]:
         params = self.estimate_.as_dict()
-        # fitted to noise: no verdict of significance (unexcited_unknowns)
+        # fitted to noise: no verdict of significance, and no standard error, whose noise
+        # model does not hold there (unexcited_unknowns); every report then shows none
         for name in self.not_excited_:
-            params[name] = {**params[name], "significant": False, "excited": False}
+            params[name] = {
+                **params[name],
+                "stderr": None,
+                "percentile_error": None,
+                "significant": False,
+                "excited": False,
+            }
         return params
 
     def describe(self) -> dict:

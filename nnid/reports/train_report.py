@@ -153,7 +153,12 @@ def train_markdown(metrics: dict) -> str:
     if nd:
         lines += ["", f"## Prime-system I (U = {nd['speed']} m/s, L = {nd['length']} m)", ""]
         lines += [
-            f"- `{k}` = {number(v['value'], 5)} ± {number(v['stderr'], 2)}"
+            f"- `{k}` = {number(v['value'], 5)} "
+            + (
+                f"± {number(v['stderr'], 2)}"
+                if v.get("excited", True)
+                else "(not excited by the data: fitted to noise, no standard error)"
+            )
             for k, v in nd["params"].items()
         ]
     lines += ["", f"Fitted and scored in {metrics['seconds']:.1f} s."]
