@@ -223,10 +223,15 @@ def compare_run(
     top = next((r for r in comparison["models"] if ranking and r["name"] == ranking[0]), {})
     measured = (top.get("ranked_nrmse") or {}).get("free_run") is not None
     best = ranking[0] if measured and comparison.get("ranked_on") else None
-    headline: dict[str, Any] = {"best": best}
+    shared = comparison.get("ranked_on") or []
+    headline: dict[str, Any] = {"best": best, "ranked_on": ",".join(shared) or None}
     for row in comparison["models"]:
         held = row.get("test") or row.get("validation") or {}
-        headline[f"free_run_nrmse:{row['name']}"] = _total(held, "free_run_nrmse")
+        # side by side, the totals must be over the same outputs: those the ranking shares
+        own = _total(held, "free_run_nrmse")
+        headline[f"free_run_nrmse:{row['name']}"] = (
+            row["ranked_nrmse"]["free_run"] if shared else own
+        )
     return Outcome(
         [
             *lost_rows(result.report),

@@ -350,3 +350,46 @@ def test_no_best_model_is_named_when_every_free_run_diverged(tmp_path):
     assert all(m["ranked_nrmse"]["free_run"] is None for m in comparison["models"])
     assert len(comparison["ranking"]) == 2 and "diverged" in comparison["summary"]
     assert outcome.headline["best"] is None
+
+
+def test_the_batch_headline_puts_totals_over_the_same_outputs_side_by_side(tmp_path):
+    """A Fossen model of u and w beside a NARX of w alone: the ranking compares them on w.
+    The headline (the batch summary's columns) gave the Fossen model's mean over u and w
+    beside the NARX's w."""
+    from nnid.config import CompareConfig, load_config
+    from nnid.runs import compare_run
+
+    config = tmp_path / "compare.toml"
+    config.write_text(
+        f"""kind = "compare"
+vehicle = "seamor"
+[data]
+simulate = "{Path(__file__).resolve().parents[1] / "configs" / "seamor_sequence.toml"}"
+experiments = ["surge", "heave", "surge-heave", "heave-yaw", "surge-sway-heave"]
+[split]
+by = "experiment"
+validation = ["heave-yaw"]
+test = ["surge-sway-heave"]
+[[models]]
+kind = "fossen"
+name = "fossen_uw"
+dofs = ["u", "w"]
+unknowns = ["added_mass", "damping"]
+[[models]]
+kind = "narx"
+name = "narx_w"
+inputs = ["tau_Z"]
+outputs = ["w"]
+hidden = [3]
+lm_samples = 1000
+trainer = {{ kind = "lm", max_epochs = 5 }}
+"""
+    )
+    outcome = compare_run(load_config(config, CompareConfig), config, tmp_path / "out")
+    comparison = json.loads((tmp_path / "out" / "comparison.json").read_text())
+    fossen = next(m for m in comparison["models"] if m["name"] == "fossen_uw")
+    assert comparison["ranked_on"] == ["w"] and outcome.headline["ranked_on"] == "w"
+    assert set(fossen["test"]["free_run_nrmse"]) >= {"u", "w"}
+    on_w = fossen["test"]["free_run_nrmse"]["w"]
+    assert outcome.headline["free_run_nrmse:fossen_uw"] == pytest.approx(on_w)
+    assert on_w != pytest.approx(fossen["test"]["free_run_nrmse"]["total"])
