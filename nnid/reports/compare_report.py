@@ -306,7 +306,9 @@ def force_figure(
 
 
 def complexity_figure(comparison: dict) -> str:
-    """Validation J/J₀ against the number of terms, with the SINDy path."""
+    """Validation J/J₀ against the number of terms, with the SINDy path. The path's points
+    are √ of the mean per-output normalised MSE, not J/J₀ (√ of the pooled one): the axis says
+    both, as on the VT690 log they differ by about 13 %."""
     fig, axes = new_figure(1, 1, 7.0, 4.0)
     ax = axes[0, 0]
     for m in comparison["models"]:
@@ -332,7 +334,7 @@ def complexity_figure(comparison: dict) -> str:
             )
             ax.legend(fontsize=8)
     ax.set_xlabel("number of terms n̄")
-    ax.set_ylabel("validation J / J0")
+    ax.set_ylabel("validation error: points J / J0, path √ mean NMSE")
     ax.set_xscale("symlog")
     return figure_uri(fig)
 
