@@ -201,8 +201,8 @@ def test_k_step_scores_say_they_are_taken_over_fewer_samples(runs):
     model = Shifted().fit(runs)
     held = evaluate(model, runs, ("free_run", "k_step"), k_step=15, warmup_s=1.0)
     # per run the free run skips the first 10 samples (1 s), the k-step the first 15
-    assert held["k_step_samples"] == held["samples"] - 2 * 5
+    assert held["k_step_scored"] == held["samples"] - 2 * 5
     metrics = {"model": "shifted", "params": {}, "seconds": 0.0, "warmup_s": 1.0}
     text = train_markdown({**metrics, "validation": held})
     assert f"{held['samples']} samples scored" in text
-    assert f"k-step: {held['k_step_samples']} samples" in text
+    assert f"k-step: {held['k_step_scored']} samples" in text

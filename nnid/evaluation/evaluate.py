@@ -214,7 +214,7 @@ def evaluate(
             predictions[name] = pred
         mask = scored_rows(log, warmup_s, model.warmup_samples_ + mode_steps(mode) - 1)
         if name == "k_step":  # its first k - 1 predictions of each run need k steps of history
-            out["k_step_samples"] = int(mask.sum())
+            out["k_step_scored"] = int(mask.sum())
         nrmse, rmse, diverged, runs, left = score_split(
             log, pred, columns, mask, lambda run: target_columns(model, run)
         )

@@ -171,7 +171,7 @@ def train_markdown(metrics: dict) -> str:
 def _k_rows(scores: dict) -> str:
     """The k-step scores' own sample count, where it differs: a k-step prediction needs k
     samples of its run before it (and the model's own warm-up), so fewer are scored."""
-    k = scores.get("k_step_samples")
+    k = scores.get("k_step_scored")
     if k is None or k == scores.get("samples"):
         return ""
     return f"; k-step: {k} samples, as each needs k samples of its run before it"
