@@ -146,6 +146,7 @@ def train_run(
         write_text(stage / "report.html", train_html(result.metrics, result.figures))
         result.report.write(stage)
     from nnid.evaluation.evaluate import diverged_columns
+    from nnid.reports.stops import training_stages
 
     metrics = result.metrics
     held = "test" if "test" in metrics else "validation"
@@ -160,6 +161,13 @@ def train_run(
     if base:
         went = diverged_columns(base_part, "free_run_nrmse")
         line += f"; physics only {score_cell(base, 'total', went)}"
+    broke = [s["stage"] for s in training_stages(metrics.get("describe") or {})
+             if s["stop"] == "non-finite loss"]  # fmt: skip
+    if broke:  # the scores are then the stage's start: said, not left to the stage table
+        line += (
+            f"; training diverged in {', '.join(dict.fromkeys(broke))} (the loss became "
+            "non-finite), which kept its start"
+        )
     headline: dict[str, Any] = {
         "model": metrics["model"],
         "trainer": metrics["trainer"],

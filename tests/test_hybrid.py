@@ -390,3 +390,28 @@ def test_a_segment_or_window_under_one_sample_is_refused(minirov, field):
     model = HybridModel(minirov, trainer=Adam(max_epochs=1), hidden=(4,), **settings)
     with pytest.raises(NnidInputError, match=rf"field '{field}': 1e-06 s is under one sample"):
         model.fit(log[first], log[~first])
+
+
+def test_a_network_whose_training_diverged_is_said_on_the_console(tmp_path):
+    """lr = 1e6: the network's loss became non-finite at once and its stage kept its start, so
+    the hybrid scored as its physics fit. The console said "0.114; physics only 0.114" alone,
+    as if the network had been trained and learned nothing; only the report's table said."""
+    root = resources.files("nnid.demo_data")
+    data = tmp_path / "demo.csv"
+    pd.read_parquet(root.joinpath("demo_minirov_heave.parquet")).to_csv(data, index=False)
+    config = tmp_path / "hybrid.toml"
+    config.write_text(
+        'kind = "train"\nwarmup_s = 2.0\n[split]\nby = "experiment"\nvalidation = ["run5"]\n'
+        'test = ["run6", "run7"]\n[model]\nkind = "hybrid"\nunknowns = ["added_mass", "damping"]\n'
+        'physics_trainer = { kind = "ls", filter_lambda = 1.0 }\nhidden = [8]\nsegments = [0.25]\n'
+        '[model.trainer]\nkind = "adam"\nlr = 1e6\nmax_epochs = 2\n'
+    )
+    vehicle = str(root.joinpath("minirov.toml"))
+    args = ["train", str(config), "--data", str(data), "--vehicle", vehicle]
+    result = CliRunner().invoke(app, [*args, "--out", str(tmp_path / "out")])
+    assert result.exit_code == 0, result.output
+    assert "training diverged in segments of 0.25 s (the loss became non-finite)" in result.output
+    calm = config.read_text().replace("lr = 1e6", "lr = 1e-3")
+    config.write_text(calm)
+    result = CliRunner().invoke(app, [*args, "--out", str(tmp_path / "calm")])
+    assert result.exit_code == 0 and "diverged" not in result.output
