@@ -131,6 +131,10 @@ def check_paths(cfg, config_path: Path, data: str | None, columns: str | None) -
         _check_file(resolve(base, value), config_path, f"data.{key}")
 
 
+#: the remedy a SINDy or named damping model's missing velocity has: no DOF can be left out
+WHOLE_LIBRARY = "fit a Fossen model of the DOFs the log has (this model's terms read all six)"
+
+
 def fitted_dofs(spec) -> list[str]:
     """The DOFs whose equations a physics model's config fits: its ``dofs``, with a
     ``sequence`` the DOFs of its steps, and for SINDy and the named damping models all six
@@ -205,7 +209,9 @@ def load_inputs(
             try:
                 logged_inputs(inputs.log, veh)
                 for m in models:  # the velocities the fit needs, said against the log
-                    if m.kind in PHYSICS_KINDS:
+                    if m.kind in ("sindy", "synthesis"):
+                        check_velocities(inputs.log.columns, fitted_dofs(m), WHOLE_LIBRARY)
+                    elif m.kind in PHYSICS_KINDS:
                         check_velocities(inputs.log.columns, fitted_dofs(m))
             except NnidInputError as err:
                 raise err.with_source(path) from None

@@ -236,7 +236,7 @@ def _log_cases() -> list[Case]:
         log = fx["demo_log"].drop(columns=["u"])
         return _command("train", tmp, fx, data=_write_log(tmp, "no u", log), config=config)
 
-    cases.append(Case("train: SINDy without a velocity", no_u_sindy, ("LOG", "'u'")))
+    cases.append(Case("train: SINDy without a velocity", no_u_sindy, ("LOG", "'u'", "all six")))
 
     def rate_change(tmp, fx):  # a NARX counts delays in samples: 20 Hz, then 100 Hz in run1
         config, data = _narx_on_a_rate_change(tmp, fx["demo_log"])

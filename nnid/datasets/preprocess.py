@@ -211,18 +211,20 @@ def derivable_velocities(columns) -> set[str]:
     return {"p", "q", "r", "w"} if "z" in have else {"p", "q", "r"}
 
 
-def check_velocities(columns, dofs) -> None:
+def check_velocities(
+    columns, dofs, remedy: str = "fit only the DOFs the log has (the model's dofs)"
+) -> None:
     """Refuse a log that neither has nor can derive (:func:`derivable_velocities`) the
     velocity of one of ``dofs``. Read as zero, it would be fitted and scored as a vehicle at
-    rest in that DOF."""
+    rest in that DOF. ``remedy``: what else the user can do, besides logging it."""
     have = set(columns) | derivable_velocities(columns)
     missing = [d for d in dofs if d not in have]
     if missing:
         raise NnidInputError(
             f"the log has no {', '.join(missing)} column and its pose cannot give "
             f"{'it' if len(missing) == 1 else 'them'} (u, v from x, y, z with phi, theta, psi; "
-            "w also from z and the attitude; p, q, r from the attitude): log the velocity, or "
-            "fit only the DOFs the log has (the model's dofs)",
+            f"w also from z and the attitude; p, q, r from the attitude): log the velocity, or "
+            f"{remedy}",
             field=missing[0],
         )
 
