@@ -411,7 +411,12 @@ def test_a_network_whose_training_diverged_is_said_on_the_console(tmp_path):
     result = CliRunner().invoke(app, [*args, "--out", str(tmp_path / "out")])
     assert result.exit_code == 0, result.output
     assert "training diverged in segments of 0.25 s (the loss became non-finite)" in result.output
+    # and the report does not explain 0 % of a force that is zero
+    report = (tmp_path / "out" / "report.md").read_text()
+    assert "The network's force is zero on the training runs" in report
     calm = config.read_text().replace("lr = 1e6", "lr = 1e-3")
     config.write_text(calm)
     result = CliRunner().invoke(app, [*args, "--out", str(tmp_path / "calm")])
     assert result.exit_code == 0 and "diverged" not in result.output
+    report = (tmp_path / "calm" / "report.md").read_text()
+    assert "Dominant terms of the learned force on the training runs" in report

@@ -139,7 +139,7 @@ def train_markdown(metrics: dict) -> str:
             "",
             "## What the network learned",
             "",
-            f"Dominant terms of the learned force (together they explain {explained} of it):",
+            _learned_sentence(metrics, explained) + (":" if rows[0][0] != "-" else "."),
             "",
             *markdown_table(head, rows),
             "",
@@ -285,6 +285,18 @@ def _terms(metrics: dict) -> tuple[list[str], list[list[str]], str]:
     return head, rows, f"{100 * expl['explained']:.0f} %"
 
 
+def _learned_sentence(metrics: dict, explained: str) -> str:
+    """What the terms table is of: the learned force on the training runs, or none at all (a
+    network whose training kept its zero start has nothing to explain)."""
+    train = metrics["correction"]["share_of_damping_force"].get("train") or {}
+    if train.get("max") == 0:
+        return "The network's force is zero on the training runs: it learned nothing to explain"
+    return (
+        "Dominant terms of the learned force on the training runs (together they explain "
+        f"{explained} of it)"
+    )
+
+
 def _shares(metrics: dict) -> tuple[list[str], list[list[str]]]:
     shares = metrics["correction"]["share_of_damping_force"]
     dofs = [d for d in DOFS if any(d in v for v in shares.values())]
@@ -360,8 +372,8 @@ def train_html(metrics: dict, figures: dict[str, Any] | None = None) -> str:
         out.append("<h2>What the network learned</h2>")
         out.append(
             "<p>The learned force at the measured states and inputs, regressed on the effect "
-            "vocabulary's columns and McCarter's basis library (sparse regression); the terms "
-            f"it keeps explain {explained} of it together.</p>"
+            "vocabulary's columns and McCarter's basis library (sparse regression). "
+            f"{html.escape(_learned_sentence(metrics, explained))}.</p>"
         )
         out.append(html_table(head, rows))
         out.append(
