@@ -236,9 +236,8 @@ def compare_run(
     for row in comparison["models"]:
         held = row.get("test") or row.get("validation") or {}
         # side by side, the totals must be over the same outputs: those the ranking shares
-        own = _total(held, "free_run_nrmse")
         headline[f"free_run_nrmse:{row['name']}"] = (
-            row["ranked_nrmse"]["free_run"] if shared else own
+            row["ranked_nrmse"]["free_run"] if shared else _total(held, "free_run_nrmse")
         )
     return Outcome(
         [

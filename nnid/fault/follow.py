@@ -19,7 +19,7 @@ from nnid.datasets.arrays import check_commands
 from nnid.datasets.log import POSE, VELOCITY
 from nnid.errors import NnidInputError
 from nnid.fault.detect import DetectResult, alarm_record
-from nnid.fault.monitor import GAP_INTERVALS, ResidualMonitor, Trace, input_columns
+from nnid.fault.monitor import ResidualMonitor, Trace, input_columns
 from nnid.validation import shown
 
 #: the first rows, whose typical interval is checked against the monitor's calibration rate
@@ -167,7 +167,7 @@ def follow_csv(
                 field="t",
                 row=n,
             )
-        elif t - last_t > GAP_INTERVALS * monitor.interval:  # the kernel skips the interval
+        elif t - last_t > monitor.max_interval:  # the kernel skips the interval
             say(
                 f"t = {t:.2f} s{f' ({name})' if name else ''}: no samples for {t - last_t:.3g} s; "
                 "that interval is not scored"

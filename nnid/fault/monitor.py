@@ -344,13 +344,16 @@ class ResidualMonitor(BaseEstimator):
         saved before it was stored has the median)."""
         return self.calibration_.get("interval", self.calibration_.get("dt"))
 
+    @property
+    def max_interval(self) -> float:
+        """The longest interval given a residual (:data:`GAP_INTERVALS` calibrated ones): a
+        longer one has samples missing."""
+        return GAP_INTERVALS * self.interval
+
     def missing_samples(self, t: np.ndarray, experiment: np.ndarray | None = None) -> int:
         """How many intervals of ``t`` (within an experiment) are longer than
-        :data:`GAP_INTERVALS` calibrated intervals: samples missing there, no residual."""
-        steps = np.diff(np.asarray(t, dtype=np.float64))
-        if experiment is not None:
-            steps = steps[np.asarray(experiment)[1:] == np.asarray(experiment)[:-1]]
-        return int(np.sum(steps > GAP_INTERVALS * self.interval))
+        :attr:`max_interval`: samples missing there, no residual."""
+        return int(np.sum(_steps(t, experiment) > self.max_interval))
 
     def check_rate(self, t: np.ndarray, experiment: np.ndarray | None = None) -> None:
         """Refuse a log sampled at another rate than the healthy record: the residual is a
@@ -527,12 +530,16 @@ def typical_interval(t: np.ndarray, experiment: np.ndarray | None = None) -> flo
     """The sample interval of a record: the 10 %-trimmed mean of its intervals within each
     experiment. Unlike the median it does not jump between the two values of a clock that
     alternates (0.04 and 0.06 s read at 20 Hz), and unlike the mean it ignores a few holes."""
-    t = np.asarray(t, dtype=np.float64)
-    same = np.ones(max(t.size - 1, 0), dtype=bool)
-    if experiment is not None:
-        same = np.asarray(experiment)[1:] == np.asarray(experiment)[:-1]
-    steps = np.diff(t)[same]
+    steps = _steps(t, experiment)
     return float(trim_mean(steps, 0.1)) if steps.size else math.nan
+
+
+def _steps(t: np.ndarray, experiment: np.ndarray | None = None) -> np.ndarray:
+    """The sample intervals of ``t`` within each experiment (none across a boundary)."""
+    steps = np.diff(np.asarray(t, dtype=np.float64))
+    if experiment is None:
+        return steps
+    return steps[np.asarray(experiment)[1:] == np.asarray(experiment)[:-1]]
 
 
 def _hours(data: dict) -> float:
