@@ -654,6 +654,12 @@ class NarxModelSpec(_InputOutput):
         args["output_bounds"] = _bounds(args["output_bounds"])
         return args
 
+    def epoch_measures(self) -> set[str]:
+        """The validation measures the fit scores every epoch, in the sweep's metric names:
+        its series-parallel stage's, and the free run's where it has a simulation stage."""
+        first = "one_step_nrmse" if self.multi_step == 1 else "k_step_nrmse"
+        return {first} | ({"free_run_nrmse"} if self.simulation_epochs > 0 else set())
+
 
 class StateSpaceModelSpec(_InputOutput):
     """A continuous-time neural state-space model (:class:`nnid.models.neural_state_space.

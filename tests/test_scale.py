@@ -567,6 +567,29 @@ def test_sweep_on_ray_tune_with_asha(sweep_inputs, tmp_path) -> None:
     assert ranked[0].mean is not None and (out / "best.toml").is_file()
 
 
+@needs_ray
+def test_sweep_refuses_asha_with_nothing_to_compare(sweep_inputs, tmp_path) -> None:
+    """A NARX without a free-run stage, ranked on the free run, scores nothing ASHA could
+    compare per epoch: refused before Ray starts (the summary said so after every trial had
+    run to its end); with a simulation stage, or early_stopping = false, it is accepted."""
+    from nnid.config import SweepSpec
+    from nnid.scale.sweep import _check_rungs, trials
+
+    config, data = sweep_inputs
+    res = CliRunner().invoke(app, ["sweep", str(config), "--data", str(data), "--out",
+                                   str(tmp_path / "o"), "--address", "local"])  # fmt: skip
+    assert res.exit_code == 2, res.output
+    assert "early_stopping" in res.output and "simulation_epochs" in res.output
+    assert not (tmp_path / "o").exists()
+    staged = tmp_path / "staged.toml"
+    staged.write_text(
+        config.read_text().replace("hidden = [3]\n", "hidden = [3]\nsimulation_epochs = 2\n")
+    )
+    spec, tasks = trials(staged, data=str(data))
+    _check_rungs(staged, spec, tasks)  # accepted: the simulation stage scores the free run
+    _check_rungs(config, SweepSpec(seeds=[0], metric="one_step_nrmse"), trials(config)[1])
+
+
 @pytest.mark.parametrize(
     ("metric", "stage"), [("free_run_nrmse", "simulation"), ("one_step_nrmse", "one-step")]
 )

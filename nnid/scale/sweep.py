@@ -268,6 +268,8 @@ def run_sweep_tune(
     from nnid.scale.task import finished
 
     spec, tasks = trials(config, data, vehicle, columns)
+    if spec.early_stopping:
+        _check_rungs(config, spec, tasks)
     out_dir = Path(out_dir).absolute()
     out_dir.mkdir(parents=True, exist_ok=True)
     own = not ray.is_initialized()
@@ -320,11 +322,29 @@ def run_sweep_tune(
     if spec.early_stopping and all((r.get("epochs") or 0) <= 1 for r in rows):
         batch.extra["sweep"]["summary"] += (
             f" ASHA compared no trials: no training stage reported a per-epoch validation "
-            f"{spec.metric} (a NARX without a free-run stage reports one-step scores only), so "
-            "every trial ran to its end."
+            f"{spec.metric} (a least-squares or SINDy fit has no epochs), so every trial ran "
+            "to its end."
         )
     write_summary(batch, out_dir, title="nnid sweep")
     return batch, ranked
+
+
+def _check_rungs(config: Path, spec: SweepSpec, tasks: list[Task]) -> None:
+    """Refuse ASHA where no trial scores the sweep's metric per epoch: it would compare
+    nothing, and every trial would run to its end (said before the work, not after it)."""
+    measures = [
+        getattr(load_config(config, TrainConfig, t.overrides).model, "epoch_measures", None)
+        for t in tasks
+    ]
+    if all(m is not None and spec.metric not in m() for m in measures):
+        raise NnidInputError(
+            f"early stopping (ASHA, on --address) compares trials by their per-epoch validation "
+            f"{spec.metric}, and no trial's model scores it per epoch (a NARX scores the free "
+            "run per epoch only in a simulation stage, model.simulation_epochs > 0): set "
+            "metric to a measure the model trains on, add that stage, or early_stopping = false",
+            source=str(config),
+            field="sweep.early_stopping",
+        )
 
 
 def _tune_row(task: Task, result, out_dir: Path, metric: str) -> dict[str, Any]:
