@@ -445,6 +445,21 @@ def k_steps(log: pd.DataFrame, seconds: float | None) -> int | None:
     return max(1, round(seconds / dt))
 
 
+def unscored_k_step(part: str, log: pd.DataFrame, scores: dict, cfg) -> list[str]:
+    """The warning for a held-out part none of whose k-step predictions was scored: each needs
+    ``k_step_s`` of its run before it, after the warm-up, and no run of the part is that long
+    (its report says "not scored"; this says why, and what would score it)."""
+    if scores.get("k_step_scored") != 0 or not len(log):
+        return []
+    spans = log.groupby("experiment", sort=False)["t"].agg(lambda t: t.iloc[-1] - t.iloc[0])
+    return [
+        f"k_step_s = {cfg.k_step_s:g} s: no {part} run is long enough for a k-step prediction "
+        f"after its {cfg.warmup_s:g}-s warm-up (the longest lasts {spans.max():.4g} s), so the "
+        f"{part} part's k-step error was not scored; choose k_step_s below "
+        f"{max(spans.max() - cfg.warmup_s, 0.0):.4g} s"
+    ]
+
+
 def score(
     model,
     log: pd.DataFrame,
@@ -520,6 +535,8 @@ def run_train(
     parts = [p for p in ("validation", "test") if len(split[p])]
     if "test" in parts:
         metrics["test"] = score(model, split.test, cfg, k, replay)
+    for p in parts:
+        caught.extend(unscored_k_step(p, split[p], metrics[p], cfg))
     base = model.baseline()
     if base is not None:
         metrics["baseline"] = {
@@ -704,6 +721,8 @@ def run_compare(
         )
         if held_name == "test":
             row["test"] = score(model, held, cfg, k, replay, predicted)
+        for message in unscored_k_step(held_name, held, row[held_name], cfg):
+            warnings.warn(message, stacklevel=2)  # the comparison's, said once by the caller
         rows.append(row)
         free_runs[name] = predicted["free_run"]
         with np.errstate(all="ignore"):

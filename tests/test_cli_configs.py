@@ -425,3 +425,32 @@ def test_a_validation_score_that_stopped_the_training_is_said_so_when_shown(tmp_
     row = {"held_out": "validation", "validation_used_for": "early stopping"}
     assert _held_out(row) == "validation (used for early stopping)"
     assert _held_out({**row, "held_out": "test"}) == "test"
+
+
+@pytest.mark.parametrize("command", ["train", "compare"])
+def test_a_k_step_horizon_longer_than_every_held_out_run_says_why_it_was_not_scored(
+    tmp_path, command
+):
+    """k_step_s = 8 s on 5-s runs: no k-step prediction is left to score, and the report says
+    "not scored"; the console now says why (no run is long enough) and what would score it."""
+    import json
+
+    (tmp_path / "sim.toml").write_text(SIM)
+    cfg = tmp_path / "long_k.toml"
+    base = TRAIN if command == "train" else COMPARE
+    cfg.write_text(base.replace('vehicle = "seamor"', 'vehicle = "seamor"\nk_step_s = 8.0', 1))
+    run = CliRunner().invoke(app, _args(command, cfg, tmp_path))
+    assert run.exit_code == 0, run.output
+    said = " ".join(run.output.split())
+    assert "k_step_s = 8 s: no validation run is long enough" in said, said
+    warmup = 1 if command == "train" else 2  # the compare config's default warm-up: 2 s
+    assert "the longest lasts 5 s), so the validation part's k-step error" in said
+    assert f"choose k_step_s below {5 - warmup} s" in said
+    if command == "train":
+        metrics = json.loads((tmp_path / "out" / "metrics.json").read_text())
+        assert metrics["validation"]["k_step_scored"] == 0
+        assert any("k_step_s = 8 s" in w for w in metrics["warnings"])
+    cfg.write_text(base.replace('vehicle = "seamor"', 'vehicle = "seamor"\nk_step_s = 2.0', 1))
+    again = [*_args(command, cfg, tmp_path)[:-1], str(tmp_path / "again")]
+    run = CliRunner().invoke(app, again)
+    assert run.exit_code == 0 and "k_step_s" not in run.output, run.output
