@@ -137,7 +137,28 @@ def test_thruster_loss_detected_named_and_sized(vehicle, monitor, efficiency):
         assert FAULT_T <= a["t"] <= deadline, (name, a["t"], visible)
         named += a["kind"] == "thruster_loss" and a["thruster"] == name
         sized += a["efficiency"] is not None and abs(a["efficiency"] - efficiency) <= 0.1
+        assert 0.0 <= a["efficiency_low"] <= a["efficiency"] <= a["efficiency_high"] <= 1.0
     assert named == 8 and sized == 8
+
+
+@pytest.mark.parametrize(("efficiency", "said"), [(1.6, "more thrust than nominal"),
+                                                   (-1.0, "thrust reversed")])  # fmt: skip
+def test_a_thruster_giving_more_thrust_or_reversed_is_not_called_a_loss(
+    vehicle, monitor, efficiency, said
+):
+    """Thruster v2 at 160 % or pushing against its command: the estimate was clipped into
+    [0, 1], so the alarm read "thruster_loss ... 100 % (95 % interval 100-100 %)" (or 0 %, a
+    stopped thruster) with confidence 1. It is a change, sized as measured, with its interval."""
+    from nnid.fault.follow import describe_alarm
+
+    fault = Fault("thruster", FAULT_T, thruster="v2", efficiency=efficiency)
+    (a,) = detect(monitor, simulate_faults(vehicle, 35, faults=[fault], seed=105)).alarms
+    assert (a["kind"], a["thruster"]) == ("model_change", "v2")
+    assert abs(a["efficiency"] - efficiency) <= 0.1
+    assert a["efficiency_low"] < a["efficiency"] < a["efficiency_high"]
+    assert not a["efficiency_low"] <= 1.0 if efficiency > 1 else a["efficiency_high"] < 0.0
+    line = describe_alarm(a)
+    assert said in line and f"gives {100 * a['efficiency']:.0f} % of its thrust" in line
 
 
 def test_external_force_is_not_blamed_on_a_thruster(vehicle, monitor):

@@ -221,11 +221,13 @@ def _arrays(ts, xs, us, codes, names) -> dict:
 def describe_alarm(a: dict) -> str:
     """One line a person reads for an alarm record."""
     where = f"t = {a['t']:.2f} s" + (f" ({a['experiment']})" if a.get("experiment") else "")
-    if a["kind"] == "thruster_loss":
+    if a.get("thruster") and a.get("efficiency") is not None:
         what = (
             f"thruster {a['thruster']} gives {100 * a['efficiency']:.0f} % of its thrust "
             f"(95 % interval {100 * a['efficiency_low']:.0f}-{100 * a['efficiency_high']:.0f} %)"
         )
+        if a["kind"] != "thruster_loss":  # more than nominal, or reversed: not a loss
+            what = f"{a['meaning']}: {what}"
     elif a["effect"]:
         what = f"{a['meaning']}: {a['effect']} = {a['value']:.3g} ± {a['stderr']:.2g}"
     else:

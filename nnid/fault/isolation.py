@@ -42,6 +42,10 @@ from nnid.physics.thrusters import Actuation
 _PRIORITY = {"thruster_loss": 0, "buoyancy_offset": 1, "external_bias": 2}
 PARALLEL = 0.95  # |cos| of whitened columns above which two hypotheses are one to the data
 SIGNIFICANCE = 0.01
+# a stopped thruster's efficiency is estimated a few % below zero on the simulated 8-thruster
+# vehicle (the monitor's model error, not in the interval): that far under 0 is a stopped
+# thruster; further, the thruster pushes against its command
+STOPPED_SLACK = 0.1
 
 
 @dataclass
@@ -203,9 +207,19 @@ def isolate(monitor, data: dict, residual: np.ndarray, rows: np.ndarray) -> Diag
         return out
     if out.kind == "thruster_loss":
         out.thruster = s.name.split(".", 1)[1]
-        out.efficiency = float(np.clip(1.0 - s.delta, 0.0, 1.0))
-        lo, hi = 1.0 - s.delta - 1.96 * s.stderr, 1.0 - s.delta + 1.96 * s.stderr
-        out.efficiency_interval = (float(np.clip(lo, 0, 1)), float(np.clip(hi, 0, 1)))
+        eff = float(1.0 - s.delta)
+        lo, hi = eff - 1.96 * s.stderr, eff + 1.96 * s.stderr
+        if eff >= -STOPPED_SLACK and lo <= 1.0:  # a loss: said within what it can be
+            out.efficiency = float(np.clip(eff, 0.0, 1.0))
+            out.efficiency_interval = (float(np.clip(lo, 0, 1)), float(np.clip(hi, 0, 1)))
+        else:  # more thrust than nominal, or reversed: a change, not a loss, and said as one
+            out.efficiency, out.efficiency_interval = eff, (lo, hi)
+            out.kind = "model_change"
+            out.meaning = (
+                f"thruster {out.thruster} gives more thrust than nominal"
+                if eff > 1.0
+                else f"thruster {out.thruster} pushes against its command (thrust reversed)"
+            )
     else:
         out.effect, out.value, out.stderr = s.name, float(s.value), float(s.stderr)
     return out
