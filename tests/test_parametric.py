@@ -133,6 +133,26 @@ def test_exact_data_does_not_make_a_zero_parameter_significant():
         assert np.all(est.stderr > 0) and np.all(est.stderr < 1e-6)
 
 
+def test_as_many_rows_as_parameters_leaves_the_standard_errors_unmeasured():
+    """Four rows for four parameters (Caccia's step 1 on four plateaus): the fit passes
+    through every row, so σ̂ has no residual to come from. The floored RSS gave s.e. of 1e-7,
+    every parameter "significant", no warning; with one row more the s.e. are measured."""
+    from nnid.trainers.least_squares import solve_least_squares
+
+    rng = np.random.default_rng(0)
+    h = rng.normal(size=(5, 4))
+    y = h @ np.array([1.0, 2.0, 3.0, 4.0]) + rng.normal(0, 0.5, 5)
+    with pytest.warns(ExcitationWarning, match="4 rows for 4 parameters: no residual degrees"):
+        est = solve_least_squares(h[:4], y[:4], names=list("abcd"))
+    assert np.isfinite(est.theta).all() and np.isnan(est.stderr).all()
+    assert not est.significant.any() and np.isnan(est.sigma2)
+    assert all(v["stderr"] is None for v in est.as_dict().values())
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        more = solve_least_squares(h, y, names=list("abcd"))
+    assert np.all(np.isfinite(more.stderr)) and np.all(more.stderr > 0)
+
+
 def test_irrelevant_parameter_is_insignificant(seamor):
     """Caccia's 51.02 % rule: a linear surge term on quadratic-only data is insignificant, the
     quadratic one is not."""

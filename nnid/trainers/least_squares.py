@@ -152,7 +152,18 @@ def solve_least_squares(
     # parameter of 1e-15 "significant")
     rss = yy - 2 * theta[live] @ rhs[live] + theta[live] @ g @ theta[live]
     rss = max(rss, 4 * np.finfo(np.float64).eps * yy)
-    sigma2 = float(rss / max(n - int(live.sum()), 1))
+    dof = n - int(live.sum())
+    if dof > 0:
+        sigma2 = float(rss / dof)
+    else:  # as many rows as parameters: the fit passes through them, σ̂ is not measured
+        sigma2 = np.nan
+        warnings.warn(
+            f"{n} rows for {int(live.sum())} parameters: no residual degrees of freedom, so "
+            "the fit passes through every row and its standard errors are not measured; give "
+            "more rows than parameters (more plateaus, a longer log)",
+            ExcitationWarning,
+            stacklevel=2,
+        )
     cov = np.full((p, p), np.nan)
     cov[np.ix_(live, live)] = sigma2 * inv
     return Estimate(names, theta, void_undetermined(cov, names, report), sigma2, n, report)
