@@ -30,7 +30,7 @@ from nnid.datasets.log import ACCELERATION, POSE, VELOCITY, input_columns
 from nnid.datasets.preprocess import experiments
 from nnid.datasets.splits import PARTS, Split, split_log
 from nnid.errors import NnidInputError
-from nnid.evaluation.evaluate import evaluate
+from nnid.evaluation.evaluate import diverged_columns, evaluate
 from nnid.evaluation.metrics import exact_mean
 from nnid.evaluation.prediction import Replay
 from nnid.models.base import encode_setting
@@ -835,18 +835,28 @@ def summary(rows: list[dict], ranking: list[str], part: str, replay: bool) -> st
     best = by_name[ranking[0]]
     free = total(best, "free_run_nrmse")
     loop = " flown under the log's autopilot" if replay else ""
+    missing = [n for n in ranking if total(by_name[n], "free_run_nrmse") is None]
+    # a None free run diverged, or had nothing left to score (a run shorter than the warm-up)
+    diverged = [n for n in missing if diverged_columns(by_name[n].get(part, {}), "free_run_nrmse")]
+    unscored = [n for n in missing if n not in diverged]
     if free is None:
         k = total(best, "k_step_nrmse")
         one = total(best, "one_step_nrmse")
-        lead = f"Every free run{loop} diverged on the {part} data{over}"
+        if unscored:
+            said = ([f"diverged: {', '.join(diverged)}"] if diverged else []) + [
+                f"not scored, nothing left after the warm-up: {', '.join(unscored)}"
+            ]
+            lead = f"No free run{loop} was scored on the {part} data{over} ({'; '.join(said)})"
+            verdict = "how these models simulate this log was not measured"
+        else:
+            lead = f"Every free run{loop} diverged on the {part} data{over}"
+            verdict = "none of these models simulates this log"
         if k is None and one is None:  # nothing was measured: no model is ranked first
-            return (
-                f"{lead}, and no other error was measured: none of these models simulates this log."
-            )
+            return f"{lead}, and no other error was measured: {verdict}."
         what = f"k-step NRMSE ({k:.3g})" if k is not None else f"one-step NRMSE ({one:.3g})"
         return (
             f"{lead}; {best['name']} ({best['kind']}, {best['n_params']} parameters) has the "
-            f"lowest {what}: none of these models simulates this log."
+            f"lowest {what}: {verdict}."
         )
     others = [by_name[n] for n in ranking[1:] if total(by_name[n], "free_run_nrmse") is not None]
     sentence = (
@@ -856,8 +866,11 @@ def summary(rows: list[dict], ranking: list[str], part: str, replay: bool) -> st
     if others:
         nxt = others[0]
         sentence += f", against {total(nxt, 'free_run_nrmse'):.3g} for {nxt['name']}"
-    diverged = [n for n in ranking if total(by_name[n], "free_run_nrmse") is None]
     sentence += ")."
     if diverged:
         sentence += f" Diverged in free run: {', '.join(diverged)}."
+    if unscored:
+        sentence += (
+            f" Not scored in free run (nothing left after the warm-up): {', '.join(unscored)}."
+        )
     return sentence

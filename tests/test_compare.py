@@ -241,21 +241,34 @@ def test_the_summary_never_ranks_on_an_error_that_was_not_measured():
     one-step), and when none was measured it names no model as the lowest."""
     from nnid.pipeline import rank, summary
 
-    def row(name, free=None, k=None, one=None):
+    def row(name, free=None, k=None, one=None, diverged=True):
         scores = {"columns": ["u"], "free_run_nrmse": {"u": free, "total": free},
                   "k_step_nrmse": {"u": k, "total": k},
-                  "one_step_nrmse": {"u": one, "total": one}}  # fmt: skip
+                  "one_step_nrmse": {"u": one, "total": one},
+                  "diverged": {"u": 12.0} if free is None and diverged else {}}  # fmt: skip
         return {"name": name, "kind": "narx", "n_params": 3, "test": scores}
 
     rows = [row("a", one=0.4), row("b", one=0.2)]
     text = summary(rows, rank(rows, "test"), "test", False)
     assert "b (narx, 3 parameters) has the lowest one-step NRMSE (0.2)" in text, text
+    assert text.startswith("Every free run diverged") and "simulates this log" in text
     rows = [row("a"), row("b")]
     text = summary(rows, rank(rows, "test"), "test", False)
     assert "no other error was measured" in text and "lowest" not in text, text
     rows = [row("a", free=0.0), row("b", free=0.3)]  # a perfect score is a score
     text = summary(rows, rank(rows, "test"), "test", False)
     assert "(0, against 0.3 for b)" in text, text
+    # a free run with nothing left to score after the warm-up did not diverge: it was not
+    # measured (the sentence said "Diverged in free run" of a model never scored)
+    rows = [row("a", free=0.2), row("b", diverged=False), row("c")]
+    text = summary(rows, rank(rows, "test"), "test", False)
+    assert "Diverged in free run: c." in text and "Diverged in free run: b" not in text, text
+    assert "Not scored in free run (nothing left after the warm-up): b." in text
+    rows = [row("b", one=0.2, diverged=False), row("c", one=0.3)]
+    text = summary(rows, rank(rows, "test"), "test", False)
+    assert text.startswith("No free run was scored on the test data (diverged: c; not scored")
+    assert "how these models simulate this log was not measured" in text, text
+    assert "Every free run diverged" not in text and "none of these models" not in text
 
 
 def test_models_scored_on_different_outputs_are_ranked_on_the_shared_ones():
