@@ -686,6 +686,7 @@ def run_compare(
     k = k_steps(held, cfg.k_step_s)
     replay = replay_of(inputs, inputs.log) if cfg.replay_autopilot else None
     rows, free_runs, forces, measured_force = [], {}, {}, None
+    said: list[str] = []  # the comparison's own warnings; each model's are in its row
     for i, spec in enumerate(cfg.models):
         name = spec.label()
         report(i, len(cfg.models), f"fitting {name}")
@@ -721,8 +722,7 @@ def run_compare(
         )
         if held_name == "test":
             row["test"] = score(model, held, cfg, k, replay, predicted)
-        for message in unscored_k_step(held_name, held, row[held_name], cfg):
-            warnings.warn(message, stacklevel=2)  # the comparison's, said once by the caller
+        said += [m for m in unscored_k_step(held_name, held, row[held_name], cfg) if m not in said]
         rows.append(row)
         free_runs[name] = predicted["free_run"]
         with np.errstate(all="ignore"):
@@ -755,6 +755,7 @@ def run_compare(
         "test": [e["experiment"] for e in split.record["parts"]["test"]],
         "autopilot_replay": replay is not None,
         "summary": summary(rows, ranking, held_name, replay is not None),
+        "warnings": said,
         "seconds": time.perf_counter() - start,
     }
     return CompareResult(comparison, held, free_runs, forces, measured_force, inputs.report)

@@ -212,7 +212,7 @@ def compare_run(
     """``nnid compare``: fit the config's models on one split, compare them on the same
     held-out runs; ``comparison.json`` and the reports."""
     from nnid.pipeline import run_compare
-    from nnid.reports.compare_report import html_page, markdown
+    from nnid.reports.compare_report import all_warnings, html_page, markdown
     from nnid.serialization import write_json, write_text
 
     try:
@@ -244,7 +244,7 @@ def compare_run(
             *lost_rows(result.report),
             f"wrote {out_dir}/: comparison.json, report.html, report.md. " + comparison["summary"],
         ],
-        [],
+        all_warnings(comparison),
         headline,
     )
 

@@ -450,6 +450,14 @@ def test_a_k_step_horizon_longer_than_every_held_out_run_says_why_it_was_not_sco
         metrics = json.loads((tmp_path / "out" / "metrics.json").read_text())
         assert metrics["validation"]["k_step_scored"] == 0
         assert any("k_step_s = 8 s" in w for w in metrics["warnings"])
+    else:  # the comparison's warnings and its models' (which compare kept to the JSON)
+        comparison = json.loads((tmp_path / "out" / "comparison.json").read_text())
+        assert any("k_step_s = 8 s" in w for w in comparison["warnings"])
+        own = [f"{m['name']}: {w}" for m in comparison["models"] for w in m["warnings"]]
+        assert own, "the fits on these 5-s runs warn"
+        report = (tmp_path / "out" / "report.md").read_text().split("## Warnings")[1]
+        for line in [*comparison["warnings"], *own]:
+            assert f"- {line}" in report and " ".join(line.split()) in said
     cfg.write_text(base.replace('vehicle = "seamor"', 'vehicle = "seamor"\nk_step_s = 2.0', 1))
     again = [*_args(command, cfg, tmp_path)[:-1], str(tmp_path / "again")]
     run = CliRunner().invoke(app, again)

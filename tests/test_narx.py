@@ -256,6 +256,21 @@ def _tank(n: int, gain: float, seed: int) -> pd.DataFrame:
     return pd.DataFrame({"t": np.arange(n, dtype=float), "u": u, "y": y})
 
 
+def test_a_validation_run_shorter_than_the_delays_is_said_not_a_traceback():
+    """A 20-sample validation run under 40 delays: building its regressors broadcast a
+    negative-length slice ("could not broadcast (20,1) into (0,1)") and nnid compare ended in
+    a traceback. It has no eligible row: the NARX says it trains without early stopping, and
+    the run's predictions are all warm-up (NaN), which scoring then says "not scored"."""
+    train, short = _tank(600, 1.3, 0), _tank(20, 1.3, 1)
+    kw = dict(hidden=(3,), balanced=False, lm_samples=300)
+    lm = LevenbergMarquardt(max_epochs=3, jacobian="samples")
+    with pytest.warns(UserWarning, match=r"no validation run is longer than .* \(41 samples\)"):
+        model = NarxModel(["u"], ["y"], 40, 40, trainer=lm, **kw).fit(train, short)
+    assert model.history_.validation == []  # nothing to stop on
+    for mode in ("one_step", "free_run"):
+        assert model.predict(short, mode)["y"].isna().all()
+
+
 def test_output_bounds_clamp_every_mode_and_survive_save_load(tmp_path):
     # inputs twice the training range drive the unbounded free run above the 1.0 ceiling
     train, wild = _tank(600, 1.3, 0), _tank(400, 2.6, 1)

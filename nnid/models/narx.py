@@ -481,6 +481,8 @@ class NarxModel(InputOutputModel):
         """[u(k − d) for d in input_delays] per row k of one experiment (zeros before warm-up)."""
         n, p = u.shape
         out = np.zeros((n, len(self.input_delays_) * p))
+        if n <= self.warmup_samples_:  # a run no longer than the delays: no row has them all
+            return out
         for j, d in enumerate(self.input_delays_):
             out[self.warmup_samples_ :, j * p : (j + 1) * p] = u[self.warmup_samples_ - d : n - d]
         return out
@@ -490,6 +492,8 @@ class NarxModel(InputOutputModel):
         n = len(y)
         blocks = [y, self._transform_np(y)] if self.output_transform else [y]
         out = np.zeros((n, self._n_y_features()))
+        if n <= self.warmup_samples_:  # as in _u_features
+            return out
         col = 0
         for src in blocks:
             w = src.shape[1]
@@ -726,6 +730,13 @@ class NarxModel(InputOutputModel):
         else:
             vtab = self._table(validation_log)
             v_idx = np.flatnonzero(self._eligible(vtab["code"].numpy(), horizon))
+            if len(validation_log) and not v_idx.size:
+                warnings.warn(
+                    f"no validation run is longer than the deepest delay and horizon "
+                    f"({self.warmup_samples_ + horizon} samples): the NARX trains without "
+                    "early stopping, on its training error alone",
+                    stacklevel=2,
+                )
         self.transient_share_ = sampler.transient_share(sampler.sample(20000))
         n_eligible = int(sampler.eligible.sum())
         trainer = clone(self.trainer, safe=False) if self.trainer is not None else Adam()

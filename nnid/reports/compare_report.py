@@ -212,6 +212,12 @@ def _tables(comparison: dict) -> list[tuple[str, list[str], list[list[str]]]]:
     return out
 
 
+def all_warnings(comparison: dict) -> list[str]:
+    """The comparison's warnings, then each model's fit warnings under its name."""
+    own = [f"{m['name']}: {w}" for m in comparison["models"] for w in m.get("warnings", [])]
+    return [*comparison.get("warnings", []), *own]
+
+
 def markdown(comparison: dict) -> str:
     """The Markdown twin: the same tables as the HTML page."""
     lines = [
@@ -225,6 +231,8 @@ def markdown(comparison: dict) -> str:
         lines += [f"## {title}", "", *markdown_table(head, rows), ""]
     lines += ["Columns:", ""]
     lines += [f"- **{k}**: {v}" for k, v in column_terms(comparison).items()]
+    if all_warnings(comparison):
+        lines += ["", "## Warnings", "", *(f"- {w}" for w in all_warnings(comparison))]
     return "\n".join(lines) + "\n"
 
 
@@ -389,5 +397,8 @@ def html_page(result) -> str:
         )
     if coef_blocks:
         parts += ["<h2>Coefficients</h2>", *coef_blocks]
+    if all_warnings(comparison):
+        items = "".join(f"<li>{html.escape(w)}</li>" for w in all_warnings(comparison))
+        parts += ["<h2>Warnings</h2>", f"<ul>{items}</ul>"]
     parts += [IMAGES_CHECK, "</body></html>\n"]
     return "\n".join(parts)
