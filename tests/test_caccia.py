@@ -224,3 +224,15 @@ def test_caccia_model_fits_one_log_and_keeps_weight_minus_buoyancy(setup, fitted
     assert back.params == model.params
     pd.testing.assert_frame_equal(back.predict(sine), model.predict(sine))
     assert list(model.residual(sine).columns) == ["Z"]
+    assert model.describe()["inertia"] == "identified"
+
+
+def test_a_missing_sinusoid_run_is_said_not_skipped_in_silence(setup, fitted):
+    """The sinusoid run named otherwise ("sine"): step 2 did not run, the model flew the
+    vehicle file's Z_wdot, and the report gave its validation score with no word of it."""
+    _, _, vehicle, log = setup
+    _, _, _, sine = fitted
+    both = pd.concat([log, sine], ignore_index=True)
+    with pytest.warns(UserWarning, match="no training run is the sinusoid experiment 'sine'"):
+        model = CacciaModel(vehicle, sinusoid_experiment="sine").fit(both)
+    assert "Z_wdot" not in model.params and model.describe()["inertia"] == "vehicle file"

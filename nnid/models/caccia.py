@@ -12,6 +12,7 @@ save and load.
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Mapping, Sequence
 from typing import Literal
 
@@ -136,6 +137,14 @@ class CacciaModel(FossenPlant):
             )
         trainer = self.trainer()
         sinusoid = log[is_sine] if is_sine.any() else None
+        if sinusoid is None:  # step 2 cannot run: the inertia the predictions fly is the file's
+            warnings.warn(
+                f"no training run is the sinusoid experiment '{self.sinusoid_experiment}' "
+                f"(sinusoid_experiment): Caccia's step 2 did not run, the inertia is not "
+                f"identified, and predictions use the vehicle file's added mass "
+                f"{trainer.force_name}_{self.dof}dot",
+                stacklevel=2,
+            )
         estimate = trainer.fit_logs(log[~is_sine], self.vehicle, sinusoid)
         progress(1, 1, f"Caccia two-step, {len(trainer.plateaus_)} plateaus")
         self.trainer_ = trainer
@@ -160,6 +169,8 @@ class CacciaModel(FossenPlant):
         if hasattr(self, "trainer_"):
             out["plateaus"] = len(self.trainer_.plateaus_)
             out["steady_state_sigma2"] = self.trainer_.steady_.sigma2
+            # step 2 ran (the sinusoid run was in the training data), or the file's inertia
+            out["inertia"] = "identified" if self.trainer_.inertia_ is not None else "vehicle file"
         return out
 
     def _state(self) -> tuple[dict, dict]:
