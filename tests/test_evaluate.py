@@ -74,6 +74,40 @@ class RunsAway(Shifted):
         return out
 
 
+class SwayAway(Shifted):
+    """Predicts u and v: u within 2 %, v (which the data barely moves) drifting to ``v_end``."""
+
+    kind = "sway_away"
+    v_end = 1e6
+
+    def _fit(self, log, validation, progress):
+        self.outputs_ = self.targets_ = ["u", "v"]
+        self.warmup_samples_ = 0
+
+    def _predict(self, log, mode):
+        return pd.DataFrame(
+            {"u": 1.02 * log["u"], "v": np.linspace(0.0, self.v_end, len(log))}, index=log.index
+        )
+
+
+@pytest.mark.parametrize(("v_end", "gone"), [(1e6, True), (np.inf, True), (0.5, False)])
+def test_a_target_the_data_barely_moves_is_still_checked_for_divergence(v_end, gone):
+    """v is not scored (its std is a thirtieth of u's): its NRMSE would divide by noise. Its
+    free run leaving for 1e6 m/s was not checked either, and the total over u stayed finite.
+    Against u's range it has diverged; a sway of 0.5 m/s (under 10 u-ranges) is coupling."""
+    t = np.arange(0, 60, 0.1)
+    noise = np.random.default_rng(0).normal(0, 0.01, t.size)
+    log = pd.DataFrame({"t": t, "u": 0.3 * np.sin(0.5 * t), "v": noise})
+    model = SwayAway().fit(log)
+    model.v_end = v_end
+    scores = evaluate(model, log, ("free_run",))
+    assert scores["columns"] == ["u"] and scores["free_run_nrmse"]["u"] == pytest.approx(
+        0.02, rel=0.01
+    )
+    assert ("v" in scores["diverged"]) is gone
+    assert (scores["free_run_nrmse"]["total"] is None) is gone
+
+
 def test_a_run_that_diverges_on_its_own_range_is_not_averaged_into_the_pooled_score(runs):
     """Pooled, run small's miss of 5 is inside the split's range (±10) and would score a
     finite NRMSE; on small's own range (±0.1) it left the physical range: the pooled column
@@ -206,3 +240,19 @@ def test_k_step_scores_say_they_are_taken_over_fewer_samples(runs):
     text = train_markdown({**metrics, "validation": held})
     assert f"{held['samples']} samples scored" in text
     assert f"k-step: {held['k_step_scored']} samples" in text
+
+
+def test_force_scores_take_j_and_j0_over_the_same_samples():
+    """McCarter's J/J₀ (eqs 4.25, 4.4) is a ratio of errors over one set of samples: rows where
+    the residual is undefined were dropped from J only, so J₀ took in rows J never saw."""
+    from types import SimpleNamespace
+
+    from nnid.evaluation.evaluate import force_scores
+
+    n = 200
+    series = pd.DataFrame({"X": np.r_[np.full(100, 1.0), np.full(100, 10.0)]})
+    resid = pd.DataFrame({"X": np.r_[np.full(100, 0.1), np.full(100, np.nan)]})
+    model = SimpleNamespace(residual=lambda log: resid, force_series=lambda log: series)
+    out = force_scores(model, pd.DataFrame({"t": np.arange(n)}), np.ones(n, bool))
+    assert out["J"] == pytest.approx(0.1) and out["J0"] == pytest.approx(1.0)
+    assert out["J_over_J0"] == pytest.approx(0.1)  # was 0.1 / 7.1

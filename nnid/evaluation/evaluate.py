@@ -12,7 +12,8 @@ model's target columns with one rule set (ARCHITECTURE.md "JSON outputs"):
 - a prediction that leaves the physical range (non-finite, or more than
   :data:`DIVERGENCE_FACTOR` measured ranges outside the measured range) has diverged: that
   column scores ``None`` and is listed with the time it left, and ``total`` is ``None`` too,
-  never an average that hides it;
+  never an average that hides it; a target velocity the data barely moves (not scored) is
+  checked too, against the ranges of the scored ones (:func:`unscored_divergence`);
 - a split of several experiments also gets each experiment's free-run NRMSE scored on its own
   (``free_run_nrmse_per_experiment``): the pooled NRMSE divides by the spread of all the runs,
   which can hide a run that fails on an output it barely moves; a run whose free run leaves
@@ -105,6 +106,34 @@ def score_prediction(
     return nrmse, rmse, diverged
 
 
+def unscored_divergence(
+    log: pd.DataFrame, predicted: pd.DataFrame, scored: Sequence[str], left_out: Sequence[str],
+    mask: np.ndarray,
+) -> dict[str, float]:  # fmt: skip
+    """``{column: t}`` of the target columns left out of the score (velocities the data barely
+    moves) whose prediction diverged all the same: non-finite, or more than
+    :data:`DIVERGENCE_FACTOR` ranges of the widest scored column of its group (linear u v w,
+    angular p q r) outside the measured range. Its own range, the data's noise, would call
+    any coupling it predicts a divergence; not checking it let a free run that left for
+    1e6 m/s in v keep a finite total over u."""
+    t = log["t"].to_numpy(np.float64)[mask]
+    out = {}
+    for c in left_out:
+        y = log[c].to_numpy(np.float64)[mask]
+        p = predicted[c].to_numpy(np.float64)[mask]
+        ok = np.isfinite(y)
+        if not ok.any():
+            continue
+        group = [g for g in scored if g in VELOCITY and (g in "uvw") == (c in "uvw")]
+        widths = [float(np.ptp(log[g].to_numpy(np.float64)[mask])) for g in group]
+        span = DIVERGENCE_FACTOR * max(widths) if widths else np.inf
+        lo, hi = float(y[ok].min()), float(y[ok].max())
+        bad = ~np.isfinite(p) | (p < lo - span) | (p > hi + span)
+        if bad.any():
+            out[c] = float(t[np.flatnonzero(bad)[0]])
+    return out
+
+
 def score_runs(
     log: pd.DataFrame,
     predicted: pd.DataFrame,
@@ -161,7 +190,9 @@ def force_scores(model, log: pd.DataFrame, mask: np.ndarray) -> dict[str, Any]:
     cols = [f for f in FORCES if f in resid.columns]
     r = resid[cols].to_numpy(np.float64)[mask]
     s = series[cols].to_numpy(np.float64)[mask]
-    r, s = r[np.isfinite(r).all(1)], s[np.isfinite(s).all(1)]
+    # one set of rows for both: J and J₀ over different samples would not be a ratio of errors
+    both = np.isfinite(r).all(1) & np.isfinite(s).all(1)
+    r, s = r[both], s[both]
     j = math.sqrt(exact_mean(r * r)) if r.size else None
     j0 = math.sqrt(exact_mean(s * s)) if s.size else None
     per_dof = {
@@ -218,6 +249,11 @@ def evaluate(
         nrmse, rmse, diverged, runs, left = score_split(
             log, pred, columns, mask, lambda run: target_columns(model, run)
         )
+        left_out = [c for c in model.targets_ if c in log and c in pred and c not in columns]
+        gone = unscored_divergence(log, pred, columns, left_out, mask)
+        if gone:  # a diverged free run, whichever column shows it, has no total
+            diverged.update(gone)
+            nrmse["total"] = rmse["total"] = None
         out[MODE_KEYS[name]] = nrmse
         out[MODE_KEYS[name].replace("nrmse", "rmse")] = rmse
         out[diverged_key(name)] = diverged
