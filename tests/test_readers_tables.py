@@ -108,6 +108,49 @@ columns = { x = "px", y = "py", z = "pz", u = "vx", v = "vy", w = "vz", tau_X = 
     assert (row["u"], row["v"], row["w"]) == pytest.approx((0.3, -0.1, -0.05))
 
 
+def _enu_flu(ned: pd.DataFrame) -> pd.DataFrame:
+    """A NED / FRD log in ENU / FLU, through the full rotations (not the column rules)."""
+    from nnid.datasets.mapping import euler_from_rotation, rotation_from_euler
+
+    t, f = np.array([[0.0, 1, 0], [1, 0, 0], [0, 0, -1]]), np.diag([1.0, -1, -1])
+    enu = ned.copy()
+    enu[["x", "y", "z"]] = ned[["x", "y", "z"]].to_numpy() @ t.T
+    for group in ("uvw", "pqr", ("du", "dv", "dw"), ("tau_X", "tau_Y", "tau_Z"),
+                  ("tau_K", "tau_M", "tau_N")):  # fmt: skip
+        enu[list(group)] = ned[list(group)].to_numpy() @ f.T
+    angles = ["phi", "theta", "psi"]
+    enu[angles] = euler_from_rotation(t @ rotation_from_euler(ned[angles].to_numpy()) @ f)
+    return enu
+
+
+@pytest.mark.parametrize("mapped", ["all", "depth, compass, two-axis DVL"])
+def test_enu_flu_converts_every_column_it_maps_alone(tmp_path, mapped):
+    """ENU / FLU back to NED / FRD: the forces were never converted (tau_Y, Z, M, N came back
+    sign-flipped), and a column outside a whole group (z without x and y, ψ without φ and θ,
+    u and v without w, r without p and q) was left as logged, with the report saying the log
+    was converted."""
+    rng = np.random.default_rng(0)
+    n = 60
+    cols = ["x", "y", "z", "phi", "theta", "psi", *"uvwpqr", "du", "dv", "dw",
+            "tau_X", "tau_Y", "tau_Z", "tau_K", "tau_M", "tau_N"]  # fmt: skip
+    ned = pd.DataFrame(rng.uniform(-1, 1, (n, len(cols))), columns=cols)
+    ned["psi"] = rng.uniform(-3, 3, n)
+    ned.insert(0, "t", np.arange(n) * 0.1)
+    _enu_flu(ned).to_csv(tmp_path / "log.csv", index=False)
+    keep = cols if mapped == "all" else ["z", "psi", "u", "v", "r", "tau_Y"]
+    columns = ", ".join(f"{c} = '{c}'" for c in keep)
+    cmap = (
+        f'[[sources]]\nfile = "log.csv"\ntime = "t"\nframe = "enu_flu"\ncolumns = {{ {columns} }}\n'
+    )
+    log, report = load_log(tmp_path, _write_map(tmp_path / "map.toml", cmap))
+    for c in keep:
+        assert np.allclose(log[c], ned[c], atol=1e-12), c
+    assert any(s.step == "frame" for s in report.steps)
+    if mapped != "all":  # x without y: ENU's x is NED's y, so one alone cannot be converted
+        with pytest.raises(NnidInputError, match="converting the frame needs both x and y"):
+            load_log(tmp_path, _write_map(tmp_path / "x.toml", cmap.replace("{ ", "{ x = 'x', ")))
+
+
 def test_one_source_column_feeds_two_targets(tmp_path):
     """A column mapped twice, each with its own scale (one force logged once, fed to two
     axes), is read once and converted for each: it was a 2-D selection and a traceback."""

@@ -21,10 +21,6 @@ from nnid.datasets.log import ANGLES, blank_labels, looks_like_degrees, refuse_r
 from nnid.errors import NnidInputError
 from nnid.validation import shown
 
-# ENU -> NED for world vectors, FLU -> FRD for body vectors (both are their own inverse).
-_ENU_NED = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
-_FLU_FRD = np.diag([1.0, -1.0, -1.0])
-
 
 def euler_from_rotation(rot: np.ndarray) -> np.ndarray:
     """zyx Euler angles (φ, θ, ψ) of rotation matrices ``[..., 3, 3]`` (inverse of J₁), with
@@ -62,17 +58,34 @@ def rotation_from_euler(angles: np.ndarray) -> np.ndarray:
     return Rotation.from_euler("ZYX", angles[..., ::-1]).as_matrix()
 
 
-def _to_ned_frd(out: pd.DataFrame) -> None:
-    """Convert the standard columns present from ENU world / FLU body to NED / FRD in place."""
-    for group in (("x", "y", "z"),):
-        if all(c in out for c in group):
-            out[list(group)] = out[list(group)].to_numpy() @ _ENU_NED.T
-    for group in (("u", "v", "w"), ("p", "q", "r"), ("du", "dv", "dw"), ("dp", "dq", "dr")):
-        if all(c in out for c in group):
-            out[list(group)] = out[list(group)].to_numpy() @ _FLU_FRD.T
-    if all(c in out for c in ANGLES):
-        rot = rotation_from_euler(out[list(ANGLES)].to_numpy())
-        out[list(ANGLES)] = euler_from_rotation(_ENU_NED @ rot @ _FLU_FRD)
+#: columns whose sign flips from ENU / FLU to NED / FRD (the world's z, the body's y and z
+#: axes: velocities, rates, accelerations, forces and moments about them; pitch)
+_FLIPPED = ("z", "v", "w", "q", "r", "dv", "dw", "dq", "dr", "tau_Y", "tau_Z", "tau_M", "tau_N",
+            "theta")  # fmt: skip
+
+
+def _to_ned_frd(out: pd.DataFrame, origin: str) -> None:
+    """Convert the standard columns present from ENU world / FLU body to NED / FRD in place,
+    each on its own: the world's x and y swap (so they come together), z and the body's y and
+    z axes change sign, and the zyx Euler angles become (φ, −θ, π/2 − ψ) (the rotation
+    T R(φ, θ, ψ) F with T the ENU-NED and F the FLU-FRD matrix, exactly). A depth sensor, a
+    compass or a two-axis DVL is converted alone; before, only whole groups were, and the
+    forces never."""
+    if ("x" in out) != ("y" in out):
+        given, absent = ("x", "y") if "x" in out else ("y", "x")
+        raise NnidInputError(
+            f"ENU {given} is NED {absent}: converting the frame needs both x and y (map "
+            f"{absent} too, or leave {given} out)",
+            source=origin,
+            field=given,
+        )
+    if "x" in out:
+        out["x"], out["y"] = out["y"].to_numpy(), out["x"].to_numpy()
+    for col in _FLIPPED:
+        if col in out:
+            out[col] = -out[col]
+    if "psi" in out:  # (−π, π], the logs' half-open range
+        out["psi"] = np.angle(np.exp(1j * (np.pi / 2 - out["psi"].to_numpy(np.float64))))
 
 
 def map_message_sources(
@@ -218,7 +231,7 @@ def map_source(
         rot = rotation_from_quaternion(values[source.quaternion].to_numpy(dtype=np.float64))
         out["phi"], out["theta"], out["psi"] = euler_from_rotation(rot).T
     if source.frame == "enu_flu":
-        _to_ned_frd(out)
+        _to_ned_frd(out, origin)
         report.add("frame", f"{origin}: ENU/FLU converted to NED/FRD")
     return out.reset_index(drop=True)
 
