@@ -432,3 +432,37 @@ def test_missing_samples_raise_no_alarm_and_are_said(vehicle, monitor, tmp_path)
     follow_csv(monitor, str(path), 10.0, said.append)
     assert sum("no samples for 2" in line for line in said) == 9
     assert not any(line.startswith("ALARM") for line in said)
+
+
+@pytest.mark.parametrize("slip", ["degrees", "mm/s", "decimal comma"])
+def test_follow_refuses_what_the_whole_log_reader_refuses(vehicle, monitor, tmp_path, slip):
+    """Angles in degrees, velocities in mm/s, a row whose decimal comma shifts every cell after
+    it under the next column (v = 196629): the whole-log reader refuses each, exit 2; --follow
+    read them and raised confident alarms (restoring_offset.M; added_mass.u = 3e3;
+    external_bias.v = 1.6e12)."""
+    log = simulate_faults(vehicle, 20, seed=54, experiment="t54")
+    path = tmp_path / "slip.csv"
+    if slip == "degrees":
+        log["psi"] = np.degrees(log["psi"]) + 90.0
+        field, row, said = "psi", None, "looks like degrees"
+    elif slip == "mm/s":
+        log[["u", "v", "w"]] *= 1000.0
+        field, row, said = None, None, "the log must be in SI units"
+    if slip == "decimal comma":
+        log.to_csv(path, index=False)
+        lines = path.read_text().splitlines()
+        lines[251] = lines[251].replace(".", ",", 1)  # one cell becomes two
+        path.write_text("\n".join(lines) + "\n")
+        field, row, said = None, 250, "fields against the header's"
+    else:
+        log.to_csv(path, index=False)
+    with pytest.raises(NnidInputError, match=said) as err:
+        follow_csv(monitor, str(path), 10.0, lambda line: None)
+    assert err.value.source == str(path)
+    assert field is None or err.value.field == field
+    assert row is None or err.value.row == row
+    if slip != "decimal comma":  # the whole-log reader says the same
+        from nnid.datasets.readers import read_log
+
+        with pytest.raises(NnidInputError, match=said):
+            read_log(path)

@@ -87,39 +87,56 @@ def validate_log(
             "motion (decay, restoring) can be identified from this log",
             stacklevel=2,
         )
-    # a unit slip (mm/s) or a corrupt sample, caught here rather than as an absurd estimate or
-    # an overflow far downstream; real vehicles stay far below these bounds
-    bounds = [(c, MAX_SPEED, "a speed", "m/s" if c in "uvw" else "rad/s") for c in VELOCITY]
-    bounds += [(c, MAX_FORCE, "a force", "N" if c in TAU[:3] else "N m") for c in TAU]
-    bounds += [
-        (c, MAX_ACCELERATION, "an acceleration", "m/s²" if c in ACCELERATION[:3] else "rad/s²")
-        for c in ACCELERATION
-    ]
-    bounds += [(c, MAX_DISTANCE, "a position", "m") for c in POSE[:3]]
-    bounds += [(c, MAX_ANGLE, "an angle", "rad") for c in ANGLES]
-    for col, bound, what, unit in bounds:
+    for col, (bound, _, _) in SI_BOUNDS.items():
         if col in df.columns:
             size = np.abs(df[col].to_numpy(dtype=np.float64))
             if np.nanmax(size) > bound:
                 row = int(np.nanargmax(size))
-                raise NnidInputError(
-                    f"{shown(df[col].iloc[row])} {unit} is not {what} an underwater vehicle "
-                    f"meets (over {bound:g}); the log must be in SI units",
-                    source=source,
-                    field=col,
-                    row=row,
-                )
+                raise out_of_bounds(col, df[col].iloc[row], source, row)
     for col in ANGLES:
         if col in df.columns and looks_like_degrees(df, col):
             size = np.abs(df[col].to_numpy(dtype=np.float64))
-            raise NnidInputError(
-                f"angle of {np.nanmax(size):.4g} looks like degrees; angles must be in radians"
-                + ("" if RATE_OF[col] in df else UNWRAPPED),
-                source=source,
-                field=col,
-                row=int(np.nanargmax(size)),
-            )
+            raise degrees_error(df, col, source, int(np.nanargmax(size)))
     return df
+
+
+# a unit slip (mm/s) or a corrupt sample, caught at reading rather than as an absurd estimate or
+# an overflow far downstream; real vehicles stay far below these bounds
+#: column -> (the largest |value| a log may hold, what it is, its SI unit)
+SI_BOUNDS: dict[str, tuple[float, str, str]] = {
+    **{c: (MAX_SPEED, "a speed", "m/s" if c in "uvw" else "rad/s") for c in VELOCITY},
+    **{c: (MAX_FORCE, "a force", "N" if c in TAU[:3] else "N m") for c in TAU},
+    **{
+        c: (MAX_ACCELERATION, "an acceleration", "m/s²" if c in ACCELERATION[:3] else "rad/s²")
+        for c in ACCELERATION
+    },
+    **{c: (MAX_DISTANCE, "a position", "m") for c in POSE[:3]},
+    **{c: (MAX_ANGLE, "an angle", "rad") for c in ANGLES},
+}
+
+
+def out_of_bounds(col: str, value, source: str, row: int) -> NnidInputError:
+    """The error of a value past its column's :data:`SI_BOUNDS`."""
+    bound, what, unit = SI_BOUNDS[col]
+    return NnidInputError(
+        f"{shown(value)} {unit} is not {what} an underwater vehicle meets (over {bound:g}); the "
+        "log must be in SI units",
+        source=source,
+        field=col,
+        row=row,
+    )
+
+
+def degrees_error(df: pd.DataFrame, col: str, source: str, row: int) -> NnidInputError:
+    """The error of an angle column that :func:`looks_like_degrees`."""
+    size = np.abs(df[col].to_numpy(dtype=np.float64))
+    return NnidInputError(
+        f"angle of {np.nanmax(size):.4g} looks like degrees; angles must be in radians"
+        + ("" if RATE_OF[col] in df else UNWRAPPED),
+        source=source,
+        field=col,
+        row=row,
+    )
 
 
 #: the body rate each Euler angle turns with when roll and pitch are small

@@ -14,14 +14,25 @@ import time
 from collections.abc import Callable
 
 import numpy as np
+import pandas as pd
 
 from nnid.datasets.arrays import check_commands
-from nnid.datasets.log import POSE, VELOCITY
+from nnid.datasets.log import (
+    ANGLES,
+    POSE,
+    SI_BOUNDS,
+    VELOCITY,
+    degrees_error,
+    looks_like_degrees,
+    out_of_bounds,
+)
 from nnid.errors import NnidInputError
 from nnid.fault.detect import DetectResult, alarm_record
 from nnid.fault.monitor import ResidualMonitor, Trace, input_columns
 from nnid.validation import shown
 
+#: the motion columns a streamed row fills (those absent read as 0)
+STATE = (*POSE, *VELOCITY)
 #: the first rows, whose typical interval is checked against the monitor's calibration rate
 RATE_ROWS = 11
 
@@ -67,9 +78,19 @@ def _rows(source: str, idle_s: float):
             handle.close()
 
 
-def _numbers(row: list[str], read: list[tuple[str, int]], n: int, where: str) -> dict:
-    """The named cells of one streamed row as finite numbers; else the first bad cell, named by
-    its column and row (an empty motion cell too: a stream has no gap bridging)."""
+def _numbers(row: list[str], read: list[tuple[str, int]], n: int, where: str, width: int) -> dict:
+    """The named cells of one streamed row as finite numbers within the log contract's SI
+    bounds (a unit slip, a corrupt sample), as the whole-log reader checks them; else the first
+    bad cell, named by its column and row (an empty motion cell too: a stream has no gap
+    bridging). A row of more or fewer cells than the header's ``width`` (a decimal comma) is
+    refused: its cells would be read under other columns."""
+    if len(row) != width:
+        raise NnidInputError(
+            f"has {len(row)} fields against the header's {width} (a decimal comma, or a cell "
+            "with a comma in it?)",
+            source=where,
+            row=n,
+        )
     out = {}
     for name, i in read:
         cell = row[i] if i < len(row) else ""
@@ -85,6 +106,8 @@ def _numbers(row: list[str], read: list[tuple[str, int]], n: int, where: str) ->
                 field=name,
                 row=n,
             )
+        if name in SI_BOUNDS and abs(value) > SI_BOUNDS[name][0]:
+            raise out_of_bounds(name, value, where, n)
         out[name] = value
     return out
 
@@ -121,7 +144,7 @@ def follow_csv(
         except NnidInputError as exc:
             raise exc.with_source(where) from None
     col = {c: header.index(c) for c in header}
-    state_cols = [col.get(c) for c in (*POSE, *VELOCITY)]
+    state_cols = [col.get(c) for c in STATE]
     input_cols = [col[c] for c in inputs]
     exp_col = col.get("experiment")
     stream = monitor.stream()
@@ -147,10 +170,22 @@ def follow_csv(
         if i is not None
     ]
     last_t = -np.inf
+    unchecked = [a for a in ANGLES if a in col]  # looked at once, when past 2π
     for n, row in enumerate(rows):  # n: the data row from 0, as the whole-log reader counts
-        values = _numbers(row, read, n, where)
+        values = _numbers(row, read, n, where, len(header))
+        for angle in [a for a in unchecked if abs(values[a]) > 2 * np.pi + 1e-6]:
+            unchecked.remove(angle)  # the rows so far and this one, as the whole log is read
+            runs = [*(names[c] for c in codes), row[exp_col] if exp_col is not None else ""]
+            state = [*xs, [values.get(c, 0.0) for c in STATE]]
+            seen = pd.DataFrame(state, columns=list(STATE)).assign(
+                t=[*ts, values["t"]], experiment=runs
+            )
+            if looks_like_degrees(
+                seen[["t", "experiment", *(c for c in STATE if c in col)]], angle
+            ):
+                raise degrees_error(seen, angle, where, n)
         t = values["t"]
-        x[:] = [values.get(c, 0.0) for c in (*POSE, *VELOCITY)]
+        x[:] = [values.get(c, 0.0) for c in STATE]
         u[:] = [values[c] for c in inputs]
         name = row[exp_col] if exp_col is not None else ""
         if name != current:
