@@ -204,10 +204,12 @@ def load_inputs(
         source = path
         if physics and veh is not None:  # the inputs the vehicle reads, said against the log
             from nnid.datasets.arrays import logged_inputs
-            from nnid.datasets.preprocess import check_velocities
+            from nnid.datasets.preprocess import check_attitude, check_velocities
 
             try:
                 logged_inputs(inputs.log, veh)
+                if any(m.kind in PHYSICS_KINDS for m in models):
+                    check_attitude(inputs.log, veh)
                 for m in models:  # the velocities the fit needs, said against the log
                     if m.kind in ("sindy", "synthesis"):
                         check_velocities(inputs.log.columns, fitted_dofs(m), WHOLE_LIBRARY)

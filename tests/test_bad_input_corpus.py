@@ -238,6 +238,20 @@ def _log_cases() -> list[Case]:
 
     cases.append(Case("train: SINDy without a velocity", no_u_sindy, ("LOG", "'u'", "all six")))
 
+    def no_attitude(command: str):  # rolling (p) with no phi: read as level, the restoring
+        # moments of the octorov were wrong, K_pdot came out +0.49, and detect alarmed
+        def args(tmp, fx):
+            # the fixture's autopilot holds roll within 0.02 rad: a vehicle that rolls more
+            log = fx["octo_log"].drop(columns=["phi", "theta"]).assign(p=lambda d: 10 * d["p"])
+            data = _write_log(tmp, "no attitude", log)
+            return _command(command, tmp, fx, data=data, vehicle=OCTO)
+
+        return args
+
+    for command in ("train", "detect"):
+        cases.append(Case(f"{command}: rolling with no attitude", no_attitude(command),
+                          ("LOG", "'phi'", "restoring")))  # fmt: skip
+
     def rate_change(tmp, fx):  # a NARX counts delays in samples: 20 Hz, then 100 Hz in run1
         config, data = _narx_on_a_rate_change(tmp, fx["demo_log"])
         return _command("train", tmp, fx, data=data, config=config)

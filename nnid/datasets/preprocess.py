@@ -229,6 +229,34 @@ def check_velocities(
         )
 
 
+#: roll or pitch turned through more than this (rad, about 3°) by a log's own rates
+TILTED = 0.05
+
+
+def check_attitude(log: pd.DataFrame, vehicle) -> None:
+    """Refuse a log without roll or pitch whose own rates p, q show the vehicle rolling or
+    pitching (more than :data:`TILTED` within a run), where the vehicle file has restoring
+    moments (r_g ≠ r_b) or weight ≠ buoyancy: read as zero, the attitude makes the restoring
+    forces those of a level vehicle, and the fit puts the error in the added mass."""
+    if (vehicle.r_g == vehicle.r_b) and vehicle.weight == vehicle.buoyancy:
+        return
+    for angle, rate in (("phi", "p"), ("theta", "q")):
+        if angle in log or rate not in log or "t" not in log:
+            continue
+        for _, idx in experiments(log):
+            t = log.loc[idx, "t"].to_numpy(np.float64)
+            w = np.nan_to_num(log.loc[idx, rate].to_numpy(np.float64))
+            turned = np.concatenate([[0.0], np.cumsum(0.5 * (w[1:] + w[:-1]) * np.diff(t))])
+            if np.ptp(turned) > TILTED:
+                raise NnidInputError(
+                    f"the log has no {angle} column, and its {rate} turns the vehicle through "
+                    f"{np.ptp(turned):.2g} rad: the restoring forces of {vehicle.name} (r_g, "
+                    f"r_b, weight, buoyancy) need the attitude; log {angle} (or map it in a "
+                    "reader config)",
+                    field=angle,
+                )
+
+
 def derive_velocities(
     log: pd.DataFrame,
     window_s: float = 0.5,

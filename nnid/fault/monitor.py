@@ -26,6 +26,7 @@ from sklearn.base import BaseEstimator
 from sklearn.utils.validation import check_is_fitted
 
 from nnid.datasets.arrays import check_commands, motion_arrays, warn_far_beyond_range
+from nnid.datasets.preprocess import check_attitude
 from nnid.errors import NnidInputError
 from nnid.fault import kernel
 from nnid.fault.thresholds import MIN_PEAKS, rate_interval, rate_threshold
@@ -130,6 +131,7 @@ def monitor_inputs(log: pd.DataFrame, plant) -> dict[str, np.ndarray]:
             field=missing[0],
         )
     warn_far_beyond_range(log, plant.vehicle)
+    check_attitude(log, plant.vehicle)
     log = prepare_motion(log, plant.dofs_, plant.savgol_window, plant.savgol_order, False)
     data = motion_arrays(log)
     return {
