@@ -335,6 +335,12 @@ def test_a_few_repeated_or_late_stamps_are_repaired_and_said(tmp_path):
         ('experiment = "vx"', "'experiment' comes from the source's 'time'"),
         ('z = { from = "vx", unit = "deg" }', "z in 'deg': z takes m, cm, mm"),
         ('u = { from = "vx", unit = "mm" }', "u in 'mm': u takes m/s, cm/s, mm/s"),
+        # a length or angle unit on a force or acceleration scaled it by 0.01 or 0.0175 unseen
+        ('tau_X = { from = "vx", unit = "cm" }', "tau_X in 'cm': tau_X takes no unit"),
+        ('du = { from = "vx", unit = "m/s" }', "du in 'm/s': du takes no unit"),
+        ('cmd_9 = { from = "vx", unit = "deg" }', "cmd_9 in 'deg': cmd_9 takes no unit"),
+        ('tau_Z = { from = "vx", scale = 0.0 }', "scale = 0 makes every sample zero"),
+        ('tau_Z = { from = "vx", offset = nan }', "'sources.0.columns.tau_Z.offset'"),
     ],
 )
 def test_a_column_target_that_is_a_typo_or_in_the_wrong_unit_is_refused(tmp_path, columns, said):

@@ -71,9 +71,17 @@ class ColumnSpec(StrictModel):
     """value = (source + offset) * scale, then converted from ``unit`` to SI."""
 
     source: str = Field(alias="from")
-    offset: float = 0.0
-    scale: float = 1.0
+    offset: float = Field(0.0, allow_inf_nan=False)
+    # a zero scale makes every sample 0: no measurement, and no error downstream to say so
+    scale: float = Field(1.0, allow_inf_nan=False)
     unit: str | None = None
+
+    @field_validator("scale")
+    @classmethod
+    def _scale(cls, scale: float) -> float:
+        if scale == 0:
+            raise ValueError("scale = 0 makes every sample zero; give the factor to SI units")
+        return scale
 
     @field_validator("unit")
     @classmethod
@@ -120,6 +128,13 @@ class Source(StrictModel):
             if unit and name in TARGET_UNITS and unit not in TARGET_UNITS[name]:
                 raise ValueError(
                     f"{name} in {unit!r}: {name} takes {', '.join(TARGET_UNITS[name])}"
+                )
+            if unit and (name in (*TAU, *ACCELERATION) or name.startswith("cmd_")):
+                # no length or angle unit makes a force: cm on tau_X scaled it by 0.01 unseen
+                raise ValueError(
+                    f"{name} in {unit!r}: {name} takes no unit (forces in N and N m, "
+                    "accelerations in m/s² and rad/s², commands as the vehicle file reads "
+                    "them); convert with scale"
                 )
         return columns
 
