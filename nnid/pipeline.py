@@ -319,6 +319,13 @@ def _prepare(log: pd.DataFrame, spec, report: CleaningReport) -> pd.DataFrame:
         log = derive_velocities(log, spec.savgol_window, spec.savgol_order, report)
     log = bridge_from_pose(log, spec.savgol_window, spec.savgol_order, report=report)
     if spec.noise > 0:
+        absent = [c for c in spec.noise_columns if c not in log]
+        if absent:  # no noise at all, with the report saying it was added
+            raise NnidInputError(
+                f"noise_columns names {', '.join(absent)}, which the log does not have "
+                f"(it has {', '.join(map(str, log.columns))})",
+                field="data.noise_columns",
+            )
         noisy = spec.noise_columns or [*input_columns(log), *VELOCITY]
         cols = [c for c in noisy if c in log]
         log = log.copy()
@@ -361,6 +368,12 @@ def make_split(
             "validation": s.validation or [],
             "test": s.test or [],
         }
+        unused = [n for n in names if n not in {*assignment["train"], *held}]
+        if unused:  # a run in no part: said, never dropped in silence
+            said = f"experiments {', '.join(map(str, unused))} are in no part of the split"
+            warnings.warn(f"{said} (split.train names the training runs): not used", stacklevel=2)
+            if report is not None:
+                report.add("split", f"{said}: not used", int(log["experiment"].isin(unused).sum()))
     try:
         if s.by == "auto":
             split = _auto_split(log, tuple(s.fractions))

@@ -88,6 +88,13 @@ CASES = [
     ("train", TRAIN, ("warmup_s = 1.0", "warmup_s = -1.0"), "warmup_s"),
     ("train", TRAIN, ("warmup_s = 1.0", "warmup_s = nan"), "warmup_s"),
     ("train", TRAIN, ("warmup_s = 1.0", "k_step_s = inf"), "k_step_s"),
+    # named experiments and fractions: the fractions were ignored
+    (
+        "train",
+        TRAIN,
+        ('validation = ["b"]', 'validation = ["b"]\nfractions = [0.5, 0.5, 0]'),
+        "split",
+    ),
     (
         "train",
         TRAIN,
@@ -462,3 +469,24 @@ def test_a_k_step_horizon_longer_than_every_held_out_run_says_why_it_was_not_sco
     again = [*_args(command, cfg, tmp_path)[:-1], str(tmp_path / "again")]
     run = CliRunner().invoke(app, again)
     assert run.exit_code == 0 and "k_step_s" not in run.output, run.output
+
+
+def test_a_run_in_no_part_of_a_named_split_is_said_and_noise_on_no_column_refused(tmp_path):
+    """split.train names run a, validation b: run c was used nowhere and said nowhere. And
+    noise_columns naming a column the log lacks added noise to nothing, while the cleaning
+    report said it was added."""
+    import json
+
+    third = "[[experiments]]" + SIM.split("[[experiments]]")[2].replace('"b"', '"c"')
+    (tmp_path / "sim.toml").write_text(SIM + third)
+    cfg = tmp_path / "named.toml"
+    cfg.write_text(TRAIN.replace('validation = ["b"]', 'train = ["a"]\nvalidation = ["b"]'))
+    run = CliRunner().invoke(app, _args("train", cfg, tmp_path))
+    assert run.exit_code == 0, run.output
+    assert "experiments c are in no part of the split" in " ".join(run.output.split())
+    report = json.loads((tmp_path / "out" / "metrics.json").read_text())
+    assert report["split"]["parts"]["train"][0]["experiment"] == "a"
+    cfg.write_text(TRAIN.replace("[data]\n", '[data]\nnoise = 0.1\nnoise_columns = ["uu"]\n'))
+    run = CliRunner().invoke(app, [*_args("train", cfg, tmp_path)[:-1], str(tmp_path / "n")])
+    assert run.exit_code == 2 and "data.noise_columns" in run.output, run.output
+    assert "noise_columns names uu, which the log does not have" in " ".join(run.output.split())
