@@ -66,6 +66,7 @@ def _input_errors(fn):
     def wrapper(*args, **kwargs):
         # the application, not the library, decides how warnings reach a person: one plain
         # line each, once, after the command's own output
+        _SAID.clear()
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             try:
@@ -75,7 +76,8 @@ def _input_errors(fn):
                 raise typer.Exit(2) from None
             finally:
                 for message in warning_messages(caught):
-                    err.print(f"warning: {message}", highlight=False)
+                    if message not in _SAID:  # a run's own warnings were said with its lines
+                        err.print(f"warning: {message}", highlight=False)
 
     return wrapper
 
@@ -225,10 +227,16 @@ def _bar(description: str):
         yield update
 
 
+#: the warnings a command has said already (each is said once)
+_SAID: set[str] = set()
+
+
 def _print(outcome) -> None:
     """A run's warnings on stderr, its sentences on stdout."""
     for warning in outcome.warnings:
-        err.print(f"warning: {warning}", highlight=False)
+        if warning not in _SAID:
+            _SAID.add(warning)
+            err.print(f"warning: {warning}", highlight=False)
     for line in outcome.lines:
         _say(line)
 

@@ -466,3 +466,31 @@ def test_follow_refuses_what_the_whole_log_reader_refuses(vehicle, monitor, tmp_
 
         with pytest.raises(NnidInputError, match=said):
             read_log(path)
+
+
+def test_forces_and_commands_that_disagree_are_said_once(vehicle, tmp_path):
+    """A log with all six forces and every thruster's command reads the forces and leaves the
+    commands unread: with the forces all zero the fit diverged and nothing said why. Where
+    they disagree it is said, once at the console (the run's warning and the command's own
+    record were printed twice); where they agree, nothing is."""
+    from nnid.datasets.arrays import logged_inputs
+    from nnid.datasets.log import TAU
+
+    log = simulate_faults(vehicle, 20, seed=55, experiment="t55")
+    cmds = log[[f"cmd_{t.name}" for t in vehicle.thrusters]].to_numpy()
+    agree = log.assign(**dict(zip(TAU, Actuation(vehicle).nominal(cmds).T, strict=True)))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        _, forces = logged_inputs(agree, vehicle)
+    assert forces
+    zero = log.assign(**dict.fromkeys(TAU, 0.0))
+    with pytest.warns(UserWarning, match="forces tau_X, tau_Y, tau_Z, tau_K, tau_M, tau_N differ"):
+        logged_inputs(zero, vehicle)
+    zero.to_csv(tmp_path / "zero.csv", index=False)
+    config = str(REPO / "configs" / "fossen_ls.toml")
+    data, out = str(tmp_path / "zero.csv"), str(tmp_path / "o")
+    res = CliRunner().invoke(
+        app, ["train", config, "--data", data, "--vehicle", str(OCTO), "--out", out]
+    )
+    assert res.exit_code == 0, res.output
+    assert " ".join(res.output.split()).count("differ from what its thruster commands give") == 1

@@ -89,8 +89,12 @@ def logged_inputs(log: pd.DataFrame, vehicle) -> tuple[np.ndarray, bool]:
     :class:`NnidInputError` naming the missing columns and the forces the log has."""
     if all(c in log for c in TAU):
         # the forces drive the model; a command no thruster takes would be read by nothing
-        check_commands(log.columns, [f"cmd_{t.name}" for t in vehicle.thrusters], vehicle.name)
-        return log[list(TAU)].to_numpy(np.float64), True
+        cols = [f"cmd_{t.name}" for t in vehicle.thrusters]
+        check_commands(log.columns, cols, vehicle.name)
+        tau = log[list(TAU)].to_numpy(np.float64)
+        if cols and all(c in log for c in cols):
+            _check_forces_match_commands(tau, log[cols].to_numpy(np.float64), vehicle)
+        return tau, True
     # a log's columns, not a setting: no config field to name
     if not vehicle.thrusters:
         raise NnidInputError(
@@ -110,6 +114,26 @@ def logged_inputs(log: pd.DataFrame, vehicle) -> tuple[np.ndarray, bool]:
         )
     warn_far_beyond_range(log, vehicle)
     return log[cols].to_numpy(np.float64), False
+
+
+def _check_forces_match_commands(tau: np.ndarray, commands: np.ndarray, vehicle) -> None:
+    """Warn where a log holds both the six forces and every thruster's command and the two
+    disagree (beyond a tenth of the forces' spread in a DOF): the forces are what the model
+    reads, and the commands are left unread, so the user should know which to trust."""
+    nominal = Actuation(vehicle).nominal(commands)
+    ok = np.isfinite(tau).all(1) & np.isfinite(nominal).all(1)
+    if not ok.any():
+        return
+    spread = np.maximum(tau[ok].std(0), nominal[ok].std(0))
+    rms = np.sqrt(np.mean((tau[ok] - nominal[ok]) ** 2, 0))
+    off = [f for f, r, s in zip(TAU, rms, spread, strict=True) if s > 0 and r > 0.1 * s]
+    if off:
+        warnings.warn(
+            f"the log's forces {', '.join(off)} differ from what its thruster commands give "
+            f"through vehicle '{vehicle.name}' (beyond a tenth of their spread): the forces "
+            "are read and the commands are not; drop the column you do not trust",
+            stacklevel=3,
+        )
 
 
 def log_arrays(log: pd.DataFrame, vehicle) -> dict[str, np.ndarray]:
