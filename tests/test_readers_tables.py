@@ -167,6 +167,23 @@ columns = { z = "depth", tau_X = "f", tau_Y = { from = "f", scale = -2.0 } }
     assert np.allclose(log["tau_X"], df["f"]) and np.allclose(log["tau_Y"], -2.0 * df["f"])
 
 
+def test_a_file_named_like_a_pattern_is_read_as_itself(tmp_path):
+    """--data "dir [1]/dive [1].csv" with a reader config: the name went into the glob, so
+    the brackets matched nothing ("no file matches") and a star took in dive_old.csv too."""
+    folder = tmp_path / "dir [1]"
+    folder.mkdir()
+    t = np.arange(0, 10, 0.05)
+    dive = pd.DataFrame({"run": "r1", "time": t, "depth": 0.5 + 0.01 * t, "pwm": 1600.0})
+    dive.to_csv(folder / "dive [1].csv", index=False)
+    dive.assign(run="r9").to_csv(folder / "dive_old.csv", index=False)
+    cmap = _write_map(tmp_path / "map.toml", 'experiment = "run"\n[[sources]]\nfile = "dive*.csv"'
+                      '\ntime = "time"\ncolumns = { z = "depth", cmd_1 = "pwm" }\n')  # fmt: skip
+    log, _ = load_log(folder / "dive [1].csv", cmap)
+    assert set(log["experiment"]) == {"r1"}  # dive_old.csv's r9 stays out
+    both, _ = load_log(folder, cmap)
+    assert set(both["experiment"]) == {"r1", "r9"}  # the pattern, under a bracketed folder
+
+
 def test_a_source_matching_no_file_names_the_reader_config(tmp_path):
     """The error names the reader config's file, where 'sources.0.file' is, not its name."""
     cmap = _write_map(tmp_path / "map.toml", 'name = "probe"\n' + MAP.replace("nav.csv", "x*.csv"))
