@@ -1022,6 +1022,44 @@ def test_a_sequence_fit_needs_only_its_steps_velocities(fixtures, tmp_path):
     assert done.exit_code == 2 and "field 'u'" in done.output, done.output
 
 
+@pytest.mark.parametrize(
+    ("edit", "said"),
+    [
+        ("cut to 3", "other shapes than the monitor's 6 channels"),
+        ("padded to 9", "other shapes than the monitor's 6 channels"),
+        ("negative correlation time", "correlation time that is not positive"),
+        ("null in whiten", "non-finite"),
+    ],
+)
+def test_a_monitor_whose_arrays_do_not_fit_the_model_is_refused(fixtures, tmp_path, edit, said):
+    """Arrays cut to 3 channels (consistent with each other) were believed: the compiled
+    kernel read past them and detect said "0 alarm(s)"; 5 or 9 ended in a broadcast
+    traceback in the isolation."""
+    import json
+    import shutil
+
+    from nnid.errors import NnidInputError
+    from nnid.fault.monitor import ResidualMonitor
+
+    folder = tmp_path / "monitor"
+    shutil.copytree(fixtures["monitor"], folder)
+    state = json.loads((folder / "monitor.json").read_text())
+    k = {"cut to 3": 3, "padded to 9": 9}.get(edit)
+    if k is not None:
+        for key in ("mu", "sigma"):
+            state[key] = (state[key] + [0.0] * 9)[:k]
+        for key in ("whiten", "s_inv"):
+            state[key] = [(row + [0.0] * 9)[:k] for row in (state[key] + [[0.0] * 9] * 9)[:k]]
+    elif edit == "negative correlation time":
+        state["correlation_time"] = -2.0
+    else:
+        state["whiten"][0][0] = None  # read as NaN, and believed by the kernel
+    (folder / "monitor.json").write_text(json.dumps(state))
+    with pytest.raises(NnidInputError, match=said) as err:
+        ResidualMonitor.load(folder)
+    assert err.value.source == str(folder / "monitor.json")
+
+
 def test_a_monitor_whose_statistic_never_rose_loads_as_it_was_saved(fixtures, tmp_path):
     # a CUSUM that never exceeds its allowance on healthy data gets the threshold 2 x 0 = 0:
     # written by nnid, so read back by it

@@ -450,10 +450,26 @@ class ResidualMonitor(BaseEstimator):
                 f"is not a monitor nnid wrote ({type(exc).__name__}: {exc})", source=str(path)
             ) from None
         # the compiled kernel does not check bounds: a file with other shapes is refused here
-        k = out.mu_.shape[0] if out.mu_.ndim == 1 else -1
+        k = len(DOFS)  # one channel per DOF, whichever the model watches
         square = (out.whiten_, out.s_inv_)
-        if k < 1 or any(a.shape != (k, k) for a in square) or out.sigma_.shape != (k,):
-            raise NnidInputError("holds arrays of inconsistent shapes", source=str(path))
+        if (
+            out.mu_.shape != (k,)
+            or any(a.shape != (k, k) for a in square)
+            or out.sigma_.shape != (k,)
+        ):
+            raise NnidInputError(
+                f"holds arrays of other shapes than the monitor's {k} channels (one per DOF: "
+                f"mu {out.mu_.shape}, whiten {out.whiten_.shape}, s_inv {out.s_inv_.shape}, "
+                f"sigma {out.sigma_.shape})",
+                source=str(path),
+            )
+        arrays = (out.mu_, out.whiten_, out.s_inv_, out.sigma_, [out.correlation_time_])
+        if not all(np.isfinite(a).all() for a in arrays) or not out.correlation_time_ > 0:
+            raise NnidInputError(
+                "holds a non-finite number, or a correlation time that is not positive: not "
+                "a monitor nnid wrote",
+                source=str(path),
+            )
         return out
 
 
