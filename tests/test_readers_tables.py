@@ -621,3 +621,48 @@ def test_a_silence_inside_a_held_source_is_said(tmp_path):
     (said,) = [s for s in report.steps if s.step == "stale hold"]
     assert "cmd.csv is silent for up to 6.1 s" in said.detail and said.rows_removed == 0
     assert "held over those 56 samples" in said.detail, said.detail
+
+
+def test_what_the_time_base_makes_up_is_said(tmp_path):
+    """Through a reader config without gap or hold_timeout: a 20-s hole was interpolated
+    (400 rows became 801 samples, inspect said "gaps 0"), a command file that ended 25 s
+    before the run was held to its end, and run labels "01" and "1" were read as one number
+    and merged. Each is said now; the labels are two runs."""
+    t = np.arange(0, 40, 0.05)
+    nav = pd.DataFrame({"t": t, "depth": 1.0 + 0.01 * t})
+    nav = nav[(t < 10) | (t > 30)]  # a 20-s hole
+    nav.to_csv(tmp_path / "nav.csv", index=False)
+    pd.DataFrame({"t": np.arange(0, 15, 0.05), "pwm": 0.2}).to_csv(
+        tmp_path / "cmd.csv", index=False
+    )
+    cmap = _write_map(
+        tmp_path / "map.toml",
+        """
+rate = 20.0
+[[sources]]
+file = "nav.csv"
+time = "t"
+columns = { z = "depth" }
+[[sources]]
+file = "cmd.csv"
+time = "t"
+method = "hold"
+columns = { cmd_1 = "pwm" }
+""",
+    )
+    with pytest.warns(UserWarning) as said:
+        _, report = load_log(tmp_path, cmap)
+    text = " ".join(str(w.message) for w in said)
+    assert "nav.csv has no sample for 20.1 s" in text and "set gap" in text
+    assert "cmd.csv ends 25 s before the run" in text and "hold_timeout" in text
+    steps = {s.step for s in report.steps}
+    assert {"interpolated over a silence", "held past its end"} <= steps
+    runs = pd.DataFrame({"run": ["01"] * 100 + ["1"] * 100, "t": np.r_[t[:100], t[:100]],
+                         "depth": 1.0, "pwm": 0.2})  # fmt: skip
+    runs.to_csv(tmp_path / "runs.csv", index=False)
+    body = 'experiment = "run"\n[[sources]]\nfile = "runs.csv"\ntime = "t"\n'
+    labelled = _write_map(
+        tmp_path / "runs.toml", body + 'columns = { z = "depth", cmd_1 = "pwm" }\n'
+    )
+    log, _ = load_log(tmp_path / "runs.csv", labelled)
+    assert sorted(set(log["experiment"])) == ["01", "1"]

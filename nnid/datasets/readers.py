@@ -13,7 +13,8 @@ from __future__ import annotations
 import glob
 import gzip
 import re
-from collections.abc import Callable, Iterator
+import warnings
+from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -29,8 +30,9 @@ from nnid.datasets.rosbag import is_bag, read_bag_sources
 from nnid.errors import NnidInputError
 
 
-def read_table(path: str | Path) -> pd.DataFrame:
-    """A CSV (optionally gzipped) or Parquet file; unreadable files are an NnidInputError."""
+def read_table(path: str | Path, labels: Sequence[str] = ("experiment",)) -> pd.DataFrame:
+    """A CSV (optionally gzipped) or Parquet file; unreadable files are an NnidInputError.
+    ``labels``: the run-label columns, read from a CSV as text ("01" and "1" are two runs)."""
     path = Path(path)
     if not path.exists():
         raise NnidInputError("file not found", source=str(path))
@@ -49,7 +51,7 @@ def read_table(path: str | Path) -> pd.DataFrame:
             header = pd.read_csv(path, header=None, nrows=1, dtype=str, **dialect).iloc[0]
             _refuse_repeated_names(header.str.strip(), path)
             # run labels are names: "01" and "1" are two runs, not one number
-            table = pd.read_csv(path, dtype={"experiment": str}, **dialect)
+            table = pd.read_csv(path, dtype=dict.fromkeys(labels, str), **dialect)
             return table.rename(columns=lambda c: c.strip() if isinstance(c, str) else c)
     except NnidInputError:
         raise
@@ -233,6 +235,8 @@ def assemble(
                 gaps = np.flatnonzero(np.diff(t_src) > cmap.gap)
                 for g in gaps:
                     valid &= ~((grid > t_src[g]) & (grid < t_src[g + 1]))
+            else:
+                _say_silences(source, t_src, grid, exp, report)
         segments = _runs(valid)
         if not segments:
             why = (
@@ -317,6 +321,48 @@ def _natural(name: str):
     return [int(s) if s.isdigit() else s for s in re.split(r"(\d+)", name)]
 
 
+#: a source silent for this many of its typical intervals is said when it is bridged
+SILENCE = 10
+
+
+def _say_silences(
+    source: Source, t_src: np.ndarray, grid: np.ndarray, exp, report: CleaningReport
+) -> None:
+    """Say (warning and cleaning report) what the time base makes up where a source is
+    silent for :data:`SILENCE` of its typical intervals: a measured source interpolated over
+    a hole (no ``gap`` set to split the run there), or a command held past its last sample
+    (no ``hold_timeout`` to cut it); before, 400 rows became 801 samples without a word."""
+    steps = np.diff(t_src)
+    if not steps.size:
+        return
+    typical = max(float(np.median(steps)), float(np.median(np.diff(grid))) if grid.size > 1 else 0)
+    if source.method == "linear":
+        k = int(np.argmax(steps))
+        if steps[k] > SILENCE * typical:
+            said = (
+                f"'{exp}': {source.file} has no sample for {steps[k]:.3g} s (t = "
+                f"{t_src[k]:.6g}-{t_src[k + 1]:.6g} s after the run's start): interpolated "
+                "over; set gap to split the run there"
+            )
+            report.add("interpolated over a silence", said)
+            warnings.warn(said, stacklevel=4)
+    elif source.hold_timeout is None and grid[-1] - t_src[-1] > SILENCE * typical:
+        said = (
+            f"'{exp}': {source.file} ends {grid[-1] - t_src[-1]:.3g} s before the run: its last "
+            "value is held to the end; set hold_timeout to cut the run where it goes stale"
+        )
+        report.add("held past its end", said)
+        warnings.warn(said, stacklevel=4)
+
+
+def _label_columns(cmap: ColumnMap) -> list[str]:
+    """The columns a reader config names its runs by (``experiment``), read as text."""
+    keys = cmap.experiment
+    if keys in (None, "file"):
+        return []
+    return [keys] if isinstance(keys, str) else list(keys)
+
+
 def read_table_sources(
     cmap: ColumnMap, root: Path, report: CleaningReport
 ) -> list[tuple[Source, pd.DataFrame]]:
@@ -345,7 +391,14 @@ def read_table_sources(
                         field=f"sources.{i}.file",
                     )
         frames = [
-            map_source(read_table(f), source, f, cmap.experiment, cmap.drop_nonfinite, report)
+            map_source(
+                read_table(f, _label_columns(cmap)),
+                source,
+                f,
+                cmap.experiment,
+                cmap.drop_nonfinite,
+                report,
+            )
             for f in files
         ]
         tables.append((source, pd.concat(frames, ignore_index=True)))
