@@ -232,9 +232,56 @@ def vehicle_from_dict(data: dict[str, Any], source: str = "<vehicle>") -> Vehicl
             "buoyancy is its own key)",
             stacklevel=2,
         )
-    for slip in sign_slips(vehicle):
+    for slip in [*sign_slips(vehicle), *size_slips(vehicle)]:
         warnings.warn(f"{source}: {slip}", stacklevel=2)
     return vehicle
+
+
+#: without a length, a vehicle's size is bounded by this many sides of the cube of its volume
+SIZE_OF_VOLUME = 5.0
+
+
+def size_slips(vehicle: Vehicle) -> list[str]:
+    """Geometry no vehicle of this size and mass has, a unit slip (cm for m, kg cm² for
+    kg m²) the fit would otherwise absorb without a word (an inertia 10⁴ too large came back
+    as an added mass of +1600, "significant"): a radius of gyration, a centre of gravity or
+    buoyancy, or a thruster further from the origin than the vehicle is long (its ``length``,
+    else :data:`SIZE_OF_VOLUME` sides of the cube of its displaced volume); principal moments
+    that break the triangle inequality a body's must keep; a thrust table that stops short of
+    the thruster's command range (commands beyond it get the table's last thrust)."""
+    size = vehicle.length or SIZE_OF_VOLUME * (vehicle.mass / vehicle.rho) ** (1 / 3)
+    what = f"the vehicle's length ({size:.3g} m)" if vehicle.length else (
+        f"{SIZE_OF_VOLUME:g} sides of the cube of its volume ({size:.3g} m; no length given)"
+    )  # fmt: skip
+    principal = np.linalg.eigvalsh(vehicle.inertia_matrix())
+    out = []
+    gyration = float(np.sqrt(principal.max() / vehicle.mass))
+    if gyration > size:
+        out.append(f"inertia: the radius of gyration {gyration:.3g} m exceeds {what}: kg m²?")
+    for key in ("r_g", "r_b"):
+        reach = float(np.linalg.norm(getattr(vehicle, key)))
+        if reach > size:
+            out.append(f"{key} is {reach:.3g} m from the origin, beyond {what}: metres?")
+    for t in vehicle.thrusters:
+        reach = float(np.linalg.norm(t.position))
+        if reach > size:
+            out.append(f"thruster {t.name}'s position is {reach:.3g} m out, beyond {what}: metres?")
+        if isinstance(t.curve, TableCurve):
+            lo, hi = t.curve.cmd[0], t.curve.cmd[-1]
+            short = [(k, v) for k, v in (("cmd_min", t.cmd_min), ("cmd_max", t.cmd_max))
+                     if v is not None and not lo <= v <= hi]  # fmt: skip
+            if short:
+                out.append(
+                    f"thruster {t.name}'s thrust table spans commands {lo:g} to {hi:g}, short of "
+                    + ", ".join(f"its {k} {v:g}" for k, v in short)
+                    + ": beyond the table a command gets the table's last thrust"
+                )
+    if principal.max() > 1.001 * (principal.sum() - principal.max()):
+        out.append(
+            "inertia: the largest principal moment exceeds the sum of the other two, which no "
+            f"body's does ({', '.join(f'{m:.4g}' for m in principal)} kg m²)"
+        )
+    return out
 
 
 def sign_slips(vehicle: Vehicle) -> list[str]:

@@ -9,6 +9,7 @@ input is never accepted and never crashes.
 from __future__ import annotations
 
 import functools
+import re
 import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -785,6 +786,39 @@ def test_vehicle_loader_gives_a_vehicle_or_names_the_field(field, value, index):
     numbers = [vehicle.mass, vehicle.rho, vehicle.g, *vehicle.r_g, *vehicle.r_b]
     numbers += list(vehicle.added_mass.values()) + list(vehicle.damping.coefficients.values())
     assert all(np.isfinite(numbers)) and 0 < vehicle.mass <= MAX_MASS
+
+
+@pytest.mark.parametrize(
+    ("edit", "said"),
+    [
+        ({"inertia": [1600.0, 1600.0, 1600.0]}, "radius of gyration 11.8 m exceeds the vehicle's"),
+        ({"r_g": [0.0, 0.0, 2.0]}, "r_g is 2 m from the origin, beyond the vehicle's length"),
+        ({"inertia": [0.1, 0.1, 0.5]}, "largest principal moment exceeds the sum"),
+        ({"thrusters": [{"name": "h1", "position": [20.0, 0.0, 0.0], "direction": [1, 0, 0],
+                         "curve": {"kind": "signed_quadratic", "k": 40.0}}]},
+         "thruster h1's position is 20 m out"),
+        ({"thrusters": [{"name": "h1", "position": [0.2, 0.0, 0.0], "direction": [1, 0, 0],
+                         "curve": {"kind": "table", "cmd": [-0.2, 0.0, 0.2],
+                                   "thrust": [-10.0, 0.0, 10.0]},
+                         "cmd_min": -0.5, "cmd_max": 0.5}]},
+         "spans commands -0.2 to 0.2, short of its cmd_min -0.5, its cmd_max 0.5"),
+    ],
+)  # fmt: skip
+def test_geometry_no_vehicle_of_its_size_has_is_warned_of(edit, said):
+    """A unit slip in the geometry was absorbed by the fit without a word: an inertia in
+    kg cm² came back as K_pdot = M_qdot = N_rdot = +1600, "significant"; r_g and thruster
+    positions in cm diverged with a warning that blamed the added mass; a table short of the
+    command range clamped the thrust. A sound file (every preset) says nothing."""
+    from nnid.vehicle import PRESETS, load_vehicle, vehicle_from_dict
+
+    base = {"name": "probe", "mass": 11.5, "length": 0.46, "inertia": [0.16, 0.16, 0.16]}
+    with pytest.warns(UserWarning, match=re.escape(said)):
+        vehicle_from_dict({**base, **edit}, source="probe.toml")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        vehicle_from_dict(base, source="probe.toml")
+        for name in PRESETS:
+            load_vehicle(name)
 
 
 def test_a_derivative_of_the_energy_adding_sign_or_a_weight_in_kg_is_warned_of():
