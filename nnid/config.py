@@ -294,16 +294,6 @@ class SplitSpec(StrictModel):
     validation: Names | None = None
     test: Names | None = None
 
-    @model_validator(mode="after")
-    def _names_or_fractions(self) -> SplitSpec:
-        named = self.train or self.validation or self.test
-        if named and "fractions" in self.model_fields_set:  # they would be ignored
-            raise ValueError(
-                "fractions beside named experiments: a split names its experiments or cuts "
-                "by fractions, not both"
-            )
-        return self
-
 
 # -- trainers ------------------------------------------------------------------------------------
 

@@ -381,6 +381,13 @@ def make_split(
             split = split_log(log, s.by, tuple(s.fractions), assignment)
     except NnidInputError as exc:
         raise NnidInputError(exc.message, source=source, field=f"split.{exc.field}") from None
+    if assignment is not None and "fractions" in s.model_fields_set:  # they would be ignored
+        raise NnidInputError(
+            "gives fractions beside named experiments: a split names its experiments or cuts "
+            "by fractions, not both",
+            source=source,
+            field="split.fractions",
+        )
     motion = [c for c in (*POSE, *VELOCITY, *ACCELERATION) if c in log]
     parts = mask_gaps([split.train, split.validation, split.test], motion, report)
     split = Split(*parts, split.record)

@@ -88,13 +88,6 @@ CASES = [
     ("train", TRAIN, ("warmup_s = 1.0", "warmup_s = -1.0"), "warmup_s"),
     ("train", TRAIN, ("warmup_s = 1.0", "warmup_s = nan"), "warmup_s"),
     ("train", TRAIN, ("warmup_s = 1.0", "k_step_s = inf"), "k_step_s"),
-    # named experiments and fractions: the fractions were ignored
-    (
-        "train",
-        TRAIN,
-        ('validation = ["b"]', 'validation = ["b"]\nfractions = [0.5, 0.5, 0]'),
-        "split",
-    ),
     (
         "train",
         TRAIN,
@@ -490,3 +483,8 @@ def test_a_run_in_no_part_of_a_named_split_is_said_and_noise_on_no_column_refuse
     run = CliRunner().invoke(app, [*_args("train", cfg, tmp_path)[:-1], str(tmp_path / "n")])
     assert run.exit_code == 2 and "data.noise_columns" in run.output, run.output
     assert "noise_columns names uu, which the log does not have" in " ".join(run.output.split())
+    cfg.write_text(
+        TRAIN.replace('validation = ["b"]', 'validation = ["b"]\nfractions = [0.5, 0.5, 0]')
+    )
+    run = CliRunner().invoke(app, [*_args("train", cfg, tmp_path)[:-1], str(tmp_path / "f")])
+    assert run.exit_code == 2 and "split.fractions" in run.output, run.output

@@ -356,7 +356,6 @@ def test_a_few_repeated_or_late_stamps_are_repaired_and_said(tmp_path):
         ('tau_X = { from = "vx", unit = "cm" }', "tau_X in 'cm': tau_X takes no unit"),
         ('du = { from = "vx", unit = "m/s" }', "du in 'm/s': du takes no unit"),
         ('cmd_9 = { from = "vx", unit = "deg" }', "cmd_9 in 'deg': cmd_9 takes no unit"),
-        ('tau_Z = { from = "vx", scale = 0.0 }', "scale = 0 makes every sample zero"),
         ('tau_Z = { from = "vx", offset = nan }', "'sources.0.columns.tau_Z.offset'"),
     ],
 )
@@ -666,3 +665,20 @@ columns = { cmd_1 = "pwm" }
     )
     log, _ = load_log(tmp_path / "runs.csv", labelled)
     assert sorted(set(log["experiment"])) == ["01", "1"]
+
+
+def test_a_column_mapped_with_scale_zero_is_said(tmp_path):
+    """scale = 0 (a channel known to stay neutral, as the NTNU BlueROV2 config maps roll and
+    pitch) is kept, and said in the cleaning report: it was silent."""
+    t = np.arange(0, 5, 0.05)
+    pd.DataFrame({"t": t, "depth": 1.0 + 0.01 * t, "f": 3.0}).to_csv(
+        tmp_path / "a.csv", index=False
+    )
+    body = '[[sources]]\nfile = "a.csv"\ntime = "t"\n'
+    cmap = _write_map(
+        tmp_path / "m.toml",
+        body + 'columns = { z = "depth", tau_Z = { from = "f", scale = 0.0 }, cmd_1 = "f" }\n',
+    )
+    log, report = load_log(tmp_path, cmap)
+    assert (log["tau_Z"] == 0).all()
+    assert any(s.step == "zero scale" and "tau_Z" in s.detail for s in report.steps)

@@ -72,16 +72,9 @@ class ColumnSpec(StrictModel):
 
     source: str = Field(alias="from")
     offset: float = Field(0.0, allow_inf_nan=False)
-    # a zero scale makes every sample 0: no measurement, and no error downstream to say so
+    # 0 is allowed (a channel known to stay neutral), and said in the cleaning report
     scale: float = Field(1.0, allow_inf_nan=False)
     unit: str | None = None
-
-    @field_validator("scale")
-    @classmethod
-    def _scale(cls, scale: float) -> float:
-        if scale == 0:
-            raise ValueError("scale = 0 makes every sample zero; give the factor to SI units")
-        return scale
 
     @field_validator("unit")
     @classmethod

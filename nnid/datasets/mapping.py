@@ -215,6 +215,9 @@ def map_source(
     specs = source.specs()
     for name, spec in specs.items():
         out[name] = (values[spec.source].to_numpy(dtype=np.float64) + spec.offset) * spec.factor()
+    zeroed = [name for name, spec in specs.items() if spec.factor() == 0]
+    if zeroed:  # a channel known to stay neutral, or a slip: either way, said
+        report.add("zero scale", f"{origin}: {', '.join(zeroed)} mapped with scale 0: all zero")
     for col in ANGLES:
         # before the frame conversion and the resampling, which wrap angles to ±π: degrees
         # wrapped as radians would pass every later check; a unit given is the user's word
