@@ -682,3 +682,43 @@ def test_a_column_mapped_with_scale_zero_is_said(tmp_path):
     log, report = load_log(tmp_path, cmap)
     assert (log["tau_Z"] == 0).all()
     assert any(s.step == "zero scale" and "tau_Z" in s.detail for s in report.steps)
+
+
+def test_quaternion_columns_that_are_no_quaternion_are_refused(tmp_path):
+    """quaternion = ["qw", "qx", "qy", "u"]: normalised row by row, any four columns made an
+    attitude. Norms far from 1 are refused, naming the columns; a zero row (a sensor not yet
+    initialised) is not counted."""
+    n = 60
+    yaw = np.linspace(0, 1, n)
+    df = pd.DataFrame({"t": np.arange(n) * 0.1, "qw": np.cos(yaw / 2), "qx": 0.0, "qy": 0.0,
+                       "qz": np.sin(yaw / 2), "u": np.linspace(0, 2.0, n), "f": 1.0})  # fmt: skip
+    df.loc[0, ["qw", "qz"]] = 0.0
+    df.to_csv(tmp_path / "odom.csv", index=False)
+    body = '[[sources]]\nfile = "odom.csv"\ntime = "t"\ncolumns = { u = "u", tau_X = "f" }\n'
+    good = _write_map(tmp_path / "good.toml", body + 'quaternion = ["qw", "qx", "qy", "qz"]\n')
+    log, report = load_log(tmp_path, good)
+    # the zero row is bridged (its one NaN made the whole run's angles NaN, "empty")
+    assert np.allclose(log["psi"].iloc[1:], yaw[1:]) and np.isfinite(log["psi"]).all()
+    assert any(s.step == "zero quaternion" for s in report.steps)
+    wrong = _write_map(tmp_path / "wrong.toml", body + 'quaternion = ["qw", "qx", "qy", "u"]\n')
+    with pytest.raises(NnidInputError, match="qw, qx, qy, u are not unit quaternions") as err:
+        load_log(tmp_path, wrong)
+    assert err.value.field == "quaternion"
+
+
+@pytest.mark.parametrize("how", ["date-times", "durations", "index"])
+def test_a_time_column_stored_otherwise_than_as_seconds_is_named_so(tmp_path, how):
+    """A Parquet t of date-times or durations was advised "looks like nanoseconds (divide by
+    1e9)"; a t stored as the file's index was "'t' is missing"."""
+    t = np.arange(20) * 0.1
+    df = pd.DataFrame({"t": t, "u": 0.1, "tau_X": 1.0})
+    if how == "date-times":
+        df["t"] = pd.to_datetime(t, unit="s", utc=True)
+    elif how == "durations":
+        df["t"] = pd.to_timedelta(t, unit="s")
+    else:
+        df = df.set_index("t")
+    df.to_parquet(tmp_path / "log.parquet")
+    said = "write it as a column" if how == "index" else "store seconds"
+    with pytest.raises(NnidInputError, match=said):
+        load_log(tmp_path / "log.parquet")

@@ -56,7 +56,11 @@ def validate_log(
     """
     _check_spelling(df, source)
     if "t" not in df.columns:
-        raise NnidInputError("required column 't' (time in seconds) is missing", source=source)
+        # a Parquet file written from a frame indexed by time keeps t as its index
+        where = " (it is the file's index: write it as a column)" if df.index.name == "t" else ""
+        raise NnidInputError(
+            f"required column 't' (time in seconds) is missing{where}", source=source
+        )
     if len(df) == 0:
         raise NnidInputError("the log has no rows", source=source)
     motion = [c for c in (*POSE, *VELOCITY) if c in df.columns]
@@ -189,6 +193,15 @@ def _check_finite(df: pd.DataFrame, columns: list[str], source: str, gaps: bool 
         if pd.api.types.is_bool_dtype(df[col]):  # true/false would be read as 1/0 N or m/s
             raise NnidInputError(
                 "holds true/false values: store the column as numbers", source=source, field=col
+            )
+        if pd.api.types.is_datetime64_any_dtype(df[col]) or pd.api.types.is_timedelta64_dtype(
+            df[col]
+        ):  # read as nanoseconds, and advised so
+            raise NnidInputError(
+                "holds date-times or durations: store seconds (since the run's start, or Unix "
+                "seconds) as numbers",
+                source=source,
+                field=col,
             )
         values = pd.to_numeric(df[col], errors="coerce").to_numpy(dtype=np.float64)
         bad = ~np.isfinite(values)

@@ -21,6 +21,9 @@ from nnid.datasets.log import ANGLES, blank_labels, looks_like_degrees, refuse_r
 from nnid.errors import NnidInputError
 from nnid.validation import shown
 
+#: how far from 1 a logged quaternion's norm may be (sensors write them unit to ~1e-3)
+QUATERNION_SLACK = 0.1
+
 
 def euler_from_rotation(rot: np.ndarray) -> np.ndarray:
     """zyx Euler angles (φ, θ, ψ) of rotation matrices ``[..., 3, 3]`` (inverse of J₁), with
@@ -231,7 +234,26 @@ def map_source(
             )
     check_clock(out, origin, "row_clock" if source.row_clock else source.time, report)
     if source.quaternion:
-        rot = rotation_from_quaternion(values[source.quaternion].to_numpy(dtype=np.float64))
+        quat = values[source.quaternion].to_numpy(dtype=np.float64)
+        norm = np.linalg.norm(quat, axis=1)
+        live = np.isfinite(norm) & (norm > 0)  # a zero quaternion: a sensor not yet initialised
+        off = live & (np.abs(norm - 1.0) > QUATERNION_SLACK)
+        if off.sum() > 0.05 * max(live.sum(), 1):  # normalising would hide the wrong columns
+            raise NnidInputError(
+                f"the quaternion columns {', '.join(source.quaternion)} are not unit "
+                f"quaternions (norms {np.min(norm[live]):.3g} to {np.max(norm[live]):.3g}, "
+                f"{int(off.sum())} rows off by more than {QUATERNION_SLACK:.0%}): are they the "
+                "w, x, y, z of one orientation?",
+                source=origin,
+                field="quaternion",
+            )
+        rot = rotation_from_quaternion(quat)
+        if not live.all():
+            report.add(
+                "zero quaternion",
+                f"{origin}: {int((~live).sum())} rows with a zero or undefined quaternion: their "
+                "attitude is interpolated from the rows beside them",
+            )
         out["phi"], out["theta"], out["psi"] = euler_from_rotation(rot).T
     if source.frame == "enu_flu":
         _to_ned_frd(out, origin)

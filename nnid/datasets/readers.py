@@ -138,8 +138,14 @@ def _resample(
         out = values[np.clip(idx, 0, len(t_src) - 1)]
     else:
         wrap = np.zeros(values.shape[1], bool) if circular is None else circular
-        values = np.where(wrap, np.unwrap(values, axis=0), values)
-        out = np.stack([np.interp(grid, t_src, values[:, k]) for k in range(values.shape[1])], 1)
+        out = np.full((grid.size, values.shape[1]), np.nan)
+        for k in range(values.shape[1]):
+            # an undefined sample (a zero quaternion's angles) is bridged, not spread: np.unwrap
+            # carried one NaN into every later sample of the run
+            ok = np.isfinite(values[:, k])
+            if ok.any():
+                v = np.unwrap(values[ok, k]) if wrap[k] else values[ok, k]
+                out[:, k] = np.interp(grid, t_src[ok], v)
         out = np.where(wrap, (out + np.pi) % (2 * np.pi) - np.pi, out)
     return out, t_src
 
