@@ -319,7 +319,7 @@ def _prepare(log: pd.DataFrame, spec, report: CleaningReport) -> pd.DataFrame:
         log = derive_velocities(log, spec.savgol_window, spec.savgol_order, report)
     log = bridge_from_pose(log, spec.savgol_window, spec.savgol_order, report=report)
     if spec.noise > 0:
-        absent = [c for c in spec.noise_columns if c not in log]
+        absent = [c for c in spec.noise_columns or [] if c not in log]
         if absent:  # no noise at all, with the report saying it was added
             raise NnidInputError(
                 f"noise_columns names {', '.join(absent)}, which the log does not have "

@@ -479,6 +479,11 @@ def test_a_run_in_no_part_of_a_named_split_is_said_and_noise_on_no_column_refuse
     assert "experiments c are in no part of the split" in " ".join(run.output.split())
     report = json.loads((tmp_path / "out" / "metrics.json").read_text())
     assert report["split"]["parts"]["train"][0]["experiment"] == "a"
+    cfg.write_text(TRAIN.replace("[data]\n", "[data]\nnoise = 0.1\n"))  # the default columns
+    run = CliRunner().invoke(app, [*_args("train", cfg, tmp_path)[:-1], str(tmp_path / "d")])
+    assert (
+        run.exit_code == 0 and "white noise of 0.1" in (tmp_path / "d" / "cleaning.md").read_text()
+    )
     cfg.write_text(TRAIN.replace("[data]\n", '[data]\nnoise = 0.1\nnoise_columns = ["uu"]\n'))
     run = CliRunner().invoke(app, [*_args("train", cfg, tmp_path)[:-1], str(tmp_path / "n")])
     assert run.exit_code == 2 and "data.noise_columns" in run.output, run.output
