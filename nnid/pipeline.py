@@ -203,11 +203,12 @@ def load_inputs(
         inputs = Inputs(*load_log(path, reader), veh)
         source = path
         if physics and veh is not None:  # the inputs the vehicle reads, said against the log
-            from nnid.datasets.arrays import logged_inputs
+            from nnid.datasets.arrays import check_forces_match_commands, logged_inputs
             from nnid.datasets.preprocess import check_attitude, check_velocities
 
             try:
                 logged_inputs(inputs.log, veh)
+                check_forces_match_commands(inputs.log, veh)
                 if any(m.kind in PHYSICS_KINDS for m in models):
                     check_attitude(inputs.log, veh)
                 for m in models:  # the velocities the fit needs, said against the log
@@ -247,6 +248,16 @@ def load_inputs(
         _check_sampling(inputs.log, models, source)
     inputs.log = _prepare(inputs.log, spec, inputs.report)
     return inputs
+
+
+def loaded_inputs(*args, **kwargs) -> tuple[Inputs, list[str]]:
+    """:func:`load_inputs` and the warnings it raised about the data, each once: they belong
+    in the run's record (``metrics.json``, ``comparison.json``, the reports), not only on the
+    console, and no fit need raise them again."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        inputs = load_inputs(*args, **kwargs)
+    return inputs, warning_messages(caught)
 
 
 def _check_sampling(log: pd.DataFrame, models: list, path: str) -> None:
@@ -467,18 +478,22 @@ def k_steps(log: pd.DataFrame, seconds: float | None) -> int | None:
     return max(1, round(seconds / dt))
 
 
-def unscored_k_step(part: str, log: pd.DataFrame, scores: dict, cfg) -> list[str]:
-    """The warning for a held-out part none of whose k-step predictions was scored: each needs
-    ``k_step_s`` of its run before it, after the warm-up, and no run of the part is that long
-    (its report says "not scored"; this says why, and what would score it)."""
+def unscored_k_step(part: str, log: pd.DataFrame, scores: dict, cfg, model) -> list[str]:
+    """The warning for a held-out part none of whose k-step predictions was scored, with the
+    horizon that would score one: a prediction k samples ahead is scored from the run's
+    sample w + k − 1 on (w the model's own warm-up samples; :func:`nnid.evaluation.evaluate.
+    evaluate`), so the longest run of n samples scores k up to n − w (the report says "not
+    scored"; this says why)."""
     if scores.get("k_step_scored") != 0 or not len(log):
         return []
-    spans = log.groupby("experiment", sort=False)["t"].agg(lambda t: t.iloc[-1] - t.iloc[0])
+    longest = max(len(idx) for _, idx in experiments(log))
+    dt = float(np.median(np.diff(log["t"].to_numpy(np.float64))))
+    own = model.warmup_samples_
     return [
         f"k_step_s = {cfg.k_step_s:g} s: no {part} run is long enough for a k-step prediction "
-        f"after its {cfg.warmup_s:g}-s warm-up (the longest lasts {spans.max():.4g} s), so the "
-        f"{part} part's k-step error was not scored; choose k_step_s below "
-        f"{max(spans.max() - cfg.warmup_s, 0.0):.4g} s"
+        f"(the longest has {longest} samples, {own} of them the model's own warm-up), so the "
+        f"{part} part's k-step error was not scored; a k_step_s of at most "
+        f"{max(longest - own, 0) * dt:.4g} s would score it"
     ]
 
 
@@ -528,7 +543,7 @@ def run_train(
     """Fit the configured model on the training split; score it on every split."""
     start = time.perf_counter()
     source = str(config_path)
-    inputs = load_inputs(cfg, config_path, [cfg.model], data, vehicle, columns)
+    inputs, loaded = loaded_inputs(cfg, config_path, [cfg.model], data, vehicle, columns)
     split = make_split(inputs.log, cfg.split, source, inputs.report, cfg.warmup_s)
     model = cfg.model.build(inputs.vehicle)
     caught = fit_model(model, split, progress or silent, "model", cfg.model)
@@ -549,7 +564,7 @@ def run_train(
         "validation": score(model, split.validation, cfg, k, replay),
         "validation_used_for": model.validation_use,
         "describe": {key: v for key, v in description.items() if key != "params"},
-        "warnings": caught,
+        "warnings": list(dict.fromkeys([*loaded, *caught])),
         "split": split.record,
         "warmup_s": cfg.warmup_s,
         "k_step_s": cfg.k_step_s,
@@ -558,7 +573,7 @@ def run_train(
     if "test" in parts:
         metrics["test"] = score(model, split.test, cfg, k, replay)
     for p in parts:
-        caught.extend(unscored_k_step(p, split[p], metrics[p], cfg))
+        metrics["warnings"] += unscored_k_step(p, split[p], metrics[p], cfg, model)
     base = model.baseline()
     if base is not None:
         metrics["baseline"] = {
@@ -701,14 +716,13 @@ def run_compare(
     start = time.perf_counter()
     report = progress or silent
     source = str(config_path)
-    inputs = load_inputs(cfg, config_path, list(cfg.models), data, vehicle, columns)
+    inputs, said = loaded_inputs(cfg, config_path, list(cfg.models), data, vehicle, columns)
     split = make_split(inputs.log, cfg.split, source, inputs.report, cfg.warmup_s)
     held_name = "test" if len(split.test) else "validation"
     held = split[held_name]
     k = k_steps(held, cfg.k_step_s)
     replay = replay_of(inputs, inputs.log) if cfg.replay_autopilot else None
     rows, free_runs, forces, measured_force = [], {}, {}, None
-    said: list[str] = []  # the comparison's own warnings; each model's are in its row
     for i, spec in enumerate(cfg.models):
         name = spec.label()
         report(i, len(cfg.models), f"fitting {name}")
@@ -744,7 +758,7 @@ def run_compare(
         )
         if held_name == "test":
             row["test"] = score(model, held, cfg, k, replay, predicted)
-        said += [m for m in unscored_k_step(held_name, held, row[held_name], cfg) if m not in said]
+        row["warnings"] += unscored_k_step(held_name, held, row[held_name], cfg, model)
         rows.append(row)
         free_runs[name] = predicted["free_run"]
         with np.errstate(all="ignore"):

@@ -471,9 +471,10 @@ def test_follow_refuses_what_the_whole_log_reader_refuses(vehicle, monitor, tmp_
 def test_forces_and_commands_that_disagree_are_said_once(vehicle, tmp_path):
     """A log with all six forces and every thruster's command reads the forces and leaves the
     commands unread: with the forces all zero the fit diverged and nothing said why. Where
-    they disagree it is said, once at the console (the run's warning and the command's own
-    record were printed twice); where they agree, nothing is."""
-    from nnid.datasets.arrays import logged_inputs
+    they disagree it is said once, against the whole log, at the console and in the run's
+    record (train printed it twice, compare once per model more); where they agree, nothing
+    is."""
+    from nnid.datasets.arrays import check_forces_match_commands
     from nnid.datasets.log import TAU
 
     log = simulate_faults(vehicle, 20, seed=55, experiment="t55")
@@ -481,16 +482,25 @@ def test_forces_and_commands_that_disagree_are_said_once(vehicle, tmp_path):
     agree = log.assign(**dict(zip(TAU, Actuation(vehicle).nominal(cmds).T, strict=True)))
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        _, forces = logged_inputs(agree, vehicle)
-    assert forces
+        check_forces_match_commands(agree, vehicle)
     zero = log.assign(**dict.fromkeys(TAU, 0.0))
     with pytest.warns(UserWarning, match="forces tau_X, tau_Y, tau_Z, tau_K, tau_M, tau_N differ"):
-        logged_inputs(zero, vehicle)
+        check_forces_match_commands(zero, vehicle)
     zero.to_csv(tmp_path / "zero.csv", index=False)
-    config = str(REPO / "configs" / "fossen_ls.toml")
-    data, out = str(tmp_path / "zero.csv"), str(tmp_path / "o")
-    res = CliRunner().invoke(
-        app, ["train", config, "--data", data, "--vehicle", str(OCTO), "--out", out]
+    data = str(tmp_path / "zero.csv")
+    compare = tmp_path / "compare.toml"
+    compare.write_text(
+        'kind = "compare"\n[split]\nby = "block"\n[[models]]\nkind = "fossen"\nname = "a"\n'
+        '[[models]]\nkind = "fossen"\nname = "b"\n'
     )
-    assert res.exit_code == 0, res.output
-    assert " ".join(res.output.split()).count("differ from what its thruster commands give") == 1
+    said = "differ from what its thruster commands give"
+    for config in (str(REPO / "configs" / "fossen_ls.toml"), str(compare)):
+        out = tmp_path / Path(config).stem
+        res = CliRunner().invoke(
+            app, ["train" if "ls" in config else "compare", config, "--data", data,
+                  "--vehicle", str(OCTO), "--out", str(out)]
+        )  # fmt: skip
+        assert res.exit_code == 0, res.output
+        assert " ".join(res.output.split()).count(said) == 1, res.output
+        record = out / ("metrics.json" if "ls" in config else "comparison.json")
+        assert said in record.read_text()

@@ -89,12 +89,8 @@ def logged_inputs(log: pd.DataFrame, vehicle) -> tuple[np.ndarray, bool]:
     :class:`NnidInputError` naming the missing columns and the forces the log has."""
     if all(c in log for c in TAU):
         # the forces drive the model; a command no thruster takes would be read by nothing
-        cols = [f"cmd_{t.name}" for t in vehicle.thrusters]
-        check_commands(log.columns, cols, vehicle.name)
-        tau = log[list(TAU)].to_numpy(np.float64)
-        if cols and all(c in log for c in cols):
-            _check_forces_match_commands(tau, log[cols].to_numpy(np.float64), vehicle)
-        return tau, True
+        check_commands(log.columns, [f"cmd_{t.name}" for t in vehicle.thrusters], vehicle.name)
+        return log[list(TAU)].to_numpy(np.float64), True
     # a log's columns, not a setting: no config field to name
     if not vehicle.thrusters:
         raise NnidInputError(
@@ -116,11 +112,16 @@ def logged_inputs(log: pd.DataFrame, vehicle) -> tuple[np.ndarray, bool]:
     return log[cols].to_numpy(np.float64), False
 
 
-def _check_forces_match_commands(tau: np.ndarray, commands: np.ndarray, vehicle) -> None:
+def check_forces_match_commands(log: pd.DataFrame, vehicle) -> None:
     """Warn where a log holds both the six forces and every thruster's command and the two
-    disagree (beyond a tenth of the forces' spread in a DOF): the forces are what the model
-    reads, and the commands are left unread, so the user should know which to trust."""
-    nominal = Actuation(vehicle).nominal(commands)
+    disagree (beyond a tenth of the forces' spread in a DOF): :func:`logged_inputs` reads the
+    forces and leaves the commands unread, so the user should know which to trust. Said once
+    against the whole log (the pipeline calls it as it loads one), not by every fit."""
+    cols = [f"cmd_{t.name}" for t in vehicle.thrusters]
+    if not cols or not all(c in log for c in (*TAU, *cols)):
+        return
+    tau = log[list(TAU)].to_numpy(np.float64)
+    nominal = Actuation(vehicle).nominal(log[cols].to_numpy(np.float64), deadband=True)
     ok = np.isfinite(tau).all(1) & np.isfinite(nominal).all(1)
     if not ok.any():
         return
@@ -132,7 +133,7 @@ def _check_forces_match_commands(tau: np.ndarray, commands: np.ndarray, vehicle)
             f"the log's forces {', '.join(off)} differ from what its thruster commands give "
             f"through vehicle '{vehicle.name}' (beyond a tenth of their spread): the forces "
             "are read and the commands are not; drop the column you do not trust",
-            stacklevel=3,
+            stacklevel=2,
         )
 
 
