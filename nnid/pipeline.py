@@ -204,13 +204,11 @@ def load_inputs(
         source = path
         if physics and veh is not None:  # the inputs the vehicle reads, said against the log
             from nnid.datasets.arrays import check_forces_match_commands, logged_inputs
-            from nnid.datasets.preprocess import check_attitude, check_velocities
+            from nnid.datasets.preprocess import check_velocities
 
             try:
                 logged_inputs(inputs.log, veh)
                 check_forces_match_commands(inputs.log, veh)
-                if any(m.kind in PHYSICS_KINDS for m in models):
-                    check_attitude(inputs.log, veh)
                 for m in models:  # the velocities the fit needs, said against the log
                     if m.kind in ("sindy", "synthesis"):
                         check_velocities(inputs.log.columns, fitted_dofs(m), WHOLE_LIBRARY)
@@ -246,6 +244,15 @@ def load_inputs(
         inputs.report.add("experiments", f"kept {', '.join(spec.experiments)}")
     if source is not None:  # the runs kept: one left out may be sampled as it likes
         _check_sampling(inputs.log, models, source)
+        # a model with no dofs fits every DOF the data excites: any of them may read the angle
+        fitted = [d for m in models if m.kind in PHYSICS_KINDS for d in fitted_dofs(m) or DOFS]
+        if fitted and inputs.vehicle is not None:
+            from nnid.datasets.preprocess import check_attitude
+
+            try:
+                check_attitude(inputs.log, inputs.vehicle, list(dict.fromkeys(fitted)))
+            except NnidInputError as err:
+                raise err.with_source(source) from None
     inputs.log = _prepare(inputs.log, spec, inputs.report)
     return inputs
 

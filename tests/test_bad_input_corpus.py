@@ -242,8 +242,9 @@ def _log_cases() -> list[Case]:
     def no_attitude(command: str):  # rolling (p) with no phi: read as level, the restoring
         # moments of the octorov were wrong, K_pdot came out +0.49, and detect alarmed
         def args(tmp, fx):
-            # the fixture's autopilot holds roll within 0.02 rad: a vehicle that rolls more
-            log = fx["octo_log"].drop(columns=["phi", "theta"]).assign(p=lambda d: 10 * d["p"])
+            # the fixture's autopilot holds roll within 0.02 rad: one that rolls ±0.3 rad
+            log = fx["octo_log"].drop(columns=["phi", "theta"])
+            log["p"] += 0.3 * np.cos(log["t"])
             data = _write_log(tmp, "no attitude", log)
             return _command(command, tmp, fx, data=data, vehicle=OCTO)
 

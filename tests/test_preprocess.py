@@ -172,3 +172,30 @@ def test_a_savgol_window_too_short_for_its_order_is_widened_with_a_warning():
         warnings.simplefilter("error")
         derive_accelerations(log, window_s=2.0, order=4)
         assert savgol_window(0.5, 5.0, 4) == 7
+
+
+@pytest.mark.parametrize(
+    ("roll_rate", "dofs", "refused"),
+    [
+        ("bias", "uvwpqr", False),  # a level vehicle, a gyro biased by 0.5°/s: not a roll
+        ("small", "uvwpqr", False),  # ±0.03 rad: the restoring moment it misses is noise
+        ("rolls", "uvwpqr", True),  # ±0.3 rad
+        ("rolls", "ur", False),  # the surge and yaw restoring forces of this vehicle read no φ
+    ],
+)
+def test_a_log_without_roll_is_refused_only_where_the_vehicle_rolled(roll_rate, dofs, refused):
+    """The check integrates p with its mean (a gyro's bias) taken out, and asks whether the
+    restoring forces of the fitted DOFs read φ (Weiss eq. 30): a biased level vehicle was
+    refused (0.5°/s turns 1 rad in two minutes), and so was one whose fit reads no φ."""
+    from nnid.datasets.preprocess import check_attitude
+
+    vehicle = load_vehicle("seamor")  # r_g below r_b: roll and pitch moments read φ and θ
+    t = np.arange(0, 120, 0.1)
+    p = {"bias": np.full(t.size, np.radians(0.5)), "small": 0.03 * np.cos(t),
+         "rolls": 0.3 * np.cos(t)}[roll_rate]  # fmt: skip
+    log = pd.DataFrame({"t": t, "experiment": "a", "u": 0.2, "p": p, "q": 0.0, "r": 0.0})
+    if refused:
+        with pytest.raises(NnidInputError, match="no phi column, and its p in experiment 'a'"):
+            check_attitude(log, vehicle, list(dofs))
+    else:
+        check_attitude(log, vehicle, list(dofs))

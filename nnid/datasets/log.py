@@ -151,6 +151,13 @@ UNWRAPPED = (
 )
 
 
+def turned_by(t: np.ndarray, rate: np.ndarray) -> np.ndarray:
+    """The angle a body rate turns through from the first sample on (trapezoids); a gap in
+    the rate (a dropout) adds no turning instead of making every later value NaN."""
+    steps = np.nan_to_num(0.5 * (rate[1:] + rate[:-1]) * np.diff(t))
+    return np.concatenate([[0.0], np.cumsum(steps)])
+
+
 def looks_like_degrees(df: pd.DataFrame, col: str) -> bool:
     """Whether angle column ``col`` of ``df`` (``t``, optional ``experiment``) holds degrees:
     values past ±2π, unless the log's body rate of that angle (:data:`RATE_OF`) says they are
@@ -172,9 +179,7 @@ def looks_like_degrees(df: pd.DataFrame, col: str) -> bool:
     lag = max(1, round(1.0 / step)) if np.isfinite(step) and step > 0 else 1
     if t.size <= lag:
         return True
-    # a gap in r (a dropout) adds no turning instead of making every later window NaN
-    rate_dt = np.nan_to_num(0.5 * (r[1:] + r[:-1]) * np.diff(t))
-    turned = np.concatenate([[0.0], np.cumsum(rate_dt)])
+    turned = turned_by(t, r)
     d_angle = np.abs(angle[lag:] - angle[:-lag])
     d_turn = np.abs(turned[lag:] - turned[:-lag])
     use = (label[lag:] == label[:-lag]) & np.isfinite(d_angle) & (d_turn > 0.05)

@@ -14,6 +14,7 @@
 from __future__ import annotations
 
 import warnings
+from collections.abc import Sequence
 from typing import Literal
 
 import numpy as np
@@ -229,30 +230,45 @@ def check_velocities(
         )
 
 
-#: roll or pitch turned through more than this (rad, about 3°) by a log's own rates
-TILTED = 0.05
+#: roll or pitch (rad, about 6°) that a log's own rates turn the vehicle through either way,
+#: after their mean (a gyro's bias) is taken out, beyond which a level vehicle is no reading
+TILTED = 0.1
 
 
-def check_attitude(log: pd.DataFrame, vehicle) -> None:
+def check_attitude(log: pd.DataFrame, vehicle, dofs: Sequence[str]) -> None:
     """Refuse a log without roll or pitch whose own rates p, q show the vehicle rolling or
-    pitching (more than :data:`TILTED` within a run), where the vehicle file has restoring
-    moments (r_g ≠ r_b) or weight ≠ buoyancy: read as zero, the attitude makes the restoring
-    forces those of a level vehicle, and the fit puts the error in the added mass."""
-    if (vehicle.r_g == vehicle.r_b) and vehicle.weight == vehicle.buoyancy:
-        return
-    for angle, rate in (("phi", "p"), ("theta", "q")):
+    pitching (more than :data:`TILTED` either way within a run, the rate's mean, a gyro bias,
+    taken out), where the restoring forces of the fitted ``dofs`` depend on that angle (Weiss
+    eq. 30: weight ≠ buoyancy, or r_g ≠ r_b across it): read as zero, the attitude makes them
+    those of a level vehicle, and the fit puts the error in the added mass."""
+    import torch
+
+    from nnid.datasets.log import turned_by
+    from nnid.physics.dofs import DOFS
+    from nnid.physics.restoring import restoring_force
+
+    def restoring(phi: float, theta: float) -> np.ndarray:
+        eta = torch.tensor([0.0, 0.0, 0.0, phi, theta, 0.0], dtype=torch.float64)
+        arms = [torch.tensor(r, dtype=torch.float64) for r in (vehicle.r_g, vehicle.r_b)]
+        g = restoring_force(eta, vehicle.weight, vehicle.buoyancy, *arms).numpy()
+        return g[[DOFS.index(d) for d in dofs]]
+
+    level = restoring(0.0, 0.0)
+    for angle, rate, tilt in (("phi", "p", (TILTED, 0.0)), ("theta", "q", (0.0, TILTED))):
         if angle in log or rate not in log or "t" not in log:
             continue
-        for _, idx in experiments(log):
-            t = log.loc[idx, "t"].to_numpy(np.float64)
-            w = np.nan_to_num(log.loc[idx, rate].to_numpy(np.float64))
-            turned = np.concatenate([[0.0], np.cumsum(0.5 * (w[1:] + w[:-1]) * np.diff(t))])
-            if np.ptp(turned) > TILTED:
+        if np.allclose(restoring(*tilt), level, rtol=0.0, atol=1e-9 * (1 + vehicle.weight)):
+            continue  # the fitted DOFs' restoring forces do not read this angle
+        for exp, idx in experiments(log):
+            w = log.loc[idx, rate].to_numpy(np.float64)
+            turned = turned_by(log.loc[idx, "t"].to_numpy(np.float64), w - np.nanmean(w))
+            if np.ptp(turned) > 2 * TILTED:
+                run = f" in experiment {exp!r}" if exp is not None else ""
                 raise NnidInputError(
-                    f"the log has no {angle} column, and its {rate} turns the vehicle through "
-                    f"{np.ptp(turned):.2g} rad: the restoring forces of {vehicle.name} (r_g, "
-                    f"r_b, weight, buoyancy) need the attitude; log {angle} (or map it in a "
-                    "reader config)",
+                    f"the log has no {angle} column, and its {rate}{run} turns the vehicle "
+                    f"through {np.ptp(turned):.2g} rad (its mean taken out): the restoring "
+                    f"forces of {vehicle.name} in {', '.join(dofs)} need the attitude; log "
+                    f"{angle} (or map it in a reader config)",
                     field=angle,
                 )
 

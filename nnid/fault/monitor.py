@@ -131,7 +131,7 @@ def monitor_inputs(log: pd.DataFrame, plant) -> dict[str, np.ndarray]:
             field=missing[0],
         )
     warn_far_beyond_range(log, plant.vehicle)
-    check_attitude(log, plant.vehicle)
+    check_attitude(log, plant.vehicle, plant.dofs_)
     log = prepare_motion(log, plant.dofs_, plant.savgol_window, plant.savgol_order, False)
     data = motion_arrays(log)
     return {
