@@ -693,17 +693,32 @@ def test_quaternion_columns_that_are_no_quaternion_are_refused(tmp_path):
     df = pd.DataFrame({"t": np.arange(n) * 0.1, "qw": np.cos(yaw / 2), "qx": 0.0, "qy": 0.0,
                        "qz": np.sin(yaw / 2), "u": np.linspace(0, 2.0, n), "f": 1.0})  # fmt: skip
     df.loc[0, ["qw", "qz"]] = 0.0
+    df.loc[30, ["qw", "qz"]] = 0.0  # one inside the run: bridged by its neighbours
     df.to_csv(tmp_path / "odom.csv", index=False)
     body = '[[sources]]\nfile = "odom.csv"\ntime = "t"\ncolumns = { u = "u", tau_X = "f" }\n'
     good = _write_map(tmp_path / "good.toml", body + 'quaternion = ["qw", "qx", "qy", "qz"]\n')
     log, report = load_log(tmp_path, good)
-    # the zero row is bridged (its one NaN made the whole run's angles NaN, "empty")
-    assert np.allclose(log["psi"].iloc[1:], yaw[1:]) and np.isfinite(log["psi"]).all()
+    # the zero first row is a gap (its one NaN made the whole run's angles NaN, "empty")
+    assert np.allclose(log["psi"].iloc[1:], yaw[1:]) and np.isnan(log["psi"].iloc[0])
     assert any(s.step == "zero quaternion" for s in report.steps)
     wrong = _write_map(tmp_path / "wrong.toml", body + 'quaternion = ["qw", "qx", "qy", "u"]\n')
-    with pytest.raises(NnidInputError, match="qw, qx, qy, u are not unit quaternions") as err:
+    with pytest.raises(NnidInputError, match="qw, qx, qy, u do not keep one norm") as err:
         load_log(tmp_path, wrong)
     assert err.value.field == "quaternion"
+    # stored at a fixed scale (integers × 10⁴): one norm throughout, read as before
+    df[["qw", "qx", "qy", "qz"]] *= 1e4
+    df.to_csv(tmp_path / "odom.csv", index=False)
+    scaled, _ = load_log(tmp_path, good)
+    assert np.allclose(scaled["psi"], log["psi"], equal_nan=True)
+    # thirty seconds of zero quaternions (an AHRS not yet up): a gap, not one held heading
+    t = np.arange(600) * 0.1
+    yaw = 0.5 * np.sin(0.2 * t)
+    late = pd.DataFrame({"t": t, "qw": np.cos(yaw / 2), "qx": 0.0, "qy": 0.0,
+                         "qz": np.sin(yaw / 2), "u": 0.1, "f": 1.0})  # fmt: skip
+    late.loc[:299, ["qw", "qz"]] = 0.0
+    late.to_csv(tmp_path / "odom.csv", index=False)
+    held, _ = load_log(tmp_path, good)
+    assert held["psi"].iloc[:300].isna().all() and np.allclose(held["psi"].iloc[300:], yaw[300:])
 
 
 @pytest.mark.parametrize("how", ["date-times", "durations", "index"])

@@ -21,7 +21,8 @@ from nnid.datasets.log import ANGLES, blank_labels, looks_like_degrees, refuse_r
 from nnid.errors import NnidInputError
 from nnid.validation import shown
 
-#: how far from 1 a logged quaternion's norm may be (sensors write them unit to ~1e-3)
+#: how far a logged quaternion's norm may be from the log's median norm (sensors write them
+#: unit to ~1e-3, some as integers at a fixed scale)
 QUATERNION_SLACK = 0.1
 
 
@@ -237,13 +238,16 @@ def map_source(
         quat = values[source.quaternion].to_numpy(dtype=np.float64)
         norm = np.linalg.norm(quat, axis=1)
         live = np.isfinite(norm) & (norm > 0)  # a zero quaternion: a sensor not yet initialised
-        off = live & (np.abs(norm - 1.0) > QUATERNION_SLACK)
+        # against their median: a constant norm is a storage scale (q × 10⁴), a varying one
+        # four columns that are not one quaternion
+        scale = float(np.median(norm[live])) if live.any() else 1.0
+        off = live & (np.abs(norm / scale - 1.0) > QUATERNION_SLACK)
         if off.sum() > 0.05 * max(live.sum(), 1):  # normalising would hide the wrong columns
             raise NnidInputError(
-                f"the quaternion columns {', '.join(source.quaternion)} are not unit "
-                f"quaternions (norms {np.min(norm[live]):.3g} to {np.max(norm[live]):.3g}, "
-                f"{int(off.sum())} rows off by more than {QUATERNION_SLACK:.0%}): are they the "
-                "w, x, y, z of one orientation?",
+                f"the quaternion columns {', '.join(source.quaternion)} do not keep one norm "
+                f"(from {np.min(norm[live]):.3g} to {np.max(norm[live]):.3g}; {int(off.sum())} "
+                f"rows off their median by more than {QUATERNION_SLACK:.0%}): are they the w, x, "
+                "y, z of one orientation?",
                 source=origin,
                 field="quaternion",
             )
@@ -252,7 +256,7 @@ def map_source(
             report.add(
                 "zero quaternion",
                 f"{origin}: {int((~live).sum())} rows with a zero or undefined quaternion: their "
-                "attitude is interpolated from the rows beside them",
+                "attitude is interpolated where the rows beside them are close, else a gap",
             )
         out["phi"], out["theta"], out["psi"] = euler_from_rotation(rot).T
     if source.frame == "enu_flu":

@@ -117,6 +117,20 @@ def _grid(start: float, stop: float, rate: float) -> np.ndarray:
     return start + np.arange(int(np.floor((stop - start) * rate + 1e-9)) + 1) / rate
 
 
+def _bridged(grid: np.ndarray, t_ok: np.ndarray, longest: float) -> np.ndarray:
+    """Where on ``grid`` a column with defined samples only at ``t_ok`` has a value: on one, or
+    between two at most ``longest`` apart (not before the first, nor after the last)."""
+    if not t_ok.size:
+        return np.zeros(grid.size, dtype=bool)
+    nxt = np.searchsorted(t_ok, grid, side="right")  # the first defined sample after
+    prev = nxt - 1
+    before, after = t_ok[np.clip(prev, 0, None)], t_ok[np.clip(nxt, 0, t_ok.size - 1)]
+    # on a sample, to the rounding of the relative times the grid and the source are in
+    near = np.minimum(np.abs(grid - before), np.abs(after - grid)) <= 1e-9 * (1 + np.abs(grid))
+    inside = (prev >= 0) & (nxt < t_ok.size)
+    return near | (inside & (after - before <= longest))
+
+
 def _resample(
     t_src: np.ndarray,
     values: np.ndarray,
@@ -139,13 +153,17 @@ def _resample(
     else:
         wrap = np.zeros(values.shape[1], bool) if circular is None else circular
         out = np.full((grid.size, values.shape[1]), np.nan)
+        typical = float(np.median(np.diff(t_src))) if t_src.size > 1 else np.inf
         for k in range(values.shape[1]):
-            # an undefined sample (a zero quaternion's angles) is bridged, not spread: np.unwrap
+            # an undefined sample (a zero quaternion's angles) is bridged where its neighbours
+            # are close, and stays a gap (for nnid.datasets.gaps) where they are not: np.unwrap
             # carried one NaN into every later sample of the run
             ok = np.isfinite(values[:, k])
             if ok.any():
                 v = np.unwrap(values[ok, k]) if wrap[k] else values[ok, k]
                 out[:, k] = np.interp(grid, t_src[ok], v)
+            if not ok.all():
+                out[~_bridged(grid, t_src[ok], SILENCE * typical), k] = np.nan
         out = np.where(wrap, (out + np.pi) % (2 * np.pi) - np.pi, out)
     return out, t_src
 
