@@ -156,9 +156,11 @@ def test_a_thruster_giving_more_thrust_or_reversed_is_not_called_a_loss(
     assert (a["kind"], a["thruster"]) == ("model_change", "v2")
     assert abs(a["efficiency"] - efficiency) <= 0.1
     assert a["efficiency_low"] < a["efficiency"] < a["efficiency_high"]
-    assert not a["efficiency_low"] <= 1.0 if efficiency > 1 else a["efficiency_high"] < 0.0
+    assert not a["efficiency_low"] <= 1.0 if efficiency > 1 else a["efficiency_high"] < -0.1
     line = describe_alarm(a)
     assert said in line and f"gives {100 * a['efficiency']:.0f} % of its thrust" in line
+    low, high = (f"{100 * a[k]:.0f}" for k in ("efficiency_low", "efficiency_high"))
+    assert f"(95 % interval {low} to {high} %)" in line  # "-50--30 %" read as a range of dashes
 
 
 def test_external_force_is_not_blamed_on_a_thruster(vehicle, monitor):

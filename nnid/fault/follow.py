@@ -259,7 +259,8 @@ def describe_alarm(a: dict) -> str:
     if a.get("thruster") and a.get("efficiency") is not None:
         what = (
             f"thruster {a['thruster']} gives {100 * a['efficiency']:.0f} % of its thrust "
-            f"(95 % interval {100 * a['efficiency_low']:.0f}-{100 * a['efficiency_high']:.0f} %)"
+            f"(95 % interval {100 * a['efficiency_low']:.0f} to "
+            f"{100 * a['efficiency_high']:.0f} %)"
         )
         if a["kind"] != "thruster_loss":  # more than nominal, or reversed: not a loss
             what = f"{a['meaning']}: {what}"

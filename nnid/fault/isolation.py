@@ -209,7 +209,7 @@ def isolate(monitor, data: dict, residual: np.ndarray, rows: np.ndarray) -> Diag
         out.thruster = s.name.split(".", 1)[1]
         eff = float(1.0 - s.delta)
         lo, hi = eff - 1.96 * s.stderr, eff + 1.96 * s.stderr
-        if eff >= -STOPPED_SLACK and lo <= 1.0:  # a loss: said within what it can be
+        if hi >= -STOPPED_SLACK and lo <= 1.0:  # a loss the interval allows: said so
             out.efficiency = float(np.clip(eff, 0.0, 1.0))
             out.efficiency_interval = (float(np.clip(lo, 0, 1)), float(np.clip(hi, 0, 1)))
         else:  # more thrust than nominal, or reversed: a change, not a loss, and said as one

@@ -101,7 +101,7 @@ def detect_html(monitor, result: DetectResult, source: str = "") -> str:
         body = []
         for a in result.alarms:
             eff = (
-                f"{a['efficiency']:.2f} ({a['efficiency_low']:.2f}-{a['efficiency_high']:.2f})"
+                f"{a['efficiency']:.2f} ({a['efficiency_low']:.2f} to {a['efficiency_high']:.2f})"
                 if a["efficiency"] is not None
                 else "-"
             )
@@ -115,7 +115,9 @@ def detect_html(monitor, result: DetectResult, source: str = "") -> str:
         out.append(
             definitions(
                 {
-                    "efficiency": "the thruster's remaining fraction of nominal thrust",
+                    "efficiency": "the thruster's thrust as a fraction of nominal: what is "
+                    "left of it for a thruster_loss, above 1 or below 0 for a thruster that "
+                    "gives more or pushes against its command (a model_change)",
                     "effect": "the change named in nnid's effect vocabulary",
                     "severity": "peak of the monitor statistic over its threshold after the alarm",
                     "confidence": "posterior weight of the named hypothesis and of those the "
