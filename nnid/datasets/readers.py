@@ -352,10 +352,11 @@ SILENCE = 10
 def _say_silences(
     source: Source, t_src: np.ndarray, grid: np.ndarray, exp, report: CleaningReport
 ) -> None:
-    """Say (warning and cleaning report) what the time base makes up where a source is
-    silent for :data:`SILENCE` of its typical intervals: a measured source interpolated over
-    a hole (no ``gap`` set to split the run there), or a command held past its last sample
-    (no ``hold_timeout`` to cut it); before, 400 rows became 801 samples without a word."""
+    """Say what the time base makes up where a source is silent for :data:`SILENCE` of its
+    typical intervals: a measured source interpolated over a hole (no ``gap`` set to split the
+    run there; a warning and the cleaning report), or a command held past its last sample (no
+    ``hold_timeout`` to cut it; the cleaning report). Before, 400 rows became 801 samples
+    without a word."""
     steps = np.diff(t_src)
     if not steps.size:
         return
@@ -371,12 +372,13 @@ def _say_silences(
             report.add("interpolated over a silence", said)
             warnings.warn(said, stacklevel=4)
     elif source.hold_timeout is None and grid[-1] - t_src[-1] > SILENCE * typical:
-        said = (
+        # only recorded: a command logged on change holds until the next one by design, and
+        # a log that ends on a held command looks the same as one whose commands stopped
+        report.add(
+            "held past its end",
             f"'{exp}': {source.file} ends {grid[-1] - t_src[-1]:.3g} s before the run: its last "
-            "value is held to the end; set hold_timeout to cut the run where it goes stale"
+            "value is held to the end (hold_timeout would cut the run where it goes stale)",
         )
-        report.add("held past its end", said)
-        warnings.warn(said, stacklevel=4)
 
 
 def _label_columns(cmap: ColumnMap) -> list[str]:
