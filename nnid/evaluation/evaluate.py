@@ -89,9 +89,7 @@ def score_prediction(
         if y.size == 0:
             nrmse[c] = rmse[c] = None
             continue
-        lo, hi = float(y.min()), float(y.max())
-        span = DIVERGENCE_FACTOR * max(hi - lo, 1e-12)
-        bad = ~np.isfinite(p) | (p < lo - span) | (p > hi + span)
+        bad = left_range(y, p, float(np.ptp(y)))
         if bad.any():
             diverged[c] = float(tc[np.flatnonzero(bad)[0]])
             nrmse[c] = rmse[c] = None
@@ -104,6 +102,13 @@ def score_prediction(
         vals = [out[c] for c in columns]
         out["total"] = exact_mean(vals) if vals and all(v is not None for v in vals) else None
     return nrmse, rmse, diverged
+
+
+def left_range(y: np.ndarray, p: np.ndarray, width: float) -> np.ndarray:
+    """Where prediction ``p`` has diverged: non-finite, or further than
+    :data:`DIVERGENCE_FACTOR` × ``width`` outside the range of the measured ``y``."""
+    span = DIVERGENCE_FACTOR * max(width, 1e-12)
+    return ~np.isfinite(p) | (p < float(y.min()) - span) | (p > float(y.max()) + span)
 
 
 def unscored_divergence(
@@ -125,10 +130,9 @@ def unscored_divergence(
         if not ok.any():
             continue
         group = [g for g in scored if g in VELOCITY and (g in "uvw") == (c in "uvw")]
-        widths = [float(np.ptp(log[g].to_numpy(np.float64)[mask])) for g in group]
-        span = DIVERGENCE_FACTOR * max(widths) if widths else np.inf
-        lo, hi = float(y[ok].min()), float(y[ok].max())
-        bad = ~np.isfinite(p) | (p < lo - span) | (p > hi + span)
+        cols = [log[g].to_numpy(np.float64)[mask] for g in group]
+        widths = [float(np.nanmax(v) - np.nanmin(v)) for v in cols if np.isfinite(v).any()]
+        bad = left_range(y[ok], p, max(widths) if widths else np.inf)
         if bad.any():
             out[c] = float(t[np.flatnonzero(bad)[0]])
     return out
