@@ -356,6 +356,7 @@ def test_a_few_repeated_or_late_stamps_are_repaired_and_said(tmp_path):
         ('tau_X = { from = "vx", unit = "cm" }', "tau_X in 'cm': tau_X takes no unit"),
         ('du = { from = "vx", unit = "m/s" }', "du in 'm/s': du takes no unit"),
         ('cmd_9 = { from = "vx", unit = "deg" }', "cmd_9 in 'deg': cmd_9 takes no unit"),
+        ('acc_x = { from = "vx", unit = "cm" }', "acc_x in 'cm': acc_x takes no unit"),
         ('tau_Z = { from = "vx", offset = nan }', "'sources.0.columns.tau_Z.offset'"),
     ],
 )

@@ -122,12 +122,13 @@ class Source(StrictModel):
                 raise ValueError(
                     f"{name} in {unit!r}: {name} takes {', '.join(TARGET_UNITS[name])}"
                 )
-            if unit and (name in (*TAU, *ACCELERATION) or name.startswith("cmd_")):
-                # no length or angle unit makes a force: cm on tau_X scaled it by 0.01 unseen
+            if unit and name not in TARGET_UNITS:
+                # the units are lengths, angles and their rates: cm on tau_X scaled it by 0.01
                 raise ValueError(
-                    f"{name} in {unit!r}: {name} takes no unit (forces in N and N m, "
-                    "accelerations in m/s² and rad/s², commands as the vehicle file reads "
-                    "them); convert with scale"
+                    f"{name} in {unit!r}: {name} takes no unit (a unit converts pose and "
+                    "velocity columns; forces in N and N m, accelerations in m/s² and rad/s², "
+                    "commands as the vehicle file reads them, other columns as logged); "
+                    "convert with scale"
                 )
         return columns
 

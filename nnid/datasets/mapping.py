@@ -140,6 +140,13 @@ def file_label(path: str) -> str:
     return Path(name).stem or name
 
 
+def label_columns(experiment: str | list[str] | None) -> list[str]:
+    """The columns a reader config names its runs by: ``experiment`` as a column or a list of
+    them; none for "file" (the file's name) or None (one run)."""
+    keys = [experiment] if isinstance(experiment, str) else list(experiment or [])
+    return [] if keys == ["file"] else keys
+
+
 def map_source(
     raw: pd.DataFrame,
     source: Source,
@@ -156,8 +163,7 @@ def map_source(
     if raw.empty:  # a header and no data: nothing to align, said here and not as a traceback
         raise NnidInputError("has no rows", source=origin)
     needed = [source.time, *source.quaternion, *(s.source for s in source.specs().values())]
-    keys = [experiment] if isinstance(experiment, str) else list(experiment or [])
-    keys = [] if keys == ["file"] else keys
+    keys = label_columns(experiment)
     # one source column may feed several targets (each its own offset and scale): read once
     needed = list(dict.fromkeys(needed + keys))
     for col in needed:

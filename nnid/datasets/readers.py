@@ -25,7 +25,7 @@ from nnid.datasets.ardupilot import is_ardupilot_log, read_ardupilot_sources
 from nnid.datasets.cleaning import CleaningReport
 from nnid.datasets.column_map import ColumnMap, Source, load_column_map
 from nnid.datasets.log import ANGLES, MAX_RUN_SAMPLES, REPLAY_GROUP, time_unit_slip, validate_log
-from nnid.datasets.mapping import file_label, map_source
+from nnid.datasets.mapping import file_label, label_columns, map_source
 from nnid.datasets.rosbag import is_bag, read_bag_sources
 from nnid.errors import NnidInputError
 
@@ -381,14 +381,6 @@ def _say_silences(
         )
 
 
-def _label_columns(cmap: ColumnMap) -> list[str]:
-    """The columns a reader config names its runs by (``experiment``), read as text."""
-    keys = cmap.experiment
-    if keys in (None, "file"):
-        return []
-    return [keys] if isinstance(keys, str) else list(keys)
-
-
 def read_table_sources(
     cmap: ColumnMap, root: Path, report: CleaningReport
 ) -> list[tuple[Source, pd.DataFrame]]:
@@ -418,7 +410,7 @@ def read_table_sources(
                     )
         frames = [
             map_source(
-                read_table(f, _label_columns(cmap)),
+                read_table(f, label_columns(cmap.experiment)),
                 source,
                 f,
                 cmap.experiment,
