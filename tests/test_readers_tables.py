@@ -178,8 +178,9 @@ def test_a_file_named_like_a_pattern_is_read_as_itself(tmp_path):
     dive.assign(run="r9").to_csv(folder / "dive_old.csv", index=False)
     cmap = _write_map(tmp_path / "map.toml", 'experiment = "run"\n[[sources]]\nfile = "dive*.csv"'
                       '\ntime = "time"\ncolumns = { z = "depth", cmd_1 = "pwm" }\n')  # fmt: skip
-    log, _ = load_log(folder / "dive [1].csv", cmap)
+    log, report = load_log(folder / "dive [1].csv", cmap)
     assert set(log["experiment"]) == {"r1"}  # dive_old.csv's r9 stays out
+    assert "dive [1].csv" in report.steps[0].detail  # named as it is, not escaped
     both, _ = load_log(folder, cmap)
     assert set(both["experiment"]) == {"r1", "r9"}  # the pattern, under a bracketed folder
 

@@ -387,8 +387,14 @@ def read_table_sources(
     """Every source of a column map read from the tables under ``root``, mapped, not assembled."""
     tables = []
     for i, source in enumerate(cmap.sources):
-        # the folder as it is named (brackets and stars in it are no pattern), then the pattern
-        files = sorted(glob.glob(str(Path(glob.escape(str(root))) / source.file)), key=_natural)
+        # a file of that very name is itself ("run [1].csv" as a pattern matched nothing, and a
+        # star took in other files); else the pattern, under the folder as it is named
+        exact = root / source.file
+        files = (
+            [str(exact)]
+            if exact.is_file()
+            else sorted(glob.glob(str(Path(glob.escape(str(root))) / source.file)), key=_natural)
+        )
         if not files:
             raise NnidInputError(
                 f"no file matches '{source.file}' under {root}",
@@ -478,12 +484,7 @@ def load_log(
     root = Path(path)
     if root.is_file():
         cmap = cmap.model_copy(
-            # the file itself, not a pattern: "run [1].csv" matched nothing, "dive*.csv" more
-            update={
-                "sources": [
-                    s.model_copy(update={"file": glob.escape(root.name)}) for s in cmap.sources
-                ]
-            }
+            update={"sources": [s.model_copy(update={"file": root.name}) for s in cmap.sources]}
         )
         root = root.parent
     with _config_named(cmap, columns):
