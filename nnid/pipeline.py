@@ -888,7 +888,7 @@ def summary(rows: list[dict], ranking: list[str], part: str, replay: bool) -> st
         one = total(best, "one_step_nrmse")
         if unscored:
             said = ([f"diverged: {', '.join(diverged)}"] if diverged else []) + [
-                f"not scored, nothing left after the warm-up: {', '.join(unscored)}"
+                f"not scored, no sample left after the warm-ups: {', '.join(unscored)}"
             ]
             lead = f"No free run{loop} was scored on the {part} data{over} ({'; '.join(said)})"
             verdict = "how these models simulate this log was not measured"
@@ -915,6 +915,6 @@ def summary(rows: list[dict], ranking: list[str], part: str, replay: bool) -> st
         sentence += f" Diverged in free run: {', '.join(diverged)}."
     if unscored:
         sentence += (
-            f" Not scored in free run (nothing left after the warm-up): {', '.join(unscored)}."
+            f" Not scored in free run (no sample left after the warm-ups): {', '.join(unscored)}."
         )
     return sentence

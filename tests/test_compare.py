@@ -263,7 +263,7 @@ def test_the_summary_never_ranks_on_an_error_that_was_not_measured():
     rows = [row("a", free=0.2), row("b", diverged=False), row("c")]
     text = summary(rows, rank(rows, "test"), "test", False)
     assert "Diverged in free run: c." in text and "Diverged in free run: b" not in text, text
-    assert "Not scored in free run (nothing left after the warm-up): b." in text
+    assert "Not scored in free run (no sample left after the warm-ups): b." in text
     rows = [row("b", one=0.2, diverged=False), row("c", one=0.3)]
     text = summary(rows, rank(rows, "test"), "test", False)
     assert text.startswith("No free run was scored on the test data (diverged: c; not scored")

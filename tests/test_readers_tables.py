@@ -138,14 +138,15 @@ def test_enu_flu_converts_every_column_it_maps_alone(tmp_path, mapped):
     ned.insert(0, "t", np.arange(n) * 0.1)
     _enu_flu(ned).to_csv(tmp_path / "log.csv", index=False)
     keep = cols if mapped == "all" else ["z", "psi", "u", "v", "r", "tau_Y"]
-    columns = ", ".join(f"{c} = '{c}'" for c in keep)
+    columns = ", ".join(f"{c} = '{c}'" for c in keep) + ", acc_x = 'du'"  # one of the user's own
     cmap = (
         f'[[sources]]\nfile = "log.csv"\ntime = "t"\nframe = "enu_flu"\ncolumns = {{ {columns} }}\n'
     )
     log, report = load_log(tmp_path, _write_map(tmp_path / "map.toml", cmap))
     for c in keep:
         assert np.allclose(log[c], ned[c], atol=1e-12), c
-    assert any(s.step == "frame" for s in report.steps)
+    frame = [s.detail for s in report.steps if s.step == "frame"]
+    assert frame and frame[0].endswith("columns of its own left as logged: acc_x")
     if mapped != "all":  # x without y: ENU's x is NED's y, so one alone cannot be converted
         with pytest.raises(NnidInputError, match="converting the frame needs both x and y"):
             load_log(tmp_path, _write_map(tmp_path / "x.toml", cmap.replace("{ ", "{ x = 'x', ")))

@@ -17,7 +17,7 @@ from scipy.spatial.transform import Rotation
 
 from nnid.datasets.cleaning import CleaningReport
 from nnid.datasets.column_map import ColumnMap, Source
-from nnid.datasets.log import ANGLES, blank_labels, looks_like_degrees, refuse_rows
+from nnid.datasets.log import ANGLES, CONTRACT, blank_labels, looks_like_degrees, refuse_rows
 from nnid.errors import NnidInputError
 from nnid.validation import shown
 
@@ -267,7 +267,13 @@ def map_source(
         out["phi"], out["theta"], out["psi"] = euler_from_rotation(rot).T
     if source.frame == "enu_flu":
         _to_ned_frd(out, origin)
-        report.add("frame", f"{origin}: ENU/FLU converted to NED/FRD")
+        # a column of the user's own (an accelerometer's acc_x) is not the contract's: it stays
+        own = [c for c in out.columns if c not in CONTRACT and not str(c).startswith("cmd_")]
+        report.add(
+            "frame",
+            f"{origin}: ENU/FLU converted to NED/FRD"
+            + (f"; columns of its own left as logged: {', '.join(own)}" if own else ""),
+        )
     return out.reset_index(drop=True)
 
 

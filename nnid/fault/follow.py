@@ -82,8 +82,8 @@ def _numbers(row: list[str], read: list[tuple[str, int]], n: int, where: str, wi
     """The named cells of one streamed row as finite numbers within the log contract's SI
     bounds (a unit slip, a corrupt sample), as the whole-log reader checks them; else the first
     bad cell, named by its column and row (an empty motion cell too: a stream has no gap
-    bridging). A row of more or fewer cells than the header's ``width`` (a decimal comma) is
-    refused: its cells would be read under other columns."""
+    bridging). A row of more cells than the header's ``width`` (a decimal comma; the whole-log
+    reader refuses it too) or fewer is refused: its cells would be read under other columns."""
     if len(row) != width:
         raise NnidInputError(
             f"has {len(row)} fields against the header's {width} (a decimal comma, or a cell "
