@@ -656,7 +656,8 @@ class NarxModelSpec(_InputOutput):
 
     def epoch_measures(self) -> set[str]:
         """The validation measures the fit scores every epoch, in the sweep's metric names:
-        its series-parallel stage's, and the free run's where it has a simulation stage."""
+        its series-parallel stage's, and the free run's where it has a simulation stage (with
+        a validation log, which a config's split always gives: ``NarxModel._fit``)."""
         first = "one_step_nrmse" if self.multi_step == 1 else "k_step_nrmse"
         return {first} | ({"free_run_nrmse"} if self.simulation_epochs > 0 else set())
 
