@@ -213,6 +213,31 @@ BAD_CONFIGS = {
         CONFIG.replace('name = "surge"', 'name = "surge"\nx0 = [0, 0, 0, 0, 0, 180]'),
         "experiments.0.x0",
     ),
+    # accepted without a word: a signal that never acts, levels never sampled, noise unread,
+    # an autopilot of positive feedback or a heading in degrees
+    "a signal after the end": (
+        CONFIG.replace("duration = 5.0 }", "duration = 5.0, start = 1.0 }") + "duration = 0.5\n",
+        "experiments.0.signals.0.start",
+    ),
+    "levels held shorter than dt": (
+        CONFIG.replace(
+            'kind = "step", channel = "X", amplitude = 10.0, duration = 5.0',
+            'kind = "stairs", channel = "X", levels = [10.0, -10.0], hold = 0.04',
+        ),
+        "experiments.0.signals.0.hold",
+    ),
+    "a noise level without a kind": (
+        CONFIG + "[measurement]\nvelocity_noise = 0.5\n",
+        "set without a kind",
+    ),
+    "an autopilot of positive feedback": (
+        CONFIG + "[autopilot]\nkp = [0, 0, -50, 0, 0, 0]\n",
+        "autopilot.kp.2",
+    ),
+    "an autopilot heading in degrees": (
+        CONFIG + "[autopilot]\nkp = [0, 0, 0, 0, 0, 5]\nreference = [0, 0, 0, 0, 0, 90]\n",
+        "autopilot.reference",
+    ),
 }
 
 
@@ -334,3 +359,27 @@ def test_a_command_line_parse_error_is_one_line_and_exit_2(args, words):
     assert lines[0].startswith("error: ") and words in lines[0] and "--help" in lines[0]
     bare = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
     assert bare.returncode == 2 and "Commands" in bare.stdout + bare.stderr
+
+
+def test_commands_in_pwm_against_a_thrust_table_are_warned_of(tmp_path):
+    """bluerov2_heavy's thrusters give no cmd_min/cmd_max: commands of 1500 ± 400 (PWM
+    microseconds) were flown at the table's last thrust without a word, and the loop then
+    found a centre-of-gravity shift in the tumbling log. The table's span is the range."""
+    import warnings
+
+    from nnid.datasets.arrays import command_range, warn_far_beyond_range
+    from nnid.vehicle import load_vehicle
+
+    heavy = load_vehicle("bluerov2_heavy")
+    assert heavy.thrusters[0].cmd_min is None and command_range(heavy.thrusters[0]) == (-1, 1)
+    pwm = pd.DataFrame({f"cmd_{t.name}": [1500.0, 1900.0] for t in heavy.thrusters})
+    with pytest.warns(UserWarning, match=r"cmd_t1 reaches 1900, far beyond thruster t1's range"):
+        warn_far_beyond_range(pwm, heavy)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        warn_far_beyond_range(pwm / 2000.0, heavy)
+    cfg = _write(tmp_path, "pwm.toml", 'vehicle = "bluerov2_heavy"\ndt = 0.05\n[[experiments]]\n'
+                 'name = "a"\nsignals = [{ kind = "step", channel = "t1", amplitude = 1900.0, '
+                 "duration = 1.0 }]\n")  # fmt: skip
+    result = runner.invoke(app, ["simulate", str(cfg), "--out", str(tmp_path / "x.csv")])
+    assert "cmd_t1 reaches 1900, far beyond thruster t1's range [-1, 1]" in result.output

@@ -59,16 +59,28 @@ def check_commands(columns: Iterable[str], cols: list[str], vehicle_name: str) -
         )
 
 
+def command_range(thruster) -> tuple[float, float] | None:
+    """A thruster's command range: its ``cmd_min``/``cmd_max``, else its thrust table's span
+    (a command past the table gets the table's last thrust), else None (a curve of any
+    command)."""
+    if thruster.cmd_min is not None and thruster.cmd_max is not None:
+        return thruster.cmd_min, thruster.cmd_max
+    if getattr(thruster.curve, "kind", None) == "table":
+        return thruster.curve.cmd[0], thruster.curve.cmd[-1]
+    return None
+
+
 def warn_far_beyond_range(log: pd.DataFrame, vehicle) -> None:
-    """Warn of a thruster command further beyond its ``cmd_min``/``cmd_max`` than the range is
-    wide. The thrust curve saturates a command at its bound, by design; one that far out is a
-    unit slip (PWM microseconds against ±1), and saturating it would fly the log at full
-    thrust without a word."""
+    """Warn of a thruster command further beyond its range (:func:`command_range`) than the
+    range is wide. The thrust curve saturates a command at its bound, by design; one that far
+    out is a unit slip (PWM microseconds against ±1), and saturating it would fly the log at
+    full thrust without a word."""
     for thruster in vehicle.thrusters:
         col = f"cmd_{thruster.name}"
-        if col not in log or thruster.cmd_min is None or thruster.cmd_max is None:
+        span = command_range(thruster)
+        if col not in log or span is None:
             continue
-        lo, hi = thruster.cmd_min, thruster.cmd_max
+        lo, hi = span
         values = log[col].to_numpy(np.float64)
         beyond = (values > hi + (hi - lo)) | (values < lo - (hi - lo))
         if beyond.any():

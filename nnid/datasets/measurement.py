@@ -64,6 +64,11 @@ class Measurement(StrictModel):
         # a noise level of the other kind's sensors would be ignored without a word; "none"
         # keeps its levels unread (switching a noisy config to the truth is one edit)
         stray = sorted(set(self.model_fields_set) - {"kind", "truth", *USES[self.kind]})
+        if stray and "kind" not in self.model_fields_set:  # no kind: the levels read nothing
+            raise ValueError(
+                f"{', '.join(stray)} set without a kind: the default kind 'none' logs the exact "
+                "truth and reads no noise level (give kind: mocap, dvl_imu, ...)"
+            )
         if stray and self.kind != "none":
             uses = ", ".join(USES[self.kind])
             raise ValueError(f"kind {self.kind!r} does not use {', '.join(stray)} (it uses {uses})")

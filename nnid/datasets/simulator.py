@@ -11,14 +11,17 @@ and gradients).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable, Sequence
+from typing import Annotated
 
 import numpy as np
 import pandas as pd
 import torch
-from pydantic import Field
+from pydantic import Field, field_validator
 from scipy.integrate import solve_ivp
 
+from nnid.datasets.arrays import warn_far_beyond_range
 from nnid.datasets.log import TAU
 from nnid.datasets.measurement import Measurement, wrap_angle
 from nnid.errors import NnidInputError
@@ -33,6 +36,9 @@ from nnid.validation import StrictModel
 INTEGRATORS = ("rk4", "adaptive", "torch")
 
 
+Gain = Annotated[float, Field(ge=0, allow_inf_nan=False)]
+
+
 class Autopilot(StrictModel):
     """A digital PD autopilot on generalized forces, evaluated once per sample and held:
     τ_fb = −k_p (η − η_ref) − k_d ν per DOF (heading error wrapped to ±π). DOFs with k_p = k_d = 0
@@ -40,9 +46,19 @@ class Autopilot(StrictModel):
     ch. 5) fly under it; the log records the total commanded force, feedback included.
     """
 
-    kp: list[float] = Field(default_factory=lambda: [0.0] * 6, min_length=6, max_length=6)
-    kd: list[float] = Field(default_factory=lambda: [0.0] * 6, min_length=6, max_length=6)
-    reference: list[float] = Field(default_factory=lambda: [0.0] * 6, min_length=6, max_length=6)
+    # a negative gain is positive feedback: the autopilot would drive the vehicle away
+    kp: list[Gain] = Field(default_factory=lambda: [0.0] * 6, min_length=6, max_length=6)
+    kd: list[Gain] = Field(default_factory=lambda: [0.0] * 6, min_length=6, max_length=6)
+    reference: list[Annotated[float, Field(allow_inf_nan=False)]] = Field(
+        default_factory=lambda: [0.0] * 6, min_length=6, max_length=6
+    )
+
+    @field_validator("reference")
+    @classmethod
+    def _radians(cls, reference: list[float]) -> list[float]:
+        if any(abs(a) > 2 * math.pi for a in reference[3:]):  # 90 was wrapped to 2.04 rad
+            raise ValueError("its angles (the last three) are in radians: one is beyond 2π")
+        return reference
 
     def force(self, state: np.ndarray) -> np.ndarray:
         """The feedback force ``[..., 6]`` for states ``[..., 12]`` (η then ν)."""
@@ -241,6 +257,20 @@ def experiment_inputs(
                 f"{', '.join(channels)}",
                 field=f"{where}signals.{j}.channel",
             )
+        field = "sequence" if where is None else f"{where}signals.{j}"
+        if signal.start >= end or signal.start > t[-1]:  # it would never act
+            raise NnidInputError(
+                f"starts at {signal.start:g} s, after the experiment's end ({end:g} s): it "
+                "would never act",
+                field=f"{field}.start" if where is not None else field,
+            )
+        hold = getattr(signal, "hold", None)
+        if hold is not None and hold < dt:  # levels held shorter than a sample are never seen
+            raise NnidInputError(
+                f"holds each level {hold:g} s, shorter than the sample time dt = {dt:g} s: "
+                "some levels would never be sampled",
+                field=f"{field}.hold" if where is not None else field,
+            )
         inputs[:, channels.index(signal.channel)] += signal(t)
     return inputs
 
@@ -255,6 +285,9 @@ def simulate_config(config, vehicle, progress=None) -> pd.DataFrame:
         # the sequence's runs follow the explicit ones: their fields are the sequence's
         where = f"experiments.{i}." if i < len(config.experiments) else None
         inputs = experiment_inputs(exp, channels, config.dt, where=where)
+        if vehicle.thrusters:  # PWM microseconds against ±1 would fly every run at full thrust
+            warn_far_beyond_range(pd.DataFrame(inputs, columns=[f"cmd_{c}" for c in channels]),
+                                  vehicle)  # fmt: skip
         effects = [(e.name, e.value) for e in (*config.effects, *exp.effects)]
         logs.append(
             simulate(
