@@ -485,6 +485,19 @@ def k_steps(log: pd.DataFrame, seconds: float | None) -> int | None:
     return max(1, round(seconds / dt))
 
 
+def diverged_training(description: dict) -> list[str]:
+    """The warning for training stages that ended on a non-finite loss: each keeps its start
+    (a hybrid's network untrained, its force zero), so the scores are of the model before it,
+    which a report, a batch row or the loop must not read as a trained one."""
+    broke = [s["stage"] for s in training_stages(description) if s["stop"] == "non-finite loss"]
+    if not broke:
+        return []
+    return [
+        f"training diverged in {', '.join(dict.fromkeys(broke))} (the loss became non-finite): "
+        "that stage kept its start, so the scores are those of the model before it"
+    ]
+
+
 def unscored_k_step(part: str, log: pd.DataFrame, scores: dict, cfg, model) -> list[str]:
     """The warning for a held-out part none of whose k-step predictions was scored, with the
     horizon that would score one: a prediction k samples ahead is scored from the run's
@@ -581,6 +594,7 @@ def run_train(
         metrics["test"] = score(model, split.test, cfg, k, replay)
     for p in parts:
         metrics["warnings"] += unscored_k_step(p, split[p], metrics[p], cfg, model)
+    metrics["warnings"] += diverged_training(description)
     base = model.baseline()
     if base is not None:
         metrics["baseline"] = {

@@ -146,7 +146,7 @@ def train_run(
         write_text(stage / "report.html", train_html(result.metrics, result.figures))
         result.report.write(stage)
     from nnid.evaluation.evaluate import diverged_columns
-    from nnid.reports.stops import training_stages
+    from nnid.pipeline import diverged_training
 
     metrics = result.metrics
     held = "test" if "test" in metrics else "validation"
@@ -161,13 +161,9 @@ def train_run(
     if base:
         went = diverged_columns(base_part, "free_run_nrmse")
         line += f"; physics only {score_cell(base, 'total', went)}"
-    broke = [s["stage"] for s in training_stages(metrics.get("describe") or {})
-             if s["stop"] == "non-finite loss"]  # fmt: skip
-    if broke:  # the scores are then the stage's start: said, not left to the stage table
-        line += (
-            f"; training diverged in {', '.join(dict.fromkeys(broke))} (the loss became "
-            "non-finite), which kept its start"
-        )
+    broke = diverged_training(metrics.get("describe") or {})
+    if broke:  # the scores are then the stage's start: said beside them, and as a warning
+        line += "; training diverged (the warning says where)"
     headline: dict[str, Any] = {
         "model": metrics["model"],
         "trainer": metrics["trainer"],
@@ -178,6 +174,7 @@ def train_run(
         "free_run_nrmse": free.get("total"),
         "one_step_nrmse": _total(metrics[held], "one_step_nrmse"),
         "diverged": ", ".join(metrics[held].get("diverged", {})) or None,
+        "training_diverged": bool(broke),
     }
     for key in ("free_run_nrmse", "one_step_nrmse", "k_step_nrmse"):  # what a sweep ranks by
         headline[f"validation_{key}"] = _total(metrics["validation"], key)

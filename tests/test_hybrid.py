@@ -410,13 +410,31 @@ def test_a_network_whose_training_diverged_is_said_on_the_console(tmp_path):
     args = ["train", str(config), "--data", str(data), "--vehicle", vehicle]
     result = CliRunner().invoke(app, [*args, "--out", str(tmp_path / "out")])
     assert result.exit_code == 0, result.output
-    assert "training diverged in segments of 0.25 s (the loss became non-finite)" in result.output
+    said = "training diverged in segments of 0.25 s (the loss became non-finite)"
+    assert said in " ".join(result.output.split())
+    # in the record too: metrics.json's warnings and the report (only the console said it)
+    metrics = json.loads((tmp_path / "out" / "metrics.json").read_text())
+    assert any(said in w for w in metrics["warnings"])
     # and the report does not explain 0 % of a force that is zero
     report = (tmp_path / "out" / "report.md").read_text()
     assert "The network's force is zero on the training runs" in report
+    assert said in report.split("## Warnings")[1]
     calm = config.read_text().replace("lr = 1e6", "lr = 1e-3")
     config.write_text(calm)
     result = CliRunner().invoke(app, [*args, "--out", str(tmp_path / "calm")])
     assert result.exit_code == 0 and "diverged" not in result.output
     report = (tmp_path / "calm" / "report.md").read_text()
     assert "Dominant terms of the learned force on the training runs" in report
+
+
+def test_a_hybrid_whose_network_never_trained_gives_no_second_opinion():
+    """A network whose training diverged keeps its zero start: the loop's second opinion read
+    its zero force as "not explained by any single effect of the vocabulary"."""
+    from nnid.reports.loop_report import hybrid_opinion
+
+    zero = {"terms": [], "explained": 0.0, "force_rms": {"w": 0.0, "r": 0.0}}
+    text = hybrid_opinion({"hybrid_opinion": zero, "added": []})
+    assert "zero on these runs" in text and "no second opinion" in text
+    assert "not explained by any single effect" not in text
+    some = {**zero, "force_rms": {"w": 0.3, "r": 0.0}}
+    assert "not explained by any single effect" in hybrid_opinion({"hybrid_opinion": some})

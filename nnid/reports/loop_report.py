@@ -417,6 +417,11 @@ def hybrid_opinion(result: dict) -> str:
     if not opinion:
         return ""
     terms = opinion["terms"][:3]
+    if not any(opinion.get("force_rms", {}).values()):  # an untrained (diverged) network
+        return (
+            "The hybrid's network force is zero on these runs (its training diverged, or it "
+            "learned nothing): it gives no second opinion."
+        )
     if not terms:
         return (
             "The hybrid's network force is not explained by any single effect of the "
