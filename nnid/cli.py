@@ -400,8 +400,8 @@ def vehicle(
     size: str | None = typer.Option(
         None, "--size", help="LENGTHxWIDTHxHEIGHT in m, e.g. 0.46x0.58x0.25."
     ),
-    layout: str = typer.Option(
-        "heavy8", "--layout", help="Thrusters: heavy8 (BlueROV2 Heavy) or none."
+    layout: str | None = typer.Option(
+        None, "--layout", help="Thrusters: heavy8 (BlueROV2 Heavy, the default) or none."
     ),
     name: str | None = typer.Option(None, "--name", help="Vehicle name; default the file's stem."),
 ) -> None:
@@ -421,6 +421,13 @@ def vehicle(
     if (preset is None) == (mass is None and size is None):
         raise NnidInputError("give either --preset or --mass and --size", field="--preset")
     if preset is not None:
+        given = [o for o, v in (("--name", name), ("--layout", layout)) if v is not None]
+        if given:  # the preset's own name and thrusters would be written without a word
+            raise NnidInputError(
+                f"{' and '.join(given)} apply to a starter file (--mass and --size), not to "
+                "a preset, which is written as it is: rename it in the file",
+                field=given[0],
+            )
         text = preset_text(preset)
     else:
         if mass is None or size is None:
@@ -433,7 +440,7 @@ def vehicle(
             dims = ()
         if len(dims) != 3:
             raise NnidInputError(f"'{size}': expected LENGTHxWIDTHxHEIGHT in m", field="--size")
-        text = starter_text(name or out_path.stem, mass, dims, layout)
+        text = starter_text(name or out_path.stem, mass, dims, layout or "heavy8")
     import tomllib
 
     vehicle_from_dict(tomllib.loads(text), source=str(out_path))  # what is written loads back

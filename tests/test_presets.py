@@ -386,6 +386,9 @@ def test_starter_vehicle_files_load_and_scale(tmp_path):
         (["--mass", "20", "--size", "1x2"], "--size"),
         (["--mass", "-3", "--size", "1x1x1"], "--mass"),
         (["--preset", "nautilus"], "--preset"),
+        # written as the preset, name and thrusters and all, without a word
+        (["--preset", "bluerov2_heavy", "--name", "myrov"], "--name"),
+        (["--preset", "bluerov2_heavy", "--layout", "none"], "--layout"),
         (["--mass", "20", "--size", "1x1x1", "--layout", "quad"], "--layout"),
         # named as the file's 'length', which was not written yet
         (["--mass", "20", "--size", "nanx0.58x0.25"], "--size"),

@@ -218,6 +218,24 @@ def test_manifest_ids_and_pairing(fleet, tmp_path) -> None:
     ]  # fmt: skip
 
 
+def test_a_glob_leaves_out_the_tables_of_folders_nnid_wrote(tmp_path):
+    """data = ["**/*.csv"] run twice into one folder read the first run's summary.csv as a
+    log (6 of 10 tasks failed, "'t' is missing"); tables in a folder nnid wrote are left out,
+    and said."""
+    (tmp_path / "logs").mkdir()
+    for name in ("a", "b"):
+        (tmp_path / "logs" / f"{name}.csv").write_text("t,z\n0,0\n")
+    out = tmp_path / "out"
+    (out / "t1").mkdir(parents=True)
+    (out / "summary.json").write_text("{}")
+    (out / "summary.csv").write_text("id\n")
+    (out / "t1" / "alarms.csv").write_text("t\n")
+    (tmp_path / "m.toml").write_text('command = "loop"\nvehicle = "seamor"\ndata = ["**/*.csv"]\n')
+    with pytest.warns(UserWarning, match=r"matches 2 file\(s\) in folders nnid wrote"):
+        tasks = expand(tmp_path / "m.toml")
+    assert sorted(Path(t.data).name for t in tasks) == ["a.csv", "b.csv"]
+
+
 @pytest.mark.parametrize(
     ("text", "field", "words"),
     [

@@ -23,6 +23,7 @@ import hashlib
 import itertools
 import json
 import re
+import warnings
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Literal
@@ -233,12 +234,42 @@ def _paths(patterns: list[str], base: Path, key: str, source: str) -> list[str]:
             found = sorted(glob.glob(full, recursive=True))
             if not found:
                 raise NnidInputError(f"'{pattern}' matches no file", source=source, field=key)
+            ours = [f for f in found if _in_run_folder(Path(f), base)]
+            if ours:  # a "**" reaches into earlier runs' outputs: their tables are no logs
+                warnings.warn(
+                    f"{source}: {key} '{pattern}' also matches {len(ours)} file(s) in folders "
+                    f"nnid wrote (e.g. {ours[0]}): left out",
+                    stacklevel=3,
+                )
+                found = [f for f in found if f not in ours]
+                if not found:
+                    raise NnidInputError(
+                        f"'{pattern}' matches only files in folders nnid wrote",
+                        source=source,
+                        field=key,
+                    )
             out += [str(Path(f).resolve()) for f in found]
         elif Path(full).exists():
             out.append(str(Path(full).resolve()))
         else:
             raise NnidInputError(f"'{pattern}': no such file or folder", source=source, field=key)
     return out
+
+
+#: files that mark a folder as a run's output (a batch's or sweep's summary, a task's record)
+RUN_FILES = ("summary.json", "metrics.json", "comparison.json", "loop.json", "detect.json")
+
+
+def _in_run_folder(path: Path, base: Path) -> bool:
+    """Whether ``path`` lies in a folder nnid wrote (one holding a :data:`RUN_FILES` file),
+    between it and ``base``."""
+    base = base.resolve()
+    for folder in path.resolve().parents:
+        if any((folder / name).is_file() for name in RUN_FILES):
+            return True
+        if folder == base or base not in folder.parents:
+            return False
+    return False
 
 
 def _vehicles(names: list[str], base: Path, source: str) -> list[str]:
