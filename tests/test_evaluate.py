@@ -200,6 +200,10 @@ def test_the_train_report_says_which_stage_stalled_diverged_or_was_undone():
     assert [r[:3] for r in rows] == [["window 64", "30", "30"], ["window whole runs", "3", "2"],
                                      ["segments of 2.0 s", "12", "-"]]  # fmt: skip
     assert rows[0][3] == STOP_WORDS["max_epochs"] + STILL_FALLING
+    # a hybrid's segment asked longer than every run trains on the longest run: said
+    capped = {"describe": {"stages": [{"segment_s": 100.0, "segment_s_trained": 24.0,
+                                       "epochs": 3, "stop_reason": "max_epochs"}]}}  # fmt: skip
+    assert _training(capped)[1][0][0] == "segments of 100.0 s (the longest run, 24 s)"
     assert rows[1][3] == STOP_WORDS["non-finite loss"]
     text = train_markdown({"model": "nss", "params": {}, "seconds": 0.0, **staged})
     assert f"## {TRAINING_TITLE}" in text and "| window whole runs | 3 | 2 | diverged" in text

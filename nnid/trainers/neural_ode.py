@@ -232,11 +232,12 @@ class MultipleShooting(BaseEstimator):
             def loss(params: dict[str, Tensor], batch: Batch) -> Tensor:
                 return residual(problem, params, batch)
 
-            histories.append(
-                optimizer.fit(
-                    problem.module, loss, batches, val_batches, progress=staged(progress, stage)
-                )
+            history = optimizer.fit(
+                problem.module, loss, batches, val_batches, progress=staged(progress, stage)
             )
+            # the length trained on: a segment asked longer than every run is the longest run
+            history.info["segment_s_trained"] = length * dt
+            histories.append(history)
         return histories
 
     def _batches(self, optimizer, runs, where, length, sampler: BalancedSampler):
