@@ -202,13 +202,17 @@ def load_inputs(
 
         inputs = Inputs(*load_log(path, reader), veh)
         source = path
+        if veh is not None:  # said once against the whole log, for every kind of run
+            from nnid.datasets.arrays import check_forces_match_commands, warn_far_beyond_range
+
+            check_forces_match_commands(inputs.log, veh)
+            warn_far_beyond_range(inputs.log, veh)
         if physics and veh is not None:  # the inputs the vehicle reads, said against the log
-            from nnid.datasets.arrays import check_forces_match_commands, logged_inputs
+            from nnid.datasets.arrays import logged_inputs
             from nnid.datasets.preprocess import check_velocities
 
             try:
                 logged_inputs(inputs.log, veh)
-                check_forces_match_commands(inputs.log, veh)
                 for m in models:  # the velocities the fit needs, said against the log
                     if m.kind in ("sindy", "synthesis"):
                         check_velocities(inputs.log.columns, fitted_dofs(m), WHOLE_LIBRARY)
@@ -263,7 +267,15 @@ def loaded_inputs(*args, **kwargs) -> tuple[Inputs, list[str]]:
     console, and no fit need raise them again."""
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        inputs = load_inputs(*args, **kwargs)
+        error: NnidInputError | None = None
+        try:
+            inputs = load_inputs(*args, **kwargs)
+        except NnidInputError as exc:
+            error = exc
+    if error is not None:  # no record to keep them in: said before the error, as they were
+        for w in caught:
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+        raise error
     return inputs, warning_messages(caught)
 
 
@@ -468,13 +480,16 @@ def fit_model(model, split: Split, progress: Progress, section: str, spec) -> li
     """Fit on the training split (validation for early stopping or selection); the warnings
     raised, each once. The model's own refusals are named where the config sets the field:
     under ``section`` (``model``, ``models.2``) when it is a key of the config table ``spec``."""
+    from nnid.datasets.arrays import CommandUnitsWarning
+
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         try:
             model.fit(split.train, split.validation, progress=progress)
         except NnidInputError as exc:
             raise exc.within(section, type(spec).model_fields) from None
-    return warning_messages(caught)
+    # the commands' units were said against the whole log as it was loaded (load_inputs)
+    return warning_messages(w for w in caught if not issubclass(w.category, CommandUnitsWarning))
 
 
 def k_steps(log: pd.DataFrame, seconds: float | None) -> int | None:
@@ -507,13 +522,16 @@ def unscored_k_step(part: str, log: pd.DataFrame, scores: dict, cfg, model) -> l
     if scores.get("k_step_scored") != 0 or not len(log):
         return []
     longest = max(len(idx) for _, idx in experiments(log))
-    dt = float(np.median(np.diff(log["t"].to_numpy(np.float64))))
     own = model.warmup_samples_
+    if longest <= own or len(log) < 2:
+        advice = "no k_step_s would: its runs are no longer than the model's warm-up"
+    else:
+        dt = float(np.median(np.diff(log["t"].to_numpy(np.float64))))
+        advice = f"a k_step_s of at most {(longest - own) * dt:.4g} s would score it"
     return [
         f"k_step_s = {cfg.k_step_s:g} s: no {part} run is long enough for a k-step prediction "
         f"(the longest has {longest} samples, {own} of them the model's own warm-up), so the "
-        f"{part} part's k-step error was not scored; a k_step_s of at most "
-        f"{max(longest - own, 0) * dt:.4g} s would score it"
+        f"{part} part's k-step error was not scored; {advice}"
     ]
 
 
@@ -780,6 +798,7 @@ def run_compare(
         if held_name == "test":
             row["test"] = score(model, held, cfg, k, replay, predicted)
         row["warnings"] += unscored_k_step(held_name, held, row[held_name], cfg, model)
+        row["warnings"] += diverged_training(model.describe())
         rows.append(row)
         free_runs[name] = predicted["free_run"]
         with np.errstate(all="ignore"):

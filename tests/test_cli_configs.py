@@ -498,3 +498,34 @@ def test_a_run_in_no_part_of_a_named_split_is_said_and_noise_on_no_column_refuse
     )
     run = CliRunner().invoke(app, [*_args("train", cfg, tmp_path)[:-1], str(tmp_path / "f")])
     assert run.exit_code == 2 and "split.fractions" in run.output, run.output
+
+
+def test_a_compared_model_whose_training_diverged_is_said(tmp_path, monkeypatch):
+    """train said it (a warning in metrics.json); compare ranked such a model with no word.
+    The NARX's one-step stage is recorded as ended on a non-finite loss (Adam's normalised
+    steps keep this small net finite, so the record stands in for a diverged fit)."""
+    import json
+
+    from nnid.models.narx import NarxModel
+
+    described = NarxModel.describe
+
+    def diverged(self):
+        out = described(self)
+        out["history"] = {**out["history"], "stop_reason": "non-finite loss"}
+        return out
+
+    monkeypatch.setattr(NarxModel, "describe", diverged)
+    (tmp_path / "sim.toml").write_text(SIM)
+    cfg = tmp_path / "cmp.toml"
+    cfg.write_text(
+        'kind = "compare"\n[data]\nsimulate = "sim.toml"\n[split]\nby = "experiment"\n'
+        'validation = ["b"]\n[[models]]\nkind = "narx"\nname = "wild"\ninputs = ["tau_X"]\n'
+        'outputs = ["u"]\ntrainer = { kind = "adam", max_epochs = 3 }\n'
+    )
+    run = CliRunner().invoke(app, _args("compare", cfg, tmp_path))
+    assert run.exit_code == 0, run.output
+    comparison = json.loads((tmp_path / "out" / "comparison.json").read_text())
+    (wild,) = comparison["models"]
+    assert any(w.startswith("training diverged in") for w in wild["warnings"]), wild["warnings"]
+    assert "wild: training diverged in" in " ".join(run.output.split())

@@ -226,6 +226,14 @@ BAD_CONFIGS = {
         ),
         "experiments.0.signals.0.hold",
     ),
+    "aprbs levels held shorter than dt": (
+        CONFIG.replace(
+            'kind = "step", channel = "X", amplitude = 10.0, duration = 5.0',
+            'kind = "aprbs", channel = "X", amplitude = 10.0, hold_min = 0.01, hold_max = 1.0, '
+            "duration = 5.0",
+        ),
+        "experiments.0.signals.0.hold_min",
+    ),
     "a noise level without a kind": (
         CONFIG + "[measurement]\nvelocity_noise = 0.5\n",
         "set without a kind",

@@ -270,6 +270,24 @@ def test_commands_far_beyond_their_range_are_said(vehicle, monitor):
         log_arrays(pwm, vehicle)
 
 
+def test_commands_far_beyond_their_range_are_said_once_in_a_run(vehicle, tmp_path):
+    """The whole log as it is loaded says it; the fit on the training part said it again, with
+    another share of samples, so the run's record held both."""
+    log = simulate_faults(vehicle, 20, seed=9)
+    pwm = log.assign(**{c: 1500 + 400 * log[c] for c in log if c.startswith("cmd_")})
+    pwm.to_csv(tmp_path / "pwm.csv", index=False)
+    config = str(REPO / "configs" / "fossen_ls.toml")
+    args = ["train", config, "--data", str(tmp_path / "pwm.csv"), "--vehicle", str(OCTO)]
+    CliRunner().invoke(app, [*args, "--out", str(tmp_path / "o")])
+    said = json.loads((tmp_path / "o" / "metrics.json").read_text())["warnings"]
+    assert sum(w.startswith("cmd_h1 reaches") for w in said) == 1, said
+    # a load that then fails still says it (the record it was kept for is never written)
+    pwm.drop(columns=["u"]).to_csv(tmp_path / "no_u.csv", index=False)  # no x, y to derive it
+    args[3] = str(tmp_path / "no_u.csv")
+    res = CliRunner().invoke(app, [*args, "--out", str(tmp_path / "n")])
+    assert res.exit_code == 2 and "cmd_h1 reaches" in res.output, res.output
+
+
 def test_a_model_without_force_equation_or_an_uncalibrated_monitor_is_refused(vehicle):
     from nnid.models.narx import NarxModel
 
@@ -496,6 +514,10 @@ def test_forces_and_commands_that_disagree_are_said_once(vehicle, tmp_path):
         '[[models]]\nkind = "fossen"\nname = "b"\n'
     )
     said = "differ from what its thruster commands give"
+    loop = CliRunner().invoke(  # the loop reads the forces too: said there as well
+        app, ["loop", "--data", data, "--vehicle", str(OCTO), "--out", str(tmp_path / "l")]
+    )
+    assert " ".join(loop.output.split()).count(said) == 1, loop.output
     for config in (str(REPO / "configs" / "fossen_ls.toml"), str(compare)):
         out = tmp_path / Path(config).stem
         res = CliRunner().invoke(

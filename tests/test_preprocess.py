@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -180,7 +182,9 @@ def test_a_savgol_window_too_short_for_its_order_is_widened_with_a_warning():
         ("bias", "uvwpqr", False),  # a level vehicle, a gyro biased by 0.5°/s: not a roll
         ("small", "uvwpqr", False),  # ±0.03 rad: the restoring moment it misses is noise
         ("rolls", "uvwpqr", True),  # ±0.3 rad
+        ("tilts and holds", "uvwpqr", True),  # 0.19 rad in 5 s, held: the mean called it bias
         ("rolls", "ur", False),  # the surge and yaw restoring forces of this vehicle read no φ
+        ("no rate", "uvwpqr", False),  # an empty p says nothing (and warned "empty slice")
     ],
 )
 def test_a_log_without_roll_is_refused_only_where_the_vehicle_rolled(roll_rate, dofs, refused):
@@ -192,10 +196,13 @@ def test_a_log_without_roll_is_refused_only_where_the_vehicle_rolled(roll_rate, 
     vehicle = load_vehicle("seamor")  # r_g below r_b: roll and pitch moments read φ and θ
     t = np.arange(0, 120, 0.1)
     p = {"bias": np.full(t.size, np.radians(0.5)), "small": 0.03 * np.cos(t),
-         "rolls": 0.3 * np.cos(t)}[roll_rate]  # fmt: skip
+         "rolls": 0.3 * np.cos(t), "tilts and holds": np.where(t < 5, 0.038, 0.0),
+         "no rate": np.full(t.size, np.nan)}[roll_rate]  # fmt: skip
     log = pd.DataFrame({"t": t, "experiment": "a", "u": 0.2, "p": p, "q": 0.0, "r": 0.0})
     if refused:
         with pytest.raises(NnidInputError, match="no phi column, and its p in experiment 'a'"):
             check_attitude(log, vehicle, list(dofs))
     else:
-        check_attitude(log, vehicle, list(dofs))
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            check_attitude(log, vehicle, list(dofs))

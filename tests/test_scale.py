@@ -230,8 +230,14 @@ def test_a_glob_leaves_out_the_tables_of_folders_nnid_wrote(tmp_path):
     (out / "summary.json").write_text("{}")
     (out / "summary.csv").write_text("id\n")
     (out / "t1" / "alarms.csv").write_text("t\n")
+    (out / "t1" / "detect.json").write_text("{}")
+    # a record of nnid's beside the user's own logs (an inspect --out, a data set's own file)
+    # and the manifest's folder as --out: the logs stay logs
+    (tmp_path / "logs" / "summary.json").write_text("{}")
+    (tmp_path / "summary.json").write_text("{}")
+    (tmp_path / "summary.csv").write_text("id\n")
     (tmp_path / "m.toml").write_text('command = "loop"\nvehicle = "seamor"\ndata = ["**/*.csv"]\n')
-    with pytest.warns(UserWarning, match=r"matches 2 file\(s\) in folders nnid wrote"):
+    with pytest.warns(UserWarning, match=r"matches 3 table\(s\) nnid wrote"):
         tasks = expand(tmp_path / "m.toml")
     assert sorted(Path(t.data).name for t in tasks) == ["a.csv", "b.csv"]
 

@@ -70,6 +70,12 @@ def command_range(thruster) -> tuple[float, float] | None:
     return None
 
 
+class CommandUnitsWarning(UserWarning):
+    """Thruster commands far beyond their range: a unit slip (:func:`warn_far_beyond_range`).
+    Its own class so that a run that said it against the whole log can leave out the same
+    warning from each fit on a part of it (whose share of samples would differ)."""
+
+
 def warn_far_beyond_range(log: pd.DataFrame, vehicle) -> None:
     """Warn of a thruster command further beyond its range (:func:`command_range`) than the
     range is wide. The thrust curve saturates a command at its bound, by design; one that far
@@ -90,6 +96,7 @@ def warn_far_beyond_range(log: pd.DataFrame, vehicle) -> None:
                 f"[{lo:g}, {hi:g}] in {beyond.mean():.0%} of the samples; the thrust curve "
                 "saturates it at the bound: are the commands in the vehicle file's units "
                 "(not PWM microseconds against ±1)?",
+                CommandUnitsWarning,
                 stacklevel=3,
             )
 

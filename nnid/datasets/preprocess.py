@@ -230,17 +230,20 @@ def check_velocities(
         )
 
 
-#: roll or pitch (rad, about 6°) that a log's own rates turn the vehicle through either way,
-#: after their mean (a gyro's bias) is taken out, beyond which a level vehicle is no reading
+#: roll or pitch (rad, about 6°) that a log's own rates turn the vehicle through, their median
+#: (a gyro's bias) taken out, beyond which a level vehicle is no reading
 TILTED = 0.1
 
 
 def check_attitude(log: pd.DataFrame, vehicle, dofs: Sequence[str]) -> None:
     """Refuse a log without roll or pitch whose own rates p, q show the vehicle rolling or
-    pitching (more than :data:`TILTED` either way within a run, the rate's mean, a gyro bias,
-    taken out), where the restoring forces of the fitted ``dofs`` depend on that angle (Weiss
-    eq. 30: weight ≠ buoyancy, or r_g ≠ r_b across it): read as zero, the attitude makes them
-    those of a level vehicle, and the fit puts the error in the added mass."""
+    pitching (its angle spanning more than :data:`TILTED` within a run), where the restoring
+    forces of the fitted ``dofs`` depend on that angle (Weiss eq. 30: weight ≠ buoyancy, or
+    r_g ≠ r_b across it): read as zero, the attitude makes them those of a level vehicle, and
+    the fit puts the error in the added mass. The rate's median is taken out first: a gyro's
+    bias turns a level vehicle through a radian in minutes, while a vehicle that tilts and
+    holds the tilt rotates only while it tilts (its median rate stays ~0; the mean would call
+    the tilt a bias)."""
     import torch
 
     from nnid.datasets.log import turned_by
@@ -261,12 +264,14 @@ def check_attitude(log: pd.DataFrame, vehicle, dofs: Sequence[str]) -> None:
             continue  # the fitted DOFs' restoring forces do not read this angle
         for exp, idx in experiments(log):
             w = log.loc[idx, rate].to_numpy(np.float64)
-            turned = turned_by(log.loc[idx, "t"].to_numpy(np.float64), w - np.nanmean(w))
-            if np.ptp(turned) > 2 * TILTED:
+            if not np.isfinite(w).any():  # a run with no rate says nothing of its attitude
+                continue
+            turned = turned_by(log.loc[idx, "t"].to_numpy(np.float64), w - np.nanmedian(w))
+            if np.ptp(turned) > TILTED:
                 run = f" in experiment {exp!r}" if exp is not None else ""
                 raise NnidInputError(
                     f"the log has no {angle} column, and its {rate}{run} turns the vehicle "
-                    f"through {np.ptp(turned):.2g} rad (its mean taken out): the restoring "
+                    f"through {np.ptp(turned):.2g} rad (its median taken out): the restoring "
                     f"forces of {vehicle.name} in {', '.join(dofs)} need the attitude; log "
                     f"{angle} (or map it in a reader config)",
                     field=angle,

@@ -260,16 +260,16 @@ def experiment_inputs(
         field = "sequence" if where is None else f"{where}signals.{j}"
         if signal.start >= end or signal.start > t[-1]:  # it would never act
             raise NnidInputError(
-                f"starts at {signal.start:g} s, after the experiment's end ({end:g} s): it "
-                "would never act",
+                f"starts at {signal.start:g} s, at or after the experiment's end ({end:g} s): "
+                "it would never act",
                 field=f"{field}.start" if where is not None else field,
             )
-        hold = getattr(signal, "hold", None)
-        if hold is not None and hold < dt:  # levels held shorter than a sample are never seen
+        key = next((k for k in ("hold", "hold_min") if getattr(signal, k, None)), None)
+        if key is not None and getattr(signal, key) < dt:  # levels never seen between samples
             raise NnidInputError(
-                f"holds each level {hold:g} s, shorter than the sample time dt = {dt:g} s: "
-                "some levels would never be sampled",
-                field=f"{field}.hold" if where is not None else field,
+                f"holds a level {getattr(signal, key):g} s, shorter than the sample time "
+                f"dt = {dt:g} s: some levels would never be sampled",
+                field=f"{field}.{key}" if where is not None else field,
             )
         inputs[:, channels.index(signal.channel)] += signal(t)
     return inputs

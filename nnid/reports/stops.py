@@ -46,10 +46,9 @@ def _own_stages(describe: dict) -> list[dict]:
             name = f"window {stage['window'] or 'whole runs'}"
         else:
             name = f"segments of {stage.get('segment_s')} s"
-            trained = stage.get("segment_s_trained")
-            if trained is not None and stage.get("segment_s") is not None:
-                if trained < stage["segment_s"] - 1e-9:  # longer than every run: the longest
-                    name += f" (the longest run, {trained:.3g} s)"
+            trained = stage.get("segment_s_trained")  # set only where the runs were shorter
+            if trained is not None:
+                name += f" (the longest run, {trained:.3g} s)"
         out.append(_recorded(name, stage))
     return out
 

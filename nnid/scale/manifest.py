@@ -234,17 +234,17 @@ def _paths(patterns: list[str], base: Path, key: str, source: str) -> list[str]:
             found = sorted(glob.glob(full, recursive=True))
             if not found:
                 raise NnidInputError(f"'{pattern}' matches no file", source=source, field=key)
-            ours = [f for f in found if _in_run_folder(Path(f), base)]
+            ours = [f for f in found if _written_by_nnid(Path(f))]
             if ours:  # a "**" reaches into earlier runs' outputs: their tables are no logs
                 warnings.warn(
-                    f"{source}: {key} '{pattern}' also matches {len(ours)} file(s) in folders "
-                    f"nnid wrote (e.g. {ours[0]}): left out",
+                    f"{source}: {key} '{pattern}' also matches {len(ours)} table(s) nnid wrote "
+                    f"(e.g. {ours[0]}): left out",
                     stacklevel=3,
                 )
                 found = [f for f in found if f not in ours]
                 if not found:
                     raise NnidInputError(
-                        f"'{pattern}' matches only files in folders nnid wrote",
+                        f"'{pattern}' matches only tables nnid wrote",
                         source=source,
                         field=key,
                     )
@@ -256,20 +256,17 @@ def _paths(patterns: list[str], base: Path, key: str, source: str) -> list[str]:
     return out
 
 
-#: files that mark a folder as a run's output (a batch's or sweep's summary, a task's record)
+#: the tables nnid writes (a batch's or sweep's summary and settings, detect's alarms), and
+#: the records beside them that mark a folder as a run's
+RUN_TABLES = ("summary.csv", "summary.parquet", "settings.csv", "alarms.csv")
 RUN_FILES = ("summary.json", "metrics.json", "comparison.json", "loop.json", "detect.json")
 
 
-def _in_run_folder(path: Path, base: Path) -> bool:
-    """Whether ``path`` lies in a folder nnid wrote (one holding a :data:`RUN_FILES` file),
-    between it and ``base``."""
-    base = base.resolve()
-    for folder in path.resolve().parents:
-        if any((folder / name).is_file() for name in RUN_FILES):
-            return True
-        if folder == base or base not in folder.parents:
-            return False
-    return False
+def _written_by_nnid(path: Path) -> bool:
+    """Whether ``path`` is a table nnid wrote: one of :data:`RUN_TABLES` beside a
+    :data:`RUN_FILES` record. Any other file, in any folder, is the user's."""
+    path = path.resolve()
+    return path.name in RUN_TABLES and any((path.parent / n).is_file() for n in RUN_FILES)
 
 
 def _vehicles(names: list[str], base: Path, source: str) -> list[str]:

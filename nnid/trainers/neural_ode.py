@@ -235,8 +235,9 @@ class MultipleShooting(BaseEstimator):
             history = optimizer.fit(
                 problem.module, loss, batches, val_batches, progress=staged(progress, stage)
             )
-            # the length trained on: a segment asked longer than every run is the longest run
-            history.info["segment_s_trained"] = length * dt
+            # a segment asked longer than every run trains on the longest run: recorded
+            if seconds / dt >= longest:
+                history.info["segment_s_trained"] = length * dt
             histories.append(history)
         return histories
 
