@@ -425,6 +425,18 @@ def test_a_network_whose_training_diverged_is_said_on_the_console(tmp_path):
     assert result.exit_code == 0 and "diverged" not in result.output
     report = (tmp_path / "calm" / "report.md").read_text()
     assert "Dominant terms of the learned force on the training runs" in report
+    stages = json.loads((tmp_path / "calm" / "metrics.json").read_text())["describe"]["stages"]
+    assert "segment_s_trained" not in stages[0]  # 0.25 s fits in every run
+    # a segment longer than every run trains on the longest: recorded and said
+    config.write_text(
+        calm.replace("segments = [0.25]", "segments = [1000.0]").replace(
+            "max_epochs = 2", "max_epochs = 1"
+        )
+    )
+    result = CliRunner().invoke(app, [*args, "--out", str(tmp_path / "long")])
+    stages = json.loads((tmp_path / "long" / "metrics.json").read_text())["describe"]["stages"]
+    assert 0 < stages[0]["segment_s_trained"] < 1000.0
+    assert "segments of 1000.0 s (the longest run," in (tmp_path / "long" / "report.md").read_text()
 
 
 def test_a_hybrid_whose_network_never_trained_gives_no_second_opinion():
