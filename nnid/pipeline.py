@@ -202,7 +202,7 @@ def load_inputs(
 
         inputs = Inputs(*load_log(path, reader), veh)
         source = path
-        if veh is not None:  # said once against the whole log, for every kind of run
+        if veh is not None and (physics or not models):  # physics fits, and the loop's log
             from nnid.datasets.arrays import check_forces_match_commands, warn_far_beyond_range
 
             check_forces_match_commands(inputs.log, veh)
