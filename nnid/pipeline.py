@@ -769,6 +769,7 @@ def run_compare(
         t0 = time.perf_counter()
         caught = fit_model(model, split, staged(progress, name), f"models.{i}", spec)
         seconds = time.perf_counter() - t0
+        description = model.describe()
         row: dict[str, Any] = {
             "name": name,
             "kind": model.kind,
@@ -779,7 +780,7 @@ def run_compare(
             "warnings": caught,
             # how each stage ended: a model whose fit stalled or ran out of epochs is not
             # ranked as if it had converged without the page saying so
-            "training": training_stages(model.describe()),
+            "training": training_stages(description),
         }
         if model.has_force_equation:
             train_force = evaluate(model, split.train, (), None, cfg.warmup_s)
@@ -798,7 +799,7 @@ def run_compare(
         if held_name == "test":
             row["test"] = score(model, held, cfg, k, replay, predicted)
         row["warnings"] += unscored_k_step(held_name, held, row[held_name], cfg, model)
-        row["warnings"] += diverged_training(model.describe())
+        row["warnings"] += diverged_training(description)
         rows.append(row)
         free_runs[name] = predicted["free_run"]
         with np.errstate(all="ignore"):
