@@ -28,7 +28,7 @@ from nnid.datasets.cleaning import CleaningReport
 from nnid.datasets.gaps import mask_gaps
 from nnid.datasets.log import ACCELERATION, POSE, VELOCITY, input_columns
 from nnid.datasets.preprocess import experiments
-from nnid.datasets.splits import PARTS, Split, split_log
+from nnid.datasets.splits import PARTS, Split, say_missed_fractions, split_log
 from nnid.errors import NnidInputError
 from nnid.evaluation.evaluate import diverged_columns, evaluate
 from nnid.evaluation.metrics import exact_mean
@@ -418,6 +418,9 @@ def make_split(
             source=source,
             field="split.fractions",
         )
+    say_missed_fractions(split)
+    if report is not None and split.record.get("missed"):
+        report.add("split", split.record["missed"])
     motion = [c for c in (*POSE, *VELOCITY, *ACCELERATION) if c in log]
     parts = mask_gaps([split.train, split.validation, split.test], motion, report)
     split = Split(*parts, split.record)

@@ -345,6 +345,8 @@ def loop_run(
     """``nnid loop``: the residual loop of a log and a vehicle file (a
     :class:`nnid.config.LoopConfig`; the keyword options override it as the CLI's do)."""
     from nnid.datasets.column_map import load_column_map
+    from nnid.datasets.preprocess import check_attitude
+    from nnid.physics.dofs import DOFS
     from nnid.pipeline import load_inputs, reader_config
 
     where = config_path or Path("loop.toml")
@@ -384,6 +386,11 @@ def loop_run(
                     source=str(config_path) if key == "validation" and config_path else None,
                     field=key,
                 )
+    fitted_dofs = dofs_option(dofs) or (tuple(cfg.dofs) if cfg.dofs else None)
+    try:  # on the runs the loop keeps, as train checks the runs its config keeps
+        check_attitude(log, inputs.vehicle, list(fitted_dofs or DOFS))
+    except NnidInputError as exc:
+        raise exc.with_source(inputs.report.source or str(where)) from None
     settings = dict(
         max_effects=cfg.max_effects if max_effects is None else max_effects,
         alpha=cfg.alpha if alpha is None else alpha,
@@ -393,7 +400,7 @@ def loop_run(
         savgol_order=cfg.savgol_order,
         warmup_s=cfg.warmup_s,
         validation=cfg.validation_fraction,
-        dofs=dofs_option(dofs) or (tuple(cfg.dofs) if cfg.dofs else None),
+        dofs=fitted_dofs,
         validation_experiments=held,
         gate_horizon_s=cfg.gate_horizon_s,
         second_opinion=second,

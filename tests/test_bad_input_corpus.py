@@ -250,7 +250,7 @@ def _log_cases() -> list[Case]:
 
         return args
 
-    for command in ("train", "detect"):
+    for command in ("train", "detect", "loop"):
         cases.append(Case(f"{command}: rolling with no attitude", no_attitude(command),
                           ("LOG", "'phi'", "restoring")))  # fmt: skip
 

@@ -127,3 +127,50 @@ def test_replays_of_one_run_stay_on_one_side_of_a_split():
         split_log(
             log, "experiment", (0.5, 0.5, 0.0), {"train": ["a", "copy1"], "validation": ["copy2"]}
         )
+
+
+def _uneven_log(sizes=(400, 400, 33)) -> pd.DataFrame:
+    return pd.concat(
+        [pd.DataFrame({"t": 0.1 * np.arange(n), "u": 0.0, "experiment": f"run{k}"})
+         for k, n in enumerate(sizes)],
+        ignore_index=True,
+    )  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    ("sizes", "by", "said"),
+    [
+        ((400, 400, 33), "experiment", "validation 52% (asked 30%)"),  # 0.3 asked, 52 % held
+        ((300, 300, 300, 300), "experiment", None),  # whole runs meet 0.7/0.3 within 0.1
+        ((400, 400, 400), "auto", None),  # a test part asked, none given: blocks, not said
+    ],
+)
+def test_a_held_out_share_whole_runs_cannot_meet_is_said_where_the_split_is_kept(sizes, by, said):
+    """Runs are never cut, so by-experiment fractions are met only as finely as the runs: a
+    share more than 10 % of the log off what was asked is warned of and kept in the record and
+    the cleaning report, on the split the run keeps (the loop's, a config's)."""
+    import warnings
+
+    from nnid.config import SplitSpec
+    from nnid.datasets.cleaning import CleaningReport
+    from nnid.loop.residual_loop import ResidualLoop
+    from nnid.pipeline import make_split
+
+    log = _uneven_log(sizes)
+    # auto: three runs of 400 give the test part none, so the split is cut in blocks
+    spec = SplitSpec(by=by, fractions=[0.7, 0.2, 0.1] if by == "auto" else [0.7, 0.3, 0.0])
+    report = CleaningReport()
+    loop = ResidualLoop(load_vehicle("seamor"), validation=0.3)
+    for run in (lambda: make_split(log, spec, report=report), lambda: loop._split(log)):
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            run()
+        messages = [str(w.message) for w in caught]
+        if said is None:
+            assert not messages
+        else:
+            assert len(messages) == 1 and said in messages[0], messages
+            assert "3 runs of 400, 400, 33 samples" in messages[0]
+    if by == "auto":  # the loop holds out 0.3 of three runs of 400: one whole run, 33 %
+        assert set(loop._split(log)[1]["experiment"]) == {"run2"}
+    assert any(said in s.detail for s in report.steps) == (said is not None)

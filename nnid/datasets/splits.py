@@ -8,6 +8,7 @@ report training error as validation error. A split records what went where.
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -18,6 +19,10 @@ from nnid.datasets.preprocess import experiments
 from nnid.errors import NnidInputError
 
 PARTS = ("train", "validation", "test")
+
+#: share of the samples (a fraction of the log) by which whole experiments may miss the split's
+#: fractions before it is said: runs are never cut, so a share is only as fine as the runs
+MISSED_SHARE = 0.1
 
 
 @dataclass
@@ -94,6 +99,9 @@ def split_log(
             centre = np.cumsum(sizes) - sizes / 2
             part_of = dict(zip(units, np.searchsorted(edges, centre), strict=True))
             chosen = {p: [n for n in names if part_of[unit[n]] == k] for k, p in enumerate(PARTS)}
+            missed = _missed_fractions(chosen, dict(groups), fractions)
+            if missed:
+                record["missed"] = missed
         index = dict(groups)
         for p in PARTS:
             for name in chosen[p]:
@@ -104,6 +112,34 @@ def split_log(
     frames = {p: (pd.concat(v) if v else log.iloc[0:0]) for p, v in parts.items()}
     record["samples"] = {p: len(f) for p, f in frames.items()}
     return Split(frames["train"], frames["validation"], frames["test"], record)
+
+
+def _missed_fractions(chosen: dict, index: dict, fractions) -> str | None:
+    """Where whole experiments give a part a share of the samples more than
+    :data:`MISSED_SHARE` from its fraction (runs of 400, 400 and 33 samples held out 52 % for
+    a validation fraction of 0.3), what to say of it; else None."""
+    sizes = {p: sum(len(index[n]) for n in chosen[p]) for p in PARTS}
+    total = sum(sizes.values())
+    missed = [
+        f"{p} {sizes[p] / total:.0%} (asked {f:.0%})"
+        for p, f in zip(PARTS, fractions, strict=True)
+        if abs(sizes[p] / total - f) > MISSED_SHARE
+    ]
+    if not missed:
+        return None
+    runs = [len(idx) for idx in index.values()]
+    runs_said = ", ".join(map(str, runs)) if len(runs) <= 6 else f"{min(runs)} to {max(runs)}"
+    return (
+        f"whole experiments ({len(runs)} runs of {runs_said} samples, never cut) give the parts "
+        f"{'; '.join(missed)} of the samples: name the runs of each part, or split by block"
+    )
+
+
+def say_missed_fractions(split: Split) -> None:
+    """Warn of the split's missed fractions (:func:`_missed_fractions`), if any: called on the
+    split a run keeps, not on one it tried and replaced by blocks."""
+    if split.record.get("missed"):
+        warnings.warn(split.record["missed"], stacklevel=3)
 
 
 def _units(log: pd.DataFrame, names: list) -> dict:

@@ -21,7 +21,7 @@ import pandas as pd
 from nnid.datasets.arrays import logged_inputs
 from nnid.datasets.gaps import mask_gaps
 from nnid.datasets.log import ANGLES
-from nnid.datasets.splits import split_log
+from nnid.datasets.splits import say_missed_fractions, split_log
 from nnid.errors import NnidInputError
 from nnid.loop.diagnose import (
     Fit,
@@ -166,6 +166,7 @@ class ResidualLoop:
         split = split_log(log, "experiment" if n_exp >= 3 else "block", frac)
         if len(split.validation) == 0 or len(split.train) == 0:
             split = split_log(log, "block", frac)
+        say_missed_fractions(split)
         self.split_ = split.record
         return split.train, split.validation
 
