@@ -447,6 +447,19 @@ def test_cli_loop_options_choose_dofs_held_out_and_excluded_runs(tmp_path):
     assert [p["experiment"] for p in parts["validation"]] == ["run2"]
     assert [p["experiment"] for p in parts["train"]] == ["run0", "run3"]
     assert "left out run1" in (tmp_path / "o" / "cleaning.md").read_text()
+    assert not [w for w in result["warnings"] if "rough reading" in w]
+    # a held-out run of 5 s: 60 scored samples, ~2 independent ones at the residual's
+    # correlation time; its before/after was reported with no word on how little it rests on
+    start = log.loc[log["experiment"] == "run2", "t"].min()
+    short = log[(log["experiment"] != "run2") | (log["t"] < start + 5.0)]
+    short.to_csv(tmp_path / "short.csv", index=False)
+    res = runner.invoke(
+        app, [args[0], "--data", str(tmp_path / "short.csv"), *args[3:], "--validation",
+              "run2", "--out", str(tmp_path / "s")],
+    )  # fmt: skip
+    assert res.exit_code == 0, res.output
+    said = json.loads((tmp_path / "s" / "loop.json").read_text())["warnings"]
+    assert [w for w in said if "rest on 60 samples after the warm-up, about 2 independent" in w]
     for bad, name in (("--dofs", "w,x"), ("--exclude", "run9"), ("--validation", "run9")):
         res = runner.invoke(app, [*args, bad, name, "--out", str(tmp_path / "bad")])
         assert res.exit_code == 2 and name.split(",")[-1] in res.output, res.output
