@@ -460,6 +460,9 @@ def test_cli_loop_options_choose_dofs_held_out_and_excluded_runs(tmp_path):
     assert res.exit_code == 0, res.output
     said = json.loads((tmp_path / "s" / "loop.json").read_text())["warnings"]
     assert [w for w in said if "rest on 60 samples after the warm-up, about 2 independent" in w]
+    for report in ("report.md", "report.html"):  # the reports showed no loop warning at all
+        assert "about 2 independent ones" in (tmp_path / "s" / report).read_text()
+    assert "## Warnings" not in (tmp_path / "o" / "report.md").read_text()
     for bad, name in (("--dofs", "w,x"), ("--exclude", "run9"), ("--validation", "run9")):
         res = runner.invoke(app, [*args, bad, name, "--out", str(tmp_path / "bad")])
         assert res.exit_code == 2 and name.split(",")[-1] in res.output, res.output

@@ -292,6 +292,8 @@ def markdown(result: dict) -> str:
     lines += [table(*error_rows(result)), ""]
     if result["added"]:
         lines += [HELD_OUT_CHOSE, ""]
+    if result.get("warnings"):  # the loop's own: they qualify the numbers above
+        lines += ["## Warnings", "", *(f"- {w}" for w in result["warnings"]), ""]
     for k, step in enumerate(result["steps"], 1):
         lines += [f"## Pass {k}: candidates (best first)", ""]
         lines += [table(CANDIDATE_HEAD, candidate_rows(step["top"])), "", CANDIDATE_COLUMNS, ""]
@@ -394,6 +396,7 @@ def html_page(result: dict, figures: dict[str, str]) -> str:
 <h2>Errors on held-out data, before and after</h2>
 {html_table(*error_rows(result))}
 {f"<p>{html.escape(HELD_OUT_CHOSE)}</p>" if result["added"] else ""}
+{_warnings_html(result)}
 <h2>Candidates</h2>
 {"".join(steps)}
 {_opinion_html(result)}
@@ -408,6 +411,13 @@ held-out {_gate_text(result)} error by at least
 </body></html>
 """
     )
+
+
+def _warnings_html(result: dict) -> str:
+    if not result.get("warnings"):
+        return ""
+    items = "".join(f"<li>{html.escape(w)}</li>" for w in result["warnings"])
+    return f"<h2>Warnings</h2><ul>{items}</ul>"
 
 
 def hybrid_opinion(result: dict) -> str:
