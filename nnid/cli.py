@@ -141,12 +141,11 @@ def inspect(
 ) -> None:
     """Show what a log holds: columns, rate, duration, experiments, gaps, derivable signals and
     the excitation of each DOF."""
-    import json
-
     from rich.table import Table
 
     from nnid.datasets.inspect import summarize
     from nnid.datasets.readers import load_log
+    from nnid.serialization import write_json
 
     if out_dir is not None:
         _check_out(out_dir)
@@ -191,7 +190,7 @@ def inspect(
         out.print(f"  cleaning: {line}", highlight=False)
     if out_dir is not None:
         with _staged(out_dir) as stage:
-            (stage / "summary.json").write_text(json.dumps(info, indent=2))
+            write_json(stage / "summary.json", info)
             report.write(stage)
 
 

@@ -22,6 +22,7 @@ from nnid.datasets.mapping import (
 )
 from nnid.datasets.readers import load_log
 from nnid.errors import NnidInputError
+from nnid.serialization import SCHEMA_VERSION, read_json
 
 runner = CliRunner()
 
@@ -461,7 +462,18 @@ def test_inspect_reports_and_writes_summary(tmp_path):
     assert result.exit_code == 0, result.output
     assert "1 experiments" in result.output and "20 Hz" in result.output
     assert "p, q, r" not in result.output  # no roll/pitch: rates are not derivable
-    assert (tmp_path / "o" / "summary.json").exists() and (tmp_path / "o" / "cleaning.md").exists()
+    assert (tmp_path / "o" / "cleaning.md").exists()
+    for name in ("summary.json", "cleaning.json"):  # strict JSON with its schema, as every file
+        assert read_json(tmp_path / "o" / name)["schema_version"] == SCHEMA_VERSION
+    # one v sample: its std is undefined, written null (json.dumps wrote NaN, which read_json
+    # and every strict JSON reader refuse)
+    log = pd.DataFrame({"t": 0.05 * np.arange(40), "u": 0.1, "v": np.nan, "tau_X": 1.0})
+    log.loc[0, "v"] = 0.2
+    log.to_csv(tmp_path / "one_v.csv", index=False)
+    result = runner.invoke(app, ["inspect", str(tmp_path / "one_v.csv"), "--out",
+                                 str(tmp_path / "o2")])  # fmt: skip
+    assert result.exit_code == 0, result.output
+    assert read_json(tmp_path / "o2" / "summary.json")["excitation"]["v"]["velocity_std"] is None
     bad = _write_map(tmp_path / "bad.toml", MAP.replace('"depth"', '"depthh"'))
     res = runner.invoke(app, ["inspect", str(tmp_path), "--columns", str(bad)])
     assert res.exit_code == 2 and "'depthh'" in res.output and "nav.csv" in res.output

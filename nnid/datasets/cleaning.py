@@ -6,10 +6,11 @@ Readers and preprocessing append to it; it is returned with the log and written 
 
 from __future__ import annotations
 
-import json
 import re
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
+
+from nnid.serialization import write_json, write_text
 
 _QUOTED = re.compile(r"'[^']*'")
 _NUMBER = re.compile(r"(?<![\w.])-?\d+(?:\.\d+)?(?:e[-+]?\d+)?")
@@ -82,6 +83,6 @@ class CleaningReport:
         directory = Path(directory)
         directory.mkdir(parents=True, exist_ok=True)
         js, md = directory / f"{stem}.json", directory / f"{stem}.md"
-        js.write_text(json.dumps(self.to_dict(), indent=2))
-        md.write_text(self.to_markdown())
+        write_json(js, self.to_dict())
+        write_text(md, self.to_markdown())
         return js, md
