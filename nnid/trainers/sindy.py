@@ -111,16 +111,17 @@ def make_optimizer(
     max_iter: int = 20,
     n_models: int = 10,
     n_candidates_to_drop: int = 5,
-    seed: int = 0,
 ) -> ps.optimizers.BaseOptimizer:
     """A pysindy optimizer whose hard threshold on (scaled) coefficients is ``threshold``.
 
     ``sr3`` uses the L0 regulariser with weight λ = threshold²/2 (its proximal step zeroes
     coefficients below √(2λν) = threshold at ν = 1); ``ensemble`` is library ensembling of STLSQ
     (``n_models`` fits each without ``n_candidates_to_drop`` random candidate terms, median
-    coefficients). pysindy's own unbiasing is off: :func:`debias` refits each support by a
-    minimum-norm least squares, which stays stable on the rank-deficient compressed system (the
-    library has exactly collinear terms, e.g. every ``(eta-1)`` term when u_c = 0).
+    coefficients; pysindy draws them from NumPy's global generator, so its fit must run inside
+    :func:`numpy_global_state`, as :class:`SparsePath` runs it). pysindy's own unbiasing is
+    off: :func:`debias` refits each support by a minimum-norm least squares, which stays stable
+    on the rank-deficient compressed system (the library has exactly collinear terms, e.g.
+    every ``(eta-1)`` term when u_c = 0).
     """
     if kind == "stlsq":
         return ps.STLSQ(threshold=threshold, alpha=alpha, max_iter=max_iter, unbias=False)
@@ -257,7 +258,7 @@ class SparsePath(BaseEstimator):
         val_out = []
         ms_y = np.maximum(np.mean(y * y, axis=0), 1e-300)
         for thr in thresholds:
-            opt = make_optimizer(self.optimizer, float(thr), self.alpha, seed=self.seed)
+            opt = make_optimizer(self.optimizer, float(thr), self.alpha)
             with warnings.catch_warnings(), numpy_global_state(self.seed):
                 # "all coefficients eliminated" at large thresholds is an answer, not a fault
                 warnings.filterwarnings("ignore", message=".*eliminated all coefficients.*")
