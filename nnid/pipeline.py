@@ -26,7 +26,7 @@ from nnid.config import (
 )
 from nnid.datasets.cleaning import CleaningReport
 from nnid.datasets.gaps import mask_gaps
-from nnid.datasets.log import ACCELERATION, POSE, VELOCITY, input_columns
+from nnid.datasets.log import ACCELERATION, ANGLES, POSE, VELOCITY, input_columns
 from nnid.datasets.preprocess import experiments
 from nnid.datasets.splits import PARTS, Split, say_missed_fractions, split_log
 from nnid.errors import NnidInputError
@@ -345,9 +345,12 @@ def _prepare(log: pd.DataFrame, spec, report: CleaningReport) -> pd.DataFrame:
     from nnid.datasets.measurement import relative_noise
     from nnid.datasets.preprocess import derive_velocities
 
-    if any(c not in log for c in VELOCITY) and all(a in log for a in ("phi", "theta", "psi")):
-        log = derive_velocities(log, spec.savgol_window, spec.savgol_order, report)
-    log = bridge_from_pose(log, spec.savgol_window, spec.savgol_order, report=report)
+    try:
+        if any(c not in log for c in VELOCITY) and all(a in log for a in ANGLES):
+            log = derive_velocities(log, spec.savgol_window, spec.savgol_order, report)
+        log = bridge_from_pose(log, spec.savgol_window, spec.savgol_order, report=report)
+    except NnidInputError as exc:  # a window the config's [data] chose
+        raise exc.within("data", type(spec).model_fields) from None
     if spec.noise > 0:
         absent = [c for c in spec.noise_columns or [] if c not in log]
         if absent:  # no noise at all, with the report saying it was added

@@ -206,3 +206,29 @@ def test_a_log_without_roll_is_refused_only_where_the_vehicle_rolled(roll_rate, 
         with warnings.catch_warnings():
             warnings.simplefilter("error")
             check_attitude(log, vehicle, list(dofs))
+
+
+@pytest.mark.parametrize("table", ["data", "model"])
+def test_a_savgol_window_longer_than_a_run_is_refused_naming_the_key_that_set_it(tmp_path, table):
+    """[data] savgol_window derives the velocities, [model] savgol_window the accelerations: a
+    window longer than a run was refused naming only the config file."""
+    from importlib import resources
+
+    from typer.testing import CliRunner
+
+    from nnid.cli import app
+
+    log = pd.read_parquet(resources.files("nnid.demo_data").joinpath("demo_minirov_heave.parquet"))
+    if table == "data":  # velocities to derive from the pose
+        log = log.drop(columns=list("uvwpqr")).assign(x=0.0, y=0.0)
+    log.to_csv(tmp_path / "log.csv", index=False)
+    vehicle = resources.files("nnid.demo_data").joinpath("minirov.toml")
+    (tmp_path / "t.toml").write_text(
+        f'kind = "train"\nvehicle = "{vehicle}"\n[data]\nlog = "log.csv"\n'
+        + ("savgol_window = 400.0\n" if table == "data" else "")
+        + '[split]\nby = "experiment"\n[model]\nkind = "fossen"\n'
+        + ("savgol_window = 400.0\n" if table == "model" else "")
+    )
+    res = CliRunner().invoke(app, ["train", str(tmp_path / "t.toml"), "--out", str(tmp_path / "o")])
+    assert res.exit_code == 2, res.output
+    assert f"field '{table}.savgol_window'" in res.output and "shorter savgol_window" in res.output

@@ -157,9 +157,16 @@ def savgol_window(seconds: float, rate: float, order: int, name: str | None = No
 
 
 def savgol_derivative(
-    y: np.ndarray, dt: float, window: int, order: int = 4, deriv: int = 1, where: str = "signal"
+    y: np.ndarray,
+    dt: float,
+    window: int,
+    order: int = 4,
+    deriv: int = 1,
+    where: str = "signal",
+    setting: str | None = None,
 ) -> np.ndarray:
-    """Symmetric-window Savitzky-Golay derivative of order ``deriv`` (Caccia III-B)."""
+    """Symmetric-window Savitzky-Golay derivative of order ``deriv`` (Caccia III-B).
+    ``setting``: the user's key that chose ``window``, named where ``y`` is too short for it."""
     if window % 2 == 0 or window <= order:
         raise NnidInputError(
             f"Savitzky-Golay window {window} must be odd and larger than the order {order}",
@@ -170,6 +177,8 @@ def savgol_derivative(
         raise NnidInputError(
             f"{where} has {len(y)} samples, too few for the Savitzky-Golay window of {window} "
             "samples (velocities and accelerations are derived with it)"
+            + (f": give a shorter {setting} or a longer run" if setting else ""),
+            field=setting,
         )
     missing = np.isnan(y)
     if not missing.any():
@@ -309,6 +318,7 @@ def derive_velocities(
                 window,
                 order,
                 where=f"experiment {name!r}",
+                setting="savgol_window",
             )
             for c in have
         }
@@ -369,6 +379,7 @@ def derive_accelerations(
                 window,
                 order,
                 where=f"experiment {name!r}",
+                setting="savgol_window",
             )
     if report is not None and cols:
         report.add(
