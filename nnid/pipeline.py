@@ -666,7 +666,7 @@ def _calibrate_monitor(model, split: Split, spec) -> tuple[Any, dict]:
         "calibration": monitor.calibration_,
     }
     if len(split.test):
-        out["test_false_alarms"] = monitor.false_alarms(split.test)
+        out["test_false_alarms"] = monitor.measure_false_alarms(split.test)
     return monitor, out
 
 

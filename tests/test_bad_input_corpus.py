@@ -980,6 +980,17 @@ def test_a_sweep_stops_drawing_once_every_combination_is_drawn(monkeypatch):
         (("settings", "time_constant_s"), 0, "settings.time_constant_s"),
         (("settings", "false_alarm_per_hour"), -1, "settings.false_alarm_per_hour"),
         (("calibration",), {}, "calibration.hours"),
+        (
+            ("measured_false_alarms",),
+            {
+                "alarms": -1,
+                "hours": 1.0,
+                "rate_per_hour": 0.0,
+                "interval": [0.0, 3.7],
+                "confidence": 0.95,
+            },
+            "measured_false_alarms.alarms",
+        ),
     ],
 )
 def test_a_hand_edited_monitor_is_refused_naming_the_key(fixtures, tmp_path, path, value, field):

@@ -244,6 +244,9 @@ def test_a_short_healthy_record_is_said_to_leave_the_false_alarm_rate_uncontroll
     said = json.loads((tmp_path / "detect.json").read_text())
     assert said["false_alarm_rate_controlled"] is False
     assert said["false_alarm_caveat"] == small.threshold_caveat()
+    # nothing measured the rate on healthy data this monitor never saw: said, not left out
+    assert said["false_alarms_measured"] is None
+    assert "the rate was not measured" in " ".join(lines[0].split())
     write_detect_outputs(monitor, detect(monitor, short), tmp_path / "fitted")
     fitted = json.loads((tmp_path / "fitted" / "detect.json").read_text())
     assert fitted["false_alarm_rate_controlled"] is False  # the 6-minute fixture: 12 and 9
@@ -334,6 +337,10 @@ def test_cli_train_detect_and_follow(vehicle, tmp_path, chromium):
     assert f"calibrated on {60 * hours:.1f} min of healthy data" in res.output, res.output
     report = json.loads((out / "detect.json").read_text())
     assert set(report) >= {"alarms", "threshold", "false_alarm_rate_per_hour", "samples", "seconds"}
+    # the rate the healthy test part measured at training beside the target (only the target
+    # was in detect.json, though the training run had measured it)
+    assert report["false_alarms_measured"] == metrics["detect"]["test_false_alarms"]
+    assert "measured at training: 0 alarm(s)" in " ".join(res.output.split())
     (a,) = report["alarms"]
     assert (a["kind"], a["thruster"], a["effect"]) == ("thruster_loss", "h3", None)
     assert abs(a["efficiency"] - 0.3) <= 0.1 and a["severity"] > 1 and a["confidence"] > 0.5

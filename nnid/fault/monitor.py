@@ -17,6 +17,7 @@ import math
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Annotated
 
 import numpy as np
 import pandas as pd
@@ -305,6 +306,7 @@ class ResidualMonitor(BaseEstimator):
             "dt": dt,
             "interval": interval,
         }
+        self.measured_false_alarms_: dict | None = None  # :meth:`measure_false_alarms`
         caveat = self.threshold_caveat()
         if caveat:
             warnings.warn(caveat, stacklevel=2)
@@ -391,6 +393,12 @@ class ResidualMonitor(BaseEstimator):
             "confidence": confidence,
         }
 
+    def measure_false_alarms(self, healthy: pd.DataFrame, confidence: float = 0.95) -> dict:
+        """:meth:`false_alarms` on a healthy record the calibration never saw, kept (and saved)
+        with the monitor: ``detect.json`` then gives the rate measured beside the target."""
+        self.measured_false_alarms_ = self.false_alarms(healthy, confidence)
+        return self.measured_false_alarms_
+
     # -- persistence ----------------------------------------------------------------------------
     def save(self, folder: str | Path) -> Path:
         """``monitor.json`` beside the saved model (strict JSON, no code)."""
@@ -411,6 +419,7 @@ class ResidualMonitor(BaseEstimator):
                 "thresholds": self.thresholds_,
                 "correlation_time": self.correlation_time_,
                 "calibration": self.calibration_,
+                "measured_false_alarms": self.measured_false_alarms_,
             },
         )
         return path
@@ -445,6 +454,7 @@ class ResidualMonitor(BaseEstimator):
             out.thresholds_ = state["thresholds"]
             out.correlation_time_ = float(state["correlation_time"])
             out.calibration_ = state["calibration"]
+            out.measured_false_alarms_ = state.get("measured_false_alarms")  # older: none
         except (KeyError, TypeError, ValueError) as exc:
             raise NnidInputError(
                 f"is not a monitor nnid wrote ({type(exc).__name__}: {exc})", source=str(path)
@@ -502,6 +512,16 @@ class _Calibration(StrictModel):
     interval: PositiveFloat | None = None  # :func:`typical_interval`; older monitors lack it
 
 
+class _Measured(StrictModel):
+    """:meth:`ResidualMonitor.false_alarms` as saved."""
+
+    alarms: int = Field(ge=0)
+    hours: PositiveFloat
+    rate_per_hour: float = Field(ge=0)
+    interval: Annotated[list[Annotated[float, Field(ge=0)]], Field(min_length=2, max_length=2)]
+    confidence: float = Field(gt=0, lt=1)
+
+
 class _SavedMonitor(BaseModel):
     """The numbers of ``monitor.json`` that detection believes, checked on loading."""
 
@@ -509,6 +529,7 @@ class _SavedMonitor(BaseModel):
     settings: _Settings
     thresholds: _Thresholds
     calibration: _Calibration
+    measured_false_alarms: _Measured | None = None  # older monitors, or no test part
 
 
 class Stream:

@@ -29,7 +29,9 @@ def detect_json(monitor, result: DetectResult) -> dict:
     were set for, and whether the calibration controls it (``false_alarm_rate_controlled``:
     false, with the reason in ``false_alarm_caveat``, when the healthy record was too short
     for the rate fit and the thresholds are twice its largest value: then the rate is a
-    target that was neither achieved by a fit nor measured)."""
+    target that was neither achieved by a fit nor measured). ``false_alarms_measured``: the
+    alarms on the healthy test part at training, with the rate's exact interval; null where
+    the training split had no test part (the rate was never measured)."""
     h_t, h_g = monitor.threshold_values
     caveat = monitor.threshold_caveat()
     return {
@@ -43,6 +45,7 @@ def detect_json(monitor, result: DetectResult) -> dict:
         "false_alarm_rate_per_hour": monitor.false_alarm_per_hour,
         "false_alarm_rate_controlled": caveat is None,
         "false_alarm_caveat": caveat,
+        "false_alarms_measured": monitor.measured_false_alarms_,
         "calibration": monitor.calibration_,
         "samples": int(result.trace.t.size),
         "seconds": result.seconds,
@@ -68,13 +71,27 @@ def write_detect_outputs(
     lines = [
         f"{len(result.alarms)} alarm(s) in {result.trace.t.size} samples "
         f"(target false-alarm rate {monitor.false_alarm_per_hour:g} per hour, calibrated on "
-        f"{60 * hours:.1f} min of healthy data)",  # as the page says it: 0.5, not "0 min"
+        f"{60 * hours:.1f} min of healthy data; {measured_rate(monitor)})",  # 0.5, not "0 min"
         *(describe_alarm(a) for a in result.alarms),
     ]
     caveat = monitor.threshold_caveat()
     if caveat:
         lines.append(f"note: {caveat}")
     return lines
+
+
+def measured_rate(monitor) -> str:
+    """What the healthy test part measured of the false-alarm rate at training, or that
+    nothing did."""
+    m = monitor.measured_false_alarms_
+    if m is None:
+        return "the rate was not measured: the training split had no healthy test part"
+    lo, hi = m["interval"]
+    return (
+        f"measured at training: {m['alarms']} alarm(s) in {60 * m['hours']:.1f} min of healthy "
+        f"test data, {m['rate_per_hour']:.3g} per hour ({100 * m['confidence']:.0f} % interval "
+        f"{lo:.3g}-{hi:.3g})"
+    )
 
 
 def detect_html(monitor, result: DetectResult, source: str = "") -> str:
@@ -89,7 +106,8 @@ def detect_html(monitor, result: DetectResult, source: str = "") -> str:
         f"{60 * cal['hours']:.1f} min of healthy data ({cal['samples']} samples); thresholds set "
         f"for {monitor.false_alarm_per_hour:g} false alarms per hour by a "
         f"{html.escape(monitor.thresholds_['ewma']['method'])} fit. "
-        f"{len(result.alarms)} alarm(s) in {trace.t.size} samples.</p>"
+        f"{len(result.alarms)} alarm(s) in {trace.t.size} samples. False-alarm rate "
+        f"{html.escape(measured_rate(monitor))}.</p>"
     )
     caveat = monitor.threshold_caveat()
     if caveat:
