@@ -865,10 +865,11 @@ def ranked_columns(rows: list[dict], part: str) -> list[str]:
 
 def ranked_score(row: dict, part: str, key: str, columns: list[str]) -> float | None:
     """A model's NRMSE of one mode over ``columns`` (:func:`ranked_columns`): its own
-    ``total`` where it is scored on exactly those, else their mean; None where one diverged
-    or was not measured, or none is shared."""
+    ``total`` where it is scored on exactly those, else their mean; None where one was not
+    measured, or none is shared, or the model diverged in any output, shared or its own (a
+    free run that left for 1e6 m/s in r is no simulation of the log, whatever its u)."""
     scores = row.get(part, {}).get(key)
-    if not scores or not columns:
+    if not scores or not columns or diverged_columns(row[part], key):
         return None
     if set(row[part].get("columns", [])) == set(columns):
         return scores.get("total")

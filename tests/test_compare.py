@@ -269,6 +269,16 @@ def test_the_summary_never_ranks_on_an_error_that_was_not_measured():
     assert text.startswith("No free run was scored on the test data (diverged: c; not scored")
     assert "how these models simulate this log was not measured" in text, text
     assert "Every free run diverged" not in text and "none of these models" not in text
+    # diverged in an output only it predicts: ranked on the shared u it was first, with a
+    # finite 0.05, and its divergence unsaid
+    d = row("d", free=0.05)
+    d["test"]["columns"] = ["u", "r"]
+    d["test"]["free_run_nrmse"] = {"u": 0.05, "r": None, "total": None}
+    d["test"]["diverged"] = {"r": 7.5}
+    rows = [d, row("e", free=0.2)]
+    assert rank(rows, "test") == ["e", "d"]
+    text = summary(rows, rank(rows, "test"), "test", False)
+    assert text.startswith("Use e") and "Diverged in free run: d." in text, text
 
 
 def test_models_scored_on_different_outputs_are_ranked_on_the_shared_ones():
