@@ -243,11 +243,13 @@ def load_inputs(
                 source=str(config_path),
                 field="data.experiments",
             )
-        keep = inputs.log["experiment"].isin(spec.experiments)
-        inputs.log = inputs.log[keep].reset_index(drop=True)
+    kept = inputs.log  # its index: the rows as read, which errors about the file name
+    if spec.experiments:
+        kept = inputs.log[inputs.log["experiment"].isin(spec.experiments)]
+        inputs.log = kept.reset_index(drop=True)
         inputs.report.add("experiments", f"kept {', '.join(spec.experiments)}")
     if source is not None:  # the runs kept: one left out may be sampled as it likes
-        _check_sampling(inputs.log, models, source)
+        _check_sampling(kept, models, source)
         # a model with no dofs fits every DOF the data excites: any of them may read the angle
         fitted = [d for m in models if m.kind in PHYSICS_KINDS for d in fitted_dofs(m) or DOFS]
         if fitted and inputs.vehicle is not None:

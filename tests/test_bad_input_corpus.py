@@ -1137,3 +1137,12 @@ def test_a_run_the_config_leaves_out_may_be_sampled_as_it_likes(fixtures, tmp_pa
     out = tmp_path / "out2"
     result = CliRunner().invoke(app, ["train", str(config), "--data", str(data), "--out", str(out)])
     assert result.exit_code == 2 and "rate_change.csv" in result.output
+    # the row named is the file's, with runs left out before it (it was the row's position
+    # among the runs kept, row 1); run1's median interval is its 100-Hz part's, so its second
+    # sample, 0.05 s after the first, is the first one off
+    table = pd.read_csv(data)
+    first_off = int(np.flatnonzero((table["experiment"] == "run1").to_numpy())[1])
+    keep = 'kind = "train"\n[data]\nexperiments = ["run1", "run2"]\n'
+    config.write_text(NARX_TRAIN.replace('kind = "train"\n', keep))
+    result = CliRunner().invoke(app, ["train", str(config), "--data", str(data), "--out", str(out)])
+    assert result.exit_code == 2 and f"row {first_off}:" in result.output, result.output

@@ -52,8 +52,9 @@ UNIFORM_TOLERANCE = 0.1
 def check_uniform(log: pd.DataFrame, what: str, name: str = "log") -> None:
     """Raise unless every experiment of ``log`` is uniformly sampled (each interval within
     :data:`UNIFORM_TOLERANCE` of the run's median: a longer one has samples missing, a rate
-    that changes within the run leaves the median), naming the first row that is not: models
-    that count time in samples (``what``) need it."""
+    that changes within the run leaves the median), naming the first row that is not (by its
+    index label: the file's row for a log as read, whatever runs were left out): models that
+    count time in samples (``what``) need it."""
     for exp, idx in experiments(log):
         t = log.loc[idx, "t"].to_numpy(np.float64)
         dt = np.diff(t)
@@ -70,7 +71,7 @@ def check_uniform(log: pd.DataFrame, what: str, name: str = "log") -> None:
                 f"{what} counts time in samples; resample the log, or split the run where "
                 "samples are missing",
                 field="t",
-                row=int(log.index.get_loc(idx[k + 1])),
+                row=int(idx[k + 1]) if isinstance(idx[k + 1], (int, np.integer)) else None,
             )
 
 
