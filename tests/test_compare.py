@@ -279,6 +279,17 @@ def test_the_summary_never_ranks_on_an_error_that_was_not_measured():
     assert rank(rows, "test") == ["e", "d"]
     text = summary(rows, rank(rows, "test"), "test", False)
     assert text.startswith("Use e") and "Diverged in free run: d." in text, text
+    from nnid.pipeline import ranked_score
+    from nnid.reports.compare_report import ranking_rows
+
+    for r in rows:
+        r["seconds"] = 1.0
+        r["ranked_nrmse"] = {m: ranked_score(r, "test", f"{m}_nrmse", ["u"])
+                             for m in ("free_run", "k_step", "one_step")}  # fmt: skip
+    comparison = {"models": rows, "ranking": rank(rows, "test"), "held_out": "test",
+                  "ranked_on": ["u"]}  # fmt: skip
+    cells = {r[1]: r for r in ranking_rows(comparison)[1]}
+    assert cells["d"][6] == "diverged", cells["d"]
 
 
 def test_models_scored_on_different_outputs_are_ranked_on_the_shared_ones():

@@ -54,3 +54,18 @@ def test_members_table_says_dash_for_a_column_a_split_does_not_score():
     assert cells["validation w"] == "0.2" and cells["test u"] == "0.07"
     assert cells["test w"] == "-"
     assert cells["test total"] == "diverged"
+
+
+def test_a_parameter_never_tested_for_significance_is_not_called_insignificant():
+    """A jointly trained hybrid's physics has values without standard errors: no test ran,
+    so its significance is "-", not "no" (the table printed "no" for every one)."""
+    from nnid.reports.train_report import _params_table
+
+    params = {
+        "Z_wdot": {"value": -1.2, "stderr": None, "vehicle_file": -1.0},
+        "Z:w": {"value": -4.0, "stderr": 0.5, "vehicle_file": -5.0, "significant": False},
+        "Z:w|w|": {"value": -9.0, "stderr": 0.5, "vehicle_file": -8.0, "significant": True},
+    }
+    head, rows = _params_table({"params": params})
+    column = head.index("significant (95 %)")
+    assert [r[column] for r in rows] == ["-", "no", "yes"]

@@ -57,8 +57,8 @@ def _ranked(row: dict, comparison: dict, key: str) -> str:
     if key not in _held(row, comparison) or not comparison.get("ranked_on"):
         return "-"
     value = row["ranked_nrmse"][key.removesuffix("_nrmse")]
-    went = diverged_columns(_held(row, comparison), key)
-    return score(value, diverged=any(c in went for c in comparison["ranked_on"]))
+    # diverged in any output, shared or its own: the ranking voided its score for it
+    return score(value, diverged=bool(diverged_columns(_held(row, comparison), key)))
 
 
 def _partial(comparison: dict) -> bool:

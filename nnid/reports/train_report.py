@@ -63,7 +63,8 @@ def _params_table(metrics: dict) -> tuple[list[str], list[list[str]]]:
             pe = p.get("percentile_error")
             row += [
                 f"{number(pe, 3)} %" if pe is not None else "-",
-                "yes" if p.get("significant") else "no",
+                # no test run (a jointly trained value without s.e.) is no "not significant"
+                "-" if p.get("significant") is None else "yes" if p["significant"] else "no",
                 number(p.get("vehicle_file"), 5),
                 _rel(p["value"], p.get("vehicle_file")),
             ]
