@@ -509,16 +509,25 @@ def k_steps(log: pd.DataFrame, seconds: float | None) -> int | None:
 
 
 def diverged_training(description: dict) -> list[str]:
-    """The warning for training stages that ended on a non-finite loss: each keeps its start
-    (a hybrid's network untrained, its force zero), so the scores are of the model before it,
-    which a report, a batch row or the loop must not read as a trained one."""
-    broke = [s["stage"] for s in training_stages(description) if s["stop"] == "non-finite loss"]
-    if not broke:
-        return []
-    return [
-        f"training diverged in {', '.join(dict.fromkeys(broke))} (the loss became non-finite): "
-        "that stage kept its start, so the scores are those of the model before it"
-    ]
+    """The warnings for training stages that kept their start: those that ended on a
+    non-finite loss, and those whose every validation free run diverged, the start's included
+    (early stopping measured nothing to keep). Either way the scores are of the model before
+    the stage (a hybrid's network untrained, its force zero), which a report, a batch row or
+    the loop must not read as a trained one."""
+    stages = training_stages(description)
+    said = []
+    for stop, what in (
+        ("non-finite loss", "training diverged in {} (the loss became non-finite)"),
+        ("validation diverged", "every validation free run diverged in {}, its start's too, "
+         "so early stopping measured nothing"),
+    ):  # fmt: skip
+        broke = [s["stage"] for s in stages if s["stop"] == stop]
+        if broke:
+            said.append(
+                what.format(", ".join(dict.fromkeys(broke)))
+                + ": that stage kept its start, so the scores are those of the model before it"
+            )
+    return said
 
 
 def unscored_k_step(part: str, log: pd.DataFrame, scores: dict, cfg, model) -> list[str]:

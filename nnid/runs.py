@@ -163,7 +163,7 @@ def train_run(
         line += f"; physics only {score_cell(base, 'total', went)}"
     broke = diverged_training(metrics.get("describe") or {})
     if broke:  # the scores are then the stage's start: said beside them, and as a warning
-        line += "; training diverged (the warning says where)"
+        line += "; a training stage kept its start (the warning says why)"
     headline: dict[str, Any] = {
         "model": metrics["model"],
         "trainer": metrics["trainer"],

@@ -107,5 +107,5 @@ def test_a_validation_run_that_always_diverges_stops_after_max_fail():
     module, residual, train, val = _diverged_while_poor(limit=-1.0)
     start = module.weight.detach().clone()
     hist = Adam(lr=0.05, max_epochs=200, max_fail=5).fit(module, residual, train, val)
-    assert hist.stop_reason == "validation" and hist.epochs == 5 and hist.best_epoch == 0
+    assert hist.stop_reason == "validation diverged" and hist.epochs == 5 and hist.best_epoch == 0
     assert torch.equal(module.weight.detach(), start)

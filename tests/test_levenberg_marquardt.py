@@ -229,7 +229,7 @@ def test_a_validation_run_that_always_diverges_counts_as_failures() -> None:
     residual = _diverged_while_poor(net, -1.0)
     lm = LevenbergMarquardt(max_epochs=200, max_fail=4, min_grad=0.0, goal=-1.0)
     hist = lm.fit(net, residual, [(x, y, False)], [(x, y, True)])
-    assert hist.stop_reason == "validation" and hist.epochs == 4 and hist.best_epoch == 0
+    assert hist.stop_reason == "validation diverged" and hist.epochs == 4 and hist.best_epoch == 0
     assert np.allclose(_flat(net), start)
 
 

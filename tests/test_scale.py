@@ -530,6 +530,24 @@ def test_sweep_missing_scores_rank_last_and_bad_options_are_refused(sweep_inputs
     ranked = rank(spec, tasks, rows)
     assert [r.setting for r in ranked] == [{"model.hidden": [6]}, {"model.hidden": [2]}]
     assert ranked[0].mean == pytest.approx(0.35) and not ranked[1].complete
+    # a trial whose training kept its start scores the untrained model: no score of the
+    # setting (an lr = 1e6 that diverged in every seed was chosen, its score the start's)
+    rows = [{"status": "ok", "validation_free_run_nrmse": 0.1, "training_diverged": True},
+            {"status": "ok", "validation_free_run_nrmse": 0.1, "training_diverged": True},
+            {"status": "ok", "validation_free_run_nrmse": 0.3},
+            {"status": "ok", "validation_free_run_nrmse": 0.4}]  # fmt: skip
+    ranked = rank(spec, tasks, rows)
+    assert [r.setting for r in ranked] == [{"model.hidden": [6]}, {"model.hidden": [2]}]
+    assert ranked[1].mean is None
+    from nnid.scale.sweep import _summary
+
+    rows[2:] = [{"status": "failed"}, {"status": "ok", "validation_free_run_nrmse": None}]
+    said = _summary(spec, rank(spec, tasks, rows))
+    assert said == (
+        "No setting gave a validation free_run_nrmse. Of 4 trials: 1 failed; 2 kept an "
+        "untrained start (training diverged); 1 has no validation free_run_nrmse (diverged, "
+        "or nothing scored: each trial's warnings say which)."
+    ), said
     config, _ = sweep_inputs
     bad = tmp_path / "bad.toml"
     bad.write_text(config.read_text().replace('"model.hidden"', '"model.hiddn"'))

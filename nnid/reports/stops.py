@@ -8,6 +8,7 @@ from __future__ import annotations
 #: on a budget, or because it could not go on
 STOP_WORDS = {
     "validation": "early-stopped: the validation error stopped falling",
+    "validation diverged": "stopped: every validation free run diverged, so it kept its start",
     "goal": "reached the error goal",
     "min_grad": "converged: gradient below its minimum",
     "max_epochs": "ran out of epochs (no stop criterion met)",

@@ -99,13 +99,16 @@ class Ranked:
 
 def rank(spec: SweepSpec, tasks: list[Task], rows: list[dict]) -> list[Ranked]:
     """Settings best first: complete ones by their mean validation score, then the ones with a
-    missing score (diverged or failed seeds) by the mean of what they have."""
+    missing score (diverged or failed seeds) by the mean of what they have. A trial whose
+    training kept its start (``training_diverged``) has no score: its numbers are of the
+    model before training, not of the setting."""
     seed_key = spec.seed_option
     groups: dict[str, Ranked] = {}
     for task, row in zip(tasks, rows, strict=True):
         setting = {k: v for k, v in task.overrides.items() if k != seed_key or not spec.seeds}
         key = json.dumps(setting, sort_keys=True)
-        score = row.get(f"validation_{spec.metric}") if row["status"] == "ok" else None
+        trained = row["status"] == "ok" and not row.get("training_diverged")
+        score = row.get(f"validation_{spec.metric}") if trained else None
         score = None if score is None or not math.isfinite(score) else score
         groups.setdefault(key, Ranked(setting, [], [])).scores.append(score)
         groups[key].rows.append(row)
@@ -161,6 +164,7 @@ def _write_sweep(
                 f"validation_{spec.metric}_mean": r.mean,
                 "seeds_scored": sum(s is not None for s in r.scores),
                 "seeds": len(r.scores),
+                "seeds_training_diverged": sum(bool(x.get("training_diverged")) for x in r.rows),
                 "scores": json.dumps(r.scores),
                 "test_free_run_nrmse": json.dumps([_test_score(row) for row in r.rows]),
             }
@@ -191,7 +195,24 @@ def _test_score(row: dict) -> float | None:
 def _summary(spec: SweepSpec, ranked: list[Ranked]) -> str:
     best = ranked[0]
     if best.mean is None:
-        return f"No setting gave a validation {spec.metric}: every trial failed or diverged."
+        rows = [row for r in ranked for row in r.rows]
+        failed = sum(row["status"] != "ok" for row in rows)
+        kept = sum(row["status"] == "ok" and bool(row.get("training_diverged")) for row in rows)
+        rest = len(rows) - failed - kept
+        said = [
+            f"{failed} failed" if failed else "",
+            f"{kept} kept an untrained start (training diverged)" if kept else "",
+            f"{rest} {'has' if rest == 1 else 'have'} no validation {spec.metric} (diverged, "
+            "or nothing scored: each "
+            "trial's warnings say which)"
+            if rest
+            else "",
+        ]
+        return (
+            f"No setting gave a validation {spec.metric}. Of {len(rows)} trials: "
+            + "; ".join(x for x in said if x)
+            + "."
+        )
     text = (
         f"Best of {len(ranked)} settings: {json.dumps(best.setting)} with validation "
         f"{spec.metric} {best.mean:.4g} "

@@ -172,7 +172,7 @@ class Adam(BaseEstimator):
             else:
                 since_best += 1
                 if val_batches and since_best >= self.max_fail:
-                    hist.stop_reason = "validation"
+                    hist.stop_reason = hist.early_stop_reason()
                     break
             if isinstance(scheduler, torch.optim.lr_scheduler.ReduceLROnPlateau):
                 scheduler.step(value)

@@ -91,6 +91,14 @@ class History:
         for key, value in extra.items():
             self.extra.setdefault(key, []).append(float(value))
 
+    def early_stop_reason(self) -> str:
+        """Why validation stopped the fit: ``validation`` (its error stopped falling), or
+        ``validation diverged`` where no validation error recorded was finite (every check's
+        held-out free run left the data's range): the fit kept its start, which no validation
+        error measured."""
+        finite = any(math.isfinite(v) for v in self.validation)
+        return "validation" if finite else "validation diverged"
+
     def as_dict(self) -> dict:
         """A JSON-ready summary (the series and the stop)."""
         return {

@@ -625,7 +625,7 @@ class LevenbergMarquardt(BaseEstimator):
             elif epoch >= self.max_epochs:
                 stop = "max_epochs"
             elif use_val and fails >= self.max_fail:
-                stop = "validation"
+                stop = hist.early_stop_reason()
             if stop:
                 break
             if drawn and epoch > 0:  # this epoch's batches: the point's SSE on them
