@@ -816,7 +816,9 @@ def run_compare(
         if held_name == "test":
             row["test"] = score(model, held, cfg, k, replay, predicted)
         row["warnings"] += unscored_k_step(held_name, held, row[held_name], cfg, model)
-        row["warnings"] += diverged_training(description)
+        kept_start = diverged_training(description)
+        row["warnings"] += kept_start
+        row["training_diverged"] = bool(kept_start)  # ranked after every trained model
         rows.append(row)
         free_runs[name] = predicted["free_run"]
         with np.errstate(all="ignore"):
@@ -891,8 +893,9 @@ def ranked_score(row: dict, part: str, key: str, columns: list[str]) -> float | 
 def rank(rows: list[dict], part: str) -> list[str]:
     """Names best first: held-out free-run NRMSE over the outputs every model is scored on
     (:func:`ranked_columns`); a model whose free run diverged (or was not scored) after every
-    model whose free run was measured, ordered by its k-step NRMSE. Models that share no
-    output are not ranked: their order is the config's."""
+    model whose free run was measured, ordered by its k-step NRMSE; a model whose training
+    kept its start (``training_diverged``: its scores are the untrained model's) after every
+    trained one. Models that share no output are not ranked: their order is the config's."""
     columns = ranked_columns(rows, part)
     if not columns:
         return [r["name"] for r in rows]
@@ -901,11 +904,12 @@ def rank(rows: list[dict], part: str) -> list[str]:
         free = ranked_score(row, part, "free_run_nrmse", columns)
         k = ranked_score(row, part, "k_step_nrmse", columns)
         one = ranked_score(row, part, "one_step_nrmse", columns)
+        untrained = bool(row.get("training_diverged"))
         if free is not None:
-            return (0, free)
+            return (untrained, 0, free)
         if k is not None:
-            return (1, k)
-        return (2, one if one is not None else np.inf)
+            return (untrained, 1, k)
+        return (untrained, 2, one if one is not None else np.inf)
 
     return [r["name"] for r in sorted(rows, key=key)]
 
@@ -929,6 +933,18 @@ def summary(rows: list[dict], ranking: list[str], part: str, replay: bool) -> st
         return ranked_score(row, part, key, columns)
 
     best = by_name[ranking[0]]
+    untrained = [n for n in ranking if by_name[n].get("training_diverged")]
+    kept = (
+        f" Training kept its start, so these scores are of the untrained model (ranked after "
+        f"the trained ones): {', '.join(untrained)}."
+        if untrained
+        else ""
+    )
+    if best.get("training_diverged"):  # every model: none is recommended on its start
+        return (
+            f"No model finished training: every one kept its start ({', '.join(untrained)}), "
+            f"so no score on the {part} data is of a trained model; see the warnings."
+        )
     free = total(best, "free_run_nrmse")
     loop = " flown under the log's autopilot" if replay else ""
     missing = [n for n in ranking if total(by_name[n], "free_run_nrmse") is None]
@@ -948,13 +964,17 @@ def summary(rows: list[dict], ranking: list[str], part: str, replay: bool) -> st
             lead = f"Every free run{loop} diverged on the {part} data{over}"
             verdict = "none of these models simulates this log"
         if k is None and one is None:  # nothing was measured: no model is ranked first
-            return f"{lead}, and no other error was measured: {verdict}."
+            return f"{lead}, and no other error was measured: {verdict}.{kept}"
         what = f"k-step NRMSE ({k:.3g})" if k is not None else f"one-step NRMSE ({one:.3g})"
         return (
             f"{lead}; {best['name']} ({best['kind']}, {best['n_params']} parameters) has the "
-            f"lowest {what}: {verdict}."
+            f"lowest {what}: {verdict}.{kept}"
         )
-    others = [by_name[n] for n in ranking[1:] if total(by_name[n], "free_run_nrmse") is not None]
+    others = [
+        by_name[n]
+        for n in ranking[1:]
+        if total(by_name[n], "free_run_nrmse") is not None and n not in untrained
+    ]
     sentence = (
         f"Use {best['name']} ({best['kind']}, {best['n_params']} parameters): the lowest "
         f"free-run NRMSE{loop} on the {part} data{over} ({free:.3g}"
@@ -969,4 +989,4 @@ def summary(rows: list[dict], ranking: list[str], part: str, replay: bool) -> st
         sentence += (
             f" Not scored in free run (no sample left after the warm-ups): {', '.join(unscored)}."
         )
-    return sentence
+    return sentence + kept

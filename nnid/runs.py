@@ -227,9 +227,15 @@ def compare_run(
     # (every free run diverged) names no best for the held-out free run: none is best
     top = next((r for r in comparison["models"] if ranking and r["name"] == ranking[0]), {})
     measured = (top.get("ranked_nrmse") or {}).get("free_run") is not None
-    best = ranking[0] if measured and comparison.get("ranked_on") else None
+    trained = not top.get("training_diverged")  # an untrained start is no best model
+    best = ranking[0] if measured and trained and comparison.get("ranked_on") else None
     shared = comparison.get("ranked_on") or []
-    headline: dict[str, Any] = {"best": best, "ranked_on": ",".join(shared) or None}
+    untrained = [r["name"] for r in comparison["models"] if r.get("training_diverged")]
+    headline: dict[str, Any] = {
+        "best": best,
+        "ranked_on": ",".join(shared) or None,
+        "training_diverged": ",".join(untrained) or None,
+    }
     for row in comparison["models"]:
         held = row.get("test") or row.get("validation") or {}
         # side by side, the totals must be over the same outputs: those the ranking shares

@@ -7,6 +7,7 @@ import json
 import re
 from pathlib import Path
 
+import pandas as pd
 import pytest
 from conftest import assert_rendered
 from typer.testing import CliRunner
@@ -290,6 +291,21 @@ def test_the_summary_never_ranks_on_an_error_that_was_not_measured():
                   "ranked_on": ["u"]}  # fmt: skip
     cells = {r[1]: r for r in ranking_rows(comparison)[1]}
     assert cells["d"][6] == "diverged", cells["d"]
+    # a model whose training kept its start: its scores are the untrained model's (a hybrid
+    # with lr = 1e6 scored its physics fit's 0.296 and was recommended); ranked after the
+    # trained ones, never the one to use, and said
+    f = row("f", free=0.01)
+    f["training_diverged"] = True
+    rows = [f, row("e", free=0.2)]
+    assert rank(rows, "test") == ["e", "f"]
+    text = summary(rows, rank(rows, "test"), "test", False)
+    assert text.startswith("Use e") and "0.2)." in text and "against" not in text, text
+    assert text.endswith("these scores are of the untrained model (ranked after the trained "
+                         "ones): f."), text  # fmt: skip
+    e = rows[1]
+    e["training_diverged"] = True
+    text = summary(rows, rank(rows, "test"), "test", False)
+    assert text.startswith("No model finished training") and "Use" not in text, text
 
 
 def test_models_scored_on_different_outputs_are_ranked_on_the_shared_ones():
@@ -427,3 +443,37 @@ trainer = {{ kind = "lm", max_epochs = 5 }}
     on_w = fossen["test"]["free_run_nrmse"]["w"]
     assert outcome.headline["free_run_nrmse:fossen_uw"] == pytest.approx(on_w)
     assert on_w != pytest.approx(fossen["test"]["free_run_nrmse"]["total"])
+
+
+def test_a_model_whose_training_diverged_is_never_the_one_to_use(tmp_path):
+    """A hybrid trained with lr = 1e6 keeps its start, whose physics fit scored below the
+    plain Fossen fit: compare said "Use hybrid_broken", and a batch row named it best."""
+    from importlib import resources
+
+    from nnid.config import CompareConfig, load_config
+    from nnid.runs import compare_run
+
+    demo = resources.files("nnid.demo_data")
+    pd.read_parquet(demo.joinpath("demo_minirov_heave.parquet")).to_csv(
+        tmp_path / "demo.csv", index=False
+    )
+    config = tmp_path / "cmp.toml"
+    config.write_text(
+        f'kind = "compare"\nvehicle = "{demo.joinpath("minirov.toml")}"\nwarmup_s = 2.0\n'
+        '[data]\nlog = "demo.csv"\n[split]\nby = "experiment"\nvalidation = ["run5"]\n'
+        'test = ["run6", "run7"]\n'
+        '[[models]]\nkind = "fossen"\nname = "fossen_ls"\ndofs = ["w"]\n'
+        'trainer = { kind = "ls", filter_lambda = 1.0 }\n'
+        '[[models]]\nkind = "hybrid"\nname = "hybrid_broken"\ndofs = ["w"]\nhidden = [8]\n'
+        "memory = []\nsegments = [0.25]\n"
+        'physics_trainer = { kind = "ls", filter_lambda = 1.0 }\n'
+        'trainer = { kind = "adam", lr = 1e6, max_epochs = 2 }\n'
+    )
+    outcome = compare_run(load_config(config, CompareConfig), config, tmp_path / "out")
+    comparison = json.loads((tmp_path / "out" / "comparison.json").read_text())
+    rows = {m["name"]: m for m in comparison["models"]}
+    assert rows["hybrid_broken"]["training_diverged"] and not rows["fossen_ls"]["training_diverged"]
+    assert comparison["ranking"] == ["fossen_ls", "hybrid_broken"]
+    assert comparison["summary"].startswith("Use fossen_ls"), comparison["summary"]
+    assert outcome.headline["best"] == "fossen_ls"
+    assert outcome.headline["training_diverged"] == "hybrid_broken"

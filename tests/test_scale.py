@@ -742,3 +742,22 @@ def test_parameter_figure_marks_a_value_without_standard_error(monkeypatch) -> N
     bars = [c for c in ax.containers if hasattr(c, "has_yerr") and c.has_yerr]
     assert len(bars) == 1 and list(bars[0].lines[0].get_xdata()) == [0, 2]
     assert [t.get_text() for t in ax.get_legend().get_texts()] == ["no standard error"]
+
+
+def test_batch_tables_say_a_training_that_kept_its_start() -> None:
+    """A train or compare task whose training diverged was an 'ok' row with its untrained
+    model's score and nothing beside it; the compare row named it the best model."""
+    from nnid.reports.batch_report import KEPT_START, _compare_table, _train_table
+
+    rows = [
+        {"data": "a.csv", "status": "ok", "model": "hybrid", "held_out": "test",
+         "free_run_nrmse": 0.296, "training_diverged": True},
+        {"data": "b.csv", "status": "ok", "model": "hybrid", "held_out": "test",
+         "free_run_nrmse": 0.31, "training_diverged": False},
+    ]  # fmt: skip
+    page = _train_table(rows)
+    assert page.count(KEPT_START) == 2  # the row's cell, and the column's definition
+    assert page.index(KEPT_START) < page.index("b.csv")
+    page = _compare_table([{"data": "a.csv", "status": "ok", "best": None,
+                            "training_diverged": "hybrid_broken"}])  # fmt: skip
+    assert "hybrid_broken" in page and KEPT_START in page

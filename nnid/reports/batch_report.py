@@ -124,19 +124,28 @@ def _held_out(row: dict) -> str:
     return f"{held} (used for {used})" if held == "validation" and used else held
 
 
+#: a row whose training kept its start: its numbers are the untrained model's
+KEPT_START = "kept its start (training diverged)"
+
+
 def _train_table(rows: list[dict]) -> str:
     body = [
         [_log(r), r["status"], str(r.get("model") or ""), _held_out(r),
-         number(r.get("free_run_nrmse")), number(r.get("one_step_nrmse"))]
+         number(r.get("free_run_nrmse")), number(r.get("one_step_nrmse")),
+         KEPT_START if r.get("training_diverged") else ""]
         for r in rows
     ]  # fmt: skip
     return html_table(
-        ["log", "status", "model", "held out", "free-run NRMSE", "one-step NRMSE"], body
+        ["log", "status", "model", "held out", "free-run NRMSE", "one-step NRMSE", "training"],
+        body,
     ) + definitions(
         {
             "held out": "the part scored (test where the split has one, else validation, "
             "and then what the fit used it for: its score is not independent)",
             "free-run NRMSE": "total over the excited DOFs; '-' where the free run diverged",
+            "training": f"'{KEPT_START}' where a training stage ended on a non-finite loss or "
+            "a validation that never measured a free run: the scores are of the model before "
+            "that stage",
         }
     )
 
@@ -151,8 +160,10 @@ def _detect_table(rows: list[dict]) -> str:
 
 
 def _compare_table(rows: list[dict]) -> str:
-    body = [[_log(r), r["status"], str(r.get("best") or "-")] for r in rows]
-    return html_table(["log", "status", "best model (held-out free run)"], body)
+    body = [[_log(r), r["status"], str(r.get("best") or "-"), str(r.get("training_diverged") or "")]
+            for r in rows]  # fmt: skip
+    head = ["log", "status", "best model (held-out free run)", f"training {KEPT_START}"]
+    return html_table(head, body)
 
 
 TABLES = {"loop": _loop_table, "train": _train_table, "detect": _detect_table,
@@ -172,8 +183,12 @@ def _sweep(result) -> list[str]:
         value = row.get(f"validation_{metric}") if row["status"] == "ok" else None
         scores.setdefault(label, []).append(value)
         test = row.get("free_run_nrmse") if row.get("held_out") == "test" else None
+        note = str(row.get("error") or "")
+        if row["status"] == "ok" and row.get("training_diverged"):  # the sweep ranks it unscored
+            note = f"{KEPT_START}: its score is the untrained model's, not ranked"
+            scores[label][-1] = None
         body.append([label, number(seed), row["status"], number(value, 4), number(test, 4),
-                     str(row.get("error") or "")])  # fmt: skip
+                     note])  # fmt: skip
     head = ["setting", "seed", "status", f"validation {metric}", "test free-run NRMSE", "note"]
     out.append(html_table(head, body))
     out.append(definitions({
