@@ -35,6 +35,7 @@ from nnid.loop.diagnose import (
     refit,
     rescore,
     residual_correlation_time,
+    reweight,
     screen_linear,
     search_nonlinear,
     sindy_opinion,
@@ -230,7 +231,7 @@ class ResidualLoop:
             if step.added is None:
                 break
             added.append(step.added)
-            fit = step.fit
+            fit = reweight(ws, step.fit)  # the next pass weighs by the model it now has
             pool = [c for c in pool if c.name != step.added.candidate.name]
         self.fit_ = fit
         self.added_ = added

@@ -7,6 +7,7 @@ One self-contained HTML page (figures embedded) and a Markdown twin with the sam
 from __future__ import annotations
 
 import html
+import math
 
 import numpy as np
 
@@ -57,8 +58,10 @@ def effect_sentence(candidate: dict) -> str:
             (args[0], args[1]),
             f"{'Positive' if args[1] == 'pos' else 'Negative'} {DOF_WORD[args[0]]} moment",
         )
-        pm = f" ± {100 * se:.0f} %" if se is not None else ""
-        return f"{what} is {100 * value:.0f} %{pm} of nominal"
+        # as many decimals as the s.e.'s first digit needs: 57.0 % ± 0.2 %, not ± 0 %
+        places = 0 if not se or 100 * se >= 1 else min(-math.floor(math.log10(100 * se)), 3)
+        pm = f" ± {100 * se:.{places}f} %" if se is not None else ""
+        return f"{what} is {100 * value:.{places}f} %{pm} of nominal"
     # plain words: a size and a direction, never "-2 cm lower"
     if kind == "buoyancy_offset":
         side = "heavier" if value >= 0 else "lighter"
