@@ -89,7 +89,9 @@ def integrate(
     rtol: float = 1e-8,
     atol: float = 1e-10,
 ) -> np.ndarray:
-    """States at the ``len(tau) + 1`` sample times for applied forces ``tau`` ``[N, 6]`` (ZOH)."""
+    """States at the ``len(tau) + 1`` sample times for applied forces ``tau`` ``[N, 6]`` (ZOH).
+    ``rk4`` steps an actuator lag by its exact exponential (:mod:`nnid.physics.compiled`);
+    ``torch`` integrates it as an RK4 state, accurate only where the lag is several steps."""
     if integrator == "rk4":
         return compiled.integrate_rk4(model.feature_form(), x0, tau, dt, substeps)
     if integrator == "torch":

@@ -104,6 +104,13 @@ def _integrate(
     scratch = np.empty((4, 18))
     k1, k2, k3, k4 = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
     tmp = np.empty(n)
+    # the actuator lag T ȧ = τ − a (states 12-17) is linear with τ held over the step: stepped
+    # exactly, a(t + c h) = τ + (a − τ) e^(−c h / T), and the RK4 stages of ν read it there.
+    # As an RK4 state it decayed by 0.99 a step where e^(−h/T) is 0.06 (h/T = 2.8), and grew
+    # past h/T = 2.79 (a 0.03-s lag at 10 Hz diverged)
+    lagged = lag > 0.0 and n > 12
+    half = math.exp(-0.5 * h / lag) if lagged else 0.0
+    full = half * half
     x = x0.copy()
     states[0] = x
     for step in range(tau.shape[0]):
@@ -112,19 +119,35 @@ def _integrate(
             _rhs(x, u, m_inv, q_rb, q_a, g_mat, theta, codes, ma, bias, cur, u_c, lag, k1, scratch)
             for i in range(n):
                 tmp[i] = x[i] + 0.5 * h * k1[i]
+            if lagged:
+                for i in range(6):
+                    tmp[12 + i] = u[i] + (x[12 + i] - u[i]) * half
             _rhs(
                 tmp, u, m_inv, q_rb, q_a, g_mat, theta, codes, ma, bias, cur, u_c, lag, k2, scratch
             )
             for i in range(n):
                 tmp[i] = x[i] + 0.5 * h * k2[i]
+            if lagged:
+                for i in range(6):
+                    tmp[12 + i] = u[i] + (x[12 + i] - u[i]) * half
             _rhs(
                 tmp, u, m_inv, q_rb, q_a, g_mat, theta, codes, ma, bias, cur, u_c, lag, k3, scratch
             )
             for i in range(n):
                 tmp[i] = x[i] + h * k3[i]
+            if lagged:
+                for i in range(6):
+                    tmp[12 + i] = u[i] + (x[12 + i] - u[i]) * full
             _rhs(
                 tmp, u, m_inv, q_rb, q_a, g_mat, theta, codes, ma, bias, cur, u_c, lag, k4, scratch
             )
+            if lagged:  # the stages left x's lag states as they were: the exact step
+                for i in range(6):
+                    k1[12 + i] = 0.0
+                    k2[12 + i] = 0.0
+                    k3[12 + i] = 0.0
+                    k4[12 + i] = 0.0
+                    x[12 + i] = u[i] + (x[12 + i] - u[i]) * full
             for i in range(n):
                 x[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
         states[step + 1] = x
