@@ -19,7 +19,7 @@ from pydantic import Field, field_validator, model_validator
 
 from nnid.datasets.log import MAX_FORCE  # a constant external force obeys the log's bound
 from nnid.errors import NnidInputError
-from nnid.physics.added_mass import parse_added_mass_key
+from nnid.physics.added_mass import mirrored_key, parse_added_mass_key
 from nnid.physics.dofs import DOFS
 from nnid.validation import StrictModel, read_toml, repeated, validated
 
@@ -188,6 +188,12 @@ class Vehicle(StrictModel):
         for key, value in added_mass.items():
             parse_added_mass_key(key)
             _not_absurd(key, value)
+            twin = mirrored_key(key)
+            if twin in added_mass and not np.isclose(added_mass[twin], value, rtol=1e-9):
+                raise ValueError(
+                    f"{key} = {value:g} and {twin} = {added_mass[twin]:g} differ: the added-mass "
+                    "matrix is symmetric (McCarter eq. 2.33); give one of them, or equal values"
+                )
         return added_mass
 
     @field_validator("installation")

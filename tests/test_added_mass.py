@@ -120,6 +120,7 @@ def test_added_mass_matrix_sign_and_position():
     assert ma[1, 5] == 2.0  # row Y, column r
     expected = np.zeros((6, 6))
     expected[0, 0], expected[1, 5] = 1.0, 2.0
+    expected[5, 1] = 2.0  # and its mirror: M_A is symmetric (McCarter eq. 2.33)
     np.testing.assert_array_equal(ma, expected)
 
 

@@ -6,6 +6,7 @@ from importlib import resources
 
 import numpy as np
 import pandas as pd
+import pytest
 import torch
 
 from nnid.datasets.log import TAU
@@ -72,6 +73,31 @@ def test_kinetic_energy_conserved(vehicle_factory):
     energy = model.kinetic_energy(torch.as_tensor(states[:, 6:12])).numpy()
     assert np.abs(energy / energy[0] - 1).max() < 1e-8
     assert np.abs(states[-1, 6:12] - states[0, 6:12]).max() > 0.1  # it did move and turn
+
+
+def test_one_of_an_added_mass_pair_is_its_mirror_too(vehicle_factory):
+    """A vehicle file giving Y_rdot and Z_qdot without their mirrors: M_A is symmetric
+    (McCarter eq. 2.33), so they fill N_vdot and M_wdot as well, and the vehicle conserves its
+    energy as the one that gives both (an asymmetric M_A gained 690 % in 30 s); mirrors that
+    differ are refused, and so is a fit of both as two unknowns."""
+    from nnid.errors import NnidInputError
+    from nnid.models.parametric import ParametricFossen, vehicle_with
+
+    both = _free_body(vehicle_factory)
+    added = {k: v for k, v in both.added_mass.items() if k not in ("N_vdot", "M_wdot")}
+    one = vehicle_factory(added_mass=added, r_g=both.r_g, r_b=both.r_b, inertia=both.inertia)
+    mass = FossenModel.from_vehicle(one).mass_matrix().numpy()
+    assert np.array_equal(mass, FossenModel.from_vehicle(both).mass_matrix().numpy())
+    x0 = [0, 0, 0, 0.1, -0.2, 0.3, 0.5, -0.3, 0.2, 0.4, -0.6, 0.8]
+    states = _run(one, [0.0] * 6, 30.0, x0=x0)
+    energy = FossenModel.from_vehicle(one).kinetic_energy(torch.as_tensor(states[:, 6:12]))
+    assert np.abs(energy.numpy() / energy.numpy()[0] - 1).max() < 1e-8
+    with pytest.raises(ValueError, match="Y_rdot = -2 and N_vdot = -3 differ"):
+        vehicle_factory(added_mass={**both.added_mass, "N_vdot": -3.0})
+    # a fitted value of one of a declared pair is the other's too
+    assert vehicle_with(both, {"Y_rdot": -4.0}).added_mass["N_vdot"] == -4.0
+    with pytest.raises(NnidInputError, match="'Y_rdot' and 'N_vdot' are one parameter"):
+        ParametricFossen(both, ["Y_rdot", "N_vdot"])
 
 
 def test_kirchhoff_impulses_conserved(vehicle_factory):

@@ -44,7 +44,7 @@ from nnid.evaluation.prediction import (
     substeps_for,
 )
 from nnid.models.base import NOT_FITTED, NnidModel, check_log
-from nnid.physics.added_mass import parse_added_mass_key
+from nnid.physics.added_mass import mirrored_key, parse_added_mass_key
 from nnid.physics.damping import parse_coefficient_key
 from nnid.physics.damping_library import (
     ATOMS,
@@ -69,7 +69,7 @@ def canonical_parameter(name: str) -> str:
     """Validate a parameter name and return its canonical spelling."""
     if re.fullmatch(r"[XYZKMN]_[uvwpqr]dot", name):
         parse_added_mass_key(name)
-        return name
+        return name  # its mirror is the same parameter: ParametricFossen refuses the pair
     if ":" in name:
         force, term = parse_coefficient_key(name)
         return f"{force}:{term}"
@@ -101,6 +101,9 @@ def vehicle_with(vehicle, values: dict[str, float]):
             coefs[key] = value
         elif name.endswith("dot"):
             out["added_mass"][name] = value
+            twin = mirrored_key(name)
+            if twin in out["added_mass"]:  # one parameter: M_A is symmetric
+                out["added_mass"][twin] = value
         elif name.startswith("eta."):
             out["installation"][name[4:]] = value
         elif name.startswith("external_bias."):
@@ -120,6 +123,14 @@ class ParametricFossen:
         self.names = [canonical_parameter(n) for n in unknowns]
         if len(set(self.names)) != len(self.names):
             raise NnidInputError("unknown parameters must be unique", field="unknowns")
+        for n in self.names:
+            twin = mirrored_key(n) if n.endswith("dot") and ":" not in n else None
+            if twin in self.names:
+                raise NnidInputError(
+                    f"'{n}' and '{twin}' are one parameter (the added-mass matrix is "
+                    "symmetric): give one of them",
+                    field="unknowns",
+                )
         self.dofs = tuple(dofs)
         for d in self.dofs:
             if d not in DOFS:

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from nnid.physics.added_mass import added_mass_matrix
+from nnid.physics.added_mass import added_mass_matrix, mirrored_key
 from nnid.physics.damping import DampingTerms, parse_coefficient_key
 from nnid.physics.dofs import DOFS, FORCES
 from nnid.physics.fossen import FossenModel
@@ -84,6 +84,9 @@ class Parts:
         """Set one parameter by its name (see :func:`canonical_parameter`)."""
         if name.endswith("dot") and "_" in name and ":" not in name:
             self.added_mass[name] = value
+            twin = mirrored_key(name)
+            if twin in self.added_mass:  # one parameter: M_A is symmetric
+                self.added_mass[twin] = value
         elif ":" in name:
             self.damping[name] = value
         elif name.startswith("eta."):
