@@ -316,3 +316,18 @@ def test_restoring_matrix_is_fossens_and_the_same_at_every_call():
     for i in range(200):  # other allocations between the calls move the buffers
         keep.append(torch.empty(int(np.random.default_rng(i).integers(1, 3000))))
         assert np.array_equal(model.form().g_mat.numpy(), first), i
+
+
+def test_a_simulation_through_ninety_degrees_of_pitch_is_refused(vehicle_factory):
+    """Euler angles are singular at θ = ±90° (Weiss eq. 16): a run started there came back
+    with φ = ψ = −3.4e12 rad after one step and no error."""
+    from nnid.datasets.simulator import simulate
+    from nnid.errors import NnidInputError
+
+    veh = vehicle_factory()
+    x0 = np.zeros(12)
+    x0[4], x0[11] = np.pi / 2, 0.1
+    with pytest.raises(NnidInputError, match=r"pitched to 90.0° at t = 0.00 s.*singular"):
+        simulate(veh, np.zeros((20, 6)), 0.05, x0=x0)
+    x0[4] = np.radians(60)  # steep, not singular: simulated
+    assert np.isfinite(simulate(veh, np.zeros((20, 6)), 0.05, x0=x0)["psi"]).all()

@@ -79,6 +79,11 @@ def plant(vehicle, effects: Iterable[tuple[str, float]] = ()):
     return vehicle
 
 
+#: |cos θ| below which a simulated pitch is refused (89.4°): the Euler-angle kinematics divide
+#: by it, and a run through θ = 90° came back with φ = ψ = −3.4e12 rad after one step
+GIMBAL_COS = 1e-2
+
+
 def integrate(
     model: FossenModel,
     x0: np.ndarray,
@@ -178,6 +183,16 @@ def simulate(
             + (f" in experiment '{experiment}'" if experiment else "")
             + ": the vehicle is unstable for these inputs (check damping signs and amplitudes, "
             "or fly it under an autopilot)",
+            field="experiments",
+        )
+    near = np.flatnonzero(np.abs(np.cos(states[:, 4])) < GIMBAL_COS)
+    if near.size:  # J(η) divides by cos θ: the attitude is garbage there, not a measurement
+        k = int(near[0])
+        raise NnidInputError(
+            f"the vehicle pitched to {np.degrees(states[k, 4]):.1f}° at t = {k * dt:.2f} s"
+            + (f" in experiment '{experiment}'" if experiment else "")
+            + ": Euler angles are singular at ±90° of pitch (Weiss eq. 16) and the simulator "
+            "integrates them; lower the pitch moments, or fly it under an autopilot",
             field="experiments",
         )
     with torch.no_grad():
