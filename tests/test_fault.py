@@ -433,7 +433,7 @@ def test_missing_samples_raise_no_alarm_and_are_said(vehicle, monitor, tmp_path)
     and the difference quotient is not the acceleration, so that interval gets no residual and
     the statistics carry across it. Scored, one such interval per hole alarmed (nine 2-s holes
     in five healthy minutes: 6 alarms against a target of 0.01 per hour). A single dropped
-    sample (twice the interval) is still scored."""
+    sample (twice the interval) is such a hole too."""
     healthy = simulate_faults(vehicle, 300, seed=53, experiment="t53")
     t = healthy["t"].to_numpy()
     holes = np.zeros(t.size, dtype=bool)
@@ -447,8 +447,8 @@ def test_missing_samples_raise_no_alarm_and_are_said(vehicle, monitor, tmp_path)
     assert after.size == 9 and np.isnan(trace.values[after]).all()
     assert np.isfinite(trace.values[after + 1, 19]).all()  # carried on at the next interval
     dropped = np.flatnonzero(np.diff(log["t"].to_numpy()) > 0.075)[0] + 1
-    assert np.isfinite(trace.values[dropped]).all()
-    assert monitor.missing_samples(log["t"].to_numpy()) == 9
+    assert np.isnan(trace.values[dropped]).all() and np.isfinite(trace.values[dropped + 1]).all()
+    assert monitor.missing_samples(log["t"].to_numpy()) == 10
     stream = monitor.stream()
     x = monitor_inputs(log, monitor.plant_)
     codes = [stream.update(x["t"][k], x["x"][k], x["inputs"][k]) for k in range(after[0] + 1)]
@@ -458,6 +458,7 @@ def test_missing_samples_raise_no_alarm_and_are_said(vehicle, monitor, tmp_path)
     said: list[str] = []
     follow_csv(monitor, str(path), 10.0, said.append)
     assert sum("no samples for 2" in line for line in said) == 9
+    assert sum("no samples for 0.1 s" in line for line in said) == 1
     assert not any(line.startswith("ALARM") for line in said)
 
 
@@ -535,3 +536,21 @@ def test_forces_and_commands_that_disagree_are_said_once(vehicle, tmp_path):
         assert " ".join(res.output.split()).count(said) == 1, res.output
         record = out / ("metrics.json" if "ls" in config else "comparison.json")
         assert said in record.read_text()
+
+
+def test_a_dropped_sample_is_a_gap_not_an_alarm(vehicle, monitor, tmp_path):
+    """One row dropped every 2 s of healthy flight: across it a command that changed after one
+    step was not held, and scored, six healthy minutes raised 3 alarms (thruster losses among
+    them; 36 an hour against a target of 0.01). The interval gets no residual, and is counted."""
+    logs = [simulate_faults(vehicle, 60, seed=9300 + s) for s in range(6)]
+    dropped = [log[np.arange(len(log)) % 40 != 7] for log in logs]
+    assert sum(len(detect(monitor, log).alarms) for log in dropped) == 0
+    t = dropped[0]["t"].to_numpy()
+    assert monitor.missing_samples(t) == 30  # every dropped row is said as missing
+    # --follow checks the rate on its latest rows, not only its first: a healthy log that
+    # went from 20 to 10 Hz after 15 s gave a thruster loss with confidence 1.00
+    log = logs[0]
+    slow = pd.concat([log[log["t"] < 15], log[log["t"] >= 15].iloc[::2]])
+    slow.to_csv(tmp_path / "slow.csv", index=False)
+    with pytest.raises(NnidInputError, match=r"is sampled every 0\.0875 s; the monitor was calib"):
+        follow_csv(monitor, tmp_path / "slow.csv", 10.0, lambda line: None)

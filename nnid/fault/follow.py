@@ -33,7 +33,8 @@ from nnid.validation import shown
 
 #: the motion columns a streamed row fills (those absent read as 0)
 STATE = (*POSE, *VELOCITY)
-#: the first rows, whose typical interval is checked against the monitor's calibration rate
+#: every this many rows, the typical interval of the latest ones is checked against the
+#: monitor's calibration rate
 RATE_ROWS = 11
 
 
@@ -208,9 +209,11 @@ def follow_csv(
                 "that interval is not scored"
             )
         last_t = t
-        if n == RATE_ROWS:  # the rate the calibration holds at, checked once on the first rows
+        if n >= RATE_ROWS and n % RATE_ROWS == 0:
+            # the rate the calibration holds at, on the latest rows: a log that went from
+            # 20 to 10 Hz after its first rows gave a confident thruster loss
             try:
-                monitor.check_rate(np.asarray(ts))
+                monitor.check_rate(np.asarray(ts[-RATE_ROWS:]), np.asarray(codes[-RATE_ROWS:]))
             except NnidInputError as exc:
                 raise exc.with_source(where) from None
         code = stream.update(t, x, u)
