@@ -343,6 +343,9 @@ def test_cli_train_detect_and_follow(vehicle, tmp_path, chromium):
     assert "measured at training: 0 alarm(s)" in " ".join(res.output.split())
     (a,) = report["alarms"]
     assert (a["kind"], a["thruster"], a["effect"]) == ("thruster_loss", "h3", None)
+    # the confidence is among the hypotheses; what the named one explains is said beside it
+    said = f"confidence {a['confidence']:.2f}, explaining {100 * a['explained']:.0f} % of"
+    assert said in " ".join(res.output.split()) and 0.5 < a["explained"] <= 1.0
     assert abs(a["efficiency"] - 0.3) <= 0.1 and a["severity"] > 1 and a["confidence"] > 0.5
     rows = pd.read_csv(out / "alarms.csv")
     assert rows["thruster"].tolist() == ["h3"]

@@ -18,7 +18,7 @@ from nnid.fault.monitor import ResidualMonitor, Trace, monitor_inputs
 
 ALARM_FIELDS = ["experiment", "t", "kind", "thruster", "efficiency", "efficiency_low",
                 "efficiency_high", "effect", "value", "stderr", "severity", "confidence",
-                "meaning"]  # fmt: skip
+                "explained", "meaning"]  # fmt: skip
 
 
 @dataclass
