@@ -255,9 +255,11 @@ def test_a_short_healthy_record_is_said_to_leave_the_false_alarm_rate_uncontroll
     assert held["false_alarm_rate_controlled"] is True and held["false_alarm_caveat"] is None
 
 
-def test_commands_far_beyond_their_range_are_said(vehicle, monitor):
+def test_commands_far_beyond_their_range_are_said(vehicle, monitor, tmp_path):
     """The thrust curve saturates a command at its bound; PWM microseconds against the vehicle
-    file's ±1 would fly the log at full thrust without a word: the monitor and the fit warn."""
+    file's ±1 would fly the log at full thrust without a word: the fit warns, and the monitor
+    refuses (it warned, then alarmed "external_bias.q = −9.58 ± 0.0096, confidence 1.00"),
+    whole log or followed row by row."""
     from nnid.datasets.arrays import log_arrays
 
     log = simulate_faults(vehicle, 10, seed=9)
@@ -267,10 +269,15 @@ def test_commands_far_beyond_their_range_are_said(vehicle, monitor):
         log_arrays(log, vehicle)
     pwm = log.assign(**{c: 1500 + 400 * log[c] for c in log if c.startswith("cmd_")})
     said = r"cmd_\w+ reaches 1\d{3}, far beyond thruster \w+'s range \[-1, 1\] in 100% of"
-    with pytest.warns(UserWarning, match=said):
+    with pytest.raises(NnidInputError, match=said) as err:
         monitor.run(pwm)
+    assert err.value.field == "cmd_h1"
     with pytest.warns(UserWarning, match=said):
         log_arrays(pwm, vehicle)
+    pwm.to_csv(tmp_path / "pwm.csv", index=False)
+    with pytest.raises(NnidInputError, match="far beyond the thruster's range") as err:
+        follow_csv(monitor, tmp_path / "pwm.csv", 10.0, lambda line: None)
+    assert (err.value.field, err.value.row) == ("cmd_h1", 0)
 
 
 def test_commands_far_beyond_their_range_are_said_once_in_a_run(vehicle, tmp_path):

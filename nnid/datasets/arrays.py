@@ -76,29 +76,50 @@ class CommandUnitsWarning(UserWarning):
     warning from each fit on a part of it (whose share of samples would differ)."""
 
 
-def warn_far_beyond_range(log: pd.DataFrame, vehicle) -> None:
-    """Warn of a thruster command further beyond its range (:func:`command_range`) than the
-    range is wide. The thrust curve saturates a command at its bound, by design; one that far
-    out is a unit slip (PWM microseconds against ±1), and saturating it would fly the log at
-    full thrust without a word."""
+#: what a command far beyond its range asks of the user
+UNITS_QUESTION = (
+    "the thrust curve saturates it at the bound: are the commands in the vehicle file's units "
+    "(not PWM microseconds against ±1)?"
+)
+
+
+def command_limits(vehicle) -> dict[str, tuple[float, float]]:
+    """``{cmd_<thruster>: (low, high)}``: beyond these a command is further from its range
+    (:func:`command_range`) than the range is wide."""
+    out = {}
     for thruster in vehicle.thrusters:
-        col = f"cmd_{thruster.name}"
         span = command_range(thruster)
-        if col not in log or span is None:
+        if span is not None:
+            lo, hi = span
+            out[f"cmd_{thruster.name}"] = (lo - (hi - lo), hi + (hi - lo))
+    return out
+
+
+def far_beyond_range(log: pd.DataFrame, vehicle) -> list[str]:
+    """What to say of each thruster command beyond its :func:`command_limits`. The thrust
+    curve saturates a command at its bound, by design; one that far out is a unit slip (PWM
+    microseconds against ±1), and saturating it would fly the log at full thrust without a
+    word."""
+    said = []
+    for col, (low, high) in command_limits(vehicle).items():
+        if col not in log:
             continue
-        lo, hi = span
         values = log[col].to_numpy(np.float64)
-        beyond = (values > hi + (hi - lo)) | (values < lo - (hi - lo))
+        beyond = (values > high) | (values < low)
         if beyond.any():
             worst = values[beyond][np.argmax(np.abs(values[beyond]))]
-            warnings.warn(
-                f"{col} reaches {worst:.4g}, far beyond thruster {thruster.name}'s range "
-                f"[{lo:g}, {hi:g}] in {beyond.mean():.0%} of the samples; the thrust curve "
-                "saturates it at the bound: are the commands in the vehicle file's units "
-                "(not PWM microseconds against ±1)?",
-                CommandUnitsWarning,
-                stacklevel=3,
+            lo, hi = command_range(next(t for t in vehicle.thrusters if f"cmd_{t.name}" == col))
+            said.append(
+                f"{col} reaches {worst:.4g}, far beyond thruster {col[4:]}'s range "
+                f"[{lo:g}, {hi:g}] in {beyond.mean():.0%} of the samples; {UNITS_QUESTION}"
             )
+    return said
+
+
+def warn_far_beyond_range(log: pd.DataFrame, vehicle) -> None:
+    """Warn of each command :func:`far_beyond_range` finds."""
+    for message in far_beyond_range(log, vehicle):
+        warnings.warn(message, CommandUnitsWarning, stacklevel=3)
 
 
 def logged_inputs(log: pd.DataFrame, vehicle) -> tuple[np.ndarray, bool]:

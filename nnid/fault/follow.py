@@ -16,7 +16,7 @@ from collections.abc import Callable
 import numpy as np
 import pandas as pd
 
-from nnid.datasets.arrays import check_commands
+from nnid.datasets.arrays import UNITS_QUESTION, check_commands, command_limits
 from nnid.datasets.log import (
     ANGLES,
     POSE,
@@ -172,8 +172,17 @@ def follow_csv(
     ]
     last_t = -np.inf
     unchecked = [a for a in ANGLES if a in col]  # looked at once, when past 2π
+    limits = command_limits(monitor.plant_.vehicle)  # the whole-log detect refuses beyond them
     for n, row in enumerate(rows):  # n: the data row from 0, as the whole-log reader counts
         values = _numbers(row, read, n, where, len(header))
+        for name, (low, high) in limits.items():
+            if name in values and not low <= values[name] <= high:
+                raise NnidInputError(
+                    f"{values[name]:.4g} is far beyond the thruster's range; {UNITS_QUESTION}",
+                    source=where,
+                    field=name,
+                    row=n,
+                )
         for angle in [a for a in unchecked if abs(values[a]) > 2 * np.pi + 1e-6]:
             unchecked.remove(angle)  # the rows so far and this one, as the whole log is read
             runs = [*(names[c] for c in codes), row[exp_col] if exp_col is not None else ""]

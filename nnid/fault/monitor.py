@@ -26,7 +26,7 @@ from scipy.stats import trim_mean
 from sklearn.base import BaseEstimator
 from sklearn.utils.validation import check_is_fitted
 
-from nnid.datasets.arrays import check_commands, motion_arrays, warn_far_beyond_range
+from nnid.datasets.arrays import check_commands, far_beyond_range, motion_arrays
 from nnid.datasets.preprocess import check_attitude
 from nnid.errors import NnidInputError
 from nnid.fault import kernel
@@ -133,7 +133,9 @@ def monitor_inputs(log: pd.DataFrame, plant) -> dict[str, np.ndarray]:
             f"the log lacks the inputs {', '.join(missing)} of vehicle '{plant.vehicle.name}'",
             field=missing[0],
         )
-    warn_far_beyond_range(log, plant.vehicle)
+    slips = far_beyond_range(log, plant.vehicle)
+    if slips:  # a monitor reads them as faults: PWM against ±1 gave "external_bias.q = −9.58"
+        raise NnidInputError(slips[0], field=slips[0].split()[0])
     check_attitude(log, plant.vehicle, plant.dofs_)
     log = prepare_motion(log, plant.dofs_, plant.savgol_window, plant.savgol_order, False)
     data = motion_arrays(log)
