@@ -564,3 +564,24 @@ def test_a_dropped_sample_is_a_gap_not_an_alarm(vehicle, monitor, tmp_path):
     slow.to_csv(tmp_path / "slow.csv", index=False)
     with pytest.raises(NnidInputError, match=r"is sampled every 0\.0875 s; the monitor was calib"):
         follow_csv(monitor, tmp_path / "slow.csv", 10.0, lambda line: None)
+
+
+def test_a_joint_change_is_headed_by_a_significant_member():
+    """A payload hypothesis whose buoyancy change is not significant (p 0.079) was headed by
+    it, 'buoyancy_offset = 2.67 ± 1.5'; with no member significant it said a change anyway."""
+    from types import SimpleNamespace
+
+    from nnid.fault.isolation import _Joint
+
+    def member(name):
+        return SimpleNamespace(name=name, value=lambda t, v: t, value_scale=lambda v: 1.0)
+
+    members = [member("buoyancy_offset"), member("added_mass.u")]
+    theta, se = np.array([2.67, 5.0]), np.array([1.5, 0.5])
+    joint = _Joint("model_change", members, theta, se, np.array([0.079, 1e-6]), 10.0, 1.0)
+    diag = joint.diagnosis(0.99, 20.0, None, [])
+    assert (diag.effect, diag.value) == ("added_mass.u", 5.0)
+    assert list(diag.components) == ["added_mass.u"]
+    joint.p_values = np.array([0.079, 0.2])
+    diag = joint.diagnosis(0.99, 20.0, None, [])
+    assert diag.effect is None and "no hypothesis explains" in diag.meaning

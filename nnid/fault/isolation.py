@@ -247,11 +247,21 @@ class _Joint:
             for c, se in zip(self.members, self.stderr, strict=True)
         ]
         keep = [k for k, p in enumerate(self.p_values) if p <= SIGNIFICANCE]
+        if not keep:  # as the one-parameter path says it: no member is significant
+            return Diagnosis(
+                "model_change",
+                confidence=posterior,
+                explained=self.drss / rss if rss > 0 else 0.0,
+                meaning="no hypothesis explains the change significantly",
+                alternatives=alternatives,
+            )
         names = [c.name for c in self.members]
+        # the buoyancy change heads a payload where it is significant (a non-significant one
+        # headed it: "buoyancy_offset = 2.67 ± 1.5, p 0.079"), else the clearest member
         main = (
             names.index("buoyancy_offset")
-            if "buoyancy_offset" in names
-            else max(keep or [0], key=lambda k: abs(self.theta[k]) / max(self.stderr[k], 1e-300))
+            if "buoyancy_offset" in names and names.index("buoyancy_offset") in keep
+            else max(keep, key=lambda k: abs(self.theta[k]) / max(self.stderr[k], 1e-300))
         )
         components = {self.members[k].name: {"value": values[k], "stderr": ses[k]} for k in keep}
         what = (
