@@ -98,6 +98,17 @@ def test_one_of_an_added_mass_pair_is_its_mirror_too(vehicle_factory):
     assert vehicle_with(both, {"Y_rdot": -4.0}).added_mass["N_vdot"] == -4.0
     with pytest.raises(NnidInputError, match="'Y_rdot' and 'N_vdot' are one parameter"):
         ParametricFossen(both, ["Y_rdot", "N_vdot"])
+    # the mirror reads as the matrix holds it (N_vdot read 0 where only Y_rdot was given)
+    assert Parts.from_vehicle(one).get("N_vdot") == -2.0
+    # a hybrid trained jointly moves both entries (it moved Y_rdot's alone)
+    from nnid.models.hybrid import HybridPhysics
+
+    physics = HybridPhysics(Parts.from_vehicle(one), ["Y_rdot", "X_udot"])
+    with torch.no_grad():
+        physics.delta[:] = torch.tensor([0.5, 0.2], dtype=torch.float64)
+    m_a = physics.fossen().added_mass.detach().numpy()
+    assert physics.values()["Y_rdot"] == pytest.approx(-2.0 + 0.5 * 2.0)  # θ + |θ| δ
+    assert m_a[1, 5] == m_a[5, 1] == pytest.approx(1.0) and np.array_equal(m_a, m_a.T)
 
 
 def test_kirchhoff_impulses_conserved(vehicle_factory):

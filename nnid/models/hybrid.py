@@ -129,8 +129,17 @@ class HybridPhysics(nn.Module):
         """The Fossen model at the current parameters (or at the changes ``delta``)."""
         delta = self.delta if delta is None else delta
         n_a = self.rows_a.numel()
+        # an off-diagonal derivative moves its mirror too: M_A stays symmetric (McCarter
+        # eq. 2.33), as the vehicle file the trained values are saved in holds it
+        off = self.rows_a != self.cols_a
+        shift = -self.scale_a * delta[:n_a]
         added_mass = self.added_mass.index_put(
-            (self.rows_a, self.cols_a), -self.scale_a * delta[:n_a], accumulate=True
+            (
+                torch.cat([self.rows_a, self.cols_a[off]]),
+                torch.cat([self.cols_a, self.rows_a[off]]),
+            ),
+            torch.cat([shift, shift[off]]),
+            accumulate=True,
         )
         coefficients = self.coefficients.index_put(
             (self.rows_d, self.cols_d), self.scale_d * delta[n_a:], accumulate=True

@@ -44,7 +44,7 @@ from nnid.evaluation.prediction import (
     substeps_for,
 )
 from nnid.models.base import NOT_FITTED, NnidModel, check_log
-from nnid.physics.added_mass import mirrored_key, parse_added_mass_key
+from nnid.physics.added_mass import mirrored_key, parse_added_mass_key, set_derivative
 from nnid.physics.damping import parse_coefficient_key
 from nnid.physics.damping_library import (
     ATOMS,
@@ -100,10 +100,7 @@ def vehicle_with(vehicle, values: dict[str, float]):
             key = next((k for k in coefs if parse_coefficient_key(k) == (force, term)), name)
             coefs[key] = value
         elif name.endswith("dot"):
-            out["added_mass"][name] = value
-            twin = mirrored_key(name)
-            if twin in out["added_mass"]:  # one parameter: M_A is symmetric
-                out["added_mass"][twin] = value
+            set_derivative(out["added_mass"], name, value)
         elif name.startswith("eta."):
             out["installation"][name[4:]] = value
         elif name.startswith("external_bias."):

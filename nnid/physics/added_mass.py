@@ -37,6 +37,22 @@ def mirrored_key(key: str) -> str | None:
     return None if i == j else f"{FORCES[j]}_{DOFS[i]}dot"
 
 
+def set_derivative(derivatives: dict[str, float], key: str, value: float) -> None:
+    """Set ``key`` in ``derivatives``, and its mirror (:func:`mirrored_key`) where that is
+    declared: they are one parameter of a symmetric M_A."""
+    derivatives[key] = value
+    twin = mirrored_key(key)
+    if twin in derivatives:
+        derivatives[twin] = value
+
+
+def derivative(derivatives: Mapping[str, float], key: str) -> float:
+    """The value of ``key`` in a symmetric M_A: its own entry, else its mirror's, else 0."""
+    if key in derivatives:
+        return float(derivatives[key])
+    return float(derivatives.get(mirrored_key(key) or key, 0.0))
+
+
 def added_mass_matrix(derivatives: Mapping[str, float], dtype=torch.float64) -> Tensor:
     """M_A = −[derivatives] as a 6x6 tensor, symmetric: an off-diagonal derivative fills its
     mirror too (X_v̇ = Y_u̇, McCarter eq. 2.33; Weiss eq. 28 reuses the upper triangle), so a

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from nnid.physics.added_mass import added_mass_matrix, mirrored_key
+from nnid.physics.added_mass import added_mass_matrix, derivative, set_derivative
 from nnid.physics.damping import DampingTerms, parse_coefficient_key
 from nnid.physics.dofs import DOFS, FORCES
 from nnid.physics.fossen import FossenModel
@@ -83,10 +83,7 @@ class Parts:
     def set(self, name: str, value: float) -> None:
         """Set one parameter by its name (see :func:`canonical_parameter`)."""
         if name.endswith("dot") and "_" in name and ":" not in name:
-            self.added_mass[name] = value
-            twin = mirrored_key(name)
-            if twin in self.added_mass:  # one parameter: M_A is symmetric
-                self.added_mass[twin] = value
+            set_derivative(self.added_mass, name, value)
         elif ":" in name:
             self.damping[name] = value
         elif name.startswith("eta."):
@@ -102,7 +99,7 @@ class Parts:
     def get(self, name: str) -> float:
         """The value of one parameter by its name; KeyError for a name that is not one."""
         if name.endswith("dot") and ":" not in name:
-            return float(self.added_mass.get(name, 0.0))
+            return derivative(self.added_mass, name)
         if ":" in name:
             return float(self.damping.get(name, 0.0))
         if name.startswith("eta."):
