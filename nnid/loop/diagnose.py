@@ -213,8 +213,7 @@ def refit(ws: Workspace, vehicle, unknowns: list[str], held_out: bool = True) ->
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", ExcitationWarning)
             est = solve_least_squares(a_mat, y, np.tile(ws.mask, n), names=unknowns)
-        var = dof_variances((a_mat @ np.nan_to_num(est.theta) - y).reshape(n, 6))
-        ws.weights = ws.mask / np.where(var > 0, var, 1.0)
+        _set_weights(ws, (a_mat @ np.nan_to_num(est.theta) - y).reshape(n, 6))
     w_rows = np.tile(ws.weights, n)
     est = solve_least_squares(a_mat, y, w_rows, names=unknowns)
     theta = np.nan_to_num(est.theta)
@@ -231,9 +230,15 @@ def reweight(ws: Workspace, fit: Fit) -> Fit:
     thousands of times the final one, and those equations, weighted down by it, would leave
     the effect's parameter to the noisy surge and sway rows (r_g.z 1 mm off at 1σ, which the
     unexplained-structure test then blamed on an effect outside the vocabulary)."""
-    var = dof_variances(fit.e)
-    ws.weights = ws.mask / np.where(var > 0, var, 1.0)
+    _set_weights(ws, fit.e)
     return refit(ws, fit.vehicle, fit.unknowns)
+
+
+def _set_weights(ws: Workspace, e: np.ndarray) -> None:
+    """1/σ̂²_dof of the residual ``e`` [N, 6]; DOF equations the log does not measure get
+    weight zero."""
+    var = dof_variances(e)
+    ws.weights = ws.mask / np.where(var > 0, var, 1.0)
 
 
 def residual_correlation_time(e: np.ndarray, dofs: tuple[str, ...] = DOFS) -> float:
