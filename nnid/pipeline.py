@@ -203,9 +203,22 @@ def load_inputs(
         inputs = Inputs(*load_log(path, reader), veh)
         source = path
         if veh is not None and (physics or not models):  # physics fits, and the loop's log
-            from nnid.datasets.arrays import check_forces_match_commands, warn_far_beyond_range
+            from nnid.datasets.arrays import (
+                check_forces_match_commands,
+                far_beyond_range,
+                warn_far_beyond_range,
+            )
 
             check_forces_match_commands(inputs.log, veh)
+            slips = far_beyond_range(inputs.log, veh)
+            if slips and getattr(cfg, "detect", None) is not None:  # before the fit, not after
+                raise NnidInputError(
+                    f"{slips[0].message} ([detect] calibrates a monitor, which reads them as "
+                    "faults)",
+                    source=path,
+                    field=slips[0].column,
+                    row=slips[0].row if isinstance(slips[0].row, (int, np.integer)) else None,
+                )
             warn_far_beyond_range(inputs.log, veh)
         if physics and veh is not None:  # the inputs the vehicle reads, said against the log
             from nnid.datasets.arrays import logged_inputs

@@ -274,10 +274,16 @@ def test_commands_far_beyond_their_range_are_said(vehicle, monitor, tmp_path):
     assert err.value.field == "cmd_h1"
     with pytest.warns(UserWarning, match=said):
         log_arrays(pwm, vehicle)
+    assert err.value.row == 0
     pwm.to_csv(tmp_path / "pwm.csv", index=False)
-    with pytest.raises(NnidInputError, match="far beyond the thruster's range") as err:
+    with pytest.raises(NnidInputError, match=said.split(" in 100%")[0]) as err:
         follow_csv(monitor, tmp_path / "pwm.csv", 10.0, lambda line: None)
     assert (err.value.field, err.value.row) == ("cmd_h1", 0)
+    # a train with [detect] refuses them as it loads, not after the fit
+    config = str(REPO / "configs" / "detect_fossen.toml")
+    args = ["--data", str(tmp_path / "pwm.csv"), "--vehicle", str(OCTO)]
+    res = CliRunner().invoke(app, ["train", config, *args, "--out", str(tmp_path / "m")])
+    assert res.exit_code == 2 and "column 'cmd_h1', row 0" in res.output, res.output
 
 
 def test_commands_far_beyond_their_range_are_said_once_in_a_run(vehicle, tmp_path):

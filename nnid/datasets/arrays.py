@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Iterable
+from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -76,50 +78,62 @@ class CommandUnitsWarning(UserWarning):
     warning from each fit on a part of it (whose share of samples would differ)."""
 
 
-#: what a command far beyond its range asks of the user
-UNITS_QUESTION = (
-    "the thrust curve saturates it at the bound: are the commands in the vehicle file's units "
-    "(not PWM microseconds against ±1)?"
-)
-
-
-def command_limits(vehicle) -> dict[str, tuple[float, float]]:
-    """``{cmd_<thruster>: (low, high)}``: beyond these a command is further from its range
-    (:func:`command_range`) than the range is wide."""
+def command_limits(vehicle) -> dict[str, tuple[float, float, float, float]]:
+    """``{cmd_<thruster>: (low, high, range low, range high)}``: beyond low and high a command
+    is further from its range (:func:`command_range`) than the range is wide."""
     out = {}
     for thruster in vehicle.thrusters:
         span = command_range(thruster)
         if span is not None:
             lo, hi = span
-            out[f"cmd_{thruster.name}"] = (lo - (hi - lo), hi + (hi - lo))
+            out[f"cmd_{thruster.name}"] = (lo - (hi - lo), hi + (hi - lo), lo, hi)
     return out
 
 
-def far_beyond_range(log: pd.DataFrame, vehicle) -> list[str]:
-    """What to say of each thruster command beyond its :func:`command_limits`. The thrust
-    curve saturates a command at its bound, by design; one that far out is a unit slip (PWM
-    microseconds against ±1), and saturating it would fly the log at full thrust without a
-    word."""
-    said = []
-    for col, (low, high) in command_limits(vehicle).items():
+def beyond_range_message(column: str, value: float, limits, share: float | None = None) -> str:
+    """What is said of ``column`` reaching ``value`` beyond its :func:`command_limits`."""
+    lo, hi = limits[2], limits[3]
+    where = f" in {share:.0%} of the samples" if share is not None else ""
+    return (
+        f"{column} reaches {value:.4g}, far beyond thruster {column[4:]}'s range [{lo:g}, "
+        f"{hi:g}]{where}; the thrust curve saturates it at the bound: are the commands in the "
+        "vehicle file's units (not PWM microseconds against ±1)?"
+    )
+
+
+@dataclass
+class CommandSlip:
+    """A thruster command beyond its :func:`command_limits`: the column, the first such row
+    (the log's index label) and what to say."""
+
+    column: str
+    row: Any
+    message: str
+
+
+def far_beyond_range(log: pd.DataFrame, vehicle) -> list[CommandSlip]:
+    """Each thruster command beyond its :func:`command_limits`. The thrust curve saturates a
+    command at its bound, by design; one that far out is a unit slip (PWM microseconds
+    against ±1), and saturating it would fly the log at full thrust without a word."""
+    slips = []
+    for col, limits in command_limits(vehicle).items():
         if col not in log:
             continue
         values = log[col].to_numpy(np.float64)
-        beyond = (values > high) | (values < low)
+        beyond = (values > limits[1]) | (values < limits[0])
         if beyond.any():
             worst = values[beyond][np.argmax(np.abs(values[beyond]))]
-            lo, hi = command_range(next(t for t in vehicle.thrusters if f"cmd_{t.name}" == col))
-            said.append(
-                f"{col} reaches {worst:.4g}, far beyond thruster {col[4:]}'s range "
-                f"[{lo:g}, {hi:g}] in {beyond.mean():.0%} of the samples; {UNITS_QUESTION}"
+            row = log.index[int(np.argmax(beyond))]
+            slips.append(
+                CommandSlip(col, row, beyond_range_message(col, worst, limits, beyond.mean()))
             )
-    return said
+    return slips
 
 
 def warn_far_beyond_range(log: pd.DataFrame, vehicle) -> None:
     """Warn of each command :func:`far_beyond_range` finds."""
-    for message in far_beyond_range(log, vehicle):
-        warnings.warn(message, CommandUnitsWarning, stacklevel=3)
+    for slip in far_beyond_range(log, vehicle):
+        warnings.warn(slip.message, CommandUnitsWarning, stacklevel=3)
 
 
 def logged_inputs(log: pd.DataFrame, vehicle) -> tuple[np.ndarray, bool]:

@@ -16,7 +16,7 @@ from collections.abc import Callable
 import numpy as np
 import pandas as pd
 
-from nnid.datasets.arrays import UNITS_QUESTION, check_commands, command_limits
+from nnid.datasets.arrays import beyond_range_message, check_commands, command_limits
 from nnid.datasets.log import (
     ANGLES,
     POSE,
@@ -178,10 +178,10 @@ def follow_csv(
     limits = command_limits(monitor.plant_.vehicle)  # the whole-log detect refuses beyond them
     for n, row in enumerate(rows):  # n: the data row from 0, as the whole-log reader counts
         values = _numbers(row, read, n, where, len(header))
-        for name, (low, high) in limits.items():
-            if name in values and not low <= values[name] <= high:
+        for name, bounds in limits.items():
+            if name in values and not bounds[0] <= values[name] <= bounds[1]:
                 raise NnidInputError(
-                    f"{values[name]:.4g} is far beyond the thruster's range; {UNITS_QUESTION}",
+                    beyond_range_message(name, values[name], bounds),
                     source=where,
                     field=name,
                     row=n,
