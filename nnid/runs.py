@@ -532,7 +532,7 @@ def detect_run(
     from nnid.datasets.log import POSE, VELOCITY
     from nnid.datasets.readers import load_log
     from nnid.fault.detect import detect
-    from nnid.fault.monitor import GAP_INTERVALS
+    from nnid.fault.monitor import CLOCK_SPREAD, GAP_INTERVALS
     from nnid.reports.detect_report import OUTPUTS, write_detect_outputs
 
     check_detect_inputs(model_dir, data)
@@ -552,12 +552,20 @@ def detect_run(
                 f"calibrated {monitor.interval:.4g} s got no residual (the monitor's statistics "
                 "carry across them)"
             )
+        spread = monitor.clock_spread(log["t"].to_numpy(), runs)
+        if spread > CLOCK_SPREAD:
+            lines.append(
+                f"note: the sample intervals wander by {100 * spread:.0f} % of the calibrated "
+                f"{monitor.interval:.4g} s (10th to 90th percentile): the residual's noise "
+                "changes with them, and the false-alarm rate holds on a uniform clock only "
+                "(resample the log to a uniform grid)"
+            )
         (progress or silent)(0, None, "running the monitor")
         result = detect(monitor, log, window_s)
     except NnidInputError as exc:
         raise exc.with_source(data) from None
     with staged(out_dir) as stage:
-        lines += write_detect_outputs(monitor, result, stage, source=data)
+        lines += write_detect_outputs(monitor, result, stage, source=data, notes=lines)
     lines.append(f"wrote {out_dir}/: {OUTPUTS}")
     alarms = result.alarms
     headline: dict[str, Any] = {

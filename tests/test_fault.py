@@ -369,8 +369,19 @@ def test_cli_train_detect_and_follow(vehicle, tmp_path, chromium):
     args = ["detect", "--model", str(model), "--data", str(tmp_path / "gappy.csv")]
     res = runner.invoke(app, [*args, "--out", str(tmp_path / "gap")])
     assert res.exit_code == 0 and "mask gaps: 1 gaps in u, v, w" in res.output, res.output
-    (g,) = json.loads((tmp_path / "gap" / "detect.json").read_text())["alarms"]
+    said = json.loads((tmp_path / "gap" / "detect.json").read_text())
+    (g,) = said["alarms"]
     assert g["thruster"] == "h3" and abs(g["t"] - a["t"]) < 0.5
+    assert any("mask gaps" in note for note in said["notes"])  # what the console said, kept
+    assert not any("wander" in note for note in said["notes"])
+    # a clock alternating 0.04 / 0.06 s: scored as it is, its false-alarm rate not held, said
+    jitter = faulty.assign(t=faulty["t"] + np.where(np.arange(len(faulty)) % 2, 0.01, 0.0))
+    jitter.to_csv(tmp_path / "jitter.csv", index=False)
+    args = ["detect", "--model", str(model), "--data", str(tmp_path / "jitter.csv")]
+    res = runner.invoke(app, [*args, "--out", str(tmp_path / "jit")])
+    assert res.exit_code == 0 and "intervals wander by 40 %" in res.output, res.output
+    notes = json.loads((tmp_path / "jit" / "detect.json").read_text())["notes"]
+    assert any("wander by 40 %" in note for note in notes)
     followed = tmp_path / "follow"
     args = ["detect", "--model", str(model), "--data", fault, "--out", str(followed), "--follow"]
     res = runner.invoke(app, args)

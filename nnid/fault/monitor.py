@@ -40,6 +40,9 @@ from nnid.validation import PositiveFloat, StrictModel, validated
 MONITOR_FILE = "monitor.json"
 #: the relative difference of sample interval a monitored log may have from the healthy record
 RATE_TOLERANCE = 0.1
+#: a spread of the scored intervals (:meth:`ResidualMonitor.clock_spread`) beyond which the
+#: false-alarm rate is said not to hold (±10 % of jitter raised 4 alarms in a healthy minute)
+CLOCK_SPREAD = 0.2
 #: an interval longer than this many typical intervals has samples missing: it gets no residual.
 #: One dropped sample (2×) is a gap too: across it a command that changed after one step was
 #: not held, and scored, one dropped row every 2 s raised 36 false alarms an hour (thruster
@@ -363,6 +366,18 @@ class ResidualMonitor(BaseEstimator):
         """How many intervals of ``t`` (within an experiment) are longer than
         :attr:`max_interval`: samples missing there, no residual."""
         return int(np.sum(_steps(t, experiment) > self.max_interval))
+
+    def clock_spread(self, t: np.ndarray, experiment: np.ndarray | None = None) -> float:
+        """The spread of the scored intervals (those within :attr:`max_interval`): their 10th
+        to 90th percentile over the calibrated interval. The residual is a difference quotient
+        whose noise grows as the interval shrinks, so the thresholds hold on a uniform clock;
+        a clock alternating 0.04 / 0.06 s (spread 0.4) raised ~200 false alarms an hour."""
+        steps = _steps(t, experiment)
+        steps = steps[(steps > 0) & (steps <= self.max_interval)]
+        if steps.size < 2:
+            return 0.0
+        lo, hi = np.percentile(steps, [10, 90])
+        return float((hi - lo) / self.interval)
 
     def check_rate(self, t: np.ndarray, experiment: np.ndarray | None = None) -> None:
         """Refuse a log sampled at another rate than the healthy record: the residual is a

@@ -24,14 +24,15 @@ from nnid.reports.figures import (
 from nnid.serialization import write_json, write_text
 
 
-def detect_json(monitor, result: DetectResult) -> dict:
+def detect_json(monitor, result: DetectResult, notes: list[str] | None = None) -> dict:
     """The ``detect.json`` contract: alarms, thresholds, the false-alarm rate the thresholds
     were set for, and whether the calibration controls it (``false_alarm_rate_controlled``:
     false, with the reason in ``false_alarm_caveat``, when the healthy record was too short
     for the rate fit and the thresholds are twice its largest value: then the rate is a
     target that was neither achieved by a fit nor measured). ``false_alarms_measured``: the
     alarms on the healthy test part at training, with the rate's exact interval; null where
-    the training split had no test part (the rate was never measured)."""
+    the training split had no test part (the rate was never measured). ``notes``: what the
+    run said of the log before the alarms (rows lost, samples missing, a wandering clock)."""
     h_t, h_g = monitor.threshold_values
     caveat = monitor.threshold_caveat()
     return {
@@ -49,6 +50,7 @@ def detect_json(monitor, result: DetectResult) -> dict:
         "calibration": monitor.calibration_,
         "samples": int(result.trace.t.size),
         "seconds": result.seconds,
+        "notes": list(notes or []),
     }
 
 
@@ -57,7 +59,7 @@ OUTPUTS = "alarms.csv, detect.json, report.html"
 
 
 def write_detect_outputs(
-    monitor, result: DetectResult, out_dir: Path, source: str = ""
+    monitor, result: DetectResult, out_dir: Path, source: str = "", notes: list[str] | None = None
 ) -> list[str]:
     """Write the three outputs (:data:`OUTPUTS`) to ``out_dir``; return the lines the CLI
     prints about the alarms (the caller says where it wrote: ``out_dir`` may be a staging
@@ -65,7 +67,7 @@ def write_detect_outputs(
     out_dir.mkdir(parents=True, exist_ok=True)
     rows = [{k: a.get(k) for k in ALARM_FIELDS} for a in result.alarms]
     write_text(out_dir / "alarms.csv", pd.DataFrame(rows, columns=ALARM_FIELDS).to_csv(index=False))
-    write_json(out_dir / "detect.json", detect_json(monitor, result))
+    write_json(out_dir / "detect.json", detect_json(monitor, result, notes))
     write_text(out_dir / "report.html", detect_html(monitor, result, source))
     hours = monitor.calibration_["hours"]
     lines = [
@@ -85,7 +87,10 @@ def measured_rate(monitor) -> str:
     nothing did."""
     m = monitor.measured_false_alarms_
     if m is None:
-        return "the rate was not measured: the training split had no healthy test part"
+        return (
+            "the rate was not measured with this monitor (no healthy test part at training, "
+            "or a monitor.json from before nnid recorded it)"
+        )
     lo, hi = m["interval"]
     return (
         f"measured at training: {m['alarms']} alarm(s) in {60 * m['hours']:.1f} min of healthy "
