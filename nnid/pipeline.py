@@ -217,7 +217,7 @@ def load_inputs(
                     "faults)",
                     source=path,
                     field=slips[0].column,
-                    row=slips[0].row if isinstance(slips[0].row, (int, np.integer)) else None,
+                    row=slips[0].row,
                 )
             warn_far_beyond_range(inputs.log, veh)
         if physics and veh is not None:  # the inputs the vehicle reads, said against the log

@@ -7,7 +7,6 @@ from __future__ import annotations
 import warnings
 from collections.abc import Iterable
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -104,10 +103,11 @@ def beyond_range_message(column: str, value: float, limits, share: float | None 
 @dataclass
 class CommandSlip:
     """A thruster command beyond its :func:`command_limits`: the column, the first such row
-    (the log's index label) and what to say."""
+    (the log's integer index label, the file's row for a log as read; else None) and what to
+    say."""
 
     column: str
-    row: Any
+    row: int | None
     message: str
 
 
@@ -123,7 +123,8 @@ def far_beyond_range(log: pd.DataFrame, vehicle) -> list[CommandSlip]:
         beyond = (values > limits[1]) | (values < limits[0])
         if beyond.any():
             worst = values[beyond][np.argmax(np.abs(values[beyond]))]
-            row = log.index[int(np.argmax(beyond))]
+            label = log.index[int(np.argmax(beyond))]
+            row = int(label) if isinstance(label, (int, np.integer)) else None
             slips.append(
                 CommandSlip(col, row, beyond_range_message(col, worst, limits, beyond.mean()))
             )

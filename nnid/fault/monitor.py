@@ -138,8 +138,7 @@ def monitor_inputs(log: pd.DataFrame, plant) -> dict[str, np.ndarray]:
         )
     slips = far_beyond_range(log, plant.vehicle)
     if slips:  # a monitor reads them as faults: PWM against ±1 gave "external_bias.q = −9.58"
-        row = slips[0].row if isinstance(slips[0].row, (int, np.integer)) else None
-        raise NnidInputError(slips[0].message, field=slips[0].column, row=row)
+        raise NnidInputError(slips[0].message, field=slips[0].column, row=slips[0].row)
     check_attitude(log, plant.vehicle, plant.dofs_)
     log = prepare_motion(log, plant.dofs_, plant.savgol_window, plant.savgol_order, False)
     data = motion_arrays(log)
