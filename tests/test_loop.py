@@ -555,3 +555,25 @@ def test_an_added_effect_is_weighed_by_the_model_that_has_it(seed):
     value, se = added["params"]["value"], added["stderr"]["value"]
     assert value == pytest.approx(-0.07, abs=5e-4) and abs(value + 0.07) < 3 * se < 1e-3
     assert result["unexplained"] == {}, result["unexplained"]
+
+
+def test_an_effect_that_differs_run_to_run_has_an_s_e_that_says_so():
+    """Ballast that differs from run to run (W − B of 2 to 6 N over eight runs): the residual's
+    correlation time gave the added buoyancy offset a s.e. of a few hundredths of a newton,
+    while holding out other runs moved it by newtons; the run-clustered s.e. reads the spread
+    across the training runs."""
+    veh = load_vehicle(MINIROV)
+    offsets = [2.0, 6.0, 3.0, 5.0, 2.5, 5.5, 4.0, 4.5]
+    log = pd.concat(
+        [effect_log(veh, [("buoyancy_offset", b)], duration=60, n_experiments=1, seed=k,
+                    measurement=DVL).assign(experiment=f"run{k}")
+         for k, b in enumerate(offsets)],
+        ignore_index=True,
+    )  # fmt: skip
+    fitted = ResidualLoop(veh, max_effects=1).fit(log)
+    result = fitted.as_dict()
+    added = result["steps"][0]["added"]
+    assert added["effect"] == "buoyancy_offset"
+    train = [p["experiment"] for p in result["settings"]["split"]["parts"]["train"]]
+    spread = np.std([offsets[int(r[3:])] for r in train], ddof=1) / np.sqrt(len(train))
+    assert 0.5 * spread < added["stderr"]["value"] < 3 * spread, (added, spread)

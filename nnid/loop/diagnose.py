@@ -241,6 +241,28 @@ def _set_weights(ws: Workspace, e: np.ndarray) -> None:
     ws.weights = ws.mask / np.where(var > 0, var, 1.0)
 
 
+#: training runs below which :func:`run_stderr` gives nothing (its variance rests on them)
+MIN_RUNS = 4
+
+
+def run_stderr(ws: Workspace, fit: Fit) -> np.ndarray | None:
+    """The run-clustered (sandwich) standard errors of the fit's unknowns: A⁻¹ (Σ_r g_r g_rᵀ)
+    A⁻¹ · G/(G − 1), g_r the weighted score Σ φᵀ W e of training run r, A = Σ φᵀ W φ. On
+    measured logs what differs run to run (ballast, a tether, contact) moves an estimate
+    further than one residual's correlation time says: holding out other NTNU runs moved an
+    added effect by 4-5 of its s.e. None with fewer than :data:`MIN_RUNS` training runs."""
+    runs = ws.data["experiment"][ws.settled(ws.data)]
+    groups = np.unique(runs)
+    if groups.size < MIN_RUNS or runs.size != fit.phi.shape[0] or not fit.unknowns:
+        return None
+    phi, e = np.nan_to_num(fit.phi), np.nan_to_num(fit.e)
+    a_inv = np.linalg.pinv(np.einsum("nkp,k,nkq->pq", phi, ws.weights, phi), hermitian=True)
+    scores = np.einsum("nkp,k,nk->np", phi, ws.weights, e)
+    g = np.stack([scores[runs == r].sum(0) for r in groups])
+    cov = a_inv @ (g.T @ g) @ a_inv * groups.size / (groups.size - 1)
+    return np.sqrt(np.maximum(np.diag(cov), 0.0))
+
+
 def residual_correlation_time(e: np.ndarray, dofs: tuple[str, ...] = DOFS) -> float:
     """The correlation time of the analysed DOFs' residual columns of ``e`` [N, 6] (lags up to
     2000 samples): how many rows one independent sample is worth."""

@@ -36,6 +36,7 @@ from nnid.loop.diagnose import (
     rescore,
     residual_correlation_time,
     reweight,
+    run_stderr,
     screen_linear,
     search_nonlinear,
     sindy_opinion,
@@ -212,8 +213,8 @@ class ResidualLoop:
         unknowns = [k for k in Parts.from_vehicle(self.vehicle).damping if k.split(":")[0] in used]
         self._check_lengths(train, val, len(unknowns))
         fit = refit(ws, self.vehicle, unknowns)
-        _warn_unphysical_damping(fit)
         ws.tau_corr = residual_correlation_time(fit.e, self.dofs_)
+        _warn_unphysical_damping(fit, float(np.sqrt(ws.tau_corr)))
         self._say_short_held_out(val, ws.tau_corr)
         self.baseline_ = fit
         self.steps_: list[Step] = []
@@ -504,12 +505,12 @@ class ResidualLoop:
     def added(self) -> list[str]:
         return [s.name for s in self.added_]
 
-    def _final_effect(self, scored: Scored, widen: float) -> dict:
+    def _final_effect(self, scored: Scored, widen: float, by_run: np.ndarray | None) -> dict:
         """An added effect as the final model holds it: a linear effect's parameter is refitted
-        jointly in every later pass, so its value ± s.e. (widened by the final residual's
-        correlation time) come from the final fit, the pass's own beside them; a
-        1-D-searched effect keeps its pass's value. ``widen``: √ of the final residual's
-        correlation time."""
+        jointly in every later pass, so its value ± s.e. come from the final fit, the pass's own
+        beside them; a 1-D-searched effect keeps its pass's value. The s.e. is the larger of
+        the fit's widened by ``widen`` (√ of the final residual's correlation time) and the
+        run-clustered one ``by_run`` (:func:`~nnid.loop.diagnose.run_stderr`)."""
         out = scored.as_dict()
         param = scored.candidate.parameter
         if param is None or param not in self.fit_.unknowns:
@@ -518,6 +519,8 @@ class ResidualLoop:
         base = Parts.from_vehicle(self.vehicle).get(param)
         cand = scored.candidate
         se = float(self.fit_.stderr[k]) * widen
+        if by_run is not None:
+            se = max(se, float(by_run[k]))
         se *= abs(cand.value_scale(self.vehicle))
         return {
             **out,
@@ -541,6 +544,7 @@ class ResidualLoop:
         # the final fit's s.e. by its own residual's correlation time, as each pass widens its
         # candidate's by the residual with the candidate in
         final = float(np.sqrt(residual_correlation_time(self.fit_.e, self.dofs_)))
+        by_run = run_stderr(self.workspace_, self.fit_)
         return {
             "vehicle": self.vehicle.name,
             "baseline": f"{self.vehicle.name}: vehicle file, damping structure refitted "
@@ -554,7 +558,9 @@ class ResidualLoop:
             "steps": [
                 {
                     "gate": gate,
-                    "added": None if st.added is None else self._final_effect(st.added, final),
+                    "added": None
+                    if st.added is None
+                    else self._final_effect(st.added, final, by_run),
                     "top": [s.as_dict() for s in st.ranked[:10]],
                     "sindy": st.sindy,
                 }
@@ -605,10 +611,12 @@ class ResidualLoop:
         }
 
 
-def _warn_unphysical_damping(fit: Fit) -> None:
+def _warn_unphysical_damping(fit: Fit, widen: float) -> None:
     """A refitted diagonal damping coefficient with the sign of a thrust: said, since a model
-    with it gains energy in free run (the log does not determine that coefficient)."""
-    for key, value, se in zip(fit.unknowns, fit.theta, fit.stderr, strict=True):
+    with it gains energy in free run (the log does not determine that coefficient). Its s.e.
+    widened by ``widen`` (√ of the residual's correlation time), as loop.json gives it (the
+    warning said ± 3.8 where loop.json said ± 84)."""
+    for key, value, se in zip(fit.unknowns, fit.theta, fit.stderr * widen, strict=True):
         force, _, term = key.partition(":")
         dof = DOFS[FORCES.index(force)] if force in FORCES else None
         if term in (dof, f"{dof}*abs({dof})") and value > 0:

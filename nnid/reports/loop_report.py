@@ -67,7 +67,7 @@ def effect_sentence(candidate: dict) -> str:
         side = "heavier" if value >= 0 else "lighter"
         return f"In water the vehicle is {number(abs(value))}{pm} N {side} than declared (W − B)"
     if kind == "restoring_offset":
-        cm = f" (± {100 * se:.1g})" if se is not None else ""
+        cm = f" (± {100 * se:.1g} cm)" if se is not None else ""
         side = "lower" if value >= 0 else "higher"
         return (
             f"The centre of gravity is {100 * abs(value):.2g} cm{cm} {side} than the vehicle "
