@@ -315,6 +315,14 @@ def test_a_diverged_baseline_is_said_and_compared_like_for_like():
     total = lines[-1]
     assert total.startswith("Total held-out one-step NRMSE") or "1 s-ahead" in total
     assert "- before" not in total
+    assert not any("stays above 1" in line for line in lines)
+    # an after above 1 (Haizhe's heave: 1.26 to 1.13) is a fall without skill: said
+    key = "one_step_nrmse" if total.startswith("Total held-out one-step") else "k_step_nrmse"
+    before[key]["total"], after[key]["total"] = 1.26, 1.13
+    lines = summary(result)
+    assert "stays above 1 after" in lines[-2] and lines[-1].endswith(
+        f"1.26 before, 1.13 after ({result['added'][0]} added)."
+    )
 
 
 # -- CLI -----------------------------------------------------------------------------------------

@@ -215,6 +215,12 @@ def _verdict(result: dict, name: str, before: dict, after: dict) -> list[str]:
             "Before and after are compared on the "
             f"{name} error because " + " and ".join(diverged) + "."
         )
+    if (after.get("total") or 0.0) > 1.0:  # a fall from 1.26 to 1.13 is no skill gained
+        lines.append(
+            f"The held-out {name} NRMSE stays above 1 after: the final model predicts the "
+            "held-out data no better than their mean, so the fall below is that of a model "
+            "without skill there."
+        )
     lines.append(
         f"Total held-out {name} NRMSE: {number(before.get('total'))} before, "
         f"{number(after.get('total'))} after ({', '.join(result['added'])} added)."
