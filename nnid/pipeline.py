@@ -543,6 +543,18 @@ def diverged_training(description: dict) -> list[str]:
     return said
 
 
+def without_skill(part: str, scores: dict) -> list[str]:
+    """The warning for a free run whose total NRMSE on ``part`` is above 1: the model
+    simulates those data no better than their mean (BlueROV1's held-out 1.02 went unsaid)."""
+    total = (scores.get("free_run_nrmse") or {}).get("total")
+    if total is None or total <= 1.0:
+        return []
+    return [
+        f"the {part} free-run NRMSE is {total:.3g}, above 1: the model simulates the {part} "
+        "data no better than their mean"
+    ]
+
+
 def unscored_k_step(part: str, log: pd.DataFrame, scores: dict, cfg, model) -> list[str]:
     """The warning for a held-out part none of whose k-step predictions was scored, with the
     horizon that would score one: a prediction k samples ahead is scored from the run's
@@ -642,6 +654,7 @@ def run_train(
         metrics["test"] = score(model, split.test, cfg, k, replay)
     for p in parts:
         metrics["warnings"] += unscored_k_step(p, split[p], metrics[p], cfg, model)
+        metrics["warnings"] += without_skill(p, metrics[p])
     metrics["warnings"] += diverged_training(description)
     base = model.baseline()
     if base is not None:

@@ -529,3 +529,15 @@ def test_a_compared_model_whose_training_diverged_is_said(tmp_path, monkeypatch)
     (wild,) = comparison["models"]
     assert any(w.startswith("training diverged in") for w in wild["warnings"]), wild["warnings"]
     assert "wild: training diverged in" in " ".join(run.output.split())
+
+
+def test_a_free_run_above_one_is_said_to_have_no_skill():
+    """BlueROV1's least-squares fit scored its held-out runs 1.02 (validation 1.24) with no
+    warning: a free-run NRMSE above 1 simulates the data no better than their mean."""
+    from nnid.pipeline import without_skill
+
+    (said,) = without_skill("test", {"free_run_nrmse": {"u": 1.3, "total": 1.02}})
+    assert said.startswith("the test free-run NRMSE is 1.02, above 1")
+    assert without_skill("test", {"free_run_nrmse": {"total": 0.98}}) == []
+    assert without_skill("test", {"free_run_nrmse": {"total": None}}) == []  # diverged: said
+    assert without_skill("validation", {}) == []  # elsewhere, not as this
