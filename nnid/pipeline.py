@@ -655,6 +655,13 @@ def run_train(
     for p in parts:
         metrics["warnings"] += unscored_k_step(p, split[p], metrics[p], cfg, model)
         metrics["warnings"] += without_skill(p, metrics[p])
+    went = metrics["train"].get("diverged") or {}
+    if went:  # unstable on the data it was fitted on: the held-out scores are not the story
+        first = min(went.values())
+        metrics["warnings"].append(
+            f"the free run on the training data diverged ({', '.join(went)} from t = "
+            f"{first:.3g} s): the model is unstable on the data it was fitted on"
+        )
     metrics["warnings"] += diverged_training(description)
     base = model.baseline()
     if base is not None:

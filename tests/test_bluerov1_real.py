@@ -97,3 +97,25 @@ def test_one_second_ahead_beats_persistence_and_yaw_is_no_worse_than_thesis(stud
     yaw = [r for r in k1 if r["dof"] == "r"]
     assert len(yaw) == 2
     assert np.mean([r["identified"] for r in yaw]) <= np.mean([r["thesis"] for r in yaw]) + 0.02
+
+
+def test_the_shipped_fit_says_it_has_no_skill_and_is_unstable_on_its_training_runs(tmp_path):
+    """`nnid train configs/bluerov1_liu_ls.toml` scored its held-out runs 1.02 (test) and 1.24
+    (validation) and diverged in free run on its own training runs (p, q, r from t = 48 s),
+    with metrics.json's warnings empty."""
+    import json
+
+    from typer.testing import CliRunner
+
+    from nnid.cli import app
+
+    config = str(REPO / "configs" / "bluerov1_liu_ls.toml")
+    res = CliRunner().invoke(app, ["train", config, "--out", str(tmp_path / "o")])
+    assert res.exit_code == 0, res.output
+    metrics = json.loads((tmp_path / "o" / "metrics.json").read_text())
+    said = " | ".join(metrics["warnings"])
+    for part in ("validation", "test"):
+        total = metrics[part]["free_run_nrmse"]["total"]
+        assert (f"the {part} free-run NRMSE is {total:.3g}, above 1" in said) == (total > 1)
+    assert bool(metrics["train"]["diverged"]) == ("on the training data diverged" in said)
+    assert "on the training data diverged" in said  # what this fit does, as measured
