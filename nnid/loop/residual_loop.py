@@ -236,6 +236,9 @@ class ResidualLoop:
             pool = [c for c in pool if c.name != step.added.candidate.name]
         self.fit_ = fit
         self.added_ = added
+        # what an added effect's final s.e. is read from (:meth:`_final_effect`), once
+        self.final_widen_ = float(np.sqrt(residual_correlation_time(fit.e, self.dofs_)))
+        self.run_stderr_ = run_stderr(ws, fit)
         self.before_, self.residuals_before_ = self._scores(ws, self.baseline_)
         self.after_, self.residuals_after_ = self._scores(ws, fit)
         self.workspace_ = ws
@@ -505,12 +508,13 @@ class ResidualLoop:
     def added(self) -> list[str]:
         return [s.name for s in self.added_]
 
-    def _final_effect(self, scored: Scored, widen: float, by_run: np.ndarray | None) -> dict:
+    def _final_effect(self, scored: Scored) -> dict:
         """An added effect as the final model holds it: a linear effect's parameter is refitted
         jointly in every later pass, so its value ± s.e. come from the final fit, the pass's own
         beside them; a 1-D-searched effect keeps its pass's value. The s.e. is the larger of
-        the fit's widened by ``widen`` (√ of the final residual's correlation time) and the
-        run-clustered one ``by_run`` (:func:`~nnid.loop.diagnose.run_stderr`)."""
+        the fit's widened by √ of the final residual's correlation time (as each pass widens
+        its candidate's by the residual with the candidate in) and the run-clustered one
+        (:func:`~nnid.loop.diagnose.run_stderr`)."""
         out = scored.as_dict()
         param = scored.candidate.parameter
         if param is None or param not in self.fit_.unknowns:
@@ -518,9 +522,9 @@ class ResidualLoop:
         k = self.fit_.unknowns.index(param)
         base = Parts.from_vehicle(self.vehicle).get(param)
         cand = scored.candidate
-        se = float(self.fit_.stderr[k]) * widen
-        if by_run is not None:
-            se = max(se, float(by_run[k]))
+        se = float(self.fit_.stderr[k]) * self.final_widen_
+        if self.run_stderr_ is not None:
+            se = max(se, float(self.run_stderr_[k]))
         se *= abs(cand.value_scale(self.vehicle))
         return {
             **out,
@@ -541,10 +545,6 @@ class ResidualLoop:
         """``loop.json`` (ARCHITECTURE.md): baseline, before, ranked candidates, added, after."""
         first = self.steps_[0] if self.steps_ else Step([], None, [])
         widen = float(np.sqrt(self.workspace_.tau_corr))
-        # the final fit's s.e. by its own residual's correlation time, as each pass widens its
-        # candidate's by the residual with the candidate in
-        final = float(np.sqrt(residual_correlation_time(self.fit_.e, self.dofs_)))
-        by_run = run_stderr(self.workspace_, self.fit_)
         return {
             "vehicle": self.vehicle.name,
             "baseline": f"{self.vehicle.name}: vehicle file, damping structure refitted "
@@ -558,9 +558,7 @@ class ResidualLoop:
             "steps": [
                 {
                     "gate": gate,
-                    "added": None
-                    if st.added is None
-                    else self._final_effect(st.added, final, by_run),
+                    "added": None if st.added is None else self._final_effect(st.added),
                     "top": [s.as_dict() for s in st.ranked[:10]],
                     "sindy": st.sindy,
                 }
