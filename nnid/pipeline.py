@@ -219,7 +219,7 @@ def load_inputs(
                     field=slips[0].column,
                     row=slips[0].row,
                 )
-            warn_far_beyond_range(inputs.log, veh)
+            warn_far_beyond_range(inputs.log, veh, slips)
         if physics and veh is not None:  # the inputs the vehicle reads, said against the log
             from nnid.datasets.arrays import logged_inputs
             from nnid.datasets.preprocess import check_velocities

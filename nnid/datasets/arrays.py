@@ -7,6 +7,7 @@ from __future__ import annotations
 import warnings
 from collections.abc import Iterable
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 import pandas as pd
@@ -77,26 +78,40 @@ class CommandUnitsWarning(UserWarning):
     warning from each fit on a part of it (whose share of samples would differ)."""
 
 
-def command_limits(vehicle) -> dict[str, tuple[float, float, float, float]]:
-    """``{cmd_<thruster>: (low, high, range low, range high)}``: beyond low and high a command
-    is further from its range (:func:`command_range`) than the range is wide."""
+class CommandLimits(NamedTuple):
+    """A thruster's command range and the bounds further beyond it than it is wide."""
+
+    low: float
+    high: float
+    range_low: float
+    range_high: float
+
+    def holds(self, value: float) -> bool:
+        return self.low <= value <= self.high
+
+
+def command_limits(vehicle) -> dict[str, CommandLimits]:
+    """``{cmd_<thruster>: CommandLimits}``: beyond ``low`` and ``high`` a command is further
+    from its range (:func:`command_range`) than the range is wide."""
     out = {}
     for thruster in vehicle.thrusters:
         span = command_range(thruster)
         if span is not None:
             lo, hi = span
-            out[f"cmd_{thruster.name}"] = (lo - (hi - lo), hi + (hi - lo), lo, hi)
+            out[f"cmd_{thruster.name}"] = CommandLimits(lo - (hi - lo), hi + (hi - lo), lo, hi)
     return out
 
 
-def beyond_range_message(column: str, value: float, limits, share: float | None = None) -> str:
+def beyond_range_message(
+    column: str, value: float, limits: CommandLimits, share: float | None = None
+) -> str:
     """What is said of ``column`` reaching ``value`` beyond its :func:`command_limits`."""
-    lo, hi = limits[2], limits[3]
     where = f" in {share:.0%} of the samples" if share is not None else ""
     return (
-        f"{column} reaches {value:.4g}, far beyond thruster {column[4:]}'s range [{lo:g}, "
-        f"{hi:g}]{where}; the thrust curve saturates it at the bound: are the commands in the "
-        "vehicle file's units (not PWM microseconds against ±1)?"
+        f"{column} reaches {value:.4g}, far beyond thruster {column[4:]}'s range "
+        f"[{limits.range_low:g}, {limits.range_high:g}]{where}; the thrust curve saturates it "
+        "at the bound: are the commands in the vehicle file's units (not PWM microseconds "
+        "against ±1)?"
     )
 
 
@@ -120,7 +135,7 @@ def far_beyond_range(log: pd.DataFrame, vehicle) -> list[CommandSlip]:
         if col not in log:
             continue
         values = log[col].to_numpy(np.float64)
-        beyond = (values > limits[1]) | (values < limits[0])
+        beyond = (values > limits.high) | (values < limits.low)
         if beyond.any():
             worst = values[beyond][np.argmax(np.abs(values[beyond]))]
             label = log.index[int(np.argmax(beyond))]
@@ -131,9 +146,11 @@ def far_beyond_range(log: pd.DataFrame, vehicle) -> list[CommandSlip]:
     return slips
 
 
-def warn_far_beyond_range(log: pd.DataFrame, vehicle) -> None:
-    """Warn of each command :func:`far_beyond_range` finds."""
-    for slip in far_beyond_range(log, vehicle):
+def warn_far_beyond_range(
+    log: pd.DataFrame, vehicle, slips: list[CommandSlip] | None = None
+) -> None:
+    """Warn of each command :func:`far_beyond_range` finds (``slips``: found already)."""
+    for slip in far_beyond_range(log, vehicle) if slips is None else slips:
         warnings.warn(slip.message, CommandUnitsWarning, stacklevel=3)
 
 

@@ -179,7 +179,7 @@ def follow_csv(
     for n, row in enumerate(rows):  # n: the data row from 0, as the whole-log reader counts
         values = _numbers(row, read, n, where, len(header))
         for name, bounds in limits.items():
-            if name in values and not bounds[0] <= values[name] <= bounds[1]:
+            if name in values and not bounds.holds(values[name]):
                 raise NnidInputError(
                     beyond_range_message(name, values[name], bounds),
                     source=where,
