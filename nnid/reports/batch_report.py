@@ -181,12 +181,12 @@ def _sweep(result) -> list[str]:
         seed = setting.pop(sweep.get("seed_option", "model.seed"), None)
         label = ", ".join(f"{k} = {v}" for k, v in setting.items()) or "as configured"
         value = row.get(f"validation_{metric}") if row["status"] == "ok" else None
-        scores.setdefault(label, []).append(value)
         test = row.get("free_run_nrmse") if row.get("held_out") == "test" else None
         note = str(row.get("error") or "")
-        if row["status"] == "ok" and row.get("training_diverged"):  # the sweep ranks it unscored
+        untrained = row["status"] == "ok" and row.get("training_diverged")
+        if untrained:  # the sweep ranks it unscored
             note = f"{KEPT_START}: its score is the untrained model's, not ranked"
-            scores[label][-1] = None
+        scores.setdefault(label, []).append(None if untrained else value)
         body.append([label, number(seed), row["status"], number(value, 4), number(test, 4),
                      note])  # fmt: skip
     head = ["setting", "seed", "status", f"validation {metric}", "test free-run NRMSE", "note"]
