@@ -42,6 +42,8 @@ from nnid.physics.thrusters import Actuation
 _PRIORITY = {"thruster_loss": 0, "buoyancy_offset": 1, "external_bias": 2}
 PARALLEL = 0.95  # |cos| of whitened columns above which two hypotheses are one to the data
 SIGNIFICANCE = 0.01
+#: what an alarm says where no hypothesis (one parameter or joint) passes :data:`SIGNIFICANCE`
+NOT_SIGNIFICANT = "no hypothesis explains the change significantly"
 # a stopped thruster's efficiency is estimated a few % below zero on the simulated 8-thruster
 # vehicle (the monitor's model error, not in the interval): that far under 0 is a stopped
 # thruster; further, the thruster pushes against its command
@@ -203,7 +205,7 @@ def isolate(monitor, data: dict, residual: np.ndarray, rows: np.ndarray) -> Diag
         ][:5],
     )
     if s.p_value > SIGNIFICANCE:
-        out.kind, out.meaning = "model_change", "no hypothesis explains the change significantly"
+        out.kind, out.meaning = "model_change", NOT_SIGNIFICANT
         return out
     if out.kind == "thruster_loss":
         out.thruster = s.name.split(".", 1)[1]
@@ -252,7 +254,7 @@ class _Joint:
                 "model_change",
                 confidence=posterior,
                 explained=self.drss / rss if rss > 0 else 0.0,
-                meaning="no hypothesis explains the change significantly",
+                meaning=NOT_SIGNIFICANT,
                 alternatives=alternatives,
             )
         names = [c.name for c in self.members]
