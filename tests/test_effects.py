@@ -106,3 +106,6 @@ def test_a_lag_shorter_than_the_sample_is_stepped_exactly(vehicle_factory, lag, 
     stepped = simulate(veh, inputs, 0.1, effects=[("actuator_lag", lag)])
     exact = simulate(veh, inputs, 0.1, effects=[("actuator_lag", lag)], integrator="adaptive")
     assert np.abs(stepped["u"] - exact["u"]).max() < tol  # u reaches 0.64 m/s
+    torch_path = simulate(veh, inputs, 0.1, effects=[("actuator_lag", lag)], integrator="torch")
+    # the same exact step in torch (differentiable): as an RK4 state the 0.03-s lag diverged
+    assert np.abs(torch_path["u"] - stepped["u"]).max() < 1e-10

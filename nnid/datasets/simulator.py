@@ -97,12 +97,13 @@ def integrate(
     atol: float = 1e-10,
 ) -> np.ndarray:
     """States at the ``len(tau) + 1`` sample times for applied forces ``tau`` ``[N, 6]`` (ZOH).
-    ``rk4`` steps an actuator lag by its exact exponential (:mod:`nnid.physics.compiled`);
-    ``torch`` integrates it as an RK4 state, accurate only where the lag is several steps."""
+    ``rk4`` (:mod:`nnid.physics.compiled`) and ``torch`` step an actuator lag by its exact
+    exponential; ``adaptive`` integrates it as a state."""
     if integrator == "rk4":
         return compiled.integrate_rk4(model.feature_form(), x0, tau, dt, substeps)
     if integrator == "torch":
-        out = rk4(model.rhs, torch.as_tensor(x0), torch.as_tensor(tau), dt, substeps)
+        x0, tau = torch.as_tensor(x0), torch.as_tensor(tau)
+        out = rk4(model.rhs, x0, tau, dt, substeps, lag=model.actuator_lag)
         return out.numpy()
     if integrator == "adaptive":
         form = model.feature_form()

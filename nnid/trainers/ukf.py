@@ -164,7 +164,7 @@ class _Process:
             x0 = torch.as_tensor(self.full_state(x[b : b + 1, : self.n_v], k)[0])
             tau = torch.as_tensor(parts.applied(self.data["tau"][k : k + 1]))
             with torch.no_grad():
-                nxt = rk4(model.rhs, x0, tau, dt)[1].numpy()
+                nxt = rk4(model.rhs, x0, tau, dt, lag=model.actuator_lag)[1].numpy()
             out[b, : self.n_v] = nxt[6 + self.idx]
         return out
 
