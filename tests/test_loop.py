@@ -345,6 +345,15 @@ def test_cli_demo_reports_the_injected_heave_thrust_loss(tmp_path):
     html = (tmp_path / "report.html").read_text()
     assert html.count("data:image/png;base64,") == 3
     assert "Upward heave thrust" in (tmp_path / "report.md").read_text()
+    # a heave-only log has u = v = 0, so V = |w| and Vw = w: these two are one column
+    same = {c["effect"]: c["same_column_as"] for c in result["steps"][0]["top"]}
+    assert same["coupled_damping.Z:abs(w)*V"] == ["coupled_damping.Z:w*Vw"]
+    assert same["coupled_damping.Z:w*Vw"] == ["coupled_damping.Z:abs(w)*V"]
+    assert same["thruster_installation.w.neg"] == []
+    assert (
+        "coupled_damping.Z:w*Vw (= coupled_damping.Z:abs(w)*V)"
+        in (tmp_path / "report.md").read_text()
+    )
 
 
 def test_cli_loop_bad_input_exits_2_naming_the_column(tmp_path):
@@ -585,3 +594,21 @@ def test_an_effect_that_differs_run_to_run_has_an_s_e_that_says_so():
     train = [p["experiment"] for p in result["settings"]["split"]["parts"]["train"]]
     spread = np.std([offsets[int(r[3:])] for r in train], ddof=1) / np.sqrt(len(train))
     assert 0.5 * spread < added["stderr"]["value"] < 3 * spread, (added, spread)
+
+
+def test_an_added_effect_the_log_cannot_tell_from_another_says_so():
+    from nnid.reports.loop_report import effect_sentence
+
+    added = {
+        "effect": "coupled_damping.Z:w*Vw",
+        "meaning": "heave damping growing with the speed through the water",
+        "params": {"value": -31.0},
+        "stderr": {"value": 2.0},
+        "same_column_as": ["coupled_damping.Z:abs(w)*V"],
+    }
+    sentence = effect_sentence(added)
+    assert sentence.endswith(
+        "(on this log coupled_damping.Z:w*Vw is the same column as coupled_damping.Z:abs(w)*V: "
+        "the data cannot tell them apart)"
+    )
+    assert "cannot tell" not in effect_sentence({**added, "same_column_as": []})

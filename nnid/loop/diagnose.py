@@ -90,6 +90,7 @@ class Scored:
     delta: float = 0.0  # parameter change θ
     shift: np.ndarray | None = None  # A⁻¹ b: how the fit's unknowns move with θ
     residual: np.ndarray | None = None  # training residual after (nonlinear candidates)
+    aliases: list[str] = field(default_factory=list)  # the same column on this log
 
     @property
     def name(self) -> str:
@@ -113,6 +114,7 @@ class Scored:
             else {"before": self.gate[0], "after": self.gate[1]},
             "admissible": self.admissible,
             "reason": self.reason,
+            "same_column_as": self.aliases,
         }
 
 
@@ -358,7 +360,29 @@ def screen_linear(ws: Workspace, fit: Fit, cands: list[Candidate]) -> list[Score
         cols = ws.columns(fit.vehicle, names, "train")
         cols_v = ws.columns(fit.vehicle, names, "val")
         out += screen(ws, fit, other, cols, cols_v)
+    mark_aliases(out)
     return out
+
+
+#: relative agreement of two candidates' F-test sums and held-out gains that marks their
+#: columns as one up to scale: a coincidence of both is far rarer than this
+ALIAS_RTOL = 1e-8
+
+
+def mark_aliases(scored: list[Scored]) -> None:
+    """Fill each candidate's ``aliases`` with the others whose column on this log is the same
+    up to scale (without u and v, V = |w|, so Z:w*abs(w) and Z:abs(w)*V are one column): such
+    candidates have the same F-test sum and held-out gain, and the data cannot tell them
+    apart, so the one the loop names is one of several."""
+    order = sorted(range(len(scored)), key=lambda i: scored[i].drss)
+    for pos, i in enumerate(order):
+        for j in order[pos + 1 :]:
+            a, b = scored[i], scored[j]
+            if not np.isclose(b.drss, a.drss, rtol=ALIAS_RTOL, atol=0.0):
+                break
+            if np.isclose(a.improvement, b.improvement, rtol=ALIAS_RTOL, atol=1e-12):
+                a.aliases.append(b.name)
+                b.aliases.append(a.name)
 
 
 def sensitivity(ws: Workspace, vehicle, cand: Candidate, a: float, b: float) -> list[np.ndarray]:

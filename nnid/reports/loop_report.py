@@ -48,7 +48,18 @@ def unit(effect: str) -> str:
 
 
 def effect_sentence(candidate: dict) -> str:
-    """'Upward heave thrust is 57 % ± 2 % of nominal' and the like."""
+    """'Upward heave thrust is 57 % ± 2 % of nominal' and the like, and the candidates the
+    log cannot tell it from."""
+    same = candidate.get("same_column_as") or []
+    if not same:
+        return _effect_words(candidate)
+    return (
+        f"{_effect_words(candidate)} (on this log {candidate['effect']} is the same column as "
+        f"{', '.join(same)}: the data cannot tell them apart)"
+    )
+
+
+def _effect_words(candidate: dict) -> str:
     name, value = candidate["effect"], candidate["params"]["value"]
     se = candidate["stderr"]["value"]
     kind, args = parse_effect(name)
@@ -238,10 +249,11 @@ HELD_OUT_CHOSE = (
 CANDIDATE_HEAD = ["effect", "value", "± s.e.", "unit", "p (F-test)", "held-out gain", "verdict"]
 #: what each column of the candidate table means, printed under every table
 CANDIDATE_COLUMNS = (
-    "Columns: effect, the vocabulary name; value ± s.e., its refitted size with the standard "
-    "error; p (F-test), the significance of adding it; held-out gain, the share of the held-out "
-    "force residual (weighted sum of squares over the analysed DOFs) that the refit with it "
-    "removes; verdict, why it was added or not."
+    "Columns: effect, the vocabulary name (after it, in brackets, the candidates whose column "
+    "on this log is the same: the data cannot tell them apart); value ± s.e., its refitted "
+    "size with the standard error; p (F-test), the significance of adding it; held-out gain, "
+    "the share of the held-out force residual (weighted sum of squares over the analysed DOFs) "
+    "that the refit with it removes; verdict, why it was added or not."
 )
 
 
@@ -249,9 +261,10 @@ def candidate_rows(candidates: list[dict], top: int = 15) -> list[list[str]]:
     rows = []
     for c in candidates[:top]:
         se = c["stderr"]["value"]
+        same = c.get("same_column_as") or []
         rows.append(
             [
-                c["effect"],
+                c["effect"] + (f" (= {', '.join(same)})" if same else ""),
                 number(c["params"]["value"], 4),
                 number(se, 2),
                 unit(c["effect"]),
