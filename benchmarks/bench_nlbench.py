@@ -306,4 +306,7 @@ if __name__ == "__main__":
     args = sys.argv[1:]
     flag = "--holdout" in args
     names = [a for a in args if a != "--holdout"]
+    unknown = [a for a in names if a not in SETTINGS]
+    if unknown:  # --help among them: the usage, not a KeyError
+        sys.exit(f"usage: bench_nlbench.py [--holdout] [{' '.join(SETTINGS)}]; not {unknown}")
     main(names or [n for n in SETTINGS if not n.endswith("_nss")], holdout=flag)
