@@ -13,8 +13,9 @@ import numpy as np
 import pandas as pd
 
 from nnid.datasets.log import ANGLES, POSE, TAU, VELOCITY
+from nnid.datasets.preprocess import first_order_lag
 from nnid.errors import NnidInputError
-from nnid.physics.thrusters import Actuation
+from nnid.physics.thrusters import Actuation, apply_deadband
 
 
 def motion_arrays(log: pd.DataFrame) -> dict[str, np.ndarray]:
@@ -209,9 +210,22 @@ def check_forces_match_commands(log: pd.DataFrame, vehicle) -> None:
         )
 
 
+def nominal_forces(log: pd.DataFrame, vehicle, lagged: bool = True) -> np.ndarray:
+    """The nominal generalized force the vehicle receives ``[N, 6]``: deadband on the inputs,
+    thrust curves and allocation, then (``lagged``) the first-order actuator lag of the vehicle
+    at the sample times (exact for inputs held between samples); installation coefficients
+    are left to the model."""
+    inputs, forces = logged_inputs(log, vehicle)
+    if forces:
+        tau = apply_deadband(inputs, vehicle.deadband)
+    else:
+        tau = Actuation(vehicle).nominal(inputs, deadband=True)
+    return first_order_lag(tau, log, vehicle.actuator_lag) if lagged else tau
+
+
 def log_arrays(log: pd.DataFrame, vehicle) -> dict[str, np.ndarray]:
     """:func:`motion_arrays` and the nominal τ (from ``tau_*`` or through the vehicle's
-    thrusters from ``cmd_*``, :func:`logged_inputs`)."""
-    inputs, forces = logged_inputs(log, vehicle)
-    tau = inputs if forces else Actuation(vehicle).nominal(inputs)
-    return {**motion_arrays(log), "tau": tau}
+    thrusters from ``cmd_*``, :func:`logged_inputs`), with the vehicle file's deadband and
+    actuator lag (:func:`nominal_forces`): a model of a vehicle whose file declares them is
+    fitted on the force that vehicle receives."""
+    return {**motion_arrays(log), "tau": nominal_forces(log, vehicle)}

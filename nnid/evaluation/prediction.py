@@ -15,7 +15,7 @@ import numpy as np
 import pandas as pd
 
 from nnid.datasets.log import POSE, TAU, VELOCITY
-from nnid.datasets.preprocess import experiments
+from nnid.datasets.preprocess import experiments, first_order_lag
 from nnid.errors import NnidInputError
 from nnid.physics import compiled
 
@@ -61,24 +61,37 @@ def measured_states(log: pd.DataFrame) -> np.ndarray:
 
 
 def predict_states(
-    parts, log: pd.DataFrame, tau_nominal: np.ndarray, mode="free_run", substeps: int = 1
+    parts,
+    log: pd.DataFrame,
+    tau_nominal: np.ndarray,
+    mode="free_run",
+    substeps: int = 1,
+    lag: float = 0.0,
 ) -> pd.DataFrame:
     """Predicted pose and velocity columns for ``mode`` = "one_step", "free_run" or k (int).
 
     Row i holds the prediction of sample i; the first k samples of each experiment (k = 1 for
-    one step) repeat the measurement and belong to the warm-up.
+    one step) repeat the measurement and belong to the warm-up. With an actuator ``lag`` T
+    > 0, ``tau_nominal`` is the force commanded before the lag: the force the vehicle feels is
+    integrated as a state (stepped exactly, as the simulator steps it), started at each
+    window from its value at that sample (:func:`~nnid.datasets.preprocess.first_order_lag`).
+    Holding those sampled values instead delays the force by about half a sample, which
+    biased a lag chosen by its simulated error by about dt/2.
     """
-    form = parts.model(check=False).feature_form()
+    form = parts.model(check=False, actuator_lag=lag).feature_form()
     tau = parts.applied(tau_nominal)
     x = measured_states(log)
     out = x.copy()
+    if lag > 0:
+        x = np.concatenate([x, first_order_lag(tau, log, lag)], 1)
     k = 1 if mode == "one_step" else mode
     for _, idx in experiments(log):
         pos = log.index.get_indexer(idx)
         t = log["t"].to_numpy(np.float64)[pos]
         dt = float(np.median(np.diff(t)))
         if mode == "free_run":
-            out[pos] = compiled.integrate_rk4(form, x[pos[0]], tau[pos[:-1]], dt, substeps)
+            flown = compiled.integrate_rk4(form, x[pos[0]], tau[pos[:-1]], dt, substeps)
+            out[pos] = flown[:, :12]
             continue
         if not isinstance(k, int) or k < 1:
             raise ValueError("mode is 'one_step', 'free_run' or a positive number of steps")
@@ -87,7 +100,7 @@ def predict_states(
             continue
         windows = np.stack([tau[pos[j : j + n]] for j in range(k)], 1)
         last = compiled.integrate_rk4(form, x[pos[:n]], windows, dt, substeps)[:, -1]
-        out[pos[k:]] = last
+        out[pos[k:]] = last[:, :12]
     return pd.DataFrame(out, columns=[*POSE, *VELOCITY], index=log.index)
 
 

@@ -32,13 +32,13 @@ import pandas as pd
 from scipy.optimize import minimize_scalar
 from scipy.stats import f as f_dist
 
-from nnid.datasets.arrays import log_arrays
+from nnid.datasets.arrays import log_arrays, nominal_forces
 from nnid.datasets.log import VELOCITY
 from nnid.datasets.preprocess import zoh_midpoint
 from nnid.evaluation.evaluate import score_split
 from nnid.evaluation.metrics import exact_mean, excited_dofs, rmse, warmup_mask
 from nnid.evaluation.prediction import predict_states
-from nnid.loop.effects import Candidate, nominal_forces
+from nnid.loop.effects import Candidate
 from nnid.models.parametric import ParametricFossen, filter_settled, vehicle_with
 from nnid.physics.dofs import DOFS
 from nnid.physics.parts import Parts
@@ -564,8 +564,9 @@ def simulation_forces(log: pd.DataFrame, vehicle, dofs: tuple[str, ...]) -> np.n
     """The nominal forces a simulation for the analysed ``dofs`` is driven by: the forces of
     the other DOFs are removed, since their velocities are not analysed (often not measured)
     and the vehicle file need not predict them (with B = W and the centres on one vertical,
-    nothing else drives them, and the rotational equations are exact)."""
-    tau = nominal_forces(log, vehicle)
+    nothing else drives them, and the rotational equations are exact). Before the actuator
+    lag, which the simulation integrates."""
+    tau = nominal_forces(log, vehicle, lagged=False)
     tau[:, [k for k, d in enumerate(DOFS) if d not in dofs]] = 0.0
     return tau
 
@@ -575,7 +576,8 @@ def predict(vehicle, log: pd.DataFrame, mode, dofs: tuple[str, ...] = DOFS) -> p
     outside ``dofs`` removed)."""
     with np.errstate(all="ignore"):
         tau = simulation_forces(log, vehicle, dofs)
-        return predict_states(Parts.from_vehicle(vehicle), log, tau, mode)
+        parts = Parts.from_vehicle(vehicle)
+        return predict_states(parts, log, tau, mode, lag=vehicle.actuator_lag)
 
 
 def velocity_scores(

@@ -33,13 +33,11 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from nnid.datasets.arrays import logged_inputs
-from nnid.datasets.preprocess import first_order_lag
+from nnid.datasets.arrays import logged_inputs, nominal_forces
 from nnid.physics.damping import parse_coefficient_key
 from nnid.physics.damping_library import LIBRARY, canonical_term
 from nnid.physics.dofs import DOF_WORD, DOFS, FORCES
 from nnid.physics.effects import apply_effect
-from nnid.physics.thrusters import Actuation, apply_deadband
 from nnid.vehicle import MAX_CURRENT, MAX_LAG
 
 _MEANING = {
@@ -198,15 +196,3 @@ def candidates(vehicle, log: pd.DataFrame, coupled: bool = True) -> list[Candida
     if width > 0:
         out.append(Candidate("thruster_deadband", "thruster_deadband", bounds=(0.0, 0.5 * width)))
     return out
-
-
-def nominal_forces(log: pd.DataFrame, vehicle) -> np.ndarray:
-    """The nominal generalized force the vehicle receives ``[N, 6]``: deadband on the inputs,
-    thrust curves and allocation, then the first-order actuator lag of the vehicle (exact for
-    inputs held between samples); installation coefficients are left to the model."""
-    inputs, forces = logged_inputs(log, vehicle)
-    if forces:
-        tau = apply_deadband(inputs, vehicle.deadband)
-    else:
-        tau = Actuation(vehicle).nominal(inputs, deadband=True)
-    return first_order_lag(tau, log, vehicle.actuator_lag)

@@ -18,7 +18,7 @@ import warnings
 import numpy as np
 import pandas as pd
 
-from nnid.datasets.arrays import logged_inputs
+from nnid.datasets.arrays import logged_inputs, nominal_forces
 from nnid.datasets.gaps import mask_gaps
 from nnid.datasets.log import ANGLES
 from nnid.datasets.preprocess import experiments
@@ -43,7 +43,7 @@ from nnid.loop.diagnose import (
     velocity_errors,
     velocity_scores,
 )
-from nnid.loop.effects import candidates, nominal_forces
+from nnid.loop.effects import candidates
 from nnid.loop.residuals import correlation_analysis
 from nnid.loop.unexplained import as_records, describe, unexplained_structure
 from nnid.models.parametric import vehicle_with

@@ -29,7 +29,7 @@ from scipy.signal import lfilter, lfilter_zi
 from sklearn.base import clone
 from sklearn.utils.validation import check_is_fitted
 
-from nnid.datasets.arrays import log_arrays
+from nnid.datasets.arrays import log_arrays, nominal_forces
 from nnid.datasets.cleaning import CleaningReport
 from nnid.datasets.log import ANGLES, POSE, VELOCITY
 from nnid.datasets.preprocess import zoh_midpoint
@@ -419,7 +419,10 @@ class FossenPlant(NnidModel):
 
     def _predict(self, log: pd.DataFrame, mode: str | int) -> pd.DataFrame:
         log, data = self._data(log, accelerations=False)
-        pred = predict_states(self.parts_, log, data["tau"], mode, substeps_for(log))
+        lag = self.vehicle.actuator_lag
+        # the lag is integrated (exactly) from the commanded force, not held at its samples
+        tau = nominal_forces(log, self.vehicle, lagged=False) if lag > 0 else data["tau"]
+        pred = predict_states(self.parts_, log, tau, mode, substeps_for(log), lag)
         return blank_initial(pred, log, self.warmup_samples_ + mode_steps(mode) - 1)
 
     def closed_loop(
@@ -430,6 +433,12 @@ class FossenPlant(NnidModel):
         steps ahead from every measured state."""
         check_is_fitted(self, msg=NOT_FITTED)
         mode = check_mode(mode)
+        if self.vehicle.actuator_lag > 0:  # the compiled autopilot loop has no lag state
+            raise NnidInputError(
+                f"vehicle '{self.vehicle.name}' declares an actuator lag; a closed-loop flight "
+                "of a lagged vehicle is not supported (predict it open loop)",
+                field="actuator_lag",
+            )
         log, _ = self._data(check_log(log), accelerations=False)
         pred = predict_closed_loop(self.parts_, log, replay, mode, substeps_for(log))
         return blank_initial(pred, log, self.warmup_samples_ + mode_steps(mode) - 1)

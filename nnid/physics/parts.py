@@ -113,9 +113,10 @@ class Parts:
             return float((self.r_g if name.startswith("r_g") else self.r_b)[_AXES.index(name[-1])])
         raise KeyError(f"'{name}' is not a parameter of a vehicle file")
 
-    def model(self, check: bool = True) -> FossenModel:
-        """The Fossen model of these parts (installation: see :meth:`applied`). ``check=False``
-        skips the positive-definite test, for the unit probes of the regression."""
+    def model(self, check: bool = True, actuator_lag: float = 0.0) -> FossenModel:
+        """The Fossen model of these parts (installation: see :meth:`applied`), with the
+        applied force a state behind an ``actuator_lag`` > 0. ``check=False`` skips the
+        positive-definite test, for the unit probes of the regression."""
         terms = tuple(dict.fromkeys(parse_coefficient_key(k)[1] for k in self.damping))
         coef = torch.zeros(6, len(terms), dtype=torch.float64)
         for key, value in self.damping.items():
@@ -132,6 +133,7 @@ class Parts:
             self.r_b,
             external_bias=self.bias,
             current=(0.0, 0.0, 0.0) if self.current is None else self.current,
+            actuator_lag=actuator_lag,
             check=check,
         )
 
