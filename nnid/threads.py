@@ -42,3 +42,19 @@ def numba_threads(n: int = 1) -> Iterator[None]:
     finally:
         numba.set_num_threads(before)
         torch.set_num_threads(torch_before)
+
+
+@contextmanager
+def torch_threads_kept() -> Iterator[None]:
+    """Run a numba ``parallel=True`` kernel without changing torch's thread count.
+
+    The first parallel launch in a process starts numba's OpenMP threading layer, which resets
+    the OpenMP thread count that torch reads: a fault monitor's first fit moved a user's
+    ``torch.set_num_threads(1)`` to 2. The library never changes process-wide state, so the
+    count is put back after the kernel."""
+    before = torch.get_num_threads()
+    try:
+        yield
+    finally:
+        if torch.get_num_threads() != before:
+            torch.set_num_threads(before)

@@ -11,6 +11,7 @@ scikit-learn's ``get_params``/``set_params``/``clone``.
 from __future__ import annotations
 
 import json
+import os
 import re
 import warnings
 from importlib import resources
@@ -321,3 +322,50 @@ def test_unidentified_parameter_stderr_stays_null_after_a_round_trip(minirov, ru
         "significant": False,
     }
     assert back.params["X_udot"] == model.params["X_udot"]
+
+
+_FIRST_PARALLEL_LAUNCH = {
+    "integrate_rk4": """
+import numpy as np
+from nnid.physics import compiled
+from nnid.physics.fossen import FossenModel
+from nnid.vehicle import load_vehicle
+form = FossenModel.from_vehicle(load_vehicle("seamor")).feature_form()
+compiled.integrate_rk4(form, np.zeros((4, 12)), np.ones((4, 6000, 6)), 0.01)
+""",
+    "monitor": """
+import warnings
+from importlib import resources
+from nnid.fault.monitor import ResidualMonitor
+from nnid.loop.scenarios import effect_log
+from nnid.models.parametric import ParametricModel
+from nnid.vehicle import load_vehicle
+warnings.simplefilter("ignore")
+v = load_vehicle(str(resources.files("nnid.demo_data") / "minirov.toml"))
+log = effect_log(v, duration=60.0, n_experiments=2, seed=2)
+model = ParametricModel(v, unknowns=()).fit(log[log.experiment == "run0"])
+ResidualMonitor(model).fit(log[log.experiment == "run1"])
+""",
+}
+
+
+@pytest.mark.parametrize("where", list(_FIRST_PARALLEL_LAUNCH))
+def test_a_parallel_kernel_leaves_torchs_thread_count_alone(where):
+    """The first numba parallel launch of a process starts its OpenMP layer, which resets the
+    OpenMP count torch reads: a monitor's first fit moved a user's 1 thread to 2. Run in a
+    fresh interpreter, since it happens once per process."""
+    import subprocess
+    import sys
+
+    script = (
+        "import torch\ntorch.set_num_threads(1)\n"
+        + _FIRST_PARALLEL_LAUNCH[where]
+        + "\nprint(torch.get_num_threads())\n"
+    )
+    env = {k: v for k, v in os.environ.items() if not k.endswith("NUM_THREADS")}
+    env["NUMBA_NUM_THREADS"] = "2"  # a parallel layer with more than the user's one thread
+    out = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, env=env, timeout=300
+    )
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.split()[-1] == "1", out.stdout

@@ -35,6 +35,7 @@ from nnid.physics.compiled import form_args
 from nnid.physics.dofs import DOFS, FORCES
 from nnid.physics.thrusters import Actuation
 from nnid.serialization import read_json, write_json
+from nnid.threads import torch_threads_kept
 from nnid.validation import PositiveFloat, StrictModel, validated
 
 MONITOR_FILE = "monitor.json"
@@ -240,21 +241,22 @@ class ResidualMonitor(BaseEstimator):
         n = data["t"].size
         codes = data["experiment"]
         starts = np.r_[0, np.flatnonzero(np.diff(codes)) + 1, n].astype(np.int64)
-        out = kernel.run_blocks(
-            starts,
-            data["t"],
-            data["x"],
-            data["inputs"],
-            cfg,
-            self.form_,
-            self.mass_,
-            self.mask_,
-            self.act_,
-            mu,
-            whiten,
-            s_inv,
-            np.empty((n, 21)),
-        )
+        with torch_threads_kept():  # a parallel launch resets torch's count
+            out = kernel.run_blocks(
+                starts,
+                data["t"],
+                data["x"],
+                data["inputs"],
+                cfg,
+                self.form_,
+                self.mass_,
+                self.mask_,
+                self.act_,
+                mu,
+                whiten,
+                s_inv,
+                np.empty((n, 21)),
+            )
         names = data["experiment_names"][codes]
         return Trace(data["t"], names, out[:, :20], out[:, 20] == 1)
 

@@ -31,6 +31,7 @@ from numba import njit, prange
 
 from nnid.physics.compiled import PARALLEL_MIN_STEPS, _rhs, form_args
 from nnid.physics.fossen import FeatureForm
+from nnid.threads import torch_threads_kept
 
 RULES = {"classic": 0, "3/8": 1}
 
@@ -175,17 +176,18 @@ def free_run(
     states = np.empty((x0.shape[0], inputs.shape[1] + 1, 12))
     small = x0.shape[0] * inputs.shape[1] * substeps < PARALLEL_MIN_STEPS
     kernel = _serial if small else _parallel
-    kernel(
-        x0,
-        inputs,
-        float(dt),
-        int(substeps),
-        RULES[rule],
-        form_args(form),
-        tuple(net),
-        level == "force",
-        states,
-    )
+    with torch_threads_kept():  # a parallel launch resets torch's count
+        kernel(
+            x0,
+            inputs,
+            float(dt),
+            int(substeps),
+            RULES[rule],
+            form_args(form),
+            tuple(net),
+            level == "force",
+            states,
+        )
     return states.transpose(1, 0, 2)
 
 

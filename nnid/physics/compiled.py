@@ -18,6 +18,7 @@ import numpy as np
 from numba import njit, prange
 
 from nnid.physics.fossen import FeatureForm
+from nnid.threads import torch_threads_kept
 
 
 @njit(cache=True, inline="always")  # inlined: a call costs as much as the evaluation
@@ -250,8 +251,11 @@ def integrate_rk4(
         return states
     states = np.empty((x0.shape[0], tau.shape[1] + 1, x0.shape[1]))
     small = x0.shape[0] * tau.shape[1] * substeps < PARALLEL_MIN_STEPS
-    kernel = _integrate_serial if small else _integrate_batch
-    kernel(x0, tau, float(dt), int(substeps), *form_args(form), states)
+    if small:
+        _integrate_serial(x0, tau, float(dt), int(substeps), *form_args(form), states)
+        return states
+    with torch_threads_kept():
+        _integrate_batch(x0, tau, float(dt), int(substeps), *form_args(form), states)
     return states
 
 
@@ -324,16 +328,17 @@ def fly_pd(
     states = np.empty((x0.shape[0], steps + 1, x0.shape[1]))
     commanded = np.zeros((x0.shape[0], steps if record else 0, 6))
     width = -1.0 if deadband is None else float(deadband)
-    _fly_batch(
-        x0,
-        tau_open,
-        starts,
-        float(dt),
-        int(substeps),
-        pilot,
-        width,
-        form_args(form),
-        states,
-        commanded,
-    )
+    with torch_threads_kept():
+        _fly_batch(
+            x0,
+            tau_open,
+            starts,
+            float(dt),
+            int(substeps),
+            pilot,
+            width,
+            form_args(form),
+            states,
+            commanded,
+        )
     return states, (commanded if record else None)
