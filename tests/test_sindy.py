@@ -184,3 +184,22 @@ def test_collinear_selected_terms_have_no_standard_error(vt690):
     assert all(params[k]["stderr"] is None for k in tied)
     alone = [k for k, p in params.items() if k.startswith("X:") and k not in tied]
     assert alone and all(params[k]["stderr"] is not None for k in alone)
+
+
+def test_the_ensemble_draws_from_its_own_generator(vt690, monkeypatch):
+    """An ensemble fit never touches NumPy's global generator (pysindy's draws from it:
+    reseeding it around the fit rewound another thread's random stream), and its seed
+    decides its draws."""
+
+    def touched(*args, **kwargs):
+        raise AssertionError("the global generator was touched")
+
+    vehicle, train, val = vt690
+    fits = {}
+    with monkeypatch.context() as m:
+        for name in ("seed", "set_state", "get_state", "choice"):
+            m.setattr(np.random, name, touched)
+        for seed in (0, 1):
+            path = SindyDamping(vehicle, optimizer="ensemble", thresholds=[0.05], seed=seed)
+            fits[seed] = path.fit(train, val).coefficients_
+    assert fits[0] != fits[1]  # another seed drops other terms

@@ -28,8 +28,7 @@ J is the mean over outputs of the normalised mean squared error MSE_F / mean(y_F
 from __future__ import annotations
 
 import warnings
-from collections.abc import Iterator, Sequence
-from contextlib import contextmanager
+from collections.abc import Sequence
 
 import numpy as np
 import pysindy as ps
@@ -111,14 +110,14 @@ def make_optimizer(
     max_iter: int = 20,
     n_models: int = 10,
     n_candidates_to_drop: int = 5,
-) -> ps.optimizers.BaseOptimizer:
+    seed: int = 0,
+) -> ps.optimizers.BaseOptimizer | LibraryEnsemble:
     """A pysindy optimizer whose hard threshold on (scaled) coefficients is ``threshold``.
 
     ``sr3`` uses the L0 regulariser with weight λ = threshold²/2 (its proximal step zeroes
     coefficients below √(2λν) = threshold at ν = 1); ``ensemble`` is library ensembling of STLSQ
-    (``n_models`` fits each without ``n_candidates_to_drop`` random candidate terms, median
-    coefficients; pysindy draws them from NumPy's global generator, so its fit must run inside
-    :func:`numpy_global_state`, as :class:`SparsePath` runs it). pysindy's own unbiasing is
+    (:class:`LibraryEnsemble`: ``n_models`` fits each without ``n_candidates_to_drop``
+    candidate terms drawn by ``seed``, median coefficients). pysindy's own unbiasing is
     off: :func:`debias` refits each support by a minimum-norm least squares, which stays stable
     on the rank-deficient compressed system (the library has exactly collinear terms, e.g.
     every ``(eta-1)`` term when u_c = 0).
@@ -133,13 +132,12 @@ def make_optimizer(
             max_iter=max(max_iter, 100),
             unbias=False,
         )
-    if kind == "ensemble":  # its random draws: see :func:`numpy_global_state`
-        return ps.EnsembleOptimizer(
-            opt=ps.STLSQ(threshold=threshold, alpha=alpha, max_iter=max_iter, unbias=False),
-            bagging=False,
-            library_ensemble=True,
+    if kind == "ensemble":
+        return LibraryEnsemble(
+            ps.STLSQ(threshold=threshold, alpha=alpha, max_iter=max_iter, unbias=False),
             n_models=n_models,
             n_candidates_to_drop=n_candidates_to_drop,
+            seed=seed,
         )
     raise ValueError(f"unknown optimizer '{kind}'; expected one of {', '.join(OPTIMIZERS)}")
 
@@ -178,17 +176,39 @@ def nmse(y: np.ndarray, pred: np.ndarray) -> np.ndarray:
     return np.mean((y - pred) ** 2, axis=0) / ms
 
 
-@contextmanager
-def numpy_global_state(seed: int) -> Iterator[None]:
-    """Run the block with NumPy's global generator seeded by ``seed``, then put back the state
-    the caller had. pysindy's ensembles draw from the global generator and take no generator
-    of their own; this keeps them reproducible without changing the user's random stream."""
-    saved = np.random.get_state()  # noqa: NPY002 (pysindy draws from the global generator)
-    np.random.set_state(np.random.RandomState(seed).get_state())  # noqa: NPY002
-    try:
-        yield
-    finally:
-        np.random.set_state(saved)  # noqa: NPY002
+class LibraryEnsemble:
+    """Library ensembling of a pysindy optimizer (pysindy's ``EnsembleOptimizer`` with
+    ``library_ensemble=True``): ``n_models`` fits of ``opt``, each on the library without
+    ``n_candidates_to_drop`` candidate terms drawn at random, and the median of their
+    coefficients (a dropped term's is zero) as ``coef_``.
+
+    Written here because pysindy's draws from NumPy's global generator and takes none of its
+    own: reseeding the global one around its fit rewound or corrupted another thread's random
+    stream. The draws come from a local ``RandomState(seed)``, the same draws pysindy made from
+    the global generator seeded so, so the ensemble's numbers are those it gave."""
+
+    def __init__(self, opt, n_models: int = 10, n_candidates_to_drop: int = 5, seed: int = 0):
+        self.opt = opt
+        self.n_models = n_models
+        self.n_candidates_to_drop = n_candidates_to_drop
+        self.seed = seed
+
+    def fit(self, x: np.ndarray, y: np.ndarray) -> LibraryEnsemble:
+        x, y = np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64)
+        if y.ndim == 1:
+            y = y[:, None]
+        n = x.shape[1]
+        drop = self.n_candidates_to_drop if self.n_candidates_to_drop <= n else 0
+        rng = np.random.RandomState(self.seed)
+        coefs = []
+        for _ in range(self.n_models):
+            keep = np.sort(rng.choice(range(n), n - drop, replace=False))
+            self.opt.fit(x[:, keep], y)
+            coef = np.zeros((y.shape[1], n))
+            coef[:, keep] = np.asarray(self.opt.coef_).reshape(y.shape[1], -1)
+            coefs.append(coef)
+        self.coef_ = np.median(coefs, axis=0)
+        return self
 
 
 class SparsePath(BaseEstimator):
@@ -258,8 +278,8 @@ class SparsePath(BaseEstimator):
         val_out = []
         ms_y = np.maximum(np.mean(y * y, axis=0), 1e-300)
         for thr in thresholds:
-            opt = make_optimizer(self.optimizer, float(thr), self.alpha)
-            with warnings.catch_warnings(), numpy_global_state(self.seed):
+            opt = make_optimizer(self.optimizer, float(thr), self.alpha, seed=self.seed)
+            with warnings.catch_warnings():
                 # "all coefficients eliminated" at large thresholds is an answer, not a fault
                 warnings.filterwarnings("ignore", message=".*eliminated all coefficients.*")
                 opt.fit(r, b)
