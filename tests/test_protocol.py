@@ -192,6 +192,12 @@ def test_save_load_reproduces_predictions(kind, fitted, runs, heave_campaign, tm
         )
     pd.testing.assert_frame_equal(back.residual(val), model.residual(val))
     assert back.params == model.params
+    # what fitted it and how long it took, as reported before saving (a loaded Caccia model
+    # named its trainer "method", a hybrid "adam" where "shooting" fitted it)
+    assert back.describe() == model.describe()
+    assert back.trainer_name() == model.trainer_name() is not None
+    if kind == "hybrid":  # and its physics fit's ("ls", None after loading)
+        assert back.baseline().trainer_name() == model.baseline().trainer_name() is not None
 
 
 @pytest.mark.parametrize("kind", list(BUILDERS))

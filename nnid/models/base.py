@@ -290,8 +290,13 @@ class NnidModel(BaseEstimator, ABC):
         return len(self._params())
 
     def trainer_name(self) -> str | None:
-        """What fitted the model: the kind of its trainer (``trainer_`` after a fit)."""
-        trainer = getattr(self, "trainer_", None) or getattr(self, "trainer", None)
+        """What fitted the model: the kind of its trainer (``trainer_`` after a fit, as saved
+        for a loaded model; else the ``trainer`` setting)."""
+        trainer = getattr(self, "trainer_", None)
+        if trainer is None and getattr(self, "fitted_by_", None):
+            return self.fitted_by_
+        if trainer is None:  # a setting, never a method of the same name (Caccia's)
+            trainer = self.get_params(deep=False).get("trainer")
         return None if trainer is None else getattr(trainer, "kind", type(trainer).__name__)
 
     def describe(self) -> dict:
@@ -400,6 +405,9 @@ def learned_state(model: NnidModel) -> tuple[dict, dict[str, torch.Tensor]]:
         "targets": list(model.targets_),
         "warmup_samples": int(model.warmup_samples_),
         "state": state,
+        # what describe() reports of the fit, kept so that a loaded model reports it too
+        "trainer": model.trainer_name(),
+        "fit_seconds": getattr(model, "fit_seconds_", None),
     }
     return learned, tensors
 
@@ -413,6 +421,14 @@ def restore_learned(model: NnidModel, learned: dict, tensors: dict[str, torch.Te
     model.targets_ = list(learned["targets"])
     model.warmup_samples_ = warmup
     model._restore(learned["state"], tensors)
+    # files saved before these were kept have neither: describe() then says None, not a guess
+    trainer, seconds = learned.get("trainer"), learned.get("fit_seconds")
+    if trainer is not None and not isinstance(trainer, str):
+        raise ValueError(f"trainer must be a name, not {trainer!r}")
+    if seconds is not None and (isinstance(seconds, bool) or not isinstance(seconds, float | int)):
+        raise ValueError(f"fit_seconds must be a number, not {seconds!r}")
+    model.fitted_by_ = trainer
+    model.fit_seconds_ = seconds
     return model
 
 

@@ -165,16 +165,32 @@ class CacciaModel(FossenPlant):
         return self.estimate_.as_dict()
 
     def describe(self) -> dict:
-        out = {**super().describe(), "vehicle": self.vehicle.name, "dof": self.dof}
-        if hasattr(self, "trainer_"):
-            out["plateaus"] = len(self.trainer_.plateaus_)
-            out["steady_state_sigma2"] = self.trainer_.steady_.sigma2
-            # step 2 ran (the sinusoid run was in the training data), or the file's inertia
-            out["inertia"] = "identified" if self.trainer_.inertia_ is not None else "vehicle file"
-        return out
+        return {
+            **super().describe(),
+            "vehicle": self.vehicle.name,
+            "dof": self.dof,
+            **self._procedure(),
+        }
+
+    def _procedure(self) -> dict:
+        """What the two steps found: plateaus, the steady-state noise, where the inertia came
+        from (step 2 ran on a sinusoid run, or the vehicle file's); as saved for a loaded
+        model."""
+        if not hasattr(self, "trainer_"):
+            return dict(getattr(self, "procedure_", {}))
+        return {
+            "plateaus": len(self.trainer_.plateaus_),
+            "steady_state_sigma2": self.trainer_.steady_.sigma2,
+            "inertia": "identified" if self.trainer_.inertia_ is not None else "vehicle file",
+        }
 
     def _state(self) -> tuple[dict, dict]:
-        return self.estimate_.as_state(), {}
+        return {**self.estimate_.as_state(), "procedure": self._procedure()}, {}
 
     def _restore(self, state: dict, tensors: dict) -> None:
+        state = dict(state)
+        procedure = state.pop("procedure", {})
+        if not isinstance(procedure, dict):
+            raise ValueError(f"procedure must be a table, not {procedure!r}")
+        self.procedure_ = procedure
         self._set_estimate(Estimate.from_state(state))

@@ -177,7 +177,7 @@ class EnsembleModel(NnidModel):
         states, tensors = [], {}
         for i, m in enumerate(self.members_):
             learned, own = learned_state(m)
-            states.append({**learned, "fit_seconds": getattr(m, "fit_seconds_", None)})
+            states.append(learned)
             tensors.update({f"member{i}.{k}": v for k, v in own.items()})
         learned = {
             "members": states,
@@ -195,10 +195,9 @@ class EnsembleModel(NnidModel):
         for i, (seed, saved) in enumerate(zip(self.member_seeds_, state["members"], strict=True)):
             prefix = f"member{i}."
             own = {k[len(prefix) :]: v for k, v in tensors.items() if k.startswith(prefix)}
-            member = restore_learned(clone(self.model).set_params(seed=seed), saved, own)
-            if saved.get("fit_seconds") is not None:
-                member.fit_seconds_ = float(saved["fit_seconds"])
-            self.members_.append(member)
+            self.members_.append(
+                restore_learned(clone(self.model).set_params(seed=seed), saved, own)
+            )
         self._take_shape()
 
 

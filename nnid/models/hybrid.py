@@ -790,6 +790,7 @@ class HybridModel(FossenPlant):
         physics_state, _ = self.physics_._state()
         state = {
             "physics": physics_state,
+            "physics_trainer": self.physics_.trainer_name(),
             "scored": list(self.scored_),
             "velocity_scale": self.velocity_scale_,
             "input_scale": self.input_scale_.tolist(),
@@ -802,6 +803,7 @@ class HybridModel(FossenPlant):
         self._check_settings()
         physics = self._physics_model()
         physics._restore(state["physics"], {})
+        physics.fitted_by_ = state.get("physics_trainer")  # absent from older files
         self.physics_ = physics
         self.parts_, self.structure_ = physics.parts_, physics.structure_
         self._set_outputs(physics.dofs_)
