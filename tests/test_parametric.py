@@ -403,3 +403,24 @@ def test_a_small_real_motion_is_excitation_and_noise_alone_is_not():
     data = {"nu": nu, "experiment": np.zeros(t.size, int)}
     names = ["X_udot", "Y_vdot", "Z_wdot", "Y:u*v", "X:u*abs(u)"]
     assert unexcited_unknowns(names, data) == {"Z_wdot": ["w"]}
+
+
+@pytest.mark.parametrize("trainer", ["adam", "lm"])
+def test_a_network_trainer_on_a_fossen_model_is_one_clear_error(trainer):
+    """The config refuses lm and adam for a Fossen model; the Python API said it with a
+    TypeError from deep inside the trainer (``fit() missing 'train_batches'``)."""
+    from importlib import resources
+
+    import pandas as pd
+
+    from nnid.errors import NnidInputError
+    from nnid.models.base import trainer_class
+
+    demo = resources.files("nnid.demo_data")
+    log = pd.read_parquet(demo / "demo_minirov_heave.parquet")
+    model = ParametricModel(
+        load_vehicle(str(demo / "minirov.toml")), trainer=trainer_class(trainer)()
+    )
+    with pytest.raises(NnidInputError, match=f"the '{trainer}' trainer cannot fit") as err:
+        model.fit(log)
+    assert err.value.field == "trainer"

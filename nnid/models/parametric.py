@@ -43,7 +43,7 @@ from nnid.evaluation.prediction import (
     predict_states,
     substeps_for,
 )
-from nnid.models.base import NOT_FITTED, NnidModel, check_log
+from nnid.models.base import NOT_FITTED, REGRESSION_TRAINERS, NnidModel, check_log
 from nnid.physics.added_mass import mirrored_key, parse_added_mass_key, set_derivative
 from nnid.physics.damping import parse_coefficient_key
 from nnid.physics.damping_library import (
@@ -517,6 +517,14 @@ class ParametricModel(FossenPlant):
         from nnid.trainers.sequence import DecoupledSequence, sequence_dofs, sequence_steps
 
         trainer = clone(self.trainer, safe=False) if self.trainer is not None else LeastSquares()
+        kind = getattr(trainer, "kind", type(trainer).__name__)
+        if kind not in REGRESSION_TRAINERS:
+            raise NnidInputError(
+                f"the '{kind}' trainer cannot fit a Fossen model's parameters; "
+                f"it is fitted by one of {', '.join(REGRESSION_TRAINERS)} (lm and adam train "
+                "networks: a hybrid's, a NARX's)",
+                field="trainer",
+            )
         if self.sequence is not None:
             steps = sequence_steps(self.sequence)
             unknowns = list(dict.fromkeys(n for s in steps for n in s.unknowns))
