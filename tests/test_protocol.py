@@ -375,3 +375,37 @@ def test_a_parallel_kernel_leaves_torchs_thread_count_alone(where):
     )
     assert out.returncode == 0, out.stderr[-2000:]
     assert out.stdout.split()[-1] == "1", out.stdout
+
+
+@pytest.mark.parametrize("kind", ["narx", "state_space", "ensemble"])
+def test_a_model_that_counts_samples_refuses_another_rate(kind, fitted, runs, tmp_path):
+    """A model whose delays or steps count samples predicts only at the rate it was trained
+    at, saved and loaded too (a state-space model fitted at 20 Hz predicted a 10-Hz log
+    exactly as the 20-Hz one), and trains on runs of one rate."""
+    from nnid.errors import NnidInputError
+
+    model, *_ = fitted[kind]
+    train, val = runs
+    slow = val.assign(t=val["t"] * 2)
+    model.save(tmp_path)
+    for m in (model, load_model(tmp_path)):
+        with pytest.raises(NnidInputError, match=r"0\.1 s, against 0\.05 s at training") as err:
+            m.predict(slow)
+        assert err.value.field == "t"
+    mixed = pd.concat([train, slow], ignore_index=True)
+    with pytest.raises(NnidInputError, match="in its first run"):
+        clone(model).fit(mixed)
+
+
+def test_a_hybrid_trains_on_runs_of_one_rate(minirov, runs):
+    """The hybrid's training steps every run at one dt: a 10-Hz run among 20-Hz ones was
+    flown at 0.05 s (velocity RMS error 0.24 against 0.005 in prediction)."""
+    from nnid.errors import NnidInputError
+
+    train, val = runs
+    slow = val.assign(t=val["t"] * 2)
+    with pytest.raises(NnidInputError, match="in its first run"):
+        BUILDERS["hybrid"](minirov).fit(pd.concat([train, slow], ignore_index=True))
+    with pytest.raises(NnidInputError, match="at training") as err:
+        BUILDERS["hybrid"](minirov).fit(train, slow)
+    assert err.value.field == "t"

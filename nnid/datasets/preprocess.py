@@ -49,22 +49,44 @@ def sample_rate(t: np.ndarray) -> float:
 UNIFORM_TOLERANCE = 0.1
 
 
-def check_uniform(log: pd.DataFrame, what: str, name: str = "log") -> None:
+def check_uniform(
+    log: pd.DataFrame,
+    what: str,
+    name: str = "log",
+    interval: float | None = None,
+    one_rate: bool = False,
+) -> float | None:
     """Raise unless every experiment of ``log`` is uniformly sampled (each interval within
     :data:`UNIFORM_TOLERANCE` of the run's median: a longer one has samples missing, a rate
     that changes within the run leaves the median), naming the first row that is not (by its
     index label: the file's row for a log as read, whatever runs were left out): models that
-    count time in samples (``what``) need it."""
+    count time in samples (``what``) need it. With ``one_rate`` every experiment is sampled
+    at one rate: ``interval`` where it is given (the rate a model was trained at), else the
+    first run's. Returns that interval (the first run's without ``one_rate``; None where no
+    run has two samples)."""
+    given = interval is not None
     for exp, idx in experiments(log):
         t = log.loc[idx, "t"].to_numpy(np.float64)
         dt = np.diff(t)
         if not dt.size:
             continue
         typical = float(np.median(dt))
+        where = f" (experiment {exp})" if exp is not None else ""
+        if (
+            one_rate
+            and interval is not None
+            and abs(typical - interval) > UNIFORM_TOLERANCE * interval
+        ):
+            raise NnidInputError(
+                f"the {name}{where} is sampled every {typical:.4g} s, against "
+                f"{interval:.4g} s {'at training' if given else 'in its first run'}, and "
+                f"{what} counts time in samples; resample the log to one rate",
+                field="t",
+            )
+        interval = typical if interval is None else interval
         off = np.flatnonzero(np.abs(dt - typical) > UNIFORM_TOLERANCE * typical)
         if off.size:
             k = int(off[0])
-            where = f" (experiment {exp})" if exp is not None else ""
             raise NnidInputError(
                 f"column t of the {name}{where} is not uniformly sampled: {dt[k]:.4g} s from "
                 f"t = {t[k]:.6g} to {t[k + 1]:.6g} s against {typical:.4g} s elsewhere, and "
@@ -73,6 +95,7 @@ def check_uniform(log: pd.DataFrame, what: str, name: str = "log") -> None:
                 field="t",
                 row=int(idx[k + 1]) if isinstance(idx[k + 1], (int, np.integer)) else None,
             )
+    return interval
 
 
 def resample_log(

@@ -66,11 +66,13 @@ class InputOutputModel(NnidModel):
     #: what counts time in samples, for the uniform-sampling check's error
     counts_samples = "the model"
 
-    def _check(self, log: pd.DataFrame, name: str = "log") -> None:
+    def _check(self, log: pd.DataFrame, name: str = "log") -> float | None:
         """The model's columns present (a missing one named under ``inputs`` or ``outputs``,
-        beside the columns there are) and finite, and (with a ``t``) uniform sampling: delays
-        and integration steps count samples, so a run whose rate changes would be read as one
-        whose dynamics do."""
+        beside the columns there are) and finite, and (with a ``t``) uniform sampling at one
+        rate, the one the model was trained at once it is (``sample_interval_``): delays and
+        integration steps count samples, so a run at another rate would be read as one whose
+        dynamics are faster or slower (a state-space model fitted at 20 Hz predicted a 10-Hz
+        log exactly as the 20-Hz one). Returns the log's sampling interval."""
         for role, columns in (("inputs", self.inputs_), ("outputs", self.outputs_)):
             missing = [c for c in columns if c not in log.columns]
             if missing:
@@ -79,8 +81,10 @@ class InputOutputModel(NnidModel):
                     field=role,
                 )
         validate_table(log, [*self.inputs_, *self.outputs_], source=name, require_time=False)
-        if "t" in log:
-            check_uniform(log, self.counts_samples, name)
+        if "t" not in log:
+            return None
+        trained = getattr(self, "sample_interval_", None)
+        return check_uniform(log, self.counts_samples, name, trained, one_rate=True)
 
     def _standardise(self, log: pd.DataFrame) -> None:
         """Means and standard deviations (1 where a column is constant) of the training data."""
@@ -121,12 +125,18 @@ class InputOutputModel(NnidModel):
         return sum(p.numel() for p in self.net_.parameters())
 
     def _state(self) -> tuple[dict, dict[str, torch.Tensor]]:
-        return self._learned(), dict(self.net_.state_dict())
+        interval = getattr(self, "sample_interval_", None)
+        return {**self._learned(), "sample_interval": interval}, dict(self.net_.state_dict())
 
     def _restore(self, state: dict, tensors: dict[str, torch.Tensor]) -> None:
         self._configure()
         self.net_ = self._new_net()
         self.net_.load_state_dict(tensors)
+        state = dict(state)
+        interval = state.pop("sample_interval", None)  # absent from older files: not checked
+        if interval is not None and not (isinstance(interval, float | int) and interval > 0):
+            raise ValueError(f"sample_interval must be a positive number, not {interval!r}")
+        self.sample_interval_ = None if interval is None else float(interval)
         self._set_learned(state)
 
     @abstractmethod

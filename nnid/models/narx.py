@@ -686,7 +686,7 @@ class NarxModel(InputOutputModel):
         from nnid.trainers.levenberg_marquardt import LevenbergMarquardt
 
         self._configure()
-        self._check(log)
+        self.sample_interval_ = self._check(log)  # every later log is checked against it
         longest = max(len(idx) for _, idx in experiments(log))
         if longest <= self.warmup_samples_:  # no sample has all its delayed regressors
             deepest = "input_delays" if max(self.input_delays_) >= self.dy_ else "output_delays"

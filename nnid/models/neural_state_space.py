@@ -376,7 +376,7 @@ class NeuralStateSpace(InputOutputModel):
         from nnid.trainers.levenberg_marquardt import LevenbergMarquardt
 
         self._configure()
-        self._check(log)
+        self.sample_interval_ = self._check(log)  # every later log is checked against it
         self.net_ = self._new_net(self._generator())
         if validation_log is None:
             split = split_log(log, "block", self.fractions)  # type: ignore[arg-type]
