@@ -38,6 +38,7 @@ from nnid.evaluation.prediction import (
     Replay,
     blank_initial,
     check_mode,
+    check_stepped,
     mode_steps,
     predict_closed_loop,
     predict_states,
@@ -419,6 +420,7 @@ class FossenPlant(NnidModel):
 
     def _predict(self, log: pd.DataFrame, mode: str | int) -> pd.DataFrame:
         log, data = self._data(log, accelerations=False)
+        check_stepped(log)
         lag = self.vehicle.actuator_lag
         # the lag is integrated (exactly) from the commanded force, not held at its samples
         tau = nominal_forces(log, self.vehicle, lagged=False) if lag > 0 else data["tau"]
@@ -440,6 +442,7 @@ class FossenPlant(NnidModel):
                 field="actuator_lag",
             )
         log, _ = self._data(check_log(log), accelerations=False)
+        check_stepped(log)
         pred = predict_closed_loop(self.parts_, log, replay, mode, substeps_for(log))
         return blank_initial(pred, log, self.warmup_samples_ + mode_steps(mode) - 1)
 
