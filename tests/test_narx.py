@@ -305,13 +305,17 @@ def test_a_log_with_missing_samples_is_refused_naming_where():
     with pytest.raises(NnidInputError, match=r"5 s from t = 300 to 305 s against 1 s") as err:
         NarxModel(["u"], ["y"], 2, 2, **kw).fit(holed)
     assert err.value.field == "t" and err.value.row == 301
-    split = holed.assign(experiment=np.where(holed["t"] <= 300, "a", "b"))
+    # a 30 Hz clock stamped to the millisecond (steps 0.033 and 0.034 s) is uniform
+    split = holed.assign(
+        experiment=np.where(holed["t"] <= 300, "a", "b"), t=np.round(holed["t"] / 30, 3)
+    )
     model = NarxModel(["u"], ["y"], 2, 2, **kw).fit(split)
     with pytest.raises(NnidInputError, match="NARX"):
-        model.predict(holed, "free_run")
-    # a 30 Hz clock stamped to the millisecond (steps 0.033 and 0.034 s) is uniform
+        model.predict(split.assign(experiment="a"), "free_run")
     stamped = train.assign(t=np.round(train["t"] / 30, 3))
     assert model.predict(stamped, "free_run")["y"].notna().sum() > 500
+    with pytest.raises(NnidInputError, match=r"every 1 s, against 0\.033"):  # trained at 30 Hz
+        model.predict(train, "free_run")
 
 
 def test_simulation_error_levenberg_marquardt_lowers_free_run_error():

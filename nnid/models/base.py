@@ -66,9 +66,10 @@ TRAINER_KINDS: dict[str, str] = {
     "lm": "nnid.trainers.levenberg_marquardt:LevenbergMarquardt",
     "adam": "nnid.trainers.adam:Adam",
 }
-#: the trainers that fit a regression's parameters (a physics model's); lm and adam train
-#: networks
+#: the trainers that fit a regression's parameters (a physics model's, alone or in a decoupled
+#: sequence); lm and adam train networks
 REGRESSION_TRAINERS = ("ls", "rls", "gradient", "ukf")
+NETWORK_TRAINERS = ("lm", "adam")
 MODEL_FILE = "model.json"
 TENSOR_FILE = "tensors.pt"
 NOT_FITTED = (

@@ -44,7 +44,13 @@ from nnid.evaluation.prediction import (
     predict_states,
     substeps_for,
 )
-from nnid.models.base import NOT_FITTED, REGRESSION_TRAINERS, NnidModel, check_log
+from nnid.models.base import (
+    NETWORK_TRAINERS,
+    NOT_FITTED,
+    REGRESSION_TRAINERS,
+    NnidModel,
+    check_log,
+)
 from nnid.physics.added_mass import mirrored_key, parse_added_mass_key, set_derivative
 from nnid.physics.damping import parse_coefficient_key
 from nnid.physics.damping_library import (
@@ -521,7 +527,7 @@ class ParametricModel(FossenPlant):
 
         trainer = clone(self.trainer, safe=False) if self.trainer is not None else LeastSquares()
         kind = getattr(trainer, "kind", type(trainer).__name__)
-        if kind not in REGRESSION_TRAINERS:
+        if kind in NETWORK_TRAINERS:
             raise NnidInputError(
                 f"the '{kind}' trainer cannot fit a Fossen model's parameters; "
                 f"it is fitted by one of {', '.join(REGRESSION_TRAINERS)} (lm and adam train "
