@@ -114,3 +114,21 @@ def test_masking_cuts_runs_into_segments_and_reports_every_row():
     (step,) = report.steps
     assert step.rows_removed == 250 - len(masked_train) == 23  # 22 empty, 1 stranded
     assert "too short" in step.detail
+
+
+def test_a_piece_cut_at_a_gap_shorter_than_the_window_gets_no_derivative():
+    """An empty cell 20 samples from a run's start cut it into a 20-sample piece, which the
+    derivative window (21 samples) refused with an error blaming savgol_window; the piece now
+    gets none, as a stretch between gaps within a run gets none, and the report says so. A
+    whole run that short is still refused."""
+    from nnid.datasets.preprocess import derive_accelerations
+
+    t = np.arange(220) * 0.05
+    log = pd.DataFrame({"t": t, "experiment": ["run0#1"] * 20 + ["run0#2"] * 200, "u": np.sin(t)})
+    report = CleaningReport(source="log")
+    out = derive_accelerations(log, 1.0, 4, report)
+    assert out["du"].iloc[:20].isna().all() and np.isfinite(out["du"].iloc[30:-30]).all()
+    assert "20 samples in pieces between gaps shorter than the window" in report.steps[-1].detail
+    with pytest.raises(NnidInputError, match="run1' has 20 samples") as err:
+        derive_accelerations(log.iloc[:20].assign(experiment="run1"), 1.0, 4)
+    assert err.value.field == "savgol_window"

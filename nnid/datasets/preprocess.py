@@ -342,11 +342,14 @@ def derive_velocities(
         raise NnidInputError("deriving body velocities needs phi, theta and psi", field="phi")
     out = unwrap_angles(log)
     new = {c: np.full(len(out), np.nan) for c in VELOCITY}
-    tilted = 0
+    tilted = short = 0
     for name, idx in experiments(out):
         t = out.loc[idx, "t"].to_numpy(np.float64)
         dt = float(np.median(np.diff(t)))
         window = savgol_window(window_s, 1.0 / dt, order, "savgol_window")
+        if short_piece(name, len(idx), window):
+            short += len(idx)
+            continue
         rates = {
             c: savgol_derivative(
                 out.loc[idx, c].to_numpy(np.float64),
@@ -390,10 +393,25 @@ def derive_velocities(
         report.add(
             "derive velocities",
             f"{', '.join(made)} from pose by Savitzky-Golay "
-            f"(order {order}, {window_s:g} s window) and J⁻¹(η){approx}",
+            f"(order {order}, {window_s:g} s window) and J⁻¹(η){approx}{short_pieces_note(short)}",
             columns=made,
         )
     return out
+
+
+def short_piece(name, samples: int, window: int) -> bool:
+    """Whether experiment ``name`` is a piece of a run cut at a gap (``<experiment>#<k>``,
+    :func:`nnid.datasets.gaps.mask_gaps`) shorter than the Savitzky-Golay ``window``: it gets
+    no derivative, as a stretch between gaps within a run gets none (an empty cell 20 samples
+    from a run's start was an error blaming the savgol_window setting)."""
+    return isinstance(name, str) and "#" in name and samples < window
+
+
+def short_pieces_note(samples: int) -> str:
+    """The cleaning report's words for the samples :func:`short_piece` left without one."""
+    if not samples:
+        return ""
+    return f"; {samples} samples in pieces between gaps shorter than the window: none there"
 
 
 def derive_accelerations(
@@ -404,10 +422,14 @@ def derive_accelerations(
     cols = [c for c in VELOCITY if c in out]
     for c in cols:
         out["d" + c] = np.nan
+    short = 0
     for name, idx in experiments(out):
         t = out.loc[idx, "t"].to_numpy(np.float64)
         dt = float(np.median(np.diff(t)))
         window = savgol_window(window_s, 1.0 / dt, order, "savgol_window")
+        if short_piece(name, len(idx), window):
+            short += len(idx)
+            continue
         for c in cols:
             out.loc[idx, "d" + c] = savgol_derivative(
                 out.loc[idx, c].to_numpy(np.float64),
@@ -420,7 +442,8 @@ def derive_accelerations(
     if report is not None and cols:
         report.add(
             "derive accelerations",
-            f"d{', d'.join(cols)} by Savitzky-Golay (order {order}, {window_s:g} s window)",
+            f"d{', d'.join(cols)} by Savitzky-Golay (order {order}, {window_s:g} s window)"
+            + short_pieces_note(short),
             columns=["d" + c for c in cols],
         )
     return out
