@@ -12,9 +12,11 @@ from __future__ import annotations
 
 import json
 import os
+import pickle
 import re
 import warnings
 from importlib import resources
+from pathlib import Path
 
 import matplotlib
 import numpy as np
@@ -229,6 +231,11 @@ def test_a_damaged_saved_model_is_one_input_error_naming_the_file(kind, fitted, 
         (tmp_path / "tensors.pt").write_bytes(b"cut sh")
         with pytest.raises(NnidInputError, match=r"tensors\.pt: damaged"):
             load_model(tmp_path)
+        # a pickle of objects: refused without torch's advice to load it unsafely
+        (tmp_path / "tensors.pt").write_bytes(pickle.dumps({"w": Path("x")}))
+        with pytest.raises(NnidInputError, match="never code from a file") as err:
+            load_model(tmp_path)
+        assert "weights_only" not in str(err.value)
         model.save(tmp_path)
         tensors = torch.load(tmp_path / "tensors.pt", weights_only=True)
         name = next(k for k, v in tensors.items() if v.is_floating_point())

@@ -369,7 +369,10 @@ def load_model(folder: str | Path) -> NnidModel:
     tensor_path = path.parent / TENSOR_FILE
     try:
         tensors = torch.load(tensor_path, weights_only=True) if tensor_path.exists() else {}
-    except (pickle.UnpicklingError, EOFError, RuntimeError, ValueError) as exc:
+    except pickle.UnpicklingError:
+        # torch's own message advises weights_only=False, which would run the file's code
+        raise NnidInputError(UNSAFE_TENSORS, source=str(tensor_path)) from None
+    except (EOFError, RuntimeError, ValueError) as exc:
         raise NnidInputError(_damaged(exc), source=str(tensor_path)) from None
     except OSError as exc:  # a folder in its place, no permission
         raise NnidInputError(f"cannot be read ({exc.strerror})", source=str(tensor_path)) from None
@@ -393,6 +396,14 @@ def load_model(folder: str | Path) -> NnidModel:
         gone = isinstance(exc, RuntimeError) and not tensor_path.exists()
         missing = f"; its {TENSOR_FILE} is missing" if gone else ""
         raise NnidInputError(_damaged(exc) + missing, source=str(path)) from None
+
+
+#: a tensors file that is no plain set of tensors: said without torch's advice to load it
+#: unsafely
+UNSAFE_TENSORS = (
+    "damaged, or not written by this nnid: it holds something other than tensors (or is not a "
+    "PyTorch file), and nnid loads tensors only, never code from a file"
+)
 
 
 def _damaged(exc: Exception) -> str:
