@@ -450,3 +450,23 @@ def test_a_hybrid_whose_network_never_trained_gives_no_second_opinion():
     assert "not explained by any single effect" not in text
     some = {**zero, "force_rms": {"w": 0.3, "r": 0.0}}
     assert "not explained by any single effect" in hybrid_opinion({"hybrid_opinion": some})
+
+
+def test_a_closed_loop_flight_with_memory_starts_each_window_from_the_logs_history(minirov):
+    """Flown under a zero-gain autopilot the commands are the log's, so the closed-loop
+    prediction is the open-loop one in every mode: k-step windows started the input memory
+    from their own first command (0.9-1.6 std apart at k = 3 and 20), where the open-loop
+    prediction carries it from the run's start."""
+    log = effect_log(minirov, duration=40.0, n_experiments=2, seed=5)
+    model = HybridModel(minirov, memory=(0.5,), trainer=Adam(max_epochs=0), segments=(0.5,))
+    model.fit(log)
+    generator = torch.Generator().manual_seed(1)
+    with torch.no_grad():  # a network that uses its memory channel
+        for p in model.dynamics_.net.parameters():
+            p.add_(0.3 * torch.randn(p.shape, generator=generator))
+    replay = Replay(Autopilot(), log[list(TAU)])
+    scale = log[["u", "v", "w", "p", "q", "r"]].std()
+    for mode in ("free_run", 3, 20):
+        a, b = model.predict(log, mode), model.closed_loop(log, replay, mode)
+        err = (a - b)[scale.index].abs().max() / scale
+        assert err.max() < 1e-6, (mode, err)

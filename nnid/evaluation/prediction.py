@@ -140,9 +140,10 @@ class Replay:
     open_loop: pd.DataFrame
 
 
-#: a model flown in closed loop: (number of windows, dt) -> step(states [B, 12], command [B, 6])
-#: -> states one sample later; a new step per experiment, so it can keep its own memory
-Stepper = Callable[[int, float], Callable[[np.ndarray, np.ndarray], np.ndarray]]
+#: a model flown in closed loop: (window starts [B], rows of the log, dt) -> step(states
+#: [B, 12], command [B, 6]) -> states one sample later; a new step per experiment, so it can
+#: keep its own memory, started from the log's history at each window's start
+Stepper = Callable[[np.ndarray, float], Callable[[np.ndarray, np.ndarray], np.ndarray]]
 
 #: a whole closed-loop flight: (states [B, 12], open-loop input [M, 6], window starts [B] in
 #: it, steps, dt) -> states [B, steps + 1, 12]; a window that turns non-finite may stop there
@@ -160,7 +161,7 @@ def fly_closed_loop(
     measurement (the caller blanks them)."""
 
     def flight(x0, tau_open, starts, steps, dt):
-        step = stepper(starts.size, dt)
+        step = stepper(starts, dt)
         states = np.full((starts.size, steps + 1, x0.shape[1]), np.nan)
         states[:, 0] = state = x0
         for j in range(steps):

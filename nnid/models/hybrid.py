@@ -690,18 +690,21 @@ class HybridModel(FossenPlant):
         sample; the input memory follows the command as flown)."""
         check_is_fitted(self, msg=NOT_FITTED)
         mode = check_mode(mode)
-        log, _ = self._data(check_log(log), accelerations=False)
-
+        log, data = self._data(check_log(log), accelerations=False)
+        # the memory filters' states at every sample, of the commands as flown (the log's):
+        # a window k samples ahead starts from them, as the open-loop prediction does (from
+        # the window's own first command, a k-step flight differed by 0.9-1.6 std from it)
+        logged = {t: first_order_lag(data["tau"], log, float(t)) for t in self.memory}
         arrays = self.dynamics_.arrays() if self.dynamics_.compiled else None
 
-        def stepper(_: int, dt: float):
-            lag: dict[float, np.ndarray] = {}  # the memory filters' states, from the first command
+        def stepper(starts: np.ndarray, dt: float):
+            lag = {t: history[starts] for t, history in logged.items()}
 
             def step(state: np.ndarray, command: np.ndarray) -> np.ndarray:
                 chans = [self.parts_.applied(command), command / self.input_scale_]
                 for t in self.memory:
                     a = np.exp(-dt / float(t))
-                    prev = lag.get(t, command)
+                    prev = lag[t]
                     chans.append((command - prev) / self.input_scale_)
                     lag[t] = a * prev + (1 - a) * command
                 chans = np.concatenate(chans, 1)[:, None, :]
