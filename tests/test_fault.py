@@ -610,3 +610,21 @@ def test_a_joint_change_is_headed_by_a_significant_member():
     joint.p_values = np.array([0.079, 0.2])
     diag = joint.diagnosis(0.99, 20.0, None, [])
     assert diag.effect is None and "no hypothesis explains" in diag.meaning
+
+
+def test_a_hand_edited_monitor_file_is_refused(monitor, tmp_path):
+    """A monitor.json of a schema this nnid does not write, or with a watched DOF's noise
+    level at zero (the isolation's weights divide by it: a thruster loss came out as a model
+    change with confidence 0), is refused naming the file, as model.json is."""
+    monitor.model.save(tmp_path)
+    monitor.save(tmp_path)
+    good = json.loads((tmp_path / "monitor.json").read_text())
+    assert ResidualMonitor.load(tmp_path).sigma_.tolist() == monitor.sigma_.tolist()
+    for edit, words in (
+        ({"schema_version": 99}, "schema_version"),
+        ({"sigma": [0.0] * 6}, "noise level"),
+    ):
+        (tmp_path / "monitor.json").write_text(json.dumps({**good, **edit}))
+        with pytest.raises(NnidInputError, match=words) as err:
+            ResidualMonitor.load(tmp_path)
+        assert "monitor.json" in str(err.value)

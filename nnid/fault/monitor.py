@@ -34,7 +34,7 @@ from nnid.fault.thresholds import MIN_PEAKS, rate_interval, rate_threshold
 from nnid.physics.compiled import form_args
 from nnid.physics.dofs import DOFS, FORCES
 from nnid.physics.thrusters import Actuation
-from nnid.serialization import read_json, write_json
+from nnid.serialization import SCHEMA_VERSION, read_json, write_json
 from nnid.threads import torch_threads_kept
 from nnid.validation import PositiveFloat, StrictModel, validated
 
@@ -495,10 +495,16 @@ class ResidualMonitor(BaseEstimator):
                 source=str(path),
             )
         arrays = (out.mu_, out.whiten_, out.s_inv_, out.sigma_, [out.correlation_time_])
-        if not all(np.isfinite(a).all() for a in arrays) or not out.correlation_time_ > 0:
+        # a zero noise level of a watched DOF divides the isolation's weights by zero
+        watched = out.sigma_[out.mask_ > 0]
+        if (
+            not all(np.isfinite(a).all() for a in arrays)
+            or not out.correlation_time_ > 0
+            or not (watched > 0).all()
+        ):
             raise NnidInputError(
-                "holds a non-finite number, or a correlation time that is not positive: not "
-                "a monitor nnid wrote",
+                "holds a non-finite number, a correlation time or a watched DOF's noise level "
+                "(sigma) that is not positive: not a monitor nnid wrote",
                 source=str(path),
             )
         return out
@@ -547,6 +553,7 @@ class _SavedMonitor(BaseModel):
     """The numbers of ``monitor.json`` that detection believes, checked on loading."""
 
     model_config = ConfigDict(extra="allow", strict=True)
+    schema_version: int = Field(ge=1, le=SCHEMA_VERSION)  # as model.json's is checked
     settings: _Settings
     thresholds: _Thresholds
     calibration: _Calibration
