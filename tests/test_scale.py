@@ -280,6 +280,8 @@ def test_a_glob_leaves_out_the_tables_of_folders_nnid_wrote(tmp_path):
          'options = {validation = "run0,run0"}\n', "options.validation", "run0 twice"),
         # an empty path was the manifest's own folder: "is a folder, not a TOML file"
         ('command = "loop"\nvehicle = ""\ndata = ["dive0.csv"]\n', "vehicle", "is empty"),
+        # a folder where a TOML file goes passed the check, then failed every task (exit 1)
+        ('command = "train"\nconfig = "."\ndata = ["dive0.csv"]\n', "config", "is a folder"),
     ],
 )  # fmt: skip
 def test_bad_manifest_is_refused_naming_the_key(fleet, tmp_path, text, field, words) -> None:

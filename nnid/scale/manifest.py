@@ -253,7 +253,16 @@ def _paths(patterns: list[str], base: Path, key: str, source: str) -> list[str]:
             out.append(str(Path(full).resolve()))
         else:
             raise NnidInputError(f"'{pattern}': no such file or folder", source=source, field=key)
+    folders = [p for p in out if key in FILE_KEYS and Path(p).is_dir()]
+    if folders:  # else every task fails on it at run time (exit 1), after the check passed
+        raise NnidInputError(
+            f"'{folders[0]}' is a folder; each {key} is a TOML file", source=source, field=key
+        )
     return out
+
+
+#: the keys whose every item is a file (a log may be a folder of bags, a model is a folder)
+FILE_KEYS = ("config", "vehicle", "columns")
 
 
 #: the tables nnid writes (a batch's or sweep's summary and settings, detect's alarms), and
