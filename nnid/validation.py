@@ -155,6 +155,10 @@ def validated(model: type[Model], data: dict[str, Any], source: str) -> Model:
             ctx = first.get("ctx", {})
             field = ".".join(filter(None, [field, str(ctx.get("discriminator", "")).strip("'")]))
             msg = "is required but missing"
+        elif first["type"] in ("model_attributes_type", "model_type", "dict_type"):
+            # "Input should be a valid dictionary or object to extract fields from" says
+            # nothing of TOML: `data = "log.csv"` where a [data] table goes
+            msg = f"is a table ([{field}] with its keys below it), not {_show(first.get('input'))}"
         elif first["type"] == "finite_number":
             msg = f"must be a finite number, not {_show(first.get('input'))}"
         elif not isinstance(first.get("input"), (dict, list, type(None))):

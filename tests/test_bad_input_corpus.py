@@ -466,6 +466,8 @@ CONFIG_CASES = [
     # every held-out run all warm-up: no score at all, once reported as "diverged"
     ("train", "warm-up longer than every run", "warmup_s", ("warmup_s = 2.0", "warmup_s = 1e9")),
     ("train", "boolean for a number", "warmup_s", ("warmup_s = 2.0", "warmup_s = true")),
+    # "Input should be a valid dictionary or object to extract fields from"
+    ("train", "a path where the [split] table goes", "split", ("[split]", 'split = "a.csv"\n[x]')),
     # overflowed the sample count, or underflowed the prime-system scale: tracebacks
     ("train", "k-step horizon of 1e308 s", "k_step_s", ("k_step_s = 1.0", "k_step_s = 1e308")),
     # settles after every run: nothing fitted and exit 0, or a singular discretisation
@@ -1146,3 +1148,15 @@ def test_a_run_the_config_leaves_out_may_be_sampled_as_it_likes(fixtures, tmp_pa
     config.write_text(NARX_TRAIN.replace('kind = "train"\n', keep))
     result = CliRunner().invoke(app, ["train", str(config), "--data", str(data), "--out", str(out)])
     assert result.exit_code == 2 and f"row {first_off}:" in result.output, result.output
+
+
+def test_a_value_where_a_table_goes_says_it_is_a_table(tmp_path):
+    """`data = "log.csv"` where a [data] table goes said "Input should be a valid dictionary
+    or object to extract fields from", which says nothing of TOML."""
+    from nnid.config import TrainConfig, load_config
+    from nnid.errors import NnidInputError
+
+    path = tmp_path / "c.toml"
+    path.write_text(TRAIN_TEXT.replace("[split]", 'split = "a.csv"\n[x]'))
+    with pytest.raises(NnidInputError, match=r"is a table \(\[split\] with its keys below it\)"):
+        load_config(path, TrainConfig)
