@@ -446,3 +446,33 @@ def test_a_physics_prediction_refuses_missing_samples_and_milliseconds():
     assert (err.value.field, err.value.row) == ("t", log.index[240])
     with pytest.raises(NnidInputError, match="looks like milliseconds"):
         model.predict(log.assign(t=log["t"] * 1000))
+
+
+def test_a_fitted_damping_of_the_sign_that_adds_energy_is_warned_of():
+    """The vehicle loader warns of a file's energy-adding damping; a fit that finds one (one
+    run of the demo's heave, one-sided: Z:w*abs(w) = +341) said nothing of it."""
+    from importlib import resources
+
+    import pandas as pd
+
+    from nnid.models.parametric import PhysicsWarning
+
+    demo = resources.files("nnid.demo_data")
+    log = pd.read_parquet(demo / "demo_minirov_heave.parquet")
+    vehicle = load_vehicle(str(demo / "minirov.toml"))
+
+    def fit(runs):
+        model = ParametricModel(
+            vehicle, ["added_mass", "damping"], dofs=["w"],
+            trainer=LeastSquares(filter_lambda=1.0), zoh_midpoint=True,
+        )  # fmt: skip
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            model.fit(log[log["experiment"].isin(runs)])
+        return model, [str(w.message) for w in caught if w.category is PhysicsWarning]
+
+    model, said = fit(["run0"])
+    assert model.params["Z:w*abs(w)"]["value"] > 0
+    assert len(said) == 1 and "fitted damping 'Z:w*abs(w)'" in said[0], said
+    model, said = fit(["run0", "run1", "run2"])
+    assert model.params["Z:w*abs(w)"]["value"] < 0 and said == []

@@ -469,6 +469,28 @@ class FossenPlant(NnidModel):
         """R(0): the force the fitted terms explain (the regression's target, −y)."""
         return self._equation(log, self.structure_.base)
 
+    def _check_signs(self) -> None:
+        """Warn of fitted diagonal added masses and damping of the sign that adds energy, as the
+        vehicle loader warns of the file's (:func:`nnid.vehicle.sign_slips`): a fit on run0
+        alone gave Z:w*abs(w) = +1565, said only as a diverged free run."""
+        from nnid.vehicle import sign_slips
+
+        theta = self.estimate_.theta
+        fitted = {n: float(v) for n, v in zip(self.estimate_.names, theta, strict=True)}
+        try:
+            vehicle = vehicle_with(self.vehicle, {n: v for n, v in fitted.items() if v == v})
+        except ValueError:  # an installation coefficient out of its range: said elsewhere
+            return
+        declared = set(sign_slips(self.vehicle))
+        for slip in sign_slips(vehicle):
+            if slip not in declared:
+                warnings.warn(
+                    f"the fitted {slip}: the data do not determine it (weak or one-sided "
+                    "excitation), and a free run of this model can gain energy",
+                    PhysicsWarning,
+                    stacklevel=3,
+                )
+
     def _check_mass(self) -> None:
         mass = self.parts_.model(check=False).mass_matrix().numpy()
         if np.linalg.eigvalsh(0.5 * (mass + mass.T)).min() <= 0:
@@ -570,6 +592,7 @@ class ParametricModel(FossenPlant):
                 stacklevel=3,
             )
         self._check_mass()
+        self._check_signs()
 
     def _params(self) -> dict[str, dict[str, float | None]]:
         params = self.estimate_.as_dict()
