@@ -238,9 +238,21 @@ def vehicle_from_dict(data: dict[str, Any], source: str = "<vehicle>") -> Vehicl
             "buoyancy is its own key)",
             stacklevel=2,
         )
+    if abs(vehicle.buoyancy - vehicle.weight) > TRIM * vehicle.weight:
+        warnings.warn(
+            f"{source}: buoyancy {vehicle.buoyancy:g} N is {vehicle.buoyancy / vehicle.weight:.2g} "
+            f"times the weight {vehicle.weight:g} N; an underwater vehicle is trimmed within "
+            "a few percent of neutral (a mass in kg, or another vehicle's buoyancy?)",
+            stacklevel=2,
+        )
     for slip in [*sign_slips(vehicle), *size_slips(vehicle)]:
         warnings.warn(f"{source}: {slip}", stacklevel=2)
     return vehicle
+
+
+#: the share of its weight by which a vehicle's buoyancy may differ before a file is warned of:
+#: a 113-N vehicle declared with 1000 N of buoyancy loaded without a word
+TRIM = 0.5
 
 
 #: without a length, a vehicle's size is bounded by this many sides of the cube of its volume

@@ -844,12 +844,16 @@ def test_a_derivative_of_the_energy_adding_sign_or_a_weight_in_kg_is_warned_of()
     assert all(p in text for p in ("X_udot = 5.5", "'X:u' = 4", "'N:r*abs(r)' = 0.5")), said
     with pytest.warns(UserWarning, match=r"probe.toml: weight 11.5 N is not mass × g"):
         vehicle_from_dict({**base, "weight": 11.5}, source="probe.toml")  # kg written as N
+    weight = base["mass"] * 9.81
+    with pytest.warns(UserWarning, match=r"probe.toml: buoyancy 1000 N is .* times the weight"):
+        vehicle_from_dict({**base, "buoyancy": 1000.0}, source="probe.toml")
     coupled = {**base, "damping": {"coefficients": {"K:p*abs(p)": 0.4, "K:p*abs(u)": -0.4}}}
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         vehicle_from_dict(coupled, source="probe.toml")
         vehicle_from_dict({**base, "added_mass": {"X_udot": -5.5}}, source="probe.toml")
         vehicle_from_dict({**base, "weight": 11.5 * 9.81}, source="probe.toml")
+        vehicle_from_dict({**base, "buoyancy": 1.05 * weight}, source="probe.toml")  # trimmed
         load_vehicle("vt690")
 
 
