@@ -232,3 +232,20 @@ def test_a_savgol_window_longer_than_a_run_is_refused_naming_the_key_that_set_it
     res = CliRunner().invoke(app, ["train", str(tmp_path / "t.toml"), "--out", str(tmp_path / "o")])
     assert res.exit_code == 2, res.output
     assert f"field '{table}.savgol_window'" in res.output and "shorter savgol_window" in res.output
+
+
+def test_resampling_far_from_the_logs_rate_is_warned_of():
+    """A log taken from 100 Hz to 5 Hz keeps every 20th sample with what lay above 2.5 Hz
+    folded in (no filter runs first), and one taken to 1 kHz is nine tenths interpolation:
+    both said, with the rates; a log near its own rate is not."""
+    t = np.arange(0, 10, 0.01)
+    log = pd.DataFrame({"t": t, "u": np.sin(t), "tau_X": np.floor(t)})
+    with pytest.warns(UserWarning, match="from 100 Hz to 5 Hz without an anti-alias filter"):
+        resample_log(log, 5.0)
+    with pytest.warns(UserWarning, match="interpolated, not measured"):
+        resample_log(log, 1000.0)
+    report = CleaningReport()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        resample_log(log, 80.0, report=report)
+    assert "1000 samples at 100 Hz -> uniform 80 Hz" in report.steps[0].detail

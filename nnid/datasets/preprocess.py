@@ -121,10 +121,12 @@ def resample_log(
         for c in log.columns
         if c not in ("t", "experiment") and pd.api.types.is_numeric_dtype(log[c])
     ]
-    pieces = []
+    pieces, rates = [], []
     for name, idx in experiments(log):
         part = log.loc[idx]
         t = part["t"].to_numpy(np.float64)
+        logged = 1.0 / float(np.median(np.diff(t))) if t.size > 1 else rate
+        rates.append(logged)
         cuts = np.flatnonzero(np.diff(t) > gap) + 1 if gap else np.array([], int)
         bounds = np.split(np.arange(t.size), cuts)
         for k, seg in enumerate(bounds):
@@ -147,10 +149,30 @@ def resample_log(
         if report is not None:
             report.add(
                 "resample",
-                f"experiment {name!r}: {t.size} samples -> uniform {rate:g} Hz"
+                f"experiment {name!r}: {t.size} samples at {logged:.3g} Hz -> uniform "
+                f"{rate:g} Hz"
                 + (f", split in {len(bounds)} at gaps > {gap} s" if len(bounds) > 1 else ""),
             )
+    fastest, slowest = max(rates, default=rate), min(rates, default=rate)
+    if fastest > RESAMPLE_RATIO * rate:  # np.interp picks samples: nothing filters first
+        warnings.warn(
+            f"resampling from {fastest:.3g} Hz to {rate:g} Hz without an anti-alias filter: "
+            f"what the log holds between {rate / 2:g} and {fastest / 2:.3g} Hz (noise, "
+            "vibration) folds into the kept samples; low-pass the log first, or keep a rate "
+            "nearer its own",
+            stacklevel=2,
+        )
+    if slowest * RESAMPLE_RATIO < rate:
+        warnings.warn(
+            f"resampling from {slowest:.3g} Hz to {rate:g} Hz: the added samples are "
+            "interpolated, not measured, and every score counts them as data",
+            stacklevel=2,
+        )
     return pd.concat(pieces, ignore_index=True)
+
+
+#: how far a reader's resampling may move a log's rate before it is warned of
+RESAMPLE_RATIO = 2.0
 
 
 def unwrap_angles(log: pd.DataFrame, report: CleaningReport | None = None) -> pd.DataFrame:
