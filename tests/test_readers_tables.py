@@ -361,6 +361,8 @@ def test_a_few_repeated_or_late_stamps_are_repaired_and_said(tmp_path):
         ('cmd_9 = { from = "vx", unit = "deg" }', "cmd_9 in 'deg': cmd_9 takes no unit"),
         ('acc_x = { from = "vx", unit = "cm" }', "acc_x in 'cm': acc_x takes no unit"),
         ('tau_Z = { from = "vx", offset = nan }', "'sources.0.columns.tau_Z.offset'"),
+        # a copy-paste slip loaded as a vehicle moving diagonally
+        ('u = "vx", v = { from = "vx" }', "u and v both read source column 'vx'"),
     ],
 )
 def test_a_column_target_that_is_a_typo_or_in_the_wrong_unit_is_refused(tmp_path, columns, said):

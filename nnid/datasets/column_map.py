@@ -130,6 +130,17 @@ class Source(StrictModel):
                     "commands as the vehicle file reads them, other columns as logged); "
                     "convert with scale"
                 )
+        # two motion columns read from one source column: a copy-paste slip (u and v both
+        # "vx" loaded as a vehicle moving diagonally); commands may share a channel
+        motion = {}
+        for name, spec in columns.items():
+            if name in (*POSE, *VELOCITY, *ACCELERATION):
+                source = spec.source if isinstance(spec, ColumnSpec) else spec
+                if source in motion:
+                    raise ValueError(
+                        f"{motion[source]} and {name} both read source column '{source}'"
+                    )
+                motion[source] = name
         return columns
 
     def targets(self) -> list[str]:
