@@ -371,7 +371,7 @@ ALIAS_RTOL = 1e-8
 
 def mark_aliases(scored: list[Scored]) -> None:
     """Fill each candidate's ``aliases`` with the others whose column on this log is the same
-    up to scale (without u and v, V = |w|, so Z:w*abs(w) and Z:abs(w)*V are one column): such
+    up to scale (without u and v, V = |w| and Vw = w, so Z:abs(w)*V and Z:w*Vw are both w²): such
     candidates have the same F-test sum and held-out gain, and the data cannot tell them
     apart, so the one the loop names is one of several."""
     order = sorted(range(len(scored)), key=lambda i: scored[i].drss)
