@@ -868,3 +868,13 @@ def test_simulation_objective_is_the_one_the_free_run_stage_trained():
     assert model.simulation_objective(train, np.int64(40)).windows[0].shape == obj.windows[0].shape
     with pytest.raises(NnidInputError, match="warm-up"):
         model.simulation_objective(train.iloc[:2], 40)
+
+
+def test_a_plant_sampled_every_10_s_is_not_read_as_milliseconds():
+    """The milliseconds rule is a vehicle log's (no vehicle is sampled every 5 s); a NARX
+    takes any plant's table, and a process sampled every 10 s was refused as milliseconds."""
+    slow = _tank(300, 1.3, 0).assign(t=lambda d: np.arange(len(d)) * 10.0)
+    lm = LevenbergMarquardt(max_epochs=2, jacobian="samples")
+    model = NarxModel(["u"], ["y"], 2, 2, hidden=(3,), trainer=lm, balanced=False).fit(slow)
+    assert model.sample_interval_ == 10.0
+    assert model.predict(slow, "free_run")["y"].notna().sum() > 250

@@ -25,14 +25,7 @@ from scipy.signal import butter, filtfilt, lfilter, savgol_coeffs, savgol_filter
 from scipy.stats import median_abs_deviation
 
 from nnid.datasets.cleaning import CleaningReport
-from nnid.datasets.log import (
-    ACCELERATION,
-    ANGLES,
-    POSE,
-    VELOCITY,
-    input_columns,
-    time_unit_slip,
-)
+from nnid.datasets.log import ACCELERATION, ANGLES, POSE, VELOCITY, input_columns
 from nnid.datasets.mapping import rotation_from_euler
 from nnid.errors import NnidInputError
 
@@ -70,12 +63,9 @@ def check_uniform(
     index label: the file's row for a log as read, whatever runs were left out): models that
     count time in samples (``what``) need it. With ``one_rate`` every experiment is sampled
     at one rate: ``interval`` where it is given (the rate a model was trained at), else the
-    first run's. A model that steps in physical time passes a wider ``tolerance``, to refuse
-    only missing samples. Time in another unit than seconds is refused first. Returns that
-    interval (the first run's without ``one_rate``; None where no run has two samples)."""
-    slip = time_unit_slip(log["t"].to_numpy(np.float64))
-    if slip:  # checked where a log is read; a log handed to the Python API is checked here
-        raise NnidInputError(f"the {name}'s {slip}; t must be seconds", field="t")
+    first run's. A model that steps in physical time passes a wider ``tolerance``: an
+    interval 1 + ``tolerance`` times the median has samples missing. Returns that interval
+    (the first run's without ``one_rate``; None where no run has two samples)."""
     given = interval is not None
     for exp, idx in experiments(log):
         t = log.loc[idx, "t"].to_numpy(np.float64)

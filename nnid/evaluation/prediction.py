@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from nnid.datasets.log import POSE, TAU, VELOCITY
+from nnid.datasets.log import POSE, TAU, VELOCITY, time_unit_slip
 from nnid.datasets.preprocess import check_uniform, experiments, first_order_lag
 from nnid.errors import NnidInputError
 from nnid.physics import compiled
@@ -46,17 +46,23 @@ MAX_STEP = 0.05
 
 #: how far an interval may differ from its run's median before a physics prediction refuses
 #: it: one 1.5 times the median has a sample missing (the fault monitor's rule), across which
-#: the commands were not held; smaller jitter is stepped at the median
+#: the commands were not held (and one under half of it is no clock's jitter either); smaller
+#: jitter is stepped at the median
 MISSING_SAMPLE = 0.5
 
 
 def check_stepped(log: pd.DataFrame) -> None:
-    """Refuse a log a physics prediction would step wrongly: time not in seconds, or a run
+    """Refuse a vehicle log a physics prediction would step wrongly: time not in seconds (the
+    rule a log file is read with; a log handed to the Python API is checked here), or a run
     with samples missing (three blocks of 2 s dropped from a 20-Hz run were each stepped as
     one sample: free-run NRMSE 0.05-0.18 of the true model on noise-free data)."""
-    if "t" in log:
-        what = "the prediction (one step of the run's typical interval a sample)"
-        check_uniform(log, what, tolerance=MISSING_SAMPLE)
+    if "t" not in log:
+        return
+    slip = time_unit_slip(log["t"].to_numpy(np.float64))
+    if slip:
+        raise NnidInputError(f"the log's {slip}; t must be seconds", field="t")
+    what = "the prediction (one step of the run's typical interval a sample)"
+    check_uniform(log, what, tolerance=MISSING_SAMPLE)
 
 
 def substeps_for(log: pd.DataFrame, max_step: float = MAX_STEP) -> int:
