@@ -4,6 +4,7 @@ nominal inputs so the effect stays undeclared."""
 from __future__ import annotations
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from nnid.datasets.simulator import simulate
@@ -159,3 +160,61 @@ def test_a_vehicle_files_deadband_is_in_a_fitted_models_forces(vehicle_factory):
     pred = ParametricModel(truth, unknowns=()).fit(log).predict(log, "free_run")
     for dof in "ur":
         assert (pred[dof] - log[dof]).abs().max() < 1e-6 * log[dof].abs().max()
+
+
+def test_a_closed_loop_flight_has_the_deadband_and_refuses_a_lag(vehicle_factory):
+    """Under a zero-gain autopilot the commands are the log's, so the closed-loop prediction
+    is the open-loop one: with a deadband it was not (2.2 std apart: the open loop applied the
+    deadband, the compiled autopilot loop did not); a lagged vehicle, which no closed-loop
+    stepper holds a state for, is refused."""
+    from nnid.datasets.log import TAU
+    from nnid.datasets.simulator import Autopilot
+    from nnid.errors import NnidInputError
+    from nnid.evaluation.prediction import Replay
+    from nnid.models.parametric import ParametricModel
+
+    veh = vehicle_factory(damping={"coefficients": {"X:u": -20.0, "N:r": -5.0}})
+    inputs = np.zeros((300, 6))
+    inputs[10:, 0] = np.repeat([4.0, -4.0, 20.0, 3.0, -25.0, 0.0], 50)[:290]
+    inputs[10:, 5] = np.repeat([2.0, -6.0, 8.0, -3.0, 0.0, 4.0], 50)[:290]
+    truth = apply_effect(veh, "thruster_deadband", 5.0)
+    log = simulate(truth, inputs, 0.05)
+    model = ParametricModel(truth, unknowns=()).fit(log)
+    replay = Replay(Autopilot(), log[list(TAU)])
+    for mode in ("free_run", 3):
+        a, b = model.predict(log, mode), model.closed_loop(log, replay, mode)
+        assert ((a - b)[["u", "r"]].abs().max() < 1e-9).all(), mode
+    lagged = ParametricModel(apply_effect(veh, "actuator_lag", 0.2), unknowns=()).fit(log)
+    with pytest.raises(NnidInputError, match="lagged vehicle is not supported"):
+        lagged.closed_loop(log, replay)
+
+
+def test_a_thruster_deadband_is_in_command_units_not_on_logged_forces():
+    """A thruster vehicle's deadband is a command's (36 µs of PWM): a log that carries the
+    forces themselves is past it, and 36 N of every force were zeroed."""
+    from nnid.datasets.arrays import log_arrays
+    from nnid.vehicle import load_vehicle
+
+    veh = load_vehicle("configs/vehicles/octorov_sim.toml").model_copy(update={"deadband": 36.0})
+    assert veh.thrusters
+    forces = np.linspace(-50, 50, 60)[:, None] * np.ones((1, 6))
+    log = pd.DataFrame(forces, columns=[f"tau_{f}" for f in "XYZKMN"])
+    log.insert(0, "t", np.arange(60) * 0.1)
+    for col in ("x", "y", "z", "phi", "theta", "psi", "u", "v", "w", "p", "q", "r"):
+        log[col] = 0.0
+    assert np.array_equal(log_arrays(log, veh)["tau"], forces)
+
+
+def test_a_lagged_force_is_regressed_as_sampled_not_at_the_midpoint(vehicle_factory):
+    """zoh_midpoint averages held inputs at a sample; a lagged force is continuous, and its
+    midpoint (as the loop already knew) gave X_udot -3.7 for -6.4 on noise-free data."""
+    from nnid.models.parametric import ParametricModel
+
+    veh = vehicle_factory(damping={"coefficients": {"X:u": -20.0, "X:u*abs(u)": -40.0}})
+    truth = apply_effect(veh, "actuator_lag", 0.3)
+    rng = np.random.default_rng(4)
+    inputs = np.zeros((600, 6))
+    inputs[:, 0] = np.repeat(rng.uniform(-40, 40, 60), 10)
+    log = simulate(truth, inputs, 0.1, substeps=8)
+    model = ParametricModel(truth, ["X_udot"], dofs=["u"], zoh_midpoint=True).fit(log)
+    assert model.params["X_udot"]["value"] == pytest.approx(veh.added_mass["X_udot"], rel=0.05)

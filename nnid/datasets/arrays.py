@@ -216,10 +216,12 @@ def nominal_forces(log: pd.DataFrame, vehicle, lagged: bool = True) -> np.ndarra
     at the sample times (exact for inputs held between samples); installation coefficients
     are left to the model."""
     inputs, forces = logged_inputs(log, vehicle)
-    if forces:
-        tau = apply_deadband(inputs, vehicle.deadband)
-    else:
+    if not forces:
         tau = Actuation(vehicle).nominal(inputs, deadband=True)
+    elif vehicle.thrusters:  # its deadband is in command units: logged forces are past it
+        tau = inputs
+    else:  # the vehicle's commands are these forces
+        tau = apply_deadband(inputs, vehicle.deadband)
     return first_order_lag(tau, log, vehicle.actuator_lag) if lagged else tau
 
 

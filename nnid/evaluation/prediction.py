@@ -146,9 +146,9 @@ class Replay:
     open_loop: pd.DataFrame
 
 
-#: a model flown in closed loop: (window starts [B], rows of the log, dt) -> step(states
-#: [B, 12], command [B, 6]) -> states one sample later; a new step per experiment, so it can
-#: keep its own memory, started from the log's history at each window's start
+#: a model flown in closed loop: (window starts [B] as positions in the log, dt) ->
+#: step(states [B, 12], command [B, 6]) -> states one sample later; a new step per experiment,
+#: so it can keep its own memory, started from the log's history at each window's start
 Stepper = Callable[[np.ndarray, float], Callable[[np.ndarray, np.ndarray], np.ndarray]]
 
 #: a whole closed-loop flight: (states [B, 12], open-loop input [M, 6], window starts [B] in
@@ -181,16 +181,22 @@ def fly_closed_loop(
 
 
 def predict_closed_loop(
-    parts, log: pd.DataFrame, replay: Replay, mode: str | int = "free_run", substeps: int = 1
+    parts,
+    log: pd.DataFrame,
+    replay: Replay,
+    mode: str | int = "free_run",
+    substeps: int = 1,
+    deadband: float = 0.0,
 ) -> pd.DataFrame:
     """A physics model (:class:`nnid.physics.parts.Parts`) flown under ``replay``'s
     autopilot as :func:`fly_closed_loop` flies a stepper, in one compiled loop
-    (:func:`nnid.physics.compiled.fly_pd`; the same numbers)."""
+    (:func:`nnid.physics.compiled.fly_pd`; the same numbers), the commanded forces through
+    the vehicle's ``deadband`` as the simulator flies them."""
     form = parts.model(check=False).feature_form()
     pilot = replay.autopilot.pilot(parts.eta_pos, parts.eta_neg)
 
     def flight(x0, tau_open, starts, steps, dt):
-        return compiled.fly_pd(form, x0, tau_open, starts, steps, dt, pilot, None, substeps)[0]
+        return compiled.fly_pd(form, x0, tau_open, starts, steps, dt, pilot, deadband, substeps)[0]
 
     return _fly(log, replay, flight, mode)
 

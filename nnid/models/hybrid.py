@@ -62,6 +62,7 @@ from nnid.physics.form import eta_dot as form_eta_dot
 from nnid.physics.fossen import FeatureForm, FossenModel
 from nnid.physics.odeint import METHODS, SampledInput, integrate
 from nnid.physics.parts import Parts
+from nnid.physics.thrusters import apply_deadband
 from nnid.threads import torch_threads
 from nnid.trainers.history import Progress, staged
 from nnid.trainers.neural_ode import Batch, MultipleShooting, Run
@@ -690,6 +691,7 @@ class HybridModel(FossenPlant):
         sample; the input memory follows the command as flown)."""
         check_is_fitted(self, msg=NOT_FITTED)
         mode = check_mode(mode)
+        self._check_unlagged()
         log, data = self._data(check_log(log), accelerations=False)
         # the memory filters' states at every sample, of the commands as flown (the log's):
         # a window k samples ahead starts from them, as the open-loop prediction does (from
@@ -701,6 +703,8 @@ class HybridModel(FossenPlant):
             lag = {t: history[starts] for t, history in logged.items()}
 
             def step(state: np.ndarray, command: np.ndarray) -> np.ndarray:
+                # through the deadband, as the log's forces the network learned from went
+                command = apply_deadband(command, self.vehicle.deadband)
                 chans = [self.parts_.applied(command), command / self.input_scale_]
                 for t in self.memory:
                     a = np.exp(-dt / float(t))

@@ -67,7 +67,7 @@ def residual_force(
     it, which is what a smoothed or filtered acceleration at t_k sees; without it a fast
     autopilot's held force leaves a half-sample lag that biases the damping by several %.
     """
-    if zoh_midpoint:
+    if zoh_midpoint and vehicle.actuator_lag == 0:  # a lagged force is continuous already
         log = zoh_midpoint_inputs(log)
     log = prepare_motion(log, DOFS, savgol_window, savgol_order, filter_lambda is None)
     data = log_arrays(log, vehicle)
