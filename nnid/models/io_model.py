@@ -134,7 +134,8 @@ class InputOutputModel(NnidModel):
         self.net_.load_state_dict(tensors)
         state = dict(state)
         interval = state.pop("sample_interval", None)  # absent from older files: not checked
-        if interval is not None and not (isinstance(interval, float | int) and interval > 0):
+        number = isinstance(interval, float | int) and not isinstance(interval, bool)
+        if interval is not None and not (number and interval > 0):
             raise ValueError(f"sample_interval must be a positive number, not {interval!r}")
         self.sample_interval_ = None if interval is None else float(interval)
         self._set_learned(state)

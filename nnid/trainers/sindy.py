@@ -188,6 +188,8 @@ class LibraryEnsemble:
     the global generator seeded so, so the ensemble's numbers are those it gave."""
 
     def __init__(self, opt, n_models: int = 10, n_candidates_to_drop: int = 5, seed: int = 0):
+        if n_models < 1 or n_candidates_to_drop < 1:
+            raise ValueError("a library ensemble fits at least one model, each without a term")
         self.opt = opt
         self.n_models = n_models
         self.n_candidates_to_drop = n_candidates_to_drop
@@ -198,7 +200,14 @@ class LibraryEnsemble:
         if y.ndim == 1:
             y = y[:, None]
         n = x.shape[1]
-        drop = self.n_candidates_to_drop if self.n_candidates_to_drop <= n else 0
+        drop = self.n_candidates_to_drop
+        if drop > n:  # as pysindy's ensemble says it
+            warnings.warn(
+                f"n_candidates_to_drop ({drop}) exceeds the library's {n} terms: every model "
+                "is fitted on the whole library",
+                stacklevel=2,
+            )
+            drop = 0
         rng = np.random.RandomState(self.seed)
         coefs = []
         for _ in range(self.n_models):
