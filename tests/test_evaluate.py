@@ -260,3 +260,26 @@ def test_force_scores_take_j_and_j0_over_the_same_samples():
     out = force_scores(model, pd.DataFrame({"t": np.arange(n)}), np.ones(n, bool))
     assert out["J"] == pytest.approx(0.1) and out["J0"] == pytest.approx(1.0)
     assert out["J_over_J0"] == pytest.approx(0.1)  # was 0.1 / 7.1
+
+
+def test_a_run_with_one_scored_sample_is_judged_by_the_splits_range():
+    """A piece of a run cut at gaps with one sample after the warm-up has a range of 0, so
+    an error of 6 mm/s read as a divergence and voided the whole split's scores (a least-
+    squares fit's train and validation alike); it is judged by the split's range now, and a
+    prediction that really leaves that range still diverges."""
+    from nnid.evaluation.evaluate import score_split
+
+    t = np.r_[np.arange(400) * 0.05, np.arange(3) * 0.05]
+    log = pd.DataFrame(
+        {
+            "t": t,
+            "experiment": ["run5#1"] * 400 + ["run5#2"] * 3,
+            "u": np.r_[np.sin(np.arange(400) * 0.05), 0.3, 0.3, 0.3],
+        }
+    )
+    mask = np.r_[np.ones(400, bool), False, False, True]
+    for error, diverges in ((0.006, False), (50.0, True)):
+        pred = log[["u"]].copy()
+        pred.iloc[-1, 0] += error
+        nrmse, _, diverged, _, _ = score_split(log, pred, ["u"], mask, lambda r: ["u"])
+        assert bool(diverged) is diverges and (nrmse["total"] is None) is diverges, error

@@ -73,10 +73,15 @@ def scored_rows(log: pd.DataFrame, warmup_s: float, initial: int) -> np.ndarray:
 
 
 def score_prediction(
-    log: pd.DataFrame, predicted: pd.DataFrame, columns: Sequence[str], mask: np.ndarray
+    log: pd.DataFrame,
+    predicted: pd.DataFrame,
+    columns: Sequence[str],
+    mask: np.ndarray,
+    widths: dict[str, float] | None = None,
 ) -> tuple[dict[str, float | None], dict[str, float | None], dict[str, float]]:
     """(NRMSE per column and ``total``, RMSE per column and ``total``, ``{column: t}`` of the
-    columns that diverged)."""
+    columns that diverged: left their measured range by :data:`DIVERGENCE_FACTOR` times that
+    range, or the column's ``widths`` where given)."""
     t = log["t"].to_numpy(np.float64)
     nrmse: dict[str, float | None] = {}
     rmse: dict[str, float | None] = {}
@@ -89,7 +94,8 @@ def score_prediction(
         if y.size == 0:
             nrmse[c] = rmse[c] = None
             continue
-        bad = left_range(y, p, float(np.ptp(y)))
+        width = float(np.ptp(y)) if widths is None else widths.get(c, float(np.ptp(y)))
+        bad = left_range(y, p, width)
         if bad.any():
             diverged[c] = float(tc[np.flatnonzero(bad)[0]])
             nrmse[c] = rmse[c] = None
@@ -152,11 +158,26 @@ def score_runs(
     for name, idx in experiments(log):
         pos = log.index.get_indexer(idx)
         run = log.iloc[pos]
-        nrmse, _, left = score_prediction(run, predicted.iloc[pos], columns_of(run), mask[pos])
+        cols = columns_of(run)
+        # a run (or a piece between gaps) with a few scored samples has no range of its own:
+        # one sample's is 0, and any error at all read as a divergence of the whole split
+        few = int(mask[pos].sum()) < MIN_RANGE_SAMPLES
+        widths = {c: _range(log[c].to_numpy(np.float64)[mask]) for c in cols} if few else None
+        nrmse, _, left = score_prediction(run, predicted.iloc[pos], cols, mask[pos], widths)
         out[str(name)] = nrmse
         if left:
             diverged[str(name)] = left
     return out, diverged
+
+
+#: fewer scored samples than this give a run no range of its own to judge divergence by: the
+#: split's range is used
+MIN_RANGE_SAMPLES = 20
+
+
+def _range(values: np.ndarray) -> float:
+    finite = values[np.isfinite(values)]
+    return float(np.ptp(finite)) if finite.size else 0.0
 
 
 def score_split(
