@@ -1008,14 +1008,22 @@ def summary(rows: list[dict], ranking: list[str], part: str, replay: bool) -> st
         for n in ranking[1:]
         if total(by_name[n], "free_run_nrmse") is not None and n not in untrained
     ]
-    sentence = (
-        f"Use {best['name']} ({best['kind']}, {best['n_params']} parameters): the lowest "
-        f"free-run NRMSE{loop} on the {part} data{over} ({free:.3g}"
-    )
+    if free > 1.0:  # below the mean's own error nothing is recommended (train says it too)
+        sentence = (
+            f"No model has skill on the {part} data: the lowest free-run NRMSE{loop}{over}, "
+            f"{best['name']}'s ({best['kind']}, {best['n_params']} parameters: {free:.3g}"
+        )
+    else:
+        sentence = (
+            f"Use {best['name']} ({best['kind']}, {best['n_params']} parameters): the lowest "
+            f"free-run NRMSE{loop} on the {part} data{over} ({free:.3g}"
+        )
     if others:
         nxt = others[0]
         sentence += f", against {total(nxt, 'free_run_nrmse'):.3g} for {nxt['name']}"
-    sentence += ")."
+    sentence += (
+        "), is above 1: every model predicts it worse than its mean does." if free > 1.0 else ")."
+    )
     if diverged:
         sentence += f" Diverged in free run: {', '.join(diverged)}."
     if unscored:

@@ -306,6 +306,12 @@ def test_the_summary_never_ranks_on_an_error_that_was_not_measured():
     e["training_diverged"] = True
     text = summary(rows, rank(rows, "test"), "test", False)
     assert text.startswith("No model finished training") and "Use" not in text, text
+    # no skill: two NARX nets of a few epochs scored 2.99 and 5.12 and the better one was
+    # "the one to use"; train says an NRMSE above 1 is no better than the mean
+    rows = [row("g", free=2.99), row("h", free=5.12)]
+    text = summary(rows, rank(rows, "test"), "test", False)
+    assert text.startswith("No model has skill on the test data") and "Use" not in text, text
+    assert "(narx, 3 parameters: 2.99, against 5.12 for h), is above 1" in text, text
 
 
 def test_models_scored_on_different_outputs_are_ranked_on_the_shared_ones():
