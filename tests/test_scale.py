@@ -710,6 +710,11 @@ def test_the_sweep_sentence_counts_its_seeds_in_words():
     assert "0.25 (one seed: 0.25)" in one and "mean of" not in one, one
     two = _summary(spec, [Ranked({"model.hidden": [4]}, [0.25, 0.35], [])])
     assert "0.3 (mean of 2 seeds: 0.25, 0.35)" in two, two
+    # "6.34 (mean of 2 seeds: no score, 6.34)" was one seed's, and above the mean's own error
+    gap = _summary(spec, [Ranked({"model.hidden": [4]}, [None, 6.34], [])])
+    assert "6.34 (mean of the 1 of 2 seeds with a score: no score, 6.34)" in gap, gap
+    assert "above 1: no setting predicts the validation runs better than their mean" in gap
+    assert "above 1" not in two
 
 
 def test_a_sweep_ranked_on_one_step_says_when_its_best_diverges_in_free_run() -> None:

@@ -213,13 +213,25 @@ def _summary(spec: SweepSpec, ranked: list[Ranked]) -> str:
             + "; ".join(x for x in said if x)
             + "."
         )
+    scored = sum(s is not None for s in best.scores)
+    if len(best.scores) == 1:
+        over = "(one seed: "
+    elif scored < len(best.scores):  # "mean of 2 seeds: no score, 6.34" was one seed's
+        over = f"(mean of the {scored} of {len(best.scores)} seeds with a score: "
+    else:
+        over = f"(mean of {len(best.scores)} seeds: "
     text = (
         f"Best of {len(ranked)} settings: {json.dumps(best.setting)} with validation "
         f"{spec.metric} {best.mean:.4g} "
-        + (f"(mean of {len(best.scores)} seeds: " if len(best.scores) > 1 else "(one seed: ")
+        + over
         + ", ".join("no score" if s is None else f"{s:.4g}" for s in best.scores)
         + ")."
     )
+    if spec.metric.endswith("nrmse") and best.mean > 1.0:
+        text += (
+            " That is above 1: no setting predicts the validation runs better than their mean, "
+            "and best.toml holds the least bad one."
+        )
     if not best.complete:
         text += " Every setting had a seed without a score; this one is ranked on the rest."
     if spec.metric != "free_run_nrmse":  # a short-horizon rank can pick a model that diverges
