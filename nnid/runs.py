@@ -12,7 +12,7 @@ import os
 import shutil
 import tempfile
 import uuid
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -353,7 +353,7 @@ def loop_run(
     from nnid.datasets.column_map import load_column_map
     from nnid.datasets.preprocess import check_attitude
     from nnid.physics.dofs import DOFS
-    from nnid.pipeline import load_inputs, reader_config
+    from nnid.pipeline import loaded_inputs, reader_config
 
     where = config_path or Path("loop.toml")
     reader = reader_config(cfg, where, columns)
@@ -365,8 +365,8 @@ def loop_run(
     if not (data or cfg.data.log or cfg.data.simulate):
         raise NnidInputError("give a log (--data or the config's data.log)", field="data")
     second = hybrid_model(hybrid) if hybrid is not None else None
-    try:
-        inputs = load_inputs(cfg, where, [], data, vehicle, columns)
+    try:  # what loading said (a vehicle file's sign slip) goes into loop.json too
+        inputs, loaded = loaded_inputs(cfg, where, [], data, vehicle, columns)
     except NnidInputError as exc:
         raise exc.with_source(str(config_path)) if config_path else exc from None
     if second is not None and second.vehicle.name != inputs.vehicle.name:
@@ -413,7 +413,7 @@ def loop_run(
     )
     source, named = data or str(config_path or ""), str(config_path or "")
     return residual_loop_run(
-        log, inputs.vehicle, out_dir, source, inputs.report, named, progress, **settings
+        log, inputs.vehicle, out_dir, source, inputs.report, named, progress, loaded, **settings
     )
 
 
@@ -425,10 +425,12 @@ def residual_loop_run(
     cleaning=None,
     config: str = "",
     progress: Progress | None = None,
+    said: Sequence[str] = (),
     **settings,
 ) -> Outcome:
     """The residual loop on a loaded log: ``loop.json``, the reports and the cleaning report
-    written to ``out_dir`` (:class:`nnid.loop.residual_loop.ResidualLoop`)."""
+    written to ``out_dir`` (:class:`nnid.loop.residual_loop.ResidualLoop`); ``said``, the
+    warnings of loading it, lead the loop's own."""
     from nnid.loop.residual_loop import ResidualLoop
     from nnid.reports.loop_report import write_loop_report
 
@@ -438,6 +440,7 @@ def residual_loop_run(
     except NnidInputError as exc:
         named = config if config and exc.field in LOOP_SETTINGS else source
         raise exc.with_source(named) if named else exc from None
+    fitted.warnings_ = list(dict.fromkeys([*said, *fitted.warnings_]))
     progress(0, None, "writing the report")
     with staged(out_dir) as stage:
         lines = write_loop_report(fitted, stage)

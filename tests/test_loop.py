@@ -612,3 +612,28 @@ def test_an_added_effect_the_log_cannot_tell_from_another_says_so():
         "the data cannot tell them apart)"
     )
     assert "cannot tell" not in effect_sentence({**added, "same_column_as": []})
+
+
+def test_a_loop_whose_baseline_cannot_be_simulated_says_nothing_was_judged(tmp_path):
+    """A vehicle file with a positive Z_wdot and K_pdot: every candidate the tests passed
+    (added_mass.w removes 72 % of the held-out force residual) met a baseline whose held-out
+    simulation diverges one step ahead, and the loop said "No significant effect"; it now
+    says none could be judged, and loop.json keeps the vehicle file's warnings."""
+    from typer.testing import CliRunner
+
+    from nnid.cli import app
+
+    text = resources.files("nnid.demo_data").joinpath("minirov.toml").read_text()
+    bad = text.replace("Z_wdot = -18.7", "Z_wdot = 13.2").replace("K_pdot = -0.19", "K_pdot = 0.25")
+    assert bad != text
+    (tmp_path / "bad.toml").write_text(bad)
+    data = str(resources.files("nnid.demo_data").joinpath("demo_minirov_heave.parquet"))
+    out = tmp_path / "out"
+    args = ["loop", "--data", data, "--vehicle", str(tmp_path / "bad.toml"), "--out", str(out)]
+    res = CliRunner().invoke(app, args)
+    assert res.exit_code == 0, res.output
+    assert "No effect was added, and none could be judged" in res.output
+    assert "No significant effect" not in res.output
+    result = json.loads((out / "loop.json").read_text())
+    assert result["added"] == []
+    assert any("Z_wdot = 13.2 > 0" in w for w in result["warnings"]), result["warnings"]

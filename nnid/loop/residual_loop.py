@@ -355,9 +355,7 @@ class ResidualLoop:
         if before is None:
             for s in admissible:
                 s.admissible = False
-                s.reason = (
-                    "the held-out simulation diverges even one step ahead: nothing to compare"
-                )
+                s.reason = UNJUDGED
             return None, None
         one_step = None
         for s in admissible[: self.gate_checks]:
@@ -607,6 +605,11 @@ class ResidualLoop:
             "warnings": self.warnings_,
             "seconds": self.seconds_,
         }
+
+
+#: the verdict of a candidate that passed every test but the simulation gate, which had no
+#: simulation to compare (the baseline's held-out one diverges at every horizon)
+UNJUDGED = "the held-out simulation diverges even one step ahead: nothing to compare"
 
 
 def _warn_unphysical_damping(fit: Fit, widen: float) -> None:

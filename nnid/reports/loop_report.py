@@ -12,6 +12,7 @@ import math
 import numpy as np
 
 from nnid.datasets.gaps import GAP_STEPS
+from nnid.loop.residual_loop import UNJUDGED
 from nnid.physics.dofs import DOF_WORD, DOFS
 from nnid.physics.effects import parse_effect
 from nnid.reports.cells import number
@@ -169,6 +170,20 @@ def _verdict(result: dict, name: str, before: dict, after: dict) -> list[str]:
     max_effects = result.get("settings", {}).get("max_effects")
     if not result["added"] and limit:  # max_effects = 0: nothing was tested, nothing found
         return [f"No effect was tested (max_effects = {max_effects})."]
+    unjudged = [
+        c for step in result["steps"][:1] for c in step["top"] if c.get("reason") == UNJUDGED
+    ]
+    if not result["added"] and unjudged:  # not "no significant effect": none could be judged
+        c = unjudged[0]
+        return [
+            f"No effect was added, and none could be judged: {len(unjudged)} candidate(s) "
+            "passed the F-test and the parameter test (the strongest, "
+            f"{c['effect']} = {number(c['params']['value'], 4)}, removes "
+            f"{100 * c['improvement']:.1f} % of the held-out force residual), but the "
+            "baseline's held-out simulation diverges even one step ahead, so the simulation "
+            "gate had nothing to compare. The vehicle file's model is unstable on these data "
+            "(see the warnings); mend it and run the loop again."
+        ]
     if not result["added"]:
         total = result["before"]["free_run_nrmse"].get("total")
         lines = [
