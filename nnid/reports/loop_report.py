@@ -266,7 +266,9 @@ CANDIDATE_HEAD = ["effect", "value", "± s.e.", "unit", "p (F-test)", "held-out 
 CANDIDATE_COLUMNS = (
     "Columns: effect, the vocabulary name (after it, in brackets, the candidates whose column "
     "on this log is the same: the data cannot tell them apart); value ± s.e., its refitted "
-    "size with the standard error; p (F-test), the significance of adding it; held-out gain, "
+    "size with the standard error as this pass screened it (an added effect's final value and "
+    "s.e., from the last joint refit with the weights renewed, are the summary's); p (F-test), "
+    "the significance of adding it; held-out gain, "
     "the share of the held-out force residual (weighted sum of squares over the analysed DOFs) "
     "that the refit with it removes; verdict, why it was added or not."
 )
