@@ -406,6 +406,14 @@ class GradientEstimator(BaseEstimator):
                 UserWarning,
                 stacklevel=2,
             )
+        # said, not left to a column of None: every other estimator gives an uncertainty
+        warnings.warn(
+            "the gradient estimator gives no standard errors (its law has no covariance): "
+            "its parameters are reported without uncertainty and none is judged significant; "
+            "fit with ls or rls for standard errors",
+            UserWarning,
+            stacklevel=2,
+        )
         sigma2, n_obs, per_dof = _residual_stats(reg, theta, 0)
         return Estimate(
             list(reg.names),
