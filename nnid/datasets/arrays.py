@@ -219,7 +219,7 @@ def nominal_forces(log: pd.DataFrame, vehicle, lagged: bool = True) -> np.ndarra
     if not forces:
         tau = Actuation(vehicle).nominal(inputs, deadband=True)
     elif vehicle.thrusters:  # its deadband is in command units: logged forces are past it
-        tau = inputs
+        tau = np.array(inputs, dtype=np.float64)  # a copy: callers zero DOFs they leave out
     else:  # the vehicle's commands are these forces
         tau = apply_deadband(inputs, vehicle.deadband)
     return first_order_lag(tau, log, vehicle.actuator_lag) if lagged else tau

@@ -161,7 +161,7 @@ def resample_log(
     return pd.concat(pieces, ignore_index=True)
 
 
-#: how far a reader's resampling may move a log's rate before it is warned of
+#: how far :func:`resample_log` may move a log's rate before it is warned of
 RESAMPLE_RATIO = 2.0
 
 

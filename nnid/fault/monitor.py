@@ -503,8 +503,8 @@ class ResidualMonitor(BaseEstimator):
             or not (watched > 0).all()
         ):
             raise NnidInputError(
-                "holds a non-finite number, a correlation time or a watched DOF's noise level "
-                "(sigma) that is not positive: not a monitor nnid wrote",
+                "holds a non-finite number, a correlation time that is not positive, or a "
+                "watched DOF's noise level (sigma) that is not: not a monitor nnid wrote",
                 source=str(path),
             )
         return out
