@@ -768,3 +768,18 @@ def test_batch_tables_say_a_training_that_kept_its_start() -> None:
     page = _compare_table([{"data": "a.csv", "status": "ok", "best": None,
                             "training_diverged": "hybrid_broken"}])  # fmt: skip
     assert "hybrid_broken" in page and KEPT_START in page
+
+
+def test_a_sweep_trial_without_a_validation_score_says_why_not() -> None:
+    """A trial whose validation free run diverged showed "-" beside status ok and an empty
+    note."""
+    from nnid.reports.batch_report import _sweep
+    from nnid.scale.batch import BatchResult
+
+    rows = [
+        {"status": "ok", "overrides": '{"model.seed": 0}', "validation_free_run_nrmse": None},
+        {"status": "ok", "overrides": '{"model.seed": 1}', "validation_free_run_nrmse": 0.2},
+    ]
+    sweep = {"metric": "validation free_run_nrmse (total)", "summary": "s"}
+    page = "".join(_sweep(BatchResult(rows, "local", extra={"sweep": sweep})))
+    assert page.count("no validation free_run_nrmse: diverged, or nothing scored") == 1

@@ -186,6 +186,8 @@ def _sweep(result) -> list[str]:
         untrained = row["status"] == "ok" and row.get("training_diverged")
         if untrained:  # the sweep ranks it unscored
             note = f"{KEPT_START}: its score is the untrained model's, not ranked"
+        elif row["status"] == "ok" and value is None and not note:  # a "-" said, not left bare
+            note = f"no validation {metric}: diverged, or nothing scored (the run's warnings)"
         scores.setdefault(label, []).append(None if untrained else value)
         body.append([label, number(seed), row["status"], number(value, 4), number(test, 4),
                      note])  # fmt: skip
