@@ -12,6 +12,7 @@ import os
 import shutil
 import tempfile
 import uuid
+import warnings
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -317,6 +318,19 @@ def exclude_experiments(log, excluded: list[str], report):
     return log[keep].reset_index(drop=True)
 
 
+@contextmanager
+def said_on_error(messages: Sequence[str]) -> Iterator[None]:
+    """Run the block; where it stops on an input error, first say ``messages``: warnings a run
+    recorded for its outputs (:func:`nnid.pipeline.loaded_inputs`), which a refusal before
+    they are written would otherwise lose."""
+    try:
+        yield
+    except NnidInputError:
+        for message in messages:
+            warnings.warn(message, stacklevel=3)
+        raise
+
+
 def hybrid_model(folder: Path):
     """A saved hybrid model, or one clear error."""
     from nnid.models.base import load_model
@@ -369,52 +383,54 @@ def loop_run(
         inputs, loaded = loaded_inputs(cfg, where, [], data, vehicle, columns)
     except NnidInputError as exc:
         raise exc.with_source(str(config_path)) if config_path else exc from None
-    if second is not None and second.vehicle.name != inputs.vehicle.name:
-        # its learned force is of another vehicle: read as this one's missing effect, it misleads
-        raise NnidInputError(
-            f"was trained for vehicle '{second.vehicle.name}'; this loop runs "
-            f"'{inputs.vehicle.name}'",
-            source=str(hybrid),
-            field="--hybrid",
+    # loop.json keeps them; a refusal before it is written says them, or nothing would
+    with said_on_error(loaded):
+        if second is not None and second.vehicle.name != inputs.vehicle.name:
+            # its learned force is of another vehicle: read as this one's missing effect, misleading
+            raise NnidInputError(
+                f"was trained for vehicle '{second.vehicle.name}'; this loop runs "
+                f"'{inputs.vehicle.name}'",
+                source=str(hybrid),
+                field="--hybrid",
+            )
+        left_out = names(exclude, "--exclude")
+        log = exclude_experiments(inputs.log, left_out, inputs.report)
+        held = names(validation, "--validation") or cfg.validation
+        if held:  # said against the option or key that names them, not against the log
+            key = "--validation" if validation else "validation"
+            known = set(log["experiment"]) if "experiment" in log else set()
+            logged = set(inputs.log["experiment"]) if "experiment" in inputs.log else set()
+            for name in held:
+                if name not in known:  # --exclude may name a replay group: its runs are gone too
+                    why = "is left out by --exclude" if name in logged else "is not in the log"
+                    raise NnidInputError(
+                        f"experiment {name!r} {why}",
+                        source=str(config_path) if key == "validation" and config_path else None,
+                        field=key,
+                    )
+        fitted_dofs = dofs_option(dofs) or (tuple(cfg.dofs) if cfg.dofs else None)
+        try:  # on the runs the loop keeps, as train checks the runs its config keeps
+            check_attitude(log, inputs.vehicle, list(fitted_dofs or DOFS))
+        except NnidInputError as exc:
+            raise exc.with_source(inputs.report.source or str(where)) from None
+        settings = dict(
+            max_effects=cfg.max_effects if max_effects is None else max_effects,
+            alpha=cfg.alpha if alpha is None else alpha,
+            coupled=cfg.coupled,
+            filter_lambda=cfg.filter_lambda,
+            savgol_window=cfg.savgol_window,
+            savgol_order=cfg.savgol_order,
+            warmup_s=cfg.warmup_s,
+            validation=cfg.validation_fraction,
+            dofs=fitted_dofs,
+            validation_experiments=held,
+            gate_horizon_s=cfg.gate_horizon_s,
+            second_opinion=second,
         )
-    left_out = names(exclude, "--exclude")
-    log = exclude_experiments(inputs.log, left_out, inputs.report)
-    held = names(validation, "--validation") or cfg.validation
-    if held:  # said against the option or key that names them, not against the log
-        key = "--validation" if validation else "validation"
-        known = set(log["experiment"]) if "experiment" in log else set()
-        logged = set(inputs.log["experiment"]) if "experiment" in inputs.log else set()
-        for name in held:
-            if name not in known:  # --exclude may name a replay group: its runs are gone too
-                why = "is left out by --exclude" if name in logged else "is not in the log"
-                raise NnidInputError(
-                    f"experiment {name!r} {why}",
-                    source=str(config_path) if key == "validation" and config_path else None,
-                    field=key,
-                )
-    fitted_dofs = dofs_option(dofs) or (tuple(cfg.dofs) if cfg.dofs else None)
-    try:  # on the runs the loop keeps, as train checks the runs its config keeps
-        check_attitude(log, inputs.vehicle, list(fitted_dofs or DOFS))
-    except NnidInputError as exc:
-        raise exc.with_source(inputs.report.source or str(where)) from None
-    settings = dict(
-        max_effects=cfg.max_effects if max_effects is None else max_effects,
-        alpha=cfg.alpha if alpha is None else alpha,
-        coupled=cfg.coupled,
-        filter_lambda=cfg.filter_lambda,
-        savgol_window=cfg.savgol_window,
-        savgol_order=cfg.savgol_order,
-        warmup_s=cfg.warmup_s,
-        validation=cfg.validation_fraction,
-        dofs=fitted_dofs,
-        validation_experiments=held,
-        gate_horizon_s=cfg.gate_horizon_s,
-        second_opinion=second,
-    )
-    source, named = data or str(config_path or ""), str(config_path or "")
-    return residual_loop_run(
-        log, inputs.vehicle, out_dir, source, inputs.report, named, progress, loaded, **settings
-    )
+        source, named = data or str(config_path or ""), str(config_path or "")
+        return residual_loop_run(
+            log, inputs.vehicle, out_dir, source, inputs.report, named, progress, loaded, **settings
+        )
 
 
 def residual_loop_run(

@@ -637,3 +637,6 @@ def test_a_loop_whose_baseline_cannot_be_simulated_says_nothing_was_judged(tmp_p
     result = json.loads((out / "loop.json").read_text())
     assert result["added"] == []
     assert any("Z_wdot = 13.2 > 0" in w for w in result["warnings"]), result["warnings"]
+    # a refusal after loading writes no loop.json: the warnings are said all the same
+    res = CliRunner().invoke(app, [*args[:-1], str(tmp_path / "o2"), "--validation", "nosuch"])
+    assert res.exit_code == 2 and "Z_wdot = 13.2 > 0" in res.output, res.output
