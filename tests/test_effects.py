@@ -218,3 +218,25 @@ def test_a_lagged_force_is_regressed_as_sampled_not_at_the_midpoint(vehicle_fact
     log = simulate(truth, inputs, 0.1, substeps=8)
     model = ParametricModel(truth, ["X_udot"], dofs=["u"], zoh_midpoint=True).fit(log)
     assert model.params["X_udot"]["value"] == pytest.approx(veh.added_mass["X_udot"], rel=0.05)
+
+
+def test_a_thruster_vehicles_closed_loop_leaves_logged_forces_past_its_deadband():
+    """A thruster vehicle's deadband is of commands; its open-loop prediction leaves logged
+    forces as they are, and its closed-loop flight put them through it (0.86 m/s in u and
+    2.3 rad/s in r apart under a zero-gain autopilot)."""
+    from nnid.datasets.log import TAU
+    from nnid.datasets.simulator import Autopilot
+    from nnid.evaluation.prediction import Replay
+    from nnid.models.parametric import ParametricModel
+    from nnid.vehicle import load_vehicle
+
+    veh = load_vehicle("configs/vehicles/octorov_sim.toml").model_copy(update={"deadband": 36.0})
+    plain = veh.model_copy(update={"thrusters": [], "deadband": 0.0})
+    inputs = np.zeros((300, 6))
+    inputs[10:, 0] = np.repeat([4.0, -4.0, 20.0, 3.0, -25.0, 0.0], 50)[:290]
+    inputs[10:, 5] = np.repeat([2.0, -6.0, 8.0, -3.0, 0.0, 4.0], 50)[:290]
+    log = simulate(plain, inputs, 0.05)
+    model = ParametricModel(veh, unknowns=()).fit(log)
+    a = model.predict(log, "free_run")
+    b = model.closed_loop(log, Replay(Autopilot(), log[list(TAU)]), "free_run")
+    assert ((a - b)[["u", "r"]].abs().max() < 1e-9).all()

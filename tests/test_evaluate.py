@@ -283,3 +283,10 @@ def test_a_run_with_one_scored_sample_is_judged_by_the_splits_range():
         pred.iloc[-1, 0] += error
         nrmse, _, diverged, _, _ = score_split(log, pred, ["u"], mask, lambda r: ["u"])
         assert bool(diverged) is diverges and (nrmse["total"] is None) is diverges, error
+    # a split that is one such run: pooled, the same rule (the whole run's range)
+    one = pd.DataFrame({"t": t[:25], "experiment": "run9", "u": np.r_[np.sin(t[:24]), 0.3]})
+    alone = np.r_[np.zeros(24, bool), True]
+    pred = one[["u"]].copy()
+    pred.iloc[-1, 0] += 0.006
+    _, rmse, diverged, _, _ = score_split(one, pred, ["u"], alone, lambda r: ["u"])
+    assert diverged == {} and rmse["u"] == pytest.approx(0.006)  # (one sample has no NRMSE)

@@ -193,7 +193,10 @@ def score_split(
     ``None``), however small the pooled score the other runs' spread divides it into.
     Returns the pooled NRMSE, RMSE and diverged columns, and each run's NRMSE and diverged
     columns."""
-    nrmse, rmse, diverged = score_prediction(log, predicted, columns, mask)
+    # a split of a few scored samples has no range of its own either: the whole log's
+    few = int(mask.sum()) < MIN_RANGE_SAMPLES
+    widths = {c: _range(log[c].to_numpy(np.float64)) for c in columns} if few else None
+    nrmse, rmse, diverged = score_prediction(log, predicted, columns, mask, widths)
     if len(experiments(log)) < 2:
         return nrmse, rmse, diverged, {}, {}
     runs, left = score_runs(log, predicted, mask, columns_of)

@@ -192,7 +192,10 @@ def candidates(vehicle, log: pd.DataFrame, coupled: bool = True) -> list[Candida
     slowest = 100 * float(np.median(np.diff(log["t"].to_numpy())))  # 100 samples
     lag = min(max(slowest, 0.5), MAX_LAG)
     out.append(Candidate("actuator_lag", "actuator_lag", bounds=(0.0, lag)))
-    width = float(np.nanmax(np.abs(logged_inputs(log, vehicle)[0]))) if len(log) else 0.0
-    if width > 0:
+    inputs, forces = logged_inputs(log, vehicle)
+    width = float(np.nanmax(np.abs(inputs))) if len(log) else 0.0
+    # a thruster vehicle's deadband is in command units: logged forces are past it, and the
+    # search would move nothing (nominal_forces leaves them as logged)
+    if width > 0 and not (forces and vehicle.thrusters):
         out.append(Candidate("thruster_deadband", "thruster_deadband", bounds=(0.0, 0.5 * width)))
     return out

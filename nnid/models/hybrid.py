@@ -704,7 +704,9 @@ class HybridModel(FossenPlant):
 
             def step(state: np.ndarray, command: np.ndarray) -> np.ndarray:
                 # through the deadband, as the log's forces the network learned from went
-                command = apply_deadband(command, self.vehicle.deadband)
+                # (a thruster vehicle's is of commands: its logged forces are past it)
+                if not self.vehicle.thrusters:
+                    command = apply_deadband(command, self.vehicle.deadband)
                 chans = [self.parts_.applied(command), command / self.input_scale_]
                 for t in self.memory:
                     a = np.exp(-dt / float(t))

@@ -446,7 +446,9 @@ class FossenPlant(NnidModel):
         self._check_unlagged()
         log, _ = self._data(check_log(log), accelerations=False)
         check_stepped(log)
-        deadband = self.vehicle.deadband  # of the commanded forces, as the open loop has it
+        # the autopilot commands forces: a deadband of commands (a thruster vehicle's) is
+        # not theirs, as the open loop leaves logged forces as they are
+        deadband = 0.0 if self.vehicle.thrusters else self.vehicle.deadband
         pred = predict_closed_loop(self.parts_, log, replay, mode, substeps_for(log), deadband)
         return blank_initial(pred, log, self.warmup_samples_ + mode_steps(mode) - 1)
 
