@@ -1032,8 +1032,9 @@ def summary(rows: list[dict], ranking: list[str], part: str, replay: bool) -> st
     ]
     if free > 1.0:  # below the mean's own error nothing is recommended (train says it too)
         sentence = (
-            f"No model has skill on the {part} data: the lowest free-run NRMSE{loop}{over}, "
-            f"{best['name']}'s ({best['kind']}, {best['n_params']} parameters: {free:.3g}"
+            f"No trained model has skill on the {part} data: the lowest trained free-run "
+            f"NRMSE{loop}{over}, {best['name']}'s ({best['kind']}, {best['n_params']} "
+            f"parameters: {free:.3g}"
         )
     else:
         sentence = (
@@ -1044,7 +1045,9 @@ def summary(rows: list[dict], ranking: list[str], part: str, replay: bool) -> st
         nxt = others[0]
         sentence += f", against {total(nxt, 'free_run_nrmse'):.3g} for {nxt['name']}"
     sentence += (
-        "), is above 1: every model predicts it worse than its mean does." if free > 1.0 else ")."
+        "), is above 1: no trained model it scored predicts these data better than their mean."
+        if free > 1.0
+        else ")."
     )
     if diverged:
         sentence += f" Diverged in free run: {', '.join(diverged)}."

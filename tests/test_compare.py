@@ -310,7 +310,7 @@ def test_the_summary_never_ranks_on_an_error_that_was_not_measured():
     # "the one to use"; train says an NRMSE above 1 is no better than the mean
     rows = [row("g", free=2.99), row("h", free=5.12)]
     text = summary(rows, rank(rows, "test"), "test", False)
-    assert text.startswith("No model has skill on the test data") and "Use" not in text, text
+    assert text.startswith("No trained model has skill on the test data") and "Use" not in text
     assert "(narx, 3 parameters: 2.99, against 5.12 for h), is above 1" in text, text
 
 

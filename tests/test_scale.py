@@ -713,7 +713,7 @@ def test_the_sweep_sentence_counts_its_seeds_in_words():
     # "6.34 (mean of 2 seeds: no score, 6.34)" was one seed's, and above the mean's own error
     gap = _summary(spec, [Ranked({"model.hidden": [4]}, [None, 6.34], [])])
     assert "6.34 (mean of the 1 of 2 seeds with a score: no score, 6.34)" in gap, gap
-    assert "above 1: no setting predicts the validation runs better than their mean" in gap
+    assert "above 1: this setting predicts the validation runs worse than their mean" in gap
     assert "above 1" not in two
 
 

@@ -175,14 +175,16 @@ def _verdict(result: dict, name: str, before: dict, after: dict) -> list[str]:
     ]
     if not result["added"] and unjudged:  # not "no significant effect": none could be judged
         c = unjudged[0]
+        shown = len(result["steps"][0]["top"])
+        why = " (see the warnings)" if result.get("warnings") else ""
         return [
-            f"No effect was added, and none could be judged: {len(unjudged)} candidate(s) "
-            "passed the F-test and the parameter test (the strongest, "
-            f"{c['effect']} = {number(c['params']['value'], 4)}, removes "
+            f"No effect was added, and none could be judged: of the {shown} best-ranked "
+            f"candidates, {len(unjudged)} passed the F-test and the parameter test (the "
+            f"strongest, {c['effect']} = {number(c['params']['value'], 4)}, removes "
             f"{100 * c['improvement']:.1f} % of the held-out force residual), but the "
             "baseline's held-out simulation diverges even one step ahead, so the simulation "
-            "gate had nothing to compare. The vehicle file's model is unstable on these data "
-            "(see the warnings); mend it and run the loop again."
+            f"gate had nothing to compare. The vehicle file's model is unstable on these "
+            f"data{why}; mend it and run the loop again."
         ]
     if not result["added"]:
         total = result["before"]["free_run_nrmse"].get("total")

@@ -229,8 +229,8 @@ def _summary(spec: SweepSpec, ranked: list[Ranked]) -> str:
     )
     if spec.metric.endswith("nrmse") and best.mean > 1.0:
         text += (
-            " That is above 1: no setting predicts the validation runs better than their mean, "
-            "and best.toml holds the least bad one."
+            " That is above 1: this setting predicts the validation runs worse than their "
+            "mean, and best.toml holds it all the same."
         )
     if not best.complete:
         text += " Every setting had a seed without a score; this one is ranked on the rest."

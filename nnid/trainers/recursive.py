@@ -158,14 +158,17 @@ def window_covariance(
     reg: Regression, theta: np.ndarray, first: int
 ) -> tuple[np.ndarray, np.ndarray]:
     """The covariance of ``theta`` over the samples ``first``…end (the estimator's memory):
-    the recursion's estimate is the window's *unweighted* least squares, so its covariance is
-    the sandwich (ΦᵀΦ)⁻¹ Φᵀ Σ Φ (ΦᵀΦ)⁻¹ with Σ each DOF equation's own residual variance
-    (forces in N and moments in N m do not share one), widened by the residuals' correlation
-    time. σ̂² P of the recursion pools the equations' variances and takes every row as
-    independent: too small for forces, too large for moments (3-24x on a minirov log); and the
-    covariance of the per-DOF *weighted* estimator, given before, is not this estimate's
-    (N_rdot: z s.d. 2.4, coverage 20 % over 30 Seamor logs). Also returns the window's
-    unweighted least-squares fit, against which θ is judged settled."""
+    without forgetting the recursion's estimate is the *unweighted* least squares, so its
+    covariance is the sandwich (ΦᵀΦ)⁻¹ Φᵀ Σ Φ (ΦᵀΦ)⁻¹ with Σ each DOF equation's own residual
+    variance (forces in N and moments in N m do not share one), widened by the residuals'
+    correlation time. With forgetting λ < 1 the estimate weighs the past by λᵏ, whose
+    effective memory is about (1 + λ)/(1 − λ) samples, twice this window: these s.e. are then
+    conservative by about √2 (a Monte Carlo gave 1.4-1.75 times the spread). σ̂² P of the
+    recursion pools the equations' variances and takes every row as independent: too small
+    for forces, too large for moments (3-24x on a minirov log); the covariance of the per-DOF
+    *weighted* estimator, given before, is not this estimate's (over 16 Seamor logs, 0.5 of the
+    spread of N_rdot; now 1.8). Also returns the window's unweighted least-squares fit, against
+    which θ is judged settled."""
     m = len(reg.dofs)
     rows = slice(first * m, reg.n_samples * m)
     phi, y = reg.phi[rows], reg.y[rows]
@@ -232,9 +235,10 @@ class RecursiveLeastSquares(BaseEstimator):
     squares). ``p0`` is the initial P = p₀ I (large: an uninformative start at ``theta0``,
     default zero). Forgetting is suspended while trace(P) ≥ P·p₀, so directions the data stops
     exciting do not wind up. ``filter_lambda`` (rad/s) uses the filtered regressors of Weiss
-    eqs 85-92. The covariance is that of the unweighted least squares the recursion computes,
-    at the final θ over the last window of ⌈1/(1 − λ)⌉ samples (the whole run for λ = 1):
-    :func:`window_covariance`; the recursion's own P is ``p_matrix_``.
+    eqs 85-92. The covariance is that of unweighted least squares at the final θ over the
+    last window of ⌈1/(1 − λ)⌉ samples (the whole run for λ = 1, where it is the recursion's
+    own estimator; conservative for λ < 1): :func:`window_covariance`; the recursion's own P
+    is ``p_matrix_``.
     """
 
     kind = "rls"
