@@ -15,7 +15,7 @@ import pandas as pd
 from nnid.datasets.log import ANGLES, POSE, TAU, VELOCITY
 from nnid.datasets.preprocess import first_order_lag
 from nnid.errors import NnidInputError
-from nnid.physics.thrusters import Actuation, apply_deadband
+from nnid.physics.thrusters import Actuation, apply_deadband, force_deadband
 
 
 def motion_arrays(log: pd.DataFrame) -> dict[str, np.ndarray]:
@@ -216,12 +216,10 @@ def nominal_forces(log: pd.DataFrame, vehicle, lagged: bool = True) -> np.ndarra
     at the sample times (exact for inputs held between samples); installation coefficients
     are left to the model."""
     inputs, forces = logged_inputs(log, vehicle)
-    if not forces:
+    if forces:  # a new array, not pandas' read-only view: the loop zeroes DOFs in it
+        tau = apply_deadband(inputs, force_deadband(vehicle))
+    else:
         tau = Actuation(vehicle).nominal(inputs, deadband=True)
-    elif vehicle.thrusters:  # its deadband is in command units: logged forces are past it
-        tau = np.array(inputs, dtype=np.float64)  # a copy: callers zero DOFs they leave out
-    else:  # the vehicle's commands are these forces
-        tau = apply_deadband(inputs, vehicle.deadband)
     return first_order_lag(tau, log, vehicle.actuator_lag) if lagged else tau
 
 

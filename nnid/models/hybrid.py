@@ -62,7 +62,7 @@ from nnid.physics.form import eta_dot as form_eta_dot
 from nnid.physics.fossen import FeatureForm, FossenModel
 from nnid.physics.odeint import METHODS, SampledInput, integrate
 from nnid.physics.parts import Parts
-from nnid.physics.thrusters import apply_deadband
+from nnid.physics.thrusters import apply_deadband, force_deadband
 from nnid.threads import torch_threads
 from nnid.trainers.history import Progress, staged
 from nnid.trainers.neural_ode import Batch, MultipleShooting, Run
@@ -704,9 +704,7 @@ class HybridModel(FossenPlant):
 
             def step(state: np.ndarray, command: np.ndarray) -> np.ndarray:
                 # through the deadband, as the log's forces the network learned from went
-                # (a thruster vehicle's is of commands: its logged forces are past it)
-                if not self.vehicle.thrusters:
-                    command = apply_deadband(command, self.vehicle.deadband)
+                command = apply_deadband(command, force_deadband(self.vehicle))
                 chans = [self.parts_.applied(command), command / self.input_scale_]
                 for t in self.memory:
                     a = np.exp(-dt / float(t))

@@ -62,6 +62,7 @@ from nnid.physics.damping_library import (
 )
 from nnid.physics.dofs import DOFS, FORCES
 from nnid.physics.parts import Parts, relative_velocity
+from nnid.physics.thrusters import force_deadband
 from nnid.trainers.history import Progress
 from nnid.trainers.regression import Regression
 
@@ -446,9 +447,7 @@ class FossenPlant(NnidModel):
         self._check_unlagged()
         log, _ = self._data(check_log(log), accelerations=False)
         check_stepped(log)
-        # the autopilot commands forces: a deadband of commands (a thruster vehicle's) is
-        # not theirs, as the open loop leaves logged forces as they are
-        deadband = 0.0 if self.vehicle.thrusters else self.vehicle.deadband
+        deadband = force_deadband(self.vehicle)  # the autopilot commands forces
         pred = predict_closed_loop(self.parts_, log, replay, mode, substeps_for(log), deadband)
         return blank_initial(pred, log, self.warmup_samples_ + mode_steps(mode) - 1)
 

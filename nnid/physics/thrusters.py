@@ -65,6 +65,13 @@ def apply_deadband(signal: np.ndarray, width: float) -> np.ndarray:
     return np.where(np.abs(signal) <= width, 0.0, signal)
 
 
+def force_deadband(vehicle) -> float:
+    """The deadband of generalized forces, as a log or an autopilot gives them: a vehicle
+    without thrusters has its commands in them; a thruster vehicle's deadband is in command
+    units, and its forces are past it (36 µs of PWM zeroed 36 N of every force)."""
+    return 0.0 if vehicle.thrusters else float(vehicle.deadband)
+
+
 class Actuation:
     """Inputs to generalized forces for a vehicle: thruster commands through curves and
     allocation, or generalized forces directly; then deadband and installation (Caccia eq. 3).
