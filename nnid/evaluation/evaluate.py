@@ -155,14 +155,19 @@ def score_runs(
     the spread of all its runs, so a run that barely moves an output can fail on it unseen.
     Returns the NRMSE of each run and ``{run: {column: t}}`` of the runs that diverged."""
     out, diverged = {}, {}
+    split_range: dict[str, float] = {}  # each column's once, however many pieces need it
     for name, idx in experiments(log):
         pos = log.index.get_indexer(idx)
         run = log.iloc[pos]
         cols = columns_of(run)
+        widths = None
         # a run (or a piece between gaps) with a few scored samples has no range of its own:
         # one sample's is 0, and any error at all read as a divergence of the whole split
-        few = int(mask[pos].sum()) < MIN_RANGE_SAMPLES
-        widths = {c: _range(log[c].to_numpy(np.float64)[mask]) for c in cols} if few else None
+        if int(mask[pos].sum()) < MIN_RANGE_SAMPLES:
+            for c in cols:
+                if c not in split_range:
+                    split_range[c] = _range(log[c].to_numpy(np.float64)[mask])
+            widths = {c: split_range[c] for c in cols}
         nrmse, _, left = score_prediction(run, predicted.iloc[pos], cols, mask[pos], widths)
         out[str(name)] = nrmse
         if left:
