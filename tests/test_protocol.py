@@ -197,9 +197,11 @@ def test_save_load_reproduces_predictions(kind, fitted, runs, heave_campaign, tm
     # what fitted it and how long it took, as reported before saving (a loaded Caccia model
     # named its trainer "method", a hybrid "adam" where "shooting" fitted it)
     assert back.describe() == model.describe()
-    assert back.trainer_name() == model.trainer_name() is not None
+    assert model.trainer_name() is not None
+    assert back.trainer_name() == model.trainer_name()
     if kind == "hybrid":  # and its physics fit's ("ls", None after loading)
-        assert back.baseline().trainer_name() == model.baseline().trainer_name() is not None
+        assert model.baseline().trainer_name() is not None
+        assert back.baseline().trainer_name() == model.baseline().trainer_name()
 
 
 @pytest.mark.parametrize("kind", list(BUILDERS))
