@@ -84,7 +84,7 @@ def validate_log(
     _check_finite(df, [*motion, *accelerations], source, gaps=True)
     _check_experiments(df, source)
     _check_time(df, source)
-    _check_time_unit(df, source)
+    check_time_unit(df, source)
     if inputs and all(np.all(pd.to_numeric(df[c], errors="coerce") == 0) for c in inputs):
         warnings.warn(
             f"{source}: every input column ({', '.join(inputs)}) is zero throughout: only free "
@@ -295,7 +295,7 @@ def blank_labels(label: pd.Series) -> np.ndarray:
     return label.isna().to_numpy() | (label.astype(str).str.strip() == "").to_numpy()
 
 
-def _check_time_unit(df: pd.DataFrame, source: str) -> None:
+def check_time_unit(df: pd.DataFrame, source: str | None = None) -> None:
     """Time in seconds: a median step of 5 to 1000 looks like milliseconds (whole, computed in
     floating point, or a logger's jittered stamps; no vehicle's dynamics are sampled every 5 s),
     one of 10⁵ or more like micro- or nanoseconds."""
@@ -306,7 +306,7 @@ def _check_time_unit(df: pd.DataFrame, source: str) -> None:
 
 def time_unit_slip(t: np.ndarray) -> str | None:
     """What a time column meant as seconds looks like when it steps as another unit does
-    (:func:`_check_time_unit`'s rule), or None."""
+    (:func:`check_time_unit`'s rule), or None."""
     if t.size < 3:
         return None
     step = float(np.median(np.abs(np.diff(t))))

@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from nnid.datasets.log import POSE, TAU, VELOCITY, time_unit_slip
+from nnid.datasets.log import POSE, TAU, VELOCITY, check_time_unit
 from nnid.datasets.preprocess import check_uniform, experiments, first_order_lag
 from nnid.errors import NnidInputError
 from nnid.physics import compiled
@@ -58,9 +58,7 @@ def check_stepped(log: pd.DataFrame) -> None:
     one sample: free-run NRMSE 0.05-0.18 of the true model on noise-free data)."""
     if "t" not in log:
         return
-    slip = time_unit_slip(log["t"].to_numpy(np.float64))
-    if slip:
-        raise NnidInputError(f"the log's {slip}; t must be seconds", field="t")
+    check_time_unit(log)
     what = "the prediction (one step of the run's typical interval a sample)"
     check_uniform(log, what, tolerance=MISSING_SAMPLE)
 
