@@ -137,7 +137,7 @@ def unscored_divergence(
             continue
         group = [g for g in scored if g in VELOCITY and (g in "uvw") == (c in "uvw")]
         cols = [log[g].to_numpy(np.float64)[mask] for g in group]
-        widths = [float(np.nanmax(v) - np.nanmin(v)) for v in cols if np.isfinite(v).any()]
+        widths = [_range(v) for v in cols if np.isfinite(v).any()]
         bad = left_range(y[ok], p, max(widths) if widths else np.inf)
         if bad.any():
             out[c] = float(t[np.flatnonzero(bad)[0]])
