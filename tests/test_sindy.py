@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import itertools
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -203,3 +204,28 @@ def test_the_ensemble_draws_from_its_own_generator(vt690, monkeypatch):
             path = SindyDamping(vehicle, optimizer="ensemble", thresholds=[0.05], seed=seed)
             fits[seed] = path.fit(train, val).coefficients_
     assert fits[0] != fits[1]  # another seed drops other terms
+
+
+@pytest.mark.parametrize(("dt", "lag"), [(0.1, 0.1), (0.05, 0.3)])
+def test_control_mode_steps_a_vehicles_actuator_lag_exactly(dt, lag):
+    """A vehicle file's actuator lag is integrated from the force commanded in the
+    control-mode prediction, as the simulator flies it: holding the lagged force's samples
+    delayed it by half a sample, and a fit that recovers the plant exactly on noise-free data
+    predicted free runs 6-7 % (NRMSE) away from it."""
+    from nnid.datasets.simulator import simulate
+    from nnid.physics.effects import apply_effect
+
+    truth = apply_effect(load_vehicle("seamor"), "actuator_lag", lag)
+    rng = np.random.default_rng(3)
+    inputs = np.zeros((400, 6))
+    levels = rng.uniform(-30, 30, size=(20, 3))
+    inputs[20:, [0, 1, 5]] = np.repeat(levels, 20, 0)[:380] * [1, 1, 0.2]
+    log = simulate(truth, inputs, dt)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the unexcited DOFs' selection warnings
+        model = SindyDamping(truth, mode="control").fit(log)
+    for mode in ("free_run", 5):
+        pred = model.predict(log, mode)
+        for dof in "uvr":
+            err = float(np.nanmax(np.abs(pred[dof] - log[dof])))
+            assert err < 1e-9 * log[dof].abs().max(), (mode, dof, err)
