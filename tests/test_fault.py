@@ -198,6 +198,42 @@ def test_a_payload_is_named_by_its_weight_minus_buoyancy(vehicle, monitor):
     assert a["value"] == pytest.approx(2.0 * vehicle.g - 4.0, rel=0.2)
 
 
+@pytest.mark.parametrize(
+    "faults",
+    [
+        [Fault("thruster", FAULT_T, thruster="h1", efficiency=0.3),
+         Fault("thruster", FAULT_T, thruster="v2", efficiency=0.3)],
+        [Fault("effect", FAULT_T, effect="linear_damping.u", value=30.0)],
+    ],
+    ids=["two thrusters", "damping"],
+)  # fmt: skip
+def test_a_fault_outside_the_hypotheses_is_said_unexplained(vehicle, monitor, faults):
+    """Two thrusters lost at once, or a declared damping term changed: no hypothesis is the
+    fault. The best one left 38 and 5.9 times the noise power and was named with confidence
+    1.00; it is said unexplained, named only as the best fit, with no size and confidence 0."""
+    from nnid.fault.follow import describe_alarm
+
+    (a,) = detect(monitor, simulate_faults(vehicle, 35, faults=faults, seed=102)).alarms
+    assert (a["kind"], a["thruster"], a["effect"], a["efficiency"]) == ("model_change", None,
+                                                                        None, None)  # fmt: skip
+    assert a["confidence"] == 0.0 and "unexplained by the hypotheses" in describe_alarm(a)
+    assert a["residual_ratio"] > 2.0 and a["hypothesis"]  # isolation.UNEXPLAINED_RATIO
+
+
+def test_a_second_fault_during_a_persisting_one_is_alarmed(vehicle, monitor):
+    """Thruster h1 at 50 % from 20 s, then a tether snag at 45 s: the statistics stayed above
+    their thresholds on the loss, so the snag raised no alarm. The monitor then watches the
+    residual the isolated loss leaves: the snag is a second alarm, named and sized."""
+    faults = [Fault("thruster", FAULT_T, thruster="h1", efficiency=0.5),
+              Fault("external", 45.0, force=(-10, 0, 0, 0, 0, 1.0))]  # fmt: skip
+    first, second = detect(monitor, simulate_faults(vehicle, 60, faults=faults, seed=7)).alarms
+    assert (first["kind"], first["thruster"]) == ("thruster_loss", "h1")
+    assert first["efficiency"] == pytest.approx(0.5, abs=0.05) and first["residual_ratio"] < 2
+    assert 45.0 <= second["t"] <= 46.0 and second["kind"] == "external_force"
+    assert second["components"]["external_bias.u"]["value"] == pytest.approx(-10.0, rel=0.1)
+    assert second["components"]["external_bias.r"]["value"] == pytest.approx(1.0, rel=0.1)
+
+
 def test_no_false_alarm_on_healthy_held_out_runs(vehicle, monitor):
     healthy = pd.concat([simulate_faults(vehicle, 300, seed=s, experiment=f"t{s}")
                          for s in (50, 51)], ignore_index=True)  # fmt: skip

@@ -3,6 +3,15 @@
 The alarm records follow the ``detect.json`` contract (ARCHITECTURE.md): time, kind, thruster and
 remaining efficiency, effect, severity (the peak of the larger statistic over its threshold in the
 window) and confidence.
+
+While an isolated change persists its residual keeps the statistics above their thresholds, and
+the monitor alone would not re-arm until it ends: a second fault during the first would not be
+alarmed. So after an alarm whose change is isolated (a hypothesis named that leaves no more than
+noise, :data:`nnid.fault.isolation.UNEXPLAINED_RATIO`), the rest of the experiment is watched
+on the residual that change leaves (the fitted hypothesis taken out, fresh EWMA and CUSUM from
+the end of the isolation window, the same thresholds): a new alarm there is a residual the
+first change no longer explains, and is isolated on that residual. An alarm that is not
+isolated (unexplained, not significant) leaves the monitor as it was.
 """
 
 from __future__ import annotations
@@ -13,12 +22,20 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from nnid.fault.isolation import isolate
+from nnid.fault import kernel
+from nnid.fault.isolation import (
+    UNEXPLAINED_RATIO,
+    UNEXPLAINED_SHARE,
+    Diagnosis,
+    isolate,
+    noise_ratio,
+    signature,
+)
 from nnid.fault.monitor import ResidualMonitor, Trace, monitor_inputs
 
 ALARM_FIELDS = ["experiment", "t", "kind", "thruster", "efficiency", "efficiency_low",
                 "efficiency_high", "effect", "value", "stderr", "severity", "confidence",
-                "explained", "meaning"]  # fmt: skip
+                "explained", "residual_ratio", "hypothesis", "meaning"]  # fmt: skip
 
 
 @dataclass
@@ -29,20 +46,31 @@ class DetectResult:
 
 
 def alarm_record(
-    monitor: ResidualMonitor, data: dict, trace: Trace, k: int, window_s: float
+    monitor: ResidualMonitor,
+    data: dict,
+    trace: Trace,
+    k: int,
+    window_s: float,
+    residual: np.ndarray | None = None,
 ) -> dict:
     """The alarm that starts at row ``k``, isolated on [t_k, t_k + window_s]. The window starts
     at the alarm, never before: the change began at or before the alarm, and healthy samples
-    before its onset would bias the size of the change toward zero."""
+    before its onset would bias the size of the change toward zero. ``residual`` [N, 6]: the
+    one to isolate (the trace's own by default)."""
+    return _record(monitor, data, trace, k, window_s, residual)[0]
+
+
+def _record(monitor, data, trace, k, window_s, residual=None) -> tuple[dict, Diagnosis, np.ndarray]:
     t, codes = data["t"], data["experiment"]
     rows = np.flatnonzero((codes == codes[k]) & (t >= t[k]) & (t <= t[k] + window_s))
-    diag = isolate(monitor, data, trace.values[:, 0:6], rows)
+    residual = trace.values[:, 0:6] if residual is None else residual
+    diag = isolate(monitor, data, residual, rows)
     h_t, h_g = monitor.threshold_values
     severity = float(
         np.nanmax(np.maximum(trace.values[rows, 18] / h_t, trace.values[rows, 19] / h_g))
     )
     interval = diag.efficiency_interval or (None, None)
-    return {
+    record = {
         "experiment": str(trace.experiment[k]),
         "t": float(t[k]),
         "kind": diag.kind,
@@ -57,18 +85,69 @@ def alarm_record(
         "confidence": diag.confidence,
         "meaning": diag.meaning,
         "explained": diag.explained,
+        "residual_ratio": diag.residual_ratio,
+        "hypothesis": diag.hypothesis,
         "p_value": diag.p_value,
         "alternatives": diag.alternatives,
         "components": diag.components,
     }
+    return record, diag, rows
 
 
 def detect(monitor: ResidualMonitor, log: pd.DataFrame, window_s: float = 10.0) -> DetectResult:
-    """Every alarm on ``log`` with its isolation on the ``window_s`` seconds after it."""
+    """Every alarm on ``log`` with its isolation on the ``window_s`` seconds after it; after an
+    isolated change, the monitor watches what that change leaves (the module docstring). The
+    trace keeps the model's residual r; its statistics and alarms are those watched."""
     start = time.perf_counter()
     data = monitor_inputs(log, monitor.plant_)
     trace = monitor.run(log)
-    alarms = [
-        alarm_record(monitor, data, trace, int(k), window_s) for k in np.flatnonzero(trace.alarm)
-    ]
-    return DetectResult(trace, alarms, time.perf_counter() - start)
+    values, alarm = trace.values.copy(), trace.alarm.copy()
+    residual = trace.values[:, 0:6].copy()  # the residual watched, re-referenced per change
+    watched = Trace(trace.t, trace.experiment, values, alarm)
+    t, codes = data["t"], data["experiment"]
+    cfg = monitor._cfg(monitor.threshold_values, monitor.interval)
+    alarms, pos = [], 0
+    changed = np.zeros(t.size, dtype=bool)  # rows watched on a re-referenced residual
+    while (ks := np.flatnonzero(alarm[pos:])).size:
+        k = pos + int(ks[0])
+        if changed[k]:
+            # an alarm on what an isolated change leaves: a new change only where that residual
+            # is beyond what a named hypothesis may leave (isolation's rule: the model's error
+            # grows with the first change; small excursions of it are not a second fault)
+            rows = np.flatnonzero((codes == codes[k]) & (t >= t[k]) & (t <= t[k] + window_s))
+            excess = noise_ratio(monitor, trace.values[rows, 0:6] - monitor.mu_) - 1.0
+            left = noise_ratio(monitor, residual[rows] - monitor.mu_)
+            if left <= max(UNEXPLAINED_RATIO, 1.0 + UNEXPLAINED_SHARE * excess):
+                _rewatch(monitor, data, residual, values, alarm, rows, cfg, changed)
+                pos = int(rows[-1]) + 1
+                continue
+        record, diag, rows = _record(monitor, data, watched, k, window_s, residual)
+        alarms.append(record)
+        pos = k + 1
+        if diag.isolated:
+            rest = _rest(data, rows)
+            residual[rest] -= signature(monitor, data, rest, diag.fitted)
+            _rewatch(monitor, data, residual, values, alarm, rows, cfg, changed)
+            pos = int(rows[-1]) + 1
+    return DetectResult(watched, alarms, time.perf_counter() - start)
+
+
+def _rest(data: dict, rows: np.ndarray) -> np.ndarray:
+    """The rows of the experiment after ``rows``."""
+    codes = data["experiment"]
+    k = int(rows[-1])
+    return np.arange(k + 1, int(np.flatnonzero(codes == codes[k])[-1]) + 1)
+
+
+def _rewatch(monitor, data, residual, values, alarm, rows, cfg, changed) -> None:
+    """Watch ``residual`` from fresh statistics on the rest of the experiment after ``rows``
+    (the window of an alarm: no new alarm within it); values and alarms rewritten there."""
+    rest = _rest(data, rows)
+    alarm[rows[0] + 1 : rows[-1] + 1] = False
+    changed[rest] = True
+    if rest.size:
+        t = data["t"]
+        out = kernel.watch(t[rows[-1]], t[rest], residual[rest], cfg, monitor.mu_,
+                           monitor.whiten_, monitor.s_inv_, np.empty((rest.size, 21)))  # fmt: skip
+        values[rest, 6:20] = out[:, 6:20]
+        alarm[rest] = out[:, 20] == 1

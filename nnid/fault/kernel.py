@@ -214,6 +214,32 @@ def run(ts, xs, cmds, prev, st, cfg, form, mass, mask, act, mu, whiten, s_inv, o
     return out
 
 
+@njit(cache=True)
+def watch(t_prev, ts, rs, cfg, mu, whiten, s_inv, out):
+    """The statistics and alarms of :func:`_update` over residuals already made, ``rs`` [N, 6]
+    (NaN: none) at times ``ts`` (``t_prev`` the time before the first), from a fresh state:
+    the monitor on a residual re-referenced to an isolated change. ``out`` as :func:`run`'s."""
+    st = np.zeros(STATE_SIZE)
+    for k in range(rs.shape[0]):
+        row = out[k]
+        for i in range(20):
+            row[i] = np.nan
+        row[20] = -1.0
+        dt = ts[k] - (t_prev if k == 0 else ts[k - 1])
+        finite = dt > 0.0
+        for i in range(6):
+            finite = finite and math.isfinite(rs[k, i])
+        if not finite:
+            continue
+        for i in range(6):
+            row[i] = rs[k, i]
+        t_stat, g = _statistics(dt, mu, whiten, s_inv, cfg, row, st)
+        row[18] = t_stat
+        row[19] = g
+        row[20] = _alarm(t_stat, g, dt, cfg, st)
+    return out
+
+
 @njit(cache=True, parallel=True)
 def run_blocks(starts, ts, xs, cmds, cfg, form, mass, mask, act, mu, whiten, s_inv, out):
     """:func:`run` over the row blocks [starts[j], starts[j + 1]) (the experiments), each from a

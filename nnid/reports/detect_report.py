@@ -144,7 +144,8 @@ def detect_html(monitor, result: DetectResult, source: str = "") -> str:
                     "effect": "the change named in nnid's effect vocabulary",
                     "severity": "peak of the monitor statistic over its threshold after the alarm",
                     "confidence": "posterior weight of the named hypothesis and of those the "
-                    "data cannot tell from it",
+                    "data cannot tell from it; 0 where the best hypothesis leaves more than "
+                    "twice the healthy noise power (unexplained by the hypotheses)",
                 }
             )
         )
