@@ -405,6 +405,41 @@ def test_a_small_real_motion_is_excitation_and_noise_alone_is_not():
     assert unexcited_unknowns(names, data) == {"Z_wdot": ["w"]}
 
 
+def _surge_with_sines(vehicle, sine: float):
+    """Two minutes of a 10-N surge with ``sine`` N of sine at 0.5 rad/s, logged by a 10-Hz
+    DVL (5 mm/s noise): the accelerations are Savitzky-Golay derivatives of noisy speeds."""
+    from nnid.datasets.measurement import Measurement
+    from nnid.datasets.simulator import simulate
+
+    t = np.arange(1201) * 0.1
+    inputs = np.zeros((t.size, 6))
+    inputs[:, 0] = 10.0 + sine * np.sin(0.5 * t)
+    dvl = Measurement(kind="dvl_imu")
+    return simulate(vehicle, inputs, 0.1, measurement=dvl, seed=0, experiment="surge")
+
+
+def test_an_added_mass_biased_by_the_noise_of_a_weak_acceleration_is_named(seamor):
+    """Errors in variables: with 1-N sines the noise of the differentiated DVL speed is a fifth
+    of u̇'s variance, least squares shrinks m − X_udot by as much, and X_udot came out 39 %
+    small (-16.6 for -27.08) with a standard error of 1.0 and no warning: the excitation
+    checks compare the velocity, not its derivative, with the noise. The fit names it and the
+    expected bias, which accounts for the error; 10-N sines identify it without a word."""
+    names = ["X_udot", "X:u*abs(u)"]
+    truth = seamor.added_mass["X_udot"]
+    weak = ParametricModel(seamor, names, dofs=["u"])
+    with pytest.warns(ExcitationWarning, match=r"errors in variables.*X_udot = -16\.6 is about"):
+        weak.fit(_surge_with_sines(seamor, 1.0))
+    theta = weak.params["X_udot"]["value"]
+    assert theta - truth > 5 * weak.params["X_udot"]["stderr"]  # far outside its s.e.
+    rho, bias = weak.attenuated_["X_udot"]
+    assert 0.15 < rho < 0.3 and theta - bias == pytest.approx(truth, rel=0.05)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        strong = ParametricModel(seamor, names, dofs=["u"]).fit(_surge_with_sines(seamor, 10.0))
+    assert strong.attenuated_ == {}
+    assert strong.params["X_udot"]["value"] == pytest.approx(truth, rel=0.1)
+
+
 @pytest.mark.parametrize("trainer", ["adam", "lm"])
 def test_a_network_trainer_on_a_fossen_model_is_one_clear_error(trainer):
     """The config refuses lm and adam for a Fossen model; the Python API said it with a

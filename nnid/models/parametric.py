@@ -359,6 +359,96 @@ def unexcited_unknowns(names: Sequence[str], data: dict[str, np.ndarray]) -> dic
     return out
 
 
+def acceleration_noise_share(
+    data: dict[str, np.ndarray],
+    dofs: Sequence[str],
+    savgol: tuple[float, int] | None,
+    filter_lambda: float | None = None,
+) -> dict[str, float]:
+    """Per DOF of ``dofs``: the share ρ = σ²_e / var(a) of the variance of the acceleration
+    regressor a that is measurement noise e (errors in variables): the velocity noise of
+    :func:`nnid.trainers.ukf.noise_level` (second differences) times the noise gain of the
+    differentiator: the Savitzky-Golay derivative (``savgol`` = (window s, order)) that made
+    ``nu_dot``, or with ``filter_lambda`` the filtered derivative sF(s) of Weiss eqs 86-92
+    (white noise gain λ²/(1 + λ dt/2) of its bilinear discretisation); ``savgol`` None: the
+    logged accelerations' own noise (gain 1). Least squares then shrinks the fitted inertia
+    M_jj = m − F_jdot by the factor 1 − ρ. Velocities that were themselves differentiated from
+    the pose carry smoothed noise that differences underestimate: ρ is then too small."""
+    from nnid.datasets.preprocess import savgol_noise_gain, savgol_window
+    from nnid.trainers.ukf import noise_level
+
+    idx = [DOFS.index(d) for d in dofs]
+    if filter_lambda is not None:
+        keep = filter_settled(data, filter_lambda)
+        acc = filter_signal(data, data["nu"], filter_lambda, derivative=True)[:, idx]
+    else:
+        keep = np.ones(data["t"].size, dtype=bool)
+        acc = np.asarray(data["nu_dot"], dtype=np.float64)[:, idx]
+    logged = savgol is None and filter_lambda is None  # the accelerations as logged
+    sigma = noise_level({"nu": data["nu_dot"] if logged else data["nu"]}, dofs)
+    gain2 = np.zeros(data["t"].size)
+    for k in np.unique(data["experiment"]):
+        rows = np.flatnonzero(data["experiment"] == k)
+        dt = float(np.median(np.diff(data["t"][rows]))) if rows.size > 1 else 1.0
+        if filter_lambda is not None:
+            gain2[rows] = filter_lambda**2 / (1.0 + filter_lambda * dt / 2.0)
+        elif savgol is not None:
+            window = savgol_window(savgol[0], 1.0 / dt, savgol[1])
+            gain2[rows] = savgol_noise_gain(window, savgol[1], dt) ** 2
+        else:
+            gain2[rows] = 1.0
+    noise2 = sigma**2 * float(np.mean(gain2[keep]))
+    spread2 = np.nanvar(acc[keep], axis=0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        share = np.where(spread2 > 0, noise2 / spread2, np.inf)
+    return {d: float(r) for d, r in zip(dofs, share, strict=True)}
+
+
+ATTENUATION_LIMIT = 0.10
+"""The expected errors-in-variables bias of an added mass, as a fraction of its value, above
+which :func:`attenuated_unknowns` names it (when the standard error does not cover it either):
+well-excited logs show 1.5-5 % (docs/reference.md), weak excitation 20-40 %."""
+
+
+def attenuated_unknowns(
+    names: Sequence[str],
+    dofs: Sequence[str],
+    data: dict[str, np.ndarray],
+    inertia: np.ndarray,
+    estimate: dict[str, tuple[float, float]],
+    savgol: tuple[float, int] | None,
+    filter_lambda: float | None = None,
+) -> dict[str, tuple[float, float]]:
+    """The diagonal added masses of ``names`` fitted from their own DOF's equation (in
+    ``dofs``) whose expected errors-in-variables bias exceeds :data:`ATTENUATION_LIMIT` of their
+    value and 2 standard errors: ``{name: (ρ, bias)}``. ``inertia`` is the diagonal of the
+    fitted M = M_RB + M_A, ``estimate`` ``{name: (θ̂, s.e.)}``. Least squares shrinks the
+    fitted inertia M̂ by the noise share ρ of :func:`acceleration_noise_share`, so F_jdot comes
+    out high (a negative added mass too small) by about M̂ ρ / (1 − ρ): an estimate, not a
+    correction (on simulated surge logs with Savitzky-Golay accelerations it accounted for the
+    error within 5 %; with filtered regressors it overstated it by up to a half)."""
+    todo = {}
+    for name in names:
+        try:
+            i, j = parse_added_mass_key(name)
+        except ValueError:
+            continue
+        if i == j and DOFS[j] in dofs and name in estimate:
+            todo[name] = DOFS[j]
+    if not todo:
+        return {}
+    share = acceleration_noise_share(
+        data, list(dict.fromkeys(todo.values())), savgol, filter_lambda
+    )
+    out = {}
+    for name, dof in todo.items():
+        rho, (theta, se) = share[dof], estimate[name]
+        bias = inertia[DOFS.index(dof)] * rho / (1.0 - rho) if rho < 1 else np.inf
+        if bias > ATTENUATION_LIMIT * abs(theta - bias) and not bias <= 2 * se:
+            out[name] = (rho, float(bias))
+    return out
+
+
 def prepare_motion(
     log: pd.DataFrame,
     dofs: Sequence[str],
@@ -600,8 +690,62 @@ class ParametricModel(FossenPlant):
                 ExcitationWarning,
                 stacklevel=3,
             )
+        self.attenuated_ = self._attenuated(trainer, unknowns, dofs, data)
+        if self.attenuated_:
+            from nnid.trainers.least_squares import ExcitationWarning
+
+            fitted = dict(zip(self.estimate_.names, self.estimate_.theta, strict=True))
+            said = "; ".join(
+                f"{n} = {fitted[n]:.3g} is about {bias:.3g} too high, near {fitted[n] - bias:.3g} "
+                f"({100 * bias / abs(fitted[n] - bias):.0f} %; noise {100 * rho:.0f} % of the "
+                f"{DOFS[parse_added_mass_key(n)[1]]} acceleration's variance)"
+                for n, (rho, bias) in self.attenuated_.items()
+            )
+            warnings.warn(
+                "the accelerations are weakly excited against the noise of their derivative "
+                "(errors in variables): least squares shrinks the fitted inertia m − F_jdot, "
+                f"and these added masses are biased by more than {100 * ATTENUATION_LIMIT:.0f} % "
+                f"and 2 standard errors, which their standard errors do not include: {said}; "
+                "excite the accelerations more (larger or faster input changes)",
+                ExcitationWarning,
+                stacklevel=3,
+            )
         self._check_mass()
         self._check_signs()
+
+    def _attenuated(
+        self, trainer, unknowns: list[str], dofs: list[str], data: dict[str, np.ndarray]
+    ) -> dict[str, tuple[float, float]]:
+        """:func:`attenuated_unknowns` of the fit, step by step for a sequence (each on its
+        experiments; a later step's verdict replaces an earlier one's), not judged for the
+        UKF, which regresses on no acceleration."""
+        from nnid.trainers.sequence import Step, _subset, sequence_steps
+
+        inner = getattr(trainer, "trainer", trainer)
+        if getattr(inner, "kind", "") == "ukf":
+            return {}
+        derived = any(s.step == "derive accelerations" for s in self.report_.steps)
+        savgol = (self.savgol_window, self.savgol_order) if derived else None
+        lam = getattr(trainer, "filter_lambda", None)
+        inertia = np.diag(self.parts_.model(check=False).mass_matrix().numpy())
+        est = self.estimate_
+        values = dict(zip(est.names, zip(est.theta, est.stderr, strict=True), strict=True))
+        values = {
+            n: v for n, v in values.items() if np.isfinite(v[0]) and n not in self.not_excited_
+        }
+        steps = (
+            [(s, _subset(data, s.experiments)) for s in sequence_steps(self.sequence)]
+            if self.sequence is not None
+            else [(Step([], dofs, unknowns), data)]
+        )
+        out: dict[str, tuple[float, float]] = {}
+        for step, subset in steps:
+            for name in step.unknowns:
+                out.pop(name, None)
+            out.update(
+                attenuated_unknowns(step.unknowns, step.dofs, subset, inertia, values, savgol, lam)
+            )
+        return out
 
     def _params(self) -> dict[str, dict[str, float | None]]:
         params = self.estimate_.as_dict()
