@@ -171,7 +171,7 @@ def inspect(
         cols = sorted({c for g in missing["gaps"] for c in g["columns"]}, key=list(log).index)
         out.print(
             f"  missing       {missing['count']} gaps in {', '.join(cols)} "
-            f"({missing['samples']} samples, {missing['seconds']:.3g} s, longest "
+            f"({missing['samples']} samples, {missing['seconds']:.3g} s missing, longest "
             f"{missing['longest_s']:.3g} s): bridged from the pose or masked where used"
         )
     table = Table(title="excitation per DOF")

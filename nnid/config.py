@@ -284,7 +284,9 @@ class SplitSpec(StrictModel):
     """Train / validation / test: whole ``experiment``s (named, or by ``fractions`` of the
     samples in order), contiguous ``block``s of each experiment (MATLAB's divideblock), or
     ``auto``: whole experiments when every part with a fraction gets at least one, else blocks
-    (the residual loop's rule: a config that runs on any log)."""
+    (the residual loop's rule: a config that runs on any log). A key left out is not named; a
+    list given is what it says: ``test = []`` is no test part, and an empty ``train`` or
+    ``validation`` (a fit needs both) is refused, not read as "split by fractions"."""
 
     by: Literal["experiment", "block", "auto"] = "block"
     fractions: list[Annotated[float, Field(ge=0, le=1)]] = Field(
@@ -293,6 +295,16 @@ class SplitSpec(StrictModel):
     train: Names | None = None
     validation: Names | None = None
     test: Names | None = None
+
+    @field_validator("train", "validation")
+    @classmethod
+    def _not_empty(cls, names: list[str] | None, info) -> list[str] | None:
+        if names is not None and not names:
+            raise ValueError(
+                f"an empty list names no {info.field_name} experiment, and a fit needs one: "
+                "name at least one, or leave the key out to split by fractions"
+            )
+        return names
 
 
 # -- trainers ------------------------------------------------------------------------------------

@@ -396,10 +396,10 @@ def make_split(
     Motion gaps are masked in each part after the split, so they never move it
     (:func:`nnid.datasets.gaps.mask_gaps`, reported in ``report``)."""
     assignment = None
-    named = [p for p in PARTS if getattr(s, p)]
+    named = [p for p in PARTS if getattr(s, p) is not None]  # test = [] says: no test part
     if named and s.by != "experiment":  # they would be ignored
         raise NnidInputError(
-            f'names experiments for {", ".join(named)}, which only by = "experiment" uses '
+            f'lists experiments for {", ".join(named)}, which only by = "experiment" uses '
             f"(by = {s.by!r} cuts every experiment by fractions)",
             source=source,
             field=f"split.{named[0]}",
@@ -495,6 +495,16 @@ def _auto_split(log: pd.DataFrame, fractions: tuple[float, float, float]) -> Spl
 
 #: models whose force series is McCarter's τ̄ (eq. 4.4): their forces share one plot and table
 DAMPING_KINDS = ("synthesis", "sindy")
+
+
+def build_model(spec, vehicle, warmup_s: float):
+    """The model of a config section; an ensemble scores its members' validation free runs
+    with the run's ``warmup_s``, as every score of the run is (one number per member, not
+    one in ``describe`` and another in ``members``)."""
+    model = spec.build(vehicle)
+    if model.kind == "ensemble":
+        model.set_params(warmup_s=warmup_s)
+    return model
 
 
 def fit_model(model, split: Split, progress: Progress, section: str, spec) -> list[str]:
@@ -625,7 +635,7 @@ def run_train(
     source = str(config_path)
     inputs, loaded = loaded_inputs(cfg, config_path, [cfg.model], data, vehicle, columns)
     split = make_split(inputs.log, cfg.split, source, inputs.report, cfg.warmup_s)
-    model = cfg.model.build(inputs.vehicle)
+    model = build_model(cfg.model, inputs.vehicle, cfg.warmup_s)
     caught = fit_model(model, split, progress or silent, "model", cfg.model)
     if hasattr(model, "report_"):
         for step in model.report_.steps:
@@ -815,7 +825,7 @@ def run_compare(
     for i, spec in enumerate(cfg.models):
         name = spec.label()
         report(i, len(cfg.models), f"fitting {name}")
-        model = spec.build(inputs.vehicle)
+        model = build_model(spec, inputs.vehicle, cfg.warmup_s)
         t0 = time.perf_counter()
         caught = fit_model(model, split, staged(progress, name), f"models.{i}", spec)
         seconds = time.perf_counter() - t0

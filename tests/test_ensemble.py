@@ -87,6 +87,23 @@ def test_a_member_diverging_on_validation_is_dropped_and_said(log):
     assert kept.validation_use is None
 
 
+def test_member_validation_totals_leave_out_the_runs_warm_up(log, tmp_path):
+    """``member_validation_free_run_nrmse`` scored each member with only its own warm-up left
+    out, ``metrics.json``'s members with the config's ``warmup_s``: two totals for one member
+    on one log. The ensemble scores with ``warmup_s``, which ``nnid train`` sets from its
+    config."""
+    from nnid.pipeline import build_model
+
+    model = EnsembleModel(Offset(), seeds=(0, 1), warmup_s=5.0).fit(log, log)
+    alone = [m.score(log, "free_run", warmup_s=5.0)["total"] for m in model.members_]
+    np.testing.assert_allclose(model.member_validation_, alone, rtol=1e-12)
+    assert model.member_validation_[1] != pytest.approx(model.members_[1].score(log)["total"])
+    text = _with_seeds((ROOT / "configs/seamor_narx_adam.toml").read_text(), "[0, 1]")
+    cfg = load_config(_config(tmp_path, text.replace("warmup_s = 1.0", "warmup_s = 2.5")),
+                      TrainConfig)  # fmt: skip
+    assert build_model(cfg.model, None, cfg.warmup_s).warmup_s == 2.5
+
+
 def test_all_members_diverging_keeps_them_all(log):
     model = EnsembleModel(Offset(), seeds=(99, 100)).fit(log, log)
     assert model.member_seeds_ == [99, 100] and model.dropped_ == []
@@ -184,6 +201,9 @@ def test_cli_train_shipped_adam_ensemble_reports_every_member(tmp_path):
         assert ft["epochs"] == 1 and np.isfinite(ft["validation_free_run_nrmse_before"])
     assert [r["seed"] for r in m["members"]] == [0, 1]
     seed_totals = [r["test"]["free_run_nrmse"]["total"] for r in m["members"]]
+    # one validation total per member: the one that chose the members is the one reported
+    checked = [r["validation"]["free_run_nrmse"]["total"] for r in m["members"]]
+    np.testing.assert_allclose(m["describe"]["member_validation_free_run_nrmse"], checked)
     assert seed_totals[0] != seed_totals[1]  # the seeds are different nets
     assert "## Ensemble members" in (out / "report.md").read_text()
     # the saved ensemble predicts the mean of its members, each as it would alone

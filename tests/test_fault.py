@@ -664,3 +664,27 @@ def test_a_hand_edited_monitor_file_is_refused(monitor, tmp_path):
         with pytest.raises(NnidInputError, match=words) as err:
             ResidualMonitor.load(tmp_path)
         assert "monitor.json" in str(err.value)
+
+
+def test_detect_json_names_the_target_rate_apart_from_the_measured_one(monitor, vehicle):
+    """``false_alarm_rate_per_hour`` (the contract's key) is the rate the thresholds were set
+    for; beside it, named for what they are, the target and the rate the healthy test part
+    measured (null where nothing measured it), so neither is read for the other."""
+    import copy
+
+    from nnid.reports.detect_report import detect_json
+
+    healthy = simulate_faults(vehicle, 25, seed=7, experiment="held")
+    result = detect(monitor, healthy)
+    unmeasured = copy.copy(monitor)
+    unmeasured.measured_false_alarms_ = None
+    said = detect_json(unmeasured, result)
+    assert said["false_alarm_rate_per_hour"] == monitor.false_alarm_per_hour
+    assert said["target_false_alarm_rate_per_hour"] == monitor.false_alarm_per_hour
+    assert said["measured_false_alarm_rate_per_hour"] is None
+    measured = copy.copy(monitor)
+    fa = measured.measure_false_alarms(healthy)
+    said = detect_json(measured, result)
+    assert said["target_false_alarm_rate_per_hour"] == monitor.false_alarm_per_hour
+    assert said["measured_false_alarm_rate_per_hour"] == fa["rate_per_hour"]
+    assert said["false_alarms_measured"]["rate_per_hour"] == fa["rate_per_hour"]

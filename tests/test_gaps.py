@@ -125,10 +125,56 @@ def test_a_piece_cut_at_a_gap_shorter_than_the_window_gets_no_derivative():
 
     t = np.arange(220) * 0.05
     log = pd.DataFrame({"t": t, "experiment": ["run0#1"] * 20 + ["run0#2"] * 200, "u": np.sin(t)})
+    log["piece_of"] = "run0"  # as mask_gaps marks its pieces
     report = CleaningReport(source="log")
     out = derive_accelerations(log, 1.0, 4, report)
     assert out["du"].iloc[:20].isna().all() and np.isfinite(out["du"].iloc[30:-30]).all()
     assert "20 samples in pieces between gaps shorter than the window" in report.steps[-1].detail
     with pytest.raises(NnidInputError, match="run1' has 20 samples") as err:
-        derive_accelerations(log.iloc[:20].assign(experiment="run1"), 1.0, 4)
+        derive_accelerations(log.iloc[:20].assign(experiment="run1", piece_of=None), 1.0, 4)
     assert err.value.field == "savgol_window"
+
+
+def test_gap_seconds_are_the_missing_samples_times_the_interval(tmp_path):
+    """400 lone samples missing at 20 Hz are 20 s missing; each gap's span between the present
+    samples around it counted 2 intervals, so ``nnid inspect`` said "400 samples, 40 s"."""
+    from typer.testing import CliRunner
+
+    from nnid.cli import app
+    from nnid.datasets.inspect import summarize
+
+    log = _mocap_log(4000)
+    log.loc[np.arange(5, 4000, 10), "u"] = np.nan  # 400 gaps of one sample each
+    missing = summarize(log)["missing"]
+    assert (missing["count"], missing["samples"]) == (400, 400)
+    assert missing["seconds"] == pytest.approx(400 * 0.05)
+    assert missing["longest_s"] == pytest.approx(0.05)
+    gap = missing["gaps"][0]
+    assert gap["missing_s"] == pytest.approx(0.05) and gap["length_s"] == pytest.approx(0.1)
+    report = CleaningReport()
+    mask_gaps([log], ["u"], report)
+    assert "400 samples, 20 s missing in total, longest 0.05 s" in report.steps[0].detail
+    log.to_csv(tmp_path / "dive.csv", index=False)
+    done = CliRunner().invoke(app, ["inspect", str(tmp_path / "dive.csv")])
+    assert done.exit_code == 0, done.output
+    assert "400 samples, 20 s missing, longest 0.05 s" in " ".join(done.output.split())
+
+
+def test_a_piece_is_told_by_its_marker_not_by_a_hash_in_the_label():
+    """A user's run named 'dive#1' was taken for a piece cut at a gap, so a run shorter than
+    the derivative window went without a derivative instead of being refused; pieces are
+    told by the ``piece_of`` column that mask_gaps writes."""
+    from nnid.datasets.preprocess import derive_accelerations
+
+    t = np.arange(20) * 0.05
+    short = pd.DataFrame({"t": t, "experiment": "dive#1", "u": np.sin(t)})
+    with pytest.raises(NnidInputError, match="dive#1' has 20 samples") as err:
+        derive_accelerations(short, 1.0, 4)
+    assert err.value.field == "savgol_window"
+    log = _mocap_log().assign(experiment="dive#1")
+    log.loc[20, "u"] = np.nan  # cuts a 20-sample piece off the run's start
+    (masked,) = mask_gaps([log], ["u"])
+    assert list(dict.fromkeys(masked["experiment"])) == ["dive#1#1", "dive#1#2"]
+    assert (masked["piece_of"] == "dive#1").all()
+    out = derive_accelerations(masked, 1.0, 4)
+    assert out["du"].iloc[:20].isna().all() and np.isfinite(out["du"].iloc[40:-40]).all()

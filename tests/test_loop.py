@@ -248,7 +248,7 @@ def test_a_gap_no_step_touched_is_said_as_such():
     (line,) = _gaps_line(data)
     assert line.endswith("left as they are in z: no step bridged or masked them."), line
     data["cleaning"].append({"step": "mask gaps", "detail": "1 gaps in z masked"})
-    assert _gaps_line(data)[0].endswith("(0.1 s, longest 0.1 s): 1 gaps in z masked.")
+    assert _gaps_line(data)[0].endswith("(0.1 s missing, longest 0.1 s): 1 gaps in z masked.")
 
 
 def _tug(t, forces):  # a tether pulling sideways every 9 s

@@ -878,3 +878,19 @@ def test_a_plant_sampled_every_10_s_is_not_read_as_milliseconds():
     model = NarxModel(["u"], ["y"], 2, 2, hidden=(3,), trainer=lm, balanced=False).fit(slow)
     assert model.sample_interval_ == 10.0
     assert model.predict(slow, "free_run")["y"].notna().sum() > 250
+
+
+def test_layer_sizes_are_settings_not_estimated_parameters():
+    """``params`` (the parameter table of metrics.json and the reports: estimate, std. error)
+    held ``layer_<i>_size`` rows beside the size: settings read as estimates. The sizes are in
+    ``describe()["layers"]``; ``params`` keeps only the network's size, as the state-space
+    model's does."""
+    train = _tank(200, 1.3, 0)
+    lm = LevenbergMarquardt(max_epochs=2, jacobian="samples")
+    model = NarxModel(["u"], ["y"], 2, 2, hidden=(3,), trainer=lm, balanced=False)
+    model.fit(train, train)
+    assert list(model.params) == ["n_params"]
+    assert model.params["n_params"]["value"] == model.n_params
+    assert model.describe()["layers"] == model.layer_sizes() == [4, 3, 1]
+    metrics = {"model": "narx", "trainer": "lm", "params": model.params, "seconds": 1.0}
+    assert "layer_" not in train_markdown(metrics)

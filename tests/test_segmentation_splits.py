@@ -174,3 +174,35 @@ def test_a_held_out_share_whole_runs_cannot_meet_is_said_where_the_split_is_kept
     if by == "auto":  # the loop holds out 0.3 of three runs of 400: one whole run, 33 %
         assert set(loop._split(log)[1]["experiment"]) == {"run2"}
     assert any(said in s.detail for s in report.steps) == (said is not None)
+
+
+def test_an_empty_list_of_experiments_in_a_split_means_what_it_says(tmp_path):
+    """``validation = []`` was read as no names at all, so the split went by fractions and
+    held out a validation run the config said not to: now an empty train or validation list
+    is refused (a fit needs both) naming the key, at exit code 2, and ``test = []`` beside
+    named validation runs is no test part."""
+    from typer.testing import CliRunner
+
+    from nnid.cli import app
+    from nnid.config import SplitSpec, TrainConfig, load_config
+    from nnid.pipeline import make_split
+
+    log = _uneven_log((300, 300, 300, 300))
+    config = tmp_path / "train.toml"
+    for key in ("validation", "train"):
+        config.write_text(f'kind = "train"\n[split]\nby = "experiment"\n{key} = []\n'
+                          '[model]\nkind = "sindy"\n')  # fmt: skip
+        with pytest.raises(NnidInputError, match="an empty list names no") as err:
+            load_config(config, TrainConfig)
+        assert err.value.field == f"split.{key}" and str(config) in str(err.value)
+    log.assign(u=np.sin(0.1 * log.index)).to_csv(tmp_path / "log.csv", index=False)
+    done = CliRunner().invoke(
+        app,
+        ["train", str(config), "--data", str(tmp_path / "log.csv"), "--out", str(tmp_path / "o")],
+    )
+    assert done.exit_code == 2 and "split.train" in done.output, done.output
+    split = make_split(log, SplitSpec(by="experiment", validation=["run1"], test=[]))
+    assert set(split.validation["experiment"]) == {"run1"} and len(split.test) == 0
+    with pytest.raises(NnidInputError, match='only by = "experiment" uses') as err:
+        make_split(log, SplitSpec(by="block", test=[]))
+    assert err.value.field == "split.test"

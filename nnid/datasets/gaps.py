@@ -1,7 +1,9 @@
 """Missing motion samples: a DVL that drops out in bursts while the pose and gyro go on.
 
 An empty cell in a pose or velocity column is a gap, never a number. Gaps are handled in two
-ways, each written to the cleaning report with counts, seconds and the longest gap:
+ways, each written to the cleaning report with counts, seconds and the longest gap (the
+seconds missing: the missing samples times the sample interval, so 400 lone samples missing
+at 20 Hz are 20 s, not the 40 s spanned between their present neighbours):
 
 - **bridged** from the pose, as the log contract derives velocities (Savitzky-Golay rates and
   ν = J⁻¹(η) η̇, Weiss eq. 17): p q r wherever the attitude is complete, u v w wherever the
@@ -13,13 +15,13 @@ ways, each written to the cleaning report with counts, seconds and the longest g
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 import pandas as pd
 
 from nnid.datasets.cleaning import CleaningReport
-from nnid.datasets.log import ACCELERATION, ANGLES, POSE, VELOCITY
+from nnid.datasets.log import ACCELERATION, ANGLES, PIECE_OF, POSE, VELOCITY
 from nnid.datasets.preprocess import derive_velocities, experiments
 
 #: a segment left between two gaps shorter than this many samples is masked with them
@@ -35,9 +37,10 @@ class Gap:
 
     experiment: str | None
     t: float  # time of the first missing sample, s
-    length_s: float  # from the last sample before to the first sample after
+    length_s: float  # spanned: from the last sample before to the first sample after
     rows: int
     columns: list[str]
+    missing_s: float  # missing: rows × the experiment's median sample interval
 
 
 def _runs(missing: np.ndarray) -> list[tuple[int, int]]:
@@ -51,12 +54,18 @@ def _gap_runs(part: pd.DataFrame, columns: list[str]):
     missing = part[columns].isna().to_numpy()
     t = part["t"].to_numpy(np.float64)
     name = part["experiment"].iloc[0] if "experiment" in part else None
+    dt = float(np.median(np.diff(t))) if t.size > 1 else 0.0
     for a, b in _runs(missing.any(axis=1)):
         t0 = t[a - 1] if a > 0 else t[a]
         t1 = t[b] if b < t.size else t[b - 1]
         cols = [c for c, m in zip(columns, missing[a:b].any(axis=0), strict=True) if m]
         gap = Gap(
-            None if name is None else str(name), float(t[a]), float(t1 - t0), int(b - a), cols
+            None if name is None else str(name),
+            float(t[a]),
+            float(t1 - t0),
+            int(b - a),
+            cols,
+            float((b - a) * dt),
         )
         yield gap, a, b
 
@@ -71,8 +80,8 @@ def find_gaps(log: pd.DataFrame, columns: list[str] | None = None) -> list[Gap]:
 
 
 def _summary(gaps: list[Gap]) -> str:
-    seconds = sum(g.length_s for g in gaps)
-    longest = max((g.length_s for g in gaps), default=0.0)
+    seconds = sum(g.missing_s for g in gaps)
+    longest = max((g.missing_s for g in gaps), default=0.0)
     order = [*POSE, *VELOCITY, *ACCELERATION]
     cols = sorted(
         {c for g in gaps for c in g.columns},
@@ -80,7 +89,7 @@ def _summary(gaps: list[Gap]) -> str:
     )
     return (
         f"{len(gaps)} gaps in {', '.join(cols)} ({sum(g.rows for g in gaps)} samples, "
-        f"{seconds:.3g} s in total, longest {longest:.3g} s)"
+        f"{seconds:.3g} s missing in total, longest {longest:.3g} s)"
     )
 
 
@@ -117,7 +126,7 @@ def bridge_from_pose(
             rows = part.index[a:b]
             for c in cols:
                 out.loc[rows, c] = out.loc[rows, c].fillna(derived.loc[rows, c])
-            bridged.append(Gap(gap.experiment, gap.t, gap.length_s, gap.rows, cols))
+            bridged.append(replace(gap, columns=cols))
     if report is not None and bridged:
         report.add(
             BRIDGE_STEP,
@@ -133,7 +142,9 @@ def mask_gaps(
 ) -> list[pd.DataFrame]:
     """Take the rows with an empty cell in ``columns`` out of each part of one log (e.g. its
     training and held-out parts) and cut each run at them into segments ``<experiment>#<k>``
-    (module docstring), reported once. Parts without gaps are returned as they are."""
+    (module docstring), reported once; a segment's ``piece_of`` column names its run, which
+    is how a piece is told from a whole run (never by the ``#`` in its label, which a user's
+    may hold too). Parts without gaps are returned as they are."""
     out, gaps, short = [], [], 0
     for log in parts:
         cols = [c for c in columns if c in log]
@@ -144,6 +155,9 @@ def mask_gaps(
         gaps += find_gaps(log, cols)
         keep = ~missing
         label = np.empty(len(log), dtype=object)
+        piece_of = np.full(len(log), None, dtype=object)  # a reader's piece stays one
+        if PIECE_OF in log:
+            piece_of[:] = log[PIECE_OF].to_numpy(object)
         for name, idx in experiments(log):
             pos = np.flatnonzero(log.index.isin(idx))
             runs = _runs(keep[pos])
@@ -153,7 +167,11 @@ def mask_gaps(
                     short += b - a
                 base = "run" if name is None else str(name)
                 label[pos[a:b]] = base if len(runs) == 1 else f"{base}#{k}"
-        out.append(log.assign(experiment=label)[keep].reset_index(drop=True))
+                if len(runs) > 1:
+                    piece_of[pos[a:b]] = [base if pd.isna(p) else p for p in piece_of[pos[a:b]]]
+        out.append(
+            log.assign(experiment=label, **{PIECE_OF: piece_of})[keep].reset_index(drop=True)
+        )
     if report is not None and gaps:
         extra = f"; {short} samples between gaps too short to use" if short else ""
         report.add(
@@ -167,11 +185,13 @@ def mask_gaps(
 
 
 def gaps_record(gaps: list[Gap]) -> dict:
-    """JSON-ready: counts, seconds, longest and each gap."""
+    """JSON-ready: counts, seconds missing (samples × sample interval), the longest gap's and
+    each gap (``length_s`` the time spanned between the present samples around it, one sample
+    interval more than ``missing_s`` inside a run)."""
     return {
         "count": len(gaps),
         "samples": int(sum(g.rows for g in gaps)),
-        "seconds": float(sum(g.length_s for g in gaps)),
-        "longest_s": float(max((g.length_s for g in gaps), default=0.0)),
+        "seconds": float(sum(g.missing_s for g in gaps)),
+        "longest_s": float(max((g.missing_s for g in gaps), default=0.0)),
         "gaps": [asdict(g) for g in gaps],
     }

@@ -39,6 +39,9 @@ MAX_ANGLE = 1e4
 MAX_RUN_SAMPLES = 10_000_000
 #: optional column: the replay group of a run (copies of one run, declared by the reader config)
 REPLAY_GROUP = "replay_group"
+#: optional column: the run a piece was cut from at a gap (``mask_gaps``, ``resample``, the
+#: readers), empty for a whole run; a piece is told by it, never by its experiment's label
+PIECE_OF = "piece_of"
 
 
 def input_columns(df: pd.DataFrame) -> list[str]:
@@ -241,7 +244,7 @@ def refuse_rows(
 
 
 #: the columns the contract names exactly (cmd_<name> aside)
-CONTRACT = ("t", "experiment", REPLAY_GROUP, *POSE, *VELOCITY, *ACCELERATION, *TAU)
+CONTRACT = ("t", "experiment", REPLAY_GROUP, PIECE_OF, *POSE, *VELOCITY, *ACCELERATION, *TAU)
 
 
 def _check_spelling(df: pd.DataFrame, source: str) -> None:

@@ -25,7 +25,7 @@ from scipy.signal import butter, filtfilt, lfilter, savgol_coeffs, savgol_filter
 from scipy.stats import median_abs_deviation
 
 from nnid.datasets.cleaning import CleaningReport
-from nnid.datasets.log import ACCELERATION, ANGLES, POSE, VELOCITY, input_columns
+from nnid.datasets.log import ACCELERATION, ANGLES, PIECE_OF, POSE, VELOCITY, input_columns
 from nnid.datasets.mapping import rotation_from_euler
 from nnid.errors import NnidInputError
 
@@ -135,6 +135,8 @@ def resample_log(
             label = name if len(bounds) == 1 else f"{name}#{k}"
             if name is not None or len(bounds) > 1:
                 frame.insert(1, "experiment", label)
+            if len(bounds) > 1:  # a piece, told by this column (short_piece), not its label
+                frame[PIECE_OF] = "run" if name is None else str(name)
             pieces.append(frame)
         if report is not None:
             report.add(
@@ -359,7 +361,7 @@ def derive_velocities(
         t = out.loc[idx, "t"].to_numpy(np.float64)
         dt = float(np.median(np.diff(t)))
         window = savgol_window(window_s, 1.0 / dt, order, "savgol_window")
-        if short_piece(name, len(idx), window):
+        if short_piece(out, idx, window):
             short += len(idx)
             continue
         rates = {
@@ -411,12 +413,14 @@ def derive_velocities(
     return out
 
 
-def short_piece(name, samples: int, window: int) -> bool:
-    """Whether experiment ``name`` is a piece of a run cut at a gap (``<experiment>#<k>``,
-    :func:`nnid.datasets.gaps.mask_gaps`) shorter than the Savitzky-Golay ``window``: it gets
-    no derivative, as a stretch between gaps within a run gets none (an empty cell 20 samples
-    from a run's start was an error blaming the savgol_window setting)."""
-    return isinstance(name, str) and "#" in name and samples < window
+def short_piece(log: pd.DataFrame, idx, window: int) -> bool:
+    """Whether the experiment at ``idx`` of ``log`` is a piece of a run cut at a gap (its
+    ``piece_of`` column set: :func:`nnid.datasets.gaps.mask_gaps`, :func:`resample`, the
+    readers) shorter than the Savitzky-Golay ``window``: it gets no derivative, as a stretch
+    between gaps within a run gets none (an empty cell 20 samples from a run's start was an
+    error blaming the savgol_window setting). A whole run that short is still refused,
+    whatever its label holds (a '#' in a user's experiment name made it a piece)."""
+    return len(idx) < window and PIECE_OF in log and bool(log.loc[idx, PIECE_OF].notna().all())
 
 
 def short_pieces_note(samples: int) -> str:
@@ -439,7 +443,7 @@ def derive_accelerations(
         t = out.loc[idx, "t"].to_numpy(np.float64)
         dt = float(np.median(np.diff(t)))
         window = savgol_window(window_s, 1.0 / dt, order, "savgol_window")
-        if short_piece(name, len(idx), window):
+        if short_piece(out, idx, window):
             short += len(idx)
             continue
         for c in cols:

@@ -24,7 +24,14 @@ import pandas as pd
 from nnid.datasets.ardupilot import is_ardupilot_log, read_ardupilot_sources
 from nnid.datasets.cleaning import CleaningReport
 from nnid.datasets.column_map import ColumnMap, Source, load_column_map
-from nnid.datasets.log import ANGLES, MAX_RUN_SAMPLES, REPLAY_GROUP, time_unit_slip, validate_log
+from nnid.datasets.log import (
+    ANGLES,
+    MAX_RUN_SAMPLES,
+    PIECE_OF,
+    REPLAY_GROUP,
+    time_unit_slip,
+    validate_log,
+)
 from nnid.datasets.mapping import file_label, label_columns, map_source
 from nnid.datasets.rosbag import is_bag, read_bag_sources
 from nnid.errors import NnidInputError
@@ -281,6 +288,8 @@ def assemble(
                 {"t": grid[a:b] - grid[a]} | {c: v[a:b] for c, v in columns.items()}
             )
             piece.insert(1, "experiment", exp if len(segments) == 1 else f"{exp}#{k}")
+            if len(segments) > 1:  # a piece, told by this column (short_piece), not its label
+                piece[PIECE_OF] = exp
             pieces.append(piece)
         report.add(
             "resample",
@@ -297,7 +306,9 @@ def assemble(
     log = pd.concat(pieces, ignore_index=True)
     if cmap.replays:
         runs = list(dict.fromkeys(log["experiment"]))
-        group = {e: cmap.replay_group(str(e).split("#")[0]) for e in runs}
+        origin = log.groupby("experiment", sort=False)[PIECE_OF].first() if PIECE_OF in log else {}
+        whole = {e: origin.get(e) if pd.notna(origin.get(e)) else e for e in runs}
+        group = {e: cmap.replay_group(str(whole[e])) for e in runs}
         log[REPLAY_GROUP] = log["experiment"].map(group)
         for label in dict.fromkeys(g for g in group.values() if g):
             members = [e for e in runs if group[e] == label]

@@ -37,7 +37,9 @@ class EnsembleModel(NnidModel):
     SINDy; a config's ``[model.member]`` is one of the first three);
     ``seeds``: the members' seeds (at least two). ``members_`` are the fitted copies,
     ``member_validation_`` their validation free-run NRMSE (total; None where it diverged or
-    there was no validation log). Members are fitted on the same training and validation
+    there was no validation log), scored as :func:`nnid.evaluation.evaluate.evaluate` scores
+    with ``warmup_s`` (``nnid train`` sets its config's, so these are the members' validation
+    totals of ``metrics.json``). Members are fitted on the same training and validation
     logs, one after the other or (``n_jobs``) in worker processes, whose progress is then
     reported per finished member.
     """
@@ -51,12 +53,14 @@ class EnsembleModel(NnidModel):
         combine: str = "mean",
         drop_diverged: bool = True,
         n_jobs: int = 1,
+        warmup_s: float = 0.0,
     ) -> None:
         self.model = model
         self.seeds = seeds
         self.combine = combine
         self.drop_diverged = drop_diverged
         self.n_jobs = n_jobs
+        self.warmup_s = warmup_s
 
     @classmethod
     def from_config(cls, spec, vehicle=None) -> EnsembleModel:
@@ -96,7 +100,7 @@ class EnsembleModel(NnidModel):
         jobs = max(1, min(int(self.n_jobs), len(seeds)))
         templates = [clone(self.model).set_params(seed=seed) for seed in seeds]
         try:
-            fitted = self._fit_members(templates, log, validation, jobs, progress)
+            fitted = self._fit_members(templates, log, validation, jobs, progress, self.warmup_s)
         except NnidInputError as exc:
             raise exc.within("member", self.model.get_params()) from None
         members = [m for m, _ in fitted]
@@ -114,18 +118,20 @@ class EnsembleModel(NnidModel):
         self._take_shape()
 
     @staticmethod
-    def _fit_members(templates, log, validation, jobs: int, progress: Progress) -> list[tuple]:
+    def _fit_members(
+        templates, log, validation, jobs: int, progress: Progress, warmup_s: float = 0.0
+    ) -> list[tuple]:
         """(member, validation free-run NRMSE) of each template, in ``jobs`` processes."""
         n = len(templates)
         if jobs == 1:
             return [
-                _fit_member(m, log, validation, staged(progress, f"member {i + 1}/{n}"))
+                _fit_member(m, log, validation, staged(progress, f"member {i + 1}/{n}"), warmup_s)
                 for i, m in enumerate(templates)
             ]
         from joblib import Parallel, delayed
 
         runs = Parallel(n_jobs=jobs, backend="loky", return_as="generator")(
-            delayed(_fit_member)(m, log, validation) for m in templates
+            delayed(_fit_member)(m, log, validation, None, warmup_s) for m in templates
         )
         fitted = []
         for i, result in enumerate(runs):
@@ -206,18 +212,21 @@ def _fit_member(
     log: pd.DataFrame,
     validation: pd.DataFrame | None,
     progress: Progress | None = None,
+    warmup_s: float = 0.0,
 ) -> tuple[NnidModel, float | None]:
     """One member fitted, and its validation free-run NRMSE (a function of its own so that a
     worker process can run it)."""
     member.fit(log, validation, progress)
-    return member, _free_run_total(member, validation)
+    return member, _free_run_total(member, validation, warmup_s)
 
 
-def _free_run_total(model: NnidModel, log: pd.DataFrame | None) -> float | None:
-    """The model's total free-run NRMSE on ``log``, only the warm-up samples unscored (None
-    without a log or where it diverged)."""
+def _free_run_total(
+    model: NnidModel, log: pd.DataFrame | None, warmup_s: float = 0.0
+) -> float | None:
+    """The model's total free-run NRMSE on ``log``, its warm-up samples and the first
+    ``warmup_s`` of each run unscored (None without a log or where it diverged)."""
     if log is None:
         return None
     with np.errstate(all="ignore"):
-        total = model.score(log, "free_run")["total"]
+        total = model.score(log, "free_run", warmup_s)["total"]
     return None if total is None else float(total)

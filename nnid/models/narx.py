@@ -439,15 +439,10 @@ class NarxModel(InputOutputModel):
 
     # -- protocol --------------------------------------------------------------------------------
     def _params(self) -> dict[str, dict[str, float | None]]:
-        """A network has no physical parameters: its size (weights and biases) and the layer
-        sizes (regressor, hidden tanh nodes, linear outputs); the weights are the tensors."""
-        return {
-            "n_params": {"value": float(self._n_params()), "stderr": None},
-            **{
-                f"layer_{i}_size": {"value": float(n), "stderr": None}
-                for i, n in enumerate(self.layer_sizes())
-            },
-        }
+        """A network has no physical parameters: its size (weights and biases), as the state
+        space model gives it; the weights are the tensors. The layer sizes are settings, not
+        estimates: :meth:`describe` gives them (``layers``)."""
+        return {"n_params": {"value": float(self._n_params()), "stderr": None}}
 
     def describe(self) -> dict:
         return {

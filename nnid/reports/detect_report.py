@@ -31,10 +31,14 @@ def detect_json(monitor, result: DetectResult, notes: list[str] | None = None) -
     for the rate fit and the thresholds are twice its largest value: then the rate is a
     target that was neither achieved by a fit nor measured). ``false_alarms_measured``: the
     alarms on the healthy test part at training, with the rate's exact interval; null where
-    the training split had no test part (the rate was never measured). ``notes``: what the
-    run said of the log before the alarms (rows lost, samples missing, a wandering clock)."""
+    the training split had no test part (the rate was never measured). The contract's
+    ``false_alarm_rate_per_hour`` is the target; ``target_false_alarm_rate_per_hour`` says so
+    by its name, and ``measured_false_alarm_rate_per_hour`` is the rate the healthy test part
+    measured (null where nothing measured it). ``notes``: what the run said of the log before
+    the alarms (rows lost, samples missing, a wandering clock)."""
     h_t, h_g = monitor.threshold_values
     caveat = monitor.threshold_caveat()
+    measured = monitor.measured_false_alarms_
     return {
         "alarms": result.alarms,
         "threshold": {
@@ -43,7 +47,11 @@ def detect_json(monitor, result: DetectResult, notes: list[str] | None = None) -
             "ewma_fit": monitor.thresholds_["ewma"],
             "cusum_fit": monitor.thresholds_["cusum"],
         },
-        "false_alarm_rate_per_hour": monitor.false_alarm_per_hour,
+        "false_alarm_rate_per_hour": monitor.false_alarm_per_hour,  # the contract's: a target
+        "target_false_alarm_rate_per_hour": monitor.false_alarm_per_hour,
+        "measured_false_alarm_rate_per_hour": (
+            None if measured is None else measured["rate_per_hour"]
+        ),
         "false_alarm_rate_controlled": caveat is None,
         "false_alarm_caveat": caveat,
         "false_alarms_measured": monitor.measured_false_alarms_,

@@ -155,8 +155,8 @@ def _gaps_line(data: dict) -> list[str]:
         columns = sorted({c for g in gaps.get("gaps", []) for c in g.get("columns", [])})
         fate = f"left as they are in {', '.join(columns)}: no step bridged or masked them"
     return [
-        f"The log misses motion data in {gaps['count']} gaps ({gaps['seconds']:.3g} s, longest "
-        f"{gaps['longest_s']:.3g} s): {fate}."
+        f"The log misses motion data in {gaps['count']} gaps ({gaps['seconds']:.3g} s missing, "
+        f"longest {gaps['longest_s']:.3g} s): {fate}."
     ]
 
 
