@@ -145,6 +145,7 @@ def scenarios() -> None:
                         "truth": eff,
                         "alarm_t": a.get("t"),
                         "early_alarms": len(early),
+                        "later_alarms": max(len(alarms) - 1, 0),
                         "visible_t": visible,
                         "named": a.get("thruster") == name,
                         "efficiency": a.get("efficiency"),
@@ -166,6 +167,9 @@ def scenarios() -> None:
     print(f"  efficiency error: median {err.median():.3f}, max {err.max():.3f}, within 0.1 "
           f"{(err <= 0.1).mean():.3f}; truth in the 95 % interval {inside:.3f}")  # fmt: skip
     print(f"  alarms before the fault: {df['early_alarms'].sum()}")
+    # one fault, one alarm: detect re-watches what an isolated change leaves, and a later
+    # alarm there would be a second fault that is not in the log
+    print(f"  alarms after the first: {df['later_alarms'].sum()}")
     others = [
         ("tether pull -15 N surge", Fault("external", 20.0, force=(-15, 0, 0, 0, 0, 0))),
         ("side push 10 N sway", Fault("external", 20.0, force=(0, 10, 0, 0, 0, 0))),
@@ -187,7 +191,8 @@ def scenarios() -> None:
             size = a["value"] if a["value"] is not None else a["efficiency"]
             what = a["effect"] or a["thruster"]
             print(f"  {label} seed {seed}: t {a['t']:.2f} s, {a['kind']}, {what} = {size:.3g}, "
-                  f"confidence {a['confidence']:.2f}")  # fmt: skip
+                  f"confidence {a['confidence']:.2f}, "
+                  f"alarms after it {len(alarms) - 1}")  # fmt: skip
     healthy = pd.concat(
         [simulate_faults(vehicle, 600, seed=5000 + s, experiment=f"q{s}") for s in range(6)],
         ignore_index=True,
