@@ -234,6 +234,19 @@ def test_a_second_fault_during_a_persisting_one_is_alarmed(vehicle, monitor):
     assert second["components"]["external_bias.r"]["value"] == pytest.approx(1.0, rel=0.1)
 
 
+@pytest.mark.parametrize(("thruster", "efficiency"), [("h1", 0.0), ("h3", -1.0)])
+def test_every_alarm_in_the_trace_has_its_record(vehicle, monitor, thruster, efficiency):
+    """After an isolated loss the residual it leaves is watched; an alarm there that the loss
+    explains is dismissed, and its mark went with it: the trace had 3 and 7 alarms on these
+    two minutes where detect.json had one, and the report drew the others."""
+    fault = Fault("thruster", FAULT_T, thruster=thruster, efficiency=efficiency)
+    result = detect(monitor, simulate_faults(vehicle, 120, faults=[fault], seed=11))
+    assert len(result.alarms) >= 1 and result.alarms[0]["t"] >= FAULT_T
+    assert int(result.trace.alarm.sum()) == len(result.alarms)
+    marked = result.trace.t[result.trace.alarm]
+    assert list(marked) == [a["t"] for a in result.alarms]
+
+
 def test_no_false_alarm_on_healthy_held_out_runs(vehicle, monitor):
     healthy = pd.concat([simulate_faults(vehicle, 300, seed=s, experiment=f"t{s}")
                          for s in (50, 51)], ignore_index=True)  # fmt: skip

@@ -118,6 +118,7 @@ def detect(monitor: ResidualMonitor, log: pd.DataFrame, window_s: float = 10.0) 
             excess = noise_ratio(monitor, trace.values[rows, 0:6] - monitor.mu_) - 1.0
             left = noise_ratio(monitor, residual[rows] - monitor.mu_)
             if left <= max(UNEXPLAINED_RATIO, 1.0 + UNEXPLAINED_SHARE * excess):
+                alarm[k] = False  # dismissed: no record, so no mark in the trace either
                 _rewatch(monitor, data, residual, values, alarm, rows, cfg, changed)
                 pos = int(rows[-1]) + 1
                 continue
@@ -126,7 +127,9 @@ def detect(monitor: ResidualMonitor, log: pd.DataFrame, window_s: float = 10.0) 
         pos = k + 1
         if diag.isolated:
             rest = _rest(data, rows)
-            residual[rest] -= signature(monitor, data, rest, diag.fitted)
+            # where the change cannot be shown (NaN) the residual is left as it was: watched
+            # blind there, a later fault would pass unsaid
+            residual[rest] -= np.nan_to_num(signature(monitor, data, rest, diag.fitted))
             _rewatch(monitor, data, residual, values, alarm, rows, cfg, changed)
             pos = int(rows[-1]) + 1
     return DetectResult(watched, alarms, time.perf_counter() - start)
