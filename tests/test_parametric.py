@@ -440,6 +440,23 @@ def test_an_added_mass_biased_by_the_noise_of_a_weak_acceleration_is_named(seamo
     assert strong.params["X_udot"]["value"] == pytest.approx(truth, rel=0.1)
 
 
+def test_an_added_mass_whose_acceleration_is_all_noise_is_named_not_identified():
+    """An acceleration that is noise only (ρ ≥ 1) is the worst case of errors in variables:
+    its bias M̂ ρ/(1 − ρ) has no value, and the comparison with it was False, so the one case
+    with no information at all went unnamed while ρ = 0.9 was named."""
+    from nnid.models.parametric import acceleration_noise_share, attenuated_unknowns
+
+    n, rng = 600, np.random.default_rng(0)
+    nu_dot = np.zeros((n, 6))
+    nu_dot[:, 0] = 0.05 * rng.uniform(-1, 1, n)  # logged accelerations: quantisation only
+    data = {"t": np.arange(n) * 0.05, "nu": np.zeros((n, 6)), "nu_dot": nu_dot,
+            "experiment": np.zeros(n, int)}  # fmt: skip
+    rho = acceleration_noise_share(data, ["u"], None)["u"]
+    inertia = np.array([60.0, 60, 60, 5, 5, 5])
+    named = attenuated_unknowns(["X_udot"], ["u"], data, inertia, {"X_udot": (-20.0, 1.0)}, None)
+    assert rho >= 1 and named == {"X_udot": (rho, np.inf)}
+
+
 @pytest.mark.parametrize("trainer", ["adam", "lm"])
 def test_a_network_trainer_on_a_fossen_model_is_one_clear_error(trainer):
     """The config refuses lm and adam for a Fossen model; the Python API said it with a

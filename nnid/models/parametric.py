@@ -421,7 +421,8 @@ def attenuated_unknowns(
 ) -> dict[str, tuple[float, float]]:
     """The diagonal added masses of ``names`` fitted from their own DOF's equation (in
     ``dofs``) whose expected errors-in-variables bias exceeds :data:`ATTENUATION_LIMIT` of their
-    value and 2 standard errors: ``{name: (ρ, bias)}``. ``inertia`` is the diagonal of the
+    value and 2 standard errors, or whose acceleration is all noise (ρ ≥ 1: bias inf):
+    ``{name: (ρ, bias)}``. ``inertia`` is the diagonal of the
     fitted M = M_RB + M_A, ``estimate`` ``{name: (θ̂, s.e.)}``. Least squares shrinks the
     fitted inertia M̂ by the noise share ρ of :func:`acceleration_noise_share`, so F_jdot comes
     out high (a negative added mass too small) by about M̂ ρ / (1 − ρ): an estimate, not a
@@ -443,7 +444,10 @@ def attenuated_unknowns(
     out = {}
     for name, dof in todo.items():
         rho, (theta, se) = share[dof], estimate[name]
-        bias = inertia[DOFS.index(dof)] * rho / (1.0 - rho) if rho < 1 else np.inf
+        if rho >= 1:  # the acceleration is noise: the added mass is not identified at all
+            out[name] = (rho, np.inf)
+            continue
+        bias = inertia[DOFS.index(dof)] * rho / (1.0 - rho)
         if bias > ATTENUATION_LIMIT * abs(theta - bias) and not bias <= 2 * se:
             out[name] = (rho, float(bias))
     return out
@@ -696,9 +700,14 @@ class ParametricModel(FossenPlant):
 
             fitted = dict(zip(self.estimate_.names, self.estimate_.theta, strict=True))
             said = "; ".join(
-                f"{n} = {fitted[n]:.3g} is about {bias:.3g} too high, near {fitted[n] - bias:.3g} "
-                f"({100 * bias / abs(fitted[n] - bias):.0f} %; noise {100 * rho:.0f} % of the "
-                f"{DOFS[parse_added_mass_key(n)[1]]} acceleration's variance)"
+                f"{n} = {fitted[n]:.3g} is not identified (the noise is "
+                f"{100 * rho:.0f} % of the {DOFS[parse_added_mass_key(n)[1]]} acceleration's "
+                "variance)"
+                if not np.isfinite(bias)
+                else f"{n} = {fitted[n]:.3g} is about {bias:.3g} too high, near "
+                f"{fitted[n] - bias:.3g} ({100 * bias / abs(fitted[n] - bias):.0f} %; noise "
+                f"{100 * rho:.0f} % of the {DOFS[parse_added_mass_key(n)[1]]} acceleration's "
+                "variance)"
                 for n, (rho, bias) in self.attenuated_.items()
             )
             warnings.warn(
