@@ -178,3 +178,21 @@ def test_a_piece_is_told_by_its_marker_not_by_a_hash_in_the_label():
     assert (masked["piece_of"] == "dive#1").all()
     out = derive_accelerations(masked, 1.0, 4)
     assert out["du"].iloc[:20].isna().all() and np.isfinite(out["du"].iloc[40:-40]).all()
+
+
+def test_a_piece_stays_one_through_resampling_and_is_no_unknown_column():
+    """resample_log kept numeric columns only, so a piece lost its marker and a short one was
+    then refused ("'dive#1' has 20 samples") where it had been skipped; inspect listed the
+    marker among the log's unknown columns."""
+    from nnid.datasets.inspect import summarize
+    from nnid.datasets.preprocess import derive_accelerations, resample_log
+
+    t = np.arange(400) * 0.05
+    log = pd.DataFrame({"t": t, "experiment": "dive", "u": np.sin(t), "tau_X": np.cos(t)})
+    log.loc[20, "u"] = np.nan
+    (masked,) = mask_gaps([log], ["u"])
+    assert summarize(masked)["columns"]["other"] == []
+    again = resample_log(masked, 20.0)
+    assert (again["piece_of"] == "dive").all()
+    out = derive_accelerations(again, 1.0, 4)
+    assert out["du"].iloc[:20].isna().all() and np.isfinite(out["du"].iloc[40:-40]).all()

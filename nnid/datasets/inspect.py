@@ -8,7 +8,15 @@ import numpy as np
 import pandas as pd
 
 from nnid.datasets.gaps import find_gaps, gaps_record
-from nnid.datasets.log import ACCELERATION, ANGLES, POSE, VELOCITY, input_columns
+from nnid.datasets.log import (
+    ACCELERATION,
+    ANGLES,
+    PIECE_OF,
+    POSE,
+    REPLAY_GROUP,
+    VELOCITY,
+    input_columns,
+)
 from nnid.datasets.preprocess import experiments
 
 DOF_FORCE = dict(zip(VELOCITY, ("tau_X", "tau_Y", "tau_Z", "tau_K", "tau_M", "tau_N"), strict=True))
@@ -17,7 +25,7 @@ DOF_FORCE = dict(zip(VELOCITY, ("tau_X", "tau_Y", "tau_Z", "tau_K", "tau_M", "ta
 def summarize(log: pd.DataFrame) -> dict:
     """A JSON-ready summary of a validated log."""
     inputs = input_columns(log)
-    known = {"t", "experiment", *POSE, *VELOCITY, *ACCELERATION, *inputs}
+    known = {"t", "experiment", PIECE_OF, REPLAY_GROUP, *POSE, *VELOCITY, *ACCELERATION, *inputs}
     groups = experiments(log)
     exp_rows, gaps, rates = [], [], []
     for name, idx in groups:

@@ -25,7 +25,15 @@ from scipy.signal import butter, filtfilt, lfilter, savgol_coeffs, savgol_filter
 from scipy.stats import median_abs_deviation
 
 from nnid.datasets.cleaning import CleaningReport
-from nnid.datasets.log import ACCELERATION, ANGLES, PIECE_OF, POSE, VELOCITY, input_columns
+from nnid.datasets.log import (
+    ACCELERATION,
+    ANGLES,
+    PIECE_OF,
+    POSE,
+    REPLAY_GROUP,
+    VELOCITY,
+    input_columns,
+)
 from nnid.datasets.mapping import rotation_from_euler
 from nnid.errors import NnidInputError
 
@@ -111,6 +119,8 @@ def resample_log(
         for c in log.columns
         if c not in ("t", "experiment") and pd.api.types.is_numeric_dtype(log[c])
     ]
+    # a run's labels the grid keeps: a piece stays one (short_piece), a replay in its group
+    labels = [c for c in (PIECE_OF, REPLAY_GROUP) if c in log and c not in numeric]
     pieces, rates = [], []
     for name, idx in experiments(log):
         part = log.loc[idx]
@@ -135,7 +145,10 @@ def resample_log(
             label = name if len(bounds) == 1 else f"{name}#{k}"
             if name is not None or len(bounds) > 1:
                 frame.insert(1, "experiment", label)
-            if len(bounds) > 1:  # a piece, told by this column (short_piece), not its label
+            for col in labels:
+                if pd.notna(part[col].iloc[0]):
+                    frame[col] = part[col].iloc[0]
+            if len(bounds) > 1 and PIECE_OF not in frame:  # told by it, never by its label
                 frame[PIECE_OF] = "run" if name is None else str(name)
             pieces.append(frame)
         if report is not None:
