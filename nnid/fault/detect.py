@@ -57,12 +57,19 @@ def alarm_record(
     at the alarm, never before: the change began at or before the alarm, and healthy samples
     before its onset would bias the size of the change toward zero. ``residual`` [N, 6]: the
     one to isolate (the trace's own by default)."""
-    return _record(monitor, data, trace, k, window_s, residual)[0]
+    return isolated_alarm(monitor, data, trace, k, window_s, residual)[0]
 
 
-def _record(monitor, data, trace, k, window_s, residual=None) -> tuple[dict, Diagnosis, np.ndarray]:
-    t, codes = data["t"], data["experiment"]
-    rows = np.flatnonzero((codes == codes[k]) & (t >= t[k]) & (t <= t[k] + window_s))
+def isolated_alarm(
+    monitor: ResidualMonitor,
+    data: dict,
+    trace: Trace,
+    k: int,
+    window_s: float,
+    residual: np.ndarray | None = None,
+) -> tuple[dict, Diagnosis, np.ndarray]:
+    """:func:`alarm_record`, with the diagnosis and the rows of the window."""
+    rows = window_rows(data, k, window_s)
     residual = trace.values[:, 0:6] if residual is None else residual
     diag = isolate(monitor, data, residual, rows)
     h_t, h_g = monitor.threshold_values
@@ -72,7 +79,7 @@ def _record(monitor, data, trace, k, window_s, residual=None) -> tuple[dict, Dia
     interval = diag.efficiency_interval or (None, None)
     record = {
         "experiment": str(trace.experiment[k]),
-        "t": float(t[k]),
+        "t": float(data["t"][k]),
         "kind": diag.kind,
         "thruster": diag.thruster,
         "efficiency": diag.efficiency,
@@ -94,6 +101,60 @@ def _record(monitor, data, trace, k, window_s, residual=None) -> tuple[dict, Dia
     return record, diag, rows
 
 
+def window_rows(data: dict, k: int, window_s: float) -> np.ndarray:
+    """The rows of the isolation window of an alarm at row ``k``: its experiment's on
+    [t_k, t_k + window_s]."""
+    t, codes = data["t"], data["experiment"]
+    return np.flatnonzero((codes == codes[k]) & (t >= t[k]) & (t <= t[k] + window_s))
+
+
+def explained_by_the_changes(monitor: ResidualMonitor, r: np.ndarray, left: np.ndarray) -> bool:
+    """Whether an alarm on what isolated changes leave is no new change: the residual
+    ``left`` [N, 6] on its window is within what a named hypothesis may leave of the model's
+    residual ``r`` there (isolation's rule: the model's error grows with the first change;
+    small excursions of it are not a second fault)."""
+    excess = noise_ratio(monitor, r - monitor.mu_) - 1.0
+    left_ratio = noise_ratio(monitor, left - monitor.mu_)
+    return left_ratio <= max(UNEXPLAINED_RATIO, 1.0 + UNEXPLAINED_SHARE * excess)
+
+
+class Rewatch:
+    """The monitor on the residual that the isolated changes of one experiment leave (the
+    module docstring), for :func:`detect` and ``detect --follow`` alike: the changes' fitted
+    hypotheses, and EWMA and CUSUM started fresh at the end of the latest one's window."""
+
+    def __init__(self, monitor: ResidualMonitor) -> None:
+        self.monitor = monitor
+        self.cfg = monitor._cfg(monitor.threshold_values, monitor.interval)
+        self.fitted: list[tuple[str, float]] = []
+        self.state = np.zeros(kernel.STATE_SIZE)
+        self.t_prev = np.nan
+
+    def restart(self, t_prev: float, fitted: list[tuple[str, float]] = ()) -> None:
+        """Fresh statistics after the time ``t_prev`` (the end of an alarm's window), with the
+        isolated change ``fitted`` (:attr:`Diagnosis.fitted`) also taken out."""
+        self.fitted = [*self.fitted, *fitted]
+        self.state[:] = 0.0
+        self.t_prev = float(t_prev)
+
+    def left(self, data: dict, rows: np.ndarray, r: np.ndarray) -> np.ndarray:
+        """What the changes leave of the model's residual ``r`` [N, 6] on ``rows``: minus
+        their signature (:func:`nnid.fault.isolation.signature`, linear in the changes)."""
+        # where a change cannot be shown (NaN) the residual is left as it was: watched blind
+        # there, a later fault would pass unsaid
+        return r - np.nan_to_num(signature(self.monitor, data, rows, self.fitted))
+
+    def step(self, ts: np.ndarray, left: np.ndarray) -> np.ndarray:
+        """The statistics of the rows at times ``ts`` (after those of the last call) on the
+        residual ``left``: [N, 21] as :func:`nnid.fault.kernel.run` gives them."""
+        m = self.monitor
+        out = kernel.watch(self.t_prev, ts, left, self.cfg, m.mu_, m.whiten_, m.s_inv_,
+                           self.state, np.empty((ts.size, 21)))  # fmt: skip
+        if ts.size:
+            self.t_prev = float(ts[-1])
+        return out
+
+
 def detect(monitor: ResidualMonitor, log: pd.DataFrame, window_s: float = 10.0) -> DetectResult:
     """Every alarm on ``log`` with its isolation on the ``window_s`` seconds after it; after an
     isolated change, the monitor watches what that change leaves (the module docstring). The
@@ -105,32 +166,27 @@ def detect(monitor: ResidualMonitor, log: pd.DataFrame, window_s: float = 10.0) 
     residual = trace.values[:, 0:6].copy()  # the residual watched, re-referenced per change
     watched = Trace(trace.t, trace.experiment, values, alarm)
     t, codes = data["t"], data["experiment"]
-    cfg = monitor._cfg(monitor.threshold_values, monitor.interval)
+    rewatch: dict[int, Rewatch] = {}  # per experiment
     alarms, pos = [], 0
     changed = np.zeros(t.size, dtype=bool)  # rows watched on a re-referenced residual
     while (ks := np.flatnonzero(alarm[pos:])).size:
         k = pos + int(ks[0])
         if changed[k]:
-            # an alarm on what an isolated change leaves: a new change only where that residual
-            # is beyond what a named hypothesis may leave (isolation's rule: the model's error
-            # grows with the first change; small excursions of it are not a second fault)
-            rows = np.flatnonzero((codes == codes[k]) & (t >= t[k]) & (t <= t[k] + window_s))
-            excess = noise_ratio(monitor, trace.values[rows, 0:6] - monitor.mu_) - 1.0
-            left = noise_ratio(monitor, residual[rows] - monitor.mu_)
-            if left <= max(UNEXPLAINED_RATIO, 1.0 + UNEXPLAINED_SHARE * excess):
+            rows = window_rows(data, k, window_s)
+            if explained_by_the_changes(monitor, trace.values[rows, 0:6], residual[rows]):
                 alarm[k] = False  # dismissed: no record, so no mark in the trace either
-                _rewatch(monitor, data, residual, values, alarm, rows, cfg, changed)
+                _rewatch(rewatch[int(codes[k])], data, residual, values, alarm, rows, changed)
                 pos = int(rows[-1]) + 1
                 continue
-        record, diag, rows = _record(monitor, data, watched, k, window_s, residual)
+        record, diag, rows = isolated_alarm(monitor, data, watched, k, window_s, residual)
         alarms.append(record)
         pos = k + 1
         if diag.isolated:
+            w = rewatch.setdefault(int(codes[k]), Rewatch(monitor))
             rest = _rest(data, rows)
-            # where the change cannot be shown (NaN) the residual is left as it was: watched
-            # blind there, a later fault would pass unsaid
-            residual[rest] -= np.nan_to_num(signature(monitor, data, rest, diag.fitted))
-            _rewatch(monitor, data, residual, values, alarm, rows, cfg, changed)
+            w.restart(t[rows[-1]], diag.fitted)
+            residual[rest] = w.left(data, rest, trace.values[rest, 0:6])
+            _rewatch(w, data, residual, values, alarm, rows, changed)
             pos = int(rows[-1]) + 1
     return DetectResult(watched, alarms, time.perf_counter() - start)
 
@@ -142,15 +198,14 @@ def _rest(data: dict, rows: np.ndarray) -> np.ndarray:
     return np.arange(k + 1, int(np.flatnonzero(codes == codes[k])[-1]) + 1)
 
 
-def _rewatch(monitor, data, residual, values, alarm, rows, cfg, changed) -> None:
+def _rewatch(w: Rewatch, data, residual, values, alarm, rows, changed) -> None:
     """Watch ``residual`` from fresh statistics on the rest of the experiment after ``rows``
     (the window of an alarm: no new alarm within it); values and alarms rewritten there."""
     rest = _rest(data, rows)
     alarm[rows[0] + 1 : rows[-1] + 1] = False
     changed[rest] = True
+    w.restart(data["t"][rows[-1]])
     if rest.size:
-        t = data["t"]
-        out = kernel.watch(t[rows[-1]], t[rest], residual[rest], cfg, monitor.mu_,
-                           monitor.whiten_, monitor.s_inv_, np.empty((rest.size, 21)))  # fmt: skip
+        out = w.step(data["t"][rest], residual[rest])
         values[rest, 6:20] = out[:, 6:20]
         alarm[rest] = out[:, 20] == 1

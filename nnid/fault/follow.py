@@ -4,6 +4,14 @@ Rows go through :class:`nnid.fault.monitor.Stream` as they arrive; an alarm is a
 and isolated when the window after it has arrived (or at the end of the input). The log needs the
 body velocities and attitude as columns (a live monitor cannot smooth over the future) and the
 inputs of the model's vehicle.
+
+After an alarm whose change is isolated, the rest of the experiment is watched as batch
+``detect`` watches it (:mod:`nnid.fault.detect`, its :class:`~nnid.fault.detect.Rewatch`): the
+fitted change's signature taken out of each new row's residual, fresh EWMA and CUSUM from the end
+of the isolation window, a later alarm judged by the same rule. The signature is computed on
+:data:`REWATCH_S` seconds of rows at once (its columns cost milliseconds a call, whatever the
+rows), so an alarm there is announced up to that much later; its time is its row's. The
+per-sample update of a stream without an isolated change is untouched.
 """
 
 from __future__ import annotations
@@ -27,7 +35,13 @@ from nnid.datasets.log import (
     out_of_bounds,
 )
 from nnid.errors import NnidInputError
-from nnid.fault.detect import DetectResult, alarm_record
+from nnid.fault.detect import (
+    DetectResult,
+    Rewatch,
+    explained_by_the_changes,
+    isolated_alarm,
+    window_rows,
+)
 from nnid.fault.monitor import ResidualMonitor, Trace, input_columns
 from nnid.validation import shown
 
@@ -39,6 +53,8 @@ RATE_ROWS = 11
 #: rows whose typical interval (a 10 %-trimmed mean) is checked: enough that a clock dropping
 #: 2 % of its samples reads as its rate (over 11 rows two drops read 1.125 and refused it)
 RATE_WINDOW = 200
+#: after an isolated change, the rows re-referenced to it at once (seconds of them)
+REWATCH_S = 0.5
 
 
 def _parse(line: str, source: str, count: int) -> list[str]:
@@ -154,19 +170,84 @@ def follow_csv(
     stream = monitor.stream()
     x, u = np.zeros(12), np.zeros(len(inputs))
     ts, xs, us, vals, codes, names = [], [], [], [], [], []
+    watched: list[np.ndarray] = []  # vals as watched: after an isolated change, what it leaves
     pending: list[int] = []  # row numbers counted from the first row ever read
     alarm_rows: list[int] = []
     alarms: list[dict] = []
     current = None
     dropped = 0  # rows forgotten from the front of the buffers
+    # after an isolated change: the experiment (code) and first row watched on what it leaves
+    ref: dict = {"rewatch": None, "code": -1, "start": 0}
+    queue: list[int] = []  # rows of it whose residual is not yet re-referenced
+    block = max(round(REWATCH_S / monitor.interval), 1)
+    context = max(int(np.ceil(monitor.plant_.savgol_window / monitor.interval)), block)
+
+    def announce(k: int) -> None:
+        pending.append(k)
+        alarm_rows.append(k)
+        i = k - dropped
+        name = names[codes[i]]
+        say(f"ALARM t = {ts[i]:.2f} s{f' ({name})' if name else ''}: isolating over {window_s} s")
+
+    def flush(final: bool = False) -> None:
+        """The queued rows re-referenced to the isolated changes and watched (the rows before
+        them, from the first after the window, as context for the signature's derivative).
+        A signature needs two rows: one alone waits for the next, unless it is the last."""
+        if not queue:
+            return
+        first, last = queue[0], queue[-1]
+        a = max(ref["start"] - 1, first - context, dropped)  # rows from a + 1 get a signature
+        i, j = a - dropped, last + 1 - dropped
+        if j - i < 3 and not final:
+            return
+        data = _arrays(ts[i:j], xs[i:j], us[i:j], codes[i:j], names)
+        rows = np.arange(1, j - i)
+        left = ref["rewatch"].left(data, rows, np.array(vals[i + 1 : j])[:, 0:6])[-len(queue) :]
+        out = ref["rewatch"].step(data["t"][-len(queue) :], left)
+        for row, (k, values) in enumerate(zip(list(queue), out, strict=True)):
+            watched[k - dropped][0:6] = left[row]
+            watched[k - dropped][6:20] = values[6:20]
+            if values[20] == 1:
+                announce(k)
+        queue.clear()
+
+    def rewatch_after(k: int, rows: np.ndarray) -> None:
+        """Fresh statistics after the window ``rows`` (buffer indices) of the alarm at ``k``:
+        the experiment's later alarms superseded, its rows since then watched again."""
+        code = codes[k - dropped]
+        later = {p for p in pending if p > k and codes[p - dropped] == code}
+        pending[:] = [p for p in pending if p not in later]
+        alarm_rows[:] = [p for p in alarm_rows if p not in later]
+        ref["start"] = dropped + int(rows[-1]) + 1
+        queue[:] = [p for p in range(ref["start"], dropped + len(ts)) if codes[p - dropped] == code]
+        flush()
 
     def isolate(k: int) -> None:
+        flush()  # the window's rows watched before it is judged
         data = _arrays(ts, xs, us, codes, names)
+        values = np.array(watched)
         trace = Trace(data["t"], np.array(names, dtype=object)[data["experiment"]],
-                      np.array(vals), np.zeros(len(ts), dtype=bool))  # fmt: skip
-        record = alarm_record(monitor, data, trace, k - dropped, window_s)
+                      values, np.zeros(len(ts), dtype=bool))  # fmt: skip
+        i, code = k - dropped, codes[k - dropped]
+        if ref["rewatch"] is not None and ref["code"] == code and k >= ref["start"]:
+            rows = window_rows(data, i, window_s)
+            r = np.array([vals[j][0:6] for j in rows])
+            if explained_by_the_changes(monitor, r, values[rows, 0:6]):
+                name = names[code]
+                say(f"t = {ts[i]:.2f} s{f' ({name})' if name else ''}: what the isolated change "
+                    "leaves, within what its hypothesis may leave: no new change")  # fmt: skip
+                alarm_rows.remove(k)  # dismissed: no record, so no mark in the trace either
+                ref["rewatch"].restart(data["t"][rows[-1]])
+                rewatch_after(k, rows)
+                return
+        record, diag, rows = isolated_alarm(monitor, data, trace, i, window_s, values[:, 0:6])
         alarms.append(record)
         say(describe_alarm(record))
+        if diag.isolated:
+            if ref["code"] != code or ref["rewatch"] is None:
+                ref.update(rewatch=Rewatch(monitor), code=code)
+            ref["rewatch"].restart(data["t"][rows[-1]], diag.fitted)
+            rewatch_after(k, rows)
 
     read = [("t", col["t"])] + [
         (c, i)
@@ -202,6 +283,7 @@ def follow_csv(
         u[:] = [values[c] for c in inputs]
         name = row[exp_col] if exp_col is not None else ""
         if name != current:
+            flush(final=True)
             stream.reset()
             current = name
             names.append(name)
@@ -233,27 +315,33 @@ def follow_csv(
         xs.append(x.copy())
         us.append(u.copy())
         vals.append(stream.values.copy())
+        watched.append(vals[-1].copy())
         codes.append(len(names) - 1)
         row_no = dropped + len(ts) - 1
-        if code == 1:
-            pending.append(row_no)
-            alarm_rows.append(row_no)
-            say(f"ALARM t = {t:.2f} s{f' ({name})' if name else ''}: isolating over {window_s} s")
+        if ref["rewatch"] is not None and ref["code"] == codes[-1] and row_no >= ref["start"]:
+            queue.append(row_no)  # watched on what the isolated changes leave
+            if len(queue) >= block:
+                flush()
+        elif code == 1:
+            announce(row_no)
         while pending and (
             t - ts[pending[0] - dropped] >= window_s or codes[pending[0] - dropped] != codes[-1]
         ):
             isolate(pending.pop(0))
-        if len(ts) > 2 * keep_rows and not pending:  # forget the older half, in one step
+        if len(ts) > 2 * keep_rows and not pending and not queue:  # forget the older half
             cut = len(ts) - keep_rows
-            for buf in (ts, xs, us, vals, codes):
+            for buf in (ts, xs, us, vals, watched, codes):
                 del buf[:cut]
             dropped += cut
-    for k in pending:
-        isolate(k)
+    flush(final=True)
+    while pending:
+        isolate(pending.pop(0))
     if not ts:
         raise NnidInputError("has a header and no rows", source=where)
     data = _arrays(ts, xs, us, codes, names)
-    trace = Trace(data["t"], np.array(names, dtype=object)[data["experiment"]], np.array(vals),
+    values = np.array(watched)  # the model's residual r, and the statistics watched
+    values[:, 0:6] = np.array(vals)[:, 0:6]
+    trace = Trace(data["t"], np.array(names, dtype=object)[data["experiment"]], values,
                   np.isin(np.arange(len(ts)) + dropped, alarm_rows))  # fmt: skip
     return DetectResult(trace, alarms, time.perf_counter() - start)
 

@@ -141,9 +141,10 @@ def midpoint_data(
     return arrays, frame
 
 
-def hypothesis_columns(monitor, data: dict, rows: np.ndarray) -> tuple:
+def hypothesis_columns(monitor, data: dict, rows: np.ndarray, names=None) -> tuple:
     """The fitted vehicle, the hypotheses (the loop's linear candidates and one per thruster)
-    and their columns [N, 6, K] on ``rows`` (each with its predecessor)."""
+    and their columns [N, 6, K] on ``rows`` (each with its predecessor); only those named in
+    ``names`` where given (a signature needs its own columns, not the ~15 regressions of all)."""
     plant = monitor.plant_
     vehicle = fitted_vehicle(plant)
     arrays, frame = midpoint_data(data, rows, vehicle, (plant.savgol_window, 2))
@@ -152,10 +153,13 @@ def hypothesis_columns(monitor, data: dict, rows: np.ndarray) -> tuple:
     cands = [
         c
         for c in candidates(vehicle, frame, coupled=False)
-        if c.linear and c.kind != "thruster_installation"
+        if c.linear and c.kind != "thruster_installation" and (names is None or c.name in names)
     ]
-    reg = ParametricFossen(vehicle, [c.parameter for c in cands]).regression(arrays)
-    cols = reg.phi.reshape(rows.size, 6, len(cands))
+    if cands:
+        reg = ParametricFossen(vehicle, [c.parameter for c in cands]).regression(arrays)
+        cols = reg.phi.reshape(rows.size, 6, len(cands))
+    else:
+        cols = np.zeros((rows.size, 6, 0))
     act = Actuation(plant.vehicle)
     if act.thrusters:
         thrust = act.thrusts(data["inputs"][rows - 1])  # [N, n]
@@ -175,7 +179,7 @@ def signature(monitor, data: dict, rows: np.ndarray, fitted: list[tuple[str, flo
     ok = rows > 0
     if ok.sum() < 2 or not fitted:
         return out
-    _, cands, cols = hypothesis_columns(monitor, data, rows[ok])
+    _, cands, cols = hypothesis_columns(monitor, data, rows[ok], {name for name, _ in fitted})
     index = {c.name: k for k, c in enumerate(cands)}
     if any(name not in index for name, _ in fitted):
         return out  # a hypothesis the rows cannot show (a DOF that no longer moves)

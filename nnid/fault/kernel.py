@@ -215,11 +215,11 @@ def run(ts, xs, cmds, prev, st, cfg, form, mass, mask, act, mu, whiten, s_inv, o
 
 
 @njit(cache=True)
-def watch(t_prev, ts, rs, cfg, mu, whiten, s_inv, out):
+def watch(t_prev, ts, rs, cfg, mu, whiten, s_inv, st, out):
     """The statistics and alarms of :func:`_update` over residuals already made, ``rs`` [N, 6]
-    (NaN: none) at times ``ts`` (``t_prev`` the time before the first), from a fresh state:
-    the monitor on a residual re-referenced to an isolated change. ``out`` as :func:`run`'s."""
-    st = np.zeros(STATE_SIZE)
+    (NaN: none) at times ``ts`` (``t_prev`` the time before the first), from the state ``st``
+    (zeros: a fresh one; carried on, so rows given in pieces are watched as in one call): the
+    monitor on a residual re-referenced to an isolated change. ``out`` as :func:`run`'s."""
     for k in range(rs.shape[0]):
         row = out[k]
         for i in range(20):
