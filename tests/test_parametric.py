@@ -457,6 +457,54 @@ def test_an_added_mass_whose_acceleration_is_all_noise_is_named_not_identified()
     assert rho >= 1 and named == {"X_udot": (rho, np.inf)}
 
 
+def _mocap_with_sines(vehicle, dof: str, offset: float, sine: float, noise: dict):
+    """Two minutes of ``offset`` plus ``sine`` (N or N m) of sine at 0.5 rad/s on ``dof``,
+    logged by 100-Hz motion capture (pose only, ``noise`` its levels): the fit derives the
+    velocities from the pose and the accelerations from those, by Savitzky-Golay twice."""
+    from nnid.datasets.measurement import Measurement
+    from nnid.datasets.simulator import simulate
+
+    t = np.arange(12001) * 0.01
+    inputs = np.zeros((t.size, 6))
+    inputs[:, "uvwpqr".index(dof)] = offset + sine * np.sin(0.5 * t)
+    mocap = Measurement(kind="mocap", **noise)
+    return simulate(vehicle, inputs, 0.01, measurement=mocap, seed=0, experiment=dof)
+
+
+@pytest.mark.parametrize(
+    ("dof", "names", "offset", "noise", "fitted"),
+    [
+        ("u", ["X_udot", "X:u*abs(u)"], 10.0, {"position_noise": 0.002}, "-21.8"),
+        ("p", ["K_pdot", "K:p*abs(p)"], 0.0, {"angle_noise": 0.005}, "-47.7"),
+    ],
+)
+def test_an_added_mass_biased_by_motion_capture_noise_is_named(
+    seamor, dof, names, offset, noise, fitted
+):
+    """Motion capture: velocities differentiated from the pose carry smoothed noise, which
+    second differences put at an eighth of its size, so the noise share ρ came out ~1e-4 and
+    X_udot 20 % (2 mm position noise) and K_pdot 23 % (5 mrad attitude noise) small under
+    1-unit sines passed without a word. ρ is now the pose noise (through J⁻¹(η)) times the
+    gain of the two derivatives in turn: about a tenth and a fifth, naming the added mass with
+    the bias that accounts for its error; 10-unit sines identify it without one."""
+    name = names[0]
+    truth = seamor.added_mass[name]
+    weak = ParametricModel(seamor, names, dofs=[dof])
+    with pytest.warns(ExcitationWarning, match=rf"errors in variables.*{name} = {fitted} is"):
+        weak.fit(_mocap_with_sines(seamor, dof, offset, 1.0, noise))
+    assert [s.step for s in weak.report_.steps] == ["derive velocities", "derive accelerations"]
+    theta = weak.params[name]["value"]
+    assert theta - truth > 5 * weak.params[name]["stderr"]
+    rho, bias = weak.attenuated_[name]
+    assert 0.05 < rho < 0.3 and theta - bias == pytest.approx(truth, rel=0.06)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        strong = ParametricModel(seamor, names, dofs=[dof])
+        strong.fit(_mocap_with_sines(seamor, dof, offset, 10.0, noise))
+    assert strong.attenuated_ == {}
+    assert strong.params[name]["value"] == pytest.approx(truth, rel=0.05)
+
+
 @pytest.mark.parametrize("trainer", ["adam", "lm"])
 def test_a_network_trainer_on_a_fossen_model_is_one_clear_error(trainer):
     """The config refuses lm and adam for a Fossen model; the Python API said it with a

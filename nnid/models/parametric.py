@@ -359,11 +359,69 @@ def unexcited_unknowns(names: Sequence[str], data: dict[str, np.ndarray]) -> dic
     return out
 
 
+def twice_differentiated_gain2(
+    window: int, order: int, dt: float, filter_lambda: float | None = None
+) -> float:
+    """The squared noise gain of a velocity differentiated from the pose (the Savitzky-Golay
+    first-derivative kernel of ``window`` samples and ``order``) and then again for its
+    acceleration: by the same kernel (the gain of the convolution of the two), or with
+    ``filter_lambda`` by the filtered derivative sF(s) of :func:`filter_signal` (its impulse
+    response to the first kernel, run until it has decayed)."""
+    from scipy.signal import savgol_coeffs
+
+    first = savgol_coeffs(window, order, deriv=1, delta=dt)
+    if filter_lambda is None:
+        return float(np.sum(np.convolve(first, first) ** 2))
+    c = filter_lambda * dt / 2.0
+    tail = int(np.ceil(20.0 / (filter_lambda * dt)))  # e^-20 of the response left
+    response = lfilter(
+        filter_lambda * np.array([1.0, -1.0]),
+        np.array([1.0 + c, -(1.0 - c)]),
+        np.concatenate([first, np.zeros(tail)]),
+    )
+    return float(np.sum(response**2))
+
+
+def pose_noise_variance(
+    data: dict[str, np.ndarray], dofs: Sequence[str], from_pose: Sequence[str]
+) -> np.ndarray:
+    """``[N, len(dofs)]``: per sample, the variance that the pose noise (σ of
+    :func:`nnid.trainers.ukf.noise_level` on the pose columns) gives a body velocity of
+    ``dofs`` derived from the pose (:func:`nnid.datasets.preprocess.derive_velocities`),
+    per unit of the differentiator's gain: p q r = T_Θ⁻¹ Θ̇ (the Euler angle rates for small
+    angles), u v w = J₁ᵀ ṗ with the full pose (``"u"`` in ``from_pose``), else w = ż/(cθ cφ)
+    (its divisor kept at 0.5 or more, as there). NaN for a DOF not in ``from_pose``."""
+    from nnid.datasets.mapping import rotation_from_euler
+    from nnid.datasets.preprocess import _euler_rates
+    from nnid.trainers.ukf import noise_level
+
+    eta = np.asarray(data["eta"], dtype=np.float64)
+    sigma2 = noise_level({"nu": eta}, DOFS) ** 2  # x y z φ θ ψ, indexed as u v w p q r
+    angles = eta[:, 3:6]
+    out = np.full((eta.shape[0], len(dofs)), np.nan)
+    rates = linear = None
+    for k, d in enumerate(dofs):
+        if d not in from_pose:
+            continue
+        i = DOFS.index(d)
+        if i >= 3:
+            rates = _euler_rates(angles, inverse=True) if rates is None else rates
+            out[:, k] = rates[:, i - 3, :] ** 2 @ sigma2[3:]
+        elif "u" in from_pose:
+            linear = rotation_from_euler(angles) if linear is None else linear
+            out[:, k] = linear[:, :, i] ** 2 @ sigma2[:3]  # u = J₁ᵀ ṗ: column i of J₁
+        else:
+            tilt = np.abs(np.cos(angles[:, 1]) * np.cos(angles[:, 0]))
+            out[:, k] = sigma2[2] / np.maximum(tilt, 0.5) ** 2
+    return out
+
+
 def acceleration_noise_share(
     data: dict[str, np.ndarray],
     dofs: Sequence[str],
     savgol: tuple[float, int] | None,
     filter_lambda: float | None = None,
+    from_pose: tuple[Sequence[str], tuple[float, int]] | None = None,
 ) -> dict[str, float]:
     """Per DOF of ``dofs``: the share ρ = σ²_e / var(a) of the variance of the acceleration
     regressor a that is measurement noise e (errors in variables): the velocity noise of
@@ -373,7 +431,10 @@ def acceleration_noise_share(
     (white noise gain λ²/(1 + λ dt/2) of its bilinear discretisation); ``savgol`` None: the
     logged accelerations' own noise (gain 1). Least squares then shrinks the fitted inertia
     M_jj = m − F_jdot by the factor 1 − ρ. Velocities that were themselves differentiated from
-    the pose carry smoothed noise that differences underestimate: ρ is then too small."""
+    the pose carry smoothed noise that differences underestimate (ρ came out 10³ times too
+    small): ``from_pose`` = (the velocity columns so derived, the (window s, order) of that
+    derivative) takes theirs from the pose noise instead (:func:`pose_noise_variance`), times
+    the gain of the two derivatives in turn (:func:`twice_differentiated_gain2`)."""
     from nnid.datasets.preprocess import savgol_noise_gain, savgol_window
     from nnid.trainers.ukf import noise_level
 
@@ -385,8 +446,11 @@ def acceleration_noise_share(
         keep = np.ones(data["t"].size, dtype=bool)
         acc = np.asarray(data["nu_dot"], dtype=np.float64)[:, idx]
     logged = savgol is None and filter_lambda is None  # the accelerations as logged
+    pose_columns, pose_savgol = from_pose if from_pose is not None and not logged else ((), None)
+    posed = np.array([d in pose_columns for d in dofs], dtype=bool)
     sigma = noise_level({"nu": data["nu_dot"] if logged else data["nu"]}, dofs)
     gain2 = np.zeros(data["t"].size)
+    pose_gain2 = np.zeros(data["t"].size)
     for k in np.unique(data["experiment"]):
         rows = np.flatnonzero(data["experiment"] == k)
         dt = float(np.median(np.diff(data["t"][rows]))) if rows.size > 1 else 1.0
@@ -397,7 +461,13 @@ def acceleration_noise_share(
             gain2[rows] = savgol_noise_gain(window, savgol[1], dt) ** 2
         else:
             gain2[rows] = 1.0
+        if posed.any():
+            window = savgol_window(pose_savgol[0], 1.0 / dt, pose_savgol[1])
+            pose_gain2[rows] = twice_differentiated_gain2(window, pose_savgol[1], dt, filter_lambda)
     noise2 = sigma**2 * float(np.mean(gain2[keep]))
+    if posed.any():
+        pose2 = pose_noise_variance(data, dofs, pose_columns) * pose_gain2[:, None]
+        noise2[posed] = np.nanmean(pose2[keep][:, posed], axis=0)
     spread2 = np.nanvar(acc[keep], axis=0)
     with np.errstate(divide="ignore", invalid="ignore"):
         share = np.where(spread2 > 0, noise2 / spread2, np.inf)
@@ -418,6 +488,7 @@ def attenuated_unknowns(
     estimate: dict[str, tuple[float, float]],
     savgol: tuple[float, int] | None,
     filter_lambda: float | None = None,
+    from_pose: tuple[Sequence[str], tuple[float, int]] | None = None,
 ) -> dict[str, tuple[float, float]]:
     """The diagonal added masses of ``names`` fitted from their own DOF's equation (in
     ``dofs``) whose expected errors-in-variables bias exceeds :data:`ATTENUATION_LIMIT` of their
@@ -427,7 +498,8 @@ def attenuated_unknowns(
     fitted inertia M̂ by the noise share ρ of :func:`acceleration_noise_share`, so F_jdot comes
     out high (a negative added mass too small) by about M̂ ρ / (1 − ρ): an estimate, not a
     correction (on simulated surge logs with Savitzky-Golay accelerations it accounted for the
-    error within 5 %; with filtered regressors it overstated it by up to a half)."""
+    error within 5 %; with filtered regressors it overstated it by up to a half). ``from_pose``:
+    the velocities derived from the pose, as :func:`acceleration_noise_share` reads it."""
     todo = {}
     for name in names:
         try:
@@ -439,7 +511,7 @@ def attenuated_unknowns(
     if not todo:
         return {}
     share = acceleration_noise_share(
-        data, list(dict.fromkeys(todo.values())), savgol, filter_lambda
+        data, list(dict.fromkeys(todo.values())), savgol, filter_lambda, from_pose
     )
     out = {}
     for name, dof in todo.items():
@@ -735,6 +807,9 @@ class ParametricModel(FossenPlant):
             return {}
         derived = any(s.step == "derive accelerations" for s in self.report_.steps)
         savgol = (self.savgol_window, self.savgol_order) if derived else None
+        # velocities differentiated from the pose: their noise is the pose's, smoothed
+        posed = [c for s in self.report_.steps if s.step == "derive velocities" for c in s.columns]
+        from_pose = (posed, (self.savgol_window, self.savgol_order)) if posed else None
         lam = getattr(trainer, "filter_lambda", None)
         inertia = np.diag(self.parts_.model(check=False).mass_matrix().numpy())
         est = self.estimate_
@@ -752,7 +827,9 @@ class ParametricModel(FossenPlant):
             for name in step.unknowns:
                 out.pop(name, None)
             out.update(
-                attenuated_unknowns(step.unknowns, step.dofs, subset, inertia, values, savgol, lam)
+                attenuated_unknowns(
+                    step.unknowns, step.dofs, subset, inertia, values, savgol, lam, from_pose
+                )
             )
         return out
 
