@@ -497,13 +497,17 @@ def _auto_split(log: pd.DataFrame, fractions: tuple[float, float, float]) -> Spl
 DAMPING_KINDS = ("synthesis", "sindy")
 
 
-def build_model(spec, vehicle, warmup_s: float):
+def build_model(spec, vehicle, warmup_s: float, report: CleaningReport | None = None):
     """The model of a config section; an ensemble scores its members' validation free runs
     with the run's ``warmup_s``, as every score of the run is (one number per member, not
-    one in ``describe`` and another in ``members``)."""
+    one in ``describe`` and another in ``members``), and a Fossen model learns which
+    velocities ``report`` derived from the pose (:func:`_prepare`: their noise is the pose's)."""
     model = spec.build(vehicle)
     if model.kind == "ensemble":
         model.set_params(warmup_s=warmup_s)
+    if "pose_velocities" in model.get_params() and report is not None:
+        derived = [c for s in report.steps if s.step == "derive velocities" for c in s.columns]
+        model.set_params(pose_velocities=tuple(dict.fromkeys(derived)))
     return model
 
 
@@ -635,7 +639,7 @@ def run_train(
     source = str(config_path)
     inputs, loaded = loaded_inputs(cfg, config_path, [cfg.model], data, vehicle, columns)
     split = make_split(inputs.log, cfg.split, source, inputs.report, cfg.warmup_s)
-    model = build_model(cfg.model, inputs.vehicle, cfg.warmup_s)
+    model = build_model(cfg.model, inputs.vehicle, cfg.warmup_s, inputs.report)
     caught = fit_model(model, split, progress or silent, "model", cfg.model)
     if hasattr(model, "report_"):
         for step in model.report_.steps:
@@ -825,7 +829,7 @@ def run_compare(
     for i, spec in enumerate(cfg.models):
         name = spec.label()
         report(i, len(cfg.models), f"fitting {name}")
-        model = build_model(spec, inputs.vehicle, cfg.warmup_s)
+        model = build_model(spec, inputs.vehicle, cfg.warmup_s, inputs.report)
         t0 = time.perf_counter()
         caught = fit_model(model, split, staged(progress, name), f"models.{i}", spec)
         seconds = time.perf_counter() - t0

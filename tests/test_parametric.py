@@ -505,6 +505,26 @@ def test_an_added_mass_biased_by_motion_capture_noise_is_named(
     assert strong.params[name]["value"] == pytest.approx(truth, rel=0.05)
 
 
+def test_nnid_train_names_the_motion_capture_bias_as_the_python_api_does(seamor, tmp_path):
+    """nnid train derives a pose-only log's velocities before the fit, so the model never saw
+    them derived and took their noise from differences (ρ ~1e-4): the weak surge's X_udot
+    was named through the Python API and not through nnid train."""
+    from nnid.config import TrainConfig, load_config
+    from nnid.pipeline import run_train
+
+    log = _mocap_with_sines(seamor, "u", 10.0, 1.0, {"position_noise": 0.002})
+    assert not {"u", "v", "w", "p", "q", "r"} & set(log.columns)  # the pose only
+    log.to_csv(tmp_path / "mocap.csv", index=False)
+    config = tmp_path / "surge.toml"
+    config.write_text(
+        'kind = "train"\nvehicle = "seamor"\n[model]\nkind = "fossen"\ndofs = ["u"]\n'
+        'unknowns = ["X_udot", "X:u*abs(u)"]\n'
+    )
+    cfg = load_config(config, TrainConfig)
+    metrics = run_train(cfg, config, data=str(tmp_path / "mocap.csv")).metrics
+    assert any("errors in variables" in w and "X_udot = " in w for w in metrics["warnings"])
+
+
 @pytest.mark.parametrize("trainer", ["adam", "lm"])
 def test_a_network_trainer_on_a_fossen_model_is_one_clear_error(trainer):
     """The config refuses lm and adam for a Fossen model; the Python API said it with a

@@ -691,7 +691,10 @@ class ParametricModel(FossenPlant):
     (``savgol_window`` s, ``savgol_order``) where the log lacks them; what was derived is in
     ``report_``. ``zoh_midpoint`` regresses on the mean of consecutive inputs, the force a
     smoothed acceleration at a sample sees when commands are held between samples (without it
-    a 20 Hz log of held commands biases the added mass by ~20 %). ``params`` holds each
+    a 20 Hz log of held commands biases the added mass by ~20 %). ``pose_velocities``: the
+    velocity columns of the logs that were derived from the pose before the fit (``nnid
+    train`` sets them from its cleaning report), whose noise is the pose's, smoothed, as for
+    those the model derives itself (the errors-in-variables check). ``params`` holds each
     estimate with its standard error, Caccia's percentile error and the 51.02 % significance
     flag.
     """
@@ -708,6 +711,7 @@ class ParametricModel(FossenPlant):
         savgol_window: float = 1.0,
         savgol_order: int = 4,
         zoh_midpoint: bool = False,
+        pose_velocities: Sequence[str] = (),
     ) -> None:
         self.vehicle = vehicle
         self.unknowns = unknowns
@@ -717,6 +721,7 @@ class ParametricModel(FossenPlant):
         self.savgol_window = savgol_window
         self.savgol_order = savgol_order
         self.zoh_midpoint = zoh_midpoint
+        self.pose_velocities = pose_velocities
 
     def _fit(self, log: pd.DataFrame, validation, progress: Progress) -> None:
         from nnid.trainers.least_squares import LeastSquares
@@ -809,6 +814,7 @@ class ParametricModel(FossenPlant):
         savgol = (self.savgol_window, self.savgol_order) if derived else None
         # velocities differentiated from the pose: their noise is the pose's, smoothed
         posed = [c for s in self.report_.steps if s.step == "derive velocities" for c in s.columns]
+        posed = list(dict.fromkeys([*self.pose_velocities, *posed]))
         from_pose = (posed, (self.savgol_window, self.savgol_order)) if posed else None
         lam = getattr(trainer, "filter_lambda", None)
         inertia = np.diag(self.parts_.model(check=False).mass_matrix().numpy())
