@@ -511,16 +511,21 @@ def build_model(spec, vehicle, warmup_s: float, report: CleaningReport | None = 
     return model
 
 
-def fit_model(model, split: Split, progress: Progress, section: str, spec) -> list[str]:
+def fit_model(
+    model, split: Split, progress: Progress, section: str, spec, replay: Replay | None = None
+) -> list[str]:
     """Fit on the training split (validation for early stopping or selection); the warnings
     raised, each once. The model's own refusals are named where the config sets the field:
-    under ``section`` (``model``, ``models.2``) when it is a key of the config table ``spec``."""
+    under ``section`` (``model``, ``models.2``) when it is a key of the config table ``spec``.
+    An ensemble is given the run's ``replay``: it scores its members' validation free runs
+    (and drops diverged ones) as the run's scores fly them."""
     from nnid.datasets.arrays import CommandUnitsWarning
 
+    extra = {"replay": replay} if model.kind == "ensemble" else {}
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         try:
-            model.fit(split.train, split.validation, progress=progress)
+            model.fit(split.train, split.validation, progress=progress, **extra)
         except NnidInputError as exc:
             raise exc.within(section, type(spec).model_fields) from None
     # the commands' units were said against the whole log as it was loaded (load_inputs)
@@ -640,12 +645,12 @@ def run_train(
     inputs, loaded = loaded_inputs(cfg, config_path, [cfg.model], data, vehicle, columns)
     split = make_split(inputs.log, cfg.split, source, inputs.report, cfg.warmup_s)
     model = build_model(cfg.model, inputs.vehicle, cfg.warmup_s, inputs.report)
-    caught = fit_model(model, split, progress or silent, "model", cfg.model)
+    replay = replay_of(inputs, inputs.log)
+    caught = fit_model(model, split, progress or silent, "model", cfg.model, replay)
     if hasattr(model, "report_"):
         for step in model.report_.steps:
             inputs.report.add(step.step, "training split: " + step.detail, step.rows_removed)
     k = k_steps(split.validation, cfg.k_step_s)
-    replay = replay_of(inputs, inputs.log)
     description = model.describe()
     metrics: dict[str, Any] = {
         "model": model.kind,
@@ -831,7 +836,7 @@ def run_compare(
         report(i, len(cfg.models), f"fitting {name}")
         model = build_model(spec, inputs.vehicle, cfg.warmup_s, inputs.report)
         t0 = time.perf_counter()
-        caught = fit_model(model, split, staged(progress, name), f"models.{i}", spec)
+        caught = fit_model(model, split, staged(progress, name), f"models.{i}", spec, replay)
         seconds = time.perf_counter() - t0
         description = model.describe()
         row: dict[str, Any] = {

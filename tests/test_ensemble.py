@@ -228,6 +228,65 @@ def test_cli_train_shipped_adam_ensemble_reports_every_member(tmp_path):
     np.testing.assert_allclose(alone, seed_totals, rtol=1e-6)
 
 
+AUTOPILOT_SIM = """kind = "simulate"
+vehicle = "seamor"
+dt = 0.1
+seed = 0
+[autopilot]
+kp = [0.0, 0.0, 40.0, 0.0, 0.0, 10.0]
+kd = [0.0, 0.0, 40.0, 0.0, 0.0, 10.0]
+reference = [0.0, 0.0, 1.0, 0.0, 0.0, 0.0]
+"""
+AUTOPILOT_RUN = """[[experiments]]
+name = "{name}"
+x0 = [0, 0, 1, 0, 0, 0, 0, 0, 0, 0, 0, 0]
+signals = [
+  {{ kind = "multisine", channel = "X", amplitude = {x}, f_min = {f}, {rest} }},
+  {{ kind = "multisine", channel = "Z", amplitude = {z}, f_min = {f}, {rest} }},
+]
+"""
+
+
+def test_members_of_an_autopilot_flown_log_are_judged_by_the_free_runs_reported(tmp_path):
+    """A log flown under the simulator's PD autopilot: ``nnid train`` flies a hybrid member's
+    validation free run under the replayed autopilot (closed loop), while the ensemble scored
+    its members open loop, 0.050 and 0.051 in ``describe`` for 0.038 and 0.042 in
+    ``metrics.json``'s members, and dropped diverged members by runs it did not report. The
+    run now passes its replay, and the two totals are one."""
+    runs = [("a", 20.0, 10.0, 0.02), ("b", 25.0, 12.0, 0.03)]
+    rest = "f_max = 0.3, n = 5, duration = 40.0"
+    sim = AUTOPILOT_SIM + "".join(
+        AUTOPILOT_RUN.format(name=n, x=x, z=z, f=f, rest=rest) for n, x, z, f in runs
+    )
+    (tmp_path / "sim.toml").write_text(sim)
+    cfg = tmp_path / "train.toml"
+    cfg.write_text(
+        'kind = "train"\nvehicle = "seamor"\nwarmup_s = 1.0\n[data]\nsimulate = "sim.toml"\n'
+        '[split]\nby = "experiment"\ntrain = ["a"]\nvalidation = ["b"]\n'
+        '[model]\nkind = "ensemble"\nseeds = [0, 1]\n'
+        '[model.member]\nkind = "hybrid"\ndofs = ["u", "w"]\nhidden = [4]\nmemory = []\n'
+        'segments = [1.0]\ntrainer = { kind = "adam", max_epochs = 2 }\n'
+    )
+    out = tmp_path / "out"
+    done = CliRunner().invoke(app, ["train", str(cfg), "--out", str(out)])
+    assert done.exit_code == 0, done.output
+    m = json.loads((out / "metrics.json").read_text())
+    members = [r["validation"] for r in m["members"]]
+    assert all(r["closed_loop"] == ["free_run"] for r in members)  # flown as the log was
+    reported = [r["free_run_nrmse"]["total"] for r in members]
+    described = m["describe"]["member_validation_free_run_nrmse"]
+    np.testing.assert_allclose(described, reported, rtol=1e-9)
+    # the open-loop free runs score otherwise: the test tells the two apart
+    from nnid.pipeline import load_inputs, make_split
+
+    cfg_obj = load_config(cfg, TrainConfig)
+    inputs = load_inputs(cfg_obj, cfg, [cfg_obj.model])
+    validation = make_split(inputs.log, cfg_obj.split, str(cfg), inputs.report).validation
+    model = load_model(out)
+    open_loop = [mb.score(validation, "free_run", warmup_s=1.0)["total"] for mb in model.members_]
+    assert not np.allclose(open_loop, reported, rtol=0.05)
+
+
 def test_members_fitted_in_worker_processes_match_the_sequential_fit():
     rng = np.random.default_rng(0)
     u = np.repeat(rng.uniform(-1, 1, 40), 15)

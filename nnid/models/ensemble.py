@@ -24,6 +24,7 @@ import torch
 from sklearn.base import clone
 
 from nnid.errors import NnidInputError
+from nnid.evaluation.prediction import Replay
 from nnid.models.base import NnidModel, learned_state, restore_learned
 from nnid.trainers.history import Progress, staged
 
@@ -38,8 +39,11 @@ class EnsembleModel(NnidModel):
     ``seeds``: the members' seeds (at least two). ``members_`` are the fitted copies,
     ``member_validation_`` their validation free-run NRMSE (total; None where it diverged or
     there was no validation log), scored as :func:`nnid.evaluation.evaluate.evaluate` scores
-    with ``warmup_s`` (``nnid train`` sets its config's, so these are the members' validation
-    totals of ``metrics.json``). Members are fitted on the same training and validation
+    with ``warmup_s`` and, for a log flown under an autopilot, the ``replay`` given to
+    :meth:`fit` (``nnid train`` sets its config's warm-up and passes its run's replay, so these
+    are the members' validation totals of ``metrics.json``, and the members that
+    ``drop_diverged`` judges are judged by the free runs reported). Members are fitted on the
+    same training and validation
     logs, one after the other or (``n_jobs``) in worker processes, whose progress is then
     reported per finished member.
     """
@@ -95,12 +99,35 @@ class EnsembleModel(NnidModel):
             raise NnidInputError("an ensemble needs at least two different seeds", field="seeds")
         return seeds
 
+    def fit(
+        self,
+        log: pd.DataFrame,
+        validation: pd.DataFrame | None = None,
+        progress: Progress | None = None,
+        replay: Replay | None = None,
+    ) -> EnsembleModel:
+        """:meth:`NnidModel.fit`; ``replay``: how the logs were flown in closed loop
+        (:func:`nnid.pipeline.replay_of`), or None. The members that can fly in closed loop
+        (hybrids) then have their validation free runs flown under it, as
+        :func:`nnid.evaluation.evaluate.evaluate` flies them with that replay: the pipeline's
+        scores, by the pipeline's own rule (open loop, it scored them 0.050 and 0.051 where
+        ``metrics.json`` said 0.038 and 0.042, and dropped members by runs it did not
+        report)."""
+        self._replay = replay  # not a setting: it is the data's, and is not saved
+        try:
+            return super().fit(log, validation, progress)
+        finally:
+            del self._replay
+
     def _fit(self, log: pd.DataFrame, validation: pd.DataFrame | None, progress: Progress):
         seeds = self._check_settings()
         jobs = max(1, min(int(self.n_jobs), len(seeds)))
         templates = [clone(self.model).set_params(seed=seed) for seed in seeds]
+        replay = getattr(self, "_replay", None)
         try:
-            fitted = self._fit_members(templates, log, validation, jobs, progress, self.warmup_s)
+            fitted = self._fit_members(
+                templates, log, validation, jobs, progress, self.warmup_s, replay
+            )
         except NnidInputError as exc:
             raise exc.within("member", self.model.get_params()) from None
         members = [m for m, _ in fitted]
@@ -119,19 +146,27 @@ class EnsembleModel(NnidModel):
 
     @staticmethod
     def _fit_members(
-        templates, log, validation, jobs: int, progress: Progress, warmup_s: float = 0.0
+        templates,
+        log,
+        validation,
+        jobs: int,
+        progress: Progress,
+        warmup_s: float = 0.0,
+        replay: Replay | None = None,
     ) -> list[tuple]:
         """(member, validation free-run NRMSE) of each template, in ``jobs`` processes."""
         n = len(templates)
         if jobs == 1:
             return [
-                _fit_member(m, log, validation, staged(progress, f"member {i + 1}/{n}"), warmup_s)
+                _fit_member(
+                    m, log, validation, staged(progress, f"member {i + 1}/{n}"), warmup_s, replay
+                )
                 for i, m in enumerate(templates)
             ]
         from joblib import Parallel, delayed
 
         runs = Parallel(n_jobs=jobs, backend="loky", return_as="generator")(
-            delayed(_fit_member)(m, log, validation, None, warmup_s) for m in templates
+            delayed(_fit_member)(m, log, validation, None, warmup_s, replay) for m in templates
         )
         fitted = []
         for i, result in enumerate(runs):
@@ -213,20 +248,28 @@ def _fit_member(
     validation: pd.DataFrame | None,
     progress: Progress | None = None,
     warmup_s: float = 0.0,
+    replay: Replay | None = None,
 ) -> tuple[NnidModel, float | None]:
     """One member fitted, and its validation free-run NRMSE (a function of its own so that a
     worker process can run it)."""
     member.fit(log, validation, progress)
-    return member, _free_run_total(member, validation, warmup_s)
+    return member, _free_run_total(member, validation, warmup_s, replay)
 
 
 def _free_run_total(
-    model: NnidModel, log: pd.DataFrame | None, warmup_s: float = 0.0
+    model: NnidModel,
+    log: pd.DataFrame | None,
+    warmup_s: float = 0.0,
+    replay: Replay | None = None,
 ) -> float | None:
     """The model's total free-run NRMSE on ``log``, its warm-up samples and the first
-    ``warmup_s`` of each run unscored (None without a log or where it diverged)."""
+    ``warmup_s`` of each run unscored (None without a log or where it diverged), flown under
+    ``replay`` where :func:`nnid.evaluation.evaluate.evaluate` flies the model so."""
+    from nnid.evaluation.evaluate import evaluate
+
     if log is None:
         return None
     with np.errstate(all="ignore"):
-        total = model.score(log, "free_run", warmup_s)["total"]
+        total = evaluate(model, log, ("free_run",), None, warmup_s, replay)["free_run_nrmse"]
+    total = total["total"]
     return None if total is None else float(total)

@@ -321,7 +321,11 @@ def _factor_velocities(atom: int) -> tuple[int, ...]:
     return {"U": (0, 1, 2), "(eta-1)": (0, 1, 2), "1": ()}.get(name, (1, 2))
 
 
-def unexcited_unknowns(names: Sequence[str], data: dict[str, np.ndarray]) -> dict[str, list[str]]:
+def unexcited_unknowns(
+    names: Sequence[str],
+    data: dict[str, np.ndarray],
+    from_pose: tuple[Sequence[str], tuple[float, int]] | None = None,
+) -> dict[str, list[str]]:
     """The unknowns whose regressor is a product with a velocity that stays within 3 times its
     measurement noise over the fit data (the noise from second differences,
     :func:`nnid.trainers.ukf.noise_level`): ``{name: [DOFs]}``.
@@ -331,13 +335,19 @@ def unexcited_unknowns(names: Sequence[str], data: dict[str, np.ndarray]) -> dic
     scaling makes it look as well conditioned as any other (Weiss eq. 95 sees no defect), and
     least squares fits it, with a small standard error, to the noise (errors in variables).
     Signal to noise only: a small but real motion is excitation. Velocities differentiated
-    from the pose (Savitzky-Golay) carry smoothed, correlated noise that differences
-    underestimate, so there the check may miss an unexcited DOF; it does not flag a moving one.
+    from the pose (Savitzky-Golay) carry smoothed, correlated noise that second differences
+    put 7-8 times too low (a surge-only motion-capture run's p, q, r, pure noise, passed as
+    excited): ``from_pose`` = (the velocity columns so derived, the (window s, order) of that
+    derivative) adds theirs from the pose noise (:func:`pose_noise_variance`) times the
+    first-derivative gain (:func:`~nnid.datasets.preprocess.savgol_noise_gain`), in quadrature
+    with the differences' (which see the white share, e.g. u times the heading noise in v).
     Off-diagonal added mass and non-motion unknowns are not judged here."""
     from nnid.trainers.ukf import noise_level
 
     nu = np.asarray(data["nu"], dtype=np.float64)
     noise = noise_level(data, DOFS)
+    if from_pose is not None and any(d in from_pose[0] for d in DOFS):
+        noise = np.hypot(noise, _pose_velocity_noise(data, *from_pose))
     spread = np.nanstd(nu, axis=0)
     # no noise estimate (too few samples): no verdict
     moving = {k for k in range(len(DOFS)) if not np.isfinite(noise[k]) or spread[k] > 3 * noise[k]}
@@ -357,6 +367,30 @@ def unexcited_unknowns(names: Sequence[str], data: dict[str, np.ndarray]) -> dic
         if still:
             out[name] = list(dict.fromkeys(DOFS[k] for f in still for k in f))
     return out
+
+
+def _pose_velocity_noise(
+    data: dict[str, np.ndarray], columns: Sequence[str], savgol: tuple[float, int]
+) -> np.ndarray:
+    """Per DOF of :data:`DOFS`: the noise σ of a velocity of ``columns`` derived from the pose
+    by the Savitzky-Golay first derivative of ``savgol`` (window s, order), each experiment at
+    its own rate: the pose noise through J⁻¹(η) (:func:`pose_noise_variance`, its mean over
+    the samples) times that derivative's gain; 0 for the DOFs not in ``columns``."""
+    from nnid.datasets.preprocess import savgol_noise_gain, savgol_window
+
+    t = np.asarray(data["t"], dtype=np.float64)
+    experiment = np.asarray(data.get("experiment", np.zeros(t.size, dtype=int)))
+    gain2 = np.ones(t.size)
+    for k in np.unique(experiment):
+        rows = np.flatnonzero(experiment == k)
+        dt = float(np.median(np.diff(t[rows]))) if rows.size > 1 else 1.0
+        window = savgol_window(savgol[0], 1.0 / dt, savgol[1])
+        gain2[rows] = savgol_noise_gain(window, savgol[1], dt) ** 2
+    var = pose_noise_variance(data, DOFS, columns) * gain2[:, None]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # a DOF not derived: all NaN
+        mean = np.nanmean(var, axis=0)
+    return np.sqrt(np.nan_to_num(mean, nan=0.0))
 
 
 def twice_differentiated_gain2(
@@ -757,7 +791,7 @@ class ParametricModel(FossenPlant):
         self.estimate_ = trainer.fit(self.structure_, data, progress=progress)
         self.trainer_ = trainer
         self.parts_ = self.structure_.parts(np.nan_to_num(self.estimate_.theta))
-        self.not_excited_ = unexcited_unknowns(unknowns, data)
+        self.not_excited_ = unexcited_unknowns(unknowns, data, self._from_pose())
         if self.not_excited_:
             from nnid.trainers.least_squares import ExcitationWarning
 
@@ -799,6 +833,14 @@ class ParametricModel(FossenPlant):
         self._check_mass()
         self._check_signs()
 
+    def _from_pose(self) -> tuple[list[str], tuple[float, int]] | None:
+        """The velocity columns the fit derived from the pose (its report's "derive
+        velocities") and the (window s, order) of that derivative, or None: their noise is
+        the pose's, smoothed (:func:`unexcited_unknowns`, :func:`attenuated_unknowns`)."""
+        posed = [c for s in self.report_.steps if s.step == "derive velocities" for c in s.columns]
+        posed = list(dict.fromkeys([*self.pose_velocities, *posed]))  # nnid train's too
+        return (posed, (self.savgol_window, self.savgol_order)) if posed else None
+
     def _attenuated(
         self, trainer, unknowns: list[str], dofs: list[str], data: dict[str, np.ndarray]
     ) -> dict[str, tuple[float, float]]:
@@ -812,10 +854,7 @@ class ParametricModel(FossenPlant):
             return {}
         derived = any(s.step == "derive accelerations" for s in self.report_.steps)
         savgol = (self.savgol_window, self.savgol_order) if derived else None
-        # velocities differentiated from the pose: their noise is the pose's, smoothed
-        posed = [c for s in self.report_.steps if s.step == "derive velocities" for c in s.columns]
-        posed = list(dict.fromkeys([*self.pose_velocities, *posed]))
-        from_pose = (posed, (self.savgol_window, self.savgol_order)) if posed else None
+        from_pose = self._from_pose()
         lam = getattr(trainer, "filter_lambda", None)
         inertia = np.diag(self.parts_.model(check=False).mass_matrix().numpy())
         est = self.estimate_
