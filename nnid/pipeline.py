@@ -53,6 +53,9 @@ class Inputs:
     vehicle: Any = None
     simulation: SimulateConfig | None = None
     notes: dict = field(default_factory=dict)
+    #: the (window s, order) of the Savitzky-Golay derivative that gave the velocities the
+    #: report says were derived from the pose ([data]'s)
+    derived_with: tuple[float, int] = (1.0, 4)
 
 
 def vehicle_for(name: str, config_path: Path, key: str = "vehicle"):
@@ -273,6 +276,7 @@ def load_inputs(
             except NnidInputError as err:
                 raise err.with_source(source) from None
     inputs.log = _prepare(inputs.log, spec, inputs.report)
+    inputs.derived_with = (float(spec.savgol_window), int(spec.savgol_order))
     return inputs
 
 
@@ -497,17 +501,24 @@ def _auto_split(log: pd.DataFrame, fractions: tuple[float, float, float]) -> Spl
 DAMPING_KINDS = ("synthesis", "sindy")
 
 
-def build_model(spec, vehicle, warmup_s: float, report: CleaningReport | None = None):
+def build_model(spec, inputs: Inputs, warmup_s: float):
     """The model of a config section; an ensemble scores its members' validation free runs
     with the run's ``warmup_s``, as every score of the run is (one number per member, not
-    one in ``describe`` and another in ``members``), and a Fossen model learns which
-    velocities ``report`` derived from the pose (:func:`_prepare`: their noise is the pose's)."""
-    model = spec.build(vehicle)
+    one in ``describe`` and another in ``members``), and a model with a Fossen fit (a Fossen
+    model's, a hybrid's) learns which velocities the inputs' report derived from the pose and
+    with which window (:func:`_prepare`: their noise is the pose's, smoothed)."""
+    model = spec.build(inputs.vehicle)
     if model.kind == "ensemble":
         model.set_params(warmup_s=warmup_s)
-    if "pose_velocities" in model.get_params() and report is not None:
-        derived = [c for s in report.steps if s.step == "derive velocities" for c in s.columns]
-        model.set_params(pose_velocities=tuple(dict.fromkeys(derived)))
+    steps = inputs.report.steps
+    derived = tuple(
+        dict.fromkeys(c for s in steps if s.step == "derive velocities" for c in s.columns)
+    )
+    for key in [k for k in model.get_params(deep=True) if k.endswith("pose_velocities")]:
+        # an ensemble's members too (model__pose_velocities)
+        model.set_params(
+            **{key: derived, key[: -len("velocities")] + "savgol": inputs.derived_with}
+        )
     return model
 
 
@@ -644,7 +655,7 @@ def run_train(
     source = str(config_path)
     inputs, loaded = loaded_inputs(cfg, config_path, [cfg.model], data, vehicle, columns)
     split = make_split(inputs.log, cfg.split, source, inputs.report, cfg.warmup_s)
-    model = build_model(cfg.model, inputs.vehicle, cfg.warmup_s, inputs.report)
+    model = build_model(cfg.model, inputs, cfg.warmup_s)
     replay = replay_of(inputs, inputs.log)
     caught = fit_model(model, split, progress or silent, "model", cfg.model, replay)
     if hasattr(model, "report_"):
@@ -834,7 +845,7 @@ def run_compare(
     for i, spec in enumerate(cfg.models):
         name = spec.label()
         report(i, len(cfg.models), f"fitting {name}")
-        model = build_model(spec, inputs.vehicle, cfg.warmup_s, inputs.report)
+        model = build_model(spec, inputs, cfg.warmup_s)
         t0 = time.perf_counter()
         caught = fit_model(model, split, staged(progress, name), f"models.{i}", spec, replay)
         seconds = time.perf_counter() - t0

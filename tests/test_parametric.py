@@ -549,7 +549,10 @@ def test_an_added_mass_biased_by_motion_capture_noise_is_named(
     assert strong.params[name]["value"] == pytest.approx(truth, rel=0.05)
 
 
-def test_nnid_train_names_the_motion_capture_bias_as_the_python_api_does(seamor, tmp_path):
+@pytest.mark.parametrize("data_window", [None, 0.3])
+def test_nnid_train_names_the_motion_capture_bias_as_the_python_api_does(
+    seamor, tmp_path, data_window
+):
     """nnid train derives a pose-only log's velocities before the fit, so the model never saw
     them derived and took their noise from differences (ρ ~1e-4): the weak surge's X_udot
     was named through the Python API and not through nnid train."""
@@ -560,13 +563,27 @@ def test_nnid_train_names_the_motion_capture_bias_as_the_python_api_does(seamor,
     assert not {"u", "v", "w", "p", "q", "r"} & set(log.columns)  # the pose only
     log.to_csv(tmp_path / "mocap.csv", index=False)
     config = tmp_path / "surge.toml"
+    # [data]'s window derives the velocities, [model]'s the accelerations: with 0.3 s against
+    # 1 s the noise share was taken with the model's window, a sixth of the noise, unsaid
+    data = "" if data_window is None else f"[data]\nsavgol_window = {data_window}\n"
     config.write_text(
-        'kind = "train"\nvehicle = "seamor"\n[model]\nkind = "fossen"\ndofs = ["u"]\n'
-        'unknowns = ["X_udot", "X:u*abs(u)"]\n'
+        'kind = "train"\nvehicle = "seamor"\n' + data + '[model]\nkind = "fossen"\n'
+        'dofs = ["u"]\nunknowns = ["X_udot", "X:u*abs(u)"]\n'
     )
     cfg = load_config(config, TrainConfig)
     metrics = run_train(cfg, config, data=str(tmp_path / "mocap.csv")).metrics
     assert any("errors in variables" in w and "X_udot = " in w for w in metrics["warnings"])
+    if data_window is not None:  # and a hybrid's Fossen fit is told the same
+        from nnid.config import HybridModelSpec
+        from nnid.datasets.cleaning import CleaningReport
+        from nnid.pipeline import Inputs, build_model
+
+        report = CleaningReport()
+        report.add("derive velocities", "u from the pose", columns=["u"])
+        inputs = Inputs(log, report, seamor, derived_with=(data_window, 4))
+        hybrid = build_model(HybridModelSpec(kind="hybrid"), inputs, 0.0)
+        physics = hybrid._physics_model()
+        assert (physics.pose_velocities, physics.pose_savgol) == (("u",), (data_window, 4))
 
 
 @pytest.mark.parametrize("trainer", ["adam", "lm"])

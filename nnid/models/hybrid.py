@@ -423,6 +423,8 @@ class HybridModel(FossenPlant):
             them (:func:`nnid.models.parametric.prepare_motion`).
         zoh_midpoint: the parametric fit regresses on the mean of consecutive inputs (held
             commands; :class:`ParametricModel`); the simulation holds them.
+        pose_velocities, pose_savgol: velocities derived from the pose before the fit and
+            that derivative's window (:class:`ParametricModel`; ``nnid train`` sets them).
         seed: initial weights and segment draws.
     """
 
@@ -452,6 +454,8 @@ class HybridModel(FossenPlant):
         savgol_window: float = 1.0,
         savgol_order: int = 4,
         zoh_midpoint: bool = True,
+        pose_velocities: Sequence[str] = (),
+        pose_savgol: tuple[float, int] | None = None,
         seed: int = 0,
     ) -> None:
         self.vehicle = vehicle
@@ -475,6 +479,8 @@ class HybridModel(FossenPlant):
         self.savgol_window = savgol_window
         self.savgol_order = savgol_order
         self.zoh_midpoint = zoh_midpoint
+        self.pose_velocities = pose_velocities
+        self.pose_savgol = pose_savgol
         self.seed = seed
 
     # -- settings --------------------------------------------------------------------------------
@@ -517,6 +523,8 @@ class HybridModel(FossenPlant):
             self.savgol_window,
             self.savgol_order,
             self.zoh_midpoint,
+            self.pose_velocities,
+            self.pose_savgol,
         )
 
     def _new_dynamics(self, generator: torch.Generator | None = None) -> HybridDynamics:

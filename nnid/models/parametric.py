@@ -726,9 +726,10 @@ class ParametricModel(FossenPlant):
     ``report_``. ``zoh_midpoint`` regresses on the mean of consecutive inputs, the force a
     smoothed acceleration at a sample sees when commands are held between samples (without it
     a 20 Hz log of held commands biases the added mass by ~20 %). ``pose_velocities``: the
-    velocity columns of the logs that were derived from the pose before the fit (``nnid
-    train`` sets them from its cleaning report), whose noise is the pose's, smoothed, as for
-    those the model derives itself (the errors-in-variables check). ``params`` holds each
+    velocity columns of the logs that were derived from the pose before the fit, with the
+    (window s, order) ``pose_savgol`` of that derivative (None: this model's); ``nnid train``
+    sets both from its cleaning report and its ``[data]``. Their noise is the pose's,
+    smoothed, as for those the model derives itself (the excitation checks). ``params`` holds each
     estimate with its standard error, Caccia's percentile error and the 51.02 % significance
     flag.
     """
@@ -746,6 +747,7 @@ class ParametricModel(FossenPlant):
         savgol_order: int = 4,
         zoh_midpoint: bool = False,
         pose_velocities: Sequence[str] = (),
+        pose_savgol: tuple[float, int] | None = None,
     ) -> None:
         self.vehicle = vehicle
         self.unknowns = unknowns
@@ -756,6 +758,7 @@ class ParametricModel(FossenPlant):
         self.savgol_order = savgol_order
         self.zoh_midpoint = zoh_midpoint
         self.pose_velocities = pose_velocities
+        self.pose_savgol = pose_savgol
 
     def _fit(self, log: pd.DataFrame, validation, progress: Progress) -> None:
         from nnid.trainers.least_squares import LeastSquares
@@ -837,8 +840,10 @@ class ParametricModel(FossenPlant):
         """The velocity columns the fit derived from the pose (its report's "derive
         velocities") and the (window s, order) of that derivative, or None: their noise is
         the pose's, smoothed (:func:`unexcited_unknowns`, :func:`attenuated_unknowns`)."""
+        if self.pose_velocities:  # derived before the fit (nnid train), with their window
+            window = self.pose_savgol or (self.savgol_window, self.savgol_order)
+            return list(self.pose_velocities), (float(window[0]), int(window[1]))
         posed = [c for s in self.report_.steps if s.step == "derive velocities" for c in s.columns]
-        posed = list(dict.fromkeys([*self.pose_velocities, *posed]))  # nnid train's too
         return (posed, (self.savgol_window, self.savgol_order)) if posed else None
 
     def _attenuated(
