@@ -10,8 +10,10 @@ After an alarm whose change is isolated, the rest of the experiment is watched a
 fitted change's signature taken out of each new row's residual, fresh EWMA and CUSUM from the end
 of the isolation window, a later alarm judged by the same rule. The signature is computed on
 :data:`REWATCH_S` seconds of rows at once (its columns cost milliseconds a call, whatever the
-rows), so an alarm there is announced up to that much later; its time is its row's. The
-per-sample update of a stream without an isolated change is untouched.
+rows) and each row waits for the half Savitzky-Golay window after it that its signature's
+acceleration is smoothed over, as batch has it, so an alarm there is announced up to that much
+later; its time is its row's. The per-sample update of a stream without an isolated change is
+untouched.
 """
 
 from __future__ import annotations
@@ -34,6 +36,7 @@ from nnid.datasets.log import (
     looks_like_degrees,
     out_of_bounds,
 )
+from nnid.datasets.preprocess import savgol_window
 from nnid.errors import NnidInputError
 from nnid.fault.detect import (
     DetectResult,
@@ -181,6 +184,15 @@ def follow_csv(
     queue: list[int] = []  # rows of it whose residual is not yet re-referenced
     block = max(round(REWATCH_S / monitor.interval), 1)
     context = max(int(np.ceil(monitor.plant_.savgol_window / monitor.interval)), block)
+    # a row's signature smooths the acceleration over a window centred on it (an added-mass
+    # or payload change): it waits for the half window after it, which batch has
+    ahead = savgol_window(monitor.plant_.savgol_window, 1.0 / monitor.interval, 2) // 2 + 1
+
+    def waits(k: int) -> float:
+        """How long after its window an alarm at ``k`` waits: on re-watched rows, until the
+        window's last row has been watched (the half smoothing window after it)."""
+        watching = ref["rewatch"] is not None and ref["code"] == codes[k - dropped]
+        return (ahead + 1) * monitor.interval if watching and k >= ref["start"] else 0.0
 
     def announce(k: int) -> None:
         pending.append(k)
@@ -195,21 +207,24 @@ def follow_csv(
         A signature needs two rows: one alone waits for the next, unless it is the last."""
         if not queue:
             return
-        first, last = queue[0], queue[-1]
+        first, last = queue[0], queue[-1]  # the queue runs to its experiment's newest row
+        ready = len(queue) if final else sum(k <= last - ahead for k in queue)
         a = max(ref["start"] - 1, first - context, dropped)  # rows from a + 1 get a signature
         i, j = a - dropped, last + 1 - dropped
-        if j - i < 3 and not final:
+        # and the smoothing's window must fit in the rows taken, whole, as it does in batch
+        if ready == 0 or (j - i < max(3, 2 * ahead + 1) and not final):
             return
         data = _arrays(ts[i:j], xs[i:j], us[i:j], codes[i:j], names)
         rows = np.arange(1, j - i)
-        left = ref["rewatch"].left(data, rows, np.array(vals[i + 1 : j])[:, 0:6])[-len(queue) :]
-        out = ref["rewatch"].step(data["t"][-len(queue) :], left)
-        for row, (k, values) in enumerate(zip(list(queue), out, strict=True)):
+        left = ref["rewatch"].left(data, rows, np.array(vals[i + 1 : j])[:, 0:6])
+        left = left[first - a - 1 : first - a - 1 + ready]
+        out = ref["rewatch"].step(data["t"][first - a : first - a + ready], left)
+        for row, (k, values) in enumerate(zip(queue[:ready], out, strict=True)):
             watched[k - dropped][0:6] = left[row]
             watched[k - dropped][6:20] = values[6:20]
             if values[20] == 1:
                 announce(k)
-        queue.clear()
+        del queue[:ready]
 
     def rewatch_after(k: int, rows: np.ndarray) -> None:
         """Fresh statistics after the window ``rows`` (buffer indices) of the alarm at ``k``:
@@ -220,10 +235,11 @@ def follow_csv(
         alarm_rows[:] = [p for p in alarm_rows if p not in later]
         ref["start"] = dropped + int(rows[-1]) + 1
         queue[:] = [p for p in range(ref["start"], dropped + len(ts)) if codes[p - dropped] == code]
-        flush()
+        flush(final=codes[-1] != code)  # the experiment has ended: no row is to come
 
     def isolate(k: int) -> None:
-        flush()  # the window's rows watched before it is judged
+        # the window's rows watched before it is judged (all of them once its run has ended)
+        flush(final=codes[-1] != codes[k - dropped])
         data = _arrays(ts, xs, us, codes, names)
         values = np.array(watched)
         trace = Trace(data["t"], np.array(names, dtype=object)[data["experiment"]],
@@ -320,19 +336,23 @@ def follow_csv(
         row_no = dropped + len(ts) - 1
         if ref["rewatch"] is not None and ref["code"] == codes[-1] and row_no >= ref["start"]:
             queue.append(row_no)  # watched on what the isolated changes leave
-            if len(queue) >= block:
+            if len(queue) >= block + ahead:
                 flush()
         elif code == 1:
             announce(row_no)
         while pending and (
-            t - ts[pending[0] - dropped] >= window_s or codes[pending[0] - dropped] != codes[-1]
+            t - ts[pending[0] - dropped] >= window_s + waits(pending[0])
+            or codes[pending[0] - dropped] != codes[-1]
         ):
             isolate(pending.pop(0))
-        if len(ts) > 2 * keep_rows and not pending and not queue:  # forget the older half
+        if len(ts) > 2 * keep_rows and not pending:  # forget the older half
             cut = len(ts) - keep_rows
-            for buf in (ts, xs, us, vals, watched, codes):
-                del buf[:cut]
-            dropped += cut
+            if queue:  # but not the rows still to be watched, nor those their signature reads
+                cut = min(cut, queue[0] - dropped - context - 1)
+            if cut > 0:
+                for buf in (ts, xs, us, vals, watched, codes):
+                    del buf[:cut]
+                dropped += cut
     flush(final=True)
     while pending:
         isolate(pending.pop(0))

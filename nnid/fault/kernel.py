@@ -196,7 +196,11 @@ def _update(t, x, cmd, prev, st, cfg, form, mass, mask, act, mu, whiten, s_inv, 
 
 @njit(cache=True)
 def update(t, x, cmd, prev, st, cfg, form, mass, mask, act, mu, whiten, s_inv, out, work, scratch):
-    """:func:`_update` as a call of its own: the streaming entry point."""
+    """:func:`_update` as a call of its own: the streaming entry point. ``out`` is NaN where
+    there is no residual, as :func:`run` leaves it (a skipped interval kept the previous
+    sample's values, which ``--follow`` then watched as a residual)."""
+    for i in range(20):
+        out[i] = np.nan
     return _update(t, x, cmd, prev, st, cfg, form, mass, mask, act, mu, whiten, s_inv, out, work,
                    scratch)  # fmt: skip
 
