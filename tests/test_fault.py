@@ -285,14 +285,25 @@ def _payload_then_snag(vehicle):
     return simulate_faults(vehicle, 60, faults=faults, seed=26)
 
 
-@pytest.mark.parametrize("scenario", [_two_faults_with_a_hole, _payload_then_snag])
+def _a_hole_after_the_second_window(vehicle):
+    faults = [Fault("thruster", FAULT_T, thruster="h1", efficiency=0.5),
+              Fault("external", 45.0, force=(-10, 0, 0, 0, 0, 1.0))]  # fmt: skip
+    log = simulate_faults(vehicle, 60, faults=faults, seed=7)
+    return log[~((log["t"] > 55.06) & (log["t"] < 57.0))].reset_index(drop=True)
+
+
+@pytest.mark.parametrize(
+    "scenario", [_two_faults_with_a_hole, _payload_then_snag, _a_hole_after_the_second_window]
+)
 def test_follow_watches_what_a_change_leaves_as_batch_detect_does(
     vehicle, monitor, scenario, tmp_path
 ):
     """--follow and batch detect after an isolated change, where they had parted: a second of
     rows missing kept the stream's previous residual, watched as one (a 'model_change' at 41 s
-    and the snag lost), and a payload's signature smooths the acceleration over a centred
-    window that the stream cut at each block's end (batch 42.05 s, follow 45.05 s)."""
+    and the snag lost); a payload's signature smooths the acceleration over a centred
+    window that the stream cut at each block's end (batch 42.05 s, follow 31.5 s); and rows
+    missing just after an alarm's window let its time pass before its last rows were watched
+    (the snag isolated on them, 'unexplained')."""
     log = scenario(vehicle)
     batch = detect(monitor, log)
     log.to_csv(tmp_path / "log.csv", index=False)

@@ -194,6 +194,17 @@ def follow_csv(
         watching = ref["rewatch"] is not None and ref["code"] == codes[k - dropped]
         return (ahead + 1) * monitor.interval if watching and k >= ref["start"] else 0.0
 
+    def judged(k: int, now: float) -> bool:
+        """Whether the alarm at ``k`` can be isolated at time ``now``: its experiment has
+        ended, or its window has arrived and every row of it has been watched (a row waits
+        for rows, not for time: after missing samples the time passes first)."""
+        i = k - dropped
+        if codes[i] != codes[-1]:
+            return True
+        if now - ts[i] < window_s + waits(k):
+            return False
+        return not (queue and ts[queue[0] - dropped] <= ts[i] + window_s)
+
     def announce(k: int) -> None:
         pending.append(k)
         alarm_rows.append(k)
@@ -340,10 +351,7 @@ def follow_csv(
                 flush()
         elif code == 1:
             announce(row_no)
-        while pending and (
-            t - ts[pending[0] - dropped] >= window_s + waits(pending[0])
-            or codes[pending[0] - dropped] != codes[-1]
-        ):
+        while pending and judged(pending[0], t):
             isolate(pending.pop(0))
         if len(ts) > 2 * keep_rows and not pending:  # forget the older half
             cut = len(ts) - keep_rows
