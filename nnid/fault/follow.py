@@ -215,7 +215,8 @@ def follow_csv(
     def flush(final: bool = False) -> None:
         """The queued rows re-referenced to the isolated changes and watched (the rows before
         them, from the first after the window, as context for the signature's derivative).
-        A signature needs two rows: one alone waits for the next, unless it is the last."""
+        Unless its run has ended (``final``), a row waits for the half smoothing window after
+        it, and the rows taken must hold a whole window, as batch's do."""
         if not queue:
             return
         first, last = queue[0], queue[-1]  # the queue runs to its experiment's newest row
