@@ -27,7 +27,7 @@ import pandas as pd
 from sklearn.metrics import roc_auc_score
 
 from nnid.datasets.readers import load_log
-from nnid.fault.detect import alarm_record
+from nnid.fault.detect import isolated_alarm
 from nnid.fault.isolation import isolate
 from nnid.fault.monitor import ResidualMonitor, monitor_inputs
 from nnid.models.parametric import ParametricModel
@@ -86,7 +86,7 @@ def main() -> None:
     arrays = monitor_inputs(test, monitor.plant_)
     named: dict[str, Counter] = {c: Counter() for c in sorted(set(lab))}
     for k in np.flatnonzero(trace.alarm):
-        a = alarm_record(monitor, arrays, trace, int(k), 5.0)
+        a = isolated_alarm(monitor, arrays, trace, int(k), 5.0)[0]
         named[runs.loc[a["experiment"], "label"]][a["effect"] or a["thruster"] or a["kind"]] += 1
     # the diagnosis of every run, alarm or not: what the isolation names on the run after its
     # first 2 s (the surface exit), as if an alarm had been raised there

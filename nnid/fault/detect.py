@@ -45,21 +45,6 @@ class DetectResult:
     seconds: float
 
 
-def alarm_record(
-    monitor: ResidualMonitor,
-    data: dict,
-    trace: Trace,
-    k: int,
-    window_s: float,
-    residual: np.ndarray | None = None,
-) -> dict:
-    """The alarm that starts at row ``k``, isolated on [t_k, t_k + window_s]. The window starts
-    at the alarm, never before: the change began at or before the alarm, and healthy samples
-    before its onset would bias the size of the change toward zero. ``residual`` [N, 6]: the
-    one to isolate (the trace's own by default)."""
-    return isolated_alarm(monitor, data, trace, k, window_s, residual)[0]
-
-
 def isolated_alarm(
     monitor: ResidualMonitor,
     data: dict,
@@ -68,7 +53,11 @@ def isolated_alarm(
     window_s: float,
     residual: np.ndarray | None = None,
 ) -> tuple[dict, Diagnosis, np.ndarray]:
-    """:func:`alarm_record`, with the diagnosis and the rows of the window."""
+    """The alarm that starts at row ``k``, isolated on [t_k, t_k + window_s]: its record, the
+    diagnosis and the rows of the window. The window starts at the alarm, never before: the
+    change began at or before the alarm, and healthy samples before its onset would bias the
+    size of the change toward zero. ``residual`` [N, 6]: the one to isolate (the trace's own
+    by default)."""
     rows = window_rows(data, k, window_s)
     residual = trace.values[:, 0:6] if residual is None else residual
     diag = isolate(monitor, data, residual, rows)
@@ -183,10 +172,7 @@ def detect(monitor: ResidualMonitor, log: pd.DataFrame, window_s: float = 10.0) 
         pos = k + 1
         if diag.isolated:
             w = rewatch.setdefault(int(codes[k]), Rewatch(monitor))
-            rest = _rest(data, rows)
-            w.restart(t[rows[-1]], diag.fitted)
-            residual[rest] = w.left(data, rest, trace.values[rest, 0:6])
-            _rewatch(w, data, residual, values, alarm, rows, changed)
+            _rewatch(w, data, residual, values, alarm, rows, changed, diag.fitted)
             pos = int(rows[-1]) + 1
     return DetectResult(watched, alarms, time.perf_counter() - start)
 
@@ -198,13 +184,16 @@ def _rest(data: dict, rows: np.ndarray) -> np.ndarray:
     return np.arange(k + 1, int(np.flatnonzero(codes == codes[k])[-1]) + 1)
 
 
-def _rewatch(w: Rewatch, data, residual, values, alarm, rows, changed) -> None:
+def _rewatch(w: Rewatch, data, residual, values, alarm, rows, changed, fitted=()) -> None:
     """Watch ``residual`` from fresh statistics on the rest of the experiment after ``rows``
-    (the window of an alarm: no new alarm within it); values and alarms rewritten there."""
+    (the window of an alarm: no new alarm within it); values and alarms rewritten there.
+    ``fitted``: a change just isolated, taken out of the model's residual there first."""
     rest = _rest(data, rows)
     alarm[rows[0] + 1 : rows[-1] + 1] = False
     changed[rest] = True
-    w.restart(data["t"][rows[-1]])
+    w.restart(data["t"][rows[-1]], fitted)
+    if fitted:  # values' first six columns are still the model's residual r
+        residual[rest] = w.left(data, rest, values[rest, 0:6])
     if rest.size:
         out = w.step(data["t"][rest], residual[rest])
         values[rest, 6:20] = out[:, 6:20]

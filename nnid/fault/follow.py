@@ -188,12 +188,6 @@ def follow_csv(
     # or payload change): it waits for the half window after it, which batch has
     ahead = savgol_window(monitor.plant_.savgol_window, 1.0 / monitor.interval, 2) // 2 + 1
 
-    def waits(k: int) -> float:
-        """How long after its window an alarm at ``k`` waits: on re-watched rows, until the
-        window's last row has been watched (the half smoothing window after it)."""
-        watching = ref["rewatch"] is not None and ref["code"] == codes[k - dropped]
-        return (ahead + 1) * monitor.interval if watching and k >= ref["start"] else 0.0
-
     def judged(k: int, now: float) -> bool:
         """Whether the alarm at ``k`` can be isolated at time ``now``: its experiment has
         ended, or its window has arrived and every row of it has been watched (a row waits
@@ -201,7 +195,7 @@ def follow_csv(
         i = k - dropped
         if codes[i] != codes[-1]:
             return True
-        if now - ts[i] < window_s + waits(k):
+        if now - ts[i] < window_s:
             return False
         return not (queue and ts[queue[0] - dropped] <= ts[i] + window_s)
 
