@@ -94,6 +94,11 @@ class EnsembleModel(NnidModel):
             )
         if self.combine not in COMBINE:
             raise NnidInputError("combine is 'mean' or 'median'", field="combine")
+        warmup = float(self.warmup_s)
+        if not (np.isfinite(warmup) and warmup >= 0):  # scored_rows would score the warm-up
+            raise NnidInputError(
+                f"warmup_s is 0 or more seconds, not {self.warmup_s!r}", field="warmup_s"
+            )
         seeds = [int(s) for s in self.seeds]
         if len(seeds) < 2 or len(set(seeds)) != len(seeds):
             raise NnidInputError("an ensemble needs at least two different seeds", field="seeds")
