@@ -32,6 +32,7 @@ from nnid.fault.thresholds import rate_interval, rate_threshold
 from nnid.models.parametric import ParametricModel
 from nnid.physics.parts import Parts
 from nnid.physics.thrusters import Actuation
+from nnid.reports.detect_report import write_detect_outputs
 from nnid.trainers.least_squares import LeastSquares
 from nnid.vehicle import load_vehicle
 
@@ -303,7 +304,10 @@ def test_follow_watches_what_a_change_leaves_as_batch_detect_does(
     and the snag lost); a payload's signature smooths the acceleration over a centred
     window that the stream cut at each block's end (batch 42.05 s, follow 31.5 s); and rows
     missing just after an alarm's window let its time pass before its last rows were watched
-    (the snag isolated on them, 'unexplained')."""
+    (the snag isolated on them, 'unexplained'). The statistics watched are batch's too: after
+    the alarm dismissed at 31.5 s the stream cut the payload's signature there, at the
+    statistics' restart, where batch keeps it whole from the payload's window on (their EWMA
+    and CUSUM parted from 41.55 s on, the alarms alike)."""
     log = scenario(vehicle)
     batch = detect(monitor, log)
     log.to_csv(tmp_path / "log.csv", index=False)
@@ -313,6 +317,31 @@ def test_follow_watches_what_a_change_leaves_as_batch_detect_does(
         (a["t"], a["kind"]) for a in batch.alarms
     ]
     assert list(followed.trace.t[followed.trace.alarm]) == list(batch.trace.t[batch.trace.alarm])
+    np.testing.assert_allclose(followed.trace.values, batch.trace.values, rtol=1e-12, atol=1e-9)
+
+
+def test_alarms_name_the_experiment_as_the_log_does(vehicle, monitor, tmp_path):
+    """A log without an experiment column is one run without a name, as
+    nnid.datasets.preprocess.experiments has it: batch detect named it "0" in its alarms and
+    --follow "", for the one log. Both now say None (null in detect.json, an empty cell in
+    alarms.csv, "-" in the report), and the label where the log has the column."""
+    fault = Fault("thruster", 12.0, thruster="v2", efficiency=0.3)
+    log = simulate_faults(vehicle, 30, faults=[fault], seed=5)
+    assert "experiment" not in log
+    for frame, name in ((log, None), (log.assign(experiment="dive 3"), "dive 3")):
+        frame.to_csv(tmp_path / "log.csv", index=False)
+        batch = detect(monitor, frame)
+        followed = follow_csv(monitor, str(tmp_path / "log.csv"), 10.0, lambda line: None)
+        assert len(batch.alarms) >= 1
+        assert [a["experiment"] for a in followed.alarms] == [a["experiment"] for a in batch.alarms]
+        assert {a["experiment"] for a in batch.alarms} == {name}
+        assert set(batch.trace.experiment) == set(followed.trace.experiment) == {name}
+    write_detect_outputs(monitor, batch, tmp_path / "named")
+    write_detect_outputs(monitor, detect(monitor, log), tmp_path / "unnamed")
+    assert pd.read_csv(tmp_path / "named" / "alarms.csv")["experiment"].tolist()[0] == "dive 3"
+    assert pd.read_csv(tmp_path / "unnamed" / "alarms.csv")["experiment"].isna().all()
+    report = json.loads((tmp_path / "unnamed" / "detect.json").read_text())
+    assert all(a["experiment"] is None for a in report["alarms"])
 
 
 def test_no_false_alarm_on_healthy_held_out_runs(vehicle, monitor):

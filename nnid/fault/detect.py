@@ -66,8 +66,9 @@ def isolated_alarm(
         np.nanmax(np.maximum(trace.values[rows, 18] / h_t, trace.values[rows, 19] / h_g))
     )
     interval = diag.efficiency_interval or (None, None)
+    name = trace.experiment[k]
     record = {
-        "experiment": str(trace.experiment[k]),
+        "experiment": None if name is None else str(name),
         "t": float(data["t"][k]),
         "kind": diag.kind,
         "thruster": diag.thruster,
@@ -88,6 +89,15 @@ def isolated_alarm(
         "components": diag.components,
     }
     return record, diag, rows
+
+
+def run_names(names, codes, named: bool) -> np.ndarray:
+    """The experiment of each row (``codes`` into ``names``) as the trace and the alarm records
+    name it: its label, or None where the log has no experiment column (``named`` false): one
+    run without a name, as :func:`nnid.datasets.preprocess.experiments` gives it, not the
+    placeholder its arrays carry ("0" in batch, "" in ``--follow``)."""
+    labels = np.array(names if named else [None] * len(names), dtype=object)
+    return labels[np.asarray(codes, dtype=int)]
 
 
 def window_rows(data: dict, k: int, window_s: float) -> np.ndarray:
@@ -153,7 +163,8 @@ def detect(monitor: ResidualMonitor, log: pd.DataFrame, window_s: float = 10.0) 
     trace = monitor.run(log)
     values, alarm = trace.values.copy(), trace.alarm.copy()
     residual = trace.values[:, 0:6].copy()  # the residual watched, re-referenced per change
-    watched = Trace(trace.t, trace.experiment, values, alarm)
+    names = run_names(data["experiment_names"], data["experiment"], "experiment" in log)
+    watched = Trace(trace.t, names, values, alarm)
     t, codes = data["t"], data["experiment"]
     rewatch: dict[int, Rewatch] = {}  # per experiment
     alarms, pos = [], 0

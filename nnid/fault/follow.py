@@ -43,6 +43,7 @@ from nnid.fault.detect import (
     Rewatch,
     explained_by_the_changes,
     isolated_alarm,
+    run_names,
     window_rows,
 )
 from nnid.fault.monitor import ResidualMonitor, Trace, input_columns
@@ -179,8 +180,10 @@ def follow_csv(
     alarms: list[dict] = []
     current = None
     dropped = 0  # rows forgotten from the front of the buffers
-    # after an isolated change: the experiment (code) and first row watched on what it leaves
-    ref: dict = {"rewatch": None, "code": -1, "start": 0}
+    # after an isolated change: the experiment (code), the first row watched on what it leaves
+    # (fresh statistics) and the first row of the latest change's signature (batch's rest
+    # after that change's window: a dismissed alarm restarts the statistics, not the signature)
+    ref: dict = {"rewatch": None, "code": -1, "start": 0, "edge": 0}
     queue: list[int] = []  # rows of it whose residual is not yet re-referenced
     block = max(round(REWATCH_S / monitor.interval), 1)
     context = max(int(np.ceil(monitor.plant_.savgol_window / monitor.interval)), block)
@@ -215,7 +218,7 @@ def follow_csv(
             return
         first, last = queue[0], queue[-1]  # the queue runs to its experiment's newest row
         ready = len(queue) if final else sum(k <= last - ahead for k in queue)
-        a = max(ref["start"] - 1, first - context, dropped)  # rows from a + 1 get a signature
+        a = max(ref["edge"] - 1, first - context, dropped)  # rows from a + 1 get a signature
         i, j = a - dropped, last + 1 - dropped
         # and the smoothing's window must fit in the rows taken, whole, as it does in batch
         if ready == 0 or (j - i < max(3, 2 * ahead + 1) and not final):
@@ -232,14 +235,17 @@ def follow_csv(
                 announce(k)
         del queue[:ready]
 
-    def rewatch_after(k: int, rows: np.ndarray) -> None:
+    def rewatch_after(k: int, rows: np.ndarray, changed: bool) -> None:
         """Fresh statistics after the window ``rows`` (buffer indices) of the alarm at ``k``:
-        the experiment's later alarms superseded, its rows since then watched again."""
+        the experiment's later alarms superseded, its rows since then watched again. A new
+        change taken out (``changed``) starts its signature there too."""
         code = codes[k - dropped]
         later = {p for p in pending if p > k and codes[p - dropped] == code}
         pending[:] = [p for p in pending if p not in later]
         alarm_rows[:] = [p for p in alarm_rows if p not in later]
         ref["start"] = dropped + int(rows[-1]) + 1
+        if changed:
+            ref["edge"] = ref["start"]
         queue[:] = [p for p in range(ref["start"], dropped + len(ts)) if codes[p - dropped] == code]
         flush(final=codes[-1] != code)  # the experiment has ended: no row is to come
 
@@ -248,7 +254,7 @@ def follow_csv(
         flush(final=codes[-1] != codes[k - dropped])
         data = _arrays(ts, xs, us, codes, names)
         values = np.array(watched)
-        trace = Trace(data["t"], np.array(names, dtype=object)[data["experiment"]],
+        trace = Trace(data["t"], run_names(names, data["experiment"], exp_col is not None),
                       values, np.zeros(len(ts), dtype=bool))  # fmt: skip
         i, code = k - dropped, codes[k - dropped]
         if ref["rewatch"] is not None and ref["code"] == code and k >= ref["start"]:
@@ -260,7 +266,7 @@ def follow_csv(
                     "leaves, within what its hypothesis may leave: no new change")  # fmt: skip
                 alarm_rows.remove(k)  # dismissed: no record, so no mark in the trace either
                 ref["rewatch"].restart(data["t"][rows[-1]])
-                rewatch_after(k, rows)
+                rewatch_after(k, rows, changed=False)
                 return
         record, diag, rows = isolated_alarm(monitor, data, trace, i, window_s, values[:, 0:6])
         alarms.append(record)
@@ -269,7 +275,7 @@ def follow_csv(
             if ref["code"] != code or ref["rewatch"] is None:
                 ref.update(rewatch=Rewatch(monitor), code=code)
             ref["rewatch"].restart(data["t"][rows[-1]], diag.fitted)
-            rewatch_after(k, rows)
+            rewatch_after(k, rows, changed=True)
 
     read = [("t", col["t"])] + [
         (c, i)
@@ -364,7 +370,7 @@ def follow_csv(
     data = _arrays(ts, xs, us, codes, names)
     values = np.array(watched)  # the model's residual r, and the statistics watched
     values[:, 0:6] = np.array(vals)[:, 0:6]
-    trace = Trace(data["t"], np.array(names, dtype=object)[data["experiment"]], values,
+    trace = Trace(data["t"], run_names(names, data["experiment"], exp_col is not None), values,
                   np.isin(np.arange(len(ts)) + dropped, alarm_rows))  # fmt: skip
     return DetectResult(trace, alarms, time.perf_counter() - start)
 

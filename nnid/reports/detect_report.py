@@ -137,7 +137,8 @@ def detect_html(monitor, result: DetectResult, source: str = "") -> str:
                 else "-"
             )
             val = f"{a['value']:.3g} ± {a['stderr']:.2g}" if a["value"] is not None else "-"
-            body.append([a["experiment"], f"{a['t']:.2f}", a["kind"], a["thruster"] or "-", eff,
+            run = "-" if a["experiment"] is None else a["experiment"]  # a log of one run
+            body.append([run, f"{a['t']:.2f}", a["kind"], a["thruster"] or "-", eff,
                          a["effect"] or "-", val, f"{a['severity']:.2f}",
                          f"{a['confidence']:.2f}"])  # fmt: skip
         out.append(html_table(head, body))
