@@ -45,7 +45,8 @@ class NnidInputError(ValueError):
         return NnidInputError(self.message, field=f"{section}.{self.field}")
 
     def with_source(self, source: str) -> NnidInputError:
-        """The same error, naming ``source`` if it named no file yet."""
-        if self.source is not None:
+        """The same error, naming ``source`` if it named no file yet, nor a command-line
+        option (``--vehicle``): an option is no key of the file, which is then not at fault."""
+        if self.source is not None or (self.field or "").startswith("--"):
             return self
         return NnidInputError(self.message, source=source, field=self.field, row=self.row)

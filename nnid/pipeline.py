@@ -265,7 +265,7 @@ def load_inputs(
         inputs.log = kept.reset_index(drop=True)
         inputs.report.add("experiments", f"kept {', '.join(spec.experiments)}")
     if source is not None:  # the runs kept: one left out may be sampled as it likes
-        _check_sampling(kept, models, source)
+        _check_sampling(kept, models, source, every_part_predicted=cfg.kind == "train")
         # a model with no dofs fits every DOF the data excites: any of them may read the angle
         fitted = [d for m in models if m.kind in PHYSICS_KINDS for d in fitted_dofs(m) or DOFS]
         if fitted and inputs.vehicle is not None:
@@ -298,15 +298,25 @@ def loaded_inputs(*args, **kwargs) -> tuple[Inputs, list[str]]:
     return inputs, warning_messages(caught)
 
 
-def _check_sampling(log: pd.DataFrame, models: list, path: str) -> None:
+def _check_sampling(
+    log: pd.DataFrame, models: list, path: str, every_part_predicted: bool = False
+) -> None:
     """Uniform sampling, said against the log before any fit, where a model counts time in
-    samples (the input-output models check it again themselves, naming the config)."""
+    samples (the input-output models check it again themselves, naming the config); and,
+    where ``every_part_predicted`` (train scores the free run of its training part too), no
+    samples missing where a physics model's prediction steps (its own check, which said the
+    config, not the log, once the fit was done)."""
     from nnid.datasets.preprocess import check_uniform
+    from nnid.evaluation.prediction import check_stepped
 
     counting = [m.kind for m in models if m.kind in SAMPLE_KINDS]
-    if counting and "t" in log:
+    stepped = every_part_predicted and any(m.kind in PHYSICS_KINDS for m in models)
+    if (counting or stepped) and "t" in log:
         try:
-            check_uniform(log, f"the {counting[0]} model")
+            if counting:
+                check_uniform(log, f"the {counting[0]} model")
+            if stepped:
+                check_stepped(log)
         except NnidInputError as err:
             raise err.with_source(path) from None
 

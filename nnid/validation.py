@@ -111,6 +111,20 @@ def field_path(loc: tuple, data: Any) -> str:
     return ".".join(out)
 
 
+def _written(loc: tuple, data: Any) -> bool:
+    """Whether every step of ``loc`` is a key or an index the user wrote (not a name that
+    pydantic gives a union member)."""
+    node = data
+    for step in loc:
+        if isinstance(node, dict) and step in node:
+            node = node[step]
+        elif isinstance(node, list) and isinstance(step, int) and 0 <= step < len(node):
+            node = node[step]
+        else:
+            return False
+    return True
+
+
 def _show(value: Any) -> str:
     """A value as the user wrote it (short)."""
     if isinstance(value, float) and not math.isfinite(value):
@@ -135,7 +149,12 @@ def validated(model: type[Model], data: dict[str, Any], source: str) -> Model:
             # fits reaches into the value, and its error is the one that says what is wrong
             # (an element, named by its index, or a key)
             loc = tuple(first["loc"])
-            if isinstance(first["input"], dict) and loc and loc[-1] not in first["input"]:
+            if (
+                isinstance(first["input"], dict)
+                and loc
+                and loc[-1] not in first["input"]
+                and not _written(loc, data)
+            ):
                 field = field_path(loc[:-1], data)  # the last step names the member, no key
             for other in errors[1:]:
                 path = field_path(tuple(other["loc"]), data)
@@ -159,6 +178,9 @@ def validated(model: type[Model], data: dict[str, Any], source: str) -> Model:
             # "Input should be a valid dictionary or object to extract fields from" says
             # nothing of TOML: `data = "log.csv"` where a [data] table goes
             msg = f"is a table ([{field}] with its keys below it), not {_show(first.get('input'))}"
+        elif first["type"] == "list_type" and isinstance(first.get("input"), dict):
+            # `[thrusters]` where `[[thrusters]]` goes: one table where a list of them does
+            msg = f"is a list of tables ([[{field}]] above each one), not one table ([{field}])"
         elif first["type"] == "finite_number":
             msg = f"must be a finite number, not {_show(first.get('input'))}"
         elif not isinstance(first.get("input"), (dict, list, type(None))):

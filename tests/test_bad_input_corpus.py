@@ -1164,3 +1164,49 @@ def test_a_value_where_a_table_goes_says_it_is_a_table(tmp_path):
     path.write_text(TRAIN_TEXT.replace("[split]", 'split = "a.csv"\n[x]'))
     with pytest.raises(NnidInputError, match=r"is a table \(\[split\] with its keys below it\)"):
         load_config(path, TrainConfig)
+
+
+@pytest.mark.parametrize("command", ["train", "compare", "loop"])
+def test_a_missing_vehicle_option_is_not_blamed_on_the_config(command, tmp_path):
+    """`--vehicle` names no key of the config: the error said "<config>, field '--vehicle'"."""
+    config = tmp_path / "run.toml"
+    compare = 'kind = "compare"\n[[models]]\nkind = "fossen"\n'
+    config.write_text({"train": TRAIN_TEXT, "compare": compare, "loop": 'kind = "loop"\n'}[command])
+    data = _write_log(tmp_path, "good", _demo_log())
+    args = [command, str(config), "--data", str(data), "--vehicle", str(tmp_path / "nothere.toml")]
+    result = CliRunner().invoke(app, [*args, "--out", str(tmp_path / "out")])
+    errors = [line for line in result.output.splitlines() if line.startswith("error:")]
+    assert result.exit_code == 2 and len(errors) == 1, result.output
+    assert "field '--vehicle'" in errors[0] and "run.toml" not in errors[0], errors[0]
+
+
+def test_one_table_where_a_list_of_tables_goes_is_named(tmp_path):
+    """`[thrusters]` for `[[thrusters]]` said "Input should be a valid list", naming no field."""
+    import tomllib
+
+    from nnid.config import CompareConfig, load_config
+    from nnid.errors import NnidInputError
+    from nnid.vehicle import vehicle_from_dict
+
+    data = tomllib.loads(GOOD_VEHICLE + _THRUSTER.replace("[[thrusters]]", "[thrusters]"))
+    with pytest.raises(NnidInputError, match=re.escape("[[thrusters]]")) as err:
+        vehicle_from_dict(data, source="probe.toml")
+    assert err.value.field == "thrusters" and err.value.source == "probe.toml"
+    path = tmp_path / "c.toml"
+    path.write_text('kind = "compare"\n[models]\nkind = "fossen"\n')
+    with pytest.raises(NnidInputError, match=re.escape("[[models]]")) as err:
+        load_config(path, CompareConfig)
+    assert err.value.field == "models" and err.value.source == str(path)
+
+
+def test_samples_missing_in_a_run_train_predicts_are_said_against_the_log(tmp_path):
+    """A run with 30 s of samples missing: train's free run refused it once fitted, naming the
+    config (its with_source) for the log's column t and row."""
+    log = _demo_log()
+    log["t"] = log["t"].where(log.index < 100, log["t"] + 30.0)
+    data = _write_log(tmp_path, "gap", log)
+    args = ["train", TRAIN, "--data", str(data), "--vehicle", MINIROV]
+    result = CliRunner().invoke(app, [*args, "--out", str(tmp_path / "out")])
+    errors = [line for line in result.output.splitlines() if line.startswith("error:")]
+    assert result.exit_code == 2 and len(errors) == 1, result.output
+    assert errors[0].startswith(f"error: {data}, column 't', row 100:"), errors[0]
