@@ -956,7 +956,10 @@ def _coefficients(model) -> dict:
     """Extra per-model material of damping models: coefficients, and SINDy's path."""
     out: dict[str, Any] = {}
     if model.kind in ("synthesis", "sindy") and getattr(model, "mode", "residual") == "residual":
-        out["coefficients"] = {k: v["value"] for k, v in model.params.items()}
+        # with their standard errors, as metrics.json's params: the value alone dropped them
+        out["coefficients"] = {
+            k: {"value": v["value"], "stderr": v.get("stderr")} for k, v in model.params.items()
+        }
     if model.kind == "sindy":
         out["sindy_path"] = model.path_
     return out
@@ -1029,12 +1032,21 @@ def summary(rows: list[dict], ranking: list[str], part: str, replay: bool) -> st
 
     best = by_name[ranking[0]]
     untrained = [n for n in ranking if by_name[n].get("training_diverged")]
-    kept = (
+    notes = (
         f" Training kept its start, so these scores are of the untrained model (ranked after "
         f"the trained ones): {', '.join(untrained)}."
         if untrained
         else ""
     )
+    # ranked on the validation part that some fits stopped or selected on: said beside the
+    # verdict, not only in a table column (the model to use was named on it without a word)
+    fitted_on = {n: by_name[n].get("validation_used_for") for n in ranking}
+    used = [f"{n} ({u})" for n, u in fitted_on.items() if u and part == "validation"]
+    if used:
+        notes += (
+            f" The fits of {', '.join(used)} used the validation data: their scores on it are "
+            "not independent of the fit (a test part would rank every model on data no fit saw)."
+        )
     if best.get("training_diverged"):  # every model: none is recommended on its start
         return (
             f"No model finished training: every one kept its start ({', '.join(untrained)}), "
@@ -1049,21 +1061,28 @@ def summary(rows: list[dict], ranking: list[str], part: str, replay: bool) -> st
     if free is None:
         k = total(best, "k_step_nrmse")
         one = total(best, "one_step_nrmse")
+        # the best is trained: so is every model this sentence speaks of, where an untrained
+        # one (ranked after) has a free run of its start (it said "Every free run diverged"
+        # of a comparison where the untrained model's was scored)
+        trained = " of a trained model" if untrained else ""
         if unscored:
             said = ([f"diverged: {', '.join(diverged)}"] if diverged else []) + [
                 f"not scored, no sample left after the warm-ups: {', '.join(unscored)}"
             ]
-            lead = f"No free run{loop} was scored on the {part} data{over} ({'; '.join(said)})"
+            lead = (
+                f"No free run{trained}{loop} was scored on the {part} data{over} "
+                f"({'; '.join(said)})"
+            )
             verdict = "how these models simulate this log was not measured"
         else:
-            lead = f"Every free run{loop} diverged on the {part} data{over}"
-            verdict = "none of these models simulates this log"
+            lead = f"Every free run{trained}{loop} diverged on the {part} data{over}"
+            verdict = f"none of these {'trained ' if untrained else ''}models simulates this log"
         if k is None and one is None:  # nothing was measured: no model is ranked first
-            return f"{lead}, and no other error was measured: {verdict}.{kept}"
+            return f"{lead}, and no other error was measured: {verdict}.{notes}"
         what = f"k-step NRMSE ({k:.3g})" if k is not None else f"one-step NRMSE ({one:.3g})"
         return (
             f"{lead}; {best['name']} ({best['kind']}, {best['n_params']} parameters) has the "
-            f"lowest {what}: {verdict}.{kept}"
+            f"lowest {what}: {verdict}.{notes}"
         )
     others = [
         by_name[n]
@@ -1095,4 +1114,4 @@ def summary(rows: list[dict], ranking: list[str], part: str, replay: bool) -> st
         sentence += (
             f" Not scored in free run (no sample left after the warm-ups): {', '.join(unscored)}."
         )
-    return sentence + kept
+    return sentence + notes

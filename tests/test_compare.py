@@ -501,3 +501,53 @@ def test_the_summary_says_when_gaps_cut_the_free_runs():
         " The log's gaps: 383 gaps in w masked; 145 of the 1130 test samples left are scored "
         "(the rest warm the pieces up)."
     )
+
+
+def _summary_row(name, free=None, k=None, **extra):
+    scores = {"columns": ["u"], "free_run_nrmse": {"u": free, "total": free},
+              "k_step_nrmse": {"u": k, "total": k}, "one_step_nrmse": {"u": 0.1, "total": 0.1},
+              "diverged": {"u": 12.0} if free is None else {}}  # fmt: skip
+    return {"name": name, "kind": "narx", "n_params": 3, "validation": scores, **extra}
+
+
+def test_the_summary_of_diverged_trained_models_leaves_an_untrained_ones_free_run_out():
+    """The trained model diverged in free run, the one whose training kept its start did
+    not (0.1, its start's): the sentence said "Every free run diverged" all the same."""
+    from nnid.pipeline import rank, summary
+
+    rows = [_summary_row("a", k=0.3), _summary_row("f", free=0.1, training_diverged=True)]
+    text = summary(rows, rank(rows, "validation"), "validation", False)
+    assert text.startswith("Every free run of a trained model diverged"), text
+    assert "none of these trained models simulates this log" in text, text
+
+
+def test_the_summary_says_when_the_models_ranked_on_validation_used_it_while_fitting():
+    """A NARX that early-stopped on the validation run was named the one to use on its
+    validation score with no word that the score is not independent of its fit (the ranking
+    table's column said it; the sentence read by batch and the console did not)."""
+    from nnid.pipeline import rank, summary
+
+    rows = [_summary_row("narx", free=0.1, validation_used_for="early stopping"),
+            _summary_row("fossen", free=0.2)]  # fmt: skip
+    text = summary(rows, rank(rows, "validation"), "validation", False)
+    assert text.startswith("Use narx") and "narx (early stopping) used the validation" in text
+    assert "not independent" in text and "fossen (" not in text, text
+    for row in rows:  # ranked on a test part: nothing to say
+        row["test"] = row.pop("validation")
+    assert "not independent" not in summary(rows, rank(rows, "test"), "test", False)
+
+
+def test_comparison_coefficients_keep_their_standard_errors():
+    """comparison.json and the report's coefficient tables held the damping models' values
+    alone: the standard errors the fit computed (metrics.json keeps them) were dropped."""
+    from types import SimpleNamespace
+
+    from nnid.pipeline import _coefficients
+    from nnid.reports.compare_report import COEFFICIENT_HEAD, coefficient_rows
+
+    params = {"X:u": {"value": -3.25, "stderr": 0.125}, "Z:w": {"value": -30.0, "stderr": None}}
+    model = SimpleNamespace(kind="synthesis", mode="residual", params=params)
+    coefs = _coefficients(model)["coefficients"]
+    assert coefs == params
+    assert COEFFICIENT_HEAD[-1] == "std. error"
+    assert coefficient_rows(coefs) == [["X:u", "-3.25", "0.12"], ["Z:w", "-30", "-"]]

@@ -297,7 +297,7 @@ def test_a_diverged_baseline_is_said_and_compared_like_for_like():
     baseline does not diverge (never "diverged before, 0.059 after"), and still find the
     injected effect."""
     from nnid.datasets.readers import load_log
-    from nnid.reports.loop_report import summary
+    from nnid.reports.loop_report import error_rows, summary
 
     root = resources.files("nnid.demo_data")
     log, _ = load_log(str(root.joinpath("demo_minirov_heave.parquet")))
@@ -312,6 +312,10 @@ def test_a_diverged_baseline_is_said_and_compared_like_for_like():
             assert after[key]["total"] <= before[key]["total"]
     lines = summary(result)
     assert any("the baseline's held-out free run diverges" in line for line in lines)
+    # its 1 s-ahead score diverged too: loop.json said null with no why, the table "-"
+    assert before["k_step_nrmse"]["total"] is None and before["k_step_diverged"]
+    rows = {r[0]: r for r in error_rows(result)[1]}
+    assert rows["1 s-ahead velocity NRMSE, before"][-1] == "diverged"
     total = lines[-1]
     assert total.startswith("Total held-out one-step NRMSE") or "1 s-ahead" in total
     assert "- before" not in total
@@ -323,6 +327,44 @@ def test_a_diverged_baseline_is_said_and_compared_like_for_like():
     assert "stays above 1 after" in lines[-2] and lines[-1].endswith(
         f"1.26 before, 1.13 after ({result['added'][0]} added)."
     )
+
+
+def test_the_error_table_says_a_diverged_k_step_or_one_step_score():
+    """Only the free run's diverged DOFs were read: a k-step score that diverged showed "-",
+    the cell of an error that was not measured."""
+    from nnid.reports.loop_report import error_rows
+
+    def errors(k_step, gone):
+        return {"free_run_nrmse": {"w": 0.2, "total": 0.2}, "diverged": {},
+                "k_step_nrmse": {"w": k_step, "total": k_step}, "k_step_diverged": gone,
+                "one_step_nrmse": {"w": 0.1, "total": 0.1}, "one_step_diverged": {}}  # fmt: skip
+
+    result = {"settings": {"k_step_s": 1.0}, "before": errors(None, {"w": 3.2}),
+              "after": errors(None, {})}  # fmt: skip
+    rows = {r[0]: r for r in error_rows(result)[1]}
+    assert rows["1 s-ahead velocity NRMSE, before"][3:] == ["diverged", "-", "-", "-", "diverged"]
+    # None and not diverged: nothing was left to score (not "diverged", not a bare "-")
+    assert rows["1 s-ahead velocity NRMSE, after"][3] == "not scored"
+    assert rows["free-run velocity NRMSE, before"][3] == "0.2"
+
+
+def test_loop_scores_never_count_the_measurement_a_prediction_starts_from():
+    """The first k samples of a k-step prediction repeat the measurement: scored whenever
+    ``warmup_s`` was shorter than the horizon (a 5 s gate after a 2 s warm-up), as perfect
+    predictions. The score is now the same whether the warm-up covers them or not."""
+    from nnid.datasets.readers import load_log
+    from nnid.loop.diagnose import velocity_scores
+
+    root = resources.files("nnid.demo_data")
+    log, _ = load_log(str(root.joinpath("demo_minirov_heave.parquet")))
+    one = log[log["experiment"] == "run0"].reset_index(drop=True)
+    data = load_vehicle(MINIROV).model_dump()
+    data["damping"]["coefficients"]["Z:w"] *= 0.5  # a model with an error to score
+    wrong = type(load_vehicle(MINIROV)).model_validate(data)
+    dt, k = float(np.median(np.diff(one["t"]))), 40
+    bare = velocity_scores(wrong, one, k, 0.0, ("w",))[0]["w"]
+    covered = velocity_scores(wrong, one, k, (k - 0.5) * dt, ("w",))[0]["w"]
+    assert bare == pytest.approx(covered, rel=1e-12)
 
 
 # -- CLI -----------------------------------------------------------------------------------------

@@ -37,7 +37,7 @@ from nnid.datasets.log import VELOCITY
 from nnid.datasets.preprocess import zoh_midpoint
 from nnid.evaluation.evaluate import score_split
 from nnid.evaluation.metrics import exact_mean, excited_dofs, rmse, warmup_mask
-from nnid.evaluation.prediction import predict_states
+from nnid.evaluation.prediction import mode_steps, predict_states
 from nnid.loop.effects import Candidate
 from nnid.models.parametric import ParametricFossen, filter_settled, vehicle_with
 from nnid.physics.dofs import DOFS
@@ -586,11 +586,14 @@ def velocity_scores(
     """Velocity NRMSE per excited DOF of ``dofs`` for a prediction ``mode`` ("free_run",
     "one_step" or k steps) and the mean ``total``, scored by the one rule of
     :func:`nnid.evaluation.evaluate.score_split`: None where the prediction diverged (not
-    finite, or far outside the measured range), listed with the time it left."""
+    finite, or far outside the measured range), listed with the time it left. The first k
+    samples of each run (1 for one step and free run) repeat the measurement
+    (:func:`predict_states`) and are never scored, whatever ``warmup_s``: a 5 s-ahead score
+    after a 2 s warm-up counted 3 s of each run's own measurement as perfect predictions."""
     pred = predict(vehicle, log, mode, dofs)
     present = [c for c in VELOCITY if c in log and c in dofs]
     nrmse_, _, diverged, _, _ = score_split(
-        log, pred, excited_dofs(log, present), warmup_mask(log, warmup_s),
+        log, pred, excited_dofs(log, present), warmup_mask(log, warmup_s, mode_steps(mode)),
         lambda run: excited_dofs(run, present),
     )  # fmt: skip
     return nrmse_, diverged

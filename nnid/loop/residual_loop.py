@@ -24,6 +24,7 @@ from nnid.datasets.log import ANGLES
 from nnid.datasets.preprocess import experiments
 from nnid.datasets.splits import say_missed_fractions, split_log
 from nnid.errors import NnidInputError
+from nnid.evaluation.evaluate import MODE_KEYS, diverged_key
 from nnid.loop.diagnose import (
     Fit,
     Scored,
@@ -439,19 +440,21 @@ class ResidualLoop:
 
     # -- scores ---------------------------------------------------------------------------------
     def _scores(self, ws: Workspace, fit: Fit) -> tuple[dict, dict]:
-        """Held-out errors of a fit (velocity NRMSE in free run and one step, force residual
-        RMS) and MATLAB ``resid`` analysis of its force residual against the input forces."""
+        """Held-out errors of a fit (velocity NRMSE in free run, :data:`FALLBACK_S` ahead and
+        one step, each with the ``{dof: t}`` of the DOFs that diverged under
+        :func:`nnid.evaluation.evaluate.diverged_key`, as ``metrics.json`` has them; force
+        residual RMS) and MATLAB ``resid`` analysis of its force residual against the input
+        forces. A k-step score that diverged was a bare null, told in the report from one
+        not measured by nothing."""
         val, dofs = ws.val, self.dofs_
         r = force_residual(ws, fit.vehicle)
-        free, diverged = velocity_scores(fit.vehicle, val, "free_run", self.warmup_s, dofs)
         k = max(round(FALLBACK_S / float(np.median(np.diff(val["t"].to_numpy())))), 1)
-        errors = {
-            "free_run_nrmse": free,
-            "diverged": diverged,
-            "k_step_nrmse": velocity_errors(fit.vehicle, val, k, self.warmup_s, dofs),
-            "one_step_nrmse": velocity_errors(fit.vehicle, val, "one_step", self.warmup_s, dofs),
-            "force_rmse": force_rmse(r, ws.arrays(fit.vehicle, "val")["tau"], dofs),
-        }
+        errors: dict = {}
+        for name, mode in (("free_run", "free_run"), ("k_step", k), ("one_step", "one_step")):
+            scores, diverged = velocity_scores(fit.vehicle, val, mode, self.warmup_s, dofs)
+            errors[MODE_KEYS[name]] = scores
+            errors[diverged_key(name)] = diverged
+        errors["force_rmse"] = force_rmse(r, ws.arrays(fit.vehicle, "val")["tau"], dofs)
         tau = nominal_forces(val, fit.vehicle)
         inputs = {f"tau_{f}": tau[:, i] for i, f in enumerate(FORCES) if np.any(tau[:, i])}
         exp = ws.data_val["experiment"]

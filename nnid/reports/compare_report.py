@@ -347,6 +347,17 @@ def complexity_figure(comparison: dict) -> str:
     return figure_uri(fig)
 
 
+COEFFICIENT_HEAD = ["coefficient", "value", "std. error"]
+
+
+def coefficient_rows(coefs: dict) -> list[list[str]]:
+    """A damping model's coefficients with their standard errors ("-" where the fit gives
+    none: a Nelder-Mead cost has no least-squares covariance)."""
+    return [
+        [k, number(v["value"], 5), number(v.get("stderr"), 2)] for k, v in sorted(coefs.items())
+    ]
+
+
 def html_page(result) -> str:
     """The self-contained HTML report of a :class:`nnid.pipeline.CompareResult`."""
     comparison = result.comparison
@@ -390,10 +401,10 @@ def html_page(result) -> str:
         coefs = m.get("coefficients")
         if not coefs:
             continue
-        crow = [[k, number(v, 5)] for k, v in sorted(coefs.items())]
+        crow = coefficient_rows(coefs)
         coef_blocks.append(
             f"<details><summary>{html.escape(m['name'])} ({len(crow)} coefficients)"
-            f"</summary>{html_table(['coefficient', 'value'], crow)}</details>"
+            f"</summary>{html_table(COEFFICIENT_HEAD, crow)}</details>"
         )
     if coef_blocks:
         parts += ["<h2>Coefficients</h2>", *coef_blocks]

@@ -12,10 +12,11 @@ import math
 import numpy as np
 
 from nnid.datasets.gaps import GAP_STEPS
+from nnid.evaluation.evaluate import diverged_columns
 from nnid.loop.residual_loop import UNJUDGED
 from nnid.physics.dofs import DOF_WORD, DOFS
 from nnid.physics.effects import parse_effect
-from nnid.reports.cells import number
+from nnid.reports.cells import number, score_cell
 from nnid.reports.figures import UNITS, figure_uri, html_table, new_figure, page_head
 from nnid.serialization import write_json, write_text
 
@@ -308,16 +309,11 @@ def error_rows(result: dict) -> tuple[list[str], list[list[str]]]:
         for when in ("before", "after"):
             if key not in result[when]:
                 continue
-            vals = result[when][key]
-            gone = result[when].get("diverged", {}) if key == "free_run_nrmse" else {}
-            rows.append(
-                [f"{label}, {when}"]
-                + [
-                    "diverged" if d in gone else number(vals.get(d)) if d in vals else ""
-                    for d in DOFS
-                ]
-                + ["diverged" if gone else number(vals.get("total"))]
-            )
+            # every mode's diverged DOFs, not the free run's alone: a diverged k-step score
+            # read "-", as if it had not been measured
+            gone = diverged_columns(result[when], key)
+            cells = [score_cell(result[when][key], d, gone) for d in (*DOFS, "total")]
+            rows.append([f"{label}, {when}", *cells])
     return head, rows
 
 
