@@ -23,6 +23,14 @@ force of the training data. Integration goes through torchdiffeq (:mod:`nnid.phy
 training is multiple shooting (:class:`nnid.trainers.neural_ode.MultipleShooting`) with a
 penalty on the network's force so it stays small where the physics suffices, and early
 stopping on held-out free runs.
+
+A vehicle file's actuator lag T enters as :func:`nnid.evaluation.prediction.predict_states`
+takes it: τ_eff is the force the physics feels, which follows the applied force commanded
+(:func:`nnid.datasets.arrays.nominal_forces` unlagged, through the installation) through
+1/(T s + 1), exact between samples from its value at each window's first sample; so the
+untrained hybrid predicts what its :class:`ParametricModel` predicts. The network's channels
+stay the lagged force's samples. Holding τ_eff's samples instead (as before) delayed the force
+by about half a sample: 0.18 std of free-run difference from the fit it started from.
 """
 
 from __future__ import annotations
@@ -37,6 +45,7 @@ from sklearn.utils.validation import check_is_fitted
 from torch import Tensor, nn
 from torch.func import functional_call
 
+from nnid.datasets.arrays import nominal_forces
 from nnid.datasets.log import POSE, VELOCITY
 from nnid.datasets.preprocess import check_uniform, experiments, first_order_lag
 from nnid.datasets.segmentation import label_transients
@@ -60,7 +69,7 @@ from nnid.physics.dofs import DOFS, FORCES
 from nnid.physics.form import Field, ned_axes, trig
 from nnid.physics.form import eta_dot as form_eta_dot
 from nnid.physics.fossen import FeatureForm, FossenModel
-from nnid.physics.odeint import METHODS, SampledInput, integrate
+from nnid.physics.odeint import LAGGED, METHODS, SampledInput, integrate
 from nnid.physics.parts import Parts
 from nnid.physics.thrusters import apply_deadband, force_deadband
 from nnid.threads import torch_threads
@@ -225,7 +234,11 @@ class CorrectionNet(nn.Module):
 class HybridDynamics(nn.Module):
     """The hybrid's vector field and its integration: ``forward(x0, inputs, dt)`` gives the
     states ``[L + 1, B, 12]`` (η, ν) from ``x0`` ``[B, 12]`` under held inputs ``[B, L, m]``
-    (the applied forces τ_eff, then the network's input channels)."""
+    (the applied forces τ_eff, then the network's input channels). With an actuator ``lag``
+    T > 0 the first six are the force commanded and six more at the end the lagged force at
+    each sample: the field reads, as τ_eff, the lag exact between samples from those
+    (:class:`nnid.physics.odeint.SampledInput`'s ``lag``; the compiled kernel and nnid_rk4
+    step it from the first one)."""
 
     def __init__(
         self,
@@ -234,6 +247,7 @@ class HybridDynamics(nn.Module):
         level: str,
         method: str,
         adjoint: bool,
+        lag: float = 0.0,
     ) -> None:
         super().__init__()
         self.physics = physics
@@ -241,6 +255,11 @@ class HybridDynamics(nn.Module):
         self.level = level
         self.method = method
         self.adjoint = adjoint
+        self.lag = float(lag)
+
+    def channels(self, inputs: Tensor) -> Tensor:
+        """The network's input channels of held inputs (without τ_eff and the lag's columns)."""
+        return inputs[..., 6 : inputs.shape[-1] - (LAGGED if self.lag > 0 else 0)]
 
     def features(self, nu_r: Tensor, s: Tensor, c: Tensor, channels: Tensor) -> Tensor:
         """Network features: ν_r scaled, the NED axes in the body frame (the entries of
@@ -248,10 +267,11 @@ class HybridDynamics(nn.Module):
         return torch.cat([nu_r / self.net.nu_scale, ned_axes(s, c), channels], -1)
 
     def correction(self, fld: Field, x: Tensor, u: Tensor) -> Tensor:
-        """f_θ (force level) or a_θ (acceleration level) at states ``x`` and inputs ``u``."""
+        """f_θ (force level) or a_θ (acceleration level) at states ``x`` and held inputs
+        ``u``."""
         s, c = trig(x)
         _, nu_r = fld.features(x[..., 6:12], s, c)
-        return self.net(self.features(nu_r, s, c, u[..., 6:]))
+        return self.net(self.features(nu_r, s, c, self.channels(u)))
 
     def vector_field(self, fld: Field):
         """ẋ = f(x, u) of the hybrid on the physics ``fld``."""
@@ -325,6 +345,7 @@ class HybridDynamics(nn.Module):
             substeps,
             _RULES[self.method],
             self.level,
+            self.lag,
         )
         return torch.as_tensor(states)
 
@@ -335,7 +356,7 @@ class HybridDynamics(nn.Module):
         return integrate(
             self.vector_field(self.physics.field(positions)),
             x0,
-            SampledInput(inputs, dt),
+            SampledInput(inputs, dt, lag=self.lag),
             steps=inputs.shape[-2],
             method=self.method,
             substeps=substeps,
@@ -383,7 +404,7 @@ class _Problem:
             x, u = batch.measured, batch.inputs.transpose(0, 1)
             s, c = trig(x)
             _, nu_r = dyn.physics.field(False).features(x[..., 6:12], s, c)
-            feats = dyn.features(nu_r, s, c, u[..., 6:])
+            feats = dyn.features(nu_r, s, c, dyn.channels(u))
             f = functional_call(dyn.net, net, (feats,)) / dyn.net.out_scale
             out.append((model.force_penalty * rows / f.numel()) ** 0.5 * f.reshape(-1))
         if model.physics == "joint" and model.prior_weight > 0 and self.module.physics.joint:
@@ -541,17 +562,29 @@ class HybridModel(FossenPlant):
             generator if generator is not None else torch.Generator().manual_seed(int(self.seed)),
         )
         return HybridDynamics(
-            HybridPhysics(self.parts_, joint), net, self.level, self.method_, bool(self.adjoint)
+            HybridPhysics(self.parts_, joint),
+            net,
+            self.level,
+            self.method_,
+            bool(self.adjoint),
+            float(self.vehicle.actuator_lag),
         )
 
     # -- data ------------------------------------------------------------------------------------
     def _channels(self, log: pd.DataFrame, tau: np.ndarray) -> np.ndarray:
         """Held inputs ``[N, 6 + 6 (1 + len(memory))]``: τ_eff, then the network's channels
-        τ/σ_τ and (τ − F_T τ)/σ_τ per memory time constant."""
+        τ/σ_τ and (τ − F_T τ)/σ_τ per memory time constant. With the vehicle's actuator lag T
+        (``tau`` the lagged force), τ_eff is the applied force commanded and the lagged one at
+        each sample ends them (:class:`HybridDynamics`), as
+        :func:`~nnid.evaluation.prediction.predict_states` takes it."""
         scale = self.input_scale_
         chans = [self.parts_.applied(tau), tau / scale]
         for t in self.memory:
             chans.append((tau - first_order_lag(tau, log, float(t))) / scale)
+        lag = float(self.vehicle.actuator_lag)
+        if lag > 0:
+            chans[0] = self.parts_.applied(nominal_forces(log, self.vehicle, lagged=False))
+            chans.append(first_order_lag(chans[0], log, lag))
         return np.concatenate(chans, 1)
 
     def _runs(self, log: pd.DataFrame, data: dict[str, np.ndarray]) -> list[Run]:

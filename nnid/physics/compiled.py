@@ -96,6 +96,14 @@ def _rhs(x, tau, m_inv, q_rb, q_a, g_mat, theta, codes, ma, bias, cur, u_c, lag,
             out[12 + i] = (tau[i] - x[12 + i]) / lag
 
 
+@njit(cache=True, inline="always")
+def _lagged(a, tau, decay, out):
+    # T ȧ = τ − a with τ held, stepped exactly: a(t + s) = τ + (a(t) − τ) e^(−s/T), decay the
+    # exponential; out[:6] may be a itself (each entry is read before it is written)
+    for i in range(6):
+        out[i] = tau[i] + (a[i] - tau[i]) * decay
+
+
 @njit(cache=True)
 def _integrate(
     x0, tau, dt, substeps, m_inv, q_rb, q_a, g_mat, theta, codes, ma, bias, cur, u_c, lag, states
@@ -121,24 +129,21 @@ def _integrate(
             for i in range(n):
                 tmp[i] = x[i] + 0.5 * h * k1[i]
             if lagged:
-                for i in range(6):
-                    tmp[12 + i] = u[i] + (x[12 + i] - u[i]) * half
+                _lagged(x[12:], u, half, tmp[12:])
             _rhs(
                 tmp, u, m_inv, q_rb, q_a, g_mat, theta, codes, ma, bias, cur, u_c, lag, k2, scratch
             )
             for i in range(n):
                 tmp[i] = x[i] + 0.5 * h * k2[i]
             if lagged:
-                for i in range(6):
-                    tmp[12 + i] = u[i] + (x[12 + i] - u[i]) * half
+                _lagged(x[12:], u, half, tmp[12:])
             _rhs(
                 tmp, u, m_inv, q_rb, q_a, g_mat, theta, codes, ma, bias, cur, u_c, lag, k3, scratch
             )
             for i in range(n):
                 tmp[i] = x[i] + h * k3[i]
             if lagged:
-                for i in range(6):
-                    tmp[12 + i] = u[i] + (x[12 + i] - u[i]) * full
+                _lagged(x[12:], u, full, tmp[12:])
             _rhs(
                 tmp, u, m_inv, q_rb, q_a, g_mat, theta, codes, ma, bias, cur, u_c, lag, k4, scratch
             )
@@ -148,7 +153,7 @@ def _integrate(
                     k2[12 + i] = 0.0
                     k3[12 + i] = 0.0
                     k4[12 + i] = 0.0
-                    x[12 + i] = u[i] + (x[12 + i] - u[i]) * full
+                _lagged(x[12:], u, full, x[12:])
             for i in range(n):
                 x[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
         states[step + 1] = x

@@ -20,18 +20,20 @@ def rk4(
     dt: float,
     substeps: int = 1,
     lag: float = 0.0,
+    lagged: int | None = None,
 ) -> Tensor:
     """Integrate ẋ = f(x, u) with u held over each step.
 
     ``x0`` is ``[..., n]``, ``u`` is ``[N, ..., m]`` (time first); returns ``[N+1, ..., n]``.
-    With ``lag`` T > 0 the last m states are a first-order actuator lag T ȧ = u − a, stepped
-    by its exact exponential as the compiled kernel steps it (the stages read it at
-    a(t + c h) = u + (a − u) e^(−c h / T)): as an RK4 state it grows past h/T = 2.79.
+    With ``lag`` T > 0 the last m states are a first-order actuator lag T ȧ = u − a of the
+    first m inputs (m: ``lagged``, default all), stepped by its exact exponential as the
+    compiled kernel steps it (the stages read it at a(t + c h) = u + (a − u) e^(−c h / T)):
+    as an RK4 state it grows past h/T = 2.79.
     """
     h = dt / substeps
     if lag > 0.0:
         half = math.exp(-0.5 * h / lag)
-        m = u.shape[-1]
+        m = u.shape[-1] if lagged is None else lagged
     x = x0
     out = [x]
     for k in range(u.shape[0]):
@@ -41,9 +43,9 @@ def rk4(
             # matters when the state is small and the per-operation overhead dominates
             k1 = f(x, uk)
             if lag > 0.0:
-                body, a = x[..., :-m], x[..., -m:]
-                mid = torch.cat([body, uk + (a - uk) * half], -1)
-                end = torch.cat([body, uk + (a - uk) * (half * half)], -1)
+                body, a, command = x[..., :-m], x[..., -m:], uk[..., :m]
+                mid = torch.cat([body, command + (a - command) * half], -1)
+                end = torch.cat([body, command + (a - command) * (half * half)], -1)
                 k2 = f(mid + 0.5 * h * _zero_tail(k1, m), uk)
                 k3 = f(mid + 0.5 * h * _zero_tail(k2, m), uk)
                 k4 = f(end + h * _zero_tail(k3, m), uk)

@@ -25,10 +25,18 @@ and calls ``torchdiffeq.odeint`` (or ``odeint_adjoint``):
   those transforms refuse. It is also ~10 % faster (fewer operations per step), which is why
   the neural state-space model, whose small vector field is dominated by per-step overhead,
   keeps it.
+
+A first-order lag on the first six inputs (a vehicle's actuator lag T: the force felt follows
+the force commanded through 1/(T s + 1)) is :class:`SampledInput`'s ``lag``: the force felt is
+exact between samples, from its value at each sample, wherever an integrator evaluates it
+(``nnid_rk4`` steps it as :func:`~nnid.physics.integrate.rk4`'s lag states instead, from its
+value at the first sample: the same numbers to rounding). Holding the lagged force's samples
+instead delays it by about half a sample.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from typing import Literal
 
@@ -40,6 +48,8 @@ from nnid.physics.integrate import rk4
 
 METHODS = ("rk4", "dopri5", "nnid_rk4")
 Hold = Literal["zoh", "linear"]
+#: inputs a ``lag`` acts on: the first six (a generalized force)
+LAGGED = 6
 
 
 class SampledInput(nn.Module):
@@ -47,17 +57,26 @@ class SampledInput(nn.Module):
     segments on one relative grid). Called at a time ``s`` counted in samples (a scalar
     tensor; :func:`integrate` works in samples), it returns the inputs there, ``[m]`` or
     ``[B, m]``: the sample at or before ``s`` (``hold="zoh"``) or the straight line between
-    the two around it (``"linear"``); beyond the last sample, the last one."""
+    the two around it (``"linear"``); beyond the last sample, the last one.
 
-    def __init__(self, values: Tensor, dt: float, hold: Hold = "zoh") -> None:
+    With ``lag`` T > 0 the first :data:`LAGGED` inputs are commanded to a first-order lag
+    T ȧ = τ − a and ``values`` ends with :data:`LAGGED` more columns, a at each sample; the
+    input at ``s`` is then a(s), exact under the held command (a(t_k + σ) = τ_k +
+    (a_k − τ_k) e^(−σ/T), as :func:`nnid.physics.integrate.rk4` steps its lag states), before
+    the other inputs (``m`` − :data:`LAGGED` wide: the last columns are not returned)."""
+
+    def __init__(self, values: Tensor, dt: float, hold: Hold = "zoh", lag: float = 0.0) -> None:
         super().__init__()
         if hold not in ("zoh", "linear"):
             raise ValueError(f"hold is 'zoh' or 'linear', not {hold!r}")
         if values.dim() not in (2, 3) or values.shape[-2] < 1:
             raise ValueError("values must be [N, m] or [B, N, m] with N ≥ 1 samples")
+        if lag > 0 and values.shape[-1] < 2 * LAGGED:
+            raise ValueError(f"a lag takes {LAGGED} commanded and {LAGGED} lagged columns")
         self.values = values
         self.dt = float(dt)
         self.hold = hold
+        self.lag = float(lag)
         self.n = values.shape[-2]
 
     def dt_field(self, f: Callable[[Tensor, Tensor], Tensor]) -> Callable[[Tensor, Tensor], Tensor]:
@@ -69,6 +88,15 @@ class SampledInput(nn.Module):
         pos = float(s.detach())
         k = min(max(int(pos // 1.0), 0), self.n - 1)
         now = self.values[..., k, :]
+        if self.lag > 0:
+            # the lag state leaves its sample for the held command: past the last sample too
+            decay = math.exp(-max(pos - k, 0.0) * self.dt / self.lag)
+            command, rest, lagged = now.split([LAGGED, now.shape[-1] - 2 * LAGGED, LAGGED], -1)
+            felt = command + (lagged - command) * decay
+            if self.hold == "linear" and k + 1 < self.n:
+                frac = min(max(pos - k, 0.0), 1.0)
+                rest = torch.lerp(rest, self.values[..., k + 1, LAGGED:-LAGGED], frac)
+            return torch.cat([felt, rest], -1)
         if self.hold == "zoh" or k + 1 >= self.n:
             return now
         frac = min(max(pos - k, 0.0), 1.0)
@@ -116,6 +144,8 @@ def integrate(
         if inputs.hold != "zoh" or adjoint:
             raise ValueError("nnid_rk4 holds inputs (zoh) and has no adjoint")
         held = inputs.values[..., :steps, :].movedim(-2, 0)  # time first
+        if inputs.lag > 0:
+            return _rk4_lagged(f, x0, inputs, held, substeps)
         return rk4(inputs.dt_field(f), x0, held, 1.0, substeps)
     s = torch.arange(steps + 1, dtype=x0.dtype)  # time in samples: exact grid points
     if method == "rk4":
@@ -128,3 +158,25 @@ def integrate(
         adjoint_params = tuple(field.parameters())
     kwargs = {"adjoint_params": adjoint_params} if adjoint else {}
     return solve(field, x0, s, rtol=rtol, atol=atol, method=method, options=options, **kwargs)
+
+
+def _rk4_lagged(
+    f: Callable[[Tensor, Tensor], Tensor],
+    x0: Tensor,
+    inputs: SampledInput,
+    held: Tensor,
+    substeps: int,
+) -> Tensor:
+    """``nnid_rk4`` under a lagged :class:`SampledInput`: the force felt as
+    :func:`~nnid.physics.integrate.rk4`'s lag states behind the first state, started from its
+    value at the first sample and stepped exactly (in samples, the time unit inside)."""
+    n = x0.shape[-1]
+
+    def lagged(x: Tensor, u: Tensor) -> Tensor:
+        rate = f(x[..., :n], torch.cat([x[..., n:], u[..., LAGGED:]], -1))
+        return torch.cat([rate, torch.zeros_like(x[..., n:])], -1)  # rk4 steps the lag itself
+
+    x = torch.cat([x0, inputs.values[..., 0, -LAGGED:]], -1)
+    lag = inputs.lag / inputs.dt
+    states = rk4(inputs.dt_field(lagged), x, held[..., :-LAGGED], 1.0, substeps, lag, LAGGED)
+    return states[..., :n]
