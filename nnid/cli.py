@@ -97,13 +97,13 @@ def simulate(
     from nnid.config import SimulateConfig, load_config
     from nnid.datasets.log import validate_log, write_log
     from nnid.datasets.simulator import simulate_config
-    from nnid.pipeline import vehicle_for
+    from nnid.pipeline import plant_for
 
     cfg = load_config(config, SimulateConfig)
     if seed is not None:
         cfg.seed = seed
     # the config's vehicle file is relative to the config's folder, as for train and loop
-    veh = vehicle_for(vehicle or cfg.vehicle, config, "--vehicle" if vehicle else "vehicle")
+    veh = plant_for(vehicle or cfg.vehicle, config, "--vehicle" if vehicle else "vehicle")
     if out_path.suffix not in (".csv", ".parquet"):
         raise NnidInputError("output must end in .csv or .parquet", source=str(out_path))
     if out_path.is_dir():

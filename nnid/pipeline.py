@@ -65,7 +65,7 @@ def vehicle_for(name: str, config_path: Path, key: str = "vehicle"):
 
     if name in PRESETS:
         return load_vehicle(name)
-    path = resolve(config_path.parent, name)
+    path = Path(vehicle_source(name, config_path))
     if not path.exists():
         where = f" (looked for {path})" if key == "vehicle" else ""
         raise NnidInputError(
@@ -74,6 +74,29 @@ def vehicle_for(name: str, config_path: Path, key: str = "vehicle"):
             field=key,
         )
     return load_vehicle(path)
+
+
+def vehicle_source(name: str, config_path: Path) -> str:
+    """What ``name`` loads: a preset's name, or the vehicle file's path (relative to the
+    config's folder unless it exists as given)."""
+    from nnid.vehicle import PRESETS
+
+    return name if name in PRESETS else str(resolve(config_path.parent, name))
+
+
+def plant_for(name: str, config_path: Path, key: str = "vehicle"):
+    """:func:`vehicle_for` of a vehicle to simulate: one whose M = M_RB + M_A is not positive
+    definite cannot be flown, said against its file and field, not the simulate config
+    (:func:`nnid.datasets.simulator.check_mass_matrix`; a fit loads such a file and refits
+    its added mass)."""
+    from nnid.datasets.simulator import check_mass_matrix
+
+    veh = vehicle_for(name, config_path, key)
+    try:
+        check_mass_matrix(veh)
+    except NnidInputError as exc:
+        raise exc.with_source(vehicle_source(name, config_path)) from None
+    return veh
 
 
 def reader_config(cfg, config_path: Path, columns: str | None) -> str | None:
@@ -241,7 +264,7 @@ def load_inputs(
 
         sim_path = resolve(base, spec.simulate)
         sim = load_config(sim_path, SimulateConfig)
-        plant = vehicle_for(sim.vehicle, sim_path)
+        plant = plant_for(sim.vehicle, sim_path)
         report = CleaningReport(source=str(sim_path))
         log = simulate_config(sim, plant)
         report.add("simulate", f"{len(log)} samples from {sim_path}")

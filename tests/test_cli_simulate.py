@@ -391,3 +391,22 @@ def test_commands_in_pwm_against_a_thrust_table_are_warned_of(tmp_path):
                  "duration = 1.0 }]\n")  # fmt: skip
     result = runner.invoke(app, ["simulate", str(cfg), "--out", str(tmp_path / "x.csv")])
     assert "cmd_t1 reaches 1900, far beyond thruster t1's range [-1, 1]" in result.output
+
+
+def test_a_vehicle_whose_mass_matrix_is_not_positive_definite_is_named(tmp_path, monkeypatch):
+    """X_udot = +40 on a 30 kg vehicle (M = M_RB + M_A not positive definite): simulate said
+    it against the simulate config, with no field, never the vehicle file. The file still
+    loads (a fit refits its added mass): only what flies it refuses it."""
+    from nnid.vehicle import load_vehicle
+
+    veh = _write(tmp_path, "heavy.toml", GOOD_VEHICLE.replace("X_udot = -10.0", "X_udot = 40.0"))
+    assert load_vehicle(veh).added_mass["X_udot"] == 40.0
+    cfg = _write(tmp_path, "sim.toml", CONFIG.format(vehicle="heavy.toml"))
+    monkeypatch.chdir(tmp_path)
+    for extra in ([], ["--vehicle", str(veh)]):
+        res = runner.invoke(app, ["simulate", str(cfg), "--out", "x.csv", *extra])
+        assert res.exit_code == 2, res.output
+        error = [line for line in res.output.splitlines() if line.startswith("error:")]
+        assert len(error) == 1 and "not positive definite" in error[0], res.output
+        assert "heavy.toml, field 'added_mass'" in error[0] and "sim.toml" not in error[0]
+        assert not (tmp_path / "x.csv").exists()

@@ -9,6 +9,7 @@ healthy held-out runs must not alarm.
 from __future__ import annotations
 
 import json
+import math
 import warnings
 from pathlib import Path
 
@@ -800,3 +801,30 @@ def test_detect_json_names_the_target_rate_apart_from_the_measured_one(monitor, 
     assert said["target_false_alarm_rate_per_hour"] == monitor.false_alarm_per_hour
     assert said["measured_false_alarm_rate_per_hour"] == fa["rate_per_hour"]
     assert said["false_alarms_measured"]["rate_per_hour"] == fa["rate_per_hour"]
+
+
+def test_an_alarm_without_a_standard_error_or_explained_share_says_so(vehicle, monitor):
+    """A standard error of NaN read "2 ± nan" in the report's table and the alarm's line, and
+    a missing ``explained`` read "explains 0 %": neither was measured."""
+    from nnid.fault.follow import describe_alarm
+    from nnid.reports.detect_report import detect_html
+
+    fault = Fault("thruster", 12.0, thruster="v2", efficiency=0.3)
+    result = detect(monitor, simulate_faults(vehicle, 30, faults=[fault], seed=5))
+    a = result.alarms[0]
+    a.update(kind="model_change", thruster=None, efficiency=None, effect="buoyancy_offset",
+             value=2.0, stderr=math.nan, explained=None, meaning="buoyancy changed")  # fmt: skip
+    result.alarms[:] = [a]
+    page = detect_html(monitor, result)
+    assert "± nan" not in page and "<td>2 ± -</td>" in page
+    assert "explains 0 %" not in page
+    assert "its share of the whitened residual after the alarm was not measured" in page
+    line = describe_alarm(a)
+    assert "buoyancy_offset = 2 ± -" in line and "nan" not in line and "explaining" not in line
+    # a thruster's interval from a NaN standard error: not measured, not "nan to nan"
+    a.update(kind="thruster_loss", thruster="v2", efficiency=0.5, efficiency_low=math.nan,
+             efficiency_high=math.nan, explained=0.55)  # fmt: skip
+    assert "(95 % interval not measured)" in describe_alarm(a)
+    assert "explaining 55 % of the residual" in describe_alarm(a)
+    page = detect_html(monitor, result)
+    assert "0.50 (not measured)" in page and "explains 55 %" in page

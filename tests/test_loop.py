@@ -682,3 +682,30 @@ def test_a_loop_whose_baseline_cannot_be_simulated_says_nothing_was_judged(tmp_p
     # a refusal after loading writes no loop.json: the warnings are said all the same
     res = CliRunner().invoke(app, [*args[:-1], str(tmp_path / "o2"), "--validation", "nosuch"])
     assert res.exit_code == 2 and "Z_wdot = 13.2 > 0" in res.output, res.output
+
+
+def test_the_total_line_says_a_diverged_one_step_score():
+    """Where every horizon diverged, the one-step fallback too, the total line read "- before,
+    - after": the mark of an error that was not measured. It says which it was."""
+    from nnid.reports.loop_report import summary
+
+    def errors(gone):
+        none = {"w": None, "total": None}
+        return {"free_run_nrmse": none, "diverged": {"w": 2.0},
+                "k_step_nrmse": none, "k_step_diverged": {"w": 2.5},
+                "one_step_nrmse": none, "one_step_diverged": gone}  # fmt: skip
+
+    effect = "thruster_installation.w.neg"
+    added = {"effect": effect, "params": {"value": 0.57}, "stderr": {"value": 0.02},
+             "meaning": "heave thrust", "reason": "added"}  # fmt: skip
+    result = {"settings": {"k_step_s": 1.0}, "before": errors({"w": 3.0}), "after": errors({}),
+              "added": [effect], "steps": [{"added": added, "top": [added], "gate": "one step"}],
+              "unexplained": {}}  # fmt: skip
+    lines = summary(result)
+    assert lines[-1] == (
+        f"Total held-out one-step NRMSE: diverged before, not scored after ({effect} added)."
+    )
+    # nothing added: the baseline's one-step score is said the same way
+    result.update(added=[], steps=[{"added": None, "top": [], "gate": "one step"}])
+    (line, _) = summary(result)
+    assert "(held-out one-step NRMSE diverged; the baseline's held-out free run" in line

@@ -69,3 +69,22 @@ def test_a_parameter_never_tested_for_significance_is_not_called_insignificant()
     head, rows = _params_table({"params": params})
     column = head.index("significant (95 %)")
     assert [r[column] for r in rows] == ["-", "no", "yes"]
+
+
+def test_a_free_run_score_of_zero_keeps_its_ratio_to_the_baseline():
+    """A free-run NRMSE of exactly 0.0 is a score: the ratio cell was left empty, as for a
+    model whose free run was not measured (a truthiness test where ``is not None`` was
+    meant)."""
+    from nnid.reports.train_report import _baseline
+
+    def part(total):
+        return {"free_run_nrmse": {"w": total, "total": total}, "diverged": {}}
+
+    metrics = {"model": "fossen", "validation": part(0.0),
+               "baseline": {"model": "physics only", "validation": part(0.5)}}  # fmt: skip
+    rows = _baseline(metrics)[1]
+    assert rows[0][2] == "0" and rows[0][-1] == "0"
+    assert rows[1][-1] == ""  # the baseline's own row has no ratio
+    metrics["validation"] = {"free_run_nrmse": {"w": None, "total": None}, "diverged": {"w": 1.0}}
+    rows = _baseline(metrics)[1]
+    assert rows[0][2] == "diverged" and rows[0][-1] == ""  # not measured: no number

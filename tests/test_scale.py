@@ -783,3 +783,25 @@ def test_a_sweep_trial_without_a_validation_score_says_why_not() -> None:
     sweep = {"metric": "validation free_run_nrmse (total)", "summary": "s"}
     page = "".join(_sweep(BatchResult(rows, "local", extra={"sweep": sweep})))
     assert page.count("no validation free_run_nrmse: diverged, or nothing scored") == 1
+
+
+def test_the_batch_train_table_says_diverged_or_not_scored() -> None:
+    """Its legend said "'-' where the free run diverged", and the cell was "-" for a free run
+    with nothing left to score too: the cell says which, from the row's ``diverged``."""
+    import re
+
+    from nnid.reports.batch_report import _train_table
+
+    rows = [
+        {"data": "a.csv", "status": "ok", "model": "fossen", "held_out": "test",
+         "free_run_nrmse": None, "diverged": "w, r"},
+        {"data": "b.csv", "status": "ok", "model": "fossen", "held_out": "test",
+         "free_run_nrmse": None, "diverged": None},
+        {"data": "c.csv", "status": "ok", "model": "fossen", "held_out": "test",
+         "free_run_nrmse": 0.0, "diverged": None},
+        {"data": "d.csv", "status": "failed", "error": "boom"},
+    ]  # fmt: skip
+    page = _train_table(rows)
+    cells = [re.findall(r"<td>(.*?)</td>", row)[4] for row in page.split("<tr>")[2:6]]
+    assert cells == ["diverged", "not scored", "0", "-"]
+    assert "'-' where the free run diverged" not in page

@@ -79,6 +79,22 @@ def plant(vehicle, effects: Iterable[tuple[str, float]] = ()):
     return vehicle
 
 
+def check_mass_matrix(vehicle) -> None:
+    """Refuse to fly a vehicle whose M = M_RB + M_A is not positive definite (its equations of
+    motion have no solution): an :class:`NnidInputError` naming ``added_mass`` where the
+    rigid body alone is positive definite, else no field (mass, inertia and r_g together). Not
+    a check of loading: a fit refits the added mass of such a file."""
+    try:
+        FossenModel.from_vehicle(vehicle)
+    except ValueError as exc:
+        try:
+            FossenModel.from_vehicle(vehicle.model_copy(update={"added_mass": {}}))
+            field = "added_mass"
+        except ValueError:
+            field = None
+        raise NnidInputError(str(exc), field=field) from None
+
+
 #: |cos θ| below which a simulated pitch is refused (within 0.006° of ±90°): the Euler-angle
 #: kinematics divide by it, and a run through θ = 90° came back with φ = ψ = −3.4e12 rad after
 #: one step. Weiss's own Seamor sequence pitches to 89.5° (cos θ = 0.009) in its surge-heave
@@ -160,10 +176,11 @@ def simulate(
             f"inputs have {inputs.shape[1]} channels; the vehicle has {len(actuation.channels)} "
             f"({', '.join(actuation.channels)})"
         )
+    check_mass_matrix(vehicle)  # the vehicle's own M first: the effects are not at fault then
     try:
         model = FossenModel.from_vehicle(truth)
     except ValueError as exc:  # an injected effect no vehicle can have (a negative mass)
-        raise NnidInputError(str(exc), field="effects" if effects else None) from None
+        raise NnidInputError(str(exc), field="effects") from None
     state = np.zeros(model.state_size)
     if x0 is not None:
         state[: len(x0)] = np.asarray(x0, dtype=np.float64)

@@ -47,6 +47,7 @@ from nnid.fault.detect import (
     window_rows,
 )
 from nnid.fault.monitor import ResidualMonitor, Trace, input_columns
+from nnid.reports.cells import missing, number
 from nnid.validation import shown
 
 #: the motion columns a streamed row fills (those absent read as 0)
@@ -385,23 +386,48 @@ def _arrays(ts, xs, us, codes, names) -> dict:
     }
 
 
+def value_pm(a: dict) -> str:
+    """An alarm's effect size ± its standard error ("-" for either where it is missing: a
+    standard error of NaN was not measured, never "nan")."""
+    if a.get("value") is None:
+        return "-"
+    return f"{number(a['value'], 3)} ± {number(a.get('stderr'), 2)}"
+
+
+def efficiency_interval(a: dict, percent: bool = False) -> str:
+    """An alarm's 95 % efficiency interval, "0.41 to 0.63" (``percent``: "41 to 63 %"), or
+    "not measured" where a bound is missing (a standard error of NaN)."""
+    lo, hi = a.get("efficiency_low"), a.get("efficiency_high")
+    if missing(lo) or missing(hi):
+        return "not measured"
+    if percent:
+        return f"{100 * lo:.0f} to {100 * hi:.0f} %"
+    return f"{lo:.2f} to {hi:.2f}"
+
+
+def explained_share(a: dict) -> str | None:
+    """How much of the whitened residual after an alarm its hypothesis explains, "55 %", or
+    None where that was not measured."""
+    explained = a.get("explained")
+    return None if missing(explained) else f"{100 * explained:.0f} %"
+
+
 def describe_alarm(a: dict) -> str:
     """One line a person reads for an alarm record."""
     where = f"t = {a['t']:.2f} s" + (f" ({a['experiment']})" if a.get("experiment") else "")
     if a.get("thruster") and a.get("efficiency") is not None:
         what = (
             f"thruster {a['thruster']} gives {100 * a['efficiency']:.0f} % of its thrust "
-            f"(95 % interval {100 * a['efficiency_low']:.0f} to "
-            f"{100 * a['efficiency_high']:.0f} %)"
+            f"(95 % interval {efficiency_interval(a, percent=True)})"
         )
         if a["kind"] != "thruster_loss":  # more than nominal, or reversed: not a loss
             what = f"{a['meaning']}: {what}"
     elif a["effect"]:
-        what = f"{a['meaning']}: {a['effect']} = {a['value']:.3g} ± {a['stderr']:.2g}"
+        what = f"{a['meaning']}: {a['effect']} = {value_pm(a)}"
     else:
         what = a["meaning"] or "a change no hypothesis explains"
     # the confidence is among the hypotheses: how much of the change the named one explains
     # says whether the fault is one of them (two thrusters lost at once: 55 %, confidence 1.00)
-    explained = a.get("explained")
-    share = f", explaining {100 * explained:.0f} % of the residual" if explained is not None else ""
+    explained = explained_share(a)
+    share = f", explaining {explained} of the residual" if explained else ""
     return f"{where}: {a['kind']}: {what}; confidence {a['confidence']:.2f}{share}"

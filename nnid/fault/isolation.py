@@ -38,6 +38,7 @@ from nnid.loop.diagnose import Fit, screen
 from nnid.loop.effects import Candidate, candidates
 from nnid.models.parametric import ParametricFossen, vehicle_with
 from nnid.physics.thrusters import Actuation
+from nnid.reports.cells import number
 
 _PRIORITY = {"thruster_loss": 0, "buoyancy_offset": 1, "external_bias": 2}
 PARALLEL = 0.95  # |cos| of whitened columns above which two hypotheses are one to the data
@@ -338,7 +339,10 @@ class _Joint:
             p_value=float(self.p_values[main]),
             meaning=what
             + ": "
-            + ", ".join(f"{n} {c['value']:.3g} ± {c['stderr']:.2g}" for n, c in components.items()),
+            + ", ".join(
+                f"{n} {number(c['value'], 3)} ± {number(c['stderr'], 2)}"
+                for n, c in components.items()
+            ),
             components=components,
             alternatives=alternatives,
         )

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from nnid.reports.cells import number
+from nnid.reports.cells import number, score
 from nnid.reports.figures import definitions, figure_uri, html_table, new_figure, page_head
 
 #: at most this many parameters are drawn per vehicle (the ones most tasks identified)
@@ -128,10 +128,18 @@ def _held_out(row: dict) -> str:
 KEPT_START = "kept its start (training diverged)"
 
 
+def _free_run(row: dict) -> str:
+    """A task's held-out free-run NRMSE: the number, "diverged" where the row names the DOFs
+    that diverged, "not scored" where none did; "-" for a task that scored nothing (failed)."""
+    if "free_run_nrmse" not in row:
+        return "-"
+    return score(row["free_run_nrmse"], diverged=bool(row.get("diverged")))
+
+
 def _train_table(rows: list[dict]) -> str:
     body = [
         [_log(r), r["status"], str(r.get("model") or ""), _held_out(r),
-         number(r.get("free_run_nrmse")), number(r.get("one_step_nrmse")),
+         _free_run(r), number(r.get("one_step_nrmse")),
          KEPT_START if r.get("training_diverged") else ""]
         for r in rows
     ]  # fmt: skip
@@ -142,7 +150,10 @@ def _train_table(rows: list[dict]) -> str:
         {
             "held out": "the part scored (test where the split has one, else validation, "
             "and then what the fit used it for: its score is not independent)",
-            "free-run NRMSE": "total over the excited DOFs; '-' where the free run diverged",
+            "free-run NRMSE": "total over the excited DOFs; 'diverged' where the free run "
+            "left the physical range, 'not scored' where no sample was left to score",
+            "one-step NRMSE": "the same total one sample ahead; '-' where it was not measured "
+            "(diverged, or no sample left to score)",
             "training": f"'{KEPT_START}' where a training stage ended on a non-finite loss or "
             "a validation that never measured a free run: the scores are of the model before "
             "that stage",

@@ -8,6 +8,13 @@ import numbers
 from typing import Any
 
 
+def missing(x: Any) -> bool:
+    """True for a number that was not measured: None, NaN or ±inf (:func:`number`'s "-")."""
+    return x is None or (
+        isinstance(x, numbers.Real) and not isinstance(x, bool) and not math.isfinite(x)
+    )
+
+
 def number(x: Any, digits: int = 3, fixed: bool = False) -> str:
     """``x`` to ``digits`` significant figures (``fixed``: decimals); "-" where it is missing
     (None, NaN, ±inf). Integers are written whole (a count or a seed is never rounded); other
@@ -17,7 +24,7 @@ def number(x: Any, digits: int = 3, fixed: bool = False) -> str:
     if isinstance(x, numbers.Integral):
         return str(int(x))
     if isinstance(x, numbers.Real):
-        if not math.isfinite(x):
+        if missing(x):
             return "-"
         return f"{float(x):.{digits}f}" if fixed else f"{float(x):.{digits}g}"
     return str(x)

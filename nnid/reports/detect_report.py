@@ -10,7 +10,7 @@ import numpy as np
 import pandas as pd
 
 from nnid.fault.detect import ALARM_FIELDS, DetectResult
-from nnid.fault.follow import describe_alarm
+from nnid.fault.follow import describe_alarm, efficiency_interval, explained_share, value_pm
 from nnid.physics.dofs import DOFS, FORCES
 from nnid.reports.figures import (
     FORCE_UNITS,
@@ -107,6 +107,14 @@ def measured_rate(monitor) -> str:
     )
 
 
+def _explains(a: dict) -> str:
+    """What share of the whitened residual after the alarm its hypothesis explains."""
+    share = explained_share(a)
+    if share is None:
+        return "its share of the whitened residual after the alarm was not measured"
+    return f"explains {share} of the whitened residual after the alarm"
+
+
 def detect_html(monitor, result: DetectResult, source: str = "") -> str:
     """The detect report as one self-contained page."""
     trace = result.trace
@@ -132,11 +140,11 @@ def detect_html(monitor, result: DetectResult, source: str = "") -> str:
         body = []
         for a in result.alarms:
             eff = (
-                f"{a['efficiency']:.2f} ({a['efficiency_low']:.2f} to {a['efficiency_high']:.2f})"
+                f"{a['efficiency']:.2f} ({efficiency_interval(a)})"
                 if a["efficiency"] is not None
                 else "-"
             )
-            val = f"{a['value']:.3g} ± {a['stderr']:.2g}" if a["value"] is not None else "-"
+            val = value_pm(a)
             run = "-" if a["experiment"] is None else a["experiment"]  # a log of one run
             body.append([run, f"{a['t']:.2f}", a["kind"], a["thruster"] or "-", eff,
                          a["effect"] or "-", val, f"{a['severity']:.2f}",
@@ -162,9 +170,8 @@ def detect_html(monitor, result: DetectResult, source: str = "") -> str:
         for a in result.alarms:
             rows = [[h["hypothesis"], f"{h['posterior']:.3g}"] for h in a.get("alternatives", [])]
             out.append(
-                f"<p>t = {a['t']:.2f} s: {html.escape(a['meaning'])} (explains "
-                f"{100 * (a.get('explained') or 0):.0f} % of the whitened residual after the "
-                "alarm); the next hypotheses:</p>"
+                f"<p>t = {a['t']:.2f} s: {html.escape(a['meaning'])} ({_explains(a)}); the "
+                "next hypotheses:</p>"
             )
             out.append(html_table(["hypothesis", "posterior"], rows))
     else:

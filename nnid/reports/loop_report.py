@@ -124,8 +124,8 @@ def summary(result: dict) -> list[str]:
     """One sentence per added effect with its effect on the held-out error, or the plain
     statement that nothing significant was found. Where a free run diverges that is said, and
     before and after are compared on the first horizon at which neither diverges."""
-    name, _, before, after = _like_for_like(result)
-    lines = _gaps_line(result.get("data", {})) + _verdict(result, name, before, after)
+    name, key, before, after = _like_for_like(result)
+    lines = _gaps_line(result.get("data", {})) + _verdict(result, name, key, before, after)
     rest = _unexplained_lines(result)
     # the total stays last; what remains unexplained is said before it
     return lines[:-1] + rest + lines[-1:] if result["added"] else lines + rest
@@ -161,7 +161,14 @@ def _gaps_line(data: dict) -> list[str]:
     ]
 
 
-def _verdict(result: dict, name: str, before: dict, after: dict) -> list[str]:
+def _total(result: dict, when: str, key: str) -> str:
+    """The held-out ``total`` of the score ``key`` before or after: the number, "diverged" or
+    "not scored" (never "-" for a score that was measured and voided)."""
+    scores = result[when].get(key, {})
+    return score_cell(scores, "total", diverged_columns(result[when], key))
+
+
+def _verdict(result: dict, name: str, key: str, before: dict, after: dict) -> list[str]:
     diverged = [
         f"the {who} held-out free run diverges ({_diverged_text(result[when])})"
         for when, who in (("before", "baseline's"), ("after", "final model's"))
@@ -195,7 +202,7 @@ def _verdict(result: dict, name: str, before: dict, after: dict) -> list[str]:
             + (
                 f"(held-out free-run NRMSE {number(total)})."
                 if total is not None
-                else f"(held-out {name} NRMSE {number(before.get('total'))}; {diverged[0]})."
+                else f"(held-out {name} NRMSE {_total(result, 'before', key)}; {diverged[0]})."
             )
         ]
         if total is None or total > 0.5:
@@ -251,8 +258,8 @@ def _verdict(result: dict, name: str, before: dict, after: dict) -> list[str]:
             "without skill there."
         )
     lines.append(
-        f"Total held-out {name} NRMSE: {number(before.get('total'))} before, "
-        f"{number(after.get('total'))} after ({', '.join(result['added'])} added)."
+        f"Total held-out {name} NRMSE: {_total(result, 'before', key)} before, "
+        f"{_total(result, 'after', key)} after ({', '.join(result['added'])} added)."
     )
     return lines
 

@@ -200,7 +200,11 @@ def _baseline(metrics: dict) -> tuple[list[str], list[list[str]]]:
                         else "-"
                         for k in ("free_run_nrmse", "k_step_nrmse", "one_step_nrmse")
                     ),
-                    number(free / ref, 3) if scores is metrics[part] and free and ref else "",
+                    # a free run of 0.0 is a score: only a missing one or a zero divisor
+                    # leaves the ratio out
+                    number(free / ref, 3)
+                    if scores is metrics[part] and free is not None and ref
+                    else "",
                 ]
             )
     return head, rows
