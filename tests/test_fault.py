@@ -321,6 +321,105 @@ def test_follow_watches_what_a_change_leaves_as_batch_detect_does(
     np.testing.assert_allclose(followed.trace.values, batch.trace.values, rtol=1e-12, atol=1e-9)
 
 
+SNAG = (-10, 0, 0, 0, 0, 1.0)
+
+
+def _snag_freed(vehicle):
+    """A snag from 20 s freed at 40 s, then thruster h1 at 30 % from 52 s."""
+    faults = [Fault("external", FAULT_T, force=SNAG, end=40.0),
+              Fault("thruster", 52.0, thruster="h1", efficiency=0.3)]  # fmt: skip
+    return simulate_faults(vehicle, 70, faults=faults, seed=3001)
+
+
+def _thruster_recovered(vehicle, seed=3002):
+    """Thruster h1 at 30 % from 20 s, back to nominal at 40 s, then a snag from 52 s."""
+    faults = [Fault("thruster", FAULT_T, thruster="h1", efficiency=0.3, end=40.0),
+              Fault("external", 52.0, force=SNAG)]  # fmt: skip
+    return simulate_faults(vehicle, 70, faults=faults, seed=seed)
+
+
+def _window_across_the_recovery(vehicle):
+    """The same with seed 3001: an alarm at 37 s whose window runs across the recovery."""
+    return _thruster_recovered(vehicle, seed=3001)
+
+
+@pytest.mark.parametrize(
+    "scenario", [_snag_freed, _thruster_recovered, _window_across_the_recovery]
+)
+def test_a_change_that_ends_is_said_ended_and_the_run_after_is_watched(vehicle, monitor, scenario):
+    """A change that goes away after its isolation leaves its signature reversed in what is
+    watched: the freed snag was alarmed at 40.05 s as a new external force of +9.98 N, the
+    recovered thruster as 'thruster h1 gives more thrust than nominal: 170 %'; and an alarm
+    at 37 s whose window ran across the recovery was 'unexplained', not isolated, so the
+    signature stayed taken out and the statistics never re-armed: the snag at 52 s passed
+    unsaid. Each is now said as the change's end (the model's own residual healthy noise from
+    about 40.05 s, a thruster measured back at nominal), the rest watched on the model's
+    residual again, and the third fault alarmed, named and sized."""
+    from nnid.fault.follow import describe_alarm
+
+    first, ended, third = detect(monitor, scenario(vehicle)).alarms
+    assert ended["kind"] == "model_change" and ended["hypothesis"] == "change_ended"
+    assert ended["ended"]["alarms"] == [first["t"]] and 40.0 <= ended["ended"]["t"] <= 40.2
+    line = describe_alarm(ended)
+    assert f"the change alarmed at {first['t']:.2f} s" in line and "ended" in line
+    assert "more thrust" not in line and ended["confidence"] > 0.99
+    assert ended["residual_ratio"] < 2.0  # isolation.UNEXPLAINED_RATIO
+    if first["kind"] == "thruster_loss":  # measured back at nominal, with its interval
+        assert ended["thruster"] == "h1" and ended["efficiency"] == pytest.approx(1.0, abs=0.03)
+        assert ended["efficiency_low"] <= 1.0 <= ended["efficiency_high"] + 0.01
+        assert third["kind"] == "external_force" and 52.0 <= third["t"] <= 53.0
+        assert third["components"]["external_bias.u"]["value"] == pytest.approx(-10, rel=0.1)
+    else:  # what is left of the snag: nothing
+        assert ended["kind"] == "model_change" and ended["thruster"] is None
+        assert abs(ended["components"]["external_bias.u"]["value"]) < 0.5
+        assert (third["kind"], third["thruster"]) == ("thruster_loss", "h1")
+        assert third["efficiency"] == pytest.approx(0.3, abs=0.05) and third["t"] >= 52.0
+
+
+def test_follow_says_a_change_ended_as_batch_detect_does(vehicle, monitor, tmp_path):
+    """The window across the recovery, followed row by row: the same three records (the end
+    said at the alarm's time) and the same statistics watched, before and after the end."""
+    log = _window_across_the_recovery(vehicle)
+    batch = detect(monitor, log)
+    log.to_csv(tmp_path / "log.csv", index=False)
+    said: list[str] = []
+    followed = follow_csv(monitor, str(tmp_path / "log.csv"), 10.0, said.append)
+    assert [(a["t"], a["kind"], a["meaning"]) for a in followed.alarms] == [
+        (a["t"], a["kind"], a["meaning"]) for a in batch.alarms
+    ]
+    assert len(batch.alarms) == 3 and batch.alarms[1]["hypothesis"] == "change_ended"
+    assert sum("ended at about 40.05 s" in line for line in said) == 1
+    assert list(followed.trace.t[followed.trace.alarm]) == list(batch.trace.t[batch.trace.alarm])
+    np.testing.assert_allclose(followed.trace.values, batch.trace.values, rtol=1e-12, atol=1e-9)
+
+
+def test_one_of_two_changes_ending_leaves_the_other_taken_out(vehicle, monitor):
+    """Thruster h1 at 50 % from 20 s, a snag from 40 s freed at 55 s: the snag's end is said,
+    and h1's loss stays taken out of what is watched (no alarm for it again)."""
+    faults = [Fault("thruster", FAULT_T, thruster="h1", efficiency=0.5),
+              Fault("external", 40.0, force=SNAG, end=55.0)]  # fmt: skip
+    loss, snag, ended = detect(monitor, simulate_faults(vehicle, 75, faults=faults, seed=7)).alarms
+    assert (loss["thruster"], snag["kind"]) == ("h1", "external_force")
+    assert ended["hypothesis"] == "change_ended" and ended["ended"]["alarms"] == [snag["t"]]
+    assert "what the changes still in effect leave" in ended["meaning"]
+
+
+@pytest.mark.parametrize(("then", "seed"), [(0.2, 7), (0.6, 3002)])
+def test_a_second_change_of_a_thruster_is_sized_against_nominal(vehicle, monitor, then, seed):
+    """Thruster h1 lost to 50 % then to 20 %, or at 30 % then partly back to 60 %: the second
+    change was sized against the model with the first taken out ('gives 70 %', 'more thrust
+    than nominal: 130 %'). The columns are the nominal thrust, so the losses add: the second
+    alarm gives the thruster's efficiency against nominal."""
+    first_eff = 0.5 if then < 0.5 else 0.3
+    faults = [Fault("thruster", FAULT_T, thruster="h1", efficiency=first_eff),
+              Fault("thruster", 40.0, thruster="h1", efficiency=then)]  # fmt: skip
+    first, second = detect(monitor, simulate_faults(vehicle, 60, faults=faults, seed=seed)).alarms
+    assert first["efficiency"] == pytest.approx(first_eff, abs=0.03)
+    assert (second["kind"], second["thruster"]) == ("thruster_loss", "h1")
+    assert second["efficiency"] == pytest.approx(then, abs=0.03) and second["t"] >= 40.0
+    assert second["efficiency_low"] <= then + 0.01 and then - 0.01 <= second["efficiency_high"]
+
+
 def test_alarms_name_the_experiment_as_the_log_does(vehicle, monitor, tmp_path):
     """A log without an experiment column is one run without a name, as
     nnid.datasets.preprocess.experiments has it: batch detect named it "0" in its alarms and

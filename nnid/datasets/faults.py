@@ -9,7 +9,8 @@ inverse of its curve; the log records those commands as ``cmd_<thruster>``, as a
 records its ESC commands, never the thrust the vehicle felt. The plant is the vehicle file (with
 the scenario's effects) and is integrated by the compiled RK4 of the physics package.
 
-Faults (:class:`Fault`), active from ``t``:
+Faults (:class:`Fault`), active from ``t`` (until ``end``, where one is given: a snag freed, a
+thruster that recovers):
 
 - ``thruster``: thruster ``thruster`` keeps ``efficiency`` (0 to 1) of its thrust (a damaged
   propeller, 0 for a stopped thruster);
@@ -41,7 +42,8 @@ from nnid.physics.thrusters import Actuation, apply_installation
 
 @dataclass(frozen=True)
 class Fault:
-    """One fault from time ``t`` (s); see the module docstring for the kinds."""
+    """One fault from time ``t`` (s) until ``end`` (s; None: to the end of the run); see the
+    module docstring for the kinds."""
 
     kind: Literal["thruster", "external", "effect", "payload"]
     t: float
@@ -51,6 +53,7 @@ class Fault:
     effect: str | None = None
     value: float = 0.0
     mass: float = 0.0
+    end: float | None = None
 
 
 @dataclass(frozen=True)
@@ -154,7 +157,7 @@ def simulate_faults(
     effect_vehicle = vehicle
     t = np.arange(n) * dt
     for fault in faults:
-        on = t >= fault.t
+        on = (t >= fault.t) & (t < (np.inf if fault.end is None else fault.end))
         if fault.kind == "thruster":
             if fault.thruster not in names:
                 raise NnidInputError(

@@ -39,8 +39,10 @@ from nnid.datasets.log import (
 from nnid.datasets.preprocess import savgol_window
 from nnid.errors import NnidInputError
 from nnid.fault.detect import (
+    Change,
     DetectResult,
     Rewatch,
+    ended_alarm,
     explained_by_the_changes,
     isolated_alarm,
     run_names,
@@ -258,24 +260,36 @@ def follow_csv(
         trace = Trace(data["t"], run_names(names, data["experiment"], exp_col is not None),
                       values, np.zeros(len(ts), dtype=bool))  # fmt: skip
         i, code = k - dropped, codes[k - dropped]
-        if ref["rewatch"] is not None and ref["code"] == code and k >= ref["start"]:
+        w, taken = ref["rewatch"], []
+        # batch's rows watched on what isolated changes leave (none left after they ended)
+        if w is not None and ref["code"] == code and k >= ref["start"] and w.changes:
             rows = window_rows(data, i, window_s)
             r = np.array([vals[j][0:6] for j in rows])
+            ended = ended_alarm(monitor, data, trace, i, window_s, w, r, values[rows, 0:6])
+            if ended is not None:  # tested first, as batch does
+                alarms.append(ended[0])
+                say(describe_alarm(ended[0]))
+                w.restart(data["t"][rows[-1]], ended=ended[1])
+                rewatch_after(k, rows, changed=True)
+                return
             if explained_by_the_changes(monitor, r, values[rows, 0:6]):
                 name = names[code]
                 say(f"t = {ts[i]:.2f} s{f' ({name})' if name else ''}: what the isolated change "
                     "leaves, within what its hypothesis may leave: no new change")  # fmt: skip
                 alarm_rows.remove(k)  # dismissed: no record, so no mark in the trace either
-                ref["rewatch"].restart(data["t"][rows[-1]])
+                w.restart(data["t"][rows[-1]])
                 rewatch_after(k, rows, changed=False)
                 return
-        record, diag, rows = isolated_alarm(monitor, data, trace, i, window_s, values[:, 0:6])
+            taken = w.fitted
+        record, diag, rows = isolated_alarm(
+            monitor, data, trace, i, window_s, values[:, 0:6], taken
+        )
         alarms.append(record)
         say(describe_alarm(record))
         if diag.isolated:
             if ref["code"] != code or ref["rewatch"] is None:
                 ref.update(rewatch=Rewatch(monitor), code=code)
-            ref["rewatch"].restart(data["t"][rows[-1]], diag.fitted)
+            ref["rewatch"].restart(data["t"][rows[-1]], Change.of(record, diag))
             rewatch_after(k, rows, changed=True)
 
     read = [("t", col["t"])] + [

@@ -188,9 +188,15 @@ def signature(monitor, data: dict, rows: np.ndarray, fitted: list[tuple[str, flo
     return out
 
 
-def isolate(monitor, data: dict, residual: np.ndarray, rows: np.ndarray) -> Diagnosis:
+def isolate(
+    monitor, data: dict, residual: np.ndarray, rows: np.ndarray, taken: list = ()
+) -> Diagnosis:
     """Name the change behind the monitor's residual ``residual`` [N, 6] on ``rows`` (indices
-    into ``data`` of :func:`nnid.fault.monitor.monitor_inputs`, each with its predecessor)."""
+    into ``data`` of :func:`nnid.fault.monitor.monitor_inputs`, each with its predecessor).
+    ``taken``: the changes already taken out of that residual (:attr:`Diagnosis.fitted` of
+    earlier alarms): a thruster's efficiency is stated against its nominal thrust, not against
+    the model those changes make (a thruster at 30 % that recovers is 100 % of nominal, where
+    the change on top of the 30 % reads 170 %)."""
     plant = monitor.plant_
     rows = rows[(rows > 0) & np.isfinite(residual[rows]).all(1)]
     if rows.size < 10:
@@ -267,7 +273,9 @@ def isolate(monitor, data: dict, residual: np.ndarray, rows: np.ndarray) -> Diag
         return out
     if out.kind == "thruster_loss":
         out.thruster = s.name.split(".", 1)[1]
-        eff = float(1.0 - s.delta)
+        # the thruster's columns are its nominal thrust bᵢfᵢ, so the losses taken out before
+        # add to this one: its efficiency against nominal is 1 minus their sum
+        eff = float(1.0 - s.delta - sum(theta for name, theta in taken if name == s.name))
         lo, hi = eff - 1.96 * s.stderr, eff + 1.96 * s.stderr
         if hi >= -STOPPED_SLACK and lo <= 1.0:  # a loss the interval allows: said so
             out.efficiency = float(np.clip(eff, 0.0, 1.0))
@@ -376,6 +384,43 @@ def _joint(
         p_values = f_dist.sf(np.where(se > 0, (theta / se) ** 2, np.inf), 1, n_eff)
     logl = drss / (2 * ws.tau_corr) - len(pick) * penalty
     return _Joint(kind, [cands[k] for k in pick], theta, se, p_values, drss, logl)
+
+
+def refit(monitor, data: dict, residual: np.ndarray, rows: np.ndarray, names: list[str]) -> dict:
+    """The hypotheses ``names`` (columns of :func:`hypothesis_columns`) fitted together to the
+    residual ``residual`` [len(rows), 6] of ``rows`` by :func:`isolate`'s weighted least
+    squares: for each, ``theta`` (the change of its parameter, 0: none), its standard error
+    ``se`` (with the residual's correlation time), and ``value`` and ``value_se`` in the
+    effect's own units (a thruster's θ is the share of its nominal thrust lost). Empty where
+    there are fewer than 10 rows or a hypothesis has no column on them."""
+    keep = (rows > 0) & np.isfinite(residual).all(1)
+    rows, residual = rows[keep], residual[keep]
+    if rows.size < 10:
+        return {}
+    vehicle, cands, cols = hypothesis_columns(monitor, data, rows, set(names))
+    index = {c.name: k for k, c in enumerate(cands)}
+    if any(name not in index for name in names):
+        return {}
+    pick = [index[name] for name in names]
+    mask = monitor.mask_
+    w = np.sqrt(mask / np.where(mask > 0, monitor.sigma_**2, 1.0))  # isolate's weights
+    a = (cols[:, :, pick] * w[None, :, None]).reshape(-1, len(pick))
+    y = -((residual - monitor.mu_) * w[None, :]).ravel()
+    theta, *_ = np.linalg.lstsq(a, y, rcond=None)
+    resid = y - a @ theta
+    n = rows.size * len(monitor.plant_.dofs_)
+    sigma2 = float(resid @ resid) / max(n - len(pick), 1)
+    cov = sigma2 * monitor.correlation_time_ * np.linalg.pinv(a.T @ a)
+    se = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    out = {}
+    for name, k, t, e in zip(names, pick, theta, se, strict=True):
+        c = cands[k]
+        thruster = c.kind == "thruster_loss"
+        value = float(t) if thruster else float(c.value(float(t), vehicle))
+        scale = 1.0 if thruster else abs(c.value_scale(vehicle))
+        out[name] = {"theta": float(t), "se": float(e), "value": value,
+                     "value_se": float(e * scale)}  # fmt: skip
+    return out
 
 
 def noise_ratio(monitor, e: np.ndarray) -> float:
