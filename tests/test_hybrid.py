@@ -514,6 +514,39 @@ def test_untrained_hybrid_feels_a_vehicles_actuator_lag_as_its_physics(minirov, 
     assert float(((reference - compiled).abs().amax((0, 1)) / spread).max()) < 1e-9
 
 
+def test_a_lagged_vehicle_flies_under_an_autopilot_in_the_hybrid(minirov):
+    """A lagged vehicle's closed-loop flight (refused before): the untrained hybrid flies as
+    its parametric fit does (to rounding with nnid's classic RK4), and with a network that
+    acts, under a zero-gain autopilot (the log's commands), as its own open-loop prediction:
+    the stepper carries the force felt, the physics' and the network's channels, from each
+    window's start as :meth:`HybridModel._channels` lays them out."""
+    from nnid.physics.effects import apply_effect
+
+    truth = apply_effect(minirov, "actuator_lag", 0.3)
+    log = effect_log(truth, duration=40.0, n_experiments=2, seed=5)
+    model = HybridModel(
+        truth, method="nnid_rk4", memory=(0.5,), trainer=Adam(max_epochs=0), segments=(0.5,)
+    ).fit(log)
+    physics = model.baseline()
+    scale = log[["u", "v", "w", "p", "q", "r"]].std()
+    pilot = Autopilot(kp=[0, 0, 20, 0, 0, 0.5], kd=[20, 20, 20, 0.1, 0.1, 0.2])
+    replay = Replay(pilot, log[list(TAU)])
+    for mode in ("free_run", 3):
+        a, b = model.closed_loop(log, replay, mode), physics.closed_loop(log, replay, mode)
+        err = (a - b)[scale.index].abs().max() / scale
+        assert err.max() < 1e-9, (mode, err)
+    generator = torch.Generator().manual_seed(1)
+    with torch.no_grad():  # a network that acts, on the lagged force and its memory
+        for p in model.dynamics_.net.parameters():
+            p.add_(0.3 * torch.randn(p.shape, generator=generator))
+    replay = Replay(Autopilot(), log[list(TAU)])
+    for mode in ("free_run", 3, 20):
+        a, b = model.predict(log, mode), model.closed_loop(log, replay, mode)
+        err = (a - b)[scale.index].abs().max() / scale
+        assert err.max() < 1e-9, (mode, err)
+        assert ((a - physics.predict(log, mode))[scale.index].abs().max() > 1e-3 * scale).any()
+
+
 def test_a_hybrid_trained_on_a_lagged_vehicle_stays_at_the_plant():
     """On noise-free data of a vehicle file that is the plant, lag included (no unknowns),
     the physics predicts the log and training leaves the hybrid there (free run within

@@ -102,7 +102,7 @@ def predict_states(
     x = measured_states(log)
     out = x.copy()
     if lag > 0:
-        x = np.concatenate([x, first_order_lag(tau, log, lag)], 1)
+        x = np.concatenate([x, felt_forces(parts, log, tau_nominal, lag)], 1)
     k = 1 if mode == "one_step" else mode
     for _, idx in experiments(log):
         pos = log.index.get_indexer(idx)
@@ -121,6 +121,14 @@ def predict_states(
         last = compiled.integrate_rk4(form, x[pos[:n]], windows, dt, substeps)[:, -1]
         out[pos[k:]] = last[:, :12]
     return pd.DataFrame(out, columns=[*POSE, *VELOCITY], index=log.index)
+
+
+def felt_forces(parts, log: pd.DataFrame, tau_nominal: np.ndarray, lag: float) -> np.ndarray:
+    """The force the vehicle feels at each sample behind an actuator ``lag`` T ``[N, 6]``: the
+    commanded ``tau_nominal`` through ``parts``' installation, then 1/(T s + 1) per experiment
+    (:func:`~nnid.datasets.preprocess.first_order_lag`, exact for forces held between
+    samples, at rest on the first one): the lag state a prediction window starts from."""
+    return first_order_lag(parts.applied(tau_nominal), log, lag)
 
 
 def blank_initial(predicted: pd.DataFrame, log: pd.DataFrame, n: int) -> pd.DataFrame:
@@ -185,16 +193,31 @@ def predict_closed_loop(
     mode: str | int = "free_run",
     substeps: int = 1,
     deadband: float = 0.0,
+    lag: float = 0.0,
+    tau_nominal: np.ndarray | None = None,
 ) -> pd.DataFrame:
     """A physics model (:class:`nnid.physics.parts.Parts`) flown under ``replay``'s
     autopilot as :func:`fly_closed_loop` flies a stepper, in one compiled loop
     (:func:`nnid.physics.compiled.fly_pd`; the same numbers), the commanded forces through
-    the vehicle's ``deadband`` as the simulator flies them."""
-    form = parts.model(check=False).feature_form()
+    the vehicle's ``deadband`` as the simulator flies them.
+
+    With an actuator ``lag`` T > 0 the force felt is a state of the flight, stepped exactly
+    as the simulator steps it, started at each window from the force felt there as the log
+    was flown: :func:`felt_forces` of ``tau_nominal``, the log's commanded force (deadband
+    applied, not lagged), as :func:`predict_states` starts it."""
+    form = parts.model(check=False, actuator_lag=lag).feature_form()
     pilot = replay.autopilot.pilot(parts.eta_pos, parts.eta_neg)
+    felt = None
+    if lag > 0:
+        if tau_nominal is None:
+            raise ValueError("a lagged flight starts from the log's commanded tau_nominal")
+        felt = felt_forces(parts, log, tau_nominal, lag)
 
     def flight(x0, tau_open, starts, steps, dt):
-        return compiled.fly_pd(form, x0, tau_open, starts, steps, dt, pilot, deadband, substeps)[0]
+        if felt is not None:  # the lag states after the 12 of pose and velocity
+            x0 = np.concatenate([x0, felt[starts]], 1)
+        flown = compiled.fly_pd(form, x0, tau_open, starts, steps, dt, pilot, deadband, substeps)
+        return flown[0][..., :12]
 
     return _fly(log, replay, flight, mode)
 

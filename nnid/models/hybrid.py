@@ -55,6 +55,7 @@ from nnid.evaluation.prediction import (
     Replay,
     blank_initial,
     check_mode,
+    felt_forces,
     fly_closed_loop,
     measured_states,
     mode_steps,
@@ -583,8 +584,9 @@ class HybridModel(FossenPlant):
             chans.append((tau - first_order_lag(tau, log, float(t))) / scale)
         lag = float(self.vehicle.actuator_lag)
         if lag > 0:
-            chans[0] = self.parts_.applied(nominal_forces(log, self.vehicle, lagged=False))
-            chans.append(first_order_lag(chans[0], log, lag))
+            commanded = nominal_forces(log, self.vehicle, lagged=False)
+            chans[0] = self.parts_.applied(commanded)
+            chans.append(felt_forces(self.parts_, log, commanded, lag))
         return np.concatenate(chans, 1)
 
     def _runs(self, log: pd.DataFrame, data: dict[str, np.ndarray]) -> list[Run]:
@@ -729,29 +731,45 @@ class HybridModel(FossenPlant):
     ) -> pd.DataFrame:
         """The prediction flown under ``replay``'s autopilot, sample by sample (the command is
         the open-loop input plus the autopilot's feedback on the simulated state, held over the
-        sample; the input memory follows the command as flown)."""
+        sample; the input memory follows the command as flown). Behind the vehicle's actuator
+        lag T the stepper carries the force felt, as :meth:`_channels` lays it out: the
+        physics' (applied, exact between samples) and the network's (nominal, its channels and
+        memory), each stepped by the command held over the sample."""
         check_is_fitted(self, msg=NOT_FITTED)
         mode = check_mode(mode)
-        self._check_unlagged()
         log, data = self._data(check_log(log), accelerations=False)
-        # the memory filters' states at every sample, of the commands as flown (the log's):
-        # a window k samples ahead starts from them, as the open-loop prediction does (from
-        # the window's own first command, a k-step flight differed by 0.9-1.6 std from it)
+        # the filters' states at every sample, of the commands as flown (the log's): a window
+        # k samples ahead starts from them, as the open-loop prediction does (from the
+        # window's own first command, a k-step flight differed by 0.9-1.6 std from it)
         logged = {t: first_order_lag(data["tau"], log, float(t)) for t in self.memory}
+        lag = float(self.vehicle.actuator_lag)
+        if lag > 0:  # data["tau"] is the nominal force felt, the network's input
+            commanded = nominal_forces(log, self.vehicle, lagged=False)
+            felt = (data["tau"], felt_forces(self.parts_, log, commanded, lag))
         arrays = self.dynamics_.arrays() if self.dynamics_.compiled else None
 
         def stepper(starts: np.ndarray, dt: float):
-            lag = {t: history[starts] for t, history in logged.items()}
+            memory = {t: history[starts] for t, history in logged.items()}
+            if lag > 0:
+                decay = np.exp(-dt / lag)
+                state_of = {"nominal": felt[0][starts], "applied": felt[1][starts]}
 
             def step(state: np.ndarray, command: np.ndarray) -> np.ndarray:
                 # through the deadband, as the log's forces the network learned from went
                 command = apply_deadband(command, force_deadband(self.vehicle))
-                chans = [self.parts_.applied(command), command / self.input_scale_]
+                applied = self.parts_.applied(command)
+                # behind a lag the network sees the force the commands before this one built
+                seen = state_of["nominal"] if lag > 0 else command
+                chans = [applied, seen / self.input_scale_]
                 for t in self.memory:
                     a = np.exp(-dt / float(t))
-                    prev = lag[t]
-                    chans.append((command - prev) / self.input_scale_)
-                    lag[t] = a * prev + (1 - a) * command
+                    prev = memory[t]
+                    chans.append((seen - prev) / self.input_scale_)
+                    memory[t] = a * prev + (1 - a) * seen
+                if lag > 0:  # the physics' lag starts from the force felt at the sample
+                    chans.append(state_of["applied"])
+                    for key, force in (("nominal", command), ("applied", applied)):
+                        state_of[key] = decay * state_of[key] + (1 - decay) * force
                 chans = np.concatenate(chans, 1)[:, None, :]
                 return self._simulate(state, chans, dt, arrays)[-1]
 

@@ -641,25 +641,21 @@ class FossenPlant(NnidModel):
     ) -> pd.DataFrame:
         """The prediction flown under ``replay``'s autopilot (its open-loop inputs plus the
         autopilot's feedback on the simulated state), as the log was flown: free run, or k
-        steps ahead from every measured state."""
+        steps ahead from every measured state. Behind the vehicle's actuator lag the force
+        felt is flown as a state, each window's started from the log's commands
+        (:func:`~nnid.evaluation.prediction.predict_closed_loop`)."""
         check_is_fitted(self, msg=NOT_FITTED)
         mode = check_mode(mode)
-        self._check_unlagged()
         log, _ = self._data(check_log(log), accelerations=False)
         check_stepped(log)
         deadband = force_deadband(self.vehicle)  # the autopilot commands forces
-        pred = predict_closed_loop(self.parts_, log, replay, mode, substeps_for(log), deadband)
+        lag = self.vehicle.actuator_lag
+        # a lag's windows start from the force felt as the log was flown: its commands, unlagged
+        tau = nominal_forces(log, self.vehicle, lagged=False) if lag > 0 else None
+        pred = predict_closed_loop(
+            self.parts_, log, replay, mode, substeps_for(log), deadband, lag, tau
+        )
         return blank_initial(pred, log, self.warmup_samples_ + mode_steps(mode) - 1)
-
-    def _check_unlagged(self) -> None:
-        """A closed-loop flight steps the commanded force with no lag state (the compiled
-        autopilot loop, a hybrid's stepper): a vehicle that declares one is refused."""
-        if self.vehicle.actuator_lag > 0:
-            raise NnidInputError(
-                f"vehicle '{self.vehicle.name}' declares an actuator lag; a closed-loop flight "
-                "of a lagged vehicle is not supported (predict it open loop)",
-                field="actuator_lag",
-            )
 
     def _forces(self) -> list[str]:
         return [FORCES[DOFS.index(d)] for d in self.dofs_]
