@@ -1,6 +1,6 @@
 """Fault detection (issue 16): speed of the monitor and its accuracy on simulated faults.
 
-Run by hand: ``python benchmarks/bench_detect.py speed`` and ``... scenarios``.
+Run by hand: ``python benchmarks/bench_detect.py speed``, ``... scenarios`` and ``... ended``.
 
 speed: the per-sample streaming update (median and 99th percentile over 20,000 samples,
 in-process, after compilation; targets 50 µs and 200 µs) and whole logs in batch mode (target
@@ -12,6 +12,10 @@ controller; the model and monitor as configs/detect_fossen.toml makes them (leas
 2 × 5 min of healthy flight, monitor calibrated on 3 × 5 min); faults at t = 20 s of 40-s runs:
 every thruster at 30 % and 0 % over 5 seeds, external forces, buoyancy changes; and one hour
 of healthy held-out flight for the false-alarm rate.
+
+ended: faults that go away at 40 s (a snag freed, a thruster that recovers, ballast or a payload
+released), then another fault at 52 s, 70-s runs, seeds 3001-3008: is the end said, and is the
+second fault alarmed?
 """
 
 from __future__ import annotations
@@ -205,5 +209,52 @@ def scenarios() -> None:
     print(f"total {time.perf_counter() - t0:.0f} s")
 
 
+#: a fault from 20 s that ends at 40 s, then another from 52 s, in 70-s runs
+SNAG = (-10, 0, 0, 0, 0, 1.0)
+ENDED = {
+    "snag freed": lambda: [Fault("external", 20.0, force=SNAG, end=40.0),
+                           Fault("thruster", 52.0, thruster="h1", efficiency=0.3)],
+    "h1 at 30 % recovers": lambda: [Fault("thruster", 20.0, thruster="h1", efficiency=0.3,
+                                          end=40.0), Fault("external", 52.0, force=SNAG)],
+    "v2 stopped, restarts": lambda: [Fault("thruster", 20.0, thruster="v2", efficiency=0.0,
+                                           end=40.0), Fault("external", 52.0, force=SNAG)],
+    "10 N ballast dropped": lambda: [Fault("effect", 20.0, effect="buoyancy_offset", value=10.0,
+                                           end=40.0), Fault("external", 52.0, force=SNAG)],
+    "2 kg payload released": lambda: [Fault("payload", 20.0, mass=2.0, value=4.0, end=40.0),
+                                      Fault("external", 52.0, force=SNAG)],
+}  # fmt: skip
+
+
+def ended() -> None:
+    """Faults that go away: is the end said (hypothesis change_ended, after 40 s), a recovered
+    thruster measured at its nominal thrust, and the fault from 52 s alarmed after it?"""
+    vehicle = load_vehicle(VEHICLE)
+    t0 = time.perf_counter()
+    mon = trained(vehicle)
+    print(f"machine: {machine(numba=numba.__version__)}; date {datetime.date.today()}")
+    print("| fault, ended at 40 s | runs | end said | end time (median, s) | recovered "
+          "thruster (% of nominal) | second fault alarmed | other alarms |")  # fmt: skip
+    print("|---|---|---|---|---|---|---|")
+    for label, faults in ENDED.items():
+        said, times, effs, second, other = 0, [], [], 0, 0
+        seeds = range(3001, 3009)
+        for seed in seeds:
+            alarms = detect(mon, simulate_faults(vehicle, 70, faults=faults(), seed=seed)).alarms
+            ends = [a for a in alarms if a.get("hypothesis") == "change_ended"]
+            if ends:
+                said += 1
+                times.append(ends[0]["ended"]["t"])
+                if ends[0]["efficiency"] is not None:
+                    effs.append(100 * ends[0]["efficiency"])
+            late = [a for a in alarms if a["t"] >= 52.0]
+            second += bool(late) and late[0].get("hypothesis") != "change_ended"
+            other += len(alarms) - 1 - len(ends[:1]) - len(late[:1])
+        eff = f"{min(effs):.0f}-{max(effs):.0f}" if effs else "-"
+        when = f"{np.median(times):.2f}" if times else "-"
+        print(f"| {label} | {len(seeds)} | {said} | {when} | {eff} | {second} | {other} |")
+    print(f"total {time.perf_counter() - t0:.0f} s")
+
+
 if __name__ == "__main__":
-    {"speed": speed, "scenarios": scenarios}[sys.argv[1] if len(sys.argv) > 1 else "speed"]()
+    modes = {"speed": speed, "scenarios": scenarios, "ended": ended}
+    modes[sys.argv[1] if len(sys.argv) > 1 else "speed"]()
