@@ -3,9 +3,11 @@
 What is measured (mass, size) is used as it is; the rest is an estimate that the identification
 refits, and the file says so line by line: inertia of a solid cuboid (Weiss eqs 32-34), added
 mass and damping scaled from the BlueROV2 Heavy of von Benzon et al. 2022 (added mass with the
-mass, drag with the frontal areas, rotational terms with area times arm), thrusters in the
-Heavy's layout scaled to the size. The output is TOML that :func:`nnid.vehicle.load_vehicle`
-reads; the damping keys it declares are the structure ``nnid loop`` and ``nnid train`` refit.
+mass, drag with the frontal areas; a rotational term with its face's area and the powers of
+the arm its Prime-system divisor has: added inertia mass × arm², linear damping area × arm²,
+quadratic damping area × arm³), thrusters in the Heavy's layout scaled to the size. The output
+is TOML that :func:`nnid.vehicle.load_vehicle` reads; the damping keys it declares are the
+structure ``nnid loop`` and ``nnid train`` refit.
 """
 
 from __future__ import annotations
@@ -62,10 +64,16 @@ def starter_text(
     ref_size = (0.457, 0.575, 0.254)  # BlueROV2 Heavy, Blue Robotics
     scale = [s / r for s, r in zip(size, ref_size, strict=True)]
     # frontal areas (surge: width x height, sway: length x height, heave: length x width);
-    # rotations: the area swept times its arm (roll: sway face x width, pitch: heave face x
-    # length, yaw: sway face x length)
+    # rotations: the face swept and its arm (roll: sway face and width, pitch: heave face and
+    # length, yaw: sway face and length). An element of the face at lever r moves at ω r: its
+    # linear drag makes a moment ∝ r², its quadratic drag ∝ r³ and its added mass an added
+    # inertia ∝ r², so a vehicle λ times the Heavy (λ³ its mass) gets λ⁴ K_p, λ⁵ K_p|p| and
+    # λ⁵ K_ṗ, as Prime system I scales them (½ρUL⁴, ½ρL⁵, ½ρL⁵; Weiss Table 4). Area times
+    # arm (and the mass ratio alone) gave all three λ³: at twice the size, a quarter of the
+    # quadratic damping and of the added inertia, half the linear damping
     area = [scale[1] * scale[2], scale[0] * scale[2], scale[0] * scale[1]]
-    arm = [area[1] * scale[1], area[2] * scale[0], area[1] * scale[0]]
+    face = [area[1], area[2], area[1]]
+    arm = [scale[1], scale[0], scale[0]]
     mass_ratio = mass / ref.mass
     weight = mass * 9.81
     lines = [
@@ -88,21 +96,28 @@ def starter_text(
         "r_b = [0.0, 0.0, 0.0]",
         "",
         f"[added_mass]                  # ESTIMATE: {REFERENCE} (von Benzon 2022) x mass ratio",
+        "                              # (x arm^2 for rotations)",
     ]
     for dof, force in zip(DOFS, FORCES, strict=True):
         key = f"{force}_{dof}dot"
-        lines.append(f"{key} = {ref.added_mass[key] * mass_ratio:.4g}")
+        lever = 1.0 if dof in "uvw" else arm[DOFS.index(dof) - 3] ** 2
+        lines.append(f"{key} = {ref.added_mass[key] * mass_ratio * lever:.4g}")
     lines += [
         "",
-        f"[damping.coefficients]        # ESTIMATE: {REFERENCE} scaled by frontal area (x arm for",
-        "                              # rotations); the keys are the structure that is refitted",
+        f"[damping.coefficients]        # ESTIMATE: {REFERENCE} scaled by frontal area (x arm^2",
+        "                              # linear, x arm^3 quadratic for rotations); the keys are",
+        "                              # the structure that is refitted",
     ]
     for i, (dof, force) in enumerate(zip(DOFS, FORCES, strict=True)):
-        factor = area[i] if i < 3 else arm[i - 3]
+        if i < 3:
+            lin_factor = quad_factor = area[i]
+        else:
+            lin_factor = face[i - 3] * arm[i - 3] ** 2
+            quad_factor = face[i - 3] * arm[i - 3] ** 3
         linear = ref.damping.coefficients.get(f"{force}:{dof}", 0.0)
         quad = ref.damping.coefficients[f"{force}:{dof}*abs({dof})"]
-        lines.append(f'"{force}:{dof}" = {min(linear * factor, -1e-3):.4g}')
-        lines.append(f'"{force}:{dof}*abs({dof})" = {quad * factor:.4g}')
+        lines.append(f'"{force}:{dof}" = {min(linear * lin_factor, -1e-3):.4g}')
+        lines.append(f'"{force}:{dof}*abs({dof})" = {quad * quad_factor:.4g}')
     if layout == "heavy8":
         lines += [
             "",
