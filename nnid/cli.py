@@ -310,15 +310,27 @@ def loop(
     columns: str | None = typer.Option(
         None, "--columns", help="Reader config for a log not in nnid's format."
     ),
-    max_effects: int | None = typer.Option(None, "--max-effects", min=0, help="At most this many."),
+    max_effects: int | None = typer.Option(
+        None,
+        "--max-effects",
+        min=0,
+        help="Add at most this many effects; default: the config's max_effects, else 3.",
+    ),
     alpha: float | None = typer.Option(
-        None, "--alpha", min=1e-12, max=0.5, help="Family-wise significance of the F-test."
+        None,
+        "--alpha",
+        min=1e-12,
+        max=0.5,
+        help="Family-wise significance of the F-test; default: the config's alpha, else 0.01.",
     ),
     dofs: str | None = typer.Option(
         None, "--dofs", help="DOFs to analyse, comma-separated (e.g. p,q,r); default: all logged."
     ),
     validation: str | None = typer.Option(
-        None, "--validation", help="Experiments held out, comma-separated; default: the last 30 %."
+        None,
+        "--validation",
+        help="Experiments held out, comma-separated; default: the config's validation, else "
+        "the last 30 % (validation_fraction).",
     ),
     exclude: str | None = typer.Option(
         None, "--exclude", help="Experiments left out (e.g. replays), comma-separated."

@@ -1003,7 +1003,8 @@ def load_config(
     for key, hint in LEGACY_KEYS.get(expected or "", {}).items():
         if key in data:
             raise NnidInputError(
-                f"is a key of the config format before nnid 0.2: {hint} (see README, Configs)",
+                f"is a key of the config format before nnid 0.2: {hint} "
+                "(see docs/reference.md, Configs)",
                 source=str(path),
                 field=key,
             )

@@ -246,6 +246,9 @@ def test_a_config_of_the_earlier_format_says_what_replaced_the_key(tmp_path, no_
     result = CliRunner().invoke(app, ["train", str(cfg), "--out", str(tmp_path / "o")])
     assert result.exit_code == 2 and "field 'narx'" in result.output
     assert 'kind = "narx"' in result.output and result.output.strip().count("\n") == 0
+    # the page it points to exists and has that section (README has no "Configs" section)
+    page, section = re.search(r"\(see ([^,]+), ([^)]+)\)", result.output).groups()
+    assert f"## {section}\n" in (ROOT / page).read_text(), result.output
 
 
 def test_there_are_at_least_25_cases():

@@ -29,8 +29,8 @@ quaternion = []               # [w, x, y, z] source columns -> phi theta psi
 [sources.columns]             # log column = source column, or a table
 cmd_1 = { from = "pwm_1", offset = -1500.0, scale = 0.0025 }   # (pwm - 1500) / 400
 psi = { from = "yaw", unit = "deg" }       # value = (x + offset) * scale, then the unit
-u = { from = "vx", unit = "mm/s" }         # units: rad deg rad/s deg/s m cm mm m/s cm/s mm/s
-                                           # s ms, each checked against the pose or velocity
+u = { from = "vx", unit = "mm/s" }         # units: rad deg rad/s deg/s m cm mm m/s cm/s mm/s,
+                                           # each checked against the pose or velocity
 ```
 """
 
