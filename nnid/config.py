@@ -919,7 +919,7 @@ class LoopConfig(_Command):
     validation: Annotated[Names, Field(min_length=1)] | None = None  # default: the last 30 %
     validation_fraction: float = Field(0.3, gt=0, lt=1)
     max_effects: int = Field(3, ge=0)
-    alpha: float = Field(0.01, gt=0, le=0.5)  # as --alpha and a batch manifest take it
+    alpha: float = Field(0.01, ge=1e-12, le=0.5)  # as --alpha and a batch manifest take it
     coupled: bool = True
     filter_lambda: PositiveFloat | None = 1.0
     savgol_window: PositiveFloat = 1.0

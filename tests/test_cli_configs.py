@@ -187,6 +187,7 @@ CASES = [
     ("loop", LOOP, ("max_effects = 2", 'dofs = ["u", "z"]'), "dofs.1"),
     ("loop", TRAIN, ("", ""), "kind"),
     ("loop", LOOP, ("max_effects = 2", "alpha = 0.9"), "alpha"),
+    ("loop", LOOP, ("max_effects = 2", "alpha = 1e-15"), "alpha"),  # as --alpha refuses it
     (
         "simulate",
         SIM,
