@@ -214,7 +214,7 @@ def nominal_forces(log: pd.DataFrame, vehicle, lagged: bool = True) -> np.ndarra
     """The nominal generalized force the vehicle receives ``[N, 6]``: deadband on the inputs,
     thrust curves and allocation, then (``lagged``) the first-order actuator lag of the vehicle
     at the sample times (exact for inputs held between samples); installation coefficients
-    are left to the model."""
+    are left to the model (they act before the lag: :func:`force_arrays`)."""
     inputs, forces = logged_inputs(log, vehicle)
     if forces:  # a new array, not pandas' read-only view: the loop zeroes DOFs in it
         tau = apply_deadband(inputs, force_deadband(vehicle))
@@ -223,9 +223,26 @@ def nominal_forces(log: pd.DataFrame, vehicle, lagged: bool = True) -> np.ndarra
     return first_order_lag(tau, log, vehicle.actuator_lag) if lagged else tau
 
 
+def force_arrays(log: pd.DataFrame, vehicle) -> dict[str, np.ndarray]:
+    """The nominal force through the vehicle's actuator lag L, ``{"tau": L[τ]}``
+    (:func:`nominal_forces`), and with a lag its negative part ``"tau_neg"`` = L[min(τ, 0)]:
+    installation coefficients act on the force commanded, before the lag (Caccia eq. 3, as the
+    simulator applies them), and L is linear, so the force felt is η⁺ L[τ⁺] + η⁻ L[τ⁻] with
+    L[τ⁺] = L[τ] − L[τ⁻] (:meth:`nnid.physics.parts.Parts.felt`), and an installation
+    coefficient's regressor is its direction's lagged part. Without a lag there is no
+    ``tau_neg``: η(sign τ) τ is exact."""
+    tau = nominal_forces(log, vehicle, lagged=False)
+    lag = vehicle.actuator_lag
+    out = {"tau": first_order_lag(tau, log, lag)}
+    if lag > 0:
+        out["tau_neg"] = first_order_lag(np.minimum(tau, 0.0), log, lag)
+    return out
+
+
 def log_arrays(log: pd.DataFrame, vehicle) -> dict[str, np.ndarray]:
     """:func:`motion_arrays` and the nominal τ (from ``tau_*`` or through the vehicle's
     thrusters from ``cmd_*``, :func:`logged_inputs`), with the vehicle file's deadband and
-    actuator lag (:func:`nominal_forces`): a model of a vehicle whose file declares them is
-    fitted on the force that vehicle receives."""
-    return {**motion_arrays(log), "tau": nominal_forces(log, vehicle)}
+    actuator lag (:func:`force_arrays`): a model of a vehicle whose file declares them is
+    fitted on the force that vehicle receives. A lagged vehicle's arrays hold ``tau_neg`` as
+    well; whoever replaces ``tau`` replaces both."""
+    return {**motion_arrays(log), **force_arrays(log, vehicle)}

@@ -32,7 +32,7 @@ import pandas as pd
 from scipy.optimize import minimize_scalar
 from scipy.stats import f as f_dist
 
-from nnid.datasets.arrays import log_arrays, nominal_forces
+from nnid.datasets.arrays import force_arrays, log_arrays, nominal_forces
 from nnid.datasets.log import VELOCITY
 from nnid.datasets.preprocess import zoh_midpoint
 from nnid.evaluation.evaluate import score_split
@@ -150,19 +150,22 @@ class Workspace:
         self.weights: np.ndarray | None = None
         self.tau_corr = 1.0
         self._cache: dict[tuple, dict[str, np.ndarray]] = {}
-        self._tau: dict[tuple, np.ndarray] = {}
+        self._tau: dict[tuple, dict[str, np.ndarray]] = {}
 
     def arrays(self, vehicle, part: str = "train") -> dict[str, np.ndarray]:
-        """The arrays with the nominal forces recomputed for ``vehicle`` (its lag, deadband)."""
+        """The arrays with the nominal forces recomputed for ``vehicle`` (its lag, deadband;
+        a lag's negative part too, :func:`~nnid.datasets.arrays.force_arrays`)."""
         log, data = (self.train, self.data) if part == "train" else (self.val, self.data_val)
         key = (part, vehicle.actuator_lag, vehicle.deadband)
         if key not in self._tau:  # the searches refit many times at one lag and deadband
-            tau = nominal_forces(log, vehicle)
+            forces = force_arrays(log, vehicle)
             if self.zoh_midpoint and vehicle.actuator_lag == 0:
                 # a held input steps at each sample; a lagged force is continuous, seen as it is
-                tau = zoh_midpoint(tau, log)
-            self._tau[key] = tau
-        return {**data, "tau": self._tau[key]}
+                forces["tau"] = zoh_midpoint(forces["tau"], log)
+            self._tau[key] = forces
+        # the lagged negative part of another lag (the workspace's vehicle's) must not stay
+        motion = {k: v for k, v in data.items() if k != "tau_neg"}
+        return {**motion, **self._tau[key]}
 
     def columns(self, vehicle, names: list[str], part: str) -> np.ndarray:
         """Regressor columns [N, 6, P] of parameters at ``vehicle``, cached: a column of a

@@ -33,7 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from nnid.datasets.arrays import logged_inputs, nominal_forces
+from nnid.datasets.arrays import force_arrays, logged_inputs
 from nnid.physics.damping import parse_coefficient_key
 from nnid.physics.damping_library import LIBRARY, canonical_term
 from nnid.physics.dofs import DOF_WORD, DOFS, FORCES
@@ -162,9 +162,13 @@ def candidates(vehicle, log: pd.DataFrame, coupled: bool = True) -> list[Candida
                         dofs=(dof,),
                     )
                 )
-    tau = nominal_forces(log, vehicle)
+    # a direction is there where its installation regressor is: the lagged part of the force
+    # in that direction (Caccia eq. 3 before the lag), the force's own sign without a lag
+    forces = force_arrays(log, vehicle)
+    neg = forces.get("tau_neg", np.minimum(forces["tau"], 0.0))
+    pos = forces["tau"] - neg
     for k, dof in enumerate(DOFS):
-        for sign, present in (("pos", (tau[:, k] > 0).any()), ("neg", (tau[:, k] < 0).any())):
+        for sign, present in (("pos", (pos[:, k] > 0).any()), ("neg", (neg[:, k] < 0).any())):
             if present:
                 out.append(
                     Candidate(

@@ -165,7 +165,8 @@ class ParametricFossen:
     def equation_residual(
         self, parts: Parts, data: dict[str, np.ndarray], filter_lambda: float | None = None
     ) -> np.ndarray:
-        """R = M ν̇ − (τ_eff + b − C ν + τ_D − g) per sample ``[N, 6]``.
+        """R = M ν̇ − (τ_eff + b − C ν + τ_D − g) per sample ``[N, 6]``, τ_eff the installed
+        force through the actuator lag (:meth:`Parts.felt`, Caccia eq. 3 before the lag).
 
         With ``filter_lambda`` = λ both sides pass through F(s) = λ/(s + λ) and M F[ν̇] is
         computed as M sF(s)[ν] from the velocity: the filtered-regressor form of Weiss eqs
@@ -174,7 +175,7 @@ class ParametricFossen:
         model = parts.model(check=False)
         with torch.no_grad():
             eta, nu = torch.as_tensor(data["eta"]), torch.as_tensor(data["nu"])
-            tau = torch.as_tensor(parts.applied(data["tau"]))
+            tau = torch.as_tensor(parts.felt(data))
             net = model.net_force(eta, nu, tau).numpy()
             mass = model.mass_matrix().numpy()
         if filter_lambda is None:

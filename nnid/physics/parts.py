@@ -141,6 +141,14 @@ class Parts:
         """τ_eff = η(sign) τ per DOF (Caccia eq. 3)."""
         return apply_installation(tau_nominal, self.eta_pos, self.eta_neg)
 
+    def felt(self, data: dict[str, np.ndarray]) -> np.ndarray:
+        """The force the vehicle feels at the samples of log arrays
+        (:func:`~nnid.datasets.arrays.log_arrays`): the nominal force through the installation
+        (Caccia eq. 3) and then the vehicle's actuator lag, L[η(sign τ) τ], from the lagged
+        parts ``tau`` and ``tau_neg`` a lagged vehicle's arrays hold; η(sign) τ of ``tau``
+        without a lag."""
+        return apply_installation(data["tau"], self.eta_pos, self.eta_neg, data.get("tau_neg"))
+
 
 def relative_velocity(parts: Parts, data: dict[str, np.ndarray]) -> np.ndarray:
     """ν_r = ν − ν_c(η), the velocity through the water that damping acts on (Fossen 2011

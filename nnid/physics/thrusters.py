@@ -52,8 +52,19 @@ def allocation_matrix(positions: Tensor, directions: Tensor) -> Tensor:
     return torch.cat([directions, moments], -1).T
 
 
-def apply_installation(tau, eta_pos, eta_neg):
-    """Caccia eq. 3: τ_eff = η⁺ τ where τ ≥ 0, η⁻ τ where τ < 0, per DOF (arrays or tensors)."""
+def apply_installation(tau, eta_pos, eta_neg, tau_neg=None):
+    """Caccia eq. 3: τ_eff = η⁺ τ where τ ≥ 0, η⁻ τ where τ < 0, per DOF (arrays or tensors).
+
+    With ``tau_neg``, ``tau`` = L[τ] and ``tau_neg`` = L[τ⁻] are the nominal force and its
+    negative part τ⁻ = min(τ, 0) through the actuator lag L = 1/(T s + 1), and the result is
+    the installed force through the lag, L[η(sign τ) τ] = η⁺ L[τ⁺] + η⁻ L[τ⁻] = η⁺ L[τ] +
+    (η⁻ − η⁺) L[τ⁻] (L is linear): the installation acts on the force commanded, before the
+    lag, as the simulator and :func:`~nnid.evaluation.prediction.predict_states` apply it.
+    η(sign L[τ]) L[τ] would differ wherever τ changes sign within a lag time. Written with
+    η⁻ − η⁺ so that a DOF of equal coefficients gets η L[τ] to the last bit, as without it.
+    """
+    if tau_neg is not None:
+        return eta_pos * tau + (eta_neg - eta_pos) * tau_neg
     if isinstance(tau, torch.Tensor):
         return torch.where(tau >= 0, eta_pos * tau, eta_neg * tau)
     return np.where(tau >= 0, eta_pos * tau, eta_neg * tau)

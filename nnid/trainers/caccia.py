@@ -82,7 +82,7 @@ from nnid.datasets.preprocess import savgol_window
 from nnid.datasets.simulator import simulate, simulate_config
 from nnid.errors import NnidInputError
 from nnid.physics.dofs import DOFS, FORCES
-from nnid.physics.thrusters import Actuation
+from nnid.physics.thrusters import Actuation, apply_installation
 from nnid.trainers.history import Progress, silent
 from nnid.trainers.least_squares import Estimate, correlation_time, solve_least_squares
 from nnid.trainers.regression import Regression
@@ -297,12 +297,15 @@ def integrated_regression(
     eta_neg: float = 1.0,
     velocity_window: float = 5.0,
     velocity_order: int = 4,
+    force_neg: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, list[str]]:
     """H and y of Caccia eqs 16-19 for one run (θ = [m_ξ, m_ξ ξ₀ + k χ₀, b]).
 
     ξ is the SG derivative of the position, I = ∫ ξ|ξ| (trapezoid), ϕ = ∫ η φⁿ summed exactly
     for a zero-order-hold input (sample k held over [t_k, t_k+1)). The position is taken
-    relative to its first sample (χ₀ is absorbed in the second parameter anyway).
+    relative to its first sample (χ₀ is absorbed in the second parameter anyway). With an
+    actuator lag, ``force`` is the lagged nominal force and ``force_neg`` its lagged negative
+    part (:func:`~nnid.datasets.arrays.force_arrays`): η acts before the lag (eq. 3).
     """
     t = np.asarray(t, np.float64) - float(t[0])
     chi = np.asarray(position, np.float64) - float(position[0])
@@ -316,7 +319,7 @@ def integrated_regression(
             field="sinusoid",
         )
     xi = savgol_filter(chi, window, velocity_order, deriv=1, delta=dt, mode="interp")
-    effective = np.where(force >= 0, eta_pos * force, eta_neg * force)
+    effective = apply_installation(force, eta_pos, eta_neg, force_neg)
     varphi = np.r_[0.0, np.cumsum(effective[:-1] * np.diff(t))]
     integral = cumulative_trapezoid(xi * np.abs(xi), t, initial=0.0)
     y = varphi - k_linear * chi - k_quadratic * integral
@@ -606,9 +609,16 @@ class CacciaTwoStep:
         )
 
     # -- step 2 ---------------------------------------------------------------------------------
-    def inertia_arrays(self, t: np.ndarray, position: np.ndarray, force: np.ndarray) -> Estimate:
+    def inertia_arrays(
+        self,
+        t: np.ndarray,
+        position: np.ndarray,
+        force: np.ndarray,
+        force_neg: np.ndarray | None = None,
+    ) -> Estimate:
         """Step 2 (eqs 16-19) on one run; Caccia's θ = [m_ξ, m_ξ ξ₀ + k χ₀, b] (also in
-        :attr:`inertia_`)."""
+        :attr:`inertia_`). ``force_neg``: the lagged negative part of a lagged ``force``
+        (:func:`integrated_regression`)."""
         k1, k2, _, _ = caccia_names(self.dof)
         h, y, names = integrated_regression(
             t,
@@ -620,6 +630,7 @@ class CacciaTwoStep:
             self.eta("neg"),
             self.velocity_window,
             self.velocity_order,
+            force_neg,
         )
         est = solve_least_squares(h, y, names=names)
         if self.correlated:
@@ -637,7 +648,13 @@ class CacciaTwoStep:
         codes = np.asarray(arrays["experiment"])
         if np.unique(codes).size > 1:
             raise NnidInputError("the sinusoid log must hold one experiment", field="sinusoid")
-        return self.inertia_arrays(arrays["t"], arrays["eta"][:, k], arrays["tau"][:, k])
+        neg = arrays.get("tau_neg")
+        return self.inertia_arrays(
+            arrays["t"],
+            arrays["eta"][:, k],
+            arrays["tau"][:, k],
+            None if neg is None else neg[:, k],
+        )
 
     # -- both -----------------------------------------------------------------------------------
     def rigid_inertia(self, vehicle) -> float:

@@ -88,7 +88,7 @@ class _Process:
             forms.append(model.feature_form())
             with torch.no_grad():
                 masses.append(model.mass_matrix().numpy())
-            taus.append(parts.applied(data["tau"]))
+            taus.append(parts.felt(data))
         base = forms[0]
         for f in forms[1:]:
             if f.codes.shape != base.codes.shape or np.any(f.codes != base.codes):
@@ -162,7 +162,7 @@ class _Process:
             parts = self.structure.parts(theta)
             model = parts.model(check=False)
             x0 = torch.as_tensor(self.full_state(x[b : b + 1, : self.n_v], k)[0])
-            tau = torch.as_tensor(parts.applied(self.data["tau"][k : k + 1]))
+            tau = torch.as_tensor(parts.felt(self.data)[k : k + 1])
             with torch.no_grad():
                 nxt = rk4(model.rhs, x0, tau, dt, lag=model.actuator_lag)[1].numpy()
             out[b, : self.n_v] = nxt[6 + self.idx]
