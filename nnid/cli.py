@@ -530,7 +530,7 @@ def sweep(
     """Search a train config's settings and seeds ([sweep]: grid, random draws, seeds), each
     trial scored on the validation experiments: writes settings.csv (ranked), best.toml (the
     chosen setting as a ready config), summary.* (one row per trial) and report.html."""
-    from nnid.scale.engines import LocalEngine, engine_for
+    from nnid.scale.engines import LocalEngine, engine_for, environment
     from nnid.scale.sweep import run_sweep, run_sweep_tune, trials
 
     _, tasks = trials(config, data, vehicle, columns)  # a bad [sweep] is refused before work
@@ -542,11 +542,14 @@ def sweep(
         else:
             engine_for(address)  # Ray installed, or one clear error
             # Tune's own console tables would interleave with the progress bar: the
-            # command's outputs are its report and this summary
-            os.environ.setdefault("RAY_AIR_NEW_OUTPUT", "0")
-            result, ranked = run_sweep_tune(
-                config, out_dir, address, data, vehicle, columns, progress
-            )
+            # command's outputs are its report and this summary. Only while Tune runs (a
+            # caller of the app, a test through CliRunner, keeps its environment), and not
+            # over a value the person set
+            quiet = {} if "RAY_AIR_NEW_OUTPUT" in os.environ else {"RAY_AIR_NEW_OUTPUT": "0"}
+            with environment(quiet):
+                result, ranked = run_sweep_tune(
+                    config, out_dir, address, data, vehicle, columns, progress
+                )
     out.print(result.extra["sweep"]["summary"], highlight=False)
     written = "settings.csv, best.toml" if ranked[0].mean is not None else "settings.csv"
     out.print(

@@ -611,6 +611,37 @@ def test_sweep_on_ray_tune_with_asha(sweep_inputs, tmp_path) -> None:
     assert ranked[0].mean is not None and (out / "best.toml").is_file()
 
 
+def test_a_sweep_on_ray_leaves_the_callers_environment_as_it_was(
+    sweep_inputs, tmp_path, monkeypatch
+) -> None:
+    """`nnid sweep --address` quiets Tune's console tables (RAY_AIR_NEW_OUTPUT=0) only while
+    Tune runs: the app called in-process (a test through CliRunner, a script) kept the value
+    in its environment for good. A value the person set is left as it is. Ray itself is not
+    needed: Tune is replaced by a stand-in that records what it saw."""
+    import nnid.scale.engines as engines
+    import nnid.scale.sweep as sweep
+
+    config, data = sweep_inputs
+    seen: list[str | None] = []
+
+    def tune(*args, **kwargs):
+        seen.append(os.environ.get("RAY_AIR_NEW_OUTPUT"))
+        raise NnidInputError("stand-in for Tune")
+
+    monkeypatch.setattr(engines, "engine_for", lambda address, workers=None: None)
+    monkeypatch.setattr(sweep, "run_sweep_tune", tune)
+    args = ["sweep", str(config), "--data", str(data), "--out", str(tmp_path / "o"),
+            "--address", "auto"]  # fmt: skip
+    monkeypatch.delenv("RAY_AIR_NEW_OUTPUT", raising=False)
+    res = CliRunner().invoke(app, args)
+    assert res.exit_code == 2 and "stand-in for Tune" in res.output, res.output
+    assert seen == ["0"] and "RAY_AIR_NEW_OUTPUT" not in os.environ
+    monkeypatch.setenv("RAY_AIR_NEW_OUTPUT", "1")
+    res = CliRunner().invoke(app, args)
+    assert res.exit_code == 2 and seen == ["0", "1"], res.output
+    assert os.environ["RAY_AIR_NEW_OUTPUT"] == "1"
+
+
 @needs_ray
 def test_sweep_refuses_asha_with_nothing_to_compare(sweep_inputs, tmp_path) -> None:
     """A NARX without a free-run stage, ranked on the free run, scores nothing ASHA could

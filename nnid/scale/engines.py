@@ -73,9 +73,9 @@ ONE_THREAD = {
 
 
 @contextmanager
-def _child_environment(values: dict[str, str]) -> Iterator[None]:
-    """``values`` in ``os.environ`` while worker processes are started (they inherit it),
-    then the previous values back."""
+def environment(values: dict[str, str]) -> Iterator[None]:
+    """``values`` in ``os.environ`` for the block (worker processes started in it inherit
+    them), then the previous values back."""
     before = {k: os.environ.get(k) for k in values}
     os.environ.update(values)
     try:
@@ -144,7 +144,7 @@ class LocalEngine:
         pool = ProcessPoolExecutor(workers, mp_context=ctx, initializer=_pin_worker)
         try:
             # the pool starts its processes as tasks are submitted: all of them here
-            with _child_environment(ONE_THREAD):
+            with environment(ONE_THREAD):
                 futures = {pool.submit(_marked_run, t, out_root): t for t in tasks}
             while futures:
                 done, _ = wait(futures, return_when=FIRST_COMPLETED)
