@@ -153,10 +153,11 @@ def simulate_faults(
     switch, refs = controller.schedule(duration, rng)
     efficiency = np.ones((n, len(names)))
     external = np.zeros((n, 6))
-    phase = np.zeros(n, dtype=int)  # which plant: 0 healthy, 1 with the effects
-    effect_vehicle = vehicle
+    # the effect and payload faults active at each sample, as a key: one plant per distinct
+    # set, so that one fault's end (or a later one's onset) is that plant's alone
+    active: list[list[int]] = [[] for _ in range(n)]
     t = np.arange(n) * dt
-    for fault in faults:
+    for index, fault in enumerate(faults):
         on = (t >= fault.t) & (t < (np.inf if fault.end is None else fault.end))
         if fault.kind == "thruster":
             if fault.thruster not in names:
@@ -167,13 +168,21 @@ def simulate_faults(
             efficiency[on, names.index(fault.thruster)] = fault.efficiency
         elif fault.kind == "external":
             external[on] += np.asarray(fault.force, dtype=np.float64)
-        elif fault.kind == "payload":
-            effect_vehicle = _with_payload(effect_vehicle, fault.mass, fault.value)
-            phase[on] = 1
-        else:
-            effect_vehicle = apply_effect(effect_vehicle, fault.effect, fault.value)
-            phase[on] = 1
-    plants = [vehicle, effect_vehicle]
+        else:  # payload or effect: a plant of its own
+            for k in np.flatnonzero(on):
+                active[k].append(index)
+    keys = {(): 0}
+    phase = np.array([keys.setdefault(tuple(a), len(keys)) for a in active], dtype=int)
+    plants = []
+    for key in keys:  # in order of their first use; () the healthy vehicle
+        plant = vehicle
+        for index in key:
+            fault = faults[index]
+            if fault.kind == "payload":
+                plant = _with_payload(plant, fault.mass, fault.value)
+            else:
+                plant = apply_effect(plant, fault.effect, fault.value)
+        plants.append(plant)
     models = [FossenModel.from_vehicle(v) for v in plants]
     forms = [m.feature_form() for m in models]
     actuation = [Actuation(v) for v in plants]
