@@ -119,6 +119,8 @@ def test_all_members_diverging_keeps_them_all(log):
         ({"combine": "max"}, "combine"),
         ({"warmup_s": -1.0}, "warmup_s is 0 or more"),
         ({"warmup_s": float("nan")}, "warmup_s is 0 or more"),
+        ({"warmup_s": None}, "warmup_s is 0 or more"),
+        ({"warmup_s": "1 s"}, "warmup_s is 0 or more"),
     ],
 )
 def test_bad_settings_are_one_clear_error(log, kw, match):

@@ -259,6 +259,13 @@ def test_a_column_spec_of_the_wrong_type_is_refused_naming_its_key(tmp_path, col
     assert error.startswith(f"{path}, field {said}")
 
 
+def test_an_unknown_unit_offers_only_units_a_column_takes(tmp_path):
+    # "s" and "ms" were offered, and every column refuses them (time has its time_scale)
+    _, error = _refused_columns(tmp_path, 'u = { from = "f", unit = "furlong" }')
+    offered = error.split("expected one of ")[1].split(", ")
+    assert {"m/s", "deg"} <= set(offered) and not {"s", "ms"} & set(offered)
+
+
 def _refused_columns(root, columns: str):
     """The reader config of one source with ``columns``, and the error that loading it gives."""
     cmap = f'[[sources]]\nfile = "log.csv"\ntime = "t"\ncolumns = {{ {columns} }}\n'

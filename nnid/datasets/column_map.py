@@ -46,8 +46,9 @@ from nnid.datasets.log import ACCELERATION, ANGLES, POSE, TAU, VELOCITY
 from nnid.validation import StrictModel
 
 UNITS = {"rad": 1.0, "deg": 0.017453292519943295, "rad/s": 1.0, "deg/s": 0.017453292519943295,
-         "m": 1.0, "cm": 0.01, "mm": 0.001, "m/s": 1.0, "cm/s": 0.01, "mm/s": 0.001,
-         "s": 1.0, "ms": 0.001}  # fmt: skip
+         "m": 1.0, "cm": 0.01, "mm": 0.001, "m/s": 1.0, "cm/s": 0.01, "mm/s": 0.001}  # fmt: skip
+# (time is scaled by the source's ``time_scale``: no column takes "s" or "ms", which the
+# message of an unknown unit had offered)
 #: the units each pose and velocity column of the log may be converted from
 TARGET_UNITS = {
     **dict.fromkeys(("x", "y", "z"), ("m", "cm", "mm")),

@@ -16,6 +16,7 @@ was fitted beyond the last bits that a thread count changes.
 
 from __future__ import annotations
 
+import numbers
 from collections.abc import Sequence
 
 import numpy as np
@@ -94,8 +95,13 @@ class EnsembleModel(NnidModel):
             )
         if self.combine not in COMBINE:
             raise NnidInputError("combine is 'mean' or 'median'", field="combine")
-        warmup = float(self.warmup_s)
-        if not (np.isfinite(warmup) and warmup >= 0):  # scored_rows would score the warm-up
+        warmup = self.warmup_s
+        # scored_rows would score the warm-up; a text or None would end in a bare TypeError
+        if (
+            isinstance(warmup, bool)
+            or not isinstance(warmup, numbers.Real)
+            or not (np.isfinite(warmup) and warmup >= 0)
+        ):
             raise NnidInputError(
                 f"warmup_s is 0 or more seconds, not {self.warmup_s!r}", field="warmup_s"
             )
