@@ -15,7 +15,9 @@ of healthy held-out flight for the false-alarm rate.
 
 ended: faults that go away at 40 s (a snag freed, a thruster that recovers, ballast or a payload
 released), then another fault at 52 s, 70-s runs, seeds 3001-3008: is the end said, and is the
-second fault alarmed?
+second fault alarmed? And changes that come back only partly at 40 s (a stopped thruster back
+to 80 %, one at 30 % back to 90 %, a snag half freed): are they said resized, at their new size,
+with no alarm repeating after?
 """
 
 from __future__ import annotations
@@ -225,19 +227,47 @@ ENDED = {
 }  # fmt: skip
 
 
+#: a change from 20 s that comes back only partly at 40 s, then a snag from 52 s, in 70-s runs:
+#: the faults, what the change is after 40 s (a thruster's efficiency, or external_bias.u), and
+#: the kind of the fault from 52 s
+PARTIAL = {
+    "v2 stopped, back to 80 %": (lambda: [
+        Fault("thruster", 20.0, thruster="v2", efficiency=0.0, end=40.0),
+        Fault("thruster", 40.0, thruster="v2", efficiency=0.8),
+        Fault("external", 52.0, force=SNAG)], 0.8, "external_force"),
+    "h1 at 30 %, back to 90 %": (lambda: [
+        Fault("thruster", 20.0, thruster="h1", efficiency=0.3, end=40.0),
+        Fault("thruster", 40.0, thruster="h1", efficiency=0.9),
+        Fault("external", 52.0, force=SNAG)], 0.9, "external_force"),
+    "snag -10 N, half freed": (lambda: [
+        Fault("external", 20.0, force=SNAG, end=40.0),
+        Fault("external", 40.0, force=tuple(0.5 * f for f in SNAG)),
+        Fault("thruster", 52.0, thruster="h1", efficiency=0.3)], -5.0, "thruster_loss"),
+}  # fmt: skip
+
+
+def _others(alarms: list[dict], *counted: dict | None) -> int:
+    """The alarms of a run besides those ``counted`` (each at most once: the alarm of a change's
+    end can also be the first alarm after the second fault's onset)."""
+    ids = {id(a) for a in counted if a is not None}
+    return sum(id(a) not in ids for a in alarms)
+
+
 def ended() -> None:
     """Faults that go away: is the end said (hypothesis change_ended, after 40 s), a recovered
-    thruster measured at its nominal thrust, and the fault from 52 s alarmed after it?"""
+    thruster measured at its nominal thrust, and the fault from 52 s alarmed after it? And
+    changes that come back only partly: said resized (hypothesis change_resized) at their new
+    size, not ended, and not alarmed again?"""
     vehicle = load_vehicle(VEHICLE)
     t0 = time.perf_counter()
     mon = trained(vehicle)
+    seeds = range(3001, 3009)
     print(f"machine: {machine(numba=numba.__version__)}; date {datetime.date.today()}")
     print("| fault, ended at 40 s | runs | end said | end time (median, s) | recovered "
           "thruster (% of nominal) | second fault alarmed | other alarms |")  # fmt: skip
     print("|---|---|---|---|---|---|---|")
     for label, faults in ENDED.items():
         said, times, effs, second, other = 0, [], [], 0, 0
-        seeds = range(3001, 3009)
         for seed in seeds:
             alarms = detect(mon, simulate_faults(vehicle, 70, faults=faults(), seed=seed)).alarms
             ends = [a for a in alarms if a.get("hypothesis") == "change_ended"]
@@ -246,12 +276,46 @@ def ended() -> None:
                 times.append(ends[0]["ended"]["t"])
                 if ends[0]["efficiency"] is not None:
                     effs.append(100 * ends[0]["efficiency"])
-            late = [a for a in alarms if a["t"] >= 52.0]
-            second += bool(late) and late[0].get("hypothesis") != "change_ended"
-            other += len(alarms) - 1 - len(ends[:1]) - len(late[:1])
+            late = [a for a in alarms if a["t"] >= 52.0 and all(a is not e for e in ends[:1])]
+            second += bool(late)
+            other += _others(alarms, alarms[0] if alarms else None, *ends[:1], *late[:1])
         eff = f"{min(effs):.0f}-{max(effs):.0f}" if effs else "-"
         when = f"{np.median(times):.2f}" if times else "-"
         print(f"| {label} | {len(seeds)} | {said} | {when} | {eff} | {second} | {other} |")
+    print()
+    print("| change from 20 s, partly back at 40 s | runs | said resized | resize time (median, "
+          "s) | size said (range) | truth in its 95 % interval | said ended | second fault "
+          "alarmed and named | other alarms |")  # fmt: skip
+    print("|---|---|---|---|---|---|---|---|---|")
+    for label, (faults, truth, then) in PARTIAL.items():
+        said, times, sizes, inside, ends, second, other = 0, [], [], 0, 0, 0, 0
+        for seed in seeds:
+            alarms = detect(mon, simulate_faults(vehicle, 70, faults=faults(), seed=seed)).alarms
+            resized = [a for a in alarms if a.get("hypothesis") == "change_resized"]
+            ends += any(a.get("hypothesis") == "change_ended" for a in alarms)
+            if resized:
+                said += 1
+                a = resized[0]
+                times.append(a["resized"]["t"])
+                if a["thruster"] is not None:
+                    size, lo, hi = 100 * a["efficiency"], a["efficiency_low"], a["efficiency_high"]
+                else:
+                    u = a["components"]["external_bias.u"]
+                    size, lo, hi = (
+                        u["value"],
+                        u["value"] - 1.96 * u["stderr"],
+                        u["value"] + 1.96 * u["stderr"],
+                    )
+                sizes.append(size)
+                inside += lo - 1e-9 <= truth <= hi + 1e-9
+            late = [a for a in alarms if a["t"] >= 52.0 and all(a is not e for e in resized[:1])]
+            second += bool(late) and late[0]["kind"] == then
+            other += _others(alarms, alarms[0] if alarms else None, *resized[:1], *late[:1])
+        unit = " %" if truth > 0 else " N"
+        size = f"{min(sizes):.3g} to {max(sizes):.3g}{unit}" if sizes else "-"
+        when = f"{np.median(times):.2f}" if times else "-"
+        print(f"| {label} | {len(seeds)} | {said} | {when} | {size} | {inside} | {ends} | "
+              f"{second} | {other} |")  # fmt: skip
     print(f"total {time.perf_counter() - t0:.0f} s")
 
 

@@ -18,10 +18,17 @@ A change can also go away (a snag freed, a thruster that recovers): the residual
 then its signature reversed, which isolation would name as a new change (a pull the other way,
 a thruster giving 170 %), and a window that straddles the end fits no hypothesis at all. So an
 alarm on rows watched on what isolated changes leave is first tested for their end
-(:func:`ended_alarm`): the changes held until a time τ in the window and gone after it, the
-model's own residual (or what the changes still in effect leave) healthy noise from τ on, by
-the rule an isolated change passes. Such an alarm is recorded as the change(s) having ended,
-and the rest is watched without them.
+(:func:`ended_alarm`): the changes held until a time τ in the window and gone after it, nothing
+significant left of them after τ and the model's own residual (or what the changes still in
+effect leave) healthy noise from τ on. Such an alarm is recorded as the change(s) having ended,
+and the rest is watched without them. A change can also come back only partly (a stopped
+thruster back to 80 %) or grow (h1 from 50 % down to 20 %): an alarm that is no end and not
+within what the changes may leave is then tested for a change of their size at τ
+(:func:`resized_alarm`), refitted on the rows after it; such an alarm is recorded as the change
+resized, and the rest is watched with it taken out at its new size (:func:`rewatched_alarm`
+orders the tests, for batch and ``--follow`` alike). Each test's "within what a hypothesis may
+leave" is isolation's one rule, :func:`nnid.fault.isolation.allowed_ratio`, of the residual
+named at each call.
 """
 
 from __future__ import annotations
@@ -36,19 +43,38 @@ from scipy.special import expit
 
 from nnid.fault import kernel
 from nnid.fault.isolation import (
-    UNEXPLAINED_RATIO,
-    UNEXPLAINED_SHARE,
+    SIGNIFICANCE,
+    STOPPED_SLACK,
     Diagnosis,
+    Refit,
+    allowed_ratio,
+    hypothesis_columns,
     isolate,
     noise_ratio,
     refit,
     signature,
 )
 from nnid.fault.monitor import ResidualMonitor, Trace, monitor_inputs
+from nnid.reports.cells import number
 
+#: the columns of alarms.csv: the record's keys, and for an alarm that says an earlier change
+#: ended or changed size (hypothesis ``change_ended``, ``change_resized``) ``change_t``, the
+#: time τ it did so, and ``change_alarm_t``, the time of the alarm(s) that isolated it
+#: (:func:`alarm_row`; the record has them under ``ended`` or ``resized``)
 ALARM_FIELDS = ["experiment", "t", "kind", "thruster", "efficiency", "efficiency_low",
                 "efficiency_high", "effect", "value", "stderr", "severity", "confidence",
-                "explained", "residual_ratio", "hypothesis", "meaning"]  # fmt: skip
+                "explained", "residual_ratio", "hypothesis", "meaning", "change_t",
+                "change_alarm_t"]  # fmt: skip
+
+
+def alarm_row(record: dict) -> dict:
+    """An alarm record as a row of alarms.csv (:data:`ALARM_FIELDS`)."""
+    row = {k: record.get(k) for k in ALARM_FIELDS}
+    of = record.get("ended") or record.get("resized")
+    if of:
+        row["change_t"] = of["t"]
+        row["change_alarm_t"] = " ".join(f"{t:.2f}" for t in of["alarms"])
+    return row
 
 
 @dataclass
@@ -134,8 +160,270 @@ def said(record: dict) -> str:
     return str(record.get("hypothesis"))
 
 
-#: the fewest rows after the end of a change that :func:`ended_alarm` fits (as isolation needs)
-ENDED_ROWS = 10
+#: the fewest seconds after the time τ at which changes ended or changed size that
+#: :func:`ended_alarm` and :func:`resized_alarm` fit (and never fewer than the 10 rows a
+#: :func:`~nnid.fault.isolation.refit` needs). A time, so that a log at another rate is split
+#: alike: 1 s is the acceleration smoothing window of the fitted models (``savgol_window``)
+#: that an added-mass or payload signature is smoothed over, so the rows after τ are not all
+#: rows whose smoothed acceleration straddles τ; and it holds 120 whitened samples at 20 Hz,
+#: on which healthy noise reads under :data:`~nnid.fault.isolation.UNEXPLAINED_RATIO`.
+CHANGED_S = 1.0
+#: what is left of a change after its end must not be significant at this level: its 95 %
+#: interval, as the record states it, holds nominal (a thruster's 100 %, an effect's 0)
+ENDED_LEVEL = 0.05
+
+
+@dataclass
+class _Split:
+    """The changes ``gone`` (indices into :attr:`Rewatch.changes`) ended or changed size at
+    the window's row ``j``: ``kept`` the fitted hypotheses of the others, ``after`` the
+    residual from row j on under the hypothesis, ``fit`` the gone changes' hypotheses refitted
+    there, ``cost`` the window's whitened power under the hypothesis."""
+
+    gone: list[int]
+    kept: list[tuple[str, float]]
+    j: int
+    after: np.ndarray
+    fit: Refit
+    cost: float
+
+
+class _Splits:
+    """The window of an alarm on rows watched on what the changes of a :class:`Rewatch` leave,
+    split at a time τ: ``left`` [rows, 6] (the residual watched) before τ, and after it what the
+    model's residual ``r`` leaves with some changes gone (:meth:`ended`) or refitted
+    (:meth:`resized`). All the changes are tried together, and each one alone where there are
+    several. Each side of τ must be within what a hypothesis may leave
+    (:func:`~nnid.fault.isolation.allowed_ratio`) of the model's residual on that side, or of
+    the healthy noise where no change is left in effect."""
+
+    def __init__(self, monitor, data, k, window_s, rewatch, r, left) -> None:
+        self.monitor, self.data, self.changes = monitor, data, rewatch.changes
+        rows = window_rows(data, k, window_s)
+        ok = np.isfinite(r).all(1) & np.isfinite(left).all(1) & (rows > 0)
+        self.rows, self.r, self.left, self.n = rows[ok], r[ok], left[ok], int(ok.sum())
+        self.dim = max(float(monitor.mask_.sum()), 1.0)
+        self.least = max(10, int(np.ceil(CHANGED_S / monitor.interval - 1e-6)))
+        self.p_left = self.power(self.left)
+        self.before = np.r_[0.0, np.cumsum(self.p_left)]  # before[j]: on the rows before j
+        self.sets = [list(range(len(self.changes)))]
+        if len(self.changes) > 1:
+            self.sets += [[i] for i in range(len(self.changes))]
+
+    def usable(self) -> bool:
+        """Enough rows, changes taken out, and what they leave more than noise may be."""
+        return (
+            self.n >= self.least
+            and bool(self.changes)
+            and self.ratio(self.p_left) > allowed_ratio(1.0)
+        )
+
+    def power(self, e: np.ndarray) -> np.ndarray:
+        m = self.monitor
+        return np.sum(((e - m.mu_) @ m.whiten_.T) ** 2, axis=1)
+
+    def ratio(self, p: np.ndarray) -> float:
+        return float(p.sum()) / max(p.size * self.dim, 1.0)
+
+    def names(self, gone: list[int]) -> list[str]:
+        return list(dict.fromkeys(name for i in gone for name, _ in self.changes[i].fitted))
+
+    def after_r(self, gone: list[int]) -> tuple[list, np.ndarray]:
+        """The other changes' fitted hypotheses, and what they leave of ``r``."""
+        kept = [f for i, c in enumerate(self.changes) if i not in gone for f in c.fitted]
+        return kept, _left(self.monitor, self.data, self.rows, self.r, kept)
+
+    def within(self, split: _Split, healthy: bool) -> bool:
+        """Whether each side of τ is within what a hypothesis may leave: before τ, ``left``
+        of the model's residual there (the changes in effect; shorter than the fewest rows
+        fitted, it is not judged), from τ on ``split.after`` of the model's residual there,
+        or of the healthy noise (``healthy``: no change left in effect)."""
+        j = split.j
+        if j >= self.least and self.ratio(self.p_left[:j]) > allowed_ratio(
+            self.ratio(self.power(self.r[:j]))
+        ):
+            return False
+        base = 1.0 if healthy else self.ratio(self.power(self.r[j:]))
+        return self.ratio(self.power(split.after)) <= allowed_ratio(base)
+
+    def ended(self) -> _Split | None:
+        """The changes gone at τ (that minimises the window's whitened power), what is left of
+        them refitted after τ not significant (:data:`ENDED_LEVEL`), what is left from τ on
+        within what the changes still in effect may leave (the healthy noise: no share, where
+        none is). The split of least power where several are."""
+        best = None
+        for gone in self.sets:
+            kept, after_r = self.after_r(gone)
+            p_after = self.power(after_r)
+            after = np.r_[np.cumsum(p_after[::-1])[::-1], 0.0]  # after[j]: from row j on
+            cost = (self.before + after)[: self.n - self.least + 1]
+            j = int(np.argmin(cost))
+            fit = refit(self.monitor, self.data, after_r[j:], self.rows[j:], self.names(gone))
+            if fit is None or fit.p_value <= ENDED_LEVEL:
+                continue  # some of the change is left: not its end
+            split = _Split(gone, kept, j, after_r[j:], fit, float(cost[j]))
+            if self.within(split, healthy=not kept) and (best is None or split.cost < best.cost):
+                best = split
+        return best
+
+    def resized(self) -> _Split | None:
+        """The changes of another size from τ on: refitted there (τ minimises the window's
+        whitened power with them refitted after it), the new size significantly another
+        (:data:`~nnid.fault.isolation.SIGNIFICANCE`, isolation's level), what is left from τ
+        on within what a change may leave of the model's residual there. The split of least
+        power where several are."""
+        best = None
+        for gone in self.sets:
+            names = self.names(gone)
+            kept, after_r = self.after_r(gone)
+            j = self._resized_at(after_r, names)
+            fit = (
+                None
+                if j is None
+                else refit(self.monitor, self.data, after_r[j:], self.rows[j:], names)
+            )
+            if fit is None or fit.p_differs([_theta(self.changes, gone, n) for n in names]) > (
+                SIGNIFICANCE
+            ):
+                continue  # the same size as taken out: not a change of it
+            cost = float(self.before[j] + self.power(fit.left).sum())
+            split = _Split(gone, kept, j, fit.left, fit, cost)
+            if self.within(split, healthy=False) and (best is None or split.cost < best.cost):
+                best = split
+        return best
+
+    def new_change_fits_better(self, split: _Split, taken: list) -> bool:
+        """Whether a new change, as the alarm would be isolated on ``left`` otherwise
+        (:func:`~nnid.fault.isolation.isolate`), leaves less of the window than ``split``
+        (resized) does, and is another hypothesis than the one resized: then a fault came on
+        top (a 6-DOF wrench resized takes up part of a thruster lost after it, within the share
+        a large residual allows). Of the same hypothesis, the two are one fit, and the resize
+        says it."""
+        residual = np.full((self.data["t"].size, 6), np.nan)
+        residual[self.rows] = self.left
+        diag = isolate(self.monitor, self.data, residual, self.rows, list(taken))
+        if not diag.isolated or {n for n, _ in diag.fitted} <= set(split.fit.fits):
+            return False
+        return diag.residual_ratio < split.cost / (self.n * self.dim)
+
+    def _resized_at(self, after_r: np.ndarray, names: list[str]) -> int | None:
+        """The row j at which ``left`` before it and ``after_r`` with the hypotheses ``names``
+        fitted from it on (whitened least squares, in closed form for every j) have the least
+        whitened power; None where a hypothesis has no column on the window."""
+        m = self.monitor
+        _, cands, cols = hypothesis_columns(m, self.data, self.rows, set(names))
+        index = {c.name: k for k, c in enumerate(cands)}
+        if any(name not in index for name in names):
+            return None
+        a = np.einsum("ij,njk->nik", m.whiten_, cols[:, :, [index[n] for n in names]])
+        e = (after_r - m.mu_) @ m.whiten_.T
+        last = self.n - self.least + 1
+
+        def suffix(x: np.ndarray) -> np.ndarray:  # sums from each row on
+            return np.cumsum(x[::-1], axis=0)[::-1][:last]
+
+        g = suffix(np.einsum("nik,nil->nkl", a, a))
+        b = suffix(np.einsum("nik,ni->nk", a, e))
+        c = suffix(np.einsum("ni,ni->n", e, e))
+        cost = self.before[:last] + c - np.einsum("nk,nkl,nl->n", b, np.linalg.pinv(g), b)
+        return int(np.argmin(cost))
+
+    def record(self, trace: Trace, k: int, window_s: float, split: _Split, ended: bool) -> dict:
+        """The alarm's record: the changes ``split.gone`` ended (``ended``) or resized, what
+        is left of them refitted after τ (against nominal for a thruster)."""
+        m, changes, gone, j = self.monitor, self.changes, split.gone, split.j
+        names = list(split.fit.fits)
+        thrusters = [n for n in names if n.startswith("thruster_loss.")]
+        effects = [n for n in names if n not in thrusters]
+        components = {}
+        for name, fit in split.fit.fits.items():
+            if name in thrusters:  # against nominal: what the changes kept take of it, and now
+                eff = 1.0 - sum(t for n, t in split.kept if n == name) - fit["theta"]
+                components[name] = {"value": eff, "stderr": fit["se"]}
+            else:
+                components[name] = {"value": fit["value"], "stderr": fit["value_se"]}
+        if not ended and len(components) > 1:  # of a resized joint change, the members that
+            # are significant now or were (its record and said() name them, as isolation's)
+            clear = {
+                n: c
+                for n, c in components.items()
+                if max(abs(split.fit.fits[n]["theta"]), abs(_theta(changes, gone, n)))
+                >= 1.96 * split.fit.fits[n]["se"]
+            }
+            components = clear or components
+        thruster = efficiency = low = high = effect = value = stderr = None
+        kind = "model_change"
+        if len(thrusters) == 1 and not effects:
+            thruster = thrusters[0].split(".", 1)[1]
+            efficiency = components[thrusters[0]]["value"]
+            half = 1.96 * components[thrusters[0]]["stderr"]
+            low, high = efficiency - half, efficiency + half
+            if not ended and high >= -STOPPED_SLACK and low <= 1.0:  # a loss, as isolation says
+                kind = "thruster_loss"
+                efficiency, low, high = (float(np.clip(v, 0, 1)) for v in (efficiency, low, high))
+        elif effects and not thrusters:
+            # the clearest member of the change: its θ over the standard error now
+            effect = max(
+                [n for n in effects if n in components],
+                key=lambda n: abs(_theta(changes, gone, n)) / max(split.fit.fits[n]["se"], 1e-300),
+            )
+            value, stderr = components[effect]["value"], components[effect]["stderr"]
+            if not ended and all(n.startswith("external_bias.") for n in effects):
+                kind = "external_force"
+        t_split = float(self.data["t"][self.rows[j]])
+        which = " and ".join(f"{changes[i].t:.2f} s ({changes[i].said})" for i in gone)
+        when = f"{'by' if j == 0 else 'at about'} {t_split:.2f} s"
+        plural = "s" if len(gone) > 1 else ""
+        if ended:
+            rest = "the model's own residual"
+            if split.kept:
+                rest = "what the changes still in effect leave"
+            meaning = (
+                f"the change{plural} alarmed at {which} ended {when}: {rest} is healthy noise "
+                "after it"
+            )
+        else:
+            if thruster is not None:
+                was = 1.0 - sum(t for n, t in split.kept if n == thrusters[0])
+                was -= _theta(changes, gone, thrusters[0])
+                now = (
+                    f"thruster {thruster} {'back' if efficiency > was else 'down'} to "
+                    f"{100 * efficiency:.0f} % of nominal"
+                )
+            else:
+                now = ", ".join(f"{n} now {number(c['value'], 3)} ± {number(c['stderr'], 2)}"
+                                for n, c in components.items())  # fmt: skip
+            meaning = (
+                f"the change{plural} alarmed at {which} changed size {when}: {now}; what is "
+                "left after it is within what the change may leave"
+            )
+        n_par = 0 if ended else len(names)
+        tau_corr = m.correlation_time_
+        penalty = 0.5 * np.log(max(self.n * len(m.plant_.dofs_) / tau_corr, 2.0))
+        gain = (float(self.p_left.sum()) - split.cost) / (2 * tau_corr)
+        name = trace.experiment[k]
+        return {
+            "experiment": None if name is None else str(name),
+            "t": float(self.data["t"][k]),
+            "kind": kind,
+            "thruster": thruster,
+            "efficiency": efficiency,
+            "efficiency_low": low,
+            "efficiency_high": high,
+            "effect": effect,
+            "value": value,
+            "stderr": stderr,
+            "severity": _severity(m, trace, window_rows(self.data, k, window_s)),
+            "confidence": float(expit(gain - (1 + n_par) * penalty)),
+            "meaning": meaning,
+            "explained": 1.0 - split.cost / float(self.p_left.sum()),
+            "residual_ratio": self.ratio(self.power(split.after)),  # from τ on
+            "hypothesis": "change_ended" if ended else "change_resized",
+            "p_value": None,
+            "alternatives": [],
+            "components": components or None,
+            "ended" if ended else "resized": {"t": t_split, "alarms": [changes[i].t for i in gone]},
+        }
 
 
 def ended_alarm(
@@ -157,105 +445,89 @@ def ended_alarm(
     residual is ``left`` before τ and what the changes still in effect leave of ``r`` from τ
     on (the model's own residual ``r`` where they all ended: a change's end is tested before
     anything else, not isolated as a new change that cancels it). τ minimises that residual's
-    whitened power (at least :data:`ENDED_ROWS` rows after it); all the changes ending is tried,
-    and each one alone where there are several. It explains the alarm where ``left`` is beyond
-    what a named hypothesis may leave and the fit within it, by isolation's rule
-    (:data:`~nnid.fault.isolation.UNEXPLAINED_RATIO` and ``UNEXPLAINED_SHARE``).
-    The confidence is its posterior weight (BIC, τ its one parameter) against the changes
-    persisting; the ended changes are refitted on the rows after τ, so the record states what
-    is left of them (a thruster's efficiency against nominal, an effect's value)."""
-    rows = window_rows(data, k, window_s)
-    ok = np.isfinite(r).all(1) & np.isfinite(left).all(1) & (rows > 0)
-    n = int(ok.sum())
-    if n < ENDED_ROWS or not rewatch.changes:
+    whitened power (at least :data:`CHANGED_S` after it); all the changes ending is tried,
+    and each one alone where there are several. It is an end where the ended changes refitted
+    after τ are not significant (:data:`ENDED_LEVEL`: a thruster's 95 % interval holds its
+    nominal thrust) and what is left after τ is within what a hypothesis may leave of the
+    healthy noise (:func:`~nnid.fault.isolation.allowed_ratio` of 1: at most
+    :data:`~nnid.fault.isolation.UNEXPLAINED_RATIO`, no share: the vehicle is healthy again),
+    or of the model's residual there where other changes are still in effect. The confidence is
+    its posterior weight (BIC, τ its one parameter) against the changes persisting; the record
+    states what is left of the ended changes (a thruster's efficiency against nominal, an
+    effect's value) and ``residual_ratio`` the noise ratio after τ. A change that came back
+    only partly is no end: :func:`resized_alarm`."""
+    splits = _Splits(monitor, data, k, window_s, rewatch, r, left)
+    split = splits.ended() if splits.usable() else None
+    if split is None:
         return None
-    rows, r, left = rows[ok], r[ok], left[ok]
-    dim = max(float(monitor.mask_.sum()), 1.0)
+    return splits.record(trace, k, window_s, split, ended=True), split.gone
 
-    def power(e: np.ndarray) -> np.ndarray:
-        return np.sum(((e - monitor.mu_) @ monitor.whiten_.T) ** 2, axis=1)
 
-    p_left = power(left)
-    ratio_left = float(p_left.sum()) / (n * dim)
-    limit = max(UNEXPLAINED_RATIO, 1.0 + UNEXPLAINED_SHARE * (ratio_left - 1.0))
-    if ratio_left <= limit:
-        return None  # what the changes leave is within the rule: no end to find
-    changes = rewatch.changes
-    sets = [list(range(len(changes)))]
-    if len(changes) > 1:
-        sets += [[i] for i in range(len(changes))]
-    before = np.r_[0.0, np.cumsum(p_left)]  # before[j]: left's power on the rows before j
-    best = None
-    for gone in sets:
-        kept = [f for i, c in enumerate(changes) if i not in gone for f in c.fitted]
-        after_r = _left(monitor, data, rows, r, kept)
-        p_after = power(after_r)
-        after = np.r_[np.cumsum(p_after[::-1])[::-1], 0.0]  # after[j]: from row j on
-        cost = (before + after)[: n - ENDED_ROWS + 1]
-        j = int(np.argmin(cost))
-        if best is None or cost[j] < best[0]:
-            best = (float(cost[j]), j, gone, kept, after_r)
-    cost, j, gone, kept, after_r = best
-    ratio = cost / (n * dim)
-    if ratio > limit:
+def resized_alarm(
+    monitor: ResidualMonitor,
+    data: dict,
+    trace: Trace,
+    k: int,
+    window_s: float,
+    rewatch: Rewatch,
+    r: np.ndarray,
+    left: np.ndarray,
+) -> tuple[dict, tuple[list[int], Change]] | None:
+    """The alarm at row ``k`` (as :func:`ended_alarm`) as some of the isolated changes having
+    changed size at a time τ of the window (a stopped thruster back to 81 %, a snag partly
+    freed, h1 from 50 % down to 20 %): its record (hypothesis ``change_resized``, the kind of
+    the change, its size now against nominal) and the changes resized with the one that
+    replaces them, or None. The changes are refitted on the rows from τ on (τ minimises the
+    window's whitened power so); the new size must differ from the one taken out
+    significantly (:data:`~nnid.fault.isolation.SIGNIFICANCE`) and leave no more than a change
+    may of the model's residual after τ (:func:`~nnid.fault.isolation.allowed_ratio`)."""
+    splits = _Splits(monitor, data, k, window_s, rewatch, r, left)
+    split = splits.resized() if splits.usable() else None
+    if split is None or splits.new_change_fits_better(split, rewatch.fitted):
         return None
-    tau_corr = monitor.correlation_time_
-    penalty = 0.5 * np.log(max(n * len(monitor.plant_.dofs_) / tau_corr, 2.0))
-    confidence = float(expit((float(p_left.sum()) - cost) / (2 * tau_corr) - penalty))
-    names = list(dict.fromkeys(name for i in gone for name, _ in changes[i].fitted))
-    now = refit(monitor, data, after_r[j:], rows[j:], names)
-    t_end = float(data["t"][rows[j]])
-    which = " and ".join(f"{changes[i].t:.2f} s ({changes[i].said})" for i in gone)
-    rest = "what the changes still in effect leave" if kept else "the model's own residual"
-    meaning = (
-        f"the change{'s' if len(gone) > 1 else ''} alarmed at {which} ended "
-        f"{'by' if j == 0 else 'at about'} {t_end:.2f} s: {rest} is healthy noise after it"
-    )
-    thrusters = [n_ for n_ in names if n_.startswith("thruster_loss.")]
-    effects = [n_ for n_ in names if n_ not in thrusters]
-    record_thruster = efficiency = low = high = effect = value = stderr = None
-    components = {}
-    for name, fit in now.items():
-        if name in thrusters:  # against nominal: what the changes kept take of it, and now
-            eff = 1.0 - sum(t for n_, t in kept if n_ == name) - fit["theta"]
-            components[name] = {"value": eff, "stderr": fit["se"]}
-        else:
-            components[name] = {"value": fit["value"], "stderr": fit["value_se"]}
-    if len(thrusters) == 1 and not effects and thrusters[0] in components:
-        record_thruster = thrusters[0].split(".", 1)[1]
-        efficiency = components[thrusters[0]]["value"]
-        half = 1.96 * components[thrusters[0]]["stderr"]
-        low, high = efficiency - half, efficiency + half
-    elif effects and not thrusters and components:
-        # the clearest member of the ended change: its θ over the standard error now
-        effect = max(
-            effects, key=lambda n_: abs(_theta(changes, gone, n_)) / max(now[n_]["se"], 1e-300)
-        )
-        value, stderr = components[effect]["value"], components[effect]["stderr"]
-    name = trace.experiment[k]
-    record = {
-        "experiment": None if name is None else str(name),
-        "t": float(data["t"][k]),
-        "kind": "model_change",
-        "thruster": record_thruster,
-        "efficiency": efficiency,
-        "efficiency_low": low,
-        "efficiency_high": high,
-        "effect": effect,
-        "value": value,
-        "stderr": stderr,
-        "severity": _severity(monitor, trace, window_rows(data, k, window_s)),
-        "confidence": confidence,
-        "meaning": meaning,
-        "explained": 1.0 - cost / float(p_left.sum()),
-        "residual_ratio": ratio,
-        "hypothesis": "change_ended",
-        "p_value": None,
-        "alternatives": [],
-        "components": components or None,
-        "ended": {"t": t_end, "alarms": [changes[i].t for i in gone]},
-    }
-    return record, gone
+    record = splits.record(trace, k, window_s, split, ended=False)
+    fitted = [(name, fit["theta"]) for name, fit in split.fit.fits.items()]
+    return record, (split.gone, Change(rewatch.changes[split.gone[0]].t, said(record), fitted))
+
+
+@dataclass
+class Verdict:
+    """What an alarm on rows watched on what isolated changes leave is
+    (:func:`rewatched_alarm`): a ``record`` of changes that ended (``ended``, indices into
+    :attr:`Rewatch.changes`) or changed size (``resized``: those changes and the one that
+    replaces them), or ``dismissed``: within what the changes may leave, no record."""
+
+    record: dict | None = None
+    ended: list[int] = field(default_factory=list)
+    resized: tuple[list[int], Change] | None = None
+    dismissed: bool = False
+
+
+def rewatched_alarm(
+    monitor: ResidualMonitor,
+    data: dict,
+    trace: Trace,
+    k: int,
+    window_s: float,
+    rewatch: Rewatch,
+    r: np.ndarray,
+    left: np.ndarray,
+) -> Verdict | None:
+    """The alarm at row ``k`` on rows watched on what the isolated changes of ``rewatch``
+    leave, judged in turn (``r``, ``left``: as :func:`ended_alarm`): the end of changes
+    (first: a window where one ends late is otherwise within what a large change may leave,
+    and dismissed); within what the changes may leave (:func:`explained_by_the_changes`,
+    dismissed); a change of their size (:func:`resized_alarm`). None: a new change, to
+    isolate on ``left``. ``detect`` and ``detect --follow`` alike."""
+    ended = ended_alarm(monitor, data, trace, k, window_s, rewatch, r, left)
+    if ended is not None:
+        return Verdict(ended[0], ended=ended[1])
+    if explained_by_the_changes(monitor, r, left):
+        return Verdict(dismissed=True)
+    resized = resized_alarm(monitor, data, trace, k, window_s, rewatch, r, left)
+    if resized is not None:
+        return Verdict(resized[0], resized=resized[1])
+    return None
 
 
 def _theta(changes: list[Change], gone: list[int], name: str) -> float:
@@ -292,11 +564,11 @@ def window_rows(data: dict, k: int, window_s: float) -> np.ndarray:
 def explained_by_the_changes(monitor: ResidualMonitor, r: np.ndarray, left: np.ndarray) -> bool:
     """Whether an alarm on what isolated changes leave is no new change: the residual
     ``left`` [N, 6] on its window is within what a named hypothesis may leave of the model's
-    residual ``r`` there (isolation's rule: the model's error grows with the first change;
-    small excursions of it are not a second fault)."""
-    excess = noise_ratio(monitor, r - monitor.mu_) - 1.0
-    left_ratio = noise_ratio(monitor, left - monitor.mu_)
-    return left_ratio <= max(UNEXPLAINED_RATIO, 1.0 + UNEXPLAINED_SHARE * excess)
+    residual ``r`` there (:func:`~nnid.fault.isolation.allowed_ratio`, the model's residual the
+    baseline: the model's error grows with the first change; small excursions of it are not a
+    second fault)."""
+    baseline = noise_ratio(monitor, r - monitor.mu_)
+    return noise_ratio(monitor, left - monitor.mu_) <= allowed_ratio(baseline)
 
 
 class Rewatch:
@@ -317,11 +589,21 @@ class Rewatch:
         return [f for c in self.changes for f in c.fitted]
 
     def restart(
-        self, t_prev: float, change: Change | None = None, ended: Sequence[int] = ()
+        self,
+        t_prev: float,
+        change: Change | None = None,
+        ended: Sequence[int] = (),
+        resized: tuple[Sequence[int], Change] | None = None,
     ) -> None:
         """Fresh statistics after the time ``t_prev`` (the end of an alarm's window), with the
-        isolated ``change`` also taken out, and the changes ``ended`` (indices into
-        :attr:`changes`, :func:`ended_alarm`) no longer."""
+        isolated ``change`` also taken out, the changes ``ended`` (indices into
+        :attr:`changes`, :func:`ended_alarm`) no longer, and the changes ``resized[0]``
+        replaced by ``resized[1]`` (:func:`resized_alarm`: taken out at their new size)."""
+        if resized is not None:
+            gone, new = resized
+            first = min(gone)
+            self.changes = [new if i == first else c for i, c in enumerate(self.changes)]
+            ended = [i for i in gone if i != first]
         self.changes = [c for i, c in enumerate(self.changes) if i not in set(ended)]
         if change is not None:
             self.changes.append(change)
@@ -366,17 +648,13 @@ def detect(monitor: ResidualMonitor, log: pd.DataFrame, window_s: float = 10.0) 
             w = rewatch[int(codes[k])]
             rows = window_rows(data, k, window_s)
             r = trace.values[rows, 0:6]
-            # first the end of changes: a window where one ends late is otherwise within
-            # what a large change may leave, and dismissed
-            ended = ended_alarm(monitor, data, watched, k, window_s, w, r, residual[rows])
-            if ended is not None:
-                alarms.append(ended[0])
-                _rewatch(w, data, residual, values, alarm, rows, changed, ended=ended[1])
-                pos = int(rows[-1]) + 1
-                continue
-            if explained_by_the_changes(monitor, r, residual[rows]):
-                alarm[k] = False  # dismissed: no record, so no mark in the trace either
-                _rewatch(w, data, residual, values, alarm, rows, changed)
+            verdict = rewatched_alarm(monitor, data, watched, k, window_s, w, r, residual[rows])
+            if verdict is not None:  # an end, a change of size, or dismissed
+                if verdict.dismissed:
+                    alarm[k] = False  # no record, so no mark in the trace either
+                else:
+                    alarms.append(verdict.record)
+                _rewatch(w, data, residual, values, alarm, rows, changed, verdict=verdict)
                 pos = int(rows[-1]) + 1
                 continue
             taken = w.fitted
@@ -397,16 +675,18 @@ def _rest(data: dict, rows: np.ndarray) -> np.ndarray:
     return np.arange(k + 1, int(np.flatnonzero(codes == codes[k])[-1]) + 1)
 
 
-def _rewatch(w: Rewatch, data, residual, values, alarm, rows, changed, change=None, ended=()):
+def _rewatch(w: Rewatch, data, residual, values, alarm, rows, changed, change=None, verdict=None):
     """Watch ``residual`` from fresh statistics on the rest of the experiment after ``rows``
     (the window of an alarm: no new alarm within it); values and alarms rewritten there.
-    ``change``: one just isolated, taken out of the model's residual there first; ``ended``:
-    changes that ended (:func:`ended_alarm`), no longer taken out."""
+    ``change``: one just isolated, taken out of the model's residual there first; ``verdict``
+    (:func:`rewatched_alarm`): changes that ended, no longer taken out, or changed size, taken
+    out at their new size."""
     rest = _rest(data, rows)
     alarm[rows[0] + 1 : rows[-1] + 1] = False
-    w.restart(data["t"][rows[-1]], change, ended)
+    verdict = verdict or Verdict(dismissed=True)
+    w.restart(data["t"][rows[-1]], change, verdict.ended, verdict.resized)
     changed[rest] = bool(w.changes)  # with none left, a later alarm is a first one again
-    if change is not None or len(ended):  # values' first six columns are still r
+    if change is not None or not verdict.dismissed:  # values' first six columns are still r
         residual[rest] = w.left(data, rest, values[rest, 0:6])
     if rest.size:
         out = w.step(data["t"][rest], residual[rest])

@@ -42,9 +42,8 @@ from nnid.fault.detect import (
     Change,
     DetectResult,
     Rewatch,
-    ended_alarm,
-    explained_by_the_changes,
     isolated_alarm,
+    rewatched_alarm,
     run_names,
     window_rows,
 )
@@ -265,20 +264,20 @@ def follow_csv(
         if w is not None and ref["code"] == code and k >= ref["start"] and w.changes:
             rows = window_rows(data, i, window_s)
             r = np.array([vals[j][0:6] for j in rows])
-            ended = ended_alarm(monitor, data, trace, i, window_s, w, r, values[rows, 0:6])
-            if ended is not None:  # tested first, as batch does
-                alarms.append(ended[0])
-                say(describe_alarm(ended[0]))
-                w.restart(data["t"][rows[-1]], ended=ended[1])
-                rewatch_after(k, rows, changed=True)
-                return
-            if explained_by_the_changes(monitor, r, values[rows, 0:6]):
+            verdict = rewatched_alarm(monitor, data, trace, i, window_s, w, r, values[rows, 0:6])
+            if verdict is not None and verdict.dismissed:
                 name = names[code]
                 say(f"t = {ts[i]:.2f} s{f' ({name})' if name else ''}: what the isolated change "
                     "leaves, within what its hypothesis may leave: no new change")  # fmt: skip
-                alarm_rows.remove(k)  # dismissed: no record, so no mark in the trace either
+                alarm_rows.remove(k)  # no record, so no mark in the trace either
                 w.restart(data["t"][rows[-1]])
                 rewatch_after(k, rows, changed=False)
+                return
+            if verdict is not None:  # changes that ended or changed size
+                alarms.append(verdict.record)
+                say(describe_alarm(verdict.record))
+                w.restart(data["t"][rows[-1]], ended=verdict.ended, resized=verdict.resized)
+                rewatch_after(k, rows, changed=True)
                 return
             taken = w.fitted
         record, diag, rows = isolated_alarm(
@@ -434,7 +433,7 @@ def describe_alarm(a: dict) -> str:
             f"thruster {a['thruster']} gives {100 * a['efficiency']:.0f} % of its thrust "
             f"(95 % interval {efficiency_interval(a, percent=True)})"
         )
-        if a["kind"] != "thruster_loss":  # more than nominal, or reversed: not a loss
+        if a["kind"] != "thruster_loss" or a.get("resized"):  # not a loss, or a loss resized
             what = f"{a['meaning']}: {what}"
     elif a["effect"]:
         what = f"{a['meaning']}: {a['effect']} = {value_pm(a)}"

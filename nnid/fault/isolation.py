@@ -386,21 +386,45 @@ def _joint(
     return _Joint(kind, [cands[k] for k in pick], theta, se, p_values, drss, logl)
 
 
-def refit(monitor, data: dict, residual: np.ndarray, rows: np.ndarray, names: list[str]) -> dict:
+@dataclass
+class Refit:
+    """Hypotheses fitted together on some rows (:func:`refit`): ``fits`` per name, its
+    ``theta`` (the change of its parameter, 0: none), standard error ``se`` (with the
+    residual's correlation time), and ``value`` and ``value_se`` in the effect's own units (a
+    thruster's θ is the share of its nominal thrust lost); ``cov`` the covariance of the θ
+    (in the order of ``fits``), ``n_eff`` the independent samples behind it, ``p_value`` the
+    F-test of all θ being 0 (none of the hypotheses on these rows), and ``left`` [rows, 6] the
+    residual with the fitted hypotheses taken out."""
+
+    fits: dict[str, dict[str, float]]
+    cov: np.ndarray
+    n_eff: float
+    p_value: float
+    left: np.ndarray
+
+    def p_differs(self, theta: np.ndarray) -> float:
+        """The F-test of the fitted θ against ``theta`` (same order): small where the rows
+        show another size than ``theta``."""
+        d = np.array([f["theta"] for f in self.fits.values()]) - np.asarray(theta, float)
+        wald = float(d @ np.linalg.pinv(self.cov) @ d)
+        return float(f_dist.sf(wald / d.size, d.size, self.n_eff))
+
+
+def refit(
+    monitor, data: dict, residual: np.ndarray, rows: np.ndarray, names: list[str]
+) -> Refit | None:
     """The hypotheses ``names`` (columns of :func:`hypothesis_columns`) fitted together to the
     residual ``residual`` [len(rows), 6] of ``rows`` by :func:`isolate`'s weighted least
-    squares: for each, ``theta`` (the change of its parameter, 0: none), its standard error
-    ``se`` (with the residual's correlation time), and ``value`` and ``value_se`` in the
-    effect's own units (a thruster's θ is the share of its nominal thrust lost). Empty where
-    there are fewer than 10 rows or a hypothesis has no column on them."""
+    squares (:class:`Refit`). None where, of the rows with a finite residual, fewer than 10
+    are left or a hypothesis has no column on them."""
     keep = (rows > 0) & np.isfinite(residual).all(1)
     rows, residual = rows[keep], residual[keep]
     if rows.size < 10:
-        return {}
+        return None
     vehicle, cands, cols = hypothesis_columns(monitor, data, rows, set(names))
     index = {c.name: k for k, c in enumerate(cands)}
     if any(name not in index for name in names):
-        return {}
+        return None
     pick = [index[name] for name in names]
     mask = monitor.mask_
     w = np.sqrt(mask / np.where(mask > 0, monitor.sigma_**2, 1.0))  # isolate's weights
@@ -412,6 +436,8 @@ def refit(monitor, data: dict, residual: np.ndarray, rows: np.ndarray, names: li
     sigma2 = float(resid @ resid) / max(n - len(pick), 1)
     cov = sigma2 * monitor.correlation_time_ * np.linalg.pinv(a.T @ a)
     se = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    n_eff = max(n / monitor.correlation_time_ - len(pick), 1.0)  # as :func:`_joint` has it
+    wald = float(theta @ np.linalg.pinv(cov) @ theta)
     out = {}
     for name, k, t, e in zip(names, pick, theta, se, strict=True):
         c = cands[k]
@@ -420,7 +446,9 @@ def refit(monitor, data: dict, residual: np.ndarray, rows: np.ndarray, names: li
         scale = 1.0 if thruster else abs(c.value_scale(vehicle))
         out[name] = {"theta": float(t), "se": float(e), "value": value,
                      "value_se": float(e * scale)}  # fmt: skip
-    return out
+    left = residual + cols[:, :, pick] @ theta  # minus the signature (:func:`signature`)
+    p_value = float(f_dist.sf(wald / len(pick), len(pick), n_eff))
+    return Refit(out, cov, n_eff, p_value, left)
 
 
 def noise_ratio(monitor, e: np.ndarray) -> float:
@@ -431,15 +459,23 @@ def noise_ratio(monitor, e: np.ndarray) -> float:
     return float(np.sum((e @ monitor.whiten_.T) ** 2)) / max(e.shape[0] * dim, 1.0)
 
 
+def allowed_ratio(baseline: float) -> float:
+    """The most a named hypothesis may leave (its :func:`noise_ratio`) of a residual whose
+    noise ratio is ``baseline``: :data:`UNEXPLAINED_RATIO`, or where more,
+    :data:`UNEXPLAINED_SHARE` of the baseline's excess over the noise (the model's error grows
+    with the fault). The one rule of isolation, of a later alarm explained by the changes
+    taken out, and of a change that ended or changed size; each caller names its baseline
+    (1, the healthy noise, where no fault is left: no share)."""
+    return max(UNEXPLAINED_RATIO, 1.0 + UNEXPLAINED_SHARE * (baseline - 1.0))
+
+
 def _unexplained(out: Diagnosis, monitor, e: np.ndarray, post: np.ndarray) -> bool:
     """Sets ``out.residual_ratio``, the :func:`noise_ratio` of the residual ``post`` the
-    hypothesis leaves of ``e``; where it exceeds :data:`UNEXPLAINED_RATIO` and
-    :data:`UNEXPLAINED_SHARE` of the excess of ``e`` over the noise, the change is not the
-    hypothesis (True, and ``out`` says so: no thruster, effect or size, confidence 0), else
-    ``out.isolated``."""
+    hypothesis leaves of ``e``; where it exceeds :func:`allowed_ratio` of ``e`` (the residual
+    isolated is the baseline), the change is not the hypothesis (True, and ``out`` says so: no
+    thruster, effect or size, confidence 0), else ``out.isolated``."""
     out.residual_ratio = noise_ratio(monitor, post)
-    excess = noise_ratio(monitor, e) - 1.0
-    if out.residual_ratio <= max(UNEXPLAINED_RATIO, 1.0 + UNEXPLAINED_SHARE * excess):
+    if out.residual_ratio <= allowed_ratio(noise_ratio(monitor, e)):
         out.isolated = True
         return False
     out.kind, out.confidence, out.isolated, out.components = "model_change", 0.0, False, None

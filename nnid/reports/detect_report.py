@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from nnid.fault.detect import ALARM_FIELDS, DetectResult
+from nnid.fault.detect import ALARM_FIELDS, DetectResult, alarm_row
 from nnid.fault.follow import describe_alarm, efficiency_interval, explained_share, value_pm
 from nnid.physics.dofs import DOFS, FORCES
 from nnid.reports.figures import (
@@ -73,7 +73,7 @@ def write_detect_outputs(
     prints about the alarms (the caller says where it wrote: ``out_dir`` may be a staging
     folder)."""
     out_dir.mkdir(parents=True, exist_ok=True)
-    rows = [{k: a.get(k) for k in ALARM_FIELDS} for a in result.alarms]
+    rows = [alarm_row(a) for a in result.alarms]
     write_text(out_dir / "alarms.csv", pd.DataFrame(rows, columns=ALARM_FIELDS).to_csv(index=False))
     write_json(out_dir / "detect.json", detect_json(monitor, result, notes))
     write_text(out_dir / "report.html", detect_html(monitor, result, source))
