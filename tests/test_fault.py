@@ -420,6 +420,26 @@ def test_one_of_two_changes_ending_leaves_the_other_taken_out(vehicle, monitor):
     assert "what the changes still in effect leave" in ended["meaning"]
 
 
+def test_one_of_two_changes_resized_leaves_the_other_as_it_was(vehicle, monitor):
+    """Thruster h1 at 50 % from 20 s, a snag from 35 s half freed at 50 s, freed at 64 s: the
+    resize of all the changes together always fits a little better than the snag's alone (one
+    more θ), so it was chosen: 'the changes alarmed at 23.30 s (h1) and 35.05 s (snag) changed
+    size', kind model_change, the two merged into one change, and the snag's end at 64 s said
+    as that change resized again. Now the snag alone is resized, then ended; h1 stays taken
+    out as it was."""
+    faults = [Fault("thruster", FAULT_T, thruster="h1", efficiency=0.5),
+              Fault("external", 35.0, force=SNAG, end=50.0),
+              Fault("external", 50.0, force=tuple(0.5 * f for f in SNAG), end=64.0)]  # fmt: skip
+    loss, snag, resized, ended = detect(
+        monitor, simulate_faults(vehicle, 75, faults=faults, seed=7)
+    ).alarms
+    assert (loss["thruster"], snag["kind"]) == ("h1", "external_force")
+    assert resized["hypothesis"] == "change_resized" and resized["kind"] == "external_force"
+    assert resized["resized"]["alarms"] == [snag["t"]]
+    assert not any(n.startswith("thruster_loss.") for n in resized["components"])
+    assert ended["hypothesis"] == "change_ended" and ended["ended"]["alarms"] == [snag["t"]]
+
+
 def _back_partly(thruster: str, first: float, back: float, seed: int):
     """Thruster ``thruster`` at ``first`` from 20 s, back only to ``back`` at 40 s, then a snag
     from 52 s, in 70 s."""

@@ -288,9 +288,21 @@ class _Splits:
                 continue  # the same size as taken out: not a change of it
             cost = float(self.before[j] + self.power(fit.left).sum())
             split = _Split(gone, kept, j, fit.left, fit, cost)
-            if self.within(split, healthy=False) and (best is None or split.cost < best.cost):
+            # the sets are nested (all the changes, each alone): the larger always fits at
+            # least as well, so they are compared as the record's confidence weighs them
+            # (BIC: each refitted θ pays the penalty), not by power alone, which merged a
+            # change that kept its size into one that changed
+            if self.within(split, healthy=False) and (
+                best is None or self.penalised(split) < self.penalised(best)
+            ):
                 best = split
         return best
+
+    def penalised(self, split: _Split) -> float:
+        """``split.cost`` plus the BIC penalty of its refitted θ, in whitened power."""
+        m = self.monitor
+        penalty = 0.5 * np.log(max(self.n * len(m.plant_.dofs_) / m.correlation_time_, 2.0))
+        return split.cost + 2 * m.correlation_time_ * penalty * len(split.fit.fits)
 
     def new_change_fits_better(self, split: _Split, taken: list) -> bool:
         """Whether a new change, as the alarm would be isolated on ``left`` otherwise
@@ -315,18 +327,33 @@ class _Splits:
         index = {c.name: k for k, c in enumerate(cands)}
         if any(name not in index for name in names):
             return None
-        a = np.einsum("ij,njk->nik", m.whiten_, cols[:, :, [index[n] for n in names]])
-        e = (after_r - m.mu_) @ m.whiten_.T
+        x = cols[:, :, [index[n] for n in names]]
         last = self.n - self.least + 1
 
-        def suffix(x: np.ndarray) -> np.ndarray:  # sums from each row on
-            return np.cumsum(x[::-1], axis=0)[::-1][:last]
+        def suffix(v: np.ndarray) -> np.ndarray:  # sums from each row on
+            return np.cumsum(v[::-1], axis=0)[::-1][:last]
 
+        # θ as refit has it (isolate's per-DOF weights), so that the τ chosen is the one whose
+        # refit leaves the least; the power it leaves, whitened by the full covariance
+        mask = m.mask_
+        wt = np.sqrt(mask / np.where(mask > 0, m.sigma_**2, 1.0))
+        xw, ew = x * wt[None, :, None], (after_r - m.mu_) * wt
+        theta = -np.einsum(
+            "nkl,nl->nk",
+            np.linalg.pinv(suffix(np.einsum("nik,nil->nkl", xw, xw))),
+            suffix(np.einsum("nik,ni->nk", xw, ew)),
+        )
+        a = np.einsum("ij,njk->nik", m.whiten_, x)
+        e = (after_r - m.mu_) @ m.whiten_.T
         g = suffix(np.einsum("nik,nil->nkl", a, a))
         b = suffix(np.einsum("nik,ni->nk", a, e))
         c = suffix(np.einsum("ni,ni->n", e, e))
-        cost = self.before[:last] + c - np.einsum("nk,nkl,nl->n", b, np.linalg.pinv(g), b)
-        return int(np.argmin(cost))
+        # ‖e + aθ‖² summed from row j on
+        power = c + 2 * np.einsum("nk,nk->n", theta, b) + np.einsum("nk,nkl,nl->n", theta, g, theta)
+        cost = self.before[:last] + power
+        if not np.isfinite(cost).any():
+            return None
+        return int(np.nanargmin(cost))
 
     def record(self, trace: Trace, k: int, window_s: float, split: _Split, ended: bool) -> dict:
         """The alarm's record: the changes ``split.gone`` ended (``ended``) or resized, what
@@ -375,13 +402,14 @@ class _Splits:
         when = f"{'by' if j == 0 else 'at about'} {t_split:.2f} s"
         plural = "s" if len(gone) > 1 else ""
         if ended:
-            rest = "the model's own residual"
+            # healthy noise (at most UNEXPLAINED_RATIO) only where no change is left in effect;
+            # else within allowed_ratio of the model's residual, whose share can be far above it
+            rest = "the model's own residual is healthy noise after it"
             if split.kept:
-                rest = "what the changes still in effect leave"
-            meaning = (
-                f"the change{plural} alarmed at {which} ended {when}: {rest} is healthy noise "
-                "after it"
-            )
+                rest = (
+                    "what the changes still in effect leave after it is within what they may leave"
+                )
+            meaning = f"the change{plural} alarmed at {which} ended {when}: {rest}"
         else:
             if thruster is not None:
                 was = 1.0 - sum(t for n, t in split.kept if n == thrusters[0])
@@ -603,7 +631,7 @@ class Rewatch:
             gone, new = resized
             first = min(gone)
             self.changes = [new if i == first else c for i, c in enumerate(self.changes)]
-            ended = [i for i in gone if i != first]
+            ended = [*ended, *(i for i in gone if i != first)]
         self.changes = [c for i, c in enumerate(self.changes) if i not in set(ended)]
         if change is not None:
             self.changes.append(change)
