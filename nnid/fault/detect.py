@@ -455,19 +455,11 @@ class _Splits:
 
 
 def ended_alarm(
-    monitor: ResidualMonitor,
-    data: dict,
-    trace: Trace,
-    k: int,
-    window_s: float,
-    rewatch: Rewatch,
-    r: np.ndarray,
-    left: np.ndarray,
+    splits: _Splits, trace: Trace, k: int, window_s: float
 ) -> tuple[dict, list[int]] | None:
-    """The alarm at row ``k`` on rows watched on what the isolated changes of ``rewatch``
-    leave, as the end of some of them: its record and the changes that ended (indices into
-    :attr:`Rewatch.changes`), or None where no end explains it. ``r`` and ``left`` [rows, 6]:
-    the model's residual and the one watched, on the window's rows.
+    """The alarm at row ``k`` on rows watched on what the isolated changes leave (``splits``
+    of its window, :class:`_Splits`), as the end of some of them: its record and the changes
+    that ended (indices into :attr:`Rewatch.changes`), or None where no end explains it.
 
     The hypothesis: the changes held until a time τ of the window and ended there, so the
     residual is ``left`` before τ and what the changes still in effect leave of ``r`` from τ
@@ -484,7 +476,6 @@ def ended_alarm(
     states what is left of the ended changes (a thruster's efficiency against nominal, an
     effect's value) and ``residual_ratio`` the noise ratio after τ. A change that came back
     only partly is no end: :func:`resized_alarm`."""
-    splits = _Splits(monitor, data, k, window_s, rewatch, r, left)
     split = splits.ended() if splits.usable() else None
     if split is None:
         return None
@@ -492,14 +483,7 @@ def ended_alarm(
 
 
 def resized_alarm(
-    monitor: ResidualMonitor,
-    data: dict,
-    trace: Trace,
-    k: int,
-    window_s: float,
-    rewatch: Rewatch,
-    r: np.ndarray,
-    left: np.ndarray,
+    splits: _Splits, trace: Trace, k: int, window_s: float
 ) -> tuple[dict, tuple[list[int], Change]] | None:
     """The alarm at row ``k`` (as :func:`ended_alarm`) as some of the isolated changes having
     changed size at a time τ of the window (a stopped thruster back to 81 %, a snag partly
@@ -509,13 +493,13 @@ def resized_alarm(
     window's whitened power so); the new size must differ from the one taken out
     significantly (:data:`~nnid.fault.isolation.SIGNIFICANCE`) and leave no more than a change
     may of the model's residual after τ (:func:`~nnid.fault.isolation.allowed_ratio`)."""
-    splits = _Splits(monitor, data, k, window_s, rewatch, r, left)
     split = splits.resized() if splits.usable() else None
-    if split is None or splits.new_change_fits_better(split, rewatch.fitted):
+    taken = [f for c in splits.changes for f in c.fitted]
+    if split is None or splits.new_change_fits_better(split, taken):
         return None
     record = splits.record(trace, k, window_s, split, ended=False)
     fitted = [(name, fit["theta"]) for name, fit in split.fit.fits.items()]
-    return record, (split.gone, Change(rewatch.changes[split.gone[0]].t, said(record), fitted))
+    return record, (split.gone, Change(splits.changes[split.gone[0]].t, said(record), fitted))
 
 
 @dataclass
@@ -542,17 +526,19 @@ def rewatched_alarm(
     left: np.ndarray,
 ) -> Verdict | None:
     """The alarm at row ``k`` on rows watched on what the isolated changes of ``rewatch``
-    leave, judged in turn (``r``, ``left``: as :func:`ended_alarm`): the end of changes
+    leave, judged in turn (``r`` and ``left`` [rows, 6]: the model's residual and the one
+    watched, on the window's rows): the end of changes
     (first: a window where one ends late is otherwise within what a large change may leave,
     and dismissed); within what the changes may leave (:func:`explained_by_the_changes`,
     dismissed); a change of their size (:func:`resized_alarm`). None: a new change, to
     isolate on ``left``. ``detect`` and ``detect --follow`` alike."""
-    ended = ended_alarm(monitor, data, trace, k, window_s, rewatch, r, left)
+    splits = _Splits(monitor, data, k, window_s, rewatch, r, left)  # once for both tests
+    ended = ended_alarm(splits, trace, k, window_s)
     if ended is not None:
         return Verdict(ended[0], ended=ended[1])
     if explained_by_the_changes(monitor, r, left):
         return Verdict(dismissed=True)
-    resized = resized_alarm(monitor, data, trace, k, window_s, rewatch, r, left)
+    resized = resized_alarm(splits, trace, k, window_s)
     if resized is not None:
         return Verdict(resized[0], resized=resized[1])
     return None
