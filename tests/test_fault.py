@@ -392,10 +392,9 @@ def test_a_change_that_ends_is_said_ended_and_the_run_after_is_watched(vehicle, 
         assert third["efficiency"] == pytest.approx(0.3, abs=0.05) and third["t"] >= 52.0
 
 
-def test_follow_says_a_change_ended_as_batch_detect_does(vehicle, monitor, tmp_path):
-    """The window across the recovery, followed row by row: the same three records (the end
-    said at the alarm's time) and the same statistics watched, before and after the end."""
-    log = _window_across_the_recovery(vehicle)
+def _followed_as_batch(monitor, log, tmp_path):
+    """Batch detect of ``log`` and --follow of it as a file: the same records, alarms and
+    statistics watched (asserted); the batch result and the lines --follow said."""
     batch = detect(monitor, log)
     log.to_csv(tmp_path / "log.csv", index=False)
     said: list[str] = []
@@ -403,10 +402,18 @@ def test_follow_says_a_change_ended_as_batch_detect_does(vehicle, monitor, tmp_p
     assert [(a["t"], a["kind"], a["meaning"]) for a in followed.alarms] == [
         (a["t"], a["kind"], a["meaning"]) for a in batch.alarms
     ]
-    assert len(batch.alarms) == 3 and batch.alarms[1]["hypothesis"] == "change_ended"
-    assert sum("ended at about 40.05 s" in line for line in said) == 1
     assert list(followed.trace.t[followed.trace.alarm]) == list(batch.trace.t[batch.trace.alarm])
     np.testing.assert_allclose(followed.trace.values, batch.trace.values, rtol=1e-12, atol=1e-9)
+    return batch, said
+
+
+def test_follow_says_a_change_ended_as_batch_detect_does(vehicle, monitor, tmp_path):
+    """The window across the recovery, followed row by row: the same three records (the end
+    said at the alarm's time) and the same statistics watched, before and after the end."""
+    log = _window_across_the_recovery(vehicle)
+    batch, said = _followed_as_batch(monitor, log, tmp_path)
+    assert len(batch.alarms) == 3 and batch.alarms[1]["hypothesis"] == "change_ended"
+    assert sum("ended at about 40.05 s" in line for line in said) == 1
 
 
 def test_one_of_two_changes_ending_leaves_the_other_taken_out(vehicle, monitor):
@@ -529,18 +536,10 @@ def test_follow_says_a_change_resized_as_batch_detect_does(vehicle, monitor, tmp
     partial recovery, followed row by row: the same records and the same statistics watched,
     before and after the resize (the change taken out at its new size in both)."""
     log = _back_partly("v2", 0.0, 0.8, 3001)(vehicle)
-    batch = detect(monitor, log)
-    log.to_csv(tmp_path / "log.csv", index=False)
-    said: list[str] = []
-    followed = follow_csv(monitor, str(tmp_path / "log.csv"), 10.0, said.append)
-    assert [(a["t"], a["kind"], a["meaning"]) for a in followed.alarms] == [
-        (a["t"], a["kind"], a["meaning"]) for a in batch.alarms
-    ]
+    batch, said = _followed_as_batch(monitor, log, tmp_path)
     assert [a["hypothesis"] for a in batch.alarms[1:]] == ["change_resized", "external_force"]
     assert batch.alarms[1]["t"] < 40.0  # the window across the partial recovery
     assert sum("back to 80 % of nominal" in line for line in said) == 1
-    assert list(followed.trace.t[followed.trace.alarm]) == list(batch.trace.t[batch.trace.alarm])
-    np.testing.assert_allclose(followed.trace.values, batch.trace.values, rtol=1e-12, atol=1e-9)
 
 
 @pytest.mark.parametrize(("then", "seed"), [(0.2, 7), (0.6, 3002)])
