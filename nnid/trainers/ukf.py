@@ -157,12 +157,14 @@ class _Process:
         """The same step through ``structure.parts(θ).model(check=False)`` and torch RK4, one
         model per row: the reference the affine combination is checked against."""
         out = x.copy()
+        # the force arrays at sample k alone: Parts.felt works sample by sample
+        at_k = {key: self.data[key][k : k + 1] for key in ("tau", "tau_neg") if key in self.data}
         for b in range(x.shape[0]):
             theta = x[b, self.n_v :]
             parts = self.structure.parts(theta)
             model = parts.model(check=False)
             x0 = torch.as_tensor(self.full_state(x[b : b + 1, : self.n_v], k)[0])
-            tau = torch.as_tensor(parts.felt(self.data)[k : k + 1])
+            tau = torch.as_tensor(parts.felt(at_k))
             with torch.no_grad():
                 nxt = rk4(model.rhs, x0, tau, dt, lag=model.actuator_lag)[1].numpy()
             out[b, : self.n_v] = nxt[6 + self.idx]
