@@ -56,6 +56,11 @@ class Inputs:
     #: the (window s, order) of the Savitzky-Golay derivative that gave the velocities the
     #: report says were derived from the pose ([data]'s)
     derived_with: tuple[float, int] = (1.0, 4)
+    #: the log file read (None for a simulated log) and the clock of the rows kept from it
+    #: (``t`` and ``experiment``, labelled by the file's rows, in the order of ``log``'s rows):
+    #: what an error found after the split names
+    source: str | None = None
+    clock: pd.DataFrame | None = None
 
 
 def vehicle_for(name: str, config_path: Path, key: str = "vehicle"):
@@ -289,6 +294,8 @@ def load_inputs(
         inputs.report.add("experiments", f"kept {', '.join(spec.experiments)}")
     if source is not None:  # the runs kept: one left out may be sampled as it likes
         _check_sampling(kept, models, source, every_part_predicted=cfg.kind == "train")
+        inputs.source = source
+        inputs.clock = kept[[c for c in ("t", "experiment") if c in kept]]
         # a model with no dofs fits every DOF the data excites: any of them may read the angle
         fitted = [d for m in models if m.kind in PHYSICS_KINDS for d in fitted_dofs(m) or DOFS]
         if fitted and inputs.vehicle is not None:
@@ -342,6 +349,34 @@ def _check_sampling(
                 check_stepped(log)
         except NnidInputError as err:
             raise err.with_source(path) from None
+
+
+def check_held_stepped(inputs: Inputs, split: Split, models: list) -> None:
+    """No samples missing where a physics model's prediction steps the held-out parts of a
+    comparison (validation and test: training is only fitted), said against the log file and
+    its row before any fit (the prediction's own check, after the fits, named the config)."""
+    from nnid.evaluation.prediction import check_stepped
+
+    clock = inputs.clock
+    if clock is None or "t" not in clock or not any(m.kind in PHYSICS_KINDS for m in models):
+        return
+    runs = clock["experiment"].to_numpy() if "experiment" in clock else None
+    held = []
+    for part in ("validation", "test"):  # the record's rows count within each experiment
+        for entry in split.record["parts"][part]:
+            pos = (
+                np.arange(len(clock))
+                if runs is None
+                else np.flatnonzero(runs == entry["experiment"])
+            )
+            a, b = entry.get("rows", (0, len(pos)))
+            held.append(pos[a:b])
+    if not held:
+        return
+    try:
+        check_stepped(clock.iloc[np.unique(np.concatenate(held))])
+    except NnidInputError as err:
+        raise err.with_source(inputs.source) from None
 
 
 def _read_table(path: str, models: list) -> tuple[pd.DataFrame, CleaningReport]:
@@ -870,6 +905,7 @@ def run_compare(
     source = str(config_path)
     inputs, said = loaded_inputs(cfg, config_path, list(cfg.models), data, vehicle, columns)
     split = make_split(inputs.log, cfg.split, source, inputs.report, cfg.warmup_s)
+    check_held_stepped(inputs, split, [m.fitted for m in cfg.models])
     held_name = "test" if len(split.test) else "validation"
     held = split[held_name]
     k = k_steps(held, cfg.k_step_s)

@@ -1210,3 +1210,43 @@ def test_samples_missing_in_a_run_train_predicts_are_said_against_the_log(tmp_pa
     errors = [line for line in result.output.splitlines() if line.startswith("error:")]
     assert result.exit_code == 2 and len(errors) == 1, result.output
     assert errors[0].startswith(f"error: {data}, column 't', row 100:"), errors[0]
+
+
+_COMPARE_GAP = """kind = "compare"
+warmup_s = 1.0
+[data]
+experiments = ["run1", "run2"]
+[split]
+by = "experiment"
+train = ["run1"]
+validation = ["run2"]
+[[models]]
+kind = "fossen"
+unknowns = ["damping"]
+trainer = { kind = "ls", filter_lambda = 1.0 }
+"""
+
+
+def test_samples_missing_in_a_run_compare_predicts_are_said_against_the_log(tmp_path):
+    """Samples missing in a held-out run: compare's prediction refused it once every model
+    was fitted, naming the config for the log's column t. Now the log and its row (the file's,
+    with run0 left out by data.experiments), before any fit; a gap in a run only fitted is
+    no error (compare never steps it)."""
+    config = tmp_path / "compare.toml"
+    config.write_text(_COMPARE_GAP)
+    log = _demo_log()
+    held = log.index[log["experiment"] == "run2"]
+    log.loc[held[150] :, "t"] += 30.0  # the file's row held[150] comes 30 s after the last
+    data = _write_log(tmp_path, "held_gap", log)
+    args = ["compare", str(config), "--data", str(data), "--vehicle", MINIROV]
+    result = CliRunner().invoke(app, [*args, "--out", str(tmp_path / "out")])
+    errors = [line for line in result.output.splitlines() if line.startswith("error:")]
+    assert result.exit_code == 2 and len(errors) == 1, result.output
+    assert errors[0].startswith(f"error: {data}, column 't', row {held[150]}:"), errors[0]
+    assert "fitting" not in result.output  # said before any fit
+    fitted_only = tmp_path / "compare_train_gap.toml"
+    swapped = 'train = ["run2"]\nvalidation = ["run1"]'
+    fitted_only.write_text(_COMPARE_GAP.replace('train = ["run1"]\nvalidation = ["run2"]', swapped))
+    args = ["compare", str(fitted_only), "--data", str(data), "--vehicle", MINIROV]
+    result = CliRunner().invoke(app, [*args, "--out", str(tmp_path / "out2")])
+    assert result.exit_code == 0, result.output
