@@ -251,6 +251,46 @@ def test_a_damaged_saved_model_is_one_input_error_naming_the_file(kind, fitted, 
             load_model(tmp_path)
 
 
+def _set(*path):
+    """An edit of a saved model.json: the value at ``path[:-1]`` set to ``path[-1]``."""
+
+    def edit(payload: dict) -> None:
+        *keys, last, value = path
+        for key in keys:
+            payload = payload[key]
+        payload[last] = value
+
+    return edit
+
+
+#: hand edits of a saved model's state or settings that loaded, and then failed inside the
+#: first prediction or describe() with a ValueError, TypeError or IndexError of their own
+LOADED_THEN_FAILED = {
+    ("synthesis", "unknown term"): _set("state", "terms", 0, "x"),
+    ("synthesis", "no standard errors"): _set("state", "stderr", []),
+    ("synthesis", "unknown mask"): _set("settings", "mask", "x"),
+    ("sindy", "unknown term"): _set("state", "terms", 0, "x"),
+    ("sindy", "unknown mode"): _set("settings", "mode", "x"),
+    ("narx", "bounds of no output"): _set("state", "bounds", []),
+    ("narx", "bounds as a number"): _set("state", "bounds", 2.5),
+    ("state_space", "one bound"): _set("state", "bounds", [[1.0]]),
+    ("ensemble", "a member's bounds as text"): _set("state", "members", 0, "state", "bounds", "x"),
+}
+
+
+@pytest.mark.parametrize(("kind", "damage"), list(LOADED_THEN_FAILED))
+def test_a_damaged_state_is_refused_at_loading_not_at_use(kind, damage, fitted, tmp_path):
+    from nnid.errors import NnidInputError
+
+    model, *_ = fitted[kind]
+    model.save(tmp_path)
+    broken = read_json(tmp_path / "model.json")
+    LOADED_THEN_FAILED[kind, damage](broken)
+    (tmp_path / "model.json").write_text(json.dumps(broken))
+    with pytest.raises(NnidInputError, match=r"model\.json: damaged"):
+        load_model(tmp_path)
+
+
 @pytest.mark.parametrize("kind", list(BUILDERS))
 def test_params_and_describe_are_strict_json(kind, fitted):
     model, *_ = fitted[kind]

@@ -643,6 +643,65 @@ def test_a_sweep_on_ray_leaves_the_callers_environment_as_it_was(
 
 
 @needs_ray
+def test_tune_trials_start_with_the_workers_one_thread_environment(
+    sweep_inputs, tmp_path, monkeypatch
+) -> None:
+    """Tune starts its trials' workers itself: the Ray that `nnid sweep --address` starts
+    carries the batch workers' one-thread environment as its job's runtime_env (Ray alone set
+    OMP_NUM_THREADS only, so numba, OpenBLAS and MKL took every core of a trial's one CPU).
+    Ray itself is not started: its init is replaced by a stand-in that records what it got."""
+    import ray
+
+    from nnid.scale.engines import ONE_THREAD
+    from nnid.scale.sweep import run_sweep_tune
+
+    config, data = sweep_inputs
+    seen: list[dict] = []
+
+    def init(**kwargs):
+        seen.append(kwargs)
+        raise NnidInputError("stand-in for Ray")
+
+    monkeypatch.setattr(ray, "is_initialized", lambda: False)
+    monkeypatch.setattr(ray, "init", init)
+    plain = tmp_path / "fifo.toml"
+    plain.write_text(config.read_text().replace("[sweep]\n", "[sweep]\nearly_stopping = false\n"))
+    with pytest.raises(NnidInputError, match="stand-in for Ray"):
+        run_sweep_tune(plain, tmp_path / "o", None, data=str(data))
+    assert seen[0]["runtime_env"]["env_vars"] == ONE_THREAD
+
+
+@needs_ray
+def test_a_tune_that_fails_is_raised_with_its_own_error(sweep_inputs, tmp_path, monkeypatch):
+    """Tune runs in a thread beside the progress loop: a Tune that failed there (storage,
+    scheduling) printed its traceback from the thread and the sweep stopped on a KeyError
+    'grid'. Its own error is raised again, in the caller's thread. Ray is not started: Tune is
+    replaced by a stand-in that fails."""
+    import ray
+    from ray import tune
+
+    from nnid.scale.sweep import run_sweep_tune
+
+    class Tuner:
+        def __init__(self, *args, **kwargs) -> None:
+            pass
+
+        def fit(self):
+            raise RuntimeError("stand-in Tune failed")
+
+    monkeypatch.setattr(ray, "is_initialized", lambda: True)
+    monkeypatch.setattr(ray, "cluster_resources", lambda: {"CPU": 1.0})
+    monkeypatch.setattr(tune, "with_parameters", lambda f, **kwargs: f)
+    monkeypatch.setattr(tune, "with_resources", lambda f, resources: f)
+    monkeypatch.setattr(tune, "Tuner", Tuner)
+    config, data = sweep_inputs
+    plain = tmp_path / "fifo.toml"
+    plain.write_text(config.read_text().replace("[sweep]\n", "[sweep]\nearly_stopping = false\n"))
+    with pytest.raises(RuntimeError, match="stand-in Tune failed"):
+        run_sweep_tune(plain, tmp_path / "o", None, data=str(data))
+
+
+@needs_ray
 def test_sweep_refuses_asha_with_nothing_to_compare(sweep_inputs, tmp_path) -> None:
     """A NARX without a free-run stage, ranked on the free run, scores nothing ASHA could
     compare per epoch: refused before Ray starts (the summary said so after every trial had

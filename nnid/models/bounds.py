@@ -71,6 +71,29 @@ def resolve_bounds(
     return out
 
 
+def restored_bounds(value: object, outputs: Sequence[str]) -> Resolved | None:
+    """Resolved bounds read back from a saved model: None, or one ``[low, high]`` per output,
+    each a number or None (open). Anything else is a damaged file, refused at loading (it
+    loaded and failed inside the first prediction)."""
+    if value is None:
+        return None
+    if (
+        not isinstance(value, list)
+        or len(value) != len(outputs)
+        or any(not isinstance(b, list) or len(b) != 2 for b in value)
+        or any(
+            v is not None and (isinstance(v, bool) or not isinstance(v, int | float))
+            for b in value
+            for v in b
+        )
+    ):
+        raise ValueError(
+            f"bounds are null or one [low, high] per output ({len(outputs)}), each a number or "
+            f"null, not {value!r}"
+        )
+    return [[None if v is None else float(v) for v in b] for b in value]
+
+
 def bound_arrays(resolved: Resolved, mean: torch.Tensor, std: torch.Tensor):
     """(low, high) tensors in normalised units (±inf where open) of resolved bounds."""
     lo = torch.tensor([-np.inf if b[0] is None else b[0] for b in resolved], dtype=mean.dtype)

@@ -79,7 +79,13 @@ from nnid.errors import NnidInputError
 from nnid.evaluation.evaluate import target_columns
 from nnid.models import narx_kernel
 from nnid.models.base import NOT_FITTED
-from nnid.models.bounds import OutputBounds, bound_arrays, check_bounds, resolve_bounds
+from nnid.models.bounds import (
+    OutputBounds,
+    bound_arrays,
+    check_bounds,
+    resolve_bounds,
+    restored_bounds,
+)
 from nnid.models.io_model import DTYPE, InputOutputModel, seeded_linear
 from nnid.serialization import jsonable
 from nnid.trainers.history import History, Progress, staged, stopping_score
@@ -465,7 +471,7 @@ class NarxModel(InputOutputModel):
         }
 
     def _set_learned(self, state: dict) -> None:
-        self.bounds_ = state["bounds"]
+        self.bounds_ = restored_bounds(state["bounds"], self.outputs_)
         self.division_ = state["division"]
         self.transient_share_ = state["transient_share_of_training_draws"]
         self.finetune_ = _finetune_as_stages(state["simulation_finetune"])

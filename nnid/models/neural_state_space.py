@@ -47,7 +47,13 @@ from torch.func import functional_call
 from nnid.datasets.splits import split_log
 from nnid.errors import NnidInputError
 from nnid.evaluation.prediction import mode_steps
-from nnid.models.bounds import OutputBounds, bound_arrays, check_bounds, resolve_bounds
+from nnid.models.bounds import (
+    OutputBounds,
+    bound_arrays,
+    check_bounds,
+    resolve_bounds,
+    restored_bounds,
+)
 from nnid.models.io_model import DTYPE, InputOutputModel
 from nnid.physics.integrate import rk4
 from nnid.threads import torch_threads
@@ -276,7 +282,7 @@ class NeuralStateSpace(InputOutputModel):
         }
 
     def _set_learned(self, state: dict) -> None:
-        self.bounds_ = state["bounds"]
+        self.bounds_ = restored_bounds(state["bounds"], self.outputs_)
         self.division_ = state["division"]
         self.stages_ = state["stages"]
 

@@ -34,7 +34,7 @@ from nnid.datasets.preprocess import experiments
 from nnid.errors import NnidInputError
 from nnid.evaluation.prediction import blank_initial, mode_steps
 from nnid.models.parametric import prepare_motion
-from nnid.models.synthesis import DampingModel
+from nnid.models.synthesis import DampingModel, restored_matrices
 from nnid.physics.damping_library import LIBRARY, BasisLibrary
 from nnid.physics.dofs import DOFS, FORCES
 from nnid.physics.integrate import rk4
@@ -311,9 +311,10 @@ class SindyDamping(DampingModel):
         }, tensors
 
     def _restore(self, state: dict, tensors: dict) -> None:
-        coef = np.array(state["coef"], dtype=float).reshape(6, -1)
-        stderr = np.array(state.get("stderr", np.full(coef.size, np.nan)), dtype=float)
-        self._set_model(list(state["terms"]), coef, stderr.reshape(coef.shape))
+        if self.mode not in MODES:  # any other value predicted as control mode
+            raise ValueError(f"mode is one of {', '.join(MODES)}, not {self.mode!r}")
+        extra = 0 if self.mode == "residual" else len(FORCES)
+        self._set_model(*restored_matrices(state, extra, stderr_default=True))
         self.coefficients_ = dict(state["coefficients"])
         self.path_ = list(state["path"])
         self.selected_ = dict(state["selected"])

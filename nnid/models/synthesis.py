@@ -102,6 +102,28 @@ def synthesis_data(
     return xi, tau_bar
 
 
+def restored_matrices(
+    state: dict, extra: int, stderr_default: bool = False
+) -> tuple[list[str], np.ndarray, np.ndarray]:
+    """The basis terms, K and its standard errors of a saved damping model, checked: terms
+    that parse (:class:`BasisLibrary`), K and its standard errors ``[6, len(terms) + extra]``
+    (``extra``: SINDy control mode's six force columns). A file edited by hand loaded and
+    failed at the first prediction or ``describe()``; it is refused at loading."""
+    terms = list(state["terms"])
+    BasisLibrary(terms)  # raises ValueError on a term that is not one
+    shape = (6, len(terms) + extra)
+    coef = np.array(state["coef"], dtype=float)
+    stderr = (
+        np.array(state["stderr"], dtype=float)
+        if "stderr" in state or not stderr_default
+        else np.full(shape, np.nan)
+    )
+    for name, values in (("coef", coef), ("stderr", stderr)):
+        if values.size != shape[0] * shape[1]:
+            raise ValueError(f"{name} has {values.size} values, not 6 × {shape[1]}")
+    return terms, coef.reshape(shape), stderr.reshape(shape)
+
+
 class DampingModel(FossenPlant):
     """A viscous damping model K ξ(ν) over basis terms, fitted to McCarter's τ̄.
 
@@ -219,11 +241,9 @@ class DampingModel(FossenPlant):
         return {"terms": self.terms_, "coef": self.coef_, "stderr": self.stderr_}, {}
 
     def _restore(self, state: dict, tensors: dict) -> None:
-        self._set_damping(
-            state["terms"],
-            np.array(state["coef"], dtype=float).reshape(6, -1),
-            np.array(state["stderr"], dtype=float).reshape(6, -1),
-        )
+        terms, coef, stderr = restored_matrices(state, extra=0)
+        self._set_damping(terms, coef, stderr)
+        self._structure()  # a mask setting edited by hand: refused here, not by describe()
 
 
 class SynthesisModel(DampingModel):

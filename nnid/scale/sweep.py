@@ -289,7 +289,10 @@ def run_sweep_tune(
 ) -> tuple[BatchResult, list[Ranked]]:
     """:func:`run_sweep` on Ray Tune, one CPU per trial, with ASHA early stopping
     (``[sweep] early_stopping``): a stopped trial is a ``stopped`` row that says at which
-    epoch, and its setting is ranked on the seeds that finished."""
+    epoch, and its setting is ranked on the seeds that finished. The trials' workers start
+    with :data:`~nnid.scale.engines.ONE_THREAD` when this function starts Ray; a Ray the
+    caller started keeps the caller's ``runtime_env`` (give it
+    ``runtime_env={"env_vars": ONE_THREAD}`` for the same)."""
     import threading
     import time
 
@@ -298,6 +301,7 @@ def run_sweep_tune(
     from ray.tune.schedulers import ASHAScheduler, FIFOScheduler
 
     from nnid.scale.batch import write_summary
+    from nnid.scale.engines import ONE_THREAD
     from nnid.scale.task import finished
 
     spec, tasks = trials(config, data, vehicle, columns)
@@ -307,8 +311,12 @@ def run_sweep_tune(
     out_dir.mkdir(parents=True, exist_ok=True)
     own = not ray.is_initialized()
     if own:
+        # Tune starts its trials' workers itself, with no runtime_env of ours: the job's
+        # gives them the one-thread environment the batch engines' workers start with (Ray
+        # sets only OMP_NUM_THREADS; numba, OpenBLAS and MKL took every core)
         ray.init(address=address, num_cpus=num_cpus if address is None else None,
-                 include_dashboard=False, log_to_driver=False, configure_logging=False)  # fmt: skip
+                 include_dashboard=False, log_to_driver=False, configure_logging=False,
+                 runtime_env={"env_vars": ONE_THREAD})  # fmt: skip
     start = time.perf_counter()
     scheduler = (
         ASHAScheduler(
@@ -332,13 +340,24 @@ def run_sweep_tune(
     )
     cpus = int(ray.cluster_resources().get("CPU", 1))
     box: dict[str, Any] = {}
-    thread = threading.Thread(target=lambda: box.setdefault("grid", tuner.fit()))
+
+    def fit() -> None:
+        # Tune's own failure is raised again here: a thread that dies of it printed its
+        # traceback and left a KeyError 'grid' behind
+        try:
+            box["grid"] = tuner.fit()
+        except BaseException as exc:
+            box["error"] = exc
+
+    thread = threading.Thread(target=fit)
     thread.start()
     while thread.is_alive():  # progress: the trials whose outputs are written
         done = sum(finished(t, out_dir) is not None for t in tasks)
         (progress or silent)(done, len(tasks), f"{done} of {len(tasks)} trials finished")
         thread.join(1.0)
     try:
+        if "error" in box:
+            raise box["error"]
         trial_results = sorted(box["grid"], key=lambda r: r.config["trial"])
         rows = [_tune_row(tasks[r.config["trial"]], r, out_dir, spec.metric) for r in trial_results]
     finally:
