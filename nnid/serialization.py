@@ -12,9 +12,9 @@ import json
 import math
 import os
 import tempfile
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
-from typing import Any
+from typing import Any, BinaryIO
 
 import numpy as np
 
@@ -66,13 +66,19 @@ def write_json(path: str | Path, value: Any, versioned: bool = True) -> Path:
 
 
 def write_text(path: str | Path, text: str) -> Path:
-    """Write ``text`` through a temporary file in the same folder and a rename."""
+    """Write ``text`` (UTF-8) atomically (:func:`write_atomic`)."""
+    return write_atomic(path, lambda fh: fh.write(text.encode("utf-8")))
+
+
+def write_atomic(path: str | Path, write: Callable[[BinaryIO], object]) -> Path:
+    """Call ``write`` on a binary temporary file in ``path``'s folder, then rename it to
+    ``path``: a reader (or a crash) never meets half a file."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
     try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            fh.write(text)
+        with os.fdopen(fd, "wb") as fh:
+            write(fh)
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)

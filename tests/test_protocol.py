@@ -204,6 +204,16 @@ def test_save_load_reproduces_predictions(kind, fitted, runs, heave_campaign, tm
         assert back.baseline().trainer_name() == model.baseline().trainer_name()
 
 
+def test_a_model_saved_over_another_leaves_none_of_its_files(fitted, tmp_path):
+    """A network's tensors.pt stayed beside a least-squares model saved into its folder
+    later: a folder that held two models' files."""
+    fitted["narx"][0].save(tmp_path)
+    assert (tmp_path / "tensors.pt").exists()
+    fitted["fossen"][0].save(tmp_path)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["model.json"]
+    assert load_model(tmp_path).kind == "fossen"
+
+
 @pytest.mark.parametrize("kind", list(BUILDERS))
 def test_a_damaged_saved_model_is_one_input_error_naming_the_file(kind, fitted, tmp_path):
     """A model.json edited by hand (a key gone, a setting unknown) or a tensors.pt cut short

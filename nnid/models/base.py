@@ -42,7 +42,7 @@ from sklearn.utils.validation import check_is_fitted
 
 from nnid.errors import NnidInputError
 from nnid.evaluation.prediction import check_mode
-from nnid.serialization import SCHEMA_VERSION, read_json, write_json
+from nnid.serialization import SCHEMA_VERSION, read_json, write_atomic, write_json
 from nnid.trainers.history import Progress, silent
 
 #: model kind -> "module:Class", imported when first needed (torch-heavy modules stay unloaded
@@ -329,8 +329,10 @@ class NnidModel(BaseEstimator, ABC):
             "settings": encode_setting(self.get_params(deep=False)),
             **learned,
         }
-        if tensors:
-            torch.save(tensors, folder / TENSOR_FILE)
+        if tensors:  # atomically, as model.json: never half a file beside a whole one
+            write_atomic(folder / TENSOR_FILE, lambda fh: torch.save(tensors, fh))
+        else:  # another model's, saved here before: not left beside this one's model.json
+            (folder / TENSOR_FILE).unlink(missing_ok=True)
         write_json(folder / MODEL_FILE, payload)
         return folder
 
