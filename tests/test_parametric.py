@@ -123,6 +123,32 @@ def test_collinear_parameters_have_no_standard_error():
     assert params["r"]["significant"]
 
 
+def test_ordinary_least_squares_of_a_force_and_a_moment_gives_each_its_own_variance():
+    """weighting="none" on a surge-yaw regression (force rows in N, moment rows in N m, 100x
+    quieter): the covariance pooled the two equations' residuals into one σ̂², so the yaw
+    parameter's s.e. was about 70x the spread of its estimates over independent noise draws
+    (20x on a simulated Seamor surge-yaw log) and its 95 % interval always covered. The
+    sandwich with each equation's own variance: spread/s.e. near 1, coverage near 95 %."""
+    truth = np.array([2.0, -0.5])
+    est, se = [], []
+    for seed in range(200):
+        rng = np.random.default_rng(seed)
+        n = 400
+        x, z = rng.normal(size=(2, n))
+        phi = np.zeros((2 * n, 2))
+        phi[0::2, 0], phi[1::2, 1] = x, z  # rows interleaved: X equation, N equation
+        y = phi @ truth + np.tile([10.0, 0.1], n) * rng.normal(size=2 * n)
+        reg = Regression(phi, y, ["X_a", "N_b"], ("u", "r"), n)
+        fit = LeastSquares(weighting="none", correlated=False).solve(reg)
+        est.append(fit.theta)
+        se.append(fit.stderr)
+    est, se = np.array(est), np.array(se)
+    ratio = est.std(0, ddof=1) / se.mean(0)
+    cover = np.mean(np.abs(est - truth) <= 1.96 * se, 0)
+    assert np.all((ratio > 0.85) & (ratio < 1.15)), ratio
+    assert np.all((cover > 0.9) & (cover < 0.99)), cover
+
+
 def test_exact_data_does_not_make_a_zero_parameter_significant():
     """Noise-free data: the RSS of the normal equations is rounding, not zero. A parameter
     whose truth is 0 (estimate ~1e-16) is not significant; the true ones are, and their

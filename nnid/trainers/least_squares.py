@@ -229,6 +229,16 @@ class LeastSquares(BaseEstimator):
                 est = solve_least_squares(reg.phi, reg.y, w, reg.names)
             dof_sigma2 = self._dof_variances(reg, est.theta)
         est.dof_sigma2 = dof_sigma2
+        if self.weighting == "none" and len(reg.dofs) > 1:
+            # ordinary least squares of several DOF equations: σ̂² (ΦᵀΦ)⁻¹ pools forces (N) and
+            # moments (N m) into one variance, which on a surge-yaw log made the yaw
+            # parameters' s.e. 20x their spread; each equation's own variance instead
+            live = np.isfinite(est.theta)
+            cov = np.full_like(est.cov, np.nan)
+            cov[np.ix_(live, live)] = dof_sandwich(
+                reg.phi[:, live], reg.y - reg.phi[:, live] @ est.theta[live], len(reg.dofs)
+            )
+            est.cov = void_undetermined(cov, reg.names, est.excitation)
         if self.correlated:
             est.cov = est.cov * correlation_time(reg.residuals(est.theta))
         return est
@@ -246,6 +256,21 @@ def dof_variances(residuals: Sequence[np.ndarray] | np.ndarray) -> np.ndarray:
     taken for noise there."""
     series = residuals.T if isinstance(residuals, np.ndarray) and residuals.ndim == 2 else residuals
     return np.asarray([float(np.nanvar(np.asarray(r, dtype=np.float64))) for r in series])
+
+
+def dof_sandwich(phi: np.ndarray, r: np.ndarray, m: int) -> np.ndarray:
+    """Covariance of the *unweighted* least squares of ``m`` interleaved DOF equations (row
+    i is equation i mod m): the sandwich (ΦᵀΦ)⁻¹ Φᵀ Σ Φ (ΦᵀΦ)⁻¹ with Σ each equation's own
+    residual variance (:func:`dof_variances`, times n/(n − p)), since forces (N) and moments
+    (N m) do not share one σ̂² (Caccia eq. 12 per equation). Rows with a non-finite residual or
+    regressor count as absent."""
+    ok = np.isfinite(r) & np.isfinite(phi).all(1)
+    var = dof_variances(np.where(ok, r, np.nan).reshape(-1, m))
+    phi = np.where(ok[:, None], phi, 0.0)
+    n = int(ok.sum())
+    spread = np.tile(np.where(var > 0, var, 0.0), r.size // m) * ok * n / max(n - phi.shape[1], 1)
+    bread = np.linalg.pinv(phi.T @ phi, hermitian=True)
+    return bread @ ((phi * spread[:, None]).T @ phi) @ bread
 
 
 def autocorrelation_time(r: np.ndarray, max_lag: int = 5000) -> float | None:

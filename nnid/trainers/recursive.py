@@ -33,6 +33,7 @@ from nnid.trainers.least_squares import (
     Estimate,
     ExcitationWarning,
     correlation_time,
+    dof_sandwich,
     dof_variances,
     void_undetermined,
 )
@@ -175,6 +176,7 @@ def window_covariance(
     r = y - phi @ np.nan_to_num(theta)
     ok = np.isfinite(r) & np.isfinite(phi).all(1)
     var = dof_variances(np.where(ok, r, np.nan).reshape(-1, m))
+    cov = dof_sandwich(phi, r, m)  # before the absent rows are zeroed below
     w = np.tile(1.0 / np.where(var > 0, var, 1.0), r.size // m) * ok
     phi, r = np.where(ok[:, None], phi, 0.0), np.where(ok, r, 0.0)
     gram = (phi * w[:, None]).T @ phi
@@ -189,10 +191,6 @@ def window_covariance(
         )
     # the window's own least-squares fit, unweighted as the recursion is
     fit = np.linalg.lstsq(phi, np.where(ok, y, 0.0), rcond=None)[0]
-    n = int(ok.sum())
-    spread = np.tile(np.where(var > 0, var, 0.0), r.size // m) * ok * n / max(n - theta.size, 1)
-    bread = np.linalg.pinv(phi.T @ phi, hermitian=True)
-    cov = bread @ ((phi * spread[:, None]).T @ phi) @ bread
     cov = void_undetermined(cov, list(reg.names), report)
     return cov * correlation_time([r[k::m] for k in range(m)]), fit
 
