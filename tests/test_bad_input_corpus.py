@@ -79,6 +79,8 @@ LOG_CASES: list[tuple[str, str, Callable]] = [
     # milliseconds computed in floating point: whole numbers but for the last bits
     ("time in float milliseconds", "'t'", lambda df, i: df.assign(t=df["t"] * 1000 + 1e-9)),
     ("time in nanoseconds", "'t'", lambda df, i: df.assign(t=(df["t"] * 1e9).round())),
+    # 20 Hz in microseconds steps by 50000: read as seconds, a fit ran for minutes on it
+    ("time in microseconds", "'t'", lambda df, i: df.assign(t=(df["t"] * 1e6).round())),
     # a logger's milliseconds with jitter: not whole numbers, still not seconds
     (
         "time in jittered milliseconds",

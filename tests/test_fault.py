@@ -879,7 +879,7 @@ def test_missing_samples_raise_no_alarm_and_are_said(vehicle, monitor, tmp_path)
     assert not any(line.startswith("ALARM") for line in said)
 
 
-@pytest.mark.parametrize("slip", ["degrees", "mm/s", "decimal comma"])
+@pytest.mark.parametrize("slip", ["degrees", "pitch in degrees", "mm/s", "decimal comma"])
 def test_follow_refuses_what_the_whole_log_reader_refuses(vehicle, monitor, tmp_path, slip):
     """Angles in degrees, velocities in mm/s, a row whose decimal comma shifts every cell after
     it under the next column (v = 196629): the whole-log reader refuses each, exit 2; --follow
@@ -890,6 +890,9 @@ def test_follow_refuses_what_the_whole_log_reader_refuses(vehicle, monitor, tmp_
     if slip == "degrees":
         log["psi"] = np.degrees(log["psi"]) + 90.0
         field, row, said = "psi", None, "looks like degrees"
+    elif slip == "pitch in degrees":  # a 3° trim: under 2π, past the pitch's ±π/2
+        log["theta"] = np.degrees(log["theta"]) + 3.0
+        field, row, said = "theta", None, "looks like degrees"
     elif slip == "mm/s":
         log[["u", "v", "w"]] *= 1000.0
         field, row, said = None, None, "the log must be in SI units"

@@ -111,6 +111,21 @@ def test_unwrapped_radians_past_two_pi_are_told_from_degrees_by_the_rate():
             validate_log(wrong, f"{name}.csv")
 
 
+def test_a_small_pitch_in_degrees_is_refused():
+    """The zyx pitch stays within ±π/2: a pitch of up to 4° logged in degrees passed as 4 rad
+    (229°) because only values past 2π were taken for degrees."""
+    t = np.arange(400) * 0.1
+    pitch = 0.07 * np.sin(0.5 * t)  # rad, 4° at most
+    log = pd.DataFrame({"t": t, "theta": pitch, "q": np.gradient(pitch, t), "tau_M": 1.0})
+    assert validate_log(log, "pitch.csv") is log
+    assert validate_log(log.assign(theta=pitch + 1.45), "pitch.csv") is not None  # 87°: radians
+    said = r"'theta', row 157: angle of 4\.011 looks like degrees.*within ±π/2"
+    degrees = log.assign(theta=np.degrees(pitch))
+    for wrong in (degrees, degrees.drop(columns="q")):  # told with the rate q and without
+        with pytest.raises(NnidInputError, match=said):
+            validate_log(wrong, "pitch.csv")
+
+
 def test_time_restarts_per_experiment_are_fine(tmp_path):
     a, b = _log(), _log()
     a["experiment"], b["experiment"] = "a", "b"

@@ -113,11 +113,42 @@ def test_resample_splits_at_gaps_and_holds_inputs():
     assert "split in 2" in report.steps[0].detail
 
 
+def test_resampling_does_not_interpolate_a_wrapped_angle_through_zero():
+    """A yaw stepping from 3.14 to -3.14 was interpolated through 0 between the two samples: a
+    turn of 2.4 rad in 1/13 s that the vehicle never made."""
+    t = np.arange(0, 10, 0.1)
+    heading = 3.0 + 0.1 * t  # crosses π at t = 1.4 s
+    log = pd.DataFrame({"t": t, "psi": np.angle(np.exp(1j * heading)), "tau_N": 1.0})
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # 10 Hz to 13 Hz: interpolated samples, said
+        out = resample_log(log, 13.0)
+    assert np.allclose(out["psi"], 3.0 + 0.1 * out["t"])
+
+
 def test_unwrap_and_degree_guard():
     psi = np.angle(np.exp(1j * np.linspace(0, 20, 500)))
     log = pd.DataFrame({"t": np.arange(500) * 0.1, "psi": psi})
     out = unwrap_angles(log)
     assert np.allclose(out["psi"], np.linspace(0, 20, 500))
+
+
+def test_an_empty_angle_cell_stays_one_gap_when_unwrapped():
+    """np.unwrap carried one empty psi cell into every later sample: a single missing yaw
+    sample of a pose-only log masked the rest of its run (1100 samples) once velocities were
+    derived from it."""
+    t = np.arange(500) * 0.1
+    heading = np.linspace(0, 20, 500)  # three turns: unwrapping has work to do after the gap
+    psi = np.angle(np.exp(1j * heading))
+    psi[100] = np.nan
+    log = pd.DataFrame({"t": t, "x": np.cos(t), "y": np.sin(t), "z": 0 * t, "phi": 0 * t,
+                        "theta": 0 * t, "psi": psi})  # fmt: skip
+    out = unwrap_angles(log)
+    assert out["psi"].isna().sum() == 1
+    kept = np.arange(500) != 100
+    assert np.allclose(out["psi"][kept], heading[kept])
+    derived = derive_velocities(log, window_s=0.5)
+    assert derived["psi"].isna().sum() == 1
+    assert derived["r"].notna().sum() == 499  # the rate only at the missing sample is missing
 
 
 def test_lowpass_is_zero_phase_and_rejects_short_logs():

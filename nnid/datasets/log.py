@@ -139,7 +139,7 @@ def degrees_error(df: pd.DataFrame, col: str, source: str, row: int) -> NnidInpu
     size = np.abs(df[col].to_numpy(dtype=np.float64))
     return NnidInputError(
         f"angle of {np.nanmax(size):.4g} looks like degrees; angles must be in radians"
-        + ("" if RATE_OF[col] in df else UNWRAPPED),
+        + (PITCH_RANGE if col == "theta" else "" if RATE_OF[col] in df else UNWRAPPED),
         source=source,
         field=col,
         row=row,
@@ -148,10 +148,15 @@ def degrees_error(df: pd.DataFrame, col: str, source: str, row: int) -> NnidInpu
 
 #: the body rate each Euler angle turns with when roll and pitch are small
 RATE_OF = {"phi": "p", "theta": "q", "psi": "r"}
+#: the largest |angle| in radians read without asking whether it is degrees: roll and yaw wrap
+#: at ±π or [0, 2π); the zyx pitch never leaves ±π/2 (a pitch of 4° logged in degrees passed
+#: as 4 rad)
+RADIAN_LIMIT = {"phi": 2 * math.pi, "theta": math.pi / 2, "psi": 2 * math.pi}
 UNWRAPPED = (
     " (unwrapped radians past ±2π are read where the log also has the angle's rate, p, q or r, "
     "to tell them from degrees)"
 )
+PITCH_RANGE = " (the zyx Euler pitch theta stays within ±π/2)"
 
 
 def turned_by(t: np.ndarray, rate: np.ndarray) -> np.ndarray:
@@ -163,13 +168,14 @@ def turned_by(t: np.ndarray, rate: np.ndarray) -> np.ndarray:
 
 def looks_like_degrees(df: pd.DataFrame, col: str) -> bool:
     """Whether angle column ``col`` of ``df`` (``t``, optional ``experiment``) holds degrees:
-    values past ±2π, unless the log's body rate of that angle (:data:`RATE_OF`) says they are
-    unwrapped radians (a yaw past 2π after a full turn, as a filter or nnid's simulator
-    writes it): over windows of about a second where the rate turned the vehicle by more
-    than 0.05 rad, the angle changed as much, not 57 times as much, and the rate itself
-    reads as rad/s (under π rad/s, not a log whose rates are in deg/s too)."""
+    values past :data:`RADIAN_LIMIT` (±2π; ±π/2 for pitch), unless the log's body rate of that
+    angle (:data:`RATE_OF`) says they are unwrapped radians (a yaw past 2π after a full turn,
+    as a filter or nnid's simulator writes it): over windows of about a second where the rate
+    turned the vehicle by more than 0.05 rad, the angle changed as much, not 57 times as much,
+    and the rate itself reads as rad/s (under π rad/s, not a log whose rates are in deg/s
+    too)."""
     angle = df[col].to_numpy(dtype=np.float64)
-    if not angle.size or not np.nanmax(np.abs(angle)) > 2 * math.pi + 1e-6:
+    if not angle.size or not np.nanmax(np.abs(angle)) > RADIAN_LIMIT[col] + 1e-6:
         return False
     rate = RATE_OF[col]
     if rate not in df:
@@ -301,7 +307,8 @@ def blank_labels(label: pd.Series) -> np.ndarray:
 def check_time_unit(df: pd.DataFrame, source: str | None = None) -> None:
     """Time in seconds: a median step of 5 to 1000 looks like milliseconds (whole, computed in
     floating point, or a logger's jittered stamps; no vehicle's dynamics are sampled every 5 s),
-    one of 10⁵ or more like micro- or nanoseconds."""
+    one over 1000 like microseconds (10 Hz to 1 kHz), one of 10⁵ or more like micro- or
+    nanoseconds."""
     slip = time_unit_slip(df["t"].to_numpy(dtype=np.float64))
     if slip:
         raise NnidInputError(f"{slip}; t must be seconds", source=source, field="t")
@@ -315,6 +322,8 @@ def time_unit_slip(t: np.ndarray) -> str | None:
     step = float(np.median(np.abs(np.diff(t))))
     if step >= 1e5:
         unit = "nanoseconds (divide by 1e9) or microseconds (by 1e6)"
+    elif step > 1000:  # a 20 Hz log in microseconds passed as 50000 s steps, and hung a fit
+        unit = "microseconds (divide by 1e6)"
     elif 5 <= step <= 1000:  # whole or jittered: no vehicle's dynamics are sampled this slowly
         unit = "milliseconds (divide by 1000)"
     else:

@@ -112,7 +112,8 @@ def resample_log(
     log: pd.DataFrame, rate: float, gap: float | None = None, report: CleaningReport | None = None
 ) -> pd.DataFrame:
     """Every experiment onto a uniform grid at ``rate`` Hz: inputs by zero-order hold, the rest
-    by linear interpolation; gaps longer than ``gap`` s split the experiment."""
+    by linear interpolation (angles unwrapped, :func:`unwrap_finite`, and left so); gaps longer
+    than ``gap`` s split the experiment."""
     held = set(input_columns(log))
     numeric = [
         c
@@ -139,6 +140,8 @@ def resample_log(
                 y = part[col].to_numpy(np.float64)[seg]
                 if col in held:
                     out[col] = y[np.clip(np.searchsorted(ts, grid, "right") - 1, 0, None)]
+                elif col in ANGLES:  # a step across ±π was interpolated through zero
+                    out[col] = np.interp(grid, ts, unwrap_finite(y))
                 else:
                     out[col] = np.interp(grid, ts, y)
             frame = pd.DataFrame(out)
@@ -180,8 +183,20 @@ def resample_log(
 RESAMPLE_RATIO = 2.0
 
 
+def unwrap_finite(angle: np.ndarray) -> np.ndarray:
+    """``np.unwrap`` over the finite samples of ``angle`` only: an empty cell (a gap,
+    :mod:`nnid.datasets.gaps`) stays empty, where ``np.unwrap`` carried it into every later
+    sample of the run."""
+    angle = np.asarray(angle, dtype=np.float64)
+    ok = np.isfinite(angle)
+    out = angle.copy()
+    out[ok] = np.unwrap(angle[ok])
+    return out
+
+
 def unwrap_angles(log: pd.DataFrame, report: CleaningReport | None = None) -> pd.DataFrame:
-    """Unwrap φ, θ, ψ within each experiment (readers may deliver them wrapped at ±π)."""
+    """Unwrap φ, θ, ψ within each experiment (readers may deliver them wrapped at ±π); an
+    empty cell stays a gap (:func:`unwrap_finite`)."""
     out = log.copy()
     for col in ANGLES:
         if col not in out:
@@ -189,7 +204,7 @@ def unwrap_angles(log: pd.DataFrame, report: CleaningReport | None = None) -> pd
         changed = 0
         for _, idx in experiments(out):
             raw = out.loc[idx, col].to_numpy(np.float64)
-            unwrapped = np.unwrap(raw)
+            unwrapped = unwrap_finite(raw)
             changed += int(np.sum(np.abs(unwrapped - raw) > 1e-12))
             out.loc[idx, col] = unwrapped
         if report is not None and changed:

@@ -33,6 +33,7 @@ from nnid.datasets.log import (
     validate_log,
 )
 from nnid.datasets.mapping import file_label, label_columns, map_source
+from nnid.datasets.preprocess import unwrap_finite
 from nnid.datasets.rosbag import is_bag, read_bag_sources
 from nnid.errors import NnidInputError
 
@@ -167,7 +168,7 @@ def _resample(
             # carried one NaN into every later sample of the run
             ok = np.isfinite(values[:, k])
             if ok.any():
-                v = np.unwrap(values[ok, k]) if wrap[k] else values[ok, k]
+                v = unwrap_finite(values[:, k])[ok] if wrap[k] else values[ok, k]
                 out[:, k] = np.interp(grid, t_src[ok], v)
             if not ok.all():
                 out[~_bridged(grid, t_src[ok], SILENCE * typical), k] = np.nan

@@ -30,6 +30,7 @@ from nnid.datasets.arrays import beyond_range_message, check_commands, command_l
 from nnid.datasets.log import (
     ANGLES,
     POSE,
+    RADIAN_LIMIT,
     SI_BOUNDS,
     VELOCITY,
     degrees_error,
@@ -297,7 +298,7 @@ def follow_csv(
         if i is not None
     ]
     last_t = -np.inf
-    unchecked = [a for a in ANGLES if a in col]  # looked at once, when past 2π
+    unchecked = [a for a in ANGLES if a in col]  # looked at once, when past RADIAN_LIMIT
     limits = command_limits(monitor.plant_.vehicle)  # the whole-log detect refuses beyond them
     for n, row in enumerate(rows):  # n: the data row from 0, as the whole-log reader counts
         values = _numbers(row, read, n, where, len(header))
@@ -309,7 +310,7 @@ def follow_csv(
                     field=name,
                     row=n,
                 )
-        for angle in [a for a in unchecked if abs(values[a]) > 2 * np.pi + 1e-6]:
+        for angle in [a for a in unchecked if abs(values[a]) > RADIAN_LIMIT[a] + 1e-6]:
             unchecked.remove(angle)  # the rows so far and this one, as the whole log is read
             runs = [*(names[c] for c in codes), row[exp_col] if exp_col is not None else ""]
             state = [*xs, [values.get(c, 0.0) for c in STATE]]
