@@ -459,14 +459,20 @@ def noise_ratio(monitor, e: np.ndarray) -> float:
     return float(np.sum((e @ monitor.whiten_.T) ** 2)) / max(e.shape[0] * dim, 1.0)
 
 
+def model_error(baseline: float) -> float:
+    """The power of the model's error, in units of the healthy noise power, in a residual whose
+    noise ratio is ``baseline``: :data:`UNEXPLAINED_SHARE` of its excess over the noise (the
+    model's error grows with the fault)."""
+    return UNEXPLAINED_SHARE * (baseline - 1.0)
+
+
 def allowed_ratio(baseline: float) -> float:
     """The most a named hypothesis may leave (its :func:`noise_ratio`) of a residual whose
-    noise ratio is ``baseline``: :data:`UNEXPLAINED_RATIO`, or where more,
-    :data:`UNEXPLAINED_SHARE` of the baseline's excess over the noise (the model's error grows
-    with the fault). The one rule of isolation, of a later alarm explained by the changes
+    noise ratio is ``baseline``: :data:`UNEXPLAINED_RATIO`, or where more, the noise and
+    :func:`model_error`. The one rule of isolation, of a later alarm explained by the changes
     taken out, and of a change that ended or changed size; each caller names its baseline
     (1, the healthy noise, where no fault is left: no share)."""
-    return max(UNEXPLAINED_RATIO, 1.0 + UNEXPLAINED_SHARE * (baseline - 1.0))
+    return max(UNEXPLAINED_RATIO, 1.0 + model_error(baseline))
 
 
 def _unexplained(out: Diagnosis, monitor, e: np.ndarray, post: np.ndarray) -> bool:
