@@ -49,7 +49,7 @@ from nnid.datasets.arrays import nominal_forces
 from nnid.datasets.log import POSE, VELOCITY
 from nnid.datasets.preprocess import check_uniform, experiments, first_order_lag
 from nnid.datasets.segmentation import label_transients
-from nnid.errors import NnidInputError
+from nnid.errors import NnidInputError, checked_number
 from nnid.evaluation.prediction import (
     MAX_STEP,
     Replay,
@@ -525,14 +525,26 @@ class HybridModel(FossenPlant):
             )
         else:
             self.method_ = self.method
-        if any(int(h) < 1 for h in self.hidden):
-            raise NnidInputError("hidden: widths of at least 1", field="hidden")
-        if any(t <= 0 for t in self.memory):
-            raise NnidInputError("memory: positive time constants (s)", field="memory")
-        if self.force_penalty < 0 or self.prior <= 0 or self.prior_weight < 0:
+        for name in ("hidden", "memory", "segments"):
+            if isinstance(getattr(self, name), str | bytes) or not np.iterable(getattr(self, name)):
+                raise NnidInputError(f"{name} is a list of numbers", field=name)
+        for h in self.hidden:
+            checked_number(h, "hidden", 1, strict=False, integer=True)
+        for t in self.memory:
+            checked_number(t, "memory")  # time constants (s)
+        for s in self.segments:
+            checked_number(s, "segments")  # lengths (s)
+        if self.validation_window is not None:
+            checked_number(self.validation_window, "validation_window")
+        checked_number(self.force_penalty, "force_penalty", strict=False)
+        checked_number(self.prior, "prior")
+        checked_number(self.prior_weight, "prior_weight", strict=False)
+        checked_number(self.batch_segments, "batch_segments", 1, strict=False, integer=True)
+        checked_number(self.seed, "seed", strict=False, integer=True)
+        if self.trainer is not None and not callable(getattr(self.trainer, "fit", None)):
             raise NnidInputError(
-                "force_penalty ≥ 0, prior > 0 and prior_weight ≥ 0 are required",
-                field="force_penalty",
+                f"trainer is an optimiser (Adam, LevenbergMarquardt), not {self.trainer!r}",
+                field="trainer",
             )
 
     def _physics_model(self) -> ParametricModel:

@@ -18,6 +18,7 @@ from typing import Any, Literal
 import torch
 from sklearn.base import BaseEstimator
 
+from nnid.errors import checked_number
 from nnid.trainers.history import History, Progress, silent, stopping_score
 
 Residual = Callable[[dict[str, torch.Tensor], Any], torch.Tensor]
@@ -94,6 +95,9 @@ class Adam(BaseEstimator):
         batches of an epoch, for resampling); stop early on ``val_batches``. ``progress(epoch,
         max_epochs, message)`` is called after every epoch; ``extra["lr"]`` holds the rate each
         epoch trained with."""
+        checked_number(self.lr, "lr")  # torch refused a NaN with its own error, ran 0 idle
+        checked_number(self.max_epochs, "max_epochs", strict=False, integer=True)
+        checked_number(self.max_fail, "max_fail", 1, strict=False, integer=True)
         start = time.perf_counter()
         report = progress or silent
         params = {k: p for k, p in module.named_parameters() if p.requires_grad}

@@ -155,7 +155,8 @@ class MultipleShooting(BaseEstimator):
             (small networks: its Jacobian has one column per weight).
         batch_segments: segments per optimiser step (Adam) or per Jacobian batch (LM).
         balance: weigh transient and steady-state segments equally.
-        validation_window: seconds per held-out free-run window (None: whole experiments).
+        validation_window: seconds per held-out free-run window (None: whole experiments; a
+            run shorter than a window is flown whole).
         seed: seeds the draws of segments.
     """
 
@@ -207,11 +208,19 @@ class MultipleShooting(BaseEstimator):
         longest = max(len(r) for r in runs) - 1
         val_batches = None
         if validation:
-            shortest = min(len(r) for r in validation) - 1
-            val_len = self.steps(self.validation_window, dt, shortest, "validation_window")
-            if val_len >= 1:
-                where = cut_segments(validation, val_len)
-                val_batches = [make_batch(validation, where, val_len, train=False)]
+            # each run in windows of validation_window, a run shorter than one whole: the
+            # shortest run set every run's window (a 2-s run made the 5-s windows 2-s ones)
+            longest_val = max(len(r) for r in validation) - 1
+            val_len = self.steps(self.validation_window, dt, longest_val, "validation_window")
+            by_length: dict[int, list[tuple[int, int]]] = {}
+            for j, run in enumerate(validation):
+                n = min(val_len, len(run) - 1)
+                if n >= 1:
+                    by_length.setdefault(n, []).extend((j, s) for _, s in cut_segments([run], n))
+            val_batches = [
+                make_batch(validation, where, n, train=False)
+                for n, where in sorted(by_length.items(), reverse=True)
+            ] or None
         histories = []
         for i, seconds in enumerate(self.segments):
             length = self.steps(seconds, dt, longest)

@@ -1,0 +1,88 @@
+"""The hybrid's settings given in Python (the config checks its own) and the held-out
+windows its early stopping flies."""
+
+from __future__ import annotations
+
+from importlib import resources
+from types import SimpleNamespace
+from typing import ClassVar
+
+import numpy as np
+import pytest
+import torch
+
+from nnid.errors import NnidInputError
+from nnid.loop.scenarios import effect_log
+from nnid.models.hybrid import HybridModel
+from nnid.trainers.adam import Adam
+from nnid.trainers.history import History
+from nnid.trainers.neural_ode import MultipleShooting, Run
+from nnid.vehicle import load_vehicle
+
+MINIROV = str(resources.files("nnid.demo_data").joinpath("minirov.toml"))
+NAN = float("nan")
+
+
+@pytest.fixture(scope="module")
+def short_log():
+    return effect_log(load_vehicle(MINIROV), duration=20.0, n_experiments=2, seed=5)
+
+
+@pytest.mark.parametrize(
+    ("field", "settings"),
+    [
+        ("hidden", {"hidden": (NAN,)}),  # int(nan): a bare ValueError
+        ("hidden", {"hidden": (1.5,)}),  # trained one unit wide
+        ("hidden", {"hidden": 8}),  # 'int' object is not iterable
+        ("memory", {"memory": (NAN,)}),  # trained to a non-finite loss
+        ("force_penalty", {"force_penalty": NAN}),
+        ("prior", {"prior": NAN}),
+        ("prior_weight", {"prior_weight": -1.0}),  # was named force_penalty
+        ("segments", {"segments": (NAN,)}),  # round(nan): a bare ValueError
+        ("segments", {"segments": (float("inf"),)}),
+        ("validation_window", {"validation_window": NAN}),
+        ("batch_segments", {"batch_segments": 0}),  # trained in batches of one
+        ("seed", {"seed": -1}),  # numpy's bare ValueError
+        ("trainer", {"trainer": "sgd"}),  # AttributeError
+        ("lr", {"trainer": Adam(lr=NAN)}),  # torch's "Invalid learning rate"
+        ("lr", {"trainer": Adam(lr=0.0)}),  # ran its epochs without moving
+        ("max_epochs", {"trainer": Adam(max_epochs=-1)}),  # no epoch, said "max_epochs"
+        ("max_fail", {"trainer": Adam(max_fail=0)}),  # stopped after one epoch
+    ],
+)
+def test_a_bad_setting_is_one_error_naming_its_field(short_log, field, settings):
+    settings = {"trainer": Adam(max_epochs=1), "segments": (0.5,), "hidden": (4,), **settings}
+    first = short_log["experiment"] == short_log["experiment"].iloc[0]
+    model = HybridModel(load_vehicle(MINIROV), **settings)
+    with pytest.raises(NnidInputError, match=rf"^field '{field}': "):
+        model.fit(short_log[first], short_log[~first])
+
+
+class _Recorder:
+    """An optimiser that records the held-out windows it is given and trains nothing."""
+
+    kind = "adam"
+    seen: ClassVar[list[list[tuple[int, int]]]] = []
+
+    def fit(self, module, loss, batches, val_batches, progress=None) -> History:
+        _Recorder.seen.append([tuple(b.inputs.shape[:2]) for b in val_batches or []])
+        return History()
+
+
+def _run(n: int) -> Run:
+    return Run(torch.zeros(n, 12), torch.zeros(n, 6), torch.zeros(n, 1), np.zeros(n, bool))
+
+
+@pytest.mark.parametrize(
+    ("window", "expected"),
+    [(5.0, [(2, 100), (1, 40)]), (None, [(1, 199), (1, 40)])],  # [segments, steps] per batch
+)
+def test_a_short_validation_run_leaves_the_other_runs_windows_whole(window, expected):
+    """A 41-sample validation run beside a 200-sample one: the longer one is still flown in
+    windows of validation_window (5 s = 100 samples), or whole; the shortest run set every
+    run's window (40 steps: early stopping judged 2-s free runs where 5-s ones were asked)."""
+    _Recorder.seen.clear()
+    trainer = MultipleShooting(segments=(0.5,), optimizer=_Recorder(), validation_window=window)
+    problem = SimpleNamespace(module=torch.nn.Linear(1, 1))
+    trainer.fit(problem, [_run(200)], 0.05, [_run(200), _run(41)])
+    assert _Recorder.seen == [expected]
