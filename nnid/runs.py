@@ -256,7 +256,16 @@ def compare_run(
 # -- loop ----------------------------------------------------------------------------------------
 
 #: loop settings a config (or an option) sets: an error about one names the config
-LOOP_SETTINGS = ("validation", "dofs", "alpha", "max_effects", "warmup_s", "gate_horizon_s")
+LOOP_SETTINGS = (
+    "validation",
+    "validation_fraction",
+    "filter_lambda",
+    "dofs",
+    "alpha",
+    "max_effects",
+    "warmup_s",
+    "gate_horizon_s",
+)
 
 
 def names(text: str | None, option: str = "") -> list[str]:

@@ -709,3 +709,57 @@ def test_the_total_line_says_a_diverged_one_step_score():
     result.update(added=[], steps=[{"added": None, "top": [], "gate": "one step"}])
     (line, _) = summary(result)
     assert "(held-out one-step NRMSE diverged; the baseline's held-out free run" in line
+
+
+def test_the_relative_force_error_has_one_yardstick_before_and_after():
+    """The total force residual is each DOF's RMS over the RMS of its input force. After an
+    added deadband that yardstick was the force past the deadband, smaller than the one
+    'before' was divided by: the after total read 0.197 where the same yardstick gives 0.133.
+    Both are measured against the force the vehicle file gives."""
+    from nnid.physics.dofs import DOFS
+
+    veh = load_vehicle("seamor")
+    log = effect_log(
+        veh, [("thruster_deadband", 3.0)], duration=300, dt=0.05, seed=11, measurement=DVL
+    )
+    loop = ResidualLoop(veh, max_effects=1).fit(log)
+    assert loop.added == ["thruster_deadband"]
+    tau = loop.workspace_.arrays(veh, "val")["tau"]
+    for errors in (loop.before_, loop.after_):
+        force = errors["force_rmse"]
+        ratios = [
+            force[d] / np.sqrt(np.mean(tau[:, i] ** 2))
+            for i, d in enumerate(DOFS)
+            if d in loop.dofs_ and np.any(tau[:, i])
+        ]
+        assert force["total"] == pytest.approx(np.mean(ratios), rel=1e-9)
+
+
+@pytest.mark.parametrize(
+    ("settings", "field", "says"),
+    [
+        # a loop config's 'validation' names held-out runs; the share is validation_fraction
+        ("validation_fraction = 0.999\nwarmup_s = 0.5", "validation_fraction", "less than 0.999"),
+        ("validation_fraction = 0.01", "warmup_s", "hold out more than 0.01 (validation_fraction)"),
+        ("filter_lambda = 1e-9", "filter_lambda", "give filter_lambda above"),
+    ],
+)
+def test_cli_loop_config_settings_are_named_as_the_config_names_them(
+    tmp_path, settings, field, says
+):
+    """A held-out share too large for the training part was said as field 'validation' (in a
+    loop config, the list of held-out runs) and one too small for a scored second named only
+    the warm-up; a filter too slow was blamed on the log, not on the config that set it."""
+    from typer.testing import CliRunner
+
+    from nnid.cli import app
+
+    data = str(resources.files("nnid.demo_data").joinpath("demo_minirov_heave.parquet"))
+    vehicle = str(resources.files("nnid.demo_data").joinpath("minirov.toml"))
+    config = tmp_path / "loop.toml"
+    config.write_text(f'kind = "loop"\n{settings}\n')
+    args = ["loop", str(config), "--data", data, "--vehicle", vehicle, "--out"]
+    res = CliRunner().invoke(app, [*args, str(tmp_path / "o")])
+    assert res.exit_code == 2, res.output
+    assert f"{config}, field '{field}'" in res.output, res.output
+    assert says in res.output, res.output

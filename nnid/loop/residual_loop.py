@@ -259,19 +259,33 @@ class ResidualLoop:
             float(part["t"].iloc[-1] - part["t"].iloc[0])
             for _, part in val.groupby("experiment", sort=False)
         ] if "experiment" in val else [float(val["t"].iloc[-1] - val["t"].iloc[0])]  # fmt: skip
+        # the held-out share is the 'validation' argument here, but 'validation_fraction' in a
+        # loop config, where 'validation' (and --validation) names the held-out runs
+        named = bool(self.validation_experiments)
         if max(durations, default=0.0) <= self.warmup_s + FALLBACK_S:
             raise NnidInputError(
                 f"the longest held-out run is {max(durations, default=0.0):.3g} s: no longer "
                 f"than the warm-up ({self.warmup_s:g} s) plus {FALLBACK_S:g} s to score; give a "
-                "longer log or more experiments, or a shorter warmup_s",
+                "longer log or more experiments, "
+                + (
+                    "hold out longer runs (validation)"
+                    if named
+                    else f"hold out more than {self.validation:g} (validation_fraction)"
+                )
+                + ", or a shorter warmup_s",
                 field="warmup_s",
             )
         if len(train) * len(self.dofs_) < 10 * max(unknowns, 1):
             raise NnidInputError(
                 f"{len(train)} training samples for {unknowns} damping coefficients in "
                 f"{len(self.dofs_)} DOFs: fewer than ten equations per coefficient; give a "
-                "longer log or hold out less (validation)",
-                field="validation",
+                "longer log or hold out "
+                + (
+                    "fewer runs (validation)"
+                    if named
+                    else f"less than {self.validation:g} (validation_fraction)"
+                ),
+                field="validation" if named else "validation_fraction",
             )
 
     def _say_short_held_out(self, val: pd.DataFrame, tau_corr: float) -> None:
@@ -454,7 +468,9 @@ class ResidualLoop:
             scores, diverged = velocity_scores(fit.vehicle, val, mode, self.warmup_s, dofs)
             errors[MODE_KEYS[name]] = scores
             errors[diverged_key(name)] = diverged
-        errors["force_rmse"] = force_rmse(r, ws.arrays(fit.vehicle, "val")["tau"], dofs)
+        # relative to the force the vehicle file gives, before and after alike: the fit's own
+        # (through an added deadband or lag) moved the total's yardstick with the effect
+        errors["force_rmse"] = force_rmse(r, ws.arrays(self.vehicle, "val")["tau"], dofs)
         tau = nominal_forces(val, fit.vehicle)
         inputs = {f"tau_{f}": tau[:, i] for i, f in enumerate(FORCES) if np.any(tau[:, i])}
         exp = ws.data_val["experiment"]
