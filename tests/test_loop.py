@@ -763,3 +763,35 @@ def test_cli_loop_config_settings_are_named_as_the_config_names_them(
     assert res.exit_code == 2, res.output
     assert f"{config}, field '{field}'" in res.output, res.output
     assert says in res.output, res.output
+
+
+@pytest.mark.parametrize("reach", [0.05, None])
+def test_a_searched_size_at_the_edge_of_its_range_is_a_bound_not_a_measurement(monkeypatch, reach):
+    """A 0.15 m/s current searched only up to 0.05 m/s (a vehicle holding station in it moves
+    slowly, and the current's range is twice the fastest speed logged): the loop added it as
+    0.050 ± 0.002 m/s, a confident size 50 standard errors from the truth. At the edge of
+    the range the size is said to be a bound, with no standard error; within it nothing
+    changes."""
+    import nnid.loop.effects as effects
+    from nnid.reports.loop_report import effect_sentence
+
+    if reach is not None:
+        monkeypatch.setattr(effects, "MAX_CURRENT", reach)
+    veh = load_vehicle(MINIROV)
+    meas = Measurement(kind="dvl_imu", velocity_noise=0.005)
+    log = effect_log(
+        veh, [("current.y", 0.15)], duration=300, dt=0.05, speed=0.4, seed=11, measurement=meas
+    )
+    loop = ResidualLoop(veh, max_effects=1).fit(log)
+    assert loop.added == ["current.y"]
+    added = loop.as_dict()["steps"][0]["added"]
+    said = [w for w in loop.warnings_ if "lies at" in w]
+    if reach is None:  # found within its range, measured
+        assert added["edge"] is None and not said
+        assert added["params"]["value"] == pytest.approx(0.15, abs=3 * added["stderr"]["value"])
+        return
+    assert added["params"]["value"] == pytest.approx(reach, rel=0.01)
+    assert added["edge"].startswith("the upper edge of the range searched")
+    assert added["stderr"]["value"] is None and added["percentile_error"] is None
+    assert len(said) == 1 and said[0].startswith("current.y = 0.04996 lies at the upper edge")
+    assert "the true size may lie beyond it, and is not measured" in effect_sentence(added)

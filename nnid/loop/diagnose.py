@@ -91,6 +91,9 @@ class Scored:
     shift: np.ndarray | None = None  # A⁻¹ b: how the fit's unknowns move with θ
     residual: np.ndarray | None = None  # training residual after (nonlinear candidates)
     aliases: list[str] = field(default_factory=list)  # the same column on this log
+    # where a 1-D search's best value lies at the edge of its range (or the search ran out of
+    # evaluations): the size is a bound there, not a measurement, and is said so
+    edge: str = ""
 
     @property
     def name(self) -> str:
@@ -101,12 +104,16 @@ class Scored:
             "effect": self.name,
             "meaning": self.candidate.meaning,
             "params": {"value": self.value},
-            "stderr": {"value": self.stderr if np.isfinite(self.stderr) else None},
+            # at a search's edge the linearised s.e. measures nothing of the true size
+            "stderr": {
+                "value": self.stderr if np.isfinite(self.stderr) and not self.edge else None
+            },
             "significance": self.p_value,
             "f_statistic": self.f_stat,
             "percentile_error": self.percentile_error
-            if np.isfinite(self.percentile_error)
+            if np.isfinite(self.percentile_error) and not self.edge
             else None,
+            "edge": self.edge or None,
             "improvement": self.improvement,
             "improvement_per_dof": self.dof_improvement,
             "gate_nrmse": None
@@ -440,6 +447,15 @@ def search_nonlinear(
             options={"xatol": 1e-3 * (hi - lo), "maxiter": 30},
         )
     value = float(res.x)
+    tol = 2e-3 * (hi - lo)  # twice the search's xatol
+    edge = (
+        f"the search ran out of its {res.nfev} evaluations"
+        if not res.success
+        else f"the {'upper' if value > (lo + hi) / 2 else 'lower'} edge of the range searched "
+        f"({lo:.4g} to {hi:.4g})"
+        if min(value - lo, hi - value) <= tol
+        else ""
+    )
     best = refit(ws, model_at(value), fit.unknowns)
     if not best.rss < fit.rss:
         return None
@@ -477,6 +493,7 @@ def search_nonlinear(
         drss=float(drss),
         sigma2=float(sigma2),
         residual=best.e,
+        edge=edge,
     )
 
 

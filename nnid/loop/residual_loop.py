@@ -445,6 +445,12 @@ class ResidualLoop:
 
     def _augment(self, ws: Workspace, fit: Fit, s: Scored) -> Fit:
         """Add the effect, make its parameter an unknown (linear ones), refit everything."""
+        if s.edge:  # added, since the model with it is measured better; its size is a bound
+            warnings.warn(
+                f"{s.name} = {s.value:.4g} lies at {s.edge}: the true size may lie beyond it, "
+                "and is not measured (no standard error is reported)",
+                stacklevel=2,
+            )
         vehicle = vehicle_with(fit.vehicle, s.refit)
         vehicle = s.candidate.augment(vehicle, s.value)
         unknowns = list(fit.unknowns)

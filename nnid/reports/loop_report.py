@@ -62,6 +62,13 @@ def effect_sentence(candidate: dict) -> str:
 
 
 def _effect_words(candidate: dict) -> str:
+    words = _size_words(candidate)
+    if candidate.get("edge"):  # a bound, not a measurement
+        words += f" (at {candidate['edge']}: the true size may lie beyond it, and is not measured)"
+    return words
+
+
+def _size_words(candidate: dict) -> str:
     name, value = candidate["effect"], candidate["params"]["value"]
     se = candidate["stderr"]["value"]
     kind, args = parse_effect(name)
