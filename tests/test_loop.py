@@ -795,3 +795,23 @@ def test_a_searched_size_at_the_edge_of_its_range_is_a_bound_not_a_measurement(m
     assert added["stderr"]["value"] is None and added["percentile_error"] is None
     assert len(said) == 1 and said[0].startswith("current.y = 0.04996 lies at the upper edge")
     assert "the true size may lie beyond it, and is not measured" in effect_sentence(added)
+
+
+def test_a_damping_candidate_with_the_sign_of_a_thrust_is_not_physical():
+    """On a 4 N buoyancy offset, linear_damping.w = +31 passed every test ("passes the
+    tests; ranked below the one added"): a diagonal damping that pushes the vehicle along its
+    own speed gains energy, and only the ranking kept it out of the model."""
+    from nnid.loop.residual_loop import thrust_signed
+
+    veh = load_vehicle("seamor")
+    meas = Measurement(kind="dvl_imu", velocity_noise=0.005)
+    log = effect_log(
+        veh, [("buoyancy_offset", 4.0)], duration=300, dt=0.05, speed=0.4, seed=11,
+        measurement=meas,
+    )  # fmt: skip
+    loop = ResidualLoop(veh, max_effects=1).fit(log)
+    assert loop.added == ["buoyancy_offset"]
+    signed = [s for s in loop.steps_[0].ranked if thrust_signed(s.candidate.parameter, s.value)]
+    assert signed, "no thrust-signed damping candidate on this log: the test tests nothing"
+    assert not [s.name for s in signed if s.admissible]
+    assert [s.name for s in signed if s.reason.startswith("not physical")]

@@ -434,6 +434,11 @@ class ResidualLoop:
                 f"held-out residual falls by {100 * best_dof:.1f} % at most "
                 f"(< {100 * self.min_improvement:.0f} %)"
             )
+        elif thrust_signed(s.candidate.parameter, s.value):  # a model with it gains energy
+            s.reason = (
+                f"not physical: {s.candidate.parameter} = {s.value:.3g} has the sign of a "
+                "thrust, not of a drag"
+            )
         else:
             try:
                 s.candidate.augment(fit.vehicle, s.value)
@@ -637,15 +642,22 @@ class ResidualLoop:
 UNJUDGED = "the held-out simulation diverges even one step ahead: nothing to compare"
 
 
+def thrust_signed(key: str | None, value: float) -> bool:
+    """Whether ``key`` (``"Z:w"``, ``"Z:w*abs(w)"``) is a diagonal damping coefficient and
+    ``value`` gives it the sign of a thrust: D(ν) dissipates only with these negative (the
+    force opposes the DOF's own speed; Weiss eq. 45, D(ν)ν = −τ_D(ν))."""
+    force, _, term = (key or "").partition(":")
+    dof = DOFS[FORCES.index(force)] if force in FORCES else None
+    return dof is not None and term in (dof, f"{dof}*abs({dof})") and value > 0
+
+
 def _warn_unphysical_damping(fit: Fit, widen: float) -> None:
     """A refitted diagonal damping coefficient with the sign of a thrust: said, since a model
     with it gains energy in free run (the log does not determine that coefficient). Its s.e.
     widened by ``widen`` (√ of the residual's correlation time), as loop.json gives it (the
     warning said ± 3.8 where loop.json said ± 84)."""
     for key, value, se in zip(fit.unknowns, fit.theta, fit.stderr * widen, strict=True):
-        force, _, term = key.partition(":")
-        dof = DOFS[FORCES.index(force)] if force in FORCES else None
-        if term in (dof, f"{dof}*abs({dof})") and value > 0:
+        if thrust_signed(key, value):
             warnings.warn(
                 f"the baseline's refitted {key} = {value:.3g} ± {se:.2g} has the sign of a "
                 "thrust, not of a drag: the log does not determine it (weak or one-sided "
