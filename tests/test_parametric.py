@@ -726,3 +726,26 @@ def test_least_squares_recovers_asymmetric_installation_through_a_lag(lagged_sur
     pred = model.predict(log)
     err = (pred["u"] - log["u"]).to_numpy()
     assert np.nanmax(np.abs(err)) < 1e-3 * float(log["u"].std())
+
+
+@pytest.mark.parametrize(("lam", "refused"), [(39.0, False), (40.0, True), (1e5, True)])
+def test_a_filter_faster_than_the_sampling_is_refused(lam, refused):
+    """F(s) = λ/(s + λ) discretised by the bilinear transform has its pole at (1 − c)/(1 + c),
+    c = λ dt/2: from c = 1 on (40 rad/s at 20 Hz) an alternating filter, not a low-pass. At
+    λ = 1e5 the residual loop found no effect on the demo log, silently; the fit is refused,
+    naming filter_lambda and the largest λ the sampling allows."""
+    from importlib import resources
+
+    from nnid.errors import NnidInputError
+
+    root = resources.files("nnid.demo_data")
+    log = pd.read_parquet(root.joinpath("demo_minirov_heave.parquet"))
+    log = log[log["experiment"].isin(["run0", "run1"])]
+    veh = load_vehicle(str(root.joinpath("minirov.toml")))
+    model = ParametricModel(veh, ["damping"], trainer=LeastSquares(filter_lambda=lam))
+    if not refused:
+        assert np.isfinite(model.fit(log).params["Z:w"]["value"])
+        return
+    with pytest.raises(NnidInputError, match=r"give filter_lambda below 40 rad/s") as err:
+        model.fit(log)
+    assert err.value.field == "filter_lambda"

@@ -268,12 +268,24 @@ class ParametricFossen:
 
 def filter_signal(data: dict[str, np.ndarray], x: np.ndarray, lam: float, derivative: bool = False):
     """F(s) = λ/(s + λ) (or s F(s) for the derivative) per experiment, discretised by the
-    bilinear transform so that the two stay consistent; started in steady state."""
+    bilinear transform so that the two stay consistent; started in steady state. A filter too
+    fast for the sampling is refused: with c = λ dt/2 ≥ 1 the pole (1 − c)/(1 + c) is at or
+    below 0, an alternating filter that amplifies the highest frequencies, not a low-pass
+    (λ = 1e5 rad/s on the demo's 20-Hz log found no effect where λ = 1 finds its heave
+    thrust)."""
     out = np.empty_like(x)
     for k in np.unique(data["experiment"]):
         idx = np.flatnonzero(data["experiment"] == k)
         dt = float(np.median(np.diff(data["t"][idx]))) if idx.size > 1 else 1.0
         c = lam * dt / 2.0
+        if idx.size > 1 and c >= 1.0:
+            raise NnidInputError(
+                f"filter_lambda = {lam:g} rad/s with samples every {dt:.4g} s (experiment "
+                f"{k}): λ dt/2 = {c:.3g} ≥ 1 turns the discretised filter into an alternating "
+                f"one, not a low-pass; give filter_lambda below {2.0 / dt:.3g} rad/s (a few "
+                "rad/s is the usual choice)",
+                field="filter_lambda",
+            )
         a = np.array([1.0 + c, -(1.0 - c)])
         b = lam * np.array([1.0, -1.0]) if derivative else np.array([c, c])
         zi = lfilter_zi(b, a)
