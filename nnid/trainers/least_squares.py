@@ -4,8 +4,10 @@
 deviations, and Caccia's percentile error 100 σ̂/|θ̂|: above 51.02 % (= 100/1.96) a parameter is
 insignificant at 95 % (a two-sided z-test of θ = 0). Weighted least squares takes row weights;
 ``feasible`` weights each DOF's equation by the inverse of its residual variance from a first
-ordinary fit, so forces (N) and moments (N m) are combined on equal statistical footing.
-Rank-deficient or unexcited regressions warn and name the parameters (Weiss eqs 95-98).
+ordinary fit, so forces (N) and moments (N m) are combined on equal statistical footing;
+``none`` over several DOF equations keeps the ordinary estimate and takes its covariance from
+each equation's own residual variance (a sandwich, :func:`dof_sandwich`). Rank-deficient or
+unexcited regressions warn and name the parameters (Weiss eqs 95-98).
 """
 
 from __future__ import annotations
@@ -229,14 +231,18 @@ class LeastSquares(BaseEstimator):
                 est = solve_least_squares(reg.phi, reg.y, w, reg.names)
             dof_sigma2 = self._dof_variances(reg, est.theta)
         est.dof_sigma2 = dof_sigma2
-        if self.weighting == "none" and len(reg.dofs) > 1:
+        if self.weighting == "none" and len(reg.dofs) > 1 and np.isfinite(est.sigma2):
             # ordinary least squares of several DOF equations: σ̂² (ΦᵀΦ)⁻¹ pools forces (N) and
             # moments (N m) into one variance, which on a surge-yaw log made the yaw
-            # parameters' s.e. 20x their spread; each equation's own variance instead
+            # parameters' s.e. 20x their spread; each equation's own variance instead (none
+            # where no residual degree of freedom is left: the fit passes through every row)
             live = np.isfinite(est.theta)
             cov = np.full_like(est.cov, np.nan)
             cov[np.ix_(live, live)] = dof_sandwich(
-                reg.phi[:, live], reg.y - reg.phi[:, live] @ est.theta[live], len(reg.dofs)
+                reg.phi[:, live],
+                reg.y - reg.phi[:, live] @ est.theta[live],
+                len(reg.dofs),
+                reg.y,
             )
             est.cov = void_undetermined(cov, reg.names, est.excitation)
         if self.correlated:
@@ -258,14 +264,20 @@ def dof_variances(residuals: Sequence[np.ndarray] | np.ndarray) -> np.ndarray:
     return np.asarray([float(np.nanvar(np.asarray(r, dtype=np.float64))) for r in series])
 
 
-def dof_sandwich(phi: np.ndarray, r: np.ndarray, m: int) -> np.ndarray:
+def dof_sandwich(phi: np.ndarray, r: np.ndarray, m: int, y: np.ndarray | None = None) -> np.ndarray:
     """Covariance of the *unweighted* least squares of ``m`` interleaved DOF equations (row
     i is equation i mod m): the sandwich (ΦᵀΦ)⁻¹ Φᵀ Σ Φ (ΦᵀΦ)⁻¹ with Σ each equation's own
     residual variance (:func:`dof_variances`, times n/(n − p)), since forces (N) and moments
     (N m) do not share one σ̂² (Caccia eq. 12 per equation). Rows with a non-finite residual or
-    regressor count as absent."""
+    regressor count as absent. Given the targets ``y``, each variance is floored at a few ulps
+    of its equation's mean square, as :func:`solve_least_squares` floors the RSS: on exact data
+    the residual is rounding, and a parameter of 1e-16 read as significant."""
     ok = np.isfinite(r) & np.isfinite(phi).all(1)
     var = dof_variances(np.where(ok, r, np.nan).reshape(-1, m))
+    if y is not None:
+        square = np.where(ok, y, 0.0).reshape(-1, m) ** 2
+        rows = np.maximum(ok.reshape(-1, m).sum(0), 1)
+        var = np.fmax(var, 4 * np.finfo(np.float64).eps * square.sum(0) / rows)
     phi = np.where(ok[:, None], phi, 0.0)
     n = int(ok.sum())
     spread = np.tile(np.where(var > 0, var, 0.0), r.size // m) * ok * n / max(n - phi.shape[1], 1)
