@@ -981,6 +981,9 @@ def run_compare(
         "train": [e["experiment"] for e in split.record["parts"]["train"]],
         "validation": [e["experiment"] for e in split.record["parts"]["validation"]],
         "test": [e["experiment"] for e in split.record["parts"]["test"]],
+        # "block": each part a block of every run above (fractions), not whole runs
+        "split_by": split.record["by"],
+        "fractions": split.record["fractions"],
         "autopilot_replay": replay is not None,
         "summary": summary(rows, ranking, held_name, replay is not None)
         + _masked_note(inputs.report, rows, ranking, held_name, len(held)),

@@ -551,3 +551,31 @@ def test_comparison_coefficients_keep_their_standard_errors():
     assert coefs == params
     assert COEFFICIENT_HEAD[-1] == "std. error"
     assert coefficient_rows(coefs) == [["X:u", "-3.25", "0.12"], ["Z:w", "-30", "-"]]
+
+
+def test_a_log_without_an_experiment_column_is_compared_by_blocks(tmp_path):
+    """A log with no experiment column split by blocks: every model was fitted, then the
+    report crashed joining the parts' run names (None) into its data sentence, exit 1 and no
+    report. Now one run, "the log", each part a block of it."""
+    from importlib import resources
+
+    root = resources.files("nnid.demo_data")
+    log = pd.read_parquet(root.joinpath("demo_minirov_heave.parquet"))
+    data = tmp_path / "one_run.csv"
+    log[log["experiment"] == "run0"].drop(columns="experiment").to_csv(data, index=False)
+    config = tmp_path / "blocks.toml"
+    config.write_text(
+        'kind = "compare"\nwarmup_s = 1.0\n[split]\nby = "block"\nfractions = [0.6, 0.2, 0.2]\n'
+        '[[models]]\nkind = "fossen"\nunknowns = ["damping"]\n'
+        'trainer = { kind = "ls", filter_lambda = 1.0 }\n'
+    )
+    vehicle = str(root.joinpath("minirov.toml"))
+    args = ["compare", str(config), "--data", str(data), "--vehicle", vehicle]
+    result = CliRunner().invoke(app, [*args, "--out", str(tmp_path / "out")])
+    assert result.exit_code == 0, result.output
+    comparison = json.loads((tmp_path / "out" / "comparison.json").read_text())
+    assert comparison["train"] == [None] and comparison["split_by"] == "block"
+    report = (tmp_path / "out" / "report.md").read_text()
+    assert "Trained on a block of 60 % of the log; validation on a block of 20 % of the log" in (
+        report
+    )

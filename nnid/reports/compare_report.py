@@ -237,12 +237,17 @@ def markdown(comparison: dict) -> str:
 
 
 def _data_text(comparison: dict) -> str:
-    text = (
-        f"Trained on {', '.join(comparison['train'])}; validation on "
-        f"{', '.join(comparison['validation'])}"
-    )
+    def runs(part: str) -> str:
+        # a log without an experiment column is one run, named None in comparison.json
+        names = ", ".join("the log" if n is None else str(n) for n in comparison[part])
+        if comparison.get("split_by") != "block":
+            return names
+        share = comparison["fractions"][("train", "validation", "test").index(part)]
+        return f"a block of {100 * share:.0f} % of {names}"
+
+    text = f"Trained on {runs('train')}; validation on {runs('validation')}"
     if comparison.get("test"):
-        text += f"; test on {', '.join(comparison['test'])} (the ranking uses the test run)"
+        text += f"; test on {runs('test')} (the ranking uses the test run)"
     text += f". The first {comparison['warmup_s']:g} s of every run are not scored"
     if comparison.get("k_step_samples", 1) > 1:  # k-step predictions need k steps of history
         text += ", nor, for the k-step scores, a run's samples before its k-th"
