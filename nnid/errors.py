@@ -56,7 +56,7 @@ class NnidInputError(ValueError):
 
 def checked_number(
     value: object, field: str, minimum: float = 0.0, strict: bool = True, integer: bool = False
-) -> float:
+) -> float | int:
     """``value`` as a finite number above ``minimum`` (at or above it unless ``strict``), a
     whole one where ``integer``, or the error naming ``field``: a setting given in Python
     skips the config's checks, and a NaN, a 1.5-wide layer or a negative rate crashed deep

@@ -307,7 +307,8 @@ def blank_labels(label: pd.Series) -> np.ndarray:
 def check_time_unit(df: pd.DataFrame, source: str | None = None) -> None:
     """Time in seconds: a median step of 5 to 1000 looks like milliseconds (whole, computed in
     floating point, or a logger's jittered stamps; no vehicle's dynamics are sampled every 5 s),
-    one over 1000 like microseconds (10 Hz to 1 kHz), one of 10⁵ or more like micro- or
+    one over 1000 like microseconds (10 Hz to under 1 kHz; a step of exactly 1000 is read as
+    milliseconds, a 1-Hz log), one of 10⁵ or more like micro- or
     nanoseconds."""
     slip = time_unit_slip(df["t"].to_numpy(dtype=np.float64))
     if slip:

@@ -453,7 +453,8 @@ def search_nonlinear(
         if not res.success
         else f"the {'upper' if value > (lo + hi) / 2 else 'lower'} edge of the range searched "
         f"({lo:.4g} to {hi:.4g})"
-        if min(value - lo, hi - value) <= tol
+        # a bound of 0 (no lag, no deadband) is no effect, not a bound on one
+        if hi - value <= tol or (lo < 0 and value - lo <= tol)
         else ""
     )
     best = refit(ws, model_at(value), fit.unknowns)
