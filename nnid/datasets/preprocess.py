@@ -35,6 +35,7 @@ from nnid.datasets.log import (
     input_columns,
 )
 from nnid.datasets.mapping import rotation_from_euler
+from nnid.datasets.measurement import wrap_angle
 from nnid.errors import NnidInputError
 
 
@@ -112,7 +113,8 @@ def resample_log(
     log: pd.DataFrame, rate: float, gap: float | None = None, report: CleaningReport | None = None
 ) -> pd.DataFrame:
     """Every experiment onto a uniform grid at ``rate`` Hz: inputs by zero-order hold, the rest
-    by linear interpolation (angles unwrapped, :func:`unwrap_finite`, and left so); gaps longer
+    by linear interpolation (angles through their unwrapped values, :func:`unwrap_finite`, and
+    wrapped back to ±π where the log had them so); gaps longer
     than ``gap`` s split the experiment."""
     held = set(input_columns(log))
     numeric = [
@@ -141,7 +143,9 @@ def resample_log(
                 if col in held:
                     out[col] = y[np.clip(np.searchsorted(ts, grid, "right") - 1, 0, None)]
                 elif col in ANGLES:  # a step across ±π was interpolated through zero
-                    out[col] = np.interp(grid, ts, unwrap_finite(y))
+                    a = np.interp(grid, ts, unwrap_finite(y))
+                    # back to ±π where the log had it so (the unwrap step is the config's)
+                    out[col] = wrap_angle(a) if np.nanmax(np.abs(y)) <= np.pi else a
                 else:
                     out[col] = np.interp(grid, ts, y)
             frame = pd.DataFrame(out)

@@ -33,6 +33,7 @@ from nnid.datasets.log import (
     validate_log,
 )
 from nnid.datasets.mapping import file_label, label_columns, map_source
+from nnid.datasets.measurement import wrap_angle
 from nnid.datasets.preprocess import unwrap_finite
 from nnid.datasets.rosbag import is_bag, read_bag_sources
 from nnid.errors import NnidInputError
@@ -172,7 +173,7 @@ def _resample(
                 out[:, k] = np.interp(grid, t_src[ok], v)
             if not ok.all():
                 out[~_bridged(grid, t_src[ok], SILENCE * typical), k] = np.nan
-        out = np.where(wrap, (out + np.pi) % (2 * np.pi) - np.pi, out)
+        out = np.where(wrap, wrap_angle(out), out)
     return out, t_src
 
 
