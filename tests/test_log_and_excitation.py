@@ -121,9 +121,11 @@ def test_a_small_pitch_in_degrees_is_refused():
     assert validate_log(log.assign(theta=pitch + 1.45), "pitch.csv") is not None  # 87°: radians
     said = r"'theta', row 157: angle of 4\.011 looks like degrees.*within ±π/2"
     degrees = log.assign(theta=np.degrees(pitch))
-    for wrong in (degrees, degrees.drop(columns="q")):  # told with the rate q and without
-        with pytest.raises(NnidInputError, match=said):
-            validate_log(wrong, "pitch.csv")
+    with pytest.raises(NnidInputError, match=said):  # told by the rate q
+        validate_log(degrees, "pitch.csv")
+    # without q a pitch within ±2π is read as radians: nnid's own simulator flies a pose-only
+    # log's pitch through ±π (Seamor's surge-heave run), and nothing tells that from degrees
+    assert validate_log(degrees.drop(columns="q"), "pitch.csv") is not None
 
 
 def test_time_restarts_per_experiment_are_fine(tmp_path):

@@ -139,7 +139,7 @@ def degrees_error(df: pd.DataFrame, col: str, source: str, row: int) -> NnidInpu
     size = np.abs(df[col].to_numpy(dtype=np.float64))
     return NnidInputError(
         f"angle of {np.nanmax(size):.4g} looks like degrees; angles must be in radians"
-        + (PITCH_RANGE if col == "theta" else "" if RATE_OF[col] in df else UNWRAPPED),
+        + (UNWRAPPED if RATE_OF[col] not in df else PITCH_RANGE if col == "theta" else ""),
         source=source,
         field=col,
         row=row,
@@ -166,18 +166,27 @@ def turned_by(t: np.ndarray, rate: np.ndarray) -> np.ndarray:
     return np.concatenate([[0.0], np.cumsum(steps)])
 
 
+def radian_limit(col: str, rate_logged: bool) -> float:
+    """The largest |angle| of ``col`` read as radians without asking: :data:`RADIAN_LIMIT`,
+    but the pitch's ±π/2 only where its rate q is logged to vouch for radians past it: nnid's
+    simulator, which integrates the Euler angles, flies a pose-only log's pitch through ±π
+    (Seamor's surge-heave run loops), and without the rate nothing tells that from degrees."""
+    return RADIAN_LIMIT[col] if rate_logged else 2 * math.pi
+
+
 def looks_like_degrees(df: pd.DataFrame, col: str) -> bool:
     """Whether angle column ``col`` of ``df`` (``t``, optional ``experiment``) holds degrees:
-    values past :data:`RADIAN_LIMIT` (±2π; ±π/2 for pitch), unless the log's body rate of that
+    values past :data:`RADIAN_LIMIT` (±2π; ±π/2 for a pitch whose rate q is logged), unless
+    the log's body rate of that
     angle (:data:`RATE_OF`) says they are unwrapped radians (a yaw past 2π after a full turn,
     as a filter or nnid's simulator writes it): over windows of about a second where the rate
     turned the vehicle by more than 0.05 rad, the angle changed as much, not 57 times as much,
     and the rate itself reads as rad/s (under π rad/s, not a log whose rates are in deg/s
     too)."""
     angle = df[col].to_numpy(dtype=np.float64)
-    if not angle.size or not np.nanmax(np.abs(angle)) > RADIAN_LIMIT[col] + 1e-6:
-        return False
     rate = RATE_OF[col]
+    if not angle.size or not np.nanmax(np.abs(angle)) > radian_limit(col, rate in df) + 1e-6:
+        return False
     if rate not in df:
         return True
     t = df["t"].to_numpy(dtype=np.float64)

@@ -30,12 +30,13 @@ from nnid.datasets.arrays import beyond_range_message, check_commands, command_l
 from nnid.datasets.log import (
     ANGLES,
     POSE,
-    RADIAN_LIMIT,
+    RATE_OF,
     SI_BOUNDS,
     VELOCITY,
     degrees_error,
     looks_like_degrees,
     out_of_bounds,
+    radian_limit,
 )
 from nnid.datasets.preprocess import savgol_window
 from nnid.errors import NnidInputError
@@ -310,7 +311,9 @@ def follow_csv(
                     field=name,
                     row=n,
                 )
-        for angle in [a for a in unchecked if abs(values[a]) > RADIAN_LIMIT[a] + 1e-6]:
+        for angle in [
+            a for a in unchecked if abs(values[a]) > radian_limit(a, RATE_OF[a] in col) + 1e-6
+        ]:
             unchecked.remove(angle)  # the rows so far and this one, as the whole log is read
             runs = [*(names[c] for c in codes), row[exp_col] if exp_col is not None else ""]
             state = [*xs, [values.get(c, 0.0) for c in STATE]]
