@@ -152,10 +152,14 @@ def inspect(
     log, report = load_log(log_path, columns)
     info = summarize(log)
     cols = info["columns"]
+    pieces = sum(e["piece_of"] is not None for e in info["experiments"])
+    low, high = (f(e["rate_hz"] for e in info["experiments"]) for f in (min, max))
     out.print(
         f"[bold]{escape(str(log_path))}[/]: {info['samples']} samples, "
-        f"{info['duration_s']:.1f} s, {len(info['experiments'])} experiments, "
-        f"about {info['rate_hz']:.3g} Hz",
+        f"{info['duration_s']:.1f} s, {info['runs']} experiments"
+        + (f" ({pieces} pieces: runs cut at gaps)" if pieces else "")
+        + f", about {info['rate_hz']:.3g} Hz"
+        + (f" (experiments from {low:.3g} to {high:.3g} Hz)" if high > 1.1 * low else ""),
         markup=True,
     )
     for group in ("pose", "velocity", "acceleration", "inputs", "other"):

@@ -88,12 +88,17 @@ def starter_text(
         'description = "starter file from mass and size (estimates: refit before trusting)"',
         "rho = 1000.0                  # kg/m^3: 1025 in sea water",
         f"length = {length:g}",
-        f"mass = {mass:g}",
-        f"buoyancy = {weight:.4g}            # N, ASSUMED neutral: weigh it (W - B is identified)",
+        # 12 digits: rounded to 6, the measured mass lost digits, and a buoyancy of 4 was not
+        # neutral (0.45 N of W - B at 1234.5 kg, a sink the loop would find)
+        f"mass = {mass:.12g}",
+        f"buoyancy = {weight:.12g}            # N, ASSUMED neutral: weigh it (W - B is identified)",
         f"inertia = {_vector(cuboid_inertia(mass, length, width, height))}"
         "   # kg m^2, solid cuboid (Weiss eqs 32-34): ESTIMATE",
-        "r_g = [0.0, 0.0, 0.02]        # m, ASSUMED 2 cm below the origin (the loop tests it)",
-        "r_b = [0.0, 0.0, 0.0]",
+        # the Heavy's 2 cm below the origin scaled with the height: a fixed 2 cm put the centre
+        # of gravity outside the hull of a vehicle under 4 cm tall
+        f"r_g = [0.0, 0.0, {0.02 * scale[2]:.3g}]        # m, ASSUMED below the origin (the "
+        "Heavy's 2 cm, scaled with the height; the loop tests it)",
+        "r_b = [0.0, 0.0, 0.0]         # m, ASSUMED at the origin, above r_g (it rights itself)",
         "",
         f"[added_mass]                  # ESTIMATE: {REFERENCE} (von Benzon 2022) x mass ratio",
         "                              # (x arm^2 for rotations)",

@@ -234,6 +234,11 @@ BAD_CONFIGS = {
         ),
         "experiments.0.signals.0.hold_min",
     ),
+    # flown as a whole sample or, falling between two, not at all (forces zero, log written)
+    "a pulse shorter than dt": (
+        CONFIG.replace("duration = 5.0 }", "duration = 0.01, start = 0.02 }") + "duration = 1.0\n",
+        "experiments.0.signals.0.duration",
+    ),
     "a noise level without a kind": (
         CONFIG + "[measurement]\nvelocity_noise = 0.5\n",
         "set without a kind",

@@ -406,3 +406,46 @@ def test_starter_vehicle_files_load_and_scale(tmp_path):
         args = ["vehicle", "--mass", "20", "--size", "1x1x0.5", "--name", name, "--out", str(named)]
         assert runner.invoke(app, args).exit_code == 0
         assert load_vehicle(named).name == name
+
+
+def test_starter_vehicle_file_is_neutral_at_its_measured_mass():
+    """The starter file says its buoyancy is ASSUMED neutral and its mass is measured: written
+    to 4 digits, 1234.5 kg came back with W - B = 0.45 N and 11.123456 kg as 11.1235 kg."""
+    import tomllib
+
+    from nnid.vehicle import vehicle_from_dict
+    from nnid.vehicle_starter import starter_text
+
+    for mass, size in [(1234.5, (3.0, 2.0, 1.0)), (11.123456, (0.457, 0.575, 0.254))]:
+        veh = vehicle_from_dict(tomllib.loads(starter_text("x", mass, size)), source="x.toml")
+        assert veh.mass == mass
+        assert veh.buoyancy == pytest.approx(veh.weight, rel=1e-12, abs=0)
+
+
+def test_starter_centre_of_gravity_lies_inside_the_hull():
+    """A fixed r_g of 2 cm put the centre of gravity of a 1-cm-tall vehicle 1.5 cm below its
+    bottom (and warned of it when the file loaded back); the Heavy keeps its 2 cm."""
+    import tomllib
+
+    from nnid.vehicle import vehicle_from_dict
+    from nnid.vehicle_starter import starter_text
+
+    for size, expected in [((0.01, 0.01, 0.01), None), ((0.457, 0.575, 0.254), 0.02)]:
+        veh = vehicle_from_dict(tomllib.loads(starter_text("x", 1e-4, size)), source="x.toml")
+        assert 0 < veh.r_g[2] < size[2] / 2
+        assert expected is None or veh.r_g[2] == pytest.approx(expected, rel=0.01)
+
+
+def test_starter_marks_every_value_it_did_not_measure():
+    """docs/vehicle_file.md: every estimate is marked ESTIMATE or ASSUMED; r_b (the centre of
+    buoyancy put at the origin) was written bare, as if measured."""
+    from nnid.vehicle_starter import starter_text
+
+    text = starter_text("x", 11.5, (0.457, 0.575, 0.254))
+    top = [line for line in text.split("\n[")[0].splitlines() if "=" in line[:20]]
+    measured = ("name", "description", "rho", "length", "mass")
+    marked = [line for line in top if "ASSUMED" in line or "ESTIMATE" in line]
+    unmarked = [line for line in top if line.split("=")[0].strip() not in measured]
+    unmarked = [line for line in unmarked if line not in marked]
+    assert {line.split("=")[0].strip() for line in top} >= {"buoyancy", "inertia", "r_g", "r_b"}
+    assert unmarked == []

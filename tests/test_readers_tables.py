@@ -84,6 +84,38 @@ def test_gap_splits_instead_of_bridging(tmp_path):
     assert any(s.step == "split at gaps" and s.rows_removed > 0 for s in report.steps)
 
 
+def test_inspect_rate_is_one_the_log_has(tmp_path):
+    """A run at 10 Hz and one at 100 Hz: inspect said "about 55 Hz", the median of the two
+    rates, a rate no sample has; now the rate of most intervals, and the spread."""
+    slow = pd.DataFrame({"t": 0.1 * np.arange(50), "experiment": "slow"})
+    fast = pd.DataFrame({"t": 0.01 * np.arange(500), "experiment": "fast"})
+    log = pd.concat([slow, fast]).assign(u=0.1, tau_X=1.0)
+    path = tmp_path / "rates.csv"
+    log.to_csv(path, index=False)
+    result = runner.invoke(app, ["inspect", str(path), "--out", str(tmp_path / "o")])
+    assert result.exit_code == 0, result.output
+    assert "about 100 Hz (experiments from 10 to 100 Hz)" in result.output
+    info = read_json(tmp_path / "o" / "summary.json")
+    assert info["rate_hz"] == pytest.approx(100.0)
+    assert [e["rate_hz"] for e in info["experiments"]] == pytest.approx([10.0, 100.0])
+
+
+def test_inspect_counts_a_run_cut_at_a_gap_as_one_experiment(tmp_path):
+    """One run cut into two pieces at a 1-s hole: inspect said "2 experiments" (it counted the
+    pieces by their labels, r1#0 and r1#1) and "gaps 0" (each piece is gap-free)."""
+    _sensor_tables(tmp_path)
+    nav = pd.read_csv(tmp_path / "nav.csv")
+    nav = nav[(nav["time"] - nav["time"].iloc[0] < 3) | (nav["time"] - nav["time"].iloc[0] > 4)]
+    nav.to_csv(tmp_path / "nav.csv", index=False)
+    cmap = _write_map(tmp_path / "map.toml", MAP)
+    result = runner.invoke(app, ["inspect", str(tmp_path), "--columns", str(cmap), "--out",
+                                 str(tmp_path / "o")])  # fmt: skip
+    assert result.exit_code == 0, result.output
+    assert "1 experiments (2 pieces: runs cut at gaps)" in result.output
+    info = read_json(tmp_path / "o" / "summary.json")
+    assert info["runs"] == 1 and [e["piece_of"] for e in info["experiments"]] == ["r1", "r1"]
+
+
 def test_enu_flu_and_quaternions(tmp_path):
     """A vehicle heading north-east in ENU (yaw 45° from east = 45° from north) with FLU body
     velocities: NED/FRD gives ψ = 45°, x = y, z = −up, v = −v_FLU."""

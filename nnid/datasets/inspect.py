@@ -22,19 +22,31 @@ from nnid.datasets.preprocess import experiments
 DOF_FORCE = dict(zip(VELOCITY, ("tau_X", "tau_Y", "tau_Z", "tau_K", "tau_M", "tau_N"), strict=True))
 
 
+def rate_of(intervals: np.ndarray) -> float:
+    """1 / the median sample interval, NaN where there is none (a run of one sample)."""
+    return 1.0 / float(np.median(intervals)) if intervals.size else float("nan")
+
+
 def summarize(log: pd.DataFrame) -> dict:
-    """A JSON-ready summary of a validated log."""
+    """A JSON-ready summary of a validated log. ``runs`` counts the experiments as recorded:
+    the pieces a reader cut one run into at its gaps (``experiments`` rows with ``piece_of``)
+    are one run."""
     inputs = input_columns(log)
     known = {"t", "experiment", PIECE_OF, REPLAY_GROUP, *POSE, *VELOCITY, *ACCELERATION, *inputs}
     groups = experiments(log)
-    exp_rows, gaps, rates = [], [], []
+    exp_rows, gaps, intervals = [], [], []
     for name, idx in groups:
         t = log.loc[idx, "t"].to_numpy(np.float64)
         dt = np.diff(t)
         med = float(np.median(dt)) if dt.size else float("nan")
-        rates.append(1.0 / med if dt.size else float("nan"))
+        intervals.append(dt)
+        # a piece cut from a run at a gap (the readers' ``<run>#<k>``) is not an experiment of
+        # its own: told by PIECE_OF, never by its label (nnid.datasets.log)
+        whole = log.loc[idx[0], PIECE_OF] if PIECE_OF in log and len(idx) else None
+        whole = str(whole) if pd.notna(whole) and str(whole) else None
         exp_rows.append({"name": None if name is None else str(name), "samples": int(t.size),
-                         "duration_s": float(t[-1] - t[0]) if t.size else 0.0})  # fmt: skip
+                         "duration_s": float(t[-1] - t[0]) if t.size else 0.0,
+                         "rate_hz": rate_of(dt), "piece_of": whole})  # fmt: skip
         for k in np.flatnonzero(dt > 1.5 * med):
             gaps.append({"experiment": None if name is None else str(name),
                          "t": float(t[k]), "length_s": float(dt[k])})  # fmt: skip
@@ -67,8 +79,11 @@ def summarize(log: pd.DataFrame) -> dict:
             "inputs": inputs,
             "other": [str(c) for c in log.columns if c not in known],
         },
-        "rate_hz": float(np.nanmedian(rates)),
+        # the median interval of all samples: the median of the runs' rates was a rate no run
+        # had (55 Hz for a run at 10 Hz and one at 100 Hz); each run's is in ``experiments``
+        "rate_hz": rate_of(np.concatenate(intervals)),
         "duration_s": float(sum(e["duration_s"] for e in exp_rows)),
+        "runs": len({e["piece_of"] or e["name"] for e in exp_rows}),
         "experiments": exp_rows,
         "gaps": gaps,
         "missing": gaps_record(find_gaps(log)),

@@ -308,6 +308,13 @@ def experiment_inputs(
                 f"dt = {dt:g} s: some levels would never be sampled",
                 field=f"{field}.{key}" if where is not None else field,
             )
+        length = getattr(signal, "duration", None)
+        if length is not None and length < dt:  # a pulse between two samples: never flown
+            raise NnidInputError(
+                f"lasts {length:g} s, shorter than the sample time dt = {dt:g} s: the inputs "
+                "are held over each sample, so it would be flown a whole sample or not at all",
+                field=f"{field}.duration" if where is not None else field,
+            )
         inputs[:, channels.index(signal.channel)] += signal(t)
     return inputs
 
