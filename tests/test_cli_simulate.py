@@ -415,3 +415,24 @@ def test_a_vehicle_whose_mass_matrix_is_not_positive_definite_is_named(tmp_path,
         assert len(error) == 1 and "not positive definite" in error[0], res.output
         assert "heavy.toml, field 'added_mass'" in error[0] and "sim.toml" not in error[0]
         assert not (tmp_path / "x.csv").exists()
+
+
+def test_a_signal_cut_by_its_experiments_duration_is_said(tmp_path):
+    """A 5-s step in an experiment of 2 s was flown for 2 s without a word: the rest of the
+    signal the config asked for was dropped in silence. Said, naming the signal; a signal
+    that fits its experiment is not."""
+    veh = _write(tmp_path, "box.toml", GOOD_VEHICLE)
+    fits = _write(tmp_path, "fits.toml", CONFIG.format(vehicle=veh))
+    cut = _write(
+        tmp_path,
+        "cut.toml",
+        CONFIG.format(vehicle=veh).replace('name = "surge"', 'name = "surge"\nduration = 2.0'),
+    )
+    said = "experiments.0.signals.0: the signal ends at 5 s, after the experiment's end (2 s"
+    for config, expected in ((fits, False), (cut, True)):
+        result = runner.invoke(
+            app, ["simulate", str(config), "--out", str(tmp_path / f"{config.stem}.parquet")]
+        )
+        assert result.exit_code == 0, result.output
+        assert (said in result.output) is expected, result.output
+        assert ("its last 3 s are not flown" in result.output) is expected

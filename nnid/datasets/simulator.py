@@ -12,6 +12,7 @@ and gradients).
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Iterable, Sequence
 from typing import Annotated
 
@@ -314,6 +315,12 @@ def experiment_inputs(
                 f"lasts {length:g} s, shorter than the sample time dt = {dt:g} s: the inputs "
                 "are held over each sample, so it would be flown a whole sample or not at all",
                 field=f"{field}.duration" if where is not None else field,
+            )
+        if signal.end() > end + dt / 2:  # cut by the experiment's duration: said, not dropped
+            warnings.warn(
+                f"{field}: the signal ends at {signal.end():g} s, after the experiment's end "
+                f"({end:g} s, its duration): its last {signal.end() - end:g} s are not flown",
+                stacklevel=2,
             )
         inputs[:, channels.index(signal.channel)] += signal(t)
     return inputs
