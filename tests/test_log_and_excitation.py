@@ -118,14 +118,16 @@ def test_a_small_pitch_in_degrees_is_refused():
     pitch = 0.07 * np.sin(0.5 * t)  # rad, 4° at most
     log = pd.DataFrame({"t": t, "theta": pitch, "q": np.gradient(pitch, t), "tau_M": 1.0})
     assert validate_log(log, "pitch.csv") is log
-    assert validate_log(log.assign(theta=pitch + 1.45), "pitch.csv") is not None  # 87°: radians
+    steep = log.assign(theta=pitch + 1.45)  # 87°: radians
+    assert validate_log(steep, "pitch.csv") is steep
     said = r"'theta', row 157: angle of 4\.011 looks like degrees.*within ±π/2"
     degrees = log.assign(theta=np.degrees(pitch))
     with pytest.raises(NnidInputError, match=said):  # told by the rate q
         validate_log(degrees, "pitch.csv")
     # without q a pitch within ±2π is read as radians: nnid's own simulator flies a pose-only
     # log's pitch through ±π (Seamor's surge-heave run), and nothing tells that from degrees
-    assert validate_log(degrees.drop(columns="q"), "pitch.csv") is not None
+    no_rate = degrees.drop(columns="q")
+    assert validate_log(no_rate, "pitch.csv") is no_rate
 
 
 def test_time_restarts_per_experiment_are_fine(tmp_path):

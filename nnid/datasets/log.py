@@ -148,10 +148,6 @@ def degrees_error(df: pd.DataFrame, col: str, source: str, row: int) -> NnidInpu
 
 #: the body rate each Euler angle turns with when roll and pitch are small
 RATE_OF = {"phi": "p", "theta": "q", "psi": "r"}
-#: the largest |angle| in radians read without asking whether it is degrees: roll and yaw wrap
-#: at ±π or [0, 2π); the zyx pitch never leaves ±π/2 (a pitch of 4° logged in degrees passed
-#: as 4 rad)
-RADIAN_LIMIT = {"phi": 2 * math.pi, "theta": math.pi / 2, "psi": 2 * math.pi}
 UNWRAPPED = (
     " (unwrapped radians past ±2π are read where the log also has the angle's rate, p, q or r, "
     "to tell them from degrees)"
@@ -167,22 +163,23 @@ def turned_by(t: np.ndarray, rate: np.ndarray) -> np.ndarray:
 
 
 def radian_limit(col: str, rate_logged: bool) -> float:
-    """The largest |angle| of ``col`` read as radians without asking: :data:`RADIAN_LIMIT`,
-    but the pitch's ±π/2 only where its rate q is logged to vouch for radians past it: nnid's
-    simulator, which integrates the Euler angles, flies a pose-only log's pitch through ±π
-    (Seamor's surge-heave run loops), and without the rate nothing tells that from degrees."""
-    return RADIAN_LIMIT[col] if rate_logged else 2 * math.pi
+    """The largest |angle| of ``col`` read as radians without asking whether it is degrees:
+    2π (roll and yaw wrap at ±π or [0, 2π)), and ±π/2 for the zyx pitch where its rate q is
+    logged to vouch for radians past it (a pitch of 4° logged in degrees passed as 4 rad).
+    Without q the pitch's limit is 2π too: nnid's simulator, which integrates the Euler
+    angles, flies a pose-only log's pitch through ±π (Seamor's surge-heave run loops), and
+    nothing tells that from degrees."""
+    return math.pi / 2 if col == "theta" and rate_logged else 2 * math.pi
 
 
 def looks_like_degrees(df: pd.DataFrame, col: str) -> bool:
     """Whether angle column ``col`` of ``df`` (``t``, optional ``experiment``) holds degrees:
-    values past :data:`RADIAN_LIMIT` (±2π; ±π/2 for a pitch whose rate q is logged), unless
-    the log's body rate of that
-    angle (:data:`RATE_OF`) says they are unwrapped radians (a yaw past 2π after a full turn,
-    as a filter or nnid's simulator writes it): over windows of about a second where the rate
-    turned the vehicle by more than 0.05 rad, the angle changed as much, not 57 times as much,
-    and the rate itself reads as rad/s (under π rad/s, not a log whose rates are in deg/s
-    too)."""
+    values past :func:`radian_limit` (±2π; ±π/2 for a pitch whose rate q is logged), unless
+    the log's body rate of that angle (:data:`RATE_OF`) says they are unwrapped radians (a yaw
+    past 2π after a full turn, as a filter or nnid's simulator writes it): over windows of
+    about a second where the rate turned the vehicle by more than 0.05 rad, the angle changed
+    as much, not 57 times as much, and the rate itself reads as rad/s (under π rad/s, not a
+    log whose rates are in deg/s too)."""
     angle = df[col].to_numpy(dtype=np.float64)
     rate = RATE_OF[col]
     if not angle.size or not np.nanmax(np.abs(angle)) > radian_limit(col, rate in df) + 1e-6:
@@ -317,8 +314,7 @@ def check_time_unit(df: pd.DataFrame, source: str | None = None) -> None:
     """Time in seconds: a median step of 5 to 1000 looks like milliseconds (whole, computed in
     floating point, or a logger's jittered stamps; no vehicle's dynamics are sampled every 5 s),
     one over 1000 like microseconds (10 Hz to under 1 kHz; a step of exactly 1000 is read as
-    milliseconds, a 1-Hz log), one of 10⁵ or more like micro- or
-    nanoseconds."""
+    milliseconds, a 1-Hz log), one of 10⁵ or more like micro- or nanoseconds."""
     slip = time_unit_slip(df["t"].to_numpy(dtype=np.float64))
     if slip:
         raise NnidInputError(f"{slip}; t must be seconds", source=source, field="t")

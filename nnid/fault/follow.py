@@ -299,7 +299,7 @@ def follow_csv(
         if i is not None
     ]
     last_t = -np.inf
-    unchecked = [a for a in ANGLES if a in col]  # looked at once, when past RADIAN_LIMIT
+    unchecked = [a for a in ANGLES if a in col]  # looked at once, when past radian_limit
     limits = command_limits(monitor.plant_.vehicle)  # the whole-log detect refuses beyond them
     for n, row in enumerate(rows):  # n: the data row from 0, as the whole-log reader counts
         values = _numbers(row, read, n, where, len(header))
