@@ -200,7 +200,8 @@ class _Splits:
     the healthy noise where no change is left in effect."""
 
     def __init__(self, monitor, data, k, window_s, rewatch, r, left) -> None:
-        self.monitor, self.data, self.changes = monitor, data, rewatch.changes
+        self.monitor, self.data, self.rewatch = monitor, data, rewatch
+        self.changes = rewatch.changes
         rows = window_rows(data, k, window_s)
         ok = np.isfinite(r).all(1) & np.isfinite(left).all(1) & (rows > 0)
         self.rows, self.r, self.left, self.n = rows[ok], r[ok], left[ok], int(ok.sum())
@@ -322,11 +323,15 @@ class _Splits:
                 best = split
         return best
 
+    def penalty(self) -> float:
+        """BIC's penalty of one parameter over the window's independent samples."""
+        m = self.monitor
+        return 0.5 * np.log(max(self.n * len(m.plant_.dofs_) / m.correlation_time_, 2.0))
+
     def penalised(self, split: _Split) -> float:
         """``split.cost`` plus the BIC penalty of its refitted θ, in whitened power."""
-        m = self.monitor
-        penalty = 0.5 * np.log(max(self.n * len(m.plant_.dofs_) / m.correlation_time_, 2.0))
-        return split.cost + 2 * m.correlation_time_ * penalty * len(split.fit.fits)
+        tau_corr = self.monitor.correlation_time_
+        return split.cost + 2 * tau_corr * self.penalty() * len(split.fit.fits)
 
     def new_change_fits_better(self, split: _Split, taken: list) -> bool:
         """Whether a new change, as the alarm would be isolated on ``left`` otherwise
@@ -450,9 +455,7 @@ class _Splits:
                 "left after it is within what the change may leave"
             )
         n_par = 0 if ended else len(names)
-        tau_corr = m.correlation_time_
-        penalty = 0.5 * np.log(max(self.n * len(m.plant_.dofs_) / tau_corr, 2.0))
-        gain = (float(self.p_left.sum()) - split.cost) / (2 * tau_corr)
+        gain = (float(self.p_left.sum()) - split.cost) / (2 * m.correlation_time_)
         name = trace.experiment[k]
         return {
             "experiment": None if name is None else str(name),
@@ -466,7 +469,7 @@ class _Splits:
             "value": value,
             "stderr": stderr,
             "severity": _severity(m, trace, window_rows(self.data, k, window_s)),
-            "confidence": float(expit(gain - (1 + n_par) * penalty)),
+            "confidence": float(expit(gain - (1 + n_par) * self.penalty())),
             "meaning": meaning,
             "explained": 1.0 - split.cost / float(self.p_left.sum()),
             "residual_ratio": self.ratio(self.power(split.after)),  # from τ on
@@ -518,8 +521,7 @@ def resized_alarm(
     significantly (:data:`~nnid.fault.isolation.SIGNIFICANCE`) and leave no more than a change
     may of the model's residual after τ (:func:`~nnid.fault.isolation.allowed_ratio`)."""
     split = splits.resized() if splits.usable() else None
-    taken = [f for c in splits.changes for f in c.fitted]
-    if split is None or splits.new_change_fits_better(split, taken):
+    if split is None or splits.new_change_fits_better(split, splits.rewatch.fitted):
         return None
     record = splits.record(trace, k, window_s, split, ended=False)
     fitted = [(name, fit["theta"]) for name, fit in split.fit.fits.items()]

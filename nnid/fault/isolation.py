@@ -399,8 +399,12 @@ class Refit:
     fits: dict[str, dict[str, float]]
     cov: np.ndarray
     n_eff: float
-    p_value: float
     left: np.ndarray
+
+    @property
+    def p_value(self) -> float:
+        """The F-test of all θ being 0: :meth:`p_differs` from none of the hypotheses."""
+        return self.p_differs(np.zeros(len(self.fits)))
 
     def p_differs(self, theta: np.ndarray) -> float:
         """The F-test of the fitted θ against ``theta`` (same order): small where the rows
@@ -437,7 +441,6 @@ def refit(
     cov = sigma2 * monitor.correlation_time_ * np.linalg.pinv(a.T @ a)
     se = np.sqrt(np.maximum(np.diag(cov), 0.0))
     n_eff = max(n / monitor.correlation_time_ - len(pick), 1.0)  # as :func:`_joint` has it
-    wald = float(theta @ np.linalg.pinv(cov) @ theta)
     out = {}
     for name, k, t, e in zip(names, pick, theta, se, strict=True):
         c = cands[k]
@@ -447,8 +450,7 @@ def refit(
         out[name] = {"theta": float(t), "se": float(e), "value": value,
                      "value_se": float(e * scale)}  # fmt: skip
     left = residual + cols[:, :, pick] @ theta  # minus the signature (:func:`signature`)
-    p_value = float(f_dist.sf(wald / len(pick), len(pick), n_eff))
-    return Refit(out, cov, n_eff, p_value, left)
+    return Refit(out, cov, n_eff, left)
 
 
 def noise_ratio(monitor, e: np.ndarray) -> float:
