@@ -140,28 +140,38 @@ def inspect(
     ),
 ) -> None:
     """Show what a log holds: columns, rate, duration, experiments, gaps, derivable signals and
-    the excitation of each DOF."""
+    the excitation of each DOF.
+
+    The duration is the time sampled, the time in gaps beside it; velocities a log lacks are
+    derived from its pose as train derives them (with the default [data] window), and each
+    command channel's excitation is shown as a command's, not a force's."""
     from rich.table import Table
 
+    from nnid.config import VehicleData
     from nnid.datasets.inspect import summarize
     from nnid.datasets.readers import load_log
+    from nnid.physics.dofs import DOFS
     from nnid.serialization import write_json
 
     if out_dir is not None:
         _check_out(out_dir)
     log, report = load_log(log_path, columns)
-    info = summarize(log)
+    # the window train uses unless a config's [data] sets another
+    window, order = (VehicleData.model_fields[k].default for k in ("savgol_window", "savgol_order"))
+    info = summarize(log, window, order)
     cols = info["columns"]
     pieces = sum(e["piece_of"] is not None for e in info["experiments"])
     low, high = (f(e["rate_hz"] for e in info["experiments"]) for f in (min, max))
+    gap_s = info["gap_s"]
     out.print(
         f"[bold]{escape(str(log_path))}[/]: {info['samples']} samples, "
-        f"{info['duration_s']:.1f} s, {info['runs']} experiments"
+        f"{info['duration_s']:.1f} s" + (f" of data (and {gap_s:.3g} s in gaps)" if gap_s else "")
+        + f", {info['runs']} experiments"
         + (f" ({pieces} pieces: runs cut at gaps)" if pieces else "")
         + f", about {info['rate_hz']:.3g} Hz"
         + (f" (experiments from {low:.3g} to {high:.3g} Hz)" if high > 1.1 * low else ""),
         markup=True,
-    )
+    )  # fmt: skip
     for group in ("pose", "velocity", "acceleration", "inputs", "other"):
         out.print(f"  {group:13s} {', '.join(cols[group]) or '-'}")
     out.print(f"  derivable     {', '.join(info['derivable']) or '-'}")
@@ -178,18 +188,51 @@ def inspect(
             f"({missing['samples']} samples, {missing['seconds']:.3g} s missing, longest "
             f"{missing['longest_s']:.3g} s): bridged from the pose or masked where used"
         )
-    table = Table(title="excitation per DOF")
-    for head in ("DOF", "velocity std", "force std", "force active"):
-        table.add_column(head)
-    for dof, e in info["excitation"].items():
-        table.add_row(
-            dof,
-            *(
-                f"{e[k]:.3g}" if k in e else "-"
-                for k in ("velocity_std", "force_std", "force_active_share")
-            ),
+    excitation, excited = info["excitation"], info["excited"]
+    posed = info["velocity_from_pose"]
+    if posed.get("columns"):
+        approx = "; w approximate, from the depth rate" if posed["approximate"] else ""
+        out.print(
+            f"  from pose     {', '.join(posed['columns'])} (as train derives them: "
+            f"{posed['window_s']:g} s window, order {posed['order']}{approx})"
         )
-    out.print(table)
+    elif posed.get("error"):
+        out.print(f"  from pose     none: {posed['error']}", highlight=False)
+    moving = [d for d in DOFS if "velocity_std" in excitation.get(d, {})]
+    still = [d for d in moving if d not in excited]
+    absent = [d for d in DOFS if d not in moving]
+    if moving:
+        out.print(
+            f"  excited       {', '.join(excited) or '-'}"
+            + (f"; not excited: {', '.join(still)} (velocity std under 10 % of the largest "
+               "linear / angular one)" if still else "")
+            + (f"; no velocity: {', '.join(absent)}" if absent else "")
+        )  # fmt: skip
+    else:
+        out.print("  excited       - (no velocity logged or derivable from the pose)")
+    forces = any("force_std" in e for e in excitation.values())
+    table = Table(title="excitation per DOF")
+    heads = ["DOF", "velocity std", "excited"] + (["force std", "force active"] if forces else [])
+    for head in heads:
+        table.add_column(head)
+    for dof, e in excitation.items():
+        std = f"{e['velocity_std']:.3g}" if "velocity_std" in e else "-"
+        if e.get("velocity_from_pose"):
+            std += " (from pose)"
+        row = [dof, std, "-" if "velocity_std" not in e else "yes" if dof in excited else "no"]
+        if forces:
+            row += [f"{e[k]:.3g}" if k in e else "-" for k in ("force_std", "force_active_share")]
+        table.add_row(*row)
+    if excitation:
+        out.print(table)
+    if info["commands"]:
+        # no vehicle file here: a command is not a force until its thrusters map it
+        table = Table(title="commands per channel (not forces: no vehicle file maps them)")
+        for head in ("channel", "std", "active"):
+            table.add_column(head)
+        for name, c in info["commands"].items():
+            table.add_row(name, f"{c['std']:.3g}", f"{c['active_share']:.3g}")
+        out.print(table)
     for line in report.summary():
         out.print(f"  cleaning: {line}", highlight=False)
     if out_dir is not None:

@@ -535,6 +535,29 @@ def test_an_added_mass_biased_by_the_noise_of_a_weak_acceleration_is_named(seamo
     assert strong.params["X_udot"]["value"] == pytest.approx(truth, rel=0.1)
 
 
+def test_a_loaded_model_keeps_the_named_attenuation_and_the_fit_report(seamor, tmp_path):
+    """A loaded Fossen model lacked attenuated_ and report_ (the fit's derived columns): the
+    grounds of the fit's warning were gone from the model a user reloads. Both are saved; the
+    inf bias of an acceleration that is all noise, written null, is inf again."""
+    import json
+
+    from nnid import load_model
+
+    names = ["X_udot", "X:u*abs(u)"]
+    weak = ParametricModel(seamor, names, dofs=["u"])
+    with pytest.warns(ExcitationWarning, match="errors in variables"):
+        weak.fit(_surge_with_sines(seamor, 1.0))
+    weak.save(tmp_path)
+    back = load_model(tmp_path)
+    assert back.attenuated_ == weak.attenuated_ and "X_udot" in back.attenuated_
+    assert back.report_.to_dict() == weak.report_.to_dict()
+    assert [s.step for s in back.report_.steps] == ["derive accelerations"]
+    saved = json.loads((tmp_path / "model.json").read_text())
+    saved["state"]["attenuated"]["X_udot"][1] = None  # as a bias of inf is written
+    (tmp_path / "model.json").write_text(json.dumps(saved))
+    assert load_model(tmp_path).attenuated_["X_udot"][1] == np.inf
+
+
 def test_an_added_mass_whose_acceleration_is_all_noise_is_named_not_identified():
     """An acceleration that is noise only (ρ ≥ 1) is the worst case of errors in variables:
     its bias M̂ ρ/(1 − ρ) has no value, and the comparison with it was False, so the one case

@@ -204,6 +204,58 @@ def test_save_load_reproduces_predictions(kind, fitted, runs, heave_campaign, tm
         assert back.baseline().trainer_name() == model.baseline().trainer_name()
 
 
+#: what a fit records beside what it learned: the cleaning steps of its data, the added masses
+#: biased by errors in variables, the trainer's per-epoch history
+FIT_RECORD = ("report_", "attenuated_", "history_")
+
+
+def _fit_record(model) -> dict:
+    """A model's fit record, comparable after a JSON round trip (a History by its fields)."""
+    from dataclasses import asdict
+
+    from nnid.trainers.history import History
+
+    def plain(value):
+        if isinstance(value, History):
+            return asdict(value)
+        if isinstance(value, list):
+            return [plain(v) for v in value]
+        return value.to_dict() if hasattr(value, "to_dict") else value
+
+    return {a: plain(getattr(model, a)) for a in FIT_RECORD if hasattr(model, a)}
+
+
+@pytest.mark.parametrize("kind", list(BUILDERS))
+def test_save_load_keeps_the_fit_record(kind, fitted, tmp_path):
+    """A loaded model lacked the report_ (its data's cleaning steps), attenuated_ and
+    history_ the fitted one had (a NARX's history_ was its summary dict, without the time
+    series, where the fitted model's is a History): saved in model.json and restored, for
+    each kind, an ensemble's members and a hybrid's physics fit."""
+    model, *_ = fitted[kind]
+    model.save(tmp_path)
+    back = load_model(tmp_path)
+    pairs = [(model, back)]
+    if kind == "ensemble":
+        pairs += list(zip(model.members_, back.members_, strict=True))
+    if kind == "hybrid":
+        pairs.append((model.baseline(), back.baseline()))
+    held = set()
+    for fit, loaded in pairs:
+        record = _fit_record(fit)
+        held |= set(record)
+        np.testing.assert_equal(_fit_record(loaded), record)
+        for name in record:
+            assert type(getattr(loaded, name)) is type(getattr(fit, name)), name
+    expected = {
+        "fossen": {"report_", "attenuated_"},
+        "hybrid": set(FIT_RECORD),
+        "narx": {"history_"},
+        "state_space": {"history_"},
+        "ensemble": {"history_"},
+    }
+    assert held == expected.get(kind, set())  # fmt: skip
+
+
 def test_a_model_saved_over_another_leaves_none_of_its_files(fitted, tmp_path):
     """A network's tensors.pt stayed beside a least-squares model saved into its folder
     later: a folder that held two models' files."""
@@ -288,14 +340,29 @@ LOADED_THEN_FAILED = {
 }
 
 
-@pytest.mark.parametrize(("kind", "damage"), list(LOADED_THEN_FAILED))
+#: hand edits of a saved fit record (FIT_RECORD) that no fit writes: refused at loading, never
+#: a report_, attenuated_ or history_ that fails when read
+FIT_RECORD_DAMAGED = {
+    ("fossen", "a report step as a number"): _set("state", "report", "steps", [1]),
+    ("fossen", "a report without steps"): _set("state", "report", {"source": "x"}),
+    ("fossen", "attenuation of no unknown"): _set("state", "attenuated", {"X_vdot": [0.2, 1.0]}),
+    ("fossen", "attenuation of one number"): _set("state", "attenuated", {"X_udot": [0.2]}),
+    ("narx", "history as text"): _set("state", "fit_history", "x"),
+    ("narx", "history's train as text"): _set("state", "fit_history", "train", "x"),
+    ("state_space", "history's time of text"): _set("state", "fit_history", 0, "time", ["x"]),
+    ("hybrid", "history without train"): lambda p: p["state"]["fit_history"][0].pop("train"),
+    ("hybrid", "physics' report as a list"): _set("state", "physics", "report", []),
+}
+
+
+@pytest.mark.parametrize(("kind", "damage"), [*LOADED_THEN_FAILED, *FIT_RECORD_DAMAGED])
 def test_a_damaged_state_is_refused_at_loading_not_at_use(kind, damage, fitted, tmp_path):
     from nnid.errors import NnidInputError
 
     model, *_ = fitted[kind]
     model.save(tmp_path)
     broken = read_json(tmp_path / "model.json")
-    LOADED_THEN_FAILED[kind, damage](broken)
+    {**LOADED_THEN_FAILED, **FIT_RECORD_DAMAGED}[kind, damage](broken)
     (tmp_path / "model.json").write_text(json.dumps(broken))
     with pytest.raises(NnidInputError, match=r"model\.json: damaged"):
         load_model(tmp_path)

@@ -116,6 +116,98 @@ def test_inspect_counts_a_run_cut_at_a_gap_as_one_experiment(tmp_path):
     assert info["runs"] == 1 and [e["piece_of"] for e in info["experiments"]] == ["r1", "r1"]
 
 
+def _pose_only_log(n: int = 600, rate: float = 20.0) -> pd.DataFrame:
+    """Depth and attitude only, with RC commands: heave and yaw move, roll only trembles."""
+    t = np.arange(n) / rate
+    return pd.DataFrame({
+        "t": t, "z": 0.3 * np.sin(0.5 * t), "phi": 1e-4 * np.sin(2.0 * t),
+        "theta": 0.05 * np.sin(0.7 * t), "psi": 0.8 * np.sin(0.3 * t),
+        "cmd_heave": np.where(np.sin(0.5 * t) > 0, 0.4, 0.0), "cmd_yaw": 0.2 * np.sin(t),
+    })  # fmt: skip
+
+
+def test_inspect_excites_a_pose_only_log_by_the_fits_derivative(tmp_path):
+    """A log of depth and attitude (an ArduSub dive): inspect printed an empty excitation
+    table, though the fits derive w, p, q, r from that pose, and never said which DOFs are
+    excited. Now each is the fits' derivative (derive_velocities, [data]'s default window),
+    marked as from the pose, and ``excited`` is excited_dofs of those velocities."""
+    from nnid.datasets.inspect import summarize
+    from nnid.datasets.preprocess import derive_velocities
+    from nnid.evaluation.metrics import excited_dofs
+
+    log = _pose_only_log()
+    info = summarize(log)
+    derived = derive_velocities(log, 1.0, 4)
+    assert info["velocity_from_pose"]["columns"] == ["w", "p", "q", "r"]
+    assert info["velocity_from_pose"]["approximate"] == ["w"]
+    for dof in ("w", "p", "q", "r"):
+        assert info["excitation"][dof]["velocity_std"] == pytest.approx(derived[dof].std())
+        assert info["excitation"][dof]["velocity_from_pose"] is True
+    assert info["excited"] == excited_dofs(derived, ["u", "v", "w", "p", "q", "r"])
+    assert info["excited"] == ["w", "q", "r"]  # roll only trembles
+    log.to_csv(tmp_path / "dive.csv", index=False)
+    done = runner.invoke(app, ["inspect", str(tmp_path / "dive.csv"), "--out", str(tmp_path / "o")])
+    assert done.exit_code == 0, done.output
+    text = " ".join(done.output.split())
+    assert "from pose w, p, q, r (as train derives them: 1 s window, order 4; w approximate" in text
+    assert "excited w, q, r; not excited: p" in text and "no velocity: u, v" in text
+    assert "(from pose)" in text
+    assert read_json(tmp_path / "o" / "summary.json")["excited"] == ["w", "q", "r"]
+
+
+def test_inspect_says_commands_are_commands_without_a_vehicle(tmp_path):
+    """A log with cmd_* columns and no tau_*: the excitation table's force columns were all
+    '-', and the commands' own excitation was never shown. Now each channel's std and active
+    share, titled as commands (no vehicle file maps them to forces), and no force columns."""
+    from nnid.datasets.inspect import summarize
+
+    log = _pose_only_log()
+    info = summarize(log)
+    assert set(info["commands"]) == {"cmd_heave", "cmd_yaw"}
+    assert info["commands"]["cmd_yaw"]["std"] == pytest.approx(log["cmd_yaw"].std())
+    share = (log["cmd_heave"] != 0).mean()
+    assert info["commands"]["cmd_heave"]["active_share"] == pytest.approx(share)
+    assert all("force_std" not in e for e in info["excitation"].values())
+    log.to_csv(tmp_path / "dive.csv", index=False)
+    done = runner.invoke(app, ["inspect", str(tmp_path / "dive.csv")])
+    assert done.exit_code == 0, done.output
+    assert "commands per channel (not forces: no vehicle file maps them)" in done.output
+    assert "cmd_heave" in done.output and "force std" not in done.output
+
+
+def test_inspect_duration_is_the_time_sampled_and_gaps_apart(tmp_path):
+    """A 10-s hole in a run at 10 Hz: inspect said '30 s', gap time counted as data. Now the
+    time sampled and the time in gaps (the hole less one interval, as missing samples are
+    counted), each run's too."""
+    from nnid.datasets.inspect import summarize
+
+    t = np.r_[np.arange(100), np.arange(200, 300)] * 0.1
+    log = pd.DataFrame({"t": t, "u": np.sin(t), "tau_X": np.cos(t)})
+    info = summarize(log)
+    assert info["duration_s"] == pytest.approx(19.9) and info["gap_s"] == pytest.approx(10.0)
+    (run,) = info["experiments"]
+    assert (run["duration_s"], run["gap_s"]) == pytest.approx((19.9, 10.0))
+    log.to_csv(tmp_path / "holed.csv", index=False)
+    done = runner.invoke(app, ["inspect", str(tmp_path / "holed.csv")])
+    assert done.exit_code == 0, done.output
+    assert "200 samples, 19.9 s of data (and 10 s in gaps), 1 experiments" in done.output
+    assert "gaps 1 (longest 10.1 s)" in " ".join(done.output.split())
+
+
+def test_inspect_says_why_a_pose_gives_no_velocities(tmp_path):
+    """A pose-only run shorter than the derivative's window: the fits refuse it; inspect
+    says so in a line rather than failing or leaving the velocities out without a word."""
+    from nnid.datasets.inspect import summarize
+
+    info = summarize(_pose_only_log(n=12))
+    assert info["velocity_from_pose"]["columns"] == [] and info["excitation"] == {}
+    assert "too few for the Savitzky-Golay window" in info["velocity_from_pose"]["error"]
+    _pose_only_log(n=12).to_csv(tmp_path / "short.csv", index=False)
+    done = runner.invoke(app, ["inspect", str(tmp_path / "short.csv")])
+    assert done.exit_code == 0, done.output
+    assert "from pose none:" in " ".join(done.output.split())
+
+
 def test_enu_flu_and_quaternions(tmp_path):
     """A vehicle heading north-east in ENU (yaw 45° from east = 45° from north) with FLU body
     velocities: NED/FRD gives ψ = 45°, x = y, z = −up, v = −v_FLU."""

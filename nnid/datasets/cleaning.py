@@ -24,6 +24,15 @@ class Step:
     columns: list[str] = field(default_factory=list)
 
 
+def _saved_step(s: object) -> bool:
+    """Whether ``s`` is a :class:`Step` as :meth:`CleaningReport.to_dict` writes it."""
+    if not isinstance(s, dict) or not all(isinstance(s.get(k), str) for k in ("step", "detail")):
+        return False
+    rows, columns = s.get("rows_removed", 0), s.get("columns", [])
+    counted = isinstance(rows, int) and not isinstance(rows, bool)
+    return counted and isinstance(columns, list) and all(isinstance(c, str) for c in columns)
+
+
 @dataclass
 class CleaningReport:
     source: str = ""
@@ -67,6 +76,21 @@ class CleaningReport:
             "rows_removed": self.rows_removed,
             "steps": [asdict(s) for s in self.steps],
         }
+
+    @classmethod
+    def from_dict(cls, value: object) -> CleaningReport:
+        """The inverse of :meth:`to_dict` (a saved model's fit report), checked: a file edited
+        by hand is refused at loading (TypeError), never a report that fails when read."""
+        steps = value.get("steps") if isinstance(value, dict) else None
+        if not isinstance(value, dict) or not isinstance(steps, list):
+            raise TypeError("the fit report is not a mapping with a list of steps")
+        report = cls(source=str(value.get("source", "")))
+        for s in steps:
+            if not _saved_step(s):
+                raise TypeError(f"a step of the fit report is not one: {s!r:.80}")
+            rows, columns = s.get("rows_removed", 0), s.get("columns", [])
+            report.add(s["step"], s["detail"], rows, columns)
+        return report
 
     def to_markdown(self) -> str:
         lines = [

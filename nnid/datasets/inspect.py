@@ -1,6 +1,7 @@
 """What a log holds: columns, rate, duration, experiments, gaps in time and empty motion cells
-(:mod:`nnid.datasets.gaps`), derivable signals and how much
-each DOF is excited. Used by ``nnid inspect``; returns data, prints nothing."""
+(:mod:`nnid.datasets.gaps`), derivable signals, how much each DOF is excited (its velocity as
+logged or as the fits derive it from the pose) and how much each input channel moves. Used by
+``nnid inspect``; returns data, prints nothing."""
 
 from __future__ import annotations
 
@@ -14,12 +15,14 @@ from nnid.datasets.log import (
     PIECE_OF,
     POSE,
     REPLAY_GROUP,
+    TAU,
     VELOCITY,
     input_columns,
 )
-from nnid.datasets.preprocess import experiments
+from nnid.datasets.preprocess import derivable_velocities, derive_velocities, experiments
+from nnid.errors import NnidInputError
 
-DOF_FORCE = dict(zip(VELOCITY, ("tau_X", "tau_Y", "tau_Z", "tau_K", "tau_M", "tau_N"), strict=True))
+DOF_FORCE = dict(zip(VELOCITY, TAU, strict=True))
 
 
 def rate_of(intervals: np.ndarray) -> float:
@@ -27,10 +30,44 @@ def rate_of(intervals: np.ndarray) -> float:
     return 1.0 / float(np.median(intervals)) if intervals.size else float("nan")
 
 
-def summarize(log: pd.DataFrame) -> dict:
+def activity(values: pd.Series) -> dict[str, float]:
+    """How much an input channel moves: its standard deviation and the share of samples where
+    it is not zero."""
+    return {"std": float(values.std()), "active_share": float((values.abs() > 1e-9).mean())}
+
+
+def velocities_from_pose(
+    log: pd.DataFrame, savgol_window: float, savgol_order: int
+) -> tuple[pd.DataFrame, dict]:
+    """``log`` with the body velocities it lacks derived from its pose as the fits derive them
+    (:func:`nnid.datasets.preprocess.derive_velocities`, the pipeline's condition and [data]'s
+    window), and what was derived: ``columns``, ``approximate`` (w from the depth rate alone),
+    the window, or ``error`` where the pose gives none (a run shorter than the window)."""
+    if all(c in log for c in VELOCITY) or not all(a in log for a in ANGLES):
+        return log, {}
+    record: dict = {"window_s": float(savgol_window), "order": int(savgol_order)}
+    try:
+        out = derive_velocities(log, savgol_window, savgol_order)
+    except NnidInputError as exc:  # said in the summary, never a failed inspect
+        return log, {**record, "columns": [], "error": exc.message}
+    made = [c for c in VELOCITY if c in out and c not in log]
+    approximate = ["w"] if "w" in made and "x" not in log else []
+    return out, {**record, "columns": made, "approximate": approximate}
+
+
+def summarize(log: pd.DataFrame, savgol_window: float = 1.0, savgol_order: int = 4) -> dict:
     """A JSON-ready summary of a validated log. ``runs`` counts the experiments as recorded:
     the pieces a reader cut one run into at its gaps (``experiments`` rows with ``piece_of``)
-    are one run."""
+    are one run. ``duration_s`` is the time sampled; ``gap_s`` the time in gaps (each gap's
+    length less one sample interval, as :mod:`nnid.datasets.gaps` counts missing samples;
+    the hole between a run's pieces is the reader's cleaning report's: a piece's clock may
+    restart). Velocities the log lacks are derived from its pose
+    with ``savgol_window`` s and ``savgol_order`` (:func:`velocities_from_pose`) for the
+    excitation and ``excited`` (:func:`nnid.evaluation.metrics.excited_dofs`). ``commands``:
+    the excitation of each ``cmd_*`` channel, a command and not a force without a vehicle
+    file's thrusters."""
+    from nnid.evaluation.metrics import excited_dofs
+
     inputs = input_columns(log)
     known = {"t", "experiment", PIECE_OF, REPLAY_GROUP, *POSE, *VELOCITY, *ACCELERATION, *inputs}
     groups = experiments(log)
@@ -44,30 +81,35 @@ def summarize(log: pd.DataFrame) -> dict:
         # its own: told by PIECE_OF, never by its label (nnid.datasets.log)
         whole = log.loc[idx[0], PIECE_OF] if PIECE_OF in log and len(idx) else None
         whole = str(whole) if pd.notna(whole) and str(whole) else None
-        exp_rows.append({"name": None if name is None else str(name), "samples": int(t.size),
-                         "duration_s": float(t[-1] - t[0]) if t.size else 0.0,
-                         "rate_hz": rate_of(dt), "piece_of": whole})  # fmt: skip
+        label = None if name is None else str(name)
+        held = []
         for k in np.flatnonzero(dt > 1.5 * med):
-            gaps.append({"experiment": None if name is None else str(name),
-                         "t": float(t[k]), "length_s": float(dt[k])})  # fmt: skip
+            held.append({"experiment": label, "t": float(t[k]), "length_s": float(dt[k]),
+                         "missing_s": float(dt[k] - med)})  # fmt: skip
+        gaps += held
+        span = float(t[-1] - t[0]) if t.size else 0.0
+        held_s = float(sum(g["missing_s"] for g in held))
+        exp_rows.append({"name": label, "samples": int(t.size), "duration_s": span - held_s,
+                         "gap_s": held_s,
+                         "rate_hz": rate_of(dt), "piece_of": whole})  # fmt: skip
     pose = [c for c in POSE if c in log]
-    derivable = []
-    if all(a in log for a in ANGLES):
-        derivable += [c for c in ("p", "q", "r") if c not in log]
-        if all(c in log for c in ("x", "y", "z")):
-            derivable += [c for c in ("u", "v", "w") if c not in log]
-        elif "z" in log and "w" not in log:
-            derivable.append("w (approximate, from depth rate)")
+    made = derivable_velocities(pose)
+    derivable = [c for c in ("p", "q", "r", "u", "v") if c in made and c not in log]
+    if "w" in made and "w" not in log:  # pose-derived w is exact only with x and y
+        derivable.append("w" if "x" in log else "w (approximate, from depth rate)")
     derivable += [f"d{c}" for c in VELOCITY if c in log and f"d{c}" not in log]
+    moving, from_pose = velocities_from_pose(log, savgol_window, savgol_order)
     excitation = {}
     for dof in VELOCITY:
         entry = {}
-        if dof in log:
-            entry["velocity_std"] = float(log[dof].std())
+        if dof in moving:
+            entry["velocity_std"] = float(moving[dof].std())
+            if dof in from_pose.get("columns", []):
+                entry["velocity_from_pose"] = True
         force = DOF_FORCE[dof]
         if force in log:
-            entry["force_std"] = float(log[force].std())
-            entry["force_active_share"] = float((log[force].abs() > 1e-9).mean())
+            moves = activity(log[force])
+            entry["force_std"], entry["force_active_share"] = moves["std"], moves["active_share"]
         if entry:
             excitation[dof] = entry
     return {
@@ -82,11 +124,16 @@ def summarize(log: pd.DataFrame) -> dict:
         # the median interval of all samples: the median of the runs' rates was a rate no run
         # had (55 Hz for a run at 10 Hz and one at 100 Hz); each run's is in ``experiments``
         "rate_hz": rate_of(np.concatenate(intervals)),
+        # the time sampled: a 10-s hole in a run was counted as 10 s of data
         "duration_s": float(sum(e["duration_s"] for e in exp_rows)),
+        "gap_s": float(sum(g["missing_s"] for g in gaps)),
         "runs": len({e["piece_of"] or e["name"] for e in exp_rows}),
         "experiments": exp_rows,
         "gaps": gaps,
         "missing": gaps_record(find_gaps(log)),
         "derivable": derivable,
+        "velocity_from_pose": from_pose,
         "excitation": excitation,
+        "excited": excited_dofs(moving, list(VELOCITY)),
+        "commands": {c: activity(log[c]) for c in inputs if c.startswith("cmd_")},
     }

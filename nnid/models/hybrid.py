@@ -74,7 +74,7 @@ from nnid.physics.odeint import LAGGED, METHODS, SampledInput, integrate
 from nnid.physics.parts import Parts
 from nnid.physics.thrusters import apply_deadband, force_deadband
 from nnid.threads import torch_threads
-from nnid.trainers.history import Progress, staged
+from nnid.trainers.history import Progress, history_state, restored_history, staged
 from nnid.trainers.neural_ode import Batch, MultipleShooting, Run
 
 DTYPE = torch.float64
@@ -877,6 +877,7 @@ class HybridModel(FossenPlant):
             "input_scale": self.input_scale_.tolist(),
             "dt": self.dt_,
             "stages": self.stages_,
+            "fit_history": history_state(self.history_),  # every field: stages_ sums it up
         }
         return state, dict(self.dynamics_.state_dict())
 
@@ -887,6 +888,10 @@ class HybridModel(FossenPlant):
         physics.fitted_by_ = state.get("physics_trainer")  # absent from older files
         self.physics_ = physics
         self.parts_, self.structure_ = physics.parts_, physics.structure_
+        if hasattr(physics, "report_"):  # absent from older files, as the history
+            self.report_ = physics.report_
+        if "fit_history" in state:
+            self.history_ = restored_history(state["fit_history"])
         self._set_outputs(physics.dofs_)
         self.scored_ = list(state["scored"])
         self.velocity_scale_ = {k: float(v) for k, v in state["velocity_scale"].items()}

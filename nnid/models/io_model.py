@@ -19,6 +19,7 @@ from nnid.errors import NnidInputError
 from nnid.evaluation.evaluate import score_split, target_columns
 from nnid.evaluation.metrics import warmup_mask
 from nnid.models.base import NnidModel
+from nnid.trainers.history import history_state, restored_history
 
 DTYPE = torch.float64
 
@@ -126,7 +127,11 @@ class InputOutputModel(NnidModel):
 
     def _state(self) -> tuple[dict, dict[str, torch.Tensor]]:
         interval = getattr(self, "sample_interval_", None)
-        return {**self._learned(), "sample_interval": interval}, dict(self.net_.state_dict())
+        # every field of the fit's history (a NARX's summary in _learned has no time series):
+        # a loaded model lacked the history_ the fitted one had, or held the summary instead
+        history = history_state(getattr(self, "history_", None))
+        learned = {**self._learned(), "sample_interval": interval, "fit_history": history}
+        return learned, dict(self.net_.state_dict())
 
     def _restore(self, state: dict, tensors: dict[str, torch.Tensor]) -> None:
         self._configure()
@@ -134,11 +139,14 @@ class InputOutputModel(NnidModel):
         self.net_.load_state_dict(tensors)
         state = dict(state)
         interval = state.pop("sample_interval", None)  # absent from older files: not checked
+        history = state.pop("fit_history", None)  # absent from older files, as the history
         number = isinstance(interval, float | int) and not isinstance(interval, bool)
         if interval is not None and not (number and interval > 0):
             raise ValueError(f"sample_interval must be a positive number, not {interval!r}")
         self.sample_interval_ = None if interval is None else float(interval)
         self._set_learned(state)
+        if history is not None:
+            self.history_ = restored_history(history)
 
     @abstractmethod
     def _learned(self) -> dict:

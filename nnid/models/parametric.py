@@ -572,6 +572,23 @@ def attenuated_unknowns(
     return out
 
 
+def restored_attenuation(value: object, names: Sequence[str]) -> dict[str, tuple[float, float]]:
+    """:func:`attenuated_unknowns`' verdict as saved, checked: ``{name: [ρ, bias]}`` over
+    fitted unknowns; null, the only non-finite number it holds (an acceleration that is all
+    noise: bias inf), is inf again. A file edited by hand is refused at loading."""
+    if not isinstance(value, dict):
+        raise TypeError("'attenuated' is not a mapping")
+    out = {}
+    for name, pair in value.items():
+        if name not in names:
+            raise ValueError(f"'attenuated' names {name!r}, which is not a fitted unknown")
+        if not (isinstance(pair, list) and len(pair) == 2):
+            raise TypeError(f"'attenuated' {name!r} is not [rho, bias]")
+        rho, bias = (np.inf if v is None else float(v) for v in pair)
+        out[name] = (rho, bias)
+    return out
+
+
 def prepare_motion(
     log: pd.DataFrame,
     dofs: Sequence[str],
@@ -911,7 +928,10 @@ class ParametricModel(FossenPlant):
 
     def _state(self) -> tuple[dict, dict]:
         state = {"dofs": list(self.dofs_), **self.estimate_.as_state()}
-        return {**state, "not_excited": dict(self.not_excited_)}, {}
+        # what the fit derived and judged, as the fitted model holds it: a loaded model lacked
+        # report_ and attenuated_ (its warnings' grounds) that the fitted one had
+        fit = {"report": self.report_.to_dict(), "attenuated": dict(self.attenuated_)}
+        return {**state, "not_excited": dict(self.not_excited_), **fit}, {}
 
     def _restore(self, state: dict, tensors: dict) -> None:
         from nnid.trainers.least_squares import Estimate
@@ -919,5 +939,8 @@ class ParametricModel(FossenPlant):
         self._set_outputs(state["dofs"])
         self.estimate_ = Estimate.from_state(state)
         self.not_excited_ = {k: list(v) for k, v in state.get("not_excited", {}).items()}
+        if "report" in state:  # absent from older files: the run folder's cleaning report
+            self.report_ = CleaningReport.from_dict(state["report"])
+            self.attenuated_ = restored_attenuation(state["attenuated"], self.estimate_.names)
         self.structure_ = ParametricFossen(self.vehicle, self.estimate_.names, self.dofs_)
         self.parts_ = self.structure_.parts(np.nan_to_num(self.estimate_.theta))

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 
 Progress = Callable[..., None]  # (done: int, total: int | None, message: str, **scores)
 
@@ -111,3 +111,52 @@ class History:
             **{k: list(v) for k, v in self.extra.items()},
             **self.info,
         }
+
+
+def _numbers(value: object, what: str) -> list[float]:
+    """A saved series: a list of numbers, null (a non-finite entry, written null) NaN again."""
+    if not isinstance(value, list) or not all(
+        v is None or (isinstance(v, int | float) and not isinstance(v, bool)) for v in value
+    ):
+        raise TypeError(f"the history's {what} is not a list of numbers")
+    return [math.nan if v is None else float(v) for v in value]
+
+
+def history_state(history: History | list[History] | None) -> dict | list | None:
+    """A fit's history (one, or one per stage) as saved in ``model.json``: every field, so
+    that :func:`restored_history` gives the fitted model's back (:meth:`History.as_dict` is a
+    summary: no time series, the trainer's series beside the fixed keys)."""
+    if isinstance(history, list):
+        return [asdict(h) for h in history]
+    return asdict(history) if isinstance(history, History) else None
+
+
+def restored_history(value: object) -> History | list[History] | None:
+    """The inverse of :func:`history_state` after a JSON round trip, checked: a file edited by
+    hand is refused at loading (TypeError), never a history that fails when read. A
+    non-finite entry (a diverged validation run's inf) was written null and is NaN again."""
+    if value is None:
+        return None
+    if isinstance(value, list):
+        return [_one_history(v) for v in value]
+    return _one_history(value)
+
+
+def _one_history(value: object) -> History:
+    if not isinstance(value, dict):
+        raise TypeError("a saved history is not a mapping")
+    extra, info = value.get("extra", {}), value.get("info", {})
+    stop, best = value.get("stop_reason", ""), value.get("best_epoch", 0)
+    if not isinstance(extra, dict) or not isinstance(info, dict):
+        raise TypeError("the history's extra and info are not mappings")
+    if not isinstance(stop, str) or not isinstance(best, int) or isinstance(best, bool):
+        raise TypeError("the history's stop_reason is not text or its best_epoch not a count")
+    return History(
+        train=_numbers(value["train"], "train"),
+        validation=_numbers(value["validation"], "validation"),
+        time=_numbers(value["time"], "time"),
+        stop_reason=stop,
+        best_epoch=best,
+        extra={str(k): _numbers(v, str(k)) for k, v in extra.items()},
+        info={str(k): _numbers([v], str(k))[0] for k, v in info.items()},
+    )
