@@ -579,3 +579,26 @@ def test_a_log_without_an_experiment_column_is_compared_by_blocks(tmp_path):
     assert "Trained on a block of 60 % of the log; validation on a block of 20 % of the log" in (
         report
     )
+
+
+def test_the_force_figure_draws_one_held_out_run_not_every_run_over_each_other(monkeypatch):
+    """With several held-out runs (each clock from 0) the force figure drew the first 60 s of
+    every run on one axis, each line jumping from 60 s back to 0 into the next run; it draws
+    the first run's, and the heading names it."""
+    import numpy as np
+
+    import nnid.reports.compare_report as report
+    from nnid.physics.dofs import FORCES
+
+    t = np.arange(0.0, 80.0, 0.5)
+    held = pd.concat([pd.DataFrame({"t": t, "experiment": e}) for e in ("a", "b")],
+                     ignore_index=True)  # fmt: skip
+    measured = pd.DataFrame({f: np.sin(held["t"]) for f in FORCES}, index=held.index)
+    drawn = []
+    monkeypatch.setattr(report, "figure_uri", lambda fig: drawn.append(fig) or "data:")
+    report.force_figure(measured, {"m": 0.9 * measured}, held)
+    for line in drawn[0].axes[0].lines:
+        x = line.get_xdata()
+        assert x.size == 121 and np.all(np.diff(x) > 0) and x[-1] == 60.0
+    assert report._of_run(held) == " of run a"
+    assert report._of_run(held[held.experiment == "a"]) == ""

@@ -290,3 +290,58 @@ def test_a_run_with_one_scored_sample_is_judged_by_the_splits_range():
     pred.iloc[-1, 0] += 0.006
     _, rmse, diverged, _, _ = score_split(one, pred, ["u"], alone, lambda r: ["u"])
     assert diverged == {} and rmse["u"] == pytest.approx(0.006)  # (one sample has no NRMSE)
+
+
+def test_metrics_nrmse_does_not_score_a_prediction_that_diverged():
+    """``metrics.nrmse`` (the docs' attitude protocol scores with it) dropped the samples where
+    the prediction was not finite: a free run that left for NaN half-way scored 0.075, about
+    the 0.071 of the one that did not, and ``per_dof``'s total averaged the columns left."""
+    from nnid.evaluation.metrics import nrmse, per_dof
+
+    y = np.sin(np.linspace(0.0, 20.0, 400))
+    gone = y + 0.05
+    gone[200:] = np.nan
+    assert np.isfinite(nrmse(y, y + 0.05))
+    assert np.isnan(nrmse(y, gone))
+    assert np.isnan(nrmse(y, np.where(np.arange(400) < 300, y, np.inf)))
+    # a sample the log lacks is not scored, whatever the prediction there
+    missing = y.copy()
+    missing[7] = np.nan
+    assert nrmse(missing, np.where(np.isnan(missing), np.nan, y + 0.05)) == pytest.approx(
+        nrmse(np.delete(y, 7), np.delete(y, 7) + 0.05), rel=1e-12
+    )
+    measured = pd.DataFrame({"u": y, "r": y})
+    scores = per_dof(measured, pd.DataFrame({"u": y + 0.05, "r": gone}), ["u", "r"],
+                     np.ones(400, bool))  # fmt: skip
+    assert np.isfinite(scores["u"]) and np.isnan(scores["r"]) and np.isnan(scores["total"])
+
+
+class Echo(Shifted):
+    """Predicts u and v: the measured values plus 0.01 (NaN where the log has none)."""
+
+    kind = "echo"
+
+    def _fit(self, log, validation, progress):
+        self.outputs_ = self.targets_ = ["u", "v"]
+        self.warmup_samples_ = 1
+
+    def _predict(self, log, mode):
+        out = log[["u", "v"]].astype(float) + 0.01
+        out.iloc[0] = np.nan
+        return out
+
+
+@pytest.mark.parametrize("v_scale", [1e-3, 1.0])
+def test_a_sample_the_log_lacks_is_no_divergence_of_an_unscored_target(v_scale):
+    """One missing sample of v (NaN, and so the one-step prediction from it) is skipped where v
+    is scored; where the data barely moves v (not scored), the divergence check of the
+    unscored targets called it a divergence at t = 15 s and voided the total."""
+    t = np.arange(300) * 0.1
+    log = pd.DataFrame({"t": t, "u": np.sin(t), "v": v_scale * np.cos(0.7 * t)})
+    log.loc[150, "v"] = np.nan
+    scores = evaluate(Echo().fit(log), log, ("one_step", "free_run"))
+    assert scores["columns"] == (["u"] if v_scale < 0.1 else ["u", "v"])
+    for mode in ("one_step", "free_run"):
+        key = "diverged" if mode == "free_run" else f"{mode}_diverged"
+        assert scores[key] == {}
+        assert scores[f"{mode}_nrmse"]["total"] is not None

@@ -138,9 +138,11 @@ def unscored_divergence(
         group = [g for g in scored if g in VELOCITY and (g in "uvw") == (c in "uvw")]
         cols = [log[g].to_numpy(np.float64)[mask] for g in group]
         widths = [_range(v) for v in cols if np.isfinite(v).any()]
-        bad = left_range(y[ok], p, max(widths) if widths else np.inf)
+        # judged where it was measured, as score_prediction judges a scored column: a sample
+        # the log lacks (NaN, so is a one-step prediction from it) is no divergence
+        bad = left_range(y[ok], p[ok], max(widths) if widths else np.inf)
         if bad.any():
-            out[c] = float(t[np.flatnonzero(bad)[0]])
+            out[c] = float(t[ok][np.flatnonzero(bad)[0]])
     return out
 
 

@@ -42,10 +42,14 @@ def exact_std(x) -> float:
 
 
 def nrmse(measured: np.ndarray, predicted: np.ndarray) -> float:
-    """RMSE / std(measured); NaN where the measured signal does not vary."""
+    """RMSE / std(measured) over the measured samples; NaN where the measured signal does not
+    vary, or where the prediction is not finite at a measured sample (a diverged prediction
+    is not scored: over its finite part alone it read as a skilful one)."""
     measured, predicted = np.asarray(measured, float), np.asarray(predicted, float)
-    ok = np.isfinite(measured) & np.isfinite(predicted)
+    ok = np.isfinite(measured)
     measured, predicted = measured[ok], predicted[ok]
+    if not np.isfinite(predicted).all():
+        return float("nan")
     std = exact_std(measured)
     if std == 0 or measured.size == 0:
         return float("nan")
@@ -65,10 +69,12 @@ def per_dof(
     mask: np.ndarray,
     metric=nrmse,
 ) -> dict[str, float]:
-    """The metric per column over the scored samples, and ``total``: their mean."""
+    """The metric per column over the scored samples, and ``total``: their mean, NaN where a
+    column has no score (as :func:`nnid.evaluation.evaluate.score_prediction`'s ``total``
+    is None: a mean over the other columns would hide it)."""
     out = {c: metric(measured[c].to_numpy()[mask], predicted[c].to_numpy()[mask]) for c in columns}
-    finite = [v for v in out.values() if np.isfinite(v)]
-    out["total"] = exact_mean(finite) if finite else float("nan")
+    values = list(out.values())
+    out["total"] = exact_mean(values) if values and all(np.isfinite(values)) else float("nan")
     return out
 
 

@@ -299,12 +299,27 @@ def free_run_figures(
     return out
 
 
+def force_window(held: pd.DataFrame, window_s: float = 60.0) -> np.ndarray:
+    """Positions of the force figure's rows: the first ``window_s`` of the first held-out run.
+    Taken of every run, the runs' clocks (each from 0) drew them over each other, joined by a
+    line from the end of one window back to the start of the next."""
+    _, idx = experiments(held)[0]
+    pos = held.index.get_indexer(idx)
+    t = held["t"].to_numpy(np.float64)[pos]
+    return pos[t - t[0] <= window_s]
+
+
 def force_figure(
-    measured: pd.DataFrame, forces: dict[str, pd.DataFrame], t: np.ndarray, window_s: float = 60.0
+    measured: pd.DataFrame,
+    forces: dict[str, pd.DataFrame],
+    held: pd.DataFrame,
+    window_s: float = 60.0,
 ) -> str:
-    """Measured and predicted viscous force per DOF over the first ``window_s`` of the held-out
-    data (a longer stretch turns many overlaid models into a blur)."""
-    keep = t - t[0] <= window_s
+    """Measured and predicted viscous force per DOF over the first ``window_s`` of the first
+    held-out run (:func:`force_window`; a longer stretch turns many overlaid models into a
+    blur)."""
+    keep = force_window(held, window_s)
+    t = held["t"].to_numpy(np.float64)
     fig, axes = new_figure(6, 1, 10.0, 1.7)
     for k, ax in enumerate(axes[:, 0]):
         f = FORCES[k]
@@ -352,6 +367,13 @@ def complexity_figure(comparison: dict) -> str:
     return figure_uri(fig)
 
 
+def _of_run(held: pd.DataFrame) -> str:
+    """The heading's " of run <name>" where the held-out data has several runs (the force
+    figure's is the first), else nothing."""
+    runs = experiments(held)
+    return f" of run {runs[0][0]}" if len(runs) > 1 else ""
+
+
 COEFFICIENT_HEAD = ["coefficient", "value", "std. error"]
 
 
@@ -395,9 +417,9 @@ def html_page(result) -> str:
             "<h2>Force error against complexity</h2>",
             f"<img alt='validation J/J0 against the number of terms' "
             f"src='{complexity_figure(comparison)}'>",
-            "<h2>Held-out force series (first 60 s)</h2>",
+            f"<h2>Held-out force series (first 60 s{_of_run(held)})</h2>",
             f"<img alt='measured and predicted viscous force per DOF' "
-            f"src='{force_figure(result.measured_force, result.forces, held['t'].to_numpy())}'>",
+            f"src='{force_figure(result.measured_force, result.forces, held)}'>",
             "<p>J is the RMS error of the viscous force (McCarter eq. 4.25), J0 the RMS of the "
             "force series τ̄ the damping model must explain (eq. 4.4).</p>",
         ]
