@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import tomllib
+from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Annotated, Any, TypeVar
 
@@ -45,6 +46,28 @@ def shown(value: Any) -> str:
 def repeated(names: list[str]) -> list[str]:
     """The names a list gives more than once, sorted (for an error that names them)."""
     return sorted({n for n in names if names.count(n) > 1})
+
+
+def checked_names(value: object, field: str) -> list[str]:
+    """``value`` as a list of column names, each given once, or the error naming ``field``
+    (and the entry): a setting given in Python skips the config's checks, and a list of ints
+    or a nested list failed deep in a fit or a prediction ("unhashable type: 'list'"). One
+    string is one name (``"tau_X"`` was split into the columns t, a, u, _ and X)."""
+    if isinstance(value, str):
+        return [value]
+    if not isinstance(value, Iterable) or isinstance(value, (bytes, Mapping)):
+        raise NnidInputError(f"a list of column names is expected, not {value!r}", field=field)
+    names = list(value)
+    for i, name in enumerate(names):
+        if not isinstance(name, str) or not name.strip():
+            raise NnidInputError(
+                f"a column name (a non-empty string) is expected, not {name!r}",
+                field=f"{field}.{i}",
+            )
+    twice = repeated(names)
+    if twice:
+        raise NnidInputError(f"{', '.join(twice)} named twice", field=field)
+    return names
 
 
 def resolve(base: Path, path: str) -> Path:

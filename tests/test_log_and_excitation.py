@@ -89,6 +89,31 @@ def test_bad_logs_name_file_column_row(mutate, column, row, words):
         assert f"column '{column}'" in msg and f"row {row}" in msg
 
 
+def test_integer_milliseconds_at_250_hz_to_1_khz_are_refused():
+    """Milliseconds step by 1 to 4 at 250 Hz to 1 kHz, under the rule's 5: a 1-kHz log was
+    read as seconds, 60 s became 17 h, without a word. Integer steps are refused as
+    milliseconds; a log in seconds that steps by about a second with fractions passes, and a
+    step of exactly 1000 is microseconds (1 kHz) rather than a whole-second 1-Hz log."""
+    rng = np.random.default_rng(3)
+    n = 400
+    for steps in (np.full(n - 1, 1.0), np.full(n - 1, 4.0), rng.integers(3, 6, n - 1) * 1.0):
+        t = 1.7e12 + np.r_[0.0, np.cumsum(steps)]  # Unix milliseconds
+        with pytest.raises(NnidInputError, match="whole number: this looks like milliseconds"):
+            validate_log(_log(n).assign(t=t), "imu.csv")
+        with pytest.raises(NnidInputError, match="milliseconds") as err:
+            validate_log(_log(n).assign(t=t - t[0]), "imu.csv")
+        assert err.value.field == "t" and "imu.csv" in str(err.value)
+    # seconds at ~1 Hz as a ROS clock stamps them, and at 250 Hz: not milliseconds
+    ros = 1.7e9 + np.arange(n) + rng.uniform(0, 0.02, n)
+    validate_log(_log(n).assign(t=ros), "slow.csv")
+    validate_log(_log(n).assign(t=np.arange(n) * 0.004), "fast.csv")
+    with pytest.raises(NnidInputError, match=r"by 1000 \(median\): this looks like micro"):
+        validate_log(_log(n).assign(t=np.arange(n) * 1000.0), "imu.csv")
+    jittered = np.arange(n) * 1000.0 + rng.integers(-2, 3, n)  # a 1-Hz logger's milliseconds
+    with pytest.raises(NnidInputError, match="like milliseconds"):
+        validate_log(_log(n).assign(t=jittered), "imu.csv")
+
+
 def test_unwrapped_radians_past_two_pi_are_told_from_degrees_by_the_rate():
     """A yaw past 2π after whole turns (a filter's, or nnid's own simulator with no
     measurement model) was refused as degrees; the yaw rate r tells the two apart."""

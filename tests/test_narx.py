@@ -880,6 +880,26 @@ def test_a_plant_sampled_every_10_s_is_not_read_as_milliseconds():
     assert model.predict(slow, "free_run")["y"].notna().sum() > 250
 
 
+@pytest.mark.parametrize(
+    ("inputs", "outputs", "field"),
+    [([0], ["y"], "inputs.0"), ((["u"],), ["y"], "inputs.0"), (["u"], [["y"]], "outputs.0"),
+     (["u", "u"], ["y"], "inputs"), (["u"], None, "outputs"), ([""], ["y"], "inputs.0")],
+)  # fmt: skip
+def test_columns_that_are_not_names_are_refused_naming_the_setting(inputs, outputs, field):
+    """Settings given in Python skip the config's checks: a tuple holding a list failed with
+    "unhashable type: 'list'", and a list of ints trained on a column 0 where the log had
+    one. Now one error naming the setting and the entry; one string is one column ("u1" was
+    list("u1"): the columns u and 1)."""
+    log = _tank(100, 1.3, 0).assign(u1=lambda d: d["u"]).assign(**{"0": 0.0})
+    log = log.rename(columns={"0": 0})
+    lm = LevenbergMarquardt(max_epochs=1, jacobian="samples")
+    with pytest.raises(NnidInputError) as err:
+        NarxModel(inputs, outputs, 2, 2, hidden=(3,), trainer=lm, balanced=False).fit(log)
+    assert err.value.field == field
+    model = NarxModel("u1", "y", 2, 2, hidden=(3,), trainer=lm, balanced=False).fit(log)
+    assert (model.inputs_, model.outputs_) == (["u1"], ["y"])
+
+
 def test_layer_sizes_are_settings_not_estimated_parameters():
     """``params`` (the parameter table of metrics.json and the reports: estimate, std. error)
     held ``layer_<i>_size`` rows beside the size: settings read as estimates. The sizes are in

@@ -295,3 +295,23 @@ def test_adam_trains_the_same_model():
     model = NeuralStateSpace(["pump"], ["level"], trainer=Adam(lr=1e-2, max_epochs=150), **kw)
     after = model.fit(train).score(test)["level"]
     assert after < 0.5 * before and after < 0.3
+
+
+@pytest.mark.parametrize(
+    ("inputs", "outputs", "field"),
+    [([0], ["level"], "inputs.0"), ((["pump"],), ["level"], "inputs.0"),
+     (["pump"], [["level"]], "outputs.0"), (["pump"], ["level", "level"], "outputs"),
+     (["pump"], 3, "outputs")],
+)  # fmt: skip
+def test_columns_that_are_not_names_are_refused_naming_the_setting(inputs, outputs, field):
+    """Settings given in Python skip the config's checks: a list of ints or a tuple holding a
+    list failed deep in the fit with "unhashable type: 'list'" (or, a log having a column 0,
+    trained on it). Now one error naming the setting and the entry."""
+    log = _tanks(50, 0, 1.0, 1.0).assign(**{"0": 0.0}).rename(columns={"0": 0})
+    with pytest.raises(NnidInputError) as err:
+        NeuralStateSpace(inputs, outputs, warmup=5).fit(log)
+    assert err.value.field == field
+    # one string is one column (was list("pump"): the columns p, u, m, p)
+    model = NeuralStateSpace("pump", "level", warmup=5)
+    model._configure()
+    assert (model.inputs_, model.outputs_) == (["pump"], ["level"])

@@ -100,17 +100,64 @@ def test_bias_estimation_recovers_injected_biases():
     assert np.allclose(estimate_gyro_bias(t, att, gyro), gyro_bias, rtol=0.05)
 
 
+def test_bias_estimation_refuses_a_gap_naming_it():
+    """One empty angle cell spread through np.unwrap and the integrals: the gyro bias came out
+    [nan, nan, nan] without a word. A gap in any argument is now refused, naming it."""
+    log = _six_dof_log(Measurement(kind="none"), seconds=20)
+    t = log["t"].to_numpy()
+    att, gyro = (
+        log[["phi", "theta", "psi"]].to_numpy(copy=True),
+        log[["p", "q", "r"]].to_numpy(copy=True),
+    )
+    vel, acc = log[["u", "v", "w"]].to_numpy(copy=True), log[["du", "dv", "dw"]].to_numpy()
+    assert np.isfinite(estimate_gyro_bias(t, att, gyro)).all()
+    att[100, 2] = np.nan
+    with pytest.raises(NnidInputError, match=r"angles: value empty .*a gap breaks") as err:
+        estimate_gyro_bias(t, att, gyro)
+    assert (err.value.field, err.value.row) == ("psi", 100)
+    gyro[7, 0] = np.inf
+    with pytest.raises(NnidInputError, match="gyro: value inf") as err:
+        estimate_gyro_bias(t, np.nan_to_num(att), gyro)
+    assert (err.value.field, err.value.row) == ("p", 7)
+    vel[50, 1] = np.nan
+    with pytest.raises(NnidInputError, match="velocity") as err:
+        estimate_accelerometer_bias(t, vel, acc)
+    assert (err.value.field, err.value.row) == ("v", 50)
+
+
 def test_resample_splits_at_gaps_and_holds_inputs():
     t = np.r_[np.arange(0, 5, 0.013), np.arange(8, 12, 0.013)]
     log = pd.DataFrame({"t": t, "u": t * 2.0, "tau_X": np.floor(t)})
     report = CleaningReport()
     out = resample_log(log, 20.0, gap=1.0, report=report)
-    assert list(dict.fromkeys(out["experiment"])) == ["None#0", "None#1"]
-    first = out[out["experiment"] == "None#0"]
+    # a log without an experiment column: its pieces were labelled 'None#0', 'None#1'
+    assert list(dict.fromkeys(out["experiment"])) == ["run#0", "run#1"]
+    assert (out["piece_of"] == "run").all()
+    first = out[out["experiment"] == "run#0"]
     assert np.allclose(np.diff(first["t"]), 0.05)
     assert np.allclose(first["u"], first["t"] * 2.0)  # linear signals interpolate exactly
     assert set(np.unique(first["tau_X"])) <= set(range(6))  # inputs are held, never blended
     assert "split in 2" in report.steps[0].detail
+
+
+def test_resampling_keeps_a_label_column_by_its_previous_value():
+    """Columns that are not numbers (a mode, a fault label) and flags were dropped from the
+    resampled log without a word; they are held as an input is, never blended."""
+    t = np.r_[np.arange(0, 5, 0.013), np.arange(8, 12, 0.013)]
+    mode = np.where(t < 3.0, "manual", "stabilize")
+    log = pd.DataFrame(
+        {"t": t, "experiment": "dive", "u": t * 2.0, "tau_X": 1.0, "mode": mode, "fault": t > 9}
+    )
+    with pytest.warns(UserWarning, match="anti-alias"):  # 77 Hz to 20 Hz, said
+        out = resample_log(log, 20.0, gap=1.0)
+    assert {"mode", "fault"} <= set(out.columns)
+    assert out["fault"].dtype == bool and out["mode"].isin(["manual", "stabilize"]).all()
+    t_log = out["t"] + np.where(out["experiment"] == "dive#0", 0.0, 8.0)  # each piece from 0
+    # the label in force at each grid time: the last logged sample's at or before it
+    k = np.searchsorted(t, t_log.to_numpy() + 1e-9, "right") - 1
+    assert (out["mode"].to_numpy() == mode[k]).all()
+    assert (out["fault"].to_numpy() == (t > 9)[k]).all()
+    assert list(dict.fromkeys(out["experiment"])) == ["dive#0", "dive#1"]
 
 
 def test_resampling_does_not_interpolate_a_wrapped_angle_through_zero():

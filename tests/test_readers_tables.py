@@ -886,3 +886,19 @@ def test_a_time_column_stored_otherwise_than_as_seconds_is_named_so(tmp_path, ho
     said = "write it as a column" if how == "index" else "store seconds"
     with pytest.raises(NnidInputError, match=said):
         load_log(tmp_path / "log.parquet")
+
+
+def test_a_source_in_integer_milliseconds_at_500_hz_is_refused_at_its_time_scale(tmp_path):
+    """Milliseconds step by 2 at 500 Hz, under the 5 of the milliseconds rule: a 4-s run was
+    read as a 2,000-s one at 0.5 Hz; now refused at the source's time_scale, which mends it."""
+    n = 2000
+    t = 1.7e12 + 2.0 * np.arange(n)
+    f = np.sin(np.arange(n) * 0.01)
+    pd.DataFrame({"t": t, "u": 0.1 * f, "f": f}).to_csv(tmp_path / "log.csv", index=False)
+    body = '[[sources]]\nfile = "log.csv"\ntime = "t"\ncolumns = { u = "u", tau_X = "f" }\n'
+    path = _write_map(tmp_path / "map.toml", body)
+    with pytest.raises(NnidInputError, match="every step is a whole number: this looks like mil"):
+        load_log(tmp_path, path)
+    _write_map(path, body.replace('time = "t"', 'time = "t"\ntime_scale = 0.001'))
+    log, _ = load_log(tmp_path, path)
+    assert log["t"].iloc[-1] - log["t"].iloc[0] == pytest.approx(4.0, abs=0.01)

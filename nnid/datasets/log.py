@@ -313,8 +313,15 @@ def blank_labels(label: pd.Series) -> np.ndarray:
 def check_time_unit(df: pd.DataFrame, source: str | None = None) -> None:
     """Time in seconds: a median step of 5 to 1000 looks like milliseconds (whole, computed in
     floating point, or a logger's jittered stamps; no vehicle's dynamics are sampled every 5 s),
-    one over 1000 like microseconds (10 Hz to under 1 kHz; a step of exactly 1000 is read as
-    milliseconds, a 1-Hz log), one of 10⁵ or more like micro- or nanoseconds."""
+    one over 1000 like microseconds (10 Hz to under 1 kHz), one of 10⁵ or more like micro- or
+    nanoseconds. Below 5, a median step of 1 to 5 whose every step is a whole number (to a
+    thousandth) looks like milliseconds at 250 Hz to 1 kHz, a logger's integer stamps: a log in
+    seconds that steps by whole seconds only is a 1-Hz or slower logger's, too slow for a
+    vehicle's dynamics, and is refused with it (a seconds log's stamps carry fractions: every
+    measured log under ``shared/data`` steps by 0.1 s or less). Jittered milliseconds at those
+    rates are not told from a ~1-Hz log in seconds and pass. A step of exactly 1000 in every
+    row is read as microseconds (1 kHz): as milliseconds it would be such a whole-second 1-Hz
+    log; a median of 1000 with other steps (a jittered 1-Hz logger's) as milliseconds."""
     slip = time_unit_slip(df["t"].to_numpy(dtype=np.float64))
     if slip:
         raise NnidInputError(f"{slip}; t must be seconds", source=source, field="t")
@@ -325,13 +332,22 @@ def time_unit_slip(t: np.ndarray) -> str | None:
     (:func:`check_time_unit`'s rule), or None."""
     if t.size < 3:
         return None
-    step = float(np.median(np.abs(np.diff(t))))
+    steps = np.abs(np.diff(t))
+    step = float(np.median(steps))
+    # integer stamps, up to float64's last bits (ms of Unix time computed from seconds)
+    whole = bool(np.all(np.abs(steps - np.round(steps)) <= 1e-3))
     if step >= 1e5:
         unit = "nanoseconds (divide by 1e9) or microseconds (by 1e6)"
-    elif step > 1000:  # a 20 Hz log in microseconds passed as 50000 s steps, and hung a fit
+    elif step > 1000 or np.all(np.abs(steps - 1000) <= 1e-3):
+        # a 20 Hz log in microseconds passed as 50000 s steps, and hung a fit
         unit = "microseconds (divide by 1e6)"
     elif 5 <= step <= 1000:  # whole or jittered: no vehicle's dynamics are sampled this slowly
         unit = "milliseconds (divide by 1000)"
+    elif step >= 1 and whole:  # 250 Hz in integer milliseconds passed as a 0.25-Hz log
+        return (
+            f"time steps by {shown(step)} (median) and every step is a whole number: this looks "
+            "like milliseconds (divide by 1000)"
+        )
     else:
         return None
     return f"time steps by {shown(step)} (median): this looks like {unit}"

@@ -37,6 +37,7 @@ from nnid.datasets.log import (
 from nnid.datasets.mapping import rotation_from_euler
 from nnid.datasets.measurement import wrap_angle
 from nnid.errors import NnidInputError
+from nnid.validation import shown
 
 
 def experiments(log: pd.DataFrame):
@@ -115,15 +116,22 @@ def resample_log(
     """Every experiment onto a uniform grid at ``rate`` Hz: inputs by zero-order hold, the rest
     by linear interpolation (angles through their unwrapped values, :func:`unwrap_finite`, and
     wrapped back to ±π where the log had them so); gaps longer
-    than ``gap`` s split the experiment."""
+    than ``gap`` s split the experiment, each piece labelled ``<experiment>#<k>`` (``run#<k>``
+    for a log without an experiment column) and marked ``piece_of`` its run. A column that is
+    not a number (a mode, a fault label) or holds true/false is kept by its previous value,
+    as an input is: a label is never blended, and no column is left out."""
     held = set(input_columns(log))
     numeric = [
         c
         for c in log.columns
-        if c not in ("t", "experiment") and pd.api.types.is_numeric_dtype(log[c])
+        if c not in ("t", "experiment")
+        and pd.api.types.is_numeric_dtype(log[c])
+        and not pd.api.types.is_bool_dtype(log[c])
     ]
     # a run's labels the grid keeps: a piece stays one (short_piece), a replay in its group
     labels = [c for c in (PIECE_OF, REPLAY_GROUP) if c in log and c not in numeric]
+    # any other column that is not a number: a mode, a fault label, a flag (once dropped)
+    categorical = [c for c in log.columns if c not in ("t", "experiment", *numeric, *labels)]
     pieces, rates = [], []
     for name, idx in experiments(log):
         part = log.loc[idx]
@@ -138,25 +146,29 @@ def resample_log(
             ts = t[seg]
             grid = ts[0] + np.arange(int(np.floor((ts[-1] - ts[0]) * rate + 1e-9)) + 1) / rate
             out = {"t": grid - grid[0]}
+            previous = np.clip(np.searchsorted(ts, grid, "right") - 1, 0, None)
             for col in numeric:
                 y = part[col].to_numpy(np.float64)[seg]
                 if col in held:
-                    out[col] = y[np.clip(np.searchsorted(ts, grid, "right") - 1, 0, None)]
+                    out[col] = y[previous]
                 elif col in ANGLES:  # a step across ±π was interpolated through zero
                     a = np.interp(grid, ts, unwrap_finite(y))
                     # back to ±π where the log had it so (the unwrap step is the config's)
                     out[col] = wrap_angle(a) if np.nanmax(np.abs(y)) <= np.pi else a
                 else:
                     out[col] = np.interp(grid, ts, y)
-            frame = pd.DataFrame(out)
-            label = name if len(bounds) == 1 else f"{name}#{k}"
+            for col in categorical:
+                out[col] = part[col].to_numpy()[seg][previous]
+            frame = pd.DataFrame(out).astype({c: log[c].dtype for c in categorical})
+            base = "run" if name is None else name  # the piece's piece_of below
+            label = name if len(bounds) == 1 else f"{base}#{k}"
             if name is not None or len(bounds) > 1:
                 frame.insert(1, "experiment", label)
             for col in labels:
                 if pd.notna(part[col].iloc[0]):
                     frame[col] = part[col].iloc[0]
             if len(bounds) > 1 and PIECE_OF not in frame:  # told by it, never by its label
-                frame[PIECE_OF] = "run" if name is None else str(name)
+                frame[PIECE_OF] = str(base)
             pieces.append(frame)
         if report is not None:
             report.add(
@@ -627,6 +639,25 @@ def first_order_lag(tau: np.ndarray, log: pd.DataFrame, time_constant: float) ->
     return out
 
 
+def _refuse_gaps(**arrays: tuple[np.ndarray, Sequence[str]]) -> None:
+    """Every sample of each ``name=(values, column names)`` a finite number: the bias
+    estimates fit integrals from a run's first sample, and one empty cell (a gap) made every
+    later integral, and so the estimate, NaN without a word."""
+    for name, (values, columns) in arrays.items():
+        values = np.asarray(values, dtype=np.float64).reshape(len(values), -1)
+        bad = ~np.isfinite(values)
+        if bad.any():
+            row, axis = (int(k[0]) for k in np.nonzero(bad))
+            raise NnidInputError(
+                f"{name}: value {shown(values[row, axis])} is not a finite number "
+                f"({int(bad.any(axis=1).sum())} such rows): the bias is fitted on integrals "
+                "from the run's first sample, which a gap breaks; estimate it on a stretch "
+                "without gaps",
+                field=columns[axis],
+                row=row,
+            )
+
+
 def estimate_accelerometer_bias(
     t: np.ndarray, velocity: np.ndarray, accel: np.ndarray
 ) -> np.ndarray:
@@ -634,6 +665,7 @@ def estimate_accelerometer_bias(
 
     v(t) = v(t₀) + ∫(a − b) dτ, so v(t) − ∫a dτ = v(t₀) − b (t − t₀): least squares per axis.
     """
+    _refuse_gaps(t=(t, ["t"]), velocity=(velocity, VELOCITY[:3]), accel=(accel, ACCELERATION[:3]))
     integral = cumulative_trapezoid(accel, t, axis=0, initial=0.0)
     design = np.stack([np.ones_like(t), -(t - t[0])], 1)
     coef, *_ = np.linalg.lstsq(design, velocity - integral, rcond=None)
@@ -644,8 +676,10 @@ def estimate_gyro_bias(t: np.ndarray, angles: np.ndarray, gyro: np.ndarray) -> n
     """Constant gyro bias b from attitude and rates (McCarter eqs 2.86-2.87).
 
     Θ(t) = Θ(t₀) + ∫ T_Θ(Θ) (ω − b) dτ; with T_Θ evaluated on the measured attitude this is
-    linear in Θ(t₀) and b, solved by least squares over all samples and axes.
+    linear in Θ(t₀) and b, solved by least squares over all samples and axes. A run with a
+    gap (an empty angle or rate) is refused, naming it: the integrals cannot cross it.
     """
+    _refuse_gaps(t=(t, ["t"]), angles=(angles, ANGLES), gyro=(gyro, VELOCITY[3:]))
     tmat = _euler_rates(angles)
     rate_integral = cumulative_trapezoid(np.einsum("nij,nj->ni", tmat, gyro), t, axis=0, initial=0)
     t_integral = cumulative_trapezoid(tmat, t, axis=0, initial=0)  # ∫ T_Θ dτ, [N, 3, 3]
@@ -653,7 +687,7 @@ def estimate_gyro_bias(t: np.ndarray, angles: np.ndarray, gyro: np.ndarray) -> n
     design = np.zeros((3 * n, 6))
     design[:, :3] = np.tile(np.eye(3), (n, 1))
     design[:, 3:] = -t_integral.reshape(3 * n, 3)
-    target = (np.unwrap(angles, axis=0) - rate_integral).reshape(3 * n)
+    target = (np.unwrap(angles, axis=0) - rate_integral).reshape(3 * n)  # finite: checked
     coef, *_ = np.linalg.lstsq(design, target, rcond=None)
     return coef[3:]
 

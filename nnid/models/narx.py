@@ -89,6 +89,7 @@ from nnid.models.bounds import (
 from nnid.models.io_model import DTYPE, InputOutputModel, seeded_linear
 from nnid.serialization import jsonable
 from nnid.trainers.history import History, Progress, staged, stopping_score
+from nnid.validation import checked_names
 
 #: ``output_transform`` values: extra regressors computed from each lagged output
 OUTPUT_TRANSFORMS = (None, "sqrt", "products", "fossen")
@@ -345,9 +346,10 @@ class NarxModel(InputOutputModel):
                 "rest_equilibrium makes the Δ increment zero at rest: it needs delta=True",
                 field="rest_equilibrium",
             )
-        if not self.inputs or not self.outputs:
+        self.inputs_ = checked_names(self.inputs, "inputs")
+        self.outputs_ = checked_names(self.outputs, "outputs")
+        if not self.inputs_ or not self.outputs_:
             raise NnidInputError("a NARX needs at least one input and one output", field="outputs")
-        self.inputs_, self.outputs_ = list(self.inputs), list(self.outputs)
         self.targets_ = list(self.outputs_)
         self.input_delays_ = _delays(self.input_delays, 0, "input_delays")
         self.output_delays_ = _delays(self.output_delays, 1, "output_delays")

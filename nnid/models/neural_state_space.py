@@ -58,6 +58,7 @@ from nnid.models.io_model import DTYPE, InputOutputModel
 from nnid.physics.integrate import rk4
 from nnid.threads import torch_threads
 from nnid.trainers.history import Progress, staged
+from nnid.validation import checked_names
 
 #: derivatives are learned per sample and scaled down, so a small network starts slow
 _RATE = 0.1
@@ -227,7 +228,9 @@ class NeuralStateSpace(InputOutputModel):
 
     def _configure(self) -> None:
         """The settings in working form, checked (by ``fit`` and on load)."""
-        if not self.outputs:
+        self.inputs_ = checked_names(self.inputs, "inputs")
+        self.outputs_ = checked_names(self.outputs, "outputs")
+        if not self.outputs_:
             raise NnidInputError("a state-space model needs at least one output", field="outputs")
         if self.hidden_states < 0 or self.hidden < 1 or self.substeps < 1 or self.warmup < 1:
             raise NnidInputError(
@@ -241,7 +244,6 @@ class NeuralStateSpace(InputOutputModel):
                 field="windows",
             )
         self.windows_ = windows
-        self.inputs_, self.outputs_ = list(self.inputs), list(self.outputs)
         self.targets_ = list(self.outputs_)
         self.warmup_samples_ = int(self.warmup)
         self.n_x_ = len(self.outputs_) + int(self.hidden_states)
