@@ -109,7 +109,7 @@ def test_masking_cuts_runs_into_segments_and_reports_every_row():
     report = CleaningReport()
     masked_train, masked_held = mask_gaps([train, held], ["u", "r"], report)
     assert masked_held is held  # no gap there
-    assert list(dict.fromkeys(masked_train["experiment"])) == ["dive1#1", "dive1#3"]
+    assert list(dict.fromkeys(masked_train["experiment"])) == ["dive1#0", "dive1#2"]
     assert masked_train["u"].notna().all()
     (step,) = report.steps
     assert step.rows_removed == 250 - len(masked_train) == 23  # 22 empty, 1 stranded
@@ -174,7 +174,7 @@ def test_a_piece_is_told_by_its_marker_not_by_a_hash_in_the_label():
     log = _mocap_log().assign(experiment="dive#1")
     log.loc[20, "u"] = np.nan  # cuts a 20-sample piece off the run's start
     (masked,) = mask_gaps([log], ["u"])
-    assert list(dict.fromkeys(masked["experiment"])) == ["dive#1#1", "dive#1#2"]
+    assert list(dict.fromkeys(masked["experiment"])) == ["dive#1#0", "dive#1#1"]
     assert (masked["piece_of"] == "dive#1").all()
     out = derive_accelerations(masked, 1.0, 4)
     assert out["du"].iloc[:20].isna().all() and np.isfinite(out["du"].iloc[40:-40]).all()
@@ -196,3 +196,21 @@ def test_a_piece_stays_one_through_resampling_and_is_no_unknown_column():
     assert (again["piece_of"] == "dive").all()
     out = derive_accelerations(again, 1.0, 4)
     assert out["du"].iloc[:20].isna().all() and np.isfinite(out["du"].iloc[40:-40]).all()
+
+
+def test_pieces_are_numbered_and_clocked_alike_by_mask_gaps_and_resample():
+    """mask_gaps numbered a run's segments from #1 and kept the run's clock, while
+    resample_log (and the readers) numbered them from #0 and restarted each piece's t at 0:
+    one hole gave 'dive#1' or 'dive#0' depending on the step that cut it, and the hole was not
+    in the resampled log's t. Both now give dive#0, dive#1 on the run's clock."""
+    from nnid.datasets.preprocess import resample_log
+
+    log = _mocap_log(400).assign(experiment="dive")
+    t = log["t"].to_numpy()
+    log.loc[200:239, "u"] = np.nan  # two seconds at 20 Hz
+    (masked,) = mask_gaps([log], ["u"])
+    resampled = resample_log(log.drop(index=range(200, 240)), 20.0, gap=0.5)
+    for out in (masked, resampled):
+        assert list(dict.fromkeys(out["experiment"])) == ["dive#0", "dive#1"]
+        second = out[out["experiment"] == "dive#1"]
+        assert second["t"].iloc[0] == pytest.approx(t[240] - t[0])

@@ -138,6 +138,8 @@ def test_resample_splits_at_gaps_and_holds_inputs():
     assert np.allclose(first["u"], first["t"] * 2.0)  # linear signals interpolate exactly
     assert set(np.unique(first["tau_X"])) <= set(range(6))  # inputs are held, never blended
     assert "split in 2" in report.steps[0].detail
+    # the second piece keeps the run's clock: its t restarted at 0, hiding the 3-s hole
+    assert out.loc[out["experiment"] == "run#1", "t"].iloc[0] == pytest.approx(8.0)
 
 
 def test_resampling_keeps_a_label_column_by_its_previous_value():
@@ -152,7 +154,7 @@ def test_resampling_keeps_a_label_column_by_its_previous_value():
         out = resample_log(log, 20.0, gap=1.0)
     assert {"mode", "fault"} <= set(out.columns)
     assert out["fault"].dtype == bool and out["mode"].isin(["manual", "stabilize"]).all()
-    t_log = out["t"] + np.where(out["experiment"] == "dive#0", 0.0, 8.0)  # each piece from 0
+    t_log = out["t"]  # each piece on the run's clock
     # the label in force at each grid time: the last logged sample's at or before it
     k = np.searchsorted(t, t_log.to_numpy() + 1e-9, "right") - 1
     assert (out["mode"].to_numpy() == mode[k]).all()

@@ -84,6 +84,27 @@ def test_gap_splits_instead_of_bridging(tmp_path):
     assert any(s.step == "split at gaps" and s.rows_removed > 0 for s in report.steps)
 
 
+def test_a_pieces_clock_shows_the_hole_it_was_cut_at(tmp_path):
+    """Each piece a reader cut a run into at a gap started again at t = 0, so the second of
+    r1's pieces looked like a new run and ``nnid inspect`` counted no time in gaps: the hole
+    (about 1 s of nav silence) was only in the cleaning report. Pieces keep the run's clock."""
+    from nnid.datasets.inspect import summarize
+
+    _sensor_tables(tmp_path)
+    nav = pd.read_csv(tmp_path / "nav.csv")
+    nav = nav[(nav["time"] - nav["time"].iloc[0] < 3) | (nav["time"] - nav["time"].iloc[0] > 4)]
+    nav.to_csv(tmp_path / "nav.csv", index=False)
+    log, _ = load_log(tmp_path, _write_map(tmp_path / "map.toml", MAP))
+    first, second = (log[log["experiment"] == e]["t"] for e in ("r1#0", "r1#1"))
+    assert first.iloc[0] == 0.0 and first.iloc[-1] < 3.0 < 4.0 < second.iloc[0]
+    assert np.allclose(log["psi"], 0.1 * log["t"], atol=1e-9)  # t is the run's own time
+    info = summarize(log)
+    hole = second.iloc[0] - first.iloc[-1]
+    assert info["gap_s"] == pytest.approx(hole - 0.05)  # less one sample interval, as gaps
+    assert info["duration_s"] == pytest.approx(np.ptp(first) + np.ptp(second))
+    assert info["runs"] == 1
+
+
 def test_inspect_rate_is_one_the_log_has(tmp_path):
     """A run at 10 Hz and one at 100 Hz: inspect said "about 55 Hz", the median of the two
     rates, a rate no sample has; now the rate of most intervals, and the spread."""

@@ -142,9 +142,11 @@ def mask_gaps(
 ) -> list[pd.DataFrame]:
     """Take the rows with an empty cell in ``columns`` out of each part of one log (e.g. its
     training and held-out parts) and cut each run at them into segments ``<experiment>#<k>``
-    (module docstring), reported once; a segment's ``piece_of`` column names its run, which
-    is how a piece is told from a whole run (never by the ``#`` in its label, which a user's
-    may hold too). Parts without gaps are returned as they are."""
+    (module docstring; k from 0, as :func:`nnid.datasets.preprocess.resample_log` and the
+    readers count, each segment keeping the run's clock ``t``), reported once; a segment's
+    ``piece_of`` column names its run, which is how a piece is told from a whole run (never
+    by the ``#`` in its label, which a user's may hold too). Parts without gaps are returned
+    as they are."""
     out, gaps, short = [], [], 0
     for log in parts:
         cols = [c for c in columns if c in log]
@@ -161,7 +163,7 @@ def mask_gaps(
         for name, idx in experiments(log):
             pos = np.flatnonzero(log.index.isin(idx))
             runs = _runs(keep[pos])
-            for k, (a, b) in enumerate(runs, start=1):
+            for k, (a, b) in enumerate(runs):  # from #0, as resample_log and the readers
                 if b - a < MIN_SEGMENT:
                     keep[pos[a:b]] = False
                     short += b - a

@@ -59,9 +59,9 @@ def summarize(log: pd.DataFrame, savgol_window: float = 1.0, savgol_order: int =
     """A JSON-ready summary of a validated log. ``runs`` counts the experiments as recorded:
     the pieces a reader cut one run into at its gaps (``experiments`` rows with ``piece_of``)
     are one run. ``duration_s`` is the time sampled; ``gap_s`` the time in gaps (each gap's
-    length less one sample interval, as :mod:`nnid.datasets.gaps` counts missing samples;
-    the hole between a run's pieces is the reader's cleaning report's: a piece's clock may
-    restart). Velocities the log lacks are derived from its pose
+    length less one sample interval, as :mod:`nnid.datasets.gaps` counts missing samples,
+    the hole between two consecutive pieces of one run included, as their run's clock shows
+    it). Velocities the log lacks are derived from its pose
     with ``savgol_window`` s and ``savgol_order`` (:func:`velocities_from_pose`) for the
     excitation and ``excited`` (:func:`nnid.evaluation.metrics.excited_dofs`). ``commands``:
     the excitation of each ``cmd_*`` channel, a command and not a force without a vehicle
@@ -72,6 +72,7 @@ def summarize(log: pd.DataFrame, savgol_window: float = 1.0, savgol_order: int =
     known = {"t", "experiment", PIECE_OF, REPLAY_GROUP, *POSE, *VELOCITY, *ACCELERATION, *inputs}
     groups = experiments(log)
     exp_rows, gaps, intervals = [], [], []
+    before: tuple[str | None, float] = (None, float("nan"))  # the last piece's run and end
     for name, idx in groups:
         t = log.loc[idx, "t"].to_numpy(np.float64)
         dt = np.diff(t)
@@ -86,6 +87,13 @@ def summarize(log: pd.DataFrame, savgol_window: float = 1.0, savgol_order: int =
         for k in np.flatnonzero(dt > 1.5 * med):
             held.append({"experiment": label, "t": float(t[k]), "length_s": float(dt[k]),
                          "missing_s": float(dt[k] - med)})  # fmt: skip
+        if whole is not None and whole == before[0] and t.size and t[0] > before[1]:
+            # the hole a reader or resample cut a run at: pieces keep the run's clock
+            # (outside either piece's span: in the log's gaps, not in a piece's gap_s)
+            hole = float(t[0] - before[1])
+            gaps.append({"experiment": whole, "t": before[1], "length_s": hole,
+                         "missing_s": hole - med})  # fmt: skip
+        before = (whole, float(t[-1]) if t.size else float("nan"))
         gaps += held
         span = float(t[-1] - t[0]) if t.size else 0.0
         held_s = float(sum(g["missing_s"] for g in held))

@@ -117,7 +117,9 @@ def resample_log(
     by linear interpolation (angles through their unwrapped values, :func:`unwrap_finite`, and
     wrapped back to ±π where the log had them so); gaps longer
     than ``gap`` s split the experiment, each piece labelled ``<experiment>#<k>`` (``run#<k>``
-    for a log without an experiment column) and marked ``piece_of`` its run. A column that is
+    for a log without an experiment column; k from 0, as :func:`nnid.datasets.gaps.mask_gaps`
+    and the readers count) and marked ``piece_of`` its run. Each run's time starts at 0 and
+    its pieces keep that clock, so the hole between two pieces is seen in ``t``. A column that is
     not a number (a mode, a fault label) or holds true/false is kept by its previous value,
     as an input is: a label is never blended, and no column is left out."""
     held = set(input_columns(log))
@@ -145,7 +147,9 @@ def resample_log(
                 continue
             ts = t[seg]
             grid = ts[0] + np.arange(int(np.floor((ts[-1] - ts[0]) * rate + 1e-9)) + 1) / rate
-            out = {"t": grid - grid[0]}
+            # the run's clock from its first sample: a later piece starts where it was
+            # measured (as mask_gaps's pieces do), so the hole before it stays in the log
+            out = {"t": grid - grid[0] + (ts[0] - t[0])}
             previous = np.clip(np.searchsorted(ts, grid, "right") - 1, 0, None)
             for col in numeric:
                 y = part[col].to_numpy(np.float64)[seg]

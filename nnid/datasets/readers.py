@@ -286,9 +286,11 @@ def assemble(
                 int((~valid).sum()),
             )
         for k, (a, b) in enumerate(segments):
-            piece = pd.DataFrame(
-                {"t": grid[a:b] - grid[a]} | {c: v[a:b] for c, v in columns.items()}
-            )
+            # a piece keeps the run's clock (from its first piece's first sample, so a run
+            # not cut starts at 0 as before), as mask_gaps's do: restarted at 0, the hole
+            # between two pieces was in the cleaning report only, not in the log
+            t = grid[a:b] - grid[segments[0][0]]
+            piece = pd.DataFrame({"t": t} | {c: v[a:b] for c, v in columns.items()})
             piece.insert(1, "experiment", exp if len(segments) == 1 else f"{exp}#{k}")
             if len(segments) > 1:  # a piece, told by this column (short_piece), not its label
                 piece[PIECE_OF] = exp
