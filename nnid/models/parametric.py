@@ -32,7 +32,7 @@ from sklearn.utils.validation import check_is_fitted
 from nnid.datasets.arrays import log_arrays, nominal_forces
 from nnid.datasets.cleaning import CleaningReport
 from nnid.datasets.log import ANGLES, POSE, VELOCITY
-from nnid.datasets.preprocess import zoh_midpoint
+from nnid.datasets.preprocess import warn_held_inputs, zoh_midpoint
 from nnid.errors import NnidInputError
 from nnid.evaluation.prediction import (
     Replay,
@@ -833,6 +833,13 @@ class ParametricModel(FossenPlant):
                 f"{', '.join(self.not_excited_)}",
                 ExcitationWarning,
                 stacklevel=3,
+            )
+        inner = getattr(trainer, "trainer", trainer)  # a sequence's steps' trainer
+        if not self.zoh_midpoint and getattr(inner, "kind", "") != "ukf":
+            # the UKF integrates the model with the inputs held: it reads them as they are
+            derived = any(s.step == "derive accelerations" for s in self.report_.steps)
+            warn_held_inputs(
+                log, "the Fossen fit", not needs_acc or derived, self.vehicle.actuator_lag
             )
         self.attenuated_ = self._attenuated(trainer, unknowns, dofs, data)
         if self.attenuated_:

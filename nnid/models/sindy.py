@@ -167,6 +167,7 @@ class SindyDamping(DampingModel):
         theta_v, y_v = self.features(validation)
         ok = self._defined(log, theta, y, "training")
         ok_v = self._defined(validation, theta_v, y_v, "validation")
+        self._warn_held(log, "the SINDy fit")
         path = SparsePath(
             self.optimizer,
             self.thresholds,

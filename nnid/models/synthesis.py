@@ -20,7 +20,8 @@ import numpy as np
 import pandas as pd
 
 from nnid.datasets.arrays import log_arrays
-from nnid.datasets.preprocess import experiments, zoh_midpoint_inputs
+from nnid.datasets.log import ACCELERATION
+from nnid.datasets.preprocess import experiments, warn_held_inputs, zoh_midpoint_inputs
 from nnid.errors import NnidInputError
 from nnid.models.parametric import (
     FossenPlant,
@@ -176,6 +177,13 @@ class DampingModel(FossenPlant):
             field=field,
         )
 
+    def _warn_held(self, log: pd.DataFrame, fit: str) -> None:
+        """:func:`~nnid.datasets.preprocess.warn_held_inputs` for this fit's τ̄: its
+        acceleration is smoothed unless the log has every one and no filter is set."""
+        if not self.zoh_midpoint:
+            smoothed = self.filtered or not all(a in log for a in ACCELERATION)
+            warn_held_inputs(log, fit, smoothed, self.vehicle.actuator_lag, stacklevel=5)
+
     def _set_damping(self, terms: Sequence[str], coef: np.ndarray, stderr: np.ndarray) -> None:
         """The fitted state: K ``[6, len(terms)]`` and its standard errors (NaN where none),
         and the plant (the vehicle file with its damping replaced by K)."""
@@ -292,6 +300,7 @@ class SynthesisModel(DampingModel):
             raise NnidInputError(str(exc), field="mask") from None
         xi, tau_bar = self._xi_tau(log, terms)
         self._defined(log, xi, tau_bar, "training")
+        self._warn_held(log, "the synthesis fit")
         fit = masked_least_squares(xi, tau_bar, mask, terms)
         progress(1, 2 if self.method != "ls" else 1, "masked least squares")
         if self.method != "ls":
