@@ -140,42 +140,73 @@ class SimulateConfig(StrictModel):
     @model_validator(mode="after")
     def _runs(self) -> SimulateConfig:
         # checked here, where the config can be named: the log it writes would carry a blank
-        # or repeated experiment label, or a run of one sample, and be refused as that file
+        # or repeated experiment label, or a run of one sample, and be refused as that file.
+        # Each error names the key (``experiments.2.signals.0.f1``; a run of the sequence is
+        # ``sequence``, whose keys make all its runs) and the value expected there.
         from nnid.datasets.log import MAX_RUN_SAMPLES
 
         if not self.all_experiments():
             raise ValueError("nothing to simulate: give [[experiments]] or a [sequence]")
         twice = repeated([e.name for e in self.effects])
         if twice:  # applied twice, or the last one kept: either way not what was written
-            raise ValueError(f"effects: {', '.join(twice)} given twice")
+            raise NnidInputError(f"{', '.join(twice)} given twice", field="effects")
         nyquist = 0.5 / self.dt
-        seen: set[str] = set()
-        for exp in self.all_experiments():
+        seen: dict[str, str] = {}
+        for i, exp in enumerate(self.all_experiments()):
+            where = f"experiments.{i}" if i < len(self.experiments) else "sequence"
+
+            def at(key: str, where: str = where) -> str:
+                return where if where == "sequence" else f"{where}.{key}"
+
             twice = repeated([e.name for e in (*self.effects, *exp.effects)])
             if twice:
-                raise ValueError(f"experiment {exp.name!r}: effect {', '.join(twice)} given twice")
-            for signal in exp.signals:
+                raise NnidInputError(
+                    f"experiment {exp.name!r}: effect {', '.join(twice)} given twice (once in "
+                    "the config's effects, which apply to every experiment, or in its own)",
+                    field=at("effects"),
+                )
+            for j, signal in enumerate(exp.signals):
                 top = signal.top_frequency()
                 if top >= nyquist:  # sampled at dt it would alias to a slower signal, unseen
-                    raise ValueError(
+                    key = signal.top_key()
+                    raise NnidInputError(
                         f"experiment {exp.name!r}: its {signal.kind} reaches {top:g} Hz, at or "
-                        f"above the {nyquist:g} Hz that dt = {self.dt:g} s can carry"
+                        f"above the {nyquist:g} Hz that dt = {self.dt:g} s can carry; expected "
+                        f"below {nyquist:g} Hz (or a smaller dt)",
+                        field=at(f"signals.{j}" + (f".{key}" if key else "")),
                     )
             if not exp.name.strip():
-                raise ValueError("every experiment needs a name (experiments.name is empty)")
+                raise NnidInputError(
+                    "every experiment needs a name: a non-blank text is expected",
+                    field=at("name"),
+                )
             if exp.name in seen:
-                raise ValueError(f"experiment name {exp.name!r} is used twice")
-            seen.add(exp.name)
+                # a run of the sequence has a fixed name: the explicit experiment's is the key
+                # to change
+                first = seen[exp.name]
+                explicit = where == "sequence" and first != "sequence"
+                raise NnidInputError(
+                    f"experiment name {exp.name!r} is used twice (also by "
+                    f"{'a run of the sequence' if explicit else first}): each experiment needs "
+                    "its own name",
+                    field=f"{first}.name" if explicit else at("name"),
+                )
+            seen[exp.name] = where
+            # the end is the duration if given, else the signals' last end
+            length = at("duration") if exp.duration is not None else at("signals")
             if round(exp.end() / self.dt) < 1:  # the simulator logs round(end / dt) + 1
-                raise ValueError(
+                raise NnidInputError(
                     f"experiment {exp.name!r} lasts {exp.end():g} s, under one step dt = "
-                    f"{self.dt:g} s: it would log a single sample"
+                    f"{self.dt:g} s: it would log a single sample; expected at least one "
+                    f"step ({self.dt:g} s)",
+                    field=length,
                 )
             if exp.end() / self.dt > MAX_RUN_SAMPLES:
-                raise ValueError(
+                raise NnidInputError(
                     f"experiment {exp.name!r} lasts {exp.end():g} s: {exp.end() / self.dt:.3g} "
                     f"steps of dt = {self.dt:g} s, more than the {MAX_RUN_SAMPLES:.0e} a run may "
-                    "hold (is dt in seconds?)"
+                    "hold (is dt in seconds?)",
+                    field=length,
                 )
         return self
 
@@ -908,6 +939,11 @@ class CompareConfig(_Command):
         return models
 
 
+def _off_at_zero(value: float | None) -> float | None:
+    """A setting that 0 switches off, as None (what the loop takes for "no filter")."""
+    return value or None
+
+
 class LoopConfig(_Command):
     """``nnid loop CONFIG``: the residual loop on a log (``--data``/``--vehicle`` override)."""
 
@@ -921,7 +957,12 @@ class LoopConfig(_Command):
     max_effects: int = Field(3, ge=0)
     alpha: float = Field(0.01, ge=1e-12, le=0.5)  # as --alpha and a batch manifest take it
     coupled: bool = True
-    filter_lambda: PositiveFloat | None = 1.0
+    # Weiss's filtered regressors, F(s) = λ/(s + λ) in rad/s (eqs 86-92); 0 switches the filter
+    # off (the loop alone filters by default, and TOML has no null to unset it; the trainers'
+    # filter is off unless their filter_lambda is given)
+    filter_lambda: Annotated[
+        float | None, Field(ge=0, allow_inf_nan=False), AfterValidator(_off_at_zero)
+    ] = 1.0
     savgol_window: PositiveFloat = 1.0
     savgol_order: int = Field(4, ge=2, le=8)
     warmup_s: float = Field(2.0, ge=0, allow_inf_nan=False)

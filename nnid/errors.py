@@ -55,18 +55,26 @@ class NnidInputError(ValueError):
 
 
 def checked_number(
-    value: object, field: str, minimum: float = 0.0, strict: bool = True, integer: bool = False
+    value: object,
+    field: str,
+    minimum: float = 0.0,
+    strict: bool = True,
+    integer: bool = False,
+    maximum: float = math.inf,
 ) -> float | int:
-    """``value`` as a finite number above ``minimum`` (at or above it unless ``strict``), a
-    whole one where ``integer``, or the error naming ``field``: a setting given in Python
-    skips the config's checks, and a NaN, a 1.5-wide layer or a negative rate crashed deep
-    in the fit (``int(nan)``, torch's optimiser) or trained as something else."""
+    """``value`` as a finite number above ``minimum`` (at or above it unless ``strict``) and
+    at most ``maximum``, a whole one where ``integer``, or the error naming ``field``: a
+    setting given in Python skips the config's checks, and a NaN, a 1.5-wide layer or a
+    negative rate crashed deep in the fit (``int(nan)``, torch's optimiser) or trained as
+    something else."""
     ok = isinstance(value, Real) and not isinstance(value, bool) and math.isfinite(value)
-    ok = ok and (value > minimum if strict else value >= minimum)
+    ok = ok and (value > minimum if strict else value >= minimum) and value <= maximum
     if ok and integer:
         ok = float(value).is_integer()
     if not ok:
         kind = "a whole number" if integer else "a finite number"
         bound = f"{'above' if strict else 'at least'} {minimum:g}"
+        if math.isfinite(maximum):
+            bound += f" and at most {maximum:g}"
         raise NnidInputError(f"{kind} {bound} is expected, not {value!r}", field=field)
     return int(value) if integer else float(value)

@@ -185,7 +185,14 @@ def validated(model: type[Model], data: dict[str, Any], source: str) -> Model:
                     first, field = other, path
                     break
         msg = first["msg"].removeprefix("Value error, ")
-        if first["type"] == "missing":
+        inner = first.get("ctx", {}).get("error")
+        table = isinstance(first.get("input"), dict)
+        if table and isinstance(inner, NnidInputError) and inner.field and inner.source is None:
+            # a check of a whole table (its input the table) that names the key within it at
+            # fault (``experiments.2.signals.0.f1`` of a simulate config); a check of one key
+            # has named it already
+            msg, field = inner.message, ".".join(filter(None, [field, inner.field]))
+        elif first["type"] == "missing":
             msg = "is required but missing"
         elif first["type"] == "extra_forbidden":
             msg = "is not a known field here"

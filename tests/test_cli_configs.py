@@ -545,3 +545,23 @@ def test_a_free_run_above_one_is_said_to_have_no_skill():
     assert without_skill("test", {"free_run_nrmse": {"total": 0.98}}) == []
     assert without_skill("test", {"free_run_nrmse": {"total": None}}) == []  # diverged: said
     assert without_skill("validation", {}) == []  # elsewhere, not as this
+
+
+@pytest.mark.parametrize(("setting", "expected"), [("filter_lambda = 0", None), ("", 1.0)])
+def test_a_loop_config_switches_the_regressor_filter_off_with_filter_lambda_zero(
+    tmp_path, setting, expected
+):
+    """The loop filters its regressors by default (λ = 1 rad/s) and TOML has no null: the
+    filter could not be switched off from a config (0 was refused as not above 0)."""
+    import json
+    from importlib import resources
+
+    demo = resources.files("nnid.demo_data")
+    config = tmp_path / "loop.toml"
+    config.write_text(f'kind = "loop"\nmax_effects = 0\n{setting}\n')
+    args = ["loop", str(config), "--data", str(demo.joinpath("demo_minirov_heave.parquet"))]
+    args += ["--vehicle", str(demo.joinpath("minirov.toml")), "--out", str(tmp_path / "o")]
+    res = CliRunner().invoke(app, args)
+    assert res.exit_code == 0, res.output
+    loop = json.loads((tmp_path / "o" / "loop.json").read_text())
+    assert loop["settings"]["filter_lambda"] == expected

@@ -436,3 +436,47 @@ def test_a_signal_cut_by_its_experiments_duration_is_said(tmp_path):
         assert result.exit_code == 0, result.output
         assert (said in result.output) is expected, result.output
         assert ("its last 3 s are not flown" in result.output) is expected
+
+
+def _run(name: str, signal: str = "", duration: str = "") -> str:
+    """One more [[experiments]] table of a simulate config."""
+    step = "{ kind = 'step', channel = 'X', amplitude = 1.0, duration = 5.0 }"
+    signals = f"signals = [{step}{', ' + signal if signal else ''}]\n"
+    return f"[[experiments]]\nname = '{name}'\n{duration}{signals}"
+
+
+@pytest.mark.parametrize(("runs", "field", "expected"), [
+    (_run("b") + _run("surge"), "experiments.2.name", "also by experiments.0"),
+    (_run("b") + _run("c", "{ kind = 'chirp', channel = 'X', amplitude = 1.0, f0 = 0.1, "
+                           "f1 = 50.0, duration = 5.0 }"),
+     "experiments.2.signals.1.f1", "expected below 10 Hz"),
+    (_run("b") + _run("c", "{ kind = 'sine', channel = 'X', amplitude = 1.0, frequency = 12.0, "
+                           "duration = 5.0 }"),
+     "experiments.2.signals.1.frequency", "expected below 10 Hz"),
+    (_run("b") + _run("c", duration="duration = 0.01\n"), "experiments.2.duration",
+     "expected at least one step (0.05 s)"),
+], ids=["a name twice", "a chirp past nyquist", "a sine past nyquist",
+        "a run under one step"])  # fmt: skip
+def test_a_run_check_names_the_experiments_key_and_what_is_expected(
+    tmp_path, runs, field, expected
+):
+    """A signal above Nyquist, a name given twice and a run under one step named the
+    experiment but no key: the message was 'sim.toml: experiment 'c': ...'."""
+    veh = _write(tmp_path, "box.toml", GOOD_VEHICLE)
+    cfg = _write(tmp_path, "sim.toml", CONFIG.format(vehicle=veh) + runs)
+    result = runner.invoke(app, ["simulate", str(cfg), "--out", str(tmp_path / "x.csv")])
+    assert result.exit_code == 2, result.output
+    assert f"sim.toml, field '{field}': " in result.output, result.output
+    assert expected in result.output and len(result.output.strip().splitlines()) == 1
+
+
+def test_a_sequence_run_named_twice_names_the_explicit_experiments_name():
+    """A run of the [sequence] has a fixed name: the explicit experiment's name is the key."""
+    from nnid.config import SimulateConfig
+    from nnid.errors import NnidInputError
+    from nnid.validation import validated
+
+    cfg = {"vehicle": "seamor", "sequence": {}, "experiments": [{"name": "surge", "duration": 1.0}]}
+    with pytest.raises(NnidInputError, match="also by a run of the sequence") as info:
+        validated(SimulateConfig, cfg, "sim.toml")
+    assert info.value.field == "experiments.0.name" and info.value.source == "sim.toml"

@@ -3,6 +3,7 @@ windows its early stopping flies."""
 
 from __future__ import annotations
 
+import warnings
 from importlib import resources
 from types import SimpleNamespace
 from typing import ClassVar
@@ -86,3 +87,50 @@ def test_a_short_validation_run_leaves_the_other_runs_windows_whole(window, expe
     problem = SimpleNamespace(module=torch.nn.Linear(1, 1))
     trainer.fit(problem, [_run(200)], 0.05, [_run(200), _run(41)])
     assert _Recorder.seen == [expected]
+
+
+@pytest.mark.parametrize(
+    ("field", "settings", "says"),
+    [
+        ("hidden", {"hidden": (200_000,)}, "at most 100000"),  # the config's MAX_WIDTH
+        ("physics_trainer", {"physics_trainer": "nope"}, "a regression trainer is expected"),
+        ("physics_trainer", {"physics_trainer": Adam()}, "cannot fit a Fossen model's"),
+        ("dofs", {"dofs": ["x"]}, "'x' is not a DOF"),  # tuple.index(x): a bare ValueError
+        ("dofs", {"dofs": "u"}, "a list of DOFs"),
+    ],
+)
+def test_a_bad_physics_setting_is_named_as_the_hybrid_names_it(short_log, field, settings, says):
+    """Not capped as the config caps it (hidden), an AttributeError ('str' object has no
+    attribute 'fit'), the parametric fit's own name ('trainer', the hybrid's network
+    optimiser) and a bare ValueError."""
+    settings = {"trainer": Adam(max_epochs=1), "segments": (0.5,), "hidden": (4,), **settings}
+    first = short_log["experiment"] == short_log["experiment"].iloc[0]
+    model = HybridModel(load_vehicle(MINIROV), **settings)
+    with pytest.raises(NnidInputError, match=rf"^field '{field}': .*{says}"):
+        model.fit(short_log[first], short_log[~first])
+
+
+@pytest.mark.parametrize(
+    ("field", "settings"), [("trainer", {"trainer": "nope"}), ("dofs", {"dofs": ["x"]})]
+)
+def test_a_bad_parametric_setting_is_one_error_naming_its_field(short_log, field, settings):
+    from nnid.models.parametric import ParametricModel
+
+    with pytest.raises(NnidInputError, match=rf"^field '{field}': "):
+        ParametricModel(load_vehicle(MINIROV), **settings).fit(short_log)
+
+
+def test_a_fit_without_validation_says_its_epochs_were_kept_on_the_training_loss(short_log):
+    """docs/hybrid.md said early stopping is never on the training error, while a fit
+    without validation silently kept each stage's lowest-training-loss epoch."""
+    settings = {"trainer": Adam(max_epochs=2), "segments": (0.5,), "hidden": (4,)}
+    first = short_log["experiment"] == short_log["experiment"].iloc[0]
+    model = HybridModel(load_vehicle(MINIROV), **settings)
+    with pytest.warns(UserWarning, match="without validation data .* lowest training loss"):
+        model.fit(short_log[first])
+    assert model.describe()["kept_on"] == "training loss"
+    assert all(stage["validation"] == [] for stage in model.describe()["stages"])
+    with warnings.catch_warnings():
+        warnings.filterwarnings("error", message=".*without validation data")
+        model.fit(short_log[first], short_log[~first])
+    assert model.describe()["kept_on"] == "validation free run"

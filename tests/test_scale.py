@@ -14,6 +14,7 @@ import shutil
 import signal
 import threading
 import time
+import warnings
 from pathlib import Path
 
 import pandas as pd
@@ -895,3 +896,28 @@ def test_the_batch_train_table_says_diverged_or_not_scored() -> None:
     cells = [re.findall(r"<td>(.*?)</td>", row)[4] for row in page.split("<tr>")[2:6]]
     assert cells == ["diverged", "not scored", "0", "-"]
     assert "'-' where the free run diverged" not in page
+
+
+def test_a_copy_of_a_log_in_another_folder_is_run_once_and_said(tmp_path):
+    """Two byte-identical dive.csv in two folders are one task id (the log's stem and the
+    contents' hash): the second was dropped, its path named nowhere."""
+    for folder in ("a", "b"):
+        (tmp_path / folder).mkdir()
+        (tmp_path / folder / "dive.csv").write_text("t,z\n0,0\n")
+    (tmp_path / "m.toml").write_text(
+        'command = "loop"\nvehicle = "seamor"\ndata = ["*/dive.csv"]\n'
+    )
+    with pytest.warns(UserWarning, match="same task dive-") as said:
+        tasks = expand(tmp_path / "m.toml")
+    assert [Path(t.data).parent.name for t in tasks] == ["a"]
+    message = str(said[0].message)
+    assert (
+        str(tmp_path / "a" / "dive.csv") in message and str(tmp_path / "b" / "dive.csv") in message
+    )
+    # the same file named twice is one task, with nothing to say
+    (tmp_path / "m.toml").write_text(
+        'command = "loop"\nvehicle = "seamor"\ndata = ["a/dive.csv", "a/*.csv"]\n'
+    )
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert len(expand(tmp_path / "m.toml")) == 1

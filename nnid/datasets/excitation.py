@@ -32,6 +32,11 @@ class _Signal(StrictModel):
         edges are sampled as they fall)."""
         return 0.0
 
+    def top_key(self) -> str | None:
+        """The key whose value is :meth:`top_frequency` (for an error to name), or None where
+        the frequency is computed from several (the d-optimal sine's)."""
+        return None
+
 
 class Step(_Signal):
     """A step of ``amplitude`` from ``start`` for ``duration`` seconds (held forever if absent)."""
@@ -82,6 +87,9 @@ class Chirp(_Signal):
     def top_frequency(self) -> float:
         return max(self.f0, self.f1)
 
+    def top_key(self) -> str | None:
+        return "f1" if self.f1 >= self.f0 else "f0"
+
     def __call__(self, t: np.ndarray) -> np.ndarray:
         tau = t - self.start
         phase = 2 * math.pi * (self.f0 * tau + (self.f1 - self.f0) * tau**2 / (2 * self.duration))
@@ -112,6 +120,9 @@ class Multisine(_Signal):
 
     def top_frequency(self) -> float:
         return self.f_max
+
+    def top_key(self) -> str | None:
+        return "f_max"
 
     def __call__(self, t: np.ndarray) -> np.ndarray:
         freqs = np.linspace(self.f_min, self.f_max, self.n)
@@ -230,6 +241,9 @@ class Sine(_Signal):
 
     def top_frequency(self) -> float:
         return self.frequency
+
+    def top_key(self) -> str | None:
+        return "frequency"
 
     def __call__(self, t: np.ndarray) -> np.ndarray:
         x = self.offset + self.amplitude * np.sin(2 * math.pi * self.frequency * (t - self.start))

@@ -35,6 +35,7 @@ by about half a sample: 0.18 std of free-run difference from the fit it started 
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Sequence
 from typing import Any, Literal
 
@@ -63,7 +64,12 @@ from nnid.evaluation.prediction import (
 from nnid.models.base import NOT_FITTED, check_log
 from nnid.models.hybrid_kernel import NetArrays, free_run
 from nnid.models.io_model import seeded_linear
-from nnid.models.parametric import FossenPlant, ParametricModel
+from nnid.models.parametric import (
+    FossenPlant,
+    ParametricModel,
+    checked_dofs,
+    regression_trainer,
+)
 from nnid.physics.added_mass import parse_added_mass_key
 from nnid.physics.damping import DampingTerms, parse_coefficient_key
 from nnid.physics.dofs import DOFS, FORCES
@@ -415,6 +421,14 @@ class _Problem:
         return torch.cat(out) if out else torch.zeros(0, dtype=DTYPE)
 
 
+def _kept_on(stages: list[dict]) -> str:
+    """What chose each stage's kept epoch: ``"validation free run"`` where every stage scored
+    held-out windows, else ``"training loss"`` (fitted without validation data: nothing
+    held out, so never to be read as early stopping)."""
+    held = all(stage.get("validation") for stage in stages)
+    return "validation free run" if held else "training loss"
+
+
 class HybridModel(FossenPlant):
     """Fossen model plus a learned correction (module docstring), behind the model protocol.
 
@@ -507,6 +521,10 @@ class HybridModel(FossenPlant):
 
     # -- settings --------------------------------------------------------------------------------
     def _check_settings(self) -> None:
+        # the parametric fit's settings by its own checks, named as this model names them
+        # (its trainer is physics_trainer here), before the fit would stumble on them
+        checked_dofs(self.dofs)
+        regression_trainer(self.physics_trainer, "physics_trainer")
         if self.physics not in ("frozen", "joint"):
             raise NnidInputError("physics is 'frozen' or 'joint'", field="physics")
         if self.level not in ("force", "acceleration"):
@@ -528,8 +546,10 @@ class HybridModel(FossenPlant):
         for name in ("hidden", "memory", "segments"):
             if isinstance(getattr(self, name), str | bytes) or not np.iterable(getattr(self, name)):
                 raise NnidInputError(f"{name} is a list of numbers", field=name)
-        for h in self.hidden:
-            checked_number(h, "hidden", 1, strict=False, integer=True)
+        from nnid.config import MAX_WIDTH
+
+        for h in self.hidden:  # capped as the config caps it: wider is a typo
+            checked_number(h, "hidden", 1, strict=False, integer=True, maximum=MAX_WIDTH)
         for t in self.memory:
             checked_number(t, "memory")  # time constants (s)
         for s in self.segments:
@@ -675,6 +695,18 @@ class HybridModel(FossenPlant):
             {"segment_s": s, **h.as_dict()}
             for s, h in zip(self.segments, self.history_, strict=True)
         ]
+        if _kept_on(self.stages_) != "validation free run":
+            # nothing held out to stop on: the kept epoch was chosen on the training loss
+            # itself, and no score of this fit is a held-out one
+            warnings.warn(
+                "the hybrid was fitted without validation data (no held-out free run to stop "
+                "on): each stage ran its epochs and kept the epoch of its lowest training loss "
+                "(Adam; Levenberg-Marquardt its last accepted step), not one chosen on "
+                "held-out data; give fit(log, validation) held-out experiments for early "
+                "stopping",
+                UserWarning,
+                stacklevel=3,
+            )
 
     def _set_scales(self, log: pd.DataFrame, data: dict[str, np.ndarray]) -> None:
         """The network's input and output scales from the training data: ν by its standard
@@ -864,6 +896,7 @@ class HybridModel(FossenPlant):
             "level": self.level,
             "method": self.method_,
             "network_weights": sum(p.numel() for p in self.dynamics_.net.parameters()),
+            "kept_on": _kept_on(self.stages_),
             "stages": self.stages_,
         }
 

@@ -120,6 +120,44 @@ def vehicle_with(vehicle, values: dict[str, float]):
     return type(vehicle).model_validate(out)
 
 
+def checked_dofs(dofs: object, field: str = "dofs") -> tuple[str, ...]:
+    """``dofs`` as a tuple of DOF names, or the error naming ``field``: given in Python, a
+    name that is no DOF failed as ``tuple.index(x)`` while the unknowns were expanded."""
+    if isinstance(dofs, str | bytes) or not np.iterable(dofs):
+        raise NnidInputError(f"a list of DOFs (some of u v w p q r) is expected, not {dofs!r}",
+                             field=field)  # fmt: skip
+    for d in dofs:
+        if d not in DOFS:
+            raise NnidInputError(f"'{d}' is not a DOF; expected u v w p q r", field=field)
+    return tuple(dofs)
+
+
+def regression_trainer(trainer: object, field: str = "trainer"):
+    """A fresh copy of the trainer of a physics fit (least squares if None), or the error
+    naming ``field``: a network's trainer, or something that is no trainer (given in Python,
+    ``"nope"`` failed as ``'str' object has no attribute 'fit'``)."""
+    from nnid.trainers.least_squares import LeastSquares
+
+    if trainer is None:
+        return LeastSquares()
+    kind = getattr(trainer, "kind", type(trainer).__name__)
+    if kind in NETWORK_TRAINERS:
+        raise NnidInputError(
+            f"the '{kind}' trainer cannot fit a Fossen model's parameters; "
+            f"it is fitted by one of {', '.join(REGRESSION_TRAINERS)} (lm and adam train "
+            "networks: a hybrid's, a NARX's)",
+            field=field,
+        )
+    if not callable(getattr(trainer, "fit", None)):
+        raise NnidInputError(
+            f"a regression trainer is expected (LeastSquares, RecursiveLeastSquares, "
+            f"GradientEstimator, UnscentedKalman: kinds {', '.join(REGRESSION_TRAINERS)}), "
+            f"not {trainer!r}",
+            field=field,
+        )
+    return clone(trainer, safe=False)
+
+
 class ParametricFossen:
     """The regression structure: a vehicle, the unknown parameters and the DOF equations used."""
 
@@ -136,10 +174,7 @@ class ParametricFossen:
                     "symmetric): give one of them",
                     field="unknowns",
                 )
-        self.dofs = tuple(dofs)
-        for d in self.dofs:
-            if d not in DOFS:
-                raise NnidInputError(f"'{d}' is not a DOF; expected u v w p q r", field="dofs")
+        self.dofs = checked_dofs(dofs)
         if {"weight", "buoyancy"} & set(self.names):
             pair = {"weight": "r_g.", "buoyancy": "r_b."}
             for n in self.names:
@@ -787,25 +822,16 @@ class ParametricModel(FossenPlant):
         self.pose_savgol = pose_savgol
 
     def _fit(self, log: pd.DataFrame, validation, progress: Progress) -> None:
-        from nnid.trainers.least_squares import LeastSquares
         from nnid.trainers.sequence import DecoupledSequence, sequence_dofs, sequence_steps
 
-        trainer = clone(self.trainer, safe=False) if self.trainer is not None else LeastSquares()
-        kind = getattr(trainer, "kind", type(trainer).__name__)
-        if kind in NETWORK_TRAINERS:
-            raise NnidInputError(
-                f"the '{kind}' trainer cannot fit a Fossen model's parameters; "
-                f"it is fitted by one of {', '.join(REGRESSION_TRAINERS)} (lm and adam train "
-                "networks: a hybrid's, a NARX's)",
-                field="trainer",
-            )
+        trainer = regression_trainer(self.trainer)
         if self.sequence is not None:
             steps = sequence_steps(self.sequence)
             unknowns = list(dict.fromkeys(n for s in steps for n in s.unknowns))
             dofs = sequence_dofs(steps)
             trainer = DecoupledSequence(steps, trainer)
         else:
-            dofs = list(self.dofs)
+            dofs = list(checked_dofs(self.dofs))
             unknowns = expand_unknowns(self.unknowns, dofs, self.vehicle)
         try:
             self.structure_ = ParametricFossen(self.vehicle, unknowns, dofs)

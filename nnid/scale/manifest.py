@@ -292,7 +292,8 @@ def load_manifest(path: str | Path) -> Manifest:
 def expand(path: str | Path) -> list[Task]:
     """The manifest's tasks in a stable order, with their ids; every path is checked before
     any work (a missing file or a glob that matches nothing is refused, naming the key).
-    Identical tasks (same id) are kept once."""
+    Identical tasks (same id) are kept once; one kept once though its paths differ (a log of
+    the same name and contents in another folder) is said, naming both."""
     source = str(path)
     spec = load_manifest(path)
     base = Path(path).resolve().parent
@@ -331,5 +332,23 @@ def expand(path: str | Path) -> list[Task]:
     for log, veh, cfg, model in combos:
         options = spec.options.model_dump(exclude_unset=True)
         task = with_id(Task(spec.command, log, veh, cfg, model, columns, options))
-        tasks.setdefault(task.id, task)
+        first = tasks.setdefault(task.id, task)
+        if first != task:  # other paths, one id: a copy of the same name and contents
+            _say_merged(first, task, source)
     return list(tasks.values())
+
+
+def _say_merged(first: Task, task: Task, source: str) -> None:
+    """Warn that ``task`` is run as ``first``: its id is the same (the same log name, the
+    same contents of every input) while its paths differ, so it is no task of its own and
+    its paths would be named nowhere."""
+    differ = [
+        f"{key} {getattr(task, key)} (as {getattr(first, key)})"
+        for key in ("data", "vehicle", "config", "model")
+        if getattr(task, key) != getattr(first, key)
+    ]
+    warnings.warn(
+        f"{source}: {'; '.join(differ)}: inputs of the same contents (and a log of the same "
+        f"name) are the same task {first.id}, run once; rename or change one to run both",
+        stacklevel=3,
+    )
