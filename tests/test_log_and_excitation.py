@@ -273,3 +273,111 @@ def test_autopilot_holds_an_unstable_vehicle_and_logs_its_force():
     assert log["u"].iloc[-1] == pytest.approx(1.5, abs=0.1)
     assert np.abs(log["tau_M"]).max() > 0  # feedback is in the logged input
     assert math.isclose(log["tau_X"].iloc[0], 11.0)
+
+
+def _turning_log(rates, seconds=60.0, dt=0.05, seed=0):
+    """A log whose attitude turns with the body rates ``rates(t) -> [N, 3]`` (rad/s), integrated
+    on the rotation (so a pitch through ±π/2 is met as a sensor writes it, φ and ψ jumping by
+    π), sampled at ``dt`` with 2 mrad of attitude noise and 5 mrad/s of gyro noise."""
+    from scipy.spatial.transform import Rotation
+
+    from nnid.datasets.mapping import euler_from_rotation
+
+    rng = np.random.default_rng(seed)
+    sub = 10  # integration substeps per sample
+    fine = np.arange(round(seconds / dt) * sub + 1) * (dt / sub)
+    steps = Rotation.from_rotvec(rates(fine[:-1] + dt / sub / 2) * (dt / sub))
+    rot = [Rotation.identity()]
+    for step in steps:
+        rot.append(rot[-1] * step)  # body-frame rate: R ← R exp([ω]× h)
+    t = fine[::sub]
+    # the noise on the rotation, as a filter's: near gimbal lock φ and ψ swing with it
+    noise = Rotation.from_rotvec(rng.normal(0, 0.002, (t.size, 3)))
+    angles = euler_from_rotation((Rotation.concatenate(rot[::sub]) * noise).as_matrix())
+    gyro = rates(t) + rng.normal(0, 0.005, (t.size, 3))
+    columns = {"t": t, "phi": angles[:, 0], "theta": angles[:, 1], "psi": angles[:, 2]}
+    columns |= {"p": gyro[:, 0], "q": gyro[:, 1], "r": gyro[:, 2], "tau_N": np.ones(t.size)}
+    return pd.DataFrame(columns)
+
+
+def _wobble(t):
+    return np.stack([0.4 * np.sin(0.7 * t), 0.3 * np.sin(0.45 * t + 1), 0.5 * np.sin(0.3 * t)], 1)
+
+
+def test_body_rates_in_deg_per_s_beside_radians_are_refused():
+    """p, q, r in deg/s beside an attitude in radians passed while under 100 "rad/s": a yaw
+    rate of 30 deg/s read as 30 rad/s, every rotational fit off by 57.3. Each rate is compared
+    with the rate the attitude turns at (T_Θ⁻¹ Θ̇), per experiment."""
+    from nnid.datasets.log import rate_slopes
+
+    a = _turning_log(_wobble).assign(experiment="a")
+    b = _turning_log(_wobble, seed=1).assign(experiment="b")
+    log = pd.concat([a, b], ignore_index=True)
+    assert validate_log(log, "imu.csv") is log  # rad/s: passes
+    assert all(0.95 < slope < 1.05 for *_, slope, _ in rate_slopes(log))
+    said = r"imu\.csv, field 'r': r reads 5\d\.\d times .* looks like deg/s.* divide by 57\.2958"
+    with pytest.raises(NnidInputError, match=said) as err:
+        validate_log(log.assign(r=np.degrees(log["r"])), "imu.csv")
+    assert err.value.field == "r" and "experiment 'a'" in str(err.value)
+    # gaps (empty cells, a dropout of 3 s) are stepped over, not read as turning
+    gappy = log.copy()
+    gappy.loc[gappy.index % 17 == 0, "psi"] = np.nan
+    gappy.loc[gappy.index % 23 == 0, "r"] = np.nan
+    gappy = gappy.drop(index=range(300, 360))
+    assert validate_log(gappy, "imu.csv") is gappy
+    with pytest.raises(NnidInputError, match=r"field 'r'.*deg/s"):
+        validate_log(gappy.assign(r=np.degrees(gappy["r"])), "imu.csv")
+    # one experiment's rates in deg/s (a log joined from two loggers): refused, naming it
+    slip = log.copy()
+    slip.loc[slip["experiment"] == "b", "q"] *= 180 / np.pi
+    with pytest.raises(NnidInputError, match=r"field 'q'.*in experiment 'b'.*deg/s"):
+        validate_log(slip, "imu.csv")
+    # rates that disagree with the attitude for another reason are not a unit: a diverged
+    # filter's attitude (the Liu replays read 0.05-0.9), a gyro scale off by 2, a noisy gyro
+    for other in (
+        log.assign(p=0.5 * log["p"], q=0.05 * log["q"], r=2.0 * log["r"]),
+        log.assign(r=log["r"] + np.random.default_rng(2).normal(0, 0.5, len(log))),
+    ):
+        assert validate_log(other, "imu.csv") is other
+
+
+def test_the_rate_unit_check_skips_a_pitch_through_ninety_degrees():
+    """A pitch looping through ±π/2 (nnid's simulator flies Seamor's through ±π): near gimbal
+    lock φ and ψ jump by π between samples and their differences are no rate; those samples
+    are left out and the rates in rad/s pass, in deg/s are refused."""
+    from nnid.datasets.log import rate_slopes
+
+    def loop(t):  # looping in pitch with a little roll: θ passes ±π/2 eight times
+        return np.stack([0.05 * np.sin(0.5 * t), np.full(t.size, 0.4), np.zeros(t.size)], 1)
+
+    log = _turning_log(loop)
+    assert np.abs(np.cos(log["theta"])).min() < 0.1  # the run meets gimbal lock
+    assert np.ptp(log["phi"]) > 3 and np.ptp(log["psi"]) > 3  # φ and ψ jump there
+    assert validate_log(log, "loop.csv") is log
+    assert all(0.9 < slope < 1.1 for *_, slope, _ in rate_slopes(log))
+    with pytest.raises(NnidInputError, match=r"field 'p'.*looks like deg/s"):
+        validate_log(log.assign(p=np.degrees(log["p"]), q=np.degrees(log["q"])), "loop.csv")
+
+
+def test_the_rate_check_turns_the_attitude_as_the_kinematics_does():
+    """rate_slopes' numpy T_Θ⁻¹ is nnid.physics.kinematics' matrix: rates made by the latter
+    from a tumbling attitude (roll and pitch to 1 rad) read a slope of 1 on every axis."""
+    import torch
+
+    from nnid.datasets.log import rate_slopes
+    from nnid.physics.kinematics import euler_rate_matrix_inverse
+
+    t = np.arange(0.0, 60.0, 0.01)
+    angles = np.stack(
+        [np.sin(0.7 * t), 0.9 * np.sin(0.45 * t + 1.0), np.unwrap(2.0 * np.sin(0.2 * t))], 1
+    )
+    rates_of_angles = np.gradient(angles, t, axis=0)
+    body = euler_rate_matrix_inverse(torch.as_tensor(angles)).numpy() @ rates_of_angles[:, :, None]
+    wrapped = (angles + np.pi) % (2 * np.pi) - np.pi
+    log = pd.DataFrame({"t": t, "phi": wrapped[:, 0], "theta": wrapped[:, 1],
+                        "psi": wrapped[:, 2], "p": body[:, 0, 0], "q": body[:, 1, 0],
+                        "r": body[:, 2, 0]})  # fmt: skip
+    slopes = {col: slope for _, col, slope, _ in rate_slopes(log)}
+    assert set(slopes) == {"p", "q", "r"}
+    for col, slope in slopes.items():
+        assert abs(slope - 1.0) < 0.01, (col, slope)

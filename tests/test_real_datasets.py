@@ -166,6 +166,27 @@ def test_haizhe_excerpt_loads_with_the_same_config():
     assert np.corrcoef(log["r"], d["r"])[0, 1] > 0.9
 
 
+def test_haizhe_gyro_without_its_unit_is_refused_as_deg_per_s(tmp_path):
+    """The Haizhe gyro logs deg/s (the config says unit = "deg/s"); mapped without the unit
+    it stayed under 100 "rad/s" on the excerpt and passed. Against the attitude's kinematic
+    rate it reads about 47 times too fast (57.3 times the excerpt's p slope of ~0.8); with the
+    unit every slope is 1.1 or under (the q axis, which barely pitches, -0.06 to 0.7)."""
+    from nnid.datasets.log import RATE_CHECK_SECONDS, rate_slopes
+
+    config = (READERS / "haizhe_auv_fault.toml").read_text()
+    stripped = re.sub(r'(\b[pqr] = \{ from = "w_\w+"), unit = "deg/s" \}', r"\1 }", config)
+    assert stripped.count('unit = "deg/s"') == 0 and config.count('unit = "deg/s"') == 3
+    (tmp_path / "haizhe.toml").write_text(stripped)
+    with pytest.raises(
+        NnidInputError, match=r"field 'p'.*looks like deg/s.*unit = \"deg/s\""
+    ) as err:
+        load_log(EXCERPT, tmp_path / "haizhe.toml")
+    assert str(EXCERPT) in str(err.value)
+    log, _ = load_log(EXCERPT, READERS / "haizhe_auv_fault.toml")
+    counted = [s for *_, s, seconds in rate_slopes(log) if seconds >= RATE_CHECK_SECONDS]
+    assert len(counted) == 12 and max(counted) < 1.1
+
+
 @needs_shared
 def test_haizhe_full_set():
     root = _shared("haizhe-auv-fault-2021")

@@ -104,6 +104,7 @@ def validate_log(
         if col in df.columns and looks_like_degrees(df, col):
             size = np.abs(df[col].to_numpy(dtype=np.float64))
             raise degrees_error(df, col, source, int(np.nanargmax(size)))
+    _check_rate_units(df, source)
     return df
 
 
@@ -204,6 +205,122 @@ def looks_like_degrees(df: pd.DataFrame, col: str) -> bool:
     if np.median(d_angle[use] / d_turn[use]) > 5.0:
         return True
     return bool(np.nanpercentile(np.abs(r), 99) > math.pi)
+
+
+#: a body rate logged in deg/s reads 180/π ≈ 57.3 times the attitude's kinematic rate
+#: (:func:`rate_slopes`); a slope in this range on an axis that turns is refused as that slip.
+#: Wide below: an attitude that lags or disagrees with its gyro pulls the slope down (the
+#: Haizhe excerpt's gyro without its deg/s unit reads 47; 20 is met by a gyro in deg/s beside
+#: an attitude whose own slope is 0.35 or more), while the measured logs under shared/data
+#: read -0.5 to 1.3 (a diverged EKF attitude: 0.05-0.9; up to 2.1 over under 2 s of turning)
+DEG_PER_S_SLOPE = (20.0, 100.0)
+#: the attitude must turn an axis by more than this (rad) over a window of about a second for
+#: the window to count: a held or noisy attitude says nothing of the rate's unit
+RATE_CHECK_TURN = 0.05
+#: and the turning windows of an experiment must cover this many seconds for its slope to count
+RATE_CHECK_SECONDS = 2.0
+#: steps where |cos θ| is under this are left out: near θ = ±π/2 (zyx gimbal lock) φ and ψ
+#: jump by up to π between samples, and T_Θ⁻¹ at a step's midpoint is not the step's (nnid's
+#: simulator flies Seamor's pitch through ±π)
+RATE_CHECK_MIN_COS = 0.2
+
+
+def rate_slopes(df: pd.DataFrame) -> list[tuple[object, str, float, float]]:
+    """Per experiment and logged body rate p, q, r of a log with the whole attitude φ, θ, ψ:
+    the least-squares slope of the rate on the attitude's kinematic rate
+    ν₂ = T_Θ⁻¹ Θ̇ (Weiss eq. 17; McCarter 2.13), over windows of about a second where the
+    attitude turns that axis by more than :data:`RATE_CHECK_TURN`. Both sides are integrated
+    over the window (the rate by trapezoids; Θ̇ as the wrapped difference of consecutive
+    angles, each step through T_Θ⁻¹ at its midpoint) so that the attitude's noise does not
+    swamp its differences; the rate is regressed on the attitude, so that noise pulls the slope
+    down, away from a false 57. A step across a gap (an empty cell, a hole in t) or near
+    gimbal lock is left out of both sums, and no window spans two experiments. Returns
+    (experiment, rate column, slope, seconds of turning windows) for each pair with any: about
+    1 for a consistent log, 57.3 for rates in deg/s beside radians."""
+    from nnid.datasets.measurement import wrap_angle  # it imports this module
+
+    rates = [c for c in ("p", "q", "r") if c in df]
+    # T_Θ⁻¹ needs the whole attitude: a missing roll or pitch taken as level would compare a
+    # tilted vehicle's r (all θ̇ when rolled 90°) with ψ̇ alone
+    if not rates or not all(a in df for a in ANGLES) or len(df) < 3:
+        return []
+    if "experiment" in df:
+        codes, labels = pd.factorize(df["experiment"])
+        names = labels.tolist()  # indexing pandas' arrow strings one at a time is slow
+    else:
+        codes, names = np.zeros(len(df), dtype=np.int64), [None]
+    order = np.argsort(codes, kind="stable")  # an experiment's rows, in order, side by side
+    codes = codes[order]
+    t = df["t"].to_numpy(dtype=np.float64)[order]
+    angles = df[list(ANGLES)].to_numpy(dtype=np.float64)[order]
+    dt = np.diff(t)
+    step = float(np.median(dt))
+    if not step > 0:
+        return []
+    # wrapped differences: the unwrapped angle's steps, and a gap stays out (NaN)
+    d_angle = wrap_angle(np.diff(angles, axis=0))
+    mid = angles[:-1] + 0.5 * d_angle
+    sphi, cphi = np.sin(mid[:, 0]), np.cos(mid[:, 0])
+    sth, cth = np.sin(mid[:, 1]), np.cos(mid[:, 1])
+    dphi, dth, dpsi = d_angle.T
+    # T_Θ⁻¹ ΔΘ, the body's turning in each step: nnid.physics.kinematics'
+    # euler_rate_matrix_inverse written out in numpy, because reading a log does not load
+    # torch (tests/test_log_and_excitation.py checks the two agree)
+    turn = {
+        "p": dphi - sth * dpsi,
+        "q": cphi * dth + cth * sphi * dpsi,
+        "r": -sphi * dth + cth * cphi * dpsi,
+    }
+    # a step over a hole in t (longer than thrice its experiment's median step) is no rate
+    usual = pd.Series(dt).groupby(codes[1:]).transform("median").to_numpy()
+    good = (dt < 3 * usual) & (np.abs(cth) > RATE_CHECK_MIN_COS)
+    lag = max(1, round(1.0 / step))
+    if dt.size < lag:
+        return []
+    # windows within one experiment; a step left out is left out of both sums, so an empty
+    # cell every few samples leaves the windows around it
+    within = _window_sums((codes[1:] != codes[:-1]).astype(np.float64), lag) == 0
+    window_codes = codes[:-lag]
+    out = []
+    for col in rates:
+        rate = df[col].to_numpy(dtype=np.float64)[order]
+        gyro = 0.5 * (rate[1:] + rate[:-1]) * dt
+        ok = good & np.isfinite(gyro) & np.isfinite(turn[col])
+        g = _window_sums(np.where(ok, gyro, 0.0), lag)
+        a = _window_sums(np.where(ok, turn[col], 0.0), lag)
+        use = within & (np.abs(a) > RATE_CHECK_TURN)
+        k = window_codes[use]
+        n = np.bincount(k, minlength=len(names))
+        ga = np.bincount(k, g[use] * a[use], minlength=len(names))
+        aa = np.bincount(k, a[use] ** 2, minlength=len(names))
+        for e in np.flatnonzero(n):
+            out.append((names[e], col, float(ga[e] / aa[e]), float(n[e] * step)))
+    return out
+
+
+def _window_sums(x: np.ndarray, lag: int) -> np.ndarray:
+    """Sums of ``x`` over every run of ``lag`` consecutive elements."""
+    total = np.concatenate([[0.0], np.cumsum(x)])
+    return total[lag:] - total[:-lag]
+
+
+def _check_rate_units(df: pd.DataFrame, source: str) -> None:
+    """Body rates p, q, r in rad/s beside an attitude in radians: a rate that reads about
+    57.3 times the rate the attitude turns at (:func:`rate_slopes`, :data:`DEG_PER_S_SLOPE`)
+    in any experiment is refused as deg/s. Per experiment, not pooled: a log joined from runs
+    of two loggers may have the slip in some runs only, and pooling would dilute it into
+    neither 1 nor 57."""
+    for name, col, slope, seconds in rate_slopes(df):
+        if seconds >= RATE_CHECK_SECONDS and DEG_PER_S_SLOPE[0] <= slope <= DEG_PER_S_SLOPE[1]:
+            run = "" if name is None else f" in experiment {str(name)!r}"
+            raise NnidInputError(
+                f"{col} reads {slope:.3g} times the body rate the attitude (phi, theta, psi) "
+                f"turns at{run} ({seconds:.3g} s of turning): it looks like deg/s; body rates "
+                f'must be rad/s: divide by 57.2958 (or set the unit: unit = "deg/s" for {col} '
+                "in the reader config)",
+                source=source,
+                field=col,
+            )
 
 
 def _check_finite(df: pd.DataFrame, columns: list[str], source: str, gaps: bool = False) -> None:
