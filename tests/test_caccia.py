@@ -236,3 +236,22 @@ def test_a_missing_sinusoid_run_is_said_not_skipped_in_silence(setup, fitted):
     with pytest.warns(UserWarning, match="no training run is the sinusoid experiment 'sine'"):
         model = CacciaModel(vehicle, sinusoid_experiment="sine").fit(both)
     assert "Z_wdot" not in model.params and model.describe()["inertia"] == "vehicle file"
+
+
+def test_a_plateau_of_a_few_samples_is_not_used():
+    """A 1-Hz log with min_plateau = 3 s: settled runs of 6 samples became plateaus, whose
+    steady-speed s.e. from the four-parameter asymptote fit is not measured (with 3 samples it
+    was 0; 44 % of 4-sample speeds lay beyond 2 s.e.) and whose row weight 1/σ² then swamped
+    step 1. Only the 30-sample plateau counts."""
+    from nnid.trainers.caccia import find_plateaus
+
+    rng = np.random.default_rng(0)
+    force = np.r_[np.full(6, 1.0), np.full(30, 2.0), np.full(6, 3.0)]
+    t = np.arange(force.size, dtype=float)
+    position = np.r_[0.0, np.cumsum(0.1 * force[:-1])] + rng.normal(0, 1e-4, force.size)
+    plateaus = find_plateaus(
+        t, position, force, np.zeros(force.size, int), settle_window=5.0, min_plateau=3.0
+    )
+    assert [p.force for p in plateaus] == [2.0]
+    assert all(p.n >= 10 for p in plateaus)  # MIN_PLATEAU_SAMPLES
+    assert plateaus[0].speed == pytest.approx(0.2, abs=3 * plateaus[0].speed_std + 1e-6)

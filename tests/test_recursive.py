@@ -293,3 +293,32 @@ def test_rls_standard_errors_cover_the_spread_of_its_estimates():
         se.append([model.params[n]["stderr"] for n in names])
     ratio = np.mean(se, 0) / np.std(est, 0, ddof=1)
     assert (ratio > 0.9).all(), dict(zip(names, ratio.round(2), strict=True))
+
+
+def test_rls_counts_only_the_rows_it_used_and_reports_no_value_for_what_it_never_saw():
+    """The batch least-squares oracle on the same regression (λ = 1: the same estimator).
+    Half the rows undefined (NaN target): the recursion skipped them, but σ̂², its per-DOF
+    variance and n_obs counted them as zero residuals (σ̂² half the batch value, n_obs 2000
+    for 1000 rows used). A regressor that is zero throughout left its parameter at theta0 and
+    reported the value 0.0 (batch least squares: NaN)."""
+    phi, noise = _two_regressors()
+    y = phi @ np.array([2.0, -3.0]) + noise
+    y[::2] = np.nan
+    reg = Regression(phi, y, ["a", "b"], ("u",), y.size)
+    rls = RecursiveLeastSquares().solve(reg)
+    batch = LeastSquares(weighting="none").solve(reg)
+    np.testing.assert_allclose(rls.theta, batch.theta, rtol=1e-6)
+    assert rls.n_obs == batch.n_obs == 1000
+    assert rls.sigma2 == pytest.approx(batch.sigma2, rel=1e-6)
+    assert rls.dof_sigma2["u"] == pytest.approx(batch.dof_sigma2["u"], rel=0.01)
+    phi[:, 1] = 0.0
+    y = phi @ np.array([2.0, -3.0]) + noise
+    reg = Regression(phi, y, ["a", "b"], ("u",), y.size)
+    with pytest.warns(ExcitationWarning, match="not excited.*: b"):
+        rls = RecursiveLeastSquares(theta0=np.array([0.0, 5.0])).solve(reg)
+    with pytest.warns(ExcitationWarning, match="not excited.*: b"):
+        batch = LeastSquares(weighting="none").solve(reg)
+    assert np.isnan(rls.theta[1]) and np.isnan(batch.theta[1])
+    assert rls.as_dict()["b"]["value"] is None
+    assert rls.theta[0] == pytest.approx(batch.theta[0], rel=1e-6)
+    assert rls.sigma2 == pytest.approx(batch.sigma2, rel=1e-6)

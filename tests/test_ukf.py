@@ -169,3 +169,49 @@ def test_an_overconfident_filter_widens_its_standard_errors_and_says_so(seamor):
         tight = UnscentedKalman(measurement_noise=sigma, **kw).fit(_structure(seamor), data)
     assert tight.sigma2 > 5.0
     assert np.all(np.abs(tight.theta - TRUTH) < 3.0 * tight.stderr), (tight.theta, tight.stderr)
+
+
+def test_ukf_gives_no_standard_error_to_what_its_data_did_not_inform(seamor):
+    """Yaw never excited: the yaw pair kept near its prior and reported the prior σ as its
+    standard error (N_rdot "significant" at 41 %), without a word (batch least squares: not
+    excited, NaN)."""
+    import warnings
+
+    from nnid.trainers.least_squares import ExcitationWarning
+
+    inputs = _surge_yaw(600)
+    inputs[:, 5] = 0.0
+    kw = {"process_noise": 1e-4, "theta0": 0.5 * TRUTH}
+    with pytest.warns(ExcitationWarning, match=r"did not inform N_rdot, N:r\*abs\(r\) beyond"):
+        est = UnscentedKalman(**kw).fit(_structure(seamor), _data(seamor, inputs, NOISY, seed=3))
+    assert np.isnan(est.stderr[2:]).all() and not est.significant[2:].any()
+    assert np.isfinite(est.stderr[:2]).all() and est.significant[:2].all()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", ExcitationWarning)  # excited: every s.e. is the data's
+        est = UnscentedKalman(**kw).fit(_structure(seamor), _data(seamor, _surge_yaw(600), NOISY))
+    assert np.isfinite(est.stderr).all()
+
+
+def test_a_nan_velocity_is_no_measurement_not_a_divergence(seamor):
+    """One NaN velocity sample stopped the filter with "the filter diverged ... widen the noise
+    levels"; it is predicted through, without an update there, and said."""
+    data = _data(seamor, _surge_yaw(600), NOISY, seed=3)
+    kw = {"process_noise": 1e-4, "theta0": 0.5 * TRUTH}
+    full = UnscentedKalman(**kw).fit(_structure(seamor), data)
+    data["nu"][300, 0] = np.nan
+    with pytest.warns(UserWarning, match="1 samples have no finite velocity of u"):
+        est = UnscentedKalman(**kw).fit(_structure(seamor), data)
+    np.testing.assert_allclose(est.theta, full.theta, rtol=0.02)
+    assert np.isfinite(est.stderr).all()
+
+
+def test_an_underconfident_filter_says_its_standard_errors_are_conservative(seamor):
+    """Process noise 100 times the model error: innovations at 0.18 of the predicted variance
+    and s.e. 10-30 times those of the calibrated filter, reported as if fine."""
+    data = _data(seamor, _surge_yaw(600), NOISY, seed=3)
+    calibrated = UnscentedKalman(process_noise=1e-4, theta0=0.5 * TRUTH).fit(
+        _structure(seamor), data
+    )
+    with pytest.warns(UserWarning, match=r"innovations are 0\.\d+ of the variance.*conservative"):
+        wide = UnscentedKalman(process_noise=1e-2, theta0=0.5 * TRUTH).fit(_structure(seamor), data)
+    assert wide.sigma2 < 0.5 and (wide.stderr > 3 * calibrated.stderr).all()

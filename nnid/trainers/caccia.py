@@ -27,7 +27,10 @@ twice by a Savitzky-Golay filter fitted *inside the segment only* (``settle_wind
 ``settle_order``), so that no window straddles a step; the segment's settled part is its longest
 run of consecutive samples with |χ̈| ≤ ``settle_accel`` (default 2e-3 m/s², about four times
 the SG acceleration noise of a 2-cm, 10-Hz depth-meter with the 10-s window), and it counts when
-that run lasts at least ``min_plateau`` s. Plateaus that never settle are dropped;
+that run lasts at least ``min_plateau`` s and holds at least ``MIN_PLATEAU_SAMPLES`` samples
+(on fewer, the steady speed's standard error is not measured: with three samples it was 0,
+with four 44 % of the speeds lay beyond 2 s.e., and the step-1 row weights 1/σ² let such a
+plateau outweigh the rest). Plateaus that never settle are dropped;
 :attr:`CacciaTwoStep.plateaus_` lists those used. The steady speed ξ* is estimated from the
 position by least squares, as Caccia did (Fig. 5, L111): by default (``speed="asymptote"``) as
 the slope of χ(t) = c + ξ* t + A e^{−(t−t₀)/τ} fitted over the settled run (τ on a grid), i.e.
@@ -89,6 +92,11 @@ from nnid.trainers.regression import Regression
 
 POSITION_OF = {"u": "x", "v": "y", "w": "z", "p": "phi", "q": "theta", "r": "psi"}
 """The position χ integrated from each DOF's velocity (level attitude, Caccia's 1-D trials)."""
+
+MIN_PLATEAU_SAMPLES = 10
+"""Fewest samples of a settled run that count as a plateau: the asymptote fit has four
+parameters (c, ξ*, A, τ); with 10 samples 13 % of 400 noisy speeds lay beyond 2 s.e. (5-6 %
+from 20 on), with 4 samples 44 %, with 3 the s.e. was 0 (the default 10 s at 1 Hz is 10)."""
 
 
 # --- step 1: plateaus and the steady-state regression ------------------------------------------
@@ -190,7 +198,7 @@ def find_plateaus(
             if not runs:
                 continue
             r0, r1 = max(runs, key=lambda r: r[1] - r[0])
-            if (r1 - r0) * dt < min_plateau:
+            if (r1 - r0) * dt < min_plateau or r1 - r0 < MIN_PLATEAU_SAMPLES:
                 continue
             tt, xx = seg_t[r0:r1], seg_x[r0:r1]
             tc = tt - tt.mean()

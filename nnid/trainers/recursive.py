@@ -27,7 +27,7 @@ from numba import njit
 from sklearn.base import BaseEstimator
 
 from nnid.errors import NnidInputError
-from nnid.evaluation.persistence import excitation_from_gram
+from nnid.evaluation.persistence import ExcitationReport, excitation_from_gram
 from nnid.trainers.history import Progress, silent
 from nnid.trainers.least_squares import (
     Estimate,
@@ -141,23 +141,46 @@ def _initial(theta0, n_par: int) -> np.ndarray:
 
 def _residual_stats(reg: Regression, theta: np.ndarray, first: int) -> tuple[float, int, dict]:
     """σ̂² = rᵀr/(n − P) over the rows of samples ``first``…end with the final θ, the row
-    count and σ̂² per DOF equation."""
+    count and σ̂² per DOF equation. Only the rows the recursion used count: a row with a
+    non-finite target or regressor was skipped, and counted as a zero residual it shrank σ̂²
+    and swelled n (half the rows undefined: σ̂² half). NaN where no residual degree of
+    freedom is left, as in :func:`~nnid.trainers.least_squares.solve_least_squares`."""
     m = len(reg.dofs)
     rows = slice(first * m, reg.n_samples * m)
     r = reg.y[rows] - reg.phi[rows] @ np.nan_to_num(theta)
-    r = np.where(np.isfinite(r), r, 0.0)
-    n = r.size
-    sigma2 = float(r @ r / max(n - theta.size, 1))
+    used = np.isfinite(r)
+    n = int(used.sum())
+    dof = n - int(np.isfinite(theta).sum())
+    sigma2 = float(r[used] @ r[used] / dof) if dof > 0 else math.nan
     per_dof = {}
     for k, d in enumerate(reg.dofs):
-        rk = r[k::m]
-        per_dof[d] = float(rk @ rk / max(rk.size - 1, 1))
+        rk = r[k::m][used[k::m]]
+        per_dof[d] = float(rk @ rk / max(rk.size - 1, 1)) if rk.size else math.nan
     return sigma2, n, per_dof
+
+
+def _memory_excitation(
+    reg: Regression, theta: np.ndarray, first: int
+) -> tuple[ExcitationReport, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The excitation check of the rows of samples ``first``…end, each DOF equation weighted
+    by 1/(its residual variance at ``theta``) so that forces and moments compare; also the
+    used-row mask, the regressor and target with the unused rows zeroed, and the residual."""
+    m = len(reg.dofs)
+    rows = slice(first * m, reg.n_samples * m)
+    phi, y = reg.phi[rows], reg.y[rows]
+    r = y - phi @ np.nan_to_num(theta)
+    ok = np.isfinite(r) & np.isfinite(phi).all(1)
+    var = dof_variances(np.where(ok, r, np.nan).reshape(-1, m))
+    w = np.tile(1.0 / np.where(var > 0, var, 1.0), r.size // m) * ok
+    phi, y = np.where(ok[:, None], phi, 0.0), np.where(ok, y, 0.0)
+    gram = (phi * w[:, None]).T @ phi
+    report = excitation_from_gram(gram, int(ok.sum()), list(reg.names))
+    return report, ok, phi, y, r
 
 
 def window_covariance(
     reg: Regression, theta: np.ndarray, first: int
-) -> tuple[np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, np.ndarray, ExcitationReport]:
     """The covariance of ``theta`` over the samples ``first``…end (the estimator's memory):
     without forgetting the recursion's estimate is the *unweighted* least squares, so its
     covariance is the sandwich (ΦᵀΦ)⁻¹ Φᵀ Σ Φ (ΦᵀΦ)⁻¹ with Σ each DOF equation's own residual
@@ -169,30 +192,25 @@ def window_covariance(
     for forces, too large for moments (3-24x on a minirov log); the covariance of the per-DOF
     *weighted* estimator, given before, is not this estimate's (over 16 Seamor logs, 0.5 of the
     spread of N_rdot; now 1.8). Also returns the window's unweighted least-squares fit, against
-    which θ is judged settled."""
+    which θ is judged settled, and the window's excitation report."""
     m = len(reg.dofs)
     rows = slice(first * m, reg.n_samples * m)
-    phi, y = reg.phi[rows], reg.y[rows]
-    r = y - phi @ np.nan_to_num(theta)
-    ok = np.isfinite(r) & np.isfinite(phi).all(1)
-    var = dof_variances(np.where(ok, r, np.nan).reshape(-1, m))
-    cov = dof_sandwich(phi, r, m)  # before the absent rows are zeroed below
-    w = np.tile(1.0 / np.where(var > 0, var, 1.0), r.size // m) * ok
-    phi, r = np.where(ok[:, None], phi, 0.0), np.where(ok, r, 0.0)
-    gram = (phi * w[:, None]).T @ phi
-    report = excitation_from_gram(gram, int(ok.sum()), list(reg.names))
+    cov = dof_sandwich(reg.phi[rows], reg.y[rows] - reg.phi[rows] @ np.nan_to_num(theta), m)
+    report, ok, phi, y, r = _memory_excitation(reg, theta, first)
+    r = np.where(ok, r, 0.0)
     if report.warnings:  # θ of such a parameter is remembered from before the window, or split
         warnings.warn(
             f"over the estimator's memory (the last {reg.n_samples - first} samples): "
             + "; ".join(report.warnings)
-            + ": their standard errors are not given",
+            + ": their standard errors are not given (nor the value of one that no sample of "
+            "the run excited: it never left theta0)",
             ExcitationWarning,
             stacklevel=3,
         )
     # the window's own least-squares fit, unweighted as the recursion is
-    fit = np.linalg.lstsq(phi, np.where(ok, y, 0.0), rcond=None)[0]
+    fit = np.linalg.lstsq(phi, y, rcond=None)[0]
     cov = void_undetermined(cov, list(reg.names), report)
-    return cov * correlation_time([r[k::m] for k in range(m)]), fit
+    return cov * correlation_time([r[k::m] for k in range(m)]), fit, report
 
 
 def _chunks(n: int, parts: int = 20) -> list[tuple[int, int]]:
@@ -236,7 +254,9 @@ class RecursiveLeastSquares(BaseEstimator):
     eqs 85-92. The covariance is that of unweighted least squares at the final θ over the
     last window of ⌈1/(1 − λ)⌉ samples (the whole run for λ = 1, where it is the recursion's
     own estimator; conservative for λ < 1): :func:`window_covariance`; the recursion's own P
-    is ``p_matrix_``.
+    is ``p_matrix_``. A parameter no sample excites is NaN, as in batch least squares (the
+    recursion never moves it from ``theta0``); rows with a non-finite value are skipped and
+    not counted in σ̂² or ``n_obs``.
     """
 
     kind = "rls"
@@ -283,9 +303,14 @@ class RecursiveLeastSquares(BaseEstimator):
             report(int(b), reg.n_samples, "recursive least squares")
         window = reg.n_samples if self.forgetting == 1.0 else math.ceil(self.memory)
         first = max(reg.n_samples - window, 0)
-        sigma2, n_obs, per_dof = _residual_stats(reg, theta, first)
         self.p_matrix_ = p_mat  # the recursion's own P, for its checks (not a covariance)
-        cov, fit = window_covariance(reg, theta, first)
+        cov, fit, report = window_covariance(reg, theta, first)
+        # a parameter no sample of the run excited kept its start theta0: no estimate at all
+        # (batch least squares gives NaN), where one unexcited only in the memory window is
+        # remembered from earlier data and kept
+        never = (report if first == 0 else _memory_excitation(reg, theta, 0)[0]).unexcited
+        theta[np.isin(reg.names, never)] = np.nan
+        sigma2, n_obs, per_dof = _residual_stats(reg, theta, first)
         # a window covariance around a θ the recursion has not settled on is no uncertainty:
         # still moving beyond its noise at the end, or ended far from its memory's fit
         se = np.sqrt(np.clip(np.diag(cov), 0.0, None))

@@ -58,12 +58,13 @@ import torch
 from scipy.stats import median_abs_deviation
 from sklearn.base import BaseEstimator
 
+from nnid.errors import NnidInputError
 from nnid.physics import compiled
 from nnid.physics.dofs import DOFS
 from nnid.physics.fossen import FeatureForm
 from nnid.physics.integrate import rk4
 from nnid.trainers.history import Progress, silent
-from nnid.trainers.least_squares import Estimate
+from nnid.trainers.least_squares import Estimate, ExcitationWarning
 
 _AFFINE = ("q_rb", "q_a", "g_mat", "theta", "added_mass", "bias")
 
@@ -321,6 +322,16 @@ class UnscentedKalman(BaseEstimator):
     values); ``theta0_std``: prior σ (None: |θ₀|, at least ``min_std``). ``alpha``, ``beta``,
     ``kappa``: the scaled unscented transform. After :meth:`fit`, ``history_`` holds per sample
     ``t``, ``theta``, ``theta_std``, ``nu`` (filtered ν_d) and ``innovation`` (eq 81).
+
+    The covariance of θ̂ is the filter's P at the last sample. θ's random walk
+    (``parameter_noise``) makes it that of a slowly drifting θ, so for a constant θ it is
+    conservative (1.2-3 times the s.e. without the walk on a 60-s surge-yaw log at 1e-4), and a
+    ``process_noise`` larger than the model error widens it further: a mean normalised
+    innovation squared per DOF below 1/``NIS_TOLERANCE`` is said (and one above it scales the
+    covariance up). A parameter the data did not inform beyond its prior (its prior σ not
+    halved, in the prior's units, along some direction it loads on) gets no standard error and
+    an :class:`ExcitationWarning`: its value leans on ``theta0``. A velocity sample that is not
+    finite gives no update there (the filter predicts through it; said).
     """
 
     kind = "ukf"
@@ -406,19 +417,37 @@ class UnscentedKalman(BaseEstimator):
         hist_std = np.empty((n_samples, n_p))
         hist_nu = np.empty((n_samples, n_v))
         hist_innov = np.zeros((n_samples, n_v))
-        nis = []
+        nis, seen_dofs = [], []
         fresh = True  # the first sample of an experiment initialised ν: no update with it
+        seen = np.isfinite(z)
+        starts = np.r_[True, ends[:-1]]  # ν starts from these samples' measurements
+        if not seen[starts].all():
+            k = int(np.flatnonzero(~seen[starts].all(1))[0])
+            k = int(np.flatnonzero(starts)[k])
+            raise NnidInputError(
+                f"the first sample of an experiment (sample {k}, t = {data['t'][k]:.6g} s) has "
+                "no finite velocity of the filtered DOFs: the filter starts from it",
+                field="nu",
+                row=k,
+            )
         for k in range(n_samples):
-            if not fresh:
-                # innovation, gain and update: Weiss eqs 81-84 (Joseph form for eq 84)
-                innov = z[k] - x[:n_v]
-                s = h @ p @ h.T + r_mat
-                gain = np.linalg.solve(s, h @ p).T
+            if not fresh and seen[k].any():
+                # innovation, gain and update: Weiss eqs 81-84 (Joseph form for eq 84), with
+                # the DOFs measured at k (a NaN velocity is no measurement, not a zero one)
+                o = seen[k]
+                hk, rk = h[o], r_mat[np.ix_(o, o)]
+                innov = z[k, o] - x[:n_v][o]
+                s = hk @ p @ hk.T + rk
+                gain = np.linalg.solve(s, hk @ p).T
                 x = x + gain @ innov
-                ikh = np.eye(n) - gain @ h
-                p = ikh @ p @ ikh.T + gain @ r_mat @ gain.T
-                hist_innov[k] = innov
+                ikh = np.eye(n) - gain @ hk
+                p = ikh @ p @ ikh.T + gain @ rk @ gain.T
+                hist_innov[k, o] = innov
+                hist_innov[k, ~o] = np.nan
                 nis.append(float(innov @ np.linalg.solve(s, innov)))
+                seen_dofs.append(int(o.sum()))
+            elif not fresh:
+                hist_innov[k] = np.nan
             fresh = False
             if k % 1000 == 999:
                 report(k + 1, n_samples, "unscented Kalman filter")
@@ -439,6 +468,15 @@ class UnscentedKalman(BaseEstimator):
             sig = np.concatenate([x[None], x + spread * chol.T, x - spread * chol.T], 0)
             prop = proc.step(sig, k, float(dts[k]))
             if not np.isfinite(prop).all():
+                given = np.r_[
+                    proc.full_state(x[None, :n_v], k)[0], proc.applied(x[None, n_v:], k)[0]
+                ]
+                if not np.isfinite(given).all():
+                    raise NnidInputError(
+                        f"sample {k} (t = {data['t'][k]:.6g} s) has a pose, velocity of another "
+                        "DOF or force that is not finite: the filter's prediction needs them",
+                        row=k,
+                    )
                 raise RuntimeError(
                     f"the filter diverged at sample {k}: widen the noise levels or give a "
                     "closer prior theta0"
@@ -454,7 +492,41 @@ class UnscentedKalman(BaseEstimator):
             "innovation": hist_innov,
         }
         cov = p[n_v:, n_v:].copy()
-        sigma2 = float(np.mean(nis)) / n_v if nis else float("nan")
+        missing = ~seen[~starts].all(1)
+        if missing.any():
+            gaps = [d for d, o in zip(structure.dofs, seen[~starts].all(0), strict=True) if not o]
+            warnings.warn(
+                f"{int(missing.sum())} samples have no finite velocity of {', '.join(gaps)}: "
+                "the filter predicted through them without that measurement",
+                UserWarning,
+                stacklevel=2,
+            )
+        prior_led = _prior_led(cov, std0, names)
+        if prior_led:
+            warnings.warn(
+                "the data did not inform "
+                + ", ".join(prior_led)
+                + " beyond the prior (their prior σ, theta0_std, was not halved along a "
+                "direction they load on; a DOF never excited, or a combination the input "
+                "cannot separate): their values lean on theta0 and get no standard error",
+                ExcitationWarning,
+                stacklevel=2,
+            )
+            tied = np.isin(names, prior_led)
+            cov[tied, :] = np.nan
+            cov[:, tied] = np.nan
+        sigma2 = float(np.sum(nis) / np.sum(seen_dofs)) if nis else float("nan")
+        if np.isfinite(sigma2) and sigma2 < 1.0 / NIS_TOLERANCE:
+            # innovations smaller than the filter predicts: its covariance is wider than the
+            # data support (too much process noise); left as it is (conservative), but said
+            warnings.warn(
+                f"the filter's innovations are {sigma2:.3g} of the variance it predicts "
+                "(normalised innovation squared per DOF, 1 for a consistent filter): its "
+                "process noise is larger than the model's error and its standard errors are "
+                "conservative, wider than the data support; lower process_noise",
+                UserWarning,
+                stacklevel=2,
+            )
         if np.isfinite(sigma2) and sigma2 > NIS_TOLERANCE:
             # innovations larger than the filter predicts: its covariance is overconfident;
             # scaled as least squares scales by the residual variance, and said
@@ -474,6 +546,31 @@ class UnscentedKalman(BaseEstimator):
 
 #: a mean normalised innovation squared per DOF above this says the filter is overconfident
 NIS_TOLERANCE = 2.0
+
+
+#: the data must shrink a parameter direction's prior σ at least this much to be measured
+PRIOR_SHRINK = 0.5
+
+
+def _prior_led(cov: np.ndarray, std0: np.ndarray, names: list[str]) -> list[str]:
+    """The parameters that load (|v| > 0.3) on a direction the data did not inform beyond the
+    prior: with the prior σ as unit, the data's information J = C⁻¹ − I (C the normalised
+    posterior covariance; θ's random walk only adds prior-like variance) has an eigenvalue
+    below 1/``PRIOR_SHRINK``² − 1 = 3 there, i.e. the posterior σ along it is over half the
+    prior's. A parameter with no prior spread (σ = 0) is the prior's by construction."""
+    fixed = std0 <= 0
+    scale = np.where(fixed, 1.0, std0)
+    c = cov / np.outer(scale, scale)
+    live = ~fixed
+    out = set(np.asarray(names)[fixed])
+    if live.any():
+        sub = c[np.ix_(live, live)]
+        info = np.linalg.pinv(0.5 * (sub + sub.T), hermitian=True) - np.eye(int(live.sum()))
+        eig, vec = np.linalg.eigh(0.5 * (info + info.T))
+        weak = eig < 1.0 / PRIOR_SHRINK**2 - 1.0
+        loads = (np.abs(vec[:, weak]) > 0.3).any(1)
+        out |= set(np.asarray(names)[live][loads])
+    return [nm for nm in names if nm in out]
 
 
 def _cholesky(p: np.ndarray) -> np.ndarray:
