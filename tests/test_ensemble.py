@@ -87,6 +87,19 @@ def test_a_member_diverging_on_validation_is_dropped_and_said(log):
     assert kept.validation_use is None
 
 
+def test_the_median_is_undetermined_by_a_nan_member_and_ranks_a_wild_one(log):
+    """The documented rule (module docstring): every kept member is combined. A NaN member
+    has no rank, so the median is NaN there (scored as a divergence, never a median of the
+    other members in silence); one at 1e9 or inf is ranked, as the median rule ranks it."""
+    model = EnsembleModel(Offset(), seeds=(0, 1, 5), combine="median").fit(log)
+    base = pd.DataFrame({"y": [0.0, 1.0]}, index=[0, 1])
+    wild = [base, base + 1.0, base + 2.0, base + 3.0, base.assign(y=[np.nan, 1e9])]
+    combined = model._combined(wild, base)["y"].to_numpy()
+    assert np.isnan(combined[0]) and combined[1] == 3.0
+    wild[-1] = base.assign(y=[np.inf, -np.inf])
+    np.testing.assert_array_equal(model._combined(wild, base)["y"].to_numpy(), [2.0, 2.0])
+
+
 def test_member_validation_totals_leave_out_the_runs_warm_up(log, tmp_path):
     """``member_validation_free_run_nrmse`` scored each member with only its own warm-up left
     out, ``metrics.json``'s members with the config's ``warmup_s``: two totals for one member

@@ -120,6 +120,23 @@ def test_a_bad_parametric_setting_is_one_error_naming_its_field(short_log, field
         ParametricModel(load_vehicle(MINIROV), **settings).fit(short_log)
 
 
+@pytest.mark.parametrize("kind", ["fossen", "hybrid"])
+def test_unknowns_given_as_one_string_are_refused_as_the_config_refuses_them(short_log, kind):
+    """``unknowns="damping"`` was read letter by letter ("unknown parameter 'd'"); the config
+    refuses a bare string (a list is expected), and so does ``dofs="u"`` in Python."""
+    from nnid.models.parametric import ParametricModel
+
+    vehicle = load_vehicle(MINIROV)
+    model = (
+        ParametricModel(vehicle, unknowns="damping")
+        if kind == "fossen"
+        else HybridModel(vehicle, unknowns="damping", trainer=Adam(max_epochs=1), hidden=(4,))
+    )
+    with pytest.raises(NnidInputError, match=r"^field 'unknowns': unknowns is a list") as err:
+        model.fit(short_log)
+    assert "['damping']" in err.value.message  # the list it should have been
+
+
 def test_a_fit_without_validation_says_its_epochs_were_kept_on_the_training_loss(short_log):
     """docs/hybrid.md said early stopping is never on the training error, while a fit
     without validation silently kept each stage's lowest-training-loss epoch."""
@@ -134,3 +151,16 @@ def test_a_fit_without_validation_says_its_epochs_were_kept_on_the_training_loss
         warnings.filterwarnings("error", message=".*without validation data")
         model.fit(short_log[first], short_log[~first])
     assert model.describe()["kept_on"] == "validation free run"
+
+
+def test_a_fit_without_validation_does_not_say_it_used_validation_for_early_stopping(short_log):
+    """``validation_used_for`` (metrics.json) said "early stopping" of a hybrid whose stages
+    kept the epochs of their lowest training loss, nothing held out."""
+    settings = {"trainer": Adam(max_epochs=2), "segments": (0.5,), "hidden": (4,)}
+    first = short_log["experiment"] == short_log["experiment"].iloc[0]
+    model = HybridModel(load_vehicle(MINIROV), **settings)
+    with pytest.warns(UserWarning, match="without validation data"):
+        model.fit(short_log[first])
+    assert model.validation_use is None
+    model.fit(short_log[first], short_log[~first])
+    assert model.validation_use == "early stopping"

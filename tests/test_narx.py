@@ -914,3 +914,19 @@ def test_layer_sizes_are_settings_not_estimated_parameters():
     assert model.describe()["layers"] == model.layer_sizes() == [4, 3, 1]
     metrics = {"model": "narx", "trainer": "lm", "params": model.params, "seconds": 1.0}
     assert "layer_" not in train_markdown(metrics)
+
+
+@pytest.mark.parametrize(
+    ("hidden", "says"),
+    [((1.5,), "a whole number"), ((float("nan"),), "a whole number"), ((0,), "at least 1"),
+     ((200_000,), "at most 100000"), (8, "a list of layer widths"),
+     ("8", "a list of layer widths")],
+)  # fmt: skip
+def test_layer_widths_given_in_python_are_checked_and_capped_as_the_config_does(hidden, says):
+    """Given in Python, ``hidden`` skipped the config's checks: 1.5 trained one unit wide
+    (``int``), NaN was a bare ValueError, 200 000 (over the config's MAX_WIDTH, a typo) built
+    the layer, "8" trained an 8-wide layer and 8 was "'int' object is not iterable"."""
+    lm = LevenbergMarquardt(max_epochs=1, jacobian="samples")
+    model = NarxModel(["u"], ["y"], 2, 2, hidden=hidden, trainer=lm, balanced=False)
+    with pytest.raises(NnidInputError, match=rf"^field 'hidden': .*{says}"):
+        model.fit(_tank(100, 1.3, 0))

@@ -315,3 +315,16 @@ def test_columns_that_are_not_names_are_refused_naming_the_setting(inputs, outpu
     model = NeuralStateSpace("pump", "level", warmup=5)
     model._configure()
     assert (model.inputs_, model.outputs_) == (["pump"], ["level"])
+
+
+@pytest.mark.parametrize(
+    ("hidden", "says"),
+    [(1.5, "a whole number"), (float("nan"), "a whole number"), (0, "at least 1"),
+     (200_000, "at most 100000"), ("8", "a whole number")],
+)  # fmt: skip
+def test_the_width_given_in_python_is_checked_and_capped_as_the_config_does(hidden, says):
+    """Given in Python, ``hidden`` skipped the config's checks: 1.5 trained one unit wide
+    (``int``), NaN passed ``hidden < 1`` and was a bare ValueError, 200 000 (over the
+    config's MAX_WIDTH, a typo) built the layer, and 0 was named 'state_space'."""
+    with pytest.raises(NnidInputError, match=rf"^field 'hidden': .*{says}"):
+        NeuralStateSpace(["pump"], ["level"], hidden=hidden, warmup=5).fit(_tanks(50, 0, 1, 1))

@@ -214,6 +214,25 @@ def test_lowpass_is_zero_phase_and_rejects_short_logs():
         savgol_derivative(noisy[:11], 0.01, 21, 4)
 
 
+def test_a_log_without_experiments_is_named_the_log_in_the_derivatives_errors():
+    """A log without an experiment column has one run, named None by ``experiments``: its
+    errors said "experiment None", where the rest of nnid says "the log"."""
+    t = np.arange(0, 0.1, 0.01)  # 10 samples, fewer than the 0.5 s window's 51
+    log = pd.DataFrame({"t": t, "phi": 0.0, "theta": 0.0, "psi": 0.01 * t, "u": 0.1 * t})
+    for call in (
+        lambda: derive_velocities(log.drop(columns="u"), window_s=0.5),
+        lambda: derive_accelerations(log, window_s=0.5),
+        lambda: lowpass(log, ["u"], cutoff=2.0),
+    ):
+        with pytest.raises(NnidInputError, match="too few") as err:
+            call()
+        assert err.value.message.startswith("the log has 10 samples")
+        assert "None" not in str(err.value)
+    labelled = log.assign(experiment="a")
+    with pytest.raises(NnidInputError, match="experiment 'a' has 10 samples"):
+        derive_accelerations(labelled, window_s=0.5)
+
+
 def test_occlusion_jumps_are_found_and_repaired():
     rng = np.random.default_rng(3)
     t = np.arange(0, 30, 0.01)

@@ -47,6 +47,13 @@ def experiments(log: pd.DataFrame):
     return [(name, idx) for name, idx in log.groupby("experiment", sort=False).groups.items()]
 
 
+def run_label(name: object) -> str:
+    """An experiment of :func:`experiments` in a message: ``experiment 'x'``, or ``the log``
+    for a log without an experiment column (its one run is named None, which read as
+    "experiment None" in the errors)."""
+    return "the log" if name is None else f"experiment {name!r}"
+
+
 def sample_rate(t: np.ndarray) -> float:
     return 1.0 / float(np.median(np.diff(t)))
 
@@ -418,7 +425,7 @@ def derive_velocities(
                 dt,
                 window,
                 order,
-                where=f"experiment {name!r}",
+                where=run_label(name),
                 setting="savgol_window",
             )
             for c in have
@@ -500,7 +507,7 @@ def derive_accelerations(
                 dt,
                 window,
                 order,
-                where=f"experiment {name!r}",
+                where=run_label(name),
                 setting="savgol_window",
             )
     if report is not None and cols:
@@ -537,7 +544,7 @@ def lowpass(
         need = 3 * max(len(a), len(b))
         if len(t) <= need:
             raise NnidInputError(
-                f"experiment {name!r} has {len(t)} samples, too few for the "
+                f"{run_label(name)} has {len(t)} samples, too few for the "
                 f"low-pass filter ({need} needed)",
                 field="lowpass",
             )

@@ -172,9 +172,9 @@ class NnidModel(BaseEstimator, ABC):
     kind: ClassVar[str] = ""
     #: whether ``residual`` is a generalized force (columns X..N) with a J₀ series
     has_force_equation: ClassVar[bool] = False
-    #: what ``fit`` does with a validation log ("early stopping", "model selection"), if
-    #: anything: scores on that log are then not independent of the fit
-    validation_use: ClassVar[str | None] = None
+    #: what ``fit`` does with a validation log it can use ("early stopping", "model
+    #: selection"), if anything; what one fit did is :attr:`validation_use`
+    validation_role: ClassVar[str | None] = None
     #: whether the fit draws on ``seed`` with these settings: an ensemble of seeds of a fit
     #: that does not is one model repeated, its parameters counted once per member
     seeded: ClassVar[bool] = True
@@ -211,7 +211,24 @@ class NnidModel(BaseEstimator, ABC):
         start = time.perf_counter()
         self._fit(log, validation, progress or silent)
         self.fit_seconds_ = time.perf_counter() - start
+        self.validation_use_ = self._validation_used(validation)
         return self
+
+    def _validation_used(self, validation: pd.DataFrame | None) -> str | None:
+        """What the fit just ended did with ``validation``: by default the model's
+        ``validation_role`` where it was given one. Models whose fit can leave a given log
+        unused (runs too short to score) say so from their record of the fit."""
+        return self.validation_role if validation is not None else None
+
+    @property
+    def validation_use(self) -> str | None:
+        """What the fit did with its validation log ("early stopping", "model selection"):
+        scores on that log are then not independent of the fit. None where it did nothing
+        with one: fitted without one (early stopping on a block of the training log is no use
+        of held-out data), or one it could not use; and for a model loaded from a file saved
+        before this was kept (not guessed). Before a fit: what a fit would do with a usable
+        validation log (``validation_role``)."""
+        return getattr(self, "validation_use_", self.validation_role)
 
     @abstractmethod
     def _fit(self, log: pd.DataFrame, validation: pd.DataFrame | None, progress: Progress):
@@ -425,6 +442,7 @@ def learned_state(model: NnidModel) -> tuple[dict, dict[str, torch.Tensor]]:
         # what describe() reports of the fit, kept so that a loaded model reports it too
         "trainer": model.trainer_name(),
         "fit_seconds": getattr(model, "fit_seconds_", None),
+        "validation_use": getattr(model, "validation_use_", None),
     }
     return learned, tensors
 
@@ -444,8 +462,12 @@ def restore_learned(model: NnidModel, learned: dict, tensors: dict[str, torch.Te
         raise ValueError(f"trainer must be a name, not {trainer!r}")
     if seconds is not None and (isinstance(seconds, bool) or not isinstance(seconds, float | int)):
         raise ValueError(f"fit_seconds must be a number, not {seconds!r}")
+    used = learned.get("validation_use")
+    if used is not None and not isinstance(used, str):
+        raise ValueError(f"validation_use must be a text or null, not {used!r}")
     model.fitted_by_ = trainer
     model.fit_seconds_ = seconds
+    model.validation_use_ = used
     return model
 
 

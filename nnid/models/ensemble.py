@@ -74,10 +74,18 @@ class EnsembleModel(NnidModel):
         return cls(model=spec.member.build(vehicle), **spec.arguments())
 
     @property
-    def validation_use(self) -> str | None:  # type: ignore[override]
+    def validation_role(self) -> str | None:  # type: ignore[override]
+        """The member's role and, with ``drop_diverged``, the judging of the members."""
         own = "dropping diverged members" if self.drop_diverged else None
-        uses = [u for u in (getattr(self.model, "validation_use", None), own) if u]
+        uses = [u for u in (getattr(self.model, "validation_role", None), own) if u]
         return ", ".join(uses) or None
+
+    def _validation_used(self, validation: pd.DataFrame | None) -> str | None:
+        """What the kept members' fits did with ``validation`` (each says its own) and,
+        with ``drop_diverged`` and a validation log, the judging of the members on it."""
+        own = "dropping diverged members" if self.drop_diverged and validation is not None else None
+        uses = [*(m.validation_use for m in self.members_), own]
+        return ", ".join(dict.fromkeys(u for u in uses if u)) or None
 
     def _check_settings(self) -> list[int]:
         if not isinstance(self.model, NnidModel) or "seed" not in self.model.get_params():
@@ -197,6 +205,11 @@ class EnsembleModel(NnidModel):
     def _combined(self, predictions: list[pd.DataFrame], log: pd.DataFrame) -> pd.DataFrame:
         """The members' predictions of the outputs combined (``combine``)."""
         preds = np.stack([p[self.outputs_].to_numpy(np.float64) for p in predictions])
+        # every member counts (the members are fixed before any score; only drop_diverged
+        # leaves one out, named): a member's NaN has no rank, so the median is NaN there and
+        # scoring says the ensemble diverged; a member at ±inf or 1e9 has one and is ranked,
+        # which is the median rule. Never nanmedian: a silent ensemble of fewer members.
+        # Each member's own divergence is in metrics.json's "members".
         with np.errstate(all="ignore"):  # a member's NaN warm-up rows stay NaN
             combined = preds.mean(0) if self.combine == "mean" else np.median(preds, 0)
         return pd.DataFrame(combined, columns=self.outputs_, index=log.index)

@@ -80,7 +80,13 @@ from nnid.physics.odeint import LAGGED, METHODS, SampledInput, integrate
 from nnid.physics.parts import Parts
 from nnid.physics.thrusters import apply_deadband, force_deadband
 from nnid.threads import torch_threads
-from nnid.trainers.history import Progress, history_state, restored_history, staged
+from nnid.trainers.history import (
+    Progress,
+    history_state,
+    restored_history,
+    scored_validation,
+    staged,
+)
 from nnid.trainers.neural_ode import Batch, MultipleShooting, Run
 
 DTYPE = torch.float64
@@ -423,10 +429,13 @@ class _Problem:
 
 def _kept_on(stages: list[dict]) -> str:
     """What chose each stage's kept epoch: ``"validation free run"`` where every stage scored
-    held-out windows, else ``"training loss"`` (fitted without validation data: nothing
-    held out, so never to be read as early stopping)."""
-    held = all(stage.get("validation") for stage in stages)
-    return "validation free run" if held else "training loss"
+    held-out windows (:func:`~nnid.trainers.history.scored_validation`), ``"training loss"``
+    where none did (fitted without validation data: nothing held out, so never to be read as
+    early stopping), and says so where the stages differ."""
+    scored = [scored_validation([stage]) for stage in stages]
+    if all(scored):
+        return "validation free run"
+    return "training loss" if not any(scored) else "validation free run in some stages only"
 
 
 class HybridModel(FossenPlant):
@@ -465,7 +474,7 @@ class HybridModel(FossenPlant):
     """
 
     kind = "hybrid"
-    validation_use = "early stopping"
+    validation_role = "early stopping"
 
     def __init__(
         self,
@@ -707,6 +716,12 @@ class HybridModel(FossenPlant):
                 UserWarning,
                 stacklevel=3,
             )
+
+    def _validation_used(self, validation: pd.DataFrame | None) -> str | None:
+        """Early stopping where a stage flew the validation log's windows; not where it had
+        none to fly (``describe()["kept_on"]`` says what each stage kept its epoch on)."""
+        held = validation is not None and scored_validation(self.stages_)
+        return self.validation_role if held else None
 
     def _set_scales(self, log: pd.DataFrame, data: dict[str, np.ndarray]) -> None:
         """The network's input and output scales from the training data: ν by its standard

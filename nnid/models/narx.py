@@ -75,7 +75,7 @@ from nnid.datasets.log import VELOCITY
 from nnid.datasets.preprocess import experiments
 from nnid.datasets.segmentation import BalancedSampler, label_transients, run_bounds
 from nnid.datasets.splits import split_log
-from nnid.errors import NnidInputError
+from nnid.errors import NnidInputError, checked_number
 from nnid.evaluation.evaluate import target_columns
 from nnid.models import narx_kernel
 from nnid.models.base import NOT_FITTED
@@ -88,7 +88,7 @@ from nnid.models.bounds import (
 )
 from nnid.models.io_model import DTYPE, InputOutputModel, seeded_linear
 from nnid.serialization import jsonable
-from nnid.trainers.history import History, Progress, staged, stopping_score
+from nnid.trainers.history import History, Progress, scored_validation, staged, stopping_score
 from nnid.validation import checked_names
 
 #: ``output_transform`` values: extra regressors computed from each lagged output
@@ -254,7 +254,7 @@ class NarxModel(InputOutputModel):
 
     kind = "narx"
     counts_samples = "the NARX (its delays)"
-    validation_use = "early stopping"
+    validation_role = "early stopping"
 
     def __init__(
         self,
@@ -353,7 +353,15 @@ class NarxModel(InputOutputModel):
         self.targets_ = list(self.outputs_)
         self.input_delays_ = _delays(self.input_delays, 0, "input_delays")
         self.output_delays_ = _delays(self.output_delays, 1, "output_delays")
-        self.hidden_ = tuple(int(h) for h in self.hidden)
+        if isinstance(self.hidden, str | bytes) or not np.iterable(self.hidden):
+            raise NnidInputError("hidden is a list of layer widths", field="hidden")
+        from nnid.config import MAX_WIDTH
+
+        # capped as the config caps it (wider is a typo); int() made 1.5 one unit wide
+        self.hidden_ = tuple(
+            checked_number(h, "hidden", 1, strict=False, integer=True, maximum=MAX_WIDTH)
+            for h in self.hidden
+        )
         self.output_bounds_ = check_bounds(self.output_bounds, len(self.outputs_))
         self.dy_ = max(self.output_delays_)
         windows = self.simulation_window
@@ -770,6 +778,14 @@ class NarxModel(InputOutputModel):
             self._simulation_finetune(
                 tab, held_out, staged(progress, "simulation", "free_run_nrmse")
             )
+
+    def _validation_used(self, validation: pd.DataFrame | None) -> str | None:
+        """Early stopping where a given validation log was scored by a stage (one-step or
+        free run); not where it was too short for any (the fit warned), nor where the fit
+        held out part of its training log itself (``division_``)."""
+        stages = [self.history_, *((self.finetune_ or {}).get("stages") or [])]
+        given = validation is not None and self.division_.get("by") == "given"
+        return self.validation_role if given and scored_validation(stages) else None
 
     def _batch(self, table: dict[str, torch.Tensor], idx: torch.Tensor, horizon: int) -> tuple:
         """Tensors of a batch, sample-major: (φ, target) one-step, or windows ending at

@@ -45,7 +45,7 @@ from torch import nn
 from torch.func import functional_call
 
 from nnid.datasets.splits import split_log
-from nnid.errors import NnidInputError
+from nnid.errors import NnidInputError, checked_number
 from nnid.evaluation.prediction import mode_steps
 from nnid.models.bounds import (
     OutputBounds,
@@ -57,7 +57,7 @@ from nnid.models.bounds import (
 from nnid.models.io_model import DTYPE, InputOutputModel
 from nnid.physics.integrate import rk4
 from nnid.threads import torch_threads
-from nnid.trainers.history import Progress, staged
+from nnid.trainers.history import Progress, scored_validation, staged
 from nnid.validation import checked_names
 
 #: derivatives are learned per sample and scaled down, so a small network starts slow
@@ -192,7 +192,7 @@ class NeuralStateSpace(InputOutputModel):
 
     kind = "state_space"
     counts_samples = "the state-space model"
-    validation_use = "early stopping"
+    validation_role = "early stopping"
 
     def __init__(
         self,
@@ -232,9 +232,13 @@ class NeuralStateSpace(InputOutputModel):
         self.outputs_ = checked_names(self.outputs, "outputs")
         if not self.outputs_:
             raise NnidInputError("a state-space model needs at least one output", field="outputs")
-        if self.hidden_states < 0 or self.hidden < 1 or self.substeps < 1 or self.warmup < 1:
+        from nnid.config import MAX_WIDTH
+
+        # capped as the config caps it (wider is a typo); int() made 1.5 one unit wide
+        checked_number(self.hidden, "hidden", 1, strict=False, integer=True, maximum=MAX_WIDTH)
+        if self.hidden_states < 0 or self.substeps < 1 or self.warmup < 1:
             raise NnidInputError(
-                "hidden_states ≥ 0, hidden ≥ 1, substeps ≥ 1 and warmup ≥ 1 are required",
+                "hidden_states ≥ 0, substeps ≥ 1 and warmup ≥ 1 are required",
                 field="state_space",
             )
         windows = [None if w is None else int(w) for w in self.windows]
@@ -437,6 +441,13 @@ class NeuralStateSpace(InputOutputModel):
             if self.hidden_states:
                 x0 = torch.as_tensor(np.concatenate(tracks))  # type: ignore[arg-type]
                 self.net_.hidden_init.copy_(x0[:, len(self.outputs_) :].mean(0))
+
+    def _validation_used(self, validation: pd.DataFrame | None) -> str | None:
+        """Early stopping where a given validation log's windows were scored; not where it was
+        no longer than the warm-up, nor where the fit held out a block of its training log
+        itself (``division_``)."""
+        given = validation is not None and self.division_.get("by") == "given"
+        return self.validation_role if given and scored_validation(self.history_) else None
 
     # -- prediction ------------------------------------------------------------------------------
     def initial_state(self, y: np.ndarray, u: np.ndarray) -> torch.Tensor:

@@ -347,7 +347,14 @@ def filter_settled(data: dict[str, np.ndarray], lam: float) -> np.ndarray:
 def expand_unknowns(spec: Sequence[str], dofs: Sequence[str], vehicle) -> list[str]:
     """The unknowns of a fit with the shortcuts expanded: ``added_mass`` (the diagonal
     derivatives of ``dofs``) and ``damping`` (the vehicle's damping-model terms of their
-    forces)."""
+    forces). A bare string is refused, as the config and :func:`checked_dofs` refuse one:
+    given in Python, ``"damping"`` was read letter by letter ("unknown parameter 'd'")."""
+    if isinstance(spec, str | bytes) or not np.iterable(spec):
+        raise NnidInputError(
+            "unknowns is a list of parameter names and the groups 'added_mass' and 'damping' "
+            f"(e.g. [{spec!r}]), not {spec!r}",
+            field="unknowns",
+        )
     out: list[str] = []
     forces = {FORCES[DOFS.index(d)] for d in dofs}
     for item in spec:

@@ -101,8 +101,9 @@ class SindyDamping(DampingModel):
         return self.optimizer == "ensemble"
 
     @property
-    def validation_use(self) -> str | None:  # type: ignore[override]
-        """The threshold is chosen on the validation log (with ``selection="validation"``)."""
+    def validation_role(self) -> str | None:  # type: ignore[override]
+        """The threshold is chosen on the validation log (with ``selection="validation"``;
+        without one, on a holdout of the training log: no use of held-out data)."""
         return "model selection" if self.selection == "validation" else None
 
     @property

@@ -52,6 +52,17 @@ def staged(progress: Progress | None, stage: str, measure: str | None = None) ->
     return call
 
 
+def scored_validation(stages) -> bool:
+    """Whether any stage of a fit (its ``History``, or the record ``as_dict`` made of it)
+    scored held-out data: its ``validation`` series holds an entry, so the epoch it kept was
+    chosen on that data, even where every entry diverged and it kept its start. A fit none of
+    whose stages did kept the epochs of its lowest training loss: no early stopping."""
+    return any(
+        len(s.validation if isinstance(s, History) else (s.get("validation") or [])) > 0
+        for s in stages
+    )
+
+
 @dataclass
 class History:
     """Per-epoch record of an iterative fit.
