@@ -43,7 +43,14 @@ from nnid.errors import NnidInputError
 from nnid.physics.damping_masks import MASKS
 from nnid.physics.dofs import DOFS, FORCES
 from nnid.physics.effects import parse_effect
-from nnid.validation import PositiveFloat, StrictModel, read_toml, repeated, validated
+from nnid.validation import (
+    PositiveFloat,
+    StrictModel,
+    read_toml,
+    refuse_other_file,
+    repeated,
+    validated,
+)
 
 Signal = Annotated[
     Step | Stairs | Chirp | Multisine | PRBS | APRBS | Sine | DOptimalSine,
@@ -847,6 +854,23 @@ class DetectSpec(StrictModel):
     window_s: PositiveFloat = 10.0
 
 
+def _option_path(path: str) -> str:
+    """``path`` as a sweep sets it: dotted keys of the train config, none empty (``""`` or
+    ``model..hidden`` set a key no config has, said without the path), and none in the
+    ``[sweep]`` table or the config's ``kind`` (every trial would fit the same config)."""
+    keys = path.split(".")
+    if not all(k.strip() for k in keys):
+        raise ValueError(
+            f"{path!r} is no option path: dotted keys of the config, such as model.hidden"
+        )
+    if keys[0] in ("sweep", "kind"):
+        raise ValueError(
+            f"{path!r} is not searched: a sweep searches the train config's options, not its "
+            "kind or its [sweep] table"
+        )
+    return path
+
+
 class SweepSpec(StrictModel):
     """``[sweep]`` of a train config, read by ``nnid sweep``: option paths (dotted, as in the
     config: ``model.hidden``, ``model.trainer.lr``) searched on a grid (every combination)
@@ -866,6 +890,18 @@ class SweepSpec(StrictModel):
     early_stopping: bool = True
     grace_epochs: int = Field(10, ge=1)
     reduction_factor: int = Field(3, ge=2)
+
+    @field_validator("grid", "random")
+    @classmethod
+    def _paths(cls, searched: dict[str, list[Any]]) -> dict[str, list[Any]]:
+        for path in searched:
+            _option_path(path)
+        return searched
+
+    @field_validator("seed_option")
+    @classmethod
+    def _seed_path(cls, path: str) -> str:
+        return _option_path(path)
 
     @model_validator(mode="after")
     def _searches(self) -> SweepSpec:
@@ -1025,6 +1061,8 @@ def load_config(
     for option, value in (overrides or {}).items():
         set_option(data, option, value, str(path))
     expected = next((k for k, m in COMMANDS.items() if m is model), None)
+    if expected is not None:
+        refuse_other_file(data, "config", f"a '{expected}' config", str(path))
     kind = data.get("kind")
     if expected is not None and isinstance(kind, str) and kind != expected:
         if kind in COMMANDS:

@@ -70,6 +70,34 @@ def checked_names(value: object, field: str) -> list[str]:
     return names
 
 
+def nnid_file(data: Mapping[str, Any]) -> tuple[str, str] | None:
+    """Which of nnid's TOML files ``data`` is, by the key that only it has (a config's
+    ``kind``, a vehicle file's ``mass``, a reader config's ``sources``, a manifest's
+    ``command``): ``("config" | "vehicle" | "columns" | "manifest", how an error names it)``;
+    None when no such key, or two, tell (a stray key is then the validation's to name)."""
+    kind = data.get("kind")
+    found = [key for key in ("mass", "sources", "command") if key in data]
+    if isinstance(kind, str) and not found:
+        return "config", f"a '{kind}' config (for `nnid {kind}`)"
+    if "kind" in data or len(found) != 1:
+        return None
+    return {
+        "mass": ("vehicle", "a vehicle file (for --vehicle, or a config's vehicle)"),
+        "sources": ("columns", "a reader config (for --columns)"),
+        "command": ("manifest", "a batch manifest (for `nnid batch`)"),
+    }[found[0]]
+
+
+def refuse_other_file(data: Mapping[str, Any], expected: str, what: str, source: str) -> None:
+    """Refuse one of nnid's files given where another goes (``expected``, a key of
+    :func:`nnid_file`; ``what`` names it): a vehicle file given as a train config was said as
+    "field 'name': is not a known field here", a config given as --vehicle as "field 'name':
+    is required but missing", blaming a key of a file that is whole and of another kind."""
+    found = nnid_file(data)
+    if found is not None and found[0] != expected:
+        raise NnidInputError(f"this is {found[1]}, not {what}", source=source)
+
+
 def resolve(base: Path, path: str) -> Path:
     """A path as given when it exists or is absolute, else relative to ``base`` (the config's
     folder)."""

@@ -21,7 +21,7 @@ from nnid.datasets.log import MAX_FORCE  # a constant external force obeys the l
 from nnid.errors import NnidInputError
 from nnid.physics.added_mass import mirrored_key, parse_added_mass_key
 from nnid.physics.dofs import DOFS
-from nnid.validation import StrictModel, read_toml, repeated, validated
+from nnid.validation import StrictModel, read_toml, refuse_other_file, repeated, validated
 
 PRESETS = ("seamor", "vlbv300", "romeo", "vt690", "bluerov2_heavy")
 
@@ -230,6 +230,7 @@ class Vehicle(StrictModel):
 def vehicle_from_dict(data: dict[str, Any], source: str = "<vehicle>") -> Vehicle:
     """Validate a parsed vehicle file; raise NnidInputError naming the file and the field, and
     warn of a diagonal added mass or damping of the wrong sign (:func:`sign_slips`)."""
+    refuse_other_file(data, "vehicle", "a vehicle file", source)
     vehicle = validated(Vehicle, data, source)
     if abs(vehicle.weight - vehicle.mass * vehicle.g) > 0.1 * vehicle.mass * vehicle.g:
         warnings.warn(

@@ -914,6 +914,39 @@ def test_a_json_file_nested_too_deep_or_a_folder_is_named(tmp_path):
     assert err.value.source == str(folder)
 
 
+@pytest.mark.parametrize(
+    ("mutate", "said"),
+    [
+        # the first of two 'u' columns was read without a word; the whole-log reader refuses it
+        pytest.param(
+            lambda text: text.replace(",extra\n", ",u\n", 1),
+            "the header names column 'u' twice",
+            id="column named twice",
+        ),
+        # a blank label started a run of its own; the whole-log reader refuses it
+        pytest.param(
+            lambda text: "\n".join(
+                line.replace(",h2,", ",,") if k == 30 else line
+                for k, line in enumerate(text.split("\n"))
+            ),
+            "column 'experiment', row 29: empty experiment label",
+            id="empty label",
+        ),
+    ],
+)
+def test_detect_follow_refuses_a_column_named_twice_and_an_empty_label(
+    fixtures, tmp_path, mutate, said
+):
+    path = tmp_path / "stream.csv"
+    text = fixtures["octo_log"].assign(extra=0.0).to_csv(index=False)
+    path.write_text(mutate(text))
+    args = _command("detect", tmp_path, fixtures, data=path, out=tmp_path / "o")
+    result = CliRunner().invoke(app, [*args, "--follow"])
+    assert result.exit_code == 2 and "Traceback" not in result.output, result.output
+    errors = [line for line in result.output.splitlines() if line.startswith("error:")]
+    assert len(errors) == 1 and said in errors[0] and str(path) in errors[0], result.output
+
+
 def test_detect_follow_names_a_row_the_csv_reader_refuses(tmp_path):
     from nnid.errors import NnidInputError
     from nnid.fault.follow import _rows
@@ -952,6 +985,98 @@ def test_sizes_beyond_any_log_are_refused_at_the_config(tmp_path, config, old, n
     with pytest.raises(NnidInputError) as err:
         load_config(path, TrainConfig)
     assert err.value.field.startswith(field) and err.value.source == str(path)
+
+
+@pytest.mark.parametrize(
+    ("sweep", "field", "said"),
+    [
+        # "<file>: is not a known field here": no field named at all
+        pytest.param('grid = { "" = [1.0, 2.0] }', "sweep.grid", "no option path", id="empty"),
+        pytest.param('grid = { "model..x" = [1, 2] }', "sweep.grid", "no option path", id="dots"),
+        # searched the [sweep] table itself: every trial fitted the same, one "best" chosen
+        pytest.param(
+            'grid = { "sweep.seeds" = [[1], [2]] }', "sweep.grid", "not searched", id="itself"
+        ),
+        # "field 'model.seed': is not a known field here", a key the config never wrote
+        pytest.param("seeds = [0, 1]", "sweep.seeds", "model.seed", id="seed of no model"),
+    ],
+)
+def test_a_sweep_path_that_names_no_option_is_said_against_the_sweep(
+    fixtures, tmp_path, sweep, field, said
+):
+    config = tmp_path / "sweep.toml"
+    config.write_text(f"{TRAIN_TEXT}\n[sweep]\n{sweep}\n")
+    data = _write_log(tmp_path, "good", fixtures["demo_log"])
+    args = ["sweep", str(config), "--data", str(data), "--vehicle", MINIROV, "--out",
+            str(tmp_path / "o")]  # fmt: skip
+    result = CliRunner().invoke(app, args)
+    assert result.exit_code == 2 and "Traceback" not in result.output, result.output
+    errors = [line for line in result.output.splitlines() if line.startswith("error:")]
+    assert len(errors) == 1, result.output
+    assert f"{config}, field '{field}'" in errors[0] and said in errors[0], result.output
+    assert not (tmp_path / "o").exists()
+
+
+READER = str(REPO / "configs" / "readers" / "tartan_auv.toml")
+
+
+def _train_with(tmp: Path, fx: dict, **given) -> list[str]:
+    return _command("train", tmp, fx, out=tmp / "o", **given)
+
+
+@pytest.mark.parametrize(
+    ("args", "path", "what", "expected"),
+    [
+        # was "field 'name': is not a known field here", a key of a whole file of another kind
+        pytest.param(
+            lambda tmp, fx: _train_with(tmp, fx, config=MINIROV),
+            MINIROV,
+            "vehicle file",
+            "not a 'train' config",
+            id="vehicle file as config",
+        ),
+        # was "field 'name': is required but missing"
+        pytest.param(
+            lambda tmp, fx: _train_with(tmp, fx, vehicle=TRAIN),
+            TRAIN,
+            "'train' config",
+            "not a vehicle file",
+            id="config as vehicle",
+        ),
+        pytest.param(
+            lambda tmp, fx: _train_with(tmp, fx, config=READER),
+            READER,
+            "reader config",
+            "not a 'train' config",
+            id="reader config as config",
+        ),
+        # was "field 'sources': is required but missing"
+        pytest.param(
+            lambda tmp, fx: [*_train_with(tmp, fx), "--columns", MINIROV],
+            MINIROV,
+            "vehicle file",
+            "not a reader config",
+            id="vehicle file as reader config",
+        ),
+        # was "field 'command': is required but missing"
+        pytest.param(
+            lambda tmp, fx: ["batch", TRAIN, "--out", str(tmp / "o")],
+            TRAIN,
+            "'train' config",
+            "not a batch manifest",
+            id="config as manifest",
+        ),
+    ],
+)
+def test_one_of_nnids_files_given_where_another_goes_is_named_as_what_it_is(
+    fixtures, tmp_path, args, path, what, expected
+):
+    result = CliRunner().invoke(app, args(tmp_path, fixtures))
+    assert result.exit_code == 2 and "Traceback" not in result.output, result.output
+    errors = [line for line in result.output.splitlines() if line.startswith("error:")]
+    assert len(errors) == 1, result.output
+    assert errors[0].startswith(f"error: {path}: this is ") and what in errors[0], errors[0]
+    assert expected in errors[0] and not (tmp_path / "o").exists(), errors[0]
 
 
 def test_a_sweep_stops_drawing_once_every_combination_is_drawn(monkeypatch):

@@ -228,6 +228,8 @@ class ColumnMap(StrictModel):
 
 def load_column_map(path: str | Path) -> ColumnMap:
     """Read and validate a reader config; NnidInputError names the file and the field."""
-    from nnid.validation import read_toml, validated
+    from nnid.validation import read_toml, refuse_other_file, validated
 
-    return validated(ColumnMap, read_toml(path), str(path))
+    data = read_toml(path)
+    refuse_other_file(data, "columns", "a reader config", str(path))
+    return validated(ColumnMap, data, str(path))

@@ -51,14 +51,14 @@ def read_table(path: str | Path, labels: Sequence[str] = ("experiment",)) -> pd.
             import pyarrow.parquet as pq
 
             # pyarrow reads a name given twice as one ambiguous field: a schema dump, not a line
-            _refuse_repeated_names(pd.Series(pq.read_schema(path).names), path)
+            refuse_repeated_names(pd.Series(pq.read_schema(path).names), path)
             return pd.read_parquet(path)
         if name.endswith((".csv", ".csv.gz", ".txt")):
             dialect = _csv_dialect(path)
             # "t, experiment, x": a space after the separator is not part of the name
             dialect["skipinitialspace"] = True
             header = pd.read_csv(path, header=None, nrows=1, dtype=str, **dialect).iloc[0]
-            _refuse_repeated_names(header.str.strip(), path)
+            refuse_repeated_names(header.str.strip(), path)
             # run labels are names: "01" and "1" are two runs, not one number
             table = pd.read_csv(path, dtype=dict.fromkeys(labels, str), **dialect)
             return table.rename(columns=lambda c: c.strip() if isinstance(c, str) else c)
@@ -88,7 +88,7 @@ def read_log(path: str | Path) -> pd.DataFrame:
     return validate_log(read_table(path), source=str(path))
 
 
-def _refuse_repeated_names(header: pd.Series, path: Path) -> None:
+def refuse_repeated_names(header: pd.Series, path: str | Path) -> None:
     """A header that names a column twice is refused: pandas would rename the second of a CSV
     ('u', 'u.1') and one of the two would be used unseen, pyarrow cannot read either of a
     Parquet file's. Empty names (a trailing separator, pandas's "Unnamed: k") are not names."""

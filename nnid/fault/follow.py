@@ -39,6 +39,7 @@ from nnid.datasets.log import (
     radian_limit,
 )
 from nnid.datasets.preprocess import savgol_window
+from nnid.datasets.readers import refuse_repeated_names
 from nnid.errors import NnidInputError
 from nnid.fault.detect import (
     Change,
@@ -157,6 +158,8 @@ def follow_csv(
     where = "stdin" if source == "-" else source
     if header is None:
         raise NnidInputError("is empty: expected a CSV header", source=where)
+    # as the whole-log reader: header.index would read the first of two 'u' columns unseen
+    refuse_repeated_names(pd.Series([c.strip() or None for c in header]), where)
     inputs = input_columns(monitor.channels_)
     needed = ["t", *VELOCITY, "phi", "theta", *inputs]
     missing = [c for c in needed if c not in header]
@@ -328,6 +331,13 @@ def follow_csv(
         x[:] = [values.get(c, 0.0) for c in STATE]
         u[:] = [values[c] for c in inputs]
         name = row[exp_col] if exp_col is not None else ""
+        if exp_col is not None and not name.strip():  # refused by the whole-log reader too
+            raise NnidInputError(
+                "empty experiment label: label every row, or remove the column for a single run",
+                source=where,
+                field="experiment",
+                row=n,
+            )
         if name != current:
             flush(final=True)
             stream.reset()

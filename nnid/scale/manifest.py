@@ -31,7 +31,7 @@ from typing import Any, Literal
 from pydantic import Field, ValidationInfo, field_validator
 
 from nnid.errors import NnidInputError
-from nnid.validation import StrictModel, read_toml, resolve, validated
+from nnid.validation import StrictModel, read_toml, refuse_other_file, resolve, validated
 
 COMMANDS = ("train", "loop", "detect", "compare")
 
@@ -286,7 +286,9 @@ def _vehicles(names: list[str], base: Path, source: str) -> list[str]:
 
 def load_manifest(path: str | Path) -> Manifest:
     """Read and validate a manifest; one NnidInputError naming the file and the key."""
-    return validated(Manifest, read_toml(path), str(path))
+    data = read_toml(path)
+    refuse_other_file(data, "manifest", "a batch manifest", str(path))
+    return validated(Manifest, data, str(path))
 
 
 def expand(path: str | Path) -> list[Task]:

@@ -72,7 +72,19 @@ def trials(
     for setting in settings(spec):
         for seed in seeds:
             overrides = {**setting, **({} if seed is None else {spec.seed_option: seed})}
-            load_config(config, TrainConfig, overrides)  # refused here, before any fit
+            try:
+                load_config(config, TrainConfig, overrides)  # refused here, before any fit
+            except NnidInputError as exc:
+                if seed is None or exc.field != spec.seed_option or spec.seed_option in setting:
+                    raise
+                # the seed option is the sweep's (model.seed by default), not a key written
+                raise NnidInputError(
+                    f"each seed is set at {spec.seed_option} (sweep.seed_option), which this "
+                    f"config does not take ({exc.message}): name the config's seed in "
+                    "seed_option, or drop seeds (a model without one fits the same each time)",
+                    source=str(config),
+                    field="sweep.seeds",
+                ) from None
             task = Task("train", str(Path(data).resolve()) if data else "", vehicle,
                         str(Path(config).resolve()), None, columns, {}, overrides)  # fmt: skip
             tasks.append(with_id(task))
