@@ -577,6 +577,7 @@ def sweep(
     """Search a train config's settings and seeds ([sweep]: grid, random draws, seeds), each
     trial scored on the validation experiments: writes settings.csv (ranked), best.toml (the
     chosen setting as a ready config), summary.* (one row per trial) and report.html."""
+    from nnid.scale.batch import not_ok_message
     from nnid.scale.engines import LocalEngine, engine_for, environment
     from nnid.scale.sweep import run_sweep, run_sweep_tune, trials
 
@@ -600,12 +601,12 @@ def sweep(
     out.print(result.extra["sweep"]["summary"], highlight=False)
     written = "settings.csv, best.toml" if ranked[0].mean is not None else "settings.csv"
     out.print(
-        f"wrote {out_dir}/: {written}, summary.csv, report.html ({len(result.failed)} "
-        "trials failed)",
+        f"wrote {out_dir}/: {written}, summary.csv, report.html (trials: "
+        f"{not_ok_message(result.rows)})",
         highlight=False,
     )
-    for row in result.failed:
-        err.print(f"failed: {row['id']}: {row['error']}", highlight=False)
+    for row in result.failed:  # a trial ASHA stopped is said as stopped, not as failed
+        err.print(f"{row['status']}: {row['id']}: {row['error']}", highlight=False)
     if ranked[0].mean is None:
         raise typer.Exit(1)
 

@@ -598,8 +598,6 @@ def fit_model(
     under ``section`` (``model``, ``models.2``) when it is a key of the config table ``spec``.
     An ensemble is given the run's ``replay``: it scores its members' validation free runs
     (and drops diverged ones) as the run's scores fly them."""
-    from nnid.datasets.arrays import CommandUnitsWarning
-
     extra = {"replay": replay} if model.kind == "ensemble" else {}
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
@@ -607,7 +605,14 @@ def fit_model(
             model.fit(split.train, split.validation, progress=progress, **extra)
         except NnidInputError as exc:
             raise exc.within(section, type(spec).model_fields) from None
-    # the commands' units were said against the whole log as it was loaded (load_inputs)
+    return _fit_warnings(caught)
+
+
+def _fit_warnings(caught) -> list[str]:
+    """The messages of warnings caught in a fit, each once; the commands' units were said
+    against the whole log as it was loaded (load_inputs), not again per part."""
+    from nnid.datasets.arrays import CommandUnitsWarning
+
     return warning_messages(w for w in caught if not issubclass(w.category, CommandUnitsWarning))
 
 
@@ -785,14 +790,17 @@ def run_train(
         )
     monitor = None
     if cfg.detect is not None:
-        monitor, metrics["detect"] = _calibrate_monitor(model, split, cfg.detect)
+        monitor, metrics["detect"], said = _calibrate_monitor(model, split, cfg.detect)
+        metrics["warnings"] = list(dict.fromkeys([*metrics["warnings"], *said]))
     metrics["seconds"] = time.perf_counter() - start
     return TrainResult(model, metrics, inputs.report, split, figures, monitor)
 
 
-def _calibrate_monitor(model, split: Split, spec) -> tuple[Any, dict]:
+def _calibrate_monitor(model, split: Split, spec) -> tuple[Any, dict, list[str]]:
     """A residual monitor calibrated on the validation part, its false alarms measured on the
-    test part (when the split has one)."""
+    test part (when the split has one), and the warnings of calibrating it (a target rate the
+    thresholds do not control): kept in ``metrics.json`` and its reports, not only said on
+    the console."""
     from nnid.fault.monitor import ResidualMonitor
 
     if len(split.validation) == 0:
@@ -801,7 +809,9 @@ def _calibrate_monitor(model, split: Split, spec) -> tuple[Any, dict]:
             field="split.fractions",
         )
     settings = spec.model_dump(exclude={"window_s"})
-    monitor = ResidualMonitor(model, **settings).fit(split.validation)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        monitor = ResidualMonitor(model, **settings).fit(split.validation)
     out: dict[str, Any] = {
         "settings": spec.model_dump(),
         "thresholds": monitor.thresholds_,
@@ -809,7 +819,7 @@ def _calibrate_monitor(model, split: Split, spec) -> tuple[Any, dict]:
     }
     if len(split.test):
         out["test_false_alarms"] = monitor.measure_false_alarms(split.test)
-    return monitor, out
+    return monitor, out, _fit_warnings(caught)
 
 
 def _correction(model, split: Split, parts: list[str], figures: dict) -> dict:

@@ -1123,3 +1123,50 @@ def test_an_alarm_without_a_standard_error_or_explained_share_says_so(vehicle, m
     assert "explaining 55 % of the residual" in describe_alarm(a)
     page = detect_html(monitor, result)
     assert "0.50 (not measured)" in page and "explains 55 %" in page
+
+
+def test_a_train_report_does_not_say_an_uncontrolled_rate_was_set(vehicle, monitor):
+    """Thresholds that fell back to 2 x the healthy maximum (too few peaks) read "set for
+    0.01 false alarms per hour" in the train report's monitor section and the CLI's
+    "monitor:" line, and the fit's warning that the rate is not controlled reached the
+    console only: metrics.json and the report's Warnings had nothing."""
+    from nnid.config import DetectSpec
+    from nnid.datasets.splits import Split
+    from nnid.pipeline import _calibrate_monitor
+    from nnid.reports.train_report import monitor_sentence, train_markdown
+
+    short = simulate_faults(vehicle, 25, seed=7, experiment="short")
+    split = Split(short.iloc[:0], short, short.iloc[:0])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # kept for the run's warnings, not raised past them
+        small, detect_dict, said = _calibrate_monitor(monitor.plant_, split, DetectSpec())
+    assert said == [small.threshold_caveat()] and "is not controlled" in said[0]
+    sentence = monitor_sentence(detect_dict)
+    assert "set for" not in sentence, sentence
+    assert "the target of 0.01 false alarms per hour is not controlled" in sentence
+    assert "no test part: the false-alarm rate was not measured" in sentence
+    text = train_markdown({"model": "fossen", "params": {}, "seconds": 0.0,
+                           "detect": detect_dict, "warnings": said})  # fmt: skip
+    assert "is not controlled" in text[text.index("## Warnings") :]
+    # a rate fitted for both statistics is one the thresholds were set for
+    fitted = {k: {**v, "peaks": 25} for k, v in detect_dict["thresholds"].items()}
+    assert "set for 0.01 false alarms per hour" in monitor_sentence(
+        {**detect_dict, "thresholds": fitted}
+    )
+
+
+def test_the_detect_page_names_each_thresholds_method(monitor):
+    """The page said "thresholds set ... by a <EWMA's method> fit" for both: a CUSUM that fell
+    back to 2 x its healthy maximum while the EWMA was fitted read as fitted."""
+    import copy
+
+    from nnid.reports.detect_report import detect_html
+
+    mixed = copy.deepcopy(monitor)
+    mixed.thresholds_["ewma"]["method"] = "generalized Pareto, peaks over threshold"
+    mixed.thresholds_["ewma"]["peaks"] = 25
+    short = simulate_faults(mixed.plant_.vehicle, 10, seed=7, experiment="short")
+    page = detect_html(mixed, detect(mixed, short))
+    cusum = mixed.thresholds_["cusum"]["value"]
+    assert f"CUSUM {cusum:.3g} (2 x healthy maximum (too few peaks))" in page
+    assert "by a generalized Pareto" not in page

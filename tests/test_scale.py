@@ -921,3 +921,69 @@ def test_a_copy_of_a_log_in_another_folder_is_run_once_and_said(tmp_path):
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         assert len(expand(tmp_path / "m.toml")) == 1
+
+
+def test_a_sweep_trial_whose_test_free_run_diverged_says_so() -> None:
+    """The test column read "-" for a trial whose test free run diverged, as for one without
+    a test part: the row names the diverged DOFs, and the cell says so."""
+    import re
+
+    from nnid.reports.batch_report import _sweep
+    from nnid.scale.batch import BatchResult
+
+    rows = [
+        {"status": "ok", "overrides": '{"model.seed": 0}', "held_out": "test",
+         "validation_free_run_nrmse": 0.3, "free_run_nrmse": None, "diverged": "u, w"},
+        {"status": "ok", "overrides": '{"model.seed": 1}', "held_out": "test",
+         "validation_free_run_nrmse": 0.2, "free_run_nrmse": 0.25, "diverged": None},
+        {"status": "ok", "overrides": '{"model.seed": 2}', "held_out": "validation",
+         "validation_free_run_nrmse": 0.2, "free_run_nrmse": 0.2, "diverged": None},
+        {"status": "failed", "overrides": '{"model.seed": 3}', "error": "boom"},
+    ]  # fmt: skip
+    sweep = {"metric": "validation free_run_nrmse (total)", "summary": "s"}
+    page = "".join(_sweep(BatchResult(rows, "local", extra={"sweep": sweep})))
+    cells = [re.findall(r"<td>(.*?)</td>", row)[4] for row in page.split("<tr>")[2:6]]
+    assert cells == ["diverged", "0.25", "-", "-"], cells
+
+
+def test_a_trial_asha_stopped_is_said_as_stopped_not_as_failed(sweep_inputs, tmp_path, monkeypatch):
+    """ASHA stopping a trial early is the scheduler at work, not a failure: the page said
+    "2 failed" under "Failed tasks", the console "(2 trials failed)" and "failed: <id>", and a
+    sweep with no score "1 failed" for a trial ASHA stopped."""
+    import nnid.scale.engines as engines
+    import nnid.scale.sweep as sweep
+    from nnid.config import SweepSpec
+    from nnid.reports.batch_report import batch_html
+    from nnid.scale.batch import BatchResult
+    from nnid.scale.manifest import Task
+    from nnid.scale.sweep import Ranked, _summary, rank
+
+    rows = [
+        {"id": "a", "status": "ok", "overrides": '{"model.seed": 0}',
+         "validation_free_run_nrmse": 0.2},
+        {"id": "b", "status": "stopped", "overrides": '{"model.seed": 1}',
+         "error": "stopped early by ASHA after 2 epochs of its validation free_run_nrmse"},
+        {"id": "c", "status": "failed", "overrides": '{"model.seed": 2}', "error": "boom"},
+    ]  # fmt: skip
+    said = {"metric": "validation free_run_nrmse (total)", "summary": "Best of 1 settings."}
+    result = BatchResult(rows, "ray tune (ASHA)", extra={"sweep": said})
+    page = batch_html(result, "nnid sweep")
+    assert "1 ok, 1 failed, 1 stopped early by ASHA," in page, page
+    assert "Failed or stopped tasks" in page
+    spec = SweepSpec(seeds=[0, 1, 2])
+    tasks = [Task("train", "", overrides={"model.seed": s}) for s in (0, 1, 2)]
+    none = [{**r, "status": r["status"] if r["id"] != "a" else "failed"} for r in rows]
+    assert "Of 3 trials: 2 failed; 1 stopped early by ASHA." in _summary(
+        spec, rank(spec, tasks, none)
+    )
+    config, data = sweep_inputs
+    ranked = [Ranked({}, [0.2, None, None], rows)]
+    monkeypatch.setattr(engines, "engine_for", lambda address, workers=None: None)
+    monkeypatch.setattr(sweep, "run_sweep_tune", lambda *a, **k: (result, ranked))
+    args = ["sweep", str(config), "--data", str(data), "--out", str(tmp_path / "o"),
+            "--address", "auto"]  # fmt: skip
+    res = CliRunner().invoke(app, args)
+    flat = " ".join(res.output.split())
+    assert res.exit_code == 0 and "(trials: 1 failed, 1 stopped early by ASHA)" in flat, flat
+    assert "stopped: b: stopped early by ASHA" in flat and "failed: c: boom" in flat
+    assert "failed: b" not in flat

@@ -30,7 +30,7 @@ from nnid.datasets.arrays import check_commands, far_beyond_range, motion_arrays
 from nnid.datasets.preprocess import check_attitude
 from nnid.errors import NnidInputError
 from nnid.fault import kernel
-from nnid.fault.thresholds import MIN_PEAKS, rate_interval, rate_threshold
+from nnid.fault.thresholds import rate_caveat, rate_interval, rate_threshold
 from nnid.physics.compiled import form_args
 from nnid.physics.dofs import DOFS, FORCES
 from nnid.physics.thrusters import Actuation
@@ -323,19 +323,9 @@ class ResidualMonitor(BaseEstimator):
 
     def threshold_caveat(self) -> str | None:
         """Why the thresholds do not hold the target false-alarm rate (a healthy record too
-        short for the peaks-over-threshold fit), or None."""
+        short for the peaks-over-threshold fit), or None (:func:`rate_caveat`)."""
         check_is_fitted(self, "thresholds_", msg=UNCALIBRATED)
-        few = {k: v["peaks"] for k, v in self.thresholds_.items() if v["peaks"] < MIN_PEAKS}
-        if not few:
-            return None
-        counts = " and ".join(f"{n} {k.upper()}" for k, n in few.items())
-        return (
-            f"the healthy record ({60 * self.calibration_['hours']:.1f} min) gives {counts} "
-            f"excursion peak(s), fewer than the {MIN_PEAKS} a rate fit needs: those thresholds "
-            "are twice the largest healthy value, and the false-alarm rate of "
-            f"{self.false_alarm_per_hour:g} per hour is not controlled (calibrate on a longer "
-            "healthy record)"
-        )
+        return rate_caveat(self.thresholds_, self.calibration_["hours"], self.false_alarm_per_hour)
 
     @property
     def threshold_values(self) -> tuple[float, float]:

@@ -74,6 +74,23 @@ def rate_threshold(
     }
 
 
+def rate_caveat(thresholds: dict, hours: float, rate_per_hour: float) -> str | None:
+    """Why thresholds from :func:`rate_threshold` (``{"ewma": ..., "cusum": ...}``, set on
+    ``hours`` of healthy data) do not hold the target ``rate_per_hour``: a statistic with
+    fewer than :data:`MIN_PEAKS` peaks got no rate fit. None where both were fitted. Read
+    from the thresholds alone, so a saved ``metrics.json`` says it as the monitor does."""
+    few = {k: v["peaks"] for k, v in thresholds.items() if v["peaks"] < MIN_PEAKS}
+    if not few:
+        return None
+    counts = " and ".join(f"{n} {k.upper()}" for k, n in few.items())
+    return (
+        f"the healthy record ({60 * hours:.1f} min) gives {counts} excursion peak(s), fewer "
+        f"than the {MIN_PEAKS} a rate fit needs: those thresholds are twice the largest healthy "
+        f"value, and the false-alarm rate of {rate_per_hour:g} per hour is not controlled "
+        "(calibrate on a longer healthy record)"
+    )
+
+
 def rate_interval(count: int, hours: float, confidence: float = 0.95) -> tuple[float, float]:
     """Exact (Garwood) interval of a Poisson rate per hour from ``count`` events."""
     a = 1.0 - confidence

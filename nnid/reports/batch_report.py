@@ -16,6 +16,7 @@ import numpy as np
 
 from nnid.reports.cells import number, score
 from nnid.reports.figures import definitions, figure_uri, html_table, new_figure, page_head
+from nnid.scale.batch import STOPPED, not_ok_message
 
 #: at most this many parameters are drawn per vehicle (the ones most tasks identified)
 MAX_PARAMS = 12
@@ -95,7 +96,9 @@ def _failed(result) -> list[str]:
     if not result.failed:
         return []
     rows = [[r["id"], _log(r), str(r.get("error") or "")] for r in result.failed]
-    return ["<h2>Failed tasks</h2>", html_table(["task", "log", "error"], rows)]
+    stopped = any(r["status"] == STOPPED for r in result.failed)
+    title = "Failed or stopped tasks" if stopped else "Failed tasks"
+    return [f"<h2>{title}</h2>", html_table(["task", "log", "error"], rows)]
 
 
 def _loop_table(rows: list[dict]) -> str:
@@ -128,12 +131,12 @@ def _held_out(row: dict) -> str:
 KEPT_START = "kept its start (training diverged)"
 
 
-def _free_run(row: dict) -> str:
+def _free_run(row: dict, digits: int = 3) -> str:
     """A task's held-out free-run NRMSE: the number, "diverged" where the row names the DOFs
     that diverged, "not scored" where none did; "-" for a task that scored nothing (failed)."""
     if "free_run_nrmse" not in row:
         return "-"
-    return score(row["free_run_nrmse"], diverged=bool(row.get("diverged")))
+    return score(row["free_run_nrmse"], digits, diverged=bool(row.get("diverged")))
 
 
 def _train_table(rows: list[dict]) -> str:
@@ -192,7 +195,8 @@ def _sweep(result) -> list[str]:
         seed = setting.pop(sweep.get("seed_option", "model.seed"), None)
         label = ", ".join(f"{k} = {v}" for k, v in setting.items()) or "as configured"
         value = row.get(f"validation_{metric}") if row["status"] == "ok" else None
-        test = row.get("free_run_nrmse") if row.get("held_out") == "test" else None
+        # a diverged test free run is said, not a "-" that reads as "no test part"
+        test = _free_run(row, 4) if row.get("held_out") == "test" else "-"
         note = str(row.get("error") or "")
         untrained = row["status"] == "ok" and row.get("training_diverged")
         if untrained:  # the sweep ranks it unscored
@@ -200,14 +204,15 @@ def _sweep(result) -> list[str]:
         elif row["status"] == "ok" and value is None and not note:  # a "-" said, not left bare
             note = f"no validation {metric}: diverged, or nothing scored (the run's warnings)"
         scores.setdefault(label, []).append(None if untrained else value)
-        body.append([label, number(seed), row["status"], number(value, 4), number(test, 4),
-                     note])  # fmt: skip
+        body.append([label, number(seed), row["status"], number(value, 4), test, note])
     head = ["setting", "seed", "status", f"validation {metric}", "test free-run NRMSE", "note"]
     out.append(html_table(head, body))
     out.append(definitions({
         f"validation {metric}": "total over the excited outputs on the validation part: what "
         "the settings are ranked by (mean over seeds)",
-        "test free-run NRMSE": "reported, never used to choose",
+        "test free-run NRMSE": "reported, never used to choose; 'diverged' where the test "
+        "free run left the physical range, 'not scored' where no sample was left to score, "
+        "'-' without a test part",
     }))  # fmt: skip
     fig, axes = new_figure(1, 1, width=8.0, height=3.2)
     ax = axes[0, 0]
@@ -230,7 +235,7 @@ def batch_html(result, title: str = "nnid batch") -> str:
     out.append(
         f"<p>{len(rows)} tasks on the {html.escape(result.engine)} engine "
         f"({result.slots} at once): {len(rows) - len(result.failed)} ok, "
-        f"{len(result.failed)} failed, {result.reused} finished by an earlier run; "
+        f"{not_ok_message(rows)}, {result.reused} finished by an earlier run; "
         f"{result.seconds:.1f} s wall time.</p>"
     )
     out += _failed(result)

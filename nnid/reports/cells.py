@@ -48,3 +48,13 @@ def score_cell(vals: dict, key: str, diverged: dict) -> str:
     if key not in vals:
         return "-"
     return score(vals[key], diverged=key in diverged or (key == "total" and bool(diverged)))
+
+
+def thresholds_cell(thresholds: dict) -> str:
+    """A residual monitor's two thresholds, each with the method that set it: the EWMA's and
+    the CUSUM's are calibrated on their own, and one may fall back where the other was fitted
+    (:func:`nnid.fault.thresholds.rate_threshold`)."""
+    return ", ".join(
+        f"{k.upper()} {number(thresholds[k]['value'], 3)} ({thresholds[k]['method']})"
+        for k in ("ewma", "cusum")
+    )

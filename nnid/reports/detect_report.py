@@ -12,6 +12,7 @@ import pandas as pd
 from nnid.fault.detect import ALARM_FIELDS, DetectResult, alarm_row
 from nnid.fault.follow import describe_alarm, efficiency_interval, explained_share, value_pm
 from nnid.physics.dofs import DOFS, FORCES
+from nnid.reports.cells import thresholds_cell
 from nnid.reports.figures import (
     FORCE_UNITS,
     IMAGES_CHECK,
@@ -124,9 +125,9 @@ def detect_html(monitor, result: DetectResult, source: str = "") -> str:
     out.append(
         f"<p>Residual monitor of a '{html.escape(monitor.plant_.kind)}' model of "
         f"'{html.escape(monitor.plant_.vehicle.name)}', calibrated on "
-        f"{60 * cal['hours']:.1f} min of healthy data ({cal['samples']} samples); thresholds set "
-        f"for {monitor.false_alarm_per_hour:g} false alarms per hour by a "
-        f"{html.escape(monitor.thresholds_['ewma']['method'])} fit. "
+        f"{60 * cal['hours']:.1f} min of healthy data ({cal['samples']} samples); thresholds "
+        f"{html.escape(thresholds_cell(monitor.thresholds_))} for a target of "
+        f"{monitor.false_alarm_per_hour:g} false alarms per hour. "
         f"{len(result.alarms)} alarm(s) in {trace.t.size} samples. False-alarm rate "
         f"{html.escape(measured_rate(monitor))}.</p>"
     )

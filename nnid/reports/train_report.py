@@ -16,8 +16,9 @@ import pandas as pd
 from nnid.datasets.log import TAU, VELOCITY
 from nnid.datasets.preprocess import experiments
 from nnid.evaluation.evaluate import diverged_columns
+from nnid.fault.thresholds import rate_caveat
 from nnid.physics.dofs import DOFS, FORCES
-from nnid.reports.cells import number, score_cell
+from nnid.reports.cells import number, score_cell, thresholds_cell
 from nnid.reports.figures import (
     FORCE_UNITS,
     IMAGES_CHECK,
@@ -230,19 +231,21 @@ MONITOR_TITLE = "Residual monitor (fault detection)"
 
 def monitor_sentence(detect: dict) -> str:
     """What a train run's ``[detect]`` calibration gave: the thresholds, the healthy time they
-    were set on, and the alarms on the healthy test part with their exact Poisson interval
-    (or that no test part measured them)."""
+    were set on (and that the target rate is not held where a statistic got no rate fit,
+    :func:`nnid.fault.thresholds.rate_caveat`), and the alarms on the healthy test part with
+    their exact Poisson interval (or that no test part measured them)."""
     th = detect["thresholds"]
     cal = detect["calibration"]
     target = detect["settings"].get("false_alarm_per_hour")
-    # each statistic is calibrated on its own: one may fall back where the other was fitted
-    stats = ", ".join(
-        f"{k.upper()} {number(th[k]['value'], 3)} ({th[k]['method']})" for k in ("ewma", "cusum")
-    )
-    text = (
-        f"thresholds {stats}, set for {number(target, 3)} false alarms per hour on "
-        f"{60 * cal['hours']:.1f} min of healthy validation data"
-    )
+    stats = thresholds_cell(th)
+    on = f"{60 * cal['hours']:.1f} min of healthy validation data"
+    if rate_caveat(th, cal["hours"], target) is None:
+        text = f"thresholds {stats}, set for {number(target, 3)} false alarms per hour on {on}"
+    else:  # no rate fit: the target is not what the thresholds hold (the warning says why)
+        text = (
+            f"thresholds {stats} from {on}: too few excursion peaks for a rate fit, so the "
+            f"target of {number(target, 3)} false alarms per hour is not controlled"
+        )
     test = detect.get("test_false_alarms")
     if test is None:
         return text + "; no test part: the false-alarm rate was not measured"

@@ -27,7 +27,7 @@ import pandas as pd
 
 from nnid.config import SweepSpec, TrainConfig, load_config, set_option
 from nnid.errors import NnidInputError
-from nnid.scale.batch import BatchResult, run_tasks
+from nnid.scale.batch import STOPPED, BatchResult, run_tasks
 from nnid.scale.manifest import Task, with_id
 from nnid.trainers.history import Progress, silent, stopping_score
 from nnid.validation import read_toml
@@ -208,11 +208,13 @@ def _summary(spec: SweepSpec, ranked: list[Ranked]) -> str:
     best = ranked[0]
     if best.mean is None:
         rows = [row for r in ranked for row in r.rows]
-        failed = sum(row["status"] != "ok" for row in rows)
+        failed = sum(row["status"] not in ("ok", STOPPED) for row in rows)
+        stopped = sum(row["status"] == STOPPED for row in rows)  # by ASHA: no failure
         kept = sum(row["status"] == "ok" and bool(row.get("training_diverged")) for row in rows)
-        rest = len(rows) - failed - kept
+        rest = len(rows) - failed - stopped - kept
         said = [
             f"{failed} failed" if failed else "",
+            f"{stopped} stopped early by ASHA" if stopped else "",
             f"{kept} kept an untrained start (training diverged)" if kept else "",
             f"{rest} {'has' if rest == 1 else 'have'} no validation {spec.metric} (diverged, "
             "or nothing scored: each "
@@ -380,7 +382,7 @@ def run_sweep_tune(
     ranked = _write_sweep(spec, config, tasks, batch, out_dir)
     batch.extra["sweep"]["early_stopping"] = {
         "scheduler": "ASHA" if spec.early_stopping else None,
-        "stopped": sum(r["status"] == "stopped" for r in rows),
+        "stopped": sum(r["status"] == STOPPED for r in rows),
         "epochs_run": sum(r.get("epochs") or 0 for r in rows),
     }
     if spec.early_stopping and all((r.get("epochs") or 0) <= 1 for r in rows):
@@ -430,5 +432,5 @@ def _tune_row(task: Task, result, out_dir: Path, metric: str) -> dict[str, Any]:
             f"stopped early by ASHA after {epochs} epochs of its validation {metric} "
             f"(objective {metrics.get('objective', float('nan')):.4g})",
         )
-        return {**row, "status": "stopped", "epochs": epochs}
+        return {**row, "status": STOPPED, "epochs": epochs}
     return {**failed_row(task, metrics.get("error") or "the fit failed"), "epochs": epochs}
