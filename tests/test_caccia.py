@@ -255,3 +255,55 @@ def test_a_plateau_of_a_few_samples_is_not_used():
     assert [p.force for p in plateaus] == [2.0]
     assert all(p.n >= 10 for p in plateaus)  # MIN_PLATEAU_SAMPLES
     assert plateaus[0].speed == pytest.approx(0.2, abs=3 * plateaus[0].speed_std + 1e-6)
+
+
+def test_a_plateau_lasts_min_plateau_from_its_first_sample_to_its_last():
+    """min_plateau = 10 s at 1 Hz: a settled run of 10 samples lasts 9 s (its end − start), yet
+    counted as (r1 − r0) dt = 10 s it was used; one of 11 samples lasts 10 s and counts, as
+    does a 10-s run at 10 Hz (101 samples) whose median interval rounds below 0.1 s."""
+    from nnid.trainers.caccia import find_plateaus
+
+    rng = np.random.default_rng(0)
+    force = np.r_[np.full(6, 1.0), np.full(10, 2.0), np.full(11, 3.0), np.full(6, 1.0)]
+    t = np.arange(force.size, dtype=float)
+    position = np.r_[0.0, np.cumsum(0.1 * force[:-1])] + rng.normal(0, 1e-4, force.size)
+    plateaus = find_plateaus(
+        t, position, force, np.zeros(force.size, int), settle_window=5.0, min_plateau=10.0
+    )
+    assert [p.force for p in plateaus] == [3.0]
+    assert all(p.end - p.start >= 10.0 for p in plateaus)
+    force = np.r_[np.full(60, 1.0), np.full(101, 2.0), np.full(60, 1.0)]
+    t = np.arange(force.size) * 0.1
+    position = np.r_[0.0, np.cumsum(0.01 * force[:-1])] + rng.normal(0, 1e-4, force.size)
+    plateaus = find_plateaus(t, position, force, np.zeros(force.size, int), settle_window=2.0)
+    assert [(p.force, p.n) for p in plateaus] == [(2.0, 101)]
+
+
+def test_a_label_that_comes_back_is_two_runs_not_one_plateau():
+    """Experiment 0's rows resume after experiment 1's (its clock running on), at the same
+    input and another depth: the input held across the join made one segment, whose settled
+    run stopped at the depth jump (250 of 300 samples), and the second run's plateau was
+    dropped without a word. Each run gives its plateaus as if the two were separate."""
+    from nnid.trainers.caccia import find_plateaus
+
+    rng = np.random.default_rng(0)
+
+    def run(forces, x0):
+        f = np.repeat(forces, 300)  # 30 s per level at 10 Hz
+        x = x0 + np.r_[0.0, np.cumsum(0.005 * f[:-1])] + rng.normal(0, 1e-3, f.size)
+        return f, x
+
+    (fa, xa), (fb, xb), (fc, xc) = run([1.0, 2.0], 0.0), run([3.0, 1.5], 5.0), run([2.0, 1.0], 10)
+    n = fa.size
+    force, position = np.r_[fa, fb, fc], np.r_[xa, xb, xc]
+    t = np.r_[np.arange(n), np.arange(n), n + np.arange(n)] * 0.1
+    separate = np.repeat([0, 1, 2], n)
+    merged = np.repeat([0, 1, 0], n)
+
+    def found(codes):
+        plateaus = find_plateaus(t, position, force, codes)
+        return sorted((p.force, p.start, p.end, p.n, p.speed) for p in plateaus)
+
+    assert len(found(separate)) == 6
+    assert found(merged) == found(separate)
+    assert {p.setting for p in find_plateaus(t, position, force, merged) if p.start >= 60} == {0}

@@ -322,3 +322,34 @@ def test_rls_counts_only_the_rows_it_used_and_reports_no_value_for_what_it_never
     assert rls.as_dict()["b"]["value"] is None
     assert rls.theta[0] == pytest.approx(batch.theta[0], rel=1e-6)
     assert rls.sigma2 == pytest.approx(batch.sigma2, rel=1e-6)
+
+
+def test_rls_per_dof_variance_is_batch_least_squares_one():
+    """Each DOF equation's residual variance, as batch least squares reports it
+    (:func:`dof_variances`: centred, over n). RLS had its own, uncentred over n − 1: on a
+    surge equation whose residual keeps a 0.3 N offset (a missing bias term) it read
+    0.34 N² where batch least squares read 0.24 N²."""
+    phi, noise = _two_regressors()
+    n = phi.shape[0]
+    rows = np.zeros((2 * n, 2))
+    rows[0::2, 0], rows[1::2, 1] = phi[:, 0], phi[:, 1]
+    y = np.empty(2 * n)
+    y[0::2] = 2.0 * phi[:, 0] + noise + 0.3
+    y[1::2] = -3.0 * phi[:, 1] + 10.0 * noise[::-1]
+    reg = Regression(rows, y, ["a", "b"], ("u", "r"), n)
+    rls = RecursiveLeastSquares().solve(reg)
+    batch = LeastSquares(weighting="none").solve(reg)
+    np.testing.assert_allclose(rls.theta, batch.theta, rtol=1e-6)
+    for d in ("u", "r"):
+        assert rls.dof_sigma2[d] == pytest.approx(batch.dof_sigma2[d], rel=1e-6), d
+
+
+def test_dof_variances_of_an_equation_without_samples_is_nan_without_a_warning():
+    """An equation with no finite residual: NaN, as RLS gave it, not numpy's "Degrees of
+    freedom <= 0" RuntimeWarning."""
+    from nnid.trainers.least_squares import dof_variances
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        var = dof_variances([np.array([np.nan, np.nan]), np.array([1.0, 3.0])])
+    assert np.isnan(var[0]) and var[1] == 1.0

@@ -96,7 +96,7 @@ POSITION_OF = {"u": "x", "v": "y", "w": "z", "p": "phi", "q": "theta", "r": "psi
 MIN_PLATEAU_SAMPLES = 10
 """Fewest samples of a settled run that count as a plateau: the asymptote fit has four
 parameters (c, ξ*, A, τ); with 10 samples 13 % of 400 noisy speeds lay beyond 2 s.e. (5-6 %
-from 20 on), with 4 samples 44 %, with 3 the s.e. was 0 (the default 10 s at 1 Hz is 10)."""
+from 20 on), with 4 samples 44 %, with 3 the s.e. was 0 (the default 10 s at 1 Hz spans 11)."""
 
 
 # --- step 1: plateaus and the steady-state regression ------------------------------------------
@@ -172,7 +172,8 @@ def find_plateaus(
 
     ``experiment`` holds integer codes 0, 1, … (``names`` their labels); the weight setting of
     code c is ``settings[c]`` (default c, Caccia's experiment number i); ``modes`` labels each
-    sample with its thrust mapping mode.
+    sample with its thrust mapping mode. A code that comes back after another's rows is one
+    experiment (one setting) but not one run: no plateau spans the other's rows.
     """
     t = np.asarray(t, np.float64)
     position = np.asarray(position, np.float64)
@@ -185,7 +186,10 @@ def find_plateaus(
         idx = np.flatnonzero(experiment == code)
         te, xe, fe, me = t[idx], position[idx], force[idx], mode_labels[idx]
         dt = float(np.median(np.diff(te)))
-        change = np.r_[True, (np.abs(np.diff(fe)) > 1e-9 * scale) | (me[1:] != me[:-1])]
+        # cut where the input or mode changes, and where the experiment's rows resume after
+        # another's: the same input on both sides of that join is two runs, not one plateau
+        joins = np.diff(idx) != 1
+        change = np.r_[True, (np.abs(np.diff(fe)) > 1e-9 * scale) | (me[1:] != me[:-1]) | joins]
         starts = np.flatnonzero(change)
         stops = np.r_[starts[1:], te.size]
         window = savgol_window(settle_window, 1.0 / dt, settle_order, "settle_window")
@@ -198,7 +202,9 @@ def find_plateaus(
             if not runs:
                 continue
             r0, r1 = max(runs, key=lambda r: r[1] - r[0])
-            if (r1 - r0) * dt < min_plateau or r1 - r0 < MIN_PLATEAU_SAMPLES:
+            # the run lasts (r1 − r0 − 1) dt (the plateau's end − start), to within rounding
+            span = (r1 - r0 - 1) * dt
+            if span < min_plateau * (1 - 1e-9) or r1 - r0 < MIN_PLATEAU_SAMPLES:
                 continue
             tt, xx = seg_t[r0:r1], seg_x[r0:r1]
             tc = tt - tt.mean()

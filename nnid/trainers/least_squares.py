@@ -259,9 +259,10 @@ def dof_variances(residuals: Sequence[np.ndarray] | np.ndarray) -> np.ndarray:
     array, or one series per equation): the first pass of the feasible weighting, whose second
     pass weights each equation by 1/σ̂² so that forces (N) and moments (N m) count on equal
     statistical footing. Centred: a missing effect that biases one equation's residual is not
-    taken for noise there."""
+    taken for noise there. NaN for an equation without a finite sample."""
     series = residuals.T if isinstance(residuals, np.ndarray) and residuals.ndim == 2 else residuals
-    return np.asarray([float(np.nanvar(np.asarray(r, dtype=np.float64))) for r in series])
+    arrays = [np.asarray(r, dtype=np.float64) for r in series]
+    return np.asarray([float(np.nanvar(r)) if np.isfinite(r).any() else np.nan for r in arrays])
 
 
 def dof_sandwich(phi: np.ndarray, r: np.ndarray, m: int, y: np.ndarray | None = None) -> np.ndarray:

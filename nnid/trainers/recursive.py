@@ -141,7 +141,8 @@ def _initial(theta0, n_par: int) -> np.ndarray:
 
 def _residual_stats(reg: Regression, theta: np.ndarray, first: int) -> tuple[float, int, dict]:
     """σ̂² = rᵀr/(n − P) over the rows of samples ``first``…end with the final θ, the row
-    count and σ̂² per DOF equation. Only the rows the recursion used count: a row with a
+    count and each DOF equation's residual variance (:func:`dof_variances`, as batch least
+    squares reports it: centred, over n). Only the rows the recursion used count: a row with a
     non-finite target or regressor was skipped, and counted as a zero residual it shrank σ̂²
     and swelled n (half the rows undefined: σ̂² half). NaN where no residual degree of
     freedom is left, as in :func:`~nnid.trainers.least_squares.solve_least_squares`."""
@@ -152,10 +153,7 @@ def _residual_stats(reg: Regression, theta: np.ndarray, first: int) -> tuple[flo
     n = int(used.sum())
     dof = n - int(np.isfinite(theta).sum())
     sigma2 = float(r[used] @ r[used] / dof) if dof > 0 else math.nan
-    per_dof = {}
-    for k, d in enumerate(reg.dofs):
-        rk = r[k::m][used[k::m]]
-        per_dof[d] = float(rk @ rk / max(rk.size - 1, 1)) if rk.size else math.nan
+    per_dof = dict(zip(reg.dofs, dof_variances(r.reshape(-1, m)).tolist(), strict=True))
     return sigma2, n, per_dof
 
 
