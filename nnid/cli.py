@@ -366,9 +366,8 @@ def loop(
     alpha: float | None = typer.Option(
         None,
         "--alpha",
-        min=1e-12,
-        max=0.5,
-        help="Family-wise significance of the F-test; default: the config's alpha, else 0.01.",
+        help="Family-wise significance of the F-test, 1e-12 to 0.5; default: the config's "
+        "alpha, else 0.01.",
     ),
     dofs: str | None = typer.Option(
         None, "--dofs", help="DOFs to analyse, comma-separated (e.g. p,q,r); default: all logged."
@@ -465,7 +464,7 @@ def vehicle(
 ) -> None:
     """Write a starter vehicle file for your own ROV: a preset's, or one estimated from its mass,
     size and thruster layout (every estimate marked; the identification refits them)."""
-    from nnid.vehicle import vehicle_from_dict
+    from nnid.vehicle import vehicle_from_dict, vehicle_name
     from nnid.vehicle_starter import preset_text, starter_text
 
     if out_path.suffix != ".toml":
@@ -498,6 +497,11 @@ def vehicle(
             dims = ()
         if len(dims) != 3:
             raise NnidInputError(f"'{size}': expected LENGTHxWIDTHxHEIGHT in m", field="--size")
+        if name is not None:  # said against the option, not the file it would be written to
+            try:
+                vehicle_name(name)
+            except ValueError as exc:
+                raise NnidInputError(f"{exc} (got {name!r})", field="--name") from None
         text = starter_text(name or out_path.stem, mass, dims, layout or "heavy8")
     import tomllib
 

@@ -894,14 +894,25 @@ class SweepSpec(StrictModel):
     @field_validator("grid", "random")
     @classmethod
     def _paths(cls, searched: dict[str, list[Any]]) -> dict[str, list[Any]]:
-        for path in searched:
+        for path, values in searched.items():
             _option_path(path)
+            for i, value in enumerate(values):
+                # a grid's repeat was merged into one setting, its seeds' scores counted twice
+                # in the mean; a random list's repeat is drawn twice as often
+                if value in values[:i]:
+                    raise ValueError(f"{path} lists {value!r} twice: give each value once")
         return searched
 
     @field_validator("seed_option")
     @classmethod
     def _seed_path(cls, path: str) -> str:
-        return _option_path(path)
+        key = _option_path(path).split(".")[-1]
+        if key != "seed" and not key.endswith("_seed"):  # warmup_s took the seeds as seconds
+            raise ValueError(
+                f"{path!r} is no seed: seeds are set at a config's seed (model.seed, the "
+                "default, or a key ending in _seed)"
+            )
+        return path
 
     @model_validator(mode="after")
     def _searches(self) -> SweepSpec:
@@ -980,6 +991,11 @@ def _off_at_zero(value: float | None) -> float | None:
     return value or None
 
 
+#: the family-wise significance the loop's F-test takes (``alpha``, ``--alpha``): above 0.5 a
+#: "significant" effect is likelier noise than not
+ALPHA_MIN, ALPHA_MAX = 1e-12, 0.5
+
+
 class LoopConfig(_Command):
     """``nnid loop CONFIG``: the residual loop on a log (``--data``/``--vehicle`` override)."""
 
@@ -991,7 +1007,9 @@ class LoopConfig(_Command):
     validation: Annotated[Names, Field(min_length=1)] | None = None  # default: the last 30 %
     validation_fraction: float = Field(0.3, gt=0, lt=1)
     max_effects: int = Field(3, ge=0)
-    alpha: float = Field(0.01, ge=1e-12, le=0.5)  # as --alpha and a batch manifest take it
+    alpha: float = Field(
+        0.01, ge=ALPHA_MIN, le=ALPHA_MAX
+    )  # as --alpha and a batch manifest take it
     coupled: bool = True
     # Weiss's filtered regressors, F(s) = λ/(s + λ) in rad/s (eqs 86-92); 0 switches the filter
     # off (the loop alone filters by default, and TOML has no null to unset it; the trainers'

@@ -13,13 +13,13 @@ import shutil
 import tempfile
 import uuid
 import warnings
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from nnid.errors import NnidInputError
+from nnid.errors import NnidInputError, checked_number
 from nnid.reports.cells import score_cell
 from nnid.trainers.history import Progress, silent
 from nnid.validation import repeated
@@ -373,11 +373,14 @@ def loop_run(
 ) -> Outcome:
     """``nnid loop``: the residual loop of a log and a vehicle file (a
     :class:`nnid.config.LoopConfig`; the keyword options override it as the CLI's do)."""
+    from nnid.config import ALPHA_MAX, ALPHA_MIN
     from nnid.datasets.column_map import load_column_map
     from nnid.datasets.preprocess import check_attitude
     from nnid.physics.dofs import DOFS
     from nnid.pipeline import loaded_inputs, reader_config
 
+    if alpha is not None:  # as the config's alpha: a NaN failed typer's bound as "above 0.5"
+        checked_number(alpha, "--alpha", ALPHA_MIN, strict=False, maximum=ALPHA_MAX)
     where = config_path or Path("loop.toml")
     reader = reader_config(cfg, where, columns)
     if not (vehicle or cfg.vehicle or (reader and load_column_map(reader).vehicle)):
@@ -437,9 +440,12 @@ def loop_run(
             second_opinion=second,
         )
         source, named = data or str(config_path or ""), str(config_path or "")
+        given = {"validation": validation, "alpha": alpha, "max_effects": max_effects, "dofs": dofs}
+        options = {k: f"--{k.replace('_', '-')}" for k, v in given.items() if v is not None}
         return residual_loop_run(
-            log, inputs.vehicle, out_dir, source, inputs.report, named, progress, loaded, **settings
-        )
+            log, inputs.vehicle, out_dir, source, inputs.report, named, progress, loaded,
+            options, **settings,
+        )  # fmt: skip
 
 
 def residual_loop_run(
@@ -451,11 +457,13 @@ def residual_loop_run(
     config: str = "",
     progress: Progress | None = None,
     said: Sequence[str] = (),
+    options: Mapping[str, str] | None = None,
     **settings,
 ) -> Outcome:
     """The residual loop on a loaded log: ``loop.json``, the reports and the cleaning report
     written to ``out_dir`` (:class:`nnid.loop.residual_loop.ResidualLoop`); ``said``, the
-    warnings of loading it, lead the loop's own."""
+    warnings of loading it, lead the loop's own; ``options``, the command-line option that
+    gave a setting (``validation``: ``--validation``), is named for a fault of that setting."""
     from nnid.loop.residual_loop import ResidualLoop
     from nnid.reports.loop_report import write_loop_report
 
@@ -463,6 +471,9 @@ def residual_loop_run(
     try:
         fitted = ResidualLoop(veh, **settings).fit(log, progress=progress)
     except NnidInputError as exc:
+        option = (options or {}).get(exc.field or "")
+        if option and exc.source is None and exc.row is None:  # neither the log's nor the file's
+            raise NnidInputError(exc.message, field=option) from None
         named = config if config and exc.field in LOOP_SETTINGS else source
         raise exc.with_source(named) if named else exc from None
     fitted.warnings_ = list(dict.fromkeys([*said, *fitted.warnings_]))

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 import tomllib
+import unicodedata
 import warnings
 from importlib import resources
 from pathlib import Path
@@ -46,20 +47,44 @@ Offset = Annotated[
 CurveNumber = Annotated[float, Field(ge=-MAX_COEFFICIENT, le=MAX_COEFFICIENT)]
 
 
+def _makes_thrust(values: list[float], what: str) -> list[float]:
+    """``values`` unless every one is zero: such a curve gives no thrust at any command, and its
+    thruster would be a column of zeros in the allocation (a typo, or a thruster to drop). A
+    negative one is kept: docs/vehicle_file.md, a thrust against ``direction``."""
+    if not any(values):
+        raise ValueError(f"{what}: no thrust at any command (give the curve, or drop the thruster)")
+    return values
+
+
 class PolyCurve(StrictModel):
     kind: Literal["poly"]
     coeffs: list[CurveNumber] = Field(min_length=1)
+
+    @field_validator("coeffs")
+    @classmethod
+    def _thrust(cls, coeffs: list[float]) -> list[float]:
+        return _makes_thrust(coeffs, "every coefficient is 0")
 
 
 class SignedQuadraticCurve(StrictModel):
     kind: Literal["signed_quadratic"]
     k: CurveNumber
 
+    @field_validator("k")
+    @classmethod
+    def _thrust(cls, k: float) -> float:
+        return _makes_thrust([k], "k = 0")[0]
+
 
 class TableCurve(StrictModel):
     kind: Literal["table"]
     cmd: list[float] = Field(min_length=2)
     thrust: list[CurveNumber] = Field(min_length=2)
+
+    @field_validator("thrust")
+    @classmethod
+    def _thrust(cls, thrust: list[float]) -> list[float]:
+        return _makes_thrust(thrust, "every thrust is 0")
 
     @model_validator(mode="after")
     def _check(self) -> TableCurve:
@@ -90,7 +115,10 @@ class Thruster(StrictModel):
     @field_validator("direction")
     @classmethod
     def _unit(cls, d: list[float]) -> list[float]:
-        norm = math.sqrt(sum(x * x for x in d))
+        # hypot scales before it squares: the sum of squares overflowed [1e300, 1e300, 0] to
+        # inf (a direction of zeros, a thruster that pushed nowhere) and underflowed [1e-300,
+        # 0, 0] to 0; components are finite here (StrictModel), so only [0, 0, 0] is refused
+        norm = math.hypot(*d)
         if not norm > 0:
             raise ValueError("direction must be a non-zero vector")
         return [x / norm for x in d]
@@ -132,10 +160,21 @@ def _not_absurd(key: str, value: float) -> None:
         raise ValueError(f"'{key}' = {value:g} is beyond {MAX_COEFFICIENT:g}: a unit slip?")
 
 
+def vehicle_name(name: str) -> str:
+    """``name`` if it can label reports and saved models: a visible character, on one line. A
+    line break or another control character would break a report's lines and headings."""
+    if not name.strip():
+        raise ValueError("give a name with a visible character")
+    control = next((c for c in name if unicodedata.category(c) == "Cc"), None)
+    if control is not None:
+        raise ValueError(f"a name is one line of text, without {control!r}")
+    return name
+
+
 class Vehicle(StrictModel):
     """A validated vehicle file."""
 
-    name: str = Field(pattern=r"\S")  # reports and saved models are labelled with it
+    name: str  # reports and saved models are labelled with it: see vehicle_name
     description: str = ""
     rho: float = Field(1000.0, ge=500, le=2000)  # kg/m³: water is 1000-1030
     g: float = Field(9.81, ge=9.0, le=10.5)
@@ -160,6 +199,11 @@ class Vehicle(StrictModel):
     ] = Field(default_factory=lambda: [0.0] * 6)  # N, N m
     actuator_lag: float = Field(0.0, ge=0, le=MAX_LAG)  # s
     deadband: float = Field(0.0, ge=0)
+
+    @field_validator("name")
+    @classmethod
+    def _name(cls, name: str) -> str:
+        return vehicle_name(name)
 
     @model_validator(mode="after")
     def _defaults(self) -> Vehicle:

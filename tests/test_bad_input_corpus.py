@@ -437,6 +437,14 @@ VEHICLE_CASES = [
         "thrusters.0.curve.k",
         ('"X:u" = -4.0', '"X:u" = -4.0\n' + _THRUSTER.replace("k = 40.0", "k = 1e15")),
     ),
+    # a thruster that makes no thrust: accepted without a word, a column of zeros in B
+    (
+        "thrust curve of no thrust",
+        "thrusters.0.curve.k",
+        ('"X:u" = -4.0', '"X:u" = -4.0\n' + _THRUSTER.replace("k = 40.0", "k = 0.0")),
+    ),
+    # a name on two lines: accepted, and every one-line error naming the vehicle split in two
+    ("name on two lines", "name", ('name = "probe"', 'name = "pro\\nbe"')),
 ]
 
 
@@ -999,8 +1007,27 @@ def test_sizes_beyond_any_log_are_refused_at_the_config(tmp_path, config, old, n
         ),
         # "field 'model.seed': is not a known field here", a key the config never wrote
         pytest.param("seeds = [0, 1]", "sweep.seeds", "model.seed", id="seed of no model"),
+        # a value given twice was merged into one setting ("Best of 1 settings"), its seeds'
+        # scores counted twice in the mean
+        pytest.param(
+            'grid = { "model.hidden" = [[4], [4]] }', "sweep.grid", "model.hidden lists [4] twice",
+            id="grid value twice",
+        ),
+        pytest.param(
+            'grid = { "warmup_s" = [1.0, 1.0] }', "sweep.grid", "warmup_s lists 1.0 twice",
+            id="grid number twice",
+        ),
+        pytest.param(
+            'random = { "warmup_s" = [1.0, 2.0, 1.0] }\nsamples = 2', "sweep.random",
+            "warmup_s lists 1.0 twice", id="random choice twice",
+        ),
+        # the seeds were used as warm-up lengths: 0 s, 1 s, 2 s
+        pytest.param(
+            'seeds = [0, 1, 2]\nseed_option = "warmup_s"', "sweep.seed_option", "is no seed",
+            id="seed option not a seed",
+        ),
     ],
-)
+)  # fmt: skip
 def test_a_sweep_path_that_names_no_option_is_said_against_the_sweep(
     fixtures, tmp_path, sweep, field, said
 ):
@@ -1377,3 +1404,81 @@ def test_samples_missing_in_a_run_compare_predicts_are_said_against_the_log(tmp_
     args = ["compare", str(fitted_only), "--data", str(data), "--vehicle", MINIROV]
     result = CliRunner().invoke(app, [*args, "--out", str(tmp_path / "out2")])
     assert result.exit_code == 0, result.output
+
+
+@pytest.mark.parametrize(
+    ("options", "field", "said"),
+    [
+        # "Input should be less than or equal to 0.5": a NaN is no number above it
+        (["--alpha", "nan"], "--alpha", "a finite number at least 1e-12 and at most 0.5"),
+        (["--alpha", "0.7"], "--alpha", "a finite number at least 1e-12 and at most 0.5"),
+        # blamed "good.csv, field 'validation'", a key of no file
+        (["--validation", "run0,run1,run2"], "--validation", "every experiment is held out"),
+    ],
+)
+def test_a_loop_option_is_named_as_the_option(fixtures, tmp_path, options, field, said):
+    args = [*_command("loop", tmp_path, fixtures), *options]
+    result = CliRunner().invoke(app, args)
+    assert result.exit_code == 2 and "Traceback" not in result.output, result.output
+    errors = [line for line in result.output.splitlines() if line.startswith("error:")]
+    assert len(errors) == 1, result.output
+    assert errors[0].startswith(f"error: field '{field}': {said}"), errors[0]
+    assert not fixtures["out"].exists()
+
+
+@pytest.mark.parametrize(("name", "said"), [("   ", "visible character"), ("a\nb", "one line")])
+def test_vehicle_name_option_is_named_as_the_option(tmp_path, name, said):
+    # blamed "v1.toml, field 'name'", a file not yet written; a newline was written
+    target = tmp_path / "v1.toml"
+    args = ["vehicle", "--out", str(target), "--mass", "10", "--size", "0.4x0.3x0.2"]
+    result = CliRunner().invoke(app, [*args, "--name", name])
+    assert result.exit_code == 2, result.output
+    errors = [line for line in result.output.splitlines() if line.startswith("error:")]
+    assert len(errors) == 1 and errors[0].startswith("error: field '--name': "), result.output
+    assert said in errors[0] and "v1.toml" not in errors[0] and not target.exists()
+
+
+@pytest.mark.parametrize(
+    ("direction", "unit"),
+    [
+        # the sum of squares overflowed to inf: a direction of zeros, simulate exited 0
+        ([1e300, 1e300, 0.0], [2**-0.5, 2**-0.5, 0.0]),
+        # it underflowed to 0: refused as a zero vector
+        ([1e-300, 0.0, 0.0], [1.0, 0.0, 0.0]),
+        ([0.0, -3.0, 4.0], [0.0, -0.6, 0.8]),
+    ],
+)
+def test_a_thruster_direction_is_normalised_at_any_scale(direction, unit):
+    from nnid.vehicle import vehicle_from_dict
+
+    thruster = {"name": "h1", "position": [0.1, 0.0, 0.0], "direction": direction,
+                "curve": {"kind": "signed_quadratic", "k": 40.0}}  # fmt: skip
+    data = {"name": "probe", "mass": 11.5, "inertia": [0.16, 0.16, 0.16], "thrusters": [thruster]}
+    got = vehicle_from_dict(data, source="probe.toml").thrusters[0].direction
+    np.testing.assert_allclose(got, unit, rtol=1e-15, atol=1e-15)
+
+
+@pytest.mark.parametrize(
+    ("curve", "field"),
+    [
+        ({"kind": "signed_quadratic", "k": 0.0}, "thrusters.0.curve.k"),
+        ({"kind": "poly", "coeffs": [0.0, 0.0, 0.0]}, "thrusters.0.curve.coeffs"),
+        ({"kind": "table", "cmd": [-1.0, 1.0], "thrust": [0.0, 0.0]}, "thrusters.0.curve.thrust"),
+        # docs/vehicle_file.md: a reversed propeller pushes against its direction
+        ({"kind": "signed_quadratic", "k": -40.0}, None),
+        ({"kind": "poly", "coeffs": [0.0, -0.5]}, None),
+    ],
+)
+def test_a_thrust_curve_of_no_thrust_is_refused_naming_it(curve, field):
+    from nnid.errors import NnidInputError
+    from nnid.vehicle import vehicle_from_dict
+
+    thruster = {"name": "h1", "position": [0.1, 0.0, 0.0], "direction": [1.0, 0.0, 0.0],
+                "curve": curve}  # fmt: skip
+    data = {"name": "probe", "mass": 11.5, "inertia": [0.16, 0.16, 0.16], "thrusters": [thruster]}
+    if field is None:
+        vehicle_from_dict(data, source="probe.toml")
+        return
+    with pytest.raises(NnidInputError, match="no thrust at any command") as err:
+        vehicle_from_dict(data, source="probe.toml")
+    assert err.value.field == field and err.value.source == "probe.toml"

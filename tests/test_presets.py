@@ -401,11 +401,19 @@ def test_starter_vehicle_files_load_and_scale(tmp_path):
     res = runner.invoke(app, ["vehicle", "--preset", "seamor", "--out", str(out)])
     assert res.exit_code == 2 and "exists" in res.output  # nothing is overwritten
     # a name with TOML's special characters is written escaped and reads back as given
-    for k, name in enumerate(['a"b', "a\\b", "a\nb", "x\x7fy"]):
+    for k, name in enumerate(['a"b', "a\\b", "my ROV é"]):
         named = tmp_path / f"named{k}.toml"
         args = ["vehicle", "--mass", "20", "--size", "1x1x0.5", "--name", name, "--out", str(named)]
         assert runner.invoke(app, args).exit_code == 0
         assert load_vehicle(named).name == name
+    # a line break or another control character is refused, naming the option: written
+    # escaped, it read back, but split every one-line error that names the vehicle in two
+    for k, name in enumerate(["a\nb", "x\x7fy"]):
+        named = tmp_path / f"control{k}.toml"
+        args = ["vehicle", "--mass", "20", "--size", "1x1x0.5", "--name", name, "--out", str(named)]
+        res = runner.invoke(app, args)
+        assert res.exit_code == 2 and "field '--name': a name is one line" in res.output
+        assert not named.exists()
 
 
 def test_starter_vehicle_file_is_neutral_at_its_measured_mass():
