@@ -115,10 +115,13 @@ class Thruster(StrictModel):
     @field_validator("direction")
     @classmethod
     def _unit(cls, d: list[float]) -> list[float]:
-        # hypot scales before it squares: the sum of squares overflowed [1e300, 1e300, 0] to
-        # inf (a direction of zeros, a thruster that pushed nowhere) and underflowed [1e-300,
-        # 0, 0] to 0; components are finite here (StrictModel), so only [0, 0, 0] is refused
-        norm = math.hypot(*d)
+        norm = math.sqrt(sum(x * x for x in d))
+        if not 0 < norm < math.inf:
+            # hypot scales before it squares: the sum of squares overflowed [1e300, 1e300, 0]
+            # to inf (a direction of zeros, a thruster that pushed nowhere) and underflowed
+            # [1e-300, 0, 0] to 0; components are finite here (StrictModel), so only [0, 0, 0]
+            # is refused. Only there: every other direction keeps its last bits
+            norm = math.hypot(*d)
         if not norm > 0:
             raise ValueError("direction must be a non-zero vector")
         return [x / norm for x in d]
