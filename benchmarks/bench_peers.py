@@ -32,7 +32,7 @@ Data, splits and warm-ups.
   r. Score = free-run NRMSE per output (RMSE / std of the measured output,
   :func:`nnid.evaluation.evaluate.score_prediction`, the function behind ``metrics.json``) over the
   samples after the config's ``warmup_s`` (1 s, nnid's; ``nonlinear-benchmarks`` has no such case),
-  on the columns ``nnid train`` scores (:func:`nnid.evaluation.metrics.excited_dofs`: w only where
+  on the columns ``nnid train`` scores (:func:`nnid.datasets.preprocess.excited_dofs`: w only where
   the run excites it); ``total`` = their mean. SysIdentPy is single-output: one model per output,
   its regressors the four inputs and the three other outputs (lagged); the four are simulated
   jointly (:class:`CoSimulation`: at each step every model's prediction uses the others' simulated
@@ -367,8 +367,8 @@ def score(case: Case, log: pd.DataFrame, pred: np.ndarray, initial: int) -> dict
     measured ranges)."""
     pred = np.asarray(pred, dtype=np.float64).reshape(len(log), -1)
     if case.name == "seamor":
+        from nnid.datasets.preprocess import excited_dofs
         from nnid.evaluation.evaluate import score_prediction, scored_rows
-        from nnid.evaluation.metrics import excited_dofs
 
         columns = excited_dofs(log, case.outputs)
         frame = pd.DataFrame(pred, columns=case.outputs, index=log.index)

@@ -581,8 +581,8 @@ def sweep(
     """Search a train config's settings and seeds ([sweep]: grid, random draws, seeds), each
     trial scored on the validation experiments: writes settings.csv (ranked), best.toml (the
     chosen setting as a ready config), summary.* (one row per trial) and report.html."""
-    from nnid.scale.batch import not_ok_message
     from nnid.scale.engines import LocalEngine, engine_for, environment
+    from nnid.scale.status import not_ok_message
     from nnid.scale.sweep import run_sweep, run_sweep_tune, trials
 
     _, tasks = trials(config, data, vehicle, columns)  # a bad [sweep] is refused before work

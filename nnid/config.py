@@ -44,6 +44,7 @@ from nnid.physics.damping_masks import MASKS
 from nnid.physics.dofs import DOFS, FORCES
 from nnid.physics.effects import parse_effect
 from nnid.validation import (
+    MAX_WIDTH,
     PositiveFloat,
     StrictModel,
     read_toml,
@@ -63,8 +64,6 @@ MaskName = Literal[tuple(MASKS)]  # type: ignore[valid-type]
 #: overflowed the sample count)
 MAX_DURATION_S = 1e6
 Duration = Annotated[float, Field(gt=0, le=MAX_DURATION_S, allow_inf_nan=False)]
-#: the widest hidden layer (a larger one is a typo that fails to allocate)
-MAX_WIDTH = 100_000
 #: the most random draws of a sweep (more is a typo that fills the memory before any trial)
 MAX_SAMPLES = 100_000
 Number = Annotated[float, Field(allow_inf_nan=False)]

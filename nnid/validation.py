@@ -43,6 +43,11 @@ def shown(value: Any) -> str:
     return "empty (NaN)" if math.isnan(number) else f"{number:g}"
 
 
+#: the widest hidden layer (a larger one is a typo that fails to allocate): the configs' cap,
+#: and the models' for settings given in Python
+MAX_WIDTH = 100_000
+
+
 def repeated(names: list[str]) -> list[str]:
     """The names a list gives more than once, sorted (for an error that names them)."""
     return sorted({n for n in names if names.count(n) > 1})

@@ -153,8 +153,7 @@ def test_inspect_excites_a_pose_only_log_by_the_fits_derivative(tmp_path):
     excited. Now each is the fits' derivative (derive_velocities, [data]'s default window),
     marked as from the pose, and ``excited`` is excited_dofs of those velocities."""
     from nnid.datasets.inspect import summarize
-    from nnid.datasets.preprocess import derive_velocities
-    from nnid.evaluation.metrics import excited_dofs
+    from nnid.datasets.preprocess import derive_velocities, excited_dofs
 
     log = _pose_only_log()
     info = summarize(log)

@@ -32,7 +32,8 @@ import numpy as np
 import pandas as pd
 import torch
 
-from nnid.datasets.measurement import Measurement, wrap_angle
+from nnid.datasets.log import wrap_angle
+from nnid.datasets.measurement import Measurement
 from nnid.errors import NnidInputError
 from nnid.physics import compiled
 from nnid.physics.effects import apply_effect

@@ -19,7 +19,12 @@ from nnid.datasets.log import (
     VELOCITY,
     input_columns,
 )
-from nnid.datasets.preprocess import derivable_velocities, derive_velocities, experiments
+from nnid.datasets.preprocess import (
+    derivable_velocities,
+    derive_velocities,
+    excited_dofs,
+    experiments,
+)
 from nnid.errors import NnidInputError
 
 DOF_FORCE = dict(zip(VELOCITY, TAU, strict=True))
@@ -63,11 +68,9 @@ def summarize(log: pd.DataFrame, savgol_window: float = 1.0, savgol_order: int =
     the hole between two consecutive pieces of one run included, as their run's clock shows
     it). Velocities the log lacks are derived from its pose
     with ``savgol_window`` s and ``savgol_order`` (:func:`velocities_from_pose`) for the
-    excitation and ``excited`` (:func:`nnid.evaluation.metrics.excited_dofs`). ``commands``:
+    excitation and ``excited`` (:func:`nnid.datasets.preprocess.excited_dofs`). ``commands``:
     the excitation of each ``cmd_*`` channel, a command and not a force without a vehicle
     file's thrusters."""
-    from nnid.evaluation.metrics import excited_dofs
-
     inputs = input_columns(log)
     known = {"t", "experiment", PIECE_OF, REPLAY_GROUP, *POSE, *VELOCITY, *ACCELERATION, *inputs}
     groups = experiments(log)

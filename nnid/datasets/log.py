@@ -207,6 +207,11 @@ def looks_like_degrees(df: pd.DataFrame, col: str) -> bool:
     return bool(np.nanpercentile(np.abs(r), 99) > math.pi)
 
 
+def wrap_angle(a: np.ndarray) -> np.ndarray:
+    """Wrap to [−π, π)."""
+    return (np.asarray(a) + np.pi) % (2 * np.pi) - np.pi
+
+
 #: a body rate logged in deg/s reads 180/π ≈ 57.3 times the attitude's kinematic rate
 #: (:func:`rate_slopes`); a slope in this range on an axis that turns is refused as that slip.
 #: Wide below: an attitude that lags or disagrees with its gyro pulls the slope down (the
@@ -237,8 +242,6 @@ def rate_slopes(df: pd.DataFrame) -> list[tuple[object, str, float, float]]:
     gimbal lock is left out of both sums, and no window spans two experiments. Returns
     (experiment, rate column, slope, seconds of turning windows) for each pair with any: about
     1 for a consistent log, 57.3 for rates in deg/s beside radians."""
-    from nnid.datasets.measurement import wrap_angle  # it imports this module
-
     rates = [c for c in ("p", "q", "r") if c in df]
     # T_Θ⁻¹ needs the whole attitude: a missing roll or pitch taken as level would compare a
     # tilted vehicle's r (all θ̇ when rolled 90°) with ψ̇ alone

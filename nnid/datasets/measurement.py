@@ -14,7 +14,7 @@ from typing import Literal
 import numpy as np
 from pydantic import Field, model_validator
 
-from nnid.datasets.log import ACCELERATION, POSE, VELOCITY
+from nnid.datasets.log import ACCELERATION, POSE, VELOCITY, wrap_angle
 from nnid.validation import StrictModel
 
 
@@ -25,11 +25,6 @@ def relative_noise(log, sources: dict[str, str], fraction: float, rng: np.random
     for column, source in sources.items():
         x = log[source]
         log[column] = x + rng.normal(0, fraction * x.std(), len(log))
-
-
-def wrap_angle(a: np.ndarray) -> np.ndarray:
-    """Wrap to [−π, π)."""
-    return (np.asarray(a) + np.pi) % (2 * np.pi) - np.pi
 
 
 #: the noise fields each kind of measurement reads

@@ -33,9 +33,9 @@ from nnid.datasets.log import (
     REPLAY_GROUP,
     VELOCITY,
     input_columns,
+    wrap_angle,
 )
 from nnid.datasets.mapping import rotation_from_euler
-from nnid.datasets.measurement import wrap_angle
 from nnid.errors import NnidInputError
 from nnid.validation import shown
 
@@ -313,6 +313,16 @@ def _euler_rates(angles: np.ndarray, inverse: bool = False) -> np.ndarray:
     rate_matrix = euler_rate_matrix_inverse if inverse else euler_rate_matrix
     # a copy: pandas hands out read-only arrays, which torch warns about
     return rate_matrix(torch.as_tensor(np.array(angles, dtype=np.float64))).numpy()
+
+
+def excited_dofs(log: pd.DataFrame, columns: list[str], rel: float = 0.1) -> list[str]:
+    """Velocity columns the data excites: std above ``rel`` of the largest linear (u v w) or
+    angular (p q r) std. A DOF that only trembles through coupling is not scored: its NRMSE
+    would divide by its own noise."""
+    stds = {c: float(log[c].std()) for c in columns if c in log}
+    lin = max([stds.get(c, 0.0) for c in "uvw"] + [0.0])
+    ang = max([stds.get(c, 0.0) for c in "pqr"] + [0.0])
+    return [c for c, s in stds.items() if s > rel * (lin if c in "uvw" else ang) and s > 0]
 
 
 def derivable_velocities(columns) -> set[str]:
@@ -658,42 +668,6 @@ def held_inputs(log: pd.DataFrame) -> list[str]:
         if steps and equal >= HELD_SHARE * (equal + steps):
             held.append(c)
     return held
-
-
-def warn_held_inputs(
-    log: pd.DataFrame, fit: str, smoothed: bool, actuator_lag: float, stacklevel: int = 4
-) -> None:
-    """Warn (:class:`~nnid.trainers.least_squares.ExcitationWarning`) when ``fit`` regresses
-    a ``smoothed`` acceleration (Savitzky-Golay or the filter F(s)) on inputs that look held
-    (:func:`held_inputs`) at a sample time of at least :data:`HELD_DT` without
-    ``zoh_midpoint``; the caller checks that setting. An acceleration logged at the sample
-    sees the force of that sample, and a lagged force is continuous: neither is warned of."""
-    if not smoothed or actuator_lag > 0:
-        return
-    held = held_inputs(log)
-    if not held:
-        return
-    dts = [np.diff(log.loc[idx, "t"].to_numpy(np.float64)) for _, idx in experiments(log)]
-    dts = [d for d in dts if d.size]
-    if not dts:
-        return
-    dt = float(np.median(np.concatenate(dts)))
-    if dt < HELD_DT:
-        return
-    from nnid.trainers.least_squares import ExcitationWarning
-
-    warnings.warn(
-        f"{fit}: the inputs {', '.join(held)} are held between samples (at least "
-        f"{100 * HELD_SHARE:.0f} % of their samples repeat the one before) at Δt = {dt:.3g} s, "
-        "and the fit reads the force at a sample as the one held after it, while the smoothed "
-        "acceleration there sees the forces held before and after it: a half-sample delay the "
-        "fit takes for inertia (about Δt/(2T) of m − F_ν̇, T the velocity time constant; on "
-        "a simulated Seamor log of held steps N_ṙ came out 19 % too large at 20 Hz, 7 % at "
-        "50 Hz, and within 3 % with the setting). Set zoh_midpoint = true in [model] if the "
-        "commands are held between samples (a thruster controller's, a simulator's)",
-        ExcitationWarning,
-        stacklevel=stacklevel,  # the caller of the model's fit
-    )
 
 
 # --- sensor biases ----------------------------------------------------------------------------

@@ -31,9 +31,9 @@ from nnid.datasets.log import (
     REPLAY_GROUP,
     time_unit_slip,
     validate_log,
+    wrap_angle,
 )
 from nnid.datasets.mapping import file_label, label_columns, map_source
-from nnid.datasets.measurement import wrap_angle
 from nnid.datasets.preprocess import unwrap_finite
 from nnid.datasets.rosbag import is_bag, read_bag_sources
 from nnid.errors import NnidInputError

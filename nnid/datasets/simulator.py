@@ -23,8 +23,8 @@ from pydantic import Field, field_validator
 from scipy.integrate import solve_ivp
 
 from nnid.datasets.arrays import warn_far_beyond_range
-from nnid.datasets.log import TAU
-from nnid.datasets.measurement import Measurement, wrap_angle
+from nnid.datasets.log import TAU, wrap_angle
+from nnid.datasets.measurement import Measurement
 from nnid.errors import NnidInputError
 from nnid.physics import compiled
 from nnid.physics.dofs import FORCES

@@ -34,8 +34,8 @@ import numpy as np
 import pandas as pd
 
 from nnid.datasets.log import VELOCITY
-from nnid.datasets.preprocess import experiments
-from nnid.evaluation.metrics import exact_mean, exact_std, excited_dofs, warmup_mask
+from nnid.datasets.preprocess import excited_dofs, experiments
+from nnid.evaluation.metrics import exact_mean, exact_std, warmup_mask
 from nnid.evaluation.prediction import check_mode, mode_steps
 from nnid.physics.dofs import DOFS, FORCES
 

@@ -76,13 +76,3 @@ def per_dof(
     values = list(out.values())
     out["total"] = exact_mean(values) if values and all(np.isfinite(values)) else float("nan")
     return out
-
-
-def excited_dofs(log: pd.DataFrame, columns: list[str], rel: float = 0.1) -> list[str]:
-    """Velocity columns the data excites: std above ``rel`` of the largest linear (u v w) or
-    angular (p q r) std. A DOF that only trembles through coupling is not scored: its NRMSE
-    would divide by its own noise."""
-    stds = {c: float(log[c].std()) for c in columns if c in log}
-    lin = max([stds.get(c, 0.0) for c in "uvw"] + [0.0])
-    ang = max([stds.get(c, 0.0) for c in "pqr"] + [0.0])
-    return [c for c, s in stds.items() if s > rel * (lin if c in "uvw" else ang) and s > 0]

@@ -34,9 +34,9 @@ from scipy.stats import f as f_dist
 
 from nnid.datasets.arrays import force_arrays, log_arrays, nominal_forces
 from nnid.datasets.log import VELOCITY
-from nnid.datasets.preprocess import zoh_midpoint
+from nnid.datasets.preprocess import excited_dofs, zoh_midpoint
 from nnid.evaluation.evaluate import score_split
-from nnid.evaluation.metrics import exact_mean, excited_dofs, rmse, warmup_mask
+from nnid.evaluation.metrics import exact_mean, rmse, warmup_mask
 from nnid.evaluation.prediction import mode_steps, predict_states
 from nnid.loop.effects import Candidate
 from nnid.models.parametric import ParametricFossen, filter_settled, vehicle_with

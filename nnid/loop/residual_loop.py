@@ -523,7 +523,7 @@ class ResidualLoop:
     # -- outputs --------------------------------------------------------------------------------
     def free_runs(self) -> tuple[np.ndarray, pd.DataFrame, pd.DataFrame, pd.DataFrame, list[str]]:
         """Held-out time, measured velocities, baseline and final free runs, excited DOFs."""
-        from nnid.evaluation.metrics import excited_dofs
+        from nnid.datasets.preprocess import excited_dofs
 
         val = self.workspace_.val
         runs = [

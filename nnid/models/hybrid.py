@@ -88,6 +88,7 @@ from nnid.trainers.history import (
     staged,
 )
 from nnid.trainers.neural_ode import Batch, MultipleShooting, Run
+from nnid.validation import MAX_WIDTH
 
 DTYPE = torch.float64
 #: state features of the network: ν_r (scaled), then the 9 entries of R(Θ)
@@ -555,8 +556,6 @@ class HybridModel(FossenPlant):
         for name in ("hidden", "memory", "segments"):
             if isinstance(getattr(self, name), str | bytes) or not np.iterable(getattr(self, name)):
                 raise NnidInputError(f"{name} is a list of numbers", field=name)
-        from nnid.config import MAX_WIDTH
-
         for h in self.hidden:  # capped as the config caps it: wider is a typo
             checked_number(h, "hidden", 1, strict=False, integer=True, maximum=MAX_WIDTH)
         for t in self.memory:

@@ -89,7 +89,7 @@ from nnid.models.bounds import (
 from nnid.models.io_model import DTYPE, InputOutputModel, seeded_linear
 from nnid.serialization import jsonable
 from nnid.trainers.history import History, Progress, scored_validation, staged, stopping_score
-from nnid.validation import checked_names
+from nnid.validation import MAX_WIDTH, checked_names
 
 #: ``output_transform`` values: extra regressors computed from each lagged output
 OUTPUT_TRANSFORMS = (None, "sqrt", "products", "fossen")
@@ -355,8 +355,6 @@ class NarxModel(InputOutputModel):
         self.output_delays_ = _delays(self.output_delays, 1, "output_delays")
         if isinstance(self.hidden, str | bytes) or not np.iterable(self.hidden):
             raise NnidInputError("hidden is a list of layer widths", field="hidden")
-        from nnid.config import MAX_WIDTH
-
         # capped as the config caps it (wider is a typo); int() made 1.5 one unit wide
         self.hidden_ = tuple(
             checked_number(h, "hidden", 1, strict=False, integer=True, maximum=MAX_WIDTH)

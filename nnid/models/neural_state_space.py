@@ -58,7 +58,7 @@ from nnid.models.io_model import DTYPE, InputOutputModel
 from nnid.physics.integrate import rk4
 from nnid.threads import torch_threads
 from nnid.trainers.history import Progress, scored_validation, staged
-from nnid.validation import checked_names
+from nnid.validation import MAX_WIDTH, checked_names
 
 #: derivatives are learned per sample and scaled down, so a small network starts slow
 _RATE = 0.1
@@ -232,8 +232,6 @@ class NeuralStateSpace(InputOutputModel):
         self.outputs_ = checked_names(self.outputs, "outputs")
         if not self.outputs_:
             raise NnidInputError("a state-space model needs at least one output", field="outputs")
-        from nnid.config import MAX_WIDTH
-
         # capped as the config caps it (wider is a typo); int() made 1.5 one unit wide
         checked_number(self.hidden, "hidden", 1, strict=False, integer=True, maximum=MAX_WIDTH)
         if self.hidden_states < 0 or self.substeps < 1 or self.warmup < 1:

@@ -21,7 +21,7 @@ import pandas as pd
 
 from nnid.datasets.arrays import log_arrays
 from nnid.datasets.log import ACCELERATION
-from nnid.datasets.preprocess import experiments, warn_held_inputs, zoh_midpoint_inputs
+from nnid.datasets.preprocess import experiments, zoh_midpoint_inputs
 from nnid.errors import NnidInputError
 from nnid.models.parametric import (
     FossenPlant,
@@ -29,6 +29,7 @@ from nnid.models.parametric import (
     filter_settled,
     filter_signal,
     prepare_motion,
+    warn_held_inputs,
 )
 from nnid.physics.damping_library import BasisLibrary
 from nnid.physics.dofs import DOFS, FORCES
@@ -178,7 +179,7 @@ class DampingModel(FossenPlant):
         )
 
     def _warn_held(self, log: pd.DataFrame, fit: str) -> None:
-        """:func:`~nnid.datasets.preprocess.warn_held_inputs` for this fit's τ̄: its
+        """:func:`~nnid.models.parametric.warn_held_inputs` for this fit's τ̄: its
         acceleration is smoothed unless the log has every one and no filter is set."""
         if not self.zoh_midpoint:
             smoothed = self.filtered or not all(a in log for a in ACCELERATION)

@@ -16,7 +16,7 @@ import numpy as np
 
 from nnid.reports.cells import number, score
 from nnid.reports.figures import definitions, figure_uri, html_table, new_figure, page_head
-from nnid.scale.batch import STOPPED, not_ok_message
+from nnid.scale.status import STOPPED, not_ok_message
 
 #: at most this many parameters are drawn per vehicle (the ones most tasks identified)
 MAX_PARAMS = 12

@@ -44,18 +44,6 @@ def counts_message(ok: int, failed: int, running: int, reused: int = 0) -> str:
     return text + (f" ({reused} finished earlier)" if reused else "")
 
 
-#: the status of a sweep's trial that Ray Tune's ASHA stopped early (by design, not a failure)
-STOPPED = "stopped"
-
-
-def not_ok_message(rows: list[dict[str, Any]]) -> str:
-    """The rows that are not ``ok`` in words: "N failed", and "M stopped early by ASHA" where
-    a sweep's scheduler stopped trials (a trial stopped by design did not fail)."""
-    stopped = sum(r["status"] == STOPPED for r in rows)
-    failed = sum(r["status"] not in ("ok", STOPPED) for r in rows)
-    return f"{failed} failed" + (f", {stopped} stopped early by ASHA" if stopped else "")
-
-
 def run_tasks(
     tasks: list[Task],
     out_root: str | Path,

@@ -27,8 +27,9 @@ import pandas as pd
 
 from nnid.config import SweepSpec, TrainConfig, load_config, set_option
 from nnid.errors import NnidInputError
-from nnid.scale.batch import STOPPED, BatchResult, run_tasks
+from nnid.scale.batch import BatchResult, run_tasks
 from nnid.scale.manifest import Task, with_id
+from nnid.scale.status import STOPPED
 from nnid.trainers.history import Progress, silent, stopping_score
 from nnid.validation import read_toml
 
