@@ -26,7 +26,7 @@ from nnid.config import (
 )
 from nnid.datasets.cleaning import CleaningReport
 from nnid.datasets.gaps import mask_gaps
-from nnid.datasets.log import ACCELERATION, ANGLES, POSE, VELOCITY, input_columns
+from nnid.datasets.log import ACCELERATION, ANGLES, POSE, VELOCITY, input_columns, run_label
 from nnid.datasets.preprocess import experiments
 from nnid.datasets.splits import PARTS, Split, say_missed_fractions, split_log
 from nnid.errors import NnidInputError
@@ -531,7 +531,7 @@ def make_split(
             if len(idx) < 2:  # no sample period: nothing to fit or score on it
                 raise NnidInputError(
                     f"the {name} split holds a single sample of "
-                    f"{'the log' if exp is None else f'experiment {exp!r}'}: each piece needs at "
+                    f"{run_label(exp)}: each piece needs at "
                     "least two; the log is too short for these fractions, so give a longer log "
                     "or other fractions",
                     source=source,

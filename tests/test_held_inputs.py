@@ -4,6 +4,7 @@ delay of the force read as inertia), and only where it biases the added mass."""
 import warnings
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from nnid.datasets.log import TAU
@@ -90,3 +91,13 @@ def test_no_warning_for_smooth_inputs_fast_sampling_or_logged_accelerations(seam
         experiment="run0",
     )
     _quiet(ParametricModel(seamor, ["N_rdot", "N:r*abs(r)"], ["r"]), exact)
+
+
+def test_a_smooth_input_resting_at_zero_between_bursts_is_not_held():
+    """A sine that is off (zero) over most of the run repeats its zeros, which read as held
+    steps; pairs of samples both at zero are no evidence of a hold, its burst is smooth."""
+    t = np.arange(0.0, 60.0, 0.05)
+    burst = np.where((t % 20.0) < 6.0, np.sin(2 * np.pi * 0.5 * t), 0.0)
+    steps = np.where((t % 20.0) < 6.0, 1.0 + np.floor(t) % 3, 0.0)  # levels held 1 s
+    log = pd.DataFrame({"t": t, "u": 0.0, "tau_N": burst, "tau_X": steps})
+    assert held_inputs(log) == ["tau_X"]

@@ -112,6 +112,12 @@ def test_integer_milliseconds_at_250_hz_to_1_khz_are_refused():
     jittered = np.arange(n) * 1000.0 + rng.integers(-2, 3, n)  # a 1-Hz logger's milliseconds
     with pytest.raises(NnidInputError, match="like milliseconds"):
         validate_log(_log(n).assign(t=jittered), "imu.csv")
+    # two runs, each its own clock: the jump between them is no sample step (it made the
+    # 1-kHz log in microseconds read as milliseconds, and a log in seconds fail the rule)
+    two = _log(n).assign(t=np.r_[np.arange(n // 2), np.arange(n - n // 2) + 7.5] * 1000.0,
+                         experiment=["a"] * (n // 2) + ["b"] * (n - n // 2))  # fmt: skip
+    with pytest.raises(NnidInputError, match=r"by 1000 \(median\): this looks like micro"):
+        validate_log(two, "imu.csv")
 
 
 def test_unwrapped_radians_past_two_pi_are_told_from_degrees_by_the_rate():

@@ -207,6 +207,12 @@ def looks_like_degrees(df: pd.DataFrame, col: str) -> bool:
     return bool(np.nanpercentile(np.abs(r), 99) > math.pi)
 
 
+def run_label(name: object) -> str:
+    """An experiment in a message: ``experiment 'x'``, or ``the log`` for a log without an
+    experiment column (its one run is named None, which read as "experiment None")."""
+    return "the log" if name is None else f"experiment {str(name)!r}"
+
+
 def wrap_angle(a: np.ndarray) -> np.ndarray:
     """Wrap to [−π, π)."""
     return (np.asarray(a) + np.pi) % (2 * np.pi) - np.pi
@@ -442,17 +448,26 @@ def check_time_unit(df: pd.DataFrame, source: str | None = None) -> None:
     rates are not told from a ~1-Hz log in seconds and pass. A step of exactly 1000 in every
     row is read as microseconds (1 kHz): as milliseconds it would be such a whole-second 1-Hz
     log; a median of 1000 with other steps (a jittered 1-Hz logger's) as milliseconds."""
-    slip = time_unit_slip(df["t"].to_numpy(dtype=np.float64))
+    within = None
+    if "experiment" in df:  # the jump from one run's clock to the next is no sample step
+        codes = pd.factorize(df["experiment"])[0]
+        within = codes[1:] == codes[:-1]
+    slip = time_unit_slip(df["t"].to_numpy(dtype=np.float64), within)
     if slip:
         raise NnidInputError(f"{slip}; t must be seconds", source=source, field="t")
 
 
-def time_unit_slip(t: np.ndarray) -> str | None:
+def time_unit_slip(t: np.ndarray, within: np.ndarray | None = None) -> str | None:
     """What a time column meant as seconds looks like when it steps as another unit does
-    (:func:`check_time_unit`'s rule), or None."""
+    (:func:`check_time_unit`'s rule), or None. ``within``: which steps lie inside one
+    experiment (the others, a clock's jump between runs, are left out)."""
     if t.size < 3:
         return None
     steps = np.abs(np.diff(t))
+    if within is not None:
+        steps = steps[within]
+    if steps.size < 2:
+        return None
     step = float(np.median(steps))
     # integer stamps, up to float64's last bits (ms of Unix time computed from seconds)
     whole = bool(np.all(np.abs(steps - np.round(steps)) <= 1e-3))
@@ -487,10 +502,9 @@ def _check_time(df: pd.DataFrame, source: str) -> None:
                 if name is None
                 else "label this row with its neighbours' experiment, or remove it"
             )
-            exp = "the log" if name is None else f"experiment {str(name)!r}"
             raise NnidInputError(
-                f"{exp} has a single sample: an experiment needs at least two (its sample "
-                f"period); {fix}",
+                f"{run_label(name)} has a single sample: an experiment needs at least two (its "
+                f"sample period); {fix}",
                 source=source,
                 field="experiment" if name is not None else "t",
                 row=0 if idx is None else int(idx[0]),

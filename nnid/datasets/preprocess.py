@@ -33,6 +33,7 @@ from nnid.datasets.log import (
     REPLAY_GROUP,
     VELOCITY,
     input_columns,
+    run_label,
     wrap_angle,
 )
 from nnid.datasets.mapping import rotation_from_euler
@@ -45,13 +46,6 @@ def experiments(log: pd.DataFrame):
     if "experiment" not in log:
         return [(None, log.index)]
     return [(name, idx) for name, idx in log.groupby("experiment", sort=False).groups.items()]
-
-
-def run_label(name: object) -> str:
-    """An experiment of :func:`experiments` in a message: ``experiment 'x'``, or ``the log``
-    for a log without an experiment column (its one run is named None, which read as
-    "experiment None" in the errors)."""
-    return "the log" if name is None else f"experiment {name!r}"
 
 
 def sample_rate(t: np.ndarray) -> float:
@@ -184,7 +178,7 @@ def resample_log(
         if report is not None:
             report.add(
                 "resample",
-                f"experiment {name!r}: {t.size} samples at {logged:.3g} Hz -> uniform "
+                f"{run_label(name)}: {t.size} samples at {logged:.3g} Hz -> uniform "
                 f"{rate:g} Hz"
                 + (f", split in {len(bounds)} at gaps > {gap} s" if len(bounds) > 1 else ""),
             )
@@ -656,13 +650,15 @@ HELD_SHARE = 0.5
 def held_inputs(log: pd.DataFrame) -> list[str]:
     """The input columns that look held between samples: per experiment, at least
     :data:`HELD_SHARE` of their consecutive samples are equal and at least one is not (a
-    column that never moves steps nowhere). A sampled smooth signal is never equal twice."""
+    column that never moves steps nowhere). A sampled smooth signal is never equal twice, but
+    may rest at zero between its bursts: a pair of samples both at zero is left out."""
     held = []
     for c in input_columns(log):
         equal = steps = 0
         for _, idx in experiments(log):
-            d = np.diff(log.loc[idx, c].to_numpy(np.float64))
-            d = d[np.isfinite(d)]
+            x = log.loc[idx, c].to_numpy(np.float64)
+            d = np.diff(x)
+            d = d[np.isfinite(d) & ((x[1:] != 0) | (x[:-1] != 0))]
             equal += int(np.count_nonzero(d == 0.0))
             steps += int(np.count_nonzero(d != 0.0))
         if steps and equal >= HELD_SHARE * (equal + steps):

@@ -703,15 +703,20 @@ class HybridModel(FossenPlant):
             {"segment_s": s, **h.as_dict()}
             for s, h in zip(self.segments, self.history_, strict=True)
         ]
-        if _kept_on(self.stages_) != "validation free run":
-            # nothing held out to stop on: the kept epoch was chosen on the training loss
-            # itself, and no score of this fit is a held-out one
+        kept_on = _kept_on(self.stages_)
+        if kept_on != "validation free run":
+            # nothing held out to stop on (in every stage, or in some): the kept epoch was
+            # chosen on the training loss itself there, and is no held-out choice
+            if validation is None:
+                why = "the hybrid was fitted without validation data"
+            else:  # given, but too short to fly a stage's windows
+                stages = "any stage" if kept_on == "training loss" else "some stages"
+                why = f"the validation log gave no held-out free run to {stages}"
             warnings.warn(
-                "the hybrid was fitted without validation data (no held-out free run to stop "
-                "on): each stage ran its epochs and kept the epoch of its lowest training loss "
-                "(Adam; Levenberg-Marquardt its last accepted step), not one chosen on "
-                "held-out data; give fit(log, validation) held-out experiments for early "
-                "stopping",
+                f"{why} (no held-out free run to stop on): those stages ran their epochs and "
+                "kept the epoch of their lowest training loss (Adam; Levenberg-Marquardt its "
+                "last accepted step), not one chosen on held-out data; give fit(log, "
+                "validation) held-out experiments longer than the segments for early stopping",
                 UserWarning,
                 stacklevel=3,
             )

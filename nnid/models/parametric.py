@@ -21,6 +21,7 @@ from __future__ import annotations
 import re
 import warnings
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -132,7 +133,7 @@ def checked_dofs(dofs: object, field: str = "dofs") -> tuple[str, ...]:
     return tuple(dofs)
 
 
-def regression_trainer(trainer: object, field: str = "trainer"):
+def regression_trainer(trainer: object, field: str = "trainer") -> Any:
     """A fresh copy of the trainer of a physics fit (least squares if None), or the error
     naming ``field``: a network's trainer, or something that is no trainer (given in Python,
     ``"nope"`` failed as ``'str' object has no attribute 'fit'``)."""

@@ -239,7 +239,8 @@ def monitor_sentence(detect: dict) -> str:
     target = detect["settings"].get("false_alarm_per_hour")
     stats = thresholds_cell(th)
     on = f"{60 * cal['hours']:.1f} min of healthy validation data"
-    if rate_caveat(th, cal["hours"], target) is None:
+    # a metrics.json without the target (none was set) has no rate to hold or to miss
+    if target is None or rate_caveat(th, cal["hours"], target) is None:
         text = f"thresholds {stats}, set for {number(target, 3)} false alarms per hour on {on}"
     else:  # no rate fit: the target is not what the thresholds hold (the warning says why)
         text = (

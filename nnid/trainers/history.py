@@ -18,7 +18,7 @@ keywords and may ignore them.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
 
 Progress = Callable[..., None]  # (done: int, total: int | None, message: str, **scores)
@@ -52,7 +52,7 @@ def staged(progress: Progress | None, stage: str, measure: str | None = None) ->
     return call
 
 
-def scored_validation(stages) -> bool:
+def scored_validation(stages: Sequence[History | dict]) -> bool:
     """Whether any stage of a fit (its ``History``, or the record ``as_dict`` made of it)
     scored held-out data: its ``validation`` series holds an entry, so the epoch it kept was
     chosen on that data, even where every entry diverged and it kept its start. A fit none of

@@ -471,7 +471,9 @@ class UnscentedKalman(BaseEstimator):
                 given = np.r_[
                     proc.full_state(x[None, :n_v], k)[0], proc.applied(x[None, n_v:], k)[0]
                 ]
-                if not np.isfinite(given).all():
+                # the log's, only where the filter's own state is finite: a state the update
+                # made non-finite is the filter's divergence, not a bad sample
+                if np.isfinite(x).all() and not np.isfinite(given).all():
                     raise NnidInputError(
                         f"sample {k} (t = {data['t'][k]:.6g} s) has a pose, velocity of another "
                         "DOF or force that is not finite: the filter's prediction needs them",
