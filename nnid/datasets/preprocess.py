@@ -119,7 +119,8 @@ def resample_log(
     wrapped back to ±π where the log had them so); gaps longer
     than ``gap`` s split the experiment, each piece labelled ``<experiment>#<k>`` (``run#<k>``
     for a log without an experiment column; k from 0, as :func:`nnid.datasets.gaps.mask_gaps`
-    and the readers count) and marked ``piece_of`` its run. Each run's time starts at 0 and
+    and the readers count) and marked ``piece_of`` its run. Each run's clock starts at 0 at
+    its first sample (a first piece too short to keep leaves the next one starting later), and
     its pieces keep that clock, so the hole between two pieces is seen in ``t``. A column that is
     not a number (a mode, a fault label) or holds true/false is kept by its previous value,
     as an input is: a label is never blended, and no column is left out."""
