@@ -815,3 +815,20 @@ def test_a_damping_candidate_with_the_sign_of_a_thrust_is_not_physical():
     assert signed, "no thrust-signed damping candidate on this log: the test tests nothing"
     assert not [s.name for s in signed if s.admissible]
     assert [s.name for s in signed if s.reason.startswith("not physical")]
+
+
+def test_a_vehicle_file_with_no_coefficient_to_refit_gets_its_baseline():
+    """A vehicle file with mass, inertia and restoring but no added mass or damping (nothing
+    for the baseline to refit, p = 0 columns) crashed the held-out residual with "cannot
+    reshape array of size 0" instead of scoring the file as it is."""
+    from nnid.datasets.readers import load_log
+
+    root = resources.files("nnid.demo_data")
+    log, _ = load_log(str(root.joinpath("demo_minirov_heave.parquet")))
+    data = load_vehicle(MINIROV).model_dump()
+    data["added_mass"], data["damping"]["coefficients"] = {}, {}
+    bare = type(load_vehicle(MINIROV)).model_validate(data)
+    result = ResidualLoop(bare, max_effects=0).fit(log[log["experiment"].isin(["run0", "run1"])])
+    before = result.as_dict()["before"]
+    assert result.as_dict()["added"] == []
+    assert before["k_step_nrmse"]["total"] is not None and before["k_step_nrmse"]["total"] > 0

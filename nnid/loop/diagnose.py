@@ -230,7 +230,8 @@ def refit(ws: Workspace, vehicle, unknowns: list[str], held_out: bool = True) ->
     est = solve_least_squares(a_mat, y, w_rows, names=unknowns)
     theta = np.nan_to_num(est.theta)
     e = (a_mat @ theta - y).reshape(n, 6)
-    e_val = (phi_v.reshape(-1, p) @ theta + r0_v.reshape(-1)).reshape(-1, 6)
+    # rows by count, not -1: a vehicle file with no coefficient to refit has p = 0 columns
+    e_val = (phi_v.reshape(phi_v.shape[0] * 6, p) @ theta + r0_v.reshape(-1)).reshape(-1, 6)
     fitted = vehicle_with(vehicle, dict(zip(unknowns, theta, strict=True)))
     return Fit(fitted, list(unknowns), theta, est.stderr, phi, phi_v, e, e_val, _wss(e, ws.weights))
 
