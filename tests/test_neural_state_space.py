@@ -328,3 +328,16 @@ def test_the_width_given_in_python_is_checked_and_capped_as_the_config_does(hidd
     config's MAX_WIDTH, a typo) built the layer, and 0 was named 'state_space'."""
     with pytest.raises(NnidInputError, match=rf"^field 'hidden': .*{says}"):
         NeuralStateSpace(["pump"], ["level"], hidden=hidden, warmup=5).fit(_tanks(50, 0, 1, 1))
+
+
+@pytest.mark.parametrize(
+    ("setting", "value"),
+    [("hidden_states", 1.5), ("hidden_states", -1), ("substeps", float("nan")),
+     ("substeps", 0), ("warmup", 2.5)],
+)  # fmt: skip
+def test_the_state_settings_given_in_python_are_whole_and_named(setting, value):
+    """``hidden_states``, ``substeps`` and ``warmup`` given in Python passed 1.5 and NaN
+    (``nan < 1`` is False) and a bad one was named 'state_space' for all three."""
+    given = {"hidden": 4, "warmup": 5, setting: value}
+    with pytest.raises(NnidInputError, match=rf"^field '{setting}': a whole number"):
+        NeuralStateSpace(["pump"], ["level"], **given).fit(_tanks(50, 0, 1, 1))

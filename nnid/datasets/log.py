@@ -238,8 +238,8 @@ RATE_CHECK_MIN_COS = 0.2
 
 def rate_slopes(df: pd.DataFrame) -> list[tuple[object, str, float, float]]:
     """Per experiment and logged body rate p, q, r of a log with the whole attitude φ, θ, ψ:
-    the least-squares slope of the rate on the attitude's kinematic rate
-    ν₂ = T_Θ⁻¹ Θ̇ (McCarter 2.13, the inverse of Weiss eq. 16), over windows of about a second where the
+    the least-squares slope of the rate on the attitude's kinematic rate ν₂ = T_Θ⁻¹ Θ̇
+    (McCarter 2.13, the inverse of Weiss eq. 16), over windows of about a second where the
     attitude turns that axis by more than :data:`RATE_CHECK_TURN`. Both sides are integrated
     over the window (the rate by trapezoids; Θ̇ as the wrapped difference of consecutive
     angles, each step through T_Θ⁻¹ at its midpoint) so that the attitude's noise does not

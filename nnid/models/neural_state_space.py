@@ -234,11 +234,10 @@ class NeuralStateSpace(InputOutputModel):
             raise NnidInputError("a state-space model needs at least one output", field="outputs")
         # capped as the config caps it (wider is a typo); int() made 1.5 one unit wide
         checked_number(self.hidden, "hidden", 1, strict=False, integer=True, maximum=MAX_WIDTH)
-        if self.hidden_states < 0 or self.substeps < 1 or self.warmup < 1:
-            raise NnidInputError(
-                "hidden_states ≥ 0, substeps ≥ 1 and warmup ≥ 1 are required",
-                field="state_space",
-            )
+        # each named, and whole: 1.5 hidden states or a NaN warm-up passed the comparisons
+        checked_number(self.hidden_states, "hidden_states", 0, strict=False, integer=True)
+        checked_number(self.substeps, "substeps", 1, strict=False, integer=True)
+        checked_number(self.warmup, "warmup", 1, strict=False, integer=True)
         windows = [None if w is None else int(w) for w in self.windows]
         if not windows or any(w is not None and w <= self.warmup for w in windows):
             raise NnidInputError(
