@@ -2,6 +2,7 @@
 voided score "diverged", a score with nothing to measure "not scored", an unscored column "-",
 and a count is never rounded."""
 
+import html
 import math
 
 import numpy as np
@@ -88,3 +89,68 @@ def test_a_free_run_score_of_zero_keeps_its_ratio_to_the_baseline():
     metrics["validation"] = {"free_run_nrmse": {"w": None, "total": None}, "diverged": {"w": 1.0}}
     rows = _baseline(metrics)[1]
     assert rows[0][2] == "diverged" and rows[0][-1] == ""  # not measured: no number
+
+
+#: a Fossen fit's parameters as metrics.json holds them: one identified, one the data do not
+#: excite (ParametricFossenModel._params: no s.e., "significant" False, "excited" False)
+_FOSSEN_PARAMS = {
+    "Z_wdot": {"value": -19.0, "stderr": 0.17, "percentile_error": 0.9, "significant": True,
+               "vehicle_file": -18.7},
+    "Y:v*abs(v)": {"value": 3.0, "stderr": None, "percentile_error": None, "significant": False,
+                   "excited": False, "vehicle_file": -217.0},
+}  # fmt: skip
+
+
+def test_the_train_parameter_table_gives_each_parameters_unit():
+    """The train report's table gave no units (the fleet report's figure had them): its unit
+    column is the fleet report's one function's (``parameter_unit``)."""
+    from nnid.reports.loop_report import parameter_unit
+    from nnid.reports.train_report import _params_table
+
+    head, rows = _params_table({"params": _FOSSEN_PARAMS})
+    cells = {r[0]: dict(zip(head, r, strict=True)) for r in rows}
+    assert cells["`Z_wdot`"]["unit"] == "kg" == parameter_unit("Z_wdot")
+    assert cells["`Y:v*abs(v)`"]["unit"] == "N / (m/s · m/s)"
+
+
+def test_an_unexcited_parameter_is_called_not_excited_not_insignificant():
+    """A parameter the data do not excite read a bare "no" (as if a test had found it
+    insignificant): the fit recorded why (``not_excited_``), and the cell says it."""
+    from nnid.reports.train_report import _params_table
+
+    head, rows = _params_table({"params": _FOSSEN_PARAMS})
+    column = head.index("significant (95 %)")
+    assert [r[column] for r in rows] == ["yes", "not excited"]
+
+
+def _train_metrics(**extra) -> dict:
+    return {"model": "fossen", "params": _FOSSEN_PARAMS, "seconds": 1.0, **extra}
+
+
+def test_the_train_page_shows_parameter_names_as_code_not_backticks():
+    """The HTML escaped the tables' Markdown code marks: the page read `Z_wdot` with its
+    backticks."""
+    from nnid.reports.train_report import train_html
+
+    page = train_html(_train_metrics())
+    assert "<code>Z_wdot</code>" in page and "<code>Y:v*abs(v)</code>" in page
+    assert "`" not in page.split("<h2>Parameters</h2>")[1]
+
+
+def test_the_train_page_has_the_markdowns_prime_system_section():
+    """report.md listed the Prime-system I coefficients; report.html left them out. Both now
+    write them from the same metrics entry, with the same words."""
+    from nnid.pipeline import _nondimensional
+    from nnid.reports.train_report import train_html, train_markdown
+    from nnid.vehicle import load_vehicle
+
+    nd = _nondimensional(_FOSSEN_PARAMS, load_vehicle("vlbv300"), 0.5)
+    metrics = _train_metrics(nondimensional=nd)
+    text, page = train_markdown(metrics), train_html(metrics)
+    title = f"Prime-system I (U = 0.5 m/s, L = {nd['length']} m)"
+    assert f"## {title}" in text and f"<h2>{title}</h2>" in page
+    values = dict(ln[3:].split("` = ", 1) for ln in text.splitlines() if ln.startswith("- `"))
+    assert set(values) == {"Z_wdot'", "Y:v*abs(v)'"}
+    for name, value in values.items():
+        assert f"<li><code>{html.escape(name)}</code> = {html.escape(value)}</li>" in page
+    assert "±" in values["Z_wdot'"] and "fitted to noise" in values["Y:v*abs(v)'"]

@@ -9,13 +9,13 @@ from __future__ import annotations
 
 import html
 import json
-import re
 from pathlib import Path
 
 import numpy as np
 
 from nnid.reports.cells import number, score
 from nnid.reports.figures import definitions, figure_uri, html_table, new_figure, page_head
+from nnid.reports.loop_report import parameter_unit as _unit
 from nnid.scale.status import STOPPED, not_ok_message
 
 #: at most this many parameters are drawn per vehicle (the ones most tasks identified)
@@ -28,30 +28,6 @@ def _log(row: dict) -> str:
 
 def _vehicle(row: dict) -> str:
     return str(row.get("vehicle_name") or Path(str(row.get("vehicle") or "-")).stem)
-
-
-def _unit(name: str) -> str:
-    """The SI unit of a parameter: an added mass ``X_udot`` (kg, kg m, kg m²), a damping
-    coefficient ``"X:u*abs(u)"`` (the force's unit over the basis term's), or an effect's size
-    (:func:`nnid.reports.loop_report.unit`)."""
-    from nnid.physics.dofs import DOFS, FORCES
-    from nnid.reports.figures import FORCE_UNITS, UNITS
-    from nnid.reports.loop_report import unit
-
-    added = re.fullmatch(r"([XYZKMN])_([uvwpqr])dot", name)
-    if added:
-        moment, angular = added[1] in "KMN", added[2] in "pqr"
-        return {(False, False): "kg", (True, True): "kg m²"}.get((moment, angular), "kg m")
-    force, _, term = name.partition(":")
-    if force in FORCES and term:
-        factors = [UNITS[v] for v in re.findall(r"[uvwpqr]", term) if v in DOFS]
-        if len(factors) == len(re.findall(r"[A-Za-z_]+", term.replace("abs", ""))):
-            return f"{FORCE_UNITS[force]} / ({' · '.join(factors)})"
-        return "SI"  # a term of McCarter's nondimensional quantities
-    try:
-        return unit(name)
-    except ValueError:
-        return "SI"
 
 
 def parameter_figure(rows: list[dict]) -> str | None:

@@ -11,6 +11,7 @@ from __future__ import annotations
 import base64
 import html
 import io
+import re
 
 from matplotlib.figure import Figure
 
@@ -83,12 +84,16 @@ def page_head(title: str) -> str:
     return PAGE_HEAD.format(title=html.escape(title))
 
 
+def _cell(text: str) -> str:
+    """A table cell's text, escaped, with the Markdown code spans the shared (Markdown and
+    HTML) tables write (`` `X:u*abs(u)` ``) as ``<code>``: escaped, their backticks showed."""
+    return re.sub(r"`([^`]+)`", r"<code>\1</code>", html.escape(text))
+
+
 def html_table(head: list[str], rows: list[list[str]]) -> str:
-    """An HTML table of text cells (escaped)."""
-    h = "".join(f"<th>{html.escape(c)}</th>" for c in head)
-    body = "".join(
-        "<tr>" + "".join(f"<td>{html.escape(c)}</td>" for c in r) + "</tr>" for r in rows
-    )
+    """An HTML table of text cells (escaped; Markdown code spans as ``<code>``)."""
+    h = "".join(f"<th>{_cell(c)}</th>" for c in head)
+    body = "".join("<tr>" + "".join(f"<td>{_cell(c)}</td>" for c in r) + "</tr>" for r in rows)
     return f"<table><thead><tr>{h}</tr></thead><tbody>{body}</tbody></table>"
 
 

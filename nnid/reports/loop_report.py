@@ -8,16 +8,17 @@ from __future__ import annotations
 
 import html
 import math
+import re
 
 import numpy as np
 
 from nnid.datasets.gaps import GAP_STEPS
 from nnid.evaluation.evaluate import diverged_columns
 from nnid.loop.residual_loop import UNJUDGED
-from nnid.physics.dofs import DOF_WORD, DOFS
+from nnid.physics.dofs import DOF_WORD, DOFS, FORCES
 from nnid.physics.effects import parse_effect
 from nnid.reports.cells import number, score_cell
-from nnid.reports.figures import UNITS, figure_uri, html_table, new_figure, page_head
+from nnid.reports.figures import FORCE_UNITS, UNITS, figure_uri, html_table, new_figure, page_head
 from nnid.serialization import write_json, write_text
 
 _DIRECTION = {
@@ -546,3 +547,23 @@ def write_loop_report(loop, out_dir) -> list[str]:
     write_text(out_dir / "report.html", html_page(result, figures))
     write_text(out_dir / "report.md", markdown(result))
     return summary(result) + ([hybrid_opinion(result)] if result.get("hybrid_opinion") else [])
+
+
+def parameter_unit(name: str) -> str:
+    """The SI unit of a parameter: an added mass ``X_udot`` (kg, kg m, kg m²), a damping
+    coefficient ``"X:u*abs(u)"`` (the force's unit over the basis term's), or an effect's size
+    (:func:`unit`); "SI" where the name says no more."""
+    added = re.fullmatch(r"([XYZKMN])_([uvwpqr])dot", name)
+    if added:
+        moment, angular = added[1] in "KMN", added[2] in "pqr"
+        return {(False, False): "kg", (True, True): "kg m²"}.get((moment, angular), "kg m")
+    force, _, term = name.partition(":")
+    if force in FORCES and term:
+        factors = [UNITS[v] for v in re.findall(r"[uvwpqr]", term) if v in DOFS]
+        if len(factors) == len(re.findall(r"[A-Za-z_]+", term.replace("abs", ""))):
+            return f"{FORCE_UNITS[force]} / ({' · '.join(factors)})"
+        return "SI"  # a term of McCarter's nondimensional quantities
+    try:
+        return unit(name)
+    except ValueError:
+        return "SI"

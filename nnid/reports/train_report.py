@@ -30,6 +30,7 @@ from nnid.reports.figures import (
     new_figure,
     page_head,
 )
+from nnid.reports.loop_report import parameter_unit
 from nnid.reports.stops import HEAD as STOP_HEAD
 from nnid.reports.stops import TRAINING_TITLE, stage_cells, training_stages
 
@@ -52,7 +53,11 @@ def _params_table(metrics: dict) -> tuple[list[str], list[list[str]]]:
     physical = any("percentile_error" in p or "vehicle_file" in p for p in params.values())
     ref = metrics.get("reference", {})
     ref_values = ref.get("values", {})
-    head = ["parameter", "estimate", "std. error"]
+    head = (
+        ["parameter", "unit", "estimate", "std. error"]
+        if physical
+        else ["parameter", "estimate", "std. error"]
+    )
     if physical:
         head += ["percentile error", "significant (95 %)", "vehicle file", "estimate / file − 1"]
     if ref_values:
@@ -62,10 +67,10 @@ def _params_table(metrics: dict) -> tuple[list[str], list[list[str]]]:
         row = [f"`{name}`", number(p["value"], 5), number(p["stderr"], 2)]
         if physical:
             pe = p.get("percentile_error")
+            row.insert(1, parameter_unit(name))
             row += [
                 f"{number(pe, 3)} %" if pe is not None else "-",
-                # no test run (a jointly trained value without s.e.) is no "not significant"
-                "-" if p.get("significant") is None else "yes" if p["significant"] else "no",
+                _significance(p),
                 number(p.get("vehicle_file"), 5),
                 _rel(p["value"], p.get("vehicle_file")),
             ]
@@ -74,6 +79,39 @@ def _params_table(metrics: dict) -> tuple[list[str], list[list[str]]]:
             row += [number(r, 5), _rel(p["value"], r)]
         rows.append(row)
     return head, rows
+
+
+def _significance(p: dict) -> str:
+    """The significance cell: "yes" or "no" by the 95 % test, "not excited" for a parameter
+    the data do not excite (its model's ``not_excited_``: fitted to noise, its "no" is no test
+    result), "-" where no test ran (a jointly trained value without s.e.)."""
+    if p.get("excited") is False:
+        return "not excited"
+    if p.get("significant") is None:
+        return "-"
+    return "yes" if p["significant"] else "no"
+
+
+PRIME_NOT_EXCITED = "(not excited by the data: fitted to noise, no standard error)"
+
+
+def _prime(metrics: dict) -> tuple[str, list[tuple[str, str]]] | None:
+    """The Prime-system I section (Weiss eqs 111-122) of ``metrics["nondimensional"]``: its
+    title and, per coefficient, its name and "value ± s.e." (or why it has no s.e.); None
+    without one. The Markdown and the HTML both write it from here."""
+    nd = metrics.get("nondimensional")
+    if not nd:
+        return None
+    title = f"Prime-system I (U = {nd['speed']} m/s, L = {nd['length']} m)"
+    items = [
+        (
+            k,
+            f"{number(v['value'], 5)} "
+            + (f"± {number(v['stderr'], 2)}" if v.get("excited", True) else PRIME_NOT_EXCITED),
+        )
+        for k, v in nd["params"].items()
+    ]
+    return title, items
 
 
 def train_markdown(metrics: dict) -> str:
@@ -151,18 +189,9 @@ def train_markdown(metrics: dict) -> str:
         ]
     if metrics.get("warnings"):
         lines += ["", "## Warnings", ""] + [f"- {w}" for w in metrics["warnings"]]
-    nd = metrics.get("nondimensional")
-    if nd:
-        lines += ["", f"## Prime-system I (U = {nd['speed']} m/s, L = {nd['length']} m)", ""]
-        lines += [
-            f"- `{k}` = {number(v['value'], 5)} "
-            + (
-                f"± {number(v['stderr'], 2)}"
-                if v.get("excited", True)
-                else "(not excited by the data: fitted to noise, no standard error)"
-            )
-            for k, v in nd["params"].items()
-        ]
+    prime = _prime(metrics)
+    if prime:
+        lines += ["", f"## {prime[0]}", ""] + [f"- `{k}` = {text}" for k, text in prime[1]]
     lines += ["", f"Fitted and scored in {metrics['seconds']:.1f} s."]
     return "\n".join(lines) + "\n"
 
@@ -406,6 +435,13 @@ def train_html(metrics: dict, figures: dict[str, Any] | None = None) -> str:
     head, rows = _params_table(metrics)
     out.append("<h2>Parameters</h2>")
     out.append(html_table(head, rows))
+    prime = _prime(metrics)
+    if prime:
+        out.append(f"<h2>{html.escape(prime[0])}</h2><ul>")
+        out += [
+            f"<li><code>{html.escape(k)}</code> = {html.escape(text)}</li>" for k, text in prime[1]
+        ]
+        out.append("</ul>")
     if metrics.get("warnings"):
         out.append("<h2>Warnings</h2><ul>")
         out += [f"<li>{html.escape(w)}</li>" for w in metrics["warnings"]]
