@@ -653,10 +653,10 @@ def held_inputs(log: pd.DataFrame) -> list[str]:
     :data:`HELD_SHARE` of their consecutive samples are equal and at least one is not (a
     column that never moves steps nowhere). A sampled smooth signal is never equal twice, but
     may rest at zero between its bursts: a pair of samples both at zero is left out."""
-    held = []
+    held, groups = [], [idx for _, idx in experiments(log)]
     for c in input_columns(log):
         equal = steps = 0
-        for _, idx in experiments(log):
+        for idx in groups:
             x = log.loc[idx, c].to_numpy(np.float64)
             d = np.diff(x)
             d = d[np.isfinite(d) & ((x[1:] != 0) | (x[:-1] != 0))]

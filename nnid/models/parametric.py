@@ -615,6 +615,12 @@ def attenuated_unknowns(
     return out
 
 
+def _is_ukf(trainer) -> bool:
+    """Whether ``trainer`` (or a sequence's steps' trainer) is the unscented Kalman filter,
+    which integrates the model with the inputs held and regresses on no acceleration."""
+    return getattr(getattr(trainer, "trainer", trainer), "kind", "") == "ukf"
+
+
 def warn_held_inputs(
     log: pd.DataFrame, fit: str, smoothed: bool, actuator_lag: float, stacklevel: int = 4
 ) -> None:
@@ -905,13 +911,10 @@ class ParametricModel(FossenPlant):
                 ExcitationWarning,
                 stacklevel=3,
             )
-        inner = getattr(trainer, "trainer", trainer)  # a sequence's steps' trainer
-        if not self.zoh_midpoint and getattr(inner, "kind", "") != "ukf":
+        if not self.zoh_midpoint and not _is_ukf(trainer):
             # the UKF integrates the model with the inputs held: it reads them as they are
-            derived = any(s.step == "derive accelerations" for s in self.report_.steps)
-            warn_held_inputs(
-                log, "the Fossen fit", not needs_acc or derived, self.vehicle.actuator_lag
-            )
+            smoothed = not needs_acc or self._derived_accelerations()
+            warn_held_inputs(log, "the Fossen fit", smoothed, self.vehicle.actuator_lag)
         self.attenuated_ = self._attenuated(trainer, unknowns, dofs, data)
         if self.attenuated_:
             from nnid.trainers.least_squares import ExcitationWarning
@@ -950,6 +953,11 @@ class ParametricModel(FossenPlant):
         posed = [c for s in self.report_.steps if s.step == "derive velocities" for c in s.columns]
         return (posed, (self.savgol_window, self.savgol_order)) if posed else None
 
+    def _derived_accelerations(self) -> bool:
+        """Whether the fit's accelerations were derived from the log (Savitzky-Golay), as its
+        cleaning report records, rather than logged."""
+        return any(s.step == "derive accelerations" for s in self.report_.steps)
+
     def _attenuated(
         self, trainer, unknowns: list[str], dofs: list[str], data: dict[str, np.ndarray]
     ) -> dict[str, tuple[float, float]]:
@@ -958,10 +966,9 @@ class ParametricModel(FossenPlant):
         UKF, which regresses on no acceleration."""
         from nnid.trainers.sequence import Step, _subset, sequence_steps
 
-        inner = getattr(trainer, "trainer", trainer)
-        if getattr(inner, "kind", "") == "ukf":
+        if _is_ukf(trainer):
             return {}
-        derived = any(s.step == "derive accelerations" for s in self.report_.steps)
+        derived = self._derived_accelerations()
         savgol = (self.savgol_window, self.savgol_order) if derived else None
         from_pose = self._from_pose()
         lam = getattr(trainer, "filter_lambda", None)
