@@ -421,8 +421,9 @@ def detect(
     follow: bool = typer.Option(
         False, "--follow", help="Read a growing CSV (or stdin) and print each alarm as it happens."
     ),
+    # bounded in nnid.runs, as --alpha: typer's min=0.5 read a NaN as under 0.5, passed inf
     window: float | None = typer.Option(
-        None, "--window", min=0.5, help="Seconds after an alarm used to isolate it."
+        None, "--window", help="Seconds after an alarm used to isolate it, 0.5 or more."
     ),
 ) -> None:
     """Fault detection: watch a log with a calibrated residual monitor; each alarm says whether a

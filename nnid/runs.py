@@ -533,6 +533,18 @@ def check_detect_inputs(model_dir: Path, data: str, follow: bool = False) -> Non
         )  # fmt: skip
 
 
+#: the shortest isolation window ``--window`` takes, s
+MIN_WINDOW_S = 0.5
+
+
+def _checked_window(window: float | None) -> None:
+    """Refuse a ``--window`` that is not a finite number of at least :data:`MIN_WINDOW_S`
+    seconds, naming the option: typer's own bound read a NaN as "should be greater than or
+    equal to 0.5", and an infinite window let every alarm wait for its run's end."""
+    if window is not None:
+        checked_number(window, "--window", MIN_WINDOW_S, strict=False)
+
+
 def _monitor(model_dir: Path, window: float | None):
     """The saved residual monitor and the isolation window to use (``window``, else the
     model's own)."""
@@ -547,6 +559,7 @@ def follow_run(model_dir: Path, data: str, out_dir: Path, window: float | None, 
     from nnid.fault.follow import follow_csv
     from nnid.reports.detect_report import OUTPUTS, write_detect_outputs
 
+    _checked_window(window)
     check_detect_inputs(model_dir, data, follow=True)
     monitor, window_s = _monitor(model_dir, window)
     try:
@@ -574,6 +587,7 @@ def detect_run(
     from nnid.fault.monitor import CLOCK_SPREAD, GAP_INTERVALS
     from nnid.reports.detect_report import OUTPUTS, write_detect_outputs
 
+    _checked_window(window)
     check_detect_inputs(model_dir, data)
     monitor, window_s = _monitor(model_dir, window)
     lines: list[str] = []

@@ -1426,6 +1426,22 @@ def test_a_loop_option_is_named_as_the_option(fixtures, tmp_path, options, field
     assert not fixtures["out"].exists()
 
 
+@pytest.mark.parametrize("follow", [False, True])
+@pytest.mark.parametrize("window", ["nan", "inf", "0.1"])
+def test_a_detect_window_is_named_as_the_option(fixtures, tmp_path, window, follow):
+    """--window nan was typer's box, "Input should be greater than or equal to 0.5", and
+    --window inf was taken (every alarm waited for its run's end): each is now nnid's one line
+    naming the option, before the model or the log is read."""
+    args = [*_command("detect", tmp_path, fixtures), "--window", window]
+    result = CliRunner().invoke(app, [*args, "--follow"] if follow else args)
+    assert result.exit_code == 2 and "Traceback" not in result.output, result.output
+    errors = [line for line in result.output.splitlines() if line.startswith("error:")]
+    assert len(errors) == 1, result.output
+    said = f"error: field '--window': a finite number at least 0.5 is expected, not {window}"
+    assert errors[0] == said, errors[0]
+    assert not fixtures["out"].exists()
+
+
 @pytest.mark.parametrize(("name", "said"), [("   ", "visible character"), ("a\nb", "one line")])
 def test_vehicle_name_option_is_named_as_the_option(tmp_path, name, said):
     # blamed "v1.toml, field 'name'", a file not yet written; a newline was written

@@ -930,12 +930,16 @@ def test_missing_samples_raise_no_alarm_and_are_said(vehicle, monitor, tmp_path)
     assert not any(line.startswith("ALARM") for line in said)
 
 
-@pytest.mark.parametrize("slip", ["degrees", "pitch in degrees", "mm/s", "decimal comma"])
+@pytest.mark.parametrize(
+    "slip", ["degrees", "pitch in degrees", "mm/s", "decimal comma", "rates in deg/s"]
+)
 def test_follow_refuses_what_the_whole_log_reader_refuses(vehicle, monitor, tmp_path, slip):
     """Angles in degrees, velocities in mm/s, a row whose decimal comma shifts every cell after
     it under the next column (v = 196629): the whole-log reader refuses each, exit 2; --follow
     read them and raised confident alarms (restoring_offset.M; added_mass.u = 3e3;
-    external_bias.v = 1.6e12)."""
+    external_bias.v = 1.6e12). Body rates in deg/s beside the attitude in radians (r reads
+    57 times the yaw's turning): --follow watched them silently; it now refuses them once the
+    yaw has turned for 2 s (the reader's RATE_CHECK_SECONDS), naming the row it judged at."""
     log = simulate_faults(vehicle, 20, seed=54, experiment="t54")
     path = tmp_path / "slip.csv"
     if slip == "degrees":
@@ -947,6 +951,9 @@ def test_follow_refuses_what_the_whole_log_reader_refuses(vehicle, monitor, tmp_
     elif slip == "mm/s":
         log[["u", "v", "w"]] *= 1000.0
         field, row, said = None, None, "the log must be in SI units"
+    elif slip == "rates in deg/s":  # checked every 100 rows (5 s): 2.7 s turned by row 99
+        log[["p", "q", "r"]] = np.degrees(log[["p", "q", "r"]])
+        field, row, said = "r", 99, "in experiment 't54'.*looks like deg/s"
     if slip == "decimal comma":
         log.to_csv(path, index=False)
         lines = path.read_text().splitlines()

@@ -66,3 +66,15 @@ def test_j_and_its_inverse(rng):
 def test_skew_is_cross_product(rng):
     a, b = torch.tensor(rng.normal(size=(8, 3))), torch.tensor(rng.normal(size=(8, 3)))
     assert torch.allclose((skew(a) @ b.unsqueeze(-1)).squeeze(-1), torch.linalg.cross(a, b))
+
+
+def test_the_numpy_euler_rate_matrices_are_the_kinematics(rng):
+    """nnid.datasets.log's numpy T_Θ and T_Θ⁻¹ (read and derive without torch) are
+    euler_rate_matrix and its inverse, to rounding (they differ by an ulp at most)."""
+    from nnid.datasets.log import euler_rate_matrices
+
+    angles = _angles(rng, 200)
+    for inverse, torch_matrix in ((False, euler_rate_matrix), (True, euler_rate_matrix_inverse)):
+        got = euler_rate_matrices(angles.numpy(), inverse=inverse)
+        want = torch_matrix(angles).numpy()
+        np.testing.assert_allclose(got, want, rtol=1e-14, atol=1e-15)

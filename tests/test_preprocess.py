@@ -100,6 +100,22 @@ def test_bias_estimation_recovers_injected_biases():
     assert np.allclose(estimate_gyro_bias(t, att, gyro), gyro_bias, rtol=0.05)
 
 
+def test_deriving_rates_from_the_attitude_does_not_need_torch(monkeypatch):
+    """p, q, r = T_Θ⁻¹ Θ̇ and the gyro bias's T_Θ (McCarter 2.13, 2.86) in numpy: reading and
+    deriving a log imported torch for these 3x3 matrices alone."""
+    import sys
+
+    monkeypatch.setitem(sys.modules, "torch", None)  # `import torch` raises ImportError
+    t = np.arange(0.0, 10.0, 0.01)
+    log = pd.DataFrame({"t": t, "phi": 0.2 * np.sin(t), "theta": 0.1 * np.cos(0.5 * t),
+                        "psi": 0.3 * t})  # fmt: skip
+    out = derive_velocities(log, 0.5, 4)
+    assert np.isfinite(out[["p", "q", "r"]].to_numpy()[30:-30]).all()
+    gyro = out[["p", "q", "r"]].to_numpy()[30:-30] + 0.01
+    bias = estimate_gyro_bias(t[30:-30], log[["phi", "theta", "psi"]].to_numpy()[30:-30], gyro)
+    np.testing.assert_allclose(bias, 0.01, atol=1e-4)
+
+
 def test_bias_estimation_refuses_a_gap_naming_it():
     """One empty angle cell spread through np.unwrap and the integrals: the gyro bias came out
     [nan, nan, nan] without a word. A gap in any argument is now refused, naming it."""

@@ -104,7 +104,7 @@ def validate_log(
         if col in df.columns and looks_like_degrees(df, col):
             size = np.abs(df[col].to_numpy(dtype=np.float64))
             raise degrees_error(df, col, source, int(np.nanargmax(size)))
-    _check_rate_units(df, source)
+    check_rate_units(df, source)
     return df
 
 
@@ -218,6 +218,24 @@ def wrap_angle(a: np.ndarray) -> np.ndarray:
     return (np.asarray(a) + np.pi) % (2 * np.pi) - np.pi
 
 
+def euler_rate_matrices(angles: np.ndarray, inverse: bool = False) -> np.ndarray:
+    """T_Θ (Weiss eq. 16; McCarter 2.12), or T_Θ⁻¹ with ``inverse`` (McCarter 2.13), of
+    angles ``[..., 3]`` = (φ, θ, ψ) as ``[..., 3, 3]``: :mod:`nnid.physics.kinematics`'
+    euler_rate_matrix and its inverse in numpy, because reading, cleaning and deriving a log
+    do not load torch (tests/test_kinematics.py checks that they agree)."""
+    angles = np.asarray(angles, dtype=np.float64)
+    phi, theta = angles[..., 0], angles[..., 1]
+    cphi, sphi, cth = np.cos(phi), np.sin(phi), np.cos(theta)
+    one, zero = np.ones_like(phi), np.zeros_like(phi)
+    if inverse:
+        sth = np.sin(theta)
+        rows = [[one, zero, -sth], [zero, cphi, cth * sphi], [zero, -sphi, cth * cphi]]
+    else:
+        tth = np.tan(theta)
+        rows = [[one, sphi * tth, cphi * tth], [zero, cphi, -sphi], [zero, sphi / cth, cphi / cth]]
+    return np.stack([np.stack(row, -1) for row in rows], -2)
+
+
 #: a body rate logged in deg/s reads 180/π ≈ 57.3 times the attitude's kinematic rate
 #: (:func:`rate_slopes`); a slope in this range on an axis that turns is refused as that slip.
 #: Wide below: an attitude that lags or disagrees with its gyro pulls the slope down (the
@@ -269,17 +287,10 @@ def rate_slopes(df: pd.DataFrame) -> list[tuple[object, str, float, float]]:
     # wrapped differences: the unwrapped angle's steps, and a gap stays out (NaN)
     d_angle = wrap_angle(np.diff(angles, axis=0))
     mid = angles[:-1] + 0.5 * d_angle
-    sphi, cphi = np.sin(mid[:, 0]), np.cos(mid[:, 0])
-    sth, cth = np.sin(mid[:, 1]), np.cos(mid[:, 1])
-    dphi, dth, dpsi = d_angle.T
-    # T_Θ⁻¹ ΔΘ, the body's turning in each step: nnid.physics.kinematics'
-    # euler_rate_matrix_inverse written out in numpy, because reading a log does not load
-    # torch (tests/test_log_and_excitation.py checks the two agree)
-    turn = {
-        "p": dphi - sth * dpsi,
-        "q": cphi * dth + cth * sphi * dpsi,
-        "r": -sphi * dth + cth * cphi * dpsi,
-    }
+    cth = np.cos(mid[:, 1])
+    # T_Θ⁻¹ ΔΘ, the body's turning in each step
+    body = np.einsum("nij,nj->ni", euler_rate_matrices(mid, inverse=True), d_angle)
+    turn = dict(zip(("p", "q", "r"), body.T, strict=True))
     # a step over a hole in t (longer than thrice its experiment's median step) is no rate
     usual = pd.Series(dt).groupby(codes[1:]).transform("median").to_numpy()
     good = (dt < 3 * usual) & (np.abs(cth) > RATE_CHECK_MIN_COS)
@@ -313,12 +324,12 @@ def _window_sums(x: np.ndarray, lag: int) -> np.ndarray:
     return total[lag:] - total[:-lag]
 
 
-def _check_rate_units(df: pd.DataFrame, source: str) -> None:
+def check_rate_units(df: pd.DataFrame, source: str, row: int | None = None) -> None:
     """Body rates p, q, r in rad/s beside an attitude in radians: a rate that reads about
     57.3 times the rate the attitude turns at (:func:`rate_slopes`, :data:`DEG_PER_S_SLOPE`)
     in any experiment is refused as deg/s. Per experiment, not pooled: a log joined from runs
     of two loggers may have the slip in some runs only, and pooling would dilute it into
-    neither 1 nor 57."""
+    neither 1 nor 57. ``row`` names the row a stream was judged at (``detect --follow``)."""
     for name, col, slope, seconds in rate_slopes(df):
         if seconds >= RATE_CHECK_SECONDS and DEG_PER_S_SLOPE[0] <= slope <= DEG_PER_S_SLOPE[1]:
             run = "" if name is None else f" in experiment {str(name)!r}"
@@ -329,6 +340,7 @@ def _check_rate_units(df: pd.DataFrame, source: str) -> None:
                 "in the reader config)",
                 source=source,
                 field=col,
+                row=row,
             )
 
 

@@ -32,6 +32,7 @@ from nnid.datasets.log import (
     POSE,
     REPLAY_GROUP,
     VELOCITY,
+    euler_rate_matrices,
     input_columns,
     run_label,
     wrap_angle,
@@ -298,18 +299,6 @@ def savgol_noise_gain(window: int, order: int, dt: float, deriv: int = 1) -> flo
     return float(np.sqrt(np.sum(savgol_coeffs(window, order, deriv=deriv, delta=dt) ** 2)))
 
 
-def _euler_rates(angles: np.ndarray, inverse: bool = False) -> np.ndarray:
-    """T_Θ, or T_Θ⁻¹ with ``inverse``, of angles ``[..., 3]`` (:mod:`nnid.physics.kinematics`)."""
-    # imported here: reading and cleaning a log does not load torch otherwise
-    import torch
-
-    from nnid.physics.kinematics import euler_rate_matrix, euler_rate_matrix_inverse
-
-    rate_matrix = euler_rate_matrix_inverse if inverse else euler_rate_matrix
-    # a copy: pandas hands out read-only arrays, which torch warns about
-    return rate_matrix(torch.as_tensor(np.array(angles, dtype=np.float64))).numpy()
-
-
 def excited_dofs(log: pd.DataFrame, columns: list[str], rel: float = 0.1) -> list[str]:
     """Velocity columns the data excites: std above ``rel`` of the largest linear (u v w) or
     angular (p q r) std. A DOF that only trembles through coupling is not scored: its NRMSE
@@ -440,7 +429,7 @@ def derive_velocities(
         dphi, dth, dpsi = rates["phi"], rates["theta"], rates["psi"]
         pos = np.flatnonzero(np.isin(out.index, idx))
         body_rates = np.einsum(
-            "nij,nj->ni", _euler_rates(angles, inverse=True), np.stack([dphi, dth, dpsi], 1)
+            "nij,nj->ni", euler_rate_matrices(angles, inverse=True), np.stack([dphi, dth, dpsi], 1)
         )
         new["p"][pos], new["q"][pos], new["r"][pos] = body_rates.T
         if "u" in derivable:
@@ -727,7 +716,7 @@ def estimate_gyro_bias(t: np.ndarray, angles: np.ndarray, gyro: np.ndarray) -> n
     gap (an empty angle or rate) is refused, naming it: the integrals cannot cross it.
     """
     _refuse_gaps(t=(t, ["t"]), angles=(angles, ANGLES), gyro=(gyro, VELOCITY[3:]))
-    tmat = _euler_rates(angles)
+    tmat = euler_rate_matrices(angles)
     rate_integral = cumulative_trapezoid(np.einsum("nij,nj->ni", tmat, gyro), t, axis=0, initial=0)
     t_integral = cumulative_trapezoid(tmat, t, axis=0, initial=0)  # ∫ T_Θ dτ, [N, 3, 3]
     n = t.size

@@ -33,6 +33,7 @@ from nnid.datasets.log import (
     RATE_OF,
     SI_BOUNDS,
     VELOCITY,
+    check_rate_units,
     degrees_error,
     looks_like_degrees,
     out_of_bounds,
@@ -64,6 +65,14 @@ RATE_ROWS = 11
 RATE_WINDOW = 200
 #: after an isolated change, the rows re-referenced to it at once (seconds of them)
 REWATCH_S = 0.5
+#: the body rates' unit is checked against the attitude (the whole-log reader's deg/s check,
+#: :func:`nnid.datasets.log.check_rate_units`) on an experiment's latest this many seconds of
+#: rows: its first minute judged as that reader judges a one-minute log, at a cost that does
+#: not grow with the run
+RATE_UNIT_S = 60.0
+#: every this many seconds of an experiment's rows, and at its end (a check of a minute at
+#: 20 Hz costs 3-9 ms; the refusal needs 2 s of turning windows anyway)
+RATE_UNIT_EVERY_S = 5.0
 
 
 def _parse(line: str, source: str, count: int) -> list[str]:
@@ -303,6 +312,30 @@ def follow_csv(
     ]
     last_t = -np.inf
     unchecked = [a for a in ANGLES if a in col]  # looked at once, when past radian_limit
+    # deg/s rates beside radians: rate_slopes needs the whole attitude (a missing psi is no
+    # heading of 0)
+    rate_unit = all(a in col for a in ANGLES)
+    unit_every = max(1, round(RATE_UNIT_EVERY_S / monitor.interval))
+    unit_rows = max(unit_every + 2, round(RATE_UNIT_S / monitor.interval))
+    exp_first = 0  # the current experiment's first row, counted from the first row ever read
+
+    def check_units(n: int) -> None:
+        """The body rates' unit on the current experiment's latest :data:`RATE_UNIT_S` of
+        rows, the newest data row ``n``, as the whole-log reader checks a whole experiment: a
+        gyro in deg/s reads a force that is not there, and the stream was watched silently."""
+        i = max(exp_first, dropped + len(ts) - unit_rows, dropped) - dropped
+        kept = np.array(xs[i:])
+        seen = pd.DataFrame(
+            {"t": ts[i:], **{c: kept[:, STATE.index(c)] for c in (*ANGLES, *RATE_OF.values())}}
+        )
+        if exp_col is not None:  # named in the error as the whole-log reader names it
+            seen["experiment"] = names[codes[-1]]
+        check_rate_units(seen, where, row=n)
+
+    def unchecked_tail() -> bool:
+        """Whether the current experiment has rows after its last unit check."""
+        return rate_unit and bool(ts) and (dropped + len(ts) - exp_first) % unit_every != 0
+
     limits = command_limits(monitor.plant_.vehicle)  # the whole-log detect refuses beyond them
     for n, row in enumerate(rows):  # n: the data row from 0, as the whole-log reader counts
         values = _numbers(row, read, n, where, len(header))
@@ -339,10 +372,13 @@ def follow_csv(
                 row=n,
             )
         if name != current:
+            if unchecked_tail():  # the experiment that ended: its last rows too
+                check_units(n - 1)
             flush(final=True)
             stream.reset()
             current = name
             names.append(name)
+            exp_first = dropped + len(ts)
         elif t <= last_t:  # the whole-log reader refuses it too (nnid.datasets.log)
             what = "duplicated" if t == last_t else "decreasing"
             raise NnidInputError(
@@ -374,6 +410,8 @@ def follow_csv(
         watched.append(vals[-1].copy())
         codes.append(len(names) - 1)
         row_no = dropped + len(ts) - 1
+        if rate_unit and not unchecked_tail():  # a whole block of rows since the last check
+            check_units(n)  # before this row's alarm is announced
         if ref["rewatch"] is not None and ref["code"] == codes[-1] and row_no >= ref["start"]:
             queue.append(row_no)  # watched on what the isolated changes leave
             if len(queue) >= block + ahead:
@@ -390,6 +428,8 @@ def follow_csv(
                 for buf in (ts, xs, us, vals, watched, codes):
                     del buf[:cut]
                 dropped += cut
+    if unchecked_tail():
+        check_units(n)
     flush(final=True)
     while pending:
         isolate(pending.pop(0))

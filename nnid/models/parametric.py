@@ -481,8 +481,8 @@ def pose_noise_variance(
     per unit of the differentiator's gain: p q r = T_Θ⁻¹ Θ̇ (the Euler angle rates for small
     angles), u v w = J₁ᵀ ṗ with the full pose (``"u"`` in ``from_pose``), else w = ż/(cθ cφ)
     (its divisor kept at 0.5 or more, as there). NaN for a DOF not in ``from_pose``."""
+    from nnid.datasets.log import euler_rate_matrices
     from nnid.datasets.mapping import rotation_from_euler
-    from nnid.datasets.preprocess import _euler_rates
     from nnid.trainers.ukf import noise_level
 
     eta = np.asarray(data["eta"], dtype=np.float64)
@@ -495,7 +495,7 @@ def pose_noise_variance(
             continue
         i = DOFS.index(d)
         if i >= 3:
-            rates = _euler_rates(angles, inverse=True) if rates is None else rates
+            rates = euler_rate_matrices(angles, inverse=True) if rates is None else rates
             out[:, k] = rates[:, i - 3, :] ** 2 @ sigma2[3:]
         elif "u" in from_pose:
             linear = rotation_from_euler(angles) if linear is None else linear
