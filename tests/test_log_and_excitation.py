@@ -387,3 +387,84 @@ def test_the_rate_check_turns_the_attitude_as_the_kinematics_does():
     assert set(slopes) == {"p", "q", "r"}
     for col, slope in slopes.items():
         assert abs(slope - 1.0) < 0.01, (col, slope)
+
+
+def _cruising_log(heading, seed: int = 0, experiment: str = "a") -> pd.DataFrame:
+    """A minute at 10 Hz of a vehicle cruising at about 0.4 m/s with a little roll and pitch,
+    its heading ``heading(t)``; x, y, z integrated from J₁(Θ) ν₁ (rotation_from_euler), the
+    position noisy by 1 cm, the velocities by 1 cm/s."""
+    from nnid.datasets.mapping import rotation_from_euler
+
+    rng = np.random.default_rng(seed)
+    t = np.arange(0.0, 60.0, 0.1)
+    angles = np.stack([0.1 * np.sin(0.9 * t), 0.08 * np.sin(0.6 * t + 1), heading(t)], 1)
+    nu = np.stack([0.4 + 0.1 * np.sin(0.3 * t), 0.1 * np.cos(0.5 * t), 0.05 * np.sin(t)], 1)
+    ned = np.einsum("nij,nj->ni", rotation_from_euler(angles), nu)
+    pos = np.concatenate([[[0.0, 0.0, 1.0]], np.cumsum(0.5 * (ned[1:] + ned[:-1]) * 0.1, 0)])
+    pos += rng.normal(0, 0.01, pos.shape)
+    nu += rng.normal(0, 0.01, nu.shape)
+    wrapped = (angles + np.pi) % (2 * np.pi) - np.pi
+    return pd.DataFrame(
+        {"t": t, "experiment": experiment, "x": pos[:, 0], "y": pos[:, 1], "z": pos[:, 2]}
+        | dict(zip(("phi", "theta", "psi"), wrapped.T, strict=True))
+        | dict(zip(("u", "v", "w"), nu.T, strict=True))
+        | {"tau_X": np.ones(t.size)}
+    )
+
+
+def test_world_frame_velocities_under_body_names_are_refused():
+    """u, v, w logged as NED velocities (a navigation filter's output under the body names)
+    passed: every surge and sway fit read north and east as forward and starboard. The
+    displacement of x, y is compared with u, v read both ways (velocity_frame_ratios)."""
+    from nnid.datasets.log import velocity_frame_ratios
+    from nnid.datasets.mapping import rotation_from_euler
+
+    def turning(t):
+        return 1.5 * np.sin(0.15 * t)
+
+    a = _cruising_log(turning)
+    b = _cruising_log(lambda t: np.full(t.size, 2.0), seed=1, experiment="b")  # holds its heading
+    log = pd.concat([a, b], ignore_index=True)
+    assert validate_log(log, "nav.csv") is log
+    ratios = {name: ratio for name, ratio, *_ in velocity_frame_ratios(log)}
+    assert ratios["a"] < 0.1 and 0.3 < ratios["b"] < 3  # turning: body; holding: can't tell
+    ned = np.einsum(
+        "nij,nj->ni",
+        rotation_from_euler(log[["phi", "theta", "psi"]].to_numpy()),
+        log[["u", "v", "w"]].to_numpy(),
+    )
+    slip = log.assign(u=ned[:, 0], v=ned[:, 1], w=ned[:, 2])
+    said = (
+        r"nav\.csv, field 'u': u, v, w look like world-frame \(NED\) velocities in experiment 'a'"
+    )
+    with pytest.raises(NnidInputError, match=said + r".*turn NED velocities by J₁\(Θ\)ᵀ"):
+        validate_log(slip, "nav.csv")
+    # the run that holds its heading alone cannot tell the frames apart: it passes
+    held = slip[slip["experiment"] == "b"]
+    assert validate_log(held, "nav.csv") is held
+    # gaps (empty cells, a 3 s dropout) are stepped over
+    gappy = slip.copy()
+    gappy.loc[gappy.index % 13 == 0, "u"] = np.nan
+    gappy = gappy.drop(index=range(200, 230))
+    with pytest.raises(NnidInputError, match=said):
+        validate_log(gappy, "nav.csv")
+    # body velocities with a constant heading offset between the position's axes and the
+    # compass (a pool frame), and a current: both absorbed, they pass
+    c, s = math.cos(0.7), math.sin(0.7)
+    offset = log.assign(
+        x=c * log["x"] - s * log["y"] + 0.05 * log["t"], y=s * log["x"] + c * log["y"]
+    )
+    assert validate_log(offset, "nav.csv") is offset
+
+
+def test_the_velocity_frame_check_turns_the_velocity_as_the_mapping_does():
+    """north_east is rotation_from_euler's J₁ ν₁ written out: they agree on a tumbling
+    attitude."""
+    from nnid.datasets.log import north_east
+    from nnid.datasets.mapping import rotation_from_euler
+
+    rng = np.random.default_rng(3)
+    angles = rng.uniform(-np.pi, np.pi, (50, 3)) * [1.0, 0.5, 1.0]
+    nu = rng.normal(size=(50, 3))
+    expected = np.einsum("nij,nj->ni", rotation_from_euler(angles), nu)
+    assert np.allclose(np.stack(north_east(angles, nu), 1), expected[:, :2], atol=1e-12)

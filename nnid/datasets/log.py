@@ -105,6 +105,7 @@ def validate_log(
             size = np.abs(df[col].to_numpy(dtype=np.float64))
             raise degrees_error(df, col, source, int(np.nanargmax(size)))
     check_rate_units(df, source)
+    _check_velocity_frame(df, source)
     return df
 
 
@@ -341,6 +342,149 @@ def check_rate_units(df: pd.DataFrame, source: str, row: int | None = None) -> N
                 source=source,
                 field=col,
                 row=row,
+            )
+
+
+#: NED velocities logged under the body names u v w fit the pose's displacement as they stand,
+#: and worse once turned by the attitude: an experiment whose x, y move this many times better
+#: with u, v read as north/east than with J₁(Θ) ν₁ (:func:`velocity_frame_ratios`) is refused.
+#: The one measured log with both (Tartan, 957 s, heading -0.8..1.5 rad) reads 0.22 as one
+#: run, at most 1.26 cut into minutes and 1.71 into 20 s pieces; its velocities turned into
+#: NED read 4.6 as one run and 4.6-9 in the minutes whose heading spans over a radian
+VELOCITY_FRAME_RATIO = 3.0
+#: windows of about this many seconds: long beside the lag of a DVL or a filter's velocity
+#: behind the position (Tartan's: ~0.25 s), short beside a turn
+VELOCITY_CHECK_WINDOW = 2.0
+#: the windows of an experiment must cover this many seconds for its ratio to count
+VELOCITY_CHECK_SECONDS = 20.0
+#: and the world reading must explain this share of the displacement (its R²): a ratio of two
+#: poor fits (a pose and velocities that do not agree either way) says nothing of the frame
+VELOCITY_CHECK_FIT = 0.5
+
+
+def north_east(angles: np.ndarray, nu: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The north and east components of J₁(Θ) ν₁ (Weiss eq. 16, J₁ = R_z(ψ) R_y(θ) R_x(φ)) of
+    angles ``[n, 3]`` = (φ, θ, ψ) and body velocities ``[n, 3]``: nnid.datasets.mapping's
+    rotation_from_euler written out in numpy, because scipy's Rotation takes a second on 240k
+    rows and every log read passes here (tests/test_log_and_excitation.py checks the two
+    agree)."""
+    sphi, cphi = np.sin(angles[:, 0]), np.cos(angles[:, 0])
+    sth, cth = np.sin(angles[:, 1]), np.cos(angles[:, 1])
+    spsi, cpsi = np.sin(angles[:, 2]), np.cos(angles[:, 2])
+    u, v, w = nu.T
+    # R_y(θ) R_x(φ) ν₁ first: its x and y, then turned by ψ
+    level_x = cth * u + sth * (sphi * v + cphi * w)
+    level_y = cphi * v - sphi * w
+    return cpsi * level_x - spsi * level_y, spsi * level_x + cpsi * level_y
+
+
+def velocity_frame_ratios(df: pd.DataFrame) -> list[tuple[object, float, float, float]]:
+    """Per experiment of a log with the pose x, y, φ, θ, ψ and body velocities u, v, w: how
+    much better u, v, w read as NED velocities fit the horizontal displacement than read as
+    body velocities turned by the attitude, η̇₁ = J₁(Θ) ν₁ (Weiss eq. 16). Over windows of
+    about :data:`VELOCITY_CHECK_WINDOW`, the displacement Δ(x + iy) is regressed on the
+    integrated velocity of each reading, with a complex gain (a constant heading offset and
+    scale between the position's axes and the compass, or a DVL's mounting) and a constant
+    drift (a current), so that only the heading's changes tell the readings apart. Returns
+    (experiment, ratio of the body reading's residual to the world reading's, the world
+    reading's R², seconds of windows): under 1 for body velocities on a log that turns, about
+    1 on one that holds its heading, over 1 for NED velocities under body names. A step
+    across a gap (an empty cell, a hole in t) is left out of every sum, and no window spans
+    two experiments."""
+    needed = ("x", "y", *ANGLES, "u", "v", "w")
+    if not all(c in df for c in needed) or len(df) < 3:
+        return []
+    if "experiment" in df:
+        codes, labels = pd.factorize(df["experiment"])
+        names = labels.tolist()
+    else:
+        codes, names = np.zeros(len(df), dtype=np.int64), [None]
+    order = np.argsort(codes, kind="stable")
+    codes = codes[order]
+    t = df["t"].to_numpy(dtype=np.float64)[order]
+    angles = df[list(ANGLES)].to_numpy(dtype=np.float64)[order]
+    nu = df[["u", "v", "w"]].to_numpy(dtype=np.float64)[order]
+    moved = np.diff(df[["x", "y"]].to_numpy(dtype=np.float64)[order], axis=0)
+    dt = np.diff(t)
+    step = float(np.median(dt))
+    lag = max(1, round(VELOCITY_CHECK_WINDOW / step)) if step > 0 else 0
+    if not lag or dt.size < lag:
+        return []
+    # each step's velocity (trapezoid), and turned by the attitude at the step's midpoint
+    world = 0.5 * (nu[1:] + nu[:-1]) * dt[:, None]
+    mid = angles[:-1] + 0.5 * wrap_angle(np.diff(angles, axis=0))
+    body = north_east(mid, world)
+    usual = pd.Series(dt).groupby(codes[1:]).transform("median").to_numpy()
+    ok = (
+        (codes[1:] == codes[:-1])
+        & (dt < 3 * usual)
+        & np.isfinite(moved).all(1)
+        & np.isfinite(body[0])
+        & np.isfinite(body[1])
+    )
+
+    def sums(x: np.ndarray) -> np.ndarray:
+        return _window_sums(np.where(ok, x, 0.0), lag)
+
+    d = sums(moved[:, 0]) + 1j * sums(moved[:, 1])
+    tau = sums(dt)
+    readings = {
+        "body": sums(body[0]) + 1j * sums(body[1]),
+        "world": sums(world[:, 0]) + 1j * sums(world[:, 1]),
+    }
+    within = _window_sums((codes[1:] != codes[:-1]).astype(np.float64), lag) == 0
+    k = codes[:-lag][within]
+    d, tau = d[within], tau[within]
+    n = len(names)
+
+    def total(x: np.ndarray) -> np.ndarray:  # per experiment, complex weights in two passes
+        x = np.asarray(x, dtype=np.complex128)
+        return np.bincount(k, x.real, minlength=n) + 1j * np.bincount(k, x.imag, minlength=n)
+
+    dd, td, tt = total(np.abs(d) ** 2).real, total(tau * d), total(tau**2).real
+    with np.errstate(invalid="ignore", divide="ignore"):
+        drift_only = dd - np.abs(td) ** 2 / tt  # the displacement a constant drift leaves
+        residual = {}
+        for name, x in readings.items():
+            x = x[within]
+            # least squares of d on [x, tau] with complex coefficients: the residual is
+            # dd - bᴴ G⁻¹ b, the 2x2 Gram matrix G inverted in closed form
+            xx, xt, xd = total(np.abs(x) ** 2).real, total(np.conj(x) * tau), total(np.conj(x) * d)
+            det = xx * tt - np.abs(xt) ** 2
+            fitted = (
+                tt * np.abs(xd) ** 2 - 2 * np.real(np.conj(xd) * xt * td) + xx * np.abs(td) ** 2
+            )
+            residual[name] = np.where(det > 1e-12 * xx * tt, dd - fitted / det, np.nan)
+        ratio = residual["body"] / residual["world"]
+        fit = 1.0 - residual["world"] / drift_only
+    seconds = np.bincount(k, minlength=n) * step
+    return [
+        (names[e], float(ratio[e]), float(fit[e]), float(seconds[e]))
+        for e in np.flatnonzero(np.isfinite(ratio) & np.isfinite(fit))
+    ]
+
+
+def _check_velocity_frame(df: pd.DataFrame, source: str) -> None:
+    """Body velocities u, v, w in the body frame (FRD) beside the pose: an experiment whose
+    x, y displacement u, v fit :data:`VELOCITY_FRAME_RATIO` times better read as north/east
+    than turned by the attitude (:func:`velocity_frame_ratios`) is refused as NED velocities
+    under the body names. Per experiment, as the rate-unit check."""
+    for name, ratio, fit, seconds in velocity_frame_ratios(df):
+        if (
+            seconds >= VELOCITY_CHECK_SECONDS
+            and fit >= VELOCITY_CHECK_FIT
+            and ratio >= VELOCITY_FRAME_RATIO
+        ):
+            run = "" if name is None else f" in experiment {str(name)!r}"
+            raise NnidInputError(
+                f"u, v, w look like world-frame (NED) velocities{run}: read as north/east they "
+                f"fit the displacement of x, y {ratio:.3g} times better than turned from the "
+                f"body by the attitude (phi, theta, psi) ({seconds:.3g} s of windows); body "
+                "velocities must be in the body frame (FRD): turn NED velocities by J₁(Θ)ᵀ, or "
+                "leave u v w out to derive them from the pose (if they are body velocities, "
+                "the heading psi may be in another convention: ENU yaw is π/2 − ψ)",
+                source=source,
+                field="u",
             )
 
 
