@@ -1,10 +1,16 @@
-"""The one error type for bad user input: it names where the problem is and what was expected."""
+"""The one error type for bad user input: it names where the problem is and what was expected;
+and the warning of data that cannot identify what is asked of them."""
 
 from __future__ import annotations
 
 import math
 from collections.abc import Container
 from numbers import Real
+
+
+class ExcitationWarning(UserWarning):
+    """The data does not excite every parameter asked for (or bias its estimate); here, below
+    every layer, as the data layer warns of it too (:func:`nnid.datasets.preprocess.preprocess`)."""
 
 
 class NnidInputError(ValueError):

@@ -33,7 +33,7 @@ from sklearn.utils.validation import check_is_fitted
 from nnid.datasets.arrays import log_arrays, nominal_forces
 from nnid.datasets.cleaning import CleaningReport
 from nnid.datasets.log import ANGLES, POSE, VELOCITY
-from nnid.datasets.preprocess import HELD_DT, HELD_SHARE, experiments, held_inputs, zoh_midpoint
+from nnid.datasets.preprocess import HELD_DT, HELD_SHARE, held_at, zoh_midpoint
 from nnid.errors import NnidInputError
 from nnid.evaluation.prediction import (
     Replay,
@@ -632,15 +632,8 @@ def warn_held_inputs(
     sees the force of that sample, and a lagged force is continuous: neither is warned of."""
     if not smoothed or actuator_lag > 0:
         return
-    held = held_inputs(log)
-    if not held:
-        return
-    dts = [np.diff(log.loc[idx, "t"].to_numpy(np.float64)) for _, idx in experiments(log)]
-    dts = [d for d in dts if d.size]
-    if not dts:
-        return
-    dt = float(np.median(np.concatenate(dts)))
-    if dt < HELD_DT:
+    held, dt = held_at(log)
+    if not held or not dt >= HELD_DT:  # NaN: no sample interval
         return
     from nnid.trainers.least_squares import ExcitationWarning
 
@@ -682,9 +675,12 @@ def prepare_motion(
     savgol_order: int,
     accelerations: bool,
     report: CleaningReport | None = None,
+    cut_at_steps: bool = False,
 ) -> pd.DataFrame:
     """The log with the velocities of ``dofs`` derived from the pose where it lacks them, and
-    (``accelerations``) their accelerations, both by Savitzky-Golay; each step reported."""
+    (``accelerations``) their accelerations, both by Savitzky-Golay, the accelerations not
+    across the steps of held inputs with ``cut_at_steps``
+    (:func:`~nnid.datasets.preprocess.derive_accelerations`); each step reported."""
     from nnid.datasets.preprocess import (
         check_velocities,
         derive_accelerations,
@@ -695,7 +691,7 @@ def prepare_motion(
     if any(d not in log for d in dofs) and all(a in log for a in ANGLES):
         log = derive_velocities(log, savgol_window, savgol_order, report)
     if accelerations and any("d" + d not in log for d in dofs):
-        log = derive_accelerations(log, savgol_window, savgol_order, report)
+        log = derive_accelerations(log, savgol_window, savgol_order, report, cut_at_steps)
     return log
 
 
@@ -719,9 +715,17 @@ class FossenPlant(NnidModel):
         # be absent from the log and are then taken as zero (e.g. an attitude-only protocol)
         dofs = getattr(self, "dofs_", None) or getattr(self, "dofs", DOFS)
         log = prepare_motion(
-            log, dofs, self.savgol_window, self.savgol_order, accelerations, report
+            log, dofs, self.savgol_window, self.savgol_order, accelerations, report, self._held()
         )
         return log, log_arrays(log, self.vehicle)
+
+    def _held(self) -> bool:
+        """Whether the inputs are taken as held between samples (``zoh_midpoint``): the force
+        is then the midpoint at a sample, and a derived acceleration is not smoothed across
+        its steps. A held input steps at each sample; a lagged force is continuous, seen as
+        it is (the loop's rule: the midpoint of a 0.3-s lag's samples gave X_udot -3.7 for
+        -6.4)."""
+        return getattr(self, "zoh_midpoint", False) and self.vehicle.actuator_lag == 0
 
     def _equation_data(
         self, log: pd.DataFrame, accelerations: bool, report: CleaningReport | None = None
@@ -731,9 +735,7 @@ class FossenPlant(NnidModel):
         after it, which a smoothed or filtered acceleration at t_k sees (simulations keep the
         held forces)."""
         log, data = self._data(log, accelerations, report)
-        # a held input steps at each sample; a lagged force is continuous, seen as it is (the
-        # loop's rule: the midpoint of a 0.3-s lag's samples gave X_udot -3.7 for -6.4)
-        if getattr(self, "zoh_midpoint", False) and self.vehicle.actuator_lag == 0:
+        if self._held():
             data = {**data, "tau": zoh_midpoint(data["tau"], log)}
         return log, data
 

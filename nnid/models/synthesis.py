@@ -69,9 +69,13 @@ def residual_force(
     it, which is what a smoothed or filtered acceleration at t_k sees; without it a fast
     autopilot's held force leaves a half-sample lag that biases the damping by several %.
     """
-    if zoh_midpoint and vehicle.actuator_lag == 0:  # a lagged force is continuous already
+    held = zoh_midpoint and vehicle.actuator_lag == 0  # a lagged force is continuous already
+    # the accelerations are cut at the steps of the inputs as logged, before their midpoint
+    log = prepare_motion(
+        log, DOFS, savgol_window, savgol_order, filter_lambda is None, cut_at_steps=held
+    )
+    if held:
         log = zoh_midpoint_inputs(log)
-    log = prepare_motion(log, DOFS, savgol_window, savgol_order, filter_lambda is None)
     data = log_arrays(log, vehicle)
     structure = ParametricFossen(vehicle, [])
     if filter_lambda is None:

@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from sklearn.base import BaseEstimator
 
+from nnid.errors import ExcitationWarning as ExcitationWarning  # raised here, long imported here
 from nnid.errors import NnidInputError
 from nnid.evaluation.persistence import ExcitationReport, excitation_from_gram
 from nnid.serialization import json_float
@@ -32,10 +33,6 @@ def significant(percentile_error: float | np.ndarray) -> bool | np.ndarray:
     """Caccia's rule (L279): a parameter whose percentile error 100 σ̂/|θ̂| is at most 51.02 %
     (= 100/1.96) is significant at 95 % (a two-sided z-test of θ = 0); NaN is not."""
     return np.asarray(percentile_error) <= INSIGNIFICANT_PERCENT
-
-
-class ExcitationWarning(UserWarning):
-    """The data does not excite every parameter asked for."""
 
 
 @dataclass
