@@ -100,6 +100,28 @@ def test_the_median_is_undetermined_by_a_nan_member_and_ranks_a_wild_one(log):
     np.testing.assert_array_equal(model._combined(wild, base)["y"].to_numpy(), [2.0, 2.0])
 
 
+def test_a_member_wild_on_a_new_log_is_named_and_still_combined(log):
+    """Fitted without a validation log, seed 99 (1e9 off) is kept; on a new log the median
+    ranked it away without a word (``nnid train`` lists each member's scores, the API did
+    not): predict now names it, and the numbers are the median's as before."""
+    import warnings
+
+    from nnid.models.ensemble import WildMemberWarning
+
+    model = EnsembleModel(Offset(), seeds=(0, 1, 99), combine="median").fit(log)
+    with pytest.warns(WildMemberWarning, match=r"seed 99: the free_run prediction") as said:
+        pred = model.predict(log)
+    assert len(said) == 1 and "seed 0" not in str(said[0].message)
+    np.testing.assert_allclose(pred["y"].iloc[1:], log["y"].iloc[1:] + 1.0)
+    # two members: the data in the reference names the wild one only, not the sane one
+    with pytest.warns(WildMemberWarning, match=r"seed 99:") as said:
+        EnsembleModel(Offset(), seeds=(2, 99), combine="median").fit(log).predict(log, 3)
+    assert "seed 2" not in str(said[0].message) and "3-step" in str(said[0].message)
+    with warnings.catch_warnings():  # members a few ranges apart are no wild member
+        warnings.simplefilter("error")
+        EnsembleModel(Offset(), seeds=(0, 1, 5), combine="median").fit(log).predict(log)
+
+
 def test_member_validation_totals_leave_out_the_runs_warm_up(log, tmp_path):
     """``member_validation_free_run_nrmse`` scored each member with only its own warm-up left
     out, ``metrics.json``'s members with the config's ``warmup_s``: two totals for one member

@@ -876,6 +876,62 @@ def test_a_sweep_trial_without_a_validation_score_says_why_not() -> None:
     assert page.count("no validation free_run_nrmse: diverged, or nothing scored") == 1
 
 
+def test_a_sweep_grid_over_the_seed_shows_each_seed_as_the_setting_it_was_ranked(
+    tmp_path, monkeypatch
+) -> None:
+    """A grid over ``model.seed`` (no ``seeds``) ranks each seed alone, as a setting; the page
+    popped the seed from every label and drew the two as one setting's seeds under one tick.
+    With ``seeds``, the trials of a setting share one label, as ranked."""
+    import re
+
+    from nnid.config import SweepSpec
+    from nnid.reports import batch_report
+    from nnid.scale.batch import BatchResult
+    from nnid.scale.manifest import Task
+    from nnid.scale.sweep import _write_sweep
+
+    config = tmp_path / "c.toml"
+    config.write_text('kind = "train"\n[model]\nkind = "narx"\n')
+    built = []
+    monkeypatch.setattr(batch_report, "figure_uri", lambda fig: built.append(fig) or "uri")
+    ticks = {}
+    for name, spec in {
+        "grid": SweepSpec(grid={"model.seed": [0, 1], "model.hidden": [[4]]}),
+        "seeds": SweepSpec(grid={"model.hidden": [[4]]}, seeds=[0, 1]),
+    }.items():
+        tasks = [Task("train", "", overrides={"model.hidden": [4], "model.seed": s})
+                 for s in (0, 1)]  # fmt: skip
+        scores = zip(tasks, (0.2, 0.3), strict=True)
+        rows = [{"status": "ok", "overrides": json.dumps(t.overrides),
+                 "validation_free_run_nrmse": v} for t, v in scores]  # fmt: skip
+        result = BatchResult(rows, "local")
+        ranked = _write_sweep(spec, config, tasks, result, tmp_path)
+        page = "".join(batch_report._sweep(result))
+        labels = [re.findall(r"<td>(.*?)</td>", r)[0] for r in page.split("<tr>")[2:4]]
+        ticks[name] = [t.get_text() for t in built[-1].axes[0].get_xticklabels()]
+        assert len(set(labels)) == len(ranked) == len(ticks[name]), (name, labels)
+    assert ticks["grid"] == ["model.hidden = [4], model.seed = 0",
+                             "model.hidden = [4], model.seed = 1"]  # fmt: skip
+    assert ticks["seeds"] == ["model.hidden = [4]"]
+
+
+def test_the_sweep_counts_failed_and_stopped_trials_as_the_page_does() -> None:
+    """The sweep's sentence counted failed and stopped trials itself, beside
+    :func:`nnid.scale.status.not_ok_message`: one count now, said the same in both."""
+    from nnid.config import SweepSpec
+    from nnid.scale.manifest import Task
+    from nnid.scale.status import not_ok_counts, not_ok_message
+    from nnid.scale.sweep import _summary, rank
+
+    rows = [{"status": s} for s in ("failed", "stopped", "failed", "stopped", "stopped")]
+    assert not_ok_counts(rows) == (2, 3)
+    assert not_ok_message(rows) == "2 failed, 3 stopped early by ASHA"
+    spec = SweepSpec(seeds=list(range(5)))
+    tasks = [Task("train", "", overrides={"model.seed": s}) for s in range(5)]
+    said = _summary(spec, rank(spec, tasks, rows))
+    assert "Of 5 trials: 2 failed; 3 stopped early by ASHA." in said, said
+
+
 def test_the_batch_train_table_says_diverged_or_not_scored() -> None:
     """Its legend said "'-' where the free run diverged", and the cell was "-" for a free run
     with nothing left to score too: the cell says which, from the row's ``diverged``."""

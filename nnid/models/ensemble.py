@@ -7,6 +7,10 @@ uses no more data (the rule of ``benchmarks/bench_nlbench.py`` on Cascaded Tanks
 a test record: every seed in ``seeds`` is a member, combined by ``combine`` ("mean" or
 "median", pointwise per output and sample), except that with ``drop_diverged`` a member whose
 free run on the validation log diverges is left out (said in ``dropped_``; never all of them).
+A kept member that goes wild on a later log is still combined (a median ranks it away, a mean
+is dragged by it), and :meth:`EnsembleModel.predict` says so with a
+:class:`WildMemberWarning` naming its seed (:func:`wild_members`): the numbers are the rule's,
+the member is not hidden.
 
 Members are independent fits: ``n_jobs`` > 1 fits them in that many worker processes
 (joblib's loky backend, which caps each worker's OpenMP threads at its share of the cores;
@@ -17,6 +21,7 @@ was fitted beyond the last bits that a thread count changes.
 from __future__ import annotations
 
 import numbers
+import warnings
 from collections.abc import Sequence
 
 import numpy as np
@@ -25,11 +30,17 @@ import torch
 from sklearn.base import clone
 
 from nnid.errors import NnidInputError
+from nnid.evaluation.evaluate import DIVERGENCE_FACTOR, left_range
+from nnid.evaluation.metrics import warmup_mask
 from nnid.evaluation.prediction import Replay
 from nnid.models.base import NnidModel, learned_state, restore_learned
 from nnid.trainers.history import Progress, staged
 
 COMBINE = ("mean", "median")
+
+
+class WildMemberWarning(UserWarning):
+    """A kept member's prediction diverged or left the range of the others and the data."""
 
 
 class EnsembleModel(NnidModel):
@@ -200,7 +211,32 @@ class EnsembleModel(NnidModel):
         self.warmup_samples_ = max(int(m.warmup_samples_) for m in self.members_)
 
     def _predict(self, log: pd.DataFrame, mode: str | int) -> pd.DataFrame:
-        return self._combined([m.predict(log, mode) for m in self.members_], log)
+        return self._combined(
+            self._said([m.predict(log, mode) for m in self.members_], log, mode), log
+        )
+
+    def _said(
+        self, predictions: list[pd.DataFrame], log: pd.DataFrame, mode: str | int
+    ) -> list[pd.DataFrame]:
+        """``predictions``, as they are, after a :class:`WildMemberWarning` naming the seeds
+        of the members that went wild on ``log`` (:func:`wild_members`): the combination
+        keeps them (the documented rule), and a median that ranks one away would otherwise
+        say nothing of it."""
+        preds = np.stack([p[self.outputs_].to_numpy(np.float64) for p in predictions])
+        wild = wild_members(preds, log, self.outputs_, warmup_mask(log, 0.0, self.warmup_samples_))
+        if wild:
+            seeds = ", ".join(str(self.member_seeds_[k]) for k in wild)
+            name = mode if isinstance(mode, str) else f"{mode}-step"
+            what = "median ranks" if self.combine == "median" else "mean averages"
+            warnings.warn(
+                f"ensemble member(s) with seed {seeds}: the {name} prediction diverged or left "
+                "the range of the other members and the data by more than "
+                f"{DIVERGENCE_FACTOR:g} times that range; the {what} it in as it stands "
+                "(member.predict(log) shows it alone)",
+                WildMemberWarning,
+                stacklevel=4,
+            )
+        return predictions
 
     def _combined(self, predictions: list[pd.DataFrame], log: pd.DataFrame) -> pd.DataFrame:
         """The members' predictions of the outputs combined (``combine``)."""
@@ -227,7 +263,8 @@ class EnsembleModel(NnidModel):
             raise AttributeError("closed_loop: a member that cannot fly in closed loop")
 
         def fly(log: pd.DataFrame, replay, mode: str | int = "free_run") -> pd.DataFrame:
-            return self._combined([m.closed_loop(log, replay, mode) for m in members], log)
+            flown = [m.closed_loop(log, replay, mode) for m in members]
+            return self._combined(self._said(flown, log, mode), log)
 
         return fly
 
@@ -283,6 +320,33 @@ class EnsembleModel(NnidModel):
                 restore_learned(clone(self.model).set_params(seed=seed), saved, own)
             )
         self._take_shape()
+
+
+def wild_members(
+    preds: np.ndarray, log: pd.DataFrame, outputs: Sequence[str], mask: np.ndarray
+) -> list[int]:
+    """Indices of the members (axis 0 of ``preds``, members × rows × ``outputs``) whose
+    prediction diverged by the scores' rule (:func:`nnid.evaluation.evaluate.left_range`:
+    non-finite, or :data:`DIVERGENCE_FACTOR` widths outside) against the other members'
+    predictions pooled with the measured column where the log has one, on the ``mask`` rows
+    where every other member is finite. A rule of the others, not of the member: with the
+    data in the reference, the sane one of two members is not named for the wild one's
+    range; a row where every member is NaN (an input the log lacks) blames none."""
+    wild = []
+    for k in range(preds.shape[0]):
+        others = np.delete(preds, k, axis=0)
+        for c, name in enumerate(outputs):
+            rows = mask & np.isfinite(others[:, :, c]).all(axis=0)
+            reference = others[:, rows, c].ravel()
+            if name in log:
+                measured = log[name].to_numpy(np.float64)[mask]
+                reference = np.concatenate([reference, measured[np.isfinite(measured)]])
+            if rows.any() and reference.size:
+                width = float(np.ptp(reference))
+                if left_range(reference, preds[k, rows, c], width).any():
+                    wild.append(k)
+                    break
+    return wild
 
 
 def _fit_member(

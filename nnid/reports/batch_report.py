@@ -16,7 +16,7 @@ import numpy as np
 from nnid.reports.cells import number, score
 from nnid.reports.figures import definitions, figure_uri, html_table, new_figure, page_head
 from nnid.reports.loop_report import parameter_unit as _unit
-from nnid.scale.status import STOPPED, not_ok_message
+from nnid.scale.status import STOPPED, not_ok_message, trial_setting
 
 #: at most this many parameters are drawn per vehicle (the ones most tasks identified)
 MAX_PARAMS = 12
@@ -166,9 +166,14 @@ def _sweep(result) -> list[str]:
     out = ["<h2>Sweep</h2>", f"<p>{html.escape(sweep.get('summary', ''))}</p>"]
     metric = sweep["metric"].split()[1]  # "validation free_run_nrmse (total), ..."
     body, scores = [], {}
+    # labelled as the sweep ranked them: a seed searched in a grid (no ``seeds``) is a setting
+    # of its own, not one of several seeds under one label (a record without "seeds", built
+    # by hand, reads its seed as the sweep's)
+    seed_option = sweep.get("seed_option", "model.seed")
+    swept = bool(sweep.get("seeds", True))
     for row in result.rows:
-        setting = json.loads(row.get("overrides") or "{}")
-        seed = setting.pop(sweep.get("seed_option", "model.seed"), None)
+        overrides = json.loads(row.get("overrides") or "{}")
+        setting, seed = trial_setting(overrides, seed_option, swept)
         label = ", ".join(f"{k} = {v}" for k, v in setting.items()) or "as configured"
         value = row.get(f"validation_{metric}") if row["status"] == "ok" else None
         # a diverged test free run is said, not a "-" that reads as "no test part"

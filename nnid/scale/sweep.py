@@ -29,7 +29,7 @@ from nnid.config import SweepSpec, TrainConfig, load_config, set_option
 from nnid.errors import NnidInputError
 from nnid.scale.batch import BatchResult, run_tasks
 from nnid.scale.manifest import Task, with_id
-from nnid.scale.status import STOPPED
+from nnid.scale.status import STOPPED, not_ok_counts, trial_setting
 from nnid.trainers.history import Progress, silent, stopping_score
 from nnid.validation import read_toml
 
@@ -115,10 +115,9 @@ def rank(spec: SweepSpec, tasks: list[Task], rows: list[dict]) -> list[Ranked]:
     missing score (diverged or failed seeds) by the mean of what they have. A trial whose
     training kept its start (``training_diverged``) has no score: its numbers are of the
     model before training, not of the setting."""
-    seed_key = spec.seed_option
     groups: dict[str, Ranked] = {}
     for task, row in zip(tasks, rows, strict=True):
-        setting = {k: v for k, v in task.overrides.items() if k != seed_key or not spec.seeds}
+        setting, _ = trial_setting(task.overrides, spec.seed_option, bool(spec.seeds))
         key = json.dumps(setting, sort_keys=True)
         trained = row["status"] == "ok" and not row.get("training_diverged")
         score = row.get(f"validation_{spec.metric}") if trained else None
@@ -191,6 +190,8 @@ def _write_sweep(
     result.extra["sweep"] = {
         "metric": f"validation {spec.metric} (total), mean over seeds",
         "seed_option": spec.seed_option,
+        # a seed searched in a grid is a setting of its own: the page labels trials as ranked
+        "seeds": list(spec.seeds),
         "settings": len(ranked),
         "trials": len(tasks),
         "best": {"settings": best.setting, "mean": best.mean, "scores": best.scores},
@@ -209,8 +210,7 @@ def _summary(spec: SweepSpec, ranked: list[Ranked]) -> str:
     best = ranked[0]
     if best.mean is None:
         rows = [row for r in ranked for row in r.rows]
-        failed = sum(row["status"] not in ("ok", STOPPED) for row in rows)
-        stopped = sum(row["status"] == STOPPED for row in rows)  # by ASHA: no failure
+        failed, stopped = not_ok_counts(rows)  # a trial ASHA stopped did not fail
         kept = sum(row["status"] == "ok" and bool(row.get("training_diverged")) for row in rows)
         rest = len(rows) - failed - stopped - kept
         said = [
@@ -383,7 +383,7 @@ def run_sweep_tune(
     ranked = _write_sweep(spec, config, tasks, batch, out_dir)
     batch.extra["sweep"]["early_stopping"] = {
         "scheduler": "ASHA" if spec.early_stopping else None,
-        "stopped": sum(r["status"] == STOPPED for r in rows),
+        "stopped": not_ok_counts(rows)[1],
         "epochs_run": sum(r.get("epochs") or 0 for r in rows),
     }
     if spec.early_stopping and all((r.get("epochs") or 0) <= 1 for r in rows):
