@@ -44,6 +44,8 @@ from nnid.physics.damping_masks import MASKS
 from nnid.physics.dofs import DOFS, FORCES
 from nnid.physics.effects import parse_effect
 from nnid.validation import (
+    ALPHA_MAX,
+    ALPHA_MIN,
     MAX_WIDTH,
     PositiveFloat,
     StrictModel,
@@ -988,11 +990,6 @@ class CompareConfig(_Command):
 def _off_at_zero(value: float | None) -> float | None:
     """A setting that 0 switches off, as None (what the loop takes for "no filter")."""
     return value or None
-
-
-#: the family-wise significance the loop's F-test takes (``alpha``, ``--alpha``): above 0.5 a
-#: "significant" effect is likelier noise than not
-ALPHA_MIN, ALPHA_MAX = 1e-12, 0.5
 
 
 class LoopConfig(_Command):

@@ -22,7 +22,7 @@ from typing import Any
 from nnid.errors import NnidInputError, checked_number
 from nnid.reports.cells import score_cell
 from nnid.trainers.history import Progress, silent
-from nnid.validation import repeated
+from nnid.validation import ALPHA_MAX, ALPHA_MIN, repeated
 
 
 @dataclass
@@ -373,7 +373,6 @@ def loop_run(
 ) -> Outcome:
     """``nnid loop``: the residual loop of a log and a vehicle file (a
     :class:`nnid.config.LoopConfig`; the keyword options override it as the CLI's do)."""
-    from nnid.config import ALPHA_MAX, ALPHA_MIN
     from nnid.datasets.column_map import load_column_map
     from nnid.datasets.preprocess import check_attitude
     from nnid.physics.dofs import DOFS

@@ -47,6 +47,11 @@ def shown(value: Any) -> str:
 #: and the models' for settings given in Python
 MAX_WIDTH = 100_000
 
+#: the family-wise significance the residual loop's F-test takes (a loop config's ``alpha``,
+#: ``--alpha``, a batch manifest's ``options.alpha``): above 0.5 a "significant" effect is
+#: likelier noise than not. Here, below both the config and the manifest, so each takes it
+ALPHA_MIN, ALPHA_MAX = 1e-12, 0.5
+
 
 def repeated(names: list[str]) -> list[str]:
     """The names a list gives more than once, sorted (for an error that names them)."""

@@ -307,3 +307,26 @@ def test_a_label_that_comes_back_is_two_runs_not_one_plateau():
     assert len(found(separate)) == 6
     assert found(merged) == found(separate)
     assert {p.setting for p in find_plateaus(t, position, force, merged) if p.start >= 60} == {0}
+
+
+def test_plateaus_are_cut_at_missing_samples_and_other_uneven_stamps_are_refused():
+    """find_plateaus took the median interval for every one: across a 20-s hole in a 10-Hz log
+    at one input the filter saw a jump in depth, so the first 30-s plateau was cut to 25 s and
+    the second dropped without a word; a plateau logged at 1 Hz inside a 10-Hz experiment
+    counted 30 s as 3 s and was dropped too. A hole now cuts the plateau (two, each whole);
+    a rate that changes is refused, naming the experiment."""
+    from nnid.errors import NnidInputError
+    from nnid.trainers.caccia import find_plateaus
+
+    rng = np.random.default_rng(0)
+    t = np.r_[np.arange(300), 500 + np.arange(300)] * 0.1
+    position = 0.02 * t + rng.normal(0, 1e-3, t.size)
+    plateaus = find_plateaus(t, position, np.full(t.size, 2.0), np.zeros(t.size, int))
+    assert [p.n for p in plateaus] == [300, 300]
+    assert [x for p in plateaus for x in (p.start, p.end)] == pytest.approx([0, 29.9, 50, 79.9])
+    assert all(p.speed == pytest.approx(0.02, abs=3 * p.speed_std) for p in plateaus)
+    t = np.r_[np.arange(600) * 0.1, 60.0 + np.arange(30)]  # then 30 s at 1 Hz
+    force = np.r_[np.full(600, 1.0), np.full(30, 2.0)]
+    position = np.r_[0.0, np.cumsum(0.01 * force[:-1] * np.diff(t))]
+    with pytest.raises(NnidInputError, match=r"t of experiment dive3 is not uniformly sampled"):
+        find_plateaus(t, position, force, np.zeros(t.size, int), names=["dive3"])

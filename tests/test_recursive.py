@@ -246,6 +246,27 @@ def test_rls_gives_no_standard_error_to_what_its_memory_does_not_determine():
     assert np.isnan(est.stderr).all() and not est.significant.any()
 
 
+def test_rls_memory_warning_words_match_the_case():
+    """The memory's excitation warning said of every case "nor the value of one that no sample
+    of the run excited: it never left theta0", also when the parameters were only collinear
+    (each has a value) or excited before the memory (its value is remembered)."""
+    phi, noise = _two_regressors(400)
+    pair = np.repeat(phi[:, :1], 2, axis=1) * [1.0, 2.0]
+    reg = Regression(pair, pair @ [2.0, -3.0] + noise, ["a", "b"], ("u",), noise.size)
+    with pytest.warns(ExcitationWarning, match="collinear regressors") as caught:
+        RecursiveLeastSquares().solve(reg)
+    assert "theta0" not in str(caught[0].message) and "no sample" not in str(caught[0].message)
+    phi[200:, 1] = 0.0  # b unexcited over the last 100 samples only: remembered
+    reg = Regression(phi, phi @ [2.0, -3.0] + noise, ["a", "b"], ("u",), noise.size)
+    with pytest.warns(ExcitationWarning, match="b keep the value learnt before") as caught:
+        RecursiveLeastSquares(forgetting=0.99).solve(reg)
+    assert "theta0" not in str(caught[0].message)
+    phi[:, 1] = 0.0  # b never excited: it never left theta0
+    reg = Regression(phi, phi @ [2.0, -3.0] + noise, ["a", "b"], ("u",), noise.size)
+    with pytest.warns(ExcitationWarning, match="value of b: no sample .* never left theta0"):
+        RecursiveLeastSquares().solve(reg)
+
+
 def test_rls_that_has_not_converged_says_so():
     """p₀ = 1e-5: the recursion barely moves from zero (a = 0.04 against 2.0) and reported
     ±0.08, 24 standard errors from the truth, without a word."""

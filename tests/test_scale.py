@@ -1043,3 +1043,20 @@ def test_a_trial_asha_stopped_is_said_as_stopped_not_as_failed(sweep_inputs, tmp
     assert res.exit_code == 0 and "(trials: 1 failed, 1 stopped early by ASHA)" in flat, flat
     assert "stopped: b: stopped early by ASHA" in flat and "failed: c: boom" in flat
     assert "failed: b" not in flat
+
+
+def test_manifest_and_loop_config_take_alpha_bounds_from_one_definition() -> None:
+    """The manifest restated the loop config's alpha bounds (1e-12, 0.5) to keep nnid.config
+    out of nnid.scale: moving one would leave the other behind. Both take nnid.validation's."""
+    from nnid import validation
+    from nnid.config import LoopConfig
+    from nnid.scale.manifest import Options
+
+    def bounds(model) -> tuple[float, float]:
+        meta = model.model_fields["alpha"].metadata  # pydantic's Ge and Le
+        return next(m.ge for m in meta if hasattr(m, "ge")), next(
+            m.le for m in meta if hasattr(m, "le")
+        )
+
+    expected = (validation.ALPHA_MIN, validation.ALPHA_MAX)
+    assert bounds(Options) == bounds(LoopConfig) == expected

@@ -80,13 +80,14 @@ def plant(vehicle, effects: Iterable[tuple[str, float]] = ()):
     return vehicle
 
 
-def check_mass_matrix(vehicle) -> None:
+def check_mass_matrix(vehicle) -> FossenModel:
     """Refuse to fly a vehicle whose M = M_RB + M_A is not positive definite (its equations of
     motion have no solution): an :class:`NnidInputError` naming ``added_mass`` where the
     rigid body alone is positive definite, else no field (mass, inertia and r_g together). Not
-    a check of loading: a fit refits the added mass of such a file."""
+    a check of loading: a fit refits the added mass of such a file. Returns the model the
+    check built (Weiss eq. 1), for a caller that flies the vehicle as it is."""
     try:
-        FossenModel.from_vehicle(vehicle)
+        return FossenModel.from_vehicle(vehicle)
     except ValueError as exc:
         try:
             FossenModel.from_vehicle(vehicle.model_copy(update={"added_mass": {}}))
@@ -177,11 +178,14 @@ def simulate(
             f"inputs have {inputs.shape[1]} channels; the vehicle has {len(actuation.channels)} "
             f"({', '.join(actuation.channels)})"
         )
-    check_mass_matrix(vehicle)  # the vehicle's own M first: the effects are not at fault then
-    try:
-        model = FossenModel.from_vehicle(truth)
-    except ValueError as exc:  # an injected effect no vehicle can have (a negative mass)
-        raise NnidInputError(str(exc), field="effects") from None
+    # the vehicle's own M first: the effects are not at fault then; without effects the
+    # model that check built is the plant (building it again gave the same model)
+    model = check_mass_matrix(vehicle)
+    if truth is not vehicle:
+        try:
+            model = FossenModel.from_vehicle(truth)
+        except ValueError as exc:  # an injected effect no vehicle can have (a negative mass)
+            raise NnidInputError(str(exc), field="effects") from None
     state = np.zeros(model.state_size)
     if x0 is not None:
         state[: len(x0)] = np.asarray(x0, dtype=np.float64)

@@ -31,7 +31,15 @@ from typing import Any, Literal
 from pydantic import Field, ValidationInfo, field_validator
 
 from nnid.errors import NnidInputError
-from nnid.validation import StrictModel, read_toml, refuse_other_file, resolve, validated
+from nnid.validation import (
+    ALPHA_MAX,
+    ALPHA_MIN,
+    StrictModel,
+    read_toml,
+    refuse_other_file,
+    resolve,
+    validated,
+)
 
 COMMANDS = ("train", "loop", "detect", "compare")
 
@@ -41,7 +49,7 @@ class Options(StrictModel):
     the bounds the CLI puts on them."""
 
     max_effects: int | None = Field(None, ge=0)
-    alpha: float | None = Field(None, ge=1e-12, le=0.5)
+    alpha: float | None = Field(None, ge=ALPHA_MIN, le=ALPHA_MAX)
     dofs: str | list[str] | None = None
     validation: str | list[str] | None = None
     exclude: str | list[str] | None = None

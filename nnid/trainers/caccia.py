@@ -81,7 +81,7 @@ from scipy.signal import savgol_filter
 from nnid.datasets.arrays import log_arrays
 from nnid.datasets.excitation import PRBS, DOptimalSine
 from nnid.datasets.measurement import Measurement
-from nnid.datasets.preprocess import savgol_window
+from nnid.datasets.preprocess import UNIFORM_TOLERANCE, savgol_window
 from nnid.datasets.simulator import simulate, simulate_config
 from nnid.errors import NnidInputError
 from nnid.physics.dofs import DOFS, FORCES
@@ -154,6 +154,35 @@ def _asymptote(t: np.ndarray, x: np.ndarray, f_crit: float = 3.0) -> tuple[float
     return float(coef[1]), float(np.sqrt(cov[1, 1]))
 
 
+def _sample_interval(
+    t: np.ndarray, joins: np.ndarray, run: str, cut_gaps: bool = True
+) -> tuple[float, np.ndarray]:
+    """The median sampling interval of one run's time stamps ``t`` (``joins``: where its rows
+    resume after another run's, not an interval) and where samples are missing (an interval
+    over 1 + :data:`UNIFORM_TOLERANCE` of the median). The Savitzky-Golay filters count time
+    in samples, so anything else that is not uniform is refused, naming ``run``: an interval
+    shorter than the median (jitter, a faster rate) or two gaps in a row (a slower rate, whose
+    every sample would be cut off alone and dropped); a gap too unless ``cut_gaps``."""
+    d = np.diff(t)
+    within = ~joins
+    dt = float(np.median(d[within])) if within.any() else 1.0
+    missing = within & (d > (1.0 + UNIFORM_TOLERANCE) * dt)
+    bad = within & (d < (1.0 - UNIFORM_TOLERANCE) * dt)
+    bad[:-1] |= missing[:-1] & missing[1:]
+    if not cut_gaps:
+        bad |= missing
+    if bad.any():
+        k = int(np.flatnonzero(bad)[0])
+        raise NnidInputError(
+            f"column t of {run} is not uniformly sampled: {d[k]:.4g} s from t = {t[k]:.6g} to "
+            f"{t[k + 1]:.6g} s against {dt:.4g} s elsewhere, and the Savitzky-Golay filter of "
+            "Caccia's procedure counts time in samples; resample the log to one rate"
+            + (" (a plateau is cut where samples are missing)" if cut_gaps else ""),
+            field="t",
+        )
+    return dt, missing
+
+
 def find_plateaus(
     t: np.ndarray,
     position: np.ndarray,
@@ -173,7 +202,9 @@ def find_plateaus(
     ``experiment`` holds integer codes 0, 1, … (``names`` their labels); the weight setting of
     code c is ``settings[c]`` (default c, Caccia's experiment number i); ``modes`` labels each
     sample with its thrust mapping mode. A code that comes back after another's rows is one
-    experiment (one setting) but not one run: no plateau spans the other's rows.
+    experiment (one setting) but not one run: no plateau spans the other's rows, nor a gap
+    where samples are missing; time stamps that are otherwise not uniform are refused
+    (:func:`_sample_interval`).
     """
     t = np.asarray(t, np.float64)
     position = np.asarray(position, np.float64)
@@ -185,11 +216,14 @@ def find_plateaus(
     for code in pd.unique(experiment):
         idx = np.flatnonzero(experiment == code)
         te, xe, fe, me = t[idx], position[idx], force[idx], mode_labels[idx]
-        dt = float(np.median(np.diff(te)))
+        label = str(names[int(code)]) if names is not None else str(code)
         # cut where the input or mode changes, and where the experiment's rows resume after
-        # another's: the same input on both sides of that join is two runs, not one plateau
+        # another's or samples are missing: the same input on both sides of that join or gap
+        # is two runs, not one plateau (the filter would take the gap for one interval)
         joins = np.diff(idx) != 1
-        change = np.r_[True, (np.abs(np.diff(fe)) > 1e-9 * scale) | (me[1:] != me[:-1]) | joins]
+        dt, gaps = _sample_interval(te, joins, f"experiment {label}")
+        cuts = (np.abs(np.diff(fe)) > 1e-9 * scale) | (me[1:] != me[:-1]) | joins | gaps
+        change = np.r_[True, cuts]
         starts = np.flatnonzero(change)
         stops = np.r_[starts[1:], te.size]
         window = savgol_window(settle_window, 1.0 / dt, settle_order, "settle_window")
@@ -324,7 +358,7 @@ def integrated_regression(
     t = np.asarray(t, np.float64) - float(t[0])
     chi = np.asarray(position, np.float64) - float(position[0])
     force = np.asarray(force, np.float64)
-    dt = float(np.median(np.diff(t)))
+    dt = _sample_interval(t, np.zeros(max(t.size - 1, 0), bool), "the sinusoid run", False)[0]
     window = savgol_window(velocity_window, 1.0 / dt, velocity_order, "velocity_window")
     if chi.size <= window:
         raise NnidInputError(

@@ -196,19 +196,37 @@ def window_covariance(
     cov = dof_sandwich(reg.phi[rows], reg.y[rows] - reg.phi[rows] @ np.nan_to_num(theta), m)
     report, ok, phi, y, r = _memory_excitation(reg, theta, first)
     r = np.where(ok, r, 0.0)
-    if report.warnings:  # θ of such a parameter is remembered from before the window, or split
-        warnings.warn(
-            f"over the estimator's memory (the last {reg.n_samples - first} samples): "
-            + "; ".join(report.warnings)
-            + ": their standard errors are not given (nor the value of one that no sample of "
-            "the run excited: it never left theta0)",
-            ExcitationWarning,
-            stacklevel=3,
-        )
     # the window's own least-squares fit, unweighted as the recursion is
     fit = np.linalg.lstsq(phi, y, rcond=None)[0]
     cov = void_undetermined(cov, list(reg.names), report)
     return cov * correlation_time([r[k::m] for k in range(m)]), fit, report
+
+
+def _warn_memory_excitation(report: ExcitationReport, never: list[str], window: int) -> None:
+    """Say which parameters the memory's excitation check left without a standard error, and
+    what became of the values of its unexcited ones. Only an unexcited parameter can have
+    never left theta0: the note on it would misdescribe a warning about collinear ones."""
+    if not report.warnings:
+        return
+    notes = []
+    if never:
+        one = len(never) == 1
+        notes.append(
+            f"nor the value of {', '.join(never)}: no sample of the run excited "
+            + ("it, and it" if one else "them, and they")
+            + " never left theta0"
+        )
+    remembered = [nm for nm in report.unexcited if nm not in never]
+    if remembered:
+        notes.append(f"{', '.join(remembered)} keep the value learnt before the memory")
+    warnings.warn(
+        f"over the estimator's memory (the last {window} samples): "
+        + "; ".join(report.warnings)
+        + ": their standard errors are not given"
+        + (f" ({'; '.join(notes)})" if notes else ""),
+        ExcitationWarning,
+        stacklevel=3,
+    )
 
 
 def _chunks(n: int, parts: int = 20) -> list[tuple[int, int]]:
@@ -307,6 +325,7 @@ class RecursiveLeastSquares(BaseEstimator):
         # (batch least squares gives NaN), where one unexcited only in the memory window is
         # remembered from earlier data and kept
         never = (report if first == 0 else _memory_excitation(reg, theta, 0)[0]).unexcited
+        _warn_memory_excitation(report, never, reg.n_samples - first)
         theta[np.isin(reg.names, never)] = np.nan
         sigma2, n_obs, per_dof = _residual_stats(reg, theta, first)
         # a window covariance around a θ the recursion has not settled on is no uncertainty:
