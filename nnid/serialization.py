@@ -53,6 +53,35 @@ def json_float(value: float | None) -> float:
     return float("nan") if value is None else float(value)
 
 
+#: the tag that keeps a non-finite number through strict JSON, where null would read back as
+#: NaN whatever it was (an infinite validation error of a diverged run is no undefined one)
+FLOAT_TAG = "$float"
+_NON_FINITE = {"inf": math.inf, "-inf": -math.inf, "nan": math.nan}
+
+
+def exact_float(value: float) -> float | dict[str, str]:
+    """``value`` as strict JSON without loss: a finite number as itself, inf, −inf and NaN as
+    ``{"$float": "inf"}`` (``"-inf"``, ``"nan"``); :func:`read_exact_float` reads it back."""
+    v = float(value)
+    return v if math.isfinite(v) else {FLOAT_TAG: repr(v)}
+
+
+def read_exact_float(value: Any, what: str = "a number") -> float:
+    """Inverse of :func:`exact_float` after a JSON round trip, checked (TypeError naming
+    ``what``): a number, null (NaN: an undefined number, as files wrote every non-finite one
+    before the tag), or the tag of inf, −inf or NaN."""
+    if isinstance(value, dict) and set(value) == {FLOAT_TAG}:
+        tagged = value[FLOAT_TAG]
+        if isinstance(tagged, str) and tagged in _NON_FINITE:
+            return _NON_FINITE[tagged]
+        raise TypeError(f"{what}: {tagged!r} is not inf, -inf or nan")
+    if value is None:
+        return math.nan
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise TypeError(f"{what} is not a number: {value!r}")
+    return float(value)
+
+
 def dumps(value: Any, indent: int | None = 2) -> str:
     """Strict JSON text of ``value`` (see :func:`jsonable`)."""
     return json.dumps(jsonable(value), indent=indent, allow_nan=False)

@@ -174,6 +174,25 @@ def vehicle_name(name: str) -> str:
     return name
 
 
+def saved_vehicle(data: dict[str, Any], source: str = "<saved model>") -> Vehicle:
+    """A vehicle as a saved model holds it (:func:`vehicle_from_dict`), loaded even where it
+    was saved by an nnid that let its name hold a control character (:func:`vehicle_name`
+    refuses those only since): a saved model stays loadable. Each such character is written
+    as its escape (a line break as ``\\n``), so that the name labels one line, and a warning
+    says so; new input (a vehicle file, ``nnid vehicle --name``) is still refused."""
+    name = data.get("name") if isinstance(data, dict) else None
+    if isinstance(name, str) and any(unicodedata.category(c) == "Cc" for c in name):
+        shown = "".join(repr(c)[1:-1] if unicodedata.category(c) == "Cc" else c for c in name)
+        warnings.warn(
+            f"{source}: the vehicle name {name!r} holds a control character, which names no "
+            f"longer may (it would break a report's lines); loaded as {shown!r}",
+            UserWarning,
+            stacklevel=2,
+        )
+        data = {**data, "name": shown}
+    return vehicle_from_dict(data, source)
+
+
 class Vehicle(StrictModel):
     """A validated vehicle file."""
 

@@ -9,9 +9,11 @@ Columns are scaled to unit RMS first, so the verdict does not depend on units.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 
 import numpy as np
+
+from nnid.serialization import exact_float, read_exact_float
 
 
 @dataclass
@@ -29,6 +31,46 @@ class ExcitationReport:
     @property
     def persistent(self) -> bool:
         return self.rank == self.n_params and not self.unexcited
+
+    def as_state(self) -> dict:
+        """The report as strict JSON data; the condition number of a singular ΦᵀΦ is inf,
+        tagged so that it reads back inf (:func:`~nnid.serialization.exact_float`)."""
+        return {**asdict(self), "condition": exact_float(self.condition)}
+
+    @classmethod
+    def from_state(cls, state: object) -> ExcitationReport:
+        """Inverse of :meth:`as_state` after a JSON round trip, checked (TypeError): a file
+        edited by hand is refused at loading, never a report that fails when read."""
+        if not isinstance(state, dict):
+            raise TypeError("the excitation report is not a mapping")
+
+        def names(key: str) -> list[str]:
+            value = state[key]
+            if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
+                raise TypeError(f"the excitation report's {key} is not a list of names")
+            return list(value)
+
+        def count(key: str) -> int:
+            value = state[key]
+            if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+                raise TypeError(f"the excitation report's {key} is not a count: {value!r}")
+            return value
+
+        values, groups = state["singular_values"], state["group_min_singular"]
+        if not isinstance(values, list) or not isinstance(groups, dict):
+            raise TypeError("the excitation report's singular values are not numbers")
+        what = "the excitation report's singular values"
+        return cls(
+            count("n_samples"),
+            count("n_params"),
+            count("rank"),
+            read_exact_float(state["condition"], "the excitation report's condition"),
+            [read_exact_float(v, what) for v in values],
+            {str(k): read_exact_float(v, what) for k, v in groups.items()},
+            names("unexcited"),
+            names("collinear"),
+            names("warnings"),
+        )
 
 
 def excitation_report(

@@ -42,7 +42,15 @@ from sklearn.utils.validation import check_is_fitted
 
 from nnid.errors import NnidInputError
 from nnid.evaluation.prediction import check_mode
-from nnid.serialization import SCHEMA_VERSION, read_json, write_atomic, write_json
+from nnid.serialization import (
+    FLOAT_TAG,
+    SCHEMA_VERSION,
+    exact_float,
+    read_exact_float,
+    read_json,
+    write_atomic,
+    write_json,
+)
 from nnid.trainers.history import Progress, silent
 
 #: model kind -> "module:Class", imported when first needed (torch-heavy modules stay unloaded
@@ -72,6 +80,10 @@ REGRESSION_TRAINERS = ("ls", "rls", "gradient", "ukf")
 NETWORK_TRAINERS = ("lm", "adam")
 MODEL_FILE = "model.json"
 TENSOR_FILE = "tensors.pt"
+#: the first part of the name of a tensor that records a fit sample by sample (a filter's θ
+#: path, its innovations), not a weight: a per-sample series is no learned scalar, so it goes to
+#: ``tensors.pt``, not ``model.json`` (ARCHITECTURE.md, "The model protocol")
+RECORD = "record"
 NOT_FITTED = (
     "this %(name)s is not fitted yet: call fit(log) first, or load a saved model with "
     "nnid.load_model(dir)"
@@ -127,7 +139,7 @@ def encode_setting(value: Any) -> Any:
     if isinstance(value, (list, tuple)):
         return [encode_setting(v) for v in value]
     if isinstance(value, float) and not math.isfinite(value):
-        return {"$float": repr(value)}
+        return exact_float(value)
     if value is None or isinstance(value, (bool, int, float, str)):
         return value
     if isinstance(value, (np.integer, np.floating, np.bool_)):
@@ -142,17 +154,17 @@ def decode_setting(value: Any, source: str = "") -> Any:
     if not isinstance(value, dict):
         return value
     if "$vehicle" in value:
-        from nnid.vehicle import vehicle_from_dict
+        from nnid.vehicle import saved_vehicle
 
-        return vehicle_from_dict(value["$vehicle"], source)
+        return saved_vehicle(value["$vehicle"], source)
     if "$trainer" in value:
         return trainer_class(value["$trainer"])(**decode_setting(value["params"], source))
     if "$model" in value:
         return model_class(value["$model"])(**decode_setting(value["params"], source))
     if "$array" in value:
         return np.asarray(value["$array"], dtype=float)
-    if "$float" in value:
-        return float(value["$float"])
+    if FLOAT_TAG in value:
+        return read_exact_float(value, "a setting")
     return {k: decode_setting(v, source) for k, v in value.items()}
 
 
@@ -398,10 +410,11 @@ def load_model(folder: str | Path) -> NnidModel:
     if not isinstance(tensors, dict):
         raise NnidInputError(_damaged(TypeError("no tensors by name")), source=str(tensor_path))
     # a NaN weight loads and predicts NaN everywhere: a damaged file, said at loading
-    broken = [k for k, v in tensors.items() if torch.is_tensor(v) and not v.isfinite().all()]
+    broken = [k for k, v in tensors.items() if torch.is_tensor(v) and not _sound(k, v)]
     if broken:
         raise NnidInputError(
-            f"'{broken[0]}' holds NaN or infinite values: the file is damaged",
+            f"'{broken[0]}' holds NaN or infinite values: the file is damaged (only a "
+            f"'{RECORD}.' series may, as its fit recorded them)",
             source=str(tensor_path),
         )
     try:
@@ -423,6 +436,37 @@ UNSAFE_TENSORS = (
     "damaged, or not written by this nnid: it holds something other than tensors (or is not a "
     "PyTorch file), and nnid loads tensors only, never code from a file"
 )
+
+
+def record_key(name: str) -> str:
+    """The ``tensors.pt`` name of the per-sample series ``name`` (:data:`RECORD`)."""
+    return f"{RECORD}.{name}"
+
+
+def _sound(key: str, tensor: torch.Tensor) -> bool:
+    """Whether a loaded tensor may be as it is: a weight only finite; a record (its name has a
+    :data:`RECORD` part, an ensemble's member's too) as its fit wrote it, NaN and ±inf
+    included: the UKF's innovation on a sample it made no update with is NaN, a diverged
+    gradient estimator's θ path runs through inf to NaN, and its model stays loadable."""
+    return RECORD in key.split(".") or bool(tensor.isfinite().all())
+
+
+def record_tensor(series: np.ndarray) -> torch.Tensor:
+    """A per-sample series as saved under a :func:`record_key`: float64, as fitted."""
+    return torch.from_numpy(np.array(series, dtype=np.float64))
+
+
+def saved_record(tensors: Mapping[str, torch.Tensor], name: str) -> np.ndarray:
+    """The series :func:`record_tensor` saved under ``record_key(name)``, checked: a float64
+    tensor; one missing is a RuntimeError, as a network's missing weight is in
+    ``load_state_dict`` (:func:`load_model` then says whether the file is gone)."""
+    key = record_key(name)
+    if key not in tensors:
+        raise RuntimeError(f"'{key}' is not in {TENSOR_FILE}")
+    value = tensors[key]
+    if not torch.is_tensor(value) or value.dtype != torch.float64:
+        raise TypeError(f"'{key}' in {TENSOR_FILE} is no float64 tensor")
+    return value.numpy().copy()
 
 
 def _damaged(exc: Exception) -> str:

@@ -51,6 +51,9 @@ from nnid.models.base import (
     REGRESSION_TRAINERS,
     NnidModel,
     check_log,
+    record_key,
+    record_tensor,
+    saved_record,
 )
 from nnid.physics.added_mass import mirrored_key, parse_added_mass_key, set_derivative
 from nnid.physics.damping import parse_coefficient_key
@@ -651,6 +654,66 @@ def warn_held_inputs(
     )
 
 
+def _inner_trainer(model: Any) -> Any:
+    """The trainer that fitted ``model``'s parameters (its ``trainer_``; a sequence's
+    ``trainer``, which fitted its last step), or None where it has none."""
+    trainer = getattr(model, "trainer_", None)
+    return getattr(trainer, "trainer", trainer)
+
+
+#: the record names (:func:`~nnid.models.base.record_key`) of a fit's per-sample series: a
+#: trainer's ``history_`` series by name, and the estimate's θ path where it is not the
+#: trainer's ``theta`` (RLS and the gradient estimator keep no ``history_``; the UKF's θ path is
+#: its ``theta``, saved once)
+TRAINER_HISTORY = "trainer_history"
+ESTIMATE_HISTORY = "estimate.history"
+
+
+def saved_records(model: Any) -> tuple[dict, dict[str, torch.Tensor]]:
+    """A fitted model's per-sample series as saved: their names for ``model.json``
+    (``trainer_history``: the series of its trainer's ``history_``, or null where it has none;
+    ``history``: the record holding the estimate's θ path, or null) and the series as float64
+    tensors for ``tensors.pt``. A model loaded from a file that kept no trainer has none, and
+    is saved so again."""
+    state: dict = {}
+    records: dict[str, np.ndarray] = {}  # record name -> series
+    series = getattr(_inner_trainer(model), "history_", None) or {}
+    if hasattr(model, "trainer_"):
+        state[TRAINER_HISTORY] = list(series) if series else None
+        records.update({f"{TRAINER_HISTORY}.{k}": v for k, v in series.items()})
+    path = model.estimate_.history
+    if path is None:
+        state["history"] = None
+    elif np.array_equal(path, series.get("theta", np.empty(0)), equal_nan=True):
+        state["history"] = f"{TRAINER_HISTORY}.theta"  # the UKF's: the same numbers, once
+    else:
+        state["history"] = ESTIMATE_HISTORY
+        records[ESTIMATE_HISTORY] = path
+    return state, {record_key(k): record_tensor(v) for k, v in records.items()}
+
+
+def restored_estimate_history(name: object, tensors: dict) -> np.ndarray | None:
+    """The estimate's θ path as :func:`saved_records` saved it: the record ``name`` names, or
+    None (null; absent from older files)."""
+    if name is None:
+        return None
+    if name not in (ESTIMATE_HISTORY, f"{TRAINER_HISTORY}.theta"):
+        raise ValueError(f"'history' names no θ path: {name!r}")
+    return saved_record(tensors, str(name))
+
+
+def restored_trainer_history(names: object, tensors: dict) -> dict[str, np.ndarray]:
+    """A trainer's per-sample ``history_`` as :func:`saved_records` saved it (the UKF's
+    ``t``, ``theta``, ``theta_std``, ``nu``, ``innovation``), checked: the series named, each
+    in ``tensors.pt``, of one length. A file edited by hand is refused at loading."""
+    if not isinstance(names, list) or not all(isinstance(n, str) for n in names):
+        raise TypeError("'trainer_history' is not a list of series names")
+    out = {n: saved_record(tensors, f"{TRAINER_HISTORY}.{n}") for n in names}
+    if len({v.shape[:1] for v in out.values()}) > 1:
+        raise ValueError("'trainer_history' holds series of different lengths")
+    return out
+
+
 def restored_attenuation(value: object, names: Sequence[str]) -> dict[str, tuple[float, float]]:
     """:func:`attenuated_unknowns`' verdict as saved, checked: ``{name: [ρ, bias]}`` over
     fitted unknowns; null, the only non-finite number it holds (an acceleration that is all
@@ -874,15 +937,24 @@ class ParametricModel(FossenPlant):
         self.pose_velocities = pose_velocities
         self.pose_savgol = pose_savgol
 
-    def _fit(self, log: pd.DataFrame, validation, progress: Progress) -> None:
-        from nnid.trainers.sequence import DecoupledSequence, sequence_dofs, sequence_steps
+    def _trainer(self) -> Any:
+        """A fresh trainer of this model's settings: ``trainer`` (least squares if None),
+        stepped through ``sequence`` where one is given."""
+        from nnid.trainers.sequence import DecoupledSequence, sequence_steps
 
         trainer = regression_trainer(self.trainer)
+        if self.sequence is not None:
+            return DecoupledSequence(sequence_steps(self.sequence), trainer)
+        return trainer
+
+    def _fit(self, log: pd.DataFrame, validation, progress: Progress) -> None:
+        from nnid.trainers.sequence import sequence_dofs, sequence_steps
+
+        trainer = self._trainer()
         if self.sequence is not None:
             steps = sequence_steps(self.sequence)
             unknowns = list(dict.fromkeys(n for s in steps for n in s.unknowns))
             dofs = sequence_dofs(steps)
-            trainer = DecoupledSequence(steps, trainer)
         else:
             dofs = list(checked_dofs(self.dofs))
             unknowns = expand_unknowns(self.unknowns, dofs, self.vehicle)
@@ -1018,16 +1090,25 @@ class ParametricModel(FossenPlant):
         # what the fit derived and judged, as the fitted model holds it: a loaded model lacked
         # report_ and attenuated_ (its warnings' grounds) that the fitted one had
         fit = {"report": self.report_.to_dict(), "attenuated": dict(self.attenuated_)}
-        return {**state, "not_excited": dict(self.not_excited_), **fit}, {}
+        # and what it recorded per sample (the UKF's history_, a recursive θ path): a loaded
+        # model had no trainer_ at all; series, not scalars, so tensors (none: no tensors.pt)
+        records, tensors = saved_records(self)
+        return {**state, "not_excited": dict(self.not_excited_), **fit, **records}, tensors
 
     def _restore(self, state: dict, tensors: dict) -> None:
         from nnid.trainers.least_squares import Estimate
 
         self._set_outputs(state["dofs"])
-        self.estimate_ = Estimate.from_state(state)
+        path = restored_estimate_history(state.get("history"), tensors)
+        self.estimate_ = Estimate.from_state(state, path)
         self.not_excited_ = {k: list(v) for k, v in state.get("not_excited", {}).items()}
         if "report" in state:  # absent from older files: the run folder's cleaning report
             self.report_ = CleaningReport.from_dict(state["report"])
             self.attenuated_ = restored_attenuation(state["attenuated"], self.estimate_.names)
         self.structure_ = ParametricFossen(self.vehicle, self.estimate_.names, self.dofs_)
         self.parts_ = self.structure_.parts(np.nan_to_num(self.estimate_.theta))
+        if TRAINER_HISTORY in state:  # absent from older files: no trainer_, as before
+            self.trainer_ = self._trainer()
+            if state[TRAINER_HISTORY] is not None:
+                history = restored_trainer_history(state[TRAINER_HISTORY], tensors)
+                _inner_trainer(self).history_ = history

@@ -83,10 +83,14 @@ def _params_table(metrics: dict) -> tuple[list[str], list[list[str]]]:
 
 def _significance(p: dict) -> str:
     """The significance cell: "yes" or "no" by the 95 % test, "not excited" for a parameter
-    the data do not excite (its model's ``not_excited_``: fitted to noise, its "no" is no test
-    result), "-" where no test ran (a jointly trained value without s.e.)."""
+    the data do not excite (its model's ``not_excited_``, or a zero regressor: fitted to noise
+    or not at all, its "no" is no test result), "collinear" for one the data do not separate
+    from others (only their combination is measured), "-" where no test ran (a jointly trained
+    value without s.e.)."""
     if p.get("excited") is False:
         return "not excited"
+    if p.get("collinear"):
+        return "collinear"
     if p.get("significant") is None:
         return "-"
     return "yes" if p["significant"] else "no"

@@ -21,6 +21,8 @@ import math
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
 
+from nnid.serialization import exact_float, read_exact_float
+
 Progress = Callable[..., None]  # (done: int, total: int | None, message: str, **scores)
 
 
@@ -125,21 +127,35 @@ class History:
 
 
 def _numbers(value: object, what: str) -> list[float]:
-    """A saved series: a list of numbers, null (a non-finite entry, written null) NaN again."""
-    if not isinstance(value, list) or not all(
-        v is None or (isinstance(v, int | float) and not isinstance(v, bool)) for v in value
-    ):
+    """A saved series: a list of numbers, each as :func:`~nnid.serialization.exact_float`
+    wrote it (a diverged run's inf tagged, so inf again), or null (NaN: older files wrote
+    every non-finite entry so)."""
+    if not isinstance(value, list):
         raise TypeError(f"the history's {what} is not a list of numbers")
-    return [math.nan if v is None else float(v) for v in value]
+    return [read_exact_float(v, f"the history's {what}") for v in value]
 
 
 def history_state(history: History | list[History] | None) -> dict | list | None:
     """A fit's history (one, or one per stage) as saved in ``model.json``: every field, so
     that :func:`restored_history` gives the fitted model's back (:meth:`History.as_dict` is a
-    summary: no time series, the trainer's series beside the fixed keys)."""
+    summary: no time series, the trainer's series beside the fixed keys). A non-finite entry
+    is tagged (:func:`~nnid.serialization.exact_float`): written null, the inf of a validation
+    run that diverged came back NaN, an undefined error instead of an infinitely bad one."""
     if isinstance(history, list):
-        return [asdict(h) for h in history]
-    return asdict(history) if isinstance(history, History) else None
+        return [_one_state(h) for h in history]
+    return _one_state(history) if isinstance(history, History) else None
+
+
+def _one_state(history: History) -> dict:
+    def exact(series: list[float]) -> list:
+        return [exact_float(v) for v in series]
+
+    state = asdict(history)
+    for key in ("train", "validation", "time"):
+        state[key] = exact(state[key])
+    state["extra"] = {k: exact(v) for k, v in state["extra"].items()}
+    state["info"] = {k: exact_float(v) for k, v in state["info"].items()}
+    return state
 
 
 def restored_history(value: object) -> History | list[History] | None:

@@ -61,8 +61,9 @@ class Estimate:
         return significant(self.percentile_error)
 
     def as_state(self) -> dict:
-        """The estimate as JSON-ready data (NaN becomes null on writing; see
-        :meth:`from_state`)."""
+        """The estimate's scalars as JSON-ready data (NaN becomes null on writing; see
+        :meth:`from_state`). Not ``history``: a series per sample is no scalar, and its model
+        saves it with its tensors (``tensors.pt``), given back to :meth:`from_state`."""
         return {
             "names": list(self.names),
             "theta": self.theta,
@@ -70,26 +71,39 @@ class Estimate:
             "sigma2": self.sigma2,
             "n_obs": self.n_obs,
             "dof_sigma2": self.dof_sigma2,
+            # what the fit found unexcited or collinear: the reports name them from it
+            "excitation": None if self.excitation is None else self.excitation.as_state(),
         }
 
     @classmethod
-    def from_state(cls, state: dict) -> Estimate:
-        """Inverse of :meth:`as_state` after a JSON round trip (null is NaN again)."""
+    def from_state(cls, state: dict, history: np.ndarray | None = None) -> Estimate:
+        """Inverse of :meth:`as_state` after a JSON round trip (null is NaN again), with the
+        θ per sample ``history`` saved apart (checked: [samples, P]). Files saved before the
+        excitation report was kept have none: None."""
         names = list(state["names"])
+        excitation = state.get("excitation")
+        if history is not None:
+            history = np.asarray(history, dtype=np.float64)
+            if history.ndim != 2 or history.shape[1] != len(names):
+                raise ValueError(f"the estimate's history is not [samples, {len(names)}]")
         return cls(
             names,
             np.array(state["theta"], dtype=float),
             np.array(state["cov"], dtype=float).reshape(len(names), len(names)),
             json_float(state["sigma2"]),
             int(state["n_obs"]),
+            None if excitation is None else ExcitationReport.from_state(excitation),
             dof_sigma2={k: json_float(v) for k, v in state["dof_sigma2"].items()},
+            history=history,
         )
 
     def as_dict(self) -> dict[str, dict[str, float | bool | None]]:
         """``{name: {"value": θ, "stderr": σ, "percentile_error": 100 σ/|θ| (%),
         "significant": bool}}``; a number that is not finite (an unidentified parameter) is
-        None."""
-        return {
+        None. A parameter the excitation check (Weiss eqs 93-98) found unexcited also has
+        ``"excited": False``, one it found collinear ``"collinear": True``: its "not
+        significant" is no test result, and the reports say why."""
+        out: dict[str, dict[str, float | bool | None]] = {
             n: {
                 "value": _finite(v),
                 "stderr": _finite(s),
@@ -105,6 +119,14 @@ class Estimate:
                 strict=True,
             )
         }
+        report = self.excitation
+        for name in [] if report is None else report.unexcited:
+            if name in out:  # a combined estimate (Caccia's) may carry a part's report
+                out[name]["excited"] = False
+        for name in [] if report is None else report.collinear:
+            if name in out:
+                out[name]["collinear"] = True
+        return out
 
 
 def _finite(x: float) -> float | None:

@@ -1,0 +1,205 @@
+"""What a saved model gives back on loading: the state a user reads of the fitted one (the
+trainer and its filter history, the excitation verdicts, a history's inf), and a model saved
+by an older nnid whose vehicle name a newer check refuses."""
+
+from __future__ import annotations
+
+import json
+import math
+import warnings
+
+import numpy as np
+import pytest
+import torch
+
+from nnid import load_model
+from nnid.datasets.simulator import simulate
+from nnid.errors import NnidInputError
+from nnid.models.parametric import ParametricModel
+from nnid.reports.train_report import _params_table
+from nnid.serialization import dumps
+from nnid.trainers.history import History, history_state, restored_history
+from nnid.trainers.least_squares import Estimate, ExcitationWarning, solve_least_squares
+from nnid.trainers.recursive import GradientEstimator
+from nnid.trainers.ukf import UnscentedKalman
+from nnid.vehicle import load_vehicle, vehicle_from_dict
+
+
+@pytest.fixture(scope="module")
+def seamor():
+    return load_vehicle("seamor")
+
+
+@pytest.fixture(scope="module")
+def surge(seamor):
+    """20 s of held surge forces, all forward (u ≥ 0: u|u| and u² are the same column)."""
+    rng = np.random.default_rng(1)
+    inputs = np.zeros((400, 6))
+    inputs[:, 0] = np.repeat(rng.uniform(2.0, 15.0, 10), 40)
+    return simulate(seamor, inputs, 0.05)
+
+
+def _edit(folder, change) -> None:
+    """Edit the saved model.json as a hand (or an older nnid) would have written it."""
+    saved = json.loads((folder / "model.json").read_text())
+    change(saved)
+    (folder / "model.json").write_text(json.dumps(saved))
+
+
+@pytest.fixture(scope="module")
+def ukf_model(seamor, surge):
+    model = ParametricModel(seamor, ["X_udot", "X:u*abs(u)"], ["u"], trainer=UnscentedKalman())
+    with warnings.catch_warnings():  # a noise-free log: the filter says it is underconfident
+        warnings.simplefilter("ignore", UserWarning)
+        return model.fit(surge)
+
+
+def test_a_loaded_ukf_model_keeps_its_trainer_and_filter_history(ukf_model, tmp_path):
+    """trainer_ was not saved: a UKF-fitted model's filter history (trainer_.history_, the
+    per-sample θ, σ_θ, ν and innovation) and the estimate's θ path were gone on loading."""
+    model = ukf_model
+    model.save(tmp_path)
+    back = load_model(tmp_path)
+    assert back.trainer_.kind == "ukf" and back.trainer_name() == "ukf"
+    fitted = model.trainer_.history_
+    assert (
+        set(back.trainer_.history_)
+        == set(fitted)
+        == {
+            "t",
+            "theta",
+            "theta_std",
+            "nu",
+            "innovation",
+        }
+    )
+    for key, series in fitted.items():
+        np.testing.assert_array_equal(back.trainer_.history_[key], series)
+        assert back.trainer_.history_[key].dtype == np.float64
+    np.testing.assert_array_equal(back.estimate_.history, model.estimate_.history)
+    # a file saved before these were kept loads as it did: no trainer_, no history
+    _edit(tmp_path, lambda s: [s["state"].pop(k) for k in ("trainer_history", "history")])
+    (tmp_path / "tensors.pt").unlink()
+    old = load_model(tmp_path)
+    assert not hasattr(old, "trainer_") and old.estimate_.history is None
+    assert old.trainer_name() == "ukf"
+    old.save(tmp_path / "again")  # and saved again: still none, not an unfitted trainer_
+    again = load_model(tmp_path / "again")
+    assert not hasattr(again, "trainer_") and not (tmp_path / "again" / "tensors.pt").exists()
+
+
+def test_a_ukf_fit_keeps_its_per_sample_series_out_of_model_json(ukf_model, tmp_path):
+    """The filter's series went into model.json as indented JSON (146 kB for these 400
+    samples, tens of MB for a long log, parsed by every report and load): they are tensors,
+    in tensors.pt (float64), and the θ path the estimate repeats is saved once."""
+    ukf_model.save(tmp_path)
+    saved = json.loads((tmp_path / "model.json").read_text())
+
+    def longest(value) -> int:  # the longest list anywhere in the file
+        if isinstance(value, dict):
+            return max(map(longest, value.values()), default=0)
+        if isinstance(value, list):
+            return max([len(value), *map(longest, value)])
+        return 0
+
+    assert longest(saved) < 50 and (tmp_path / "model.json").stat().st_size < 10_000
+    assert saved["state"]["trainer_history"] == ["t", "theta", "theta_std", "nu", "innovation"]
+    assert saved["state"]["history"] == "trainer_history.theta"
+    tensors = torch.load(tmp_path / "tensors.pt", weights_only=True)
+    assert sorted(tensors) == sorted(
+        f"record.trainer_history.{k}" for k in ukf_model.trainer_.history_
+    )
+    assert all(v.dtype == torch.float64 for v in tensors.values())
+    (tmp_path / "tensors.pt").unlink()  # the series named, not there: said, with the file
+    with pytest.raises(
+        NnidInputError,
+        match=r"'record\.trainer_history\.\w+' is not in tensors\.pt\); its tensors\.pt is miss",
+    ):
+        load_model(tmp_path)
+
+
+def test_a_recorded_series_may_hold_nan_and_inf_where_a_weight_may_not(seamor, surge, tmp_path):
+    """A diverged gradient estimator's θ path runs through inf to NaN: a record, kept as the
+    fit wrote it and loadable (load_model refuses a non-finite tensor only among weights); a
+    θ path with no trainer history_ (RLS, gradient) is saved under its own name."""
+    model = ParametricModel(
+        seamor, ["X_udot", "X:u*abs(u)"], ["u"], trainer=GradientEstimator(gain=1e6)
+    )
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # diverged, and said so
+        model.fit(surge)
+    path = model.estimate_.history
+    assert np.isinf(path).any() and np.isnan(path).any()
+    model.save(tmp_path)
+    assert json.loads((tmp_path / "model.json").read_text())["state"]["history"] == (
+        "estimate.history"
+    )
+    back = load_model(tmp_path)
+    np.testing.assert_array_equal(back.estimate_.history, path)
+    assert not hasattr(back.trainer_, "history_")
+
+
+def test_a_history_keeps_an_infinite_validation_error_through_json():
+    """A diverged validation run's inf was written null and read back NaN (undefined, not
+    infinitely bad); it is tagged now. Null, as older files hold, still reads NaN; a tag that
+    is no non-finite number is refused."""
+    hist = History(
+        train=[2.0, 1.0, 0.5],
+        validation=[1.0, math.inf, math.nan],
+        time=[0.0, 0.1, 0.2],
+        extra={"mu": [1e-3, -math.inf, 1e-2]},
+        info={"peak": math.inf},
+    )
+    back = restored_history(json.loads(dumps(history_state(hist))))
+    assert back.validation[:2] == [1.0, math.inf] and math.isnan(back.validation[2])
+    assert back.extra["mu"][1] == -math.inf and back.info["peak"] == math.inf
+    assert back.train == hist.train and back.time == hist.time
+    older = {**history_state(hist), "validation": [1.0, None, None]}
+    assert all(math.isnan(v) for v in restored_history(older).validation[1:])
+    with pytest.raises(TypeError, match="validation"):
+        restored_history({**history_state(hist), "validation": [{"$float": "1e999"}]})
+
+
+def test_a_model_saved_with_a_control_character_in_its_vehicle_name_loads(seamor, surge, tmp_path):
+    """An older nnid saved vehicle names with control characters that vehicle_name now
+    refuses: such a model stays loadable, its name escaped and said; new input is refused."""
+    model = ParametricModel(seamor, ["X_udot", "X:u*abs(u)"], ["u"]).fit(surge)
+    model.save(tmp_path)
+    _edit(tmp_path, lambda s: s["settings"]["vehicle"]["$vehicle"].update(name="sea\nmor\x00"))
+    with pytest.warns(UserWarning, match=r"control character.*loaded as 'sea\\\\nmor\\\\x00'"):
+        back = load_model(tmp_path)
+    assert back.vehicle.name == "sea\\nmor\\x00" and back.describe()["vehicle"] == "sea\\nmor\\x00"
+    assert np.array_equal(back.estimate_.theta, model.estimate_.theta)
+    data = {**seamor.model_dump(mode="json"), "name": "sea\nmor"}
+    with pytest.raises(Exception, match="one line of text"):
+        vehicle_from_dict(data, "new.toml")
+
+
+def test_a_loaded_model_reports_what_least_squares_found_collinear_or_unexcited(
+    seamor, surge, tmp_path
+):
+    """Estimate.from_state dropped the excitation report: a parameter least squares found
+    collinear (u|u| and u² on u ≥ 0) or unexcited (a zero column) read "no" in the parameter
+    table, a test result it is not. The fitted and the loaded model say why alike."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ExcitationWarning)
+        model = ParametricModel(seamor, ["X_udot", "X:u*abs(u)", "X:u*u", "X:v"], ["u"])
+        model.fit(surge)
+    model.save(tmp_path)
+    back = load_model(tmp_path)
+    assert back.estimate_.excitation == model.estimate_.excitation
+    assert back.estimate_.excitation.condition == math.inf  # tagged, not NaN
+    assert back.params == model.params
+    cells = {row[0]: row[5] for row in _params_table({"params": back.params})[1]}
+    assert cells == {
+        "`X_udot`": "yes",
+        "`X:u*abs(u)`": "collinear",
+        "`X:u*u`": "collinear",
+        "`X:v`": "not excited",
+    }
+    # least squares' own verdict, apart from the model's not_excited_ (X:v is in both)
+    phi = np.c_[np.linspace(1.0, 2.0, 50), np.zeros(50)]
+    with pytest.warns(ExcitationWarning, match="not excited"):
+        est = solve_least_squares(phi, 3.0 * phi[:, 0], names=["a", "b"])
+    again = Estimate.from_state(json.loads(dumps(est.as_state())))
+    assert again.as_dict()["b"]["excited"] is False and "excited" not in again.as_dict()["a"]
