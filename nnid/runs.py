@@ -22,7 +22,7 @@ from typing import Any
 from nnid.errors import NnidInputError, checked_number
 from nnid.reports.cells import score_cell
 from nnid.trainers.history import Progress, silent
-from nnid.validation import ALPHA_MAX, ALPHA_MIN, repeated
+from nnid.validation import ALPHA_MAX, ALPHA_MIN, MIN_WINDOW_S, repeated
 
 
 @dataclass
@@ -530,10 +530,6 @@ def check_detect_inputs(model_dir: Path, data: str, follow: bool = False) -> Non
             "is a folder: --follow reads one growing CSV file (or '-')", source=data,
             field="--data",
         )  # fmt: skip
-
-
-#: the shortest isolation window ``--window`` takes, s
-MIN_WINDOW_S = 0.5
 
 
 def _checked_window(window: float | None) -> None:

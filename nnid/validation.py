@@ -52,6 +52,11 @@ MAX_WIDTH = 100_000
 #: likelier noise than not. Here, below both the config and the manifest, so each takes it
 ALPHA_MIN, ALPHA_MAX = 1e-12, 0.5
 
+#: the shortest isolation window after a fault alarm, s (``nnid detect --window``, a batch
+#: manifest's ``options.window``): here, below both the CLI's runs and the manifest, so each
+#: takes it
+MIN_WINDOW_S = 0.5
+
 
 def repeated(names: list[str]) -> list[str]:
     """The names a list gives more than once, sorted (for an error that names them)."""

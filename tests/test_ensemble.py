@@ -384,3 +384,22 @@ def test_sigterm_to_the_cli_ends_the_ensemble_workers(tmp_path):
     assert alive == []
     assert code == 128 + signal.SIGTERM
     assert not (tmp_path / "out" / "metrics.json").exists()
+
+
+def test_a_member_predicting_a_small_coupling_on_a_still_dof_is_not_wild():
+    """A log that holds w at rest (range 0): the members' w differs by a few mm/s, a
+    hundredth of u's range, and the one apart was named wild ("diverged or left the range").
+    A velocity is judged on its scale's widest range (u v w), as the scores judge one the
+    data barely moves; a w 10 ranges of u away is still named."""
+    from nnid.models.ensemble import wild_members
+
+    t = np.arange(200) * 0.05
+    log = pd.DataFrame({"t": t, "u": np.sin(t), "w": 0.0})
+    u = np.sin(t)
+    preds = np.stack(
+        [np.stack([u, np.full(t.size, w)], 1) for w in (0.001, 0.0012, 0.02)]
+    )  # members x rows x (u, w)
+    mask = np.ones(t.size, dtype=bool)
+    assert wild_members(preds, log, ["u", "w"], mask) == []
+    preds[2, :, 1] = 25.0  # 12 ranges of u: wild
+    assert wild_members(preds, log, ["u", "w"], mask) == [2]

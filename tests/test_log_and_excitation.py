@@ -468,3 +468,37 @@ def test_the_velocity_frame_check_turns_the_velocity_as_the_mapping_does():
     nu = rng.normal(size=(50, 3))
     expected = np.einsum("nij,nj->ni", rotation_from_euler(angles), nu)
     assert np.allclose(np.stack(north_east(angles, nu), 1), expected[:, :2], atol=1e-12)
+
+
+def test_a_pose_integrated_exactly_at_a_held_heading_is_no_world_frame():
+    """Body velocities whose pose is their exact trapezoid integral at a held heading: both
+    readings fit to rounding, and their ratio was one of rounding errors (12 at ψ = 1 rad:
+    refused as NED velocities). Rounding now reads as equal residuals: about 1."""
+    from scipy.integrate import cumulative_trapezoid
+
+    from nnid.datasets.log import velocity_frame_ratios
+
+    t = np.arange(0.0, 60.0, 0.1)
+    u, v = 1.0 + 0.5 * np.sin(0.3 * t), 0.2 * np.cos(0.2 * t)
+    for heading in (0.5, 1.0, 2.0, -2.5):
+        c, s = math.cos(heading), math.sin(heading)
+        log = pd.DataFrame(
+            {"t": t, "x": cumulative_trapezoid(c * u - s * v, t, initial=0.0),
+             "y": cumulative_trapezoid(s * u + c * v, t, initial=0.0), "z": 0.0, "phi": 0.0,
+             "theta": 0.0, "psi": heading, "u": u, "v": v, "w": 0.0, "tau_X": 1.0}
+        )  # fmt: skip
+        [(_, ratio, fit, _)] = velocity_frame_ratios(log)
+        assert fit > 0.99 and abs(ratio - 1.0) < 1e-3, (heading, ratio)
+        assert validate_log(log, "exact.csv") is log
+
+
+def test_the_velocity_frame_check_counts_the_seconds_that_hold_velocities():
+    """Windows over empty u, v, w cells hold no evidence of the frame: a minute whose
+    velocities stop after 12 s counted 58 s of windows (the 20 s the check asks for); it
+    counts the seconds with data."""
+    from nnid.datasets.log import velocity_frame_ratios
+
+    log = _cruising_log(lambda t: 1.5 * np.sin(0.15 * t))
+    log.loc[log["t"] > 12.0, ["u", "v", "w"]] = np.nan
+    [(_, _, _, seconds)] = velocity_frame_ratios(log)
+    assert 9.0 < seconds < 12.0, seconds

@@ -1060,3 +1060,14 @@ def test_manifest_and_loop_config_take_alpha_bounds_from_one_definition() -> Non
 
     expected = (validation.ALPHA_MIN, validation.ALPHA_MAX)
     assert bounds(Options) == bounds(LoopConfig) == expected
+
+
+def test_manifest_and_detect_take_the_window_bound_from_one_definition() -> None:
+    """The manifest's options.window restated --window's 0.5 s (nnid.runs.MIN_WINDOW_S) as a
+    literal: moving one would leave the other behind. Both take nnid.validation's."""
+    from nnid import runs, validation
+    from nnid.scale.manifest import Options
+
+    meta = Options.model_fields["window"].metadata
+    assert next(m.ge for m in meta if hasattr(m, "ge")) == validation.MIN_WINDOW_S
+    assert runs.MIN_WINDOW_S is validation.MIN_WINDOW_S

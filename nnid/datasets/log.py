@@ -360,6 +360,10 @@ VELOCITY_CHECK_SECONDS = 20.0
 #: and the world reading must explain this share of the displacement (its R²): a ratio of two
 #: poor fits (a pose and velocities that do not agree either way) says nothing of the frame
 VELOCITY_CHECK_FIT = 0.5
+#: a residual under this share of the displacement's sum of squares is rounding, not misfit:
+#: it is added to both readings' residuals, so that two exact fits (a pose integrated from its
+#: velocities at a held heading) read 1, not a ratio of rounding errors (0.1 to 12 by chance)
+VELOCITY_CHECK_ROUNDING = 1e-9
 
 
 def north_east(angles: np.ndarray, nu: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -455,9 +459,12 @@ def velocity_frame_ratios(df: pd.DataFrame) -> list[tuple[object, float, float, 
                 tt * np.abs(xd) ** 2 - 2 * np.real(np.conj(xd) * xt * td) + xx * np.abs(td) ** 2
             )
             residual[name] = np.where(det > 1e-12 * xx * tt, dd - fitted / det, np.nan)
-        ratio = residual["body"] / residual["world"]
+        rounding = VELOCITY_CHECK_ROUNDING * dd
+        ratio = (residual["body"] + rounding) / (residual["world"] + rounding)
         fit = 1.0 - residual["world"] / drift_only
-    seconds = np.bincount(k, minlength=n) * step
+    # a window counts by the share of its time that holds data: windows over a long gap in
+    # u, v, w add no seconds of evidence (tau: the window's steps that are not left out)
+    seconds = np.bincount(k, tau, minlength=n) / lag
     return [
         (names[e], float(ratio[e]), float(fit[e]), float(seconds[e]))
         for e in np.flatnonzero(np.isfinite(ratio) & np.isfinite(fit))

@@ -117,6 +117,16 @@ def left_range(y: np.ndarray, p: np.ndarray, width: float) -> np.ndarray:
     return ~np.isfinite(p) | (p < float(y.min()) - span) | (p > float(y.max()) + span)
 
 
+def same_scale(column: str, columns: Sequence[str]) -> list[str]:
+    """The velocities among ``columns`` measured on ``column``'s scale: the linear u v w of a
+    linear velocity, the angular p q r of an angular one; none for a column that is not a
+    velocity. A velocity the data barely moves is judged for divergence by their widest
+    range, not by its own (the data's noise, next to which any coupling reads as wild)."""
+    if column not in VELOCITY:
+        return []
+    return [g for g in columns if g in VELOCITY and (g in "uvw") == (column in "uvw")]
+
+
 def unscored_divergence(
     log: pd.DataFrame, predicted: pd.DataFrame, scored: Sequence[str], left_out: Sequence[str],
     mask: np.ndarray,
@@ -135,7 +145,7 @@ def unscored_divergence(
         ok = np.isfinite(y)
         if not ok.any():
             continue
-        group = [g for g in scored if g in VELOCITY and (g in "uvw") == (c in "uvw")]
+        group = same_scale(c, scored)
         cols = [log[g].to_numpy(np.float64)[mask] for g in group]
         widths = [_range(v) for v in cols if np.isfinite(v).any()]
         # judged where it was measured, as score_prediction judges a scored column: a sample

@@ -30,7 +30,7 @@ import torch
 from sklearn.base import clone
 
 from nnid.errors import NnidInputError
-from nnid.evaluation.evaluate import DIVERGENCE_FACTOR, left_range
+from nnid.evaluation.evaluate import DIVERGENCE_FACTOR, left_range, same_scale
 from nnid.evaluation.metrics import warmup_mask
 from nnid.evaluation.prediction import Replay
 from nnid.models.base import NnidModel, learned_state, restore_learned
@@ -331,19 +331,28 @@ def wild_members(
     predictions pooled with the measured column where the log has one, on the ``mask`` rows
     where every other member is finite. A rule of the others, not of the member: with the
     data in the reference, the sane one of two members is not named for the wild one's
-    range; a row where every member is NaN (an input the log lacks) blames none."""
+    range; a row where every member is NaN (an input the log lacks) blames none. A velocity
+    is measured against the widest reference of its scale (:func:`same_scale`), as the scores
+    judge one the data barely moves: a w the log holds at rest is no divergence when one
+    member predicts a coupling of a hundredth of u's range and the others a thousandth."""
+    outputs = list(outputs)
     wild = []
     for k in range(preds.shape[0]):
         others = np.delete(preds, k, axis=0)
+        rows, references = {}, {}
         for c, name in enumerate(outputs):
-            rows = mask & np.isfinite(others[:, :, c]).all(axis=0)
-            reference = others[:, rows, c].ravel()
+            rows[name] = mask & np.isfinite(others[:, :, c]).all(axis=0)
+            reference = others[:, rows[name], c].ravel()
             if name in log:
                 measured = log[name].to_numpy(np.float64)[mask]
                 reference = np.concatenate([reference, measured[np.isfinite(measured)]])
-            if rows.any() and reference.size:
-                width = float(np.ptp(reference))
-                if left_range(reference, preds[k, rows, c], width).any():
+            references[name] = reference
+        widths = {n: float(np.ptp(r)) if r.size else 0.0 for n, r in references.items()}
+        for c, name in enumerate(outputs):
+            reference = references[name]
+            if rows[name].any() and reference.size:
+                width = max([widths[name], *(widths[g] for g in same_scale(name, outputs))])
+                if left_range(reference, preds[k, rows[name], c], width).any():
                     wild.append(k)
                     break
     return wild

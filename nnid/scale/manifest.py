@@ -34,6 +34,7 @@ from nnid.errors import NnidInputError
 from nnid.validation import (
     ALPHA_MAX,
     ALPHA_MIN,
+    MIN_WINDOW_S,
     StrictModel,
     read_toml,
     refuse_other_file,
@@ -53,7 +54,7 @@ class Options(StrictModel):
     dofs: str | list[str] | None = None
     validation: str | list[str] | None = None
     exclude: str | list[str] | None = None
-    window: float | None = Field(None, ge=0.5)
+    window: float | None = Field(None, ge=MIN_WINDOW_S)
 
     @field_validator("dofs", "validation", "exclude")
     @classmethod

@@ -161,7 +161,8 @@ def _one_state(history: History) -> dict:
 def restored_history(value: object) -> History | list[History] | None:
     """The inverse of :func:`history_state` after a JSON round trip, checked: a file edited by
     hand is refused at loading (TypeError), never a history that fails when read. A
-    non-finite entry (a diverged validation run's inf) was written null and is NaN again."""
+    non-finite entry comes back as tagged (a diverged validation run's inf is inf again); null,
+    as files written before the tag hold for every non-finite entry, is NaN."""
     if value is None:
         return None
     if isinstance(value, list):
