@@ -330,3 +330,9 @@ def test_plateaus_are_cut_at_missing_samples_and_other_uneven_stamps_are_refused
     position = np.r_[0.0, np.cumsum(0.01 * force[:-1] * np.diff(t))]
     with pytest.raises(NnidInputError, match=r"t of experiment dive3 is not uniformly sampled"):
         find_plateaus(t, position, force, np.zeros(t.size, int), names=["dive3"])
+    # dropouts with a lone sample between two (and two samples between three) are cut, not
+    # refused as another rate: the plateaus either side stay whole
+    t = np.r_[np.arange(300), 310, 320, 321, 330, 340 + np.arange(300)] * 0.1
+    position = 0.02 * t + rng.normal(0, 1e-3, t.size)
+    plateaus = find_plateaus(t, position, np.full(t.size, 2.0), np.zeros(t.size, int))
+    assert [p.n for p in plateaus] == [300, 300]

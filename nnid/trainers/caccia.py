@@ -154,6 +154,11 @@ def _asymptote(t: np.ndarray, x: np.ndarray, f_crit: float = 3.0) -> tuple[float
     return float(coef[1]), float(np.sqrt(cov[1, 1]))
 
 
+#: this many missing-sample gaps in a row are a stretch logged at a slower rate, refused; fewer
+#: are a logger's dropouts, cut (a lone sample between two is no plateau of any length)
+SLOW_GAPS = 4
+
+
 def _sample_interval(
     t: np.ndarray, joins: np.ndarray, run: str, cut_gaps: bool = True
 ) -> tuple[float, np.ndarray]:
@@ -161,14 +166,17 @@ def _sample_interval(
     resume after another run's, not an interval) and where samples are missing (an interval
     over 1 + :data:`UNIFORM_TOLERANCE` of the median). The Savitzky-Golay filters count time
     in samples, so anything else that is not uniform is refused, naming ``run``: an interval
-    shorter than the median (jitter, a faster rate) or two gaps in a row (a slower rate, whose
-    every sample would be cut off alone and dropped); a gap too unless ``cut_gaps``."""
+    shorter than the median (jitter, a faster rate) or :data:`SLOW_GAPS` gaps in a row (a
+    slower rate, whose every sample would be cut off alone and dropped; fewer are dropouts, a
+    lone sample between two of them too short for any plateau); a gap too unless
+    ``cut_gaps``."""
     d = np.diff(t)
     within = ~joins
     dt = float(np.median(d[within])) if within.any() else 1.0
     missing = within & (d > (1.0 + UNIFORM_TOLERANCE) * dt)
     bad = within & (d < (1.0 - UNIFORM_TOLERANCE) * dt)
-    bad[:-1] |= missing[:-1] & missing[1:]
+    in_row = np.convolve(missing.astype(np.int64), np.ones(SLOW_GAPS, np.int64), "valid")
+    bad[: in_row.size] |= in_row == SLOW_GAPS
     if not cut_gaps:
         bad |= missing
     if bad.any():
