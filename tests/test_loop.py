@@ -70,8 +70,6 @@ def test_correlation_grid_keeps_every_label_inside_the_figure(rng, monkeypatch, 
     """The report's correlation grid has fixed margins (no layout engine): every panel's
     tick labels, axis labels, title and legend must still lie inside the figure and out of
     the other panels, from one DOF to six."""
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-
     from nnid.reports import loop_report
 
     built = []
@@ -82,6 +80,14 @@ def test_correlation_grid_keeps_every_label_inside_the_figure(rng, monkeypatch, 
     uri = loop_report.correlation_figure(dict.fromkeys("uvwpqr"[:n_dofs], c), "baseline")
     assert uri.startswith("data:image/png;base64,")
     (fig,) = built
+    _assert_labels_inside(fig)
+
+
+def _assert_labels_inside(fig) -> None:
+    """A figure of fixed margins (no layout engine): every panel's tick labels, axis labels,
+    title and legend lie inside the figure and out of the other panels."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
     assert fig.get_layout_engine() is None  # the fixed margins, not the constrained layout
     renderer = FigureCanvasAgg(fig).get_renderer()
     page = fig.bbox
@@ -93,6 +99,29 @@ def test_correlation_grid_keeps_every_label_inside_the_figure(rng, monkeypatch, 
     for i, box in enumerate(boxes):  # a panel's labels never reach into another panel
         for j, panel in enumerate(panels):
             assert i == j or not box.overlaps(panel), (i, j)
+
+
+@pytest.mark.parametrize(("n_dofs", "amplitude", "longest"), [(6, 3e-4, 7), (1, 1e6, 2)])
+def test_free_run_figure_draws_once_with_every_label_inside(
+    monkeypatch, n_dofs, amplitude, longest
+):
+    """The held-out free-run figure has fixed margins (the constrained layout drew it twice):
+    its velocity tick labels, unbounded unlike a correlation's, still fit, from a DOF barely
+    moving (labels of seven or eight characters, -0.00050) to a diverged run (an offset, 1e6)."""
+    from nnid.reports import loop_report
+
+    built = []
+    real_uri = loop_report.figure_uri
+    monkeypatch.setattr(loop_report, "figure_uri", lambda fig: built.append(fig) or real_uri(fig))
+    t = np.arange(600) * 0.1
+    dofs = list("uvwpqr"[:n_dofs])
+    measured = pd.DataFrame({d: amplitude * np.sin(t / 7) for d in dofs})
+    uri = loop_report.free_run_figure(t, measured, 1.1 * measured, 0.9 * measured, dofs)
+    assert uri.startswith("data:image/png;base64,")
+    (fig,) = built
+    _assert_labels_inside(fig)
+    # the case asked for: labels this long (an offset, 1e6, keeps the diverged run's short)
+    assert max(len(x.get_text()) for x in fig.axes[0].get_yticklabels()) >= longest
 
 
 # -- candidates ------------------------------------------------------------------------------------

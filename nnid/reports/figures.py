@@ -35,16 +35,22 @@ FIXED_GAPS = dict(hspace=0.35, wspace=0.15)
 
 
 def new_figure(
-    rows: int = 1, cols: int = 1, width: float = 9.0, height: float = 3.0, fixed: bool = False
+    rows: int = 1,
+    cols: int = 1,
+    width: float = 9.0,
+    height: float = 3.0,
+    fixed: bool = False,
+    left: float | None = None,
 ):
     """A figure and its axes grid ``[rows, cols]`` (``height`` per row), laid out so tick
     labels of one panel never run into the next. ``fixed``: :data:`FIXED_MARGINS_IN` instead of
     matplotlib's constrained layout, for a grid of small panels whose labels are known to
     fit; it draws in about half the time (the loop report's correlation grid, twelve panels
-    drawn twice in every ``nnid loop``)."""
+    drawn twice in every ``nnid loop``). ``left``: a wider left margin [in] of a ``fixed``
+    figure, for y tick labels longer than a correlation's."""
     if fixed:
         fig = Figure(figsize=(width, height * rows))
-        m = FIXED_MARGINS_IN
+        m = FIXED_MARGINS_IN if left is None else {**FIXED_MARGINS_IN, "left": left}
         fig.subplots_adjust(
             left=m["left"] / width,
             right=1.0 - m["right"] / width,

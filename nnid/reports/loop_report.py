@@ -400,13 +400,20 @@ def correlation_figure(analysis: dict, title: str) -> str:
     return figure_uri(fig)
 
 
+#: inches left of the free-run panels: a velocity's tick labels are not bounded like a
+#: correlation's; room for the y label and eight characters (``−0.00050``, a DOF barely
+#: moving) with one to spare (a test holds the labels inside for amplitudes 1e-4 to 1e6)
+FREE_RUN_LEFT_IN = 1.2
+
+
 def free_run_figure(t, measured, before, after, dofs, window_s: float = 60.0) -> str:
     """Held-out velocities: measured, baseline and augmented free runs over the first
     ``window_s`` of the first held-out experiment."""
     keep = t - t[0] <= window_s
     if "experiment" in measured:
         keep &= (measured["experiment"] == measured["experiment"].iloc[0]).to_numpy()
-    fig, axes = new_figure(len(dofs), 1, 10.0, 1.5)
+    # fixed margins: the constrained layout drew the figure twice (to place, then to paint)
+    fig, axes = new_figure(len(dofs), 1, 10.0, 1.5, fixed=True, left=FREE_RUN_LEFT_IN)
     for k, d in enumerate(dofs):
         ax = axes[k, 0]
         ax.plot(t[keep], measured[d][keep], color="black", lw=1.0, label="measured")
