@@ -336,3 +336,26 @@ def test_plateaus_are_cut_at_missing_samples_and_other_uneven_stamps_are_refused
     position = 0.02 * t + rng.normal(0, 1e-3, t.size)
     plateaus = find_plateaus(t, position, np.full(t.size, 2.0), np.zeros(t.size, int))
     assert [p.n for p in plateaus] == [300, 300]
+
+
+def test_the_pieces_a_gap_cut_a_run_into_keep_its_weight_setting(setup):
+    """resample_log cuts a run at a 5-s hole into pieces 'weight1#0', 'weight1#1' (piece_of
+    'weight1'). Caccia took each piece for an experiment: by default a weight setting each
+    (every later run's i shifted by one, ΔW 5.56 for 7.11), and with settings keyed by the
+    runs' names 'no weight setting for experiments ['weight1#0', …]'. The pieces are their
+    run: the fit is that of the log with the hole and no pieces, either way."""
+    from nnid.datasets.preprocess import resample_log
+
+    cfg, _, vehicle, log = setup
+    hole = (log["experiment"] == "weight1") & log["t"].between(100.0, 105.0)
+    holed = log[~hole].reset_index(drop=True)
+    pieces = resample_log(holed, 10.0, gap=1.0)
+    assert {"weight1#0", "weight1#1"} <= set(pieces["experiment"])
+    for settings in (None, {f"weight{k}": k for k in range(5)}):
+        fits = []
+        for data in (holed, pieces):
+            trainer = cfg.model.build(vehicle).trainer()
+            trainer.settings = settings
+            fits.append(trainer.fit_steady(data, vehicle))
+        assert fits[1].names == fits[0].names
+        np.testing.assert_allclose(fits[1].theta, fits[0].theta, rtol=1e-9)

@@ -214,3 +214,25 @@ def test_pieces_are_numbered_and_clocked_alike_by_mask_gaps_and_resample():
         assert list(dict.fromkeys(out["experiment"])) == ["dive#0", "dive#1"]
         second = out[out["experiment"] == "dive#1"]
         assert second["t"].iloc[0] == pytest.approx(t[240] - t[0])
+
+
+def test_a_sequence_step_naming_a_run_takes_all_its_pieces():
+    """A Weiss sequence step names its run ('surge'); masked at a gap the run became pieces
+    'surge#0', 'surge#1' (piece_of 'surge') and the step was refused: 'the log has no
+    experiments ['surge']'. The step takes every piece of its run, and no other run."""
+    from nnid.datasets.arrays import motion_arrays
+    from nnid.trainers.sequence import _subset
+
+    log = pd.concat(
+        [_mocap_log(60).assign(experiment="surge"), _mocap_log(40).assign(experiment="yaw")],
+        ignore_index=True,
+    )
+    log.loc[20:24, "u"] = np.nan
+    [pieces] = mask_gaps([log], ["u"])
+    assert list(pd.unique(pieces["experiment"])) == ["surge#0", "surge#1", "yaw"]
+    data = motion_arrays(pieces)
+    assert list(data["experiment_runs"]) == ["surge", "surge", "yaw"]
+    assert _subset(data, ["surge"])["t"].size == 55
+    assert _subset(data, ["surge#1"])["t"].size == 35  # a piece by its own name still
+    with pytest.raises(NnidInputError, match=r"no experiments \['roll'\]"):
+        _subset(data, ["roll"])

@@ -389,6 +389,49 @@ def test_the_rate_check_turns_the_attitude_as_the_kinematics_does():
         assert abs(slope - 1.0) < 0.01, (col, slope)
 
 
+def _tumbling_run(name: str, seconds: float, dt: float) -> pd.DataFrame:
+    """A run ``name`` of a tumbling attitude (roll and pitch to 0.6 rad) sampled at ``dt``,
+    its body rates exact (nnid.physics.kinematics' T_Θ⁻¹ Θ̇ of the analytic angles)."""
+    import torch
+
+    from nnid.physics.kinematics import euler_rate_matrix_inverse
+
+    t = np.arange(round(seconds / dt) + 1) * dt
+    w = np.array([0.7, 0.45, 0.3])
+    angles = np.array([0.6, 0.5, 1.5]) * np.sin(w * t[:, None] + np.array([0.0, 1.0, 2.0]))
+    rates_of_angles = np.array([0.6, 0.5, 1.5]) * w * np.cos(w * t[:, None] + [0.0, 1.0, 2.0])
+    body = euler_rate_matrix_inverse(torch.as_tensor(angles)).numpy() @ rates_of_angles[:, :, None]
+    return pd.DataFrame({"t": t, "experiment": name, "phi": angles[:, 0], "theta": angles[:, 1],
+                         "psi": angles[:, 2], "p": body[:, 0, 0], "q": body[:, 1, 0],
+                         "r": body[:, 2, 0], "tau_N": np.ones(t.size)})  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    ("runs", "slip"),
+    [
+        # a short 10-Hz run among 100-Hz ones: the log's step (0.01 s) made its windows 10 s
+        # long and counted 0.5 s of them, under the 2 s the check asks
+        ([("fast", 30.0, 0.01), ("slow", 15.0, 0.1)], "slow"),
+        # a 100-Hz run among 10-Hz ones: windows of 0.1 s turned too little to count
+        ([("slow1", 60.0, 0.1), ("slow2", 60.0, 0.1), ("fast", 10.0, 0.01)], "fast"),
+    ],
+)
+def test_the_rate_unit_check_sizes_windows_by_each_runs_own_step(runs, slip):
+    """A log joining runs logged at 10 Hz and at 100 Hz: each run's windows of about a second,
+    and its seconds of them, come from its own median step, so the run of the minority rate
+    whose r is in deg/s is refused, naming it, and its seconds are its own."""
+    from nnid.datasets.log import rate_slopes
+
+    log = pd.concat([_tumbling_run(*run) for run in runs], ignore_index=True)
+    assert validate_log(log, "joined.csv") is log
+    for name, _, slope, seconds in rate_slopes(log):
+        length = next(s for n, s, _ in runs if n == name)
+        assert abs(slope - 1.0) < 0.01 and seconds <= length, (name, slope, seconds)
+    deg = log.assign(r=np.where(log["experiment"] == slip, np.degrees(log["r"]), log["r"]))
+    with pytest.raises(NnidInputError, match=rf"field 'r'.*in experiment '{slip}'.*deg/s"):
+        validate_log(deg, "joined.csv")
+
+
 def _cruising_log(heading, seed: int = 0, experiment: str = "a") -> pd.DataFrame:
     """A minute at 10 Hz of a vehicle cruising at about 0.4 m/s with a little roll and pitch,
     its heading ``heading(t)``; x, y, z integrated from J₁(Θ) ν₁ (rotation_from_euler), the

@@ -12,7 +12,7 @@ from typing import NamedTuple
 import numpy as np
 import pandas as pd
 
-from nnid.datasets.log import ANGLES, POSE, TAU, VELOCITY
+from nnid.datasets.log import ANGLES, PIECE_OF, POSE, TAU, VELOCITY
 from nnid.datasets.preprocess import first_order_lag
 from nnid.errors import NnidInputError
 from nnid.physics.thrusters import Actuation, apply_deadband, force_deadband
@@ -21,7 +21,9 @@ from nnid.physics.thrusters import Actuation, apply_deadband, force_deadband
 def motion_arrays(log: pd.DataFrame) -> dict[str, np.ndarray]:
     """η, ν, ν̇, time and experiment codes from a log (missing pose components are zero;
     velocities and accelerations must be present: derive them with
-    :mod:`nnid.datasets.preprocess`)."""
+    :mod:`nnid.datasets.preprocess`). ``experiment_runs`` names the run of each experiment
+    code: its ``piece_of`` where a gap cut a run into pieces, else its own name, so that what
+    is keyed by run (a weight setting, a sequence step) finds its pieces."""
     n = len(log)
     eta = np.zeros((n, 6))
     for k, c in enumerate(POSE):
@@ -38,6 +40,14 @@ def motion_arrays(log: pd.DataFrame) -> dict[str, np.ndarray]:
         codes, names = pd.factorize(log["experiment"])
     else:
         codes, names = np.zeros(n, dtype=int), ["0"]
+    runs = list(names)
+    if PIECE_OF in log:
+        # a piece's rows share one piece_of: the first row of each code tells its run
+        first = np.unique(codes, return_index=True)[1]
+        runs = [
+            r if pd.notna(r) else e
+            for r, e in zip(log[PIECE_OF].to_numpy(object)[first], runs, strict=True)
+        ]
     return {
         "eta": eta,
         "nu": nu,
@@ -46,6 +56,7 @@ def motion_arrays(log: pd.DataFrame) -> dict[str, np.ndarray]:
         "t": log["t"].to_numpy(np.float64),
         "experiment": codes,
         "experiment_names": np.asarray(names, dtype=object),
+        "experiment_runs": np.asarray(runs, dtype=object),
     }
 
 

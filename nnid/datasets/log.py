@@ -282,8 +282,10 @@ def rate_slopes(df: pd.DataFrame) -> list[tuple[object, str, float, float]]:
     t = df["t"].to_numpy(dtype=np.float64)[order]
     angles = df[list(ANGLES)].to_numpy(dtype=np.float64)[order]
     dt = np.diff(t)
-    step = float(np.median(dt))
-    if not step > 0:
+    # each experiment's own step sizes its windows: a log may join a 10-Hz run and a 100-Hz one
+    step = _experiment_steps(codes, dt, len(names))
+    starts, ends, _ = _experiment_windows(codes, step, 1.0)
+    if not starts.size:
         return []
     # wrapped differences: the unwrapped angle's steps, and a gap stays out (NaN)
     d_angle = wrap_angle(np.diff(angles, axis=0))
@@ -293,36 +295,62 @@ def rate_slopes(df: pd.DataFrame) -> list[tuple[object, str, float, float]]:
     body = np.einsum("nij,nj->ni", euler_rate_matrices(mid, inverse=True), d_angle)
     turn = dict(zip(("p", "q", "r"), body.T, strict=True))
     # a step over a hole in t (longer than thrice its experiment's median step) is no rate
-    usual = pd.Series(dt).groupby(codes[1:]).transform("median").to_numpy()
-    good = (dt < 3 * usual) & (np.abs(cth) > RATE_CHECK_MIN_COS)
-    lag = max(1, round(1.0 / step))
-    if dt.size < lag:
-        return []
-    # windows within one experiment; a step left out is left out of both sums, so an empty
-    # cell every few samples leaves the windows around it
-    within = _window_sums((codes[1:] != codes[:-1]).astype(np.float64), lag) == 0
-    window_codes = codes[:-lag]
+    good = (dt < 3 * step[codes[1:]]) & (np.abs(cth) > RATE_CHECK_MIN_COS)
+    # a step left out is left out of both sums, so an empty cell every few samples leaves the
+    # windows around it
+    window_codes = codes[starts]
     out = []
     for col in rates:
         rate = df[col].to_numpy(dtype=np.float64)[order]
         gyro = 0.5 * (rate[1:] + rate[:-1]) * dt
         ok = good & np.isfinite(gyro) & np.isfinite(turn[col])
-        g = _window_sums(np.where(ok, gyro, 0.0), lag)
-        a = _window_sums(np.where(ok, turn[col], 0.0), lag)
-        use = within & (np.abs(a) > RATE_CHECK_TURN)
+        g = _window_sums(np.where(ok, gyro, 0.0), starts, ends)
+        a = _window_sums(np.where(ok, turn[col], 0.0), starts, ends)
+        use = np.abs(a) > RATE_CHECK_TURN
         k = window_codes[use]
         n = np.bincount(k, minlength=len(names))
         ga = np.bincount(k, g[use] * a[use], minlength=len(names))
         aa = np.bincount(k, a[use] ** 2, minlength=len(names))
         for e in np.flatnonzero(n):
-            out.append((names[e], col, float(ga[e] / aa[e]), float(n[e] * step)))
+            out.append((names[e], col, float(ga[e] / aa[e]), float(n[e] * step[e])))
     return out
 
 
-def _window_sums(x: np.ndarray, lag: int) -> np.ndarray:
-    """Sums of ``x`` over every run of ``lag`` consecutive elements."""
+def _experiment_steps(codes: np.ndarray, dt: np.ndarray, n: int) -> np.ndarray:
+    """The median time step of each of ``n`` experiments (``codes`` of the rows, sorted so
+    that an experiment's rows are side by side; ``dt`` their steps), over the steps within it:
+    its own rate, as a log may join runs of loggers at different rates. NaN for an experiment
+    of one row."""
+    inside = codes[1:] == codes[:-1]
+    medians = pd.Series(dt[inside]).groupby(codes[1:][inside]).median()
+    return medians.reindex(range(n)).to_numpy(dtype=np.float64)
+
+
+def _experiment_windows(
+    codes: np.ndarray, step: np.ndarray, seconds: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Windows of steps within one experiment, each of about ``seconds`` at its experiment's
+    median ``step`` (:func:`_experiment_steps`; at least one step): the first step of every
+    window that ends before its experiment does, the step after its last (for
+    :func:`_window_sums`), and each experiment's window length in steps. An experiment without
+    a positive step has no window."""
+    steps = codes.size - 1
+    with np.errstate(invalid="ignore", divide="ignore"):
+        lags = np.rint(seconds / step)
+    # a lag past the log's end (a step near 0) or none (a step of 0 or NaN) fits no window
+    lags = np.where(step > 0, np.clip(np.nan_to_num(lags, nan=0.0), 1, steps + 1), steps + 1)
+    lags = lags.astype(np.int64)
+    starts = np.arange(steps)
+    ends = starts + lags[codes[:-1]]
+    fits = ends <= steps
+    fits[fits] = codes[ends[fits]] == codes[:-1][fits]
+    return starts[fits], ends[fits], lags
+
+
+def _window_sums(x: np.ndarray, starts: np.ndarray, ends: np.ndarray) -> np.ndarray:
+    """Sums of ``x`` over the elements ``starts[i]`` up to (not including) ``ends[i]``."""
     total = np.concatenate([[0.0], np.cumsum(x)])
-    return total[lag:] - total[:-lag]
+    return total[ends] - total[starts]
 
 
 def check_rate_units(df: pd.DataFrame, source: str, row: int | None = None) -> None:
@@ -410,25 +438,25 @@ def velocity_frame_ratios(df: pd.DataFrame) -> list[tuple[object, float, float, 
     nu = df[["u", "v", "w"]].to_numpy(dtype=np.float64)[order]
     moved = np.diff(df[["x", "y"]].to_numpy(dtype=np.float64)[order], axis=0)
     dt = np.diff(t)
-    step = float(np.median(dt))
-    lag = max(1, round(VELOCITY_CHECK_WINDOW / step)) if step > 0 else 0
-    if not lag or dt.size < lag:
+    # each experiment's own step sizes its windows, as in rate_slopes
+    step = _experiment_steps(codes, dt, len(names))
+    starts, ends, lags = _experiment_windows(codes, step, VELOCITY_CHECK_WINDOW)
+    if not starts.size:
         return []
     # each step's velocity (trapezoid), and turned by the attitude at the step's midpoint
     world = 0.5 * (nu[1:] + nu[:-1]) * dt[:, None]
     mid = angles[:-1] + 0.5 * wrap_angle(np.diff(angles, axis=0))
     body = north_east(mid, world)
-    usual = pd.Series(dt).groupby(codes[1:]).transform("median").to_numpy()
     ok = (
         (codes[1:] == codes[:-1])
-        & (dt < 3 * usual)
+        & (dt < 3 * step[codes[1:]])
         & np.isfinite(moved).all(1)
         & np.isfinite(body[0])
         & np.isfinite(body[1])
     )
 
     def sums(x: np.ndarray) -> np.ndarray:
-        return _window_sums(np.where(ok, x, 0.0), lag)
+        return _window_sums(np.where(ok, x, 0.0), starts, ends)
 
     d = sums(moved[:, 0]) + 1j * sums(moved[:, 1])
     tau = sums(dt)
@@ -436,9 +464,7 @@ def velocity_frame_ratios(df: pd.DataFrame) -> list[tuple[object, float, float, 
         "body": sums(body[0]) + 1j * sums(body[1]),
         "world": sums(world[:, 0]) + 1j * sums(world[:, 1]),
     }
-    within = _window_sums((codes[1:] != codes[:-1]).astype(np.float64), lag) == 0
-    k = codes[:-lag][within]
-    d, tau = d[within], tau[within]
+    k = codes[starts]
     n = len(names)
 
     def total(x: np.ndarray) -> np.ndarray:  # per experiment, complex weights in two passes
@@ -450,7 +476,6 @@ def velocity_frame_ratios(df: pd.DataFrame) -> list[tuple[object, float, float, 
         drift_only = dd - np.abs(td) ** 2 / tt  # the displacement a constant drift leaves
         residual = {}
         for name, x in readings.items():
-            x = x[within]
             # least squares of d on [x, tau] with complex coefficients: the residual is
             # dd - bᴴ G⁻¹ b, the 2x2 Gram matrix G inverted in closed form
             xx, xt, xd = total(np.abs(x) ** 2).real, total(np.conj(x) * tau), total(np.conj(x) * d)
@@ -464,7 +489,7 @@ def velocity_frame_ratios(df: pd.DataFrame) -> list[tuple[object, float, float, 
         fit = 1.0 - residual["world"] / drift_only
     # a window counts by the share of its time that holds data: windows over a long gap in
     # u, v, w add no seconds of evidence (tau: the window's steps that are not left out)
-    seconds = np.bincount(k, tau, minlength=n) / lag
+    seconds = np.bincount(k, tau, minlength=n) / lags
     return [
         (names[e], float(ratio[e]), float(fit[e]), float(seconds[e]))
         for e in np.flatnonzero(np.isfinite(ratio) & np.isfinite(fit))

@@ -547,19 +547,29 @@ class CacciaTwoStep:
         experiment: np.ndarray,
         names: Sequence[str] | None = None,
         modes: np.ndarray | None = None,
+        runs: Sequence[str] | None = None,
     ) -> Estimate:
         """Step 1 on arrays (position χ, nominal force φⁿ_ξ, experiment codes 0, 1, …).
-        Returns the Caccia-signed estimate (also in :attr:`steady_`)."""
+        ``runs``: the run of each code (``experiment_runs`` of
+        :func:`nnid.datasets.arrays.motion_arrays`): the pieces a gap cut one run into are one
+        weight setting, keyed in :attr:`settings` by the run's name. Returns the Caccia-signed
+        estimate (also in :attr:`steady_`)."""
         settings = None
+        if runs is not None:
+            runs = [str(r) for r in runs]
+            names = [str(n) for n in names] if names is not None else runs
+            if list(runs) != list(names):  # a run's pieces share its setting: eq. 20's i
+                settings = pd.factorize(np.asarray(runs, dtype=object))[0].tolist()
+        keys = runs if runs is not None else names
         if self.settings is not None:
-            if names is None:
+            if keys is None:
                 raise ValueError("settings by experiment name need the experiment names")
-            missing = [n for n in names if n not in self.settings]
+            missing = list(dict.fromkeys(n for n in keys if n not in self.settings))
             if missing:
                 raise NnidInputError(
                     f"no weight setting for experiments {missing}", field="steady_state.settings"
                 )
-            settings = [self.settings[n] for n in names]
+            settings = [self.settings[n] for n in keys]
         self.plateaus_ = find_plateaus(
             t,
             position,
@@ -603,6 +613,7 @@ class CacciaTwoStep:
             arrays["experiment"],
             names,
             modes,
+            arrays.get("experiment_runs"),
         )
 
     def _log_arrays(self, log: pd.DataFrame, vehicle) -> dict[str, Any]:

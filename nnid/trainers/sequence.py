@@ -49,12 +49,17 @@ WEISS_STEPS = (
 
 def _subset(data: dict[str, np.ndarray], names: Sequence[str]) -> dict[str, np.ndarray]:
     known = list(data["experiment_names"])
-    missing = [n for n in names if n not in known]
+    # a step names a run: the pieces a gap cut it into (experiment_runs) are all its rows
+    runs = list(data.get("experiment_runs", known))
+    missing = [n for n in names if n not in known and n not in runs]
     if missing:
         raise NnidInputError(
             f"the log has no experiments {missing} (it has {known})", field="sequence"
         )
-    codes = [known.index(n) for n in names]
+    wanted = set(names)
+    codes = [
+        c for c, (e, r) in enumerate(zip(known, runs, strict=True)) if e in wanted or r in wanted
+    ]
     rows = np.isin(data["experiment"], codes)
     return {
         k: (v[rows] if isinstance(v, np.ndarray) and v.shape[:1] == rows.shape else v)
