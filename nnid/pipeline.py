@@ -26,7 +26,15 @@ from nnid.config import (
 )
 from nnid.datasets.cleaning import CleaningReport
 from nnid.datasets.gaps import mask_gaps
-from nnid.datasets.log import ACCELERATION, ANGLES, POSE, VELOCITY, input_columns, run_label
+from nnid.datasets.log import (
+    ACCELERATION,
+    ANGLES,
+    POSE,
+    VELOCITY,
+    input_columns,
+    run_label,
+    run_pieces,
+)
 from nnid.datasets.preprocess import experiments
 from nnid.datasets.splits import PARTS, Split, say_missed_fractions, split_log
 from nnid.errors import NnidInputError
@@ -482,11 +490,13 @@ def make_split(
                 "the log has no 'experiment' column to split by", source=source, field="split"
             )
         names = list(dict.fromkeys(log["experiment"]))
-        held = set((s.validation or []) + (s.test or []))
+        # a run a gap cut into pieces is named as logged: all its pieces
+        validation, test = run_pieces(log, s.validation or []), run_pieces(log, s.test or [])
+        held = set(validation + test)
         assignment = {
-            "train": s.train or [n for n in names if n not in held],
-            "validation": s.validation or [],
-            "test": s.test or [],
+            "train": run_pieces(log, s.train or []) or [n for n in names if n not in held],
+            "validation": validation,
+            "test": test,
         }
         unused = [n for n in names if n not in {*assignment["train"], *held}]
         if unused:  # a run in no part: said, never dropped in silence

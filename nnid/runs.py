@@ -304,10 +304,11 @@ def dofs_option(text: str | None) -> tuple[str, ...] | None:
 def exclude_experiments(log, excluded: list[str], report):
     """The log without the named experiments (a name may be a replay group of the reader
     config, ``replays[0]``: all its copies), reported; an unknown name is an error."""
-    from nnid.datasets.log import REPLAY_GROUP
+    from nnid.datasets.log import REPLAY_GROUP, run_pieces
 
     if not excluded:
         return log
+    excluded = run_pieces(log, excluded)  # a run a gap cut into pieces: all of them
     if REPLAY_GROUP in log:
         groups = log.groupby(REPLAY_GROUP, sort=False)["experiment"].unique()
         excluded = [e for n in excluded for e in (groups[n] if n in groups else [n])]

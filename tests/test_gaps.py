@@ -236,3 +236,33 @@ def test_a_sequence_step_naming_a_run_takes_all_its_pieces():
     assert _subset(data, ["surge#1"])["t"].size == 35  # a piece by its own name still
     with pytest.raises(NnidInputError, match=r"no experiments \['roll'\]"):
         _subset(data, ["roll"])
+
+
+def test_a_run_cut_into_pieces_is_named_as_logged_in_a_split_and_in_exclude():
+    """A reader cut run 'b' at a gap into 'b#0', 'b#1' (piece_of 'b'); a split that held out
+    'b', the loop's held-out runs and ``--exclude b`` refused it as 'not in the log', though
+    the user named the run as logged. A run's name stands for all its pieces; a piece is
+    still named by its own label, and an unknown name is still refused."""
+    from nnid.config import SplitSpec
+    from nnid.datasets.log import run_pieces
+    from nnid.loop.residual_loop import ResidualLoop
+    from nnid.pipeline import make_split
+    from nnid.runs import exclude_experiments
+
+    runs = [_mocap_log(80).assign(experiment=e) for e in ("a", "b", "c")]
+    log = pd.concat(runs, ignore_index=True)
+    log.loc[110:114, "u"] = np.nan
+    [pieces] = mask_gaps([log], ["u"])
+    assert list(pd.unique(pieces["experiment"])) == ["a", "b#0", "b#1", "c"]
+    assert run_pieces(pieces, ["b", "c", "b#1", "z"]) == ["b#0", "b#1", "c", "b#1", "z"]
+    assert run_pieces(log, ["b"]) == ["b"]  # no pieces: as given
+    split = make_split(pieces, SplitSpec(by="experiment", validation=["b"], test=["c"]))
+    assert set(split.validation["experiment"]) == {"b#0", "b#1"}
+    assert set(split.train["experiment"]) == {"a"}
+    loop = ResidualLoop(None, validation_experiments=["b"])
+    train, held = loop._split(pieces)
+    assert set(held["experiment"]) == {"b#0", "b#1"} and set(train["experiment"]) == {"a", "c"}
+    kept = exclude_experiments(pieces, ["b"], CleaningReport())
+    assert list(pd.unique(kept["experiment"])) == ["a", "c"]
+    with pytest.raises(NnidInputError, match=r"experiments z are not in the log"):
+        exclude_experiments(pieces, ["z"], CleaningReport())

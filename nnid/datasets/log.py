@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 import os
 import warnings
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -212,6 +213,18 @@ def run_label(name: object) -> str:
     """An experiment in a message: ``experiment 'x'``, or ``the log`` for a log without an
     experiment column (its one run is named None, which read as "experiment None")."""
     return "the log" if name is None else f"experiment {str(name)!r}"
+
+
+def run_pieces(log: pd.DataFrame, names: Sequence[object]) -> list:
+    """``names`` of experiments as a user gives them, each name of a run that a gap cut into
+    pieces (their ``piece_of``, :mod:`nnid.datasets.gaps`) standing for all its pieces in log
+    order: the run is what the user logged and names (a split, ``--exclude``, held-out
+    runs); any other name is kept as it is, for the caller to judge."""
+    if PIECE_OF not in log or "experiment" not in log:
+        return list(names)
+    known = set(log["experiment"])
+    pieces = log.groupby(PIECE_OF, sort=False)["experiment"].unique()
+    return [e for n in names for e in (pieces[n] if n not in known and n in pieces.index else [n])]
 
 
 def wrap_angle(a: np.ndarray) -> np.ndarray:

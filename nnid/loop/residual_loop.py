@@ -20,7 +20,7 @@ import pandas as pd
 
 from nnid.datasets.arrays import logged_inputs, nominal_forces
 from nnid.datasets.gaps import mask_gaps
-from nnid.datasets.log import ANGLES
+from nnid.datasets.log import ANGLES, run_pieces
 from nnid.datasets.preprocess import experiments
 from nnid.datasets.splits import say_missed_fractions, split_log
 from nnid.errors import NnidInputError
@@ -150,13 +150,13 @@ class ResidualLoop:
         frac = (1.0 - self.validation, self.validation, 0.0)
         if self.validation_experiments:
             names = list(dict.fromkeys(log["experiment"])) if "experiment" in log else []
-            unknown = [n for n in self.validation_experiments if n not in names]
+            held = run_pieces(log, self.validation_experiments)  # a run cut at gaps: its pieces
+            unknown = [n for n in held if n not in names]
             if unknown:
                 raise NnidInputError(
-                    f"validation experiments not in the log: {', '.join(unknown)}",
+                    f"validation experiments not in the log: {', '.join(map(str, unknown))}",
                     field="validation",
                 )
-            held = self.validation_experiments
             assignment = {
                 "train": [n for n in names if n not in held],
                 "validation": list(held),
