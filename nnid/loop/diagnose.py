@@ -39,7 +39,12 @@ from nnid.evaluation.evaluate import score_split
 from nnid.evaluation.metrics import exact_mean, rmse, warmup_mask
 from nnid.evaluation.prediction import mode_steps, predict_states
 from nnid.loop.effects import Candidate
-from nnid.models.parametric import ParametricFossen, filter_settled, vehicle_with
+from nnid.models.parametric import (
+    ParametricFossen,
+    filter_settled,
+    filter_signal,
+    vehicle_with,
+)
 from nnid.physics.dofs import DOFS
 from nnid.physics.parts import Parts
 from nnid.trainers.least_squares import (
@@ -158,6 +163,10 @@ class Workspace:
         self.tau_corr = 1.0
         self._cache: dict[tuple, dict[str, np.ndarray]] = {}
         self._tau: dict[tuple, dict[str, np.ndarray]] = {}
+        # held-out simulations of one fit, by (id(vehicle), mode): the loop's gate and its
+        # before/after scores simulate the same models (:meth:`ResidualLoop._velocity_scores`)
+        self.simulations: dict[tuple, tuple] = {}
+        self._nu_dot_f: dict[str, np.ndarray] = {}
 
     def arrays(self, vehicle, part: str = "train") -> dict[str, np.ndarray]:
         """The arrays with the nominal forces recomputed for ``vehicle`` (its lag, deadband;
@@ -182,9 +191,24 @@ class Workspace:
         cache = self._cache.setdefault(key, {})
         missing = [n for n in names if n not in cache]
         if missing:
-            cols, _ = _columns(vehicle, missing, self.arrays(vehicle, part), self.filter_lambda)
+            data = self.arrays(vehicle, part)
+            cols, _ = _columns(vehicle, missing, data, self.filter_lambda, self.nu_dot_f(part))
             cache.update({n: cols[:, :, k] for k, n in enumerate(missing)})
         return np.stack([cache[n] for n in names], 2)
+
+    def nu_dot_f(self, part: str) -> np.ndarray | None:
+        """sF(s)[ν] of a part at the workspace's λ (None unfiltered), filtered once: it
+        depends on the measured velocities alone, and every regression of the loop (each
+        candidate's column, each step of a 1-D search) needs it
+        (:meth:`ParametricFossen.equation_residual`)."""
+        if self.filter_lambda is None:
+            return None
+        if part not in self._nu_dot_f:
+            data = self.data if part == "train" else self.data_val
+            self._nu_dot_f[part] = filter_signal(
+                data, data["nu"], self.filter_lambda, derivative=True
+            )
+        return self._nu_dot_f[part]
 
     def settled(self, data: dict[str, np.ndarray]) -> np.ndarray:
         """The rows the regression keeps: all, or those after the filters settle."""
@@ -194,11 +218,16 @@ class Workspace:
 
 
 def _columns(
-    vehicle, names: list[str], data: dict, filter_lambda: float | None
+    vehicle,
+    names: list[str],
+    data: dict,
+    filter_lambda: float | None,
+    nu_dot_f: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """(Φ [N, 6, P], R(0) [N, 6]) of the unknowns ``names`` at ``vehicle``."""
+    """(Φ [N, 6, P], R(0) [N, 6]) of the unknowns ``names`` at ``vehicle``; ``nu_dot_f`` as
+    :meth:`ParametricFossen.equation_residual` takes it (:meth:`Workspace.nu_dot_f`)."""
     with np.errstate(invalid="ignore", over="ignore", divide="ignore"):  # rows of NaN (gaps)
-        reg = ParametricFossen(vehicle, names).regression(data, filter_lambda)
+        reg = ParametricFossen(vehicle, names).regression(data, filter_lambda, nu_dot_f)
     n = reg.n_samples
     return reg.phi.reshape(n, 6, len(names)), -reg.y.reshape(n, 6)
 
@@ -214,10 +243,11 @@ def refit(ws: Workspace, vehicle, unknowns: list[str], held_out: bool = True) ->
     renewed by :func:`reweight` as each effect is added. Without ``held_out`` the held-out
     arrays are left empty (for searches that need only the RSS)."""
     data = ws.arrays(vehicle)
-    phi, r0 = _columns(vehicle, unknowns, data, ws.filter_lambda)
+    phi, r0 = _columns(vehicle, unknowns, data, ws.filter_lambda, ws.nu_dot_f("train"))
     n, p = r0.shape[0], len(unknowns)
     if held_out:
-        phi_v, r0_v = _columns(vehicle, unknowns, ws.arrays(vehicle, "val"), ws.filter_lambda)
+        data_v = ws.arrays(vehicle, "val")
+        phi_v, r0_v = _columns(vehicle, unknowns, data_v, ws.filter_lambda, ws.nu_dot_f("val"))
     else:
         phi_v, r0_v = np.zeros((0, 6, p)), np.zeros((0, 6))
     a_mat, y = phi.reshape(n * 6, p), -r0.reshape(-1)
@@ -351,8 +381,13 @@ def damping_block(ws: Workspace, vehicle, cands: list[Candidate], data: dict) ->
     """Columns [N, 6, K] of damping candidates, built by the regression's own one-shot
     damping columns (−ξ_term(ν_r) in row F) and cut to its rows."""
     structure = ParametricFossen(vehicle, [c.parameter for c in cands])
-    cols = structure.damping_columns(data, ws.filter_lambda)
-    return np.stack([cols[n] for n in structure.names], 2)[ws.settled(data)]
+    _, xi, rows = structure.damping_terms(data, ws.filter_lambda)
+    xi = xi[ws.settled(data)]
+    # filled in place: stacking K columns [N, 6] along a new last axis (a strided copy of
+    # mostly zeros) and cutting the rows after took two thirds of this function's time
+    block = np.zeros((xi.shape[0], 6, xi.shape[1]))
+    block[:, rows, np.arange(xi.shape[1])] = -xi
+    return block
 
 
 def screen_linear(ws: Workspace, fit: Fit, cands: list[Candidate]) -> list[Scored]:
@@ -404,7 +439,8 @@ def sensitivity(ws: Workspace, vehicle, cand: Candidate, a: float, b: float) -> 
         r = []
         for v in (a, b):
             veh = cand.augment(vehicle, v)
-            _, r0 = _columns(veh, [], ws.arrays(veh, part), ws.filter_lambda)
+            data = ws.arrays(veh, part)
+            _, r0 = _columns(veh, [], data, ws.filter_lambda, ws.nu_dot_f(part))
             r.append(r0)
         cols.append(((r[1] - r[0]) / (b - a))[:, :, None])
     return cols
@@ -621,13 +657,6 @@ def velocity_scores(
     return nrmse_, diverged
 
 
-def velocity_errors(
-    vehicle, log: pd.DataFrame, mode, warmup_s: float, dofs: tuple[str, ...] = DOFS
-) -> dict[str, float | None]:
-    """The NRMSE part of :func:`velocity_scores`."""
-    return velocity_scores(vehicle, log, mode, warmup_s, dofs)[0]
-
-
 def force_residual(ws: Workspace, vehicle, part: str = "val") -> np.ndarray:
     """R = M ν̇ − (τ_eff + b − Cν + τ_D − g) per sample ``[N, 6]`` with Savitzky-Golay
     accelerations, unfiltered: McCarter's τ̄ (eq. 4.4) minus the model's damping."""
@@ -668,5 +697,5 @@ __all__ = [
     "search_nonlinear",
     "sensitivity",
     "sindy_opinion",
-    "velocity_errors",
+    "velocity_scores",
 ]

@@ -12,6 +12,7 @@ force residual RMS per DOF (McCarter eq. 4.4 minus the model's damping).
 
 from __future__ import annotations
 
+import copy
 import time
 import warnings
 
@@ -41,7 +42,6 @@ from nnid.loop.diagnose import (
     screen_linear,
     search_nonlinear,
     sindy_opinion,
-    velocity_errors,
     velocity_scores,
 )
 from nnid.loop.effects import candidates
@@ -241,7 +241,12 @@ class ResidualLoop:
         self.final_widen_ = float(np.sqrt(residual_correlation_time(fit.e, self.dofs_)))
         self.run_stderr_ = run_stderr(ws, fit)
         self.before_, self.residuals_before_ = self._scores(ws, self.baseline_)
-        self.after_, self.residuals_after_ = self._scores(ws, fit)
+        if fit is self.baseline_:  # nothing added: the final model is the baseline just scored
+            self.after_, self.residuals_after_ = copy.deepcopy(
+                (self.before_, self.residuals_before_)
+            )
+        else:
+            self.after_, self.residuals_after_ = self._scores(ws, fit)
         self.workspace_ = ws
         self.unexplained_ = self._unexplained(ws, fit)
         self.hybrid_opinion_ = None
@@ -415,7 +420,22 @@ class ResidualLoop:
     def _simulation_error(self, ws: Workspace, vehicle, mode: str | int) -> float | None:
         """Held-out velocity NRMSE (mean over the analysed DOFs) of a simulation ``mode``;
         None where it diverges."""
-        return velocity_errors(vehicle, ws.val, mode, self.warmup_s, self.dofs_)["total"]
+        return self._velocity_scores(ws, vehicle, mode)[0]["total"]
+
+    def _velocity_scores(
+        self, ws: Workspace, vehicle, mode: str | int
+    ) -> tuple[dict[str, float | None], dict[str, float]]:
+        """:func:`~nnid.loop.diagnose.velocity_scores` of ``vehicle`` on the held-out part,
+        simulated once per vehicle and mode in a fit: the gate's simulation of the current fit
+        is the one its before (or after) scores report. Keyed by the vehicle object, which the
+        loop never changes once made (:func:`vehicle_with` makes a new one), and held in the
+        memo so that its id is not reused; copies, so that no caller's edit reaches another."""
+        key = (id(vehicle), mode)
+        if key not in ws.simulations:
+            scores = velocity_scores(vehicle, ws.val, mode, self.warmup_s, self.dofs_)
+            ws.simulations[key] = (vehicle, scores)
+        scores, diverged = ws.simulations[key][1]
+        return dict(scores), dict(diverged)
 
     def _judge(self, s: Scored, tested: int, fit: Fit) -> None:
         """Admissible: significant after Bonferroni, a significant parameter (Caccia), a
@@ -476,7 +496,7 @@ class ResidualLoop:
         k = max(round(FALLBACK_S / float(np.median(np.diff(val["t"].to_numpy())))), 1)
         errors: dict = {}
         for name, mode in (("free_run", "free_run"), ("k_step", k), ("one_step", "one_step")):
-            scores, diverged = velocity_scores(fit.vehicle, val, mode, self.warmup_s, dofs)
+            scores, diverged = self._velocity_scores(ws, fit.vehicle, mode)
             errors[MODE_KEYS[name]] = scores
             errors[diverged_key(name)] = diverged
         # relative to the force the vehicle file gives, before and after alike: the fit's own
@@ -504,6 +524,7 @@ class ResidualLoop:
         tau = nominal_forces(ws.val, fit.vehicle)
         inputs = {f"tau_{f}": tau[:, i] for i, f in enumerate(FORCES) if np.any(tau[:, i])}
         velocities = {d: data["nu"][:, i] for i, d in enumerate(DOFS) if d in ws.val}
+        memo: dict = {}  # the signals' autocorrelations, shared by the DOFs of this residual
         return {
             d: unexplained_structure(
                 r[:, i],
@@ -515,6 +536,7 @@ class ResidualLoop:
                 self.savgol_order,
                 self.alpha,
                 force_rms=float(np.sqrt(np.mean(tau[:, i] ** 2))),
+                memo=memo,
             )
             for i, d in enumerate(DOFS)
             if d in self.dofs_

@@ -72,11 +72,15 @@ def unexplained_structure(
     top: int = 3,
     force_rms: float | None = None,
     min_share: float = 0.02,
+    memo: dict | None = None,
 ) -> list[Correlate]:
     """The strongest correlates of one DOF's held-out ``residual`` outside their bands
     (module docstring), strongest first; empty when the residual is consistent with noise.
     ``force_rms``: the RMS of the force that drives this DOF; a correlate whose share of the
-    residual, |ρ| · RMS(residual), is below ``min_share`` of it is immaterial."""
+    residual, |ρ| · RMS(residual), is below ``min_share`` of it is immaterial. ``memo``: a
+    dict shared by the calls for the DOFs of one residual (the same inputs, velocities,
+    experiments, ``dt``, ``window`` and ``max_lag_s``), which then centre and autocorrelate
+    each signal once for all DOFs whose finite samples are the same."""
     ok = np.isfinite(residual)
     for v in (*inputs.values(), *velocities.values()):
         ok &= np.isfinite(v)
@@ -111,11 +115,18 @@ def unexplained_structure(
         k = lags_auto[np.argmax(np.abs(auto[lags_auto]))]
         if abs(auto[k]) > max(band, min_corr):
             found.append(Correlate("own past", float(k * dt), float(auto[k]), float(band)))
+    samples = ok.tobytes()  # a signal's centred segments depend on the samples kept
     for name, s in signals.items():
-        x = _centred_segments(s, groups)
-        if not any(np.any(xi) for xi in x):
+        key = (name, samples, max_lag)
+        if memo is not None and key in memo:
+            x, sx = memo[key]
+        else:
+            x = _centred_segments(s, groups)
+            sx = _xcorr(x, x, max_lag) if any(np.any(xi) for xi in x) else None
+            if memo is not None:
+                memo[key] = (x, sx)
+        if sx is None:  # a signal that is zero wherever the residual is scored
             continue
-        sx = _xcorr(x, x, max_lag)
         rho = _xcorr(e, x, max_lag)
         # Bartlett: Σ_j ρ_ee(j) ρ_xx(j) over j = −max_lag..max_lag (both even in j)
         var = (rho0[0] * sx[max_lag] + 2 * np.sum(rho0[1:] * sx[max_lag + 1 :])) / n

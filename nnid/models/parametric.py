@@ -202,14 +202,20 @@ class ParametricFossen:
         return out
 
     def equation_residual(
-        self, parts: Parts, data: dict[str, np.ndarray], filter_lambda: float | None = None
+        self,
+        parts: Parts,
+        data: dict[str, np.ndarray],
+        filter_lambda: float | None = None,
+        nu_dot_f: np.ndarray | None = None,
     ) -> np.ndarray:
         """R = M ν̇ − (τ_eff + b − C ν + τ_D − g) per sample ``[N, 6]``, τ_eff the installed
         force through the actuator lag (:meth:`Parts.felt`, Caccia eq. 3 before the lag).
 
         With ``filter_lambda`` = λ both sides pass through F(s) = λ/(s + λ) and M F[ν̇] is
         computed as M sF(s)[ν] from the velocity: the filtered-regressor form of Weiss eqs
-        86-92, which needs no differentiated (noisy) acceleration.
+        86-92, which needs no differentiated (noisy) acceleration. ``nu_dot_f``: sF(s)[ν] of
+        this ``data`` at this λ where the caller has it (:func:`filter_signal`, derivative);
+        it depends on the data alone, not on ``parts``, so a regression filters it once.
         """
         model = parts.model(check=False)
         with torch.no_grad():
@@ -219,16 +225,21 @@ class ParametricFossen:
             mass = model.mass_matrix().numpy()
         if filter_lambda is None:
             return data["nu_dot"] @ mass.T - net
-        nu_dot_f = filter_signal(data, data["nu"], filter_lambda, derivative=True)
+        if nu_dot_f is None:
+            nu_dot_f = filter_signal(data, data["nu"], filter_lambda, derivative=True)
         return nu_dot_f @ mass.T - filter_signal(data, net, filter_lambda)
 
     def regression(
-        self, data: dict[str, np.ndarray], filter_lambda: float | None = None
+        self,
+        data: dict[str, np.ndarray],
+        filter_lambda: float | None = None,
+        nu_dot_f: np.ndarray | None = None,
     ) -> Regression:
         """Φ θ = y over the chosen DOF equations; φ_k = R(e_k) − R(0), y = −R(0).
 
-        With ``filter_lambda`` the filtered form is used (see :meth:`equation_residual`) and
-        the first 3/λ seconds of each experiment, where the filters settle, are left out.
+        With ``filter_lambda`` the filtered form is used (see :meth:`equation_residual`,
+        which also says ``nu_dot_f``) and the first 3/λ seconds of each experiment, where the
+        filters settle, are left out.
         """
         rows = [DOFS.index(d) for d in self.dofs]
         keep = np.ones(data["t"].size, dtype=bool)
@@ -245,7 +256,9 @@ class ParametricFossen:
                     f"sample is left to fit; give filter_lambda above {3.0 / longest:.3g} rad/s",
                     field="filter_lambda",
                 )
-        r0 = self.equation_residual(self.base, data, filter_lambda)
+        if filter_lambda is not None and nu_dot_f is None:  # once for R(0) and every column
+            nu_dot_f = filter_signal(data, data["nu"], filter_lambda, derivative=True)
+        r0 = self.equation_residual(self.base, data, filter_lambda, nu_dot_f)
         damping = self.damping_columns(data, filter_lambda)
         cols = []
         for name in self.names:
@@ -254,7 +267,7 @@ class ParametricFossen:
             else:
                 unit = self.base.copy()
                 unit.set(name, 1.0)
-                col = self.equation_residual(unit, data, filter_lambda) - r0
+                col = self.equation_residual(unit, data, filter_lambda, nu_dot_f) - r0
             cols.append(col[keep][:, rows].reshape(-1))
         n = int(keep.sum())
         phi = np.stack(cols, 1) if cols else np.zeros((n * len(rows), 0))
@@ -274,20 +287,30 @@ class ParametricFossen:
         """Columns of the damping unknowns in one evaluation of the basis library: R holds
         −τ_D = −Θ ξ(ν), so coefficient "F:term" has −ξ_term(ν) in row F and zero elsewhere
         (the same number R(e_k) − R(0) gives, without one physics call per term)."""
+        names, xi, rows = self.damping_terms(data, filter_lambda)
+        out = {}
+        for k, (name, row) in enumerate(zip(names, rows, strict=True)):
+            col = np.zeros((xi.shape[0], 6))
+            col[:, row] = -xi[:, k]
+            out[name] = col
+        return out
+
+    def damping_terms(
+        self, data: dict[str, np.ndarray], filter_lambda: float | None = None
+    ) -> tuple[list[str], np.ndarray, list[int]]:
+        """The damping unknowns, their terms ξ_term(ν_r) ``[N, K]`` (filtered with
+        ``filter_lambda``) from one evaluation of the basis library, and the row (force) of
+        R each enters with −ξ: what :meth:`damping_columns` spreads into ``[N, 6]`` columns,
+        for callers that build the ``[N, 6, K]`` block at once."""
         names = [n for n in self.names if ":" in n]
         if not names:
-            return {}
+            return [], np.zeros((data["t"].size, 0)), []
         split = [parse_coefficient_key(n) for n in names]
         nu = relative_velocity(self.base, data)
         xi = evaluate_terms(nu, term_codes([t for _, t in split]), self.base.u_c)
         if filter_lambda is not None:
             xi = filter_signal(data, xi, filter_lambda)
-        out = {}
-        for k, (name, (force, _)) in enumerate(zip(names, split, strict=True)):
-            col = np.zeros((xi.shape[0], 6))
-            col[:, FORCES.index(force)] = -xi[:, k]
-            out[name] = col
-        return out
+        return names, xi, [FORCES.index(force) for force, _ in split]
 
     def restricted(
         self, unknowns: Sequence[str], dofs: Sequence[str], known: dict[str, float]
@@ -313,6 +336,7 @@ def filter_signal(data: dict[str, np.ndarray], x: np.ndarray, lam: float, deriva
     (λ = 1e5 rad/s on the demo's 20-Hz log found no effect where λ = 1 finds its heave
     thrust)."""
     out = np.empty_like(x)
+    zis: dict[float, np.ndarray] = {}  # the runs of a log mostly share one rate: solved once
     for k in np.unique(data["experiment"]):
         idx = np.flatnonzero(data["experiment"] == k)
         dt = float(np.median(np.diff(data["t"][idx]))) if idx.size > 1 else 1.0
@@ -327,7 +351,9 @@ def filter_signal(data: dict[str, np.ndarray], x: np.ndarray, lam: float, deriva
             )
         a = np.array([1.0 + c, -(1.0 - c)])
         b = lam * np.array([1.0, -1.0]) if derivative else np.array([c, c])
-        zi = lfilter_zi(b, a)
+        if c not in zis:
+            zis[c] = lfilter_zi(b, a)
+        zi = zis[c]
         seg = x[idx]
         out[idx] = lfilter(b, a, seg, axis=0, zi=zi[:, None] * seg[:1])[0]
     return out
