@@ -199,11 +199,13 @@ def _show(value: Any) -> str:
     return text if len(text) <= 60 else text[:57] + "..."
 
 
-def validated(model: type[Model], data: dict[str, Any], source: str) -> Model:
-    """``model.model_validate(data)``, or an NnidInputError naming the source and the field
-    (dotted path) of the first problem."""
+def validated(
+    model: type[Model], data: dict[str, Any], source: str, context: dict[str, Any] | None = None
+) -> Model:
+    """``model.model_validate(data, context=context)``, or an NnidInputError naming the source
+    and the field (dotted path) of the first problem."""
     try:
-        return model.model_validate(data)
+        return model.model_validate(data, context=context)
     except ValidationError as err:
         errors = err.errors()
         first = errors[0]

@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Annotated, Any, Literal
 
 import numpy as np
-from pydantic import Field, field_validator, model_validator
+from pydantic import Field, ValidationInfo, field_validator, model_validator
 
 from nnid.datasets.log import MAX_FORCE  # a constant external force obeys the log's bound
 from nnid.errors import NnidInputError
@@ -47,11 +47,18 @@ Offset = Annotated[
 CurveNumber = Annotated[float, Field(ge=-MAX_COEFFICIENT, le=MAX_COEFFICIENT)]
 
 
-def _makes_thrust(values: list[float], what: str) -> list[float]:
+#: the validation context of a vehicle whose thrust curves were read before: a saved model's
+#: (:func:`saved_vehicle`), or a copy of a vehicle with other values set. Its curves are kept as
+#: they were, one of no thrust included (an nnid before the refusal saved such a model)
+KEEP_CURVES: dict[str, Any] = {"keep_curves": True}
+
+
+def _makes_thrust(values: list[float], what: str, info: ValidationInfo) -> list[float]:
     """``values`` unless every one is zero: such a curve gives no thrust at any command, and its
     thruster would be a column of zeros in the allocation (a typo, or a thruster to drop). A
-    negative one is kept: docs/vehicle_file.md, a thrust against ``direction``."""
-    if not any(values):
+    negative one is kept: docs/vehicle_file.md, a thrust against ``direction``. Kept under
+    :data:`KEEP_CURVES` (a curve read before)."""
+    if not any(values) and not (info.context or {}).get("keep_curves"):
         raise ValueError(f"{what}: no thrust at any command (give the curve, or drop the thruster)")
     return values
 
@@ -62,8 +69,8 @@ class PolyCurve(StrictModel):
 
     @field_validator("coeffs")
     @classmethod
-    def _thrust(cls, coeffs: list[float]) -> list[float]:
-        return _makes_thrust(coeffs, "every coefficient is 0")
+    def _thrust(cls, coeffs: list[float], info: ValidationInfo) -> list[float]:
+        return _makes_thrust(coeffs, "every coefficient is 0", info)
 
 
 class SignedQuadraticCurve(StrictModel):
@@ -72,8 +79,8 @@ class SignedQuadraticCurve(StrictModel):
 
     @field_validator("k")
     @classmethod
-    def _thrust(cls, k: float) -> float:
-        return _makes_thrust([k], "k = 0")[0]
+    def _thrust(cls, k: float, info: ValidationInfo) -> float:
+        return _makes_thrust([k], "k = 0", info)[0]
 
 
 class TableCurve(StrictModel):
@@ -83,8 +90,8 @@ class TableCurve(StrictModel):
 
     @field_validator("thrust")
     @classmethod
-    def _thrust(cls, thrust: list[float]) -> list[float]:
-        return _makes_thrust(thrust, "every thrust is 0")
+    def _thrust(cls, thrust: list[float], info: ValidationInfo) -> list[float]:
+        return _makes_thrust(thrust, "every thrust is 0", info)
 
     @model_validator(mode="after")
     def _check(self) -> TableCurve:
@@ -179,7 +186,9 @@ def saved_vehicle(data: dict[str, Any], source: str = "<saved model>") -> Vehicl
     was saved by an nnid that let its name hold a control character (:func:`vehicle_name`
     refuses those only since): a saved model stays loadable. Each such character is written
     as its escape (a line break as ``\\n``), so that the name labels one line, and a warning
-    says so; new input (a vehicle file, ``nnid vehicle --name``) is still refused."""
+    says so; new input (a vehicle file, ``nnid vehicle --name``) is still refused. A thruster
+    whose curve gives no thrust (refused in new input since, :func:`_makes_thrust`) is kept
+    as saved, with a warning: the model predicts what it did, that thruster pushing nothing."""
     name = data.get("name") if isinstance(data, dict) else None
     if isinstance(name, str) and any(unicodedata.category(c) == "Cc" for c in name):
         shown = "".join(repr(c)[1:-1] if unicodedata.category(c) == "Cc" else c for c in name)
@@ -190,7 +199,23 @@ def saved_vehicle(data: dict[str, Any], source: str = "<saved model>") -> Vehicl
             stacklevel=2,
         )
         data = {**data, "name": shown}
-    return vehicle_from_dict(data, source)
+    vehicle = vehicle_from_dict(data, source, context=KEEP_CURVES)
+    for thruster in vehicle.thrusters:
+        if not any(_curve_numbers(thruster.curve)):
+            warnings.warn(
+                f"{source}: thruster '{thruster.name}' has a thrust curve of no thrust at any "
+                "command, which vehicle files no longer may; loaded as saved: it gives no thrust",
+                UserWarning,
+                stacklevel=2,
+            )
+    return vehicle
+
+
+def _curve_numbers(curve: PolyCurve | SignedQuadraticCurve | TableCurve) -> list[float]:
+    """The numbers :func:`_makes_thrust` checks of a curve: all zero, it gives no thrust."""
+    if isinstance(curve, PolyCurve):
+        return curve.coeffs
+    return [curve.k] if isinstance(curve, SignedQuadraticCurve) else curve.thrust
 
 
 class Vehicle(StrictModel):
@@ -293,11 +318,14 @@ class Vehicle(StrictModel):
         return pos, neg
 
 
-def vehicle_from_dict(data: dict[str, Any], source: str = "<vehicle>") -> Vehicle:
+def vehicle_from_dict(
+    data: dict[str, Any], source: str = "<vehicle>", context: dict[str, Any] | None = None
+) -> Vehicle:
     """Validate a parsed vehicle file; raise NnidInputError naming the file and the field, and
-    warn of a diagonal added mass or damping of the wrong sign (:func:`sign_slips`)."""
+    warn of a diagonal added mass or damping of the wrong sign (:func:`sign_slips`).
+    ``context``: pydantic's validation context (:data:`KEEP_CURVES`)."""
     refuse_other_file(data, "vehicle", "a vehicle file", source)
-    vehicle = validated(Vehicle, data, source)
+    vehicle = validated(Vehicle, data, source, context)
     if abs(vehicle.weight - vehicle.mass * vehicle.g) > 0.1 * vehicle.mass * vehicle.g:
         warnings.warn(
             f"{source}: weight {vehicle.weight:g} N is not mass × g = "

@@ -122,6 +122,28 @@ def test_a_member_wild_on_a_new_log_is_named_and_still_combined(log):
         EnsembleModel(Offset(), seeds=(0, 1, 5), combine="median").fit(log).predict(log)
 
 
+class Flying(Offset):
+    """An Offset member that also flies in closed loop: its flight is its prediction."""
+
+    kind = "offset_flying"
+
+    def closed_loop(self, log, replay, mode="free_run"):
+        return self._predict(log, mode)
+
+
+def test_a_wild_member_warning_points_at_the_users_line(log):
+    """The warning's stacklevel named the user's line for predict but the ensemble's module
+    for closed_loop (one frame too high): both now name this file."""
+    from nnid.models.ensemble import WildMemberWarning
+
+    model = EnsembleModel(Flying(), seeds=(0, 1, 99), combine="median").fit(log)
+    with pytest.warns(WildMemberWarning) as said:
+        model.predict(log)
+    with pytest.warns(WildMemberWarning) as flown:
+        model.closed_loop(log, None)
+    assert [w.filename for w in [*said, *flown]] == [__file__, __file__]
+
+
 def test_member_validation_totals_leave_out_the_runs_warm_up(log, tmp_path):
     """``member_validation_free_run_nrmse`` scored each member with only its own warm-up left
     out, ``metrics.json``'s members with the config's ``warmup_s``: two totals for one member

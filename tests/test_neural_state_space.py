@@ -121,6 +121,12 @@ def test_save_load_round_trip(fitted, tmp_path):
     assert cfg["structure"] == CASCADE and cfg["hidden_states"] == 1
     again = load_model(tmp_path)
     np.testing.assert_allclose(again.predict(test), model.predict(test), rtol=1e-10)
+    # every field of each stage's fit history comes back (InputOutputModel saves fit_history)
+    assert again.history_ == model.history_ and again.stages_ == model.stages_
+    saved = json.loads((tmp_path / "model.json").read_text())
+    saved["state"].pop("fit_history")  # a file saved before the history was kept still loads
+    (tmp_path / "model.json").write_text(json.dumps(saved))
+    assert not hasattr(load_model(tmp_path), "history_")
 
 
 def test_k_step_prediction_restarts_from_the_measured_level(fitted):

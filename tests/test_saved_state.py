@@ -15,7 +15,7 @@ import torch
 from nnid import load_model
 from nnid.datasets.simulator import simulate
 from nnid.errors import NnidInputError
-from nnid.models.parametric import ParametricModel
+from nnid.models.parametric import ParametricModel, vehicle_with
 from nnid.reports.train_report import _params_table
 from nnid.serialization import dumps
 from nnid.trainers.history import History, history_state, restored_history
@@ -203,3 +203,36 @@ def test_a_loaded_model_reports_what_least_squares_found_collinear_or_unexcited(
         est = solve_least_squares(phi, 3.0 * phi[:, 0], names=["a", "b"])
     again = Estimate.from_state(json.loads(dumps(est.as_state())))
     assert again.as_dict()["b"]["excited"] is False and "excited" not in again.as_dict()["a"]
+
+
+def test_a_model_saved_with_a_thruster_of_no_thrust_loads_and_predicts_as_saved(
+    vehicle_factory, tmp_path
+):
+    """An older nnid saved vehicles whose thrust curve gave no thrust (k = 0), which
+    _makes_thrust now refuses: such a model did not load at all. It loads with a warning, the
+    thruster giving no thrust: the model predicts what it did, and new input is still refused."""
+    push = {"position": [0.0, 0.0, 0.0], "direction": [1.0, 0.0, 0.0]}
+    curve = {"kind": "signed_quadratic", "k": 40.0}
+    vehicle = vehicle_factory(
+        damping={"coefficients": {"X:u*abs(u)": -20.0}},
+        thrusters=[{"name": "h1", **push, "curve": curve}, {"name": "h2", **push, "curve": curve}],
+    )
+    rng = np.random.default_rng(2)
+    log = simulate(vehicle, np.repeat(rng.uniform(0.2, 1.0, (10, 2)), 20, axis=0), 0.05)
+    model = ParametricModel(vehicle, ["X:u*abs(u)"], ["u"]).fit(log)
+    model.save(tmp_path)
+    _edit(
+        tmp_path,
+        lambda s: s["settings"]["vehicle"]["$vehicle"]["thrusters"][1]["curve"].update(k=0.0),
+    )
+    with pytest.warns(UserWarning, match=r"thruster 'h2' has a thrust curve of no thrust"):
+        back = load_model(tmp_path)
+    assert back.vehicle.thrusters[1].curve.k == 0.0
+    assert "cmd_h2" in log and not np.array_equal(back.predict(log), model.predict(log))
+    silent_h2 = log.assign(cmd_h2=0.0)  # k·0·|0| = 0: the thrust of the saved curve
+    np.testing.assert_array_equal(back.predict(log), model.predict(silent_h2))
+    # a copy with fitted values keeps the saved curve (the loop, explain and fault isolation)
+    assert vehicle_with(back.vehicle, {"X:u*abs(u)": -10.0}).thrusters[1].curve.k == 0.0
+    data = back.vehicle.model_dump(mode="json")
+    with pytest.raises(NnidInputError, match="no thrust at any command"):
+        vehicle_from_dict(data, "new.toml")

@@ -212,16 +212,17 @@ class EnsembleModel(NnidModel):
 
     def _predict(self, log: pd.DataFrame, mode: str | int) -> pd.DataFrame:
         return self._combined(
-            self._said([m.predict(log, mode) for m in self.members_], log, mode), log
+            self._said([m.predict(log, mode) for m in self.members_], log, mode, caller=4), log
         )
 
     def _said(
-        self, predictions: list[pd.DataFrame], log: pd.DataFrame, mode: str | int
+        self, predictions: list[pd.DataFrame], log: pd.DataFrame, mode: str | int, caller: int
     ) -> list[pd.DataFrame]:
         """``predictions``, as they are, after a :class:`WildMemberWarning` naming the seeds
         of the members that went wild on ``log`` (:func:`wild_members`): the combination
         keeps them (the documented rule), and a median that ranks one away would otherwise
-        say nothing of it."""
+        say nothing of it. ``caller``: the warning's stacklevel, the user's line (``predict``
+        reaches here one frame deeper than a ``closed_loop`` flight)."""
         preds = np.stack([p[self.outputs_].to_numpy(np.float64) for p in predictions])
         wild = wild_members(preds, log, self.outputs_, warmup_mask(log, 0.0, self.warmup_samples_))
         if wild:
@@ -234,7 +235,7 @@ class EnsembleModel(NnidModel):
                 f"{DIVERGENCE_FACTOR:g} times that range; the {what} it in as it stands "
                 "(member.predict(log) shows it alone)",
                 WildMemberWarning,
-                stacklevel=4,
+                stacklevel=caller,
             )
         return predictions
 
@@ -264,7 +265,7 @@ class EnsembleModel(NnidModel):
 
         def fly(log: pd.DataFrame, replay, mode: str | int = "free_run") -> pd.DataFrame:
             flown = [m.closed_loop(log, replay, mode) for m in members]
-            return self._combined(self._said(flown, log, mode), log)
+            return self._combined(self._said(flown, log, mode, caller=3), log)
 
         return fly
 

@@ -69,6 +69,7 @@ from nnid.physics.parts import Parts, relative_velocity
 from nnid.physics.thrusters import force_deadband
 from nnid.trainers.history import Progress
 from nnid.trainers.regression import Regression
+from nnid.vehicle import KEEP_CURVES
 
 _AXES = "xyz"
 
@@ -121,7 +122,9 @@ def vehicle_with(vehicle, values: dict[str, float]):
             out[name] = value
         else:
             out[name[:3]][_AXES.index(name[-1])] = value
-    return type(vehicle).model_validate(out)
+    # the curves are the given vehicle's, checked when it was read: one of no thrust that a
+    # saved model kept (saved_vehicle) is kept, so that the model's vehicle can be refitted
+    return type(vehicle).model_validate(out, context=KEEP_CURVES)
 
 
 def checked_dofs(dofs: object, field: str = "dofs") -> tuple[str, ...]:
