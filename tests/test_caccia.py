@@ -359,3 +359,29 @@ def test_the_pieces_a_gap_cut_a_run_into_keep_its_weight_setting(setup):
             fits.append(trainer.fit_steady(data, vehicle))
         assert fits[1].names == fits[0].names
         np.testing.assert_allclose(fits[1].theta, fits[0].theta, rtol=1e-9)
+
+
+def test_the_steps_excitation_verdicts_reach_the_estimate_under_its_names():
+    """to_vehicle_signs renamed the parameters but kept the excitation report under Caccia's
+    names (k_w|w|): its verdict matched no parameter; and the union of the two steps dropped
+    both steps' reports. A parameter the data did not excite (a zero column) or separate (m_w
+    collinear with the offset) showed as merely "not significant"."""
+    from types import SimpleNamespace
+
+    from nnid.trainers.least_squares import ExcitationWarning, solve_least_squares
+
+    a, b, c = np.random.default_rng(0).normal(size=(3, 200))
+    trainer = CacciaTwoStep(dof="w")
+    with pytest.warns(ExcitationWarning):
+        trainer.steady_ = solve_least_squares(
+            np.stack([a, 0 * a, b], 1), a + b, names=["k_w", "k_w|w|", "W"]
+        )
+        trainer.inertia_ = solve_least_squares(
+            np.stack([c, a, c], 1), a + c, names=["m_w", "x0", "b"]
+        )
+    signed = trainer.to_vehicle_signs(trainer.steady_).as_dict()
+    assert signed["Z:w*abs(w)"]["excited"] is False and "excited" not in signed["Z:w"]
+    params = trainer._finish(SimpleNamespace(mass=100.0)).as_dict()
+    assert params["Z:w*abs(w)"]["excited"] is False
+    assert params["Z_wdot"]["collinear"] is True
+    assert all(k not in params["Z:w"] for k in ("excited", "collinear"))

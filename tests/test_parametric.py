@@ -575,6 +575,58 @@ def test_an_added_mass_whose_acceleration_is_all_noise_is_named_not_identified()
     assert rho >= 1 and named == {"X_udot": (rho, np.inf)}
 
 
+def _surge_at_one_thrust(vehicle):
+    """A minute of a constant 10-N surge, logged without noise: the force, hence its installation
+    coefficient's regressor, is a constant, as is that of a constant external force."""
+    t = np.arange(601) * 0.1
+    inputs = np.zeros((t.size, 6))
+    inputs[:, 0] = 10.0
+    return simulate(vehicle, inputs, 0.1, seed=0, experiment="surge")
+
+
+def test_a_sequence_model_says_which_of_its_parameters_a_step_could_not_separate(seamor, tmp_path):
+    """The decoupled sequence built its estimate with no excitation report: a parameter one
+    step could not separate from another (η⁺ and a constant bias under one constant thrust)
+    showed, fitted and after loading, as merely "not significant", its "collinear" lost. Each
+    parameter carries the verdict of the step whose value it keeps (X:u*abs(u), collinear in
+    no step, is refitted in the second)."""
+    steps = [
+        {"experiments": ["surge"], "dofs": ["u"], "unknowns": ["X_udot", "X:u*abs(u)"]},
+        {
+            "experiments": ["surge"],
+            "dofs": ["u"],
+            "unknowns": ["X:u*abs(u)", "eta.u.pos", "external_bias.u"],
+        },
+    ]
+    with pytest.warns(ExcitationWarning, match=r"collinear regressors\): eta\.u\.pos"):
+        model = ParametricModel(seamor, sequence=steps).fit(_surge_at_one_thrust(seamor))
+    model.save(tmp_path)
+    for params in (model.params, load_model(tmp_path).params):
+        for name in ("eta.u.pos", "external_bias.u"):
+            assert params[name]["collinear"] is True and not params[name]["significant"]
+        for name in ("X_udot", "X:u*abs(u)"):
+            assert "collinear" not in params[name] and "excited" not in params[name]
+    report = model.estimate_.excitation
+    # no one regressor of the whole estimate: no spectrum claimed, the worst step's condition
+    assert report.singular_values == [] and report.condition == np.inf
+    assert report.rank == 2 and not report.persistent
+
+
+def test_the_attenuation_keeps_an_infinite_bias_tagged_and_reads_older_files_null():
+    """restored_attenuation read numbers with float() and null as inf on its own: the tag
+    exact_float writes ({"$float": "inf"}) was refused as damaged and a boolean passed as 1.
+    The fit now writes the tag; null (files saved before it) still reads inf."""
+    from nnid.models.parametric import restored_attenuation
+    from nnid.serialization import exact_float
+
+    assert exact_float(np.inf) == {"$float": "inf"}
+    tagged = restored_attenuation({"X_udot": [0.2, exact_float(np.inf)]}, ["X_udot"])
+    assert tagged == {"X_udot": (0.2, np.inf)}
+    assert restored_attenuation({"X_udot": [0.2, None]}, ["X_udot"]) == {"X_udot": (0.2, np.inf)}
+    with pytest.raises(TypeError, match=r"'attenuated' 'X_udot' is not a number: True"):
+        restored_attenuation({"X_udot": [True, 1.0]}, ["X_udot"])
+
+
 def _mocap_with_sines(vehicle, dof: str, offset: float, sine: float, noise: dict):
     """Two minutes of ``offset`` plus ``sine`` (N or N m) of sine at 0.5 rad/s on ``dof``,
     logged by 100-Hz motion capture (pose only, ``noise`` its levels): the fit derives the

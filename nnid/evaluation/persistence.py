@@ -9,7 +9,9 @@ Columns are scaled to unit RMS first, so the verdict does not depend on units.
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 
@@ -36,6 +38,19 @@ class ExcitationReport:
         """The report as strict JSON data; the condition number of a singular ΦᵀΦ is inf,
         tagged so that it reads back inf (:func:`~nnid.serialization.exact_float`)."""
         return {**asdict(self), "condition": exact_float(self.condition)}
+
+    def renamed(self, names: Mapping[str, str]) -> ExcitationReport:
+        """The same report with its parameters renamed (old name -> new; others kept), for an
+        estimate whose parameters were renamed (Caccia's signs): verdicts under the old names
+        would match no parameter of it."""
+        unexcited = [names.get(n, n) for n in self.unexcited]
+        collinear = [names.get(n, n) for n in self.collinear]
+        return replace(
+            self,
+            unexcited=unexcited,
+            collinear=collinear,
+            warnings=_verdict_warnings(unexcited, collinear, self.rank, self.n_params),
+        )
 
     @classmethod
     def from_state(cls, state: object) -> ExcitationReport:
@@ -118,6 +133,14 @@ def excitation_from_gram(
         cols = [names.index(m) for m in members]
         sub = np.linalg.eigvalsh(normed[np.ix_(cols, cols)])
         group_min[g] = float(np.sqrt(max(sub.min(), 0.0))) if sub.size else 0.0
+    warnings = _verdict_warnings(unexcited, collinear, rank, p)
+    return ExcitationReport(
+        n, p, rank, condition, [float(x) for x in sv], group_min, unexcited, collinear, warnings
+    )
+
+
+def _verdict_warnings(unexcited: list[str], collinear: list[str], rank: int, p: int) -> list[str]:
+    """The report's warnings: the parameters it names, or its rank deficit when it names none."""
     warnings = []
     if unexcited:
         warnings.append(f"not excited by this data (zero regressor): {', '.join(unexcited)}")
@@ -127,6 +150,52 @@ def excitation_from_gram(
         )
     if rank < p and not warnings:
         warnings.append(f"the regressor has rank {rank} < {p} parameters")
+    return warnings
+
+
+def combined_excitation(
+    parts: Sequence[tuple[Sequence[str], ExcitationReport | None]], names: Sequence[str]
+) -> ExcitationReport | None:
+    """One report for an estimate of ``names`` assembled from parts, each (the parameters it
+    gives the estimate, its report under those names or None where it made no check): a
+    decoupled sequence's steps (Weiss eqs 99-108), Caccia's two steps. A parameter takes the
+    verdict of the last part that gives it (a later step's refit replaces an earlier value,
+    and its verdict with it); None when no part that gives one had a report.
+
+    No regressor of the whole estimate exists, so nothing here claims one was measured:
+    ``rank`` counts the parameters a part's check found excited and separable (one of a part
+    without a check, or of no part, counts as not, and a warning names it), so ``persistent``
+    holds only when every parameter was checked and passed; ``condition`` is the worst (largest) of
+    the parts' own; ``singular_values`` and ``group_min_singular`` are left empty (each part's
+    are of its own unit-scaled regressor, not parts of one spectrum); ``n_samples`` sums the
+    parts' rows."""
+    last: dict[str, int] = {}
+    for k, (given, _) in enumerate(parts):
+        last.update(dict.fromkeys((n for n in given if n in names), k))
+    used = sorted(set(last.values()))
+    reports = {k: parts[k][1] for k in used if parts[k][1] is not None}
+    if not reports:
+        return None
+    unchecked = [n for n in names if n in last and last[n] not in reports]
+    unexcited = [n for n in names if last.get(n) in reports and n in reports[last[n]].unexcited]
+    collinear = [n for n in names if last.get(n) in reports and n in reports[last[n]].collinear]
+    unchecked += [n for n in names if n not in last]
+    rank = len(names) - len({*unexcited, *collinear, *unchecked})
+    # no rank-deficit line: there is no one regressor whose rank fell short
+    warnings = _verdict_warnings(unexcited, collinear, len(names), len(names))
+    if unchecked:
+        warnings.append(
+            f"not checked for excitation (a part without a check): {', '.join(unchecked)}"
+        )
+    conditions = [r.condition for r in reports.values()]
     return ExcitationReport(
-        n, p, rank, condition, [float(x) for x in sv], group_min, unexcited, collinear, warnings
+        sum(r.n_samples for r in reports.values()),
+        len(names),
+        rank,
+        max(conditions) if not any(math.isnan(c) for c in conditions) else math.nan,
+        [],
+        {},
+        unexcited,
+        collinear,
+        warnings,
     )

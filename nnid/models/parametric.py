@@ -67,6 +67,7 @@ from nnid.physics.damping_library import (
 from nnid.physics.dofs import DOFS, FORCES
 from nnid.physics.parts import Parts, relative_velocity
 from nnid.physics.thrusters import force_deadband
+from nnid.serialization import exact_float, read_exact_float
 from nnid.trainers.history import Progress
 from nnid.trainers.regression import Regression
 from nnid.vehicle import KEEP_CURVES
@@ -745,8 +746,9 @@ def restored_trainer_history(names: object, tensors: dict) -> dict[str, np.ndarr
 
 def restored_attenuation(value: object, names: Sequence[str]) -> dict[str, tuple[float, float]]:
     """:func:`attenuated_unknowns`' verdict as saved, checked: ``{name: [ρ, bias]}`` over
-    fitted unknowns; null, the only non-finite number it holds (an acceleration that is all
-    noise: bias inf), is inf again. A file edited by hand is refused at loading."""
+    fitted unknowns, the numbers as :func:`~nnid.serialization.exact_float` writes them. Null
+    is inf: files saved before the tag wrote the only non-finite number it holds (an
+    acceleration that is all noise: bias inf) so. A file edited by hand is refused at loading."""
     if not isinstance(value, dict):
         raise TypeError("'attenuated' is not a mapping")
     out = {}
@@ -755,7 +757,8 @@ def restored_attenuation(value: object, names: Sequence[str]) -> dict[str, tuple
             raise ValueError(f"'attenuated' names {name!r}, which is not a fitted unknown")
         if not (isinstance(pair, list) and len(pair) == 2):
             raise TypeError(f"'attenuated' {name!r} is not [rho, bias]")
-        rho, bias = (np.inf if v is None else float(v) for v in pair)
+        what = f"'attenuated' {name!r}"
+        rho, bias = (np.inf if v is None else read_exact_float(v, what) for v in pair)
         out[name] = (rho, bias)
     return out
 
@@ -1118,7 +1121,10 @@ class ParametricModel(FossenPlant):
         state = {"dofs": list(self.dofs_), **self.estimate_.as_state()}
         # what the fit derived and judged, as the fitted model holds it: a loaded model lacked
         # report_ and attenuated_ (its warnings' grounds) that the fitted one had
-        fit = {"report": self.report_.to_dict(), "attenuated": dict(self.attenuated_)}
+        fit = {
+            "report": self.report_.to_dict(),
+            "attenuated": {n: [exact_float(v) for v in p] for n, p in self.attenuated_.items()},
+        }
         # and what it recorded per sample (the UKF's history_, a recursive θ path): a loaded
         # model had no trainer_ at all; series, not scalars, so tensors (none: no tensors.pt)
         records, tensors = saved_records(self)

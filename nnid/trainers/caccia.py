@@ -84,6 +84,7 @@ from nnid.datasets.measurement import Measurement
 from nnid.datasets.preprocess import UNIFORM_TOLERANCE, savgol_window
 from nnid.datasets.simulator import simulate, simulate_config
 from nnid.errors import NnidInputError
+from nnid.evaluation.persistence import combined_excitation
 from nnid.physics.dofs import DOFS, FORCES
 from nnid.physics.thrusters import Actuation, apply_installation
 from nnid.trainers.history import Progress, silent
@@ -417,20 +418,26 @@ def force_to_commands(vehicle, dof: str, force: np.ndarray) -> np.ndarray:
 
 
 def _combine(parts: Sequence[Estimate], names: Sequence[str] | None = None) -> Estimate:
-    """Block-diagonal union of estimates (the steps' covariances are not cross-correlated)."""
+    """Block-diagonal union of estimates (the steps' covariances are not cross-correlated),
+    with the parts' excitation verdicts (:func:`~nnid.evaluation.persistence.combined_excitation`)
+    under the union's names: the reports show them beside each parameter."""
+    names = list(names) if names is not None else [n for p in parts for n in p.names]
     theta = np.concatenate([p.theta for p in parts])
     cov = np.zeros((theta.size, theta.size))
+    checks = []
     k = 0
     for p in parts:
         n = p.theta.size
         cov[k : k + n, k : k + n] = p.cov
+        checks.append((names[k : k + n], p.excitation))
         k += n
     return Estimate(
-        list(names) if names is not None else [n for p in parts for n in p.names],
+        names,
         theta,
         cov,
         parts[0].sigma2,
         sum(p.n_obs for p in parts),
+        combined_excitation(checks, names),
     )
 
 
@@ -515,16 +522,20 @@ class CacciaTwoStep:
         return [table.get(n, n) for n in names]
 
     def to_vehicle_signs(self, est: Estimate) -> Estimate:
-        """Caccia's positive k -> Fossen coefficients −k (covariance transformed alike)."""
+        """Caccia's positive k -> Fossen coefficients −k (covariance transformed alike), the
+        excitation verdicts renamed with them (under Caccia's names they named no parameter)."""
         k1, k2, _, _ = caccia_names(self.dof)
         sign = np.array([-1.0 if n in (k1, k2) else 1.0 for n in est.names])
+        names = self.vehicle_names(est.names)
         return Estimate(
-            self.vehicle_names(est.names),
+            names,
             est.theta * sign,
             est.cov * np.outer(sign, sign),
             est.sigma2,
             est.n_obs,
-            est.excitation,
+            None
+            if est.excitation is None
+            else est.excitation.renamed(dict(zip(est.names, names, strict=True))),
         )
 
     def _caccia_value(self, name: str, default: float = 0.0) -> float:
@@ -766,6 +777,8 @@ class CacciaTwoStep:
                     m.cov[:1, :1].copy(),
                     m.sigma2,
                     m.n_obs,
+                    # m_ξ's verdict is the added mass's (−(m_ξ − m), m known)
+                    None if m.excitation is None else m.excitation.renamed({m.names[0]: added}),
                 )
             )
         self.estimate_ = _combine(parts)

@@ -10,6 +10,8 @@ gyroscopic terms of C_A carry roll and pitch errors into yaw).
 
 The covariance is block-diagonal over the steps: it does not carry the uncertainty of the
 plugged-in values forward (they are far better determined than the parameters they feed).
+The excitation report joins the steps' (:func:`~nnid.evaluation.persistence.combined_excitation`):
+each parameter with the verdict of the step whose value it keeps.
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from nnid.errors import NnidInputError
+from nnid.evaluation.persistence import ExcitationReport, combined_excitation
 from nnid.trainers.history import Progress, silent
 from nnid.trainers.least_squares import Estimate, LeastSquares
 
@@ -106,6 +109,7 @@ class DecoupledSequence:
         cov = np.full((len(names), len(names)), np.nan)
         found: dict[str, float] = {}
         n_obs = 0
+        checks: list[tuple[list[str], ExcitationReport | None]] = []
         report = progress or silent
         for k, step in enumerate(self.steps):
             try:
@@ -120,7 +124,10 @@ class DecoupledSequence:
             cov[np.ix_(idx, idx)] = est.cov
             found.update(zip(sub.names, est.theta, strict=True))
             n_obs += est.n_obs
+            checks.append((list(sub.names), est.excitation))
         left = [n for n, v in zip(names, theta, strict=True) if not np.isfinite(v)]
         if left:
             raise NnidInputError(f"no step of the sequence identifies {left}", field="sequence")
-        return Estimate(names, theta, cov, float("nan"), n_obs)
+        # the steps' unexcited and collinear verdicts, which the reports show beside each
+        # parameter: the combined estimate had none, so its "not significant" read as a test
+        return Estimate(names, theta, cov, float("nan"), n_obs, combined_excitation(checks, names))
