@@ -12,7 +12,7 @@ from typing import NamedTuple
 import numpy as np
 import pandas as pd
 
-from nnid.datasets.log import ANGLES, PIECE_OF, POSE, TAU, VELOCITY
+from nnid.datasets.log import ANGLES, POSE, TAU, VELOCITY, run_of
 from nnid.datasets.preprocess import first_order_lag
 from nnid.errors import NnidInputError
 from nnid.physics.thrusters import Actuation, apply_deadband, force_deadband
@@ -40,14 +40,8 @@ def motion_arrays(log: pd.DataFrame) -> dict[str, np.ndarray]:
         codes, names = pd.factorize(log["experiment"])
     else:
         codes, names = np.zeros(n, dtype=int), ["0"]
-    runs = list(names)
-    if PIECE_OF in log:
-        # a piece's rows share one piece_of: the first row of each code tells its run
-        first = np.unique(codes, return_index=True)[1]
-        runs = [
-            r if pd.notna(r) else e
-            for r, e in zip(log[PIECE_OF].to_numpy(object)[first], runs, strict=True)
-        ]
+    run = run_of(log)
+    runs = [run.get(e, e) for e in names]
     return {
         "eta": eta,
         "nu": nu,

@@ -215,16 +215,32 @@ def run_label(name: object) -> str:
     return "the log" if name is None else f"experiment {str(name)!r}"
 
 
+def run_of(log: pd.DataFrame) -> dict:
+    """Each experiment of ``log`` (in log order) -> the run it belongs to: its ``piece_of``
+    where a gap cut a run into pieces (:mod:`nnid.datasets.gaps`), else itself; empty for a
+    log without experiments."""
+    if "experiment" not in log:
+        return {}
+    first = log.drop_duplicates("experiment")
+    if PIECE_OF not in log:
+        return {e: e for e in first["experiment"]}
+    return {
+        e: r if pd.notna(r) else e
+        for e, r in zip(first["experiment"], first[PIECE_OF].to_numpy(object), strict=True)
+    }
+
+
 def run_pieces(log: pd.DataFrame, names: Sequence[object]) -> list:
     """``names`` of experiments as a user gives them, each name of a run that a gap cut into
-    pieces (their ``piece_of``, :mod:`nnid.datasets.gaps`) standing for all its pieces in log
-    order: the run is what the user logged and names (a split, ``--exclude``, held-out
-    runs); any other name is kept as it is, for the caller to judge."""
-    if PIECE_OF not in log or "experiment" not in log:
-        return list(names)
-    known = set(log["experiment"])
-    pieces = log.groupby(PIECE_OF, sort=False)["experiment"].unique()
-    return [e for n in names for e in (pieces[n] if n not in known and n in pieces.index else [n])]
+    pieces (:func:`run_of`) standing for all its pieces in log order: the run is what the
+    user logged and names (a split, ``--exclude``, held-out runs); any other name is kept as
+    it is, for the caller to judge."""
+    runs = run_of(log)
+    out = []
+    for n in names:
+        pieces = [e for e, r in runs.items() if r == n] if n not in runs else []
+        out += pieces or [n]
+    return out
 
 
 def wrap_angle(a: np.ndarray) -> np.ndarray:
