@@ -123,7 +123,7 @@ def simulate(
     write_log(log, out_path)
     n_exp = log["experiment"].nunique() if "experiment" in log else 1
     out.print(
-        f"wrote {out_path}: {len(log)} samples, {n_exp} experiments, "
+        f"wrote {out_path}: {len(log)} samples, {n_exp} experiment{'s' * (n_exp != 1)}, "
         f"{log['t'].groupby(log.get('experiment', 0)).max().sum():.1f} s of '{veh.name}'"
     )
 
@@ -166,7 +166,7 @@ def inspect(
     out.print(
         f"[bold]{escape(str(log_path))}[/]: {info['samples']} samples, "
         f"{info['duration_s']:.1f} s" + (f" of data (and {gap_s:.3g} s in gaps)" if gap_s else "")
-        + f", {info['runs']} experiments"
+        + f", {info['runs']} experiment{'s' * (info['runs'] != 1)}"
         + (f" ({pieces} pieces: runs cut at gaps)" if pieces else "")
         + f", about {info['rate_hz']:.3g} Hz"
         + (f" (experiments from {low:.3g} to {high:.3g} Hz)" if high > 1.1 * low else ""),
@@ -691,3 +691,7 @@ def _usage_error(exc: typer.TyperException) -> int:
             f"[bold red]error:[/] {escape(message)}{escape(hint)}", highlight=False, markup=True
         )
     return exc.exit_code
+
+
+if __name__ == "__main__":  # `python -m nnid.cli` ran nothing and exited 0
+    main()

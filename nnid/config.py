@@ -1067,10 +1067,12 @@ def load_config(
     path: str | Path,
     model: type[BaseModel] = SimulateConfig,
     overrides: dict[str, Any] | None = None,
+    command: str | None = None,
 ) -> BaseModel:
     """Read and validate a TOML config; raise NnidInputError naming the file and field. A
     config written for another command is refused with that command's name. ``overrides``
-    set dotted option paths first (a sweep's trial)."""
+    set dotted option paths first (a sweep's trial). ``command``: the command the user ran,
+    if not the one the config kind is named for (``nnid sweep`` reads a 'train' config)."""
     data = read_toml(path)
     for option, value in (overrides or {}).items():
         set_option(data, option, value, str(path))
@@ -1089,7 +1091,7 @@ def load_config(
             else ""
         )
         raise NnidInputError(
-            f"{what}; `nnid {expected}` needs a '{expected}' config{extra}",
+            f"{what}; `nnid {command or expected}` needs a '{expected}' config{extra}",
             source=str(path),
             field="kind",
         )

@@ -146,6 +146,8 @@ def train_run(
         write_text(stage / "report.md", train_markdown(result.metrics))
         write_text(stage / "report.html", train_html(result.metrics, result.figures))
         result.report.write(stage)
+        # what this run wrote, as written: tensors.pt and the cleaning report had gone unsaid
+        files = ", ".join(sorted(item.name for item in stage.iterdir()))
     from nnid.evaluation.evaluate import diverged_columns
     from nnid.pipeline import diverged_training
 
@@ -182,9 +184,6 @@ def train_run(
     for name, p in metrics["params"].items():
         headline[f"param:{name}"] = p.get("value")
         headline[f"stderr:{name}"] = p.get("stderr")
-    files = "model.json, metrics.json, report.md, report.html"
-    if result.monitor is not None:
-        files += f", {MONITOR_FILE}"
     said = [f"wrote {out_dir}/: {files} ({line})"]
     if result.monitor is not None:
         said.append(f"monitor: {monitor_sentence(metrics['detect'])}")

@@ -112,6 +112,13 @@ LOG_CASES: list[tuple[str, str, Callable]] = [
         ),
     ),
     ("angle in degrees", "'psi'", lambda df, i: df.assign(psi=np.degrees(df["psi"]) + 200)),
+    # a length unit slip under every bound: 12 cm/s logged as 12 m/s was fitted as it stood
+    (
+        "velocities in cm per s",
+        "'w'",
+        lambda df, i: df.assign(**{c: df[c] * 100 for c in ("u", "v", "w")}),
+    ),
+    ("depth in cm", "'z'", lambda df, i: df.assign(z=df["z"] * 100)),
     ("text in an angle", "'phi'", _set("phi", 50, "level")),
     (
         "no motion columns",
@@ -305,7 +312,7 @@ def _log_cases() -> list[Case]:
     # --follow reads row by row, not through the log reader: the row checks it repeats, with
     # the same column and row numbers
     follow_cases = ("text in time", "duplicated time", "decreasing time", "text in a velocity",
-                    "infinite input", "empty input cell")  # fmt: skip
+                    "infinite input", "empty input cell", "velocities in cm per s")  # fmt: skip
     for name in follow_cases:
 
         def followed(tmp, fx, name=name):

@@ -284,7 +284,11 @@ def test_a_config_without_data_runs_with_data_and_vehicle_given(tmp_path):
     )
     assert run.exit_code == 0, run.output
     assert (out / "metrics.json").exists() and (out / "model.json").exists()
-    assert any(f"wrote {out}/" in line for line in run.output.splitlines()), run.output
+    wrote = next(line for line in run.output.splitlines() if f"wrote {out}/" in line)
+    # every file the run wrote is named (the cleaning report went unsaid), and only those
+    listed = wrote.split(f"wrote {out}/: ")[1].split(" (")[0].split(", ")
+    assert sorted(listed) == sorted(p.name for p in out.iterdir()), (listed, wrote)
+    assert {"cleaning.json", "cleaning.md", "model.json", "metrics.json"} <= set(listed)
     assert "gaps" not in run.output  # a complete log: nothing filled in or left out, nothing said
     # a velocity sample missing: bridged from the pose, and the console says so (it was said
     # only in cleaning.md)
@@ -411,6 +415,28 @@ def test_a_config_of_no_kind_nnid_has_names_the_kinds(tmp_path, no_simulation):
     text = CliRunner().invoke(app, _args("train", cfg, tmp_path)).output
     assert "'detect' is not a config kind (kinds: " in text and "train" in text, text
     assert "a 'train' config with a [detect] table" in text and "another tool" not in text
+
+
+def test_a_sweep_of_another_kind_of_config_names_the_command_that_was_run(tmp_path):
+    """`nnid sweep` on a compare config said "`nnid train` needs a 'train' config": the user
+    ran sweep."""
+    cfg = tmp_path / "cmp.toml"
+    cfg.write_text('kind = "compare"\n')
+    run = CliRunner().invoke(app, ["sweep", str(cfg), "--out", str(tmp_path / "o")])
+    assert run.exit_code == 2, run.output
+    text = " ".join(run.output.split())
+    assert "`nnid sweep` needs a 'train' config" in text and "nnid train`" not in text, text
+
+
+def test_python_dash_m_runs_the_command_line():
+    """`python -m nnid` had no entry, and `python -m nnid.cli` ran nothing and exited 0."""
+    import subprocess
+    import sys
+
+    for module in ("nnid", "nnid.cli"):
+        done = subprocess.run([sys.executable, "-m", module, "--version"], capture_output=True,
+                              text=True, timeout=120)  # fmt: skip
+        assert done.returncode == 0 and done.stdout.startswith("nnid "), (module, done)
 
 
 def test_a_validation_score_that_stopped_the_training_is_said_so_when_shown(tmp_path):

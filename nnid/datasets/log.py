@@ -106,6 +106,7 @@ def validate_log(
             size = np.abs(df[col].to_numpy(dtype=np.float64))
             raise degrees_error(df, col, source, int(np.nanargmax(size)))
     check_rate_units(df, source)
+    check_depth_units(df, source)
     _check_velocity_frame(df, source)
     return df
 
@@ -398,6 +399,103 @@ def check_rate_units(df: pd.DataFrame, source: str, row: int | None = None) -> N
                 "in the reader config)",
                 source=source,
                 field=col,
+                row=row,
+            )
+
+
+#: the depth change u, v, w imply (ż = J₁(Θ)₃ ν₁) over the depth change z logs, as a slope
+#: (:func:`depth_slopes`): velocities in cm/s or mm/s beside a depth in metres read 100 or
+#: 1000, a depth in cm or mm beside velocities in m/s 0.01 or 0.001. Logs read 0.94-1.03 (the
+#: demo's runs, the octorov's simulated DVL, the romeo and vt690 simulate configs, the Tartan
+#: session's 957 s)
+DEPTH_UNIT_SLOPE = (20.0, 2000.0)
+#: windows of about this many seconds, where z changes by more than :data:`DEPTH_CHECK_CHANGE`
+#: (in the log's own unit): a depth sensor's noise says nothing of the unit
+DEPTH_CHECK_WINDOW = 2.0
+DEPTH_CHECK_CHANGE = 0.05
+#: the windows' depth change must explain this share of the implied one (the regression's R²):
+#: a depth sensor's noise on a run that barely heaves pulls the slope toward 0, not a unit slip
+DEPTH_CHECK_FIT = 0.5
+#: the columns the depth-unit check reads (ψ plays no part in ż)
+DEPTH_UNIT_COLUMNS = ("z", "phi", "theta", "u", "v", "w")
+
+
+def depth_slopes(df: pd.DataFrame) -> list[tuple[object, float, float, float]]:
+    """Per experiment of a log with z, φ, θ and body velocities u, v, w: the least-squares
+    slope of the depth change the velocities imply, ż = −sin θ u + cos θ sin φ v + cos θ cos φ w
+    (the third row of J₁, Weiss eq. 16), on the depth change z logs, over windows of about
+    :data:`DEPTH_CHECK_WINDOW` where z changes by more than :data:`DEPTH_CHECK_CHANGE`, both
+    sides summed over the window as :func:`rate_slopes` does. Returns (experiment, slope, R²,
+    seconds of windows): about 1 for a consistent log, 100 for velocities in cm/s beside a
+    depth in metres, 0.01 for a depth in cm beside velocities in m/s."""
+    if not all(c in df for c in DEPTH_UNIT_COLUMNS) or len(df) < 3:
+        return []
+    if "experiment" in df:
+        codes, labels = pd.factorize(df["experiment"])
+        names = labels.tolist()
+    else:
+        codes, names = np.zeros(len(df), dtype=np.int64), [None]
+    order = np.argsort(codes, kind="stable")
+    codes = codes[order]
+    t = df["t"].to_numpy(dtype=np.float64)[order]
+    angles = df[["phi", "theta"]].to_numpy(dtype=np.float64)[order]
+    nu = df[["u", "v", "w"]].to_numpy(dtype=np.float64)[order]
+    dz = np.diff(df["z"].to_numpy(dtype=np.float64)[order])
+    dt = np.diff(t)
+    step = _experiment_steps(codes, dt, len(names))
+    starts, ends, _ = _experiment_windows(codes, step, DEPTH_CHECK_WINDOW)
+    if not starts.size:
+        return []
+    mid = angles[:-1] + 0.5 * wrap_angle(np.diff(angles, axis=0))
+    sphi, cphi = np.sin(mid[:, 0]), np.cos(mid[:, 0])
+    sth, cth = np.sin(mid[:, 1]), np.cos(mid[:, 1])
+    u, v, w = (0.5 * (nu[1:] + nu[:-1])).T  # each step's velocity (trapezoid)
+    implied = (-sth * u + cth * sphi * v + cth * cphi * w) * dt
+    # a step over a hole in t or an empty cell is left out of both sums, as in rate_slopes
+    ok = (dt < 3 * step[codes[1:]]) & np.isfinite(implied) & np.isfinite(dz)
+    g = _window_sums(np.where(ok, implied, 0.0), starts, ends)
+    a = _window_sums(np.where(ok, dz, 0.0), starts, ends)
+    use = np.abs(a) > DEPTH_CHECK_CHANGE
+    k = codes[starts][use]
+    n = np.bincount(k, minlength=len(names))
+    ga = np.bincount(k, g[use] * a[use], minlength=len(names))
+    aa = np.bincount(k, a[use] ** 2, minlength=len(names))
+    gg = np.bincount(k, g[use] ** 2, minlength=len(names))
+    out = []
+    for e in np.flatnonzero(n):
+        fit = float(ga[e] ** 2 / (aa[e] * gg[e])) if gg[e] > 0 else 0.0
+        out.append((names[e], float(ga[e] / aa[e]), fit, float(n[e] * step[e])))
+    return out
+
+
+def check_depth_units(df: pd.DataFrame, source: str, row: int | None = None) -> None:
+    """Velocities u, v, w and the depth z in one unit of length: an experiment whose depth
+    change the velocities imply reads 20 to 2000 times (or 1/2000 to 1/20 of) the one z logs
+    (:func:`depth_slopes`, :data:`DEPTH_UNIT_SLOPE`) is refused as a unit slip, cm/s or mm/s
+    velocities or a depth in cm or mm, which the fit would take as a vehicle 100 times
+    faster or slower than it is. Per experiment, as :func:`check_rate_units`."""
+    low, high = DEPTH_UNIT_SLOPE
+    for name, slope, fit, seconds in depth_slopes(df):
+        if seconds < RATE_CHECK_SECONDS or fit < DEPTH_CHECK_FIT:
+            continue
+        run = "" if name is None else f" in experiment {str(name)!r}"
+        said = f"({seconds:.3g} s of windows where z changes)"
+        if low <= slope <= high:
+            raise NnidInputError(
+                f"u, v, w say the depth changes {slope:.3g} times as fast as z does{run} "
+                f"{said}: the velocities look like cm/s or mm/s beside a depth in metres; "
+                'velocities must be m/s (or set the unit: unit = "cm/s" in the reader config)',
+                source=source,
+                field="w",
+                row=row,
+            )
+        if 1 / high <= slope <= 1 / low:
+            raise NnidInputError(
+                f"z changes {1 / slope:.3g} times as fast as u, v, w say it does{run} {said}: "
+                "the depth looks like cm or mm beside velocities in m/s; z must be in metres "
+                '(or set the unit: unit = "cm" in the reader config)',
+                source=source,
+                field="z",
                 row=row,
             )
 

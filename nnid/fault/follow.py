@@ -29,10 +29,12 @@ import pandas as pd
 from nnid.datasets.arrays import beyond_range_message, check_commands, command_limits
 from nnid.datasets.log import (
     ANGLES,
+    DEPTH_UNIT_COLUMNS,
     POSE,
     RATE_OF,
     SI_BOUNDS,
     VELOCITY,
+    check_depth_units,
     check_rate_units,
     degrees_error,
     looks_like_degrees,
@@ -66,7 +68,8 @@ RATE_WINDOW = 200
 #: after an isolated change, the rows re-referenced to it at once (seconds of them)
 REWATCH_S = 0.5
 #: the body rates' unit is checked against the attitude (the whole-log reader's deg/s check,
-#: :func:`nnid.datasets.log.check_rate_units`) on an experiment's latest this many seconds of
+#: :func:`nnid.datasets.log.check_rate_units`, and the depth's against the velocities,
+#: :func:`~nnid.datasets.log.check_depth_units`) on an experiment's latest this many seconds of
 #: rows: its first minute judged as that reader judges a one-minute log, at a cost that does
 #: not grow with the run
 RATE_UNIT_S = 60.0
@@ -315,6 +318,9 @@ def follow_csv(
     # deg/s rates beside radians: rate_slopes needs the whole attitude (a missing psi is no
     # heading of 0)
     rate_unit = all(a in col for a in ANGLES)
+    # velocities and depth in one unit of length (the whole-log reader's check, on the same rows)
+    depth_unit = all(c in col for c in DEPTH_UNIT_COLUMNS)
+    unit_check = rate_unit or depth_unit
     unit_every = max(1, round(RATE_UNIT_EVERY_S / monitor.interval))
     unit_rows = max(unit_every + 2, round(RATE_UNIT_S / monitor.interval))
     exp_first = 0  # the current experiment's first row, counted from the first row ever read
@@ -325,16 +331,19 @@ def follow_csv(
         gyro in deg/s reads a force that is not there, and the stream was watched silently."""
         i = max(exp_first, dropped + len(ts) - unit_rows, dropped) - dropped
         kept = np.array(xs[i:])
-        seen = pd.DataFrame(
-            {"t": ts[i:], **{c: kept[:, STATE.index(c)] for c in (*ANGLES, *RATE_OF.values())}}
-        )
+        checked = (*ANGLES, *RATE_OF.values()) if rate_unit else ()
+        checked += tuple(c for c in DEPTH_UNIT_COLUMNS if depth_unit and c not in checked)
+        seen = pd.DataFrame({"t": ts[i:], **{c: kept[:, STATE.index(c)] for c in checked}})
         if exp_col is not None:  # named in the error as the whole-log reader names it
             seen["experiment"] = names[codes[-1]]
-        check_rate_units(seen, where, row=n)
+        if rate_unit:
+            check_rate_units(seen, where, row=n)
+        if depth_unit:
+            check_depth_units(seen, where, row=n)
 
     def unchecked_tail() -> bool:
         """Whether the current experiment has rows after its last unit check."""
-        return rate_unit and bool(ts) and (dropped + len(ts) - exp_first) % unit_every != 0
+        return unit_check and bool(ts) and (dropped + len(ts) - exp_first) % unit_every != 0
 
     limits = command_limits(monitor.plant_.vehicle)  # the whole-log detect refuses beyond them
     for n, row in enumerate(rows):  # n: the data row from 0, as the whole-log reader counts
@@ -410,7 +419,7 @@ def follow_csv(
         watched.append(vals[-1].copy())
         codes.append(len(names) - 1)
         row_no = dropped + len(ts) - 1
-        if rate_unit and not unchecked_tail():  # a whole block of rows since the last check
+        if unit_check and not unchecked_tail():  # a whole block of rows since the last check
             check_units(n)  # before this row's alarm is announced
         if ref["rewatch"] is not None and ref["code"] == codes[-1] and row_no >= ref["start"]:
             queue.append(row_no)  # watched on what the isolated changes leave

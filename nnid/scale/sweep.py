@@ -63,7 +63,7 @@ def trials(
 ) -> tuple[SweepSpec, list[Task]]:
     """The sweep of a train config and its trial tasks; every setting is validated as a
     config before any work (a bad option path is refused, naming it)."""
-    cfg = load_config(config, TrainConfig)
+    cfg = load_config(config, TrainConfig, command="sweep")
     if cfg.sweep is None:
         raise NnidInputError("has no [sweep] table (see docs/scale.md)", source=str(config),
                              field="sweep")  # fmt: skip
