@@ -345,6 +345,14 @@ def vehicle_from_dict(
     return vehicle
 
 
+def vehicle_copy(vehicle: Vehicle, data: dict[str, Any]) -> Vehicle:
+    """A vehicle of ``vehicle``'s type from ``data``, a dump of ``vehicle`` with other values
+    set (fitted parameters, a payload). Its curves are ``vehicle``'s, checked when it was read,
+    so they are kept (:data:`KEEP_CURVES`): one of no thrust that a saved model kept
+    (:func:`saved_vehicle`) would otherwise refuse the copy of a vehicle already accepted."""
+    return type(vehicle).model_validate(data, context=KEEP_CURVES)
+
+
 #: the share of its weight by which a vehicle's buoyancy may differ before a file is warned of:
 #: a 113-N vehicle declared with 1000 N of buoyancy loaded without a word
 TRIM = 0.5

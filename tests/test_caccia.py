@@ -361,6 +361,28 @@ def test_the_pieces_a_gap_cut_a_run_into_keep_its_weight_setting(setup):
         np.testing.assert_allclose(fits[1].theta, fits[0].theta, rtol=1e-9)
 
 
+def test_a_sinusoid_run_cut_at_a_gap_is_refused_saying_so(setup, fitted):
+    """resample_log cuts the sinusoid run at a 5-s hole into 'sinusoid#0' and 'sinusoid#1'.
+    Step 2 was refused with "the sinusoid log must hold one experiment", which said neither
+    the gap nor what to do; the model did not take the pieces for the sinusoid run at all: it
+    warned "no training run is the sinusoid experiment" and gave them to step 1. Eqs 16-19
+    integrate over one uninterrupted run, so the pieces are refused naming the gap."""
+    from nnid.datasets.preprocess import resample_log
+    from nnid.errors import NnidInputError
+
+    _, _, vehicle, log = setup
+    trainer, _, _, sine = fitted
+    holed = sine[~sine["t"].between(30.0, 35.0)].reset_index(drop=True)
+    pieces = resample_log(holed, 1.0 / float(np.median(np.diff(sine["t"]))), gap=1.0)
+    assert set(pieces["experiment"]) == {"sinusoid#0", "sinusoid#1"}
+    said = r"sinusoid run 'sinusoid' was cut at time gaps into 2 pieces .*holes at t = 29"
+    with pytest.raises(NnidInputError, match=said) as err:
+        trainer.fit_inertia(pieces, vehicle)
+    assert "longest is 'sinusoid#1'" in str(err.value)
+    with pytest.raises(NnidInputError, match=said):
+        CacciaModel(vehicle).fit(pd.concat([log, pieces], ignore_index=True))
+
+
 def test_the_steps_excitation_verdicts_reach_the_estimate_under_its_names():
     """to_vehicle_signs renamed the parameters but kept the excitation report under Caccia's
     names (k_w|w|): its verdict matched no parameter; and the union of the two steps dropped

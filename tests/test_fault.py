@@ -216,6 +216,21 @@ def test_a_payload_is_named_by_its_weight_minus_buoyancy(vehicle, monitor):
     assert a["value"] == pytest.approx(2.0 * vehicle.g - 4.0, rel=0.2)
 
 
+def test_a_payload_keeps_a_saved_models_curve_of_no_thrust(vehicle):
+    """A saved model may hold a thruster whose curve gives no thrust (saved_vehicle keeps it,
+    new vehicle files refuse it); the payload's copy of that vehicle had been validated as new
+    input, and the scenario failed with pydantic's ValidationError at the payload."""
+    from nnid.vehicle import saved_vehicle
+
+    data = vehicle.model_dump(mode="json")
+    data["thrusters"][-1]["curve"]["k"] = 0.0
+    with pytest.warns(UserWarning, match="no thrust at any command"):
+        saved = saved_vehicle(data)
+    fault = Fault("payload", 0.5, mass=2.0, value=4.0)
+    log = simulate_faults(saved, 1.0, faults=[fault], seed=26)
+    assert np.isfinite(log["u"]).all() and f"cmd_{saved.thrusters[-1].name}" in log
+
+
 @pytest.mark.parametrize(
     "faults",
     [

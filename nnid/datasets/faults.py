@@ -39,6 +39,7 @@ from nnid.physics import compiled
 from nnid.physics.effects import apply_effect
 from nnid.physics.fossen import FossenModel
 from nnid.physics.thrusters import Actuation, apply_installation
+from nnid.vehicle import vehicle_copy
 
 
 @dataclass(frozen=True)
@@ -127,7 +128,7 @@ def _with_payload(vehicle, mass: float, buoyancy: float):
     data["buoyancy"] = vehicle.buoyancy + buoyancy
     inertia = np.asarray(vehicle.inertia_matrix())
     data["inertia"] = (inertia * (1 + 0.2 * (scale - 1))).tolist()
-    return type(vehicle).model_validate(data)
+    return vehicle_copy(vehicle, data)
 
 
 def simulate_faults(

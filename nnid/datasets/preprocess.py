@@ -320,7 +320,7 @@ def _between_steps(
     total, count = np.zeros_like(y), np.zeros_like(y)
     for a, b in pairwise(bounds):
         piece = y[a : b + 1]
-        w = min(window, piece.size - (1 - piece.size % 2))
+        w = _piece_window(piece.size, window)
         if w >= 3:
             d = savgol_filter(piece, w, min(order, w - 1), deriv=deriv, delta=dt, mode="interp")
         else:  # two samples: a slope, and no higher derivative
@@ -333,6 +333,84 @@ def _between_steps(
 def savgol_noise_gain(window: int, order: int, dt: float, deriv: int = 1) -> float:
     """Standard deviation of the SG estimate per unit white measurement noise: sqrt(Σ cₖ²)."""
     return float(np.sqrt(np.sum(savgol_coeffs(window, order, deriv=deriv, delta=dt) ** 2)))
+
+
+def _piece_window(size: int, window: int) -> int:
+    """The widest odd window up to ``window`` that a piece of ``size`` samples holds."""
+    return min(window, size - (1 - size % 2))
+
+
+def savgol_derivative_gain2(
+    n: int,
+    dt: float,
+    window: int,
+    order: int = 4,
+    deriv: int = 1,
+    steps: np.ndarray | None = None,
+    missing: np.ndarray | None = None,
+) -> np.ndarray:
+    """Per sample, the variance per unit white measurement noise of :func:`savgol_derivative`
+    of ``n`` samples with these arguments (``missing``: its NaN samples): NaN where it gives
+    no estimate. Without ``steps`` each sample has the full window's :func:`savgol_noise_gain`
+    squared. Cut at ``steps``, each sample has the gain of the estimate that made it
+    (:func:`_between_steps_gain2`): at the centre of a 3- or 5-sample piece 8-10 times the
+    noise gain of a 21-sample window (60-110 times its variance), more at a piece's ends, and
+    at a step that of the mean of two one-sided estimates."""
+    out = np.full(n, np.nan)
+    missing = np.zeros(n, dtype=bool) if missing is None else np.asarray(missing, dtype=bool)
+    steps = None if steps is None else np.asarray(steps, dtype=np.int64)
+    full = savgol_noise_gain(window, order, dt, deriv) ** 2
+    edges = np.diff(np.concatenate([[1], missing.astype(np.int8), [1]]))
+    for a, b in zip(np.flatnonzero(edges == -1), np.flatnonzero(edges == 1), strict=True):
+        if b - a < window:  # as savgol_derivative: no estimate
+            continue
+        if steps is None:
+            out[a:b] = full
+        else:
+            inside = steps[(steps > a) & (steps < b - 1)] - a
+            out[a:b] = _between_steps_gain2(b - a, dt, window, order, deriv, inside)
+    return out
+
+
+def _between_steps_gain2(
+    n: int, dt: float, window: int, order: int, deriv: int, steps: np.ndarray
+) -> np.ndarray:
+    """The variance per unit white noise of each sample of :func:`_between_steps`: Σⱼ cᵢⱼ² of
+    the weights cᵢⱼ of sample j in the estimate at i. In a piece the Savitzky-Golay fit of
+    its window (the first and last half window evaluated off-centre, scipy's ``interp``); at a
+    step the mean of the two pieces' estimates, which share the step sample: (g²ₗ + g²ᵣ +
+    2 cₗ cᵣ)/4. The stretch's own ends (the off-centre half window of its first and last
+    piece) keep their window's centre gain, as a stretch without steps does
+    (:func:`savgol_derivative_gain2`): those were never counted, and one step more or less
+    must not change how a run's ends count."""
+    bounds = np.concatenate([[0], steps, [n - 1]]).astype(int)
+    var, count = np.zeros(n), np.zeros(n)
+    first, last = np.zeros(n), np.zeros(n)  # a piece's weight of its own first / last sample
+    ends = []  # (rows, centre gain²) of the stretch's first and last piece's outer half window
+    for a, b in pairwise(bounds):
+        size = b - a + 1
+        w = _piece_window(size, window)
+        if w >= 3:
+            o = min(order, w - 1)
+            fit = savgol_filter(np.eye(w), w, o, deriv=deriv, delta=dt, axis=0, mode="interp")
+            rows2 = np.sum(fit**2, axis=1)  # rows: the estimates at the window's samples
+            gain2 = np.full(size, savgol_noise_gain(w, o, dt, deriv) ** 2)
+            h = w // 2
+            if a == 0:
+                ends.append((slice(0, h), gain2[0]))
+            if b == n - 1:
+                ends.append((slice(n - h, n), gain2[0]))
+            gain2[:h], gain2[size - h :] = rows2[:h], rows2[w - h :]
+            first[a], last[b] = fit[0, 0], fit[-1, -1]
+        else:  # two samples: their slope (no higher derivative, as _between_steps)
+            gain2 = np.full(2, 2.0 / dt**2 if deriv == 1 else np.nan)
+            first[a], last[b] = -1.0 / dt, 1.0 / dt
+        var[a : b + 1] += gain2
+        count[a : b + 1] += 1
+    out = np.where(count == 2, (var + 2.0 * first * last) / 4.0, var)
+    for rows, centre in ends:
+        out[rows] = centre
+    return out
 
 
 def excited_dofs(log: pd.DataFrame, columns: list[str], rel: float = 0.1) -> list[str]:
@@ -515,6 +593,38 @@ def short_pieces_note(samples: int) -> str:
     return f"; {samples} samples in pieces between gaps shorter than the window: none there"
 
 
+def _held_steps(log: pd.DataFrame, idx, held: list[str]) -> np.ndarray | None:
+    """The positions in the experiment at ``idx`` where one of the ``held`` inputs steps (the
+    cuts of :func:`_between_steps`), or None without held inputs."""
+    if not held:
+        return None
+    step = np.diff(log.loc[idx, held].to_numpy(np.float64), axis=0)
+    return np.flatnonzero((np.isfinite(step) & (step != 0)).any(axis=1)) + 1
+
+
+def acceleration_gain2(
+    log: pd.DataFrame, window_s: float, order: int, cut_at_steps: bool = False
+) -> np.ndarray:
+    """Per row of ``log``, the variance per unit white velocity noise of the acceleration
+    :func:`derive_accelerations` derives with these arguments
+    (:func:`savgol_derivative_gain2`), NaN where it derives none. Cut at the steps of held
+    inputs the short pieces between steps are much noisier than the full window says."""
+    out = np.full(len(log), np.nan)
+    held = held_inputs(log) if cut_at_steps else []
+    for _, idx in experiments(log):
+        t = log.loc[idx, "t"].to_numpy(np.float64)
+        dt = float(np.median(np.diff(t)))
+        window = savgol_window(window_s, 1.0 / dt, order, "savgol_window")
+        if short_piece(log, idx, window):
+            continue
+        rows = log.index.get_indexer(idx)
+        missing = ~np.isfinite(log.loc[idx, [c for c in VELOCITY if c in log]].to_numpy(float))
+        out[rows] = savgol_derivative_gain2(
+            len(idx), dt, window, order, 1, _held_steps(log, idx, held), missing.any(axis=1)
+        )
+    return out
+
+
 def derive_accelerations(
     log: pd.DataFrame,
     window_s: float = 0.5,
@@ -538,11 +648,8 @@ def derive_accelerations(
         if short_piece(out, idx, window):
             short += len(idx)
             continue
-        steps = None
-        if held:
-            step = np.diff(out.loc[idx, held].to_numpy(np.float64), axis=0)
-            steps = np.flatnonzero((np.isfinite(step) & (step != 0)).any(axis=1)) + 1
-            cuts += steps.size
+        steps = _held_steps(out, idx, held)
+        cuts += 0 if steps is None else steps.size
         for c in cols:
             out.loc[idx, "d" + c] = savgol_derivative(
                 out.loc[idx, c].to_numpy(np.float64),
@@ -811,9 +918,15 @@ class PreprocessConfig(BaseModel):
 
 
 def preprocess(
-    log: pd.DataFrame, cfg: PreprocessConfig, report: CleaningReport | None = None
+    log: pd.DataFrame,
+    cfg: PreprocessConfig,
+    report: CleaningReport | None = None,
+    actuator_lag: float = 0.0,
 ) -> tuple[pd.DataFrame, CleaningReport]:
-    """Run the configured steps in order; return the log and the report."""
+    """Run the configured steps in order; return the log and the report. ``actuator_lag``:
+    the vehicle's (s), where known: behind a lag the force felt is continuous, so accelerations
+    derived across the steps of held commands have no jump to smear, and are not warned of
+    (as a fit's held-input warning, :func:`nnid.models.parametric.warn_held_inputs`)."""
     report = report or CleaningReport()
     if cfg.rate:
         log = resample_log(log, cfg.rate, cfg.gap, report)
@@ -829,7 +942,7 @@ def preprocess(
         )
     if cfg.accelerations and not all(c in log for c in ACCELERATION):
         log = derive_accelerations(log, cfg.savgol_window, cfg.savgol_order, report)
-        held, dt = held_at(log)
+        held, dt = held_at(log) if actuator_lag == 0 else ([], float("nan"))
         if held:
             # a fit then reads them as logged, and its own held-input warning cannot fire;
             # the smear does not shrink with the sample time, so at every rate

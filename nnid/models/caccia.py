@@ -19,6 +19,7 @@ from typing import Literal
 import numpy as np
 import pandas as pd
 
+from nnid.datasets.log import run_of
 from nnid.errors import NnidInputError
 from nnid.models.parametric import FossenPlant, ParametricFossen, canonical_parameter
 from nnid.physics.dofs import DOFS
@@ -128,7 +129,11 @@ class CacciaModel(FossenPlant):
         if self.dof not in DOFS:
             raise NnidInputError(f"'{self.dof}' is not a DOF; expected u v w p q r", field="dof")
         exp = log["experiment"] if "experiment" in log else pd.Series("0", index=log.index)
-        is_sine = (exp == self.sinusoid_experiment).to_numpy()
+        # the sinusoid run's pieces (a gap cut it, run_of) are that run, never steady-state
+        # experiments: step 2 then says why it cannot use them
+        is_sine = (
+            (exp == self.sinusoid_experiment) | (exp.map(run_of(log)) == self.sinusoid_experiment)
+        ).to_numpy()
         if is_sine.all():
             raise NnidInputError(
                 f"the log holds only the sinusoid run '{self.sinusoid_experiment}': step 1 needs "

@@ -70,7 +70,7 @@ from nnid.physics.thrusters import force_deadband
 from nnid.serialization import exact_float, read_exact_float
 from nnid.trainers.history import Progress
 from nnid.trainers.regression import Regression
-from nnid.vehicle import KEEP_CURVES
+from nnid.vehicle import vehicle_copy
 
 _AXES = "xyz"
 
@@ -123,9 +123,9 @@ def vehicle_with(vehicle, values: dict[str, float]):
             out[name] = value
         else:
             out[name[:3]][_AXES.index(name[-1])] = value
-    # the curves are the given vehicle's, checked when it was read: one of no thrust that a
-    # saved model kept (saved_vehicle) is kept, so that the model's vehicle can be refitted
-    return type(vehicle).model_validate(out, context=KEEP_CURVES)
+    # the curves are the given vehicle's: one of no thrust that a saved model kept is kept, so
+    # that the model's vehicle can be refitted
+    return vehicle_copy(vehicle, out)
 
 
 def checked_dofs(dofs: object, field: str = "dofs") -> tuple[str, ...]:
@@ -557,7 +557,11 @@ def acceleration_noise_share(
     the pose carry smoothed noise that differences underestimate (ρ came out 10³ times too
     small): ``from_pose`` = (the velocity columns so derived, the (window s, order) of that
     derivative) takes theirs from the pose noise instead (:func:`pose_noise_variance`), times
-    the gain of the two derivatives in turn (:func:`twice_differentiated_gain2`)."""
+    the gain of the two derivatives in turn (:func:`twice_differentiated_gain2`). With
+    ``savgol``, ``data["nu_dot_gain2"]`` where present is each sample's squared gain of the
+    derivative that made it (:func:`~nnid.datasets.preprocess.acceleration_gain2`: cut at the
+    steps of held inputs, ``zoh_midpoint``), whose short pieces the full window's gain
+    under-states many times."""
     from nnid.datasets.preprocess import savgol_noise_gain, savgol_window
     from nnid.trainers.ukf import noise_level
 
@@ -579,6 +583,8 @@ def acceleration_noise_share(
         dt = float(np.median(np.diff(data["t"][rows]))) if rows.size > 1 else 1.0
         if filter_lambda is not None:
             gain2[rows] = filter_lambda**2 / (1.0 + filter_lambda * dt / 2.0)
+        elif savgol is not None and "nu_dot_gain2" in data:
+            gain2[rows] = data["nu_dot_gain2"][rows]
         elif savgol is not None:
             window = savgol_window(savgol[0], 1.0 / dt, savgol[1])
             gain2[rows] = savgol_noise_gain(window, savgol[1], dt) ** 2
@@ -587,7 +593,7 @@ def acceleration_noise_share(
         if posed.any():
             window = savgol_window(pose_savgol[0], 1.0 / dt, pose_savgol[1])
             pose_gain2[rows] = twice_differentiated_gain2(window, pose_savgol[1], dt, filter_lambda)
-    noise2 = sigma**2 * float(np.mean(gain2[keep]))
+    noise2 = sigma**2 * float(np.nanmean(gain2[keep]))  # NaN: a sample with no derivative
     if posed.any():
         pose2 = pose_noise_variance(data, dofs, pose_columns) * pose_gain2[:, None]
         noise2[posed] = np.nanmean(pose2[keep][:, posed], axis=0)
@@ -999,7 +1005,7 @@ class ParametricModel(FossenPlant):
         self._set_outputs(dofs)
         self.report_ = CleaningReport(source="fit data")
         needs_acc = getattr(trainer, "filter_lambda", None) is None
-        _, data = self._equation_data(log, accelerations=needs_acc, report=self.report_)
+        prepared, data = self._equation_data(log, accelerations=needs_acc, report=self.report_)
         self.estimate_ = trainer.fit(self.structure_, data, progress=progress)
         self.trainer_ = trainer
         self.parts_ = self.structure_.parts(np.nan_to_num(self.estimate_.theta))
@@ -1021,7 +1027,7 @@ class ParametricModel(FossenPlant):
             # the UKF integrates the model with the inputs held: it reads them as they are
             smoothed = not needs_acc or self._derived_accelerations()
             warn_held_inputs(log, "the Fossen fit", smoothed, self.vehicle.actuator_lag)
-        self.attenuated_ = self._attenuated(trainer, unknowns, dofs, data)
+        self.attenuated_ = self._attenuated(trainer, unknowns, dofs, data, prepared)
         if self.attenuated_:
             from nnid.trainers.least_squares import ExcitationWarning
 
@@ -1065,17 +1071,27 @@ class ParametricModel(FossenPlant):
         return any(s.step == "derive accelerations" for s in self.report_.steps)
 
     def _attenuated(
-        self, trainer, unknowns: list[str], dofs: list[str], data: dict[str, np.ndarray]
+        self,
+        trainer,
+        unknowns: list[str],
+        dofs: list[str],
+        data: dict[str, np.ndarray],
+        log: pd.DataFrame,
     ) -> dict[str, tuple[float, float]]:
         """:func:`attenuated_unknowns` of the fit, step by step for a sequence (each on its
         experiments; a later step's verdict replaces an earlier one's), not judged for the
-        UKF, which regresses on no acceleration."""
+        UKF, which regresses on no acceleration. ``log``: the fit's, as its accelerations were
+        derived from it (their noise gain where they were cut at held steps)."""
+        from nnid.datasets.preprocess import acceleration_gain2
         from nnid.trainers.sequence import Step, _subset, sequence_steps
 
         if _is_ukf(trainer):
             return {}
         derived = self._derived_accelerations()
         savgol = (self.savgol_window, self.savgol_order) if derived else None
+        if derived and self._held():  # cut at the steps: each piece's own gain
+            gain2 = acceleration_gain2(log, self.savgol_window, self.savgol_order, True)
+            data = {**data, "nu_dot_gain2": gain2}
         from_pose = self._from_pose()
         lam = getattr(trainer, "filter_lambda", None)
         inertia = np.diag(self.parts_.model(check=False).mass_matrix().numpy())

@@ -71,6 +71,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from itertools import pairwise
 from typing import Any, Literal
 
 import numpy as np
@@ -98,6 +99,40 @@ MIN_PLATEAU_SAMPLES = 10
 """Fewest samples of a settled run that count as a plateau: the asymptote fit has four
 parameters (c, ξ*, A, τ); with 10 samples 13 % of 400 noisy speeds lay beyond 2 s.e. (5-6 %
 from 20 on), with 4 samples 44 %, with 3 the s.e. was 0 (the default 10 s at 1 Hz spans 11)."""
+
+
+def _one_sinusoid_run(arrays: Mapping[str, Any]) -> None:
+    """Refuse a sinusoid log of several experiments, naming them. Pieces a gap cut one run into
+    (``experiment_runs``, :func:`nnid.datasets.log.run_of`) are said as such: eqs 16-19
+    integrate eq. 3 from the run's start, θ₂ = m_ξ ξ₀ + k χ₀ holding its one initial state, and
+    ϕ = ∫ η φⁿ across a hole integrates a force nobody logged; the step is not fitted on the
+    longest piece alone unasked, which would drop the rest without a word."""
+    codes = np.asarray(arrays["experiment"])
+    used = np.unique(codes)
+    if used.size <= 1:
+        return
+    names = arrays.get("experiment_names")
+    names = [str(names[c]) if names is not None else str(c) for c in used]
+    runs = arrays.get("experiment_runs")
+    runs = {str(runs[c]) for c in used} if runs is not None else set(names)
+    if len(runs) > 1:
+        raise NnidInputError(
+            f"the sinusoid log must hold one experiment (one run of the d-optimal sinusoid), "
+            f"not {len(names)}: {names}",
+            field="sinusoid",
+        )
+    t = np.asarray(arrays["t"], dtype=np.float64)
+    spans = [(t[codes == c].min(), t[codes == c].max()) for c in used]
+    holes = ", ".join(f"{end:g}-{start:g} s" for (_, end), (start, _) in pairwise(spans))
+    longest = int(np.argmax([b - a for a, b in spans]))
+    raise NnidInputError(
+        f"the sinusoid run '{runs.pop()}' was cut at time gaps into {len(names)} pieces "
+        f"{names} (holes at t = {holes}): Caccia's step 2 integrates the motion over one "
+        f"uninterrupted run (eqs 16-19) and cannot cross a hole nobody measured; log the "
+        f"sinusoid without a gap, or fit step 2 on one piece (the longest is "
+        f"'{names[longest]}', {spans[longest][1] - spans[longest][0]:g} s)",
+        field="sinusoid",
+    )
 
 
 # --- step 1: plateaus and the steady-state regression ------------------------------------------
@@ -723,9 +758,7 @@ class CacciaTwoStep:
 
     def _inertia_from(self, arrays: Mapping[str, Any]) -> Estimate:
         k = DOFS.index(self.dof)
-        codes = np.asarray(arrays["experiment"])
-        if np.unique(codes).size > 1:
-            raise NnidInputError("the sinusoid log must hold one experiment", field="sinusoid")
+        _one_sinusoid_run(arrays)
         neg = arrays.get("tau_neg")
         return self.inertia_arrays(
             arrays["t"],
