@@ -626,7 +626,8 @@ def demo(
 ) -> None:
     """The main job end to end on bundled data: the residual loop on a simulated log of the
     'minirov' vehicle whose upward heave thrust is weaker than its vehicle file says (an
-    undeclared effect, injected on purpose; see datasets/demo_minirov_heave.md)."""
+    undeclared effect, injected on purpose). The log's card is datasets/demo_minirov_heave.md
+    in nnid's source repository (not installed with the package)."""
     from importlib import resources
 
     from nnid.datasets.readers import load_log

@@ -290,8 +290,13 @@ def load_inputs(
         known = set(inputs.log["experiment"]) if "experiment" in inputs.log else set()
         missing = [e for e in spec.experiments if e not in known]
         if missing:
+            have = sorted(map(str, known))
+            said = have if len(have) <= 8 else [*have[:8], f"… {len(have)} in all"]
+            # a config that names its runs fits only logs holding them (the shipped Seamor
+            # ones): the way to another log was left unsaid
             raise NnidInputError(
-                f"experiments {missing} are not in the log",
+                f"experiments {missing} are not in the log (it has {said}): for this log, "
+                "name its runs in data.experiments and [split] (or remove them)",
                 source=str(config_path),
                 field="data.experiments",
             )

@@ -428,6 +428,20 @@ def test_a_sweep_of_another_kind_of_config_names_the_command_that_was_run(tmp_pa
     assert "`nnid sweep` needs a 'train' config" in text and "nnid train`" not in text, text
 
 
+def test_a_config_naming_its_runs_on_another_log_says_what_that_log_holds(tmp_path):
+    """The shipped Seamor comparison with --data the demo log: refused naming the runs it wants
+    but not the ones the log has, nor the way to run it there."""
+    demo = ROOT / "nnid/demo_data"
+    run = CliRunner().invoke(app, ["compare", str(ROOT / "configs/seamor_families.toml"),
+                                   "--data", str(demo / "demo_minirov_heave.parquet"),
+                                   "--vehicle", str(demo / "minirov.toml"),
+                                   "--out", str(tmp_path / "o")])  # fmt: skip
+    assert run.exit_code == 2, run.output
+    text = " ".join(run.output.split())
+    assert "are not in the log (it has [" in text and "name its runs in data.experiments" in text
+    assert not (tmp_path / "o").exists()
+
+
 def test_python_dash_m_runs_the_command_line():
     """`python -m nnid` had no entry, and `python -m nnid.cli` ran nothing and exited 0."""
     import subprocess
