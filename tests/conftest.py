@@ -167,6 +167,23 @@ def pytest_configure(config):
         threadpool_limits(1)
 
 
+def pytest_sessionstart(session):
+    """In pytest-xdist's controller, before its workers start (xdist starts them in its own
+    sessionstart, run last): nnid's numba kernels compiled into their on-disk cache once, in
+    one process per core (:mod:`kernel_warmup`), so that the workers, and the processes their
+    tests start, load them instead of each compiling the same ones (a fresh clone, as CI
+    runs). Only the time changes; a failure here is said and costs only that time."""
+    config = session.config
+    if not config.pluginmanager.has_plugin("dsession"):
+        return  # one process, --collect-only or a worker: kernels compile where first called
+    from kernel_warmup import warm
+
+    seconds, failed = warm(min(len(config.getoption("tx")), os.cpu_count() or 1))
+    reporter = config.pluginmanager.get_plugin("terminalreporter")
+    for line in failed if reporter is not None else []:
+        reporter.write_line(f"numba kernel warm-up failed ({seconds:.0f} s): {line}")
+
+
 @pytest.fixture
 def all_numba_threads():
     """Every numba thread the machine has for the test (the xdist workers run with one), so

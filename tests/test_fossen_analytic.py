@@ -257,6 +257,38 @@ def test_compiled_pd_flight_stops_where_the_flight_diverges():
     assert np.array_equal(record[0, :stop], commands[:stop])
 
 
+def test_the_compiled_kernels_get_one_array_type_for_read_only_inputs(monkeypatch):
+    """A read-only array (pandas' view of a log column) reaches the kernels as the writable
+    type the other call sites pass, the same values: numba would compile a second variant
+    of each kernel for it (seconds per process on a cold cache)."""
+    import numba
+
+    form = FossenModel.from_vehicle(load_vehicle("vt690")).feature_form()
+    seen = {}
+
+    def record(name):
+        def kernel(*args):
+            seen[name] = args
+
+        return kernel
+
+    for name in ("_fly_batch", "_integrate", "_rhs"):
+        monkeypatch.setattr(compiled, name, record(name))
+    tau = np.arange(24.0).reshape(4, 6)
+    tau.flags.writeable = False
+    x0 = np.zeros(12)
+    x0.flags.writeable = False
+    compiled.fly_pd(form, x0, tau, np.zeros(1, int), 3, 0.05, np.ones((5, 6)))
+    compiled.integrate_rk4(form, x0, tau, 0.05)
+    compiled.rhs(form, x0, tau[0])
+    writable = numba.typeof(np.zeros((4, 6)))
+    assert numba.typeof(seen["_fly_batch"][1]) == writable
+    assert numba.typeof(seen["_integrate"][1]) == writable
+    assert numba.typeof(seen["_integrate"][0]) == numba.typeof(np.zeros(12))
+    assert numba.typeof(seen["_rhs"][0]) == numba.typeof(np.zeros(12))
+    assert np.array_equal(seen["_fly_batch"][1], tau) and np.array_equal(seen["_rhs"][1], tau[0])
+
+
 def test_physics_prediction_under_an_autopilot_is_the_stepped_one():
     """predict_closed_loop (one compiled flight per experiment, or per window for k steps)
     predicts what fly_closed_loop predicts stepping the compiled RK4 once per sample."""

@@ -214,6 +214,15 @@ def _integrate_batch(
         )
 
 
+def _kernel_array(a, dtype=np.float64) -> np.ndarray:
+    """``a`` as the kernels take it: C-contiguous, of ``dtype``, writable. Numba types a
+    read-only array (pandas' view of a column) apart from a writable one, so each kernel it
+    reaches would compile a second variant, seconds in every process on a cold cache; the copy
+    has the same bits."""
+    a = np.ascontiguousarray(a, dtype=dtype)
+    return a if a.flags.writeable else a.copy()
+
+
 def form_args(form: FeatureForm) -> tuple:
     """The form as the compiled kernels take it: a tuple of arrays and scalars."""
     return (
@@ -233,9 +242,9 @@ def form_args(form: FeatureForm) -> tuple:
 
 def rhs(form: FeatureForm, x: np.ndarray, tau: np.ndarray) -> np.ndarray:
     """ẋ at one state (for tests and adaptive integrators)."""
-    x = np.ascontiguousarray(x, dtype=np.float64)
+    x = _kernel_array(x)
     out = np.empty_like(x)
-    _rhs(x, np.ascontiguousarray(tau, dtype=np.float64), *form_args(form), out, np.empty((4, 18)))
+    _rhs(x, _kernel_array(tau), *form_args(form), out, np.empty((4, 18)))
     return out
 
 
@@ -248,8 +257,8 @@ def integrate_rk4(
     the N+1 sample times, ``[N+1, n]`` or ``[B, N+1, n]``. Batches of at least
     :data:`PARALLEL_MIN_STEPS` steps run in parallel threads (the same numbers either way).
     """
-    x0 = np.ascontiguousarray(x0, dtype=np.float64)
-    tau = np.ascontiguousarray(tau, dtype=np.float64)
+    x0 = _kernel_array(x0)
+    tau = _kernel_array(tau)
     if x0.ndim == 1:
         states = np.empty((tau.shape[0] + 1, x0.shape[0]))
         _integrate(x0, tau, float(dt), int(substeps), *form_args(form), states)
@@ -320,10 +329,10 @@ def fly_pd(
     are left zero). Windows run in parallel threads (the same numbers either way); one kernel
     for any number of them, since a flight is one call, not one per sample, and each compiled
     variant costs seconds of compilation on a cold cache."""
-    x0 = np.ascontiguousarray(np.atleast_2d(x0), dtype=np.float64)
-    tau_open = np.ascontiguousarray(tau_open, dtype=np.float64)
-    starts = np.ascontiguousarray(starts, dtype=np.int64)
-    pilot = np.ascontiguousarray(pilot, dtype=np.float64)
+    x0 = _kernel_array(np.atleast_2d(x0))
+    tau_open = _kernel_array(tau_open)
+    starts = _kernel_array(starts, np.int64)
+    pilot = _kernel_array(pilot)
     if pilot.shape != (5, 6):
         raise ValueError("pilot is [5, 6]: kp, kd, reference, eta_pos, eta_neg")
     if starts.shape != (x0.shape[0],) or (
