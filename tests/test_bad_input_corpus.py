@@ -119,6 +119,8 @@ LOG_CASES: list[tuple[str, str, Callable]] = [
         lambda df, i: df.assign(**{c: df[c] * 100 for c in ("u", "v", "w")}),
     ),
     ("depth in cm", "'z'", lambda df, i: df.assign(z=df["z"] * 100)),
+    # a height (positive up) where the depth belongs: read as a vehicle that climbs as it dives
+    ("height for the depth", "'z'", lambda df, i: df.assign(z=-df["z"])),
     ("text in an angle", "'phi'", _set("phi", 50, "level")),
     (
         "no motion columns",

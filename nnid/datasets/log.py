@@ -409,6 +409,9 @@ def check_rate_units(df: pd.DataFrame, source: str, row: int | None = None) -> N
 #: demo's runs, the octorov's simulated DVL, the romeo and vt690 simulate configs, the Tartan
 #: session's 957 s)
 DEPTH_UNIT_SLOPE = (20.0, 2000.0)
+#: slopes that say z or w has its sign turned: a height or altitude (positive up) logged as z,
+#: or a w positive up; a consistent log reads about +1
+DEPTH_SIGN_SLOPE = (-2.0, -0.5)
 #: windows of about this many seconds, where z changes by more than :data:`DEPTH_CHECK_CHANGE`
 #: (in the log's own unit): a depth sensor's noise says nothing of the unit
 DEPTH_CHECK_WINDOW = 2.0
@@ -473,7 +476,9 @@ def check_depth_units(df: pd.DataFrame, source: str, row: int | None = None) -> 
     change the velocities imply reads 20 to 2000 times (or 1/2000 to 1/20 of) the one z logs
     (:func:`depth_slopes`, :data:`DEPTH_UNIT_SLOPE`) is refused as a unit slip, cm/s or mm/s
     velocities or a depth in cm or mm, which the fit would take as a vehicle 100 times
-    faster or slower than it is. Per experiment, as :func:`check_rate_units`."""
+    faster or slower than it is. One that reads about −1 (:data:`DEPTH_SIGN_SLOPE`) is
+    refused as a sign turned: a height for the depth, or an upward w, which the fit would take
+    as a vehicle that climbs when it dives. Per experiment, as :func:`check_rate_units`."""
     low, high = DEPTH_UNIT_SLOPE
     for name, slope, fit, seconds in depth_slopes(df):
         if seconds < RATE_CHECK_SECONDS or fit < DEPTH_CHECK_FIT:
@@ -494,6 +499,15 @@ def check_depth_units(df: pd.DataFrame, source: str, row: int | None = None) -> 
                 f"z changes {1 / slope:.3g} times as fast as u, v, w say it does{run} {said}: "
                 "the depth looks like cm or mm beside velocities in m/s; z must be in metres "
                 '(or set the unit: unit = "cm" in the reader config)',
+                source=source,
+                field="z",
+                row=row,
+            )
+        if DEPTH_SIGN_SLOPE[0] <= slope <= DEPTH_SIGN_SLOPE[1]:
+            raise NnidInputError(
+                f"u, v, w say the depth changes against the way z does{run} (slope "
+                f"{slope:.3g}, {said[1:-1]}): z must be the depth, positive down (NED), and w "
+                "positive down the body's z axis; a height or altitude is −z, an upward w is −w",
                 source=source,
                 field="z",
                 row=row,
