@@ -416,7 +416,7 @@ class LevenbergMarquardtSpec(_Trainer):
     min_grad: float = Field(1e-7, ge=0, allow_inf_nan=False)
     goal: float = Field(0.0, ge=0, allow_inf_nan=False)
     memory_budget_mb: PositiveFloat = 256.0
-    jacobian: Literal["auto", "forward", "samples"] = "auto"
+    jacobian: Literal["auto", "forward", "reverse", "samples"] = "auto"
     damping: Literal["trainlm", "nielsen"] = "trainlm"
     l2: float = Field(0.0, ge=0, allow_inf_nan=False)
     geodesic: bool = False

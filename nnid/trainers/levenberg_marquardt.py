@@ -30,10 +30,10 @@ epochs = 1000, max_fail = 6 validation checks, min_grad = 1e-7, goal = 0. As in 
 floored at 1e-20 after a decrease, and when validation batches are given the returned
 parameters are those of the best validation error.
 
-Jacobians come from :mod:`torch.func`; there are two modes:
+Jacobians come from :mod:`torch.func`; there are these modes:
 
-- ``jacobian="forward"`` (always valid; what ``"auto"`` uses unless told otherwise):
-  forward-mode products J v for a block of unit tangents at a time (``vmap`` over ``jvp``).
+- ``jacobian="forward"`` (always valid): forward-mode products J v for a block of unit
+  tangents at a time (``vmap`` over ``jvp``).
   It works for any residual, including ones that
   couple all rows (a simulated trajectory integrated with RK4, a parallel NARX simulation).
   When the whole n × P Jacobian of a batch fits the memory budget it is formed and JᵀJ is one
@@ -41,6 +41,24 @@ Jacobians come from :mod:`torch.func`; there are two modes:
   the columns of JᵀJ are accumulated as Jᵀ(J_a) by reverse-mode products (``vmap`` over the
   ``vjp`` of the same forward pass), so memory holds one n × c block and never n × P, and every
   column block is computed once.
+- ``jacobian="reverse"`` (always valid): the rows of J by reverse mode, ``vmap`` over the
+  ``vjp`` of one forward pass with a block of unit cotangents at a time (c rows, c·max(n, P)
+  ≤ budget), each block's JᵀJ and Jᵀr added into the system.
+- ``"auto"`` without ``separable`` or ``jacobian_rows`` chooses between the two per batch,
+  from what the residual's differentiable operations move (counted once per batch, on the
+  pass that finds n): forward mode carries P tangents of each operation's result, reverse
+  mode n cotangents of each of its inputs that need a gradient (the whole stacked trajectory
+  where a step is read back from it). Per operation forward mode costs more (~25-100 µs
+  against ~17 µs under ``vmap``; an operand without a tangent, a constant or a Python number,
+  gets a zero one whose shape torch infers through a Python meta kernel, ~0.3-0.5 ms),
+  per element moved both ~2.5 ns (torch 2.13, CPU). Reverse mode is taken where its extra
+  elements per operation, (n·R − P·F)/ops, are at most 2¹² (R and F the elements above),
+  i.e. where the per-operation cost dominates: a physics model stepped through a long
+  rollout of small states (one surge state through 150 RK4 steps, P = 2: 0.51 s forward,
+  0.08 s reverse; 2400 steps: 8.6 against 2.0 s), and batches with fewer rows than
+  parameters. Forward mode stays where the tensors or the read-back trajectories are large
+  (a hybrid's 240 shooting segments, n = 14,400, P = 230; a neural state-space simulation of
+  200 rows, 0.11 s forward against 0.19 s reverse, of 584 rows 0.07 against 2.3 s).
 - ``jacobian="samples"``: for residuals that are separable by sample (a one-step-ahead/series-
   parallel NARX, a static regression), the per-sample Jacobians are taken with ``vmap`` over
   samples of ``jacrev``. The batch is then a tensor, or a (nested) tuple/list/dict of tensors,
@@ -88,6 +106,7 @@ from typing import Any
 import torch
 from sklearn.base import BaseEstimator
 from torch.func import jacrev, jvp, vjp, vmap
+from torch.overrides import TorchFunctionMode
 
 from nnid.errors import NnidInputError
 from nnid.trainers.history import History, Progress, silent, stopping_score
@@ -102,6 +121,12 @@ JacobianRows = Callable[
 
 _MU_FLOOR = 1e-20  # trainlm: ``if mu < 1e-20, mu = 1e-20``
 _CACHE_ROWS = 8192  # samples mode: row chunks above this are no faster (cache), only larger
+#: "auto": reverse mode where (n·R − P·F)/ops is at most this (module docstring). The
+#: threshold is the low end of the break-even, (o_f − o_r)/2.5 ns with forward's per-operation
+#: overhead o_f 25-100 µs and reverse's o_r ~17 µs (2,400-35,000 elements): where the choice
+#: errs, reverse mode costs at most ~ops·4 µs more; measured winners of reverse were ≤ 4,000,
+#: of forward ≥ 18,000 (a 200-row neural state-space simulation; 2026-11-29)
+_REVERSE_ELEMENTS = 2**12
 
 
 @dataclass
@@ -157,6 +182,38 @@ def _leading_len(batch: Any) -> int:
     return sizes.pop()
 
 
+class _Cost(TorchFunctionMode):
+    """What one pass's differentiable operations move, per direction of each mode: the
+    elements they return (a forward-mode tangent each) and the elements of their inputs that
+    need a gradient (a reverse-mode cotangent each); module docstring."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.ops = 0
+        self.forward = 0
+        self.reverse = 0
+
+    def __torch_function__(self, func, types, args=(), kwargs=None):
+        out = func(*args, **(kwargs or {}))
+        tracked = [t for t in _tensors((args, kwargs)) if t.requires_grad]
+        if tracked and isinstance(out, torch.Tensor):
+            self.ops += 1
+            self.forward += out.numel()
+            self.reverse += sum(t.numel() for t in tracked)
+        return out
+
+
+def _tensors(tree: Any) -> list[torch.Tensor]:
+    """The tensors in a call's arguments."""
+    if isinstance(tree, torch.Tensor):
+        return [tree]
+    if isinstance(tree, dict):
+        tree = list(tree.values())
+    if isinstance(tree, (tuple, list)):
+        return [t for v in tree for t in _tensors(v)]
+    return []
+
+
 # --------------------------------------------------------------------------- trainer
 
 
@@ -174,10 +231,11 @@ class LevenbergMarquardt(BaseEstimator):
         min_grad: stop when ‖∇ MSE‖ = 2‖Jᵀr‖/N falls below this (trainlm ``min_grad`` = 1e-7).
         goal: stop when the training MSE is at or below this (trainlm ``goal`` = 0).
         memory_budget_mb: the largest Jacobian block (float64) held at once, in MiB.
-        jacobian: ``"forward"`` (any residual), ``"samples"`` (residual separable by sample;
-            see the module docstring) or ``"auto"`` (default: the caller's ``jacobian_rows``
-            when :meth:`fit` is given them, else "samples" when the caller says the residual
-            is separable, else "forward").
+        jacobian: ``"forward"`` or ``"reverse"`` (any residual), ``"samples"`` (residual
+            separable by sample; see the module docstring) or ``"auto"`` (default: the
+            caller's ``jacobian_rows`` when :meth:`fit` is given them, else "samples" when the
+            caller says the residual is separable, else forward or reverse mode per batch,
+            whichever its shape makes cheaper).
         damping: ``"trainlm"`` (μ·μ_dec after an accepted step, μ·μ_inc after a rejected one)
             or ``"nielsen"`` (the gain-ratio rule of the module docstring; μ_dec and μ_inc
             unused).
@@ -231,7 +289,7 @@ class LevenbergMarquardt(BaseEstimator):
         self._rows_fn: JacobianRows | None = None
         self._peak_rows = 0
         self._peak_elements = 0
-        self._rows: dict[int, int] = {}
+        self._rows: dict[int, tuple[int, _Cost]] = {}  # id(batch): (n, its cost)
         self._center: torch.Tensor | None = None
 
     # ------------------------------------------------------------------ parameters
@@ -349,9 +407,9 @@ class LevenbergMarquardt(BaseEstimator):
         return self._normal_equations(residual, theta, self._layout(module), batches)
 
     def _select_mode(self, separable: bool, jacobian_rows: JacobianRows | None) -> None:
-        if self.jacobian not in ("auto", "forward", "samples"):
+        if self.jacobian not in ("auto", "forward", "reverse", "samples"):
             raise NnidInputError(
-                f"jacobian is 'auto', 'forward' or 'samples', not {self.jacobian!r}",
+                f"jacobian is 'auto', 'forward', 'reverse' or 'samples', not {self.jacobian!r}",
                 field="jacobian",
             )
         self._rows_fn = jacobian_rows
@@ -359,8 +417,8 @@ class LevenbergMarquardt(BaseEstimator):
             self._mode = self.jacobian
         elif jacobian_rows is not None:
             self._mode = "supplied"
-        else:
-            self._mode = "samples" if separable else "forward"
+        else:  # "dense": forward or reverse mode, chosen per batch
+            self._mode = "samples" if separable else "dense"
 
     def _normal_equations(
         self,
@@ -375,8 +433,8 @@ class LevenbergMarquardt(BaseEstimator):
         jtr = torch.zeros(p, dtype=torch.float64)
         sse, n = 0.0, 0
         for b in batches:
-            if self._mode == "forward":
-                s, k = self._accumulate_forward(residual, theta, layout, b, jtj, jtr)
+            if self._mode in ("forward", "reverse", "dense"):
+                s, k = self._accumulate_dense(residual, theta, layout, b, jtj, jtr)
             elif self._mode == "supplied":
                 s, k = self._accumulate_supplied(theta, layout, b, jtj, jtr)
             else:
@@ -437,17 +495,53 @@ class LevenbergMarquardt(BaseEstimator):
             n += r64.numel()
         return sse, n
 
-    def _accumulate_forward(self, residual, theta, layout, batch, jtj, jtr) -> tuple[float, int]:
-        """Forward-mode Jacobian of one batch, in column blocks within the budget."""
+    def _accumulate_dense(self, residual, theta, layout, batch, jtj, jtr) -> tuple[float, int]:
+        """The Jacobian of one batch by forward or reverse mode (module docstring)."""
 
         def f(th: torch.Tensor) -> torch.Tensor:
             return residual(self._unflatten(th, layout), batch).reshape(-1)
 
         p = theta.numel()
-        n = self._rows.get(id(batch))
-        if n is None:
-            with torch.no_grad():
-                n = f(theta).numel()
+        shape = self._rows.get(id(batch))
+        if shape is None:
+            cost = _Cost()
+            if self._mode == "dense":  # the pass that finds n also weighs the two modes
+                with torch.enable_grad(), cost:
+                    n = f(theta.detach().requires_grad_(True)).numel()
+            else:
+                with torch.no_grad():
+                    n = f(theta).numel()
+            shape = self._rows[id(batch)] = (n, cost)
+        n, cost = shape
+        if self._mode == "dense":
+            extra = n * cost.reverse - p * cost.forward  # elements reverse moves beyond forward
+            reverse = extra <= _REVERSE_ELEMENTS * max(cost.ops, 1)
+        else:
+            reverse = self._mode == "reverse"
+        if reverse:
+            return self._accumulate_reverse(f, theta, n, jtj, jtr), n
+        return self._accumulate_forward(f, theta, n, jtj, jtr), n
+
+    def _accumulate_reverse(self, f, theta, n, jtj, jtr) -> float:
+        """Reverse-mode rows of one batch's Jacobian, in row blocks within the budget; the
+        batch's SSE."""
+        p = theta.numel()
+        r, pull = vjp(f, theta)
+        r64 = r.detach().to(torch.float64)
+        height = max(1, min(n, self._budget_elements // max(n, p)))
+        for a in range(0, n, height):
+            units = torch.zeros(min(height, n - a), n, dtype=r.dtype)
+            units.diagonal(a).fill_(1.0)  # rows a.. of the identity
+            block = vmap(lambda u: pull(u)[0])(units).detach().to(torch.float64)  # [c, P]
+            self._note(block.shape[0], p)
+            add_gram(jtj, jtr, block, r64[a : a + block.shape[0]])
+            del units, block
+        return float(r64 @ r64)
+
+    def _accumulate_forward(self, f, theta, n, jtj, jtr) -> float:
+        """Forward-mode Jacobian of one batch, in column blocks within the budget; the
+        batch's SSE."""
+        p = theta.numel()
         width = max(1, min(p, self._budget_elements // max(n, 1)))
         eye = torch.eye(p, dtype=theta.dtype)
         if width >= p:
@@ -472,8 +566,7 @@ class LevenbergMarquardt(BaseEstimator):
                 jtj[:, a : a + width] += cols.T.to(torch.float64)
                 del block, cols
             jtr += vjp_fn(r.detach())[0].detach().to(torch.float64)
-        self._rows[id(batch)] = n
-        return float(r64 @ r64), n
+        return float(r64 @ r64)
 
     def _accumulate_samples(self, residual, theta, layout, batch, jtj, jtr) -> tuple[float, int]:
         """Per-sample reverse-mode Jacobians (vmap over samples), in row chunks."""
@@ -561,14 +654,15 @@ class LevenbergMarquardt(BaseEstimator):
         validation batches the best-validation parameters are written back (as trainlm).
         ``progress(epoch, max_epochs, message)`` is called after every epoch. ``separable``
         tells ``jacobian="auto"`` that the residual is separable by sample (then "samples"
-        mode, else "forward"); ``jacobian_rows(params, batch, budget_elements)``, when given,
-        yields the Jacobian's rows of a batch with their residuals in blocks of at most
-        ``budget_elements`` (then "supplied" mode under "auto"; it must agree with
-        ``residual``, which still judges the trial steps). ``train_batches(epoch)``, when a
-        function, draws each epoch's batches (module docstring). ``curvature_batches(epoch)``,
-        when given, returns the batches (a subset of the training data) whose JᵀJ, scaled to
-        the training rows, stands for the whole one in that epoch, while the gradient Jᵀr and
-        the trial steps' SSE stay those of every training batch (module docstring).
+        mode, else forward or reverse mode per batch); ``jacobian_rows(params, batch,
+        budget_elements)``, when given, yields the Jacobian's rows of a batch with their
+        residuals in blocks of at most ``budget_elements`` (then "supplied" mode under
+        "auto"; it must agree with ``residual``, which still judges the trial steps).
+        ``train_batches(epoch)``, when a function, draws each epoch's batches (module
+        docstring). ``curvature_batches(epoch)``, when given, returns the batches (a subset of
+        the training data) whose JᵀJ, scaled to the training rows, stands for the whole one in
+        that epoch, while the gradient Jᵀr and the trial steps' SSE stay those of every
+        training batch (module docstring).
         """
         self._select_mode(separable, jacobian_rows)
         if not (0.0 < self.mu_dec < 1.0 < self.mu_inc):
