@@ -33,6 +33,7 @@ from nnid.datasets.log import (
     VELOCITY,
     input_columns,
     run_label,
+    run_of,
     run_pieces,
 )
 from nnid.datasets.preprocess import experiments
@@ -286,11 +287,13 @@ def load_inputs(
         raise NnidInputError(
             "give data.log, data.simulate (or --data)", source=str(config_path), field="data"
         )
+    # a run a gap cut into pieces is named as logged: its name stands for all its pieces
+    wanted = run_pieces(inputs.log, spec.experiments) if spec.experiments else []
     if spec.experiments:
-        known = set(inputs.log["experiment"]) if "experiment" in inputs.log else set()
-        missing = [e for e in spec.experiments if e not in known]
+        runs = run_of(inputs.log)
+        missing = [e for e in wanted if e not in runs]
         if missing:
-            have = sorted(map(str, known))
+            have = sorted(map(str, dict.fromkeys(runs.values())))
             said = have if len(have) <= 8 else [*have[:8], f"… {len(have)} in all"]
             # a config that names its runs fits only logs holding them (the shipped Seamor
             # ones): the way to another log was left unsaid
@@ -302,7 +305,7 @@ def load_inputs(
             )
     kept = inputs.log  # its index: the rows as read, which errors about the file name
     if spec.experiments:
-        kept = inputs.log[inputs.log["experiment"].isin(spec.experiments)]
+        kept = inputs.log[inputs.log["experiment"].isin(wanted)]
         inputs.log = kept.reset_index(drop=True)
         inputs.report.add("experiments", f"kept {', '.join(spec.experiments)}")
     if source is not None:  # the runs kept: one left out may be sampled as it likes

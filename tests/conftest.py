@@ -176,6 +176,8 @@ def pytest_sessionstart(session):
     config = session.config
     if not config.pluginmanager.has_plugin("dsession"):
         return  # one process, --collect-only or a worker: kernels compile where first called
+    if os.environ.get("NUMBA_DISABLE_JIT", "0") not in ("", "0"):
+        return  # nothing is compiled (a coverage run)
     from kernel_warmup import warm
 
     seconds, failed = warm(min(len(config.getoption("tx")), os.cpu_count() or 1))

@@ -8,7 +8,8 @@ CPU to compile and 1 s to load (2026-11-29, on the loaded 2-core CI machine); th
 ensemble test took 129 s and 76 s on a cold cache, 68 s and 43 s on a warm one.
 
 :func:`warm` compiles them once, in parallel processes that each own whole kernel modules
-(no two processes write one kernel's cache index), before the workers start; every later
+(a callee in another module, ``compiled._rhs`` under the fault kernels, may be
+compiled by two of them: both write the same cache entry), before the workers start; every later
 process loads them. Only the time changes: what a process loads is the machine code it would
 have compiled. The signatures below are the argument types nnid's call sites pass (read from
 a full run's cache index, 2026-11-29): a kernel compiles its callees (``_fly_batch`` its
@@ -116,6 +117,10 @@ def parts(modules: list[str], n: int) -> list[list[str]]:
     return groups
 
 
+#: the warm-up's limit (s): a cold compile of every module takes ~50 s idle, ~110 s loaded
+WARM_TIMEOUT_S = 600.0
+
+
 def warm(n: int) -> tuple[float, list[str]]:
     """Compile the kernels the cache lacks in ``n`` processes side by side; the seconds it
     took and, for each process that failed, the end of what it said (a failure costs only
@@ -125,7 +130,9 @@ def warm(n: int) -> tuple[float, list[str]]:
     start = time.perf_counter()
     todo = [name for name in COMPILE_SECONDS if not cached(name)]
     root = str(Path(nnid.__file__).resolve().parents[1])  # the nnid the workers import
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join([root, os.environ.get("PYTHONPATH", "")]))
+    # no empty entry: it would put the working directory on the path
+    paths = [root, *filter(None, os.environ.get("PYTHONPATH", "").split(os.pathsep))]
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(paths))
     procs = [
         subprocess.Popen(
             [sys.executable, __file__, *group],
@@ -138,7 +145,15 @@ def warm(n: int) -> tuple[float, list[str]]:
     ]
     failed = []
     for proc in procs:
-        _, err = proc.communicate()
+        try:  # a hung compile must not hold the session before any worker starts
+            _, err = proc.communicate(
+                timeout=max(1.0, WARM_TIMEOUT_S - (time.perf_counter() - start))
+            )
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.communicate()
+            failed.append(f"{' '.join(proc.args[2:])}: stopped after {WARM_TIMEOUT_S:.0f} s")
+            continue
         if proc.returncode != 0:
             said = (err.strip().splitlines() or ["no output"])[-1]
             failed.append(f"{' '.join(proc.args[2:])}: {said}")

@@ -266,3 +266,30 @@ def test_a_run_cut_into_pieces_is_named_as_logged_in_a_split_and_in_exclude():
     assert list(pd.unique(kept["experiment"])) == ["a", "c"]
     with pytest.raises(NnidInputError, match=r"experiments z are not in the log"):
         exclude_experiments(pieces, ["z"], CleaningReport())
+
+
+def test_a_config_keeps_the_pieces_of_a_run_it_names(tmp_path):
+    """data.experiments = ["a", "b"] on a log whose reader cut 'b' into 'b#0', 'b#1' refused
+    'b' as not in the log (the split and --exclude already took a run's name for its
+    pieces); an unknown name is still refused, naming the runs the log has."""
+    from nnid.config import TrainConfig, load_config
+    from nnid.pipeline import load_inputs
+
+    runs = [_mocap_log(80).assign(experiment=e) for e in ("a", "b", "c")]
+    log = pd.concat(runs, ignore_index=True)
+    log.loc[110:114, "u"] = np.nan
+    [pieces] = mask_gaps([log], ["u"])
+    pieces = pieces.assign(**{f"tau_{c}": 0.0 for c in "YZKMN" if f"tau_{c}" not in pieces})
+    pieces.to_parquet(tmp_path / "cut.parquet")
+    cfg = tmp_path / "t.toml"
+    for names in (["a", "b"], ["a", "z"]):
+        cfg.write_text(f'kind = "train"\n[data]\nlog = "cut.parquet"\nexperiments = {names}\n'
+                       '[model]\nkind = "fossen"\ndofs = ["u"]\n')  # fmt: skip
+        spec = load_config(cfg, TrainConfig)
+        if names[1] == "z":
+            with pytest.raises(NnidInputError, match=r"\['z'\] are not in the log \(it has "
+                                                     r"\['a', 'b', 'c'\]\)"):  # fmt: skip
+                load_inputs(spec, cfg, [spec.model], vehicle="seamor")
+        else:
+            inputs = load_inputs(spec, cfg, [spec.model], vehicle="seamor")
+            assert list(pd.unique(inputs.log["experiment"])) == ["a", "b#0", "b#1"]

@@ -226,3 +226,15 @@ def test_an_acceleration_cut_at_frequent_steps_is_judged_with_its_pieces_noise(s
     assert fitted["value"] - truth > 10 * fitted["stderr"]
     rho, _ = model.attenuated_["X_udot"]
     assert 0.3 < rho < 0.6
+
+
+def test_a_widened_window_is_warned_of_once_in_a_fit_cut_at_steps(seamor, held_20hz):
+    """savgol_window = 0.1 s is 2 samples at 20 Hz, widened to 7: the attenuation check's
+    gain of the pieces (acceleration_gain2) warned of it a second time, word for word."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        ParametricModel(
+            seamor, ["N_rdot", "N:r*abs(r)"], ["r"], zoh_midpoint=True, savgol_window=0.1
+        ).fit(held_20hz)
+    widened = [w for w in caught if "too few for a Savitzky-Golay" in str(w.message)]
+    assert len(widened) == 1, [str(w.message) for w in widened]

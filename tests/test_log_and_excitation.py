@@ -545,3 +545,35 @@ def test_the_velocity_frame_check_counts_the_seconds_that_hold_velocities():
     log.loc[log["t"] > 12.0, ["u", "v", "w"]] = np.nan
     [(_, _, _, seconds)] = velocity_frame_ratios(log)
     assert 9.0 < seconds < 12.0, seconds
+
+
+def _diving_by_pitch(pitched: bool) -> pd.DataFrame:
+    """A 1.5-m/s run whose depth changes through its pitch (−sin θ u, a torpedo AUV) or
+    through its heave w at level attitude, z the depth it implies."""
+    t = np.arange(0.0, 120.0, 0.05)
+    theta = 0.3 * np.sin(0.2 * t) if pitched else np.zeros_like(t)
+    w = np.zeros_like(t) if pitched else 0.4 * np.sin(0.2 * t)
+    u = np.full_like(t, 1.5)
+    rate = -np.sin(theta) * u + np.cos(theta) * w
+    z = 5.0 + np.concatenate([[0.0], np.cumsum(0.5 * (rate[1:] + rate[:-1]) * 0.05)])
+    zero = np.zeros_like(t)
+    return pd.DataFrame({"t": t, "z": z, "phi": zero, "theta": theta, "psi": zero, "u": u,
+                         "v": zero, "w": w, "tau_X": np.full_like(t, 10.0)})  # fmt: skip
+
+
+def test_a_turned_pitch_is_named_beside_a_turned_depth():
+    """A run that dives by pitching reads slope −1 with θ turned (nose down positive) just as
+    with z turned: the refusal named only z and w, and turning z as it advised passed a log
+    whose θ and z were both wrong. It names θ there; a run that heaves level is not told
+    of θ, which plays no part in its depth."""
+    pitched = _diving_by_pitch(True)
+    validate_log(pitched, "ok")
+    with pytest.raises(NnidInputError, match="or theta is turned"):
+        validate_log(pitched.assign(theta=-pitched["theta"]), "pitch")
+    with pytest.raises(NnidInputError, match="or theta is turned"):
+        validate_log(pitched.assign(z=-pitched["z"]), "height")  # the same to the depth alone
+    level = _diving_by_pitch(False)
+    validate_log(level, "ok")
+    with pytest.raises(NnidInputError, match="a height or altitude is −z") as err:
+        validate_log(level.assign(z=-level["z"]), "height")
+    assert "theta" not in str(err.value)

@@ -210,7 +210,7 @@ def test_inspect_duration_is_the_time_sampled_and_gaps_apart(tmp_path):
     log.to_csv(tmp_path / "holed.csv", index=False)
     done = runner.invoke(app, ["inspect", str(tmp_path / "holed.csv")])
     assert done.exit_code == 0, done.output
-    assert "200 samples, 19.9 s of data (and 10 s in gaps), 1 experiment" in done.output
+    assert "200 samples, 19.9 s of data (and 10 s in gaps), 1 experiment," in done.output
     assert "gaps 1 (longest 10.1 s)" in " ".join(done.output.split())
 
 
@@ -613,7 +613,7 @@ def test_inspect_reports_and_writes_summary(tmp_path):
     result = runner.invoke(app, ["inspect", str(tmp_path), "--columns", str(cmap), "--out",
                                  str(tmp_path / "o")])  # fmt: skip
     assert result.exit_code == 0, result.output
-    assert "1 experiment" in result.output and "20 Hz" in result.output
+    assert "1 experiment, " in result.output and "20 Hz" in result.output
     assert "p, q, r" not in result.output  # no roll/pitch: rates are not derivable
     assert (tmp_path / "o" / "cleaning.md").exists()
     for name in ("summary.json", "cleaning.json"):  # strict JSON with its schema, as every file

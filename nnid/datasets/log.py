@@ -504,14 +504,34 @@ def check_depth_units(df: pd.DataFrame, source: str, row: int | None = None) -> 
                 row=row,
             )
         if DEPTH_SIGN_SLOPE[0] <= slope <= DEPTH_SIGN_SLOPE[1]:
+            # a run that dives by pitching (−sin θ u) reads the same with θ turned: z turned
+            # is then only one of two readings, and turning z where θ was wrong passes a log
+            # that climbs as it dives
+            pitched = _pitch_turned(df, name)
             raise NnidInputError(
                 f"u, v, w say the depth changes against the way z does{run} (slope "
                 f"{slope:.3g}, {said[1:-1]}): z must be the depth, positive down (NED), and w "
-                "positive down the body's z axis; a height or altitude is −z, an upward w is −w",
+                "positive down the body's z axis; a height or altitude is −z, an upward w is −w"
+                + (
+                    "; or theta is turned (it must be positive nose up): with −theta u, v, w "
+                    "agree with z, as the depth changes mostly through the pitch"
+                    if pitched
+                    else ""
+                ),
                 source=source,
                 field="z",
                 row=row,
             )
+
+
+def _pitch_turned(df: pd.DataFrame, name: object) -> bool:
+    """Whether experiment ``name`` of ``df`` (None: the log without experiments) reads as a
+    consistent log (:func:`depth_slopes` about +1) once θ is turned."""
+    turned = depth_slopes(df.assign(theta=-df["theta"].to_numpy(dtype=np.float64)))
+    return any(
+        n == name and -DEPTH_SIGN_SLOPE[1] <= s <= -DEPTH_SIGN_SLOPE[0] and fit >= DEPTH_CHECK_FIT
+        for n, s, fit, _ in turned
+    )
 
 
 #: NED velocities logged under the body names u v w fit the pose's displacement as they stand,

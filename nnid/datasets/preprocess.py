@@ -614,7 +614,8 @@ def acceleration_gain2(
     for _, idx in experiments(log):
         t = log.loc[idx, "t"].to_numpy(np.float64)
         dt = float(np.median(np.diff(t)))
-        window = savgol_window(window_s, 1.0 / dt, order, "savgol_window")
+        # derive_accelerations has warned of a widened window: not said a second time
+        window = savgol_window(window_s, 1.0 / dt, order)
         if short_piece(log, idx, window):
             continue
         rows = log.index.get_indexer(idx)
