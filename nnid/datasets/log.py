@@ -302,18 +302,8 @@ def rate_slopes(df: pd.DataFrame) -> list[tuple[object, str, float, float]]:
     # tilted vehicle's r (all θ̇ when rolled 90°) with ψ̇ alone
     if not rates or not all(a in df for a in ANGLES) or len(df) < 3:
         return []
-    if "experiment" in df:
-        codes, labels = pd.factorize(df["experiment"])
-        names = labels.tolist()  # indexing pandas' arrow strings one at a time is slow
-    else:
-        codes, names = np.zeros(len(df), dtype=np.int64), [None]
-    order = np.argsort(codes, kind="stable")  # an experiment's rows, in order, side by side
-    codes = codes[order]
-    t = df["t"].to_numpy(dtype=np.float64)[order]
+    codes, names, order, dt, step = _experiment_sorted(df)
     angles = df[list(ANGLES)].to_numpy(dtype=np.float64)[order]
-    dt = np.diff(t)
-    # each experiment's own step sizes its windows: a log may join a 10-Hz run and a 100-Hz one
-    step = _experiment_steps(codes, dt, len(names))
     starts, ends, _ = _experiment_windows(codes, step, 1.0)
     if not starts.size:
         return []
@@ -344,6 +334,25 @@ def rate_slopes(df: pd.DataFrame) -> list[tuple[object, str, float, float]]:
         for e in np.flatnonzero(n):
             out.append((names[e], col, float(ga[e] / aa[e]), float(n[e] * step[e])))
     return out
+
+
+def _experiment_sorted(
+    df: pd.DataFrame,
+) -> tuple[np.ndarray, list, np.ndarray, np.ndarray, np.ndarray]:
+    """The rows of ``df`` grouped by experiment for the per-experiment window checks
+    (:func:`rate_slopes`, :func:`depth_slopes`, :func:`velocity_frame_ratios`): the sorted
+    experiment codes, their names (``[None]`` without an experiment column), the row order,
+    the time steps in that order, and each experiment's own median step (a log may join a
+    10-Hz run and a 100-Hz one: each sizes its own windows)."""
+    if "experiment" in df:
+        codes, labels = pd.factorize(df["experiment"])
+        names = labels.tolist()  # indexing pandas' arrow strings one at a time is slow
+    else:
+        codes, names = np.zeros(len(df), dtype=np.int64), [None]
+    order = np.argsort(codes, kind="stable")  # an experiment's rows, in order, side by side
+    codes = codes[order]
+    dt = np.diff(df["t"].to_numpy(dtype=np.float64)[order])
+    return codes, names, order, dt, _experiment_steps(codes, dt, len(names))
 
 
 def _experiment_steps(codes: np.ndarray, dt: np.ndarray, n: int) -> np.ndarray:
@@ -433,19 +442,10 @@ def depth_slopes(df: pd.DataFrame) -> list[tuple[object, float, float, float]]:
     depth in metres, 0.01 for a depth in cm beside velocities in m/s."""
     if not all(c in df for c in DEPTH_UNIT_COLUMNS) or len(df) < 3:
         return []
-    if "experiment" in df:
-        codes, labels = pd.factorize(df["experiment"])
-        names = labels.tolist()
-    else:
-        codes, names = np.zeros(len(df), dtype=np.int64), [None]
-    order = np.argsort(codes, kind="stable")
-    codes = codes[order]
-    t = df["t"].to_numpy(dtype=np.float64)[order]
+    codes, names, order, dt, step = _experiment_sorted(df)
     angles = df[["phi", "theta"]].to_numpy(dtype=np.float64)[order]
     nu = df[["u", "v", "w"]].to_numpy(dtype=np.float64)[order]
     dz = np.diff(df["z"].to_numpy(dtype=np.float64)[order])
-    dt = np.diff(t)
-    step = _experiment_steps(codes, dt, len(names))
     starts, ends, _ = _experiment_windows(codes, step, DEPTH_CHECK_WINDOW)
     if not starts.size:
         return []
@@ -587,20 +587,10 @@ def velocity_frame_ratios(df: pd.DataFrame) -> list[tuple[object, float, float, 
     needed = ("x", "y", *ANGLES, "u", "v", "w")
     if not all(c in df for c in needed) or len(df) < 3:
         return []
-    if "experiment" in df:
-        codes, labels = pd.factorize(df["experiment"])
-        names = labels.tolist()
-    else:
-        codes, names = np.zeros(len(df), dtype=np.int64), [None]
-    order = np.argsort(codes, kind="stable")
-    codes = codes[order]
-    t = df["t"].to_numpy(dtype=np.float64)[order]
+    codes, names, order, dt, step = _experiment_sorted(df)
     angles = df[list(ANGLES)].to_numpy(dtype=np.float64)[order]
     nu = df[["u", "v", "w"]].to_numpy(dtype=np.float64)[order]
     moved = np.diff(df[["x", "y"]].to_numpy(dtype=np.float64)[order], axis=0)
-    dt = np.diff(t)
-    # each experiment's own step sizes its windows, as in rate_slopes
-    step = _experiment_steps(codes, dt, len(names))
     starts, ends, lags = _experiment_windows(codes, step, VELOCITY_CHECK_WINDOW)
     if not starts.size:
         return []
