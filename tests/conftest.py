@@ -178,6 +178,8 @@ def pytest_sessionstart(session):
         return  # one process, --collect-only or a worker: kernels compile where first called
     if os.environ.get("NUMBA_DISABLE_JIT", "0") not in ("", "0"):
         return  # nothing is compiled (a coverage run)
+    if os.environ.get("NNID_KERNEL_WARMUP", "1") == "0":
+        return  # asked not to (timing the suite without it)
     from kernel_warmup import warm
 
     seconds, failed = warm(min(len(config.getoption("tx")), os.cpu_count() or 1))

@@ -790,7 +790,7 @@ def test_cli_train_detect_and_follow(vehicle, tmp_path, chromium):
     flat = " ".join(res.output.split())
     hi = metrics["detect"]["test_false_alarms"]["interval"][1]
     assert (
-        "report.html, monitor.json" in flat
+        "model.json, monitor.json, report.html" in flat  # the files written, named
         and f"0 alarm(s), 0 per hour (95 % interval 0-{hi:.3g})" in flat
     )
     assert "Residual monitor (fault detection)" in (model / "report.md").read_text()

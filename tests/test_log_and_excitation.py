@@ -21,7 +21,7 @@ from nnid.datasets.excitation import (
     doptimal_frequency,
     mls,
 )
-from nnid.datasets.log import validate_log
+from nnid.datasets.log import ANGLES, validate_log
 from nnid.datasets.readers import read_log
 from nnid.datasets.simulator import Autopilot, simulate
 from nnid.errors import NnidInputError
@@ -577,3 +577,78 @@ def test_a_turned_pitch_is_named_beside_a_turned_depth():
     with pytest.raises(NnidInputError, match="a height or altitude is −z") as err:
         validate_log(level.assign(z=-level["z"]), "height")
     assert "theta" not in str(err.value)
+
+
+def _every(log: pd.DataFrame, columns: list[str], k: int) -> pd.DataFrame:
+    """``log`` with ``columns`` logged at a k-th of the clock's rate: empty between samples, as
+    a slower sensor merged on one time column is (a depth sensor beside a faster DVL)."""
+    out = log.copy()
+    out.loc[out.index % k != 0, columns] = np.nan
+    return out
+
+
+def test_the_depth_check_reads_a_depth_logged_slower_than_the_velocities():
+    """z every 10th row beside u, v, w every row (a 2-Hz depth sensor and a 20-Hz DVL on one
+    clock): every step met an empty z, every window was empty, and cm/s velocities passed. The
+    velocities' steps are now summed between z's samples (depth_slopes); and a DVL slower than
+    the depth sensor is read across its samples the same way."""
+    from nnid.datasets.log import depth_slopes
+
+    level = _diving_by_pitch(False).assign(u=0.3)  # 0.4 m/s of heave
+    [(_, dense, _, seconds)] = depth_slopes(level)
+    for sparse in (_every(level, ["z"], 10), _every(level, ["u", "v", "w"], 10)):
+        [(_, slope, fit, sparse_seconds)] = depth_slopes(sparse)
+        assert abs(slope - dense) < 0.01 and fit > 0.99 and sparse_seconds > 0.9 * seconds
+        assert validate_log(sparse, "m.csv") is sparse  # m/s: passes
+        cm = sparse.assign(**{c: 100 * sparse[c] for c in "uvw"})
+        with pytest.raises(
+            NnidInputError, match=r"field 'w'.*(99\.\d|100) times as fast.*cm/s"
+        ) as err:
+            validate_log(cm, "cm.csv")
+        assert err.value.field == "w"
+        with pytest.raises(NnidInputError, match="a height or altitude is −z"):
+            validate_log(sparse.assign(z=-sparse["z"]), "height.csv")
+
+
+def test_the_rate_check_reads_an_attitude_logged_slower_than_the_gyro():
+    """The attitude every 5th row beside a gyro every row (or the gyro the slower one): a gyro
+    in deg/s passed, no step having the whole attitude at both ends. The gyro's steps are
+    summed between the attitude's samples (rate_slopes)."""
+    from nnid.datasets.log import rate_slopes
+
+    log = _turning_log(_wobble, seconds=30.0)
+    for sparse in (_every(log, list(ANGLES), 5), _every(log, ["p", "q", "r"], 5)):
+        assert all(0.97 < slope < 1.03 for *_, slope, _ in rate_slopes(sparse))
+        assert validate_log(sparse, "imu.csv") is sparse  # rad/s: passes
+        with pytest.raises(NnidInputError, match=r"field 'r'.*r reads 5\d\.\d times.*deg/s"):
+            validate_log(sparse.assign(r=np.degrees(sparse["r"])), "imu.csv")
+
+
+def test_the_velocity_frame_check_reads_a_position_logged_slower_than_the_velocities():
+    """x, y every 10th row (a 1-Hz position fix beside a 10-Hz DVL): NED velocities under the
+    body names passed, every step meeting an empty position; the displacement between fixes
+    is now compared with the velocities summed across it."""
+    from nnid.datasets.mapping import rotation_from_euler
+
+    log = _every(_cruising_log(lambda t: 1.5 * np.sin(0.15 * t)), ["x", "y"], 10)
+    assert validate_log(log, "nav.csv") is log
+    ned = np.einsum(
+        "nij,nj->ni",
+        rotation_from_euler(log[list(ANGLES)].to_numpy()),
+        log[["u", "v", "w"]].to_numpy(),
+    )
+    with pytest.raises(NnidInputError, match=r"field 'u'.*world-frame \(NED\) velocities"):
+        validate_log(log.assign(u=ned[:, 0], v=ned[:, 1], w=ned[:, 2]), "nav.csv")
+
+
+def test_a_dropout_longer_than_two_windows_is_not_read_across():
+    """A depth that drops out for 10 s (two windows of 2 s are 4 s) is a gap, not a slower
+    sensor: its span is left out of both sums, as its steps were before."""
+    from nnid.datasets.log import depth_slopes
+
+    level = _diving_by_pitch(False).assign(u=0.3)
+    [(_, _, _, seconds)] = depth_slopes(level)
+    gap = level.copy()
+    gap.loc[(gap["t"] > 50.0) & (gap["t"] < 60.0), "z"] = np.nan
+    [(_, slope, _, gap_seconds)] = depth_slopes(gap)
+    assert abs(slope - 1.0) < 0.01 and seconds - 12.0 < gap_seconds < seconds - 8.0

@@ -293,20 +293,22 @@ def rate_slopes(df: pd.DataFrame) -> list[tuple[object, str, float, float]]:
     over the window (the rate by trapezoids; Θ̇ as the wrapped difference of consecutive
     angles, each step through T_Θ⁻¹ at its midpoint) so that the attitude's noise does not
     swamp its differences; the rate is regressed on the attitude, so that noise pulls the slope
-    down, away from a false 57. A step across a gap (an empty cell, a hole in t) or near
-    gimbal lock is left out of both sums, and no window spans two experiments. Returns
-    (experiment, rate column, slope, seconds of turning windows) for each pair with any: about
-    1 for a consistent log, 57.3 for rates in deg/s beside radians."""
+    down, away from a false 57. A column logged slower than the others (an attitude at 2 Hz
+    beside a 10-Hz gyro: an empty cell between its samples) is read across the spans between
+    its samples (:func:`_sampled_spans`); a step across a gap (a hole in t, a dropout longer
+    than two windows) or near gimbal lock is left out of both sums, and no window spans two
+    experiments. Returns (experiment, rate column, slope, seconds of turning windows) for
+    each pair with any: about 1 for a consistent log, 57.3 for rates in deg/s beside
+    radians."""
     rates = [c for c in ("p", "q", "r") if c in df]
     # T_Θ⁻¹ needs the whole attitude: a missing roll or pitch taken as level would compare a
     # tilted vehicle's r (all θ̇ when rolled 90°) with ψ̇ alone
     if not rates or not all(a in df for a in ANGLES) or len(df) < 3:
         return []
     codes, names, order, dt, step = _experiment_sorted(df)
-    angles = df[list(ANGLES)].to_numpy(dtype=np.float64)[order]
-    starts, ends, _ = _experiment_windows(codes, step, 1.0)
-    if not starts.size:
-        return []
+    t = df["t"].to_numpy(dtype=np.float64)[order]
+    logged = df[list(ANGLES)].to_numpy(dtype=np.float64)[order]
+    angles = np.stack([_filled(a, t, codes, angle=True) for a in logged.T], 1)
     # wrapped differences: the unwrapped angle's steps, and a gap stays out (NaN)
     d_angle = wrap_angle(np.diff(angles, axis=0))
     mid = angles[:-1] + 0.5 * d_angle
@@ -316,18 +318,22 @@ def rate_slopes(df: pd.DataFrame) -> list[tuple[object, str, float, float]]:
     turn = dict(zip(("p", "q", "r"), body.T, strict=True))
     # a step over a hole in t (longer than thrice its experiment's median step) is no rate
     good = (dt < 3 * step[codes[1:]]) & (np.abs(cth) > RATE_CHECK_MIN_COS)
-    # a step left out is left out of both sums, so an empty cell every few samples leaves the
-    # windows around it
-    window_codes = codes[starts]
+    attitude = np.isfinite(logged).all(1)
     out = []
     for col in rates:
-        rate = df[col].to_numpy(dtype=np.float64)[order]
+        logged_rate = df[col].to_numpy(dtype=np.float64)[order]
+        rate = _filled(logged_rate, t, codes)
         gyro = 0.5 * (rate[1:] + rate[:-1]) * dt
         ok = good & np.isfinite(gyro) & np.isfinite(turn[col])
-        g = _window_sums(np.where(ok, gyro, 0.0), starts, ends)
-        a = _window_sums(np.where(ok, turn[col], 0.0), starts, ends)
+        # a span left out is left out of both sums, so an empty cell every few samples leaves
+        # the windows around it
+        first, stop, starts, ends, _ = _sampled_spans(
+            codes, t, attitude & np.isfinite(logged_rate), ok, step, 1.0
+        )
+        g = _window_sums(_span_sums(gyro, first, stop), starts, ends)
+        a = _window_sums(_span_sums(turn[col], first, stop), starts, ends)
         use = np.abs(a) > RATE_CHECK_TURN
-        k = window_codes[use]
+        k = codes[starts][use]
         n = np.bincount(k, minlength=len(names))
         ga = np.bincount(k, g[use] * a[use], minlength=len(names))
         aa = np.bincount(k, a[use] ** 2, minlength=len(names))
@@ -392,6 +398,83 @@ def _window_sums(x: np.ndarray, starts: np.ndarray, ends: np.ndarray) -> np.ndar
     return total[ends] - total[starts]
 
 
+def _filled(x: np.ndarray, t: np.ndarray, codes: np.ndarray, angle: bool = False) -> np.ndarray:
+    """``x`` (rows sorted by experiment, :func:`_experiment_sorted`) with each run of empty
+    cells between two samples of one experiment linearly interpolated in ``t`` (an ``angle``
+    along the shorter turn), before its first sample and after its last left empty. A channel
+    logged slower than the others on a common clock (a depth sensor at 1 Hz beside a 10-Hz
+    DVL) has an empty cell in every step: the window checks read it between its own samples,
+    and :func:`_sampled_spans` keeps only spans that end on samples. ``x`` itself without
+    empty cells (a fully sampled log's numbers stay as they were)."""
+    bad = ~np.isfinite(x)
+    if not bad.any():
+        return x
+    rows = np.arange(x.size)
+    prev = np.maximum.accumulate(np.where(bad, -1, rows))
+    nxt = np.minimum.accumulate(np.where(bad, x.size, rows)[::-1])[::-1]
+    fill = bad & (prev >= 0) & (nxt < x.size)
+    fill[fill] = codes[prev[fill]] == codes[nxt[fill]]
+    a, b = prev[fill], nxt[fill]
+    change = x[b] - x[a]
+    out = x.copy()
+    with np.errstate(invalid="ignore", divide="ignore"):  # a repeated stamp: no value, no span
+        share = (t[fill] - t[a]) / (t[b] - t[a])
+    out[fill] = x[a] + share * (wrap_angle(change) if angle else change)
+    return out
+
+
+def _sampled_spans(
+    codes: np.ndarray,
+    t: np.ndarray,
+    sampled: np.ndarray,
+    ok: np.ndarray,
+    step: np.ndarray,
+    seconds: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The spans a window check sums over (rows sorted by experiment): from one ``sampled`` row
+    (every column the check reads has a value) to the next of its experiment, each span's
+    steps all ``ok``, and no longer than two windows. A fully sampled log's spans are its steps;
+    with a column logged slower than the clock, each runs from one of its samples to the next,
+    so that the other side's steps are summed across the same span (the evidence that one
+    empty cell in every step removed entirely). Windows (:func:`_experiment_windows`) are
+    about ``seconds`` long, or the experiment's median span if longer, so that a window holds
+    a span. Returns each span's first step and the step after its last, and the windows'
+    starts, ends and lags."""
+    rows = np.flatnonzero(sampled)
+    # an experiment's median span: its median step when fully sampled (the windows unchanged)
+    span = step
+    if rows.size < t.size:
+        span = _experiment_steps(codes[rows], np.diff(t[rows]), step.size)
+    starts, ends, lags = _experiment_windows(codes, step, np.fmax(seconds, span))
+    first, stop = rows[:-1], rows[1:]
+    left_out = np.concatenate([[0], np.cumsum(~ok)])
+    # a span over a hole in t or an empty cell that could not be read across is no evidence,
+    # and one longer than two windows is a dropout, not a slower channel (whose samples land
+    # a row early or late on a merged clock): left out of both sums.
+    # A span into the next experiment would end in its windows; the one step from an
+    # experiment's last row to the next's first lies in no window, and stays in the running
+    # sums of _window_sums so that their rounding is the fully sampled log's as before
+    keep = (
+        ((codes[first] == codes[stop]) | (stop - first == 1))
+        & (stop - first <= 2 * lags[codes[first]])
+        & (left_out[stop] == left_out[first])
+    )
+    return first[keep], stop[keep], starts, ends, lags
+
+
+def _span_sums(x: np.ndarray, first: np.ndarray, stop: np.ndarray) -> np.ndarray:
+    """The steps ``x`` summed over each span of :func:`_sampled_spans`, at the span's last step
+    and zero elsewhere, for :func:`_window_sums`: a window holds the spans that end in it, on
+    both sides of a check alike. A one-step span is its step's value exactly."""
+    out = np.zeros(x.size)
+    one = stop - first == 1  # a step: its own value (every span of a fully sampled log)
+    out[first[one]] = x[first[one]]
+    if not one.all():
+        edges = np.column_stack([first[~one], stop[~one]]).ravel()
+        out[stop[~one] - 1] = np.add.reduceat(np.append(x, 0.0), edges)[::2]
+    return out
+
+
 def check_rate_units(df: pd.DataFrame, source: str, row: int | None = None) -> None:
     """Body rates p, q, r in rad/s beside an attitude in radians: a rate that reads about
     57.3 times the rate the attitude turns at (:func:`rate_slopes`, :data:`DEG_PER_S_SLOPE`)
@@ -443,21 +526,27 @@ def depth_slopes(df: pd.DataFrame) -> list[tuple[object, float, float, float]]:
     if not all(c in df for c in DEPTH_UNIT_COLUMNS) or len(df) < 3:
         return []
     codes, names, order, dt, step = _experiment_sorted(df)
-    angles = df[["phi", "theta"]].to_numpy(dtype=np.float64)[order]
-    nu = df[["u", "v", "w"]].to_numpy(dtype=np.float64)[order]
-    dz = np.diff(df["z"].to_numpy(dtype=np.float64)[order])
-    starts, ends, _ = _experiment_windows(codes, step, DEPTH_CHECK_WINDOW)
-    if not starts.size:
-        return []
+    t = df["t"].to_numpy(dtype=np.float64)[order]
+    logged = df[list(DEPTH_UNIT_COLUMNS)].to_numpy(dtype=np.float64)[order]
+    z, phi, theta, u, v, w = (
+        _filled(x, t, codes, angle=c in ANGLES)
+        for c, x in zip(DEPTH_UNIT_COLUMNS, logged.T, strict=True)
+    )
+    angles, nu, dz = np.stack([phi, theta], 1), np.stack([u, v, w], 1), np.diff(z)
     mid = angles[:-1] + 0.5 * wrap_angle(np.diff(angles, axis=0))
     sphi, cphi = np.sin(mid[:, 0]), np.cos(mid[:, 0])
     sth, cth = np.sin(mid[:, 1]), np.cos(mid[:, 1])
     u, v, w = (0.5 * (nu[1:] + nu[:-1])).T  # each step's velocity (trapezoid)
     implied = (-sth * u + cth * sphi * v + cth * cphi * w) * dt
-    # a step over a hole in t or an empty cell is left out of both sums, as in rate_slopes
+    # a span over a hole in t or a dropout is left out of both sums, as in rate_slopes; a
+    # depth logged slower than the DVL is compared with the velocities' steps summed between
+    # its samples
     ok = (dt < 3 * step[codes[1:]]) & np.isfinite(implied) & np.isfinite(dz)
-    g = _window_sums(np.where(ok, implied, 0.0), starts, ends)
-    a = _window_sums(np.where(ok, dz, 0.0), starts, ends)
+    first, stop, starts, ends, _ = _sampled_spans(
+        codes, t, np.isfinite(logged).all(1), ok, step, DEPTH_CHECK_WINDOW
+    )
+    g = _window_sums(_span_sums(implied, first, stop), starts, ends)
+    a = _window_sums(_span_sums(dz, first, stop), starts, ends)
     use = np.abs(a) > DEPTH_CHECK_CHANGE
     k = codes[starts][use]
     n = np.bincount(k, minlength=len(names))
@@ -581,19 +670,22 @@ def velocity_frame_ratios(df: pd.DataFrame) -> list[tuple[object, float, float, 
     drift (a current), so that only the heading's changes tell the readings apart. Returns
     (experiment, ratio of the body reading's residual to the world reading's, the world
     reading's R², seconds of windows): under 1 for body velocities on a log that turns, about
-    1 on one that holds its heading, over 1 for NED velocities under body names. A step
-    across a gap (an empty cell, a hole in t) is left out of every sum, and no window spans
-    two experiments."""
+    1 on one that holds its heading, over 1 for NED velocities under body names. A position
+    logged slower than the velocities (a USBL fix at 1 Hz) is read across the spans between
+    its samples (:func:`_sampled_spans`); a step across a gap (a hole in t, a dropout longer
+    than two windows) is left out of every sum, and no window spans two experiments."""
     needed = ("x", "y", *ANGLES, "u", "v", "w")
     if not all(c in df for c in needed) or len(df) < 3:
         return []
     codes, names, order, dt, step = _experiment_sorted(df)
-    angles = df[list(ANGLES)].to_numpy(dtype=np.float64)[order]
-    nu = df[["u", "v", "w"]].to_numpy(dtype=np.float64)[order]
-    moved = np.diff(df[["x", "y"]].to_numpy(dtype=np.float64)[order], axis=0)
-    starts, ends, lags = _experiment_windows(codes, step, VELOCITY_CHECK_WINDOW)
-    if not starts.size:
-        return []
+    t = df["t"].to_numpy(dtype=np.float64)[order]
+    logged = df[list(needed)].to_numpy(dtype=np.float64)[order]
+    x, y, *columns = (
+        _filled(values, t, codes, angle=col in ANGLES)
+        for col, values in zip(needed, logged.T, strict=True)
+    )
+    angles, nu = np.stack(columns[:3], 1), np.stack(columns[3:], 1)
+    moved = np.diff(np.stack([x, y], 1), axis=0)
     # each step's velocity (trapezoid), and turned by the attitude at the step's midpoint
     world = 0.5 * (nu[1:] + nu[:-1]) * dt[:, None]
     mid = angles[:-1] + 0.5 * wrap_angle(np.diff(angles, axis=0))
@@ -605,9 +697,14 @@ def velocity_frame_ratios(df: pd.DataFrame) -> list[tuple[object, float, float, 
         & np.isfinite(body[0])
         & np.isfinite(body[1])
     )
+    first, stop, starts, ends, lags = _sampled_spans(
+        codes, t, np.isfinite(logged).all(1), ok, step, VELOCITY_CHECK_WINDOW
+    )
+    if not starts.size:
+        return []
 
     def sums(x: np.ndarray) -> np.ndarray:
-        return _window_sums(np.where(ok, x, 0.0), starts, ends)
+        return _window_sums(_span_sums(x, first, stop), starts, ends)
 
     d = sums(moved[:, 0]) + 1j * sums(moved[:, 1])
     tau = sums(dt)
