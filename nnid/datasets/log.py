@@ -305,8 +305,7 @@ def rate_slopes(df: pd.DataFrame) -> list[tuple[object, str, float, float]]:
     # tilted vehicle's r (all θ̇ when rolled 90°) with ψ̇ alone
     if not rates or not all(a in df for a in ANGLES) or len(df) < 3:
         return []
-    codes, names, order, dt, step = _experiment_sorted(df)
-    t = df["t"].to_numpy(dtype=np.float64)[order]
+    codes, names, order, t, dt, step = _experiment_sorted(df)
     logged = df[list(ANGLES)].to_numpy(dtype=np.float64)[order]
     angles = np.stack([_filled(a, t, codes, angle=True) for a in logged.T], 1)
     # wrapped differences: the unwrapped angle's steps, and a gap stays out (NaN)
@@ -344,12 +343,12 @@ def rate_slopes(df: pd.DataFrame) -> list[tuple[object, str, float, float]]:
 
 def _experiment_sorted(
     df: pd.DataFrame,
-) -> tuple[np.ndarray, list, np.ndarray, np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, list, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The rows of ``df`` grouped by experiment for the per-experiment window checks
     (:func:`rate_slopes`, :func:`depth_slopes`, :func:`velocity_frame_ratios`): the sorted
     experiment codes, their names (``[None]`` without an experiment column), the row order,
-    the time steps in that order, and each experiment's own median step (a log may join a
-    10-Hz run and a 100-Hz one: each sizes its own windows)."""
+    the times and time steps in that order, and each experiment's own median step (a log may
+    join a 10-Hz run and a 100-Hz one: each sizes its own windows)."""
     if "experiment" in df:
         codes, labels = pd.factorize(df["experiment"])
         names = labels.tolist()  # indexing pandas' arrow strings one at a time is slow
@@ -357,8 +356,9 @@ def _experiment_sorted(
         codes, names = np.zeros(len(df), dtype=np.int64), [None]
     order = np.argsort(codes, kind="stable")  # an experiment's rows, in order, side by side
     codes = codes[order]
-    dt = np.diff(df["t"].to_numpy(dtype=np.float64)[order])
-    return codes, names, order, dt, _experiment_steps(codes, dt, len(names))
+    t = df["t"].to_numpy(dtype=np.float64)[order]
+    dt = np.diff(t)
+    return codes, names, order, t, dt, _experiment_steps(codes, dt, len(names))
 
 
 def _experiment_steps(codes: np.ndarray, dt: np.ndarray, n: int) -> np.ndarray:
@@ -525,8 +525,7 @@ def depth_slopes(df: pd.DataFrame) -> list[tuple[object, float, float, float]]:
     depth in metres, 0.01 for a depth in cm beside velocities in m/s."""
     if not all(c in df for c in DEPTH_UNIT_COLUMNS) or len(df) < 3:
         return []
-    codes, names, order, dt, step = _experiment_sorted(df)
-    t = df["t"].to_numpy(dtype=np.float64)[order]
+    codes, names, order, t, dt, step = _experiment_sorted(df)
     logged = df[list(DEPTH_UNIT_COLUMNS)].to_numpy(dtype=np.float64)[order]
     z, phi, theta, u, v, w = (
         _filled(x, t, codes, angle=c in ANGLES)
@@ -677,8 +676,7 @@ def velocity_frame_ratios(df: pd.DataFrame) -> list[tuple[object, float, float, 
     needed = ("x", "y", *ANGLES, "u", "v", "w")
     if not all(c in df for c in needed) or len(df) < 3:
         return []
-    codes, names, order, dt, step = _experiment_sorted(df)
-    t = df["t"].to_numpy(dtype=np.float64)[order]
+    codes, names, order, t, dt, step = _experiment_sorted(df)
     logged = df[list(needed)].to_numpy(dtype=np.float64)[order]
     x, y, *columns = (
         _filled(values, t, codes, angle=col in ANGLES)
