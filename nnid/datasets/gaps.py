@@ -22,7 +22,7 @@ import pandas as pd
 
 from nnid.datasets.cleaning import CleaningReport
 from nnid.datasets.log import ACCELERATION, ANGLES, PIECE_OF, POSE, VELOCITY
-from nnid.datasets.preprocess import derive_velocities, experiments
+from nnid.datasets.preprocess import derive_velocities, experiments, true_runs
 
 #: a segment left between two gaps shorter than this many samples is masked with them
 MIN_SEGMENT = 3
@@ -43,19 +43,13 @@ class Gap:
     missing_s: float  # missing: rows × the experiment's median sample interval
 
 
-def _runs(missing: np.ndarray) -> list[tuple[int, int]]:
-    """[start, stop) of each run of True."""
-    edges = np.diff(np.concatenate([[0], missing.astype(np.int8), [0]]))
-    return list(zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1), strict=True))
-
-
 def _gap_runs(part: pd.DataFrame, columns: list[str]):
     """(Gap, first row, stop row) of each gap of one experiment, rows by position."""
     missing = part[columns].isna().to_numpy()
     t = part["t"].to_numpy(np.float64)
     name = part["experiment"].iloc[0] if "experiment" in part else None
     dt = float(np.median(np.diff(t))) if t.size > 1 else 0.0
-    for a, b in _runs(missing.any(axis=1)):
+    for a, b in true_runs(missing.any(axis=1)):
         t0 = t[a - 1] if a > 0 else t[a]
         t1 = t[b] if b < t.size else t[b - 1]
         cols = [c for c, m in zip(columns, missing[a:b].any(axis=0), strict=True) if m]
@@ -162,7 +156,7 @@ def mask_gaps(
             piece_of[:] = log[PIECE_OF].to_numpy(object)
         for name, idx in experiments(log):
             pos = np.flatnonzero(log.index.isin(idx))
-            runs = _runs(keep[pos])
+            runs = true_runs(keep[pos])
             for k, (a, b) in enumerate(runs):  # from #0, as resample_log and the readers
                 if b - a < MIN_SEGMENT:
                     keep[pos[a:b]] = False

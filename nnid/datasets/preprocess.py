@@ -258,6 +258,13 @@ def savgol_window(seconds: float, rate: float, order: int, name: str | None = No
     return n
 
 
+def true_runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """[start, stop) of each run of True in ``mask`` (the stretches between gaps, a gap's
+    rows, a plateau's samples)."""
+    edges = np.diff(np.concatenate([[0], np.asarray(mask).astype(np.int8), [0]]))
+    return list(zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1), strict=True))
+
+
 def savgol_derivative(
     y: np.ndarray,
     dt: float,
@@ -292,8 +299,7 @@ def savgol_derivative(
     # a gap (nnid.datasets.gaps): each stretch between gaps on its own, never across one;
     # a stretch shorter than the window has no estimate
     out = np.full_like(y, np.nan)
-    edges = np.diff(np.concatenate([[1], missing.astype(np.int8), [1]]))
-    for a, b in zip(np.flatnonzero(edges == -1), np.flatnonzero(edges == 1), strict=True):
+    for a, b in true_runs(~missing):
         if b - a < window:
             continue
         if steps is None:
@@ -360,8 +366,7 @@ def savgol_derivative_gain2(
     missing = np.zeros(n, dtype=bool) if missing is None else np.asarray(missing, dtype=bool)
     steps = None if steps is None else np.asarray(steps, dtype=np.int64)
     full = savgol_noise_gain(window, order, dt, deriv) ** 2
-    edges = np.diff(np.concatenate([[1], missing.astype(np.int8), [1]]))
-    for a, b in zip(np.flatnonzero(edges == -1), np.flatnonzero(edges == 1), strict=True):
+    for a, b in true_runs(~missing):
         if b - a < window:  # as savgol_derivative: no estimate
             continue
         if steps is None:

@@ -82,7 +82,7 @@ from scipy.signal import savgol_filter
 from nnid.datasets.arrays import log_arrays
 from nnid.datasets.excitation import PRBS, DOptimalSine
 from nnid.datasets.measurement import Measurement
-from nnid.datasets.preprocess import UNIFORM_TOLERANCE, savgol_window
+from nnid.datasets.preprocess import UNIFORM_TOLERANCE, savgol_window, true_runs
 from nnid.datasets.simulator import simulate, simulate_config
 from nnid.errors import NnidInputError
 from nnid.evaluation.persistence import combined_excitation
@@ -156,12 +156,6 @@ class Plateau:
     def direction(self) -> str:
         """'pos' for φⁿ ≥ 0, 'neg' otherwise (the sign the installation coefficient uses)."""
         return "pos" if self.force >= 0 else "neg"
-
-
-def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
-    """[start, stop) of the runs of True in ``mask``."""
-    edges = np.diff(np.r_[0, mask.astype(np.int8), 0])
-    return list(zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1), strict=True))
 
 
 def _asymptote(t: np.ndarray, x: np.ndarray, f_crit: float = 3.0) -> tuple[float, float]:
@@ -276,7 +270,7 @@ def find_plateaus(
                 continue
             seg_t, seg_x = te[a:b], xe[a:b]
             acc = savgol_filter(seg_x, window, settle_order, deriv=2, delta=dt, mode="interp")
-            runs = _runs(np.abs(acc) <= settle_accel)
+            runs = true_runs(np.abs(acc) <= settle_accel)
             if not runs:
                 continue
             r0, r1 = max(runs, key=lambda r: r[1] - r[0])
