@@ -616,19 +616,32 @@ def acceleration_gain2(
     inputs the short pieces between steps are much noisier than the full window says."""
     out = np.full(len(log), np.nan)
     held = held_inputs(log) if cut_at_steps else []
-    for _, idx in experiments(log):
-        t = log.loc[idx, "t"].to_numpy(np.float64)
-        dt = float(np.median(np.diff(t)))
-        # derive_accelerations has warned of a widened window: not said a second time
-        window = savgol_window(window_s, 1.0 / dt, order)
-        if short_piece(log, idx, window):
+    # derive_accelerations has warned of a widened window: not said a second time
+    for _, idx, dt, window, steps in _derivative_runs(log, window_s, order, held, None):
+        if window is None:
             continue
         rows = log.index.get_indexer(idx)
         missing = ~np.isfinite(log.loc[idx, [c for c in VELOCITY if c in log]].to_numpy(float))
         out[rows] = savgol_derivative_gain2(
-            len(idx), dt, window, order, 1, _held_steps(log, idx, held), missing.any(axis=1)
+            len(idx), dt, window, order, 1, steps, missing.any(axis=1)
         )
     return out
+
+
+def _derivative_runs(
+    log: pd.DataFrame, window_s: float, order: int, held: list[str], setting: str | None
+):
+    """Per experiment of ``log``, how :func:`derive_accelerations` differentiates it, which
+    :func:`acceleration_gain2` must follow: (name, rows, median step, Savitzky-Golay window
+    or None for a run shorter than it, the steps of the ``held`` inputs or None).
+    ``setting``: the key named where the window is widened (None: not warned again)."""
+    for name, idx in experiments(log):
+        dt = float(np.median(np.diff(log.loc[idx, "t"].to_numpy(np.float64))))
+        window = savgol_window(window_s, 1.0 / dt, order, setting)
+        if short_piece(log, idx, window):
+            yield name, idx, dt, None, None
+        else:
+            yield name, idx, dt, window, _held_steps(log, idx, held)
 
 
 def derive_accelerations(
@@ -647,14 +660,11 @@ def derive_accelerations(
         out["d" + c] = np.nan
     held = held_inputs(log) if cut_at_steps else []
     short = cuts = 0
-    for name, idx in experiments(out):
-        t = out.loc[idx, "t"].to_numpy(np.float64)
-        dt = float(np.median(np.diff(t)))
-        window = savgol_window(window_s, 1.0 / dt, order, "savgol_window")
-        if short_piece(out, idx, window):
+    runs = _derivative_runs(out, window_s, order, held, "savgol_window")
+    for name, idx, dt, window, steps in runs:
+        if window is None:
             short += len(idx)
             continue
-        steps = _held_steps(out, idx, held)
         cuts += 0 if steps is None else steps.size
         for c in cols:
             out.loc[idx, "d" + c] = savgol_derivative(
