@@ -16,6 +16,7 @@ from nnid import load_model
 from nnid.cli import app
 from nnid.config import load_config
 from nnid.datasets.arrays import log_arrays
+from nnid.datasets.measurement import Measurement
 from nnid.datasets.simulator import simulate, simulate_config
 from nnid.models.parametric import ParametricFossen, ParametricModel, prepare_motion
 from nnid.physics.dofs import DOFS
@@ -610,6 +611,50 @@ def test_a_sequence_model_says_which_of_its_parameters_a_step_could_not_separate
     # no one regressor of the whole estimate: no spectrum claimed, the worst step's condition
     assert report.singular_values == [] and report.condition == np.inf
     assert report.rank == 2 and not report.persistent
+
+
+def _surge_and_sway_runs(vehicle):
+    """Half a minute each of a 10 ± 10-N surge and a 10 ± 10-N sway, logged by a 10-Hz DVL
+    (5 mm/s noise): in the surge run v and r are their noise only."""
+    t = np.arange(301) * 0.1
+    logs = []
+    for k, name in enumerate(["surge", "sway"]):
+        inputs = np.zeros((t.size, 6))
+        inputs[:, k] = 10.0 + 10.0 * np.sin(0.5 * t)
+        dvl = Measurement(kind="dvl_imu")
+        logs.append(simulate(vehicle, inputs, 0.1, measurement=dvl, seed=k, experiment=name))
+    return pd.concat(logs, ignore_index=True)
+
+
+def test_a_sequence_step_that_fits_a_parameter_to_noise_names_it_and_so_do_the_steps_after(
+    seamor,
+):
+    """The surge equation reads Y_vdot only through the Coriolis product v r; in the surge run
+    v and r are noise, so the surge step fitted Y_vdot to noise times noise (s.e. 2.6 times the
+    value, which Weiss eq. 95 does not see), and the noise check judged it on the whole log,
+    whose sway run moves v: no word, and the sway step took that value as known for its
+    damping. Each step is judged on its own runs: Y_vdot is named not excited in step 1, and
+    the sway step is named as resting on it; a later step that refits Y_vdot on the sway run
+    replaces the verdict, not the fact that step 2 used the noise value."""
+    steps = [
+        {"experiments": ["surge"], "dofs": ["u"], "unknowns": ["X_udot", "X:u*abs(u)", "Y_vdot"]},
+        {"experiments": ["sway"], "dofs": ["v"], "unknowns": ["Y:v*abs(v)"]},
+    ]
+    log = _surge_and_sway_runs(seamor)
+    with pytest.warns(ExcitationWarning) as caught:
+        model = ParametricModel(seamor, sequence=steps).fit(log)
+    said = " | ".join(str(w.message) for w in caught if w.category is ExcitationWarning)
+    assert "sequence steps that fit them (step 1: Y_vdot) do not excite v" in said
+    assert "step 2 (v) takes Y_vdot from step 1, for Y:v*abs(v)" in said
+    assert model.not_excited_ == {"Y_vdot": ["v"]}
+    assert model.params["Y_vdot"]["excited"] is False and model.params["Y_vdot"]["stderr"] is None
+    assert "excited" not in model.params["X_udot"]
+    refit = [*steps, {"experiments": ["sway"], "dofs": ["v"], "unknowns": ["Y_vdot"]}]
+    with pytest.warns(ExcitationWarning) as caught:
+        model = ParametricModel(seamor, sequence=refit).fit(log)
+    said = " | ".join(str(w.message) for w in caught if w.category is ExcitationWarning)
+    assert "do not excite" not in said and "step 2 (v) takes Y_vdot from step 1" in said
+    assert model.not_excited_ == {} and "excited" not in model.params["Y_vdot"]
 
 
 def test_the_attenuation_keeps_an_infinite_bias_tagged_and_reads_older_files_null():

@@ -1009,17 +1009,43 @@ class ParametricModel(FossenPlant):
         self.estimate_ = trainer.fit(self.structure_, data, progress=progress)
         self.trainer_ = trainer
         self.parts_ = self.structure_.parts(np.nan_to_num(self.estimate_.theta))
-        self.not_excited_ = unexcited_unknowns(unknowns, data, self._from_pose())
+        steps = self._step_data(data, dofs, unknowns)
+        by_step = self._not_excited(steps)
+        self.not_excited_ = self._last_verdicts(steps, by_step)
         if self.not_excited_:
             from nnid.trainers.least_squares import ExcitationWarning
 
             dofs_left = sorted({d for ds in self.not_excited_.values() for d in ds}, key=DOFS.index)
+            # a sequence's log may move v in one run and not in the step that fits Y_vdot:
+            # "the fit data" would then name data that do excite it
+            where = "the fit data do not excite"
+            if self.sequence is not None:
+                judged = [
+                    ", ".join(n for n in found if n in self.not_excited_) for found in by_step
+                ]
+                where = (
+                    "the runs of the sequence steps that fit them ("
+                    + ", ".join(f"step {k + 1}: {n}" for k, n in enumerate(judged) if n)
+                    + ") do not excite"
+                )
             warnings.warn(
-                f"the fit data do not excite {', '.join(dofs_left)} (their velocities stay "
+                f"{where} {', '.join(dofs_left)} (their velocities stay "
                 "within 3 times their noise): these unknowns are fitted to noise, not "
                 "identified, and reported as not significant, without standard errors (theirs "
                 "would not hold): "
                 f"{', '.join(self.not_excited_)}",
+                ExcitationWarning,
+                stacklevel=3,
+            )
+        rested = self._rested_on_noise(steps, by_step, getattr(trainer, "filter_lambda", None))
+        if rested:
+            from nnid.trainers.least_squares import ExcitationWarning
+
+            warnings.warn(
+                "later sequence steps take as known values that an earlier step fitted to "
+                "noise (their velocities stay within 3 times their noise in its runs), and their "
+                "estimates rest on them; their standard errors do not include that error: "
+                + "; ".join(rested),
                 ExcitationWarning,
                 stacklevel=3,
             )
@@ -1070,6 +1096,69 @@ class ParametricModel(FossenPlant):
         cleaning report records, rather than logged."""
         return any(s.step == "derive accelerations" for s in self.report_.steps)
 
+    def _step_data(
+        self, data: dict[str, np.ndarray], dofs: list[str], unknowns: list[str]
+    ) -> list[tuple[Any, dict[str, np.ndarray]]]:
+        """The fit's steps, each with the rows of its experiments: a sequence's (Weiss eqs
+        99-108), else one step of every unknown on all of ``data``."""
+        from nnid.trainers.sequence import Step, _subset, sequence_steps
+
+        if self.sequence is None:
+            return [(Step([], dofs, unknowns), data)]
+        return [(s, _subset(data, s.experiments)) for s in sequence_steps(self.sequence)]
+
+    def _not_excited(
+        self, steps: list[tuple[Any, dict[str, np.ndarray]]]
+    ) -> list[dict[str, list[str]]]:
+        """:func:`unexcited_unknowns` of each step's unknowns on its own experiments. On the
+        whole log of a sequence a sway run moved v, while the surge step fitted Y_vdot, which
+        its equation reads through v r only, to v's noise (a regressor of noise times noise,
+        which Weiss eq. 95 does not see): its s.e. 258 % of it, and no check named it."""
+        from_pose = self._from_pose()
+        return [
+            unexcited_unknowns([canonical_parameter(n) for n in step.unknowns], subset, from_pose)
+            for step, subset in steps
+        ]
+
+    def _last_verdicts(
+        self, steps: list[tuple[Any, dict[str, np.ndarray]]], by_step: list[dict[str, list[str]]]
+    ) -> dict[str, list[str]]:
+        """Each parameter's verdict of :meth:`_not_excited` from the last step that fits it,
+        whose value it keeps, in the estimate's order."""
+        out: dict[str, list[str]] = {}
+        for (step, _), found in zip(steps, by_step, strict=True):
+            for name in step.unknowns:
+                out.pop(canonical_parameter(name), None)
+            out.update(found)
+        return {n: out[n] for n in self.estimate_.names if n in out}
+
+    def _rested_on_noise(
+        self,
+        steps: list[tuple[Any, dict[str, np.ndarray]]],
+        by_step: list[dict[str, list[str]]],
+        filter_lambda: float | None,
+    ) -> list[str]:
+        """Each later step of a sequence that takes as known a value an earlier step fitted to
+        noise (:meth:`_not_excited`) and whose equations read it (its column is not all zero
+        on the later step's runs), said as "step j (dofs) takes NAME from step k, for ..."."""
+        said = []
+        source: dict[str, int] = {}  # the step whose value a parameter holds so far
+        for j, (step, subset) in enumerate(steps):
+            names = [canonical_parameter(n) for n in step.unknowns]
+            for name, k in source.items():
+                if name in names or name not in by_step[k]:
+                    continue
+                reg = ParametricFossen(self.vehicle, [name], step.dofs).regression(
+                    subset, filter_lambda
+                )
+                if np.any(reg.phi != 0):
+                    said.append(
+                        f"step {j + 1} ({', '.join(step.dofs)}) takes {name} from step {k + 1}, "
+                        f"for {', '.join(names)}"
+                    )
+            source.update(dict.fromkeys(names, j))
+        return said
+
     def _attenuated(
         self,
         trainer,
@@ -1079,11 +1168,11 @@ class ParametricModel(FossenPlant):
         log: pd.DataFrame,
     ) -> dict[str, tuple[float, float]]:
         """:func:`attenuated_unknowns` of the fit, step by step for a sequence (each on its
-        experiments; a later step's verdict replaces an earlier one's), not judged for the
-        UKF, which regresses on no acceleration. ``log``: the fit's, as its accelerations were
-        derived from it (their noise gain where they were cut at held steps)."""
+        experiments, :meth:`_step_data`; a later step's verdict replaces an earlier one's), not
+        judged for the UKF, which regresses on no acceleration. ``log``: the fit's, as its
+        accelerations were derived from it (their noise gain where they were cut at held
+        steps)."""
         from nnid.datasets.preprocess import acceleration_gain2
-        from nnid.trainers.sequence import Step, _subset, sequence_steps
 
         if _is_ukf(trainer):
             return {}
@@ -1100,13 +1189,8 @@ class ParametricModel(FossenPlant):
         values = {
             n: v for n, v in values.items() if np.isfinite(v[0]) and n not in self.not_excited_
         }
-        steps = (
-            [(s, _subset(data, s.experiments)) for s in sequence_steps(self.sequence)]
-            if self.sequence is not None
-            else [(Step([], dofs, unknowns), data)]
-        )
         out: dict[str, tuple[float, float]] = {}
-        for step, subset in steps:
+        for step, subset in self._step_data(data, dofs, unknowns):
             for name in step.unknowns:
                 out.pop(name, None)
             out.update(
