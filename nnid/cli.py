@@ -148,6 +148,7 @@ def inspect(
     from rich.table import Table
 
     from nnid.config import VehicleData
+    from nnid.datasets.gaps import SlowChannel
     from nnid.datasets.inspect import summarize
     from nnid.datasets.readers import load_log
     from nnid.physics.dofs import DOFS
@@ -180,11 +181,20 @@ def inspect(
         f"  gaps          {len(gaps)}"
         + (f" (longest {max(g['length_s'] for g in gaps):.3g} s)" if gaps else "")
     )
+    for ch in info["slow"]:
+        slow = SlowChannel(**{k: v for k, v in ch.items() if k != "filled"})
+        how = (
+            "filled between its samples with the gyro where a fit needs it on every row"
+            if ch["filled"]
+            else "not filled: bridged from the pose or masked where used"
+        )
+        out.print(f"  slow          {slow.describe()} ({how})", highlight=False)
     missing = info["missing"]
     if missing["count"]:
         cols = sorted({c for g in missing["gaps"] for c in g["columns"]}, key=list(log).index)
         out.print(
-            f"  missing       {missing['count']} gaps in {', '.join(cols)} "
+            f"  missing       {missing['count']} gap{'s' * (missing['count'] != 1)} in "
+            f"{', '.join(cols)} "
             f"({missing['samples']} samples, {missing['seconds']:.3g} s missing, longest "
             f"{missing['longest_s']:.3g} s): bridged from the pose or masked where used"
         )

@@ -441,13 +441,15 @@ def _caccia_campaign(spec: CacciaCampaignData, config_path: Path, models: list, 
 
 
 def _prepare(log: pd.DataFrame, spec, report: CleaningReport) -> pd.DataFrame:
-    """Velocities derived from the pose where the log lacks them (every model is fitted and
-    scored on the same measured velocities), then light white noise (``spec.noise``), each
-    step reported."""
-    from nnid.datasets.gaps import bridge_from_pose
+    """A pose channel logged slower than the clock interpolated between its samples
+    (:func:`nnid.datasets.gaps.fill_slow`), velocities derived from the pose where the log
+    lacks them (every model is fitted and scored on the same measured velocities), then light
+    white noise (``spec.noise``), each step reported."""
+    from nnid.datasets.gaps import bridge_from_pose, fill_slow
     from nnid.datasets.measurement import relative_noise
     from nnid.datasets.preprocess import derive_velocities
 
+    log = fill_slow(log, report)
     try:
         if any(c not in log for c in VELOCITY) and all(a in log for a in ANGLES):
             log = derive_velocities(log, spec.savgol_window, spec.savgol_order, report)

@@ -575,7 +575,7 @@ def detect_run(
     progress: Progress | None = None,
 ) -> Outcome:
     """``nnid detect`` on a whole log: ``alarms.csv``, ``detect.json`` and the report."""
-    from nnid.datasets.gaps import mask_gaps
+    from nnid.datasets.gaps import fill_slow, mask_gaps
     from nnid.datasets.log import POSE, VELOCITY
     from nnid.datasets.readers import load_log
     from nnid.fault.detect import detect
@@ -590,7 +590,8 @@ def detect_run(
         log, report = load_log(data, columns)
         # a gap in the motion data cuts the run into segments, and the monitor restarts on
         # each (its EWMA, CUSUM and alarm from zero)
-        log = mask_gaps([log], [*POSE, *VELOCITY], report)[0]
+        # (a pose channel logged slower than the clock is read between its samples first)
+        log = mask_gaps([fill_slow(log, report)], [*POSE, *VELOCITY], report)[0]
         lines += lost_rows(report)
         runs = log["experiment"].to_numpy() if "experiment" in log else None
         missing = monitor.missing_samples(log["t"].to_numpy(), runs)

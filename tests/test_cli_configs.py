@@ -299,7 +299,7 @@ def test_a_config_without_data_runs_with_data_and_vehicle_given(tmp_path):
     gappy.to_csv(tmp_path / "gappy.csv", index=False)
     args = ["train", str(cfg), "--data", str(tmp_path / "gappy.csv"), "--vehicle", "seamor"]
     run = CliRunner().invoke(app, [*args, "--out", str(tmp_path / "o4")])
-    assert run.exit_code == 0 and "bridge velocity gaps: 1 gaps in u" in run.output, run.output
+    assert run.exit_code == 0 and "bridge velocity gaps: 1 gap in u" in run.output, run.output
     missing = CliRunner().invoke(app, ["train", str(cfg), "--out", str(tmp_path / "o2")])
     assert missing.exit_code == 2 and "field 'data'" in missing.output
     novehicle = CliRunner().invoke(

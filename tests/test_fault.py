@@ -822,7 +822,7 @@ def test_cli_train_detect_and_follow(vehicle, tmp_path, chromium):
     gappy.to_csv(tmp_path / "gappy.csv", index=False)
     args = ["detect", "--model", str(model), "--data", str(tmp_path / "gappy.csv")]
     res = runner.invoke(app, [*args, "--out", str(tmp_path / "gap")])
-    assert res.exit_code == 0 and "mask gaps: 1 gaps in u, v, w" in res.output, res.output
+    assert res.exit_code == 0 and "mask gaps: 1 gap in u, v, w" in res.output, res.output
     said = json.loads((tmp_path / "gap" / "detect.json").read_text())
     (g,) = said["alarms"]
     assert g["thruster"] == "h3" and abs(g["t"] - a["t"]) < 0.5

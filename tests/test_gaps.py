@@ -90,7 +90,7 @@ def test_velocity_gaps_are_bridged_from_the_pose_and_long_ones_are_left():
         out.drop(index=range(100, 120)).fillna(0).equals(log.drop(index=range(100, 120)).fillna(0))
     )
     (step,) = report.steps
-    assert step.step == "bridge velocity gaps" and "1 gaps" in step.detail
+    assert step.step == "bridge velocity gaps" and "1 gap in" in step.detail
 
 
 def test_attitude_alone_bridges_rates_but_not_translations():
@@ -293,3 +293,66 @@ def test_a_config_keeps_the_pieces_of_a_run_it_names(tmp_path):
         else:
             inputs = load_inputs(spec, cfg, [spec.model], vehicle="seamor")
             assert list(pd.unique(inputs.log["experiment"])) == ["a", "b#0", "b#1"]
+
+
+def _slow(log: pd.DataFrame, columns: list[str], k: int) -> pd.DataFrame:
+    """``columns`` kept on every ``k``-th row of each run only: a slower sensor on one clock."""
+    out = log.copy()
+    keep = np.zeros(len(log), dtype=bool)
+    for idx in log.groupby("experiment").indices.values():
+        keep[idx[::k]] = True
+    out.loc[~keep, columns] = np.nan
+    return out
+
+
+def test_inspect_says_a_slow_channel_is_its_rate_not_hundreds_of_gaps(tmp_path):
+    """z kept on every 10th row was said as '36 gaps in z … masked where used': a sensor at
+    2 Hz beside 20 Hz ones, not dropouts. Only what it leaves empty past its last sample is
+    a gap."""
+    from typer.testing import CliRunner
+
+    from nnid.cli import app
+
+    log = _slow(_mocap_log().assign(experiment="dive"), ["z"], 10)
+    log.to_csv(tmp_path / "slow.csv", index=False)
+    done = CliRunner().invoke(app, ["inspect", str(tmp_path / "slow.csv")])
+    assert done.exit_code == 0, done.output
+    said = " ".join(done.output.split())
+    assert "slow z logged every 10th row: 2 Hz against 20 Hz (not filled" in said
+    assert "1 gap in z (9 samples" in said  # after its last sample: a gap, as before
+
+
+def test_a_fit_on_a_slow_attitude_gives_the_full_logs_estimates(tmp_path):
+    """φ, θ kept on every 5th row: every row lacked them, so the split masked the whole log
+    ('the training split is empty'). Read between their samples with the gyro, the roll and
+    pitch fit (restoring forces on every row) gives the full log's estimates within their
+    standard errors, and the report says what was filled."""
+    from importlib import resources
+
+    from nnid.config import TrainConfig, load_config
+    from nnid.datasets.measurement import Measurement
+    from nnid.loop.scenarios import effect_log
+    from nnid.pipeline import build_model, load_inputs, make_split
+    from nnid.vehicle import load_vehicle
+
+    minirov = str(resources.files("nnid.demo_data").joinpath("minirov.toml"))
+    meas = Measurement(kind="dvl_imu", velocity_noise=0.005)
+    full = effect_log(load_vehicle(minirov), duration=60, n_experiments=3, seed=3, measurement=meas)
+    fits = {}
+    for name, log in (("full", full), ("slow", _slow(full, ["phi", "theta"], 5))):
+        log.to_parquet(tmp_path / f"{name}.parquet")
+        cfg = tmp_path / f"{name}.toml"
+        cfg.write_text(f'kind = "train"\nvehicle = "{minirov}"\n[data]\nlog = "{name}.parquet"\n'
+                       '[model]\nkind = "fossen"\ndofs = ["p", "q"]\n')  # fmt: skip
+        spec = load_config(cfg, TrainConfig)
+        inputs = load_inputs(spec, cfg, [spec.model])
+        split = make_split(inputs.log, spec.split, report=inputs.report)
+        model = build_model(spec.model, inputs, 0.0).fit(split.train, split.validation)
+        fits[name] = (model.estimate_.as_dict(), inputs.report)
+    (full_fit, _), (slow_fit, report) = fits["full"], fits["slow"]
+    for key, est in full_fit.items():
+        assert abs(slow_fit[key]["value"] - est["value"]) < est["stderr"], key
+    step = next(s for s in report.steps if s.step == "slow channels")
+    assert step.columns == ["phi", "theta"]
+    assert "phi logged every 5th row: 4 Hz against 20 Hz" in step.detail
+    assert "samples between its own filled" in step.detail and ": with the gyro" in step.detail

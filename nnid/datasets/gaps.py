@@ -11,6 +11,18 @@ at 20 Hz are 20 s, not the 40 s spanned between their present neighbours):
 - **masked** otherwise: the rows are taken out of regressions and scores and the run is cut
   into segments at them (``<experiment>#<k>``), each simulated from its own measured start, so
   a free run never integrates across time nobody measured.
+
+A channel logged slower than the others on one clock (a 1-Hz depth beside a 10-Hz DVL, a
+10-Hz attitude beside a 100-Hz gyro) has empty cells between its samples that are its rate,
+not dropouts (:func:`slow_channels`). A slow roll, pitch or yaw beside a complete gyro is
+**filled** between its own samples with what p q r turn it through (:func:`fill_slow`): the
+fits read the attitude on every row (the restoring forces g(η), the kinematics J(η)), and the
+gyro measures how it moves between samples. Nothing else is: a velocity or an acceleration is
+the fits' response and is differentiated into accelerations, and a position or an attitude
+without a gyro is differentiated into velocities, so samples made between their own by a
+straight line would be fitted as measured (standard errors as if from k times the data) and
+change the noise of a Savitzky-Golay derivative; they are bridged from the pose or masked, as
+a gap is, and the report says why.
 """
 
 from __future__ import annotations
@@ -21,7 +33,18 @@ import numpy as np
 import pandas as pd
 
 from nnid.datasets.cleaning import CleaningReport
-from nnid.datasets.log import ACCELERATION, ANGLES, PIECE_OF, POSE, VELOCITY
+from nnid.datasets.log import (
+    ACCELERATION,
+    ANGLES,
+    PIECE_OF,
+    POSE,
+    VELOCITY,
+    _experiment_sorted,
+    _filled,
+    euler_rate_matrices,
+    turned_by,
+    wrap_angle,
+)
 from nnid.datasets.preprocess import derive_velocities, experiments, true_runs
 
 #: a segment left between two gaps shorter than this many samples is masked with them
@@ -29,6 +52,156 @@ MIN_SEGMENT = 3
 #: the cleaning steps that say what became of the gaps (bridged from the pose, or masked)
 BRIDGE_STEP, MASK_STEP = "bridge velocity gaps", "mask gaps"
 GAP_STEPS = (BRIDGE_STEP, MASK_STEP)
+#: a channel is logged slower than the clock when at least this share of the steps between
+#: its samples is one stride of two rows or more (a sample landing a row early or late on a
+#: merged clock is the rest)
+SLOW_SHARE = 0.9
+#: the fewest steps between a channel's samples that show it slow, not a few lone samples
+SLOW_MIN_STEPS = 10
+#: the most of a slow channel's own steps one interpolation spans: a longer hole is a gap
+SLOW_SPAN = 3
+#: the cleaning step that says which channels were slow and what became of them
+SLOW_STEP = "slow channels"
+#: the body rates that turn the attitude between a slow channel's samples
+GYRO = ("p", "q", "r")
+
+
+@dataclass
+class SlowChannel:
+    """A channel logged every ``stride`` rows of the log's clock (module docstring)."""
+
+    column: str
+    stride: int  # rows between its samples, most of the time
+    rate_hz: float  # its own rate: the clock's over the stride
+    clock_hz: float  # the log's: 1 / its median sample interval within runs
+
+    def describe(self) -> str:
+        """'z logged every 10th row: 2 Hz against 20 Hz'."""
+        k = self.stride
+        suffix = "th" if 10 <= k % 100 <= 20 else {1: "st", 2: "nd", 3: "rd"}.get(k % 10, "th")
+        return (
+            f"{self.column} logged every {k}{suffix} row: {self.rate_hz:.3g} Hz against "
+            f"{self.clock_hz:.3g} Hz"
+        )
+
+
+def slow_channels(log: pd.DataFrame, columns: list[str] | None = None) -> list[SlowChannel]:
+    """The channels of ``columns`` (default: pose, velocity, acceleration) logged slower than
+    the clock: at least :data:`SLOW_SHARE` of the steps between a channel's samples within a
+    run are one stride of two rows or more, over at least :data:`SLOW_MIN_STEPS` steps. A
+    channel without an empty cell, or with scattered dropouts (its usual step one row), is
+    not slow."""
+    columns = [c for c in (columns or [*POSE, *VELOCITY, *ACCELERATION]) if c in log]
+    if not columns or not log[columns].isna().to_numpy().any():
+        return []
+    codes, _, order, _, dt, _ = _experiment_sorted(log)
+    inside = codes[1:] == codes[:-1]
+    clock = float(np.median(dt[inside])) if inside.any() else float("nan")
+    out = []
+    for c in columns:
+        present = log[c].notna().to_numpy()[order]
+        if present.all():
+            continue
+        rows = np.flatnonzero(present)
+        steps = np.diff(rows)[codes[rows[1:]] == codes[rows[:-1]]]
+        if steps.size < SLOW_MIN_STEPS:
+            continue
+        values, counts = np.unique(steps, return_counts=True)
+        stride = int(values[np.argmax(counts)])
+        if stride >= 2 and counts.max() >= SLOW_SHARE * steps.size and clock > 0:
+            out.append(SlowChannel(c, stride, 1.0 / (stride * clock), 1.0 / clock))
+    return out
+
+
+def fill_slow(log: pd.DataFrame, report: CleaningReport | None = None) -> pd.DataFrame:
+    """``log`` with the empty cells of each slow roll, pitch or yaw (:func:`slow_channels`)
+    beside a complete gyro filled between two of its samples within each experiment with what
+    p q r turn it through, η̇ = T_Θ(η) ω (Weiss eq. 16), and what the gyro leaves unexplained
+    spread linearly in ``t`` so that each sample is met (:func:`_between_samples`). A straight
+    line alone would miss the angle's curvature, the rate's derivative, and put the restoring
+    forces' error into the added mass (K_pdot 5 s.e. off on a 5th-row attitude). Every slow
+    channel is said in ``report``, those not filled with why (module docstring). ``log``
+    itself where no channel is slow."""
+    slow = slow_channels(log)
+    if not slow:
+        return log
+    filling = gyro_filled(log, slow)
+    turning = {}
+    if filling:
+        gyro = list(GYRO)
+        codes, _, order, t, _, _ = _experiment_sorted(log)
+        line = [_filled(log[a].to_numpy(np.float64)[order], t, codes, True) for a in ANGLES]
+        rates = np.einsum(
+            "nij,nj->ni",
+            euler_rate_matrices(np.column_stack(line)),
+            log[gyro].to_numpy(np.float64)[order],
+        )
+        turning = {a: turned_by(t, rates[:, k]) for k, a in enumerate(ANGLES)}
+    out, said = _between_samples(log, filling, turning)
+    kept = [ch.describe() for ch in slow if ch not in filling]
+    if report is not None:
+        detail = []
+        if said:
+            detail.append(
+                f"{'; '.join(said)}: with the gyro, within each run, what p q r turn it "
+                "through between its samples (η̇ = T(η) ω) and the rest linearly in t, never "
+                f"across a hole longer than {SLOW_SPAN} of its own steps"
+            )
+        if kept:
+            detail.append(
+                f"{'; '.join(kept)}: not filled (it is differentiated, or is the fits' "
+                "response: samples made between its own would be fitted as measured); "
+                "bridged from the pose or masked where used"
+            )
+        report.add(SLOW_STEP, "; ".join(detail), columns=[ch.column for ch in slow])
+    return out
+
+
+def gyro_filled(log: pd.DataFrame, slow: list[SlowChannel]) -> list[SlowChannel]:
+    """The channels of ``slow`` that :func:`fill_slow` fills: roll, pitch and yaw, where the
+    log holds all three and a gyro without an empty cell."""
+    complete = all(a in log for a in ANGLES) and log.reindex(columns=list(GYRO)).notna().all().all()
+    return [ch for ch in slow if complete and ch.column in ANGLES]
+
+
+def between_samples(log: pd.DataFrame, slow: list[SlowChannel] | None = None) -> pd.DataFrame:
+    """``log`` with every slow channel's cells (``slow``, else :func:`slow_channels`) between
+    its own samples filled linearly: the cells its rate leaves empty, not gaps (what
+    ``inspect`` counts as missing is the rest)."""
+    return _between_samples(log, slow_channels(log) if slow is None else slow, {})[0]
+
+
+def _between_samples(
+    log: pd.DataFrame, slow: list[SlowChannel], turning: dict[str, np.ndarray]
+) -> tuple[pd.DataFrame, list[str]]:
+    """``log`` with the empty cells of each channel of ``slow`` between two of its samples
+    within an experiment filled in ``t``: what ``turning`` (an angle's turn from the first row,
+    in :func:`nnid.datasets.log._experiment_sorted` order) gives, and the rest linearly, so
+    each sample is met (an angle along the shorter turn, wrapped back to ±π where the log had
+    it so); never across a hole longer than :data:`SLOW_SPAN` of its own steps nor before its
+    first sample or after its last: those stay gaps, bridged or masked as any. With what was
+    done to each channel, said."""
+    if not slow:
+        return log, []
+    out = log.copy()
+    codes, _, order, t, _, _ = _experiment_sorted(log)
+    said = []
+    for ch in slow:
+        y = log[ch.column].to_numpy(np.float64)[order]
+        angle = ch.column in ANGLES
+        turned = turning.get(ch.column, np.zeros_like(y))
+        new = _filled(y - turned, t, codes, angle, max_rows=SLOW_SPAN * ch.stride) + turned
+        if angle and np.nanmax(np.abs(y)) <= np.pi:  # wrapped back where the log had it so
+            new = wrap_angle(new)
+        new = np.where(np.isfinite(y), y, new)
+        values = np.empty_like(new)
+        values[order] = new
+        out[ch.column] = values
+        left = int((~np.isfinite(new)).sum())
+        ends = f", {left} at a run's ends or in longer holes left as gaps" * bool(left)
+        filled = int(np.isfinite(new).sum() - np.isfinite(y).sum())
+        said.append(f"{ch.describe()} ({filled} samples between its own filled{ends})")
+    return out, said
 
 
 @dataclass
@@ -82,7 +255,8 @@ def _summary(gaps: list[Gap]) -> str:
         key=lambda c: (c not in order, order.index(c) if c in order else c),
     )
     return (
-        f"{len(gaps)} gaps in {', '.join(cols)} ({sum(g.rows for g in gaps)} samples, "
+        f"{len(gaps)} gap{'s' * (len(gaps) != 1)} in {', '.join(cols)} "
+        f"({sum(g.rows for g in gaps)} samples, "
         f"{seconds:.3g} s missing in total, longest {longest:.3g} s)"
     )
 

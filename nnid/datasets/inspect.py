@@ -5,10 +5,18 @@ logged or as the fits derive it from the pose) and how much each input channel m
 
 from __future__ import annotations
 
+from dataclasses import asdict
+
 import numpy as np
 import pandas as pd
 
-from nnid.datasets.gaps import find_gaps, gaps_record
+from nnid.datasets.gaps import (
+    between_samples,
+    find_gaps,
+    gaps_record,
+    gyro_filled,
+    slow_channels,
+)
 from nnid.datasets.log import (
     ACCELERATION,
     ANGLES,
@@ -70,7 +78,9 @@ def summarize(log: pd.DataFrame, savgol_window: float = 1.0, savgol_order: int =
     with ``savgol_window`` s and ``savgol_order`` (:func:`velocities_from_pose`) for the
     excitation and ``excited`` (:func:`nnid.datasets.preprocess.excited_dofs`). ``commands``:
     the excitation of each ``cmd_*`` channel, a command and not a force without a vehicle
-    file's thrusters."""
+    file's thrusters. ``slow``: the channels logged slower than the clock
+    (:func:`nnid.datasets.gaps.slow_channels`; ``filled`` where the fits fill it with the gyro),
+    whose empty cells between their samples are not in ``missing``."""
     inputs = input_columns(log)
     known = {"t", "experiment", PIECE_OF, REPLAY_GROUP, *POSE, *VELOCITY, *ACCELERATION, *inputs}
     groups = experiments(log)
@@ -123,6 +133,8 @@ def summarize(log: pd.DataFrame, savgol_window: float = 1.0, savgol_order: int =
             entry["force_std"], entry["force_active_share"] = moves["std"], moves["active_share"]
         if entry:
             excitation[dof] = entry
+    slow = slow_channels(log)
+    filled = gyro_filled(log, slow)
     return {
         "samples": len(log),
         "columns": {
@@ -141,7 +153,10 @@ def summarize(log: pd.DataFrame, savgol_window: float = 1.0, savgol_order: int =
         "runs": len({e["piece_of"] or e["name"] for e in exp_rows}),
         "experiments": exp_rows,
         "gaps": gaps,
-        "missing": gaps_record(find_gaps(log)),
+        # a channel logged slower than the clock: its rate, not gaps; what it leaves empty
+        # beyond its own steps (a run's ends, a longer hole) is
+        "slow": [asdict(ch) | {"filled": ch in filled} for ch in slow],
+        "missing": gaps_record(find_gaps(between_samples(log, slow))),
         "derivable": derivable,
         "velocity_from_pose": from_pose,
         "excitation": excitation,

@@ -132,10 +132,13 @@ class ResidualLoop:
     # -- data -----------------------------------------------------------------------------------
     def _prepare(self, log: pd.DataFrame) -> pd.DataFrame:
         from nnid.datasets.cleaning import CleaningReport
-        from nnid.datasets.gaps import bridge_from_pose, find_gaps, gaps_record
+        from nnid.datasets.gaps import bridge_from_pose, fill_slow, find_gaps, gaps_record
         from nnid.datasets.preprocess import derive_accelerations, derive_velocities
 
         self.cleaning_ = CleaningReport(source="loop data")
+        # a pose channel logged slower than the clock is read between its samples (restoring
+        # forces need the attitude on every row); what is left empty is a gap
+        log = fill_slow(log, self.cleaning_)
         self.gaps_ = gaps_record(find_gaps(log))
         if any(d not in log for d in DOFS) and all(a in log for a in ANGLES):
             log = derive_velocities(log, self.savgol_window, self.savgol_order, self.cleaning_)
