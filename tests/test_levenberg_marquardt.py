@@ -145,6 +145,22 @@ class _Surge(torch.nn.Module):
         return torch.stack(out)
 
 
+def test_a_batch_that_changed_between_calls_is_measured_again() -> None:
+    """The dense modes kept each batch's residual count by id(batch) for the trainer's life: a
+    batch that held other rows at the next call (or a new batch at a freed one's id) read the
+    old count, and reverse mode's unit rows no longer matched its residual."""
+    _, x, y, net, _ = _teacher_problem()
+    residual = _regression_residual(net)
+    lm = LevenbergMarquardt(jacobian="reverse")
+    batch = [x[:50], y[:50]]
+    lm.normal_equations(net, residual, [batch])
+    batch[:] = [x, y]  # the same object, 200 rows
+    ne = lm.normal_equations(net, residual, [batch])
+    ref = LevenbergMarquardt(jacobian="forward").normal_equations(net, residual, [(x, y)])
+    assert ne.n == 200
+    torch.testing.assert_close(ne.jtj, ref.jtj, rtol=1e-10, atol=1e-12)
+
+
 def test_physics_parameter_fit_through_rk4() -> None:
     # 15 s of exact data identify k and m as well as 30 s did (k, m within 5e-14 and 2e-14
     # relative, final SSE 8e-28, against the 1e-6 and 1e-12 asked). "auto" takes reverse mode

@@ -289,7 +289,9 @@ class LevenbergMarquardt(BaseEstimator):
         self._rows_fn: JacobianRows | None = None
         self._peak_rows = 0
         self._peak_elements = 0
-        self._rows: dict[int, tuple[int, _Cost]] = {}  # id(batch): (n, its cost)
+        # id(batch): (the batch, n, its cost) for one fit: the batch is held so that its id
+        # cannot pass to another object (a fresh batch of another size read a stale n)
+        self._rows: dict[int, tuple[Any, int, _Cost]] = {}
         self._center: torch.Tensor | None = None
 
     # ------------------------------------------------------------------ parameters
@@ -413,6 +415,7 @@ class LevenbergMarquardt(BaseEstimator):
                 field="jacobian",
             )
         self._rows_fn = jacobian_rows
+        self._rows = {}  # batches of an earlier fit, whose contents may have changed
         if self.jacobian != "auto":
             self._mode = self.jacobian
         elif jacobian_rows is not None:
@@ -503,7 +506,7 @@ class LevenbergMarquardt(BaseEstimator):
 
         p = theta.numel()
         shape = self._rows.get(id(batch))
-        if shape is None:
+        if shape is None or shape[0] is not batch:
             cost = _Cost()
             if self._mode == "dense":  # the pass that finds n also weighs the two modes
                 with torch.enable_grad(), cost:
@@ -511,8 +514,8 @@ class LevenbergMarquardt(BaseEstimator):
             else:
                 with torch.no_grad():
                     n = f(theta).numel()
-            shape = self._rows[id(batch)] = (n, cost)
-        n, cost = shape
+            shape = self._rows[id(batch)] = (batch, n, cost)
+        _, n, cost = shape
         if self._mode == "dense":
             extra = n * cost.reverse - p * cost.forward  # elements reverse moves beyond forward
             reverse = extra <= _REVERSE_ELEMENTS * max(cost.ops, 1)
