@@ -657,6 +657,59 @@ def test_a_sequence_step_that_fits_a_parameter_to_noise_names_it_and_so_do_the_s
     assert model.not_excited_ == {} and "excited" not in model.params["Y_vdot"]
 
 
+@pytest.mark.filterwarnings("ignore:the fitted added mass N_rdot")  # refitted to r's noise
+def test_a_value_a_sequence_step_left_unidentified_is_not_plugged_into_the_later_steps(seamor):
+    """Step 1 fits N_rdot from the surge equation, which does not read it (NaN, zero
+    regressor). Plugged into step 2 as known, that NaN made every row of the yaw equation
+    undefined; the rows were dropped without a word, N:r*abs(r) read "not excited (zero
+    regressor)" and the fit ended "no step identifies ['N_rdot', 'N:r*abs(r)']". Step 2 now
+    reads N_rdot at the vehicle file's value, and a warning says so; a step 3 that refits
+    N_rdot completes the fit, and no message says step 2 took N_rdot from step 1."""
+    from nnid.errors import NnidInputError
+
+    steps = [
+        {"experiments": ["surge"], "dofs": ["u"], "unknowns": ["X_udot", "X:u*abs(u)", "N_rdot"]},
+        {
+            "experiments": ["sway"],
+            "dofs": ["v", "r"],
+            "unknowns": ["Y_vdot", "Y:v*abs(v)", "N:r*abs(r)"],
+        },
+    ]
+    log = _surge_and_sway_runs(seamor)
+    with pytest.warns(ExcitationWarning) as caught, pytest.raises(NnidInputError) as failed:
+        ParametricModel(seamor, sequence=steps).fit(log)
+    assert "identifies ['N_rdot']" in str(failed.value)  # N_rdot only: no step reads it
+    said = " | ".join(str(w.message) for w in caught if w.category is ExcitationWarning)
+    assert "step 1 (u) could not identify N_rdot, so step 2 (v, r) read it at the vehicle " in said
+    assert "file's value -0.154" in said and "N:r*abs(r)" not in said and "left out" not in said
+    refit = [*steps, {"experiments": ["sway"], "dofs": ["r"], "unknowns": ["N_rdot"]}]
+    with pytest.warns(ExcitationWarning) as caught:
+        model = ParametricModel(seamor, sequence=refit).fit(log)
+    said = " | ".join(str(w.message) for w in caught if w.category is ExcitationWarning)
+    assert "step 2 (v, r) read it at the vehicle file's value" in said
+    assert "takes N_rdot from step 1" not in said
+    assert np.isfinite(model.params["N:r*abs(r)"]["value"])
+
+
+def test_least_squares_says_which_rows_it_leaves_out_and_whom_only_they_read():
+    """Rows with a non-finite target or regressor were dropped silently, and a parameter only
+    those rows read was called "not excited (zero regressor)"."""
+    from nnid.trainers.least_squares import solve_least_squares
+
+    rng = np.random.default_rng(0)
+    phi = np.zeros((40, 2))
+    phi[:, 0] = rng.normal(size=40)
+    phi[20:, 1] = rng.normal(size=20)
+    y = phi @ [1.0, 2.0]
+    y[20:] = np.nan  # the second half undefined: only it reads b
+    with pytest.warns(ExcitationWarning) as caught:
+        est = solve_least_squares(phi, y, names=["a", "b"])
+    said = " | ".join(str(w.message) for w in caught)
+    assert "20 of 40 rows of the regression are left out" in said and "only they read b" in said
+    assert "zero regressor" not in said and "not measured" in said
+    assert est.theta[0] == pytest.approx(1.0) and np.isnan(est.theta[1])
+
+
 def test_the_attenuation_keeps_an_infinite_bias_tagged_and_reads_older_files_null():
     """restored_attenuation read numbers with float() and null as inf on its own: the tag
     exact_float writes ({"$float": "inf"}) was refused as damaged and a boolean passed as 1.

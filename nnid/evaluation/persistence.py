@@ -107,9 +107,12 @@ def excitation_from_gram(
     names: list[str],
     groups: dict[str, list[str]] | None = None,
     tol: float = 1e-6,
+    left_out: Sequence[str] = (),
 ) -> ExcitationReport:
     """The same report from ΦᵀΦ (cheap for long logs): singular values of the unit-RMS-scaled
-    regressor are the square roots of the eigenvalues of its scaled Gram matrix."""
+    regressor are the square roots of the eigenvalues of its scaled Gram matrix. ``left_out``:
+    parameters whose regressor the caller had only in rows it left out (not finite): their
+    verdict says so, not "zero regressor"."""
     p = len(names)
     rms = np.sqrt(np.clip(np.diag(gram), 0.0, None) / max(n, 1))
     scale = rms.max() if rms.size and rms.max() > 0 else 1.0
@@ -133,17 +136,27 @@ def excitation_from_gram(
         cols = [names.index(m) for m in members]
         sub = np.linalg.eigvalsh(normed[np.ix_(cols, cols)])
         group_min[g] = float(np.sqrt(max(sub.min(), 0.0))) if sub.size else 0.0
-    warnings = _verdict_warnings(unexcited, collinear, rank, p)
+    warnings = _verdict_warnings(unexcited, collinear, rank, p, left_out)
     return ExcitationReport(
         n, p, rank, condition, [float(x) for x in sv], group_min, unexcited, collinear, warnings
     )
 
 
-def _verdict_warnings(unexcited: list[str], collinear: list[str], rank: int, p: int) -> list[str]:
-    """The report's warnings: the parameters it names, or its rank deficit when it names none."""
+def _verdict_warnings(
+    unexcited: list[str], collinear: list[str], rank: int, p: int, left_out: Sequence[str] = ()
+) -> list[str]:
+    """The report's warnings: the parameters it names, or its rank deficit when it names none;
+    an unexcited one in ``left_out`` had its regressor only in rows left out (not finite)."""
     warnings = []
-    if unexcited:
-        warnings.append(f"not excited by this data (zero regressor): {', '.join(unexcited)}")
+    zero = [n for n in unexcited if n not in left_out]
+    unread = [n for n in unexcited if n in left_out]
+    if zero:
+        warnings.append(f"not excited by this data (zero regressor): {', '.join(zero)}")
+    if unread:
+        warnings.append(
+            "not measured (every row that reads them was left out: its target or regressor is "
+            f"not finite): {', '.join(unread)}"
+        )
     if collinear:
         warnings.append(
             f"not separable from each other (collinear regressors): {', '.join(collinear)}"

@@ -1037,7 +1037,12 @@ class ParametricModel(FossenPlant):
                 ExcitationWarning,
                 stacklevel=3,
             )
-        rested = self._rested_on_noise(steps, by_step, getattr(trainer, "filter_lambda", None))
+        rested = self._rested_on_noise(
+            steps,
+            by_step,
+            getattr(trainer, "filter_lambda", None),
+            getattr(trainer, "unidentified_", None),
+        )
         if rested:
             from nnid.trainers.least_squares import ExcitationWarning
 
@@ -1137,10 +1142,15 @@ class ParametricModel(FossenPlant):
         steps: list[tuple[Any, dict[str, np.ndarray]]],
         by_step: list[dict[str, list[str]]],
         filter_lambda: float | None,
+        unidentified: list[list[str]] | None = None,
     ) -> list[str]:
         """Each later step of a sequence that takes as known a value an earlier step fitted to
         noise (:meth:`_not_excited`) and whose equations read it (its column is not all zero
-        on the later step's runs), said as "step j (dofs) takes NAME from step k, for ..."."""
+        on the later step's runs, :func:`~nnid.trainers.sequence.step_reads`), said as "step j
+        (dofs) takes NAME from step k, for ...". A value a step left NaN (``unidentified``,
+        per step) is not taken: the later steps read the vehicle file's, as the sequence says."""
+        from nnid.trainers.sequence import step_reads
+
         said = []
         source: dict[str, int] = {}  # the step whose value a parameter holds so far
         for j, (step, subset) in enumerate(steps):
@@ -1148,15 +1158,14 @@ class ParametricModel(FossenPlant):
             for name, k in source.items():
                 if name in names or name not in by_step[k]:
                     continue
-                reg = ParametricFossen(self.vehicle, [name], step.dofs).regression(
-                    subset, filter_lambda
-                )
-                if np.any(reg.phi != 0):
+                if step_reads(self.structure_, name, step, subset, filter_lambda):
                     said.append(
                         f"step {j + 1} ({', '.join(step.dofs)}) takes {name} from step {k + 1}, "
                         f"for {', '.join(names)}"
                     )
             source.update(dict.fromkeys(names, j))
+            for name in [] if unidentified is None else unidentified[j]:
+                source.pop(name, None)
         return said
 
     def _attenuated(

@@ -145,19 +145,33 @@ def solve_least_squares(
     Unexcited parameters get NaN and a warning that names them; collinear ones (the data do
     not separate them: the excitation check's near-null directions) keep the pseudo-inverse's
     value, a warning, and no standard error (NaN), since only their combination is measured."""
+    names = names or [f"theta{k}" for k in range(phi.shape[1])]
     finite = np.isfinite(y) & np.isfinite(phi).all(1)
+    left_out: list[str] = []
     if not finite.all():  # rows with an undefined signal (e.g. w of a tumbling vehicle)
+        # said, never silent: a NaN known of a sequence step once dropped a whole equation,
+        # and its unknowns read "zero regressor" (their regressor was only in those rows)
+        read = phi != 0  # NaN counts: an undefined entry still reads the parameter
+        left_out = [
+            nm for j, nm in enumerate(names) if read[~finite, j].any() and not read[finite, j].any()
+        ]
+        warnings.warn(
+            f"{int((~finite).sum())} of {finite.size} rows of the regression are left out: "
+            "their target or regressor is not finite (an undefined signal or value)"
+            + (f"; only they read {', '.join(left_out)}" if left_out else ""),
+            ExcitationWarning,
+            stacklevel=2,
+        )
         phi, y = phi[finite], y[finite]
         weights = None if weights is None else np.asarray(weights)[finite]
     n, p = phi.shape
-    names = names or [f"theta{k}" for k in range(p)]
     if weights is None:
         gram, rhs, yy = phi.T @ phi, phi.T @ y, float(y @ y)
     else:
         w = np.asarray(weights, dtype=np.float64)
         pw = phi * w[:, None]
         gram, rhs, yy = pw.T @ phi, pw.T @ y, float((y * w) @ y)
-    report = excitation_from_gram(gram, n, names) if check else None
+    report = excitation_from_gram(gram, n, names, left_out=left_out) if check else None
     live = np.ones(p, dtype=bool)
     if report is not None and report.warnings:
         warnings.warn("; ".join(report.warnings), ExcitationWarning, stacklevel=2)

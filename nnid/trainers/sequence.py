@@ -10,18 +10,23 @@ gyroscopic terms of C_A carry roll and pitch errors into yaw).
 
 The covariance is block-diagonal over the steps: it does not carry the uncertainty of the
 plugged-in values forward (they are far better determined than the parameters they feed).
+A value a step could not identify (NaN: not excited on its runs) is not plugged in: a later
+step reads that parameter at the vehicle file's value, as it reads a parameter no step has fitted
+yet, and a warning names it (plugged in, the NaN made every row of each equation reading it
+undefined, and those rows were dropped, so the later step's own unknowns read "not excited").
 The excitation report joins the steps' (:func:`~nnid.evaluation.persistence.combined_excitation`):
 each parameter with the verdict of the step whose value it keeps.
 """
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
-from nnid.errors import NnidInputError
+from nnid.errors import ExcitationWarning, NnidInputError
 from nnid.evaluation.persistence import ExcitationReport, combined_excitation
 from nnid.trainers.history import Progress, silent
 from nnid.trainers.least_squares import Estimate, LeastSquares
@@ -70,6 +75,16 @@ def _subset(data: dict[str, np.ndarray], names: Sequence[str]) -> dict[str, np.n
     }
 
 
+def step_reads(
+    structure, name: str, step: Step, data: dict[str, np.ndarray], filter_lambda: float | None
+) -> bool:
+    """Whether the equations of ``step`` read parameter ``name`` on its runs ``data``: its
+    regression column (``structure.restricted([name], ...)``, Weiss eqs 99-108) is not all
+    zero there, so the value the step takes for it enters its estimates."""
+    reg = structure.restricted([name], step.dofs, {}).regression(data, filter_lambda)
+    return bool(np.any(reg.phi != 0))
+
+
 def sequence_steps(sequence: str | Sequence[Step | Mapping]) -> list[Step]:
     """The steps of a sequence: ``"weiss"`` (:data:`WEISS_STEPS`) or a list of steps, each a
     :class:`Step` or a mapping with its fields."""
@@ -107,7 +122,10 @@ class DecoupledSequence:
         names = list(structure.names)
         theta = np.full(len(names), np.nan)
         cov = np.full((len(names), len(names)), np.nan)
-        found: dict[str, float] = {}
+        found: dict[str, float] = {}  # identified values, plugged into the later steps
+        lost: dict[str, int] = {}  # a parameter the latest step fitting it left NaN: that step
+        prior: dict[tuple[str, int], list[int]] = {}  # (it, that step): steps reading its prior
+        self.unidentified_: list[list[str]] = []
         n_obs = 0
         checks: list[tuple[list[str], ExcitationReport | None]] = []
         report = progress or silent
@@ -119,12 +137,41 @@ class DecoupledSequence:
                 raise NnidInputError(f"step {k + 1}: {exc.message}", field="sequence") from None
             est = self.trainer.fit(sub, subset)
             report(k + 1, len(self.steps), f"sequence step {k + 1}: {', '.join(step.dofs)}")
+            for name, j in lost.items():
+                if name not in sub.names and step_reads(
+                    structure, name, step, subset, self.filter_lambda
+                ):
+                    prior.setdefault((name, j), []).append(k)
             idx = [names.index(n) for n in sub.names]
             theta[idx] = est.theta
             cov[np.ix_(idx, idx)] = est.cov
-            found.update(zip(sub.names, est.theta, strict=True))
+            # NaN is no value: plugged in, it undefined every row of each equation reading it
+            missing = [n for n, v in zip(sub.names, est.theta, strict=True) if not np.isfinite(v)]
+            for name, value in zip(sub.names, est.theta, strict=True):
+                if name in missing:
+                    found.pop(name, None)
+                    lost[name] = k
+                else:
+                    found[name] = float(value)
+                    lost.pop(name, None)
+            self.unidentified_.append(missing)
             n_obs += est.n_obs
             checks.append((list(sub.names), est.excitation))
+        if prior:
+            vehicle = structure.restricted([], self.steps[0].dofs, {}).base  # nothing set
+            said = [
+                f"step {j + 1} ({', '.join(self.steps[j].dofs)}) could not identify {name}, so "
+                + ", ".join(f"step {i + 1} ({', '.join(self.steps[i].dofs)})" for i in steps)
+                + f" read it at the vehicle file's value {vehicle.get(name):.6g}"
+                for (name, j), steps in prior.items()
+            ]
+            warnings.warn(
+                "later sequence steps read a parameter that an earlier step left unidentified "
+                "at the vehicle file's value, not at an estimate; their estimates rest on that "
+                "prior, and their standard errors do not include its error: " + "; ".join(said),
+                ExcitationWarning,
+                stacklevel=2,
+            )
         left = [n for n, v in zip(names, theta, strict=True) if not np.isfinite(v)]
         if left:
             raise NnidInputError(f"no step of the sequence identifies {left}", field="sequence")
