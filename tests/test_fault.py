@@ -33,7 +33,7 @@ from nnid.fault.thresholds import rate_interval, rate_threshold
 from nnid.models.parametric import ParametricModel
 from nnid.physics.parts import Parts
 from nnid.physics.thrusters import Actuation
-from nnid.reports.detect_report import write_detect_outputs
+from nnid.reports.detect_report import detect_json, write_detect_outputs
 from nnid.trainers.least_squares import LeastSquares
 from nnid.vehicle import load_vehicle
 
@@ -56,6 +56,14 @@ def monitor(vehicle):
         zoh_midpoint=True,
     ).fit(pd.concat(logs[:2], ignore_index=True))  # fmt: skip
     return ResidualMonitor(model).fit(pd.concat(logs[2:], ignore_index=True))
+
+
+@pytest.fixture(scope="module")
+def stopped_h1(vehicle):
+    """Thruster h1 stopped from 20 s, 120 s (seed 11): simulated once for the tests that read
+    it."""
+    fault = Fault("thruster", FAULT_T, thruster="h1", efficiency=0.0)
+    return simulate_faults(vehicle, 120, faults=[fault], seed=11)
 
 
 @njit
@@ -268,7 +276,9 @@ def test_a_second_fault_during_a_persisting_one_is_alarmed(vehicle, monitor):
 
 
 @pytest.mark.parametrize(("thruster", "efficiency"), [("h1", 0.0), ("h3", -1.0)])
-def test_every_alarm_in_the_trace_has_its_record(vehicle, monitor, thruster, efficiency, tmp_path):
+def test_every_alarm_in_the_trace_has_its_record(
+    vehicle, monitor, thruster, efficiency, tmp_path, stopped_h1
+):
     """After an isolated loss the residual it leaves is watched; an alarm there that the loss
     explains is dismissed, and its mark went with it: the trace had 3 and 7 alarms on these
     two minutes where detect.json had one, and the report drew the others."""
@@ -279,11 +289,33 @@ def test_every_alarm_in_the_trace_has_its_record(vehicle, monitor, thruster, eff
     marked = result.trace.t[result.trace.alarm]
     assert list(marked) == [a["t"] for a in result.alarms]
     if efficiency == 0.0:  # and so in --follow, which watches the residual left as batch does
-        log = simulate_faults(vehicle, 120, faults=[fault], seed=11)
-        log.to_csv(tmp_path / "one.csv", index=False)
+        stopped_h1.to_csv(tmp_path / "one.csv", index=False)
         followed = follow_csv(monitor, str(tmp_path / "one.csv"), 10.0, lambda line: None)
         assert [a["t"] for a in followed.alarms] == [a["t"] for a in result.alarms]
         assert list(followed.trace.t[followed.trace.alarm]) == list(marked)
+
+
+def test_follow_says_an_announced_alarm_withdrawn_as_batch_drops_it(monitor, stopped_h1, tmp_path):
+    """h1 stopped at 20 s, watched with a 20-s window: what the isolated loss leaves alarmed at
+    46.10 s (dismissed, within what the loss may leave) and again at 59.70 s, inside that
+    window. --follow printed "ALARM t = 59.70 s" and then dropped it unsaid, as batch drops it:
+    the operator was told of an alarm that the final result (batch's too) does not hold. Now
+    every announced alarm is in the final alarms or said withdrawn, and recorded with why."""
+    log = stopped_h1[stopped_h1["t"] <= 67.0]  # the window of the alarm at 46.10 s, whole
+    batch = detect(monitor, log, 20.0)
+    log.to_csv(tmp_path / "log.csv", index=False)
+    said: list[str] = []
+    followed = follow_csv(monitor, str(tmp_path / "log.csv"), 20.0, said.append, idle_s=0.0)
+    assert [a["t"] for a in followed.alarms] == [a["t"] for a in batch.alarms]
+    kept = {f"{a['t']:.2f}" for a in followed.alarms}
+    announced = [line.split()[3] for line in said if line.startswith("ALARM t = ")]
+    gone = [line.split()[2] for line in said if "announced, then withdrawn" in line]
+    assert "59.70" in announced and len(announced) >= 3
+    assert sorted(announced) == sorted([*kept, *gone]) and not kept & set(gone)
+    assert [f"{w['t']:.2f}" for w in followed.withdrawn] == gone and batch.withdrawn == []
+    late = followed.withdrawn[gone.index("59.70")]
+    assert late["by"] == pytest.approx(46.1) and "inside the window" in late["reason"]
+    assert detect_json(monitor, followed)["withdrawn"] == followed.withdrawn  # detect.json
 
 
 def test_follow_alarms_a_second_fault_as_batch_detect_does(vehicle, monitor, tmp_path):

@@ -81,9 +81,32 @@ def alarm_row(record: dict) -> dict:
 
 @dataclass
 class DetectResult:
+    """The trace watched, the alarm records and the seconds taken. ``withdrawn``: the alarms
+    ``detect --follow`` announced ("ALARM t = …") that ``alarms`` does not hold, each with
+    the alarm whose judgement withdrew it (:func:`withdrawn_record`); batch announces none,
+    and the two agree on ``alarms``."""
+
     trace: Trace
     alarms: list[dict]
     seconds: float
+    withdrawn: list[dict] = field(default_factory=list)
+
+
+def withdrawn_record(experiment: str | None, t: float, by: float, why: str) -> dict:
+    """An announced alarm at time ``t`` that the final alarms do not hold, as batch
+    :func:`detect` drops it; ``why``: ``"dismissed"`` (its window within what the isolated
+    changes may leave: :func:`rewatched_alarm`), ``"inside"`` the window of the alarm at time
+    ``by`` whose judgement restarted the statistics after it (:func:`_rewatch` clears the
+    window's alarms), or ``"after"`` it (a row read before that judgement, watched again on
+    the restarted statistics)."""
+    reasons = {
+        "dismissed": "within what the isolated change(s) may leave: no new change",
+        "inside": f"inside the window of the alarm at t = {by:.2f} s, judged with it; the "
+        "statistics restart after that window",
+        "after": f"read before the alarm at t = {by:.2f} s was judged, after its window: "
+        "watched again on the statistics restarted there",
+    }
+    return {"experiment": experiment, "t": float(t), "by": float(by), "reason": reasons[why]}
 
 
 def isolated_alarm(

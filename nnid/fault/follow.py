@@ -3,7 +3,10 @@
 Rows go through :class:`nnid.fault.monitor.Stream` as they arrive; an alarm is announced at once
 and isolated when the window after it has arrived (or at the end of the input). The log needs the
 body velocities and attitude as columns (a live monitor cannot smooth over the future) and the
-inputs of the model's vehicle.
+inputs of the model's vehicle. Whether an announced alarm stays is known only once the alarms
+before it are judged: one that batch ``detect`` drops (dismissed, or inside the window of an
+earlier alarm whose judgement restarts the statistics) is said withdrawn, with why, and kept in
+the result's ``withdrawn``, so that no announced alarm vanishes unsaid.
 
 After an alarm whose change is isolated, the rest of the experiment is watched as batch
 ``detect`` watches it (:mod:`nnid.fault.detect`, its :class:`~nnid.fault.detect.Rewatch`): the
@@ -52,6 +55,7 @@ from nnid.fault.detect import (
     rewatched_alarm,
     run_names,
     window_rows,
+    withdrawn_record,
 )
 from nnid.fault.monitor import ResidualMonitor, Trace, input_columns
 from nnid.reports.cells import missing, number
@@ -197,6 +201,7 @@ def follow_csv(
     pending: list[int] = []  # row numbers counted from the first row ever read
     alarm_rows: list[int] = []
     alarms: list[dict] = []
+    withdrawn: list[dict] = []  # announced, then not in the final alarms (said so)
     current = None
     dropped = 0  # rows forgotten from the front of the buffers
     # after an isolated change: the experiment (code), the first row watched on what it leaves
@@ -254,12 +259,26 @@ def follow_csv(
                 announce(k)
         del queue[:ready]
 
+    def withdraw(p: int, by: int, why: str) -> None:
+        """The announced alarm at ``p`` is not in the final alarms (batch drops it too), as
+        the judgement of the alarm at ``by`` has it (:func:`withdrawn_record`): said and
+        recorded, so that no announced alarm vanishes unsaid."""
+        i = p - dropped
+        name = names[codes[i]]
+        record = withdrawn_record(name if exp_col is not None else None, ts[i],
+                                  ts[by - dropped], why)  # fmt: skip
+        withdrawn.append(record)
+        say(withdrawn_line(record))
+
     def rewatch_after(k: int, rows: np.ndarray, changed: bool) -> None:
         """Fresh statistics after the window ``rows`` (buffer indices) of the alarm at ``k``:
-        the experiment's later alarms superseded, its rows since then watched again. A new
-        change taken out (``changed``) starts its signature there too."""
+        the experiment's later alarms superseded (announced, so said withdrawn), its rows
+        since then watched again. A new change taken out (``changed``) starts its signature
+        there too."""
         code = codes[k - dropped]
-        later = {p for p in pending if p > k and codes[p - dropped] == code}
+        later = sorted(p for p in pending if p > k and codes[p - dropped] == code)
+        for p in later:
+            withdraw(p, k, "inside" if p - dropped <= rows[-1] else "after")
         pending[:] = [p for p in pending if p not in later]
         alarm_rows[:] = [p for p in alarm_rows if p not in later]
         ref["start"] = dropped + int(rows[-1]) + 1
@@ -283,10 +302,8 @@ def follow_csv(
             r = np.array([vals[j][0:6] for j in rows])
             verdict = rewatched_alarm(monitor, data, trace, i, window_s, w, r, values[rows, 0:6])
             if verdict is not None and verdict.dismissed:
-                name = names[code]
-                say(f"t = {ts[i]:.2f} s{f' ({name})' if name else ''}: what the isolated change "
-                    "leaves, within what its hypothesis may leave: no new change")  # fmt: skip
                 alarm_rows.remove(k)  # no record, so no mark in the trace either
+                withdraw(k, k, "dismissed")
                 w.restart(data["t"][rows[-1]])
                 rewatch_after(k, rows, changed=False)
                 return
@@ -449,7 +466,7 @@ def follow_csv(
     values[:, 0:6] = np.array(vals)[:, 0:6]
     trace = Trace(data["t"], run_names(names, data["experiment"], exp_col is not None), values,
                   np.isin(np.arange(len(ts)) + dropped, alarm_rows))  # fmt: skip
-    return DetectResult(trace, alarms, time.perf_counter() - start)
+    return DetectResult(trace, alarms, time.perf_counter() - start, withdrawn)
 
 
 def _arrays(ts, xs, us, codes, names) -> dict:
@@ -486,6 +503,12 @@ def explained_share(a: dict) -> str | None:
     None where that was not measured."""
     explained = a.get("explained")
     return None if missing(explained) else f"{100 * explained:.0f} %"
+
+
+def withdrawn_line(w: dict) -> str:
+    """One line a person reads for an announced alarm that the alarms do not hold."""
+    run = f" ({w['experiment']})" if w.get("experiment") else ""
+    return f"t = {w['t']:.2f} s{run}: announced, then withdrawn: {w['reason']}"
 
 
 def describe_alarm(a: dict) -> str:

@@ -10,7 +10,13 @@ import numpy as np
 import pandas as pd
 
 from nnid.fault.detect import ALARM_FIELDS, DetectResult, alarm_row
-from nnid.fault.follow import describe_alarm, efficiency_interval, explained_share, value_pm
+from nnid.fault.follow import (
+    describe_alarm,
+    efficiency_interval,
+    explained_share,
+    value_pm,
+    withdrawn_line,
+)
 from nnid.physics.dofs import DOFS, FORCES
 from nnid.reports.cells import thresholds_cell
 from nnid.reports.figures import (
@@ -36,12 +42,15 @@ def detect_json(monitor, result: DetectResult, notes: list[str] | None = None) -
     ``false_alarm_rate_per_hour`` is the target; ``target_false_alarm_rate_per_hour`` says so
     by its name, and ``measured_false_alarm_rate_per_hour`` is the rate the healthy test part
     measured (null where nothing measured it). ``notes``: what the run said of the log before
-    the alarms (rows lost, samples missing, a wandering clock)."""
+    the alarms (rows lost, samples missing, a wandering clock). ``withdrawn``: the alarms
+    ``--follow`` announced that ``alarms`` does not hold, and why (empty in batch, which
+    announces none: :attr:`~nnid.fault.detect.DetectResult.withdrawn`)."""
     h_t, h_g = monitor.threshold_values
     caveat = monitor.threshold_caveat()
     measured = monitor.measured_false_alarms_
     return {
         "alarms": result.alarms,
+        "withdrawn": result.withdrawn,
         "threshold": {
             "ewma": h_t,
             "cusum": h_g,
@@ -84,6 +93,7 @@ def write_detect_outputs(
         f"(target false-alarm rate {monitor.false_alarm_per_hour:g} per hour, calibrated on "
         f"{60 * hours:.1f} min of healthy data; {measured_rate(monitor)})",  # 0.5, not "0 min"
         *(describe_alarm(a) for a in result.alarms),
+        *(withdrawn_line(w) for w in result.withdrawn),
     ]
     caveat = monitor.threshold_caveat()
     if caveat:
@@ -177,6 +187,9 @@ def detect_html(monitor, result: DetectResult, source: str = "") -> str:
             out.append(html_table(["hypothesis", "posterior"], rows))
     else:
         out.append("<p><b>No alarm</b>: the residual stayed within its healthy range.</p>")
+    if result.withdrawn:
+        items = "".join(f"<li>{html.escape(withdrawn_line(w))}</li>" for w in result.withdrawn)
+        out.append(f"<h2>Announced and withdrawn</h2><ul>{items}</ul>")
     out.append("<h2>Residual and statistics</h2>")
     out.append(f'<img alt="residual traces" src="{figure_uri(_figure(monitor, trace, h_t, h_g))}">')
     out.append(IMAGES_CHECK + "</body></html>")
