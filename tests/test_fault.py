@@ -290,7 +290,9 @@ def test_every_alarm_in_the_trace_has_its_record(
     assert list(marked) == [a["t"] for a in result.alarms]
     if efficiency == 0.0:  # and so in --follow, which watches the residual left as batch does
         stopped_h1.to_csv(tmp_path / "one.csv", index=False)
-        followed = follow_csv(monitor, str(tmp_path / "one.csv"), 10.0, lambda line: None)
+        followed = follow_csv(
+            monitor, str(tmp_path / "one.csv"), 10.0, lambda line: None, idle_s=0.0
+        )
         assert [a["t"] for a in followed.alarms] == [a["t"] for a in result.alarms]
         assert list(followed.trace.t[followed.trace.alarm]) == list(marked)
 
@@ -328,7 +330,7 @@ def test_follow_alarms_a_second_fault_as_batch_detect_does(vehicle, monitor, tmp
     batch = detect(monitor, log).alarms
     log.to_csv(tmp_path / "two.csv", index=False)
     said: list[str] = []
-    followed = follow_csv(monitor, str(tmp_path / "two.csv"), 10.0, said.append).alarms
+    followed = follow_csv(monitor, str(tmp_path / "two.csv"), 10.0, said.append, idle_s=0.0).alarms
     assert [a["kind"] for a in followed] == [a["kind"] for a in batch] == [
         "thruster_loss", "external_force"]  # fmt: skip
     step = float(np.median(np.diff(log["t"])))
@@ -375,7 +377,7 @@ def test_follow_watches_what_a_change_leaves_as_batch_detect_does(
     log = scenario(vehicle)
     batch = detect(monitor, log)
     log.to_csv(tmp_path / "log.csv", index=False)
-    followed = follow_csv(monitor, str(tmp_path / "log.csv"), 10.0, lambda line: None)
+    followed = follow_csv(monitor, str(tmp_path / "log.csv"), 10.0, lambda line: None, idle_s=0.0)
     assert len(batch.alarms) >= 2
     assert [(a["t"], a["kind"]) for a in followed.alarms] == [
         (a["t"], a["kind"]) for a in batch.alarms
@@ -445,7 +447,7 @@ def _followed_as_batch(monitor, log, tmp_path):
     batch = detect(monitor, log)
     log.to_csv(tmp_path / "log.csv", index=False)
     said: list[str] = []
-    followed = follow_csv(monitor, str(tmp_path / "log.csv"), 10.0, said.append)
+    followed = follow_csv(monitor, str(tmp_path / "log.csv"), 10.0, said.append, idle_s=0.0)
     assert [(a["t"], a["kind"], a["meaning"]) for a in followed.alarms] == [
         (a["t"], a["kind"], a["meaning"]) for a in batch.alarms
     ]
@@ -671,7 +673,9 @@ def test_alarms_name_the_experiment_as_the_log_does(vehicle, monitor, tmp_path):
     for frame, name in ((log, None), (log.assign(experiment="dive 3"), "dive 3")):
         frame.to_csv(tmp_path / "log.csv", index=False)
         batch = detect(monitor, frame)
-        followed = follow_csv(monitor, str(tmp_path / "log.csv"), 10.0, lambda line: None)
+        followed = follow_csv(
+            monitor, str(tmp_path / "log.csv"), 10.0, lambda line: None, idle_s=0.0
+        )
         assert len(batch.alarms) >= 1
         assert [a["experiment"] for a in followed.alarms] == [a["experiment"] for a in batch.alarms]
         assert {a["experiment"] for a in batch.alarms} == {name}
@@ -763,7 +767,7 @@ def test_commands_far_beyond_their_range_are_said(vehicle, monitor, tmp_path):
     assert err.value.row == 0
     pwm.to_csv(tmp_path / "pwm.csv", index=False)
     with pytest.raises(NnidInputError, match=said.split(" in 100%")[0]) as err:
-        follow_csv(monitor, tmp_path / "pwm.csv", 10.0, lambda line: None)
+        follow_csv(monitor, tmp_path / "pwm.csv", 10.0, lambda line: None, idle_s=0.0)
     assert (err.value.field, err.value.row) == ("cmd_h1", 0)
     # a train with [detect] refuses them as it loads, not after the fit
     config = str(REPO / "configs" / "detect_fossen.toml")
@@ -880,7 +884,9 @@ def test_cli_train_detect_and_follow(vehicle, tmp_path, chromium):
     same = pytest.approx(a["efficiency"], rel=1e-12, abs=0)
     assert (b["t"], b["thruster"], b["efficiency"]) == (a["t"], a["thruster"], same)
     # a long watch keeps a bounded history: the same alarm with only the last rows kept
-    kept = follow_csv(ResidualMonitor.load(model), fault, 10.0, lambda line: None, keep_rows=150)
+    kept = follow_csv(
+        ResidualMonitor.load(model), fault, 10.0, lambda line: None, keep_rows=150, idle_s=0.0
+    )
     # (twice keep_rows, and the window of an alarm pending: at 35.6 s one on what the isolated
     # loss leaves, judged within what it may leave, as batch detect judges it)
     assert 150 <= kept.trace.t.size <= 300 + 200 and kept.trace.t[-1] == faulty["t"].iloc[-1]
@@ -919,7 +925,7 @@ def test_a_log_at_another_sampling_rate_is_refused(vehicle, monitor, tmp_path):
     path = tmp_path / "coarse.csv"
     coarse.to_csv(path, index=False)
     with pytest.raises(NnidInputError, match="calibrated at") as err:
-        follow_csv(monitor, str(path), 10.0, lambda line: None)
+        follow_csv(monitor, str(path), 10.0, lambda line: None, idle_s=0.0)
     assert err.value.source == str(path)
 
 
@@ -971,7 +977,7 @@ def test_missing_samples_raise_no_alarm_and_are_said(vehicle, monitor, tmp_path)
     path = tmp_path / "holes.csv"
     log.to_csv(path, index=False)
     said: list[str] = []
-    follow_csv(monitor, str(path), 10.0, said.append)
+    follow_csv(monitor, str(path), 10.0, said.append, idle_s=0.0)
     assert sum("no samples for 2" in line for line in said) == 9
     assert sum("no samples for 0.1 s" in line for line in said) == 1
     assert not any(line.startswith("ALARM") for line in said)
@@ -1010,7 +1016,7 @@ def test_follow_refuses_what_the_whole_log_reader_refuses(vehicle, monitor, tmp_
     else:
         log.to_csv(path, index=False)
     with pytest.raises(NnidInputError, match=said) as err:
-        follow_csv(monitor, str(path), 10.0, lambda line: None)
+        follow_csv(monitor, str(path), 10.0, lambda line: None, idle_s=0.0)
     assert err.value.source == str(path)
     assert field is None or err.value.field == field
     assert row is None or err.value.row == row
@@ -1078,7 +1084,7 @@ def test_a_dropped_sample_is_a_gap_not_an_alarm(vehicle, monitor, tmp_path):
     slow = pd.concat([log[log["t"] < 15], log[log["t"] >= 15].iloc[::2]])
     slow.to_csv(tmp_path / "slow.csv", index=False)
     with pytest.raises(NnidInputError, match=r"is sampled every 0\.0\d+ s; the monitor was calib"):
-        follow_csv(monitor, tmp_path / "slow.csv", 10.0, lambda line: None)
+        follow_csv(monitor, tmp_path / "slow.csv", 10.0, lambda line: None, idle_s=0.0)
     # a clock that drops 2 % of its samples at random is at its rate: followed, not refused
     # (judged on its latest 11 rows, two drops read 1.125 times the interval)
     rng = np.random.default_rng(5)
@@ -1086,7 +1092,7 @@ def test_a_dropped_sample_is_a_gap_not_an_alarm(vehicle, monitor, tmp_path):
     sparse = sparse.assign(t=0.05 * np.arange(len(sparse)), experiment="a")
     sparse = sparse[rng.random(len(sparse)) > 0.02]
     sparse.to_csv(tmp_path / "sparse.csv", index=False)
-    follow_csv(monitor, tmp_path / "sparse.csv", 10.0, lambda line: None)
+    follow_csv(monitor, tmp_path / "sparse.csv", 10.0, lambda line: None, idle_s=0.0)
 
 
 def test_a_joint_change_is_headed_by_a_significant_member():
