@@ -613,14 +613,15 @@ def test_a_sequence_model_says_which_of_its_parameters_a_step_could_not_separate
     assert report.rank == 2 and not report.persistent
 
 
-def _surge_and_sway_runs(vehicle):
-    """Half a minute each of a 10 ± 10-N surge and a 10 ± 10-N sway, logged by a 10-Hz DVL
-    (5 mm/s noise): in the surge run v and r are their noise only."""
+def _surge_and_sway_runs(vehicle, yaw: bool = False):
+    """Half a minute each of a 10 ± 10-N surge and a 10 ± 10-N sway (and with ``yaw`` a
+    1 ± 1-N m yaw), logged by a 10-Hz DVL (5 mm/s noise): in the surge run v and r are their
+    noise only."""
     t = np.arange(301) * 0.1
     logs = []
-    for k, name in enumerate(["surge", "sway"]):
+    for k, name in [(0, "surge"), (1, "sway"), *[(5, "yaw")] * yaw]:
         inputs = np.zeros((t.size, 6))
-        inputs[:, k] = 10.0 + 10.0 * np.sin(0.5 * t)
+        inputs[:, k] = (10.0 if k < 3 else 1.0) * (1.0 + np.sin(0.5 * t))
         dvl = Measurement(kind="dvl_imu")
         logs.append(simulate(vehicle, inputs, 0.1, measurement=dvl, seed=k, experiment=name))
     return pd.concat(logs, ignore_index=True)
@@ -689,6 +690,23 @@ def test_a_value_a_sequence_step_left_unidentified_is_not_plugged_into_the_later
     assert "step 2 (v, r) read it at the vehicle file's value" in said
     assert "takes N_rdot from step 1" not in said
     assert np.isfinite(model.params["N:r*abs(r)"]["value"])
+
+
+def test_a_refit_that_cannot_identify_a_value_keeps_the_earlier_estimate(seamor):
+    """Step 1 fits N_rdot on the yaw run; step 2 refits it from the surge equation, which does
+    not read it (NaN). The refit replaced step 1's estimate with NaN and the fit ended "no step
+    of the sequence identifies ['N_rdot']", though step 1 had. Step 1's estimate and standard
+    error are kept, and a warning names both steps."""
+    first = {"experiments": ["yaw"], "dofs": ["r"], "unknowns": ["N_rdot", "N:r*abs(r)"]}
+    log = _surge_and_sway_runs(seamor, yaw=True)
+    alone = ParametricModel(seamor, sequence=[first]).fit(log).params["N_rdot"]
+    steps = [first, {"experiments": ["surge"], "dofs": ["u"], "unknowns": ["X_udot", "N_rdot"]}]
+    with pytest.warns(ExcitationWarning) as caught:
+        model = ParametricModel(seamor, sequence=steps).fit(log)
+    said = " | ".join(str(w.message) for w in caught if w.category is ExcitationWarning)
+    assert "N_rdot from step 1 (r), which step 2 (u) refitted and could not identify" in said
+    kept = model.params["N_rdot"]
+    assert kept["value"] == alone["value"] and kept["stderr"] == alone["stderr"] > 0
 
 
 def test_least_squares_says_which_rows_it_leaves_out_and_whom_only_they_read():

@@ -1104,13 +1104,27 @@ class ParametricModel(FossenPlant):
     def _step_data(
         self, data: dict[str, np.ndarray], dofs: list[str], unknowns: list[str]
     ) -> list[tuple[Any, dict[str, np.ndarray]]]:
-        """The fit's steps, each with the rows of its experiments: a sequence's (Weiss eqs
-        99-108), else one step of every unknown on all of ``data``."""
+        """The fit's steps, each with the rows of its experiments and the unknowns whose
+        values it gives the estimate: a sequence's (Weiss eqs 99-108; a refit that could not
+        identify an earlier step's value gives none: the trainer's ``kept_``), else one step of
+        every unknown on all of ``data``."""
         from nnid.trainers.sequence import Step, _subset, sequence_steps
 
         if self.sequence is None:
             return [(Step([], dofs, unknowns), data)]
-        return [(s, _subset(data, s.experiments)) for s in sequence_steps(self.sequence)]
+        steps = sequence_steps(self.sequence)
+        kept = getattr(self.trainer_, "kept_", None) or [[] for _ in steps]
+        return [
+            (
+                Step(
+                    s.experiments,
+                    s.dofs,
+                    [u for u in s.unknowns if canonical_parameter(u) not in old],
+                ),
+                _subset(data, s.experiments),
+            )
+            for s, old in zip(steps, kept, strict=True)
+        ]
 
     def _not_excited(
         self, steps: list[tuple[Any, dict[str, np.ndarray]]]

@@ -14,6 +14,8 @@ A value a step could not identify (NaN: not excited on its runs) is not plugged 
 step reads that parameter at the vehicle file's value, as it reads a parameter no step has fitted
 yet, and a warning names it (plugged in, the NaN made every row of each equation reading it
 undefined, and those rows were dropped, so the later step's own unknowns read "not excited").
+A refit that cannot identify a value an earlier step did keeps the earlier estimate (and its
+verdict), plugged in as before, and a warning names both steps.
 The excitation report joins the steps' (:func:`~nnid.evaluation.persistence.combined_excitation`):
 each parameter with the verdict of the step whose value it keeps.
 """
@@ -125,7 +127,10 @@ class DecoupledSequence:
         found: dict[str, float] = {}  # identified values, plugged into the later steps
         lost: dict[str, int] = {}  # a parameter the latest step fitting it left NaN: that step
         prior: dict[tuple[str, int], list[int]] = {}  # (it, that step): steps reading its prior
-        self.unidentified_: list[list[str]] = []
+        source: dict[str, int] = {}  # the step whose estimate a parameter holds
+        refits: dict[tuple[str, int], list[int]] = {}  # (it, that step): refits that left NaN
+        self.unidentified_: list[list[str]] = []  # per step: left NaN, and no earlier value
+        self.kept_: list[list[str]] = []  # per step: left NaN, an earlier step's estimate kept
         n_obs = 0
         checks: list[tuple[list[str], ExcitationReport | None]] = []
         report = progress or silent
@@ -142,21 +147,30 @@ class DecoupledSequence:
                     structure, name, step, subset, self.filter_lambda
                 ):
                     prior.setdefault((name, j), []).append(k)
-            idx = [names.index(n) for n in sub.names]
-            theta[idx] = est.theta
-            cov[np.ix_(idx, idx)] = est.cov
             # NaN is no value: plugged in, it undefined every row of each equation reading it
             missing = [n for n, v in zip(sub.names, est.theta, strict=True) if not np.isfinite(v)]
+            # an earlier step's estimate outlives a refit that could not identify it: the
+            # refit measured nothing, and dropping the estimate left the parameter unidentified
+            kept = [n for n in missing if n in found]
+            given = [n for n in sub.names if n not in kept]
+            idx = [names.index(n) for n in given]
+            pos = [list(sub.names).index(n) for n in given]
+            theta[idx] = est.theta[pos]
+            cov[np.ix_(idx, idx)] = est.cov[np.ix_(pos, pos)]
             for name, value in zip(sub.names, est.theta, strict=True):
-                if name in missing:
+                if name in kept:
+                    refits.setdefault((name, source[name]), []).append(k)
+                elif name in missing:
                     found.pop(name, None)
                     lost[name] = k
                 else:
                     found[name] = float(value)
+                    source[name] = k
                     lost.pop(name, None)
-            self.unidentified_.append(missing)
+            self.unidentified_.append([n for n in missing if n not in kept])
+            self.kept_.append(kept)
             n_obs += est.n_obs
-            checks.append((list(sub.names), est.excitation))
+            checks.append((given, est.excitation))  # a kept one keeps its verdict too
         if prior:
             vehicle = structure.restricted([], self.steps[0].dofs, {}).base  # nothing set
             said = [
@@ -169,6 +183,20 @@ class DecoupledSequence:
                 "later sequence steps read a parameter that an earlier step left unidentified "
                 "at the vehicle file's value, not at an estimate; their estimates rest on that "
                 "prior, and their standard errors do not include its error: " + "; ".join(said),
+                ExcitationWarning,
+                stacklevel=2,
+            )
+        if refits:
+            said = [
+                f"{name} from step {j + 1} ({', '.join(self.steps[j].dofs)}), which "
+                + ", ".join(f"step {i + 1} ({', '.join(self.steps[i].dofs)})" for i in steps)
+                + " refitted and could not identify"
+                for (name, j), steps in refits.items()
+            ]
+            warnings.warn(
+                "a later sequence step refitted a parameter on runs that do not identify it: "
+                "the earlier step's estimate is kept, and plugged into the steps after: "
+                + "; ".join(said),
                 ExcitationWarning,
                 stacklevel=2,
             )
