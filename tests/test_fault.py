@@ -465,6 +465,62 @@ def test_follow_says_a_change_ended_as_batch_detect_does(vehicle, monitor, tmp_p
     assert sum("ended at about 40.05 s" in line for line in said) == 1
 
 
+def test_an_unexplained_alarm_says_how_long_the_monitor_stays_blind(vehicle, monitor, tmp_path):
+    """A snag from 20 to 27 s ends inside its 10-s window: unexplained, and the statistics are
+    (deliberately) not restarted; the CUSUM was left at ~9,500 times its threshold and h1 at
+    30 % from 45 s was never alarmed, with nothing to say the monitor was blind. The record
+    now says until when, by the kernel's rule: batch and --follow alike, a time after the
+    loss, the CUSUM's fall a second the one this log's healthy rows after the snag show, and
+    never faster than its bound."""
+    from nnid.fault.detect import alarm_row
+    from nnid.serialization import dumps
+
+    faults = [Fault("external", FAULT_T, force=SNAG, end=27.0),
+              Fault("thruster", 45.0, thruster="h1", efficiency=0.3)]  # fmt: skip
+    log = simulate_faults(vehicle, 50, faults=faults, seed=3001)
+    batch = detect(monitor, log)
+    log.to_csv(tmp_path / "log.csv", index=False)
+    followed = follow_csv(monitor, str(tmp_path / "log.csv"), 10.0, lambda line: None, idle_s=0.0)
+    (first,) = batch.alarms  # the loss at 45 s is not alarmed: the monitor is blind
+    assert first["kind"] == "model_change" and first["blind"]["t"] == pytest.approx(30.05)
+    assert first["blind_until"] > 45.0 and first["blind"]["not_before"] > 45.0
+    assert first["blind"]["not_before"] < first["blind_until"]
+    assert f"before about t = {first['blind_until']:.1f} s" in first["meaning"]
+    (streamed,) = followed.alarms
+    assert streamed["meaning"] == first["meaning"]
+    assert streamed["blind_until"] == pytest.approx(first["blind_until"], rel=1e-9)
+    assert streamed["blind"] == pytest.approx(first["blind"], rel=1e-9)
+    # the fall the record states is the one the trace shows between the snag and the loss
+    t, g = batch.trace.t, batch.trace.values[:, 19] / monitor.threshold_values[1]
+    rows = (t >= first["blind"]["t"]) & (t < 45.0)
+    fall = (g[rows][0] - g[rows][-1]) / (t[rows][-1] - t[rows][0])
+    assert fall == pytest.approx(first["blind"]["cusum_fall_per_s"], rel=0.02)
+    assert -np.diff(g[rows]).max() <= first["blind"]["cusum_fall_max_per_s"] * monitor.interval
+    assert g[rows][0] == pytest.approx(first["blind"]["cusum"])
+    # strict JSON in detect.json, and alarms.csv's column
+    assert json.loads(dumps(detect_json(monitor, batch)))["alarms"][0]["blind_until"] > 45.0
+    assert alarm_row(first)["blind_until"] == first["blind_until"]
+
+
+def test_blind_until_is_none_once_the_monitor_re_armed(monitor):
+    """Statistics under their thresholds at the window's end: blind until the re-arm time
+    after they fell under, or not at all (None) where that passed within the window."""
+    from nnid.fault.detect import blind_after
+    from nnid.fault.monitor import Trace
+
+    h_t, h_g = monitor.threshold_values
+    t = np.arange(0.0, 10.0001, 0.05)
+    for last_above, expected in [(2.0, None), (7.0, 12.0)]:
+        values = np.full((t.size, 20), np.nan)
+        values[:, 18], values[:, 19] = 0.5 * h_t, np.where(t <= last_above, 3 * h_g, 0.2 * h_g)
+        trace = Trace(t, np.zeros(t.size), values, np.zeros(t.size, dtype=bool))
+        record = {"meaning": "unexplained"}
+        blind_after(monitor, trace, np.arange(t.size), record)
+        assert record["blind_until"] == (None if expected is None else pytest.approx(expected))
+        assert record["blind"]["cusum"] == pytest.approx(0.2)
+        assert "under their thresholds" in record["meaning"]
+
+
 def test_one_of_two_changes_ending_leaves_the_other_taken_out(vehicle, monitor):
     """Thruster h1 at 50 % from 20 s, a snag from 40 s freed at 55 s: the snag's end is said,
     and h1's loss stays taken out of what is watched (no alarm for it again)."""

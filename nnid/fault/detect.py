@@ -12,7 +12,9 @@ on the residual that change leaves (the fitted hypothesis taken out, fresh EWMA 
 the end of the isolation window, the same thresholds): a new alarm there is a residual the
 first change no longer explains, and is isolated on that residual (a thruster's efficiency
 stated against its nominal thrust, the losses taken out before included). An alarm that is not
-isolated (unexplained, not significant) leaves the monitor as it was.
+isolated (unexplained, not significant) leaves the monitor as it was (restarted on a change that
+persists, it would alarm it again at once), so no new alarm starts until the statistics fall
+under their thresholds: its record says when, about, and its bound (:func:`blind_after`).
 
 A change can also go away (a snag freed, a thruster that recovers): the residual it leaves is
 then its signature reversed, which isolation would name as a new change (a pull the other way,
@@ -62,11 +64,12 @@ from nnid.reports.cells import number
 #: the columns of alarms.csv: the record's keys, and for an alarm that says an earlier change
 #: ended or changed size (hypothesis ``change_ended``, ``change_resized``) ``change_t``, the
 #: time τ it did so, and ``change_alarm_t``, the time of the alarm(s) that isolated it
-#: (:func:`alarm_row`; the record has them under ``ended`` or ``resized``)
+#: (:func:`alarm_row`; the record has them under ``ended`` or ``resized``); ``blind_until``
+#: last (:func:`blind_after`), so the columns before it keep their places
 ALARM_FIELDS = ["experiment", "t", "kind", "thruster", "efficiency", "efficiency_low",
                 "efficiency_high", "effect", "value", "stderr", "severity", "confidence",
                 "explained", "residual_ratio", "hypothesis", "meaning", "change_t",
-                "change_alarm_t"]  # fmt: skip
+                "change_alarm_t", "blind_until"]  # fmt: skip
 
 
 def alarm_row(record: dict) -> dict:
@@ -149,8 +152,98 @@ def isolated_alarm(
         "p_value": diag.p_value,
         "alternatives": diag.alternatives,
         "components": diag.components,
+        "blind_until": None,  # isolated: the statistics restart at the window's end
+        "blind": None,
     }
+    if not diag.isolated:
+        blind_after(monitor, trace, rows, record)
     return record, diag, rows
+
+
+def blind_after(monitor: ResidualMonitor, trace: Trace, rows: np.ndarray, record: dict) -> None:
+    """How long the monitor stays blind after an alarm that is not isolated, written into its
+    ``record`` (``blind_until``, ``blind`` and a clause of ``meaning``; ``detect`` and
+    ``detect --follow`` alike). Such an alarm leaves the statistics as they are (restarted on
+    a change that persists, they would alarm it again at once), and no new alarm starts before
+    both are under their thresholds for the re-arm time: a snag from 20 to 27 s left the CUSUM
+    at 9,526 times its threshold at the window's end, and h1 at 30 % from 45 s was not alarmed.
+
+    The times are the kernel's own rule (:func:`nnid.fault.kernel._statistics`) from the
+    statistics at the window's last row (``rows``: from the alarm on), at the calibrated
+    sample interval. The CUSUM adds the whitened residual's power less the dimension and the
+    allowance each sample: on a healthy residual (mean power the dimension) it falls by the
+    allowance on average, and whatever the residual by at most the dimension and the
+    allowance (the power is never negative), a bound. The EWMA of a healthy residual decays by
+    exp(−dt/τ) a sample, its statistic (a quadratic form) by the square, to about its
+    threshold (the noise it then holds aside). ``blind_until``: about when a new alarm can
+    start on a healthy residual from the window's end (later while the change persists), or
+    None where the monitor re-armed within the window; ``blind``: the statistics over their
+    thresholds at the window's end, the CUSUM's fall a second (mean, and at most), the EWMA
+    statistic's half-life, the re-arm time and ``not_before``, the bound's earliest alarm."""
+    cfg = monitor._cfg(monitor.threshold_values, monitor.interval)  # the kernel's settings
+    h_t, h_g, tau = cfg[kernel.H_EWMA], cfg[kernel.H_CUSUM], cfg[kernel.TAU]
+    rearm, dt = cfg[kernel.REARM], monitor.interval
+    rows = rows[np.isfinite(trace.values[rows, 18:20]).all(1)]  # the alarm's row at least
+    t, stat = trace.t[rows], trace.values[rows, 18:20]
+    above = (stat[:, 0] > h_t) | (stat[:, 1] > h_g)
+    end, (ewma, cusum) = float(t[-1]), stat[-1]
+    fall, fall_max = cfg[kernel.ALLOWANCE], cfg[kernel.DIM] + cfg[kernel.ALLOWANCE]
+    half = tau * np.log(2.0) / 2.0
+    blind = {
+        "t": end,
+        "ewma": float(ewma / h_t) if h_t > 0 else None,  # a zero threshold: no ratio
+        "cusum": float(cusum / h_g) if h_g > 0 else None,
+        "cusum_fall_per_s": float(fall / dt / h_g) if h_g > 0 else None,
+        "cusum_fall_max_per_s": float(fall_max / dt / h_g) if h_g > 0 else None,
+        "ewma_half_life_s": float(half),
+        "rearm_s": float(rearm),
+        "not_before": None,
+    }
+    said = (
+        f"the CUSUM is {number(blind['cusum'], 4)} times its threshold and the EWMA statistic "
+        f"{number(blind['ewma'], 2)} times its"
+    )
+    head = (
+        "; the statistics are not restarted (a change that persists would alarm again at "
+        f"once): at the window's end ({end:.2f} s)"
+    )
+    if not above[-1]:
+        until = float(t[above][-1]) + rearm  # re-armed that long after they fell under
+        blind_until = until if until > end else None
+        blind["not_before"] = blind_until  # and later if they rise again before
+        tail = (
+            "and the monitor re-armed within the window"
+            if blind_until is None
+            else f"and the monitor re-arms {rearm:g} s after they fell under: a later change "
+            f"is not alarmed before about t = {until:.1f} s"
+        )
+        clause = f"{head} they are under their thresholds ({said}), {tail}"
+    elif h_t <= 0 and ewma > h_t:  # no decay reaches a zero threshold: not computed
+        blind_until = None
+        clause = (
+            f"{head} {said}; the EWMA threshold is 0, so when the monitor re-arms is not computed"
+        )
+    else:
+        excess = max(float(cusum - h_g), 0.0)
+        ewma_s = tau / 2.0 * np.log(ewma / h_t) if ewma > h_t else 0.0
+        blind_until = end + max(excess / fall * dt, ewma_s) + rearm
+        # samples at the fastest fall, then the re-arm time under the thresholds
+        blind["not_before"] = end + np.ceil(excess / fall_max) * dt + rearm
+        # the EWMA's decay said where it is above its threshold (it then may set the time)
+        halves = f" and the EWMA statistic halves every {half:.2g} s" if ewma > h_t else ""
+        clause = (
+            f"{head} {said}; on a healthy residual the CUSUM falls about "
+            f"{number(blind['cusum_fall_per_s'], 2)} thresholds a second (its allowance; at "
+            f"most {number(blind['cusum_fall_max_per_s'], 2)} whatever the residual){halves}, "
+            f"and the monitor re-arms {rearm:g} s after both are under: a later change is not "
+            f"alarmed before about t = {blind_until:.1f} s (not before "
+            f"{blind['not_before']:.1f} s whatever the residual; later while this change "
+            "persists)"
+        )
+    blind["not_before"] = None if blind["not_before"] is None else float(blind["not_before"])
+    record["blind_until"] = None if blind_until is None else float(blind_until)
+    record["blind"] = blind
+    record["meaning"] = f"{record['meaning'] or 'a change no hypothesis explains'}{clause}"
 
 
 def _severity(monitor: ResidualMonitor, trace: Trace, rows: np.ndarray) -> float:
@@ -500,6 +593,8 @@ class _Splits:
             "p_value": None,
             "alternatives": [],
             "components": components or None,
+            "blind_until": None,  # the statistics restart at the window's end
+            "blind": None,
             "ended" if ended else "resized": {"t": t_split, "alarms": [changes[i].t for i in gone]},
         }
 
