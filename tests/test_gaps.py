@@ -356,3 +356,27 @@ def test_a_fit_on_a_slow_attitude_gives_the_full_logs_estimates(tmp_path):
     assert step.columns == ["phi", "theta"]
     assert "phi logged every 5th row: 4 Hz against 20 Hz" in step.detail
     assert "samples between its own filled" in step.detail and ": with the gyro" in step.detail
+
+
+def test_a_slow_yaw_is_filled_where_the_gyro_has_samples_and_kept_in_the_logs_range():
+    """A yaw logged every 5th row beside a gyro with one empty cell: that cell had kept every
+    span from being filled (the report blamed differentiation), and a yaw logged in [0, 2π)
+    came out past 2π. Now only the span holding the empty cell stays a gap, and every filled
+    value is the turning the gyro measured, in the log's range."""
+    from nnid.datasets.cleaning import CleaningReport
+    from nnid.datasets.gaps import fill_slow
+
+    t = np.arange(401) * 0.05
+    truth = np.mod(1.0 + 0.5 * t, 2 * np.pi)  # a steady turn at 0.5 rad/s, logged in [0, 2π)
+    log = pd.DataFrame({"t": t, "phi": 0.0, "theta": 0.0, "psi": truth, "p": 0.0, "q": 0.0})
+    log["r"] = 0.5
+    log.loc[103, "r"] = np.nan  # one dropout of the gyro, in the span from row 100 to 105
+    slow = _slow(log.assign(experiment="turn"), ["psi"], 5)
+    report = CleaningReport(source="test")
+    out = fill_slow(slow, report)
+    gap = np.isnan(out["psi"].to_numpy())
+    assert list(np.flatnonzero(gap)) == [101, 102, 103, 104]
+    np.testing.assert_allclose(out["psi"].to_numpy()[~gap], truth[~gap], atol=1e-12)
+    assert out["psi"].max() < 2 * np.pi
+    (step,) = report.steps
+    assert "or where the gyro has empty cells left as gaps" in step.detail

@@ -126,18 +126,15 @@ def fill_slow(log: pd.DataFrame, report: CleaningReport | None = None) -> pd.Dat
     if not slow:
         return log
     filling = gyro_filled(log, slow)
-    turning = {}
+    turning, blocked = {}, None
     if filling:
-        gyro = list(GYRO)
         codes, _, order, t, _, _ = _experiment_sorted(log)
         line = [_filled(log[a].to_numpy(np.float64)[order], t, codes, True) for a in ANGLES]
-        rates = np.einsum(
-            "nij,nj->ni",
-            euler_rate_matrices(np.column_stack(line)),
-            log[gyro].to_numpy(np.float64)[order],
-        )
+        gyro = log[list(GYRO)].to_numpy(np.float64)[order]
+        rates = np.einsum("nij,nj->ni", euler_rate_matrices(np.column_stack(line)), gyro)
         turning = {a: turned_by(t, rates[:, k]) for k, a in enumerate(ANGLES)}
-    out, said = _between_samples(log, filling, turning)
+        blocked = ~np.isfinite(gyro).all(1)  # where the turn between two samples is unknown
+    out, said = _between_samples(log, filling, turning, blocked)
     kept = [ch.describe() for ch in slow if ch not in filling]
     if report is not None:
         detail = []
@@ -159,9 +156,10 @@ def fill_slow(log: pd.DataFrame, report: CleaningReport | None = None) -> pd.Dat
 
 def gyro_filled(log: pd.DataFrame, slow: list[SlowChannel]) -> list[SlowChannel]:
     """The channels of ``slow`` that :func:`fill_slow` fills: roll, pitch and yaw, where the
-    log holds all three and a gyro without an empty cell."""
-    complete = all(a in log for a in ANGLES) and log.reindex(columns=list(GYRO)).notna().all().all()
-    return [ch for ch in slow if complete and ch.column in ANGLES]
+    log holds all three and a gyro (p q r; its own empty cells leave the spans they fall in
+    unfilled)."""
+    held = all(c in log for c in (*ANGLES, *GYRO))
+    return [ch for ch in slow if held and ch.column in ANGLES]
 
 
 def between_samples(log: pd.DataFrame, slow: list[SlowChannel] | None = None) -> pd.DataFrame:
@@ -172,15 +170,19 @@ def between_samples(log: pd.DataFrame, slow: list[SlowChannel] | None = None) ->
 
 
 def _between_samples(
-    log: pd.DataFrame, slow: list[SlowChannel], turning: dict[str, np.ndarray]
+    log: pd.DataFrame,
+    slow: list[SlowChannel],
+    turning: dict[str, np.ndarray],
+    blocked: np.ndarray | None = None,
 ) -> tuple[pd.DataFrame, list[str]]:
     """``log`` with the empty cells of each channel of ``slow`` between two of its samples
     within an experiment filled in ``t``: what ``turning`` (an angle's turn from the first row,
     in :func:`nnid.datasets.log._experiment_sorted` order) gives, and the rest linearly, so
-    each sample is met (an angle along the shorter turn, wrapped back to ±π where the log had
-    it so); never across a hole longer than :data:`SLOW_SPAN` of its own steps nor before its
-    first sample or after its last: those stay gaps, bridged or masked as any. With what was
-    done to each channel, said."""
+    each sample is met (an angle along the shorter turn, wrapped back to the log's range,
+    ±π or [0, 2π)); never across a hole longer than :data:`SLOW_SPAN` of its own steps, nor
+    across a row of ``blocked`` (the same order: where the turning is not known), nor before
+    its first sample or after its last: those stay gaps, bridged or masked as any. With what
+    was done to each channel, said."""
     if not slow:
         return log, []
     out = log.copy()
@@ -191,17 +193,42 @@ def _between_samples(
         angle = ch.column in ANGLES
         turned = turning.get(ch.column, np.zeros_like(y))
         new = _filled(y - turned, t, codes, angle, max_rows=SLOW_SPAN * ch.stride) + turned
-        if angle and np.nanmax(np.abs(y)) <= np.pi:  # wrapped back where the log had it so
-            new = wrap_angle(new)
+        if angle:  # wrapped back to the range the log keeps
+            lo, hi = np.nanmin(y), np.nanmax(y)
+            if -np.pi <= lo and hi <= np.pi:
+                new = wrap_angle(new)
+            elif 0.0 <= lo and hi <= 2 * np.pi:
+                new = np.mod(new, 2 * np.pi)
         new = np.where(np.isfinite(y), y, new)
+        if blocked is not None and blocked.any():
+            new = _unblocked(new, y, codes, blocked)
         values = np.empty_like(new)
         values[order] = new
         out[ch.column] = values
         left = int((~np.isfinite(new)).sum())
-        ends = f", {left} at a run's ends or in longer holes left as gaps" * bool(left)
+        ends = (
+            f", {left} at a run's ends, in longer holes"
+            + " or where the gyro has empty cells" * bool(blocked is not None and blocked.any())
+            + " left as gaps"
+        ) * bool(left)
         filled = int(np.isfinite(new).sum() - np.isfinite(y).sum())
         said.append(f"{ch.describe()} ({filled} samples between its own filled{ends})")
     return out, said
+
+
+def _unblocked(
+    new: np.ndarray, y: np.ndarray, codes: np.ndarray, blocked: np.ndarray
+) -> np.ndarray:
+    """``new`` (``y`` filled between its samples) with each span between two samples of ``y``
+    in one experiment that holds a ``blocked`` row empty again."""
+    rows = np.flatnonzero(np.isfinite(y))
+    a, b = rows[:-1], rows[1:]
+    count = np.concatenate([[0], np.cumsum(blocked)])
+    spans = (codes[a] == codes[b]) & (b - a > 1) & (count[b + 1] - count[a] > 0)
+    out = new.copy()
+    for i, j in zip(a[spans], b[spans], strict=True):
+        out[i + 1 : j] = np.nan
+    return out
 
 
 @dataclass
