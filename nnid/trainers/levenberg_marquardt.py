@@ -289,9 +289,9 @@ class LevenbergMarquardt(BaseEstimator):
         self._rows_fn: JacobianRows | None = None
         self._peak_rows = 0
         self._peak_elements = 0
-        # id(batch): (the batch, n, its cost) for one fit: the batch is held so that its id
-        # cannot pass to another object (a fresh batch of another size read a stale n)
-        self._rows: dict[int, tuple[Any, int, _Cost]] = {}
+        # id(batch): (its tensors' shapes, n, its cost) for one fit; the shapes, because an id
+        # passes to a fresh object once the batch is freed (one of another size read a stale n)
+        self._rows: dict[int, tuple[tuple, int, _Cost]] = {}
         self._center: torch.Tensor | None = None
 
     # ------------------------------------------------------------------ parameters
@@ -506,7 +506,8 @@ class LevenbergMarquardt(BaseEstimator):
 
         p = theta.numel()
         shape = self._rows.get(id(batch))
-        if shape is None or shape[0] is not batch:
+        shapes = tuple(tuple(x.shape) for x in _tensors(batch))
+        if shape is None or shape[0] != shapes:
             cost = _Cost()
             if self._mode == "dense":  # the pass that finds n also weighs the two modes
                 with torch.enable_grad(), cost:
@@ -514,7 +515,7 @@ class LevenbergMarquardt(BaseEstimator):
             else:
                 with torch.no_grad():
                     n = f(theta).numel()
-            shape = self._rows[id(batch)] = (batch, n, cost)
+            shape = self._rows[id(batch)] = (shapes, n, cost)
         _, n, cost = shape
         if self._mode == "dense":
             extra = n * cost.reverse - p * cost.forward  # elements reverse moves beyond forward
