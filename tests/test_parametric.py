@@ -693,20 +693,29 @@ def test_a_value_a_sequence_step_left_unidentified_is_not_plugged_into_the_later
 
 
 def test_a_refit_that_cannot_identify_a_value_keeps_the_earlier_estimate(seamor):
-    """Step 1 fits N_rdot on the yaw run; step 2 refits it from the surge equation, which does
-    not read it (NaN). The refit replaced step 1's estimate with NaN and the fit ended "no step
-    of the sequence identifies ['N_rdot']", though step 1 had. Step 1's estimate and standard
-    error are kept, and a warning names both steps."""
-    first = {"experiments": ["yaw"], "dofs": ["r"], "unknowns": ["N_rdot", "N:r*abs(r)"]}
+    """Step 1 fits N_rdot and X_udot on the surge and yaw runs; step 2 refits both from the
+    surge equation, which does not read N_rdot (NaN). The refit replaced step 1's estimate with
+    NaN and the fit ended "no step of the sequence identifies ['N_rdot']", though step 1 had.
+    Step 1's estimate and standard error are kept, and a warning names both steps; its
+    covariance with the refitted X_udot is not measured (it had kept step 1's)."""
+    first = {
+        "experiments": ["surge", "yaw"],
+        "dofs": ["u", "r"],
+        "unknowns": ["X_udot", "X:u*abs(u)", "N_rdot", "N:r*abs(r)"],
+    }
     log = _surge_and_sway_runs(seamor, yaw=True)
     alone = ParametricModel(seamor, sequence=[first]).fit(log).params["N_rdot"]
     steps = [first, {"experiments": ["surge"], "dofs": ["u"], "unknowns": ["X_udot", "N_rdot"]}]
     with pytest.warns(ExcitationWarning) as caught:
         model = ParametricModel(seamor, sequence=steps).fit(log)
     said = " | ".join(str(w.message) for w in caught if w.category is ExcitationWarning)
-    assert "N_rdot from step 1 (r), which step 2 (u) refitted and could not identify" in said
+    assert "N_rdot from step 1 (u, r), which step 2 (u) refitted and could not identify" in said
     kept = model.params["N_rdot"]
     assert kept["value"] == alone["value"] and kept["stderr"] == alone["stderr"] > 0
+    names = list(model.estimate_.names)
+    i, j, k = (names.index(n) for n in ("N_rdot", "N:r*abs(r)", "X_udot"))
+    cov = model.estimate_.cov
+    assert np.isfinite(cov[i, j]) and np.isnan(cov[i, k])  # one step's block; none across
 
 
 def test_least_squares_says_which_rows_it_leaves_out_and_whom_only_they_read():

@@ -156,6 +156,10 @@ class DecoupledSequence:
             idx = [names.index(n) for n in given]
             pos = [list(sub.names).index(n) for n in given]
             theta[idx] = est.theta[pos]
+            # block-diagonal over the steps: a refitted value's covariance with the values an
+            # earlier step left (kept, or not refitted) is not measured
+            cov[idx, :] = np.nan
+            cov[:, idx] = np.nan
             cov[np.ix_(idx, idx)] = est.cov[np.ix_(pos, pos)]
             for name, value in zip(sub.names, est.theta, strict=True):
                 if name in kept:
