@@ -1286,3 +1286,17 @@ def test_the_detect_page_names_each_thresholds_method(monitor):
     cusum = mixed.thresholds_["cusum"]["value"]
     assert f"CUSUM {cusum:.3g} (2 x healthy maximum (too few peaks))" in page
     assert "by a generalized Pareto" not in page
+
+
+def test_follow_names_an_empty_cell_as_what_it_most_often_is(monitor, stopped_h1, tmp_path):
+    """An empty motion cell was refused as "value '' is not a finite number": batch detect
+    reads such a log (a slow attitude filled from the gyro, a gap masked), so the message says
+    what an empty cell most often is and that batch reads it."""
+    log = stopped_h1.head(40).copy()
+    log.loc[20, "theta"] = np.nan
+    log.to_csv(tmp_path / "slow.csv", index=False)
+    with pytest.raises(NnidInputError) as refused:
+        follow_csv(monitor, str(tmp_path / "slow.csv"), 10.0, lambda line: None, idle_s=0.0)
+    said = str(refused.value)
+    assert "theta" in said and "an empty cell, a sensor logged slower" in said
+    assert "batch detect reads" in said

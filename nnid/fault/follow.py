@@ -144,9 +144,14 @@ def _numbers(row: list[str], read: list[tuple[str, int]], n: int, where: str, wi
         except ValueError:
             value = np.nan
         if not np.isfinite(value):
+            # an empty cell is most often a sensor logged slower than the others on one clock
+            empty = (
+                ": an empty cell, a sensor logged slower than the others or a dropout, which "
+                "batch detect reads (a slow attitude filled from the gyro, gaps masked)"
+            ) * (cell.strip() == "")
             raise NnidInputError(
                 f"value {shown(cell)} is not a finite number (--follow needs one in every "
-                "column it reads)",
+                f"column it reads{empty})",
                 source=where,
                 field=name,
                 row=n,

@@ -157,7 +157,7 @@ def solve_least_squares(
         ]
         warnings.warn(
             f"{int((~finite).sum())} of {finite.size} rows of the regression are left out: "
-            "their target or regressor is not finite (an undefined signal or value)"
+            "their target or regressor is not finite (a dropout, an undefined signal or value)"
             + (f"; only they read {', '.join(left_out)}" if left_out else ""),
             ExcitationWarning,
             stacklevel=2,
