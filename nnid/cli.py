@@ -128,6 +128,23 @@ def simulate(
     )
 
 
+def _check_time_unit(unit: str | None) -> None:
+    """A ``--time-unit`` nnid knows, refused before any work otherwise."""
+    if unit is not None:
+        from nnid.datasets.log import checked_time_unit
+
+        checked_time_unit(unit, "--time-unit")
+
+
+#: ``--time-unit`` on every command that reads a log file
+TIME_UNIT_HELP = (
+    "Unit of the log's t: s, ms, us or ns, converted to seconds (said in the cleaning report). "
+    "Default: seconds, and a clock that steps as another unit does is refused (a 1-Hz log "
+    "stepping by whole seconds reads as integer milliseconds); replaces the config's "
+    "data.time_unit."
+)
+
+
 @app.command()
 @_input_errors
 def inspect(
@@ -138,6 +155,7 @@ def inspect(
     out_dir: Path | None = typer.Option(
         None, "--out", help="Also write summary.json and the cleaning report here."
     ),
+    time_unit: str | None = typer.Option(None, "--time-unit", help=TIME_UNIT_HELP),
 ) -> None:
     """Show what a log holds: columns, rate, duration, experiments, gaps, derivable signals and
     the excitation of each DOF.
@@ -156,7 +174,8 @@ def inspect(
 
     if out_dir is not None:
         _check_out(out_dir)
-    log, report = load_log(log_path, columns)
+    _check_time_unit(time_unit)
+    log, report = load_log(log_path, columns, time_unit, "--time-unit")
     # the window train uses unless a config's [data] sets another
     window, order = (VehicleData.model_fields[k].default for k in ("savgol_window", "savgol_order"))
     info = summarize(log, window, order)
@@ -314,6 +333,7 @@ def train(
     columns: str | None = typer.Option(
         None, "--columns", help="Reader config for a log not in nnid's format."
     ),
+    time_unit: str | None = typer.Option(None, "--time-unit", help=TIME_UNIT_HELP),
 ) -> None:
     """Fit one model on the training split and score it on held-out data: writes the model
     (model.json, and tensors.pt for networks; load it with nnid.load_model), metrics.json,
@@ -321,10 +341,13 @@ def train(
     from nnid.config import TrainConfig, load_config
     from nnid.runs import train_run
 
+    _check_time_unit(time_unit)
     cfg = load_config(config, TrainConfig)
     _check_out(out_dir)
     with _bar(f"training a {cfg.model.kind} model") as progress:
-        outcome = train_run(cfg, config, out_dir, data, vehicle, columns, progress=progress)
+        outcome = train_run(
+            cfg, config, out_dir, data, vehicle, columns, progress=progress, time_unit=time_unit
+        )
     _print(outcome)
 
 
@@ -340,16 +363,20 @@ def compare(
     columns: str | None = typer.Option(
         None, "--columns", help="Reader config for a log not in nnid's format."
     ),
+    time_unit: str | None = typer.Option(None, "--time-unit", help=TIME_UNIT_HELP),
 ) -> None:
     """Fit the config's [[models]] (any kinds) on one split and compare them on the same
     held-out experiments: writes comparison.json, report.html and report.md to --out."""
     from nnid.config import CompareConfig, load_config
     from nnid.runs import compare_run
 
+    _check_time_unit(time_unit)
     cfg = load_config(config, CompareConfig)
     _check_out(out_dir)
     with _bar("comparing models") as progress:
-        outcome = compare_run(cfg, config, out_dir, data, vehicle, columns, progress=progress)
+        outcome = compare_run(
+            cfg, config, out_dir, data, vehicle, columns, progress=progress, time_unit=time_unit
+        )
     _print(outcome)
 
 
@@ -397,6 +424,7 @@ def loop(
         help="Folder of a trained hybrid (nnid train configs/hybrid.toml) of this vehicle: "
         "its learned force, named in the effect vocabulary, as a second opinion.",
     ),
+    time_unit: str | None = typer.Option(None, "--time-unit", help=TIME_UNIT_HELP),
 ) -> None:
     """Residual loop: fit the vehicle file to the log, find the effect the residual points to,
     add it, refit, repeat; writes loop.json, report.html and report.md to --out, with the
@@ -404,13 +432,14 @@ def loop(
     from nnid.config import LoopConfig, load_config
     from nnid.runs import loop_run
 
+    _check_time_unit(time_unit)
     cfg = load_config(config, LoopConfig) if config else LoopConfig()
     _check_out(out_dir)
     with _bar("residual loop") as progress:
         outcome = loop_run(
             cfg, config, out_dir, data, vehicle, columns,
             max_effects=max_effects, alpha=alpha, dofs=dofs, validation=validation,
-            exclude=exclude, hybrid=hybrid, progress=progress,
+            exclude=exclude, hybrid=hybrid, progress=progress, time_unit=time_unit,
         )  # fmt: skip
     _print(outcome)
 
@@ -435,12 +464,14 @@ def detect(
     window: float | None = typer.Option(
         None, "--window", help="Seconds after an alarm used to isolate it, 0.5 or more."
     ),
+    time_unit: str | None = typer.Option(None, "--time-unit", help=TIME_UNIT_HELP),
 ) -> None:
     """Fault detection: watch a log with a calibrated residual monitor; each alarm says whether a
     thruster lost thrust (which one, its remaining efficiency), an external force appeared, or
     the vehicle changed (the effect, e.g. buoyancy_offset, with its size)."""
     from nnid.runs import detect_run, follow_run
 
+    _check_time_unit(time_unit)
     _check_out(out_dir)
     if follow and columns is not None:  # a stream is read as nnid's CSV, row by row
         raise NnidInputError(
@@ -448,12 +479,20 @@ def detect(
             "(drop --follow)",
             field="--columns",
         )
+    if follow and time_unit is not None:  # a stream's rows are read as they come, in seconds
+        raise NnidInputError(
+            "--follow reads a CSV whose t is in seconds, row by row (drop --follow to declare "
+            "a whole log's time unit)",
+            field="--time-unit",
+        )
     if follow:
         for line in follow_run(model_dir, data, out_dir, window, _say):
             _say(line)
         return
     with _bar("detecting") as progress:
-        outcome = detect_run(model_dir, data, out_dir, columns, window, progress=progress)
+        outcome = detect_run(
+            model_dir, data, out_dir, columns, window, progress=progress, time_unit=time_unit
+        )
     _print(outcome)
 
 

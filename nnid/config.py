@@ -246,12 +246,15 @@ class _DataCommon(StrictModel):
 class VehicleData(_DataCommon):
     """A vehicle log: a file (``log``, through a reader config ``columns`` if it is not in
     nnid's format) or a simulate config run on the fly (``simulate``). Paths are relative to
-    the config file; ``--data`` and ``--columns`` override them."""
+    the config file; ``--data`` and ``--columns`` override them. ``time_unit`` declares the
+    unit of a log file's ``t`` (``s``, ``ms``, ``us``, ``ns``; ``--time-unit`` overrides it):
+    converted to seconds, and not guessed from its steps."""
 
     kind: Literal["vehicle"] = "vehicle"
     log: str | None = None
     columns: str | None = None
     simulate: str | None = None
+    time_unit: Literal["s", "ms", "us", "ns"] | None = None
 
 
 class TableData(_DataCommon):

@@ -197,9 +197,11 @@ def load_inputs(
     data: str | None = None,
     vehicle: str | None = None,
     columns: str | None = None,
+    time_unit: str | None = None,
 ) -> Inputs:
     """The log of a train or compare run (``--data``/``--columns`` replace the config's file,
-    ``--vehicle`` its vehicle), with velocities derived and noise added where asked."""
+    ``--vehicle`` its vehicle, ``--time-unit`` its ``data.time_unit``), with velocities
+    derived and noise added where asked."""
     check_paths(cfg, config_path, data, columns)
     models = [m.fitted for m in models]  # an ensemble needs the data its members need
     spec = cfg.data if cfg.data is not None else VehicleData()
@@ -218,7 +220,14 @@ def load_inputs(
             field="vehicle",
         )
     sim, source = None, None  # source: the log file read, which errors about it name
+    # the declared unit of the log's t: the option's, else the config's
+    unit, unit_key = (
+        (time_unit, "--time-unit")
+        if time_unit
+        else (getattr(spec, "time_unit", None), "data.time_unit")
+    )
     if isinstance(spec, TableData):
+        _nothing_to_declare(unit, unit_key, config_path, "a generic table")
         if physics:
             raise NnidInputError(
                 'data kind = "table" is for the input-output models (narx, state_space)',
@@ -231,6 +240,7 @@ def load_inputs(
         inputs = Inputs(*_read_table(path, models))
         source = path
     elif isinstance(spec, CacciaCampaignData) and data is None:
+        _nothing_to_declare(unit, unit_key, config_path, "a simulated campaign")
         sim, log, report = _caccia_campaign(spec, config_path, models, veh)
         inputs = Inputs(log, report, veh, sim)
     elif path := (
@@ -240,7 +250,7 @@ def load_inputs(
     ):
         from nnid.datasets.readers import load_log
 
-        inputs = Inputs(*load_log(path, reader), veh)
+        inputs = Inputs(*load_log(path, reader, unit, unit_key), veh)
         source = path
         if veh is not None and (physics or not models):  # physics fits, and the loop's log
             from nnid.datasets.arrays import (
@@ -276,6 +286,7 @@ def load_inputs(
     elif getattr(spec, "simulate", None):
         from nnid.datasets.simulator import simulate_config
 
+        _nothing_to_declare(unit, unit_key, config_path, "simulated")
         sim_path = resolve(base, spec.simulate)
         sim = load_config(sim_path, SimulateConfig)
         plant = plant_for(sim.vehicle, sim_path)
@@ -324,6 +335,17 @@ def load_inputs(
     inputs.log = _prepare(inputs.log, spec, inputs.report)
     inputs.derived_with = (float(spec.savgol_window), int(spec.savgol_order))
     return inputs
+
+
+def _nothing_to_declare(unit: str | None, key: str, config_path: Path, data: str) -> None:
+    """A declared time unit where the run reads no vehicle log file: refused, not dropped
+    without a word."""
+    if unit is not None:
+        raise NnidInputError(
+            f"declares the time unit of a vehicle log file, and this run's data is {data}",
+            source=None if key.startswith("--") else str(config_path),
+            field=key,
+        )
 
 
 def loaded_inputs(*args, **kwargs) -> tuple[Inputs, list[str]]:
@@ -742,11 +764,14 @@ def run_train(
     vehicle: str | None = None,
     columns: str | None = None,
     progress: Progress | None = None,
+    time_unit: str | None = None,
 ) -> TrainResult:
     """Fit the configured model on the training split; score it on every split."""
     start = time.perf_counter()
     source = str(config_path)
-    inputs, loaded = loaded_inputs(cfg, config_path, [cfg.model], data, vehicle, columns)
+    inputs, loaded = loaded_inputs(
+        cfg, config_path, [cfg.model], data, vehicle, columns, time_unit=time_unit
+    )
     split = make_split(inputs.log, cfg.split, source, inputs.report, cfg.warmup_s)
     model = build_model(cfg.model, inputs, cfg.warmup_s)
     replay = replay_of(inputs, inputs.log)
@@ -924,6 +949,7 @@ def run_compare(
     vehicle: str | None = None,
     columns: str | None = None,
     progress: Progress | None = None,
+    time_unit: str | None = None,
 ) -> CompareResult:
     """Fit every ``[[models]]`` entry on the training split and score them all on the same
     held-out experiments (the test split when there is one, else validation): one-step,
@@ -933,7 +959,9 @@ def run_compare(
     start = time.perf_counter()
     report = progress or silent
     source = str(config_path)
-    inputs, said = loaded_inputs(cfg, config_path, list(cfg.models), data, vehicle, columns)
+    inputs, said = loaded_inputs(
+        cfg, config_path, list(cfg.models), data, vehicle, columns, time_unit=time_unit
+    )
     split = make_split(inputs.log, cfg.split, source, inputs.report, cfg.warmup_s)
     check_held_stepped(inputs, split, [m.fitted for m in cfg.models])
     held_name = "test" if len(split.test) else "validation"

@@ -123,16 +123,20 @@ def train_run(
     vehicle: str | None = None,
     columns: str | None = None,
     progress: Progress | None = None,
+    time_unit: str | None = None,
 ) -> Outcome:
     """``nnid train``: fit the configured model, score it on the held-out parts, write the
     model (``model.json``, ``tensors.pt``), ``metrics.json``, the reports and the cleaning
-    report to ``out_dir``."""
+    report to ``out_dir``. ``time_unit``: ``--time-unit`` (the config's ``data.time_unit``
+    otherwise)."""
     from nnid.pipeline import run_train
     from nnid.reports.train_report import monitor_sentence, train_html, train_markdown
     from nnid.serialization import write_json, write_text
 
     try:
-        result = run_train(cfg, config_path, data, vehicle, columns, progress=progress)
+        result = run_train(
+            cfg, config_path, data, vehicle, columns, progress=progress, time_unit=time_unit
+        )
     except NnidInputError as exc:
         raise exc.with_source(str(config_path)) from None
     from nnid.fault.monitor import MONITOR_FILE
@@ -205,15 +209,18 @@ def compare_run(
     vehicle: str | None = None,
     columns: str | None = None,
     progress: Progress | None = None,
+    time_unit: str | None = None,
 ) -> Outcome:
     """``nnid compare``: fit the config's models on one split, compare them on the same
-    held-out runs; ``comparison.json`` and the reports."""
+    held-out runs; ``comparison.json`` and the reports. ``time_unit``: ``--time-unit``."""
     from nnid.pipeline import run_compare
     from nnid.reports.compare_report import all_warnings, html_page, markdown
     from nnid.serialization import write_json, write_text
 
     try:
-        result = run_compare(cfg, config_path, data, vehicle, columns, progress=progress)
+        result = run_compare(
+            cfg, config_path, data, vehicle, columns, progress=progress, time_unit=time_unit
+        )
     except NnidInputError as exc:
         raise exc.with_source(str(config_path)) from None
     with staged(out_dir) as stage:
@@ -370,9 +377,11 @@ def loop_run(
     exclude: str | None = None,
     hybrid: Path | None = None,
     progress: Progress | None = None,
+    time_unit: str | None = None,
 ) -> Outcome:
     """``nnid loop``: the residual loop of a log and a vehicle file (a
-    :class:`nnid.config.LoopConfig`; the keyword options override it as the CLI's do)."""
+    :class:`nnid.config.LoopConfig`; the keyword options override it as the CLI's do,
+    ``time_unit`` its ``data.time_unit``)."""
     from nnid.datasets.column_map import load_column_map
     from nnid.datasets.preprocess import check_attitude
     from nnid.physics.dofs import DOFS
@@ -391,7 +400,7 @@ def loop_run(
         raise NnidInputError("give a log (--data or the config's data.log)", field="data")
     second = hybrid_model(hybrid) if hybrid is not None else None
     try:  # what loading said (a vehicle file's sign slip) goes into loop.json too
-        inputs, loaded = loaded_inputs(cfg, where, [], data, vehicle, columns)
+        inputs, loaded = loaded_inputs(cfg, where, [], data, vehicle, columns, time_unit=time_unit)
     except NnidInputError as exc:
         raise exc.with_source(str(config_path)) if config_path else exc from None
     # loop.json keeps them; a refusal before it is written says them, or nothing would
@@ -573,8 +582,10 @@ def detect_run(
     columns: str | None = None,
     window: float | None = None,
     progress: Progress | None = None,
+    time_unit: str | None = None,
 ) -> Outcome:
-    """``nnid detect`` on a whole log: ``alarms.csv``, ``detect.json`` and the report."""
+    """``nnid detect`` on a whole log: ``alarms.csv``, ``detect.json`` and the report;
+    ``time_unit`` declares the unit of its ``t`` (``--time-unit``)."""
     from nnid.datasets.gaps import fill_slow, mask_gaps
     from nnid.datasets.log import POSE, VELOCITY
     from nnid.datasets.readers import load_log
@@ -587,7 +598,7 @@ def detect_run(
     monitor, window_s = _monitor(model_dir, window)
     lines: list[str] = []
     try:
-        log, report = load_log(data, columns)
+        log, report = load_log(data, columns, time_unit, "--time-unit")
         # a gap in the motion data cuts the run into segments, and the monitor restarts on
         # each (its EWMA, CUSUM and alarm from zero)
         # (a pose channel logged slower than the clock is read between its samples first)

@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from pandas.api.types import is_bool_dtype, is_numeric_dtype
 
 from nnid.errors import NnidInputError
 from nnid.physics.dofs import DOFS, FORCES
@@ -43,6 +44,23 @@ REPLAY_GROUP = "replay_group"
 #: optional column: the run a piece was cut from at a gap (``mask_gaps``, ``resample``, the
 #: readers), empty for a whole run; a piece is told by it, never by its experiment's label
 PIECE_OF = "piece_of"
+#: the units a log's ``t`` may be declared in (``--time-unit``, ``[data] time_unit``): name
+#: and how many make a second
+TIME_UNITS: dict[str, tuple[str, float]] = {
+    "s": ("seconds", 1.0),
+    "ms": ("milliseconds", 1e3),
+    "us": ("microseconds", 1e6),
+    "ns": ("nanoseconds", 1e9),
+}
+#: the ``DataFrame.attrs`` key of a log whose time unit the user declared: the unit guess of
+#: :func:`check_time_unit` is skipped for it (the clock alone cannot tell a 1-Hz log in
+#: seconds from one in integer milliseconds); it travels with the log's copies and slices
+TIME_UNIT_ATTR = "time_unit"
+#: how a time unit is declared, named where the guess refuses one
+DECLARE_TIME_UNIT = (
+    "if it is, or to have it converted, declare t's unit with --time-unit or the config's "
+    "[data] time_unit (s, ms, us, ns)"
+)
 
 
 def input_columns(df: pd.DataFrame) -> list[str]:
@@ -880,6 +898,35 @@ def blank_labels(label: pd.Series) -> np.ndarray:
     return label.isna().to_numpy() | (label.astype(str).str.strip() == "").to_numpy()
 
 
+def checked_time_unit(unit: str, field: str = "time_unit", source: str | None = None) -> str:
+    """``unit`` if it is one of :data:`TIME_UNITS`, else an error naming ``field`` and them."""
+    if unit not in TIME_UNITS:
+        raise NnidInputError(
+            f"unknown time unit {unit!r}: expected one of {', '.join(TIME_UNITS)}",
+            source=source,
+            field=field,
+        )
+    return unit
+
+
+def declare_time_unit(df: pd.DataFrame, unit: str) -> tuple[pd.DataFrame, str]:
+    """The log with ``t`` read in the declared ``unit`` (one of :data:`TIME_UNITS`) and
+    converted to seconds (a copy; ``t`` as given when it is seconds), marked so that
+    :func:`check_time_unit` does not guess again; and the sentence for the cleaning report."""
+    name, per_second = TIME_UNITS[checked_time_unit(unit)]
+    out = df.copy()
+    t = out["t"] if "t" in out else None
+    numeric = t is not None and is_numeric_dtype(t) and not is_bool_dtype(t)
+    if numeric and per_second != 1.0:
+        # divided, not multiplied by 1e-3: whole milliseconds stay the nearest seconds
+        out["t"] = t.to_numpy(dtype=np.float64) / per_second
+        said = f"t read as {name}, as declared: divided by {per_second:.0f}"
+    else:  # seconds; or a t that validate_log refuses (missing, text, true/false) as it is
+        said = f"t read as {name}, as declared: its unit not guessed from its steps"
+    out.attrs[TIME_UNIT_ATTR] = unit
+    return out, said
+
+
 def check_time_unit(df: pd.DataFrame, source: str | None = None) -> None:
     """Time in seconds: a median step of 5 to 1000 looks like milliseconds (whole, computed in
     floating point, or a logger's jittered stamps; no vehicle's dynamics are sampled every 5 s),
@@ -891,14 +938,21 @@ def check_time_unit(df: pd.DataFrame, source: str | None = None) -> None:
     measured log under ``shared/data`` steps by 0.1 s or less). Jittered milliseconds at those
     rates are not told from a ~1-Hz log in seconds and pass. A step of exactly 1000 in every
     row is read as microseconds (1 kHz): as milliseconds it would be such a whole-second 1-Hz
-    log; a median of 1000 with other steps (a jittered 1-Hz logger's) as milliseconds."""
+    log; a median of 1000 with other steps (a jittered 1-Hz logger's) as milliseconds.
+
+    Only the user knows which such a clock is: a log whose unit was declared
+    (:func:`declare_time_unit`) is not guessed at, and the refusal names how to declare it."""
+    if df.attrs.get(TIME_UNIT_ATTR):
+        return
     within = None
     if "experiment" in df:  # the jump from one run's clock to the next is no sample step
         codes = pd.factorize(df["experiment"])[0]
         within = codes[1:] == codes[:-1]
     slip = time_unit_slip(df["t"].to_numpy(dtype=np.float64), within)
     if slip:
-        raise NnidInputError(f"{slip}; t must be seconds", source=source, field="t")
+        raise NnidInputError(
+            f"{slip}; t must be seconds: {DECLARE_TIME_UNIT}", source=source, field="t"
+        )
 
 
 def time_unit_slip(t: np.ndarray, within: np.ndarray | None = None) -> str | None:

@@ -29,6 +29,8 @@ from nnid.datasets.log import (
     MAX_RUN_SAMPLES,
     PIECE_OF,
     REPLAY_GROUP,
+    checked_time_unit,
+    declare_time_unit,
     time_unit_slip,
     validate_log,
     wrap_angle,
@@ -467,15 +469,32 @@ def _log_reader(
 
 
 def load_log(
-    path: str | Path, columns: str | Path | None = None
+    path: str | Path,
+    columns: str | Path | None = None,
+    time_unit: str | None = None,
+    time_unit_field: str = "time_unit",
 ) -> tuple[pd.DataFrame, CleaningReport]:
     """A log file in the contract, or any table/folder read through a column map.
 
     ``columns`` is the reader config (``--columns MAP.toml``); with it, ``path`` is the data
     root or file the config's sources are found under. A ROS bag (``.bag``, ``.db3``, ``.mcap``
     or a ROS 2 bag folder) or an ArduPilot log (``.bin``, ``.tlog``) needs the config, whose
-    sources name topics or message types. Returns the validated log and the cleaning report.
+    sources name topics or message types. ``time_unit`` declares the unit of a contract log's
+    ``t`` (one of :data:`~nnid.datasets.log.TIME_UNITS`): converted to seconds, said in the
+    cleaning report, and not guessed from its steps; a reader config gives its sources' units
+    itself (``time_scale``). ``time_unit_field``: what an error about it names (the CLI option
+    or the config key). Returns the validated log and the cleaning report.
     """
+    if time_unit is not None:
+        checked_time_unit(time_unit, time_unit_field)
+        if columns is not None or _log_reader(Path(path)) is not None:
+            # one mechanism per reader: two scalings of one clock would multiply
+            how = f"the reader config {columns}" if columns is not None else "its reader config"
+            raise NnidInputError(
+                f"declares the time unit of a log in nnid's columns; {how} gives each "
+                "source's unit with its time_scale (0.001 for milliseconds)",
+                field=time_unit_field,
+            )
     special = _log_reader(Path(path))
     if special is not None:
         kind, what, read_sources = special
@@ -494,6 +513,9 @@ def load_log(
         report = CleaningReport(source=str(path))
         df = read_table(path)
         report.add("read", f"{len(df)} rows, contract columns as given")
+        if time_unit is not None:
+            df, said = declare_time_unit(df, time_unit)
+            report.add("time unit", said, columns=["t"])
         return validate_log(df, source=str(path)), report
     cmap = load_column_map(columns)
     root = Path(path)
