@@ -149,19 +149,21 @@ def solve_least_squares(
     finite = np.isfinite(y) & np.isfinite(phi).all(1)
     left_out: list[str] = []
     if not finite.all():  # rows with an undefined signal (e.g. w of a tumbling vehicle)
-        # said, never silent: a NaN known of a sequence step once dropped a whole equation,
-        # and its unknowns read "zero regressor" (their regressor was only in those rows)
+        # masked gaps and accelerations cut at held steps are such rows, said where they are
+        # made; what is said here is a parameter only the left-out rows read: a NaN known of a
+        # sequence step once dropped a whole equation, and its unknowns read "zero regressor"
         read = phi != 0  # NaN counts: an undefined entry still reads the parameter
         left_out = [
             nm for j, nm in enumerate(names) if read[~finite, j].any() and not read[finite, j].any()
         ]
-        warnings.warn(
-            f"{int((~finite).sum())} of {finite.size} rows of the regression are left out: "
-            "their target or regressor is not finite (a dropout, an undefined signal or value)"
-            + (f"; only they read {', '.join(left_out)}" if left_out else ""),
-            ExcitationWarning,
-            stacklevel=2,
-        )
+        if left_out:
+            warnings.warn(
+                f"{int((~finite).sum())} of {finite.size} rows of the regression are left out: "
+                "their target or regressor is not finite (a dropout, an undefined signal or "
+                f"value); only they read {', '.join(left_out)}",
+                ExcitationWarning,
+                stacklevel=2,
+            )
         phi, y = phi[finite], y[finite]
         weights = None if weights is None else np.asarray(weights)[finite]
     n, p = phi.shape
