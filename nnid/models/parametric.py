@@ -1163,7 +1163,7 @@ class ParametricModel(FossenPlant):
         on the later step's runs, :func:`~nnid.trainers.sequence.step_reads`), said as "step j
         (dofs) takes NAME from step k, for ...". A value a step left NaN (``unidentified``,
         per step) is not taken: the later steps read the vehicle file's, as the sequence says."""
-        from nnid.trainers.sequence import step_reads
+        from nnid.trainers.sequence import step_label, step_reads
 
         said = []
         source: dict[str, int] = {}  # the step whose value a parameter holds so far
@@ -1174,7 +1174,7 @@ class ParametricModel(FossenPlant):
                     continue
                 if step_reads(self.structure_, name, step, subset, filter_lambda):
                     said.append(
-                        f"step {j + 1} ({', '.join(step.dofs)}) takes {name} from step {k + 1}, "
+                        f"{step_label(j, step)} takes {name} from step {k + 1}, "
                         f"for {', '.join(names)}"
                     )
             source.update(dict.fromkeys(names, j))

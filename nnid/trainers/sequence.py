@@ -77,6 +77,11 @@ def _subset(data: dict[str, np.ndarray], names: Sequence[str]) -> dict[str, np.n
     }
 
 
+def step_label(k: int, step: Step) -> str:
+    """How the warnings name the sequence's step ``k`` (from 0): "step 2 (v, r)"."""
+    return f"step {k + 1} ({', '.join(step.dofs)})"
+
+
 def step_reads(
     structure, name: str, step: Step, data: dict[str, np.ndarray], filter_lambda: float | None
 ) -> bool:
@@ -178,8 +183,8 @@ class DecoupledSequence:
         if prior:
             vehicle = structure.restricted([], self.steps[0].dofs, {}).base  # nothing set
             said = [
-                f"step {j + 1} ({', '.join(self.steps[j].dofs)}) could not identify {name}, so "
-                + ", ".join(f"step {i + 1} ({', '.join(self.steps[i].dofs)})" for i in steps)
+                f"{step_label(j, self.steps[j])} could not identify {name}, so "
+                + ", ".join(step_label(i, self.steps[i]) for i in steps)
                 + f" read it at the vehicle file's value {vehicle.get(name):.6g}"
                 for (name, j), steps in prior.items()
             ]
@@ -192,8 +197,8 @@ class DecoupledSequence:
             )
         if refits:
             said = [
-                f"{name} from step {j + 1} ({', '.join(self.steps[j].dofs)}), which "
-                + ", ".join(f"step {i + 1} ({', '.join(self.steps[i].dofs)})" for i in steps)
+                f"{name} from {step_label(j, self.steps[j])}, which "
+                + ", ".join(step_label(i, self.steps[i]) for i in steps)
                 + " refitted and could not identify"
                 for (name, j), steps in refits.items()
             ]
