@@ -463,7 +463,7 @@ def _caccia_campaign(spec: CacciaCampaignData, config_path: Path, models: list, 
 
 
 def _prepare(log: pd.DataFrame, spec, report: CleaningReport) -> pd.DataFrame:
-    """A pose channel logged slower than the clock interpolated between its samples
+    """An attitude logged slower than the clock filled from the gyro between its samples
     (:func:`nnid.datasets.gaps.fill_slow`), velocities derived from the pose where the log
     lacks them (every model is fitted and scored on the same measured velocities), then light
     white noise (``spec.noise``), each step reported."""

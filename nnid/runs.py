@@ -601,7 +601,7 @@ def detect_run(
         log, report = load_log(data, columns, time_unit, "--time-unit")
         # a gap in the motion data cuts the run into segments, and the monitor restarts on
         # each (its EWMA, CUSUM and alarm from zero)
-        # (a pose channel logged slower than the clock is read between its samples first)
+        # (an attitude logged slower than the clock is filled from the gyro first)
         log = mask_gaps([fill_slow(log, report)], [*POSE, *VELOCITY], report)[0]
         lines += lost_rows(report)
         runs = log["experiment"].to_numpy() if "experiment" in log else None

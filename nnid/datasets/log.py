@@ -430,7 +430,7 @@ def _filled(
     slower channel's step). A channel logged slower than the others on a common clock (a
     depth sensor at 1 Hz beside a 10-Hz DVL) has an empty cell in every step: the window
     checks read it between its own samples, and :func:`_sampled_spans` keeps only spans that
-    end on samples; :func:`nnid.datasets.gaps.fill_slow` fills a slow pose channel with it.
+    end on samples; :func:`nnid.datasets.gaps.fill_slow` fills a slow attitude with it.
     ``x`` itself without empty cells (a fully sampled log's numbers stay as they were)."""
     bad = ~np.isfinite(x)
     if not bad.any():

@@ -136,8 +136,8 @@ class ResidualLoop:
         from nnid.datasets.preprocess import derive_accelerations, derive_velocities
 
         self.cleaning_ = CleaningReport(source="loop data")
-        # a pose channel logged slower than the clock is read between its samples (restoring
-        # forces need the attitude on every row); what is left empty is a gap
+        # an attitude logged slower than the clock is filled from the gyro between its samples
+        # (restoring forces need it on every row); what is left empty is a gap
         log = fill_slow(log, self.cleaning_)
         self.gaps_ = gaps_record(find_gaps(log))
         if any(d not in log for d in DOFS) and all(a in log for a in ANGLES):
