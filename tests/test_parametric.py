@@ -658,6 +658,75 @@ def test_a_sequence_step_that_fits_a_parameter_to_noise_names_it_and_so_do_the_s
     assert model.not_excited_ == {} and "excited" not in model.params["Y_vdot"]
 
 
+@pytest.fixture(scope="module")
+def surge_and_sway(seamor):
+    return _surge_and_sway_runs(seamor)
+
+
+def _fit_said(vehicle, steps: list[dict], log: pd.DataFrame) -> tuple[ParametricModel, str]:
+    """A sequence model fitted on ``log`` and its excitation warnings, joined by " | "."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        model = ParametricModel(vehicle, sequence=steps).fit(log)
+    said = " | ".join(str(w.message) for w in caught if w.category is ExcitationWarning)
+    return model, said
+
+
+def test_a_later_step_is_said_to_rest_on_a_noise_value_only_for_the_unknowns_it_reaches(
+    seamor, surge_and_sway
+):
+    """Step 2 reads Y_vdot (fitted to v's noise in step 1) in the sway equation only; the
+    message named every unknown of step 2 after "for", M:q*abs(q) of the pitch equation too,
+    whose estimate no error of Y_vdot reaches. It names those the error reaches: the unknowns
+    of an equation that reads it, and those sharing an equation with them."""
+    steps = [
+        {"experiments": ["surge"], "dofs": ["u"], "unknowns": ["X_udot", "X:u*abs(u)", "Y_vdot"]},
+        {"experiments": ["sway"], "dofs": ["v", "q"], "unknowns": ["Y:v*abs(v)", "M:q*abs(q)"]},
+    ]
+    _, said = _fit_said(seamor, steps, surge_and_sway)
+    rested = [s for s in said.split(" | ") if s.startswith("later sequence steps take")]
+    assert len(rested) == 1
+    assert rested[0].endswith("step 2 (v, q) takes Y_vdot from step 1, for Y:v*abs(v)")
+    # through an equation: X:u*abs(u) shares surge with Y_vdot (v r), which shares sway (v̇)
+    from nnid.trainers.sequence import Step, resting_on
+
+    data = log_arrays(surge_and_sway, seamor)
+    step = Step(["surge", "sway"], ["u", "v"], [])
+    structure = ParametricFossen(seamor, ["Y:v*abs(v)"], ["u", "v"])
+    for unknowns, reached in [
+        (["X:u*abs(u)", "Y_vdot"], ["X:u*abs(u)", "Y_vdot"]),
+        (["X:u*abs(u)"], []),
+    ]:
+        assert resting_on(structure, "Y:v*abs(v)", step, data, 1.0, unknowns) == reached
+    assert resting_on(structure, "N:r*abs(r)", step, data, 1.0, ["X:u*abs(u)", "Y_vdot"]) == []
+
+
+def test_a_product_regressor_with_one_factor_at_noise_is_named_fitted_to_noise(
+    seamor, surge_and_sway
+):
+    """The surge equation reads Y_vdot through v r alone. On the surge and sway runs together v
+    moves and r stays at its noise: the column is signal times noise, and Y_vdot (s.e. 1.7
+    times its value) was fitted to r's noise. The check read Y_vdot's own velocity only, v,
+    and called it excited; it now judges each factor of the products the step's equations
+    read it through. The estimates are those least squares gave, and a later step reading
+    the value is said to rest on it."""
+    steps = [
+        {
+            "experiments": ["surge", "sway"],
+            "dofs": ["u"],
+            "unknowns": ["X_udot", "X:u*abs(u)", "Y_vdot"],
+        },
+        {"experiments": ["sway"], "dofs": ["v"], "unknowns": ["Y:v*abs(v)"]},
+    ]
+    model, said = _fit_said(seamor, steps, surge_and_sway)
+    assert "sequence steps that fit them (step 1: Y_vdot) do not excite r" in said
+    assert "step 2 (v) takes Y_vdot from step 1, for Y:v*abs(v)" in said
+    assert model.not_excited_ == {"Y_vdot": ["r"]}
+    assert model.params["Y_vdot"]["excited"] is False and model.params["Y_vdot"]["stderr"] is None
+    k = model.estimate_.names.index("Y_vdot")
+    assert model.estimate_.stderr[k] > abs(model.estimate_.theta[k])  # least squares' own
+
+
 @pytest.mark.filterwarnings("ignore:the fitted added mass N_rdot")  # refitted to r's noise
 def test_a_value_a_sequence_step_left_unidentified_is_not_plugged_into_the_later_steps(seamor):
     """Step 1 fits N_rdot from the surge equation, which does not read it (NaN, zero
@@ -735,6 +804,40 @@ def test_least_squares_says_which_rows_it_leaves_out_and_whom_only_they_read():
     assert "20 of 40 rows of the regression are left out" in said and "only they read b" in said
     assert "zero regressor" not in said and "not measured" in said
     assert est.theta[0] == pytest.approx(1.0) and np.isnan(est.theta[1])
+
+
+def test_a_parameter_only_left_out_rows_read_stays_not_measured_in_every_rebuilt_report():
+    """The "not measured" verdict lived only in the warning text of the report least squares
+    made: its rebuilders (Caccia's renaming to vehicle signs, the union of a sequence's or
+    Caccia's steps, a saved estimate read back) knew it as unexcited only and said "zero
+    regressor". The report carries it, and each of them keeps it."""
+    from nnid.evaluation.persistence import ExcitationReport, combined_excitation
+    from nnid.trainers.caccia import CacciaTwoStep
+    from nnid.trainers.least_squares import solve_least_squares
+
+    rng = np.random.default_rng(0)
+    phi = np.zeros((40, 3))
+    phi[:, [0, 2]] = rng.normal(size=(40, 2))
+    phi[20:, 1] = rng.normal(size=20)
+    y = phi @ [1.0, 2.0, 3.0]
+    y[20:] = np.nan  # only the undefined half reads the second parameter
+    trainer = CacciaTwoStep(dof="w")
+    with pytest.warns(ExcitationWarning):  # the rows left out, and whom only they read
+        trainer.steady_ = solve_least_squares(phi, y, names=["k_w", "k_w|w|", "W"])
+    signed = trainer.to_vehicle_signs(trainer.steady_)
+    union = combined_excitation([(signed.names, signed.excitation)], signed.names)
+    saved = json.loads(json.dumps(signed.excitation.as_state()))
+    for report in (
+        signed.excitation,
+        union,
+        trainer._finish(None).excitation,
+        ExcitationReport.from_state(saved),
+    ):
+        said = " | ".join(report.warnings)
+        assert "not measured" in said and "Z:w*abs(w)" in said and "zero regressor" not in said
+        assert report.not_measured == ["Z:w*abs(w)"]
+    older = {k: v for k, v in saved.items() if k != "not_measured"}
+    assert ExcitationReport.from_state(older).not_measured == []  # saved before it was kept
 
 
 def test_the_attenuation_keeps_an_infinite_bias_tagged_and_reads_older_files_null():

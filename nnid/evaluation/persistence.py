@@ -29,6 +29,10 @@ class ExcitationReport:
     unexcited: list[str]
     collinear: list[str]
     warnings: list[str] = field(default_factory=list)
+    #: the unexcited parameters whose regressor the fit had only in rows it left out (not
+    #: finite): not measured, rather than a zero regressor; kept so that a report rebuilt from
+    #: this one (:meth:`renamed`, :func:`combined_excitation`) says the same
+    not_measured: list[str] = field(default_factory=list)
 
     @property
     def persistent(self) -> bool:
@@ -45,11 +49,13 @@ class ExcitationReport:
         would match no parameter of it."""
         unexcited = [names.get(n, n) for n in self.unexcited]
         collinear = [names.get(n, n) for n in self.collinear]
+        unread = [names.get(n, n) for n in self.not_measured]
         return replace(
             self,
             unexcited=unexcited,
             collinear=collinear,
-            warnings=_verdict_warnings(unexcited, collinear, self.rank, self.n_params),
+            warnings=_verdict_warnings(unexcited, collinear, self.rank, self.n_params, unread),
+            not_measured=unread,
         )
 
     @classmethod
@@ -75,6 +81,8 @@ class ExcitationReport:
         if not isinstance(values, list) or not isinstance(groups, dict):
             raise TypeError("the excitation report's singular values are not numbers")
         what = "the excitation report's singular values"
+        # files saved before the verdict was kept have none: their warnings still say it
+        unread = names("not_measured") if "not_measured" in state else []
         return cls(
             count("n_samples"),
             count("n_params"),
@@ -85,6 +93,7 @@ class ExcitationReport:
             names("unexcited"),
             names("collinear"),
             names("warnings"),
+            unread,
         )
 
 
@@ -137,8 +146,18 @@ def excitation_from_gram(
         sub = np.linalg.eigvalsh(normed[np.ix_(cols, cols)])
         group_min[g] = float(np.sqrt(max(sub.min(), 0.0))) if sub.size else 0.0
     warnings = _verdict_warnings(unexcited, collinear, rank, p, left_out)
+    unread = [n for n in unexcited if n in left_out]
     return ExcitationReport(
-        n, p, rank, condition, [float(x) for x in sv], group_min, unexcited, collinear, warnings
+        n,
+        p,
+        rank,
+        condition,
+        [float(x) for x in sv],
+        group_min,
+        unexcited,
+        collinear,
+        warnings,
+        unread,
     )
 
 
@@ -192,10 +211,11 @@ def combined_excitation(
     unchecked = [n for n in names if n in last and last[n] not in reports]
     unexcited = [n for n in names if last.get(n) in reports and n in reports[last[n]].unexcited]
     collinear = [n for n in names if last.get(n) in reports and n in reports[last[n]].collinear]
+    unread = [n for n in unexcited if n in reports[last[n]].not_measured]
     unchecked += [n for n in names if n not in last]
     rank = len(names) - len({*unexcited, *collinear, *unchecked})
     # no rank-deficit line: there is no one regressor whose rank fell short
-    warnings = _verdict_warnings(unexcited, collinear, len(names), len(names))
+    warnings = _verdict_warnings(unexcited, collinear, len(names), len(names), unread)
     if unchecked:
         warnings.append(
             f"not checked for excitation (a part without a check): {', '.join(unchecked)}"
@@ -211,4 +231,5 @@ def combined_excitation(
         unexcited,
         collinear,
         warnings,
+        unread,
     )

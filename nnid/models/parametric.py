@@ -414,6 +414,10 @@ def unexcited_unknowns(
     names: Sequence[str],
     data: dict[str, np.ndarray],
     from_pose: tuple[Sequence[str], tuple[float, int]] | None = None,
+    *,
+    structure: ParametricFossen | None = None,
+    dofs: Sequence[str] = (),
+    filter_lambda: float | None = None,
 ) -> dict[str, list[str]]:
     """The unknowns whose regressor is a product with a velocity that stays within 3 times its
     measurement noise over the fit data (the noise from second differences,
@@ -430,7 +434,14 @@ def unexcited_unknowns(
     derivative) adds theirs from the pose noise (:func:`pose_noise_variance`) times the
     first-derivative gain (:func:`~nnid.datasets.preprocess.savgol_noise_gain`), in quadrature
     with the differences' (which see the white share, e.g. u times the heading noise in v).
-    Off-diagonal added mass and non-motion unknowns are not judged here."""
+
+    A diagonal added mass enters the other equations through the Coriolis products of
+    C_A(ν)ν (Weiss eqs 27-28), whose other factor may be the one at noise: the surge equation
+    reads ``Y_vdot`` through v r alone, so with v moving and r only noise its column is signal
+    times noise. Given the ``structure`` and the ``dofs`` equations it is fitted from (with
+    ``filter_lambda`` as fitted), its column (:func:`still_factors`) is also judged: at noise
+    when every product in it has a factor at noise. Off-diagonal added mass and non-motion
+    unknowns are not judged here."""
     from nnid.trainers.ukf import noise_level
 
     nu = np.asarray(data["nu"], dtype=np.float64)
@@ -455,7 +466,53 @@ def unexcited_unknowns(
         still = [f for f in factors if f and not moving.intersection(f)]
         if still:
             out[name] = list(dict.fromkeys(DOFS[k] for f in still for k in f))
+        elif ":" not in name and structure is not None and dofs:
+            at_noise = set(range(len(DOFS))) - moving
+            found = still_factors(structure, name, dofs, data, at_noise, filter_lambda)
+            if found:
+                out[name] = [DOFS[k] for k in found]
     return out
+
+
+#: a column that zeroing the velocities at noise leaves at most this share of (RMS) is all
+#: products with such a factor: the rest is the rounding of R(e_k) − R(0), ~1e-16 of R
+_STILL_SHARE = 1e-6
+
+
+def still_factors(
+    structure: ParametricFossen,
+    name: str,
+    dofs: Sequence[str],
+    data: dict[str, np.ndarray],
+    at_noise: set[int],
+    filter_lambda: float | None = None,
+) -> list[int]:
+    """The DOFs of ``at_noise`` (indices into :data:`DOFS`) that are factors of every product
+    in the regression column of ``name`` over the ``dofs`` equations on ``data`` (the column
+    of :func:`~nnid.trainers.sequence.step_reads`, φ_k = R(e_k) − R(0)), or [] where some
+    product has no such factor, or the column is zero. Judged numerically, as the column is
+    built: with those velocities and their accelerations set to zero the column vanishes (up to
+    rounding), and each DOF named changes it when zeroed alone."""
+    if not at_noise:
+        return []
+    sub = structure.restricted([name], dofs, {})
+
+    def column(zeroed: set[int]) -> np.ndarray:
+        cut = list(zeroed)
+        moved = {k: np.array(data[k], dtype=np.float64) for k in ("nu", "nu_dot") if k in data}
+        for v in moved.values():
+            v[:, cut] = 0.0
+        phi = sub.regression({**data, **moved}, filter_lambda).phi[:, 0]
+        return np.where(np.isfinite(phi), phi, 0.0)  # rows least squares leaves out
+
+    def rms(x: np.ndarray) -> float:
+        return float(np.sqrt(np.mean(x**2))) if x.size else 0.0
+
+    whole = column(set())
+    size = rms(whole)
+    if size == 0.0 or rms(column(at_noise)) > _STILL_SHARE * size:
+        return []
+    return [k for k in sorted(at_noise) if rms(whole - column({k})) > _STILL_SHARE * size]
 
 
 def _pose_velocity_noise(
@@ -1010,7 +1067,7 @@ class ParametricModel(FossenPlant):
         self.trainer_ = trainer
         self.parts_ = self.structure_.parts(np.nan_to_num(self.estimate_.theta))
         steps = self._step_data(data, dofs, unknowns)
-        by_step = self._not_excited(steps)
+        by_step = self._not_excited(steps, getattr(trainer, "filter_lambda", None))
         self.not_excited_ = self._last_verdicts(steps, by_step)
         if self.not_excited_:
             from nnid.trainers.least_squares import ExcitationWarning
@@ -1127,15 +1184,23 @@ class ParametricModel(FossenPlant):
         ]
 
     def _not_excited(
-        self, steps: list[tuple[Any, dict[str, np.ndarray]]]
+        self, steps: list[tuple[Any, dict[str, np.ndarray]]], filter_lambda: float | None = None
     ) -> list[dict[str, list[str]]]:
-        """:func:`unexcited_unknowns` of each step's unknowns on its own experiments. On the
-        whole log of a sequence a sway run moved v, while the surge step fitted Y_vdot, which
-        its equation reads through v r only, to v's noise (a regressor of noise times noise,
-        which Weiss eq. 95 does not see): its s.e. 258 % of it, and no check named it."""
+        """:func:`unexcited_unknowns` of each step's unknowns on its own experiments, from the
+        step's equations (fitted with ``filter_lambda``). On the whole log of a sequence a sway
+        run moved v, while the surge step fitted Y_vdot, which its equation reads through v r
+        only, to v's noise (a regressor of noise times noise, which Weiss eq. 95 does not
+        see): its s.e. 258 % of it, and no check named it."""
         from_pose = self._from_pose()
         return [
-            unexcited_unknowns([canonical_parameter(n) for n in step.unknowns], subset, from_pose)
+            unexcited_unknowns(
+                [canonical_parameter(n) for n in step.unknowns],
+                subset,
+                from_pose,
+                structure=self.structure_,
+                dofs=step.dofs,
+                filter_lambda=filter_lambda,
+            )
             for step, subset in steps
         ]
 
@@ -1159,11 +1224,12 @@ class ParametricModel(FossenPlant):
         unidentified: list[list[str]] | None = None,
     ) -> list[str]:
         """Each later step of a sequence that takes as known a value an earlier step fitted to
-        noise (:meth:`_not_excited`) and whose equations read it (its column is not all zero
-        on the later step's runs, :func:`~nnid.trainers.sequence.step_reads`), said as "step j
-        (dofs) takes NAME from step k, for ...". A value a step left NaN (``unidentified``,
-        per step) is not taken: the later steps read the vehicle file's, as the sequence says."""
-        from nnid.trainers.sequence import step_label, step_reads
+        noise (:meth:`_not_excited`) and whose estimates rest on it (the unknowns its equations
+        read it beside, or joined to those through an equation, on the later step's runs:
+        :func:`~nnid.trainers.sequence.resting_on`), said as "step j (dofs) takes NAME from
+        step k, for" those. A value a step left NaN (``unidentified``, per step) is not taken:
+        the later steps read the vehicle file's, as the sequence says."""
+        from nnid.trainers.sequence import resting_on, step_label
 
         said = []
         source: dict[str, int] = {}  # the step whose value a parameter holds so far
@@ -1172,10 +1238,11 @@ class ParametricModel(FossenPlant):
             for name, k in source.items():
                 if name in names or name not in by_step[k]:
                     continue
-                if step_reads(self.structure_, name, step, subset, filter_lambda):
+                rest = resting_on(self.structure_, name, step, subset, filter_lambda, names)
+                if rest:  # read only where no unknown is: no estimate of the step moves with it
                     said.append(
                         f"{step_label(j, step)} takes {name} from step {k + 1}, "
-                        f"for {', '.join(names)}"
+                        f"for {', '.join(rest)}"
                     )
             source.update(dict.fromkeys(names, j))
             for name in [] if unidentified is None else unidentified[j]:

@@ -82,14 +82,49 @@ def step_label(k: int, step: Step) -> str:
     return f"step {k + 1} ({', '.join(step.dofs)})"
 
 
+def step_equations(
+    structure, name: str, step: Step, data: dict[str, np.ndarray], filter_lambda: float | None
+) -> list[str]:
+    """The DOFs of ``step`` whose equations read parameter ``name`` on its runs ``data``: its
+    regression column (``structure.restricted([name], ...)``, Weiss eqs 99-108) is not all
+    zero in their rows there (NaN counts: an undefined entry still reads it)."""
+    reg = structure.restricted([name], step.dofs, {}).regression(data, filter_lambda)
+    rows = reg.phi[:, 0].reshape(-1, len(step.dofs))  # sample-major, one row per equation
+    return [d for d, read in zip(step.dofs, np.any(rows != 0, axis=0), strict=True) if read]
+
+
 def step_reads(
     structure, name: str, step: Step, data: dict[str, np.ndarray], filter_lambda: float | None
 ) -> bool:
-    """Whether the equations of ``step`` read parameter ``name`` on its runs ``data``: its
-    regression column (``structure.restricted([name], ...)``, Weiss eqs 99-108) is not all
-    zero there, so the value the step takes for it enters its estimates."""
-    reg = structure.restricted([name], step.dofs, {}).regression(data, filter_lambda)
-    return bool(np.any(reg.phi != 0))
+    """Whether the equations of ``step`` read parameter ``name`` on its runs ``data``
+    (:func:`step_equations`), so that the value the step takes for it enters its estimates."""
+    return bool(step_equations(structure, name, step, data, filter_lambda))
+
+
+def resting_on(
+    structure,
+    name: str,
+    step: Step,
+    data: dict[str, np.ndarray],
+    filter_lambda: float | None,
+    unknowns: Sequence[str],
+) -> list[str]:
+    """The ``unknowns`` of ``step`` whose estimates rest on the value it takes for ``name``:
+    those its equations read where they read ``name`` (:func:`step_equations`; that value's
+    error is in their targets), and those sharing an equation with one of them (least squares
+    solves them together, so the error reaches them through it). [] where no equation reads
+    ``name``."""
+    reached = set(step_equations(structure, name, step, data, filter_lambda))
+    reads = {n: set(step_equations(structure, n, step, data, filter_lambda)) for n in unknowns}
+    out: set[str] = set()
+    grew = bool(reached)
+    while grew:  # the equations the error reaches, through the unknowns that join them
+        joined = {n for n, eqs in reads.items() if eqs & reached} - out
+        out |= joined
+        grew = bool(joined)
+        for n in joined:
+            reached |= reads[n]
+    return [n for n in unknowns if n in out]
 
 
 def sequence_steps(sequence: str | Sequence[Step | Mapping]) -> list[Step]:
