@@ -97,3 +97,145 @@ def test_a_declared_log_is_not_guessed_at_again_by_its_slices():
     assert said.startswith("t read as seconds") and declared["t"].equals(df["t"])
     check_time_unit(declared.iloc[10:30].reset_index(drop=True))
     check_time_unit(declared[["t", "u"]].copy())
+
+
+def _mapped(tmp_path: Path, source: str = "", rate: str = "") -> Path:
+    """A 1-Hz log whose stamps step by whole seconds, read through a reader config whose one
+    source adds the ``source`` lines (a time_unit, a time_scale) after its time column."""
+    _write(tmp_path / "nav.csv", np.arange(60))
+    cmap = tmp_path / "map.toml"
+    columns = "".join(f'{c} = "{c}"\n' for c in COLUMNS)
+    cmap.write_text(
+        f'name = "m"\n{rate}[[sources]]\nfile = "nav.csv"\ntime = "t"\n{source}'
+        f"[sources.columns]\n{columns}"
+    )
+    return cmap
+
+
+def test_a_reader_config_source_declares_its_time_unit(tmp_path):
+    """time_scale = 1.0 is the default and declares nothing, and --time-unit is refused beside
+    a reader config: a 1-Hz source stepping by whole seconds had no way through. A source's
+    time_unit declares it (converted as --time-unit converts, said, not guessed at)."""
+    with pytest.raises(NnidInputError, match="time_unit") as err:
+        load_log(tmp_path, _mapped(tmp_path))
+    assert err.value.field == "sources.0.time_scale" and err.value.source.endswith("map.toml")
+    for rate in ("", "rate = 1.0\n"):  # the grid at 1 Hz, from the source or from rate
+        log, report = load_log(tmp_path, _mapped(tmp_path, 'time_unit = "s"\n', rate))
+        np.testing.assert_array_equal(log["t"].to_numpy()[:3], [0.0, 1.0, 2.0])
+        said = [s.detail for s in report.steps if s.step == "time unit"]
+        assert any("nav.csv: t read as seconds, as declared" in d for d in said)
+        check_time_unit(log.iloc[5:40])  # the log's slices are not guessed at later either
+    log, _ = load_log(tmp_path, _mapped(tmp_path, 'time_unit = "ms"\n'))
+    assert log["t"].iloc[1] == pytest.approx(0.001)
+
+
+@pytest.mark.parametrize(
+    ("lines", "field", "words"),
+    [
+        ('time_unit = "min"\n', "sources.0.time_unit", "s, ms, us, ns"),
+        ('time_unit = "ms"\ntime_scale = 0.001\n', "sources.0", "give one"),
+        ('time_unit = "s"\nrow_clock = 1.0\n', "sources.0", "row_clock"),
+    ],
+)
+def test_a_reader_config_time_unit_is_checked_naming_the_file_and_key(
+    tmp_path, lines, field, words
+):
+    with pytest.raises(NnidInputError, match=words) as err:
+        load_log(tmp_path, _mapped(tmp_path, lines))
+    assert err.value.field == field and err.value.source.endswith("map.toml")
+
+
+def test_a_partly_declared_reader_config_is_refused_naming_the_reader_config(tmp_path):
+    """One source declared, a second (commands held, whose steps are not judged) not: the 1-Hz
+    log is refused at its grid naming the sources' time_unit, not --time-unit (refused here)."""
+    cmap = _mapped(tmp_path, 'time_unit = "s"\n')
+    pd.read_csv(tmp_path / "nav.csv").rename(columns={"tau_X": "thrust"}).to_csv(
+        tmp_path / "cmd.csv", index=False
+    )
+    body = cmap.read_text().replace('tau_X = "tau_X"\n', "")
+    body += '[[sources]]\nfile = "cmd.csv"\ntime = "t"\nmethod = "hold"\n'
+    body += '[sources.columns]\ntau_X = "thrust"\n'
+    cmap.write_text(body)
+    with pytest.raises(NnidInputError, match="every source's time_unit") as err:
+        load_log(tmp_path, cmap)
+    assert err.value.source.endswith("map.toml") and "--time-unit" not in err.value.message
+    cmap.write_text(body.replace('method = "hold"', 'method = "hold"\ntime_unit = "s"'))
+    assert load_log(tmp_path, cmap)[0]["t"].iloc[-1] == 59.0
+
+
+def test_a_batch_manifest_declares_the_time_unit_of_every_log(tmp_path, monkeypatch):
+    """nnid batch had no way to declare a unit: a 1-Hz log stepping by whole seconds failed
+    in every task. The manifest's time_unit is each task's --time-unit (the loop itself is
+    stood in for: the task runs everything up to it, the log's loading among it)."""
+    from nnid import runs
+    from nnid.scale.batch import run_tasks
+    from nnid.scale.engines import SerialEngine
+    from nnid.scale.manifest import expand
+
+    def loop_on(log, *args, **kwargs):
+        return runs.Outcome(headline={"t_end": float(log["t"].max()), "samples": len(log)})
+
+    monkeypatch.setattr(runs, "residual_loop_run", loop_on)
+    demo = Path(__file__).resolve().parents[1] / "nnid" / "demo_data"
+    log = pd.read_parquet(demo / "demo_minirov_heave.parquet")
+    log = log[log["experiment"].isin(log["experiment"].unique()[:2])].groupby("experiment")
+    log = log.head(100)
+    log.assign(t=(log["t"] * 20).round()).to_csv(tmp_path / "hz1.csv", index=False)  # 1 Hz
+    head = f'command = "loop"\nvehicle = "{demo / "minirov.toml"}"\ndata = "hz1.csv"\n'
+    manifest = tmp_path / "fleet.toml"
+    manifest.write_text(head)
+    (undeclared,) = expand(manifest)
+    (row,) = run_tasks([undeclared], tmp_path / "a", SerialEngine()).rows
+    assert row["status"] == "failed" and "looks like milliseconds" in row["error"]
+    assert "a batch manifest's time_unit" in " ".join(row["error"].split())
+    manifest.write_text(head + 'time_unit = "s"\n')
+    (declared,) = expand(manifest)
+    assert declared.time_unit == "s" and declared.id != undeclared.id
+    (row,) = run_tasks([declared], tmp_path / "b", SerialEngine()).rows
+    assert row["status"] == "ok", row["error"]
+    assert row["time_unit"] == "s" and (row["t_end"], row["samples"]) == (99.0, 200)
+
+
+@pytest.mark.parametrize(
+    ("line", "words"),
+    [('time_unit = "sec"', "s, ms, us, ns"), ('columns = "map.toml"\ntime_unit = "s"', "reader")],
+)
+def test_a_batch_manifest_time_unit_is_checked_before_any_task(tmp_path, line, words):
+    """An unknown unit, or one beside a reader config (which declares its sources' own), is
+    one error naming the manifest and its key (exit 2), not a failure in every task."""
+    _write(tmp_path / "a.csv", np.arange(50) * 0.1)
+    (tmp_path / "map.toml").write_text('name = "m"\n[[sources]]\nfile = "a.csv"\ntime = "t"\n')
+    manifest = tmp_path / "fleet.toml"
+    manifest.write_text(f'command = "loop"\nvehicle = "seamor"\ndata = "a.csv"\n{line}\n')
+    res = CliRunner().invoke(app, ["batch", str(manifest), "--out", str(tmp_path / "out")])
+    said = " ".join(res.output.split())
+    assert res.exit_code == 2 and "fleet.toml" in said and "'time_unit'" in said
+    assert words in said and not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize(
+    ("command", "config", "runner"),
+    [
+        ("train", "fossen_ls.toml", "train_run"),
+        ("compare", "vt690_compare.toml", "compare_run"),
+        ("detect", None, "detect_run"),
+    ],
+)
+def test_every_batch_command_gets_the_manifests_time_unit(monkeypatch, command, config, runner):
+    """train, compare and detect tasks pass the manifest's unit on as their --time-unit."""
+    import inspect
+
+    from nnid import runs
+    from nnid.scale.manifest import Task
+    from nnid.scale.task import _run
+
+    real = getattr(runs, runner)
+    got = {}
+    monkeypatch.setattr(
+        runs, runner, lambda *a, **k: got.update(inspect.signature(real).bind(*a, **k).arguments)
+    )
+    configs = Path(__file__).resolve().parents[1] / "configs"
+    task = Task(command, "log.csv", config=config and str(configs / config), model="det",
+                time_unit="ms")  # fmt: skip
+    _run(task, Path("out"))
+    assert got["time_unit"] == "ms"

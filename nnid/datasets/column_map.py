@@ -18,7 +18,11 @@ vehicle = "bluerov1_liu.toml" # optional vehicle file, relative to this file
 [[sources]]
 file = "thrusters.csv.gz"     # a path or glob under root (or a bag topic, an ArduPilot message)
 time = "t_unix_s"             # time column
-time_scale = 1.0              # to seconds (1e-9 for nanoseconds)
+time_scale = 1.0              # to seconds (1e-9 for nanoseconds); the default 1.0 declares
+                              # nothing: the unit is still guessed from the steps
+time_unit = "s"               # optional: declares the time column's unit (s, ms, us, ns),
+                              # converted to seconds and not guessed from its steps (a 1-Hz
+                              # logger stepping by whole seconds); not with another time_scale
 row_clock = 20.0              # optional, Hz: t = row number within the experiment / row_clock,
                               # for a time column too coarse to use (an hhmmss clock); time is
                               # then still read but only the row order counts
@@ -40,9 +44,10 @@ import re
 from pathlib import Path
 from typing import Literal
 
-from pydantic import Field, field_validator
+from pydantic import Field, field_validator, model_validator
 
-from nnid.datasets.log import ACCELERATION, ANGLES, POSE, TAU, VELOCITY
+from nnid.datasets.log import ACCELERATION, ANGLES, POSE, TAU, VELOCITY, checked_time_unit
+from nnid.errors import NnidInputError
 from nnid.validation import StrictModel
 
 UNITS = {"rad": 1.0, "deg": 0.017453292519943295, "rad/s": 1.0, "deg/s": 0.017453292519943295,
@@ -92,12 +97,45 @@ class Source(StrictModel):
     file: str
     time: str
     time_scale: float = Field(1.0, gt=0)
+    #: the declared unit of ``time`` (one of :data:`~nnid.datasets.log.TIME_UNITS`): the
+    #: default ``time_scale`` of 1.0 cannot tell "seconds, as declared" from "not said"
+    time_unit: str | None = None
     row_clock: float | None = Field(None, gt=0)
     method: Literal["hold", "linear"] = "linear"
     hold_timeout: float | None = Field(None, gt=0)
     frame: Literal["ned_frd", "enu_flu"] = "ned_frd"
     quaternion: list[str] = Field(default_factory=list)
     columns: dict[str, str | ColumnSpec] = Field(default_factory=dict)
+
+    @field_validator("time_unit")
+    @classmethod
+    def _time_unit(cls, unit: str | None) -> str | None:
+        if unit is None:
+            return unit
+        try:
+            return checked_time_unit(unit)
+        except NnidInputError as err:  # said by pydantic against sources.N.time_unit
+            raise ValueError(err.message) from None
+
+    @model_validator(mode="after")
+    def _one_clock_declaration(self) -> Source:
+        # two scalings of one clock would multiply; a row clock reads no time unit at all
+        if self.time_unit is not None and self.time_scale != 1.0:
+            raise ValueError(
+                f"time_unit = {self.time_unit!r} and time_scale = {self.time_scale:g} both scale "
+                'the time column: give one (time_unit = "ms" is time_scale = 0.001)'
+            )
+        if self.time_unit is not None and self.row_clock is not None:
+            raise ValueError(
+                "time_unit declares the time column's unit, which row_clock does not read "
+                "(t is the row number / row_clock, in seconds): give one"
+            )
+        return self
+
+    def declares_clock(self) -> bool:
+        """Whether the source's clock is in seconds by declaration (``time_unit``, or a
+        ``row_clock`` in Hz), so that its steps are not guessed at."""
+        return self.time_unit is not None or self.row_clock is not None
 
     @field_validator("quaternion")
     @classmethod

@@ -44,7 +44,8 @@ REPLAY_GROUP = "replay_group"
 #: optional column: the run a piece was cut from at a gap (``mask_gaps``, ``resample``, the
 #: readers), empty for a whole run; a piece is told by it, never by its experiment's label
 PIECE_OF = "piece_of"
-#: the units a log's ``t`` may be declared in (``--time-unit``, ``[data] time_unit``): name
+#: the units a log's ``t`` may be declared in (``--time-unit``, ``[data] time_unit``, a batch
+#: manifest's ``time_unit``, a reader config source's ``time_unit``): name
 #: and how many make a second
 TIME_UNITS: dict[str, tuple[str, float]] = {
     "s": ("seconds", 1.0),
@@ -58,8 +59,8 @@ TIME_UNITS: dict[str, tuple[str, float]] = {
 TIME_UNIT_ATTR = "time_unit"
 #: how a time unit is declared, named where the guess refuses one
 DECLARE_TIME_UNIT = (
-    "if it is, or to have it converted, declare t's unit with --time-unit or the config's "
-    "[data] time_unit (s, ms, us, ns)"
+    "if it is, or to have it converted, declare t's unit with --time-unit, the config's "
+    "[data] time_unit or a batch manifest's time_unit (s, ms, us, ns)"
 )
 
 
@@ -927,7 +928,9 @@ def declare_time_unit(df: pd.DataFrame, unit: str) -> tuple[pd.DataFrame, str]:
     return out, said
 
 
-def check_time_unit(df: pd.DataFrame, source: str | None = None) -> None:
+def check_time_unit(
+    df: pd.DataFrame, source: str | None = None, declare: str = DECLARE_TIME_UNIT
+) -> None:
     """Time in seconds: a median step of 5 to 1000 looks like milliseconds (whole, computed in
     floating point, or a logger's jittered stamps; no vehicle's dynamics are sampled every 5 s),
     one over 1000 like microseconds (10 Hz to under 1 kHz), one of 10⁵ or more like micro- or
@@ -941,7 +944,8 @@ def check_time_unit(df: pd.DataFrame, source: str | None = None) -> None:
     log; a median of 1000 with other steps (a jittered 1-Hz logger's) as milliseconds.
 
     Only the user knows which such a clock is: a log whose unit was declared
-    (:func:`declare_time_unit`) is not guessed at, and the refusal names how to declare it."""
+    (:func:`declare_time_unit`) is not guessed at, and the refusal names how to declare it
+    (``declare``: a reader config's log is declared in the reader config)."""
     if df.attrs.get(TIME_UNIT_ATTR):
         return
     within = None
@@ -950,9 +954,7 @@ def check_time_unit(df: pd.DataFrame, source: str | None = None) -> None:
         within = codes[1:] == codes[:-1]
     slip = time_unit_slip(df["t"].to_numpy(dtype=np.float64), within)
     if slip:
-        raise NnidInputError(
-            f"{slip}; t must be seconds: {DECLARE_TIME_UNIT}", source=source, field="t"
-        )
+        raise NnidInputError(f"{slip}; t must be seconds: {declare}", source=source, field="t")
 
 
 def time_unit_slip(t: np.ndarray, within: np.ndarray | None = None) -> str | None:

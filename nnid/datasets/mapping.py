@@ -17,7 +17,14 @@ from scipy.spatial.transform import Rotation
 
 from nnid.datasets.cleaning import CleaningReport
 from nnid.datasets.column_map import ColumnMap, Source
-from nnid.datasets.log import ANGLES, CONTRACT, blank_labels, looks_like_degrees, refuse_rows
+from nnid.datasets.log import (
+    ANGLES,
+    CONTRACT,
+    blank_labels,
+    declare_time_unit,
+    looks_like_degrees,
+    refuse_rows,
+)
 from nnid.errors import NnidInputError
 from nnid.validation import shown
 
@@ -210,6 +217,9 @@ def map_source(
         out["t"] = clock.loc[raw.index].to_numpy()
     else:
         out["t"] = values[source.time].to_numpy(dtype=np.float64) * source.time_scale
+        if source.time_unit is not None:  # declared: converted and said as a log's --time-unit
+            out, said = declare_time_unit(out, source.time_unit)
+            report.add("time unit", f"{origin}: {said}", columns=["t"])
     if experiment == "file":
         out["experiment"] = file_label(origin)
     elif keys:

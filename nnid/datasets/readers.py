@@ -29,6 +29,7 @@ from nnid.datasets.log import (
     MAX_RUN_SAMPLES,
     PIECE_OF,
     REPLAY_GROUP,
+    check_time_unit,
     checked_time_unit,
     declare_time_unit,
     time_unit_slip,
@@ -310,6 +311,14 @@ def assemble(
             source=cmap.name,
         )
     log = pd.concat(pieces, ignore_index=True)
+    if all(s.declares_clock() for s in cmap.sources):
+        # every clock in seconds as declared: the grid is too (rate is in Hz), and a 1-Hz
+        # one is not refused as milliseconds (validate_log's guess is skipped)
+        log, _ = declare_time_unit(log, "s")
+        said = "every source's clock is declared (time_unit or row_clock): t not guessed at"
+        report.add("time unit", said, columns=["t"])
+    else:  # the guess, naming the reader config's declaration (--time-unit is refused here)
+        check_time_unit(log, cmap.name, DECLARE_SOURCE_TIME_UNIT)
     if cmap.replays:
         runs = list(dict.fromkeys(log["experiment"]))
         origin = log.groupby("experiment", sort=False)[PIECE_OF].first() if PIECE_OF in log else {}
@@ -324,6 +333,13 @@ def assemble(
                 f"({', '.join(members)}); a split keeps them on one side",
             )
     return log
+
+
+#: how the unit of a reader config's clock is declared, named where the guess refuses its log
+DECLARE_SOURCE_TIME_UNIT = (
+    "if it is, declare every source's time_unit in the reader config (s, ms, us, ns), or set "
+    "a source's time_scale (0.001 for milliseconds)"
+)
 
 
 def _clock(parts: list[tuple[Source, pd.DataFrame]], cmap: ColumnMap, exp: str) -> float:
@@ -342,11 +358,13 @@ def _clock(parts: list[tuple[Source, pd.DataFrame]], cmap: ColumnMap, exp: str) 
             f"no source of '{exp}' has two distinct time stamps: give rate", source=cmap.name,
             field="rate",
         )  # fmt: skip
-    slip = time_unit_slip(t) if timed else None
+    slip = time_unit_slip(t) if timed and not source.declares_clock() else None
     if slip:
         i = cmap.sources.index(source)
         raise NnidInputError(
-            f"source '{source.file}': {slip}: set its time_scale (0.001 for milliseconds)",
+            f"source '{source.file}': {slip}: set its time_scale (0.001 for milliseconds), "
+            'or declare its time_unit (s, ms, us, ns: "s" for a logger stepping by whole '
+            "seconds)",
             source=cmap.name,
             field=f"sources.{i}.time_scale",
         )
@@ -482,8 +500,9 @@ def load_log(
     sources name topics or message types. ``time_unit`` declares the unit of a contract log's
     ``t`` (one of :data:`~nnid.datasets.log.TIME_UNITS`): converted to seconds, said in the
     cleaning report, and not guessed from its steps; a reader config gives its sources' units
-    itself (``time_scale``). ``time_unit_field``: what an error about it names (the CLI option
-    or the config key). Returns the validated log and the cleaning report.
+    itself (each source's ``time_unit`` or ``time_scale``). ``time_unit_field``: what an error
+    about it names (the CLI option or the config key). Returns the validated log and the
+    cleaning report.
     """
     if time_unit is not None:
         checked_time_unit(time_unit, time_unit_field)
@@ -492,7 +511,8 @@ def load_log(
             how = f"the reader config {columns}" if columns is not None else "its reader config"
             raise NnidInputError(
                 f"declares the time unit of a log in nnid's columns; {how} gives each "
-                "source's unit with its time_scale (0.001 for milliseconds)",
+                "source's unit with its time_unit (s, ms, us, ns) or time_scale (0.001 for "
+                "milliseconds)",
                 field=time_unit_field,
             )
     special = _log_reader(Path(path))

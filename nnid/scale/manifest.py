@@ -8,6 +8,7 @@ A manifest is TOML, paths relative to its own folder::
     vehicle = "minirov.toml"         # a preset or a path, or a list of them
     config = "loop.toml"             # optional where the command has defaults; or a list
     pair = "product"                 # product (every log x vehicle x config) or zip
+    time_unit = "s"                  # optional: the unit of every log's t (--time-unit)
 
 A task is one run of the command on one log with one vehicle, config (and, for ``detect``, one
 detection model). Its id is stable: the log's stem and a hash of the *contents* of every input
@@ -91,6 +92,9 @@ class Manifest(StrictModel):
     config: list[str] = Field(default_factory=list)
     model: list[str] = Field(default_factory=list)  # detect: folders of detection models
     columns: str | None = None  # one reader config for every log
+    # the unit of every log's t, as each command's --time-unit (a reader config declares its
+    # sources' units itself)
+    time_unit: str | None = None
     pair: Literal["product", "zip"] = "product"
     options: Options = Field(default_factory=Options)  # loop: dofs, alpha...; detect: window
 
@@ -98,6 +102,24 @@ class Manifest(StrictModel):
     @classmethod
     def _listed(cls, value: Any) -> Any:
         return [value] if isinstance(value, str) else value
+
+    @field_validator("time_unit")
+    @classmethod
+    def _time_unit(cls, unit: str | None, info: ValidationInfo) -> str | None:
+        from nnid.datasets.log import checked_time_unit
+
+        if unit is None:
+            return unit
+        try:
+            checked_time_unit(unit)
+        except NnidInputError as err:
+            raise ValueError(err.message) from None
+        if info.data.get("columns"):  # refused in every task at run time, else
+            raise ValueError(
+                "declares the unit of logs in nnid's columns; the reader config in 'columns' "
+                "declares each source's unit itself (its time_unit or time_scale)"
+            )
+        return unit
 
     @field_validator("options")
     @classmethod
@@ -129,11 +151,13 @@ class Task:
     columns: str | None = None
     options: dict[str, Any] = field(default_factory=dict)
     overrides: dict[str, Any] = field(default_factory=dict)
+    time_unit: str | None = None  # the unit of the log's t (the manifest's time_unit)
     id: str = ""
 
     def inputs(self) -> dict[str, Any]:
         """The task's inputs as a summary row's columns."""
-        row = {k: v for k, v in asdict(self).items() if k not in ("options", "overrides", "id")}
+        skip = ("options", "overrides", "id") + (() if self.time_unit else ("time_unit",))
+        row = {k: v for k, v in asdict(self).items() if k not in skip}
         row["options"] = json.dumps(self.options, sort_keys=True) if self.options else None
         row["overrides"] = json.dumps(self.overrides, sort_keys=True) if self.overrides else None
         return row
@@ -212,6 +236,8 @@ def task_id(task: Task) -> str:
         "options": task.options,
         "overrides": task.overrides,
     }
+    if task.time_unit:  # only when declared: the ids of the tasks without one stay as they were
+        settings["time_unit"] = task.time_unit
     h.update(json.dumps(settings, sort_keys=True, default=str).encode())
     for path in (task.data, task.vehicle, task.config, task.model, task.columns):
         _digest(path, h)
@@ -342,7 +368,9 @@ def expand(path: str | Path) -> list[Task]:
     tasks: dict[str, Task] = {}
     for log, veh, cfg, model in combos:
         options = spec.options.model_dump(exclude_unset=True)
-        task = with_id(Task(spec.command, log, veh, cfg, model, columns, options))
+        task = with_id(
+            Task(spec.command, log, veh, cfg, model, columns, options, time_unit=spec.time_unit)
+        )
         first = tasks.setdefault(task.id, task)
         if first != task:  # other paths, one id: a copy of the same name and contents
             _say_merged(first, task, source)

@@ -40,11 +40,11 @@ def _run(task: Task, out_dir: Path, progress: Progress | None = None):
     if task.command == "train":
         cfg = load_config(config, TrainConfig, task.overrides)
         return runs.train_run(cfg, config, out_dir, task.data or None, task.vehicle,
-                              task.columns, progress)  # fmt: skip
+                              task.columns, progress, task.time_unit)  # fmt: skip
     if task.command == "compare":
         cfg = load_config(config, CompareConfig, task.overrides)
         return runs.compare_run(cfg, config, out_dir, task.data or None, task.vehicle,
-                                task.columns, progress)  # fmt: skip
+                                task.columns, progress, task.time_unit)  # fmt: skip
     if task.command == "loop":
         cfg = load_config(config, LoopConfig, task.overrides) if config else LoopConfig()
         options = dict(task.options)
@@ -52,11 +52,12 @@ def _run(task: Task, out_dir: Path, progress: Progress | None = None):
             if isinstance(options.get(key), list):
                 options[key] = ",".join(options[key])
         return runs.loop_run(cfg, config, out_dir, task.data or None, task.vehicle,
-                             task.columns, progress=progress, **options)  # fmt: skip
+                             task.columns, progress=progress, time_unit=task.time_unit,
+                             **options)  # fmt: skip
     if task.command == "detect":
         window = task.options.get("window")
         return runs.detect_run(Path(task.model), task.data, out_dir, task.columns, window,
-                               progress)  # fmt: skip
+                               progress, task.time_unit)  # fmt: skip
     raise NnidInputError(f"unknown command '{task.command}'", field="command")
 
 
