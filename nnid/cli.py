@@ -166,7 +166,7 @@ def inspect(
     from rich.table import Table
 
     from nnid.config import VehicleData
-    from nnid.datasets.gaps import SlowChannel
+    from nnid.datasets.gaps import SlowChannel, say_ends
     from nnid.datasets.inspect import summarize
     from nnid.datasets.readers import load_log
     from nnid.physics.dofs import DOFS
@@ -201,13 +201,14 @@ def inspect(
         + (f" (longest {max(g['length_s'] for g in gaps):.3g} s)" if gaps else "")
     )
     for ch in info["slow"]:
-        slow = SlowChannel(**{k: v for k, v in ch.items() if k != "filled"})
+        slow = SlowChannel(**{k: v for k, v in ch.items() if k not in ("filled", "ends")})
         how = (
             "filled between its samples with the gyro where a fit needs it on every row"
             if ch["filled"]
-            else "not filled: bridged from the pose or masked where used"
+            else "not filled: bridged from the pose where it allows, else a fit refuses it"
         )
-        out.print(f"  slow          {slow.describe()} ({how})", highlight=False)
+        ends = f"; {say_ends(ch['ends'])}" if ch["ends"] else ""
+        out.print(f"  slow          {slow.describe()} ({how}){ends}", highlight=False)
     missing = info["missing"]
     if missing["count"]:
         cols = sorted({c for g in missing["gaps"] for c in g["columns"]}, key=list(log).index)

@@ -501,12 +501,14 @@ def make_split(
     source: str = "",
     report: CleaningReport | None = None,
     warmup_s: float = 0.0,
+    log_source: str | None = None,
 ) -> Split:
     """The split a config asks for: named experiments (the rest trains) or fractions. A split
     with nothing to validate on is an error: scores on training data are not validation; so
     is one whose held-out runs are all no longer than the scores' warm-up ``warmup_s``.
     Motion gaps are masked in each part after the split, so they never move it
-    (:func:`nnid.datasets.gaps.mask_gaps`, reported in ``report``)."""
+    (:func:`nnid.datasets.gaps.mask_gaps`, reported in ``report``); a channel logged slower
+    than the clock there is refused, naming ``log_source``."""
     assignment = None
     named = [p for p in PARTS if getattr(s, p) is not None]  # test = [] says: no test part
     if named and s.by != "experiment":  # they would be ignored
@@ -554,7 +556,10 @@ def make_split(
     if report is not None and split.record.get("missed"):
         report.add("split", split.record["missed"])
     motion = [c for c in (*POSE, *VELOCITY, *ACCELERATION) if c in log]
-    parts = mask_gaps([split.train, split.validation, split.test], motion, report)
+    try:
+        parts = mask_gaps([split.train, split.validation, split.test], motion, report)
+    except NnidInputError as exc:  # a slow channel: said against the log (``log_source``)
+        raise exc.with_source(log_source) if log_source else exc from None
     split = Split(*parts, split.record)
     if len(split.train) == 0:
         raise NnidInputError("the training split is empty", source=source, field="split")
@@ -772,7 +777,7 @@ def run_train(
     inputs, loaded = loaded_inputs(
         cfg, config_path, [cfg.model], data, vehicle, columns, time_unit=time_unit
     )
-    split = make_split(inputs.log, cfg.split, source, inputs.report, cfg.warmup_s)
+    split = make_split(inputs.log, cfg.split, source, inputs.report, cfg.warmup_s, inputs.source)
     model = build_model(cfg.model, inputs, cfg.warmup_s)
     replay = replay_of(inputs, inputs.log)
     caught = fit_model(model, split, progress or silent, "model", cfg.model, replay)
@@ -962,7 +967,7 @@ def run_compare(
     inputs, said = loaded_inputs(
         cfg, config_path, list(cfg.models), data, vehicle, columns, time_unit=time_unit
     )
-    split = make_split(inputs.log, cfg.split, source, inputs.report, cfg.warmup_s)
+    split = make_split(inputs.log, cfg.split, source, inputs.report, cfg.warmup_s, inputs.source)
     check_held_stepped(inputs, split, [m.fitted for m in cfg.models])
     held_name = "test" if len(split.test) else "validation"
     held = split[held_name]

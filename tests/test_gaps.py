@@ -307,8 +307,8 @@ def _slow(log: pd.DataFrame, columns: list[str], k: int) -> pd.DataFrame:
 
 def test_inspect_says_a_slow_channel_is_its_rate_not_hundreds_of_gaps(tmp_path):
     """z kept on every 10th row was said as '36 gaps in z … masked where used': a sensor at
-    2 Hz beside 20 Hz ones, not dropouts. Only what it leaves empty past its last sample is
-    a gap."""
+    2 Hz beside 20 Hz ones, not dropouts. The 9 rows after its last sample were then said as
+    '1 gap in z (9 samples …)': they are outside its sampled span, and said so."""
     from typer.testing import CliRunner
 
     from nnid.cli import app
@@ -319,7 +319,9 @@ def test_inspect_says_a_slow_channel_is_its_rate_not_hundreds_of_gaps(tmp_path):
     assert done.exit_code == 0, done.output
     said = " ".join(done.output.split())
     assert "slow z logged every 10th row: 2 Hz against 20 Hz (not filled" in said
-    assert "1 gap in z (9 samples" in said  # after its last sample: a gap, as before
+    # after its last sample (row 390 of 400): outside its span, said so, and no gap
+    assert "its samples end at t = 19.5 s: 9 rows after its last sample" in said
+    assert "missing" not in said
 
 
 def test_a_fit_on_a_slow_attitude_gives_the_full_logs_estimates(tmp_path):
@@ -380,3 +382,86 @@ def test_a_slow_yaw_is_filled_where_the_gyro_has_samples_and_kept_in_the_logs_ra
     assert out["psi"].max() < 2 * np.pi
     (step,) = report.steps
     assert "or where the gyro has empty cells left as gaps" in step.detail
+
+
+def test_a_slow_velocity_without_the_pose_is_refused_not_masked_away(tmp_path):
+    """u, v (a DVL) kept on every 5th row, thrust at the full rate, no x, y to bridge them
+    from: masking their empty cells took all 200 rows out (pieces of one row, 'too short to
+    use'), and ``nnid train`` said only 'the training split is empty'. It is refused (exit 2),
+    naming the log, the channels and their rate against the log's."""
+    from typer.testing import CliRunner
+
+    from nnid.cli import app
+
+    log = _mocap_log(200).drop(columns=["x", "y"]).assign(experiment="dive")
+    log = _slow(log.assign(**{f"tau_{c}": 0.0 for c in "YZKMN"}), ["u", "v"], 5)
+    log.to_csv(tmp_path / "dvl.csv", index=False)
+    cfg = tmp_path / "t.toml"
+    cfg.write_text('kind = "train"\nvehicle = "seamor"\n[data]\nlog = "dvl.csv"\n'
+                   '[model]\nkind = "fossen"\ndofs = ["u"]\n')  # fmt: skip
+    done = CliRunner().invoke(app, ["train", str(cfg), "--out", str(tmp_path / "out")])
+    said = " ".join(done.output.split())
+    assert done.exit_code == 2, said
+    assert "dvl.csv, field 'u': u logged every 5th row: 4 Hz against 20 Hz; v logged" in said
+    assert "160 of the 200 rows" in said and "full rate" in said
+    with pytest.raises(NnidInputError, match="u logged every 5th row"):
+        mask_gaps([log], ["u"])  # the detector's and the loop's masking, too
+
+
+def test_rows_outside_a_slow_attitudes_span_are_said_as_such():
+    """A yaw kept on every 5th row of 403: the 2 rows after its last sample were counted among
+    'left as gaps' with a longer hole's; they are said as outside its sampled span, with the
+    time its samples end, and that they are taken out with the gaps."""
+    from nnid.datasets.gaps import fill_slow
+
+    t = np.arange(403) * 0.05
+    log = pd.DataFrame({"t": t, "phi": 0.0, "theta": 0.0, "psi": 0.5 * t, "p": 0.0, "q": 0.0})
+    log["r"] = 0.5
+    report = CleaningReport(source="test")
+    out = fill_slow(_slow(log.assign(experiment="turn"), ["psi"], 5), report)
+    assert list(np.flatnonzero(out["psi"].isna())) == [401, 402]
+    (step,) = report.steps
+    assert (
+        "320 samples between its own filled; its samples end at t = 20 s: 2 rows after its "
+        "last sample: outside its sampled span, taken out with the gaps" in step.detail
+    )
+    assert "left as gaps" not in step.detail
+    # in a log of several runs, the run is named
+    two = pd.concat([log.assign(experiment="a"), log.iloc[:401].assign(experiment="b")])
+    report = CleaningReport(source="test")
+    fill_slow(_slow(two.reset_index(drop=True), ["psi"], 5), report)
+    assert "in a, its samples end at t = 20 s: 2 rows" in report.steps[0].detail
+    assert "in b," not in report.steps[0].detail
+    # inspect: outside the span is no gap; a hole inside it still is
+    from nnid.datasets.inspect import summarize
+
+    z = _slow(_mocap_log().assign(experiment="dive"), ["z"], 10)
+    z.loc[200:260, "z"] = np.nan
+    info = summarize(z)
+    after = {"experiment": None, "first_t": 0.0, "before": 0, "last_t": 19.5, "after": 9}
+    assert info["slow"][0]["ends"] == [after]
+    assert [g["rows"] for g in info["missing"]["gaps"]] == [79]
+
+
+def test_each_run_is_measured_at_its_own_rate():
+    """Run a at 20 Hz with psi on every 5th row and run b at 100 Hz with psi on every 50th got
+    one stride from the whole log (5th row, 4 Hz against 20 Hz), so b's yaw, 50 rows between
+    samples, was a hole past 3 strides and left unfilled. Each run is said at its own rate and
+    filled."""
+    from nnid.datasets.gaps import fill_slow, slow_channels
+
+    runs = []
+    for name, n, dt in (("a", 2000, 0.05), ("b", 1001, 0.01)):
+        t = np.arange(n) * dt
+        runs.append(pd.DataFrame({"t": t, "experiment": name, "phi": 0.0, "theta": 0.0,
+                                  "psi": 0.2 * t, "p": 0.0, "q": 0.0, "r": 0.2}))  # fmt: skip
+    log = pd.concat(runs, ignore_index=True)
+    log.loc[np.r_[np.arange(2000) % 5 != 0, np.arange(1001) % 50 != 0], "psi"] = np.nan
+    out = fill_slow(log)
+    assert out["psi"].notna().sum() == len(log) - 4  # a's 4 rows after its last sample
+    np.testing.assert_allclose(out["psi"].dropna(), 0.2 * log["t"][out["psi"].notna()])
+    said = [ch.describe() for ch in slow_channels(log)]
+    assert said == [
+        "psi logged every 5th row in a: 4 Hz against 20 Hz",
+        "psi logged every 50th row in b: 2 Hz against 100 Hz",
+    ]

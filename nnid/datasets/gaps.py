@@ -21,8 +21,11 @@ gyro measures how it moves between samples. Nothing else is: a velocity or an ac
 the fits' response and is differentiated into accelerations, and a position or an attitude
 without a gyro is differentiated into velocities, so samples made between their own by a
 straight line would be fitted as measured (standard errors as if from k times the data) and
-change the noise of a Savitzky-Golay derivative; they are bridged from the pose or masked, as
-a gap is, and the report says why.
+change the noise of a Savitzky-Golay derivative; they are bridged from the pose where it
+allows, and the report says why. Masking one would take every row between its samples out
+(the whole log, in pieces of one row): a fit refuses it instead (:func:`refuse_slow`). The rows
+of a run before a slow channel's first sample or after its last are outside its sampled span,
+said as such (:func:`span_ends`), not as a gap; a fit takes them out with the gaps.
 """
 
 from __future__ import annotations
@@ -46,6 +49,7 @@ from nnid.datasets.log import (
     wrap_angle,
 )
 from nnid.datasets.preprocess import derive_velocities, experiments, true_runs
+from nnid.errors import NnidInputError
 
 #: a segment left between two gaps shorter than this many samples is masked with them
 MIN_SEGMENT = 3
@@ -68,48 +72,62 @@ GYRO = ("p", "q", "r")
 
 @dataclass
 class SlowChannel:
-    """A channel logged every ``stride`` rows of the log's clock (module docstring)."""
+    """A channel logged every ``stride`` rows of its runs' clock (module docstring)."""
 
     column: str
     stride: int  # rows between its samples, most of the time
     rate_hz: float  # its own rate: the clock's over the stride
-    clock_hz: float  # the log's: 1 / its median sample interval within runs
+    clock_hz: float  # its runs': 1 / their median sample interval
+    # the runs it is logged at this rate in; None: every run with an empty cell of it (a log
+    # may join runs logged at different rates, each measured on its own)
+    runs: list[str] | None = None
 
     def describe(self) -> str:
-        """'z logged every 10th row: 2 Hz against 20 Hz'."""
+        """'z logged every 10th row: 2 Hz against 20 Hz' (and 'in a, b' for some runs)."""
         k = self.stride
         suffix = "th" if 10 <= k % 100 <= 20 else {1: "st", 2: "nd", 3: "rd"}.get(k % 10, "th")
+        where = "" if self.runs is None else f" in {', '.join(self.runs)}"
         return (
-            f"{self.column} logged every {k}{suffix} row: {self.rate_hz:.3g} Hz against "
+            f"{self.column} logged every {k}{suffix} row{where}: {self.rate_hz:.3g} Hz against "
             f"{self.clock_hz:.3g} Hz"
         )
 
 
 def slow_channels(log: pd.DataFrame, columns: list[str] | None = None) -> list[SlowChannel]:
     """The channels of ``columns`` (default: pose, velocity, acceleration) logged slower than
-    the clock: at least :data:`SLOW_SHARE` of the steps between a channel's samples within a
-    run are one stride of two rows or more, over at least :data:`SLOW_MIN_STEPS` steps. A
-    channel without an empty cell, or with scattered dropouts (its usual step one row), is
-    not slow."""
+    the clock, measured in each run on its own clock: at least :data:`SLOW_SHARE` of the steps
+    between a channel's samples within the run are one stride of two rows or more, over at
+    least :data:`SLOW_MIN_STEPS` steps; runs at one stride and rate are one entry. A channel
+    without an empty cell, or with scattered dropouts (its usual step one row), is not
+    slow."""
     columns = [c for c in (columns or [*POSE, *VELOCITY, *ACCELERATION]) if c in log]
     if not columns or not log[columns].isna().to_numpy().any():
         return []
-    codes, _, order, _, dt, _ = _experiment_sorted(log)
-    inside = codes[1:] == codes[:-1]
-    clock = float(np.median(dt[inside])) if inside.any() else float("nan")
+    codes, names, order, _, _, step = _experiment_sorted(log)
     out = []
     for c in columns:
         present = log[c].notna().to_numpy()[order]
         if present.all():
             continue
         rows = np.flatnonzero(present)
-        steps = np.diff(rows)[codes[rows[1:]] == codes[rows[:-1]]]
-        if steps.size < SLOW_MIN_STEPS:
-            continue
-        values, counts = np.unique(steps, return_counts=True)
-        stride = int(values[np.argmax(counts)])
-        if stride >= 2 and counts.max() >= SLOW_SHARE * steps.size and clock > 0:
-            out.append(SlowChannel(c, stride, 1.0 / (stride * clock), 1.0 / clock))
+        within = codes[rows[1:]] == codes[rows[:-1]]
+        spacing, runs_of = np.diff(rows)[within], codes[rows[1:]][within]  # sorted by run
+        lacking = np.unique(codes[~present])  # the runs with an empty cell of it
+        lo, hi = (np.searchsorted(runs_of, lacking, side) for side in ("left", "right"))
+        rates: dict[tuple[int, str], list[int]] = {}  # (stride, clock as said): runs
+        for e, a, b in zip(lacking, lo, hi, strict=True):
+            steps = spacing[a:b]
+            if steps.size < SLOW_MIN_STEPS or not step[e] > 0:
+                continue
+            values, counts = np.unique(steps, return_counts=True)
+            stride = int(values[np.argmax(counts)])
+            if stride >= 2 and counts.max() >= SLOW_SHARE * steps.size:
+                rates.setdefault((stride, f"{1.0 / step[e]:.3g}"), []).append(int(e))
+        for (stride, _), runs in rates.items():
+            clock = float(np.median(step[runs]))
+            every = len(rates) == 1 and len(runs) == lacking.size
+            named = None if every else [str(names[e]) for e in runs]
+            out.append(SlowChannel(c, stride, 1.0 / (stride * clock), 1.0 / clock, named))
     return out
 
 
@@ -148,9 +166,10 @@ def fill_slow(log: pd.DataFrame, report: CleaningReport | None = None) -> pd.Dat
             detail.append(
                 f"{'; '.join(kept)}: not filled (it is differentiated, or is the fits' "
                 "response: samples made between its own would be fitted as measured); "
-                "bridged from the pose or masked where used"
+                "bridged from the pose where it allows, else refused where a fit would mask it"
             )
-        report.add(SLOW_STEP, "; ".join(detail), columns=[ch.column for ch in slow])
+        columns = list(dict.fromkeys(ch.column for ch in slow))
+        report.add(SLOW_STEP, "; ".join(detail), columns=columns)
     return out
 
 
@@ -163,10 +182,101 @@ def gyro_filled(log: pd.DataFrame, slow: list[SlowChannel]) -> list[SlowChannel]
 
 
 def between_samples(log: pd.DataFrame, slow: list[SlowChannel] | None = None) -> pd.DataFrame:
-    """``log`` with every slow channel's cells (``slow``, else :func:`slow_channels`) between
-    its own samples filled linearly: the cells its rate leaves empty, not gaps (what
-    ``inspect`` counts as missing is the rest)."""
-    return _between_samples(log, slow_channels(log) if slow is None else slow, {})[0]
+    """``log`` as ``inspect`` counts its gaps: every slow channel's cells (``slow``, else
+    :func:`slow_channels`) between its own samples filled linearly (the cells its rate leaves
+    empty), and those outside its sampled span in a run (before its first sample, after its
+    last: said apart, :func:`span_ends`) held at its nearest sample; neither is a gap, and
+    what ``inspect`` counts as missing is the rest."""
+    slow = slow_channels(log) if slow is None else slow
+    out = _between_samples(log, slow, {})[0]
+    runs = log["experiment"] if "experiment" in log else pd.Series(0, index=log.index)
+    for column in dict.fromkeys(ch.column for ch in slow):
+        rows = _slow_rows(log, [ch for ch in slow if ch.column == column])
+        present = log[column].notna()
+        began = present.groupby(runs).cummax()  # at or after its first sample in the run
+        going = present[::-1].groupby(runs[::-1]).cummax()[::-1]  # at or before its last
+        edges = (~(began & going)).to_numpy() & rows
+        held = out[column].groupby(runs)
+        out.loc[edges, column] = held.ffill().fillna(held.bfill())[edges]
+    return out
+
+
+def span_ends(log: pd.DataFrame, ch: SlowChannel) -> list[dict]:
+    """Each run of ``ch`` whose rows go on before its first sample or after its last: the run
+    (None in a log of one), the time of its first and last sample, and the rows before and
+    after them. They are outside its sampled span, not gaps in it: a channel logged every k-th
+    row leaves up to k - 1 rows after its last sample by its rate alone."""
+    codes, names, order, t, _, _ = _experiment_sorted(log)
+    present = log[ch.column].notna().to_numpy()[order]
+    mine = _slow_rows(log, [ch])[order]
+    out = []
+    runs = np.unique(codes[mine])
+    starts, stops = (np.searchsorted(codes, runs, side) for side in ("left", "right"))
+    for e, a, b in zip(runs, starts, stops, strict=True):  # codes are sorted: a run is a:b
+        run = np.arange(a, b)
+        rows = run[present[a:b]]
+        if not rows.size:
+            continue
+        before, after = int(rows[0] - run[0]), int(run[-1] - rows[-1])
+        if before or after:
+            name = None if len(names) == 1 else str(names[e])  # one run: no need to name it
+            out.append({"experiment": name, "first_t": float(t[rows[0]]), "before": before,
+                        "last_t": float(t[rows[-1]]), "after": after})  # fmt: skip
+    return out
+
+
+def say_ends(ends: list[dict]) -> str:
+    """:func:`span_ends` in words: 'its samples end at t = 19.5 s: 9 rows after its last'."""
+    said = []
+    for end in ends:
+        where = "" if end["experiment"] is None else f"in {end['experiment']}, "
+        parts = []
+        if end["before"]:
+            parts.append(
+                f"start at t = {end['first_t']:.4g} s: {end['before']} "
+                f"row{'s' * (end['before'] != 1)} before its first sample"
+            )
+        if end["after"]:
+            parts.append(
+                f"end at t = {end['last_t']:.4g} s: {end['after']} "
+                f"row{'s' * (end['after'] != 1)} after its last sample"
+            )
+        said.append(f"{where}its samples {'; they '.join(parts)}")
+    return "; ".join(said)
+
+
+def _slow_rows(log: pd.DataFrame, slow: list[SlowChannel]) -> np.ndarray:
+    """Which rows of ``log`` (in its own order) belong to a run that ``slow`` holds."""
+    if any(ch.runs is None for ch in slow) or "experiment" not in log:
+        return np.ones(len(log), dtype=bool)
+    names = {r for ch in slow for r in ch.runs or []}
+    return log["experiment"].astype(str).isin(names).to_numpy()
+
+
+def refuse_slow(parts: list[pd.DataFrame], columns: list[str]) -> None:
+    """An error naming each channel of ``columns`` still logged slower than the clock in the
+    parts of one log (not filled from the gyro, nor bridged from the pose): masking its gaps
+    would take every row between its samples out, and a piece of one row between two is too
+    short to use, so the whole log went, said only as 'the training split is empty'."""
+    parts = [p for p in parts if len(p)]
+    if not any(p[[c for c in columns if c in p]].isna().to_numpy().any() for p in parts):
+        return  # nothing empty: no copy of the log
+    joined = parts[0] if len(parts) == 1 else pd.concat(parts, ignore_index=True)
+    slow = slow_channels(joined, [c for c in columns if c in joined])
+    if not slow:
+        return
+    said = "; ".join(ch.describe() for ch in slow)
+    its, it = ("its", "it") if len({ch.column for ch in slow}) == 1 else ("their", "them")
+    empty = int(joined[list(dict.fromkeys(ch.column for ch in slow))].isna().any(axis=1).sum())
+    raise NnidInputError(
+        f"{said}: the empty cells between {its} samples are {its} rate, not dropouts, and a "
+        f"fit reads the motion on every row; masked as gaps they would take {empty} of the "
+        f"{len(joined)} rows out and leave pieces of one row, too short to fit. Log {it} at "
+        f"the full rate, or resample the log to {its} rate; a velocity is bridged between "
+        "its samples where the log holds the whole pose (x y z, roll, pitch, yaw), and an "
+        "attitude filled where it holds a gyro (p q r)",
+        field=slow[0].column,
+    )
 
 
 def _between_samples(
@@ -179,20 +289,25 @@ def _between_samples(
     within an experiment filled in ``t``: what ``turning`` (an angle's turn from the first row,
     in :func:`nnid.datasets.log._experiment_sorted` order) gives, and the rest linearly, so
     each sample is met (an angle along the shorter turn, wrapped back to the log's range,
-    ±π or [0, 2π)); never across a hole longer than :data:`SLOW_SPAN` of its own steps, nor
-    across a row of ``blocked`` (the same order: where the turning is not known), nor before
-    its first sample or after its last: those stay gaps, bridged or masked as any. With what
-    was done to each channel, said."""
+    ±π or [0, 2π)); never across a hole longer than :data:`SLOW_SPAN` of its own steps (each
+    run's own stride), nor across a row of ``blocked`` (the same order: where the turning is
+    not known), nor before its first sample or after its last: those stay empty, the rows
+    outside its span said as such (:func:`span_ends`), the rest as gaps. With what was done
+    to each channel, said."""
     if not slow:
         return log, []
     out = log.copy()
     codes, _, order, t, _, _ = _experiment_sorted(log)
     said = []
-    for ch in slow:
-        y = log[ch.column].to_numpy(np.float64)[order]
-        angle = ch.column in ANGLES
-        turned = turning.get(ch.column, np.zeros_like(y))
-        new = _filled(y - turned, t, codes, angle, max_rows=SLOW_SPAN * ch.stride) + turned
+    for column in dict.fromkeys(ch.column for ch in slow):
+        channels = [ch for ch in slow if ch.column == column]
+        limit = np.zeros(len(log), dtype=np.int64)  # a run where it is not slow: no fill
+        for ch in channels:
+            limit[_slow_rows(log, [ch])[order]] = SLOW_SPAN * ch.stride
+        y = log[column].to_numpy(np.float64)[order]
+        angle = column in ANGLES
+        turned = turning.get(column, np.zeros_like(y))
+        new = _filled(y - turned, t, codes, angle, max_rows=limit) + turned
         if angle:  # wrapped back to the range the log keeps
             lo, hi = np.nanmin(y), np.nanmax(y)
             if -np.pi <= lo and hi <= np.pi:
@@ -204,15 +319,24 @@ def _between_samples(
             new = _unblocked(new, y, codes, blocked)
         values = np.empty_like(new)
         values[order] = new
-        out[ch.column] = values
-        left = int((~np.isfinite(new)).sum())
-        ends = (
-            f", {left} at a run's ends, in longer holes"
-            + " or where the gyro has empty cells" * bool(blocked is not None and blocked.any())
-            + " left as gaps"
-        ) * bool(left)
-        filled = int(np.isfinite(new).sum() - np.isfinite(y).sum())
-        said.append(f"{ch.describe()} ({filled} samples between its own filled{ends})")
+        out[column] = values
+        for ch in channels:
+            mine = _slow_rows(log, [ch])[order]
+            ends = span_ends(log, ch)
+            outside = sum(e["before"] + e["after"] for e in ends)
+            left = int((~np.isfinite(new[mine])).sum()) - outside
+            holes = (
+                f", {left} in longer holes"
+                + " or where the gyro has empty cells" * bool(blocked is not None and blocked.any())
+                + " left as gaps"
+            ) * bool(left)
+            span = (
+                f"; {say_ends(ends)}: outside its sampled span, taken out with the gaps"
+                if ends
+                else ""
+            )
+            filled = int(np.isfinite(new[mine]).sum() - np.isfinite(y[mine]).sum())
+            said.append(f"{ch.describe()} ({filled} samples between its own filled{holes}{span})")
     return out, said
 
 
@@ -342,6 +466,7 @@ def mask_gaps(
     ``piece_of`` column names its run, which is how a piece is told from a whole run (never
     by the ``#`` in its label, which a user's may hold too). Parts without gaps are returned
     as they are."""
+    refuse_slow(parts, columns)  # a slow channel's cells between its samples are no gaps
     out, gaps, short = [], [], 0
     for log in parts:
         cols = [c for c in columns if c in log]

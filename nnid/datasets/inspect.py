@@ -16,6 +16,7 @@ from nnid.datasets.gaps import (
     gaps_record,
     gyro_filled,
     slow_channels,
+    span_ends,
 )
 from nnid.datasets.log import (
     ACCELERATION,
@@ -80,7 +81,8 @@ def summarize(log: pd.DataFrame, savgol_window: float = 1.0, savgol_order: int =
     the excitation of each ``cmd_*`` channel, a command and not a force without a vehicle
     file's thrusters. ``slow``: the channels logged slower than the clock
     (:func:`nnid.datasets.gaps.slow_channels`; ``filled`` where the fits fill it with the gyro),
-    whose empty cells between their samples are not in ``missing``."""
+    whose empty cells between their samples are not in ``missing``, nor the rows outside their
+    sampled span (``ends``, :func:`nnid.datasets.gaps.span_ends`)."""
     inputs = input_columns(log)
     known = {"t", "experiment", PIECE_OF, REPLAY_GROUP, *POSE, *VELOCITY, *ACCELERATION, *inputs}
     groups = experiments(log)
@@ -153,9 +155,10 @@ def summarize(log: pd.DataFrame, savgol_window: float = 1.0, savgol_order: int =
         "runs": len({e["piece_of"] or e["name"] for e in exp_rows}),
         "experiments": exp_rows,
         "gaps": gaps,
-        # a channel logged slower than the clock: its rate, not gaps; what it leaves empty
-        # beyond its own steps (a run's ends, a longer hole) is
-        "slow": [asdict(ch) | {"filled": ch in filled} for ch in slow],
+        # a channel logged slower than the clock: its rate, not gaps, and the rows before its
+        # first sample or after its last in a run are outside its span (``ends``); what it
+        # leaves empty beyond its own steps inside its span (a longer hole) is
+        "slow": [asdict(ch) | {"filled": ch in filled, "ends": span_ends(log, ch)} for ch in slow],
         "missing": gaps_record(find_gaps(between_samples(log, slow))),
         "derivable": derivable,
         "velocity_from_pose": from_pose,

@@ -422,14 +422,15 @@ def _filled(
     t: np.ndarray,
     codes: np.ndarray,
     angle: bool = False,
-    max_rows: int | None = None,
+    max_rows: int | np.ndarray | None = None,
 ) -> np.ndarray:
     """``x`` (rows sorted by experiment, :func:`_experiment_sorted`) with each run of empty
     cells between two samples of one experiment linearly interpolated in ``t`` (an ``angle``
     along the shorter turn), before its first sample and after its last left empty, and with
-    ``max_rows`` so is a run whose samples are more than that many rows apart (a hole, not a
-    slower channel's step). A channel logged slower than the others on a common clock (a
-    depth sensor at 1 Hz beside a 10-Hz DVL) has an empty cell in every step: the window
+    ``max_rows`` (one number, or one per row: the row before the run) so is a run whose
+    samples are more than that many rows apart (a hole, not a slower channel's step). A
+    channel logged slower than the others on a common clock (a depth sensor at 1 Hz beside a
+    10-Hz DVL) has an empty cell in every step: the window
     checks read it between its own samples, and :func:`_sampled_spans` keeps only spans that
     end on samples; :func:`nnid.datasets.gaps.fill_slow` fills a slow attitude with it.
     ``x`` itself without empty cells (a fully sampled log's numbers stay as they were)."""
@@ -441,8 +442,9 @@ def _filled(
     nxt = np.minimum.accumulate(np.where(bad, x.size, rows)[::-1])[::-1]
     fill = bad & (prev >= 0) & (nxt < x.size)
     fill[fill] = codes[prev[fill]] == codes[nxt[fill]]
-    if max_rows is not None:
-        fill[fill] = nxt[fill] - prev[fill] <= max_rows
+    if max_rows is not None:  # one for all rows, or each row's own (a run's own stride)
+        limit = np.broadcast_to(max_rows, x.shape)
+        fill[fill] = nxt[fill] - prev[fill] <= limit[prev[fill]]
     a, b = prev[fill], nxt[fill]
     change = x[b] - x[a]
     out = x.copy()
