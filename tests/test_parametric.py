@@ -787,6 +787,91 @@ def test_a_refit_that_cannot_identify_a_value_keeps_the_earlier_estimate(seamor)
     assert np.isfinite(cov[i, j]) and np.isnan(cov[i, k])  # one step's block; none across
 
 
+@pytest.fixture(scope="module")
+def surge_and_faint_sway(seamor):
+    """Exact states (no noise) of the surge run of :func:`_surge_and_sway_runs` and a sway run
+    under a 1e-9-N force: v about 1e-11 m/s, so v|v|, Y:v*abs(v)'s regressor, is 1e-11 of
+    v̇'s and least squares finds it unexcited (zero regressor), though the sway equation
+    reads it."""
+    t = np.arange(301) * 0.1
+    logs = []
+    for k, name, force in [(0, "surge", 10.0), (1, "sway", 1e-9)]:
+        inputs = np.zeros((t.size, 6))
+        inputs[:, k] = force * (1.0 + np.sin(0.5 * t))
+        logs.append(simulate(seamor, inputs, 0.1, seed=k, experiment=name))
+    return pd.concat(logs, ignore_index=True)
+
+
+def test_a_sequence_keeps_what_it_identified_when_one_run_leaves_a_parameter_unidentified(
+    seamor, surge_and_faint_sway
+):
+    """The faint sway run cannot identify Y:v*abs(v), which its equation reads: the sequence
+    raised "no step of the sequence identifies ['Y:v*abs(v)']" and threw away the surge
+    step's exact X_udot and X:u*abs(u), where plain least squares warns and leaves it NaN. A
+    data outcome: the sequence now does the same, naming the step that tried. A parameter no
+    step's equations read stays an error (a mistake of the sequence: the N_rdot test above)."""
+    steps = [
+        {"experiments": ["surge"], "dofs": ["u"], "unknowns": ["X_udot", "X:u*abs(u)"]},
+        {"experiments": ["sway"], "dofs": ["v"], "unknowns": ["Y_vdot", "Y:v*abs(v)"]},
+    ]
+    model, said = _fit_said(seamor, steps, surge_and_faint_sway)
+    assert "the sequence left parameters unidentified" in said
+    assert "Y:v*abs(v) (tried by step 2 (v))" in said
+    params = model.params
+    assert params["X_udot"]["value"] == pytest.approx(seamor.added_mass["X_udot"], rel=1e-6)
+    assert params["Y:v*abs(v)"]["value"] is None and params["Y:v*abs(v)"]["stderr"] is None
+
+
+def test_an_unidentified_parameter_is_simulated_at_the_vehicle_files_value_and_said(
+    seamor, surge_and_faint_sway, tmp_path
+):
+    """The surge equation reads neither K:p*abs(p) nor K:p*p (zero regressors: NaN). The model
+    simulated both at 0 (np.nan_to_num), without a word, so the roll damping the vehicle file
+    gives (-12) vanished from every prediction. It now simulates an unidentified parameter at
+    the file's value, or at 0 where the file has no such term (K:p*p: its own model has none),
+    says so, and keeps it in its parameters and its saved state; the estimate stays NaN."""
+    surge = surge_and_faint_sway[surge_and_faint_sway["experiment"] == "surge"]
+    names = ["X_udot", "X:u*abs(u)", "K:p*abs(p)", "K:p*p"]
+    with pytest.warns(ExcitationWarning) as caught:
+        model = ParametricModel(seamor, names, dofs=["u"]).fit(surge)
+    said = " | ".join(str(w.message) for w in caught if w.category is ExcitationWarning)
+    assert "K:p*abs(p) at the vehicle file's value -12" in said
+    assert "K:p*p at 0 (the vehicle file has no such term)" in said
+    assert model.parts_.damping["K:p*abs(p)"] == seamor.damping.coefficients["K:p*abs(p)"]
+    assert model.parts_.damping["K:p*p"] == 0.0
+    k = model.estimate_.names.index("K:p*abs(p)")
+    assert np.isnan(model.estimate_.theta[k]) and np.isnan(model.estimate_.stderr[k])
+    entry = model.params["K:p*abs(p)"]
+    assert entry["value"] is None and entry["stderr"] is None and entry["simulated_at"] == -12.0
+    assert "simulated_at" not in model.params["X_udot"]
+    from nnid.reports.train_report import _params_table
+
+    _, rows = _params_table({"params": model.params})
+    assert rows[2][2] == "- (simulated at -12)"
+    model.save(tmp_path / "m")
+    loaded = load_model(tmp_path / "m")
+    assert loaded.from_file_ == {"K:p*abs(p)": -12.0, "K:p*p": None}
+    assert loaded.parts_.damping == model.parts_.damping
+
+
+def test_a_parameter_only_left_out_rows_read_has_its_own_significance_cell():
+    """The train report's significance cell read "not excited" for a parameter no finite row
+    read, as for one the data leave at noise: it had no data at all. It reads "not measured"."""
+    from nnid.reports.train_report import _significance
+    from nnid.trainers.least_squares import solve_least_squares
+
+    rng = np.random.default_rng(0)
+    phi = np.zeros((40, 3))  # c: a zero regressor
+    phi[:, 0] = rng.normal(size=40)
+    phi[20:, 1] = rng.normal(size=20)  # b: read only where the target is undefined
+    y = phi @ [1.0, 2.0, 3.0]
+    y[20:] = np.nan
+    with pytest.warns(ExcitationWarning):
+        est = solve_least_squares(phi, y, names=["a", "b", "c"])
+    cells = {n: _significance(p) for n, p in est.as_dict().items()}
+    assert cells == {"a": "yes", "b": "not measured", "c": "not excited"}
+
+
 def test_least_squares_says_which_rows_it_leaves_out_and_whom_only_they_read():
     """Rows with a non-finite target or regressor were dropped silently, and a parameter only
     those rows read was called "not excited (zero regressor)"."""

@@ -453,7 +453,9 @@ def test_unidentified_parameter_stderr_stays_null_after_a_round_trip(minirov, ru
         "percentile_error": None,
         "significant": False,
         "excited": False,  # least squares' own verdict (a zero column), kept on save
+        "simulated_at": 0.0,  # not an estimate: what the model simulates (no term in the file)
     }
+    assert back.from_file_ == {"K_qdot": None}
     assert back.params == model.params
 
 

@@ -374,3 +374,19 @@ def test_dof_variances_of_an_equation_without_samples_is_nan_without_a_warning()
         warnings.simplefilter("error")
         var = dof_variances([np.array([np.nan, np.nan]), np.array([1.0, 3.0])])
     assert np.isnan(var[0]) and var[1] == 1.0
+
+
+def test_rls_says_not_measured_of_a_parameter_only_its_skipped_rows_read():
+    """The memory's excitation check zeroed the rows with an undefined target and called a
+    parameter only they read "not excited (zero regressor)", as batch least squares once did:
+    it is not measured, and both estimators now say so in the same words."""
+    phi, noise = _two_regressors(400)
+    phi[:200, 1] = 0.0  # b read only in the second half,
+    y = phi @ np.array([2.0, -3.0]) + noise
+    y[200:] = np.nan  # whose targets are undefined
+    reg = Regression(phi, y, ["a", "b"], ("u",), y.size)
+    with pytest.warns(ExcitationWarning) as caught:
+        rls = RecursiveLeastSquares().solve(reg)
+    said = " | ".join(str(w.message) for w in caught if w.category is ExcitationWarning)
+    assert "not measured" in said and "zero regressor" not in said
+    assert np.isnan(rls.theta[1]) and rls.theta[0] == pytest.approx(2.0, abs=0.2)

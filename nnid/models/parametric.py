@@ -826,6 +826,42 @@ def restored_attenuation(value: object, names: Sequence[str]) -> dict[str, tuple
     return out
 
 
+def vehicle_file_value(declared: Parts, name: str) -> float | None:
+    """The value the vehicle file (``declared``: its :meth:`Parts.from_vehicle`) gives
+    parameter ``name``; None where it declares no such term (an added-mass derivative or a
+    damping coefficient it leaves out, which its own model reads as 0) or ``name`` is no
+    vehicle-file parameter."""
+    if name.endswith("dot") and ":" not in name:
+        if name not in declared.added_mass and mirrored_key(name) not in declared.added_mass:
+            return None
+    elif ":" in name and name not in declared.damping:
+        return None
+    try:
+        return declared.get(name)
+    except KeyError:
+        return None
+
+
+def simulated_values(
+    vehicle, names: Sequence[str], theta: np.ndarray
+) -> tuple[dict[str, float], dict[str, float | None]]:
+    """The values a fitted Fossen model simulates with (Fossen eq. 2.1 with the estimate
+    plugged in): each estimate of ``theta``, and for a parameter the fit left unidentified
+    (NaN) the vehicle file's value, as a later step of Weiss's sequence reads it, or 0 where
+    the file has no such term: the file's own model has none there, and 0 is that. Also the
+    file's value of each unidentified one (None: no such term, simulated at 0), to be said."""
+    declared = Parts.from_vehicle(vehicle)
+    values: dict[str, float] = {}
+    from_file: dict[str, float | None] = {}
+    for name, value in zip(names, theta, strict=True):
+        if np.isfinite(value):
+            values[name] = float(value)
+        else:
+            from_file[name] = vehicle_file_value(declared, name)
+            values[name] = 0.0 if from_file[name] is None else float(from_file[name])
+    return values, from_file
+
+
 def prepare_motion(
     log: pd.DataFrame,
     dofs: Sequence[str],
@@ -1065,7 +1101,28 @@ class ParametricModel(FossenPlant):
         prepared, data = self._equation_data(log, accelerations=needs_acc, report=self.report_)
         self.estimate_ = trainer.fit(self.structure_, data, progress=progress)
         self.trainer_ = trainer
-        self.parts_ = self.structure_.parts(np.nan_to_num(self.estimate_.theta))
+        values, self.from_file_ = simulated_values(
+            self.vehicle, self.estimate_.names, self.estimate_.theta
+        )
+        self.parts_ = self.structure_.parts(values)
+        if self.from_file_:
+            from nnid.trainers.least_squares import ExcitationWarning
+
+            # at 0 (the old nan_to_num) an unidentified added mass or damping term vanished
+            # from every simulation, unsaid, where the sequence's later steps read the file's
+            said = ", ".join(
+                f"{n} at 0 (the vehicle file has no such term)"
+                if v is None
+                else f"{n} at the vehicle file's value {v:.6g}"
+                for n, v in self.from_file_.items()
+            )
+            warnings.warn(
+                "the fit left parameters unidentified (NaN in the estimate, without a standard "
+                "error); the model simulates them at values that are not estimates, and its "
+                f"predictions rest on those: {said}",
+                ExcitationWarning,
+                stacklevel=3,
+            )
         steps = self._step_data(data, dofs, unknowns)
         by_step = self._not_excited(steps, getattr(trainer, "filter_lambda", None))
         self.not_excited_ = self._last_verdicts(steps, by_step)
@@ -1302,6 +1359,9 @@ class ParametricModel(FossenPlant):
                 "significant": False,
                 "excited": False,
             }
+        # not an estimate: the value the model simulates it at, said beside the missing one
+        for name, value in self.from_file_.items():
+            params[name] = {**params[name], "simulated_at": 0.0 if value is None else value}
         return params
 
     def describe(self) -> dict:
@@ -1318,6 +1378,10 @@ class ParametricModel(FossenPlant):
         # and what it recorded per sample (the UKF's history_, a recursive θ path): a loaded
         # model had no trainer_ at all; series, not scalars, so tensors (none: no tensors.pt)
         records, tensors = saved_records(self)
+        # the unidentified parameters it simulates at the vehicle file's values (None: at 0)
+        fit["from_file"] = {
+            n: None if v is None else exact_float(v) for n, v in self.from_file_.items()
+        }
         return {**state, "not_excited": dict(self.not_excited_), **fit, **records}, tensors
 
     def _restore(self, state: dict, tensors: dict) -> None:
@@ -1331,7 +1395,18 @@ class ParametricModel(FossenPlant):
             self.report_ = CleaningReport.from_dict(state["report"])
             self.attenuated_ = restored_attenuation(state["attenuated"], self.estimate_.names)
         self.structure_ = ParametricFossen(self.vehicle, self.estimate_.names, self.dofs_)
-        self.parts_ = self.structure_.parts(np.nan_to_num(self.estimate_.theta))
+        values, from_file = simulated_values(
+            self.vehicle, self.estimate_.names, self.estimate_.theta
+        )
+        if "from_file" in state:  # what the fit simulated, whatever the vehicle file says now
+            what = "the saved 'from_file' value"
+            from_file = {
+                str(k): None if v is None else read_exact_float(v, what)
+                for k, v in state["from_file"].items()
+            }
+            values.update({k: 0.0 if v is None else v for k, v in from_file.items()})
+        self.from_file_ = from_file
+        self.parts_ = self.structure_.parts(values)
         if TRAINER_HISTORY in state:  # absent from older files: no trainer_, as before
             self.trainer_ = self._trainer()
             if state[TRAINER_HISTORY] is not None:

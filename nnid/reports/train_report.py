@@ -64,7 +64,7 @@ def _params_table(metrics: dict) -> tuple[list[str], list[list[str]]]:
         head += [ref.get("label", "reference"), "estimate / reference − 1"]
     rows = []
     for name, p in params.items():
-        row = [f"`{name}`", number(p["value"], 5), number(p["stderr"], 2)]
+        row = [f"`{name}`", _estimate(p), number(p["stderr"], 2)]
         if physical:
             pe = p.get("percentile_error")
             row.insert(1, parameter_unit(name))
@@ -81,12 +81,24 @@ def _params_table(metrics: dict) -> tuple[list[str], list[list[str]]]:
     return head, rows
 
 
+def _estimate(p: dict) -> str:
+    """The estimate cell: the value, or "-" for none; for an unidentified parameter its model
+    simulates at another value (the vehicle file's, ``simulated_at``) "- (simulated at X)",
+    so that no one reads the model's predictions as resting on the fit alone."""
+    if p["value"] is None and p.get("simulated_at") is not None:
+        return f"- (simulated at {number(p['simulated_at'], 5)})"
+    return number(p["value"], 5)
+
+
 def _significance(p: dict) -> str:
-    """The significance cell: "yes" or "no" by the 95 % test, "not excited" for a parameter
+    """The significance cell: "yes" or "no" by the 95 % test, "not measured" for a parameter
+    only rows the fit left out read (not finite: no data on it at all), "not excited" for one
     the data do not excite (its model's ``not_excited_``, or a zero regressor: fitted to noise
     or not at all, its "no" is no test result), "collinear" for one the data do not separate
     from others (only their combination is measured), "-" where no test ran (a jointly trained
     value without s.e.)."""
+    if p.get("measured") is False:
+        return "not measured"
     if p.get("excited") is False:
         return "not excited"
     if p.get("collinear"):

@@ -101,8 +101,9 @@ class Estimate:
         """``{name: {"value": θ, "stderr": σ, "percentile_error": 100 σ/|θ| (%),
         "significant": bool}}``; a number that is not finite (an unidentified parameter) is
         None. A parameter the excitation check (Weiss eqs 93-98) found unexcited also has
-        ``"excited": False``, one it found collinear ``"collinear": True``: its "not
-        significant" is no test result, and the reports say why."""
+        ``"excited": False`` (and ``"measured": False`` where only rows left out read it:
+        :attr:`ExcitationReport.not_measured`), one it found collinear ``"collinear": True``:
+        its "not significant" is no test result, and the reports say why."""
         out: dict[str, dict[str, float | bool | None]] = {
             n: {
                 "value": _finite(v),
@@ -123,6 +124,9 @@ class Estimate:
         for name in [] if report is None else report.unexcited:
             if name in out:  # a combined estimate (Caccia's) may carry a part's report
                 out[name]["excited"] = False
+        for name in [] if report is None else report.not_measured:
+            if name in out:  # only rows left out read it: no data on it, not unexcited data
+                out[name]["measured"] = False
         for name in [] if report is None else report.collinear:
             if name in out:
                 out[name]["collinear"] = True
@@ -131,6 +135,14 @@ class Estimate:
 
 def _finite(x: float) -> float | None:
     return float(x) if np.isfinite(x) else None
+
+
+def read_only_where_left_out(phi: np.ndarray, kept: np.ndarray, names: Sequence[str]) -> list[str]:
+    """The parameters ``names`` whose regressor column of ``phi`` reads them (non-zero; NaN
+    counts: an undefined entry still reads it) only in the rows not ``kept``: left out as not
+    finite, they are not measured, rather than unexcited (a zero regressor, Weiss eq. 95)."""
+    read = phi != 0
+    return [nm for j, nm in enumerate(names) if read[~kept, j].any() and not read[kept, j].any()]
 
 
 def solve_least_squares(
@@ -152,10 +164,7 @@ def solve_least_squares(
         # masked gaps and accelerations cut at held steps are such rows, said where they are
         # made; what is said here is a parameter only the left-out rows read: a NaN known of a
         # sequence step once dropped a whole equation, and its unknowns read "zero regressor"
-        read = phi != 0  # NaN counts: an undefined entry still reads the parameter
-        left_out = [
-            nm for j, nm in enumerate(names) if read[~finite, j].any() and not read[finite, j].any()
-        ]
+        left_out = read_only_where_left_out(phi, finite, names)
         if left_out:
             warnings.warn(
                 f"{int((~finite).sum())} of {finite.size} rows of the regression are left out: "

@@ -35,6 +35,7 @@ from nnid.trainers.least_squares import (
     correlation_time,
     dof_sandwich,
     dof_variances,
+    read_only_where_left_out,
     void_undetermined,
 )
 from nnid.trainers.regression import Regression
@@ -170,9 +171,11 @@ def _memory_excitation(
     ok = np.isfinite(r) & np.isfinite(phi).all(1)
     var = dof_variances(np.where(ok, r, np.nan).reshape(-1, m))
     w = np.tile(1.0 / np.where(var > 0, var, 1.0), r.size // m) * ok
+    # a parameter only the skipped rows read is not measured there, not a zero regressor
+    left_out = read_only_where_left_out(phi, ok, list(reg.names))
     phi, y = np.where(ok[:, None], phi, 0.0), np.where(ok, y, 0.0)
     gram = (phi * w[:, None]).T @ phi
-    report = excitation_from_gram(gram, int(ok.sum()), list(reg.names))
+    report = excitation_from_gram(gram, int(ok.sum()), list(reg.names), left_out=left_out)
     return report, ok, phi, y, r
 
 

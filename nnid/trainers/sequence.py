@@ -16,6 +16,9 @@ yet, and a warning names it (plugged in, the NaN made every row of each equation
 undefined, and those rows were dropped, so the later step's own unknowns read "not excited").
 A refit that cannot identify a value an earlier step did keeps the earlier estimate (and its
 verdict), plugged in as before, and a warning names both steps.
+A parameter left NaN at the end (no step's runs identify it) stays NaN with a warning, as in
+plain least squares, and the other steps' estimates stand; one that only steps whose equations
+never read it fit is a mistake of the sequence, an error.
 The excitation report joins the steps' (:func:`~nnid.evaluation.persistence.combined_excitation`):
 each parameter with the verdict of the step whose value it keeps.
 """
@@ -171,6 +174,7 @@ class DecoupledSequence:
         refits: dict[tuple[str, int], list[int]] = {}  # (it, that step): refits that left NaN
         self.unidentified_: list[list[str]] = []  # per step: left NaN, and no earlier value
         self.kept_: list[list[str]] = []  # per step: left NaN, an earlier step's estimate kept
+        tried: dict[str, list[tuple[int, bool]]] = {}  # left NaN: (step, its equations read it)
         n_obs = 0
         checks: list[tuple[list[str], ExcitationReport | None]] = []
         report = progress or silent
@@ -211,6 +215,9 @@ class DecoupledSequence:
                     found[name] = float(value)
                     source[name] = k
                     lost.pop(name, None)
+            for name in missing:
+                reads = step_reads(structure, name, step, subset, self.filter_lambda)
+                tried.setdefault(name, []).append((k, reads))
             self.unidentified_.append([n for n in missing if n not in kept])
             self.kept_.append(kept)
             n_obs += est.n_obs
@@ -245,8 +252,51 @@ class DecoupledSequence:
                 stacklevel=2,
             )
         left = [n for n, v in zip(names, theta, strict=True) if not np.isfinite(v)]
-        if left:
-            raise NnidInputError(f"no step of the sequence identifies {left}", field="sequence")
+        self._check_left(left, tried)
         # the steps' unexcited and collinear verdicts, which the reports show beside each
         # parameter: the combined estimate had none, so its "not significant" read as a test
         return Estimate(names, theta, cov, float("nan"), n_obs, combined_excitation(checks, names))
+
+    def _check_left(self, left: list[str], tried: Mapping[str, list[tuple[int, bool]]]) -> None:
+        """Judge the parameters ``left`` NaN after the whole sequence (``tried``: per parameter,
+        each step that fitted it and left it NaN, with whether its equations read it on its runs,
+        :func:`step_reads`). One that no step fits, or that only steps whose equations never
+        read it fit (N_rdot in a surge step), is a mistake of the sequence, whatever the data:
+        NnidInputError. One a step's equations do read was not identified by its runs (not
+        excited, or read only by rows left out): a data outcome, so it stays NaN with a warning,
+        as plain least squares leaves it, and the parameters the other steps identified stand."""
+        unread = [n for n in left if not any(reads for _, reads in tried.get(n, []))]
+        if unread:
+            said = [
+                f"{n}: "
+                + (
+                    "the equations of "
+                    + ", ".join(step_label(k, self.steps[k]) for k, _ in tried[n])
+                    + ", which fit it, read it in no row of their runs (it is not in them, or "
+                    "those runs never move what it multiplies)"
+                    if n in tried
+                    else "no step has it among its unknowns"
+                )
+                for n in unread
+            ]
+            raise NnidInputError(
+                f"no step of the sequence identifies {unread}: "
+                + "; ".join(said)
+                + "; fit each in a step whose equations read it on its runs",
+                field="sequence",
+            )
+        if left:
+            said = [
+                f"{n} (tried by "
+                + ", ".join(step_label(k, self.steps[k]) for k, _ in tried[n])
+                + ")"
+                for n in left
+            ]
+            warnings.warn(
+                "the sequence left parameters unidentified: the runs of the steps that fit them "
+                "do not identify them (see each step's excitation verdict); they are NaN in the "
+                "estimate, without a standard error, and the other steps' estimates stand: "
+                + ", ".join(said),
+                ExcitationWarning,
+                stacklevel=3,
+            )
