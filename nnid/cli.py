@@ -466,6 +466,13 @@ def detect(
         None, "--window", help="Seconds after an alarm used to isolate it, 0.5 or more."
     ),
     time_unit: str | None = typer.Option(None, "--time-unit", help=TIME_UNIT_HELP),
+    # bounded in nnid.runs, as --window
+    idle_s: float | None = typer.Option(
+        None,
+        "--idle-s",
+        help="With --follow: seconds the file may stop growing before its log is taken as "
+        "ended (0 or more, default 3); standard input is read until it closes.",
+    ),
 ) -> None:
     """Fault detection: watch a log with a calibrated residual monitor; each alarm says whether a
     thruster lost thrust (which one, its remaining efficiency), an external force appeared, or
@@ -486,8 +493,12 @@ def detect(
             "a whole log's time unit)",
             field="--time-unit",
         )
+    if idle_s is not None and not follow:  # a whole log is read at once: it never waits
+        raise NnidInputError(
+            "applies to --follow only (drop it, or add --follow)", field="--idle-s"
+        )
     if follow:
-        for line in follow_run(model_dir, data, out_dir, window, _say):
+        for line in follow_run(model_dir, data, out_dir, window, _say, idle_s):
             _say(line)
         return
     with _bar("detecting") as progress:

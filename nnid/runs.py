@@ -557,17 +557,30 @@ def _monitor(model_dir: Path, window: float | None):
     return ResidualMonitor.load(model_dir), window or detection_window(model_dir)
 
 
-def follow_run(model_dir: Path, data: str, out_dir: Path, window: float | None, say) -> list[str]:
+def follow_run(
+    model_dir: Path,
+    data: str,
+    out_dir: Path,
+    window: float | None,
+    say,
+    idle_s: float | None = None,
+) -> list[str]:
     """``nnid detect --follow``: watch a growing CSV (or ``-``, standard input), ``say`` each
-    alarm as it happens; the outputs written when the log ends; their sentences returned."""
-    from nnid.fault.follow import follow_csv
+    alarm as it happens; the outputs written when the log ends (a file: once it has not grown
+    for ``idle_s`` seconds, ``--idle-s``, else :data:`nnid.fault.follow.IDLE_S`); their
+    sentences returned."""
+    from nnid.fault.follow import IDLE_S, follow_csv
     from nnid.reports.detect_report import OUTPUTS, write_detect_outputs
 
     _checked_window(window)
+    if idle_s is not None:  # a NaN never compares, so a NaN wait was forever
+        checked_number(idle_s, "--idle-s", 0.0, strict=False)
     check_detect_inputs(model_dir, data, follow=True)
     monitor, window_s = _monitor(model_dir, window)
     try:
-        result = follow_csv(monitor, data, window_s, say)
+        result = follow_csv(
+            monitor, data, window_s, say, idle_s=IDLE_S if idle_s is None else idle_s
+        )
     except NnidInputError as exc:
         raise exc.with_source(data) from None
     with staged(out_dir) as stage:

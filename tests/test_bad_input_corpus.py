@@ -1451,6 +1451,26 @@ def test_a_detect_window_is_named_as_the_option(fixtures, tmp_path, window, foll
     assert not fixtures["out"].exists()
 
 
+@pytest.mark.parametrize(
+    ("idle", "follow", "said"),
+    [
+        ("-1", True, "a finite number at least 0 is expected, not -1.0"),
+        ("nan", True, "a finite number at least 0 is expected, not nan"),  # never compared
+        ("0", False, "applies to --follow only (drop it, or add --follow)"),  # no wait
+    ],
+)
+def test_a_detect_idle_time_is_named_as_the_option(fixtures, tmp_path, idle, follow, said):
+    """--idle-s, how long a followed file may stop growing before it has ended: a negative
+    or NaN time, or one given without --follow, is one line naming the option, before the
+    model or the log is read."""
+    args = [*_command("detect", tmp_path, fixtures), "--idle-s", idle]
+    result = CliRunner().invoke(app, [*args, "--follow"] if follow else args)
+    assert result.exit_code == 2 and "Traceback" not in result.output, result.output
+    errors = [line for line in result.output.splitlines() if line.startswith("error:")]
+    assert errors == [f"error: field '--idle-s': {said}"], result.output
+    assert not fixtures["out"].exists()
+
+
 @pytest.mark.parametrize(("name", "said"), [("   ", "visible character"), ("a\nb", "one line")])
 def test_vehicle_name_option_is_named_as_the_option(tmp_path, name, said):
     # blamed "v1.toml, field 'name'", a file not yet written; a newline was written

@@ -26,7 +26,7 @@ from nnid.datasets.faults import Fault, simulate_faults
 from nnid.datasets.measurement import Measurement
 from nnid.errors import NnidInputError
 from nnid.fault import kernel
-from nnid.fault.detect import detect
+from nnid.fault.detect import alarm_row, detect
 from nnid.fault.follow import follow_csv
 from nnid.fault.monitor import ResidualMonitor, monitor_inputs, pack_actuation
 from nnid.fault.thresholds import rate_interval, rate_threshold
@@ -318,6 +318,27 @@ def test_follow_says_an_announced_alarm_withdrawn_as_batch_drops_it(monitor, sto
     late = followed.withdrawn[gone.index("59.70")]
     assert late["by"] == pytest.approx(46.1) and "inside the window" in late["reason"]
     assert detect_json(monitor, followed)["withdrawn"] == followed.withdrawn  # detect.json
+
+
+def test_follow_announces_no_alarm_read_after_a_window_still_to_be_judged(
+    monitor, stopped_h1, tmp_path
+):
+    """The same log with one sample missing at 40 s and a 13.58-s window: the window of the
+    alarm at 46.10 s ends at 59.68 s, but --follow judged it only once rows past it had been
+    watched (in blocks of 0.5 s on what the loss leaves), and announced 'ALARM t = 59.70 s'
+    there, then withdrew it ('read before the alarm at t = 46.10 s was judged'): an alarm
+    that batch never has. A row past a window now waits for that window's judgement."""
+    log = stopped_h1[stopped_h1["t"] <= 61.0].drop(index=[800])  # t = 40.00 s
+    batch = detect(monitor, log, 13.58)
+    log.to_csv(tmp_path / "log.csv", index=False)
+    said: list[str] = []
+    followed = follow_csv(monitor, str(tmp_path / "log.csv"), 13.58, said.append, idle_s=0.0)
+    assert [a["t"] for a in followed.alarms] == [a["t"] for a in batch.alarms]
+    assert list(followed.trace.t[followed.trace.alarm]) == list(batch.trace.t[batch.trace.alarm])
+    announced = [line.split()[3] for line in said if line.startswith("ALARM t = ")]
+    assert "46.10" in announced and "59.70" not in announced
+    assert not any("read before" in w["reason"] for w in followed.withdrawn)
+    assert len(announced) == len(followed.alarms) + len(followed.withdrawn)
 
 
 def test_follow_alarms_a_second_fault_as_batch_detect_does(vehicle, monitor, tmp_path):
@@ -690,6 +711,27 @@ def test_a_ballast_that_changes_size_is_said_and_taken_out_at_its_new_size(
     assert "external_bias.w" not in parts or abs(parts["external_bias.w"]["value"]) < 0.5
 
 
+def test_a_ballast_dropped_inside_its_own_window_is_sized_on_its_own_span(
+    vehicle, monitor, tmp_path
+):
+    """A 10 N ballast from 20 s dropped at 28 s, inside the 10-s window of its alarm: sized on
+    the whole window it read 7.96 N (the 2 s after its end averaged in), and the change was
+    taken out at that size after the window, so what it left there was alarmed as its end
+    'by 30.25 s', not when it ended. The end inside the window is now found as a later
+    alarm's is (the ended split), the ballast sized on the rows before it, the end's time
+    said in its record, and nothing taken out after the window: batch and --follow alike."""
+    fault = Fault("effect", FAULT_T, effect="buoyancy_offset", value=10.0, end=28.0)
+    log = simulate_faults(vehicle, 40, faults=[fault], seed=7)
+    batch, said = _followed_as_batch(monitor, log, tmp_path)
+    (ballast,) = batch.alarms
+    assert ballast["effect"] == "buoyancy_offset" and ballast["hypothesis"] == "buoyancy_offset"
+    assert abs(ballast["value"] - 10.0) <= max(1.96 * ballast["stderr"], 0.3)
+    assert 28.0 <= ballast["ended"]["t"] <= 28.5 and ballast["ended"]["alarms"] == [ballast["t"]]
+    assert "ended at about 28." in ballast["meaning"] and ballast["severity"] > 1
+    assert alarm_row(ballast)["change_t"] == ballast["ended"]["t"]  # alarms.csv says when
+    assert sum("ended at about 28." in line for line in said) == 1  # --follow says it once
+
+
 def test_follow_says_a_ballast_resized_as_batch_detect_does(vehicle, monitor, tmp_path):
     """The 10 N ballast down to 4 N, followed row by row: the same records, and the same
     statistics watched after the resize (the ballast taken out at 4 N in both)."""
@@ -930,7 +972,7 @@ def test_cli_train_detect_and_follow(vehicle, tmp_path, chromium):
     assert any("wander by 40 %" in note for note in notes)
     followed = tmp_path / "follow"
     args = ["detect", "--model", str(model), "--data", fault, "--out", str(followed), "--follow"]
-    res = runner.invoke(app, args)
+    res = runner.invoke(app, [*args, "--idle-s", "0"])  # a complete file: no wait for rows
     assert res.exit_code == 0 and f"wrote {followed}/: alarms.csv" in res.output, res.output
     assert res.output.index("ALARM t = ") < res.output.index("thruster h3 gives")
     (b,) = json.loads((followed / "detect.json").read_text())["alarms"]

@@ -101,7 +101,8 @@ def withdrawn_record(experiment: str | None, t: float, by: float, why: str) -> d
     changes may leave: :func:`rewatched_alarm`), ``"inside"`` the window of the alarm at time
     ``by`` whose judgement restarted the statistics after it (:func:`_rewatch` clears the
     window's alarms), or ``"after"`` it (a row read before that judgement, watched again on
-    the restarted statistics)."""
+    the restarted statistics: ``--follow`` holds rows after a window until it is judged, so
+    this is a safeguard, not a case it is known to reach)."""
     reasons = {
         "dismissed": "within what the isolated change(s) may leave: no new change",
         "inside": f"inside the window of the alarm at t = {by:.2f} s, judged with it; the "
@@ -125,10 +126,20 @@ def isolated_alarm(
     diagnosis and the rows of the window. The window starts at the alarm, never before: the
     change began at or before the alarm, and healthy samples before its onset would bias the
     size of the change toward zero. ``residual`` [N, 6]: the one to isolate (the trace's own
-    by default); ``taken``: the changes already taken out of it (:attr:`Rewatch.fitted`)."""
+    by default); ``taken``: the changes already taken out of it (:attr:`Rewatch.fitted`).
+
+    A change isolated that ended inside its own window (:func:`ended_within`) is sized on its
+    own span, the window's rows before its end (a 10 N ballast dropped 8 s into the window
+    read 7.96 N on the whole window), and its record says when it ended (``ended``: τ and
+    its own alarm; nothing of it is taken out after the window). The severity stays the
+    window's."""
     rows = window_rows(data, k, window_s)
     residual = trace.values[:, 0:6] if residual is None else residual
     diag = isolate(monitor, data, residual, rows, list(taken))
+    end = ended_within(monitor, data, k, window_s, residual, diag) if diag.isolated else None
+    if end is not None:
+        own = isolate(monitor, data, residual, rows[rows < end], list(taken))
+        diag, end = (own, end) if own.isolated else (diag, None)
     severity = _severity(monitor, trace, rows)
     interval = diag.efficiency_interval or (None, None)
     name = trace.experiment[k]
@@ -155,9 +166,51 @@ def isolated_alarm(
         "blind_until": None,  # isolated: the statistics restart at the window's end
         "blind": None,
     }
+    if end is not None:
+        t_end = float(data["t"][end])
+        record["ended"] = {"t": t_end, "alarms": [record["t"]]}
+        record["meaning"] = (
+            f"{record['meaning']}; it ended at about {t_end:.2f} s, inside the window: sized "
+            f"on the {t_end - record['t']:.3g} s before, and not taken out after the window"
+        )
     if not diag.isolated:
         blind_after(monitor, trace, rows, record)
     return record, diag, rows
+
+
+def ended_within(
+    monitor: ResidualMonitor,
+    data: dict,
+    k: int,
+    window_s: float,
+    residual: np.ndarray,
+    diag: Diagnosis,
+) -> int | None:
+    """The row at which the change ``diag`` just isolated at row ``k`` ended inside its own
+    window, or None where it persists. The window is split as :func:`ended_alarm` splits a
+    later alarm's (:meth:`_Splits.ended`): the change taken out before τ, the ``residual``
+    [N, 6] isolated (the model's, less the changes taken out before) after it, nothing
+    significant of the change left after τ and that residual healthy noise there; at least
+    :data:`CHANGED_S` on each side (the refit on the change's own span needs its rows). The
+    end must also be the better reading by BIC (τ its one parameter): the confidence that
+    :func:`ended_alarm`'s record states, over one half, against the change persisting."""
+    w = Rewatch(monitor)
+    w.changes.append(Change(float(data["t"][k]), "", list(diag.fitted)))
+    rows = window_rows(data, k, window_s)
+    r = residual[rows]
+    splits = _Splits(monitor, data, k, window_s, w, r, w.left(data, rows, r))
+    if splits.n < 2 * splits.least:
+        return None
+    # the gain of the best τ, as ended() finds it, before its refit (most changes persist:
+    # the residual isolated after τ then holds the change, and no τ gains)
+    bar = float(splits.p_left.sum()) - 2 * monitor.correlation_time_ * splits.penalty()
+    after = np.cumsum(splits.power(splits.r)[::-1])[::-1]  # from each row on
+    if np.min((splits.before[:-1] + after)[: splits.n - splits.least + 1]) >= bar:
+        return None
+    split = splits.ended()
+    if split is None or split.j < splits.least or split.cost >= bar:
+        return None
+    return int(splits.rows[split.j])
 
 
 def blind_after(monitor: ResidualMonitor, trace: Trace, rows: np.ndarray, record: dict) -> None:
@@ -821,9 +874,10 @@ def detect(monitor: ResidualMonitor, log: pd.DataFrame, window_s: float = 10.0) 
         record, diag, rows = isolated_alarm(monitor, data, watched, k, window_s, residual, taken)
         alarms.append(record)
         pos = k + 1
-        if diag.isolated:
+        if diag.isolated:  # fresh statistics after the window, the change taken out unless it ended
             w = rewatch.setdefault(int(codes[k]), Rewatch(monitor))
-            _rewatch(w, data, residual, values, alarm, rows, changed, Change.of(record, diag))
+            change = None if record.get("ended") else Change.of(record, diag)
+            _rewatch(w, data, residual, values, alarm, rows, changed, change)
             pos = int(rows[-1]) + 1
     return DetectResult(watched, alarms, time.perf_counter() - start)
 

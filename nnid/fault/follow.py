@@ -6,7 +6,10 @@ body velocities and attitude as columns (a live monitor cannot smooth over the f
 inputs of the model's vehicle. Whether an announced alarm stays is known only once the alarms
 before it are judged: one that batch ``detect`` drops (dismissed, or inside the window of an
 earlier alarm whose judgement restarts the statistics) is said withdrawn, with why, and kept in
-the result's ``withdrawn``, so that no announced alarm vanishes unsaid.
+the result's ``withdrawn``, so that no announced alarm vanishes unsaid. An alarm is judged as
+soon as its window (batch's rows, :func:`~nnid.fault.detect.window_rows`) is whole and watched,
+and no row after that window is announced before the judgement: an alarm there, read before a
+judgement that restarts the statistics, was announced and then withdrawn, one batch never has.
 
 After an alarm whose change is isolated, the rest of the experiment is watched as batch
 ``detect`` watches it (:mod:`nnid.fault.detect`, its :class:`~nnid.fault.detect.Rewatch`): the
@@ -77,6 +80,8 @@ REWATCH_S = 0.5
 #: rows: its first minute judged as that reader judges a one-minute log, at a cost that does
 #: not grow with the run
 RATE_UNIT_S = 60.0
+#: a followed file that has not grown for this many seconds has ended (``--idle-s``)
+IDLE_S = 3.0
 #: every this many seconds of an experiment's rows, and at its end (a check of a minute at
 #: 20 Hz costs 3-9 ms; the refusal needs 2 s of turning windows anyway)
 RATE_UNIT_EVERY_S = 5.0
@@ -167,7 +172,7 @@ def follow_csv(
     source: str,
     window_s: float,
     say: Callable[[str], None],
-    idle_s: float = 3.0,
+    idle_s: float = IDLE_S,
     keep_rows: int = 100_000,
 ) -> DetectResult:
     """Watch ``source`` row by row; ``say`` gets one line per alarm and per isolation. The
@@ -220,14 +225,15 @@ def follow_csv(
     # or payload change): it waits for the half window after it, which batch has
     ahead = savgol_window(monitor.plant_.savgol_window, 1.0 / monitor.interval, 2) // 2 + 1
 
-    def judged(k: int, now: float) -> bool:
-        """Whether the alarm at ``k`` can be isolated at time ``now``: its experiment has
-        ended, or its window has arrived and every row of it has been watched (a row waits
-        for rows, not for time: after missing samples the time passes first)."""
+    def judged(k: int) -> bool:
+        """Whether the alarm at ``k`` can be isolated now: its experiment has ended, or its
+        window (batch's, :func:`window_rows`) is whole, the newest row its last or past it,
+        and every row of it has been watched (a row waits for rows, not for time: after
+        missing samples the time passes first)."""
         i = k - dropped
         if codes[i] != codes[-1]:
             return True
-        if now - ts[i] < window_s:
+        if ts[-1] < ts[i] + window_s:  # the same sum as window_rows: a row there is in it
             return False
         return not (queue and ts[queue[0] - dropped] <= ts[i] + window_s)
 
@@ -238,15 +244,21 @@ def follow_csv(
         name = names[codes[i]]
         say(f"ALARM t = {ts[i]:.2f} s{f' ({name})' if name else ''}: isolating over {window_s} s")
 
-    def flush(final: bool = False) -> None:
+    def flush(final: bool = False, until: float = np.inf) -> None:
         """The queued rows re-referenced to the isolated changes and watched (the rows before
         them, from the first after the window, as context for the signature's derivative).
         Unless its run has ended (``final``), a row waits for the half smoothing window after
-        it, and the rows taken must hold a whole window, as batch's do."""
+        it, and the rows taken must hold a whole window, as batch's do. No row after the
+        window of an alarm still to be judged (``until``, the time its window ends, or the
+        first pending alarm's) is watched: its judgement may restart the statistics before
+        that row, and an alarm there would be announced that batch never has."""
         if not queue:
             return
         first, last = queue[0], queue[-1]  # the queue runs to its experiment's newest row
         ready = len(queue) if final else sum(k <= last - ahead for k in queue)
+        if pending and codes[pending[0] - dropped] == codes[first - dropped]:
+            until = min(until, ts[pending[0] - dropped] + window_s)
+        ready = min(ready, sum(ts[k - dropped] <= until for k in queue))
         a = max(ref["edge"] - 1, first - context, dropped)  # rows from a + 1 get a signature
         i, j = a - dropped, last + 1 - dropped
         # and the smoothing's window must fit in the rows taken, whole, as it does in batch
@@ -256,7 +268,15 @@ def follow_csv(
         rows = np.arange(1, j - i)
         left = ref["rewatch"].left(data, rows, np.array(vals[i + 1 : j])[:, 0:6])
         left = left[first - a - 1 : first - a - 1 + ready]
-        out = ref["rewatch"].step(data["t"][first - a : first - a + ready], left)
+        w, times = ref["rewatch"], data["t"][first - a : first - a + ready]
+        state, t_prev = w.state.copy(), w.t_prev
+        out = w.step(times, left)
+        alarmed = np.flatnonzero(out[:, 20] == 1)
+        if alarmed.size:  # the rows after the first new alarm's window wait for its judgement
+            keep = int(np.sum(times <= times[alarmed[0]] + window_s))
+            if keep < ready:  # watched again from the state before, as one call (kernel.watch)
+                w.state[:], w.t_prev, ready = state, t_prev, keep
+                out = w.step(times[:ready], left[:ready])
         for row, (k, values) in enumerate(zip(queue[:ready], out, strict=True)):
             watched[k - dropped][0:6] = left[row]
             watched[k - dropped][6:20] = values[6:20]
@@ -275,11 +295,11 @@ def follow_csv(
         withdrawn.append(record)
         say(withdrawn_line(record))
 
-    def rewatch_after(k: int, rows: np.ndarray, changed: bool) -> None:
+    def rewatch_after(k: int, rows: np.ndarray, changed: bool, ended: bool) -> None:
         """Fresh statistics after the window ``rows`` (buffer indices) of the alarm at ``k``:
         the experiment's later alarms superseded (announced, so said withdrawn), its rows
-        since then watched again. A new change taken out (``changed``) starts its signature
-        there too."""
+        since then watched again (all of them where it has ended, ``ended``). A new change
+        taken out (``changed``) starts its signature there too."""
         code = codes[k - dropped]
         later = sorted(p for p in pending if p > k and codes[p - dropped] == code)
         for p in later:
@@ -290,11 +310,14 @@ def follow_csv(
         if changed:
             ref["edge"] = ref["start"]
         queue[:] = [p for p in range(ref["start"], dropped + len(ts)) if codes[p - dropped] == code]
-        flush(final=codes[-1] != code)  # the experiment has ended: no row is to come
+        flush(final=ended or codes[-1] != code)  # the experiment has ended: no row is to come
 
-    def isolate(k: int) -> None:
+    def isolate(k: int, ended: bool = False) -> None:
+        """The alarm at ``k`` judged on its window (``ended``: its experiment has no more
+        rows), as batch :func:`~nnid.fault.detect.detect` judges it."""
         # the window's rows watched before it is judged (all of them once its run has ended)
-        flush(final=codes[-1] != codes[k - dropped])
+        ended = ended or codes[-1] != codes[k - dropped]
+        flush(final=ended, until=ts[k - dropped] + window_s)
         data = _arrays(ts, xs, us, codes, names)
         values = np.array(watched)
         trace = Trace(data["t"], run_names(names, data["experiment"], exp_col is not None),
@@ -310,13 +333,13 @@ def follow_csv(
                 alarm_rows.remove(k)  # no record, so no mark in the trace either
                 withdraw(k, k, "dismissed")
                 w.restart(data["t"][rows[-1]])
-                rewatch_after(k, rows, changed=False)
+                rewatch_after(k, rows, changed=False, ended=ended)
                 return
             if verdict is not None:  # changes that ended or changed size
                 alarms.append(verdict.record)
                 say(describe_alarm(verdict.record))
                 w.restart(data["t"][rows[-1]], ended=verdict.ended, resized=verdict.resized)
-                rewatch_after(k, rows, changed=True)
+                rewatch_after(k, rows, changed=True, ended=ended)
                 return
             taken = w.fitted
         record, diag, rows = isolated_alarm(
@@ -324,11 +347,20 @@ def follow_csv(
         )
         alarms.append(record)
         say(describe_alarm(record))
-        if diag.isolated:
+        if diag.isolated:  # as batch: the change taken out after the window, unless it ended
             if ref["code"] != code or ref["rewatch"] is None:
                 ref.update(rewatch=Rewatch(monitor), code=code)
-            ref["rewatch"].restart(data["t"][rows[-1]], Change.of(record, diag))
-            rewatch_after(k, rows, changed=True)
+            gone = bool(record.get("ended"))
+            ref["rewatch"].restart(data["t"][rows[-1]], None if gone else Change.of(record, diag))
+            rewatch_after(k, rows, changed=not gone, ended=ended)
+
+    def settle() -> None:
+        """The current experiment has no more rows: its alarms judged in turn, each on its
+        window's rows watched, and its last rows watched."""
+        flush(final=True)
+        while pending:
+            isolate(pending.pop(0), ended=True)
+            flush(final=True)
 
     read = [("t", col["t"])] + [
         (c, i)
@@ -405,7 +437,7 @@ def follow_csv(
         if name != current:
             if unchecked_tail():  # the experiment that ended: its last rows too
                 check_units(n - 1)
-            flush(final=True)
+            settle()
             stream.reset()
             current = name
             names.append(name)
@@ -443,14 +475,20 @@ def follow_csv(
         row_no = dropped + len(ts) - 1
         if unit_check and not unchecked_tail():  # a whole block of rows since the last check
             check_units(n)  # before this row's alarm is announced
-        if ref["rewatch"] is not None and ref["code"] == codes[-1] and row_no >= ref["start"]:
+        rewatched = ref["rewatch"] is not None and ref["code"] == codes[-1]
+        # an alarm on a row that completes an earlier alarm's window, or is past it, waits for
+        # that judgement: one that restarts the statistics drops it, as batch does
+        held = code == 1 and not rewatched and bool(pending) and judged(pending[0])
+        if rewatched and row_no >= ref["start"]:
             queue.append(row_no)  # watched on what the isolated changes leave
             if len(queue) >= block + ahead:
                 flush()
-        elif code == 1:
+        elif code == 1 and not held:
             announce(row_no)
-        while pending and judged(pending[0], t):
+        while pending and judged(pending[0]):
             isolate(pending.pop(0))
+        if held and not (ref["rewatch"] is not None and ref["code"] == codes[-1]):
+            announce(row_no)  # no isolated change restarted the statistics: batch's alarm too
         if len(ts) > 2 * keep_rows and not pending:  # forget the older half
             cut = len(ts) - keep_rows
             if queue:  # but not the rows still to be watched, nor those their signature reads
@@ -461,9 +499,7 @@ def follow_csv(
                 dropped += cut
     if unchecked_tail():
         check_units(n)
-    flush(final=True)
-    while pending:
-        isolate(pending.pop(0))
+    settle()
     if not ts:
         raise NnidInputError("has a header and no rows", source=where)
     data = _arrays(ts, xs, us, codes, names)
