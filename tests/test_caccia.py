@@ -431,3 +431,45 @@ def test_asymptote_speed_error_counts_the_time_constant_and_the_f_tests_choice()
             value, se = _asymptote(t, x)
             inside.append(abs(value - speed) <= 1.96 * se)
         assert 0.88 <= np.mean(inside) <= 0.99, (amplitude, np.mean(inside))
+
+
+def test_an_unidentified_installation_coefficient_is_flown_at_the_vehicle_files_value(
+    setup, monkeypatch, tmp_path
+):
+    """A Caccia fit that leaves eta.w.neg unidentified (NaN) flew it at 0 (np.nan_to_num),
+    without a word: no upward thrust at all. (Forced here: step 1 has no eta column for a
+    group without plateaus, so a campaign does not leave it NaN; a zero column would.) It
+    flies the vehicle file's value, as ParametricModel does, says so, and keeps it through a
+    save; a file saved before that keeps 0, as it was fitted, and says so."""
+    import dataclasses
+    import json
+
+    from nnid.errors import ExcitationWarning
+
+    _, _, vehicle, log = setup
+    fit_logs = CacciaTwoStep.fit_logs
+
+    def unidentified(self, *args, **kwargs):
+        est = fit_logs(self, *args, **kwargs)
+        theta = est.theta.copy()
+        theta[est.names.index("eta.w.neg")] = np.nan
+        return dataclasses.replace(est, theta=theta)
+
+    monkeypatch.setattr(CacciaTwoStep, "fit_logs", unidentified)
+    file_value = vehicle.installation["w.neg"]
+    with (
+        pytest.warns(UserWarning, match="step 2 did not run"),  # no sinusoid run: cheaper
+        pytest.warns(ExcitationWarning, match=r"eta\.w\.neg at the vehicle file's value"),
+    ):
+        model = CacciaModel(vehicle).fit(log)
+    assert file_value != 0 and model.parts_.eta_neg[2] == file_value
+    assert model.params["eta.w.neg"]["simulated_at"] == file_value
+    model.save(tmp_path)
+    assert load_model(tmp_path).params == model.params
+    path = tmp_path / "model.json"
+    payload = json.loads(path.read_text())
+    del payload["state"]["from_file"]
+    path.write_text(json.dumps(payload))
+    with pytest.warns(ExcitationWarning, match=r"predates .* at 0, .*: eta\.w\.neg"):
+        older = load_model(tmp_path)
+    assert older.parts_.eta_neg[2] == 0.0 and older.from_file_ == {"eta.w.neg": None}

@@ -854,6 +854,78 @@ def test_an_unidentified_parameter_is_simulated_at_the_vehicle_files_value_and_s
     assert loaded.parts_.damping == model.parts_.damping
 
 
+def _saved_state_edited(folder: Path, edit) -> None:
+    """Edit the model state of the model.json in ``folder`` in place (``edit(state)``)."""
+    path = folder / "model.json"
+    payload = json.loads(path.read_text())
+    edit(payload["state"])
+    path.write_text(json.dumps(payload))
+
+
+def test_a_model_saved_before_from_file_still_simulates_its_unidentified_parameters_at_0(
+    seamor, surge_and_faint_sway, tmp_path
+):
+    """A model.json saved before 'from_file' was kept simulated K:p*abs(p), left NaN, at 0
+    (np.nan_to_num), and its saved metrics and plots are of that model; loaded, it took the
+    vehicle file's -12, and predicted otherwise without a word. It keeps 0, and says so once.
+    A 'from_file' naming a parameter the fit did identify is a damaged file, refused."""
+    from nnid.errors import NnidInputError
+
+    surge = surge_and_faint_sway[surge_and_faint_sway["experiment"] == "surge"]
+    with pytest.warns(ExcitationWarning):
+        model = ParametricModel(seamor, ["X_udot", "X:u*abs(u)", "K:p*abs(p)"], dofs=["u"]).fit(
+            surge
+        )
+    model.save(tmp_path / "old")
+    _saved_state_edited(tmp_path / "old", lambda state: state.pop("from_file"))
+    with pytest.warns(ExcitationWarning) as caught:
+        loaded = load_model(tmp_path / "old")
+    said = [str(w.message) for w in caught if "predates" in str(w.message)]
+    assert len(said) == 1 and "at 0" in said[0] and "K:p*abs(p)" in said[0]
+    assert loaded.parts_.damping["K:p*abs(p)"] == 0.0
+    assert loaded.from_file_ == {"K:p*abs(p)": None}
+    assert loaded.params["K:p*abs(p)"]["simulated_at"] == 0.0
+    model.save(tmp_path / "edited")
+    _saved_state_edited(tmp_path / "edited", lambda state: state["from_file"].update(X_udot=1.0))
+    with pytest.raises(NnidInputError, match=r"'from_file' names 'X_udot', whose estimate is a"):
+        load_model(tmp_path / "edited")
+
+
+def test_a_sequence_says_an_undeclared_term_is_read_at_0_as_the_model_says_it(
+    seamor, surge_and_sway
+):
+    """Step 2 reads N:v*abs(v), which step 1's surge equation cannot identify and the vehicle
+    file does not declare: the sequence said "read it at the vehicle file's value 0", the
+    model "at 0 (the vehicle file has no such term)" for the same thing. One phrase."""
+    from nnid.errors import NnidInputError
+
+    steps = [
+        {"experiments": ["surge"], "dofs": ["u"], "unknowns": ["X_udot", "N:v*abs(v)"]},
+        {"experiments": ["sway"], "dofs": ["v", "r"], "unknowns": ["Y_vdot", "Y:v*abs(v)"]},
+    ]
+    with pytest.warns(ExcitationWarning) as caught, pytest.raises(NnidInputError):
+        ParametricModel(seamor, sequence=steps).fit(surge_and_sway)
+    said = " | ".join(str(w.message) for w in caught)
+    assert "so step 2 (v, r) read it at 0 (the vehicle file has no such term)" in said
+
+
+def test_a_parameter_whose_factor_the_runs_never_move_is_a_data_outcome_not_a_mistake(
+    seamor, surge_and_faint_sway
+):
+    """The surge equation contains X:v*abs(v), but the exact surge run has v ≡ 0: its column
+    is zero on the run. The sequence called that a mistake of the sequence (NnidInputError,
+    "no step of the sequence identifies"), where plain least squares warns: whether a step's
+    equations contain a parameter was judged on its runs. It is judged at a generic state:
+    the parameter stays NaN with a warning, and the step's other estimates stand."""
+    surge = surge_and_faint_sway[surge_and_faint_sway["experiment"] == "surge"].copy()
+    surge[["v", "dv"]] = 0.0  # exactly: the simulator's round-off leaves v at 1e-34
+    steps = [{"experiments": ["surge"], "dofs": ["u"], "unknowns": ["X_udot", "X:v*abs(v)"]}]
+    model, said = _fit_said(seamor, steps, surge)
+    assert "X:v*abs(v) (tried by step 1 (u))" in said
+    assert model.params["X:v*abs(v)"]["value"] is None
+    assert model.params["X_udot"]["value"] == pytest.approx(seamor.added_mass["X_udot"], rel=1e-3)
+
+
 def test_a_parameter_only_left_out_rows_read_has_its_own_significance_cell():
     """The train report's significance cell read "not excited" for a parameter no finite row
     read, as for one the data leave at noise: it had no data at all. It reads "not measured"."""

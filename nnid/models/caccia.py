@@ -16,12 +16,21 @@ import warnings
 from collections.abc import Mapping, Sequence
 from typing import Literal
 
-import numpy as np
 import pandas as pd
 
 from nnid.datasets.log import run_of
 from nnid.errors import NnidInputError
-from nnid.models.parametric import FossenPlant, ParametricFossen, canonical_parameter
+from nnid.models.parametric import (
+    FROM_FILE,
+    FossenPlant,
+    ParametricFossen,
+    canonical_parameter,
+    restored_simulated,
+    saved_from_file,
+    simulated_values,
+    warn_simulated,
+    with_simulated_at,
+)
 from nnid.physics.dofs import DOFS
 from nnid.trainers.history import Progress
 from nnid.trainers.least_squares import Estimate
@@ -154,20 +163,31 @@ class CacciaModel(FossenPlant):
         progress(1, 1, f"Caccia two-step, {len(trainer.plateaus_)} plateaus")
         self.trainer_ = trainer
         self._set_estimate(estimate)
+        warn_simulated(self.from_file_, stacklevel=3)
 
-    def _set_estimate(self, estimate: Estimate) -> None:
+    def _set_estimate(self, estimate: Estimate, state: Mapping | None = None) -> None:
+        """Set the fitted plant from ``estimate``: its vehicle-file parameters in the vehicle
+        file, one it left unidentified (NaN: a zero regressor) at the file's value
+        (:func:`simulated_values`; with a saved ``state``, as that model was:
+        :func:`restored_simulated`)."""
         self.estimate_ = estimate
         fossen = _fossen_names(estimate.names)
         idx = [estimate.names.index(n) for n in fossen]
         self.structure_ = ParametricFossen(self.vehicle, fossen, [self.dof])
         self._set_outputs([self.dof])
-        self.parts_ = self.structure_.parts(np.nan_to_num(estimate.theta[idx]))
+        if state is None:
+            values, self.from_file_ = simulated_values(self.vehicle, fossen, estimate.theta[idx])
+        else:
+            values, self.from_file_ = restored_simulated(
+                state, self.vehicle, fossen, estimate.theta[idx]
+            )
+        self.parts_ = self.structure_.parts(values)
         if self.dof == "w" and "weight_minus_buoyancy" in estimate.names:
             wb = float(estimate.theta[estimate.names.index("weight_minus_buoyancy")])
             self.parts_.buoyancy = self.parts_.weight - wb
 
     def _params(self) -> dict[str, dict[str, float | None]]:
-        return self.estimate_.as_dict()
+        return with_simulated_at(self.estimate_.as_dict(), self.from_file_)
 
     def describe(self) -> dict:
         return {
@@ -190,7 +210,8 @@ class CacciaModel(FossenPlant):
         }
 
     def _state(self) -> tuple[dict, dict]:
-        return {**self.estimate_.as_state(), "procedure": self._procedure()}, {}
+        saved = {FROM_FILE: saved_from_file(self.from_file_)}
+        return {**self.estimate_.as_state(), "procedure": self._procedure(), **saved}, {}
 
     def _restore(self, state: dict, tensors: dict) -> None:
         state = dict(state)
@@ -198,4 +219,5 @@ class CacciaModel(FossenPlant):
         if not isinstance(procedure, dict):
             raise ValueError(f"procedure must be a table, not {procedure!r}")
         self.procedure_ = procedure
-        self._set_estimate(Estimate.from_state(state))
+        simulated = {k: state.pop(k) for k in [FROM_FILE] if k in state}
+        self._set_estimate(Estimate.from_state(state), simulated)

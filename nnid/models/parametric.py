@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import re
 import warnings
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -34,7 +34,7 @@ from nnid.datasets.arrays import log_arrays, nominal_forces
 from nnid.datasets.cleaning import CleaningReport
 from nnid.datasets.log import ANGLES, POSE, VELOCITY
 from nnid.datasets.preprocess import HELD_DT, HELD_SHARE, held_at, zoh_midpoint
-from nnid.errors import NnidInputError
+from nnid.errors import ExcitationWarning, NnidInputError
 from nnid.evaluation.prediction import (
     Replay,
     blank_initial,
@@ -65,7 +65,7 @@ from nnid.physics.damping_library import (
     term_codes,
 )
 from nnid.physics.dofs import DOFS, FORCES
-from nnid.physics.parts import Parts, relative_velocity
+from nnid.physics.parts import Parts, at_file_value, relative_velocity
 from nnid.physics.thrusters import force_deadband
 from nnid.serialization import exact_float, read_exact_float
 from nnid.trainers.history import Progress
@@ -826,30 +826,15 @@ def restored_attenuation(value: object, names: Sequence[str]) -> dict[str, tuple
     return out
 
 
-def vehicle_file_value(declared: Parts, name: str) -> float | None:
-    """The value the vehicle file (``declared``: its :meth:`Parts.from_vehicle`) gives
-    parameter ``name``; None where it declares no such term (an added-mass derivative or a
-    damping coefficient it leaves out, which its own model reads as 0) or ``name`` is no
-    vehicle-file parameter."""
-    if name.endswith("dot") and ":" not in name:
-        if name not in declared.added_mass and mirrored_key(name) not in declared.added_mass:
-            return None
-    elif ":" in name and name not in declared.damping:
-        return None
-    try:
-        return declared.get(name)
-    except KeyError:
-        return None
-
-
 def simulated_values(
     vehicle, names: Sequence[str], theta: np.ndarray
 ) -> tuple[dict[str, float], dict[str, float | None]]:
     """The values a fitted Fossen model simulates with (Fossen eq. 2.1 with the estimate
     plugged in): each estimate of ``theta``, and for a parameter the fit left unidentified
-    (NaN) the vehicle file's value, as a later step of Weiss's sequence reads it, or 0 where
-    the file has no such term: the file's own model has none there, and 0 is that. Also the
-    file's value of each unidentified one (None: no such term, simulated at 0), to be said."""
+    (NaN) the vehicle file's value (:meth:`Parts.declared`), as a later step of Weiss's
+    sequence reads it, or 0 where the file has no such term: the file's own model has none
+    there, and 0 is that. Also the file's value of each unidentified one (None: no such term,
+    simulated at 0), to be said (:func:`warn_simulated`)."""
     declared = Parts.from_vehicle(vehicle)
     values: dict[str, float] = {}
     from_file: dict[str, float | None] = {}
@@ -857,8 +842,92 @@ def simulated_values(
         if np.isfinite(value):
             values[name] = float(value)
         else:
-            from_file[name] = vehicle_file_value(declared, name)
+            from_file[name] = declared.declared(name)
             values[name] = 0.0 if from_file[name] is None else float(from_file[name])
+    return values, from_file
+
+
+def warn_simulated(from_file: Mapping[str, float | None], stacklevel: int) -> None:
+    """Say the values a fitted model simulates its unidentified parameters at
+    (:func:`simulated_values`): its predictions rest on them, and they are no estimates."""
+    if not from_file:
+        return
+    # at 0 (the old nan_to_num) an unidentified added mass or damping term vanished from
+    # every simulation, unsaid, where the sequence's later steps read the file's
+    said = ", ".join(f"{n} {at_file_value(v)}" for n, v in from_file.items())
+    warnings.warn(
+        "the fit left parameters unidentified (NaN in the estimate, without a standard "
+        "error); the model simulates them at values that are not estimates, and its "
+        f"predictions rest on those: {said}",
+        ExcitationWarning,
+        stacklevel=stacklevel + 1,
+    )
+
+
+def with_simulated_at(
+    params: dict[str, dict[str, Any]], from_file: Mapping[str, float | None]
+) -> dict[str, dict[str, Any]]:
+    """``params`` with ``simulated_at`` beside each unidentified parameter: not an estimate,
+    the value its model simulates it at (None in ``from_file``: at 0)."""
+    for name, value in from_file.items():
+        params[name] = {**params[name], "simulated_at": 0.0 if value is None else value}
+    return params
+
+
+#: the saved state's key of :func:`simulated_values`' ``from_file`` (absent from files saved
+#: before a model simulated an unidentified parameter at the vehicle file's value)
+FROM_FILE = "from_file"
+
+
+def saved_from_file(from_file: Mapping[str, float | None]) -> dict[str, Any]:
+    """``from_file`` as a model's saved state holds it (:func:`restored_simulated` reads it)."""
+    return {n: None if v is None else exact_float(v) for n, v in from_file.items()}
+
+
+def restored_simulated(
+    state: Mapping[str, Any], vehicle, names: Sequence[str], theta: np.ndarray
+) -> tuple[dict[str, float], dict[str, float | None]]:
+    """:func:`simulated_values` of a saved model, as it was fitted and saved: the values of its
+    state's ``from_file``, whatever the vehicle file says now, checked (one entry for each
+    parameter the estimate leaves NaN and no other, a finite number or null: a file edited by
+    hand is refused at loading). A file saved before the key simulated those parameters at 0
+    (np.nan_to_num), and its metrics and plots are of that model: they stay at 0 (None in
+    ``from_file``), and a warning says so."""
+    values, from_file = simulated_values(vehicle, names, theta)
+    if FROM_FILE not in state:
+        from_file = dict.fromkeys(from_file)
+        values.update(dict.fromkeys(from_file, 0.0))
+        if from_file:
+            warnings.warn(
+                "the saved model predates simulating an unidentified parameter at the vehicle "
+                "file's value (it has no 'from_file'): it simulates them at 0, as it did when "
+                f"it was fitted and saved: {', '.join(from_file)}",
+                ExcitationWarning,
+                stacklevel=2,
+            )
+        return values, from_file
+    saved = state[FROM_FILE]
+    if not isinstance(saved, dict):
+        raise TypeError(f"'{FROM_FILE}' is not a mapping: {saved!r}")
+    for name in saved:
+        if name not in names:
+            raise ValueError(f"'{FROM_FILE}' names {name!r}, which is not a fitted unknown")
+        if name not in from_file:
+            raise ValueError(
+                f"'{FROM_FILE}' names {name!r}, whose estimate is a number: only an "
+                "unidentified (NaN) one is simulated at another value"
+            )
+    lacking = [n for n in from_file if n not in saved]
+    if lacking:
+        raise ValueError(
+            f"'{FROM_FILE}' lacks {lacking}, which the estimate leaves unidentified (NaN)"
+        )
+    for name, value in saved.items():
+        number = None if value is None else read_exact_float(value, f"'{FROM_FILE}' {name!r}")
+        if number is not None and not np.isfinite(number):
+            raise ValueError(f"'{FROM_FILE}' {name!r} is {number}, not a number to simulate")
+        from_file[name] = number
+        values[name] = 0.0 if number is None else number
     return values, from_file
 
 
@@ -1105,24 +1174,7 @@ class ParametricModel(FossenPlant):
             self.vehicle, self.estimate_.names, self.estimate_.theta
         )
         self.parts_ = self.structure_.parts(values)
-        if self.from_file_:
-            from nnid.trainers.least_squares import ExcitationWarning
-
-            # at 0 (the old nan_to_num) an unidentified added mass or damping term vanished
-            # from every simulation, unsaid, where the sequence's later steps read the file's
-            said = ", ".join(
-                f"{n} at 0 (the vehicle file has no such term)"
-                if v is None
-                else f"{n} at the vehicle file's value {v:.6g}"
-                for n, v in self.from_file_.items()
-            )
-            warnings.warn(
-                "the fit left parameters unidentified (NaN in the estimate, without a standard "
-                "error); the model simulates them at values that are not estimates, and its "
-                f"predictions rest on those: {said}",
-                ExcitationWarning,
-                stacklevel=3,
-            )
+        warn_simulated(self.from_file_, stacklevel=3)
         steps = self._step_data(data, dofs, unknowns)
         by_step = self._not_excited(steps, getattr(trainer, "filter_lambda", None))
         self.not_excited_ = self._last_verdicts(steps, by_step)
@@ -1360,9 +1412,7 @@ class ParametricModel(FossenPlant):
                 "excited": False,
             }
         # not an estimate: the value the model simulates it at, said beside the missing one
-        for name, value in self.from_file_.items():
-            params[name] = {**params[name], "simulated_at": 0.0 if value is None else value}
-        return params
+        return with_simulated_at(params, self.from_file_)
 
     def describe(self) -> dict:
         return {**super().describe(), "vehicle": self.vehicle.name, "dofs": list(self.dofs_)}
@@ -1379,9 +1429,7 @@ class ParametricModel(FossenPlant):
         # model had no trainer_ at all; series, not scalars, so tensors (none: no tensors.pt)
         records, tensors = saved_records(self)
         # the unidentified parameters it simulates at the vehicle file's values (None: at 0)
-        fit["from_file"] = {
-            n: None if v is None else exact_float(v) for n, v in self.from_file_.items()
-        }
+        fit[FROM_FILE] = saved_from_file(self.from_file_)
         return {**state, "not_excited": dict(self.not_excited_), **fit, **records}, tensors
 
     def _restore(self, state: dict, tensors: dict) -> None:
@@ -1395,17 +1443,10 @@ class ParametricModel(FossenPlant):
             self.report_ = CleaningReport.from_dict(state["report"])
             self.attenuated_ = restored_attenuation(state["attenuated"], self.estimate_.names)
         self.structure_ = ParametricFossen(self.vehicle, self.estimate_.names, self.dofs_)
-        values, from_file = simulated_values(
-            self.vehicle, self.estimate_.names, self.estimate_.theta
+        # what the fit simulated, whatever the vehicle file says now
+        values, self.from_file_ = restored_simulated(
+            state, self.vehicle, self.estimate_.names, self.estimate_.theta
         )
-        if "from_file" in state:  # what the fit simulated, whatever the vehicle file says now
-            what = "the saved 'from_file' value"
-            from_file = {
-                str(k): None if v is None else read_exact_float(v, what)
-                for k, v in state["from_file"].items()
-            }
-            values.update({k: 0.0 if v is None else v for k, v in from_file.items()})
-        self.from_file_ = from_file
         self.parts_ = self.structure_.parts(values)
         if TRAINER_HISTORY in state:  # absent from older files: no trainer_, as before
             self.trainer_ = self._trainer()

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from nnid.physics.added_mass import added_mass_matrix, derivative, set_derivative
+from nnid.physics.added_mass import added_mass_matrix, derivative, mirrored_key, set_derivative
 from nnid.physics.damping import DampingTerms, parse_coefficient_key
 from nnid.physics.dofs import DOFS, FORCES
 from nnid.physics.fossen import FossenModel
@@ -113,6 +113,18 @@ class Parts:
             return float((self.r_g if name.startswith("r_g") else self.r_b)[_AXES.index(name[-1])])
         raise KeyError(f"'{name}' is not a parameter of a vehicle file")
 
+    def declared(self, name: str) -> float | None:
+        """The value of parameter ``name`` as these parts declare it (those of a vehicle file:
+        :meth:`from_vehicle`), or None where they declare no such term: an added-mass
+        derivative (nor its mirror) or a damping coefficient left out, which :meth:`get`
+        and the model read as 0. KeyError for a name that is not a parameter."""
+        if name.endswith("dot") and ":" not in name:
+            if name not in self.added_mass and mirrored_key(name) not in self.added_mass:
+                return None
+        elif ":" in name and name not in self.damping:
+            return None
+        return self.get(name)
+
     def model(self, check: bool = True, actuator_lag: float = 0.0) -> FossenModel:
         """The Fossen model of these parts (installation: see :meth:`applied`), with the
         applied force a state behind an ``actuator_lag`` > 0. ``check=False`` skips the
@@ -148,6 +160,15 @@ class Parts:
         parts ``tau`` and ``tau_neg`` a lagged vehicle's arrays hold; η(sign) τ of ``tau``
         without a lag."""
         return apply_installation(data["tau"], self.eta_pos, self.eta_neg, data.get("tau_neg"))
+
+
+def at_file_value(value: float | None) -> str:
+    """How every message says a parameter is taken at the vehicle file's value
+    (:meth:`Parts.declared`): "at the vehicle file's value V", or "at 0 (the vehicle file has
+    no such term)" for None, which the file's own model reads as 0."""
+    if value is None:
+        return "at 0 (the vehicle file has no such term)"
+    return f"at the vehicle file's value {value:.6g}"
 
 
 def relative_velocity(parts: Parts, data: dict[str, np.ndarray]) -> np.ndarray:

@@ -18,7 +18,8 @@ A refit that cannot identify a value an earlier step did keeps the earlier estim
 verdict), plugged in as before, and a warning names both steps.
 A parameter left NaN at the end (no step's runs identify it) stays NaN with a warning, as in
 plain least squares, and the other steps' estimates stand; one that only steps whose equations
-never read it fit is a mistake of the sequence, an error.
+do not contain it fit (zero at any state, not only on their runs) is a mistake of the sequence,
+an error.
 The excitation report joins the steps' (:func:`~nnid.evaluation.persistence.combined_excitation`):
 each parameter with the verdict of the step whose value it keeps.
 """
@@ -33,6 +34,7 @@ import numpy as np
 
 from nnid.errors import ExcitationWarning, NnidInputError
 from nnid.evaluation.persistence import ExcitationReport, combined_excitation
+from nnid.physics.parts import at_file_value
 from nnid.trainers.history import Progress, silent
 from nnid.trainers.least_squares import Estimate, LeastSquares
 
@@ -102,6 +104,35 @@ def step_reads(
     """Whether the equations of ``step`` read parameter ``name`` on its runs ``data``
     (:func:`step_equations`), so that the value the step takes for it enters its estimates."""
     return bool(step_equations(structure, name, step, data, filter_lambda))
+
+
+#: a generic state of the vehicle for :func:`step_contains`, fixed (no generator): two
+#: samples with every velocity, acceleration, pose component and force nonzero, of both
+#: signs (an installation coefficient of negative thrust reads only a negative force)
+_PROBE_NU = np.array(
+    [[0.31, -0.23, 0.17, 0.13, -0.11, 0.29], [-0.27, 0.19, -0.21, -0.15, 0.12, -0.18]]
+)
+_PROBE_NU_DOT = np.array(
+    [[0.07, 0.05, -0.09, 0.04, 0.06, -0.03], [-0.08, -0.06, 0.05, -0.07, -0.04, 0.09]]
+)
+_PROBE_ETA = np.array([[1.3, -0.7, 2.1, 0.21, -0.17, 0.43], [-0.9, 1.1, 1.7, -0.19, 0.23, -0.37]])
+_PROBE_TAU = np.array([[13.0, 7.0, 11.0, 3.0, 2.0, 5.0], [-9.0, -8.0, -12.0, -4.0, -3.0, -6.0]])
+
+
+def step_contains(structure, name: str, step: Step) -> bool:
+    """Whether the equations of ``step`` contain parameter ``name`` at all: its regression
+    column (Weiss eqs 99-108) is not zero at a generic state (:data:`_PROBE_NU` and the
+    others), whatever the step's runs. A column that is zero only on the runs (they never move
+    what it multiplies: N:v in a yaw run where v ≡ 0) is a data outcome, not this."""
+    probe = {
+        "t": np.arange(len(_PROBE_NU), dtype=float),
+        "experiment": np.zeros(len(_PROBE_NU), dtype=int),
+        "nu": _PROBE_NU.copy(),
+        "nu_dot": _PROBE_NU_DOT.copy(),
+        "eta": _PROBE_ETA.copy(),
+        "tau": _PROBE_TAU.copy(),
+    }
+    return bool(step_equations(structure, name, step, probe, None))
 
 
 def resting_on(
@@ -174,7 +205,7 @@ class DecoupledSequence:
         refits: dict[tuple[str, int], list[int]] = {}  # (it, that step): refits that left NaN
         self.unidentified_: list[list[str]] = []  # per step: left NaN, and no earlier value
         self.kept_: list[list[str]] = []  # per step: left NaN, an earlier step's estimate kept
-        tried: dict[str, list[tuple[int, bool]]] = {}  # left NaN: (step, its equations read it)
+        tried: dict[str, list[tuple[int, bool]]] = {}  # left NaN: (step, its equations have it)
         n_obs = 0
         checks: list[tuple[list[str], ExcitationReport | None]] = []
         report = progress or silent
@@ -215,19 +246,19 @@ class DecoupledSequence:
                     found[name] = float(value)
                     source[name] = k
                     lost.pop(name, None)
-            for name in missing:
-                reads = step_reads(structure, name, step, subset, self.filter_lambda)
-                tried.setdefault(name, []).append((k, reads))
+            for name in missing:  # structural, not on these runs: they may not move its factor
+                tried.setdefault(name, []).append((k, step_contains(structure, name, step)))
             self.unidentified_.append([n for n in missing if n not in kept])
             self.kept_.append(kept)
             n_obs += est.n_obs
             checks.append((given, est.excitation))  # a kept one keeps its verdict too
         if prior:
             vehicle = structure.restricted([], self.steps[0].dofs, {}).base  # nothing set
+            # the value it reads: the declared one, or 0 where the file has no such term
             said = [
                 f"{step_label(j, self.steps[j])} could not identify {name}, so "
                 + ", ".join(step_label(i, self.steps[i]) for i in steps)
-                + f" read it at the vehicle file's value {vehicle.get(name):.6g}"
+                + f" read it {at_file_value(vehicle.declared(name))}"
                 for (name, j), steps in prior.items()
             ]
             warnings.warn(
@@ -259,21 +290,22 @@ class DecoupledSequence:
 
     def _check_left(self, left: list[str], tried: Mapping[str, list[tuple[int, bool]]]) -> None:
         """Judge the parameters ``left`` NaN after the whole sequence (``tried``: per parameter,
-        each step that fitted it and left it NaN, with whether its equations read it on its runs,
-        :func:`step_reads`). One that no step fits, or that only steps whose equations never
-        read it fit (N_rdot in a surge step), is a mistake of the sequence, whatever the data:
-        NnidInputError. One a step's equations do read was not identified by its runs (not
-        excited, or read only by rows left out): a data outcome, so it stays NaN with a warning,
-        as plain least squares leaves it, and the parameters the other steps identified stand."""
-        unread = [n for n in left if not any(reads for _, reads in tried.get(n, []))]
+        each step that fitted it and left it NaN, with whether its equations contain it,
+        :func:`step_contains`). One that no step fits, or that only steps whose equations do
+        not contain it fit (N_rdot in a surge step), is a mistake of the sequence, whatever
+        the data: NnidInputError. One a step's equations contain was not identified by its
+        runs (not excited, a factor its runs never move, or read only by rows left out): a data
+        outcome, so it stays NaN with a warning, as plain least squares leaves it, and the
+        parameters the other steps identified stand."""
+        unread = [n for n in left if not any(has for _, has in tried.get(n, []))]
         if unread:
             said = [
                 f"{n}: "
                 + (
                     "the equations of "
                     + ", ".join(step_label(k, self.steps[k]) for k, _ in tried[n])
-                    + ", which fit it, read it in no row of their runs (it is not in them, or "
-                    "those runs never move what it multiplies)"
+                    + ", which fit it, do not contain it (its regressor is zero whatever the "
+                    "motion)"
                     if n in tried
                     else "no step has it among its unknowns"
                 )
@@ -282,7 +314,7 @@ class DecoupledSequence:
             raise NnidInputError(
                 f"no step of the sequence identifies {unread}: "
                 + "; ".join(said)
-                + "; fit each in a step whose equations read it on its runs",
+                + "; fit each in a step whose equations contain it",
                 field="sequence",
             )
         if left:

@@ -117,6 +117,10 @@ def masked_least_squares(
         names = [f"{outputs[f]}:{terms[j] if terms is not None else j}" for j in cols]
         reg = Regression(xi[:, cols], tau_bar[:, f], names, ("u",), tau_bar.shape[0])
         est = solver.solve(reg)
+        # an unidentified term (a zero regressor: NaN, which solve names) at 0, not at the
+        # vehicle file's value as a Fossen model's (simulated_values): K replaces the file's
+        # damping wholesale (McCarter eq. 4.6), so a file coefficient of another basis would
+        # mix two damping models; 0 is the term absent, as off the mask
         k[f, cols] = np.nan_to_num(est.theta)
         se[f, cols] = est.stderr  # NaN for a term of a collinear group
     return SynthesisFit(k, se, mask)
