@@ -573,8 +573,6 @@ def follow_run(
     from nnid.reports.detect_report import OUTPUTS, write_detect_outputs
 
     _checked_window(window)
-    if idle_s is not None:  # a NaN never compares, so a NaN wait was forever
-        checked_number(idle_s, "--idle-s", 0.0, strict=False)
     check_detect_inputs(model_dir, data, follow=True)
     monitor, window_s = _monitor(model_dir, window)
     try:
@@ -582,6 +580,8 @@ def follow_run(
             monitor, data, window_s, say, idle_s=IDLE_S if idle_s is None else idle_s
         )
     except NnidInputError as exc:
+        if exc.field == "idle_s" and exc.source is None:  # follow_csv's check: the option's
+            raise NnidInputError(exc.message, field="--idle-s") from None
         raise exc.with_source(data) from None
     with staged(out_dir) as stage:
         lines = write_detect_outputs(monitor, result, stage, source=data)

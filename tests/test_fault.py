@@ -1342,3 +1342,14 @@ def test_follow_names_an_empty_cell_as_what_it_most_often_is(monitor, stopped_h1
     said = str(refused.value)
     assert "theta" in said and "an empty cell, a sensor logged slower" in said
     assert "batch detect reads" in said
+
+
+@pytest.mark.parametrize("idle", [math.nan, math.inf, -1.0])
+def test_follow_csv_refuses_an_idle_time_it_would_wait_on_forever(tmp_path, idle):
+    """follow_csv(idle_s=nan) from Python waited forever on a file that stopped growing (a
+    NaN never compares): only the CLI checked --idle-s. It is refused naming idle_s, before
+    the file is read or the monitor used (the CLI says it as --idle-s:
+    test_bad_input_corpus)."""
+    (tmp_path / "log.csv").write_text("t,u\n0,0\n")
+    with pytest.raises(NnidInputError, match="field 'idle_s': a finite number at least 0"):
+        follow_csv(None, str(tmp_path / "log.csv"), 10.0, lambda line: None, idle_s=idle)

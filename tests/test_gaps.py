@@ -465,3 +465,43 @@ def test_each_run_is_measured_at_its_own_rate():
         "psi logged every 5th row in a: 4 Hz against 20 Hz",
         "psi logged every 50th row in b: 2 Hz against 100 Hz",
     ]
+
+
+def test_a_run_with_a_slow_velocity_is_taken_out_and_said_the_others_fit(tmp_path):
+    """Run a logs u, v on every row, run b on every 5th only: masking took b's rows out
+    (pieces of one row) and the fit went on with a, until a slow channel in any run refused
+    the whole log. It fits on a; the report says b was taken out for u's and v's rate, with
+    its rows, not as gaps; refused only where that leaves nothing (the test above)."""
+    from typer.testing import CliRunner
+
+    from nnid.cli import app
+    from nnid.datasets.gaps import SLOW_STEP
+
+    one = _mocap_log(200).drop(columns=["x", "y"]).assign(**{f"tau_{c}": 0.0 for c in "YZKMN"})
+    log = pd.concat([one.assign(experiment="a"), one.assign(experiment="b")], ignore_index=True)
+    log.loc[200:, ["u", "v"]] = _slow(log.loc[200:], ["u", "v"], 5)[["u", "v"]]
+    log.loc[50:52, "w"] = np.nan  # an ordinary gap in a: said as a gap, apart
+    report = CleaningReport(source="test")
+    train, val = mask_gaps([log.iloc[np.r_[0:140, 200:340]], log.iloc[np.r_[140:200, 340:400]]],
+                           ["u", "v", "w"], report)  # fmt: skip
+    assert set(train["experiment"]) == {"a#0", "a#1"} and set(val["experiment"]) == {"a"}
+    masked, slow = report.steps
+    assert masked.detail.startswith("1 gap in w (3 samples") and masked.rows_removed == 3
+    assert slow.step == SLOW_STEP and slow.rows_removed == 200
+    assert slow.detail.startswith(
+        "b (200 rows): u logged every 5th row: 4 Hz against 20 Hz, v logged every 5th row: "
+        "4 Hz against 20 Hz: taken out, not masked as gaps"
+    )
+    log.to_csv(tmp_path / "dvl.csv", index=False)
+    cfg = tmp_path / "t.toml"
+    cfg.write_text('kind = "train"\nvehicle = "seamor"\n[data]\nlog = "dvl.csv"\n'
+                   '[model]\nkind = "fossen"\ndofs = ["u"]\n')  # fmt: skip
+    done = CliRunner().invoke(app, ["train", str(cfg), "--out", str(tmp_path / "out")])
+    said = " ".join(done.output.split())
+    assert done.exit_code == 0, said
+    assert "slow channels: b (200 rows): u logged every 5th row" in said
+    # refused where nothing is left (a's u dropped out on 3 of every 5 rows: pieces of one
+    # row, gaps, not a rate): the rows it names are b's slow cells, not a's gaps with them
+    log.loc[np.flatnonzero(np.arange(200) % 5 % 2 == 0), "u"] = np.nan
+    with pytest.raises(NnidInputError, match="take 160 of the 400 rows out"):
+        mask_gaps([log], ["u", "v"])

@@ -239,3 +239,17 @@ def test_every_batch_command_gets_the_manifests_time_unit(monkeypatch, command, 
                 time_unit="ms")  # fmt: skip
     _run(task, Path("out"))
     assert got["time_unit"] == "ms"
+
+
+def test_the_reader_config_example_in_the_column_map_docstring_parses():
+    """The module docstring's example [[sources]] set time_unit = "s" and row_clock = 20.0
+    together, which the source's own check refuses (one clock declaration): the example is
+    read as a reader config, its row_clock an alternative left commented out."""
+    import re
+    import tomllib
+
+    from nnid.datasets import column_map
+
+    (example,) = re.findall(r"```toml\n(.*?)```", column_map.__doc__ or "", re.S)
+    (source,) = column_map.ColumnMap.model_validate(tomllib.loads(example)).sources
+    assert source.time_unit == "s" and source.row_clock is None

@@ -23,9 +23,10 @@ time_scale = 1.0              # to seconds (1e-9 for nanoseconds); the default 1
 time_unit = "s"               # optional: declares the time column's unit (s, ms, us, ns),
                               # converted to seconds and not guessed from its steps (a 1-Hz
                               # logger stepping by whole seconds); not with another time_scale
-row_clock = 20.0              # optional, Hz: t = row number within the experiment / row_clock,
-                              # for a time column too coarse to use (an hhmmss clock); time is
-                              # then still read but only the row order counts
+# row_clock = 20.0            # or, instead of time_unit, optional, Hz: t = row number within
+                              # the experiment / row_clock, for a time column too coarse to use
+                              # (an hhmmss clock); time is then still read but only the row
+                              # order counts
 method = "hold"               # "hold" (zero-order, commands sent on change) or "linear"
 hold_timeout = 0.5            # optional: a held value is stale this long after the last one
 frame = "ned_frd"             # or "enu_flu": converted to NED/FRD after renaming

@@ -23,7 +23,8 @@ without a gyro is differentiated into velocities, so samples made between their 
 straight line would be fitted as measured (standard errors as if from k times the data) and
 change the noise of a Savitzky-Golay derivative; they are bridged from the pose where it
 allows, and the report says why. Masking one would take every row between its samples out
-(the whole log, in pieces of one row): a fit refuses it instead (:func:`refuse_slow`). The rows
+(its runs, in pieces of one row): a fit takes each run it is slow in out whole and says so, and
+refuses a log that leaves nothing of (:func:`mask_gaps`, :func:`refuse_slow`). The rows
 of a run before a slow channel's first sample or after its last are outside its sampled span,
 said as such (:func:`span_ends`), not as a gap; a fit takes them out with the gaps.
 """
@@ -166,7 +167,8 @@ def fill_slow(log: pd.DataFrame, report: CleaningReport | None = None) -> pd.Dat
             detail.append(
                 f"{'; '.join(kept)}: not filled (it is differentiated, or is the fits' "
                 "response: samples made between its own would be fitted as measured); "
-                "bridged from the pose where it allows, else refused where a fit would mask it"
+                "bridged from the pose where it allows, else a fit takes its runs out (refused "
+                "where that leaves nothing)"
             )
         columns = list(dict.fromkeys(ch.column for ch in slow))
         report.add(SLOW_STEP, "; ".join(detail), columns=columns)
@@ -190,15 +192,29 @@ def between_samples(log: pd.DataFrame, slow: list[SlowChannel] | None = None) ->
     slow = slow_channels(log) if slow is None else slow
     out = _between_samples(log, slow, {})[0]
     runs = log["experiment"] if "experiment" in log else pd.Series(0, index=log.index)
+    codes, _, order, _, _, _ = _experiment_sorted(log)
     for column in dict.fromkeys(ch.column for ch in slow):
         rows = _slow_rows(log, [ch for ch in slow if ch.column == column])
-        present = log[column].notna()
-        began = present.groupby(runs).cummax()  # at or after its first sample in the run
-        going = present[::-1].groupby(runs[::-1]).cummax()[::-1]  # at or before its last
-        edges = (~(began & going)).to_numpy() & rows
+        before, after = _beyond_span(log[column].notna().to_numpy()[order], codes)
+        edges = np.empty(len(log), dtype=bool)
+        edges[order] = before | after
+        edges &= rows
         held = out[column].groupby(runs)
         out.loc[edges, column] = held.ffill().fillna(held.bfill())[edges]
     return out
+
+
+def _beyond_span(present: np.ndarray, codes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(before, after): the rows (sorted by experiment, :func:`_experiment_sorted`) before a
+    channel's first sample in their run and after its last, ``present`` where it has one;
+    every row of a run without a sample is both. The rows outside its sampled span, which
+    :func:`between_samples` holds and :func:`span_ends` counts."""
+    n = present.size
+    rows = np.arange(n)
+    start, stop = np.searchsorted(codes, codes, "left"), np.searchsorted(codes, codes, "right")
+    last_seen = np.maximum.accumulate(np.where(present, rows, -1))  # at or before each row
+    next_seen = np.minimum.accumulate(np.where(present, rows, n)[::-1])[::-1]  # at or after
+    return last_seen < start, next_seen >= stop
 
 
 def span_ends(log: pd.DataFrame, ch: SlowChannel) -> list[dict]:
@@ -208,20 +224,20 @@ def span_ends(log: pd.DataFrame, ch: SlowChannel) -> list[dict]:
     row leaves up to k - 1 rows after its last sample by its rate alone."""
     codes, names, order, t, _, _ = _experiment_sorted(log)
     present = log[ch.column].notna().to_numpy()[order]
+    before, after = _beyond_span(present, codes)
     mine = _slow_rows(log, [ch])[order]
+    n_before, n_after, n_present = (
+        np.bincount(codes[rows], minlength=len(names)) for rows in (before, after, present)
+    )
     out = []
-    runs = np.unique(codes[mine])
-    starts, stops = (np.searchsorted(codes, runs, side) for side in ("left", "right"))
-    for e, a, b in zip(runs, starts, stops, strict=True):  # codes are sorted: a run is a:b
-        run = np.arange(a, b)
-        rows = run[present[a:b]]
-        if not rows.size:
-            continue
-        before, after = int(rows[0] - run[0]), int(run[-1] - rows[-1])
-        if before or after:
-            name = None if len(names) == 1 else str(names[e])  # one run: no need to name it
-            out.append({"experiment": name, "first_t": float(t[rows[0]]), "before": before,
-                        "last_t": float(t[rows[-1]]), "after": after})  # fmt: skip
+    for e in np.unique(codes[mine]):
+        if not n_present[e] or not (n_before[e] or n_after[e]):
+            continue  # no sample in the run (nothing to say it by), or none outside its span
+        a, b = np.searchsorted(codes, e, "left"), np.searchsorted(codes, e, "right")
+        first, last = a + n_before[e], b - 1 - n_after[e]  # its first and last sample
+        name = None if len(names) == 1 else str(names[e])  # one run: no need to name it
+        out.append({"experiment": name, "first_t": float(t[first]), "before": int(n_before[e]),
+                    "last_t": float(t[last]), "after": int(n_after[e])})  # fmt: skip
     return out
 
 
@@ -246,36 +262,96 @@ def say_ends(ends: list[dict]) -> str:
 
 
 def _slow_rows(log: pd.DataFrame, slow: list[SlowChannel]) -> np.ndarray:
-    """Which rows of ``log`` (in its own order) belong to a run that ``slow`` holds."""
-    if any(ch.runs is None for ch in slow) or "experiment" not in log:
-        return np.ones(len(log), dtype=bool)
-    names = {r for ch in slow for r in ch.runs or []}
-    return log["experiment"].astype(str).isin(names).to_numpy()
+    """Which rows of ``log`` (in its own order) belong to a run that a channel of ``slow`` is
+    logged slower in: its ``runs``, or, where they are None, each run with an empty cell of it
+    (a run that logs it on every row is not one)."""
+    if "experiment" not in log:
+        return np.full(len(log), bool(slow))
+    names = log["experiment"].astype(str)
+    out = np.zeros(len(log), dtype=bool)
+    for ch in slow:
+        runs = names[log[ch.column].isna()].unique() if ch.runs is None else ch.runs
+        out |= names.isin(runs).to_numpy()
+    return out
 
 
-def refuse_slow(parts: list[pd.DataFrame], columns: list[str]) -> None:
-    """An error naming each channel of ``columns`` still logged slower than the clock in the
-    parts of one log (not filled from the gyro, nor bridged from the pose): masking its gaps
-    would take every row between its samples out, and a piece of one row between two is too
-    short to use, so the whole log went, said only as 'the training split is empty'."""
+def still_slow(parts: list[pd.DataFrame], columns: list[str]) -> list[SlowChannel]:
+    """The channels of ``columns`` still logged slower than the clock in the parts of one log,
+    measured on them joined (:func:`slow_channels`: not filled from the gyro, nor bridged from
+    the pose by now)."""
     parts = [p for p in parts if len(p)]
     if not any(p[[c for c in columns if c in p]].isna().to_numpy().any() for p in parts):
-        return  # nothing empty: no copy of the log
+        return []  # nothing empty: no copy of the log
     joined = parts[0] if len(parts) == 1 else pd.concat(parts, ignore_index=True)
-    slow = slow_channels(joined, [c for c in columns if c in joined])
-    if not slow:
-        return
+    return slow_channels(joined, [c for c in columns if c in joined])
+
+
+def refuse_slow(parts: list[pd.DataFrame], slow: list[SlowChannel]) -> NnidInputError:
+    """The error for a log that the ``slow`` channels (:func:`still_slow`) leave nothing of
+    to fit: masking a slow channel's empty cells takes every row between its samples out, and
+    a piece of one row between two is too short to use, so each run it is slow in goes; where
+    that is every run of every part, it ended as 'the training split is empty'. It names
+    each channel, its rate, the rows it empties and what to do."""
+    parts = [p for p in parts if len(p)]
+    emptied = [
+        np.logical_or.reduce([_slow_rows(p, [ch]) & p[ch.column].isna().to_numpy() for ch in slow])
+        for p in parts
+    ]
+    empty = int(sum(e.sum() for e in emptied))  # a slow channel's own cells, in its own runs
     said = "; ".join(ch.describe() for ch in slow)
     its, it = ("its", "it") if len({ch.column for ch in slow}) == 1 else ("their", "them")
-    empty = int(joined[list(dict.fromkeys(ch.column for ch in slow))].isna().any(axis=1).sum())
-    raise NnidInputError(
+    return NnidInputError(
         f"{said}: the empty cells between {its} samples are {its} rate, not dropouts, and a "
         f"fit reads the motion on every row; masked as gaps they would take {empty} of the "
-        f"{len(joined)} rows out and leave pieces of one row, too short to fit. Log {it} at "
-        f"the full rate, or resample the log to {its} rate; a velocity is bridged between "
-        "its samples where the log holds the whole pose (x y z, roll, pitch, yaw), and an "
-        "attitude filled where it holds a gyro (p q r)",
+        f"{sum(map(len, parts))} rows out and leave pieces of one row, too short to fit, and "
+        f"nothing of the log to fit on. Log {it} at the full rate, or resample the log to "
+        f"{its} rate; a velocity is bridged between its samples where the log holds the whole "
+        "pose (x y z, roll, pitch, yaw), and an attitude filled where it holds a gyro (p q r)",
         field=slow[0].column,
+    )
+
+
+def _slow_runs(parts: list[pd.DataFrame], slow: list[SlowChannel]) -> list[np.ndarray]:
+    """Each part's rows (in its own order) of the runs that a channel of ``slow`` is logged
+    slower in (:func:`_slow_rows`), the same runs in every part: a block split puts pieces of
+    one run in several."""
+    if not slow:
+        return [np.zeros(len(p), dtype=bool) for p in parts]
+    found = [_slow_rows(p, slow) for p in parts]
+    if not any("experiment" in p for p in parts):
+        return found
+    runs = {str(e) for p, f in zip(parts, found, strict=True) if len(p) for e in p["experiment"][f]}
+    return [p["experiment"].astype(str).isin(runs).to_numpy() if len(p) else f
+            for p, f in zip(parts, found, strict=True)]  # fmt: skip
+
+
+def _say_slow_runs(
+    parts: list[pd.DataFrame], slow: list[SlowChannel], taken: list[np.ndarray]
+) -> tuple[str, int]:
+    """What :func:`mask_gaps` says of the runs it takes out whole (``taken``, each part's
+    rows, :func:`_slow_runs`) because a channel of ``slow`` is logged slower in them: each
+    run with its rows and its slow channels' rates (never as the gaps their empty cells
+    would count as), and how many rows that is."""
+    rows: dict[str, int] = {}
+    why: dict[str, list[str]] = {}
+    for p, mask in zip(parts, taken, strict=True):
+        if not len(p):
+            continue
+        names = p["experiment"].astype(str) if "experiment" in p else pd.Series("run", p.index)
+        for ch in slow:
+            plain = replace(ch, runs=None).describe()  # its rate, the run said once before
+            for run in dict.fromkeys(names[_slow_rows(p, [ch])]):
+                if plain not in why.setdefault(run, []):
+                    why[run].append(plain)
+        for run, n in names[mask].value_counts(sort=False).items():
+            rows[run] = rows.get(run, 0) + int(n)
+    said = "; ".join(f"{run} ({rows[run]} rows): {', '.join(why[run])}" for run in why)
+    return (
+        f"{said}: taken out, not masked as gaps: the empty cells between a slow channel's "
+        "samples are its rate, a fit reads the motion on every row, and pieces of one row "
+        "between them are too short to fit. Log it at the full rate, or resample the log to "
+        "its rate, to fit on these runs",
+        sum(rows.values()),
     )
 
 
@@ -465,17 +541,21 @@ def mask_gaps(
     readers count, each segment keeping the run's clock ``t``), reported once; a segment's
     ``piece_of`` column names its run, which is how a piece is told from a whole run (never
     by the ``#`` in its label, which a user's may hold too). Parts without gaps are returned
-    as they are."""
-    refuse_slow(parts, columns)  # a slow channel's cells between its samples are no gaps
+    as they are. A run in which a channel of ``columns`` is logged slower than the clock
+    (:func:`still_slow`) is taken out whole and said as such, its rate, not gaps: masked, its
+    empty cells would leave pieces of one row, too short to use; where that leaves nothing
+    of the log, it is refused (:func:`refuse_slow`)."""
+    slow = still_slow(parts, columns)  # a slow channel's cells between its samples are no gaps
+    slow_runs = _slow_runs(parts, slow)
     out, gaps, short = [], [], 0
-    for log in parts:
+    for log, taken in zip(parts, slow_runs, strict=True):
         cols = [c for c in columns if c in log]
         missing = log[cols].isna().any(axis=1).to_numpy() if cols else np.zeros(len(log), bool)
-        if not missing.any():
+        if not missing.any() and not taken.any():
             out.append(log)
             continue
-        gaps += find_gaps(log, cols)
-        keep = ~missing
+        gaps += find_gaps(log[~taken], cols)
+        keep = ~missing & ~taken
         label = np.empty(len(log), dtype=object)
         piece_of = np.full(len(log), None, dtype=object)  # a reader's piece stays one
         if PIECE_OF in log:
@@ -494,15 +574,21 @@ def mask_gaps(
         out.append(
             log.assign(experiment=label, **{PIECE_OF: piece_of})[keep].reset_index(drop=True)
         )
+    if slow and any(len(p) for p in parts) and not any(len(p) for p in out):
+        raise refuse_slow(parts, slow)
+    said, taken = _say_slow_runs(parts, slow, slow_runs) if slow else ("", 0)
     if report is not None and gaps:
         extra = f"; {short} samples between gaps too short to use" if short else ""
         report.add(
             MASK_STEP,
             f"{_summary(gaps)} masked (out of regressions and scores; runs cut into segments "
             f"at them, each simulated from its own start{extra})",
-            rows_removed=sum(len(a) - len(b) for a, b in zip(parts, out, strict=True)),
+            rows_removed=sum(len(a) - len(b) for a, b in zip(parts, out, strict=True)) - taken,
             columns=sorted({c for g in gaps for c in g.columns}),
         )
+    if report is not None and slow:
+        columns = list(dict.fromkeys(ch.column for ch in slow))
+        report.add(SLOW_STEP, said, rows_removed=taken, columns=columns)
     return out
 
 

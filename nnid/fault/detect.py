@@ -63,9 +63,11 @@ from nnid.reports.cells import number
 
 #: the columns of alarms.csv: the record's keys, and for an alarm that says an earlier change
 #: ended or changed size (hypothesis ``change_ended``, ``change_resized``) ``change_t``, the
-#: time τ it did so, and ``change_alarm_t``, the time of the alarm(s) that isolated it
-#: (:func:`alarm_row`; the record has them under ``ended`` or ``resized``); ``blind_until``
-#: last (:func:`blind_after`), so the columns before it keep their places
+#: time τ it did so, and ``change_alarm_t``, the time of the alarm(s) that isolated it; so
+#: too for an alarm isolated whose own change ended inside its window (:func:`ended_within`),
+#: ``change_alarm_t`` then its own time (:func:`alarm_row`; the record has them under
+#: ``ended`` or ``resized``); ``blind_until`` last (:func:`blind_after`), so the columns
+#: before it keep their places
 ALARM_FIELDS = ["experiment", "t", "kind", "thruster", "efficiency", "efficiency_low",
                 "efficiency_high", "effect", "value", "stderr", "severity", "confidence",
                 "explained", "residual_ratio", "hypothesis", "meaning", "change_t",
@@ -204,8 +206,7 @@ def ended_within(
     # the gain of the best τ, as ended() finds it, before its refit (most changes persist:
     # the residual isolated after τ then holds the change, and no τ gains)
     bar = float(splits.p_left.sum()) - 2 * monitor.correlation_time_ * splits.penalty()
-    after = np.cumsum(splits.power(splits.r)[::-1])[::-1]  # from each row on
-    if np.min((splits.before[:-1] + after)[: splits.n - splits.least + 1]) >= bar:
+    if np.min(splits.ended_costs(splits.power(splits.r))) >= bar:
         return None
     split = splits.ended()
     if split is None or split.j < splits.least or split.cost >= bar:
@@ -448,9 +449,7 @@ class _Splits:
         best = None
         for gone in self.sets:
             kept, after_r = self.after_r(gone)
-            p_after = self.power(after_r)
-            after = np.r_[np.cumsum(p_after[::-1])[::-1], 0.0]  # after[j]: from row j on
-            cost = (self.before + after)[: self.n - self.least + 1]
+            cost = self.ended_costs(self.power(after_r))
             j = int(np.argmin(cost))
             fit = refit(self.monitor, self.data, after_r[j:], self.rows[j:], self.names(gone))
             if fit is None or fit.p_value <= ENDED_LEVEL:
@@ -459,6 +458,14 @@ class _Splits:
             if self.within(split, healthy=not kept) and (best is None or split.cost < best.cost):
                 best = split
         return best
+
+    def ended_costs(self, p_after: np.ndarray) -> np.ndarray:
+        """The window's whitened power split at each row j that an end may be at (at least
+        :attr:`least` rows from it on): ``left`` before j, ``p_after`` (the power of what is
+        left with the changes gone) from j on; :meth:`ended` takes its least, and
+        :func:`ended_within` checks it first."""
+        after = np.cumsum(p_after[::-1])[::-1]  # after[j]: from row j on
+        return (self.before[:-1] + after)[: self.n - self.least + 1]
 
     def resized(self) -> _Split | None:
         """The changes of another size from τ on: refitted there (τ minimises the window's

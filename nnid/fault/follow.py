@@ -49,7 +49,7 @@ from nnid.datasets.log import (
 )
 from nnid.datasets.preprocess import savgol_window
 from nnid.datasets.readers import refuse_repeated_names
-from nnid.errors import NnidInputError
+from nnid.errors import NnidInputError, checked_number
 from nnid.fault.detect import (
     Change,
     DetectResult,
@@ -177,8 +177,11 @@ def follow_csv(
 ) -> DetectResult:
     """Watch ``source`` row by row; ``say`` gets one line per alarm and per isolation. The
     last ``keep_rows`` to twice as many samples are kept (for isolation and the report's
-    traces), so a monitor left running does not grow without bound; every alarm is kept."""
+    traces), so a monitor left running does not grow without bound; every alarm is kept.
+    ``idle_s``: how long a file may stop growing before its log has ended (0 or more)."""
     start = time.perf_counter()
+    # checked before the source is opened: a NaN never compares, so a NaN wait was forever
+    checked_number(idle_s, "idle_s", 0.0, strict=False)
     rows = _rows(source, idle_s)
     header = next(rows, None)
     where = "stdin" if source == "-" else source
