@@ -473,3 +473,38 @@ def test_an_unidentified_installation_coefficient_is_flown_at_the_vehicle_files_
     with pytest.warns(ExcitationWarning, match=r"predates .* at 0, .*: eta\.w\.neg"):
         older = load_model(tmp_path)
     assert older.parts_.eta_neg[2] == 0.0 and older.from_file_ == {"eta.w.neg": None}
+
+
+def test_an_unidentified_weight_minus_buoyancy_is_flown_at_the_vehicle_files(
+    setup, monkeypatch, tmp_path
+):
+    """A Caccia heave fit that leaves W − B unidentified (NaN) set the plant's buoyancy to
+    W − NaN: every prediction NaN, unsaid. (Forced, as the installation coefficient above.) It
+    flies the vehicle file's W − B (its weight and buoyancy), says so in the warning and in
+    simulated_at, and keeps it through a save."""
+    import dataclasses
+
+    from nnid.errors import ExcitationWarning
+
+    _, _, vehicle, log = setup
+    fit_logs = CacciaTwoStep.fit_logs
+
+    def unidentified(self, *args, **kwargs):
+        est = fit_logs(self, *args, **kwargs)
+        theta = est.theta.copy()
+        theta[est.names.index("weight_minus_buoyancy")] = np.nan
+        return dataclasses.replace(est, theta=theta)
+
+    monkeypatch.setattr(CacciaTwoStep, "fit_logs", unidentified)
+    file_value = float(vehicle.weight - vehicle.buoyancy)
+    with (
+        pytest.warns(UserWarning, match="step 2 did not run"),  # no sinusoid run: cheaper
+        pytest.warns(ExcitationWarning, match=r"weight_minus_buoyancy at the vehicle file's"),
+    ):
+        model = CacciaModel(vehicle).fit(log)
+    assert file_value != 0 and model.parts_.buoyancy == vehicle.buoyancy
+    entry = model.params["weight_minus_buoyancy"]
+    assert entry["value"] is None and entry["simulated_at"] == pytest.approx(file_value)
+    model.save(tmp_path)
+    back = load_model(tmp_path)
+    assert back.params == model.params and back.parts_.buoyancy == model.parts_.buoyancy

@@ -352,6 +352,8 @@ FIT_RECORD_DAMAGED = {
     ("state_space", "history's time of text"): _set("state", "fit_history", 0, "time", ["x"]),
     ("hybrid", "history without train"): lambda p: p["state"]["fit_history"][0].pop("train"),
     ("hybrid", "physics' report as a list"): _set("state", "physics", "report", []),
+    ("synthesis", "an estimated term as unidentified"): _set("state", "unidentified", ["X:u"]),
+    ("synthesis", "unidentified off the mask"): _set("state", "unidentified", ["X:v"]),
 }
 
 

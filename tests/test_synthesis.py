@@ -167,3 +167,38 @@ def test_a_nelder_mead_search_stopped_by_its_budget_is_said(fossen_problem):
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         nelder_mead(xi, tau, mask, "mse", start=ls, forces=("X",))
+
+
+@pytest.mark.parametrize("method", ["ls", "mae"])
+def test_an_unidentified_coefficient_stays_visible_not_an_estimate_of_zero(method, tmp_path):
+    """A masked term no row reads (X:u of a heave-only log) is unidentified: least squares
+    leaves it NaN and the model simulates it at 0 (K replaces the file's damping, eq. 4.6).
+    Its 0 was in params as the estimate 0.0, in the saved state and the report alike; it is now
+    null with simulated_at 0.0, said at the fit, kept through a save, and held at 0 by
+    Nelder-Mead (no cost reads it)."""
+    from importlib import resources
+
+    from nnid import load_model
+    from nnid.datasets.simulator import simulate
+    from nnid.errors import ExcitationWarning
+    from nnid.reports.train_report import _params_table
+
+    vehicle = load_vehicle(str(resources.files("nnid.demo_data").joinpath("minirov.toml")))
+    t = np.arange(300) * 0.1
+    inputs = np.zeros((t.size, 6))
+    inputs[:, 2] = 30.0 + 20.0 * np.sin(1.2 * t)
+    log = simulate(vehicle, inputs, 0.1, substeps=2, experiment="heave")
+    log[["u", "v", "p", "q", "r"]] = 0.0  # exactly: the regressor of X:u is zero
+    mask = {"X": ["u"], "Z": ["w", "w*abs(w)"]}
+    with pytest.warns(ExcitationWarning, match=r"X:u at 0 \(K replaces"):
+        model = SynthesisModel(vehicle, mask, method, filter_lambda=1.0).fit(log)
+    entry = model.params["X:u"]
+    assert entry == {"value": None, "stderr": None, "simulated_at": 0.0}
+    assert model.coef_[0, 0] == 0.0 and model.params["Z:w"]["value"] < 0
+    assert model.n_params == 3
+    _, rows = _params_table({"params": model.params})
+    assert rows[0][:2] == ["`X:u`", "- (simulated at 0)"]
+    model.save(tmp_path)
+    back = load_model(tmp_path)
+    assert back.params == model.params
+    np.testing.assert_array_equal(back.coef_, model.coef_)

@@ -32,11 +32,12 @@ from nnid.models.parametric import (
     with_simulated_at,
 )
 from nnid.physics.dofs import DOFS
+from nnid.physics.parts import WEIGHT_MINUS_BUOYANCY
 from nnid.trainers.history import Progress
 from nnid.trainers.least_squares import Estimate
 
 #: Caccia's disturbance terms that are not parameters of a vehicle file
-_NOT_FOSSEN = ("weight_minus_buoyancy", "delta_weight")
+_NOT_FOSSEN = (WEIGHT_MINUS_BUOYANCY, "delta_weight")
 
 
 def _fossen_names(names: Sequence[str]) -> list[str]:
@@ -167,23 +168,27 @@ class CacciaModel(FossenPlant):
 
     def _set_estimate(self, estimate: Estimate, state: Mapping | None = None) -> None:
         """Set the fitted plant from ``estimate``: its vehicle-file parameters in the vehicle
-        file, one it left unidentified (NaN: a zero regressor) at the file's value
-        (:func:`simulated_values`; with a saved ``state``, as that model was:
-        :func:`restored_simulated`)."""
+        file and heave's W − B as the buoyancy B = W − (W − B) (Caccia eq. 20), one it left
+        unidentified (NaN: a zero regressor) at the file's value (:func:`simulated_values`;
+        with a saved ``state``, as that model was: :func:`restored_simulated`)."""
         self.estimate_ = estimate
         fossen = _fossen_names(estimate.names)
-        idx = [estimate.names.index(n) for n in fossen]
+        # W − B goes through the same simulated values: a NaN one made the buoyancy NaN
+        flown = fossen + (
+            [WEIGHT_MINUS_BUOYANCY]
+            if self.dof == "w" and WEIGHT_MINUS_BUOYANCY in estimate.names
+            else []
+        )
+        theta = estimate.theta[[estimate.names.index(n) for n in flown]]
         self.structure_ = ParametricFossen(self.vehicle, fossen, [self.dof])
         self._set_outputs([self.dof])
         if state is None:
-            values, self.from_file_ = simulated_values(self.vehicle, fossen, estimate.theta[idx])
+            values, self.from_file_ = simulated_values(self.vehicle, flown, theta)
         else:
-            values, self.from_file_ = restored_simulated(
-                state, self.vehicle, fossen, estimate.theta[idx]
-            )
+            values, self.from_file_ = restored_simulated(state, self.vehicle, flown, theta)
+        wb = values.pop(WEIGHT_MINUS_BUOYANCY, None)
         self.parts_ = self.structure_.parts(values)
-        if self.dof == "w" and "weight_minus_buoyancy" in estimate.names:
-            wb = float(estimate.theta[estimate.names.index("weight_minus_buoyancy")])
+        if wb is not None:
             self.parts_.buoyancy = self.parts_.weight - wb
 
     def _params(self) -> dict[str, dict[str, float | None]]:

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import re
 import warnings
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -847,14 +847,19 @@ def simulated_values(
     return values, from_file
 
 
-def warn_simulated(from_file: Mapping[str, float | None], stacklevel: int) -> None:
+def warn_simulated(
+    from_file: Mapping[str, float | None],
+    stacklevel: int,
+    at: Callable[[float | None], str] = at_file_value,
+) -> None:
     """Say the values a fitted model simulates its unidentified parameters at
-    (:func:`simulated_values`): its predictions rest on them, and they are no estimates."""
+    (:func:`simulated_values`): its predictions rest on them, and they are no estimates.
+    ``at`` says where each is taken (by default the vehicle file's value, or 0)."""
     if not from_file:
         return
     # at 0 (the old nan_to_num) an unidentified added mass or damping term vanished from
     # every simulation, unsaid, where the sequence's later steps read the file's
-    said = ", ".join(f"{n} {at_file_value(v)}" for n, v in from_file.items())
+    said = ", ".join(f"{n} {at(v)}" for n, v in from_file.items())
     warnings.warn(
         "the fit left parameters unidentified (NaN in the estimate, without a standard "
         "error); the model simulates them at values that are not estimates, and its "

@@ -212,6 +212,7 @@ class SindyDamping(DampingModel):
         self.outputs_ = list(VELOCITY)
         self.targets_ = list(VELOCITY)
         self.warmup_samples_ = 1
+        self.unidentified_ = np.zeros(self.coef_.shape, dtype=bool)  # K of ν̇: none kept
 
     def trainer_name(self) -> str:
         return f"pysindy {self.optimizer}"

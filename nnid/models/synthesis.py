@@ -30,6 +30,8 @@ from nnid.models.parametric import (
     filter_signal,
     prepare_motion,
     warn_held_inputs,
+    warn_simulated,
+    with_simulated_at,
 )
 from nnid.physics.damping_library import BasisLibrary
 from nnid.physics.dofs import DOFS, FORCES
@@ -130,6 +132,35 @@ def restored_matrices(
     return terms, coef.reshape(shape), stderr.reshape(shape)
 
 
+#: the saved state's key of a damping model's unidentified coefficients (absent from files
+#: saved before they were kept: those show the 0 they are simulated at as a value)
+UNIDENTIFIED = "unidentified"
+
+
+def restored_unidentified(
+    state: Mapping, terms: Sequence[str], coef: np.ndarray, stderr: np.ndarray
+) -> np.ndarray:
+    """The unidentified entries of K ``[6, len(terms)]`` a saved damping model names under
+    :data:`UNIDENTIFIED` (``"F:term"`` keys, as its params), checked: each an entry of K that
+    holds 0 without a standard error, as a fit leaves one; none for an older file."""
+    out = np.zeros(coef.shape, dtype=bool)
+    names = state.get(UNIDENTIFIED, [])
+    if not isinstance(names, list):
+        raise TypeError(f"'{UNIDENTIFIED}' is not a list of coefficients: {names!r}")
+    index = {f"{FORCES[f]}:{t}": (f, j) for f in range(6) for j, t in enumerate(terms)}
+    for name in names:
+        if name not in index:
+            raise ValueError(f"'{UNIDENTIFIED}' names {name!r}, which is no entry of K")
+        f, j = index[name]
+        if coef[f, j] != 0 or np.isfinite(stderr[f, j]):
+            raise ValueError(
+                f"'{UNIDENTIFIED}' names {name!r}, which has a value {coef[f, j]!r} or a "
+                "standard error: an unidentified coefficient has neither (it is simulated at 0)"
+            )
+        out[f, j] = True
+    return out
+
+
 class DampingModel(FossenPlant):
     """A viscous damping model K ξ(ν) over basis terms, fitted to McCarter's τ̄.
 
@@ -189,12 +220,24 @@ class DampingModel(FossenPlant):
             smoothed = self.filtered or not all(a in log for a in ACCELERATION)
             warn_held_inputs(log, fit, smoothed, self.vehicle.actuator_lag, stacklevel=5)
 
-    def _set_damping(self, terms: Sequence[str], coef: np.ndarray, stderr: np.ndarray) -> None:
+    def _set_damping(
+        self,
+        terms: Sequence[str],
+        coef: np.ndarray,
+        stderr: np.ndarray,
+        unidentified: np.ndarray | None = None,
+    ) -> None:
         """The fitted state: K ``[6, len(terms)]`` and its standard errors (NaN where none),
-        and the plant (the vehicle file with its damping replaced by K)."""
+        the entries the fit left unidentified (``unidentified``: K holds 0 there, no
+        estimate), and the plant (the vehicle file with its damping replaced by K)."""
         self.terms_ = list(terms)
         self.coef_ = np.asarray(coef, dtype=np.float64)
         self.stderr_ = np.asarray(stderr, dtype=np.float64)
+        self.unidentified_ = (
+            np.zeros(self.coef_.shape, dtype=bool)
+            if unidentified is None
+            else np.asarray(unidentified, dtype=bool)
+        )
         self.parts_ = Parts.from_vehicle(self.vehicle)
         self.parts_.damping = {
             f"{FORCES[f]}:{self.terms_[j]}": float(self.coef_[f, j])
@@ -238,25 +281,46 @@ class DampingModel(FossenPlant):
 
     def _params(self) -> dict[str, dict[str, float | None]]:
         out: dict[str, dict[str, float | None]] = {}
-        for f, j in zip(*np.nonzero(self._structure()), strict=True):
+        for f, j in zip(*np.nonzero(self._structure() | self.unidentified_), strict=True):
             s = self.stderr_[f, j]
             out[f"{FORCES[f]}:{self.terms_[j]}"] = {
-                "value": float(self.coef_[f, j]),
+                # an unidentified coefficient's 0 is no estimate: null, and simulated_at says 0
+                "value": None if self.unidentified_[f, j] else float(self.coef_[f, j]),
                 "stderr": float(s) if np.isfinite(s) else None,
             }
-        return out
+        return with_simulated_at(out, dict.fromkeys(self._unidentified_names()))
+
+    def _unidentified_names(self) -> list[str]:
+        """The ``"F:term"`` names of the coefficients the fit left unidentified."""
+        return self._entry_names(self.unidentified_)
+
+    def _entry_names(self, entries: np.ndarray) -> list[str]:
+        """The ``"F:term"`` names (those of params) of the True ``entries`` of a K-shaped mask."""
+        return [f"{FORCES[f]}:{self.terms_[j]}" for f, j in zip(*np.nonzero(entries), strict=True)]
 
     def _structure(self) -> np.ndarray:
         """Which entries of K are parameters of the model."""
         return self.coef_ != 0
 
     def _state(self) -> tuple[dict, dict]:
-        return {"terms": self.terms_, "coef": self.coef_, "stderr": self.stderr_}, {}
+        state = {"terms": self.terms_, "coef": self.coef_, "stderr": self.stderr_}
+        return {**state, UNIDENTIFIED: self._unidentified_names()}, {}
 
     def _restore(self, state: dict, tensors: dict) -> None:
         terms, coef, stderr = restored_matrices(state, extra=0)
-        self._set_damping(terms, coef, stderr)
-        self._structure()  # a mask setting edited by hand: refused here, not by describe()
+        self._set_damping(terms, coef, stderr, restored_unidentified(state, terms, coef, stderr))
+        # a mask setting edited by hand: refused here, not by describe()
+        stray = self.unidentified_ & ~self._structure()
+        if stray.any():  # a fit leaves unidentified only terms of its structure (the mask)
+            raise ValueError(
+                f"'{UNIDENTIFIED}' names {self._entry_names(stray)}, which are not terms of the "
+                "model"
+            )
+
+
+def _at_zero(_: float | None) -> str:
+    """Where a damping model simulates an unidentified coefficient (:func:`warn_simulated`)."""
+    return "at 0 (K replaces the vehicle file's damping wholesale, McCarter eq. 4.6)"
 
 
 class SynthesisModel(DampingModel):
@@ -311,7 +375,8 @@ class SynthesisModel(DampingModel):
         if self.method != "ls":
             fit = nelder_mead(xi, tau_bar, mask, self.method, start=fit)
             progress(2, 2, f"Nelder-Mead on {self.method}")
-        self._set_damping(terms, fit.coefficients, fit.stderr)
+        self._set_damping(terms, fit.coefficients, fit.stderr, fit.unidentified)
+        warn_simulated(dict.fromkeys(self._unidentified_names()), stacklevel=3, at=_at_zero)
 
     def _structure(self) -> np.ndarray:
         return mask_matrix(self.mask, self.terms_)

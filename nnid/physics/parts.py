@@ -22,6 +22,9 @@ from nnid.physics.thrusters import apply_installation
 
 _AXES = "xyz"
 
+#: Caccia's mean heave disturbance W − B (Caccia eq. 20), estimated where the file has W and B
+WEIGHT_MINUS_BUOYANCY = "weight_minus_buoyancy"
+
 
 @dataclass
 class Parts:
@@ -117,7 +120,11 @@ class Parts:
         """The value of parameter ``name`` as these parts declare it (those of a vehicle file:
         :meth:`from_vehicle`), or None where they declare no such term: an added-mass
         derivative (nor its mirror) or a damping coefficient left out, which :meth:`get`
-        and the model read as 0. KeyError for a name that is not a parameter."""
+        and the model read as 0. Also Caccia's ``weight_minus_buoyancy`` (eq. 20, heave): W − B
+        of these parts, the offset a heave model flies (no parameter :meth:`get` reads: the
+        file declares W and B). KeyError for a name that is not a parameter."""
+        if name == WEIGHT_MINUS_BUOYANCY:
+            return float(self.weight - self.buoyancy)
         if name.endswith("dot") and ":" not in name:
             if name not in self.added_mass and mirrored_key(name) not in self.added_mass:
                 return None

@@ -77,11 +77,18 @@ def mask_term_list(mask: str | Mapping[str, Sequence[str]]) -> list[str]:
 @dataclass
 class SynthesisFit:
     """A fitted coefficient matrix K ``[6, n_terms]`` (zero off the mask) with its standard
-    errors (NaN off the mask and for Nelder-Mead fits) and the mask itself."""
+    errors (NaN off the mask and for Nelder-Mead fits), the mask itself, and the entries of
+    the mask the fit left unidentified (``unidentified``, boolean like the mask; none when not
+    given): no estimate, K holds 0 there (see :func:`masked_least_squares`)."""
 
     coefficients: np.ndarray
     stderr: np.ndarray
     mask: np.ndarray
+    unidentified: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        if self.unidentified is None:
+            self.unidentified = np.zeros(np.shape(self.mask), dtype=bool)
 
     def predict(self, xi: np.ndarray) -> np.ndarray:
         """τ̂ = K ξ(ν) per sample ``[N, 6]`` (eq. 4.6)."""
@@ -109,6 +116,7 @@ def masked_least_squares(
     mask = np.asarray(mask, dtype=bool)
     k = np.zeros(mask.shape)
     se = np.full(mask.shape, np.nan)
+    unidentified = np.zeros(mask.shape, dtype=bool)
     solver = LeastSquares(weighting="none")
     for f in range(6):
         cols = np.flatnonzero(mask[f])
@@ -120,10 +128,12 @@ def masked_least_squares(
         # an unidentified term (a zero regressor: NaN, which solve names) at 0, not at the
         # vehicle file's value as a Fossen model's (simulated_values): K replaces the file's
         # damping wholesale (McCarter eq. 4.6), so a file coefficient of another basis would
-        # mix two damping models; 0 is the term absent, as off the mask
+        # mix two damping models; 0 is the term absent, as off the mask. Which ones is kept
+        # (unidentified): a 0 there is no estimate, and the model says so (its params)
         k[f, cols] = np.nan_to_num(est.theta)
+        unidentified[f, cols] = ~np.isfinite(est.theta)
         se[f, cols] = est.stderr  # NaN for a term of a collinear group
-    return SynthesisFit(k, se, mask)
+    return SynthesisFit(k, se, mask, unidentified)
 
 
 def loss_value(residual: np.ndarray, loss: Loss) -> float:
@@ -166,7 +176,9 @@ def nelder_mead(
     stopped: list[str] = []
     for force in forces:
         f = FORCES.index(force)
-        cols = np.flatnonzero(mask[f])
+        # an unidentified term stays at 0: no cost reads it (a zero or left-out regressor),
+        # and a flat direction of the simplex would carry it to a value the data never saw
+        cols = np.flatnonzero(mask[f] & ~base.unidentified[f])
         if cols.size == 0:
             continue
         y = tau_bar[:, f]
@@ -207,7 +219,7 @@ def nelder_mead(
             UserWarning,
             stacklevel=2,
         )
-    return SynthesisFit(k, np.full(mask.shape, np.nan), mask)
+    return SynthesisFit(k, np.full(mask.shape, np.nan), mask, base.unidentified.copy())
 
 
 def force_error(
