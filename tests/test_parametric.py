@@ -1232,3 +1232,34 @@ def test_a_filter_faster_than_the_sampling_is_refused(lam, refused):
     with pytest.raises(NnidInputError, match=r"give filter_lambda below 40 rad/s") as err:
         model.fit(log)
     assert err.value.field == "filter_lambda"
+
+
+def test_feasible_weights_do_not_make_a_regressor_of_rounding_look_excited():
+    """An equation of rounding (X of a heave-only log: its column and target 1e-18) is found a
+    zero regressor by the ordinary fit, but the feasible second pass weights it by 1/σ̂² ~ 1e34
+    and its weighted column looked as excited as Z's: X:u came back -13.7 with the warning
+    said. Zero columns are judged on Φ unweighted."""
+
+    rng = np.random.default_rng(0)
+    n = 200
+    a, b = 1e-18 * rng.normal(size=n), rng.normal(size=n)
+    phi = np.zeros((2 * n, 2))  # rows: X, Z of each sample
+    phi[0::2, 0], phi[1::2, 1] = a, b
+    y = np.empty(2 * n)
+    y[0::2], y[1::2] = -13.7 * a, 2.0 * b + 0.01 * rng.normal(size=n)
+    with pytest.warns(ExcitationWarning, match=r"zero regressor\): X:u"):
+        est = LeastSquares().solve(Regression(phi, y, ["X:u", "Z:w"], ("u", "w"), n))
+    assert np.isnan(est.theta[0]) and est.excitation.unexcited == ["X:u"]
+    assert est.theta[1] == pytest.approx(2.0, abs=0.01)
+
+
+def test_a_regressor_zero_where_defined_is_not_excited_not_unmeasured():
+    """A left-out row is evidence that it reads a parameter only where its regressor is finite
+    and non-zero: a row NaN in every column (a filter settling) is none."""
+    from nnid.trainers.least_squares import read_only_where_left_out
+
+    phi = np.array([[np.nan, np.nan], [np.nan, 1.0], [0.0, 0.0], [0.0, 1.0]])
+    kept = np.array([False, False, True, True])
+    assert read_only_where_left_out(phi, kept, ["a", "b"]) == []
+    phi[1, 0] = 2.0  # read where left out, zero where kept: not measured, as before
+    assert read_only_where_left_out(phi, kept, ["a", "b"]) == ["a"]

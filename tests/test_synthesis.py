@@ -202,3 +202,31 @@ def test_an_unidentified_coefficient_stays_visible_not_an_estimate_of_zero(metho
     back = load_model(tmp_path)
     assert back.params == model.params
     np.testing.assert_array_equal(back.coef_, model.coef_)
+
+
+@pytest.mark.parametrize("u_level", [1e-18, 0.0])
+def test_a_regressor_of_rounding_or_zero_but_for_settling_rows_is_a_zero_regressor(u_level):
+    """X:u of a heave-only log whose u is rounding (the simulator leaves 1e-17): alone in its
+    force's block, the per-column scaling made it as excited as any, and it read X:u = -13.7 ±
+    0.0006 off a target of rounding; it is a zero regressor against Ξ's largest column (eq.
+    4.20). Exactly 0, the filtered form's NaN settling rows (NaN in every column) made it
+    "not measured (every row that reads them was left out)"; a NaN reads nothing."""
+    from nnid.errors import ExcitationWarning
+
+    rng = np.random.default_rng(0)
+    n = 200
+    u = u_level * rng.normal(size=n)
+    w = 0.3 * np.sin(0.1 * np.arange(n))
+    xi = np.stack([u, w, w * np.abs(w)], 1)
+    tau = np.zeros((n, 6))
+    tau[:, 0] = -13.7 * u  # X: rounding too, as on the simulated log
+    tau[:, 2] = xi[:, 1:] @ [-33.0, -190.0] + 0.01 * rng.normal(size=n)
+    xi[:30], tau[:30] = np.nan, np.nan  # the filter's settling rows (synthesis_data)
+    mask = mask_matrix({"X": ["u"], "Z": ["w", "w*abs(w)"]}, ["u", "w", "w*abs(w)"])
+    with pytest.warns(ExcitationWarning) as caught:
+        fit = masked_least_squares(xi, tau, mask, ["u", "w", "w*abs(w)"])
+    said = " | ".join(str(x.message) for x in caught)
+    assert "not excited by this data (zero regressor): X:u" in said
+    assert "not measured" not in said and "only they read" not in said
+    assert fit.unidentified[0, 0] and fit.coefficients[0, 0] == 0.0
+    assert fit.coefficients[2, 1] == pytest.approx(-33.0, rel=0.05)

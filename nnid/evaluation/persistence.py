@@ -17,6 +17,14 @@ import numpy as np
 
 from nnid.serialization import exact_float, read_exact_float
 
+#: a regressor column whose RMS is at most this fraction of the largest column of its whole
+#: regression is rounding, not data: float64 rounds a value computed from quantities of size S
+#: at about 2e-16 S (a simulator's "zero" velocity is 1e-17 of its others), and a margin of
+#: 10⁶ above that is still far below any sensor's resolution of its range (a 24-bit converter
+#: resolves 6e-8). Scale-free, as the fraction is of another column; not of the target: on
+#: such data the target is rounding too (X of a heave-only log), and it has other units
+ROUNDING = 1e-10
+
 
 @dataclass
 class ExcitationReport:
@@ -117,15 +125,26 @@ def excitation_from_gram(
     groups: dict[str, list[str]] | None = None,
     tol: float = 1e-6,
     left_out: Sequence[str] = (),
+    column_rms: np.ndarray | None = None,
+    reference: float = 0.0,
 ) -> ExcitationReport:
     """The same report from ΦᵀΦ (cheap for long logs): singular values of the unit-RMS-scaled
     regressor are the square roots of the eigenvalues of its scaled Gram matrix. ``left_out``:
     parameters whose regressor the caller had only in rows it left out (not finite): their
-    verdict says so, not "zero regressor"."""
+    verdict says so, not "zero regressor".
+
+    A column is zero (Weiss eq. 95's α₁ = 0) when its RMS is at most ``tol`` of the largest
+    (the scaled Gram could not tell it from 0) or at most :data:`ROUNDING` of ``reference``,
+    the largest column RMS of the whole regression this one is a block of (McCarter's Ξ, eq.
+    4.20, solved force by force): a block of one column has no other to be compared with, and
+    one of rounding (1e-17) fitted to a target of rounding read as a precise estimate.
+    ``column_rms``: each column's RMS unweighted, where ``gram`` is weighted (weights that
+    scale each equation by its residual made a column of rounding as large as any)."""
     p = len(names)
     rms = np.sqrt(np.clip(np.diag(gram), 0.0, None) / max(n, 1))
+    raw = rms if column_rms is None else np.asarray(column_rms, dtype=np.float64)
     scale = rms.max() if rms.size and rms.max() > 0 else 1.0
-    live = rms > tol * scale
+    live = (rms > tol * scale) & (raw > ROUNDING * max(reference, raw.max(initial=0.0)))
     unexcited = [names[j] for j in range(p) if not live[j]]
     d = np.where(live, 1.0 / np.where(live, rms, 1.0), 0.0)
     normed = gram * np.outer(d, d) / max(n, 1)

@@ -138,11 +138,19 @@ def _finite(x: float) -> float | None:
 
 
 def read_only_where_left_out(phi: np.ndarray, kept: np.ndarray, names: Sequence[str]) -> list[str]:
-    """The parameters ``names`` whose regressor column of ``phi`` reads them (non-zero; NaN
-    counts: an undefined entry still reads it) only in the rows not ``kept``: left out as not
-    finite, they are not measured, rather than unexcited (a zero regressor, Weiss eq. 95)."""
-    read = phi != 0
-    return [nm for j, nm in enumerate(names) if read[~kept, j].any() and not read[kept, j].any()]
+    """The parameters ``names`` whose regressor column of ``phi`` reads them (finite and
+    non-zero) only in the rows not ``kept``: left out as not finite, they are not measured,
+    rather than unexcited (a zero regressor, Weiss eq. 95). A NaN entry is no evidence that a
+    row reads it: a filter's settling rows are NaN in every column (:func:`synthesis_data`),
+    and a term zero on every other row read "not measured" there. A column with no finite
+    entry at all is not measured either: nothing shows it zero."""
+    read = np.isfinite(phi) & (phi != 0)
+    unknown = ~np.isfinite(phi).any(0)
+    return [
+        nm
+        for j, nm in enumerate(names)
+        if (read[~kept, j].any() or unknown[j]) and not read[kept, j].any()
+    ]
 
 
 def solve_least_squares(
@@ -151,12 +159,15 @@ def solve_least_squares(
     weights: np.ndarray | None = None,
     names: list[str] | None = None,
     check: bool = True,
+    reference: float = 0.0,
 ) -> Estimate:
     """Weighted least squares with covariance, through the normal equations of the
     column-scaled regressor (fast on long logs; the excitation check guards conditioning).
     Unexcited parameters get NaN and a warning that names them; collinear ones (the data do
     not separate them: the excitation check's near-null directions) keep the pseudo-inverse's
-    value, a warning, and no standard error (NaN), since only their combination is measured."""
+    value, a warning, and no standard error (NaN), since only their combination is measured.
+    ``reference``: the largest column RMS of the whole regression ``phi`` is a block of, against
+    which a column of rounding is zero (:func:`excitation_from_gram`)."""
     names = names or [f"theta{k}" for k in range(phi.shape[1])]
     finite = np.isfinite(y) & np.isfinite(phi).all(1)
     left_out: list[str] = []
@@ -182,7 +193,13 @@ def solve_least_squares(
         w = np.asarray(weights, dtype=np.float64)
         pw = phi * w[:, None]
         gram, rhs, yy = pw.T @ phi, pw.T @ y, float((y * w) @ y)
-    report = excitation_from_gram(gram, n, names, left_out=left_out) if check else None
+    # the zero columns are judged on Φ unweighted: weights scale an equation of rounding up
+    raw = None if weights is None else np.sqrt(np.einsum("ij,ij->j", phi, phi) / max(n, 1))
+    report = (
+        excitation_from_gram(gram, n, names, left_out=left_out, column_rms=raw, reference=reference)
+        if check
+        else None
+    )
     live = np.ones(p, dtype=bool)
     if report is not None and report.warnings:
         warnings.warn("; ".join(report.warnings), ExcitationWarning, stacklevel=2)
@@ -261,10 +278,12 @@ class LeastSquares(BaseEstimator):
         (progress or silent)(1, 1, "least squares")
         return est
 
-    def solve(self, reg: Regression) -> Estimate:
+    def solve(self, reg: Regression, reference: float = 0.0) -> Estimate:
+        """Solve ``reg``; ``reference``: the largest column RMS of the regression it is a block
+        of (:func:`solve_least_squares`)."""
         if self.weighting not in ("feasible", "none"):
             raise NnidInputError("weighting is 'feasible' or 'none'", field="weighting")
-        est = solve_least_squares(reg.phi, reg.y, names=reg.names)
+        est = solve_least_squares(reg.phi, reg.y, names=reg.names, reference=reference)
         dof_sigma2 = self._dof_variances(reg, est.theta)
         if self.weighting == "feasible" and len(reg.dofs) > 1:
             w = np.empty(reg.y.size)
@@ -272,7 +291,7 @@ class LeastSquares(BaseEstimator):
                 w[reg.dof_rows(d)] = 1.0 / max(dof_sigma2[d], 1e-300)
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", ExcitationWarning)  # already said once
-                est = solve_least_squares(reg.phi, reg.y, w, reg.names)
+                est = solve_least_squares(reg.phi, reg.y, w, reg.names, reference=reference)
             dof_sigma2 = self._dof_variances(reg, est.theta)
         est.dof_sigma2 = dof_sigma2
         if self.weighting == "none" and len(reg.dofs) > 1 and np.isfinite(est.sigma2):

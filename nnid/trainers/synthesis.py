@@ -118,13 +118,18 @@ def masked_least_squares(
     se = np.full(mask.shape, np.nan)
     unidentified = np.zeros(mask.shape, dtype=bool)
     solver = LeastSquares(weighting="none")
+    # the forces' problems are blocks of one (Ξ, eq. 4.20): a column of rounding is zero
+    # against the largest of Ξ, though its own block (X:u alone) has no other to compare
+    used = xi[:, mask.any(0)]
+    used = used[np.isfinite(used).all(1)]
+    reference = float(np.sqrt(np.mean(used * used, 0)).max()) if used.size else 0.0
     for f in range(6):
         cols = np.flatnonzero(mask[f])
         if cols.size == 0:
             continue
         names = [f"{outputs[f]}:{terms[j] if terms is not None else j}" for j in cols]
         reg = Regression(xi[:, cols], tau_bar[:, f], names, ("u",), tau_bar.shape[0])
-        est = solver.solve(reg)
+        est = solver.solve(reg, reference)
         # an unidentified term (a zero regressor: NaN, which solve names) at 0, not at the
         # vehicle file's value as a Fossen model's (simulated_values): K replaces the file's
         # damping wholesale (McCarter eq. 4.6), so a file coefficient of another basis would
