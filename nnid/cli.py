@@ -205,8 +205,8 @@ def inspect(
         how = (
             "filled between its samples with the gyro where a fit needs it on every row"
             if ch["filled"]
-            else "not filled: bridged from the pose where it allows, else a fit takes its runs "
-            "out (refused where that leaves nothing)"
+            else "not filled: bridged from the pose where it allows, else a fit that reads it "
+            "takes its runs out (refused where that leaves nothing)"
         )
         ends = f"; {say_ends(ch['ends'])}" if ch["ends"] else ""
         out.print(f"  slow          {slow.describe()} ({how}){ends}", highlight=False)

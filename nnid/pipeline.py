@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import time
 import warnings
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -25,10 +26,10 @@ from nnid.config import (
     load_config,
 )
 from nnid.datasets.cleaning import CleaningReport
-from nnid.datasets.gaps import mask_gaps
+from nnid.datasets.gaps import MASK_STEP, mask_gaps
 from nnid.datasets.log import (
-    ACCELERATION,
     ANGLES,
+    MOTION,
     POSE,
     VELOCITY,
     input_columns,
@@ -502,13 +503,17 @@ def make_split(
     report: CleaningReport | None = None,
     warmup_s: float = 0.0,
     log_source: str | None = None,
+    read: Sequence[str] | None = None,
 ) -> Split:
     """The split a config asks for: named experiments (the rest trains) or fractions. A split
     with nothing to validate on is an error: scores on training data are not validation; so
     is one whose held-out runs are all no longer than the scores' warm-up ``warmup_s``.
     Motion gaps are masked in each part after the split, so they never move it
-    (:func:`nnid.datasets.gaps.mask_gaps`, reported in ``report``); a channel logged slower
-    than the clock there is refused, naming ``log_source``."""
+    (:func:`nnid.datasets.gaps.mask_gaps`, reported in ``report``), in the motion columns
+    the models ``read`` (:func:`read_motion`; None: every one); a channel logged slower than
+    the clock there is refused, naming ``log_source``. Empty cells of a motion column no
+    model reads stay, said in ``report``: a 1-Hz GPS x y beside a 10-Hz DVL refused a
+    Fossen fit that never reads them."""
     assignment = None
     named = [p for p in PARTS if getattr(s, p) is not None]  # test = [] says: no test part
     if named and s.by != "experiment":  # they would be ignored
@@ -555,7 +560,8 @@ def make_split(
     say_missed_fractions(split)
     if report is not None and split.record.get("missed"):
         report.add("split", split.record["missed"])
-    motion = [c for c in (*POSE, *VELOCITY, *ACCELERATION) if c in log]
+    motion = [c for c in MOTION if c in log and (read is None or c in read)]
+    _say_unread(log, motion, report)
     try:
         parts = mask_gaps([split.train, split.validation, split.test], motion, report)
     except NnidInputError as exc:  # a slow channel: said against the log (``log_source``)
@@ -595,6 +601,41 @@ def make_split(
                 field="warmup_s",
             )
     return split
+
+
+def read_motion(models, log: pd.DataFrame, replay: Replay | None = None) -> list[str]:
+    """The motion columns of ``log`` that a fit or a score of any of ``models`` reads on every
+    row (:meth:`nnid.models.base.NnidModel.motion_columns`): those :func:`make_split` masks
+    gaps in. Every one under an autopilot ``replay``: its feedback acts on the flown pose,
+    which starts from the measured one (η_ref − η, a position included)."""
+    if replay is not None:
+        return [c for c in MOTION if c in log]
+    read = {c for m in models for c in m.motion_columns(log.columns)}
+    return [c for c in MOTION if c in read]
+
+
+def _say_unread(log: pd.DataFrame, read: Sequence[str], report: CleaningReport | None) -> None:
+    """Say in ``report`` each motion column with empty cells that is not masked because no
+    model reads it (``read``: those masked): its rows are kept, not dropped, and a simulated
+    pose starts from a run's last sample before, else first after
+    (:func:`nnid.evaluation.prediction.measured_states`)."""
+    empty = {c: int(log[c].isna().sum()) for c in MOTION if c in log and c not in read}
+    unread = [c for c, n in empty.items() if n]
+    if report is None or not unread:
+        return
+    them = "them" if len(unread) > 1 else "it"
+    start = (
+        "; a simulated pose starts from its run's last sample before (else its first after)"
+        if any(c in POSE for c in unread)
+        else ""
+    )
+    report.add(
+        MASK_STEP,
+        f"{', '.join(unread)} not masked: no model of this run reads {them} "
+        f"({', '.join(f'{empty[c]} empty cells in {c}' for c in unread)}): their rows stay "
+        f"in the fit and the scores, which read no cell of {them}{start}",
+        columns=unread,
+    )
 
 
 def _auto_split(log: pd.DataFrame, fractions: tuple[float, float, float]) -> Split:
@@ -777,9 +818,14 @@ def run_train(
     inputs, loaded = loaded_inputs(
         cfg, config_path, [cfg.model], data, vehicle, columns, time_unit=time_unit
     )
-    split = make_split(inputs.log, cfg.split, source, inputs.report, cfg.warmup_s, inputs.source)
     model = build_model(cfg.model, inputs, cfg.warmup_s)
     replay = replay_of(inputs, inputs.log)
+    # a [detect] monitor's residual takes the whole measured state η, ν: none on a row with
+    # an empty cell of it (nnid.fault.kernel), so every motion column is read
+    read = None if cfg.detect is not None else read_motion([model], inputs.log, replay)
+    split = make_split(
+        inputs.log, cfg.split, source, inputs.report, cfg.warmup_s, inputs.source, read
+    )
     caught = fit_model(model, split, progress or silent, "model", cfg.model, replay)
     if hasattr(model, "report_"):
         for step in model.report_.steps:
@@ -967,17 +1013,20 @@ def run_compare(
     inputs, said = loaded_inputs(
         cfg, config_path, list(cfg.models), data, vehicle, columns, time_unit=time_unit
     )
-    split = make_split(inputs.log, cfg.split, source, inputs.report, cfg.warmup_s, inputs.source)
+    models = [build_model(spec, inputs, cfg.warmup_s) for spec in cfg.models]
+    replay = replay_of(inputs, inputs.log) if cfg.replay_autopilot else None
+    read = read_motion(models, inputs.log, replay)
+    split = make_split(
+        inputs.log, cfg.split, source, inputs.report, cfg.warmup_s, inputs.source, read
+    )
     check_held_stepped(inputs, split, [m.fitted for m in cfg.models])
     held_name = "test" if len(split.test) else "validation"
     held = split[held_name]
     k = k_steps(held, cfg.k_step_s)
-    replay = replay_of(inputs, inputs.log) if cfg.replay_autopilot else None
     rows, free_runs, forces, measured_force = [], {}, {}, None
-    for i, spec in enumerate(cfg.models):
+    for i, (spec, model) in enumerate(zip(cfg.models, models, strict=True)):
         name = spec.label()
         report(i, len(cfg.models), f"fitting {name}")
-        model = build_model(spec, inputs, cfg.warmup_s)
         t0 = time.perf_counter()
         caught = fit_model(model, split, staged(progress, name), f"models.{i}", spec, replay)
         seconds = time.perf_counter() - t0

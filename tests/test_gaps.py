@@ -505,3 +505,84 @@ def test_a_run_with_a_slow_velocity_is_taken_out_and_said_the_others_fit(tmp_pat
     log.loc[np.flatnonzero(np.arange(200) % 5 % 2 == 0), "u"] = np.nan
     with pytest.raises(NnidInputError, match="take 160 of the 400 rows out"):
         mask_gaps([log], ["u", "v"])
+
+
+def test_a_slow_position_no_fit_reads_is_left_in_and_said_not_refused(tmp_path):
+    """x, y from a 2-Hz GPS beside 20-Hz u..r, attitude and thrust: make_split masked every
+    motion column, so the log was refused ('x logged every 10th row ...') although a Fossen
+    least-squares fit reads only ν, ν̇ and the attitude. It trains, with the full log's
+    estimates and scores, and the report says x, y were not masked and why; a slow u beside
+    them (read by the fit, and no whole pose to bridge it from) is still refused."""
+    from nnid.config import TrainConfig, load_config
+    from nnid.pipeline import run_train
+
+    one = _mocap_log(200).assign(**{f"tau_{c}": 0.0 for c in "YZKMN"})
+    full = pd.concat([one.assign(experiment="a"), one.assign(experiment="b")], ignore_index=True)
+    results = {}
+    gps = _slow(full, ["x", "y"], 10)
+    for name, log in (("full", full), ("gps", gps), ("dvl", _slow(gps, ["u"], 10))):
+        log.to_csv(tmp_path / f"{name}.csv", index=False)
+        cfg = tmp_path / f"{name}.toml"
+        cfg.write_text(f'kind = "train"\nvehicle = "seamor"\n[data]\nlog = "{name}.csv"\n'
+                       '[model]\nkind = "fossen"\ndofs = ["u"]\n')  # fmt: skip
+        try:
+            results[name] = run_train(load_config(cfg, TrainConfig), cfg)
+        except NnidInputError as exc:
+            results[name] = exc
+    full_fit, gps = results["full"], results["gps"]
+    assert not isinstance(gps, NnidInputError), gps.message
+    assert gps.model.params == full_fit.model.params
+    assert gps.metrics["validation"] == full_fit.metrics["validation"]
+    said = [s for s in gps.report.steps if s.step == "mask gaps"]
+    assert [s.columns for s in said] == [["x", "y"]]
+    assert said[0].detail.startswith(
+        "x, y not masked: no model of this run reads them (360 empty cells in x, 360 empty "
+        "cells in y): their rows stay in the fit and the scores"
+    )
+    assert said[0].rows_removed == 0 and len(gps.split.train) == len(full_fit.split.train)
+    assert isinstance(results["dvl"], NnidInputError)  # read by the fit: refused as before
+    assert results["dvl"].message.startswith("u logged every 10th row: 2 Hz against 20 Hz: the")
+
+
+def test_each_model_kind_says_the_motion_columns_it_reads():
+    """What make_split masks gaps in (read_motion): a least-squares Fossen fit, SINDy and the
+    synthesis read ν, ν̇ and the attitude; the UKF propagates the whole state and a model
+    that does not say (Caccia, a hybrid) reads every motion column; a NARX its own columns;
+    an ensemble its members'; under an autopilot replay, every column."""
+    from conftest import make_vehicle
+
+    from nnid.datasets.log import MOTION
+    from nnid.evaluation.prediction import Replay
+    from nnid.models import base
+    from nnid.pipeline import read_motion
+    from nnid.trainers.ukf import UnscentedKalman
+
+    vehicle, log = make_vehicle(), pd.DataFrame(columns=["t", *MOTION, "tau_X"])
+    equation = [*MOTION[3:]]  # phi theta psi, u..r, du..dr
+
+    def reads(kind, **kw):
+        return read_motion([base.model_class(kind)(**kw)], log)
+
+    for kind in ("fossen", "sindy", "synthesis"):
+        assert reads(kind, vehicle=vehicle) == equation, kind
+    assert reads("fossen", vehicle=vehicle, pose_velocities=["u"]) == list(MOTION)
+    assert reads("fossen", vehicle=vehicle, trainer=UnscentedKalman()) == list(MOTION)
+    assert reads("caccia", vehicle=vehicle) == reads("hybrid", vehicle=vehicle) == list(MOTION)
+    assert reads("narx", inputs=["tau_X", "x"], outputs=["u"]) == ["x", "u"]
+    fossen = base.model_class("fossen")(vehicle=vehicle)
+    assert reads("ensemble", model=fossen) == equation
+    assert read_motion([fossen], log.drop(columns=["v"])) == [c for c in MOTION if c != "v"]
+    assert read_motion([fossen], log, Replay(None, pd.DataFrame())) == list(MOTION)
+
+
+def test_a_simulated_pose_starts_from_the_runs_nearest_sample_not_zero():
+    """An empty x (a slow GPS no fit reads, left in) became 0 at a free run's start: the
+    simulated x began at the origin. It is held from the run's last sample (else its
+    first), each run on its own."""
+    from nnid.evaluation.prediction import measured_states
+
+    log = pd.DataFrame({"experiment": ["a"] * 3 + ["b"] * 3, "t": [0.0, 0.1, 0.2] * 2,
+                        "x": [np.nan, 5.0, np.nan, np.nan, np.nan, 7.0], "u": 1.0})  # fmt: skip
+    states = measured_states(log)
+    assert list(states[:, 0]) == [5.0, 5.0, 5.0, 7.0, 7.0, 7.0]
+    assert list(states[:, 6]) == [1.0] * 6 and not states[:, 1:6].any()

@@ -167,8 +167,9 @@ def fill_slow(log: pd.DataFrame, report: CleaningReport | None = None) -> pd.Dat
             detail.append(
                 f"{'; '.join(kept)}: not filled (it is differentiated, or is the fits' "
                 "response: samples made between its own would be fitted as measured); "
-                "bridged from the pose where it allows, else a fit takes its runs out (refused "
-                "where that leaves nothing)"
+                "bridged from the pose where it allows, else a fit that reads it takes its runs "
+                "out (refused where that leaves nothing; a fit that does not, e.g. of x y, "
+                "leaves it)"
             )
         columns = list(dict.fromkeys(ch.column for ch in slow))
         report.add(SLOW_STEP, "; ".join(detail), columns=columns)

@@ -26,6 +26,8 @@ VELOCITY = DOFS  # velocity columns are named after their DOF
 ACCELERATION = tuple(f"d{s}" for s in VELOCITY)
 TAU = tuple(f"tau_{f}" for f in FORCES)
 ANGLES = ("phi", "theta", "psi")
+#: the motion columns: a gap in one is masked where a fit or a score reads it (mask_gaps)
+MOTION = (*POSE, *VELOCITY, *ACCELERATION)
 #: the largest |velocity| a log may hold, m/s or rad/s (a bound on corrupt data, not physics)
 MAX_SPEED = 100.0
 #: the largest |generalized force| a log may hold, N or N m (ten meganewtons: no thruster's)

@@ -71,11 +71,18 @@ def substeps_for(log: pd.DataFrame, max_step: float = MAX_STEP) -> int:
 
 
 def measured_states(log: pd.DataFrame) -> np.ndarray:
-    """[N, 12] pose and velocity from the log (absent columns are zero)."""
+    """[N, 12] pose and velocity from the log (absent columns are zero). An empty pose cell
+    (a 1-Hz GPS x y beside a 10-Hz DVL, which no fit reads and ``make_split`` leaves in)
+    takes its run's last sample before it, else its first after: a simulated pose starts
+    from where the vehicle was measured, not from 0 (η̇ = J(η) ν carries the offset on)."""
     x = np.zeros((len(log), 12))
     for k, c in enumerate((*POSE, *VELOCITY)):
         if c in log:
             x[:, k] = log[c].to_numpy(np.float64)
+    if np.isnan(x[:, :6]).any():
+        runs = log["experiment"].to_numpy() if "experiment" in log else np.zeros(len(log))
+        held = pd.DataFrame(x[:, :6]).groupby(runs, sort=False)
+        x[:, :6] = held.ffill().fillna(held.bfill()).to_numpy()
     return np.nan_to_num(x)  # an undefined component (w of a tumbling vehicle) starts at zero
 
 

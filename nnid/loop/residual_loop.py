@@ -47,7 +47,7 @@ from nnid.loop.diagnose import (
 from nnid.loop.effects import candidates
 from nnid.loop.residuals import correlation_analysis
 from nnid.loop.unexplained import as_records, describe, unexplained_structure
-from nnid.models.parametric import vehicle_with
+from nnid.models.parametric import EQUATION_COLUMNS, vehicle_with
 from nnid.physics.dofs import DOF_WORD, DOFS, FORCES
 from nnid.physics.parts import Parts
 from nnid.reports.cells import score
@@ -205,7 +205,7 @@ class ResidualLoop:
         log = self._prepare(log)
         train, val = self._split(log)
         # split first, on whole runs as if complete, so that gaps never move the split
-        needed = [c for c in (*DOFS, *(f"d{d}" for d in DOFS), *ANGLES) if c in log]
+        needed = [c for c in EQUATION_COLUMNS if c in log]  # what the Fossen regression reads
         train, val = mask_gaps([train, val], needed, self.cleaning_)
         self.dofs_ = tuple(self.dofs) if self.dofs else tuple(d for d in DOFS if d in log)
         if not self.dofs_:

@@ -15,6 +15,8 @@ fitted (scikit-learn's ``check_is_fitted``), so a model used too early raises on
 - ``residual(log)``: the equation error (a generalized force for physics models, columns
   ``X Y Z K M N``; the one-step output error otherwise), on the log's index.
 - ``params`` (``{name: {"value", "stderr"}}``) and ``describe()`` (a JSON-ready summary).
+- ``motion_columns(columns)``: the motion columns the fit and scores read on every row, the
+  ones whose gaps are masked (default: all of them).
 - ``baseline()``: the simpler fitted model this one builds on (a hybrid's physics), or None;
   reports score it beside the model on the same data.
 - ``save(dir)`` and :func:`load_model`: ``model.json`` (kind, schema version, constructor
@@ -30,7 +32,7 @@ import math
 import pickle
 import time
 from abc import ABC, abstractmethod
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any, ClassVar
 
@@ -40,6 +42,7 @@ import torch
 from sklearn.base import BaseEstimator
 from sklearn.utils.validation import check_is_fitted
 
+from nnid.datasets.log import MOTION
 from nnid.errors import NnidInputError
 from nnid.evaluation.prediction import check_mode
 from nnid.serialization import (
@@ -296,6 +299,16 @@ class NnidModel(BaseEstimator, ABC):
             raise TypeError(f"a {self.kind} model has no force equation")
         check_is_fitted(self, msg=NOT_FITTED)
         return self._force_series(check_log(log)).set_axis(log.index)
+
+    def motion_columns(self, columns: Iterable[str]) -> list[str]:
+        """The motion columns of a log with ``columns`` (pose, velocity, acceleration:
+        :data:`~nnid.datasets.log.MOTION`) that this model's fit and scores read on every
+        row, as a regressor, a target or a simulation's state: a gap in one is masked
+        (:func:`nnid.datasets.gaps.mask_gaps`), a gap in another left. Works before ``fit``
+        (the settings say it). Default: every motion column, so a model that does not say
+        has every gap masked."""
+        present = set(columns)
+        return [c for c in MOTION if c in present]
 
     def baseline(self) -> NnidModel | None:
         """The simpler fitted model this one builds on (a hybrid's physics-only fit), scored

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import numbers
 import warnings
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 
 import numpy as np
 import pandas as pd
@@ -148,6 +148,13 @@ class EnsembleModel(NnidModel):
             return super().fit(log, validation, progress)
         finally:
             del self._replay
+
+    def motion_columns(self, columns: Iterable[str]) -> list[str]:
+        """Its members' (clones of ``model``); every motion column where ``model`` is no
+        nnid model (the fit says what is wrong with it)."""
+        if not isinstance(self.model, NnidModel):
+            return super().motion_columns(columns)
+        return self.model.motion_columns(columns)
 
     def _fit(self, log: pd.DataFrame, validation: pd.DataFrame | None, progress: Progress):
         seeds = self._check_settings()

@@ -6,6 +6,7 @@ network's state dict (``tensors.pt``, loaded with ``weights_only=True``) plus JS
 from __future__ import annotations
 
 from abc import abstractmethod
+from collections.abc import Iterable
 from typing import Any
 
 import numpy as np
@@ -52,6 +53,16 @@ class InputOutputModel(NnidModel):
     """
 
     net_: Any
+
+    def motion_columns(self, columns: Iterable[str]) -> list[str]:
+        """The motion columns among its ``inputs`` and ``outputs``: it reads no other column
+        (:meth:`_check`). Every motion column where those are not yet a list of names (the
+        fit names what is wrong with them)."""
+        named = [self.inputs, self.outputs]
+        if not all(np.iterable(n) and not isinstance(n, str | bytes) for n in named):
+            return super().motion_columns(columns)
+        read = {c for n in named for c in n}
+        return [c for c in super().motion_columns(columns) if c in read]
 
     @abstractmethod
     def _configure(self) -> None: ...

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import re
 import warnings
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -32,7 +32,7 @@ from sklearn.utils.validation import check_is_fitted
 
 from nnid.datasets.arrays import log_arrays, nominal_forces
 from nnid.datasets.cleaning import CleaningReport
-from nnid.datasets.log import ANGLES, POSE, VELOCITY
+from nnid.datasets.log import ACCELERATION, ANGLES, MOTION, POSE, VELOCITY
 from nnid.datasets.preprocess import HELD_DT, HELD_SHARE, held_at, zoh_midpoint
 from nnid.errors import ExcitationWarning, NnidInputError
 from nnid.evaluation.prediction import (
@@ -936,6 +936,23 @@ def restored_simulated(
     return values, from_file
 
 
+#: the motion columns the Fossen equation of motion reads on a row (Weiss eq. 11): ν, ν̇ and the
+#: attitude of g(η) and J(η). No position enters it (a submerged vehicle's g(η) depends on
+#: φ and θ alone, :func:`nnid.physics.restoring.restoring_force`): x y z are only the start
+#: of a simulated pose, which no score reads (the targets are velocities)
+EQUATION_COLUMNS = (*VELOCITY, *ACCELERATION, *ANGLES)
+
+
+def equation_columns(columns: Iterable[str], from_pose: bool = False) -> list[str]:
+    """The motion columns of a log with ``columns`` that a regression on the Fossen equation
+    (:data:`EQUATION_COLUMNS`) reads on every row: the whole pose too where a velocity is
+    derived from it (``from_pose``, or a velocity the log lacks: :func:`prepare_motion`
+    derives it; the pose's noise is then read for its noise as well)."""
+    present = set(columns)
+    derived = from_pose or any(v not in present for v in VELOCITY)
+    return [c for c in MOTION if c in present and (derived or c in EQUATION_COLUMNS)]
+
+
 def prepare_motion(
     log: pd.DataFrame,
     dofs: Sequence[str],
@@ -1141,6 +1158,14 @@ class ParametricModel(FossenPlant):
         self.zoh_midpoint = zoh_midpoint
         self.pose_velocities = pose_velocities
         self.pose_savgol = pose_savgol
+
+    def motion_columns(self, columns: Iterable[str]) -> list[str]:
+        """A regression's columns (:func:`equation_columns`; the pose's too where a velocity
+        was derived from it, ``pose_velocities``); with the UKF, every motion column: it
+        propagates the whole measured state η, ν (Weiss eq. 80), a position too."""
+        if getattr(self.trainer, "kind", "ls") not in ("ls", "rls", "gradient"):
+            return super().motion_columns(columns)
+        return equation_columns(columns, bool(self.pose_velocities))
 
     def _trainer(self) -> Any:
         """A fresh trainer of this model's settings: ``trainer`` (least squares if None),

@@ -13,7 +13,7 @@ chooses the terms by sparse regression.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from typing import Literal
 
 import numpy as np
@@ -26,6 +26,7 @@ from nnid.errors import NnidInputError
 from nnid.models.parametric import (
     FossenPlant,
     ParametricFossen,
+    equation_columns,
     filter_settled,
     filter_signal,
     prepare_motion,
@@ -167,6 +168,11 @@ class DampingModel(FossenPlant):
     Subclasses store ``vehicle``, ``savgol_window``, ``savgol_order``, ``filter_lambda`` and
     ``zoh_midpoint`` (the form of τ̄, :func:`residual_force`) and call :meth:`_set_damping`
     with the fitted terms, coefficient matrix and standard errors."""
+
+    def motion_columns(self, columns: Iterable[str]) -> list[str]:
+        """τ̄ and ξ(ν)'s columns (eq. 4.4): a regression on the Fossen equation's
+        (:func:`~nnid.models.parametric.equation_columns`)."""
+        return equation_columns(columns)
 
     def _xi_tau(self, log: pd.DataFrame, terms: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
         library = BasisLibrary(terms, self.vehicle.damping.u_c or 0.0)
