@@ -295,6 +295,21 @@ def test_a_config_keeps_the_pieces_of_a_run_it_names(tmp_path):
             assert list(pd.unique(inputs.log["experiment"])) == ["a", "b#0", "b#1"]
 
 
+def _train_surge(tmp_path, log: pd.DataFrame):
+    """``nnid train`` of a surge Fossen fit on ``log`` (written as dvl.csv): the CLI's result
+    and its output on one line."""
+    from typer.testing import CliRunner
+
+    from nnid.cli import app
+
+    log.to_csv(tmp_path / "dvl.csv", index=False)
+    cfg = tmp_path / "t.toml"
+    cfg.write_text('kind = "train"\nvehicle = "seamor"\n[data]\nlog = "dvl.csv"\n'
+                   '[model]\nkind = "fossen"\ndofs = ["u"]\n')  # fmt: skip
+    done = CliRunner().invoke(app, ["train", str(cfg), "--out", str(tmp_path / "out")])
+    return done, " ".join(done.output.split())
+
+
 def _slow(log: pd.DataFrame, columns: list[str], k: int) -> pd.DataFrame:
     """``columns`` kept on every ``k``-th row of each run only: a slower sensor on one clock."""
     out = log.copy()
@@ -389,18 +404,9 @@ def test_a_slow_velocity_without_the_pose_is_refused_not_masked_away(tmp_path):
     from: masking their empty cells took all 200 rows out (pieces of one row, 'too short to
     use'), and ``nnid train`` said only 'the training split is empty'. It is refused (exit 2),
     naming the log, the channels and their rate against the log's."""
-    from typer.testing import CliRunner
-
-    from nnid.cli import app
-
     log = _mocap_log(200).drop(columns=["x", "y"]).assign(experiment="dive")
     log = _slow(log.assign(**{f"tau_{c}": 0.0 for c in "YZKMN"}), ["u", "v"], 5)
-    log.to_csv(tmp_path / "dvl.csv", index=False)
-    cfg = tmp_path / "t.toml"
-    cfg.write_text('kind = "train"\nvehicle = "seamor"\n[data]\nlog = "dvl.csv"\n'
-                   '[model]\nkind = "fossen"\ndofs = ["u"]\n')  # fmt: skip
-    done = CliRunner().invoke(app, ["train", str(cfg), "--out", str(tmp_path / "out")])
-    said = " ".join(done.output.split())
+    done, said = _train_surge(tmp_path, log)
     assert done.exit_code == 2, said
     assert "dvl.csv, field 'u': u logged every 5th row: 4 Hz against 20 Hz; v logged" in said
     assert "160 of the 200 rows" in said and "full rate" in said
@@ -472,9 +478,7 @@ def test_a_run_with_a_slow_velocity_is_taken_out_and_said_the_others_fit(tmp_pat
     (pieces of one row) and the fit went on with a, until a slow channel in any run refused
     the whole log. It fits on a; the report says b was taken out for u's and v's rate, with
     its rows, not as gaps; refused only where that leaves nothing (the test above)."""
-    from typer.testing import CliRunner
 
-    from nnid.cli import app
     from nnid.datasets.gaps import SLOW_STEP
 
     one = _mocap_log(200).drop(columns=["x", "y"]).assign(**{f"tau_{c}": 0.0 for c in "YZKMN"})
@@ -492,12 +496,7 @@ def test_a_run_with_a_slow_velocity_is_taken_out_and_said_the_others_fit(tmp_pat
         "b (200 rows): u logged every 5th row: 4 Hz against 20 Hz, v logged every 5th row: "
         "4 Hz against 20 Hz: taken out, not masked as gaps"
     )
-    log.to_csv(tmp_path / "dvl.csv", index=False)
-    cfg = tmp_path / "t.toml"
-    cfg.write_text('kind = "train"\nvehicle = "seamor"\n[data]\nlog = "dvl.csv"\n'
-                   '[model]\nkind = "fossen"\ndofs = ["u"]\n')  # fmt: skip
-    done = CliRunner().invoke(app, ["train", str(cfg), "--out", str(tmp_path / "out")])
-    said = " ".join(done.output.split())
+    done, said = _train_surge(tmp_path, log)
     assert done.exit_code == 0, said
     assert "slow channels: b (200 rows): u logged every 5th row" in said
     # refused where nothing is left (a's u dropped out on 3 of every 5 rows: pieces of one
