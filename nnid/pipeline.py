@@ -26,7 +26,7 @@ from nnid.config import (
     load_config,
 )
 from nnid.datasets.cleaning import CleaningReport
-from nnid.datasets.gaps import MASK_STEP, mask_gaps
+from nnid.datasets.gaps import UNREAD_STEP, mask_gaps
 from nnid.datasets.log import (
     ANGLES,
     MOTION,
@@ -510,8 +510,9 @@ def make_split(
     is one whose held-out runs are all no longer than the scores' warm-up ``warmup_s``.
     Motion gaps are masked in each part after the split, so they never move it
     (:func:`nnid.datasets.gaps.mask_gaps`, reported in ``report``), in the motion columns
-    the models ``read`` (:func:`read_motion`; None: every one); a channel logged slower than
-    the clock there is refused, naming ``log_source``. Empty cells of a motion column no
+    the models ``read`` (:func:`read_motion`; None: every one); a run in which one of them is
+    logged slower than the clock is taken out whole and said, and the log refused, naming
+    ``log_source``, only where that empties a part that had rows. Empty cells of a motion column no
     model reads stay, said in ``report``: a 1-Hz GPS x y beside a 10-Hz DVL refused a
     Fossen fit that never reads them."""
     assignment = None
@@ -563,7 +564,12 @@ def make_split(
     motion = [c for c in MOTION if c in log and (read is None or c in read)]
     _say_unread(log, motion, report)
     try:
-        parts = mask_gaps([split.train, split.validation, split.test], motion, report)
+        parts = mask_gaps(
+            [split.train, split.validation, split.test],
+            motion,
+            report,
+            ("training", "validation", "test"),
+        )
     except NnidInputError as exc:  # a slow channel: said against the log (``log_source``)
         raise exc.with_source(log_source) if log_source else exc from None
     split = Split(*parts, split.record)
@@ -630,7 +636,7 @@ def _say_unread(log: pd.DataFrame, read: Sequence[str], report: CleaningReport |
         else ""
     )
     report.add(
-        MASK_STEP,
+        UNREAD_STEP,
         f"{', '.join(unread)} not masked: no model of this run reads {them} "
         f"({', '.join(f'{empty[c]} empty cells in {c}' for c in unread)}): their rows stay "
         f"in the fit and the scores, which read no cell of {them}{start}",

@@ -508,3 +508,16 @@ def test_an_unidentified_weight_minus_buoyancy_is_flown_at_the_vehicle_files(
     model.save(tmp_path)
     back = load_model(tmp_path)
     assert back.params == model.params and back.parts_.buoyancy == model.parts_.buoyancy
+    # saved before 'from_file', it predicted NaN (a NaN buoyancy), not 0 as it flies now
+    import json
+
+    path = tmp_path / "model.json"
+    payload = json.loads(path.read_text())
+    del payload["state"]["from_file"]
+    path.write_text(json.dumps(payload))
+    with pytest.warns(ExcitationWarning) as said:
+        older = load_model(tmp_path)
+    words = " ".join(str(w.message) for w in said)
+    assert "weight_minus_buoyancy at 0 (neutrally buoyant), where the saved model " in words
+    assert "as it did when it was fitted" not in words
+    assert older.parts_.buoyancy == older.parts_.weight

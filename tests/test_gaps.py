@@ -532,8 +532,8 @@ def test_a_slow_position_no_fit_reads_is_left_in_and_said_not_refused(tmp_path):
     assert not isinstance(gps, NnidInputError), gps.message
     assert gps.model.params == full_fit.model.params
     assert gps.metrics["validation"] == full_fit.metrics["validation"]
-    said = [s for s in gps.report.steps if s.step == "mask gaps"]
-    assert [s.columns for s in said] == [["x", "y"]]
+    said = [s for s in gps.report.steps if s.step in ("mask gaps", "unread motion")]
+    assert [(s.step, s.columns) for s in said] == [("unread motion", ["x", "y"])]
     assert said[0].detail.startswith(
         "x, y not masked: no model of this run reads them (360 empty cells in x, 360 empty "
         "cells in y): their rows stay in the fit and the scores"
@@ -585,3 +585,98 @@ def test_a_simulated_pose_starts_from_the_runs_nearest_sample_not_zero():
     states = measured_states(log)
     assert list(states[:, 0]) == [5.0, 5.0, 5.0, 7.0, 7.0, 7.0]
     assert list(states[:, 6]) == [1.0] * 6 and not states[:, 1:6].any()
+
+
+def test_unread_motion_is_not_said_as_the_logs_gaps_in_the_summary():
+    """The 'x, y not masked' note was filed as a 'mask gaps' step: compare's summary read it
+    as the log's gaps ("The log's gaps: x, y not masked: …; N of the M validation samples
+    left are scored (the rest warm the pieces up)") with nothing masked. It is its own step,
+    which the console still lists and the summary leaves out."""
+    from nnid.config import SplitSpec
+    from nnid.datasets.gaps import GAP_STEPS, UNREAD_STEP
+    from nnid.pipeline import _masked_note, make_split
+    from nnid.runs import lost_rows
+
+    one = _mocap_log(200)
+    log = _slow(pd.concat([one.assign(experiment="a"), one.assign(experiment="b")],
+                          ignore_index=True), ["x", "y"], 20)  # fmt: skip
+    report = CleaningReport(source="log")
+    make_split(log, SplitSpec(by="experiment", validation=["b"]), report=report,
+               read=["u", "r", "psi"])  # fmt: skip
+    assert [s.step for s in report.steps] == [UNREAD_STEP] and UNREAD_STEP in GAP_STEPS
+    assert lost_rows(report)[0].startswith("unread motion: x, y not masked")
+    rows = [{"name": "a", "validation": {"samples": 190}}]
+    assert _masked_note(report, rows, ["a"], "validation", 200) == ""
+
+
+def test_a_slow_channel_that_empties_one_part_is_refused_as_such():
+    """Runs a, b train, c validates, u logged every 5th row in c only: c was taken out
+    whole and make_split said 'the validation split is empty: hold out an experiment or a
+    block', untrue; with a and b slow, 'the training split is empty'. The error names the
+    channel, its rate and the part it emptied, as the residual loop's does."""
+    from nnid.config import SplitSpec
+    from nnid.pipeline import make_split
+
+    one = _mocap_log(100)
+    log = pd.concat([one.assign(experiment=e) for e in "abc"], ignore_index=True)
+    slow_c = log.copy()
+    slow_c.loc[200:, "u"] = _slow(log.loc[200:], ["u"], 5)["u"]
+    spec = SplitSpec(by="experiment", validation=["c"])
+    with pytest.raises(NnidInputError, match=r"nothing of the validation part \(100 rows: c\)"
+                       ) as err:  # fmt: skip
+        make_split(slow_c, spec, read=["u"])
+    assert err.value.message.startswith("u logged every 5th row: 4 Hz against 20 Hz: the")
+    assert err.value.field == "u"
+    slow_ab = log.copy()
+    slow_ab.loc[:199, "u"] = _slow(log.loc[:199], ["u"], 5)["u"]
+    with pytest.raises(NnidInputError, match="nothing of the training part"):
+        make_split(slow_ab, spec, read=["u"])
+    from conftest import make_vehicle
+
+    from nnid.loop.residual_loop import ResidualLoop
+
+    taus = {f"tau_{c}": 0.0 for c in "YZKMN"}
+    loop = ResidualLoop(make_vehicle(), validation_experiments=["c"])
+    with pytest.raises(NnidInputError, match="nothing of the held-out part"):
+        loop.fit(slow_c.drop(columns=["x", "y"]).assign(**taus))  # no pose to bridge u from
+    report = CleaningReport(source="log")  # held out where it logs u at the full rate: fits
+    split = make_split(slow_c, SplitSpec(by="experiment", validation=["a"]), report=report,
+                       read=["u"])  # fmt: skip
+    assert set(split.train["experiment"]) == {"b"} and report.steps[-1].rows_removed == 100
+
+
+def test_only_the_pose_a_derived_velocity_is_made_of_is_masked(tmp_path):
+    """u v w from a DVL, the attitude at 20 Hz, z from a depth sensor, x y from a 1-Hz GPS,
+    no p q r: p q r, derived from the attitude, masked the whole pose, so x y were found
+    slow, every run taken out and the log refused. Only the attitude makes p q r: the fit
+    runs, x and y said unmasked; u v w derived from the pose read x y z."""
+    from nnid.datasets.log import ANGLES, MOTION
+    from nnid.models.parametric import equation_columns
+
+    log = _mocap_log(200).drop(columns=["p", "q", "r"])
+    log = _slow(pd.concat([log.assign(experiment="a"), log.assign(experiment="b")],
+                          ignore_index=True), ["x", "y"], 20)  # fmt: skip
+    log = log.assign(**{f"tau_{c}": 0.0 for c in "YZKMN"})
+    assert equation_columns(log.columns) == [*ANGLES, "u", "v", "w"]  # p q r: the angles
+    equation = [c for c in MOTION if c not in ("x", "y", "z")]
+    assert equation_columns(MOTION, ["p", "q", "r"]) == equation
+    no_u = [c for c in MOTION if c != "u"]
+    assert equation_columns(no_u) == no_u  # u from the whole pose
+    no_xy = [c for c in MOTION if c not in ("x", "y")]
+    # w from depth and the attitude reads z; a u no pose gives reads none of it
+    assert equation_columns([c for c in no_xy if c != "w"]) == [c for c in no_xy if c != "w"]
+    assert "z" not in equation_columns([c for c in no_xy if c != "u"])
+    done, said = _train_surge(tmp_path, log)
+    assert done.exit_code == 0, said
+    assert "unread motion: x, y not masked" in said
+
+
+def test_a_piece_without_a_pose_sample_starts_from_its_runs():
+    """measured_states grouped by the piece label (a#1) that masking writes: a piece between
+    two 1-Hz GPS samples held none and started x at 0. It takes its run's (``piece_of``)."""
+    from nnid.evaluation.prediction import measured_states
+
+    log = pd.DataFrame({"experiment": ["a#0"] * 2 + ["a#1"] * 2 + ["b"] * 2,
+                        "piece_of": ["a"] * 4 + [None] * 2, "t": [0.0, 0.1] * 3,
+                        "x": [np.nan, 5.0, np.nan, np.nan, 7.0, np.nan], "u": 1.0})  # fmt: skip
+    assert list(measured_states(log)[:, 0]) == [5.0, 5.0, 5.0, 5.0, 7.0, 7.0]

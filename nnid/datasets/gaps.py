@@ -31,6 +31,7 @@ said as such (:func:`span_ends`), not as a gap; a fit takes them out with the ga
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass, replace
 
 import numpy as np
@@ -38,8 +39,8 @@ import pandas as pd
 
 from nnid.datasets.cleaning import CleaningReport
 from nnid.datasets.log import (
-    ACCELERATION,
     ANGLES,
+    MOTION,
     PIECE_OF,
     POSE,
     VELOCITY,
@@ -54,9 +55,10 @@ from nnid.errors import NnidInputError
 
 #: a segment left between two gaps shorter than this many samples is masked with them
 MIN_SEGMENT = 3
-#: the cleaning steps that say what became of the gaps (bridged from the pose, or masked)
-BRIDGE_STEP, MASK_STEP = "bridge velocity gaps", "mask gaps"
-GAP_STEPS = (BRIDGE_STEP, MASK_STEP)
+#: the cleaning steps that say what became of the gaps (bridged from the pose, masked, or left
+#: in a motion column no model reads: its own step, so no summary reads it as gaps masked)
+BRIDGE_STEP, MASK_STEP, UNREAD_STEP = "bridge velocity gaps", "mask gaps", "unread motion"
+GAP_STEPS = (BRIDGE_STEP, MASK_STEP, UNREAD_STEP)
 #: a channel is logged slower than the clock when at least this share of the steps between
 #: its samples is one stride of two rows or more (a sample landing a row early or late on a
 #: merged clock is the rest)
@@ -101,7 +103,7 @@ def slow_channels(log: pd.DataFrame, columns: list[str] | None = None) -> list[S
     least :data:`SLOW_MIN_STEPS` steps; runs at one stride and rate are one entry. A channel
     without an empty cell, or with scattered dropouts (its usual step one row), is not
     slow."""
-    columns = [c for c in (columns or [*POSE, *VELOCITY, *ACCELERATION]) if c in log]
+    columns = [c for c in (columns or MOTION) if c in log]
     if not columns or not log[columns].isna().to_numpy().any():
         return []
     codes, names, order, _, _, step = _experiment_sorted(log)
@@ -287,13 +289,29 @@ def still_slow(parts: list[pd.DataFrame], columns: list[str]) -> list[SlowChanne
     return slow_channels(joined, [c for c in columns if c in joined])
 
 
-def refuse_slow(parts: list[pd.DataFrame], slow: list[SlowChannel]) -> NnidInputError:
+def refuse_slow(
+    parts: list[pd.DataFrame], slow: list[SlowChannel], part: str | None = None
+) -> NnidInputError:
     """The error for a log that the ``slow`` channels (:func:`still_slow`) leave nothing of
     to fit: masking a slow channel's empty cells takes every row between its samples out, and
     a piece of one row between two is too short to use, so each run it is slow in goes; where
     that is every run of every part, it ended as 'the training split is empty'. It names
-    each channel, its rate, the rows it empties and what to do."""
+    each channel, its rate, the rows it empties and what to do. ``part``: the one part
+    (e.g. 'validation', of ``parts`` its only one) whose every run went, the rest kept; it
+    ended as 'the validation split is empty: hold out an experiment', which was untrue."""
     parts = [p for p in parts if len(p)]
+    if part is not None:
+        said = "; ".join(ch.describe() for ch in slow)
+        its, it = ("its", "it") if len({ch.column for ch in slow}) == 1 else ("their", "them")
+        runs = parts[0]["experiment"].astype(str).unique() if "experiment" in parts[0] else ["run"]
+        return NnidInputError(
+            f"{said}: the empty cells between {its} samples are {its} rate, not dropouts, and "
+            f"a fit reads the motion on every row, so each run {it} is slow in is taken out "
+            f"whole; that leaves nothing of the {part} part ({len(parts[0])} rows: "
+            f"{', '.join(runs)}). Log {it} at the full rate, resample the log to {its} rate, "
+            f"or put a run without {it} slow in the {part} part",
+            field=slow[0].column,
+        )
     emptied = [
         np.logical_or.reduce([_slow_rows(p, [ch]) & p[ch.column].isna().to_numpy() for ch in slow])
         for p in parts
@@ -341,7 +359,7 @@ def _say_slow_runs(
         names = p["experiment"].astype(str) if "experiment" in p else pd.Series("run", p.index)
         for ch in slow:
             plain = replace(ch, runs=None).describe()  # its rate, the run said once before
-            for run in dict.fromkeys(names[_slow_rows(p, [ch])]):
+            for run in names[_slow_rows(p, [ch])].unique():
                 if plain not in why.setdefault(run, []):
                     why[run].append(plain)
         for run, n in names[mask].value_counts(sort=False).items():
@@ -477,7 +495,7 @@ def find_gaps(log: pd.DataFrame, columns: list[str] | None = None) -> list[Gap]:
 def _summary(gaps: list[Gap]) -> str:
     seconds = sum(g.missing_s for g in gaps)
     longest = max((g.missing_s for g in gaps), default=0.0)
-    order = [*POSE, *VELOCITY, *ACCELERATION]
+    order = list(MOTION)
     cols = sorted(
         {c for g in gaps for c in g.columns},
         key=lambda c: (c not in order, order.index(c) if c in order else c),
@@ -534,7 +552,10 @@ def bridge_from_pose(
 
 
 def mask_gaps(
-    parts: list[pd.DataFrame], columns: list[str], report: CleaningReport | None = None
+    parts: list[pd.DataFrame],
+    columns: list[str],
+    report: CleaningReport | None = None,
+    names: Sequence[str] | None = None,
 ) -> list[pd.DataFrame]:
     """Take the rows with an empty cell in ``columns`` out of each part of one log (e.g. its
     training and held-out parts) and cut each run at them into segments ``<experiment>#<k>``
@@ -545,7 +566,8 @@ def mask_gaps(
     as they are. A run in which a channel of ``columns`` is logged slower than the clock
     (:func:`still_slow`) is taken out whole and said as such, its rate, not gaps: masked, its
     empty cells would leave pieces of one row, too short to use; where that leaves nothing
-    of the log, it is refused (:func:`refuse_slow`)."""
+    of the log, or of one part that had rows (``names``: each part's, as an error says it),
+    it is refused (:func:`refuse_slow`): not as an empty split with another cause."""
     slow = still_slow(parts, columns)  # a slow channel's cells between its samples are no gaps
     slow_runs = _slow_runs(parts, slow)
     out, gaps, short = [], [], 0
@@ -577,6 +599,10 @@ def mask_gaps(
         )
     if slow and any(len(p) for p in parts) and not any(len(p) for p in out):
         raise refuse_slow(parts, slow)
+    for k, (log, taken, kept) in enumerate(zip(parts, slow_runs, out, strict=True)):
+        if len(log) and not len(kept) and taken.any():  # its runs went for their rate
+            mine = [ch for ch in slow if _slow_rows(log, [ch]).any()] or slow
+            raise refuse_slow([log], mine, names[k] if names else f"part {k + 1}")
     said, taken = _say_slow_runs(parts, slow, slow_runs) if slow else ("", 0)
     if report is not None and gaps:
         extra = f"; {short} samples between gaps too short to use" if short else ""

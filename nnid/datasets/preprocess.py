@@ -428,15 +428,24 @@ def excited_dofs(log: pd.DataFrame, columns: list[str], rel: float = 0.1) -> lis
     return [c for c, s in stds.items() if s > rel * (lin if c in "uvw" else ang) and s > 0]
 
 
-def derivable_velocities(columns) -> set[str]:
-    """The body velocities a pose of these columns gives (:func:`derive_velocities`): p, q, r
-    from the attitude; u, v, w from x, y, z with it; w alone from z with it."""
+def velocity_sources(columns) -> dict[str, tuple[str, ...]]:
+    """Each body velocity a pose of these columns gives (:func:`derive_velocities`) and the
+    pose columns it is derived from: p, q, r from the attitude; u, v, w from x, y, z with it;
+    w alone from z with it. What a fit that derives a velocity reads of the pose."""
     have = set(columns)
     if not all(a in have for a in ANGLES):
-        return set()
+        return {}
+    out = dict.fromkeys(("p", "q", "r"), tuple(ANGLES))
     if all(c in have for c in ("x", "y", "z")):
-        return set(VELOCITY)
-    return {"p", "q", "r", "w"} if "z" in have else {"p", "q", "r"}
+        out.update(dict.fromkeys(("u", "v", "w"), ("x", "y", "z", *ANGLES)))
+    elif "z" in have:
+        out["w"] = ("z", *ANGLES)
+    return out
+
+
+def derivable_velocities(columns) -> set[str]:
+    """The body velocities a pose of these columns gives (:func:`velocity_sources`)."""
+    return set(velocity_sources(columns))
 
 
 def check_velocities(

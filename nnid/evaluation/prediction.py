@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from nnid.datasets.log import POSE, TAU, VELOCITY, check_time_unit
+from nnid.datasets.log import PIECE_OF, POSE, TAU, VELOCITY, check_time_unit
 from nnid.datasets.preprocess import check_uniform, experiments, first_order_lag
 from nnid.errors import NnidInputError
 from nnid.physics import compiled
@@ -73,14 +73,18 @@ def substeps_for(log: pd.DataFrame, max_step: float = MAX_STEP) -> int:
 def measured_states(log: pd.DataFrame) -> np.ndarray:
     """[N, 12] pose and velocity from the log (absent columns are zero). An empty pose cell
     (a 1-Hz GPS x y beside a 10-Hz DVL, which no fit reads and ``make_split`` leaves in)
-    takes its run's last sample before it, else its first after: a simulated pose starts
-    from where the vehicle was measured, not from 0 (η̇ = J(η) ν carries the offset on)."""
+    takes its run's last sample before it, else its first after, a piece cut at a gap
+    (``piece_of``) within the run it was cut from: a simulated pose starts from where the
+    vehicle was measured, not from 0 (η̇ = J(η) ν carries the offset on)."""
     x = np.zeros((len(log), 12))
     for k, c in enumerate((*POSE, *VELOCITY)):
         if c in log:
             x[:, k] = log[c].to_numpy(np.float64)
     if np.isnan(x[:, :6]).any():
-        runs = log["experiment"].to_numpy() if "experiment" in log else np.zeros(len(log))
+        runs = log["experiment"] if "experiment" in log else pd.Series(0, log.index)
+        if PIECE_OF in log:  # a piece (a#1) may hold no sample of x where its run does
+            runs = log[PIECE_OF].where(log[PIECE_OF].notna(), runs)
+        runs = runs.to_numpy(object)
         held = pd.DataFrame(x[:, :6]).groupby(runs, sort=False)
         x[:, :6] = held.ffill().fillna(held.bfill()).to_numpy()
     return np.nan_to_num(x)  # an undefined component (w of a tumbling vehicle) starts at zero

@@ -206,7 +206,7 @@ class ResidualLoop:
         train, val = self._split(log)
         # split first, on whole runs as if complete, so that gaps never move the split
         needed = [c for c in EQUATION_COLUMNS if c in log]  # what the Fossen regression reads
-        train, val = mask_gaps([train, val], needed, self.cleaning_)
+        train, val = mask_gaps([train, val], needed, self.cleaning_, ("training", "held-out"))
         self.dofs_ = tuple(self.dofs) if self.dofs else tuple(d for d in DOFS if d in log)
         if not self.dofs_:
             raise NnidInputError(

@@ -185,7 +185,14 @@ class CacciaModel(FossenPlant):
         if state is None:
             values, self.from_file_ = simulated_values(self.vehicle, flown, theta)
         else:
-            values, self.from_file_ = restored_simulated(state, self.vehicle, flown, theta)
+            # an older save flew a NaN W − B as a NaN buoyancy, not at 0 as the rest
+            values, self.from_file_ = restored_simulated(
+                state,
+                self.vehicle,
+                flown,
+                theta,
+                nan_before={WEIGHT_MINUS_BUOYANCY: "neutrally buoyant"},
+            )
         wb = values.pop(WEIGHT_MINUS_BUOYANCY, None)
         self.parts_ = self.structure_.parts(values)
         if wb is not None:

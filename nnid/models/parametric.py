@@ -33,7 +33,13 @@ from sklearn.utils.validation import check_is_fitted
 from nnid.datasets.arrays import log_arrays, nominal_forces
 from nnid.datasets.cleaning import CleaningReport
 from nnid.datasets.log import ACCELERATION, ANGLES, MOTION, POSE, VELOCITY
-from nnid.datasets.preprocess import HELD_DT, HELD_SHARE, held_at, zoh_midpoint
+from nnid.datasets.preprocess import (
+    HELD_DT,
+    HELD_SHARE,
+    held_at,
+    velocity_sources,
+    zoh_midpoint,
+)
 from nnid.errors import ExcitationWarning, NnidInputError
 from nnid.evaluation.prediction import (
     Replay,
@@ -890,23 +896,38 @@ def saved_from_file(from_file: Mapping[str, float | None]) -> dict[str, Any]:
 
 
 def restored_simulated(
-    state: Mapping[str, Any], vehicle, names: Sequence[str], theta: np.ndarray
+    state: Mapping[str, Any],
+    vehicle,
+    names: Sequence[str],
+    theta: np.ndarray,
+    nan_before: Mapping[str, str] | None = None,
 ) -> tuple[dict[str, float], dict[str, float | None]]:
     """:func:`simulated_values` of a saved model, as it was fitted and saved: the values of its
     state's ``from_file``, whatever the vehicle file says now, checked (one entry for each
     parameter the estimate leaves NaN and no other, a finite number or null: a file edited by
     hand is refused at loading). A file saved before the key simulated those parameters at 0
     (np.nan_to_num), and its metrics and plots are of that model: they stay at 0 (None in
-    ``from_file``), and a warning says so."""
+    ``from_file``), and a warning says so. Those of ``nan_before`` (each with what 0 means)
+    were not zeroed but left NaN (Caccia's W − B: a NaN buoyancy, every prediction NaN): at 0
+    now, the warning says the model no longer predicts as it was saved."""
     values, from_file = simulated_values(vehicle, names, theta)
+    nan_before = nan_before or {}
     if FROM_FILE not in state:
         from_file = dict.fromkeys(from_file)
         values.update(dict.fromkeys(from_file, 0.0))
-        if from_file:
+        zeroed = [n for n in from_file if n not in nan_before]
+        said = [
+            f"it simulates {n} at 0 ({nan_before[n]}), where the saved model predicted NaN"
+            for n in from_file
+            if n in nan_before
+        ]
+        if zeroed:
+            said.insert(0, "it simulates them at 0, as it did when it was fitted and saved: "
+                        + ", ".join(zeroed))  # fmt: skip
+        if said:
             warnings.warn(
                 "the saved model predates simulating an unidentified parameter at the vehicle "
-                "file's value (it has no 'from_file'): it simulates them at 0, as it did when "
-                f"it was fitted and saved: {', '.join(from_file)}",
+                f"file's value (it has no 'from_file'): {'; '.join(said)}",
                 ExcitationWarning,
                 stacklevel=2,
             )
@@ -943,14 +964,18 @@ def restored_simulated(
 EQUATION_COLUMNS = (*VELOCITY, *ACCELERATION, *ANGLES)
 
 
-def equation_columns(columns: Iterable[str], from_pose: bool = False) -> list[str]:
+def equation_columns(columns: Iterable[str], from_pose: Iterable[str] = ()) -> list[str]:
     """The motion columns of a log with ``columns`` that a regression on the Fossen equation
-    (:data:`EQUATION_COLUMNS`) reads on every row: the whole pose too where a velocity is
-    derived from it (``from_pose``, or a velocity the log lacks: :func:`prepare_motion`
-    derives it; the pose's noise is then read for its noise as well)."""
+    (:data:`EQUATION_COLUMNS`) reads on every row, and the pose columns each velocity derived
+    from the pose is made of (``from_pose``, and each the log lacks that its pose gives:
+    :func:`prepare_motion` derives it; the pose's noise is then read for its noise as well):
+    :func:`~nnid.datasets.preprocess.velocity_sources`, so p q r derived from the attitude
+    leave a 1-Hz GPS's x, y unread, unmasked."""
     present = set(columns)
-    derived = from_pose or any(v not in present for v in VELOCITY)
-    return [c for c in MOTION if c in present and (derived or c in EQUATION_COLUMNS)]
+    sources = velocity_sources(present)
+    derived = {*from_pose, *(v for v in VELOCITY if v not in present)}
+    read = {*EQUATION_COLUMNS, *(c for v in derived for c in sources.get(v, ()))}
+    return [c for c in MOTION if c in present and c in read]
 
 
 def prepare_motion(
@@ -1160,12 +1185,13 @@ class ParametricModel(FossenPlant):
         self.pose_savgol = pose_savgol
 
     def motion_columns(self, columns: Iterable[str]) -> list[str]:
-        """A regression's columns (:func:`equation_columns`; the pose's too where a velocity
-        was derived from it, ``pose_velocities``); with the UKF, every motion column: it
-        propagates the whole measured state η, ν (Weiss eq. 80), a position too."""
+        """A regression's columns (:func:`equation_columns`; those of the pose a velocity
+        was derived from too, ``pose_velocities``); with a trainer of any kind but ls, rls or
+        gradient (the UKF), every motion column: the UKF propagates the whole measured state
+        η, ν (Weiss eq. 80), a position too."""
         if getattr(self.trainer, "kind", "ls") not in ("ls", "rls", "gradient"):
             return super().motion_columns(columns)
-        return equation_columns(columns, bool(self.pose_velocities))
+        return equation_columns(columns, self.pose_velocities)
 
     def _trainer(self) -> Any:
         """A fresh trainer of this model's settings: ``trainer`` (least squares if None),
