@@ -20,7 +20,7 @@ from nnid.datasets.measurement import Measurement
 from nnid.datasets.simulator import simulate, simulate_config
 from nnid.models.parametric import ParametricFossen, ParametricModel, prepare_motion
 from nnid.physics.dofs import DOFS
-from nnid.trainers.least_squares import ExcitationWarning, LeastSquares
+from nnid.trainers.least_squares import ExcitationWarning, LeastSquares, solve_least_squares
 from nnid.trainers.regression import Regression
 from nnid.trainers.sequence import DecoupledSequence
 from nnid.vehicle import load_vehicle
@@ -1263,3 +1263,22 @@ def test_a_regressor_zero_where_defined_is_not_excited_not_unmeasured():
     assert read_only_where_left_out(phi, kept, ["a", "b"]) == []
     phi[1, 0] = 2.0  # read where left out, zero where kept: not measured, as before
     assert read_only_where_left_out(phi, kept, ["a", "b"]) == ["a"]
+
+
+def test_a_column_is_judged_on_the_rows_its_fit_weights_not_on_equations_switched_off():
+    """The loop's weights are 1/σ̂² on the DOFs the log measures and 0 elsewhere. X of a
+    heave-only log is rounding (weighted up 1e34), Y is not measured (weight 0): a column of
+    rounding in X and of 1 in the switched-off Y rows was live by its RMS over every row, and
+    X:u read -13.7 off rounding. Judged over the rows of weight > 0 it is a zero regressor."""
+    rng = np.random.default_rng(0)
+    n = 200
+    a, b = 1e-18 * rng.normal(size=n), rng.normal(size=n)
+    phi = np.zeros((3 * n, 2))  # rows: X, Y, Z of each sample
+    phi[0::3, 0], phi[1::3, 0], phi[2::3, 1] = a, 1.0, b
+    y = np.zeros(3 * n)
+    y[0::3], y[2::3] = -13.7 * a, 2.0 * b + 0.01 * rng.normal(size=n)
+    w = np.tile([1e34, 0.0, 1e4], n)
+    with pytest.warns(ExcitationWarning, match=r"zero regressor\): X:u"):
+        est = solve_least_squares(phi, y, w, ["X:u", "Z:w"])
+    assert np.isnan(est.theta[0]) and est.excitation.unexcited == ["X:u"]
+    assert est.theta[1] == pytest.approx(2.0, abs=0.01)

@@ -229,3 +229,44 @@ def test_control_mode_steps_a_vehicles_actuator_lag_exactly(dt, lag):
         for dof in "uvr":
             err = float(np.nanmax(np.abs(pred[dof] - log[dof])))
             assert err < 1e-9 * log[dof].abs().max(), (mode, dof, err)
+
+
+def test_a_selected_term_of_a_zero_regressor_is_unidentified_not_simulated(monkeypatch, tmp_path):
+    """A term the sparse regression kept whose regressor the debiasing finds zero (u|u| on a
+    heave-only log) kept the path's coefficient: simulated, with no standard error. It is held
+    at 0 and named unidentified, as the synthesis model's, through a save and load."""
+    from importlib import resources
+
+    import nnid.models.sindy as sindy_module
+    from nnid import load_model
+    from nnid.datasets.simulator import simulate
+    from nnid.trainers.least_squares import ExcitationWarning
+
+    vehicle = load_vehicle(str(resources.files("nnid.demo_data").joinpath("minirov.toml")))
+    t = np.arange(400) * 0.1
+    inputs = np.zeros((t.size, 6))
+    inputs[:, 2] = 30.0 + 20.0 * np.sin(1.2 * t)
+    log = simulate(vehicle, inputs, 0.1, substeps=2, experiment="heave")
+    log[["u", "v", "p", "q", "r"]] = 0.0  # exactly: the regressor of Z:u*abs(u) is zero
+    terms = SindyDamping(vehicle)._terms()
+
+    class Chosen:  # the path's choice, stubbed: the debiasing of its support is tested
+        def __init__(self, *args) -> None:
+            pass
+
+        def fit(self, theta, *args):
+            self.coef_ = np.zeros((6, theta.shape[1]))
+            self.coef_[2, terms.index("w*abs(w)")] = -100.0
+            self.coef_[2, terms.index("u*abs(u)")] = 5.0
+            self.path_, self.selected_ = [], {}
+            return self
+
+    monkeypatch.setattr(sindy_module, "SparsePath", Chosen)
+    with pytest.warns(ExcitationWarning, match=r"zero regressor\): Z:u\*abs\(u\)"):
+        model = SindyDamping(vehicle).fit(log)
+    assert model.params["Z:u*abs(u)"] == {"value": None, "stderr": None, "simulated_at": 0.0}
+    assert model.params["Z:w*abs(w)"]["value"] == -100.0
+    assert "Z:u*abs(u)" not in model.coefficients_
+    assert model.coefficient_matrix()[2, terms.index("u*abs(u)")] == 0.0
+    model.save(tmp_path)
+    assert load_model(tmp_path).params == model.params

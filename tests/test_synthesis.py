@@ -230,3 +230,31 @@ def test_a_regressor_of_rounding_or_zero_but_for_settling_rows_is_a_zero_regress
     assert "not measured" not in said and "only they read" not in said
     assert fit.unidentified[0, 0] and fit.coefficients[0, 0] == 0.0
     assert fit.coefficients[2, 1] == pytest.approx(-33.0, rel=0.05)
+
+
+def test_one_column_singular_on_a_few_rows_does_not_make_the_others_rounding():
+    """An (η − 1) term at U = 0 under a current (a DVL reading 0.000) reaches 1e12 on those
+    rows: Ξ's largest column RMS, the reference of the rounding rule, made every ordinary
+    column of every force "zero regressor" (K = 0). Against Ξ's typical regressor they stay
+    live, and a column of rounding (1e-17) is still zero."""
+    from nnid.errors import ExcitationWarning
+
+    rng = np.random.default_rng(1)
+    n = 400
+    u = 1e-17 * rng.normal(size=n)
+    w = 0.3 * np.sin(0.05 * np.arange(n))
+    r = 0.2 * np.cos(0.03 * np.arange(n))
+    singular = r * r * (0.1 / np.sqrt(w * w + 0.01) - 1.0)
+    singular[[5, 77, 301]] = 1e12  # U = 0 there: u_c / sqrt(1e-30) - 1
+    terms = ["u", "w", "w*abs(w)", "r*r*(eta-1)"]
+    xi = np.stack([u, w, w * np.abs(w), singular], 1)
+    tau = np.zeros((n, 6))
+    tau[:, 0] = -13.7 * u
+    tau[:, 2] = xi[:, 1:3] @ [-33.0, -190.0] + 0.01 * rng.normal(size=n)
+    tau[:, 5] = 2.0 * singular + 0.01 * rng.normal(size=n)
+    mask = mask_matrix({"X": ["u"], "Z": ["w", "w*abs(w)"], "N": ["r*r*(eta-1)"]}, terms)
+    with pytest.warns(ExcitationWarning, match=r"zero regressor\): X:u$"):
+        fit = masked_least_squares(xi, tau, mask, terms)
+    assert fit.unidentified[0, 0] and fit.unidentified.sum() == 1
+    assert fit.coefficients[2, 1] == pytest.approx(-33.0, rel=0.05)
+    assert fit.coefficients[2, 2] == pytest.approx(-190.0, rel=0.05)

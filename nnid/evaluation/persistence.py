@@ -17,12 +17,18 @@ import numpy as np
 
 from nnid.serialization import exact_float, read_exact_float
 
-#: a regressor column whose RMS is at most this fraction of the largest column of its whole
-#: regression is rounding, not data: float64 rounds a value computed from quantities of size S
-#: at about 2e-16 S (a simulator's "zero" velocity is 1e-17 of its others), and a margin of
-#: 10⁶ above that is still far below any sensor's resolution of its range (a 24-bit converter
-#: resolves 6e-8). Scale-free, as the fraction is of another column; not of the target: on
-#: such data the target is rounding too (X of a heave-only log), and it has other units
+#: a regressor column whose RMS is at most this fraction of the typical size of a regressor of
+#: its whole regression (:func:`typical_size`) is rounding, not data. What this assumes: the
+#: regressors of one regression, in SI units for a vehicle of metres and seconds, are of
+#: comparable size (within a few decades), so a column 10⁻¹⁰ below the typical one carries no
+#: measurement: float64 leaves about 2e-16 of the quantities a value is computed from (a
+#: simulator's "zero" velocity is 1e-17 of its others), and 10⁻¹⁰ keeps a margin of 10⁶ above
+#: that. The fraction is across columns of different units, so it is no scale-free bound: it
+#: could misjudge a regression whose columns differ by ten decades in earnest (a velocity in
+#: km/s beside a force in mN, or a term of a high power of a small velocity: |r|³ of r ~ 1e-4
+#: rad/s is 1e-12 beside a velocity of 1 m/s) and call a measured column rounding; such a
+#: regression is ill-scaled in any case. Not of the target: on data of rounding the target is
+#: rounding too (X of a heave-only log), and it has other units
 ROUNDING = 1e-10
 
 
@@ -105,6 +111,20 @@ class ExcitationReport:
         )
 
 
+def typical_size(columns: np.ndarray) -> float:
+    """The typical size of a regressor of ``columns`` ``[N, P]``, against which a column of
+    rounding is zero (:data:`ROUNDING`): the largest, over the columns, of the median |x| of
+    each column's finite non-zero entries. A median, as one column singular on a few rows (an
+    (η − 1) term at U = 0 under a current, 1e12: :func:`~nnid.physics.damping_library.atoms`)
+    must not set it; of the non-zero entries, as a stacked regression (a row per DOF) reads a
+    column on its DOF's rows only; the largest over the columns, not their median, as most
+    columns of a library may be rounding (the u, v, p, q, r terms of a heave-only log)."""
+    a = np.abs(np.asarray(columns, dtype=np.float64))
+    read = np.isfinite(a) & (a > 0)
+    sizes = [float(np.median(a[read[:, j], j])) for j in range(a.shape[1]) if read[:, j].any()]
+    return max(sizes, default=0.0)
+
+
 def excitation_report(
     phi: np.ndarray,
     names: list[str],
@@ -115,7 +135,8 @@ def excitation_report(
     phi = np.asarray(phi, dtype=np.float64)
     if phi.ndim != 2 or phi.shape[1] != len(names):
         raise ValueError("phi must be [N, len(names)]")
-    return excitation_from_gram(phi.T @ phi, phi.shape[0], names, groups, tol)
+    reference = typical_size(phi)
+    return excitation_from_gram(phi.T @ phi, phi.shape[0], names, groups, tol, reference=reference)
 
 
 def excitation_from_gram(
@@ -135,16 +156,21 @@ def excitation_from_gram(
 
     A column is zero (Weiss eq. 95's α₁ = 0) when its RMS is at most ``tol`` of the largest
     (the scaled Gram could not tell it from 0) or at most :data:`ROUNDING` of ``reference``,
-    the largest column RMS of the whole regression this one is a block of (McCarter's Ξ, eq.
-    4.20, solved force by force): a block of one column has no other to be compared with, and
-    one of rounding (1e-17) fitted to a target of rounding read as a precise estimate.
+    the typical size of a regressor of the whole regression this one is a block of
+    (:func:`typical_size`; McCarter's Ξ, eq. 4.20, solved force by force): a block of one
+    column has no other to be compared with, and one of rounding (1e-17) fitted to a target
+    of rounding read as a precise estimate. Without ``reference`` (0) the largest column RMS
+    stands for it, which one column singular on a few rows would inflate.
     ``column_rms``: each column's RMS unweighted, where ``gram`` is weighted (weights that
     scale each equation by its residual made a column of rounding as large as any)."""
     p = len(names)
     rms = np.sqrt(np.clip(np.diag(gram), 0.0, None) / max(n, 1))
     raw = rms if column_rms is None else np.asarray(column_rms, dtype=np.float64)
     scale = rms.max() if rms.size and rms.max() > 0 else 1.0
-    live = (rms > tol * scale) & (raw > ROUNDING * max(reference, raw.max(initial=0.0)))
+    # the largest RMS only where no robust reference is given (from ΦᵀΦ alone, as the
+    # recursive fit has it): one column singular on a few rows would set it
+    typical = reference if reference > 0 else raw.max(initial=0.0)
+    live = (rms > tol * scale) & (raw > ROUNDING * typical)
     unexcited = [names[j] for j in range(p) if not live[j]]
     d = np.where(live, 1.0 / np.where(live, rms, 1.0), 0.0)
     normed = gram * np.outer(d, d) / max(n, 1)

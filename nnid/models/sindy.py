@@ -33,8 +33,8 @@ from nnid.datasets.log import VELOCITY
 from nnid.datasets.preprocess import experiments
 from nnid.errors import NnidInputError
 from nnid.evaluation.prediction import blank_initial, mode_steps
-from nnid.models.parametric import prepare_motion
-from nnid.models.synthesis import DampingModel, restored_matrices
+from nnid.models.parametric import prepare_motion, warn_simulated
+from nnid.models.synthesis import DampingModel, _at_zero, restored_matrices, restored_unidentified
 from nnid.physics.damping_library import LIBRARY, BasisLibrary
 from nnid.physics.dofs import DOFS, FORCES
 from nnid.physics.integrate import rk4
@@ -189,21 +189,38 @@ class SindyDamping(DampingModel):
         terms = self._terms()
         names = terms + (list(f"tau_{f}" for f in FORCES) if self.mode == "control" else [])
         self.feature_names_ = names
-        self.coefficients_ = {
-            f"{out}:{names[j]}": float(path.coef_[i, j])
-            for i, out in enumerate(self.output_names)
-            for j in np.flatnonzero(path.coef_[i])
-        }
         # the debiased coefficients are the least squares of each output on its selected terms:
         # that regression's standard errors (widened for correlated residuals), with its
         # warnings when the support is collinear or a term unexcited. They are conditional on
         # the support and leave out the uncertainty of the selection itself.
         support = masked_least_squares(theta[ok], y[ok], path.coef_ != 0, names, self.output_names)
-        self._set_model(terms, path.coef_, support.stderr)
-
-    def _set_model(self, terms: list[str], coef: np.ndarray, stderr: np.ndarray) -> None:
+        coef, unidentified = path.coef_, None
         if self.mode == "residual":
-            self._set_damping(terms, coef, stderr)
+            # a selected term the debiasing finds unexcited (a zero regressor) has no estimate:
+            # the sparse regression's value would be simulated without a standard error. It is
+            # held at 0 and named unidentified, as the synthesis model's (McCarter eq. 4.6);
+            # control mode's ν̇ model keeps no such marks, and keeps the value
+            unidentified = support.unidentified & (path.coef_ != 0)
+            coef = np.where(unidentified, 0.0, path.coef_)
+        self.coefficients_ = {
+            f"{out}:{names[j]}": float(coef[i, j])
+            for i, out in enumerate(self.output_names)
+            for j in np.flatnonzero(coef[i])
+        }
+        self._set_model(terms, coef, support.stderr, unidentified)
+        if unidentified is not None:
+            warn_simulated(dict.fromkeys(self._unidentified_names()), stacklevel=3, at=_at_zero)
+
+    def _set_model(
+        self,
+        terms: list[str],
+        coef: np.ndarray,
+        stderr: np.ndarray,
+        unidentified: np.ndarray | None = None,
+    ) -> None:
+        """The fitted state; ``unidentified`` (residual mode): the entries of K held at 0."""
+        if self.mode == "residual":
+            self._set_damping(terms, coef, stderr, unidentified)
             return
         self.terms_ = list(terms)
         self.coef_ = np.asarray(coef, dtype=np.float64)
@@ -317,7 +334,11 @@ class SindyDamping(DampingModel):
         if self.mode not in MODES:  # any other value predicted as control mode
             raise ValueError(f"mode is one of {', '.join(MODES)}, not {self.mode!r}")
         extra = 0 if self.mode == "residual" else len(FORCES)
-        self._set_model(*restored_matrices(state, extra, stderr_default=True))
+        terms, coef, stderr = restored_matrices(state, extra, stderr_default=True)
+        unidentified = (
+            restored_unidentified(state, terms, coef, stderr) if self.mode == "residual" else None
+        )
+        self._set_model(terms, coef, stderr, unidentified)
         self.coefficients_ = dict(state["coefficients"])
         self.path_ = list(state["path"])
         self.selected_ = dict(state["selected"])

@@ -21,7 +21,7 @@ from sklearn.base import BaseEstimator
 
 from nnid.errors import ExcitationWarning as ExcitationWarning  # raised here, long imported here
 from nnid.errors import NnidInputError
-from nnid.evaluation.persistence import ExcitationReport, excitation_from_gram
+from nnid.evaluation.persistence import ExcitationReport, excitation_from_gram, typical_size
 from nnid.serialization import json_float
 from nnid.trainers.history import Progress, silent
 from nnid.trainers.regression import Regression
@@ -143,7 +143,15 @@ def read_only_where_left_out(phi: np.ndarray, kept: np.ndarray, names: Sequence[
     rather than unexcited (a zero regressor, Weiss eq. 95). A NaN entry is no evidence that a
     row reads it: a filter's settling rows are NaN in every column (:func:`synthesis_data`),
     and a term zero on every other row read "not measured" there. A column with no finite
-    entry at all is not measured either: nothing shows it zero."""
+    entry at all is not measured either: nothing shows it zero.
+
+    The price: a column NaN in exactly the rows that would read it and 0 on every other row is
+    "zero regressor" here, not "not measured" (the case at :func:`solve_least_squares`'s
+    left-out rows). Its cause there, a NaN known multiplying a whole equation, is refused
+    before any regression since 9accf6c (a sequence raises where a step's equations do not
+    contain a parameter, ``step_contains``); what is left needs the data's own NaN (a masked
+    gap) to cover every row where the signal is non-zero, and then the kept rows, measured at
+    0, do show the term unexcited."""
     read = np.isfinite(phi) & (phi != 0)
     unknown = ~np.isfinite(phi).any(0)
     return [
@@ -166,8 +174,9 @@ def solve_least_squares(
     Unexcited parameters get NaN and a warning that names them; collinear ones (the data do
     not separate them: the excitation check's near-null directions) keep the pseudo-inverse's
     value, a warning, and no standard error (NaN), since only their combination is measured.
-    ``reference``: the largest column RMS of the whole regression ``phi`` is a block of, against
-    which a column of rounding is zero (:func:`excitation_from_gram`)."""
+    ``reference``: the typical regressor size of the whole regression ``phi`` is a block of
+    (:func:`~nnid.evaluation.persistence.typical_size`), against which a column of rounding is
+    zero (:func:`excitation_from_gram`); ``phi``'s own, where larger."""
     names = names or [f"theta{k}" for k in range(phi.shape[1])]
     finite = np.isfinite(y) & np.isfinite(phi).all(1)
     left_out: list[str] = []
@@ -193,8 +202,13 @@ def solve_least_squares(
         w = np.asarray(weights, dtype=np.float64)
         pw = phi * w[:, None]
         gram, rhs, yy = pw.T @ phi, pw.T @ y, float((y * w) @ y)
-    # the zero columns are judged on Φ unweighted: weights scale an equation of rounding up
-    raw = None if weights is None else np.sqrt(np.einsum("ij,ij->j", phi, phi) / max(n, 1))
+    # the zero columns are judged on Φ unweighted (weights scale an equation of rounding up),
+    # over the rows of weight > 0: a weight 0 switches an equation off (a DOF the log does not
+    # measure), and a column is not to be called excited by equations that are not fitted
+    rows = np.ones(n, dtype=bool) if weights is None else np.asarray(weights) > 0
+    fitted = phi[rows]
+    raw = np.sqrt(np.einsum("ij,ij->j", fitted, fitted) / max(fitted.shape[0], 1))
+    reference = max(reference, typical_size(fitted))
     report = (
         excitation_from_gram(gram, n, names, left_out=left_out, column_rms=raw, reference=reference)
         if check
@@ -279,8 +293,8 @@ class LeastSquares(BaseEstimator):
         return est
 
     def solve(self, reg: Regression, reference: float = 0.0) -> Estimate:
-        """Solve ``reg``; ``reference``: the largest column RMS of the regression it is a block
-        of (:func:`solve_least_squares`)."""
+        """Solve ``reg``; ``reference``: the typical regressor size of the regression it is a
+        block of (:func:`solve_least_squares`)."""
         if self.weighting not in ("feasible", "none"):
             raise NnidInputError("weighting is 'feasible' or 'none'", field="weighting")
         est = solve_least_squares(reg.phi, reg.y, names=reg.names, reference=reference)

@@ -34,6 +34,7 @@ from typing import Literal
 import numpy as np
 from scipy.optimize import minimize
 
+from nnid.evaluation.persistence import typical_size
 from nnid.physics.damping_library import LIBRARY, canonical_term, mask_terms
 from nnid.physics.dofs import FORCES
 from nnid.trainers.least_squares import LeastSquares
@@ -119,10 +120,10 @@ def masked_least_squares(
     unidentified = np.zeros(mask.shape, dtype=bool)
     solver = LeastSquares(weighting="none")
     # the forces' problems are blocks of one (Ξ, eq. 4.20): a column of rounding is zero
-    # against the largest of Ξ, though its own block (X:u alone) has no other to compare
+    # against Ξ's typical regressor, though its own block (X:u alone) has no other to compare;
+    # typical, not largest: an (η − 1) term at U = 0 (1e12) would make every other one "zero"
     used = xi[:, mask.any(0)]
-    used = used[np.isfinite(used).all(1)]
-    reference = float(np.sqrt(np.mean(used * used, 0)).max()) if used.size else 0.0
+    reference = typical_size(used[np.isfinite(used).all(1)])
     for f in range(6):
         cols = np.flatnonzero(mask[f])
         if cols.size == 0:
