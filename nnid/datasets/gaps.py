@@ -300,9 +300,9 @@ def refuse_slow(
     (e.g. 'validation', of ``parts`` its only one) whose every run went, the rest kept; it
     ended as 'the validation split is empty: hold out an experiment', which was untrue."""
     parts = [p for p in parts if len(p)]
+    said = "; ".join(ch.describe() for ch in slow)
+    its, it = ("its", "it") if len({ch.column for ch in slow}) == 1 else ("their", "them")
     if part is not None:
-        said = "; ".join(ch.describe() for ch in slow)
-        its, it = ("its", "it") if len({ch.column for ch in slow}) == 1 else ("their", "them")
         runs = parts[0]["experiment"].astype(str).unique() if "experiment" in parts[0] else ["run"]
         return NnidInputError(
             f"{said}: the empty cells between {its} samples are {its} rate, not dropouts, and "
@@ -317,8 +317,6 @@ def refuse_slow(
         for p in parts
     ]
     empty = int(sum(e.sum() for e in emptied))  # a slow channel's own cells, in its own runs
-    said = "; ".join(ch.describe() for ch in slow)
-    its, it = ("its", "it") if len({ch.column for ch in slow}) == 1 else ("their", "them")
     return NnidInputError(
         f"{said}: the empty cells between {its} samples are {its} rate, not dropouts, and a "
         f"fit reads the motion on every row; masked as gaps they would take {empty} of the "
