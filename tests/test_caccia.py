@@ -433,6 +433,22 @@ def test_asymptote_speed_error_counts_the_time_constant_and_the_f_tests_choice()
         assert 0.88 <= np.mean(inside) <= 0.99, (amplitude, np.mean(inside))
 
 
+def _leave_unidentified(monkeypatch, name: str) -> None:
+    """Make every Caccia campaign fit leave parameter ``name`` unidentified (NaN), as a zero
+    column would: the cases a campaign of the fixture cannot produce itself."""
+    import dataclasses
+
+    fit_logs = CacciaTwoStep.fit_logs
+
+    def unidentified(self, *args, **kwargs):
+        est = fit_logs(self, *args, **kwargs)
+        theta = est.theta.copy()
+        theta[est.names.index(name)] = np.nan
+        return dataclasses.replace(est, theta=theta)
+
+    monkeypatch.setattr(CacciaTwoStep, "fit_logs", unidentified)
+
+
 def test_an_unidentified_installation_coefficient_is_flown_at_the_vehicle_files_value(
     setup, monkeypatch, tmp_path
 ):
@@ -441,21 +457,12 @@ def test_an_unidentified_installation_coefficient_is_flown_at_the_vehicle_files_
     group without plateaus, so a campaign does not leave it NaN; a zero column would.) It
     flies the vehicle file's value, as ParametricModel does, says so, and keeps it through a
     save; a file saved before that keeps 0, as it was fitted, and says so."""
-    import dataclasses
     import json
 
     from nnid.errors import ExcitationWarning
 
     _, _, vehicle, log = setup
-    fit_logs = CacciaTwoStep.fit_logs
-
-    def unidentified(self, *args, **kwargs):
-        est = fit_logs(self, *args, **kwargs)
-        theta = est.theta.copy()
-        theta[est.names.index("eta.w.neg")] = np.nan
-        return dataclasses.replace(est, theta=theta)
-
-    monkeypatch.setattr(CacciaTwoStep, "fit_logs", unidentified)
+    _leave_unidentified(monkeypatch, "eta.w.neg")
     file_value = vehicle.installation["w.neg"]
     with (
         pytest.warns(UserWarning, match="step 2 did not run"),  # no sinusoid run: cheaper
@@ -482,20 +489,10 @@ def test_an_unidentified_weight_minus_buoyancy_is_flown_at_the_vehicle_files(
     W − NaN: every prediction NaN, unsaid. (Forced, as the installation coefficient above.) It
     flies the vehicle file's W − B (its weight and buoyancy), says so in the warning and in
     simulated_at, and keeps it through a save."""
-    import dataclasses
-
     from nnid.errors import ExcitationWarning
 
     _, _, vehicle, log = setup
-    fit_logs = CacciaTwoStep.fit_logs
-
-    def unidentified(self, *args, **kwargs):
-        est = fit_logs(self, *args, **kwargs)
-        theta = est.theta.copy()
-        theta[est.names.index("weight_minus_buoyancy")] = np.nan
-        return dataclasses.replace(est, theta=theta)
-
-    monkeypatch.setattr(CacciaTwoStep, "fit_logs", unidentified)
+    _leave_unidentified(monkeypatch, "weight_minus_buoyancy")
     file_value = float(vehicle.weight - vehicle.buoyancy)
     with (
         pytest.warns(UserWarning, match="step 2 did not run"),  # no sinusoid run: cheaper
