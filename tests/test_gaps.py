@@ -473,6 +473,77 @@ def test_each_run_is_measured_at_its_own_rate():
     ]
 
 
+def test_a_slow_channel_in_many_runs_is_said_in_a_few_names_and_kept_whole():
+    """A log a reader cut into hundreds of runs at two rates was said 'psi logged every 5th
+    row in r0, r1, … r349: …', a sentence hundreds of names long, in the cleaning report, the
+    refusal and ``inspect``. Each rate names a few runs and counts the rest; the whole list
+    stays in ``runs`` (``inspect``'s summary.json)."""
+    from nnid.datasets.gaps import SlowChannel, slow_channels
+
+    def run(name: str, k: int) -> pd.DataFrame:
+        one = pd.DataFrame({"t": np.arange(60) * 0.05, "experiment": name, "psi": 0.0})
+        one.loc[np.arange(60) % k != 0, "psi"] = np.nan
+        return one
+
+    log = pd.concat([run(f"r{i}", 5) for i in range(5)] + [run("s", 2)], ignore_index=True)
+    five, two = slow_channels(log)
+    assert five.runs == [f"r{i}" for i in range(5)] and two.runs == ["s"]
+    assert (
+        five.describe()
+        == "psi logged every 5th row in 5 runs (r0, r1, r2 and 2 more): 4 Hz against 20 Hz"
+    )
+    assert two.describe() == "psi logged every 2nd row in s: 10 Hz against 20 Hz"
+    many = SlowChannel("z", 20, 1.0, 20.0, [f"r{i}" for i in range(350)])
+    assert many.describe() == (
+        "z logged every 20th row in 350 runs (r0, r1, r2 and 347 more): 1 Hz against 20 Hz"
+    )
+
+
+def test_a_short_run_of_a_slow_channel_is_judged_by_its_other_runs_rate():
+    """Run b holds 6 samples of u, every 5th row as in run a: under SLOW_MIN_STEPS steps, it
+    was not judged slow, so its 24 empty cells were masked as '6 gaps in u' and its 6 samples
+    lost as 'too short to use'. It is judged at a's rate, taken out whole as a's is, and a
+    slow yaw in it is filled as a's is."""
+    from nnid.datasets.gaps import SLOW_STEP, fill_slow, slow_channels
+
+    a, b = _mocap_log(200).assign(experiment="a"), _mocap_log(30).assign(experiment="b")
+    c = _mocap_log(100).assign(experiment="c")  # u on every row: what a fit has left
+    log = pd.concat([_slow(pd.concat([a, b], ignore_index=True), ["u"], 5), c],
+                    ignore_index=True)  # fmt: skip
+    assert [(ch.stride, ch.runs) for ch in slow_channels(log)] == [(5, None)]
+    report = CleaningReport(source="test")
+    (kept,) = mask_gaps([log], ["u"], report)
+    assert set(kept["experiment"]) == {"c"}
+    assert [s.step for s in report.steps] == [SLOW_STEP]  # no "6 gaps in u" masked
+    assert report.steps[0].detail.startswith(
+        "a (200 rows): u logged every 5th row: 4 Hz against 20 Hz; b (30 rows): u logged"
+    )
+    yaw = fill_slow(_slow(pd.concat([a, b], ignore_index=True), ["psi"], 5))
+    assert yaw.groupby("experiment")["psi"].count().to_dict() == {"a": 196, "b": 26}
+
+
+def test_a_short_run_whose_rate_no_run_measures_is_said_so_not_masked_away():
+    """The same short run alone (or beside a run at another rate): no channel was found slow,
+    its empty cells were masked as gaps, pieces of one row, and mask_gaps handed back an
+    empty log with '6 gaps in u masked'. Its rate could not be measured, and it is said so
+    with the run and its samples: taken out whole, refused where that leaves nothing."""
+    from nnid.datasets.gaps import SLOW_STEP, slow_channels
+
+    b = _slow(_mocap_log(30).assign(experiment="b"), ["u"], 5)
+    with pytest.raises(NnidInputError, match=r"u's rate could not be measured in b \(6 samples\)"):
+        mask_gaps([b], ["u"])
+    a = _slow(_mocap_log(200).assign(experiment="a"), ["u"], 2)  # at 10 Hz, b at 4 Hz
+    c = _mocap_log(100).assign(experiment="c")
+    log = pd.concat([a, b, c], ignore_index=True)
+    at_a, unmeasured = slow_channels(log)
+    assert (at_a.stride, at_a.runs) == (2, ["a"])
+    assert (unmeasured.rate_hz, unmeasured.runs, unmeasured.samples) == (None, ["b"], [6])
+    report = CleaningReport(source="test")
+    (kept,) = mask_gaps([log], ["u"], report)
+    assert set(kept["experiment"]) == {"c"} and [s.step for s in report.steps] == [SLOW_STEP]
+    assert "b (30 rows): u's rate could not be measured in b (6 samples)" in report.steps[0].detail
+
+
 def test_a_run_with_a_slow_velocity_is_taken_out_and_said_the_others_fit(tmp_path):
     """Run a logs u, v on every row, run b on every 5th only: masking took b's rows out
     (pieces of one row) and the fit went on with a, until a slow channel in any run refused

@@ -65,6 +65,8 @@ GAP_STEPS = (BRIDGE_STEP, MASK_STEP, UNREAD_STEP)
 SLOW_SHARE = 0.9
 #: the fewest steps between a channel's samples that show it slow, not a few lone samples
 SLOW_MIN_STEPS = 10
+#: the most runs a sentence names for one rate of a slow channel (the rest are counted)
+SAY_RUNS = 3
 #: the most of a slow channel's own steps one interpolation spans: a longer hole is a gap
 SLOW_SPAN = 3
 #: the cleaning step that says which channels were slow and what became of them
@@ -75,25 +77,58 @@ GYRO = ("p", "q", "r")
 
 @dataclass
 class SlowChannel:
-    """A channel logged every ``stride`` rows of its runs' clock (module docstring)."""
+    """A channel logged every ``stride`` rows of its runs' clock (module docstring); or, with
+    ``samples``, one whose rate could not be measured in ``runs`` (:func:`slow_channels`)."""
 
     column: str
-    stride: int  # rows between its samples, most of the time
-    rate_hz: float  # its own rate: the clock's over the stride
+    stride: int  # rows between its samples, most of the time; 0 where not measured
+    rate_hz: float | None  # its own rate: the clock's over the stride; None: not measured
     clock_hz: float  # its runs': 1 / their median sample interval
     # the runs it is logged at this rate in; None: every run with an empty cell of it (a log
     # may join runs logged at different rates, each measured on its own)
     runs: list[str] | None = None
+    # where its rate could not be measured: its samples in each of ``runs``, too few to
+    # measure a rate on and with no other run of it measured at one they fit
+    samples: list[int] | None = None
 
     def describe(self) -> str:
-        """'z logged every 10th row: 2 Hz against 20 Hz' (and 'in a, b' for some runs)."""
+        """'z logged every 10th row: 2 Hz against 20 Hz' (and 'in a, b' for some runs, 'in 350
+        runs (a, b, c and 347 more)' for many: the whole list is ``runs``, e.g. in
+        ``inspect``'s summary.json); 'z's rate could not be measured in b (6 samples): …'."""
+        if self.rate_hz is None:
+            counts = [f"{n} sample{'s' * (n != 1)}" for n in self.samples or []]
+            return (
+                f"{self.column}'s rate could not be measured in "
+                f"{_some_runs(self.runs or [], counts)}: under the {SLOW_MIN_STEPS + 1} "
+                "samples in a run it takes, and no other run of it measured at a rate they fit"
+            )
         k = self.stride
         suffix = "th" if 10 <= k % 100 <= 20 else {1: "st", 2: "nd", 3: "rd"}.get(k % 10, "th")
-        where = "" if self.runs is None else f" in {', '.join(self.runs)}"
+        where = "" if self.runs is None else f" in {_some_runs(self.runs)}"
         return (
             f"{self.column} logged every {k}{suffix} row{where}: {self.rate_hz:.3g} Hz against "
             f"{self.clock_hz:.3g} Hz"
         )
+
+
+def _some_runs(runs: list[str], counts: list[str] | None = None) -> str:
+    """'a, b' or, past :data:`SAY_RUNS` runs, '350 runs (a, b, c and 347 more)': a log cut
+    into hundreds of runs made a sentence hundreds of names long. ``counts``: what to say of
+    each run in brackets after its name."""
+    said = runs if counts is None else [f"{r} ({n})" for r, n in zip(runs, counts, strict=True)]
+    if len(said) <= SAY_RUNS:
+        return ", ".join(said)
+    return f"{len(said)} runs ({', '.join(said[:SAY_RUNS])} and {len(said) - SAY_RUNS} more)"
+
+
+def _stride(steps: np.ndarray) -> int:
+    """The rows between a channel's samples in one run where at least :data:`SLOW_SHARE` of
+    ``steps`` are that one stride of two rows or more; else 0 (dropouts, or no step)."""
+    if not steps.size:
+        return 0
+    values, counts = np.unique(steps, return_counts=True)
+    stride = int(values[np.argmax(counts)])
+    return stride if stride >= 2 and counts.max() >= SLOW_SHARE * steps.size else 0
 
 
 def slow_channels(log: pd.DataFrame, columns: list[str] | None = None) -> list[SlowChannel]:
@@ -102,7 +137,9 @@ def slow_channels(log: pd.DataFrame, columns: list[str] | None = None) -> list[S
     between a channel's samples within the run are one stride of two rows or more, over at
     least :data:`SLOW_MIN_STEPS` steps; runs at one stride and rate are one entry. A channel
     without an empty cell, or with scattered dropouts (its usual step one row), is not
-    slow."""
+    slow. A run with fewer steps, one stride apart, is judged by the rate the channel's other
+    runs measure, where its steps show it; else it is an entry whose rate could not be
+    measured (``rate_hz`` None, with each run's ``samples``)."""
     columns = [c for c in (columns or MOTION) if c in log]
     if not columns or not log[columns].isna().to_numpy().any():
         return []
@@ -117,20 +154,43 @@ def slow_channels(log: pd.DataFrame, columns: list[str] | None = None) -> list[S
         spacing, runs_of = np.diff(rows)[within], codes[rows[1:]][within]  # sorted by run
         lacking = np.unique(codes[~present])  # the runs with an empty cell of it
         lo, hi = (np.searchsorted(runs_of, lacking, side) for side in ("left", "right"))
+        counted = np.bincount(codes[rows], minlength=len(names))  # its samples in each run
         rates: dict[tuple[int, str], list[int]] = {}  # (stride, clock as said): runs
+        short: dict[int, int] = {}  # a run with too few steps to measure: the stride it shows
         for e, a, b in zip(lacking, lo, hi, strict=True):
             steps = spacing[a:b]
-            if steps.size < SLOW_MIN_STEPS or not step[e] > 0:
+            if not step[e] > 0:
                 continue
-            values, counts = np.unique(steps, return_counts=True)
-            stride = int(values[np.argmax(counts)])
-            if stride >= 2 and counts.max() >= SLOW_SHARE * steps.size:
+            stride = _stride(steps)
+            if steps.size < SLOW_MIN_STEPS:
+                if counted[e] and (stride or not steps.size):  # a lone sample shows nothing
+                    short[int(e)] = stride
+                continue
+            if stride:
                 rates.setdefault((stride, f"{1.0 / step[e]:.3g}"), []).append(int(e))
+        # A run with under SLOW_MIN_STEPS steps of it (a short run a reader cut, a few samples)
+        # was not judged: its empty cells became gaps, masked into pieces of one row and lost
+        # as 'too short'. It is judged by the rate measured on the other runs of the channel,
+        # where its steps show that rate; else its rate could not be measured, and it is said
+        # so, by run and samples: its runs go whole as a slow channel's do, never as gaps.
+        measured = [1.0 / (k * float(np.median(step[r]))) for (k, _), r in rates.items()]
+        unmeasured = []
+        for e, stride in short.items():
+            rate = 1.0 / (stride * step[e]) if stride else np.nan
+            if any(np.isclose(rate, r, rtol=0.01) for r in measured):
+                rates.setdefault((stride, f"{1.0 / step[e]:.3g}"), []).append(e)
+            else:
+                unmeasured.append(e)
         for (stride, _), runs in rates.items():
+            runs = sorted(runs)
             clock = float(np.median(step[runs]))
             every = len(rates) == 1 and len(runs) == lacking.size
             named = None if every else [str(names[e]) for e in runs]
             out.append(SlowChannel(c, stride, 1.0 / (stride * clock), 1.0 / clock, named))
+        if unmeasured:
+            clock = 1.0 / float(np.median(step[unmeasured]))
+            said = [str(names[e]) for e in unmeasured]
+            out.append(SlowChannel(c, 0, None, clock, said, [int(counted[e]) for e in unmeasured]))
     return out
 
 
@@ -156,7 +216,8 @@ def fill_slow(log: pd.DataFrame, report: CleaningReport | None = None) -> pd.Dat
         turning = {a: turned_by(t, rates[:, k]) for k, a in enumerate(ANGLES)}
         blocked = ~np.isfinite(gyro).all(1)  # where the turn between two samples is unknown
     out, said = _between_samples(log, filling, turning, blocked)
-    kept = [ch.describe() for ch in slow if ch not in filling]
+    kept = [ch.describe() for ch in slow if ch not in filling and ch.rate_hz is not None]
+    unmeasured = [ch.describe() for ch in slow if ch.rate_hz is None]
     if report is not None:
         detail = []
         if said:
@@ -173,6 +234,12 @@ def fill_slow(log: pd.DataFrame, report: CleaningReport | None = None) -> pd.Dat
                 "out (refused where that leaves nothing; a fit that does not, e.g. of x y, "
                 "leaves it)"
             )
+        if unmeasured:
+            detail.append(
+                f"{'; '.join(unmeasured)}: not filled, nor its empty cells masked as gaps (they "
+                "may be its rate): a fit that reads it takes those runs out (refused where that "
+                "leaves nothing; a fit that does not leaves it)"
+            )
         columns = list(dict.fromkeys(ch.column for ch in slow))
         report.add(SLOW_STEP, "; ".join(detail), columns=columns)
     return out
@@ -183,7 +250,8 @@ def gyro_filled(log: pd.DataFrame, slow: list[SlowChannel]) -> list[SlowChannel]
     log holds all three and a gyro (p q r; its own empty cells leave the spans they fall in
     unfilled)."""
     held = all(c in log for c in (*ANGLES, *GYRO))
-    return [ch for ch in slow if held and ch.column in ANGLES]
+    # a rate not measured gives no span to fill across: such a run goes whole (slow_channels)
+    return [ch for ch in slow if held and ch.column in ANGLES and ch.rate_hz is not None]
 
 
 def between_samples(log: pd.DataFrame, slow: list[SlowChannel] | None = None) -> pd.DataFrame:
@@ -302,10 +370,12 @@ def refuse_slow(
     parts = [p for p in parts if len(p)]
     said = "; ".join(ch.describe() for ch in slow)
     its, it = ("its", "it") if len({ch.column for ch in slow}) == 1 else ("their", "them")
+    # where slow_channels could not measure the rate, the empty cells may be it, not are
+    are = "may be" if any(ch.rate_hz is None for ch in slow) else "are"
     if part is not None:
         runs = parts[0]["experiment"].astype(str).unique() if "experiment" in parts[0] else ["run"]
         return NnidInputError(
-            f"{said}: the empty cells between {its} samples are {its} rate, not dropouts, and "
+            f"{said}: the empty cells between {its} samples {are} {its} rate, not dropouts, and "
             f"a fit reads the motion on every row, so each run {it} is slow in is taken out "
             f"whole; that leaves nothing of the {part} part ({len(parts[0])} rows: "
             f"{', '.join(runs)}). Log {it} at the full rate, resample the log to {its} rate, "
@@ -318,7 +388,7 @@ def refuse_slow(
     ]
     empty = int(sum(e.sum() for e in emptied))  # a slow channel's own cells, in its own runs
     return NnidInputError(
-        f"{said}: the empty cells between {its} samples are {its} rate, not dropouts, and a "
+        f"{said}: the empty cells between {its} samples {are} {its} rate, not dropouts, and a "
         f"fit reads the motion on every row; masked as gaps they would take {empty} of the "
         f"{sum(map(len, parts))} rows out and leave pieces of one row, too short to fit, and "
         f"nothing of the log to fit on. Log {it} at the full rate, or resample the log to "
@@ -356,8 +426,12 @@ def _say_slow_runs(
             continue
         names = p["experiment"].astype(str) if "experiment" in p else pd.Series("run", p.index)
         for ch in slow:
-            plain = replace(ch, runs=None).describe()  # its rate, the run said once before
             for run in names[_slow_rows(p, [ch])].unique():
+                if ch.rate_hz is None:  # no rate to say: the run's own samples of it
+                    n = (ch.samples or [])[(ch.runs or []).index(run)]
+                    plain = replace(ch, runs=[run], samples=[n]).describe()
+                else:
+                    plain = replace(ch, runs=None).describe()  # its rate, the run said before
                 if plain not in why.setdefault(run, []):
                     why[run].append(plain)
         for run, n in names[mask].value_counts(sort=False).items():
