@@ -26,11 +26,10 @@ from nnid.config import (
     load_config,
 )
 from nnid.datasets.cleaning import CleaningReport
-from nnid.datasets.gaps import UNREAD_STEP, mask_gaps
+from nnid.datasets.gaps import mask_gaps, say_unread
 from nnid.datasets.log import (
     ANGLES,
     MOTION,
-    POSE,
     VELOCITY,
     input_columns,
     run_label,
@@ -562,7 +561,7 @@ def make_split(
     if report is not None and split.record.get("missed"):
         report.add("split", split.record["missed"])
     motion = [c for c in MOTION if c in log and (read is None or c in read)]
-    _say_unread(log, motion, report)
+    say_unread(log, motion, report)
     try:
         parts = mask_gaps(
             [split.train, split.validation, split.test],
@@ -618,30 +617,6 @@ def read_motion(models, log: pd.DataFrame, replay: Replay | None = None) -> list
         return [c for c in MOTION if c in log]
     read = {c for m in models for c in m.motion_columns(log.columns)}
     return [c for c in MOTION if c in read]
-
-
-def _say_unread(log: pd.DataFrame, read: Sequence[str], report: CleaningReport | None) -> None:
-    """Say in ``report`` each motion column with empty cells that is not masked because no
-    model reads it (``read``: those masked): its rows are kept, not dropped, and a simulated
-    pose starts from a run's last sample before, else first after
-    (:func:`nnid.evaluation.prediction.measured_states`)."""
-    empty = {c: int(log[c].isna().sum()) for c in MOTION if c in log and c not in read}
-    unread = [c for c, n in empty.items() if n]
-    if report is None or not unread:
-        return
-    them = "them" if len(unread) > 1 else "it"
-    start = (
-        "; a simulated pose starts from its run's last sample before (else its first after)"
-        if any(c in POSE for c in unread)
-        else ""
-    )
-    report.add(
-        UNREAD_STEP,
-        f"{', '.join(unread)} not masked: no model of this run reads {them} "
-        f"({', '.join(f'{empty[c]} empty cells in {c}' for c in unread)}): their rows stay "
-        f"in the fit and the scores, which read no cell of {them}{start}",
-        columns=unread,
-    )
 
 
 def _auto_split(log: pd.DataFrame, fractions: tuple[float, float, float]) -> Split:

@@ -599,11 +599,10 @@ def detect_run(
 ) -> Outcome:
     """``nnid detect`` on a whole log: ``alarms.csv``, ``detect.json`` and the report;
     ``time_unit`` declares the unit of its ``t`` (``--time-unit``)."""
-    from nnid.datasets.gaps import fill_slow, mask_gaps
-    from nnid.datasets.log import POSE, VELOCITY
+    from nnid.datasets.gaps import fill_slow, mask_gaps, say_unread
     from nnid.datasets.readers import load_log
     from nnid.fault.detect import detect
-    from nnid.fault.monitor import CLOCK_SPREAD, GAP_INTERVALS
+    from nnid.fault.monitor import CLOCK_SPREAD, GAP_INTERVALS, UNREAD_BY, monitor_motion
     from nnid.reports.detect_report import OUTPUTS, write_detect_outputs
 
     _checked_window(window)
@@ -614,8 +613,13 @@ def detect_run(
         log, report = load_log(data, columns, time_unit, "--time-unit")
         # a gap in the motion data cuts the run into segments, and the monitor restarts on
         # each (its EWMA, CUSUM and alarm from zero)
-        # (an attitude logged slower than the clock is filled from the gyro first)
-        log = mask_gaps([fill_slow(log, report)], [*POSE, *VELOCITY], report)[0]
+        # (an attitude logged slower than the clock is filled from the gyro first), in the
+        # columns the residual reads only: a 1-Hz GPS x, y masked cut every run to nothing
+        log = fill_slow(log, report)
+        read = monitor_motion(log.columns)
+        held = "an empty cell holds its run's last sample before (else its first after)"
+        say_unread(log, read, report, UNREAD_BY, "the monitor, which reads", held)
+        log = mask_gaps([log], read, report)[0]
         lines += lost_rows(report)
         runs = log["experiment"].to_numpy() if "experiment" in log else None
         missing = monitor.missing_samples(log["t"].to_numpy(), runs)

@@ -786,6 +786,48 @@ def test_alarms_name_the_experiment_as_the_log_does(vehicle, monitor, tmp_path):
     assert all(a["experiment"] is None for a in report["alarms"])
 
 
+def test_a_slow_gps_position_is_held_not_masked_and_alarms_as_at_full_rate(
+    monitor, stopped_h1, tmp_path
+):
+    """x, y from a 1-Hz GPS beside 20-Hz velocities and attitude: detect masked every pose
+    column, so the log was refused ('x logged every 20th row ...') and --follow stopped at the
+    first empty x cell, although the monitor's residual (Fossen eq. 2) reads ν and the attitude
+    only. Both now give the full-rate log's alarm and say x, y were held; a slow u, which the
+    residual reads, is still refused as before."""
+    from nnid.runs import detect_run
+
+    full = stopped_h1.head(600).copy()  # the fault at 20 s, its 10-s window whole
+    psi, dt = full["psi"].to_numpy(), 0.05
+    full["x"] = np.cumsum(full["u"] * np.cos(psi) - full["v"] * np.sin(psi)) * dt
+    full["y"] = np.cumsum(full["u"] * np.sin(psi) + full["v"] * np.cos(psi)) * dt
+    gps, dvl = full.copy(), full.copy()
+    gps.loc[full.index % 20 != 0, ["x", "y"]] = np.nan
+    dvl.loc[full.index % 20 != 0, "u"] = np.nan
+    monitor.model.save(tmp_path / "m")
+    monitor.save(tmp_path / "m")
+    for name, log in (("gps", gps), ("dvl", dvl)):
+        log.to_csv(tmp_path / f"{name}.csv", index=False)
+    expected = detect(monitor, full).alarms
+    got = detect_run(tmp_path / "m", str(tmp_path / "gps.csv"), tmp_path / "out")
+    alarms = json.loads((tmp_path / "out" / "detect.json").read_text())["alarms"]
+    said: list[str] = []
+    followed = follow_csv(monitor, str(tmp_path / "gps.csv"), 10.0, said.append, idle_s=0.0)
+    assert len(expected) == 1 and expected[0]["thruster"] == "h1"
+    for a in (alarms, followed.alarms):
+        assert [(b["kind"], b["thruster"]) for b in a] == [("thruster_loss", "h1")]
+        assert abs(a[0]["t"] - expected[0]["t"]) <= dt + 1e-9
+        assert a[0]["efficiency"] == pytest.approx(expected[0]["efficiency"], abs=0.02)
+    assert any(line.startswith("unread motion: x, y not masked: the monitor's residual")
+               for line in got.lines)  # fmt: skip
+    assert sum("never reads" in line for line in said) == 2  # once for x, once for y
+    with pytest.raises(NnidInputError, match="u logged every 20th row"):
+        detect_run(tmp_path / "m", str(tmp_path / "dvl.csv"), tmp_path / "out_dvl")
+    # a velocity derived from the pose reads it: x, y, z are then masked, not held
+    from nnid.fault.monitor import monitor_motion
+
+    assert {"x", "y", "z"} <= set(monitor_motion(["x", "y", "z", *"uvpqr", "phi", "theta", "psi"]))
+
+
 def test_no_false_alarm_on_healthy_held_out_runs(vehicle, monitor):
     healthy = pd.concat([simulate_faults(vehicle, 300, seed=s, experiment=f"t{s}")
                          for s in (50, 51)], ignore_index=True)  # fmt: skip

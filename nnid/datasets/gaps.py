@@ -623,6 +623,38 @@ def bridge_from_pose(
     return out
 
 
+#: how the training path says a simulated pose starts where an unread pose column is empty
+SIMULATED_START = "a simulated pose starts from its run's last sample before (else its first after)"
+
+
+def say_unread(
+    log: pd.DataFrame,
+    read: Sequence[str],
+    report: CleaningReport | None,
+    reader: str = "no model of this run reads",
+    kept: str = "the fit and the scores, which read",
+    start: str = SIMULATED_START,
+) -> None:
+    """Say in ``report`` each motion column with empty cells that is not masked because
+    nothing reads it (``read``: those masked; ``reader`` says who does not, ``kept`` what the
+    rows stay in and that it reads none): its rows are kept, not dropped, and an empty pose
+    cell takes its run's last sample before, else first after (``start`` says what for;
+    :func:`nnid.evaluation.prediction.nearest_samples`)."""
+    empty = {c: int(log[c].isna().sum()) for c in MOTION if c in log and c not in read}
+    unread = [c for c, n in empty.items() if n]
+    if report is None or not unread:
+        return
+    them = "them" if len(unread) > 1 else "it"
+    report.add(
+        UNREAD_STEP,
+        f"{', '.join(unread)} not masked: {reader} {them} "
+        f"({', '.join(f'{empty[c]} empty cells in {c}' for c in unread)}): their rows stay "
+        f"in {kept} no cell of {them}"
+        f"{f'; {start}' if any(c in POSE for c in unread) else ''}",
+        columns=unread,
+    )
+
+
 def mask_gaps(
     parts: list[pd.DataFrame],
     columns: list[str],

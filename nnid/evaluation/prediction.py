@@ -80,14 +80,22 @@ def measured_states(log: pd.DataFrame) -> np.ndarray:
     for k, c in enumerate((*POSE, *VELOCITY)):
         if c in log:
             x[:, k] = log[c].to_numpy(np.float64)
-    if np.isnan(x[:, :6]).any():
-        runs = log["experiment"] if "experiment" in log else pd.Series(0, log.index)
-        if PIECE_OF in log:  # a piece (a#1) may hold no sample of x where its run does
-            runs = log[PIECE_OF].where(log[PIECE_OF].notna(), runs)
-        runs = runs.to_numpy(object)
-        held = pd.DataFrame(x[:, :6]).groupby(runs, sort=False)
-        x[:, :6] = held.ffill().fillna(held.bfill()).to_numpy()
+    x[:, :6] = nearest_samples(log, x[:, :6])
     return np.nan_to_num(x)  # an undefined component (w of a tumbling vehicle) starts at zero
+
+
+def nearest_samples(log: pd.DataFrame, values: np.ndarray) -> np.ndarray:
+    """``values`` [N, k] (columns of ``log``'s rows) with each NaN taken from its run's last
+    sample before it, else its first after; a piece cut at a gap (``piece_of``) within the run
+    it was cut from. NaN stays only where a run holds no sample of that column. What
+    :func:`measured_states` starts an unread pose from, and the fault monitor holds one in."""
+    if not np.isnan(values).any():
+        return values
+    runs = log["experiment"] if "experiment" in log else pd.Series(0, log.index)
+    if PIECE_OF in log:  # a piece (a#1) may hold no sample of x where its run does
+        runs = log[PIECE_OF].where(log[PIECE_OF].notna(), runs)
+    held = pd.DataFrame(values).groupby(runs.to_numpy(object), sort=False)
+    return held.ffill().fillna(held.bfill()).to_numpy()
 
 
 def predict_states(

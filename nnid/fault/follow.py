@@ -60,7 +60,13 @@ from nnid.fault.detect import (
     window_rows,
     withdrawn_record,
 )
-from nnid.fault.monitor import ResidualMonitor, Trace, input_columns
+from nnid.fault.monitor import (
+    UNREAD_BY,
+    ResidualMonitor,
+    Trace,
+    input_columns,
+    monitor_motion,
+)
 from nnid.reports.cells import missing, number
 from nnid.validation import shown
 
@@ -128,12 +134,21 @@ def _rows(source: str, idle_s: float):
             handle.close()
 
 
-def _numbers(row: list[str], read: list[tuple[str, int]], n: int, where: str, width: int) -> dict:
+def _numbers(
+    row: list[str],
+    read: list[tuple[str, int]],
+    n: int,
+    where: str,
+    width: int,
+    held: frozenset[str] = frozenset(),
+) -> dict:
     """The named cells of one streamed row as finite numbers within the log contract's SI
     bounds (a unit slip, a corrupt sample), as the whole-log reader checks them; else the first
     bad cell, named by its column and row (an empty motion cell too: a stream has no gap
-    bridging). A row of more cells than the header's ``width`` (a decimal comma; the whole-log
-    reader refuses it too) or fewer is refused: its cells would be read under other columns."""
+    bridging). An empty cell of a column in ``held`` (a pose the residual never reads,
+    :func:`~nnid.fault.monitor.monitor_motion`) is left out: the caller holds its last value.
+    A row of more cells than the header's ``width`` (a decimal comma; the whole-log reader
+    refuses it too) or fewer is refused: its cells would be read under other columns."""
     if len(row) != width:
         raise NnidInputError(
             f"has {len(row)} fields against the header's {width} (a decimal comma, or a cell "
@@ -144,6 +159,8 @@ def _numbers(row: list[str], read: list[tuple[str, int]], n: int, where: str, wi
     out = {}
     for name, i in read:
         cell = row[i] if i < len(row) else ""
+        if name in held and not cell.strip():
+            continue
         try:
             value = float(cell)
         except ValueError:
@@ -205,6 +222,10 @@ def follow_csv(
             raise exc.with_source(where) from None
     col = {c: header.index(c) for c in header}
     state_cols = [col.get(c) for c in STATE]
+    # a pose column the residual never reads (a 1-Hz GPS x, y beside a 20-Hz DVL): an empty
+    # cell holds the last value, said once a column, as batch detect holds it unmasked
+    unread = [c for c in POSE if c in col and c not in monitor_motion(header)]
+    kept_unread, said_held = frozenset(unread), set()
     input_cols = [col[c] for c in inputs]
     exp_col = col.get("experiment")
     stream = monitor.stream()
@@ -404,7 +425,13 @@ def follow_csv(
 
     limits = command_limits(monitor.plant_.vehicle)  # the whole-log detect refuses beyond them
     for n, row in enumerate(rows):  # n: the data row from 0, as the whole-log reader counts
-        values = _numbers(row, read, n, where, len(header))
+        values = _numbers(row, read, n, where, len(header), kept_unread)
+        for c in [c for c in unread if c not in values and c not in said_held]:
+            said_held.add(c)
+            say(
+                f"{c}: an empty cell at row {n} (a sensor logged slower than the others) holds "
+                f"the last value: {UNREAD_BY} {c}"
+            )
         for name, bounds in limits.items():
             if name in values and not bounds.holds(values[name]):
                 raise NnidInputError(
@@ -427,7 +454,7 @@ def follow_csv(
             ):
                 raise degrees_error(seen, angle, where, n)
         t = values["t"]
-        x[:] = [values.get(c, 0.0) for c in STATE]
+        x[:] = [values.get(c, x[i] if c in kept_unread else 0.0) for i, c in enumerate(STATE)]
         u[:] = [values[c] for c in inputs]
         name = row[exp_col] if exp_col is not None else ""
         if exp_col is not None and not name.strip():  # refused by the whole-log reader too

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import math
 import warnings
+from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated
@@ -27,6 +28,7 @@ from sklearn.base import BaseEstimator
 from sklearn.utils.validation import check_is_fitted
 
 from nnid.datasets.arrays import check_commands, far_beyond_range, motion_arrays
+from nnid.datasets.log import POSE, VELOCITY
 from nnid.datasets.preprocess import check_attitude
 from nnid.errors import NnidInputError
 from nnid.fault import kernel
@@ -60,6 +62,8 @@ UNCALIBRATED = (
     "this monitor is not calibrated yet: call fit(healthy_log) first, or load one with "
     "ResidualMonitor.load(dir)"
 )
+#: who never reads a pose column :func:`monitor_motion` leaves out, as detect says it
+UNREAD_BY = "the monitor's residual (Fossen eq. 2: ν and the attitude) never reads"
 _KINDS = {"poly": kernel.CURVE_POLY, "signed_quadratic": kernel.CURVE_QUADRATIC}
 
 
@@ -123,9 +127,27 @@ def input_columns(channels: list[str]) -> list[str]:
     return [f"cmd_{c}" for c in channels]
 
 
+def monitor_motion(columns: Iterable[str]) -> list[str]:
+    """The pose and velocity columns of a log with ``columns`` that the monitor's residual
+    reads on every row: ν and the attitude (Fossen eq. 2: C(ν), D(ν) and the restoring g(η) of
+    φ, θ; ψ turns a current), and the pose a velocity the log lacks is derived from
+    (:func:`~nnid.models.parametric.equation_columns`, as a least-squares fit reads them). The
+    kernel's right-hand side reads no x, y, z (:func:`nnid.physics.compiled._rhs`), whichever
+    trainer fitted the plant: a UKF-fitted plant's ``motion_columns`` says every column, for
+    its filter, not for this residual. A gap in one of these cuts the run; an empty cell of
+    another is held (:func:`monitor_inputs`)."""
+    from nnid.models.parametric import equation_columns
+
+    return [c for c in equation_columns(columns) if c in (*POSE, *VELOCITY)]
+
+
 def monitor_inputs(log: pd.DataFrame, plant) -> dict[str, np.ndarray]:
     """Time, state [N, 12] (velocities derived from the pose where the log lacks them, by the
-    model's Savitzky-Golay setting) and the input channels [N, n] the kernel maps to forces."""
+    model's Savitzky-Golay setting) and the input channels [N, n] the kernel maps to forces.
+    An empty cell of a pose column the residual does not read (:func:`monitor_motion`: a 1-Hz
+    GPS x, y beside a 20-Hz DVL) takes its run's nearest sample, so the kernel, which scores
+    no row with a value that is not finite, scores that row; its value changes no residual."""
+    from nnid.evaluation.prediction import nearest_samples
     from nnid.models.parametric import prepare_motion
 
     cols = input_columns(list(Actuation(plant.vehicle).channels))
@@ -143,6 +165,10 @@ def monitor_inputs(log: pd.DataFrame, plant) -> dict[str, np.ndarray]:
     check_attitude(log, plant.vehicle, plant.dofs_)
     log = prepare_motion(log, plant.dofs_, plant.savgol_window, plant.savgol_order, False)
     data = motion_arrays(log)
+    read = monitor_motion(log.columns)
+    unread = [k for k, c in enumerate(POSE) if c in log and c not in read]
+    if unread:  # 0 where a run has no sample of one: read by no equation either
+        data["eta"][:, unread] = np.nan_to_num(nearest_samples(log, data["eta"][:, unread]))
     return {
         "t": data["t"],
         "x": np.ascontiguousarray(np.concatenate([data["eta"], data["nu"]], 1)),
