@@ -8,8 +8,9 @@ import pandas as pd
 import pytest
 
 from nnid.datasets.cleaning import CleaningReport
-from nnid.datasets.gaps import bridge_from_pose, find_gaps, mask_gaps
+from nnid.datasets.gaps import MIN_SEGMENT, bridge_from_pose, find_gaps, mask_gaps
 from nnid.datasets.log import validate_log
+from nnid.datasets.preprocess import true_runs
 from nnid.errors import NnidInputError
 
 
@@ -114,6 +115,65 @@ def test_masking_cuts_runs_into_segments_and_reports_every_row():
     (step,) = report.steps
     assert step.rows_removed == 250 - len(masked_train) == 23  # 22 empty, 1 stranded
     assert "too short" in step.detail
+
+
+def _masked_run_by_run(part: pd.DataFrame, columns: list[str], taken: np.ndarray) -> pd.DataFrame:
+    """mask_gaps's cut of ``part`` computed one run at a time from that run's own rows (the
+    rows of ``taken``, a slow run's, out whole): the reference for its one-pass grouping."""
+    keep = part[columns].notna().all(axis=1).to_numpy() & ~taken
+    label = np.full(len(part), None, dtype=object)
+    piece_of = part["piece_of"].to_numpy(object).copy()
+    for name in part["experiment"].unique():
+        pos = np.flatnonzero(part["experiment"].to_numpy() == name)
+        runs = true_runs(keep[pos])
+        for k, (a, b) in enumerate(runs):
+            rows = pos[a:b]
+            keep[rows] &= b - a >= MIN_SEGMENT
+            label[rows] = name if len(runs) == 1 else f"{name}#{k}"
+            if len(runs) > 1:
+                piece_of[rows] = [name if pd.isna(p) else p for p in piece_of[rows]]
+    return part.assign(experiment=label, piece_of=piece_of)[keep].reset_index(drop=True)
+
+
+def test_masking_many_runs_at_once_gives_what_each_run_alone_gives():
+    """mask_gaps found each run's rows by looking its index labels up in the whole part (rows
+    × runs: seconds on a log cut into thousands of pieces) and now groups the rows once; the
+    output is pinned to the run-by-run computation on interleaved runs with shuffled index
+    labels, gaps, a stranded sample, a reader's piece and a run slow in u (taken out whole).
+    Passed before the change too: it pins equivalence, not a bug."""
+    rng = np.random.default_rng(7)
+    one = _mocap_log(60)[["t", "u", "v", "r"]]
+    runs = {e: one.assign(experiment=e, piece_of=None) for e in "abc"}
+    runs["b"]["piece_of"] = "b-file"  # a reader's piece: stays one when cut again
+    runs["c"] = _slow(runs["c"], ["u"], 5)
+    runs["a"].loc[10:14, "u"] = np.nan
+    runs["a"].loc[16:17, "v"] = np.nan  # one sample stranded between two gaps
+    runs["a"].loc[40:44, "r"] = np.nan
+    runs["b"].loc[[3, 30, 50], "v"] = np.nan
+    blocks = [runs[e].iloc[a : a + 20] for a in (0, 20, 40) for e in "abc"]  # interleaved
+    log = pd.concat(blocks, ignore_index=True)
+    log.index = rng.permutation(len(log)) * 3 + 100  # labels no position matches
+    parts = [log.iloc[: len(log) // 2], log.iloc[len(log) // 2 :]]
+    report = CleaningReport()
+    got = mask_gaps(parts, ["u", "v", "r"], report)
+    assert [s.step for s in report.steps] == ["mask gaps", "slow channels"]
+    for part, out in zip(parts, got, strict=True):
+        taken = (part["experiment"] == "c").to_numpy()
+        pd.testing.assert_frame_equal(out, _masked_run_by_run(part, ["u", "v", "r"], taken))
+    alone = [g for e in "ab" for g in find_gaps(log[log["experiment"] == e], ["u", "v", "r"])]
+    assert find_gaps(log[log["experiment"] != "c"], ["u", "v", "r"]) == alone
+
+
+def test_runs_joined_without_a_fresh_index_are_cut_each_on_its_own_rows():
+    """Two runs joined by pd.concat keep their index labels 0..9 twice: mask_gaps found a
+    run's rows by its labels, so run a's rows were labelled b's pieces ('b#0', 'b#1') and
+    find_gaps counted b's one gap twice. Rows are now grouped by position."""
+    a = pd.DataFrame({"t": np.arange(10) * 0.1, "u": np.arange(10.0), "experiment": "a"})
+    log = pd.concat([a, a.assign(experiment="b")])
+    log.iloc[4, 1] = np.nan  # in run a only
+    (out,) = mask_gaps([log], ["u"])
+    assert out["experiment"].tolist() == ["a#0"] * 4 + ["a#1"] * 5 + ["b"] * 10
+    assert [(g.experiment, g.rows) for g in find_gaps(log, ["u"])] == [("a", 1)]
 
 
 def test_a_piece_cut_at_a_gap_shorter_than_the_window_gets_no_derivative():

@@ -50,7 +50,7 @@ from nnid.datasets.log import (
     turned_by,
     wrap_angle,
 )
-from nnid.datasets.preprocess import derive_velocities, experiments, true_runs
+from nnid.datasets.preprocess import derive_velocities, experiment_rows, experiments, true_runs
 from nnid.errors import NnidInputError
 
 #: a segment left between two gaps shorter than this many samples is masked with them
@@ -536,9 +536,13 @@ class Gap:
 
 def _gap_runs(part: pd.DataFrame, columns: list[str]):
     """(Gap, first row, stop row) of each gap of one experiment, rows by position."""
-    missing = part[columns].isna().to_numpy()
-    t = part["t"].to_numpy(np.float64)
     name = part["experiment"].iloc[0] if "experiment" in part else None
+    return _gaps_of(part[columns].isna().to_numpy(), part["t"].to_numpy(np.float64), name, columns)
+
+
+def _gaps_of(missing: np.ndarray, t: np.ndarray, name: object, columns: list[str]):
+    """:func:`_gap_runs` on one experiment's arrays: ``missing`` (rows × ``columns``), its
+    times ``t`` and its name."""
     dt = float(np.median(np.diff(t))) if t.size > 1 else 0.0
     for a, b in true_runs(missing.any(axis=1)):
         t0 = t[a - 1] if a > 0 else t[a]
@@ -561,7 +565,18 @@ def find_gaps(log: pd.DataFrame, columns: list[str] | None = None) -> list[Gap]:
     columns = [c for c in (columns or [*POSE, *VELOCITY]) if c in log]
     if not columns:
         return []
-    return [g for _, idx in experiments(log) for g, _, _ in _gap_runs(log.loc[idx], columns)]
+    # one pass over the log: a run without an empty cell (most of them) costs nothing more
+    missing = log[columns].isna().to_numpy()
+    t = log["t"].to_numpy(np.float64)
+    names = log["experiment"] if "experiment" in log else None
+    return [
+        g
+        for _, pos in experiment_rows(log)
+        if missing[pos].any()
+        for g, _, _ in _gaps_of(
+            missing[pos], t[pos], None if names is None else names.iloc[pos[0]], columns
+        )
+    ]
 
 
 def _summary(gaps: list[Gap]) -> str:
@@ -687,8 +702,7 @@ def mask_gaps(
         piece_of = np.full(len(log), None, dtype=object)  # a reader's piece stays one
         if PIECE_OF in log:
             piece_of[:] = log[PIECE_OF].to_numpy(object)
-        for name, idx in experiments(log):
-            pos = np.flatnonzero(log.index.isin(idx))
+        for name, pos in experiment_rows(log):
             runs = true_runs(keep[pos])
             for k, (a, b) in enumerate(runs):  # from #0, as resample_log and the readers
                 if b - a < MIN_SEGMENT:
