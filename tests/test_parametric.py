@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import warnings
 from pathlib import Path
 
@@ -22,7 +23,7 @@ from nnid.models.parametric import ParametricFossen, ParametricModel, prepare_mo
 from nnid.physics.dofs import DOFS
 from nnid.trainers.least_squares import ExcitationWarning, LeastSquares, solve_least_squares
 from nnid.trainers.regression import Regression
-from nnid.trainers.sequence import DecoupledSequence
+from nnid.trainers.sequence import DecoupledSequence, Step
 from nnid.vehicle import load_vehicle
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -1282,3 +1283,55 @@ def test_a_column_is_judged_on_the_rows_its_fit_weights_not_on_equations_switche
         est = solve_least_squares(phi, y, w, ["X:u", "Z:w"])
     assert np.isnan(est.theta[0]) and est.excitation.unexcited == ["X:u"]
     assert est.theta[1] == pytest.approx(2.0, abs=0.01)
+
+
+@pytest.fixture(scope="module")
+def heave_only():
+    """The demo miniROV driven in heave alone, 10 s: the simulator leaves u, v, p, q, r at
+    rounding (1e-17), not exactly 0."""
+    from importlib import resources
+
+    vehicle = load_vehicle(str(resources.files("nnid.demo_data").joinpath("minirov.toml")))
+    t = np.arange(100) * 0.1
+    inputs = np.zeros((t.size, 6))
+    inputs[:, 2] = 30.0 + 20.0 * np.sin(1.2 * t)
+    return vehicle, simulate(vehicle, inputs, 0.1, substeps=2, experiment="heave")
+
+
+@pytest.mark.parametrize("term", ["u", "u*abs(u)"])
+@pytest.mark.parametrize("trainer", [LeastSquares, DecoupledSequence])
+def test_a_one_dof_fit_of_rounding_alone_is_not_identified(heave_only, term, trainer):
+    """X:u alone from the u equation of a heave-only log: every column of the regression is
+    rounding (u ~ 1e-17), so against its own columns none was; it read X:u = -13.7 ± 4e-8 off
+    a target of rounding, with no excitation warning (only the noise guard's "not excited").
+    Against the same regressor at the log's typical motion (|w| ~ 0.3 m/s, to the term's
+    power: unit-consistent for u|u| too) it is a zero regressor: NaN, simulated at the file's
+    value, as any unidentified parameter."""
+    vehicle, log = heave_only
+    assert 0 < log["u"].abs().max() < 1e-15  # rounding, not an exact 0
+    name = f"X:{term}"
+    if trainer is DecoupledSequence:
+        fit = DecoupledSequence([Step(["heave"], ["u"], [name])])
+    else:
+        fit = LeastSquares()
+    with pytest.warns(ExcitationWarning, match=rf"zero regressor\): {re.escape(name)}"):
+        model = ParametricModel(vehicle, [name], ["u"], trainer=fit).fit(log)
+    assert np.isnan(model.estimate_.theta[0])
+    assert model.estimate_.excitation.unexcited == [name]
+    entry = model.params[name]
+    assert entry["value"] is None and entry["stderr"] is None
+    assert entry["simulated_at"] == vehicle.damping.coefficients.get(name, 0.0)
+
+
+def test_a_small_measured_velocity_is_not_rounding(heave_only):
+    """The reference is the log's typical motion, not a floor of absolute size: a surge of
+    1e-6 m/s beside a heave of 0.3 m/s is measured (1e-6 of the typical column), and fitted."""
+    vehicle, log = heave_only
+    log = log.copy()
+    log["u"] = 1e-6 * np.sin(0.7 * log["t"])
+    log["du"] = 1e-6 * 0.7 * np.cos(0.7 * log["t"])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the noise guard's; X:u > 0, as the target has no X:u
+        model = ParametricModel(vehicle, ["X:u"], ["u"], trainer=LeastSquares()).fit(log)
+    assert model.estimate_.excitation.unexcited == []
+    assert np.isfinite(model.estimate_.theta[0])

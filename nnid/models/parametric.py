@@ -41,6 +41,7 @@ from nnid.datasets.preprocess import (
     zoh_midpoint,
 )
 from nnid.errors import ExcitationWarning, NnidInputError
+from nnid.evaluation.persistence import typical_size
 from nnid.evaluation.prediction import (
     Replay,
     blank_initial,
@@ -172,6 +173,11 @@ def regression_trainer(trainer: object, field: str = "trainer") -> Any:
     return clone(trainer, safe=False)
 
 
+#: the rows :meth:`ParametricFossen.motion_reference` evaluates at most: its state is one
+#: constant motion, the rows differ only by pose and inputs
+REFERENCE_ROWS = 256
+
+
 class ParametricFossen:
     """The regression structure: a vehicle, the unknown parameters and the DOF equations used."""
 
@@ -268,20 +274,68 @@ class ParametricFossen:
                 )
         if filter_lambda is not None and nu_dot_f is None:  # once for R(0) and every column
             nu_dot_f = filter_signal(data, data["nu"], filter_lambda, derivative=True)
+        r0, columns = self._columns(data, filter_lambda, nu_dot_f)
+        cols = [col[keep][:, rows].reshape(-1) for col in columns]
+        n = int(keep.sum())
+        phi = np.stack(cols, 1) if cols else np.zeros((n * len(rows), 0))
+        acceleration = data["nu_dot"] if nu_dot_f is None else nu_dot_f
+        reference = self.motion_reference(data, acceleration[keep])
+        y = -r0[keep][:, rows].reshape(-1)
+        return Regression(phi, y, list(self.names), self.dofs, n, reference)
+
+    def _columns(
+        self,
+        data: dict[str, np.ndarray],
+        filter_lambda: float | None = None,
+        nu_dot_f: np.ndarray | None = None,
+    ) -> tuple[np.ndarray, list[np.ndarray]]:
+        """R(0) and each unknown's column R(e_k) − R(0), ``[N, 6]`` each, over all six DOF
+        equations (:meth:`regression` keeps its own)."""
         r0 = self.equation_residual(self.base, data, filter_lambda, nu_dot_f)
         damping = self.damping_columns(data, filter_lambda)
         cols = []
         for name in self.names:
             if name in damping:
-                col = damping[name]
-            else:
-                unit = self.base.copy()
-                unit.set(name, 1.0)
-                col = self.equation_residual(unit, data, filter_lambda, nu_dot_f) - r0
-            cols.append(col[keep][:, rows].reshape(-1))
-        n = int(keep.sum())
-        phi = np.stack(cols, 1) if cols else np.zeros((n * len(rows), 0))
-        return Regression(phi, -r0[keep][:, rows].reshape(-1), list(self.names), self.dofs, n)
+                cols.append(damping[name])
+                continue
+            unit = self.base.copy()
+            unit.set(name, 1.0)
+            cols.append(self.equation_residual(unit, data, filter_lambda, nu_dot_f) - r0)
+        return r0, cols
+
+    def motion_reference(self, data: dict[str, np.ndarray], nu_dot: np.ndarray) -> float:
+        """The reference of the rounding rule (:data:`~nnid.evaluation.persistence.ROUNDING`)
+        for this structure's regression on ``data``: the typical size of its regressors had
+        the log moved in every DOF at its typical speed and acceleration (``nu_dot``, the
+        accelerations the regression reads: logged, or sF(s)[ν] of the filtered form).
+
+        Why not the regression's own columns: a one-DOF fit whose every column is rounding
+        (X:u alone on a heave-only log, u ~ 1e-17) has nothing to be compared with, and read
+        X:u = -13.7 off a target of rounding as a precise estimate. Why the same regressors at
+        the log's motion, not that motion itself: a column's units are its term's (u|u| is a
+        velocity squared), so it is compared with itself at a state where ν = s in every DOF
+        and ν̇ = a, s and a the largest per-DOF median |ν| and |ν̇| of the log
+        (:func:`~nnid.evaluation.persistence.typical_size`): s² for u|u|, s for u, a (and the
+        C_A(ν)ν products of s) for an added mass. Row by row otherwise (η, the inputs), on at
+        most :data:`REFERENCE_ROWS` rows drawn by a fixed local generator: the rule needs a
+        size within decades. A log at rest in every DOF (all of ν rounding) gives a reference
+        of rounding, and the rule then finds nothing: there is no motion to compare with."""
+        if not self.names:
+            return 0.0
+        n = data["t"].size
+        picked = np.arange(n)
+        if n > REFERENCE_ROWS:
+            picked = np.sort(np.random.default_rng(0).choice(n, REFERENCE_ROWS, replace=False))
+        moved = {
+            k: v[picked]
+            for k, v in data.items()
+            if isinstance(v, np.ndarray) and v.shape[:1] == (n,)
+        }
+        moved["nu"] = np.full((picked.size, 6), typical_size(data["nu"]))
+        moved["nu_dot"] = np.full((picked.size, 6), typical_size(nu_dot))
+        _, columns = self._columns(moved)
+        rows = [DOFS.index(d) for d in self.dofs]
+        return typical_size(np.stack([c[:, rows].reshape(-1) for c in columns], 1))
 
     def damping_force(self, data: dict[str, np.ndarray]) -> np.ndarray:
         """McCarter's residual force τ̄ = M ν̇ + C(ν)ν + g(η) − τ (eq. 4.4, his g on the other

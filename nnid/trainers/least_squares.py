@@ -294,9 +294,10 @@ class LeastSquares(BaseEstimator):
 
     def solve(self, reg: Regression, reference: float = 0.0) -> Estimate:
         """Solve ``reg``; ``reference``: the typical regressor size of the regression it is a
-        block of (:func:`solve_least_squares`)."""
+        block of (:func:`solve_least_squares`), or ``reg``'s own where larger."""
         if self.weighting not in ("feasible", "none"):
             raise NnidInputError("weighting is 'feasible' or 'none'", field="weighting")
+        reference = max(reference, reg.reference)
         est = solve_least_squares(reg.phi, reg.y, names=reg.names, reference=reference)
         dof_sigma2 = self._dof_variances(reg, est.theta)
         if self.weighting == "feasible" and len(reg.dofs) > 1:

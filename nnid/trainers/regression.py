@@ -21,6 +21,12 @@ class Regression:
     names: list[str]
     dofs: tuple[str, ...]
     n_samples: int
+    #: the typical regressor size against which a column of rounding is zero
+    #: (:func:`~nnid.evaluation.persistence.excitation_from_gram`) where the regression's own
+    #: columns cannot give it (all of them rounding); 0: none but its own. A Fossen regression
+    #: gives its regressors at the log's typical motion
+    #: (:meth:`~nnid.models.parametric.ParametricFossen.motion_reference`)
+    reference: float = 0.0
 
     def dof_rows(self, dof: str) -> np.ndarray:
         """Row indices of one DOF's equation."""
