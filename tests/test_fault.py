@@ -255,6 +255,7 @@ def test_a_fault_outside_the_hypotheses_is_said_unexplained(vehicle, monitor, fa
     from nnid.fault.follow import describe_alarm
 
     (a,) = detect(monitor, simulate_faults(vehicle, 35, faults=faults, seed=102)).alarms
+    assert a["repeats"] >= 1  # alarmed again after its window: the same change persisting
     assert (a["kind"], a["thruster"], a["effect"], a["efficiency"]) == ("model_change", None,
                                                                         None, None)  # fmt: skip
     assert a["confidence"] == 0.0 and "unexplained by the hypotheses" in describe_alarm(a)
@@ -486,60 +487,69 @@ def test_follow_says_a_change_ended_as_batch_detect_does(vehicle, monitor, tmp_p
     assert sum("ended at about 40.05 s" in line for line in said) == 1
 
 
-def test_an_unexplained_alarm_says_how_long_the_monitor_stays_blind(vehicle, monitor, tmp_path):
-    """A snag from 20 to 27 s ends inside its 10-s window: unexplained, and the statistics are
-    (deliberately) not restarted; the CUSUM was left at ~9,500 times its threshold and h1 at
-    30 % from 45 s was never alarmed, with nothing to say the monitor was blind. The record
-    now says until when, by the kernel's rule: batch and --follow alike, a time after the
-    loss, the CUSUM's fall a second the one this log's healthy rows after the snag show, and
-    never faster than its bound."""
-    from nnid.fault.detect import alarm_row
+def test_a_fault_after_an_unexplained_change_is_alarmed(vehicle, monitor, tmp_path):
+    """A snag from 20 to 27 s ends inside its 10-s window: unexplained, and the statistics were
+    (deliberately) not restarted; the CUSUM was left at 9,526 times its threshold, the monitor
+    blind for 72 minutes (its record said until when, ``blind_until``), and h1 at 30 % from
+    45 s was never alarmed. The statistics now restart at the window's end with nothing taken
+    out, as after an isolated change, and the loss is a new alarm, named and sized: batch and
+    --follow alike (records, marks and statistics watched)."""
     from nnid.serialization import dumps
 
     faults = [Fault("external", FAULT_T, force=SNAG, end=27.0),
               Fault("thruster", 45.0, thruster="h1", efficiency=0.3)]  # fmt: skip
     log = simulate_faults(vehicle, 50, faults=faults, seed=3001)
-    batch = detect(monitor, log)
-    log.to_csv(tmp_path / "log.csv", index=False)
-    followed = follow_csv(monitor, str(tmp_path / "log.csv"), 10.0, lambda line: None, idle_s=0.0)
-    (first,) = batch.alarms  # the loss at 45 s is not alarmed: the monitor is blind
-    assert first["kind"] == "model_change" and first["blind"]["t"] == pytest.approx(30.05)
-    assert first["blind_until"] > 45.0 and first["blind"]["not_before"] > 45.0
-    assert first["blind"]["not_before"] < first["blind_until"]
-    assert f"before about t = {first['blind_until']:.1f} s" in first["meaning"]
-    (streamed,) = followed.alarms
-    assert streamed["meaning"] == first["meaning"]
-    assert streamed["blind_until"] == pytest.approx(first["blind_until"], rel=1e-9)
-    assert streamed["blind"] == pytest.approx(first["blind"], rel=1e-9)
-    # the fall the record states is the one the trace shows between the snag and the loss
-    t, g = batch.trace.t, batch.trace.values[:, 19] / monitor.threshold_values[1]
-    rows = (t >= first["blind"]["t"]) & (t < 45.0)
-    fall = (g[rows][0] - g[rows][-1]) / (t[rows][-1] - t[rows][0])
-    assert fall == pytest.approx(first["blind"]["cusum_fall_per_s"], rel=0.02)
-    assert -np.diff(g[rows]).max() <= first["blind"]["cusum_fall_max_per_s"] * monitor.interval
-    assert g[rows][0] == pytest.approx(first["blind"]["cusum"])
-    # strict JSON in detect.json, and alarms.csv's column
-    assert json.loads(dumps(detect_json(monitor, batch)))["alarms"][0]["blind_until"] > 45.0
-    assert alarm_row(first)["blind_until"] == first["blind_until"]
+    batch, _ = _followed_as_batch(monitor, log, tmp_path)
+    first, second = batch.alarms
+    assert first["kind"] == "model_change" and first["confidence"] == 0.0
+    assert (first["repeats"], first["last_seen_t"]) == (0, first["t"])
+    assert first["blind_until"] is None and first["blind"] is None
+    assert "the statistics restart at the window's end (30.05 s)" in first["meaning"]
+    assert (second["kind"], second["thruster"]) == ("thruster_loss", "h1")
+    assert 45.0 <= second["t"] <= 46.0 and second["efficiency"] == pytest.approx(0.3, abs=0.05)
+    assert second["repeats"] is None and second["last_seen_t"] is None
+    # restarted: under their thresholds from the first row after the window to the loss
+    t, stat = batch.trace.t, batch.trace.values[:, 18:20] / monitor.threshold_values
+    assert (stat[(t > 30.05) & (t < 45.0)] < 1.0).all()
+    # strict JSON in detect.json, and alarms.csv's columns
+    (said,) = json.loads(dumps(detect_json(monitor, batch)))["alarms"][:1]
+    assert said["repeats"] == 0 and said["blind_until"] is None
+    assert alarm_row(first)["repeats"] == 0 and alarm_row(second)["repeats"] is None
 
 
-def test_blind_until_is_none_once_the_monitor_re_armed(monitor):
-    """Statistics under their thresholds at the window's end: blind until the re-arm time
-    after they fell under, or not at all (None) where that passed within the window."""
-    from nnid.fault.detect import blind_after
-    from nnid.fault.monitor import Trace
+def test_an_unexplained_change_that_persists_is_one_alarm_that_repeats(vehicle, monitor, tmp_path):
+    """A declared damping term changed from 20 s: unexplained. Restarted after its window, the
+    statistics alarm on it again at once (a healthy second after a window cannot tell a change
+    gone from one the vehicle does not excite just then); not isolated again, that alarm is the
+    same change persisting: one record, its repeats counted, no second mark. --follow
+    announced the repeat and says it withdrawn, folded into that record, as batch has it."""
+    fault = Fault("effect", FAULT_T, effect="linear_damping.u", value=30.0)
+    log = simulate_faults(vehicle, 35, faults=[fault], seed=102)
+    batch, said = _followed_as_batch(monitor, log, tmp_path)
+    (a,) = batch.alarms
+    assert a["kind"] == "model_change" and a["repeats"] >= 1
+    assert a["last_seen_t"] > a["t"] + 10.0  # after the window, on the restarted statistics
+    assert f"the latest at {a['last_seen_t']:.2f} s" in a["meaning"]
+    assert int(batch.trace.alarm.sum()) == 1
+    folded = [line for line in said if "persisting, counted in its record's repeats" in line]
+    assert len(folded) == a["repeats"] and f"alarmed at t = {a['t']:.2f} s" in folded[0]
 
-    h_t, h_g = monitor.threshold_values
-    t = np.arange(0.0, 10.0001, 0.05)
-    for last_above, expected in [(2.0, None), (7.0, 12.0)]:
-        values = np.full((t.size, 20), np.nan)
-        values[:, 18], values[:, 19] = 0.5 * h_t, np.where(t <= last_above, 3 * h_g, 0.2 * h_g)
-        trace = Trace(t, np.zeros(t.size), values, np.zeros(t.size, dtype=bool))
-        record = {"meaning": "unexplained"}
-        blind_after(monitor, trace, np.arange(t.size), record)
-        assert record["blind_until"] == (None if expected is None else pytest.approx(expected))
-        assert record["blind"]["cusum"] == pytest.approx(0.2)
-        assert "under their thresholds" in record["meaning"]
+
+def test_an_unexplained_record_says_its_repeats_once():
+    """The record of an unexplained alarm, then each later one not isolated folded into it:
+    the count and the latest time, said once in its meaning (rewritten, not appended), and no
+    blind time (the statistics restart after each window)."""
+    from nnid.fault.detect import persisting, unexplained
+
+    record = {"t": 20.05, "meaning": "unexplained by the hypotheses", "blind_until": 4352.1}
+    unexplained(record, 30.05)
+    assert (record["repeats"], record["last_seen_t"], record["blind_until"]) == (0, 20.05, None)
+    assert "restart at the window's end (30.05 s)" in record["meaning"]
+    persisting(record, 30.2, 40.2)
+    persisting(record, 40.4, 50.4)
+    assert (record["repeats"], record["last_seen_t"]) == (2, 40.4)
+    assert record["meaning"].count("alarmed again") == 1 and "2 times" in record["meaning"]
+    assert "the latest at 40.40 s" in record["meaning"] and "30.20" not in record["meaning"]
 
 
 def test_one_of_two_changes_ending_leaves_the_other_taken_out(vehicle, monitor):

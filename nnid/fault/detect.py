@@ -11,10 +11,22 @@ noise, :data:`nnid.fault.isolation.UNEXPLAINED_RATIO`), the rest of the experime
 on the residual that change leaves (the fitted hypothesis taken out, fresh EWMA and CUSUM from
 the end of the isolation window, the same thresholds): a new alarm there is a residual the
 first change no longer explains, and is isolated on that residual (a thruster's efficiency
-stated against its nominal thrust, the losses taken out before included). An alarm that is not
-isolated (unexplained, not significant) leaves the monitor as it was (restarted on a change that
-persists, it would alarm it again at once), so no new alarm starts until the statistics fall
-under their thresholds: its record says when, about, and its bound (:func:`blind_after`).
+stated against its nominal thrust, the losses taken out before included).
+
+An alarm that is not isolated (unexplained, not significant) has nothing to take out. Left as
+they were, its statistics stayed above their thresholds long after such a change had gone: a
+snag from 20 to 27 s left the CUSUM at 9,526 times its threshold at its window's end, the
+monitor was blind for 72 minutes, and h1 at 30 % from 45 s was not alarmed. So the statistics
+restart after its window too, on the residual watched as it is (the model's own, less any
+isolated change taken out before). A change that persists then alarms again at once, and a
+healthy second cannot tell a change gone from one not excited just then (a damping change reads
+as noise while the vehicle barely moves): a later alarm on the restarted rows is isolated as
+usual. Named and significant, it is a new change and a new record; not isolated again, it is
+no new alarm but the unexplained change persisting, counted in its open record (``repeats``,
+``last_seen_t`` and its ``meaning``: :func:`persisting`), and the statistics restart after its
+window again. One unexplained record is open per experiment, from its first such alarm on: a
+second change that no hypothesis explains reads as the first persisting, and so does a named
+fault that isolation cannot tell apart from a change that persists in its window.
 
 A change can also go away (a snag freed, a thruster that recovers): the residual it leaves is
 then its signature reversed, which isolation would name as a new change (a pull the other way,
@@ -66,12 +78,13 @@ from nnid.reports.cells import number
 #: time τ it did so, and ``change_alarm_t``, the time of the alarm(s) that isolated it; so
 #: too for an alarm isolated whose own change ended inside its window (:func:`ended_within`),
 #: ``change_alarm_t`` then its own time (:func:`alarm_row`; the record has them under
-#: ``ended`` or ``resized``); ``blind_until`` last (:func:`blind_after`), so the columns
-#: before it keep their places
+#: ``ended`` or ``resized``); ``blind_until``, now always empty (the statistics restart after
+#: every alarm's window: :func:`unexplained`), kept so the columns keep their places; then, of
+#: an alarm that is not isolated, ``repeats`` and ``last_seen_t`` (:func:`persisting`)
 ALARM_FIELDS = ["experiment", "t", "kind", "thruster", "efficiency", "efficiency_low",
                 "efficiency_high", "effect", "value", "stderr", "severity", "confidence",
                 "explained", "residual_ratio", "hypothesis", "meaning", "change_t",
-                "change_alarm_t", "blind_until"]  # fmt: skip
+                "change_alarm_t", "blind_until", "repeats", "last_seen_t"]  # fmt: skip
 
 
 def alarm_row(record: dict) -> dict:
@@ -104,13 +117,17 @@ def withdrawn_record(experiment: str | None, t: float, by: float, why: str) -> d
     ``by`` whose judgement restarted the statistics after it (:func:`_rewatch` clears the
     window's alarms), or ``"after"`` it (a row read before that judgement, watched again on
     the restarted statistics: ``--follow`` holds rows after a window until it is judged, so
-    this is a safeguard, not a case it is known to reach)."""
+    this is a safeguard, not a case it is known to reach), or ``"persisting"``: not isolated,
+    the unexplained change alarmed at ``by`` persisting (:func:`persisting`, counted in its
+    record)."""
     reasons = {
         "dismissed": "within what the isolated change(s) may leave: no new change",
         "inside": f"inside the window of the alarm at t = {by:.2f} s, judged with it; the "
         "statistics restart after that window",
         "after": f"read before the alarm at t = {by:.2f} s was judged, after its window: "
         "watched again on the statistics restarted there",
+        "persisting": f"not isolated: the unexplained change alarmed at t = {by:.2f} s "
+        "persisting, counted in its record's repeats; the statistics restart after this window",
     }
     return {"experiment": experiment, "t": float(t), "by": float(by), "reason": reasons[why]}
 
@@ -165,8 +182,10 @@ def isolated_alarm(
         "p_value": diag.p_value,
         "alternatives": diag.alternatives,
         "components": diag.components,
-        "blind_until": None,  # isolated: the statistics restart at the window's end
+        "blind_until": None,  # never blind: the statistics restart at the window's end
         "blind": None,
+        "repeats": None,  # an isolated change: no unexplained one persisting (unexplained())
+        "last_seen_t": None,
     }
     if end is not None:
         t_end = float(data["t"][end])
@@ -176,7 +195,7 @@ def isolated_alarm(
             f"on the {t_end - record['t']:.3g} s before, and not taken out after the window"
         )
     if not diag.isolated:
-        blind_after(monitor, trace, rows, record)
+        unexplained(record, float(data["t"][rows[-1]]))
     return record, diag, rows
 
 
@@ -214,90 +233,45 @@ def ended_within(
     return int(splits.rows[split.j])
 
 
-def blind_after(monitor: ResidualMonitor, trace: Trace, rows: np.ndarray, record: dict) -> None:
-    """How long the monitor stays blind after an alarm that is not isolated, written into its
-    ``record`` (``blind_until``, ``blind`` and a clause of ``meaning``; ``detect`` and
-    ``detect --follow`` alike). Such an alarm leaves the statistics as they are (restarted on
-    a change that persists, they would alarm it again at once), and no new alarm starts before
-    both are under their thresholds for the re-arm time: a snag from 20 to 27 s left the CUSUM
-    at 9,526 times its threshold at the window's end, and h1 at 30 % from 45 s was not alarmed.
+def unexplained(record: dict, restart_t: float) -> None:
+    """The ``record`` of an alarm that is not isolated, as the module docstring has it: the
+    statistics restart at ``restart_t`` (its window's end) on the residual watched, and a later
+    alarm that is not isolated either is this change persisting (:func:`persisting`), counted
+    in ``repeats`` (0 here) with the time of the latest in ``last_seen_t`` (its own here).
+    ``blind_until`` and ``blind`` stay None: they said how long the statistics, left as they
+    were, kept the monitor blind (72 minutes after a snag, a thruster lost in them unsaid);
+    restarted, the monitor is blind only over each alarm's window, as after any alarm."""
+    record["repeats"], record["last_seen_t"] = 0, record["t"]
+    record["blind_until"] = record["blind"] = None
+    record["meaning"] = (
+        f"{record['meaning'] or 'a change no hypothesis explains'}; the statistics restart at "
+        f"the window's end ({restart_t:.2f} s) with nothing taken out: a later alarm isolated is "
+        "a new change, one that is not isolated either is this change persisting"
+    )
 
-    The times are the kernel's own rule (:func:`nnid.fault.kernel._statistics`) from the
-    statistics at the window's last row (``rows``: from the alarm on), at the calibrated
-    sample interval. The CUSUM adds the whitened residual's power less the dimension and the
-    allowance each sample: on a healthy residual (mean power the dimension) it falls by the
-    allowance on average, and whatever the residual by at most the dimension and the
-    allowance (the power is never negative), a bound. The EWMA of a healthy residual decays by
-    exp(−dt/τ) a sample, its statistic (a quadratic form) by the square, to about its
-    threshold (the noise it then holds aside). ``blind_until``: about when a new alarm can
-    start on a healthy residual from the window's end (later while the change persists), or
-    None where the monitor re-armed within the window; ``blind``: the statistics over their
-    thresholds at the window's end, the CUSUM's fall a second (mean, and at most), the EWMA
-    statistic's half-life, the re-arm time and ``not_before``, the bound's earliest alarm."""
-    cfg = monitor._cfg(monitor.threshold_values, monitor.interval)  # the kernel's settings
-    h_t, h_g, tau = cfg[kernel.H_EWMA], cfg[kernel.H_CUSUM], cfg[kernel.TAU]
-    rearm, dt = cfg[kernel.REARM], monitor.interval
-    rows = rows[np.isfinite(trace.values[rows, 18:20]).all(1)]  # the alarm's row at least
-    t, stat = trace.t[rows], trace.values[rows, 18:20]
-    above = (stat[:, 0] > h_t) | (stat[:, 1] > h_g)
-    end, (ewma, cusum) = float(t[-1]), stat[-1]
-    fall, fall_max = cfg[kernel.ALLOWANCE], cfg[kernel.DIM] + cfg[kernel.ALLOWANCE]
-    half = tau * np.log(2.0) / 2.0
-    blind = {
-        "t": end,
-        "ewma": float(ewma / h_t) if h_t > 0 else None,  # a zero threshold: no ratio
-        "cusum": float(cusum / h_g) if h_g > 0 else None,
-        "cusum_fall_per_s": float(fall / dt / h_g) if h_g > 0 else None,
-        "cusum_fall_max_per_s": float(fall_max / dt / h_g) if h_g > 0 else None,
-        "ewma_half_life_s": float(half),
-        "rearm_s": float(rearm),
-        "not_before": None,
-    }
-    said = (
-        f"the CUSUM is {number(blind['cusum'], 4)} times its threshold and the EWMA statistic "
-        f"{number(blind['ewma'], 2)} times its"
+
+#: how :func:`persisting` starts its clause of a record's ``meaning`` (rewritten each time)
+PERSISTING = "; alarmed again "
+
+
+def persisting(record: dict, t: float, restart_t: float) -> None:
+    """Fold an alarm at time ``t`` that is not isolated into the open unexplained ``record``
+    of its experiment (:func:`unexplained`): no new record, the same change persisting (the
+    statistics restarted after its window cannot tell it from a new one that no hypothesis
+    explains either). ``repeats`` counts such alarms, ``last_seen_t`` is the latest, and the
+    ``meaning`` says so once (its clause rewritten, not appended). ``restart_t``: the end of
+    this alarm's window, where the statistics restart again. ``detect`` and ``detect
+    --follow`` alike."""
+    record["repeats"] += 1
+    record["last_seen_t"] = float(t)
+    base = record["meaning"].partition(PERSISTING)[0]
+    times = "once" if record["repeats"] == 1 else f"{record['repeats']} times"
+    record["meaning"] = (
+        f"{base}{PERSISTING}{times} on the restarted statistics, the latest at {t:.2f} s, "
+        f"not isolated: taken as this change persisting (restarted again at {restart_t:.2f} s; "
+        "a new change no hypothesis explains, or a fault not told apart from this one, reads "
+        "the same)"
     )
-    head = (
-        "; the statistics are not restarted (a change that persists would alarm again at "
-        f"once): at the window's end ({end:.2f} s)"
-    )
-    if not above[-1]:
-        until = float(t[above][-1]) + rearm  # re-armed that long after they fell under
-        blind_until = until if until > end else None
-        blind["not_before"] = blind_until  # and later if they rise again before
-        tail = (
-            "and the monitor re-armed within the window"
-            if blind_until is None
-            else f"and the monitor re-arms {rearm:g} s after they fell under: a later change "
-            f"is not alarmed before about t = {until:.1f} s"
-        )
-        clause = f"{head} they are under their thresholds ({said}), {tail}"
-    elif h_t <= 0 and ewma > h_t:  # no decay reaches a zero threshold: not computed
-        blind_until = None
-        clause = (
-            f"{head} {said}; the EWMA threshold is 0, so when the monitor re-arms is not computed"
-        )
-    else:
-        excess = max(float(cusum - h_g), 0.0)
-        ewma_s = tau / 2.0 * np.log(ewma / h_t) if ewma > h_t else 0.0
-        blind_until = end + max(excess / fall * dt, ewma_s) + rearm
-        # samples at the fastest fall, then the re-arm time under the thresholds
-        blind["not_before"] = end + np.ceil(excess / fall_max) * dt + rearm
-        # the EWMA's decay said where it is above its threshold (it then may set the time)
-        halves = f" and the EWMA statistic halves every {half:.2g} s" if ewma > h_t else ""
-        clause = (
-            f"{head} {said}; on a healthy residual the CUSUM falls about "
-            f"{number(blind['cusum_fall_per_s'], 2)} thresholds a second (its allowance; at "
-            f"most {number(blind['cusum_fall_max_per_s'], 2)} whatever the residual){halves}, "
-            f"and the monitor re-arms {rearm:g} s after both are under: a later change is not "
-            f"alarmed before about t = {blind_until:.1f} s (not before "
-            f"{blind['not_before']:.1f} s whatever the residual; later while this change "
-            "persists)"
-        )
-    blind["not_before"] = None if blind["not_before"] is None else float(blind["not_before"])
-    record["blind_until"] = None if blind_until is None else float(blind_until)
-    record["blind"] = blind
-    record["meaning"] = f"{record['meaning'] or 'a change no hypothesis explains'}{clause}"
 
 
 def _severity(monitor: ResidualMonitor, trace: Trace, rows: np.ndarray) -> float:
@@ -655,6 +629,8 @@ class _Splits:
             "components": components or None,
             "blind_until": None,  # the statistics restart at the window's end
             "blind": None,
+            "repeats": None,  # no unexplained change (unexplained())
+            "last_seen_t": None,
             "ended" if ended else "resized": {"t": t_split, "alarms": [changes[i].t for i in gone]},
         }
 
@@ -848,8 +824,10 @@ class Rewatch:
 
 def detect(monitor: ResidualMonitor, log: pd.DataFrame, window_s: float = 10.0) -> DetectResult:
     """Every alarm on ``log`` with its isolation on the ``window_s`` seconds after it; after an
-    isolated change, the monitor watches what that change leaves (the module docstring). The
-    trace keeps the model's residual r; its statistics and alarms are those watched."""
+    isolated change, the monitor watches what that change leaves, and after one that is not
+    isolated, the residual as it was, a later unexplained alarm folded into its record (the
+    module docstring). The trace keeps the model's residual r; its statistics and alarms are
+    those watched."""
     start = time.perf_counter()
     data = monitor_inputs(log, monitor.plant_)
     trace = monitor.run(log)
@@ -859,6 +837,7 @@ def detect(monitor: ResidualMonitor, log: pd.DataFrame, window_s: float = 10.0) 
     watched = Trace(trace.t, names, values, alarm)
     t, codes = data["t"], data["experiment"]
     rewatch: dict[int, Rewatch] = {}  # per experiment
+    open_: dict[int, dict] = {}  # per experiment, its unexplained record (unexplained())
     alarms, pos = [], 0
     changed = np.zeros(t.size, dtype=bool)  # rows watched on a re-referenced residual
     while (ks := np.flatnonzero(alarm[pos:])).size:
@@ -879,13 +858,19 @@ def detect(monitor: ResidualMonitor, log: pd.DataFrame, window_s: float = 10.0) 
                 continue
             taken = w.fitted
         record, diag, rows = isolated_alarm(monitor, data, watched, k, window_s, residual, taken)
-        alarms.append(record)
-        pos = k + 1
-        if diag.isolated:  # fresh statistics after the window, the change taken out unless it ended
-            w = rewatch.setdefault(int(codes[k]), Rewatch(monitor))
+        code, change = int(codes[k]), None
+        if diag.isolated:  # the change taken out after the window, unless it ended
+            alarms.append(record)
             change = None if record.get("ended") else Change.of(record, diag)
-            _rewatch(w, data, residual, values, alarm, rows, changed, change)
-            pos = int(rows[-1]) + 1
+        elif code in open_:  # the unexplained change persisting: no new record, nor mark
+            persisting(open_[code], record["t"], float(t[rows[-1]]))
+            alarm[k] = False
+        else:
+            alarms.append(open_.setdefault(code, record))
+        # fresh statistics after the window, isolated or not (the module docstring)
+        _rewatch(rewatch.setdefault(code, Rewatch(monitor)), data, residual, values, alarm, rows,
+                 changed, change)  # fmt: skip
+        pos = int(rows[-1]) + 1
     return DetectResult(watched, alarms, time.perf_counter() - start)
 
 

@@ -18,8 +18,11 @@ of the isolation window, a later alarm judged by the same rule. The signature is
 :data:`REWATCH_S` seconds of rows at once (its columns cost milliseconds a call, whatever the
 rows) and each row waits for the half Savitzky-Golay window after it that its signature's
 acceleration is smoothed over, as batch has it, so an alarm there is announced up to that much
-later; its time is its row's. The per-sample update of a stream without an isolated change is
-untouched.
+later; its time is its row's. After an alarm that is not isolated the statistics restart
+after its window too, as in batch, with nothing taken out (the rows watched the same way), and a
+later alarm that is not isolated either is announced, then said withdrawn: the unexplained
+change persisting, counted in its record (:func:`~nnid.fault.detect.persisting`). The
+per-sample update of a stream before its first judged alarm is untouched.
 """
 
 from __future__ import annotations
@@ -55,6 +58,7 @@ from nnid.fault.detect import (
     DetectResult,
     Rewatch,
     isolated_alarm,
+    persisting,
     rewatched_alarm,
     run_names,
     window_rows,
@@ -242,6 +246,7 @@ def follow_csv(
     # (fresh statistics) and the first row of the latest change's signature (batch's rest
     # after that change's window: a dismissed alarm restarts the statistics, not the signature)
     ref: dict = {"rewatch": None, "code": -1, "start": 0, "edge": 0}
+    open_: dict[int, dict] = {}  # per experiment, its unexplained record (batch's rule)
     queue: list[int] = []  # rows of it whose residual is not yet re-referenced
     block = max(round(REWATCH_S / monitor.interval), 1)
     context = max(int(np.ceil(monitor.plant_.savgol_window / monitor.interval)), block)
@@ -308,14 +313,15 @@ def follow_csv(
                 announce(k)
         del queue[:ready]
 
-    def withdraw(p: int, by: int, why: str) -> None:
+    def withdraw(p: int, by: int, why: str, by_t: float | None = None) -> None:
         """The announced alarm at ``p`` is not in the final alarms (batch drops it too), as
-        the judgement of the alarm at ``by`` has it (:func:`withdrawn_record`): said and
-        recorded, so that no announced alarm vanishes unsaid."""
+        the judgement of the alarm at ``by`` has it (:func:`withdrawn_record`; ``by_t``: the
+        time of the alarm it is folded into, ``why`` "persisting"): said and recorded, so that
+        no announced alarm vanishes unsaid."""
         i = p - dropped
         name = names[codes[i]]
-        record = withdrawn_record(name if exp_col is not None else None, ts[i],
-                                  ts[by - dropped], why)  # fmt: skip
+        by_t = ts[by - dropped] if by_t is None else by_t
+        record = withdrawn_record(name if exp_col is not None else None, ts[i], by_t, why)
         withdrawn.append(record)
         say(withdrawn_line(record))
 
@@ -369,14 +375,23 @@ def follow_csv(
         record, diag, rows = isolated_alarm(
             monitor, data, trace, i, window_s, values[:, 0:6], taken
         )
-        alarms.append(record)
-        say(describe_alarm(record))
+        change = None
         if diag.isolated:  # as batch: the change taken out after the window, unless it ended
-            if ref["code"] != code or ref["rewatch"] is None:
-                ref.update(rewatch=Rewatch(monitor), code=code)
-            gone = bool(record.get("ended"))
-            ref["rewatch"].restart(data["t"][rows[-1]], None if gone else Change.of(record, diag))
-            rewatch_after(k, rows, changed=not gone, ended=ended)
+            alarms.append(record)
+            say(describe_alarm(record))
+            change = None if record.get("ended") else Change.of(record, diag)
+        elif code in open_:  # the unexplained change persisting: no new record (batch's rule)
+            persisting(open_[code], record["t"], float(data["t"][rows[-1]]))
+            alarm_rows.remove(k)
+            withdraw(k, k, "persisting", by_t=open_[code]["t"])
+        else:
+            alarms.append(open_.setdefault(code, record))
+            say(describe_alarm(record))
+        # as batch: fresh statistics after the window, isolated or not
+        if ref["code"] != code or ref["rewatch"] is None:
+            ref.update(rewatch=Rewatch(monitor), code=code)
+        ref["rewatch"].restart(data["t"][rows[-1]], change)
+        rewatch_after(k, rows, changed=change is not None, ended=ended)
 
     def settle() -> None:
         """The current experiment has no more rows: its alarms judged in turn, each on its
