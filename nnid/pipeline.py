@@ -503,6 +503,7 @@ def make_split(
     warmup_s: float = 0.0,
     log_source: str | None = None,
     read: Sequence[str] | None = None,
+    unread_said: tuple[str, str, str] | None = None,
 ) -> Split:
     """The split a config asks for: named experiments (the rest trains) or fractions. A split
     with nothing to validate on is an error: scores on training data are not validation; so
@@ -512,8 +513,9 @@ def make_split(
     the models ``read`` (:func:`read_motion`; None: every one); a run in which one of them is
     logged slower than the clock is taken out whole and said, and the log refused, naming
     ``log_source``, only where that empties a part that had rows. Empty cells of a motion column no
-    model reads stay, said in ``report``: a 1-Hz GPS x y beside a 10-Hz DVL refused a
-    Fossen fit that never reads them."""
+    model reads stay, said in ``report`` (``unread_said``: who reads none, what the rows stay
+    in, what an empty pose cell takes; :func:`~nnid.datasets.gaps.say_unread`): a 1-Hz GPS x y
+    beside a 10-Hz DVL refused a Fossen fit that never reads them."""
     assignment = None
     named = [p for p in PARTS if getattr(s, p) is not None]  # test = [] says: no test part
     if named and s.by != "experiment":  # they would be ignored
@@ -561,7 +563,7 @@ def make_split(
     if report is not None and split.record.get("missed"):
         report.add("split", split.record["missed"])
     motion = [c for c in MOTION if c in log and (read is None or c in read)]
-    say_unread(log, motion, report)
+    say_unread(log, motion, report, *(unread_said or ()))
     try:
         parts = mask_gaps(
             [split.train, split.validation, split.test],
@@ -801,11 +803,11 @@ def run_train(
     )
     model = build_model(cfg.model, inputs, cfg.warmup_s)
     replay = replay_of(inputs, inputs.log)
-    # a [detect] monitor's residual takes the whole measured state η, ν: none on a row with
-    # an empty cell of it (nnid.fault.kernel), so every motion column is read
-    read = None if cfg.detect is not None else read_motion([model], inputs.log, replay)
+    read, said = read_motion([model], inputs.log, replay), None
+    if cfg.detect is not None:  # and what the monitor it calibrates reads
+        read, said = _monitored_motion(read, inputs.log)
     split = make_split(
-        inputs.log, cfg.split, source, inputs.report, cfg.warmup_s, inputs.source, read
+        inputs.log, cfg.split, source, inputs.report, cfg.warmup_s, inputs.source, read, said
     )
     caught = fit_model(model, split, progress or silent, "model", cfg.model, replay)
     if hasattr(model, "report_"):
@@ -871,6 +873,28 @@ def run_train(
         metrics["warnings"] = list(dict.fromkeys([*metrics["warnings"], *said]))
     metrics["seconds"] = time.perf_counter() - start
     return TrainResult(model, metrics, inputs.report, split, figures, monitor)
+
+
+def _monitored_motion(
+    read: Sequence[str], log: pd.DataFrame
+) -> tuple[list[str], tuple[str, str, str]]:
+    """The motion columns masked for a config with [detect]: those its model reads (``read``,
+    :func:`read_motion`) and those the monitor's residual reads on every row
+    (:func:`~nnid.fault.monitor.monitor_motion`: ν and the attitude, Fossen eq. 2), and how
+    an unread one is said (:func:`~nnid.datasets.gaps.say_unread`). Every column was masked,
+    so a 1-Hz GPS x, y beside a 20-Hz DVL refused the training; the calibration holds an
+    empty pose cell as detect does (:func:`~nnid.fault.monitor.monitor_inputs`)."""
+    from nnid.fault.monitor import monitor_motion
+
+    watched = {*read, *monitor_motion(log.columns)}
+    said = (
+        "neither the model of this run nor the monitor's residual (Fossen eq. 2: ν and the "
+        "attitude) reads",
+        "the fit, the scores and the monitor's calibration, which read",
+        "a simulated pose starts from, and the monitor holds, its run's last sample before "
+        "(else its first after)",
+    )
+    return [c for c in MOTION if c in watched], said
 
 
 def _calibrate_monitor(model, split: Split, spec) -> tuple[Any, dict, list[str]]:

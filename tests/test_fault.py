@@ -796,6 +796,19 @@ def test_alarms_name_the_experiment_as_the_log_does(vehicle, monitor, tmp_path):
     assert all(a["experiment"] is None for a in report["alarms"])
 
 
+def _slow_gps(log: pd.DataFrame, dt: float = 0.05) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """``log`` (sampled every ``dt``) with a position x, y integrated from its velocities and
+    heading, and the same with x, y on every 20th row only: a 1-Hz GPS beside a 20-Hz DVL."""
+    psi = log["psi"].to_numpy()
+    full = log.assign(
+        x=np.cumsum(log["u"] * np.cos(psi) - log["v"] * np.sin(psi)) * dt,
+        y=np.cumsum(log["u"] * np.sin(psi) + log["v"] * np.cos(psi)) * dt,
+    )
+    gps = full.copy()
+    gps.loc[full.index % 20 != 0, ["x", "y"]] = np.nan
+    return full, gps
+
+
 def test_a_slow_gps_position_is_held_not_masked_and_alarms_as_at_full_rate(
     monitor, stopped_h1, tmp_path
 ):
@@ -806,12 +819,8 @@ def test_a_slow_gps_position_is_held_not_masked_and_alarms_as_at_full_rate(
     residual reads, is still refused as before."""
     from nnid.runs import detect_run
 
-    full = stopped_h1.head(600).copy()  # the fault at 20 s, its 10-s window whole
-    psi, dt = full["psi"].to_numpy(), 0.05
-    full["x"] = np.cumsum(full["u"] * np.cos(psi) - full["v"] * np.sin(psi)) * dt
-    full["y"] = np.cumsum(full["u"] * np.sin(psi) + full["v"] * np.cos(psi)) * dt
-    gps, dvl = full.copy(), full.copy()
-    gps.loc[full.index % 20 != 0, ["x", "y"]] = np.nan
+    full, gps = _slow_gps(stopped_h1.head(600))  # the fault at 20 s, its 10-s window whole
+    dt, dvl = 0.05, full.copy()
     dvl.loc[full.index % 20 != 0, "u"] = np.nan
     monitor.model.save(tmp_path / "m")
     monitor.save(tmp_path / "m")
@@ -836,6 +845,43 @@ def test_a_slow_gps_position_is_held_not_masked_and_alarms_as_at_full_rate(
     from nnid.fault.monitor import monitor_motion
 
     assert {"x", "y", "z"} <= set(monitor_motion(["x", "y", "z", *"uvpqr", "phi", "theta", "psi"]))
+
+
+def test_a_detect_training_holds_a_slow_gps_position_as_detect_does(vehicle, stopped_h1, tmp_path):
+    """nnid train of a config with [detect] masked every motion column, so a 1-Hz GPS x, y
+    beside 20-Hz velocities was refused ('x logged every 20th row ...'), though neither the
+    least-squares Fossen fit nor the monitor's residual (Fossen eq. 2: ν and the attitude)
+    reads x, y. Now it trains, says x, y unread, and saves a monitor calibrated as on the
+    full-rate rows (x, y held, not NaN) that detects on a slow-GPS log as on a full-rate one."""
+    healthy = simulate_faults(vehicle, 100, seed=3)
+    healthy["experiment"] = [f"h{min(k // 400, 4)}" for k in range(len(healthy))]
+    full, gps = _slow_gps(healthy)
+    gps.to_csv(tmp_path / "gps.csv", index=False)
+    config = str(REPO / "configs" / "detect_fossen.toml")
+    args = ["train", config, "--data", str(tmp_path / "gps.csv"), "--vehicle", str(OCTO)]
+    res = CliRunner().invoke(app, [*args, "--out", str(tmp_path / "m")])
+    assert res.exit_code == 0, res.output
+    cleaning = json.loads((tmp_path / "m" / "cleaning.json").read_text())
+    (said,) = [s for s in cleaning["steps"] if s["step"] == "unread motion"]
+    assert said["columns"] == ["x", "y"] and "nor the monitor's residual" in said["detail"]
+    assert "the monitor's calibration" in said["detail"]
+    # the saved monitor detects on a slow-GPS log as on the full-rate one (detect_run on such
+    # a log: the test above)
+    saved = ResidualMonitor.load(tmp_path / "m")
+    fault, fault_gps = _slow_gps(stopped_h1.head(600))
+    alarms, expected = detect(saved, fault_gps).alarms, detect(saved, fault).alarms
+    assert [(a["kind"], a["thruster"], a["t"]) for a in alarms] == [
+        (a["kind"], a["thruster"], a["t"]) for a in expected
+    ]
+    assert [a["thruster"] for a in alarms] == ["h1"]
+    # and was calibrated as on the full-rate rows: x, y held, not NaN
+    thresholds, calibration = saved.thresholds_, saved.calibration_
+    with warnings.catch_warnings():  # 0.7 healthy minutes: the rate is not controlled
+        warnings.simplefilter("ignore")
+        saved.fit(full[full["experiment"].isin(calibration["experiments"])])
+    assert saved.calibration_["samples"] == calibration["samples"]
+    for statistic, threshold in saved.thresholds_.items():
+        assert thresholds[statistic]["value"] == pytest.approx(threshold["value"], rel=1e-12)
 
 
 def test_no_false_alarm_on_healthy_held_out_runs(vehicle, monitor):
