@@ -811,3 +811,17 @@ def test_a_piece_without_a_pose_sample_starts_from_its_runs():
                         "piece_of": ["a"] * 4 + [None] * 2, "t": [0.0, 0.1] * 3,
                         "x": [np.nan, 5.0, np.nan, np.nan, 7.0, np.nan], "u": 1.0})  # fmt: skip
     assert list(measured_states(log)[:, 0]) == [5.0, 5.0, 5.0, 5.0, 7.0, 7.0]
+
+
+def test_a_gap_bridged_in_a_log_joined_without_a_fresh_index_fills_its_own_run():
+    """Two runs joined by pd.concat keep their index labels 0..399 twice: bridge_from_pose
+    took a run's rows and wrote a bridged cell by label, so run a's gap was read as both runs'
+    rows and its bridge written into run b's rows too. Rows are now taken by position."""
+    truth = _mocap_log()
+    a = truth.assign(experiment="a")
+    a.loc[100:119, ["u", "r"]] = np.nan
+    b = truth.assign(experiment="b", u=truth["u"] + 1.0)  # b has no gap: nothing of it changes
+    out = bridge_from_pose(pd.concat([a, b]))
+    alone = bridge_from_pose(a)
+    pd.testing.assert_frame_equal(out.iloc[:400], alone)
+    pd.testing.assert_frame_equal(out.iloc[400:], b)

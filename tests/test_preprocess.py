@@ -366,3 +366,17 @@ def test_resampling_far_from_the_logs_rate_is_warned_of():
         warnings.simplefilter("error")
         resample_log(log, 80.0, report=report)
     assert "1000 samples at 100 Hz -> uniform 80 Hz" in report.steps[0].detail
+
+
+def test_runs_joined_without_a_fresh_index_get_each_their_own_velocities():
+    """Two runs joined by pd.concat keep their index labels 0..59 twice: derive_velocities
+    (and the unwrapping before it) read and wrote a run by its labels, so each run took the
+    other's samples too. Rows are now taken by position: each run is derived as it is alone."""
+    t = np.arange(60) * 0.05
+    zero = 0 * t
+    a = pd.DataFrame({"t": t, "experiment": "a", "x": np.cos(t), "y": np.sin(t), "z": zero,
+                      "phi": zero, "theta": zero, "psi": np.angle(np.exp(3j * t))})  # fmt: skip
+    b = a.assign(experiment="b", x=0.5 * t, y=zero, psi=0.2 * t)
+    joined = derive_velocities(pd.concat([a, b]), window_s=0.5)
+    alone = pd.concat([derive_velocities(a, window_s=0.5), derive_velocities(b, window_s=0.5)])
+    pd.testing.assert_frame_equal(joined, alone)

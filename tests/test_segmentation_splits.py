@@ -206,3 +206,24 @@ def test_an_empty_list_of_experiments_in_a_split_means_what_it_says(tmp_path):
     with pytest.raises(NnidInputError, match='only by = "experiment" uses') as err:
         make_split(log, SplitSpec(by="block", test=[]))
     assert err.value.field == "split.test"
+
+
+def test_runs_joined_without_a_fresh_index_are_split_and_labelled_each_on_its_own_rows():
+    """Two runs joined by pd.concat keep their index labels 0..99 twice (as a Parquet file
+    written from such a frame is read back): split_log took a run's rows by its labels, so
+    each block held both runs' samples (140 training rows of 100) and run b, held out, was
+    trained on too; label_transients failed in pandas. Rows are now taken by position."""
+    t = np.arange(100) * 0.1
+    a = pd.DataFrame({"t": t, "u": np.tanh(t - 5.0), "tau_X": 1.0, "experiment": "a"})
+    log = pd.concat([a, a.assign(experiment="b", u=-np.tanh(t - 3.0))])
+    fresh = log.reset_index(drop=True)
+    for how in (
+        {"by": "block"},
+        {"by": "experiment", "assignment": {"train": ["a"], "test": ["b"]}},
+    ):
+        got, want = split_log(log, **how), split_log(fresh, **how)
+        for part in ("train", "validation", "test"):
+            pd.testing.assert_frame_equal(
+                got[part].reset_index(drop=True), want[part].reset_index(drop=True)
+            )
+    assert np.array_equal(label_transients(log).to_numpy(), label_transients(fresh).to_numpy())

@@ -50,7 +50,7 @@ from nnid.datasets.log import (
     turned_by,
     wrap_angle,
 )
-from nnid.datasets.preprocess import derive_velocities, experiment_rows, experiments, true_runs
+from nnid.datasets.preprocess import derive_velocities, experiment_rows, true_runs
 from nnid.errors import NnidInputError
 
 #: a segment left between two gaps shorter than this many samples is masked with them
@@ -608,8 +608,10 @@ def bridge_from_pose(
         return log
     out = log.copy()
     bridged: list[Gap] = []
-    for _, idx in experiments(log):
-        part = log.loc[idx]
+    # a run's rows by position, as its cells are written: by label, a log joined by pd.concat
+    # (labels repeated) read both runs as one and wrote a bridge into the other's rows too
+    for _, pos in experiment_rows(log):
+        part = log.iloc[pos]
         pose = [c for c in POSE if c in part]
         complete = [c for c in pose if part[c].notna().all()]
         if not all(a in complete for a in ANGLES):
@@ -624,9 +626,11 @@ def bridge_from_pose(
             cols = [c for c in gap.columns if c in can]
             if gap.length_s > max_bridge_s or not cols:
                 continue
-            rows = part.index[a:b]
             for c in cols:
-                out.loc[rows, c] = out.loc[rows, c].fillna(derived.loc[rows, c])
+                at = out.columns.get_loc(c)
+                held = out.iloc[pos[a:b], at].to_numpy(np.float64)
+                bridge = derived[c].to_numpy(np.float64)[a:b]
+                out.iloc[pos[a:b], at] = np.where(np.isnan(held), bridge, held)
             bridged.append(replace(gap, columns=cols))
     if report is not None and bridged:
         report.add(

@@ -231,15 +231,16 @@ def unwrap_angles(log: pd.DataFrame, report: CleaningReport | None = None) -> pd
     """Unwrap φ, θ, ψ within each experiment (readers may deliver them wrapped at ±π); an
     empty cell stays a gap (:func:`unwrap_finite`)."""
     out = log.copy()
+    runs = experiment_rows(out)  # by position: a run's labels may repeat another's (pd.concat)
     for col in ANGLES:
         if col not in out:
             continue
-        changed = 0
-        for _, idx in experiments(out):
-            raw = out.loc[idx, col].to_numpy(np.float64)
-            unwrapped = unwrap_finite(raw)
-            changed += int(np.sum(np.abs(unwrapped - raw) > 1e-12))
-            out.loc[idx, col] = unwrapped
+        raw = out[col].to_numpy(np.float64)
+        angle = raw.copy()
+        for _, pos in runs:
+            angle[pos] = unwrap_finite(raw[pos])
+        changed = int(np.sum(np.abs(angle - raw) > 1e-12))
+        out[col] = angle
         if report is not None and changed:
             report.add("unwrap", f"{col}: {changed} samples shifted by multiples of 2π")
     return out
@@ -543,16 +544,18 @@ def derive_velocities(
     out = unwrap_angles(log)
     new = {c: np.full(len(out), np.nan) for c in VELOCITY}
     tilted = short = 0
-    for name, idx in experiments(out):
-        t = out.loc[idx, "t"].to_numpy(np.float64)
-        dt = float(np.median(np.diff(t)))
+    # each column read once and each run's rows taken by position: looking a run's labels up
+    # in the whole log cost rows × runs, and a label repeated (pd.concat) read another run
+    column = {c: out[c].to_numpy(np.float64) for c in ("t", *have)}
+    for name, pos in experiment_rows(out):
+        dt = float(np.median(np.diff(column["t"][pos])))
         window = savgol_window(window_s, 1.0 / dt, order, "savgol_window")
-        if short_piece(out, idx, window):
-            short += len(idx)
+        if short_piece(out, pos, window):
+            short += len(pos)
             continue
         rates = {
             c: savgol_derivative(
-                out.loc[idx, c].to_numpy(np.float64),
+                column[c][pos],
                 dt,
                 window,
                 order,
@@ -561,10 +564,9 @@ def derive_velocities(
             )
             for c in have
         }
-        angles = out.loc[idx, list(ANGLES)].to_numpy(np.float64)
+        angles = np.stack([column[a][pos] for a in ANGLES], 1)
         phi, theta = angles[:, 0], angles[:, 1]
         dphi, dth, dpsi = rates["phi"], rates["theta"], rates["psi"]
-        pos = np.flatnonzero(np.isin(out.index, idx))
         body_rates = np.einsum(
             "nij,nj->ni", euler_rate_matrices(angles, inverse=True), np.stack([dphi, dth, dpsi], 1)
         )
@@ -599,14 +601,15 @@ def derive_velocities(
     return out
 
 
-def short_piece(log: pd.DataFrame, idx, window: int) -> bool:
-    """Whether the experiment at ``idx`` of ``log`` is a piece of a run cut at a gap (its
-    ``piece_of`` column set: :func:`nnid.datasets.gaps.mask_gaps`, :func:`resample`, the
-    readers) shorter than the Savitzky-Golay ``window``: it gets no derivative, as a stretch
-    between gaps within a run gets none (an empty cell 20 samples from a run's start was an
-    error blaming the savgol_window setting). A whole run that short is still refused,
-    whatever its label holds (a '#' in a user's experiment name made it a piece)."""
-    return len(idx) < window and PIECE_OF in log and bool(log.loc[idx, PIECE_OF].notna().all())
+def short_piece(log: pd.DataFrame, rows: np.ndarray, window: int) -> bool:
+    """Whether the experiment at row positions ``rows`` of ``log`` (:func:`experiment_rows`)
+    is a piece of a run cut at a gap (its ``piece_of`` column set:
+    :func:`nnid.datasets.gaps.mask_gaps`, :func:`resample`, the readers) shorter than the
+    Savitzky-Golay ``window``: it gets no derivative, as a stretch between gaps within a run
+    gets none (an empty cell 20 samples from a run's start was an error blaming the
+    savgol_window setting). A whole run that short is still refused, whatever its label holds
+    (a '#' in a user's experiment name made it a piece)."""
+    return len(rows) < window and PIECE_OF in log and bool(log[PIECE_OF].iloc[rows].notna().all())
 
 
 def short_pieces_note(samples: int) -> str:
@@ -653,10 +656,12 @@ def _derivative_runs(
     :func:`acceleration_gain2` must follow: (name, rows, median step, Savitzky-Golay window
     or None for a run shorter than it, the steps of the ``held`` inputs or None).
     ``setting``: the key named where the window is widened (None: not warned again)."""
-    for name, idx in experiments(log):
-        dt = float(np.median(np.diff(log.loc[idx, "t"].to_numpy(np.float64))))
+    t = log["t"].to_numpy(np.float64)
+    for name, pos in experiment_rows(log):
+        idx = log.index[pos]
+        dt = float(np.median(np.diff(t[pos])))
         window = savgol_window(window_s, 1.0 / dt, order, setting)
-        if short_piece(log, idx, window):
+        if short_piece(log, pos, window):
             yield name, idx, dt, None, None
         else:
             yield name, idx, dt, window, _held_steps(log, idx, held)

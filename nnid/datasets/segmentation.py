@@ -24,7 +24,7 @@ from scipy.stats import median_abs_deviation
 
 from nnid.datasets.log import VELOCITY
 from nnid.datasets.preprocess import (
-    experiments,
+    experiment_rows,
     savgol_derivative,
     savgol_noise_gain,
     savgol_window,
@@ -39,8 +39,7 @@ def accelerations_with_noise(
     for c in VELOCITY:
         if c in log:
             col, sig = np.empty(len(log)), []
-            for name, idx in experiments(log):
-                pos = log.index.get_indexer(idx)
+            for name, pos in experiment_rows(log):
                 v = log[c].to_numpy(np.float64)[pos]
                 dt = float(np.median(np.diff(log["t"].to_numpy(np.float64)[pos])))
                 w = savgol_window(window_s, 1.0 / dt, order)
@@ -71,8 +70,7 @@ def label_transients(
             continue  # a DOF that never moves beyond its noise
         labels |= a > max(rel * scale, 3 * noise[c])
     out = np.zeros_like(labels)
-    for _, idx in experiments(log):
-        pos = log.index.get_indexer(idx)
+    for _, pos in experiment_rows(log):
         t = log["t"].to_numpy(np.float64)[pos]
         steps = max(0, round(hold / float(np.median(np.diff(t)))))
         seg = labels[pos]

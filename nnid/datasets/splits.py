@@ -15,7 +15,7 @@ import numpy as np
 import pandas as pd
 
 from nnid.datasets.log import REPLAY_GROUP
-from nnid.datasets.preprocess import experiments
+from nnid.datasets.preprocess import experiment_rows
 from nnid.errors import NnidInputError
 
 PARTS = ("train", "validation", "test")
@@ -52,10 +52,12 @@ def split_log(
         )
     parts: dict[str, list[pd.DataFrame]] = {p: [] for p in PARTS}
     record: dict = {"by": by, "fractions": list(fractions), "parts": {p: [] for p in PARTS}}
-    groups = experiments(log)
+    # each run's rows by position: by label, a log joined by pd.concat (labels repeated) put
+    # every run's rows into each run's blocks, and a run named for one part into every part
+    groups = experiment_rows(log)
     if by == "block":
-        for name, idx in groups:
-            part = log.loc[idx]
+        for name, pos in groups:
+            part = log.iloc[pos]
             n = len(part)
             cuts = np.round(np.cumsum(fractions)[:2] * n).astype(int)
             for p, (a, b) in zip(
@@ -105,7 +107,7 @@ def split_log(
         index = dict(groups)
         for p in PARTS:
             for name in chosen[p]:
-                parts[p].append(log.loc[index[name]])
+                parts[p].append(log.iloc[index[name]])
                 record["parts"][p].append({"experiment": name, "rows": [0, len(index[name])]})
     else:
         raise NnidInputError(f"unknown split '{by}'; expected 'block' or 'experiment'", field="by")
