@@ -390,3 +390,19 @@ def test_rls_says_not_measured_of_a_parameter_only_its_skipped_rows_read():
     said = " | ".join(str(w.message) for w in caught if w.category is ExcitationWarning)
     assert "not measured" in said and "zero regressor" not in said
     assert np.isnan(rls.theta[1]) and rls.theta[0] == pytest.approx(2.0, abs=0.2)
+
+
+def test_rls_memory_check_is_not_set_by_one_column_huge_on_a_few_rows():
+    """The recursive fit's check had ΦᵀΦ alone, so its zero rule's scale was the largest
+    column RMS: a column 1e12 on three rows made the others "zero regressor". It now reads the
+    typical regressor size and the unweighted RMS of its rows, as batch least squares does."""
+    from nnid.trainers.recursive import window_covariance
+
+    rng = np.random.default_rng(1)
+    n = 300
+    phi = np.stack([rng.normal(size=n), rng.normal(size=n), 0.1 * rng.normal(size=n)], 1)
+    phi[[5, 77, 201], 2] = 1e12
+    y = phi @ np.array([2.0, -3.0, 0.5]) + 0.01 * rng.normal(size=n)
+    reg = Regression(phi, y, ["a", "b", "c"], ("u",), n)
+    *_, report = window_covariance(reg, np.array([2.0, -3.0, 0.5]), 0)
+    assert report.unexcited == [] and report.collinear == []

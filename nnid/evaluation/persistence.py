@@ -164,36 +164,45 @@ def excitation_from_gram(
     parameters whose regressor the caller had only in rows it left out (not finite): their
     verdict says so, not "zero regressor".
 
-    A column is zero (Weiss eq. 95's α₁ = 0) when its RMS is at most ``tol`` of the largest
-    (the scaled Gram could not tell it from 0) or at most :data:`ROUNDING` of ``reference``,
-    the typical size of a regressor of the whole regression this one is a block of
-    (:func:`typical_size`; McCarter's Ξ, eq. 4.20, solved force by force): a block of one
-    column has no other to be compared with, and one of rounding (1e-17) fitted to a target
-    of rounding read as a precise estimate. Without ``reference`` (0) the largest column RMS
-    stands for it, which one column singular on a few rows would inflate.
+    A column is zero (Weiss eq. 95's α₁ = 0) when its RMS is at most ``tol`` of its block's
+    largest, though never of more than ``reference`` (a millionth of the other regressors is
+    not measured beside them), or at most :data:`ROUNDING` of ``reference``, the typical size
+    of a regressor of the whole regression this one is a block of (:func:`typical_size`;
+    McCarter's Ξ, eq. 4.20, solved force by force): a block of one column has no other to be
+    compared with, and one of rounding (1e-17) fitted to a target of rounding read as a
+    precise estimate. Without ``reference`` (0) the largest column RMS stands for it, which
+    one column singular on a few rows would inflate.
     ``column_rms``: each column's RMS unweighted, where ``gram`` is weighted (weights that
-    scale each equation by its residual made a column of rounding as large as any)."""
+    scale each equation by its residual made a column of rounding as large as any); both rules
+    read it."""
     p = len(names)
     rms = np.sqrt(np.clip(np.diag(gram), 0.0, None) / max(n, 1))
     raw = rms if column_rms is None else np.asarray(column_rms, dtype=np.float64)
-    scale = rms.max() if rms.size and rms.max() > 0 else 1.0
-    # the largest RMS only where no robust reference is given (from ΦᵀΦ alone, as the
-    # recursive fit has it): one column singular on a few rows would set it
+    # the largest RMS only where no robust reference is given (from ΦᵀΦ alone): one column
+    # singular on a few rows would set it
     typical = reference if reference > 0 else raw.max(initial=0.0)
-    live = (rms > tol * scale) & (raw > ROUNDING * typical)
+    # the tol rule is no limit of the scaled Gram (columns are scaled to unit RMS, so one a
+    # millionth of another is not lost in it), but a verdict on the block's other columns: its
+    # size is their largest, capped at the typical one, as one column singular on a few rows
+    # (an (η − 1) term at U = 0, 1e12) made every other column of its block "zero regressor";
+    # unweighted, as weights of 1/σ̂² per equation (beside one of exact data: 1e16) did the same
+    block = min(raw.max(initial=0.0), typical)
+    live = (rms > 0) & (raw > tol * block) & (raw > ROUNDING * typical)
     unexcited = [names[j] for j in range(p) if not live[j]]
     d = np.where(live, 1.0 / np.where(live, rms, 1.0), 0.0)
     normed = gram * np.outer(d, d) / max(n, 1)
-    eig, vec = np.linalg.eigh(normed) if p else (np.array([]), np.zeros((0, 0)))
-    sv = np.sqrt(np.clip(eig[::-1], 0.0, None))
-    vec = vec[:, ::-1]
+    # the spectrum of the live columns only: a zero column's exact null direction is
+    # degenerate with a collinear pair's, and eigh mixed the two, so that the pair was not
+    # named (its values then kept the pseudo-inverse's, with a standard error)
+    idx = np.flatnonzero(live)
+    eig, vec = np.linalg.eigh(normed[np.ix_(idx, idx)]) if idx.size else (np.array([]), None)
+    sv = np.concatenate([np.sqrt(np.clip(eig[::-1], 0.0, None)), np.zeros(p - idx.size)])
     rank = int(np.sum(sv > np.sqrt(tol) * (sv[0] if sv.size else 1.0)))
     condition = float((sv[0] / sv[p - 1]) ** 2) if p and sv[p - 1] > 0 else float("inf")
     collinear: list[str] = []
-    n_live = int(live.sum())
-    for k in range(n_live):
+    for k in range(idx.size):
         if sv[k] < np.sqrt(tol) * sv[0]:
-            collinear += [names[j] for j in np.flatnonzero(live & (np.abs(vec[:, k]) > 0.3))]
+            collinear += [names[j] for j in idx[np.abs(vec[:, idx.size - 1 - k]) > 0.3]]
     collinear = sorted(set(collinear), key=names.index)
     group_min = {}
     for g, members in (groups or {}).items():

@@ -27,7 +27,7 @@ from numba import njit
 from sklearn.base import BaseEstimator
 
 from nnid.errors import NnidInputError
-from nnid.evaluation.persistence import ExcitationReport, excitation_from_gram
+from nnid.evaluation.persistence import ExcitationReport, excitation_from_gram, typical_size
 from nnid.trainers.history import Progress, silent
 from nnid.trainers.least_squares import (
     Estimate,
@@ -175,7 +175,18 @@ def _memory_excitation(
     left_out = read_only_where_left_out(phi, ok, list(reg.names))
     phi, y = np.where(ok[:, None], phi, 0.0), np.where(ok, y, 0.0)
     gram = (phi * w[:, None]).T @ phi
-    report = excitation_from_gram(gram, int(ok.sum()), list(reg.names), left_out=left_out)
+    # zero columns judged unweighted against the typical regressor, as batch least squares
+    # judges them: from ΦᵀΦ alone one column singular on a few rows set the scale
+    used = phi[ok]
+    raw = np.sqrt(np.einsum("ij,ij->j", used, used) / max(used.shape[0], 1))
+    report = excitation_from_gram(
+        gram,
+        int(ok.sum()),
+        list(reg.names),
+        left_out=left_out,
+        column_rms=raw,
+        reference=typical_size(used),
+    )
     return report, ok, phi, y, r
 
 
