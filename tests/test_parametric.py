@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import re
 import warnings
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -22,6 +23,7 @@ from nnid.datasets.simulator import simulate, simulate_config
 from nnid.models.parametric import ParametricFossen, ParametricModel, prepare_motion
 from nnid.physics.dofs import DOFS
 from nnid.trainers.least_squares import ExcitationWarning, LeastSquares, solve_least_squares
+from nnid.trainers.recursive import RecursiveLeastSquares
 from nnid.trainers.regression import Regression
 from nnid.trainers.sequence import DecoupledSequence, Step
 from nnid.vehicle import load_vehicle
@@ -1299,21 +1301,31 @@ def heave_only():
 
 
 @pytest.mark.parametrize("term", ["u", "u*abs(u)"])
-@pytest.mark.parametrize("trainer", [LeastSquares, DecoupledSequence])
+@pytest.mark.parametrize(
+    "trainer",
+    [
+        LeastSquares,
+        DecoupledSequence,
+        RecursiveLeastSquares,
+        pytest.param(partial(RecursiveLeastSquares, forgetting=0.98), id="rls-forgetting"),
+    ],
+)
 def test_a_one_dof_fit_of_rounding_alone_is_not_identified(heave_only, term, trainer):
     """X:u alone from the u equation of a heave-only log: every column of the regression is
     rounding (u ~ 1e-17), so against its own columns none was; it read X:u = -13.7 ± 4e-8 off
     a target of rounding, with no excitation warning (only the noise guard's "not excited").
     Against the same regressor at the log's typical motion (|w| ~ 0.3 m/s, to the term's
     power: unit-consistent for u|u| too) it is a zero regressor: NaN, simulated at the file's
-    value, as any unidentified parameter."""
+    value, as any unidentified parameter. Recursive least squares read X:u = -1.9e-26 as a
+    value, with no excitation report: its memory's check weights each equation by 1/σ̂², which
+    made a column of rounding as large as any, and had no reference."""
     vehicle, log = heave_only
     assert 0 < log["u"].abs().max() < 1e-15  # rounding, not an exact 0
     name = f"X:{term}"
     if trainer is DecoupledSequence:
         fit = DecoupledSequence([Step(["heave"], ["u"], [name])])
     else:
-        fit = LeastSquares()
+        fit = trainer()
     with pytest.warns(ExcitationWarning, match=rf"zero regressor\): {re.escape(name)}"):
         model = ParametricModel(vehicle, [name], ["u"], trainer=fit).fit(log)
     assert np.isnan(model.estimate_.theta[0])

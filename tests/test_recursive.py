@@ -237,6 +237,9 @@ def test_rls_gives_no_standard_error_to_what_its_memory_does_not_determine():
         est = RecursiveLeastSquares(forgetting=0.99).solve(reg)
     assert est.theta[1] == pytest.approx(-3.0, abs=0.2)  # remembered, and kept
     assert np.isnan(est.stderr[1]) and not est.significant[1]
+    # the verdict is kept with the estimate, as batch least squares keeps its own (it was
+    # said in a warning only: the tables read b's missing s.e. as a plain "no")
+    assert est.excitation.unexcited == ["b"] and est.as_dict()["b"]["excited"] is False
     assert est.stderr[0] == pytest.approx(0.05, rel=0.5) and est.significant[0]
     phi2 = np.repeat(phi[:, :1], 2, axis=1) * [1.0, 2.0]
     y2 = phi2 @ np.array([2.0, -3.0]) + noise
@@ -244,6 +247,7 @@ def test_rls_gives_no_standard_error_to_what_its_memory_does_not_determine():
     with pytest.warns(ExcitationWarning, match="collinear regressors"):
         est = RecursiveLeastSquares().solve(reg2)
     assert np.isnan(est.stderr).all() and not est.significant.any()
+    assert est.excitation.collinear == ["a", "b"] and est.as_dict()["a"]["collinear"]
 
 
 def test_rls_memory_warning_words_match_the_case():

@@ -161,6 +161,19 @@ def read_only_where_left_out(phi: np.ndarray, kept: np.ndarray, names: Sequence[
     ]
 
 
+def rounding_scale(fitted: np.ndarray, reference: float = 0.0) -> tuple[np.ndarray, float]:
+    """What the rounding rule (:data:`~nnid.evaluation.persistence.ROUNDING`) of
+    :func:`excitation_from_gram` compares: each column's RMS over the ``fitted`` rows
+    ``[N, P]`` (finite, those the fit reads), unweighted, and the reference it is compared
+    with, ``reference`` (the regression's at its typical motion,
+    :attr:`~nnid.trainers.regression.Regression.reference`) or the rows' own
+    :func:`~nnid.evaluation.persistence.typical_size` where larger. Unweighted because a fit
+    that weights each equation by 1/σ̂² (feasible weighting, the recursive fit's memory check)
+    scales an equation of rounding up by ~1e34, and its column then looked as large as any."""
+    raw = np.sqrt(np.einsum("ij,ij->j", fitted, fitted) / max(fitted.shape[0], 1))
+    return raw, max(reference, typical_size(fitted))
+
+
 def solve_least_squares(
     phi: np.ndarray,
     y: np.ndarray,
@@ -202,13 +215,10 @@ def solve_least_squares(
         w = np.asarray(weights, dtype=np.float64)
         pw = phi * w[:, None]
         gram, rhs, yy = pw.T @ phi, pw.T @ y, float((y * w) @ y)
-    # the zero columns are judged on Φ unweighted (weights scale an equation of rounding up),
     # over the rows of weight > 0: a weight 0 switches an equation off (a DOF the log does not
     # measure), and a column is not to be called excited by equations that are not fitted
     rows = np.ones(n, dtype=bool) if weights is None else np.asarray(weights) > 0
-    fitted = phi[rows]
-    raw = np.sqrt(np.einsum("ij,ij->j", fitted, fitted) / max(fitted.shape[0], 1))
-    reference = max(reference, typical_size(fitted))
+    raw, reference = rounding_scale(phi[rows], reference)
     report = (
         excitation_from_gram(gram, n, names, left_out=left_out, column_rms=raw, reference=reference)
         if check

@@ -27,7 +27,7 @@ from numba import njit
 from sklearn.base import BaseEstimator
 
 from nnid.errors import NnidInputError
-from nnid.evaluation.persistence import ExcitationReport, excitation_from_gram, typical_size
+from nnid.evaluation.persistence import ExcitationReport, excitation_from_gram
 from nnid.trainers.history import Progress, silent
 from nnid.trainers.least_squares import (
     Estimate,
@@ -36,6 +36,7 @@ from nnid.trainers.least_squares import (
     dof_sandwich,
     dof_variances,
     read_only_where_left_out,
+    rounding_scale,
     void_undetermined,
 )
 from nnid.trainers.regression import Regression
@@ -162,8 +163,10 @@ def _memory_excitation(
     reg: Regression, theta: np.ndarray, first: int
 ) -> tuple[ExcitationReport, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The excitation check of the rows of samples ``first``…end, each DOF equation weighted
-    by 1/(its residual variance at ``theta``) so that forces and moments compare; also the
-    used-row mask, the regressor and target with the unused rows zeroed, and the residual."""
+    by 1/(its residual variance at ``theta``) so that forces and moments compare, its columns
+    of rounding judged unweighted against the regression's reference (:func:`rounding_scale`,
+    as batch least squares judges them); also the used-row mask, the regressor and target
+    with the unused rows zeroed, and the residual."""
     m = len(reg.dofs)
     rows = slice(first * m, reg.n_samples * m)
     phi, y = reg.phi[rows], reg.y[rows]
@@ -175,17 +178,17 @@ def _memory_excitation(
     left_out = read_only_where_left_out(phi, ok, list(reg.names))
     phi, y = np.where(ok[:, None], phi, 0.0), np.where(ok, y, 0.0)
     gram = (phi * w[:, None]).T @ phi
-    # zero columns judged unweighted against the typical regressor, as batch least squares
-    # judges them: from ΦᵀΦ alone one column singular on a few rows set the scale
-    used = phi[ok]
-    raw = np.sqrt(np.einsum("ij,ij->j", used, used) / max(used.shape[0], 1))
+    # the same rows as the Gram: the memory is a window of them, not λᵏ-weighted, so the
+    # unweighted RMS forgets as the Gram does. Weighted alone, an equation of rounding (X of a
+    # heave-only log, σ̂² ~ 1e-34) made its column as large as any: X:u read -1.9e-26, a value
+    raw, reference = rounding_scale(phi[ok], reg.reference)
     report = excitation_from_gram(
         gram,
         int(ok.sum()),
         list(reg.names),
         left_out=left_out,
         column_rms=raw,
-        reference=typical_size(used),
+        reference=reference,
     )
     return report, ok, phi, y, r
 
@@ -374,6 +377,10 @@ class RecursiveLeastSquares(BaseEstimator):
             cov,
             sigma2,
             n_obs,
+            # the memory's verdicts, which void the s.e. above: kept, as batch least squares
+            # keeps its own, so that the reports say why (none was: "zero regressor" was said
+            # once, in a warning, and the tables read a value of rounding as unidentified noise)
+            excitation=report,
             dof_sigma2=per_dof,
             history=history,
         )
