@@ -515,6 +515,11 @@ def test_a_fault_after_an_unexplained_change_is_alarmed(vehicle, monitor, tmp_pa
     (said,) = json.loads(dumps(detect_json(monitor, batch)))["alarms"][:1]
     assert said["repeats"] == 0 and said["blind_until"] is None
     assert alarm_row(first)["repeats"] == 0 and alarm_row(second)["repeats"] is None
+    # the report's table: not seen again, and not applicable to the isolated loss
+    from nnid.reports.detect_report import detect_html
+
+    rows = detect_html(monitor, batch).split("<tbody>")[1].split("</tbody>")[0].split("</tr>")
+    assert rows[0].endswith("<td>no</td>") and rows[1].endswith("<td>-</td>")
 
 
 def test_an_unexplained_change_that_persists_is_one_alarm_that_repeats(vehicle, monitor, tmp_path):
@@ -533,6 +538,14 @@ def test_an_unexplained_change_that_persists_is_one_alarm_that_repeats(vehicle, 
     assert int(batch.trace.alarm.sum()) == 1
     folded = [line for line in said if "persisting, counted in its record's repeats" in line]
     assert len(folded) == a["repeats"] and f"alarmed at t = {a['t']:.2f} s" in folded[0]
+    # the report's table and the console line say it too: it was in neither, or only at the
+    # end of the meaning's long sentence
+    lines = write_detect_outputs(monitor, batch, tmp_path / "out")
+    page = (tmp_path / "out" / "report.html").read_text()
+    times = "once" if a["repeats"] == 1 else f"{a['repeats']} times"
+    seen = f"{times}, last at {a['last_seen_t']:.2f} s"
+    assert "<th>seen again</th>" in page and f"<td>{seen}</td></tr>" in page
+    assert sum(line.startswith(f"t = {a['t']:.2f} s, seen again {seen}: ") for line in lines) == 1
 
 
 def test_an_unexplained_record_says_its_repeats_once():
@@ -1368,6 +1381,7 @@ def test_an_alarm_without_a_standard_error_or_explained_share_says_so(vehicle, m
     result.alarms[:] = [a]
     page = detect_html(monitor, result)
     assert "± nan" not in page and "<td>2 ± -</td>" in page
+    assert "seen again" not in page  # isolated alarms only: no column of "-" for repeats
     assert "explains 0 %" not in page
     assert "its share of the whitened residual after the alarm was not measured" in page
     line = describe_alarm(a)

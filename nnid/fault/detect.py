@@ -254,6 +254,11 @@ def unexplained(record: dict, restart_t: float) -> None:
 PERSISTING = "; alarmed again "
 
 
+def how_often(n: int) -> str:
+    """A count of repeats as a person says it: "once", "3 times"."""
+    return "once" if n == 1 else f"{n} times"
+
+
 def persisting(record: dict, t: float, restart_t: float) -> None:
     """Fold an alarm at time ``t`` that is not isolated into the open unexplained ``record``
     of its experiment (:func:`unexplained`): no new record, the same change persisting (the
@@ -265,12 +270,11 @@ def persisting(record: dict, t: float, restart_t: float) -> None:
     record["repeats"] += 1
     record["last_seen_t"] = float(t)
     base = record["meaning"].partition(PERSISTING)[0]
-    times = "once" if record["repeats"] == 1 else f"{record['repeats']} times"
     record["meaning"] = (
-        f"{base}{PERSISTING}{times} on the restarted statistics, the latest at {t:.2f} s, "
-        f"not isolated: taken as this change persisting (restarted again at {restart_t:.2f} s; "
-        "a new change no hypothesis explains, or a fault not told apart from this one, reads "
-        "the same)"
+        f"{base}{PERSISTING}{how_often(record['repeats'])} on the restarted statistics, the "
+        f"latest at {t:.2f} s, not isolated: taken as this change persisting (restarted again "
+        f"at {restart_t:.2f} s; a new change no hypothesis explains, or a fault not told apart "
+        "from this one, reads the same)"
     )
 
 

@@ -57,6 +57,7 @@ from nnid.fault.detect import (
     Change,
     DetectResult,
     Rewatch,
+    how_often,
     isolated_alarm,
     persisting,
     rewatched_alarm,
@@ -591,6 +592,20 @@ def explained_share(a: dict) -> str | None:
     return None if missing(explained) else f"{100 * explained:.0f} %"
 
 
+def seen_again(a: dict) -> str | None:
+    """How often the change of an alarm that is not isolated was alarmed again, taken as it
+    persisting (:func:`~nnid.fault.detect.persisting`), and the latest: "3 times, last at
+    81.20 s", or "no"; None for an alarm that counts no repeats (an isolated change, or one
+    said ended or resized: a later alarm after it is judged as a new change), for which the
+    question does not apply."""
+    repeats = a.get("repeats")
+    if repeats is None:
+        return None
+    if repeats == 0:
+        return "no"
+    return f"{how_often(repeats)}, last at {a['last_seen_t']:.2f} s"
+
+
 def withdrawn_line(w: dict) -> str:
     """One line a person reads for an announced alarm that the alarms do not hold."""
     run = f" ({w['experiment']})" if w.get("experiment") else ""
@@ -600,6 +615,8 @@ def withdrawn_line(w: dict) -> str:
 def describe_alarm(a: dict) -> str:
     """One line a person reads for an alarm record."""
     where = f"t = {a['t']:.2f} s" + (f" ({a['experiment']})" if a.get("experiment") else "")
+    if a.get("repeats"):  # up front: the meaning says it too, at the end of a long sentence
+        where += f", seen again {seen_again(a)}"
     if a.get("thruster") and a.get("efficiency") is not None:
         what = (
             f"thruster {a['thruster']} gives {100 * a['efficiency']:.0f} % of its thrust "

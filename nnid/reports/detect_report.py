@@ -14,11 +14,12 @@ from nnid.fault.follow import (
     describe_alarm,
     efficiency_interval,
     explained_share,
+    seen_again,
     value_pm,
     withdrawn_line,
 )
 from nnid.physics.dofs import DOFS, FORCES
-from nnid.reports.cells import thresholds_cell
+from nnid.reports.cells import number, thresholds_cell
 from nnid.reports.figures import (
     FORCE_UNITS,
     IMAGES_CHECK,
@@ -160,23 +161,33 @@ def detect_html(monitor, result: DetectResult, source: str = "") -> str:
             body.append([run, f"{a['t']:.2f}", a["kind"], a["thruster"] or "-", eff,
                          a["effect"] or "-", val, f"{a['severity']:.2f}",
                          f"{a['confidence']:.2f}"])  # fmt: skip
+        # only where an alarm was not isolated: a column of "-" on every other page is noise
+        repeats = any(a.get("repeats") is not None for a in result.alarms)
+        if repeats:
+            head.append("seen again")
+            for row, a in zip(body, result.alarms, strict=True):
+                row.append(number(seen_again(a)))  # "-": an isolated alarm counts none
         out.append(html_table(head, body))
         out.append("<ul>" + "".join(f"<li>{html.escape(describe_alarm(a))}</li>"
                                     for a in result.alarms) + "</ul>")  # fmt: skip
-        out.append(
-            definitions(
-                {
-                    "efficiency": "the thruster's thrust as a fraction of nominal: what is "
-                    "left of it for a thruster_loss, above 1 or below 0 for a thruster that "
-                    "gives more or pushes against its command (a model_change)",
-                    "effect": "the change named in nnid's effect vocabulary",
-                    "severity": "peak of the monitor statistic over its threshold after the alarm",
-                    "confidence": "posterior weight of the named hypothesis and of those the "
-                    "data cannot tell from it; 0 where the best hypothesis leaves more than "
-                    "twice the healthy noise power (unexplained by the hypotheses)",
-                }
+        terms = {
+            "efficiency": "the thruster's thrust as a fraction of nominal: what is "
+            "left of it for a thruster_loss, above 1 or below 0 for a thruster that "
+            "gives more or pushes against its command (a model_change)",
+            "effect": "the change named in nnid's effect vocabulary",
+            "severity": "peak of the monitor statistic over its threshold after the alarm",
+            "confidence": "posterior weight of the named hypothesis and of those the "
+            "data cannot tell from it; 0 where the best hypothesis leaves more than "
+            "twice the healthy noise power (unexplained by the hypotheses)",
+        }
+        if repeats:
+            terms["seen again"] = (
+                "for an alarm not isolated, how many later alarms on the statistics restarted "
+                "after its window were not isolated either, taken as its change persisting "
+                "(no record of their own), and the latest; - for an isolated alarm, after "
+                "which a later alarm is judged as a new change"
             )
-        )
+        out.append(definitions(terms))
         out.append("<h2>Isolation evidence</h2>")
         for a in result.alarms:
             rows = [[h["hypothesis"], f"{h['posterior']:.3g}"] for h in a.get("alternatives", [])]
