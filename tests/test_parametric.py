@@ -1407,3 +1407,90 @@ def test_a_zero_column_does_not_hide_a_collinear_pair():
     assert est.excitation.unexcited == ["d"] and est.excitation.collinear == ["a", "b"]
     assert np.isnan(est.stderr[:2]).all() and est.theta[2] == pytest.approx(1.0, abs=0.01)
     assert est.excitation.singular_values[2:] == [0.0, 0.0] and est.excitation.rank == 2
+
+
+def _pair_split_by_one_equation(
+    scale_b: float, noise_a: float, noise_b: float
+) -> tuple[Regression, np.ndarray]:
+    """Two DOF equations of parameters a = 1, b = 2: equation A reads them through one signal
+    (a + b only), equation B (regressors ``scale_b``) apart. B's noise is orthogonal to its
+    columns, so the ordinary fit leaves A's residual its own noise (``noise_a``)."""
+    rng = np.random.default_rng(0)
+    n = 60
+    x, xb, zb = rng.normal(size=n), scale_b * rng.normal(size=n), scale_b * rng.normal(size=n)
+    e = rng.normal(size=n)
+    e -= np.column_stack([xb, zb]) @ np.linalg.lstsq(np.column_stack([xb, zb]), e, rcond=None)[0]
+    phi = np.zeros((2 * n, 2))
+    phi[0::2], phi[1::2] = np.column_stack([x, x]), np.column_stack([xb, zb])
+    y = phi @ [1.0, 2.0]
+    y[0::2] += noise_a * rng.normal(size=n)
+    y[1::2] += noise_b * e / e.std()
+    return Regression(phi, y, ["a", "b"], ("A", "B"), n), np.array([1.0, 2.0])
+
+
+def test_feasible_weights_say_a_collinearity_only_the_weighted_pass_finds():
+    """Beside an equation of near exact data (σ̂ 1e-9) the feasible weights 1/σ̂² scale the
+    noisy equation, the only one that separates a from b, down by 1e18: the weighted Gram
+    sees a and b collinear, the ordinary one did not. Its warning was muted as said once, and
+    a = b = 1.5 came back without a standard error and without a word."""
+    reg, _ = _pair_split_by_one_equation(1.0, 1e-9, 1.0)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        est = LeastSquares(weighting="feasible", correlated=False).solve(reg)
+    said = [str(w.message) for w in caught if issubclass(w.category, ExcitationWarning)]
+    assert est.excitation.collinear == ["a", "b"] and np.isnan(est.stderr).all()
+    assert len(said) == 1 and "weighted pass" in said[0]
+    assert "not separable from each other (collinear regressors): a, b" in said[0]
+
+
+def test_feasible_weights_say_a_collinearity_the_weighted_pass_resolves():
+    """The mirror: B separates a from b but its regressors are 1e-4 of A's, so the ordinary
+    fit names them collinear; B's noise is 1e-12, and its weight makes them separable. The
+    estimate (the weighted one) gives both values and standard errors, and the one warning
+    said they were not separable: the weighted pass's verdict is said too."""
+    reg, truth = _pair_split_by_one_equation(1e-4, 1.0, 1e-12)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        est = LeastSquares(weighting="feasible", correlated=False).solve(reg)
+    said = [str(w.message) for w in caught if issubclass(w.category, ExcitationWarning)]
+    assert est.excitation.collinear == [] and np.isfinite(est.stderr).all()
+    assert est.theta == pytest.approx(truth, abs=0.05)
+    assert len(said) == 2 and "collinear regressors): a, b" in said[0]
+    assert "weighted pass" in said[1] and "separable after all: a, b" in said[1]
+
+
+def test_feasible_weights_repeat_no_verdict_both_passes_share():
+    """A verdict both passes reach (an unexcited column) is said once, not twice."""
+    reg, _ = _pair_split_by_one_equation(1.0, 0.1, 1.0)
+    reg.phi = np.column_stack([reg.phi, np.zeros(reg.y.size)])
+    reg.names = [*reg.names, "c"]
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        est = LeastSquares(weighting="feasible", correlated=False).solve(reg)
+    said = [str(w.message) for w in caught if issubclass(w.category, ExcitationWarning)]
+    assert est.excitation.unexcited == ["c"]
+    assert said == ["not excited by this data (zero regressor): c"]
+
+
+def test_changed_verdicts_name_only_what_the_second_check_adds_or_clears():
+    """The comparison of the two passes' reports, on the branches a real regression reaches
+    rarely: a new unexcited column (not measured where the rows that read it are left out),
+    a rank deficit no name says, a verdict cleared; the same report gives nothing."""
+    from nnid.evaluation.persistence import ExcitationReport, changed_verdicts
+
+    def report(rank, unexcited=(), collinear=(), unread=()):
+        return ExcitationReport(9, 3, rank, 1.0, [], {}, [*unexcited], [*collinear], [], [*unread])
+
+    full = report(3)
+    assert changed_verdicts(full, full) == []
+    assert changed_verdicts(report(2, ["a"]), report(2, ["a"])) == []
+    assert changed_verdicts(full, report(2, ["a", "b"], unread=["b"])) == [
+        "not excited by this data (zero regressor): a",
+        "not measured (every row that reads them was left out: its target or regressor is not "
+        "finite): b",
+    ]
+    assert changed_verdicts(full, report(2)) == ["the regressor has rank 2 < 3 parameters"]
+    cleared = changed_verdicts(report(1, ["c"], ["a", "b"]), report(2, collinear=["a", "b"]))
+    assert cleared == [
+        "excited and separable after all: c (the estimate gives their values and standard errors)"
+    ]

@@ -249,6 +249,29 @@ def _verdict_warnings(
     return warnings
 
 
+def changed_verdicts(before: ExcitationReport, after: ExcitationReport) -> list[str]:
+    """What the excitation check ``after``, of the same regression refitted with other row
+    weights (feasible weighting's second pass, Weiss eqs 93-98), says that ``before`` did
+    not: the parameters it newly finds unexcited or collinear (or its rank deficit, where it
+    names none and its rank fell), and those ``before`` named that it excites and separates.
+    Empty for the same verdict: ``before``'s warnings were given, and are not to be repeated.
+    The weights change which equations dominate the Gram matrix, so a pair separable only in
+    an equation that 1/σ̂² scales down beside one of exact data is collinear after them."""
+    unexcited = [n for n in after.unexcited if n not in before.unexcited]
+    collinear = [n for n in after.collinear if n not in before.collinear]
+    # the rank line only where no name says it, as in the report's own warnings
+    rank = after.rank if after.rank < before.rank else after.n_params
+    lines = _verdict_warnings(unexcited, collinear, rank, after.n_params, after.not_measured)
+    flagged = {*after.unexcited, *after.collinear}
+    cleared = [n for n in [*before.unexcited, *before.collinear] if n not in flagged]
+    if cleared:
+        lines.append(
+            f"excited and separable after all: {', '.join(dict.fromkeys(cleared))} (the "
+            "estimate gives their values and standard errors)"
+        )
+    return lines
+
+
 def combined_excitation(
     parts: Sequence[tuple[Sequence[str], ExcitationReport | None]], names: Sequence[str]
 ) -> ExcitationReport | None:

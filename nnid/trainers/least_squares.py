@@ -21,7 +21,12 @@ from sklearn.base import BaseEstimator
 
 from nnid.errors import ExcitationWarning as ExcitationWarning  # raised here, long imported here
 from nnid.errors import NnidInputError
-from nnid.evaluation.persistence import ExcitationReport, excitation_from_gram, typical_size
+from nnid.evaluation.persistence import (
+    ExcitationReport,
+    changed_verdicts,
+    excitation_from_gram,
+    typical_size,
+)
 from nnid.serialization import json_float
 from nnid.trainers.history import Progress, silent
 from nnid.trainers.regression import Regression
@@ -314,9 +319,27 @@ class LeastSquares(BaseEstimator):
             w = np.empty(reg.y.size)
             for d in reg.dofs:
                 w[reg.dof_rows(d)] = 1.0 / max(dof_sigma2[d], 1e-300)
+            first = est.excitation
+            # its left-out rows and residual degrees of freedom are the first pass's (the
+            # weights change neither which rows are finite nor which columns are zero): said
             with warnings.catch_warnings():
-                warnings.simplefilter("ignore", ExcitationWarning)  # already said once
+                warnings.simplefilter("ignore", ExcitationWarning)
                 est = solve_least_squares(reg.phi, reg.y, w, reg.names, reference=reference)
+            # but its verdict may differ: 1/σ̂² beside an equation of exact data (~1e18) left
+            # a pair separable only in the other equation collinear, and dropped it unsaid
+            changed = (
+                changed_verdicts(first, est.excitation)
+                if first is not None and est.excitation is not None
+                else []
+            )
+            if changed:
+                warnings.warn(
+                    "the weighted pass (each DOF equation weighted by 1/σ̂² of the ordinary "
+                    "fit's residual, whose estimate is the one given) differs from the ordinary "
+                    "fit's excitation check: " + "; ".join(changed),
+                    ExcitationWarning,
+                    stacklevel=2,
+                )
             dof_sigma2 = self._dof_variances(reg, est.theta)
         est.dof_sigma2 = dof_sigma2
         if self.weighting == "none" and len(reg.dofs) > 1 and np.isfinite(est.sigma2):
