@@ -40,6 +40,15 @@ def _demo_log() -> pd.DataFrame:
     return log.groupby("experiment").head(300).reset_index(drop=True)
 
 
+def _parquet_indexed(df: pd.DataFrame) -> bytes:
+    """The log written by pandas with its run labels as the index."""
+    import io
+
+    buf = io.BytesIO()
+    df.set_index("experiment").to_parquet(buf)
+    return buf.getvalue()
+
+
 # -- log mutations: (name, what the error must name, mutate(df, input column) -> df | bytes) ----
 def _set(col: str, row: int, value):
     def mutate(df: pd.DataFrame, inp: str) -> pd.DataFrame:
@@ -140,6 +149,8 @@ LOG_CASES: list[tuple[str, str, Callable]] = [
     ),
     # pyarrow's error was a 25-line schema dump
     ("a parquet column named twice", "'u'", lambda df, i: _parquet_naming_u_twice(df)),
+    # pandas reads a column written as the index back as the index: the runs were read as one
+    ("runs stored as the parquet's index", "'experiment'", lambda df, i: _parquet_indexed(df)),
     # a parquet column of strings: every number readable, every later step meets text
     ("numbers stored as text", "'u'", lambda df, i: df.assign(u=df["u"].astype(str))),
     # a parquet column of booleans: read as 1 or 0 newtons without a word
@@ -155,6 +166,7 @@ LOG_SUFFIX = {
     "an input stored as booleans": ".parquet",
     "an input name with a space": ".parquet",  # a CSV header's spaces are stripped on reading
     "a parquet column named twice": ".parquet",
+    "runs stored as the parquet's index": ".parquet",
 }
 
 

@@ -347,3 +347,16 @@ def test_a_sample_the_log_lacks_is_no_divergence_of_an_unscored_target(v_scale):
         # the prediction is the measurement + 0.01: each scored column's NRMSE is 0.01 / std
         expected = np.mean([0.01 / log[c].iloc[1:].std() for c in scores["columns"]])
         assert scores[f"{mode}_nrmse"]["total"] == pytest.approx(expected, rel=0.02)
+
+
+def test_runs_joined_without_a_fresh_index_are_refused_before_scoring(runs):
+    """pd.concat([big, small]) gives each label to two rows; each run's scored rows and
+    prediction were found by label. One clear error saying the fix, before any scoring."""
+    from nnid.errors import NnidInputError
+
+    model = Shifted().fit(runs)
+    twice = pd.concat([g for _, g in runs.groupby("experiment")]).set_axis(
+        np.r_[np.arange(300), np.arange(300)]
+    )
+    with pytest.raises(NnidInputError, match=r"repeats 300 labels.*reset_index\(drop=True\)"):
+        evaluate(model, twice, ("free_run",), warmup_s=1.0)

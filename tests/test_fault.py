@@ -929,7 +929,7 @@ def test_a_short_healthy_record_is_said_to_leave_the_false_alarm_rate_uncontroll
 
     # about two CUSUM peaks a minute here: 18 healthy minutes fit both rates, 6 do not
     long = [simulate_faults(vehicle, 120, seed=s, experiment=f"h{s}") for s in range(10, 19)]
-    long_monitor = ResidualMonitor(monitor.plant_).fit(pd.concat(long))
+    long_monitor = ResidualMonitor(monitor.plant_).fit(pd.concat(long, ignore_index=True))
     assert long_monitor.threshold_caveat() is None
     assert "12 EWMA and 9 CUSUM excursion peak(s)" in monitor.threshold_caveat()
     short = simulate_faults(vehicle, 25, seed=7, experiment="short")
@@ -1465,3 +1465,17 @@ def test_follow_csv_refuses_an_idle_time_it_would_wait_on_forever(tmp_path, idle
     (tmp_path / "log.csv").write_text("t,u\n0,0\n")
     with pytest.raises(NnidInputError, match="field 'idle_s': a finite number at least 0"):
         follow_csv(None, str(tmp_path / "log.csv"), 10.0, lambda line: None, idle_s=idle)
+
+
+def test_runs_joined_without_a_fresh_index_are_refused_by_the_monitor(vehicle, monitor):
+    """Two runs joined by pd.concat keep their labels twice, and the monitor's inputs (the
+    motion derived per run) found a run's rows by label. Calibration, run and detect: one
+    clear error saying the fix."""
+    log = simulate_faults(vehicle, 10, seed=12, experiment="a")
+    twice = pd.concat([log, log.assign(experiment="b")])
+    said = rf"repeats {len(log)} labels \(the first: 0\).*pd\.concat without ignore_index=True"
+    for use in (ResidualMonitor(monitor.plant_).fit, monitor.run, monitor.false_alarms):
+        with pytest.raises(NnidInputError, match=said):
+            use(twice)
+    with pytest.raises(NnidInputError, match=said):
+        detect(monitor, twice)

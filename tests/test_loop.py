@@ -861,3 +861,17 @@ def test_a_vehicle_file_with_no_coefficient_to_refit_gets_its_baseline():
     before = result.as_dict()["before"]
     assert result.as_dict()["added"] == []
     assert before["k_step_nrmse"]["total"] is not None and before["k_step_nrmse"]["total"] > 0
+
+
+def test_runs_joined_without_a_fresh_index_are_refused_before_the_loop():
+    """Two runs joined by pd.concat keep their labels twice; the loop's preparation and
+    split found a run's rows by label. One clear error saying the fix, before any fit."""
+    from nnid.errors import NnidInputError
+
+    veh = load_vehicle(MINIROV)
+    t = np.arange(100) * 0.1
+    forces = {f"tau_{f}": np.sin(t) for f in ("X", "Y", "Z", "K", "M", "N")}
+    run = pd.DataFrame({"t": t, "u": 0.1 * np.sin(t), "w": 0.0, "r": 0.0, **forces})
+    twice = pd.concat([run.assign(experiment="a"), run.assign(experiment="b")])
+    with pytest.raises(NnidInputError, match=r"repeats 100 labels \(the first: 0\).*pd\.concat"):
+        ResidualLoop(veh, max_effects=1).fit(twice)

@@ -10,6 +10,7 @@ scikit-learn's ``get_params``/``set_params``/``clone``.
 
 from __future__ import annotations
 
+import functools
 import json
 import os
 import pickle
@@ -28,6 +29,7 @@ from sklearn.exceptions import NotFittedError
 
 from nnid import load_model
 from nnid.datasets.simulator import simulate
+from nnid.errors import NnidInputError
 from nnid.loop.scenarios import effect_log
 from nnid.models.base import MODEL_KINDS, model_class
 from nnid.models.caccia import CacciaModel
@@ -540,3 +542,26 @@ def test_a_hybrid_trains_on_runs_of_one_rate(minirov, runs):
     with pytest.raises(NnidInputError, match="at training") as err:
         BUILDERS["hybrid"](minirov).fit(train, slow)
     assert err.value.field == "t"
+
+
+def test_a_log_whose_index_repeats_labels_is_one_clear_error(fitted, runs):
+    """Runs joined by pd.concat without ignore_index keep their labels twice, and a run's rows
+    are found by label: a fit mixed the runs up, a prediction said 'not uniformly sampled' or
+    raised pandas' InvalidIndexError. Refused at every entry, saying the fix; not reset, as
+    a prediction answers on the log's own index."""
+    _, val = runs
+    twice = pd.concat([val, val.assign(experiment="copy")])
+    said = (
+        rf"index repeats {len(val)} labels \(the first: {val.index[0]}\).*pd\.concat without "
+        r"ignore_index=True.*log\.reset_index\(drop=True\)"
+    )
+    for model, *_ in fitted.values():
+        uses = [
+            (clone(model).fit, twice),
+            (functools.partial(clone(model).fit, val), twice),
+            (functools.partial(model.predict, mode="one_step"), twice),
+            (model.residual, twice),
+        ]
+        for use, log in uses:
+            with pytest.raises(NnidInputError, match=said):
+                use(log)

@@ -922,3 +922,40 @@ def test_a_source_in_integer_milliseconds_at_500_hz_is_refused_at_its_time_scale
     _write_map(path, body.replace('time = "t"', 'time = "t"\ntime_scale = 0.001'))
     log, _ = load_log(tmp_path, path)
     assert log["t"].iloc[-1] - log["t"].iloc[0] == pytest.approx(4.0, abs=0.01)
+
+
+def test_a_parquet_of_runs_joined_without_a_fresh_index_is_read_on_row_numbers(tmp_path):
+    """pd.read_parquet restores the index a frame was written with: two runs joined by
+    pd.concat without ignore_index were read with labels 0..199 twice, and the split's parts
+    found each run's rows by label, so a run's rows were both runs'. A file is read on fresh
+    row numbers, as a CSV is."""
+    from nnid.config import SplitSpec
+    from nnid.datasets.preprocess import experiments
+    from nnid.pipeline import make_split
+
+    t = np.arange(200) * 0.1
+    run = pd.DataFrame({"t": t, "u": 0.1 * np.sin(t), "tau_X": np.sin(t)})
+    pd.concat([run.assign(experiment="a"), run.assign(experiment="b")]).to_parquet(
+        tmp_path / "two.parquet"
+    )
+    log, _ = load_log(tmp_path / "two.parquet")
+    assert log.index.equals(pd.RangeIndex(400))
+    split = make_split(log, SplitSpec(by="block", fractions=[0.7, 0.3, 0.0]))
+    for part in (split.train, split.validation):
+        for name, rows in experiments(part):
+            assert (part.loc[rows, "experiment"] == name).all()
+
+
+def test_a_column_stored_as_a_parquet_files_index_is_refused_naming_it(tmp_path):
+    """A frame indexed by its runs written to Parquet keeps 'experiment' as the file's index,
+    which pandas reads back as the index, not a column: the runs were read as one. Refused
+    naming the column, as t stored so is, never dropped with the old index."""
+    t = np.arange(20) * 0.1
+    log = pd.DataFrame({"t": np.r_[t, t], "experiment": ["a"] * 20 + ["b"] * 20, "u": 0.1,
+                        "tau_X": 1.0})  # fmt: skip
+    log.set_index("experiment").to_parquet(tmp_path / "log.parquet")
+    with pytest.raises(NnidInputError, match="column 'experiment' is stored as the file's index"):
+        load_log(tmp_path / "log.parquet")
+    # a RangeIndex that only has a name is no stored column: read as the row numbers
+    log.rename_axis("t").to_parquet(tmp_path / "named.parquet")
+    assert load_log(tmp_path / "named.parquet")[0].index.equals(pd.RangeIndex(40))

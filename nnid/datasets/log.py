@@ -12,6 +12,7 @@ import os
 import warnings
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -69,6 +70,28 @@ DECLARE_TIME_UNIT = (
 def input_columns(df: pd.DataFrame) -> list[str]:
     """The input columns present: generalized forces, or thruster commands."""
     return [c for c in df.columns if c in TAU or str(c).startswith("cmd_")]
+
+
+def check_log(log: Any, name: str = "log") -> pd.DataFrame:
+    """The log a model, the residual loop or the fault monitor is given in Python: a DataFrame
+    with rows, each row under its own index label. Labels given twice are refused, not reset:
+    a run's rows are found by label, so the runs of ``pd.concat([a, b])`` were mixed up (a
+    held-out run trained on, values written into another run's rows), and ``predict``
+    answers on the log's own index, which a reset would change. (Files are read onto fresh
+    row numbers: :func:`nnid.datasets.readers.read_table`.)"""
+    if not isinstance(log, pd.DataFrame):
+        raise NnidInputError(f"the {name} must be a pandas DataFrame, not {type(log).__name__}")
+    if len(log) == 0:
+        raise NnidInputError(f"the {name} has no rows")
+    if not log.index.is_unique:
+        repeated = log.index[log.index.duplicated()].unique()
+        raise NnidInputError(
+            f"the {name}'s index repeats {len(repeated)} label{'s' * (len(repeated) != 1)} "
+            f"(the first: {shown(repeated[0])}): a run's rows are found by their labels, so "
+            "the runs would be mixed up; this usually comes from pd.concat without "
+            "ignore_index=True: give the log a fresh index with log.reset_index(drop=True)"
+        )
+    return log
 
 
 def validate_log(

@@ -53,9 +53,10 @@ def read_table(path: str | Path, labels: Sequence[str] = ("experiment",)) -> pd.
         if name.endswith(".parquet"):
             import pyarrow.parquet as pq
 
+            names = pq.read_schema(path).names
             # pyarrow reads a name given twice as one ambiguous field: a schema dump, not a line
-            refuse_repeated_names(pd.Series(pq.read_schema(path).names), path)
-            return pd.read_parquet(path)
+            refuse_repeated_names(pd.Series(names), path)
+            return fresh_index(pd.read_parquet(path), names, path)
         if name.endswith((".csv", ".csv.gz", ".txt")):
             dialect = _csv_dialect(path)
             # "t, experiment, x": a space after the separator is not part of the name
@@ -78,6 +79,23 @@ def read_table(path: str | Path, labels: Sequence[str] = ("experiment",)) -> pd.
     raise NnidInputError(
         "unknown table format; expected .csv, .csv.gz or .parquet", source=str(path)
     )
+
+
+def fresh_index(table: pd.DataFrame, stored: Sequence[str], path: str | Path) -> pd.DataFrame:
+    """A Parquet table on the row numbers 0 … n-1, as a CSV is read. pandas restores the index
+    a frame was written with: two runs joined without ``ignore_index`` kept their labels
+    twice, and everything that finds a run's rows by label mixed the runs up. An unnamed
+    index (row labels) is dropped; a named one stored as a column of the file (``stored``:
+    the schema's names; a RangeIndex is metadata, not one) is a column written as the index,
+    refused naming it rather than dropped or guessed."""
+    hidden = [n for n in table.index.names if n is not None and n in stored and n not in table]
+    if hidden:
+        raise NnidInputError(
+            f"column '{hidden[0]}' is stored as the file's index: write it as a column "
+            "(df.reset_index().to_parquet(...))",
+            source=str(path),
+        )
+    return table.reset_index(drop=True)
 
 
 def read_log(path: str | Path) -> pd.DataFrame:

@@ -33,7 +33,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from nnid.datasets.log import VELOCITY
+from nnid.datasets.log import VELOCITY, check_log
 from nnid.datasets.preprocess import excited_dofs, experiments
 from nnid.evaluation.metrics import exact_mean, exact_std, warmup_mask
 from nnid.evaluation.prediction import check_mode, mode_steps
@@ -268,6 +268,7 @@ def evaluate(
     a ``closed_loop`` method: physics models and hybrids) under it, so an open-loop unstable
     plant is compared as it was flown; the modes flown so are listed under ``closed_loop``.
     ``predictions``, when given, receives each mode's predicted DataFrame (for figures)."""
+    log = check_log(log)  # before the scored rows, which are found before any prediction
     columns = target_columns(model, log)
     out: dict[str, Any] = {"columns": columns}
     base = scored_rows(log, warmup_s, model.warmup_samples_)

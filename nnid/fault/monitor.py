@@ -28,7 +28,7 @@ from sklearn.base import BaseEstimator
 from sklearn.utils.validation import check_is_fitted
 
 from nnid.datasets.arrays import check_commands, far_beyond_range, motion_arrays
-from nnid.datasets.log import POSE, VELOCITY
+from nnid.datasets.log import POSE, VELOCITY, check_log
 from nnid.datasets.preprocess import check_attitude
 from nnid.errors import NnidInputError
 from nnid.fault import kernel
@@ -150,6 +150,7 @@ def monitor_inputs(log: pd.DataFrame, plant) -> dict[str, np.ndarray]:
     from nnid.evaluation.prediction import nearest_samples
     from nnid.models.parametric import prepare_motion
 
+    log = check_log(log)  # every entry (fit, run, detect) reads the log here first
     cols = input_columns(list(Actuation(plant.vehicle).channels))
     if plant.vehicle.thrusters:
         check_commands(log.columns, cols, plant.vehicle.name)

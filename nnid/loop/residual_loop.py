@@ -21,7 +21,7 @@ import pandas as pd
 
 from nnid.datasets.arrays import logged_inputs, nominal_forces
 from nnid.datasets.gaps import mask_gaps
-from nnid.datasets.log import ANGLES, run_pieces
+from nnid.datasets.log import ANGLES, check_log, run_pieces
 from nnid.datasets.preprocess import experiments
 from nnid.datasets.splits import say_missed_fractions, split_log
 from nnid.errors import NnidInputError
@@ -186,6 +186,7 @@ class ResidualLoop:
         starts. Warnings raised on the way (unexcited parameters, ...) are kept in
         ``warnings_``."""
         start = time.perf_counter()
+        log = check_log(log)
         report = progress or silent
         total = self.max_effects + 1
 

@@ -42,7 +42,7 @@ import torch
 from sklearn.base import BaseEstimator
 from sklearn.utils.validation import check_is_fitted
 
-from nnid.datasets.log import MOTION
+from nnid.datasets.log import MOTION, check_log
 from nnid.errors import NnidInputError
 from nnid.evaluation.prediction import check_mode
 from nnid.serialization import (
@@ -109,15 +109,6 @@ def model_class(kind: str) -> type[NnidModel]:
 def trainer_class(kind: str) -> type:
     """The trainer class of a kind ("ls", "lm", ...)."""
     return resolve(TRAINER_KINDS, kind, "trainer")
-
-
-def check_log(log: Any, name: str = "log") -> pd.DataFrame:
-    """The log of a fit or prediction: a DataFrame with rows."""
-    if not isinstance(log, pd.DataFrame):
-        raise NnidInputError(f"the {name} must be a pandas DataFrame, not {type(log).__name__}")
-    if len(log) == 0:
-        raise NnidInputError(f"the {name} has no rows")
-    return log
 
 
 # -- settings as JSON ----------------------------------------------------------------------------
