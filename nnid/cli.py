@@ -202,11 +202,14 @@ def inspect(
     )
     for ch in info["slow"]:
         slow = SlowChannel(**{k: v for k, v in ch.items() if k not in ("filled", "ends")})
+        # a rate not measured: its empty cells may be that rate, said here and not as gaps
+        unmeasured = ", nor its empty cells counted as gaps (they may be its rate)"
         how = (
             "filled between its samples with the gyro where a fit needs it on every row"
             if ch["filled"]
-            else "not filled: bridged from the pose where it allows, else a fit that reads it "
-            "takes its runs out (refused where that leaves nothing)"
+            else f"not filled{unmeasured * (ch['rate_hz'] is None)}: bridged from the pose "
+            "where it allows, else a fit that reads it takes its runs out (refused where that "
+            "leaves nothing)"
         )
         ends = f"; {say_ends(ch['ends'])}" if ch["ends"] else ""
         out.print(f"  slow          {slow.describe()} ({how}){ends}", highlight=False)

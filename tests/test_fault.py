@@ -522,6 +522,27 @@ def test_a_fault_after_an_unexplained_change_is_alarmed(vehicle, monitor, tmp_pa
     assert rows[0].endswith("<td>no</td>") and rows[1].endswith("<td>-</td>")
 
 
+def test_an_isolated_change_stays_taken_out_after_an_unexplained_alarm(vehicle, monitor, tmp_path):
+    """h1 at 50 % from 20 s (isolated, taken out), a snag from 40 s freed at 47 s (ended inside
+    its window: unexplained), then h2 at 30 % from 56 s. The statistics restart after the
+    unexplained window with nothing more taken out, h1's loss still taken out (it read 'with
+    nothing taken out', and no test watched the rows after): no alarm for h1 again, and the
+    h2 loss is a new change sized against nominal; batch and --follow alike."""
+    faults = [Fault("thruster", FAULT_T, thruster="h1", efficiency=0.5),
+              Fault("external", 40.0, force=SNAG, end=47.0),
+              Fault("thruster", 56.0, thruster="h2", efficiency=0.3)]  # fmt: skip
+    batch, _ = _followed_as_batch(monitor, simulate_faults(vehicle, 67, faults=faults, seed=3001),
+                                  tmp_path)  # fmt: skip
+    loss, snag, later = batch.alarms
+    assert (loss["thruster"], snag["kind"], snag["repeats"]) == ("h1", "model_change", 0)
+    assert "with nothing more taken out (an isolated change before it stays" in snag["meaning"]
+    # h1's loss still taken out: under the thresholds from the window's end to h2's loss
+    t, stat = batch.trace.t, batch.trace.values[:, 18:20] / monitor.threshold_values
+    assert (stat[(t > snag["t"] + 10.0) & (t < 56.0)] < 1.0).all()
+    assert (later["thruster"], later["repeats"]) == ("h2", None) and later["t"] >= 56.0
+    assert later["efficiency"] == pytest.approx(0.3, abs=0.05)
+
+
 def test_an_unexplained_change_that_persists_is_one_alarm_that_repeats(vehicle, monitor, tmp_path):
     """A declared damping term changed from 20 s: unexplained. Restarted after its window, the
     statistics alarm on it again at once (a healthy second after a window cannot tell a change
@@ -858,6 +879,33 @@ def test_a_slow_gps_position_is_held_not_masked_and_alarms_as_at_full_rate(
     from nnid.fault.monitor import monitor_motion
 
     assert {"x", "y", "z"} <= set(monitor_motion(["x", "y", "z", *"uvpqr", "phi", "theta", "psi"]))
+
+
+def test_follow_checks_a_slow_depth_on_its_samples_not_on_the_held_cells(
+    monitor, stopped_h1, tmp_path
+):
+    """A 1-Hz depth of a vehicle at 50 m, first sampled 3 s in, beside 20-Hz velocities:
+    --follow's depth-unit check read the held z (0 before its first sample), a 0 to 50 m jump
+    in a step that w does not make, and refused the log as 'the depth looks like cm or mm'
+    (z changes 792 times as fast as u, v, w say), which the whole-log reader, reading z with
+    its empty cells, passes. Its held cells are said as what they are: the run's last sample,
+    0 before its first (there was no last value at row 0)."""
+    from nnid.datasets.log import check_depth_units
+
+    # 7 to 15 s, healthy (the fault is at 20 s), the depth consistent with w
+    log = stopped_h1.iloc[140:300].reset_index(drop=True)
+    log["z"] += 50.0
+    rows = np.arange(len(log))
+    log.loc[(rows % 20 != 0) | (rows < 60), "z"] = np.nan
+    check_depth_units(log, "slow_z.csv")  # the whole-log reader's check: passes
+    log.to_csv(tmp_path / "slow_z.csv", index=False)
+    said: list[str] = []
+    follow_csv(monitor, str(tmp_path / "slow_z.csv"), 10.0, said.append, idle_s=0.0)
+    assert (
+        "z: empty cells (the first at row 0) hold their run's last sample (0 before its "
+        "first), not masked: the monitor's residual (Fossen eq. 2: ν and the attitude) never "
+        "reads z"
+    ) in said
 
 
 def test_a_detect_training_holds_a_slow_gps_position_as_detect_does(vehicle, stopped_h1, tmp_path):

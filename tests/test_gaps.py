@@ -399,6 +399,29 @@ def test_inspect_says_a_slow_channel_is_its_rate_not_hundreds_of_gaps(tmp_path):
     assert "missing" not in said
 
 
+def test_inspect_says_a_slow_channel_whose_rate_was_not_measured_once_not_as_gaps(tmp_path):
+    """u on every 5th row of a 30-row run: too few samples to measure its rate. inspect
+    listed it as slow and counted its 20 empty cells again as '5 gaps in u … bridged from the
+    pose or masked where used'. They are said once, with the slow channel, as what they may
+    be."""
+    from typer.testing import CliRunner
+
+    from nnid.cli import app
+    from nnid.datasets.inspect import summarize
+
+    log = _slow(_mocap_log(30).assign(experiment="b"), ["u"], 5)
+    info = summarize(log)
+    assert [(ch["rate_hz"], ch["samples"]) for ch in info["slow"]] == [(None, [6])]
+    assert info["missing"]["count"] == 0
+    log.to_csv(tmp_path / "short.csv", index=False)
+    done = CliRunner().invoke(app, ["inspect", str(tmp_path / "short.csv")])
+    assert done.exit_code == 0, done.output
+    said = " ".join(done.output.split())
+    assert "u's rate could not be measured in b (6 samples)" in said
+    assert "nor its empty cells counted as gaps (they may be its rate)" in said
+    assert "missing" not in said
+
+
 def test_a_fit_on_a_slow_attitude_gives_the_full_logs_estimates(tmp_path):
     """φ, θ kept on every 5th row: every row lacked them, so the split masked the whole log
     ('the training split is empty'). Read between their samples with the gyro, the roll and
@@ -601,7 +624,11 @@ def test_a_short_run_whose_rate_no_run_measures_is_said_so_not_masked_away():
     report = CleaningReport(source="test")
     (kept,) = mask_gaps([log], ["u"], report)
     assert set(kept["experiment"]) == {"c"} and [s.step for s in report.steps] == [SLOW_STEP]
-    assert "b (30 rows): u's rate could not be measured in b (6 samples)" in report.steps[0].detail
+    detail = report.steps[0].detail
+    # the run named once (it read 'b (30 rows): u's rate could not be measured in b (…)'),
+    # and its empty cells said as what they may be, not as what they are
+    assert "b (30 rows): u's rate could not be measured (6 samples): fewer than" in detail
+    assert "samples may be its rate" in detail
 
 
 def test_a_run_with_a_slow_velocity_is_taken_out_and_said_the_others_fit(tmp_path):

@@ -94,13 +94,18 @@ class SlowChannel:
     def describe(self) -> str:
         """'z logged every 10th row: 2 Hz against 20 Hz' (and 'in a, b' for some runs, 'in 350
         runs (a, b, c and 347 more)' for many: the whole list is ``runs``, e.g. in
-        ``inspect``'s summary.json); 'z's rate could not be measured in b (6 samples): …'."""
+        ``inspect``'s summary.json); 'z's rate could not be measured in b (6 samples): …' (with
+        ``runs`` None, where a sentence names the run already: '… measured (6 samples): …')."""
         if self.rate_hz is None:
             counts = [f"{n} sample{'s' * (n != 1)}" for n in self.samples or []]
+            if self.runs is None:
+                where = f"({', '.join(counts)})"
+            else:
+                where = f"in {_some_runs(self.runs, counts)}"
             return (
-                f"{self.column}'s rate could not be measured in "
-                f"{_some_runs(self.runs or [], counts)}: under the {SLOW_MIN_STEPS + 1} "
-                "samples in a run it takes, and no other run of it measured at a rate they fit"
+                f"{self.column}'s rate could not be measured {where}: fewer than the "
+                f"{SLOW_MIN_STEPS + 1} samples a rate needs, and no other run of it measured "
+                "at a rate they fit"
             )
         k = self.stride
         suffix = "th" if 10 <= k % 100 <= 20 else {1: "st", 2: "nd", 3: "rd"}.get(k % 10, "th")
@@ -137,9 +142,10 @@ def slow_channels(log: pd.DataFrame, columns: list[str] | None = None) -> list[S
     between a channel's samples within the run are one stride of two rows or more, over at
     least :data:`SLOW_MIN_STEPS` steps; runs at one stride and rate are one entry. A channel
     without an empty cell, or with scattered dropouts (its usual step one row), is not
-    slow. A run with fewer steps, one stride apart, is judged by the rate the channel's other
-    runs measure, where its steps show it; else it is an entry whose rate could not be
-    measured (``rate_hz`` None, with each run's ``samples``)."""
+    slow. A run with fewer steps, one stride apart, or a lone sample of it, is judged by the
+    rate the channel's other runs measure, where its steps show it (a lone sample shows no
+    step, so none does); else it is an entry whose rate could not be measured (``rate_hz``
+    None, with each run's ``samples``)."""
     columns = [c for c in (columns or MOTION) if c in log]
     if not columns or not log[columns].isna().to_numpy().any():
         return []
@@ -163,7 +169,9 @@ def slow_channels(log: pd.DataFrame, columns: list[str] | None = None) -> list[S
                 continue
             stride = _stride(steps)
             if steps.size < SLOW_MIN_STEPS:
-                if counted[e] and (stride or not steps.size):  # a lone sample shows nothing
+                # samples one stride apart, or a lone sample (no step): too few to measure,
+                # judged by the channel's other runs below; scattered dropouts are not slow
+                if counted[e] and (stride or not steps.size):
                     short[int(e)] = stride
                 continue
             if stride:
@@ -258,21 +266,41 @@ def between_samples(log: pd.DataFrame, slow: list[SlowChannel] | None = None) ->
     """``log`` as ``inspect`` counts its gaps: every slow channel's cells (``slow``, else
     :func:`slow_channels`) between its own samples filled linearly (the cells its rate leaves
     empty), and those outside its sampled span in a run (before its first sample, after its
-    last: said apart, :func:`span_ends`) held at its nearest sample; neither is a gap, and
-    what ``inspect`` counts as missing is the rest."""
+    last: said apart, :func:`span_ends`) held at its nearest sample, as is every empty cell of
+    a run whose rate could not be measured (said as that slow channel, they may be its rate);
+    none is a gap, and what ``inspect`` counts as missing is the rest."""
     slow = slow_channels(log) if slow is None else slow
     out = _between_samples(log, slow, {})[0]
-    runs = log["experiment"] if "experiment" in log else pd.Series(0, index=log.index)
     codes, _, order, _, _, _ = _experiment_sorted(log)
     for column in dict.fromkeys(ch.column for ch in slow):
         rows = _slow_rows(log, [ch for ch in slow if ch.column == column])
         before, after = _beyond_span(log[column].notna().to_numpy()[order], codes)
         edges = np.empty(len(log), dtype=bool)
         edges[order] = before | after
+        # a run whose rate could not be measured: its empty cells may be that rate, said
+        # once as the slow channel (its entry), never counted again as gaps
+        unmeasured = [ch for ch in slow if ch.column == column and ch.rate_hz is None]
+        edges |= _slow_rows(log, unmeasured)
         edges &= rows
-        held = out[column].groupby(runs)
-        out.loc[edges, column] = held.ffill().fillna(held.bfill())[edges]
+        values = out[column].to_numpy(np.float64)[:, None]
+        held = nearest_samples(log, values, pieces=False)[:, 0]
+        out.loc[edges, column] = held[edges]
     return out
+
+
+def nearest_samples(log: pd.DataFrame, values: np.ndarray, pieces: bool = True) -> np.ndarray:
+    """``values`` [N, k] (columns of ``log``'s rows, in its order) with each NaN taken from its
+    run's last sample before it, else its first after; NaN stays only where a run holds no
+    sample of that column. With ``pieces``, a piece cut at a gap (``piece_of``) is held within
+    the run it was cut from (a simulated pose's start, the fault monitor's held pose); without,
+    within its own label, as :func:`between_samples` counts each experiment's span."""
+    if not np.isnan(values).any():
+        return values
+    runs = log["experiment"] if "experiment" in log else pd.Series(0, log.index)
+    if pieces and PIECE_OF in log:  # a piece (a#1) may hold no sample of x where its run does
+        runs = log[PIECE_OF].where(log[PIECE_OF].notna(), runs)
+    held = pd.DataFrame(values).groupby(runs.to_numpy(object), sort=False)
+    return held.ffill().fillna(held.bfill()).to_numpy()
 
 
 def _beyond_span(present: np.ndarray, codes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -429,7 +457,7 @@ def _say_slow_runs(
             for run in names[_slow_rows(p, [ch])].unique():
                 if ch.rate_hz is None:  # no rate to say: the run's own samples of it
                     n = (ch.samples or [])[(ch.runs or []).index(run)]
-                    plain = replace(ch, runs=[run], samples=[n]).describe()
+                    plain = replace(ch, runs=None, samples=[n]).describe()  # run said before
                 else:
                     plain = replace(ch, runs=None).describe()  # its rate, the run said before
                 if plain not in why.setdefault(run, []):
@@ -437,9 +465,11 @@ def _say_slow_runs(
         for run, n in names[mask].value_counts(sort=False).items():
             rows[run] = rows.get(run, 0) + int(n)
     said = "; ".join(f"{run} ({rows[run]} rows): {', '.join(why[run])}" for run in why)
+    # where slow_channels could not measure the rate, the empty cells may be it, not are
+    are = "may be" if any(ch.rate_hz is None for ch in slow) else "are"
     return (
         f"{said}: taken out, not masked as gaps: the empty cells between a slow channel's "
-        "samples are its rate, a fit reads the motion on every row, and pieces of one row "
+        f"samples {are} its rate, a fit reads the motion on every row, and pieces of one row "
         "between them are too short to fit. Log it at the full rate, or resample the log to "
         "its rate, to fit on these runs",
         sum(rows.values()),
@@ -658,7 +688,7 @@ def say_unread(
     nothing reads it (``read``: those masked; ``reader`` says who does not, ``kept`` what the
     rows stay in and that it reads none): its rows are kept, not dropped, and an empty pose
     cell takes its run's last sample before, else first after (``start`` says what for;
-    :func:`nnid.evaluation.prediction.nearest_samples`)."""
+    :func:`nearest_samples`)."""
     empty = {c: int(log[c].isna().sum()) for c in MOTION if c in log and c not in read}
     unread = [c for c, n in empty.items() if n]
     if report is None or not unread:

@@ -14,7 +14,8 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from nnid.datasets.log import PIECE_OF, POSE, TAU, VELOCITY, check_time_unit
+from nnid.datasets.gaps import nearest_samples
+from nnid.datasets.log import POSE, TAU, VELOCITY, check_time_unit
 from nnid.datasets.preprocess import check_uniform, experiments, first_order_lag
 from nnid.errors import NnidInputError
 from nnid.physics import compiled
@@ -82,20 +83,6 @@ def measured_states(log: pd.DataFrame) -> np.ndarray:
             x[:, k] = log[c].to_numpy(np.float64)
     x[:, :6] = nearest_samples(log, x[:, :6])
     return np.nan_to_num(x)  # an undefined component (w of a tumbling vehicle) starts at zero
-
-
-def nearest_samples(log: pd.DataFrame, values: np.ndarray) -> np.ndarray:
-    """``values`` [N, k] (columns of ``log``'s rows) with each NaN taken from its run's last
-    sample before it, else its first after; a piece cut at a gap (``piece_of``) within the run
-    it was cut from. NaN stays only where a run holds no sample of that column. What
-    :func:`measured_states` starts an unread pose from, and the fault monitor holds one in."""
-    if not np.isnan(values).any():
-        return values
-    runs = log["experiment"] if "experiment" in log else pd.Series(0, log.index)
-    if PIECE_OF in log:  # a piece (a#1) may hold no sample of x where its run does
-        runs = log[PIECE_OF].where(log[PIECE_OF].notna(), runs)
-    held = pd.DataFrame(values).groupby(runs.to_numpy(object), sort=False)
-    return held.ffill().fillna(held.bfill()).to_numpy()
 
 
 def predict_states(

@@ -245,8 +245,9 @@ def unexplained(record: dict, restart_t: float) -> None:
     record["blind_until"] = record["blind"] = None
     record["meaning"] = (
         f"{record['meaning'] or 'a change no hypothesis explains'}; the statistics restart at "
-        f"the window's end ({restart_t:.2f} s) with nothing taken out: a later alarm isolated is "
-        "a new change, one that is not isolated either is this change persisting"
+        f"the window's end ({restart_t:.2f} s) with nothing more taken out (an isolated change "
+        "before it stays taken out): a later alarm isolated is a new change, one that is not "
+        "isolated either is this change persisting"
     )
 
 

@@ -19,10 +19,11 @@ of the isolation window, a later alarm judged by the same rule. The signature is
 rows) and each row waits for the half Savitzky-Golay window after it that its signature's
 acceleration is smoothed over, as batch has it, so an alarm there is announced up to that much
 later; its time is its row's. After an alarm that is not isolated the statistics restart
-after its window too, as in batch, with nothing taken out (the rows watched the same way), and a
-later alarm that is not isolated either is announced, then said withdrawn: the unexplained
-change persisting, counted in its record (:func:`~nnid.fault.detect.persisting`). The
-per-sample update of a stream before its first judged alarm is untouched.
+after its window too, as in batch, with nothing more taken out (an isolated change before it
+stays taken out; the rows watched the same way), and a later alarm that is not isolated
+either is announced, then said withdrawn: the unexplained change persisting, counted in its
+record (:func:`~nnid.fault.detect.persisting`). The per-sample update of a stream before its
+first judged alarm is untouched.
 """
 
 from __future__ import annotations
@@ -151,9 +152,9 @@ def _numbers(
     bounds (a unit slip, a corrupt sample), as the whole-log reader checks them; else the first
     bad cell, named by its column and row (an empty motion cell too: a stream has no gap
     bridging). An empty cell of a column in ``held`` (a pose the residual never reads,
-    :func:`~nnid.fault.monitor.monitor_motion`) is left out: the caller holds its last value.
-    A row of more cells than the header's ``width`` (a decimal comma; the whole-log reader
-    refuses it too) or fewer is refused: its cells would be read under other columns."""
+    :func:`~nnid.fault.monitor.monitor_motion`) is left out: the caller holds its run's last
+    sample. A row of more cells than the header's ``width`` (a decimal comma; the whole-log
+    reader refuses it too) or fewer is refused: its cells would be read under other columns."""
     if len(row) != width:
         raise NnidInputError(
             f"has {len(row)} fields against the header's {width} (a decimal comma, or a cell "
@@ -228,14 +229,18 @@ def follow_csv(
     col = {c: header.index(c) for c in header}
     state_cols = [col.get(c) for c in STATE]
     # a pose column the residual never reads (a 1-Hz GPS x, y beside a 20-Hz DVL): an empty
-    # cell holds the last value, said once a column, as batch detect holds it unmasked
+    # cell holds its run's last sample, said once a column, as batch detect holds it unmasked
     unread = [c for c in POSE if c in col and c not in monitor_motion(header)]
     kept_unread, said_held = frozenset(unread), set()
+    # which cells of each buffered row were held, not read: the unit checks see them empty,
+    # as the whole-log reader does (a held 0 before a depth's first sample read as a jump)
+    nothing_held = np.zeros(len(STATE), dtype=bool)
     input_cols = [col[c] for c in inputs]
     exp_col = col.get("experiment")
     stream = monitor.stream()
     x, u = np.zeros(12), np.zeros(len(inputs))
     ts, xs, us, vals, codes, names = [], [], [], [], [], []
+    held_cells: list[np.ndarray] = []  # per row, the cells of xs held (nothing_held: none)
     watched: list[np.ndarray] = []  # vals as watched: after an isolated change, what it leaves
     pending: list[int] = []  # row numbers counted from the first row ever read
     alarm_rows: list[int] = []
@@ -425,6 +430,7 @@ def follow_csv(
         gyro in deg/s reads a force that is not there, and the stream was watched silently."""
         i = max(exp_first, dropped + len(ts) - unit_rows, dropped) - dropped
         kept = np.array(xs[i:])
+        kept[np.array(held_cells[i:])] = np.nan
         checked = (*ANGLES, *RATE_OF.values()) if rate_unit else ()
         checked += tuple(c for c in DEPTH_UNIT_COLUMNS if depth_unit and c not in checked)
         seen = pd.DataFrame({"t": ts[i:], **{c: kept[:, STATE.index(c)] for c in checked}})
@@ -445,8 +451,8 @@ def follow_csv(
         for c in [c for c in unread if c not in values and c not in said_held]:
             said_held.add(c)
             say(
-                f"{c}: an empty cell at row {n} (a sensor logged slower than the others) holds "
-                f"the last value: {UNREAD_BY} {c}"
+                f"{c}: empty cells (the first at row {n}) hold their run's last sample (0 "
+                f"before its first), not masked: {UNREAD_BY} {c}"
             )
         for name, bounds in limits.items():
             if name in values and not bounds.holds(values[name]):
@@ -470,9 +476,13 @@ def follow_csv(
             ):
                 raise degrees_error(seen, angle, where, n)
         t = values["t"]
-        x[:] = [values.get(c, x[i] if c in kept_unread else 0.0) for i, c in enumerate(STATE)]
-        u[:] = [values[c] for c in inputs]
         name = row[exp_col] if exp_col is not None else ""
+        # held within its run, as batch holds it (a stream cannot look ahead to the run's
+        # first sample: 0 before it, which no residual reads either)
+        hold = name == current
+        x[:] = [values.get(c, x[i] if hold and c in kept_unread else 0.0)
+                for i, c in enumerate(STATE)]  # fmt: skip
+        u[:] = [values[c] for c in inputs]
         if exp_col is not None and not name.strip():  # refused by the whole-log reader too
             raise NnidInputError(
                 "empty experiment label: label every row, or remove the column for a single run",
@@ -514,6 +524,8 @@ def follow_csv(
         code = stream.update(t, x, u)
         ts.append(t)
         xs.append(x.copy())
+        empty = [c for c in unread if c not in values]
+        held_cells.append(np.isin(STATE, empty) if empty else nothing_held)
         us.append(u.copy())
         vals.append(stream.values.copy())
         watched.append(vals[-1].copy())
@@ -540,7 +552,7 @@ def follow_csv(
             if queue:  # but not the rows still to be watched, nor those their signature reads
                 cut = min(cut, queue[0] - dropped - context - 1)
             if cut > 0:
-                for buf in (ts, xs, us, vals, watched, codes):
+                for buf in (ts, xs, us, vals, watched, codes, held_cells):
                     del buf[:cut]
                 dropped += cut
     if unchecked_tail():

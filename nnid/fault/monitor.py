@@ -147,7 +147,7 @@ def monitor_inputs(log: pd.DataFrame, plant) -> dict[str, np.ndarray]:
     An empty cell of a pose column the residual does not read (:func:`monitor_motion`: a 1-Hz
     GPS x, y beside a 20-Hz DVL) takes its run's nearest sample, so the kernel, which scores
     no row with a value that is not finite, scores that row; its value changes no residual."""
-    from nnid.evaluation.prediction import nearest_samples
+    from nnid.datasets.gaps import nearest_samples
     from nnid.models.parametric import prepare_motion
 
     log = check_log(log)  # every entry (fit, run, detect) reads the log here first
