@@ -1349,6 +1349,105 @@ def test_a_small_measured_velocity_is_not_rounding(heave_only):
     assert np.isfinite(model.estimate_.theta[0])
 
 
+@pytest.fixture(scope="module")
+def minirov():
+    from importlib import resources
+
+    return load_vehicle(str(resources.files("nnid.demo_data").joinpath("minirov.toml")))
+
+
+def _surge_with_faint_turn(vehicle, level: float) -> pd.DataFrame:
+    """The demo miniROV surging at ~0.5 m/s, 20 s, under a sway force and a yaw moment of
+    ``level`` (N, N m): a real sway and yaw rate ~1e-6 of the surge speed (exact states)."""
+    t = np.arange(200) * 0.1
+    inputs = np.zeros((t.size, 6))
+    inputs[:, 0] = 40.0 + 20.0 * np.sin(0.5 * t)
+    inputs[:, 1] = level * np.sin(0.7 * t)
+    inputs[:, 5] = level * np.sin(0.9 * t)
+    return simulate(vehicle, inputs, 0.1, substeps=2, experiment="surge")
+
+
+@pytest.mark.parametrize(
+    ("names", "dofs"),
+    [
+        (["N:r", "N:r*abs(r)"], ["r"]),
+        (["Y:v", "Y:v*abs(v)", "N:r", "N:r*abs(r)"], ["v", "r"]),
+    ],
+    ids=["yaw", "sway-and-yaw"],
+)
+def test_a_quadratic_term_of_a_small_real_motion_is_not_rounding(minirov, names, dofs):
+    """A yaw rate of 2.6e-6 rad/s beside a surge of 0.5 m/s: the rounding rule's reference
+    state had every DOF at 0.5 (a yaw rate the log never had, in other units), and compared
+    r|r| (7e-12) with 1e-10 of its value there, not with 1e-10 of the motion to its power:
+    N:r*abs(r) came back "zero regressor" and N:r biased (-0.600005 for -0.6), Y:v*abs(v)
+    likewise beside them. Each column is now judged at its own kind of motion (angular rates
+    at the log's typical angular rate) and to its power (a quadratic's floor is 1e-20 of its
+    size there): measured, and exact on exact data."""
+    log = _surge_with_faint_turn(minirov, 3e-6)
+    assert 1e-6 < np.sqrt(np.mean(log["r"] ** 2)) < 1e-5 < 0.4 < log["u"].abs().median()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the noise guard's: v and r are within its noise
+        model = ParametricModel(minirov, names, dofs, trainer=LeastSquares()).fit(log)
+    assert model.estimate_.excitation.unexcited == []
+    truth = [minirov.damping.coefficients[n] for n in names]
+    assert model.estimate_.theta == pytest.approx(truth, rel=1e-6)
+
+
+def test_a_kind_of_motion_the_log_never_had_is_judged_against_the_other(heave_only):
+    """A heave-only log's roll rate is rounding (1e-17 rad/s, its largest angular rate): the
+    angular rates of the reference state are not their own typical size (rounding, against
+    which rounding is never rounding) but the linear one's over the vehicle's length;
+    K:p*abs(p) alone is zero."""
+    vehicle, log = heave_only
+    assert 0 < log["p"].abs().max() < 1e-15
+    with pytest.warns(ExcitationWarning, match=r"zero regressor\): K:p\*abs\(p\)"):
+        model = ParametricModel(vehicle, ["K:p*abs(p)"], ["p"], trainer=LeastSquares()).fit(log)
+    assert np.isnan(model.estimate_.theta[0])
+
+
+def test_rounding_floors_follow_the_motion_a_column_is_made_of():
+    """A column's floor is ROUNDING to its power of its size at the typical motion: u|u| of a
+    surge 1e-6 of the typical motion is live, of rounding (1e-17) zero; a column that does not
+    grow with the motion (a restoring term) has no floor of its own and the scalar rule
+    (ROUNDING of the typical regressor) judges it; a linear column's floor is ROUNDING of it."""
+    from nnid.evaluation.persistence import ROUNDING, excitation_from_gram, rounding_floors
+
+    s = 0.3  # the typical motion
+    floors = rounding_floors(np.array([s * s, s, 2.0]), np.array([100 * s * s, 10 * s, 2.0]))
+    assert floors[0] == pytest.approx(ROUNDING**2 * s * s)
+    assert floors[1] == pytest.approx(ROUNDING * s) and np.isnan(floors[2])
+    rng = np.random.default_rng(0)
+    for motion, live in [(1e-6 * s, True), (1e-17 * s, False)]:
+        u = motion * rng.normal(size=200)
+        phi = (u * np.abs(u))[:, None]
+        report = excitation_from_gram(phi.T @ phi, 200, ["X:u*abs(u)"], floors=floors[:1])
+        assert (report.unexcited == []) is live
+        # the scalar rule, as before, against its typical regressor: both zero there
+        scalar = excitation_from_gram(phi.T @ phi, 200, ["X:u*abs(u)"], reference=s)
+        assert scalar.unexcited == ["X:u*abs(u)"]
+
+
+def test_a_regression_computes_its_rounding_floors_only_where_a_solve_reads_them(
+    heave_only, monkeypatch
+):
+    """The floors (the regressors at the log's typical motion, twice) took 3-5 ms of every
+    regression, 19 % of its time in the residual loop, whose diagnosis, a sequence's step
+    check and the fault monitor's hypotheses read Φ alone. Now computed once, where read."""
+    vehicle, log = heave_only
+    calls = []
+    original = ParametricFossen.rounding_floors
+
+    def counted(self, data, nu_dot):
+        calls.append(1)
+        return original(self, data, nu_dot)
+
+    monkeypatch.setattr(ParametricFossen, "rounding_floors", counted)
+    reg = ParametricFossen(vehicle, ["X:u", "Z:w"], ["u", "w"]).regression(log_arrays(log, vehicle))
+    assert calls == []
+    assert reg.floors() is reg.floors() and len(calls) == 1
+    assert reg.floors().shape == (2,)
+
+
 def test_one_column_huge_on_a_few_rows_leaves_the_others_of_its_block_excited():
     """A column singular on a few rows (an (η − 1) term at U = 0: 1e12 there) set the zero
     rule's scale, the block's largest RMS (4e10), so that its other, well-excited columns were

@@ -28,8 +28,15 @@ from nnid.serialization import exact_float, read_exact_float
 #: km/s beside a force in mN, or a term of a high power of a small velocity: |r|³ of r ~ 1e-4
 #: rad/s is 1e-12 beside a velocity of 1 m/s) and call a measured column rounding; such a
 #: regression is ill-scaled in any case. Not of the target: on data of rounding the target is
-#: rounding too (X of a heave-only log), and it has other units
+#: rounding too (X of a heave-only log), and it has other units. Where a regression knows the
+#: motion its columns are made of (a Fossen regression), each column has its own floor instead
+#: (:func:`rounding_floors`): the motion it is made of at most this fraction of the log's
+#: typical motion, which is scale-free and power-aware
 ROUNDING = 1e-10
+
+#: the factor by which :func:`rounding_floors`' caller scales the reference motion to read
+#: each column's power in it
+POWER_PROBE = 10.0
 
 
 @dataclass
@@ -135,6 +142,29 @@ def typical_size(columns: np.ndarray) -> float:
     return max(sizes, default=0.0)
 
 
+def rounding_floors(at_motion: np.ndarray, at_probe: np.ndarray) -> np.ndarray:
+    """Each column's floor of the rounding rule from its typical size at a reference motion
+    (``at_motion`` ``[P]``: the log's typical motion) and at that motion scaled by
+    :data:`POWER_PROBE` (``at_probe``): the column is rounding when the motion it is made of is
+    at most :data:`ROUNDING` of the reference, so its floor is ROUNDING^p × its size at the
+    reference, p its power in the motion, log(at_probe / at_motion) / log(POWER_PROBE), clipped
+    to [1, 3]. Why powers: a quadratic column (u|u|) of a real velocity 10⁻⁶ of the typical one
+    is 10⁻¹² of its reference, and a floor of ROUNDING × reference called it rounding, where
+    rounding of a velocity is ~1e-16 of it. A column of mixed powers (an added mass: ν̇ and
+    C_A(ν)ν) reads a power between its parts'.
+
+    NaN (no floor of its own: the caller's scalar rule judges it) where the column does not
+    grow with the motion (p < 0.5: a restoring, bias or thrust column, made of the pose or the
+    inputs, which the reference motion does not change: against itself it could never be
+    rounding) or is zero at the reference motion (nothing to compare with)."""
+    one = np.asarray(at_motion, dtype=np.float64)
+    probe = np.asarray(at_probe, dtype=np.float64)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        power = np.log(probe / one) / np.log(POWER_PROBE)
+    moves = (one > 0) & np.isfinite(one) & np.isfinite(power) & (power >= 0.5)
+    return np.where(moves, ROUNDING ** np.clip(np.nan_to_num(power), 1.0, 3.0) * one, np.nan)
+
+
 def excitation_report(
     phi: np.ndarray,
     names: list[str],
@@ -158,6 +188,7 @@ def excitation_from_gram(
     left_out: Sequence[str] = (),
     column_rms: np.ndarray | None = None,
     reference: float = 0.0,
+    floors: np.ndarray | None = None,
 ) -> ExcitationReport:
     """The same report from ΦᵀΦ (cheap for long logs): singular values of the unit-RMS-scaled
     regressor are the square roots of the eigenvalues of its scaled Gram matrix. ``left_out``:
@@ -174,7 +205,10 @@ def excitation_from_gram(
     one column singular on a few rows would inflate.
     ``column_rms``: each column's RMS unweighted, where ``gram`` is weighted (weights that
     scale each equation by its residual made a column of rounding as large as any); both rules
-    read it."""
+    read it. ``floors`` ``[P]``: each column's own floor of the rounding rule where it is not
+    NaN (:func:`rounding_floors`, a Fossen regression's), in place of ROUNDING × ``reference``:
+    a column is compared with itself at the log's typical motion, to its power, not with the
+    other columns (a yaw rate 1e-6 of the surge speed is measured, and its r|r| 1e-12)."""
     p = len(names)
     rms = np.sqrt(np.clip(np.diag(gram), 0.0, None) / max(n, 1))
     raw = rms if column_rms is None else np.asarray(column_rms, dtype=np.float64)
@@ -187,7 +221,11 @@ def excitation_from_gram(
     # (an (η − 1) term at U = 0, 1e12) made every other column of its block "zero regressor";
     # unweighted, as weights of 1/σ̂² per equation (beside one of exact data: 1e16) did the same
     block = min(raw.max(initial=0.0), typical)
-    live = (rms > 0) & (raw > tol * block) & (raw > ROUNDING * typical)
+    floor = np.full(p, ROUNDING * typical)
+    if floors is not None:  # a column's own floor, where its regression gives one
+        own = np.asarray(floors, dtype=np.float64)
+        floor = np.where(np.isnan(own), floor, own)
+    live = (rms > 0) & (raw > tol * block) & (raw > floor)
     unexcited = [names[j] for j in range(p) if not live[j]]
     d = np.where(live, 1.0 / np.where(live, rms, 1.0), 0.0)
     normed = gram * np.outer(d, d) / max(n, 1)

@@ -41,7 +41,7 @@ from nnid.datasets.preprocess import (
     zoh_midpoint,
 )
 from nnid.errors import ExcitationWarning, NnidInputError
-from nnid.evaluation.persistence import typical_size
+from nnid.evaluation.persistence import POWER_PROBE, ROUNDING, rounding_floors, typical_size
 from nnid.evaluation.prediction import (
     Replay,
     blank_initial,
@@ -173,9 +173,28 @@ def regression_trainer(trainer: object, field: str = "trainer") -> Any:
     return clone(trainer, safe=False)
 
 
-#: the rows :meth:`ParametricFossen.motion_reference` evaluates at most: its state is one
+#: the rows :meth:`ParametricFossen.rounding_floors` evaluates at most: its state is one
 #: constant motion, the rows differ only by pose and inputs
 REFERENCE_ROWS = 256
+
+
+def typical_motion(x: np.ndarray, length: float) -> np.ndarray:
+    """The reference state of the rounding rule for ``x`` ``[N, 6]`` (ν, or ν̇): u, v, w at
+    the largest typical |linear| entry and p, q, r at the largest typical |angular| one
+    (:func:`~nnid.evaluation.persistence.typical_size`), so that each kind is in its own units
+    (one number for all six compared a yaw-only fit with a yaw rate of the surge speed, 0.49
+    rad/s, where the log had 2.5e-6, and called its r|r| rounding). A kind whose typical
+    size is itself rounding beside the other's (at most
+    :data:`~nnid.evaluation.persistence.ROUNDING` of it, angular rates taken over ``length``:
+    the rates at the ends of the vehicle) takes the other's over ``length``, as a log that
+    never moved in that kind gives no size of its own: its rounding (1e-17 rad/s of a
+    heave-only log) would be the reference of itself, and never rounding."""
+    linear, angular = typical_size(x[:, :3]), typical_size(x[:, 3:])
+    if angular * length <= ROUNDING * linear:
+        angular = linear / length
+    elif linear <= ROUNDING * angular * length:
+        linear = angular * length
+    return np.repeat([linear, angular], 3)
 
 
 class ParametricFossen:
@@ -279,9 +298,12 @@ class ParametricFossen:
         n = int(keep.sum())
         phi = np.stack(cols, 1) if cols else np.zeros((n * len(rows), 0))
         acceleration = data["nu_dot"] if nu_dot_f is None else nu_dot_f
-        reference = self.motion_reference(data, acceleration[keep])
         y = -r0[keep][:, rows].reshape(-1)
-        return Regression(phi, y, list(self.names), self.dofs, n, reference)
+
+        def floors() -> np.ndarray:  # only where a solve reads them (Regression.floors)
+            return self.rounding_floors(data, acceleration[keep])
+
+        return Regression(phi, y, list(self.names), self.dofs, n, floors)
 
     def _columns(
         self,
@@ -303,25 +325,28 @@ class ParametricFossen:
             cols.append(self.equation_residual(unit, data, filter_lambda, nu_dot_f) - r0)
         return r0, cols
 
-    def motion_reference(self, data: dict[str, np.ndarray], nu_dot: np.ndarray) -> float:
-        """The reference of the rounding rule (:data:`~nnid.evaluation.persistence.ROUNDING`)
-        for this structure's regression on ``data``: the typical size of its regressors had
-        the log moved in every DOF at its typical speed and acceleration (``nu_dot``, the
-        accelerations the regression reads: logged, or sF(s)[ν] of the filtered form).
+    def rounding_floors(self, data: dict[str, np.ndarray], nu_dot: np.ndarray) -> np.ndarray:
+        """Each unknown's floor of the rounding rule
+        (:func:`~nnid.evaluation.persistence.rounding_floors`) for this structure's regression
+        on ``data``: its column at the log's typical motion, and at that motion times
+        :data:`~nnid.evaluation.persistence.POWER_PROBE` for its power in it. The typical
+        motion (:func:`typical_motion`): ν of each kind (linear, angular) at the largest
+        typical |ν| of that kind, ν̇ likewise of ``nu_dot`` (the accelerations the regression
+        reads: logged, or sF(s)[ν] of the filtered form); both are scaled, as a motion of
+        larger amplitude at the same frequencies has both larger, so that an added mass's ν̇
+        column is of power 1 in it, as its velocity's. Row by row otherwise (η, the inputs),
+        on at most :data:`REFERENCE_ROWS` rows drawn by a fixed local generator: the rule needs
+        a size within decades.
 
         Why not the regression's own columns: a one-DOF fit whose every column is rounding
         (X:u alone on a heave-only log, u ~ 1e-17) has nothing to be compared with, and read
-        X:u = -13.7 off a target of rounding as a precise estimate. Why the same regressors at
-        the log's motion, not that motion itself: a column's units are its term's (u|u| is a
-        velocity squared), so it is compared with itself at a state where ν = s in every DOF
-        and ν̇ = a, s and a the largest per-DOF median |ν| and |ν̇| of the log
-        (:func:`~nnid.evaluation.persistence.typical_size`): s² for u|u|, s for u, a (and the
-        C_A(ν)ν products of s) for an added mass. Row by row otherwise (η, the inputs), on at
-        most :data:`REFERENCE_ROWS` rows drawn by a fixed local generator: the rule needs a
-        size within decades. A log at rest in every DOF (all of ν rounding) gives a reference
-        of rounding, and the rule then finds nothing: there is no motion to compare with."""
+        X:u = -13.7 off a target of rounding as a precise estimate. Why each column at the
+        motion to its power, not one size for all: the columns' units and powers differ (u|u|
+        of a real surge 1e-6 of the heave is 1e-12 of the heave's w|w|, not rounding). A log at
+        rest in every DOF (all of ν rounding) gives floors of rounding, and the rule then finds
+        nothing: there is no motion to compare with."""
         if not self.names:
-            return 0.0
+            return np.zeros(0)
         n = data["t"].size
         picked = np.arange(n)
         if n > REFERENCE_ROWS:
@@ -331,11 +356,18 @@ class ParametricFossen:
             for k, v in data.items()
             if isinstance(v, np.ndarray) and v.shape[:1] == (n,)
         }
-        moved["nu"] = np.full((picked.size, 6), typical_size(data["nu"]))
-        moved["nu_dot"] = np.full((picked.size, 6), typical_size(nu_dot))
-        _, columns = self._columns(moved)
+        # the rates at the ends of the vehicle, where its file gives its length; else a
+        # metre, the scale the rule's ROUNDING assumes of a vehicle in SI units
+        length = self.vehicle.length or 1.0
+        nu, acc = typical_motion(data["nu"], length), typical_motion(nu_dot, length)
         rows = [DOFS.index(d) for d in self.dofs]
-        return typical_size(np.stack([c[:, rows].reshape(-1) for c in columns], 1))
+        sizes = []
+        for scale in (1.0, POWER_PROBE):
+            moved["nu"] = np.tile(scale * nu, (picked.size, 1))
+            moved["nu_dot"] = np.tile(scale * acc, (picked.size, 1))
+            _, columns = self._columns(moved)
+            sizes.append([typical_size(c[:, rows].reshape(-1, 1)) for c in columns])
+        return rounding_floors(np.array(sizes[0]), np.array(sizes[1]))
 
     def damping_force(self, data: dict[str, np.ndarray]) -> np.ndarray:
         """McCarter's residual force τ̄ = M ν̇ + C(ν)ν + g(η) − τ (eq. 4.4, his g on the other

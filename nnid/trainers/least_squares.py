@@ -170,8 +170,9 @@ def rounding_scale(fitted: np.ndarray, reference: float = 0.0) -> tuple[np.ndarr
     """What the rounding rule (:data:`~nnid.evaluation.persistence.ROUNDING`) of
     :func:`excitation_from_gram` compares: each column's RMS over the ``fitted`` rows
     ``[N, P]`` (finite, those the fit reads), unweighted, and the reference it is compared
-    with, ``reference`` (the regression's at its typical motion,
-    :attr:`~nnid.trainers.regression.Regression.reference`) or the rows' own
+    with where a column has no floor of its own
+    (:meth:`~nnid.trainers.regression.Regression.floors`), ``reference`` (the typical size of
+    the regression this one is a block of) or the rows' own
     :func:`~nnid.evaluation.persistence.typical_size` where larger. Unweighted because a fit
     that weights each equation by 1/σ̂² (feasible weighting, the recursive fit's memory check)
     scales an equation of rounding up by ~1e34, and its column then looked as large as any."""
@@ -186,6 +187,7 @@ def solve_least_squares(
     names: list[str] | None = None,
     check: bool = True,
     reference: float = 0.0,
+    floors: np.ndarray | None = None,
 ) -> Estimate:
     """Weighted least squares with covariance, through the normal equations of the
     column-scaled regressor (fast on long logs; the excitation check guards conditioning).
@@ -194,7 +196,9 @@ def solve_least_squares(
     value, a warning, and no standard error (NaN), since only their combination is measured.
     ``reference``: the typical regressor size of the whole regression ``phi`` is a block of
     (:func:`~nnid.evaluation.persistence.typical_size`), against which a column of rounding is
-    zero (:func:`excitation_from_gram`); ``phi``'s own, where larger."""
+    zero (:func:`excitation_from_gram`); ``phi``'s own, where larger. ``floors``: each
+    column's own floor of that rule, where not NaN
+    (:func:`~nnid.evaluation.persistence.rounding_floors`)."""
     names = names or [f"theta{k}" for k in range(phi.shape[1])]
     finite = np.isfinite(y) & np.isfinite(phi).all(1)
     left_out: list[str] = []
@@ -225,7 +229,9 @@ def solve_least_squares(
     rows = np.ones(n, dtype=bool) if weights is None else np.asarray(weights) > 0
     raw, reference = rounding_scale(phi[rows], reference)
     report = (
-        excitation_from_gram(gram, n, names, left_out=left_out, column_rms=raw, reference=reference)
+        excitation_from_gram(
+            gram, n, names, left_out=left_out, column_rms=raw, reference=reference, floors=floors
+        )
         if check
         else None
     )
@@ -309,11 +315,14 @@ class LeastSquares(BaseEstimator):
 
     def solve(self, reg: Regression, reference: float = 0.0) -> Estimate:
         """Solve ``reg``; ``reference``: the typical regressor size of the regression it is a
-        block of (:func:`solve_least_squares`), or ``reg``'s own where larger."""
+        block of (:func:`solve_least_squares`), or ``reg``'s own where larger; a column with a
+        floor of its own (:meth:`Regression.floors`) is judged by that instead."""
         if self.weighting not in ("feasible", "none"):
             raise NnidInputError("weighting is 'feasible' or 'none'", field="weighting")
-        reference = max(reference, reg.reference)
-        est = solve_least_squares(reg.phi, reg.y, names=reg.names, reference=reference)
+        floors = reg.floors()
+        est = solve_least_squares(
+            reg.phi, reg.y, names=reg.names, reference=reference, floors=floors
+        )
         dof_sigma2 = self._dof_variances(reg, est.theta)
         if self.weighting == "feasible" and len(reg.dofs) > 1:
             w = np.empty(reg.y.size)
@@ -324,7 +333,9 @@ class LeastSquares(BaseEstimator):
             # weights change neither which rows are finite nor which columns are zero): said
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", ExcitationWarning)
-                est = solve_least_squares(reg.phi, reg.y, w, reg.names, reference=reference)
+                est = solve_least_squares(
+                    reg.phi, reg.y, w, reg.names, reference=reference, floors=floors
+                )
             # but its verdict may differ: 1/σ̂² beside an equation of exact data (~1e18) left
             # a pair separable only in the other equation collinear, and dropped it unsaid
             changed = (

@@ -164,9 +164,9 @@ def _memory_excitation(
 ) -> tuple[ExcitationReport, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The excitation check of the rows of samples ``first``…end, each DOF equation weighted
     by 1/(its residual variance at ``theta``) so that forces and moments compare, its columns
-    of rounding judged unweighted against the regression's reference (:func:`rounding_scale`,
-    as batch least squares judges them); also the used-row mask, the regressor and target
-    with the unused rows zeroed, and the residual."""
+    of rounding judged unweighted against the regression's floors (:meth:`Regression.floors`)
+    or its own columns (:func:`rounding_scale`), as batch least squares judges them; also the
+    used-row mask, the regressor and target with the unused rows zeroed, and the residual."""
     m = len(reg.dofs)
     rows = slice(first * m, reg.n_samples * m)
     phi, y = reg.phi[rows], reg.y[rows]
@@ -181,7 +181,7 @@ def _memory_excitation(
     # the same rows as the Gram: the memory is a window of them, not λᵏ-weighted, so the
     # unweighted RMS forgets as the Gram does. Weighted alone, an equation of rounding (X of a
     # heave-only log, σ̂² ~ 1e-34) made its column as large as any: X:u read -1.9e-26, a value
-    raw, reference = rounding_scale(phi[ok], reg.reference)
+    raw, reference = rounding_scale(phi[ok])
     report = excitation_from_gram(
         gram,
         int(ok.sum()),
@@ -189,6 +189,7 @@ def _memory_excitation(
         left_out=left_out,
         column_rms=raw,
         reference=reference,
+        floors=reg.floors(),
     )
     return report, ok, phi, y, r
 

@@ -7,7 +7,8 @@ DOF equation.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Callable
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -21,12 +22,23 @@ class Regression:
     names: list[str]
     dofs: tuple[str, ...]
     n_samples: int
-    #: the typical regressor size against which a column of rounding is zero
-    #: (:func:`~nnid.evaluation.persistence.excitation_from_gram`) where the regression's own
-    #: columns cannot give it (all of them rounding); 0: none but its own. A Fossen regression
-    #: gives its regressors at the log's typical motion
-    #: (:meth:`~nnid.models.parametric.ParametricFossen.motion_reference`)
-    reference: float = 0.0
+    #: what gives each column's floor of the rounding rule
+    #: (:func:`~nnid.evaluation.persistence.rounding_floors`), called by :meth:`floors` only
+    #: where a solve reads them: a Fossen regression's are its columns at the log's typical
+    #: motion (:meth:`~nnid.models.parametric.ParametricFossen.rounding_floors`), a cost that
+    #: callers who read Φ alone (the loop's diagnosis, a sequence's step check) need not pay.
+    #: None: no floors of its own; the rule compares the columns with each other
+    motion: Callable[[], np.ndarray] | None = field(default=None, repr=False, compare=False)
+    _floors: np.ndarray | None = field(default=None, init=False, repr=False, compare=False)
+
+    def floors(self) -> np.ndarray | None:
+        """Each column's floor of the rounding rule ``[P]`` (NaN: none of its own), computed
+        once, or None where the regression gives none (:attr:`motion`)."""
+        if self.motion is None:
+            return None
+        if self._floors is None:
+            self._floors = np.asarray(self.motion(), dtype=np.float64)
+        return self._floors
 
     def dof_rows(self, dof: str) -> np.ndarray:
         """Row indices of one DOF's equation."""
