@@ -981,6 +981,8 @@ def _nondimensional(params: dict, vehicle, speed: float) -> dict:
             "value": entry["value"] / scale,
             "stderr": None if se is None else se / scale,
             "excited": entry.get("excited", True),
+            # learnt before a recursive estimator's memory: not fitted to noise
+            **({"remembered": True} if entry.get("remembered") else {}),
         }
     return out
 

@@ -262,13 +262,92 @@ def test_rls_memory_warning_words_match_the_case():
     assert "theta0" not in str(caught[0].message) and "no sample" not in str(caught[0].message)
     phi[200:, 1] = 0.0  # b unexcited over the last 100 samples only: remembered
     reg = Regression(phi, phi @ [2.0, -3.0] + noise, ["a", "b"], ("u",), noise.size)
-    with pytest.warns(ExcitationWarning, match="b keep the value learnt before") as caught:
+    with pytest.warns(ExcitationWarning, match=r"value remembered from earlier .*: b") as caught:
         RecursiveLeastSquares(forgetting=0.99).solve(reg)
     assert "theta0" not in str(caught[0].message)
     phi[:, 1] = 0.0  # b never excited: it never left theta0
     reg = Regression(phi, phi @ [2.0, -3.0] + noise, ["a", "b"], ("u",), noise.size)
     with pytest.warns(ExcitationWarning, match="value of b: no sample .* never left theta0"):
         RecursiveLeastSquares().solve(reg)
+
+
+def _remembered_and_never(n: int = 400):
+    """Three parameters, λ = 0.99 (a 100-sample memory): "X:u" excited throughout, "X:v"
+    excited in the first half only (unexcited in the memory: its value is remembered), "X:w"
+    never excited (NaN). Returns the estimate and the warnings' text."""
+    phi, noise = _two_regressors(n)
+    phi = np.c_[phi, np.zeros(n)]
+    phi[n // 2 :, 1] = 0.0
+    reg = Regression(phi, phi @ [2.0, -3.0, 1.0] + noise, ["X:u", "X:v", "X:w"], ("u",), n)
+    with pytest.warns(ExcitationWarning) as caught:
+        est = RecursiveLeastSquares(forgetting=0.99).solve(reg)
+    return est, " | ".join(str(w.message) for w in caught)
+
+
+def test_rls_says_a_value_learnt_before_its_memory_remembered_not_fitted_to_noise():
+    """A parameter excited in the first half of a run and zero over the memory keeps the
+    value learnt from the excited samples (-3.0), yet the estimate's verdict was a plain
+    "excited": False, so the table's cell said "not excited", the Prime-system section "not
+    excited by the data: fitted to noise" and the report's warning "zero regressor": false of
+    a value learnt from excited data. A parameter no sample of the run excited keeps those."""
+    from nnid.evaluation.persistence import REMEMBERED
+    from nnid.pipeline import _nondimensional
+    from nnid.reports.train_report import PRIME_NOT_EXCITED, _prime, _significance
+
+    est, said = _remembered_and_never()
+    assert est.theta[1] == pytest.approx(-3.0, abs=0.2) and np.isnan(est.theta[2])
+    params = est.as_dict()
+    assert params["X:v"]["excited"] is False and params["X:v"]["remembered"] is True
+    assert params["X:w"]["excited"] is False and "remembered" not in params["X:w"]
+    assert _significance(params["X:v"]) == REMEMBERED
+    assert _significance(params["X:w"]) == "not excited"  # never excited: unchanged
+    assert f"{REMEMBERED}: X:v" in said and "zero regressor): X:w" in said
+    assert "zero regressor): X:v" not in said and "X:v, X:w" not in said
+    _, items = _prime({"nondimensional": _nondimensional(params, load_vehicle("seamor"), 1.0)})
+    prime = dict(items)
+    assert "remembered from earlier samples" in prime["X:v'"]
+    assert PRIME_NOT_EXCITED not in prime["X:v'"]  # X:w has no value: no Prime line
+
+
+def test_the_remembered_verdict_survives_saving_and_every_rebuilt_report():
+    """The estimate saved and read back, renamed (Caccia's signs) or joined with others (a
+    sequence's steps) says "remembered" as the fit did; a file saved before the verdict was
+    kept reads as before (unexcited, said in its saved warnings)."""
+    import json
+
+    from nnid.evaluation.persistence import REMEMBERED, ExcitationReport, combined_excitation
+    from nnid.serialization import dumps
+    from nnid.trainers.least_squares import Estimate
+
+    est, _ = _remembered_and_never()
+    saved = json.loads(dumps(est.as_state()))
+    back = Estimate.from_state(saved)
+    assert back.as_dict()["X:v"].get("remembered") is True
+    report = est.excitation
+    renamed = report.renamed({"X:v": "Y:v"})
+    union = combined_excitation([(est.names, report)], est.names)
+    for rebuilt, name in ((back.excitation, "X:v"), (renamed, "Y:v"), (union, "X:v")):
+        assert rebuilt.remembered == [name] and f"{REMEMBERED}: {name}" in rebuilt.warnings
+    older = {k: v for k, v in saved["excitation"].items() if k != "remembered"}
+    old = ExcitationReport.from_state(older)
+    assert old.remembered == [] and old.unexcited == report.unexcited
+    assert old.warnings == report.warnings  # its own words, as saved
+
+
+def test_a_model_that_judges_the_run_noise_says_fitted_to_noise_not_remembered():
+    """The model's own check (its velocities within their noise over the whole fit data,
+    ``not_excited_``) outranks the recursive estimator's "remembered": whatever the samples
+    before the memory read, the run's motion was noise, and its table says "not excited"."""
+    from nnid.reports.train_report import _significance
+
+    est, _ = _remembered_and_never()
+    model = ParametricModel(load_vehicle("seamor"), ["X:u", "X:v", "X:w"])
+    model.estimate_, model.from_file_ = est, {}
+    model.not_excited_ = {"X:v": ["v"]}
+    params = model._params()
+    assert "remembered" not in params["X:v"] and _significance(params["X:v"]) == "not excited"
+    model.not_excited_ = {}
+    assert model._params()["X:v"]["remembered"] is True
 
 
 def test_rls_that_has_not_converged_says_so():

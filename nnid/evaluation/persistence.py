@@ -38,6 +38,10 @@ ROUNDING = 1e-10
 #: each column's power in it
 POWER_PROBE = 10.0
 
+#: the verdict on a parameter a recursive estimator's memory does not excite but earlier
+#: samples of its run did: its value is learnt from data, not fitted to noise, and kept
+REMEMBERED = "not excited in the estimator's memory (value remembered from earlier samples)"
+
 
 @dataclass
 class ExcitationReport:
@@ -54,6 +58,9 @@ class ExcitationReport:
     #: finite): not measured, rather than a zero regressor; kept so that a report rebuilt from
     #: this one (:meth:`renamed`, :func:`combined_excitation`) says the same
     not_measured: list[str] = field(default_factory=list)
+    #: the unexcited parameters whose values a recursive estimator learnt from samples before
+    #: its memory (:data:`REMEMBERED`), kept so that a rebuilt or saved report says the same
+    remembered: list[str] = field(default_factory=list)
 
     @property
     def persistent(self) -> bool:
@@ -71,13 +78,28 @@ class ExcitationReport:
         unexcited = [names.get(n, n) for n in self.unexcited]
         collinear = [names.get(n, n) for n in self.collinear]
         unread = [names.get(n, n) for n in self.not_measured]
+        kept = [names.get(n, n) for n in self.remembered]
         return replace(
             self,
             unexcited=unexcited,
             collinear=collinear,
-            warnings=_verdict_warnings(unexcited, collinear, self.rank, self.n_params, unread),
+            warnings=_verdict_warnings(
+                unexcited, collinear, self.rank, self.n_params, unread, kept
+            ),
             not_measured=unread,
+            remembered=kept,
         )
+
+    def with_remembered(self, remembered: Sequence[str]) -> ExcitationReport:
+        """The same report where its unexcited parameters among ``remembered`` kept a value
+        learnt from earlier data (a recursive estimator's memory check: samples before the
+        memory excited them): said so, not "zero regressor", whose "fitted to noise" would be
+        false of a value learnt from excited data."""
+        kept = [n for n in self.unexcited if n in remembered]
+        warnings = _verdict_warnings(
+            self.unexcited, self.collinear, self.rank, self.n_params, self.not_measured, kept
+        )
+        return replace(self, warnings=warnings, remembered=kept)
 
     @classmethod
     def from_state(cls, state: object) -> ExcitationReport:
@@ -104,6 +126,7 @@ class ExcitationReport:
         what = "the excitation report's singular values"
         # files saved before the verdict was kept have none: their warnings still say it
         unread = names("not_measured") if "not_measured" in state else []
+        kept = names("remembered") if "remembered" in state else []
         return cls(
             count("n_samples"),
             count("n_params"),
@@ -115,6 +138,7 @@ class ExcitationReport:
             names("collinear"),
             names("warnings"),
             unread,
+            kept,
         )
 
 
@@ -264,13 +288,23 @@ def excitation_from_gram(
 
 
 def _verdict_warnings(
-    unexcited: list[str], collinear: list[str], rank: int, p: int, left_out: Sequence[str] = ()
+    unexcited: list[str],
+    collinear: list[str],
+    rank: int,
+    p: int,
+    left_out: Sequence[str] = (),
+    remembered: Sequence[str] = (),
 ) -> list[str]:
     """The report's warnings: the parameters it names, or its rank deficit when it names none;
-    an unexcited one in ``left_out`` had its regressor only in rows left out (not finite)."""
+    an unexcited one in ``left_out`` had its regressor only in rows left out (not finite), one
+    in ``remembered`` keeps a value learnt before a recursive estimator's memory
+    (:data:`REMEMBERED`, whichever of the two the memory lacked: its value rests on data)."""
     warnings = []
-    zero = [n for n in unexcited if n not in left_out]
-    unread = [n for n in unexcited if n in left_out]
+    kept = [n for n in unexcited if n in remembered]
+    zero = [n for n in unexcited if n not in left_out and n not in remembered]
+    unread = [n for n in unexcited if n in left_out and n not in remembered]
+    if kept:
+        warnings.append(f"{REMEMBERED}: {', '.join(kept)}")
     if zero:
         warnings.append(f"not excited by this data (zero regressor): {', '.join(zero)}")
     if unread:
@@ -337,10 +371,11 @@ def combined_excitation(
     unexcited = [n for n in names if last.get(n) in reports and n in reports[last[n]].unexcited]
     collinear = [n for n in names if last.get(n) in reports and n in reports[last[n]].collinear]
     unread = [n for n in unexcited if n in reports[last[n]].not_measured]
+    kept = [n for n in unexcited if n in reports[last[n]].remembered]
     unchecked += [n for n in names if n not in last]
     rank = len(names) - len({*unexcited, *collinear, *unchecked})
     # no rank-deficit line: there is no one regressor whose rank fell short
-    warnings = _verdict_warnings(unexcited, collinear, len(names), len(names), unread)
+    warnings = _verdict_warnings(unexcited, collinear, len(names), len(names), unread, kept)
     if unchecked:
         warnings.append(
             f"not checked for excitation (a part without a check): {', '.join(unchecked)}"
@@ -357,4 +392,5 @@ def combined_excitation(
         collinear,
         warnings,
         unread,
+        kept,
     )

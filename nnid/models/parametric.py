@@ -1546,6 +1546,9 @@ class ParametricModel(FossenPlant):
         # fitted to noise: no verdict of significance, and no standard error, whose noise
         # model does not hold there (unexcited_unknowns); every report then shows none
         for name in self.not_excited_:
+            # the model's own check of the fit data overrides a recursive estimator's
+            # "remembered": whatever earlier samples excited, the run's motion is noise
+            params[name].pop("remembered", None)
             params[name] = {
                 **params[name],
                 "stderr": None,

@@ -16,6 +16,7 @@ import pandas as pd
 from nnid.datasets.log import TAU, VELOCITY
 from nnid.datasets.preprocess import experiments
 from nnid.evaluation.evaluate import diverged_columns
+from nnid.evaluation.persistence import REMEMBERED
 from nnid.fault.thresholds import rate_caveat
 from nnid.physics.dofs import DOFS, FORCES
 from nnid.reports.cells import number, score_cell, thresholds_cell
@@ -94,9 +95,13 @@ def _significance(p: dict) -> str:
     """The significance cell: "yes" or "no" by the 95 % test, "not measured" for a parameter
     only rows the fit left out read (not finite: no data on it at all), "not excited" for one
     the data do not excite (its model's ``not_excited_``, or a zero regressor: fitted to noise
-    or not at all, its "no" is no test result), "collinear" for one the data do not separate
-    from others (only their combination is measured), "-" where no test ran (a jointly trained
-    value without s.e.)."""
+    or not at all, its "no" is no test result), :data:`REMEMBERED` for one a recursive
+    estimator's memory does not excite but earlier samples did (its value is learnt from data;
+    before "not measured", which the memory alone may say of it), "collinear" for one the data
+    do not separate from others (only their combination is measured), "-" where no test ran (a
+    jointly trained value without s.e.)."""
+    if p.get("remembered"):
+        return REMEMBERED
     if p.get("measured") is False:
         return "not measured"
     if p.get("excited") is False:
@@ -109,6 +114,18 @@ def _significance(p: dict) -> str:
 
 
 PRIME_NOT_EXCITED = "(not excited by the data: fitted to noise, no standard error)"
+#: one excited before a recursive estimator's memory only (:data:`REMEMBERED`)
+PRIME_REMEMBERED = (
+    "(not excited in the estimator's memory: value remembered from earlier samples, "
+    "no standard error)"
+)
+
+
+def _prime_error(v: dict) -> str:
+    """What follows a Prime-system value: its standard error, or why it has none."""
+    if v.get("remembered"):
+        return PRIME_REMEMBERED
+    return f"± {number(v['stderr'], 2)}" if v.get("excited", True) else PRIME_NOT_EXCITED
 
 
 def _prime(metrics: dict) -> tuple[str, list[tuple[str, str]]] | None:
@@ -119,14 +136,7 @@ def _prime(metrics: dict) -> tuple[str, list[tuple[str, str]]] | None:
     if not nd:
         return None
     title = f"Prime-system I (U = {nd['speed']} m/s, L = {nd['length']} m)"
-    items = [
-        (
-            k,
-            f"{number(v['value'], 5)} "
-            + (f"± {number(v['stderr'], 2)}" if v.get("excited", True) else PRIME_NOT_EXCITED),
-        )
-        for k, v in nd["params"].items()
-    ]
+    items = [(k, f"{number(v['value'], 5)} {_prime_error(v)}") for k, v in nd["params"].items()]
     return title, items
 
 

@@ -107,8 +107,10 @@ class Estimate:
         "significant": bool}}``; a number that is not finite (an unidentified parameter) is
         None. A parameter the excitation check (Weiss eqs 93-98) found unexcited also has
         ``"excited": False`` (and ``"measured": False`` where only rows left out read it:
-        :attr:`ExcitationReport.not_measured`), one it found collinear ``"collinear": True``:
-        its "not significant" is no test result, and the reports say why."""
+        :attr:`ExcitationReport.not_measured`; ``"remembered": True`` where a recursive
+        estimator learnt its value before its memory: :attr:`ExcitationReport.remembered`), one
+        it found collinear ``"collinear": True``: its "not significant" is no test result, and
+        the reports say why."""
         out: dict[str, dict[str, float | bool | None]] = {
             n: {
                 "value": _finite(v),
@@ -132,6 +134,9 @@ class Estimate:
         for name in [] if report is None else report.not_measured:
             if name in out:  # only rows left out read it: no data on it, not unexcited data
                 out[name]["measured"] = False
+        for name in [] if report is None else report.remembered:
+            if name in out:  # unexcited in the memory only: its value is learnt from data
+                out[name]["remembered"] = True
         for name in [] if report is None else report.collinear:
             if name in out:
                 out[name]["collinear"] = True

@@ -222,8 +222,10 @@ def window_covariance(
 
 def _warn_memory_excitation(report: ExcitationReport, never: list[str], window: int) -> None:
     """Say which parameters the memory's excitation check left without a standard error, and
-    what became of the values of its unexcited ones. Only an unexcited parameter can have
-    never left theta0: the note on it would misdescribe a warning about collinear ones."""
+    what became of the values of its unexcited ones: those earlier samples excited are said
+    remembered by the report's own words (:meth:`ExcitationReport.with_remembered`). Only an
+    unexcited parameter can have never left theta0: the note on it would misdescribe a
+    warning about collinear ones."""
     if not report.warnings:
         return
     notes = []
@@ -234,9 +236,6 @@ def _warn_memory_excitation(report: ExcitationReport, never: list[str], window: 
             + ("it, and it" if one else "them, and they")
             + " never left theta0"
         )
-    remembered = [nm for nm in report.unexcited if nm not in never]
-    if remembered:
-        notes.append(f"{', '.join(remembered)} keep the value learnt before the memory")
     warnings.warn(
         f"over the estimator's memory (the last {window} samples): "
         + "; ".join(report.warnings)
@@ -343,6 +342,9 @@ class RecursiveLeastSquares(BaseEstimator):
         # (batch least squares gives NaN), where one unexcited only in the memory window is
         # remembered from earlier data and kept
         never = (report if first == 0 else _memory_excitation(reg, theta, 0)[0]).unexcited
+        # said so wherever the verdict goes (the table, the Prime system, the warnings): "zero
+        # regressor", read as "fitted to noise", is false of a value learnt from excited data
+        report = report.with_remembered([nm for nm in report.unexcited if nm not in never])
         _warn_memory_excitation(report, never, reg.n_samples - first)
         theta[np.isin(reg.names, never)] = np.nan
         sigma2, n_obs, per_dof = _residual_stats(reg, theta, first)
