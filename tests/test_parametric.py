@@ -1542,6 +1542,22 @@ def test_feasible_weights_say_a_collinearity_only_the_weighted_pass_finds():
     assert "not separable from each other (collinear regressors): a, b" in said[0]
 
 
+def test_feasible_weights_spread_no_further_than_the_normal_equations_resolve():
+    """Beside an equation of noise 1e-7 (σ̂² 1e-14) the feasible weights spread 1e14: the
+    normal equations, whose forward error is eps times that, fitted neither equation, a + b
+    came back 0.4 % off where A measures it to 1e-8, and σ̂² was 7e9, so that every standard
+    error came out 1e5 times too large. Weights spread at most 1/√eps: the pair is still named
+    collinear (by the weighted pass), and the fit is the data's."""
+    reg, truth = _pair_split_by_one_equation(1.0, 1e-7, 1.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ExcitationWarning)  # the collinearity, said
+        est = LeastSquares(weighting="feasible", correlated=False).solve(reg)
+    assert est.excitation.collinear == ["a", "b"]
+    assert est.theta.sum() == pytest.approx(3.0, abs=1e-6)
+    assert est.theta == pytest.approx(truth, abs=1e-3)
+    assert est.sigma2 == pytest.approx(1.0, abs=0.2)
+
+
 def test_feasible_weights_say_a_collinearity_the_weighted_pass_resolves():
     """The mirror: B separates a from b but its regressors are 1e-4 of A's, so the ordinary
     fit names them collinear; B's noise is 1e-12, and its weight makes them separable. The
@@ -1556,6 +1572,51 @@ def test_feasible_weights_say_a_collinearity_the_weighted_pass_resolves():
     assert est.theta == pytest.approx(truth, abs=0.05)
     assert len(said) == 2 and "collinear regressors): a, b" in said[0]
     assert "weighted pass" in said[1] and "separable after all: a, b" in said[1]
+
+
+def _exact_beside_noisy(exact_target: float) -> tuple[Regression, float]:
+    """Equation A reads c through x ~ 1e3 without noise (target ``exact_target`` x), B reads
+    d = 2 through z with unit noise; also the s.e. of d from B alone, σ̂_B/√Σz² (Caccia
+    eq. 11 on B's own rows: c and d share no equation)."""
+    rng = np.random.default_rng(0)
+    n = 1000  # a draw whose exact equation's ordinary residual is rounding (1e-13), not 0
+    x, z = rng.integers(500, 2000, size=n).astype(float), rng.normal(size=n)
+    phi = np.zeros((2 * n, 2))  # rows: A, B of each sample
+    phi[0::2, 0], phi[1::2, 1] = x, z
+    y = np.empty(2 * n)
+    y[0::2], y[1::2] = exact_target * x, 2.0 * z + rng.normal(size=n)
+    r = y[1::2] - z * (z @ y[1::2]) / (z @ z)
+    return Regression(phi, y, ["c", "d"], ("A", "B"), n), float(np.sqrt(r @ r / (n - 1) / (z @ z)))
+
+
+def test_feasible_weights_give_a_noisy_equation_its_own_stderr_beside_exact_data():
+    """Beside an equation of exact data (σ̂² 1e-25: rounding) feasible weighting gave it a
+    weight of 1e25, and the RSS, from yᵀWy − 2θᵀΦᵀWy + θᵀΦᵀWΦθ floored at 4 eps yᵀWy (1e34),
+    was that floor: the noisy equation's d came out 2.05 ± 1.7e7 (σ̂/√Σz² = 0.03). The exact
+    equation's variance is floored where it is rounding, and each equation's RSS on its own."""
+    reg, se_alone = _exact_beside_noisy(1.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        est = LeastSquares(weighting="feasible", correlated=False).solve(reg)
+    assert est.theta[0] == pytest.approx(1.0, rel=1e-12)
+    assert est.theta[1] == pytest.approx(2.0, abs=4 * se_alone)
+    assert est.stderr[1] == pytest.approx(se_alone, rel=0.02)
+    assert 0 < est.stderr[0] < 1e-8  # exact to rounding, not to 0: nothing reads significant
+
+
+def test_feasible_weights_of_an_equation_of_exact_zeros_do_not_overflow():
+    """An equation whose target and first-pass residual are exactly 0 (c = 0 read off
+    x ~ 1e3) got the weight 1/1e-300: ΦᵀWΦ overflowed, and c and d came back 0 and 0 with NaN
+    standard errors. σ̂² is floored at eps of the largest equation's: c is exactly 0, and d
+    has B's own standard error."""
+    reg, se_alone = _exact_beside_noisy(0.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        est = LeastSquares(weighting="feasible", correlated=False).solve(reg)
+    assert est.theta[0] == 0.0 and est.dof_sigma2["A"] == 0.0
+    assert est.theta[1] == pytest.approx(2.0, abs=4 * se_alone)
+    assert est.stderr[1] == pytest.approx(se_alone, rel=0.02)
+    assert np.isfinite(est.stderr[0])
 
 
 def test_feasible_weights_repeat_no_verdict_both_passes_share():

@@ -32,6 +32,10 @@ from nnid.trainers.history import Progress, silent
 from nnid.trainers.regression import Regression
 
 INSIGNIFICANT_PERCENT = 100.0 / 1.96  # 51.02 %, Caccia (L279)
+EPS = float(np.finfo(np.float64).eps)
+#: a residual variance below this share of its target's mean square is rounding, not noise
+#: (:func:`rounding_floor`): the three-term RSS of exact data is a few ulps of yᵀy
+ROUNDING_SHARE = 4 * EPS
 
 
 def significant(percentile_error: float | np.ndarray) -> bool | np.ndarray:
@@ -193,6 +197,8 @@ def solve_least_squares(
     check: bool = True,
     reference: float = 0.0,
     floors: np.ndarray | None = None,
+    equations: int = 1,
+    variance_floor: np.ndarray | None = None,
 ) -> Estimate:
     """Weighted least squares with covariance, through the normal equations of the
     column-scaled regressor (fast on long logs; the excitation check guards conditioning).
@@ -203,8 +209,17 @@ def solve_least_squares(
     (:func:`~nnid.evaluation.persistence.typical_size`), against which a column of rounding is
     zero (:func:`excitation_from_gram`); ``phi``'s own, where larger. ``floors``: each
     column's own floor of that rule, where not NaN
-    (:func:`~nnid.evaluation.persistence.rounding_floors`)."""
+    (:func:`~nnid.evaluation.persistence.rounding_floors`).
+
+    σ̂² = rᵀWr/(n − p) (Caccia eq. 12), rᵀWr at least 4·eps of yᵀWy (the rounding of exact
+    data). Of several ``equations`` weighted apart (row i is equation i mod ``equations``:
+    feasible weighting's second pass) each equation's share is floored on its own
+    (:func:`_equations_rss`): at ``variance_floor`` (a variance per equation, weighted as its
+    rows are) where given, else at 4·eps of its weighted target square."""
     names = names or [f"theta{k}" for k in range(phi.shape[1])]
+    if phi.shape[0] % equations:
+        raise ValueError(f"{phi.shape[0]} rows are no whole number of {equations} equations")
+    equation = np.arange(phi.shape[0]) % equations
     finite = np.isfinite(y) & np.isfinite(phi).all(1)
     left_out: list[str] = []
     if not finite.all():  # rows with an undefined signal (e.g. w of a tumbling vehicle)
@@ -220,7 +235,7 @@ def solve_least_squares(
                 ExcitationWarning,
                 stacklevel=2,
             )
-        phi, y = phi[finite], y[finite]
+        phi, y, equation = phi[finite], y[finite], equation[finite]
         weights = None if weights is None else np.asarray(weights)[finite]
     n, p = phi.shape
     if weights is None:
@@ -251,10 +266,19 @@ def solve_least_squares(
     theta = np.full(p, np.nan)
     theta[live] = inv @ rhs[live]
     # rᵀWr = yᵀWy − 2θᵀΦᵀWy + θᵀΦᵀWΦθ, three terms of size yᵀWy: below a few ulps of it the
-    # difference is rounding, so the RSS is floored there (on exact data σ̂ = 0 made a
-    # parameter of 1e-15 "significant")
+    # difference is rounding, so one equation's RSS is floored there (on exact data σ̂ = 0
+    # made a parameter of 1e-15 "significant")
     rss = yy - 2 * theta[live] @ rhs[live] + theta[live] @ g @ theta[live]
-    rss = max(rss, 4 * np.finfo(np.float64).eps * yy)
+    if equations == 1:
+        rss = max(rss, ROUNDING_SHARE * yy)
+    else:  # each equation's share, floored on its own (feasible weighting's second pass)
+        below = (
+            ROUNDING_SHARE * y * y
+            if variance_floor is None
+            else np.asarray(variance_floor, dtype=np.float64)[equation]
+        )
+        wts = np.ones(n) if weights is None else w
+        rss = _equations_rss(rss, yy, y - phi[:, live] @ theta[live], wts, below, equation)
     dof = n - int(live.sum())
     if dof > 0:
         sigma2 = float(rss / dof)
@@ -270,6 +294,24 @@ def solve_least_squares(
     cov = np.full((p, p), np.nan)
     cov[np.ix_(live, live)] = sigma2 * inv
     return Estimate(names, theta, void_undetermined(cov, names, report), sigma2, n, report)
+
+
+def _equations_rss(
+    rss: float, yy: float, r: np.ndarray, w: np.ndarray, below: np.ndarray, equation: np.ndarray
+) -> float:
+    """rᵀWr of several equations weighted apart, each equation's share (rows ``equation``,
+    residual ``r``, weights ``w``) at least its rows' variance floor ``below``, weighted as
+    they are: one equation's floor, or the rounding of its weighted targets, no longer swamps
+    another's residual. ``rss``: the three-term rᵀWr, kept where it resolves the sum (above
+    √eps of yᵀWy, whose few ulps are its rounding), so that a noisy fit's σ̂² is the one it
+    was; below that, the residual's own shares. The three terms have the scale of the
+    heaviest equation: beside one of exact data weighted 1e25 (yᵀWy 1e34), a noisy
+    equation's s.e. came out 1e7, not 0.03."""
+    share = np.bincount(equation, weights=w * r * r)
+    floor = np.bincount(equation, weights=w * below, minlength=share.size)
+    if rss > np.sqrt(EPS) * yy:
+        return float(rss + np.fmax(floor - share, 0.0).sum())
+    return float(np.fmax(share, floor).sum())
 
 
 def void_undetermined(
@@ -330,16 +372,26 @@ class LeastSquares(BaseEstimator):
         )
         dof_sigma2 = self._dof_variances(reg, est.theta)
         if self.weighting == "feasible" and len(reg.dofs) > 1:
-            w = np.empty(reg.y.size)
-            for d in reg.dofs:
-                w[reg.dof_rows(d)] = 1.0 / max(dof_sigma2[d], 1e-300)
+            m = len(reg.dofs)
+            var = np.array([dof_sigma2[d] for d in reg.dofs])
+            ok = np.isfinite(reg.y) & np.isfinite(reg.phi).all(1)
+            floor = feasible_floor(var, np.where(ok, reg.y, np.nan), m)
+            # rows are sample-major (Regression.dof_rows): equation k is every m-th row from k
+            w = np.tile(feasible_weights(var, floor), reg.n_samples)
             first = est.excitation
             # its left-out rows and residual degrees of freedom are the first pass's (the
             # weights change neither which rows are finite nor which columns are zero): said
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", ExcitationWarning)
                 est = solve_least_squares(
-                    reg.phi, reg.y, w, reg.names, reference=reference, floors=floors
+                    reg.phi,
+                    reg.y,
+                    w,
+                    reg.names,
+                    reference=reference,
+                    floors=floors,
+                    equations=m,
+                    variance_floor=floor,
                 )
             # but its verdict may differ: 1/σ̂² beside an equation of exact data (~1e18) left
             # a pair separable only in the other equation collinear, and dropped it unsaid
@@ -392,6 +444,44 @@ def dof_variances(residuals: Sequence[np.ndarray] | np.ndarray) -> np.ndarray:
     return np.asarray([float(np.nanvar(r)) if np.isfinite(r).any() else np.nan for r in arrays])
 
 
+def rounding_floor(y: np.ndarray, m: int = 1) -> np.ndarray:
+    """The variance below which each of ``m`` interleaved equations' (row i is equation
+    i mod m) residual is rounding, not noise: 4·eps of the mean square of its finite targets
+    ``y`` (0 where it has none). The floor :func:`solve_least_squares` puts on its RSS and
+    :func:`dof_sandwich` on each equation's variance (Caccia eq. 12 on exact data)."""
+    known = np.isfinite(y).reshape(-1, m)
+    square = np.where(known, y.reshape(-1, m), 0.0) ** 2
+    return ROUNDING_SHARE * square.sum(0) / np.maximum(known.sum(0), 1)
+
+
+def feasible_floor(var: np.ndarray, y: np.ndarray, m: int) -> np.ndarray:
+    """The variance below which feasible weighting does not take an equation's σ̂² ``var``
+    [m] at its word, each of the ``m`` interleaved equations' (``y``: their targets, NaN
+    where a row is not fitted): its :func:`rounding_floor` (a residual below it is rounding,
+    and 1/rounding gave an equation of exact data a weight of 1e25, made of noise), and √eps
+    of the largest σ̂², so that the weights' spread stays within 1/√eps (6.7e7). An equation
+    whose residual is exactly 0 (its target 0 too) got 1/1e-300, and the Gram overflowed.
+    Beyond 1/√eps a lighter equation keeps less than half its digits in a Gram entry it
+    shares with the heaviest, and the normal equations, whose forward error is about eps
+    times the spread, fitted neither: beside an equation of noise 1e-7 (spread 1e14), a pair
+    only the other equation separates came back with a + b 0.4 % off where the first says it
+    to 1e-8, and σ̂² 7e9 for every parameter. The price: a precise equation more than 1/√eps
+    above the others is weighted 1/√eps, and its parameters' s.e. are the larger, safe side
+    (the RSS counts it at its floor, :func:`solve_least_squares`)."""
+    largest = float(np.nanmax(var)) if np.isfinite(var).any() else 0.0
+    return np.fmax(rounding_floor(y, m), np.sqrt(EPS) * largest)
+
+
+def feasible_weights(var: np.ndarray, floor: np.ndarray) -> np.ndarray:
+    """Feasible weighting's weight of each DOF equation, 1/σ̂² (its residual variance
+    ``var`` from the ordinary fit, :func:`dof_variances`, at least ``floor``:
+    :func:`feasible_floor`); 1 where both are 0 or unknown (every equation exact and of zero
+    target: any weight fits them)."""
+    v = np.fmax(var, floor)
+    good = np.isfinite(v) & (v > 0)
+    return np.where(good, 1.0 / np.where(good, v, 1.0), 1.0)
+
+
 def dof_sandwich(phi: np.ndarray, r: np.ndarray, m: int, y: np.ndarray | None = None) -> np.ndarray:
     """Covariance of the *unweighted* least squares of ``m`` interleaved DOF equations (row
     i is equation i mod m): the sandwich (ΦᵀΦ)⁻¹ Φᵀ Σ Φ (ΦᵀΦ)⁻¹ with Σ each equation's own
@@ -403,9 +493,7 @@ def dof_sandwich(phi: np.ndarray, r: np.ndarray, m: int, y: np.ndarray | None = 
     ok = np.isfinite(r) & np.isfinite(phi).all(1)
     var = dof_variances(np.where(ok, r, np.nan).reshape(-1, m))
     if y is not None:
-        square = np.where(ok, y, 0.0).reshape(-1, m) ** 2
-        rows = np.maximum(ok.reshape(-1, m).sum(0), 1)
-        var = np.fmax(var, 4 * np.finfo(np.float64).eps * square.sum(0) / rows)
+        var = np.fmax(var, rounding_floor(np.where(ok, y, np.nan), m))
     phi = np.where(ok[:, None], phi, 0.0)
     n = int(ok.sum())
     spread = np.tile(np.where(var > 0, var, 0.0), r.size // m) * ok * n / max(n - phi.shape[1], 1)
