@@ -645,6 +645,44 @@ def test_an_added_effect_is_weighed_by_the_model_that_has_it(seed):
     assert result["unexplained"] == {}, result["unexplained"]
 
 
+def test_a_noisy_dof_keeps_its_own_stderr_beside_an_exact_one(monkeypatch):
+    """The loop's weights are feasible least squares' (1/σ̂²_dof, each σ̂² floored where it is
+    rounding, spread within 1/√eps) and each DOF's RSS share is floored on its own. Beside a
+    surge equation of exact data (X:u = 1 read off u ~ 1e3, σ̂² 3e-27: rounding) the weights
+    were 1/σ̂², 3e26 on surge, and the pooled RSS was its rounding floor: N:r came out
+    1.93 ± 9.5e6 where its own equation measures it to 0.032. The columns are given directly."""
+    import warnings
+    from types import SimpleNamespace
+
+    import nnid.loop.diagnose as diagnose
+
+    rng = np.random.default_rng(0)
+    n = 1000
+    u, r = rng.integers(500, 2000, size=n).astype(float), rng.normal(size=n)
+    phi = np.zeros((n, 6, 2))
+    phi[:, 0, 0], phi[:, 5, 1] = u, r
+    y = rng.normal(size=(n, 6))  # sway to pitch: unit noise, no unknown
+    y[:, 0], y[:, 5] = u, 2.0 * r + y[:, 5]
+    e = y[:, 5] - r * (r @ y[:, 5]) / (r @ r)
+    se_alone = np.sqrt(e @ e / (n - 1) / (r @ r))  # N:r's s.e. from yaw's own rows
+    monkeypatch.setattr(diagnose, "_columns", lambda *args: (phi, -y))
+    ws = SimpleNamespace(arrays=lambda *args: {}, filter_lambda=None, nu_dot_f=lambda part: None,
+                         mask=np.ones(6), weights=None)  # fmt: skip
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        fit = diagnose.refit(ws, load_vehicle(MINIROV), ["X:u", "N:r"], held_out=False)
+        again = diagnose.reweight(ws, fit)  # weights from the fit's own residual and targets
+    for f in (fit, again):
+        assert f.theta[0] == pytest.approx(1.0, rel=1e-12) and 0 < f.stderr[0] < 1e-8
+        assert f.theta[1] == pytest.approx(2.0, abs=4 * se_alone)
+        assert f.stderr[1] == pytest.approx(se_alone, rel=0.02)
+    # a DOF the log does not measure sets no floor: a huge residual there moves no weight
+    weights, e = ws.weights.copy(), again.e.copy()
+    ws.mask[1], e[:, 1], y[:, 1] = 0.0, 1e12 * e[:, 1], 1e12 * y[:, 1]
+    diagnose._set_weights(ws, e, y)
+    assert ws.weights[1] == 0.0 and np.array_equal(np.delete(ws.weights, 1), np.delete(weights, 1))
+
+
 def test_an_effect_that_differs_run_to_run_has_an_s_e_that_says_so():
     """Ballast that differs from run to run (W − B of 2 to 6 N over eight runs): the residual's
     correlation time gave the added buoyancy offset a s.e. of a few hundredths of a newton,

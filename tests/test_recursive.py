@@ -489,3 +489,28 @@ def test_rls_memory_check_is_not_set_by_one_column_huge_on_a_few_rows():
     reg = Regression(phi, y, ["a", "b", "c"], ("u",), n)
     *_, report = window_covariance(reg, np.array([2.0, -3.0, 0.5]), 0)
     assert report.unexcited == [] and report.collinear == []
+
+
+def test_rls_memory_check_weights_an_equation_of_exact_data_as_batch_least_squares_does():
+    """Equation A reads a + b alone, exactly (σ̂² 1e-26: rounding); B, with regressors 100
+    times A's and unit noise, separates them. The memory check weighted each equation by 1/σ̂²,
+    A by 1e26: B fell below the check's tolerance, a and b read collinear and lost their
+    standard errors. Its weights are batch least squares' feasible ones (floored, spread
+    within 1/√eps), and both say what B measures: a and b apart, to 6e-4."""
+    from nnid.trainers.recursive import window_covariance
+
+    rng = np.random.default_rng(0)
+    n = 300
+    x, xb, zb = rng.normal(size=n), 100 * rng.normal(size=n), 100 * rng.normal(size=n)
+    phi = np.zeros((2 * n, 2))  # rows: A, B of each sample
+    phi[0::2], phi[1::2] = np.column_stack([x, x]), np.column_stack([xb, zb])
+    y = phi @ [1.0, 2.0]
+    y[0::2] += 1e-13 * rng.normal(size=n)
+    y[1::2] += rng.normal(size=n)
+    reg = Regression(phi, y, ["a", "b"], ("A", "B"), n)
+    cov, _, report = window_covariance(reg, np.array([1.0, 2.0]), 0)
+    assert report.collinear == [] and report.unexcited == []
+    assert np.sqrt(np.diag(cov)) == pytest.approx(1 / (100 * np.sqrt(n)), rel=0.2)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", ExcitationWarning)
+        assert LeastSquares(correlated=False).solve(reg).excitation.collinear == []

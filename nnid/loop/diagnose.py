@@ -51,6 +51,8 @@ from nnid.trainers.least_squares import (
     ExcitationWarning,
     correlation_time,
     dof_variances,
+    feasible_floor,
+    feasible_weights,
     solve_least_squares,
 )
 from nnid.trainers.sindy import compress
@@ -160,6 +162,7 @@ class Workspace:
         self.data = log_arrays(train, vehicle)
         self.data_val = log_arrays(val, vehicle)
         self.weights: np.ndarray | None = None
+        self.variance_floor: np.ndarray | None = None  # per DOF, set with the weights
         self.tau_corr = 1.0
         self._cache: dict[tuple, dict[str, np.ndarray]] = {}
         self._tau: dict[tuple, dict[str, np.ndarray]] = {}
@@ -239,9 +242,9 @@ def _wss(x: np.ndarray, w: np.ndarray) -> float:
 
 def refit(ws: Workspace, vehicle, unknowns: list[str], held_out: bool = True) -> Fit:
     """Weighted least squares of ``unknowns`` at ``vehicle``, with the workspace's weights:
-    set by the first (baseline) fit, 1/σ̂²_dof of its ordinary-least-squares residual, and
-    renewed by :func:`reweight` as each effect is added. Without ``held_out`` the held-out
-    arrays are left empty (for searches that need only the RSS)."""
+    set by the first (baseline) fit, 1/σ̂²_dof of its ordinary-least-squares residual (floored,
+    :func:`_set_weights`), and renewed by :func:`reweight` as each effect is added. Without
+    ``held_out`` the held-out arrays are left empty (for searches that need only the RSS)."""
     data = ws.arrays(vehicle)
     phi, r0 = _columns(vehicle, unknowns, data, ws.filter_lambda, ws.nu_dot_f("train"))
     n, p = r0.shape[0], len(unknowns)
@@ -255,9 +258,13 @@ def refit(ws: Workspace, vehicle, unknowns: list[str], held_out: bool = True) ->
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", ExcitationWarning)
             est = solve_least_squares(a_mat, y, np.tile(ws.mask, n), names=unknowns)
-        _set_weights(ws, (a_mat @ np.nan_to_num(est.theta) - y).reshape(n, 6))
+        _set_weights(ws, (a_mat @ np.nan_to_num(est.theta) - y).reshape(n, 6), -r0)
     w_rows = np.tile(ws.weights, n)
-    est = solve_least_squares(a_mat, y, w_rows, names=unknowns)
+    # six DOF equations weighted apart (rows sample-major): each one's share of the RSS is
+    # floored on its own, at the variance its weight was floored at
+    est = solve_least_squares(
+        a_mat, y, w_rows, names=unknowns, equations=6, variance_floor=ws.variance_floor
+    )
     theta = np.nan_to_num(est.theta)
     e = (a_mat @ theta - y).reshape(n, 6)
     # rows by count, not -1: a vehicle file with no coefficient to refit has p = 0 columns
@@ -273,15 +280,21 @@ def reweight(ws: Workspace, fit: Fit) -> Fit:
     thousands of times the final one, and those equations, weighted down by it, would leave
     the effect's parameter to the noisy surge and sway rows (r_g.z 1 mm off at 1σ, which the
     unexplained-structure test then blamed on an effect outside the vocabulary)."""
-    _set_weights(ws, fit.e)
+    # the targets the fit was made to, Φθ − e: to rounding, which is all their floor reads
+    _set_weights(ws, fit.e, fit.phi @ fit.theta - fit.e)
     return refit(ws, fit.vehicle, fit.unknowns)
 
 
-def _set_weights(ws: Workspace, e: np.ndarray) -> None:
-    """1/σ̂²_dof of the residual ``e`` [N, 6]; DOF equations the log does not measure get
-    weight zero."""
-    var = dof_variances(e)
-    ws.weights = ws.mask / np.where(var > 0, var, 1.0)
+def _set_weights(ws: Workspace, e: np.ndarray, y: np.ndarray) -> None:
+    """Feasible weights of the residual ``e`` [N, 6] of the targets ``y`` [N, 6]: 1/σ̂²_dof,
+    each σ̂² at least its :func:`feasible_floor` (kept in ``ws.variance_floor``, at which the
+    fits floor each equation's RSS share): beside a DOF equation of exact data, weighted 3e26
+    by its rounding, a noisy one's s.e. read 1e7 for 0.03. DOF equations the log does not
+    measure get weight zero, and neither their residual nor their targets set a floor."""
+    measured = ws.mask > 0
+    var = np.where(measured, dof_variances(e), np.nan)
+    ws.variance_floor = feasible_floor(var, np.where(measured, y, np.nan).reshape(-1), 6)
+    ws.weights = ws.mask * feasible_weights(var, ws.variance_floor)
 
 
 #: training runs below which :func:`run_stderr` gives nothing (its variance rests on them)

@@ -35,6 +35,8 @@ from nnid.trainers.least_squares import (
     correlation_time,
     dof_sandwich,
     dof_variances,
+    feasible_floor,
+    feasible_weights,
     read_only_where_left_out,
     rounding_scale,
     void_undetermined,
@@ -173,7 +175,11 @@ def _memory_excitation(
     r = y - phi @ np.nan_to_num(theta)
     ok = np.isfinite(r) & np.isfinite(phi).all(1)
     var = dof_variances(np.where(ok, r, np.nan).reshape(-1, m))
-    w = np.tile(1.0 / np.where(var > 0, var, 1.0), r.size // m) * ok
+    # batch least squares' feasible weights (floored where σ̂² is rounding, spread within
+    # 1/√eps): beside an equation of exact data, weighted 1e26 by its rounding, a noisy one
+    # that alone separates a pair fell below the check's tolerance, and the pair read collinear
+    floor = feasible_floor(var, np.where(ok, y, np.nan), m)
+    w = np.tile(feasible_weights(var, floor), r.size // m) * ok
     # a parameter only the skipped rows read is not measured there, not a zero regressor
     left_out = read_only_where_left_out(phi, ok, list(reg.names))
     phi, y = np.where(ok[:, None], phi, 0.0), np.where(ok, y, 0.0)
