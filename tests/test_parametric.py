@@ -1405,17 +1405,33 @@ def test_a_kind_of_motion_the_log_never_had_is_judged_against_the_other(heave_on
     assert np.isnan(model.estimate_.theta[0])
 
 
+@pytest.mark.parametrize("trainer", [LeastSquares, RecursiveLeastSquares])
+def test_a_restoring_column_of_rounding_is_judged_against_the_logs_motion(heave_only, trainer):
+    """A heave-only log's K equation is rounding (φ, p ~ 1e-17): a restoring column (r_b.z,
+    made of the pose, not of the motion) has no floor of its own, and was judged against the
+    regression's own typical column, itself rounding, so never rounding: r_b.z read
+    -2.4e-4 ± 4.4e-4 off a target of rounding. Its floor is now ROUNDING × the regression's
+    largest column at the log's typical motion: both are zero."""
+    vehicle, log = heave_only
+    assert 0 < log["phi"].abs().max() < 1e-15
+    with pytest.warns(ExcitationWarning, match="zero regressor"):
+        model = ParametricModel(vehicle, ["K:p", "r_b.z"], ["p"], trainer=trainer()).fit(log)
+    assert model.estimate_.excitation.unexcited == ["K:p", "r_b.z"]
+    assert np.isnan(model.estimate_.theta).all() and np.isnan(model.estimate_.stderr).all()
+
+
 def test_rounding_floors_follow_the_motion_a_column_is_made_of():
     """A column's floor is ROUNDING to its power of its size at the typical motion: u|u| of a
     surge 1e-6 of the typical motion is live, of rounding (1e-17) zero; a column that does not
-    grow with the motion (a restoring term) has no floor of its own and the scalar rule
-    (ROUNDING of the typical regressor) judges it; a linear column's floor is ROUNDING of it."""
+    grow with the motion (a restoring term) has no floor of its own and is judged against the
+    largest column at the typical motion; a linear column's floor is ROUNDING of it."""
     from nnid.evaluation.persistence import ROUNDING, excitation_from_gram, rounding_floors
 
     s = 0.3  # the typical motion
     floors = rounding_floors(np.array([s * s, s, 2.0]), np.array([100 * s * s, 10 * s, 2.0]))
     assert floors[0] == pytest.approx(ROUNDING**2 * s * s)
-    assert floors[1] == pytest.approx(ROUNDING * s) and np.isnan(floors[2])
+    assert floors[1] == pytest.approx(ROUNDING * s) and floors[2] == pytest.approx(ROUNDING * 2.0)
+    assert np.isnan(rounding_floors(np.zeros(2), np.zeros(2))).all()  # no size: scalar rule
     rng = np.random.default_rng(0)
     for motion, live in [(1e-6 * s, True), (1e-17 * s, False)]:
         u = motion * rng.normal(size=200)

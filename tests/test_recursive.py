@@ -309,6 +309,29 @@ def test_rls_says_a_value_learnt_before_its_memory_remembered_not_fitted_to_nois
     assert PRIME_NOT_EXCITED not in prime["X:v'"]  # X:w has no value: no Prime line
 
 
+def test_rls_says_a_pair_collinear_over_its_run_collinear_not_remembered():
+    """Two identical columns excited in the first half only, λ = 0.99: earlier samples fixed
+    only their sum (-2), yet both were said "value remembered from earlier samples", with no
+    word of collinearity, beside a split (-1.0, -1.0) no data chose. Collinear over the run,
+    they keep that verdict."""
+    from nnid.reports.train_report import _significance
+
+    rng = np.random.default_rng(0)
+    n = 400
+    a, b = rng.normal(size=n), rng.normal(size=n)
+    phi = np.c_[a, b, b]
+    phi[n // 2 :, 1:] = 0.0
+    y = phi @ [2.0, -3.0, 1.0] + 0.01 * rng.normal(size=n)
+    reg = Regression(phi, y, ["X:u", "X:v", "X:w"], ("u",), n)
+    with pytest.warns(ExcitationWarning, match=r"collinear regressors\): X:v, X:w") as caught:
+        est = RecursiveLeastSquares(forgetting=0.99).solve(reg)
+    assert est.excitation.remembered == [] and est.excitation.collinear == ["X:v", "X:w"]
+    assert not any("remembered" in str(w.message) for w in caught)
+    assert est.theta[1] + est.theta[2] == pytest.approx(-2.0, abs=0.01)
+    params = est.as_dict()
+    assert [_significance(params[k]) for k in ("X:v", "X:w")] == ["collinear"] * 2
+
+
 def test_the_remembered_verdict_survives_saving_and_every_rebuilt_report():
     """The estimate saved and read back, renamed (Caccia's signs) or joined with others (a
     sequence's steps) says "remembered" as the fit did; a file saved before the verdict was
@@ -348,6 +371,23 @@ def test_a_model_that_judges_the_run_noise_says_fitted_to_noise_not_remembered()
     assert "remembered" not in params["X:v"] and _significance(params["X:v"]) == "not excited"
     model.not_excited_ = {}
     assert model._params()["X:v"]["remembered"] is True
+
+
+def test_a_model_that_judges_the_run_noise_says_so_in_its_excitation_report_too():
+    """Where the model's own check overrode "remembered", its table said fitted to noise but
+    the excitation report it saves (its ``remembered`` and its warnings) still said
+    remembered. The report now drops it too, as the fit and a loaded file set it."""
+    from nnid.evaluation.persistence import REMEMBERED
+
+    est, _ = _remembered_and_never()
+    model = ParametricModel(load_vehicle("seamor"), ["X:u", "X:v", "X:w"])
+    model.not_excited_ = {"X:v": ["v"]}
+    report = model._noise_judged(est).excitation
+    assert report.remembered == [] and report.unexcited == ["X:v", "X:w"]
+    assert not any(REMEMBERED in w for w in report.warnings)
+    assert "not excited by this data (zero regressor): X:v, X:w" in report.warnings
+    model.not_excited_ = {}
+    assert model._noise_judged(est) is est
 
 
 def test_rls_that_has_not_converged_says_so():
@@ -457,6 +497,19 @@ def test_dof_variances_of_an_equation_without_samples_is_nan_without_a_warning()
         warnings.simplefilter("error")
         var = dof_variances([np.array([np.nan, np.nan]), np.array([1.0, 3.0])])
     assert np.isnan(var[0]) and var[1] == 1.0
+
+
+def test_dof_variances_read_finite_samples_only():
+    """A row with an infinite regressor gives its equation an infinite residual: nanvar read
+    it as a sample, the equation's variance came out NaN, and feasible weighting gave it the
+    heaviest weight allowed. Finite samples only, as for NaN; an equation of infinities only
+    has none (NaN)."""
+    from nnid.trainers.least_squares import dof_variances
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        var = dof_variances(np.array([[1.0, np.inf], [np.inf, -np.inf], [3.0, np.nan]]))
+    assert var[0] == 1.0 and np.isnan(var[1])
 
 
 def test_rls_says_not_measured_of_a_parameter_only_its_skipped_rows_read():

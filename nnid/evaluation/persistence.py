@@ -90,16 +90,25 @@ class ExcitationReport:
             remembered=kept,
         )
 
-    def with_remembered(self, remembered: Sequence[str]) -> ExcitationReport:
+    def with_remembered(
+        self, remembered: Sequence[str], collinear: Sequence[str] = ()
+    ) -> ExcitationReport:
         """The same report where its unexcited parameters among ``remembered`` kept a value
         learnt from earlier data (a recursive estimator's memory check: samples before the
         memory excited them): said so, not "zero regressor", whose "fitted to noise" would be
-        false of a value learnt from excited data."""
-        kept = [n for n in self.unexcited if n in remembered]
+        false of a value learnt from excited data. Those among ``collinear`` (collinear over
+        the whole run: earlier samples measured only their combination with others) are said
+        collinear, neither remembered (no value of theirs was learnt) nor zero regressor."""
+        tied = [n for n in self.unexcited if n in collinear]
+        unexcited = [n for n in self.unexcited if n not in tied]
+        both = self.collinear + [n for n in tied if n not in self.collinear]
+        kept = [n for n in unexcited if n in remembered]
         warnings = _verdict_warnings(
-            self.unexcited, self.collinear, self.rank, self.n_params, self.not_measured, kept
+            unexcited, both, self.rank, self.n_params, self.not_measured, kept
         )
-        return replace(self, warnings=warnings, remembered=kept)
+        return replace(
+            self, unexcited=unexcited, collinear=both, warnings=warnings, remembered=kept
+        )
 
     @classmethod
     def from_state(cls, state: object) -> ExcitationReport:
@@ -177,16 +186,23 @@ def rounding_floors(at_motion: np.ndarray, at_probe: np.ndarray) -> np.ndarray:
     rounding of a velocity is ~1e-16 of it. A column of mixed powers (an added mass: ν̇ and
     C_A(ν)ν) reads a power between its parts'.
 
-    NaN (no floor of its own: the caller's scalar rule judges it) where the column does not
-    grow with the motion (p < 0.5: a restoring, bias or thrust column, made of the pose or the
-    inputs, which the reference motion does not change: against itself it could never be
-    rounding) or is zero at the reference motion (nothing to compare with)."""
+    A column that does not grow with the motion (p < 0.5: a restoring, bias or thrust column,
+    made of the pose or the inputs, which the reference motion does not change) or is zero at
+    the reference motion has no floor of its own: against itself it could never be rounding.
+    Its floor is ROUNDING × the largest column of the regression at the reference motion, as
+    the log's typical motion is what it is measured beside: judged against the regression's
+    own columns, of a log where every column is rounding (the K equation of a heave-only log,
+    φ and p ~ 1e-17), nothing was, and r_b.z read -2.4e-4 ± 4.4e-4 off a target of rounding.
+    NaN (the caller's scalar rule judges it) only where no column has a size at the reference
+    motion."""
     one = np.asarray(at_motion, dtype=np.float64)
     probe = np.asarray(at_probe, dtype=np.float64)
     with np.errstate(divide="ignore", invalid="ignore"):
         power = np.log(probe / one) / np.log(POWER_PROBE)
-    moves = (one > 0) & np.isfinite(one) & np.isfinite(power) & (power >= 0.5)
-    return np.where(moves, ROUNDING ** np.clip(np.nan_to_num(power), 1.0, 3.0) * one, np.nan)
+    sized = (one > 0) & np.isfinite(one)
+    moves = sized & np.isfinite(power) & (power >= 0.5)
+    beside = ROUNDING * one[sized].max() if sized.any() else np.nan
+    return np.where(moves, ROUNDING ** np.clip(np.nan_to_num(power), 1.0, 3.0) * one, beside)
 
 
 def excitation_report(
@@ -229,10 +245,14 @@ def excitation_from_gram(
     one column singular on a few rows would inflate.
     ``column_rms``: each column's RMS unweighted, where ``gram`` is weighted (weights that
     scale each equation by its residual made a column of rounding as large as any); both rules
-    read it. ``floors`` ``[P]``: each column's own floor of the rounding rule where it is not
-    NaN (:func:`rounding_floors`, a Fossen regression's), in place of ROUNDING × ``reference``:
-    a column is compared with itself at the log's typical motion, to its power, not with the
-    other columns (a yaw rate 1e-6 of the surge speed is measured, and its r|r| 1e-12)."""
+    read it. ``floors`` ``[P]``: each column's floor of the rounding rule where it is not NaN
+    (:func:`rounding_floors`, a Fossen regression's), in place of ROUNDING × ``reference``: a
+    column is compared with itself at the log's typical motion, to its power (a yaw rate 1e-6
+    of the surge speed is measured, and its r|r| 1e-12). The tol rule still holds beside it,
+    and compares a column with every column of the block, other DOF equations' included: the
+    r|r| of a yaw rate 5e-6 of the surge speed passes its floor but, fitted with X:u|u| in
+    one regression, is at most ``tol`` of it and called zero (its N equation alone measures
+    it); a sway under a 1e-9-N force has v|v| 1e-11 of v̇'s column, likewise zero beside it."""
     p = len(names)
     rms = np.sqrt(np.clip(np.diag(gram), 0.0, None) / max(n, 1))
     raw = rms if column_rms is None else np.asarray(column_rms, dtype=np.float64)

@@ -18,10 +18,11 @@ Parameter names follow the vehicle file: ``X_udot``, ``"X:u*abs(u)"``, ``eta.w.n
 
 from __future__ import annotations
 
+import dataclasses
 import re
 import warnings
 from collections.abc import Callable, Iterable, Mapping, Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pandas as pd
@@ -78,6 +79,9 @@ from nnid.serialization import exact_float, read_exact_float
 from nnid.trainers.history import Progress
 from nnid.trainers.regression import Regression
 from nnid.vehicle import vehicle_copy
+
+if TYPE_CHECKING:  # at run time imported where used, as this module does elsewhere
+    from nnid.trainers.least_squares import Estimate
 
 _AXES = "xyz"
 
@@ -1320,6 +1324,7 @@ class ParametricModel(FossenPlant):
         steps = self._step_data(data, dofs, unknowns)
         by_step = self._not_excited(steps, getattr(trainer, "filter_lambda", None))
         self.not_excited_ = self._last_verdicts(steps, by_step)
+        self.estimate_ = self._noise_judged(self.estimate_)  # as saved, and as its table says
         if self.not_excited_:
             from nnid.trainers.least_squares import ExcitationWarning
 
@@ -1541,14 +1546,23 @@ class ParametricModel(FossenPlant):
             )
         return out
 
+    def _noise_judged(self, est: Estimate) -> Estimate:
+        """``est`` whose excitation report says of the parameters the model's own check of
+        the fit data judged fitted to noise (``not_excited_``) what the table says: not a
+        recursive estimator's "remembered", which that check overrides (whatever earlier
+        samples excited, the run's motion is noise). Its saved report and warnings said
+        remembered beside a table that said fitted to noise."""
+        report = est.excitation
+        if report is None or not set(report.remembered) & set(self.not_excited_):
+            return est
+        kept = [n for n in report.remembered if n not in self.not_excited_]
+        return dataclasses.replace(est, excitation=report.with_remembered(kept))
+
     def _params(self) -> dict[str, dict[str, float | None]]:
-        params = self.estimate_.as_dict()
+        params = self._noise_judged(self.estimate_).as_dict()
         # fitted to noise: no verdict of significance, and no standard error, whose noise
         # model does not hold there (unexcited_unknowns); every report then shows none
         for name in self.not_excited_:
-            # the model's own check of the fit data overrides a recursive estimator's
-            # "remembered": whatever earlier samples excited, the run's motion is noise
-            params[name].pop("remembered", None)
             params[name] = {
                 **params[name],
                 "stderr": None,
@@ -1584,6 +1598,7 @@ class ParametricModel(FossenPlant):
         path = restored_estimate_history(state.get("history"), tensors)
         self.estimate_ = Estimate.from_state(state, path)
         self.not_excited_ = {k: list(v) for k, v in state.get("not_excited", {}).items()}
+        self.estimate_ = self._noise_judged(self.estimate_)  # files saved before it was
         if "report" in state:  # absent from older files: the run folder's cleaning report
             self.report_ = CleaningReport.from_dict(state["report"])
             self.attenuated_ = restored_attenuation(state["attenuated"], self.estimate_.names)

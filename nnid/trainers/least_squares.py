@@ -215,11 +215,13 @@ def solve_least_squares(
     data). Of several ``equations`` weighted apart (row i is equation i mod ``equations``:
     feasible weighting's second pass) each equation's share is floored on its own
     (:func:`_equations_rss`): at ``variance_floor`` (a variance per equation, weighted as its
-    rows are) where given, else at 4·eps of its weighted target square."""
+    rows are) where given, else at its :func:`rounding_floor`."""
     names = names or [f"theta{k}" for k in range(phi.shape[1])]
     if phi.shape[0] % equations:
         raise ValueError(f"{phi.shape[0]} rows are no whole number of {equations} equations")
     equation = np.arange(phi.shape[0]) % equations
+    if equations > 1 and variance_floor is None:
+        variance_floor = rounding_floor(np.asarray(y, dtype=np.float64), equations)
     finite = np.isfinite(y) & np.isfinite(phi).all(1)
     left_out: list[str] = []
     if not finite.all():  # rows with an undefined signal (e.g. w of a tumbling vehicle)
@@ -272,11 +274,7 @@ def solve_least_squares(
     if equations == 1:
         rss = max(rss, ROUNDING_SHARE * yy)
     else:  # each equation's share, floored on its own (feasible weighting's second pass)
-        below = (
-            ROUNDING_SHARE * y * y
-            if variance_floor is None
-            else np.asarray(variance_floor, dtype=np.float64)[equation]
-        )
+        below = np.asarray(variance_floor, dtype=np.float64)[equation]
         wts = np.ones(n) if weights is None else w
         rss = _equations_rss(rss, yy, y - phi[:, live] @ theta[live], wts, below, equation)
     dof = n - int(live.sum())
@@ -440,8 +438,10 @@ def dof_variances(residuals: Sequence[np.ndarray] | np.ndarray) -> np.ndarray:
     statistical footing. Centred: a missing effect that biases one equation's residual is not
     taken for noise there. NaN for an equation without a finite sample."""
     series = residuals.T if isinstance(residuals, np.ndarray) and residuals.ndim == 2 else residuals
-    arrays = [np.asarray(r, dtype=np.float64) for r in series]
-    return np.asarray([float(np.nanvar(r)) if np.isfinite(r).any() else np.nan for r in arrays])
+    # finite, not merely not NaN: nanvar read a ±inf (an inf regressor's row) as a sample, and
+    # the equation's NaN variance then took feasible weighting's heaviest weight
+    finite = [r[np.isfinite(r)] for r in (np.asarray(s, dtype=np.float64) for s in series)]
+    return np.asarray([float(np.var(r)) if r.size else np.nan for r in finite])
 
 
 def rounding_floor(y: np.ndarray, m: int = 1) -> np.ndarray:

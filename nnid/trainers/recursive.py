@@ -347,10 +347,14 @@ class RecursiveLeastSquares(BaseEstimator):
         # a parameter no sample of the run excited kept its start theta0: no estimate at all
         # (batch least squares gives NaN), where one unexcited only in the memory window is
         # remembered from earlier data and kept
-        never = (report if first == 0 else _memory_excitation(reg, theta, 0)[0]).unexcited
+        run = report if first == 0 else _memory_excitation(reg, theta, 0)[0]
+        never = run.unexcited
         # said so wherever the verdict goes (the table, the Prime system, the warnings): "zero
-        # regressor", read as "fitted to noise", is false of a value learnt from excited data
-        report = report.with_remembered([nm for nm in report.unexcited if nm not in never])
+        # regressor", read as "fitted to noise", is false of a value learnt from excited data;
+        # but one collinear over the run was learnt only in a combination: said collinear
+        report = report.with_remembered(
+            [nm for nm in report.unexcited if nm not in never], collinear=run.collinear
+        )
         _warn_memory_excitation(report, never, reg.n_samples - first)
         theta[np.isin(reg.names, never)] = np.nan
         sigma2, n_obs, per_dof = _residual_stats(reg, theta, first)
