@@ -1287,6 +1287,23 @@ def test_a_column_is_judged_on_the_rows_its_fit_weights_not_on_equations_switche
     assert est.theta[1] == pytest.approx(2.0, abs=0.01)
 
 
+def test_rows_of_weight_zero_count_no_residual_degrees_of_freedom():
+    """The loop's ``--dofs p,q,r`` weights three of six DOF equations 0: σ̂² = rᵀWr/(n − p)
+    counted those rows in n, so σ̂² was half and every s.e. √2 too small. The equations switched
+    off are not fitted: the solve is the one on the weighted rows alone, σ̂², s.e. and n."""
+    rng = np.random.default_rng(1)
+    n = 100
+    phi = rng.normal(size=(2 * n, 2))  # rows: a fitted equation and one switched off
+    y = phi @ [1.0, -2.0] + 0.1 * rng.normal(size=2 * n)
+    w = np.tile([4.0, 0.0], n)
+    est = solve_least_squares(phi, y, w, ["a", "b"], equations=2)
+    alone = solve_least_squares(phi[0::2], y[0::2], w[0::2], ["a", "b"])
+    assert est.theta == pytest.approx(alone.theta, rel=1e-12)
+    assert est.sigma2 == pytest.approx(alone.sigma2, rel=1e-12)
+    assert est.stderr == pytest.approx(alone.stderr, rel=1e-12)
+    assert est.n_obs == alone.n_obs == n and est.excitation.n_samples == n
+
+
 @pytest.fixture(scope="module")
 def heave_only():
     """The demo miniROV driven in heave alone, 10 s: the simulator leaves u, v, p, q, r at

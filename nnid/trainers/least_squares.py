@@ -211,9 +211,10 @@ def solve_least_squares(
     column's own floor of that rule, where not NaN
     (:func:`~nnid.evaluation.persistence.rounding_floors`).
 
-    σ̂² = rᵀWr/(n − p) (Caccia eq. 12), rᵀWr at least 4·eps of yᵀWy (the rounding of exact
-    data). Of several ``equations`` weighted apart (row i is equation i mod ``equations``:
-    feasible weighting's second pass) each equation's share is floored on its own
+    σ̂² = rᵀWr/(n − p) (Caccia eq. 12), n the rows of weight > 0 (``n_obs``: a weight 0
+    switches a row off), rᵀWr at least 4·eps of yᵀWy (the rounding of exact data). Of several
+    ``equations`` weighted apart (row i is equation i mod ``equations``: feasible weighting's
+    second pass) each equation's share is floored on its own
     (:func:`_equations_rss`): at ``variance_floor`` (a variance per equation, weighted as its
     rows are) where given, else at its :func:`rounding_floor`."""
     names = names or [f"theta{k}" for k in range(phi.shape[1])]
@@ -247,12 +248,21 @@ def solve_least_squares(
         pw = phi * w[:, None]
         gram, rhs, yy = pw.T @ phi, pw.T @ y, float((y * w) @ y)
     # over the rows of weight > 0: a weight 0 switches an equation off (a DOF the log does not
-    # measure), and a column is not to be called excited by equations that are not fitted
+    # measure), and a column is not to be called excited by equations that are not fitted, nor
+    # are they observations: counted in n − p (the loop's --dofs p,q,r weights three of six
+    # equations 0), σ̂² was half and every s.e. √2 too small
     rows = np.ones(n, dtype=bool) if weights is None else np.asarray(weights) > 0
+    fitted = int(rows.sum())
     raw, reference = rounding_scale(phi[rows], reference)
     report = (
         excitation_from_gram(
-            gram, n, names, left_out=left_out, column_rms=raw, reference=reference, floors=floors
+            gram,
+            fitted,
+            names,
+            left_out=left_out,
+            column_rms=raw,
+            reference=reference,
+            floors=floors,
         )
         if check
         else None
@@ -277,13 +287,13 @@ def solve_least_squares(
         below = np.asarray(variance_floor, dtype=np.float64)[equation]
         wts = np.ones(n) if weights is None else w
         rss = _equations_rss(rss, yy, y - phi[:, live] @ theta[live], wts, below, equation)
-    dof = n - int(live.sum())
+    dof = fitted - int(live.sum())
     if dof > 0:
         sigma2 = float(rss / dof)
     else:  # as many rows as parameters: the fit passes through them, σ̂ is not measured
         sigma2 = np.nan
         warnings.warn(
-            f"{n} rows for {int(live.sum())} parameters: no residual degrees of freedom, so "
+            f"{fitted} rows for {int(live.sum())} parameters: no residual degrees of freedom, so "
             "the fit passes through every row and its standard errors are not measured; give "
             "more rows than parameters (more plateaus, a longer log)",
             ExcitationWarning,
@@ -291,7 +301,7 @@ def solve_least_squares(
         )
     cov = np.full((p, p), np.nan)
     cov[np.ix_(live, live)] = sigma2 * inv
-    return Estimate(names, theta, void_undetermined(cov, names, report), sigma2, n, report)
+    return Estimate(names, theta, void_undetermined(cov, names, report), sigma2, fitted, report)
 
 
 def _equations_rss(
