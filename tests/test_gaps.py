@@ -380,19 +380,24 @@ def _slow(log: pd.DataFrame, columns: list[str], k: int) -> pd.DataFrame:
     return out
 
 
-def test_inspect_says_a_slow_channel_is_its_rate_not_hundreds_of_gaps(tmp_path):
-    """z kept on every 10th row was said as '36 gaps in z … masked where used': a sensor at
-    2 Hz beside 20 Hz ones, not dropouts. The 9 rows after its last sample were then said as
-    '1 gap in z (9 samples …)': they are outside its sampled span, and said so."""
+def _inspected(log: pd.DataFrame, path) -> str:
+    """What ``nnid inspect`` says of ``log`` written to ``path``, on one line."""
     from typer.testing import CliRunner
 
     from nnid.cli import app
 
-    log = _slow(_mocap_log().assign(experiment="dive"), ["z"], 10)
-    log.to_csv(tmp_path / "slow.csv", index=False)
-    done = CliRunner().invoke(app, ["inspect", str(tmp_path / "slow.csv")])
+    log.to_csv(path, index=False)
+    done = CliRunner().invoke(app, ["inspect", str(path)])
     assert done.exit_code == 0, done.output
-    said = " ".join(done.output.split())
+    return " ".join(done.output.split())
+
+
+def test_inspect_says_a_slow_channel_is_its_rate_not_hundreds_of_gaps(tmp_path):
+    """z kept on every 10th row was said as '36 gaps in z … masked where used': a sensor at
+    2 Hz beside 20 Hz ones, not dropouts. The 9 rows after its last sample were then said as
+    '1 gap in z (9 samples …)': they are outside its sampled span, and said so."""
+    log = _slow(_mocap_log().assign(experiment="dive"), ["z"], 10)
+    said = _inspected(log, tmp_path / "slow.csv")
     assert "slow z logged every 10th row: 2 Hz against 20 Hz (not filled" in said
     # after its last sample (row 390 of 400): outside its span, said so, and no gap
     assert "its samples end at t = 19.5 s: 9 rows after its last sample" in said
@@ -404,19 +409,13 @@ def test_inspect_says_a_slow_channel_whose_rate_was_not_measured_once_not_as_gap
     listed it as slow and counted its 20 empty cells again as '5 gaps in u … bridged from the
     pose or masked where used'. They are said once, with the slow channel, as what they may
     be."""
-    from typer.testing import CliRunner
-
-    from nnid.cli import app
     from nnid.datasets.inspect import summarize
 
     log = _slow(_mocap_log(30).assign(experiment="b"), ["u"], 5)
     info = summarize(log)
     assert [(ch["rate_hz"], ch["samples"]) for ch in info["slow"]] == [(None, [6])]
     assert info["missing"]["count"] == 0
-    log.to_csv(tmp_path / "short.csv", index=False)
-    done = CliRunner().invoke(app, ["inspect", str(tmp_path / "short.csv")])
-    assert done.exit_code == 0, done.output
-    said = " ".join(done.output.split())
+    said = _inspected(log, tmp_path / "short.csv")
     assert "u's rate could not be measured in b (6 samples)" in said
     assert "nor its empty cells counted as gaps (they may be its rate)" in said
     assert "missing" not in said
