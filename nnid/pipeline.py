@@ -884,12 +884,11 @@ def _monitored_motion(
     an unread one is said (:func:`~nnid.datasets.gaps.say_unread`). Every column was masked,
     so a 1-Hz GPS x, y beside a 20-Hz DVL refused the training; the calibration holds an
     empty pose cell as detect does (:func:`~nnid.fault.monitor.monitor_inputs`)."""
-    from nnid.fault.monitor import monitor_motion
+    from nnid.fault.monitor import RESIDUAL, monitor_motion
 
     watched = {*read, *monitor_motion(log.columns)}
     said = (
-        "neither the model of this run nor the monitor's residual (Fossen eq. 2: ν and the "
-        "attitude) reads",
+        f"neither the model of this run nor {RESIDUAL} reads",
         "the fit, the scores and the monitor's calibration, which read",
         "a simulated pose starts from, and the monitor holds, its run's last sample before "
         "(else its first after)",

@@ -279,6 +279,24 @@ def persisting(record: dict, t: float, restart_t: float) -> None:
     )
 
 
+def filed(
+    record: dict, diag: Diagnosis, open_: dict[int, dict], code: int, restart_t: float
+) -> tuple[bool, Change | None]:
+    """How an alarm judged by :func:`isolated_alarm` is filed, ``detect`` and ``detect
+    --follow`` alike (the module docstring): whether ``record`` is a new record, and the change
+    taken out after its window. Isolated: new, its change taken out unless it ended. Not
+    isolated, with an unexplained record open in its experiment ``code`` (``open_``): the
+    change persisting, folded into that record (:func:`persisting`; ``restart_t``, its
+    window's end), no record; else it opens the experiment's unexplained record."""
+    if diag.isolated:
+        return True, None if record.get("ended") else Change.of(record, diag)
+    if code in open_:
+        persisting(open_[code], record["t"], restart_t)
+        return False, None
+    open_[code] = record
+    return True, None
+
+
 def _severity(monitor: ResidualMonitor, trace: Trace, rows: np.ndarray) -> float:
     """The peak of the larger statistic over its threshold on ``rows``."""
     h_t, h_g = monitor.threshold_values
@@ -863,15 +881,12 @@ def detect(monitor: ResidualMonitor, log: pd.DataFrame, window_s: float = 10.0) 
                 continue
             taken = w.fitted
         record, diag, rows = isolated_alarm(monitor, data, watched, k, window_s, residual, taken)
-        code, change = int(codes[k]), None
-        if diag.isolated:  # the change taken out after the window, unless it ended
+        code = int(codes[k])
+        new, change = filed(record, diag, open_, code, float(t[rows[-1]]))
+        if new:
             alarms.append(record)
-            change = None if record.get("ended") else Change.of(record, diag)
-        elif code in open_:  # the unexplained change persisting: no new record, nor mark
-            persisting(open_[code], record["t"], float(t[rows[-1]]))
+        else:  # the unexplained change persisting: no record, nor mark
             alarm[k] = False
-        else:
-            alarms.append(open_.setdefault(code, record))
         # fresh statistics after the window, isolated or not (the module docstring)
         _rewatch(rewatch.setdefault(code, Rewatch(monitor)), data, residual, values, alarm, rows,
                  changed, change)  # fmt: skip

@@ -55,12 +55,11 @@ from nnid.datasets.preprocess import savgol_window
 from nnid.datasets.readers import refuse_repeated_names
 from nnid.errors import NnidInputError, checked_number
 from nnid.fault.detect import (
-    Change,
     DetectResult,
     Rewatch,
+    filed,
     how_often,
     isolated_alarm,
-    persisting,
     rewatched_alarm,
     run_names,
     window_rows,
@@ -381,18 +380,13 @@ def follow_csv(
         record, diag, rows = isolated_alarm(
             monitor, data, trace, i, window_s, values[:, 0:6], taken
         )
-        change = None
-        if diag.isolated:  # as batch: the change taken out after the window, unless it ended
+        new, change = filed(record, diag, open_, code, float(data["t"][rows[-1]]))
+        if new:
             alarms.append(record)
             say(describe_alarm(record))
-            change = None if record.get("ended") else Change.of(record, diag)
-        elif code in open_:  # the unexplained change persisting: no new record (batch's rule)
-            persisting(open_[code], record["t"], float(data["t"][rows[-1]]))
+        else:  # the unexplained change persisting: no new record (batch's rule)
             alarm_rows.remove(k)
             withdraw(k, k, "persisting", by_t=open_[code]["t"])
-        else:
-            alarms.append(open_.setdefault(code, record))
-            say(describe_alarm(record))
         # as batch: fresh statistics after the window, isolated or not
         if ref["code"] != code or ref["rewatch"] is None:
             ref.update(rewatch=Rewatch(monitor), code=code)

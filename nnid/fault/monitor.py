@@ -62,8 +62,10 @@ UNCALIBRATED = (
     "this monitor is not calibrated yet: call fit(healthy_log) first, or load one with "
     "ResidualMonitor.load(dir)"
 )
+#: what the monitor reads, as detect and training say it (:func:`monitor_motion`)
+RESIDUAL = "the monitor's residual (Fossen eq. 2: ν and the attitude)"
 #: who never reads a pose column :func:`monitor_motion` leaves out, as detect says it
-UNREAD_BY = "the monitor's residual (Fossen eq. 2: ν and the attitude) never reads"
+UNREAD_BY = f"{RESIDUAL} never reads"
 _KINDS = {"poly": kernel.CURVE_POLY, "signed_quadratic": kernel.CURVE_QUADRATIC}
 
 
