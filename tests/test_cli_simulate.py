@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import pytest
 from typer.testing import CliRunner
@@ -480,3 +481,21 @@ def test_a_sequence_run_named_twice_names_the_explicit_experiments_name():
     with pytest.raises(NnidInputError, match="also by a run of the sequence") as info:
         validated(SimulateConfig, cfg, "sim.toml")
     assert info.value.field == "experiments.0.name" and info.value.source == "sim.toml"
+
+
+def test_open_loop_inputs_are_written_by_position_where_labels_repeat():
+    """The open-loop inputs an autopilot replay regenerates, on a log of two blocks joined by
+    pd.concat (labels 0..199 twice): written by label, each block's rows took both blocks'
+    (a ValueError); by position, each row gets what the same log with a fresh index gets."""
+    from nnid.config import load_config
+    from nnid.datasets.simulator import open_loop_inputs
+
+    cfg = load_config(ROOT / "configs/vt690_maneuvers.toml")
+    name = cfg.all_experiments()[0].name
+    block = pd.DataFrame({"t": 0.05 * np.arange(200), "experiment": name})
+    joined = pd.concat([block, block.iloc[:150]])
+    got = open_loop_inputs(cfg, joined)
+    assert got.index.equals(joined.index)
+    want = open_loop_inputs(cfg, joined.reset_index(drop=True))
+    np.testing.assert_array_equal(got.to_numpy(), want.to_numpy())
+    assert np.isfinite(want.to_numpy()).all() and want["tau_X"].abs().max() > 0

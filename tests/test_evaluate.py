@@ -360,3 +360,28 @@ def test_runs_joined_without_a_fresh_index_are_refused_before_scoring(runs):
     )
     with pytest.raises(NnidInputError, match=r"repeats 300 labels.*reset_index\(drop=True\)"):
         evaluate(model, twice, ("free_run",), warmup_s=1.0)
+
+
+def test_scoring_finds_each_runs_rows_by_position_where_labels_repeat(runs):
+    """The warm-up mask, the blanked initial conditions and each run's own scores on runs
+    joined without a fresh index (each label twice): found by label, they failed on the
+    repeated labels. By position, each is what the same log with a fresh index gives."""
+    from nnid.evaluation.evaluate import score_runs
+    from nnid.evaluation.metrics import warmup_mask
+    from nnid.evaluation.prediction import blank_initial
+
+    big, small = (g.reset_index(drop=True) for _, g in runs.groupby("experiment"))
+    twice = pd.concat([big, small.iloc[:200]])  # labels 0..199 name a row of each run
+    fresh = twice.reset_index(drop=True)
+    mask = warmup_mask(twice, 1.0, 3)
+    np.testing.assert_array_equal(mask, warmup_mask(fresh, 1.0, 3))
+    assert mask.sum() == 290 + 190  # each run's first second (10 samples) out
+    predicted = twice[["y"]] + 1.0
+    blanked = blank_initial(predicted, twice, 2)
+    assert blanked.index.equals(twice.index)  # on the log's own labels
+    np.testing.assert_array_equal(
+        blanked.to_numpy(), blank_initial(predicted.reset_index(drop=True), fresh, 2).to_numpy()
+    )
+    scores = score_runs(twice, predicted, mask, lambda run: ["y"])
+    assert scores == score_runs(fresh, predicted.reset_index(drop=True), mask, lambda r: ["y"])
+    assert scores[0]["small"]["y"] > 10 * scores[0]["big"]["y"]  # each run over its own std

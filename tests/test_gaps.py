@@ -851,3 +851,18 @@ def test_a_gap_bridged_in_a_log_joined_without_a_fresh_index_fills_its_own_run()
     alone = bridge_from_pose(a)
     pd.testing.assert_frame_equal(out.iloc[:400], alone)
     pd.testing.assert_frame_equal(out.iloc[400:], b)
+
+
+def test_inspect_summarizes_runs_joined_without_a_fresh_index_as_alone():
+    """pd.concat of two runs repeats the labels 0..199: ``summarize`` read each run's clock by
+    label, so a run held the other's samples too (its duration negative, gaps that are none).
+    By position, the summary is the one of the same log with a fresh index."""
+    from nnid.datasets.inspect import summarize
+
+    a = _mocap_log(400).assign(experiment="a")
+    b = _mocap_log(200, dt=0.1).assign(experiment="b")
+    joined = pd.concat([a, b])
+    info = summarize(joined)
+    assert info == summarize(joined.reset_index(drop=True))
+    assert [e["samples"] for e in info["experiments"]] == [400, 200]
+    assert info["gaps"] == []

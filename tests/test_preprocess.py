@@ -12,11 +12,15 @@ from nnid.datasets.cleaning import CleaningReport
 from nnid.datasets.excitation import Multisine
 from nnid.datasets.measurement import Measurement
 from nnid.datasets.preprocess import (
+    acceleration_gain2,
+    check_uniform,
     derive_accelerations,
     derive_velocities,
     detect_jumps,
     estimate_accelerometer_bias,
     estimate_gyro_bias,
+    first_order_lag,
+    held_at,
     lowpass,
     repair_jumps,
     resample_log,
@@ -24,6 +28,7 @@ from nnid.datasets.preprocess import (
     savgol_noise_gain,
     savgol_window,
     unwrap_angles,
+    zoh_midpoint,
 )
 from nnid.datasets.simulator import simulate
 from nnid.errors import NnidInputError
@@ -380,3 +385,78 @@ def test_runs_joined_without_a_fresh_index_get_each_their_own_velocities():
     joined = derive_velocities(pd.concat([a, b]), window_s=0.5)
     alone = pd.concat([derive_velocities(a, window_s=0.5), derive_velocities(b, window_s=0.5)])
     pd.testing.assert_frame_equal(joined, alone)
+
+
+def _joined_with_repeated_labels() -> pd.DataFrame:
+    """Two runs of different rates and lengths joined by pd.concat without ignore_index:
+    labels 0..39 name a row of each, each run with a jump in u and a held input."""
+    rng = np.random.default_rng(4)
+    ta, tb = np.arange(80) * 0.05, np.arange(40) * 0.1
+    a = pd.DataFrame({"t": ta, "experiment": "a", "u": np.sin(ta) + rng.normal(0, 0.01, 80)})
+    a["r"], a["tau_X"] = np.cos(2 * ta), np.repeat(rng.normal(0, 5, 16), 5)
+    b = pd.DataFrame({"t": tb, "experiment": "b", "u": 0.3 * tb + rng.normal(0, 0.01, 40)})
+    b["r"], b["tau_X"] = -np.sin(tb), np.repeat(rng.normal(0, 5, 10), 4)
+    a.loc[30, "u"] += 2.0
+    b.loc[12, "u"] -= 2.0
+    return pd.concat([a, b])
+
+
+@pytest.mark.parametrize(
+    "step",
+    [
+        lambda log: lowpass(log, ["u", "r"], 2.0),
+        lambda log: derive_accelerations(log, window_s=1.0),
+        lambda log: derive_accelerations(log, window_s=1.0, cut_at_steps=True),
+        lambda log: repair_jumps(log, ["u"], min_jump=0.5),
+        lambda log: resample_log(log, 10.0),
+    ],
+    ids=["lowpass", "derive_accelerations", "cut_at_steps", "repair_jumps", "resample_log"],
+)
+def test_runs_joined_without_a_fresh_index_are_each_processed_as_alone(step):
+    """pd.concat([a, b]) gives labels 0..39 to a row of each run: each run's rows were found by
+    label, so a run was read (and written) with the other's rows too. Found by position, every
+    row comes out as it does from the same log with a fresh index."""
+    joined = _joined_with_repeated_labels()
+    fresh = joined.reset_index(drop=True)
+    got, want = step(joined), step(fresh)
+    assert not got.equals(joined)  # the step changed something to compare
+    pd.testing.assert_frame_equal(got.reset_index(drop=True), want.reset_index(drop=True))
+
+
+def test_arrays_of_runs_joined_without_a_fresh_index_are_each_made_as_alone():
+    """check_uniform, held_at (held_inputs), zoh_midpoint, first_order_lag and
+    acceleration_gain2 on runs whose labels repeat (pd.concat): the same as on a fresh index,
+    row by row."""
+    joined = _joined_with_repeated_labels()
+    fresh = joined.reset_index(drop=True)
+    # the first run's interval; reading both runs' t under each label was a clock going back
+    interval = check_uniform(joined, "the test")
+    assert interval == check_uniform(fresh, "the test") == pytest.approx(0.05)
+    held = held_at(joined)
+    assert held == held_at(fresh) and held[0] == ["tau_X"]  # held over 5 and 4 samples
+    tau = joined[["tau_X"]].to_numpy(np.float64)
+    np.testing.assert_array_equal(zoh_midpoint(tau, joined), zoh_midpoint(tau, fresh))
+    np.testing.assert_array_equal(
+        first_order_lag(tau, joined, 0.3), first_order_lag(tau, fresh, 0.3)
+    )
+    np.testing.assert_array_equal(
+        acceleration_gain2(joined, 1.0, 4, True), acceleration_gain2(fresh, 1.0, 4, True)
+    )
+
+
+def test_a_roll_is_judged_run_by_run_where_labels_repeat():
+    """A level run whose gyro is biased, joined by pd.concat after a longer one that trembles:
+    each run's p was read by label, with the other's rows under the same labels, and the
+    mixture's median left an offset that "rolled" the vehicle 0.8 rad. By position, neither
+    run is refused, as with a fresh index."""
+    from nnid.datasets.preprocess import check_attitude
+
+    vehicle = load_vehicle("seamor")
+    ta, tb = np.arange(0, 120, 0.1), np.arange(0, 60, 0.1)
+    a = pd.DataFrame({"t": ta, "experiment": "a", "u": 0.2, "p": 0.03 * np.cos(ta), "q": 0.0})
+    b = pd.DataFrame({"t": tb, "experiment": "b", "u": 0.2, "p": np.radians(0.5), "q": 0.0})
+    joined = pd.concat([a, b])
+    check_attitude(joined.reset_index(drop=True), vehicle, list("uvwpqr"))
+    check_attitude(joined, vehicle, list("uvwpqr"))
+    with pytest.raises(NnidInputError, match="its p in experiment 'a'"):  # a roll still is one
+        check_attitude(pd.concat([a.assign(p=0.3 * np.cos(ta)), b]), vehicle, list("uvwpqr"))

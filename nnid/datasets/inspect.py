@@ -32,7 +32,7 @@ from nnid.datasets.preprocess import (
     derivable_velocities,
     derive_velocities,
     excited_dofs,
-    experiments,
+    experiment_rows,
 )
 from nnid.errors import NnidInputError
 
@@ -85,17 +85,18 @@ def summarize(log: pd.DataFrame, savgol_window: float = 1.0, savgol_order: int =
     sampled span (``ends``, :func:`nnid.datasets.gaps.span_ends`)."""
     inputs = input_columns(log)
     known = {"t", "experiment", PIECE_OF, REPLAY_GROUP, *POSE, *VELOCITY, *ACCELERATION, *inputs}
-    groups = experiments(log)
+    groups = experiment_rows(log)
     exp_rows, gaps, intervals = [], [], []
     before: tuple[str | None, float] = (None, float("nan"))  # the last piece's run and end
-    for name, idx in groups:
-        t = log.loc[idx, "t"].to_numpy(np.float64)
+    t_all = log["t"].to_numpy(np.float64)
+    for name, pos in groups:
+        t = t_all[pos]
         dt = np.diff(t)
         med = float(np.median(dt)) if dt.size else float("nan")
         intervals.append(dt)
         # a piece cut from a run at a gap (the readers' ``<run>#<k>``) is not an experiment of
         # its own: told by PIECE_OF, never by its label (nnid.datasets.log)
-        whole = log.loc[idx[0], PIECE_OF] if PIECE_OF in log and len(idx) else None
+        whole = log[PIECE_OF].iloc[pos[0]] if PIECE_OF in log and len(pos) else None
         whole = str(whole) if pd.notna(whole) and str(whole) else None
         label = None if name is None else str(name)
         held = []

@@ -89,8 +89,9 @@ def check_uniform(
     interval 1 + ``tolerance`` times the median has samples missing. Returns that interval
     (the first run's without ``one_rate``; None where no run has two samples)."""
     given = interval is not None
-    for exp, idx in experiments(log):
-        t = log.loc[idx, "t"].to_numpy(np.float64)
+    t_all = log["t"].to_numpy(np.float64)
+    for exp, pos in experiment_rows(log):
+        t = t_all[pos]
         dt = np.diff(t)
         if not dt.size:
             continue
@@ -111,13 +112,14 @@ def check_uniform(
         off = np.flatnonzero(np.abs(dt - typical) > tolerance * typical)
         if off.size:
             k = int(off[0])
+            label = log.index[pos[k + 1]]  # the row named by its label, as the file's row
             raise NnidInputError(
                 f"column t of the {name}{where} is not uniformly sampled: {dt[k]:.4g} s from "
                 f"t = {t[k]:.6g} to {t[k + 1]:.6g} s against {typical:.4g} s elsewhere, and "
                 f"{what} counts time in samples; resample the log, or split the run where "
                 "samples are missing",
                 field="t",
-                row=int(idx[k + 1]) if isinstance(idx[k + 1], (int, np.integer)) else None,
+                row=int(label) if isinstance(label, (int, np.integer)) else None,
             )
     return interval
 
@@ -148,8 +150,8 @@ def resample_log(
     # any other column that is not a number: a mode, a fault label, a flag (once dropped)
     categorical = [c for c in log.columns if c not in ("t", "experiment", *numeric, *labels)]
     pieces, rates = [], []
-    for name, idx in experiments(log):
-        part = log.loc[idx]
+    for name, pos in experiment_rows(log):
+        part = log.iloc[pos]
         t = part["t"].to_numpy(np.float64)
         logged = 1.0 / float(np.median(np.diff(t))) if t.size > 1 else rate
         rates.append(logged)
@@ -508,11 +510,12 @@ def check_attitude(log: pd.DataFrame, vehicle, dofs: Sequence[str]) -> None:
             continue
         if np.allclose(restoring(*tilt), level, rtol=0.0, atol=1e-9 * (1 + vehicle.weight)):
             continue  # the fitted DOFs' restoring forces do not read this angle
-        for exp, idx in experiments(log):
-            w = log.loc[idx, rate].to_numpy(np.float64)
+        rates, t = log[rate].to_numpy(np.float64), log["t"].to_numpy(np.float64)
+        for exp, pos in experiment_rows(log):
+            w = rates[pos]
             if not np.isfinite(w).any():  # a run with no rate says nothing of its attitude
                 continue
-            turned = turned_by(log.loc[idx, "t"].to_numpy(np.float64), w - np.nanmedian(w))
+            turned = turned_by(t[pos], w - np.nanmedian(w))
             if np.ptp(turned) > TILTED:
                 run = f" in experiment {exp!r}" if exp is not None else ""
                 raise NnidInputError(
@@ -619,12 +622,12 @@ def short_pieces_note(samples: int) -> str:
     return f"; {samples} samples in pieces between gaps shorter than the window: none there"
 
 
-def _held_steps(log: pd.DataFrame, idx, held: list[str]) -> np.ndarray | None:
-    """The positions in the experiment at ``idx`` where one of the ``held`` inputs steps (the
-    cuts of :func:`_between_steps`), or None without held inputs."""
+def _held_steps(log: pd.DataFrame, pos: np.ndarray, held: list[str]) -> np.ndarray | None:
+    """The positions in the experiment at row positions ``pos`` where one of the ``held``
+    inputs steps (the cuts of :func:`_between_steps`), or None without held inputs."""
     if not held:
         return None
-    step = np.diff(log.loc[idx, held].to_numpy(np.float64), axis=0)
+    step = np.diff(log[held].to_numpy(np.float64)[pos], axis=0)
     return np.flatnonzero((np.isfinite(step) & (step != 0)).any(axis=1)) + 1
 
 
@@ -638,13 +641,13 @@ def acceleration_gain2(
     out = np.full(len(log), np.nan)
     held = held_inputs(log) if cut_at_steps else []
     # derive_accelerations has warned of a widened window: not said a second time
-    for _, idx, dt, window, steps in _derivative_runs(log, window_s, order, held, None):
+    velocity = log[[c for c in VELOCITY if c in log]].to_numpy(float)
+    for _, pos, dt, window, steps in _derivative_runs(log, window_s, order, held, None):
         if window is None:
             continue
-        rows = log.index.get_indexer(idx)
-        missing = ~np.isfinite(log.loc[idx, [c for c in VELOCITY if c in log]].to_numpy(float))
-        out[rows] = savgol_derivative_gain2(
-            len(idx), dt, window, order, 1, steps, missing.any(axis=1)
+        missing = ~np.isfinite(velocity[pos])
+        out[pos] = savgol_derivative_gain2(
+            len(pos), dt, window, order, 1, steps, missing.any(axis=1)
         )
     return out
 
@@ -653,18 +656,17 @@ def _derivative_runs(
     log: pd.DataFrame, window_s: float, order: int, held: list[str], setting: str | None
 ):
     """Per experiment of ``log``, how :func:`derive_accelerations` differentiates it, which
-    :func:`acceleration_gain2` must follow: (name, rows, median step, Savitzky-Golay window
-    or None for a run shorter than it, the steps of the ``held`` inputs or None).
+    :func:`acceleration_gain2` must follow: (name, row positions, median step, Savitzky-Golay
+    window or None for a run shorter than it, the steps of the ``held`` inputs or None).
     ``setting``: the key named where the window is widened (None: not warned again)."""
     t = log["t"].to_numpy(np.float64)
     for name, pos in experiment_rows(log):
-        idx = log.index[pos]
         dt = float(np.median(np.diff(t[pos])))
         window = savgol_window(window_s, 1.0 / dt, order, setting)
         if short_piece(log, pos, window):
-            yield name, idx, dt, None, None
+            yield name, pos, dt, None, None
         else:
-            yield name, idx, dt, window, _held_steps(log, idx, held)
+            yield name, pos, dt, window, _held_steps(log, pos, held)
 
 
 def derive_accelerations(
@@ -679,19 +681,20 @@ def derive_accelerations(
     the inputs that look held (:func:`held_inputs`, :func:`_between_steps`)."""
     out = log.copy()
     cols = [c for c in VELOCITY if c in out]
-    for c in cols:
-        out["d" + c] = np.nan
     held = held_inputs(log) if cut_at_steps else []
     short = cuts = 0
+    # each run's rows by position: a run's labels may repeat another's (pd.concat)
+    velocity = {c: out[c].to_numpy(np.float64) for c in cols}
+    derived = {c: np.full(len(out), np.nan) for c in cols}
     runs = _derivative_runs(out, window_s, order, held, "savgol_window")
-    for name, idx, dt, window, steps in runs:
+    for name, pos, dt, window, steps in runs:
         if window is None:
-            short += len(idx)
+            short += len(pos)
             continue
         cuts += 0 if steps is None else steps.size
         for c in cols:
-            out.loc[idx, "d" + c] = savgol_derivative(
-                out.loc[idx, c].to_numpy(np.float64),
+            derived[c][pos] = savgol_derivative(
+                velocity[c][pos],
                 dt,
                 window,
                 order,
@@ -699,6 +702,8 @@ def derive_accelerations(
                 setting="savgol_window",
                 steps=steps,
             )
+    for c in cols:
+        out["d" + c] = derived[c]
     if report is not None and cols:
         cut = f", not across the {cuts} steps of the held inputs {', '.join(held)}" if held else ""
         report.add(
@@ -723,8 +728,11 @@ def lowpass(
 ) -> pd.DataFrame:
     """Zero-phase Butterworth low-pass (forward-backward, no delay) per experiment."""
     out = log.copy()
-    for name, idx in experiments(out):
-        t = out.loc[idx, "t"].to_numpy(np.float64)
+    t_all = out["t"].to_numpy(np.float64)
+    # each run's rows by position: a run's labels may repeat another's (pd.concat)
+    values = {c: out[c].to_numpy(np.float64, copy=True) for c in columns}
+    for name, pos in experiment_rows(out):
+        t = t_all[pos]
         rate = sample_rate(t)
         if cutoff >= rate / 2:
             raise NnidInputError(
@@ -740,7 +748,9 @@ def lowpass(
                 field="lowpass",
             )
         for c in columns:
-            out.loc[idx, c] = filtfilt(b, a, out.loc[idx, c].to_numpy(np.float64))
+            values[c][pos] = filtfilt(b, a, values[c][pos])
+    for c in columns:
+        out[c] = values[c]
     if report is not None:
         report.add(
             "low-pass",
@@ -782,15 +792,23 @@ def repair_jumps(
     """Replace detected jumps by linear interpolation from their neighbours, and report them."""
     out = log.copy()
     total = 0
-    for _, idx in experiments(out):
-        t = out.loc[idx, "t"].to_numpy(np.float64)
+    t_all = out["t"].to_numpy(np.float64)
+    # each run's rows by position: a run's labels may repeat another's (pd.concat)
+    values = {c: out[c].to_numpy(np.float64, copy=True) for c in columns}
+    repaired = set()
+    for _, pos in experiment_rows(out):
+        t = t_all[pos]
         for c in columns:
-            y = out.loc[idx, c].to_numpy(np.float64, copy=True)
+            y = values[c][pos]
             bad = detect_jumps(y, kernel, threshold, min_jump)
             if bad.any() and (~bad).sum() >= 2:
                 y[bad] = np.interp(t[bad], t[~bad], y[~bad])
-                out.loc[idx, c] = y
+                values[c][pos] = y
+                repaired.add(c)
                 total += int(bad.sum())
+    for c in columns:
+        if c in repaired:  # a column without a jump is left as it was
+            out[c] = values[c]
     if report is not None:
         report.add(
             "jumps",
@@ -816,8 +834,7 @@ def zoh_midpoint(x: np.ndarray, log: pd.DataFrame) -> np.ndarray:
     """Per experiment, the mean of consecutive samples (the first kept): the force a
     zero-order-held input applies around t_k, which a smoothed acceleration at t_k sees."""
     y = np.array(x, dtype=np.float64, copy=True)
-    for _, idx in experiments(log):
-        pos = log.index.get_indexer(idx)
+    for _, pos in experiment_rows(log):
         y[pos[1:]] = 0.5 * (x[pos[1:]] + x[pos[:-1]])
     return y
 
@@ -839,11 +856,12 @@ def held_inputs(log: pd.DataFrame) -> list[str]:
     :data:`HELD_SHARE` of their consecutive samples are equal and at least one is not (a
     column that never moves steps nowhere). A sampled smooth signal is never equal twice, but
     may rest at zero between its bursts: a pair of samples both at zero is left out."""
-    held, groups = [], [idx for _, idx in experiments(log)]
+    held, groups = [], [pos for _, pos in experiment_rows(log)]
     for c in input_columns(log):
         equal = steps = 0
-        for idx in groups:
-            x = log.loc[idx, c].to_numpy(np.float64)
+        column = log[c].to_numpy(np.float64)
+        for pos in groups:
+            x = column[pos]
             d = np.diff(x)
             d = d[np.isfinite(d) & ((x[1:] != 0) | (x[:-1] != 0))]
             equal += int(np.count_nonzero(d == 0.0))
@@ -859,7 +877,8 @@ def held_at(log: pd.DataFrame) -> tuple[list[str], float]:
     held = held_inputs(log)
     if not held:
         return held, float("nan")
-    dts = [np.diff(log.loc[idx, "t"].to_numpy(np.float64)) for _, idx in experiments(log)]
+    t = log["t"].to_numpy(np.float64)
+    dts = [np.diff(t[pos]) for _, pos in experiment_rows(log)]
     dts = [d for d in dts if d.size]
     return held, float(np.median(np.concatenate(dts))) if dts else float("nan")
 
@@ -874,8 +893,7 @@ def first_order_lag(tau: np.ndarray, log: pd.DataFrame, time_constant: float) ->
         return tau
     out = np.empty_like(tau)
     t = log["t"].to_numpy(np.float64)
-    for _, idx in experiments(log):
-        pos = log.index.get_indexer(idx)
+    for _, pos in experiment_rows(log):
         dt = float(np.median(np.diff(t[pos]))) if pos.size > 1 else 1.0
         a = np.exp(-dt / time_constant)
         # zi = τ_0 starts the filter at rest on the first input

@@ -377,11 +377,11 @@ def open_loop_inputs(config, log: pd.DataFrame) -> pd.DataFrame:
             raise NnidInputError(
                 f"experiment {name!r} is not one of the simulate config's", field="experiments"
             )
-        rows = log.index[(names == name).to_numpy()]
+        rows = np.flatnonzero((names == name).to_numpy())  # by position: labels may repeat
         inputs = experiment_inputs(runs[name], FORCES, config.dt)
         if len(inputs) < len(rows):
             raise NnidInputError(
                 f"experiment {name!r} has more rows than its simulation", field="experiments"
             )
-        out.loc[rows] = inputs[: len(rows)]
+        out.iloc[rows] = inputs[: len(rows)]
     return out

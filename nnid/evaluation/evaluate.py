@@ -34,7 +34,7 @@ import numpy as np
 import pandas as pd
 
 from nnid.datasets.log import VELOCITY, check_log
-from nnid.datasets.preprocess import excited_dofs, experiments
+from nnid.datasets.preprocess import excited_dofs, experiment_rows
 from nnid.evaluation.metrics import exact_mean, exact_std, warmup_mask
 from nnid.evaluation.prediction import check_mode, mode_steps
 from nnid.physics.dofs import DOFS, FORCES
@@ -168,8 +168,7 @@ def score_runs(
     Returns the NRMSE of each run and ``{run: {column: t}}`` of the runs that diverged."""
     out, diverged = {}, {}
     split_range: dict[str, float] = {}  # each column's once, however many pieces need it
-    for name, idx in experiments(log):
-        pos = log.index.get_indexer(idx)
+    for name, pos in experiment_rows(log):
         run = log.iloc[pos]
         cols = columns_of(run)
         widths = None
@@ -214,7 +213,7 @@ def score_split(
     few = int(mask.sum()) < MIN_RANGE_SAMPLES
     widths = {c: _range(log[c].to_numpy(np.float64)) for c in columns} if few else None
     nrmse, rmse, diverged = score_prediction(log, predicted, columns, mask, widths)
-    if len(experiments(log)) < 2:
+    if len(experiment_rows(log)) < 2:
         return nrmse, rmse, diverged, {}, {}
     runs, left = score_runs(log, predicted, mask, columns_of)
     # only the pooled score's own columns: a run may score one the split as a whole does not

@@ -12,15 +12,14 @@ import math
 import numpy as np
 import pandas as pd
 
-from nnid.datasets.preprocess import experiments
+from nnid.datasets.preprocess import experiment_rows
 
 
 def warmup_mask(log: pd.DataFrame, warmup_s: float = 0.0, warmup_samples: int = 0) -> np.ndarray:
     """True where a sample is scored: after the warm-up at the start of each experiment."""
     keep = np.ones(len(log), dtype=bool)
     t = log["t"].to_numpy(np.float64)
-    for _, idx in experiments(log):
-        pos = log.index.get_indexer(idx)
+    for _, pos in experiment_rows(log):
         keep[pos[:warmup_samples]] = False
         keep[pos] &= t[pos] - t[pos[0]] >= warmup_s
     return keep

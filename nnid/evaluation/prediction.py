@@ -16,7 +16,7 @@ import pandas as pd
 
 from nnid.datasets.gaps import nearest_samples
 from nnid.datasets.log import POSE, TAU, VELOCITY, check_time_unit
-from nnid.datasets.preprocess import check_uniform, experiments, first_order_lag
+from nnid.datasets.preprocess import check_uniform, experiment_rows, first_order_lag
 from nnid.errors import NnidInputError
 from nnid.physics import compiled
 
@@ -110,8 +110,7 @@ def predict_states(
     if lag > 0:
         x = np.concatenate([x, felt_forces(parts, log, tau_nominal, lag)], 1)
     k = 1 if mode == "one_step" else mode
-    for _, idx in experiments(log):
-        pos = log.index.get_indexer(idx)
+    for _, pos in experiment_rows(log):
         t = log["t"].to_numpy(np.float64)[pos]
         dt = float(np.median(np.diff(t)))
         if mode == "free_run":
@@ -143,8 +142,8 @@ def blank_initial(predicted: pd.DataFrame, log: pd.DataFrame, n: int) -> pd.Data
     if n <= 0:
         return predicted
     values = predicted.to_numpy(np.float64, copy=True)
-    for _, idx in experiments(log):
-        values[log.index.get_indexer(idx)[:n]] = np.nan
+    for _, pos in experiment_rows(log):
+        values[pos[:n]] = np.nan
     return pd.DataFrame(values, columns=predicted.columns, index=predicted.index)
 
 
@@ -235,8 +234,7 @@ def _fly(log: pd.DataFrame, replay: Replay, flight: Flight, mode: str | int) -> 
     out = x.copy()
     tau_open = replay.open_loop.loc[log.index, list(TAU)].to_numpy(np.float64)
     k = mode_steps(mode)
-    for _, idx in experiments(log):
-        pos = log.index.get_indexer(idx)
+    for _, pos in experiment_rows(log):
         dt = float(np.median(np.diff(log["t"].to_numpy(np.float64)[pos])))
         if mode == "free_run":
             flown = flight(x[pos[:1]], tau_open, pos[:1], pos.size - 1, dt)[0]
