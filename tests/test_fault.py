@@ -8,6 +8,7 @@ healthy held-out runs must not alarm.
 
 from __future__ import annotations
 
+import copy
 import json
 import math
 import warnings
@@ -195,6 +196,21 @@ def test_external_force_is_not_blamed_on_a_thruster(vehicle, monitor):
     (a,) = detect(monitor, log).alarms
     assert a["kind"] == "external_force" and a["thruster"] is None
     assert a["effect"] == "external_bias.u" and a["value"] == pytest.approx(-15.0, rel=0.1)
+
+
+@pytest.mark.parametrize("sigma", [1e-100, 0.0])
+def test_a_dof_of_exact_data_does_not_swamp_isolation(monitor, stopped_h1, sigma):
+    """A monitor whose healthy residual in r is exact (σ 0, or 1e-100, which monitor.json
+    passes): isolation weighed r by 1/σ², unfloored: 1e200 ('unexplained: the best, added_mass.u,
+    explains inf % of the residual') or infinite ('no hypothesis has a signature'). Floored as
+    feasible weighting floors an equation's variance (feasible_floor), h1 stopped is named and
+    sized as with r's own σ."""
+    exact = copy.copy(monitor)
+    exact.sigma_ = monitor.sigma_.copy()
+    exact.sigma_[5] = sigma  # r
+    (a,) = detect(exact, stopped_h1.head(700)).alarms
+    assert (a["kind"], a["thruster"]) == ("thruster_loss", "h1")
+    assert a["efficiency"] == pytest.approx(0.0, abs=0.1) and 0.9 < a["explained"] <= 1.0
 
 
 def test_a_snag_in_two_dofs_is_one_external_wrench(vehicle, monitor):
@@ -566,7 +582,15 @@ def test_an_unexplained_change_that_persists_is_one_alarm_that_repeats(vehicle, 
     times = "once" if a["repeats"] == 1 else f"{a['repeats']} times"
     seen = f"{times}, last at {a['last_seen_t']:.2f} s"
     assert "<th>seen again</th>" in page and f"<td>{seen}</td></tr>" in page
-    assert sum(line.startswith(f"t = {a['t']:.2f} s, seen again {seen}: ") for line in lines) == 1
+    (line,) = [
+        line for line in lines if line.startswith(f"t = {a['t']:.2f} s, seen again {seen}: ")
+    ]
+    # the count said once, in a line a person reads: it was 700 characters, the meaning's
+    # whole sentence saying the count again; detect.json keeps that sentence
+    assert line.count(times) == 1 and "alarmed again" not in line and len(line) < 250
+    assert "unexplained by the hypotheses: the best, " in line
+    saved = json.loads((tmp_path / "out" / "detect.json").read_text())["alarms"][0]
+    assert saved["meaning"] == a["meaning"] and f"alarmed again {times}" in saved["meaning"]
 
 
 def test_an_unexplained_record_says_its_repeats_once():
@@ -902,10 +926,47 @@ def test_follow_checks_a_slow_depth_on_its_samples_not_on_the_held_cells(
     said: list[str] = []
     follow_csv(monitor, str(tmp_path / "slow_z.csv"), 10.0, said.append, idle_s=0.0)
     assert (
-        "z: empty cells (the first at row 0) hold their run's last sample (0 before its "
-        "first), not masked: the monitor's residual (Fossen eq. 2: ν and the attitude) never "
-        "reads z"
+        "z: empty cells (the first at row 0) hold their run's last sample (before its first, "
+        "not yet sampled: filled from it once it arrives), not masked: the monitor's residual "
+        "(Fossen eq. 2: ν and the attitude) never reads z"
     ) in said
+
+
+def test_follow_holds_a_slow_position_as_batch_not_at_a_made_up_0(
+    monitor, stopped_h1, tmp_path, monkeypatch
+):
+    """A 1-Hz GPS first sampled 15 s (x) and 32 s (y) into the run: --follow held each at 0
+    until then, where batch detect holds the run's first sample (nearest_samples), and said
+    so ("0 before its first"). The residual reads neither, but the pose isolation is handed
+    held a made-up 0. Now a cell before the first sample is NaN (not yet sampled), and the
+    rows kept are filled from that sample once it arrives: the pose isolation reads at 30 s
+    is batch's for x, not yet sampled for y, and the alarm is batch's."""
+    import nnid.fault.follow as follow
+
+    _, gps = _slow_gps(stopped_h1.head(700))
+    rows = np.arange(len(gps))
+    gps.loc[rows < 300, "x"] = np.nan
+    gps.loc[rows < 640, "y"] = np.nan
+    gps.to_csv(tmp_path / "gps.csv", index=False)
+    seen = []  # the pose each isolation is handed
+
+    def isolated_alarm(monitor, data, *args):
+        seen.append(data["x"][:, 0:2].copy())
+        return judge(monitor, data, *args)
+
+    judge = follow.isolated_alarm
+    monkeypatch.setattr(follow, "isolated_alarm", isolated_alarm)
+    said: list[str] = []
+    followed = follow_csv(monitor, str(tmp_path / "gps.csv"), 10.0, said.append, idle_s=0.0)
+    batch = detect(monitor, gps)
+    x = seen[0]  # at 30 s, the window of the alarm at 20 s whole
+    assert [(a["t"], a["thruster"], a["meaning"]) for a in followed.alarms] == [
+        (a["t"], a["thruster"], a["meaning"]) for a in batch.alarms
+    ] and batch.alarms[0]["thruster"] == "h1"
+    held = monitor_inputs(gps, monitor.plant_)["x"][: len(x), 0]
+    np.testing.assert_array_equal(x[:, 0], held)  # back-filled from 15 s, as batch
+    assert np.isnan(x[:, 1]).all()  # y: not sampled by 30 s, and not said 0
+    assert not any("0 before" in line for line in said)
 
 
 def test_a_detect_training_holds_a_slow_gps_position_as_detect_does(vehicle, stopped_h1, tmp_path):

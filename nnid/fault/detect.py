@@ -63,6 +63,7 @@ from nnid.fault.isolation import (
     Diagnosis,
     Refit,
     allowed_ratio,
+    dof_weights,
     hypothesis_columns,
     isolate,
     model_error,
@@ -244,15 +245,25 @@ def unexplained(record: dict, restart_t: float) -> None:
     record["repeats"], record["last_seen_t"] = 0, record["t"]
     record["blind_until"] = record["blind"] = None
     record["meaning"] = (
-        f"{record['meaning'] or 'a change no hypothesis explains'}; the statistics restart at "
-        f"the window's end ({restart_t:.2f} s) with nothing more taken out (an isolated change "
+        f"{record['meaning'] or 'a change no hypothesis explains'}{RESTARTS}"
+        f"({restart_t:.2f} s) with nothing more taken out (an isolated change "
         "before it stays taken out): a later alarm isolated is a new change, one that is not "
         "isolated either is this change persisting"
     )
 
 
+#: how :func:`unexplained` starts its clause of a record's ``meaning``
+RESTARTS = "; the statistics restart at the window's end "
 #: how :func:`persisting` starts its clause of a record's ``meaning`` (rewritten each time)
 PERSISTING = "; alarmed again "
+
+
+def finding(record: dict) -> str:
+    """What isolation said of an alarm: its ``meaning`` without the clauses that
+    :func:`unexplained` and :func:`persisting` add to a record not isolated (the statistics'
+    restart, and the later alarms taken as the change persisting, whose count a console line
+    gives once, up front); the record keeps them."""
+    return (record.get("meaning") or "").partition(RESTARTS)[0].partition(PERSISTING)[0]
 
 
 def how_often(n: int) -> str:
@@ -537,9 +548,9 @@ class _Splits:
 
         # θ as refit has it (isolate's per-DOF weights), so that the τ chosen is the one whose
         # refit leaves the least; the power it leaves, whitened by the full covariance
-        mask = m.mask_
-        wt = np.sqrt(mask / np.where(mask > 0, m.sigma_**2, 1.0))
-        xw, ew = x * wt[None, :, None], (after_r - m.mu_) * wt
+        e = after_r - m.mu_
+        wt = np.sqrt(dof_weights(m, e))
+        xw, ew = x * wt[None, :, None], e * wt
         theta = -np.einsum(
             "nkl,nl->nk",
             np.linalg.pinv(suffix(np.einsum("nik,nil->nkl", xw, xw))),

@@ -58,6 +58,7 @@ from nnid.fault.detect import (
     DetectResult,
     Rewatch,
     filed,
+    finding,
     how_often,
     isolated_alarm,
     rewatched_alarm,
@@ -65,6 +66,7 @@ from nnid.fault.detect import (
     window_rows,
     withdrawn_record,
 )
+from nnid.fault.isolation import UNEXPLAINED
 from nnid.fault.monitor import (
     UNREAD_BY,
     ResidualMonitor,
@@ -232,7 +234,7 @@ def follow_csv(
     unread = [c for c in POSE if c in col and c not in monitor_motion(header)]
     kept_unread, said_held = frozenset(unread), set()
     # which cells of each buffered row were held, not read: the unit checks see them empty,
-    # as the whole-log reader does (a held 0 before a depth's first sample read as a jump)
+    # as the whole-log reader does (a held depth read as a jump that w does not make)
     nothing_held = np.zeros(len(STATE), dtype=bool)
     input_cols = [col[c] for c in inputs]
     exp_col = col.get("experiment")
@@ -445,8 +447,9 @@ def follow_csv(
         for c in [c for c in unread if c not in values and c not in said_held]:
             said_held.add(c)
             say(
-                f"{c}: empty cells (the first at row {n}) hold their run's last sample (0 "
-                f"before its first), not masked: {UNREAD_BY} {c}"
+                f"{c}: empty cells (the first at row {n}) hold their run's last sample (before "
+                f"its first, not yet sampled: filled from it once it arrives), not masked: "
+                f"{UNREAD_BY} {c}"
             )
         for name, bounds in limits.items():
             if name in values and not bounds.holds(values[name]):
@@ -471,10 +474,15 @@ def follow_csv(
                 raise degrees_error(seen, angle, where, n)
         t = values["t"]
         name = row[exp_col] if exp_col is not None else ""
-        # held within its run, as batch holds it (a stream cannot look ahead to the run's
-        # first sample: 0 before it, which no residual reads either)
+        # held within its run, as batch holds it (nearest_samples); before the run's first
+        # sample NaN, not yet sampled, not a made-up 0: its rows still kept are filled from
+        # that sample once it arrives, as batch back-fills them (no residual reads them)
         hold = name == current
-        x[:] = [values.get(c, x[i] if hold and c in kept_unread else 0.0)
+        for j in [j for j, c in enumerate(STATE) if c in kept_unread and c in values]:
+            if hold and np.isnan(x[j]):  # the run's first sample of it
+                for earlier in xs[max(exp_first - dropped, 0) :]:
+                    earlier[j] = values[STATE[j]]
+        x[:] = [values.get(c, (x[i] if hold else np.nan) if c in kept_unread else 0.0)
                 for i, c in enumerate(STATE)]  # fmt: skip
         u[:] = [values[c] for c in inputs]
         if exp_col is not None and not name.strip():  # refused by the whole-log reader too
@@ -515,7 +523,8 @@ def follow_csv(
                 monitor.check_rate(np.asarray(ts[-RATE_WINDOW:]), np.asarray(codes[-RATE_WINDOW:]))
             except NnidInputError as exc:
                 raise exc.with_source(where) from None
-        code = stream.update(t, x, u)
+        # the kernel scores no row with a value that is not finite, and reads no x, y, z
+        code = stream.update(t, np.nan_to_num(x) if np.isnan(x).any() else x, u)
         ts.append(t)
         xs.append(x.copy())
         empty = [c for c in unread if c not in values]
@@ -619,23 +628,29 @@ def withdrawn_line(w: dict) -> str:
 
 
 def describe_alarm(a: dict) -> str:
-    """One line a person reads for an alarm record."""
+    """One line a person reads for an alarm record: of one not isolated, what isolation found
+    (:func:`~nnid.fault.detect.finding`) and how often it was seen again, once; the record's
+    ``meaning`` says how later alarms are counted (a line of 700 characters said the count
+    twice)."""
     where = f"t = {a['t']:.2f} s" + (f" ({a['experiment']})" if a.get("experiment") else "")
-    if a.get("repeats"):  # up front: the meaning says it too, at the end of a long sentence
+    if a.get("repeats"):
         where += f", seen again {seen_again(a)}"
+    meaning = finding(a)
     if a.get("thruster") and a.get("efficiency") is not None:
         what = (
             f"thruster {a['thruster']} gives {100 * a['efficiency']:.0f} % of its thrust "
             f"(95 % interval {efficiency_interval(a, percent=True)})"
         )
         if a["kind"] != "thruster_loss" or a.get("resized"):  # not a loss, or a loss resized
-            what = f"{a['meaning']}: {what}"
+            what = f"{meaning}: {what}"
     elif a["effect"]:
-        what = f"{a['meaning']}: {a['effect']} = {value_pm(a)}"
+        what = f"{meaning}: {a['effect']} = {value_pm(a)}"
     else:
-        what = a["meaning"] or "a change no hypothesis explains"
+        what = meaning or "a change no hypothesis explains"
     # the confidence is among the hypotheses: how much of the change the named one explains
-    # says whether the fault is one of them (two thrusters lost at once: 55 %, confidence 1.00)
+    # says whether the fault is one of them (two thrusters lost at once: 55 %, confidence 1.00);
+    # an unexplained one's finding says that share itself
     explained = explained_share(a)
-    share = f", explaining {explained} of the residual" if explained else ""
+    said = explained and not meaning.startswith(UNEXPLAINED)
+    share = f", explaining {explained} of the residual" if said else ""
     return f"{where}: {a['kind']}: {what}; confidence {a['confidence']:.2f}{share}"

@@ -39,6 +39,7 @@ from nnid.loop.effects import Candidate, candidates
 from nnid.models.parametric import ParametricFossen, vehicle_with
 from nnid.physics.thrusters import Actuation
 from nnid.reports.cells import number
+from nnid.trainers.least_squares import feasible_floor, feasible_weights
 
 _PRIORITY = {"thruster_loss": 0, "buoyancy_offset": 1, "external_bias": 2}
 PARALLEL = 0.95  # |cos| of whitened columns above which two hypotheses are one to the data
@@ -172,6 +173,19 @@ def hypothesis_columns(monitor, data: dict, rows: np.ndarray, names=None) -> tup
     return vehicle, cands, cols
 
 
+def dof_weights(monitor, e: np.ndarray) -> np.ndarray:
+    """Each DOF equation's weight [6] in isolation's least squares of the residual ``e``
+    [N, 6] (μ taken out, NaN where a row is not fitted): 1/σ² of the monitor's healthy
+    residual on the DOFs it watches (0 on the others), σ² at least feasible weighting's floor
+    (:func:`~nnid.trainers.least_squares.feasible_floor`, ``e`` its targets). Unfloored, a DOF
+    of exact data (σ ~0) took a weight of 1e16 or more that swamped the other DOFs, or an
+    infinite one, and no hypothesis had a signature."""
+    watched = monitor.mask_ > 0
+    var = np.where(watched, monitor.sigma_**2, np.nan)
+    floor = feasible_floor(var, np.where(watched, e, np.nan).reshape(-1), 6)
+    return np.where(watched, feasible_weights(var, floor), 0.0)
+
+
 def signature(monitor, data: dict, rows: np.ndarray, fitted: list[tuple[str, float]]):
     """The residual an isolated change leaves on ``rows`` [N, 6] (NaN where there is none):
     minus the fitted hypothesis' columns times their θ (:attr:`Diagnosis.fitted`). Taken from
@@ -203,9 +217,7 @@ def isolate(
         return Diagnosis("model_change", meaning="too few samples after the alarm to isolate")
     vehicle, cands, cols = hypothesis_columns(monitor, data, rows)
     e = residual[rows] - monitor.mu_
-    mask = monitor.mask_
-    sigma2 = np.where(mask > 0, monitor.sigma_**2, 1.0)
-    weights = mask / sigma2
+    weights = dof_weights(monitor, e)
     ws = SimpleNamespace(weights=weights, dofs=plant.dofs_, tau_corr=monitor.correlation_time_)
     empty = np.zeros((rows.size, 6, 0))
     rss = float(np.sum(e**2 * weights))
@@ -430,10 +442,10 @@ def refit(
     if any(name not in index for name in names):
         return None
     pick = [index[name] for name in names]
-    mask = monitor.mask_
-    w = np.sqrt(mask / np.where(mask > 0, monitor.sigma_**2, 1.0))  # isolate's weights
+    e = residual - monitor.mu_
+    w = np.sqrt(dof_weights(monitor, e))  # isolate's weights
     a = (cols[:, :, pick] * w[None, :, None]).reshape(-1, len(pick))
-    y = -((residual - monitor.mu_) * w[None, :]).ravel()
+    y = -(e * w[None, :]).ravel()
     theta, *_ = np.linalg.lstsq(a, y, rcond=None)
     resid = y - a @ theta
     n = rows.size * len(monitor.plant_.dofs_)

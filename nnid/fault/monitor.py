@@ -514,7 +514,7 @@ class ResidualMonitor(BaseEstimator):
                 source=str(path),
             )
         arrays = (out.mu_, out.whiten_, out.s_inv_, out.sigma_, [out.correlation_time_])
-        # a zero noise level of a watched DOF divides the isolation's weights by zero
+        # a zero noise level of a watched DOF: fit refuses one (noise-free data), nnid wrote none
         watched = out.sigma_[out.mask_ > 0]
         if (
             not all(np.isfinite(a).all() for a in arrays)
