@@ -242,6 +242,17 @@ class _DataCommon(StrictModel):
     savgol_window: PositiveFloat = 1.0
     savgol_order: int = Field(4, ge=2, le=8)
 
+    @field_validator("experiments")
+    @classmethod
+    def _not_empty(cls, names: list[str] | None) -> list[str] | None:
+        # an empty list was read as no list: every run kept and fitted without a word
+        if names is not None and not names:
+            raise ValueError(
+                "an empty list keeps no experiment: name at least one, or leave the key out "
+                "to keep every experiment of the log"
+            )
+        return names
+
 
 class VehicleData(_DataCommon):
     """A vehicle log: a file (``log``, through a reader config ``columns`` if it is not in

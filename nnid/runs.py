@@ -539,6 +539,13 @@ def check_detect_inputs(model_dir: Path, data: str, follow: bool = False) -> Non
             "is a folder: --follow reads one growing CSV file (or '-')", source=data,
             field="--data",
         )  # fmt: skip
+    if follow and data.lower().endswith((".parquet", ".gz")):  # read as text: a traceback
+        raise NnidInputError(
+            "is not a plain-text CSV: --follow reads a growing CSV file (or '-') row by row; "
+            "a whole Parquet or gzipped log is read without --follow",
+            source=data,
+            field="--data",
+        )
 
 
 def _checked_window(window: float | None) -> None:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 import tomllib
 from collections.abc import Iterable, Mapping
+from numbers import Real
 from pathlib import Path
 from typing import Annotated, Any, TypeVar
 
@@ -225,6 +226,8 @@ def validated(
             ):
                 field = field_path(loc[:-1], data)  # the last step names the member, no key
             for other in errors[1:]:
+                if other.get("input") is first["input"] and other["type"].endswith("_type"):
+                    continue  # another member refusing the whole value: no key within it
                 path = field_path(tuple(other["loc"]), data)
                 if path.startswith(field + "."):
                     first, field = other, path
@@ -254,8 +257,14 @@ def validated(
             # nothing of TOML: `data = "log.csv"` where a [data] table goes
             msg = f"is a table ([{field}] with its keys below it), not {_show(first.get('input'))}"
         elif first["type"] == "list_type" and isinstance(first.get("input"), dict):
-            # `[thrusters]` where `[[thrusters]]` goes: one table where a list of them does
-            msg = f"is a list of tables ([[{field}]] above each one), not one table ([{field}])"
+            values = list(first["input"].values())
+            if values and all(isinstance(v, Real) and not isinstance(v, bool) for v in values):
+                # `[r_g]` with x, y, z below it: a vector written as a table of named values
+                shown_list = ", ".join(_show(v) for v in values)
+                msg = f"is a list of values ({field} = [{shown_list}]), not a table of them"
+            else:
+                # `[thrusters]` where `[[thrusters]]` goes: one table where a list of them does
+                msg = f"is a list of tables ([[{field}]] above each one), not one table ([{field}])"
         elif first["type"] == "finite_number":
             msg = f"must be a finite number, not {_show(first.get('input'))}"
         elif not isinstance(first.get("input"), (dict, list, type(None))):

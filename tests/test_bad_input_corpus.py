@@ -73,6 +73,13 @@ def _parquet_naming_u_twice(df: pd.DataFrame) -> bytes:
     return buf.getvalue()
 
 
+def _latin1_row(df: pd.DataFrame) -> bytes:
+    """The log as a logger on a Latin-1 locale writes it: a degree sign in row 30's label."""
+    lines = df.to_csv(index=False).split("\n")
+    lines[31] = lines[31].replace(",", ",\u00b0", 1)
+    return "\n".join(lines).encode("latin-1")
+
+
 LOG_CASES: list[tuple[str, str, Callable]] = [
     ("no time column", "'t'", lambda df, i: df.drop(columns="t")),
     ("text in time", "'t'", _set("t", 5, "noon")),
@@ -158,6 +165,14 @@ LOG_CASES: list[tuple[str, str, Callable]] = [
     ("empty file", "", lambda df, i: b""),
     ("binary garbage", "", lambda df, i: bytes(range(256)) * 8),
     ("one garbled line", "", lambda df, i: b"t,u\n0.0,1,2,3,4\n"),
+    # --follow read it as text: a UnicodeDecodeError traceback
+    ("a Latin-1 character", "UTF-8", lambda df, i: _latin1_row(df)),
+    # kept as an unknown column, and u said missing beside the column that holds it
+    (
+        "a unit after a column's name",
+        "'u [m/s]'",
+        lambda df, i: df.rename(columns={"u": "u [m/s]"}),
+    ),
 ]
 LOG_SUFFIX = {
     "empty file": ".csv",
@@ -326,7 +341,8 @@ def _log_cases() -> list[Case]:
     # --follow reads row by row, not through the log reader: the row checks it repeats, with
     # the same column and row numbers
     follow_cases = ("text in time", "duplicated time", "decreasing time", "text in a velocity",
-                    "infinite input", "empty input cell", "velocities in cm per s")  # fmt: skip
+                    "infinite input", "empty input cell", "velocities in cm per s",
+                    "a Latin-1 character")  # fmt: skip
     for name in follow_cases:
 
         def followed(tmp, fx, name=name):
@@ -338,6 +354,13 @@ def _log_cases() -> list[Case]:
 
         field = {n: f for n, f, _ in LOG_CASES}[name]
         cases.append(Case(f"detect --follow: {name}", followed, ("LOG", field, "row ")))
+
+    def parquet_followed(tmp, fx):  # read as text, row by row: a UnicodeDecodeError traceback
+        path = tmp / "octo.parquet"
+        fx["octo_log"].to_parquet(path, index=False)
+        return [*_command("detect", tmp, fx, data=path), "--follow"]
+
+    cases.append(Case("detect --follow: a Parquet log", parquet_followed, ("LOG", "--follow")))
 
     def stray_command(tmp, fx, command, follow=False):  # a thruster the vehicle does not have
         log = fx["octo_log"].assign(cmd_v5=0.0)
@@ -466,6 +489,18 @@ VEHICLE_CASES = [
     ),
     # a name on two lines: accepted, and every one-line error naming the vehicle split in two
     ("name on two lines", "name", ('name = "probe"', 'name = "pro\\nbe"')),
+    # a vector as a table of named values: said to be "a list of tables ([[r_g]] …)", and the
+    # inertia's field named 'inertia.list[list[float]]', a member of pydantic's union
+    (
+        "r_g as a table",
+        "r_g = [0.0, 0.0, 0.02]",
+        ("r_g = [0.0, 0.0, 0.02]", "r_g = { x = 0.0, y = 0.0, z = 0.02 }"),
+    ),
+    (
+        "inertia as a table",
+        "field 'inertia': is a list of values (inertia = [0.16, 0.16, 0.16])",
+        ("inertia = [0.16, 0.16, 0.16]", "inertia = { Ixx = 0.16, Iyy = 0.16, Izz = 0.16 }"),
+    ),
 ]
 
 
@@ -596,6 +631,14 @@ CONFIG_CASES = [
     ("loop", "every run held out", "validation", None),
     ("loop", "empty dofs", "dofs", None),
     ("loop", "dofs named twice", "dofs", None),
+    # [] was read as no list: every run kept, and fitted, without a word
+    (
+        "train",
+        "an empty experiment list",
+        "data.experiments",
+        ("[split]", "[data]\nexperiments = []\n\n[split]"),
+    ),
+    ("loop", "an empty experiment list", "data.experiments", None),
 ]
 LOOP_TEXT = {
     "unknown dof": 'kind = "loop"\ndofs = ["u", "x"]\n',
@@ -605,6 +648,7 @@ LOOP_TEXT = {
     "every run held out": 'kind = "loop"\nvalidation = ["run0", "run1", "run2"]\n',
     "empty dofs": 'kind = "loop"\ndofs = []\n',  # [] is not "all": leave the key out for all
     "dofs named twice": 'kind = "loop"\ndofs = ["w", "w"]\n',
+    "an empty experiment list": 'kind = "loop"\n[data]\nexperiments = []\n',
 }
 
 
@@ -974,6 +1018,54 @@ def test_detect_follow_refuses_a_column_named_twice_and_an_empty_label(
     assert result.exit_code == 2 and "Traceback" not in result.output, result.output
     errors = [line for line in result.output.splitlines() if line.startswith("error:")]
     assert len(errors) == 1 and said in errors[0] and str(path) in errors[0], result.output
+
+
+@pytest.mark.parametrize(
+    "variant", ["byte-order mark", "semicolons and decimal commas", "tabs", "spaces", "blank lines"]
+)
+def test_detect_follow_reads_a_csv_as_the_whole_log_reader_does(fixtures, tmp_path, variant):
+    """A CSV that batch detect reads was refused by --follow: behind a byte-order mark, a
+    semicolon or a tab the header's columns were said missing, a space after each comma
+    hid all but t, and a blank line ended the watch in "has 0 fields against the header's
+    20". Each is now read as the whole-log reader reads it: the same samples, watched alike."""
+    from nnid.fault.follow import follow_csv
+    from nnid.fault.monitor import ResidualMonitor
+
+    log = fixtures["octo_log"]
+    text = log.to_csv(index=False)
+    written = {
+        "byte-order mark": ("\ufeff" + text).encode(),
+        "semicolons and decimal commas": log.to_csv(index=False, sep=";", decimal=",").encode(),
+        "tabs": log.to_csv(index=False, sep="\t").encode(),
+        "spaces": text.replace(",", ", ").encode(),
+        "blank lines": text.replace("\n", "\n\n", 3).encode() + b"\n\n",
+    }[variant]
+    (tmp_path / "plain.csv").write_text(text)
+    (tmp_path / "variant.csv").write_bytes(written)
+    assert written != text.encode()
+    watched = [
+        follow_csv(
+            ResidualMonitor.load(fixtures["monitor"]), str(tmp_path / name), 10.0,
+            lambda line: None, idle_s=0.0,
+        ).trace
+        for name in ("plain.csv", "variant.csv")
+    ]  # fmt: skip
+    assert watched[1].t.size == len(log)
+    np.testing.assert_array_equal(watched[1].t, watched[0].t)
+    np.testing.assert_array_equal(watched[1].experiment, watched[0].experiment)
+    np.testing.assert_array_equal(watched[1].values, watched[0].values)
+
+
+def test_detect_follow_refuses_a_decimal_point_in_a_file_of_decimal_commas():
+    # the whole-log reader reads such a column as text and refuses it: so does --follow
+    from nnid.errors import NnidInputError
+    from nnid.fault.follow import _numbers
+
+    assert _numbers(["0,5", "x"], [("u", 0)], 0, "s.csv", 2, decimal=",") == {"u": 0.5}
+    with pytest.raises(NnidInputError, match="decimal mark is a comma") as err:
+        _numbers(["1.5", "x"], [("u", 0)], 3, "s.csv", 2, decimal=",")
+    assert (err.value.field, err.value.row) == ("u", 3) and "'1.5'" in str(err.value)
+    assert _numbers(["1.5", "x"], [("u", 0)], 3, "s.csv", 2) == {"u": 1.5}
 
 
 def test_detect_follow_names_a_row_the_csv_reader_refuses(tmp_path):

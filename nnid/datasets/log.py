@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 import os
+import re
 import warnings
 from collections.abc import Sequence
 from pathlib import Path
@@ -875,21 +876,31 @@ def refuse_rows(
 CONTRACT = ("t", "experiment", REPLAY_GROUP, PIECE_OF, *POSE, *VELOCITY, *ACCELERATION, *TAU)
 
 
+#: a unit written after a column's name (``u [m/s]``, ``tau_X (N)``)
+_UNIT_SUFFIX = re.compile(r"\s*[\[(][^\])]*[\])]\s*$")
+
+
 def _check_spelling(df: pd.DataFrame, source: str) -> None:
-    """A column that is a contract column but for case or spaces, where the contract column
-    itself is absent: it would be kept as an unknown column and the quantity derived or left
-    out in its place. Refused (``' w'``, ``tau_z``, ``Experiment``, ``CMD_left``), except a
-    single letter that differs only in case, which is said: ``P`` may be a pressure and ``V`` a
-    battery voltage as well as a roll rate or a sway speed mistyped."""
+    """A column that is a contract column but for case, spaces or a unit after its name,
+    where the contract column itself is absent: it would be kept as an unknown column and the
+    quantity derived or left out in its place. Refused (``' w'``, ``tau_z``, ``Experiment``,
+    ``CMD_left``, ``u [m/s]``), except a single letter that differs only in case, which is
+    said: ``P`` may be a pressure and ``V`` a battery voltage as well as a roll rate or a sway
+    speed mistyped."""
     folded = {c.lower(): c for c in CONTRACT}
     for col in map(str, df.columns):
-        key = col.strip().lower()
         if col in CONTRACT or col.startswith("cmd_"):
             continue
-        meant = folded.get(key) or (f"cmd_{col.strip()[4:]}" if key.startswith("cmd_") else None)
+        bare = _UNIT_SUFFIX.sub("", col).strip()
+        key = bare.lower()
+        meant = folded.get(key) or (f"cmd_{bare[4:]}" if key.startswith("cmd_") else None)
         if meant is None or meant in df.columns:
             continue
-        said = f"column {col!r} is not a column of the log contract (names are case-sensitive)"
+        # "u [m/s]" was kept unread and u said missing, beside the column that holds it
+        why = "names are case-sensitive" if _UNIT_SUFFIX.search(col) is None else (
+            "a name carries no unit: every column is in SI units"
+        )  # fmt: skip
+        said = f"column {col!r} is not a column of the log contract ({why})"
         if len(col) == 1:
             warnings.warn(
                 f"{source}: {said}: it is not read; if it is {meant!r}, rename it",

@@ -127,19 +127,25 @@ def refuse_repeated_names(header: pd.Series, path: str | Path) -> None:
 
 
 def _csv_dialect(path: Path) -> dict:
-    """The separator (comma, semicolon or tab) of a CSV from its header line, and the decimal
-    comma that a semicolon-separated file from a European locale uses."""
+    """The dialect (:func:`csv_dialect`) of a CSV file from its first two lines."""
     opener = gzip.open if path.name.lower().endswith(".gz") else open
     try:
         with opener(path, "rt", errors="replace") as f:
             head = [f.readline(), f.readline()]
     except (OSError, EOFError):
         return {}  # pandas says what is wrong with the file
-    counts = {sep: head[0].count(sep) for sep in (",", ";", "\t")}
+    return csv_dialect(*head)
+
+
+def csv_dialect(header: str, row: str) -> dict:
+    """The separator (comma, semicolon or tab) of a CSV from its header line, and the decimal
+    comma that a semicolon-separated file from a European locale uses (seen in its first
+    ``row``): pandas's ``sep`` and ``decimal``, none for a comma-separated file."""
+    counts = {sep: header.count(sep) for sep in (",", ";", "\t")}
     sep = max(counts, key=counts.get)
     if counts[sep] == 0 or sep == ",":
         return {}
-    decimal = "," if sep == ";" and "," in head[1] else "."
+    decimal = "," if sep == ";" and "," in row else "."
     return {"sep": sep, "decimal": decimal}
 
 

@@ -52,7 +52,7 @@ from nnid.datasets.log import (
     radian_limit,
 )
 from nnid.datasets.preprocess import savgol_window
-from nnid.datasets.readers import refuse_repeated_names
+from nnid.datasets.readers import csv_dialect, refuse_repeated_names
 from nnid.errors import NnidInputError, checked_number
 from nnid.fault.detect import (
     DetectResult,
@@ -100,11 +100,12 @@ IDLE_S = 3.0
 RATE_UNIT_EVERY_S = 5.0
 
 
-def _parse(line: str, source: str, count: int) -> list[str]:
-    """One CSV line as cells; a line the CSV reader refuses (a bare carriage return inside a
-    field) is named by its data row, counted as the whole-log reader counts them."""
+def _parse(line: str, source: str, count: int, sep: str = ",") -> list[str]:
+    """One CSV line as cells, split at ``sep`` with the spaces after it dropped, as the
+    whole-log reader splits them; a line the CSV reader refuses (a bare carriage return inside
+    a field) is named by its data row, counted as the whole-log reader counts them."""
     try:
-        return next(csv.reader([line]))
+        return next(csv.reader([line], delimiter=sep, skipinitialspace=True))
     except csv.Error as exc:
         raise NnidInputError(
             f"is not a CSV row ({exc})",
@@ -113,31 +114,57 @@ def _parse(line: str, source: str, count: int) -> list[str]:
         ) from None
 
 
-def _rows(source: str, idle_s: float):
-    """Rows of a CSV as lists of strings; a file is followed until it stops growing for
-    ``idle_s`` seconds, stdin until it closes."""
-    handle = sys.stdin if source == "-" else open(source, newline="")
+def _decoded(line: bytes, source: str, count: int) -> str:
+    """One line as UTF-8 text, as the whole-log reader reads a CSV, a byte-order mark before
+    the header dropped; else the error naming its data row (a Latin-1 degree sign was a
+    UnicodeDecodeError traceback)."""
     try:
-        buffer, quiet, count = "", 0.0, 0
+        text = line.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise NnidInputError(
+            f"is not UTF-8 text (byte {exc.start} of {'this row' if count else 'the header'}): "
+            "save it as UTF-8",
+            source="stdin" if source == "-" else source,
+            row=count - 1 if count else None,
+        ) from None
+    return text if count else text.removeprefix("\ufeff")
+
+
+def _rows(source: str, idle_s: float, dialect: dict | None = None):
+    """Rows of a CSV as lists of strings; a file is followed until it stops growing for
+    ``idle_s`` seconds, stdin until it closes. Read as the whole-log reader reads a CSV:
+    UTF-8, the separator and decimal mark of :func:`~nnid.datasets.readers.csv_dialect`
+    (put in ``dialect`` once the first row is read) and blank lines skipped, not counted."""
+    stdin = getattr(sys.stdin, "buffer", sys.stdin)
+    handle = stdin if source == "-" else open(source, "rb")
+    found = {} if dialect is None else dialect
+    try:
+        buffer, quiet, count, header = b"", 0.0, 0, ""
         while True:
             line = handle.readline()
-            if not line:
-                if source == "-" or quiet >= idle_s:
-                    break
+            if not line and source != "-" and quiet < idle_s:
                 time.sleep(0.1)
                 quiet += 0.1
                 continue
-            quiet = 0.0
-            buffer += line
-            if not buffer.endswith("\n"):
-                continue  # a row still being written
-            yield _parse(buffer, source, count)
+            if not line and not buffer.strip():
+                break
+            if line:
+                quiet = 0.0
+                # bytes until the line is whole: a row still being written may end inside a
+                # character of more than one byte
+                buffer += line if isinstance(line, bytes) else line.encode()
+                if not buffer.endswith(b"\n"):
+                    continue  # a row still being written
+            text, buffer = _decoded(buffer, source, count), b""  # at the end, what is left
+            if not text.strip("\r\n"):
+                continue  # a blank line, which the whole-log reader skips
+            if count <= 1:  # the separator from the header, the decimal mark from a row
+                header = header or text
+                found.update(csv_dialect(header, text if count else ""))
+            yield _parse(text, source, count, found.get("sep", ","))
             count += 1
-            buffer = ""
-        if buffer.strip():
-            yield _parse(buffer, source, count)
     finally:
-        if handle is not sys.stdin:
+        if handle is not stdin:
             handle.close()
 
 
@@ -148,6 +175,7 @@ def _numbers(
     where: str,
     width: int,
     held: frozenset[str] = frozenset(),
+    decimal: str = ".",
 ) -> dict:
     """The named cells of one streamed row as finite numbers within the log contract's SI
     bounds (a unit slip, a corrupt sample), as the whole-log reader checks them; else the first
@@ -155,7 +183,9 @@ def _numbers(
     bridging). An empty cell of a column in ``held`` (a pose the residual never reads,
     :func:`~nnid.fault.monitor.monitor_motion`) is left out: the caller holds its run's last
     sample. A row of more cells than the header's ``width`` (a decimal comma; the whole-log
-    reader refuses it too) or fewer is refused: its cells would be read under other columns."""
+    reader refuses it too) or fewer is refused: its cells would be read under other columns.
+    ``decimal``: the decimal mark (a comma in a semicolon-separated file, where a point is
+    refused as that reader refuses it)."""
     if len(row) != width:
         raise NnidInputError(
             f"has {len(row)} fields against the header's {width} (a decimal comma, or a cell "
@@ -168,8 +198,11 @@ def _numbers(
         cell = row[i] if i < len(row) else ""
         if name in held and not cell.strip():
             continue
+        number = cell
+        if decimal == ",":  # a point there is text to the whole-log reader, refused
+            number = cell.replace(",", ".") if "." not in cell else "nan"
         try:
-            value = float(cell)
+            value = float(number)
         except ValueError:
             value = np.nan
         if not np.isfinite(value):
@@ -178,9 +211,10 @@ def _numbers(
                 ": an empty cell, a sensor logged slower than the others or a dropout, which "
                 "batch detect reads (a slow attitude filled from the gyro, gaps masked)"
             ) * (cell.strip() == "")
+            mark = "; this file's decimal mark is a comma" * (decimal == "," and "." in cell)
             raise NnidInputError(
                 f"value {shown(cell)} is not a finite number (--follow needs one in every "
-                f"column it reads{empty})",
+                f"column it reads{empty}{mark})",
                 source=where,
                 field=name,
                 row=n,
@@ -206,13 +240,15 @@ def follow_csv(
     start = time.perf_counter()
     # checked before the source is opened: a NaN never compares, so a NaN wait was forever
     checked_number(idle_s, "idle_s", 0.0, strict=False)
-    rows = _rows(source, idle_s)
+    dialect: dict = {}
+    rows = _rows(source, idle_s, dialect)
     header = next(rows, None)
     where = "stdin" if source == "-" else source
     if header is None:
         raise NnidInputError("is empty: expected a CSV header", source=where)
+    header = [c.strip() for c in header]  # as the whole-log reader names its columns
     # as the whole-log reader: header.index would read the first of two 'u' columns unseen
-    refuse_repeated_names(pd.Series([c.strip() or None for c in header]), where)
+    refuse_repeated_names(pd.Series([c or None for c in header]), where)
     inputs = input_columns(monitor.channels_)
     needed = ["t", *VELOCITY, "phi", "theta", *inputs]
     missing = [c for c in needed if c not in header]
@@ -443,7 +479,8 @@ def follow_csv(
 
     limits = command_limits(monitor.plant_.vehicle)  # the whole-log detect refuses beyond them
     for n, row in enumerate(rows):  # n: the data row from 0, as the whole-log reader counts
-        values = _numbers(row, read, n, where, len(header), kept_unread)
+        decimal = dialect.get("decimal", ".")
+        values = _numbers(row, read, n, where, len(header), kept_unread, decimal)
         for c in [c for c in unread if c not in values and c not in said_held]:
             said_held.add(c)
             say(
