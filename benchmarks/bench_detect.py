@@ -1,6 +1,7 @@
 """Fault detection (issue 16): speed of the monitor and its accuracy on simulated faults.
 
-Run by hand: ``python benchmarks/bench_detect.py speed``, ``... scenarios`` and ``... ended``.
+Run by hand: ``python benchmarks/bench_detect.py speed``, ``... scenarios``, ``... ended`` and
+``... follow [REV]``.
 
 speed: the per-sample streaming update (median and 99th percentile over 20,000 samples,
 in-process, after compilation; targets 50 µs and 200 µs) and whole logs in batch mode (target
@@ -18,12 +19,26 @@ released), then another fault at 52 s, 70-s runs, seeds 3001-3008: is the end sa
 second fault alarmed? And changes that come back only partly at 40 s (a stopped thruster back
 to 80 %, one at 30 % back to 90 %, a snag half freed): are they said resized, at their new size,
 with no alarm repeating after?
+
+follow: ``detect --follow`` on 10-minute streams (12,000 rows) with a change isolated at 20 s (a
+thruster at 30 %, a snag, a ballast change): its signature is taken out of every 0.5 s of rows
+after it, so each such flush is timed (the row whose reading flushed, read to read), over the
+stream's first and last quarter of flushes (a cost growing with the rows seen shows as a
+ratio above 1), with the rows each signature was computed on and the stream's time per row.
+``REV`` (a git revision): the same streams also followed by that revision's nnid, in a
+subprocess, and the ratio of its per-flush time to this tree's.
 """
 
 from __future__ import annotations
 
 import datetime
+import io
+import json
+import os
+import subprocess
 import sys
+import tarfile
+import tempfile
 import time
 from pathlib import Path
 
@@ -33,7 +48,8 @@ import pandas as pd
 from common import machine
 
 from nnid.datasets.faults import Fault, simulate_faults
-from nnid.fault.detect import detect
+from nnid.fault import follow as follow_module
+from nnid.fault.detect import Rewatch, detect
 from nnid.fault.monitor import ResidualMonitor, monitor_inputs
 from nnid.models.parametric import ParametricModel
 from nnid.physics import compiled
@@ -319,6 +335,117 @@ def ended() -> None:
     print(f"total {time.perf_counter() - t0:.0f} s")
 
 
+#: the changes of the follow mode, isolated at 20 s of 10-minute streams
+FOLLOWED = {
+    "h1 at 30 %": Fault("thruster", 20.0, thruster="h1", efficiency=0.3),
+    "snag -10 N + 1 N m yaw": Fault("external", 20.0, force=SNAG),
+    "10 N ballast": Fault("effect", 20.0, effect="buoyancy_offset", value=10.0),
+}
+
+
+def _followed(mon, path: str) -> dict:
+    """``path`` followed, each row's reading timed (from the row read to the next read), the
+    rows after which a signature was taken out (a flush) marked, with that call's rows."""
+    stamps, flushed, sizes = [], [], []
+    read, left = follow_module._rows, Rewatch.left
+
+    def rows(source, idle_s):
+        for row in read(source, idle_s):
+            stamps.append(time.perf_counter())
+            flushed.append(False)
+            yield row
+        stamps.append(time.perf_counter())
+        flushed.append(False)  # the flushes after the last row (the run's end) are not timed
+
+    def timed_left(self, data, rows_, r):
+        flushed[-1] = True
+        sizes.append(rows_.size)
+        return left(self, data, rows_, r)
+
+    follow_module._rows, Rewatch.left = rows, timed_left
+    try:
+        result = follow_module.follow_csv(mon, path, 10.0, lambda line: None, idle_s=0.0)
+    finally:
+        follow_module._rows, Rewatch.left = read, left
+    cost = np.diff(stamps)[1:]  # each data row's reading (the header's first)
+    at = np.flatnonzero(flushed[1:-1])
+    quarter, rows_quarter = max(at.size // 4, 1), cost.size // 4
+    return {
+        "alarms": [[round(a["t"], 2), a["kind"]] for a in result.alarms],  # as JSON has them
+        "flushes": int(at.size),
+        "first_ms": 1e3 * float(np.median(cost[at[:quarter]])),
+        "last_ms": 1e3 * float(np.median(cost[at[-quarter:]])),
+        "rows_median": int(np.median(sizes)) if sizes else 0,
+        "rows_max": max(sizes, default=0),
+        "row_first_us": 1e6 * float(np.median(cost[:rows_quarter])),
+        "row_last_us": 1e6 * float(np.median(cost[-rows_quarter:])),
+        "row_us": 1e6 * float(np.mean(cost)),
+    }
+
+
+def follow_streams() -> dict:
+    """Each change of :data:`FOLLOWED` followed on a 10-minute stream (after one short stream
+    that compiles the kernels)."""
+    vehicle = load_vehicle(VEHICLE)
+    mon = trained(vehicle)
+    out = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        warm = simulate_faults(vehicle, 40, faults=[FOLLOWED["h1 at 30 %"]], seed=31)
+        warm.to_csv(f"{tmp}/warm.csv", index=False)
+        _followed(mon, f"{tmp}/warm.csv")
+        for i, (label, fault) in enumerate(FOLLOWED.items()):
+            log = simulate_faults(vehicle, 600, faults=[fault], seed=41 + i)
+            log.to_csv(f"{tmp}/{i}.csv", index=False)
+            out[label] = _followed(mon, f"{tmp}/{i}.csv")
+    return out
+
+
+def follow() -> None:
+    """``detect --follow``'s cost per flush after an isolated change (the module docstring);
+    ``sys.argv[2]``, where given, the revision it is compared with."""
+    rev = sys.argv[2] if len(sys.argv) > 2 else None
+    if rev == "--json":  # a subprocess of another tree's run: its numbers only
+        print(json.dumps(follow_streams()))
+        return
+    t0 = time.perf_counter()
+    here = follow_streams()
+    before = _at_revision(rev) if rev else None
+    print(f"machine: {machine(numba=numba.__version__)}; date {datetime.date.today()}")
+    print("| change at 20 s, 600-s stream | alarms | flushes | rows per signature (median, "
+          "max) | per flush, first / last quarter (ms) | growth (last / first) | per row, "
+          "median of the first / last quarter (us) | per row, mean (us) |"
+          + (f" per flush at {rev} (ms) | {rev} / this tree |" if rev else ""))  # fmt: skip
+    print("|---|---|---|---|---|---|---|---|" + ("---|---|" if rev else ""))
+    for label, h in here.items():
+        line = (f"| {label} | {len(h['alarms'])} | {h['flushes']} | {h['rows_median']}, "
+                f"{h['rows_max']} | {h['first_ms']:.2f} / {h['last_ms']:.2f} | "
+                f"{h['last_ms'] / h['first_ms']:.2f} | {h['row_first_us']:.0f} / "
+                f"{h['row_last_us']:.0f} | {h['row_us']:.0f} |")  # fmt: skip
+        if before is not None:
+            b = before[label]
+            same = "" if b["alarms"] == h["alarms"] else " (other alarms!)"
+            mine, theirs = h["first_ms"] + h["last_ms"], b["first_ms"] + b["last_ms"]
+            line += (f" {b['first_ms']:.2f} / {b['last_ms']:.2f}{same} | "
+                     f"{theirs / mine:.1f}x |")  # fmt: skip
+        print(line)
+    print(f"total {time.perf_counter() - t0:.0f} s")
+
+
+def _at_revision(rev: str) -> dict:
+    """:func:`follow_streams` with the nnid of git revision ``rev`` (this script run on it in a
+    subprocess, that revision's package first on its path)."""
+    repo = Path(__file__).resolve().parents[1]
+    with tempfile.TemporaryDirectory() as tmp:
+        archive = subprocess.run(["git", "-C", str(repo), "archive", rev, "nnid"],
+                                 check=True, capture_output=True).stdout  # fmt: skip
+        with tarfile.open(fileobj=io.BytesIO(archive)) as tar:
+            tar.extractall(tmp, filter="data")
+        env = {**os.environ, "PYTHONPATH": os.pathsep.join([tmp, str(Path(__file__).parent)])}
+        out = subprocess.run([sys.executable, __file__, "follow", "--json"], env=env,
+                             check=True, stdout=subprocess.PIPE, text=True).stdout  # fmt: skip
+    return json.loads(out.strip().splitlines()[-1])
+
+
 if __name__ == "__main__":
-    modes = {"speed": speed, "scenarios": scenarios, "ended": ended}
+    modes = {"speed": speed, "scenarios": scenarios, "ended": ended, "follow": follow}
     modes[sys.argv[1] if len(sys.argv) > 1 else "speed"]()

@@ -149,27 +149,28 @@ def hypothesis_columns(monitor, data: dict, rows: np.ndarray, names=None) -> tup
     ``names`` where given (a signature needs its own columns, not the ~15 regressions of all)."""
     plant = monitor.plant_
     vehicle = fitted_vehicle(plant)
-    arrays, frame = midpoint_data(data, rows, vehicle, (plant.savgol_window, 2))
-    # the thrusters themselves stand for thrust changes; a DOF's installation coefficient
-    # would only be a coarser copy of them
-    cands = [
-        c
-        for c in candidates(vehicle, frame, coupled=False)
-        if c.linear and c.kind != "thruster_installation" and (names is None or c.name in names)
-    ]
-    if cands:
-        reg = ParametricFossen(vehicle, [c.parameter for c in cands]).regression(arrays)
-        cols = reg.phi.reshape(rows.size, 6, len(cands))
-    else:
-        cols = np.zeros((rows.size, 6, 0))
     act = Actuation(plant.vehicle)
-    if act.thrusters:
-        thrust = act.thrusts(data["inputs"][rows - 1])  # [N, n]
-        own = thrust[:, None, :] * act.matrix[None, :, :]  # bᵢ fᵢ, [N, 6, n]
-        cands += [
-            Candidate(f"thruster_loss.{n}", "thruster_loss", f"thruster.{n}") for n in act.channels
+    own = [Candidate(f"thruster_loss.{n}", "thruster_loss", f"thruster.{n}")
+           for n in act.channels] if act.thrusters else []  # fmt: skip
+    cands, cols = [], np.zeros((rows.size, 6, 0))
+    # thrusters alone (a lost thruster's signature, taken out at every --follow flush) need
+    # none of the loop's columns: their midpoint data and candidates were most of its cost
+    if names is None or not set(names) <= {c.name for c in own}:
+        arrays, frame = midpoint_data(data, rows, vehicle, (plant.savgol_window, 2))
+        # the thrusters themselves stand for thrust changes; a DOF's installation coefficient
+        # would only be a coarser copy of them
+        cands = [
+            c
+            for c in candidates(vehicle, frame, coupled=False)
+            if c.linear and c.kind != "thruster_installation" and (names is None or c.name in names)
         ]
-        cols = np.concatenate([cols, own], 2)
+        if cands:
+            reg = ParametricFossen(vehicle, [c.parameter for c in cands]).regression(arrays)
+            cols = reg.phi.reshape(rows.size, 6, len(cands))
+    if own:
+        thrust = act.thrusts(data["inputs"][rows - 1])  # [N, n]
+        cols = np.concatenate([cols, thrust[:, None, :] * act.matrix[None, :, :]], 2)  # bᵢ fᵢ
+        cands += own
     return vehicle, cands, cols
 
 
