@@ -36,7 +36,7 @@ from nnid.datasets.log import (
     run_of,
     run_pieces,
 )
-from nnid.datasets.preprocess import experiments
+from nnid.datasets.preprocess import experiment_rows
 from nnid.datasets.splits import PARTS, Split, say_missed_fractions, split_log
 from nnid.errors import NnidInputError
 from nnid.evaluation.evaluate import diverged_columns, evaluate
@@ -587,8 +587,8 @@ def make_split(
         (split.validation, "validation"),
         (split.test, "test"),
     ):
-        for exp, idx in experiments(part):
-            if len(idx) < 2:  # no sample period: nothing to fit or score on it
+        for exp, pos in experiment_rows(part):
+            if len(pos) < 2:  # no sample period: nothing to fit or score on it
                 raise NnidInputError(
                     f"the {name} split holds a single sample of "
                     f"{run_label(exp)}: each piece needs at "
@@ -597,7 +597,8 @@ def make_split(
                     source=source,
                     field="split",
                 )
-        spans = [float(np.ptp(part.loc[idx, "t"])) for _, idx in experiments(part)]
+        t = part["t"].to_numpy(np.float64)
+        spans = [float(np.ptp(t[pos])) for _, pos in experiment_rows(part)]
         if name != "training" and spans and max(spans) <= warmup_s:
             # every scored run would be all warm-up: no score, not a "diverged" one
             raise NnidInputError(
@@ -737,7 +738,7 @@ def unscored_k_step(part: str, log: pd.DataFrame, scores: dict, cfg, model) -> l
     scored"; this says why)."""
     if scores.get("k_step_scored") != 0 or not len(log):
         return []
-    longest = max(len(idx) for _, idx in experiments(log))
+    longest = max(len(pos) for _, pos in experiment_rows(log))
     own = model.warmup_samples_
     if longest <= own or len(log) < 2:
         advice = "no k_step_s would: its runs are no longer than the model's warm-up"

@@ -385,3 +385,28 @@ def test_scoring_finds_each_runs_rows_by_position_where_labels_repeat(runs):
     scores = score_runs(twice, predicted, mask, lambda run: ["y"])
     assert scores == score_runs(fresh, predicted.reset_index(drop=True), mask, lambda r: ["y"])
     assert scores[0]["small"]["y"] > 10 * scores[0]["big"]["y"]  # each run over its own std
+
+
+def test_a_closed_loop_replay_refuses_repeated_labels_naming_the_table():
+    """A split's rows take the replay's open-loop inputs by label (the split is a subset of
+    the log the replay was made for): where either index repeats a label, a row took the
+    inputs of several (or of another run's row). Refused, naming which index repeats."""
+    from nnid.datasets.log import TAU
+    from nnid.errors import NnidInputError
+    from nnid.evaluation.prediction import Replay, fly_closed_loop
+
+    def stepper(starts, dt):
+        raise AssertionError("nothing is flown")
+
+    t = 0.1 * np.arange(20)
+    run = pd.DataFrame({"t": t, **{c: 0.0 for c in ("x", "y", "z", "phi", "theta", "psi")},
+                        **{c: 0.1 for c in ("u", "v", "w", "p", "q", "r")},
+                        **{c: 1.0 for c in TAU}})  # fmt: skip
+    joined = pd.concat([run.assign(experiment="a"), run.assign(experiment="b")])
+    fresh = joined.reset_index(drop=True)
+    with pytest.raises(NnidInputError, match=r"^the log's index repeats 20 labels \(the first"):
+        fly_closed_loop(joined, Replay(None, fresh[list(TAU)]), stepper)
+    with pytest.raises(
+        NnidInputError, match=r"^the index of the replay's open-loop inputs repeats 20 labels"
+    ):
+        fly_closed_loop(fresh, Replay(None, joined[list(TAU)]), stepper)

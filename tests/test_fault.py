@@ -880,7 +880,7 @@ def test_a_second_change_of_a_thruster_is_sized_against_nominal(vehicle, monitor
 
 def test_alarms_name_the_experiment_as_the_log_does(vehicle, monitor, tmp_path):
     """A log without an experiment column is one run without a name, as
-    nnid.datasets.preprocess.experiments has it: batch detect named it "0" in its alarms and
+    nnid.datasets.preprocess.experiment_rows has it: batch detect named it "0" in its alarms and
     --follow "", for the one log. Both now say None (null in detect.json, an empty cell in
     alarms.csv, "-" in the report), and the label where the log has the column."""
     fault = Fault("thruster", 12.0, thruster="v2", efficiency=0.3)

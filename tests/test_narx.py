@@ -930,3 +930,23 @@ def test_layer_widths_given_in_python_are_checked_and_capped_as_the_config_does(
     model = NarxModel(["u"], ["y"], 2, 2, hidden=hidden, trainer=lm, balanced=False)
     with pytest.raises(NnidInputError, match=rf"^field 'hidden': .*{says}"):
         model.fit(_tank(100, 1.3, 0))
+
+
+def test_a_narx_predicts_each_run_from_its_own_rows_where_labels_repeat():
+    """Under the entry check (which refuses repeated labels), the NARX's prediction of runs
+    joined by pd.concat (labels 0..149 name a row of each): each run's rows were found by
+    label (pandas refused the repeated labels); by position, every mode predicts what it
+    predicts on the same log with a fresh index."""
+    lm = LevenbergMarquardt(max_epochs=2, jacobian="samples")
+    model = NarxModel(["u"], ["y"], 2, 2, hidden=(3,), trainer=lm, balanced=False)
+    model.fit(_tank(300, 1.3, 0))
+    a, b = _tank(300, 1.1, 1).assign(experiment="a"), _tank(150, 0.9, 2).assign(experiment="b")
+    joined = pd.concat([a, b])  # labels 0..299, then 0..149
+    fresh = joined.reset_index(drop=True)
+    for mode in ("one_step", "free_run", 3):
+        got = model._predict(joined, mode)
+        want = model._predict(fresh, mode)
+        np.testing.assert_array_equal(got.to_numpy(), want.to_numpy())
+        # the second run is predicted from its own first samples (warm-up NaN, then values)
+        assert np.isnan(want["y"].to_numpy()[300:302]).all()
+        assert np.isfinite(want["y"].to_numpy()[305:]).all()

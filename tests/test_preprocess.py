@@ -236,7 +236,7 @@ def test_lowpass_is_zero_phase_and_rejects_short_logs():
 
 
 def test_a_log_without_experiments_is_named_the_log_in_the_derivatives_errors():
-    """A log without an experiment column has one run, named None by ``experiments``: its
+    """A log without an experiment column has one run, named None by ``experiment_rows``: its
     errors said "experiment None", where the rest of nnid says "the log"."""
     t = np.arange(0, 0.1, 0.01)  # 10 samples, fewer than the 0.5 s window's 51
     log = pd.DataFrame({"t": t, "phi": 0.0, "theta": 0.0, "psi": 0.01 * t, "u": 0.1 * t})

@@ -930,7 +930,7 @@ def test_a_parquet_of_runs_joined_without_a_fresh_index_is_read_on_row_numbers(t
     found each run's rows by label, so a run's rows were both runs'. A file is read on fresh
     row numbers, as a CSV is."""
     from nnid.config import SplitSpec
-    from nnid.datasets.preprocess import experiments
+    from nnid.datasets.preprocess import experiment_rows
     from nnid.pipeline import make_split
 
     t = np.arange(200) * 0.1
@@ -942,8 +942,8 @@ def test_a_parquet_of_runs_joined_without_a_fresh_index_is_read_on_row_numbers(t
     assert log.index.equals(pd.RangeIndex(400))
     split = make_split(log, SplitSpec(by="block", fractions=[0.7, 0.3, 0.0]))
     for part in (split.train, split.validation):
-        for name, rows in experiments(part):
-            assert (part.loc[rows, "experiment"] == name).all()
+        for name, pos in experiment_rows(part):
+            assert (part["experiment"].iloc[pos] == name).all()
 
 
 def test_a_column_stored_as_a_parquet_files_index_is_refused_naming_it(tmp_path):

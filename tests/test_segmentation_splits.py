@@ -227,3 +227,23 @@ def test_runs_joined_without_a_fresh_index_are_split_and_labelled_each_on_its_ow
                 got[part].reset_index(drop=True), want[part].reset_index(drop=True)
             )
     assert np.array_equal(label_transients(log).to_numpy(), label_transients(fresh).to_numpy())
+
+
+def test_a_split_part_too_short_to_score_is_refused_where_labels_repeat():
+    """Two runs of 20 s joined by pd.concat (each label twice) split into blocks: the
+    validation blocks (the last 6 s of each run) share their labels, and each run's span
+    was read by label over both runs' rows (from 14 s to 119.9 s): a part all warm-up
+    passed. By position, it is refused as on the same log with a fresh index."""
+    from nnid.config import SplitSpec
+    from nnid.pipeline import make_split
+
+    t = 0.1 * np.arange(200)
+    a = pd.DataFrame({"t": t, "experiment": "a", "u": np.sin(t), "tau_X": np.cos(t)})
+    b = pd.DataFrame({"t": 100.0 + t, "experiment": "b", "u": np.cos(t), "tau_X": 1.0})
+    joined = pd.concat([a, b])
+    spec = SplitSpec(by="block", fractions=[0.7, 0.3, 0.0])
+    said = r"the longest validation run is 5.9 s, no longer than the warm-up \(8 s\)"
+    for log in (joined, joined.reset_index(drop=True)):
+        with pytest.raises(NnidInputError, match=said):
+            make_split(log, spec, warmup_s=8.0)
+    assert len(make_split(joined, spec, warmup_s=5.0).validation) == 120  # 5.9 s scores

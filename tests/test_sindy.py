@@ -7,6 +7,7 @@ import warnings
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from nnid.config import load_config
@@ -270,3 +271,21 @@ def test_a_selected_term_of_a_zero_regressor_is_unidentified_not_simulated(monke
     assert model.coefficient_matrix()[2, terms.index("u*abs(u)")] == 0.0
     model.save(tmp_path)
     assert load_model(tmp_path).params == model.params
+
+
+def test_the_holdout_takes_each_runs_own_tail_where_labels_repeat():
+    """The holdout a SINDy fit without validation data takes (the last 25 % of each run), on
+    runs joined by pd.concat (labels 0..59 name a row of each): each run was taken by label,
+    with the other's rows under the same labels, so both parts mixed the runs. By position,
+    each part is the one of the same log with a fresh index."""
+    model = SindyDamping(load_vehicle("seamor"), holdout=0.25)
+    t = 0.1 * np.arange(100)
+    a = pd.DataFrame({"t": t, "experiment": "a", "u": np.sin(t)})
+    b = pd.DataFrame({"t": t[:60], "experiment": "b", "u": np.cos(t[:60])})
+    joined = pd.concat([a, b])
+    train, val = model._split(joined)
+    fresh = model._split(joined.reset_index(drop=True))
+    for got, want in zip((train, val), fresh, strict=True):
+        pd.testing.assert_frame_equal(got.reset_index(drop=True), want.reset_index(drop=True))
+    assert val["experiment"].value_counts().to_dict() == {"a": 25, "b": 15}
+    assert val.index.equals(pd.Index([*range(75, 100), *range(45, 60)]))  # the log's labels

@@ -75,24 +75,34 @@ def input_columns(df: pd.DataFrame) -> list[str]:
 
 def check_log(log: Any, name: str = "log") -> pd.DataFrame:
     """The log a model, the residual loop or the fault monitor is given in Python: a DataFrame
-    with rows, each row under its own index label. Labels given twice are refused, not reset:
-    a run's rows are found by label, so the runs of ``pd.concat([a, b])`` were mixed up (a
-    held-out run trained on, values written into another run's rows), and ``predict``
-    answers on the log's own index, which a reset would change. (Files are read onto fresh
-    row numbers: :func:`nnid.datasets.readers.read_table`.)"""
+    with rows, each row under its own index label. Each run's rows are found by position
+    (:func:`nnid.datasets.preprocess.experiment_rows`), but labels given twice are refused,
+    not reset: ``predict`` answers on the log's own index, which a reset would change and a
+    repeated label leaves ambiguous, and a split's rows are matched with the whole log's by
+    label (a closed-loop replay's open-loop inputs, :func:`check_unique_labels`). (Files are
+    read onto fresh row numbers: :func:`nnid.datasets.readers.read_table`.)"""
     if not isinstance(log, pd.DataFrame):
         raise NnidInputError(f"the {name} must be a pandas DataFrame, not {type(log).__name__}")
     if len(log) == 0:
         raise NnidInputError(f"the {name} has no rows")
-    if not log.index.is_unique:
-        repeated = log.index[log.index.duplicated()].unique()
-        raise NnidInputError(
-            f"the {name}'s index repeats {len(repeated)} label{'s' * (len(repeated) != 1)} "
-            f"(the first: {shown(repeated[0])}): a run's rows are found by their labels, so "
-            "the runs would be mixed up; this usually comes from pd.concat without "
-            "ignore_index=True: give the log a fresh index with log.reset_index(drop=True)"
-        )
+    check_unique_labels(
+        log.index, f"the {name}'s index", "rows are answered on, and matched, by their labels"
+    )
     return log
+
+
+def check_unique_labels(index: pd.Index, what: str, why: str) -> None:
+    """Raise where ``index`` (``what``, as "the log's index") repeats a label, naming the
+    first and ``why`` a label must name one row."""
+    if index.is_unique:
+        return
+    repeated = index[index.duplicated()].unique()
+    raise NnidInputError(
+        f"{what} repeats {len(repeated)} label{'s' * (len(repeated) != 1)} "
+        f"(the first: {shown(repeated[0])}): {why}, so the runs would be mixed up; this "
+        "usually comes from pd.concat without ignore_index=True: give the log a fresh index "
+        "with log.reset_index(drop=True)"
+    )
 
 
 def validate_log(

@@ -43,17 +43,12 @@ from nnid.errors import ExcitationWarning, NnidInputError
 from nnid.validation import shown
 
 
-def experiments(log: pd.DataFrame):
-    """(name, index) of each experiment, in order of appearance."""
-    if "experiment" not in log:
-        return [(None, log.index)]
-    return [(name, idx) for name, idx in log.groupby("experiment", sort=False).groups.items()]
-
-
 def experiment_rows(log: pd.DataFrame) -> list[tuple[object, np.ndarray]]:
-    """(name, positions) of each experiment, as :func:`experiments` but by row position
-    (ascending), from one grouping pass: finding each run's index labels in the whole log
-    costs rows × runs: seconds on a log a reader cut into thousands of pieces."""
+    """(name, positions) of each experiment, in order of appearance (a log without an
+    experiment column: one run named None), by row position (ascending), from one grouping
+    pass: a run's index labels may repeat another's (``pd.concat`` without ``ignore_index``),
+    and finding them in the whole log costs rows × runs: seconds on a log a reader cut into
+    thousands of pieces."""
     if "experiment" not in log:
         return [(None, np.arange(len(log)))]
     return list(log.groupby("experiment", sort=False).indices.items())

@@ -15,7 +15,7 @@ import numpy as np
 import pandas as pd
 
 from nnid.datasets.gaps import nearest_samples
-from nnid.datasets.log import POSE, TAU, VELOCITY, check_time_unit
+from nnid.datasets.log import POSE, TAU, VELOCITY, check_time_unit, check_unique_labels
 from nnid.datasets.preprocess import check_uniform, experiment_rows, first_order_lag
 from nnid.errors import NnidInputError
 from nnid.physics import compiled
@@ -230,6 +230,10 @@ def predict_closed_loop(
 def _fly(log: pd.DataFrame, replay: Replay, flight: Flight, mode: str | int) -> pd.DataFrame:
     """Each experiment of ``log`` flown by ``flight`` from its measured states: a free run
     from the first (NaN from its first non-finite state on), or k samples from every one."""
+    # a split's rows take the whole log's open-loop inputs by label: one label, one row
+    why = "the log's rows take the replay's open-loop inputs by label"
+    check_unique_labels(log.index, "the log's index", why)
+    check_unique_labels(replay.open_loop.index, "the index of the replay's open-loop inputs", why)
     x = measured_states(log)
     out = x.copy()
     tau_open = replay.open_loop.loc[log.index, list(TAU)].to_numpy(np.float64)

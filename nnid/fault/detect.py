@@ -778,7 +778,7 @@ def _left(monitor, data: dict, rows: np.ndarray, r: np.ndarray, fitted: list) ->
 def run_names(names, codes, named: bool) -> np.ndarray:
     """The experiment of each row (``codes`` into ``names``) as the trace and the alarm records
     name it: its label, or None where the log has no experiment column (``named`` false): one
-    run without a name, as :func:`nnid.datasets.preprocess.experiments` gives it, not the
+    run without a name, as :func:`nnid.datasets.preprocess.experiment_rows` gives it, not the
     placeholder its arrays carry ("0" in batch, "" in ``--follow``)."""
     labels = np.array(names if named else [None] * len(names), dtype=object)
     return labels[np.asarray(codes, dtype=int)]

@@ -22,7 +22,7 @@ import pandas as pd
 from nnid.datasets.arrays import logged_inputs, nominal_forces
 from nnid.datasets.gaps import mask_gaps
 from nnid.datasets.log import ANGLES, check_log, run_pieces
-from nnid.datasets.preprocess import experiments
+from nnid.datasets.preprocess import experiment_rows
 from nnid.datasets.splits import say_missed_fractions, split_log
 from nnid.errors import NnidInputError
 from nnid.evaluation.evaluate import MODE_KEYS, diverged_key
@@ -303,8 +303,9 @@ class ResidualLoop:
         correlation time. A before/after on a 13-sample run ("fell from 0.749 to 0.182") is a
         reading of a few seconds, not a measured improvement of the model."""
         scored = 0
-        for _, idx in experiments(val):
-            t = val.loc[idx, "t"].to_numpy(np.float64)
+        t_all = val["t"].to_numpy(np.float64)
+        for _, pos in experiment_rows(val):
+            t = t_all[pos]
             scored += int(np.sum(t - t[0] >= self.warmup_s))
         independent = scored / max(tau_corr, 1.0)
         if independent < MIN_INDEPENDENT:

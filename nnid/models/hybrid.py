@@ -48,7 +48,7 @@ from torch.func import functional_call
 
 from nnid.datasets.arrays import nominal_forces
 from nnid.datasets.log import POSE, VELOCITY
-from nnid.datasets.preprocess import check_uniform, experiments, first_order_lag
+from nnid.datasets.preprocess import check_uniform, experiment_rows, first_order_lag
 from nnid.datasets.segmentation import label_transients
 from nnid.errors import NnidInputError, checked_number
 from nnid.evaluation.prediction import (
@@ -636,8 +636,7 @@ class HybridModel(FossenPlant):
         targets = targets / np.array([self.velocity_scale_[d] for d in self.scored_])
         transient = label_transients(log).to_numpy()
         runs = []
-        for _, idx in experiments(log):
-            pos = log.index.get_indexer(idx)
+        for _, pos in experiment_rows(log):
             runs.append(
                 Run(
                     torch.as_tensor(states[pos]),
@@ -770,8 +769,7 @@ class HybridModel(FossenPlant):
         out = x.copy()
         k = mode_steps(mode)
         groups: dict[tuple[int, float], list[np.ndarray]] = {}
-        for _, idx in experiments(log):
-            pos = log.index.get_indexer(idx)
+        for _, pos in experiment_rows(log):
             if pos.size >= 2:
                 groups.setdefault((pos.size, self._dt(log.iloc[pos])), []).append(pos)
         with torch_threads(1):

@@ -15,7 +15,7 @@ import torch
 from torch import nn
 
 from nnid.datasets.log import validate_table
-from nnid.datasets.preprocess import check_uniform, experiments
+from nnid.datasets.preprocess import check_uniform, experiment_rows
 from nnid.errors import NnidInputError
 from nnid.evaluation.evaluate import score_split, target_columns
 from nnid.evaluation.metrics import warmup_mask
@@ -116,8 +116,7 @@ class InputOutputModel(NnidModel):
         y = (log[self.outputs_].to_numpy(np.float64) - net.y_mean.numpy()) / net.y_std.numpy()
         u = (log[self.inputs_].to_numpy(np.float64) - net.u_mean.numpy()) / net.u_std.numpy()
         out = []
-        for _, idx in experiments(log):
-            pos = log.index.get_indexer(idx)
+        for _, pos in experiment_rows(log):
             out.append((pos, y[pos], u[pos]))
         return out
 

@@ -72,7 +72,7 @@ from torch.func import functional_call
 from torch.nn.utils import parameters_to_vector
 
 from nnid.datasets.log import VELOCITY
-from nnid.datasets.preprocess import experiments
+from nnid.datasets.preprocess import experiment_rows
 from nnid.datasets.segmentation import BalancedSampler, label_transients, run_bounds
 from nnid.datasets.splits import split_log
 from nnid.errors import NnidInputError, checked_number
@@ -696,7 +696,7 @@ class NarxModel(InputOutputModel):
 
         self._configure()
         self.sample_interval_ = self._check(log)  # every later log is checked against it
-        longest = max(len(idx) for _, idx in experiments(log))
+        longest = max(len(pos) for _, pos in experiment_rows(log))
         if longest <= self.warmup_samples_:  # no sample has all its delayed regressors
             deepest = "input_delays" if max(self.input_delays_) >= self.dy_ else "output_delays"
             raise NnidInputError(
@@ -1042,13 +1042,13 @@ class NarxModel(InputOutputModel):
         output (the yaw the Munk moment alone drives) barely counts."""
         starts, stops = run_bounds(table["code"].numpy())
         runs = []
-        for (_, idx), s, e in zip(experiments(log), starts, stops, strict=True):
+        for (_, pos), s, e in zip(experiment_rows(log), starts, stops, strict=True):
             if e - s <= self.warmup_samples_:
                 continue
             hist, uf, y = self._batch(
                 table, torch.as_tensor([e - 1]), int(e - s - self.warmup_samples_)
             )
-            excited = set(target_columns(self, log.loc[idx]))
+            excited = set(target_columns(self, log.iloc[pos]))
             scored = torch.tensor([c in excited for c in self.outputs_])
             std = y[0].std(0, correction=0)
             weight = torch.where(scored & (std > 0), 1.0 / std.clamp_min(1e-300), 0.0)

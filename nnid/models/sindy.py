@@ -30,7 +30,7 @@ import torch
 
 from nnid.datasets.arrays import log_arrays, nominal_forces
 from nnid.datasets.log import VELOCITY
-from nnid.datasets.preprocess import experiments
+from nnid.datasets.preprocess import experiment_rows
 from nnid.errors import NnidInputError
 from nnid.evaluation.prediction import blank_initial, mode_steps
 from nnid.models.parametric import prepare_motion, warn_simulated
@@ -141,8 +141,8 @@ class SindyDamping(DampingModel):
 
     def _split(self, log: pd.DataFrame) -> tuple[pd.DataFrame, pd.DataFrame]:
         train, val = [], []
-        for _, idx in experiments(log):
-            g = log.loc[idx]
+        for _, pos in experiment_rows(log):
+            g = log.iloc[pos]
             cut = round(len(g) * (1.0 - self.holdout))
             train.append(g.iloc[:cut])
             val.append(g.iloc[cut:])
@@ -294,8 +294,7 @@ class SindyDamping(DampingModel):
         drive = data["tau"] if lag <= 0 else nominal_forces(log, self.vehicle, lagged=False)
         out = np.full((len(log), 6), np.nan)
         k = mode_steps(mode)
-        for _, idx in experiments(log):
-            pos = log.index.get_indexer(idx)
+        for _, pos in experiment_rows(log):
             dt = float(np.median(np.diff(log["t"].to_numpy(np.float64)[pos])))
             x = torch.as_tensor(state[pos])
             tau = torch.as_tensor(drive[pos])

@@ -15,7 +15,7 @@ import html
 import numpy as np
 import pandas as pd
 
-from nnid.datasets.preprocess import experiments
+from nnid.datasets.preprocess import experiment_rows
 from nnid.evaluation.evaluate import diverged_columns
 from nnid.physics.dofs import DOFS, FORCES
 from nnid.reports.cells import number, score, score_cell
@@ -273,8 +273,7 @@ def free_run_figures(
     """Per held-out experiment and DOF, the measured velocity and every model's free run."""
     out = []
     t_all = held["t"].to_numpy(np.float64)
-    for name, idx in experiments(held):
-        pos = held.index.get_indexer(idx)
+    for name, pos in experiment_rows(held):
         t = t_all[pos] - t_all[pos[0]]
         for d in dofs:
             fig, axes = new_figure(1, 1, 10.0, 3.2)
@@ -303,8 +302,7 @@ def force_window(held: pd.DataFrame, window_s: float = 60.0) -> np.ndarray:
     """Positions of the force figure's rows: the first ``window_s`` of the first held-out run.
     Taken of every run, the runs' clocks (each from 0) drew them over each other, joined by a
     line from the end of one window back to the start of the next."""
-    _, idx = experiments(held)[0]
-    pos = held.index.get_indexer(idx)
+    _, pos = experiment_rows(held)[0]
     t = held["t"].to_numpy(np.float64)[pos]
     return pos[t - t[0] <= window_s]
 
@@ -370,7 +368,7 @@ def complexity_figure(comparison: dict) -> str:
 def _of_run(held: pd.DataFrame) -> str:
     """The heading's " of run <name>" where the held-out data has several runs (the force
     figure's is the first), else nothing."""
-    runs = experiments(held)
+    runs = experiment_rows(held)
     return f" of run {runs[0][0]}" if len(runs) > 1 else ""
 
 

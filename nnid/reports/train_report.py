@@ -14,7 +14,7 @@ import numpy as np
 import pandas as pd
 
 from nnid.datasets.log import TAU, VELOCITY
-from nnid.datasets.preprocess import experiments
+from nnid.datasets.preprocess import experiment_rows
 from nnid.evaluation.evaluate import diverged_columns
 from nnid.evaluation.persistence import REMEMBERED
 from nnid.fault.thresholds import rate_caveat
@@ -500,14 +500,15 @@ def _dof_cells(vals: dict, diverged: dict) -> list[str]:
 def _free_run_figure(figures: dict) -> str:
     held, _ = figures["correction"]
     hybrid, physics = figures["free_run"], figures["baseline_free_run"]
-    name, idx = experiments(held)[0]
+    name, pos = experiment_rows(held)[0]
     cols = [c for c in VELOCITY if c in held and hybrid[c].notna().any()]
     fig, axes = new_figure(len(cols), 1, width=9.0, height=1.8)
-    t = held.loc[idx, "t"].to_numpy()
+    t = held["t"].to_numpy()[pos]
     for ax, c in zip(axes[:, 0], cols, strict=True):
-        ax.plot(t, held.loc[idx, c], color="0.6", lw=1.2, label="measured")
-        ax.plot(t, physics.loc[idx, c], color="tab:orange", lw=0.9, label="physics only")
-        ax.plot(t, hybrid.loc[idx, c], color="tab:blue", lw=0.9, label="hybrid")
+        # the predictions are row-aligned with the held-out log (predict answers on its index)
+        ax.plot(t, held[c].to_numpy()[pos], color="0.6", lw=1.2, label="measured")
+        ax.plot(t, physics[c].to_numpy()[pos], color="tab:orange", lw=0.9, label="physics only")
+        ax.plot(t, hybrid[c].to_numpy()[pos], color="tab:blue", lw=0.9, label="hybrid")
         ax.set_ylabel(f"{c} [{UNITS[c]}]")
     axes[0, 0].set_title(f"experiment {name}" if name is not None else "held-out data")
     axes[0, 0].legend(loc="upper right", fontsize=8, ncols=3)
