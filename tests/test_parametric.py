@@ -825,6 +825,55 @@ def test_a_sequence_keeps_what_it_identified_when_one_run_leaves_a_parameter_uni
     assert params["Y:v*abs(v)"]["value"] is None and params["Y:v*abs(v)"]["stderr"] is None
 
 
+@pytest.fixture(scope="module")
+def surge_and_faint_yaw(seamor):
+    """Exact states of a surge with a yaw rate about 1e-4 of its speed: N:r*abs(r)'s regressor
+    is 1e-8 of X:u*abs(u)'s, at most the excitation check's tol (1e-6) of it, though the N
+    equation reads it beside its own N_rdot column."""
+    t = np.arange(301) * 0.1
+    inputs = np.zeros((t.size, 6))
+    inputs[:, 0] = 10.0 * (1.0 + np.sin(0.5 * t))
+    inputs[:, 5] = 1e-5 * (1.0 + np.sin(0.3 * t))
+    log = simulate(seamor, inputs, 0.1, experiment="turn")
+    u, r = log["u"].to_numpy(), log["r"].to_numpy()
+    # the case: r|r| at most tol of u|u|, where the whole regression's rule reads zero
+    assert np.sqrt(np.mean((r * np.abs(r)) ** 2) / np.mean((u * np.abs(u)) ** 2)) < 1e-6
+    return log
+
+
+def _yaw_fit_said(seamor, log, trainer) -> tuple[ParametricModel, str]:
+    """The surge and yaw equations' fit of ``log`` by ``trainer`` and its excitation warnings."""
+    names = ["X_udot", "X:u*abs(u)", "N_rdot", "N:r*abs(r)"]
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        model = ParametricModel(seamor, names, dofs=["u", "r"], trainer=trainer).fit(log)
+    said = " | ".join(str(w.message) for w in caught if w.category is ExcitationWarning)
+    return model, said
+
+
+def test_a_faint_yaw_is_measured_by_its_own_equation_beside_a_surge(seamor, surge_and_faint_yaw):
+    """The excitation check compared each column with the largest of the whole regression and
+    called N:r*abs(r) zero (NaN) beside X:u*abs(u), whose X equation says nothing of the N
+    equation's rows. Compared within each DOF equation, it is identified."""
+    model, said = _yaw_fit_said(seamor, surge_and_faint_yaw, LeastSquares())
+    assert "N:r*abs(r)" not in said
+    assert model.estimate_.excitation.unexcited == []
+    truth = seamor.damping.coefficients["N:r*abs(r)"]
+    assert model.params["N:r*abs(r)"]["value"] == pytest.approx(truth, rel=1e-6)
+
+
+def test_a_recursive_memory_check_compares_a_column_within_its_own_equation(
+    seamor, surge_and_faint_yaw
+):
+    """The recursive estimator's memory check judges as batch least squares does: N:r*abs(r)
+    was "zero regressor" beside X:u*abs(u) and its value NaN, though the run excited it. (Its
+    value is where the recursion ended: it says it has not converged, with no s.e.)"""
+    model, said = _yaw_fit_said(seamor, surge_and_faint_yaw, RecursiveLeastSquares())
+    assert "N:r*abs(r)" not in said
+    assert model.estimate_.excitation.unexcited == []
+    assert np.isfinite(model.estimate_.theta).all()
+
+
 def test_an_unidentified_parameter_is_simulated_at_the_vehicle_files_value_and_said(
     seamor, surge_and_faint_sway, tmp_path
 ):
@@ -1458,6 +1507,29 @@ def test_rounding_floors_follow_the_motion_a_column_is_made_of():
         # the scalar rule, as before, against its typical regressor: both zero there
         scalar = excitation_from_gram(phi.T @ phi, 200, ["X:u*abs(u)"], reference=s)
         assert scalar.unexcited == ["X:u*abs(u)"]
+
+
+def test_a_column_in_two_equations_is_excited_where_one_of_them_measures_it():
+    """The tol rule within each DOF equation (sample-major rows X, N): a coupled column (an
+    added mass's) 1e-8 of X:u*abs(u) in the X rows, zero beside it there, and as large as
+    N_rdot's in the N rows, is measured by the N equation; the whole regression's rule, which
+    compares both with X:u*abs(u), calls both zero."""
+    from nnid.evaluation.persistence import equation_rms, excitation_from_gram
+
+    rng = np.random.default_rng(0)
+    x, nn = rng.standard_normal((2, 200, 3))
+    x[:, 1] = 0.0  # N_rdot is not in the X equation
+    x[:, 2] *= 1e-8
+    nn[:, 0] = 0.0  # nor X:u*abs(u) in the N equation
+    nn[:, 1:] *= 1e-7
+    phi = np.stack([x, nn], 1).reshape(400, 3)
+    names = ["X:u*abs(u)", "N_rdot", "coupled"]
+    whole = excitation_from_gram(phi.T @ phi, 400, names)
+    sizes = equation_rms(phi, 2)
+    within = excitation_from_gram(phi.T @ phi, 400, names, by_equation=sizes)
+    assert whole.unexcited == ["N_rdot", "coupled"] and within.unexcited == []
+    x_only = equation_rms(phi, 2, kept=np.arange(400) % 2 == 0)  # the N rows left out
+    assert x_only[0] == pytest.approx(sizes[0]) and x_only[1].tolist() == [0.0, 0.0, 0.0]
 
 
 def test_a_regression_computes_its_rounding_floors_only_where_a_solve_reads_them(

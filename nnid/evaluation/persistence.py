@@ -175,6 +175,21 @@ def typical_size(columns: np.ndarray) -> float:
     return max(sizes, default=0.0)
 
 
+def equation_rms(columns: np.ndarray, m: int, kept: np.ndarray | None = None) -> np.ndarray:
+    """Each column's RMS over the rows of each of ``m`` equations ``[m, P]``, unweighted: the
+    sizes :func:`excitation_from_gram`'s tol rule compares within an equation. ``columns``
+    ``[N, P]`` stacks the equations sample-major (row i is equation i mod m, a
+    :class:`~nnid.trainers.regression.Regression`'s layout); ``kept`` ``[N]``: the rows that
+    count (those a fit reads), all where None. An equation without rows has RMS 0."""
+    n, p = np.shape(columns)
+    a = np.asarray(columns, dtype=np.float64).reshape(n // m, m, p)
+    count = np.full(m, a.shape[0])
+    if kept is not None and not np.all(kept):  # a view of the layout, copied only here
+        k = np.asarray(kept, dtype=bool).reshape(n // m, m)
+        a, count = np.where(k[:, :, None], a, 0.0), k.sum(0)
+    return np.sqrt(np.einsum("nej,nej->ej", a, a) / np.maximum(count, 1)[:, None])
+
+
 def rounding_floors(at_motion: np.ndarray, at_probe: np.ndarray) -> np.ndarray:
     """Each column's floor of the rounding rule from its typical size at a reference motion
     (``at_motion`` ``[P]``: the log's typical motion) and at that motion scaled by
@@ -229,30 +244,36 @@ def excitation_from_gram(
     column_rms: np.ndarray | None = None,
     reference: float = 0.0,
     floors: np.ndarray | None = None,
+    by_equation: np.ndarray | None = None,
 ) -> ExcitationReport:
     """The same report from ΦᵀΦ (cheap for long logs): singular values of the unit-RMS-scaled
     regressor are the square roots of the eigenvalues of its scaled Gram matrix. ``left_out``:
     parameters whose regressor the caller had only in rows it left out (not finite): their
     verdict says so, not "zero regressor".
 
-    A column is zero (Weiss eq. 95's α₁ = 0) when its RMS is at most ``tol`` of its block's
-    largest, though never of more than ``reference`` (a millionth of the other regressors is
-    not measured beside them), or at most :data:`ROUNDING` of ``reference``, the typical size
-    of a regressor of the whole regression this one is a block of (:func:`typical_size`;
+    A column is zero (Weiss eq. 95's α₁ = 0) when its RMS is at most ``tol`` of the largest
+    column of its DOF equation (of the whole regression without ``by_equation``), though
+    never of more than ``reference`` (a millionth of the other regressors is not measured
+    beside them), or at most :data:`ROUNDING` of ``reference``, the typical size of a
+    regressor of the whole regression this one is a block of (:func:`typical_size`;
     McCarter's Ξ, eq. 4.20, solved force by force): a block of one column has no other to be
     compared with, and one of rounding (1e-17) fitted to a target of rounding read as a
     precise estimate. Without ``reference`` (0) the largest column RMS stands for it, which
     one column singular on a few rows would inflate.
     ``column_rms``: each column's RMS unweighted, where ``gram`` is weighted (weights that
-    scale each equation by its residual made a column of rounding as large as any); both rules
-    read it. ``floors`` ``[P]``: each column's floor of the rounding rule where it is not NaN
-    (:func:`rounding_floors`, a Fossen regression's), in place of ROUNDING × ``reference``: a
-    column is compared with itself at the log's typical motion, to its power (a yaw rate 1e-6
-    of the surge speed is measured, and its r|r| 1e-12). The tol rule still holds beside it,
-    and compares a column with every column of the block, other DOF equations' included: the
-    r|r| of a yaw rate 5e-6 of the surge speed passes its floor but, fitted with X:u|u| in
-    one regression, is at most ``tol`` of it and called zero (its N equation alone measures
-    it); a sway under a 1e-9-N force has v|v| 1e-11 of v̇'s column, likewise zero beside it."""
+    scale each equation by its residual made a column of rounding as large as any); the
+    rounding rule reads it, and the tol rule without ``by_equation``. ``floors`` ``[P]``:
+    each column's floor of the rounding rule where it is not NaN (:func:`rounding_floors`, a
+    Fossen regression's), in place of ROUNDING × ``reference``: a column is compared with
+    itself at the log's typical motion, to its power (a yaw rate 1e-6 of the surge speed is
+    measured, and its r|r| 1e-12). The tol rule still holds beside it.
+    ``by_equation`` ``[E, P]``: each column's unweighted RMS over the rows of each DOF
+    equation the regression stacks (:func:`equation_rms`); the tol rule then compares a
+    column with the columns of each equation it is in, and it is excited where one of them
+    measures it: the r|r| of a yaw rate 1e-4 of the surge speed, 1e-8 of X:u|u| and called
+    zero beside it in one regression, is measured by its N equation; a sway under a 1e-9-N
+    force has v|v| 1e-11 of v̇'s column in the Y equation, zero beside it. None: the
+    regression is one equation (``column_rms``)."""
     p = len(names)
     rms = np.sqrt(np.clip(np.diag(gram), 0.0, None) / max(n, 1))
     raw = rms if column_rms is None else np.asarray(column_rms, dtype=np.float64)
@@ -260,16 +281,23 @@ def excitation_from_gram(
     # singular on a few rows would set it
     typical = reference if reference > 0 else raw.max(initial=0.0)
     # the tol rule is no limit of the scaled Gram (columns are scaled to unit RMS, so one a
-    # millionth of another is not lost in it), but a verdict on the block's other columns: its
-    # size is their largest, capped at the typical one, as one column singular on a few rows
-    # (an (η − 1) term at U = 0, 1e12) made every other column of its block "zero regressor";
-    # unweighted, as weights of 1/σ̂² per equation (beside one of exact data: 1e16) did the same
-    block = min(raw.max(initial=0.0), typical)
+    # millionth of another is not lost in it), but a verdict on the equation's other columns:
+    # its size is their largest, capped at the typical one, as one column singular on a few
+    # rows (an (η − 1) term at U = 0, 1e12) made every other column of its block "zero
+    # regressor"; unweighted, as weights of 1/σ̂² per equation (beside one of exact data:
+    # 1e16) did the same. Within each equation, as each is fitted against its own target,
+    # in its own units (N, N m): X's u|u| said nothing of N's rows, yet called N:r|r| zero
+    sizes = raw[None, :] if by_equation is None else np.asarray(by_equation, np.float64)
+    block = np.minimum(sizes.max(1, initial=0.0), typical)
+    # a column in several equations' rows (an added mass: its ν̇ in its own equation, its
+    # C_A(ν)ν in others) is measured where any one of them measures it beside that
+    # equation's columns: its rows there are data whatever it is in the other equations
+    measured = (sizes > tol * block[:, None]).any(0)
     floor = np.full(p, ROUNDING * typical)
     if floors is not None:  # a column's own floor, where its regression gives one
         own = np.asarray(floors, dtype=np.float64)
         floor = np.where(np.isnan(own), floor, own)
-    live = (rms > 0) & (raw > tol * block) & (raw > floor)
+    live = (rms > 0) & measured & (raw > floor)
     unexcited = [names[j] for j in range(p) if not live[j]]
     d = np.where(live, 1.0 / np.where(live, rms, 1.0), 0.0)
     normed = gram * np.outer(d, d) / max(n, 1)

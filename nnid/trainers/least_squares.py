@@ -24,6 +24,7 @@ from nnid.errors import NnidInputError
 from nnid.evaluation.persistence import (
     ExcitationReport,
     changed_verdicts,
+    equation_rms,
     excitation_from_gram,
     typical_size,
 )
@@ -199,6 +200,7 @@ def solve_least_squares(
     floors: np.ndarray | None = None,
     equations: int = 1,
     variance_floor: np.ndarray | None = None,
+    stacked: int = 1,
 ) -> Estimate:
     """Weighted least squares with covariance, through the normal equations of the
     column-scaled regressor (fast on long logs; the excitation check guards conditioning).
@@ -209,7 +211,10 @@ def solve_least_squares(
     (:func:`~nnid.evaluation.persistence.typical_size`), against which a column of rounding is
     zero (:func:`excitation_from_gram`); ``phi``'s own, where larger. ``floors``: each
     column's own floor of that rule, where not NaN
-    (:func:`~nnid.evaluation.persistence.rounding_floors`).
+    (:func:`~nnid.evaluation.persistence.rounding_floors`). ``stacked``: the DOF equations
+    ``phi``'s rows stack (row i is equation i mod ``stacked``: :class:`Regression`'s
+    layout), within each of which the check compares a column with the others
+    (:func:`excitation_from_gram`'s ``by_equation``); 1: with all of ``phi``'s columns.
 
     σ̂² = rᵀWr/(n − p) (Caccia eq. 12), n the rows of weight > 0 (``n_obs``: a weight 0
     switches a row off), rᵀWr at least 4·eps of yᵀWy (the rounding of exact data). Of several
@@ -218,12 +223,22 @@ def solve_least_squares(
     (:func:`_equations_rss`): at ``variance_floor`` (a variance per equation, weighted as its
     rows are) where given, else at its :func:`rounding_floor`."""
     names = names or [f"theta{k}" for k in range(phi.shape[1])]
-    if phi.shape[0] % equations:
-        raise ValueError(f"{phi.shape[0]} rows are no whole number of {equations} equations")
+    for m in (equations, stacked):
+        if phi.shape[0] % m:
+            raise ValueError(f"{phi.shape[0]} rows are no whole number of {m} equations")
     equation = np.arange(phi.shape[0]) % equations
     if equations > 1 and variance_floor is None:
         variance_floor = rounding_floor(np.asarray(y, dtype=np.float64), equations)
     finite = np.isfinite(y) & np.isfinite(phi).all(1)
+    # each DOF equation's column sizes, of the rows fitted (finite, weight > 0), read from the
+    # sample-major layout before the rows are cut from it
+    by_equation = (
+        equation_rms(
+            phi, stacked, finite if weights is None else finite & (np.asarray(weights) > 0)
+        )
+        if check and stacked > 1
+        else None
+    )
     left_out: list[str] = []
     if not finite.all():  # rows with an undefined signal (e.g. w of a tumbling vehicle)
         # masked gaps and accelerations cut at held steps are such rows, said where they are
@@ -263,6 +278,7 @@ def solve_least_squares(
             column_rms=raw,
             reference=reference,
             floors=floors,
+            by_equation=by_equation,
         )
         if check
         else None
@@ -375,12 +391,12 @@ class LeastSquares(BaseEstimator):
         if self.weighting not in ("feasible", "none"):
             raise NnidInputError("weighting is 'feasible' or 'none'", field="weighting")
         floors = reg.floors()
+        m = len(reg.dofs)
         est = solve_least_squares(
-            reg.phi, reg.y, names=reg.names, reference=reference, floors=floors
+            reg.phi, reg.y, names=reg.names, reference=reference, floors=floors, stacked=m
         )
         dof_sigma2 = self._dof_variances(reg, est.theta)
-        if self.weighting == "feasible" and len(reg.dofs) > 1:
-            m = len(reg.dofs)
+        if self.weighting == "feasible" and m > 1:
             var = np.array([dof_sigma2[d] for d in reg.dofs])
             ok = np.isfinite(reg.y) & np.isfinite(reg.phi).all(1)
             floor = feasible_floor(var, np.where(ok, reg.y, np.nan), m)
@@ -400,6 +416,7 @@ class LeastSquares(BaseEstimator):
                     floors=floors,
                     equations=m,
                     variance_floor=floor,
+                    stacked=m,
                 )
             # but its verdict may differ: 1/σ̂² beside an equation of exact data (~1e18) left
             # a pair separable only in the other equation collinear, and dropped it unsaid

@@ -27,7 +27,7 @@ from numba import njit
 from sklearn.base import BaseEstimator
 
 from nnid.errors import NnidInputError
-from nnid.evaluation.persistence import ExcitationReport, excitation_from_gram
+from nnid.evaluation.persistence import ExcitationReport, equation_rms, excitation_from_gram
 from nnid.trainers.history import Progress, silent
 from nnid.trainers.least_squares import (
     Estimate,
@@ -196,6 +196,9 @@ def _memory_excitation(
         column_rms=raw,
         reference=reference,
         floors=reg.floors(),
+        # each DOF equation's columns compared with each other, as batch least squares
+        # compares them (the window's rows are sample-major from sample ``first``)
+        by_equation=equation_rms(phi, m, ok) if m > 1 else None,
     )
     return report, ok, phi, y, r
 
