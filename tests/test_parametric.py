@@ -1613,6 +1613,29 @@ def test_a_zero_column_does_not_hide_a_collinear_pair():
     assert est.excitation.singular_values[2:] == [0.0, 0.0] and est.excitation.rank == 2
 
 
+def test_a_direction_singular_to_rounding_has_an_infinite_condition_on_every_cpu():
+    """An exact null direction (a thrust and a bias both constant) came out of the eigen-solver
+    +2e-16 of the largest eigenvalue with one CPU's BLAS kernels and -2e-16 with another's: the
+    condition number read 1.4e16 on one, inf on the other. A scaled Gram one ulp from singular
+    (a pair correlated 1 − 2⁻⁵³: eigenvalue 2⁻⁵³ of 2, below the solver's resolution of
+    3·eps·2) or exactly singular is singular: condition inf, singular value 0, the pair
+    collinear. A pair correlated 1 − 1e-10 (eigenvalue 1e-10, far above rounding) is measured:
+    its condition is (1 + c)/(1 − c), finite."""
+    from nnid.evaluation.persistence import excitation_from_gram
+
+    for c, singular in ((1 - 2.0**-53, True), (1.0, True), (1 - 1e-10, False)):
+        gram = np.array([[1.0, c, 0.0], [c, 1.0, 0.0], [0.0, 0.0, 1.0]])
+        report = excitation_from_gram(gram, 1, ["a", "b", "c"], groups={"pair": ["a", "b"]})
+        assert report.rank == 2 and report.collinear == ["a", "b"]
+        if singular:
+            assert report.condition == np.inf and report.singular_values[-1] == 0.0
+            assert report.group_min_singular["pair"] == 0.0
+        else:
+            # each eigenvalue within a few eps × the largest (2), ~1e-15: 1e-5 of 1e-10
+            assert report.condition == pytest.approx((1 + c) / (1 - c), rel=1e-4)
+            assert report.group_min_singular["pair"] == pytest.approx(np.sqrt(1 - c), rel=1e-4)
+
+
 def _pair_split_by_one_equation(
     scale_b: float, noise_a: float, noise_b: float
 ) -> tuple[Regression, np.ndarray]:

@@ -247,7 +247,10 @@ def excitation_from_gram(
     by_equation: np.ndarray | None = None,
 ) -> ExcitationReport:
     """The same report from ΦᵀΦ (cheap for long logs): singular values of the unit-RMS-scaled
-    regressor are the square roots of the eigenvalues of its scaled Gram matrix. ``left_out``:
+    regressor are the square roots of the eigenvalues of its scaled Gram matrix; an eigenvalue
+    at or below the rounding of the largest is 0 (:func:`_resolved`): its singular value is 0,
+    the condition number inf, and its direction collinear, whatever the BLAS kernels' last
+    bits made of it. ``left_out``:
     parameters whose regressor the caller had only in rows it left out (not finite): their
     verdict says so, not "zero regressor".
 
@@ -306,19 +309,21 @@ def excitation_from_gram(
     # named (its values then kept the pseudo-inverse's, with a standard error)
     idx = np.flatnonzero(live)
     eig, vec = np.linalg.eigh(normed[np.ix_(idx, idx)]) if idx.size else (np.array([]), None)
-    sv = np.concatenate([np.sqrt(np.clip(eig[::-1], 0.0, None)), np.zeros(p - idx.size)])
-    rank = int(np.sum(sv > np.sqrt(tol) * (sv[0] if sv.size else 1.0)))
+    sv = np.concatenate([np.sqrt(_resolved(eig)[::-1]), np.zeros(p - idx.size)])
+    # one threshold for both verdicts: a direction rank does not count is named collinear
+    weak = sv <= np.sqrt(tol) * (sv[0] if sv.size else 1.0)
+    rank = int(np.sum(~weak))
     condition = float((sv[0] / sv[p - 1]) ** 2) if p and sv[p - 1] > 0 else float("inf")
     collinear: list[str] = []
     for k in range(idx.size):
-        if sv[k] < np.sqrt(tol) * sv[0]:
+        if weak[k]:
             collinear += [names[j] for j in idx[np.abs(vec[:, idx.size - 1 - k]) > 0.3]]
     collinear = sorted(set(collinear), key=names.index)
     group_min = {}
     for g, members in (groups or {}).items():
         cols = [names.index(m) for m in members]
-        sub = np.linalg.eigvalsh(normed[np.ix_(cols, cols)])
-        group_min[g] = float(np.sqrt(max(sub.min(), 0.0))) if sub.size else 0.0
+        sub = _resolved(np.linalg.eigvalsh(normed[np.ix_(cols, cols)]))
+        group_min[g] = float(np.sqrt(sub.min())) if sub.size else 0.0
     warnings = _verdict_warnings(unexcited, collinear, rank, p, left_out)
     unread = [n for n in unexcited if n in left_out]
     return ExcitationReport(
@@ -333,6 +338,18 @@ def excitation_from_gram(
         warnings,
         unread,
     )
+
+
+def _resolved(eig: np.ndarray) -> np.ndarray:
+    """The eigenvalues ``eig`` of a symmetric positive semi-definite matrix, those at or below
+    the rounding of the largest (size × eps × largest, :func:`numpy.linalg.matrix_rank`'s
+    tolerance) set to 0. The eigen-solver computes each to within about that of the largest,
+    so below it a value is rounding, not a measurement: an exact null direction (a thrust and
+    a bias both constant) came out +2e-16 of the largest with one CPU's BLAS kernels and
+    -2e-16 with another's, a condition number of 1.4e16 on one and inf on the other."""
+    eig = np.asarray(eig, dtype=np.float64)
+    top = float(eig.max(initial=0.0))
+    return np.where(eig > eig.size * np.finfo(np.float64).eps * top, eig, 0.0)
 
 
 def _verdict_warnings(
