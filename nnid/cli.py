@@ -119,7 +119,10 @@ def simulate(
             log = simulate_config(cfg, veh, progress=progress)
     except NnidInputError as exc:
         raise exc.with_source(str(config)) from None
-    validate_log(log, source=str(out_path))
+    try:
+        validate_log(log, source="the log it simulates")
+    except NnidInputError as exc:  # made by the config: the --out file is not yet written
+        raise NnidInputError(f"the log contract refuses {exc}", source=str(config)) from None
     write_log(log, out_path)
     n_exp = log["experiment"].nunique() if "experiment" in log else 1
     out.print(

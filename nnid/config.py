@@ -37,6 +37,7 @@ from nnid.datasets.excitation import (
     Step,
     WeissSequence,
 )
+from nnid.datasets.log import MAX_DISTANCE, MAX_SPEED
 from nnid.datasets.measurement import Measurement
 from nnid.datasets.simulator import Autopilot
 from nnid.errors import NnidInputError
@@ -46,7 +47,9 @@ from nnid.physics.effects import parse_effect
 from nnid.validation import (
     ALPHA_MAX,
     ALPHA_MIN,
+    MAX_FALSE_ALARMS_PER_HOUR,
     MAX_WIDTH,
+    MIN_WINDOW_S,
     PositiveFloat,
     StrictModel,
     read_toml,
@@ -54,6 +57,7 @@ from nnid.validation import (
     repeated,
     validated,
 )
+from nnid.vehicle import vehicle_name
 
 Signal = Annotated[
     Step | Stairs | Chirp | Multisine | PRBS | APRBS | Sine | DOptimalSine,
@@ -123,6 +127,15 @@ class Experiment(StrictModel):
             raise ValueError("x0 has 6 (pose) or 12 (pose and velocity) values")
         if x0 is not None and max(abs(a) for a in x0[3:6]) > 2 * math.pi:
             raise ValueError("x0's angles (its 4th to 6th values) are radians, within ±2π")
+        # the log the run writes must hold them: its bounds on a position and a velocity
+        if x0 is not None and max(abs(a) for a in x0[0:3]) > MAX_DISTANCE:
+            raise ValueError(
+                f"x0's position (its 1st to 3rd values) is metres, within ±{MAX_DISTANCE:g}"
+            )
+        if x0 is not None and max((abs(a) for a in x0[6:12]), default=0.0) > MAX_SPEED:
+            raise ValueError(
+                f"x0's velocity (its 7th to 12th values) is m/s and rad/s, within ±{MAX_SPEED:g}"
+            )
         return x0
 
     def end(self) -> float:
@@ -188,6 +201,10 @@ class SimulateConfig(StrictModel):
                     "every experiment needs a name: a non-blank text is expected",
                     field=at("name"),
                 )
+            try:  # one line, as a vehicle's name: it labels the log's runs and report lines
+                vehicle_name(exp.name)
+            except ValueError as exc:
+                raise NnidInputError(f"experiment {exp.name!r}: {exc}", field=at("name")) from None
             if exp.name in seen:
                 # a run of the sequence has a fixed name: the explicit experiment's is the key
                 # to change
@@ -233,10 +250,12 @@ class _DataCommon(StrictModel):
     pose (once, before the split: every model is fitted and scored on the same velocities),
     and light white noise on logged signals (``noise``: standard deviation as a fraction of
     each column's, on ``noise_columns``, default the inputs and velocities; seeded by
-    ``noise_seed``; Weiss V.B)."""
+    ``noise_seed``; Weiss V.B) of at most the column's own std (``noise`` ≤ 1)."""
 
     experiments: Names | None = None
-    noise: float = Field(0.0, ge=0, allow_inf_nan=False)
+    # light noise: at 1 it is as large as the signal it is added to, beyond it the column is
+    # mostly noise (1e300 was taken, and every score read "diverged")
+    noise: float = Field(0.0, ge=0, le=1.0, allow_inf_nan=False)
     noise_columns: Names | None = None
     noise_seed: Seed = 0
     savgol_window: PositiveFloat = 1.0
@@ -862,11 +881,15 @@ class DetectSpec(StrictModel):
     (never on the data the model was fitted on) and measure its false alarms on the test part;
     ``nnid detect --model DIR`` then works from the output folder alone."""
 
-    false_alarm_per_hour: PositiveFloat = 0.01
+    false_alarm_per_hour: float = Field(
+        0.01, gt=0, le=MAX_FALSE_ALARMS_PER_HOUR, allow_inf_nan=False
+    )
     time_constant_s: PositiveFloat = 0.25
     allowance: PositiveFloat = 1.0
     rearm_s: PositiveFloat = 5.0
-    window_s: PositiveFloat = 10.0
+    # as --window bounds it; longer than the log it calibrates on is refused there
+    # (nnid.pipeline.check_detect_window)
+    window_s: float = Field(10.0, ge=MIN_WINDOW_S, allow_inf_nan=False)
 
 
 def _option_path(path: str) -> str:

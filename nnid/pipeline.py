@@ -4,9 +4,11 @@ data; the CLI writes files and talks to people."""
 
 from __future__ import annotations
 
+import difflib
 import time
 import warnings
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager, nullcontext
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -671,13 +673,21 @@ def fit_model(
     An ensemble is given the run's ``replay``: it scores its members' validation free runs
     (and drops diverged ones) as the run's scores fly them."""
     extra = {"replay": replay} if model.kind == "ensemble" else {}
-    with warnings.catch_warnings(record=True) as caught:
+    with warnings.catch_warnings(record=True) as caught, named_in(section, spec):
         warnings.simplefilter("always")
-        try:
-            model.fit(split.train, split.validation, progress=progress, **extra)
-        except NnidInputError as exc:
-            raise exc.within(section, type(spec).model_fields) from None
+        model.fit(split.train, split.validation, progress=progress, **extra)
     return _fit_warnings(caught)
+
+
+@contextmanager
+def named_in(section: str, spec) -> Iterator[None]:
+    """A model's refusals (in its fit, or in scoring it: a ``savgol_window`` longer than a
+    held-out run) named where the config sets the field: under ``section`` (``model``,
+    ``models.2``) when it is a key of the config table ``spec``."""
+    try:
+        yield
+    except NnidInputError as exc:
+        raise exc.within(section, type(spec).model_fields) from None
 
 
 def _fit_warnings(caught) -> list[str]:
@@ -759,10 +769,12 @@ def score(
     k: int | None,
     replay: Replay | None = None,
     predictions: dict | None = None,
+    at: tuple[str, Any] | None = None,
 ) -> dict:
-    """The scores of one split (one-step, k-step when asked, free run)."""
+    """The scores of one split (one-step, k-step when asked, free run); the model's refusals
+    named under ``at``, (section, config table), as :func:`named_in` names them."""
     modes = ("one_step", "k_step", "free_run") if k else ("one_step", "free_run")
-    with np.errstate(all="ignore"):
+    with np.errstate(all="ignore"), named_in(*at) if at else nullcontext():
         return evaluate(model, log, modes, k, cfg.warmup_s, replay, predictions)
 
 
@@ -802,6 +814,8 @@ def run_train(
     inputs, loaded = loaded_inputs(
         cfg, config_path, [cfg.model], data, vehicle, columns, time_unit=time_unit
     )
+    if cfg.detect is not None:
+        check_detect_window(cfg.detect.window_s, inputs.log, source)
     model = build_model(cfg.model, inputs, cfg.warmup_s)
     replay = replay_of(inputs, inputs.log)
     read, said = read_motion([model], inputs.log, replay), None
@@ -811,11 +825,13 @@ def run_train(
         inputs.log, cfg.split, source, inputs.report, cfg.warmup_s, inputs.source, read, said
     )
     caught = fit_model(model, split, progress or silent, "model", cfg.model, replay)
+    check_reference(cfg.reference, list(model.params), source)
     if hasattr(model, "report_"):
         for step in model.report_.steps:
             inputs.report.add(step.step, "training split: " + step.detail, step.rows_removed)
     k = k_steps(split.validation, cfg.k_step_s)
     description = model.describe()
+    at = ("model", cfg.model)
     metrics: dict[str, Any] = {
         "model": model.kind,
         "trainer": model.trainer_name(),
@@ -823,8 +839,8 @@ def run_train(
         "params": _params(model, inputs.vehicle),
         "n_params": model.n_params,
         "settings": encode_setting(model.get_params(deep=False)),
-        "train": score(model, split.train, cfg, k, replay),
-        "validation": score(model, split.validation, cfg, k, replay),
+        "train": score(model, split.train, cfg, k, replay, at=at),
+        "validation": score(model, split.validation, cfg, k, replay, at=at),
         "validation_used_for": model.validation_use,
         "describe": {key: v for key, v in description.items() if key != "params"},
         "warnings": list(dict.fromkeys([*loaded, *caught])),
@@ -834,7 +850,7 @@ def run_train(
     }
     parts = [p for p in ("validation", "test") if len(split[p])]
     if "test" in parts:
-        metrics["test"] = score(model, split.test, cfg, k, replay)
+        metrics["test"] = score(model, split.test, cfg, k, replay, at=at)
     for p in parts:
         metrics["warnings"] += unscored_k_step(p, split[p], metrics[p], cfg, model)
         metrics["warnings"] += without_skill(p, metrics[p])
@@ -852,7 +868,7 @@ def run_train(
             "model": base.kind,
             "trainer": base.trainer_name(),
             "n_params": base.n_params,
-            **{p: score(base, split[p], cfg, k, replay) for p in parts},
+            **{p: score(base, split[p], cfg, k, replay, at=at) for p in parts},
         }
     if model.kind == "ensemble":  # the spread behind the combined prediction, per member
         metrics["members"] = [
@@ -874,6 +890,45 @@ def run_train(
         metrics["warnings"] = list(dict.fromkeys([*metrics["warnings"], *said]))
     metrics["seconds"] = time.perf_counter() - start
     return TrainResult(model, metrics, inputs.report, split, figures, monitor)
+
+
+def check_reference(reference: dict[str, float], fitted: Sequence[str], source: str) -> None:
+    """Each key of a train config's ``[reference]`` table a parameter the model fitted
+    (``fitted``), or the error naming the key and the closest fitted name: a typo
+    (``Z_wdott``) was kept in metrics.json and compared with nothing."""
+    for key in reference:
+        if key in fitted:
+            continue
+        close = difflib.get_close_matches(key, fitted, n=1)
+        hint = (
+            f"did you mean {close[0]!r}?"
+            if close
+            else f"it fitted {', '.join(fitted)}"
+            if fitted
+            else "this model has no named parameters"
+        )
+        raise NnidInputError(
+            f"{key!r} names no parameter the model fitted, so it would be compared with "
+            f"nothing; {hint}",
+            source=source,
+            field=f"reference.{key}",
+        )
+
+
+def check_detect_window(window_s: float, log: pd.DataFrame, source: str) -> None:
+    """``[detect] window_s`` within the healthy log it is set beside: the isolation window is
+    the data after an alarm that its isolation reads, and one longer than all the runs of this
+    log together is no window of data like it (1e308 s was taken: every alarm waited for the
+    end of its run)."""
+    t = log["t"].to_numpy(np.float64)
+    span = sum(float(t[pos[-1]] - t[pos[0]]) for _, pos in experiment_rows(log))
+    if window_s > span:
+        raise NnidInputError(
+            f"{window_s:g} s is longer than the whole log ({span:.4g} s over all its runs): "
+            "the isolation window after an alarm is some seconds of it (several manoeuvres)",
+            source=source,
+            field="detect.window_s",
+        )
 
 
 def _monitored_motion(
@@ -1051,7 +1106,8 @@ def run_compare(
             "training": training_stages(description),
         }
         if model.has_force_equation:
-            train_force = evaluate(model, split.train, (), None, cfg.warmup_s)
+            with named_in(f"models.{i}", spec):
+                train_force = evaluate(model, split.train, (), None, cfg.warmup_s)
             row["train"] = {"J": train_force["J"], "J_over_J0": train_force["J_over_J0"]}
         else:
             row["train"] = {}
@@ -1063,9 +1119,10 @@ def run_compare(
             k,
             replay,
             predicted if held_name == "validation" else None,
+            at=(f"models.{i}", spec),
         )
         if held_name == "test":
-            row["test"] = score(model, held, cfg, k, replay, predicted)
+            row["test"] = score(model, held, cfg, k, replay, predicted, (f"models.{i}", spec))
         row["warnings"] += unscored_k_step(held_name, held, row[held_name], cfg, model)
         kept_start = diverged_training(description)
         row["warnings"] += kept_start

@@ -271,6 +271,8 @@ LOOP_SETTINGS = (
     "max_effects",
     "warmup_s",
     "gate_horizon_s",
+    "savgol_window",
+    "savgol_order",
 )
 
 

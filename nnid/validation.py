@@ -58,6 +58,11 @@ ALPHA_MIN, ALPHA_MAX = 1e-12, 0.5
 #: takes it
 MIN_WINDOW_S = 0.5
 
+#: the highest false-alarm target of a residual monitor, per hour (a train config's
+#: ``[detect] false_alarm_per_hour``, a saved monitor's): one a second. Its thresholds are
+#: fitted to the tail of rare healthy excursions; a rate above it asks for no threshold at all
+MAX_FALSE_ALARMS_PER_HOUR = 3600.0
+
 
 def repeated(names: list[str]) -> list[str]:
     """The names a list gives more than once, sorted (for an error that names them)."""
@@ -232,6 +237,19 @@ def validated(
                 if path.startswith(field + "."):
                     first, field = other, path
                     break
+            else:
+                if isinstance(first["input"], list):
+                    # a row of a matrix where a vector's number goes ("inertia.0" for text in
+                    # the middle of a 3x3 tensor): the member the rows fit names the element,
+                    # or the row or matrix of the wrong length
+                    parent = field.rpartition(".")[0]
+                    for other in errors[1:]:
+                        path = field_path(tuple(other["loc"]), data)
+                        leaf = not isinstance(other.get("input"), (dict, list))
+                        within = path == parent or path.startswith(parent + ".")
+                        if parent and within and (leaf or not other["type"].endswith("_type")):
+                            first, field = other, path
+                            break
         msg = first["msg"].removeprefix("Value error, ")
         inner = first.get("ctx", {}).get("error")
         table = isinstance(first.get("input"), dict)

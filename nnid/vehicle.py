@@ -18,7 +18,8 @@ from typing import Annotated, Any, Literal
 import numpy as np
 from pydantic import Field, ValidationInfo, field_validator, model_validator
 
-from nnid.datasets.log import MAX_FORCE  # a constant external force obeys the log's bound
+# a constant external force and a commanded speed obey the log's bounds
+from nnid.datasets.log import MAX_FORCE, MAX_SPEED
 from nnid.errors import NnidInputError
 from nnid.physics.added_mass import mirrored_key, parse_added_mass_key
 from nnid.physics.dofs import DOFS
@@ -136,7 +137,9 @@ class Thruster(StrictModel):
 
 class Damping(StrictModel):
     model: str | None = None
-    u_c: float = 0.0
+    # McCarter's commanded forward speed, compared with the speed U >= 0 in eta = u_c / U: not
+    # negative, and within the speeds a log may hold (a bound on corrupt data)
+    u_c: float = Field(0.0, ge=0, le=MAX_SPEED)  # m/s
     coefficients: dict[str, float] = Field(default_factory=dict)
 
     @field_validator("model")
@@ -297,6 +300,26 @@ class Vehicle(StrictModel):
             if not 0 < value <= 2:
                 raise ValueError(f"'{key}' = {value}: an installation coefficient lies in (0, 2]")
         return installation
+
+    @model_validator(mode="after")
+    def _deadband_below_commands(self) -> Vehicle:
+        # a band at least as wide as the largest command the thrusters take (or, for a vehicle
+        # without thrusters, whose commands are forces, the largest force a log may hold)
+        # swallows every input: the vehicle would never move
+        ranges = [(t.cmd_min, t.cmd_max) for t in self.thrusters]
+        if not self.thrusters:
+            widest, what = MAX_FORCE, f"the largest force a log may hold ({MAX_FORCE:g} N)"
+        elif all(a is not None and b is not None for a, b in ranges):
+            widest = max(max(abs(a), abs(b)) for a, b in ranges)  # type: ignore[arg-type]
+            what = f"the largest command of the thrusters' cmd_min and cmd_max ({widest:g})"
+        else:
+            return self  # command ranges not given: no bound to hold it to
+        if self.deadband >= widest:
+            raise NnidInputError(
+                f"{self.deadband:g} is not below {what}: no command would give thrust",
+                field="deadband",
+            )
+        return self
 
     @model_validator(mode="after")
     def _unique_thrusters(self) -> Vehicle:

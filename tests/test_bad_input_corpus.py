@@ -73,6 +73,16 @@ def _parquet_naming_u_twice(df: pd.DataFrame) -> bytes:
     return buf.getvalue()
 
 
+def _decimal_point_at_row_49(df: pd.DataFrame) -> bytes:
+    """The log as a European locale writes it (';' and decimal commas), but for one velocity
+    written with a decimal point in data row 49 (the file's line 51)."""
+    lines = df.to_csv(index=False, sep=";", decimal=",").split("\n")
+    cells = lines[50].split(";")
+    cells[list(df.columns).index("u")] = "2.45"
+    lines[50] = ";".join(cells)
+    return "\n".join(lines).encode()
+
+
 def _latin1_row(df: pd.DataFrame) -> bytes:
     """The log as a logger on a Latin-1 locale writes it: a degree sign in row 30's label."""
     lines = df.to_csv(index=False).split("\n")
@@ -172,6 +182,18 @@ LOG_CASES: list[tuple[str, str, Callable]] = [
         "a unit after a column's name",
         "'u [m/s]'",
         lambda df, i: df.rename(columns={"u": "u [m/s]"}),
+    ),
+    # the column was read as text and refused at row 0, "399 such rows", not at the cell
+    (
+        "a decimal point among decimal commas",
+        "column 'u', row 49",
+        lambda df, i: _decimal_point_at_row_49(df),
+    ),
+    # read as the header: "required column 't' is missing", without a word of the line read
+    (
+        "a comment line above the header",
+        "line 1 ('# logged by rov1')",
+        lambda df, i: ("# logged by rov1\n" + df.to_csv(index=False)).encode(),
     ),
 ]
 LOG_SUFFIX = {
@@ -318,8 +340,23 @@ def _log_cases() -> list[Case]:
         )
     )
 
+    one_run = '[[experiments]]\nname = "%s"\nduration = 1.0\n%s\n[sequence]'
     simulate_cases = {  # the config named, with the field or the experiment
         "negative seed": ("seed", ("seed = 0\n", "seed = -1\n")),
+        # the log the run would write was refused, blamed on the --out file (not written)
+        "an initial depth of 1e300 m": (
+            "experiments.0.x0",
+            ("[sequence]", one_run % ("e1", "x0 = [0, 0, 1e300, 0, 0, 0]\n")),
+        ),
+        "a position noise of 1e300 m": (
+            "measurement.position_noise",
+            ("position_noise = 0.001", "position_noise = 1e300"),
+        ),
+        # a line break in a label splits every line naming the run
+        "an experiment name on two lines": (
+            "experiments.0.name",
+            ("[sequence]", one_run % ("dive\\n1", "")),
+        ),
         "an experiment named twice": (
             "used twice",
             (
@@ -501,6 +538,24 @@ VEHICLE_CASES = [
         "field 'inertia': is a list of values (inertia = [0.16, 0.16, 0.16])",
         ("inertia = [0.16, 0.16, 0.16]", "inertia = { Ixx = 0.16, Iyy = 0.16, Izz = 0.16 }"),
     ),
+    # named 'inertia.0', the first row read as the vector's first number
+    (
+        "text in the inertia tensor",
+        "field 'inertia.1.1'",
+        ("inertia = [0.16, 0.16, 0.16]", 'inertia = [[0.16, 0, 0], [0, "a", 0], [0, 0, 0.16]]'),
+    ),
+    # accepted without a word: no force ever passed the band, and every score "diverged"
+    ("deadband absurd", "deadband", ("mass = 11.5", "mass = 11.5\ndeadband = 1e300")),
+    (
+        "commanded speed negative",
+        "damping.u_c",
+        ("[damping.coefficients]", "[damping]\nu_c = -1.0\n[damping.coefficients]"),
+    ),
+    (
+        "commanded speed absurd",
+        "damping.u_c",
+        ("[damping.coefficients]", "[damping]\nu_c = 1e300\n[damping.coefficients]"),
+    ),
 ]
 
 
@@ -639,6 +694,37 @@ CONFIG_CASES = [
         ("[split]", "[data]\nexperiments = []\n\n[split]"),
     ),
     ("loop", "an empty experiment list", "data.experiments", None),
+    # kept in metrics.json and compared with nothing
+    (
+        "train",
+        "a reference naming no fitted parameter",
+        ("reference.Z_wdott", "did you mean 'Z_wdot'?"),
+        ("zoh_midpoint = true", "zoh_midpoint = true\n\n[reference]\nZ_wdott = -18.7"),
+    ),
+    # named 'savgol_window', a key of no table of this config
+    (
+        "train",
+        "a savgol window longer than a held-out run",
+        "model.savgol_window",
+        ("zoh_midpoint = true", "zoh_midpoint = true\nsavgol_window = 21.0"),
+    ),
+    # each taken, exit 0: no alarm ever isolated, no threshold, every score "diverged"
+    (
+        "train",
+        "an isolation window longer than the log",
+        "detect.window_s",
+        ("zoh_midpoint = true", "zoh_midpoint = true\n\n[detect]\nwindow_s = 1e308"),
+    ),
+    (
+        "train",
+        "a false-alarm target of 1e308 an hour",
+        "detect.false_alarm_per_hour",
+        ("zoh_midpoint = true", "zoh_midpoint = true\n\n[detect]\nfalse_alarm_per_hour = 1e308"),
+    ),
+    ("train", "noise of 1e300", "data.noise", ("[split]", "[data]\nnoise = 1e300\n\n[split]")),
+    # blamed on the log ("good.csv, field 'savgol_window'"), with a 300-digit window
+    ("loop", "a savgol window longer than every run", "savgol_window", None),
+    ("loop", "a savgol window of 1e300 s", ("savgol_window", "window of 2e+301 samples"), None),
 ]
 LOOP_TEXT = {
     "unknown dof": 'kind = "loop"\ndofs = ["u", "x"]\n',
@@ -649,6 +735,8 @@ LOOP_TEXT = {
     "empty dofs": 'kind = "loop"\ndofs = []\n',  # [] is not "all": leave the key out for all
     "dofs named twice": 'kind = "loop"\ndofs = ["w", "w"]\n',
     "an empty experiment list": 'kind = "loop"\n[data]\nexperiments = []\n',
+    "a savgol window longer than every run": 'kind = "loop"\nsavgol_window = 21.0\n',
+    "a savgol window of 1e300 s": 'kind = "loop"\nsavgol_window = 1e300\n',  # 20 Hz runs
 }
 
 
@@ -696,7 +784,8 @@ def _config_cases() -> list[Case]:
             path.write_text(text)
             return _command(command, tmp, fx, config=path)
 
-        cases.append(Case(f"{command} config: {name}", args, ("CONFIG", field)))
+        fields = (field,) if isinstance(field, str) else field
+        cases.append(Case(f"{command} config: {name}", args, ("CONFIG", *fields)))
     return cases
 
 
@@ -736,17 +825,38 @@ def _out_cases() -> list[Case]:
             return _command("detect", tmp, fx, model=folder(tmp, fx), out=tmp / "o")
 
         cases.append(Case(f"detect --model: {name}", args, ("MODEL",)))
+    # a hand-edited model.json loaded without a word, and detect ran on it
+    edits = {
+        "a DOF that is none": (("settings", "dofs"), ["x"], "settings.dofs"),
+        "an unknown parameter": (("settings", "unknowns"), ["bogus"], "settings.unknowns"),
+        "a window written as text": (("settings", "savgol_window"), "1", "settings.savgol_window"),
+        "outputs the model does not predict": (("outputs",), ["zz"], "field 'outputs'"),
+        "a trainer that did not fit it": (("trainer",), "bogus", "field 'trainer'"),
+    }
+    for name, (key, value, field) in edits.items():
+
+        def edited(tmp, fx, key=key, value=value):
+            folder = _damaged_model(tmp, fx["monitor"], key, value)
+            return _command("detect", tmp, fx, model=folder, out=tmp / "o")
+
+        cases.append(Case(f"detect --model: model.json with {name}", edited, ("MODEL", field)))
     return cases
 
 
-def _damaged_model(tmp: Path, good: Path) -> Path:
+def _damaged_model(
+    tmp: Path, good: Path, key: tuple[str, ...] = ("settings", "vehicle"), value: object = "zzz"
+) -> Path:
+    """A copy of the model folder ``good`` with model.json's ``key`` (a path) set to ``value``."""
     import json
     import shutil
 
     folder = tmp / "damaged_model"
     shutil.copytree(good, folder)
     payload = json.loads((folder / "model.json").read_text())
-    payload["settings"]["vehicle"] = "zzz"
+    node = payload
+    for step in key[:-1]:
+        node = node[step]
+    node[key[-1]] = value
     (folder / "model.json").write_text(json.dumps(payload))
     return folder
 
@@ -814,7 +924,7 @@ def test_bad_input_is_refused_in_one_line_naming_the_file_and_field(case, fixtur
     elif kind == "OUT":
         assert "--out" in line or "nnid-out" in line or "taken" in line, line
     elif kind == "MODEL":
-        assert "--model" in line or "monitor" in line or "model.json: damaged" in line, line
+        assert "--model" in line or "monitor" in line or "model.json" in line, line
         # a fault of model.json is said against it, not wrapped as one of monitor.json
         assert not ("model.json: damaged" in line and "is not a monitor" in line), line
     for field in fields:
@@ -1004,6 +1114,12 @@ def test_a_json_file_nested_too_deep_or_a_folder_is_named(tmp_path):
             ),
             "column 'experiment', row 29: empty experiment label",
             id="empty label",
+        ),
+        # the header's columns were said missing, not the line read as the header
+        pytest.param(
+            lambda text: "# logged by rov1\n" + text,
+            "line 1 ('# logged by rov1') is a comment",
+            id="comment line",
         ),
     ],
 )
@@ -1631,3 +1747,40 @@ def test_a_thrust_curve_of_no_thrust_is_refused_naming_it(curve, field):
     with pytest.raises(NnidInputError, match="no thrust at any command") as err:
         vehicle_from_dict(data, source="probe.toml")
     assert err.value.field == field and err.value.source == "probe.toml"
+
+
+@pytest.mark.parametrize(("deadband", "refused"), [(1.0, True), (0.05, False)])
+def test_a_deadband_as_wide_as_every_command_is_refused(deadband, refused):
+    """A thruster vehicle's deadband is in command units: one as wide as the largest command
+    of its thrusters' cmd_min and cmd_max swallows every command (no thrust, ever)."""
+    import tomllib
+
+    from nnid.errors import NnidInputError
+    from nnid.vehicle import vehicle_from_dict
+
+    data = tomllib.loads(GOOD_VEHICLE + _THRUSTER)
+    data["deadband"] = deadband
+    if not refused:
+        assert vehicle_from_dict(data, source="probe.toml").deadband == deadband
+        return
+    with pytest.raises(NnidInputError, match="not below the largest command") as err:
+        vehicle_from_dict(data, source="probe.toml")
+    assert err.value.field == "deadband" and err.value.source == "probe.toml"
+
+
+def test_a_simulated_log_the_contract_refuses_is_said_against_the_config(tmp_path):
+    """A noise level within its bound can still make positions no log may hold: the refusal
+    named the --out file, which is not written; now the config, and the column."""
+    from nnid.datasets.log import MAX_DISTANCE
+
+    config = tmp_path / "noisy.toml"
+    config.write_text(
+        'kind = "simulate"\nvehicle = "seamor"\n[[experiments]]\nname = "e1"\nduration = 1.0\n'
+        f'[measurement]\nkind = "mocap"\nposition_noise = {MAX_DISTANCE / 2:g}\n'
+    )
+    out = tmp_path / "sim.csv"
+    result = CliRunner().invoke(app, ["simulate", str(config), "--out", str(out)])
+    errors = [line for line in result.output.splitlines() if line.startswith("error:")]
+    assert result.exit_code == 2 and len(errors) == 1, result.output
+    assert errors[0].startswith(f"error: {config}: the log contract refuses "), errors[0]
+    assert "column 'x'" in errors[0] and str(out) not in errors[0] and not out.exists()

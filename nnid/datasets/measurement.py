@@ -9,12 +9,20 @@
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import Annotated, Literal
 
 import numpy as np
 from pydantic import Field, model_validator
 
-from nnid.datasets.log import ACCELERATION, POSE, VELOCITY, wrap_angle
+from nnid.datasets.log import (
+    ACCELERATION,
+    MAX_ANGLE,
+    MAX_DISTANCE,
+    MAX_SPEED,
+    POSE,
+    VELOCITY,
+    wrap_angle,
+)
 from nnid.validation import StrictModel
 
 
@@ -36,22 +44,30 @@ USES = {
 }  # fmt: skip
 
 
+#: a sensor's noise level or bias, bounded by the log's bound on what it measures: one beyond
+#: every value a log may hold measures nothing, and the log it made was refused as the --out file
+Length = Annotated[float, Field(ge=0, le=MAX_DISTANCE)]
+Angle = Annotated[float, Field(ge=0, le=MAX_ANGLE)]
+Speed = Annotated[float, Field(ge=0, le=MAX_SPEED)]
+Bias = Annotated[float, Field(ge=-MAX_SPEED, le=MAX_SPEED)]
+
+
 class Measurement(StrictModel):
     """Noise levels are standard deviations in SI units; biases are constant per run."""
 
     kind: Literal["none", "mocap", "dvl_imu"] = "none"
-    position_noise: float = Field(0.001, ge=0)
-    angle_noise: float = Field(0.002, ge=0)
-    velocity_noise: float = Field(0.005, ge=0)
-    velocity_bias: list[float] = Field(
+    position_noise: Length = 0.001
+    angle_noise: Angle = 0.002
+    velocity_noise: Speed = 0.005
+    velocity_bias: list[Bias] = Field(
         default_factory=lambda: [0.0, 0.0, 0.0], min_length=3, max_length=3
     )
-    gyro_noise: float = Field(0.002, ge=0)
-    gyro_bias: list[float] = Field(
+    gyro_noise: Speed = 0.002  # rad/s: bounded as a log's angular rates
+    gyro_bias: list[Bias] = Field(
         default_factory=lambda: [0.0, 0.0, 0.0], min_length=3, max_length=3
     )
-    depth_noise: float = Field(0.01, ge=0)
-    attitude_noise: float = Field(0.005, ge=0)
+    depth_noise: Length = 0.01
+    attitude_noise: Angle = 0.005
     truth: bool = False
 
     @model_validator(mode="after")

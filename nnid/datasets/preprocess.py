@@ -29,6 +29,7 @@ from nnid.datasets.cleaning import CleaningReport
 from nnid.datasets.log import (
     ACCELERATION,
     ANGLES,
+    MAX_RUN_SAMPLES,
     PIECE_OF,
     POSE,
     REPLAY_GROUP,
@@ -293,8 +294,10 @@ def savgol_derivative(
         )
     y = np.asarray(y, dtype=np.float64)
     if len(y) < window:
+        # a window of 1e300 s is a 300-digit count: written to 3 figures beyond a run's size
+        size = window if window <= MAX_RUN_SAMPLES else f"{float(window):.3g}"
         raise NnidInputError(
-            f"{where} has {len(y)} samples, too few for the Savitzky-Golay window of {window} "
+            f"{where} has {len(y)} samples, too few for the Savitzky-Golay window of {size} "
             "samples (velocities and accelerations are derived with it)"
             + (f": give a shorter {setting} or a longer run" if setting else ""),
             field=setting,

@@ -62,10 +62,14 @@ def read_table(path: str | Path, labels: Sequence[str] = ("experiment",)) -> pd.
             # "t, experiment, x": a space after the separator is not part of the name
             dialect["skipinitialspace"] = True
             header = pd.read_csv(path, header=None, nrows=1, dtype=str, **dialect).iloc[0]
+            refuse_comment_header(header.tolist(), path)
             refuse_repeated_names(header.str.strip(), path)
             # run labels are names: "01" and "1" are two runs, not one number
             table = pd.read_csv(path, dtype=dict.fromkeys(labels, str), **dialect)
-            return table.rename(columns=lambda c: c.strip() if isinstance(c, str) else c)
+            table = table.rename(columns=lambda c: c.strip() if isinstance(c, str) else c)
+            if dialect.get("decimal") == ",":
+                refuse_decimal_points(table, path, labels)
+            return table
     except NnidInputError:
         raise
     except Exception as err:  # pandas/pyarrow raise many types for truncated or corrupt files
@@ -124,6 +128,43 @@ def refuse_repeated_names(header: pd.Series, path: str | Path) -> None:
                 source=str(path),
             )
         seen[column] = k
+
+
+def refuse_comment_header(header: Sequence[object], path: str | Path) -> None:
+    """A first line starting with '#' is refused, naming it: it was read as the header, and
+    every contract column was said missing (t first) without a word of the line read."""
+    first = header[0] if len(header) else None
+    if isinstance(first, str) and first.strip().startswith("#"):
+        line = ",".join("" if pd.isna(c) else str(c) for c in header)
+        raise NnidInputError(
+            f"line 1 ({line[:60]!r}) is a comment, read as the header: the first line of a "
+            "CSV log names its columns (t, experiment, u, …); move the comment out of the file "
+            "(a dataset card beside it)",
+            source=str(path),
+        )
+
+
+def refuse_decimal_points(table: pd.DataFrame, path: str | Path, labels: Sequence[str]) -> None:
+    """In a CSV of decimal commas (:func:`csv_dialect`), the first cell written with a decimal
+    point, named by its column and row: pandas reads that column as text, and it was refused
+    as such at row 0, not at the cell. A column of text of its own (not numbers but for the
+    point cells) is left to the log's checks; as --follow, the point is refused, not read."""
+    for col in table.columns:
+        if col in labels or not pd.api.types.is_string_dtype(table[col]):
+            continue
+        cells = table[col].dropna().astype(str).str.strip()
+        point = cells.str.contains(".", regex=False).to_numpy()
+        rest = pd.to_numeric(cells[~point].str.replace(",", ".", regex=False), errors="coerce")
+        if point.any() and not rest.isna().any():
+            row = int(cells.index[np.flatnonzero(point)[0]])
+            raise NnidInputError(
+                f"value {cells[row]!r} has a decimal point, but this file's decimal mark is a "
+                "comma (its separator is ';' and its first row writes decimal commas): write "
+                "every number of the file with one mark",
+                source=str(path),
+                field=str(col),
+                row=row,
+            )
 
 
 def _csv_dialect(path: Path) -> dict:

@@ -52,7 +52,7 @@ from nnid.datasets.log import (
     radian_limit,
 )
 from nnid.datasets.preprocess import savgol_window
-from nnid.datasets.readers import csv_dialect, refuse_repeated_names
+from nnid.datasets.readers import csv_dialect, refuse_comment_header, refuse_repeated_names
 from nnid.errors import NnidInputError, checked_number
 from nnid.fault.detect import (
     DetectResult,
@@ -247,6 +247,7 @@ def follow_csv(
     if header is None:
         raise NnidInputError("is empty: expected a CSV header", source=where)
     header = [c.strip() for c in header]  # as the whole-log reader names its columns
+    refuse_comment_header(header, where)
     # as the whole-log reader: header.index would read the first of two 'u' columns unseen
     refuse_repeated_names(pd.Series([c or None for c in header]), where)
     inputs = input_columns(monitor.channels_)

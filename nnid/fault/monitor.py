@@ -38,7 +38,7 @@ from nnid.physics.dofs import DOFS, FORCES
 from nnid.physics.thrusters import Actuation
 from nnid.serialization import SCHEMA_VERSION, read_json, write_json
 from nnid.threads import torch_threads_kept
-from nnid.validation import PositiveFloat, StrictModel, validated
+from nnid.validation import MAX_FALSE_ALARMS_PER_HOUR, PositiveFloat, StrictModel, validated
 
 MONITOR_FILE = "monitor.json"
 #: the relative difference of sample interval a monitored log may have from the healthy record
@@ -530,7 +530,7 @@ class ResidualMonitor(BaseEstimator):
 
 
 class _Settings(StrictModel):
-    false_alarm_per_hour: PositiveFloat
+    false_alarm_per_hour: float = Field(gt=0, le=MAX_FALSE_ALARMS_PER_HOUR)
     time_constant_s: PositiveFloat
     allowance: PositiveFloat
     rearm_s: PositiveFloat

@@ -424,14 +424,41 @@ def load_model(folder: str | Path) -> NnidModel:
     try:
         cls = model_class(payload["kind"])
         model = cls(**decode_setting(payload["settings"], str(path)))
-        return restore_learned(model, payload, tensors)
-    except NnidInputError as exc:
-        raise exc.with_source(str(path)) from None
+        model = restore_learned(model, payload, tensors)
+    except NnidInputError as exc:  # a model's check of its settings: named as a key of them
+        settings = payload.get("settings")
+        keys = settings if isinstance(settings, dict) else {}
+        raise exc.within("settings", keys).with_source(str(path)) from None
     except (KeyError, TypeError, ValueError, RuntimeError, AttributeError, IndexError) as exc:
         # a network without its tensors fails in load_state_dict, a RuntimeError
         gone = isinstance(exc, RuntimeError) and not tensor_path.exists()
         missing = f"; its {TENSOR_FILE} is missing" if gone else ""
         raise NnidInputError(_damaged(exc) + missing, source=str(path)) from None
+    _check_learned(model, payload, str(path))
+    return model
+
+
+def _check_learned(model: NnidModel, payload: dict, source: str) -> None:
+    """What model.json says of the fit against what the loaded model holds: its outputs and
+    targets as its settings and state give them, and the trainer its restored trainer names.
+    Edited by hand they loaded without a word (outputs ["zz"], trainer "bogus") and were
+    reported beside a model that predicts other columns."""
+    for key, held in (("outputs", model.outputs_), ("targets", model.targets_)):
+        if list(payload[key]) != list(held):
+            raise NnidInputError(
+                f"{payload[key]} are not the {key} of this model ({list(held)}, as its settings "
+                "and state give them): the file was edited or is damaged",
+                source=source,
+                field=key,
+            )
+    saved = payload.get("trainer")
+    if getattr(model, "trainer_", None) is not None and saved != model.trainer_name():
+        raise NnidInputError(
+            f"{saved!r} is not the trainer of this model ({model.trainer_name()!r}, as its "
+            "settings give it): the file was edited or is damaged",
+            source=source,
+            field="trainer",
+        )
 
 
 #: a tensors file that is no plain set of tensors: said without torch's advice to load it

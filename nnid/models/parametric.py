@@ -41,7 +41,7 @@ from nnid.datasets.preprocess import (
     velocity_sources,
     zoh_midpoint,
 )
-from nnid.errors import ExcitationWarning, NnidInputError
+from nnid.errors import ExcitationWarning, NnidInputError, checked_number
 from nnid.evaluation.persistence import POWER_PROBE, ROUNDING, rounding_floors, typical_size
 from nnid.evaluation.prediction import (
     Replay,
@@ -1293,10 +1293,19 @@ class ParametricModel(FossenPlant):
             return DecoupledSequence(sequence_steps(self.sequence), trainer)
         return trainer
 
-    def _fit(self, log: pd.DataFrame, validation, progress: Progress) -> None:
+    def _settings(self) -> tuple[list[str], list[str], ParametricFossen]:
+        """The DOFs, the unknowns and the regression structure the settings give, each
+        checked (by ``fit``, and on load: a hand-edited model.json loaded a DOF 'x', an unknown
+        'bogus' or a window "1" without a word, and detect ran on it)."""
         from nnid.trainers.sequence import sequence_dofs, sequence_steps
 
-        trainer = self._trainer()
+        checked_number(self.savgol_window, "savgol_window")
+        # as the config bounds it: a Savitzky-Golay polynomial of order 2 to 8
+        checked_number(self.savgol_order, "savgol_order", 2, strict=False, integer=True, maximum=8)
+        if not isinstance(self.zoh_midpoint, bool | np.bool_):
+            raise NnidInputError(
+                f"true or false is expected, not {self.zoh_midpoint!r}", field="zoh_midpoint"
+            )
         if self.sequence is not None:
             steps = sequence_steps(self.sequence)
             unknowns = list(dict.fromkeys(n for s in steps for n in s.unknowns))
@@ -1305,11 +1314,15 @@ class ParametricModel(FossenPlant):
             dofs = list(checked_dofs(self.dofs))
             unknowns = expand_unknowns(self.unknowns, dofs, self.vehicle)
         try:
-            self.structure_ = ParametricFossen(self.vehicle, unknowns, dofs)
+            return dofs, unknowns, ParametricFossen(self.vehicle, unknowns, dofs)
         except NnidInputError as exc:  # with a sequence, the unknowns are its steps'
             if self.sequence is None or exc.field != "unknowns":
                 raise
             raise NnidInputError(f"a step's unknowns: {exc.message}", field="sequence") from None
+
+    def _fit(self, log: pd.DataFrame, validation, progress: Progress) -> None:
+        trainer = self._trainer()
+        dofs, unknowns, self.structure_ = self._settings()
         self._set_outputs(dofs)
         self.report_ = CleaningReport(source="fit data")
         needs_acc = getattr(trainer, "filter_lambda", None) is None
@@ -1594,6 +1607,14 @@ class ParametricModel(FossenPlant):
     def _restore(self, state: dict, tensors: dict) -> None:
         from nnid.trainers.least_squares import Estimate
 
+        self._trainer()  # the trainer setting checked, as the settings below
+        dofs = self._settings()[0]
+        if list(state["dofs"]) != dofs:  # predicted on the state's, refitted on the settings'
+            raise NnidInputError(
+                f"{dofs} are not the DOFs the model was fitted on (state.dofs: "
+                f"{list(state['dofs'])})",
+                field="dofs",
+            )
         self._set_outputs(state["dofs"])
         path = restored_estimate_history(state.get("history"), tensors)
         self.estimate_ = Estimate.from_state(state, path)
