@@ -22,7 +22,7 @@ from nnid.physics.added_mass import added_mass_coriolis_force, added_mass_matrix
 from nnid.physics.damping import DampingTerms
 from nnid.physics.damping_library import ONE
 from nnid.physics.kinematics import eta_dot, rotation_matrix
-from nnid.physics.restoring import restoring_force
+from nnid.physics.restoring import restoring_force, restoring_matrix
 from nnid.physics.rigid_body import rigid_body_coriolis_force, rigid_body_mass_matrix
 
 PAIRS = tuple((i, j) for i in range(6) for j in range(i, 6))
@@ -223,18 +223,10 @@ class FossenModel:
 
         q_rb = polarise(lambda n: rigid_body_coriolis_force(self.mass, self.r_g, self.inertia, n))
         q_a = polarise(lambda n: added_mass_coriolis_force(self.added_mass, n))
-        gen = torch.Generator().manual_seed(0)
-        angles = (torch.rand(16, 2, generator=gen, dtype=torch.float64) - 0.5) * 3.0
-        eta = torch.zeros(16, 6, dtype=torch.float64)
-        eta[:, 3:5] = angles
-        phi, th = angles[:, 0], angles[:, 1]
-        s = torch.stack(
-            [torch.sin(th), torch.cos(th) * torch.sin(phi), torch.cos(th) * torch.cos(phi)], -1
-        )
-        # g(η) is linear in s: G from the normal equations of 16 attitudes. Not lstsq: MKL's
-        # least squares gave last bits that changed with the buffers' memory (1.8e-15 in a
-        # third of repeated calls), so predictions of one model differed between calls
-        g_mat = torch.linalg.solve(s.T @ s, s.T @ self.restoring_force(eta)).T
+        # G in closed form, not fitted to attitudes: a fit (MKL's lstsq, then the normal
+        # equations) left last-bit entries where G is zero that differed between processors,
+        # and those forces moved the simulated vehicle in DOFs nothing drives
+        g_mat = restoring_matrix(self.weight, self.buoyancy, self.r_g, self.r_b)
         theta = self.damping.coefficients
         codes = torch.as_tensor(self.damping.codes, dtype=torch.long).reshape(-1, 3)
         if not self.damping.terms:

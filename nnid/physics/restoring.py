@@ -1,34 +1,57 @@
 """Restoring forces g(η) from weight W, buoyancy B, r_g and r_b (Weiss eq. 30; McCarter 2.42-2.44).
 
 g(η) sits on the left-hand side of M ν̇ + C ν + D ν + g(η) = τ, as in Fossen (2011) eq. 4.6.
+It is linear in s(η) = (sin θ, cos θ sin φ, cos θ cos φ): g(η) = G s(η), G of W, B, r_g, r_b.
 """
 
 from __future__ import annotations
+
+from collections.abc import Sequence
 
 import torch
 from torch import Tensor
 
 
-def restoring_force(
-    eta: Tensor, weight: Tensor, buoyancy: Tensor, r_g: Tensor, r_b: Tensor
+def restoring_matrix(
+    weight: Tensor | float,
+    buoyancy: Tensor | float,
+    r_g: Tensor | Sequence[float],
+    r_b: Tensor | Sequence[float],
+    dtype: torch.dtype = torch.float64,
 ) -> Tensor:
-    """g(η) for a submerged vehicle; only φ and θ matter."""
-    phi, theta = eta[..., 3], eta[..., 4]
-    sth, cth, sphi, cphi = torch.sin(theta), torch.cos(theta), torch.sin(phi), torch.cos(phi)
-    weight = torch.as_tensor(weight, dtype=eta.dtype)
-    buoyancy = torch.as_tensor(buoyancy, dtype=eta.dtype)
+    """G ``[..., 6, 3]`` with g(η) = G (sin θ, cos θ sin φ, cos θ cos φ), from its closed form.
+
+    Built entry by entry, not fitted: a zero of G (W = B, or the centres of gravity and
+    buoyancy on one vertical) is exactly zero, where a least-squares fit left last-bit forces
+    that depend on the processor's kernels and moved a vehicle in DOFs nothing drives.
+    """
+    weight = torch.as_tensor(weight, dtype=dtype)
+    buoyancy = torch.as_tensor(buoyancy, dtype=dtype)
+    r_g, r_b = torch.as_tensor(r_g, dtype=dtype), torch.as_tensor(r_b, dtype=dtype)
     w_b = weight - buoyancy
     mx = r_g[..., 0] * weight - r_b[..., 0] * buoyancy
     my = r_g[..., 1] * weight - r_b[..., 1] * buoyancy
     mz = r_g[..., 2] * weight - r_b[..., 2] * buoyancy
-    return torch.stack(
-        [
-            w_b * sth,
-            -w_b * cth * sphi,
-            -w_b * cth * cphi,
-            -my * cth * cphi + mz * cth * sphi,
-            mz * sth + mx * cth * cphi,
-            -mx * cth * sphi - my * sth,
-        ],
-        -1,
-    )
+    w_b, mx, my, mz = torch.broadcast_tensors(w_b, mx, my, mz)
+    zero = torch.zeros_like(w_b)
+    rows = [
+        (w_b, zero, zero),
+        (zero, -w_b, zero),
+        (zero, zero, -w_b),
+        (zero, mz, -my),
+        (mz, zero, mx),
+        (-my, -mx, zero),
+    ]
+    return torch.stack([torch.stack(row, -1) for row in rows], -2)
+
+
+def restoring_force(
+    eta: Tensor, weight: Tensor, buoyancy: Tensor, r_g: Tensor, r_b: Tensor
+) -> Tensor:
+    """g(η) = G s(η) for a submerged vehicle (:func:`restoring_matrix`); only φ and θ matter."""
+    phi, theta = eta[..., 3], eta[..., 4]
+    cth = torch.cos(theta)
+    s = torch.stack([torch.sin(theta), cth * torch.sin(phi), cth * torch.cos(phi)], -1)
+    g_mat = restoring_matrix(weight, buoyancy, r_g, r_b, eta.dtype)
+    # at most two nonzero products a row: their sum does not depend on the order of summing
+    return (g_mat * s[..., None, :]).sum(-1)
