@@ -38,7 +38,7 @@ from nnid.datasets.log import (
     run_of,
     run_pieces,
 )
-from nnid.datasets.preprocess import experiment_rows
+from nnid.datasets.preprocess import experiment_rows, run_spans
 from nnid.datasets.splits import PARTS, Split, say_missed_fractions, split_log
 from nnid.errors import NnidInputError
 from nnid.evaluation.evaluate import diverged_columns, evaluate
@@ -599,8 +599,7 @@ def make_split(
                     source=source,
                     field="split",
                 )
-        t = part["t"].to_numpy(np.float64)
-        spans = [float(np.ptp(t[pos])) for _, pos in experiment_rows(part)]
+        spans = run_spans(part)
         if name != "training" and spans and max(spans) <= warmup_s:
             # every scored run would be all warm-up: no score, not a "diverged" one
             raise NnidInputError(
@@ -920,8 +919,7 @@ def check_detect_window(window_s: float, log: pd.DataFrame, source: str) -> None
     the data after an alarm that its isolation reads, and one longer than all the runs of this
     log together is no window of data like it (1e308 s was taken: every alarm waited for the
     end of its run)."""
-    t = log["t"].to_numpy(np.float64)
-    span = sum(float(t[pos[-1]] - t[pos[0]]) for _, pos in experiment_rows(log))
+    span = sum(run_spans(log))
     if window_s > span:
         raise NnidInputError(
             f"{window_s:g} s is longer than the whole log ({span:.4g} s over all its runs): "

@@ -55,6 +55,13 @@ def experiment_rows(log: pd.DataFrame) -> list[tuple[object, np.ndarray]]:
     return list(log.groupby("experiment", sort=False).indices.items())
 
 
+def run_spans(log: pd.DataFrame) -> list[float]:
+    """Each experiment's time span (s: its last sample's t less its first's, the runs of
+    :func:`experiment_rows` in order)."""
+    t = log["t"].to_numpy(np.float64)
+    return [float(np.ptp(t[pos])) for _, pos in experiment_rows(log)]
+
+
 def sample_rate(t: np.ndarray) -> float:
     return 1.0 / float(np.median(np.diff(t)))
 

@@ -21,7 +21,7 @@ import pandas as pd
 
 from nnid.datasets.arrays import log_arrays
 from nnid.datasets.log import ACCELERATION
-from nnid.datasets.preprocess import experiment_rows, zoh_midpoint_inputs
+from nnid.datasets.preprocess import run_spans, zoh_midpoint_inputs
 from nnid.errors import NnidInputError
 from nnid.models.parametric import (
     FossenPlant,
@@ -200,8 +200,7 @@ class DampingModel(FossenPlant):
         ok = np.isfinite(theta).all(1) & np.isfinite(y).all(1)
         if ok.any():
             return ok
-        t = log["t"].to_numpy(np.float64)
-        longest = max((float(np.ptp(t[pos])) for _, pos in experiment_rows(log)), default=0.0)
+        longest = max(run_spans(log), default=0.0)
         if self.filtered:
             field = "filter_lambda"
             settle = 3.0 / self.filter_lambda
