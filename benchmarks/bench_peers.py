@@ -956,6 +956,8 @@ def _nnid_seamor(case: Case, seeds: tuple[int, ...]) -> list[dict]:
                         "value": nr["total"],
                         "per": {c: nr[c] for c in res["columns"]},
                         "diverged": sorted(res["diverged"]),
+                        # pooled scores can hide one run's miss: each run scored alone too
+                        "per_run": res.get("free_run_nrmse_per_experiment", {}),
                     }
                 )
             print(
@@ -991,6 +993,10 @@ def _nnid_seamor(case: Case, seeds: tuple[int, ...]) -> list[dict]:
                 "value": _median([x["value"] for x in scores]),
                 "per_seed": [x["value"] for x in scores],
                 "per": {c: _median([x["per"][c] for x in scores]) for c in scores[0]["per"]},
+            }
+            entry["per_run"] = {
+                run: {c: _median([x["per_run"][run][c] for x in scores]) for c in cols}
+                for run, cols in scores[0]["per_run"].items()
             }
             if part == "validation":
                 row["validation"] = entry
@@ -1035,6 +1041,9 @@ def _fmt(entry: dict | None) -> str:
     text = _r(entry.get("value"))
     if entry.get("per"):
         text += " (" + ", ".join(f"{c} {_r(v)}" for c, v in entry["per"].items()) + ")"
+    if len(entry.get("per_run", {})) > 1:  # one run alone is the pooled score
+        for run, scores in entry["per_run"].items():
+            text += f"; {run} alone: " + ", ".join(f"{c} {_r(v)}" for c, v in scores.items())
     return text
 
 

@@ -31,6 +31,9 @@ signals = [{ kind = "stairs", channel = "X", levels = [-15, 10, 0], hold = 4.0 }
 [[experiments]]
 name = "c"
 signals = [{ kind = "stairs", channel = "X", levels = [12, -18, 0], hold = 4.0 }]
+[[experiments]]
+name = "d"
+signals = [{ kind = "stairs", channel = "X", levels = [8, -6, 0], hold = 4.0 }]
 """
 
 NARX = """kind = "train"
@@ -40,7 +43,7 @@ warmup_s = 0.5
 simulate = "sim.toml"
 [split]
 by = "experiment"
-validation = ["b"]
+validation = ["b", "d"]
 test = ["c"]
 [model]
 kind = "narx"
@@ -64,7 +67,7 @@ def test_nnid_seamor_rows_score_as_nnid_train(tmp_path, monkeypatch) -> None:
     monkeypatch.setattr(bench, "SEAMOR_CONFIG", config)
     monkeypatch.setattr(bench, "SEAMOR_NNID_CONFIGS", {"NARX (LM)": config})
     case = bench.load_case("seamor")
-    assert case.notes["test_runs"] == ["c"] and case.notes["validation_runs"] == ["b"]
+    assert case.notes["test_runs"] == ["c"] and case.notes["validation_runs"] == ["b", "d"]
 
     row = next(r for r in bench.nnid_rows(case, seeds=(0,)) if r["model"] == "NARX (LM)")
 
@@ -74,4 +77,13 @@ def test_nnid_seamor_rows_score_as_nnid_train(tmp_path, monkeypatch) -> None:
         assert math.isfinite(got["value"])
         assert got["value"] == pytest.approx(want["total"], rel=1e-9), part
         assert got["per"]["u"] == pytest.approx(want["u"], rel=1e-9), part
+    # each validation run alone, as the issue's line reads them (pooled scores hide a miss)
+    runs = metrics["validation"]["free_run_nrmse_per_experiment"]
+    assert set(row["validation"]["per_run"]) == {"b", "d"}
+    for run in ("b", "d"):
+        got = row["validation"]["per_run"][run]["u"]
+        assert (
+            got == pytest.approx(runs[run]["u"], rel=1e-9)
+            and got != runs["b" if run == "d" else "d"]["u"]
+        )
     assert row["fit_s"] > 0 and row["seeds"] == [0]
