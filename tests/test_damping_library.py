@@ -91,3 +91,45 @@ def test_damping_structure_from_mask_and_coefficients():
     nu = torch.tensor([0.5, 0.2, 0.0, 0.0, 0.0, -0.4])
     force = d.force(nu)
     assert torch.allclose(force, torch.tensor([-61.117 * 0.25, 0, 0, 0, 0, -3.0 * 0.2 * 0.4]))
+
+
+def test_a_velocity_at_rounding_level_has_no_sign(vehicle_factory, rng):
+    """Vv = V sign(v), Vw = V sign(w): a w that is only rounding (1e-17 m/s on a vehicle that
+    never heaves) gave every Vw term a full-size V with a random sign. Its sign is 0, as of an
+    exact zero, in NumPy, torch and the compiled kernel; a w a sensor resolves keeps its sign."""
+    from nnid.physics import compiled
+    from nnid.physics.fossen import FossenModel
+
+    nu = rng.normal(size=(200, 6))
+    nu[:, 2] = 0.0
+    rounding = nu.copy()
+    rounding[:, 2] = 1e-17 * rng.standard_normal(200)
+    lib = BasisLibrary()
+    vw = [i for i, t in enumerate(lib.terms) if "Vw" in t]
+    exact = lib(nu)
+    assert not exact[:, vw].any()
+    for got in (lib(rounding), lib(torch.tensor(rounding)).numpy()):
+        assert np.array_equal(got[:, vw], exact[:, vw])
+        assert np.allclose(got, exact, rtol=0, atol=1e-15)  # the w factors: rounding
+    # heave without sway: a rounding v leaves Vv 0 too
+    swapped = nu.copy()
+    swapped[:, 2], swapped[:, 1] = nu[:, 1], 1e-17 * rng.standard_normal(200)
+    vv = [i for i, t in enumerate(lib.terms) if "Vv" in t]
+    assert not lib(swapped)[:, vv].any()
+    # a micrometre per second is motion: Vw = ±V
+    measured = nu.copy()
+    measured[:, 2] = 1e-6 * np.sign(rng.standard_normal(200))
+    big_v = np.hypot(nu[:, 1], measured[:, 2])
+    assert np.allclose(
+        lib(measured)[:, lib.index("Vw*u")], nu[:, 0] * big_v * np.sign(measured[:, 2])
+    )
+    # the simulator's kernel: a Vw force on a vehicle that never heaves stays off
+    veh = vehicle_factory(damping={"coefficients": {"M:u*Vw": -40.0, "Z:abs(q)*Vw": -5.0}})
+    form = FossenModel.from_vehicle(veh).feature_form()
+    tau = np.array([20.0, 5.0, 0.0, 0.0, 0.0, 1.0])
+    for x_exact in np.hstack([np.zeros((5, 6)), nu[:5] * [1, 1, 0, 0, 0, 1]]):
+        x_round = x_exact.copy()
+        x_round[8] = 1e-17
+        # the Coriolis products of w stay rounding; -40 u V was the jump
+        got, want = compiled.rhs(form, x_round, tau), compiled.rhs(form, x_exact, tau)
+        assert np.allclose(got, want, rtol=0, atol=1e-12), np.abs(got - want).max()

@@ -289,3 +289,35 @@ def test_the_holdout_takes_each_runs_own_tail_where_labels_repeat():
         pd.testing.assert_frame_equal(got.reset_index(drop=True), want.reset_index(drop=True))
     assert val["experiment"].value_counts().to_dict() == {"a": 25, "b": 15}
     assert val.index.equals(pd.Index([*range(75, 100), *range(45, 60)]))  # the log's labels
+
+
+def test_outputs_that_explain_nothing_do_not_loosen_the_others():
+    """A vehicle driven in surge, sway and yaw only, with gyro noise for ṗ and q̇: their best
+    validation NMSE is that of no model (1), and as two sixths of the mean J it set a budget
+    that let ṙ drop its Munk moment u·v (NMSE 0.0003 -> 0.0046). Outputs that explain nothing
+    keep no terms and have no share in the budget: ṙ keeps u·v, selected as without the noise."""
+    from nnid.datasets.simulator import simulate
+
+    vehicle = load_vehicle("seamor")
+    rng = np.random.default_rng(3)
+    inputs = np.zeros((400, 6))
+    inputs[20:, [0, 1, 5]] = np.repeat(rng.uniform(-30, 30, (19, 3)), 20, 0) * [1, 1, 0.2]
+    log = simulate(vehicle, inputs, 0.1)
+    for c in ("du", "dv", "dr"):  # accelerometer-grade noise on the excited DOFs
+        log[c] += 0.02 * log[c].std() * rng.standard_normal(len(log))
+    noisy = log.assign(
+        dp=0.05 * rng.standard_normal(len(log)), dq=0.05 * rng.standard_normal(len(log))
+    )
+    models, path = [], np.logspace(-3, 0, 13)
+    for data in (log, noisy):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # the unexcited outputs' selection warnings
+            models.append(SindyDamping(vehicle, mode="control", thresholds=path).fit(data))
+    quiet, loud = ({k for k in m.coefficients_ if k.startswith("dr:")} for m in models)
+    # u*v, u*Vv (w = 0) and u*v*(eta-1) (u_c = 0) are one column, u·v, shared among them
+    assert quiet & {"dr:u*v", "dr:u*Vv", "dr:u*v*(eta-1)"}
+    assert loud == quiet
+    nmse_v = models[1].selected_["validation_nmse"]
+    assert nmse_v["dr"] < 2 * models[0].selected_["validation_nmse"]["dr"]
+    assert nmse_v["dp"] == nmse_v["dq"] == 1.0
+    assert not any(k[:3] in ("dp:", "dq:") for k in models[1].coefficients_)

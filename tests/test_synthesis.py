@@ -258,3 +258,33 @@ def test_one_column_singular_on_a_few_rows_does_not_make_the_others_rounding():
     assert fit.unidentified[0, 0] and fit.unidentified.sum() == 1
     assert fit.coefficients[2, 1] == pytest.approx(-33.0, rel=0.05)
     assert fit.coefficients[2, 2] == pytest.approx(-190.0, rel=0.05)
+
+
+def test_a_w_at_rounding_level_fits_the_model_of_an_exact_zero():
+    """A vehicle driven in surge, sway and yaw only, its w logged as exact zeros or as 1e-17
+    rounding: the Vw regressors were ±V with the rounding's random sign, so a mask with Vw terms
+    fitted noise coefficients to them where exact zeros leave them unidentified. Both logs give
+    the same regression and the same model."""
+    import warnings
+
+    from nnid.datasets.simulator import simulate
+    from nnid.trainers.least_squares import ExcitationWarning
+
+    vehicle = load_vehicle("seamor")
+    rng = np.random.default_rng(3)
+    inputs = np.zeros((300, 6))
+    inputs[20:, [0, 1, 5]] = np.repeat(rng.uniform(-30, 30, (15, 3)), 20, 0)[:280] * [1, 1, 0.2]
+    log = simulate(vehicle, inputs, 0.1)
+    assert not log[["w", "p", "q"]].to_numpy().any()
+    rounding = log.assign(w=1e-17 * rng.standard_normal(len(log)))
+    mask = {"X": ["u*abs(u)", "u*Vw"], "Y": ["v*abs(v)", "abs(r)*Vw"], "N": ["r*abs(r)", "v*Vw"]}
+    fits, said = [], []
+    for data in (log, rounding):
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            fits.append(SynthesisModel(vehicle, mask).fit(data))
+        said.append(" ".join(str(w.message) for w in caught if w.category is ExcitationWarning))
+    exact, rounded = fits
+    assert rounded.params == exact.params
+    assert exact.params["X:u*Vw"] == {"value": None, "stderr": None, "simulated_at": 0.0}
+    assert all("zero regressor" in text and "N:v*Vw" in text for text in said)

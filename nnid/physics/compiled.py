@@ -17,6 +17,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
+from nnid.physics.damping_library import SIGN_FLOOR
 from nnid.physics.fossen import FeatureForm
 from nnid.threads import torch_threads_kept
 
@@ -64,8 +65,9 @@ def _rhs(x, tau, m_inv, q_rb, q_a, g_mat, theta, codes, ma, bias, cur, u_c, lag,
     big_u = math.sqrt(nur[0] * nur[0] + nur[1] * nur[1] + nur[2] * nur[2] + 1e-30)
     at[12] = big_u
     at[13] = big_v
-    at[14] = big_v * np.sign(nur[1])
-    at[15] = big_v * np.sign(nur[2])
+    # damping_library.rounded_sign; numba freezes SIGN_FLOOR into the cached machine code
+    at[14] = big_v * np.sign(nur[1]) if abs(nur[1]) > SIGN_FLOOR else 0.0
+    at[15] = big_v * np.sign(nur[2]) if abs(nur[2]) > SIGN_FLOOR else 0.0
     at[16] = u_c / big_u - 1.0
     at[17] = 1.0
     s0, s1, s2 = st, ct * sf, ct * cf

@@ -6,6 +6,9 @@ product of factors drawn from the atoms ``u v w p q r``, ``abs(u)`` … ``abs(r)
 
     U = sqrt(u² + v² + w²),  V = sqrt(v² + w²),  Vv = V sign(v),  Vw = V sign(w),  η = u_c / U.
 
+sign(x) is 0 for |x| ≤ :data:`SIGN_FLOOR` (:func:`rounded_sign`): a v or w that is only rounding
+must not switch a full-size V on with a random sign.
+
 Every term is encoded as up to three atom indices, so one gather-and-product evaluates any set
 of terms on NumPy arrays, PyTorch tensors, or inside the compiled simulator kernel.
 """
@@ -36,6 +39,12 @@ ONE = ATOM_INDEX["1"]
 MAX_FACTORS = 3
 # Keeps sqrt differentiable at rest and η finite; far below any speed a log resolves.
 _TINY = 1e-30
+#: m/s: a v or w at most this is rounding, its sign 0 in Vv and Vw. Float64 arithmetic on
+#: vehicle speeds (0.01-10 m/s) leaves residues of 1e-18-1e-15 m/s (a vehicle that never
+#: heaves logs w ~ 1e-17), integration a few orders more; no velocity sensor resolves below
+#: ~1e-6 m/s. Absolute, not relative to the data's largest w: a term's value at a sample must
+#: not depend on the other samples evaluated with it (the compiled kernel sees one at a time).
+SIGN_FLOOR = 1e-9
 
 
 def _library_names() -> tuple[str, ...]:
@@ -96,6 +105,12 @@ def term_codes(terms: Sequence[str]) -> np.ndarray:
     return np.array([parse_term(t) for t in terms], dtype=np.int64).reshape(-1, MAX_FACTORS)
 
 
+def rounded_sign(x: np.ndarray | torch.Tensor) -> np.ndarray | torch.Tensor:
+    """sign(x) of an array or tensor, 0 where ``|x| <= SIGN_FLOOR`` (NaN stays NaN)."""
+    sign = x.sign() if isinstance(x, torch.Tensor) else np.sign(x)
+    return (abs(x) > SIGN_FLOOR) * sign
+
+
 def atoms(nu, u_c: float = 0.0):
     """The atom values ``[..., 18]`` for body velocities ``nu`` ``[..., 6]`` (NumPy or torch)."""
     if isinstance(nu, torch.Tensor):
@@ -115,8 +130,8 @@ def atoms(nu, u_c: float = 0.0):
             *(xp.abs(x) for x in vel),
             big_u,
             big_v,
-            big_v * xp.sign(v),
-            big_v * xp.sign(w),
+            big_v * rounded_sign(v),
+            big_v * rounded_sign(w),
             eta_m1,
             one,
         ]

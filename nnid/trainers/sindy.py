@@ -230,9 +230,10 @@ class SparsePath(BaseEstimator):
     validation data also ``validation_nmse``, each output's normalised MSE) and ``coef_``
     ``[m, K]`` its coefficients. ``selection`` is "validation" (the sparsest model
     whose validation J is within ``tolerance`` of the best; with ``per_output`` each output
-    picks its own row, greedily sparsest while the mean validation J stays within ``tolerance``
-    of the best, so ``selected_`` may mix thresholds; the zero row is every output's candidate
-    too), "aic" or "bic". J is the mean over outputs of the normalised MSE. Outputs the
+    picks its own row, greedily sparsest while the mean validation J of the outputs the path
+    explains stays within ``tolerance`` of the best, so ``selected_`` may mix thresholds; the
+    zero row is every output's candidate too, and an output it is within ``tolerance`` of keeps
+    no terms), "aic" or "bic". J is the mean over outputs of the normalised MSE. Outputs the
     selected model does not explain on the validation data (NMSE ≥ 1, that of no model) are
     named in a :class:`SindyWarning`; ``output_names`` names them.
     """
@@ -366,26 +367,37 @@ class SparsePath(BaseEstimator):
         )
 
     def _select_per_output(self, coefs: np.ndarray, val: np.ndarray) -> np.ndarray:
-        """Rows per output (the outputs are separate regressions; J is their mean): start from
-        each output's best validation row and, while the mean stays within ``tolerance`` of
-        that best J, greedily take the sparser row that costs the least J per term saved."""
-        m = coefs.shape[1]
+        """Rows per output (the outputs are separate regressions; J is their mean). An output
+        whose zero row (the last) is within ``tolerance`` of its best explains nothing: it keeps
+        no terms and has no share in the budget, where its error (noise, or rounding that
+        differs by CPU) loosened every other output's selection. The others start from their
+        best validation rows and, while their mean stays within ``tolerance`` of that best,
+        greedily take the sparser row that costs the least J per term saved."""
+        zero = val.shape[0] - 1
+        best = np.nanmin(val, axis=0)
         k = np.count_nonzero(coefs, axis=2)  # [T, m]
-        pick = [int(np.nanargmin(val[:, i])) for i in range(m)]
-        budget = (1.0 + self.tolerance) * float(np.mean([val[pick[i], i] for i in range(m)]))
+        pick = {
+            i: int(np.nanargmin(val[:, i]))
+            for i in range(coefs.shape[1])
+            if not val[zero, i] <= (1.0 + self.tolerance) * best[i]
+        }
+        m = len(pick)
+        if not pick:
+            return np.zeros_like(coefs[zero])
+        budget = (1.0 + self.tolerance) * float(np.mean([val[j, i] for i, j in pick.items()]))
         while True:
-            total = float(np.mean([val[pick[i], i] for i in range(m)]))
-            best, best_rate = None, np.inf
-            for i in range(m):
+            total = float(np.mean([val[j, i] for i, j in pick.items()]))
+            choice, best_rate = None, np.inf
+            for i in pick:
                 for j in range(val.shape[0]):
                     saved = k[pick[i], i] - k[j, i]
                     extra = (val[j, i] - val[pick[i], i]) / m
                     if saved > 0 and total + extra <= budget and extra / saved < best_rate:
-                        best, best_rate = (i, j), extra / saved
-            if best is None:
+                        choice, best_rate = (i, j), extra / saved
+            if choice is None:
                 break
-            pick[best[0]] = best[1]
-        return np.stack([coefs[pick[i], i] for i in range(m)])
+            pick[choice[0]] = choice[1]
+        return np.stack([coefs[pick.get(i, zero), i] for i in range(coefs.shape[1])])
 
     def _select(self, path: list[dict]) -> int:
         if self.selection in ("aic", "bic"):
