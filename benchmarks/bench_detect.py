@@ -349,8 +349,8 @@ def _followed(mon, path: str) -> dict:
     stamps, flushed, sizes = [], [], []
     read, left = follow_module._rows, Rewatch.left
 
-    def rows(source, idle_s):
-        for row in read(source, idle_s):
+    def rows(source, idle_s, *rest):  # rest: the dialect found, which follow_csv reads back
+        for row in read(source, idle_s, *rest):
             stamps.append(time.perf_counter())
             flushed.append(False)
             yield row

@@ -61,6 +61,7 @@ from nnid.fault.isolation import (
     SIGNIFICANCE,
     STOPPED_SLACK,
     Diagnosis,
+    Hypotheses,
     Refit,
     allowed_ratio,
     dof_weights,
@@ -765,14 +766,22 @@ def _theta(changes: list[Change], gone: list[int], name: str) -> float:
     return sum(t for i in gone for n, t in changes[i].fitted if n == name)
 
 
-def _left(monitor, data: dict, rows: np.ndarray, r: np.ndarray, fitted: list) -> np.ndarray:
+def _left(
+    monitor,
+    data: dict,
+    rows: np.ndarray,
+    r: np.ndarray,
+    fitted: list,
+    hypotheses: Hypotheses | None = None,
+) -> np.ndarray:
     """What the changes ``fitted`` leave of the model's residual ``r`` [N, 6] on ``rows``:
-    minus their signature (:func:`nnid.fault.isolation.signature`, linear in the changes)."""
+    minus their signature (:func:`nnid.fault.isolation.signature`, linear in the changes;
+    ``hypotheses`` its columns' made before)."""
     if not fitted:
         return r.copy()
     # where a change cannot be shown (NaN) the residual is left as it was: watched blind
     # there, a later fault would pass unsaid
-    return r - np.nan_to_num(signature(monitor, data, rows, fitted))
+    return r - np.nan_to_num(signature(monitor, data, rows, fitted, hypotheses))
 
 
 def run_names(names, codes, named: bool) -> np.ndarray:
@@ -812,6 +821,8 @@ class Rewatch:
         self.changes: list[Change] = []
         self.state = np.zeros(kernel.STATE_SIZE)
         self.t_prev = np.nan
+        # the columns of the changes' hypotheses, remade only when they name others
+        self.hypotheses: Hypotheses | None = None
 
     @property
     def fitted(self) -> list[tuple[str, float]]:
@@ -843,7 +854,11 @@ class Rewatch:
     def left(self, data: dict, rows: np.ndarray, r: np.ndarray) -> np.ndarray:
         """What the changes leave of the model's residual ``r`` [N, 6] on ``rows``: minus
         their signature (:func:`nnid.fault.isolation.signature`, linear in the changes)."""
-        return _left(self.monitor, data, rows, r, self.fitted)
+        fitted = self.fitted
+        if fitted:
+            names = {name for name, _ in fitted}
+            self.hypotheses = Hypotheses.reused(self.hypotheses, self.monitor, names)
+        return _left(self.monitor, data, rows, r, fitted, self.hypotheses)
 
     def step(self, ts: np.ndarray, left: np.ndarray) -> np.ndarray:
         """The statistics of the rows at times ``ts`` (after those of the last call) on the

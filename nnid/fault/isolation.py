@@ -25,6 +25,7 @@ how sure the *group* is.
 
 from __future__ import annotations
 
+from collections.abc import Collection
 from dataclasses import dataclass, field
 from types import SimpleNamespace
 
@@ -106,7 +107,7 @@ def fitted_vehicle(plant):
 
 def midpoint_data(
     data: dict, rows: np.ndarray, vehicle, savgol: tuple[float, int] = (0.5, 2)
-) -> tuple[dict, pd.DataFrame]:
+) -> dict:
     """The arrays of the intervals ending at ``rows`` as the regression sees them: pose and
     velocity at the midpoint, the force of the commands held over the interval, and the
     acceleration by a Savitzky-Golay derivative (``savgol``: window in seconds, order). Not the
@@ -127,51 +128,95 @@ def midpoint_data(
     at = rows - span[0]
     act = Actuation(vehicle)
     inputs = data["inputs"][rows - 1]
-    tau = act.nominal(inputs) if act.thrusters else inputs
-    arrays = {
+    return {
         "eta": mid[:, 0:6],
         "nu": mid[:, 6:12],
         "nu_dot": 0.5 * (acc[at] + acc[at - 1]),
-        "tau": tau,
+        "tau": act.nominal(inputs) if act.thrusters else inputs,
         "angles_known": np.array(True),
         "t": 0.5 * (data["t"][rows] + data["t"][rows - 1]),
         "experiment": np.zeros(rows.size, dtype=int),
         "experiment_names": np.array(["window"], dtype=object),
     }
-    frame = pd.DataFrame(np.concatenate([mid, tau], 1), columns=[*POSE, *VELOCITY, *TAU])
+
+
+def midpoint_frame(arrays: dict) -> pd.DataFrame:
+    """:func:`midpoint_data`'s arrays as the log frame the loop's candidates read."""
+    values = np.concatenate([arrays["eta"], arrays["nu"], arrays["tau"]], 1)
+    frame = pd.DataFrame(values, columns=[*POSE, *VELOCITY, *TAU])
     frame.insert(0, "t", arrays["t"])
-    return arrays, frame
+    return frame
+
+
+class Hypotheses:
+    """The hypotheses of a monitor's model (the loop's linear candidates and one per thruster),
+    only those in ``names`` where given, and what their columns need that depends on the
+    model alone: the fitted vehicle, its actuation, which candidates, the regression. Made
+    once, their :meth:`columns` are taken on any rows: --follow takes a change's signature
+    out of every flush (:class:`~nnid.fault.detect.Rewatch` keeps one per change), where
+    remaking these cost about as much as the columns."""
+
+    def __init__(self, monitor, names: Collection[str] | None = None) -> None:
+        plant = monitor.plant_
+        self.plant = plant
+        self.names = None if names is None else frozenset(names)
+        self.vehicle = fitted_vehicle(plant)
+        self.savgol = (plant.savgol_window, 2)
+        self.act = Actuation(plant.vehicle)
+        self.own = [Candidate(f"thruster_loss.{n}", "thruster_loss", f"thruster.{n}")
+                    for n in self.act.channels] if self.act.thrusters else []  # fmt: skip
+        # thrusters alone (a lost thruster's signature) need none of the loop's columns:
+        # their midpoint data and candidates were most of its cost
+        self.loop = self.names is None or not self.names <= {c.name for c in self.own}
+        self._cands: list[Candidate] | None = None  # the loop's, once rows show them
+        self._structure: ParametricFossen | None = None
+
+    @classmethod
+    def reused(cls, made: Hypotheses | None, monitor, names: Collection[str] | None) -> Hypotheses:
+        """``made`` where it holds ``monitor``'s model's hypotheses ``names``, else new ones
+        (a change taken out, ended or resized names others; a model refitted is another)."""
+        named = None if names is None else frozenset(names)
+        if made is not None and made.plant is monitor.plant_ and made.names == named:
+            return made
+        return cls(monitor, names)
+
+    def columns(self, data: dict, rows: np.ndarray) -> tuple:
+        """The fitted vehicle, the hypotheses and their columns [N, 6, K] on ``rows`` (each
+        with its predecessor)."""
+        cands, cols = [], np.zeros((rows.size, 6, 0))
+        if self.loop:
+            arrays = midpoint_data(data, rows, self.vehicle, self.savgol)
+            if self._cands is None:
+                # the thrusters themselves stand for thrust changes; a DOF's installation
+                # coefficient would only be a coarser copy of them. Which of the others are
+                # linear depends on the vehicle alone (the rows choose only installation
+                # directions and the nonlinear ones), so the first rows' choice holds for all
+                self._cands = [
+                    c
+                    for c in candidates(self.vehicle, midpoint_frame(arrays), coupled=False)
+                    if c.linear
+                    and c.kind != "thruster_installation"
+                    and (self.names is None or c.name in self.names)
+                ]
+                if self._cands:
+                    params = [c.parameter for c in self._cands]
+                    self._structure = ParametricFossen(self.vehicle, params)
+            cands = list(self._cands)
+            if self._structure is not None:
+                reg = self._structure.regression(arrays)
+                cols = reg.phi.reshape(rows.size, 6, len(cands))
+        if self.own:
+            thrust = self.act.thrusts(data["inputs"][rows - 1])  # [N, n]
+            cols = np.concatenate([cols, thrust[:, None, :] * self.act.matrix[None, :, :]], 2)
+            cands += self.own  # bᵢ fᵢ
+        return self.vehicle, cands, cols
 
 
 def hypothesis_columns(monitor, data: dict, rows: np.ndarray, names=None) -> tuple:
     """The fitted vehicle, the hypotheses (the loop's linear candidates and one per thruster)
     and their columns [N, 6, K] on ``rows`` (each with its predecessor); only those named in
     ``names`` where given (a signature needs its own columns, not the ~15 regressions of all)."""
-    plant = monitor.plant_
-    vehicle = fitted_vehicle(plant)
-    act = Actuation(plant.vehicle)
-    own = [Candidate(f"thruster_loss.{n}", "thruster_loss", f"thruster.{n}")
-           for n in act.channels] if act.thrusters else []  # fmt: skip
-    cands, cols = [], np.zeros((rows.size, 6, 0))
-    # thrusters alone (a lost thruster's signature, taken out at every --follow flush) need
-    # none of the loop's columns: their midpoint data and candidates were most of its cost
-    if names is None or not set(names) <= {c.name for c in own}:
-        arrays, frame = midpoint_data(data, rows, vehicle, (plant.savgol_window, 2))
-        # the thrusters themselves stand for thrust changes; a DOF's installation coefficient
-        # would only be a coarser copy of them
-        cands = [
-            c
-            for c in candidates(vehicle, frame, coupled=False)
-            if c.linear and c.kind != "thruster_installation" and (names is None or c.name in names)
-        ]
-        if cands:
-            reg = ParametricFossen(vehicle, [c.parameter for c in cands]).regression(arrays)
-            cols = reg.phi.reshape(rows.size, 6, len(cands))
-    if own:
-        thrust = act.thrusts(data["inputs"][rows - 1])  # [N, n]
-        cols = np.concatenate([cols, thrust[:, None, :] * act.matrix[None, :, :]], 2)  # bᵢ fᵢ
-        cands += own
-    return vehicle, cands, cols
+    return Hypotheses(monitor, names).columns(data, rows)
 
 
 def dof_weights(monitor, e: np.ndarray) -> np.ndarray:
@@ -187,15 +232,23 @@ def dof_weights(monitor, e: np.ndarray) -> np.ndarray:
     return np.where(watched, feasible_weights(var, floor), 0.0)
 
 
-def signature(monitor, data: dict, rows: np.ndarray, fitted: list[tuple[str, float]]):
+def signature(
+    monitor,
+    data: dict,
+    rows: np.ndarray,
+    fitted: list[tuple[str, float]],
+    hypotheses: Hypotheses | None = None,
+):
     """The residual an isolated change leaves on ``rows`` [N, 6] (NaN where there is none):
     minus the fitted hypothesis' columns times their θ (:attr:`Diagnosis.fitted`). Taken from
-    the residual, it leaves what a model *with* that change would leave."""
+    the residual, it leaves what a model *with* that change would leave. ``hypotheses``:
+    those of ``fitted`` made before (:class:`Hypotheses`), else made here."""
     out = np.full((rows.size, 6), np.nan)
     ok = rows > 0
     if ok.sum() < 2 or not fitted:
         return out
-    _, cands, cols = hypothesis_columns(monitor, data, rows[ok], {name for name, _ in fitted})
+    hypotheses = Hypotheses.reused(hypotheses, monitor, {name for name, _ in fitted})
+    _, cands, cols = hypotheses.columns(data, rows[ok])
     index = {c.name: k for k, c in enumerate(cands)}
     if any(name not in index for name, _ in fitted):
         return out  # a hypothesis the rows cannot show (a DOF that no longer moves)
