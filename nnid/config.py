@@ -887,7 +887,7 @@ class DetectSpec(StrictModel):
     time_constant_s: PositiveFloat = 0.25
     allowance: PositiveFloat = 1.0
     rearm_s: PositiveFloat = 5.0
-    # as --window bounds it; longer than the log it calibrates on is refused there
+    # as --window bounds it; longer than the longest run of the log it calibrates on is refused
     # (nnid.pipeline.check_detect_window)
     window_s: float = Field(10.0, ge=MIN_WINDOW_S, allow_inf_nan=False)
 

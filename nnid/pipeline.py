@@ -38,7 +38,7 @@ from nnid.datasets.log import (
     run_of,
     run_pieces,
 )
-from nnid.datasets.preprocess import experiment_rows, run_spans
+from nnid.datasets.preprocess import check_acceleration_window, experiment_rows, run_spans
 from nnid.datasets.splits import PARTS, Split, say_missed_fractions, split_log
 from nnid.errors import NnidInputError
 from nnid.evaluation.evaluate import diverged_columns, evaluate
@@ -689,6 +689,37 @@ def named_in(section: str, spec) -> Iterator[None]:
         raise exc.within(section, type(spec).model_fields) from None
 
 
+def check_savgol_window(
+    spec, model, split: Split, section: str, members_scored: bool = False
+) -> None:
+    """A model's ``savgol_window`` no longer than any run of the parts whose accelerations it
+    derives with it (where the log lacks them), said before its fit: the residual of a force
+    equation not filtered, in every part scored (train's scores, compare's training J; an
+    ensemble's members where their held-out parts are scored, ``members_scored``), and
+    SINDy's control-mode regression, in the parts it fits. Its own refusal came once it was
+    fitted, in scoring it (minutes of a hybrid's training). Named as :func:`named_in` names it
+    (an ensemble's: under its member)."""
+    parts: tuple[str, ...] = PARTS
+    if spec.kind == "ensemble":
+        if not members_scored:  # the ensemble has no force equation of its own
+            return
+        spec, model, section = spec.member, model.model, f"{section}.member"
+        parts = ("validation", "test")
+    if "savgol_window" not in type(spec).model_fields:  # caccia's windows are its own keys
+        return
+    if spec.kind == "sindy" and spec.mode == "control":  # its regression's targets
+        parts = ("train", "validation")
+    elif not model.has_force_equation or getattr(model, "filtered", False):
+        return
+    dofs = fitted_dofs(spec) or list(DOFS)
+    names = dict(zip(PARTS, ("training", "validation", "test"), strict=True))
+    with named_in(section, spec):
+        for part in parts:
+            log = split[part]
+            if len(log) and any("d" + d not in log for d in dofs):
+                check_acceleration_window(log, spec.savgol_window, spec.savgol_order, names[part])
+
+
 def _fit_warnings(caught) -> list[str]:
     """The messages of warnings caught in a fit, each once; the commands' units were said
     against the whole log as it was loaded (load_inputs), not again per part."""
@@ -823,6 +854,7 @@ def run_train(
     split = make_split(
         inputs.log, cfg.split, source, inputs.report, cfg.warmup_s, inputs.source, read, said
     )
+    check_savgol_window(cfg.model, model, split, "model", members_scored=True)
     caught = fit_model(model, split, progress or silent, "model", cfg.model, replay)
     check_reference(cfg.reference, list(model.params), source)
     if hasattr(model, "report_"):
@@ -915,15 +947,18 @@ def check_reference(reference: dict[str, float], fitted: Sequence[str], source: 
 
 
 def check_detect_window(window_s: float, log: pd.DataFrame, source: str) -> None:
-    """``[detect] window_s`` within the healthy log it is set beside: the isolation window is
-    the data after an alarm that its isolation reads, and one longer than all the runs of this
-    log together is no window of data like it (1e308 s was taken: every alarm waited for the
-    end of its run)."""
-    span = sum(run_spans(log))
-    if window_s > span:
+    """``[detect] window_s`` within the longest run of the healthy log it is set beside: the
+    isolation window is the data after an alarm in its own run that its isolation reads, and
+    no alarm is raised inside it (:func:`nnid.fault.detect.detect`), so one longer than every
+    run reaches each run's end and leaves it watched only up to its first alarm (1e308 s was
+    taken; so was a window longer than each run, measured against all of them together)."""
+    longest = max(run_spans(log))
+    if window_s > longest:
         raise NnidInputError(
-            f"{window_s:g} s is longer than the whole log ({span:.4g} s over all its runs): "
-            "the isolation window after an alarm is some seconds of it (several manoeuvres)",
+            f"{window_s:g} s is longer than the longest run of the log ({longest:.4g} s): the "
+            "isolation window after an alarm is some seconds of the alarm's own run (several "
+            "manoeuvres), and no new alarm is raised inside it, so one past the end of every run "
+            "would leave each run watched only up to its first alarm",
             source=source,
             field="detect.window_s",
         )
@@ -1080,6 +1115,8 @@ def run_compare(
         inputs.log, cfg.split, source, inputs.report, cfg.warmup_s, inputs.source, read
     )
     check_held_stepped(inputs, split, [m.fitted for m in cfg.models])
+    for i, (spec, model) in enumerate(zip(cfg.models, models, strict=True)):
+        check_savgol_window(spec, model, split, f"models.{i}")
     held_name = "test" if len(split.test) else "validation"
     held = split[held_name]
     k = k_steps(held, cfg.k_step_s)

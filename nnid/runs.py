@@ -519,13 +519,28 @@ def residual_loop_run(
 
 
 def detection_window(model_dir: Path) -> float:
-    """The isolation window a detection model was trained with (metrics.json), else 10 s."""
+    """The isolation window a detection model was trained with (metrics.json's
+    ``detect.settings.window_s``, bounded as the [detect] config bounds it), else 10 s: a
+    hand-edited value was read unchecked (text a traceback, a negative one no window at all)."""
     from nnid.serialization import read_json
 
     path = Path(model_dir) / "metrics.json"
-    if path.is_file():
-        return float(read_json(path).get("detect", {}).get("settings", {}).get("window_s", 10.0))
-    return 10.0
+    if not path.is_file():
+        return 10.0
+    keys = ("detect", "settings", "window_s")
+    node = read_json(path)
+    for depth, key in enumerate(keys):
+        if not isinstance(node, dict):  # a table edited into a list or a number
+            raise NnidInputError(
+                f"a JSON object is expected, not a {type(node).__name__}",
+                source=str(path),
+                field=".".join(keys[:depth]) or None,
+            )
+        node = node.get(key, 10.0 if key == "window_s" else {})
+    try:  # as the [detect] config bounds it (nnid.config.DetectSpec)
+        return checked_number(node, ".".join(keys), MIN_WINDOW_S, strict=False)
+    except NnidInputError as exc:
+        raise exc.with_source(str(path)) from None
 
 
 def check_detect_inputs(model_dir: Path, data: str, follow: bool = False) -> None:

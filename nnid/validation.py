@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import tomllib
+import unicodedata
 from collections.abc import Iterable, Mapping
 from numbers import Real
 from pathlib import Path
@@ -62,6 +63,22 @@ MIN_WINDOW_S = 0.5
 #: ``[detect] false_alarm_per_hour``, a saved monitor's): one a second. Its thresholds are
 #: fitted to the tail of rare healthy excursions; a rate above it asks for no threshold at all
 MAX_FALSE_ALARMS_PER_HOUR = 3600.0
+
+
+def control_character(text: str) -> str | None:
+    """The first control character of ``text`` (a line break, a tab, ``\\x00``-``\\x1f``,
+    ``\\x7f`` …), or None."""
+    return next((c for c in text if unicodedata.category(c) == "Cc"), None)
+
+
+def one_line(name: str) -> str:
+    """``name`` if it is one line of text (no :func:`control_character`), else a ValueError
+    saying which: a name labels report lines and headings (a vehicle's, a run's), which a line
+    break or another control character would break."""
+    control = control_character(name)
+    if control is not None:
+        raise ValueError(f"a name is one line of text, without {control!r}")
+    return name
 
 
 def repeated(names: list[str]) -> list[str]:

@@ -23,7 +23,15 @@ from nnid.datasets.log import MAX_FORCE, MAX_SPEED
 from nnid.errors import NnidInputError
 from nnid.physics.added_mass import mirrored_key, parse_added_mass_key
 from nnid.physics.dofs import DOFS
-from nnid.validation import StrictModel, read_toml, refuse_other_file, repeated, validated
+from nnid.validation import (
+    StrictModel,
+    control_character,
+    one_line,
+    read_toml,
+    refuse_other_file,
+    repeated,
+    validated,
+)
 
 PRESETS = ("seamor", "vlbv300", "romeo", "vt690", "bluerov2_heavy")
 
@@ -178,10 +186,7 @@ def vehicle_name(name: str) -> str:
     line break or another control character would break a report's lines and headings."""
     if not name.strip():
         raise ValueError("give a name with a visible character")
-    control = next((c for c in name if unicodedata.category(c) == "Cc"), None)
-    if control is not None:
-        raise ValueError(f"a name is one line of text, without {control!r}")
-    return name
+    return one_line(name)
 
 
 def saved_vehicle(data: dict[str, Any], source: str = "<saved model>") -> Vehicle:
@@ -193,7 +198,7 @@ def saved_vehicle(data: dict[str, Any], source: str = "<saved model>") -> Vehicl
     whose curve gives no thrust (refused in new input since, :func:`_makes_thrust`) is kept
     as saved, with a warning: the model predicts what it did, that thruster pushing nothing."""
     name = data.get("name") if isinstance(data, dict) else None
-    if isinstance(name, str) and any(unicodedata.category(c) == "Cc" for c in name):
+    if isinstance(name, str) and control_character(name) is not None:
         shown = "".join(repr(c)[1:-1] if unicodedata.category(c) == "Cc" else c for c in name)
         warnings.warn(
             f"{source}: the vehicle name {name!r} holds a control character, which names no "

@@ -118,6 +118,21 @@ LOG_CASES: list[tuple[str, str, Callable]] = [
     ("an input name with a space", "INPUT", lambda df, i: df.rename(columns={i: f" {i}"})),
     ("empty experiment label", "'experiment'", _set("experiment", 20, np.nan)),
     ("blank experiment label", "'experiment'", _set("experiment", 21, " ")),
+    # a control character in a run's label: a line break split every report line naming it
+    (
+        "a line break in an experiment label",
+        "column 'experiment', row 0: experiment label 'dive\\n1'",
+        lambda df, i: df.assign(
+            experiment=df["experiment"].replace(df["experiment"][0], "dive\n1")
+        ),
+    ),
+    (
+        "a tab in an experiment label",
+        "column 'experiment', row 0: experiment label 'dive\\t1'",
+        lambda df, i: df.assign(
+            experiment=df["experiment"].replace(df["experiment"][0], "dive\t1")
+        ),
+    ),
     # a stray label makes an experiment of one sample: no sample period to derive or fit with
     ("a one-sample experiment", "'experiment'", _set("experiment", 22, "stray")),
     ("text in an input", "INPUT", _set("INPUT", 30, "full")),
@@ -379,7 +394,7 @@ def _log_cases() -> list[Case]:
     # the same column and row numbers
     follow_cases = ("text in time", "duplicated time", "decreasing time", "text in a velocity",
                     "infinite input", "empty input cell", "velocities in cm per s",
-                    "a Latin-1 character")  # fmt: skip
+                    "a Latin-1 character", "a tab in an experiment label")  # fmt: skip
     for name in follow_cases:
 
         def followed(tmp, fx, name=name):
@@ -715,6 +730,13 @@ CONFIG_CASES = [
         "detect.window_s",
         ("zoh_midpoint = true", "zoh_midpoint = true\n\n[detect]\nwindow_s = 1e308"),
     ),
+    # the window slides within one run: three 15-s runs are 45 s together, and it was taken
+    (
+        "train",
+        "an isolation window longer than every run",
+        ("detect.window_s", "longest run of the log (14.95 s)"),
+        ("zoh_midpoint = true", "zoh_midpoint = true\n\n[detect]\nwindow_s = 20.0"),
+    ),
     (
         "train",
         "a false-alarm target of 1e308 an hour",
@@ -725,6 +747,14 @@ CONFIG_CASES = [
     # blamed on the log ("good.csv, field 'savgol_window'"), with a 300-digit window
     ("loop", "a savgol window longer than every run", "savgol_window", None),
     ("loop", "a savgol window of 1e300 s", ("savgol_window", "window of 2e+301 samples"), None),
+    # λ dt/2 lost beside 1: the filter's steady start was singular, a LinAlgError traceback
+    (
+        "loop",
+        "a filter of 1e-300 rad per s",
+        ("filter_lambda", "lost beside 1", "experiment 'run0'"),
+        None,
+    ),
+    ("train", "sindy filter of 1e-300 rad per s", ("model.filter_lambda", "lost beside 1"), None),
 ]
 LOOP_TEXT = {
     "unknown dof": 'kind = "loop"\ndofs = ["u", "x"]\n',
@@ -737,6 +767,7 @@ LOOP_TEXT = {
     "an empty experiment list": 'kind = "loop"\n[data]\nexperiments = []\n',
     "a savgol window longer than every run": 'kind = "loop"\nsavgol_window = 21.0\n',
     "a savgol window of 1e300 s": 'kind = "loop"\nsavgol_window = 1e300\n',  # 20 Hz runs
+    "a filter of 1e-300 rad per s": 'kind = "loop"\nfilter_lambda = 1e-300\n',
 }
 
 
@@ -751,6 +782,7 @@ MODEL_TEXT = {
     "narx delay beyond every run": f"[model]\n{_NARX}input_delays = 5000\n",
     "sindy term not of the library": '[model]\nkind = "sindy"\nterms = ["u*banana"]\n',
     "sindy without thresholds": '[model]\nkind = "sindy"\nthresholds = []\n',
+    "sindy filter of 1e-300 rad per s": '[model]\nkind = "sindy"\nfilter_lambda = 1e-300\n',
     "narx delay list with a negative delay": f"[model]\n{_NARX}input_delays = [0, -1]\n",
     # a NaN bound was said as "Input should be 'train'"
     "narx bound not a number": f"[model]\n{_NARX}output_bounds = [[nan, 1.0]]\n",
@@ -840,6 +872,34 @@ def _out_cases() -> list[Case]:
             return _command("detect", tmp, fx, model=folder, out=tmp / "o")
 
         cases.append(Case(f"detect --model: model.json with {name}", edited, ("MODEL", field)))
+    # the isolation window the model was trained with, read from metrics.json unchecked: text
+    # a traceback or taken ("10"), a negative, zero or infinite window taken as it stood
+    windows = {
+        "a window written as text": ('{"window_s": "10"}', "detect.settings.window_s"),
+        "a negative window": ('{"window_s": -5}', "detect.settings.window_s"),
+        "a window of zero": ('{"window_s": 0}', "detect.settings.window_s"),
+        "an infinite window": ('{"window_s": 1e999}', "detect.settings.window_s"),
+        "a window as a list": ('{"window_s": [10]}', "detect.settings.window_s"),
+        "settings as a list": ("[10]", "field 'detect.settings'"),
+    }
+    for name, (settings_json, field) in windows.items():
+
+        def metrics(tmp, fx, settings_json=settings_json):
+            import shutil
+
+            folder = tmp / "edited_model"
+            shutil.copytree(fx["monitor"], folder)
+            text = '{"detect": {"settings": ' + settings_json + "}}"
+            (folder / "metrics.json").write_text(text)
+            return _command("detect", tmp, fx, model=folder, out=tmp / "o")
+
+        cases.append(
+            Case(
+                f"detect --model: metrics.json with {name}",
+                metrics,
+                ("MODEL", "metrics.json", field),
+            )
+        )
     return cases
 
 
@@ -924,7 +984,7 @@ def test_bad_input_is_refused_in_one_line_naming_the_file_and_field(case, fixtur
     elif kind == "OUT":
         assert "--out" in line or "nnid-out" in line or "taken" in line, line
     elif kind == "MODEL":
-        assert "--model" in line or "monitor" in line or "model.json" in line, line
+        assert any(n in line for n in ("--model", "monitor", "model.json", "metrics.json")), line
         # a fault of model.json is said against it, not wrapped as one of monitor.json
         assert not ("model.json: damaged" in line and "is not a monitor" in line), line
     for field in fields:
@@ -1784,3 +1844,58 @@ def test_a_simulated_log_the_contract_refuses_is_said_against_the_config(tmp_pat
     assert result.exit_code == 2 and len(errors) == 1, result.output
     assert errors[0].startswith(f"error: {config}: the log contract refuses "), errors[0]
     assert "column 'x'" in errors[0] and str(out) not in errors[0] and not out.exists()
+
+
+class _Fitted(Exception):
+    """Raised in place of a fit: the run got as far as fitting a model."""
+
+
+_WINDOW = "savgol_window = 4.0\n"  # 81 samples at 20 Hz: a training block's 180 hold it
+_SPLIT = 'kind = "%s"\nwarmup_s = 1.0\n[split]\nby = "auto"\nfractions = [0.6, 0.2, 0.2]\n'
+
+
+@pytest.mark.parametrize(
+    ("command", "models", "said"),
+    [
+        pytest.param("train", f'[model]\nkind = "fossen"\n{_WINDOW}', "model.savgol_window",
+                     id="fossen"),
+        pytest.param("train", f'[model]\nkind = "hybrid"\n{_WINDOW}', "model.savgol_window",
+                     id="hybrid"),
+        pytest.param("train", f'[model]\nkind = "synthesis"\n{_WINDOW}', "model.savgol_window",
+                     id="synthesis"),
+        pytest.param("train", f'[model]\nkind = "sindy"\nmode = "control"\n{_WINDOW}',
+                     "model.savgol_window", id="sindy control"),
+        pytest.param("train", '[model]\nkind = "ensemble"\nseeds = [0, 1]\n[model.member]\n'
+                     f'kind = "hybrid"\n{_WINDOW}', "model.member.savgol_window", id="ensemble"),
+        pytest.param("compare", f'[[models]]\nkind = "fossen"\n[[models]]\nkind = "hybrid"\n'
+                     f"{_WINDOW}", "models.1.savgol_window", id="compare"),
+        # a window the runs hold, and a filtered damping fit that derives no acceleration: fitted
+        pytest.param("train", '[model]\nkind = "hybrid"\nsavgol_window = 2.0\n', None,
+                     id="hybrid, a window that fits"),
+        pytest.param("train", f'[model]\nkind = "synthesis"\nfilter_lambda = 1.0\n{_WINDOW}',
+                     None, id="synthesis, filtered"),
+    ],
+)  # fmt: skip
+def test_a_savgol_window_longer_than_a_scored_run_is_refused_before_any_fit(
+    fixtures, tmp_path, monkeypatch, command, models, said
+):
+    """A window longer than the 3-s validation blocks was refused once the model was fitted,
+    as its residual was scored there (a hybrid's training of minutes, then exit 2): now before
+    any fit, for every model kind whose scores derive accelerations with it."""
+    from nnid import pipeline
+
+    def fitted(*args, **kwargs):
+        raise _Fitted
+
+    monkeypatch.setattr(pipeline, "fit_model", fitted)
+    config = tmp_path / "window.toml"
+    config.write_text(_SPLIT % command + models)
+    args = _command(command, tmp_path, fixtures, config=config, out=tmp_path / "o")
+    result = CliRunner().invoke(app, args)
+    if said is None:
+        assert isinstance(result.exception, _Fitted), result.output
+        return
+    errors = [line for line in result.output.splitlines() if line.startswith("error:")]
+    assert result.exit_code == 2 and len(errors) == 1, result.output
+    assert errors[0].startswith(f"error: {config}, field '{said}': the validation part's ")
+    assert "too few for the Savitzky-Golay window of 81 samples" in errors[0], errors[0]

@@ -21,7 +21,7 @@ from pandas.api.types import is_bool_dtype, is_numeric_dtype
 
 from nnid.errors import NnidInputError
 from nnid.physics.dofs import DOFS, FORCES
-from nnid.validation import shown
+from nnid.validation import one_line, shown
 
 POSE = ("x", "y", "z", "phi", "theta", "psi")
 VELOCITY = DOFS  # velocity columns are named after their DOF
@@ -940,6 +940,25 @@ def _check_experiments(df: pd.DataFrame, source: str) -> None:
             field="experiment",
             row=int(rows[0]),
         )
+    codes, labels = pd.factorize(df["experiment"])
+    first = np.unique(codes, return_index=True)[1]  # each label's first row, checked once
+    for label, row in zip(labels, first, strict=True):
+        check_label(label, source, int(row))
+
+
+def check_label(label: object, source: str, row: int) -> None:
+    """An experiment label on one line (:func:`nnid.validation.one_line`), as a simulated
+    run's name and a vehicle's are: a line break in it split every report line and heading
+    naming its run. ``row``: its first, which the error names."""
+    try:
+        one_line(str(label))
+    except ValueError as exc:
+        raise NnidInputError(
+            f"experiment label {str(label)!r}: {exc}: rename the run",
+            source=source,
+            field="experiment",
+            row=row,
+        ) from None
 
 
 def blank_labels(label: pd.Series) -> np.ndarray:

@@ -301,14 +301,7 @@ def savgol_derivative(
         )
     y = np.asarray(y, dtype=np.float64)
     if len(y) < window:
-        # a window of 1e300 s is a 300-digit count: written to 3 figures beyond a run's size
-        size = window if window <= MAX_RUN_SAMPLES else f"{float(window):.3g}"
-        raise NnidInputError(
-            f"{where} has {len(y)} samples, too few for the Savitzky-Golay window of {size} "
-            "samples (velocities and accelerations are derived with it)"
-            + (f": give a shorter {setting} or a longer run" if setting else ""),
-            field=setting,
-        )
+        raise too_short_for_window(where, len(y), window, setting)
     missing = np.isnan(y)
     steps = None if steps is None else np.asarray(steps, dtype=np.int64)
     if not missing.any() and steps is None:
@@ -325,6 +318,21 @@ def savgol_derivative(
             inside = steps[(steps > a) & (steps < b - 1)] - a
             out[a:b] = _between_steps(y[a:b], dt, window, order, deriv, inside)
     return out
+
+
+def too_short_for_window(
+    where: str, samples: int, window: int, setting: str | None
+) -> NnidInputError:
+    """The refusal of ``where`` (a run, a part's run), ``samples`` long, for a Savitzky-Golay
+    ``window`` (samples) longer than it, naming the user's key ``setting`` that chose it."""
+    # a window of 1e300 s is a 300-digit count: written to 3 figures beyond a run's size
+    size = window if window <= MAX_RUN_SAMPLES else f"{float(window):.3g}"
+    return NnidInputError(
+        f"{where} has {samples} samples, too few for the Savitzky-Golay window of {size} "
+        "samples (velocities and accelerations are derived with it)"
+        + (f": give a shorter {setting} or a longer run" if setting else ""),
+        field=setting,
+    )
 
 
 def _between_steps(
@@ -672,6 +680,19 @@ def _derivative_runs(
             yield name, pos, dt, None, None
         else:
             yield name, pos, dt, window, _held_steps(log, pos, held)
+
+
+def check_acceleration_window(
+    log: pd.DataFrame, window_s: float, order: int, part: str, setting: str = "savgol_window"
+) -> None:
+    """The refusal :func:`derive_accelerations` would give ``log`` (the ``part`` of a split,
+    named in it): an experiment (not a piece cut at a gap) shorter than the Savitzky-Golay
+    window of ``window_s`` s, said before a fit whose scores would derive them (a hybrid's
+    training of minutes ended in it)."""
+    for name, pos, _, window, _ in _derivative_runs(log, window_s, order, [], None):
+        if window is not None and len(pos) < window:
+            where = f"the {part} part's {run_label(name)}"
+            raise too_short_for_window(where, len(pos), window, setting)
 
 
 def derive_accelerations(

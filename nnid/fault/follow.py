@@ -45,6 +45,7 @@ from nnid.datasets.log import (
     SI_BOUNDS,
     VELOCITY,
     check_depth_units,
+    check_label,
     check_rate_units,
     degrees_error,
     looks_like_degrees,
@@ -531,6 +532,8 @@ def follow_csv(
                 row=n,
             )
         if name != current:
+            if exp_col is not None:  # as the whole-log reader checks it
+                check_label(name, where, n)
             if unchecked_tail():  # the experiment that ended: its last rows too
                 check_units(n - 1)
             settle()

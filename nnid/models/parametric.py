@@ -33,7 +33,7 @@ from sklearn.utils.validation import check_is_fitted
 
 from nnid.datasets.arrays import log_arrays, nominal_forces
 from nnid.datasets.cleaning import CleaningReport
-from nnid.datasets.log import ACCELERATION, ANGLES, MOTION, POSE, VELOCITY
+from nnid.datasets.log import ACCELERATION, ANGLES, MOTION, POSE, VELOCITY, run_label
 from nnid.datasets.preprocess import (
     HELD_DT,
     HELD_SHARE,
@@ -437,16 +437,29 @@ def filter_signal(data: dict[str, np.ndarray], x: np.ndarray, lam: float, deriva
     thrust)."""
     out = np.empty_like(x)
     zis: dict[float, np.ndarray] = {}  # the runs of a log mostly share one rate: solved once
+    names = data.get("experiment_names")
     for k in np.unique(data["experiment"]):
         idx = np.flatnonzero(data["experiment"] == k)
         dt = float(np.median(np.diff(data["t"][idx]))) if idx.size > 1 else 1.0
         c = lam * dt / 2.0
+        where = run_label(names[k]) if names is not None else f"experiment {k}"
         if idx.size > 1 and c >= 1.0:
             raise NnidInputError(
-                f"filter_lambda = {lam:g} rad/s with samples every {dt:.4g} s (experiment "
-                f"{k}): λ dt/2 = {c:.3g} ≥ 1 turns the discretised filter into an alternating "
+                f"filter_lambda = {lam:g} rad/s with samples every {dt:.4g} s ({where}): "
+                f"λ dt/2 = {c:.3g} ≥ 1 turns the discretised filter into an alternating "
                 f"one, not a low-pass; give filter_lambda below {2.0 / dt:.3g} rad/s (a few "
                 "rad/s is the usual choice)",
+                field="filter_lambda",
+            )
+        if idx.size > 1 and (1.0 - c) / (1.0 + c) == 1.0:
+            # c lost beside 1: the pole rounds to 1, a filter that never moves, whose steady
+            # start is singular (a LinAlgError traceback where the regression's check of the
+            # settling came after the filtering: the loop, the filtered damping models)
+            raise NnidInputError(
+                f"filter_lambda = {lam:g} rad/s with samples every {dt:.4g} s ({where}): "
+                f"λ dt/2 = {c:.3g} is lost beside 1 in floating point, so the discretised "
+                f"filter never moves (it would settle in 3/λ = {3.0 / lam:.3g} s); give a "
+                "filter_lambda of a few rad/s",
                 field="filter_lambda",
             )
         a = np.array([1.0 + c, -(1.0 - c)])
