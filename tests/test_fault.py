@@ -1071,6 +1071,50 @@ def test_follow_holds_a_slow_position_as_batch_not_at_a_made_up_0(
     assert not any("0 before" in line for line in said)
 
 
+def test_a_run_without_a_position_sample_is_nan_in_batch_as_in_follow(
+    monitor, stopped_h1, tmp_path, monkeypatch
+):
+    """A run with no sample of x at all (a GPS that never fixed), beside one that has them:
+    batch detect filled the run's x with a made-up 0 (monitor_inputs) where --follow holds
+    NaN (not yet sampled), so the pose isolation read a vehicle at x = 0 in batch only. Both
+    now hand it NaN, and the kernel, which reads no x, still scores those rows."""
+    import nnid.fault.detect as detect_module
+    import nnid.fault.follow as follow
+
+    _, gps = _slow_gps(stopped_h1.head(700))
+    log = pd.concat(
+        [gps.head(200).assign(experiment="a"), gps.assign(experiment="b", x=np.nan)],
+        ignore_index=True,
+    )
+    log.to_csv(tmp_path / "no_fix.csv", index=False)
+    seen: dict[str, list] = {"batch": [], "follow": []}
+
+    def watching(module, key):
+        judge = module.isolated_alarm
+
+        def isolated_alarm(monitor, data, *args):
+            b = data["experiment"] == list(data["experiment_names"]).index("b")
+            seen[key].append(data["x"][b, 0].copy())
+            return judge(monitor, data, *args)
+
+        monkeypatch.setattr(module, "isolated_alarm", isolated_alarm)
+
+    watching(detect_module, "batch")
+    watching(follow, "follow")
+    batch = detect(monitor, log)
+    followed = follow_csv(monitor, str(tmp_path / "no_fix.csv"), 10.0, lambda _: None, idle_s=0)
+    assert [(a["t"], a["thruster"]) for a in followed.alarms] == [
+        (a["t"], a["thruster"]) for a in batch.alarms
+    ] and [a["thruster"] for a in batch.alarms][:1] == ["h1"]
+    assert seen["batch"] and seen["follow"]
+    assert all(np.isnan(x).all() for x in seen["batch"] + seen["follow"])
+    data = monitor_inputs(log, monitor.plant_)
+    b = data["experiment"] == 1
+    assert np.isnan(data["x"][b, 0]).all() and np.isfinite(data["x"][~b, 0]).all()
+    zero = monitor.run(log.assign(x=log["x"].fillna(0.0)))  # the x that was fed before
+    np.testing.assert_array_equal(monitor.run(log).values, zero.values)
+
+
 def test_a_detect_training_holds_a_slow_gps_position_as_detect_does(vehicle, stopped_h1, tmp_path):
     """nnid train of a config with [detect] masked every motion column, so a 1-Hz GPS x, y
     beside 20-Hz velocities was refused ('x logged every 20th row ...'), though neither the

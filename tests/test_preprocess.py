@@ -183,6 +183,33 @@ def test_resampling_keeps_a_label_column_by_its_previous_value():
     assert list(dict.fromkeys(out["experiment"])) == ["dive#0", "dive#1"]
 
 
+def test_resampling_a_log_at_its_own_rate_changes_nothing():
+    """The grid t0 + k/rate is not the logged k·0.1 in floating point (k/10 and k·0.1, or a
+    cumulative sum of 0.1, differ in the last bits), so a log resampled at its own rate had
+    every value interpolated a rounding away from its sample, an angle unwrapped and wrapped
+    back, and a held input taken from the sample before where the grid fell just short."""
+    n = 300
+    rng = np.random.default_rng(4)
+    run = {
+        "u": rng.normal(size=n),
+        "psi": np.angle(np.exp(1j * (3.0 + 0.07 * np.arange(n)))),  # wraps at ±π
+        "theta": rng.normal(0.0, 0.1, n),
+        "tau_X": np.repeat(rng.normal(size=n // 3), 3),  # held over three samples
+    }
+    log = pd.concat(
+        [
+            pd.DataFrame({"t": np.arange(n) * 0.1, "experiment": "a", **run}),
+            pd.DataFrame({"t": np.cumsum(np.full(n, 0.1)) - 0.1, "experiment": "b", **run}),
+        ],
+        ignore_index=True,
+    )
+    assert np.any(np.arange(n) / 10.0 != log["t"].to_numpy()[:n])  # the grid is not the log's
+    out = resample_log(log, 10.0)
+    assert list(out.columns) == list(log.columns) and len(out) == len(log)
+    for col in log.columns:
+        np.testing.assert_array_equal(out[col].to_numpy(), log[col].to_numpy(), err_msg=col)
+
+
 def test_resampling_does_not_interpolate_a_wrapped_angle_through_zero():
     """A yaw stepping from 3.14 to -3.14 was interpolated through 0 between the two samples: a
     turn of 2.4 rad in 1/13 s that the vehicle never made."""
@@ -382,9 +409,35 @@ def test_runs_joined_without_a_fresh_index_get_each_their_own_velocities():
     a = pd.DataFrame({"t": t, "experiment": "a", "x": np.cos(t), "y": np.sin(t), "z": zero,
                       "phi": zero, "theta": zero, "psi": np.angle(np.exp(3j * t))})  # fmt: skip
     b = a.assign(experiment="b", x=0.5 * t, y=zero, psi=0.2 * t)
-    joined = derive_velocities(pd.concat([a, b]), window_s=0.5)
-    alone = pd.concat([derive_velocities(a, window_s=0.5), derive_velocities(b, window_s=0.5)])
-    pd.testing.assert_frame_equal(joined, alone)
+    # a run of another length, with a gap: the runs of one length are unwrapped together,
+    # the attitude's matrices made for all rows at once; each run's numbers are its own
+    c = a.head(45).assign(experiment="c", psi=np.angle(np.exp(-2j * t[:45])), theta=0.1 * t[:45])
+    c.loc[20, "psi"] = np.nan
+    runs = [a, b, c]
+    joined = derive_velocities(pd.concat(runs), window_s=0.5)
+    alone = pd.concat([derive_velocities(run, window_s=0.5) for run in runs])
+    pd.testing.assert_frame_equal(joined, alone, check_exact=True)  # to the bit
+
+
+def test_an_infinite_pose_or_velocity_is_refused_naming_its_column_and_row():
+    """An inf at a run's end stopped scipy's Savitzky-Golay edge fit ('array must not contain
+    infs or NaNs', naming no column or row), and one inside a run turned the window around it
+    into ±inf and NaN without a word; a NaN time failed as 'cannot convert float NaN to
+    integer'. Each is refused, naming its column and row (the index label)."""
+    t = np.arange(60) * 0.05
+    pose = pd.DataFrame({"t": t, "x": np.sin(t), "y": t, "z": 0 * t, "phi": 0 * t,
+                         "theta": 0 * t, "psi": 0.1 * t}, index=np.arange(60) + 100)  # fmt: skip
+    for col, row, value in [("y", 101, np.inf), ("psi", 130, -np.inf), ("t", 140, np.nan)]:
+        bad = pose.copy()
+        bad.loc[row, col] = value
+        with pytest.raises(NnidInputError, match="not a finite number") as err:
+            derive_velocities(bad, window_s=0.5)
+        assert (err.value.field, err.value.row) == (col, row)
+    velocity = derive_velocities(pose, window_s=0.5)
+    velocity.loc[159, "q"] = np.inf  # the last row: the edge fit
+    with pytest.raises(NnidInputError, match="accelerations") as err:
+        derive_accelerations(velocity, window_s=0.5)
+    assert (err.value.field, err.value.row) == ("q", 159)
 
 
 def _joined_with_repeated_labels() -> pd.DataFrame:

@@ -868,17 +868,28 @@ def _check_finite(df: pd.DataFrame, columns: list[str], source: str, gaps: bool 
 
 
 def refuse_rows(
-    df: pd.DataFrame, col: str, bad: np.ndarray, source: str, why: str, labels: bool = False
+    df: pd.DataFrame,
+    col: str,
+    bad: np.ndarray,
+    source: str | None,
+    why: str,
+    labels: bool = False,
 ) -> None:
     """An error naming the first row ``bad`` flags in ``col`` and how many it flags: its
-    position, or with ``labels`` its index label (the file's row once rows were dropped)."""
+    position, or with ``labels`` its index label (the file's row once rows were dropped; a
+    label that is not a whole number, a DataFrame's own index given in Python, is named in
+    the message)."""
     if bad.any():
         row = int(np.flatnonzero(bad)[0])
+        label = df.index[row] if labels else row
+        whole = isinstance(label, (int, np.integer))
         raise NnidInputError(
-            f"value {shown(df[col].iloc[row])} {why} ({int(bad.sum())} such rows in this column)",
+            f"value {shown(df[col].iloc[row])} {why} ({int(bad.sum())} such rows in this column"
+            + ("" if whole else f"; the first at index {shown(label)}")
+            + ")",
             source=source,
             field=col,
-            row=int(df.index[row]) if labels else row,
+            row=int(label) if whole else None,
         )
 
 

@@ -36,6 +36,7 @@ from nnid.datasets.log import (
     VELOCITY,
     euler_rate_matrices,
     input_columns,
+    refuse_rows,
     run_label,
     wrap_angle,
 )
@@ -165,6 +166,7 @@ def resample_log(
                 continue
             ts = t[seg]
             grid = ts[0] + np.arange(int(np.floor((ts[-1] - ts[0]) * rate + 1e-9)) + 1) / rate
+            on = _snap_to_samples(grid, ts, ON_SAMPLE / rate)
             # the run's clock from its first sample: a later piece starts where it was
             # measured (as mask_gaps's pieces do), so the hole before it stays in the log
             out = {"t": grid - grid[0] + (ts[0] - t[0])}
@@ -175,8 +177,13 @@ def resample_log(
                     out[col] = y[previous]
                 elif col in ANGLES:  # a step across ±π was interpolated through zero
                     a = np.interp(grid, ts, unwrap_finite(y))
-                    # back to ±π where the log had it so (the unwrap step is the config's)
-                    out[col] = wrap_angle(a) if np.nanmax(np.abs(y)) <= np.pi else a
+                    # back to ±π where the log had it so (the unwrap step is the config's);
+                    # a sample on the grid as logged, not unwrapped and wrapped back (2πk
+                    # added and taken away moves its last bits)
+                    if np.nanmax(np.abs(y)) <= np.pi:
+                        a = wrap_angle(a)
+                        a[on] = y[previous[on]]
+                    out[col] = a
                 else:
                     out[col] = np.interp(grid, ts, y)
             for col in categorical:
@@ -219,6 +226,21 @@ def resample_log(
 
 #: how far :func:`resample_log` may move a log's rate before it is warned of
 RESAMPLE_RATIO = 2.0
+#: how near (a share of the grid's interval) a grid time of :func:`resample_log` must be to a
+#: logged time to be that sample: k/rate is not the logged k·Δt in floating point (k/10 and
+#: k·0.1 differ in the last bits), which moved every value of a log resampled at its own rate
+ON_SAMPLE = 1e-9
+
+
+def _snap_to_samples(grid: np.ndarray, ts: np.ndarray, tolerance: float) -> np.ndarray:
+    """Set each time of ``grid`` within ``tolerance`` of a time of ``ts`` (increasing) to that
+    time, in place, and return where: np.interp gives such a sample exactly, and a held value
+    is the sample's own, never the one before."""
+    k = np.clip(np.searchsorted(ts, grid), 1, max(ts.size - 1, 1))
+    nearest = np.where(np.abs(ts[k - 1] - grid) <= np.abs(ts[k] - grid), k - 1, k)
+    on = np.abs(ts[nearest] - grid) <= tolerance
+    grid[on] = ts[nearest[on]]
+    return on
 
 
 def unwrap_finite(angle: np.ndarray) -> np.ndarray:
@@ -241,14 +263,32 @@ def unwrap_angles(log: pd.DataFrame, report: CleaningReport | None = None) -> pd
         if col not in out:
             continue
         raw = out[col].to_numpy(np.float64)
-        angle = raw.copy()
-        for _, pos in runs:
-            angle[pos] = unwrap_finite(raw[pos])
+        angle = _unwrap_runs(raw, runs)
         changed = int(np.sum(np.abs(angle - raw) > 1e-12))
         out[col] = angle
         if report is not None and changed:
             report.add("unwrap", f"{col}: {changed} samples shifted by multiples of 2π")
     return out
+
+
+def _unwrap_runs(raw: np.ndarray, runs: list[tuple[object, np.ndarray]]) -> np.ndarray:
+    """:func:`unwrap_finite` of each run of ``raw`` (row positions, :func:`experiment_rows`).
+    The runs without an empty cell are unwrapped by length, each length's runs as the rows of
+    one array (``np.unwrap`` along them is ``np.unwrap`` of each row, to the bit): a call per
+    run is a fixed cost per run, on a log a reader cut into thousands of runs
+    (benchmarks/bench_runs.py)."""
+    angle = raw.copy()
+    finite = np.isfinite(raw)
+    by_length: dict[int, list[np.ndarray]] = {}
+    for _, pos in runs:
+        if finite[pos].all():
+            by_length.setdefault(pos.size, []).append(pos)
+        else:
+            angle[pos] = unwrap_finite(raw[pos])
+    for group in by_length.values():
+        rows = np.stack(group)
+        angle[rows] = np.unwrap(raw[rows], axis=1)
+    return angle
 
 
 # --- Savitzky-Golay ---------------------------------------------------------------------------
@@ -300,8 +340,7 @@ def savgol_derivative(
             field="savgol.window",
         )
     y = np.asarray(y, dtype=np.float64)
-    if len(y) < window:
-        raise too_short_for_window(where, len(y), window, setting)
+    _check_window_fits(len(y), window, where, setting)
     missing = np.isnan(y)
     steps = None if steps is None else np.asarray(steps, dtype=np.int64)
     if not missing.any() and steps is None:
@@ -333,6 +372,33 @@ def too_short_for_window(
         + (f": give a shorter {setting} or a longer run" if setting else ""),
         field=setting,
     )
+
+
+def _check_window_fits(n: int, window: int, where: str, setting: str | None) -> None:
+    """Refuse ``n`` samples of ``where`` as too few for the Savitzky-Golay ``window``
+    (``setting``: the user's key that chose it, named)."""
+    if n < window:
+        raise too_short_for_window(where, n, window, setting)
+
+
+def _refuse_infinite(log: pd.DataFrame, columns: Sequence[str], what: str) -> None:
+    """Refuse an infinite value in ``columns`` of ``log``, or in ``t`` any value that is not a
+    finite number, naming its column and row (the row's index label: the file's row for a
+    log as read): an empty cell is a gap, which a Savitzky-Golay derivative (``what``) leaves
+    out, but an inf at a run's end stopped scipy's edge fit with a message that named neither,
+    and one inside a run turned the window around it into ±inf and NaN without a word."""
+    for col in columns:
+        values = log[col].to_numpy(np.float64)
+        bad = ~np.isfinite(values) if col == "t" else np.isinf(values)
+        refuse_rows(
+            log,
+            col,
+            bad,
+            None,
+            f"is not a finite number, which {what} by Savitzky-Golay needs"
+            + ("" if col == "t" else "; an empty cell would be a gap, left out"),
+            labels=True,
+        )
 
 
 def _between_steps(
@@ -557,18 +623,28 @@ def derive_velocities(
     derivable = derivable_velocities(have)
     if not derivable:
         raise NnidInputError("deriving body velocities needs phi, theta and psi", field="phi")
+    _refuse_infinite(log, ["t", *have], "deriving velocities from the pose")
     out = unwrap_angles(log)
     new = {c: np.full(len(out), np.nan) for c in VELOCITY}
     tilted = short = 0
     # each column read once and each run's rows taken by position: looking a run's labels up
     # in the whole log cost rows × runs, and a label repeated (pd.concat) read another run
     column = {c: out[c].to_numpy(np.float64) for c in ("t", *have)}
-    for name, pos in experiment_rows(out):
+    runs = []  # every run's window checked before any is derived: one too short was refused
+    for name, pos in experiment_rows(out):  # after the work on every run before it
         dt = float(np.median(np.diff(column["t"][pos])))
         window = savgol_window(window_s, 1.0 / dt, order, "savgol_window")
         if short_piece(out, pos, window):
             short += len(pos)
             continue
+        _check_window_fits(len(pos), window, run_label(name), "savgol_window")
+        runs.append((name, pos, dt, window))
+    # T_Θ⁻¹ and J₁ of every row in one call each (row by row the same numbers): once per run,
+    # scipy's Rotation was a fixed cost per run on a log of many short runs (bench_runs.py)
+    angles = np.stack([column[a] for a in ANGLES], 1)
+    inverse = euler_rate_matrices(angles, inverse=True)
+    turn = rotation_from_euler(angles) if "u" in derivable else None
+    for name, pos, dt, window in runs:
         rates = {
             c: savgol_derivative(
                 column[c][pos],
@@ -580,22 +656,20 @@ def derive_velocities(
             )
             for c in have
         }
-        angles = np.stack([column[a][pos] for a in ANGLES], 1)
-        phi, theta = angles[:, 0], angles[:, 1]
+        # a run's rows in one stretch (ascending positions) as a view: no copy of its matrices
+        rows = slice(pos[0], pos[-1] + 1) if pos[-1] - pos[0] + 1 == pos.size else pos
         dphi, dth, dpsi = rates["phi"], rates["theta"], rates["psi"]
-        body_rates = np.einsum(
-            "nij,nj->ni", euler_rate_matrices(angles, inverse=True), np.stack([dphi, dth, dpsi], 1)
-        )
+        body_rates = np.einsum("nij,nj->ni", inverse[rows], np.stack([dphi, dth, dpsi], 1))
         new["p"][pos], new["q"][pos], new["r"][pos] = body_rates.T
-        if "u" in derivable:
+        if turn is not None:
             ned = np.stack([rates["x"], rates["y"], rates["z"]], 1)
-            body = np.einsum("nji,nj->ni", rotation_from_euler(angles), ned)  # J₁ᵀ ṗ
+            body = np.einsum("nji,nj->ni", turn[rows], ned)  # J₁ᵀ ṗ
             for k, c in enumerate(("u", "v", "w")):
                 new[c][pos] = body[:, k]
         elif "w" in derivable:
             # ż = −sθ u + cθsφ v + cθcφ w: w ≈ ż/(cθcφ) holds only near level; the divisor
             # is kept at 0.5 or more (60° of tilt) so that it cannot blow up
-            tilt = np.cos(theta) * np.cos(phi)
+            tilt = np.cos(column["theta"][pos]) * np.cos(column["phi"][pos])
             tilted += int(np.sum(np.abs(tilt) < 0.5))
             new["w"][pos] = rates["z"] / np.copysign(np.maximum(np.abs(tilt), 0.5), tilt)
     made = []
@@ -690,9 +764,8 @@ def check_acceleration_window(
     window of ``window_s`` s, said before a fit whose scores would derive them (a hybrid's
     training of minutes ended in it)."""
     for name, pos, _, window, _ in _derivative_runs(log, window_s, order, [], None):
-        if window is not None and len(pos) < window:
-            where = f"the {part} part's {run_label(name)}"
-            raise too_short_for_window(where, len(pos), window, setting)
+        if window is not None:
+            _check_window_fits(len(pos), window, f"the {part} part's {run_label(name)}", setting)
 
 
 def derive_accelerations(
@@ -705,8 +778,9 @@ def derive_accelerations(
     """ν̇ (``du`` … ``dr``) by SG differentiation of the body velocities present;
     ``cut_at_steps`` (inputs held between samples, ``zoh_midpoint``): never across a step of
     the inputs that look held (:func:`held_inputs`, :func:`_between_steps`)."""
+    cols = [c for c in VELOCITY if c in log]
+    _refuse_infinite(log, ["t", *cols], "deriving accelerations from the velocities")
     out = log.copy()
-    cols = [c for c in VELOCITY if c in out]
     held = held_inputs(log) if cut_at_steps else []
     short = cuts = 0
     # each run's rows by position: a run's labels may repeat another's (pd.concat)

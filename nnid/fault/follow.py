@@ -73,6 +73,7 @@ from nnid.fault.monitor import (
     ResidualMonitor,
     Trace,
     input_columns,
+    kernel_state,
     monitor_motion,
 )
 from nnid.reports.cells import missing, number
@@ -271,6 +272,7 @@ def follow_csv(
     # cell holds its run's last sample, said once a column, as batch detect holds it unmasked
     unread = [c for c in POSE if c in col and c not in monitor_motion(header)]
     kept_unread, said_held = frozenset(unread), set()
+    unread_at = np.array([STATE.index(c) for c in unread], dtype=np.int64)  # kernel_state
     # which cells of each buffered row were held, not read: the unit checks see them empty,
     # as the whole-log reader does (a held depth read as a jump that w does not make)
     nothing_held = np.zeros(len(STATE), dtype=bool)
@@ -565,7 +567,7 @@ def follow_csv(
             except NnidInputError as exc:
                 raise exc.with_source(where) from None
         # the kernel scores no row with a value that is not finite, and reads no x, y, z
-        code = stream.update(t, np.nan_to_num(x) if np.isnan(x).any() else x, u)
+        code = stream.update(t, kernel_state(x, unread_at), u)
         ts.append(t)
         xs.append(x.copy())
         empty = [c for c in unread if c not in values]

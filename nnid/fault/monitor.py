@@ -147,8 +147,10 @@ def monitor_inputs(log: pd.DataFrame, plant) -> dict[str, np.ndarray]:
     """Time, state [N, 12] (velocities derived from the pose where the log lacks them, by the
     model's Savitzky-Golay setting) and the input channels [N, n] the kernel maps to forces.
     An empty cell of a pose column the residual does not read (:func:`monitor_motion`: a 1-Hz
-    GPS x, y beside a 20-Hz DVL) takes its run's nearest sample, so the kernel, which scores
-    no row with a value that is not finite, scores that row; its value changes no residual."""
+    GPS x, y beside a 20-Hz DVL) takes its run's nearest sample, and stays NaN in a run with
+    no sample of it, as ``--follow`` holds it (:mod:`nnid.fault.follow`): not a made-up 0 for
+    the isolation to read. ``unread``: those columns of the state, which the kernel is fed
+    as 0 where NaN (:func:`kernel_state`), so that it scores the row; they change no residual."""
     from nnid.datasets.gaps import nearest_samples
     from nnid.models.parametric import prepare_motion
 
@@ -170,15 +172,28 @@ def monitor_inputs(log: pd.DataFrame, plant) -> dict[str, np.ndarray]:
     data = motion_arrays(log)
     read = monitor_motion(log.columns)
     unread = [k for k, c in enumerate(POSE) if c in log and c not in read]
-    if unread:  # 0 where a run has no sample of one: read by no equation either
-        data["eta"][:, unread] = np.nan_to_num(nearest_samples(log, data["eta"][:, unread]))
+    if unread:  # NaN where a run has no sample of one: not sampled, read by no equation
+        data["eta"][:, unread] = nearest_samples(log, data["eta"][:, unread])
     return {
         "t": data["t"],
         "x": np.ascontiguousarray(np.concatenate([data["eta"], data["nu"]], 1)),
         "inputs": np.ascontiguousarray(log[cols].to_numpy(np.float64)),
         "experiment": data["experiment"],
         "experiment_names": data["experiment_names"],
+        "unread": np.array(unread, dtype=np.int64),
     }
+
+
+def kernel_state(x: np.ndarray, unread: np.ndarray) -> np.ndarray:
+    """The state ``x`` ([12] or [N, 12]) as the kernel is fed it: a NaN in one of the
+    ``unread`` columns (a pose the residual never reads, not yet sampled in its run) as 0.
+    The kernel scores no row with a value that is not finite, and reads no x, y, z; the
+    arrays the isolation reads keep the NaN."""
+    if not unread.size or not np.isnan(x[..., unread]).any():
+        return x
+    out = x.copy()
+    out[..., unread] = np.nan_to_num(x[..., unread])
+    return out
 
 
 @dataclass
@@ -274,7 +289,7 @@ class ResidualMonitor(BaseEstimator):
             out = kernel.run_blocks(
                 starts,
                 data["t"],
-                data["x"],
+                kernel_state(data["x"], data.get("unread", np.zeros(0, np.int64))),
                 data["inputs"],
                 cfg,
                 self.form_,
