@@ -31,6 +31,7 @@ subprocess, and the ratio of its per-flush time to this tree's.
 
 from __future__ import annotations
 
+import argparse
 import datetime
 import io
 import json
@@ -446,6 +447,27 @@ def _at_revision(rev: str) -> dict:
     return json.loads(out.strip().splitlines()[-1])
 
 
+MODES = {"speed": speed, "scenarios": scenarios, "ended": ended, "follow": follow}
+
+
+def parser() -> argparse.ArgumentParser:
+    """The command line: a mode (the module docstring says what each measures) and, for
+    ``follow``, the revision it is compared with."""
+    ap = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    ap.add_argument("mode", nargs="?", default="speed", choices=list(MODES),
+                    help="what to measure (default: speed)")  # fmt: skip
+    ap.add_argument("rev", nargs="?", help="follow only: a git revision to compare with")
+    # follow's subprocess on another revision's tree prints its numbers as JSON (follow reads
+    # sys.argv itself): not for a person
+    ap.add_argument("--json", action="store_true", help=argparse.SUPPRESS)
+    return ap
+
+
 if __name__ == "__main__":
-    modes = {"speed": speed, "scenarios": scenarios, "ended": ended, "follow": follow}
-    modes[sys.argv[1] if len(sys.argv) > 1 else "speed"]()
+    ap = parser()
+    args = ap.parse_args()
+    if (args.rev or args.json) and args.mode != "follow":
+        ap.error(f"{args.mode} takes no revision: only follow compares with one")
+    MODES[args.mode]()

@@ -87,6 +87,9 @@ def _once(names: list[str]) -> list[str]:
 
 #: a list of names, or DOFs, each given once (``dofs = ["u", "u"]`` is a typo, not a weight)
 Names = Annotated[list[str], AfterValidator(_once)]
+#: a name that heads a report's rows and columns (a model's, a reference's): a visible
+#: character, on one line, as a vehicle's name
+Label = Annotated[str, AfterValidator(vehicle_name)]
 Dofs = Annotated[list[Dof], Field(min_length=1), AfterValidator(_once)]
 
 
@@ -493,7 +496,7 @@ class _Model(StrictModel):
     """A model table: ``kind`` and the model's constructor arguments; ``name`` labels it in a
     comparison (default: its kind)."""
 
-    name: str | None = None
+    name: Label | None = None
 
     @field_validator("trainer", mode="before", check_fields=False)
     @classmethod
@@ -985,7 +988,7 @@ class TrainConfig(_Command):
     warmup_s: float = Field(1.0, ge=0, allow_inf_nan=False)
     k_step_s: Duration | None = None
     reference: dict[str, float] = Field(default_factory=dict)
-    reference_label: str = "reference"
+    reference_label: Label = "reference"
     # m/s; below a micrometre per second its square underflows the prime-system scale
     nondimensional_speed: Annotated[float, Field(ge=1e-6)] | None = None
     detect: DetectSpec | None = None

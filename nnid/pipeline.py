@@ -819,6 +819,28 @@ def replay_of(inputs: Inputs, log: pd.DataFrame) -> Replay | None:
     return Replay(sim.autopilot, open_loop_inputs(sim, log))
 
 
+def unreplayed(cfg: CompareConfig, inputs: Inputs, replay: Replay | None) -> list[str]:
+    """The warning that a compare config's ``replay_autopilot = true``, written, replays
+    nothing on this log (``replay`` None), else none. The replay regenerates the autopilot's
+    open-loop inputs from the simulate config that flew the log, which a log file has not; the
+    key is said, not refused, as a config runs on any log (``--data``), flown under an
+    autopilot or not, and the default (true, unwritten) replays where there is one."""
+    if replay is not None or not cfg.replay_autopilot:
+        return []
+    if "replay_autopilot" not in cfg.model_fields_set:
+        return []
+    lacks = (
+        "its simulate config has no [autopilot] table"
+        if inputs.simulation is not None
+        else "it is a log file, not a [data] simulate config run here, whose autopilot the "
+        "replay regenerates"
+    )
+    return [
+        f"replay_autopilot = true, but the log was flown under no autopilot to replay ({lacks}): "
+        "every model's free run and k-step predictions are driven by the logged inputs, open loop"
+    ]
+
+
 @dataclass
 class TrainResult:
     model: Any
@@ -1110,6 +1132,7 @@ def run_compare(
     )
     models = [build_model(spec, inputs, cfg.warmup_s) for spec in cfg.models]
     replay = replay_of(inputs, inputs.log) if cfg.replay_autopilot else None
+    said = [*said, *unreplayed(cfg, inputs, replay)]
     read = read_motion(models, inputs.log, replay)
     split = make_split(
         inputs.log, cfg.split, source, inputs.report, cfg.warmup_s, inputs.source, read

@@ -65,16 +65,23 @@ MIN_WINDOW_S = 0.5
 MAX_FALSE_ALARMS_PER_HOUR = 3600.0
 
 
+#: the Unicode categories of a character that has no place in one line of text: the control
+#: characters (a line break, a tab, \x00-\x1f, \x7f-\x9f) and the line and paragraph
+#: separators U+2028 and U+2029, which are none, yet str.splitlines breaks at them as at \n
+_NOT_ONE_LINE = ("Cc", "Zl", "Zp")
+
+
 def control_character(text: str) -> str | None:
     """The first control character of ``text`` (a line break, a tab, ``\\x00``-``\\x1f``,
-    ``\\x7f`` …), or None."""
-    return next((c for c in text if unicodedata.category(c) == "Cc"), None)
+    ``\\x7f`` …) or Unicode line or paragraph separator (U+2028, U+2029), or None: every
+    character ``str.splitlines`` breaks at is one."""
+    return next((c for c in text if unicodedata.category(c) in _NOT_ONE_LINE), None)
 
 
 def one_line(name: str) -> str:
     """``name`` if it is one line of text (no :func:`control_character`), else a ValueError
-    saying which: a name labels report lines and headings (a vehicle's, a run's), which a line
-    break or another control character would break."""
+    saying which: a name labels report lines and headings (a vehicle's, a run's, a model's),
+    which a line break, a line separator or another control character would break."""
     control = control_character(name)
     if control is not None:
         raise ValueError(f"a name is one line of text, without {control!r}")

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import math
 import tomllib
-import unicodedata
 import warnings
 from importlib import resources
 from pathlib import Path
@@ -199,10 +198,11 @@ def saved_vehicle(data: dict[str, Any], source: str = "<saved model>") -> Vehicl
     as saved, with a warning: the model predicts what it did, that thruster pushing nothing."""
     name = data.get("name") if isinstance(data, dict) else None
     if isinstance(name, str) and control_character(name) is not None:
-        shown = "".join(repr(c)[1:-1] if unicodedata.category(c) == "Cc" else c for c in name)
+        shown = "".join(repr(c)[1:-1] if control_character(c) else c for c in name)
         warnings.warn(
-            f"{source}: the vehicle name {name!r} holds a control character, which names no "
-            f"longer may (it would break a report's lines); loaded as {shown!r}",
+            f"{source}: the vehicle name {name!r} holds a control character or a line "
+            "separator, which names no longer may (it would break a report's lines); loaded "
+            f"as {shown!r}",
             UserWarning,
             stacklevel=2,
         )

@@ -407,6 +407,39 @@ def _log_cases() -> list[Case]:
         field = {n: f for n, f, _ in LOG_CASES}[name]
         cases.append(Case(f"detect --follow: {name}", followed, ("LOG", field, "row ")))
 
+    def quoted_break_followed(tmp, fx):  # "dive<newline>1" quoted: its halves were said as rows
+        # of too few fields "(a decimal comma, or a cell with a comma in it?)"
+        log = fx["octo_log"].assign(experiment="dive\n1")
+        return [*_command("detect", tmp, fx, data=_write_log(tmp, "quoted", log)), "--follow"]
+
+    cases.append(
+        Case(
+            "detect --follow: a line break inside a quoted experiment label",
+            quoted_break_followed,
+            ("LOG", "column 'experiment', row 0", "line break inside quotes"),
+        )
+    )
+
+    def table_label(tmp, fx, label):  # a generic table's rows of no run: taken without a word
+        config = tmp / "narx_table.toml"
+        config.write_text(NARX_TRAIN.replace("[split]", '[data]\nkind = "table"\n\n[split]'))
+        log = fx["demo_log"].astype({"experiment": object})
+        log.loc[20:21, "experiment"] = label
+        return _command("train", tmp, fx, data=_write_log(tmp, "table", log), config=config)
+
+    for label, said in (
+        (np.nan, "empty experiment label"),
+        (" ", "empty experiment label"),
+        ("dive\u20281", "one line"),
+    ):
+        cases.append(
+            Case(
+                f"train: a generic table's experiment label {label!r}",
+                functools.partial(table_label, label=label),
+                ("LOG", "column 'experiment', row 20", said),
+            )
+        )
+
     def parquet_followed(tmp, fx):  # read as text, row by row: a UnicodeDecodeError traceback
         path = tmp / "octo.parquet"
         fx["octo_log"].to_parquet(path, index=False)
@@ -755,6 +788,23 @@ CONFIG_CASES = [
         None,
     ),
     ("train", "sindy filter of 1e-300 rad per s", ("model.filter_lambda", "lost beside 1"), None),
+    # accepted, exit 0: a model's name and the reference's label head the reports' rows and
+    # columns, which a line break or a tab broke, and a blank one labelled nothing
+    ("compare", "a model name with a tab", ("models.0.name", "one line"), None),
+    ("compare", "a model name of spaces", ("models.1.name", "visible character"), None),
+    ("train", "a model name on two lines", ("model.name", "one line"), None),
+    (
+        "train",
+        "a reference label on two lines",
+        ("reference_label", "one line"),
+        ("k_step_s = 1.0", 'k_step_s = 1.0\nreference_label = "Weiss\\nTable 3"'),
+    ),
+    (
+        "train",
+        "a blank reference label",
+        ("reference_label", "visible character"),
+        ("k_step_s = 1.0", 'k_step_s = 1.0\nreference_label = "  "'),
+    ),
 ]
 LOOP_TEXT = {
     "unknown dof": 'kind = "loop"\ndofs = ["u", "x"]\n',
@@ -799,6 +849,11 @@ MODEL_TEXT = {
     "second model input not in the log": (
         f"[[models]]{TRAIN_TEXT.split('[model]')[1]}[[models]]\n{_NARX.replace('tau_Z', 'tau_Q')}"
     ),
+    "a model name with a tab": f'[[models]]{TRAIN_TEXT.split("[model]")[1]}name = "fossen\\tls"\n',
+    "a model name of spaces": (
+        f'[[models]]{TRAIN_TEXT.split("[model]")[1]}[[models]]\n{_NARX}name = "   "\n'
+    ),
+    "a model name on two lines": f'[model]\n{_NARX}name = "narx\\n1"\n',
 }
 
 
@@ -1899,3 +1954,58 @@ def test_a_savgol_window_longer_than_a_scored_run_is_refused_before_any_fit(
     assert result.exit_code == 2 and len(errors) == 1, result.output
     assert errors[0].startswith(f"error: {config}, field '{said}': the validation part's ")
     assert "too few for the Savitzky-Golay window of 81 samples" in errors[0], errors[0]
+
+
+def test_every_character_splitlines_breaks_at_is_refused_in_a_name_and_a_run_label(tmp_path):
+    """U+2028 and U+2029 (line and paragraph separators) are no control characters: a run
+    labelled "dive<U+2028>1" was read, and every report line naming it split in two."""
+    from nnid.datasets.readers import read_log
+    from nnid.errors import NnidInputError
+    from nnid.validation import one_line
+
+    breaks = [c for c in map(chr, range(0x110000)) if len(f"a{c}b".splitlines()) > 1]
+    assert {"\n", "\r", "\x85", "\u2028", "\u2029"} <= set(breaks)
+    log = pd.DataFrame({"t": [0.0, 0.1, 0.0, 0.1], "u": 0.0, "tau_X": 1.0})
+    for c in breaks:
+        with pytest.raises(ValueError, match="one line of text"):
+            one_line(f"dive{c}1")
+        path = tmp_path / "log.parquet"
+        log.assign(experiment=["run0", "run0", f"dive{c}1", f"dive{c}1"]).to_parquet(path)
+        with pytest.raises(NnidInputError) as err:
+            read_log(path)
+        said = str(err.value)
+        assert said.startswith(f"{path}, column 'experiment', row 2: experiment label"), said
+        assert repr(f"dive{c}1") in said, said
+
+
+@pytest.mark.parametrize(
+    ("written", "simulation", "said"),
+    [
+        ("replay_autopilot = true\n", False, "it is a log file"),
+        ("replay_autopilot = true\n", True, "its simulate config has no [autopilot] table"),
+        ("", False, None),  # the default replays where the log was flown under one: no word
+        ("replay_autopilot = false\n", False, None),
+    ],
+)
+def test_a_written_autopilot_replay_on_a_log_flown_under_none_is_said(
+    tmp_path, written, simulation, said
+):
+    """replay_autopilot = true on a log file was not applied, and only comparison.json's
+    autopilot_replay: false showed it; the free runs compared were open loop."""
+    from nnid.config import CompareConfig, SimulateConfig, load_config
+    from nnid.datasets.cleaning import CleaningReport
+    from nnid.pipeline import Inputs, unreplayed
+
+    config = tmp_path / "cmp.toml"
+    config.write_text(f'kind = "compare"\n{written}[[models]]\nkind = "fossen"\n')
+    cfg = load_config(config, CompareConfig)
+    sim = load_config(SIMULATE, SimulateConfig) if simulation else None
+    assert sim is None or sim.autopilot is None
+    inputs = Inputs(pd.DataFrame({"t": [0.0]}), CleaningReport(), simulation=sim)
+    warned = unreplayed(cfg, inputs, None)
+    if said is None:
+        assert warned == []
+        return
+    assert len(warned) == 1 and warned[0].startswith("replay_autopilot = true, but the log")
+    assert said in warned[0] and "open loop" in warned[0], warned[0]
+    assert unreplayed(cfg, inputs, replay=object()) == []  # replayed: nothing to say

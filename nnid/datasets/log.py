@@ -1107,8 +1107,9 @@ def validate_table(
 ) -> pd.DataFrame:
     """Check a generic input-output table (a benchmark, a plant that is not a vehicle): a time
     column ``t`` strictly increasing within each experiment (``require_time=False``: only if
-    there is one) and the named ``columns`` present and finite. Returns it unchanged; other
-    columns are kept and ignored."""
+    there is one), the named ``columns`` present and finite, and every experiment label
+    given, on one line, as a vehicle log's. Returns it unchanged; other columns are kept and
+    ignored."""
     timed = require_time or "t" in df.columns
     needed = ["t", *columns] if timed else list(columns)
     missing = [c for c in needed if c not in df.columns]
@@ -1117,6 +1118,8 @@ def validate_table(
     if len(df) == 0:
         raise NnidInputError("the table has no rows", source=source)
     _check_finite(df, needed, source)
+    # a row of no run was dropped by the per-run steps without a word (as in a vehicle log)
+    _check_experiments(df, source)
     if timed:
         _check_time(df, source)
     return df

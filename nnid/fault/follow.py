@@ -102,18 +102,35 @@ IDLE_S = 3.0
 RATE_UNIT_EVERY_S = 5.0
 
 
-def _parse(line: str, source: str, count: int, sep: str = ",") -> list[str]:
+def _parse(line: str, source: str, count: int, sep: str = ",", header: str = "") -> list[str]:
     """One CSV line as cells, split at ``sep`` with the spaces after it dropped, as the
     whole-log reader splits them; a line the CSV reader refuses (a bare carriage return inside
-    a field) is named by its data row, counted as the whole-log reader counts them."""
+    a field) is named by its data row, counted as the whole-log reader counts them, and so is
+    a field that holds a line break inside quotes (a label ``"dive<newline>1"``): --follow
+    reads a row a line, and its halves were said as rows of too few fields. ``header``: the
+    header line, whose column the quoted field is named by."""
+    where = "stdin" if source == "-" else source
     try:
-        return next(csv.reader([line], delimiter=sep, skipinitialspace=True))
+        cells = next(csv.reader([line], delimiter=sep, skipinitialspace=True))
     except csv.Error as exc:
         raise NnidInputError(
-            f"is not a CSV row ({exc})",
-            source="stdin" if source == "-" else source,
-            row=count - 1 if count else None,
+            f"is not a CSV row ({exc})", source=where, row=count - 1 if count else None
         ) from None
+    # a quote left open at the line's end holds the line break: the reader puts it in the last
+    # cell, where a closed row never has one (the reader takes the line's own end off)
+    if cells and cells[-1].endswith(("\n", "\r")):
+        names = (
+            next(csv.reader([header], delimiter=sep, skipinitialspace=True), []) if count else []
+        )
+        column = names[len(cells) - 1].strip() if len(cells) <= len(names) else None
+        raise NnidInputError(
+            f"a field holds a line break inside quotes ({cells[-1].rstrip()[:40]!r} then the "
+            "next line): --follow reads one row a line; write the field on one line",
+            source=where,
+            field=column,
+            row=count - 1 if count else None,
+        )
+    return cells
 
 
 def _decoded(line: bytes, source: str, count: int) -> str:
@@ -163,7 +180,7 @@ def _rows(source: str, idle_s: float, dialect: dict | None = None):
             if count <= 1:  # the separator from the header, the decimal mark from a row
                 header = header or text
                 found.update(csv_dialect(header, text if count else ""))
-            yield _parse(text, source, count, found.get("sep", ","))
+            yield _parse(text, source, count, found.get("sep", ","), header)
             count += 1
     finally:
         if handle is not stdin:
