@@ -397,6 +397,10 @@ needs_ray = pytest.mark.skipif(
 )
 
 
+#: the raylet's setting for worker processes at nice 0 (:func:`ray_at_normal_priority`)
+NORMAL_PRIORITY = ("RAY_worker_niceness", "0")
+
+
 @pytest.fixture
 def ray_at_normal_priority(monkeypatch):
     """Ray starts its worker processes at nice 15 (its ``worker_niceness``), so that its own
@@ -404,23 +408,7 @@ def ray_at_normal_priority(monkeypatch):
     of a core, and a sweep that takes 21 s alone took 84 s beside one busy process (33 s at
     nice 0). The raylet reads the setting from its environment when it starts; a test
     setting, not the library's (a user's Ray keeps its own)."""
-    monkeypatch.setenv("RAY_worker_niceness", "0")
-
-
-@needs_ray
-@pytest.mark.usefixtures("ray_at_normal_priority")
-def test_ray_local_instance(fleet, serial, tmp_path) -> None:
-    import ray
-
-    serial_out, _ = serial
-    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False, configure_logging=False)
-    try:
-        out = tmp_path / "ray"
-        _, result = _run(RayEngine(), fleet, out)
-        assert result.engine == "ray" and result.slots == 2
-        _check_rows(result, serial_out, out)
-    finally:
-        ray.shutdown()
+    monkeypatch.setenv(*NORMAL_PRIORITY)
 
 
 @needs_ray
@@ -572,44 +560,63 @@ def test_sweep_missing_scores_rank_last_and_bad_options_are_refused(sweep_inputs
         SweepSpec(grid={"warmup_s": [1.0, 2.0]}, random={"warmup_s": [1.5]}, samples=1)
 
 
-@needs_ray
-@pytest.mark.usefixtures("ray_at_normal_priority")
-def test_sweep_on_ray_tune_with_asha(sweep_inputs, tmp_path) -> None:
-    """The same sweep through Ray Tune: ASHA reads the trainers' per-epoch validation
-    objective; a trial it stops is a 'stopped' row that says when, never a score."""
+@pytest.fixture(scope="class")
+def local_ray():
+    """A local Ray instance of 2 CPUs, its workers at nice 0 (:func:`ray_at_normal_priority`),
+    shared by the tests of a class: starting and stopping one took about 8 s a test. Shut
+    down after the class, before a test that starts a cluster of its own."""
     import ray
 
-    from nnid.scale.sweep import run_sweep_tune
-
-    config, data = sweep_inputs
-    # ranked on the one-step score, which these one-stage trials report every epoch
-    one_step = tmp_path / "one_step.toml"
-    one_step.write_text(
-        config.read_text().replace("[sweep]\n", '[sweep]\nmetric = "one_step_nrmse"\n')
-    )
-    out = tmp_path / "tune"
-    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False, configure_logging=False)
+    with pytest.MonkeyPatch.context() as mp:  # the raylet reads it when it starts
+        mp.setenv(*NORMAL_PRIORITY)
+        ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False, configure_logging=False)
     try:
-        result, ranked = run_sweep_tune(one_step, out, None, data=str(data))
+        yield
     finally:
         ray.shutdown()
-    assert result.engine == "ray tune (ASHA)" and len(result.rows) == 4
-    statuses = {r["status"] for r in result.rows}
-    assert statuses <= {"ok", "stopped"} and "ok" in statuses
-    for row in result.rows:
-        assert row["epochs"] >= 2  # the grace period: every trial reached the first rung
-        if row["status"] == "stopped":
-            assert "stopped early by ASHA" in row["error"]
-            assert not (out / row["id"] / "metrics.json").exists()
-        else:
-            metrics = json.loads((out / row["id"] / "metrics.json").read_text())
-            assert (
-                row["validation_one_step_nrmse"] == metrics["validation"]["one_step_nrmse"]["total"]
-            )
-    early = result.extra["sweep"]["early_stopping"]
-    assert early["stopped"] == sum(r["status"] == "stopped" for r in result.rows)
-    assert (out / "settings.csv").is_file() and (out / "report.html").is_file()
-    assert ranked[0].mean is not None and (out / "best.toml").is_file()
+
+
+@needs_ray
+@pytest.mark.usefixtures("local_ray")
+class TestOnALocalRay:
+    def test_ray_local_instance(self, fleet, serial, tmp_path) -> None:
+        serial_out, _ = serial
+        out = tmp_path / "ray"
+        _, result = _run(RayEngine(), fleet, out)
+        assert result.engine == "ray" and result.slots == 2
+        _check_rows(result, serial_out, out)
+
+    def test_sweep_on_ray_tune_with_asha(self, sweep_inputs, tmp_path) -> None:
+        """The same sweep through Ray Tune: ASHA reads the trainers' per-epoch validation
+        objective; a trial it stops is a 'stopped' row that says when, never a score."""
+        from nnid.scale.sweep import run_sweep_tune
+
+        config, data = sweep_inputs
+        # ranked on the one-step score, which these one-stage trials report every epoch
+        one_step = tmp_path / "one_step.toml"
+        one_step.write_text(
+            config.read_text().replace("[sweep]\n", '[sweep]\nmetric = "one_step_nrmse"\n')
+        )
+        out = tmp_path / "tune"
+        result, ranked = run_sweep_tune(one_step, out, None, data=str(data))
+        assert result.engine == "ray tune (ASHA)" and len(result.rows) == 4
+        statuses = {r["status"] for r in result.rows}
+        assert statuses <= {"ok", "stopped"} and "ok" in statuses
+        for row in result.rows:
+            assert row["epochs"] >= 2  # the grace period: every trial reached the first rung
+            if row["status"] == "stopped":
+                assert "stopped early by ASHA" in row["error"]
+                assert not (out / row["id"] / "metrics.json").exists()
+            else:
+                metrics = json.loads((out / row["id"] / "metrics.json").read_text())
+                assert (
+                    row["validation_one_step_nrmse"]
+                    == metrics["validation"]["one_step_nrmse"]["total"]
+                )
+        early = result.extra["sweep"]["early_stopping"]
+        assert early["stopped"] == sum(r["status"] == "stopped" for r in result.rows)
+        assert (out / "settings.csv").is_file() and (out / "report.html").is_file()
+        assert ranked[0].mean is not None and (out / "best.toml").is_file()
 
 
 def test_a_sweep_on_ray_leaves_the_callers_environment_as_it_was(
