@@ -693,31 +693,23 @@ def check_savgol_window(
     spec, model, split: Split, section: str, members_scored: bool = False
 ) -> None:
     """A model's ``savgol_window`` no longer than any run of the parts whose accelerations it
-    derives with it (where the log lacks them), said before its fit: the residual of a force
-    equation not filtered, in every part scored (train's scores, compare's training J; an
-    ensemble's members where their held-out parts are scored, ``members_scored``), and
-    SINDy's control-mode regression, in the parts it fits. Its own refusal came once it was
-    fitted, in scoring it (minutes of a hybrid's training). Named as :func:`named_in` names it
-    (an ensemble's: under its member)."""
-    parts: tuple[str, ...] = PARTS
-    if spec.kind == "ensemble":
-        if not members_scored:  # the ensemble has no force equation of its own
-            return
-        spec, model, section = spec.member, model.model, f"{section}.member"
-        parts = ("validation", "test")
-    if "savgol_window" not in type(spec).model_fields:  # caccia's windows are its own keys
+    derives with it, where they lack one it reads (the model's
+    :meth:`~nnid.models.base.NnidModel.acceleration_parts`; ``members_scored``: an ensemble's
+    members are scored on the held-out parts, as train's scores are), said before its fit. Its
+    own refusal came once it was fitted, in scoring it (minutes of a hybrid's training). Named
+    as :func:`named_in` names it (an ensemble's: under its member)."""
+    derived = model.acceleration_parts(members_scored)
+    if derived is None:
         return
-    if spec.kind == "sindy" and spec.mode == "control":  # its regression's targets
-        parts = ("train", "validation")
-    elif not model.has_force_equation or getattr(model, "filtered", False):
-        return
-    dofs = fitted_dofs(spec) or list(DOFS)
     names = dict(zip(PARTS, ("training", "validation", "test"), strict=True))
     with named_in(section, spec):
-        for part in parts:
+        for part in derived.parts:
             log = split[part]
-            if len(log) and any("d" + d not in log for d in dofs):
-                check_acceleration_window(log, spec.savgol_window, spec.savgol_order, names[part])
+            if len(log) and any("d" + d not in log for d in derived.dofs):
+                try:
+                    check_acceleration_window(log, derived.window_s, derived.order, names[part])
+                except NnidInputError as exc:  # named by the model's key that sets the window
+                    raise NnidInputError(exc.message, field=derived.field) from None
 
 
 def _fit_warnings(caught) -> list[str]:

@@ -1956,6 +1956,71 @@ def test_a_savgol_window_longer_than_a_scored_run_is_refused_before_any_fit(
     assert "too few for the Savitzky-Golay window of 81 samples" in errors[0], errors[0]
 
 
+def test_each_model_kind_says_where_it_derives_accelerations_with_its_window():
+    """check_savgol_window asks the model (acceleration_parts), not the config's kind: the
+    parts and DOFs whose accelerations its fit and scores derive with its own window and
+    order; none for a filtered damping fit, Caccia and a network; an ensemble's members'
+    held-out parts, named under its member, only where nnid train scores them."""
+    from conftest import make_vehicle
+
+    from nnid.datasets.splits import PARTS
+    from nnid.models import base
+    from nnid.physics.dofs import DOFS
+
+    vehicle = make_vehicle()
+
+    def said(kind, members_scored=False, **kw):
+        derived = base.model_class(kind)(**kw).acceleration_parts(members_scored)
+        if derived is None:
+            return None
+        return derived.parts, tuple(derived.dofs), derived.window_s, derived.order, derived.field
+
+    fossen = said("fossen", vehicle=vehicle, dofs=["u", "r"], savgol_window=2.5, savgol_order=3)
+    assert fossen == (PARTS, ("u", "r"), 2.5, 3, "savgol_window")
+    steps = [{"experiments": ["a"], "dofs": ["v"], "unknowns": ["Y_vdot"]},
+             {"experiments": ["b"], "dofs": ["r"], "unknowns": ["N_rdot"]}]  # fmt: skip
+    assert said("fossen", vehicle=vehicle, sequence=steps)[1] == ("v", "r")  # before its fit
+    assert said("hybrid", vehicle=vehicle, dofs=["w"])[:2] == (PARTS, ("w",))
+    for kind in ("synthesis", "sindy"):  # τ̄ reads all six accelerations
+        assert said(kind, vehicle=vehicle)[:2] == (PARTS, tuple(DOFS)), kind
+        assert said(kind, vehicle=vehicle, filter_lambda=1.0) is None, kind
+    control = said("sindy", vehicle=vehicle, mode="control", filter_lambda=1.0)
+    assert control[:2] == (("train", "validation"), tuple(DOFS))  # its regression's targets
+    assert said("caccia", vehicle=vehicle) is None
+    assert said("narx", inputs=["tau_X"], outputs=["u"]) is None
+    member = base.model_class("hybrid")(vehicle=vehicle, dofs=["u"], savgol_window=3.0)
+    assert said("ensemble", model=member) is None  # compare scores no member
+    held_out = said("ensemble", members_scored=True, model=member)
+    assert held_out == (("validation", "test"), ("u",), 3.0, 4, "member.savgol_window")
+
+
+def test_a_log_with_the_accelerations_a_model_reads_is_not_judged_against_its_window():
+    """Only the DOFs whose accelerations the model reads decide: a surge-only Fossen fit on a
+    log that logs du derives none, so validation runs shorter than its window are no fault,
+    whatever other DOFs lack; without du the window is refused, naming the part's run."""
+    from conftest import make_vehicle
+
+    from nnid.config import FossenModelSpec
+    from nnid.datasets.splits import Split
+    from nnid.errors import NnidInputError
+    from nnid.pipeline import check_savgol_window
+
+    def run(n: int, name: str) -> pd.DataFrame:
+        t = np.arange(n) * 0.05
+        return pd.DataFrame({"t": t, "experiment": name, "u": np.sin(t), "du": np.cos(t),
+                             "v": 0.0, "r": 0.0, "tau_X": 1.0})  # fmt: skip
+
+    spec = FossenModelSpec(dofs=["u"], savgol_window=4.0)  # 81 samples at 20 Hz
+    model = spec.build(make_vehicle())
+    split = Split(run(200, "a"), run(30, "b"), run(30, "c"))
+    check_savgol_window(spec, model, split, "model")  # du logged: nothing derived
+    unlogged = Split(*(split[p].drop(columns="du") for p in ("train", "validation", "test")))
+    with pytest.raises(NnidInputError) as err:
+        check_savgol_window(spec, model, unlogged, "model")
+    assert err.value.field == "model.savgol_window"
+    assert err.value.message.startswith("the validation part's experiment 'b' has 30 samples")
+
+
 def test_every_character_splitlines_breaks_at_is_refused_in_a_name_and_a_run_label(tmp_path):
     """U+2028 and U+2029 (line and paragraph separators) are no control characters: a run
     labelled "dive<U+2028>1" was read, and every report line naming it split in two."""

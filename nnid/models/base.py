@@ -17,6 +17,8 @@ fitted (scikit-learn's ``check_is_fitted``), so a model used too early raises on
 - ``params`` (``{name: {"value", "stderr"}}``) and ``describe()`` (a JSON-ready summary).
 - ``motion_columns(columns)``: the motion columns the fit and scores read on every row, the
   ones whose gaps are masked (default: all of them).
+- ``acceleration_parts()``: where the fit and scores derive accelerations with the model's
+  Savitzky-Golay window (:class:`AccelerationParts`; default: nowhere).
 - ``baseline()``: the simpler fitted model this one builds on (a hybrid's physics), or None;
   reports score it beside the model on the same data.
 - ``save(dir)`` and :func:`load_model`: ``model.json`` (kind, schema version, constructor
@@ -33,6 +35,7 @@ import pickle
 import time
 from abc import ABC, abstractmethod
 from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, ClassVar
 
@@ -163,6 +166,20 @@ def decode_setting(value: Any, source: str = "") -> Any:
 
 
 # -- the protocol --------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class AccelerationParts:
+    """Where a model's fit and scores derive accelerations by Savitzky-Golay: in the ``parts``
+    of a split (``"train"``, ``"validation"``, ``"test"``), wherever such a part lacks the
+    acceleration ``d<dof>`` of one of ``dofs``, with a window of ``window_s`` s and polynomial
+    ``order`` set by the model's key ``field`` (an ensemble's: ``member.savgol_window``)."""
+
+    parts: tuple[str, ...]
+    dofs: tuple[str, ...]
+    window_s: float
+    order: int
+    field: str = "savgol_window"
 
 
 class NnidModel(BaseEstimator, ABC):
@@ -300,6 +317,14 @@ class NnidModel(BaseEstimator, ABC):
         has every gap masked."""
         present = set(columns)
         return [c for c in MOTION if c in present]
+
+    def acceleration_parts(self, members_scored: bool = False) -> AccelerationParts | None:
+        """Where this model's fit and scores derive accelerations with its Savitzky-Golay
+        window (:class:`AccelerationParts`), so that a window longer than a run there can be
+        refused before a long fit; None where they derive none (the default).
+        ``members_scored``: an ensemble's members are scored on the held-out parts too (nnid
+        train's table of members). Works before ``fit`` (the settings say it)."""
+        return None
 
     def baseline(self) -> NnidModel | None:
         """The simpler fitted model this one builds on (a hybrid's physics-only fit), scored

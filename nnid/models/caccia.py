@@ -20,6 +20,7 @@ import pandas as pd
 
 from nnid.datasets.log import run_of
 from nnid.errors import NnidInputError
+from nnid.models.base import AccelerationParts
 from nnid.models.parametric import (
     FROM_FILE,
     FossenPlant,
@@ -112,6 +113,11 @@ class CacciaModel(FossenPlant):
     @property
     def savgol_order(self) -> int:
         return self.velocity_order
+
+    def acceleration_parts(self, members_scored: bool = False) -> AccelerationParts | None:
+        """None: its residual derives accelerations with ``velocity_window``, a key of its
+        own, not judged before its fit (seconds); its scores refuse a window too long."""
+        return None
 
     def trainer(self):
         """The :class:`~nnid.trainers.caccia.CacciaTwoStep` procedure with these settings."""

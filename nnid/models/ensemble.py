@@ -23,6 +23,7 @@ from __future__ import annotations
 import numbers
 import warnings
 from collections.abc import Iterable, Sequence
+from dataclasses import replace
 
 import numpy as np
 import pandas as pd
@@ -33,7 +34,7 @@ from nnid.errors import NnidInputError
 from nnid.evaluation.evaluate import DIVERGENCE_FACTOR, left_range, same_scale
 from nnid.evaluation.metrics import warmup_mask
 from nnid.evaluation.prediction import Replay
-from nnid.models.base import NnidModel, learned_state, restore_learned
+from nnid.models.base import AccelerationParts, NnidModel, learned_state, restore_learned
 from nnid.trainers.history import Progress, staged
 
 COMBINE = ("mean", "median")
@@ -155,6 +156,18 @@ class EnsembleModel(NnidModel):
         if not isinstance(self.model, NnidModel):
             return super().motion_columns(columns)
         return self.model.motion_columns(columns)
+
+    def acceleration_parts(self, members_scored: bool = False) -> AccelerationParts | None:
+        """Its members' in the held-out parts where those score them (``members_scored``),
+        the window named under ``member``: the ensemble has no force equation of its own, and a
+        member's fit refuses a window too long for the training part as it starts."""
+        if not members_scored or not isinstance(self.model, NnidModel):
+            return None
+        member = self.model.acceleration_parts()
+        if member is None:
+            return None
+        held_out = tuple(p for p in member.parts if p in ("validation", "test"))
+        return replace(member, parts=held_out, field=f"member.{member.field}")
 
     def _fit(self, log: pd.DataFrame, validation: pd.DataFrame | None, progress: Progress):
         seeds = self._check_settings()

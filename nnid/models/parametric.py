@@ -41,6 +41,7 @@ from nnid.datasets.preprocess import (
     velocity_sources,
     zoh_midpoint,
 )
+from nnid.datasets.splits import PARTS
 from nnid.errors import ExcitationWarning, NnidInputError, checked_number
 from nnid.evaluation.persistence import POWER_PROBE, ROUNDING, rounding_floors, typical_size
 from nnid.evaluation.prediction import (
@@ -57,6 +58,7 @@ from nnid.models.base import (
     NETWORK_TRAINERS,
     NOT_FITTED,
     REGRESSION_TRAINERS,
+    AccelerationParts,
     NnidModel,
     check_log,
     record_key,
@@ -1124,13 +1126,29 @@ class FossenPlant(NnidModel):
     def _data(
         self, log: pd.DataFrame, accelerations: bool, report: CleaningReport | None = None
     ) -> tuple[pd.DataFrame, dict[str, np.ndarray]]:
-        # the fitted DOFs, or before a fit sets them the DOFs asked for: those outside them may
-        # be absent from the log and are then taken as zero (e.g. an attitude-only protocol)
-        dofs = getattr(self, "dofs_", None) or getattr(self, "dofs", DOFS)
         log = prepare_motion(
-            log, dofs, self.savgol_window, self.savgol_order, accelerations, report, self._held()
+            log,
+            self._equation_dofs(),
+            self.savgol_window,
+            self.savgol_order,
+            accelerations,
+            report,
+            self._held(),
         )
         return log, log_arrays(log, self.vehicle)
+
+    def _equation_dofs(self) -> Sequence[str]:
+        """The DOFs whose velocities and accelerations :meth:`_data` derives where a log lacks
+        them: the fitted DOFs, or before a fit sets them the DOFs asked for. Those outside them
+        may be absent from the log and are then taken as zero (e.g. an attitude-only
+        protocol)."""
+        return getattr(self, "dofs_", None) or getattr(self, "dofs", DOFS)
+
+    def acceleration_parts(self, members_scored: bool = False) -> AccelerationParts | None:
+        """The residual, the Fossen equation error of :meth:`_equation_dofs`, derives their
+        accelerations where a part lacks one, and it is scored in every part."""
+        dofs = tuple(self._equation_dofs())
+        return AccelerationParts(PARTS, dofs, self.savgol_window, self.savgol_order)
 
     def _held(self) -> bool:
         """Whether the inputs are taken as held between samples (``zoh_midpoint``): the force
@@ -1305,6 +1323,15 @@ class ParametricModel(FossenPlant):
         if self.sequence is not None:
             return DecoupledSequence(sequence_steps(self.sequence), trainer)
         return trainer
+
+    def _equation_dofs(self) -> Sequence[str]:
+        """As :meth:`FossenPlant._equation_dofs`; before a fit with a ``sequence``, the DOFs of
+        its steps, which the fit takes instead of ``dofs``."""
+        if getattr(self, "dofs_", None) or self.sequence is None:
+            return super()._equation_dofs()
+        from nnid.trainers.sequence import sequence_dofs, sequence_steps
+
+        return sequence_dofs(sequence_steps(self.sequence))
 
     def _settings(self) -> tuple[list[str], list[str], ParametricFossen]:
         """The DOFs, the unknowns and the regression structure the settings give, each

@@ -33,6 +33,7 @@ from nnid.datasets.log import VELOCITY
 from nnid.datasets.preprocess import experiment_rows
 from nnid.errors import NnidInputError
 from nnid.evaluation.prediction import blank_initial, mode_steps
+from nnid.models.base import AccelerationParts
 from nnid.models.parametric import prepare_motion, warn_simulated
 from nnid.models.synthesis import DampingModel, _at_zero, restored_matrices, restored_unidentified
 from nnid.physics.damping_library import LIBRARY, BasisLibrary
@@ -152,6 +153,14 @@ class SindyDamping(DampingModel):
     def filtered(self) -> bool:
         """Only residual mode filters; control mode regresses Savitzky-Golay accelerations."""
         return self.mode == "residual" and self.filter_lambda is not None
+
+    def acceleration_parts(self, members_scored: bool = False) -> AccelerationParts | None:
+        """Control mode's regression targets are the six accelerations, in the parts it fits
+        (training, and validation for the selection); residual mode's are τ̄'s."""
+        if self.mode == "control":
+            parts = ("train", "validation")
+            return AccelerationParts(parts, DOFS, self.savgol_window, self.savgol_order)
+        return super().acceleration_parts(members_scored)
 
     @property
     def output_names(self) -> list[str]:

@@ -22,7 +22,9 @@ import pandas as pd
 from nnid.datasets.arrays import log_arrays
 from nnid.datasets.log import ACCELERATION
 from nnid.datasets.preprocess import run_spans, zoh_midpoint_inputs
+from nnid.datasets.splits import PARTS
 from nnid.errors import NnidInputError
+from nnid.models.base import AccelerationParts
 from nnid.models.parametric import (
     FossenPlant,
     ParametricFossen,
@@ -190,6 +192,13 @@ class DampingModel(FossenPlant):
     def filtered(self) -> bool:
         """Whether the regression's rows go through F(s) = λ/(s + λ) (``filter_lambda``)."""
         return self.filter_lambda is not None
+
+    def acceleration_parts(self, members_scored: bool = False) -> AccelerationParts | None:
+        """τ̄ (:func:`residual_force`) reads all six accelerations, in every part its residual
+        is scored; none in the filtered form."""
+        if self.filtered:
+            return None
+        return AccelerationParts(PARTS, DOFS, self.savgol_window, self.savgol_order)
 
     def _defined(
         self, log: pd.DataFrame, theta: np.ndarray, y: np.ndarray, what: str
