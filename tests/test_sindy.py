@@ -334,3 +334,38 @@ def test_outputs_that_explain_nothing_do_not_loosen_the_others():
     assert nmse_v["dr"] < 2 * models[0].selected_["validation_nmse"]["dr"]
     assert nmse_v["dp"] == nmse_v["dq"] == 1.0
     assert not any(k[:3] in ("dp:", "dq:") for k in models[1].coefficients_)
+
+
+def test_columns_of_rounding_are_zero_to_the_path_not_noise_scaled_up():
+    """A surge/sway/yaw log whose w is rounding (1e-17) instead of exactly 0: scaled to unit
+    RMS, u·w and v·w were full-size columns of noise, and the path selected them to fit the
+    Munk moments' rounding in K and M ((Y_v̇ − Z_ẇ) v w): terms of a zero regressor, held at
+    0 and named unidentified. A column of rounding is zero (the excitation check's rule): no
+    w term is selected, and the fit is the one of the same log with w exactly 0."""
+    from nnid.datasets.simulator import simulate
+    from nnid.trainers.sindy import SparsePath
+
+    vehicle = load_vehicle("seamor")
+    rng = np.random.default_rng(3)
+    inputs = np.zeros((400, 6))
+    inputs[20:, [0, 1, 5]] = np.repeat(rng.uniform(-30, 30, (19, 3)), 20, 0) * [1, 1, 0.2]
+    exact = simulate(vehicle, inputs, 0.1)
+    assert (exact["w"] == 0).all()  # the vehicle never heaves
+    rounding = exact.assign(w=1e-17 * rng.standard_normal(len(exact)))
+    models, thresholds = [], np.logspace(-3, 0, 13)
+    for log in (exact, rounding):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # K and M, rounding or 0, explain nothing
+            models.append(SindyDamping(vehicle, thresholds=thresholds).fit(log))
+    zero, noisy = models
+    assert not any("w" in key.split(":")[1] for key in noisy.params)
+    assert noisy.params.keys() == zero.params.keys()
+    for key, p in zero.params.items():
+        for what in ("value", "stderr"):
+            assert noisy.params[key][what] == pytest.approx(p[what], rel=1e-12), (key, what)
+    # the path's own verdict: the w columns are zero to it, as where w is exactly 0
+    theta, y = SindyDamping(vehicle).features(rounding)
+    ok = np.isfinite(theta).all(1) & np.isfinite(y).all(1)
+    path = SparsePath(thresholds=[0.1], selection="aic").fit(theta[ok], y[ok])
+    w_terms = np.array(["w" in t for t in SindyDamping(vehicle)._terms()])
+    assert path.excluded_[w_terms].all() and not (path.coef_[:, w_terms]).any()

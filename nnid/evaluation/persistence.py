@@ -220,6 +220,22 @@ def rounding_floors(at_motion: np.ndarray, at_probe: np.ndarray) -> np.ndarray:
     return np.where(moves, ROUNDING ** np.clip(np.nan_to_num(power), 1.0, 3.0) * one, beside)
 
 
+def rounding_columns(
+    column_rms: np.ndarray, reference: float, floors: np.ndarray | None = None
+) -> np.ndarray:
+    """Which columns of RMS ``column_rms`` ``[P]`` are rounding, not data (the rounding rule,
+    :data:`ROUNDING`): those at most ROUNDING × ``reference`` (the typical size of a regressor
+    of the regression, :func:`typical_size`), or at most their own floor in ``floors`` where
+    it is not NaN (:func:`rounding_floors`); a NaN RMS too, as nothing shows it above. A column
+    of rounding is zero: scaled to unit RMS it would be a full-size column of noise."""
+    raw = np.asarray(column_rms, dtype=np.float64)
+    floor = np.full(raw.shape, ROUNDING * reference)
+    if floors is not None:  # a column's own floor, where its regression gives one
+        own = np.asarray(floors, dtype=np.float64)
+        floor = np.where(np.isnan(own), floor, own)
+    return ~(raw > floor)
+
+
 def excitation_report(
     phi: np.ndarray,
     names: list[str],
@@ -296,11 +312,7 @@ def excitation_from_gram(
     # C_A(ν)ν in others) is measured where any one of them measures it beside that
     # equation's columns: its rows there are data whatever it is in the other equations
     measured = (sizes > tol * block[:, None]).any(0)
-    floor = np.full(p, ROUNDING * typical)
-    if floors is not None:  # a column's own floor, where its regression gives one
-        own = np.asarray(floors, dtype=np.float64)
-        floor = np.where(np.isnan(own), floor, own)
-    live = (rms > 0) & measured & (raw > floor)
+    live = (rms > 0) & measured & ~rounding_columns(raw, typical, floors)
     unexcited = [names[j] for j in range(p) if not live[j]]
     d = np.where(live, 1.0 / np.where(live, rms, 1.0), 0.0)
     normed = gram * np.outer(d, d) / max(n, 1)

@@ -37,6 +37,7 @@ from pysindy.utils import AxesArray, comprehend_axes
 from sklearn.base import BaseEstimator
 
 from nnid.errors import NnidInputError
+from nnid.evaluation.persistence import rounding_columns, typical_size
 from nnid.physics.damping_library import BasisLibrary, evaluate_terms
 from nnid.physics.dofs import DOFS
 
@@ -228,12 +229,16 @@ class SparsePath(BaseEstimator):
     ``y`` ``[N, m]``: ``path_`` lists every threshold tried (``threshold``, ``n_terms``,
     ``train_J``, ``validation_J``, ``aic``, ``bic``), ``selected_`` the chosen entry (with
     validation data also ``validation_nmse``, each output's normalised MSE) and ``coef_``
-    ``[m, K]`` its coefficients. ``selection`` is "validation" (the sparsest model
-    whose validation J is within ``tolerance`` of the best; with ``per_output`` each output
-    picks its own row, greedily sparsest while the mean validation J of the outputs the path
-    explains stays within ``tolerance`` of the best, so ``selected_`` may mix thresholds; the
-    zero row is every output's candidate too, and an output it is within ``tolerance`` of keeps
-    no terms), "aic" or "bic". J is the mean over outputs of the normalised MSE. Outputs the
+    ``[m, K]`` its coefficients. ``excluded_`` ``[K]``: the columns of ``theta`` that are
+    rounding, not data (:func:`~nnid.evaluation.persistence.rounding_columns` against
+    :func:`~nnid.evaluation.persistence.typical_size`: u·w of a log that never heaves, w ~
+    1e-17); they are zero to the path, never selected, their coefficients exactly 0.
+    ``selection`` is "validation" (the sparsest model whose validation J is within
+    ``tolerance`` of the best; with ``per_output`` each output picks its own row, greedily
+    sparsest while the mean validation J of the outputs the path explains stays within
+    ``tolerance`` of the best, so ``selected_`` may mix thresholds; the zero row is every
+    output's candidate too, and an output it is within ``tolerance`` of keeps no terms),
+    "aic" or "bic". J is the mean over outputs of the normalised MSE. Outputs the
     selected model does not explain on the validation data (NMSE ≥ 1, that of no model) are
     named in a :class:`SindyWarning`; ``output_names`` names them.
     """
@@ -279,10 +284,16 @@ class SparsePath(BaseEstimator):
         )
         n = theta.shape[0]
         col = np.sqrt(np.mean(theta * theta, axis=0))
-        col[col == 0] = 1.0
+        # a column of rounding is zero, as the excitation check says it: scaled to unit RMS it
+        # was a full-size column of noise, and the path selected u·w of a log that never
+        # heaved (w ~ 1e-17) to fit the Munk moments' rounding in M and K
+        self.excluded_ = rounding_columns(col, typical_size(theta))
+        col[self.excluded_] = 1.0
         out = np.sqrt(np.mean(y * y, axis=0))
         out[out == 0] = 1.0
-        r, b, _ = compress(theta / col, y / out)
+        scaled_theta = theta / col
+        scaled_theta[:, self.excluded_] = 0.0  # as the same log's with those columns exactly 0
+        r, b, _ = compress(scaled_theta, y / out)
         path = []
         coefs = []
         val_out = []
@@ -293,7 +304,9 @@ class SparsePath(BaseEstimator):
                 # "all coefficients eliminated" at large thresholds is an answer, not a fault
                 warnings.filterwarnings("ignore", message=".*eliminated all coefficients.*")
                 opt.fit(r, b)
-            scaled = debias(r, b, np.asarray(opt.coef_).reshape(y.shape[1], -1))
+            chosen = np.array(opt.coef_, dtype=np.float64).reshape(y.shape[1], -1)
+            chosen[:, self.excluded_] = 0.0  # exactly: eigh may leave last bits in R's column
+            scaled = debias(r, b, chosen)
             coef = scaled * out[:, None] / col[None, :]  # [m, K]
             train_err = nmse(y, theta @ coef.T)
             k = int(np.count_nonzero(coef))
