@@ -281,6 +281,26 @@ def test_a_log_without_experiments_is_named_the_log_in_the_derivatives_errors():
         derive_accelerations(labelled, window_s=0.5)
 
 
+def test_a_run_of_one_sample_is_refused_by_name_and_a_piece_of_one_gets_no_derivative():
+    """A run of one sample has no time step: its window's count was NaN and scipy said
+    "cannot convert float NaN to integer". It is refused naming the run and the samples the
+    shortest window needs (order 4: 7); a one-sample piece cut at a gap is left underived."""
+    pose = {"phi": 0.0, "theta": 0.0, "psi": 0.0, "u": 0.0}
+    one = pd.DataFrame({"t": [0.0], "experiment": "solo"} | pose)
+    ten = pd.DataFrame({"t": np.arange(10) * 0.1, "experiment": "long"} | pose)
+    log = pd.concat([ten, one], ignore_index=True)
+    for call in (
+        lambda: derive_velocities(log.drop(columns="u"), window_s=0.7, order=4),
+        lambda: derive_accelerations(log, window_s=0.7, order=4),
+    ):
+        with pytest.raises(NnidInputError, match=r"experiment 'solo' has 1 sample\b") as err:
+            call()
+        assert "at least 7 samples" in str(err.value)
+    pieces = log.assign(piece_of="run")  # both runs pieces of one cut at gaps
+    out = derive_velocities(pieces.drop(columns="u"), window_s=0.5, order=2)
+    assert out["r"].iloc[:10].notna().all() and np.isnan(out["r"].iloc[10])
+
+
 def test_occlusion_jumps_are_found_and_repaired():
     rng = np.random.default_rng(3)
     t = np.arange(0, 30, 0.01)

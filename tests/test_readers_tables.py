@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 import re
+from decimal import Decimal
 
 import numpy as np
 import pandas as pd
@@ -72,6 +73,42 @@ def test_multi_rate_sources_onto_one_time_base(tmp_path):
     assert held(2.45) == 0.0 and held(2.5) == 0.5 and held(5.15) == -0.5  # zero-order hold
     assert log["t"].iloc[-1] == pytest.approx(9.99, abs=0.05)  # the last command holds on
     assert any(s.step == "resample" for s in report.steps)
+
+
+ON_GRID_MAP = """
+rate = 10.0
+experiment = "run"
+[[sources]]
+file = "nav.csv"
+time = "time"
+columns = { z = "depth" }
+[[sources]]
+file = "cmd.csv"
+time = "time"
+method = "hold"
+columns = { cmd_1 = "pwm" }
+"""
+
+
+@pytest.mark.parametrize("start", ["0.3", "1700000000.123"])
+def test_a_grid_time_that_is_a_logged_time_to_rounding_takes_that_sample(tmp_path, start):
+    """Times logged every 0.1 s from a start that is not round: k/10 on the grid and the logged
+    time less the start differ in the last bits (by ~1e-7 s on a UNIX epoch), and a command
+    logged at 0.1 s or 0.6 s was held from the next sample (the one before held on); a
+    measured value on a logged sample was interpolated, not that sample."""
+    times = [str(Decimal(start) + Decimal(k) / 10) for k in range(10)]  # as a logger writes
+    depth = np.sqrt(np.arange(10.0))  # not a straight line: interpolating it shows
+    pd.DataFrame({"run": "r1", "time": times, "depth": depth}).to_csv(
+        tmp_path / "nav.csv", index=False
+    )
+    changes = {0: 0.0, 1: 0.5, 6: -0.5}  # sample -> command, logged on change
+    cmd = {"run": "r1", "time": [times[k] for k in changes], "pwm": list(changes.values())}
+    pd.DataFrame(cmd).to_csv(tmp_path / "cmd.csv", index=False)
+    log, _ = load_log(tmp_path, _write_map(tmp_path / "map.toml", ON_GRID_MAP))
+    assert np.allclose(log["t"], np.arange(10) / 10, rtol=0, atol=1e-12)
+    held = [changes[max(c for c in changes if c <= k)] for k in range(10)]
+    assert log["cmd_1"].tolist() == held
+    assert log["z"].tolist() == depth.tolist()
 
 
 def test_gap_splits_instead_of_bridging(tmp_path):
@@ -786,8 +823,10 @@ def test_a_silence_inside_a_held_source_is_said(tmp_path):
     log, report = load_log(tmp_path, _write_map(tmp_path / "map.toml", body))
     assert len(log) == 101 and log.loc[(log["t"] - 5.0).abs() < 1e-9, "cmd_a"].item() == 1.0
     (said,) = [s for s in report.steps if s.step == "stale hold"]
-    assert "cmd.csv is silent for up to 6.1 s" in said.detail and said.rows_removed == 0
-    assert "held over those 56 samples" in said.detail, said.detail
+    # held at 2.5-7.9 s, 6 s old at most: at 8.0 s the next command is logged (the grid, at
+    # the rate of nav's median step, is 3e-14 s early there, and held the old one: 6.1 s, 56)
+    assert "cmd.csv is silent for up to 6 s" in said.detail and said.rows_removed == 0
+    assert "held over those 55 samples" in said.detail, said.detail
 
 
 def test_what_the_time_base_makes_up_is_said(tmp_path):

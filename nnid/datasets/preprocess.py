@@ -166,7 +166,7 @@ def resample_log(
                 continue
             ts = t[seg]
             grid = ts[0] + np.arange(int(np.floor((ts[-1] - ts[0]) * rate + 1e-9)) + 1) / rate
-            on = _snap_to_samples(grid, ts, ON_SAMPLE / rate)
+            on = snap_to_samples(grid, ts, ON_SAMPLE / rate)
             # the run's clock from its first sample: a later piece starts where it was
             # measured (as mask_gaps's pieces do), so the hole before it stays in the log
             out = {"t": grid - grid[0] + (ts[0] - t[0])}
@@ -226,13 +226,14 @@ def resample_log(
 
 #: how far :func:`resample_log` may move a log's rate before it is warned of
 RESAMPLE_RATIO = 2.0
-#: how near (a share of the grid's interval) a grid time of :func:`resample_log` must be to a
-#: logged time to be that sample: k/rate is not the logged k·Δt in floating point (k/10 and
-#: k·0.1 differ in the last bits), which moved every value of a log resampled at its own rate
+#: how near (a share of the grid's interval) a grid time of :func:`resample_log` or of the
+#: readers (:func:`nnid.datasets.readers.assemble`) must be to a logged time to be that
+#: sample: k/rate is not the logged k·Δt in floating point (k/10 and k·0.1 differ in the last
+#: bits), which moved every value of a log resampled at its own rate
 ON_SAMPLE = 1e-9
 
 
-def _snap_to_samples(grid: np.ndarray, ts: np.ndarray, tolerance: float) -> np.ndarray:
+def snap_to_samples(grid: np.ndarray, ts: np.ndarray, tolerance: float) -> np.ndarray:
     """Set each time of ``grid`` within ``tolerance`` of a time of ``ts`` (increasing) to that
     time, in place, and return where: np.interp gives such a sample exactly, and a held value
     is the sample's own, never the one before."""
@@ -364,6 +365,12 @@ def too_short_for_window(
 ) -> NnidInputError:
     """The refusal of ``where`` (a run, a part's run), ``samples`` long, for a Savitzky-Golay
     ``window`` (samples) longer than it, naming the user's key ``setting`` that chose it."""
+    if samples < 2:  # no interval to set a window by: no setting would make it fit
+        return NnidInputError(
+            f"{where} has {samples} sample{'' if samples == 1 else 's'}: velocities and "
+            f"accelerations are derived over a Savitzky-Golay window, and a run needs at least "
+            f"{window} samples for it",
+        )
     # a window of 1e300 s is a 300-digit count: written to 3 figures beyond a run's size
     size = window if window <= MAX_RUN_SAMPLES else f"{float(window):.3g}"
     return NnidInputError(
@@ -372,6 +379,20 @@ def too_short_for_window(
         + (f": give a shorter {setting} or a longer run" if setting else ""),
         field=setting,
     )
+
+
+def _run_window(
+    t: np.ndarray, window_s: float, order: int, setting: str | None
+) -> tuple[float, int]:
+    """A run's median step (``t``: its times) and its Savitzky-Golay window of ``window_s`` s
+    (:func:`savgol_window`, ``setting`` named where widened). A run of one sample has no step
+    (NaN, where the window's count was "cannot convert float NaN to integer"): the shortest
+    window an ``order`` allows stands for it, which it is too short for (a piece cut at a gap
+    gets no derivative, :func:`short_piece`; a run is refused, :func:`_check_window_fits`)."""
+    if t.size < 2:
+        return np.nan, savgol_window(0.0, 1.0, order)
+    dt = float(np.median(np.diff(t)))
+    return dt, savgol_window(window_s, 1.0 / dt, order, setting)
 
 
 def _check_window_fits(n: int, window: int, where: str, setting: str | None) -> None:
@@ -632,8 +653,7 @@ def derive_velocities(
     column = {c: out[c].to_numpy(np.float64) for c in ("t", *have)}
     runs = []  # every run's window checked before any is derived: one too short was refused
     for name, pos in experiment_rows(out):  # after the work on every run before it
-        dt = float(np.median(np.diff(column["t"][pos])))
-        window = savgol_window(window_s, 1.0 / dt, order, "savgol_window")
+        dt, window = _run_window(column["t"][pos], window_s, order, "savgol_window")
         if short_piece(out, pos, window):
             short += len(pos)
             continue
@@ -748,8 +768,7 @@ def _derivative_runs(
     ``setting``: the key named where the window is widened (None: not warned again)."""
     t = log["t"].to_numpy(np.float64)
     for name, pos in experiment_rows(log):
-        dt = float(np.median(np.diff(t[pos])))
-        window = savgol_window(window_s, 1.0 / dt, order, setting)
+        dt, window = _run_window(t[pos], window_s, order, setting)
         if short_piece(log, pos, window):
             yield name, pos, dt, None, None
         else:

@@ -37,7 +37,7 @@ from nnid.datasets.log import (
     wrap_angle,
 )
 from nnid.datasets.mapping import file_label, label_columns, map_source
-from nnid.datasets.preprocess import unwrap_finite
+from nnid.datasets.preprocess import ON_SAMPLE, snap_to_samples, unwrap_finite
 from nnid.datasets.rosbag import is_bag, read_bag_sources
 from nnid.errors import NnidInputError
 
@@ -194,18 +194,28 @@ def _grid(start: float, stop: float, rate: float) -> np.ndarray:
     return start + np.arange(int(np.floor((stop - start) * rate + 1e-9)) + 1) / rate
 
 
-def _bridged(grid: np.ndarray, t_ok: np.ndarray, longest: float) -> np.ndarray:
-    """Where on ``grid`` a column with defined samples only at ``t_ok`` has a value: on one, or
-    between two at most ``longest`` apart (not before the first, nor after the last)."""
+def _bridged(at: np.ndarray, t_ok: np.ndarray, longest: float) -> np.ndarray:
+    """Where on the grid (``at``, snapped to the source's samples, :func:`snap_to_samples`) a
+    column with defined samples only at ``t_ok`` has a value: on one, or between two at most
+    ``longest`` apart (not before the first, nor after the last)."""
     if not t_ok.size:
-        return np.zeros(grid.size, dtype=bool)
-    nxt = np.searchsorted(t_ok, grid, side="right")  # the first defined sample after
+        return np.zeros(at.size, dtype=bool)
+    nxt = np.searchsorted(t_ok, at, side="right")  # the first defined sample after
     prev = nxt - 1
     before, after = t_ok[np.clip(prev, 0, None)], t_ok[np.clip(nxt, 0, t_ok.size - 1)]
-    # on a sample, to the rounding of the relative times the grid and the source are in
-    near = np.minimum(np.abs(grid - before), np.abs(after - grid)) <= 1e-9 * (1 + np.abs(grid))
     inside = (prev >= 0) & (nxt < t_ok.size)
-    return near | (inside & (after - before <= longest))
+    return (at == before) | (inside & (after - before <= longest))
+
+
+def _clock_tolerance(t: np.ndarray, start: float, rate: float) -> float:
+    """How near a grid time must be to a source's time (``t``, before ``start`` is taken away)
+    to be that sample: :data:`ON_SAMPLE` of the grid's interval, or two units in the last place
+    of the source's clock where that is coarser. An epoch's times (~1.7e9 s) are held to
+    ~2.4e-7 s: ``t - start`` carries the rounding of both (half a unit each) and as much again
+    from a parser or a ``time_scale``; no more, as a clock that resolves microseconds has a
+    stamp 1e-6 s off a grid time that is not on it."""
+    largest = max(float(np.max(np.abs(t))), abs(start)) if t.size else abs(start)
+    return max(ON_SAMPLE / rate, 2 * float(np.spacing(largest)))
 
 
 def _resample(
@@ -213,9 +223,13 @@ def _resample(
     values: np.ndarray,
     grid: np.ndarray,
     method: str,
+    tolerance: float,
     circular: np.ndarray | None = None,
-):
-    """Values on ``grid`` and the mask of grid points each source sample pair supports.
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Values on ``grid``, the source's times sorted and unique, and the grid with each time
+    within ``tolerance`` of a source time set to it (:func:`snap_to_samples`): a grid time
+    that is a logged time to rounding takes that sample's value, a held command included,
+    never the one before.
 
     Columns flagged in ``circular`` (angles) are interpolated unwrapped and wrapped back to
     [-π, π), so a step across ±π is not interpolated through zero.
@@ -224,12 +238,14 @@ def _resample(
     t_src, values = t_src[order], values[order]
     t_src, first = np.unique(t_src, return_index=True)  # a repeated stamp: keep the first
     values = values[first]
-    idx = np.searchsorted(t_src, grid, side="right") - 1
+    at = grid.copy()  # the log's own t stays the uniform grid
+    snap_to_samples(at, t_src, tolerance)
+    idx = np.searchsorted(t_src, at, side="right") - 1
     if method == "hold":
         out = values[np.clip(idx, 0, len(t_src) - 1)]
     else:
         wrap = np.zeros(values.shape[1], bool) if circular is None else circular
-        out = np.full((grid.size, values.shape[1]), np.nan)
+        out = np.full((at.size, values.shape[1]), np.nan)
         typical = float(np.median(np.diff(t_src))) if t_src.size > 1 else np.inf
         for k in range(values.shape[1]):
             # an undefined sample (a zero quaternion's angles) is bridged where its neighbours
@@ -238,11 +254,11 @@ def _resample(
             ok = np.isfinite(values[:, k])
             if ok.any():
                 v = unwrap_finite(values[:, k])[ok] if wrap[k] else values[ok, k]
-                out[:, k] = np.interp(grid, t_src[ok], v)
+                out[:, k] = np.interp(at, t_src[ok], v)
             if not ok.all():
-                out[~_bridged(grid, t_src[ok], SILENCE * typical), k] = np.nan
+                out[~_bridged(at, t_src[ok], SILENCE * typical), k] = np.nan
         out = np.where(wrap, wrap_angle(out), out)
-    return out, t_src
+    return out, t_src, at
 
 
 def assemble(
@@ -311,19 +327,21 @@ def assemble(
         valid = np.ones(grid.size, dtype=bool)
         for source, df in parts:
             names = [c for c in df.columns if c not in ("t", "experiment")]
-            values, t_src = _resample(
-                df["t"].to_numpy() - start,
+            t_abs = df["t"].to_numpy(np.float64)
+            values, t_src, at = _resample(
+                t_abs - start,
                 df[names].to_numpy(np.float64),
                 grid,
                 source.method,
+                _clock_tolerance(t_abs, start, rate),
                 np.isin(names, ANGLES),
             )
             columns.update(dict(zip(names, values.T, strict=True)))
             if source.method == "hold" and source.hold_timeout is not None:
                 # inside the run a held command is held over a silence (the end is cut
                 # above): said, with how long, as the timeout declares such values stale
-                last = np.searchsorted(t_src, grid, side="right") - 1
-                age = grid - t_src[np.clip(last, 0, None)]
+                last = np.searchsorted(t_src, at, side="right") - 1
+                age = at - t_src[np.clip(last, 0, None)]
                 stale = (last >= 0) & (age > source.hold_timeout)
                 if stale.any():
                     report.add(
@@ -335,7 +353,7 @@ def assemble(
             if cmap.gap and source.method == "linear":
                 gaps = np.flatnonzero(np.diff(t_src) > cmap.gap)
                 for g in gaps:
-                    valid &= ~((grid > t_src[g]) & (grid < t_src[g + 1]))
+                    valid &= ~((at > t_src[g]) & (at < t_src[g + 1]))
             else:
                 _say_silences(source, t_src, grid, exp, report)
         segments = _runs(valid)
