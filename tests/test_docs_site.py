@@ -170,10 +170,12 @@ def test_the_commands_in_configs_comments_and_help_texts_exist_with_their_option
     assert [d for text in texts for d in command_drift(text, options)] == []
 
 
-def block_drift(block: str) -> list[str]:
+def block_drift(block: str, key: str | None = None) -> list[str]:
     """The keys of a TOML block from a page that its model refuses. The model is told by the
     block's keys; a block may leave out what it does not show (a member's inputs, ``...``),
-    so only unknown keys and wrong values count, not missing ones."""
+    so only unknown keys and wrong values count, not missing ones. With ``key``, only what is
+    refused at that key (a commented option shown alone may miss its partner: random and
+    samples)."""
     import tomllib
 
     from pydantic import TypeAdapter, ValidationError
@@ -203,9 +205,43 @@ def block_drift(block: str) -> list[str]:
         return [
             f"{'.'.join(map(str, e['loc']))}: {e['msg']}"
             for e in exc.errors()
-            if e["type"] != "missing"
+            if e["type"] != "missing" and (key is None or key in e["loc"] or model is Curve)
         ]
     return []
+
+
+COMMENTED = re.compile(r'^\s*#\s*(("[^"]+"|[\w.-]+)\s*=.*)$')
+HEADER = re.compile(r"^\s*\[")
+
+
+def commented_options(block: str) -> list[tuple[str, str]]:
+    """``(block, key)`` for each option a TOML block shows commented out (``# key = value``,
+    TOML on its own): the block with that line in force, in place of the same key set in its
+    table (an alternative curve). A commented line that is not TOML is prose."""
+    import tomllib
+
+    lines = block.splitlines()
+    out = []
+    for i, line in enumerate(lines):
+        m = COMMENTED.match(line)
+        if m is None:
+            continue
+        try:
+            tomllib.loads(m.group(1))
+        except tomllib.TOMLDecodeError:
+            continue
+        raw = m.group(2)
+        key = raw.strip('"') if raw.startswith('"') else raw.split(".")[-1]
+        start = max((j + 1 for j in range(i) if HEADER.match(lines[j])), default=0)
+        end = next((j for j in range(i + 1, len(lines)) if HEADER.match(lines[j])), len(lines))
+        same = {
+            j
+            for j in range(start, end)
+            if not lines[j].lstrip().startswith("#") and lines[j].split("=")[0].strip() == raw
+        }
+        shown = [m.group(1) if j == i else s for j, s in enumerate(lines) if j not in same]
+        out.append(("\n".join(shown) + "\n", key))
+    return out
 
 
 def test_the_block_check_finds_an_unknown_key_and_a_wrong_default_type():
@@ -220,6 +256,26 @@ def test_the_block_check_finds_an_unknown_key_and_a_wrong_default_type():
 def test_every_toml_block_shown_is_a_config_nnid_takes(page):
     blocks = [body for info, body in FENCE.findall(page.read_text()) if info.strip() == "toml"]
     assert [d for block in blocks for d in block_drift(block)] == []
+
+
+def test_the_block_check_reads_an_option_shown_commented_out():
+    block = '[sweep]\ngrid = { "model.hidden" = [[3]] }\n# random = { "model.lr" = [1] }  # or\n'
+    # random without its samples is refused at [sweep], not at the option shown: that is kept
+    assert [b for b, key in commented_options(block) if block_drift(b, key)] == []
+    wrong = block + "# samples = 8\n# sampels = 8  # a typo\n# seeds = [0, 1]  with a comment\n"
+    found = [d for b, key in commented_options(wrong) for d in block_drift(b, key)]
+    assert len(found) == 1 and found[0].startswith("sweep.sampels"), found
+    thruster = '[[thrusters]]\ncurve = { kind = "poly", coeffs = [1.0] }\n'
+    thruster += '# curve = { kind = "signed_quadratic", kk = 2.0 }  # or\n'
+    ((alternative, key),) = commented_options("mass = 1.0\n" + thruster)
+    assert key == "curve" and alternative.count("curve =") == 1
+    assert block_drift(alternative, key) != []  # kk: the alternative curve is read, not skipped
+
+
+@pytest.mark.parametrize("page", PAGES, ids=[p.relative_to(REPO).as_posix() for p in PAGES])
+def test_every_option_a_toml_block_shows_commented_out_is_one_nnid_takes(page):
+    blocks = [body for info, body in FENCE.findall(page.read_text()) if info.strip() == "toml"]
+    assert [d for b in blocks for v, key in commented_options(b) for d in block_drift(v, key)] == []
 
 
 def test_the_reference_names_every_option_of_every_command():
