@@ -111,6 +111,52 @@ def test_a_grid_time_that_is_a_logged_time_to_rounding_takes_that_sample(tmp_pat
     assert log["z"].tolist() == depth.tolist()
 
 
+@pytest.mark.parametrize(
+    ("start", "unit"),
+    [("1712345678.9", "s"), ("1700000000.123", "ms"), ("1700000000.1", "ns")],
+)
+def test_a_runs_last_logged_sample_on_the_grid_is_kept(tmp_path, start, unit):
+    """300 samples logged every 0.1 s on an epoch clock (seconds, or integer ms or ns with a
+    time_scale): stop - start carries the epoch's rounding (~1e-7 s), more than the grid's
+    1e-9 samples of slack, and the run lost its last sample (299 rows). Logged 1 us before
+    the grid time instead (1 ms on a ms clock; a float64 epoch resolves ~2.4e-7 s), that sample
+    is not on the grid and no grid time past it is made."""
+    ticks = {"s": None, "ms": 10**3, "ns": 10**9}[unit]
+    scale = "" if ticks is None else f"time_scale = {1 / ticks:g}\n"
+    depth = np.sqrt(np.arange(300.0))  # not a straight line: a value interpolated shows
+    tick = Decimal("0.001") if unit == "ms" else Decimal("0.000001")
+    for early in (0, 1):  # the last stamp on the grid time, or a tick before it
+        times = [Decimal(start) + Decimal(k) / 10 for k in range(300)]
+        times[-1] -= early * tick
+        stamps = [str(x) if ticks is None else int(x * ticks) for x in times]
+        nav = {"run": "r1", "time": stamps, "depth": depth, "pwm": depth}
+        pd.DataFrame(nav).to_csv(tmp_path / "nav.csv", index=False)
+        body = ON_GRID_MAP.split("[[sources]]")[:2]
+        body[1] = body[1].replace('time = "time"\n', 'time = "time"\n' + scale)
+        body[1] = body[1].replace('z = "depth"', 'z = "depth", cmd_1 = "pwm"')
+        log, _ = load_log(tmp_path, _write_map(tmp_path / "map.toml", "[[sources]]".join(body)))
+        kept = 300 - early
+        assert len(log) == kept and log["t"].iloc[-1] == pytest.approx((kept - 1) / 10)
+        assert log["z"].tolist() == depth[:kept].tolist()
+
+
+@pytest.mark.parametrize(("start", "last"), [("0.3", 99), ("1712345678.987", 53)])
+def test_a_run_cut_at_its_hold_timeout_ends_on_a_sample_not_stale(tmp_path, start, last):
+    """Commands logged every 0.1 s until sample ``last``, hold_timeout 2 s: the run is cut 2 s
+    after the last command, on a grid time. That sample was said to be "silent for up to
+    2 s" (aged the timeout plus the clock's rounding), and on an epoch clock it was dropped."""
+    times = [str(Decimal(start) + Decimal(k) / 10) for k in range(300)]
+    pd.DataFrame({"run": "r1", "time": times, "depth": np.arange(300.0)}).to_csv(
+        tmp_path / "nav.csv", index=False
+    )
+    cmd = {"run": "r1", "time": times[: last + 1], "pwm": np.arange(last + 1.0)}
+    pd.DataFrame(cmd).to_csv(tmp_path / "cmd.csv", index=False)
+    timed = ON_GRID_MAP.replace('method = "hold"', 'method = "hold"\nhold_timeout = 2.0')
+    log, report = load_log(tmp_path, _write_map(tmp_path / "map.toml", timed))
+    assert len(log) == last + 21 and log["cmd_1"].iloc[-1] == last  # 20 samples held
+    assert [s.step for s in report.steps if "stale hold" in s.step] == ["cut stale hold"]
+
+
 def test_gap_splits_instead_of_bridging(tmp_path):
     _sensor_tables(tmp_path)
     nav = pd.read_csv(tmp_path / "nav.csv")

@@ -190,8 +190,12 @@ def csv_dialect(header: str, row: str) -> dict:
     return {"sep": sep, "decimal": decimal}
 
 
-def _grid(start: float, stop: float, rate: float) -> np.ndarray:
-    return start + np.arange(int(np.floor((stop - start) * rate + 1e-9)) + 1) / rate
+def _grid(span: float, rate: float, tolerance: float) -> np.ndarray:
+    """A run's times from 0 every 1/``rate`` s to ``span`` (its stop less its start), the last
+    kept where it is ``span`` to ``tolerance`` (:func:`_clock_tolerance`): on an epoch clock
+    ``span`` is rounded by ~1e-7 s, and a run whose last logged sample is on the grid lost it
+    (1e-9 samples of slack); no time more than ``tolerance`` beyond ``span`` is added."""
+    return np.arange(int(np.floor(span * rate + tolerance * rate)) + 1) / rate
 
 
 def _bridged(at: np.ndarray, t_ok: np.ndarray, longest: float) -> np.ndarray:
@@ -321,19 +325,21 @@ def assemble(
                 source=cmap.name,
                 field="rate",
             )
-        # relative times: a grid built on UNIX epochs (~1.7e9 s) jitters by ~1e-7 s
-        grid = _grid(0.0, stop - start, rate)
+        # relative times: a grid built on UNIX epochs (~1.7e9 s) jitters by ~1e-7 s. The end
+        # to the clock's rounding at stop: no more than the source logged there is snapped by
+        grid = _grid(stop - start, rate, _clock_tolerance(np.array([stop]), start, rate))
         columns: dict[str, np.ndarray] = {}
         valid = np.ones(grid.size, dtype=bool)
         for source, df in parts:
             names = [c for c in df.columns if c not in ("t", "experiment")]
             t_abs = df["t"].to_numpy(np.float64)
+            tolerance = _clock_tolerance(t_abs, start, rate)
             values, t_src, at = _resample(
                 t_abs - start,
                 df[names].to_numpy(np.float64),
                 grid,
                 source.method,
-                _clock_tolerance(t_abs, start, rate),
+                tolerance,
                 np.isin(names, ANGLES),
             )
             columns.update(dict(zip(names, values.T, strict=True)))
@@ -342,7 +348,9 @@ def assemble(
                 # above): said, with how long, as the timeout declares such values stale
                 last = np.searchsorted(t_src, at, side="right") - 1
                 age = at - t_src[np.clip(last, 0, None)]
-                stale = (last >= 0) & (age > source.hold_timeout)
+                # a run cut at the last command + hold_timeout ends on a sample aged the
+                # timeout to the clock's rounding: held as the timeout allows, not stale
+                stale = (last >= 0) & (age > source.hold_timeout + tolerance)
                 if stale.any():
                     report.add(
                         "stale hold",
