@@ -706,9 +706,13 @@ def check_savgol_window(
         for part in derived.parts:
             log = split[part]
             if len(log) and any("d" + d not in log for d in derived.dofs):
+                # named by the model's key that sets the window (Caccia's velocity_window)
+                key = derived.field.rsplit(".", 1)[-1]
                 try:
-                    check_acceleration_window(log, derived.window_s, derived.order, names[part])
-                except NnidInputError as exc:  # named by the model's key that sets the window
+                    check_acceleration_window(
+                        log, derived.window_s, derived.order, names[part], key
+                    )
+                except NnidInputError as exc:  # an ensemble's under its member
                     raise NnidInputError(exc.message, field=derived.field) from None
 
 

@@ -1924,6 +1924,9 @@ _SPLIT = 'kind = "%s"\nwarmup_s = 1.0\n[split]\nby = "auto"\nfractions = [0.6, 0
                      f'kind = "hybrid"\n{_WINDOW}', "model.member.savgol_window", id="ensemble"),
         pytest.param("compare", f'[[models]]\nkind = "fossen"\n[[models]]\nkind = "hybrid"\n'
                      f"{_WINDOW}", "models.1.savgol_window", id="compare"),
+        # Caccia's residual derives them with its step-2 filter, its own key
+        pytest.param("train", '[model]\nkind = "caccia"\nvelocity_window = 4.0\n',
+                     "model.velocity_window", id="caccia"),
         # a window the runs hold, and a filtered damping fit that derives no acceleration: fitted
         pytest.param("train", '[model]\nkind = "hybrid"\nsavgol_window = 2.0\n', None,
                      id="hybrid, a window that fits"),
@@ -1954,13 +1957,17 @@ def test_a_savgol_window_longer_than_a_scored_run_is_refused_before_any_fit(
     assert result.exit_code == 2 and len(errors) == 1, result.output
     assert errors[0].startswith(f"error: {config}, field '{said}': the validation part's ")
     assert "too few for the Savitzky-Golay window of 81 samples" in errors[0], errors[0]
+    assert errors[0].endswith(f"give a shorter {said.split('.')[-1]} or a longer run"), errors[0]
 
 
 def test_each_model_kind_says_where_it_derives_accelerations_with_its_window():
     """check_savgol_window asks the model (acceleration_parts), not the config's kind: the
     parts and DOFs whose accelerations its fit and scores derive with its own window and
-    order; none for a filtered damping fit, Caccia and a network; an ensemble's members'
-    held-out parts, named under its member, only where nnid train scores them."""
+    order; none for a filtered damping fit and a network; Caccia's residual in its one DOF
+    with its step-2 filter, named by its key velocity_window (it returned none, so a window too
+    long for a held-out run was refused only in scoring the fitted model, naming savgol_window,
+    a key its config has not); an ensemble's members' held-out parts, named under its member,
+    only where nnid train scores them."""
     from conftest import make_vehicle
 
     from nnid.datasets.splits import PARTS
@@ -1986,7 +1993,8 @@ def test_each_model_kind_says_where_it_derives_accelerations_with_its_window():
         assert said(kind, vehicle=vehicle, filter_lambda=1.0) is None, kind
     control = said("sindy", vehicle=vehicle, mode="control", filter_lambda=1.0)
     assert control[:2] == (("train", "validation"), tuple(DOFS))  # its regression's targets
-    assert said("caccia", vehicle=vehicle) is None
+    caccia = said("caccia", vehicle=vehicle, dof="r", velocity_window=3.0, velocity_order=3)
+    assert caccia == (PARTS, ("r",), 3.0, 3, "velocity_window")
     assert said("narx", inputs=["tau_X"], outputs=["u"]) is None
     member = base.model_class("hybrid")(vehicle=vehicle, dofs=["u"], savgol_window=3.0)
     assert said("ensemble", model=member) is None  # compare scores no member

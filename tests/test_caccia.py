@@ -229,6 +229,28 @@ def test_caccia_model_fits_one_log_and_keeps_weight_minus_buoyancy(setup, fitted
     assert model.describe()["inertia"] == "identified"
 
 
+def test_its_scores_name_velocity_window_the_key_that_sets_their_window(setup, fitted):
+    """The residual derives ẇ with the step-2 filter (velocity_window), yet scoring a 3-s run
+    against its 5-s window was refused as "field 'savgol_window'", a key a Caccia config has
+    not, and a window widened at the log's rate was said as savgol_window too."""
+    from nnid.errors import NnidInputError
+    from nnid.pipeline import score
+
+    cfg, _, vehicle, log = setup
+    _, _, _, sine = fitted
+    model = CacciaModel(vehicle).fit(pd.concat([log, sine], ignore_index=True))
+    dt = float(np.median(np.diff(sine["t"])))
+    short = sine[sine["t"] < sine["t"].iloc[0] + 3.0].assign(experiment="short")
+    assert len(short) * dt < model.velocity_window
+    with pytest.raises(NnidInputError) as err:
+        score(model, short, cfg, None, at=("model", cfg.model))
+    assert err.value.field == "model.velocity_window", str(err.value)
+    assert err.value.message.endswith("give a shorter velocity_window or a longer run")
+    narrow = 2 * dt  # two samples: too few for velocity_order 4, widened
+    with pytest.warns(UserWarning, match=rf"^velocity_window = {narrow:g} s is 2 samples"):
+        model.set_params(velocity_window=narrow).residual(sine)
+
+
 def test_a_missing_sinusoid_run_is_said_not_skipped_in_silence(setup, fitted):
     """The sinusoid run named otherwise ("sine"): step 2 did not run, the model flew the
     vehicle file's Z_wdot, and the report gave its validation score with no word of it."""

@@ -665,7 +665,11 @@ def test_a_noisy_dof_keeps_its_own_stderr_beside_an_exact_one(monkeypatch):
     y[:, 0], y[:, 5] = u, 2.0 * r + y[:, 5]
     e = y[:, 5] - r * (r @ y[:, 5]) / (r @ r)
     se_alone = np.sqrt(e @ e / (n - 1) / (r @ r))  # N:r's s.e. from yaw's own rows
-    monkeypatch.setattr(diagnose, "_columns", lambda *args: (phi, -y))
+    from nnid.physics.dofs import DOFS
+    from nnid.trainers.regression import Regression
+
+    regression = Regression(phi.reshape(n * 6, 2), y.reshape(-1), ["X:u", "N:r"], DOFS, n)
+    monkeypatch.setattr(diagnose, "_regression", lambda *args: regression)
     ws = SimpleNamespace(arrays=lambda *args: {}, filter_lambda=None, nu_dot_f=lambda part: None,
                          mask=np.ones(6), weights=None)  # fmt: skip
     with warnings.catch_warnings():
@@ -681,6 +685,60 @@ def test_a_noisy_dof_keeps_its_own_stderr_beside_an_exact_one(monkeypatch):
     ws.mask[1], e[:, 1], y[:, 1] = 0.0, 1e12 * e[:, 1], 1e12 * y[:, 1]
     diagnose._set_weights(ws, e, y)
     assert ws.weights[1] == 0.0 and np.array_equal(np.delete(ws.weights, 1), np.delete(weights, 1))
+
+
+@pytest.mark.parametrize("yaw", [1e-4, 1e-6])
+def test_a_term_its_own_dof_equation_measures_is_excited_for_the_loop_as_for_least_squares(yaw):
+    """A surge run whose yaw rate is ``yaw`` of its speed: N:r*abs(r) is ~yaw² of X:u*abs(u).
+    The loop's refit judged excitation over the six DOF equations at once: at 1e-4 the column,
+    1e-8 of the surge one, read "not excited (zero regressor)", and at 1e-6 (1e-12) rounding
+    beside the surge column; either way N:r*abs(r) = 0 and its s.e. NaN, where the yaw
+    equation measures it and the least-squares trainer, judging each DOF equation apart and
+    each column at its own floor, estimates it. The loop now judges as the trainer does."""
+    import warnings
+
+    from conftest import make_vehicle
+
+    from nnid.datasets.arrays import log_arrays
+    from nnid.loop.diagnose import Workspace, refit
+    from nnid.models.parametric import ParametricFossen
+    from nnid.physics.parts import Parts
+    from nnid.trainers.least_squares import LeastSquares
+
+    truth = {"X:u*abs(u)": -30.0, "N:r*abs(r)": -5.0}
+    vehicle = make_vehicle(damping={"model": None, "coefficients": truth})
+    rng = np.random.default_rng(0)
+
+    def run(name: str, phase: float) -> pd.DataFrame:
+        t = np.arange(2000) * 0.05
+        zero = np.zeros(t.size)
+        log = pd.DataFrame({"t": t, "experiment": name, "x": zero, "y": zero, "z": zero,
+                            "phi": zero, "theta": zero, "psi": zero, "v": zero, "w": zero,
+                            "p": zero, "q": zero, "dv": zero, "dw": zero, "dp": zero, "dq": zero,
+                            "u": 1.0 + 0.5 * np.sin(0.3 * t + phase),
+                            "du": 0.15 * np.cos(0.3 * t + phase),
+                            "r": yaw * np.sin(0.7 * t + phase),
+                            "dr": 0.7 * yaw * np.cos(0.7 * t + phase)})  # fmt: skip
+        # the forces that fly this motion under the true file, with noise in X and N
+        data = log_arrays(log.assign(**{f"tau_{f}": 0.0 for f in "XYZKMN"}), vehicle)
+        force = ParametricFossen(vehicle, []).equation_residual(Parts.from_vehicle(vehicle), data)
+        force[:, 0] += rng.normal(0, 1e-9, t.size)
+        force[:, 5] += rng.normal(0, 1e-13, t.size)
+        return log.assign(**{f"tau_{f}": force[:, k] for k, f in enumerate("XYZKMN")})
+
+    train = run("a", 0.0)
+    ws = Workspace(train, run("b", 1.0), vehicle, None, zoh_midpoint=False, dofs=("u", "r"))
+    trained = LeastSquares(correlated=False).solve(
+        ParametricFossen(vehicle, list(truth), ["u", "r"]).regression(log_arrays(train, vehicle))
+    )
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        fit = refit(ws, vehicle, list(truth), held_out=False)
+    assert trained.excitation.unexcited == [] and trained.excitation.collinear == []
+    for k, value in enumerate(truth.values()):
+        assert 0 < fit.stderr[k] < abs(value) / 100, (fit.theta, fit.stderr)
+        assert fit.theta[k] == pytest.approx(value, abs=4 * fit.stderr[k])
+        assert trained.theta[k] == pytest.approx(fit.theta[k], abs=fit.stderr[k] / 10)
 
 
 def test_an_effect_that_differs_run_to_run_has_an_s_e_that_says_so():

@@ -633,12 +633,14 @@ def derive_velocities(
     order: int = 4,
     report: CleaningReport | None = None,
     overwrite: bool = False,
+    setting: str = "savgol_window",
 ) -> pd.DataFrame:
     """Body velocities from pose by SG differentiation and ν = J⁻¹(η) η̇ (Weiss eq. 17).
 
     With the full pose: u v w p q r. With attitude only: p q r = T_Θ⁻¹ Θ̇. With depth and
     attitude but no x, y: also w ≈ ż / (cos θ cos φ), exact when u = v = 0 and reported as an
-    approximation. Existing velocity columns are kept unless ``overwrite``.
+    approximation. Existing velocity columns are kept unless ``overwrite``. ``setting``: the
+    user's key that chose ``window_s``, named where the window is widened or refused.
     """
     have = [c for c in POSE if c in log]
     derivable = derivable_velocities(have)
@@ -653,11 +655,11 @@ def derive_velocities(
     column = {c: out[c].to_numpy(np.float64) for c in ("t", *have)}
     runs = []  # every run's window checked before any is derived: one too short was refused
     for name, pos in experiment_rows(out):  # after the work on every run before it
-        dt, window = _run_window(column["t"][pos], window_s, order, "savgol_window")
+        dt, window = _run_window(column["t"][pos], window_s, order, setting)
         if short_piece(out, pos, window):
             short += len(pos)
             continue
-        _check_window_fits(len(pos), window, run_label(name), "savgol_window")
+        _check_window_fits(len(pos), window, run_label(name), setting)
         runs.append((name, pos, dt, window))
     # T_Θ⁻¹ and J₁ of every row in one call each (row by row the same numbers): once per run,
     # scipy's Rotation was a fixed cost per run on a log of many short runs (bench_runs.py)
@@ -672,7 +674,7 @@ def derive_velocities(
                 window,
                 order,
                 where=run_label(name),
-                setting="savgol_window",
+                setting=setting,
             )
             for c in have
         }
@@ -793,10 +795,12 @@ def derive_accelerations(
     order: int = 4,
     report: CleaningReport | None = None,
     cut_at_steps: bool = False,
+    setting: str = "savgol_window",
 ) -> pd.DataFrame:
     """ν̇ (``du`` … ``dr``) by SG differentiation of the body velocities present;
     ``cut_at_steps`` (inputs held between samples, ``zoh_midpoint``): never across a step of
-    the inputs that look held (:func:`held_inputs`, :func:`_between_steps`)."""
+    the inputs that look held (:func:`held_inputs`, :func:`_between_steps`). ``setting``: the
+    user's key that chose ``window_s``, named where the window is widened or refused."""
     cols = [c for c in VELOCITY if c in log]
     _refuse_infinite(log, ["t", *cols], "deriving accelerations from the velocities")
     out = log.copy()
@@ -805,7 +809,7 @@ def derive_accelerations(
     # each run's rows by position: a run's labels may repeat another's (pd.concat)
     velocity = {c: out[c].to_numpy(np.float64) for c in cols}
     derived = {c: np.full(len(out), np.nan) for c in cols}
-    runs = _derivative_runs(out, window_s, order, held, "savgol_window")
+    runs = _derivative_runs(out, window_s, order, held, setting)
     for name, pos, dt, window, steps in runs:
         if window is None:
             short += len(pos)
@@ -818,7 +822,7 @@ def derive_accelerations(
                 window,
                 order,
                 where=run_label(name),
-                setting="savgol_window",
+                setting=setting,
                 steps=steps,
             )
     for c in cols:

@@ -168,7 +168,14 @@ def monitor_inputs(log: pd.DataFrame, plant) -> dict[str, np.ndarray]:
     if slips:  # a monitor reads them as faults: PWM against ±1 gave "external_bias.q = −9.58"
         raise NnidInputError(slips[0].message, field=slips[0].column, row=slips[0].row)
     check_attitude(log, plant.vehicle, plant.dofs_)
-    log = prepare_motion(log, plant.dofs_, plant.savgol_window, plant.savgol_order, False)
+    log = prepare_motion(
+        log,
+        plant.dofs_,
+        plant.savgol_window,
+        plant.savgol_order,
+        False,
+        setting=plant.window_key,
+    )
     data = motion_arrays(log)
     read = monitor_motion(log.columns)
     unread = [k for k, c in enumerate(POSE) if c in log and c not in read]

@@ -53,8 +53,9 @@ from nnid.trainers.least_squares import (
     dof_variances,
     feasible_floor,
     feasible_weights,
-    solve_least_squares,
+    solve_regression,
 )
+from nnid.trainers.regression import Regression
 from nnid.trainers.sindy import compress
 
 _CHUNK = 64
@@ -229,10 +230,22 @@ def _columns(
 ) -> tuple[np.ndarray, np.ndarray]:
     """(Φ [N, 6, P], R(0) [N, 6]) of the unknowns ``names`` at ``vehicle``; ``nu_dot_f`` as
     :meth:`ParametricFossen.equation_residual` takes it (:meth:`Workspace.nu_dot_f`)."""
-    with np.errstate(invalid="ignore", over="ignore", divide="ignore"):  # rows of NaN (gaps)
-        reg = ParametricFossen(vehicle, names).regression(data, filter_lambda, nu_dot_f)
+    reg = _regression(vehicle, names, data, filter_lambda, nu_dot_f)
     n = reg.n_samples
     return reg.phi.reshape(n, 6, len(names)), -reg.y.reshape(n, 6)
+
+
+def _regression(
+    vehicle,
+    names: list[str],
+    data: dict,
+    filter_lambda: float | None,
+    nu_dot_f: np.ndarray | None = None,
+) -> Regression:
+    """The six DOF equations' regression of the unknowns ``names`` at ``vehicle``, stacked
+    sample-major (:meth:`ParametricFossen.regression`; ``nu_dot_f`` as :func:`_columns`)."""
+    with np.errstate(invalid="ignore", over="ignore", divide="ignore"):  # rows of NaN (gaps)
+        return ParametricFossen(vehicle, names).regression(data, filter_lambda, nu_dot_f)
 
 
 def _wss(x: np.ndarray, w: np.ndarray) -> float:
@@ -245,26 +258,28 @@ def refit(ws: Workspace, vehicle, unknowns: list[str], held_out: bool = True) ->
     set by the first (baseline) fit, 1/σ̂²_dof of its ordinary-least-squares residual (floored,
     :func:`_set_weights`), and renewed by :func:`reweight` as each effect is added. Without
     ``held_out`` the held-out arrays are left empty (for searches that need only the RSS)."""
-    data = ws.arrays(vehicle)
-    phi, r0 = _columns(vehicle, unknowns, data, ws.filter_lambda, ws.nu_dot_f("train"))
-    n, p = r0.shape[0], len(unknowns)
+    reg = _regression(vehicle, unknowns, ws.arrays(vehicle), ws.filter_lambda, ws.nu_dot_f("train"))
+    n, p = reg.n_samples, len(unknowns)
+    phi = reg.phi.reshape(n, 6, p)
     if held_out:
         data_v = ws.arrays(vehicle, "val")
         phi_v, r0_v = _columns(vehicle, unknowns, data_v, ws.filter_lambda, ws.nu_dot_f("val"))
     else:
         phi_v, r0_v = np.zeros((0, 6, p)), np.zeros((0, 6))
-    a_mat, y = phi.reshape(n * 6, p), -r0.reshape(-1)
+    a_mat, y = reg.phi, reg.y
+    # what the data excite is judged as the least-squares trainer judges it (solve_regression):
+    # within each DOF equation, each column against its own rounding floor. Compared with all
+    # six equations' columns at once, a yaw term 1e-8 of a surge one, measured by the N rows,
+    # was a zero regressor: dropped, its s.e. NaN
     if ws.weights is None:  # DOF equations the log does not measure get weight zero
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", ExcitationWarning)
-            est = solve_least_squares(a_mat, y, np.tile(ws.mask, n), names=unknowns)
-        _set_weights(ws, (a_mat @ np.nan_to_num(est.theta) - y).reshape(n, 6), -r0)
+            est = solve_regression(reg, np.tile(ws.mask, n))
+        _set_weights(ws, (a_mat @ np.nan_to_num(est.theta) - y).reshape(n, 6), y.reshape(n, 6))
     w_rows = np.tile(ws.weights, n)
     # six DOF equations weighted apart (rows sample-major): each one's share of the RSS is
     # floored on its own, at the variance its weight was floored at
-    est = solve_least_squares(
-        a_mat, y, w_rows, names=unknowns, equations=6, variance_floor=ws.variance_floor
-    )
+    est = solve_regression(reg, w_rows, equations=6, variance_floor=ws.variance_floor)
     theta = np.nan_to_num(est.theta)
     e = (a_mat @ theta - y).reshape(n, 6)
     # rows by count, not -1: a vehicle file with no coefficient to refit has p = 0 columns

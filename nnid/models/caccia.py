@@ -20,7 +20,6 @@ import pandas as pd
 
 from nnid.datasets.log import run_of
 from nnid.errors import NnidInputError
-from nnid.models.base import AccelerationParts
 from nnid.models.parametric import (
     FROM_FILE,
     FossenPlant,
@@ -66,6 +65,7 @@ class CacciaModel(FossenPlant):
     """
 
     kind = "caccia"
+    window_key = "velocity_window"
 
     def __init__(
         self,
@@ -105,7 +105,8 @@ class CacciaModel(FossenPlant):
         self.correlated = correlated
         self.weighting = weighting
 
-    # the plant's velocities are derived with the step-2 filter
+    # the plant's velocities and accelerations are derived with the step-2 filter, its
+    # velocity_window (window_key) named where that window is refused
     @property
     def savgol_window(self) -> float:
         return self.velocity_window
@@ -114,10 +115,9 @@ class CacciaModel(FossenPlant):
     def savgol_order(self) -> int:
         return self.velocity_order
 
-    def acceleration_parts(self, members_scored: bool = False) -> AccelerationParts | None:
-        """None: its residual derives accelerations with ``velocity_window``, a key of its
-        own, not judged before its fit (seconds); its scores refuse a window too long."""
-        return None
+    def _equation_dofs(self) -> Sequence[str]:
+        """Its one DOF, before a fit sets ``dofs_`` to it too."""
+        return getattr(self, "dofs_", None) or (self.dof,)
 
     def trainer(self):
         """The :class:`~nnid.trainers.caccia.CacciaTwoStep` procedure with these settings."""

@@ -22,7 +22,7 @@ import dataclasses
 import re
 import warnings
 from collections.abc import Callable, Iterable, Mapping, Sequence
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 import pandas as pd
@@ -1091,11 +1091,13 @@ def prepare_motion(
     accelerations: bool,
     report: CleaningReport | None = None,
     cut_at_steps: bool = False,
+    setting: str = "savgol_window",
 ) -> pd.DataFrame:
     """The log with the velocities of ``dofs`` derived from the pose where it lacks them, and
     (``accelerations``) their accelerations, both by Savitzky-Golay, the accelerations not
     across the steps of held inputs with ``cut_at_steps``
-    (:func:`~nnid.datasets.preprocess.derive_accelerations`); each step reported."""
+    (:func:`~nnid.datasets.preprocess.derive_accelerations`); each step reported. ``setting``:
+    the model's key that sets ``savgol_window``, named where the window is widened or refused."""
     from nnid.datasets.preprocess import (
         check_velocities,
         derive_accelerations,
@@ -1104,9 +1106,11 @@ def prepare_motion(
 
     check_velocities(log.columns, dofs)
     if any(d not in log for d in dofs) and all(a in log for a in ANGLES):
-        log = derive_velocities(log, savgol_window, savgol_order, report)
+        log = derive_velocities(log, savgol_window, savgol_order, report, setting=setting)
     if accelerations and any("d" + d not in log for d in dofs):
-        log = derive_accelerations(log, savgol_window, savgol_order, report, cut_at_steps)
+        log = derive_accelerations(
+            log, savgol_window, savgol_order, report, cut_at_steps, setting=setting
+        )
     return log
 
 
@@ -1122,6 +1126,9 @@ class FossenPlant(NnidModel):
     ``dofs_`` in ``_fit``."""
 
     has_force_equation = True
+    #: the settings key that sets ``savgol_window``, named where that window is refused
+    #: (Caccia's is its step-2 ``velocity_window``)
+    window_key: ClassVar[str] = "savgol_window"
 
     def _data(
         self, log: pd.DataFrame, accelerations: bool, report: CleaningReport | None = None
@@ -1134,6 +1141,7 @@ class FossenPlant(NnidModel):
             accelerations,
             report,
             self._held(),
+            self.window_key,
         )
         return log, log_arrays(log, self.vehicle)
 
@@ -1148,7 +1156,9 @@ class FossenPlant(NnidModel):
         """The residual, the Fossen equation error of :meth:`_equation_dofs`, derives their
         accelerations where a part lacks one, and it is scored in every part."""
         dofs = tuple(self._equation_dofs())
-        return AccelerationParts(PARTS, dofs, self.savgol_window, self.savgol_order)
+        return AccelerationParts(
+            PARTS, dofs, self.savgol_window, self.savgol_order, self.window_key
+        )
 
     def _held(self) -> bool:
         """Whether the inputs are taken as held between samples (``zoh_midpoint``): the force

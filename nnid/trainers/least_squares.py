@@ -320,6 +320,32 @@ def solve_least_squares(
     return Estimate(names, theta, void_undetermined(cov, names, report), sigma2, fitted, report)
 
 
+def solve_regression(
+    reg: Regression,
+    weights: np.ndarray | None = None,
+    reference: float = 0.0,
+    equations: int = 1,
+    variance_floor: np.ndarray | None = None,
+) -> Estimate:
+    """:func:`solve_least_squares` of ``reg`` under nnid's one rule of what a stacked
+    regression excites: each column compared with the others within each DOF equation ``reg``
+    stacks (a column small in N beside N m columns of another equation is not unexcited for
+    it), and rounding below its own floor (:meth:`Regression.floors`). ``weights``,
+    ``reference``, ``equations`` and ``variance_floor`` as :func:`solve_least_squares` takes
+    them; the least-squares trainer and the residual loop's fits solve through it."""
+    return solve_least_squares(
+        reg.phi,
+        reg.y,
+        weights,
+        reg.names,
+        reference=reference,
+        floors=reg.floors(),
+        equations=equations,
+        variance_floor=variance_floor,
+        stacked=len(reg.dofs),
+    )
+
+
 def _equations_rss(
     rss: float, yy: float, r: np.ndarray, w: np.ndarray, below: np.ndarray, equation: np.ndarray
 ) -> float:
@@ -390,11 +416,8 @@ class LeastSquares(BaseEstimator):
         floor of its own (:meth:`Regression.floors`) is judged by that instead."""
         if self.weighting not in ("feasible", "none"):
             raise NnidInputError("weighting is 'feasible' or 'none'", field="weighting")
-        floors = reg.floors()
         m = len(reg.dofs)
-        est = solve_least_squares(
-            reg.phi, reg.y, names=reg.names, reference=reference, floors=floors, stacked=m
-        )
+        est = solve_regression(reg, reference=reference)
         dof_sigma2 = self._dof_variances(reg, est.theta)
         if self.weighting == "feasible" and m > 1:
             var = np.array([dof_sigma2[d] for d in reg.dofs])
@@ -407,16 +430,8 @@ class LeastSquares(BaseEstimator):
             # weights change neither which rows are finite nor which columns are zero): said
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", ExcitationWarning)
-                est = solve_least_squares(
-                    reg.phi,
-                    reg.y,
-                    w,
-                    reg.names,
-                    reference=reference,
-                    floors=floors,
-                    equations=m,
-                    variance_floor=floor,
-                    stacked=m,
+                est = solve_regression(
+                    reg, w, reference=reference, equations=m, variance_floor=floor
                 )
             # but its verdict may differ: 1/σ̂² beside an equation of exact data (~1e18) left
             # a pair separable only in the other equation collinear, and dropped it unsaid
