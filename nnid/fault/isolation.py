@@ -527,6 +527,15 @@ def noise_ratio(monitor, e: np.ndarray) -> float:
     return float(np.sum((e @ monitor.whiten_.T) ** 2)) / max(e.shape[0] * dim, 1.0)
 
 
+def dof_noise_ratios(monitor, e: np.ndarray) -> np.ndarray:
+    """:func:`noise_ratio` of each DOF equation [6]: the mean square of each coordinate of the
+    whitened residual ``e`` [N, 6] (μ taken out; the whitening is triangular, so coordinate j
+    is DOF j's equation less what the DOFs before it predict of its noise); 0 on a DOF the
+    monitor does not watch."""
+    e = e[np.isfinite(e).all(1)]
+    return np.sum((e @ monitor.whiten_.T) ** 2, axis=0) / max(e.shape[0], 1)
+
+
 def model_error(baseline: float) -> float:
     """The power of the model's error, in units of the healthy noise power, in a residual whose
     noise ratio is ``baseline``: :data:`UNEXPLAINED_SHARE` of its excess over the noise (the
