@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
+from pydantic import BaseModel
 
 from nnid.config import (
     PHYSICS_KINDS,
@@ -168,7 +169,9 @@ def check_paths(cfg, config_path: Path, data: str | None, columns: str | None) -
         return
     for key in ("log", "columns", "simulate", "campaign"):
         value = getattr(spec, key, None)
-        if not value or (key == "log" and data) or (key == "columns" and columns):
+        # --data replaces the data the config names (its log, simulation or campaign), which
+        # is then not read: a copied config whose simulate file stayed behind was refused
+        if not value or (key != "columns" and data) or (key == "columns" and columns):
             continue
         _check_file(resolve(base, value), config_path, f"data.{key}")
 
@@ -682,11 +685,31 @@ def fit_model(
 def named_in(section: str, spec) -> Iterator[None]:
     """A model's refusals (in its fit, or in scoring it: a ``savgol_window`` longer than a
     held-out run) named where the config sets the field: under ``section`` (``model``,
-    ``models.2``) when it is a key of the config table ``spec``."""
+    ``models.2``) when it is a key of the config table ``spec`` or of a table below it
+    (:func:`config_named`)."""
     try:
         yield
     except NnidInputError as exc:
-        raise exc.within(section, type(spec).model_fields) from None
+        raise config_named(exc, section, spec) from None
+
+
+#: the tables below a model's table whose keys a model's refusal names bare: its trainers'
+#: (``filter_lambda`` of ``[model.trainer]``) and an ensemble's member's
+_PARTS = ("trainer", "physics_trainer", "member")
+
+
+def config_named(exc: NnidInputError, section: str, spec: Any) -> NnidInputError:
+    """``exc`` with its field named where the config table ``spec`` (under ``section``) sets
+    it: a key of the table, else of the one table below it that has it (a trainer's
+    ``filter_lambda`` is ``model.trainer.filter_lambda``, not a key of ``[model]``); else
+    as it was, where no table or two have it."""
+    named = exc.within(section, type(spec).model_fields)
+    if named is not exc:
+        return named
+    below = [(f"{section}.{key}", getattr(spec, key, None)) for key in _PARTS]
+    found = [config_named(exc, at, part) for at, part in below if isinstance(part, BaseModel)]
+    found = [f for f in found if f is not exc]
+    return found[0] if len(found) == 1 else exc
 
 
 def check_savgol_window(

@@ -662,7 +662,10 @@ def detect_run(
                 "(resample the log to a uniform grid)"
             )
         (progress or silent)(0, None, "running the monitor")
-        result = detect(monitor, log, window_s)
+        result = detect(monitor, log, window_s, report)
+        # a velocity the log lacks, derived from its pose: the residual reads it, and its noise
+        # is not that of the logged velocity the monitor was calibrated on (it went unsaid)
+        lines += [f"{s.step}: {s.detail}" for s in report.steps if s.step == "derive velocities"]
     except NnidInputError as exc:
         raise exc.with_source(data) from None
     with staged(out_dir) as stage:

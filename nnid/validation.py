@@ -88,6 +88,14 @@ def one_line(name: str) -> str:
     return name
 
 
+def visible_line(name: str) -> str:
+    """``name`` if it can label reports, files and messages (a vehicle's, a model's, a reader
+    config's): a visible character, on one line (:func:`one_line`), else a ValueError."""
+    if not name.strip():
+        raise ValueError("give a name with a visible character")
+    return one_line(name)
+
+
 def repeated(names: list[str]) -> list[str]:
     """The names a list gives more than once, sorted (for an error that names them)."""
     return sorted({n for n in names if names.count(n) > 1})

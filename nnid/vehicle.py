@@ -25,11 +25,11 @@ from nnid.physics.dofs import DOFS
 from nnid.validation import (
     StrictModel,
     control_character,
-    one_line,
     read_toml,
     refuse_other_file,
     repeated,
     validated,
+    visible_line,
 )
 
 PRESETS = ("seamor", "vlbv300", "romeo", "vt690", "bluerov2_heavy")
@@ -183,9 +183,7 @@ def _not_absurd(key: str, value: float) -> None:
 def vehicle_name(name: str) -> str:
     """``name`` if it can label reports and saved models: a visible character, on one line. A
     line break or another control character would break a report's lines and headings."""
-    if not name.strip():
-        raise ValueError("give a name with a visible character")
-    return one_line(name)
+    return visible_line(name)
 
 
 def saved_vehicle(data: dict[str, Any], source: str = "<saved model>") -> Vehicle:

@@ -639,12 +639,20 @@ CONFIG_CASES = [
     ("train", "a path where the [split] table goes", "split", ("[split]", 'split = "a.csv"\n[x]')),
     # overflowed the sample count, or underflowed the prime-system scale: tracebacks
     ("train", "k-step horizon of 1e308 s", "k_step_s", ("k_step_s = 1.0", "k_step_s = 1e308")),
-    # settles after every run: nothing fitted and exit 0, or a singular discretisation
+    # settles after every run: nothing fitted and exit 0, or a singular discretisation; named
+    # where the config sets it (was 'filter_lambda', a key of no table of the config)
     (
         "train",
         "a filter slower than every run",
-        "filter_lambda",
+        "model.trainer.filter_lambda",
         ("filter_lambda = 1.0", "filter_lambda = 1e-6"),
+    ),
+    ("compare", "second model's trainer filter too slow", "models.1.trainer.filter_lambda", None),
+    (
+        "train",
+        "ensemble member's physics trainer filter too slow",
+        "model.member.physics_trainer.filter_lambda",
+        None,
     ),
     (
         "train",
@@ -854,6 +862,14 @@ MODEL_TEXT = {
         f'[[models]]{TRAIN_TEXT.split("[model]")[1]}[[models]]\n{_NARX}name = "   "\n'
     ),
     "a model name on two lines": f'[model]\n{_NARX}name = "narx\\n1"\n',
+    "second model's trainer filter too slow": (
+        f'[[models]]{TRAIN_TEXT.split("[model]")[1]}[[models]]\nkind = "fossen"\n'
+        'name = "filtered"\ntrainer = { kind = "rls", filter_lambda = 1e-6 }\n'
+    ),
+    "ensemble member's physics trainer filter too slow": (
+        '[model]\nkind = "ensemble"\nseeds = [0, 1]\n[model.member]\nkind = "hybrid"\n'
+        'physics_trainer = { kind = "ls", filter_lambda = 1e-6 }\n'
+    ),
 }
 
 
@@ -2082,3 +2098,93 @@ def test_a_written_autopilot_replay_on_a_log_flown_under_none_is_said(
     assert len(warned) == 1 and warned[0].startswith("replay_autopilot = true, but the log")
     assert said in warned[0] and "open loop" in warned[0], warned[0]
     assert unreplayed(cfg, inputs, replay=object()) == []  # replayed: nothing to say
+
+
+def _reader_config(log: pd.DataFrame, file: str) -> str:
+    """A reader config mapping each column of ``log`` (in ``file``) to itself."""
+    columns = "".join(f'{c} = "{c}"\n' for c in log.columns if c not in ("t", "experiment"))
+    return (
+        f'name = "demo"\nexperiment = "experiment"\n[[sources]]\nfile = "{file}"\n'
+        f'time = "t"\n[sources.columns]\n{columns}'
+    )
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "field", "said"),
+    [
+        ('name = "demo"', 'name = "demo\\nlog"', "name", "one line"),
+        ('name = "demo"', 'name = "demo\\u2028log"', "name", "one line"),
+        ('name = "demo"', 'name = "  "', "name", "visible character"),
+        ('file = "good.csv"', 'file = "good\\t.csv"', "sources.0.file", "one line"),
+    ],
+)
+def test_a_reader_configs_name_and_file_are_one_visible_line(
+    fixtures, tmp_path, old, new, field, said
+):
+    """A reader config's name heads the cleaning report (cleaning.md's title: "demo" and
+    "log" on two lines) and its files are said in the report's lines: both were taken
+    whatever they held, exit 0."""
+    fixtures["demo_log"].to_csv(tmp_path / "good.csv", index=False)
+    config = tmp_path / "map.toml"
+    config.write_text(_reader_config(fixtures["demo_log"], "good.csv").replace(old, new))
+    args = ["inspect", str(tmp_path), "--columns", str(config), "--out", str(tmp_path / "o")]
+    result = CliRunner().invoke(app, args)
+    assert result.exit_code == 2 and "Traceback" not in result.output, result.output
+    errors = [line for line in result.output.splitlines() if line.startswith("error:")]
+    assert len(errors) == 1, result.output
+    assert errors[0].startswith(f"error: {config}, field '{field}': "), errors[0]
+    assert said in errors[0] and not (tmp_path / "o").exists(), errors[0]
+
+
+def test_detect_says_a_velocity_it_derived_from_the_pose(fixtures, tmp_path):
+    """A log without w: detect derived it from the pose, where the monitor had been calibrated
+    on a logged w (another noise in the residual it watches), and said nothing of it."""
+    import json
+
+    data = _write_log(tmp_path, "no w", fixtures["octo_log"].drop(columns="w"))
+    result = CliRunner().invoke(
+        app, _command("detect", tmp_path, fixtures, data=data, out=tmp_path / "o")
+    )
+    assert result.exit_code == 0, result.output
+    said = [line for line in result.output.splitlines() if line.startswith("derive velocities:")]
+    assert len(said) == 1 and said[0].startswith("derive velocities: w from pose"), result.output
+    notes = json.loads((tmp_path / "o" / "detect.json").read_text())["notes"]
+    assert said[0] in notes, notes
+    full = _write_log(tmp_path, "good", fixtures["octo_log"])
+    kept = CliRunner().invoke(
+        app, _command("detect", tmp_path, fixtures, data=full, out=tmp_path / "k")
+    )
+    assert kept.exit_code == 0 and "derive velocities" not in kept.output, kept.output
+
+
+@pytest.mark.parametrize("command", ["train", "loop"])
+def test_a_copied_config_whose_simulation_stayed_behind_runs_on_data(
+    fixtures, tmp_path, monkeypatch, command
+):
+    """--data replaces the data a config names (its log, simulation or campaign), which is
+    then not read; a shipped config copied to another folder (seamor_ls.toml, its simulate
+    file left behind) was refused for it ("field 'data.simulate': no such file or folder")
+    on the very log it was given. Without --data the missing file is still named."""
+    from nnid import pipeline, runs
+
+    def fitted(*args, **kwargs):
+        raise _Fitted
+
+    monkeypatch.setattr(pipeline, "fit_model", fitted)
+    monkeypatch.setattr(runs, "residual_loop_run", fitted)
+    behind = "[data]\nsimulate = 'left_behind.toml'\n"
+    text = (
+        TRAIN_TEXT.replace("[split]", f"{behind}\n[split]")
+        if command == "train"
+        else (f'kind = "loop"\n{behind}')
+    )
+    config = tmp_path / "copied.toml"
+    config.write_text(text)
+    args = _command(command, tmp_path, fixtures, config=config, out=tmp_path / "o")
+    result = CliRunner().invoke(app, args)
+    assert isinstance(result.exception, _Fitted), result.output
+    at = args.index("--data")
+    result = CliRunner().invoke(app, args[:at] + args[at + 2 :])
+    errors = [line for line in result.output.splitlines() if line.startswith("error:")]
+    assert result.exit_code == 2 and len(errors) == 1, result.output
+    assert errors[0].startswith(f"error: {config}, field 'data.simulate': no such file"), errors

@@ -236,3 +236,27 @@ def test_a_model_saved_with_a_thruster_of_no_thrust_loads_and_predicts_as_saved(
     data = back.vehicle.model_dump(mode="json")
     with pytest.raises(NnidInputError, match="no thrust at any command"):
         vehicle_from_dict(data, "new.toml")
+
+
+@pytest.mark.parametrize("separator", ["\u2028", "\u2029"])
+def test_a_model_saved_with_a_line_separator_in_its_vehicle_name_loads_on_one_line(
+    seamor, surge, separator, tmp_path
+):
+    """U+2028 and U+2029 are no control characters, yet str.splitlines breaks at them as at a
+    line break: a saved model whose vehicle name holds one loads as the control characters'
+    do, the name escaped on one line and the warning saying it on one line too."""
+    model = ParametricModel(seamor, ["X_udot", "X:u*abs(u)"], ["u"]).fit(surge)
+    model.save(tmp_path)
+    _edit(
+        tmp_path, lambda s: s["settings"]["vehicle"]["$vehicle"].update(name=f"sea{separator}mor")
+    )
+    escaped = f"sea\\u{ord(separator):04x}mor"
+    with pytest.warns(UserWarning, match="line separator") as caught:
+        back = load_model(tmp_path)
+    (said,) = [str(w.message) for w in caught if "line separator" in str(w.message)]
+    assert len(said.splitlines()) == 1 and repr(escaped) in said, said
+    assert back.vehicle.name == escaped and back.describe()["vehicle"] == escaped
+    assert np.array_equal(back.estimate_.theta, model.estimate_.theta)
+    data = {**seamor.model_dump(mode="json"), "name": f"sea{separator}mor"}
+    with pytest.raises(Exception, match="one line of text"):
+        vehicle_from_dict(data, "new.toml")

@@ -29,6 +29,7 @@ from nnid.scale.engines import RUNNING, LocalEngine, RayEngine, SerialEngine
 from nnid.scale.manifest import expand, task_id
 
 MINIROV = Path(__file__).resolve().parents[1] / "nnid" / "demo_data" / "minirov.toml"
+CONFIGS = Path(__file__).resolve().parents[1] / "configs"
 ETA = (0.6, 0.7, 0.8)  # the true upward heave efficiency of each dive
 
 
@@ -283,6 +284,13 @@ def test_a_glob_leaves_out_the_tables_of_folders_nnid_wrote(tmp_path):
         ('command = "loop"\nvehicle = ""\ndata = ["dive0.csv"]\n', "vehicle", "is empty"),
         # a folder where a TOML file goes passed the check, then failed every task (exit 1)
         ('command = "train"\nconfig = "."\ndata = ["dive0.csv"]\n', "config", "is a folder"),
+        # a file of another kind passed the check too, then failed every task (exit 1)
+        (f'command = "train"\nconfig = "{CONFIGS / "seamor_families.toml"}"\n'
+         'data = ["dive0.csv"]\n', "config", "has kind = 'compare': 'train' tasks need"),
+        ('command = "train"\nconfig = "minirov.toml"\ndata = ["dive0.csv"]\n', "config",
+         "this is a vehicle file"),
+        (f'command = "loop"\nvehicle = "{CONFIGS / "fossen_ls.toml"}"\ndata = ["dive0.csv"]\n',
+         "vehicle", "this is a 'train' config"),
     ],
 )  # fmt: skip
 def test_bad_manifest_is_refused_naming_the_key(fleet, tmp_path, text, field, words) -> None:

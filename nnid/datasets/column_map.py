@@ -49,7 +49,7 @@ from pydantic import Field, field_validator, model_validator
 
 from nnid.datasets.log import ACCELERATION, ANGLES, POSE, TAU, VELOCITY, checked_time_unit
 from nnid.errors import NnidInputError
-from nnid.validation import StrictModel
+from nnid.validation import StrictModel, one_line, visible_line
 
 UNITS = {"rad": 1.0, "deg": 0.017453292519943295, "rad/s": 1.0, "deg/s": 0.017453292519943295,
          "m": 1.0, "cm": 0.01, "mm": 0.001, "m/s": 1.0, "cm/s": 0.01, "mm/s": 0.001}  # fmt: skip
@@ -107,6 +107,12 @@ class Source(StrictModel):
     frame: Literal["ned_frd", "enu_flu"] = "ned_frd"
     quaternion: list[str] = Field(default_factory=list)
     columns: dict[str, str | ColumnSpec] = Field(default_factory=dict)
+
+    @field_validator("file")
+    @classmethod
+    def _file(cls, file: str) -> str:
+        # said in the cleaning report's lines and in messages, which a line break would split
+        return one_line(file)
 
     @field_validator("time_unit")
     @classmethod
@@ -210,6 +216,12 @@ class ColumnMap(StrictModel):
     # run: a split keeps each group on one side
     replays: list[str] = Field(default_factory=list)
     sources: list[Source] = Field(min_length=1)
+
+    @field_validator("name")
+    @classmethod
+    def _name(cls, name: str) -> str:
+        # it heads the cleaning report (cleaning.md's title) and names the reading's source
+        return visible_line(name)
 
     @field_validator("include", "exclude")
     @classmethod

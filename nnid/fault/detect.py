@@ -57,6 +57,7 @@ import numpy as np
 import pandas as pd
 from scipy.special import expit
 
+from nnid.datasets.cleaning import CleaningReport
 from nnid.fault import kernel
 from nnid.fault.isolation import (
     SIGNIFICANCE,
@@ -924,14 +925,20 @@ class Rewatch:
         return out
 
 
-def detect(monitor: ResidualMonitor, log: pd.DataFrame, window_s: float = 10.0) -> DetectResult:
+def detect(
+    monitor: ResidualMonitor,
+    log: pd.DataFrame,
+    window_s: float = 10.0,
+    report: CleaningReport | None = None,
+) -> DetectResult:
     """Every alarm on ``log`` with its isolation on the ``window_s`` seconds after it; after an
     isolated change, the monitor watches what that change leaves, and after one that is not
     isolated, the residual as it was, a later unexplained alarm folded into its record (the
     module docstring). The trace keeps the model's residual r; its statistics and alarms are
-    those watched."""
+    those watched. ``report`` records the velocities derived from the pose, where the log
+    lacks them."""
     start = time.perf_counter()
-    data = monitor_inputs(log, monitor.plant_)
+    data = monitor_inputs(log, monitor.plant_, report)
     trace = monitor.run(log)
     values, alarm = trace.values.copy(), trace.alarm.copy()
     residual = trace.values[:, 0:6].copy()  # the residual watched, re-referenced per change

@@ -28,6 +28,7 @@ from sklearn.base import BaseEstimator
 from sklearn.utils.validation import check_is_fitted
 
 from nnid.datasets.arrays import check_commands, far_beyond_range, motion_arrays
+from nnid.datasets.cleaning import CleaningReport
 from nnid.datasets.log import POSE, VELOCITY, check_log
 from nnid.datasets.preprocess import check_attitude
 from nnid.errors import NnidInputError
@@ -143,14 +144,17 @@ def monitor_motion(columns: Iterable[str]) -> list[str]:
     return [c for c in equation_columns(columns) if c in (*POSE, *VELOCITY)]
 
 
-def monitor_inputs(log: pd.DataFrame, plant) -> dict[str, np.ndarray]:
+def monitor_inputs(
+    log: pd.DataFrame, plant, report: CleaningReport | None = None
+) -> dict[str, np.ndarray]:
     """Time, state [N, 12] (velocities derived from the pose where the log lacks them, by the
     model's Savitzky-Golay setting) and the input channels [N, n] the kernel maps to forces.
     An empty cell of a pose column the residual does not read (:func:`monitor_motion`: a 1-Hz
     GPS x, y beside a 20-Hz DVL) takes its run's nearest sample, and stays NaN in a run with
     no sample of it, as ``--follow`` holds it (:mod:`nnid.fault.follow`): not a made-up 0 for
     the isolation to read. ``unread``: those columns of the state, which the kernel is fed
-    as 0 where NaN (:func:`kernel_state`), so that it scores the row; they change no residual."""
+    as 0 where NaN (:func:`kernel_state`), so that it scores the row; they change no residual.
+    ``report`` records the velocities derived from the pose ("derive velocities")."""
     from nnid.datasets.gaps import nearest_samples
     from nnid.models.parametric import prepare_motion
 
@@ -174,6 +178,7 @@ def monitor_inputs(log: pd.DataFrame, plant) -> dict[str, np.ndarray]:
         plant.savgol_window,
         plant.savgol_order,
         False,
+        report,
         setting=plant.window_key,
     )
     data = motion_arrays(log)

@@ -346,6 +346,8 @@ def expand(path: str | Path) -> list[Task]:
     if spec.command == "loop" and not (vehicles or configs):
         raise NnidInputError("'loop' tasks need a vehicle (or a config that names one)",
                              source=source, field="vehicle")  # fmt: skip
+    _of_kind(configs, "config", spec.command, source)
+    _of_kind([v for v in vehicles if Path(v).is_file()], "vehicle", spec.command, source)
     axes = [logs, vehicles or [None], configs or [None], models or [None]]
     if spec.pair == "zip":
         longest = max(len(a) for a in axes)
@@ -375,6 +377,29 @@ def expand(path: str | Path) -> list[Task]:
         if first != task:  # other paths, one id: a copy of the same name and contents
             _say_merged(first, task, source)
     return list(tasks.values())
+
+
+def _of_kind(paths: list[str], key: str, command: str, source: str) -> None:
+    """Each file of ``key`` (``config``, ``vehicle``) of the kind it names: one of nnid's other
+    files, or a config of another command, failed in every task at run time (exit 1) after
+    the manifest's check passed. A file that does not parse is left to its task to say."""
+    what = f"a '{command}' config" if key == "config" else "a vehicle file"
+    for path in paths:
+        try:
+            data = read_toml(path)
+        except NnidInputError:
+            continue
+        try:
+            refuse_other_file(data, key, what, path)
+        except NnidInputError as err:
+            raise NnidInputError(f"'{path}': {err.message}", source=source, field=key) from None
+        kind = data.get("kind")
+        if key == "config" and isinstance(kind, str) and kind != command:
+            raise NnidInputError(
+                f"'{path}' has kind = '{kind}': '{command}' tasks need {what}",
+                source=source,
+                field=key,
+            )
 
 
 def _say_merged(first: Task, task: Task, source: str) -> None:
