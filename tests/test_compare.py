@@ -178,7 +178,11 @@ def test_markdown_twin_holds_the_same_tables(which, request):
     md = _markdown_tables((out / "report.md").read_text())
     html_tables = _html_tables(page.replace("&#x27;", "'").replace("&amp;", "&"))
     assert md and md == html_tables[: len(md)]
-    assert "data:image/png;base64," in page and "http" not in page.split("<body>")[1]
+    assert "data:image/png;base64," in page
+    # nothing fetched from elsewhere; the figures' base64 left out, where "http" is four random
+    # characters (the VT 690 page's held them once its PNGs were encoded at zlib level 3)
+    body = re.sub(r"data:image/png;base64,[A-Za-z0-9+/=]+", "", page.split("<body>")[1])
+    assert "http" not in body
 
 
 def test_families_rank_four_model_kinds_on_one_held_out_run(families):
@@ -602,3 +606,31 @@ def test_the_force_figure_draws_one_held_out_run_not_every_run_over_each_other(m
         assert x.size == 121 and np.all(np.diff(x) > 0) and x[-1] == 60.0
     assert report._of_run(held) == " of run a"
     assert report._of_run(held[held.experiment == "a"]) == ""
+
+
+@pytest.mark.parametrize("name", ["m", "a model named at much greater length than usual"])
+def test_the_force_figure_has_fixed_margins_and_its_legend_inside(monkeypatch, name):
+    """The force figure is drawn once with fixed margins (the constrained layout placed it,
+    then the crop drew it again): its legend above the first panel, two rows for nine models
+    and the measured force, still lies inside the figure and off the panels, in fewer
+    columns where a long model name would run past the right edge."""
+    import numpy as np
+    from conftest import assert_labels_inside
+
+    import nnid.reports.compare_report as report
+    from nnid.physics.dofs import FORCES
+
+    held = pd.DataFrame({"t": np.arange(0.0, 60.0, 0.5), "experiment": "a"})
+    measured = pd.DataFrame({f: 3e-4 * np.sin(held["t"]) for f in FORCES}, index=held.index)
+    models = {f"{name} {k}": (1 + 0.1 * k) * measured for k in range(9)}
+    drawn = []
+    real = report.figure_uri
+    monkeypatch.setattr(report, "figure_uri", lambda fig: drawn.append(fig) or real(fig))
+    assert report.force_figure(measured, models, held).startswith("data:image/png;base64,")
+    (fig,) = drawn
+    assert_labels_inside(fig)
+    texts = [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
+    assert texts == ["measured τ̄", *models]
+    assert [ax.get_ylabel() for ax in fig.axes] == [
+        f"{f} [{report.FORCE_UNITS[f]}]" for f in FORCES
+    ]

@@ -15,6 +15,7 @@ from importlib import resources
 import numpy as np
 import pandas as pd
 import pytest
+from conftest import assert_labels_inside
 
 from nnid.datasets.measurement import Measurement
 from nnid.datasets.preprocess import first_order_lag
@@ -80,25 +81,7 @@ def test_correlation_grid_keeps_every_label_inside_the_figure(rng, monkeypatch, 
     uri = loop_report.correlation_figure(dict.fromkeys("uvwpqr"[:n_dofs], c), "baseline")
     assert uri.startswith("data:image/png;base64,")
     (fig,) = built
-    _assert_labels_inside(fig)
-
-
-def _assert_labels_inside(fig) -> None:
-    """A figure of fixed margins (no layout engine): every panel's tick labels, axis labels,
-    title and legend lie inside the figure and out of the other panels."""
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-
-    assert fig.get_layout_engine() is None  # the fixed margins, not the constrained layout
-    renderer = FigureCanvasAgg(fig).get_renderer()
-    page = fig.bbox
-    boxes = [ax.get_tightbbox(renderer) for ax in fig.axes]
-    for ax, box in zip(fig.axes, boxes, strict=True):
-        assert box.x0 >= page.x0 and box.x1 <= page.x1, (ax.get_ylabel(), box, page)
-        assert box.y0 >= page.y0 and box.y1 <= page.y1, (ax.get_title(), box, page)
-    panels = [ax.get_window_extent(renderer) for ax in fig.axes]
-    for i, box in enumerate(boxes):  # a panel's labels never reach into another panel
-        for j, panel in enumerate(panels):
-            assert i == j or not box.overlaps(panel), (i, j)
+    assert_labels_inside(fig)
 
 
 @pytest.mark.parametrize(("n_dofs", "amplitude", "longest"), [(6, 3e-4, 7), (1, 1e6, 2)])
@@ -119,7 +102,7 @@ def test_free_run_figure_draws_once_with_every_label_inside(
     uri = loop_report.free_run_figure(t, measured, 1.1 * measured, 0.9 * measured, dofs)
     assert uri.startswith("data:image/png;base64,")
     (fig,) = built
-    _assert_labels_inside(fig)
+    assert_labels_inside(fig)
     # the case asked for: labels this long (an offset, 1e6, keeps the diverged run's short)
     assert max(len(x.get_text()) for x in fig.axes[0].get_yticklabels()) >= longest
 

@@ -154,3 +154,90 @@ def test_the_train_page_has_the_markdowns_prime_system_section():
     for name, value in values.items():
         assert f"<li><code>{html.escape(name)}</code> = {html.escape(value)}</li>" in page
     assert "±" in values["Z_wdot'"] and "fitted to noise" in values["Y:v*abs(v)'"]
+
+
+def _hybrid_figure_data(forces: str, scale: float, n: int = 2000):
+    """A held-out log and a learned force (``forces``, each of size ``scale``, a feature's
+    too) as the train report draws them."""
+    import pandas as pd
+
+    from nnid.datasets.log import TAU, VELOCITY
+
+    rng = np.random.default_rng(0)
+    t = np.arange(n) * 0.05
+    log = pd.DataFrame({"t": t, "experiment": "run0"})
+    for k, c in enumerate([*VELOCITY, *TAU, "phi", "theta", "psi"]):
+        log[c] = scale * np.sin(t / (3 + k)) + 0.1 * scale * rng.standard_normal(n)
+    force = pd.DataFrame({f: 0.0 for f in "XYZKMN"}, index=log.index)
+    for k, f in enumerate(forces):
+        force[f] = scale * (log[VELOCITY[k]] / scale) ** 2 + 0.1 * scale * rng.standard_normal(n)
+    return log, force
+
+
+def _drawn(monkeypatch, draw):
+    """The figure ``draw`` builds (its data URI checked)."""
+    from nnid.reports import train_report
+
+    built = []
+    real = train_report.figure_uri
+    monkeypatch.setattr(train_report, "figure_uri", lambda fig: built.append(fig) or real(fig))
+    assert draw().startswith("data:image/png;base64,")
+    (fig,) = built
+    return fig
+
+
+@pytest.mark.parametrize(("forces", "scale"), [("XN", 1.0), ("Y", 3e-4), ("K", 1e6)])
+def test_the_hybrid_correction_figure_has_fixed_margins_a_y_axis_a_row_and_labels_inside(
+    monkeypatch, forces, scale
+):
+    """The hybrid's six-DOF correction grid (24 panels) took 2-4 s a report under the
+    constrained layout: fixed margins and one y axis per row. Each row still says which force
+    it plots, each panel its feature and |r|; the force's tick labels are on the row's first
+    panel only; every label lies inside the figure and out of the other panels, from forces
+    and features of 3e-4 to 1e6 (the row layout is the same for one row as for six)."""
+    from conftest import assert_labels_inside
+
+    from nnid.reports.figures import FORCE_UNITS
+    from nnid.reports.train_report import _correction_figure
+
+    log, force = _hybrid_figure_data(forces, scale)
+    fig = _drawn(monkeypatch, lambda: _correction_figure(log, force))
+    assert_labels_inside(fig)
+    grid = np.array(fig.axes).reshape(len(forces), 4)
+    for row, f in zip(grid, forces, strict=True):
+        assert row[0].get_ylabel() == f"learned {f} [{FORCE_UNITS[f]}]"
+        assert [ax.get_ylabel() for ax in row[1:]] == ["", "", ""]
+        assert all(ax.get_visible() and ax.get_xlabel() for ax in row)
+        assert all(ax.get_title().startswith("|r| = ") for ax in row)
+        shown = [[t for t in ax.get_yticklabels() if t.get_visible() and t.get_text()]
+                 for ax in row]  # fmt: skip
+        assert shown[0] and not any(shown[1:])
+        assert all(ax.get_ylim() == row[0].get_ylim() for ax in row)
+    if scale < 1:  # a tick label on every panel's edge, eight characters long, still fits
+        for ax in fig.axes:
+            ax.set_xlim(-1e-4, 1e-4)
+        assert_labels_inside(fig)
+        assert fig.axes[0].get_xticklabels()[0].get_text() == "−0.00010"
+
+
+def test_the_hybrid_free_run_figure_has_fixed_margins_and_its_labels_inside(monkeypatch):
+    """The train report's free runs of the hybrid and its physics (six panels) are drawn once,
+    with fixed margins: labels of a DOF barely moving still fit."""
+    from conftest import assert_labels_inside
+
+    from nnid.datasets.log import VELOCITY
+    from nnid.reports.train_report import _free_run_figure
+
+    log, force = _hybrid_figure_data("XYZKMN", 3e-4)
+    velocity = log[list(VELOCITY)]
+    figures = {"correction": (log, force), "free_run": 1.1 * velocity,
+               "baseline_free_run": 0.9 * velocity}  # fmt: skip
+    fig = _drawn(monkeypatch, lambda: _free_run_figure(figures))
+    assert_labels_inside(fig)
+    assert [ax.get_ylabel() for ax in fig.axes] == [f"{c} [m/s]" for c in "uvw"] + [
+        f"{c} [rad/s]" for c in "pqr"
+    ]
+    assert fig.axes[0].get_title() == "experiment run0" and fig.axes[-1].get_xlabel() == "t [s]"
+    assert [t.get_text() for t in fig.axes[0].get_legend().get_texts()] == [
+        "measured", "physics only", "hybrid"
+    ]  # fmt: skip

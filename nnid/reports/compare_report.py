@@ -22,10 +22,12 @@ from nnid.reports.cells import number, score, score_cell
 from nnid.reports.figures import (
     FORCE_UNITS,
     IMAGES_CHECK,
+    LONG_TICKS_LEFT_IN,
     UNITS,
     definitions,
     figure_uri,
     html_table,
+    legend_above,
     markdown_table,
     new_figure,
     page_head,
@@ -318,7 +320,8 @@ def force_figure(
     blur)."""
     keep = force_window(held, window_s)
     t = held["t"].to_numpy(np.float64)
-    fig, axes = new_figure(6, 1, 10.0, 1.7)
+    # fixed margins: the constrained layout drew the figure twice (to place, then to paint)
+    fig, axes = new_figure(6, 1, 10.0, 1.7, fixed=True, left=LONG_TICKS_LEFT_IN)
     for k, ax in enumerate(axes[:, 0]):
         f = FORCES[k]
         ax.plot(t[keep], measured[f].to_numpy()[keep], color="black", lw=1.2, label="measured τ̄")
@@ -326,7 +329,7 @@ def force_figure(
             ax.plot(t[keep], series[f].to_numpy()[keep], lw=0.8, label=name)
         ax.set_ylabel(f"{f} [{FORCE_UNITS[f]}]")
         ax.tick_params(labelsize=8)
-    axes[0, 0].legend(ncol=5, fontsize=7, loc="lower left", bbox_to_anchor=(0.0, 1.02))
+    legend_above(axes[0, 0], ncols=5, fontsize=7)
     axes[-1, 0].set_xlabel("t [s]")
     return figure_uri(fig)
 

@@ -18,7 +18,15 @@ from nnid.loop.residual_loop import UNJUDGED
 from nnid.physics.dofs import DOF_WORD, DOFS, FORCES
 from nnid.physics.effects import parse_effect
 from nnid.reports.cells import number, score_cell
-from nnid.reports.figures import FORCE_UNITS, UNITS, figure_uri, html_table, new_figure, page_head
+from nnid.reports.figures import (
+    FORCE_UNITS,
+    LONG_TICKS_LEFT_IN,
+    UNITS,
+    figure_uri,
+    html_table,
+    new_figure,
+    page_head,
+)
 from nnid.serialization import write_json, write_text
 
 _DIRECTION = {
@@ -400,12 +408,6 @@ def correlation_figure(analysis: dict, title: str) -> str:
     return figure_uri(fig)
 
 
-#: inches left of the free-run panels: a velocity's tick labels are not bounded like a
-#: correlation's; room for the y label and eight characters (``−0.00050``, a DOF barely
-#: moving) with one to spare (a test holds the labels inside for amplitudes 1e-4 to 1e6)
-FREE_RUN_LEFT_IN = 1.2
-
-
 def free_run_figure(t, measured, before, after, dofs, window_s: float = 60.0) -> str:
     """Held-out velocities: measured, baseline and augmented free runs over the first
     ``window_s`` of the first held-out experiment."""
@@ -413,7 +415,7 @@ def free_run_figure(t, measured, before, after, dofs, window_s: float = 60.0) ->
     if "experiment" in measured:
         keep &= (measured["experiment"] == measured["experiment"].iloc[0]).to_numpy()
     # fixed margins: the constrained layout drew the figure twice (to place, then to paint)
-    fig, axes = new_figure(len(dofs), 1, 10.0, 1.5, fixed=True, left=FREE_RUN_LEFT_IN)
+    fig, axes = new_figure(len(dofs), 1, 10.0, 1.5, fixed=True, left=LONG_TICKS_LEFT_IN)
     for k, d in enumerate(dofs):
         ax = axes[k, 0]
         ax.plot(t[keep], measured[d][keep], color="black", lw=1.0, label="measured")

@@ -23,6 +23,7 @@ from nnid.reports.cells import number, score_cell, thresholds_cell
 from nnid.reports.figures import (
     FORCE_UNITS,
     IMAGES_CHECK,
+    LONG_TICKS_LEFT_IN,
     UNITS,
     definitions,
     figure_uri,
@@ -502,7 +503,8 @@ def _free_run_figure(figures: dict) -> str:
     hybrid, physics = figures["free_run"], figures["baseline_free_run"]
     name, pos = experiment_rows(held)[0]
     cols = [c for c in VELOCITY if c in held and hybrid[c].notna().any()]
-    fig, axes = new_figure(len(cols), 1, width=9.0, height=1.8)
+    # fixed margins: the constrained layout drew the figure twice (to place, then to paint)
+    fig, axes = new_figure(len(cols), 1, 9.0, 1.8, fixed=True, left=LONG_TICKS_LEFT_IN)
     t = held["t"].to_numpy()[pos]
     for ax, c in zip(axes[:, 0], cols, strict=True):
         # the predictions are row-aligned with the held-out log (predict answers on its index)
@@ -532,7 +534,14 @@ def _correction_figure(log: pd.DataFrame, force: pd.DataFrame, per_dof: int = 4)
     cols = [f for f in FORCES if force[f].abs().max() > 0]
     feats = [c for c in _FEATURES if c in log and log[c].std() > 0]
     pick = np.unique(np.linspace(0, len(log) - 1, min(len(log), 3000)).round().astype(int))
-    fig, axes = new_figure(len(cols), per_dof, width=11.0, height=2.2)
+    # fixed margins and one y axis per row (every panel of a row plots the same force): the
+    # constrained layout measured every label of 24 panels, then the crop drew them again.
+    # Room right of each panel for half an x tick label (``−0.00010``) on its edge; between
+    # rows for the tick labels, the feature and the next row's |r|
+    fig, axes = new_figure(
+        len(cols), per_dof, 11.0, 2.2, fixed=True, left=LONG_TICKS_LEFT_IN, right=0.4,
+        hspace=0.55, wspace=0.3, sharey="row",
+    )  # fmt: skip
     for row, f in zip(axes, cols, strict=True):
         y = force[f].to_numpy()
         corr = {c: abs(np.corrcoef(log[c].to_numpy(), y)[0, 1]) for c in feats}
@@ -540,7 +549,10 @@ def _correction_figure(log: pd.DataFrame, force: pd.DataFrame, per_dof: int = 4)
         for ax, c in zip(row, best, strict=False):
             ax.scatter(log[c].to_numpy()[pick], y[pick], s=2, alpha=0.4, color="tab:blue")
             ax.set_xlabel(f"{c} [{_FEATURES[c]}]")
-            ax.set_title(f"|r| = {corr[c]:.2f}", fontsize=8)
+            # y given: matplotlib no longer measures the panel's tick labels for a title
+            # over axes with none on top (a tenth of the figure's time); the y axis's offset
+            # text, the one label up there, is at the left, clear of a centred title
+            ax.set_title(f"|r| = {corr[c]:.2f}", fontsize=8, y=1.0)
         row[0].set_ylabel(f"learned {f} [{FORCE_UNITS[f]}]")
         for ax in row[len(best) :]:
             ax.set_visible(False)
