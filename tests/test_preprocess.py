@@ -210,6 +210,34 @@ def test_resampling_a_log_at_its_own_rate_changes_nothing():
         np.testing.assert_array_equal(out[col].to_numpy(), log[col].to_numpy(), err_msg=col)
 
 
+def test_resampling_an_epoch_clock_at_its_own_rate_changes_nothing():
+    """An epoch clock (~1.7e9 s) as read from text is held to units of 2.4e-7 s: its span fell
+    1.4e-7 s short of 29.9 s, and the 1e-9 samples of slack lost the last sample, which is on
+    the grid; grid times a unit off their samples (1e-10 s to snap to) were interpolated a
+    rounding away, a held input taken from the sample before. The grid's end and its samples
+    are the clock's rounding (the readers' rule): the log comes back as it was, its clock
+    from 0."""
+    n = 300
+    rng = np.random.default_rng(4)
+    t = np.array([float(f"{1700000000.2 + k / 10:.1f}") for k in range(n)])  # as read from text
+    assert (t[-1] - t[0]) * 10.0 < n - 1  # the span is short of the last grid time
+    assert np.any(t[0] + np.arange(n) / 10.0 != t)  # the grid is not the log's
+    log = pd.DataFrame(
+        {
+            "t": t,
+            "experiment": "a",
+            "u": rng.normal(size=n),
+            "psi": np.angle(np.exp(1j * (3.0 + 0.07 * np.arange(n)))),  # wraps at ±π
+            "tau_X": np.repeat(rng.normal(size=n // 3), 3),  # held over three samples
+        }
+    )
+    out = resample_log(log, 10.0)
+    assert list(out.columns) == list(log.columns) and len(out) == n
+    want = log.assign(t=t - t[0])  # each run's clock starts at 0 at its first sample
+    for col in log.columns:
+        np.testing.assert_array_equal(out[col].to_numpy(), want[col].to_numpy(), err_msg=col)
+
+
 def test_resampling_does_not_interpolate_a_wrapped_angle_through_zero():
     """A yaw stepping from 3.14 to -3.14 was interpolated through 0 between the two samples: a
     turn of 2.4 rad in 1/13 s that the vehicle never made."""

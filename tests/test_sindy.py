@@ -355,7 +355,7 @@ def test_columns_of_rounding_are_zero_to_the_path_not_noise_scaled_up():
     models, thresholds = [], np.logspace(-3, 0, 13)
     for log in (exact, rounding):
         with warnings.catch_warnings():
-            warnings.simplefilter("ignore")  # K and M, rounding or 0, explain nothing
+            warnings.simplefilter("ignore")  # Y's collinear terms (ExcitationWarning)
             models.append(SindyDamping(vehicle, thresholds=thresholds).fit(log))
     zero, noisy = models
     assert not any("w" in key.split(":")[1] for key in noisy.params)
@@ -369,3 +369,44 @@ def test_columns_of_rounding_are_zero_to_the_path_not_noise_scaled_up():
     path = SparsePath(thresholds=[0.1], selection="aic").fit(theta[ok], y[ok])
     w_terms = np.array(["w" in t for t in SindyDamping(vehicle)._terms()])
     assert path.excluded_[w_terms].all() and not (path.coef_[:, w_terms]).any()
+
+
+def test_targets_of_rounding_keep_no_terms_and_are_not_called_unexplained():
+    """The same log with 2 % accelerometer noise: K and M are the Munk moments' rounding
+    ((Y_v̇ − Z_ẇ) v w, w ~ 1e-17). Scaled to unit RMS, that rounding had real columns fitted to
+    it (M kept six terms of ~1e-16) and K and M were warned unexplained (validation NMSE 1),
+    where w exactly 0 gave NMSE 0 and no warning. A target of rounding is zero (the rounding
+    rule among the targets): the fit, its warnings and its scores are those of w exactly 0."""
+    from nnid.datasets.simulator import simulate
+    from nnid.trainers.sindy import SindyWarning, SparsePath
+
+    vehicle = load_vehicle("seamor")
+    rng = np.random.default_rng(3)
+    inputs = np.zeros((400, 6))
+    inputs[20:, [0, 1, 5]] = np.repeat(rng.uniform(-30, 30, (19, 3)), 20, 0) * [1, 1, 0.2]
+    exact = simulate(vehicle, inputs, 0.1)
+    for c in ("du", "dv", "dr"):  # accelerometer-grade noise on the excited DOFs
+        exact[c] += 0.02 * exact[c].std() * rng.standard_normal(len(exact))
+    rounding = exact.assign(w=1e-17 * rng.standard_normal(len(exact)))
+    models, said = [], []
+    for log in (exact, rounding):
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            models.append(SindyDamping(vehicle, thresholds=np.logspace(-3, 0, 13)).fit(log))
+        said.append([str(w.message) for w in caught if issubclass(w.category, SindyWarning)])
+    zero, noisy = models
+    assert said[1] == said[0]
+    assert noisy.params.keys() == zero.params.keys()
+    assert not any(key[0] in "KM" for key in noisy.params)
+    for key, p in zero.params.items():
+        for what in ("value", "stderr"):
+            assert noisy.params[key][what] == pytest.approx(p[what], rel=1e-12), (key, what)
+    for f in "KM":
+        assert noisy.selected_["validation_nmse"][f] == zero.selected_["validation_nmse"][f]
+    # the path's own verdict: K and M are the idle outputs, X, Y and N are not
+    theta, y = SindyDamping(vehicle).features(rounding)
+    ok = np.isfinite(theta).all(1) & np.isfinite(y).all(1)
+    path = SparsePath(thresholds=[0.1], selection="aic").fit(theta[ok], y[ok])
+    idle = dict(zip("XYZKMN", path.idle_outputs_, strict=True))
+    assert idle["K"] and idle["M"] and not (idle["X"] or idle["Y"] or idle["N"])
+    assert not path.coef_[path.idle_outputs_].any()

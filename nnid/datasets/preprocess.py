@@ -165,8 +165,12 @@ def resample_log(
             if seg.size < 2:
                 continue
             ts = t[seg]
-            grid = ts[0] + np.arange(int(np.floor((ts[-1] - ts[0]) * rate + 1e-9)) + 1) / rate
-            on = snap_to_samples(grid, ts, ON_SAMPLE / rate)
+            # the end, and a grid time on a sample, to the clock's rounding: on an epoch clock
+            # (~1.7e9 s, units of 2.4e-7 s) 1e-9 samples of slack lost a last sample on the
+            # grid, and a held input took the sample before one it fell a unit short of
+            tolerance = clock_tolerance(ts, ts[0], rate)
+            grid = ts[0] + run_grid(ts[-1] - ts[0], rate, tolerance)
+            on = snap_to_samples(grid, ts, tolerance)
             # the run's clock from its first sample: a later piece starts where it was
             # measured (as mask_gaps's pieces do), so the hole before it stays in the log
             out = {"t": grid - grid[0] + (ts[0] - t[0])}
@@ -231,6 +235,26 @@ RESAMPLE_RATIO = 2.0
 #: sample: k/rate is not the logged k·Δt in floating point (k/10 and k·0.1 differ in the last
 #: bits), which moved every value of a log resampled at its own rate
 ON_SAMPLE = 1e-9
+
+
+def run_grid(span: float, rate: float, tolerance: float) -> np.ndarray:
+    """A run's times from 0 every 1/``rate`` s to ``span`` (its stop less its start), the grid
+    of the readers and of :func:`resample_log`, the last time kept where it is ``span`` to
+    ``tolerance`` (:func:`clock_tolerance`): on an epoch clock ``span`` is rounded by ~1e-7 s,
+    and a run whose last logged sample is on the grid lost it (1e-9 samples of slack); no time
+    more than ``tolerance`` beyond ``span`` is added."""
+    return np.arange(int(np.floor(span * rate + tolerance * rate)) + 1) / rate
+
+
+def clock_tolerance(t: np.ndarray, start: float, rate: float) -> float:
+    """How near a grid time must be to a source's time (``t``, before ``start`` is taken away)
+    to be that sample: :data:`ON_SAMPLE` of the grid's interval, or two units in the last place
+    of the source's clock where that is coarser. An epoch's times (~1.7e9 s) are held to
+    ~2.4e-7 s: ``t - start`` carries the rounding of both (half a unit each) and as much again
+    from a parser or a ``time_scale``; no more, as a clock that resolves microseconds has a
+    stamp 1e-6 s off a grid time that is not on it."""
+    largest = max(float(np.max(np.abs(t))), abs(start)) if t.size else abs(start)
+    return max(ON_SAMPLE / rate, 2 * float(np.spacing(largest)))
 
 
 def snap_to_samples(grid: np.ndarray, ts: np.ndarray, tolerance: float) -> np.ndarray:

@@ -37,7 +37,7 @@ from nnid.datasets.log import (
     wrap_angle,
 )
 from nnid.datasets.mapping import file_label, label_columns, map_source
-from nnid.datasets.preprocess import ON_SAMPLE, snap_to_samples, unwrap_finite
+from nnid.datasets.preprocess import clock_tolerance, run_grid, snap_to_samples, unwrap_finite
 from nnid.datasets.rosbag import is_bag, read_bag_sources
 from nnid.errors import NnidInputError
 
@@ -190,14 +190,6 @@ def csv_dialect(header: str, row: str) -> dict:
     return {"sep": sep, "decimal": decimal}
 
 
-def _grid(span: float, rate: float, tolerance: float) -> np.ndarray:
-    """A run's times from 0 every 1/``rate`` s to ``span`` (its stop less its start), the last
-    kept where it is ``span`` to ``tolerance`` (:func:`_clock_tolerance`): on an epoch clock
-    ``span`` is rounded by ~1e-7 s, and a run whose last logged sample is on the grid lost it
-    (1e-9 samples of slack); no time more than ``tolerance`` beyond ``span`` is added."""
-    return np.arange(int(np.floor(span * rate + tolerance * rate)) + 1) / rate
-
-
 def _bridged(at: np.ndarray, t_ok: np.ndarray, longest: float) -> np.ndarray:
     """Where on the grid (``at``, snapped to the source's samples, :func:`snap_to_samples`) a
     column with defined samples only at ``t_ok`` has a value: on one, or between two at most
@@ -209,17 +201,6 @@ def _bridged(at: np.ndarray, t_ok: np.ndarray, longest: float) -> np.ndarray:
     before, after = t_ok[np.clip(prev, 0, None)], t_ok[np.clip(nxt, 0, t_ok.size - 1)]
     inside = (prev >= 0) & (nxt < t_ok.size)
     return (at == before) | (inside & (after - before <= longest))
-
-
-def _clock_tolerance(t: np.ndarray, start: float, rate: float) -> float:
-    """How near a grid time must be to a source's time (``t``, before ``start`` is taken away)
-    to be that sample: :data:`ON_SAMPLE` of the grid's interval, or two units in the last place
-    of the source's clock where that is coarser. An epoch's times (~1.7e9 s) are held to
-    ~2.4e-7 s: ``t - start`` carries the rounding of both (half a unit each) and as much again
-    from a parser or a ``time_scale``; no more, as a clock that resolves microseconds has a
-    stamp 1e-6 s off a grid time that is not on it."""
-    largest = max(float(np.max(np.abs(t))), abs(start)) if t.size else abs(start)
-    return max(ON_SAMPLE / rate, 2 * float(np.spacing(largest)))
 
 
 def _resample(
@@ -327,13 +308,13 @@ def assemble(
             )
         # relative times: a grid built on UNIX epochs (~1.7e9 s) jitters by ~1e-7 s. The end
         # to the clock's rounding at stop: no more than the source logged there is snapped by
-        grid = _grid(stop - start, rate, _clock_tolerance(np.array([stop]), start, rate))
+        grid = run_grid(stop - start, rate, clock_tolerance(np.array([stop]), start, rate))
         columns: dict[str, np.ndarray] = {}
         valid = np.ones(grid.size, dtype=bool)
         for source, df in parts:
             names = [c for c in df.columns if c not in ("t", "experiment")]
             t_abs = df["t"].to_numpy(np.float64)
-            tolerance = _clock_tolerance(t_abs, start, rate)
+            tolerance = clock_tolerance(t_abs, start, rate)
             values, t_src, at = _resample(
                 t_abs - start,
                 df[names].to_numpy(np.float64),

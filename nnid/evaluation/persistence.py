@@ -28,10 +28,14 @@ from nnid.serialization import exact_float, read_exact_float
 #: km/s beside a force in mN, or a term of a high power of a small velocity: |r|³ of r ~ 1e-4
 #: rad/s is 1e-12 beside a velocity of 1 m/s) and call a measured column rounding; such a
 #: regression is ill-scaled in any case. Not of the target: on data of rounding the target is
-#: rounding too (X of a heave-only log), and it has other units. Where a regression knows the
-#: motion its columns are made of (a Fossen regression), each column has its own floor instead
-#: (:func:`rounding_floors`): the motion it is made of at most this fraction of the log's
-#: typical motion, which is scale-free and power-aware
+#: rounding too (X of a heave-only log), and it has other units. The targets of a regression of
+#: several outputs are judged by the same rule among themselves, against their own typical
+#: size, never the regressors' (SINDy's, :class:`~nnid.trainers.sindy.SparsePath`: K of a
+#: surge/sway/yaw log is the Munk moments' rounding beside X, and has nothing to explain);
+#: where every target is rounding, their typical size is too, and none is called so. Where a
+#: regression knows the motion its columns are made of (a Fossen regression), each column has
+#: its own floor instead (:func:`rounding_floors`): the motion it is made of at most this
+#: fraction of the log's typical motion, which is scale-free and power-aware
 ROUNDING = 1e-10
 
 #: the factor by which :func:`rounding_floors`' caller scales the reference motion to read

@@ -171,6 +171,15 @@ def debias(r: np.ndarray, b: np.ndarray, coef: np.ndarray) -> np.ndarray:
     return out
 
 
+def _rounding_outputs(y: np.ndarray) -> np.ndarray:
+    """Which outputs of targets ``y`` ``[N, m]`` are rounding, not data ``[m]``: the rounding
+    rule (:func:`~nnid.evaluation.persistence.rounding_columns`) of each target against the
+    typical size of the regression's targets, not of its regressors (other units). A target
+    that is not finite is not idle: zeroed, it would hide bad input behind a zero row."""
+    rms = np.sqrt(np.mean(y * y, axis=0))
+    return np.isfinite(rms) & rounding_columns(rms, typical_size(y))
+
+
 def nmse(y: np.ndarray, pred: np.ndarray) -> np.ndarray:
     """Per-output normalised MSE: mean((y − ŷ)²) / mean(y²)."""
     ms = np.maximum(np.mean(y * y, axis=0), 1e-300)
@@ -233,6 +242,10 @@ class SparsePath(BaseEstimator):
     rounding, not data (:func:`~nnid.evaluation.persistence.rounding_columns` against
     :func:`~nnid.evaluation.persistence.typical_size`: u·w of a log that never heaves, w ~
     1e-17); they are zero to the path, never selected, their coefficients exactly 0.
+    ``idle_outputs_`` ``[m]``: the outputs whose target is rounding against the typical size
+    of the targets (the Munk moments' 1e-17 in K and M of that log); their target is zero, as
+    if exactly so: they keep no terms, and where the held-out target is rounding too their
+    validation NMSE is that of a zero target (0), not called unexplained.
     ``selection`` is "validation" (the sparsest model whose validation J is within
     ``tolerance`` of the best; with ``per_output`` each output picks its own row, greedily
     sparsest while the mean validation J of the outputs the path explains stays within
@@ -289,6 +302,13 @@ class SparsePath(BaseEstimator):
         # heaved (w ~ 1e-17) to fit the Munk moments' rounding in M and K
         self.excluded_ = rounding_columns(col, typical_size(theta))
         col[self.excluded_] = 1.0
+        # a target of rounding is zero too: scaled to unit RMS, the Munk moments' rounding in K
+        # and M (w ~ 1e-17) had real columns fitted to it, and it was warned unexplained
+        self.idle_outputs_ = _rounding_outputs(y)
+        y = np.where(self.idle_outputs_, 0.0, y)
+        if y_val is not None:  # an idle output's prediction is 0: nothing to explain where
+            # its held-out target is rounding too; where it is not, scored (and warned) as is
+            y_val = np.where(self.idle_outputs_ & _rounding_outputs(y_val), 0.0, y_val)
         out = np.sqrt(np.mean(y * y, axis=0))
         out[out == 0] = 1.0
         scaled_theta = theta / col
