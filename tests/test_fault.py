@@ -808,6 +808,22 @@ def test_a_recovery_is_said_ended_and_alarms_csv_says_when(vehicle, monitor, tmp
     assert rows["change_t"].tolist()[1] == pytest.approx(resized.alarms[1]["resized"]["t"])
 
 
+def test_a_lasting_loss_is_not_said_ended_where_the_rows_cannot_show_it(vehicle, monitor, tmp_path):
+    """Thruster v3 stopped from 20 s and never back (seed 61): an alarm at 79.15 s on what the
+    loss leaves was said to be its end at about 88.20 s, on the 1 s after it in which v3 is
+    commanded about 0.06 N (1 N elsewhere), so its refit there (87 ± 50 % lost) held both
+    nominal and the loss; no longer taken out, the loss was alarmed again at 90.15 s as a new
+    one. An end must now also reject the change persisting at its size on those rows: one
+    alarm, never ended, batch and --follow alike."""
+    fault = Fault("thruster", FAULT_T, thruster="v3", efficiency=0.0)
+    log = simulate_faults(vehicle, 120, faults=[fault], seed=61)
+    batch, said = _followed_as_batch(monitor, log, tmp_path)
+    (loss,) = batch.alarms
+    assert (loss["kind"], loss["thruster"], loss["hypothesis"]) == (
+        "thruster_loss", "v3", "thruster_loss.v3")  # fmt: skip
+    assert loss.get("ended") is None and not any("ended" in line for line in said)
+
+
 def test_a_fault_after_a_resize_is_a_new_change_not_another_resize(vehicle, monitor):
     """A snag half freed at 40 s is said resized (u −5 N); thruster h1 lost to 30 % at 52 s was
     then said to be the snag resized again (a 6-DOF wrench takes up part of a thruster's
