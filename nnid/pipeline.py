@@ -253,10 +253,10 @@ def load_inputs(
         or (str(resolve(base, spec.log)) if getattr(spec, "log", None) else None)
         or reader_root(reader)  # read only when the run gives no log
     ):
-        from nnid.datasets.readers import load_log
+        from nnid.datasets.readers import load_log, mapped_source
 
         inputs = Inputs(*load_log(path, reader, unit, unit_key), veh)
-        source = path
+        source = mapped_source(path, reader)
         if veh is not None and (physics or not models):  # physics fits, and the loop's log
             from nnid.datasets.arrays import (
                 check_forces_match_commands,
@@ -270,7 +270,7 @@ def load_inputs(
                 raise NnidInputError(
                     f"{slips[0].message} ([detect] calibrates a monitor, which reads them as "
                     "faults)",
-                    source=path,
+                    source=source,
                     field=slips[0].column,
                     row=slips[0].row,
                 )
@@ -287,7 +287,7 @@ def load_inputs(
                     elif m.kind in PHYSICS_KINDS:
                         check_velocities(inputs.log.columns, fitted_dofs(m))
             except NnidInputError as err:
-                raise err.with_source(path) from None
+                raise err.with_source(source) from None
     elif getattr(spec, "simulate", None):
         from nnid.datasets.simulator import simulate_config
 

@@ -434,7 +434,8 @@ def loop_run(
         try:  # on the runs the loop keeps, as train checks the runs its config keeps
             check_attitude(log, inputs.vehicle, list(fitted_dofs or DOFS))
         except NnidInputError as exc:
-            raise exc.with_source(inputs.report.source or str(where)) from None
+            # the log file read (through its reader config), not the reader config's name
+            raise exc.with_source(inputs.source or inputs.report.source or str(where)) from None
         settings = dict(
             max_effects=cfg.max_effects if max_effects is None else max_effects,
             alpha=cfg.alpha if alpha is None else alpha,
@@ -624,7 +625,7 @@ def detect_run(
     """``nnid detect`` on a whole log: ``alarms.csv``, ``detect.json`` and the report;
     ``time_unit`` declares the unit of its ``t`` (``--time-unit``)."""
     from nnid.datasets.gaps import fill_slow, mask_gaps, say_unread
-    from nnid.datasets.readers import load_log
+    from nnid.datasets.readers import load_log, mapped_source
     from nnid.fault.detect import detect
     from nnid.fault.monitor import CLOCK_SPREAD, GAP_INTERVALS, UNREAD_BY, monitor_motion
     from nnid.reports.detect_report import OUTPUTS, write_detect_outputs
@@ -667,7 +668,7 @@ def detect_run(
         # is not that of the logged velocity the monitor was calibrated on (it went unsaid)
         lines += [f"{s.step}: {s.detail}" for s in report.steps if s.step == "derive velocities"]
     except NnidInputError as exc:
-        raise exc.with_source(data) from None
+        raise exc.with_source(mapped_source(data, columns)) from None
     with staged(out_dir) as stage:
         lines += write_detect_outputs(monitor, result, stage, source=data, notes=lines)
     lines.append(f"wrote {out_dir}/: {OUTPUTS}")

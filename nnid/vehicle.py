@@ -366,6 +366,19 @@ def vehicle_from_dict(
             "a few percent of neutral (a mass in kg, or another vehicle's buoyancy?)",
             stacklevel=2,
         )
+    z_g, z_b = vehicle.r_g[2], vehicle.r_b[2]
+    # FRD, z down (Fossen's g(η)): K = (z_g W − z_b B) cos θ sin φ rights a roll only where
+    # z_g W > z_b B (z_g > z_b at W = B); a warning, not an error: the file may hold what the
+    # vehicle is
+    if z_g * vehicle.weight < z_b * vehicle.buoyancy:
+        warnings.warn(
+            f"{source}: the centre of gravity is above the centre of buoyancy (r_g z = "
+            f"{z_g:g} m, r_b z = {z_b:g} m, body z down; z_g W < z_b B): the restoring "
+            "moments tip the vehicle over in roll and pitch instead of righting it (statically "
+            "unstable), where underwater vehicles are trimmed bottom-heavy (z up, or r_g and "
+            "r_b swapped?)",
+            stacklevel=2,
+        )
     for slip in [*sign_slips(vehicle), *size_slips(vehicle)]:
         warnings.warn(f"{source}: {slip}", stacklevel=2)
     return vehicle

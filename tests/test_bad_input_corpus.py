@@ -113,6 +113,8 @@ LOG_CASES: list[tuple[str, str, Callable]] = [
         "'t'",
         lambda df, i: df.assign(t=(df["t"] * 1000 + 0.3 * np.sin(np.arange(len(df)))).round(3)),
     ),
+    # 20 Hz in hours steps by 1.4e-5: refused as a warmup_s or savgol_window too long
+    ("time in hours", "'t'", lambda df, i: df.assign(t=df["t"] / 3600)),
     # a contract column but for case or spaces: kept as an unknown column, phi then missing
     ("an angle named in capitals", "'PHI'", lambda df, i: df.rename(columns={"phi": "PHI"})),
     ("an input name with a space", "INPUT", lambda df, i: df.rename(columns={i: f" {i}"})),
@@ -1173,6 +1175,30 @@ def test_a_derivative_of_the_energy_adding_sign_or_a_weight_in_kg_is_warned_of()
         load_vehicle("vt690")
 
 
+@pytest.mark.parametrize(("r_g", "r_b"), [(-0.02, 0.0), (0.0, 0.03), (0.01, 0.05)])
+def test_a_centre_of_gravity_above_the_centre_of_buoyancy_is_warned_of(r_g, r_b):
+    """FRD, z down: a vehicle whose CG is above its CB (r_g z < r_b z) is statically
+    unstable in roll and pitch, which no ROV or AUV is trimmed to be (a sign slip, z written
+    up): loaded without a word. Said once, naming the file and both values; a bottom-heavy
+    vehicle, one with both at the origin, and every shipped vehicle file say nothing."""
+    from nnid.vehicle import PRESETS, load_vehicle, vehicle_from_dict
+
+    base = {"name": "probe", "mass": 11.5, "inertia": [0.2, 0.2, 0.3]}
+    tipped = {**base, "r_g": [0.0, 0.0, r_g], "r_b": [0.0, 0.0, r_b]}
+    with pytest.warns(UserWarning) as caught:
+        vehicle_from_dict(tipped, source="probe.toml")
+    said = [str(w.message) for w in caught]
+    assert len(said) == 1 and said[0].startswith("probe.toml: the centre of gravity is above"), said
+    assert f"r_g z = {r_g:g} m, r_b z = {r_b:g} m" in said[0] and "unstable" in said[0], said
+    swapped = {**base, "r_g": [0.0, 0.0, r_b], "r_b": [0.0, 0.0, r_g]}
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        vehicle_from_dict(swapped, source="probe.toml")  # bottom-heavy
+        vehicle_from_dict(base, source="probe.toml")  # both at the origin: neutral
+        for name in [*PRESETS, MINIROV, *map(str, (REPO / "configs" / "vehicles").glob("*.toml"))]:
+            load_vehicle(name)
+
+
 @pytest.mark.parametrize(
     ("extra", "said"),
     [
@@ -2155,6 +2181,25 @@ def test_detect_says_a_velocity_it_derived_from_the_pose(fixtures, tmp_path):
         app, _command("detect", tmp_path, fixtures, data=full, out=tmp_path / "k")
     )
     assert kept.exit_code == 0 and "derive velocities" not in kept.output, kept.output
+    assert "<h2>Notes on the log</h2>" not in (tmp_path / "k" / "report.html").read_text()
+
+
+def test_detects_report_shows_the_runs_notes(fixtures, tmp_path):
+    """report.html showed none of the notes detect said of the log (a velocity derived from
+    the pose, rows lost, a wandering clock): they were on the console and in detect.json
+    only."""
+    import html
+    import json
+
+    data = _write_log(tmp_path, "no w", fixtures["octo_log"].drop(columns="w"))
+    result = CliRunner().invoke(
+        app, _command("detect", tmp_path, fixtures, data=data, out=tmp_path / "o")
+    )
+    assert result.exit_code == 0, result.output
+    notes = json.loads((tmp_path / "o" / "detect.json").read_text())["notes"]
+    page = (tmp_path / "o" / "report.html").read_text()
+    assert notes and "<h2>Notes on the log</h2>" in page
+    assert all(f"<li>{html.escape(n)}</li>" in page for n in notes), notes
 
 
 @pytest.mark.parametrize("command", ["train", "loop"])
@@ -2188,3 +2233,54 @@ def test_a_copied_config_whose_simulation_stayed_behind_runs_on_data(
     errors = [line for line in result.output.splitlines() if line.startswith("error:")]
     assert result.exit_code == 2 and len(errors) == 1, result.output
     assert errors[0].startswith(f"error: {config}, field 'data.simulate': no such file"), errors
+
+
+def test_a_fossen_fit_of_no_unknowns_says_it_estimated_nothing(fixtures, tmp_path):
+    """unknowns = [] fitted nothing, exited 0 without a word, and metrics.json said
+    "trainer": "ls" as though least squares had run. The model is the vehicle file as
+    written: said on the console and in metrics.json, and no trainer recorded."""
+    import json
+
+    config = tmp_path / "as_written.toml"
+    config.write_text(TRAIN_TEXT.replace('unknowns = ["added_mass", "damping"]', "unknowns = []"))
+    args = _command("train", tmp_path, fixtures, config=config, out=tmp_path / "o")
+    result = CliRunner().invoke(app, args)
+    assert result.exit_code == 0, result.output
+    said = " ".join(result.output.split())
+    assert "warning: the fit has no unknowns (unknowns = []): nothing is estimated" in said
+    metrics = json.loads((tmp_path / "o" / "metrics.json").read_text())
+    assert metrics["trainer"] is None and metrics["params"] == {}
+    assert any(w.startswith("the fit has no unknowns") for w in metrics["warnings"])
+
+
+def test_a_hybrid_of_no_physics_unknowns_says_its_physics_is_the_file():
+    """A hybrid may keep its physics as written (unknowns = []): kept, and said, its physics
+    fit recorded as fitted by no trainer (it said "ls")."""
+    from nnid.models.hybrid import HybridModel
+    from nnid.trainers.adam import Adam
+    from nnid.vehicle import load_vehicle
+
+    log = _demo_log()
+    model = HybridModel(
+        load_vehicle(MINIROV), unknowns=[], dofs=["w"], trainer=Adam(max_epochs=0),
+        segments=(0.5,),
+    )  # fmt: skip
+    with pytest.warns(UserWarning, match=r"the fit has no unknowns \(unknowns = \[\]\)"):
+        model.fit(log[log["experiment"] == "run0"])
+    physics = model.baseline()  # metrics.json's "baseline", model.json's physics_trainer
+    assert physics.trainer_name() is None and physics.params == {}
+
+
+def test_a_loop_error_names_the_log_read_through_a_reader_config(fixtures, tmp_path):
+    """The loop said an error about the log it read through a reader config against the
+    config's name (the cleaning report's title), as though "tartan-auv-2022" were a file."""
+    log = fixtures["demo_log"].drop(columns=["phi", "theta"])
+    log["p"] += 0.3 * np.cos(log["t"])  # rolling, with no roll angle to read it by
+    log.to_csv(tmp_path / "nav.csv", index=False)
+    config = tmp_path / "map.toml"
+    config.write_text(_reader_config(log, "nav.csv").replace('"demo"', '"tartan-auv-2022"'))
+    args = ["loop", "--data", str(tmp_path), "--columns", str(config), "--vehicle", MINIROV]
+    result = CliRunner().invoke(app, [*args, "--out", str(tmp_path / "o")])
+    errors = [line for line in result.output.splitlines() if line.startswith("error:")]
+    assert result.exit_code == 2 and len(errors) == 1, result.output
+    assert errors[0].startswith(f"error: {tmp_path} (through {config}), field 'phi'"), errors

@@ -253,3 +253,49 @@ def test_the_reader_config_example_in_the_column_map_docstring_parses():
     (example,) = re.findall(r"```toml\n(.*?)```", column_map.__doc__ or "", re.S)
     (source,) = column_map.ColumnMap.model_validate(tomllib.loads(example)).sources
     assert source.time_unit == "s" and source.row_clock is None
+
+
+def _said(result) -> str:
+    """The one error line of a refused run, its wrapping undone."""
+    errors = [line for line in result.output.splitlines() if line.startswith("error:")]
+    assert result.exit_code == 2 and len(errors) == 1, result.output
+    return " ".join(result.output.split())
+
+
+def test_a_clock_too_fine_for_its_unit_is_named_not_blamed_on_a_window(tmp_path):
+    """Only steps too large were checked for another unit: a log in hours read as seconds
+    was refused as a warmup_s or savgol_window too long, and seconds declared as
+    milliseconds too. The median step is said against t, with the unit assumed and the
+    units that give a step a vehicle's log takes."""
+    step = 0.05  # 20 Hz
+    hours = _write(tmp_path / "hours.csv", np.arange(400) * step / 3600)
+    said = _said(CliRunner().invoke(app, ["inspect", str(hours)]))
+    assert f"{hours}, field 't': time, read as seconds" in said
+    assert f"{3600 / step:.0f} Hz" in said and "hours (a step of 0.05 s, 20 Hz)" in said
+    assert "multiply by 3600" in said and "savgol_window" not in said
+    seconds = _write(tmp_path / "seconds.csv", np.arange(400) * step)
+    args = ["loop", "--data", str(seconds), "--vehicle", "seamor", "--time-unit", "ms"]
+    said = _said(CliRunner().invoke(app, [*args, "--out", str(tmp_path / "o")]))
+    assert f"{seconds}, field 't': time, declared in milliseconds, steps by 0.05 ms" in said
+    assert "seconds (a step of 0.05 s, 20 Hz)" in said and "--time-unit" in said
+    assert "savgol_window" not in said and not (tmp_path / "o").exists()
+    # a 1-kHz logger's clock, the fastest the unit guess reads, and the demo log pass
+    check_time_unit(pd.DataFrame({"t": np.arange(50) * 1e-3}))
+    demo = Path(__file__).resolve().parents[1] / "nnid" / "demo_data"
+    check_time_unit(pd.read_parquet(demo / "demo_minirov_heave.parquet"))
+
+
+def test_a_reader_config_source_too_fine_for_its_unit_is_named(tmp_path):
+    """A source declared in milliseconds whose stamps are seconds, or stamped in hours:
+    said against the source's time_unit or time_scale, before a grid of tens of kHz."""
+    cmap = _mapped(tmp_path, 'time_unit = "ms"\n')
+    _write(tmp_path / "nav.csv", np.arange(60) * 0.1)  # 10 Hz in seconds
+    with pytest.raises(NnidInputError, match="declared in milliseconds") as err:
+        load_log(tmp_path, cmap)
+    assert err.value.field == "sources.0.time_unit" and err.value.source.endswith("map.toml")
+    assert 'time_unit = "s"' in err.value.message
+    cmap = _mapped(tmp_path)
+    _write(tmp_path / "nav.csv", np.arange(60) * 0.1 / 3600)  # 10 Hz in hours
+    with pytest.raises(NnidInputError, match=r"hours \(a step of 0.1 s, 10 Hz\)") as err:
+        load_log(tmp_path, cmap)
+    assert err.value.field == "sources.0.time_scale" and "3600 for hours" in err.value.message

@@ -61,6 +61,16 @@ TIME_UNITS: dict[str, tuple[str, float]] = {
 #: :func:`check_time_unit` is skipped for it (the clock alone cannot tell a 1-Hz log in
 #: seconds from one in integer milliseconds); it travels with the log's copies and slices
 TIME_UNIT_ATTR = "time_unit"
+#: the median step, s, from which a log's t reads as milliseconds or coarser (the unit guess of
+#: :func:`time_unit_slip`): no vehicle's dynamics are sampled this slowly (five 1-Hz steps)
+SLOWEST_STEP = 5.0
+#: the median step, s, under which a log's t is refused as a clock in a coarser unit than the
+#: one assumed (:func:`fine_clock_slip`): the mirror of :data:`SLOWEST_STEP`, a fifth of the step
+#: of the fastest logger the unit guess reads (1 kHz in microseconds): 5 kHz, beyond any
+#: vehicle's log (the measured ones under ``shared/data`` log at 270 Hz at most)
+FASTEST_STEP = 2e-4
+#: the units coarser than seconds a clock too fine for its unit may be in: seconds in each
+COARSER_UNITS: dict[str, float] = {"minutes": 60.0, "hours": 3600.0}
 #: how a time unit is declared, named where the guess refuses one
 DECLARE_TIME_UNIT = (
     "if it is, or to have it converted, declare t's unit with --time-unit, the config's "
@@ -1023,27 +1033,85 @@ def check_time_unit(
 
     Only the user knows which such a clock is: a log whose unit was declared
     (:func:`declare_time_unit`) is not guessed at, and the refusal names how to declare it
-    (``declare``: a reader config's log is declared in the reader config)."""
-    if df.attrs.get(TIME_UNIT_ATTR):
-        return
+    (``declare``: a reader config's log is declared in the reader config). Declared or not,
+    a median step under :data:`FASTEST_STEP` is refused (:func:`fine_clock_slip`): hours or
+    minutes read as seconds, seconds declared as milliseconds."""
     within = None
     if "experiment" in df:  # the jump from one run's clock to the next is no sample step
         codes = pd.factorize(df["experiment"])[0]
         within = codes[1:] == codes[:-1]
-    slip = time_unit_slip(df["t"].to_numpy(dtype=np.float64), within)
+    t = df["t"].to_numpy(dtype=np.float64)
+    # a declared unit is checked too: seconds declared as milliseconds step too finely
+    declared = df.attrs.get(TIME_UNIT_ATTR)
+    unit = declared if declared in TIME_UNITS else "s"
+    steps = _run_steps(t, within)
+    fine = None
+    if steps.size >= 2:
+        fine = fine_clock_slip(float(np.median(steps)), unit, bool(declared))
+    if fine:
+        slip, seconds = fine
+        convert = (
+            "convert it to seconds (multiply by 3600 for hours, 60 for minutes): a declared "
+            f"unit is one of {', '.join(TIME_UNITS)}"
+        )
+        fix = declare if seconds else convert
+        raise NnidInputError(f"{slip}; t must be seconds: {fix}", source=source, field="t")
+    if declared:
+        return
+    slip = time_unit_slip(t, within)
     if slip:
         raise NnidInputError(f"{slip}; t must be seconds: {declare}", source=source, field="t")
+
+
+def _run_steps(t: np.ndarray, within: np.ndarray | None = None) -> np.ndarray:
+    """The sample steps of a clock ``t``, those inside one experiment (``within``) only."""
+    if t.size < 3:
+        return np.empty(0)
+    steps = np.abs(np.diff(t))
+    return steps if within is None else steps[within]
+
+
+def fine_clock_slip(
+    step: float, unit: str = "s", declared: bool = False
+) -> tuple[str, bool] | None:
+    """What a median sample step of ``step`` s under :data:`FASTEST_STEP` looks like, read
+    from a clock in ``unit`` (one of :data:`TIME_UNITS`; ``declared``: as the user declared
+    it), or None for a step an underwater vehicle's log may take. Returns the sentence and
+    whether the clock looks like seconds (a finer unit declared for seconds: the fix is
+    declaring them), else like a unit coarser than seconds (hours or minutes read as seconds:
+    the fix is converting). A unit is named where its step would be one a log may take
+    (:data:`FASTEST_STEP` to :data:`SLOWEST_STEP`)."""
+    if not 0.0 < step < FASTEST_STEP:  # a clock that stands still is refused elsewhere
+        return None
+    name, per_second = TIME_UNITS[unit]
+    given = step * per_second  # the median step as the clock wrote it
+    likely = {"seconds": 1.0} if per_second > 1.0 else {}
+    likely |= COARSER_UNITS
+    named = [
+        f"{u} (a step of {shown(given * f)} s, {_hz(1 / (given * f))})"
+        for u, f in likely.items()
+        if FASTEST_STEP <= given * f < SLOWEST_STEP
+    ]
+    read = f"declared in {name}" if declared else f"read as {name}"
+    said = (
+        f"time, {read}, steps by {shown(given)} {unit} (median), {_hz(1 / step)}: faster than "
+        f"any underwater vehicle's log (over {_hz(1 / FASTEST_STEP)})"
+    )
+    if not named:
+        return f"{said}: t is not in {name}", False
+    return f"{said}: this looks like {' or '.join(named)}", named[0].startswith("seconds")
+
+
+def _hz(rate: float) -> str:
+    """A sample rate as said to a user: whole hertz from 100 Hz, else three digits."""
+    return f"{rate:.0f} Hz" if rate >= 100 else f"{rate:.3g} Hz"
 
 
 def time_unit_slip(t: np.ndarray, within: np.ndarray | None = None) -> str | None:
     """What a time column meant as seconds looks like when it steps as another unit does
     (:func:`check_time_unit`'s rule), or None. ``within``: which steps lie inside one
     experiment (the others, a clock's jump between runs, are left out)."""
-    if t.size < 3:
-        return None
-    steps = np.abs(np.diff(t))
-    if within is not None:
-        steps = steps[within]
+    steps = _run_steps(t, within)
     if steps.size < 2:
         return None
     step = float(np.median(steps))
@@ -1054,7 +1122,8 @@ def time_unit_slip(t: np.ndarray, within: np.ndarray | None = None) -> str | Non
     elif step > 1000 or np.all(np.abs(steps - 1000) <= 1e-3):
         # a 20 Hz log in microseconds passed as 50000 s steps, and hung a fit
         unit = "microseconds (divide by 1e6)"
-    elif 5 <= step <= 1000:  # whole or jittered: no vehicle's dynamics are sampled this slowly
+    # whole or jittered: no vehicle's dynamics are sampled this slowly
+    elif SLOWEST_STEP <= step <= 1000:
         unit = "milliseconds (divide by 1000)"
     elif step >= 1 and whole:  # 250 Hz in integer milliseconds passed as a 0.25-Hz log
         return (

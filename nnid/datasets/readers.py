@@ -29,9 +29,11 @@ from nnid.datasets.log import (
     MAX_RUN_SAMPLES,
     PIECE_OF,
     REPLAY_GROUP,
+    TIME_UNITS,
     check_time_unit,
     checked_time_unit,
     declare_time_unit,
+    fine_clock_slip,
     time_unit_slip,
     validate_log,
     wrap_angle,
@@ -430,9 +432,30 @@ def _clock(parts: list[tuple[Source, pd.DataFrame]], cmap: ColumnMap, exp: str) 
             f"no source of '{exp}' has two distinct time stamps: give rate", source=cmap.name,
             field="rate",
         )  # fmt: skip
+    i = cmap.sources.index(source)
+    # declared or not: a clock in hours read as seconds (or seconds declared as milliseconds)
+    # made a grid of tens of kHz, refused later as a savgol_window or warmup_s too long
+    unit = source.time_unit or next(
+        (u for u, (_, n) in TIME_UNITS.items() if np.isclose(n * source.time_scale, 1.0)), None
+    )
+    scaled = source.declares_clock() or source.time_scale != 1.0
+    fine = fine_clock_slip(step, unit or "s", scaled) if timed else None
+    if fine:
+        key = "time_unit" if source.time_unit else "time_scale"
+        fix = (
+            'declare its time_unit = "s"'
+            if fine[1]
+            else "set its time_scale to convert it to seconds (3600 for hours, 60 for minutes)"
+        )
+        if fine[1] != (key == "time_unit"):  # one clock declaration: the other key goes
+            fix += f" in place of its {key}"
+        raise NnidInputError(
+            f"source '{source.file}': {fine[0]}; {fix}",
+            source=cmap.name,
+            field=f"sources.{i}.{key}",
+        )
     slip = time_unit_slip(t) if timed and not source.declares_clock() else None
     if slip:
-        i = cmap.sources.index(source)
         raise NnidInputError(
             f"source '{source.file}': {slip}: set its time_scale (0.001 for milliseconds), "
             'or declare its time_unit (s, ms, us, ns: "s" for a logger stepping by whole '
@@ -600,7 +623,7 @@ def load_log(
         report = CleaningReport(source=str(path))
         with _config_named(cmap, columns):
             df = assemble(read_sources(path, cmap, report), cmap, report)
-        return validate_log(df, source=f"{path} (through {columns})"), report
+        return validate_log(df, source=mapped_source(path, columns)), report
     if columns is None:
         report = CleaningReport(source=str(path))
         df = read_table(path)
@@ -618,7 +641,14 @@ def load_log(
         root = root.parent
     with _config_named(cmap, columns):
         df, report = read_mapped(cmap, root)
-    return validate_log(df, source=f"{path} (through {columns})"), report
+    return validate_log(df, source=mapped_source(path, columns)), report
+
+
+def mapped_source(path: str | Path, columns: str | Path | None) -> str:
+    """How an error names a log read from ``path`` (a file, or the root a reader config's
+    sources are found under) through the reader config ``columns`` (None: read as it is).
+    Not the config's ``name``, which heads the cleaning report and names no file."""
+    return str(path) if columns is None else f"{path} (through {columns})"
 
 
 @contextmanager

@@ -489,6 +489,14 @@ def filter_settled(data: dict[str, np.ndarray], lam: float) -> np.ndarray:
     return settled_rows(data, 3.0 / lam)
 
 
+#: what a Fossen fit of no unknowns says: nothing was fitted, though it ran and is scored
+NOTHING_ESTIMATED = (
+    "the fit has no unknowns ({}): nothing is estimated and no trainer runs; the Fossen model "
+    "is the vehicle file as written (its added mass, damping and restoring as given), and its "
+    "scores are those of the file's values"
+)
+
+
 def expand_unknowns(spec: Sequence[str], dofs: Sequence[str], vehicle) -> list[str]:
     """The unknowns of a fit with the shortcuts expanded: ``added_mass`` (the diagonal
     derivatives of ``dofs``) and ``damping`` (the vehicle's damping-model terms of their
@@ -1377,7 +1385,18 @@ class ParametricModel(FossenPlant):
         self.report_ = CleaningReport(source="fit data")
         needs_acc = getattr(trainer, "filter_lambda", None) is None
         prepared, data = self._equation_data(log, accelerations=needs_acc, report=self.report_)
-        self.estimate_ = trainer.fit(self.structure_, data, progress=progress)
+        if unknowns:
+            self.estimate_ = trainer.fit(self.structure_, data, progress=progress)
+        else:  # no trainer runs (a UKF cannot, on no parameters): said, and trainer_name() None
+            from nnid.trainers.least_squares import LeastSquares
+
+            given = f"unknowns = {list(self.unknowns)}" + (
+                "; its groups name no parameter of the vehicle's" if list(self.unknowns) else ""
+            )
+            warnings.warn(NOTHING_ESTIMATED.format(given), UserWarning, stacklevel=3)
+            # a regression of no columns: the equation error of the file's values, measured
+            lam = getattr(trainer, "filter_lambda", None)
+            self.estimate_ = LeastSquares(filter_lambda=lam).fit(self.structure_, data, progress)
         self.trainer_ = trainer
         values, self.from_file_ = simulated_values(
             self.vehicle, self.estimate_.names, self.estimate_.theta
@@ -1461,6 +1480,14 @@ class ParametricModel(FossenPlant):
             )
         self._check_mass()
         self._check_signs()
+
+    def trainer_name(self) -> str | None:
+        """As :meth:`NnidModel.trainer_name`; None where the fit estimated nothing (no
+        unknowns: the vehicle file as written, which no trainer fitted)."""
+        estimate = getattr(self, "estimate_", None)
+        if estimate is not None and not estimate.names:
+            return None
+        return super().trainer_name()
 
     def _from_pose(self) -> tuple[list[str], tuple[float, int]] | None:
         """The velocity columns the fit derived from the pose (its report's "derive

@@ -31,6 +31,7 @@ from nnid.reports.figures import (
     markdown_table,
     new_figure,
     page_head,
+    said_list,
 )
 from nnid.reports.stops import HEAD as STOP_HEAD
 from nnid.reports.stops import TRAINING_TITLE, stage_cells
@@ -436,8 +437,6 @@ def html_page(result) -> str:
         )
     if coef_blocks:
         parts += ["<h2>Coefficients</h2>", *coef_blocks]
-    if all_warnings(comparison):
-        items = "".join(f"<li>{html.escape(w)}</li>" for w in all_warnings(comparison))
-        parts += ["<h2>Warnings</h2>", f"<ul>{items}</ul>"]
+    parts.append(said_list(all_warnings(comparison)))
     parts += [IMAGES_CHECK, "</body></html>\n"]
     return "\n".join(parts)

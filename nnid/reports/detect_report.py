@@ -28,6 +28,7 @@ from nnid.reports.figures import (
     html_table,
     new_figure,
     page_head,
+    said_list,
 )
 from nnid.serialization import write_json, write_text
 
@@ -87,7 +88,7 @@ def write_detect_outputs(
     rows = [alarm_row(a) for a in result.alarms]
     write_text(out_dir / "alarms.csv", pd.DataFrame(rows, columns=ALARM_FIELDS).to_csv(index=False))
     write_json(out_dir / "detect.json", detect_json(monitor, result, notes))
-    write_text(out_dir / "report.html", detect_html(monitor, result, source))
+    write_text(out_dir / "report.html", detect_html(monitor, result, source, notes))
     hours = monitor.calibration_["hours"]
     lines = [
         f"{len(result.alarms)} alarm(s) in {result.trace.t.size} samples "
@@ -127,8 +128,11 @@ def _explains(a: dict) -> str:
     return f"explains {share} of the whitened residual after the alarm"
 
 
-def detect_html(monitor, result: DetectResult, source: str = "") -> str:
-    """The detect report as one self-contained page."""
+def detect_html(
+    monitor, result: DetectResult, source: str = "", notes: list[str] | None = None
+) -> str:
+    """The detect report as one self-contained page; ``notes``: what the run said of the log
+    (:func:`detect_json`'s), which qualify the alarms."""
     trace = result.trace
     h_t, h_g = monitor.threshold_values
     out = [page_head("fault detection" + (f": {source}" if source else ""))]
@@ -145,6 +149,7 @@ def detect_html(monitor, result: DetectResult, source: str = "") -> str:
     caveat = monitor.threshold_caveat()
     if caveat:
         out.append(f"<p><b>Note</b>: {html.escape(caveat)}.</p>")
+    out.append(said_list(list(notes or []), "Notes on the log"))
     if result.alarms:
         out.append("<h2>Alarms</h2>")
         head = ["experiment", "t [s]", "kind", "thruster", "efficiency (95 %)", "effect",

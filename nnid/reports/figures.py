@@ -146,6 +146,15 @@ def markdown_table(head: list[str], rows: list[list[str]]) -> list[str]:
     ]
 
 
+def said_list(items: list[str], title: str = "Warnings") -> str:
+    """What a run said of its data or its results (its warnings, its notes), as a headed
+    HTML list; empty where it said nothing."""
+    if not items:
+        return ""
+    lines = "".join(f"<li>{html.escape(w)}</li>" for w in items)
+    return f"<h2>{html.escape(title)}</h2><ul>{lines}</ul>"
+
+
 def definitions(terms: dict[str, str]) -> str:
     """An HTML definition list of table columns."""
     items = "".join(f"<dt>{html.escape(k)}</dt><dd>{html.escape(v)}</dd>" for k, v in terms.items())

@@ -26,6 +26,7 @@ from nnid.reports.figures import (
     html_table,
     new_figure,
     page_head,
+    said_list,
 )
 from nnid.serialization import write_json, write_text
 
@@ -457,7 +458,7 @@ def html_page(result: dict, figures: dict[str, str]) -> str:
 <h2>Errors on held-out data, before and after</h2>
 {html_table(*error_rows(result))}
 {f"<p>{html.escape(HELD_OUT_CHOSE)}</p>" if result["added"] else ""}
-{_warnings_html(result)}
+{said_list(result.get("warnings", []))}
 <h2>Candidates</h2>
 {"".join(steps)}
 {_opinion_html(result)}
@@ -472,13 +473,6 @@ held-out {_gate_text(result)} error by at least
 </body></html>
 """
     )
-
-
-def _warnings_html(result: dict) -> str:
-    if not result.get("warnings"):
-        return ""
-    items = "".join(f"<li>{html.escape(w)}</li>" for w in result["warnings"])
-    return f"<h2>Warnings</h2><ul>{items}</ul>"
 
 
 def hybrid_opinion(result: dict) -> str:

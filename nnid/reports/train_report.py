@@ -31,6 +31,7 @@ from nnid.reports.figures import (
     markdown_table,
     new_figure,
     page_head,
+    said_list,
 )
 from nnid.reports.loop_report import parameter_unit
 from nnid.reports.stops import HEAD as STOP_HEAD
@@ -469,10 +470,7 @@ def train_html(metrics: dict, figures: dict[str, Any] | None = None) -> str:
             f"<li><code>{html.escape(k)}</code> = {html.escape(text)}</li>" for k, text in prime[1]
         ]
         out.append("</ul>")
-    if metrics.get("warnings"):
-        out.append("<h2>Warnings</h2><ul>")
-        out += [f"<li>{html.escape(w)}</li>" for w in metrics["warnings"]]
-        out.append("</ul>")
+    out.append(said_list(metrics.get("warnings", [])))
     out.append(IMAGES_CHECK + "</body></html>")
     return "\n".join(out)
 
