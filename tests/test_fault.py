@@ -526,6 +526,46 @@ def test_follow_makes_a_changes_columns_once_and_anew_for_the_next(
     assert made == expected
 
 
+def test_follow_takes_a_snag_and_ballast_out_with_no_model_made_per_flush(
+    vehicle, monitor, monkeypatch
+):
+    """After an isolated snag (an external force in six DOFs) or ballast change, each flush's
+    signature made a physics model per column (seven for a snag), an actuation, and six
+    Savitzky-Golay derivatives through scipy's dispatch: 8.5 ms (snag) and 4.7 ms (ballast)
+    a flush on an idle Xeon. After its first call a Rewatch makes none of them, and what it
+    leaves is bit for bit what one made afresh leaves."""
+    from nnid.datasets import preprocess
+    from nnid.fault import detect as detect_module
+    from nnid.physics.parts import Parts
+    from nnid.physics.thrusters import Actuation
+
+    faults = [Fault("external", FAULT_T, force=SNAG),
+              Fault("effect", 22.0, effect="buoyancy_offset", value=10.0)]  # fmt: skip
+    log = simulate_faults(vehicle, 30, faults=faults, seed=6)
+    data = monitor_inputs(log, monitor.plant_)
+    r = monitor.run(log).values[:, 0:6]
+    w = detect_module.Rewatch(monitor)
+    snag = [(f"external_bias.{d}", f) for d, f in zip("uvwpqr", SNAG, strict=True)]
+    w.changes = [detect_module.Change(20.0, "snag", snag),
+                 detect_module.Change(22.0, "ballast", [("buoyancy_offset", -10.0)])]  # fmt: skip
+    blocks = [np.arange(k, k + 41) for k in range(460, 560, 10)]  # --follow's: 2 s every 0.5 s
+    w.left(data, blocks[0], r[blocks[0]])
+    made: list[str] = []
+    model, actuation, scipys = Parts.model, Actuation.__init__, preprocess.savgol_filter
+    monkeypatch.setattr(Parts, "model", lambda *a, **k: made.append("model") or model(*a, **k))
+    monkeypatch.setattr(Actuation, "__init__", lambda *a: made.append("act") or actuation(*a))
+    monkeypatch.setattr(
+        preprocess, "savgol_filter", lambda *a, **k: made.append("scipy") or scipys(*a, **k)
+    )
+    left = [w.left(data, rows, r[rows]) for rows in blocks[1:]]
+    assert made == []
+    monkeypatch.undo()
+    for rows, out in zip(blocks[1:], left, strict=True):
+        np.testing.assert_array_equal(
+            out, detect_module._left(monitor, data, rows, r[rows], w.fitted)
+        )
+
+
 SNAG = (-10, 0, 0, 0, 0, 1.0)
 
 

@@ -365,6 +365,53 @@ def _assert_columns_equal_the_probe(vehicle, names, data, lam, check=None):
     return fast
 
 
+def test_a_regressions_columns_make_each_model_once_and_are_each_units_own(seamor, monkeypatch):
+    """The regression made a physics model and evaluated it per unknown at every call:
+    ``detect --follow``'s signature of a snag (an external force in six DOFs) made seven
+    models every 0.5 s of rows. An external force's columns now share R(0)'s evaluation (b
+    enters R alone), and each other model is made once per value of its parts. The columns
+    are still each unit's own R(e_k) − R(0) bit for bit, and parts edited since get a model
+    of their own."""
+    from nnid.physics.parts import Parts
+
+    rng = np.random.default_rng(5)
+    n = 30
+    data = {
+        "eta": rng.normal(size=(n, 6)) * 0.2,
+        "nu": rng.normal(size=(n, 6)),
+        "nu_dot": rng.normal(size=(n, 6)),
+        "tau": rng.normal(size=(n, 6)) * 20.0,
+        "t": np.arange(n) * 0.05,
+        "experiment": np.zeros(n, dtype=int),
+    }
+    names = [*(f"external_bias.{d}" for d in DOFS), "buoyancy", "Y_vdot", "N:r"]
+    structure = ParametricFossen(seamor, names)
+    made, model = [], Parts.model
+    monkeypatch.setattr(
+        Parts, "model", lambda self, *a, **k: made.append(1) or model(self, *a, **k)
+    )
+    fits = [structure.regression(data) for _ in range(3)]
+    assert len(made) == 3  # R(0)'s, buoyancy's and Y_vdot's, once: none for a force or damping
+    monkeypatch.undo()
+
+    def assert_probes(reg):
+        r0 = structure.equation_residual(structure.base, data)
+        np.testing.assert_array_equal(reg.y, -r0.reshape(-1))
+        for k, name in enumerate(names[:-1]):  # a damping column is the basis, not a probe
+            unit = structure.base.copy()
+            unit.set(name, 1.0)
+            probe = structure.equation_residual(unit, data) - r0
+            np.testing.assert_array_equal(reg.phi[:, k], probe.reshape(-1))
+
+    for reg in fits:
+        assert_probes(reg)
+    structure.base.set("X_udot", structure.base.get("X_udot") - 3.0)  # edited since
+    structure.base.weight += 5.0
+    edited = structure.regression(data)
+    assert not np.array_equal(edited.y, fits[0].y)
+    assert_probes(edited)
+
+
 def test_non_physical_mass_matrix_warns(seamor):
     """A heave mass the data cannot determine: the fit warns instead of simulating nonsense."""
     from nnid.models.parametric import PhysicsWarning

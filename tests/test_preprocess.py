@@ -357,6 +357,44 @@ def test_heave_rate_from_depth_stays_bounded_when_tilted():
     assert "tilted beyond 60°" in report.steps[-1].detail
 
 
+def test_savgol_derivative_is_scipys_bit_for_bit_without_its_dispatch(monkeypatch):
+    """scipy's savgol_filter cost about 1 ms a call on a 2-s window, ten times its arithmetic
+    (its array-API dispatch, the coefficients remade at every call), and ``detect --follow``
+    took six derivatives every 0.5 s of rows. savgol_derivative now convolves with
+    coefficients made once per setting and fits each end's half window as scipy does: scipy's
+    result bit for bit over windows, orders, derivatives and lengths, between gaps and between
+    steps, without calling it."""
+    from scipy.signal import savgol_filter
+
+    from nnid.datasets import preprocess
+
+    def scipys(y, window, order, deriv, dt):
+        return savgol_filter(y, window, order, deriv=deriv, delta=dt, mode="interp")
+
+    def refused(*args, **kwargs):
+        raise AssertionError("scipy's savgol_filter called")
+
+    monkeypatch.setattr(preprocess, "savgol_filter", refused)
+    rng = np.random.default_rng(3)
+    settings = [(3, 1, 1), (5, 2, 1), (7, 3, 3), (9, 2, 3), (11, 2, 0), (21, 4, 1), (21, 4, 2)]
+    for window, order, deriv in settings:
+        for n in (window, window + 1, 3 * window + 4):
+            y = np.cumsum(rng.normal(size=n)) * 10.0 ** rng.uniform(-3, 3)
+            dt = float(rng.uniform(0.005, 0.5))
+            got = savgol_derivative(y, dt, window, order, deriv)
+            np.testing.assert_array_equal(got, scipys(y, window, order, deriv, dt))
+    y = np.cumsum(rng.normal(size=60))
+    y[25] = np.nan  # a gap: each stretch on its own
+    got = savgol_derivative(y, 0.05, 21, 4)
+    np.testing.assert_array_equal(got[:25], scipys(y[:25], 21, 4, 1, 0.05))
+    np.testing.assert_array_equal(got[26:], scipys(y[26:], 21, 4, 1, 0.05))
+    y[25], steps = 0.0, np.array([17, 40])  # steps: each piece on its own, as scipy has it
+    with monkeypatch.context() as scipy_pieces:
+        scipy_pieces.setattr(preprocess, "savgol_interp", scipys)
+        expected = savgol_derivative(y, 0.05, 21, 4, steps=steps)
+    np.testing.assert_array_equal(savgol_derivative(y, 0.05, 21, 4, steps=steps), expected)
+
+
 def test_a_savgol_window_too_short_for_its_order_is_widened_with_a_warning():
     """0.4 s at 5 Hz is 2 samples, too few for a quartic (6): the derivative uses 7 samples,
     and the setting's name says so; a window that fits, or no name (an internal default), is

@@ -106,14 +106,19 @@ def fitted_vehicle(plant):
 
 
 def midpoint_data(
-    data: dict, rows: np.ndarray, vehicle, savgol: tuple[float, int] = (0.5, 2)
+    data: dict,
+    rows: np.ndarray,
+    vehicle,
+    savgol: tuple[float, int] = (0.5, 2),
+    act: Actuation | None = None,
 ) -> dict:
     """The arrays of the intervals ending at ``rows`` as the regression sees them: pose and
     velocity at the midpoint, the force of the commands held over the interval, and the
     acceleration by a Savitzky-Golay derivative (``savgol``: window in seconds, order). Not the
     difference quotient the residual is made of: a column built from the same noisy
     difference would "explain" the residual's own noise (errors in variables; an added-mass
-    column then comes out near the vehicle's whole mass on a healthy window)."""
+    column then comes out near the vehicle's whole mass on a healthy window). ``act``: the
+    ``vehicle``'s :class:`~nnid.physics.thrusters.Actuation` where the caller keeps one."""
     x, x0 = data["x"][rows], data["x"][rows - 1]
     mid = 0.5 * (x + x0)
     step = x[:, 3:6] - x0[:, 3:6]
@@ -126,7 +131,7 @@ def midpoint_data(
     vel = data["x"][span, 6:12]
     acc = np.column_stack([savgol_derivative(vel[:, j], dt, window, savgol[1]) for j in range(6)])
     at = rows - span[0]
-    act = Actuation(vehicle)
+    act = Actuation(vehicle) if act is None else act
     inputs = data["inputs"][rows - 1]
     return {
         "eta": mid[:, 0:6],
@@ -163,6 +168,7 @@ class Hypotheses:
         self.vehicle = fitted_vehicle(plant)
         self.savgol = (plant.savgol_window, 2)
         self.act = Actuation(plant.vehicle)
+        self.fitted_act = Actuation(self.vehicle)  # the midpoint data's nominal force
         self.own = [Candidate(f"thruster_loss.{n}", "thruster_loss", f"thruster.{n}")
                     for n in self.act.channels] if self.act.thrusters else []  # fmt: skip
         # thrusters alone (a lost thruster's signature) need none of the loop's columns:
@@ -185,7 +191,7 @@ class Hypotheses:
         with its predecessor)."""
         cands, cols = [], np.zeros((rows.size, 6, 0))
         if self.loop:
-            arrays = midpoint_data(data, rows, self.vehicle, self.savgol)
+            arrays = midpoint_data(data, rows, self.vehicle, self.savgol, self.fitted_act)
             if self._cands is None:
                 # the thrusters themselves stand for thrust changes; a DOF's installation
                 # coefficient would only be a coarser copy of them. Which of the others are

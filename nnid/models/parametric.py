@@ -75,6 +75,7 @@ from nnid.physics.damping_library import (
     term_codes,
 )
 from nnid.physics.dofs import DOFS, FORCES
+from nnid.physics.fossen import FossenModel, net_force_of
 from nnid.physics.parts import Parts, at_file_value, relative_velocity
 from nnid.physics.thrusters import force_deadband
 from nnid.serialization import exact_float, read_exact_float
@@ -203,6 +204,22 @@ def typical_motion(x: np.ndarray, length: float) -> np.ndarray:
     return np.repeat([linear, angular], 3)
 
 
+def _parts_key(parts: Parts) -> tuple:
+    """Every field of ``parts`` by value (its bytes: -0.0 and NaN as they are), in its order
+    (a dict's order is its model's term order), hashable."""
+    out = []
+    for f in dataclasses.fields(parts):
+        value = getattr(parts, f.name)
+        if isinstance(value, dict):
+            out.append(tuple((k, np.float64(v).tobytes()) for k, v in value.items()))
+        elif value is None:
+            out.append(None)
+        else:
+            array = np.asarray(value, dtype=np.float64)
+            out.append((array.shape, array.tobytes()))
+    return tuple(out)
+
+
 class ParametricFossen:
     """The regression structure: a vehicle, the unknown parameters and the DOF equations used."""
 
@@ -233,6 +250,21 @@ class ParametricFossen:
         self.base = Parts.from_vehicle(vehicle)
         for name in self.names:  # unknowns start from zero in R(0)
             self.base.set(name, 0.0)
+        self._models: dict[tuple, FossenModel] = {}  # :meth:`_model`'s, by the parts' values
+
+    def _model(self, parts: Parts) -> FossenModel:
+        """The (unchecked) model of ``parts``, made once per value of them: :meth:`_columns`
+        evaluates the base and each unknown's unit at every call (``detect --follow`` every
+        0.5 s of rows), and making a model cost about as much as evaluating it. Keyed by
+        every field's value, so parts edited since (:meth:`restricted`'s known values) get
+        a model of their own; made from a copy, which no later edit reaches."""
+        key = _parts_key(parts)
+        model = self._models.get(key)
+        if model is None:
+            if len(self._models) > 2 * len(self.names) + 2:  # not the columns' parts alone
+                self._models.clear()
+            model = self._models[key] = parts.copy().model(check=False)
+        return model
 
     def parts(self, theta: Sequence[float] | dict) -> Parts:
         """The vehicle's parts with the unknowns set to ``theta``."""
@@ -258,17 +290,39 @@ class ParametricFossen:
         this ``data`` at this λ where the caller has it (:func:`filter_signal`, derivative);
         it depends on the data alone, not on ``parts``, so a regression filters it once.
         """
-        model = parts.model(check=False)
+        return self._residuals(parts, data, [parts.bias], filter_lambda, nu_dot_f)[0]
+
+    def _residuals(
+        self,
+        parts: Parts,
+        data: dict[str, np.ndarray],
+        biases: Sequence[np.ndarray],
+        filter_lambda: float | None = None,
+        nu_dot_f: np.ndarray | None = None,
+        model: FossenModel | None = None,
+    ) -> list[np.ndarray]:
+        """:meth:`equation_residual` of ``parts`` with its external force b set to each of
+        ``biases`` [6] in turn, from one evaluation of the model: b enters R alone (neither
+        M nor the other forces read it), so each R is the one its own parts give, bit for bit.
+        A regression's external-force columns cost a model and its forces each otherwise.
+        ``model``: that of ``parts`` (:meth:`_model`), else made here."""
+        model = parts.model(check=False) if model is None else model
         with torch.no_grad():
             eta, nu = torch.as_tensor(data["eta"]), torch.as_tensor(data["nu"])
             tau = torch.as_tensor(parts.felt(data))
-            net = model.net_force(eta, nu, tau).numpy()
+            terms = model.motion_terms(eta, nu)
+            nets = [
+                net_force_of(tau + torch.as_tensor(b, dtype=torch.float64), terms).numpy()
+                for b in biases
+            ]
             mass = model.mass_matrix().numpy()
         if filter_lambda is None:
-            return data["nu_dot"] @ mass.T - net
+            inertial = data["nu_dot"] @ mass.T
+            return [inertial - net for net in nets]
         if nu_dot_f is None:
             nu_dot_f = filter_signal(data, data["nu"], filter_lambda, derivative=True)
-        return nu_dot_f @ mass.T - filter_signal(data, net, filter_lambda)
+        inertial = nu_dot_f @ mass.T
+        return [inertial - filter_signal(data, net, filter_lambda) for net in nets]
 
     def regression(
         self,
@@ -319,16 +373,29 @@ class ParametricFossen:
     ) -> tuple[np.ndarray, list[np.ndarray]]:
         """R(0) and each unknown's column R(e_k) − R(0), ``[N, 6]`` each, over all six DOF
         equations (:meth:`regression` keeps its own)."""
-        r0 = self.equation_residual(self.base, data, filter_lambda, nu_dot_f)
         damping = self.damping_columns(data, filter_lambda)
+        units = {}
+        for name in self.names:
+            if name not in damping:
+                units[name] = self.base.copy()
+                units[name].set(name, 1.0)
+        # an external force's unit differs from the base in b alone: R(0) and its R(e_k) from
+        # one evaluation of the model
+        forces = [n for n in units if n.startswith("external_bias.")]
+        biases = [self.base.bias, *(units[n].bias for n in forces)]
+        base = self._model(self.base)
+        r0, *shifted = self._residuals(self.base, data, biases, filter_lambda, nu_dot_f, base)
+        at_force = dict(zip(forces, shifted, strict=True))
         cols = []
         for name in self.names:
             if name in damping:
                 cols.append(damping[name])
-                continue
-            unit = self.base.copy()
-            unit.set(name, 1.0)
-            cols.append(self.equation_residual(unit, data, filter_lambda, nu_dot_f) - r0)
+            elif name in at_force:
+                cols.append(at_force[name] - r0)
+            else:
+                unit, model = units[name], self._model(units[name])
+                unit_r = self._residuals(unit, data, [unit.bias], filter_lambda, nu_dot_f, model)
+                cols.append(unit_r[0] - r0)
         return r0, cols
 
     def rounding_floors(self, data: dict[str, np.ndarray], nu_dot: np.ndarray) -> np.ndarray:

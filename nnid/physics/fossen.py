@@ -11,6 +11,7 @@ where ν_c = [J₁(η)ᵀ v_c; 0] so that ν̇_c = [ν_c,lin × ω; 0], and b is
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -68,6 +69,15 @@ class TorchForm(NamedTuple):
     bias: Tensor
     current: Tensor
     u_c: float
+
+
+def net_force_of(tau_b: Tensor, terms: Sequence[Tensor]) -> Tensor:
+    """:meth:`FossenModel.net_force` from τ + b (``tau_b``) and its other ``terms``
+    (:meth:`FossenModel.motion_terms`), summed in its order: τ + b − C ν + τ_D − g
+    (+ M_A ν̇_c), so that each force is the one :meth:`~FossenModel.net_force` gives, bit for
+    bit."""
+    out = tau_b - terms[0] + terms[1] - terms[2]
+    return out + terms[3] if len(terms) > 3 else out
 
 
 class FossenModel:
@@ -161,27 +171,25 @@ class FossenModel:
 
     def net_force(self, eta: Tensor, nu: Tensor, tau: Tensor) -> Tensor:
         """M ν̇: everything on the right-hand side of the equation of motion."""
+        return net_force_of(tau + self.external_bias, self.motion_terms(eta, nu))
+
+    def motion_terms(self, eta: Tensor, nu: Tensor) -> tuple[Tensor, ...]:
+        """The terms of :meth:`net_force` besides τ + b, in its order: C ν, τ_D, g and, in a
+        current, M_A ν̇_c. None reads b, so forces that differ in b alone (a regression's
+        external-force columns) share them (:func:`net_force_of`)."""
         if not bool(torch.any(self.current != 0)) and not self.current.requires_grad:
             # still water: ν_r = ν (skips a rotation per sample on long logs)
-            return (
-                tau
-                + self.external_bias
-                - self.coriolis_force(nu)
-                + self.damping_force(nu)
-                - self.restoring_force(eta)
-            )
+            return self.coriolis_force(nu), self.damping_force(nu), self.restoring_force(eta)
         nu_c = self.current_body(eta)
         nu_r = nu - nu_c
         nu_c_dot = torch.cat(
             [torch.linalg.cross(nu_c[..., :3], nu[..., 3:6]), torch.zeros_like(nu[..., 3:6])], -1
         )
         return (
-            tau
-            + self.external_bias
-            - self.coriolis_force(nu, nu_r)
-            + self.damping_force(nu_r)
-            - self.restoring_force(eta)
-            + nu_c_dot @ self.added_mass.T
+            self.coriolis_force(nu, nu_r),
+            self.damping_force(nu_r),
+            self.restoring_force(eta),
+            nu_c_dot @ self.added_mass.T,
         )
 
     def nu_dot(self, eta: Tensor, nu: Tensor, tau: Tensor) -> Tensor:
