@@ -634,3 +634,68 @@ def test_the_force_figure_has_fixed_margins_and_its_legend_inside(monkeypatch, n
     assert [ax.get_ylabel() for ax in fig.axes] == [
         f"{f} [{report.FORCE_UNITS[f]}]" for f in FORCES
     ]
+
+
+@pytest.mark.parametrize(
+    ("name", "scale"),
+    [("m", 1.0), ("a model named at much greater length than usual", 3e-4), ("narx", 1e6)],
+)
+def test_the_free_run_figures_have_fixed_margins_and_their_legend_below_inside(
+    monkeypatch, name, scale
+):
+    """Each free-run figure (one per held-out run and DOF) is drawn once with fixed margins:
+    the constrained layout placed it, then the crop drew it again, and a legend wider than
+    the figure (long model names, four columns) squeezed the panel to a sliver at the left of
+    a wider picture. The legend, in fewer columns where it must be, lies under the x label and
+    inside the figure; the panel keeps its size; every label fits for velocities of 3e-4 to
+    1e6."""
+    import numpy as np
+    from conftest import assert_labels_inside
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    import nnid.reports.compare_report as report
+
+    t = np.arange(0.0, 40.0, 0.1)
+    held = pd.DataFrame({"t": 100.0 + t, "experiment": "run6"})
+    held["u"], held["r"] = scale * np.sin(t / 5), -scale * np.cos(t / 3)
+    runs = {f"{name} {k}": (1 + 0.05 * k) * held[["u", "r"]] for k in range(9)}
+    drawn = []
+    real = report.figure_uri
+    monkeypatch.setattr(report, "figure_uri", lambda fig: drawn.append(fig) or real(fig))
+    titles = [title for title, _ in report.free_run_figures(held, runs, ["u", "r"])]
+    assert titles == ["Free run, run6: u", "Free run, run6: r"]
+    for fig, d in zip(drawn, ["u", "r"], strict=True):
+        (ax,) = fig.axes
+        assert ax.get_ylabel() == f"{d} [{report.UNITS[d]}]"
+        legend = ax.get_legend()
+        assert [t.get_text() for t in legend.get_texts()] == ["measured", *runs]
+        renderer = FigureCanvasAgg(fig).get_renderer()
+        box, x_axis = legend.get_window_extent(renderer), ax.xaxis.get_tightbbox(renderer)
+        assert box.y1 < x_axis.y0 and box.y0 > fig.bbox.y0  # under the x label, in the figure
+        panel = ax.get_window_extent(renderer)
+        assert panel.width > 0.8 * fig.bbox.width and panel.height / fig.dpi > 2.0
+        assert_labels_inside(fig)
+
+
+def test_the_force_figures_legend_is_clear_of_a_scaled_axis_offset_text(monkeypatch):
+    """Forces of 1e6 write their scale (``1e6``) over the first panel's top left corner,
+    where the legend above it began: the legend lies above that text, not over it."""
+    import numpy as np
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    import nnid.reports.compare_report as report
+    from nnid.physics.dofs import FORCES
+
+    held = pd.DataFrame({"t": np.arange(0.0, 60.0, 0.5), "experiment": "a"})
+    measured = pd.DataFrame({f: 1e6 * np.sin(held["t"]) for f in FORCES}, index=held.index)
+    drawn = []
+    monkeypatch.setattr(report, "figure_uri", lambda fig: drawn.append(fig) or "data:")
+    report.force_figure(measured, {f"m {k}": (1 + 0.1 * k) * measured for k in range(9)}, held)
+    (fig,) = drawn
+    canvas = FigureCanvasAgg(fig)
+    canvas.draw()  # places the offset text, as figure_uri's drawing does
+    ax, renderer = fig.axes[0], canvas.get_renderer()
+    offset = ax.yaxis.offsetText
+    assert offset.get_text() == "1e6"
+    legend = ax.get_legend().get_window_extent(renderer)
+    assert legend.y0 > offset.get_window_extent(renderer).y1

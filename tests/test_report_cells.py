@@ -156,6 +156,43 @@ def test_the_train_page_has_the_markdowns_prime_system_section():
     assert "±" in values["Z_wdot'"] and "fitted to noise" in values["Y:v*abs(v)'"]
 
 
+def test_a_train_report_imports_neither_matplotlib_nor_the_residual_loop(monkeypatch):
+    """Every report module imports ``nnid.reports.figures`` for its tables, and that module
+    imported matplotlib: 0.6 s of CPU in every ``nnid train`` of a model with no figure (all
+    but a hybrid); the train report imports the loop report's ``parameter_unit``, and that
+    module imported the residual loop (pysindy with it, 0.13 s) for one constant. Each is
+    imported where it is used: with neither importable, fresh copies of every report module
+    load, and a Fossen model's pages are written."""
+    import importlib.util
+    import sys
+
+    import nnid.reports
+
+    loaded = [m for m in sys.modules if m.split(".")[0] == "matplotlib"]
+    for name in {"matplotlib", "nnid.loop.residual_loop", *loaded}:  # their imports now fail
+        monkeypatch.setitem(sys.modules, name, None)
+    with pytest.raises(ImportError):
+        import matplotlib.figure  # noqa: F401
+
+    copies = {}
+    folder = nnid.reports.__path__[0]
+    for name in ("figures", "batch_report", "compare_report", "detect_report", "loop_report",
+                 "train_report"):  # fmt: skip
+        spec = importlib.util.spec_from_file_location(f"_copy_{name}", f"{folder}/{name}.py")
+        copies[name] = importlib.util.module_from_spec(spec)
+        monkeypatch.setitem(sys.modules, spec.name, copies[name])
+        spec.loader.exec_module(copies[name])
+    metrics = _train_metrics()
+    page = copies["train_report"].train_html(metrics)
+    assert "<code>Z_wdot</code>" in page and "Z_wdot" in copies["train_report"].train_markdown(
+        metrics
+    )
+    assert copies["figures"].html_table(["a"], [["`b`"]]) == (
+        "<table><thead><tr><th>a</th></tr></thead><tbody><tr><td><code>b</code></td></tr>"
+        "</tbody></table>"
+    )
+
+
 def _hybrid_figure_data(forces: str, scale: float, n: int = 2000):
     """A held-out log and a learned force (``forces``, each of size ``scale``, a feature's
     too) as the train report draws them."""

@@ -27,7 +27,7 @@ from nnid.reports.figures import (
     definitions,
     figure_uri,
     html_table,
-    legend_above,
+    legend_outside,
     markdown_table,
     new_figure,
     page_head,
@@ -279,7 +279,9 @@ def free_run_figures(
     for name, pos in experiment_rows(held):
         t = t_all[pos] - t_all[pos[0]]
         for d in dofs:
-            fig, axes = new_figure(1, 1, 10.0, 3.2)
+            # fixed margins: the constrained layout drew the figure twice (to place, then to
+            # paint), and a legend wider than the figure squeezed the panel to a sliver
+            fig, axes = new_figure(1, 1, 10.0, 3.2, fixed=True, left=LONG_TICKS_LEFT_IN)
             ax = axes[0, 0]
             y = held[d].to_numpy(np.float64)[pos]
             ax.plot(t, y, color="black", lw=1.4, label="measured")
@@ -295,7 +297,7 @@ def free_run_figures(
             ax.set_xlabel("time since the start of the run [s]")
             ax.set_ylabel(f"{d} [{UNITS.get(d, '')}]")
             ax.tick_params(labelsize=8)
-            ax.legend(ncol=4, fontsize=7, loc="upper left", bbox_to_anchor=(0.0, -0.22))
+            legend_outside(ax, ncols=4, fontsize=7, side="below")
             label = f"{name}: {d}" if name is not None else d
             out.append((f"Free run, {label}", figure_uri(fig)))
     return out
@@ -330,7 +332,7 @@ def force_figure(
             ax.plot(t[keep], series[f].to_numpy()[keep], lw=0.8, label=name)
         ax.set_ylabel(f"{f} [{FORCE_UNITS[f]}]")
         ax.tick_params(labelsize=8)
-    legend_above(axes[0, 0], ncols=5, fontsize=7)
+    legend_outside(axes[0, 0], ncols=5, fontsize=7)
     axes[-1, 0].set_xlabel("t [s]")
     return figure_uri(fig)
 

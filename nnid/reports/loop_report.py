@@ -14,7 +14,6 @@ import numpy as np
 
 from nnid.datasets.gaps import GAP_STEPS
 from nnid.evaluation.evaluate import diverged_columns
-from nnid.loop.residual_loop import UNJUDGED
 from nnid.physics.dofs import DOF_WORD, DOFS, FORCES
 from nnid.physics.effects import parse_effect
 from nnid.reports.cells import number, score_cell
@@ -195,6 +194,10 @@ def _verdict(result: dict, name: str, key: str, before: dict, after: dict) -> li
     max_effects = result.get("settings", {}).get("max_effects")
     if not result["added"] and limit:  # max_effects = 0: nothing was tested, nothing found
         return [f"No effect was tested (max_effects = {max_effects})."]
+    # imported here: the train report imports this module for parameter_unit, and the residual
+    # loop's import (pysindy's with it) took 0.13 s of CPU a train report has no use for
+    from nnid.loop.residual_loop import UNJUDGED
+
     unjudged = [
         c for step in result["steps"][:1] for c in step["top"] if c.get("reason") == UNJUDGED
     ]
