@@ -304,20 +304,28 @@ def test_the_holdout_takes_each_runs_own_tail_where_labels_repeat():
     assert val.index.equals(pd.Index([*range(75, 100), *range(45, 60)]))  # the log's labels
 
 
+def _surge_sway_yaw(rng: np.random.Generator, noise: bool = True) -> pd.DataFrame:
+    """400 samples at 10 Hz of the Seamor driven in surge, sway and yaw only (held random
+    levels from ``rng``; it never heaves: w exactly 0), with accelerometer-grade noise (2 %
+    of each one's std) on the excited DOFs' accelerations where ``noise``."""
+    from nnid.datasets.simulator import simulate
+
+    inputs = np.zeros((400, 6))
+    inputs[20:, [0, 1, 5]] = np.repeat(rng.uniform(-30, 30, (19, 3)), 20, 0) * [1, 1, 0.2]
+    log = simulate(load_vehicle("seamor"), inputs, 0.1)
+    for c in ("du", "dv", "dr") if noise else ():
+        log[c] += 0.02 * log[c].std() * rng.standard_normal(len(log))
+    return log
+
+
 def test_outputs_that_explain_nothing_do_not_loosen_the_others():
     """A vehicle driven in surge, sway and yaw only, with gyro noise for ṗ and q̇: their best
     validation NMSE is that of no model (1), and as two sixths of the mean J it set a budget
     that let ṙ drop its Munk moment u·v (NMSE 0.0003 -> 0.0046). Outputs that explain nothing
     keep no terms and have no share in the budget: ṙ keeps u·v, selected as without the noise."""
-    from nnid.datasets.simulator import simulate
-
     vehicle = load_vehicle("seamor")
     rng = np.random.default_rng(3)
-    inputs = np.zeros((400, 6))
-    inputs[20:, [0, 1, 5]] = np.repeat(rng.uniform(-30, 30, (19, 3)), 20, 0) * [1, 1, 0.2]
-    log = simulate(vehicle, inputs, 0.1)
-    for c in ("du", "dv", "dr"):  # accelerometer-grade noise on the excited DOFs
-        log[c] += 0.02 * log[c].std() * rng.standard_normal(len(log))
+    log = _surge_sway_yaw(rng)
     noisy = log.assign(
         dp=0.05 * rng.standard_normal(len(log)), dq=0.05 * rng.standard_normal(len(log))
     )
@@ -342,14 +350,11 @@ def test_columns_of_rounding_are_zero_to_the_path_not_noise_scaled_up():
     Munk moments' rounding in K and M ((Y_v̇ − Z_ẇ) v w): terms of a zero regressor, held at
     0 and named unidentified. A column of rounding is zero (the excitation check's rule): no
     w term is selected, and the fit is the one of the same log with w exactly 0."""
-    from nnid.datasets.simulator import simulate
     from nnid.trainers.sindy import SparsePath
 
     vehicle = load_vehicle("seamor")
     rng = np.random.default_rng(3)
-    inputs = np.zeros((400, 6))
-    inputs[20:, [0, 1, 5]] = np.repeat(rng.uniform(-30, 30, (19, 3)), 20, 0) * [1, 1, 0.2]
-    exact = simulate(vehicle, inputs, 0.1)
+    exact = _surge_sway_yaw(rng, noise=False)
     assert (exact["w"] == 0).all()  # the vehicle never heaves
     rounding = exact.assign(w=1e-17 * rng.standard_normal(len(exact)))
     models, thresholds = [], np.logspace(-3, 0, 13)
@@ -377,16 +382,11 @@ def test_targets_of_rounding_keep_no_terms_and_are_not_called_unexplained():
     it (M kept six terms of ~1e-16) and K and M were warned unexplained (validation NMSE 1),
     where w exactly 0 gave NMSE 0 and no warning. A target of rounding is zero (the rounding
     rule among the targets): the fit, its warnings and its scores are those of w exactly 0."""
-    from nnid.datasets.simulator import simulate
     from nnid.trainers.sindy import SindyWarning, SparsePath
 
     vehicle = load_vehicle("seamor")
     rng = np.random.default_rng(3)
-    inputs = np.zeros((400, 6))
-    inputs[20:, [0, 1, 5]] = np.repeat(rng.uniform(-30, 30, (19, 3)), 20, 0) * [1, 1, 0.2]
-    exact = simulate(vehicle, inputs, 0.1)
-    for c in ("du", "dv", "dr"):  # accelerometer-grade noise on the excited DOFs
-        exact[c] += 0.02 * exact[c].std() * rng.standard_normal(len(exact))
+    exact = _surge_sway_yaw(rng)
     rounding = exact.assign(w=1e-17 * rng.standard_normal(len(exact)))
     models, said = [], []
     for log in (exact, rounding):
