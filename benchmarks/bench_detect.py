@@ -33,12 +33,8 @@ from __future__ import annotations
 
 import argparse
 import datetime
-import io
 import json
-import os
-import subprocess
 import sys
-import tarfile
 import tempfile
 import time
 from pathlib import Path
@@ -46,7 +42,7 @@ from pathlib import Path
 import numba
 import numpy as np
 import pandas as pd
-from common import machine
+from common import at_revision, machine
 
 from nnid.datasets.faults import Fault, simulate_faults
 from nnid.fault import follow as follow_module
@@ -435,16 +431,7 @@ def follow() -> None:
 def _at_revision(rev: str) -> dict:
     """:func:`follow_streams` with the nnid of git revision ``rev`` (this script run on it in a
     subprocess, that revision's package first on its path)."""
-    repo = Path(__file__).resolve().parents[1]
-    with tempfile.TemporaryDirectory() as tmp:
-        archive = subprocess.run(["git", "-C", str(repo), "archive", rev, "nnid"],
-                                 check=True, capture_output=True).stdout  # fmt: skip
-        with tarfile.open(fileobj=io.BytesIO(archive)) as tar:
-            tar.extractall(tmp, filter="data")
-        env = {**os.environ, "PYTHONPATH": os.pathsep.join([tmp, str(Path(__file__).parent)])}
-        out = subprocess.run([sys.executable, __file__, "follow", "--json"], env=env,
-                             check=True, stdout=subprocess.PIPE, text=True).stdout  # fmt: skip
-    return json.loads(out.strip().splitlines()[-1])
+    return at_revision(rev, Path(__file__), "follow", "--json")
 
 
 MODES = {"speed": speed, "scenarios": scenarios, "ended": ended, "follow": follow}
