@@ -60,9 +60,11 @@ def at_revision(rev: str, script: Path, *args: str) -> Any:
             tar.extractall(tmp, filter="data")
         env = {**os.environ, "PYTHONPATH": os.pathsep.join([tmp, str(script.parent)])}
         # an nnid found before the archive's (a path file, a finder) would time this tree as
-        # if it were the revision's
+        # if it were the revision's; run from the archive's folder, as ``-c`` puts the working
+        # directory first on the path (a run from the repository found its nnid there)
         found = subprocess.run([sys.executable, "-c", "import nnid; print(nnid.__file__)"],
-                               env=env, check=True, stdout=subprocess.PIPE, text=True)  # fmt: skip
+                               env=env, check=True, stdout=subprocess.PIPE, text=True,
+                               cwd=tmp)  # fmt: skip
         if not Path(found.stdout.strip()).resolve().is_relative_to(Path(tmp).resolve()):
             raise RuntimeError(f"the subprocess imports nnid from {found.stdout.strip()}, "
                                f"not from {rev}'s archive")  # fmt: skip
