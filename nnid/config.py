@@ -37,7 +37,7 @@ from nnid.datasets.excitation import (
     Step,
     WeissSequence,
 )
-from nnid.datasets.log import MAX_DISTANCE, MAX_SPEED
+from nnid.datasets.log import FASTEST_STEP, MAX_DISTANCE, MAX_SPEED
 from nnid.datasets.measurement import Measurement
 from nnid.datasets.simulator import Autopilot
 from nnid.errors import NnidInputError
@@ -151,7 +151,9 @@ class SimulateConfig(StrictModel):
 
     kind: Literal["simulate"] = "simulate"
     vehicle: str
-    dt: PositiveFloat = 0.01
+    # no faster than a log nnid reads (FASTEST_STEP): a finer simulated clock was refused
+    # downstream as hours read as seconds
+    dt: float = Field(0.01, ge=FASTEST_STEP)
     substeps: int = Field(1, ge=1, le=1000)
     integrator: Literal["rk4", "adaptive", "torch"] = "rk4"
     seed: Seed = 0

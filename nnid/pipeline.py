@@ -735,8 +735,10 @@ def check_savgol_window(
                     check_acceleration_window(
                         log, derived.window_s, derived.order, names[part], key
                     )
-                except NnidInputError as exc:  # an ensemble's under its member
-                    raise NnidInputError(exc.message, field=derived.field) from None
+                except NnidInputError as exc:  # an ensemble's under its member; a run of
+                    # one sample names no setting (none would make it fit)
+                    field = derived.field if exc.field else None
+                    raise NnidInputError(exc.message, field=field) from None
 
 
 def _fit_warnings(caught) -> list[str]:

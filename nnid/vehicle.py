@@ -371,10 +371,15 @@ def vehicle_from_dict(
     # z_g W > z_b B (z_g > z_b at W = B); a warning, not an error: the file may hold what the
     # vehicle is
     if z_g * vehicle.weight < z_b * vehicle.buoyancy:
+        where = (
+            "the centre of gravity is above the centre of buoyancy"
+            if z_g < z_b
+            else "the buoyancy's moment outweighs the weight's"
+        )
         warnings.warn(
-            f"{source}: the centre of gravity is above the centre of buoyancy (r_g z = "
-            f"{z_g:g} m, r_b z = {z_b:g} m, body z down; z_g W < z_b B): the restoring "
-            "moments tip the vehicle over in roll and pitch instead of righting it (statically "
+            f"{source}: {where} (r_g z = {z_g:g} m, W = {vehicle.weight:g} N; r_b z = {z_b:g} "
+            f"m, B = {vehicle.buoyancy:g} N; body z down; z_g W < z_b B): the restoring moments "
+            "tip the vehicle over in roll and pitch instead of righting it (statically "
             "unstable), where underwater vehicles are trimmed bottom-heavy (z up, or r_g and "
             "r_b swapped?)",
             stacklevel=2,

@@ -1189,7 +1189,8 @@ def test_a_centre_of_gravity_above_the_centre_of_buoyancy_is_warned_of(r_g, r_b)
         vehicle_from_dict(tipped, source="probe.toml")
     said = [str(w.message) for w in caught]
     assert len(said) == 1 and said[0].startswith("probe.toml: the centre of gravity is above"), said
-    assert f"r_g z = {r_g:g} m, r_b z = {r_b:g} m" in said[0] and "unstable" in said[0], said
+    assert f"r_g z = {r_g:g} m," in said[0] and f"r_b z = {r_b:g} m," in said[0], said
+    assert "unstable" in said[0], said
     swapped = {**base, "r_g": [0.0, 0.0, r_b], "r_b": [0.0, 0.0, r_g]}
     with warnings.catch_warnings():
         warnings.simplefilter("error")
@@ -1197,6 +1198,69 @@ def test_a_centre_of_gravity_above_the_centre_of_buoyancy_is_warned_of(r_g, r_b)
         vehicle_from_dict(base, source="probe.toml")  # both at the origin: neutral
         for name in [*PRESETS, MINIROV, *map(str, (REPO / "configs" / "vehicles").glob("*.toml"))]:
             load_vehicle(name)
+
+
+def test_a_buoyancy_whose_moment_outweighs_the_weights_is_warned_of_as_such():
+    """The righting moment is z_g W − z_b B (Fossen's g(η)): with both centres at the same
+    height below the origin and B > W it tips the vehicle over, though the centre of gravity
+    is not above the centre of buoyancy; said as what it is, not as a CG above the CB."""
+    from nnid.vehicle import vehicle_from_dict
+
+    base = {"name": "probe", "mass": 11.5, "inertia": [0.2, 0.2, 0.3]}
+    weight = 11.5 * 9.81
+    light = {**base, "r_g": [0.0, 0.0, 0.02], "r_b": [0.0, 0.0, 0.02], "buoyancy": 1.01 * weight}
+    with pytest.warns(UserWarning) as caught:
+        vehicle_from_dict(light, source="probe.toml")
+    said = [str(w.message) for w in caught]
+    assert len(said) == 1, said
+    assert said[0].startswith("probe.toml: the buoyancy's moment outweighs the weight's"), said
+    assert "z_g W < z_b B" in said[0] and "unstable" in said[0], said
+
+
+def test_a_clock_finer_than_nnid_reads_is_refused_where_it_is_set():
+    """A simulated dt or a reader config's rate finer than any log nnid reads (FASTEST_STEP)
+    was refused downstream as hours read as seconds ("convert it to seconds"): nothing was
+    read in a wrong unit. Refused where it is set, naming the key."""
+    from pydantic import ValidationError
+
+    from nnid.config import SimulateConfig
+    from nnid.datasets.column_map import ColumnMap
+    from nnid.datasets.log import FASTEST_STEP
+
+    with pytest.raises(ValidationError) as err:
+        SimulateConfig(vehicle="seamor", dt=FASTEST_STEP / 2)
+    assert err.value.errors()[0]["loc"] == ("dt",)
+    with pytest.raises(ValidationError) as err:  # the bound itself is taken: what is left
+        SimulateConfig(vehicle="seamor", dt=FASTEST_STEP)  # is the missing experiments
+    assert all(e["loc"] != ("dt",) for e in err.value.errors()), err.value.errors()
+    source = {"file": "nav.csv", "time": "t", "columns": {"z": "depth"}}
+    with pytest.raises(ValidationError) as err:
+        ColumnMap(rate=2.0 / FASTEST_STEP, sources=[source])
+    assert err.value.errors()[0]["loc"] == ("rate",)
+    ColumnMap(rate=1.0 / FASTEST_STEP, sources=[source])
+
+
+def test_a_run_of_one_sample_in_a_scored_part_names_no_window_setting():
+    """A run too short for any window (one sample) is refused before the fit naming no key:
+    no savgol_window would make it fit, and the pre-fit check had named model.savgol_window."""
+    from conftest import make_vehicle
+
+    from nnid.config import FossenModelSpec
+    from nnid.datasets.splits import Split
+    from nnid.errors import NnidInputError
+    from nnid.pipeline import check_savgol_window
+
+    def run(n: int, name: str) -> pd.DataFrame:
+        t = np.arange(n) * 0.05
+        return pd.DataFrame({"t": t, "experiment": name, "u": np.sin(t), "v": 0.0, "r": 0.0,
+                             "tau_X": 1.0})  # fmt: skip
+
+    spec = FossenModelSpec(dofs=["u"], savgol_window=0.5)
+    split = Split(run(200, "a"), run(1, "b"), run(30, "c"))
+    with pytest.raises(NnidInputError) as err:
+        check_savgol_window(spec, spec.build(make_vehicle()), split, "model")
+    assert err.value.field is None, err.value.field
+    assert "'b' has 1 sample" in err.value.message, err.value.message
 
 
 @pytest.mark.parametrize(

@@ -47,7 +47,15 @@ from typing import Literal
 
 from pydantic import Field, field_validator, model_validator
 
-from nnid.datasets.log import ACCELERATION, ANGLES, POSE, TAU, VELOCITY, checked_time_unit
+from nnid.datasets.log import (
+    ACCELERATION,
+    ANGLES,
+    FASTEST_STEP,
+    POSE,
+    TAU,
+    VELOCITY,
+    checked_time_unit,
+)
 from nnid.errors import NnidInputError
 from nnid.validation import StrictModel, one_line, visible_line
 
@@ -205,7 +213,9 @@ class ColumnMap(StrictModel):
 
     name: str = "log"
     root: str | None = None
-    rate: float | None = Field(None, gt=0)
+    # no faster than a log nnid reads (FASTEST_STEP): a finer grid was refused downstream as
+    # a clock in a coarser unit
+    rate: float | None = Field(None, gt=0, le=1.0 / FASTEST_STEP)
     gap: float | None = Field(None, gt=0)
     experiment: str | list[str] | None = None
     include: str | None = None

@@ -4,7 +4,8 @@
 - angle unwrapping;
 - Savitzky-Golay differentiation (Caccia III-B and IV-D used fourth order, symmetric windows),
   with the noise gain the filter theory predicts; scipy's ``savgol_filter`` (interp mode)
-  re-done in :func:`savgol_interp` for speed alone, bit for bit: its dispatch cost ten times
+  re-done in :func:`savgol_interp` for speed alone, bit for bit that of scipy ≥ 1.17 (the
+  floor pyproject sets: an older scipy's edge fit is not checked): its dispatch cost ten times
   the arithmetic of a short window, which ``detect --follow`` pays six times a flush;
 - body velocities from pose rates through ν = J⁻¹(η) η̇ (Weiss eq. 17);
 - zero-phase Butterworth low-pass filtering (Weiss V.A.2);
