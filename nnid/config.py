@@ -151,9 +151,7 @@ class SimulateConfig(StrictModel):
 
     kind: Literal["simulate"] = "simulate"
     vehicle: str
-    # no faster than a log nnid reads (FASTEST_STEP): a finer simulated clock was refused
-    # downstream as hours read as seconds
-    dt: float = Field(0.01, ge=FASTEST_STEP)
+    dt: PositiveFloat = 0.01
     substeps: int = Field(1, ge=1, le=1000)
     integrator: Literal["rk4", "adaptive", "torch"] = "rk4"
     seed: Seed = 0
@@ -162,6 +160,18 @@ class SimulateConfig(StrictModel):
     experiments: list[Experiment] = Field(default_factory=list)
     sequence: WeissSequence | None = None
     autopilot: Autopilot | None = None
+
+    @field_validator("dt")
+    @classmethod
+    def _dt(cls, dt: float) -> float:
+        # no finer than a log nnid reads (FASTEST_STEP): a finer simulated clock was refused
+        # downstream as hours read as seconds
+        if dt < FASTEST_STEP:
+            raise ValueError(
+                f"{dt:g} s is a finer step than any log nnid reads (at least {FASTEST_STEP:g} s, "
+                f"{1 / FASTEST_STEP:g} Hz): is dt in seconds?"
+            )
+        return dt
 
     @model_validator(mode="after")
     def _runs(self) -> SimulateConfig:

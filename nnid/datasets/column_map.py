@@ -213,9 +213,7 @@ class ColumnMap(StrictModel):
 
     name: str = "log"
     root: str | None = None
-    # no faster than a log nnid reads (FASTEST_STEP): a finer grid was refused downstream as
-    # a clock in a coarser unit
-    rate: float | None = Field(None, gt=0, le=1.0 / FASTEST_STEP)
+    rate: float | None = Field(None, gt=0)
     gap: float | None = Field(None, gt=0)
     experiment: str | list[str] | None = None
     include: str | None = None
@@ -226,6 +224,18 @@ class ColumnMap(StrictModel):
     # run: a split keeps each group on one side
     replays: list[str] = Field(default_factory=list)
     sources: list[Source] = Field(min_length=1)
+
+    @field_validator("rate")
+    @classmethod
+    def _rate(cls, rate: float | None) -> float | None:
+        # no faster than a log nnid reads (FASTEST_STEP): a finer grid was refused downstream
+        # as a clock in a coarser unit
+        if rate is not None and rate > 1.0 / FASTEST_STEP:
+            raise ValueError(
+                f"{rate:g} Hz is faster than any log nnid reads (at most {1 / FASTEST_STEP:g} "
+                "Hz): is rate in Hz?"
+            )
+        return rate
 
     @field_validator("name")
     @classmethod
