@@ -10,6 +10,7 @@ import pytest
 
 from nnid.datasets.cleaning import CleaningReport
 from nnid.datasets.excitation import Multisine
+from nnid.datasets.log import declare_time_unit
 from nnid.datasets.measurement import Measurement
 from nnid.datasets.preprocess import (
     acceleration_gain2,
@@ -236,6 +237,22 @@ def test_resampling_an_epoch_clock_at_its_own_rate_changes_nothing():
     want = log.assign(t=t - t[0])  # each run's clock starts at 0 at its first sample
     for col in log.columns:
         np.testing.assert_array_equal(out[col].to_numpy(), want[col].to_numpy(), err_msg=col)
+
+
+def test_resampling_a_log_declared_in_epoch_nanoseconds_keeps_its_last_sample():
+    """A log whose t was declared in nanoseconds since the epoch (~1.7e18, held to 256 ns
+    as float64 before the division by 1e9): its span came 2.04 units of the seconds' last
+    place short of its last grid time, over the two the grid allowed, and the last sample
+    was lost. The declared unit's rounding is allowed for: the log comes back as it was."""
+    first, n = 1700980056381051776, 27
+    ns = first + np.arange(n, dtype=np.int64) * 10_000_000
+    values = np.sqrt(np.arange(n, dtype=np.float64))  # not a straight line: interpolating shows
+    log, _ = declare_time_unit(pd.DataFrame({"t": ns, "u": values, "tau_X": values}), "ns")
+    t = log["t"].to_numpy()
+    assert abs((t[-1] - t[0]) - (n - 1) / 100.0) > 2 * np.spacing(t[-1])  # the case
+    out = resample_log(log, 100.0)
+    assert len(out) == n
+    assert out["u"].tolist() == values.tolist() and out["tau_X"].tolist() == values.tolist()
 
 
 def test_resampling_does_not_interpolate_a_wrapped_angle_through_zero():

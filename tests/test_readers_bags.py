@@ -238,6 +238,34 @@ def test_flattening_receive_time_and_header_stamp(tmp_path: Path) -> None:
     assert any("/imu/data: 100 messages" in s.detail for s in report.steps)
 
 
+def test_receive_times_on_a_nanosecond_epoch_keep_the_last_sample(tmp_path: Path) -> None:
+    """The bag's own receive time (ns since the epoch, ~1.7e18) was made float64 before its
+    division, rounded to 256 ns: the last of 27 messages 10 ms apart came 2.04 units of the
+    seconds' last place short of its grid time, and the run lost it. Converted as a header's
+    stamp is (whole seconds and nanoseconds, rounded once), it is on the grid."""
+    from rosbags.rosbag1 import Writer
+
+    first, n = 1700357253267554176, 27
+    ts = get_typestore(Stores.ROS1_NOETIC)
+    array = ts.types["std_msgs/msg/Float64MultiArray"]
+    layout = ts.types["std_msgs/msg/MultiArrayLayout"](dim=[], data_offset=0)
+    values = np.sqrt(np.arange(n, dtype=np.float64))  # not a straight line: interpolating shows
+    with Writer(tmp_path / "epoch.bag") as writer:
+        conn = writer.add_connection("/cmd", array.__msgtype__, typestore=ts)
+        for k in range(n):
+            msg = array(layout=layout, data=np.array([values[k], values[k]]))
+            writer.write(conn, first + k * 10_000_000, ts.serialize_ros1(msg, array.__msgtype__))
+    source = '[[sources]]\nfile = "/cmd"\ntime = "t_recv"\n'
+    cmap = tmp_path / "map.toml"
+    cmap.write_text(
+        f'rate = 100.0\n{source}[sources.columns]\nz = "data.0"\n'
+        f'{source}method = "hold"\n[sources.columns]\ncmd_1 = "data.1"\n'
+    )
+    df, _ = load_log(tmp_path / "epoch.bag", columns=cmap)
+    assert len(df) == n
+    assert df["z"].tolist() == values.tolist() and df["cmd_1"].tolist() == values.tolist()
+
+
 def test_unknown_topic_names_bag_and_lists_topics(tmp_path: Path) -> None:
     from nnid.datasets.rosbag import read_bag_sources
 

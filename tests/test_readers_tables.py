@@ -140,6 +140,35 @@ def test_a_runs_last_logged_sample_on_the_grid_is_kept(tmp_path, start, unit):
         assert log["z"].tolist() == depth[:kept].tolist()
 
 
+#: two runs of nanoseconds since the epoch, 100 Hz: the first's last stamp is 2.04 units of its
+#: seconds' last place past its grid time once divided by 1e9 (time_unit), the second's that
+#: much short once multiplied by 1e-9 (time_scale)
+NS_EPOCH_RUNS = [('time_unit = "ns"', 1700570955193767552, 75),
+                 ("time_scale = 1e-9", 1700357253267554176, 27)]  # fmt: skip
+
+
+@pytest.mark.parametrize(("clock", "first", "n"), NS_EPOCH_RUNS)
+def test_a_nanosecond_epoch_clock_keeps_its_samples_on_the_grid(tmp_path, clock, first, n):
+    """Nanoseconds since the epoch (~1.7e18, ROS stamps) are held to 256 ns as float64
+    before they become seconds: two stamps 10 ms apart could differ from 10 ms by 2.04 units
+    of the seconds' last place, over the two the grid allowed, and the last sample was lost
+    (the span short of its grid time) or taken off the grid (interpolated, a held command
+    taken from the sample before). The snap allows the rounding of the unit read."""
+    ns = first + np.arange(n, dtype=np.int64) * 10_000_000
+    seconds = ns.astype(np.float64) / 1e9 if "unit" in clock else ns.astype(np.float64) * 1e-9
+    off = (seconds[-1] - seconds[0]) - (n - 1) / 100.0
+    assert abs(off) > 2 * np.spacing(seconds[-1])  # over the two units the grid allowed
+    depth = np.sqrt(np.arange(n, dtype=np.float64))  # not a straight line: interpolating shows
+    pd.DataFrame({"run": "r1", "time": ns, "depth": depth}).to_csv(
+        tmp_path / "nav.csv", index=False
+    )
+    body = ON_GRID_MAP.replace("rate = 10.0", "rate = 100.0").replace("cmd.csv", "nav.csv")
+    body = body.replace('time = "time"\n', f'time = "time"\n{clock}\n')
+    log, _ = load_log(tmp_path, _write_map(tmp_path / "map.toml", body.replace("pwm", "depth")))
+    assert len(log) == n
+    assert log["z"].tolist() == depth.tolist() and log["cmd_1"].tolist() == depth.tolist()
+
+
 @pytest.mark.parametrize(("start", "last"), [("0.3", 99), ("1712345678.987", 53)])
 def test_a_run_cut_at_its_hold_timeout_ends_on_a_sample_not_stale(tmp_path, start, last):
     """Commands logged every 0.1 s until sample ``last``, hold_timeout 2 s: the run is cut 2 s

@@ -14,7 +14,7 @@ from typer.testing import CliRunner
 
 from nnid.cli import app
 from nnid.config import LoopConfig, load_config
-from nnid.datasets.log import check_time_unit
+from nnid.datasets.log import FASTEST_STEP, check_time_unit
 from nnid.datasets.readers import load_log
 from nnid.errors import NnidInputError
 from nnid.pipeline import load_inputs
@@ -299,3 +299,36 @@ def test_a_reader_config_source_too_fine_for_its_unit_is_named(tmp_path):
     with pytest.raises(NnidInputError, match=r"hours \(a step of 0.1 s, 10 Hz\)") as err:
         load_log(tmp_path, cmap)
     assert err.value.field == "sources.0.time_scale" and "3600 for hours" in err.value.message
+
+
+def test_stamps_that_come_in_bursts_are_no_clock_too_fine(tmp_path):
+    """An IMU delivering ten samples in one burst every 10 ms: nine steps in ten are 10 us,
+    and its clock was refused as hours read as seconds ("set its time_scale to 3600"),
+    though it samples at 1 kHz over the run. A unit slip scales every step and the span
+    with them: the mean step tells the two apart. A reader config's rate reads it; without
+    one the median step, a burst's, is no time base, and rate is asked for."""
+    bursty = (np.arange(60)[:, None] * 0.01 + np.arange(10)[None, :] * 1e-5).ravel()
+    check_time_unit(pd.DataFrame({"t": bursty}))
+    with pytest.raises(NnidInputError, match="faster than any"):  # in hours: every step
+        check_time_unit(pd.DataFrame({"t": bursty / 3600}))
+    cmap = _mapped(tmp_path, rate="rate = 100.0\n")
+    _write(tmp_path / "nav.csv", 1.7e9 + bursty)
+    log, _ = load_log(tmp_path, cmap)
+    assert len(log) == 60 and np.allclose(np.diff(log["t"]), 0.01)
+    cmap = _mapped(tmp_path)
+    _write(tmp_path / "nav.csv", 1.7e9 + bursty)
+    with pytest.raises(NnidInputError, match=r"bursts.*give rate") as err:
+        load_log(tmp_path, cmap)
+    assert err.value.field == "rate" and "hours" not in err.value.message
+
+
+def test_a_unit_slip_with_a_pause_in_its_run_is_still_too_fine_a_clock():
+    """Hours read as seconds: a minute at 10 Hz with a 10-min stop in it. The stop's one
+    step (0.17 "s") pulls the run's plain mean step to 0.3 ms, and a burst rule on that mean
+    took the slip for stamps that come in bursts; every other step is 2.8e-5 "s"."""
+    t = np.arange(600) * 0.1
+    t[300:] += 600.0
+    assert np.diff(t / 3600).mean() > FASTEST_STEP
+    with pytest.raises(NnidInputError, match="faster than any"):
+        check_time_unit(pd.DataFrame({"t": t / 3600}))
+    check_time_unit(pd.DataFrame({"t": t}))

@@ -53,6 +53,7 @@ from nnid.datasets.log import (
     FASTEST_STEP,
     POSE,
     TAU,
+    TIME_UNITS,
     VELOCITY,
     checked_time_unit,
 )
@@ -151,6 +152,16 @@ class Source(StrictModel):
         """Whether the source's clock is in seconds by declaration (``time_unit``, or a
         ``row_clock`` in Hz), so that its steps are not guessed at."""
         return self.time_unit is not None or self.row_clock is not None
+
+    def ticks_per_second(self) -> float:
+        """How many units of the time column make a second: the number its stamps were read
+        as before their conversion to seconds (1e9 for nanoseconds), whose float64 rounding
+        the grid allows for (:func:`nnid.datasets.preprocess.clock_tolerance`)."""
+        if self.row_clock is not None:  # row numbers, held exactly, over the rate in Hz
+            return 1.0
+        if self.time_unit is not None:
+            return TIME_UNITS[self.time_unit][1]
+        return 1.0 / self.time_scale
 
     @field_validator("quaternion")
     @classmethod

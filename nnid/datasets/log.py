@@ -1035,7 +1035,8 @@ def check_time_unit(
     (:func:`declare_time_unit`) is not guessed at, and the refusal names how to declare it
     (``declare``: a reader config's log is declared in the reader config). Declared or not,
     a median step under :data:`FASTEST_STEP` is refused (:func:`fine_clock_slip`): hours or
-    minutes read as seconds, seconds declared as milliseconds."""
+    minutes read as seconds, seconds declared as milliseconds; not stamps that come in
+    bursts, whose mean step a log may take."""
     within = None
     if "experiment" in df:  # the jump from one run's clock to the next is no sample step
         codes = pd.factorize(df["experiment"])[0]
@@ -1047,7 +1048,7 @@ def check_time_unit(
     steps = _run_steps(t, within)
     fine = None
     if steps.size >= 2:
-        fine = fine_clock_slip(float(np.median(steps)), unit, bool(declared))
+        fine = fine_clock_slip(float(np.median(steps)), unit, bool(declared), paced_step(steps))
     if fine:
         slip, seconds = fine
         convert = (
@@ -1071,17 +1072,32 @@ def _run_steps(t: np.ndarray, within: np.ndarray | None = None) -> np.ndarray:
     return steps if within is None else steps[within]
 
 
+def paced_step(steps: np.ndarray) -> float:
+    """A clock's mean sample step without its longest pauses (the longest 1 % of ``steps``,
+    at least one), for :func:`burst_clock`: a unit slip with one pause in its run (a 10-min
+    stop read in hours) is still fine throughout, where a plain mean would take the pause for
+    a sample rate."""
+    if steps.size < 2:
+        return float(steps.mean()) if steps.size else np.inf
+    kept = np.sort(steps)[: steps.size - max(1, steps.size // 100)]
+    return float(kept.mean())
+
+
 def fine_clock_slip(
-    step: float, unit: str = "s", declared: bool = False
+    step: float, unit: str = "s", declared: bool = False, overall: float | None = None
 ) -> tuple[str, bool] | None:
     """What a median sample step of ``step`` s under :data:`FASTEST_STEP` looks like, read
     from a clock in ``unit`` (one of :data:`TIME_UNITS`; ``declared``: as the user declared
-    it), or None for a step an underwater vehicle's log may take. Returns the sentence and
-    whether the clock looks like seconds (a finer unit declared for seconds: the fix is
-    declaring them), else like a unit coarser than seconds (hours or minutes read as seconds:
-    the fix is converting). A unit is named where its step would be one a log may take
-    (:data:`FASTEST_STEP` to :data:`SLOWEST_STEP`)."""
+    it), or None for a step an underwater vehicle's log may take, or for stamps that come in
+    bursts (``overall``, the clock's :func:`paced_step`, at least :data:`FASTEST_STEP`:
+    :func:`burst_clock`). Returns the sentence and whether the clock looks like seconds (a
+    finer unit declared for seconds: the fix is declaring them), else like a unit coarser
+    than seconds (hours or minutes read as seconds: the fix is converting). A unit is named
+    where its step would be one a log may take (:data:`FASTEST_STEP` to
+    :data:`SLOWEST_STEP`)."""
     if not 0.0 < step < FASTEST_STEP:  # a clock that stands still is refused elsewhere
+        return None
+    if burst_clock(step, overall):
         return None
     name, per_second = TIME_UNITS[unit]
     given = step * per_second  # the median step as the clock wrote it
@@ -1100,6 +1116,20 @@ def fine_clock_slip(
     if not named:
         return f"{said}: t is not in {name}", False
     return f"{said}: this looks like {' or '.join(named)}", named[0].startswith("seconds")
+
+
+def burst_clock(step: float, overall: float | None) -> str | None:
+    """What a clock whose median step ``step`` (s) is under :data:`FASTEST_STEP` but whose
+    :func:`paced_step` ``overall`` is not looks like (None for any other): stamps that come
+    in bursts (an IMU delivering ten samples together every 10 ms), at a rate a log may take
+    over the run. A unit slip (hours read as seconds, seconds declared as milliseconds) scales every
+    step, the run's span with them, and steps finely by both."""
+    if overall is None or not 0.0 < step < FASTEST_STEP <= overall:
+        return None
+    return (
+        f"its stamps come in bursts: {shown(step)} s apart (median), {_hz(1 / overall)} over "
+        "the run"
+    )
 
 
 def _hz(rate: float) -> str:

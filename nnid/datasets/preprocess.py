@@ -39,6 +39,8 @@ from nnid.datasets.log import (
     PIECE_OF,
     POSE,
     REPLAY_GROUP,
+    TIME_UNIT_ATTR,
+    TIME_UNITS,
     VELOCITY,
     euler_rate_matrices,
     input_columns,
@@ -160,6 +162,9 @@ def resample_log(
     # any other column that is not a number: a mode, a fault label, a flag (once dropped)
     categorical = [c for c in log.columns if c not in ("t", "experiment", *numeric, *labels)]
     pieces, rates = [], []
+    # a t declared in a finer unit was a number of those before it was seconds (ns since the
+    # epoch are rounded to 256 ns): the samples are snapped to that rounding too
+    _, per_second = TIME_UNITS.get(log.attrs.get(TIME_UNIT_ATTR), ("seconds", 1.0))
     for name, pos in experiment_rows(log):
         part = log.iloc[pos]
         t = part["t"].to_numpy(np.float64)
@@ -174,7 +179,7 @@ def resample_log(
             # the end, and a grid time on a sample, to the clock's rounding: on an epoch clock
             # (~1.7e9 s, units of 2.4e-7 s) 1e-9 samples of slack lost a last sample on the
             # grid, and a held input took the sample before one it fell a unit short of
-            tolerance = clock_tolerance(ts, ts[0], rate)
+            tolerance = clock_tolerance(ts, ts[0], rate, per_second)
             grid = ts[0] + run_grid(ts[-1] - ts[0], rate, tolerance)
             on = snap_to_samples(grid, ts, tolerance)
             # the run's clock from its first sample: a later piece starts where it was
@@ -252,15 +257,20 @@ def run_grid(span: float, rate: float, tolerance: float) -> np.ndarray:
     return np.arange(int(np.floor(span * rate + tolerance * rate)) + 1) / rate
 
 
-def clock_tolerance(t: np.ndarray, start: float, rate: float) -> float:
+def clock_tolerance(t: np.ndarray, start: float, rate: float, per_second: float = 1.0) -> float:
     """How near a grid time must be to a source's time (``t``, before ``start`` is taken away)
-    to be that sample: :data:`ON_SAMPLE` of the grid's interval, or two units in the last place
-    of the source's clock where that is coarser. An epoch's times (~1.7e9 s) are held to
-    ~2.4e-7 s: ``t - start`` carries the rounding of both (half a unit each) and as much again
-    from a parser or a ``time_scale``; no more, as a clock that resolves microseconds has a
-    stamp 1e-6 s off a grid time that is not on it."""
+    to be that sample: :data:`ON_SAMPLE` of the grid's interval, or the rounding of the
+    source's clock where that is coarser. Each stamp carries half a unit in the last place of
+    its seconds (the conversion to seconds) and half a unit of the number it was read as (a
+    count of 1/``per_second`` s: a parser's, a ``time_scale``'s), and ``t - start`` both
+    stamps' rounding: two units of an epoch's seconds (~1.7e9 s, held to ~2.4e-7 s), and 2.07
+    for nanoseconds since the epoch (~1.7e18, held to 256 ns before the division: stamps
+    10 ms apart were 2.04 units off, and a sample on the grid was taken for one off it). No
+    more, as a clock that resolves microseconds has a stamp 1e-6 s off a grid time that is
+    not on it."""
     largest = max(float(np.max(np.abs(t))), abs(start)) if t.size else abs(start)
-    return max(ON_SAMPLE / rate, 2 * float(np.spacing(largest)))
+    read = float(np.spacing(largest * per_second)) / per_second
+    return max(ON_SAMPLE / rate, float(np.spacing(largest)) + read)
 
 
 def snap_to_samples(grid: np.ndarray, ts: np.ndarray, tolerance: float) -> np.ndarray:

@@ -30,10 +30,12 @@ from nnid.datasets.log import (
     PIECE_OF,
     REPLAY_GROUP,
     TIME_UNITS,
+    burst_clock,
     check_time_unit,
     checked_time_unit,
     declare_time_unit,
     fine_clock_slip,
+    paced_step,
     time_unit_slip,
     validate_log,
     wrap_angle,
@@ -309,14 +311,18 @@ def assemble(
                 field="rate",
             )
         # relative times: a grid built on UNIX epochs (~1.7e9 s) jitters by ~1e-7 s. The end
-        # to the clock's rounding at stop: no more than the source logged there is snapped by
-        grid = run_grid(stop - start, rate, clock_tolerance(np.array([stop]), start, rate))
+        # to the clock's rounding at stop: no more than a source logged there is snapped by
+        # (the finest unit read rounds the most: ns since the epoch)
+        end = max(
+            clock_tolerance(np.array([stop]), start, rate, s.ticks_per_second()) for s, _ in parts
+        )
+        grid = run_grid(stop - start, rate, end)
         columns: dict[str, np.ndarray] = {}
         valid = np.ones(grid.size, dtype=bool)
         for source, df in parts:
             names = [c for c in df.columns if c not in ("t", "experiment")]
             t_abs = df["t"].to_numpy(np.float64)
-            tolerance = clock_tolerance(t_abs, start, rate)
+            tolerance = clock_tolerance(t_abs, start, rate, source.ticks_per_second())
             values, t_src, at = _resample(
                 t_abs - start,
                 df[names].to_numpy(np.float64),
@@ -427,6 +433,7 @@ def _clock(parts: list[tuple[Source, pd.DataFrame]], cmap: ColumnMap, exp: str) 
         t = np.unique(df["t"].to_numpy())
         steps.append((float(np.median(np.diff(t))) if t.size > 1 else np.inf, s, t))
     step, source, t = min(steps, key=lambda x: x[0])
+    overall = paced_step(np.diff(t)) if t.size > 1 else np.inf
     if not np.isfinite(step):
         raise NnidInputError(
             f"no source of '{exp}' has two distinct time stamps: give rate", source=cmap.name,
@@ -439,7 +446,7 @@ def _clock(parts: list[tuple[Source, pd.DataFrame]], cmap: ColumnMap, exp: str) 
         (u for u, (_, n) in TIME_UNITS.items() if np.isclose(n * source.time_scale, 1.0)), None
     )
     scaled = source.declares_clock() or source.time_scale != 1.0
-    fine = fine_clock_slip(step, unit or "s", scaled) if timed else None
+    fine = fine_clock_slip(step, unit or "s", scaled, overall) if timed else None
     if fine:
         key = "time_unit" if source.time_unit else "time_scale"
         fix = (
@@ -462,6 +469,16 @@ def _clock(parts: list[tuple[Source, pd.DataFrame]], cmap: ColumnMap, exp: str) 
             "seconds)",
             source=cmap.name,
             field=f"sources.{i}.time_scale",
+        )
+    # a median step inside a burst is no sample period: a grid at it was refused downstream
+    # as hours read as seconds
+    burst = burst_clock(step, overall) if cmap.rate is None else None
+    if burst:
+        raise NnidInputError(
+            f"source '{source.file}': {burst}: its median step is no sample period to make "
+            "the time base of; give rate (Hz), the rate of the log to make",
+            source=cmap.name,
+            field="rate",
         )
     return step
 

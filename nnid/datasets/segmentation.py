@@ -19,13 +19,13 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 from scipy.ndimage import binary_dilation
-from scipy.signal import savgol_filter
 from scipy.stats import median_abs_deviation
 
 from nnid.datasets.log import VELOCITY
 from nnid.datasets.preprocess import (
     experiment_rows,
     savgol_derivative,
+    savgol_interp,
     savgol_noise_gain,
     savgol_window,
 )
@@ -44,7 +44,7 @@ def accelerations_with_noise(
                 dt = float(np.median(np.diff(log["t"].to_numpy(np.float64)[pos])))
                 w = savgol_window(window_s, 1.0 / dt, order)
                 col[pos] = savgol_derivative(v, dt, w, order, where=f"experiment {name!r}")
-                resid = v - savgol_filter(v, w, order, mode="interp")
+                resid = v - savgol_interp(v, w, order, 0, 1.0)
                 sigma_v = median_abs_deviation(resid, scale="normal")
                 sig.append(sigma_v * savgol_noise_gain(w, order, dt))
             acc[c], noise[c] = col, float(np.median(sig))

@@ -79,12 +79,11 @@ import numpy as np
 import pandas as pd
 from scipy.integrate import cumulative_trapezoid
 from scipy.optimize import minimize_scalar
-from scipy.signal import savgol_filter
 
 from nnid.datasets.arrays import log_arrays
 from nnid.datasets.excitation import PRBS, DOptimalSine
 from nnid.datasets.measurement import Measurement
-from nnid.datasets.preprocess import UNIFORM_TOLERANCE, savgol_window, true_runs
+from nnid.datasets.preprocess import UNIFORM_TOLERANCE, savgol_interp, savgol_window, true_runs
 from nnid.datasets.simulator import simulate, simulate_config
 from nnid.errors import NnidInputError
 from nnid.evaluation.persistence import combined_excitation
@@ -297,7 +296,7 @@ def find_plateaus(
             if (b - a) * dt < min_plateau or b - a <= window:
                 continue
             seg_t, seg_x = te[a:b], xe[a:b]
-            acc = savgol_filter(seg_x, window, settle_order, deriv=2, delta=dt, mode="interp")
+            acc = savgol_interp(seg_x, window, settle_order, 2, dt)
             runs = true_runs(np.abs(acc) <= settle_accel)
             if not runs:
                 continue
@@ -312,7 +311,7 @@ def find_plateaus(
             resid = xx - xx.mean() - slope * tc
             slope_std = float(np.sqrt(resid @ resid / max(tt.size - 2, 1) / (tc @ tc)))
             if speed == "mean":
-                vel = savgol_filter(seg_x, window, settle_order, deriv=1, delta=dt, mode="interp")
+                vel = savgol_interp(seg_x, window, settle_order, 1, dt)
                 value = float(vel[r0:r1].mean())
             elif speed == "asymptote":
                 value, slope_std = _asymptote(tt, xx)
@@ -432,7 +431,7 @@ def integrated_regression(
             f"of {window}",
             field="sinusoid",
         )
-    xi = savgol_filter(chi, window, velocity_order, deriv=1, delta=dt, mode="interp")
+    xi = savgol_interp(chi, window, velocity_order, 1, dt)
     effective = apply_installation(force, eta_pos, eta_neg, force_neg)
     varphi = np.r_[0.0, np.cumsum(effective[:-1] * np.diff(t))]
     integral = cumulative_trapezoid(xi * np.abs(xi), t, initial=0.0)
