@@ -304,15 +304,23 @@ def test_the_holdout_takes_each_runs_own_tail_where_labels_repeat():
     assert val.index.equals(pd.Index([*range(75, 100), *range(45, 60)]))  # the log's labels
 
 
-def _surge_sway_yaw(rng: np.random.Generator, noise: bool = True) -> pd.DataFrame:
-    """400 samples at 10 Hz of the Seamor driven in surge, sway and yaw only (held random
-    levels from ``rng``; it never heaves: w exactly 0), with accelerometer-grade noise (2 %
-    of each one's std) on the excited DOFs' accelerations where ``noise``."""
+def _surge_sway_yaw(
+    rng: np.random.Generator,
+    noise: bool = True,
+    vehicle=None,
+    yaw: float = 0.2,
+    roll: float = 0.0,
+) -> pd.DataFrame:
+    """400 samples at 10 Hz of the Seamor (or ``vehicle``) driven in surge, sway and yaw only
+    (held random levels from ``rng``, ±30 N and ±30 ``yaw`` N·m; it never heaves: w exactly
+    0), with accelerometer-grade noise (2 % of each one's std) on the excited DOFs'
+    accelerations where ``noise``; ``roll``: the amplitude of a slow roll torque (N·m)."""
     from nnid.datasets.simulator import simulate
 
     inputs = np.zeros((400, 6))
-    inputs[20:, [0, 1, 5]] = np.repeat(rng.uniform(-30, 30, (19, 3)), 20, 0) * [1, 1, 0.2]
-    log = simulate(load_vehicle("seamor"), inputs, 0.1)
+    inputs[20:, [0, 1, 5]] = np.repeat(rng.uniform(-30, 30, (19, 3)), 20, 0) * [1, 1, yaw]
+    inputs[:, 3] = roll * np.sin(0.07 * np.arange(400))
+    log = simulate(vehicle or load_vehicle("seamor"), inputs, 0.1)
     for c in ("du", "dv", "dr") if noise else ():
         log[c] += 0.02 * log[c].std() * rng.standard_normal(len(log))
     return log
@@ -410,3 +418,74 @@ def test_targets_of_rounding_keep_no_terms_and_are_not_called_unexplained():
     idle = dict(zip("XYZKMN", path.idle_outputs_, strict=True))
     assert idle["K"] and idle["M"] and not (idle["X"] or idle["Y"] or idle["N"])
     assert not path.coef_[path.idle_outputs_].any()
+
+
+def test_a_moment_is_judged_rounding_beside_moments_not_beside_forces():
+    """A small ROV's log whose moments are small in N·m beside its forces in N (yaw torques of
+    ±6 mN·m: N ~ 0.09 N·m beside X, Y ~ 10 N) and which rolls a little under a roll torque
+    of 1e-8 N·m: its linear roll damping K:p = -0.1 gives K ~ 2e-10 N·m, real (p ~ 2e-9
+    rad/s, a measured column) but 1e-10 of the forces. Judged beside the forces, K was
+    rounding: it kept no term and, zeroed on the held-out part too, read a validation NMSE of
+    0, said by nothing. Beside the moments (1e-9 of N) it is data, and K:p comes back."""
+    from nnid.physics.effects import apply_effect
+    from nnid.trainers.sindy import SparsePath
+
+    vehicle = apply_effect(load_vehicle("seamor"), "linear_damping.p", -0.1)
+    log = _surge_sway_yaw(np.random.default_rng(3), False, vehicle, yaw=2e-4, roll=1e-8)
+    theta, y = SindyDamping(vehicle).features(log)
+    rms = np.sqrt(np.mean(y * y, axis=0))
+    assert rms[3] < 1e-10 * rms[:3].max() and rms[3] > 1e-9 * rms[5]  # the case above
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # Y's collinear terms (ExcitationWarning)
+        model = SindyDamping(vehicle, thresholds=np.logspace(-3, 0, 13)).fit(log)
+    assert [key for key in model.coefficients_ if key[0] == "K"] == ["K:p"]
+    assert model.coefficients_["K:p"] == pytest.approx(-0.1, rel=1e-5)
+    assert model.selected_["validation_nmse"]["K"] < 1e-9
+    # a kind that is all rounding is still judged beside the other (over the length): the
+    # moments of a log whose every moment is rounding keep nothing
+    ok = np.isfinite(theta).all(1) & np.isfinite(y).all(1)
+    quiet = y[ok].copy()
+    quiet[:, 3:] = 1e-17 * np.random.default_rng(4).standard_normal((ok.sum(), 3))
+    path = SparsePath(thresholds=[0.1], selection="aic", to_linear=1 / vehicle.length)
+    path.fit(theta[ok], quiet)
+    assert path.idle_outputs_.tolist() == [False, False, True, True, True, True]
+    assert not path.coef_[3:].any()
+
+
+def test_an_error_beside_a_zero_held_out_target_is_not_measured_as_an_nmse():
+    """Fitted on a log that heaves (Z noisy with 2 % accelerometer noise) and validated on one
+    that never does (Z exactly 0), a shared threshold keeps Z's terms and predicts a Z of RMS
+    2.4 N there. Its NMSE was that error over a floor of 1e-300, 5.9e300, and the path's J
+    9.8e299, warned as "validation NMSE 5.86e+300": numbers nothing measured. It is NaN (null
+    in JSON), a validation J that includes it too, and the warning says Z's error in N."""
+    from nnid.datasets.simulator import simulate
+    from nnid.trainers.sindy import SindyWarning
+
+    vehicle = load_vehicle("seamor")
+    rng = np.random.default_rng(5)
+    inputs = np.zeros((400, 6))
+    inputs[20:, [0, 1, 2, 5]] = np.repeat(rng.uniform(-30, 30, (19, 4)), 20, 0) * [1, 1, 1, 0.2]
+    train = simulate(vehicle, inputs, 0.1)
+    for c in ("du", "dv", "dw", "dr"):
+        train[c] += 0.02 * train[c].std() * rng.standard_normal(len(train))
+    val = _surge_sway_yaw(np.random.default_rng(3), noise=False)
+    assert (val["w"] == 0).all()
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        model = SindyDamping(vehicle, thresholds=[1e-3], per_output=False).fit(train, val)
+    said = [str(w.message) for w in caught if issubclass(w.category, SindyWarning)]
+    nmse_v = model.selected_["validation_nmse"]
+    assert any(key[0] == "Z" for key in model.coefficients_)  # Z keeps terms
+    assert np.isnan(nmse_v["Z"]) and np.isnan(model.path_[0]["validation_J"])
+    assert all(np.isfinite(nmse_v[f]) for f in "XYKMN")
+    assert len(said) == 1 and "do not measure" in said[0]
+    error = re.search(
+        r"Z \(held-out target zero, the model's prediction RMS ([0-9.e+-]+)\)", said[0]
+    )
+    x, y = model.arrays(val)
+    truth = np.sqrt(np.mean((model.predict_arrays(x)[:, 2] - y[:, 2]) ** 2))
+    assert error and float(error.group(1)) == pytest.approx(truth, rel=1e-2)
+    assert "explains nothing" not in said[0]
+    # the function itself: 0 where nothing is predicted of a zero target, NaN where something is
+    got = nmse(np.zeros((3, 2)), np.array([[0.0, 1.0], [0.0, 0.0], [0.0, 0.0]]))
+    assert got[0] == 0.0 and np.isnan(got[1])

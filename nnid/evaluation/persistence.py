@@ -31,8 +31,10 @@ from nnid.serialization import exact_float, read_exact_float
 #: rounding too (X of a heave-only log), and it has other units. The targets of a regression of
 #: several outputs are judged by the same rule among themselves, against their own typical
 #: size, never the regressors' (SINDy's, :class:`~nnid.trainers.sindy.SparsePath`: K of a
-#: surge/sway/yaw log is the Munk moments' rounding beside X, and has nothing to explain);
-#: where every target is rounding, their typical size is too, and none is called so. Where a
+#: surge/sway/yaw log is the Munk moments' rounding beside N, and has nothing to explain), and
+#: six DOFs' targets each against its own kind's (:func:`kind_sizes`: a moment in N·m beside
+#: moments, not beside forces in N); where every target is rounding, their typical size is
+#: too, and none is called so. Where a
 #: regression knows the motion its columns are made of (a Fossen regression), each column has
 #: its own floor instead (:func:`rounding_floors`): the motion it is made of at most this
 #: fraction of the log's typical motion, which is scale-free and power-aware
@@ -179,6 +181,26 @@ def typical_size(columns: np.ndarray) -> float:
     return max(sizes, default=0.0)
 
 
+def kind_sizes(columns: np.ndarray, to_linear: float) -> np.ndarray:
+    """The typical size (:func:`typical_size`) of each column of a six-DOF quantity ``columns``
+    ``[N, 6]`` by its kind ``[6]``: the linear one's (u v w, X Y Z) for the first three, the
+    angular one's (p q r, K M N) for the last three, each in its own units. One number for all
+    six compared a moment in N·m with forces in N, and a yaw rate with a surge speed: a real
+    one of a kind that is small beside the other (a yaw-only fit's 2.5e-6 rad/s beside 0.49
+    m/s) was called rounding. A kind whose size is itself rounding beside the other's (at most
+    :data:`ROUNDING` of it once ``to_linear`` puts it in the other's units: a length for rates
+    and angular accelerations, at the ends of the vehicle; one over it for moments, a force's
+    arm) takes the other's in its own units, as a kind that never moved has no size of its own:
+    its rounding (the moments of a heave-only log, 1e-17) would be its own reference, and never
+    rounding."""
+    linear, angular = typical_size(columns[:, :3]), typical_size(columns[:, 3:])
+    if angular * to_linear <= ROUNDING * linear:
+        angular = linear / to_linear
+    elif linear <= ROUNDING * angular * to_linear:
+        linear = angular * to_linear
+    return np.repeat([linear, angular], 3)
+
+
 def equation_rms(columns: np.ndarray, m: int, kept: np.ndarray | None = None) -> np.ndarray:
     """Each column's RMS over the rows of each of ``m`` equations ``[m, P]``, unweighted: the
     sizes :func:`excitation_from_gram`'s tol rule compares within an equation. ``columns``
@@ -225,15 +247,16 @@ def rounding_floors(at_motion: np.ndarray, at_probe: np.ndarray) -> np.ndarray:
 
 
 def rounding_columns(
-    column_rms: np.ndarray, reference: float, floors: np.ndarray | None = None
+    column_rms: np.ndarray, reference: float | np.ndarray, floors: np.ndarray | None = None
 ) -> np.ndarray:
     """Which columns of RMS ``column_rms`` ``[P]`` are rounding, not data (the rounding rule,
     :data:`ROUNDING`): those at most ROUNDING × ``reference`` (the typical size of a regressor
-    of the regression, :func:`typical_size`), or at most their own floor in ``floors`` where
-    it is not NaN (:func:`rounding_floors`); a NaN RMS too, as nothing shows it above. A column
-    of rounding is zero: scaled to unit RMS it would be a full-size column of noise."""
+    of the regression, :func:`typical_size`, or one per column: :func:`kind_sizes`), or at
+    most their own floor in ``floors`` where it is not NaN (:func:`rounding_floors`); a NaN RMS
+    too, as nothing shows it above. A column of rounding is zero: scaled to unit RMS it would
+    be a full-size column of noise."""
     raw = np.asarray(column_rms, dtype=np.float64)
-    floor = np.full(raw.shape, ROUNDING * reference)
+    floor = np.full(raw.shape, ROUNDING * np.asarray(reference, dtype=np.float64))
     if floors is not None:  # a column's own floor, where its regression gives one
         own = np.asarray(floors, dtype=np.float64)
         floor = np.where(np.isnan(own), floor, own)

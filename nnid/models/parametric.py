@@ -43,7 +43,7 @@ from nnid.datasets.preprocess import (
 )
 from nnid.datasets.splits import PARTS
 from nnid.errors import ExcitationWarning, NnidInputError, checked_number
-from nnid.evaluation.persistence import POWER_PROBE, ROUNDING, rounding_floors, typical_size
+from nnid.evaluation.persistence import POWER_PROBE, kind_sizes, rounding_floors, typical_size
 from nnid.evaluation.prediction import (
     Replay,
     blank_initial,
@@ -183,25 +183,6 @@ def regression_trainer(trainer: object, field: str = "trainer") -> Any:
 #: the rows :meth:`ParametricFossen.rounding_floors` evaluates at most: its state is one
 #: constant motion, the rows differ only by pose and inputs
 REFERENCE_ROWS = 256
-
-
-def typical_motion(x: np.ndarray, length: float) -> np.ndarray:
-    """The reference state of the rounding rule for ``x`` ``[N, 6]`` (ν, or ν̇): u, v, w at
-    the largest typical |linear| entry and p, q, r at the largest typical |angular| one
-    (:func:`~nnid.evaluation.persistence.typical_size`), so that each kind is in its own units
-    (one number for all six compared a yaw-only fit with a yaw rate of the surge speed, 0.49
-    rad/s, where the log had 2.5e-6, and called its r|r| rounding). A kind whose typical
-    size is itself rounding beside the other's (at most
-    :data:`~nnid.evaluation.persistence.ROUNDING` of it, angular rates taken over ``length``:
-    the rates at the ends of the vehicle) takes the other's over ``length``, as a log that
-    never moved in that kind gives no size of its own: its rounding (1e-17 rad/s of a
-    heave-only log) would be the reference of itself, and never rounding."""
-    linear, angular = typical_size(x[:, :3]), typical_size(x[:, 3:])
-    if angular * length <= ROUNDING * linear:
-        angular = linear / length
-    elif linear <= ROUNDING * angular * length:
-        linear = angular * length
-    return np.repeat([linear, angular], 3)
 
 
 def _parts_key(parts: Parts) -> tuple:
@@ -403,11 +384,14 @@ class ParametricFossen:
         (:func:`~nnid.evaluation.persistence.rounding_floors`) for this structure's regression
         on ``data``: its column at the log's typical motion, and at that motion times
         :data:`~nnid.evaluation.persistence.POWER_PROBE` for its power in it. The typical
-        motion (:func:`typical_motion`): ν of each kind (linear, angular) at the largest
-        typical |ν| of that kind, ν̇ likewise of ``nu_dot`` (the accelerations the regression
-        reads: logged, or sF(s)[ν] of the filtered form); both are scaled, as a motion of
-        larger amplitude at the same frequencies has both larger, so that an added mass's ν̇
-        column is of power 1 in it, as its velocity's. Row by row otherwise (η, the inputs),
+        motion (:func:`~nnid.evaluation.persistence.kind_sizes`, angular rates over the
+        vehicle's length): ν of each kind (linear, angular) at the largest typical |ν| of that
+        kind (one number for all six compared a yaw-only fit with a yaw rate of the surge
+        speed, 0.49 rad/s, where the log had 2.5e-6, and called its r|r| rounding), ν̇ likewise
+        of ``nu_dot`` (the accelerations the regression reads: logged, or sF(s)[ν] of the
+        filtered form); both are scaled, as a motion of larger amplitude at the same
+        frequencies has both larger, so that an added mass's ν̇ column is of power 1 in it, as
+        its velocity's. Row by row otherwise (η, the inputs),
         on at most :data:`REFERENCE_ROWS` rows drawn by a fixed local generator: the rule needs
         a size within decades.
 
@@ -432,7 +416,7 @@ class ParametricFossen:
         # the rates at the ends of the vehicle, where its file gives its length; else a
         # metre, the scale the rule's ROUNDING assumes of a vehicle in SI units
         length = self.vehicle.length or 1.0
-        nu, acc = typical_motion(data["nu"], length), typical_motion(nu_dot, length)
+        nu, acc = kind_sizes(data["nu"], length), kind_sizes(nu_dot, length)
         rows = [DOFS.index(d) for d in self.dofs]
         sizes = []
         for scale in (1.0, POWER_PROBE):

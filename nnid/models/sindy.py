@@ -178,6 +178,10 @@ class SindyDamping(DampingModel):
         ok = self._defined(log, theta, y, "training")
         ok_v = self._defined(validation, theta_v, y_v, "validation")
         self._warn_held(log, "the SINDy fit")
+        # forces and moments (linear and angular accelerations) are each judged rounding within
+        # their own kind, a kind put in the other's units by the vehicle's length where its
+        # file gives one, else a metre (as the Fossen regression's rounding floors)
+        length = self.vehicle.length or 1.0
         path = SparsePath(
             self.optimizer,
             self.thresholds,
@@ -187,6 +191,7 @@ class SindyDamping(DampingModel):
             self.per_output,
             self.seed,
             self.output_names,
+            1.0 / length if self.mode == "residual" else length,
         ).fit(theta[ok], y[ok], theta_v[ok_v], y_v[ok_v])
         progress(1, 1, f"SINDy path of {len(path.path_)} thresholds")
         self.path_ = path.path_

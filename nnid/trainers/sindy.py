@@ -37,7 +37,7 @@ from pysindy.utils import AxesArray, comprehend_axes
 from sklearn.base import BaseEstimator
 
 from nnid.errors import NnidInputError
-from nnid.evaluation.persistence import rounding_columns, typical_size
+from nnid.evaluation.persistence import kind_sizes, rounding_columns, typical_size
 from nnid.physics.damping_library import BasisLibrary, evaluate_terms
 from nnid.physics.dofs import DOFS
 
@@ -171,19 +171,34 @@ def debias(r: np.ndarray, b: np.ndarray, coef: np.ndarray) -> np.ndarray:
     return out
 
 
-def _rounding_outputs(y: np.ndarray) -> np.ndarray:
+def _rounding_outputs(y: np.ndarray, to_linear: float | None = None) -> np.ndarray:
     """Which outputs of targets ``y`` ``[N, m]`` are rounding, not data ``[m]``: the rounding
     rule (:func:`~nnid.evaluation.persistence.rounding_columns`) of each target against the
-    typical size of the regression's targets, not of its regressors (other units). A target
-    that is not finite is not idle: zeroed, it would hide bad input behind a zero row."""
+    typical size of the regression's targets, not of its regressors (other units); with
+    ``to_linear``, of six DOFs' targets, against its own kind's
+    (:func:`~nnid.evaluation.persistence.kind_sizes`: a moment beside moments, not forces). A
+    target that is not finite is not idle: zeroed, it would hide bad input behind a zero row."""
     rms = np.sqrt(np.mean(y * y, axis=0))
-    return np.isfinite(rms) & rounding_columns(rms, typical_size(y))
+    reference = typical_size(y) if to_linear is None else kind_sizes(y, to_linear)
+    return np.isfinite(rms) & rounding_columns(rms, reference)
 
 
 def nmse(y: np.ndarray, pred: np.ndarray) -> np.ndarray:
-    """Per-output normalised MSE: mean((y − ŷ)²) / mean(y²)."""
-    ms = np.maximum(np.mean(y * y, axis=0), 1e-300)
-    return np.mean((y - pred) ** 2, axis=0) / ms
+    """Per-output normalised MSE: mean((y − ŷ)²) / mean(y²). Where a target is zero
+    throughout, 0 where the prediction is too (nothing to explain, nothing predicted) and NaN
+    where it is not: an error with nothing to normalise it by is not measured as a share (a
+    floor of 1e-300 made it an NMSE of ~1e299)."""
+    ms = np.mean(y * y, axis=0)
+    err = np.mean((y - pred) ** 2, axis=0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(ms > 0, err / ms, np.where(err == 0, 0.0, np.nan))
+
+
+def _least(val: np.ndarray) -> np.ndarray:
+    """The smallest of each column of ``val`` ``[T, m]`` over its rows, NaN where no row is
+    measured (np.nanmin's answer, without its warning of an all-NaN column)."""
+    least = np.min(np.where(np.isnan(val), np.inf, val), axis=0)
+    return np.where(np.isnan(val).all(axis=0), np.nan, least)
 
 
 class LibraryEnsemble:
@@ -245,7 +260,15 @@ class SparsePath(BaseEstimator):
     ``idle_outputs_`` ``[m]``: the outputs whose target is rounding against the typical size
     of the targets (the Munk moments' 1e-17 in K and M of that log); their target is zero, as
     if exactly so: they keep no terms, and where the held-out target is rounding too their
-    validation NMSE is that of a zero target (0), not called unexplained.
+    validation NMSE is that of a zero target (0), not called unexplained. ``to_linear``: where
+    the six outputs are a six-DOF quantity's (X Y Z K M N, or ν̇), the factor that puts the
+    angular kind in the linear one's units (one over the vehicle's length for moments, the
+    length for angular accelerations); each target is then judged within its own kind
+    (:func:`~nnid.evaluation.persistence.kind_sizes`), as a moment in N·m beside forces in N
+    is no rounding for being small; None: the outputs are one kind. An output whose held-out
+    target is zero throughout and which the model predicts non-zero there has no validation
+    NMSE (NaN, :func:`nmse`): it is said, with its error's RMS, and a validation J that
+    includes it is NaN too (the shared selection chooses among the rows that are measured).
     ``selection`` is "validation" (the sparsest model whose validation J is within
     ``tolerance`` of the best; with ``per_output`` each output picks its own row, greedily
     sparsest while the mean validation J of the outputs the path explains stays within
@@ -266,6 +289,7 @@ class SparsePath(BaseEstimator):
         per_output: bool = True,
         seed: int = 0,
         output_names: Sequence[str] | None = None,
+        to_linear: float | None = None,
     ) -> None:
         self.optimizer = optimizer
         self.thresholds = thresholds
@@ -275,6 +299,7 @@ class SparsePath(BaseEstimator):
         self.per_output = per_output
         self.seed = seed
         self.output_names = output_names
+        self.to_linear = to_linear
 
     def fit(
         self,
@@ -290,6 +315,11 @@ class SparsePath(BaseEstimator):
             raise NnidInputError(f"selection is one of {', '.join(SELECTIONS)}", field="selection")
         if theta_val is None and self.selection == "validation":
             raise NnidInputError("selection='validation' needs validation data", field="selection")
+        if self.to_linear is not None and y.shape[1] != 6:
+            raise NnidInputError(
+                f"to_linear judges six DOFs' targets by kind; y has {y.shape[1]} outputs",
+                field="to_linear",
+            )
         thresholds = (
             np.logspace(-3, 0, 41)
             if self.thresholds is None
@@ -304,11 +334,12 @@ class SparsePath(BaseEstimator):
         col[self.excluded_] = 1.0
         # a target of rounding is zero too: scaled to unit RMS, the Munk moments' rounding in K
         # and M (w ~ 1e-17) had real columns fitted to it, and it was warned unexplained
-        self.idle_outputs_ = _rounding_outputs(y)
+        self.idle_outputs_ = _rounding_outputs(y, self.to_linear)
         y = np.where(self.idle_outputs_, 0.0, y)
         if y_val is not None:  # an idle output's prediction is 0: nothing to explain where
             # its held-out target is rounding too; where it is not, scored (and warned) as is
-            y_val = np.where(self.idle_outputs_ & _rounding_outputs(y_val), 0.0, y_val)
+            idle_val = _rounding_outputs(y_val, self.to_linear)
+            y_val = np.where(self.idle_outputs_ & idle_val, 0.0, y_val)
         out = np.sqrt(np.mean(y * y, axis=0))
         out[out == 0] = 1.0
         scaled_theta = theta / col
@@ -348,11 +379,11 @@ class SparsePath(BaseEstimator):
             if theta_val is not None:
                 val_out.append(nmse(y_val, theta_val @ coef.T))
         self.path_ = path
-        best = self._select(path)
+        best = self._select(path, val_out)
         self.selected_ = dict(path[best])
         self.coef_ = coefs[best]
         val_nmse = val_out[best] if theta_val is not None else None
-        path_best = np.nanmin(np.array(val_out), axis=0) if theta_val is not None else None
+        path_best = _least(np.array(val_out)) if theta_val is not None else None
         if self.per_output and self.selection == "validation":
             # the zero row is every output's candidate too: a regression that predicts held-out
             # data worse than no model at all must not keep its terms because the threshold
@@ -371,12 +402,34 @@ class SparsePath(BaseEstimator):
             # the mean J can hide one output the library cannot explain: each output's own
             self.selected_["validation_nmse"] = [float(v) for v in val_nmse]
             self._warn_unexplained(val_nmse, path_best)
+            error = np.sqrt(np.mean((y_val - theta_val @ self.coef_.T) ** 2, axis=0))
+            self._warn_unmeasured(val_nmse, error)
         return self
+
+    def _names(self, m: int) -> list[str]:
+        return list(self.output_names or [f"output {i}" for i in range(m)])
+
+    def _warn_unmeasured(self, selected: np.ndarray, error: np.ndarray) -> None:
+        """Say which outputs have no validation NMSE (NaN: the held-out target is zero
+        throughout, the selected model's prediction is not), with the RMS of that error."""
+        names = self._names(len(selected))
+        unmeasured = [
+            f"{names[i]} (held-out target zero, the model's prediction RMS {error[i]:.3g})"
+            for i in np.flatnonzero(np.isnan(selected))
+        ]
+        if unmeasured:
+            warnings.warn(
+                f"the validation data do not measure the SINDy model's NMSE of "
+                f"{', '.join(unmeasured)}: an error beside a zero target is no share of it "
+                "(NaN); give validation data in which those outputs act",
+                SindyWarning,
+                stacklevel=3,
+            )
 
     def _warn_unexplained(self, selected: np.ndarray, best: np.ndarray) -> None:
         """Say which outputs the selected model does not explain on the validation data
         (normalised MSE ≥ 1, that of predicting zero), with the best each reached on the path."""
-        names = self.output_names or [f"output {i}" for i in range(len(best))]
+        names = self._names(len(best))
         poor = [
             f"{names[i]} (validation NMSE {selected[i]:.3g}, best on the path {best[i]:.3g})"
             for i in np.flatnonzero(selected >= UNEXPLAINED)
@@ -432,9 +485,17 @@ class SparsePath(BaseEstimator):
             pick[choice[0]] = choice[1]
         return np.stack([coefs[pick.get(i, zero), i] for i in range(coefs.shape[1])])
 
-    def _select(self, path: list[dict]) -> int:
+    def _select(self, path: list[dict], val_out: list[np.ndarray]) -> int:
+        """The row of the shared selection: by AIC or BIC, or the sparsest within
+        ``tolerance`` of the best validation J among the rows whose J is measured; where none
+        is (an output with a zero held-out target predicted non-zero at every threshold), J
+        over the outputs measured on every row."""
         if self.selection in ("aic", "bic"):
             return int(np.argmin([p[self.selection] for p in path]))
         val = np.array([p["validation_J"] for p in path])
+        if np.isnan(val).all():
+            per = np.array(val_out)
+            common = ~np.isnan(per).any(axis=0)
+            val = per[:, common].mean(axis=1) if common.any() else np.zeros(len(path))
         ok = np.flatnonzero(val <= (1.0 + self.tolerance) * np.nanmin(val))
         return int(min(ok, key=lambda i: (path[i]["n_terms"], val[i])))
