@@ -549,7 +549,9 @@ class SequenceStep(StrictModel):
 class _PhysicsModel(_Model):
     """A model with a parametric Fossen fit: unknown parameters (``added_mass`` and
     ``damping`` are shortcuts for the DOFs' diagonal added mass and the vehicle's damping
-    terms) identified from the ``dofs`` equations."""
+    terms; ``damping`` written where the vehicle declares none in those equations is
+    refused, and by default said not estimated)
+    identified from the ``dofs`` equations."""
 
     unknowns: Names = Field(default_factory=lambda: ["added_mass", "damping"])
     dofs: Dofs = Field(default_factory=lambda: list(DOFS))

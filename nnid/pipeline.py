@@ -68,6 +68,9 @@ class Inputs:
     #: the (window s, order) of the Savitzky-Golay derivative that gave the velocities the
     #: report says were derived from the pose ([data]'s)
     derived_with: tuple[float, int] = (1.0, 4)
+    #: how an error names the vehicle's file ("vehicle file PATH", "preset 'NAME'"; None
+    #: where no vehicle was named)
+    vehicle_label: str | None = None
     #: the log file read (None for a simulated log) and the clock of the rows kept from it
     #: (``t`` and ``experiment``, labelled by the file's rows, in the order of ``log``'s rows):
     #: what an error found after the split names
@@ -91,6 +94,18 @@ def vehicle_for(name: str, config_path: Path, key: str = "vehicle"):
             field=key,
         )
     return load_vehicle(path)
+
+
+def vehicle_label(name: str, config_path: Path) -> str:
+    """How an error names the vehicle ``name`` loads: "preset 'NAME'", or "vehicle file
+    PATH" (:func:`vehicle_source`)."""
+    from nnid.vehicle import PRESETS
+
+    return (
+        f"preset '{name}'"
+        if name in PRESETS
+        else f"vehicle file {vehicle_source(name, config_path)}"
+    )
 
 
 def vehicle_source(name: str, config_path: Path) -> str:
@@ -136,13 +151,16 @@ def reader_root(columns: str | None) -> str | None:
     return str(cmap.resolve_root(Path(columns))) if cmap.root else None
 
 
-def reader_vehicle(columns: str):
-    """The vehicle a reader config names (its ``vehicle``, relative to its own folder), or
-    None: the vehicle of a run that names none, as the reader config documents."""
+def reader_vehicle(columns: str) -> tuple[Any, str | None]:
+    """The vehicle a reader config names (its ``vehicle``, relative to its own folder) and
+    its :func:`vehicle_label`, or (None, None): the vehicle of a run that names none, as the
+    reader config documents."""
     from nnid.datasets.column_map import load_column_map
 
     name = load_column_map(columns).vehicle
-    return vehicle_for(name, Path(columns)) if name else None
+    if not name:
+        return None, None
+    return vehicle_for(name, Path(columns)), vehicle_label(name, Path(columns))
 
 
 def _check_file(path: Path, source: Path, key: str) -> None:
@@ -214,9 +232,10 @@ def load_inputs(
     physics = any(m.kind in PHYSICS_KINDS for m in models)
     name = vehicle or cfg.vehicle
     veh = vehicle_for(name, config_path, "--vehicle" if vehicle else "vehicle") if name else None
+    veh_label = vehicle_label(name, config_path) if name else None
     reader = reader_config(cfg, config_path, columns)
     if veh is None and reader is not None:
-        veh = reader_vehicle(reader)
+        veh, veh_label = reader_vehicle(reader)
     simulated = data is None and bool(getattr(spec, "simulate", None))
     if physics and veh is None and not simulated:  # said before any data is read
         raise NnidInputError(
@@ -299,6 +318,7 @@ def load_inputs(
         log = simulate_config(sim, plant)
         report.add("simulate", f"{len(log)} samples from {sim_path}")
         inputs = Inputs(log, report, veh or plant, sim)
+        veh_label = veh_label or vehicle_label(sim.vehicle, sim_path)
     else:
         raise NnidInputError(
             "give data.log, data.simulate (or --data)", source=str(config_path), field="data"
@@ -339,6 +359,7 @@ def load_inputs(
                 raise err.with_source(source) from None
     inputs.log = _prepare(inputs.log, spec, inputs.report)
     inputs.derived_with = (float(spec.savgol_window), int(spec.savgol_order))
+    inputs.vehicle_label = veh_label if inputs.vehicle is not None else None
     return inputs
 
 
@@ -741,6 +762,24 @@ def check_savgol_window(
                     raise NnidInputError(exc.message, field=field) from None
 
 
+def check_damping_unknowns(spec, inputs: Inputs, section: str) -> None:
+    """A Fossen fit's unknowns (a Fossen model's, a hybrid's, an ensemble member's) whose
+    group ``damping`` names no damping term of the vehicle, refused before the fit where the
+    config writes them (:func:`~nnid.models.parametric.check_damping_group`), naming the
+    vehicle's file and, as :func:`named_in` names it, the config key that asks for it. The
+    default unknowns ask for damping on any vehicle: there the fit says it estimates none."""
+    from nnid.models.parametric import check_damping_group
+
+    fitted = spec.fitted
+    unknowns = getattr(fitted, "unknowns", None)
+    if unknowns is None or getattr(fitted, "sequence", None) or inputs.vehicle is None:
+        return
+    if "unknowns" not in fitted.model_fields_set:
+        return
+    with named_in(section, spec):
+        check_damping_group(unknowns, fitted.dofs, inputs.vehicle, inputs.vehicle_label)
+
+
 def _fit_warnings(caught) -> list[str]:
     """The messages of warnings caught in a fit, each once; the commands' units were said
     against the whole log as it was loaded (load_inputs), not again per part."""
@@ -898,6 +937,7 @@ def run_train(
         inputs.log, cfg.split, source, inputs.report, cfg.warmup_s, inputs.source, read, said
     )
     check_savgol_window(cfg.model, model, split, "model", members_scored=True)
+    check_damping_unknowns(cfg.model, inputs, "model")
     caught = fit_model(model, split, progress or silent, "model", cfg.model, replay)
     check_reference(cfg.reference, list(model.params), source)
     if hasattr(model, "report_"):
@@ -1161,6 +1201,7 @@ def run_compare(
     check_held_stepped(inputs, split, [m.fitted for m in cfg.models])
     for i, (spec, model) in enumerate(zip(cfg.models, models, strict=True)):
         check_savgol_window(spec, model, split, f"models.{i}")
+        check_damping_unknowns(spec, inputs, f"models.{i}")
     held_name = "test" if len(split.test) else "validation"
     held = split[held_name]
     k = k_steps(held, cfg.k_step_s)

@@ -9,6 +9,7 @@ input is never accepted and never crashes.
 from __future__ import annotations
 
 import functools
+import json
 import re
 import warnings
 from collections.abc import Callable
@@ -2315,6 +2316,82 @@ def test_a_fossen_fit_of_no_unknowns_says_it_estimated_nothing(fixtures, tmp_pat
     metrics = json.loads((tmp_path / "o" / "metrics.json").read_text())
     assert metrics["trainer"] is None and metrics["params"] == {}
     assert any(w.startswith("the fit has no unknowns") for w in metrics["warnings"])
+
+
+@pytest.mark.parametrize("unknowns", ['["damping"]', '["added_mass", "damping"]'])
+def test_damping_asked_of_a_vehicle_file_with_none_is_one_error(tmp_path, unknowns):
+    """unknowns = ["damping"] on a vehicle file of no damping terms warned "nothing is
+    estimated" and exited 0; beside added_mass, the damping asked for was dropped without a
+    word. One error (exit 2) naming the config key, the vehicle file and what it needs."""
+    text = Path(MINIROV).read_text()
+    vehicle = tmp_path / "bare.toml"
+    vehicle.write_text(text[: text.index("[damping")])
+    data = tmp_path / "good.parquet"
+    _demo_log().to_parquet(data)
+    config = tmp_path / "damping.toml"
+    config.write_text(
+        TRAIN_TEXT.replace('unknowns = ["added_mass", "damping"]', f"unknowns = {unknowns}")
+    )
+    args = [
+        "train",
+        str(config),
+        "--data",
+        str(data),
+        "--vehicle",
+        str(vehicle),
+        "--out",
+        str(tmp_path / "o"),
+    ]
+    result = CliRunner().invoke(app, args)
+    errors = [line for line in result.output.splitlines() if line.startswith("error:")]
+    assert result.exit_code == 2 and len(errors) == 1, result.output
+    said = " ".join(result.output.split())
+    assert said.startswith(f"error: {config}, field 'model.unknowns': 'damping' asks"), said
+    assert f"vehicle file {vehicle}, which declares no damping term" in said
+    assert "[damping] model" in said and "leave 'damping' out of unknowns" in said
+    assert not (tmp_path / "o").exists()
+
+
+def test_damping_asked_by_default_of_a_vehicle_file_with_none_is_said_not_refused(tmp_path):
+    """The default unknowns (added_mass and damping) ask for damping on any vehicle: on one of
+    no damping terms the added mass is estimated and the damping said not to be (it was
+    dropped without a word), where written in the config it is refused (above)."""
+    text = Path(MINIROV).read_text()
+    vehicle = tmp_path / "bare.toml"
+    vehicle.write_text(text[: text.index("[damping")])
+    data = tmp_path / "good.parquet"
+    _demo_log().to_parquet(data)
+    config = tmp_path / "default.toml"
+    config.write_text(TRAIN_TEXT.replace('unknowns = ["added_mass", "damping"]\n', ""))
+    assert "unknowns" not in config.read_text()
+    out = tmp_path / "o"
+    args = ["train", str(config), "--data", str(data), "--vehicle", str(vehicle), "--out", str(out)]
+    result = CliRunner().invoke(app, args)
+    assert result.exit_code == 0, result.output
+    said = " ".join(result.output.split())
+    assert "which declares no damping term" in said and "no damping is estimated" in said
+    params = json.loads((out / "metrics.json").read_text())["params"]
+    assert params and all(k.endswith("dot") for k in params), params  # added mass only
+
+
+def test_damping_of_other_forces_only_is_refused_by_the_fit_itself():
+    """Given in Python, a fit of the heave equation with unknowns ["damping"] on a vehicle
+    that declares surge damping only is refused too, naming the vehicle by its name."""
+    from nnid.errors import NnidInputError
+    from nnid.models.parametric import ParametricModel
+    from nnid.vehicle import load_vehicle
+
+    veh = load_vehicle(MINIROV)
+    surge = veh.model_copy(
+        update={"damping": veh.damping.model_copy(update={"coefficients": {"X:u": -13.7}})}
+    )
+    with pytest.raises(NnidInputError) as err:
+        ParametricModel(surge, ["damping"], dofs=["w"]).fit(_demo_log())
+    assert err.value.field == "unknowns"
+    assert (
+        "vehicle 'minirov', which declares damping terms of X only, none of the Z"
+        in err.value.message
+    )
 
 
 def test_a_hybrid_of_no_physics_unknowns_says_its_physics_is_the_file():

@@ -699,3 +699,33 @@ def test_the_force_figures_legend_is_clear_of_a_scaled_axis_offset_text(monkeypa
     assert offset.get_text() == "1e6"
     legend = ax.get_legend().get_window_extent(renderer)
     assert legend.y0 > offset.get_window_extent(renderer).y1
+
+
+@pytest.mark.parametrize("name", ["m", "a model named at much greater length than usual"])
+def test_the_complexity_figure_has_fixed_margins_and_names_every_model_inside(monkeypatch, name):
+    """The complexity figure is drawn once with fixed margins (the constrained layout placed
+    it, then the crop drew it again; a long name beside its point shrank the panel): every
+    damping model with a J/J0 and the SINDy path are named in the legend above the panel,
+    inside the figure and off the panel, a NARX (no force equation) left out."""
+    from conftest import assert_labels_inside
+
+    import nnid.reports.compare_report as report
+
+    def row(k: int, kind: str) -> dict:
+        out = {"name": f"{name} {k}", "kind": kind, "n_params": 6 + 4 * k,
+               "validation": {"J_over_J0": 0.3 + 0.1 * k, "J0": 10.0}}  # fmt: skip
+        if kind == "sindy":
+            out["sindy_path"] = [{"n_terms": j, "validation_J": 1.0 / j} for j in range(1, 9)]
+        return out
+
+    models = [row(k, kind) for k, kind in enumerate(["synthesis", "sindy", "synthesis", "narx"])]
+    drawn = []
+    real = report.figure_uri
+    monkeypatch.setattr(report, "figure_uri", lambda fig: drawn.append(fig) or real(fig))
+    assert report.complexity_figure({"models": models}).startswith("data:image/png;base64,")
+    (fig,) = drawn
+    assert_labels_inside(fig)
+    texts = [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
+    path = f"{name} 1 path (√ of normalised MSE)"
+    assert sorted(texts) == sorted([f"{name} 0", f"{name} 1", path, f"{name} 2"])
+    assert fig.axes[0].get_ylabel() == "validation error: points J / J0, path √ mean NMSE"

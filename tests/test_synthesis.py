@@ -204,6 +204,38 @@ def test_an_unidentified_coefficient_stays_visible_not_an_estimate_of_zero(metho
     np.testing.assert_array_equal(back.coef_, model.coef_)
 
 
+def test_an_older_file_shows_its_unidentified_coefficient_as_not_identified(tmp_path):
+    """A file saved before the unidentified coefficients were kept (no "unidentified" in its
+    state) showed X:u, which no row read, as the estimate 0.0. Such a file tells them apart:
+    masked least squares left each at exactly 0 with no standard error, which no estimate
+    is. Loaded, it reads as a file of today does: null, simulated at 0, the same predictions."""
+    import json
+    from importlib import resources
+
+    from nnid import load_model
+    from nnid.datasets.simulator import simulate
+    from nnid.errors import ExcitationWarning
+
+    vehicle = load_vehicle(str(resources.files("nnid.demo_data").joinpath("minirov.toml")))
+    t = np.arange(300) * 0.1
+    inputs = np.zeros((t.size, 6))
+    inputs[:, 2] = 30.0 + 20.0 * np.sin(1.2 * t)
+    log = simulate(vehicle, inputs, 0.1, substeps=2, experiment="heave")
+    log[["u", "v", "p", "q", "r"]] = 0.0  # exactly: the regressor of X:u is zero
+    mask = {"X": ["u"], "Z": ["w", "w*abs(w)"]}
+    with pytest.warns(ExcitationWarning):
+        model = SynthesisModel(vehicle, mask, filter_lambda=1.0).fit(log)
+    model.save(tmp_path)
+    path = tmp_path / "model.json"
+    saved = json.loads(path.read_text())
+    del saved["state"]["unidentified"]  # as an older nnid wrote it
+    path.write_text(json.dumps(saved))
+    older = load_model(tmp_path)
+    assert older.params["X:u"] == {"value": None, "stderr": None, "simulated_at": 0.0}
+    assert older.params == model.params  # the estimates, Z:w and Z:w*abs(w), as fitted
+    pd.testing.assert_frame_equal(older.predict(log, "one_step"), model.predict(log, "one_step"))
+
+
 @pytest.mark.parametrize("u_level", [1e-18, 0.0])
 def test_a_regressor_of_rounding_or_zero_but_for_settling_rows_is_a_zero_regressor(u_level):
     """X:u of a heave-only log whose u is rounding (the simulator leaves 1e-17): alone in its

@@ -85,13 +85,15 @@ from nnid.reports.cells import number
 #: time τ it did so, and ``change_alarm_t``, the time of the alarm(s) that isolated it; so
 #: too for an alarm isolated whose own change ended inside its window (:func:`ended_within`),
 #: ``change_alarm_t`` then its own time (:func:`alarm_row`; the record has them under
-#: ``ended`` or ``resized``); ``blind_until``, now always empty (the statistics restart after
-#: every alarm's window: :func:`unexplained`), kept so the columns keep their places; then, of
-#: an alarm that is not isolated, ``repeats`` and ``last_seen_t`` (:func:`persisting`)
+#: ``ended`` or ``resized``); then, of an alarm that is not isolated, ``repeats`` and
+#: ``last_seen_t`` (:func:`persisting`). No ``blind_until`` (nor ``blind`` in the record): they
+#: said how long statistics left over their thresholds kept the monitor from re-arming after an
+#: unexplained alarm, and the statistics now restart at every alarm's window end
+#: (:func:`unexplained`), so they were always empty; a value never measured is not kept as one
 ALARM_FIELDS = ["experiment", "t", "kind", "thruster", "efficiency", "efficiency_low",
                 "efficiency_high", "effect", "value", "stderr", "severity", "confidence",
                 "explained", "residual_ratio", "hypothesis", "meaning", "change_t",
-                "change_alarm_t", "blind_until", "repeats", "last_seen_t"]  # fmt: skip
+                "change_alarm_t", "repeats", "last_seen_t"]  # fmt: skip
 
 
 def alarm_row(record: dict) -> dict:
@@ -189,8 +191,6 @@ def isolated_alarm(
         "p_value": diag.p_value,
         "alternatives": diag.alternatives,
         "components": diag.components,
-        "blind_until": None,  # never blind: the statistics restart at the window's end
-        "blind": None,
         "repeats": None,  # an isolated change: no unexplained one persisting (unexplained())
         "last_seen_t": None,
     }
@@ -246,11 +246,10 @@ def unexplained(record: dict, restart_t: float) -> None:
     statistics restart at ``restart_t`` (its window's end) on the residual watched, and a later
     alarm that is not isolated either is this change persisting (:func:`persisting`), counted
     in ``repeats`` (0 here) with the time of the latest in ``last_seen_t`` (its own here).
-    ``blind_until`` and ``blind`` stay None: they said how long the statistics, left as they
-    were, kept the monitor blind (72 minutes after a snag, a thruster lost in them unsaid);
-    restarted, the monitor is blind only over each alarm's window, as after any alarm."""
+    Restarted, the monitor is blind only over each alarm's window, as after any alarm: no
+    blind time is left to state (the statistics left as they were kept it blind 72 minutes
+    after a snag, a thruster lost in them unsaid)."""
     record["repeats"], record["last_seen_t"] = 0, record["t"]
-    record["blind_until"] = record["blind"] = None
     record["meaning"] = (
         f"{record['meaning'] or 'a change no hypothesis explains'}{RESTARTS}"
         f"({restart_t:.2f} s) with nothing more taken out (an isolated change "
@@ -723,8 +722,6 @@ class _Splits:
             "p_value": None,
             "alternatives": [],
             "components": components or None,
-            "blind_until": None,  # the statistics restart at the window's end
-            "blind": None,
             "repeats": None,  # no unexplained change (unexplained())
             "last_seen_t": None,
             "ended" if ended else "resized": {"t": t_split, "alarms": [changes[i].t for i in gone]},

@@ -548,6 +548,45 @@ NOTHING_ESTIMATED = (
 )
 
 
+def check_damping_group(
+    spec: Sequence[str],
+    dofs: Sequence[str],
+    vehicle,
+    vehicle_label: str | None = None,
+    strict: bool = True,
+) -> None:
+    """The group ``damping`` of the unknowns ``spec`` refused where the vehicle declares no
+    damping term in the forces of ``dofs``: it asks to estimate damping the model does not
+    contain (a fit of ``["damping"]`` alone warned and estimated nothing). Not ``strict`` (the
+    group asked by default, not by the user), a warning that it is not estimated: it was
+    dropped without a word. ``vehicle_label`` names the vehicle in the message (``nnid train``
+    knows its file; else its name). Not checked on loading a saved model: one fitted so
+    before is read as it was."""
+    if "damping" not in spec:
+        return
+    forces = [FORCES[DOFS.index(d)] for d in dofs]
+    declared = sorted({k.split(":")[0] for k in Parts.from_vehicle(vehicle).damping})
+    if set(declared) & set(forces):
+        return
+    where = vehicle_label or f"vehicle '{vehicle.name}'"
+    has = (
+        "declares no damping term"
+        if not declared
+        else f"declares damping terms of {', '.join(declared)} only, none of the "
+        f"{', '.join(forces)} equation{'s' if len(forces) > 1 else ''} fitted"
+    )
+    said = (
+        f"'damping' asks to estimate the damping of {where}, which {has} ([damping] model or "
+        "[damping.coefficients]): there is nothing to estimate. Give the vehicle file the terms "
+        '([damping] model = a named mask such as "fossen", whose coefficients left out are '
+        "identified, or keys under [damping.coefficients]), or leave 'damping' out of unknowns"
+    )
+    if not strict:
+        warnings.warn(f"{said}; no damping is estimated", UserWarning, stacklevel=3)
+        return
+    raise NnidInputError(said, field="unknowns")
+
+
 def expand_unknowns(spec: Sequence[str], dofs: Sequence[str], vehicle) -> list[str]:
     """The unknowns of a fit with the shortcuts expanded: ``added_mass`` (the diagonal
     derivatives of ``dofs``) and ``damping`` (the vehicle's damping-model terms of their
@@ -1432,6 +1471,9 @@ class ParametricModel(FossenPlant):
     def _fit(self, log: pd.DataFrame, validation, progress: Progress) -> None:
         trainer = self._trainer()
         dofs, unknowns, self.structure_ = self._settings()
+        if self.sequence is None:  # a sequence's steps name their unknowns one by one
+            # refused where it leaves nothing to estimate; beside what is estimated, said
+            check_damping_group(self.unknowns, dofs, self.vehicle, strict=not unknowns)
         self._set_outputs(dofs)
         self.report_ = CleaningReport(source="fit data")
         needs_acc = getattr(trainer, "filter_lambda", None) is None
@@ -1441,9 +1483,8 @@ class ParametricModel(FossenPlant):
         else:  # no trainer runs (a UKF cannot, on no parameters): said, and trainer_name() None
             from nnid.trainers.least_squares import LeastSquares
 
-            given = f"unknowns = {list(self.unknowns)}" + (
-                "; its groups name no parameter of the vehicle's" if list(self.unknowns) else ""
-            )
+            # unknowns = [] (a group naming nothing is refused above)
+            given = f"unknowns = {list(self.unknowns)}"
             warnings.warn(NOTHING_ESTIMATED.format(given), UserWarning, stacklevel=3)
             # a regression of no columns: the equation error of the file's values, measured
             lam = getattr(trainer, "filter_lambda", None)

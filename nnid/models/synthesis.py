@@ -136,8 +136,21 @@ def restored_matrices(
 
 
 #: the saved state's key of a damping model's unidentified coefficients (absent from files
-#: saved before they were kept: those show the 0 they are simulated at as a value)
+#: saved before they were kept: a synthesis model's are told from K there,
+#: :func:`older_unidentified`)
 UNIDENTIFIED = "unidentified"
+
+
+def older_unidentified(structure: np.ndarray, coef: np.ndarray, stderr: np.ndarray) -> np.ndarray:
+    """The unidentified entries of a synthesis model's K in a file saved before they were
+    kept (:data:`UNIDENTIFIED`): the entries of its ``structure`` (the mask) at exactly 0
+    with no standard error. Masked least squares has always left an unidentified term so (its
+    NaN estimate at 0, no standard error), and no estimate is exactly 0 (least squares on a
+    column the data excite, or a Nelder-Mead search started from it), so the file tells them
+    apart. What it cannot tell: a Nelder-Mead search of that time could move an unidentified
+    term off 0 (no cost read it, and the search was not yet held there); such a value is
+    shown as saved."""
+    return structure & (coef == 0) & ~np.isfinite(stderr)
 
 
 def restored_unidentified(
@@ -393,6 +406,11 @@ class SynthesisModel(DampingModel):
 
     def _structure(self) -> np.ndarray:
         return mask_matrix(self.mask, self.terms_)
+
+    def _restore(self, state: dict, tensors: dict) -> None:
+        super()._restore(state, tensors)
+        if UNIDENTIFIED not in state:  # an older file: its 0 was shown as an estimate
+            self.unidentified_ = older_unidentified(self._structure(), self.coef_, self.stderr_)
 
     def trainer_name(self) -> str:
         return "masked least squares" if self.method == "ls" else f"Nelder-Mead ({self.method})"

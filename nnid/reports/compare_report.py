@@ -340,15 +340,22 @@ def force_figure(
 def complexity_figure(comparison: dict) -> str:
     """Validation J/J₀ against the number of terms, with the SINDy path. The path's points
     are √ of the mean per-output normalised MSE, not J/J₀ (√ of the pooled one): the axis says
-    both, as on the VT690 log they differ by about 13 %."""
-    fig, axes = new_figure(1, 1, 7.0, 4.0)
+    both, as on the VT690 log they differ by about 13 %. Each model's point and path in one
+    colour, named in the legend above the panel."""
+    # fixed margins: the constrained layout drew the figure twice (to place, then to paint).
+    # The models are named in the legend, not beside their points: a name there ran past the
+    # panel's right edge, which the constrained layout's crop only made room for by shrinking
+    # the panel, and a legend above is measured to fit (legend_outside)
+    fig, axes = new_figure(1, 1, 7.0, 4.0, fixed=True, left=LONG_TICKS_LEFT_IN)
     ax = axes[0, 0]
+    drawn = 0
     for m in comparison["models"]:
         ratio = m["validation"].get("J_over_J0")
         if ratio is None or m["kind"] not in ("synthesis", "sindy"):
             continue
-        ax.scatter(m["n_params"], ratio, zorder=3)
-        ax.annotate(m["name"], (m["n_params"], ratio), fontsize=8)
+        color = f"C{drawn % 10}"
+        drawn += 1
+        ax.scatter(m["n_params"], ratio, zorder=3, color=color, label=m["name"])
         path = m.get("sindy_path") or []
         j0 = m["validation"].get("J0")
         if path and j0:
@@ -361,13 +368,15 @@ def complexity_figure(comparison: dict) -> str:
                 [p[0] for p in pts],
                 [p[1] for p in pts],
                 "--",
-                color="gray",
+                color=color,
                 label=f"{m['name']} path (√ of normalised MSE)",
             )
-            ax.legend(fontsize=8)
     ax.set_xlabel("number of terms n̄")
     ax.set_ylabel("validation error: points J / J0, path √ mean NMSE")
     ax.set_xscale("symlog")
+    entries = len(ax.get_legend_handles_labels()[1])
+    if entries:  # one row where it fits: a column read down split a model from its path
+        legend_outside(ax, ncols=entries, fontsize=8)
     return figure_uri(fig)
 
 
