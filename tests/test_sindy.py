@@ -310,16 +310,19 @@ def _surge_sway_yaw(
     vehicle=None,
     yaw: float = 0.2,
     roll: float = 0.0,
+    pitch: float = 0.0,
 ) -> pd.DataFrame:
     """400 samples at 10 Hz of the Seamor (or ``vehicle``) driven in surge, sway and yaw only
     (held random levels from ``rng``, ±30 N and ±30 ``yaw`` N·m; it never heaves: w exactly
     0), with accelerometer-grade noise (2 % of each one's std) on the excited DOFs'
-    accelerations where ``noise``; ``roll``: the amplitude of a slow roll torque (N·m)."""
+    accelerations where ``noise``; ``roll``, ``pitch``: the amplitudes of slow roll and pitch
+    torques (N·m)."""
     from nnid.datasets.simulator import simulate
 
     inputs = np.zeros((400, 6))
     inputs[20:, [0, 1, 5]] = np.repeat(rng.uniform(-30, 30, (19, 3)), 20, 0) * [1, 1, yaw]
     inputs[:, 3] = roll * np.sin(0.07 * np.arange(400))
+    inputs[:, 4] = pitch * np.sin(0.07 * np.arange(400))
     log = simulate(vehicle or load_vehicle("seamor"), inputs, 0.1)
     for c in ("du", "dv", "dr") if noise else ():
         log[c] += 0.02 * log[c].std() * rng.standard_normal(len(log))
@@ -382,6 +385,53 @@ def test_columns_of_rounding_are_zero_to_the_path_not_noise_scaled_up():
     path = SparsePath(thresholds=[0.1], selection="aic").fit(theta[ok], y[ok])
     w_terms = np.array(["w" in t for t in SindyDamping(vehicle)._terms()])
     assert path.excluded_[w_terms].all() and not (path.coef_[:, w_terms]).any()
+
+
+def test_a_high_power_of_a_small_real_motion_is_data_not_rounding():
+    """The Seamor driven in surge, sway and yaw, pitching (and rolling) a little under a pitch
+    torque of 1e-4 N·m: q ~ 4e-6 rad/s beside r ~ 1 rad/s, M = M_q|q| q|q| ~ 2e-9 N·m, data
+    beside N (1e-9 of it). Against one size for every library column (the regressors'
+    typical, ~1), q|q| (4e-11) and p|p| were rounding: M kept no term and was warned
+    unexplained, K fitted K:p. Each column against itself at the log's typical motion, to its
+    power (the Fossen regression's rule), they are data: Weiss's M and K terms come back. A
+    product with a factor of rounding is still rounding (u·w of the same log with w 1e-17:
+    its power in w alone, 1, not in the whole motion, 2)."""
+    from nnid.errors import NnidInputError
+    from nnid.evaluation.persistence import ROUNDING, typical_size
+    from nnid.trainers.sindy import SindyWarning, SparsePath
+
+    vehicle = load_vehicle("seamor")
+    rng = np.random.default_rng(3)
+    log = _surge_sway_yaw(rng, False, pitch=1e-4)
+    theta, y = SindyDamping(vehicle).features(log)
+    ok = np.isfinite(theta).all(1) & np.isfinite(y).all(1)
+    terms = SindyDamping(vehicle)._terms()
+    rms = np.sqrt(np.mean(theta[ok] ** 2, axis=0))
+    small = [terms.index("q*abs(q)"), terms.index("p*abs(p)")]
+    assert (rms[small] < ROUNDING * typical_size(theta[ok])).all()  # the case above
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        model = SindyDamping(vehicle, thresholds=np.logspace(-3, 0, 13)).fit(log)
+    said = [str(w.message) for w in caught if issubclass(w.category, SindyWarning)]
+    assert not said
+    for key, truth in (("M:q*abs(q)", -56.61), ("K:p*abs(p)", -12.0)):
+        assert [k for k in model.coefficients_ if k[0] == key[0]] == [key]
+        assert model.coefficients_[key] == pytest.approx(truth, rel=1e-6)
+        assert model.selected_["validation_nmse"][key[0]] < 1e-9
+    # the same log with w rounding: every w term is excluded by its own floor, q|q| is not
+    from nnid.trainers.sindy import library_floors
+
+    rounding = log.assign(w=1e-17 * rng.standard_normal(len(log)))
+    theta, y = SindyDamping(vehicle).features(rounding)
+    ok = np.isfinite(theta).all(1) & np.isfinite(y).all(1)
+    nu = rounding[["u", "v", "w", "p", "q", "r"]].to_numpy()[ok]
+    floors = library_floors(nu, BasisLibrary(), vehicle.length)
+    path = SparsePath(thresholds=[0.1], selection="aic").fit(theta[ok], y[ok], floors=floors)
+    w_terms = np.array(["w" in t for t in terms])
+    assert path.excluded_[w_terms].all() and not path.excluded_[small].any()
+    with pytest.raises(NnidInputError, match="one per column of theta") as err:
+        SparsePath(selection="aic").fit(theta[ok], y[ok], floors=floors[:3])
+    assert err.value.field == "floors"
 
 
 def test_targets_of_rounding_keep_no_terms_and_are_not_called_unexplained():

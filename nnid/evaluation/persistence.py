@@ -10,7 +10,7 @@ Columns are scaled to unit RMS first, so the verdict does not depend on units.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
@@ -35,13 +35,14 @@ from nnid.serialization import exact_float, read_exact_float
 #: six DOFs' targets each against its own kind's (:func:`kind_sizes`: a moment in N·m beside
 #: moments, not beside forces in N); where every target is rounding, their typical size is
 #: too, and none is called so. Where a
-#: regression knows the motion its columns are made of (a Fossen regression), each column has
-#: its own floor instead (:func:`rounding_floors`): the motion it is made of at most this
-#: fraction of the log's typical motion, which is scale-free and power-aware
+#: regression knows the motion its columns are made of (a Fossen regression, SINDy's library
+#: of terms of ν), each column has its own floor instead (:func:`motion_floors`): the motion it
+#: is made of at most this fraction of the log's typical motion, which is scale-free and
+#: power-aware (q|q| of a real pitch rate 1e-6 of the yaw rate is data, not rounding)
 ROUNDING = 1e-10
 
-#: the factor by which :func:`rounding_floors`' caller scales the reference motion to read
-#: each column's power in it
+#: the factor by which :func:`motion_floors` scales the reference motion (or each part of it)
+#: to read each column's power in it
 POWER_PROBE = 10.0
 
 #: the verdict on a parameter a recursive estimator's memory does not excite but earlier
@@ -227,23 +228,49 @@ def rounding_floors(at_motion: np.ndarray, at_probe: np.ndarray) -> np.ndarray:
     rounding of a velocity is ~1e-16 of it. A column of mixed powers (an added mass: ν̇ and
     C_A(ν)ν) reads a power between its parts'.
 
-    A column that does not grow with the motion (p < 0.5: a restoring, bias or thrust column,
-    made of the pose or the inputs, which the reference motion does not change) or is zero at
-    the reference motion has no floor of its own: against itself it could never be rounding.
-    Its floor is ROUNDING × the largest column of the regression at the reference motion, as
-    the log's typical motion is what it is measured beside: judged against the regression's
-    own columns, of a log where every column is rounding (the K equation of a heave-only log,
-    φ and p ~ 1e-17), nothing was, and r_b.z read -2.4e-4 ± 4.4e-4 off a target of rounding.
-    NaN (the caller's scalar rule judges it) only where no column has a size at the reference
-    motion."""
+    ``at_probe`` ``[D, P]``: the sizes with each of D parts of the motion (a velocity) scaled
+    by POWER_PROBE in turn; p is then the least of a column's powers in the parts it grows
+    with, as a product is rounding where one of its factors is: u·w of a log whose w is
+    rounding (1e-17 of u) is of power 1 in w, and by its power in the whole motion (2, a floor
+    of ROUNDING²) its 1e-17 of u² read as data. ``[P]`` is one part, the whole motion.
+
+    A column that does not grow with the motion (p < 0.5 in every part: a restoring, bias or
+    thrust column, made of the pose or the inputs, which the reference motion does not change)
+    or is zero at the reference motion has no floor of its own: against itself it could never
+    be rounding. Its floor is ROUNDING × the largest column of the regression at the reference
+    motion, as the log's typical motion is what it is measured beside: judged against the
+    regression's own columns, of a log where every column is rounding (the K equation of a
+    heave-only log, φ and p ~ 1e-17), nothing was, and r_b.z read -2.4e-4 ± 4.4e-4 off a target
+    of rounding. NaN (the caller's scalar rule judges it) only where no column has a size at
+    the reference motion."""
     one = np.asarray(at_motion, dtype=np.float64)
-    probe = np.asarray(at_probe, dtype=np.float64)
+    probe = np.atleast_2d(np.asarray(at_probe, dtype=np.float64))
     with np.errstate(divide="ignore", invalid="ignore"):
-        power = np.log(probe / one) / np.log(POWER_PROBE)
+        powers = np.log(probe / one) / np.log(POWER_PROBE)
+    grows = np.isfinite(powers) & (powers >= 0.5)
+    power = np.where(grows, powers, np.inf).min(0, initial=np.inf)
     sized = (one > 0) & np.isfinite(one)
-    moves = sized & np.isfinite(power) & (power >= 0.5)
+    moves = sized & grows.any(0)
     beside = ROUNDING * one[sized].max() if sized.any() else np.nan
     return np.where(moves, ROUNDING ** np.clip(np.nan_to_num(power), 1.0, 3.0) * one, beside)
+
+
+def motion_floors(
+    columns_at: Callable[[np.ndarray], Sequence[np.ndarray]], parts: int = 1
+) -> np.ndarray:
+    """Each column's floor of the rounding rule (:func:`rounding_floors`) of a regression that
+    knows the motion its columns are made of: ``columns_at(scale)`` gives its columns (each an
+    array of its entries) at the log's typical motion with each of its ``parts`` scaled by
+    ``scale`` ``[parts]``, read at scale 1 and with each part alone at :data:`POWER_PROBE`; a
+    column's size there is its typical size (:func:`typical_size`). One part: the whole motion
+    (a Fossen regression's columns mix ν and ν̇ across equations); six: each velocity, for
+    columns that are products of them (SINDy's library terms)."""
+
+    def sizes(scale: np.ndarray) -> np.ndarray:
+        return np.array([typical_size(np.reshape(c, (-1, 1))) for c in columns_at(scale)])
+
+    probes = np.where(np.eye(parts, dtype=bool), POWER_PROBE, 1.0)
+    return rounding_floors(sizes(np.ones(parts)), np.stack([sizes(s) for s in probes]))
 
 
 def rounding_columns(

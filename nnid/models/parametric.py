@@ -43,7 +43,7 @@ from nnid.datasets.preprocess import (
 )
 from nnid.datasets.splits import PARTS
 from nnid.errors import ExcitationWarning, NnidInputError, checked_number
-from nnid.evaluation.persistence import POWER_PROBE, kind_sizes, rounding_floors, typical_size
+from nnid.evaluation.persistence import kind_sizes, motion_floors
 from nnid.evaluation.prediction import (
     Replay,
     blank_initial,
@@ -381,9 +381,10 @@ class ParametricFossen:
 
     def rounding_floors(self, data: dict[str, np.ndarray], nu_dot: np.ndarray) -> np.ndarray:
         """Each unknown's floor of the rounding rule
-        (:func:`~nnid.evaluation.persistence.rounding_floors`) for this structure's regression
+        (:func:`~nnid.evaluation.persistence.motion_floors`) for this structure's regression
         on ``data``: its column at the log's typical motion, and at that motion times
-        :data:`~nnid.evaluation.persistence.POWER_PROBE` for its power in it. The typical
+        :data:`~nnid.evaluation.persistence.POWER_PROBE` for its power in it (the whole motion
+        at once: a column mixes ν and ν̇ across the DOF equations). The typical
         motion (:func:`~nnid.evaluation.persistence.kind_sizes`, angular rates over the
         vehicle's length): ν of each kind (linear, angular) at the largest typical |ν| of that
         kind (one number for all six compared a yaw-only fit with a yaw rate of the surge
@@ -418,13 +419,13 @@ class ParametricFossen:
         length = self.vehicle.length or 1.0
         nu, acc = kind_sizes(data["nu"], length), kind_sizes(nu_dot, length)
         rows = [DOFS.index(d) for d in self.dofs]
-        sizes = []
-        for scale in (1.0, POWER_PROBE):
-            moved["nu"] = np.tile(scale * nu, (picked.size, 1))
-            moved["nu_dot"] = np.tile(scale * acc, (picked.size, 1))
-            _, columns = self._columns(moved)
-            sizes.append([typical_size(c[:, rows].reshape(-1, 1)) for c in columns])
-        return rounding_floors(np.array(sizes[0]), np.array(sizes[1]))
+
+        def columns_at(scale: np.ndarray) -> list[np.ndarray]:  # the whole motion, one part
+            moved["nu"] = np.tile(scale[0] * nu, (picked.size, 1))
+            moved["nu_dot"] = np.tile(scale[0] * acc, (picked.size, 1))
+            return [c[:, rows] for c in self._columns(moved)[1]]
+
+        return motion_floors(columns_at)
 
     def damping_force(self, data: dict[str, np.ndarray]) -> np.ndarray:
         """McCarter's residual force τ̄ = M ν̇ + C(ν)ν + g(η) − τ (eq. 4.4, his g on the other

@@ -40,7 +40,7 @@ from nnid.physics.damping_library import LIBRARY, BasisLibrary
 from nnid.physics.dofs import DOFS, FORCES
 from nnid.physics.integrate import rk4
 from nnid.trainers.history import Progress
-from nnid.trainers.sindy import MODES, BasisFeatureLibrary, SparsePath, nmse
+from nnid.trainers.sindy import MODES, BasisFeatureLibrary, SparsePath, library_floors, nmse
 from nnid.trainers.synthesis import masked_least_squares
 
 ACCELERATION_OUTPUTS = tuple(f"d{d}" for d in DOFS)
@@ -120,12 +120,20 @@ class SindyDamping(DampingModel):
         """Evaluated library ``[N, K]`` (with the six controls appended in control mode) and
         targets ``[N, 6]`` (τ̄, or ν̇ in control mode), row-aligned with the log (NaN where a
         value is undefined)."""
+        theta, y, _ = self._regression(log)
+        return theta, y
+
+    def _library(self) -> BasisLibrary:
+        return BasisLibrary(self._terms(), self.vehicle.damping.u_c or 0.0)
+
+    def _regression(self, log: pd.DataFrame) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`features` and the velocities ν ``[N, 6]`` the library's terms are of."""
         if self.mode == "residual":
-            return self._xi_tau(log, self._terms())
+            return self._library_data(log, self._terms())
         log = prepare_motion(log, DOFS, self.savgol_window, self.savgol_order, True)
         data = log_arrays(log, self.vehicle)
-        library = BasisLibrary(self._terms(), self.vehicle.damping.u_c or 0.0)
-        return np.concatenate([library(data["nu"]), data["tau"]], axis=1), data["nu_dot"]
+        theta = np.concatenate([self._library()(data["nu"]), data["tau"]], axis=1)
+        return theta, data["nu_dot"], data["nu"]
 
     def arrays(self, log: pd.DataFrame) -> tuple[np.ndarray, np.ndarray]:
         """Library inputs ``x`` (ν, and τ in control mode) and targets ``y`` (τ̄ or ν̇) of a
@@ -173,15 +181,18 @@ class SindyDamping(DampingModel):
             raise NnidInputError(f"mode is one of {', '.join(MODES)}", field="mode")
         if validation is None:
             log, validation = self._split(log)
-        theta, y = self.features(log)
+        theta, y, nu = self._regression(log)
         theta_v, y_v = self.features(validation)
         ok = self._defined(log, theta, y, "training")
         ok_v = self._defined(validation, theta_v, y_v, "validation")
         self._warn_held(log, "the SINDy fit")
         # forces and moments (linear and angular accelerations) are each judged rounding within
         # their own kind, a kind put in the other's units by the vehicle's length where its
-        # file gives one, else a metre (as the Fossen regression's rounding floors)
+        # file gives one, else a metre (as the Fossen regression's rounding floors); each
+        # library column against itself at the log's typical motion, to its power
         length = self.vehicle.length or 1.0
+        k = len(self._terms())
+        floors = library_floors(nu[ok], self._library(), length, theta[ok][:, k:])
         path = SparsePath(
             self.optimizer,
             self.thresholds,
@@ -192,7 +203,7 @@ class SindyDamping(DampingModel):
             self.seed,
             self.output_names,
             1.0 / length if self.mode == "residual" else length,
-        ).fit(theta[ok], y[ok], theta_v[ok_v], y_v[ok_v])
+        ).fit(theta[ok], y[ok], theta_v[ok_v], y_v[ok_v], floors)
         progress(1, 1, f"SINDy path of {len(path.path_)} thresholds")
         self.path_ = path.path_
         self.selected_ = path.selected_
@@ -207,7 +218,9 @@ class SindyDamping(DampingModel):
         # that regression's standard errors (widened for correlated residuals), with its
         # warnings when the support is collinear or a term unexcited. They are conditional on
         # the support and leave out the uncertainty of the selection itself.
-        support = masked_least_squares(theta[ok], y[ok], path.coef_ != 0, names, self.output_names)
+        support = masked_least_squares(
+            theta[ok], y[ok], path.coef_ != 0, names, self.output_names, floors
+        )
         coef, unidentified = path.coef_, None
         if self.mode == "residual":
             # a selected term the debiasing finds unexcited (a zero regressor) has no estimate:

@@ -100,9 +100,11 @@ def synthesis_data(
     savgol_order: int = 4,
     filter_lambda: float | None = None,
     zoh_midpoint: bool = False,
-) -> tuple[np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The basis terms ξ(ν) ``[N, n_terms]`` and τ̄ ``[N, 6]`` of a log, both through F(s)
-    when ``filter_lambda`` is given, so that τ̄ = K ξ holds on either form (eq. 4.6)."""
+    when ``filter_lambda`` is given, so that τ̄ = K ξ holds on either form (eq. 4.6), and the
+    velocities ν ``[N, 6]`` the terms are of (unfiltered: the motion a term is judged
+    beside, :func:`~nnid.trainers.sindy.library_floors`)."""
     tau_bar, data = residual_force(
         vehicle, log, savgol_window, savgol_order, filter_lambda, zoh_midpoint
     )
@@ -110,7 +112,7 @@ def synthesis_data(
     if filter_lambda is not None:
         xi = filter_signal(data, xi, filter_lambda)
         xi[~np.isfinite(tau_bar).all(1)] = np.nan
-    return xi, tau_bar
+    return xi, tau_bar, data["nu"]
 
 
 def restored_matrices(
@@ -190,6 +192,12 @@ class DampingModel(FossenPlant):
         return equation_columns(columns)
 
     def _xi_tau(self, log: pd.DataFrame, terms: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
+        return self._library_data(log, terms)[:2]
+
+    def _library_data(
+        self, log: pd.DataFrame, terms: Sequence[str]
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """ξ(ν), τ̄ and ν of a log (:func:`synthesis_data`) in this model's form."""
         library = BasisLibrary(terms, self.vehicle.damping.u_c or 0.0)
         return synthesis_data(
             self.vehicle,

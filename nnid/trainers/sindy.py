@@ -37,7 +37,12 @@ from pysindy.utils import AxesArray, comprehend_axes
 from sklearn.base import BaseEstimator
 
 from nnid.errors import NnidInputError
-from nnid.evaluation.persistence import kind_sizes, rounding_columns, typical_size
+from nnid.evaluation.persistence import (
+    kind_sizes,
+    motion_floors,
+    rounding_columns,
+    typical_size,
+)
 from nnid.physics.damping_library import BasisLibrary, evaluate_terms
 from nnid.physics.dofs import DOFS
 
@@ -171,6 +176,27 @@ def debias(r: np.ndarray, b: np.ndarray, coef: np.ndarray) -> np.ndarray:
     return out
 
 
+def library_floors(
+    nu: np.ndarray, library: BasisLibrary, length: float, inputs: np.ndarray | None = None
+) -> np.ndarray:
+    """Each column's floor of the rounding rule (:func:`~nnid.evaluation.persistence.
+    motion_floors`) of ``library`` evaluated on the velocities ``nu`` ``[N, 6]``, then of the
+    ``inputs`` ``[N, n_u]`` appended to it (SINDy with control's τ): each term at the log's
+    typical motion (:func:`~nnid.evaluation.persistence.kind_sizes` of ``nu``, angular rates
+    over ``length``, as the Fossen regression's floors), and with each velocity alone times
+    :data:`~nnid.evaluation.persistence.POWER_PROBE`, as a term is a product of them: q|q| of a
+    real pitch rate 1e-6 of the yaw rate is data (power 2), u·w of a log whose w is rounding
+    is rounding (power 1 in w). An input does not grow with the motion: its floor is that of
+    a column with no power (ROUNDING × the largest column at the typical motion)."""
+    reference = kind_sizes(np.asarray(nu, dtype=np.float64), length)
+    passed = [] if inputs is None else list(np.asarray(inputs, dtype=np.float64).T)
+
+    def columns_at(scale: np.ndarray) -> list[np.ndarray]:
+        return [*library((scale * reference)[None, :]).T, *passed]
+
+    return motion_floors(columns_at, len(DOFS))
+
+
 def _rounding_outputs(y: np.ndarray, to_linear: float | None = None) -> np.ndarray:
     """Which outputs of targets ``y`` ``[N, m]`` are rounding, not data ``[m]``: the rounding
     rule (:func:`~nnid.evaluation.persistence.rounding_columns`) of each target against the
@@ -254,9 +280,12 @@ class SparsePath(BaseEstimator):
     ``train_J``, ``validation_J``, ``aic``, ``bic``), ``selected_`` the chosen entry (with
     validation data also ``validation_nmse``, each output's normalised MSE) and ``coef_``
     ``[m, K]`` its coefficients. ``excluded_`` ``[K]``: the columns of ``theta`` that are
-    rounding, not data (:func:`~nnid.evaluation.persistence.rounding_columns` against
-    :func:`~nnid.evaluation.persistence.typical_size`: u·w of a log that never heaves, w ~
-    1e-17); they are zero to the path, never selected, their coefficients exactly 0.
+    rounding, not data (:func:`~nnid.evaluation.persistence.rounding_columns`: u·w of a log
+    that never heaves, w ~ 1e-17), each against its own floor in ``fit``'s ``floors`` where
+    given (:func:`library_floors`: a term at the log's typical motion, to its power, so that
+    q|q| of a real pitch rate 1e-6 of the yaw rate is data), else against
+    :func:`~nnid.evaluation.persistence.typical_size` of ``theta``; they are zero to the path,
+    never selected, their coefficients exactly 0.
     ``idle_outputs_`` ``[m]``: the outputs whose target is rounding against the typical size
     of the targets (the Munk moments' 1e-17 in K and M of that log); their target is zero, as
     if exactly so: they keep no terms, and where the held-out target is rounding too their
@@ -307,8 +336,11 @@ class SparsePath(BaseEstimator):
         y: np.ndarray,
         theta_val: np.ndarray | None = None,
         y_val: np.ndarray | None = None,
+        floors: np.ndarray | None = None,
     ) -> SparsePath:
-        """The path and the selection (class docstring)."""
+        """The path and the selection (class docstring); ``floors`` ``[K]``: each column's
+        floor of the rounding rule (:func:`library_floors`), where NaN or None the scalar
+        rule's."""
         if self.optimizer not in OPTIMIZERS:
             raise NnidInputError(f"optimizer is one of {', '.join(OPTIMIZERS)}", field="optimizer")
         if self.selection not in SELECTIONS:
@@ -320,6 +352,12 @@ class SparsePath(BaseEstimator):
                 f"to_linear judges six DOFs' targets by kind; y has {y.shape[1]} outputs",
                 field="to_linear",
             )
+        if floors is not None and np.shape(floors) != theta.shape[1:]:
+            raise NnidInputError(
+                f"floors has shape {np.shape(floors)}; one per column of theta, "
+                f"({theta.shape[1]},), is expected",
+                field="floors",
+            )
         thresholds = (
             np.logspace(-3, 0, 41)
             if self.thresholds is None
@@ -329,8 +367,10 @@ class SparsePath(BaseEstimator):
         col = np.sqrt(np.mean(theta * theta, axis=0))
         # a column of rounding is zero, as the excitation check says it: scaled to unit RMS it
         # was a full-size column of noise, and the path selected u·w of a log that never
-        # heaved (w ~ 1e-17) to fit the Munk moments' rounding in M and K
-        self.excluded_ = rounding_columns(col, typical_size(theta))
+        # heaved (w ~ 1e-17) to fit the Munk moments' rounding in M and K. Each against its
+        # own floor where given: against one size for all, q|q| of a real pitch rate 1e-6 of
+        # the yaw rate (1e-11 beside u|u|) was rounding, and M was warned unexplained
+        self.excluded_ = rounding_columns(col, typical_size(theta), floors)
         col[self.excluded_] = 1.0
         # a target of rounding is zero too: scaled to unit RMS, the Munk moments' rounding in K
         # and M (w ~ 1e-17) had real columns fitted to it, and it was warned unexplained

@@ -107,11 +107,14 @@ def masked_least_squares(
     mask: np.ndarray,
     terms: Sequence[str] | None = None,
     outputs: Sequence[str] = FORCES,
+    floors: np.ndarray | None = None,
 ) -> SynthesisFit:
     """Least squares of the synthesis model σ̃ = Ξ κ − σ̄ (eqs 4.20, 4.22), one force at a time
     (Ξ is block diagonal). ``xi`` ``[N, n_terms]``, ``tau_bar`` ``[N, 6]``, ``mask`` boolean
     ``[6, n_terms]``; ``terms`` and ``outputs`` only name the coefficients in warnings.
-    Standard errors come from :class:`LeastSquares` (widened for the residual's
+    ``floors`` ``[n_terms]``: each term's floor of the rounding rule where not NaN
+    (:func:`~nnid.trainers.sindy.library_floors`), else it is judged against Ξ's typical
+    regressor. Standard errors come from :class:`LeastSquares` (widened for the residual's
     autocorrelation, as smoothed accelerations make neighbouring samples dependent).
     """
     mask = np.asarray(mask, dtype=bool)
@@ -129,7 +132,9 @@ def masked_least_squares(
         if cols.size == 0:
             continue
         names = [f"{outputs[f]}:{terms[j] if terms is not None else j}" for j in cols]
-        reg = Regression(xi[:, cols], tau_bar[:, f], names, ("u",), tau_bar.shape[0])
+        own = None if floors is None else np.asarray(floors, dtype=np.float64)[cols]
+        motion = None if own is None else (lambda own=own: own)
+        reg = Regression(xi[:, cols], tau_bar[:, f], names, ("u",), tau_bar.shape[0], motion)
         est = solver.solve(reg, reference)
         # an unidentified term (a zero regressor: NaN, which solve names) at 0, not at the
         # vehicle file's value as a Fossen model's (simulated_values): K replaces the file's
