@@ -19,6 +19,7 @@ import pandas as pd
 import pytest
 from conftest import assert_rendered
 from numba import njit
+from scipy.stats import chi2
 from sklearn.exceptions import NotFittedError
 from typer.testing import CliRunner
 
@@ -29,6 +30,7 @@ from nnid.errors import NnidInputError
 from nnid.fault import kernel
 from nnid.fault.detect import alarm_row, detect
 from nnid.fault.follow import follow_csv
+from nnid.fault.isolation import allowed_over, allowed_ratio
 from nnid.fault.monitor import ResidualMonitor, monitor_inputs, pack_actuation
 from nnid.fault.thresholds import rate_interval, rate_threshold
 from nnid.models.parametric import ParametricModel
@@ -961,6 +963,34 @@ def test_a_ballast_change_after_a_snag_is_isolated_in_batch_and_follow(vehicle, 
         assert ballast["effect"] == "buoyancy_offset" and 35.0 <= ballast["t"] <= 36.0
         assert ballast["value"] == pytest.approx(10.0, rel=0.3)
         assert result.withdrawn == []
+
+
+def test_an_8_n_ballast_after_a_snag_is_read_over_the_dofs_the_snag_leaves_alone(vehicle, monitor):
+    """A snag from 20 s, then an 8 N ballast change from 35 s (seed 2): 6.0 times the noise in
+    heave, which the snag leaves alone. Read over the six DOF equations, the three the snag
+    acts on (surge, pitch, yaw) counted as noise, it was 1.85, under 2, and dismissed; over
+    the three it leaves alone it is 2.70, above what healthy noise reaches there as rarely as
+    2 over six (``allowed_over``: 2.55), and isolated at its size."""
+    faults = [Fault("external", FAULT_T, force=SNAG),
+              Fault("effect", 35.0, effect="buoyancy_offset", value=8.0)]  # fmt: skip
+    snag, ballast = detect(monitor, simulate_faults(vehicle, 47, faults=faults, seed=2)).alarms
+    assert snag["kind"] == "external_force" and 20.0 <= snag["t"] <= 21.0
+    assert ballast["effect"] == "buoyancy_offset" and 35.0 <= ballast["t"] <= 36.0
+    assert ballast["value"] == pytest.approx(8.0, rel=0.05)
+
+
+def test_the_allowance_over_fewer_dof_equations_is_as_rare_from_healthy_noise():
+    """``allowed_over(n, dim)``: the level a noise ratio over n of the dim DOF equations
+    watched may reach, as unlikely from healthy noise as 2 over all dim. The χ² tail of the
+    ratio over n equations (N = 200 independent rows each: the 10-s window at 20 Hz) at that
+    level has the exponent of 2 over six; the fewer the equations, the higher the level."""
+    rows = 200
+    full = chi2.logsf(allowed_ratio(1.0) * 6 * rows, 6 * rows)
+    levels = [allowed_over(n, 6) for n in range(1, 7)]
+    assert levels[-1] == pytest.approx(allowed_ratio(1.0))
+    assert (np.diff(levels) < 0).all()
+    for n, level in enumerate(levels, 1):
+        assert chi2.logsf(level * n * rows, n * rows) == pytest.approx(full, rel=0.01)
 
 
 def test_two_changes_at_once_the_larger_named_first_the_one_beside_it_at_the_next_window(

@@ -31,6 +31,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pandas as pd
+from scipy.special import lambertw
 from scipy.stats import f as f_dist
 
 from nnid.datasets.log import POSE, TAU, VELOCITY
@@ -556,6 +557,21 @@ def allowed_ratio(baseline: float) -> float:
     taken out, and of a change that ended or changed size; each caller names its baseline
     (1, the healthy noise, where no fault is left: no share)."""
     return max(UNEXPLAINED_RATIO, 1.0 + model_error(baseline))
+
+
+def allowed_over(n_dofs: int, dim: float) -> float:
+    """What a hypothesis may leave of the healthy noise (:func:`allowed_ratio` of 1) in a noise
+    ratio averaged over ``n_dofs`` of the ``dim`` DOF equations watched, as unlikely from
+    healthy noise as :func:`allowed_ratio` of 1 is over all ``dim``. Healthy, the ratio over n
+    equations of N rows is χ² of n·N/τ independent samples over its count, whose tail above x
+    falls as exp(−n·N/(2τ)·(x − 1 − ln x)) (Chernoff): the level x where that exponent equals
+    the one of the full ratio, whatever N and τ (2 over 6 DOF equations: 2.12 over 5, 2.55 over
+    3, 4.30 over 1). A fixed level is crossed more easily over fewer equations: their mean
+    spreads more."""
+    a = allowed_ratio(1.0)
+    rate = dim / max(n_dofs, 1) * (a - 1.0 - np.log(a))
+    # x − ln x = 1 + rate, x > 1: the lower real branch of Lambert's W
+    return float(-lambertw(-np.exp(-1.0 - rate), -1).real)
 
 
 def _unexplained(out: Diagnosis, monitor, e: np.ndarray, post: np.ndarray) -> bool:
