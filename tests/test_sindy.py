@@ -434,6 +434,41 @@ def test_a_high_power_of_a_small_real_motion_is_data_not_rounding():
     assert err.value.field == "floors"
 
 
+def test_a_named_mask_fits_a_high_power_of_a_small_real_motion():
+    """The same pitching log under the named "weiss_quadratic" mask (masked least squares, no
+    path): against Ξ's typical regressor, q|q| and p|p| were zero regressors, K:p*abs(p) and
+    M:q*abs(q) warned not excited and held at 0. Each term against its own floor (SINDy's),
+    they are Weiss's values. u·w of a log whose w is rounding (1e-17, of a log that never
+    pitches, so that its Munk moment is rounding too) is still no estimate."""
+    from nnid.evaluation.persistence import ROUNDING, typical_size
+    from nnid.models.synthesis import SynthesisModel
+    from nnid.trainers.least_squares import ExcitationWarning
+
+    vehicle = load_vehicle("seamor")
+    rng = np.random.default_rng(3)
+    log = _surge_sway_yaw(rng, False, pitch=1e-4)
+    terms = ["u*abs(u)", "v*abs(v)", "w*abs(w)", "p*abs(p)", "q*abs(q)", "r*abs(r)"]
+    xi = BasisLibrary(terms)(log[["u", "v", "w", "p", "q", "r"]].to_numpy())
+    assert (np.sqrt(np.mean(xi[:, 3:5] ** 2, 0)) < ROUNDING * typical_size(xi)).all()
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        model = SynthesisModel(vehicle, "weiss_quadratic").fit(log)
+    assert not [str(w.message) for w in caught if issubclass(w.category, ExcitationWarning)]
+    assert not model.unidentified_.any()
+    for key in ("K:p*abs(p)", "M:q*abs(q)"):
+        assert model.params[key]["value"] == pytest.approx(
+            vehicle.damping.coefficients[key], rel=1e-6
+        )
+    level = _surge_sway_yaw(rng, False)
+    level = level.assign(w=1e-17 * rng.standard_normal(len(level)))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ExcitationWarning)
+        munk = SynthesisModel(vehicle, {"M": ["u*w"], "N": ["r*abs(r)"]}).fit(level)
+    assert munk.params["M:u*w"]["value"] is None
+    truth = vehicle.damping.coefficients["N:r*abs(r)"]
+    assert munk.params["N:r*abs(r)"]["value"] == pytest.approx(truth, rel=1e-6)
+
+
 def test_targets_of_rounding_keep_no_terms_and_are_not_called_unexplained():
     """The same log with 2 % accelerometer noise: K and M are the Munk moments' rounding
     ((Y_v̇ − Z_ẇ) v w, w ~ 1e-17). Scaled to unit RMS, that rounding had real columns fitted to

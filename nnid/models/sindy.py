@@ -36,11 +36,11 @@ from nnid.evaluation.prediction import blank_initial, mode_steps
 from nnid.models.base import AccelerationParts
 from nnid.models.parametric import prepare_motion, warn_simulated
 from nnid.models.synthesis import DampingModel, _at_zero, restored_matrices, restored_unidentified
-from nnid.physics.damping_library import LIBRARY, BasisLibrary
+from nnid.physics.damping_library import LIBRARY
 from nnid.physics.dofs import DOFS, FORCES
 from nnid.physics.integrate import rk4
 from nnid.trainers.history import Progress
-from nnid.trainers.sindy import MODES, BasisFeatureLibrary, SparsePath, library_floors, nmse
+from nnid.trainers.sindy import MODES, BasisFeatureLibrary, SparsePath, nmse
 from nnid.trainers.synthesis import masked_least_squares
 
 ACCELERATION_OUTPUTS = tuple(f"d{d}" for d in DOFS)
@@ -123,16 +123,13 @@ class SindyDamping(DampingModel):
         theta, y, _ = self._regression(log)
         return theta, y
 
-    def _library(self) -> BasisLibrary:
-        return BasisLibrary(self._terms(), self.vehicle.damping.u_c or 0.0)
-
     def _regression(self, log: pd.DataFrame) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """:meth:`features` and the velocities ν ``[N, 6]`` the library's terms are of."""
         if self.mode == "residual":
             return self._library_data(log, self._terms())
         log = prepare_motion(log, DOFS, self.savgol_window, self.savgol_order, True)
         data = log_arrays(log, self.vehicle)
-        theta = np.concatenate([self._library()(data["nu"]), data["tau"]], axis=1)
+        theta = np.concatenate([self._basis(self._terms())(data["nu"]), data["tau"]], axis=1)
         return theta, data["nu_dot"], data["nu"]
 
     def arrays(self, log: pd.DataFrame) -> tuple[np.ndarray, np.ndarray]:
@@ -192,7 +189,7 @@ class SindyDamping(DampingModel):
         # library column against itself at the log's typical motion, to its power
         length = self.vehicle.length or 1.0
         k = len(self._terms())
-        floors = library_floors(nu[ok], self._library(), length, theta[ok][:, k:])
+        floors = self._floors(nu[ok], self._terms(), theta[ok][:, k:])
         path = SparsePath(
             self.optimizer,
             self.thresholds,
@@ -294,9 +291,8 @@ class SindyDamping(DampingModel):
 
     def _accelerations(self, nu: torch.Tensor, tau: torch.Tensor) -> torch.Tensor:
         """ν̇ = Ξ [ξ(ν), τ] of control mode (torch, batched)."""
-        library = BasisLibrary(self.terms_, self.vehicle.damping.u_c or 0.0)
         coef = torch.as_tensor(self.coef_)
-        return torch.cat([library(nu), tau], -1) @ coef.T
+        return torch.cat([self._basis(self.terms_)(nu), tau], -1) @ coef.T
 
     def _state_rate(self, x: torch.Tensor, tau: torch.Tensor) -> torch.Tensor:
         """ẋ of the predicted state: ν̇ (:meth:`_accelerations`), and with an actuator lag a

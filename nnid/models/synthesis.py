@@ -40,6 +40,7 @@ from nnid.physics.damping_library import BasisLibrary
 from nnid.physics.dofs import DOFS, FORCES
 from nnid.physics.parts import Parts
 from nnid.trainers.history import Progress
+from nnid.trainers.sindy import library_floors
 from nnid.trainers.synthesis import (
     LOSSES,
     force_error,
@@ -198,16 +199,27 @@ class DampingModel(FossenPlant):
         self, log: pd.DataFrame, terms: Sequence[str]
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """ξ(ν), τ̄ and ν of a log (:func:`synthesis_data`) in this model's form."""
-        library = BasisLibrary(terms, self.vehicle.damping.u_c or 0.0)
         return synthesis_data(
             self.vehicle,
             log,
-            library,
+            self._basis(terms),
             self.savgol_window,
             self.savgol_order,
             self.filter_lambda,
             self.zoh_midpoint,
         )
+
+    def _basis(self, terms: Sequence[str]) -> BasisLibrary:
+        """The basis library of ``terms`` at the vehicle file's current speed u_c."""
+        return BasisLibrary(terms, self.vehicle.damping.u_c or 0.0)
+
+    def _floors(
+        self, nu: np.ndarray, terms: Sequence[str], inputs: np.ndarray | None = None
+    ) -> np.ndarray:
+        """Each term's floor of the rounding rule on the velocities ``nu`` ``[N, 6]`` the fit
+        reads, then of the ``inputs`` appended (:func:`~nnid.trainers.sindy.library_floors`,
+        angular rates over the vehicle's length where its file gives one, else a metre)."""
+        return library_floors(nu, self._basis(terms), self.vehicle.length or 1.0, inputs)
 
     @property
     def filtered(self) -> bool:
@@ -401,10 +413,14 @@ class SynthesisModel(DampingModel):
             mask = mask_matrix(self.mask, terms)
         except ValueError as exc:  # an unknown model name or term
             raise NnidInputError(str(exc), field="mask") from None
-        xi, tau_bar = self._xi_tau(log, terms)
-        self._defined(log, xi, tau_bar, "training")
+        xi, tau_bar, nu = self._library_data(log, terms)
+        ok = self._defined(log, xi, tau_bar, "training")
         self._warn_held(log, "the synthesis fit")
-        fit = masked_least_squares(xi, tau_bar, mask, terms)
+        # each term against itself at the log's typical motion, to its power (as SINDy's):
+        # against Ξ's typical regressor, q|q| of a real pitch rate 1e-6 of the yaw rate
+        # (1e-11 beside r|r|) was a zero regressor, held at 0 and warned unexcited
+        floors = self._floors(nu[ok], terms)
+        fit = masked_least_squares(xi, tau_bar, mask, terms, floors=floors)
         progress(1, 2 if self.method != "ls" else 1, "masked least squares")
         if self.method != "ls":
             fit = nelder_mead(xi, tau_bar, mask, self.method, start=fit)
