@@ -1,7 +1,7 @@
 """Fault detection (issue 16): speed of the monitor and its accuracy on simulated faults.
 
-Run by hand: ``python benchmarks/bench_detect.py speed``, ``... scenarios``, ``... ended`` and
-``... follow [REV]``.
+Run by hand: ``python benchmarks/bench_detect.py speed``, ``... scenarios``, ``... ended``,
+``... second`` and ``... follow [REV]``.
 
 speed: the per-sample streaming update (median and 99th percentile over 20,000 samples,
 in-process, after compilation; targets 50 µs and 200 µs) and whole logs in batch mode (target
@@ -19,6 +19,17 @@ released), then another fault at 52 s, 70-s runs, seeds 3001-3008: is the end sa
 second fault alarmed? And changes that come back only partly at 40 s (a stopped thruster back
 to 80 %, one at 30 % back to 90 %, a snag half freed): are they said resized, at their new size,
 with no alarm repeating after?
+
+second: a second change after a first, with the scenarios monitor. A snag (-10 N + 1 N m yaw)
+or h1 stopped from 20 s, then a ballast change of 7, 8, 9 or 10 N from 35 s, 60-s runs, seeds
+1-8: is the ballast isolated (an alarm from 35 s isolated as buoyancy_offset), when, at what
+size, and with what other alarms? And 12 single changes from 20 s (h1 and v2 stopped, h3 and v4
+at 30 %, two snags, a tether pull, a side push, a 10 N ballast, a 6 N float, two payloads),
+90-s runs, seeds 1-7 (the whole mode: about a minute of one thread, monitor included): alarms
+after the first, and among the alarms dismissed as within what the change may leave
+(``DetectResult.dismissed``) the highest noise ratio over the DOF equations the change leaves
+alone, with the level it was judged against there (``allowed_over``; "-" where no alarm was
+dismissed, so none was read).
 
 follow: ``detect --follow`` on 10-minute streams (12,000 rows) with a change isolated at 20 s (a
 thruster at 30 %, a snag, a ballast change): its signature is taken out of every 0.5 s of rows
@@ -57,8 +68,10 @@ from nnid.vehicle import load_vehicle
 VEHICLE = Path(__file__).resolve().parents[1] / "configs" / "vehicles" / "octorov_sim.toml"
 
 
-def trained(vehicle) -> ResidualMonitor:
-    logs = [simulate_faults(vehicle, 300, seed=s, experiment=f"h{s}") for s in range(5)]
+def trained(vehicle, run_s: float = 300.0) -> ResidualMonitor:
+    """The monitor of the benchmark: least squares on 2 healthy runs of ``run_s`` seconds,
+    calibrated on 3 others."""
+    logs = [simulate_faults(vehicle, run_s, seed=s, experiment=f"h{s}") for s in range(5)]
     model = ParametricModel(
         vehicle,
         ["added_mass", "damping"],
@@ -139,6 +152,20 @@ def _timed(fn) -> float:
     return time.perf_counter() - t0
 
 
+#: the faults besides thruster losses, from 20 s (scenarios; some of them single changes in
+#: second)
+OTHERS = {
+    "tether pull -15 N surge": Fault("external", 20.0, force=(-15, 0, 0, 0, 0, 0)),
+    "side push 10 N sway": Fault("external", 20.0, force=(0, 10, 0, 0, 0, 0)),
+    "snag -8 N + 1.5 N m yaw": Fault("external", 20.0, force=(-8, 0, 0, 0, 0, 1.5)),
+    "payload 10 N heavy": Fault("effect", 20.0, effect="buoyancy_offset", value=10.0),
+    "float 6 N light": Fault("effect", 20.0, effect="buoyancy_offset", value=-6.0),
+    "payload 4 N heavy": Fault("effect", 20.0, effect="buoyancy_offset", value=4.0),
+    "payload 2 kg, 4 N lift (W-B +15.6 N)": Fault("payload", 20.0, mass=2.0, value=4.0),
+    "payload 3 kg, 25 N lift (W-B +4.4 N)": Fault("payload", 20.0, mass=3.0, value=25.0),
+}
+
+
 def scenarios() -> None:
     vehicle = load_vehicle(VEHICLE)
     t0 = time.perf_counter()
@@ -189,17 +216,7 @@ def scenarios() -> None:
     # one fault, one alarm: detect re-watches what an isolated change leaves, and a later
     # alarm there would be a second fault that is not in the log
     print(f"  alarms after the first: {df['later_alarms'].sum()}")
-    others = [
-        ("tether pull -15 N surge", Fault("external", 20.0, force=(-15, 0, 0, 0, 0, 0))),
-        ("side push 10 N sway", Fault("external", 20.0, force=(0, 10, 0, 0, 0, 0))),
-        ("snag -8 N + 1.5 N m yaw", Fault("external", 20.0, force=(-8, 0, 0, 0, 0, 1.5))),
-        ("payload 10 N heavy", Fault("effect", 20.0, effect="buoyancy_offset", value=10.0)),
-        ("float 6 N light", Fault("effect", 20.0, effect="buoyancy_offset", value=-6.0)),
-        ("payload 4 N heavy", Fault("effect", 20.0, effect="buoyancy_offset", value=4.0)),
-        ("payload 2 kg, 4 N lift (W-B +15.6 N)", Fault("payload", 20.0, mass=2.0, value=4.0)),
-        ("payload 3 kg, 25 N lift (W-B +4.4 N)", Fault("payload", 20.0, mass=3.0, value=25.0)),
-    ]
-    for label, fault in others:
+    for label, fault in OTHERS.items():
         for seed in (1, 2, 3):
             log = simulate_faults(vehicle, 40, faults=[fault], seed=2000 + seed)
             alarms = [a for a in detect(mon, log).alarms if a["t"] >= 20.0]
@@ -332,6 +349,103 @@ def ended() -> None:
     print(f"total {time.perf_counter() - t0:.0f} s")
 
 
+#: second: the first changes, from 20 s, and the ballast changes (N) from 35 s after them
+FIRSTS = {
+    "snag -10 N + 1 N m yaw": Fault("external", 20.0, force=SNAG),
+    "h1 stopped": Fault("thruster", 20.0, thruster="h1", efficiency=0.0),
+}
+BALLASTS = (7.0, 8.0, 9.0, 10.0)
+SECOND_T = 35.0
+#: second: the single changes from 20 s, watched for an alarm after the first
+SINGLES = {
+    "h1 stopped": FIRSTS["h1 stopped"],
+    "v2 stopped": Fault("thruster", 20.0, thruster="v2", efficiency=0.0),
+    "h3 at 30 %": Fault("thruster", 20.0, thruster="h3", efficiency=0.3),
+    "v4 at 30 %": Fault("thruster", 20.0, thruster="v4", efficiency=0.3),
+    "snag -10 N + 1 N m yaw": FIRSTS["snag -10 N + 1 N m yaw"],
+    **{k: OTHERS[k] for k in ("snag -8 N + 1.5 N m yaw", "tether pull -15 N surge",
+                              "side push 10 N sway", "payload 10 N heavy", "float 6 N light",
+                              "payload 2 kg, 4 N lift (W-B +15.6 N)",
+                              "payload 3 kg, 25 N lift (W-B +4.4 N)")},
+}  # fmt: skip
+
+
+def _span(values: list[float]) -> str:
+    """The range of ``values`` as a table cell ("-": none measured)."""
+    return f"{min(values):.2f}-{max(values):.2f}" if values else "-"
+
+
+def second(
+    monitor: ResidualMonitor | None = None,
+    seeds: range | list[int] = range(1, 9),
+    single_seeds: range | list[int] = range(1, 8),
+    firsts: dict[str, Fault] | None = None,
+    ballasts: tuple[float, ...] = BALLASTS,
+    singles: dict[str, Fault] | None = None,
+    run_s: float = 60.0,
+    single_s: float = 90.0,
+) -> None:
+    """A ballast change from 35 s after a first change (:data:`FIRSTS` × :data:`BALLASTS`): is
+    it isolated, when, at what size, with what other alarms? And single changes
+    (:data:`SINGLES`): alarms after the first, and the highest reading over the DOF
+    equations the change leaves alone among the alarms dismissed
+    (:attr:`~nnid.fault.detect.DetectResult.dismissed`), with the level it was judged against.
+    ``monitor`` (default: the scenarios monitor) and the rest: a smaller run (tests)."""
+    vehicle = load_vehicle(VEHICLE)
+    t0 = time.perf_counter()
+    mon = monitor if monitor is not None else trained(vehicle)
+    firsts = FIRSTS if firsts is None else firsts
+    singles = SINGLES if singles is None else singles
+    print(f"machine: {machine(numba=numba.__version__)}; date {datetime.date.today()}")
+    print(f"| first change, from 20 s ({run_s:g}-s runs) | ballast from {SECOND_T:g} s | runs | "
+          "first alarmed | ballast isolated | time (median, latest; s) | size said (N) | "
+          "other alarms |")  # fmt: skip
+    print("|---|---|---|---|---|---|---|---|")
+    for label, first in firsts.items():
+        for value in ballasts:
+            ballast = Fault("effect", SECOND_T, effect="buoyancy_offset", value=value)
+            alarmed, times, sizes, other = 0, [], [], 0
+            for seed in seeds:
+                log = simulate_faults(vehicle, run_s, faults=[first, ballast], seed=seed)
+                alarms = detect(mon, log).alarms
+                head = next((a for a in alarms if first.t <= a["t"] < SECOND_T), None)
+                iso = next((a for a in alarms if a["t"] >= SECOND_T
+                            and a.get("hypothesis") == "buoyancy_offset"), None)  # fmt: skip
+                alarmed += head is not None
+                if iso is not None:
+                    times.append(iso["t"])
+                    sizes.append(iso["value"])
+                other += _others(alarms, head, iso)
+            when = f"{np.median(times):.2f}, {max(times):.2f}" if times else "-"
+            print(f"| {label} | {value:g} N | {len(seeds)} | {alarmed} | {len(times)} | {when} | "
+                  f"{_span(sizes)} | {other} |")  # fmt: skip
+    print()
+    print(f"| single change, from 20 s ({single_s:g}-s runs) | runs | first alarm at the change "
+          "| alarms after the first | alarms dismissed | highest beside-reading | level it was "
+          "judged against |")  # fmt: skip
+    print("|---|---|---|---|---|---|---|")
+    for label, fault in singles.items():
+        at, later, dismissed, top = 0, 0, 0, None
+        for seed in single_seeds:
+            result = detect(mon, simulate_faults(vehicle, single_s, faults=[fault], seed=seed))
+            alarms = result.alarms
+            at += bool(alarms) and alarms[0]["t"] >= fault.t
+            later += max(len(alarms) - 1, 0)
+            dismissed += len(result.dismissed)
+            read = [d for d in result.dismissed if d["beside_ratio"] is not None]
+            best = max(read, key=lambda d: d["beside_ratio"], default=None)
+            if best is not None and (top is None or best["beside_ratio"] > top["beside_ratio"]):
+                top = best
+        reading, level = (
+            ("-", "-")
+            if top is None
+            else (f"{top['beside_ratio']:.2f}", f"{top['beside_allowed']:.2f}")
+        )
+        print(f"| {label} | {len(single_seeds)} | {at} | {later} | {dismissed} | {reading} | "
+              f"{level} |")  # fmt: skip
+    print(f"total {time.perf_counter() - t0:.0f} s")
+
+
 #: the changes of the follow mode, isolated at 20 s of 10-minute streams
 FOLLOWED = {
     "h1 at 30 %": Fault("thruster", 20.0, thruster="h1", efficiency=0.3),
@@ -434,7 +548,13 @@ def _at_revision(rev: str) -> dict:
     return at_revision(rev, Path(__file__), "follow", "--json")
 
 
-MODES = {"speed": speed, "scenarios": scenarios, "ended": ended, "follow": follow}
+MODES = {
+    "speed": speed,
+    "scenarios": scenarios,
+    "ended": ended,
+    "second": second,
+    "follow": follow,
+}
 
 
 def parser() -> argparse.ArgumentParser:

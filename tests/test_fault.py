@@ -993,6 +993,25 @@ def test_the_allowance_over_fewer_dof_equations_is_as_rare_from_healthy_noise():
         assert chi2.logsf(level * n * rows, n * rows) == pytest.approx(full, rel=0.01)
 
 
+def test_batch_lists_the_alarms_it_dismisses_with_their_reading_beside_the_changes(
+    monitor, stopped_h1
+):
+    """h1 stopped from 20 s, a 20-s window: what the isolated loss leaves alarmed at 46.10 s,
+    dismissed as within what the loss may leave, and batch kept no trace of it (no record, no
+    mark), so what the test of a change beside the loss read there could not be measured
+    (the benchmark's false-alarm sweep, ``bench_detect.py second``). Now it is listed, with
+    the noise ratio over the DOF equations the loss leaves alone and the level it was judged
+    against: ``allowed_over`` of those equations, fewer than all six (the loss acts on some)."""
+    result = detect(monitor, stopped_h1[stopped_h1["t"] <= 67.0], 20.0)
+    assert [f"{d['t']:.2f}" for d in result.dismissed] == ["46.10"]
+    assert "46.10" not in {f"{a['t']:.2f}" for a in result.alarms}
+    seen = result.dismissed[0]
+    assert seen["experiment"] is None  # the log has no experiment column
+    levels = [allowed_over(n, 6) for n in range(1, 6)]
+    assert any(seen["beside_allowed"] == pytest.approx(level) for level in levels)
+    assert 0.0 < seen["beside_ratio"] <= seen["beside_allowed"]  # dismissed on that reading
+
+
 def test_two_changes_at_once_the_larger_named_first_the_one_beside_it_at_the_next_window(
     vehicle, monitor
 ):

@@ -112,12 +112,17 @@ class DetectResult:
     """The trace watched, the alarm records and the seconds taken. ``withdrawn``: the alarms
     ``detect --follow`` announced ("ALARM t = …") that ``alarms`` does not hold, each with
     the alarm whose judgement withdrew it (:func:`withdrawn_record`); batch announces none,
-    and the two agree on ``alarms``."""
+    and the two agree on ``alarms``. ``dismissed`` (batch only; ``--follow`` says them
+    withdrawn): the alarms judged within what the isolated changes may leave, no record,
+    each with its ``experiment`` and ``t``, and ``beside_ratio`` and ``beside_allowed``, what
+    it held over the DOF equations the changes leave alone and the level it was judged
+    against there (:meth:`_Splits.change_beside`; None where the changes act on every one)."""
 
     trace: Trace
     alarms: list[dict]
     seconds: float
     withdrawn: list[dict] = field(default_factory=list)
+    dismissed: list[dict] = field(default_factory=list)
 
 
 def withdrawn_record(experiment: str | None, t: float, by: float, why: str) -> dict:
@@ -401,6 +406,8 @@ class _Splits:
             self.sets += [[i] for i in range(len(self.changes))]
         self._signature: bool | None = None
         self._new: Diagnosis | None = None
+        # (the noise ratio, its allowed level) over the equations beside, once read
+        self.beside: tuple[float, float] | None = None
 
     def usable(self) -> bool:
         """Enough rows, changes taken out, and what they leave more than noise may be, or
@@ -453,7 +460,8 @@ class _Splits:
         # model's error, and read as noise (1), unmeasured, they averaged a change in one
         # DOF down by six
         allowed = allowed_over(int(beside.sum()), self.dim)
-        if self.beside_ratio(self.left, beside) <= allowed:
+        self.beside = (self.beside_ratio(self.left, beside), allowed)
+        if self.beside[0] <= allowed:
             return False
         new = self.new_change()
         if not new.isolated:
@@ -786,12 +794,15 @@ class Verdict:
     """What an alarm on rows watched on what isolated changes leave is
     (:func:`rewatched_alarm`): a ``record`` of changes that ended (``ended``, indices into
     :attr:`Rewatch.changes`) or changed size (``resized``: those changes and the one that
-    replaces them), or ``dismissed``: within what the changes may leave, no record."""
+    replaces them), or ``dismissed``: within what the changes may leave, no record;
+    ``beside``: the noise ratio over the DOF equations the changes leave alone and its
+    allowed level, where :meth:`_Splits.change_beside` read them."""
 
     record: dict | None = None
     ended: list[int] = field(default_factory=list)
     resized: tuple[list[int], Change] | None = None
     dismissed: bool = False
+    beside: tuple[float, float] | None = None
 
 
 def rewatched_alarm(
@@ -823,7 +834,7 @@ def rewatched_alarm(
         and not splits.signature_left()
         and not splits.change_beside()
     ):
-        return Verdict(dismissed=True)
+        return Verdict(dismissed=True, beside=splits.beside)
     resized = resized_alarm(splits, trace, k, window_s)
     if resized is not None:
         return Verdict(resized[0], resized=resized[1])
@@ -962,7 +973,7 @@ def detect(
     t, codes = data["t"], data["experiment"]
     rewatch: dict[int, Rewatch] = {}  # per experiment
     open_: dict[int, dict] = {}  # per experiment, its unexplained record (unexplained())
-    alarms, pos = [], 0
+    alarms, dismissed, pos = [], [], 0
     changed = np.zeros(t.size, dtype=bool)  # rows watched on a re-referenced residual
     while (ks := np.flatnonzero(alarm[pos:])).size:
         k = pos + int(ks[0])
@@ -975,6 +986,16 @@ def detect(
             if verdict is not None:  # an end, a change of size, or dismissed
                 if verdict.dismissed:
                     alarm[k] = False  # no record, so no mark in the trace either
+                    ratio, allowed = verdict.beside or (None, None)
+                    name = None if names[k] is None else str(names[k])
+                    dismissed.append(
+                        {
+                            "experiment": name,
+                            "t": float(t[k]),
+                            "beside_ratio": ratio,
+                            "beside_allowed": allowed,
+                        }
+                    )
                 else:
                     alarms.append(verdict.record)
                 _rewatch(w, data, residual, values, alarm, rows, changed, verdict=verdict)
@@ -992,7 +1013,7 @@ def detect(
         _rewatch(rewatch.setdefault(code, Rewatch(monitor)), data, residual, values, alarm, rows,
                  changed, change)  # fmt: skip
         pos = int(rows[-1]) + 1
-    return DetectResult(watched, alarms, time.perf_counter() - start)
+    return DetectResult(watched, alarms, time.perf_counter() - start, dismissed=dismissed)
 
 
 def _rest(data: dict, rows: np.ndarray) -> np.ndarray:
