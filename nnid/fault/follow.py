@@ -359,17 +359,18 @@ def follow_csv(
             return
         data = _arrays(ts[i:j], xs[i:j], us[i:j], codes[i:j], names)
         rows = np.arange(1, j - i)
-        left = ref["rewatch"].left(data, rows, np.array(vals[i + 1 : j])[:, 0:6])
-        left = left[first - a - 1 : first - a - 1 + ready]
+        model = np.array(vals[i + 1 : j])[:, 0:6]  # the model's residual r
+        taken = slice(first - a - 1, first - a - 1 + ready)
+        left, r = ref["rewatch"].left(data, rows, model)[taken], model[taken]
         w, times = ref["rewatch"], data["t"][first - a : first - a + ready]
         state, t_prev = w.state.copy(), w.t_prev
-        out = w.step(times, left)
+        out = w.step(times, left, r)
         alarmed = np.flatnonzero(out[:, 20] == 1)
         if alarmed.size:  # the rows after the first new alarm's window wait for its judgement
             keep = int(np.sum(times <= times[alarmed[0]] + window_s))
             if keep < ready:  # watched again from the state before, as one call (kernel.watch)
                 w.state[:], w.t_prev, ready = state, t_prev, keep
-                out = w.step(times[:ready], left[:ready])
+                out = w.step(times[:ready], left[:ready], r[:ready])
         for row, (k, values) in enumerate(zip(queue[:ready], out, strict=True)):
             watched[k - dropped][0:6] = left[row]
             watched[k - dropped][6:20] = values[6:20]

@@ -34,6 +34,12 @@ CFG_SIZE = 7
 # layout of the state vector ``st``: flags and CUSUM, then the EWMA [EWMA:EWMA + 6]
 HAS_PREV, CUSUM, ACTIVE, QUIET, EWMA = range(5)
 STATE_SIZE = EWMA + 6
+# :func:`watch`'s state after it: the level of the changes' signature [LEVEL:LEVEL + 6]
+# (:func:`levels`), carried with the statistics so that rows given in pieces read alike
+LEVEL = STATE_SIZE
+WATCH_STATE_SIZE = LEVEL + 6
+#: the per-DOF scale of :func:`_statistics` where the residual is read against healthy noise
+UNSCALED = np.ones(6)
 
 
 @njit(cache=True, inline="always")
@@ -120,9 +126,12 @@ def _residual(prev, x, n, dt, form, mass, mask, act, out, work, scratch):
 
 
 @njit(cache=True, inline="always")
-def _statistics(dt, mu, whiten, s_inv, cfg, out, st):
+def _statistics(dt, mu, whiten, s_inv, cfg, out, st, scale):
     """out[6:12] ← z = W (r − μ) of r = out[0:6]; the EWMA (kept in ``st``, copied to
-    out[12:18]) and the CUSUM updated; returns (T, g)."""
+    out[12:18]) and the CUSUM updated; returns (T, g). ``scale`` [6]: how many times the
+    healthy noise's excess each whitened DOF may hold (:data:`UNSCALED`, but in :func:`watch`):
+    the EWMA reads z / √scale, the CUSUM z² / scale + 1 − 1 / scale (the noise's mean kept, its
+    excess read in units of scale; at 1 both are z and z² exactly)."""
     for i in range(6):
         acc = 0.0
         for j in range(6):
@@ -131,9 +140,10 @@ def _statistics(dt, mu, whiten, s_inv, cfg, out, st):
     lam = 1.0 - math.exp(-dt / cfg[TAU])
     power = 0.0
     for i in range(6):
-        st[EWMA + i] = (1.0 - lam) * st[EWMA + i] + lam * out[6 + i]
+        z, a = out[6 + i], scale[i]
+        st[EWMA + i] = (1.0 - lam) * st[EWMA + i] + lam * (z / math.sqrt(a))
         out[12 + i] = st[EWMA + i]
-        power += out[6 + i] * out[6 + i]
+        power += z * z / a + (1.0 - 1.0 / a)
     t_stat = 0.0
     for i in range(6):
         for j in range(6):
@@ -176,7 +186,7 @@ def _update(t, x, cmd, prev, st, cfg, form, mass, mask, act, mu, whiten, s_inv, 
     dt = t - prev[12 + n_ch]
     if st[HAS_PREV] > 0.0 and 0.0 < dt <= cfg[MAX_DT]:
         if _residual(prev, x, n_ch, dt, form, mass, mask, act, out, work, scratch):
-            t_stat, g = _statistics(dt, mu, whiten, s_inv, cfg, out, st)
+            t_stat, g = _statistics(dt, mu, whiten, s_inv, cfg, out, st, UNSCALED)
             out[18] = t_stat
             out[19] = g
             code = _alarm(t_stat, g, dt, cfg, st)
@@ -219,11 +229,32 @@ def run(ts, xs, cmds, prev, st, cfg, form, mass, mask, act, mu, whiten, s_inv, o
 
 
 @njit(cache=True)
-def watch(t_prev, ts, rs, cfg, mu, whiten, s_inv, st, out):
+def levels(t_prev, ts, sig, cfg, whiten, st, out):
+    """``out`` [N, 6] ← the level of the signature ``sig`` [N, 6] (what isolated changes put in
+    the model's residual) in each whitened DOF at times ``ts`` (``t_prev`` the time before the
+    first): its power there, or where more its EWMA over the monitor's time constant (kept in
+    ``st[LEVEL:]``, zeros: a fresh one). The EWMA holds it over the motion's lag: a model's
+    error that the change caused outlasts the change's own force by some tenths of a second."""
+    for k in range(sig.shape[0]):
+        dt = ts[k] - (t_prev if k == 0 else ts[k - 1])
+        lam = 1.0 - math.exp(-dt / cfg[TAU]) if dt > 0.0 else 0.0
+        for i in range(6):
+            acc = 0.0
+            for j in range(6):
+                acc += whiten[i, j] * sig[k, j]
+            p = acc * acc if math.isfinite(acc) else 0.0
+            st[LEVEL + i] = (1.0 - lam) * st[LEVEL + i] + lam * p
+            out[k, i] = max(p, st[LEVEL + i])
+    return out
+
+
+@njit(cache=True)
+def watch(t_prev, ts, rs, scale, cfg, mu, whiten, s_inv, st, out):
     """The statistics and alarms of :func:`_update` over residuals already made, ``rs`` [N, 6]
     (NaN: none) at times ``ts`` (``t_prev`` the time before the first), from the state ``st``
     (zeros: a fresh one; carried on, so rows given in pieces are watched as in one call): the
-    monitor on a residual re-referenced to an isolated change. ``out`` as :func:`run`'s."""
+    monitor on a residual re-referenced to an isolated change, each DOF read against what the
+    change may leave there (``scale`` [N, 6], :func:`_statistics`). ``out`` as :func:`run`'s."""
     for k in range(rs.shape[0]):
         row = out[k]
         for i in range(20):
@@ -237,7 +268,7 @@ def watch(t_prev, ts, rs, cfg, mu, whiten, s_inv, st, out):
             continue
         for i in range(6):
             row[i] = rs[k, i]
-        t_stat, g = _statistics(dt, mu, whiten, s_inv, cfg, row, st)
+        t_stat, g = _statistics(dt, mu, whiten, s_inv, cfg, row, st, scale[k])
         row[18] = t_stat
         row[19] = g
         row[20] = _alarm(t_stat, g, dt, cfg, st)
