@@ -1536,6 +1536,30 @@ def test_a_restoring_column_of_rounding_is_judged_against_the_logs_motion(heave_
     assert np.isnan(model.estimate_.theta).all() and np.isnan(model.estimate_.stderr).all()
 
 
+@pytest.mark.parametrize("w", ["exactly 0", "1e-17"])
+def test_a_product_with_a_factor_of_rounding_is_rounding(seamor, w):
+    """The Seamor driven in surge, sway and yaw only: w is exactly 0, or the 1e-17 a log's last
+    bits leave. M:u*w's column is then u times rounding, and its floor read its power in the
+    whole motion (2: ROUNDING² × its size), so its 1e-17 of u² was data and M:u*w was fitted to
+    the Munk moment's rounding (-41.5, "fitted to noise", simulated by a later log that heaves).
+    Each velocity alone sets a product's power (1 in w): a zero regressor, as with w = 0, and
+    not estimated; N:u*v of the real u and v is measured beside it."""
+    rng = np.random.default_rng(3)
+    inputs = np.zeros((200, 6))
+    inputs[20:, [0, 1, 5]] = np.repeat(rng.uniform(-30, 30, (9, 3)), 20, 0)
+    log = simulate(seamor, inputs, 0.1)
+    assert (log["w"] == 0).all() and log["u"].abs().median() > 0.1
+    if w == "1e-17":
+        log["w"] = 1e-17 * rng.standard_normal(len(log))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the excitation warnings and the noise guard's
+        model = ParametricModel(seamor, ["M:u*w", "N:u*v"], ["q", "r"], trainer=LeastSquares())
+        model.fit(log)
+    assert model.estimate_.excitation.unexcited == ["M:u*w"]
+    assert np.isnan(model.estimate_.theta[0]) and model.params["M:u*w"]["value"] is None
+    assert model.params["N:u*v"]["value"] == pytest.approx(0.0, abs=1e-6)  # the file has none
+
+
 def test_rounding_floors_follow_the_motion_a_column_is_made_of():
     """A column's floor is ROUNDING to its power of its size at the typical motion: u|u| of a
     surge 1e-6 of the typical motion is live, of rounding (1e-17) zero; a column that does not

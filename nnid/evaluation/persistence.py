@@ -262,9 +262,10 @@ def motion_floors(
     knows the motion its columns are made of: ``columns_at(scale)`` gives its columns (each an
     array of its entries) at the log's typical motion with each of its ``parts`` scaled by
     ``scale`` ``[parts]``, read at scale 1 and with each part alone at :data:`POWER_PROBE`; a
-    column's size there is its typical size (:func:`typical_size`). One part: the whole motion
-    (a Fossen regression's columns mix ν and ν̇ across equations); six: each velocity, for
-    columns that are products of them (SINDy's library terms)."""
+    column's size there is its typical size (:func:`typical_size`). One part: the whole motion;
+    six: each velocity, for columns that are products of them (SINDy's library terms; a Fossen
+    regression's, each velocity with its acceleration), so that a product of a velocity of
+    rounding is rounding."""
 
     def sizes(scale: np.ndarray) -> np.ndarray:
         return np.array([typical_size(np.reshape(c, (-1, 1))) for c in columns_at(scale)])

@@ -382,17 +382,28 @@ class ParametricFossen:
     def rounding_floors(self, data: dict[str, np.ndarray], nu_dot: np.ndarray) -> np.ndarray:
         """Each unknown's floor of the rounding rule
         (:func:`~nnid.evaluation.persistence.motion_floors`) for this structure's regression
-        on ``data``: its column at the log's typical motion, and at that motion times
-        :data:`~nnid.evaluation.persistence.POWER_PROBE` for its power in it (the whole motion
-        at once: a column mixes ν and ν̇ across the DOF equations). The typical
-        motion (:func:`~nnid.evaluation.persistence.kind_sizes`, angular rates over the
-        vehicle's length): ν of each kind (linear, angular) at the largest typical |ν| of that
+        on ``data``: its column at the log's typical motion, and with each velocity alone
+        times :data:`~nnid.evaluation.persistence.POWER_PROBE`, for its least power among the
+        velocities it grows with (as SINDy's library terms,
+        :func:`~nnid.trainers.sindy.library_floors`): a product is rounding where one of its
+        factors is, so that u·w of a log whose w is rounding (1e-17) is of power 1 in w; read
+        in the whole motion at once it was of power 2, its floor ROUNDING² × its size, and its
+        1e-17 of u² was data: M:u*w was fitted to rounding (the Munk moment's, -41.5 on a Seamor
+        surge/sway/yaw log), a value a later log that heaves would simulate. The typical motion
+        (:func:`~nnid.evaluation.persistence.kind_sizes`, angular rates over the vehicle's
+        length): ν of each kind (linear, angular) at the largest typical |ν| of that
         kind (one number for all six compared a yaw-only fit with a yaw rate of the surge
         speed, 0.49 rad/s, where the log had 2.5e-6, and called its r|r| rounding), ν̇ likewise
         of ``nu_dot`` (the accelerations the regression reads: logged, or sF(s)[ν] of the
-        filtered form); both are scaled, as a motion of larger amplitude at the same
-        frequencies has both larger, so that an added mass's ν̇ column is of power 1 in it, as
-        its velocity's. Row by row otherwise (η, the inputs),
+        filtered form); each velocity's acceleration is scaled with it, as a motion of larger
+        amplitude at the same frequencies has both larger: an added mass's column (its ν̇ in
+        its own equation, its C_A(ν)ν in others, each a product with its velocity) is of power
+        1 in its velocity, as a ν̇ alone is. A column whose motion is spread so that no velocity
+        alone moves its typical size (r_g.z of a surge/sway/yaw log: ν̇ and products of each
+        velocity, one per equation) takes the floor of a column that does not grow with the
+        motion, ROUNDING × the regression's largest column at that motion (the tol rule of
+        :func:`~nnid.evaluation.persistence.excitation_from_gram` calls a column 1e-6 of its
+        equation's largest zero in any case). Row by row otherwise (η, the inputs),
         on at most :data:`REFERENCE_ROWS` rows drawn by a fixed local generator: the rule needs
         a size within decades.
 
@@ -420,12 +431,12 @@ class ParametricFossen:
         nu, acc = kind_sizes(data["nu"], length), kind_sizes(nu_dot, length)
         rows = [DOFS.index(d) for d in self.dofs]
 
-        def columns_at(scale: np.ndarray) -> list[np.ndarray]:  # the whole motion, one part
-            moved["nu"] = np.tile(scale[0] * nu, (picked.size, 1))
-            moved["nu_dot"] = np.tile(scale[0] * acc, (picked.size, 1))
+        def columns_at(scale: np.ndarray) -> list[np.ndarray]:  # each velocity with its ν̇
+            moved["nu"] = np.tile(scale * nu, (picked.size, 1))
+            moved["nu_dot"] = np.tile(scale * acc, (picked.size, 1))
             return [c[:, rows] for c in self._columns(moved)[1]]
 
-        return motion_floors(columns_at)
+        return motion_floors(columns_at, len(DOFS))
 
     def damping_force(self, data: dict[str, np.ndarray]) -> np.ndarray:
         """McCarter's residual force τ̄ = M ν̇ + C(ν)ν + g(η) − τ (eq. 4.4, his g on the other
