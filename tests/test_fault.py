@@ -28,7 +28,7 @@ from nnid.datasets.faults import Fault, simulate_faults
 from nnid.datasets.measurement import Measurement
 from nnid.errors import NnidInputError
 from nnid.fault import kernel
-from nnid.fault.detect import alarm_row, detect
+from nnid.fault.detect import alarm_row, detect, leave_scale, read_ratio
 from nnid.fault.follow import follow_csv
 from nnid.fault.isolation import allowed_over, allowed_ratio
 from nnid.fault.monitor import ResidualMonitor, monitor_inputs, pack_actuation
@@ -1985,3 +1985,20 @@ def test_runs_joined_without_a_fresh_index_are_refused_by_the_monitor(vehicle, m
             use(twice)
     with pytest.raises(NnidInputError, match=said):
         detect(monitor, twice)
+
+
+@pytest.mark.parametrize("level", [0.5, 100.0, 7354.0])
+def test_a_dof_holding_all_its_change_may_leave_reads_as_healthy_noise_at_its_allowance(level):
+    """The statistics on what an isolated change leaves read each DOF's excess over the noise
+    in units of :func:`leave_scale`: a DOF holding exactly what a hypothesis may leave of a
+    residual of the change's level (isolation's one rule, ``allowed_ratio(1 + level)``) reads
+    as healthy noise at its allowance, ``allowed_ratio(1)``. The ratio of the totals allowed
+    half of it where the change acts strongly (7,354 times the noise: a stopped vertical
+    thruster's roll read 2.99 against 2 at its own allowance)."""
+    from types import SimpleNamespace
+
+    one = SimpleNamespace(mask_=np.array([1.0, 0, 0, 0, 0, 0]))
+    ratios = np.array([allowed_ratio(1.0 + level), 1, 1, 1, 1, 1])
+    scale = leave_scale(np.array([level, 0, 0, 0, 0, 0]))
+    assert read_ratio(one, ratios, scale) == pytest.approx(allowed_ratio(1.0))
+    assert np.all(scale[1:] == 1.0)  # a DOF the change leaves alone is read as healthy

@@ -907,17 +907,17 @@ def explained_by_the_changes(monitor: ResidualMonitor, r: np.ndarray, left: np.n
     )
 
 
-#: isolation's one rule (:func:`~nnid.fault.isolation.allowed_ratio`) over an array
-_allowed = np.vectorize(allowed_ratio, otypes=[float])
-
-
 def leave_scale(level: np.ndarray) -> np.ndarray:
     """How many times the healthy noise's excess a whitened DOF may hold where isolated
     changes put ``level`` (their signature's power there, in units of the noise power) in the
-    model's residual: what a hypothesis may leave of that residual
-    (:func:`~nnid.fault.isolation.allowed_ratio` of 1 + ``level``) over what it may leave of
-    healthy noise; 1 where the changes put little (a DOF they leave alone is read as healthy)."""
-    return _allowed(1.0 + np.asarray(level, dtype=float)) / allowed_ratio(1.0)
+    model's residual: the excess over the noise a hypothesis may leave of that residual
+    (:func:`~nnid.fault.isolation.allowed_ratio` of 1 + ``level``, less 1) over the excess it
+    may leave of healthy noise, as the statistics read each DOF's excess in units of it
+    (:func:`read_ratio`): a DOF then holding all it may leave reads as healthy noise at its
+    allowance (the ratio of the totals allowed half of it where the changes act strongly);
+    1 where the changes put little (a DOF they leave alone is read as healthy)."""
+    allowed = allowed_ratio(1.0 + np.asarray(level, dtype=float))
+    return (allowed - 1.0) / (allowed_ratio(1.0) - 1.0)
 
 
 def read_ratio(monitor: ResidualMonitor, ratios: np.ndarray, scale: np.ndarray) -> float:

@@ -550,13 +550,14 @@ def model_error(baseline: float) -> float:
     return UNEXPLAINED_SHARE * (baseline - 1.0)
 
 
-def allowed_ratio(baseline: float) -> float:
+def allowed_ratio(baseline: float | np.ndarray) -> float | np.ndarray:
     """The most a named hypothesis may leave (its :func:`noise_ratio`) of a residual whose
-    noise ratio is ``baseline``: :data:`UNEXPLAINED_RATIO`, or where more, the noise and
-    :func:`model_error`. The one rule of isolation, of a later alarm explained by the changes
-    taken out, and of a change that ended or changed size; each caller names its baseline
-    (1, the healthy noise, where no fault is left: no share)."""
-    return max(UNEXPLAINED_RATIO, 1.0 + model_error(baseline))
+    noise ratio is ``baseline`` (a number, or an array of them): :data:`UNEXPLAINED_RATIO`,
+    or where more, the noise and :func:`model_error`. The one rule of isolation, of a later
+    alarm explained by the changes taken out, and of a change that ended or changed size; each
+    caller names its baseline (1, the healthy noise, where no fault is left: no share)."""
+    allowed = np.maximum(UNEXPLAINED_RATIO, 1.0 + model_error(baseline))
+    return float(allowed) if np.ndim(allowed) == 0 else allowed
 
 
 def allowed_over(n_dofs: int, dim: float) -> float:
@@ -568,8 +569,10 @@ def allowed_over(n_dofs: int, dim: float) -> float:
     the one of the full ratio, whatever N and τ (2 over 6 DOF equations: 2.12 over 5, 2.55 over
     3, 4.30 over 1). A fixed level is crossed more easily over fewer equations: their mean
     spreads more."""
+    if n_dofs < 1:
+        raise ValueError(f"allowed_over needs at least one DOF equation, got {n_dofs}")
     a = allowed_ratio(1.0)
-    rate = dim / max(n_dofs, 1) * (a - 1.0 - np.log(a))
+    rate = dim / n_dofs * (a - 1.0 - np.log(a))
     # x − ln x = 1 + rate, x > 1: the lower real branch of Lambert's W
     return float(-lambertw(-np.exp(-1.0 - rate), -1).real)
 
