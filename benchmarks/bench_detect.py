@@ -468,10 +468,10 @@ def _followed(mon, path: str) -> dict:
         stamps.append(time.perf_counter())
         flushed.append(False)  # the flushes after the last row (the run's end) are not timed
 
-    def timed_left(self, data, rows_, r):
+    def timed_left(self, data, rows_, r, to_end=False):
         flushed[-1] = True
         sizes.append(rows_.size)
-        return left(self, data, rows_, r)
+        return left(self, data, rows_, r, to_end)
 
     follow_module._rows, Rewatch.left = rows, timed_left
     try:

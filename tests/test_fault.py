@@ -26,6 +26,7 @@ from typer.testing import CliRunner
 from nnid.cli import app
 from nnid.datasets.faults import Fault, simulate_faults
 from nnid.datasets.measurement import Measurement
+from nnid.datasets.preprocess import savgol_window
 from nnid.errors import NnidInputError
 from nnid.fault import kernel
 from nnid.fault.detect import alarm_row, detect, leave_scale, read_ratio
@@ -561,12 +562,12 @@ def test_follow_makes_a_changes_columns_once_and_anew_for_the_next(
     calls, made, inside = [], [], []
     left, candidates = detect_module.Rewatch.left, isolation.candidates
 
-    def counted_left(self, data, rows, r):
+    def counted_left(self, data, rows, r, to_end=False):
         calls.append((self, frozenset(name for name, _ in self.fitted)))
         made.append(False)
         inside.append(True)
         try:
-            out = left(self, data, rows, r)
+            out = left(self, data, rows, r, to_end)
         finally:
             inside.pop()
         remade = detect_module._left(self.monitor, data, rows, r, self.fitted)  # nothing kept
@@ -717,6 +718,41 @@ def test_follow_says_a_change_ended_as_batch_detect_does(vehicle, monitor, tmp_p
     batch, said = _followed_as_batch(monitor, log, tmp_path)
     assert len(batch.alarms) == 3 and batch.alarms[1]["hypothesis"] == "change_ended"
     assert sum("ended at about 40.05 s" in line for line in said) == 1
+
+
+@pytest.mark.parametrize(
+    ("fault", "reads_acceleration"),
+    [
+        (Fault("payload", FAULT_T, mass=10.0, value=4.0), True),
+        (Fault("external", FAULT_T, force=(-10, 0, 0, 0, 0, 1.0)), False),
+    ],
+)
+def test_a_runs_last_rows_are_judged_as_in_a_longer_run_or_not_at_all(
+    vehicle, monitor, fault, reads_acceleration, tmp_path
+):
+    """A run that ends 0.05 s after a command step, a change isolated before: a payload's
+    signature reads the acceleration smoothed over a centred window, which the run's last
+    rows lack; the derivative's polynomial extrapolated over them raised an alarm on the
+    run's last rows (57.50 s of a run ending at 57.55 s; 90.00 s of the 90-s runs of
+    bench_detect second), a model_change with confidence 0, where the same rows of the longer
+    run raise none. Each row judged is judged as in the longer run; the rows left unjudged
+    are the last half smoothing window, and only where the signature reads the acceleration
+    (a snag's does not); ``--follow`` alike."""
+    log = simulate_faults(vehicle, 60, faults=[fault], seed=26)
+    cut = log[log["t"] <= 57.55 + 1e-9].reset_index(drop=True)
+    longer, ended = detect(monitor, log), detect(monitor, cut)
+    assert len(ended.alarms) == 1 and ended.alarms[0]["t"] < 21.0  # the change, nothing after
+    has_mass = any(k.startswith("added_mass") for k in ended.alarms[0]["components"] or {})
+    assert has_mass == reads_acceleration
+    n = ended.trace.t.size
+    judged = np.isfinite(ended.trace.values[:, 18])
+    np.testing.assert_allclose(
+        ended.trace.values[judged], longer.trace.values[:n][judged], rtol=1e-9, atol=1e-9
+    )
+    half = savgol_window(monitor.plant_.savgol_window, 1.0 / monitor.interval, 2) // 2
+    unjudged = n - 1 - np.flatnonzero(judged)[-1]
+    assert unjudged == (half if reads_acceleration else 0)
+    _followed_as_batch(monitor, cut, tmp_path)
 
 
 def test_a_fault_after_an_unexplained_change_is_alarmed(vehicle, monitor, tmp_path):

@@ -971,14 +971,26 @@ class Rewatch:
         self.state[:] = 0.0
         self.t_prev = float(t_prev)
 
-    def left(self, data: dict, rows: np.ndarray, r: np.ndarray) -> np.ndarray:
+    def left(self, data: dict, rows: np.ndarray, r: np.ndarray, to_end: bool = False) -> np.ndarray:
         """What the changes leave of the model's residual ``r`` [N, 6] on ``rows``: minus
-        their signature (:func:`nnid.fault.isolation.signature`, linear in the changes)."""
+        their signature (:func:`nnid.fault.isolation.signature`, linear in the changes).
+        ``to_end``: ``rows`` run to their experiment's last row. A signature that reads the
+        acceleration (an added mass, a payload) has there no half smoothing window after a
+        row, and the derivative's polynomial extrapolated over it
+        (:meth:`~nnid.fault.isolation.Hypotheses.extrapolated`) is not the centred estimate
+        the change was fitted and is watched with: after a command step 0.5 s before a
+        payload's run ended, those rows held 1.5-3.6 times the run's mean whitened power, the
+        EWMA statistic rose from 35 to 152 over them (threshold 115), and the run's last
+        sample alarmed (a model_change that too few rows could isolate). Those rows are NaN,
+        not judged, as rows without a residual are."""
         fitted = self.fitted
         if fitted:
             names = {name for name, _ in fitted}
             self.hypotheses = Hypotheses.reused(self.hypotheses, self.monitor, names)
-        return _left(self.monitor, data, rows, r, fitted, self.hypotheses)
+        out = _left(self.monitor, data, rows, r, fitted, self.hypotheses)
+        if to_end and fitted:
+            out[self.hypotheses.extrapolated(data, rows)] = np.nan
+        return out
 
     def step(self, ts: np.ndarray, left: np.ndarray, r: np.ndarray) -> np.ndarray:
         """The statistics of the rows at times ``ts`` (after those of the last call) on the
@@ -1084,7 +1096,7 @@ def _rewatch(w: Rewatch, data, residual, values, alarm, rows, changed, change=No
     w.restart(data["t"][rows[-1]], change, verdict.ended, verdict.resized)
     changed[rest] = bool(w.changes)  # with none left, a later alarm is a first one again
     if change is not None or not verdict.dismissed:  # values' first six columns are still r
-        residual[rest] = w.left(data, rest, values[rest, 0:6])
+        residual[rest] = w.left(data, rest, values[rest, 0:6], to_end=True)
     if rest.size:
         out = w.step(data["t"][rest], residual[rest], values[rest, 0:6])
         values[rest, 6:20] = out[:, 6:20]

@@ -18,7 +18,9 @@ of the isolation window, a later alarm judged by the same rule. The signature is
 :data:`REWATCH_S` seconds of rows at once (its columns cost milliseconds a call, whatever the
 rows) and each row waits for the half Savitzky-Golay window after it that its signature's
 acceleration is smoothed over, as batch has it, so an alarm there is announced up to that much
-later; its time is its row's. After an alarm that is not isolated the statistics restart
+later; its time is its row's. The run's last rows, which never get that half window, are not
+judged where the signature reads the acceleration (:meth:`~nnid.fault.detect.Rewatch.left`), as
+in batch. After an alarm that is not isolated the statistics restart
 after its window too, as in batch, with nothing more taken out (an isolated change before it
 stays taken out; the rows watched the same way), and a later alarm that is not isolated
 either is announced, then said withdrawn: the unexplained change persisting, counted in its
@@ -361,7 +363,10 @@ def follow_csv(
         rows = np.arange(1, j - i)
         model = np.array(vals[i + 1 : j])[:, 0:6]  # the model's residual r
         taken = slice(first - a - 1, first - a - 1 + ready)
-        left, r = ref["rewatch"].left(data, rows, model)[taken], model[taken]
+        # the run ended (final): its last rows are not judged where the signature's
+        # derivative is extrapolated (Rewatch.left), as batch does
+        left = ref["rewatch"].left(data, rows, model, to_end=final)[taken]
+        r = model[taken]
         w, times = ref["rewatch"], data["t"][first - a : first - a + ready]
         state, t_prev = w.state.copy(), w.t_prev
         out = w.step(times, left, r)

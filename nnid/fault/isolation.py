@@ -128,7 +128,7 @@ def midpoint_data(
     span = np.arange(rows[0] - 1, rows[-1] + 1)
     t = data["t"][span]
     dt = float(np.median(np.diff(t)))
-    window = min(savgol_window(savgol[0], 1.0 / dt, savgol[1]), span.size - (1 - span.size % 2))
+    window = smoothing_window(t, savgol)
     vel = data["x"][span, 6:12]
     acc = np.column_stack([savgol_derivative(vel[:, j], dt, window, savgol[1]) for j in range(6)])
     at = rows - span[0]
@@ -144,6 +144,15 @@ def midpoint_data(
         "experiment": np.zeros(rows.size, dtype=int),
         "experiment_names": np.array(["window"], dtype=object),
     }
+
+
+def smoothing_window(t: np.ndarray, savgol: tuple[float, int]) -> int:
+    """The samples of :func:`midpoint_data`'s Savitzky-Golay derivative on a span of times
+    ``t``: ``savgol``'s window in seconds at the span's rate, at most the span (odd). Its
+    last half window is evaluated off-centre, the window's polynomial extrapolated
+    (:func:`~nnid.datasets.preprocess.savgol_interp`)."""
+    dt = float(np.median(np.diff(t)))
+    return min(savgol_window(savgol[0], 1.0 / dt, savgol[1]), t.size - (1 - t.size % 2))
 
 
 def midpoint_frame(arrays: dict) -> pd.DataFrame:
@@ -177,6 +186,7 @@ class Hypotheses:
         self.loop = self.names is None or not self.names <= {c.name for c in self.own}
         self._cands: list[Candidate] | None = None  # the loop's, once rows show them
         self._structure: ParametricFossen | None = None
+        self._inertial: bool | None = None  # :meth:`reads_acceleration`, once asked
 
     @classmethod
     def reused(cls, made: Hypotheses | None, monitor, names: Collection[str] | None) -> Hypotheses:
@@ -217,6 +227,33 @@ class Hypotheses:
             cols = np.concatenate([cols, thrust[:, None, :] * self.act.matrix[None, :, :]], 2)
             cands += self.own  # bᵢ fᵢ
         return self.vehicle, cands, cols
+
+    def reads_acceleration(self) -> bool:
+        """Whether a column of these hypotheses, as :meth:`columns` made them, reads the
+        acceleration: its unit changes the mass matrix (an added mass, a payload's; the
+        centre of gravity's height, which M_RB couples to the accelerations)."""
+        if self._structure is None:  # no column of the loop's made yet (thrusters only)
+            return False
+        if self._inertial is None:
+            s = self._structure
+            base = s.parts({}).model(check=False).mass_matrix().numpy()
+            self._inertial = any(
+                not np.array_equal(s.parts({n: 1.0}).model(check=False).mass_matrix().numpy(), base)
+                for n in s.names
+            )
+        return self._inertial
+
+    def extrapolated(self, data: dict, rows: np.ndarray) -> np.ndarray:
+        """Which of ``rows`` (as :meth:`columns` takes them) have columns read off the
+        acceleration's extrapolated end, [rows] bool: the span's last half smoothing window
+        (:func:`smoothing_window`) where a column reads the acceleration
+        (:meth:`reads_acceleration`), none elsewhere."""
+        out = np.zeros(rows.size, dtype=bool)
+        if rows.size and self.reads_acceleration():
+            span = data["t"][max(rows[0] - 1, 0) : rows[-1] + 1]  # as midpoint_data's
+            half = smoothing_window(span, self.savgol) // 2
+            out[rows.size - min(half, rows.size) :] = True
+        return out
 
 
 def hypothesis_columns(monitor, data: dict, rows: np.ndarray, names=None) -> tuple:
