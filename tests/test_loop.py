@@ -954,3 +954,171 @@ def test_runs_joined_without_a_fresh_index_are_refused_before_the_loop():
     twice = pd.concat([run.assign(experiment="a"), run.assign(experiment="b")])
     with pytest.raises(NnidInputError, match=r"repeats 100 labels \(the first: 0\).*pd\.concat"):
         ResidualLoop(veh, max_effects=1).fit(twice)
+
+
+def _flown(vehicle, name: str, motion: dict, noise: float, rng) -> pd.DataFrame:
+    """A 100-s run of ``motion`` (velocity and acceleration columns; the rest zero) with the
+    forces that fly it under ``vehicle``, and ``noise`` (N) of noise in X and Z."""
+    from nnid.datasets.arrays import log_arrays
+    from nnid.models.parametric import ParametricFossen
+    from nnid.physics.parts import Parts
+
+    t = np.arange(2000) * 0.05
+    still = dict.fromkeys(["x", "y", "z", "phi", "theta", "psi", "u", "v", "w", "p", "q", "r",
+                           "du", "dv", "dw", "dp", "dq", "dr"], np.zeros(t.size))  # fmt: skip
+    log = pd.DataFrame(
+        {"t": t, "experiment": name, **still, **{k: f(t) for k, f in motion.items()}}
+    )
+    data = log_arrays(log.assign(**{f"tau_{f}": 0.0 for f in "XYZKMN"}), vehicle)
+    force = ParametricFossen(vehicle, []).equation_residual(Parts.from_vehicle(vehicle), data)
+    force[:, [0, 2]] += rng.normal(0, noise, (t.size, 2))
+    return log.assign(**{f"tau_{f}": force[:, k] for k, f in enumerate("XYZKMN")})
+
+
+def _excitation_said(fit_call) -> list[str]:
+    """The parameters a refit's warnings call not excited."""
+    import warnings
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        fit_call()
+    said = [str(w.message) for w in caught if "not excited" in str(w.message)]
+    return [n.strip() for m in said for n in m.split("zero regressor):")[1].split(",")]
+
+
+@pytest.mark.parametrize("surge", [1e-7, 1e-13])
+def test_a_candidate_the_data_do_not_excite_is_screened_as_not_excited(surge):
+    """A heave run whose surge speed is ``surge`` of its heave, analysed in heave: the refit of
+    the baseline with Z:u (or Z:u|u|) leaves it out as not excited (at 1e-7 nothing beside
+    Z:w|w| in the heave equation, at 1e-13 rounding), but the closed-form screen scored it as
+    if it were measured: a value, a standard error, a p-value and the F-test's verdict. The
+    screen now judges each linear candidate as the refit would and says it is not excited,
+    with nothing measured; the candidates the heave measures are scored as before."""
+    from conftest import make_vehicle
+
+    from nnid.loop.diagnose import NOT_EXCITED, Workspace, refit, screen_linear
+    from nnid.reports.loop_report import candidate_rows
+
+    vehicle = make_vehicle(damping={"model": None, "coefficients": {"Z:w*abs(w)": -30.0}})
+    rng = np.random.default_rng(1)
+    runs = [
+        _flown(vehicle, name, {"w": lambda t, a=a: 0.4 * np.sin(0.5 * t + a),
+                               "dw": lambda t, a=a: 0.2 * np.cos(0.5 * t + a),
+                               "u": lambda t, a=a: surge * np.cos(0.3 * t + a),
+                               "du": lambda t, a=a: -0.3 * surge * np.sin(0.3 * t + a)},
+               1e-3, rng)
+        for name, a in (("a", 0.0), ("b", 1.0))
+    ]  # fmt: skip
+    ws = Workspace(*runs, vehicle, None, zoh_midpoint=False, dofs=("w",))
+    fit = refit(ws, vehicle, ["Z:w*abs(w)"])
+    names = ["coupled_damping.Z:u", "coupled_damping.Z:u*abs(u)", "linear_damping.w",
+             "coupled_damping.Z:w*w", "external_bias.w", "added_mass.w"]  # fmt: skip
+    chosen = [c for c in candidates(vehicle, runs[0]) if c.name in names]
+    assert sorted(c.name for c in chosen) == sorted(names)
+    scored = {s.name: s for s in screen_linear(ws, fit, chosen)}
+    assert set(scored) == set(names)
+    unexcited = {  # as the refit of the baseline with each candidate says
+        c.name: c.parameter
+        in _excitation_said(lambda c=c: refit(ws, vehicle, [*fit.unknowns, c.parameter], False))
+        for c in chosen
+    }
+    assert unexcited == {c.name: "u" in c.parameter for c in chosen}
+    assert {n: s.reason == NOT_EXCITED for n, s in scored.items()} == unexcited
+    for name, s in scored.items():
+        if unexcited[name]:
+            assert not s.excited and not s.admissible and np.isnan(s.value) and np.isnan(s.p_value)
+            _, value, se, _, p, gain, verdict = candidate_rows([s.as_dict()])[0]
+            assert value == se == p == gain == "-" and verdict == NOT_EXCITED
+        else:
+            assert s.excited and np.isfinite(s.value) and np.isfinite(s.p_value)
+
+
+def test_a_heave_only_fit_judges_its_columns_by_the_heave_equation_as_least_squares_does():
+    """A surge run whose heave is 1e-12 of it, analysed in heave alone. Z_wdot's column is ẇ
+    in the heave equation and C_A(ν)ν products in the other five; its rounding floor was sized
+    over all six (a product's, 1e-20 of the motion squared, not ẇ's 1e-10 of the acceleration),
+    and the loop's refit estimated Z_wdot off a heave of rounding, beside Z:w|w| it called
+    rounding in the same equation, where the least-squares trainer of the heave equation calls
+    both not excited. The floors are now sized over the equations the loop fits, and its screen
+    says added_mass.w not excited too."""
+    from conftest import make_vehicle
+
+    from nnid.datasets.arrays import log_arrays
+    from nnid.loop.diagnose import NOT_EXCITED, Workspace, refit, screen_linear
+    from nnid.models.parametric import ParametricFossen
+    from nnid.trainers.least_squares import LeastSquares
+
+    truth = {"X:u*abs(u)": -30.0, "Z:w*abs(w)": -30.0}
+    vehicle = make_vehicle(damping={"model": None, "coefficients": truth})
+    rng = np.random.default_rng(0)
+    heave = 1e-12
+    runs = [
+        _flown(vehicle, name, {"u": lambda t, a=a: 1.0 + 0.5 * np.sin(0.3 * t + a),
+                               "du": lambda t, a=a: 0.15 * np.cos(0.3 * t + a),
+                               "w": lambda t, a=a: heave * np.sin(0.7 * t + a),
+                               "dw": lambda t, a=a: 0.7 * heave * np.cos(0.7 * t + a)},
+               1e-3, rng)
+        for name, a in (("a", 0.0), ("b", 1.0))
+    ]  # fmt: skip
+    names = ["Z:w*abs(w)", "Z_wdot"]
+    trained = LeastSquares(correlated=False)
+    trainer_said = _excitation_said(
+        lambda: trained.solve(
+            ParametricFossen(vehicle, names, ["w"]).regression(log_arrays(runs[0], vehicle))
+        )
+    )
+    assert sorted(trainer_said) == sorted(names)
+    ws = Workspace(*runs, vehicle, None, zoh_midpoint=False, dofs=("w",))
+    assert sorted(_excitation_said(lambda: refit(ws, vehicle, names, held_out=False))) == sorted(
+        trainer_said
+    )
+    fit = refit(ws, vehicle, names[:1])
+    added_mass = [c for c in candidates(vehicle, runs[0]) if c.name == "added_mass.w"]
+    assert screen_linear(ws, fit, added_mass)[0].reason == NOT_EXCITED
+
+
+def test_candidates_the_data_do_not_excite_are_counted_in_one_line_and_named_in_loop_json():
+    """A heave run whose surge is rounding (1e-13 of the heave), analysed in heave: the terms
+    in u are not excited and measure nothing. Listed in the pass's table and in loop.json's
+    ranked candidates they padded both with rows of "not excited" (165 on a BlueROV1 log
+    without u or v); they are now named in the step's ``not_excited`` and counted in one line
+    of the report, and every row of the tables is a scored candidate."""
+    from conftest import make_vehicle
+
+    from nnid.loop.diagnose import NOT_EXCITED
+    from nnid.reports.loop_report import markdown
+
+    vehicle = make_vehicle(damping={"model": None, "coefficients": {"Z:w*abs(w)": -30.0}})
+    rng = np.random.default_rng(2)
+    log = pd.concat(
+        [
+            _flown(vehicle, name, {"w": lambda t, a=a: 0.4 * np.sin(0.5 * t + a),
+                                   "dw": lambda t, a=a: 0.2 * np.cos(0.5 * t + a),
+                                   "u": lambda t, a=a: 1e-13 * np.cos(0.3 * t + a),
+                                   "du": lambda t, a=a: -3e-14 * np.sin(0.3 * t + a)},
+                   1e-3, rng)
+            for name, a in (("a", 0.0), ("b", 1.0), ("c", 2.0))
+        ],
+        ignore_index=True,
+    )  # fmt: skip
+    loop = ResidualLoop(vehicle, dofs=("w",), max_effects=1).fit(log)
+    result = loop.as_dict()
+    step = result["steps"][0]
+    named = step["not_excited"]
+    # the damping terms in a velocity other than w (u of rounding, v p q r zero), and only those
+    ranked = loop.steps_[0].ranked
+    in_others = {
+        s.name
+        for s in ranked
+        if ":" in (s.candidate.parameter or "")  # a damping term; a search has none
+        and set(s.candidate.parameter.split(":")[1]) & set("uvpqr")
+    }
+    assert named and set(named) == in_others
+    shown = [*result["candidates"], *(c for s in result["steps"] for c in s["top"])]
+    assert shown and not {c["effect"] for c in shown} & set(named)
+    assert all(c["reason"] != NOT_EXCITED and c["improvement"] is not None for c in shown)
+    assert result["candidates_tested"] == len(ranked) > len(named)
+    said = [line for line in markdown(result).splitlines() if "not excited" in line]
+    assert said == [
+        line for line in said if line.startswith(f"{len(named)} candidates not excited")
+    ] and len(said) == len(result["steps"])

@@ -165,11 +165,20 @@ TYPICAL_ROWS = 20_000
 def typical_size(columns: np.ndarray) -> float:
     """The typical size of a regressor of ``columns`` ``[N, P]``, against which a column of
     rounding is zero (:data:`ROUNDING`): the largest, over the columns, of the median |x| of
-    each column's finite non-zero entries. A median, as one column singular on a few rows (an
-    (η − 1) term at U = 0 under a current, 1e12: :func:`~nnid.physics.damping_library.atoms`)
-    must not set it; of the non-zero entries, as a stacked regression (a row per DOF) reads a
-    column on its DOF's rows only; the largest over the columns, not their median, as most
-    columns of a library may be rounding (the u, v, p, q, r terms of a heave-only log)."""
+    each column's finite non-zero entries (:func:`column_sizes`). A median, as one column
+    singular on a few rows (an (η − 1) term at U = 0 under a current, 1e12:
+    :func:`~nnid.physics.damping_library.atoms`) must not set it; of the non-zero entries, as a
+    stacked regression (a row per DOF) reads a column on its DOF's rows only; the largest over
+    the columns, not their median, as most columns of a library may be rounding (the u, v, p,
+    q, r terms of a heave-only log)."""
+    return float(column_sizes(columns).max(initial=0.0))
+
+
+def column_sizes(columns: np.ndarray) -> np.ndarray:
+    """Each column's median |x| over its finite non-zero entries ``[P]`` (0 where it has none),
+    of at most :data:`TYPICAL_ROWS` rows of ``columns`` ``[N, P]``: the sizes whose largest is
+    :func:`typical_size`. Its rows are drawn by their count alone, so a block of a regression's
+    columns on the same rows is sized as the whole regression sizes it."""
     a = np.asarray(columns)
     if a.shape[0] > TYPICAL_ROWS:  # a size within decades is all the rule needs: rows drawn
         # by a fixed local generator, not a stride, which could read one DOF's rows of a
@@ -178,8 +187,9 @@ def typical_size(columns: np.ndarray) -> float:
         a = a[np.sort(keep)]
     a = np.abs(a.astype(np.float64, copy=False))
     read = np.isfinite(a) & (a > 0)
-    sizes = [float(np.median(a[read[:, j], j])) for j in range(a.shape[1]) if read[:, j].any()]
-    return max(sizes, default=0.0)
+    return np.array(
+        [float(np.median(a[read[:, j], j])) if read[:, j].any() else 0.0 for j in range(a.shape[1])]
+    )
 
 
 def kind_sizes(columns: np.ndarray, to_linear: float) -> np.ndarray:
@@ -242,36 +252,56 @@ def rounding_floors(at_motion: np.ndarray, at_probe: np.ndarray) -> np.ndarray:
     regression's own columns, of a log where every column is rounding (the K equation of a
     heave-only log, φ and p ~ 1e-17), nothing was, and r_b.z read -2.4e-4 ± 4.4e-4 off a target
     of rounding. NaN (the caller's scalar rule judges it) only where no column has a size at
-    the reference motion."""
+    the reference motion. Leading axes (``at_motion`` ``[..., P]``, ``at_probe``
+    ``[..., D, P]``): as many regressions, each its own largest column."""
     one = np.asarray(at_motion, dtype=np.float64)
-    probe = np.atleast_2d(np.asarray(at_probe, dtype=np.float64))
+    probe = np.asarray(at_probe, dtype=np.float64)
+    if probe.ndim == one.ndim:  # one part: the whole motion
+        probe = probe[..., None, :]
     with np.errstate(divide="ignore", invalid="ignore"):
-        powers = np.log(probe / one) / np.log(POWER_PROBE)
+        powers = np.log(probe / one[..., None, :]) / np.log(POWER_PROBE)
     grows = np.isfinite(powers) & (powers >= 0.5)
-    power = np.where(grows, powers, np.inf).min(0, initial=np.inf)
+    power = np.where(grows, powers, np.inf).min(-2, initial=np.inf)
     sized = (one > 0) & np.isfinite(one)
-    moves = sized & grows.any(0)
-    beside = ROUNDING * one[sized].max() if sized.any() else np.nan
+    moves = sized & grows.any(-2)
+    largest = np.where(sized, one, -np.inf).max(-1, initial=-np.inf, keepdims=True)
+    beside = np.where(np.isfinite(largest), ROUNDING * largest, np.nan)
     return np.where(moves, ROUNDING ** np.clip(np.nan_to_num(power), 1.0, 3.0) * one, beside)
+
+
+def motion_sizes(
+    columns_at: Callable[[np.ndarray], Sequence[np.ndarray]], parts: int = 1
+) -> tuple[np.ndarray, np.ndarray]:
+    """The sizes a regression's floors of the rounding rule are made of
+    (:func:`rounding_floors`), of a regression that knows the motion its columns are made of:
+    ``columns_at(scale)`` gives its columns (each an array of its entries) at the log's typical
+    motion with each of its ``parts`` scaled by ``scale`` ``[parts]``, read at scale 1
+    (``[P]``) and with each part alone at :data:`POWER_PROBE` (``[parts, P]``); a column's size
+    there is its typical size (:func:`column_sizes` of its entries). One part: the whole
+    motion; six: each velocity, for columns that are products of them (SINDy's library terms;
+    a Fossen regression's, each velocity with its acceleration), so that a product of a
+    velocity of rounding is rounding."""
+
+    def sizes(scale: np.ndarray) -> np.ndarray:
+        columns = [np.reshape(c, -1) for c in columns_at(scale)]
+        out = np.zeros(len(columns))
+        # columns of one length sized in one call (the loop's screen sizes hundreds of
+        # candidates), drawn as each alone would be (column_sizes draws by the count)
+        for length in {c.size for c in columns}:
+            same = [j for j, c in enumerate(columns) if c.size == length]
+            out[same] = column_sizes(np.stack([columns[j] for j in same], 1))
+        return out
+
+    probes = np.where(np.eye(parts, dtype=bool), POWER_PROBE, 1.0)
+    return sizes(np.ones(parts)), np.stack([sizes(s) for s in probes])
 
 
 def motion_floors(
     columns_at: Callable[[np.ndarray], Sequence[np.ndarray]], parts: int = 1
 ) -> np.ndarray:
-    """Each column's floor of the rounding rule (:func:`rounding_floors`) of a regression that
-    knows the motion its columns are made of: ``columns_at(scale)`` gives its columns (each an
-    array of its entries) at the log's typical motion with each of its ``parts`` scaled by
-    ``scale`` ``[parts]``, read at scale 1 and with each part alone at :data:`POWER_PROBE`; a
-    column's size there is its typical size (:func:`typical_size`). One part: the whole motion;
-    six: each velocity, for columns that are products of them (SINDy's library terms; a Fossen
-    regression's, each velocity with its acceleration), so that a product of a velocity of
-    rounding is rounding."""
-
-    def sizes(scale: np.ndarray) -> np.ndarray:
-        return np.array([typical_size(np.reshape(c, (-1, 1))) for c in columns_at(scale)])
-
-    probes = np.where(np.eye(parts, dtype=bool), POWER_PROBE, 1.0)
-    return rounding_floors(sizes(np.ones(parts)), np.stack([sizes(s) for s in probes]))
+    """Each column's floor of the rounding rule (:func:`rounding_floors`) of the sizes
+    :func:`motion_sizes` reads of ``columns_at`` in ``parts`` parts of the motion."""
+    return rounding_floors(*motion_sizes(columns_at, parts))
 
 
 def rounding_columns(
@@ -282,9 +312,13 @@ def rounding_columns(
     of the regression, :func:`typical_size`, or one per column: :func:`kind_sizes`), or at
     most their own floor in ``floors`` where it is not NaN (:func:`rounding_floors`); a NaN RMS
     too, as nothing shows it above. A column of rounding is zero: scaled to unit RMS it would
-    be a full-size column of noise."""
+    be a full-size column of noise. Leading axes (``[..., P]``, ``reference`` ``[...]``, one
+    per regression, or ``[..., P]``, one per column): as many regressions."""
     raw = np.asarray(column_rms, dtype=np.float64)
-    floor = np.full(raw.shape, ROUNDING * np.asarray(reference, dtype=np.float64))
+    reference = np.asarray(reference, dtype=np.float64)
+    if reference.ndim < raw.ndim:  # one per regression
+        reference = reference[..., None]
+    floor = np.broadcast_to(ROUNDING * reference, raw.shape)
     if floors is not None:  # a column's own floor, where its regression gives one
         own = np.asarray(floors, dtype=np.float64)
         floor = np.where(np.isnan(own), floor, own)
@@ -351,23 +385,7 @@ def excitation_from_gram(
     p = len(names)
     rms = np.sqrt(np.clip(np.diag(gram), 0.0, None) / max(n, 1))
     raw = rms if column_rms is None else np.asarray(column_rms, dtype=np.float64)
-    # the largest RMS only where no robust reference is given (from ΦᵀΦ alone): one column
-    # singular on a few rows would set it
-    typical = reference if reference > 0 else raw.max(initial=0.0)
-    # the tol rule is no limit of the scaled Gram (columns are scaled to unit RMS, so one a
-    # millionth of another is not lost in it), but a verdict on the equation's other columns:
-    # its size is their largest, capped at the typical one, as one column singular on a few
-    # rows (an (η − 1) term at U = 0, 1e12) made every other column of its block "zero
-    # regressor"; unweighted, as weights of 1/σ̂² per equation (beside one of exact data:
-    # 1e16) did the same. Within each equation, as each is fitted against its own target,
-    # in its own units (N, N m): X's u|u| said nothing of N's rows, yet called N:r|r| zero
-    sizes = raw[None, :] if by_equation is None else np.asarray(by_equation, np.float64)
-    block = np.minimum(sizes.max(1, initial=0.0), typical)
-    # a column in several equations' rows (an added mass: its ν̇ in its own equation, its
-    # C_A(ν)ν in others) is measured where any one of them measures it beside that
-    # equation's columns: its rows there are data whatever it is in the other equations
-    measured = (sizes > tol * block[:, None]).any(0)
-    live = (rms > 0) & measured & ~rounding_columns(raw, typical, floors)
+    live = (rms > 0) & measured_columns(raw, reference, floors, by_equation, tol)
     unexcited = [names[j] for j in range(p) if not live[j]]
     d = np.where(live, 1.0 / np.where(live, rms, 1.0), 0.0)
     normed = gram * np.outer(d, d) / max(n, 1)
@@ -405,6 +423,45 @@ def excitation_from_gram(
         warnings,
         unread,
     )
+
+
+def measured_columns(
+    column_rms: np.ndarray,
+    reference: float | np.ndarray = 0.0,
+    floors: np.ndarray | None = None,
+    by_equation: np.ndarray | None = None,
+    tol: float = 1e-6,
+) -> np.ndarray:
+    """Which columns ``[P]`` of a regression its data measure, by the two rules of
+    :func:`excitation_from_gram` (which says the rest "not excited (zero regressor)"): above
+    ``tol`` of the largest column of a DOF equation they are in (``by_equation`` ``[E, P]``,
+    each column's unweighted RMS in each equation; None: one equation, ``column_rms``), that
+    largest capped at ``reference``; and above their floor of the rounding rule
+    (:func:`rounding_columns`: ``floors`` where not NaN, else :data:`ROUNDING` ×
+    ``reference``). ``reference``: the typical size of a regressor of the whole regression
+    (:func:`typical_size`); 0: the largest ``column_rms`` stands for it. Leading axes
+    (``column_rms`` and ``floors`` ``[..., P]``, ``reference`` ``[...]``, ``by_equation``
+    ``[..., E, P]``): as many regressions, judged each on its own (a candidate column beside
+    a fit's, for each candidate)."""
+    raw = np.asarray(column_rms, dtype=np.float64)
+    reference = np.asarray(reference, dtype=np.float64)
+    # the largest RMS only where no robust reference is given (from ΦᵀΦ alone): one column
+    # singular on a few rows would set it
+    typical = np.where(reference > 0, reference, raw.max(-1, initial=0.0))
+    # the tol rule is no limit of the scaled Gram (columns are scaled to unit RMS, so one a
+    # millionth of another is not lost in it), but a verdict on the equation's other columns:
+    # its size is their largest, capped at the typical one, as one column singular on a few
+    # rows (an (η − 1) term at U = 0, 1e12) made every other column of its block "zero
+    # regressor"; unweighted, as weights of 1/σ̂² per equation (beside one of exact data:
+    # 1e16) did the same. Within each equation, as each is fitted against its own target,
+    # in its own units (N, N m): X's u|u| said nothing of N's rows, yet called N:r|r| zero
+    sizes = raw[..., None, :] if by_equation is None else np.asarray(by_equation, np.float64)
+    block = np.minimum(sizes.max(-1, initial=0.0), typical[..., None])
+    # a column in several equations' rows (an added mass: its ν̇ in its own equation, its
+    # C_A(ν)ν in others) is measured where any one of them measures it beside that
+    # equation's columns: its rows there are data whatever it is in the other equations
+    measured = (sizes > tol * block[..., None]).any(-2)
+    return measured & ~rounding_columns(raw, typical, floors)
 
 
 def _resolved(eig: np.ndarray) -> np.ndarray:

@@ -37,6 +37,12 @@ from nnid.datasets.log import VELOCITY
 from nnid.datasets.preprocess import excited_dofs, zoh_midpoint
 from nnid.evaluation.evaluate import score_split
 from nnid.evaluation.metrics import exact_mean, rmse, warmup_mask
+from nnid.evaluation.persistence import (
+    column_sizes,
+    equation_rms,
+    measured_columns,
+    rounding_floors,
+)
 from nnid.evaluation.prediction import mode_steps, predict_states
 from nnid.loop.effects import Candidate
 from nnid.models.parametric import (
@@ -53,6 +59,7 @@ from nnid.trainers.least_squares import (
     dof_variances,
     feasible_floor,
     feasible_weights,
+    rounding_scale,
     solve_regression,
 )
 from nnid.trainers.regression import Regression
@@ -102,6 +109,8 @@ class Scored:
     # where a 1-D search's best value lies at the edge of its range (or the search ran out of
     # evaluations): the size is a bound there, not a measurement, and is said so
     edge: str = ""
+    # False: the data do not excite its column (CandidateExcitation): nothing measured
+    excited: bool = True
 
     @property
     def name(self) -> str:
@@ -166,6 +175,7 @@ class Workspace:
         self.variance_floor: np.ndarray | None = None  # per DOF, set with the weights
         self.tau_corr = 1.0
         self._cache: dict[tuple, dict[str, np.ndarray]] = {}
+        self._sizes: dict[tuple, dict[str, tuple[float, float]]] = {}
         self._tau: dict[tuple, dict[str, np.ndarray]] = {}
         # held-out simulations of one fit, by (id(vehicle), mode): the loop's gate and its
         # before/after scores simulate the same models (:meth:`ResidualLoop._velocity_scores`)
@@ -200,6 +210,31 @@ class Workspace:
             cache.update({n: cols[:, :, k] for k, n in enumerate(missing)})
         return np.stack([cache[n] for n in names], 2)
 
+    def reference_sizes(self, vehicle, names: list[str]) -> tuple[np.ndarray, np.ndarray]:
+        """The training columns' sizes of parameters at ``vehicle`` over the analysed DOF
+        equations, at the log's typical motion ``[P]`` and with each velocity scaled
+        ``[6, P]``, of which their rounding
+        floors are made (:meth:`ParametricFossen.reference_sizes`), cached as :meth:`columns`
+        caches the columns: a column of a parameter the model is affine in depends only on
+        the data, the current, the lag and the deadband. Damping terms are sized together
+        (one basis evaluation), the rest apart from them (a model each, which would otherwise
+        carry hundreds of damping terms)."""
+        key = (tuple(vehicle.current), vehicle.actuator_lag, vehicle.deadband)
+        cache = self._sizes.setdefault(key, {})
+        missing = [n for n in dict.fromkeys(names) if n not in cache]
+        for damping in (True, False):
+            part = [n for n in missing if (":" in n) == damping]
+            if part:
+                structure = ParametricFossen(vehicle, part)
+                with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+                    one, probe = structure.reference_sizes(
+                        self.arrays(vehicle), self.accelerations(), _fitted_dofs(self)
+                    )
+                cache.update({n: (one[k], probe[:, k]) for k, n in enumerate(part)})
+        one = np.array([cache[n][0] for n in names], dtype=float)
+        probe = np.array([cache[n][1] for n in names], dtype=float).reshape(len(names), -1)
+        return one, probe.T
+
     def nu_dot_f(self, part: str) -> np.ndarray | None:
         """sF(s)[ν] of a part at the workspace's λ (None unfiltered), filtered once: it
         depends on the measured velocities alone, and every regression of the loop (each
@@ -213,6 +248,13 @@ class Workspace:
                 data, data["nu"], self.filter_lambda, derivative=True
             )
         return self._nu_dot_f[part]
+
+    def accelerations(self) -> np.ndarray:
+        """ν̇ as the training regression reads it, on its rows: sF(s)[ν] of the filtered form,
+        else the logged (or derived) ν̇; the columns' rounding floors are sized at it
+        (:meth:`ParametricFossen.reference_sizes`)."""
+        acc = self.data["nu_dot"] if self.filter_lambda is None else self.nu_dot_f("train")
+        return acc[self.settled(self.data)]
 
     def settled(self, data: dict[str, np.ndarray]) -> np.ndarray:
         """The rows the regression keeps: all, or those after the filters settle."""
@@ -241,11 +283,19 @@ def _regression(
     data: dict,
     filter_lambda: float | None,
     nu_dot_f: np.ndarray | None = None,
+    floor_dofs: tuple[str, ...] | None = None,
 ) -> Regression:
     """The six DOF equations' regression of the unknowns ``names`` at ``vehicle``, stacked
-    sample-major (:meth:`ParametricFossen.regression`; ``nu_dot_f`` as :func:`_columns`)."""
+    sample-major (:meth:`ParametricFossen.regression`; ``nu_dot_f`` as :func:`_columns`), its
+    rounding floors sized over the equations ``floor_dofs`` (default: all six)."""
     with np.errstate(invalid="ignore", over="ignore", divide="ignore"):  # rows of NaN (gaps)
-        return ParametricFossen(vehicle, names).regression(data, filter_lambda, nu_dot_f)
+        structure = ParametricFossen(vehicle, names)
+        return structure.regression(data, filter_lambda, nu_dot_f, floor_dofs)
+
+
+def _fitted_dofs(ws: Workspace) -> tuple[str, ...]:
+    """The DOF equations the loop's fits weight (weight > 0): the analysed ones."""
+    return tuple(d for d, m in zip(DOFS, ws.mask, strict=True) if m > 0)
 
 
 def _wss(x: np.ndarray, w: np.ndarray) -> float:
@@ -258,7 +308,13 @@ def refit(ws: Workspace, vehicle, unknowns: list[str], held_out: bool = True) ->
     set by the first (baseline) fit, 1/σ̂²_dof of its ordinary-least-squares residual (floored,
     :func:`_set_weights`), and renewed by :func:`reweight` as each effect is added. Without
     ``held_out`` the held-out arrays are left empty (for searches that need only the RSS)."""
-    reg = _regression(vehicle, unknowns, ws.arrays(vehicle), ws.filter_lambda, ws.nu_dot_f("train"))
+    # its columns are judged by the equations it fits, as a trainer's fit of those DOFs judges
+    # them: an added mass's C_A(ν)ν rows in the other five set its floor 1e-10 below its ν̇
+    # row's, and a heave-only fit estimated Z_wdot off a heave of rounding (1e-12 of the surge)
+    reg = _regression(
+        vehicle, unknowns, ws.arrays(vehicle), ws.filter_lambda, ws.nu_dot_f("train"),
+        _fitted_dofs(ws),
+    )  # fmt: skip
     n, p = reg.n_samples, len(unknowns)
     phi = reg.phi.reshape(n, 6, p)
     if held_out:
@@ -341,10 +397,18 @@ def residual_correlation_time(e: np.ndarray, dofs: tuple[str, ...] = DOFS) -> fl
 
 
 def screen(
-    ws: Workspace, fit: Fit, cands: list[Candidate], cols: np.ndarray, cols_val: np.ndarray
+    ws: Workspace,
+    fit: Fit,
+    cands: list[Candidate],
+    cols: np.ndarray,
+    cols_val: np.ndarray,
+    excited: np.ndarray | None = None,
 ) -> list[Scored]:
     """Score linear candidates whose columns at the current fit are ``cols`` [N, 6, K] (and
-    ``cols_val``): the exact joint refit of each with the fit's unknowns, in closed form."""
+    ``cols_val``): the exact joint refit of each with the fit's unknowns, in closed form.
+    ``excited`` [K] (:meth:`CandidateExcitation.excited`; None: all): a candidate the data do not
+    excite is said :data:`NOT_EXCITED`, with nothing measured (no value, s.e., p-value or
+    held-out gain)."""
     w = ws.weights
     n, n_dof, p = fit.phi.shape
     # the weighted sums over samples and DOFs as matrix products on rows (n, d): BLAS, where
@@ -379,6 +443,13 @@ def screen(
     per_dof = 1.0 - after / np.where(before > 0, before, np.inf)[:, None]
     out = []
     for k, cand in enumerate(cands):
+        if excited is not None and not excited[k]:
+            nothing = float("nan")
+            out.append(
+                Scored(cand, nothing, nothing, nothing, nothing, nothing, {}, nothing,
+                       reason=NOT_EXCITED, excited=False)
+            )  # fmt: skip
+            continue
         if not ok[k]:
             continue
         scale = cand.value_scale(fit.vehicle)
@@ -423,19 +494,107 @@ def screen_linear(ws: Workspace, fit: Fit, cands: list[Candidate]) -> list[Score
     data, data_val = ws.arrays(fit.vehicle), ws.arrays(fit.vehicle, "val")
     damping = [c for c in cands if ":" in c.parameter]
     other = [c for c in cands if ":" not in c.parameter]
+    excitation = CandidateExcitation(ws, fit, cands)
     out: list[Scored] = []
     for start in range(0, len(damping), _CHUNK):
         chunk = damping[start : start + _CHUNK]
         cols = damping_block(ws, fit.vehicle, chunk, data)
         cols_v = damping_block(ws, fit.vehicle, chunk, data_val)
-        out += screen(ws, fit, chunk, cols, cols_v)
+        out += screen(ws, fit, chunk, cols, cols_v, excitation.excited(chunk, cols))
     if other:
         names = [c.parameter for c in other]
         cols = ws.columns(fit.vehicle, names, "train")
         cols_v = ws.columns(fit.vehicle, names, "val")
-        out += screen(ws, fit, other, cols, cols_v)
-    mark_aliases(out)
+        out += screen(ws, fit, other, cols, cols_v, excitation.excited(other, cols))
+    mark_aliases([s for s in out if s.excited])
     return out
+
+
+#: the verdict on a candidate whose column the data do not excite, in the refit's words
+NOT_EXCITED = "not excited by this data (zero regressor): nothing of it is measured"
+
+
+class CandidateExcitation:
+    """Which linear candidates the data excite, each judged as the refit of the fit's unknowns
+    with it would judge it (:func:`~nnid.trainers.least_squares.solve_regression`: within each
+    analysed DOF equation beside the other columns, and against its own rounding floor sized
+    over those equations; :func:`~nnid.evaluation.persistence.measured_columns`). What the
+    check reads of the fit's own columns is made once a pass, each column's floor once a fit
+    (:meth:`Workspace.reference_sizes`); :meth:`excited` judges a block of candidates. The
+    closed-form screen has no such rule of its own: on a heave run whose surge is 1e-13 of it
+    (rounding), analysed in heave, it scored Z:u = -2.2e8 ± 3.2e8 (p = 0.49) and Z:u|u| =
+    -2.8e21 as if measured, where the refit leaves both out."""
+
+    def __init__(self, ws: Workspace, fit: Fit, cands: list[Candidate]) -> None:
+        n, _, p = fit.phi.shape
+        self.ws, self.vehicle = ws, fit.vehicle
+        self.phi = fit.phi.reshape(n * 6, p)
+        # the rows the refit reads: finite, of an analysed DOF equation (weight > 0)
+        self.rows = (np.tile(ws.weights, n) > 0) & np.isfinite(fit.e).reshape(-1)
+        self.rows &= np.isfinite(self.phi).all(1)
+        self.equations = np.flatnonzero(ws.weights > 0)  # the analysed DOF equations
+        self._baseline(self.rows)
+        # every candidate sized here at once (one damping basis evaluation for all of them)
+        names = [*fit.unknowns, *(c.parameter for c in cands)]
+        one, probe = ws.reference_sizes(fit.vehicle, names)
+        self.sizes = (one[:p], probe[:, :p])
+
+    def _baseline(self, rows: np.ndarray) -> None:
+        """The fit's columns' RMS, typical size and RMS per DOF equation over ``rows``."""
+        self.raw, self.size = rounding_scale(self.phi[rows])
+        self.by_equation = equation_rms(self.phi, 6, rows)
+
+    def _by_equation(self, cols: np.ndarray, rows: np.ndarray) -> np.ndarray:
+        """:func:`~nnid.evaluation.persistence.equation_rms` of ``cols`` [N, 6, K] over
+        ``rows``, read in the analysed equations only (0 in the others, which no row keeps):
+        beside three of six, the mask over all six cost more than the rest of the check."""
+        k, eqs = cols.shape[2], self.equations
+        block = cols if eqs.size == 6 else cols[:, eqs, :]
+        out = np.zeros((6, k))
+        kept = rows.reshape(-1, 6)[:, eqs].reshape(-1)
+        out[eqs] = equation_rms(block.reshape(-1, k), eqs.size, kept)
+        return out
+
+    def excited(self, cands: list[Candidate], cols: np.ndarray) -> np.ndarray:
+        """Whether each of ``cands`` (columns ``cols`` [N, 6, K] at the fit) is excited."""
+        k = cols.shape[2]
+        col = cols.reshape(-1, k)
+        rows = self.rows
+        c_eq = self._by_equation(cols, rows)
+        if not np.isfinite(c_eq).all():  # the refit leaves out a candidate's NaN rows
+            rows = rows & np.isfinite(col).all(1)
+            self._baseline(rows)
+            c_eq = self._by_equation(cols, rows)
+        # each column's RMS over the rows, from its RMS in each equation and their counts
+        count = rows.reshape(-1, 6).sum(0)
+        c_raw = np.sqrt(count @ c_eq**2 / max(count.sum(), 1))
+
+        def joined(base: np.ndarray, own: np.ndarray) -> np.ndarray:
+            """The fit's ``base`` [..., P] with each candidate's ``own`` [..., K] as its last
+            column: [K, ..., P + 1], a regression per candidate."""
+            own = np.moveaxis(own, -1, 0)[..., None]
+            return np.concatenate([np.broadcast_to(base, (k, *base.shape)), own], -1)
+
+        one, probe = self.ws.reference_sizes(self.vehicle, [c.parameter for c in cands])
+        floors = rounding_floors(joined(self.sizes[0], one), joined(self.sizes[1], probe))
+        raw = joined(self.raw, c_raw)
+        by_equation = joined(self.by_equation, c_eq)
+
+        def verdict(reference: np.ndarray) -> np.ndarray:
+            return measured_columns(raw, reference, floors, by_equation)[:, -1] & (c_raw > 0)
+
+        # the typical size of the regression with a candidate in it is at least the fit's own,
+        # and the verdict only falls as it grows: a candidate's own size (a median over its
+        # rows) is needed only where the two ends disagree
+        out = verdict(np.full(k, self.size))
+        need = (out != verdict(np.full(k, np.inf))) | (self.size == 0)
+        if need.any():
+            reference = np.full(k, self.size)
+            reference[need] = np.maximum(self.size, column_sizes(col[rows][:, need]))
+            out[need] = verdict(reference)[need]
+        if rows is not self.rows:
+            self._baseline(self.rows)
+        return out
 
 
 #: relative agreement of two candidates' F-test sums and held-out gains that marks their
@@ -568,6 +727,7 @@ def rescore(ws: Workspace, fit: Fit, scored: list[Scored]) -> None:
     residual (the model *with* the effect): the baseline's residual, dominated by a missing
     effect, is correlated over whole experiments, and its autocorrelation time would make
     every test of that very effect look insignificant."""
+    scored = [s for s in scored if s.excited]  # nothing of the others is measured
     linear = [s for s in scored if s.candidate.linear]
     cols: dict[str, np.ndarray] = {}
     if linear:
@@ -610,7 +770,8 @@ def sindy_opinion(
     asks a term to explain ``share`` of the weighted training residual on its own."""
     import pysindy as ps
 
-    lin = sorted((s for s in scored if s.candidate.linear), key=lambda s: -s.improvement)[:top]
+    linear = (s for s in scored if s.candidate.linear and s.excited)
+    lin = sorted(linear, key=lambda s: -s.improvement)[:top]
     if not lin:
         return []
     data = ws.arrays(fit.vehicle)
@@ -709,6 +870,7 @@ def force_rmse(r: np.ndarray, tau: np.ndarray, dofs: tuple[str, ...]) -> dict[st
 
 
 __all__ = [
+    "CandidateExcitation",
     "Fit",
     "Scored",
     "Step",

@@ -65,6 +65,11 @@ MIN_INDEPENDENT = 10
 MAX_WORSENING = 10.0
 
 
+def _scored(step: Step) -> list[Scored]:
+    """The candidates of a pass its data excite, best first: the others measure nothing."""
+    return [s for s in step.ranked if s.excited]
+
+
 class ResidualLoop:
     """Find effects the vehicle file lacks in a log, add them, and report before and after.
 
@@ -328,10 +333,12 @@ class ResidualLoop:
                     if s is not None:
                         scored.append(s)
         tested = max(len(linear) + sum(not c.linear for c in pool), 1)
-        scored.sort(key=lambda s: -s.improvement)
+        # a candidate the data do not excite measures nothing: ranked after every other
+        scored.sort(key=lambda s: (not s.excited, -s.improvement if s.excited else 0.0))
         rescore(ws, fit, scored[: self.rescore_top])
         for s in scored:
-            self._judge(s, tested, fit)
+            if s.excited:  # the others keep their verdict (NOT_EXCITED)
+                self._judge(s, tested, fit)
         try:
             sindy = sindy_opinion(ws, fit, scored)
         except Exception as exc:  # a second opinion must not stop the loop
@@ -605,7 +612,10 @@ class ResidualLoop:
             "baseline": f"{self.vehicle.name}: vehicle file, damping structure refitted "
             f"({len(self.baseline_.unknowns)} coefficients)",
             "before": self.before_,
-            "candidates": [s.as_dict() for s in first.ranked[: self.report_candidates]],
+            # the candidates the data do not excite measure nothing: named in each step's
+            # "not_excited", not listed among the scored ones (a BlueROV1 log without u or v
+            # has 165 of them)
+            "candidates": [s.as_dict() for s in _scored(first)[: self.report_candidates]],
             "candidates_tested": len(first.ranked),
             "added": self.added,
             "after": self.after_,
@@ -614,7 +624,8 @@ class ResidualLoop:
                 {
                     "gate": gate,
                     "added": None if st.added is None else self._final_effect(st.added),
-                    "top": [s.as_dict() for s in st.ranked[:10]],
+                    "top": [s.as_dict() for s in _scored(st)[:10]],
+                    "not_excited": [s.name for s in st.ranked if not s.excited],
                     "sindy": st.sindy,
                 }
                 for st, gate in zip(self.steps_, self.gates_, strict=True)

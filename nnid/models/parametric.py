@@ -43,7 +43,7 @@ from nnid.datasets.preprocess import (
 )
 from nnid.datasets.splits import PARTS
 from nnid.errors import ExcitationWarning, NnidInputError, checked_number
-from nnid.evaluation.persistence import kind_sizes, motion_floors
+from nnid.evaluation.persistence import kind_sizes, motion_sizes, rounding_floors
 from nnid.evaluation.prediction import (
     Replay,
     blank_initial,
@@ -310,12 +310,15 @@ class ParametricFossen:
         data: dict[str, np.ndarray],
         filter_lambda: float | None = None,
         nu_dot_f: np.ndarray | None = None,
+        floor_dofs: Sequence[str] | None = None,
     ) -> Regression:
         """Φ θ = y over the chosen DOF equations; φ_k = R(e_k) − R(0), y = −R(0).
 
         With ``filter_lambda`` the filtered form is used (see :meth:`equation_residual`,
         which also says ``nu_dot_f``) and the first 3/λ seconds of each experiment, where the
-        filters settle, are left out.
+        filters settle, are left out. ``floor_dofs``: the DOF equations the columns' rounding
+        floors are sized over (:meth:`rounding_floors`), where a fit weights only those of the
+        chosen ones (the residual loop's analysed DOFs); default: all the chosen ones.
         """
         rows = [DOFS.index(d) for d in self.dofs]
         keep = np.ones(data["t"].size, dtype=bool)
@@ -342,7 +345,7 @@ class ParametricFossen:
         y = -r0[keep][:, rows].reshape(-1)
 
         def floors() -> np.ndarray:  # only where a solve reads them (Regression.floors)
-            return self.rounding_floors(data, acceleration[keep])
+            return self.rounding_floors(data, acceleration[keep], floor_dofs)
 
         return Regression(phi, y, list(self.names), self.dofs, n, floors)
 
@@ -379,12 +382,30 @@ class ParametricFossen:
                 cols.append(unit_r[0] - r0)
         return r0, cols
 
-    def rounding_floors(self, data: dict[str, np.ndarray], nu_dot: np.ndarray) -> np.ndarray:
+    def rounding_floors(
+        self,
+        data: dict[str, np.ndarray],
+        nu_dot: np.ndarray,
+        dofs: Sequence[str] | None = None,
+    ) -> np.ndarray:
         """Each unknown's floor of the rounding rule
-        (:func:`~nnid.evaluation.persistence.motion_floors`) for this structure's regression
-        on ``data``: its column at the log's typical motion, and with each velocity alone
-        times :data:`~nnid.evaluation.persistence.POWER_PROBE`, for its least power among the
-        velocities it grows with (as SINDy's library terms,
+        (:func:`~nnid.evaluation.persistence.rounding_floors`) for this structure's regression
+        on ``data``, of :meth:`reference_sizes` over the rows of ``dofs`` (default: the
+        structure's DOF equations)."""
+        return rounding_floors(*self.reference_sizes(data, nu_dot, dofs))
+
+    def reference_sizes(
+        self,
+        data: dict[str, np.ndarray],
+        nu_dot: np.ndarray,
+        dofs: Sequence[str] | None = None,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Each unknown's typical column size in the rows of the DOF equations ``dofs``
+        (default: the structure's), of which its floor of the rounding rule is made
+        (:meth:`rounding_floors`; :func:`~nnid.evaluation.persistence.motion_sizes`): its
+        column at the log's typical motion ``[P]``, and with each velocity alone times
+        :data:`~nnid.evaluation.persistence.POWER_PROBE` ``[6, P]``, for its least power among
+        the velocities it grows with (as SINDy's library terms,
         :func:`~nnid.trainers.sindy.library_floors`): a product is rounding where one of its
         factors is, so that u·w of a log whose w is rounding (1e-17) is of power 1 in w; read
         in the whole motion at once it was of power 2, its floor ROUNDING² × its size, and its
@@ -415,7 +436,7 @@ class ParametricFossen:
         rest in every DOF (all of ν rounding) gives floors of rounding, and the rule then finds
         nothing: there is no motion to compare with."""
         if not self.names:
-            return np.zeros(0)
+            return np.zeros(0), np.zeros((len(DOFS), 0))
         n = data["t"].size
         picked = np.arange(n)
         if n > REFERENCE_ROWS:
@@ -429,14 +450,16 @@ class ParametricFossen:
         # metre, the scale the rule's ROUNDING assumes of a vehicle in SI units
         length = self.vehicle.length or 1.0
         nu, acc = kind_sizes(data["nu"], length), kind_sizes(nu_dot, length)
-        rows = [DOFS.index(d) for d in self.dofs]
+        # the rows a fit weights: a column's entries in an equation it does not fit (an added
+        # mass's C_A(ν)ν beside the one DOF analysed) are no size of what it measures there
+        rows = [DOFS.index(d) for d in (self.dofs if dofs is None else dofs)]
 
         def columns_at(scale: np.ndarray) -> list[np.ndarray]:  # each velocity with its ν̇
             moved["nu"] = np.tile(scale * nu, (picked.size, 1))
             moved["nu_dot"] = np.tile(scale * acc, (picked.size, 1))
             return [c[:, rows] for c in self._columns(moved)[1]]
 
-        return motion_floors(columns_at, len(DOFS))
+        return motion_sizes(columns_at, len(DOFS))
 
     def damping_force(self, data: dict[str, np.ndarray]) -> np.ndarray:
         """McCarter's residual force τ̄ = M ν̇ + C(ν)ν + g(η) − τ (eq. 4.4, his g on the other

@@ -16,7 +16,7 @@ from nnid.datasets.gaps import GAP_STEPS
 from nnid.evaluation.evaluate import diverged_columns
 from nnid.physics.dofs import DOF_WORD, DOFS, FORCES
 from nnid.physics.effects import parse_effect
-from nnid.reports.cells import number, score_cell
+from nnid.reports.cells import missing, number, score_cell
 from nnid.reports.figures import (
     FORCE_UNITS,
     LONG_TICKS_LEFT_IN,
@@ -316,11 +316,27 @@ def candidate_rows(candidates: list[dict], top: int = 15) -> list[list[str]]:
                 number(se, 2),
                 unit(c["effect"]),
                 number(c["significance"], 2),
-                f"{100 * c['improvement']:.1f} %",
+                # none for a candidate the data do not excite: nothing of it is measured
+                "-" if missing(c["improvement"]) else f"{100 * c['improvement']:.1f} %",
                 c["reason"],
             ]
         )
     return rows
+
+
+def not_excited_line(step: dict, k: int) -> str:
+    """One line counting pass ``k``'s candidates the data do not excite ("" where none): they
+    measure nothing, and listed in its table they would pad it (165 rows on a BlueROV1 log
+    without u or v); their names are in ``loop.json``."""
+    names = step.get("not_excited") or []
+    if not names:
+        return ""
+    some = ", ".join(names[:3]) + (", ..." if len(names) > 3 else "")
+    return (
+        f"{len(names)} candidate{'s' if len(names) > 1 else ''} not excited by this data (zero "
+        f"regressor: {some}): nothing of {'them' if len(names) > 1 else 'it'} is measured; "
+        f"the names are in loop.json (steps[{k - 1}].not_excited)."
+    )
 
 
 def error_rows(result: dict) -> tuple[list[str], list[list[str]]]:
@@ -361,6 +377,8 @@ def markdown(result: dict) -> str:
     for k, step in enumerate(result["steps"], 1):
         lines += [f"## Pass {k}: candidates (best first)", ""]
         lines += [table(CANDIDATE_HEAD, candidate_rows(step["top"])), "", CANDIDATE_COLUMNS, ""]
+        if not_excited_line(step, k):
+            lines += [not_excited_line(step, k), ""]
         if step["sindy"]:
             lines += [f"pysindy STLSQ second opinion: {', '.join(step['sindy'])}.", ""]
         else:
@@ -447,6 +465,11 @@ def html_page(result: dict, figures: dict[str, str]) -> str:
             f"<h3>Pass {k}</h3><p>{verdict}</p>"
             + html_table(CANDIDATE_HEAD, candidate_rows(step["top"]))
             + f"<p class='note'>{html.escape(CANDIDATE_COLUMNS)}</p>"
+            + (
+                f"<p>{html.escape(not_excited_line(step, k))}</p>"
+                if step.get("not_excited")
+                else ""
+            )
             + f"<p>pysindy STLSQ over the strongest linear candidates: {html.escape(sindy)}.</p>"
         )
     imgs = "".join(
