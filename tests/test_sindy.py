@@ -574,3 +574,18 @@ def test_an_error_beside_a_zero_held_out_target_is_not_measured_as_an_nmse():
     # the function itself: 0 where nothing is predicted of a zero target, NaN where something is
     got = nmse(np.zeros((3, 2)), np.array([[0.0, 1.0], [0.0, 0.0], [0.0, 0.0]]))
     assert got[0] == 0.0 and np.isnan(got[1])
+
+
+@pytest.mark.parametrize("to_linear", [0.0, -1.0, float("nan"), float("inf")])
+def test_a_to_linear_that_is_no_length_is_refused_by_name(to_linear):
+    """``to_linear`` puts moments in forces' units (one over a length): 0 made every moment
+    target's reference infinite, each zeroed as rounding without a word; negative or NaN
+    compared nothing. Refused, naming the field."""
+    from nnid.errors import NnidInputError
+    from nnid.trainers.sindy import SparsePath
+
+    rng = np.random.default_rng(0)
+    theta, y = rng.normal(size=(50, 3)), rng.normal(size=(50, 6))
+    with pytest.raises(NnidInputError) as err:
+        SparsePath(selection="aic", to_linear=to_linear).fit(theta, y)
+    assert err.value.field == "to_linear"

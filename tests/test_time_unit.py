@@ -332,3 +332,8 @@ def test_a_unit_slip_with_a_pause_in_its_run_is_still_too_fine_a_clock():
     with pytest.raises(NnidInputError, match="faster than any"):
         check_time_unit(pd.DataFrame({"t": t / 3600}))
     check_time_unit(pd.DataFrame({"t": t}))
+    # twenty 5-s runs at 10 Hz, 2-min pauses between them, no experiment column: nine pauses
+    # in a thousand steps (more than the longest 1 %) took the slip for bursts
+    runs = (np.arange(20)[:, None] * 125.0 + np.arange(50)[None, :] * 0.1).ravel()
+    with pytest.raises(NnidInputError, match="faster than any"):
+        check_time_unit(pd.DataFrame({"t": runs / 3600}))

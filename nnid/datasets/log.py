@@ -1073,14 +1073,15 @@ def _run_steps(t: np.ndarray, within: np.ndarray | None = None) -> np.ndarray:
 
 
 def paced_step(steps: np.ndarray) -> float:
-    """A clock's mean sample step without its longest pauses (the longest 1 % of ``steps``,
-    at least one), for :func:`burst_clock`: a unit slip with one pause in its run (a 10-min
-    stop read in hours) is still fine throughout, where a plain mean would take the pause for
-    a sample rate."""
+    """A clock's mean sample step without its pauses (``steps`` over ten times their 95th
+    percentile), for :func:`burst_clock`: a unit slip with stops in its run (a 10-min stop,
+    or 2-min pauses between 5-s runs, read in hours) is still fine throughout, where a plain
+    mean would take the pauses for a sample rate. A burst's gap is no pause while bursts hold
+    at most 20 stamps (the gaps then more than 5 % of the steps)."""
     if steps.size < 2:
         return float(steps.mean()) if steps.size else np.inf
-    kept = np.sort(steps)[: steps.size - max(1, steps.size // 100)]
-    return float(kept.mean())
+    kept = steps[steps <= 10.0 * np.quantile(steps, 0.95)]
+    return float(kept.mean()) if kept.size else float(steps.mean())
 
 
 def fine_clock_slip(

@@ -81,7 +81,7 @@ from nnid.physics.thrusters import force_deadband
 from nnid.serialization import exact_float, read_exact_float
 from nnid.trainers.history import Progress
 from nnid.trainers.regression import Regression
-from nnid.vehicle import vehicle_copy
+from nnid.vehicle import Vehicle, vehicle_copy
 
 if TYPE_CHECKING:  # at run time imported where used, as this module does elsewhere
     from nnid.trainers.least_squares import Estimate
@@ -586,7 +586,7 @@ NOTHING_ESTIMATED = (
 def check_damping_group(
     spec: Sequence[str],
     dofs: Sequence[str],
-    vehicle,
+    vehicle: Vehicle,
     vehicle_label: str | None = None,
     strict: bool = True,
 ) -> None:

@@ -347,6 +347,11 @@ class SparsePath(BaseEstimator):
             raise NnidInputError(f"selection is one of {', '.join(SELECTIONS)}", field="selection")
         if theta_val is None and self.selection == "validation":
             raise NnidInputError("selection='validation' needs validation data", field="selection")
+        if self.to_linear is not None and not (np.isfinite(self.to_linear) and self.to_linear > 0):
+            raise NnidInputError(
+                f"to_linear is a finite factor > 0 (a length or one over it), got {self.to_linear}",
+                field="to_linear",
+            )
         if self.to_linear is not None and y.shape[1] != 6:
             raise NnidInputError(
                 f"to_linear judges six DOFs' targets by kind; y has {y.shape[1]} outputs",
