@@ -2318,16 +2318,22 @@ def test_a_fossen_fit_of_no_unknowns_says_it_estimated_nothing(fixtures, tmp_pat
     assert any(w.startswith("the fit has no unknowns") for w in metrics["warnings"])
 
 
-@pytest.mark.parametrize("unknowns", ['["damping"]', '["added_mass", "damping"]'])
-def test_damping_asked_of_a_vehicle_file_with_none_is_one_error(tmp_path, unknowns):
-    """unknowns = ["damping"] on a vehicle file of no damping terms warned "nothing is
-    estimated" and exited 0; beside added_mass, the damping asked for was dropped without a
-    word. One error (exit 2) naming the config key, the vehicle file and what it needs."""
+def _bare_vehicle_and_log(tmp_path: Path) -> tuple[Path, Path]:
+    """The demo's vehicle file with its damping tables cut off, and the demo log, written."""
     text = Path(MINIROV).read_text()
     vehicle = tmp_path / "bare.toml"
     vehicle.write_text(text[: text.index("[damping")])
     data = tmp_path / "good.parquet"
     _demo_log().to_parquet(data)
+    return vehicle, data
+
+
+@pytest.mark.parametrize("unknowns", ['["damping"]', '["added_mass", "damping"]'])
+def test_damping_asked_of_a_vehicle_file_with_none_is_one_error(tmp_path, unknowns):
+    """unknowns = ["damping"] on a vehicle file of no damping terms warned "nothing is
+    estimated" and exited 0; beside added_mass, the damping asked for was dropped without a
+    word. One error (exit 2) naming the config key, the vehicle file and what it needs."""
+    vehicle, data = _bare_vehicle_and_log(tmp_path)
     config = tmp_path / "damping.toml"
     config.write_text(
         TRAIN_TEXT.replace('unknowns = ["added_mass", "damping"]', f"unknowns = {unknowns}")
@@ -2356,11 +2362,7 @@ def test_damping_asked_by_default_of_a_vehicle_file_with_none_is_said_not_refuse
     """The default unknowns (added_mass and damping) ask for damping on any vehicle: on one of
     no damping terms the added mass is estimated and the damping said not to be (it was
     dropped without a word), where written in the config it is refused (above)."""
-    text = Path(MINIROV).read_text()
-    vehicle = tmp_path / "bare.toml"
-    vehicle.write_text(text[: text.index("[damping")])
-    data = tmp_path / "good.parquet"
-    _demo_log().to_parquet(data)
+    vehicle, data = _bare_vehicle_and_log(tmp_path)
     config = tmp_path / "default.toml"
     config.write_text(TRAIN_TEXT.replace('unknowns = ["added_mass", "damping"]\n', ""))
     assert "unknowns" not in config.read_text()

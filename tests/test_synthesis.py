@@ -169,6 +169,22 @@ def test_a_nelder_mead_search_stopped_by_its_budget_is_said(fossen_problem):
         nelder_mead(xi, tau, mask, "mse", start=ls, forces=("X",))
 
 
+def _heave_only():
+    """The demo vehicle and a 30-s heave run of it whose u, v, p, q, r are exactly 0 (the
+    regressor of X:u is zero)."""
+    from importlib import resources
+
+    from nnid.datasets.simulator import simulate
+
+    vehicle = load_vehicle(str(resources.files("nnid.demo_data").joinpath("minirov.toml")))
+    t = np.arange(300) * 0.1
+    inputs = np.zeros((t.size, 6))
+    inputs[:, 2] = 30.0 + 20.0 * np.sin(1.2 * t)
+    log = simulate(vehicle, inputs, 0.1, substeps=2, experiment="heave")
+    log[["u", "v", "p", "q", "r"]] = 0.0
+    return vehicle, log
+
+
 @pytest.mark.parametrize("method", ["ls", "mae"])
 def test_an_unidentified_coefficient_stays_visible_not_an_estimate_of_zero(method, tmp_path):
     """A masked term no row reads (X:u of a heave-only log) is unidentified: least squares
@@ -176,19 +192,11 @@ def test_an_unidentified_coefficient_stays_visible_not_an_estimate_of_zero(metho
     Its 0 was in params as the estimate 0.0, in the saved state and the report alike; it is now
     null with simulated_at 0.0, said at the fit, kept through a save, and held at 0 by
     Nelder-Mead (no cost reads it)."""
-    from importlib import resources
-
     from nnid import load_model
-    from nnid.datasets.simulator import simulate
     from nnid.errors import ExcitationWarning
     from nnid.reports.train_report import _params_table
 
-    vehicle = load_vehicle(str(resources.files("nnid.demo_data").joinpath("minirov.toml")))
-    t = np.arange(300) * 0.1
-    inputs = np.zeros((t.size, 6))
-    inputs[:, 2] = 30.0 + 20.0 * np.sin(1.2 * t)
-    log = simulate(vehicle, inputs, 0.1, substeps=2, experiment="heave")
-    log[["u", "v", "p", "q", "r"]] = 0.0  # exactly: the regressor of X:u is zero
+    vehicle, log = _heave_only()
     mask = {"X": ["u"], "Z": ["w", "w*abs(w)"]}
     with pytest.warns(ExcitationWarning, match=r"X:u at 0 \(K replaces"):
         model = SynthesisModel(vehicle, mask, method, filter_lambda=1.0).fit(log)
@@ -210,18 +218,11 @@ def test_an_older_file_shows_its_unidentified_coefficient_as_not_identified(tmp_
     masked least squares left each at exactly 0 with no standard error, which no estimate
     is. Loaded, it reads as a file of today does: null, simulated at 0, the same predictions."""
     import json
-    from importlib import resources
 
     from nnid import load_model
-    from nnid.datasets.simulator import simulate
     from nnid.errors import ExcitationWarning
 
-    vehicle = load_vehicle(str(resources.files("nnid.demo_data").joinpath("minirov.toml")))
-    t = np.arange(300) * 0.1
-    inputs = np.zeros((t.size, 6))
-    inputs[:, 2] = 30.0 + 20.0 * np.sin(1.2 * t)
-    log = simulate(vehicle, inputs, 0.1, substeps=2, experiment="heave")
-    log[["u", "v", "p", "q", "r"]] = 0.0  # exactly: the regressor of X:u is zero
+    vehicle, log = _heave_only()
     mask = {"X": ["u"], "Z": ["w", "w*abs(w)"]}
     with pytest.warns(ExcitationWarning):
         model = SynthesisModel(vehicle, mask, filter_lambda=1.0).fit(log)
