@@ -1146,6 +1146,8 @@ def test_batch_lists_the_alarms_it_dismisses_with_their_reading_beside_the_chang
     levels = [allowed_over(n, 6) for n in range(1, 6)]
     assert any(seen["beside_allowed"] == pytest.approx(level) for level in levels)
     assert 0.0 < seen["beside_ratio"] <= seen["beside_allowed"]  # dismissed on that reading
+    assert "no more than noise" in seen["why"]
+    assert detect_json(monitor, result)["dismissed"] == result.dismissed  # detect.json says it
 
 
 def test_two_changes_at_once_the_larger_named_first_the_one_beside_it_at_the_next_window(

@@ -117,13 +117,28 @@ class DetectResult:
     withdrawn): the alarms judged within what the isolated changes may leave, no record,
     each with its ``experiment`` and ``t``, and ``beside_ratio`` and ``beside_allowed``, what
     it held over the DOF equations the changes leave alone and the level it was judged
-    against there (:meth:`_Splits.change_beside`; None where the changes act on every one)."""
+    against there (:meth:`_Splits.change_beside`; None where the changes act on every one),
+    and ``why`` (:func:`dismissed_why`)."""
 
     trace: Trace
     alarms: list[dict]
     seconds: float
     withdrawn: list[dict] = field(default_factory=list)
     dismissed: list[dict] = field(default_factory=list)
+
+
+def dismissed_why(ratio: float | None, allowed: float | None) -> str:
+    """Why batch dismissed an alarm on what isolated changes leave (:attr:`DetectResult.
+    dismissed`), from its reading beside the changes (:meth:`_Splits.change_beside`)."""
+    within = "within what the isolated changes may leave"
+    if ratio is None:
+        return f"{within} (they act on every DOF equation watched)"
+    if ratio <= allowed:
+        return f"{within}; beside them, no more than noise ({ratio:.3g} <= {allowed:.3g})"
+    return (
+        f"{within}; beside them more than noise ({ratio:.3g} > {allowed:.3g}), but no new "
+        "change named there leaves it within noise"
+    )
 
 
 def withdrawn_record(experiment: str | None, t: float, by: float, why: str) -> dict:
@@ -1055,6 +1070,7 @@ def detect(
                             "t": float(t[k]),
                             "beside_ratio": ratio,
                             "beside_allowed": allowed,
+                            "why": dismissed_why(ratio, allowed),
                         }
                     )
                 else:

@@ -46,13 +46,17 @@ def detect_json(monitor, result: DetectResult, notes: list[str] | None = None) -
     measured (null where nothing measured it). ``notes``: what the run said of the log before
     the alarms (rows lost, samples missing, a wandering clock). ``withdrawn``: the alarms
     ``--follow`` announced that ``alarms`` does not hold, and why (empty in batch, which
-    announces none: :attr:`~nnid.fault.detect.DetectResult.withdrawn`)."""
+    announces none: :attr:`~nnid.fault.detect.DetectResult.withdrawn`). ``dismissed``: the
+    alarms batch judged within what isolated changes may leave, with their reading beside the
+    changes and why (:attr:`~nnid.fault.detect.DetectResult.dismissed`; empty with
+    ``--follow``, which says them in ``withdrawn``)."""
     h_t, h_g = monitor.threshold_values
     caveat = monitor.threshold_caveat()
     measured = monitor.measured_false_alarms_
     return {
         "alarms": result.alarms,
         "withdrawn": result.withdrawn,
+        "dismissed": result.dismissed,
         "threshold": {
             "ewma": h_t,
             "cusum": h_g,
