@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 import warnings
 
 import numpy as np
@@ -501,6 +502,25 @@ def test_resampling_far_from_the_logs_rate_is_warned_of():
         warnings.simplefilter("error")
         resample_log(log, 80.0, report=report)
     assert "1000 samples at 100 Hz -> uniform 80 Hz" in report.steps[0].detail
+
+
+def test_resampling_a_log_whose_stamps_come_in_bursts_reads_its_rate_over_the_run():
+    """An IMU delivering ten samples together every 10 ms (1 kHz over the run, median step
+    10 us) was quoted at its median step's 100 kHz: the anti-alias warning and the cleaning
+    report said 100 kHz, and a grid at 600 Hz (within twice 1 kHz) was warned of as aliasing.
+    The rate said and used is the run's (paced_step), as the readers take it."""
+    t = (np.arange(100)[:, None] * 0.01 + np.arange(10)[None, :] * 1e-5).ravel()
+    log = pd.DataFrame({"t": t, "u": np.sin(t), "tau_X": np.floor(10 * t)})
+    report = CleaningReport()
+    with pytest.warns(UserWarning, match="anti-alias") as caught:
+        resample_log(log, 100.0, report=report)
+    said = float(re.search(r"from (\S+) Hz", str(caught[0].message)).group(1))
+    reported = float(re.search(r"samples at (\S+) Hz", report.steps[0].detail).group(1))
+    assert 900 < said < 1100 and 900 < reported < 1100
+    assert "in bursts" in report.steps[0].detail
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # 1 kHz to 600 Hz is within RESAMPLE_RATIO
+        resample_log(log, 600.0)
 
 
 def test_runs_joined_without_a_fresh_index_get_each_their_own_velocities():

@@ -42,8 +42,10 @@ from nnid.datasets.log import (
     TIME_UNIT_ATTR,
     TIME_UNITS,
     VELOCITY,
+    burst_clock,
     euler_rate_matrices,
     input_columns,
+    paced_step,
     refuse_rows,
     run_label,
     wrap_angle,
@@ -168,7 +170,7 @@ def resample_log(
     for name, pos in experiment_rows(log):
         part = log.iloc[pos]
         t = part["t"].to_numpy(np.float64)
-        logged = 1.0 / float(np.median(np.diff(t))) if t.size > 1 else rate
+        logged, burst = _logged_rate(t, rate)
         rates.append(logged)
         cuts = np.flatnonzero(np.diff(t) > gap) + 1 if gap else np.array([], int)
         bounds = np.split(np.arange(t.size), cuts)
@@ -217,8 +219,9 @@ def resample_log(
         if report is not None:
             report.add(
                 "resample",
-                f"{run_label(name)}: {t.size} samples at {logged:.3g} Hz -> uniform "
-                f"{rate:g} Hz"
+                f"{run_label(name)}: {t.size} samples at {logged:.3g} Hz"
+                + (" over the run (its stamps in bursts)" if burst else "")
+                + f" -> uniform {rate:g} Hz"
                 + (f", split in {len(bounds)} at gaps > {gap} s" if len(bounds) > 1 else ""),
             )
     fastest, slowest = max(rates, default=rate), min(rates, default=rate)
@@ -237,6 +240,21 @@ def resample_log(
             stacklevel=2,
         )
     return pd.concat(pieces, ignore_index=True)
+
+
+def _logged_rate(t: np.ndarray, rate: float) -> tuple[float, bool]:
+    """A run's logged rate (``t``: its times; ``rate``: the grid's, for a run of one sample)
+    and whether its stamps come in bursts: the median step's, or for stamps in bursts
+    (:func:`nnid.datasets.log.burst_clock`) the rate over the run, as the median step is one
+    inside a burst (an IMU's ten samples every 10 ms read as 100 kHz, not 1 kHz)."""
+    if t.size < 2:
+        return rate, False
+    steps = np.diff(t)
+    step = float(np.median(steps))
+    overall = paced_step(steps)
+    if burst_clock(step, overall):
+        return 1.0 / overall, True
+    return 1.0 / step, False
 
 
 #: how far :func:`resample_log` may move a log's rate before it is warned of
