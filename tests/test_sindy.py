@@ -537,6 +537,42 @@ def test_a_moment_is_judged_rounding_beside_moments_not_beside_forces():
     assert not path.coef_[3:].any()
 
 
+def test_an_output_idle_in_training_is_said_idle_not_unexplained_by_the_path():
+    """K right at its kind's rounding floor: a roll torque of 5e-8 N·m on a vehicle with
+    K:p = -0.1 gives a K of ~5e-11 of the moments' size on one log (rounding: idle, no terms)
+    and ~3e-10 on another (data). Fitted on the first, validated on the second, K's NMSE is
+    that of its zero prediction (1), a fact; but it was warned "explains nothing of K ...
+    best on the path 1 ... the library lacks it", of an output the fit left empty on purpose.
+    The warning says why: idle in training, its target rounding there."""
+    from nnid.physics.effects import apply_effect
+    from nnid.trainers.sindy import SindyWarning, SparsePath
+
+    vehicle = apply_effect(load_vehicle("seamor"), "linear_damping.p", -0.1)
+    train, val = (
+        _surge_sway_yaw(np.random.default_rng(seed), vehicle=vehicle, roll=5e-8) for seed in (4, 3)
+    )
+    idle = []  # the case: K is idle on the training log and not on the held-out one
+    for log in (train, val):
+        theta, y = SindyDamping(vehicle).features(log)
+        ok = np.isfinite(theta).all(1) & np.isfinite(y).all(1)
+        path = SparsePath(thresholds=[0.1], selection="aic", to_linear=1 / vehicle.length)
+        idle.append(path.fit(theta[ok], y[ok]).idle_outputs_.tolist())
+    assert idle == [
+        [False, False, True, True, True, False],
+        [False, False, True, False, True, False],
+    ]
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        model = SindyDamping(vehicle, thresholds=np.logspace(-3, 0, 13)).fit(train, val)
+    said = [str(w.message) for w in caught if issubclass(w.category, SindyWarning)]
+    assert model.selected_["validation_nmse"]["K"] == 1.0  # never fitted: the zero prediction
+    assert not any(key[0] == "K" for key in model.coefficients_)
+    assert len(said) == 1 and said[0].startswith("the SINDy model fits nothing of K (")
+    assert "idle in training" in said[0] and "rounding" in said[0]
+    assert "explains nothing" not in said[0] and "best on the path" not in said[0]
+    assert not any(f"{f} (" in said[0] for f in "XYZMN")
+
+
 def test_an_error_beside_a_zero_held_out_target_is_not_measured_as_an_nmse():
     """Fitted on a log that heaves (Z noisy with 2 % accelerometer noise) and validated on one
     that never does (Z exactly 0), a shared threshold keeps Z's terms and predicts a Z of RMS

@@ -38,6 +38,7 @@ from sklearn.base import BaseEstimator
 
 from nnid.errors import NnidInputError
 from nnid.evaluation.persistence import (
+    ROUNDING,
     kind_sizes,
     motion_floors,
     rounding_columns,
@@ -305,7 +306,9 @@ class SparsePath(BaseEstimator):
     output's candidate too, and an output it is within ``tolerance`` of keeps no terms),
     "aic" or "bic". J is the mean over outputs of the normalised MSE. Outputs the
     selected model does not explain on the validation data (NMSE ≥ 1, that of no model) are
-    named in a :class:`SindyWarning`; ``output_names`` names them.
+    named in a :class:`SindyWarning`; ``output_names`` names them. An idle output whose
+    held-out target is not rounding has the NMSE of its zero prediction (1): it is named in a
+    warning of its own, which says it was idle in training.
     """
 
     def __init__(
@@ -473,11 +476,28 @@ class SparsePath(BaseEstimator):
 
     def _warn_unexplained(self, selected: np.ndarray, best: np.ndarray) -> None:
         """Say which outputs the selected model does not explain on the validation data
-        (normalised MSE ≥ 1, that of predicting zero), with the best each reached on the path."""
+        (normalised MSE ≥ 1, that of predicting zero), with the best each reached on the path.
+        An idle output (``idle_outputs_``) among them was never fitted: it is said apart, with
+        why, as no path or library could have explained it."""
         names = self._names(len(best))
+        unexplained = selected >= UNEXPLAINED
+        idle = [
+            f"{names[i]} (validation NMSE {selected[i]:.3g})"
+            for i in np.flatnonzero(unexplained & self.idle_outputs_)
+        ]
+        if idle:  # its training target was zeroed as rounding: "best on the path" and "the
+            # library lacks it" would send the user to the thresholds and terms for nothing
+            warnings.warn(
+                f"the SINDy model fits nothing of {', '.join(idle)}: each was idle in "
+                f"training, its target rounding there (RMS at most {ROUNDING:g} of its kind's "
+                "typical size), so it keeps no terms, while its held-out target is not "
+                "rounding; give training data in which it acts",
+                SindyWarning,
+                stacklevel=3,
+            )
         poor = [
             f"{names[i]} (validation NMSE {selected[i]:.3g}, best on the path {best[i]:.3g})"
-            for i in np.flatnonzero(selected >= UNEXPLAINED)
+            for i in np.flatnonzero(unexplained & ~self.idle_outputs_)
         ]
         if not poor:
             return
