@@ -332,6 +332,13 @@ class Vehicle(StrictModel):
             raise ValueError(f"thruster names must be unique: {', '.join(twice)} appear twice")
         return self
 
+    @property
+    def rounding_length(self) -> float:
+        """The arm by which the rounding rule puts angular quantities in linear units (rates at
+        the ends of the vehicle, a moment's force): the file's ``length``, else a metre, the
+        scale :data:`~nnid.evaluation.persistence.ROUNDING` assumes of a vehicle in SI units."""
+        return self.length or 1.0
+
     def inertia_matrix(self) -> np.ndarray:
         return np.diag(self.inertia) if np.ndim(self.inertia) == 1 else np.asarray(self.inertia)
 

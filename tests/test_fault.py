@@ -353,9 +353,7 @@ def test_a_ballast_change_after_a_stopped_vertical_thruster_is_alarmed(vehicle, 
     faults = [Fault("thruster", FAULT_T, thruster="v4", efficiency=0.0),
               Fault("effect", 60.0, effect="buoyancy_offset", value=10.0)]  # fmt: skip
     log = simulate_faults(vehicle, 72, faults=faults, seed=8)
-    log.to_csv(tmp_path / "log.csv", index=False)
-    batch = detect(monitor, log)
-    followed = follow_csv(monitor, str(tmp_path / "log.csv"), 10.0, lambda line: None, idle_s=0.0)
+    batch, followed = _batch_and_followed(monitor, log, tmp_path)
     for result in (batch, followed):
         loss, ballast = result.alarms
         assert loss["thruster"] == "v4" and loss["efficiency"] == pytest.approx(0.0, abs=0.05)
@@ -365,6 +363,15 @@ def test_a_ballast_change_after_a_stopped_vertical_thruster_is_alarmed(vehicle, 
         )
         assert heave is not None and abs(heave["value"]) == pytest.approx(10.0, rel=0.3)
         assert result.withdrawn == []
+
+
+def _batch_and_followed(monitor, log, tmp_path):
+    """``log`` watched by batch detect and by ``detect --follow`` (a 10-s window, nothing
+    said), for the tests that hold the two to one result."""
+    log.to_csv(tmp_path / "log.csv", index=False)
+    batch = detect(monitor, log)
+    followed = follow_csv(monitor, str(tmp_path / "log.csv"), 10.0, lambda line: None, idle_s=0.0)
+    return batch, followed
 
 
 def _stopped_with_pushes(vehicle, pushes, duration):
@@ -531,9 +538,7 @@ def test_follow_watches_what_a_change_leaves_as_batch_detect_does(
     statistics' restart, where batch keeps it whole from the payload's window on (their EWMA
     and CUSUM parted from 41.55 s on, the alarms alike)."""
     log = scenario(vehicle)
-    batch = detect(monitor, log)
-    log.to_csv(tmp_path / "log.csv", index=False)
-    followed = follow_csv(monitor, str(tmp_path / "log.csv"), 10.0, lambda line: None, idle_s=0.0)
+    batch, followed = _batch_and_followed(monitor, log, tmp_path)
     assert len(batch.alarms) >= 2
     assert [(a["t"], a["kind"]) for a in followed.alarms] == [
         (a["t"], a["kind"]) for a in batch.alarms
@@ -1089,9 +1094,7 @@ def test_a_ballast_change_after_a_snag_is_isolated_in_batch_and_follow(vehicle, 
     faults = [Fault("external", FAULT_T, force=SNAG),
               Fault("effect", 35.0, effect="buoyancy_offset", value=10.0)]  # fmt: skip
     log = simulate_faults(vehicle, 47, faults=faults, seed=7)
-    log.to_csv(tmp_path / "log.csv", index=False)
-    batch = detect(monitor, log)
-    followed = follow_csv(monitor, str(tmp_path / "log.csv"), 10.0, lambda line: None, idle_s=0.0)
+    batch, followed = _batch_and_followed(monitor, log, tmp_path)
     for result in (batch, followed):
         snag, ballast = result.alarms
         assert snag["kind"] == "external_force" and 20.0 <= snag["t"] <= 21.0

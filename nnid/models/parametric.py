@@ -446,9 +446,8 @@ class ParametricFossen:
             for k, v in data.items()
             if isinstance(v, np.ndarray) and v.shape[:1] == (n,)
         }
-        # the rates at the ends of the vehicle, where its file gives its length; else a
-        # metre, the scale the rule's ROUNDING assumes of a vehicle in SI units
-        length = self.vehicle.length or 1.0
+        # the rates at the ends of the vehicle (Vehicle.rounding_length)
+        length = self.vehicle.rounding_length
         nu, acc = kind_sizes(data["nu"], length), kind_sizes(nu_dot, length)
         # the rows a fit weights: a column's entries in an equation it does not fit (an added
         # mass's C_A(ν)ν beside the one DOF analysed) are no size of what it measures there

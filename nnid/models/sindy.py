@@ -187,7 +187,7 @@ class SindyDamping(DampingModel):
         # their own kind, a kind put in the other's units by the vehicle's length where its
         # file gives one, else a metre (as the Fossen regression's rounding floors); each
         # library column against itself at the log's typical motion, to its power
-        length = self.vehicle.length or 1.0
+        length = self.vehicle.rounding_length
         k = len(self._terms())
         floors = self._floors(nu[ok], self._terms(), theta[ok][:, k:])
         path = SparsePath(

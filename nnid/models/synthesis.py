@@ -219,7 +219,7 @@ class DampingModel(FossenPlant):
         """Each term's floor of the rounding rule on the velocities ``nu`` ``[N, 6]`` the fit
         reads, then of the ``inputs`` appended (:func:`~nnid.trainers.sindy.library_floors`,
         angular rates over the vehicle's length where its file gives one, else a metre)."""
-        return library_floors(nu, self._basis(terms), self.vehicle.length or 1.0, inputs)
+        return library_floors(nu, self._basis(terms), self.vehicle.rounding_length, inputs)
 
     @property
     def filtered(self) -> bool:
