@@ -29,9 +29,16 @@ from nnid.datasets.measurement import Measurement
 from nnid.datasets.preprocess import savgol_window
 from nnid.errors import NnidInputError
 from nnid.fault import kernel
-from nnid.fault.detect import alarm_row, detect, leave_scale, read_ratio
+from nnid.fault.detect import NOT_JUDGED, alarm_row, detect, leave_scale, read_ratio
 from nnid.fault.follow import follow_csv
-from nnid.fault.isolation import allowed_over, allowed_ratio
+from nnid.fault.isolation import (
+    LEAST_ROWS,
+    TOO_FEW,
+    allowed_over,
+    allowed_ratio,
+    dof_noise_ratios,
+    noise_ratio,
+)
 from nnid.fault.monitor import ResidualMonitor, monitor_inputs, pack_actuation
 from nnid.fault.thresholds import rate_interval, rate_threshold
 from nnid.models.parametric import ParametricModel
@@ -607,6 +614,8 @@ def test_follow_takes_a_snag_and_ballast_out_with_no_model_made_per_flush(
     Savitzky-Golay derivatives through scipy's dispatch: 8.5 ms (snag) and 4.7 ms (ballast)
     a flush on an idle Xeon. After its first call a Rewatch makes none of them, and what it
     leaves is bit for bit what one made afresh leaves."""
+    import scipy.signal
+
     from nnid.datasets import preprocess
     from nnid.fault import detect as detect_module
     from nnid.physics.parts import Parts
@@ -624,11 +633,12 @@ def test_follow_takes_a_snag_and_ballast_out_with_no_model_made_per_flush(
     blocks = [np.arange(k, k + 41) for k in range(460, 560, 10)]  # --follow's: 2 s every 0.5 s
     w.left(data, blocks[0], r[blocks[0]])
     made: list[str] = []
-    model, actuation, scipys = Parts.model, Actuation.__init__, preprocess.savgol_filter
+    model, actuation, scipys = Parts.model, Actuation.__init__, scipy.signal.savgol_filter
     monkeypatch.setattr(Parts, "model", lambda *a, **k: made.append("model") or model(*a, **k))
     monkeypatch.setattr(Actuation, "__init__", lambda *a: made.append("act") or actuation(*a))
+    assert "savgol_filter" not in vars(preprocess)  # its derivatives: savgol_interp
     monkeypatch.setattr(
-        preprocess, "savgol_filter", lambda *a, **k: made.append("scipy") or scipys(*a, **k)
+        scipy.signal, "savgol_filter", lambda *a, **k: made.append("scipy") or scipys(*a, **k)
     )
     left = [w.left(data, rows, r[rows]) for rows in blocks[1:]]
     assert made == []
@@ -1115,6 +1125,63 @@ def test_an_8_n_ballast_after_a_snag_is_read_over_the_dofs_the_snag_leaves_alone
     assert snag["kind"] == "external_force" and 20.0 <= snag["t"] <= 21.0
     assert ballast["effect"] == "buoyancy_offset" and 35.0 <= ballast["t"] <= 36.0
     assert ballast["value"] == pytest.approx(8.0, rel=0.05)
+
+
+def test_a_change_beside_a_first_on_too_few_rows_is_not_dismissed(vehicle, monitor, tmp_path):
+    """A snag from 20 s, then an 8 N ballast from 35 s in a log that ends 0.3 s after its
+    alarm (seed 1): over the equations the snag leaves alone it read 2.92, above the 2.55
+    allowed, and on its 7 rows isolation could not try a new change ("too few samples after
+    the alarm to isolate"), yet the alarm was dismissed as "no new change named there leaves
+    it within noise", a judgement never made. On fewer rows than a first alarm's isolation
+    needs it is not dismissed: it is isolated as a first alarm is and said so, its window
+    cut short by the log's end; batch and --follow alike."""
+    faults = [Fault("external", FAULT_T, force=SNAG),
+              Fault("effect", 35.0, effect="buoyancy_offset", value=8.0)]  # fmt: skip
+    log = simulate_faults(vehicle, 37, faults=faults, seed=1)
+    batch, followed = _batch_and_followed(monitor, log[log["t"] <= 35.5 + 1e-9], tmp_path)
+    assert batch.dismissed == [] and followed.withdrawn == []
+    for result in (batch, followed):
+        snag, late = result.alarms
+        assert snag["kind"] == "external_force" and 35.0 <= late["t"] <= 35.5
+        assert late["cut_short"]["samples"] < LEAST_ROWS and TOO_FEW in late["meaning"]
+
+
+def test_an_alarm_whose_window_the_log_cuts_short_is_not_judged_not_unexplained(
+    vehicle, monitor, tmp_path
+):
+    """A snag from 20 s in a log that ends 0.35 s after its alarm: too few samples to
+    isolate, and the record was an unexplained change whose statistics "restart at the
+    window's end" (repeats 0), an experiment's open unexplained record, where no row is left
+    and nothing was judged. It says the end of the log cut its window short, how much of it
+    there was, and is no unexplained record; batch and --follow alike."""
+    log = simulate_faults(vehicle, 22, faults=[Fault("external", FAULT_T, force=SNAG)], seed=1)
+    cut = log[log["t"] <= 20.4 + 1e-9].reset_index(drop=True)
+    batch, _ = _followed_as_batch(monitor, cut, tmp_path)
+    (alarm,) = batch.alarms
+    held = cut["t"][cut["t"] >= alarm["t"] - 1e-9]
+    assert alarm["meaning"].startswith(NOT_JUDGED) and "restart" not in alarm["meaning"]
+    assert (alarm["repeats"], alarm["last_seen_t"]) == (None, None)
+    assert alarm["cut_short"]["samples"] == held.size
+    assert alarm["cut_short"]["seconds"] == pytest.approx(held.iloc[-1] - alarm["t"])
+
+
+def test_detect_json_says_the_runs_last_rows_left_unjudged(vehicle, monitor, tmp_path):
+    """A payload isolated from 20 s and a run that ends 0.05 s after a command step (as in
+    ``test_a_runs_last_rows_are_judged_as_in_a_longer_run_or_not_at_all``): its last half
+    smoothing window is not judged (the signature reads the acceleration there), and
+    detect.json said nothing of it: the run read as watched to its last sample. ``unjudged``
+    says which rows, how many, the seconds they span and why; batch and --follow alike."""
+    fault = Fault("payload", FAULT_T, mass=10.0, value=4.0)
+    log = simulate_faults(vehicle, 60, faults=[fault], seed=26)
+    batch, followed = _batch_and_followed(monitor, log[log["t"] <= 57.55 + 1e-9], tmp_path)
+    t = batch.trace.t
+    judged = np.flatnonzero(np.isfinite(batch.trace.values[:, 18]))[-1]
+    for result in (batch, followed):
+        (tail,) = detect_json(monitor, result)["unjudged"]
+        assert tail["samples"] == t.size - 1 - judged and tail["samples"] > 0
+        assert (tail["from_t"], tail["to_t"]) == (t[judged + 1], t[-1])
+        assert tail["seconds"] == pytest.approx(t[-1] - t[judged])
+        assert "reads the acceleration" in tail["why"]
 
 
 def test_the_allowance_over_fewer_dof_equations_is_as_rare_from_healthy_noise():
@@ -2043,3 +2110,23 @@ def test_a_dof_holding_all_its_change_may_leave_reads_as_healthy_noise_at_its_al
     scale = leave_scale(np.array([level, 0, 0, 0, 0, 0]))
     assert read_ratio(one, ratios, scale) == pytest.approx(allowed_ratio(1.0))
     assert np.all(scale[1:] == 1.0)  # a DOF the change leaves alone is read as healthy
+
+
+def test_the_noise_ratio_is_the_mean_of_the_dof_ratios_on_the_finite_rows(rng):
+    """:func:`noise_ratio` and :func:`dof_noise_ratios` whiten and keep the finite rows alike
+    (one implementation, :func:`whitened_power`): the ratio over the DOF equations watched is
+    the mean of the DOF ratios, and a row with a NaN counts in neither."""
+    from types import SimpleNamespace
+
+    mask = np.array([1.0, 1, 1, 0, 1, 1])
+    whiten = np.tril(rng.normal(size=(6, 6))) * np.outer(mask, mask)
+    mon = SimpleNamespace(mask_=mask, whiten_=whiten)
+    e = 3.0 * rng.normal(size=(40, 6))
+    holed = e.copy()
+    holed[[4, 17], [1, 5]] = np.nan
+    dof = dof_noise_ratios(mon, holed)
+    assert dof[3] == 0.0  # not watched
+    assert noise_ratio(mon, holed) == pytest.approx(dof[mask > 0].mean(), rel=1e-12)
+    kept = np.delete(e, [4, 17], axis=0)
+    assert noise_ratio(mon, holed) == noise_ratio(mon, kept)
+    assert np.array_equal(dof, dof_noise_ratios(mon, kept))

@@ -308,6 +308,36 @@ def test_lowpass_is_zero_phase_and_rejects_short_logs():
         savgol_derivative(noisy[:11], 0.01, 21, 4)
 
 
+def test_lowpass_refuses_a_log_whose_stamps_come_in_bursts_and_filters_it_resampled():
+    """An IMU delivering ten samples together every 10 ms (1 kHz over the run, median step
+    10 us): the filter was designed at the median step's 100 kHz, so a 5 Hz cut-off acted at
+    about 0.05 Hz on the samples and removed the 1 Hz motion it was to keep. No one rate fits
+    samples in bursts: refused, naming the run's rate and the fix, which then works."""
+    t = (np.arange(300)[:, None] * 0.01 + np.arange(10)[None, :] * 1e-5).ravel()
+    motion = np.sin(2 * np.pi * t)
+    log = pd.DataFrame({"t": t, "u": motion + 0.3 * np.sin(2 * np.pi * 30 * t)})
+    with pytest.raises(NnidInputError, match="in bursts") as err:
+        lowpass(log, ["u"], cutoff=5.0)
+    rate = float(re.search(r"(\d+) Hz over the run", err.value.message).group(1))
+    assert 900 < rate < 1100 and "resample" in err.value.message
+    grid = resample_log(log, 1000.0)
+    out = lowpass(grid, ["u"], cutoff=5.0)
+    off = np.abs(out["u"] - np.sin(2 * np.pi * grid["t"]))[300:-300]
+    assert off.max() < 0.02  # the 30 Hz gone (0.3 before), the 1 Hz kept
+
+
+def test_lowpass_refuses_a_run_of_one_sample_as_too_short_without_reading_its_rate():
+    """A run of one sample has no step: its rate was read first (NumPy's "mean of empty
+    slice" and scipy's divide warnings) before it was refused as too short."""
+    log = pd.DataFrame(
+        {"t": [0.0, *np.arange(100) * 0.01], "experiment": ["a"] + ["b"] * 100, "u": 0.0}
+    )
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(NnidInputError, match="experiment 'a' has 1 samples, too few"):
+            lowpass(log, ["u"], cutoff=2.0)
+
+
 def test_a_log_without_experiments_is_named_the_log_in_the_derivatives_errors():
     """A log without an experiment column has one run, named None by ``experiment_rows``: its
     errors said "experiment None", where the rest of nnid says "the log"."""
@@ -381,18 +411,22 @@ def test_savgol_derivative_is_scipys_bit_for_bit_without_its_dispatch(monkeypatc
     took six derivatives every 0.5 s of rows. savgol_derivative now convolves with
     coefficients made once per setting and fits each end's half window as scipy does: scipy's
     result bit for bit over windows, orders, derivatives and lengths, between gaps and between
-    steps, without calling it."""
+    steps, without calling it. The same of each column of a 2-D signal (one edge solve for
+    all, as scipy's axis=0): the noise gain of a derivative cut at steps takes each piece's
+    weights from the unit impulses' (:func:`_between_steps_gain2`), as scipy made them."""
+    import scipy.signal
     from scipy.signal import savgol_filter
 
     from nnid.datasets import preprocess
 
     def scipys(y, window, order, deriv, dt):
-        return savgol_filter(y, window, order, deriv=deriv, delta=dt, mode="interp")
+        return savgol_filter(y, window, order, deriv=deriv, delta=dt, axis=0, mode="interp")
 
     def refused(*args, **kwargs):
         raise AssertionError("scipy's savgol_filter called")
 
-    monkeypatch.setattr(preprocess, "savgol_filter", refused)
+    assert "savgol_filter" not in vars(preprocess)  # one implementation: savgol_interp
+    monkeypatch.setattr(scipy.signal, "savgol_filter", refused)
     rng = np.random.default_rng(3)
     settings = [(3, 1, 1), (5, 2, 1), (7, 3, 3), (9, 2, 3), (11, 2, 0), (21, 4, 1), (21, 4, 2)]
     for window, order, deriv in settings:
@@ -411,6 +445,19 @@ def test_savgol_derivative_is_scipys_bit_for_bit_without_its_dispatch(monkeypatc
         scipy_pieces.setattr(preprocess, "savgol_interp", scipys)
         expected = savgol_derivative(y, 0.05, 21, 4, steps=steps)
     np.testing.assert_array_equal(savgol_derivative(y, 0.05, 21, 4, steps=steps), expected)
+    for window, order, deriv in settings:
+        impulses = np.eye(window)
+        dt = float(rng.uniform(0.005, 0.5))
+        np.testing.assert_array_equal(
+            preprocess.savgol_interp(impulses, window, order, deriv, dt),
+            scipys(impulses, window, order, deriv, dt),
+        )
+    steps = np.array([3, 13, 18, 24, 27, 28, 32, 45])  # pieces of 2 to 14 samples
+    with monkeypatch.context() as scipy_pieces:
+        scipy_pieces.setattr(preprocess, "savgol_interp", scipys)
+        expected = preprocess.savgol_derivative_gain2(50, 0.05, 21, 4, 1, steps)
+    got = preprocess.savgol_derivative_gain2(50, 0.05, 21, 4, 1, steps)
+    np.testing.assert_array_equal(got, expected)
 
 
 def test_a_savgol_window_too_short_for_its_order_is_widened_with_a_warning():

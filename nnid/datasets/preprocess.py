@@ -28,7 +28,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from scipy.integrate import cumulative_trapezoid
 from scipy.linalg import lstsq
 from scipy.ndimage import convolve1d
-from scipy.signal import butter, filtfilt, lfilter, savgol_coeffs, savgol_filter
+from scipy.signal import butter, filtfilt, lfilter, savgol_coeffs
 from scipy.stats import median_abs_deviation
 
 from nnid.datasets.cleaning import CleaningReport
@@ -71,10 +71,6 @@ def run_spans(log: pd.DataFrame) -> list[float]:
     :func:`experiment_rows` in order)."""
     t = log["t"].to_numpy(np.float64)
     return [float(np.ptp(t[pos])) for _, pos in experiment_rows(log)]
-
-
-def sample_rate(t: np.ndarray) -> float:
-    return 1.0 / float(np.median(np.diff(t)))
 
 
 # --- time base -------------------------------------------------------------------------------
@@ -242,19 +238,19 @@ def resample_log(
     return pd.concat(pieces, ignore_index=True)
 
 
-def _logged_rate(t: np.ndarray, rate: float) -> tuple[float, bool]:
+def _logged_rate(t: np.ndarray, rate: float) -> tuple[float, str | None]:
     """A run's logged rate (``t``: its times; ``rate``: the grid's, for a run of one sample)
-    and whether its stamps come in bursts: the median step's, or for stamps in bursts
-    (:func:`nnid.datasets.log.burst_clock`) the rate over the run, as the median step is one
-    inside a burst (an IMU's ten samples every 10 ms read as 100 kHz, not 1 kHz)."""
+    and, where its stamps come in bursts, :func:`nnid.datasets.log.burst_clock`'s sentence
+    of them (else None): the median step's rate, or for stamps in bursts the rate over the
+    run, as the median step is one inside a burst (an IMU's ten samples every 10 ms read as
+    100 kHz, not 1 kHz)."""
     if t.size < 2:
-        return rate, False
+        return rate, None
     steps = np.diff(t)
     step = float(np.median(steps))
     overall = paced_step(steps)
-    if burst_clock(step, overall):
-        return 1.0 / overall, True
-    return 1.0 / step, False
+    burst = burst_clock(step, overall)
+    return (1.0 / overall if burst else 1.0 / step), burst
 
 
 #: how far :func:`resample_log` may move a log's rate before it is warned of
@@ -402,26 +398,26 @@ def _edge_design(window: int, order: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def savgol_interp(y: np.ndarray, window: int, order: int, deriv: int, delta: float) -> np.ndarray:
-    """``scipy.signal.savgol_filter(y, window, order, deriv=deriv, delta=delta,
-    mode="interp")`` of a 1-D float64 ``y``, bit for bit (a test holds it to scipy's), at a
-    tenth of its cost on a short signal: the same convolution with the same coefficients, and
-    each end's half window from the same least-squares polynomial of the window's samples,
-    differentiated and evaluated as scipy does; what is made once per setting is kept
+    """``scipy.signal.savgol_filter(y, window, order, deriv=deriv, delta=delta, axis=0,
+    mode="interp")`` of a float64 ``y`` (1-D, or each column of a 2-D one), bit for bit (a
+    test holds it to scipy's), at a tenth of its cost on a short signal: the same convolution
+    with the same coefficients, and each end's half window from the same least-squares
+    polynomial of the window's samples (all columns in one solve, as scipy's), differentiated
+    and evaluated as scipy does; what is made once per setting is kept
     (:func:`_savgol_kernel`, :func:`_edge_design`). scipy's array-API dispatch cost about 1 ms
     a call, where the arithmetic of a 2-s window costs 0.1 ms: ``detect --follow`` takes six
     such derivatives from every 0.5 s of rows."""
     y = np.asarray(y, dtype=np.float64)
     if window > y.shape[0]:  # callers refuse it first (_check_window_fits, _piece_window)
         raise ValueError(f"a Savitzky-Golay window of {window} samples on {y.shape[0]} samples")
-    out = convolve1d(y, _savgol_kernel(window, order, deriv, delta), mode="constant")
+    out = convolve1d(y, _savgol_kernel(window, order, deriv, delta), axis=0, mode="constant")
     lhs, scale = _edge_design(window, order)
     half, n = window // 2, y.shape[0]
     for start, lo, hi in ((0, 0, half), (n - window, n - half, n)):
-        coeffs, *_ = lstsq(
-            lhs, y[start : start + window, None], cond=window * np.finfo(np.float64).eps
-        )
+        edge = y[start : start + window].reshape(window, -1)  # (window, columns), as scipy's
+        coeffs, *_ = lstsq(lhs, edge, cond=window * np.finfo(np.float64).eps)
         p = (coeffs.T / scale).T
-        if deriv > 0:  # scipy's _polyder of the (order + 1, 1) coefficients
+        if deriv > 0:  # scipy's _polyder of the (order + 1, columns) coefficients
             if p.shape[0] <= deriv:
                 p = np.zeros_like(p[:1])
             else:
@@ -430,10 +426,10 @@ def savgol_interp(y: np.ndarray, window: int, order: int, deriv: int, delta: flo
                     dp *= np.arange(p.shape[0] - k - 1, deriv - k - 1, -1, dtype=p.dtype)[:, None]
                 p = dp
         at = np.arange(lo - start, hi - start, dtype=p.dtype)[:, None]
-        values = np.zeros_like(at)
+        values = np.zeros((at.shape[0], p.shape[1]))
         for j in range(p.shape[0]):  # Horner's rule, as scipy's polyval
             values = values * at + p[j]
-        out[lo:hi] = (values / (delta**deriv)).reshape(-1)
+        out[lo:hi] = (values / (delta**deriv)).reshape(hi - lo, *y.shape[1:])
     return out
 
 
@@ -625,7 +621,7 @@ def _between_steps_gain2(
         w = _piece_window(size, window)
         if w >= 3:
             o = min(order, w - 1)
-            fit = savgol_filter(np.eye(w), w, o, deriv=deriv, delta=dt, axis=0, mode="interp")
+            fit = savgol_interp(np.eye(w), w, o, deriv, dt)  # row i: the weights at sample i
             rows2 = np.sum(fit**2, axis=1)  # rows: the estimates at the window's samples
             gain2 = np.full(size, savgol_noise_gain(w, o, dt, deriv) ** 2)
             h = w // 2
@@ -965,27 +961,39 @@ def lowpass(
     order: int = 4,
     report: CleaningReport | None = None,
 ) -> pd.DataFrame:
-    """Zero-phase Butterworth low-pass (forward-backward, no delay) per experiment."""
+    """Zero-phase Butterworth low-pass (forward-backward, no delay) per experiment, designed
+    at the run's logged rate (:func:`_logged_rate`, as :func:`resample_log` reads it). The
+    filter steps sample by sample, so a run whose stamps come in bursts (an IMU's ten
+    samples together every 10 ms) is refused: resample it first (:func:`resample_log`)."""
     out = log.copy()
     t_all = out["t"].to_numpy(np.float64)
     # each run's rows by position: a run's labels may repeat another's (pd.concat)
     values = {c: out[c].to_numpy(np.float64, copy=True) for c in columns}
+    need = 3 * (order + 1)  # filtfilt's padding: three times the filter's order + 1 taps
     for name, pos in experiment_rows(out):
         t = t_all[pos]
-        rate = sample_rate(t)
+        if len(t) <= need:  # before the rate: a run of one sample has no step to read it by
+            raise NnidInputError(
+                f"{run_label(name)} has {len(t)} samples, too few for the "
+                f"low-pass filter ({need} needed)",
+                field="lowpass",
+            )
+        rate, burst = _logged_rate(t, np.nan)  # NaN never read: two samples or more here
+        if burst:
+            # no rate designs it: at the median step's (~100 kHz) a 5 Hz cut-off acted at
+            # 0.05 Hz, at the run's a burst's samples would be spread over its gap
+            raise NnidInputError(
+                f"{run_label(name)}: {burst}; a Butterworth filter steps sample by sample at "
+                "one rate, which these samples do not have: resample the run onto a uniform "
+                "grid first (the preprocessing's rate, resample_log)",
+                field="lowpass",
+            )
         if cutoff >= rate / 2:
             raise NnidInputError(
                 f"cut-off {cutoff} Hz is not below the Nyquist rate {rate / 2:g} Hz",
                 field="lowpass.cutoff",
             )
         b, a = butter(order, cutoff, fs=rate)
-        need = 3 * max(len(a), len(b))
-        if len(t) <= need:
-            raise NnidInputError(
-                f"{run_label(name)} has {len(t)} samples, too few for the "
-                f"low-pass filter ({need} needed)",
-                field="lowpass",
-            )
         for c in columns:
             values[c][pos] = filtfilt(b, a, values[c][pos])
     for c in columns:

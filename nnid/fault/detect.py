@@ -64,8 +64,10 @@ from scipy.special import expit
 from nnid.datasets.cleaning import CleaningReport
 from nnid.fault import kernel
 from nnid.fault.isolation import (
+    LEAST_ROWS,
     SIGNIFICANCE,
     STOPPED_SLACK,
+    TOO_FEW,
     Diagnosis,
     Hypotheses,
     Refit,
@@ -118,13 +120,15 @@ class DetectResult:
     each with its ``experiment`` and ``t``, and ``beside_ratio`` and ``beside_allowed``, what
     it held over the DOF equations the changes leave alone and the level it was judged
     against there (:meth:`_Splits.change_beside`; None where the changes act on every one),
-    and ``why`` (:func:`dismissed_why`)."""
+    and ``why`` (:func:`dismissed_why`). ``unjudged``: per experiment, the rows at its end
+    that were not judged (:func:`unjudged_tail`), batch and ``--follow`` alike."""
 
     trace: Trace
     alarms: list[dict]
     seconds: float
     withdrawn: list[dict] = field(default_factory=list)
     dismissed: list[dict] = field(default_factory=list)
+    unjudged: list[dict] = field(default_factory=list)
 
 
 def dismissed_why(ratio: float | None, allowed: float | None) -> str:
@@ -223,9 +227,38 @@ def isolated_alarm(
             f"{record['meaning']}; it ended at about {t_end:.2f} s, inside the window: sized "
             f"on the {t_end - record['t']:.3g} s before, and not taken out after the window"
         )
-    if not diag.isolated:
+    if not diag.isolated and cut_short(data, k, window_s):
+        not_judged(record, float(data["t"][rows[-1]] - data["t"][k]), window_s, int(rows.size))
+    elif not diag.isolated:
         unexplained(record, float(data["t"][rows[-1]]))
     return record, diag, rows
+
+
+def cut_short(data: dict, k: int, window_s: float) -> bool:
+    """Whether the end of its experiment's rows cuts the isolation window of the alarm at row
+    ``k`` short (:func:`window_rows`: no row at or after t_k + ``window_s``). ``--follow``
+    judges a window before its run ends only once it is whole, so batch and it agree."""
+    t, codes = data["t"], data["experiment"]
+    return bool(t[np.flatnonzero(codes == codes[k])[-1]] < t[k] + window_s)
+
+
+#: how the ``meaning`` of a record whose window the log's end cut short starts (:func:`not_judged`)
+NOT_JUDGED = "not judged: the end of the log cut the isolation window short"
+
+
+def not_judged(record: dict, held_s: float, window_s: float, samples: int) -> None:
+    """The ``record`` of an alarm not isolated on a window that the end of the log cut short
+    (:func:`cut_short`) to ``held_s`` seconds and ``samples`` rows: not judged, not an
+    unexplained change (no ``repeats``, no record opened for a later alarm to persist in: no
+    row is left to watch). ``cut_short`` says how much of the window there was, and the
+    ``meaning`` says so before what isolation read on those rows. A 0.35-s window was an
+    unexplained record whose statistics "restart at the window's end"."""
+    record["cut_short"] = {"seconds": held_s, "window_s": float(window_s), "samples": samples}
+    read = record["meaning"]
+    said = read if read == TOO_FEW else f"too few samples to judge (on them, {read})"
+    record["meaning"] = (
+        f"{NOT_JUDGED} ({held_s:.2f} s of {window_s:g} s, {samples} samples): {said}"
+    )
 
 
 def ended_within(
@@ -326,12 +359,15 @@ def filed(
     taken out after its window. Isolated: new, its change taken out unless it ended. Not
     isolated, with an unexplained record open in its experiment ``code`` (``open_``): the
     change persisting, folded into that record (:func:`persisting`; ``restart_t``, its
-    window's end), no record; else it opens the experiment's unexplained record."""
+    window's end), no record; else a new record, which opens the experiment's unexplained
+    record unless the log's end cut its window short (:func:`not_judged`)."""
     if diag.isolated:
         return True, None if record.get("ended") else Change.of(record, diag)
     if code in open_:
         persisting(open_[code], record["t"], restart_t)
         return False, None
+    if record.get("cut_short"):  # not judged (not_judged): no unexplained change to persist
+        return True, None
     open_[code] = record
     return True, None
 
@@ -369,12 +405,13 @@ def said(record: dict) -> str:
 
 
 #: the fewest seconds after the time τ at which changes ended or changed size that
-#: :func:`ended_alarm` and :func:`resized_alarm` fit (and never fewer than the 10 rows a
-#: :func:`~nnid.fault.isolation.refit` needs). A time, so that a log at another rate is split
-#: alike: 1 s is the acceleration smoothing window of the fitted models (``savgol_window``)
-#: that an added-mass or payload signature is smoothed over, so the rows after τ are not all
-#: rows whose smoothed acceleration straddles τ; and it holds 120 whitened samples at 20 Hz,
-#: on which healthy noise reads under :data:`~nnid.fault.isolation.UNEXPLAINED_RATIO`.
+#: :func:`ended_alarm` and :func:`resized_alarm` fit (and never fewer than the
+#: :data:`~nnid.fault.isolation.LEAST_ROWS` rows a :func:`~nnid.fault.isolation.refit`
+#: needs). A time, so that a log at another rate is split alike: 1 s is the acceleration
+#: smoothing window of the fitted models (``savgol_window``) that an added-mass or payload
+#: signature is smoothed over, so the rows after τ are not all rows whose smoothed
+#: acceleration straddles τ; and it holds 120 whitened samples at 20 Hz, on which healthy
+#: noise reads under :data:`~nnid.fault.isolation.UNEXPLAINED_RATIO`.
 CHANGED_S = 1.0
 #: what is left of a change after its end must not be significant at this level: its 95 %
 #: interval, as the record states it, holds nominal (a thruster's 100 %, an effect's 0). The
@@ -414,7 +451,7 @@ class _Splits:
         ok = np.isfinite(r).all(1) & np.isfinite(left).all(1) & (rows > 0)
         self.rows, self.r, self.left, self.n = rows[ok], r[ok], left[ok], int(ok.sum())
         self.dim = max(float(monitor.mask_.sum()), 1.0)
-        self.least = max(10, int(np.ceil(CHANGED_S / monitor.interval - 1e-6)))
+        self.least = max(LEAST_ROWS, int(np.ceil(CHANGED_S / monitor.interval - 1e-6)))
         self.p_left = self.power(self.left)
         self.before = np.r_[0.0, np.cumsum(self.p_left)]  # before[j]: on the rows before j
         self.sets = [list(range(len(self.changes)))]
@@ -454,9 +491,12 @@ class _Splits:
                 self._signature = gain > model_error(self.ratio(self.power(self.r)))
         return self._signature
 
-    def change_beside(self) -> bool:
+    def change_beside(self) -> bool | None:
         """Whether ``left`` holds a new change in the DOF equations that the changes leave
-        alone, judged there as a first alarm is: where their signature (``r`` less ``left``)
+        alone, judged there as a first alarm is (None: more than noise there, on fewer rows
+        than a first alarm's isolation needs, :data:`~nnid.fault.isolation.LEAST_ROWS`: not
+        judged, so not dismissed either, and isolated as a first alarm is, which says
+        :data:`~nnid.fault.isolation.TOO_FEW`): where their signature (``r`` less ``left``)
         has no more power than the noise, what ``left`` holds there is more than a hypothesis
         may leave of that noise (:meth:`beside_ratio` over
         :func:`~nnid.fault.isolation.allowed_over` those equations), and the alarm isolated as
@@ -479,6 +519,8 @@ class _Splits:
         self.beside = (self.beside_ratio(self.left, beside), allowed)
         if self.beside[0] <= allowed:
             return False
+        if self.n < LEAST_ROWS:  # the window cut short: "no new change" would be unmeasured
+            return None
         new = self.new_change()
         if not new.isolated:
             return False
@@ -857,7 +899,7 @@ def rewatched_alarm(
     if (
         explained_by_the_changes(monitor, r, left)
         and not splits.signature_left()
-        and not splits.change_beside()
+        and splits.change_beside() is False  # None: too few rows to tell, not dismissed
     ):
         return Verdict(dismissed=True, beside=splits.beside)
     resized = resized_alarm(splits, trace, k, window_s)
@@ -958,6 +1000,9 @@ class Rewatch:
         self.t_prev = np.nan
         # the columns of the changes' hypotheses, remade only when they name others
         self.hypotheses: Hypotheses | None = None
+        # the rows at the run's end that the latest :meth:`left` to it left unjudged: the time
+        # before the first, the first's and the last's, and how many (None: none)
+        self.tail: tuple[float, float, float, int] | None = None
 
     @property
     def fitted(self) -> list[tuple[str, float]]:
@@ -997,14 +1042,23 @@ class Rewatch:
         payload's run ended, those rows held 1.5-3.6 times the run's mean whitened power, the
         EWMA statistic rose from 35 to 152 over them (threshold 115), and the run's last
         sample alarmed (a model_change that too few rows could isolate). Those rows are NaN,
-        not judged, as rows without a residual are."""
+        not judged, as rows without a residual are, and kept in :attr:`tail` to be said
+        (:func:`unjudged_tail`)."""
         fitted = self.fitted
         if fitted:
             names = {name for name, _ in fitted}
             self.hypotheses = Hypotheses.reused(self.hypotheses, self.monitor, names)
         out = _left(self.monitor, data, rows, r, fitted, self.hypotheses)
+        if to_end:
+            self.tail = None
         if to_end and fitted:
-            out[self.hypotheses.extrapolated(data, rows)] = np.nan
+            mask = self.hypotheses.extrapolated(data, rows)
+            out[mask] = np.nan
+            gone = rows[mask]
+            if gone.size:
+                t = data["t"]
+                self.tail = (float(t[gone[0] - 1]), float(t[gone[0]]), float(t[gone[-1]]),
+                             int(gone.size))  # fmt: skip
         return out
 
     def step(self, ts: np.ndarray, left: np.ndarray, r: np.ndarray) -> np.ndarray:
@@ -1025,6 +1079,29 @@ class Rewatch:
         if ts.size:
             self.t_prev = float(ts[-1])
         return out
+
+
+#: why :func:`unjudged_tail`'s rows were not judged
+UNJUDGED_WHY = (
+    "the run's last half smoothing window: an isolated change taken out there reads the "
+    "acceleration, whose smoothed derivative is extrapolated over these rows, not the centred "
+    "estimate the change was fitted with; their statistics were not computed, so no alarm could "
+    "be raised there"
+)
+
+
+def unjudged_tail(experiment: str | None, w: Rewatch) -> dict | None:
+    """The rows at the end of ``experiment`` that its :class:`Rewatch` ``w`` left unjudged
+    (:meth:`Rewatch.left` to the run's end), as ``detect.json`` states them: ``from_t`` and
+    ``to_t`` the first and last, ``samples`` how many, ``seconds`` the time they span (from
+    the last row judged), and ``why``; None where every row was judged. Dropped unsaid, a
+    payload's run read as judged to its last sample."""
+    if w.tail is None:
+        return None
+    before, first, last, n = w.tail
+    name = None if experiment is None else str(experiment)
+    return {"experiment": name, "from_t": first, "to_t": last, "samples": n,
+            "seconds": last - before, "why": UNJUDGED_WHY}  # fmt: skip
 
 
 def detect(
@@ -1090,7 +1167,9 @@ def detect(
         _rewatch(rewatch.setdefault(code, Rewatch(monitor)), data, residual, values, alarm, rows,
                  changed, change)  # fmt: skip
         pos = int(rows[-1]) + 1
-    return DetectResult(watched, alarms, time.perf_counter() - start, dismissed=dismissed)
+    tails = [unjudged_tail(names[np.argmax(codes == c)], w) for c, w in rewatch.items()]
+    return DetectResult(watched, alarms, time.perf_counter() - start, dismissed=dismissed,
+                        unjudged=[u for u in tails if u is not None])  # fmt: skip
 
 
 def _rest(data: dict, rows: np.ndarray) -> np.ndarray:

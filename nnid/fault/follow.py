@@ -20,8 +20,9 @@ rows) and each row waits for the half Savitzky-Golay window after it that its si
 acceleration is smoothed over, as batch has it, so an alarm there is announced up to that much
 later; its time is its row's. The run's last rows, which never get that half window, are not
 judged where the signature reads the acceleration (:meth:`~nnid.fault.detect.Rewatch.left`), as
-in batch. After an alarm that is not isolated the statistics restart
-after its window too, as in batch, with nothing more taken out (an isolated change before it
+in batch, and said in the result's ``unjudged`` (:func:`~nnid.fault.detect.unjudged_tail`).
+After an alarm that is not isolated the statistics restart after its window too, as in batch,
+with nothing more taken out (an isolated change before it
 stays taken out; the rows watched the same way), and a later alarm that is not isolated
 either is announced, then said withdrawn: the unexplained change persisting, counted in its
 record (:func:`~nnid.fault.detect.persisting`). The per-sample update of a stream before its
@@ -66,6 +67,7 @@ from nnid.fault.detect import (
     isolated_alarm,
     rewatched_alarm,
     run_names,
+    unjudged_tail,
     window_rows,
     withdrawn_record,
 )
@@ -306,6 +308,7 @@ def follow_csv(
     alarm_rows: list[int] = []
     alarms: list[dict] = []
     withdrawn: list[dict] = []  # announced, then not in the final alarms (said so)
+    unjudged: list[dict] = []  # per experiment ended, its rows left unjudged at its end
     current = None
     dropped = 0  # rows forgotten from the front of the buffers
     # after an isolated change: the experiment (code), the first row watched on what it leaves
@@ -454,9 +457,18 @@ def follow_csv(
             withdraw(k, k, "persisting", by_t=open_[code]["t"])
         # as batch: fresh statistics after the window, isolated or not
         if ref["code"] != code or ref["rewatch"] is None:
+            said_unjudged()  # the experiment before, whose rows have all been watched
             ref.update(rewatch=Rewatch(monitor), code=code)
         ref["rewatch"].restart(data["t"][rows[-1]], change)
         rewatch_after(k, rows, changed=change is not None, ended=ended)
+
+    def said_unjudged() -> None:
+        """The rows the experiment of the current :class:`Rewatch` left unjudged at its end
+        (:func:`~nnid.fault.detect.unjudged_tail`, as batch has them), once it has ended."""
+        if ref["rewatch"] is not None:
+            name = names[ref["code"]] if exp_col is not None else None
+            tail = unjudged_tail(name, ref["rewatch"])
+            unjudged.extend([] if tail is None else [tail])
 
     def settle() -> None:
         """The current experiment has no more rows: its alarms judged in turn, each on its
@@ -627,6 +639,7 @@ def follow_csv(
     if unchecked_tail():
         check_units(n)
     settle()
+    said_unjudged()
     if not ts:
         raise NnidInputError("has a header and no rows", source=where)
     data = _arrays(ts, xs, us, codes, names)
@@ -634,7 +647,7 @@ def follow_csv(
     values[:, 0:6] = np.array(vals)[:, 0:6]
     trace = Trace(data["t"], run_names(names, data["experiment"], exp_col is not None), values,
                   np.isin(np.arange(len(ts)) + dropped, alarm_rows))  # fmt: skip
-    return DetectResult(trace, alarms, time.perf_counter() - start, withdrawn)
+    return DetectResult(trace, alarms, time.perf_counter() - start, withdrawn, unjudged=unjudged)
 
 
 def _arrays(ts, xs, us, codes, names) -> dict:

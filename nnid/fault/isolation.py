@@ -50,6 +50,11 @@ SIGNIFICANCE = 0.01
 NOT_SIGNIFICANT = "no hypothesis explains the change significantly"
 #: what an alarm says where the best hypothesis leaves more than :data:`UNEXPLAINED_RATIO`
 UNEXPLAINED = "unexplained by the hypotheses"
+#: the fewest rows with a finite residual that isolation fits (:func:`isolate`, :func:`refit`);
+#: an alarm with fewer after it is said :data:`TOO_FEW`, not judged
+LEAST_ROWS = 10
+#: what an alarm says where its window holds fewer than :data:`LEAST_ROWS` rows to isolate on
+TOO_FEW = "too few samples after the alarm to isolate"
 # the largest mean square of the whitened residual, in units of the healthy noise power, that
 # a named hypothesis may leave: twice the noise, i.e. as much unexplained power as the noise
 # itself. The one right hypothesis left at most 1.48 over 59 alarms of simulated single faults,
@@ -311,8 +316,8 @@ def isolate(
     the change on top of the 30 % reads 170 %)."""
     plant = monitor.plant_
     rows = rows[(rows > 0) & np.isfinite(residual[rows]).all(1)]
-    if rows.size < 10:
-        return Diagnosis("model_change", meaning="too few samples after the alarm to isolate")
+    if rows.size < LEAST_ROWS:
+        return Diagnosis("model_change", meaning=TOO_FEW)
     vehicle, cands, cols = hypothesis_columns(monitor, data, rows)
     e = residual[rows] - monitor.mu_
     weights = dof_weights(monitor, e)
@@ -529,11 +534,11 @@ def refit(
 ) -> Refit | None:
     """The hypotheses ``names`` (columns of :func:`hypothesis_columns`) fitted together to the
     residual ``residual`` [len(rows), 6] of ``rows`` by :func:`isolate`'s weighted least
-    squares (:class:`Refit`). None where, of the rows with a finite residual, fewer than 10
-    are left or a hypothesis has no column on them."""
+    squares (:class:`Refit`). None where, of the rows with a finite residual, fewer than
+    :data:`LEAST_ROWS` are left or a hypothesis has no column on them."""
     keep = (rows > 0) & np.isfinite(residual).all(1)
     rows, residual = rows[keep], residual[keep]
-    if rows.size < 10:
+    if rows.size < LEAST_ROWS:
         return None
     vehicle, cands, cols = hypothesis_columns(monitor, data, rows, set(names))
     index = {c.name: k for k, c in enumerate(cands)}
@@ -563,12 +568,22 @@ def refit(
     return Refit(out, cov, n_eff, left)
 
 
+def whitened_power(monitor, e: np.ndarray) -> np.ndarray:
+    """The square of each coordinate of the residual ``e`` [N, 6] (μ taken out) whitened by
+    the monitor's healthy covariance, on its rows that are finite: [rows, 6], the power that
+    :func:`noise_ratio` and :func:`dof_noise_ratios` average."""
+    e = e[np.isfinite(e).all(1)]
+    return (e @ monitor.whiten_.T) ** 2
+
+
 def noise_ratio(monitor, e: np.ndarray) -> float:
     """Mean square of the residual ``e`` [N, 6] (μ taken out) whitened by the monitor's
-    healthy covariance: 1 is the healthy noise level."""
-    e = e[np.isfinite(e).all(1)]
+    healthy covariance: 1 is the healthy noise level. :func:`dof_noise_ratios`' mean over
+    the DOF equations watched, but summed over every value at once (their mean, summed DOF by
+    DOF first, differs in the last bit)."""
+    power = whitened_power(monitor, e)
     dim = float(monitor.mask_.sum())
-    return float(np.sum((e @ monitor.whiten_.T) ** 2)) / max(e.shape[0] * dim, 1.0)
+    return float(np.sum(power)) / max(power.shape[0] * dim, 1.0)
 
 
 def dof_noise_ratios(monitor, e: np.ndarray) -> np.ndarray:
@@ -576,8 +591,8 @@ def dof_noise_ratios(monitor, e: np.ndarray) -> np.ndarray:
     whitened residual ``e`` [N, 6] (μ taken out; the whitening is triangular, so coordinate j
     is DOF j's equation less what the DOFs before it predict of its noise); 0 on a DOF the
     monitor does not watch."""
-    e = e[np.isfinite(e).all(1)]
-    return np.sum((e @ monitor.whiten_.T) ** 2, axis=0) / max(e.shape[0], 1)
+    power = whitened_power(monitor, e)
+    return np.sum(power, axis=0) / max(power.shape[0], 1)
 
 
 def model_error(baseline: float) -> float:

@@ -49,7 +49,9 @@ def detect_json(monitor, result: DetectResult, notes: list[str] | None = None) -
     announces none: :attr:`~nnid.fault.detect.DetectResult.withdrawn`). ``dismissed``: the
     alarms batch judged within what isolated changes may leave, with their reading beside the
     changes and why (:attr:`~nnid.fault.detect.DetectResult.dismissed`; empty with
-    ``--follow``, which says them in ``withdrawn``)."""
+    ``--follow``, which says them in ``withdrawn``). ``unjudged``: per experiment, the rows at
+    its end that were not judged, how many, the seconds they span and why
+    (:func:`~nnid.fault.detect.unjudged_tail`; batch and ``--follow`` alike)."""
     h_t, h_g = monitor.threshold_values
     caveat = monitor.threshold_caveat()
     measured = monitor.measured_false_alarms_
@@ -57,6 +59,7 @@ def detect_json(monitor, result: DetectResult, notes: list[str] | None = None) -
         "alarms": result.alarms,
         "withdrawn": result.withdrawn,
         "dismissed": result.dismissed,
+        "unjudged": result.unjudged,
         "threshold": {
             "ewma": h_t,
             "cusum": h_g,
