@@ -13,6 +13,8 @@ import pytest
 
 from nnid.config import load_config
 from nnid.datasets.simulator import simulate_config
+from nnid.evaluation.metrics import nrmse
+from nnid.evaluation.persistence import ROUNDING, kind_sizes
 from nnid.models.sindy import SindyDamping
 from nnid.physics.damping_library import BasisLibrary, mask_terms
 from nnid.physics.fossen import FossenModel
@@ -419,7 +421,7 @@ def test_a_high_power_of_a_small_real_motion_is_data_not_rounding():
         assert model.coefficients_[key] == pytest.approx(truth, rel=1e-6)
         assert model.selected_["validation_nmse"][key[0]] < 1e-9
     # the same log with w rounding: every w term is excluded by its own floor, q|q| is not
-    from nnid.trainers.sindy import library_floors
+    from nnid.evaluation.persistence import library_floors
 
     rounding = log.assign(w=1e-17 * rng.standard_normal(len(log)))
     theta, y = SindyDamping(vehicle).features(rounding)
@@ -494,8 +496,9 @@ def test_targets_of_rounding_keep_no_terms_and_are_not_called_unexplained():
     for key, p in zero.params.items():
         for what in ("value", "stderr"):
             assert noisy.params[key][what] == pytest.approx(p[what], rel=1e-12), (key, what)
-    for f in "KM":
-        assert noisy.selected_["validation_nmse"][f] == zero.selected_["validation_nmse"][f]
+    for f in "KM":  # a zero held-out target scores nothing, predicted zero or not
+        assert np.isnan(noisy.selected_["validation_nmse"][f])
+        assert np.isnan(zero.selected_["validation_nmse"][f])
     # the path's own verdict: K and M are the idle outputs, X, Y and N are not
     theta, y = SindyDamping(vehicle).features(rounding)
     ok = np.isfinite(theta).all(1) & np.isfinite(y).all(1)
@@ -503,6 +506,13 @@ def test_targets_of_rounding_keep_no_terms_and_are_not_called_unexplained():
     idle = dict(zip("XYZKMN", path.idle_outputs_, strict=True))
     assert idle["K"] and idle["M"] and not (idle["X"] or idle["Y"] or idle["N"])
     assert not path.coef_[path.idle_outputs_].any()
+    assert np.isfinite(path.selected_["aic"])  # the likelihood reads the idle outputs' MSE
+    # J is over the outputs with something to explain: K and M, still, would make it NaN
+    for model in (zero, noisy):
+        nmse_v = model.selected_["validation_nmse"]
+        explained = [nmse_v[f] for f in "XYZN" if not np.isnan(nmse_v[f])]
+        assert model.selected_["validation_J"] == pytest.approx(np.mean(explained), rel=1e-12)
+        assert np.isfinite(model.selected_["train_J"])
 
 
 def test_a_moment_is_judged_rounding_beside_moments_not_beside_forces():
@@ -569,18 +579,22 @@ def test_an_output_idle_in_training_is_said_idle_not_unexplained_by_the_path():
     assert not any(key[0] == "K" for key in model.coefficients_)
     assert len(said) == 1 and said[0].startswith("the SINDy model fits nothing of K (")
     assert "idle in training" in said[0] and "rounding" in said[0]
+    # what the rule measured (K's RMS over the moments' typical size), not only its floor
+    theta, y = SindyDamping(vehicle).features(train)
+    y = y[np.isfinite(theta).all(1) & np.isfinite(y).all(1)]
+    ratio = np.sqrt(np.mean(y[:, 3] ** 2)) / kind_sizes(y, 1 / vehicle.length)[3]
+    quoted = re.search(r"training target RMS ([0-9.e+-]+) of its kind's typical size", said[0])
+    assert quoted and float(quoted.group(1)) == pytest.approx(ratio, rel=1e-2)
+    assert ratio < 0.8 * ROUNDING  # the case: a measured number the floor's 1e-10 is not
+    assert f"floor {ROUNDING:g}" in said[0]
     assert "explains nothing" not in said[0] and "best on the path" not in said[0]
     assert not any(f"{f} (" in said[0] for f in "XYZMN")
 
 
-def test_an_error_beside_a_zero_held_out_target_is_not_measured_as_an_nmse():
-    """Fitted on a log that heaves (Z noisy with 2 % accelerometer noise) and validated on one
-    that never does (Z exactly 0), a shared threshold keeps Z's terms and predicts a Z of RMS
-    2.4 N there. Its NMSE was that error over a floor of 1e-300, 5.9e300, and the path's J
-    9.8e299, warned as "validation NMSE 5.86e+300": numbers nothing measured. It is NaN (null
-    in JSON), a validation J that includes it too, and the warning says Z's error in N."""
+def _heaves_then_level():
+    """Seamor, a training log that heaves (accelerations with 2 % noise) and a held-out one
+    that never does (w and Z exactly 0)."""
     from nnid.datasets.simulator import simulate
-    from nnid.trainers.sindy import SindyWarning
 
     vehicle = load_vehicle("seamor")
     rng = np.random.default_rng(5)
@@ -591,6 +605,18 @@ def test_an_error_beside_a_zero_held_out_target_is_not_measured_as_an_nmse():
         train[c] += 0.02 * train[c].std() * rng.standard_normal(len(train))
     val = _surge_sway_yaw(np.random.default_rng(3), noise=False)
     assert (val["w"] == 0).all()
+    return vehicle, train, val
+
+
+def test_an_error_beside_a_zero_held_out_target_is_not_measured_as_an_nmse():
+    """Fitted on a log that heaves (Z noisy with 2 % accelerometer noise) and validated on one
+    that never does (Z exactly 0), a shared threshold keeps Z's terms and predicts a Z of RMS
+    2.4 N there. Its NMSE was that error over a floor of 1e-300, 5.9e300, and the path's J
+    9.8e299, warned as "validation NMSE 5.86e+300": numbers nothing measured. It is NaN (null
+    in JSON), a validation J that includes it too, and the warning says Z's error in N."""
+    from nnid.trainers.sindy import SindyWarning
+
+    vehicle, train, val = _heaves_then_level()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         model = SindyDamping(vehicle, thresholds=[1e-3], per_output=False).fit(train, val)
@@ -598,7 +624,8 @@ def test_an_error_beside_a_zero_held_out_target_is_not_measured_as_an_nmse():
     nmse_v = model.selected_["validation_nmse"]
     assert any(key[0] == "Z" for key in model.coefficients_)  # Z keeps terms
     assert np.isnan(nmse_v["Z"]) and np.isnan(model.path_[0]["validation_J"])
-    assert all(np.isfinite(nmse_v[f]) for f in "XYKMN")
+    # K and M, zero held out too (no roll or pitch there), predicted zero: not measured either
+    assert all(np.isfinite(nmse_v[f]) for f in "XYN") and np.isnan([nmse_v["K"], nmse_v["M"]]).all()
     assert len(said) == 1 and "do not measure" in said[0]
     error = re.search(
         r"Z \(held-out target zero, the model's prediction RMS ([0-9.e+-]+)\)", said[0]
@@ -607,9 +634,35 @@ def test_an_error_beside_a_zero_held_out_target_is_not_measured_as_an_nmse():
     truth = np.sqrt(np.mean((model.predict_arrays(x)[:, 2] - y[:, 2]) ** 2))
     assert error and float(error.group(1)) == pytest.approx(truth, rel=1e-2)
     assert "explains nothing" not in said[0]
-    # the function itself: 0 where nothing is predicted of a zero target, NaN where something is
-    got = nmse(np.zeros((3, 2)), np.array([[0.0, 1.0], [0.0, 0.0], [0.0, 0.0]]))
-    assert got[0] == 0.0 and np.isnan(got[1])
+    # the function itself: a zero target scores nothing, whether its prediction is zero or not
+    # (as nrmse of a flat signal); a target that is not zero is scored
+    y = np.array([[0.0, 0.0, 2.0]] * 3)
+    got = nmse(y, np.array([[0.0, 1.0, 1.0], [0.0] * 3, [0.0] * 3]))
+    assert np.isnan(got[:2]).all() and got[2] == pytest.approx((1 + 4 + 4) / 12)
+    assert np.isnan(nrmse(np.zeros(3), np.zeros(3)))
+
+
+def test_a_zero_prediction_of_a_zero_held_out_target_is_not_scored_perfect():
+    """The same logs, each output selected on its own: Z, K and M are zero held out (no heave,
+    roll or pitch there) and were predicted exactly zero there, each scored NMSE 0, a perfect
+    score nothing measured, said by nothing (where nrmse of a flat signal is NaN). None is
+    measured (NaN, and the J that includes them), Z keeps no terms as before, and the warning
+    names the three, each fitted in training."""
+    from nnid.trainers.sindy import SindyWarning
+
+    vehicle, train, val = _heaves_then_level()
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        model = SindyDamping(vehicle, thresholds=[1e-3]).fit(train, val)
+    said = [str(w.message) for w in caught if issubclass(w.category, SindyWarning)]
+    nmse_v = model.selected_["validation_nmse"]
+    assert not any(key[0] == "Z" for key in model.coefficients_)
+    assert np.isnan([nmse_v[f] for f in "ZKM"]).all() and np.isnan(model.selected_["validation_J"])
+    assert all(np.isfinite(nmse_v[f]) for f in "XYN")
+    unmeasured = [s for s in said if "do not measure" in s]
+    assert len(unmeasured) == 1
+    for f in "ZKM":
+        assert f"{f} (held-out target zero, the model's prediction RMS 0)" in unmeasured[0]
 
 
 @pytest.mark.parametrize("to_linear", [0.0, -1.0, float("nan"), float("inf")])

@@ -321,3 +321,16 @@ def test_a_w_at_rounding_level_fits_the_model_of_an_exact_zero():
     assert rounded.params == exact.params
     assert exact.params["X:u*Vw"] == {"value": None, "stderr": None, "simulated_at": 0.0}
     assert all("zero regressor" in text and "N:v*Vw" in text for text in said)
+
+
+def test_the_named_mask_synthesis_does_not_import_pysindy():
+    """The named-mask synthesis imported nnid.trainers.sindy, and with it pysindy and
+    scikit-learn, for library_floors alone, which lives beside motion_floors now."""
+    import os
+    import subprocess
+    import sys
+
+    code = "import sys, nnid.models.synthesis; sys.exit('pysindy' in sys.modules)"
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    done = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, timeout=120)
+    assert done.returncode == 0, done.stderr.decode()[-2000:]

@@ -12,10 +12,15 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass, field, replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 
+from nnid.physics.dofs import DOFS
 from nnid.serialization import exact_float, read_exact_float
+
+if TYPE_CHECKING:  # the library is only called here: importing it at run time pulls in torch
+    from nnid.physics.damping_library import BasisLibrary
 
 #: a regressor column whose RMS is at most this fraction of the typical size of a regressor of
 #: its whole regression (:func:`typical_size`) is rounding, not data. What this assumes: the
@@ -302,6 +307,27 @@ def motion_floors(
     """Each column's floor of the rounding rule (:func:`rounding_floors`) of the sizes
     :func:`motion_sizes` reads of ``columns_at`` in ``parts`` parts of the motion."""
     return rounding_floors(*motion_sizes(columns_at, parts))
+
+
+def library_floors(
+    nu: np.ndarray, library: BasisLibrary, length: float, inputs: np.ndarray | None = None
+) -> np.ndarray:
+    """Each column's floor of the rounding rule (:func:`motion_floors`) of ``library`` (SINDy's
+    and the named-mask synthesis's basis terms) evaluated on the velocities ``nu`` ``[N, 6]``,
+    then of the ``inputs`` ``[N, n_u]`` appended to it (SINDy with control's τ): each term at
+    the log's typical motion (:func:`kind_sizes` of ``nu``, angular rates over ``length``, as
+    the Fossen regression's floors), and with each velocity alone times :data:`POWER_PROBE`, as
+    a term is a product of them: q|q| of a real pitch rate 1e-6 of the yaw rate is data (power
+    2), u·w of a log whose w is rounding is rounding (power 1 in w). An input does not grow
+    with the motion: its floor is that of a column with no power (ROUNDING × the largest
+    column at the typical motion)."""
+    reference = kind_sizes(np.asarray(nu, dtype=np.float64), length)
+    passed = [] if inputs is None else list(np.asarray(inputs, dtype=np.float64).T)
+
+    def columns_at(scale: np.ndarray) -> list[np.ndarray]:
+        return [*library((scale * reference)[None, :]).T, *passed]
+
+    return motion_floors(columns_at, len(DOFS))
 
 
 def rounding_columns(

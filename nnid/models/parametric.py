@@ -406,13 +406,13 @@ class ParametricFossen:
         column at the log's typical motion ``[P]``, and with each velocity alone times
         :data:`~nnid.evaluation.persistence.POWER_PROBE` ``[6, P]``, for its least power among
         the velocities it grows with (as SINDy's library terms,
-        :func:`~nnid.trainers.sindy.library_floors`): a product is rounding where one of its
-        factors is, so that u·w of a log whose w is rounding (1e-17) is of power 1 in w; read
-        in the whole motion at once it was of power 2, its floor ROUNDING² × its size, and its
-        1e-17 of u² was data: M:u*w was fitted to rounding (the Munk moment's, -41.5 on a Seamor
-        surge/sway/yaw log), a value a later log that heaves would simulate. The typical motion
-        (:func:`~nnid.evaluation.persistence.kind_sizes`, angular rates over the vehicle's
-        length): ν of each kind (linear, angular) at the largest typical |ν| of that
+        :func:`~nnid.evaluation.persistence.library_floors`): a product is rounding where one
+        of its factors is, so that u·w of a log whose w is rounding (1e-17) is of power 1 in
+        w; read in the whole motion at once it was of power 2, its floor ROUNDING² × its size,
+        and its 1e-17 of u² was data: M:u*w was fitted to rounding (the Munk moment's, -41.5
+        on a Seamor surge/sway/yaw log), a value a later log that heaves would simulate. The
+        typical motion (:func:`~nnid.evaluation.persistence.kind_sizes`, angular rates over the
+        vehicle's length): ν of each kind (linear, angular) at the largest typical |ν| of that
         kind (one number for all six compared a yaw-only fit with a yaw rate of the surge
         speed, 0.49 rad/s, where the log had 2.5e-6, and called its r|r| rounding), ν̇ likewise
         of ``nu_dot`` (the accelerations the regression reads: logged, or sF(s)[ν] of the

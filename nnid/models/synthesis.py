@@ -24,6 +24,7 @@ from nnid.datasets.log import ACCELERATION
 from nnid.datasets.preprocess import run_spans, zoh_midpoint_inputs
 from nnid.datasets.splits import PARTS
 from nnid.errors import NnidInputError
+from nnid.evaluation.persistence import library_floors
 from nnid.models.base import AccelerationParts
 from nnid.models.parametric import (
     FossenPlant,
@@ -40,7 +41,6 @@ from nnid.physics.damping_library import BasisLibrary
 from nnid.physics.dofs import DOFS, FORCES
 from nnid.physics.parts import Parts
 from nnid.trainers.history import Progress
-from nnid.trainers.sindy import library_floors
 from nnid.trainers.synthesis import (
     LOSSES,
     force_error,
@@ -105,7 +105,7 @@ def synthesis_data(
     """The basis terms ξ(ν) ``[N, n_terms]`` and τ̄ ``[N, 6]`` of a log, both through F(s)
     when ``filter_lambda`` is given, so that τ̄ = K ξ holds on either form (eq. 4.6), and the
     velocities ν ``[N, 6]`` the terms are of (unfiltered: the motion a term is judged
-    beside, :func:`~nnid.trainers.sindy.library_floors`)."""
+    beside, :func:`~nnid.evaluation.persistence.library_floors`)."""
     tau_bar, data = residual_force(
         vehicle, log, savgol_window, savgol_order, filter_lambda, zoh_midpoint
     )
@@ -217,8 +217,9 @@ class DampingModel(FossenPlant):
         self, nu: np.ndarray, terms: Sequence[str], inputs: np.ndarray | None = None
     ) -> np.ndarray:
         """Each term's floor of the rounding rule on the velocities ``nu`` ``[N, 6]`` the fit
-        reads, then of the ``inputs`` appended (:func:`~nnid.trainers.sindy.library_floors`,
-        angular rates over the vehicle's length where its file gives one, else a metre)."""
+        reads, then of the ``inputs`` appended
+        (:func:`~nnid.evaluation.persistence.library_floors`, angular rates over the vehicle's
+        length where its file gives one, else a metre)."""
         return library_floors(nu, self._basis(terms), self.vehicle.rounding_length, inputs)
 
     @property

@@ -40,7 +40,6 @@ from nnid.errors import NnidInputError
 from nnid.evaluation.persistence import (
     ROUNDING,
     kind_sizes,
-    motion_floors,
     rounding_columns,
     typical_size,
 )
@@ -177,48 +176,40 @@ def debias(r: np.ndarray, b: np.ndarray, coef: np.ndarray) -> np.ndarray:
     return out
 
 
-def library_floors(
-    nu: np.ndarray, library: BasisLibrary, length: float, inputs: np.ndarray | None = None
-) -> np.ndarray:
-    """Each column's floor of the rounding rule (:func:`~nnid.evaluation.persistence.
-    motion_floors`) of ``library`` evaluated on the velocities ``nu`` ``[N, 6]``, then of the
-    ``inputs`` ``[N, n_u]`` appended to it (SINDy with control's τ): each term at the log's
-    typical motion (:func:`~nnid.evaluation.persistence.kind_sizes` of ``nu``, angular rates
-    over ``length``, as the Fossen regression's floors), and with each velocity alone times
-    :data:`~nnid.evaluation.persistence.POWER_PROBE`, as a term is a product of them: q|q| of a
-    real pitch rate 1e-6 of the yaw rate is data (power 2), u·w of a log whose w is rounding
-    is rounding (power 1 in w). An input does not grow with the motion: its floor is that of
-    a column with no power (ROUNDING × the largest column at the typical motion)."""
-    reference = kind_sizes(np.asarray(nu, dtype=np.float64), length)
-    passed = [] if inputs is None else list(np.asarray(inputs, dtype=np.float64).T)
-
-    def columns_at(scale: np.ndarray) -> list[np.ndarray]:
-        return [*library((scale * reference)[None, :]).T, *passed]
-
-    return motion_floors(columns_at, len(DOFS))
-
-
-def _rounding_outputs(y: np.ndarray, to_linear: float | None = None) -> np.ndarray:
+def _rounding_outputs(
+    y: np.ndarray, to_linear: float | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """Which outputs of targets ``y`` ``[N, m]`` are rounding, not data ``[m]``: the rounding
     rule (:func:`~nnid.evaluation.persistence.rounding_columns`) of each target against the
     typical size of the regression's targets, not of its regressors (other units); with
     ``to_linear``, of six DOFs' targets, against its own kind's
     (:func:`~nnid.evaluation.persistence.kind_sizes`: a moment beside moments, not forces). A
-    target that is not finite is not idle: zeroed, it would hide bad input behind a zero row."""
+    target that is not finite is not idle: zeroed, it would hide bad input behind a zero row.
+    Also each target's RMS over that size ``[m]``, the number the rule compares with
+    :data:`~nnid.evaluation.persistence.ROUNDING` (0 for a target zero throughout)."""
     rms = np.sqrt(np.mean(y * y, axis=0))
     reference = typical_size(y) if to_linear is None else kind_sizes(y, to_linear)
-    return np.isfinite(rms) & rounding_columns(rms, reference)
+    with np.errstate(divide="ignore", invalid="ignore"):  # a size of 0: every target is 0
+        ratio = np.where(rms == 0, 0.0, rms / reference)
+    return np.isfinite(rms) & rounding_columns(rms, reference), ratio
 
 
 def nmse(y: np.ndarray, pred: np.ndarray) -> np.ndarray:
-    """Per-output normalised MSE: mean((y − ŷ)²) / mean(y²). Where a target is zero
-    throughout, 0 where the prediction is too (nothing to explain, nothing predicted) and NaN
-    where it is not: an error with nothing to normalise it by is not measured as a share (a
-    floor of 1e-300 made it an NMSE of ~1e299)."""
+    """Per-output normalised MSE: mean((y − ŷ)²) / mean(y²). NaN where a target is zero
+    throughout, whatever the prediction: there is nothing to normalise an error by, so no share
+    of it is measured (a floor of 1e-300 made an error an NMSE of ~1e299, and a zero error
+    was 0, a perfect score that nothing measured), as :func:`~nnid.evaluation.metrics.nrmse`
+    of a flat signal."""
     ms = np.mean(y * y, axis=0)
     err = np.mean((y - pred) ** 2, axis=0)
     with np.errstate(divide="ignore", invalid="ignore"):
-        return np.where(ms > 0, err / ms, np.where(err == 0, 0.0, np.nan))
+        return np.where(ms > 0, err / ms, np.nan)
+
+
+def _j(err: np.ndarray, outputs: np.ndarray) -> float:
+    """J, the mean NMSE over ``outputs`` [m] (those with something to explain); NaN where
+    none is, or where one of them is not measured (:func:`nmse`)."""
+    return float(err[outputs].mean()) if outputs.any() else float("nan")
 
 
 def _least(val: np.ndarray) -> np.ndarray:
@@ -283,22 +274,24 @@ class SparsePath(BaseEstimator):
     ``[m, K]`` its coefficients. ``excluded_`` ``[K]``: the columns of ``theta`` that are
     rounding, not data (:func:`~nnid.evaluation.persistence.rounding_columns`: u·w of a log
     that never heaves, w ~ 1e-17), each against its own floor in ``fit``'s ``floors`` where
-    given (:func:`library_floors`: a term at the log's typical motion, to its power, so that
-    q|q| of a real pitch rate 1e-6 of the yaw rate is data), else against
-    :func:`~nnid.evaluation.persistence.typical_size` of ``theta``; they are zero to the path,
-    never selected, their coefficients exactly 0.
+    given (:func:`~nnid.evaluation.persistence.library_floors`: a term at the log's typical
+    motion, to its power, so that q|q| of a real pitch rate 1e-6 of the yaw rate is data),
+    else against :func:`~nnid.evaluation.persistence.typical_size` of ``theta``; they are zero
+    to the path, never selected, their coefficients exactly 0.
     ``idle_outputs_`` ``[m]``: the outputs whose target is rounding against the typical size
     of the targets (the Munk moments' 1e-17 in K and M of that log); their target is zero, as
     if exactly so: they keep no terms, and where the held-out target is rounding too their
-    validation NMSE is that of a zero target (0), not called unexplained. ``to_linear``: where
-    the six outputs are a six-DOF quantity's (X Y Z K M N, or ν̇), the factor that puts the
-    angular kind in the linear one's units (one over the vehicle's length for moments, the
-    length for angular accelerations); each target is then judged within its own kind
-    (:func:`~nnid.evaluation.persistence.kind_sizes`), as a moment in N·m beside forces in N
-    is no rounding for being small; None: the outputs are one kind. An output whose held-out
-    target is zero throughout and which the model predicts non-zero there has no validation
-    NMSE (NaN, :func:`nmse`): it is said, with its error's RMS, and a validation J that
-    includes it is NaN too (the shared selection chooses among the rows that are measured).
+    validation NMSE is that of a zero target (not measured: NaN), not called unexplained nor
+    named. ``to_linear``: where the six outputs are a six-DOF quantity's (X Y Z K M N, or ν̇),
+    the factor that puts the angular kind in the linear one's units (one over the vehicle's
+    length for moments, the length for angular accelerations); each target is then judged
+    within its own kind (:func:`~nnid.evaluation.persistence.kind_sizes`), as a moment in N·m
+    beside forces in N is no rounding for being small; None: the outputs are one kind. An
+    output whose held-out target is zero throughout has no validation NMSE, whether the model
+    predicts zero there or not (NaN, :func:`nmse`): one fitted in training is said, with its
+    prediction's RMS there, keeps no terms under ``per_output`` (nothing measured speaks for
+    them), and a J that includes it is NaN too (the shared selection chooses by the outputs
+    that are measured).
     ``selection`` is "validation" (the sparsest model whose validation J is within
     ``tolerance`` of the best; with ``per_output`` each output picks its own row, greedily
     sparsest while the mean validation J of the outputs the path explains stays within
@@ -342,8 +335,8 @@ class SparsePath(BaseEstimator):
         floors: np.ndarray | None = None,
     ) -> SparsePath:
         """The path and the selection (class docstring); ``floors`` ``[K]``: each column's
-        floor of the rounding rule (:func:`library_floors`), where NaN or None the scalar
-        rule's."""
+        floor of the rounding rule (:func:`~nnid.evaluation.persistence.library_floors`), where
+        NaN or None the scalar rule's."""
         if self.optimizer not in OPTIMIZERS:
             raise NnidInputError(f"optimizer is one of {', '.join(OPTIMIZERS)}", field="optimizer")
         if self.selection not in SELECTIONS:
@@ -382,12 +375,16 @@ class SparsePath(BaseEstimator):
         col[self.excluded_] = 1.0
         # a target of rounding is zero too: scaled to unit RMS, the Munk moments' rounding in K
         # and M (w ~ 1e-17) had real columns fitted to it, and it was warned unexplained
-        self.idle_outputs_ = _rounding_outputs(y, self.to_linear)
+        self.idle_outputs_, self._idle_ratio = _rounding_outputs(y, self.to_linear)
         y = np.where(self.idle_outputs_, 0.0, y)
         if y_val is not None:  # an idle output's prediction is 0: nothing to explain where
             # its held-out target is rounding too; where it is not, scored (and warned) as is
-            idle_val = _rounding_outputs(y_val, self.to_linear)
+            idle_val, _ = _rounding_outputs(y_val, self.to_linear)
             y_val = np.where(self.idle_outputs_ & idle_val, 0.0, y_val)
+        # J over the outputs with something to explain: an idle one has no NMSE (a zero
+        # target), and averaged in as NaN it made every J of a log with a still DOF unmeasured
+        fitted = ~self.idle_outputs_
+        scored = fitted if y_val is None else ~(self.idle_outputs_ & idle_val)
         out = np.sqrt(np.mean(y * y, axis=0))
         out[out == 0] = 1.0
         scaled_theta = theta / col
@@ -407,15 +404,19 @@ class SparsePath(BaseEstimator):
             chosen[:, self.excluded_] = 0.0  # exactly: eigh may leave last bits in R's column
             scaled = debias(r, b, chosen)
             coef = scaled * out[:, None] / col[None, :]  # [m, K]
-            train_err = nmse(y, theta @ coef.T)
+            pred = theta @ coef.T
+            train_err = nmse(y, pred)
             k = int(np.count_nonzero(coef))
-            log_mse = float(np.sum(n * np.log(np.maximum(train_err * ms_y, 1e-300))))
+            # the likelihood reads each output's MSE, of an output with a zero target too
+            # (idle), which has no NMSE: there its MSE is its prediction's (0: it keeps no terms)
+            mse = np.where(np.isnan(train_err), np.mean(pred * pred, axis=0), train_err * ms_y)
+            log_mse = float(np.sum(n * np.log(np.maximum(mse, 1e-300))))
             entry = {
                 "threshold": float(thr),
                 "n_terms": k,
-                "train_J": float(train_err.mean()),
+                "train_J": _j(train_err, fitted),
                 "validation_J": (
-                    float(nmse(y_val, theta_val @ coef.T).mean())
+                    _j(nmse(y_val, theta_val @ coef.T), scored)
                     if theta_val is not None
                     else float("nan")
                 ),
@@ -443,8 +444,8 @@ class SparsePath(BaseEstimator):
             self.selected_ = {
                 "threshold": None,
                 "n_terms": int(np.count_nonzero(self.coef_)),
-                "train_J": float(nmse(y, theta @ self.coef_.T).mean()),
-                "validation_J": float(val_nmse.mean()),
+                "train_J": _j(nmse(y, theta @ self.coef_.T), fitted),
+                "validation_J": _j(val_nmse, scored),
             }
         if val_nmse is not None:
             # the mean J can hide one output the library cannot explain: each output's own
@@ -458,12 +459,14 @@ class SparsePath(BaseEstimator):
         return list(self.output_names or [f"output {i}" for i in range(m)])
 
     def _warn_unmeasured(self, selected: np.ndarray, error: np.ndarray) -> None:
-        """Say which outputs have no validation NMSE (NaN: the held-out target is zero
-        throughout, the selected model's prediction is not), with the RMS of that error."""
+        """Say which outputs fitted in training have no validation NMSE (NaN: the held-out
+        target is zero throughout), with the RMS of the selected model's prediction there (0
+        where it keeps no terms). An idle output (``idle_outputs_``) is not named: fitted to
+        nothing and scored on nothing, it has nothing to explain."""
         names = self._names(len(selected))
         unmeasured = [
             f"{names[i]} (held-out target zero, the model's prediction RMS {error[i]:.3g})"
-            for i in np.flatnonzero(np.isnan(selected))
+            for i in np.flatnonzero(np.isnan(selected) & ~self.idle_outputs_)
         ]
         if unmeasured:
             warnings.warn(
@@ -478,20 +481,26 @@ class SparsePath(BaseEstimator):
         """Say which outputs the selected model does not explain on the validation data
         (normalised MSE ≥ 1, that of predicting zero), with the best each reached on the path.
         An idle output (``idle_outputs_``) among them was never fitted: it is said apart, with
-        why, as no path or library could have explained it."""
+        why (its training target's RMS over its kind's typical size, the number the rounding
+        rule compared with its floor), as no path or library could have explained it."""
         names = self._names(len(best))
         unexplained = selected >= UNEXPLAINED
         idle = [
-            f"{names[i]} (validation NMSE {selected[i]:.3g})"
+            f"{names[i]} (validation NMSE {selected[i]:.3g}, training target "
+            + (
+                f"RMS {self._idle_ratio[i]:.3g} of its kind's typical size)"
+                if self._idle_ratio[i] > 0
+                else "zero throughout)"
+            )
             for i in np.flatnonzero(unexplained & self.idle_outputs_)
         ]
         if idle:  # its training target was zeroed as rounding: "best on the path" and "the
             # library lacks it" would send the user to the thresholds and terms for nothing
             warnings.warn(
                 f"the SINDy model fits nothing of {', '.join(idle)}: each was idle in "
-                f"training, its target rounding there (RMS at most {ROUNDING:g} of its kind's "
-                "typical size), so it keeps no terms, while its held-out target is not "
-                "rounding; give training data in which it acts",
+                f"training, its target rounding there (at most the rounding floor {ROUNDING:g} "
+                "of its kind's typical size), so it keeps no terms, while its held-out target "
+                "is not rounding; give training data in which it acts",
                 SindyWarning,
                 stacklevel=3,
             )
@@ -525,12 +534,14 @@ class SparsePath(BaseEstimator):
         best validation rows and, while their mean stays within ``tolerance`` of that best,
         greedily take the sparser row that costs the least J per term saved."""
         zero = val.shape[0] - 1
-        best = np.nanmin(val, axis=0)
+        best = _least(val)
         k = np.count_nonzero(coefs, axis=2)  # [T, m]
+        # an output whose held-out target is zero has no NMSE on any row: nothing measured
+        # speaks for its terms, and it keeps none (as when the zero row scored it 0)
         pick = {
             i: int(np.nanargmin(val[:, i]))
             for i in range(coefs.shape[1])
-            if not val[zero, i] <= (1.0 + self.tolerance) * best[i]
+            if np.isfinite(best[i]) and not val[zero, i] <= (1.0 + self.tolerance) * best[i]
         }
         m = len(pick)
         if not pick:
@@ -553,8 +564,8 @@ class SparsePath(BaseEstimator):
     def _select(self, path: list[dict], val_out: list[np.ndarray]) -> int:
         """The row of the shared selection: by AIC or BIC, or the sparsest within
         ``tolerance`` of the best validation J among the rows whose J is measured; where none
-        is (an output with a zero held-out target predicted non-zero at every threshold), J
-        over the outputs measured on every row."""
+        is (an output with a zero held-out target, whose NMSE no row measures), J over the
+        outputs measured on every row."""
         if self.selection in ("aic", "bic"):
             return int(np.argmin([p[self.selection] for p in path]))
         val = np.array([p["validation_J"] for p in path])

@@ -113,7 +113,7 @@ def masked_least_squares(
     (Ξ is block diagonal). ``xi`` ``[N, n_terms]``, ``tau_bar`` ``[N, 6]``, ``mask`` boolean
     ``[6, n_terms]``; ``terms`` and ``outputs`` only name the coefficients in warnings.
     ``floors`` ``[n_terms]``: each term's floor of the rounding rule where not NaN
-    (:func:`~nnid.trainers.sindy.library_floors`), else it is judged against Ξ's typical
+    (:func:`~nnid.evaluation.persistence.library_floors`), else it is judged against Ξ's typical
     regressor. Standard errors come from :class:`LeastSquares` (widened for the residual's
     autocorrelation, as smoothed accelerations make neighbouring samples dependent).
     """
