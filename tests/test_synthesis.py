@@ -169,6 +169,34 @@ def test_a_nelder_mead_search_stopped_by_its_budget_is_said(fossen_problem):
         nelder_mead(xi, tau, mask, "mse", start=ls, forces=("X",))
 
 
+def test_nelder_mead_starts_from_the_least_squares_of_the_solves_floors():
+    """X:u alone in its mask on a heave-only log whose u is rounding (1e-17): against Ξ's
+    typical regressor (its own column, the only one) it is data, and the default start fitted
+    X:u = -13.7 to rounding, which Nelder-Mead then searched. With the floors the model's solve
+    uses (each term against the log's typical motion, :func:`library_floors`) the start is that
+    solve's: X:u unidentified, held at 0."""
+    from nnid.errors import ExcitationWarning
+    from nnid.evaluation.persistence import library_floors
+
+    rng = np.random.default_rng(0)
+    n = 200
+    nu = np.zeros((n, 6))
+    nu[:, 0] = 1e-17 * rng.normal(size=n)
+    nu[:, 2] = 0.3 * np.sin(0.1 * np.arange(n))
+    xi = nu[:, :1].copy()
+    tau = np.zeros((n, 6))
+    tau[:, 0] = -13.7 * nu[:, 0]
+    mask = mask_matrix({"X": ["u"]}, ["u"])
+    floors = library_floors(nu, BasisLibrary(["u"]), 1.0)
+    assert not masked_least_squares(xi, tau, mask).unidentified[0, 0]  # the scalar rule's
+    with pytest.warns(ExcitationWarning, match=r"zero regressor\): X:0"):
+        solve = masked_least_squares(xi, tau, mask, floors=floors)
+    with pytest.warns(ExcitationWarning, match=r"zero regressor\): X:0"):
+        fit = nelder_mead(xi, tau, mask, "mse", floors=floors)
+    assert solve.unidentified[0, 0] and fit.unidentified[0, 0]
+    assert fit.coefficients[0, 0] == 0.0
+
+
 def _heave_only():
     """The demo vehicle and a 30-s heave run of it whose u, v, p, q, r are exactly 0 (the
     regressor of X:u is zero)."""

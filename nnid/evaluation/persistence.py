@@ -279,26 +279,28 @@ def motion_sizes(
 ) -> tuple[np.ndarray, np.ndarray]:
     """The sizes a regression's floors of the rounding rule are made of
     (:func:`rounding_floors`), of a regression that knows the motion its columns are made of:
-    ``columns_at(scale)`` gives its columns (each an array of its entries) at the log's typical
-    motion with each of its ``parts`` scaled by ``scale`` ``[parts]``, read at scale 1
-    (``[P]``) and with each part alone at :data:`POWER_PROBE` (``[parts, P]``); a column's size
-    there is its typical size (:func:`column_sizes` of its entries). One part: the whole
+    ``columns_at(scales)`` gives its columns at the log's typical motion with each of its
+    ``parts`` scaled by each row of ``scales`` ``[S, parts]``, each column an array
+    ``[S, ...]`` of its entries at each row, read at scale 1 (``[P]``) and with each part
+    alone at :data:`POWER_PROBE` (``[parts, P]``); a column's size there is its typical size
+    (:func:`column_sizes` of its entries). All the scales in one call, so that a regression
+    evaluates its columns once for all of them (a Fossen regression's cost a model per unknown;
+    read one scale a call, a floor read evaluated them seven times). One part: the whole
     motion; six: each velocity, for columns that are products of them (SINDy's library terms;
     a Fossen regression's, each velocity with its acceleration), so that a product of a
     velocity of rounding is rounding."""
-
-    def sizes(scale: np.ndarray) -> np.ndarray:
-        columns = [np.reshape(c, -1) for c in columns_at(scale)]
-        out = np.zeros(len(columns))
-        # columns of one length sized in one call (the loop's screen sizes hundreds of
-        # candidates), drawn as each alone would be (column_sizes draws by the count)
-        for length in {c.size for c in columns}:
-            same = [j for j, c in enumerate(columns) if c.size == length]
-            out[same] = column_sizes(np.stack([columns[j] for j in same], 1))
-        return out
-
-    probes = np.where(np.eye(parts, dtype=bool), POWER_PROBE, 1.0)
-    return sizes(np.ones(parts)), np.stack([sizes(s) for s in probes])
+    scales = np.vstack([np.ones(parts), np.where(np.eye(parts, dtype=bool), POWER_PROBE, 1.0)])
+    columns = [np.reshape(c, (len(scales), -1)) for c in columns_at(scales)]
+    out = np.zeros((len(scales), len(columns)))
+    # columns of one length sized in one call (the loop's screen sizes hundreds of
+    # candidates), each scale's entries a column of their own, drawn as each alone would be
+    # (column_sizes draws by the count)
+    for length in {c.shape[1] for c in columns}:
+        same = [j for j, c in enumerate(columns) if c.shape[1] == length]
+        block = np.stack([columns[j] for j in same], 2)  # [S, length, J]
+        flat = block.transpose(1, 0, 2).reshape(length, -1)
+        out[:, same] = column_sizes(flat).reshape(len(scales), len(same))
+    return out[0], out[1:]
 
 
 def motion_floors(
@@ -324,8 +326,9 @@ def library_floors(
     reference = kind_sizes(np.asarray(nu, dtype=np.float64), length)
     passed = [] if inputs is None else list(np.asarray(inputs, dtype=np.float64).T)
 
-    def columns_at(scale: np.ndarray) -> list[np.ndarray]:
-        return [*library((scale * reference)[None, :]).T, *passed]
+    def columns_at(scales: np.ndarray) -> list[np.ndarray]:
+        held = [np.broadcast_to(x, (len(scales), x.size)) for x in passed]
+        return [*library(scales * reference).T, *held]
 
     return motion_floors(columns_at, len(DOFS))
 

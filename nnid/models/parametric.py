@@ -420,13 +420,23 @@ class ParametricFossen:
         amplitude at the same frequencies has both larger: an added mass's column (its ν̇ in
         its own equation, its C_A(ν)ν in others, each a product with its velocity) is of power
         1 in its velocity, as a ν̇ alone is. A column whose motion is spread so that no velocity
-        alone moves its typical size (r_g.z of a surge/sway/yaw log: ν̇ and products of each
-        velocity, one per equation) takes the floor of a column that does not grow with the
-        motion, ROUNDING × the regression's largest column at that motion (the tol rule of
-        :func:`~nnid.evaluation.persistence.excitation_from_gram` calls a column 1e-6 of its
-        equation's largest zero in any case). Row by row otherwise (η, the inputs),
-        on at most :data:`REFERENCE_ROWS` rows drawn by a fixed local generator: the rule needs
-        a size within decades.
+        alone moves its typical size (an r_g column: its restoring part and, in each equation, a
+        ν̇ or a product of another velocity) takes the floor of a column that does not grow with
+        the motion, ROUNDING × the regression's largest column at that motion. Why that is no
+        wrong verdict: a column with a motion part has a ν̇ part (each parameter of C(ν) is one
+        of M: an added mass, r_g), of power 1, so the floor its power would give is ROUNDING ×
+        its own size, and the fallback is never below it (its own size is at most the
+        largest): no column of rounding is estimated. It is stricter only by the largest
+        column over its own, so a real column is called rounding only where it is within
+        ROUNDING of the regression's largest column at the log's typical motion, the scalar
+        rule's own limit (:data:`~nnid.evaluation.persistence.ROUNDING`: ten decades in
+        earnest), which the tol rule of
+        :func:`~nnid.evaluation.persistence.excitation_from_gram` calls zero too unless an
+        equation it is in has no column 1e6 times its size; its restoring part has no power,
+        and the fallback is that part's floor in any case (r_g.z and r_g.x of a BlueROV2 Heavy
+        log, mostly restoring, are themselves the largest column: the two floors are one). Row
+        by row otherwise (η, the inputs), on at most :data:`REFERENCE_ROWS` rows drawn by a
+        fixed local generator: the rule needs a size within decades.
 
         Why not the regression's own columns: a one-DOF fit whose every column is rounding
         (X:u alone on a heave-only log, u ~ 1e-17) has nothing to be compared with, and read
@@ -453,10 +463,16 @@ class ParametricFossen:
         # mass's C_A(ν)ν beside the one DOF analysed) are no size of what it measures there
         rows = [DOFS.index(d) for d in (self.dofs if dofs is None else dofs)]
 
-        def columns_at(scale: np.ndarray) -> list[np.ndarray]:  # each velocity with its ν̇
-            moved["nu"] = np.tile(scale * nu, (picked.size, 1))
-            moved["nu_dot"] = np.tile(scale * acc, (picked.size, 1))
-            return [c[:, rows] for c in self._columns(moved)[1]]
+        def columns_at(scales: np.ndarray) -> list[np.ndarray]:  # each velocity with its ν̇
+            # every scale's rows stacked in one evaluation (a model per unknown each): each
+            # row is evaluated on its own, so each scale's columns are those it alone gives
+            batch = {k: np.concatenate([v] * len(scales)) for k, v in moved.items()}
+            batch["nu"] = np.repeat(scales * nu, picked.size, 0)
+            batch["nu_dot"] = np.repeat(scales * acc, picked.size, 0)
+            return [
+                c[:, rows].reshape(len(scales), picked.size, len(rows))
+                for c in self._columns(batch)[1]
+            ]
 
         return motion_sizes(columns_at, len(DOFS))
 

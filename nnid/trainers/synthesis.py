@@ -172,17 +172,22 @@ def nelder_mead(
     forces: Sequence[str] = FORCES,
     max_iter_per_param: int = 400,
     tol: float = 1e-9,
+    floors: np.ndarray | None = None,
 ) -> SynthesisFit:
     """Minimise an eq. 4.23-4.27 cost by Nelder-Mead, force by force, from the least-squares
     solution (or ``start``). Each cost is a sum (or monotone in a sum) of per-force costs, so
     the per-force minima are the joint minimum. The search runs in coordinates where a unit step
     of a coefficient changes its force by one RMS unit of the force series, with an initial
     simplex of 10 % of that scale. Slow: the budget grows with the parameters per force
-    (``max_iter_per_param``), so keep it to small masks or to the ``forces`` of interest."""
+    (``max_iter_per_param``), so keep it to small masks or to the ``forces`` of interest.
+    ``floors``: each term's floor of the rounding rule for the least-squares start
+    (:func:`masked_least_squares`'s, unused with ``start``): the start the model's own solve
+    gives, so that a term of rounding is unidentified and held at 0, not searched from a
+    value fitted to rounding."""
     if loss not in LOSSES:
         raise ValueError(f"unknown loss '{loss}'; expected one of {', '.join(LOSSES)}")
     mask = np.asarray(mask, dtype=bool)
-    base = start if start is not None else masked_least_squares(xi, tau_bar, mask)
+    base = start if start is not None else masked_least_squares(xi, tau_bar, mask, floors=floors)
     k = base.coefficients.copy()
     stopped: list[str] = []
     for force in forces:
