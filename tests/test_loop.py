@@ -1117,8 +1117,103 @@ def test_candidates_the_data_do_not_excite_are_counted_in_one_line_and_named_in_
     shown = [*result["candidates"], *(c for s in result["steps"] for c in s["top"])]
     assert shown and not {c["effect"] for c in shown} & set(named)
     assert all(c["reason"] != NOT_EXCITED and c["improvement"] is not None for c in shown)
-    assert result["candidates_tested"] == len(ranked) > len(named)
+    # tested: those scored (the Bonferroni family), not those named
+    assert result["candidates_tested"] == loop.steps_[0].tested < len(ranked)
+    assert result["candidates_not_excited"] == len(named)
     said = [line for line in markdown(result).splitlines() if "not excited" in line]
     assert said == [
         line for line in said if line.startswith(f"{len(named)} candidates not excited")
     ] and len(said) == len(result["steps"])
+
+
+def _collinear_said(fit_call) -> list[str]:
+    """The parameters a refit's warnings call collinear."""
+    import warnings
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        fit_call()
+    said = [str(w.message) for w in caught if "collinear regressors" in str(w.message)]
+    return [
+        n.strip()
+        for m in said
+        for n in m.split("collinear regressors):")[1].split(";")[0].split(",")
+    ]
+
+
+def _heave_with_a_little_surge(vehicle, rng, names=("a", "b")) -> list[pd.DataFrame]:
+    """Heave runs with a sway 2.5 % of the heave: Z's V is |w| but for the sway, so its w V is
+    w|w| but for a column far below the refit's rank rule, yet not zero."""
+    return [
+        _flown(vehicle, name, {"w": lambda t, a=a: 0.4 * np.sin(0.5 * t + a),
+                               "dw": lambda t, a=a: 0.2 * np.cos(0.5 * t + a),
+                               "v": lambda t, a=a: 0.01 * np.cos(0.3 * t + a),
+                               "dv": lambda t, a=a: -0.003 * np.sin(0.3 * t + a)},
+               1e-3, rng)
+        for name, a in zip(names, (0.0, 1.0, 2.0), strict=False)
+    ]  # fmt: skip
+
+
+def test_a_candidate_in_the_span_of_the_model_is_named_not_identifiable_not_scored():
+    """Beside a fitted Z:w|w|, Z:w*V and Z:abs(w)*Vw of a heave run with little sway are w|w|
+    but for a sliver: the refit with either calls the pair collinear, but the closed-form
+    screen scored them (here p 0.66 and 0.43 for a coefficient of -30; ROMEO's heave: p 0.9,
+    1.9e5 for -430). They are now named not identifiable, with nothing measured, as the refit's rank
+    rule judges them; the candidates the refit separates are scored as before."""
+    from conftest import make_vehicle
+
+    from nnid.loop.diagnose import NOT_IDENTIFIABLE, Workspace, refit, screen_linear
+
+    vehicle = make_vehicle(damping={"model": None, "coefficients": {"Z:w*abs(w)": -30.0}})
+    runs = _heave_with_a_little_surge(vehicle, np.random.default_rng(3))
+    ws = Workspace(*runs, vehicle, None, zoh_midpoint=False, dofs=("w",))
+    fit = refit(ws, vehicle, ["Z:w*abs(w)"])
+    names = ["coupled_damping.Z:w*V", "coupled_damping.Z:abs(w)*Vw", "linear_damping.w",
+             "coupled_damping.Z:w*w", "external_bias.w"]  # fmt: skip
+    chosen = [c for c in candidates(vehicle, runs[0]) if c.name in names]
+    assert sorted(c.name for c in chosen) == sorted(names)
+    scored = {s.name: s for s in screen_linear(ws, fit, chosen)}
+    collinear = {  # as the refit of the baseline with each candidate says
+        c.name: c.parameter
+        in _collinear_said(lambda c=c: refit(ws, vehicle, [*fit.unknowns, c.parameter], False))
+        for c in chosen
+    }
+    assert collinear == {n: n.startswith(("coupled_damping.Z:w*V", "coupled_damping.Z:abs(w)*V"))
+                         for n in names}  # fmt: skip
+    assert set(scored) == set(names)
+    for name, s in scored.items():
+        assert s.excited
+        if collinear[name]:
+            assert not s.identifiable and not s.scored and s.reason == NOT_IDENTIFIABLE
+            assert np.isnan(s.value) and np.isnan(s.p_value) and np.isnan(s.improvement)
+        else:
+            assert s.scored and np.isfinite(s.value) and np.isfinite(s.p_value)
+
+
+def test_the_bonferroni_correction_counts_only_the_candidates_scored():
+    """A candidate not excited (terms in a surge of zero) or not identifiable beside the
+    model (Z:w*V beside Z:w|w|) has no p-value: it was not tested. The correction divided α by
+    every candidate of the pool (BlueROV1: 324, of which 165 were zero columns), a threshold
+    stricter than the family tested asks; it now divides by those tested, which loop.json
+    counts apart from those named."""
+    from conftest import make_vehicle
+
+    from nnid.reports.loop_report import markdown
+
+    vehicle = make_vehicle(damping={"model": None, "coefficients": {"Z:w*abs(w)": -30.0}})
+    log = pd.concat(_heave_with_a_little_surge(vehicle, np.random.default_rng(4), "abc"),
+                    ignore_index=True)  # fmt: skip
+    loop = ResidualLoop(vehicle, dofs=("w",), max_effects=1, nonlinear=False).fit(log)
+    result = loop.as_dict()
+    step = loop.steps_[0]
+    unscored = [s for s in step.ranked if not s.scored]
+    assert result["steps"][0]["not_identifiable"]
+    # every linear candidate of the pool is ranked: scored or named
+    pool = [c for c in candidates(vehicle, loop.workspace_.train) if "w" in c.dofs and c.linear]
+    assert len(step.ranked) == len(pool)
+    assert result["candidates_tested"] == len(pool) - len(unscored)
+    assert result["candidates_not_excited"] + result["candidates_not_identifiable"] == len(unscored)
+    threshold = f"{0.01 / result['candidates_tested']:.2g}"
+    said = [s.reason for s in step.ranked if s.reason.startswith("not significant")]
+    assert said and all(r.endswith(f"≥ {threshold})") for r in said)
+    assert f"over the {result['candidates_tested']} candidates tested" in markdown(result)

@@ -326,7 +326,9 @@ def isolate(
     rss = float(np.sum(e**2 * weights))
     fit = Fit(vehicle, [], np.zeros(0), np.zeros(0), empty, empty, e, e, rss)
     with np.errstate(invalid="ignore", divide="ignore"):
-        scored = screen(ws, fit, cands, cols, cols)
+        # screen names a hypothesis whose column is zero on the window (a thruster not run)
+        # or adds no direction: nothing of it is measured, so it has no posterior either
+        scored = [s for s in screen(ws, fit, cands, cols, cols) if s.scored]
     if not scored:
         return Diagnosis("model_change", meaning="no hypothesis has a signature on this window")
     scored.sort(key=lambda s: -s.drss)

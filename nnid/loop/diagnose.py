@@ -7,7 +7,8 @@ weighted least squares; the candidate is scored by
 - the drop of the *training* weighted residual sum of squares, tested with an F-test whose
   degrees of freedom are shrunk by the residual's integrated autocorrelation time (smoothed
   and filtered logs have far fewer independent samples than rows), at ``alpha`` divided by
-  the number of candidates tested (Bonferroni: hundreds of coupled terms are tried);
+  the number of candidates tested (Bonferroni: hundreds of coupled terms are tried; one the
+  data do not excite, or whose column lies in the span of the fit's, is named, not tested);
 - Caccia's percentile error of the new parameter, 100 σ/|θ| ≤ 51 % (Caccia eq. 12, L135);
 - the drop of the *held-out* force residual, total and in the DOF it explains most: a
   candidate must improve held-out error by at least ``min_improvement``, not only fit noise.
@@ -40,6 +41,7 @@ from nnid.evaluation.metrics import exact_mean, rmse, warmup_mask
 from nnid.evaluation.persistence import (
     column_sizes,
     equation_rms,
+    excitation_from_gram,
     measured_columns,
     rounding_floors,
 )
@@ -111,10 +113,17 @@ class Scored:
     edge: str = ""
     # False: the data do not excite its column (CandidateExcitation): nothing measured
     excited: bool = True
+    # False: its column lies in the span of the fit's (:func:`identifiable`): nothing measured
+    identifiable: bool = True
 
     @property
     def name(self) -> str:
         return self.candidate.name
+
+    @property
+    def scored(self) -> bool:
+        """Whether anything of the candidate was measured: excited and identifiable."""
+        return self.excited and self.identifiable
 
     def as_dict(self) -> dict:
         return {
@@ -150,6 +159,7 @@ class Step:
     added: Scored | None
     sindy: list[str]
     fit: Fit | None = None  # the refitted model with ``added`` in it
+    tested: int = 0  # the candidates tested (scored): the Bonferroni correction's count
 
 
 class Workspace:
@@ -406,9 +416,10 @@ def screen(
 ) -> list[Scored]:
     """Score linear candidates whose columns at the current fit are ``cols`` [N, 6, K] (and
     ``cols_val``): the exact joint refit of each with the fit's unknowns, in closed form.
-    ``excited`` [K] (:meth:`CandidateExcitation.excited`; None: all): a candidate the data do not
-    excite is said :data:`NOT_EXCITED`, with nothing measured (no value, s.e., p-value or
-    held-out gain)."""
+    ``excited`` [K] (:meth:`CandidateExcitation.excited`; None: every column not zero): a
+    candidate the data do not excite is said :data:`NOT_EXCITED`, and one whose column lies in
+    the span of the fit's (:func:`identifiable`) :data:`NOT_IDENTIFIABLE`, each with nothing
+    measured (no value, s.e., p-value or held-out gain)."""
     w = ws.weights
     n, n_dof, p = fit.phi.shape
     # the weighted sums over samples and DOFs as matrix products on rows (n, d): BLAS, where
@@ -425,6 +436,14 @@ def screen(
     bb = a_inv @ b
     denom = q - np.einsum("pk,pk->k", b, bb)
     ok = denom > 1e-9 * np.maximum(q, 1e-300)
+    if excited is None:  # a zero column is the zero-regressor rule's at least
+        excited = q != 0
+    # the augmented regression judged as the refit would judge it: a column in the span of
+    # the fit's (Z:w*V beside Z:w*abs(w) of a heave run) scored p 0.9 and a value of 1.9e5
+    judged = np.isfinite(denom) & excited
+    beside = np.ones(len(cands), dtype=bool)
+    if judged.any():
+        beside[judged] = identifiable(a_mat, b[:, judged], q[judged], n * len(ws.dofs))
     denom = np.where(ok, denom, np.inf)
     theta = -s / denom
     drss = s**2 / denom
@@ -443,14 +462,15 @@ def screen(
     per_dof = 1.0 - after / np.where(before > 0, before, np.inf)[:, None]
     out = []
     for k, cand in enumerate(cands):
-        if excited is not None and not excited[k]:
-            nothing = float("nan")
+        if not excited[k] or (judged[k] and not (beside[k] and ok[k])):
+            nothing, alone = float("nan"), not excited[k]  # unexcited: never judged beside
             out.append(
                 Scored(cand, nothing, nothing, nothing, nothing, nothing, {}, nothing,
-                       reason=NOT_EXCITED, excited=False)
+                       reason=NOT_EXCITED if alone else NOT_IDENTIFIABLE,
+                       excited=not alone, identifiable=alone)
             )  # fmt: skip
             continue
-        if not ok[k]:
+        if not ok[k]:  # a column not finite on the fit's rows: nothing to judge it by
             continue
         scale = cand.value_scale(fit.vehicle)
         value = cand.value(float(theta[k]), fit.vehicle)
@@ -506,12 +526,43 @@ def screen_linear(ws: Workspace, fit: Fit, cands: list[Candidate]) -> list[Score
         cols = ws.columns(fit.vehicle, names, "train")
         cols_v = ws.columns(fit.vehicle, names, "val")
         out += screen(ws, fit, other, cols, cols_v, excitation.excited(other, cols))
-    mark_aliases([s for s in out if s.excited])
+    mark_aliases([s for s in out if s.scored])
     return out
 
 
 #: the verdict on a candidate whose column the data do not excite, in the refit's words
 NOT_EXCITED = "not excited by this data (zero regressor): nothing of it is measured"
+#: the verdict on a candidate whose column lies in the span of the fit's regressors
+NOT_IDENTIFIABLE = (
+    "not identifiable beside the model (its column lies in the span of the fitted "
+    "regressors): nothing of it is measured"
+)
+
+
+def identifiable(a_mat: np.ndarray, b: np.ndarray, q: np.ndarray, n: int) -> np.ndarray:
+    """Whether each candidate adds a direction to the fit's regression ``[K]``: the rank of
+    the weighted Gram matrix with its column, [[A, b_k], [b_kᵀ, q_k]], above the fit's own
+    (A ``[P, P]``, b ``[P, K]``, q ``[K]``; ``n`` rows), by the refit's rank rule
+    (:func:`~nnid.evaluation.persistence.excitation_from_gram`: near-null directions of the
+    unit-RMS-scaled matrix do not count). Only the rank is read: the columns were judged
+    excited before (:class:`CandidateExcitation`, the fit's own refit), so every column
+    passes its size rules here (unit sizes)."""
+    p = a_mat.shape[0]
+
+    def rank(gram: np.ndarray) -> int:
+        m = gram.shape[0]
+        names = [str(j) for j in range(m)]
+        return excitation_from_gram(gram, n, names, column_rms=np.ones(m), reference=1.0).rank
+
+    base = rank(a_mat)
+    out = np.zeros(q.size, dtype=bool)
+    gram = np.zeros((p + 1, p + 1))
+    gram[:p, :p] = a_mat
+    for k in range(q.size):
+        gram[:p, p] = gram[p, :p] = b[:, k]
+        gram[p, p] = q[k]
+        out[k] = rank(gram) > base
+    return out
 
 
 class CandidateExcitation:
@@ -647,6 +698,8 @@ def search_nonlinear(
     h = 0.02 * (hi - lo)
     a, b = (v0 - h / 2, v0 + h / 2) if lo < v0 - h / 2 else (v0, v0 + h)
     pre = screen(ws, fit, [cand], *sensitivity(ws, fit.vehicle, cand, a, b))
+    if pre and not pre[0].scored:  # its linearised column measures nothing: named, not searched
+        return pre[0]
     if not pre or pre[0].p_value > prescreen_p:
         for s in pre:
             s.value = v0 + (s.value if np.isfinite(s.value) else 0.0)
@@ -700,7 +753,7 @@ def search_nonlinear(
     before = np.nansum(fit.e_val**2, axis=0)
     after = np.nansum(best.e_val**2, axis=0)
     w = ws.weights
-    se = scored[0].stderr if scored else float("nan")
+    se = scored[0].stderr if scored and scored[0].scored else float("nan")
     return Scored(
         cand,
         value,
@@ -727,7 +780,7 @@ def rescore(ws: Workspace, fit: Fit, scored: list[Scored]) -> None:
     residual (the model *with* the effect): the baseline's residual, dominated by a missing
     effect, is correlated over whole experiments, and its autocorrelation time would make
     every test of that very effect look insignificant."""
-    scored = [s for s in scored if s.excited]  # nothing of the others is measured
+    scored = [s for s in scored if s.scored]  # nothing of the others is measured
     linear = [s for s in scored if s.candidate.linear]
     cols: dict[str, np.ndarray] = {}
     if linear:
@@ -770,7 +823,7 @@ def sindy_opinion(
     asks a term to explain ``share`` of the weighted training residual on its own."""
     import pysindy as ps
 
-    linear = (s for s in scored if s.candidate.linear and s.excited)
+    linear = (s for s in scored if s.candidate.linear and s.scored)
     lin = sorted(linear, key=lambda s: -s.improvement)[:top]
     if not lin:
         return []
@@ -878,6 +931,7 @@ __all__ = [
     "damping_block",
     "force_residual",
     "force_rmse",
+    "identifiable",
     "predict",
     "refit",
     "rescore",

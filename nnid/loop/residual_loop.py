@@ -66,8 +66,9 @@ MAX_WORSENING = 10.0
 
 
 def _scored(step: Step) -> list[Scored]:
-    """The candidates of a pass its data excite, best first: the others measure nothing."""
-    return [s for s in step.ranked if s.excited]
+    """The candidates of a pass that were scored (excited and identifiable beside the model),
+    best first: the others measure nothing."""
+    return [s for s in step.ranked if s.scored]
 
 
 class ResidualLoop:
@@ -326,25 +327,32 @@ class ResidualLoop:
         known = set(fit.unknowns)
         linear = [c for c in pool if c.linear and c.parameter not in known]
         scored = screen_linear(ws, fit, linear)
+        found_nothing = 0  # searches that found no better fit: tested, with nothing to rank
         if self.nonlinear:
             for cand in pool:
                 if not cand.linear:
                     s = search_nonlinear(ws, fit, cand)
                     if s is not None:
                         scored.append(s)
-        tested = max(len(linear) + sum(not c.linear for c in pool), 1)
-        # a candidate the data do not excite measures nothing: ranked after every other
-        scored.sort(key=lambda s: (not s.excited, -s.improvement if s.excited else 0.0))
+                    else:
+                        found_nothing += 1
+        # Bonferroni over the candidates tested: a candidate not excited or not identifiable
+        # beside the model had no test (no p-value), and counting them (165 of BlueROV1's 324)
+        # made the threshold stricter than the family tested asks
+        tested = max(sum(s.scored for s in scored) + found_nothing, 1)
+        # a candidate not scored (not excited, not identifiable) measures nothing: ranked
+        # after every other
+        scored.sort(key=lambda s: (not s.scored, -s.improvement if s.scored else 0.0))
         rescore(ws, fit, scored[: self.rescore_top])
         for s in scored:
-            if s.excited:  # the others keep their verdict (NOT_EXCITED)
+            if s.scored:  # the others keep their verdict (NOT_EXCITED, NOT_IDENTIFIABLE)
                 self._judge(s, tested, fit)
         try:
             sindy = sindy_opinion(ws, fit, scored)
         except Exception as exc:  # a second opinion must not stop the loop
             sindy = [f"(pysindy failed: {exc})"]
         chosen, augmented = self._simulation_gate(ws, fit, [s for s in scored if s.admissible])
-        return Step(scored, chosen, sindy, augmented)
+        return Step(scored, chosen, sindy, augmented, tested)
 
     def _gate_modes(self, ws: Workspace) -> list[tuple[str, str | int]]:
         """The held-out simulations the gate may compare, first choice first: the free run (or
@@ -616,7 +624,11 @@ class ResidualLoop:
             # "not_excited", not listed among the scored ones (a BlueROV1 log without u or v
             # has 165 of them)
             "candidates": [s.as_dict() for s in _scored(first)[: self.report_candidates]],
-            "candidates_tested": len(first.ranked),
+            # the family the Bonferroni correction is over: the candidates scored (and the
+            # 1-D searches that found nothing better); those not scored are counted apart
+            "candidates_tested": first.tested,
+            "candidates_not_excited": sum(not s.excited for s in first.ranked),
+            "candidates_not_identifiable": sum(not s.identifiable for s in first.ranked),
             "added": self.added,
             "after": self.after_,
             "stopped": "max_effects" if self.stopped_at_limit else "no candidate passed",
@@ -626,6 +638,8 @@ class ResidualLoop:
                     "added": None if st.added is None else self._final_effect(st.added),
                     "top": [s.as_dict() for s in _scored(st)[:10]],
                     "not_excited": [s.name for s in st.ranked if not s.excited],
+                    "not_identifiable": [s.name for s in st.ranked if not s.identifiable],
+                    "tested": st.tested,
                     "sindy": st.sindy,
                 }
                 for st, gate in zip(self.steps_, self.gates_, strict=True)

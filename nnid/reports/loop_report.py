@@ -324,19 +324,37 @@ def candidate_rows(candidates: list[dict], top: int = 15) -> list[list[str]]:
     return rows
 
 
-def not_excited_line(step: dict, k: int) -> str:
-    """One line counting pass ``k``'s candidates the data do not excite ("" where none): they
-    measure nothing, and listed in its table they would pad it (165 rows on a BlueROV1 log
-    without u or v); their names are in ``loop.json``."""
-    names = step.get("not_excited") or []
+#: what each kind of candidate that was not scored is, by its ``loop.json`` key
+UNSCORED = {
+    "not_excited": "not excited by this data (zero regressor",
+    "not_identifiable": "not identifiable beside the model (column in the span of its regressors",
+}
+
+
+def not_excited_line(step: dict, k: int, key: str = "not_excited") -> str:
+    """One line counting pass ``k``'s candidates the data do not excite (``key``
+    ``"not_identifiable"``: whose column lies in the span of the model's) ("" where none): they
+    measure nothing and were not tested, and listed in its table they would pad it (165 rows
+    on a BlueROV1 log without u or v); their names are in ``loop.json``."""
+    names = step.get(key) or []
     if not names:
         return ""
     some = ", ".join(names[:3]) + (", ..." if len(names) > 3 else "")
     return (
-        f"{len(names)} candidate{'s' if len(names) > 1 else ''} not excited by this data (zero "
-        f"regressor: {some}): nothing of {'them' if len(names) > 1 else 'it'} is measured; "
-        f"the names are in loop.json (steps[{k - 1}].not_excited)."
+        f"{len(names)} candidate{'s' if len(names) > 1 else ''} {UNSCORED[key]}: {some}): "
+        f"nothing of {'them' if len(names) > 1 else 'it'} is measured, and "
+        f"{'they are' if len(names) > 1 else 'it is'} not counted among the candidates tested; "
+        f"the names are in loop.json (steps[{k - 1}].{key})."
     )
+
+
+def _tested_text(result: dict) -> str:
+    """The count the Bonferroni correction divides α by, as the first pass had it ("" where
+    no pass ran)."""
+    tested = result.get("candidates_tested")
+    if not result.get("steps") or tested is None:
+        return ""
+    return f" over the {tested} candidates tested in the first pass, those not scored left out"
 
 
 def error_rows(result: dict) -> tuple[list[str], list[list[str]]]:
@@ -377,8 +395,9 @@ def markdown(result: dict) -> str:
     for k, step in enumerate(result["steps"], 1):
         lines += [f"## Pass {k}: candidates (best first)", ""]
         lines += [table(CANDIDATE_HEAD, candidate_rows(step["top"])), "", CANDIDATE_COLUMNS, ""]
-        if not_excited_line(step, k):
-            lines += [not_excited_line(step, k), ""]
+        for key in UNSCORED:
+            if not_excited_line(step, k, key):
+                lines += [not_excited_line(step, k, key), ""]
         if step["sindy"]:
             lines += [f"pysindy STLSQ second opinion: {', '.join(step['sindy'])}.", ""]
         else:
@@ -390,9 +409,9 @@ def markdown(result: dict) -> str:
         "Significance: F-test of the refit against the model without the effect, degrees of "
         "freedom shrunk by the residual's autocorrelation time "
         f"({number(result['settings']['autocorrelation_time'])} samples), Bonferroni-corrected "
-        f"(α = {result['settings']['alpha']}); a candidate must also be a significant parameter "
-        "(Caccia's percentile error ≤ 51 %), lower the held-out force residual and lower the "
-        f"held-out {_gate_text(result)} error.",
+        f"(α = {result['settings']['alpha']}{_tested_text(result)}); a candidate must also be a "
+        "significant parameter (Caccia's percentile error ≤ 51 %), lower the held-out force "
+        f"residual and lower the held-out {_gate_text(result)} error.",
         "",
     ]
     return "\n".join(lines)
@@ -465,10 +484,10 @@ def html_page(result: dict, figures: dict[str, str]) -> str:
             f"<h3>Pass {k}</h3><p>{verdict}</p>"
             + html_table(CANDIDATE_HEAD, candidate_rows(step["top"]))
             + f"<p class='note'>{html.escape(CANDIDATE_COLUMNS)}</p>"
-            + (
-                f"<p>{html.escape(not_excited_line(step, k))}</p>"
-                if step.get("not_excited")
-                else ""
+            + "".join(
+                f"<p>{html.escape(not_excited_line(step, k, key))}</p>"
+                for key in UNSCORED
+                if step.get(key)
             )
             + f"<p>pysindy STLSQ over the strongest linear candidates: {html.escape(sindy)}.</p>"
         )
@@ -491,9 +510,9 @@ def html_page(result: dict, figures: dict[str, str]) -> str:
 <p>Significance is the p-value of an F-test of the refit against the model without the effect,
 its degrees of freedom shrunk by the residual's autocorrelation time
 ({number(result["settings"]["autocorrelation_time"])} samples) and Bonferroni-corrected
-(α = {result["settings"]["alpha"]}). A candidate is added only if its parameter is significant
-(Caccia's percentile error ≤ 51 %), it lowers the held-out force residual, and it lowers the
-held-out {_gate_text(result)} error by at least
+(α = {result["settings"]["alpha"]}{html.escape(_tested_text(result))}). A candidate is added
+only if its parameter is significant (Caccia's percentile error ≤ 51 %), it lowers the held-out
+force residual, and it lowers the held-out {_gate_text(result)} error by at least
 {100 * result["settings"]["min_gate_gain"]:.0f} %.</p>
 {imgs}
 </body></html>
