@@ -326,6 +326,77 @@ def test_lowpass_refuses_a_log_whose_stamps_come_in_bursts_and_filters_it_resamp
     assert off.max() < 0.02  # the 30 Hz gone (0.3 before), the 1 Hz kept
 
 
+def _transient_accelerations(log: pd.DataFrame, window_s: float) -> pd.DataFrame:
+    from nnid.datasets.segmentation import accelerations_with_noise
+
+    return accelerations_with_noise(log, window_s)[0]
+
+
+#: each Savitzky-Golay derivative over a run's samples: (call, column, its true amplitude)
+_DERIVATIVES = {
+    "derive_velocities": (lambda log, w: derive_velocities(log, w), "r", 0.5 * np.pi),
+    "derive_accelerations": (lambda log, w: derive_accelerations(log, w), "du", np.pi),
+    "segmentation": (_transient_accelerations, "u", np.pi),
+}
+
+
+@pytest.mark.parametrize("path", list(_DERIVATIVES))
+def test_a_derivative_refuses_a_log_whose_stamps_come_in_bursts_and_is_right_resampled(path):
+    """Ten samples together every 10 ms (1 kHz over the run, median step 10 us): the window
+    was set at the median step's 100 kHz, so 0.02 s took 2001 samples (2 s) spaced 10 us,
+    and a rate of amplitude pi came out at about 600. Refused as lowpass refuses it, naming
+    the run and the fix, which then derives it."""
+    call, column, amplitude = _DERIVATIVES[path]
+    t = (np.arange(600)[:, None] * 0.01 + np.arange(10)[None, :] * 1e-5).ravel()
+    wave = np.sin(np.pi * t)
+    log = pd.DataFrame({"t": t, "phi": 0.0, "theta": 0.0, "psi": 0.5 * wave, "u": wave})
+    with pytest.raises(NnidInputError, match="in bursts") as err:
+        call(log, 0.02)
+    assert err.value.field == "t" and err.value.message.startswith("the log: its stamps")
+    assert "Savitzky-Golay" in err.value.message and "resample_log" in err.value.message
+    grid = resample_log(log, 1000.0)
+    got = call(grid, 0.02)[column].to_numpy()
+    assert np.abs(got - amplitude * np.cos(np.pi * grid["t"].to_numpy())).max() < 0.01
+
+
+def _dropped(t: np.ndarray) -> np.ndarray:
+    """``t`` without 20 of its samples (one in ten from its 300th)."""
+    return np.delete(t, np.arange(300, 500, 10))
+
+
+@pytest.mark.parametrize("path", ["lowpass", *_DERIVATIVES], ids=["lowpass", *_DERIVATIVES])
+def test_a_run_with_dropped_samples_is_warned_of_by_name_and_its_steps_spread(path):
+    """A 100-Hz run with 20 samples dropped: the filter (designed at the median step's rate)
+    and the derivatives (at the median step) take its samples as evenly spaced, so across
+    each hole they acted over half the time, without a word. Warned of, naming the run and
+    its steps' spread; a run whose stamps only jitter within 10 % is not, nor a uniform one."""
+    rng = np.random.default_rng(0)
+    even = np.arange(1000) * 0.01
+    runs = {
+        "even": even,
+        "jitter": even + rng.uniform(-4e-4, 4e-4, even.size),
+        "gaps": _dropped(even),
+    }
+    log = pd.concat(
+        [pd.DataFrame({"t": t, "experiment": name}) for name, t in runs.items()], ignore_index=True
+    )
+    wave = np.sin(np.pi * log["t"])
+    log = log.assign(phi=0.0, theta=0.0, psi=0.5 * wave, u=wave)
+    if path == "lowpass":
+        step = lambda log: lowpass(log, ["u"], 2.0)  # noqa: E731
+    else:
+        step = lambda log: _DERIVATIVES[path][0](log, 0.5)  # noqa: E731
+    with pytest.warns(UserWarning, match="not evenly sampled") as caught:
+        step(log)
+    said = [str(w.message) for w in caught if "not evenly sampled" in str(w.message)]
+    assert len(said) == 1 and said[0].startswith("experiment 'gaps' is not evenly sampled")
+    assert "20 of its 979 steps" in said[0] and "from 0.01 to 0.02 s" in said[0]
+    assert "other runs" not in said[0] and "resample_log" in said[0]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        step(log[log["experiment"] != "gaps"])
+
+
 def test_lowpass_refuses_a_run_of_one_sample_as_too_short_without_reading_its_rate():
     """A run of one sample has no step: its rate was read first (NumPy's "mean of empty
     slice" and scipy's divide warnings) before it was refused as too short."""

@@ -81,6 +81,43 @@ def run_spans(log: pd.DataFrame) -> list[float]:
 UNIFORM_TOLERANCE = 0.1
 
 
+def off_steps(steps: np.ndarray, tolerance: float = UNIFORM_TOLERANCE) -> tuple[float, np.ndarray]:
+    """A run's median sampling interval (``steps``: its intervals, at least one) and where an
+    interval differs from it by more than ``tolerance`` of it (samples missing, a rate that
+    changes, jitter beyond a clock's rounding): :func:`check_uniform`'s rule."""
+    typical = float(np.median(steps))
+    return typical, np.flatnonzero(np.abs(steps - typical) > tolerance * typical)
+
+
+def uneven_runs(log: pd.DataFrame, method: str) -> None:
+    """Warn, once for ``log``, of its runs whose intervals are not one interval
+    (:func:`off_steps`), naming each and the spread of its steps: ``method`` (what reads the
+    samples, as said to the user) takes them as evenly spaced at the median step, so where
+    a step is longer (a dropped sample) or shorter it acts over another span of time. Not
+    refused: a few dropped samples move a filter or a derivative there only."""
+    t_all = log["t"].to_numpy(np.float64)
+    said = []
+    for name, pos in experiment_rows(log):
+        steps = np.diff(t_all[pos])
+        if not steps.size:
+            continue
+        typical, off = off_steps(steps)
+        if off.size:
+            said.append(
+                f"{run_label(name)} is not evenly sampled ({off.size} of its {steps.size} "
+                f"steps more than {UNIFORM_TOLERANCE:.0%} off its median {typical:.4g} s, "
+                f"from {steps.min():.4g} to {steps.max():.4g} s)"
+            )
+    if said:
+        more = f", nor are {len(said) - 1} other runs" if len(said) > 1 else ""
+        warnings.warn(
+            f"{said[0]}{more}: {method} takes the samples as evenly spaced at the median "
+            "step, so where a step differs it acts over another span of time; resample the "
+            "log onto a uniform grid first (resample_log)",
+            stacklevel=3,
+        )
+
+
 def check_uniform(
     log: pd.DataFrame,
     what: str,
@@ -105,7 +142,7 @@ def check_uniform(
         dt = np.diff(t)
         if not dt.size:
             continue
-        typical = float(np.median(dt))
+        typical, off = off_steps(dt, tolerance)
         where = f" (experiment {exp})" if exp is not None else ""
         if (
             one_rate
@@ -119,7 +156,6 @@ def check_uniform(
                 field="t",
             )
         interval = typical if interval is None else interval
-        off = np.flatnonzero(np.abs(dt - typical) > tolerance * typical)
         if off.size:
             k = int(off[0])
             label = log.index[pos[k + 1]]  # the row named by its label, as the file's row
@@ -251,6 +287,23 @@ def _logged_rate(t: np.ndarray, rate: float) -> tuple[float, str | None]:
     overall = paced_step(steps)
     burst = burst_clock(step, overall)
     return (1.0 / overall if burst else 1.0 / step), burst
+
+
+def refuse_bursts(t: np.ndarray, name: object, method: str, field: str) -> None:
+    """Refuse the run ``name`` (``t``: its times) whose stamps come in bursts
+    (:func:`_logged_rate`): ``method`` (what reads the samples, as said to the user) steps
+    sample by sample at one rate, which they do not have; ``field``: the error's."""
+    _, burst = _logged_rate(t, np.nan)  # NaN never read: a run of one sample is no burst
+    if burst:
+        # no rate fits: at the median step's (~100 kHz) a 5 Hz cut-off acted at 0.05 Hz (and
+        # a derivative came out ~190 times too large); at the run's, a burst's samples would
+        # be spread over its gap
+        raise NnidInputError(
+            f"{run_label(name)}: {burst}; {method} steps sample by sample at one rate, which "
+            "these samples do not have: resample the run onto a uniform grid first (the "
+            "preprocessing's rate, resample_log)",
+            field=field,
+        )
 
 
 #: how far :func:`resample_log` may move a log's rate before it is warned of
@@ -493,16 +546,22 @@ def too_short_for_window(
     )
 
 
-def _run_window(
-    t: np.ndarray, window_s: float, order: int, setting: str | None
+def run_window(
+    t: np.ndarray, window_s: float, order: int, name: object, setting: str | None = None
 ) -> tuple[float, int]:
-    """A run's median step (``t``: its times) and its Savitzky-Golay window of ``window_s`` s
-    (:func:`savgol_window`, ``setting`` named where widened). A run of one sample has no step
-    (NaN, where the window's count was "cannot convert float NaN to integer"): the shortest
-    window an ``order`` allows stands for it, which it is too short for (a piece cut at a gap
-    gets no derivative, :func:`short_piece`; a run is refused, :func:`_check_window_fits`)."""
+    """A run's median step (``t``: the times of the run ``name``) and its Savitzky-Golay
+    window of ``window_s`` s (:func:`savgol_window`, ``setting`` named where widened), for a
+    derivative that takes its samples as evenly spaced: a run whose stamps come in bursts is
+    refused (:func:`refuse_bursts`), as its median step is one inside a burst (an IMU's ten
+    samples every 10 ms: a 0.02 s window took 2001 samples, 2 s of them, as 0.02 s, and a
+    derivative of amplitude π came out at 600).
+    A run of one sample has no step (NaN, where the window's count was "cannot convert float
+    NaN to integer"): the shortest window an ``order`` allows stands for it, which it is too
+    short for (a piece cut at a gap gets no derivative, :func:`short_piece`; a run is
+    refused, :func:`_check_window_fits`)."""
     if t.size < 2:
         return np.nan, savgol_window(0.0, 1.0, order)
+    refuse_bursts(t, name, "a Savitzky-Golay derivative", "t")
     dt = float(np.median(np.diff(t)))
     return dt, savgol_window(window_s, 1.0 / dt, order, setting)
 
@@ -767,7 +826,7 @@ def derive_velocities(
     column = {c: out[c].to_numpy(np.float64) for c in ("t", *have)}
     runs = []  # every run's window checked before any is derived: one too short was refused
     for name, pos in experiment_rows(out):  # after the work on every run before it
-        dt, window = _run_window(column["t"][pos], window_s, order, setting)
+        dt, window = run_window(column["t"][pos], window_s, order, name, setting)
         if short_piece(out, pos, window):
             short += len(pos)
             continue
@@ -806,6 +865,7 @@ def derive_velocities(
             tilt = np.cos(column["theta"][pos]) * np.cos(column["phi"][pos])
             tilted += int(np.sum(np.abs(tilt) < 0.5))
             new["w"][pos] = rates["z"] / np.copysign(np.maximum(np.abs(tilt), 0.5), tilt)
+    uneven_runs(out, "the Savitzky-Golay derivative")
     made = []
     for c, values in new.items():
         if np.isfinite(values).any() and (overwrite or c not in out):
@@ -882,7 +942,7 @@ def _derivative_runs(
     ``setting``: the key named where the window is widened (None: not warned again)."""
     t = log["t"].to_numpy(np.float64)
     for name, pos in experiment_rows(log):
-        dt, window = _run_window(t[pos], window_s, order, setting)
+        dt, window = run_window(t[pos], window_s, order, name, setting)
         if short_piece(log, pos, window):
             yield name, pos, dt, None, None
         else:
@@ -937,6 +997,7 @@ def derive_accelerations(
                 setting=setting,
                 steps=steps,
             )
+    uneven_runs(out, "the Savitzky-Golay derivative")
     for c in cols:
         out["d" + c] = derived[c]
     if report is not None and cols:
@@ -964,7 +1025,9 @@ def lowpass(
     """Zero-phase Butterworth low-pass (forward-backward, no delay) per experiment, designed
     at the run's logged rate (:func:`_logged_rate`, as :func:`resample_log` reads it). The
     filter steps sample by sample, so a run whose stamps come in bursts (an IMU's ten
-    samples together every 10 ms) is refused: resample it first (:func:`resample_log`)."""
+    samples together every 10 ms) is refused (:func:`refuse_bursts`), and one whose steps
+    are not one step (dropped samples, jitter) is warned of (:func:`uneven_runs`): resample
+    it first (:func:`resample_log`)."""
     out = log.copy()
     t_all = out["t"].to_numpy(np.float64)
     # each run's rows by position: a run's labels may repeat another's (pd.concat)
@@ -978,16 +1041,8 @@ def lowpass(
                 f"low-pass filter ({need} needed)",
                 field="lowpass",
             )
-        rate, burst = _logged_rate(t, np.nan)  # NaN never read: two samples or more here
-        if burst:
-            # no rate designs it: at the median step's (~100 kHz) a 5 Hz cut-off acted at
-            # 0.05 Hz, at the run's a burst's samples would be spread over its gap
-            raise NnidInputError(
-                f"{run_label(name)}: {burst}; a Butterworth filter steps sample by sample at "
-                "one rate, which these samples do not have: resample the run onto a uniform "
-                "grid first (the preprocessing's rate, resample_log)",
-                field="lowpass",
-            )
+        refuse_bursts(t, name, "a Butterworth filter", "lowpass")
+        rate, _ = _logged_rate(t, np.nan)  # NaN never read: two samples or more here
         if cutoff >= rate / 2:
             raise NnidInputError(
                 f"cut-off {cutoff} Hz is not below the Nyquist rate {rate / 2:g} Hz",
@@ -996,6 +1051,7 @@ def lowpass(
         b, a = butter(order, cutoff, fs=rate)
         for c in columns:
             values[c][pos] = filtfilt(b, a, values[c][pos])
+    uneven_runs(out, "the low-pass filter (designed at its rate)")
     for c in columns:
         out[c] = values[c]
     if report is not None:

@@ -24,10 +24,11 @@ from scipy.stats import median_abs_deviation
 from nnid.datasets.log import VELOCITY
 from nnid.datasets.preprocess import (
     experiment_rows,
+    run_window,
     savgol_derivative,
     savgol_interp,
     savgol_noise_gain,
-    savgol_window,
+    uneven_runs,
 )
 
 
@@ -41,8 +42,7 @@ def accelerations_with_noise(
             col, sig = np.empty(len(log)), []
             for name, pos in experiment_rows(log):
                 v = log[c].to_numpy(np.float64)[pos]
-                dt = float(np.median(np.diff(log["t"].to_numpy(np.float64)[pos])))
-                w = savgol_window(window_s, 1.0 / dt, order)
+                dt, w = run_window(log["t"].to_numpy(np.float64)[pos], window_s, order, name)
                 col[pos] = savgol_derivative(v, dt, w, order, where=f"experiment {name!r}")
                 resid = v - savgol_interp(v, w, order, 0, 1.0)
                 sigma_v = median_abs_deviation(resid, scale="normal")
@@ -54,6 +54,8 @@ def accelerations_with_noise(
             noise[c] = float(median_abs_deviation(np.diff(a), scale="normal") / np.sqrt(2))
     if not acc:
         raise ValueError("labelling transients needs body velocities or accelerations")
+    if any(c in log for c in VELOCITY):
+        uneven_runs(log, "the Savitzky-Golay derivative")
     return pd.DataFrame(acc, index=log.index), noise
 
 
