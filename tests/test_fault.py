@@ -9,6 +9,7 @@ healthy held-out runs must not alarm.
 from __future__ import annotations
 
 import copy
+import html
 import json
 import math
 import warnings
@@ -29,7 +30,14 @@ from nnid.datasets.measurement import Measurement
 from nnid.datasets.preprocess import savgol_window
 from nnid.errors import NnidInputError
 from nnid.fault import kernel
-from nnid.fault.detect import NOT_JUDGED, alarm_row, detect, leave_scale, read_ratio
+from nnid.fault.detect import (
+    NOT_JUDGED,
+    alarm_row,
+    detect,
+    explained_by_the_changes,
+    leave_scale,
+    read_ratio,
+)
 from nnid.fault.follow import follow_csv
 from nnid.fault.isolation import (
     LEAST_ROWS,
@@ -414,6 +422,19 @@ def test_follow_says_an_announced_alarm_withdrawn_as_batch_drops_it(vehicle, mon
     assert late["by"] == pytest.approx(46.15) and "inside the window" in late["reason"]
     assert "within what" in followed.withdrawn[gone.index("46.15")]["reason"]
     assert detect_json(monitor, followed)["withdrawn"] == followed.withdrawn  # detect.json
+
+
+def test_follow_says_a_dismissed_alarm_withdrawn_with_batchs_why(vehicle, monitor, tmp_path):
+    """h1 stopped, a 0.5-s heave push at 46 s: its alarm is dismissed, within what the loss
+    may leave. Batch's ``dismissed`` said why, with the reading beside the loss
+    (:func:`dismissed_why`), where --follow withdrew the same alarm with a fixed "no new
+    change" that said neither. Both now say the one why."""
+    log = _stopped_with_pushes(vehicle, [(46.0, 46.5, 6.0)], 57.0)
+    batch, followed = _batch_and_followed(monitor, log, tmp_path)
+    (seen,) = batch.dismissed
+    (gone,) = followed.withdrawn
+    assert f"{gone['t']:.2f}" == f"{seen['t']:.2f}"
+    assert gone["reason"] == seen["why"] and "noise" in seen["why"]
 
 
 def test_follow_announces_no_alarm_read_after_a_window_still_to_be_judged(
@@ -1171,9 +1192,7 @@ def test_detect_json_says_the_runs_last_rows_left_unjudged(vehicle, monitor, tmp
     smoothing window is not judged (the signature reads the acceleration there), and
     detect.json said nothing of it: the run read as watched to its last sample. ``unjudged``
     says which rows, how many, the seconds they span and why; batch and --follow alike."""
-    fault = Fault("payload", FAULT_T, mass=10.0, value=4.0)
-    log = simulate_faults(vehicle, 60, faults=[fault], seed=26)
-    batch, followed = _batch_and_followed(monitor, log[log["t"] <= 57.55 + 1e-9], tmp_path)
+    batch, followed = _batch_and_followed(monitor, _payload_ending_after_a_step(vehicle), tmp_path)
     t = batch.trace.t
     judged = np.flatnonzero(np.isfinite(batch.trace.values[:, 18]))[-1]
     for result in (batch, followed):
@@ -1182,6 +1201,31 @@ def test_detect_json_says_the_runs_last_rows_left_unjudged(vehicle, monitor, tmp
         assert (tail["from_t"], tail["to_t"]) == (t[judged + 1], t[-1])
         assert tail["seconds"] == pytest.approx(t[-1] - t[judged])
         assert "reads the acceleration" in tail["why"]
+
+
+def _payload_ending_after_a_step(vehicle):
+    """A payload from 20 s, its run ending 0.05 s after a command step (seed 26): its last
+    half smoothing window is left unjudged."""
+    fault = Fault("payload", FAULT_T, mass=10.0, value=4.0)
+    log = simulate_faults(vehicle, 60, faults=[fault], seed=26)
+    return log[log["t"] <= 57.55 + 1e-9]
+
+
+def test_the_report_and_the_console_say_the_runs_last_rows_left_unjudged(
+    vehicle, monitor, tmp_path
+):
+    """The rows at a run's end left unjudged were in detect.json alone: report.html and the
+    lines ``nnid detect`` prints read as if the run was watched to its last sample. Each says
+    them in one line: when, how long, how many samples and why in short."""
+    result = detect(monitor, _payload_ending_after_a_step(vehicle))
+    (tail,) = result.unjudged
+    lines = write_detect_outputs(monitor, result, tmp_path)
+    (line,) = [line for line in lines if "not judged" in line]
+    assert line.startswith(f"t = {tail['from_t']:.2f}-{tail['to_t']:.2f} s: ")
+    assert f"last {tail['seconds']:.2f} s ({tail['samples']} samples)" in line
+    assert "half smoothing window" in line and "acceleration" in line
+    page = (tmp_path / "report.html").read_text()
+    assert f"<li>{html.escape(line)}</li>" in page
 
 
 def test_the_allowance_over_fewer_dof_equations_is_as_rare_from_healthy_noise():
@@ -2130,3 +2174,22 @@ def test_the_noise_ratio_is_the_mean_of_the_dof_ratios_on_the_finite_rows(rng):
     kept = np.delete(e, [4, 17], axis=0)
     assert noise_ratio(mon, holed) == noise_ratio(mon, kept)
     assert np.array_equal(dof, dof_noise_ratios(mon, kept))
+
+
+def test_a_noise_ratio_of_no_finite_row_is_not_measured_and_dismisses_nothing(rng):
+    """Where no row of the residual is finite, :func:`noise_ratio` and :func:`dof_noise_ratios`
+    read 0, "no excess over the noise", where nothing was measured; and an alarm whose window
+    held no finite row read as within what the isolated changes may leave
+    (:func:`explained_by_the_changes`), the first step to being dismissed. NaN, not measured:
+    no window of nothing is within."""
+    from types import SimpleNamespace
+
+    mask = np.array([1.0, 1, 1, 0, 1, 1])
+    mon = SimpleNamespace(mask_=mask, whiten_=np.diag(mask), mu_=np.zeros(6))
+    holed = np.full((30, 6), np.nan)
+    holed[:, 2] = rng.normal(size=30)  # finite in a DOF, but no row finite in all six
+    for e in (holed, np.empty((0, 6))):
+        assert math.isnan(noise_ratio(mon, e)) and np.isnan(dof_noise_ratios(mon, e)).all()
+        assert not explained_by_the_changes(mon, e, e)
+    r = rng.normal(size=(30, 6))  # a window of healthy noise measured: within, as before
+    assert explained_by_the_changes(mon, r, r)

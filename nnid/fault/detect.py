@@ -80,6 +80,7 @@ from nnid.fault.isolation import (
     model_error,
     refit,
     signature,
+    whitened_power,
 )
 from nnid.fault.monitor import ResidualMonitor, Trace, monitor_inputs
 from nnid.reports.cells import number
@@ -145,18 +146,25 @@ def dismissed_why(ratio: float | None, allowed: float | None) -> str:
     )
 
 
-def withdrawn_record(experiment: str | None, t: float, by: float, why: str) -> dict:
+def withdrawn_record(
+    experiment: str | None,
+    t: float,
+    by: float,
+    why: str,
+    beside: tuple[float, float] | None = None,
+) -> dict:
     """An announced alarm at time ``t`` that the final alarms do not hold, as batch
     :func:`detect` drops it; ``why``: ``"dismissed"`` (its window within what the isolated
-    changes may leave: :func:`rewatched_alarm`), ``"inside"`` the window of the alarm at time
-    ``by`` whose judgement restarted the statistics after it (:func:`_rewatch` clears the
-    window's alarms), or ``"after"`` it (a row read before that judgement, watched again on
-    the restarted statistics: ``--follow`` holds rows after a window until it is judged, so
-    this is a safeguard, not a case it is known to reach), or ``"persisting"``: not isolated,
-    the unexplained change alarmed at ``by`` persisting (:func:`persisting`, counted in its
-    record)."""
+    changes may leave: :func:`rewatched_alarm`; said as batch's ``dismissed`` says it, by
+    :func:`dismissed_why` of ``beside``, its :attr:`Verdict.beside`), ``"inside"`` the window
+    of the alarm at time ``by`` whose judgement restarted the statistics after it
+    (:func:`_rewatch` clears the window's alarms), or ``"after"`` it (a row read before that
+    judgement, watched again on the restarted statistics: ``--follow`` holds rows after a
+    window until it is judged, so this is a safeguard, not a case it is known to reach), or
+    ``"persisting"``: not isolated, the unexplained change alarmed at ``by`` persisting
+    (:func:`persisting`, counted in its record)."""
     reasons = {
-        "dismissed": "within what the isolated change(s) may leave: no new change",
+        "dismissed": dismissed_why(*(beside or (None, None))),
         "inside": f"inside the window of the alarm at t = {by:.2f} s, judged with it; the "
         "statistics restart after that window",
         "after": f"read before the alarm at t = {by:.2f} s was judged, after its window: "
@@ -542,8 +550,15 @@ class _Splits:
         return self._new
 
     def power(self, e: np.ndarray) -> np.ndarray:
+        """Each row's :func:`~nnid.fault.isolation.whitened_power` of ``e`` [rows, 6] (μ taken
+        out here), summed over the DOF equations; NaN on a row that is not finite, so that row
+        j stays row j (:attr:`before` and the splits index it)."""
         m = self.monitor
-        return np.sum(((e - m.mu_) @ m.whiten_.T) ** 2, axis=1)
+        e = e - m.mu_
+        ok = np.isfinite(e).all(1)
+        out = np.full(e.shape[0], np.nan)
+        out[ok] = np.sum(whitened_power(m, e), axis=1)
+        return out
 
     def ratio(self, p: np.ndarray) -> float:
         return float(p.sum()) / max(p.size * self.dim, 1.0)
@@ -957,7 +972,8 @@ def explained_by_the_changes(monitor: ResidualMonitor, r: np.ndarray, left: np.n
     small excursions of it are no second fault. Pooled over the DOFs, the share of a stopped
     vertical thruster's roll and pitch (7,354 and 1,818 times the noise power there) was lent
     to heave: a 10 N ballast change after it (7.9 times the noise in heave, 3.7 over the DOFs)
-    was within the window's allowance of 31.6, and dismissed at every window."""
+    was within the window's allowance of 31.6, and dismissed at every window. False where no
+    row of the window is finite: nothing measured is not within (NaN compares False)."""
     scale = leave_scale(dof_noise_ratios(monitor, r - left))
     return read_ratio(monitor, dof_noise_ratios(monitor, left - monitor.mu_), scale) <= (
         allowed_ratio(1.0)
@@ -1081,6 +1097,12 @@ class Rewatch:
         return out
 
 
+#: why :func:`unjudged_tail`'s rows were not judged, in short: the line a person reads
+#: (:func:`nnid.fault.follow.unjudged_line`); ``detect.json`` says :data:`UNJUDGED_WHY`
+UNJUDGED_SHORT = (
+    "the isolated change taken out reads an extrapolated acceleration there (the last half "
+    "smoothing window)"
+)
 #: why :func:`unjudged_tail`'s rows were not judged
 UNJUDGED_WHY = (
     "the run's last half smoothing window: an isolated change taken out there reads the "

@@ -59,6 +59,7 @@ from nnid.datasets.preprocess import savgol_window
 from nnid.datasets.readers import csv_dialect, refuse_comment_header, refuse_repeated_names
 from nnid.errors import NnidInputError, checked_number
 from nnid.fault.detect import (
+    UNJUDGED_SHORT,
     DetectResult,
     Rewatch,
     filed,
@@ -386,15 +387,23 @@ def follow_csv(
                 announce(k)
         del queue[:ready]
 
-    def withdraw(p: int, by: int, why: str, by_t: float | None = None) -> None:
+    def withdraw(
+        p: int,
+        by: int,
+        why: str,
+        by_t: float | None = None,
+        beside: tuple[float, float] | None = None,
+    ) -> None:
         """The announced alarm at ``p`` is not in the final alarms (batch drops it too), as
         the judgement of the alarm at ``by`` has it (:func:`withdrawn_record`; ``by_t``: the
-        time of the alarm it is folded into, ``why`` "persisting"): said and recorded, so that
-        no announced alarm vanishes unsaid."""
+        time of the alarm it is folded into, ``why`` "persisting"; ``beside``: the reading
+        of one ``why`` "dismissed"): said and recorded, so that no announced alarm vanishes
+        unsaid."""
         i = p - dropped
         name = names[codes[i]]
         by_t = ts[by - dropped] if by_t is None else by_t
-        record = withdrawn_record(name if exp_col is not None else None, ts[i], by_t, why)
+        run = name if exp_col is not None else None
+        record = withdrawn_record(run, ts[i], by_t, why, beside)
         withdrawn.append(record)
         say(withdrawn_line(record))
 
@@ -434,7 +443,7 @@ def follow_csv(
             verdict = rewatched_alarm(monitor, data, trace, i, window_s, w, r, values[rows, 0:6])
             if verdict is not None and verdict.dismissed:
                 alarm_rows.remove(k)  # no record, so no mark in the trace either
-                withdraw(k, k, "dismissed")
+                withdraw(k, k, "dismissed", beside=verdict.beside)
                 w.restart(data["t"][rows[-1]])
                 rewatch_after(k, rows, changed=False, ended=ended)
                 return
@@ -704,6 +713,17 @@ def withdrawn_line(w: dict) -> str:
     """One line a person reads for an announced alarm that the alarms do not hold."""
     run = f" ({w['experiment']})" if w.get("experiment") else ""
     return f"t = {w['t']:.2f} s{run}: announced, then withdrawn: {w['reason']}"
+
+
+def unjudged_line(u: dict) -> str:
+    """One line a person reads for the rows at a run's end left unjudged
+    (:func:`~nnid.fault.detect.unjudged_tail`): no alarm could be raised on them."""
+    run = f" ({u['experiment']})" if u.get("experiment") else ""
+    return (
+        f"t = {u['from_t']:.2f}-{u['to_t']:.2f} s{run}: the run's last {u['seconds']:.2f} s "
+        f"({u['samples']} samples) not judged, so no alarm could be raised there: "
+        f"{UNJUDGED_SHORT}"
+    )
 
 
 def describe_alarm(a: dict) -> str:

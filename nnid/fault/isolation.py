@@ -580,10 +580,13 @@ def whitened_power(monitor, e: np.ndarray) -> np.ndarray:
 
 def noise_ratio(monitor, e: np.ndarray) -> float:
     """Mean square of the residual ``e`` [N, 6] (μ taken out) whitened by the monitor's
-    healthy covariance: 1 is the healthy noise level. :func:`dof_noise_ratios`' mean over
-    the DOF equations watched, but summed over every value at once (their mean, summed DOF by
-    DOF first, differs in the last bit)."""
+    healthy covariance: 1 is the healthy noise level; NaN where no row of ``e`` is finite
+    (nothing measured, not "no excess"). :func:`dof_noise_ratios`' mean over the DOF equations
+    watched, but summed over every value at once (their mean, summed DOF by DOF first, differs
+    in the last bit)."""
     power = whitened_power(monitor, e)
+    if power.shape[0] == 0:
+        return np.nan
     dim = float(monitor.mask_.sum())
     return float(np.sum(power)) / max(power.shape[0] * dim, 1.0)
 
@@ -592,9 +595,11 @@ def dof_noise_ratios(monitor, e: np.ndarray) -> np.ndarray:
     """:func:`noise_ratio` of each DOF equation [6]: the mean square of each coordinate of the
     whitened residual ``e`` [N, 6] (μ taken out; the whitening is triangular, so coordinate j
     is DOF j's equation less what the DOFs before it predict of its noise); 0 on a DOF the
-    monitor does not watch."""
+    monitor does not watch; NaN on every DOF where no row of ``e`` is finite."""
     power = whitened_power(monitor, e)
-    return np.sum(power, axis=0) / max(power.shape[0], 1)
+    if power.shape[0] == 0:
+        return np.full(power.shape[1], np.nan)
+    return np.sum(power, axis=0) / power.shape[0]
 
 
 def model_error(baseline: float) -> float:

@@ -15,6 +15,7 @@ from nnid.fault.follow import (
     efficiency_interval,
     explained_share,
     seen_again,
+    unjudged_line,
     value_pm,
     withdrawn_line,
 )
@@ -103,6 +104,7 @@ def write_detect_outputs(
         f"{60 * hours:.1f} min of healthy data; {measured_rate(monitor)})",  # 0.5, not "0 min"
         *(describe_alarm(a) for a in result.alarms),
         *(withdrawn_line(w) for w in result.withdrawn),
+        *(unjudged_line(u) for u in result.unjudged),
     ]
     caveat = monitor.threshold_caveat()
     if caveat:
@@ -213,6 +215,9 @@ def detect_html(
     if result.withdrawn:
         items = "".join(f"<li>{html.escape(withdrawn_line(w))}</li>" for w in result.withdrawn)
         out.append(f"<h2>Announced and withdrawn</h2><ul>{items}</ul>")
+    if result.unjudged:
+        items = "".join(f"<li>{html.escape(unjudged_line(u))}</li>" for u in result.unjudged)
+        out.append(f"<h2>Not judged at a run's end</h2><ul>{items}</ul>")
     out.append("<h2>Residual and statistics</h2>")
     out.append(f'<img alt="residual traces" src="{figure_uri(_figure(monitor, trace, h_t, h_g))}">')
     out.append(IMAGES_CHECK + "</body></html>")
