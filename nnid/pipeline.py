@@ -38,6 +38,7 @@ from nnid.datasets.log import (
     run_label,
     run_of,
     run_pieces,
+    typical_step,
 )
 from nnid.datasets.preprocess import check_acceleration_window, experiment_rows, run_spans
 from nnid.datasets.splits import PARTS, Split, say_missed_fractions, split_log
@@ -395,18 +396,25 @@ def loaded_inputs(*args, **kwargs) -> tuple[Inputs, list[str]]:
 def _check_sampling(
     log: pd.DataFrame, models: list, path: str, every_part_predicted: bool = False
 ) -> None:
-    """Uniform sampling, said against the log before any fit, where a model counts time in
-    samples (the input-output models check it again themselves, naming the config); and,
-    where ``every_part_predicted`` (train scores the free run of its training part too), no
+    """No run whose stamps come in bursts, for any model (the loop's too): each is fitted,
+    simulated and scored at its run's typical step (:func:`~nnid.datasets.log.typical_step`),
+    one inside a burst (an IMU's samples 10 µs apart, every 10 ms); uniform sampling, said
+    against the log before any fit, where a model counts time in samples (the input-output
+    models check it again themselves, naming the config); and, where
+    ``every_part_predicted`` (train scores the free run of its training part too), no
     samples missing where a physics model's prediction steps (its own check, which said the
     config, not the log, once the fit was done)."""
-    from nnid.datasets.preprocess import check_uniform
+    from nnid.datasets.preprocess import check_uniform, refuse_bursts
     from nnid.evaluation.prediction import check_stepped
 
     counting = [m.kind for m in models if m.kind in SAMPLE_KINDS]
     stepped = every_part_predicted and any(m.kind in PHYSICS_KINDS for m in models)
-    if (counting or stepped) and "t" in log:
+    if "t" in log:
         try:
+            t = log["t"].to_numpy(np.float64)
+            for name, pos in experiment_rows(log):  # before check_uniform, which read a
+                # burst's gap as samples missing
+                refuse_bursts(t[pos], name, "a model's fit and simulation", "t")
             if counting:
                 check_uniform(log, f"the {counting[0]} model")
             if stepped:
@@ -792,7 +800,7 @@ def k_steps(log: pd.DataFrame, seconds: float | None) -> int | None:
     """Samples in ``seconds`` at the log's median sampling interval."""
     if seconds is None:
         return None
-    dt = float(np.median(np.diff(log["t"].to_numpy(np.float64))))
+    dt = typical_step(log["t"].to_numpy(np.float64), np.nan)
     return max(1, round(seconds / dt))
 
 
@@ -843,7 +851,7 @@ def unscored_k_step(part: str, log: pd.DataFrame, scores: dict, cfg, model) -> l
     if longest <= own or len(log) < 2:
         advice = "no k_step_s would: its runs are no longer than the model's warm-up"
     else:
-        dt = float(np.median(np.diff(log["t"].to_numpy(np.float64))))
+        dt = typical_step(log["t"].to_numpy(np.float64), np.nan)
         advice = f"a k_step_s of at most {(longest - own) * dt:.4g} s would score it"
     return [
         f"k_step_s = {cfg.k_step_s:g} s: no {part} run is long enough for a k-step prediction "
@@ -1267,7 +1275,7 @@ def run_compare(
     comparison = {
         "vehicle": getattr(inputs.vehicle, "name", None),
         "models": rows,
-        "k_step_s": k * float(np.median(np.diff(held["t"].to_numpy()))) if k else None,
+        "k_step_s": k * typical_step(held["t"].to_numpy(), np.nan) if k else None,
         "k_step_samples": k,
         "warmup_s": cfg.warmup_s,
         "held_out": held_name,

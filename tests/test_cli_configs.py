@@ -605,3 +605,36 @@ def test_a_loop_config_switches_the_regressor_filter_off_with_filter_lambda_zero
     assert res.exit_code == 0, res.output
     loop = json.loads((tmp_path / "o" / "loop.json").read_text())
     assert loop["settings"]["filter_lambda"] == expected
+
+
+def test_a_log_whose_stamps_come_in_bursts_is_refused_by_train_and_loop_naming_its_run(tmp_path):
+    """A run whose stamps come in bursts (five samples 10 µs apart, every 0.25 s), logged with
+    its velocities and accelerations, so no derivative refuses it: a model steps by its run's
+    median step, one inside a burst. The loop fitted it and ran to its end (a run all in
+    bursts gave findings at lags of 1e-05 s) and train refused it as samples missing; both
+    refuse it, before any fit, by the bursts' rule, naming the run (run0 before it, on a
+    regular clock, passes)."""
+    from importlib import resources
+
+    import numpy as np
+    import pandas as pd
+
+    demo = resources.files("nnid.demo_data")
+    log = pd.read_parquet(demo.joinpath("demo_minirov_heave.parquet"))
+    log = log[log["experiment"].isin(["run0", "run1", "run2"])].groupby("experiment").head(300)
+    log = log.reset_index(drop=True)
+    for c in ("u", "v", "w", "p", "q", "r"):
+        log["d" + c] = np.gradient(log[c].to_numpy(), log["t"].to_numpy())
+    k = np.arange(300)
+    log.loc[log["experiment"] == "run1", "t"] = 0.25 * (k // 5) + 1e-5 * (k % 5)
+    data = tmp_path / "imu.csv"
+    log.to_csv(data, index=False)
+    vehicle = str(demo.joinpath("minirov.toml"))
+    for command in (["train", str(ROOT / "configs/fossen_ls.toml")], ["loop"]):
+        args = [*command, "--data", str(data), "--vehicle", vehicle]
+        run = CliRunner().invoke(app, [*args, "--out", str(tmp_path / command[0])])
+        assert run.exit_code == 2, run.output
+        text = " ".join(run.output.split())
+        assert "Traceback" not in text and text.count("error:") == 1, text
+        assert f"{data}, field 't': experiment 'run1': its stamps come in bursts" in text, text
+        assert not (tmp_path / command[0]).exists()

@@ -48,6 +48,7 @@ from nnid.datasets.log import (
     _filled,
     euler_rate_matrices,
     turned_by,
+    typical_step,
     wrap_angle,
 )
 from nnid.datasets.preprocess import derive_velocities, experiment_rows, true_runs
@@ -573,7 +574,7 @@ def _gap_runs(part: pd.DataFrame, columns: list[str]):
 def _gaps_of(missing: np.ndarray, t: np.ndarray, name: object, columns: list[str]):
     """:func:`_gap_runs` on one experiment's arrays: ``missing`` (rows × ``columns``), its
     times ``t`` and its name."""
-    dt = float(np.median(np.diff(t))) if t.size > 1 else 0.0
+    dt = typical_step(t, 0.0)
     for a, b in true_runs(missing.any(axis=1)):
         t0 = t[a - 1] if a > 0 else t[a]
         t1 = t[b] if b < t.size else t[b - 1]

@@ -13,7 +13,7 @@ import re
 import warnings
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 import pandas as pd
@@ -273,6 +273,21 @@ def looks_like_degrees(df: pd.DataFrame, col: str) -> bool:
     if np.median(d_angle[use] / d_turn[use]) > 5.0:
         return True
     return bool(np.nanpercentile(np.abs(r), 99) > math.pi)
+
+
+#: what a caller takes for the step of a run too short to have one (:func:`typical_step`)
+OneSample = TypeVar("OneSample", float, None)
+
+
+def typical_step(t: np.ndarray, one_sample: OneSample) -> float | OneSample:
+    """A run's typical sampling step, s (``t``: its times): the median of its steps, or
+    ``one_sample`` for a run of one sample, which has none (each caller says what stands for
+    it: NaN where nothing may). Stamps that come in bursts have a median step inside a burst
+    (an IMU's ten samples every 10 ms step by 10 µs, not 1 ms): what steps by this refuses
+    them first (:func:`nnid.datasets.preprocess.refuse_bursts`; the pipeline, for every
+    model, before any fit)."""
+    t = np.asarray(t)
+    return float(np.median(np.diff(t))) if t.size > 1 else one_sample
 
 
 def run_label(name: object) -> str:

@@ -48,6 +48,7 @@ from nnid.datasets.log import (
     paced_step,
     refuse_rows,
     run_label,
+    typical_step,
     wrap_angle,
 )
 from nnid.datasets.mapping import rotation_from_euler
@@ -562,7 +563,7 @@ def run_window(
     if t.size < 2:
         return np.nan, savgol_window(0.0, 1.0, order)
     refuse_bursts(t, name, "a Savitzky-Golay derivative", "t")
-    dt = float(np.median(np.diff(t)))
+    dt = typical_step(t, np.nan)
     return dt, savgol_window(window_s, 1.0 / dt, order, setting)
 
 
@@ -1197,7 +1198,7 @@ def first_order_lag(tau: np.ndarray, log: pd.DataFrame, time_constant: float) ->
     out = np.empty_like(tau)
     t = log["t"].to_numpy(np.float64)
     for _, pos in experiment_rows(log):
-        dt = float(np.median(np.diff(t[pos]))) if pos.size > 1 else 1.0
+        dt = typical_step(t[pos], 1.0)
         a = np.exp(-dt / time_constant)
         # zi = τ_0 starts the filter at rest on the first input
         out[pos] = lfilter([0.0, 1.0 - a], [1.0, -a], tau[pos], axis=0, zi=tau[pos][:1])[0]

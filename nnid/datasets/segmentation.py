@@ -21,7 +21,7 @@ import pandas as pd
 from scipy.ndimage import binary_dilation
 from scipy.stats import median_abs_deviation
 
-from nnid.datasets.log import VELOCITY
+from nnid.datasets.log import VELOCITY, typical_step
 from nnid.datasets.preprocess import (
     experiment_rows,
     run_window,
@@ -74,7 +74,7 @@ def label_transients(
     out = np.zeros_like(labels)
     for _, pos in experiment_rows(log):
         t = log["t"].to_numpy(np.float64)[pos]
-        steps = max(0, round(hold / float(np.median(np.diff(t)))))
+        steps = max(0, round(hold / typical_step(t, np.nan)))
         seg = labels[pos]
         out[pos] = binary_dilation(seg, iterations=steps) if steps and seg.any() else seg
     return pd.Series(out, index=log.index, name="transient")

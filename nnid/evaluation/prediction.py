@@ -15,7 +15,14 @@ import numpy as np
 import pandas as pd
 
 from nnid.datasets.gaps import nearest_samples
-from nnid.datasets.log import POSE, TAU, VELOCITY, check_time_unit, check_unique_labels
+from nnid.datasets.log import (
+    POSE,
+    TAU,
+    VELOCITY,
+    check_time_unit,
+    check_unique_labels,
+    typical_step,
+)
 from nnid.datasets.preprocess import check_uniform, experiment_rows, first_order_lag
 from nnid.errors import NnidInputError
 from nnid.physics import compiled
@@ -67,7 +74,7 @@ def check_stepped(log: pd.DataFrame) -> None:
 def substeps_for(log: pd.DataFrame, max_step: float = MAX_STEP) -> int:
     """RK4 sub-steps per sample so that no step exceeds ``max_step`` seconds."""
     t = log["t"].to_numpy(np.float64)
-    dt = float(np.median(np.diff(t))) if t.size > 1 else max_step
+    dt = typical_step(t, max_step)
     return max(1, int(np.ceil(dt / max_step - 1e-9)))
 
 
@@ -112,7 +119,7 @@ def predict_states(
     k = 1 if mode == "one_step" else mode
     for _, pos in experiment_rows(log):
         t = log["t"].to_numpy(np.float64)[pos]
-        dt = float(np.median(np.diff(t)))
+        dt = typical_step(t, np.nan)
         if mode == "free_run":
             flown = compiled.integrate_rk4(form, x[pos[0]], tau[pos[:-1]], dt, substeps)
             out[pos] = flown[:, :12]
@@ -239,7 +246,7 @@ def _fly(log: pd.DataFrame, replay: Replay, flight: Flight, mode: str | int) -> 
     tau_open = replay.open_loop.loc[log.index, list(TAU)].to_numpy(np.float64)
     k = mode_steps(mode)
     for _, pos in experiment_rows(log):
-        dt = float(np.median(np.diff(log["t"].to_numpy(np.float64)[pos])))
+        dt = typical_step(log["t"].to_numpy(np.float64)[pos], np.nan)
         if mode == "free_run":
             flown = flight(x[pos[:1]], tau_open, pos[:1], pos.size - 1, dt)[0]
             bad = np.flatnonzero(~np.isfinite(flown).all(1))

@@ -34,7 +34,7 @@ import pandas as pd
 from scipy.special import lambertw
 from scipy.stats import f as f_dist
 
-from nnid.datasets.log import POSE, TAU, VELOCITY
+from nnid.datasets.log import POSE, TAU, VELOCITY, typical_step
 from nnid.datasets.preprocess import savgol_derivative, savgol_window
 from nnid.loop.diagnose import Fit, screen
 from nnid.loop.effects import Candidate, candidates
@@ -132,7 +132,7 @@ def midpoint_data(
     mid[:, 3:6] = x0[:, 3:6] + 0.5 * step
     span = np.arange(rows[0] - 1, rows[-1] + 1)
     t = data["t"][span]
-    dt = float(np.median(np.diff(t)))
+    dt = typical_step(t, np.nan)
     window = smoothing_window(t, savgol)
     vel = data["x"][span, 6:12]
     acc = np.column_stack([savgol_derivative(vel[:, j], dt, window, savgol[1]) for j in range(6)])
@@ -156,7 +156,7 @@ def smoothing_window(t: np.ndarray, savgol: tuple[float, int]) -> int:
     ``t``: ``savgol``'s window in seconds at the span's rate, at most the span (odd). Its
     last half window is evaluated off-centre, the window's polynomial extrapolated
     (:func:`~nnid.datasets.preprocess.savgol_interp`)."""
-    dt = float(np.median(np.diff(t)))
+    dt = typical_step(t, np.nan)
     return min(savgol_window(savgol[0], 1.0 / dt, savgol[1]), t.size - (1 - t.size % 2))
 
 

@@ -29,7 +29,7 @@ from sklearn.utils.validation import check_is_fitted
 
 from nnid.datasets.arrays import check_commands, far_beyond_range, motion_arrays
 from nnid.datasets.cleaning import CleaningReport
-from nnid.datasets.log import POSE, VELOCITY, check_log
+from nnid.datasets.log import POSE, VELOCITY, check_log, typical_step
 from nnid.datasets.preprocess import check_attitude
 from nnid.errors import NnidInputError
 from nnid.fault import kernel
@@ -351,7 +351,7 @@ class ResidualMonitor(BaseEstimator):
         self.sigma_ = np.sqrt(_variances(cov, active))  # per DOF, for the isolation's weights
         trace = self._pass(data, mu, whiten, s_inv, none, interval)
         hours = _hours(data)
-        dt = float(np.median(np.diff(data["t"])))
+        dt = typical_step(data["t"], np.nan)
         gap = max(round(self.rearm_s / dt), 1)
         series = {name: [] for name in ("T", "g")}
         for code in np.unique(data["experiment"]):

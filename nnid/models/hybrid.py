@@ -47,7 +47,7 @@ from torch import Tensor, nn
 from torch.func import functional_call
 
 from nnid.datasets.arrays import nominal_forces
-from nnid.datasets.log import POSE, VELOCITY
+from nnid.datasets.log import POSE, VELOCITY, typical_step
 from nnid.datasets.preprocess import check_uniform, experiment_rows, first_order_lag
 from nnid.datasets.segmentation import label_transients
 from nnid.errors import NnidInputError, checked_number
@@ -649,7 +649,7 @@ class HybridModel(FossenPlant):
 
     @staticmethod
     def _dt(log: pd.DataFrame) -> float:
-        return float(np.median(np.diff(log["t"].to_numpy(np.float64))))
+        return typical_step(log["t"].to_numpy(np.float64), np.nan)
 
     # -- fit -------------------------------------------------------------------------------------
     def _fit(self, log: pd.DataFrame, validation: pd.DataFrame | None, progress: Progress) -> None:

@@ -33,7 +33,15 @@ from sklearn.utils.validation import check_is_fitted
 
 from nnid.datasets.arrays import log_arrays, nominal_forces
 from nnid.datasets.cleaning import CleaningReport
-from nnid.datasets.log import ACCELERATION, ANGLES, MOTION, POSE, VELOCITY, run_label
+from nnid.datasets.log import (
+    ACCELERATION,
+    ANGLES,
+    MOTION,
+    POSE,
+    VELOCITY,
+    run_label,
+    typical_step,
+)
 from nnid.datasets.preprocess import (
     HELD_DT,
     HELD_SHARE,
@@ -543,7 +551,7 @@ def filter_signal(data: dict[str, np.ndarray], x: np.ndarray, lam: float, deriva
     names = data.get("experiment_names")
     for k in np.unique(data["experiment"]):
         idx = np.flatnonzero(data["experiment"] == k)
-        dt = float(np.median(np.diff(data["t"][idx]))) if idx.size > 1 else 1.0
+        dt = typical_step(data["t"][idx], 1.0)
         c = lam * dt / 2.0
         where = run_label(names[k]) if names is not None else f"experiment {k}"
         if idx.size > 1 and c >= 1.0:
@@ -788,7 +796,7 @@ def _pose_velocity_noise(
     gain2 = np.ones(t.size)
     for k in np.unique(experiment):
         rows = np.flatnonzero(experiment == k)
-        dt = float(np.median(np.diff(t[rows]))) if rows.size > 1 else 1.0
+        dt = typical_step(t[rows], 1.0)
         window = savgol_window(savgol[0], 1.0 / dt, savgol[1])
         gain2[rows] = savgol_noise_gain(window, savgol[1], dt) ** 2
     var = pose_noise_variance(data, DOFS, columns) * gain2[:, None]
@@ -896,7 +904,7 @@ def acceleration_noise_share(
     pose_gain2 = np.zeros(data["t"].size)
     for k in np.unique(data["experiment"]):
         rows = np.flatnonzero(data["experiment"] == k)
-        dt = float(np.median(np.diff(data["t"][rows]))) if rows.size > 1 else 1.0
+        dt = typical_step(data["t"][rows], 1.0)
         if filter_lambda is not None:
             gain2[rows] = filter_lambda**2 / (1.0 + filter_lambda * dt / 2.0)
         elif savgol is not None and "nu_dot_gain2" in data:

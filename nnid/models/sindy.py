@@ -29,7 +29,7 @@ import pandas as pd
 import torch
 
 from nnid.datasets.arrays import log_arrays, nominal_forces
-from nnid.datasets.log import VELOCITY
+from nnid.datasets.log import VELOCITY, typical_step
 from nnid.datasets.preprocess import experiment_rows
 from nnid.errors import NnidInputError
 from nnid.evaluation.prediction import blank_initial, mode_steps
@@ -318,7 +318,7 @@ class SindyDamping(DampingModel):
         out = np.full((len(log), 6), np.nan)
         k = mode_steps(mode)
         for _, pos in experiment_rows(log):
-            dt = float(np.median(np.diff(log["t"].to_numpy(np.float64)[pos])))
+            dt = typical_step(log["t"].to_numpy(np.float64)[pos], np.nan)
             x = torch.as_tensor(state[pos])
             tau = torch.as_tensor(drive[pos])
             with torch.no_grad():
