@@ -729,3 +729,39 @@ def test_the_complexity_figure_has_fixed_margins_and_names_every_model_inside(mo
     path = f"{name} 1 path (√ of normalised MSE)"
     assert sorted(texts) == sorted([f"{name} 0", f"{name} 1", path, f"{name} 2"])
     assert fig.axes[0].get_ylabel() == "validation error: points J / J0, path √ mean NMSE"
+
+
+def test_a_sindy_path_and_a_ratio_of_no_measured_j_are_not_drawn_nor_named(monkeypatch):
+    """A SINDy fit validated on a log whose heave is exactly zero held out: every J on its
+    path is NaN in memory (a zero target has no NMSE: not measured), which passed the
+    figure's "is not None" filter: nothing drawn, yet the path was named in the legend. A
+    J/J0 of NaN drew no point and was named too. Both are missing (cells.missing, the
+    report's one rule): no entry, and "-" in the force-error table (the Markdown twin's
+    too)."""
+    import warnings
+
+    import numpy as np
+    from test_sindy import _heaves_then_level
+
+    import nnid.reports.compare_report as report
+    from nnid.models.sindy import SindyDamping
+
+    vehicle, train, val = _heaves_then_level()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the unmeasured held-out outputs are warned of
+        model = SindyDamping(vehicle, thresholds=[1e-3], per_output=False).fit(train, val)
+    assert np.isnan([p["validation_J"] for p in model.path_]).all()
+
+    def row(name: str, kind: str, ratio: float) -> dict:
+        return {"name": name, "kind": kind, "n_params": 6, "train": {"J": 1.0, "J_over_J0": 0.4},
+                "validation": {"J": ratio, "J_over_J0": ratio, "J0": 10.0}}  # fmt: skip
+
+    sindy = {**row("sindy", "sindy", 0.5), "sindy_path": model.path_}
+    models = [sindy, row("unscored", "synthesis", float("nan"))]
+    drawn = []
+    monkeypatch.setattr(report, "figure_uri", lambda fig: drawn.append(fig) or "data:")
+    report.complexity_figure({"models": models})
+    (fig,) = drawn
+    assert [t.get_text() for t in fig.axes[0].get_legend().get_texts()] == ["sindy"]
+    unscored = next(r for r in report.table_rows({"models": models}) if r[0] == "unscored")
+    assert unscored[4:] == ["-", "-"]

@@ -31,6 +31,7 @@ from nnid.datasets.preprocess import savgol_window
 from nnid.errors import NnidInputError
 from nnid.fault import kernel
 from nnid.fault.detect import (
+    ISOLATED_SHORT,
     NOT_JUDGED,
     alarm_row,
     detect,
@@ -1184,6 +1185,23 @@ def test_an_alarm_whose_window_the_log_cuts_short_is_not_judged_not_unexplained(
     assert (alarm["repeats"], alarm["last_seen_t"]) == (None, None)
     assert alarm["cut_short"]["samples"] == held.size
     assert alarm["cut_short"]["seconds"] == pytest.approx(held.iloc[-1] - alarm["t"])
+
+
+def test_an_alarm_isolated_on_a_window_the_log_cuts_short_says_so(vehicle, monitor, tmp_path):
+    """A snag from 20 s in a log that ends 3 s after its alarm: isolated on those 3 s, its
+    record held no ``cut_short`` key (only an alarm not isolated there had one), so
+    detect.json did not say it was judged on part of its window. It holds the key, as a
+    record not judged does, and its meaning ends saying so; batch and --follow alike."""
+    log = simulate_faults(vehicle, 24, faults=[Fault("external", FAULT_T, force=SNAG)], seed=1)
+    cut = log[log["t"] <= 23.0 + 1e-9].reset_index(drop=True)
+    for result in _batch_and_followed(monitor, cut, tmp_path):
+        (alarm,) = result.alarms
+        held = cut["t"][cut["t"] >= alarm["t"] - 1e-9]
+        assert alarm["kind"] == "external_force" and not alarm["meaning"].startswith(NOT_JUDGED)
+        assert alarm["cut_short"]["samples"] == held.size
+        assert alarm["cut_short"]["seconds"] == pytest.approx(held.iloc[-1] - alarm["t"])
+        assert alarm["cut_short"]["window_s"] == 10.0
+        assert f"{ISOLATED_SHORT} ({held.iloc[-1] - alarm['t']:.2f} s of 10 s)" in alarm["meaning"]
 
 
 def test_detect_json_says_the_runs_last_rows_left_unjudged(vehicle, monitor, tmp_path):

@@ -174,7 +174,8 @@ def test_nelder_mead_starts_from_the_least_squares_of_the_solves_floors():
     typical regressor (its own column, the only one) it is data, and the default start fitted
     X:u = -13.7 to rounding, which Nelder-Mead then searched. With the floors the model's solve
     uses (each term against the log's typical motion, :func:`library_floors`) the start is that
-    solve's: X:u unidentified, held at 0."""
+    solve's: X:u unidentified, held at 0. Given Ξ's column names (``terms``, as the solve is),
+    the start's warning names X:u, where without them it said "X:0"."""
     from nnid.errors import ExcitationWarning
     from nnid.evaluation.persistence import library_floors
 
@@ -191,8 +192,8 @@ def test_nelder_mead_starts_from_the_least_squares_of_the_solves_floors():
     assert not masked_least_squares(xi, tau, mask).unidentified[0, 0]  # the scalar rule's
     with pytest.warns(ExcitationWarning, match=r"zero regressor\): X:0"):
         solve = masked_least_squares(xi, tau, mask, floors=floors)
-    with pytest.warns(ExcitationWarning, match=r"zero regressor\): X:0"):
-        fit = nelder_mead(xi, tau, mask, "mse", floors=floors)
+    with pytest.warns(ExcitationWarning, match=r"zero regressor\): X:u"):
+        fit = nelder_mead(xi, tau, mask, "mse", floors=floors, terms=["u"])
     assert solve.unidentified[0, 0] and fit.unidentified[0, 0]
     assert fit.coefficients[0, 0] == 0.0
 

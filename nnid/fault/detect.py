@@ -235,8 +235,18 @@ def isolated_alarm(
             f"{record['meaning']}; it ended at about {t_end:.2f} s, inside the window: sized "
             f"on the {t_end - record['t']:.3g} s before, and not taken out after the window"
         )
-    if not diag.isolated and cut_short(data, k, window_s):
-        not_judged(record, float(data["t"][rows[-1]] - data["t"][k]), window_s, int(rows.size))
+    if cut_short(data, k, window_s):
+        # isolated or not, on part of its window: detect.json says so of every such alarm
+        held_s = float(data["t"][rows[-1]] - data["t"][k])
+        record["cut_short"] = {
+            "seconds": held_s,
+            "window_s": float(window_s),
+            "samples": int(rows.size),
+        }
+        if diag.isolated:
+            record["meaning"] += f"; {ISOLATED_SHORT} ({held_s:.2f} s of {window_s:g} s)"
+        else:
+            not_judged(record)
     elif not diag.isolated:
         unexplained(record, float(data["t"][rows[-1]]))
     return record, diag, rows
@@ -252,16 +262,20 @@ def cut_short(data: dict, k: int, window_s: float) -> bool:
 
 #: how the ``meaning`` of a record whose window the log's end cut short starts (:func:`not_judged`)
 NOT_JUDGED = "not judged: the end of the log cut the isolation window short"
+#: the clause that ends the ``meaning`` of a change isolated on a window the log's end cut
+#: short (:func:`isolated_alarm`)
+ISOLATED_SHORT = "isolated on the part of its window before the end of the log"
 
 
-def not_judged(record: dict, held_s: float, window_s: float, samples: int) -> None:
+def not_judged(record: dict) -> None:
     """The ``record`` of an alarm not isolated on a window that the end of the log cut short
-    (:func:`cut_short`) to ``held_s`` seconds and ``samples`` rows: not judged, not an
-    unexplained change (no ``repeats``, no record opened for a later alarm to persist in: no
-    row is left to watch). ``cut_short`` says how much of the window there was, and the
+    (:func:`cut_short`; its ``cut_short`` key, which :func:`isolated_alarm` sets, says how
+    much of the window there was): not judged, not an unexplained change (no ``repeats``, no
+    record opened for a later alarm to persist in: no row is left to watch), and the
     ``meaning`` says so before what isolation read on those rows. A 0.35-s window was an
     unexplained record whose statistics "restart at the window's end"."""
-    record["cut_short"] = {"seconds": held_s, "window_s": float(window_s), "samples": samples}
+    short = record["cut_short"]
+    held_s, window_s, samples = short["seconds"], short["window_s"], short["samples"]
     read = record["meaning"]
     said = read if read == TOO_FEW else f"too few samples to judge (on them, {read})"
     record["meaning"] = (

@@ -18,7 +18,7 @@ import pandas as pd
 from nnid.datasets.preprocess import experiment_rows
 from nnid.evaluation.evaluate import diverged_columns
 from nnid.physics.dofs import DOFS, FORCES
-from nnid.reports.cells import number, score, score_cell
+from nnid.reports.cells import missing, number, score, score_cell
 from nnid.reports.figures import (
     FORCE_UNITS,
     IMAGES_CHECK,
@@ -351,19 +351,20 @@ def complexity_figure(comparison: dict) -> str:
     drawn = 0
     for m in comparison["models"]:
         ratio = m["validation"].get("J_over_J0")
-        if ratio is None or m["kind"] not in ("synthesis", "sindy"):
+        # a NaN read in memory (a J over an output whose held-out target is zero) is as
+        # unmeasured as JSON's null: no point, no legend entry (cells.missing, one rule)
+        if missing(ratio) or m["kind"] not in ("synthesis", "sindy"):
             continue
         color = f"C{drawn % 10}"
         drawn += 1
         ax.scatter(m["n_params"], ratio, zorder=3, color=color, label=m["name"])
-        path = m.get("sindy_path") or []
         j0 = m["validation"].get("J0")
-        if path and j0:
-            pts = sorted(
-                (p["n_terms"], np.sqrt(p["validation_J"]) * 1.0)
-                for p in path
-                if p.get("validation_J") is not None
-            )
+        pts = sorted(
+            (p["n_terms"], float(np.sqrt(p["validation_J"])))
+            for p in m.get("sindy_path") or []
+            if not missing(p.get("validation_J"))
+        )
+        if pts and not missing(j0) and j0:
             ax.plot(
                 [p[0] for p in pts],
                 [p[1] for p in pts],

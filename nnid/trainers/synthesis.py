@@ -173,6 +173,7 @@ def nelder_mead(
     max_iter_per_param: int = 400,
     tol: float = 1e-9,
     floors: np.ndarray | None = None,
+    terms: Sequence[str] | None = None,
 ) -> SynthesisFit:
     """Minimise an eq. 4.23-4.27 cost by Nelder-Mead, force by force, from the least-squares
     solution (or ``start``). Each cost is a sum (or monotone in a sum) of per-force costs, so
@@ -183,11 +184,16 @@ def nelder_mead(
     ``floors``: each term's floor of the rounding rule for the least-squares start
     (:func:`masked_least_squares`'s, unused with ``start``): the start the model's own solve
     gives, so that a term of rounding is unidentified and held at 0, not searched from a
-    value fitted to rounding."""
+    value fitted to rounding. ``terms``: the names of Ξ's columns, which the least-squares
+    start's warnings name its coefficients by ("X:u", not "X:0"; unused with ``start``)."""
     if loss not in LOSSES:
         raise ValueError(f"unknown loss '{loss}'; expected one of {', '.join(LOSSES)}")
     mask = np.asarray(mask, dtype=bool)
-    base = start if start is not None else masked_least_squares(xi, tau_bar, mask, floors=floors)
+    base = (
+        start
+        if start is not None
+        else masked_least_squares(xi, tau_bar, mask, terms, floors=floors)
+    )
     k = base.coefficients.copy()
     stopped: list[str] = []
     for force in forces:
