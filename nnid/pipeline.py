@@ -46,7 +46,7 @@ from nnid.errors import NnidInputError
 from nnid.evaluation.evaluate import diverged_columns, evaluate
 from nnid.evaluation.metrics import exact_mean
 from nnid.evaluation.prediction import Replay
-from nnid.models.base import encode_setting
+from nnid.models.base import FIT_AND_SIMULATION, encode_setting
 from nnid.physics.dofs import DOFS
 from nnid.reports.stops import training_stages
 from nnid.trainers.history import Progress, silent, staged
@@ -404,17 +404,15 @@ def _check_sampling(
     ``every_part_predicted`` (train scores the free run of its training part too), no
     samples missing where a physics model's prediction steps (its own check, which said the
     config, not the log, once the fit was done)."""
-    from nnid.datasets.preprocess import check_uniform, refuse_bursts
+    from nnid.datasets.preprocess import check_uniform, refuse_bursty_runs
     from nnid.evaluation.prediction import check_stepped
 
     counting = [m.kind for m in models if m.kind in SAMPLE_KINDS]
     stepped = every_part_predicted and any(m.kind in PHYSICS_KINDS for m in models)
     if "t" in log:
         try:
-            t = log["t"].to_numpy(np.float64)
-            for name, pos in experiment_rows(log):  # before check_uniform, which read a
-                # burst's gap as samples missing
-                refuse_bursts(t[pos], name, "a model's fit and simulation", "t")
+            # before check_uniform, which read a burst's gap as samples missing
+            refuse_bursty_runs(log, FIT_AND_SIMULATION)
             if counting:
                 check_uniform(log, f"the {counting[0]} model")
             if stepped:

@@ -332,6 +332,33 @@ def _log_cases() -> list[Case]:
         cases.append(Case(f"{command}: rolling with no attitude", no_attitude(command),
                           ("LOG", "'phi'", "restoring")))  # fmt: skip
 
+    def in_bursts(tmp, fx, command, follow=False):  # an IMU's stamps: five samples 10 us
+        # apart every 0.25 s (20 Hz over the run); every model, and the monitor, steps at a
+        # run's typical step, one inside a burst (detect watched pairs of them, exit 0)
+        detecting = command == "detect"
+        log = fx["octo_log" if detecting else "demo_log"].copy()
+        rows = (log["experiment"] == ("h2" if detecting else "run1")).to_numpy()
+        k = np.arange(int(rows.sum()))
+        log.loc[rows, "t"] = 0.25 * (k // 5) + 1e-5 * (k % 5)
+        config = None
+        if command == "compare":  # the shipped one names the Seamor runs, refused before
+            config = tmp / "compare.toml"
+            config.write_text('kind = "compare"\n[[models]]\nkind = "fossen"\n')
+        data = _write_log(tmp, "in bursts", log)
+        args = _command(command, tmp, fx, data=data, config=config)
+        return [*args, "--follow"] if follow else args
+
+    for command, follow in (("train", False), ("compare", False), ("loop", False),
+                            ("detect", False), ("detect", True)):  # fmt: skip
+        run = "h2" if command == "detect" else "run1"
+        cases.append(
+            Case(
+                f"{command}{' --follow' if follow else ''}: a run whose stamps come in bursts",
+                functools.partial(in_bursts, command=command, follow=follow),
+                ("LOG", "'t'", f"experiment '{run}': its stamps come in bursts"),
+            )
+        )
+
     def rate_change(tmp, fx):  # a NARX counts delays in samples: 20 Hz, then 100 Hz in run1
         config, data = _narx_on_a_rate_change(tmp, fx["demo_log"])
         return _command("train", tmp, fx, data=data, config=config)

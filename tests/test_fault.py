@@ -1814,6 +1814,43 @@ def test_a_log_at_another_sampling_rate_is_refused(vehicle, monitor, tmp_path):
     assert err.value.source == str(path)
 
 
+@pytest.mark.parametrize("size", [2, 10])
+def test_detect_refuses_a_log_whose_stamps_come_in_bursts_naming_the_file_and_run(
+    vehicle, monitor, tmp_path, size
+):
+    """Stamps in bursts of ``size`` samples 1e-05 s apart, at the calibrated rate over the
+    run: the trimmed mean of the rate check read pairs as the calibrated interval, and the
+    log was watched (a 40-s one, exit 0, alarmed at its first sample, the residual 9.4e+07
+    times the healthy noise), and tens as 'sampled every 1e-05 s', naming neither the run
+    nor the bursts. Batch detect
+    (the Python API too) and --follow refuse both by the pipeline's rule, naming the file,
+    the run and the bursts; --follow at its first clock check, on the rows it has."""
+    from nnid.fault.follow import RATE_ROWS
+
+    # an even count of samples: pairs then hold the median step (one more step in a burst)
+    log = simulate_faults(vehicle, 15, seed=9, experiment="dive1").head(300)
+    k = np.arange(len(log))
+    bursty = log.assign(t=size * monitor.interval * (k // size) + 1e-5 * (k % size))
+    said = "experiment 'dive1': its stamps come in bursts"
+    with pytest.raises(NnidInputError, match=said) as err:
+        detect(monitor, bursty)
+    assert err.value.field == "t"
+    data = tmp_path / "imu.csv"
+    bursty.to_csv(data, index=False)
+    monitor.model.save(tmp_path / "m")
+    monitor.save(tmp_path / "m")
+    args = ["detect", "--model", str(tmp_path / "m"), "--data", str(data)]
+    for how, extra, where in (
+        ("batch", [], "field 't'"),
+        ("follow", ["--follow", "--idle-s", "0"], f"column 't', row {RATE_ROWS}"),
+    ):
+        res = CliRunner().invoke(app, [*args, "--out", str(tmp_path / how), *extra])
+        text = " ".join(res.output.split())
+        assert res.exit_code == 2 and "Traceback" not in text, text
+        assert text.count("error:") == 1 and f"{data}, {where}: {said}" in text, text
+        assert "residual monitor" in text and not (tmp_path / how).exists()
+
+
 def test_the_rate_check_reads_an_alternating_clock_as_one_rate(vehicle, monitor):
     # a 20 Hz clock read at uneven intervals (0.04, 0.06 s): the median of its intervals jumps
     # between the two with one sample more or less; the trimmed mean does not

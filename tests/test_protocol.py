@@ -565,3 +565,30 @@ def test_a_log_whose_index_repeats_labels_is_one_clear_error(fitted, runs):
         for use, log in uses:
             with pytest.raises(NnidInputError, match=said):
                 use(log)
+
+
+def _in_bursts(log: pd.DataFrame, run: str) -> pd.DataFrame:
+    """``log`` with ``run``'s stamps in bursts: five samples 10 us apart every 0.25 s (its
+    20 Hz over the run), the other runs as they were."""
+    rows = (log["experiment"] == run).to_numpy()
+    t, k = log["t"].to_numpy(np.float64).copy(), np.arange(int(rows.sum()))
+    t[rows] = 0.25 * (k // 5) + 1e-5 * (k % 5)
+    return log.assign(t=t)
+
+
+@pytest.mark.parametrize("kind", list(BUILDERS))
+def test_every_kind_refuses_a_run_whose_stamps_come_in_bursts_before_any_fit(kind, minirov, runs):
+    """Every model fits and simulates at a run's typical step, one inside a burst: through
+    the Python API the fossen, synthesis and SINDy fits went on, the models that count
+    samples said the run 'sampled every 1e-05 s' and Caccia's found no plateau, where the
+    pipeline refuses the log before any fit. The protocol's one fit refuses it by the
+    pipeline's rule, in the training and in the validation log, naming the run, before the
+    model's own fit reports progress."""
+    train, val = runs
+    said: list[str] = []
+    for log, validation in ((_in_bursts(train, "run1"), val), (train, _in_bursts(val, "run2"))):
+        run = "run1" if validation is val else "run2"
+        with pytest.raises(NnidInputError, match=f"experiment '{run}': its stamps come in") as err:
+            BUILDERS[kind](minirov).fit(log, validation, progress=lambda *a: said.append(a))
+        assert err.value.field == "t" and "a model's fit and simulation" in err.value.message
+    assert said == []

@@ -48,6 +48,7 @@ from nnid.datasets.log import (
     paced_step,
     refuse_rows,
     run_label,
+    run_of,
     typical_step,
     wrap_angle,
 )
@@ -305,6 +306,19 @@ def refuse_bursts(t: np.ndarray, name: object, method: str, field: str) -> None:
             "preprocessing's rate, resample_log)",
             field=field,
         )
+
+
+def refuse_bursty_runs(log: pd.DataFrame, method: str) -> None:
+    """:func:`refuse_bursts` on each run of ``log`` (field ``t``), a piece that a gap cut
+    from a run named as that run (:func:`~nnid.datasets.log.run_of`): what every whole-log
+    entry (the pipeline, a model's ``fit``, the fault monitor) checks before it steps at a
+    run's typical step (:func:`~nnid.datasets.log.typical_step`), one inside a burst."""
+    if "t" not in log:
+        return
+    t = log["t"].to_numpy(np.float64)
+    runs = run_of(log)
+    for name, pos in experiment_rows(log):
+        refuse_bursts(t[pos], runs.get(name, name), method, "t")
 
 
 #: how far :func:`resample_log` may move a log's rate before it is warned of

@@ -3,10 +3,15 @@
 Rows go through :class:`nnid.fault.monitor.Stream` as they arrive; an alarm is announced at once
 and isolated when the window after it has arrived (or at the end of the input). The log needs the
 body velocities and attitude as columns (a live monitor cannot smooth over the future) and the
-inputs of the model's vehicle. Whether an announced alarm stays is known only once the alarms
-before it are judged: one that batch ``detect`` drops (dismissed, or inside the window of an
-earlier alarm whose judgement restarts the statistics) is said withdrawn, with why, and kept in
-the result's ``withdrawn``, so that no announced alarm vanishes unsaid. An alarm is judged as
+inputs of the model's vehicle. Its clock is checked on the rows it has: every
+:data:`RATE_ROWS` rows, the current experiment's latest :data:`RATE_WINDOW` for stamps that come
+in bursts, refused by batch's rule (:func:`~nnid.datasets.preprocess.refuse_bursts`), then all
+the latest rows for the calibrated rate. The rows before the first check are watched unchecked,
+and a run whose stamps begin to come in bursts later is refused once bursts hold the median of
+its latest rows' steps. Whether an announced alarm stays is known only once the alarms before it
+are judged: one that batch ``detect`` drops (dismissed, or inside the window of an earlier alarm
+whose judgement restarts the statistics) is said withdrawn, with why, and kept in the result's
+``withdrawn``, so that no announced alarm vanishes unsaid. An alarm is judged as
 soon as its window (batch's rows, :func:`~nnid.fault.detect.window_rows`) is whole and watched,
 and no row after that window is announced before the judgement: an alarm there, read before a
 judgement that restarts the statistics, was announced and then withdrawn, one batch never has.
@@ -55,7 +60,7 @@ from nnid.datasets.log import (
     out_of_bounds,
     radian_limit,
 )
-from nnid.datasets.preprocess import savgol_window
+from nnid.datasets.preprocess import refuse_bursts, savgol_window
 from nnid.datasets.readers import csv_dialect, refuse_comment_header, refuse_repeated_names
 from nnid.errors import NnidInputError, checked_number
 from nnid.fault.detect import (
@@ -74,6 +79,7 @@ from nnid.fault.detect import (
 )
 from nnid.fault.isolation import UNEXPLAINED
 from nnid.fault.monitor import (
+    MONITOR_STEPS,
     UNREAD_BY,
     ResidualMonitor,
     Trace,
@@ -604,6 +610,15 @@ def follow_csv(
             )
         last_t = t
         if n >= RATE_ROWS and n % RATE_ROWS == 0:
+            # stamps in bursts, batch's rule on the rows the current experiment has (its latest
+            # RATE_WINDOW and this one), before the rate: pairs 1e-05 s apart every 0.1 s read
+            # as the calibrated 0.05 s, and a difference quotient over 1e-05 s alarmed
+            since = max(exp_first - dropped, len(ts) - RATE_WINDOW, 0)
+            try:
+                run = current if exp_col is not None else None
+                refuse_bursts(np.append(ts[since:], t), run, MONITOR_STEPS, "t")
+            except NnidInputError as exc:
+                raise NnidInputError(exc.message, source=where, field="t", row=n) from None
             # the rate the calibration holds at, on the latest rows: a log that went from
             # 20 to 10 Hz after its first rows gave a confident thruster loss
             try:

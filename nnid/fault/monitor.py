@@ -30,7 +30,7 @@ from sklearn.utils.validation import check_is_fitted
 from nnid.datasets.arrays import check_commands, far_beyond_range, motion_arrays
 from nnid.datasets.cleaning import CleaningReport
 from nnid.datasets.log import POSE, VELOCITY, check_log, typical_step
-from nnid.datasets.preprocess import check_attitude
+from nnid.datasets.preprocess import check_attitude, refuse_bursty_runs
 from nnid.errors import NnidInputError
 from nnid.fault import kernel
 from nnid.fault.thresholds import rate_caveat, rate_interval, rate_threshold
@@ -42,6 +42,9 @@ from nnid.threads import torch_threads_kept
 from nnid.validation import MAX_FALSE_ALARMS_PER_HOUR, PositiveFloat, StrictModel, validated
 
 MONITOR_FILE = "monitor.json"
+#: what reads a log sample by sample at one interval, as said in a refusal of stamps in bursts
+#: (:func:`~nnid.datasets.preprocess.refuse_bursts`; batch and ``--follow`` alike)
+MONITOR_STEPS = "the residual monitor, calibrated at one sample interval,"
 #: the relative difference of sample interval a monitored log may have from the healthy record
 RATE_TOLERANCE = 0.1
 #: a spread of the scored intervals (:meth:`ResidualMonitor.clock_spread`) beyond which the
@@ -154,11 +157,17 @@ def monitor_inputs(
     no sample of it, as ``--follow`` holds it (:mod:`nnid.fault.follow`): not a made-up 0 for
     the isolation to read. ``unread``: those columns of the state, which the kernel is fed
     as 0 where NaN (:func:`kernel_state`), so that it scores the row; they change no residual.
-    ``report`` records the velocities derived from the pose ("derive velocities")."""
+    ``report`` records the velocities derived from the pose ("derive velocities"). A run
+    whose stamps come in bursts is refused (:func:`~nnid.datasets.preprocess.refuse_bursts`):
+    the residual steps sample by sample at the calibrated interval."""
     from nnid.datasets.gaps import nearest_samples
     from nnid.models.parametric import prepare_motion
 
     log = check_log(log)  # every entry (fit, run, detect) reads the log here first
+    # before check_rate, whose trimmed mean read ten stamps a burst as 1e-05 s apart, and
+    # pairs 1e-05 s apart every 0.1 s as 0.05 s: that log was watched, and a difference
+    # quotient over 1e-05 s alarmed at its start
+    refuse_bursty_runs(log, MONITOR_STEPS)
     cols = input_columns(list(Actuation(plant.vehicle).channels))
     if plant.vehicle.thrusters:
         check_commands(log.columns, cols, plant.vehicle.name)

@@ -46,6 +46,7 @@ from sklearn.base import BaseEstimator
 from sklearn.utils.validation import check_is_fitted
 
 from nnid.datasets.log import MOTION, check_log
+from nnid.datasets.preprocess import refuse_bursty_runs
 from nnid.errors import NnidInputError
 from nnid.evaluation.prediction import check_mode
 from nnid.serialization import (
@@ -90,6 +91,9 @@ TENSOR_FILE = "tensors.pt"
 #: path, its innovations), not a weight: a per-sample series is no learned scalar, so it goes to
 #: ``tensors.pt``, not ``model.json`` (ARCHITECTURE.md, "The model protocol")
 RECORD = "record"
+#: what steps a log at its runs' typical step, as said in a refusal of stamps in bursts
+#: (:func:`~nnid.datasets.preprocess.refuse_bursty_runs`; the pipeline's too)
+FIT_AND_SIMULATION = "a model's fit and simulation"
 NOT_FITTED = (
     "this %(name)s is not fitted yet: call fit(log) first, or load a saved model with "
     "nnid.load_model(dir)"
@@ -225,10 +229,15 @@ class NnidModel(BaseEstimator, ABC):
     ) -> NnidModel:
         """Fit on ``log``; ``validation`` (held-out experiments) is used for early stopping or
         model selection where the model has such a choice; ``progress(done, total, message)``
-        is called as the fit goes. Returns the model."""
+        is called as the fit goes. Returns the model. A run of either log whose stamps come
+        in bursts is refused before any fit: every model fits and simulates at a run's
+        typical step, one inside a burst (:func:`~nnid.datasets.preprocess.refuse_bursty_runs`,
+        the pipeline's rule)."""
         log = check_log(log, "training log")
+        refuse_bursty_runs(log, FIT_AND_SIMULATION)
         if validation is not None:
             validation = check_log(validation, "validation log")
+            refuse_bursty_runs(validation, FIT_AND_SIMULATION)
         for name in [k for k in vars(self) if k.endswith("_") and not k.startswith("__")]:
             delattr(self, name)  # a refit starts from nothing learned
         start = time.perf_counter()
