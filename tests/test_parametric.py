@@ -1583,6 +1583,30 @@ def test_rounding_floors_follow_the_motion_a_column_is_made_of():
         assert scalar.unexcited == ["X:u*abs(u)"]
 
 
+def test_column_sizes_are_each_columns_median_as_numpy_gives_it():
+    """column_sizes (the rounding rule's sizes, thousands of columns a loop pass) reads every
+    column's median from one sort: each is numpy.median of its finite non-zero |entries| to the
+    last bit, with odd and even counts, none (0), and on the rows drawn from a longer block."""
+    from nnid.evaluation.persistence import TYPICAL_ROWS, column_sizes
+
+    rng = np.random.default_rng(0)
+    for rows in (7, 200, TYPICAL_ROWS + 5):
+        a = rng.normal(size=(rows, 9)) * np.logspace(-12, 8, 9)
+        a[rng.random(a.shape) < 0.3] = 0.0
+        a[rng.random(a.shape) < 0.05] = np.nan
+        a[:, 0], a[:2, 1], a[2:, 1], a[0, 2] = 0.0, [np.inf, -3.0], 0.0, -np.inf
+        drawn = a
+        if rows > TYPICAL_ROWS:  # the rows it reads of a longer block
+            keep = np.random.default_rng(0).choice(rows, TYPICAL_ROWS, replace=False)
+            drawn = a[np.sort(keep)]
+        x = np.abs(drawn)
+        read = np.isfinite(x) & (x > 0)
+        want = [np.median(x[read[:, j], j]) if read[:, j].any() else 0.0 for j in range(9)]
+        assert read[:, 3:].sum(0).min() > 1 and len(set(read.sum(0) % 2)) == 2
+        assert np.array_equal(column_sizes(a), want)
+        assert column_sizes(a)[0] == 0.0 and column_sizes(a)[1] == 3.0
+
+
 def test_a_column_in_two_equations_is_excited_where_one_of_them_measures_it():
     """The tol rule within each DOF equation (sample-major rows X, N): a coupled column (an
     added mass's) 1e-8 of X:u*abs(u) in the X rows, zero beside it there, and as large as

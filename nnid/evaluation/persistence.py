@@ -192,9 +192,21 @@ def column_sizes(columns: np.ndarray) -> np.ndarray:
         a = a[np.sort(keep)]
     a = np.abs(a.astype(np.float64, copy=False))
     read = np.isfinite(a) & (a > 0)
-    return np.array(
-        [float(np.median(a[read[:, j], j])) if read[:, j].any() else 0.0 for j in range(a.shape[1])]
-    )
+    count = read.sum(0)
+    out = np.zeros(a.shape[1])
+    # the columns with as many entries read medianed together, as numpy.median does each:
+    # its middle entry, or the mean of the middle two, by partition (bit-identical). The
+    # demo loop's floors size 4410 candidate columns of one count in one call, which a
+    # median a column took 2.5-3 times as long to read
+    flat = a.T[read.T]  # the entries read, column after column
+    start = np.cumsum(count) - count
+    for c in np.unique(count[count > 0]):
+        same = np.flatnonzero(count == c)
+        entries = flat[start[same, None] + np.arange(c)]
+        middle = np.partition(entries, [(c - 1) // 2, c // 2], axis=-1)
+        low, high = middle[:, (c - 1) // 2], middle[:, c // 2]
+        out[same] = low if c % 2 else (low + high) / 2
+    return out
 
 
 def kind_sizes(columns: np.ndarray, to_linear: float) -> np.ndarray:
@@ -422,10 +434,7 @@ def excitation_from_gram(
     # degenerate with a collinear pair's, and eigh mixed the two, so that the pair was not
     # named (its values then kept the pseudo-inverse's, with a standard error)
     idx = np.flatnonzero(live)
-    eig, vec = np.linalg.eigh(normed[np.ix_(idx, idx)]) if idx.size else (np.array([]), None)
-    sv = np.concatenate([np.sqrt(_resolved(eig)[::-1]), np.zeros(p - idx.size)])
-    # one threshold for both verdicts: a direction rank does not count is named collinear
-    weak = sv <= np.sqrt(tol) * (sv[0] if sv.size else 1.0)
+    sv, weak, vec = _spectrum(normed[np.ix_(idx, idx)], p, tol)
     rank = int(np.sum(~weak))
     condition = float((sv[0] / sv[p - 1]) ** 2) if p and sv[p - 1] > 0 else float("inf")
     collinear: list[str] = []
@@ -501,8 +510,51 @@ def _resolved(eig: np.ndarray) -> np.ndarray:
     a bias both constant) came out +2e-16 of the largest with one CPU's BLAS kernels and
     -2e-16 with another's, a condition number of 1.4e16 on one and inf on the other."""
     eig = np.asarray(eig, dtype=np.float64)
-    top = float(eig.max(initial=0.0))
-    return np.where(eig > eig.size * np.finfo(np.float64).eps * top, eig, 0.0)
+    top = eig.max(-1, initial=0.0, keepdims=True)  # a stack ``[..., m]``: each its own largest
+    return np.where(eig > eig.shape[-1] * np.finfo(np.float64).eps * top, eig, 0.0)
+
+
+def _spectrum(
+    normed: np.ndarray, p: int, tol: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """The singular values ``[..., p]`` of a regressor scaled to unit-RMS columns whose
+    scaled Gram matrix over its ``m`` live columns is ``normed`` ``[..., m, m]`` (the other
+    ``p - m`` are 0), largest first; which of them the rank does not count (at most √``tol``
+    of the largest); and the eigenvectors of ``normed`` (None where m = 0). A stack is
+    decomposed in one call, each matrix as it alone would be (:func:`gram_ranks`)."""
+    m = normed.shape[-1]
+    eig, vec = np.linalg.eigh(normed) if m else (np.zeros(normed.shape[:-1]), None)
+    zeros = np.zeros((*eig.shape[:-1], p - m))
+    sv = np.concatenate([np.sqrt(_resolved(eig)[..., ::-1]), zeros], -1)
+    # one threshold for both verdicts: a direction rank does not count is named collinear
+    weak = sv <= np.sqrt(tol) * (sv[..., :1] if p else 1.0)
+    return sv, weak, vec
+
+
+def gram_ranks(grams: np.ndarray, n: int, tol: float = 1e-6) -> np.ndarray:
+    """The rank :func:`excitation_from_gram` finds in each of a stack of Gram matrices
+    ``grams`` ``[K, m, m]`` of ``n`` rows ``[K]``, where every column passes its size rules
+    (unit ``column_rms``, ``reference`` 1: only a zero column is left out). The matrices with
+    the same columns left out are decomposed in one call: a call of excitation_from_gram a
+    matrix (the loop's screen judges hundreds of candidates' augmented regressions a pass)
+    took the demo's loop 0.16 s, three times what the stack takes."""
+    grams = np.asarray(grams, dtype=np.float64)
+    k, m = grams.shape[0], grams.shape[-1]
+    ranks = np.zeros(k, dtype=int)
+    if not (k and m):
+        return ranks
+    # excitation_from_gram's scaling, elementwise the same (each matrix scaled as alone)
+    rms = np.sqrt(np.clip(np.diagonal(grams, axis1=1, axis2=2), 0.0, None) / max(n, 1))
+    live = rms > 0
+    d = np.where(live, 1.0 / np.where(live, rms, 1.0), 0.0)
+    normed = grams * (d[:, :, None] * d[:, None, :]) / max(n, 1)
+    patterns, which = np.unique(live, axis=0, return_inverse=True)
+    for j, pattern in enumerate(patterns):
+        members = np.flatnonzero(which.reshape(-1) == j)
+        idx = np.flatnonzero(pattern)
+        _, weak, _ = _spectrum(normed[np.ix_(members, idx, idx)], m, tol)
+        ranks[members] = np.sum(~weak, -1)
+    return ranks
 
 
 def _verdict_warnings(

@@ -41,7 +41,7 @@ from nnid.evaluation.metrics import exact_mean, rmse, warmup_mask
 from nnid.evaluation.persistence import (
     column_sizes,
     equation_rms,
-    excitation_from_gram,
+    gram_ranks,
     measured_columns,
     rounding_floors,
 )
@@ -544,25 +544,16 @@ def identifiable(a_mat: np.ndarray, b: np.ndarray, q: np.ndarray, n: int) -> np.
     the weighted Gram matrix with its column, [[A, b_k], [b_kᵀ, q_k]], above the fit's own
     (A ``[P, P]``, b ``[P, K]``, q ``[K]``; ``n`` rows), by the refit's rank rule
     (:func:`~nnid.evaluation.persistence.excitation_from_gram`: near-null directions of the
-    unit-RMS-scaled matrix do not count). Only the rank is read: the columns were judged
-    excited before (:class:`CandidateExcitation`, the fit's own refit), so every column
+    unit-RMS-scaled matrix do not count), all candidates' matrices in one call
+    (:func:`~nnid.evaluation.persistence.gram_ranks`). Only the rank is read: the columns were
+    judged excited before (:class:`CandidateExcitation`, the fit's own refit), so every column
     passes its size rules here (unit sizes)."""
     p = a_mat.shape[0]
-
-    def rank(gram: np.ndarray) -> int:
-        m = gram.shape[0]
-        names = [str(j) for j in range(m)]
-        return excitation_from_gram(gram, n, names, column_rms=np.ones(m), reference=1.0).rank
-
-    base = rank(a_mat)
-    out = np.zeros(q.size, dtype=bool)
-    gram = np.zeros((p + 1, p + 1))
-    gram[:p, :p] = a_mat
-    for k in range(q.size):
-        gram[:p, p] = gram[p, :p] = b[:, k]
-        gram[p, p] = q[k]
-        out[k] = rank(gram) > base
-    return out
+    gram = np.zeros((q.size, p + 1, p + 1))
+    gram[:, :p, :p] = a_mat
+    gram[:, :p, p] = gram[:, p, :p] = b.T
+    gram[:, p, p] = q
+    return gram_ranks(gram, n) > gram_ranks(a_mat[None], n)[0]
 
 
 class CandidateExcitation:
