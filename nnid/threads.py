@@ -1,4 +1,5 @@
-"""Torch's intra-op thread count for work made of many small element-wise operations."""
+"""Thread counts (torch, numba, BLAS) for work made of many small operations, each set for a
+block and restored after it: the library never changes process-wide state."""
 
 from __future__ import annotations
 
@@ -6,6 +7,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 
 import torch
+from threadpoolctl import threadpool_limits
 
 
 @contextmanager
@@ -21,6 +23,21 @@ def torch_threads(n: int = 1) -> Iterator[None]:
         yield
     finally:
         torch.set_num_threads(before)
+
+
+@contextmanager
+def blas_threads(n: int = 1) -> Iterator[None]:
+    """Run the block with at most ``n`` threads in each BLAS library loaded so far (NumPy's and
+    SciPy's OpenBLAS, MKL), then restore each one's previous count.
+
+    Small products (``dgemv`` on matrices of a few columns) gain nothing from a second thread,
+    which spins waiting for work (``blas_thread_server``): the whole `nnid demo` took 12.7-42.7 s
+    of user CPU in 3 runs with OpenBLAS's default 2 threads against 9.0-10.2 s in 4 with one
+    (2 cores, load 2.9-3.5, 2026-11-30). Its findings were the same; its numbers repeat bit for
+    bit at one thread count but moved by up to 1e-11 (relative) between the two. A library
+    loaded inside the block keeps its own count."""
+    with threadpool_limits(limits=n, user_api="blas"):
+        yield
 
 
 @contextmanager

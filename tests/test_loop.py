@@ -410,6 +410,26 @@ def test_cli_demo_reports_the_injected_heave_thrust_loss(tmp_path):
     )
 
 
+def test_the_loop_runs_with_one_blas_thread_and_gives_the_callers_back(monkeypatch):
+    """The loop's work runs with one thread per BLAS library (a second one only spins on its
+    small products: nnid.threads.blas_threads), and the caller's count is back after it."""
+    from threadpoolctl import threadpool_info, threadpool_limits
+
+    def blas():
+        return [p["num_threads"] for p in threadpool_info() if p["user_api"] == "blas"]
+
+    seen = []
+    monkeypatch.setattr(ResidualLoop, "_fit", lambda self, log, say: seen.append(blas()))
+    log = pd.read_parquet(resources.files("nnid.demo_data").joinpath("demo_minirov_heave.parquet"))
+    with threadpool_limits(limits=2, user_api="blas"):  # the caller's (tests run with one)
+        caller = blas()
+        ResidualLoop(load_vehicle(MINIROV)).fit(log)
+        after = blas()
+    assert caller and set(caller) == {2}, caller
+    assert seen and set(seen[0]) == {1}, seen
+    assert after == caller
+
+
 def test_cli_loop_bad_input_exits_2_naming_the_column(tmp_path):
     from typer.testing import CliRunner
 

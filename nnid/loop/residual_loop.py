@@ -51,7 +51,7 @@ from nnid.models.parametric import EQUATION_COLUMNS, vehicle_with
 from nnid.physics.dofs import DOF_WORD, DOFS, FORCES
 from nnid.physics.parts import Parts
 from nnid.reports.cells import score
-from nnid.threads import torch_threads
+from nnid.threads import blas_threads, torch_threads
 from nnid.trainers.history import Progress, silent
 from nnid.trainers.least_squares import significant
 from nnid.warning_messages import warning_messages
@@ -199,7 +199,12 @@ class ResidualLoop:
         def say(message: str, done: int = 0) -> None:
             report(done, total, message)
 
-        with torch_threads(1), warnings.catch_warnings(record=True) as caught:
+        # one thread per library: pinned numbers are one BLAS thread's (nnid.threads says why)
+        with (
+            torch_threads(1),
+            blas_threads(1),
+            warnings.catch_warnings(record=True) as caught,
+        ):
             warnings.simplefilter("always")
             self._fit(log, say)
         self.warnings_ = warning_messages(caught)

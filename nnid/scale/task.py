@@ -65,10 +65,8 @@ def run_task(task: Task, out_root: str | Path, progress: Progress | None = None)
     """Run ``task`` and return its row: the inputs, ``status`` (``ok`` or ``failed``),
     ``error``, the headline scores, ``seconds``, ``worker`` and ``warnings``. ``progress``
     receives the fit's progress (and its trainers' per-epoch scores)."""
-    from threadpoolctl import threadpool_limits
-
     from nnid.serialization import jsonable, write_json
-    from nnid.threads import numba_threads, torch_threads
+    from nnid.threads import blas_threads, numba_threads, torch_threads
 
     out_dir = Path(out_root) / task.id
     row: dict[str, Any] = {"id": task.id, **task.inputs(), "status": "ok", "error": None}
@@ -77,7 +75,7 @@ def run_task(task: Task, out_root: str | Path, progress: Progress | None = None)
         with (
             warnings.catch_warnings(record=True) as caught,
             torch_threads(1),
-            threadpool_limits(1, user_api="blas"),  # OpenMP: torch_threads and numba_threads
+            blas_threads(1),  # OpenMP: torch_threads and numba_threads
             numba_threads(1),
         ):
             warnings.simplefilter("always")
