@@ -513,6 +513,8 @@ def test_targets_of_rounding_keep_no_terms_and_are_not_called_unexplained():
         explained = [nmse_v[f] for f in "XYZN" if not np.isnan(nmse_v[f])]
         assert model.selected_["validation_J"] == pytest.approx(np.mean(explained), rel=1e-12)
         assert np.isfinite(model.selected_["train_J"])
+        # and the same J on a log (K and M still there): the outputs with something to explain
+        assert np.isfinite(model.regression_error(exact))
 
 
 def test_a_moment_is_judged_rounding_beside_moments_not_beside_forces():

@@ -40,7 +40,7 @@ from nnid.physics.damping_library import LIBRARY
 from nnid.physics.dofs import DOFS, FORCES
 from nnid.physics.integrate import rk4
 from nnid.trainers.history import Progress
-from nnid.trainers.sindy import MODES, BasisFeatureLibrary, SparsePath, nmse
+from nnid.trainers.sindy import MODES, BasisFeatureLibrary, SparsePath, path_j
 from nnid.trainers.synthesis import masked_least_squares
 
 ACCELERATION_OUTPUTS = tuple(f"d{d}" for d in DOFS)
@@ -187,7 +187,6 @@ class SindyDamping(DampingModel):
         # their own kind, a kind put in the other's units by the vehicle's length where its
         # file gives one, else a metre (as the Fossen regression's rounding floors); each
         # library column against itself at the log's typical motion, to its power
-        length = self.vehicle.rounding_length
         k = len(self._terms())
         floors = self._floors(nu[ok], self._terms(), theta[ok][:, k:])
         path = SparsePath(
@@ -199,7 +198,7 @@ class SindyDamping(DampingModel):
             self.per_output,
             self.seed,
             self.output_names,
-            1.0 / length if self.mode == "residual" else length,
+            self._to_linear(),
         ).fit(theta[ok], y[ok], theta_v[ok_v], y_v[ok_v], floors)
         progress(1, 1, f"SINDy path of {len(path.path_)} thresholds")
         self.path_ = path.path_
@@ -285,9 +284,18 @@ class SindyDamping(DampingModel):
         return np.asarray(library.transform(x)) @ self.coef_.T
 
     def regression_error(self, log: pd.DataFrame) -> float:
-        """The path's J on a log: the mean normalised MSE of the regression's six outputs."""
+        """The path's J on a log (:func:`~nnid.trainers.sindy.path_j`): the mean normalised
+        MSE of the regression's outputs that have something to explain there (an output still
+        on the log, its target rounding, has no NMSE)."""
         x, y = self.arrays(log)
-        return float(nmse(y, self.predict_arrays(x)).mean())
+        return path_j(y, self.predict_arrays(x), self._to_linear())
+
+    def _to_linear(self) -> float:
+        """The factor that puts the regression's angular kind in its linear one's units (the
+        rounding rule judges each target within its kind): one over the vehicle's length for
+        moments (residual mode), the length for angular accelerations (control mode)."""
+        length = self.vehicle.rounding_length
+        return 1.0 / length if self.mode == "residual" else length
 
     def _accelerations(self, nu: torch.Tensor, tau: torch.Tensor) -> torch.Tensor:
         """ν̇ = Ξ [ξ(ν), τ] of control mode (torch, batched)."""

@@ -212,6 +212,14 @@ def _j(err: np.ndarray, outputs: np.ndarray) -> float:
     return float(err[outputs].mean()) if outputs.any() else float("nan")
 
 
+def path_j(y: np.ndarray, pred: np.ndarray, to_linear: float | None = None) -> float:
+    """J of predictions ``pred`` of targets ``y`` ``[N, m]`` as the path scores it
+    (:func:`_j`): the mean NMSE over the outputs whose target is not rounding
+    (:func:`_rounding_outputs`: one zero throughout, still on the log, is one of those); NaN
+    where none has anything to explain."""
+    return _j(nmse(y, pred), ~_rounding_outputs(y, to_linear)[0])
+
+
 def _least(val: np.ndarray) -> np.ndarray:
     """The smallest of each column of ``val`` ``[T, m]`` over its rows, NaN where no row is
     measured (np.nanmin's answer, without its warning of an all-NaN column)."""
