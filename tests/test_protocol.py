@@ -592,3 +592,24 @@ def test_every_kind_refuses_a_run_whose_stamps_come_in_bursts_before_any_fit(kin
             BUILDERS[kind](minirov).fit(log, validation, progress=lambda *a: said.append(a))
         assert err.value.field == "t" and "a model's fit and simulation" in err.value.message
     assert said == []
+
+
+def test_a_fitted_model_and_the_loop_refuse_a_log_whose_stamps_come_in_bursts(minirov, runs):
+    """A fitted model's predict, residual and force series step at a run's typical step too,
+    as does the residual loop's fit in Python (a bursty log ran the loop at a 10-us step): each
+    refuses the log by the pipeline's rule, naming the run."""
+    from nnid.loop.residual_loop import ResidualLoop
+
+    train, val = runs
+    model = BUILDERS["fossen"](minirov).fit(train, val)
+    bursty = _in_bursts(val, "run2")
+    calls = [
+        lambda: model.predict(bursty),
+        lambda: model.residual(bursty),
+        lambda: model.force_series(bursty),
+        lambda: ResidualLoop(minirov).fit(_in_bursts(train, "run1")),
+    ]
+    for call in calls:
+        with pytest.raises(NnidInputError, match="its stamps come in bursts") as err:
+            call()
+        assert err.value.field == "t"

@@ -284,8 +284,10 @@ def typical_step(t: np.ndarray, one_sample: OneSample) -> float | OneSample:
     ``one_sample`` for a run of one sample, which has none (each caller says what stands for
     it: NaN where nothing may). Stamps that come in bursts have a median step inside a burst
     (an IMU's ten samples every 10 ms step by 10 µs, not 1 ms): what steps by this refuses
-    them first (:func:`nnid.datasets.preprocess.refuse_bursty_runs`: the pipeline and every
-    model's ``fit`` before any fit, the fault monitor before any residual)."""
+    them first (:func:`nnid.datasets.preprocess.refuse_bursty_runs`: the pipeline, every
+    model's ``fit``, ``predict``, ``residual`` and ``force_series``, the residual loop's
+    ``fit``, the fault monitor before any residual; the derivatives and the low-pass filter
+    refuse them too)."""
     t = np.asarray(t)
     return float(np.median(np.diff(t))) if t.size > 1 else one_sample
 

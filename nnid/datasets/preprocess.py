@@ -316,9 +316,10 @@ def refuse_bursty_runs(log: pd.DataFrame, method: str) -> None:
     if "t" not in log:
         return
     t = log["t"].to_numpy(np.float64)
-    runs = run_of(log)
     for name, pos in experiment_rows(log):
-        refuse_bursts(t[pos], runs.get(name, name), method, "t")
+        if _logged_rate(t[pos], np.nan)[1]:  # run_of only to name a run refused: it reads
+            # the whole log, and a log cut into thousands of pieces is checked on every fit
+            refuse_bursts(t[pos], run_of(log).get(name, name), method, "t")
 
 
 #: how far :func:`resample_log` may move a log's rate before it is warned of

@@ -22,7 +22,7 @@ import pandas as pd
 from nnid.datasets.arrays import logged_inputs, nominal_forces
 from nnid.datasets.gaps import mask_gaps
 from nnid.datasets.log import ANGLES, check_log, run_pieces, typical_step
-from nnid.datasets.preprocess import experiment_rows
+from nnid.datasets.preprocess import experiment_rows, refuse_bursty_runs
 from nnid.datasets.splits import say_missed_fractions, split_log
 from nnid.errors import NnidInputError
 from nnid.evaluation.evaluate import MODE_KEYS, diverged_key
@@ -47,6 +47,7 @@ from nnid.loop.diagnose import (
 from nnid.loop.effects import candidates
 from nnid.loop.residuals import correlation_analysis
 from nnid.loop.unexplained import as_records, describe, unexplained_structure
+from nnid.models.base import FIT_AND_SIMULATION
 from nnid.models.parametric import EQUATION_COLUMNS, vehicle_with
 from nnid.physics.dofs import DOF_WORD, DOFS, FORCES
 from nnid.physics.parts import Parts
@@ -193,6 +194,9 @@ class ResidualLoop:
         ``warnings_``."""
         start = time.perf_counter()
         log = check_log(log)
+        # its fits and simulations step at a run's typical step, one inside a burst: the
+        # pipeline refuses such a log before the loop, a caller in Python here
+        refuse_bursty_runs(log, FIT_AND_SIMULATION)
         report = progress or silent
         total = self.max_effects + 1
 

@@ -94,6 +94,17 @@ RECORD = "record"
 #: what steps a log at its runs' typical step, as said in a refusal of stamps in bursts
 #: (:func:`~nnid.datasets.preprocess.refuse_bursty_runs`; the pipeline's too)
 FIT_AND_SIMULATION = "a model's fit and simulation"
+
+
+def _checked(log: pd.DataFrame, what: str = "log") -> pd.DataFrame:
+    """``log`` checked (:func:`~nnid.datasets.log.check_log`) and refused where a run's stamps
+    come in bursts: every model fits, simulates and scores at a run's typical step, one inside
+    a burst (:func:`~nnid.datasets.preprocess.refuse_bursty_runs`, the pipeline's rule)."""
+    log = check_log(log, what)
+    refuse_bursty_runs(log, FIT_AND_SIMULATION)
+    return log
+
+
 NOT_FITTED = (
     "this %(name)s is not fitted yet: call fit(log) first, or load a saved model with "
     "nnid.load_model(dir)"
@@ -233,11 +244,9 @@ class NnidModel(BaseEstimator, ABC):
         in bursts is refused before any fit: every model fits and simulates at a run's
         typical step, one inside a burst (:func:`~nnid.datasets.preprocess.refuse_bursty_runs`,
         the pipeline's rule)."""
-        log = check_log(log, "training log")
-        refuse_bursty_runs(log, FIT_AND_SIMULATION)
+        log = _checked(log, "training log")
         if validation is not None:
-            validation = check_log(validation, "validation log")
-            refuse_bursty_runs(validation, FIT_AND_SIMULATION)
+            validation = _checked(validation, "validation log")
         for name in [k for k in vars(self) if k.endswith("_") and not k.startswith("__")]:
             delattr(self, name)  # a refit starts from nothing learned
         start = time.perf_counter()
@@ -273,7 +282,7 @@ class NnidModel(BaseEstimator, ABC):
         """Predicted outputs on the log's index (see the module docstring for ``mode``)."""
         check_is_fitted(self, msg=NOT_FITTED)
         mode = check_mode(mode)
-        log = check_log(log)
+        log = _checked(log)
         out = self._predict(log, mode)
         return out.set_axis(log.index)
 
@@ -301,7 +310,7 @@ class NnidModel(BaseEstimator, ABC):
         """The model's equation error on the log's index: measured minus modelled (a
         generalized force ``X … N`` for physics models, the one-step output error else)."""
         check_is_fitted(self, msg=NOT_FITTED)
-        return self._residual(check_log(log)).set_axis(log.index)
+        return self._residual(_checked(log)).set_axis(log.index)
 
     def _residual(self, log: pd.DataFrame) -> pd.DataFrame:
         """Default: the one-step output error, measured minus predicted."""
@@ -315,7 +324,7 @@ class NnidModel(BaseEstimator, ABC):
         if not self.has_force_equation:
             raise TypeError(f"a {self.kind} model has no force equation")
         check_is_fitted(self, msg=NOT_FITTED)
-        return self._force_series(check_log(log)).set_axis(log.index)
+        return self._force_series(_checked(log)).set_axis(log.index)
 
     def motion_columns(self, columns: Iterable[str]) -> list[str]:
         """The motion columns of a log with ``columns`` (pose, velocity, acceleration:
