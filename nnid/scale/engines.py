@@ -142,6 +142,7 @@ class LocalEngine:
         """Rows as tasks finish; if the pool breaks, a last item: the unfinished tasks."""
         ctx = get_context("spawn")
         pool = ProcessPoolExecutor(workers, mp_context=ctx, initializer=_pin_worker)
+        interrupted = False
         try:
             # the pool starts its processes as tasks are submitted: all of them here
             with environment(ONE_THREAD):
@@ -165,9 +166,13 @@ class LocalEngine:
             # interrupted (Ctrl-C, the CLI's SIGTERM, a caller that stops reading the rows):
             # a plain shutdown would wait for every queued task to run
             _end_workers(pool)
+            interrupted = True
             raise
         finally:
-            pool.shutdown(wait=True)
+            # an interrupted pool's ended workers are waited for; once every task has its row
+            # the idle workers exit in the background: a worker's interpreter takes seconds to
+            # tear down torch and numba, and the caller has nothing left to wait for
+            pool.shutdown(wait=interrupted)
 
     def run(self, tasks: list[Task], out_root: str | Path) -> Iterator[dict[str, Any]]:
         out_root = str(out_root)

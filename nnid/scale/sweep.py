@@ -350,7 +350,12 @@ def run_sweep_tune(
     tuner = tune.Tuner(
         trainable,
         param_space={"trial": tune.grid_search(list(range(len(tasks))))},
-        tune_config=tune.TuneConfig(metric="objective", mode="min", scheduler=scheduler),
+        # a trial reuses a finished one's actor: a fresh actor is a process that imports torch
+        # and nnid again (8-10 s a trial of a small NARX sweep beside a busy core, 1.5 s warm).
+        # A trial ASHA stopped waits in its report and ends there when its actor is reset
+        tune_config=tune.TuneConfig(
+            metric="objective", mode="min", scheduler=scheduler, reuse_actors=True
+        ),
         run_config=tune.RunConfig(storage_path=str(out_dir / ".tune"), name="sweep", verbose=0),
     )
     cpus = int(ray.cluster_resources().get("CPU", 1))
