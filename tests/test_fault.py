@@ -33,7 +33,10 @@ from nnid.fault import kernel
 from nnid.fault.detect import (
     ISOLATED_SHORT,
     NOT_JUDGED,
+    UNEXPLAINED_SHORT,
+    Rewatch,
     alarm_row,
+    cut_short,
     detect,
     explained_by_the_changes,
     leave_scale,
@@ -1202,6 +1205,58 @@ def test_an_alarm_isolated_on_a_window_the_log_cuts_short_says_so(vehicle, monit
         assert alarm["cut_short"]["seconds"] == pytest.approx(held.iloc[-1] - alarm["t"])
         assert alarm["cut_short"]["window_s"] == 10.0
         assert f"{ISOLATED_SHORT} ({held.iloc[-1] - alarm['t']:.2f} s of 10 s)" in alarm["meaning"]
+
+
+def test_a_grid_ending_one_window_after_the_alarm_is_not_cut_short():
+    """A grid t = i * 0.05 whose last row is 200 steps (10 s) after the alarm's: that row
+    is 1 ulp short of t_k + 10 (the grid's float times), and the window, whole, was said cut
+    short. Only a missing span of more than half the run's step cuts it short: a row fewer
+    does."""
+    t, k = np.arange(365) * 0.05, 164
+    assert t[-1] < t[k] + 10.0  # the float grid's shortfall the rule must tolerate
+    data = {"t": t, "experiment": np.zeros(t.size, dtype=int)}
+    assert not cut_short(data, k, 10.0)
+    fewer = {"t": t[:-1], "experiment": data["experiment"][:-1]}
+    assert cut_short(fewer, k, 10.0)
+
+
+def test_an_alarm_not_isolated_on_enough_rows_of_a_cut_window_is_unexplained(
+    vehicle, monitor, tmp_path
+):
+    """Two thrusters lost at 20 s (no hypothesis is the fault) in a log that ends 6 s after
+    the alarm: isolation ran on its 120 rows and explained nothing, and the record was "not
+    judged … too few samples to judge", a finding demoted with a reason never measured. It
+    is an unexplained change, its ``cut_short`` and meaning saying on how much of the window
+    it was judged; "not judged" is only for fewer rows than isolation fits. Batch and
+    --follow alike."""
+    faults = [Fault("thruster", FAULT_T, thruster="h1", efficiency=0.3),
+              Fault("thruster", FAULT_T, thruster="v2", efficiency=0.3)]  # fmt: skip
+    log = simulate_faults(vehicle, 30, faults=faults, seed=102)
+    cut = log[log["t"] <= 26.0 + 1e-9].reset_index(drop=True)
+    for result in _batch_and_followed(monitor, cut, tmp_path):
+        (alarm,) = result.alarms
+        held = cut["t"][cut["t"] >= alarm["t"] - 1e-9]
+        assert alarm["kind"] == "model_change" and not alarm["meaning"].startswith(NOT_JUDGED)
+        assert (alarm["repeats"], alarm["last_seen_t"]) == (0, alarm["t"])
+        assert alarm["cut_short"]["samples"] == held.size >= LEAST_ROWS
+        seconds = held.iloc[-1] - alarm["t"]
+        assert alarm["cut_short"]["seconds"] == pytest.approx(seconds)
+        assert f"{UNEXPLAINED_SHORT} ({seconds:.2f} s of 10 s)" in alarm["meaning"]
+
+
+def test_a_window_to_the_runs_end_keeps_its_unjudged_tail(monitor):
+    """:meth:`Rewatch.left` to a run's end with no rows left (a later alarm's window reached
+    the end) cleared the tail an earlier call left unjudged, though those rows are still NaN
+    and unwatched: detect.json's ``unjudged`` lost them. With no rows it keeps the tail; rows
+    to the end, all judged (no change taken out), clear it."""
+    t = np.arange(40) * 0.05
+    data = {"t": t, "experiment": np.zeros(t.size, dtype=int)}
+    w = Rewatch(monitor)
+    w.tail = (t[29], t[30], t[39], 10)  # as an earlier left() to the end leaves it
+    w.left(data, np.arange(0), np.zeros((0, 6)), to_end=True)
+    assert w.tail == (t[29], t[30], t[39], 10)
+    w.left(data, np.arange(30, 40), np.zeros((10, 6)), to_end=True)
+    assert w.tail is None
 
 
 def test_detect_json_says_the_runs_last_rows_left_unjudged(vehicle, monitor, tmp_path):

@@ -62,6 +62,7 @@ import pandas as pd
 from scipy.special import expit
 
 from nnid.datasets.cleaning import CleaningReport
+from nnid.datasets.log import typical_step
 from nnid.fault import kernel
 from nnid.fault.isolation import (
     LEAST_ROWS,
@@ -235,51 +236,62 @@ def isolated_alarm(
             f"{record['meaning']}; it ended at about {t_end:.2f} s, inside the window: sized "
             f"on the {t_end - record['t']:.3g} s before, and not taken out after the window"
         )
-    if cut_short(data, k, window_s):
-        # isolated or not, on part of its window: detect.json says so of every such alarm
+    short = cut_short(data, k, window_s)
+    if short:
+        # on part of its window, judged or not: detect.json says so of every such alarm
         held_s = float(data["t"][rows[-1]] - data["t"][k])
         record["cut_short"] = {
             "seconds": held_s,
             "window_s": float(window_s),
             "samples": int(rows.size),
         }
-        if diag.isolated:
-            record["meaning"] += f"; {ISOLATED_SHORT} ({held_s:.2f} s of {window_s:g} s)"
-        else:
-            not_judged(record)
-    elif not diag.isolated:
+    if short and diag.meaning == TOO_FEW:  # isolation had too few rows: nothing was judged
+        not_judged(record)
+        return record, diag, rows
+    if short:  # judged on the rows there were, and said so (finding() keeps the clause)
+        said = ISOLATED_SHORT if diag.isolated else UNEXPLAINED_SHORT
+        record["meaning"] = f"{record['meaning']}; {said} ({held_s:.2f} s of {window_s:g} s)"
+    if not diag.isolated:
         unexplained(record, float(data["t"][rows[-1]]))
     return record, diag, rows
 
 
 def cut_short(data: dict, k: int, window_s: float) -> bool:
     """Whether the end of its experiment's rows cuts the isolation window of the alarm at row
-    ``k`` short (:func:`window_rows`: no row at or after t_k + ``window_s``). ``--follow``
-    judges a window before its run ends only once it is whole, so batch and it agree."""
+    ``k`` short (:func:`window_rows`): the span from its last row to t_k + ``window_s`` is
+    more than half the experiment's typical step, a sample missing. ``--follow`` judges a
+    window before its run ends only once it is whole, so batch and it agree."""
     t, codes = data["t"], data["experiment"]
-    return bool(t[np.flatnonzero(codes == codes[k])[-1]] < t[k] + window_s)
+    run = t[codes == codes[k]]
+    # a grid t = i*dt ending one window after the alarm can end 1 ulp short of t_k + window_s:
+    # no sample is missing there (one step: one is); a run of one sample has no step
+    return bool(t[k] + window_s - run[-1] > typical_step(run, 0.0) / 2)
 
 
 #: how the ``meaning`` of a record whose window the log's end cut short starts (:func:`not_judged`)
 NOT_JUDGED = "not judged: the end of the log cut the isolation window short"
-#: the clause that ends the ``meaning`` of a change isolated on a window the log's end cut
-#: short (:func:`isolated_alarm`)
-ISOLATED_SHORT = "isolated on the part of its window before the end of the log"
+#: what the clause that ends the ``meaning`` of an alarm judged on a window the log's end
+#: cut short says after how it was read (:func:`isolated_alarm`; the seconds follow)
+ON_PART = "on the part of its window before the end of the log"
+#: that clause for a change isolated there
+ISOLATED_SHORT = f"isolated {ON_PART}"
+#: that clause for an alarm isolation judged there and did not isolate: an unexplained change
+UNEXPLAINED_SHORT = f"not isolated {ON_PART}"
 
 
 def not_judged(record: dict) -> None:
-    """The ``record`` of an alarm not isolated on a window that the end of the log cut short
+    """The ``record`` of an alarm on a window that the end of the log cut short
     (:func:`cut_short`; its ``cut_short`` key, which :func:`isolated_alarm` sets, says how
-    much of the window there was): not judged, not an unexplained change (no ``repeats``, no
-    record opened for a later alarm to persist in: no row is left to watch), and the
-    ``meaning`` says so before what isolation read on those rows. A 0.35-s window was an
-    unexplained record whose statistics "restart at the window's end"."""
+    much of the window there was) to fewer rows than isolation fits
+    (:data:`~nnid.fault.isolation.LEAST_ROWS`, said :data:`~nnid.fault.isolation.TOO_FEW`):
+    not judged, not an unexplained change (no ``repeats``, no record opened for a later alarm
+    to persist in: no row is left to watch). A 0.35-s window was an unexplained record whose
+    statistics "restart at the window's end". On more rows isolation judges it, and an alarm
+    it does not isolate is an unexplained change (:data:`UNEXPLAINED_SHORT`)."""
     short = record["cut_short"]
     held_s, window_s, samples = short["seconds"], short["window_s"], short["samples"]
-    read = record["meaning"]
-    said = read if read == TOO_FEW else f"too few samples to judge (on them, {read})"
     record["meaning"] = (
-        f"{NOT_JUDGED} ({held_s:.2f} s of {window_s:g} s, {samples} samples): {said}"
+        f"{NOT_JUDGED} ({held_s:.2f} s of {window_s:g} s, {samples} samples): {TOO_FEW}"
     )
 
 
@@ -382,13 +394,13 @@ def filed(
     isolated, with an unexplained record open in its experiment ``code`` (``open_``): the
     change persisting, folded into that record (:func:`persisting`; ``restart_t``, its
     window's end), no record; else a new record, which opens the experiment's unexplained
-    record unless the log's end cut its window short (:func:`not_judged`)."""
+    record unless it was not judged (:func:`not_judged`)."""
     if diag.isolated:
         return True, None if record.get("ended") else Change.of(record, diag)
     if code in open_:
         persisting(open_[code], record["t"], restart_t)
         return False, None
-    if record.get("cut_short"):  # not judged (not_judged): no unexplained change to persist
+    if record["repeats"] is None:  # not judged (not_judged): no unexplained change to persist
         return True, None
     open_[code] = record
     return True, None
@@ -1079,7 +1091,7 @@ class Rewatch:
             names = {name for name, _ in fitted}
             self.hypotheses = Hypotheses.reused(self.hypotheses, self.monitor, names)
         out = _left(self.monitor, data, rows, r, fitted, self.hypotheses)
-        if to_end:
+        if to_end and rows.size:  # no rows (a window to the run's end): the tail stays unjudged
             self.tail = None
         if to_end and fitted:
             mask = self.hypotheses.extrapolated(data, rows)
