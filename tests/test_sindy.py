@@ -680,3 +680,36 @@ def test_a_to_linear_that_is_no_length_is_refused_by_name(to_linear):
     with pytest.raises(NnidInputError) as err:
         SparsePath(selection="aic", to_linear=to_linear).fit(theta, y)
     assert err.value.field == "to_linear"
+
+
+def test_the_fit_runs_with_one_blas_thread_and_gives_the_callers_back(monkeypatch):
+    """The SINDy fit runs with one thread per BLAS library (a second one only spins on its
+    least squares: nnid.threads.blas_threads), and the caller's count is back after it, also
+    when the fit fails."""
+    from threadpoolctl import threadpool_info, threadpool_limits
+
+    import nnid.models.sindy as sindy
+
+    def blas():
+        return [p["num_threads"] for p in threadpool_info() if p["user_api"] == "blas"]
+
+    seen = []
+
+    class Path:  # records the count the path is fitted under, then stops the fit
+        def __init__(self, *args):
+            pass
+
+        def fit(self, *args):
+            seen.append(blas())
+            raise RuntimeError("stop")
+
+    monkeypatch.setattr(sindy, "SparsePath", Path)
+    log = _surge_sway_yaw(np.random.default_rng(3), noise=False)
+    with threadpool_limits(limits=2, user_api="blas"):  # the caller's (tests run with one)
+        caller = blas()
+        with pytest.raises(RuntimeError, match="stop"):
+            SindyDamping(load_vehicle("seamor")).fit(log.iloc[:300], log.iloc[300:])
+        after = blas()
+    assert caller and set(caller) == {2}, caller
+    assert seen and set(seen[0]) == {1}, seen
+    assert after == caller

@@ -39,6 +39,7 @@ from nnid.models.synthesis import DampingModel, _at_zero, restored_matrices, res
 from nnid.physics.damping_library import LIBRARY
 from nnid.physics.dofs import DOFS, FORCES
 from nnid.physics.integrate import rk4
+from nnid.threads import blas_threads
 from nnid.trainers.history import Progress
 from nnid.trainers.sindy import MODES, BasisFeatureLibrary, SparsePath, path_j
 from nnid.trainers.synthesis import masked_least_squares
@@ -174,6 +175,13 @@ class SindyDamping(DampingModel):
 
     # -- fitting --------------------------------------------------------------------------------
     def _fit(self, log: pd.DataFrame, validation, progress: Progress) -> None:
+        # one BLAS thread (nnid.threads says why): this fit on 6,000 rows took 8.2-12.4 s of
+        # CPU with OpenBLAS's default 2 threads on 2 cores against 1.6-1.9 s with one (2 runs
+        # each, load 4-7, 2026-11-30), its coefficients up to 2e-13 (relative) apart
+        with blas_threads(1):
+            self._sparse_fit(log, validation, progress)
+
+    def _sparse_fit(self, log: pd.DataFrame, validation, progress: Progress) -> None:
         if self.mode not in MODES:
             raise NnidInputError(f"mode is one of {', '.join(MODES)}", field="mode")
         if validation is None:
