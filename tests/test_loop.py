@@ -1275,3 +1275,19 @@ def test_the_bonferroni_correction_counts_only_the_candidates_scored():
     said = [s.reason for s in step.ranked if s.reason.startswith("not significant")]
     assert said and all(r.endswith(f"≥ {threshold})") for r in said)
     assert f"over the {result['candidates_tested']} candidates tested" in markdown(result)
+
+
+def test_the_report_states_each_passs_own_bonferroni_count():
+    """Each pass is judged at α over the candidates it tested (steps[k].tested), and a later
+    pass tests fewer (an added effect leaves the pool): the report said the first pass's count
+    for every pass. Each pass's own now; one count where they agree; the first pass's where
+    a file has no per-pass count."""
+    from nnid.reports.loop_report import _tested_text
+
+    two = {"candidates_tested": 160, "steps": [{"tested": 160}, {"tested": 158}]}
+    assert "160 in pass 1, 158 in pass 2" in _tested_text(two)
+    same = {"candidates_tested": 160, "steps": [{"tested": 160}, {"tested": 160}]}
+    assert "over the 160 candidates tested in each pass" in _tested_text(same)
+    older = {"candidates_tested": 324, "steps": [{}, {}]}
+    assert "over the 324 candidates tested in the first pass" in _tested_text(older)
+    assert _tested_text({"candidates_tested": 5, "steps": []}) == ""

@@ -349,12 +349,21 @@ def not_excited_line(step: dict, k: int, key: str = "not_excited") -> str:
 
 
 def _tested_text(result: dict) -> str:
-    """The count the Bonferroni correction divides α by, as the first pass had it ("" where
-    no pass ran)."""
-    tested = result.get("candidates_tested")
-    if not result.get("steps") or tested is None:
-        return ""
-    return f" over the {tested} candidates tested in the first pass, those not scored left out"
+    """The count the Bonferroni correction divides α by, each pass its own (``steps[k].
+    tested``; a file without them, the first pass's ``candidates_tested``); "" where no pass
+    ran."""
+    steps = result.get("steps") or []
+    counts = [st.get("tested") for st in steps]
+    if not steps or None in counts:
+        tested = result.get("candidates_tested")
+        if not steps or tested is None:
+            return ""
+        return f" over the {tested} candidates tested in the first pass, those not scored left out"
+    if len(set(counts)) == 1:
+        each = "" if len(counts) == 1 else " in each pass"
+        return f" over the {counts[0]} candidates tested{each}, those not scored left out"
+    passes = ", ".join(f"{n} in pass {k}" for k, n in enumerate(counts, 1))
+    return f" over the candidates each pass tested ({passes}), those not scored left out"
 
 
 def error_rows(result: dict) -> tuple[list[str], list[list[str]]]:
