@@ -291,11 +291,13 @@ def _logged_rate(t: np.ndarray, rate: float) -> tuple[float, str | None]:
     return (1.0 / overall if burst else 1.0 / step), burst
 
 
-def refuse_bursts(t: np.ndarray, name: object, method: str, field: str) -> None:
+def refuse_bursts(t: np.ndarray, name: object, method: str, field: str) -> float:
     """Refuse the run ``name`` (``t``: its times) whose stamps come in bursts
     (:func:`_logged_rate`): ``method`` (what reads the samples, as said to the user) steps
-    sample by sample at one rate, which they do not have; ``field``: the error's."""
-    _, burst = _logged_rate(t, np.nan)  # NaN never read: a run of one sample is no burst
+    sample by sample at one rate, which they do not have; ``field``: the error's. Returns
+    the run's logged rate (NaN for a run of one sample), read once for the check and its
+    caller."""
+    rate, burst = _logged_rate(t, np.nan)  # a run of one sample is no burst
     if burst:
         # no rate fits: at the median step's (~100 kHz) a 5 Hz cut-off acted at 0.05 Hz (and
         # a derivative came out ~190 times too large); at the run's, a burst's samples would
@@ -306,6 +308,7 @@ def refuse_bursts(t: np.ndarray, name: object, method: str, field: str) -> None:
             "preprocessing's rate, resample_log)",
             field=field,
         )
+    return rate
 
 
 def refuse_bursty_runs(log: pd.DataFrame, method: str) -> None:
@@ -1057,8 +1060,7 @@ def lowpass(
                 f"low-pass filter ({need} needed)",
                 field="lowpass",
             )
-        refuse_bursts(t, name, "a Butterworth filter", "lowpass")
-        rate, _ = _logged_rate(t, np.nan)  # NaN never read: two samples or more here
+        rate = refuse_bursts(t, name, "a Butterworth filter", "lowpass")  # two samples or more
         if cutoff >= rate / 2:
             raise NnidInputError(
                 f"cut-off {cutoff} Hz is not below the Nyquist rate {rate / 2:g} Hz",

@@ -424,12 +424,11 @@ def excitation_from_gram(
     force has v|v| 1e-11 of v̇'s column in the Y equation, zero beside it. None: the
     regression is one equation (``column_rms``)."""
     p = len(names)
-    rms = np.sqrt(np.clip(np.diag(gram), 0.0, None) / max(n, 1))
+    rms = _gram_rms(gram, n)
     raw = rms if column_rms is None else np.asarray(column_rms, dtype=np.float64)
     live = (rms > 0) & measured_columns(raw, reference, floors, by_equation, tol)
     unexcited = [names[j] for j in range(p) if not live[j]]
-    d = np.where(live, 1.0 / np.where(live, rms, 1.0), 0.0)
-    normed = gram * np.outer(d, d) / max(n, 1)
+    normed = _unit_scaled(gram, rms, live, n)
     # the spectrum of the live columns only: a zero column's exact null direction is
     # degenerate with a collinear pair's, and eigh mixed the two, so that the pair was not
     # named (its values then kept the pseudo-inverse's, with a standard error)
@@ -514,6 +513,18 @@ def _resolved(eig: np.ndarray) -> np.ndarray:
     return np.where(eig > eig.shape[-1] * np.finfo(np.float64).eps * top, eig, 0.0)
 
 
+def _gram_rms(gram: np.ndarray, n: int) -> np.ndarray:
+    """Each column's RMS over ``n`` rows from its Gram matrix ``[..., m, m]``: ``[..., m]``."""
+    return np.sqrt(np.clip(np.diagonal(gram, axis1=-2, axis2=-1), 0.0, None) / max(n, 1))
+
+
+def _unit_scaled(gram: np.ndarray, rms: np.ndarray, live: np.ndarray, n: int) -> np.ndarray:
+    """The Gram matrix ``[..., m, m]`` of the regressor scaled to unit-RMS columns over ``n``
+    rows (``rms`` :func:`_gram_rms`), its columns not ``live`` zeroed."""
+    d = np.where(live, 1.0 / np.where(live, rms, 1.0), 0.0)
+    return gram * (d[..., :, None] * d[..., None, :]) / max(n, 1)
+
+
 def _spectrum(
     normed: np.ndarray, p: int, tol: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
@@ -543,11 +554,9 @@ def gram_ranks(grams: np.ndarray, n: int, tol: float = 1e-6) -> np.ndarray:
     ranks = np.zeros(k, dtype=int)
     if not (k and m):
         return ranks
-    # excitation_from_gram's scaling, elementwise the same (each matrix scaled as alone)
-    rms = np.sqrt(np.clip(np.diagonal(grams, axis1=1, axis2=2), 0.0, None) / max(n, 1))
+    rms = _gram_rms(grams, n)  # excitation_from_gram's scaling, each matrix as alone
     live = rms > 0
-    d = np.where(live, 1.0 / np.where(live, rms, 1.0), 0.0)
-    normed = grams * (d[:, :, None] * d[:, None, :]) / max(n, 1)
+    normed = _unit_scaled(grams, rms, live, n)
     patterns, which = np.unique(live, axis=0, return_inverse=True)
     for j, pattern in enumerate(patterns):
         members = np.flatnonzero(which.reshape(-1) == j)
