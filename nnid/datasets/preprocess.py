@@ -43,6 +43,7 @@ from nnid.datasets.log import (
     TIME_UNITS,
     VELOCITY,
     burst_clock,
+    clock_step,
     euler_rate_matrices,
     input_columns,
     paced_step,
@@ -78,46 +79,64 @@ def run_spans(log: pd.DataFrame) -> list[float]:
 # --- time base -------------------------------------------------------------------------------
 
 
-#: how far one sampling interval may differ from the run's median interval and still be one
-#: sample: time stamps rounded to the millisecond make a 30 Hz clock step 0.033 and 0.034 s
+#: how far one sampling interval may differ from the run's typical interval and still be one
+#: sample (beyond a coarsely rounded clock's rounding, :func:`~nnid.datasets.log.rounded_clock`):
+#: jitter, and stamps rounded to the millisecond that step 0.033 and 0.034 s at 30 Hz
 UNIFORM_TOLERANCE = 0.1
 
 
-def off_steps(steps: np.ndarray, tolerance: float = UNIFORM_TOLERANCE) -> tuple[float, np.ndarray]:
-    """A run's median sampling interval (``steps``: its intervals, at least one) and where an
-    interval differs from it by more than ``tolerance`` of it (samples missing, a rate that
-    changes, jitter beyond a clock's rounding): :func:`check_uniform`'s rule."""
-    typical = float(np.median(steps))
-    return typical, np.flatnonzero(np.abs(steps - typical) > tolerance * typical)
+def off_steps(
+    t: np.ndarray, tolerance: float = UNIFORM_TOLERANCE
+) -> tuple[float, np.ndarray, float]:
+    """A run's typical sampling interval (``t``: its times, two or more;
+    :func:`~nnid.datasets.log.clock_step`), where an interval differs from it by more than
+    ``tolerance`` of it plus the clock's rounding (samples missing, a rate that changes,
+    jitter beyond a clock's rounding), and that rounding (0 for a clock not rounded
+    coarsely): :func:`check_uniform`'s rule. 120 Hz stamped in milliseconds steps 8 and 9 ms
+    around 8.33 ms, each one sample; the median rule took the 9-ms steps for missing ones."""
+    steps = np.diff(t)
+    typical, rounding = clock_step(t)
+    return (
+        typical,
+        np.flatnonzero(np.abs(steps - typical) > rounding + tolerance * typical),
+        rounding,
+    )
 
 
 def uneven_runs(log: pd.DataFrame, method: str) -> None:
     """Warn, once for ``log``, of its runs whose intervals are not one interval
     (:func:`off_steps`), naming each and the spread of its steps: ``method`` (what reads the
-    samples, as said to the user) takes them as evenly spaced at the median step, so where
+    samples, as said to the user) takes them as evenly spaced at the typical step, so where
     a step is longer (a dropped sample) or shorter it acts over another span of time. Not
     refused: a few dropped samples move a filter or a derivative there only."""
     t_all = log["t"].to_numpy(np.float64)
     said = []
     for name, pos in experiment_rows(log):
-        steps = np.diff(t_all[pos])
-        if not steps.size:
+        t = t_all[pos]
+        if t.size < 2:
             continue
-        typical, off = off_steps(steps)
+        typical, off, rounding = off_steps(t)
         if off.size:
+            steps = np.diff(t)
             said.append(
                 f"{run_label(name)} is not evenly sampled ({off.size} of its {steps.size} "
-                f"steps more than {UNIFORM_TOLERANCE:.0%} off its median {typical:.4g} s, "
+                f"steps more than {UNIFORM_TOLERANCE:.0%}{_beyond(rounding)} off its "
+                f"{'step' if rounding else 'median'} {typical:.4g} s, "
                 f"from {steps.min():.4g} to {steps.max():.4g} s)"
             )
     if said:
         more = f", nor are {len(said) - 1} other runs" if len(said) > 1 else ""
         warnings.warn(
-            f"{said[0]}{more}: {method} takes the samples as evenly spaced at the median "
+            f"{said[0]}{more}: {method} takes the samples as evenly spaced at the typical "
             "step, so where a step differs it acts over another span of time; resample the "
             "log onto a uniform grid first (resample_log)",
             stacklevel=3,
         )
+
+
+def _beyond(rounding: float) -> str:
+    """The words for a clock's rounding in a message about steps off the typical one."""
+    return f" (beyond the clock's rounding of {rounding:.4g} s)" if rounding else ""
 
 
 def check_uniform(
@@ -129,8 +148,9 @@ def check_uniform(
     tolerance: float = UNIFORM_TOLERANCE,
 ) -> float | None:
     """Raise unless every experiment of ``log`` is uniformly sampled (each interval within
-    :data:`UNIFORM_TOLERANCE` of the run's median: a longer one has samples missing, a rate
-    that changes within the run leaves the median), naming the first row that is not (by its
+    :data:`UNIFORM_TOLERANCE` of the run's typical interval, beyond a coarsely rounded clock's
+    rounding: :func:`off_steps`; a longer one has samples missing, a rate that changes within
+    the run leaves the typical one), naming the first row that is not (by its
     index label: the file's row for a log as read, whatever runs were left out): models that
     count time in samples (``what``) need it. With ``one_rate`` every experiment is sampled
     at one rate: ``interval`` where it is given (the rate a model was trained at), else the
@@ -141,10 +161,10 @@ def check_uniform(
     t_all = log["t"].to_numpy(np.float64)
     for exp, pos in experiment_rows(log):
         t = t_all[pos]
-        dt = np.diff(t)
-        if not dt.size:
+        if t.size < 2:
             continue
-        typical, off = off_steps(dt, tolerance)
+        dt = np.diff(t)
+        typical, off, rounding = off_steps(t, tolerance)
         where = f" (experiment {exp})" if exp is not None else ""
         if (
             one_rate
@@ -163,9 +183,9 @@ def check_uniform(
             label = log.index[pos[k + 1]]  # the row named by its label, as the file's row
             raise NnidInputError(
                 f"column t of the {name}{where} is not uniformly sampled: {dt[k]:.4g} s from "
-                f"t = {t[k]:.6g} to {t[k + 1]:.6g} s against {typical:.4g} s elsewhere, and "
-                f"{what} counts time in samples; resample the log, or split the run where "
-                "samples are missing",
+                f"t = {t[k]:.6g} to {t[k + 1]:.6g} s against {typical:.4g} s elsewhere"
+                f"{_beyond(rounding)}, and {what} counts time in samples; resample the log, "
+                "or split the run where samples are missing",
                 field="t",
                 row=int(label) if isinstance(label, (int, np.integer)) else None,
             )
@@ -279,16 +299,16 @@ def resample_log(
 def _logged_rate(t: np.ndarray, rate: float) -> tuple[float, str | None]:
     """A run's logged rate (``t``: its times; ``rate``: the grid's, for a run of one sample)
     and, where its stamps come in bursts, :func:`nnid.datasets.log.burst_clock`'s sentence
-    of them (else None): the median step's rate, or for stamps in bursts the rate over the
-    run, as the median step is one inside a burst (an IMU's ten samples every 10 ms read as
+    of them (else None): the typical step's rate (:func:`~nnid.datasets.log.clock_step`: the
+    median's, or a coarsely rounded clock's), or for stamps in bursts the rate over the run,
+    as the median step is one inside a burst (an IMU's ten samples every 10 ms read as
     100 kHz, not 1 kHz)."""
     if t.size < 2:
         return rate, None
     steps = np.diff(t)
-    step = float(np.median(steps))
     overall = paced_step(steps)
-    burst = burst_clock(step, overall)
-    return (1.0 / overall if burst else 1.0 / step), burst
+    burst = burst_clock(float(np.median(steps)), overall)
+    return (1.0 / overall if burst else 1.0 / clock_step(t)[0]), burst
 
 
 def refuse_bursts(t: np.ndarray, name: object, method: str, field: str) -> float:
