@@ -1291,3 +1291,74 @@ def test_the_report_states_each_passs_own_bonferroni_count():
     older = {"candidates_tested": 324, "steps": [{}, {}]}
     assert "over the 324 candidates tested in the first pass" in _tested_text(older)
     assert _tested_text({"candidates_tested": 5, "steps": []}) == ""
+
+
+def test_a_linear_candidate_not_finite_on_the_fits_rows_is_named_not_dropped():
+    """The closed-form screen dropped a candidate whose column is NaN on a row the fit reads
+    (its sums are NaN: nothing to judge it by): neither scored nor named, loop.json and the
+    report never said it was looked at. It now comes back named not finite, with nothing
+    measured; a finite column in the span of the fit's (the screen's denominator ~0) is named
+    not identifiable, and a column that adds a direction is scored as before."""
+    from types import SimpleNamespace
+
+    from nnid.loop.diagnose import NOT_FINITE, NOT_IDENTIFIABLE, Fit, screen
+
+    rng = np.random.default_rng(0)
+    n = 200
+    x, z, other = rng.normal(size=(3, n))
+    phi = np.zeros((n, 6, 1))
+    phi[:, 2, 0] = x
+    e = np.zeros((n, 6))
+    e[:, 2] = 0.5 * z + 0.01 * rng.normal(size=n)
+    fit = Fit(
+        None, ["Z:w"], np.array([1.0]), np.array([0.1]), phi, phi, e, e, float(e[:, 2] @ e[:, 2])
+    )
+    ws = SimpleNamespace(weights=np.eye(6)[2], dofs=("w",), tau_corr=1.0)
+    cols = np.zeros((n, 6, 3))
+    cols[:, 2, 0] = -z  # adds a direction: explains the residual
+    cols[:, 2, 1] = 3.0 * x  # in the span of the fit's column
+    cols[:, 2, 2] = other
+    cols[7, 2, 2] = np.nan  # one row the fit reads
+    cands = [Candidate(f"c{k}", "linear_damping", f"Z:c{k}") for k in range(3)]
+    out = {s.name: s for s in screen(ws, fit, cands, cols, cols)}
+    assert set(out) == {"c0", "c1", "c2"}
+    good, span, bad = out["c0"], out["c1"], out["c2"]
+    assert good.scored and good.p_value < 1e-6 and good.value == pytest.approx(0.5, rel=0.05)
+    assert span.finite and not span.identifiable and span.reason == NOT_IDENTIFIABLE
+    assert not bad.finite and not bad.scored and bad.reason == NOT_FINITE
+    assert bad.excited and bad.identifiable  # counted once, as not finite only
+    assert np.isnan([bad.value, bad.stderr, bad.p_value, bad.improvement]).all()
+
+
+def test_a_search_with_nothing_to_search_is_named_not_counted_as_tested(monkeypatch):
+    """A 1-D search whose linearised column is not finite on the fit's rows had an empty
+    pre-screen: it returned None, read as "searched, found no better fit", and was counted in
+    the Bonferroni family (loop.json's tested, the report's count) though nothing was tested.
+    It is now named in the step's ``not_finite`` (and counted in ``candidates_not_finite``),
+    and tested counts the candidates scored alone, in loop.json and the report alike."""
+    from conftest import make_vehicle
+
+    import nnid.loop.diagnose as diagnose
+    from nnid.loop.diagnose import NOT_FINITE
+    from nnid.reports.loop_report import _tested_text, markdown
+
+    sensitivity = diagnose.sensitivity
+    monkeypatch.setattr(  # every searched effect's linearised column NaN
+        diagnose, "sensitivity", lambda *a: [np.full_like(c, np.nan) for c in sensitivity(*a)]
+    )
+    vehicle = make_vehicle(damping={"model": None, "coefficients": {"Z:w*abs(w)": -30.0}})
+    log = pd.concat(_heave_with_a_little_surge(vehicle, np.random.default_rng(4), "abc"),
+                    ignore_index=True)  # fmt: skip
+    loop = ResidualLoop(vehicle, dofs=("w",), max_effects=1).fit(log)
+    result = loop.as_dict()
+    ranked = loop.steps_[0].ranked
+    searched = {s.name: s for s in ranked if not s.candidate.linear}
+    assert searched and all(s.reason == NOT_FINITE and not s.scored for s in searched.values())
+    step = result["steps"][0]
+    assert sorted(step["not_finite"]) == sorted(searched)
+    assert result["candidates_not_finite"] == len(searched)
+    tested = sum(s.scored for s in ranked)
+    assert result["candidates_tested"] == step["tested"] == tested
+    assert f" over the {tested} candidates tested" in _tested_text(result)
+    said = [line for line in markdown(result).splitlines() if "not finite" in line]
+    assert len(said) == 1 and said[0].startswith(f"{len(searched)} candidate")

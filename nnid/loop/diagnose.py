@@ -115,6 +115,8 @@ class Scored:
     excited: bool = True
     # False: its column lies in the span of the fit's (:func:`identifiable`): nothing measured
     identifiable: bool = True
+    # False: its column is not finite on the fit's rows (:data:`NOT_FINITE`): nothing measured
+    finite: bool = True
 
     @property
     def name(self) -> str:
@@ -122,8 +124,8 @@ class Scored:
 
     @property
     def scored(self) -> bool:
-        """Whether anything of the candidate was measured: excited and identifiable."""
-        return self.excited and self.identifiable
+        """Whether anything of the candidate was measured: excited, identifiable and finite."""
+        return self.excited and self.identifiable and self.finite
 
     def as_dict(self) -> dict:
         return {
@@ -159,7 +161,9 @@ class Step:
     added: Scored | None
     sindy: list[str]
     fit: Fit | None = None  # the refitted model with ``added`` in it
-    tested: int = 0  # the candidates tested (scored): the Bonferroni correction's count
+    # the candidates tested (scored, and 1-D searches that found no better fit): the
+    # Bonferroni correction's count
+    tested: int = 0
 
 
 class Workspace:
@@ -418,8 +422,9 @@ def screen(
     ``cols_val``): the exact joint refit of each with the fit's unknowns, in closed form.
     ``excited`` [K] (:meth:`CandidateExcitation.excited`; None: every column not zero): a
     candidate the data do not excite is said :data:`NOT_EXCITED`, and one whose column lies in
-    the span of the fit's (:func:`identifiable`) :data:`NOT_IDENTIFIABLE`, each with nothing
-    measured (no value, s.e., p-value or held-out gain)."""
+    the span of the fit's (:func:`identifiable`) :data:`NOT_IDENTIFIABLE`, and one whose
+    column is not finite on the fit's rows :data:`NOT_FINITE`, each with nothing measured (no
+    value, s.e., p-value or held-out gain). Every candidate comes back, scored or named."""
     w = ws.weights
     n, n_dof, p = fit.phi.shape
     # the weighted sums over samples and DOFs as matrix products on rows (n, d): BLAS, where
@@ -461,16 +466,24 @@ def screen(
     total = 1.0 - (w @ after) / float(w @ before)
     per_dof = 1.0 - after / np.where(before > 0, before, np.inf)[:, None]
     out = []
+    nothing = float("nan")
     for k, cand in enumerate(cands):
         if not excited[k] or (judged[k] and not (beside[k] and ok[k])):
-            nothing, alone = float("nan"), not excited[k]  # unexcited: never judged beside
+            alone = not excited[k]  # unexcited: never judged beside
             out.append(
                 Scored(cand, nothing, nothing, nothing, nothing, nothing, {}, nothing,
                        reason=NOT_EXCITED if alone else NOT_IDENTIFIABLE,
                        excited=not alone, identifiable=alone)
             )  # fmt: skip
             continue
-        if not ok[k]:  # a column not finite on the fit's rows: nothing to judge it by
+        if not judged[k]:
+            # excited, but its sums over the fit's rows are not finite: nothing to judge it by.
+            # Named, not dropped: a dropped candidate was neither in loop.json nor the report,
+            # and a 1-D search whose pre-screen came back empty counted as tested
+            out.append(
+                Scored(cand, nothing, nothing, nothing, nothing, nothing, {}, nothing,
+                       reason=NOT_FINITE, finite=False)
+            )  # fmt: skip
             continue
         scale = cand.value_scale(fit.vehicle)
         value = cand.value(float(theta[k]), fit.vehicle)
@@ -536,6 +549,12 @@ NOT_EXCITED = "not excited by this data (zero regressor): nothing of it is measu
 NOT_IDENTIFIABLE = (
     "not identifiable beside the model (its column lies in the span of the fitted "
     "regressors): nothing of it is measured"
+)
+#: the verdict on a candidate whose column (or its sums with the fit's) is NaN or infinite on
+#: the rows the fit reads: the closed-form screen has nothing to judge it by
+NOT_FINITE = (
+    "not finite on the fit's rows (its column is NaN or infinite where the fit reads the "
+    "data): nothing of it is measured"
 )
 
 
@@ -679,7 +698,8 @@ def search_nonlinear(
     ws: Workspace, fit: Fit, cand: Candidate, prescreen_p: float = 1e-3
 ) -> Scored | None:
     """Bounded 1-D search of the effect value with the fit's unknowns refitted at each step;
-    its standard error from the linearised column at the optimum (variable projection).
+    its standard error from the linearised column at the optimum (variable projection). None
+    only where the search ran and found no better fit (a candidate tested).
 
     The search is run only if the effect, linearised at its current value, already explains a
     significant part of the residual (``prescreen_p``); otherwise the linearised score is
@@ -688,13 +708,12 @@ def search_nonlinear(
     v0 = cand.current_value(fit.vehicle)
     h = 0.02 * (hi - lo)
     a, b = (v0 - h / 2, v0 + h / 2) if lo < v0 - h / 2 else (v0, v0 + h)
-    pre = screen(ws, fit, [cand], *sensitivity(ws, fit.vehicle, cand, a, b))
-    if pre and not pre[0].scored:  # its linearised column measures nothing: named, not searched
-        return pre[0]
-    if not pre or pre[0].p_value > prescreen_p:
-        for s in pre:
-            s.value = v0 + (s.value if np.isfinite(s.value) else 0.0)
-        return pre[0] if pre else None
+    (pre,) = screen(ws, fit, [cand], *sensitivity(ws, fit.vehicle, cand, a, b))
+    if not pre.scored:  # its linearised column measures nothing: named, not searched
+        return pre
+    if pre.p_value > prescreen_p:
+        pre.value = v0 + (pre.value if np.isfinite(pre.value) else 0.0)
+        return pre
 
     def model_at(value: float):
         return cand.augment(fit.vehicle, value)
@@ -744,7 +763,7 @@ def search_nonlinear(
     before = np.nansum(fit.e_val**2, axis=0)
     after = np.nansum(best.e_val**2, axis=0)
     w = ws.weights
-    se = scored[0].stderr if scored and scored[0].scored else float("nan")
+    se = scored[0].stderr if scored[0].scored else float("nan")
     return Scored(
         cand,
         value,

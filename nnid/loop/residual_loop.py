@@ -67,8 +67,8 @@ MAX_WORSENING = 10.0
 
 
 def _scored(step: Step) -> list[Scored]:
-    """The candidates of a pass that were scored (excited and identifiable beside the model),
-    best first: the others measure nothing."""
+    """The candidates of a pass that were scored (excited, identifiable beside the model and
+    finite on its rows), best first: the others measure nothing."""
     return [s for s in step.ranked if s.scored]
 
 
@@ -336,7 +336,9 @@ class ResidualLoop:
         known = set(fit.unknowns)
         linear = [c for c in pool if c.linear and c.parameter not in known]
         scored = screen_linear(ws, fit, linear)
-        found_nothing = 0  # searches that found no better fit: tested, with nothing to rank
+        # searches that ran and found no better fit: tested, with nothing to rank (a candidate
+        # whose linearised column measures nothing comes back named, not searched)
+        found_nothing = 0
         if self.nonlinear:
             for cand in pool:
                 if not cand.linear:
@@ -345,16 +347,16 @@ class ResidualLoop:
                         scored.append(s)
                     else:
                         found_nothing += 1
-        # Bonferroni over the candidates tested: a candidate not excited or not identifiable
-        # beside the model had no test (no p-value), and counting them (165 of BlueROV1's 324)
-        # made the threshold stricter than the family tested asks
+        # Bonferroni over the candidates tested: a candidate not excited, not identifiable
+        # beside the model or not finite on its rows had no test (no p-value), and counting
+        # them (165 of BlueROV1's 324) made the threshold stricter than the family tested asks
         tested = max(sum(s.scored for s in scored) + found_nothing, 1)
-        # a candidate not scored (not excited, not identifiable) measures nothing: ranked
-        # after every other
+        # a candidate not scored (not excited, not identifiable, not finite) measures nothing:
+        # ranked after every other
         scored.sort(key=lambda s: (not s.scored, -s.improvement if s.scored else 0.0))
         rescore(ws, fit, scored[: self.rescore_top])
         for s in scored:
-            if s.scored:  # the others keep their verdict (NOT_EXCITED, NOT_IDENTIFIABLE)
+            if s.scored:  # the others keep their verdict (NOT_EXCITED, ..., NOT_FINITE)
                 self._judge(s, tested, fit)
         try:
             sindy = sindy_opinion(ws, fit, scored)
@@ -638,6 +640,7 @@ class ResidualLoop:
             "candidates_tested": first.tested,
             "candidates_not_excited": sum(not s.excited for s in first.ranked),
             "candidates_not_identifiable": sum(not s.identifiable for s in first.ranked),
+            "candidates_not_finite": sum(not s.finite for s in first.ranked),
             "added": self.added,
             "after": self.after_,
             "stopped": "max_effects" if self.stopped_at_limit else "no candidate passed",
@@ -648,6 +651,7 @@ class ResidualLoop:
                     "top": [s.as_dict() for s in _scored(st)[:10]],
                     "not_excited": [s.name for s in st.ranked if not s.excited],
                     "not_identifiable": [s.name for s in st.ranked if not s.identifiable],
+                    "not_finite": [s.name for s in st.ranked if not s.finite],
                     "tested": st.tested,
                     "sindy": st.sindy,
                 }

@@ -328,12 +328,14 @@ def candidate_rows(candidates: list[dict], top: int = 15) -> list[list[str]]:
 UNSCORED = {
     "not_excited": "not excited by this data (zero regressor",
     "not_identifiable": "not identifiable beside the model (column in the span of its regressors",
+    "not_finite": "not finite on the model's rows (column NaN or infinite where the fit reads data",
 }
 
 
 def not_excited_line(step: dict, k: int, key: str = "not_excited") -> str:
     """One line counting pass ``k``'s candidates the data do not excite (``key``
-    ``"not_identifiable"``: whose column lies in the span of the model's) ("" where none): they
+    ``"not_identifiable"``: whose column lies in the span of the model's; ``"not_finite"``:
+    whose column is not finite on its rows) ("" where none): they
     measure nothing and were not tested, and listed in its table they would pad it (165 rows
     on a BlueROV1 log without u or v); their names are in ``loop.json``."""
     names = step.get(key) or []
