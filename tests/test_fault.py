@@ -31,8 +31,12 @@ from nnid.datasets.preprocess import savgol_window
 from nnid.errors import NnidInputError
 from nnid.fault import kernel
 from nnid.fault.detect import (
+    DISMISSED_SHORT,
+    ENDED_SHORT,
     ISOLATED_SHORT,
     NOT_JUDGED,
+    RESIZED_SHORT,
+    TOO_FEW_FINITE,
     UNEXPLAINED_SHORT,
     Rewatch,
     alarm_row,
@@ -41,6 +45,7 @@ from nnid.fault.detect import (
     explained_by_the_changes,
     leave_scale,
     read_ratio,
+    unjudged_tail,
 )
 from nnid.fault.follow import follow_csv
 from nnid.fault.isolation import (
@@ -1244,6 +1249,82 @@ def test_an_alarm_not_isolated_on_enough_rows_of_a_cut_window_is_unexplained(
         assert f"{UNEXPLAINED_SHORT} ({seconds:.2f} s of 10 s)" in alarm["meaning"]
 
 
+@pytest.mark.parametrize(
+    ("faults", "seconds", "seed", "end", "hypothesis", "said"),
+    [
+        ([Fault("external", FAULT_T, force=SNAG, end=40.0)], 45, 3001, 42.0, "change_ended",
+         ENDED_SHORT),
+        ([Fault("thruster", FAULT_T, thruster="v2", efficiency=0.0, end=40.0),
+          Fault("thruster", 40.0, thruster="v2", efficiency=0.8)], 50, 3002, 44.0,
+         "change_resized", RESIZED_SHORT),
+    ],
+)  # fmt: skip
+def test_an_end_or_a_resize_on_a_window_the_log_cuts_short_says_so(
+    vehicle, monitor, tmp_path, faults, seconds, seed, end, hypothesis, said
+):
+    """A snag freed at 40 s, and a stopped v2 back to 80 % at 40 s, in logs that end a few
+    seconds after the alarm that says it: the end (the resize) was measured on those seconds
+    of its 10-s window, and its record said nothing of it (no ``cut_short``, no clause), as
+    if judged on all of it. It says so as an alarm isolated there does; batch and --follow
+    alike."""
+    log = simulate_faults(vehicle, seconds, faults=faults, seed=seed)
+    cut = log[log["t"] <= end + 1e-9].reset_index(drop=True)
+    for result in _batch_and_followed(monitor, cut, tmp_path):
+        changed = result.alarms[-1]
+        held = cut["t"][cut["t"] >= changed["t"] - 1e-9]
+        seconds_held = held.iloc[-1] - changed["t"]
+        assert changed["hypothesis"] == hypothesis
+        assert changed["cut_short"]["samples"] == held.size
+        assert changed["cut_short"]["seconds"] == pytest.approx(seconds_held)
+        assert changed["meaning"].endswith(f"; {said} ({seconds_held:.2f} s of 10 s)")
+
+
+def test_a_window_with_too_few_finite_rows_is_not_judged_not_unexplained(
+    vehicle, monitor, tmp_path
+):
+    """A snag from 20 s, the log without samples from 20.3 to 31 s: the alarm's window, not
+    cut short by the log's end, held 6 rows, too few to isolate, and its record was an
+    unexplained change ("too few samples after the alarm to isolate; the statistics
+    restart…", repeats 0) that later alarms not isolated would persist in. It is not judged,
+    saying how many rows it held, and opens no unexplained record; batch and --follow
+    alike."""
+    log = simulate_faults(vehicle, 35, faults=[Fault("external", FAULT_T, force=SNAG)], seed=1)
+    gap = log[(log["t"] <= 20.3 + 1e-9) | (log["t"] >= 31.0 - 1e-9)].reset_index(drop=True)
+    for result in _batch_and_followed(monitor, gap, tmp_path):
+        first = result.alarms[0]
+        held = gap["t"][(gap["t"] >= first["t"] - 1e-9) & (gap["t"] <= first["t"] + 10.0)]
+        assert held.size < LEAST_ROWS and "cut_short" not in first
+        assert first["meaning"].startswith(TOO_FEW_FINITE) and "restart" not in first["meaning"]
+        assert f"({held.size} of the {held.size} samples it holds" in first["meaning"]
+        assert (first["repeats"], first["last_seen_t"]) == (None, None)
+
+
+def test_a_dismissal_on_a_window_the_log_cuts_short_says_so(vehicle, monitor, tmp_path):
+    """A payload from 20 s (seed 26), its alarm at 32.75 s dismissed as within what the
+    payload may leave, in a log that ends at 38 s: ``dismissed`` and the reason --follow
+    gives for withdrawing it said nothing of the 5.25 s of its window judged. Both say it.
+    And in a log that ends at 33.4 s, the window's last half smoothing window not judged
+    (the payload reads the acceleration), the record not judged said "14 samples" where 4
+    had a residual: it says how many."""
+    log = simulate_faults(vehicle, 60, faults=[Fault("payload", FAULT_T, mass=10.0, value=4.0)],
+                          seed=26)  # fmt: skip
+    cut = log[log["t"] <= 38.0 + 1e-9].reset_index(drop=True)
+    batch, followed = _batch_and_followed(monitor, cut, tmp_path)
+    (dismissed,) = batch.dismissed
+    held = cut["t"][cut["t"] >= dismissed["t"] - 1e-9]
+    seconds_held = held.iloc[-1] - dismissed["t"]
+    assert dismissed["cut_short"]["samples"] == held.size
+    assert dismissed["cut_short"]["seconds"] == pytest.approx(seconds_held)
+    assert dismissed["why"].endswith(f"; {DISMISSED_SHORT} ({seconds_held:.2f} s of 10 s)")
+    assert [w["reason"] for w in followed.withdrawn] == [dismissed["why"]]
+    shorter = log[log["t"] <= 33.4 + 1e-9].reset_index(drop=True)
+    result = detect(monitor, shorter)
+    late, (tail,) = result.alarms[-1], result.unjudged
+    assert late["meaning"].startswith(NOT_JUDGED) and tail["from_t"] > late["t"]
+    samples = int((shorter["t"] >= late["t"] - 1e-9).sum())
+    assert f"{samples} samples, {samples - tail['samples']} of them finite" in late["meaning"]
+
+
 def test_a_window_to_the_runs_end_keeps_its_unjudged_tail(monitor):
     """:meth:`Rewatch.left` to a run's end with no rows left (a later alarm's window reached
     the end) cleared the tail an earlier call left unjudged, though those rows are still NaN
@@ -1252,11 +1333,28 @@ def test_a_window_to_the_runs_end_keeps_its_unjudged_tail(monitor):
     t = np.arange(40) * 0.05
     data = {"t": t, "experiment": np.zeros(t.size, dtype=int)}
     w = Rewatch(monitor)
-    w.tail = (t[29], t[30], t[39], 10)  # as an earlier left() to the end leaves it
+    w.tail = (t[29], t[30:40])  # as an earlier left() to the end leaves it
     w.left(data, np.arange(0), np.zeros((0, 6)), to_end=True)
-    assert w.tail == (t[29], t[30], t[39], 10)
+    assert w.tail[0] == t[29] and list(w.tail[1]) == list(t[30:40])
     w.left(data, np.arange(30, 40), np.zeros((10, 6)), to_end=True)
     assert w.tail is None
+
+
+def test_a_tail_partly_inside_a_later_window_stays_unjudged(monitor):
+    """A later alarm's window that reaches into the tail an earlier :meth:`Rewatch.left` left
+    unjudged (rows 30-39) and ends at row 34: its judgement read rows 30-34 NaN, and the
+    statistics restart after them, so no window judged them; ``left`` from row 35 on (the
+    change ended: all judged) dropped the tail, and ``unjudged`` said nothing of them. They
+    stay: 5 samples from the first unjudged row."""
+    t = np.arange(40) * 0.05
+    data = {"t": t, "experiment": np.zeros(t.size, dtype=int)}
+    w = Rewatch(monitor)
+    w.tail = (t[29], t[30:40])
+    w.left(data, np.arange(35, 40), np.zeros((5, 6)), to_end=True)
+    tail = unjudged_tail(None, w)
+    assert tail is not None
+    assert (tail["from_t"], tail["to_t"], tail["samples"]) == (t[30], t[34], 5)
+    assert tail["seconds"] == pytest.approx(t[34] - t[29])
 
 
 def test_detect_json_says_the_runs_last_rows_left_unjudged(vehicle, monitor, tmp_path):

@@ -76,6 +76,7 @@ from nnid.fault.isolation import (
     allowed_ratio,
     dof_noise_ratios,
     dof_weights,
+    fits_rows,
     hypothesis_columns,
     isolate,
     model_error,
@@ -122,7 +123,8 @@ class DetectResult:
     each with its ``experiment`` and ``t``, and ``beside_ratio`` and ``beside_allowed``, what
     it held over the DOF equations the changes leave alone and the level it was judged
     against there (:meth:`_Splits.change_beside`; None where the changes act on every one),
-    and ``why`` (:func:`dismissed_why`). ``unjudged``: per experiment, the rows at its end
+    and ``why`` (:func:`dismissed_why`), and ``cut_short`` where the log's end cut its
+    window short (:func:`on_part`). ``unjudged``: per experiment, the rows at its end
     that were not judged (:func:`unjudged_tail`), batch and ``--follow`` alike."""
 
     trace: Trace
@@ -133,18 +135,21 @@ class DetectResult:
     unjudged: list[dict] = field(default_factory=list)
 
 
-def dismissed_why(ratio: float | None, allowed: float | None) -> str:
+def dismissed_why(ratio: float | None, allowed: float | None, short: dict | None = None) -> str:
     """Why batch dismissed an alarm on what isolated changes leave (:attr:`DetectResult.
-    dismissed`), from its reading beside the changes (:meth:`_Splits.change_beside`)."""
+    dismissed`), from its reading beside the changes (:meth:`_Splits.change_beside`), and on
+    how much of its window where the log's end cut it ``short`` (:func:`on_part`)."""
     within = "within what the isolated changes may leave"
     if ratio is None:
-        return f"{within} (they act on every DOF equation watched)"
-    if ratio <= allowed:
-        return f"{within}; beside them, no more than noise ({ratio:.3g} <= {allowed:.3g})"
-    return (
-        f"{within}; beside them more than noise ({ratio:.3g} > {allowed:.3g}), but no new "
-        "change named there leaves it within noise"
-    )
+        why = f"{within} (they act on every DOF equation watched)"
+    elif ratio <= allowed:
+        why = f"{within}; beside them, no more than noise ({ratio:.3g} <= {allowed:.3g})"
+    else:
+        why = (
+            f"{within}; beside them more than noise ({ratio:.3g} > {allowed:.3g}), but no new "
+            "change named there leaves it within noise"
+        )
+    return why if short is None else f"{why}; {part_clause(short, DISMISSED_SHORT)}"
 
 
 def withdrawn_record(
@@ -153,11 +158,13 @@ def withdrawn_record(
     by: float,
     why: str,
     beside: tuple[float, float] | None = None,
+    short: dict | None = None,
 ) -> dict:
     """An announced alarm at time ``t`` that the final alarms do not hold, as batch
     :func:`detect` drops it; ``why``: ``"dismissed"`` (its window within what the isolated
     changes may leave: :func:`rewatched_alarm`; said as batch's ``dismissed`` says it, by
-    :func:`dismissed_why` of ``beside``, its :attr:`Verdict.beside`), ``"inside"`` the window
+    :func:`dismissed_why` of ``beside`` and ``short``, its :attr:`Verdict.beside` and
+    :attr:`Verdict.cut_short`), ``"inside"`` the window
     of the alarm at time ``by`` whose judgement restarted the statistics after it
     (:func:`_rewatch` clears the window's alarms), or ``"after"`` it (a row read before that
     judgement, watched again on the restarted statistics: ``--follow`` holds rows after a
@@ -165,7 +172,7 @@ def withdrawn_record(
     ``"persisting"``: not isolated, the unexplained change alarmed at ``by`` persisting
     (:func:`persisting`, counted in its record)."""
     reasons = {
-        "dismissed": dismissed_why(*(beside or (None, None))),
+        "dismissed": dismissed_why(*(beside or (None, None)), short),
         "inside": f"inside the window of the alarm at t = {by:.2f} s, judged with it; the "
         "statistics restart after that window",
         "after": f"read before the alarm at t = {by:.2f} s was judged, after its window: "
@@ -236,21 +243,12 @@ def isolated_alarm(
             f"{record['meaning']}; it ended at about {t_end:.2f} s, inside the window: sized "
             f"on the {t_end - record['t']:.3g} s before, and not taken out after the window"
         )
-    short = cut_short(data, k, window_s)
-    if short:
-        # on part of its window, judged or not: detect.json says so of every such alarm
-        held_s = float(data["t"][rows[-1]] - data["t"][k])
-        record["cut_short"] = {
-            "seconds": held_s,
-            "window_s": float(window_s),
-            "samples": int(rows.size),
-        }
-    if short and diag.meaning == TOO_FEW:  # isolation had too few rows: nothing was judged
-        not_judged(record)
+    short = on_part(data, k, window_s, rows)
+    if diag.meaning == TOO_FEW:  # isolation had too few rows: nothing was judged
+        judged_on_part(record, short, None)
+        not_judged(record, int(rows.size), int(fits_rows(rows, residual[rows]).sum()))
         return record, diag, rows
-    if short:  # judged on the rows there were, and said so (finding() keeps the clause)
-        said = ISOLATED_SHORT if diag.isolated else UNEXPLAINED_SHORT
-        record["meaning"] = f"{record['meaning']}; {said} ({held_s:.2f} s of {window_s:g} s)"
+    judged_on_part(record, short, ISOLATED_SHORT if diag.isolated else UNEXPLAINED_SHORT)
     if not diag.isolated:
         unexplained(record, float(data["t"][rows[-1]]))
     return record, diag, rows
@@ -268,30 +266,78 @@ def cut_short(data: dict, k: int, window_s: float) -> bool:
     return bool(t[k] + window_s - run[-1] > typical_step(run, 0.0) / 2)
 
 
+def on_part(data: dict, k: int, window_s: float, rows: np.ndarray) -> dict | None:
+    """The ``cut_short`` key of the record of the alarm at row ``k`` whose isolation window
+    (``rows``, :func:`window_rows`) the end of its run cuts short (:func:`cut_short`): the
+    ``seconds`` of it there are, ``window_s`` and ``samples``; None where it is whole."""
+    if not cut_short(data, k, window_s):
+        return None
+    held_s = float(data["t"][rows[-1]] - data["t"][k])
+    return {"seconds": held_s, "window_s": float(window_s), "samples": int(rows.size)}
+
+
+def part_clause(short: dict, said: str) -> str:
+    """The clause that says an alarm was judged (``said``: how) on the part of its window
+    that ``short`` (:func:`on_part`) holds: "isolated on the part … (3.00 s of 10 s)"."""
+    return f"{said} ({short['seconds']:.2f} s of {short['window_s']:g} s)"
+
+
+def judged_on_part(record: dict, short: dict | None, said: str | None) -> None:
+    """An alarm's ``record`` judged on the window ``short`` (:func:`on_part`; None: whole,
+    nothing to say): its ``cut_short`` key, and its ``meaning`` ending with what was judged
+    there (``said``: :data:`ISOLATED_SHORT`, :data:`UNEXPLAINED_SHORT`, :data:`ENDED_SHORT`,
+    :data:`RESIZED_SHORT`; None for a record :func:`not_judged` says). :func:`isolated_alarm`
+    and the ends and resizes of :meth:`_Splits.record` alike: an end said on the 2 s a log
+    kept of its window read as measured on all 10."""
+    if short is None:
+        return
+    record["cut_short"] = short  # detect.json says so of every such alarm, judged or not
+    if said is not None:  # finding() keeps the clause
+        record["meaning"] = f"{record['meaning']}; {part_clause(short, said)}"
+
+
 #: how the ``meaning`` of a record whose window the log's end cut short starts (:func:`not_judged`)
 NOT_JUDGED = "not judged: the end of the log cut the isolation window short"
+#: how the ``meaning`` of a record whose whole window held too few rows with a finite residual
+#: (a sensor dropout, a gap in the log) starts (:func:`not_judged`)
+TOO_FEW_FINITE = "not judged: too few rows with a finite residual in the isolation window"
 #: what the clause that ends the ``meaning`` of an alarm judged on a window the log's end
-#: cut short says after how it was read (:func:`isolated_alarm`; the seconds follow)
+#: cut short says after how it was read (:func:`judged_on_part`; the seconds follow)
 ON_PART = "on the part of its window before the end of the log"
 #: that clause for a change isolated there
 ISOLATED_SHORT = f"isolated {ON_PART}"
 #: that clause for an alarm isolation judged there and did not isolate: an unexplained change
 UNEXPLAINED_SHORT = f"not isolated {ON_PART}"
+#: that clause for the end of changes measured there (:func:`ended_alarm`)
+ENDED_SHORT = f"the end measured {ON_PART}"
+#: that clause for the new size of changes measured there (:func:`resized_alarm`)
+RESIZED_SHORT = f"the new size measured {ON_PART}"
+#: that clause, ending its ``why``, for an alarm dismissed there (:func:`dismissed_why`)
+DISMISSED_SHORT = f"judged {ON_PART}"
 
 
-def not_judged(record: dict) -> None:
-    """The ``record`` of an alarm on a window that the end of the log cut short
-    (:func:`cut_short`; its ``cut_short`` key, which :func:`isolated_alarm` sets, says how
-    much of the window there was) to fewer rows than isolation fits
-    (:data:`~nnid.fault.isolation.LEAST_ROWS`, said :data:`~nnid.fault.isolation.TOO_FEW`):
-    not judged, not an unexplained change (no ``repeats``, no record opened for a later alarm
-    to persist in: no row is left to watch). A 0.35-s window was an unexplained record whose
-    statistics "restart at the window's end". On more rows isolation judges it, and an alarm
-    it does not isolate is an unexplained change (:data:`UNEXPLAINED_SHORT`)."""
-    short = record["cut_short"]
-    held_s, window_s, samples = short["seconds"], short["window_s"], short["samples"]
+def not_judged(record: dict, samples: int, finite: int) -> None:
+    """The ``record`` of an alarm whose window of ``samples`` rows holds fewer that isolation
+    fits (``finite``, :func:`~nnid.fault.isolation.fits_rows`) than
+    :data:`~nnid.fault.isolation.LEAST_ROWS` (said :data:`~nnid.fault.isolation.TOO_FEW`):
+    the end of the log cut it short (its ``cut_short`` key, which :func:`judged_on_part`
+    sets, says how much of it there was), or its rows hold no finite residual (a dropout, a
+    gap). Not judged, not an unexplained change (no ``repeats``, no record opened for a later
+    alarm to persist in). A 0.35-s window was an unexplained record whose statistics "restart
+    at the window's end", and so was a window that a 10-s gap in the log left 5 rows. On
+    more rows isolation judges it, and an alarm it does not isolate is an unexplained change
+    (:data:`UNEXPLAINED_SHORT`)."""
+    short = record.get("cut_short")
+    if short is None:
+        record["meaning"] = (
+            f"{TOO_FEW_FINITE} ({finite} of the {samples} samples it holds; at least "
+            f"{LEAST_ROWS} needed): {TOO_FEW}"
+        )
+        return
+    held_s, window_s = short["seconds"], short["window_s"]
+    some = f", {finite} of them finite" if finite < samples else ""
     record["meaning"] = (
-        f"{NOT_JUDGED} ({held_s:.2f} s of {window_s:g} s, {samples} samples): {TOO_FEW}"
+        f"{NOT_JUDGED} ({held_s:.2f} s of {window_s:g} s, {samples} samples{some}): {TOO_FEW}"
     )
 
 
@@ -819,7 +865,8 @@ class _Splits:
         n_par = 0 if ended else len(names)
         gain = (float(self.p_left.sum()) - split.cost) / (2 * m.correlation_time_)
         name = trace.experiment[k]
-        return {
+        window = window_rows(self.data, k, window_s)
+        record = {
             "experiment": None if name is None else str(name),
             "t": float(self.data["t"][k]),
             "kind": kind,
@@ -830,7 +877,7 @@ class _Splits:
             "effect": effect,
             "value": value,
             "stderr": stderr,
-            "severity": _severity(m, trace, window_rows(self.data, k, window_s)),
+            "severity": _severity(m, trace, window),
             "confidence": float(expit(gain - (1 + n_par) * self.penalty())),
             "meaning": meaning,
             "explained": 1.0 - split.cost / float(self.p_left.sum()),
@@ -843,6 +890,10 @@ class _Splits:
             "last_seen_t": None,
             "ended" if ended else "resized": {"t": t_split, "alarms": [changes[i].t for i in gone]},
         }
+        # measured on the rows the log kept of the window (at least self.least: usable())
+        short = on_part(self.data, k, window_s, window)
+        judged_on_part(record, short, ENDED_SHORT if ended else RESIZED_SHORT)
+        return record
 
 
 def ended_alarm(
@@ -904,13 +955,15 @@ class Verdict:
     :attr:`Rewatch.changes`) or changed size (``resized``: those changes and the one that
     replaces them), or ``dismissed``: within what the changes may leave, no record;
     ``beside``: the noise ratio over the DOF equations the changes leave alone and its
-    allowed level, where :meth:`_Splits.change_beside` read them."""
+    allowed level, where :meth:`_Splits.change_beside` read them; ``cut_short``: of one
+    dismissed on a window the log's end cut short, how much of it there was (:func:`on_part`)."""
 
     record: dict | None = None
     ended: list[int] = field(default_factory=list)
     resized: tuple[list[int], Change] | None = None
     dismissed: bool = False
     beside: tuple[float, float] | None = None
+    cut_short: dict | None = None
 
 
 def rewatched_alarm(
@@ -930,7 +983,8 @@ def rewatched_alarm(
     and dismissed); within what the changes may leave (:func:`explained_by_the_changes`) and
     without their signature (:meth:`_Splits.signature_left`), dismissed; a change of their
     size (:func:`resized_alarm`). None: a new change, to
-    isolate on ``left``. ``detect`` and ``detect --follow`` alike."""
+    isolate on ``left``. ``detect`` and ``detect --follow`` alike; each on the rows the log
+    kept of its window, and said so where its end cut it short (:func:`on_part`)."""
     splits = _Splits(monitor, data, k, window_s, rewatch, r, left)  # once for both tests
     ended = ended_alarm(splits, trace, k, window_s)
     if ended is not None:
@@ -942,7 +996,8 @@ def rewatched_alarm(
         and not splits.signature_left()
         and splits.change_beside() is False  # None: too few rows to tell, not dismissed
     ):
-        return Verdict(dismissed=True, beside=splits.beside)
+        short = on_part(data, k, window_s, window_rows(data, k, window_s))
+        return Verdict(dismissed=True, beside=splits.beside, cut_short=short)
     resized = resized_alarm(splits, trace, k, window_s)
     if resized is not None:
         return Verdict(resized[0], resized=resized[1])
@@ -1042,9 +1097,9 @@ class Rewatch:
         self.t_prev = np.nan
         # the columns of the changes' hypotheses, remade only when they name others
         self.hypotheses: Hypotheses | None = None
-        # the rows at the run's end that the latest :meth:`left` to it left unjudged: the time
-        # before the first, the first's and the last's, and how many (None: none)
-        self.tail: tuple[float, float, float, int] | None = None
+        # the rows at the run's end that :meth:`left` to it left unjudged: the time of the row
+        # before the first, and the times of each (None: none)
+        self.tail: tuple[float, np.ndarray] | None = None
 
     @property
     def fitted(self) -> list[tuple[str, float]]:
@@ -1085,22 +1140,26 @@ class Rewatch:
         EWMA statistic rose from 35 to 152 over them (threshold 115), and the run's last
         sample alarmed (a model_change that too few rows could isolate). Those rows are NaN,
         not judged, as rows without a residual are, and kept in :attr:`tail` to be said
-        (:func:`unjudged_tail`)."""
+        (:func:`unjudged_tail`). The rows of an earlier tail before ``rows`` stay in it: they
+        lie in the window of the alarm judged since (``rows`` run from its end), which read
+        them NaN, so no window judged them; dropped, a tail that window reached into was
+        said only from its end on."""
         fitted = self.fitted
         if fitted:
             names = {name for name, _ in fitted}
             self.hypotheses = Hypotheses.reused(self.hypotheses, self.monitor, names)
         out = _left(self.monitor, data, rows, r, fitted, self.hypotheses)
-        if to_end and rows.size:  # no rows (a window to the run's end): the tail stays unjudged
-            self.tail = None
-        if to_end and fitted:
-            mask = self.hypotheses.extrapolated(data, rows)
-            out[mask] = np.nan
-            gone = rows[mask]
-            if gone.size:
-                t = data["t"]
-                self.tail = (float(t[gone[0] - 1]), float(t[gone[0]]), float(t[gone[-1]]),
-                             int(gone.size))  # fmt: skip
+        if not (to_end and rows.size):  # no rows (a window to the run's end): the tail stays
+            return out
+        t = data["t"]
+        before, kept = self.tail or (np.nan, np.zeros(0))
+        kept = kept[kept < t[rows[0]]]
+        gone = rows[self.hypotheses.extrapolated(data, rows)] if fitted else rows[:0]
+        out[np.isin(rows, gone)] = np.nan
+        if not kept.size and gone.size:
+            before = float(t[gone[0] - 1])
+        unjudged = np.r_[kept, t[gone]]
+        self.tail = (before, unjudged) if unjudged.size else None
         return out
 
     def step(self, ts: np.ndarray, left: np.ndarray, r: np.ndarray) -> np.ndarray:
@@ -1146,9 +1205,10 @@ def unjudged_tail(experiment: str | None, w: Rewatch) -> dict | None:
     payload's run read as judged to its last sample."""
     if w.tail is None:
         return None
-    before, first, last, n = w.tail
+    before, times = w.tail
+    first, last = float(times[0]), float(times[-1])
     name = None if experiment is None else str(experiment)
-    return {"experiment": name, "from_t": first, "to_t": last, "samples": n,
+    return {"experiment": name, "from_t": first, "to_t": last, "samples": int(times.size),
             "seconds": last - before, "why": UNJUDGED_WHY}  # fmt: skip
 
 
@@ -1195,7 +1255,8 @@ def detect(
                             "t": float(t[k]),
                             "beside_ratio": ratio,
                             "beside_allowed": allowed,
-                            "why": dismissed_why(ratio, allowed),
+                            "why": dismissed_why(ratio, allowed, verdict.cut_short),
+                            **({"cut_short": verdict.cut_short} if verdict.cut_short else {}),
                         }
                     )
                 else:

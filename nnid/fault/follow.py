@@ -399,17 +399,18 @@ def follow_csv(
         why: str,
         by_t: float | None = None,
         beside: tuple[float, float] | None = None,
+        short: dict | None = None,
     ) -> None:
         """The announced alarm at ``p`` is not in the final alarms (batch drops it too), as
         the judgement of the alarm at ``by`` has it (:func:`withdrawn_record`; ``by_t``: the
         time of the alarm it is folded into, ``why`` "persisting"; ``beside``: the reading
-        of one ``why`` "dismissed"): said and recorded, so that no announced alarm vanishes
-        unsaid."""
+        of one ``why`` "dismissed", and ``short`` its window cut short): said and recorded, so
+        that no announced alarm vanishes unsaid."""
         i = p - dropped
         name = names[codes[i]]
         by_t = ts[by - dropped] if by_t is None else by_t
         run = name if exp_col is not None else None
-        record = withdrawn_record(run, ts[i], by_t, why, beside)
+        record = withdrawn_record(run, ts[i], by_t, why, beside, short)
         withdrawn.append(record)
         say(withdrawn_line(record))
 
@@ -449,7 +450,7 @@ def follow_csv(
             verdict = rewatched_alarm(monitor, data, trace, i, window_s, w, r, values[rows, 0:6])
             if verdict is not None and verdict.dismissed:
                 alarm_rows.remove(k)  # no record, so no mark in the trace either
-                withdraw(k, k, "dismissed", beside=verdict.beside)
+                withdraw(k, k, "dismissed", beside=verdict.beside, short=verdict.cut_short)
                 w.restart(data["t"][rows[-1]])
                 rewatch_after(k, rows, changed=False, ended=ended)
                 return

@@ -305,6 +305,13 @@ def signature(
     return out
 
 
+def fits_rows(rows: np.ndarray, residual: np.ndarray) -> np.ndarray:
+    """Which of ``rows`` isolation fits, [rows] bool: each with its predecessor and a finite
+    ``residual`` [rows, 6] (a row of a sensor dropout, or not judged at a run's end, has
+    none); fewer than :data:`LEAST_ROWS` of them and nothing is judged (:data:`TOO_FEW`)."""
+    return (rows > 0) & np.isfinite(residual).all(1)
+
+
 def isolate(
     monitor, data: dict, residual: np.ndarray, rows: np.ndarray, taken: list = ()
 ) -> Diagnosis:
@@ -315,7 +322,7 @@ def isolate(
     the model those changes make (a thruster at 30 % that recovers is 100 % of nominal, where
     the change on top of the 30 % reads 170 %)."""
     plant = monitor.plant_
-    rows = rows[(rows > 0) & np.isfinite(residual[rows]).all(1)]
+    rows = rows[fits_rows(rows, residual[rows])]
     if rows.size < LEAST_ROWS:
         return Diagnosis("model_change", meaning=TOO_FEW)
     vehicle, cands, cols = hypothesis_columns(monitor, data, rows)
@@ -538,7 +545,7 @@ def refit(
     residual ``residual`` [len(rows), 6] of ``rows`` by :func:`isolate`'s weighted least
     squares (:class:`Refit`). None where, of the rows with a finite residual, fewer than
     :data:`LEAST_ROWS` are left or a hypothesis has no column on them."""
-    keep = (rows > 0) & np.isfinite(residual).all(1)
+    keep = fits_rows(rows, residual)
     rows, residual = rows[keep], residual[keep]
     if rows.size < LEAST_ROWS:
         return None
