@@ -1880,3 +1880,35 @@ def test_changed_verdicts_name_only_what_the_second_check_adds_or_clears():
     assert cleared == [
         "excited and separable after all: c (the estimate gives their values and standard errors)"
     ]
+
+
+def test_damping_terms_are_sized_without_a_six_row_column_each(heave_only):
+    """A floor read sizes every column at seven scales in one evaluation; the residual loop
+    sizes its hundreds of damping candidates so. Each spread into a six-equation column (−ξ in
+    its force's row, 0 in the five others) held 54 MB a copy for the demo's 630 and raised its
+    loop's peak memory by 150 MB (812 against 659 MB); a size reads a column's non-zero
+    entries alone, so a term's own entries give the same sizes. The spread read's peak was
+    3.9 times the spread columns of all seven scales, now under one (the bound: two); a term
+    whose force is not fitted (the Y equation below) has no size, as its spread column had
+    none in the rows fitted."""
+    import tracemalloc
+
+    from nnid.physics.damping_library import _library_names
+    from nnid.physics.dofs import FORCES
+
+    vehicle, log = heave_only
+    data = log_arrays(log, vehicle)
+    dofs = [d for d in DOFS if d != "v"]
+    names = [f"{f}:{t}" for f in FORCES for t in _library_names()[:100]]
+    structure = ParametricFossen(vehicle, [*names, "Z_wdot"], dofs)
+    spread = (1 + len(DOFS)) * data["t"].size * len(DOFS) * len(names) * 8
+    tracemalloc.start()
+    try:
+        one, probe = structure.reference_sizes(data, data["nu_dot"])
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 2 * spread
+    in_y = np.array([n.startswith("Y:") for n in names] + [False])
+    assert (one[in_y] == 0).all() and (probe[:, in_y] == 0).all()
+    assert (one[~in_y] > 0).any() and one[-1] > 0  # Z_wdot: ν̇ of a heave run

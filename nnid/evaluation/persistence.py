@@ -309,8 +309,8 @@ def motion_sizes(
     # (column_sizes draws by the count)
     for length in {c.shape[1] for c in columns}:
         same = [j for j, c in enumerate(columns) if c.shape[1] == length]
-        block = np.stack([columns[j] for j in same], 2)  # [S, length, J]
-        flat = block.transpose(1, 0, 2).reshape(length, -1)
+        # [length, S, J] stacked as such, one copy (a transpose of [S, length, J] was two)
+        flat = np.stack([columns[j].T for j in same], 2).reshape(length, -1)
         out[:, same] = column_sizes(flat).reshape(len(scales), len(same))
     return out[0], out[1:]
 

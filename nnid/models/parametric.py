@@ -362,12 +362,15 @@ class ParametricFossen:
         data: dict[str, np.ndarray],
         filter_lambda: float | None = None,
         nu_dot_f: np.ndarray | None = None,
+        names: Sequence[str] | None = None,
     ) -> tuple[np.ndarray, list[np.ndarray]]:
         """R(0) and each unknown's column R(e_k) − R(0), ``[N, 6]`` each, over all six DOF
-        equations (:meth:`regression` keeps its own)."""
-        damping = self.damping_columns(data, filter_lambda)
+        equations (:meth:`regression` keeps its own), of the unknowns ``names`` (default
+        all, in order)."""
+        names = self.names if names is None else names
+        damping = self.damping_columns(data, filter_lambda) if any(":" in n for n in names) else {}
         units = {}
-        for name in self.names:
+        for name in names:
             if name not in damping:
                 units[name] = self.base.copy()
                 units[name].set(name, 1.0)
@@ -379,7 +382,7 @@ class ParametricFossen:
         r0, *shifted = self._residuals(self.base, data, biases, filter_lambda, nu_dot_f, base)
         at_force = dict(zip(forces, shifted, strict=True))
         cols = []
-        for name in self.names:
+        for name in names:
             if name in damping:
                 cols.append(damping[name])
             elif name in at_force:
@@ -471,16 +474,30 @@ class ParametricFossen:
         # mass's C_A(ν)ν beside the one DOF analysed) are no size of what it measures there
         rows = [DOFS.index(d) for d in (self.dofs if dofs is None else dofs)]
 
+        others = [n for n in self.names if ":" not in n]
+
         def columns_at(scales: np.ndarray) -> list[np.ndarray]:  # each velocity with its ν̇
             # every scale's rows stacked in one evaluation (a model per unknown each): each
             # row is evaluated on its own, so each scale's columns are those it alone gives
             batch = {k: np.concatenate([v] * len(scales)) for k, v in moved.items()}
             batch["nu"] = np.repeat(scales * nu, picked.size, 0)
             batch["nu_dot"] = np.repeat(scales * acc, picked.size, 0)
-            return [
-                c[:, rows].reshape(len(scales), picked.size, len(rows))
-                for c in self._columns(batch)[1]
-            ]
+            shape = (len(scales), picked.size, -1)
+            cols = {}
+            if others:
+                at = self._columns(batch, names=others)[1]
+                cols.update(zip(others, (c[:, rows].reshape(shape) for c in at), strict=True))
+            # a damping column is −ξ_term in its force's row, 0 in the others
+            # (damping_columns), and a size reads a column's non-zero entries alone
+            # (column_sizes, which draws no rows from REFERENCE_ROWS × 6): the term's own
+            # entries where its force is fitted, none where not, not spread into [N, 6]
+            # columns (the loop's 630 candidates at seven scales: 54 MB a copy, the demo
+            # loop's peak 150 MB higher)
+            terms, xi, forces = self.damping_terms(batch)
+            if terms:
+                xi = np.where(np.isin(forces, rows), xi, 0.0)
+                cols.update(zip(terms, np.moveaxis(xi.reshape(shape), 2, 0), strict=True))
+            return [cols[n] for n in self.names]
 
         return motion_sizes(columns_at, len(DOFS))
 
