@@ -171,6 +171,7 @@ def inspect(
     from nnid.config import VehicleData
     from nnid.datasets.gaps import SlowChannel, say_ends
     from nnid.datasets.inspect import summarize
+    from nnid.datasets.log import run_label
     from nnid.datasets.readers import load_log
     from nnid.physics.dofs import DOFS
     from nnid.serialization import write_json
@@ -186,23 +187,43 @@ def inspect(
     pieces = sum(e["piece_of"] is not None for e in info["experiments"])
     low, high = (f(e["rate_hz"] for e in info["experiments"]) for f in (min, max))
     gap_s = info["gap_s"]
+    bursty = [e for e in info["experiments"] if e["bursts"]]
+    # a run in bursts counts at its rate over the run, not its median step's (~100 kHz)
+    in_bursts = (
+        ""
+        if not bursty
+        else " (stamps in bursts: the rate over the run)"
+        if len(bursty) == len(info["experiments"])
+        else f" ({len(bursty)} run{'s' * (len(bursty) != 1)} in bursts: at the rate over the run)"
+    )
     out.print(
         f"[bold]{escape(str(log_path))}[/]: {info['samples']} samples, "
         f"{info['duration_s']:.1f} s" + (f" of data (and {gap_s:.3g} s in gaps)" if gap_s else "")
         + f", {info['runs']} experiment{'s' * (info['runs'] != 1)}"
         + (f" ({pieces} pieces: runs cut at gaps)" if pieces else "")
         + f", about {info['rate_hz']:.3g} Hz"
+        + in_bursts
         + (f" (experiments from {low:.3g} to {high:.3g} Hz)" if high > 1.1 * low else ""),
         markup=True,
     )  # fmt: skip
     for group in ("pose", "velocity", "acceleration", "inputs", "other"):
         out.print(f"  {group:13s} {', '.join(cols[group]) or '-'}")
     out.print(f"  derivable     {', '.join(info['derivable']) or '-'}")
+    for e in bursty:
+        # its median step is one inside a burst: no rate of ~100 kHz, nor each burst's end a gap
+        out.print(
+            f"  clock         {run_label(e['name'])}: {e['bursts']}; its gaps are not counted "
+            "and the fits refuse it (they step sample by sample at one rate): resample it "
+            "onto a uniform grid first",
+            highlight=False,
+        )
     gaps = info["gaps"]
     out.print(
         f"  gaps          {len(gaps)}"
         + (f" (longest {max(g['length_s'] for g in gaps):.3g} s)" if gaps else "")
-    )
+        + (f" (not counted in the {len(bursty)} run{'s' * (len(bursty) != 1)} in bursts)"
+           if bursty else "")
+    )  # fmt: skip
     for ch in info["slow"]:
         slow = SlowChannel(**{k: v for k, v in ch.items() if k not in ("filled", "ends")})
         # a rate not measured: its empty cells may be that rate, said here and not as gaps

@@ -15,6 +15,7 @@ from nnid.datasets.log import declare_time_unit, typical_step
 from nnid.datasets.measurement import Measurement
 from nnid.datasets.preprocess import (
     UNIFORM_TOLERANCE,
+    PreprocessConfig,
     acceleration_gain2,
     check_uniform,
     derive_accelerations,
@@ -26,6 +27,7 @@ from nnid.datasets.preprocess import (
     held_at,
     lowpass,
     off_steps,
+    preprocess,
     repair_jumps,
     resample_log,
     savgol_derivative,
@@ -463,6 +465,49 @@ def test_a_clock_not_rounded_coarsely_keeps_the_median_step_bit_for_bit():
         assert (typical, rounding) == (median, 0.0), name
         expected = np.flatnonzero(np.abs(steps - median) > UNIFORM_TOLERANCE * median)
         np.testing.assert_array_equal(off, expected, err_msg=name)
+
+
+def _prepare_motion(log: pd.DataFrame) -> pd.DataFrame:
+    from nnid.models.parametric import prepare_motion
+
+    return prepare_motion(log, ["r"], 0.5, 4, True)
+
+
+def _loop_prepare(log: pd.DataFrame) -> pd.DataFrame:
+    from nnid.loop.residual_loop import ResidualLoop
+
+    loop = ResidualLoop(load_vehicle("bluerov2_heavy"))
+    loop.savgol_window = 0.5
+    return loop._prepare(log)
+
+
+_CHAINS = {
+    "preprocess": lambda log: preprocess(
+        log, PreprocessConfig(velocities="derive", accelerations=True)
+    )[0],
+    "prepare_motion": _prepare_motion,
+    "residual_loop": _loop_prepare,
+}
+
+
+@pytest.mark.parametrize("chain", list(_CHAINS))
+def test_a_chain_that_derives_velocities_then_accelerations_warns_of_dropped_samples_once(chain):
+    """A pose-only run with 20 samples dropped, its velocities and then its accelerations
+    derived in one call (the preprocessing, a model's motion, the residual loop's data): each
+    derivative warned that it was not evenly sampled, the same sentence twice for one clock.
+    Said once; the accelerations alone still say it."""
+    t = _dropped(np.arange(1000) * 0.01)
+    wave = np.sin(np.pi * t)
+    log = pd.DataFrame({"t": t, "experiment": "gaps", "z": 0.1 * wave, "phi": 0.0,
+                        "theta": 0.0, "psi": 0.5 * wave})  # fmt: skip
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        out = _CHAINS[chain](log)
+    said = [str(w.message) for w in caught if "not evenly sampled" in str(w.message)]
+    assert len(said) == 1 and said[0].startswith("experiment 'gaps' is not evenly sampled"), said
+    assert "dr" in out
+    with pytest.warns(UserWarning, match="experiment 'gaps' is not evenly sampled"):
+        derive_accelerations(out.drop(columns=[c for c in out if c.startswith("d")]), 0.5)
 
 
 def test_lowpass_refuses_a_run_of_one_sample_as_too_short_without_reading_its_rate():

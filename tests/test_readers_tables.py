@@ -233,6 +233,37 @@ def test_inspect_rate_is_one_the_log_has(tmp_path):
     assert [e["rate_hz"] for e in info["experiments"]] == pytest.approx([10.0, 100.0])
 
 
+def test_inspect_says_a_run_whose_stamps_come_in_bursts_is_so_not_a_100_khz_run_of_gaps(
+    tmp_path,
+):
+    """An IMU's run, ten samples 10 µs apart every 10 ms, beside a 100-Hz run with a 1-s hole:
+    inspect said the IMU's run was at 1e+05 Hz (its median step, one inside a burst) with each
+    burst's end a gap (29 of them). It says the run's clock comes in bursts, with the burst
+    sentence the fits refuse it by and its rate over the run, and counts no gap in it; the
+    hole in the even run is still a gap."""
+    k = np.arange(300)
+    imu = pd.DataFrame({"t": 0.01 * (k // 10) + 1e-5 * (k % 10), "experiment": "imu"})
+    even_t = 0.01 * np.arange(400)
+    even_t[200:] += 1.0
+    even = pd.DataFrame({"t": even_t, "experiment": "even"})
+    log = pd.concat([imu, even]).assign(u=0.1, tau_X=1.0)
+    path = tmp_path / "imu.csv"
+    log.to_csv(path, index=False)
+    result = runner.invoke(app, ["inspect", str(path), "--out", str(tmp_path / "o")])
+    assert result.exit_code == 0, result.output
+    said = " ".join(result.output.split())
+    assert "experiment 'imu': its stamps come in bursts: 1e-05 s apart (median)" in said, said
+    assert "gaps 1 (longest 1.01 s) (not counted in the 1 run in bursts)" in said, said
+    info = read_json(tmp_path / "o" / "summary.json")
+    runs = {e["name"]: e for e in info["experiments"]}
+    over_run = (imu["t"].size - 1) / np.ptp(imu["t"])  # the mean step: no pause in the run
+    assert runs["imu"]["rate_hz"] == pytest.approx(over_run)
+    assert f"{over_run:.0f} Hz over the run" in runs["imu"]["bursts"]
+    assert runs["imu"]["gap_s"] is None and runs["even"]["bursts"] is None
+    assert runs["even"]["rate_hz"] == pytest.approx(100.0)
+    assert [g["experiment"] for g in info["gaps"]] == ["even"]
+
+
 def test_inspect_counts_a_run_cut_at_a_gap_as_one_experiment(tmp_path):
     """One run cut into two pieces at a 1-s hole: inspect said "2 experiments" (it counted the
     pieces by their labels, r1#0 and r1#1) and "gaps 0" (each piece is gap-free)."""

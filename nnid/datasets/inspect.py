@@ -33,6 +33,7 @@ from nnid.datasets.preprocess import (
     derive_velocities,
     excited_dofs,
     experiment_rows,
+    logged_rate,
 )
 from nnid.errors import NnidInputError
 
@@ -82,7 +83,10 @@ def summarize(log: pd.DataFrame, savgol_window: float = 1.0, savgol_order: int =
     file's thrusters. ``slow``: the channels logged slower than the clock
     (:func:`nnid.datasets.gaps.slow_channels`; ``filled`` where the fits fill it with the gyro),
     whose empty cells between their samples are not in ``missing``, nor the rows outside their
-    sampled span (``ends``, :func:`nnid.datasets.gaps.span_ends`)."""
+    sampled span (``ends``, :func:`nnid.datasets.gaps.span_ends`). A run whose stamps come in
+    bursts (``bursts``: :func:`nnid.datasets.log.burst_clock`'s sentence, else None) has its
+    rate over the run (:func:`nnid.datasets.preprocess.logged_rate`) and no gaps counted
+    (``gap_s`` None): its steps are a burst's and the next burst's, no sample interval."""
     inputs = input_columns(log)
     known = {"t", "experiment", PIECE_OF, REPLAY_GROUP, *POSE, *VELOCITY, *ACCELERATION, *inputs}
     groups = experiment_rows(log)
@@ -92,7 +96,14 @@ def summarize(log: pd.DataFrame, savgol_window: float = 1.0, savgol_order: int =
     for name, pos in groups:
         t = t_all[pos]
         dt = np.diff(t)
+        rate, burst = logged_rate(t, np.nan)
         med = float(np.median(dt)) if dt.size else float("nan")
+        if burst:
+            # the median step is one inside a burst (an IMU's ten samples every 10 ms read as
+            # 100 kHz, and every burst's end as a gap): the run's rate is its rate over the
+            # run, and its steps tell no gap from the next burst
+            med = 1.0 / rate
+            dt = np.full(dt.size, med)
         intervals.append(dt)
         # a piece cut from a run at a gap (the readers' ``<run>#<k>``) is not an experiment of
         # its own: told by PIECE_OF, never by its label (nnid.datasets.log)
@@ -114,8 +125,9 @@ def summarize(log: pd.DataFrame, savgol_window: float = 1.0, savgol_order: int =
         span = float(t[-1] - t[0]) if t.size else 0.0
         held_s = float(sum(g["missing_s"] for g in held))
         exp_rows.append({"name": label, "samples": int(t.size), "duration_s": span - held_s,
-                         "gap_s": held_s,
-                         "rate_hz": rate_of(dt), "piece_of": whole})  # fmt: skip
+                         "gap_s": None if burst else held_s,
+                         "rate_hz": rate if burst else rate_of(dt), "piece_of": whole,
+                         "bursts": burst})  # fmt: skip
     pose = [c for c in POSE if c in log]
     made = derivable_velocities(pose)
     derivable = [c for c in ("p", "q", "r", "u", "v") if c in made and c not in log]
@@ -152,7 +164,11 @@ def summarize(log: pd.DataFrame, savgol_window: float = 1.0, savgol_order: int =
         "rate_hz": rate_of(np.concatenate(intervals)),
         # the time sampled: a 10-s hole in a run was counted as 10 s of data
         "duration_s": float(sum(e["duration_s"] for e in exp_rows)),
-        "gap_s": float(sum(g["missing_s"] for g in gaps)),
+        # not measured where no run's steps tell a gap (every run in bursts, no hole between
+        # a run's pieces)
+        "gap_s": None
+        if not gaps and all(e["bursts"] for e in exp_rows)
+        else float(sum(g["missing_s"] for g in gaps)),
         "runs": len({e["piece_of"] or e["name"] for e in exp_rows}),
         "experiments": exp_rows,
         "gaps": gaps,

@@ -224,7 +224,7 @@ def resample_log(
     for name, pos in experiment_rows(log):
         part = log.iloc[pos]
         t = part["t"].to_numpy(np.float64)
-        logged, burst = _logged_rate(t, rate)
+        logged, burst = logged_rate(t, rate)
         rates.append(logged)
         cuts = np.flatnonzero(np.diff(t) > gap) + 1 if gap else np.array([], int)
         bounds = np.split(np.arange(t.size), cuts)
@@ -296,7 +296,7 @@ def resample_log(
     return pd.concat(pieces, ignore_index=True)
 
 
-def _logged_rate(t: np.ndarray, rate: float) -> tuple[float, str | None]:
+def logged_rate(t: np.ndarray, rate: float) -> tuple[float, str | None]:
     """A run's logged rate (``t``: its times; ``rate``: the grid's, for a run of one sample)
     and, where its stamps come in bursts, :func:`nnid.datasets.log.burst_clock`'s sentence
     of them (else None): the typical step's rate (:func:`~nnid.datasets.log.clock_step`: the
@@ -313,11 +313,11 @@ def _logged_rate(t: np.ndarray, rate: float) -> tuple[float, str | None]:
 
 def refuse_bursts(t: np.ndarray, name: object, method: str, field: str) -> float:
     """Refuse the run ``name`` (``t``: its times) whose stamps come in bursts
-    (:func:`_logged_rate`): ``method`` (what reads the samples, as said to the user) steps
+    (:func:`logged_rate`): ``method`` (what reads the samples, as said to the user) steps
     sample by sample at one rate, which they do not have; ``field``: the error's. Returns
     the run's logged rate (NaN for a run of one sample), read once for the check and its
     caller."""
-    rate, burst = _logged_rate(t, np.nan)  # a run of one sample is no burst
+    rate, burst = logged_rate(t, np.nan)  # a run of one sample is no burst
     if burst:
         # no rate fits: at the median step's (~100 kHz) a 5 Hz cut-off acted at 0.05 Hz (and
         # a derivative came out ~190 times too large); at the run's, a burst's samples would
@@ -340,7 +340,7 @@ def refuse_bursty_runs(log: pd.DataFrame, method: str) -> None:
         return
     t = log["t"].to_numpy(np.float64)
     for name, pos in experiment_rows(log):
-        if _logged_rate(t[pos], np.nan)[1]:  # run_of only to name a run refused: it reads
+        if logged_rate(t[pos], np.nan)[1]:  # run_of only to name a run refused: it reads
             # the whole log, and a log cut into thousands of pieces is checked on every fit
             refuse_bursts(t[pos], run_of(log).get(name, name), method, "t")
 
@@ -500,7 +500,7 @@ def savgol_interp(y: np.ndarray, window: int, order: int, deriv: int, delta: flo
     a call, where the arithmetic of a 2-s window costs 0.1 ms: ``detect --follow`` takes six
     such derivatives from every 0.5 s of rows."""
     y = np.asarray(y, dtype=np.float64)
-    if window > y.shape[0]:  # callers refuse it first (_check_window_fits, _piece_window)
+    if window > y.shape[0]:  # callers refuse it first (_check_window_fits, piece_window)
         raise ValueError(f"a Savitzky-Golay window of {window} samples on {y.shape[0]} samples")
     out = convolve1d(y, _savgol_kernel(window, order, deriv, delta), axis=0, mode="constant")
     lhs, scale = _edge_design(window, order)
@@ -601,7 +601,21 @@ def run_window(
     if t.size < 2:
         return np.nan, savgol_window(0.0, 1.0, order)
     refuse_bursts(t, name, "a Savitzky-Golay derivative", "t")
-    dt = typical_step(t, np.nan)
+    return step_window(t, window_s, order, np.nan, setting)
+
+
+def step_window(
+    t: np.ndarray,
+    window_s: float,
+    order: int,
+    one_sample: float,
+    setting: str | None = None,
+) -> tuple[float, int]:
+    """A run's typical step (:func:`~nnid.datasets.log.typical_step`, ``one_sample`` for a run
+    of one sample) and the Savitzky-Golay window of ``window_s`` s at its rate
+    (:func:`savgol_window`, ``setting`` named where widened). No check of the clock:
+    :func:`run_window` is the one that refuses stamps in bursts before a derivative."""
+    dt = typical_step(t, one_sample)
     return dt, savgol_window(window_s, 1.0 / dt, order, setting)
 
 
@@ -648,7 +662,7 @@ def _between_steps(
     total, count = np.zeros_like(y), np.zeros_like(y)
     for a, b in pairwise(bounds):
         piece = y[a : b + 1]
-        w = _piece_window(piece.size, window)
+        w = piece_window(piece.size, window)
         if w >= 3:
             d = savgol_interp(piece, w, min(order, w - 1), deriv, dt)
         else:  # two samples: a slope, and no higher derivative
@@ -663,7 +677,7 @@ def savgol_noise_gain(window: int, order: int, dt: float, deriv: int = 1) -> flo
     return float(np.sqrt(np.sum(savgol_coeffs(window, order, deriv=deriv, delta=dt) ** 2)))
 
 
-def _piece_window(size: int, window: int) -> int:
+def piece_window(size: int, window: int) -> int:
     """The widest odd window up to ``window`` that a piece of ``size`` samples holds."""
     return min(window, size - (1 - size % 2))
 
@@ -716,7 +730,7 @@ def _between_steps_gain2(
     ends = []  # (rows, centre gain²) of the stretch's first and last piece's outer half window
     for a, b in pairwise(bounds):
         size = b - a + 1
-        w = _piece_window(size, window)
+        w = piece_window(size, window)
         if w >= 3:
             o = min(order, w - 1)
             fit = savgol_interp(np.eye(w), w, o, deriv, dt)  # row i: the weights at sample i
@@ -1007,11 +1021,15 @@ def derive_accelerations(
     report: CleaningReport | None = None,
     cut_at_steps: bool = False,
     setting: str = "savgol_window",
+    warn_uneven: bool = True,
 ) -> pd.DataFrame:
     """ν̇ (``du`` … ``dr``) by SG differentiation of the body velocities present;
     ``cut_at_steps`` (inputs held between samples, ``zoh_midpoint``): never across a step of
     the inputs that look held (:func:`held_inputs`, :func:`_between_steps`). ``setting``: the
-    user's key that chose ``window_s``, named where the window is widened or refused."""
+    user's key that chose ``window_s``, named where the window is widened or refused.
+    ``warn_uneven`` False: the caller has just derived this log's velocities
+    (:func:`derive_velocities`), which warned of its uneven runs (:func:`uneven_runs`) on the
+    same clock: not said twice."""
     cols = [c for c in VELOCITY if c in log]
     _refuse_infinite(log, ["t", *cols], "deriving accelerations from the velocities")
     out = log.copy()
@@ -1036,7 +1054,8 @@ def derive_accelerations(
                 setting=setting,
                 steps=steps,
             )
-    uneven_runs(out, "the Savitzky-Golay derivative")
+    if warn_uneven:
+        uneven_runs(out, "the Savitzky-Golay derivative")
     for c in cols:
         out["d" + c] = derived[c]
     if report is not None and cols:
@@ -1062,7 +1081,7 @@ def lowpass(
     report: CleaningReport | None = None,
 ) -> pd.DataFrame:
     """Zero-phase Butterworth low-pass (forward-backward, no delay) per experiment, designed
-    at the run's logged rate (:func:`_logged_rate`, as :func:`resample_log` reads it). The
+    at the run's logged rate (:func:`logged_rate`, as :func:`resample_log` reads it). The
     filter steps sample by sample, so a run whose stamps come in bursts (an IMU's ten
     samples together every 10 ms) is refused (:func:`refuse_bursts`), and one whose steps
     are not one step (dropped samples, jitter) is warned of (:func:`uneven_runs`): resample
@@ -1334,12 +1353,15 @@ def preprocess(
         log = repair_jumps(log, cfg.jumps, threshold=cfg.jump_threshold, report=report)
     if cfg.lowpass:
         log = lowpass(log, cfg.lowpass, cfg.cutoff, report=report)
-    if cfg.velocities != "keep":
+    derived = cfg.velocities != "keep"
+    if derived:
         log = derive_velocities(
             log, cfg.savgol_window, cfg.savgol_order, report, overwrite=cfg.velocities == "replace"
         )
     if cfg.accelerations and not all(c in log for c in ACCELERATION):
-        log = derive_accelerations(log, cfg.savgol_window, cfg.savgol_order, report)
+        log = derive_accelerations(
+            log, cfg.savgol_window, cfg.savgol_order, report, warn_uneven=not derived
+        )
         held, dt = held_at(log) if actuator_lag == 0 else ([], float("nan"))
         if held:
             # a fit then reads them as logged, and its own held-input warning cannot fire;

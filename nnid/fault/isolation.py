@@ -34,8 +34,8 @@ import pandas as pd
 from scipy.special import lambertw
 from scipy.stats import f as f_dist
 
-from nnid.datasets.log import POSE, TAU, VELOCITY, typical_step
-from nnid.datasets.preprocess import savgol_derivative, savgol_window
+from nnid.datasets.log import POSE, TAU, VELOCITY
+from nnid.datasets.preprocess import piece_window, savgol_derivative, step_window
 from nnid.loop.diagnose import Fit, screen
 from nnid.loop.effects import Candidate, candidates
 from nnid.models.parametric import ParametricFossen, vehicle_with
@@ -131,9 +131,7 @@ def midpoint_data(
     step -= 2 * np.pi * np.floor((step + np.pi) / (2 * np.pi))
     mid[:, 3:6] = x0[:, 3:6] + 0.5 * step
     span = np.arange(rows[0] - 1, rows[-1] + 1)
-    t = data["t"][span]
-    dt = typical_step(t, np.nan)
-    window = smoothing_window(t, savgol)
+    dt, window = smoothing_window(data["t"][span], savgol)
     vel = data["x"][span, 6:12]
     acc = np.column_stack([savgol_derivative(vel[:, j], dt, window, savgol[1]) for j in range(6)])
     at = rows - span[0]
@@ -151,13 +149,15 @@ def midpoint_data(
     }
 
 
-def smoothing_window(t: np.ndarray, savgol: tuple[float, int]) -> int:
-    """The samples of :func:`midpoint_data`'s Savitzky-Golay derivative on a span of times
-    ``t``: ``savgol``'s window in seconds at the span's rate, at most the span (odd). Its
-    last half window is evaluated off-centre, the window's polynomial extrapolated
+def smoothing_window(t: np.ndarray, savgol: tuple[float, int]) -> tuple[float, int]:
+    """The typical step and the samples of :func:`midpoint_data`'s Savitzky-Golay derivative
+    on a span of times ``t``: ``savgol``'s window in seconds at the span's rate
+    (:func:`~nnid.datasets.preprocess.step_window`), at most the span (odd,
+    :func:`~nnid.datasets.preprocess.piece_window`). Its last half window is evaluated
+    off-centre, the window's polynomial extrapolated
     (:func:`~nnid.datasets.preprocess.savgol_interp`)."""
-    dt = typical_step(t, np.nan)
-    return min(savgol_window(savgol[0], 1.0 / dt, savgol[1]), t.size - (1 - t.size % 2))
+    dt, window = step_window(t, *savgol, np.nan)
+    return dt, piece_window(t.size, window)
 
 
 def midpoint_frame(arrays: dict) -> pd.DataFrame:
@@ -256,7 +256,7 @@ class Hypotheses:
         out = np.zeros(rows.size, dtype=bool)
         if rows.size and self.reads_acceleration():
             span = data["t"][max(rows[0] - 1, 0) : rows[-1] + 1]  # as midpoint_data's
-            half = smoothing_window(span, self.savgol) // 2
+            half = smoothing_window(span, self.savgol)[1] // 2
             out[rows.size - min(half, rows.size) :] = True
         return out
 

@@ -147,13 +147,17 @@ class ResidualLoop:
         # (restoring forces need it on every row); what is left empty is a gap
         log = fill_slow(log, self.cleaning_)
         self.gaps_ = gaps_record(find_gaps(log))
-        if any(d not in log for d in DOFS) and all(a in log for a in ANGLES):
+        derived = any(d not in log for d in DOFS) and all(a in log for a in ANGLES)
+        if derived:
             log = derive_velocities(log, self.savgol_window, self.savgol_order, self.cleaning_)
         log = bridge_from_pose(
             log, self.savgol_window, self.savgol_order, self.max_bridge_s, self.cleaning_
         )
         if any("d" + d not in log for d in DOFS):
-            log = derive_accelerations(log, self.savgol_window, self.savgol_order, self.cleaning_)
+            # derive_velocities has warned of the log's uneven runs (bridging keeps its clock)
+            log = derive_accelerations(
+                log, self.savgol_window, self.savgol_order, self.cleaning_, warn_uneven=not derived
+            )
         return log
 
     def _split(self, log: pd.DataFrame) -> tuple[pd.DataFrame, pd.DataFrame]:

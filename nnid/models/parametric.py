@@ -46,6 +46,8 @@ from nnid.datasets.preprocess import (
     HELD_DT,
     HELD_SHARE,
     held_at,
+    savgol_noise_gain,
+    step_window,
     velocity_sources,
     zoh_midpoint,
 )
@@ -806,21 +808,33 @@ def _pose_velocity_noise(
     by the Savitzky-Golay first derivative of ``savgol`` (window s, order), each experiment at
     its own rate: the pose noise through J⁻¹(η) (:func:`pose_noise_variance`, its mean over
     the samples) times that derivative's gain; 0 for the DOFs not in ``columns``."""
-    from nnid.datasets.preprocess import savgol_noise_gain, savgol_window
-
     t = np.asarray(data["t"], dtype=np.float64)
     experiment = np.asarray(data.get("experiment", np.zeros(t.size, dtype=int)))
-    gain2 = np.ones(t.size)
-    for k in np.unique(experiment):
-        rows = np.flatnonzero(experiment == k)
-        dt = typical_step(t[rows], 1.0)
-        window = savgol_window(savgol[0], 1.0 / dt, savgol[1])
-        gain2[rows] = savgol_noise_gain(window, savgol[1], dt) ** 2
+    gain2 = _run_gain2(t, experiment, savgol)
     var = pose_noise_variance(data, DOFS, columns) * gain2[:, None]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # a DOF not derived: all NaN
         mean = np.nanmean(var, axis=0)
     return np.sqrt(np.nan_to_num(mean, nan=0.0))
+
+
+def _run_gain2(
+    t: np.ndarray,
+    experiment: np.ndarray,
+    savgol: tuple[float, int],
+    gain2: Callable[[int, float], float] | None = None,
+) -> np.ndarray:
+    """Per sample, the squared noise gain of the Savitzky-Golay derivative of ``savgol``
+    (window s, order) at its experiment's typical step (:func:`step_window`; 1 s for a run of
+    one sample): the first derivative's (:func:`savgol_noise_gain`), or ``gain2(window, dt)``."""
+    out = np.ones(t.size)
+    for k in np.unique(experiment):
+        rows = np.flatnonzero(experiment == k)
+        dt, window = step_window(t[rows], *savgol, 1.0)
+        out[rows] = (
+            savgol_noise_gain(window, savgol[1], dt) ** 2 if gain2 is None else gain2(window, dt)
+        )
+    return out
 
 
 def twice_differentiated_gain2(
@@ -903,7 +917,6 @@ def acceleration_noise_share(
     derivative that made it (:func:`~nnid.datasets.preprocess.acceleration_gain2`: cut at the
     steps of held inputs, ``zoh_midpoint``), whose short pieces the full window's gain
     under-states many times."""
-    from nnid.datasets.preprocess import savgol_noise_gain, savgol_window
     from nnid.trainers.ukf import noise_level
 
     idx = [DOFS.index(d) for d in dofs]
@@ -917,23 +930,27 @@ def acceleration_noise_share(
     pose_columns, pose_savgol = from_pose if from_pose is not None and not logged else ((), None)
     posed = np.array([d in pose_columns for d in dofs], dtype=bool)
     sigma = noise_level({"nu": data["nu_dot"] if logged else data["nu"]}, dofs)
-    gain2 = np.zeros(data["t"].size)
-    pose_gain2 = np.zeros(data["t"].size)
-    for k in np.unique(data["experiment"]):
-        rows = np.flatnonzero(data["experiment"] == k)
-        dt = typical_step(data["t"][rows], 1.0)
-        if filter_lambda is not None:
+    t, experiment = data["t"], data["experiment"]
+    if filter_lambda is not None:
+        gain2 = np.zeros(t.size)
+        for k in np.unique(experiment):
+            rows = np.flatnonzero(experiment == k)
+            dt = typical_step(t[rows], 1.0)
             gain2[rows] = filter_lambda**2 / (1.0 + filter_lambda * dt / 2.0)
-        elif savgol is not None and "nu_dot_gain2" in data:
-            gain2[rows] = data["nu_dot_gain2"][rows]
-        elif savgol is not None:
-            window = savgol_window(savgol[0], 1.0 / dt, savgol[1])
-            gain2[rows] = savgol_noise_gain(window, savgol[1], dt) ** 2
-        else:
-            gain2[rows] = 1.0
-        if posed.any():
-            window = savgol_window(pose_savgol[0], 1.0 / dt, pose_savgol[1])
-            pose_gain2[rows] = twice_differentiated_gain2(window, pose_savgol[1], dt, filter_lambda)
+    elif savgol is not None and "nu_dot_gain2" in data:
+        gain2 = np.asarray(data["nu_dot_gain2"], dtype=np.float64)
+    elif savgol is not None:
+        gain2 = _run_gain2(t, experiment, savgol)
+    else:
+        gain2 = np.ones(t.size)
+    if posed.any():
+        order = pose_savgol[1]
+        pose_gain2 = _run_gain2(
+            t,
+            experiment,
+            pose_savgol,
+            lambda window, dt: twice_differentiated_gain2(window, order, dt, filter_lambda),
+        )
     noise2 = sigma**2 * float(np.nanmean(gain2[keep]))  # NaN: a sample with no derivative
     if posed.any():
         pose2 = pose_noise_variance(data, dofs, pose_columns) * pose_gain2[:, None]
@@ -1278,11 +1295,19 @@ def prepare_motion(
     )
 
     check_velocities(log.columns, dofs)
-    if any(d not in log for d in dofs) and all(a in log for a in ANGLES):
+    derived = any(d not in log for d in dofs) and all(a in log for a in ANGLES)
+    if derived:
         log = derive_velocities(log, savgol_window, savgol_order, report, setting=setting)
     if accelerations and any("d" + d not in log for d in dofs):
+        # derive_velocities has warned of the log's uneven runs: not said a second time
         log = derive_accelerations(
-            log, savgol_window, savgol_order, report, cut_at_steps, setting=setting
+            log,
+            savgol_window,
+            savgol_order,
+            report,
+            cut_at_steps,
+            setting=setting,
+            warn_uneven=not derived,
         )
     return log
 
