@@ -362,6 +362,56 @@ def test_plateaus_are_cut_at_missing_samples_and_other_uneven_stamps_are_refused
     assert [p.n for p in plateaus] == [300, 300]
 
 
+def test_a_clock_stamped_in_whole_ms_gives_the_plateaus_of_its_float_clock():
+    """120 Hz stamped in whole milliseconds steps 8, 8, 9 ms. The median, 8 ms, took every
+    9-ms step for a missing sample and cut the log into pieces of three samples: no plateau
+    at all, without a word. The step is now the one the rest of nnid reads (the mean of the
+    one-sample steps), also for an experiment whose rows resume after another's on a clock
+    4 ms off its first piece's line: each piece keeps to its own."""
+    from nnid.trainers.caccia import find_plateaus
+
+    rng = np.random.default_rng(0)
+    n = 2 * 20 * 120  # two 20-s levels at 120 Hz
+
+    def run(forces):
+        f = np.repeat(forces, n // 2)
+        return f, np.r_[0.0, np.cumsum(0.05 * f[:-1] / 120)] + rng.normal(0, 1e-4, f.size)
+
+    (fa, xa), (fb, xb), (fc, xc) = run([1.0, 2.0]), run([3.0, -1.5]), run([2.0, 1.0])
+    force, position = np.r_[fa, fb, fc], np.r_[xa, xb, xc]
+    exact = np.r_[np.arange(2 * n), 2 * n + 0.48 + np.arange(n)] / 120
+    whole_ms = np.round(exact * 1000) / 1000
+    assert set(np.round(np.diff(whole_ms[:n]) * 1000)) == {8.0, 9.0}
+
+    def found(t, codes):
+        return sorted((p.force, p.n, p.start, p.end, p.speed) for p in find_plateaus(
+            t, position, force, codes, settle_window=2.0))  # fmt: skip
+
+    want = found(exact, np.repeat([0, 1, 2], n))
+    assert len(want) == 6
+    for codes in ([0, 1, 2], [0, 1, 0]):
+        got = found(whole_ms, np.repeat(codes, n))
+        assert [p[:2] for p in got] == [p[:2] for p in want]
+        # the stamps are the exact times to half a millisecond, the speeds to their noise
+        assert np.array(got)[:, 2:4] == pytest.approx(np.array(want)[:, 2:4], abs=5e-4)
+        assert [p[4] for p in got] == pytest.approx([p[4] for p in want], rel=1e-5)
+
+
+def test_a_sinusoid_run_stamped_in_whole_ms_is_integrated_at_its_step():
+    """Step 2 on a 120-Hz sinusoid run stamped in whole ms was refused as "not uniformly
+    sampled" (every 9-ms step more than 10 % over the median 8 ms). It is now read at its
+    step: the velocity column is the float clock's, not 8/8.33 of it."""
+    from nnid.trainers.caccia import integrated_regression
+
+    exact = np.arange(20 * 120) / 120
+    position = 0.3 * np.sin(0.5 * exact)
+    force = np.cos(0.5 * exact)
+    whole_ms = np.round(exact * 1000) / 1000
+    want = integrated_regression(exact, position, force, 1.0, 1.0)[0][:, 0]
+    got = integrated_regression(whole_ms, position, force, 1.0, 1.0)[0][:, 0]
+    assert got == pytest.approx(want, rel=1e-4, abs=1e-6)
+
+
 def test_the_pieces_a_gap_cut_a_run_into_keep_its_weight_setting(setup):
     """resample_log cuts a run at a 5-s hole into pieces 'weight1#0', 'weight1#1' (piece_of
     'weight1'). Caccia took each piece for an experiment: by default a weight setting each

@@ -140,6 +140,25 @@ def test_a_runs_last_logged_sample_on_the_grid_is_kept(tmp_path, start, unit):
         assert log["z"].tolist() == depth[:kept].tolist()
 
 
+def test_a_clock_stamped_in_whole_ms_is_gridded_at_its_rate_when_no_rate_is_given(tmp_path):
+    """No rate: the grid's period is the source's step. 120 Hz stamped in whole milliseconds
+    steps 8, 8, 9 ms, whose median made a 125-Hz grid (25 more rows in 600 samples, values
+    interpolated between the logged ones); its step is the mean of its one-sample steps, as
+    the rest of nnid reads it (nnid.datasets.log.clock_step)."""
+    n = 600
+    stamps = np.round(np.arange(n) / 120, 3)
+    assert set(np.round(np.diff(stamps) * 1000)) == {8.0, 9.0}
+    depth = np.sqrt(np.arange(n, dtype=np.float64))
+    nav = {"run": "r1", "time": stamps, "depth": depth, "pwm": depth}
+    pd.DataFrame(nav).to_csv(tmp_path / "nav.csv", index=False)
+    body = ON_GRID_MAP.split("[[sources]]")[:2]
+    body[0] = body[0].replace("rate = 10.0\n", "")
+    body[1] = body[1].replace('z = "depth"', 'z = "depth", cmd_1 = "pwm"')
+    log, _ = load_log(tmp_path, _write_map(tmp_path / "map.toml", "[[sources]]".join(body)))
+    assert len(log) == n
+    assert np.diff(log["t"]) == pytest.approx(np.full(n - 1, 1 / 120), rel=1e-3)
+
+
 #: two runs of nanoseconds since the epoch, 100 Hz: the first's last stamp is 2.04 units of its
 #: seconds' last place past its grid time once divided by 1e9 (time_unit), the second's that
 #: much short once multiplied by 1e-9 (time_scale)

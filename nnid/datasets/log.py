@@ -294,11 +294,16 @@ def typical_step(t: np.ndarray, one_sample: OneSample) -> float | OneSample:
     return clock_step(t)[0] if t.size > 1 else one_sample
 
 
-def clock_step(t: np.ndarray) -> tuple[float, float]:
-    """A run's typical step (``t``: its times, two or more) and its clock's rounding, s: a
-    coarsely rounded clock's (:func:`rounded_clock`), else the median step and 0."""
-    rounded = rounded_clock(t)
-    return rounded if rounded is not None else (float(np.median(np.diff(t))), 0.0)
+def clock_step(t: np.ndarray, within: np.ndarray | None = None) -> tuple[float, float]:
+    """A run's typical step (``t``: its times, two or more; ``within``: which of its steps are
+    sample steps, at least one, where a run resumes after another's rows) and its clock's
+    rounding, s: a coarsely rounded clock's (:func:`rounded_clock`), else the median step
+    and 0."""
+    rounded = rounded_clock(t, within)
+    if rounded is not None:
+        return rounded
+    steps = np.diff(t)
+    return float(np.median(steps if within is None else steps[within])), 0.0
 
 
 #: how many times a step's float error the resolution of a clock must be to be read as its
@@ -307,7 +312,7 @@ def clock_step(t: np.ndarray) -> tuple[float, float]:
 ROUNDING_OVER_FLOAT = 1e3
 
 
-def rounded_clock(t: np.ndarray) -> tuple[float, float] | None:
+def rounded_clock(t: np.ndarray, within: np.ndarray | None = None) -> tuple[float, float] | None:
     """(step, resolution q), s, of a run (``t``: its times) whose clock is rounded coarsely:
     every step a whole number of q (to the stamps' float error), q at most half the median
     step, and its one-sample steps (those within q of the median) two neighbouring multiples
@@ -315,17 +320,20 @@ def rounded_clock(t: np.ndarray) -> tuple[float, float] | None:
     rounded: 120 Hz in milliseconds steps 8, 8, 9 ms; a rate that changes from 8 to 9 ms
     drifts off the line). The step is the mean of the one-sample steps, the rate over them.
     None for any other clock (float stamps, jitter, a rate a whole number of q), whose step
-    stays the median (:func:`typical_step`)."""
+    stays the median (:func:`typical_step`). ``within``: which steps are sample steps (else
+    all), for a run whose rows resume after another's: the others, its joins, are read for
+    nothing, and each piece between them keeps to a line of its own."""
     t = np.asarray(t, dtype=np.float64)
-    if t.size < 3:
-        return None
     steps = np.diff(t)
-    median = float(np.median(steps))
+    inside = steps if within is None else steps[within]
+    if inside.size < 2:
+        return None
+    median = float(np.median(inside))
     if not median > 0:
         return None
     # a step holds both its stamps' float rounding and their reading (a count of ms divided)
     err = 4.0 * float(np.spacing(np.max(np.abs(t))))
-    near = steps[np.abs(steps - median) < 0.5 * median]
+    near = inside[np.abs(inside - median) < 0.5 * median]
     above = near - near.min()
     above = above[above > err]
     if not above.size:  # one step throughout: the median is it
@@ -334,19 +342,22 @@ def rounded_clock(t: np.ndarray) -> tuple[float, float] | None:
     # one unit of q apart may be a dropped sample (1 and 2 ms), not rounding
     if q < ROUNDING_OVER_FLOAT * err or q > median / 2:
         return None
-    units = np.round(steps / q)
+    units = np.round(inside / q)
     # q itself is read to 2 err, which each unit of a step multiplies
-    if np.any(np.abs(steps - units * q) > (1.0 + 2.0 * units) * err):
+    if np.any(np.abs(inside - units * q) > (1.0 + 2.0 * units) * err):
         return None
     one = np.abs(units - np.round(median / q)) <= 1
     if np.unique(units[one]).size != 2:  # three values are jitter, not rounding
         return None
-    step = float(steps[one].mean())
+    step = float(inside[one].mean())
     # rounded stamps stay within q/2 of the line of the true step (2q once the step is the
-    # mean of a few runs between dropped samples); a rate change drifts off it
+    # mean of a few runs between dropped samples); a rate change drifts off it. A join's
+    # count shifts every later stamp alike, so each piece is measured against its own line
     count = np.cumsum(np.round(steps / step))
     off_line = np.concatenate([[0.0], t[1:] - t[0] - count * step])
-    if np.ptp(off_line) > 3.0 * q:
+    starts = np.flatnonzero(np.r_[True, ~within]) if within is not None else np.zeros(1, int)
+    spread = np.maximum.reduceat(off_line, starts) - np.minimum.reduceat(off_line, starts)
+    if np.max(spread) > 3.0 * q:
         return None
     return step, q
 

@@ -86,21 +86,22 @@ UNIFORM_TOLERANCE = 0.1
 
 
 def off_steps(
-    t: np.ndarray, tolerance: float = UNIFORM_TOLERANCE
+    t: np.ndarray, tolerance: float = UNIFORM_TOLERANCE, within: np.ndarray | None = None
 ) -> tuple[float, np.ndarray, float]:
     """A run's typical sampling interval (``t``: its times, two or more;
     :func:`~nnid.datasets.log.clock_step`), where an interval differs from it by more than
     ``tolerance`` of it plus the clock's rounding (samples missing, a rate that changes,
     jitter beyond a clock's rounding), and that rounding (0 for a clock not rounded
     coarsely): :func:`check_uniform`'s rule. 120 Hz stamped in milliseconds steps 8 and 9 ms
-    around 8.33 ms, each one sample; the median rule took the 9-ms steps for missing ones."""
+    around 8.33 ms, each one sample; the median rule took the 9-ms steps for missing ones.
+    ``within``: which steps are intervals (at least one), for a run whose rows resume after
+    another's; its joins are neither read nor returned."""
     steps = np.diff(t)
-    typical, rounding = clock_step(t)
-    return (
-        typical,
-        np.flatnonzero(np.abs(steps - typical) > rounding + tolerance * typical),
-        rounding,
-    )
+    typical, rounding = clock_step(t, within)
+    off = np.abs(steps - typical) > rounding + tolerance * typical
+    if within is not None:
+        off &= within
+    return typical, np.flatnonzero(off), rounding
 
 
 def uneven_runs(log: pd.DataFrame, method: str) -> None:

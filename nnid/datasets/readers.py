@@ -37,6 +37,7 @@ from nnid.datasets.log import (
     fine_clock_slip,
     paced_step,
     time_unit_slip,
+    typical_step,
     validate_log,
     wrap_angle,
 )
@@ -424,15 +425,20 @@ DECLARE_SOURCE_TIME_UNIT = (
 
 def _clock(parts: list[tuple[Source, pd.DataFrame]], cmap: ColumnMap, exp: str) -> float:
     """The sample period of an experiment's fastest measured source (the time base when the
-    config gives no ``rate``), its clock checked for seconds: milliseconds without a
-    ``time_scale`` would make a run a thousand times longer. Commands logged on change and
-    row clocks are not judged: their steps are the commands' or the config's."""
+    config gives no ``rate``): its typical step (:func:`~nnid.datasets.log.typical_step`, so
+    120 Hz stamped in ms, 8, 8, 9 ms, is gridded at 120 Hz, not its median's 125), its clock
+    checked for seconds: milliseconds without a ``time_scale`` would make a run a thousand
+    times longer. Commands logged on change and row clocks are not judged: their steps are
+    the commands' or the config's."""
     timed = [(s, df) for s, df in parts if s.method == "linear" and not s.row_clock]
     steps = []
     for s, df in timed or parts:
         t = np.unique(df["t"].to_numpy())
-        steps.append((float(np.median(np.diff(t))) if t.size > 1 else np.inf, s, t))
+        steps.append((typical_step(t, np.inf), s, t))
     step, source, t = min(steps, key=lambda x: x[0])
+    # the unit and burst checks read the median step, as check_time_unit and the logged
+    # rate do: a burst's is the step inside it, which burst_clock sets against the pace
+    median = float(np.median(np.diff(t))) if t.size > 1 else np.inf
     overall = paced_step(np.diff(t)) if t.size > 1 else np.inf
     if not np.isfinite(step):
         raise NnidInputError(
@@ -446,7 +452,7 @@ def _clock(parts: list[tuple[Source, pd.DataFrame]], cmap: ColumnMap, exp: str) 
         (u for u, (_, n) in TIME_UNITS.items() if np.isclose(n * source.time_scale, 1.0)), None
     )
     scaled = source.declares_clock() or source.time_scale != 1.0
-    fine = fine_clock_slip(step, unit or "s", scaled, overall) if timed else None
+    fine = fine_clock_slip(median, unit or "s", scaled, overall) if timed else None
     if fine:
         key = "time_unit" if source.time_unit else "time_scale"
         fix = (
@@ -472,7 +478,7 @@ def _clock(parts: list[tuple[Source, pd.DataFrame]], cmap: ColumnMap, exp: str) 
         )
     # a median step inside a burst is no sample period: a grid at it was refused downstream
     # as hours read as seconds
-    burst = burst_clock(step, overall) if cmap.rate is None else None
+    burst = burst_clock(median, overall) if cmap.rate is None else None
     if burst:
         raise NnidInputError(
             f"source '{source.file}': {burst}: its median step is no sample period to make "

@@ -83,7 +83,7 @@ from scipy.optimize import minimize_scalar
 from nnid.datasets.arrays import log_arrays
 from nnid.datasets.excitation import PRBS, DOptimalSine
 from nnid.datasets.measurement import Measurement
-from nnid.datasets.preprocess import UNIFORM_TOLERANCE, savgol_interp, savgol_window, true_runs
+from nnid.datasets.preprocess import off_steps, savgol_interp, savgol_window, true_runs
 from nnid.datasets.simulator import simulate, simulate_config
 from nnid.errors import NnidInputError
 from nnid.evaluation.persistence import combined_excitation
@@ -219,19 +219,24 @@ SLOW_GAPS = 4
 def _sample_interval(
     t: np.ndarray, joins: np.ndarray, run: str, cut_gaps: bool = True
 ) -> tuple[float, np.ndarray]:
-    """The median sampling interval of one run's time stamps ``t`` (``joins``: where its rows
-    resume after another run's, not an interval) and where samples are missing (an interval
-    over 1 + :data:`UNIFORM_TOLERANCE` of the median). The Savitzky-Golay filters count time
-    in samples, so anything else that is not uniform is refused, naming ``run``: an interval
-    shorter than the median (jitter, a faster rate) or :data:`SLOW_GAPS` gaps in a row (a
-    slower rate, whose every sample would be cut off alone and dropped; fewer are dropouts, a
-    lone sample between two of them too short for any plateau); a gap too unless
-    ``cut_gaps``."""
+    """The typical sampling interval of one run's time stamps ``t`` (``joins``: where its rows
+    resume after another run's, not an interval) and where samples are missing: the
+    one-sample rule of the rest of nnid (:func:`~nnid.datasets.preprocess.off_steps`: the
+    median, or a coarsely rounded clock's step, 120 Hz stamped in ms steps 8, 8, 9 ms), an
+    interval longer than that. The Savitzky-Golay filters count time in samples, so anything
+    else that is not uniform is refused, naming ``run``: an interval shorter than one (jitter,
+    a faster rate) or :data:`SLOW_GAPS` gaps in a row (a slower rate, whose every sample
+    would be cut off alone and dropped; fewer are dropouts, a lone sample between two of them
+    too short for any plateau); a gap too unless ``cut_gaps``."""
     d = np.diff(t)
     within = ~joins
-    dt = float(np.median(d[within])) if within.any() else 1.0
-    missing = within & (d > (1.0 + UNIFORM_TOLERANCE) * dt)
-    bad = within & (d < (1.0 - UNIFORM_TOLERANCE) * dt)
+    dt, off = 1.0, np.empty(0, np.int64)  # no interval: nothing to count in
+    if within.any():
+        dt, off, _ = off_steps(t, within=within)
+    missing = np.zeros(d.size, bool)
+    bad = np.zeros(d.size, bool)
+    missing[off] = d[off] > dt
+    bad[off] = d[off] < dt
     in_row = np.convolve(missing.astype(np.int64), np.ones(SLOW_GAPS, np.int64), "valid")
     bad[: in_row.size] |= in_row == SLOW_GAPS
     if not cut_gaps:
