@@ -226,8 +226,10 @@ def scenarios() -> None:
                 continue
             size = a["value"] if a["value"] is not None else a["efficiency"]
             what = a["effect"] or a["thruster"]
+            # None: an alarm not judged (too few samples in its window), no confidence measured
+            confidence = "not measured" if a["confidence"] is None else f"{a['confidence']:.2f}"
             print(f"  {label} seed {seed}: t {a['t']:.2f} s, {a['kind']}, {what} = {size:.3g}, "
-                  f"confidence {a['confidence']:.2f}, "
+                  f"confidence {confidence}, "
                   f"alarms after it {len(alarms) - 1}")  # fmt: skip
     healthy = pd.concat(
         [simulate_faults(vehicle, 600, seed=5000 + s, experiment=f"q{s}") for s in range(6)],

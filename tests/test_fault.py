@@ -35,6 +35,8 @@ from nnid.fault.detect import (
     ENDED_SHORT,
     ISOLATED_SHORT,
     NOT_JUDGED,
+    ON_HELD,
+    ON_PART,
     RESIZED_SHORT,
     TOO_FEW_FINITE,
     UNEXPLAINED_SHORT,
@@ -44,10 +46,11 @@ from nnid.fault.detect import (
     detect,
     explained_by_the_changes,
     leave_scale,
+    on_part,
     read_ratio,
     unjudged_tail,
 )
-from nnid.fault.follow import follow_csv
+from nnid.fault.follow import describe_alarm, follow_csv
 from nnid.fault.isolation import (
     LEAST_ROWS,
     TOO_FEW,
@@ -1293,10 +1296,112 @@ def test_a_window_with_too_few_finite_rows_is_not_judged_not_unexplained(
     for result in _batch_and_followed(monitor, gap, tmp_path):
         first = result.alarms[0]
         held = gap["t"][(gap["t"] >= first["t"] - 1e-9) & (gap["t"] <= first["t"] + 10.0)]
-        assert held.size < LEAST_ROWS and "cut_short" not in first
+        # the gap, not the log's end, left its rows over part of the window (on_part)
+        assert held.size < LEAST_ROWS and first["cut_short"]["by"] == "gap"
         assert first["meaning"].startswith(TOO_FEW_FINITE) and "restart" not in first["meaning"]
         assert f"({held.size} of the {held.size} samples it holds" in first["meaning"]
         assert (first["repeats"], first["last_seen_t"]) == (None, None)
+
+
+@pytest.fixture(scope="module")
+def persisting_then_cut(vehicle):
+    """Two thrusters lost at 20 s (seed 102: unexplained, alarmed at 20.05 s and again at
+    30.10 s, right after the statistics restart), the log ending at 30.45 s: the second
+    alarm's window holds 8 rows, too few to judge."""
+    faults = [Fault("thruster", FAULT_T, thruster="h1", efficiency=0.3),
+              Fault("thruster", FAULT_T, thruster="v2", efficiency=0.3)]  # fmt: skip
+    log = simulate_faults(vehicle, 31, faults=faults, seed=102)
+    return log[log["t"] <= 30.45 + 1e-9].reset_index(drop=True)
+
+
+def test_an_alarm_not_judged_is_no_repeat_of_an_open_unexplained_record(
+    monitor, persisting_then_cut, tmp_path
+):
+    """An unexplained change open in its experiment, and a later alarm whose window the log's
+    end leaves too few rows to isolate: it was counted in the open record's repeats ("seen
+    again once ... not isolated: taken as this change persisting", and --follow withdrew it
+    as persisting), though nothing was judged of it. It is a record of its own, not judged,
+    and the open record counts no repeat; batch and --follow alike."""
+    for result in _batch_and_followed(monitor, persisting_then_cut, tmp_path):
+        first, late = result.alarms
+        assert first["meaning"].startswith("unexplained") and first["repeats"] == 0
+        assert first["last_seen_t"] == first["t"]
+        assert late["meaning"].startswith(NOT_JUDGED) and late["cut_short"]["by"] == "end"
+        assert (late["repeats"], late["last_seen_t"]) == (None, None)
+        assert result.withdrawn == []
+
+
+def test_an_alarm_not_judged_states_no_confidence_nor_share(vehicle, monitor, tmp_path):
+    """A snag from 20 s in a log that ends 0.35 s after its alarm: too few rows to isolate,
+    no hypothesis fitted, yet its console line (batch's and --follow's) said "confidence
+    0.00, explaining 0 % of the residual" and detect.json held 0 for both: the diagnosis's
+    defaults, never measured. They are null in detect.json, "-" in the report's table, and
+    the line says the confidence was not measured."""
+    from nnid.reports.detect_report import detect_html
+
+    log = simulate_faults(vehicle, 22, faults=[Fault("external", FAULT_T, force=SNAG)], seed=1)
+    cut = log[log["t"] <= 20.4 + 1e-9].reset_index(drop=True)
+    result, said = _followed_as_batch(monitor, cut, tmp_path)
+    (alarm,) = result.alarms
+    assert alarm["meaning"].startswith(NOT_JUDGED)
+    saved = json.loads(json.dumps(detect_json(monitor, result)))["alarms"][0]
+    assert saved["confidence"] is None and saved["explained"] is None
+    line = describe_alarm(alarm)
+    assert line in said  # --follow's line is batch's
+    assert "confidence not measured" in line and "explaining" not in line and "0.00" not in line
+    page = detect_html(monitor, result)
+    assert f"<td>{alarm['severity']:.2f}</td><td>-</td></tr>" in page  # the confidence cell
+
+
+def test_an_alarm_whose_window_a_gap_leaves_part_of_says_so(vehicle, monitor, tmp_path):
+    """A snag from 20 s, the log without samples from 20.5 to 30.5 s (inside the run, not its
+    end): the alarm's 10-s window holds 10 rows over 0.45 s, enough to isolate, and the
+    record was isolated with no word that it was judged on 0.45 s of 10 s. Its ``cut_short``
+    says so (``by`` "gap") and its meaning ends as one the log's end cut short does, saying
+    where the samples were; batch and --follow alike."""
+    log = simulate_faults(vehicle, 32, faults=[Fault("external", FAULT_T, force=SNAG)], seed=1)
+    gap = log[(log["t"] <= 20.5 + 1e-9) | (log["t"] >= 30.5 - 1e-9)].reset_index(drop=True)
+    for result in _batch_and_followed(monitor, gap, tmp_path):
+        first = result.alarms[0]
+        held = gap["t"][(gap["t"] >= first["t"] - 1e-9) & (gap["t"] <= first["t"] + 10.0)]
+        seconds = held.iloc[-1] - first["t"]
+        assert first["kind"] == "external_force" and held.size >= LEAST_ROWS
+        assert first["cut_short"]["by"] == "gap"
+        assert first["cut_short"]["samples"] == held.size
+        assert first["cut_short"]["seconds"] == pytest.approx(seconds)
+        clause = ISOLATED_SHORT.replace(ON_PART, ON_HELD)
+        assert f"{clause} ({seconds:.2f} s of 10 s)" in first["meaning"]
+
+
+def test_a_window_is_said_on_part_where_its_rows_hold_under_half_of_it():
+    """The rule of :func:`on_part` inside a run: a window whose rows hold samples over less
+    than half of it (a gap longer than the monitor's longest interval, ``max_step``) is said
+    on part, with the seconds held; one that holds most of it is whole, gap or not."""
+    t = np.r_[np.arange(0, 2.0, 0.05), np.arange(8.0, 20.0, 0.05)]  # 6 s missing
+    data = {"t": t, "experiment": np.zeros(t.size, dtype=int)}
+    rows = np.flatnonzero(t <= 10.0)
+    short = on_part(data, 0, 10.0, rows, max_step=0.075)
+    assert short["by"] == "gap" and short["samples"] == rows.size
+    # the rows' span less the step across the gap, from 1.95 to 8.0 s
+    assert short["seconds"] == pytest.approx(t[rows[-1]] - (8.0 - 1.95))
+    one_s = np.r_[np.arange(0, 2.0, 0.05), np.arange(3.0, 20.0, 0.05)]  # 1 s missing
+    data = {"t": one_s, "experiment": np.zeros(one_s.size, dtype=int)}
+    assert on_part(data, 0, 10.0, np.flatnonzero(one_s <= 10.0), max_step=0.075) is None
+
+
+def test_cut_short_reads_the_step_on_rows_follow_keeps():
+    """--follow keeps a run's latest 100,000 to 200,000 rows; batch read the step that
+    decides whether the log's end cut a window short on the whole run. A clock whose step
+    drifted (0.0500 s, then 0.0502 s over its last 259 rows) read 0.0500 there and 0.0502 on
+    the rows --follow kept, and a window whose end lay 0.02505 s past the run's last row was
+    cut short to batch and whole to --follow. The step is read on the window's rows, which
+    both hold."""
+    t = np.r_[0.0, np.cumsum([0.05] * 999 + [0.0502] * 258)]
+    k = t.size - 1 - 198  # 198 steps after the alarm's row, then the run's last row
+    t = np.r_[t, t[k] + 10.0 - 0.02505]
+    full = {"t": t, "experiment": np.zeros(t.size, dtype=int)}
+    kept = {"t": t[-250:], "experiment": np.zeros(250, dtype=int)}  # as --follow keeps them
+    assert cut_short(full, k, 10.0) == cut_short(kept, k - (t.size - 250), 10.0)
 
 
 def test_a_dismissal_on_a_window_the_log_cuts_short_says_so(vehicle, monitor, tmp_path):

@@ -28,7 +28,9 @@ no new alarm but the unexplained change persisting, counted in its open record (
 ``last_seen_t`` and its ``meaning``: :func:`persisting`), and the statistics restart after its
 window again. One unexplained record is open per experiment, from its first such alarm on: a
 second change that no hypothesis explains reads as the first persisting, and so does a named
-fault that isolation cannot tell apart from a change that persists in its window.
+fault that isolation cannot tell apart from a change that persists in its window. An alarm
+whose window holds too few rows to isolate (the log's end, a gap) is not judged
+(:func:`not_judged`): a record of its own, neither opening nor repeating an unexplained one.
 
 A change can also go away (a snag freed, a thruster that recovers): the residual it leaves is
 then its signature reversed, which isolation would name as a new change (a pull the other way,
@@ -124,8 +126,9 @@ class DetectResult:
     it held over the DOF equations the changes leave alone and the level it was judged
     against there (:meth:`_Splits.change_beside`; None where the changes act on every one),
     and ``why`` (:func:`dismissed_why`), and ``cut_short`` where the log's end cut its
-    window short (:func:`on_part`). ``unjudged``: per experiment, the rows at its end
-    that were not judged (:func:`unjudged_tail`), batch and ``--follow`` alike."""
+    window short, or a gap left its rows over part of it (:func:`on_part`). ``unjudged``:
+    per experiment, the rows at its end that were not judged (:func:`unjudged_tail`), batch
+    and ``--follow`` alike."""
 
     trace: Trace
     alarms: list[dict]
@@ -138,7 +141,7 @@ class DetectResult:
 def dismissed_why(ratio: float | None, allowed: float | None, short: dict | None = None) -> str:
     """Why batch dismissed an alarm on what isolated changes leave (:attr:`DetectResult.
     dismissed`), from its reading beside the changes (:meth:`_Splits.change_beside`), and on
-    how much of its window where the log's end cut it ``short`` (:func:`on_part`)."""
+    how much of its window where the log's end (or a gap) cut it ``short`` (:func:`on_part`)."""
     within = "within what the isolated changes may leave"
     if ratio is None:
         why = f"{within} (they act on every DOF equation watched)"
@@ -243,7 +246,7 @@ def isolated_alarm(
             f"{record['meaning']}; it ended at about {t_end:.2f} s, inside the window: sized "
             f"on the {t_end - record['t']:.3g} s before, and not taken out after the window"
         )
-    short = on_part(data, k, window_s, rows)
+    short = on_part(data, k, window_s, rows, monitor.max_interval)
     if diag.meaning == TOO_FEW:  # isolation had too few rows: nothing was judged
         judged_on_part(record, short, None)
         not_judged(record, int(rows.size), int(fits_rows(rows, residual[rows]).sum()))
@@ -257,28 +260,58 @@ def isolated_alarm(
 def cut_short(data: dict, k: int, window_s: float) -> bool:
     """Whether the end of its experiment's rows cuts the isolation window of the alarm at row
     ``k`` short (:func:`window_rows`): the span from its last row to t_k + ``window_s`` is
-    more than half the experiment's typical step, a sample missing. ``--follow`` judges a
-    window before its run ends only once it is whole, so batch and it agree."""
+    more than half the typical step of the window's rows, a sample missing. ``--follow``
+    judges a window before its run ends only once it is whole, so batch and it agree."""
     t, codes = data["t"], data["experiment"]
     run = t[codes == codes[k]]
     # a grid t = i*dt ending one window after the alarm can end 1 ulp short of t_k + window_s:
-    # no sample is missing there (one step: one is); a run of one sample has no step
-    return bool(t[k] + window_s - run[-1] > typical_step(run, 0.0) / 2)
+    # no sample is missing there (one step: one is); a window of one sample has no step. The
+    # step is read on the window's rows, which --follow holds as batch does: on the whole run,
+    # batch read it on rows that --follow (which keeps its latest 100,000 to 200,000) had
+    # forgotten, and a clock whose step drifted read another half step there
+    return bool(
+        t[k] + window_s - run[-1] > typical_step(t[window_rows(data, k, window_s)], 0.0) / 2
+    )
 
 
-def on_part(data: dict, k: int, window_s: float, rows: np.ndarray) -> dict | None:
+#: a window whose rows hold samples over less than this share of it, samples missing inside
+#: its run (a gap in the log), is said judged on that part (:func:`on_part`), as one the log's
+#: end cut short is
+HELD_SHARE = 0.5
+
+
+def held_seconds(t: np.ndarray, max_step: float) -> float:
+    """The seconds over which rows at times ``t`` (a window's) hold samples: the sum of their
+    steps, less those longer than ``max_step`` (samples missing there: the monitor's
+    :attr:`~nnid.fault.monitor.ResidualMonitor.max_interval`, past which it scores no
+    interval)."""
+    steps = np.diff(np.asarray(t, dtype=float))
+    return float(steps[steps <= max_step].sum())
+
+
+def on_part(data: dict, k: int, window_s: float, rows: np.ndarray, max_step: float) -> dict | None:
     """The ``cut_short`` key of the record of the alarm at row ``k`` whose isolation window
-    (``rows``, :func:`window_rows`) the end of its run cuts short (:func:`cut_short`): the
-    ``seconds`` of it there are, ``window_s`` and ``samples``; None where it is whole."""
-    if not cut_short(data, k, window_s):
+    (``rows``, :func:`window_rows`) holds samples over part of it only: the end of its run
+    cuts it short (:func:`cut_short`; ``by`` "end"), or samples missing inside the run (a gap
+    of more than ``max_step``) leave its rows over less than :data:`HELD_SHARE` of it (``by``
+    "gap": a 10-s window of 10 rows over 0.45 s before a 10-s gap was isolated unsaid). The
+    ``seconds`` its rows hold samples over (:func:`held_seconds`), ``window_s``, ``samples``
+    and ``by``; None where it is whole, or holds samples over most of it."""
+    held_s = held_seconds(data["t"][rows], max_step)
+    end = cut_short(data, k, window_s)
+    if not end and held_s >= HELD_SHARE * window_s:
         return None
-    held_s = float(data["t"][rows[-1]] - data["t"][k])
-    return {"seconds": held_s, "window_s": float(window_s), "samples": int(rows.size)}
+    return {"seconds": held_s, "window_s": float(window_s), "samples": int(rows.size),
+            "by": "end" if end else "gap"}  # fmt: skip
 
 
 def part_clause(short: dict, said: str) -> str:
-    """The clause that says an alarm was judged (``said``: how) on the part of its window
-    that ``short`` (:func:`on_part`) holds: "isolated on the part … (3.00 s of 10 s)"."""
+    """The clause that says an alarm was judged (``said``: how, one of the clauses that say
+    :data:`ON_PART`) on the part of its window that ``short`` (:func:`on_part`) holds:
+    "isolated on the part … (3.00 s of 10 s)"; :data:`ON_HELD` in place of :data:`ON_PART`
+    where samples missing inside the run, not the log's end, left that part."""
+    if short.get("by") == "gap":
+        said = said.replace(ON_PART, ON_HELD)
     return f"{said} ({short['seconds']:.2f} s of {short['window_s']:g} s)"
 
 
@@ -304,6 +337,9 @@ TOO_FEW_FINITE = "not judged: too few rows with a finite residual in the isolati
 #: what the clause that ends the ``meaning`` of an alarm judged on a window the log's end
 #: cut short says after how it was read (:func:`judged_on_part`; the seconds follow)
 ON_PART = "on the part of its window before the end of the log"
+#: what that clause says in place of :data:`ON_PART` where samples missing inside the run (a
+#: gap in the log) left the window's rows over part of it (:func:`on_part`, ``by`` "gap")
+ON_HELD = "on the part of its window that holds samples, the rest missing"
 #: that clause for a change isolated there
 ISOLATED_SHORT = f"isolated {ON_PART}"
 #: that clause for an alarm isolation judged there and did not isolate: an unexplained change
@@ -322,15 +358,20 @@ def not_judged(record: dict, samples: int, finite: int) -> None:
     :data:`~nnid.fault.isolation.LEAST_ROWS` (said :data:`~nnid.fault.isolation.TOO_FEW`):
     the end of the log cut it short (its ``cut_short`` key, which :func:`judged_on_part`
     sets, says how much of it there was), or its rows hold no finite residual (a dropout, a
-    gap). Not judged, not an unexplained change (no ``repeats``, no record opened for a later
-    alarm to persist in). A 0.35-s window was an unexplained record whose statistics "restart
-    at the window's end", and so was a window that a 10-s gap in the log left 5 rows. On
-    more rows isolation judges it, and an alarm it does not isolate is an unexplained change
-    (:data:`UNEXPLAINED_SHORT`)."""
+    gap; ``cut_short`` ``by`` "gap" where the rows it holds span less than
+    :data:`HELD_SHARE` of it). Not judged, not an unexplained change (no ``repeats``, no
+    record opened for a later alarm to persist in, nor a repeat of one open: :func:`filed`).
+    A 0.35-s window was an unexplained record whose statistics "restart at the window's
+    end", and so was a window that a 10-s gap in the log left 5 rows. No hypothesis was
+    fitted: ``confidence`` and ``explained`` are None, not measured (the diagnosis's 0 read
+    "confidence 0.00, explaining 0 %"). On more rows isolation judges it, and an alarm it
+    does not isolate is an unexplained change (:data:`UNEXPLAINED_SHORT`)."""
+    record["confidence"] = record["explained"] = None
     short = record.get("cut_short")
-    if short is None:
+    if short is None or short["by"] == "gap":
+        over = "" if short is None else f" over {short['seconds']:.2f} s of {short['window_s']:g} s"
         record["meaning"] = (
-            f"{TOO_FEW_FINITE} ({finite} of the {samples} samples it holds; at least "
+            f"{TOO_FEW_FINITE} ({finite} of the {samples} samples it holds{over}; at least "
             f"{LEAST_ROWS} needed): {TOO_FEW}"
         )
         return
@@ -437,17 +478,20 @@ def filed(
     """How an alarm judged by :func:`isolated_alarm` is filed, ``detect`` and ``detect
     --follow`` alike (the module docstring): whether ``record`` is a new record, and the change
     taken out after its window. Isolated: new, its change taken out unless it ended. Not
-    isolated, with an unexplained record open in its experiment ``code`` (``open_``): the
-    change persisting, folded into that record (:func:`persisting`; ``restart_t``, its
-    window's end), no record; else a new record, which opens the experiment's unexplained
-    record unless it was not judged (:func:`not_judged`)."""
+    judged (:func:`not_judged`): new, whatever is open, and opening nothing: an alarm never
+    judged is no evidence that an unexplained change persists (one that the log's end or a
+    gap left too few rows was counted in the open record's repeats, "not isolated …
+    persisting"). Not isolated, with an unexplained record open in its experiment ``code``
+    (``open_``): the change persisting, folded into that record (:func:`persisting`;
+    ``restart_t``, its window's end), no record; else a new record, which opens the
+    experiment's unexplained record."""
     if diag.isolated:
         return True, None if record.get("ended") else Change.of(record, diag)
+    if diag.meaning == TOO_FEW:  # not judged (not_judged): neither opens nor repeats a record
+        return True, None
     if code in open_:
         persisting(open_[code], record["t"], restart_t)
         return False, None
-    if record["repeats"] is None:  # not judged (not_judged): no unexplained change to persist
-        return True, None
     open_[code] = record
     return True, None
 
@@ -891,7 +935,7 @@ class _Splits:
             "ended" if ended else "resized": {"t": t_split, "alarms": [changes[i].t for i in gone]},
         }
         # measured on the rows the log kept of the window (at least self.least: usable())
-        short = on_part(self.data, k, window_s, window)
+        short = on_part(self.data, k, window_s, window, m.max_interval)
         judged_on_part(record, short, ENDED_SHORT if ended else RESIZED_SHORT)
         return record
 
@@ -956,7 +1000,8 @@ class Verdict:
     replaces them), or ``dismissed``: within what the changes may leave, no record;
     ``beside``: the noise ratio over the DOF equations the changes leave alone and its
     allowed level, where :meth:`_Splits.change_beside` read them; ``cut_short``: of one
-    dismissed on a window the log's end cut short, how much of it there was (:func:`on_part`)."""
+    dismissed on a window the log's end (or a gap) cut short, how much of it there was
+    (:func:`on_part`)."""
 
     record: dict | None = None
     ended: list[int] = field(default_factory=list)
@@ -996,7 +1041,7 @@ def rewatched_alarm(
         and not splits.signature_left()
         and splits.change_beside() is False  # None: too few rows to tell, not dismissed
     ):
-        short = on_part(data, k, window_s, window_rows(data, k, window_s))
+        short = on_part(data, k, window_s, window_rows(data, k, window_s), monitor.max_interval)
         return Verdict(dismissed=True, beside=splits.beside, cut_short=short)
     resized = resized_alarm(splits, trace, k, window_s)
     if resized is not None:

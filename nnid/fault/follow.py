@@ -764,8 +764,10 @@ def describe_alarm(a: dict) -> str:
         what = meaning or "a change no hypothesis explains"
     # the confidence is among the hypotheses: how much of the change the named one explains
     # says whether the fault is one of them (two thrusters lost at once: 55 %, confidence 1.00);
-    # an unexplained one's finding says that share itself
+    # an unexplained one's finding says that share itself. An alarm not judged has neither
+    # (None: no hypothesis was fitted), and said "confidence 0.00, explaining 0 %"
     explained = explained_share(a)
     said = explained and not meaning.startswith(UNEXPLAINED)
     share = f", explaining {explained} of the residual" if said else ""
-    return f"{where}: {a['kind']}: {what}; confidence {a['confidence']:.2f}{share}"
+    confidence = "not measured" if missing(a["confidence"]) else f"{a['confidence']:.2f}"
+    return f"{where}: {a['kind']}: {what}; confidence {confidence}{share}"

@@ -174,7 +174,7 @@ def detect_html(
             run = "-" if a["experiment"] is None else a["experiment"]  # a log of one run
             body.append([run, f"{a['t']:.2f}", a["kind"], a["thruster"] or "-", eff,
                          a["effect"] or "-", val, f"{a['severity']:.2f}",
-                         f"{a['confidence']:.2f}"])  # fmt: skip
+                         number(a["confidence"], 2, fixed=True)])  # fmt: skip
         # only where an alarm was not isolated: a column of "-" on every other page is noise
         repeats = any(a.get("repeats") is not None for a in result.alarms)
         if repeats:
@@ -192,7 +192,8 @@ def detect_html(
             "severity": "peak of the monitor statistic over its threshold after the alarm",
             "confidence": "posterior weight of the named hypothesis and of those the "
             "data cannot tell from it; 0 where the best hypothesis leaves more than "
-            "twice the healthy noise power (unexplained by the hypotheses)",
+            "twice the healthy noise power (unexplained by the hypotheses); - where the "
+            "alarm was not judged (too few samples in its window: no hypothesis was fitted)",
         }
         if repeats:
             terms["seen again"] = (
