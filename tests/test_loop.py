@@ -1362,3 +1362,96 @@ def test_a_search_with_nothing_to_search_is_named_not_counted_as_tested(monkeypa
     assert f" over the {tested} candidates tested" in _tested_text(result)
     said = [line for line in markdown(result).splitlines() if "not finite" in line]
     assert len(said) == 1 and said[0].startswith(f"{len(searched)} candidate")
+
+
+def _measured(s) -> tuple:
+    """What the screen measured of a candidate, to compare two screens of it."""
+    return (s.value, s.stderr, s.p_value, s.improvement, s.percentile_error, s.reason, s.scored)
+
+
+def test_a_column_nan_only_in_an_equation_not_analysed_is_judged_like_any_other(monkeypatch):
+    """A heave loop weights surge 0: no fit reads the X rows. A damping candidate whose column
+    was NaN there (on one sample) had NaN weighted sums (0 · NaN = NaN) and was named not
+    finite, with nothing measured, though every row the refit reads is finite; it fell out of
+    SINDy's opinion too. It is now judged as the same column without the NaN (value, s.e.,
+    p-value, held-out gain alike) and SINDy keeps it; NaN on a row the fit reads (heave) is
+    still not finite."""
+    from conftest import make_vehicle
+
+    import nnid.loop.diagnose as diagnose
+    from nnid.loop.diagnose import NOT_FINITE, Workspace, refit, screen_linear, sindy_opinion
+
+    quadratic = {"Z:w*abs(w)": -30.0}
+    truth = make_vehicle(damping={"model": None, "coefficients": {**quadratic, "Z:w": -20.0}})
+    runs = _heave_with_a_little_surge(truth, np.random.default_rng(6))
+    vehicle = make_vehicle(damping={"model": None, "coefficients": quadratic})
+    ws = Workspace(*runs, vehicle, None, zoh_midpoint=False, dofs=("w",))
+    fit = refit(ws, vehicle, ["Z:w*abs(w)"])
+    assert ws.weights[0] == 0 and ws.weights[2] > 0
+    chosen = [c for c in candidates(vehicle, runs[0])
+              if c.name in ("linear_damping.w", "coupled_damping.Z:w*w")]  # fmt: skip
+    assert len(chosen) == 2
+    clean = {s.name: s for s in screen_linear(ws, fit, chosen)}
+    opinion = sindy_opinion(ws, fit, list(clean.values()))
+    assert "linear_damping.w" in opinion
+
+    block = diagnose.damping_block
+
+    def doctored(dof: int):
+        def cols(*args):
+            out = block(*args).copy()
+            out[7, dof, :] = np.nan  # one sample, in surge (weight 0) or heave
+            return out
+
+        return cols
+
+    monkeypatch.setattr(diagnose, "damping_block", doctored(0))
+    unread = {s.name: s for s in screen_linear(ws, fit, chosen)}
+    assert {n: _measured(s) for n, s in unread.items()} == {
+        n: _measured(s) for n, s in clean.items()
+    }
+    assert all(s.scored and np.isfinite(s.value) for s in unread.values())
+    assert sindy_opinion(ws, fit, list(unread.values())) == opinion
+    monkeypatch.setattr(diagnose, "damping_block", doctored(2))
+    read = screen_linear(ws, fit, chosen)
+    assert all(s.reason == NOT_FINITE and not s.finite for s in read)
+
+
+def test_a_search_whose_range_leaves_no_linearised_step_keeps_its_better_fit(monkeypatch):
+    """The s.e. of a 1-D search's optimum is read off the effect's column linearised over
+    1e-3 of the range about it. A range narrower than the floats resolve beside its size
+    (here three floats at 0.1) gives no such step, and the search came back None, "searched
+    and found no better fit", though it had found and measured one (the true current, the
+    residual gone). It now comes back with the refit's exact numbers and its s.e. said not
+    measured. The vocabulary's ranges all hold 0 (a step is 1e-3 of at least the value):
+    only a Candidate built with such a range gets here."""
+    from conftest import make_vehicle
+
+    import nnid.loop.diagnose as diagnose
+    from nnid.loop.diagnose import Workspace, refit, search_nonlinear
+
+    damping = {"model": None, "coefficients": {"Z:w*abs(w)": -30.0}}
+    truth = make_vehicle(damping=damping, current=[0.0, 0.0, 0.1])
+    runs = _heave_with_a_little_surge(truth, np.random.default_rng(5))
+    vehicle = make_vehicle(damping=damping)
+    ws = Workspace(*runs, vehicle, None, zoh_midpoint=False, dofs=("w",))
+    fit = refit(ws, vehicle, ["Z:w*abs(w)"])
+    lo = 0.1
+    hi = np.nextafter(np.nextafter(lo, 1.0), 1.0)
+    cand = Candidate("current.z", "current", bounds=(lo, float(hi)))
+    sensitivity, steps = diagnose.sensitivity, []
+
+    def resolved(ws, vehicle, cand, a, b):
+        # the pre-screen's own step (0.02 of the range, from the current 0) the floats lose
+        steps.append((a, b))
+        return sensitivity(ws, vehicle, cand, a, a + 1e-3)
+
+    monkeypatch.setattr(diagnose, "sensitivity", resolved)
+    s = search_nonlinear(ws, fit, cand)
+    assert s is not None and s.scored and lo <= s.value <= hi
+    best = refit(ws, cand.augment(fit.vehicle, s.value), fit.unknowns)
+    assert s.drss == fit.rss - best.rss > 0.99 * fit.rss
+    assert s.p_value < 1e-6 and s.improvement > 0.99
+    assert np.isnan(s.stderr) and np.isnan(s.percentile_error)
+    assert s.as_dict()["stderr"]["value"] is None and s.as_dict()["percentile_error"] is None
+    assert len(steps) == 1  # the pre-screen's: no s.e. read off a step rounded away

@@ -312,6 +312,21 @@ def _fitted_dofs(ws: Workspace) -> tuple[str, ...]:
     return tuple(d for d, m in zip(DOFS, ws.mask, strict=True) if m > 0)
 
 
+def _unread_zeroed(cols: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """``cols`` [N, 6, K] with its NaN or infinite entries in the DOF equations of weight 0
+    (``w`` [6]) set to 0, a copy only where there are any: no fit reads those equations, but
+    a weighted sum over all six reads 0 · NaN = NaN, and a column NaN only where the loop does
+    not look (a velocity the log lacks, in another DOF's row) measured nothing."""
+    idle = np.flatnonzero(w == 0)
+    unread = cols[:, idle, :]
+    bad = ~np.isfinite(unread)
+    if not bad.any():
+        return cols  # the same array: every sum bit for bit as before
+    out = cols.copy()
+    out[:, idle, :] = np.where(bad, 0.0, unread)
+    return out
+
+
 def _wss(x: np.ndarray, w: np.ndarray) -> float:
     """Σ_d w_d Σ_n x[n, d]² over finite samples."""
     return float(np.nansum(x**2 * w))
@@ -427,6 +442,9 @@ def screen(
     value, s.e., p-value or held-out gain). Every candidate comes back, scored or named."""
     w = ws.weights
     n, n_dof, p = fit.phi.shape
+    # judged on the rows the refit reads: a column NaN only in an equation of weight 0 is not
+    # NOT_FINITE (the refit leaves those entries out)
+    cols, cols_val = _unread_zeroed(cols, w), _unread_zeroed(cols_val, w)
     # the weighted sums over samples and DOFs as matrix products on rows (n, d): BLAS, where
     # a three-operand einsum loops over every index (a sixth of a loop's time); p may be 0
     phi = fit.phi.reshape(n * n_dof, p)
@@ -747,14 +765,8 @@ def search_nonlinear(
     best = refit(ws, model_at(value), fit.unknowns)
     if not best.rss < fit.rss:
         return None
-    h = 1e-3 * (hi - lo)
-    lo_v, hi_v = max(value - h, lo), min(value + h, hi)
-    if hi_v <= lo_v:
-        return None
-    fitted = vehicle_with(fit.vehicle, dict(zip(best.unknowns, best.theta, strict=True)))
-    col = sensitivity(ws, fitted, cand, lo_v, hi_v)
-    # score the linearised column at the optimum, then put the exact numbers back in
-    scored = screen(ws, best, [cand], col[0], col[1])
+    se = _linearised_stderr(ws, fit, best, cand, value)
+    # the exact numbers of the refit at the optimum: measured whatever its s.e.
     drss = fit.rss - best.rss
     rows = best.e.shape[0] * len(ws.dofs)
     sigma2 = best.rss / max(rows - len(best.unknowns) - 1, 1)
@@ -763,7 +775,6 @@ def search_nonlinear(
     before = np.nansum(fit.e_val**2, axis=0)
     after = np.nansum(best.e_val**2, axis=0)
     w = ws.weights
-    se = scored[0].stderr if scored[0].scored else float("nan")
     return Scored(
         cand,
         value,
@@ -783,6 +794,25 @@ def search_nonlinear(
         residual=best.e,
         edge=edge,
     )
+
+
+def _linearised_stderr(ws: Workspace, fit: Fit, best: Fit, cand: Candidate, value: float) -> float:
+    """The standard error of a 1-D search's ``value`` (``best``: the refit there) from the
+    effect's column linearised at it (variable projection), over a step of 1e-3 of the range
+    kept inside it; NaN (not measured) where that column measures nothing, or where no such
+    step exists: a range narrower than about 1e-13 of its distance from 0 (or one that
+    underflows) leaves value ± step rounded to ``value``. The vocabulary's ranges all hold 0
+    (:func:`~nnid.loop.effects.candidates`: ±reach, 0 to a lag or half a width), so a step
+    is 1e-3 of at least ``|value|`` there; a Candidate built with such a range was searched
+    and its better fit measured all the same."""
+    lo, hi = cand.bounds  # type: ignore[misc]
+    h = 1e-3 * (hi - lo)
+    lo_v, hi_v = max(value - h, lo), min(value + h, hi)
+    if not hi_v > lo_v:
+        return float("nan")
+    fitted = vehicle_with(fit.vehicle, dict(zip(best.unknowns, best.theta, strict=True)))
+    (at,) = screen(ws, best, [cand], *sensitivity(ws, fitted, cand, lo_v, hi_v))
+    return at.stderr if at.scored else float("nan")
 
 
 def rescore(ws: Workspace, fit: Fit, scored: list[Scored]) -> None:
@@ -847,7 +877,7 @@ def sindy_opinion(
     if other:
         blocks.append(ws.columns(fit.vehicle, [c.parameter for c in other], "train"))
         order += other
-    cols = np.concatenate(blocks, 2)
+    cols = _unread_zeroed(np.concatenate(blocks, 2), ws.weights)  # as :func:`screen` reads it
     sw = np.sqrt(ws.weights)
     n, _, p = fit.phi.shape
     x = (cols * sw[None, :, None]).reshape(n * 6, -1)
