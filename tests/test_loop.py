@@ -1455,3 +1455,6 @@ def test_a_search_whose_range_leaves_no_linearised_step_keeps_its_better_fit(mon
     assert np.isnan(s.stderr) and np.isnan(s.percentile_error)
     assert s.as_dict()["stderr"]["value"] is None and s.as_dict()["percentile_error"] is None
     assert len(steps) == 1  # the pre-screen's: no s.e. read off a step rounded away
+    # judged, it is no parameter shown significant, and said so: not "uncertain (nan % ...)"
+    ResidualLoop(vehicle)._judge(s, 1, fit)
+    assert s.reason == "parameter uncertainty not measured: its significance cannot be shown"

@@ -482,6 +482,10 @@ class ResidualLoop:
             s.candidate = s.candidate.renamed(f"restoring_offset.{FORCES[DOFS.index(dof)]}")
         if not s.p_value < self.alpha / tested:
             s.reason = f"not significant (p = {s.p_value:.2g} ≥ {self.alpha / tested:.2g})"
+        elif np.isnan(s.percentile_error):
+            # no s.e. was measured (a 1-D search whose range leaves no linearised step): an
+            # uncertainty never read is no parameter shown significant (Caccia's test)
+            s.reason = "parameter uncertainty not measured: its significance cannot be shown"
         elif not significant(s.percentile_error):
             s.reason = f"parameter uncertain ({s.percentile_error:.0f} % > 51 %)"
         elif not (best_dof >= self.min_improvement and s.improvement > 0):
