@@ -555,6 +555,36 @@ def test_each_run_is_measured_at_its_own_rate():
     ]
 
 
+def test_a_slow_channel_on_a_millisecond_clock_is_said_at_the_clocks_rate():
+    """A 120-Hz clock stamped in whole ms (8, 8, 9 ms) with psi on every 12th row: the runs'
+    plain median step made it '10.4 Hz against 125 Hz'. Each run's step is its typical step
+    (nnid.datasets.log.typical_step), so 10 Hz against 120 Hz."""
+    from nnid.datasets.gaps import slow_channels
+
+    true = np.arange(600) / 120
+    log = pd.DataFrame({"t": np.round(true * 1e3) / 1e3, "experiment": "a", "phi": 0.0,
+                        "theta": 0.0, "psi": 0.2 * true, "p": 0.0, "q": 0.0, "r": 0.2})  # fmt: skip
+    log.loc[np.arange(600) % 12 != 0, "psi"] = np.nan
+    (slow,) = slow_channels(log)
+    assert slow.stride == 12
+    assert slow.clock_hz == pytest.approx(120.0, rel=1e-3)
+    assert slow.rate_hz == pytest.approx(10.0, rel=1e-3)
+
+
+def test_a_bridge_warns_of_an_uneven_run_by_its_name():
+    """bridge_from_pose derives a run's velocities with its experiment column dropped, so a
+    run with a dropped sample was warned of as 'the log is not evenly sampled', whichever of
+    a log's runs it was. The warning names the run."""
+    log = _mocap_log().assign(experiment="dive7")
+    log = log.drop(index=50).reset_index(drop=True)  # a dropped sample: one step of two
+    log.loc[100:109, ["u", "r"]] = np.nan
+    with pytest.warns(UserWarning, match="not evenly sampled") as caught:
+        out = bridge_from_pose(log)
+    said = [str(w.message) for w in caught if "not evenly sampled" in str(w.message)]
+    assert said and all(m.startswith("experiment 'dive7' is not evenly") for m in said), said
+    assert out.loc[100:109, ["u", "r"]].notna().all().all()
+
+
 def test_a_slow_channel_in_many_runs_is_said_in_a_few_names_and_kept_whole():
     """A log a reader cut into hundreds of runs at two rates was said 'psi logged every 5th
     row in r0, r1, … r349: …', a sentence hundreds of names long, in the cleaning report, the

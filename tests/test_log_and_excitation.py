@@ -432,6 +432,22 @@ def test_the_rate_unit_check_sizes_windows_by_each_runs_own_step(runs, slip):
         validate_log(deg, "joined.csv")
 
 
+def test_the_rate_unit_check_sizes_windows_of_a_millisecond_clock_at_its_rate():
+    """120 Hz stamped in whole milliseconds steps 8, 8, 9 ms: its median, 8 ms, sized the
+    windows of about a second 125 steps long and said each of its steps was 8 ms, so 5 s of
+    turning counted 3.8 s of windows. At the run's step (typical_step) a window is 120 steps,
+    a second, and the windows cover the run less one second."""
+    from nnid.datasets.log import rate_slopes
+
+    true = np.arange(601) / 120  # 5 s
+    zero = np.zeros(true.size)
+    log = pd.DataFrame({"t": np.round(true * 1e3) / 1e3, "phi": zero, "theta": zero,
+                        "psi": 0.5 * true, "p": zero, "q": zero, "r": zero + 0.5})  # fmt: skip
+    ((_, col, slope, seconds),) = rate_slopes(log)
+    assert col == "r" and slope == pytest.approx(1.0, rel=1e-3)
+    assert seconds == pytest.approx(5.0 - 1.0, abs=1 / 120)
+
+
 def _cruising_log(heading, seed: int = 0, experiment: str = "a") -> pd.DataFrame:
     """A minute at 10 Hz of a vehicle cruising at about 0.4 m/s with a little roll and pitch,
     its heading ``heading(t)``; x, y, z integrated from J₁(Θ) ν₁ (rotation_from_euler), the

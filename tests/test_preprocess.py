@@ -510,6 +510,34 @@ def test_a_chain_that_derives_velocities_then_accelerations_warns_of_dropped_sam
         derive_accelerations(out.drop(columns=[c for c in out if c.startswith("d")]), 0.5)
 
 
+def test_held_at_reads_a_clock_rounded_to_the_millisecond_at_its_rate():
+    """held_at's sample time (a held force's lag, whether zoh_midpoint is warned of) was the
+    plain median of the steps, 8 ms for 120 Hz stamped in whole ms (8, 8, 9 ms): it reads
+    the runs' steps as the rest of nnid does (clock_step), each run's joins left out."""
+    runs = []
+    for name in ("a", "b"):
+        run = _ms_clock(120.0, 3.0).iloc[:241].assign(experiment=name)  # 0 to 2 s, whole stamps
+        run["tau_X"] = np.repeat(np.arange(1.0, 122.0), 2)[:241]  # held over two samples
+        runs.append(run)
+    held, dt = held_at(pd.concat(runs, ignore_index=True))
+    assert held == ["tau_X"]
+    assert dt == pytest.approx(1 / 120, rel=1e-6)
+
+
+def test_steps_split_between_two_rates_keep_their_median():
+    """Steps split evenly between two rates far apart (0.01 and 0.1 s) have a median near
+    neither: rounded_clock found no step near it and raised NumPy's 'zero-size array to
+    reduction operation minimum' from typical_step, held_at (runs at 100 and 10 Hz read
+    together) and the unit checks, instead of reading the median."""
+    assert typical_step(np.array([0.0, 0.01, 0.11]), np.nan) == pytest.approx(0.055)
+    runs = [
+        pd.DataFrame({"t": np.arange(3) * dt, "experiment": name, "tau_X": [1.0, 1.0, 2.0]})
+        for name, dt in (("fast", 0.01), ("slow", 0.1))
+    ]
+    held, dt = held_at(pd.concat(runs, ignore_index=True))
+    assert held == ["tau_X"] and dt == pytest.approx(0.055)
+
+
 def test_lowpass_refuses_a_run_of_one_sample_as_too_short_without_reading_its_rate():
     """A run of one sample has no step: its rate was read first (NumPy's "mean of empty
     slice" and scipy's divide warnings) before it was refused as too short."""

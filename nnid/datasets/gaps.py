@@ -84,7 +84,7 @@ class SlowChannel:
     column: str
     stride: int  # rows between its samples, most of the time; 0 where not measured
     rate_hz: float | None  # its own rate: the clock's over the stride; None: not measured
-    clock_hz: float  # its runs': 1 / their median sample interval
+    clock_hz: float  # its runs': 1 / the median of their sample steps (each run's typical_step)
     # the runs it is logged at this rate in; None: every run with an empty cell of it (a log
     # may join runs logged at different rates, each measured on its own)
     runs: list[str] | None = None
@@ -562,7 +562,7 @@ class Gap:
     length_s: float  # spanned: from the last sample before to the first sample after
     rows: int
     columns: list[str]
-    missing_s: float  # missing: rows × the experiment's median sample interval
+    missing_s: float  # missing: rows × the experiment's sample step (typical_step)
 
 
 def _gap_runs(part: pd.DataFrame, columns: list[str]):
@@ -648,8 +648,10 @@ def bridge_from_pose(
         if not all(a in complete for a in ANGLES):
             continue
         # derive_velocities sees no velocity column, so it makes each one the pose gives; w
-        # from depth alone assumes u = v = 0, an approximation a bridge must not use
-        derived = derive_velocities(part[["t", *complete]], window_s, order)
+        # from depth alone assumes u = v = 0, an approximation a bridge must not use. The
+        # experiment column stays, so that what it warns of names the run, not "the log"
+        named = ["experiment"] if "experiment" in part else []
+        derived = derive_velocities(part[["t", *named, *complete]], window_s, order)
         can = [c for c in ("p", "q", "r") if c in velocity]
         if all(c in complete for c in ("x", "y", "z")):
             can += [c for c in ("u", "v", "w") if c in velocity]

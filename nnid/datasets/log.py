@@ -12,6 +12,7 @@ import os
 import re
 import warnings
 from collections.abc import Sequence
+from itertools import pairwise
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -334,6 +335,8 @@ def rounded_clock(t: np.ndarray, within: np.ndarray | None = None) -> tuple[floa
     # a step holds both its stamps' float rounding and their reading (a count of ms divided)
     err = 4.0 * float(np.spacing(np.max(np.abs(t))))
     near = inside[np.abs(inside - median) < 0.5 * median]
+    if not near.size:  # steps split between two rates far apart (0.01, 0.1 s): no one step
+        return None
     above = near - near.min()
     above = above[above > err]
     if not above.size:  # one step throughout: the median is it
@@ -467,7 +470,7 @@ def rate_slopes(df: pd.DataFrame) -> list[tuple[object, str, float, float]]:
     # T_Θ⁻¹ ΔΘ, the body's turning in each step
     body = np.einsum("nij,nj->ni", euler_rate_matrices(mid, inverse=True), d_angle)
     turn = dict(zip(("p", "q", "r"), body.T, strict=True))
-    # a step over a hole in t (longer than thrice its experiment's median step) is no rate
+    # a step over a hole in t (longer than thrice its experiment's step) is no rate
     good = (dt < 3 * step[codes[1:]]) & (np.abs(cth) > RATE_CHECK_MIN_COS)
     attitude = np.isfinite(logged).all(1)
     out = []
@@ -499,8 +502,8 @@ def _experiment_sorted(
     """The rows of ``df`` grouped by experiment for the per-experiment window checks
     (:func:`rate_slopes`, :func:`depth_slopes`, :func:`velocity_frame_ratios`): the sorted
     experiment codes, their names (``[None]`` without an experiment column), the row order,
-    the times and time steps in that order, and each experiment's own median step (a log may
-    join a 10-Hz run and a 100-Hz one: each sizes its own windows)."""
+    the times and time steps in that order, and each experiment's own sample step (a log may
+    join a 10-Hz run and a 100-Hz one: each sizes its own windows; :func:`_experiment_steps`)."""
     if "experiment" in df:
         codes, labels = pd.factorize(df["experiment"])
         names = labels.tolist()  # indexing pandas' arrow strings one at a time is slow
@@ -510,14 +513,25 @@ def _experiment_sorted(
     codes = codes[order]
     t = df["t"].to_numpy(dtype=np.float64)[order]
     dt = np.diff(t)
-    return codes, names, order, t, dt, _experiment_steps(codes, dt, len(names))
+    return codes, names, order, t, dt, _experiment_steps(codes, t, len(names))
 
 
-def _experiment_steps(codes: np.ndarray, dt: np.ndarray, n: int) -> np.ndarray:
-    """The median time step of each of ``n`` experiments (``codes`` of the rows, sorted so
-    that an experiment's rows are side by side; ``dt`` their steps), over the steps within it:
-    its own rate, as a log may join runs of loggers at different rates. NaN for an experiment
-    of one row."""
+def _experiment_steps(codes: np.ndarray, t: np.ndarray, n: int) -> np.ndarray:
+    """The typical step (:func:`typical_step`) of each of ``n`` experiments (``codes`` of the
+    rows, sorted; ``t`` their times), over the steps within it: its own rate, as a log may
+    join runs of loggers at different rates. The median's 8 ms of 120 Hz stamped in whole ms
+    sized a second's window 125 steps and said its 120 steps were 0.96 s. NaN for an
+    experiment of one row."""
+    bounds = np.searchsorted(codes, np.arange(n + 1))
+    return np.array(
+        [typical_step(t[a:b], np.nan) for a, b in pairwise(bounds)],
+        dtype=np.float64,
+    )
+
+
+def _experiment_medians(codes: np.ndarray, dt: np.ndarray, n: int) -> np.ndarray:
+    """The median of each of ``n`` experiments' steps ``dt`` (``codes`` of the rows, sorted),
+    over the steps within it; NaN for an experiment of one row."""
     inside = codes[1:] == codes[:-1]
     medians = pd.Series(dt[inside]).groupby(codes[1:][inside]).median()
     return medians.reindex(range(n)).to_numpy(dtype=np.float64)
@@ -527,7 +541,7 @@ def _experiment_windows(
     codes: np.ndarray, step: np.ndarray, seconds: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Windows of steps within one experiment, each of about ``seconds`` at its experiment's
-    median ``step`` (:func:`_experiment_steps`; at least one step): the first step of every
+    ``step`` (:func:`_experiment_steps`; at least one step): the first step of every
     window that ends before its experiment does, the step after its last (for
     :func:`_window_sums`), and each experiment's window length in steps. An experiment without
     a positive step has no window."""
@@ -605,10 +619,12 @@ def _sampled_spans(
     a span. Returns each span's first step and the step after its last, and the windows'
     starts, ends and lags."""
     rows = np.flatnonzero(sampled)
-    # an experiment's median span: its median step when fully sampled (the windows unchanged)
+    # an experiment's median span: its step when fully sampled (the windows unchanged); a
+    # slow channel's own spacing, rows of the clock with its samples a row early or late, only
+    # floors a window's length, so its median stays
     span = step
     if rows.size < t.size:
-        span = _experiment_steps(codes[rows], np.diff(t[rows]), step.size)
+        span = _experiment_medians(codes[rows], np.diff(t[rows]), step.size)
     starts, ends, lags = _experiment_windows(codes, step, np.fmax(seconds, span))
     first, stop = rows[:-1], rows[1:]
     left_out = np.concatenate([[0], np.cumsum(~ok)])

@@ -1233,15 +1233,21 @@ def held_inputs(log: pd.DataFrame) -> list[str]:
 
 
 def held_at(log: pd.DataFrame) -> tuple[list[str], float]:
-    """The inputs that look held (:func:`held_inputs`) and the median sample time of the log's
-    experiments (NaN where none has two samples): whether and how far a held force lags."""
+    """The inputs that look held (:func:`held_inputs`) and the sample time of the log's
+    experiments, their steps read together (:func:`~nnid.datasets.log.clock_step`: the median,
+    or a coarsely rounded clock's step; NaN where none has two samples): whether and how far
+    a held force lags. 120 Hz stamped in whole ms read 8 ms, its median, not 8.33."""
     held = held_inputs(log)
     if not held:
         return held, float("nan")
-    t = log["t"].to_numpy(np.float64)
-    dts = [np.diff(t[pos]) for _, pos in experiment_rows(log)]
-    dts = [d for d in dts if d.size]
-    return held, float(np.median(np.concatenate(dts))) if dts else float("nan")
+    runs = [pos for _, pos in experiment_rows(log) if pos.size > 1]
+    if not runs:
+        return held, float("nan")
+    t = log["t"].to_numpy(np.float64)[np.concatenate(runs)]
+    # the step from one run's last row to the next's first is no sample step
+    within = np.ones(t.size - 1, dtype=bool)
+    within[np.cumsum([pos.size for pos in runs])[:-1] - 1] = False
+    return held, clock_step(t, within)[0]
 
 
 # --- sensor biases ----------------------------------------------------------------------------
