@@ -27,7 +27,7 @@ from typer.testing import CliRunner
 from nnid.cli import app
 from nnid.datasets.faults import Fault, simulate_faults
 from nnid.datasets.measurement import Measurement
-from nnid.datasets.preprocess import savgol_window
+from nnid.datasets.preprocess import savgol_window, true_runs
 from nnid.errors import NnidInputError
 from nnid.fault import kernel
 from nnid.fault.detect import (
@@ -39,6 +39,7 @@ from nnid.fault.detect import (
     ON_PART,
     RESIZED_SHORT,
     TOO_FEW_FINITE,
+    TOO_FEW_ROWS,
     UNEXPLAINED_SHORT,
     Rewatch,
     alarm_row,
@@ -50,7 +51,7 @@ from nnid.fault.detect import (
     read_ratio,
     unjudged_tail,
 )
-from nnid.fault.follow import describe_alarm, follow_csv
+from nnid.fault.follow import describe_alarm, follow_csv, unjudged_line
 from nnid.fault.isolation import (
     LEAST_ROWS,
     TOO_FEW,
@@ -1289,8 +1290,8 @@ def test_a_window_with_too_few_finite_rows_is_not_judged_not_unexplained(
     cut short by the log's end, held 6 rows, too few to isolate, and its record was an
     unexplained change ("too few samples after the alarm to isolate; the statistics
     restart…", repeats 0) that later alarms not isolated would persist in. It is not judged,
-    saying how many rows it held, and opens no unexplained record; batch and --follow
-    alike."""
+    saying how many rows it held (too few rows, every one finite: not "too few with a finite
+    residual"), and opens no unexplained record; batch and --follow alike."""
     log = simulate_faults(vehicle, 35, faults=[Fault("external", FAULT_T, force=SNAG)], seed=1)
     gap = log[(log["t"] <= 20.3 + 1e-9) | (log["t"] >= 31.0 - 1e-9)].reset_index(drop=True)
     for result in _batch_and_followed(monitor, gap, tmp_path):
@@ -1298,9 +1299,31 @@ def test_a_window_with_too_few_finite_rows_is_not_judged_not_unexplained(
         held = gap["t"][(gap["t"] >= first["t"] - 1e-9) & (gap["t"] <= first["t"] + 10.0)]
         # the gap, not the log's end, left its rows over part of the window (on_part)
         assert held.size < LEAST_ROWS and first["cut_short"]["by"] == "gap"
-        assert first["meaning"].startswith(TOO_FEW_FINITE) and "restart" not in first["meaning"]
-        assert f"({held.size} of the {held.size} samples it holds" in first["meaning"]
+        assert first["meaning"].startswith(TOO_FEW_ROWS) and "restart" not in first["meaning"]
+        assert f"({held.size} samples over " in first["meaning"]
+        assert "samples missing" in first["meaning"] and "finite" not in first["meaning"]
         assert (first["repeats"], first["last_seen_t"]) == (None, None)
+
+
+def test_a_window_of_too_few_rows_all_finite_says_so_not_a_finite_residual(
+    vehicle, monitor, tmp_path
+):
+    """A snag from 20 s watched with a 0.4-s window: 8 rows at 20 Hz (the float grid's
+    last one just past it), every one with a finite residual, too few to isolate. Its record
+    said "too few rows with a finite residual in the isolation window (8 of the 8 samples it
+    holds …)", a dropout that was not there:
+    the window holds too few rows, and says so; batch and --follow alike."""
+    log = simulate_faults(vehicle, 21, faults=[Fault("external", FAULT_T, force=SNAG)], seed=1)
+    log.to_csv(tmp_path / "log.csv", index=False)
+    followed = follow_csv(monitor, str(tmp_path / "log.csv"), 0.4, lambda line: None, idle_s=0.0)
+    for result in (detect(monitor, log, 0.4), followed):
+        first = result.alarms[0]
+        held = log["t"][(log["t"] >= first["t"]) & (log["t"] <= first["t"] + 0.4)]  # window_rows
+        assert held.size < LEAST_ROWS and "cut_short" not in first
+        assert first["meaning"].startswith(TOO_FEW_ROWS) and "finite" not in first["meaning"]
+        assert (
+            f"({held.size} samples in its 0.4 s; at least {LEAST_ROWS} needed)" in first["meaning"]
+        )
 
 
 @pytest.fixture(scope="module")
@@ -1404,16 +1427,22 @@ def test_cut_short_reads_the_step_on_rows_follow_keeps():
     assert cut_short(full, k, 10.0) == cut_short(kept, k - (t.size - 250), 10.0)
 
 
-def test_a_dismissal_on_a_window_the_log_cuts_short_says_so(vehicle, monitor, tmp_path):
-    """A payload from 20 s (seed 26), its alarm at 32.75 s dismissed as within what the
-    payload may leave, in a log that ends at 38 s: ``dismissed`` and the reason --follow
-    gives for withdrawing it said nothing of the 5.25 s of its window judged. Both say it.
-    And in a log that ends at 33.4 s, the window's last half smoothing window not judged
-    (the payload reads the acceleration), the record not judged said "14 samples" where 4
-    had a residual: it says how many."""
-    log = simulate_faults(vehicle, 60, faults=[Fault("payload", FAULT_T, mass=10.0, value=4.0)],
-                          seed=26)  # fmt: skip
-    cut = log[log["t"] <= 38.0 + 1e-9].reset_index(drop=True)
+@pytest.fixture(scope="module")
+def payload_26(vehicle):
+    """A payload from 20 s, 60 s (seed 26): isolated at 20.05 s, its alarm at 32.75 s
+    dismissed as within what the payload may leave; the payload reads the acceleration, so a
+    run's last half smoothing window is not judged."""
+    fault = Fault("payload", FAULT_T, mass=10.0, value=4.0)
+    return simulate_faults(vehicle, 60, faults=[fault], seed=26)
+
+
+def test_a_dismissal_on_a_window_the_log_cuts_short_says_so(monitor, payload_26, tmp_path):
+    """The payload's alarm at 32.75 s in a log that ends at 38 s: ``dismissed`` and the
+    reason --follow gives for withdrawing it said nothing of the 5.25 s of its window judged.
+    Both say it. And --follow's withdrawn record kept it in those words alone, where batch's
+    entry holds ``cut_short``: detect.json held it in batch and not with --follow. Both hold
+    it."""
+    cut = payload_26[payload_26["t"] <= 38.0 + 1e-9].reset_index(drop=True)
     batch, followed = _batch_and_followed(monitor, cut, tmp_path)
     (dismissed,) = batch.dismissed
     held = cut["t"][cut["t"] >= dismissed["t"] - 1e-9]
@@ -1422,12 +1451,59 @@ def test_a_dismissal_on_a_window_the_log_cuts_short_says_so(vehicle, monitor, tm
     assert dismissed["cut_short"]["seconds"] == pytest.approx(seconds_held)
     assert dismissed["why"].endswith(f"; {DISMISSED_SHORT} ({seconds_held:.2f} s of 10 s)")
     assert [w["reason"] for w in followed.withdrawn] == [dismissed["why"]]
-    shorter = log[log["t"] <= 33.4 + 1e-9].reset_index(drop=True)
+    withdrawn = detect_json(monitor, followed)["withdrawn"]
+    assert [w.get("cut_short") for w in withdrawn] == [dismissed["cut_short"]]
+
+
+def test_a_window_the_logs_end_cuts_to_rows_without_a_residual_says_so(monitor, payload_26):
+    """The payload in a log that ends at 33.4 s: the last alarm's window holds 14 rows, enough
+    to isolate, but the run's last half smoothing window is not judged (the payload reads the
+    acceleration) and 4 of them have a residual. Its record said "the end of the log cut the
+    isolation window short (…, 14 samples, 4 of them finite)", though 14 rows would have been
+    judged: the rows without a residual left too few, and it says so, with the window cut
+    short by the log's end."""
+    shorter = payload_26[payload_26["t"] <= 33.4 + 1e-9].reset_index(drop=True)
     result = detect(monitor, shorter)
     late, (tail,) = result.alarms[-1], result.unjudged
-    assert late["meaning"].startswith(NOT_JUDGED) and tail["from_t"] > late["t"]
     samples = int((shorter["t"] >= late["t"] - 1e-9).sum())
-    assert f"{samples} samples, {samples - tail['samples']} of them finite" in late["meaning"]
+    assert samples >= LEAST_ROWS > samples - tail["samples"] and tail["from_t"] > late["t"]
+    assert late["meaning"].startswith(TOO_FEW_FINITE) and late["cut_short"]["by"] == "end"
+    finite = samples - tail["samples"]
+    assert f"({finite} of the {samples} samples it holds over " in late["meaning"]
+    assert "the end of the log cutting it short" in late["meaning"]
+
+
+def test_an_unjudged_tail_with_judged_rows_between_is_said_in_its_stretches(
+    monitor, payload_26, tmp_path
+):
+    """The payload watched with a 1-s window in a log that ends at 22.45 s: the run's last
+    half smoothing window (from 22.00 s) is not judged; the alarm at 21.25 s, isolated, has
+    its window end inside it, and the rows after it, fewer than a smoothing window, leave only
+    their own last half unjudged: the two rows between are judged. ``unjudged`` said one
+    stretch from 22.00 to 22.45 s, its ``seconds`` 0.5 over judged rows. It says each stretch
+    of rows without statistics, and ``seconds`` is theirs; batch and --follow alike, and the
+    console line names both."""
+    cut = payload_26[payload_26["t"] <= 22.45 + 1e-9].reset_index(drop=True)
+    cut.to_csv(tmp_path / "log.csv", index=False)
+    followed = follow_csv(monitor, str(tmp_path / "log.csv"), 1.0, lambda line: None, idle_s=0.0)
+    for result in (detect(monitor, cut, 1.0), followed):
+        t, stat = result.trace.t, result.trace.values[:, 18]
+        (tail,) = result.unjudged
+        # the rows without statistics from the last alarm on: two stretches, rows judged between
+        runs = true_runs(~np.isfinite(stat) & (t >= result.alarms[-1]["t"]))
+        assert len(runs) == 2 and runs[-1][1] == t.size
+        said = [(s["from_t"], s["to_t"], s["samples"], s["seconds"]) for s in tail["segments"]]
+        assert said == [
+            (t[a], t[b - 1], b - a, pytest.approx(t[b - 1] - t[a - 1])) for a, b in runs
+        ]
+        assert tail["seconds"] == pytest.approx(sum(s[3] for s in said))
+        assert (tail["from_t"], tail["to_t"]) == (t[runs[0][0]], t[-1])
+        assert tail["samples"] == sum(b - a for a, b in runs)
+        line = unjudged_line(tail)
+        assert (
+            " and ".join(f"{s['from_t']:.2f}-{s['to_t']:.2f} s" for s in tail["segments"]) in line
+        )
+        assert f"{tail['seconds']:.2f} s ({tail['samples']} samples)" in line
 
 
 def test_a_window_to_the_runs_end_keeps_its_unjudged_tail(monitor):
@@ -1438,11 +1514,12 @@ def test_a_window_to_the_runs_end_keeps_its_unjudged_tail(monitor):
     t = np.arange(40) * 0.05
     data = {"t": t, "experiment": np.zeros(t.size, dtype=int)}
     w = Rewatch(monitor)
-    w.tail = (t[29], t[30:40])  # as an earlier left() to the end leaves it
+    w.tail = [(t[29], t[30:40])]  # as an earlier left() to the end leaves it
     w.left(data, np.arange(0), np.zeros((0, 6)), to_end=True)
-    assert w.tail[0] == t[29] and list(w.tail[1]) == list(t[30:40])
+    ((before, times),) = w.tail
+    assert before == t[29] and list(times) == list(t[30:40])
     w.left(data, np.arange(30, 40), np.zeros((10, 6)), to_end=True)
-    assert w.tail is None
+    assert w.tail == []
 
 
 def test_a_tail_partly_inside_a_later_window_stays_unjudged(monitor):
@@ -1454,7 +1531,7 @@ def test_a_tail_partly_inside_a_later_window_stays_unjudged(monitor):
     t = np.arange(40) * 0.05
     data = {"t": t, "experiment": np.zeros(t.size, dtype=int)}
     w = Rewatch(monitor)
-    w.tail = (t[29], t[30:40])
+    w.tail = [(t[29], t[30:40])]
     w.left(data, np.arange(35, 40), np.zeros((5, 6)), to_end=True)
     tail = unjudged_tail(None, w)
     assert tail is not None

@@ -167,7 +167,8 @@ def withdrawn_record(
     :func:`detect` drops it; ``why``: ``"dismissed"`` (its window within what the isolated
     changes may leave: :func:`rewatched_alarm`; said as batch's ``dismissed`` says it, by
     :func:`dismissed_why` of ``beside`` and ``short``, its :attr:`Verdict.beside` and
-    :attr:`Verdict.cut_short`), ``"inside"`` the window
+    :attr:`Verdict.cut_short`, and holding ``short`` as ``cut_short`` where there is one, as
+    batch's entry does: detect.json says it in either mode), ``"inside"`` the window
     of the alarm at time ``by`` whose judgement restarted the statistics after it
     (:func:`_rewatch` clears the window's alarms), or ``"after"`` it (a row read before that
     judgement, watched again on the restarted statistics: ``--follow`` holds rows after a
@@ -183,7 +184,10 @@ def withdrawn_record(
         "persisting": f"not isolated: the unexplained change alarmed at t = {by:.2f} s "
         "persisting, counted in its record's repeats; the statistics restart after this window",
     }
-    return {"experiment": experiment, "t": float(t), "by": float(by), "reason": reasons[why]}
+    record = {"experiment": experiment, "t": float(t), "by": float(by), "reason": reasons[why]}
+    if why == "dismissed" and short is not None:  # as batch's dismissed entry holds it
+        record["cut_short"] = short
+    return record
 
 
 def isolated_alarm(
@@ -249,7 +253,8 @@ def isolated_alarm(
     short = on_part(data, k, window_s, rows, monitor.max_interval)
     if diag.meaning == TOO_FEW:  # isolation had too few rows: nothing was judged
         judged_on_part(record, short, None)
-        not_judged(record, int(rows.size), int(fits_rows(rows, residual[rows]).sum()))
+        finite = int(fits_rows(rows, residual[rows]).sum())
+        not_judged(record, int(rows.size), finite, window_s)
         return record, diag, rows
     judged_on_part(record, short, ISOLATED_SHORT if diag.isolated else UNEXPLAINED_SHORT)
     if not diag.isolated:
@@ -329,10 +334,15 @@ def judged_on_part(record: dict, short: dict | None, said: str | None) -> None:
         record["meaning"] = f"{record['meaning']}; {part_clause(short, said)}"
 
 
-#: how the ``meaning`` of a record whose window the log's end cut short starts (:func:`not_judged`)
+#: how the ``meaning`` of a record whose window the log's end cut short to fewer rows than
+#: isolation fits starts (:func:`not_judged`)
 NOT_JUDGED = "not judged: the end of the log cut the isolation window short"
-#: how the ``meaning`` of a record whose whole window held too few rows with a finite residual
-#: (a sensor dropout, a gap in the log) starts (:func:`not_judged`)
+#: how the ``meaning`` of a record whose window, not cut by the log's end, holds fewer rows
+#: than isolation fits (a gap in the log, or a window shorter than that many steps) starts
+#: (:func:`not_judged`)
+TOO_FEW_ROWS = "not judged: the isolation window holds too few rows"
+#: how the ``meaning`` of a record whose window holds rows enough, but too few of them with a
+#: finite residual (a sensor dropout, the run's last rows not judged), starts (:func:`not_judged`)
 TOO_FEW_FINITE = "not judged: too few rows with a finite residual in the isolation window"
 #: what the clause that ends the ``meaning`` of an alarm judged on a window the log's end
 #: cut short says after how it was read (:func:`judged_on_part`; the seconds follow)
@@ -352,14 +362,20 @@ RESIZED_SHORT = f"the new size measured {ON_PART}"
 DISMISSED_SHORT = f"judged {ON_PART}"
 
 
-def not_judged(record: dict, samples: int, finite: int) -> None:
-    """The ``record`` of an alarm whose window of ``samples`` rows holds fewer that isolation
-    fits (``finite``, :func:`~nnid.fault.isolation.fits_rows`) than
-    :data:`~nnid.fault.isolation.LEAST_ROWS` (said :data:`~nnid.fault.isolation.TOO_FEW`):
-    the end of the log cut it short (its ``cut_short`` key, which :func:`judged_on_part`
-    sets, says how much of it there was), or its rows hold no finite residual (a dropout, a
-    gap; ``cut_short`` ``by`` "gap" where the rows it holds span less than
-    :data:`HELD_SHARE` of it). Not judged, not an unexplained change (no ``repeats``, no
+def not_judged(record: dict, samples: int, finite: int, window_s: float) -> None:
+    """The ``record`` of an alarm whose window (``window_s``) of ``samples`` rows holds fewer
+    that isolation fits (``finite``, :func:`~nnid.fault.isolation.fits_rows`) than
+    :data:`~nnid.fault.isolation.LEAST_ROWS` (said :data:`~nnid.fault.isolation.TOO_FEW`).
+    The cause said is the one that left too few: fewer ``samples`` than that, the end of the
+    log cut it short (:data:`NOT_JUDGED`; its ``cut_short`` key, which
+    :func:`judged_on_part` sets, says how much of it there was) or else the window holds too
+    few rows (:data:`TOO_FEW_ROWS`: a gap, ``cut_short`` ``by`` "gap" where the rows it holds
+    span less than :data:`HELD_SHARE` of it, or a window of fewer steps than that at the
+    log's rate); rows enough but too few of them with a finite residual, that (a dropout, the
+    run's last rows not judged: :data:`TOO_FEW_FINITE`). A 0.5-s window of 6 rows at 10 Hz,
+    every one finite, was said "too few rows with a finite residual (6 of the 6 …)", and one
+    the log's end cut to 50 rows, 5 of them finite, "the end of the log cut the isolation
+    window short". Not judged, not an unexplained change (no ``repeats``, no
     record opened for a later alarm to persist in, nor a repeat of one open: :func:`filed`).
     A 0.35-s window was an unexplained record whose statistics "restart at the window's
     end", and so was a window that a 10-s gap in the log left 5 rows. No hypothesis was
@@ -368,18 +384,23 @@ def not_judged(record: dict, samples: int, finite: int) -> None:
     does not isolate is an unexplained change (:data:`UNEXPLAINED_SHORT`)."""
     record["confidence"] = record["explained"] = None
     short = record.get("cut_short")
-    if short is None or short["by"] == "gap":
-        over = "" if short is None else f" over {short['seconds']:.2f} s of {short['window_s']:g} s"
+    by = None if short is None else short["by"]
+    held = "" if short is None else f" over {short['seconds']:.2f} s of {short['window_s']:g} s"
+    some = f", {finite} of them finite" if finite < samples else ""
+    if samples < LEAST_ROWS and by == "end":  # how much of it the log kept says the rest
         record["meaning"] = (
-            f"{TOO_FEW_FINITE} ({finite} of the {samples} samples it holds{over}; at least "
-            f"{LEAST_ROWS} needed): {TOO_FEW}"
+            f"{NOT_JUDGED} ({short['seconds']:.2f} s of {short['window_s']:g} s, {samples} "
+            f"samples{some}): {TOO_FEW}"
         )
         return
-    held_s, window_s = short["seconds"], short["window_s"]
-    some = f", {finite} of them finite" if finite < samples else ""
-    record["meaning"] = (
-        f"{NOT_JUDGED} ({held_s:.2f} s of {window_s:g} s, {samples} samples{some}): {TOO_FEW}"
-    )
+    if samples >= LEAST_ROWS:  # rows enough: too few of them had a residual
+        end = ", the end of the log cutting it short" if by == "end" else ""
+        said = f"{TOO_FEW_FINITE} ({finite} of the {samples} samples it holds{held}{end}"
+    elif by == "gap":
+        said = f"{TOO_FEW_ROWS} ({samples} samples{some}{held}, samples missing in the rest"
+    else:  # the window itself spans too few steps at the log's rate
+        said = f"{TOO_FEW_ROWS} ({samples} samples{some} in its {window_s:g} s"
+    record["meaning"] = f"{said}; at least {LEAST_ROWS} needed): {TOO_FEW}"
 
 
 def ended_within(
@@ -1142,9 +1163,10 @@ class Rewatch:
         self.t_prev = np.nan
         # the columns of the changes' hypotheses, remade only when they name others
         self.hypotheses: Hypotheses | None = None
-        # the rows at the run's end that :meth:`left` to it left unjudged: the time of the row
-        # before the first, and the times of each (None: none)
-        self.tail: tuple[float, np.ndarray] | None = None
+        # the rows at the run's end that :meth:`left` to it left unjudged, one (the time of the
+        # row before its first, the times of each) per stretch of consecutive rows: judged rows
+        # can lie between two (empty: none)
+        self.tail: list[tuple[float, np.ndarray]] = []
 
     @property
     def fitted(self) -> list[tuple[str, float]]:
@@ -1188,7 +1210,11 @@ class Rewatch:
         (:func:`unjudged_tail`). The rows of an earlier tail before ``rows`` stay in it: they
         lie in the window of the alarm judged since (``rows`` run from its end), which read
         them NaN, so no window judged them; dropped, a tail that window reached into was
-        said only from its end on."""
+        said only from its end on. Where ``rows`` span less than a smoothing window, the
+        half window left unjudged shrinks with it (:meth:`~nnid.fault.isolation.Hypotheses.
+        extrapolated`), and the first of ``rows`` are judged: the tail is then two stretches
+        with judged rows between, kept apart (one span from the earlier tail's first row to
+        the run's end counted the judged rows as unjudged)."""
         fitted = self.fitted
         if fitted:
             names = {name for name, _ in fitted}
@@ -1197,14 +1223,17 @@ class Rewatch:
         if not (to_end and rows.size):  # no rows (a window to the run's end): the tail stays
             return out
         t = data["t"]
-        before, kept = self.tail or (np.nan, np.zeros(0))
-        kept = kept[kept < t[rows[0]]]
+        kept = [(before, times[times < t[rows[0]]]) for before, times in self.tail]
+        kept = [(before, times) for before, times in kept if times.size]
         gone = rows[self.hypotheses.extrapolated(data, rows)] if fitted else rows[:0]
         out[np.isin(rows, gone)] = np.nan
-        if not kept.size and gone.size:
+        if gone.size:
             before = float(t[gone[0] - 1])
-        unjudged = np.r_[kept, t[gone]]
-        self.tail = (before, unjudged) if unjudged.size else None
+            if kept and kept[-1][1][-1] == before:  # the row before is the earlier tail's last
+                kept[-1] = (kept[-1][0], np.r_[kept[-1][1], t[gone]])
+            else:
+                kept.append((before, t[gone]))
+        self.tail = kept
         return out
 
     def step(self, ts: np.ndarray, left: np.ndarray, r: np.ndarray) -> np.ndarray:
@@ -1245,16 +1274,21 @@ UNJUDGED_WHY = (
 def unjudged_tail(experiment: str | None, w: Rewatch) -> dict | None:
     """The rows at the end of ``experiment`` that its :class:`Rewatch` ``w`` left unjudged
     (:meth:`Rewatch.left` to the run's end), as ``detect.json`` states them: ``from_t`` and
-    ``to_t`` the first and last, ``samples`` how many, ``seconds`` the time they span (from
-    the last row judged), and ``why``; None where every row was judged. Dropped unsaid, a
-    payload's run read as judged to its last sample."""
-    if w.tail is None:
+    ``to_t`` the first and last, ``samples`` how many, ``seconds`` the time they cover (each
+    stretch of consecutive rows from the last row judged before it, summed), ``segments``
+    each stretch alike (``from_t``, ``to_t``, ``samples``, ``seconds``; more than one where
+    judged rows lie between: from ``from_t`` to ``to_t`` is then not all unjudged), and
+    ``why``; None where every row was judged. Dropped unsaid, a payload's run read as judged
+    to its last sample."""
+    if not w.tail:
         return None
-    before, times = w.tail
-    first, last = float(times[0]), float(times[-1])
+    segments = [{"from_t": float(times[0]), "to_t": float(times[-1]), "samples": int(times.size),
+                 "seconds": float(times[-1] - before)} for before, times in w.tail]  # fmt: skip
     name = None if experiment is None else str(experiment)
-    return {"experiment": name, "from_t": first, "to_t": last, "samples": int(times.size),
-            "seconds": last - before, "why": UNJUDGED_WHY}  # fmt: skip
+    return {"experiment": name, "from_t": segments[0]["from_t"], "to_t": segments[-1]["to_t"],
+            "samples": sum(s["samples"] for s in segments),
+            "seconds": sum(s["seconds"] for s in segments), "segments": segments,
+            "why": UNJUDGED_WHY}  # fmt: skip
 
 
 def detect(

@@ -733,11 +733,20 @@ def withdrawn_line(w: dict) -> str:
 
 def unjudged_line(u: dict) -> str:
     """One line a person reads for the rows at a run's end left unjudged
-    (:func:`~nnid.fault.detect.unjudged_tail`): no alarm could be raised on them."""
+    (:func:`~nnid.fault.detect.unjudged_tail`): no alarm could be raised on them. Where judged
+    rows lie between stretches of them, each stretch is named, and the seconds are theirs."""
     run = f" ({u['experiment']})" if u.get("experiment") else ""
+    segments = u.get("segments") or [u]
+    if len(segments) == 1:
+        return (
+            f"t = {u['from_t']:.2f}-{u['to_t']:.2f} s{run}: the run's last {u['seconds']:.2f} s "
+            f"({u['samples']} samples) not judged, so no alarm could be raised there: "
+            f"{UNJUDGED_SHORT}"
+        )
+    spans = " and ".join(f"{s['from_t']:.2f}-{s['to_t']:.2f} s" for s in segments)
     return (
-        f"t = {u['from_t']:.2f}-{u['to_t']:.2f} s{run}: the run's last {u['seconds']:.2f} s "
-        f"({u['samples']} samples) not judged, so no alarm could be raised there: "
+        f"t = {spans}{run}: {u['seconds']:.2f} s ({u['samples']} samples) of the run's last "
+        "rows not judged, the rows between judged, so no alarm could be raised there: "
         f"{UNJUDGED_SHORT}"
     )
 

@@ -51,8 +51,9 @@ def detect_json(monitor, result: DetectResult, notes: list[str] | None = None) -
     alarms batch judged within what isolated changes may leave, with their reading beside the
     changes and why (:attr:`~nnid.fault.detect.DetectResult.dismissed`; empty with
     ``--follow``, which says them in ``withdrawn``). ``unjudged``: per experiment, the rows at
-    its end that were not judged, how many, the seconds they span and why
-    (:func:`~nnid.fault.detect.unjudged_tail`; batch and ``--follow`` alike)."""
+    its end that were not judged, how many, the seconds they cover, each stretch of them
+    where judged rows lie between, and why (:func:`~nnid.fault.detect.unjudged_tail`; batch
+    and ``--follow`` alike)."""
     h_t, h_g = monitor.threshold_values
     caveat = monitor.threshold_caveat()
     measured = monitor.measured_false_alarms_
