@@ -11,7 +11,7 @@ import pytest
 
 from nnid.datasets.cleaning import CleaningReport
 from nnid.datasets.excitation import Multisine
-from nnid.datasets.log import declare_time_unit, typical_step
+from nnid.datasets.log import clock_step, declare_time_unit, log_step, typical_step
 from nnid.datasets.measurement import Measurement
 from nnid.datasets.preprocess import (
     UNIFORM_TOLERANCE,
@@ -33,6 +33,7 @@ from nnid.datasets.preprocess import (
     savgol_derivative,
     savgol_noise_gain,
     savgol_window,
+    uneven_runs,
     unwrap_angles,
     zoh_midpoint,
 )
@@ -521,7 +522,8 @@ def test_held_at_reads_a_clock_rounded_to_the_millisecond_at_its_rate():
         runs.append(run)
     held, dt = held_at(pd.concat(runs, ignore_index=True))
     assert held == ["tau_X"]
-    assert dt == pytest.approx(1 / 120, rel=1e-6)
+    # 2 s of whole-ms stamps fix the rate to a few 1e-6 (the run's slope, rounded_clock)
+    assert dt == pytest.approx(1 / 120, rel=1e-5)
 
 
 def test_steps_split_between_two_rates_keep_their_median():
@@ -536,6 +538,71 @@ def test_steps_split_between_two_rates_keep_their_median():
     ]
     held, dt = held_at(pd.concat(runs, ignore_index=True))
     assert held == ["tau_X"] and dt == pytest.approx(0.055)
+
+
+def test_an_uneven_clock_or_one_glitch_is_no_rounded_clock():
+    """Float stamps of a clock alternating 0.04 and 0.06 s step by multiples of 0.02 s: read
+    as a clock rounded to 0.02 s, check_uniform accepted them for a sample-counting model and
+    nothing warned. A clock's resolution is a decimal unit, so they stay uneven. One 11-ms
+    step on an exact 10-ms grid read as 1-ms rounding (step 10.0017 ms): a glitch is no
+    share of the steps, so the grid keeps its median."""
+    t = np.cumsum(np.r_[0.0, np.tile([0.04, 0.06], 100)])
+    assert clock_step(t)[1] == 0.0
+    alternating = pd.DataFrame({"t": t, "experiment": "alt", "u": 0.0})
+    with pytest.raises(NnidInputError, match="not uniformly sampled"):
+        check_uniform(alternating, "a NARX model")
+    with pytest.warns(UserWarning, match="experiment 'alt' is not evenly sampled"):
+        uneven_runs(alternating, "the filter")
+    grid = np.arange(600) * 0.01
+    grid[300:] += 0.001
+    assert clock_step(grid) == (float(np.median(np.diff(grid))), 0.0)
+
+
+def test_a_rounded_clock_with_dropped_samples_is_read_at_its_rate():
+    """120 Hz stamped in whole ms for 20 s, 40 samples dropped: its step was the mean of its
+    one-sample steps, whose error drifted the stamps more than 3 ms off its line, so the
+    rule fell back to the 8-ms median and took every 9-ms step for a dropped sample. The
+    step is the rate over the run, and only the dropped samples' steps are off."""
+    rng = np.random.default_rng(0)
+    true = np.arange(2400) / 120.0
+    kept = np.sort(np.delete(np.arange(2400), rng.choice(np.arange(1, 2399), 40, False)))
+    t = np.round(true[kept] * 1e3) / 1e3
+    step, rounding = clock_step(t)
+    assert step == pytest.approx(1 / 120, rel=1e-5)
+    assert rounding == pytest.approx(1e-3)
+    _, off, _ = off_steps(t)
+    np.testing.assert_array_equal(off, np.flatnonzero(np.diff(kept) > 1))
+
+
+def test_a_clock_step_with_no_sample_step_is_not_measured():
+    """Runs of one sample each have no step within a run: clock_step took the median of
+    nothing (NaN with NumPy's 'Mean of empty slice'); it says NaN, the step not measured."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        step, rounding = clock_step(np.arange(4.0), np.zeros(3, dtype=bool))
+        assert np.isnan(step) and rounding == 0.0
+        assert np.isnan(log_step(np.zeros(3), np.array(["a", "b", "c"])))
+
+
+def test_a_whole_log_reads_its_runs_steps_without_the_joins():
+    """Two runs of 120 Hz stamped in ms, t restarting at 0: read over the whole log, the
+    negative step at the join took the rounded clock off its line, so the fault monitor's
+    rearm gap, the hybrid model's step and the actuator lag's bound read the 8-ms median
+    where each run alone reads 8.33 ms. log_step leaves the join out."""
+    from nnid.loop.effects import candidates
+
+    log = pd.concat(
+        [_ms_clock(120.0, 3.0).assign(experiment=name) for name in ("a", "b")],
+        ignore_index=True,
+    )
+    assert log_step(log["t"].to_numpy(), log["experiment"].to_numpy()) == pytest.approx(
+        1 / 120, rel=1e-5
+    )
+    log = log.assign(**{f"tau_{d}": 0.0 for d in ("X", "Y", "Z", "K", "M", "N")})
+    lag = next(
+        c for c in candidates(load_vehicle("bluerov2_heavy"), log) if c.name == "actuator_lag"
+    )
+    assert lag.bounds[1] == pytest.approx(100 / 120, rel=1e-5)
 
 
 def test_lowpass_refuses_a_run_of_one_sample_as_too_short_without_reading_its_rate():

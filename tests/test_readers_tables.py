@@ -252,6 +252,23 @@ def test_inspect_rate_is_one_the_log_has(tmp_path):
     assert [e["rate_hz"] for e in info["experiments"]] == pytest.approx([10.0, 100.0])
 
 
+def test_inspect_says_the_rate_of_a_clock_rounded_to_the_millisecond():
+    """Two runs at 120 Hz stamped in whole ms (8, 8, 9 ms) with a dropped sample: inspect said
+    125 Hz (1 / the 8-ms median) where lowpass and resample design at 120 Hz; each run's rate
+    and the log's are its logged rate, and the dropped sample is the only gap."""
+    from nnid.datasets.inspect import summarize
+
+    true = np.arange(360) / 120.0
+    runs = []
+    for name in ("a", "b"):
+        t = np.round(np.delete(true, 100) * 1e3) / 1e3
+        runs.append(pd.DataFrame({"t": t, "experiment": name, "u": 0.1, "tau_X": 1.0}))
+    info = summarize(pd.concat(runs, ignore_index=True))
+    assert [e["rate_hz"] for e in info["experiments"]] == pytest.approx([120.0, 120.0], rel=1e-4)
+    assert info["rate_hz"] == pytest.approx(120.0, rel=1e-4)
+    assert [g["length_s"] for g in info["gaps"]] == pytest.approx([0.017, 0.017])
+
+
 def test_inspect_says_a_run_whose_stamps_come_in_bursts_is_so_not_a_100_khz_run_of_gaps(
     tmp_path,
 ):

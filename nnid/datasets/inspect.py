@@ -26,6 +26,7 @@ from nnid.datasets.log import (
     REPLAY_GROUP,
     TAU,
     VELOCITY,
+    clock_step,
     input_columns,
 )
 from nnid.datasets.preprocess import (
@@ -41,7 +42,8 @@ DOF_FORCE = dict(zip(VELOCITY, TAU, strict=True))
 
 
 def rate_of(intervals: np.ndarray) -> float:
-    """1 / the median sample interval, NaN where there is none (a run of one sample)."""
+    """1 / the median sample interval, NaN where there is none (a run of one sample). The
+    intervals of a coarsely rounded clock are read at its step first (:func:`summarize`)."""
     return 1.0 / float(np.median(intervals)) if intervals.size else float("nan")
 
 
@@ -86,7 +88,12 @@ def summarize(log: pd.DataFrame, savgol_window: float = 1.0, savgol_order: int =
     sampled span (``ends``, :func:`nnid.datasets.gaps.span_ends`). A run whose stamps come in
     bursts (``bursts``: :func:`nnid.datasets.log.burst_clock`'s sentence, else None) has its
     rate over the run (:func:`nnid.datasets.preprocess.logged_rate`) and no gaps counted
-    (``gap_s`` None): its steps are a burst's and the next burst's, no sample interval."""
+    (``gap_s`` None): its steps are a burst's and the next burst's, no sample interval, so
+    its ``duration_s`` is its whole span, no gap taken out. Each run's ``rate_hz`` is its
+    logged rate, the rate lowpass and resample design at (a clock rounded coarsely,
+    :func:`nnid.datasets.log.rounded_clock`: 120 Hz stamped in whole ms, not the 125 Hz of
+    its median 8-ms step), and the log's is that of most of its runs' intervals, each
+    one-sample step of a rounded clock read at its run's step."""
     inputs = input_columns(log)
     known = {"t", "experiment", PIECE_OF, REPLAY_GROUP, *POSE, *VELOCITY, *ACCELERATION, *inputs}
     groups = experiment_rows(log)
@@ -97,7 +104,11 @@ def summarize(log: pd.DataFrame, savgol_window: float = 1.0, savgol_order: int =
         t = t_all[pos]
         dt = np.diff(t)
         rate, burst = logged_rate(t, np.nan)
-        med = float(np.median(dt)) if dt.size else float("nan")
+        med, rounding = clock_step(t) if dt.size else (float("nan"), 0.0)
+        if rounding:
+            # a rounded clock's steps within its rounding of its step are one sample each
+            # (8 and 9 ms at 120 Hz): read at its step, as its rate is
+            dt = np.where(np.abs(dt - med) <= rounding, med, dt)
         if burst:
             # the median step is one inside a burst (an IMU's ten samples every 10 ms read as
             # 100 kHz, and every burst's end as a gap): the run's rate is its rate over the
@@ -126,7 +137,7 @@ def summarize(log: pd.DataFrame, savgol_window: float = 1.0, savgol_order: int =
         held_s = float(sum(g["missing_s"] for g in held))
         exp_rows.append({"name": label, "samples": int(t.size), "duration_s": span - held_s,
                          "gap_s": None if burst else held_s,
-                         "rate_hz": rate if burst else rate_of(dt), "piece_of": whole,
+                         "rate_hz": rate, "piece_of": whole,
                          "bursts": burst})  # fmt: skip
     pose = [c for c in POSE if c in log]
     made = derivable_velocities(pose)

@@ -296,15 +296,30 @@ def typical_step(t: np.ndarray, one_sample: OneSample) -> float | OneSample:
 
 
 def clock_step(t: np.ndarray, within: np.ndarray | None = None) -> tuple[float, float]:
-    """A run's typical step (``t``: its times, two or more; ``within``: which of its steps are
-    sample steps, at least one, where a run resumes after another's rows) and its clock's
-    rounding, s: a coarsely rounded clock's (:func:`rounded_clock`), else the median step
-    and 0."""
+    """A run's typical step (``t``: its times; ``within``: which of its steps are sample
+    steps, where a run resumes after another's rows) and its clock's rounding, s: a coarsely
+    rounded clock's (:func:`rounded_clock`), else the median step and 0. (NaN, 0) where no
+    step is a sample step (a run of one sample, runs of one sample each): there is none to
+    read, as :func:`typical_step`'s ``one_sample``."""
     rounded = rounded_clock(t, within)
     if rounded is not None:
         return rounded
     steps = np.diff(t)
-    return float(np.median(steps if within is None else steps[within])), 0.0
+    inside = steps if within is None else steps[within]
+    return (float(np.median(inside)) if inside.size else math.nan), 0.0
+
+
+def log_step(t: np.ndarray, experiment: np.ndarray | None = None) -> float:
+    """The typical step of a log's runs together (``t``: its times in log order;
+    ``experiment``: each row's run, None for a log of one run): :func:`clock_step` over the
+    steps within a run, the step across a join left out (t restarting at 0 is a negative
+    step, and a coarsely rounded clock read with it fell back to the median, 8 ms for 120 Hz
+    stamped in ms, where each run alone reads 8.33 ms). NaN where no run has two samples."""
+    t = np.asarray(t, dtype=np.float64)
+    if experiment is None:
+        return clock_step(t)[0]
+    runs = np.asarray(experiment)
+    return clock_step(t, runs[1:] == runs[:-1])[0]
 
 
 #: how many times a step's float error the resolution of a clock must be to be read as its
@@ -313,17 +328,29 @@ def clock_step(t: np.ndarray, within: np.ndarray | None = None) -> tuple[float, 
 ROUNDING_OVER_FLOAT = 1e3
 
 
+#: the least share of a rounded clock's one-sample steps that each of its two step values
+#: holds (:func:`rounded_clock`): a rate between multiples n and n + 1 of the rounding q
+#: steps n q a share 1 - f of the time and (n + 1) q the rest, f, and its median n q is f q
+#: short of the step. Below this share the median is under 5 % of q off (0.5 µs of 1-ms
+#: stamps, 0.05 % of a 10-ms step), while a glitch or two among thousands of steps of an
+#: exact float grid (one 11-ms step among 10-ms ones) is no rounding to read
+ROUNDED_SHARE = 0.05
+
+
 def rounded_clock(t: np.ndarray, within: np.ndarray | None = None) -> tuple[float, float] | None:
     """(step, resolution q), s, of a run (``t``: its times) whose clock is rounded coarsely:
-    every step a whole number of q (to the stamps' float error), q at most half the median
-    step, and its one-sample steps (those within q of the median) two neighbouring multiples
-    of q that keep the stamps within a few q of one line (a rate between multiples of q,
-    rounded: 120 Hz in milliseconds steps 8, 8, 9 ms; a rate that changes from 8 to 9 ms
-    drifts off the line). The step is the mean of the one-sample steps, the rate over them.
-    None for any other clock (float stamps, jitter, a rate a whole number of q), whose step
-    stays the median (:func:`typical_step`). ``within``: which steps are sample steps (else
-    all), for a run whose rows resume after another's: the others, its joins, are read for
-    nothing, and each piece between them keeps to a line of its own."""
+    q a decimal resolution (1 ms, 0.1 ms: 10^-k s), every step a whole number of q (to the
+    stamps' float error), q at most half the median step, and its one-sample steps (those
+    within q of the median) two neighbouring multiples of q, each a real share of them
+    (:data:`ROUNDED_SHARE`), that keep the stamps within a few q of one line (a rate between
+    multiples of q, rounded: 120 Hz in milliseconds steps 8, 8, 9 ms; a rate that changes
+    from 8 to 9 ms drifts off the line). The step is the rate over the run: the slope of the
+    stamps against their count of samples (a dropped sample's step counts two), each piece
+    between joins with an offset of its own. None for any other clock (float stamps, jitter,
+    a rate a whole number of q, a clock alternating 0.04 and 0.06 s), whose step stays the
+    median (:func:`typical_step`). ``within``: which steps are sample steps (else all), for a
+    run whose rows resume after another's: the others, its joins, are read for nothing, and
+    each piece between them keeps to a line of its own."""
     t = np.asarray(t, dtype=np.float64)
     steps = np.diff(t)
     inside = steps if within is None else steps[within]
@@ -341,24 +368,45 @@ def rounded_clock(t: np.ndarray, within: np.ndarray | None = None) -> tuple[floa
     above = above[above > err]
     if not above.size:  # one step throughout: the median is it
         return None
-    q = float(above.min())
+    # a clock's resolution is a decimal unit of the second: a clock alternating 0.04 and
+    # 0.06 s steps by multiples of 0.02 s, an uneven clock, not a rounded one. q is read
+    # to 2 err (a difference of two steps)
+    decimal = 10.0 ** round(math.log10(above.min()))
+    if abs(above.min() - decimal) > 2.0 * err:
+        return None
+    q = decimal
     # one unit of q apart may be a dropped sample (1 and 2 ms), not rounding
     if q < ROUNDING_OVER_FLOAT * err or q > median / 2:
         return None
     units = np.round(inside / q)
-    # q itself is read to 2 err, which each unit of a step multiplies
     if np.any(np.abs(inside - units * q) > (1.0 + 2.0 * units) * err):
         return None
     one = np.abs(units - np.round(median / q)) <= 1
-    if np.unique(units[one]).size != 2:  # three values are jitter, not rounding
+    values, counts = np.unique(units[one], return_counts=True)
+    # three values are jitter, not rounding; a value too rare is a glitch (ROUNDED_SHARE)
+    if values.size != 2 or counts.min() < ROUNDED_SHARE * counts.sum():
         return None
-    step = float(inside[one].mean())
-    # rounded stamps stay within q/2 of the line of the true step (2q once the step is the
-    # mean of a few runs between dropped samples); a rate change drifts off it. A join's
-    # count shifts every later stamp alike, so each piece is measured against its own line
-    count = np.cumsum(np.round(steps / step))
-    off_line = np.concatenate([[0.0], t[1:] - t[0] - count * step])
-    starts = np.flatnonzero(np.r_[True, ~within]) if within is not None else np.zeros(1, int)
+    # the mean of the one-sample steps is off by their rounding at each dropped sample, a few
+    # dozen of which drift it off the line: it only counts each step's samples, and the step
+    # is the least-squares slope of the stamps against that count, a line for each piece
+    count = np.round(steps / float(inside[one].mean()))
+    if within is not None:
+        count[~within] = 0.0  # a join counts no sample: its piece has an offset of its own
+    k = np.concatenate([[0.0], np.cumsum(count)])
+    piece = np.zeros(t.size, np.int64) if within is None else np.r_[0, np.cumsum(~within)]
+    size = np.bincount(piece)
+    rel = t - t[0]
+    k_c = k - (np.bincount(piece, k) / size)[piece]
+    t_c = rel - (np.bincount(piece, rel) / size)[piece]
+    spread_k = float(k_c @ k_c)
+    if not spread_k > 0:
+        return None
+    step = float(k_c @ t_c) / spread_k
+    # rounded stamps stay within q/2 of the line of the true step; a rate change drifts off
+    # it. A join's count shifts every later stamp alike, so each piece is measured against
+    # its own line
+    off_line = rel - k * step
+    starts = np.flatnonzero(np.r_[True, piece[1:] != piece[:-1]])
     spread = np.maximum.reduceat(off_line, starts) - np.minimum.reduceat(off_line, starts)
     if np.max(spread) > 3.0 * q:
         return None

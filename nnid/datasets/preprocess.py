@@ -46,6 +46,7 @@ from nnid.datasets.log import (
     clock_step,
     euler_rate_matrices,
     input_columns,
+    log_step,
     paced_step,
     refuse_rows,
     run_label,
@@ -1234,20 +1235,14 @@ def held_inputs(log: pd.DataFrame) -> list[str]:
 
 def held_at(log: pd.DataFrame) -> tuple[list[str], float]:
     """The inputs that look held (:func:`held_inputs`) and the sample time of the log's
-    experiments, their steps read together (:func:`~nnid.datasets.log.clock_step`: the median,
+    experiments, their steps read together (:func:`~nnid.datasets.log.log_step`: the median,
     or a coarsely rounded clock's step; NaN where none has two samples): whether and how far
     a held force lags. 120 Hz stamped in whole ms read 8 ms, its median, not 8.33."""
     held = held_inputs(log)
     if not held:
         return held, float("nan")
-    runs = [pos for _, pos in experiment_rows(log) if pos.size > 1]
-    if not runs:
-        return held, float("nan")
-    t = log["t"].to_numpy(np.float64)[np.concatenate(runs)]
-    # the step from one run's last row to the next's first is no sample step
-    within = np.ones(t.size - 1, dtype=bool)
-    within[np.cumsum([pos.size for pos in runs])[:-1] - 1] = False
-    return held, clock_step(t, within)[0]
+    runs = log["experiment"].to_numpy() if "experiment" in log else None
+    return held, log_step(log["t"].to_numpy(np.float64), runs)
 
 
 # --- sensor biases ----------------------------------------------------------------------------

@@ -29,7 +29,7 @@ from sklearn.utils.validation import check_is_fitted
 
 from nnid.datasets.arrays import check_commands, far_beyond_range, motion_arrays
 from nnid.datasets.cleaning import CleaningReport
-from nnid.datasets.log import POSE, VELOCITY, check_log, typical_step
+from nnid.datasets.log import POSE, VELOCITY, check_log, log_step
 from nnid.datasets.preprocess import check_attitude, refuse_bursty_runs
 from nnid.errors import NnidInputError
 from nnid.fault import kernel
@@ -360,7 +360,8 @@ class ResidualMonitor(BaseEstimator):
         self.sigma_ = np.sqrt(_variances(cov, active))  # per DOF, for the isolation's weights
         trace = self._pass(data, mu, whiten, s_inv, none, interval)
         hours = _hours(data)
-        dt = typical_step(data["t"], np.nan)
+        # the runs' steps, the joins between them left out (t restarting is no step)
+        dt = log_step(data["t"], data["experiment"])
         gap = max(round(self.rearm_s / dt), 1)
         series = {name: [] for name in ("T", "g")}
         for code in np.unique(data["experiment"]):
