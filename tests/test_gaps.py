@@ -571,6 +571,26 @@ def test_a_slow_channel_on_a_millisecond_clock_is_said_at_the_clocks_rate():
     assert slow.rate_hz == pytest.approx(10.0, rel=1e-3)
 
 
+def test_a_millisecond_clock_resumed_after_another_run_keeps_its_rate():
+    """Run a's rows come in two blocks with run b's between (a reader's resumed run): sorted
+    by experiment, the step between a's blocks, 0.51 s, was read as 61 or 62 samples of its
+    120-Hz clock stamped in whole ms, half a sample off the line of the stamps, so its step
+    fell back on the 8-ms median: 'against 125 Hz'. Only steps between rows side by side in
+    the log are sample steps, each block on a line of its own: 120 Hz."""
+    from nnid.datasets.gaps import slow_channels
+
+    def run(name: str, start: float) -> pd.DataFrame:
+        true = start + np.arange(300) / 120
+        psi = np.where(np.arange(300) % 12 == 0, 0.2 * true, np.nan)
+        return pd.DataFrame({"t": np.round(true * 1e3) / 1e3, "experiment": name, "phi": 0.0,
+                             "theta": 0.0, "psi": psi, "p": 0.0, "q": 0.0, "r": 0.2})  # fmt: skip
+
+    log = pd.concat([run("a", 0.0), run("b", 0.0), run("a", 3.0042)], ignore_index=True)
+    slow = slow_channels(log)
+    assert slow and all(s.stride == 12 for s in slow)
+    assert [s.clock_hz for s in slow] == pytest.approx([120.0] * len(slow), rel=1e-4)
+
+
 def test_a_bridge_warns_of_an_uneven_run_by_its_name():
     """bridge_from_pose derives a run's velocities with its experiment column dropped, so a
     run with a dropped sample was warned of as 'the log is not evenly sampled', whichever of

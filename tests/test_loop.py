@@ -1457,4 +1457,49 @@ def test_a_search_whose_range_leaves_no_linearised_step_keeps_its_better_fit(mon
     assert len(steps) == 1  # the pre-screen's: no s.e. read off a step rounded away
     # judged, it is no parameter shown significant, and said so: not "uncertain (nan % ...)"
     ResidualLoop(vehicle)._judge(s, 1, fit)
-    assert s.reason == "parameter uncertainty not measured: its significance cannot be shown"
+    assert s.reason == (
+        f"parameter uncertainty not measured: {diagnose.NO_LINEARISED_STEP}; its significance "
+        "cannot be shown"
+    )
+
+
+def test_a_search_whose_linearised_column_measures_nothing_says_why(monkeypatch):
+    """A 1-D search's s.e. is read off its column linearised at the optimum, screened as any
+    column: where that column is not excited (or not identifiable, not finite) no s.e. is
+    measured, and the verdict said only 'parameter uncertainty not measured', the column's
+    reason lost; at a value of 0 its percentile error is inf and the verdict read 'parameter
+    uncertain (inf % > 51 %)', as if an uncertainty had been measured. Both now say that no
+    s.e. was measured, and why."""
+    from conftest import make_vehicle
+
+    import nnid.loop.diagnose as diagnose
+    from nnid.loop.diagnose import NOT_EXCITED, Workspace, refit, search_nonlinear
+
+    damping = {"model": None, "coefficients": {"Z:w*abs(w)": -30.0}}
+    truth = make_vehicle(damping=damping, current=[0.0, 0.0, 0.1])
+    runs = _heave_with_a_little_surge(truth, np.random.default_rng(5))
+    vehicle = make_vehicle(damping=damping)
+    ws = Workspace(*runs, vehicle, None, zoh_midpoint=False, dofs=("w",))
+    fit = refit(ws, vehicle, ["Z:w*abs(w)"])
+    cand = Candidate("current.z", "current", bounds=(-0.5, 0.5))
+    sensitivity, calls = diagnose.sensitivity, []
+
+    def flat_at_the_optimum(ws, vehicle, cand, a, b):
+        # the pre-screen's column as it is; the one linearised at the optimum all zero
+        calls.append((a, b))
+        cols = sensitivity(ws, vehicle, cand, a, b)
+        return cols if len(calls) == 1 else tuple(np.zeros_like(c) for c in cols)
+
+    monkeypatch.setattr(diagnose, "sensitivity", flat_at_the_optimum)
+    s = search_nonlinear(ws, fit, cand)
+    assert s is not None and s.scored and len(calls) == 2
+    assert s.value == pytest.approx(0.1, abs=0.01) and s.p_value < 1e-6
+    assert np.isnan(s.stderr)
+    excited = NOT_EXCITED.removesuffix(": nothing of it is measured")
+    ResidualLoop(vehicle)._judge(s, 1, fit)
+    assert s.reason.startswith("parameter uncertainty not measured: its column linearised at")
+    assert excited in s.reason and s.reason.endswith("its significance cannot be shown")
+    # the same at a value of 0, whose percentile error is inf, not NaN
+    s.value, s.percentile_error, s.reason = 0.0, float("inf"), ""
+    ResidualLoop(vehicle)._judge(s, 1, fit)
+    assert s.reason.startswith("parameter uncertainty not measured: its column linearised at")

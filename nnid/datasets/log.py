@@ -12,7 +12,6 @@ import os
 import re
 import warnings
 from collections.abc import Sequence
-from itertools import pairwise
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -561,26 +560,68 @@ def _experiment_sorted(
     codes = codes[order]
     t = df["t"].to_numpy(dtype=np.float64)[order]
     dt = np.diff(t)
-    return codes, names, order, t, dt, _experiment_steps(codes, t, len(names))
+    return codes, names, order, t, dt, _experiment_steps(codes, order, t, len(names))
 
 
-def _experiment_steps(codes: np.ndarray, t: np.ndarray, n: int) -> np.ndarray:
-    """The typical step (:func:`typical_step`) of each of ``n`` experiments (``codes`` of the
-    rows, sorted; ``t`` their times), over the steps within it: its own rate, as a log may
-    join runs of loggers at different rates. The median's 8 ms of 120 Hz stamped in whole ms
-    sized a second's window 125 steps and said its 120 steps were 0.96 s. NaN for an
+def _experiment_steps(codes: np.ndarray, order: np.ndarray, t: np.ndarray, n: int) -> np.ndarray:
+    """The typical step (:func:`clock_step`) of each of ``n`` experiments (``codes`` of the
+    rows, sorted; ``order`` their positions in the log; ``t`` their times), over the steps
+    within it: its own rate, as a log may join runs of loggers at different rates. The
+    median's 8 ms of 120 Hz stamped in whole ms sized a second's window 125 steps and said its
+    120 steps were 0.96 s. Where an experiment's rows resume after another's (a reader's
+    resumed run, an interleaved log), the step across is no sample step: only steps between
+    rows side by side in the log are read, each piece on a line of its own. NaN for an
     experiment of one row."""
+    same = codes[1:] == codes[:-1]
+    within = same & (np.diff(order) == 1)
+    # an experiment whose rows all alternate with another's (two loggers row by row) has no
+    # rows side by side: its steps in time order are all there is to read
+    alone = np.bincount(codes[1:][within], minlength=n) == 0
+    within |= same & alone[codes[1:]]
     bounds = np.searchsorted(codes, np.arange(n + 1))
-    return np.array(
-        [typical_step(t[a:b], np.nan) for a, b in pairwise(bounds)],
-        dtype=np.float64,
-    )
+    median, ruled = _plain_steps(codes, t, within, bounds)
+    step = median.copy()  # pandas' array, read-only
+    # the rounded-clock rule, one experiment at a time, only where the screen cannot say it
+    # reads the median (a clock rounded coarsely, or stamps the screen does not judge)
+    for e in np.flatnonzero(ruled):
+        a, b = bounds[e], bounds[e + 1]
+        step[e] = clock_step(t[a:b], within[a : b - 1])[0]
+    return step
 
 
-def _experiment_medians(codes: np.ndarray, dt: np.ndarray, n: int) -> np.ndarray:
+def _plain_steps(
+    codes: np.ndarray, t: np.ndarray, within: np.ndarray, bounds: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Each experiment's median step (of the steps ``within`` it; NaN where none), as
+    :func:`clock_step` computes it, and which experiments may be rounded clocks (``True``:
+    ask :func:`rounded_clock`). Only its first refusal is read here, for all experiments at
+    once: a run whose steps near its median are one step to the stamps' float error (a grid,
+    a resampled log) keeps the median. A log a reader cut into 10^4 pieces took half a
+    second a call asking the rule one experiment at a time."""
+    n = bounds.size - 1
+    x = np.diff(t)[within]
+    k = codes[1:][within]
+    median = _experiment_medians(codes, np.diff(t), n, within)
+    with np.errstate(invalid="ignore"):
+        near = np.abs(x - median[k]) < 0.5 * median[k]
+    low, high = np.full(n, np.inf), np.full(n, -np.inf)
+    np.minimum.at(low, k[near], x[near])
+    np.maximum.at(high, k[near], x[near])
+    # rounded_clock's err: the stamps' float error at the run's largest |t|
+    err = 4.0 * np.spacing(np.maximum.reduceat(np.abs(t), bounds[:-1])) if t.size else np.zeros(n)
+    finite = np.bincount(codes[~np.isfinite(t)], minlength=n) == 0
+    one_step = high - low <= err  # no step above the least by more than err: "one step"
+    plain = finite & ((np.bincount(k, minlength=n) < 2) | one_step)
+    return median, ~plain
+
+
+def _experiment_medians(
+    codes: np.ndarray, dt: np.ndarray, n: int, within: np.ndarray | None = None
+) -> np.ndarray:
     """The median of each of ``n`` experiments' steps ``dt`` (``codes`` of the rows, sorted),
-    over the steps within it; NaN for an experiment of one row."""
-    inside = codes[1:] == codes[:-1]
+    over the steps within it (``within``: those read, else every step between two rows of
+    it); NaN for an experiment of one row."""
+    inside = codes[1:] == codes[:-1] if within is None else within
     medians = pd.Series(dt[inside]).groupby(codes[1:][inside]).median()
     return medians.reindex(range(n)).to_numpy(dtype=np.float64)
 

@@ -117,6 +117,9 @@ class Scored:
     identifiable: bool = True
     # False: its column is not finite on the fit's rows (:data:`NOT_FINITE`): nothing measured
     finite: bool = True
+    # why its s.e. was not measured (a 1-D search's, :func:`_linearised_stderr`), said in its
+    # verdict; "" where it was, or where nothing of it was
+    unmeasured: str = ""
 
     @property
     def name(self) -> str:
@@ -561,6 +564,9 @@ def screen_linear(ws: Workspace, fit: Fit, cands: list[Candidate]) -> list[Score
     return out
 
 
+#: why a 1-D search's s.e. was not measured where its range leaves no step about its value
+#: (:func:`_linearised_stderr`)
+NO_LINEARISED_STEP = "no step within the range searched to linearise its column over"
 #: the verdict on a candidate whose column the data do not excite, in the refit's words
 NOT_EXCITED = "not excited by this data (zero regressor): nothing of it is measured"
 #: the verdict on a candidate whose column lies in the span of the fit's regressors
@@ -765,7 +771,7 @@ def search_nonlinear(
     best = refit(ws, model_at(value), fit.unknowns)
     if not best.rss < fit.rss:
         return None
-    se = _linearised_stderr(ws, fit, best, cand, value)
+    se, unmeasured = _linearised_stderr(ws, fit, best, cand, value)
     # the exact numbers of the refit at the optimum: measured whatever its s.e.
     drss = fit.rss - best.rss
     rows = best.e.shape[0] * len(ws.dofs)
@@ -793,26 +799,34 @@ def search_nonlinear(
         sigma2=float(sigma2),
         residual=best.e,
         edge=edge,
+        unmeasured=unmeasured,
     )
 
 
-def _linearised_stderr(ws: Workspace, fit: Fit, best: Fit, cand: Candidate, value: float) -> float:
+def _linearised_stderr(
+    ws: Workspace, fit: Fit, best: Fit, cand: Candidate, value: float
+) -> tuple[float, str]:
     """The standard error of a 1-D search's ``value`` (``best``: the refit there) from the
     effect's column linearised at it (variable projection), over a step of 1e-3 of the range
-    kept inside it; NaN (not measured) where that column measures nothing, or where no such
-    step exists: a range narrower than about 1e-13 of its distance from 0 (or one that
-    underflows) leaves value ± step rounded to ``value``. The vocabulary's ranges all hold 0
-    (:func:`~nnid.loop.effects.candidates`: ±reach, 0 to a lag or half a width), so a step
-    is 1e-3 of at least ``|value|`` there; a Candidate built with such a range was searched
-    and its better fit measured all the same."""
+    kept inside it, and why none was measured ("" where one was). NaN (not measured) where
+    that column measures nothing (its verdict: :data:`NOT_EXCITED`, :data:`NOT_IDENTIFIABLE`,
+    :data:`NOT_FINITE`), or where no such step exists: a range narrower than about 1e-13 of
+    its distance from 0 (or one that underflows) leaves value ± step rounded to ``value``.
+    The vocabulary's ranges all hold 0 (:func:`~nnid.loop.effects.candidates`: ±reach, 0 to
+    a lag or half a width), so a step is 1e-3 of at least ``|value|`` there; a Candidate
+    built with such a range was searched and its better fit measured all the same."""
     lo, hi = cand.bounds  # type: ignore[misc]
     h = 1e-3 * (hi - lo)
     lo_v, hi_v = max(value - h, lo), min(value + h, hi)
     if not hi_v > lo_v:
-        return float("nan")
+        return float("nan"), NO_LINEARISED_STEP
     fitted = vehicle_with(fit.vehicle, dict(zip(best.unknowns, best.theta, strict=True)))
     (at,) = screen(ws, best, [cand], *sensitivity(ws, fitted, cand, lo_v, hi_v))
-    return at.stderr if at.scored else float("nan")
+    if not at.scored:
+        # its verdict less "nothing of it is measured", which the caller says of the s.e.
+        verdict = at.reason.removesuffix(": nothing of it is measured")
+        return float("nan"), f"its column linearised at {value:.4g} is {verdict}"
+    return at.stderr, ""
 
 
 def rescore(ws: Workspace, fit: Fit, scored: list[Scored]) -> None:

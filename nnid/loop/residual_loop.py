@@ -482,10 +482,12 @@ class ResidualLoop:
             s.candidate = s.candidate.renamed(f"restoring_offset.{FORCES[DOFS.index(dof)]}")
         if not s.p_value < self.alpha / tested:
             s.reason = f"not significant (p = {s.p_value:.2g} ≥ {self.alpha / tested:.2g})"
-        elif np.isnan(s.percentile_error):
-            # no s.e. was measured (a 1-D search whose range leaves no linearised step): an
-            # uncertainty never read is no parameter shown significant (Caccia's test)
-            s.reason = "parameter uncertainty not measured: its significance cannot be shown"
+        elif np.isnan(s.stderr):
+            # no s.e. was measured (a 1-D search's column linearised at its value measured
+            # nothing, or its range leaves no step): an uncertainty never read is no parameter
+            # shown significant (Caccia's test). Its percentile error is NaN, or inf at 0
+            why = f": {s.unmeasured};" if s.unmeasured else ":"
+            s.reason = f"parameter uncertainty not measured{why} its significance cannot be shown"
         elif not significant(s.percentile_error):
             s.reason = f"parameter uncertain ({s.percentile_error:.0f} % > 51 %)"
         elif not (best_dof >= self.min_improvement and s.improvement > 0):
