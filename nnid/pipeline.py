@@ -34,11 +34,11 @@ from nnid.datasets.log import (
     ANGLES,
     MOTION,
     VELOCITY,
+    frame_step,
     input_columns,
     run_label,
     run_of,
     run_pieces,
-    typical_step,
 )
 from nnid.datasets.preprocess import check_acceleration_window, experiment_rows, run_spans
 from nnid.datasets.splits import PARTS, Split, say_missed_fractions, split_log
@@ -795,10 +795,11 @@ def _fit_warnings(caught) -> list[str]:
 
 
 def k_steps(log: pd.DataFrame, seconds: float | None) -> int | None:
-    """Samples in ``seconds`` at the log's median sampling interval."""
+    """Samples in ``seconds`` at the typical step of the log's runs
+    (:func:`~nnid.datasets.log.frame_step`: the joins between them left out)."""
     if seconds is None:
         return None
-    dt = typical_step(log["t"].to_numpy(np.float64), np.nan)
+    dt = frame_step(log)
     return max(1, round(seconds / dt))
 
 
@@ -849,7 +850,7 @@ def unscored_k_step(part: str, log: pd.DataFrame, scores: dict, cfg, model) -> l
     if longest <= own or len(log) < 2:
         advice = "no k_step_s would: its runs are no longer than the model's warm-up"
     else:
-        dt = typical_step(log["t"].to_numpy(np.float64), np.nan)
+        dt = frame_step(log)
         advice = f"a k_step_s of at most {(longest - own) * dt:.4g} s would score it"
     return [
         f"k_step_s = {cfg.k_step_s:g} s: no {part} run is long enough for a k-step prediction "
@@ -1273,7 +1274,7 @@ def run_compare(
     comparison = {
         "vehicle": getattr(inputs.vehicle, "name", None),
         "models": rows,
-        "k_step_s": k * typical_step(held["t"].to_numpy(), np.nan) if k else None,
+        "k_step_s": k * frame_step(held) if k else None,
         "k_step_samples": k,
         "warmup_s": cfg.warmup_s,
         "held_out": held_name,

@@ -765,3 +765,49 @@ def test_a_sindy_path_and_a_ratio_of_no_measured_j_are_not_drawn_nor_named(monke
     assert [t.get_text() for t in fig.axes[0].get_legend().get_texts()] == ["sindy"]
     unscored = next(r for r in report.table_rows({"models": models}) if r[0] == "unscored")
     assert unscored[4:] == ["-", "-"]
+
+
+def test_a_comparisons_k_step_of_held_out_runs_stamped_in_ms_is_read_at_their_rate(tmp_path):
+    """Two held-out runs of 120 Hz stamped in whole ms (8, 8, 9 ms), t restarting at 0: read
+    over the whole part, the join's negative step threw the rounded clock back on its 8-ms
+    median, so k_step_s = 0.5 was 62 samples and reported as 0.496 s. Each run reads 8.33 ms:
+    60 samples, 0.5 s."""
+    from importlib import resources
+
+    import numpy as np
+
+    from nnid.config import CompareConfig, load_config
+    from nnid.runs import compare_run
+
+    root = resources.files("nnid.demo_data")
+    log = pd.read_parquet(root.joinpath("demo_minirov_heave.parquet"))
+    log = log[log["experiment"].isin(["run0", "run5", "run6", "run7"])].copy()
+    log["t"] = np.round(log.groupby("experiment").cumcount().to_numpy() / 120 * 1e3) / 1e3
+    log.to_csv(tmp_path / "log.csv", index=False)
+    config = tmp_path / "compare.toml"
+    config.write_text(
+        f'kind = "compare"\nvehicle = "{root.joinpath("minirov.toml")}"\nk_step_s = 0.5\n'
+        '[data]\nlog = "log.csv"\n[split]\nby = "experiment"\nvalidation = ["run5"]\n'
+        'test = ["run6", "run7"]\n[[models]]\nkind = "fossen"\ndofs = ["w"]\nunknowns = []\n'
+    )
+    compare_run(load_config(config, CompareConfig), config, tmp_path / "out")
+    comparison = json.loads((tmp_path / "out" / "comparison.json").read_text())
+    assert comparison["held_out"] == "test"
+    assert comparison["k_step_samples"] == 60
+    assert comparison["k_step_s"] == pytest.approx(0.5, rel=1e-5)
+
+
+def test_the_k_step_advice_reads_held_out_runs_stamped_in_ms_at_their_rate():
+    """The horizon advised where no run is long enough: 360 samples of two 120-Hz runs
+    stamped in ms (t restarting at 0) are 3 s, not the 2.88 s of their 8-ms median."""
+    from types import SimpleNamespace
+
+    import numpy as np
+
+    from nnid.pipeline import unscored_k_step
+
+    t = np.round(np.arange(360) / 120 * 1e3) / 1e3
+    held = pd.DataFrame({"t": np.r_[t, t], "experiment": ["a"] * t.size + ["b"] * t.size})
+    cfg, model = SimpleNamespace(k_step_s=20.0), SimpleNamespace(warmup_samples_=0)
+    [said] = unscored_k_step("test", held, {"k_step_scored": 0}, cfg, model)
+    assert "a k_step_s of at most 3 s would score it" in said, said

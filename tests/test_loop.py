@@ -1503,3 +1503,50 @@ def test_a_search_whose_linearised_column_measures_nothing_says_why(monkeypatch)
     s.value, s.percentile_error, s.reason = 0.0, float("inf"), ""
     ResidualLoop(vehicle)._judge(s, 1, fit)
     assert s.reason.startswith("parameter uncertainty not measured: its column linearised at")
+
+
+def test_the_loops_horizons_and_smoothing_read_held_out_runs_at_their_own_step(monkeypatch):
+    """Two held-out runs of 120 Hz stamped in whole ms (8, 8, 9 ms), t restarting at 0: read
+    over the whole part, the join's negative step threw the rounded clock back on its 8-ms
+    median, so the gate's 0.5-s and 1-s horizons were 62 and 125 samples, the scores' 1-s
+    k-step 125, and the unexplained structure's Savitzky-Golay window that of 125 Hz. The
+    runs' step leaves the join out: 8.33 ms, as each run alone reads."""
+    from types import SimpleNamespace
+
+    import nnid.loop.residual_loop as residual_loop
+    from nnid.datasets.preprocess import savgol_window
+
+    class Stop(Exception):
+        pass
+
+    t = np.round(np.arange(360) / 120 * 1e3) / 1e3
+    val = pd.DataFrame({"t": np.r_[t, t], "experiment": ["a"] * t.size + ["b"] * t.size})
+    codes = np.repeat([0, 1], t.size)
+    data = {"t": val["t"].to_numpy(), "experiment": codes, "nu": np.zeros((val.shape[0], 6))}
+    ws = SimpleNamespace(val=val, data_val=data)
+    fit = SimpleNamespace(vehicle=None)
+    loop = ResidualLoop(load_vehicle(MINIROV), gate_horizon_s=0.5)
+    loop.dofs_ = ("w",)
+    loop.cleaning_ = SimpleNamespace(steps=[SimpleNamespace(step="derive accelerations")])
+    assert loop._gate_modes(ws)[:2] == [("0.5 s ahead", 60), ("1 s ahead", 120)]
+
+    def velocity_scores(ws, vehicle, mode):
+        if not isinstance(mode, str):
+            raise Stop(mode)
+        return {}, {}
+
+    zeros = np.zeros((val.shape[0], 6))
+    monkeypatch.setattr(residual_loop, "force_residual", lambda ws, vehicle: zeros)
+    monkeypatch.setattr(residual_loop, "nominal_forces", lambda log, vehicle: zeros)
+    monkeypatch.setattr(loop, "_velocity_scores", velocity_scores)
+    with pytest.raises(Stop) as k:
+        loop._scores(ws, fit)
+    assert k.value.args == (120,)
+    read = []
+    monkeypatch.setattr(
+        residual_loop, "unexplained_structure", lambda *args, **kw: read.append(args[4:6])
+    )
+    loop._unexplained(ws, fit)
+    [(dt, window)] = read  # one analysed DOF
+    assert dt == pytest.approx(1 / 120, rel=1e-5)
+    assert window == savgol_window(loop.savgol_window, 120.0, loop.savgol_order)

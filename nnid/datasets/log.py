@@ -321,6 +321,13 @@ def log_step(t: np.ndarray, experiment: np.ndarray | None = None) -> float:
     return clock_step(t, runs[1:] == runs[:-1])[0]
 
 
+def frame_step(log: pd.DataFrame) -> float:
+    """:func:`log_step` of a log's own ``t`` and ``experiment`` columns (a log without the
+    latter is one run): the typical step of its runs, the joins between them left out."""
+    runs = log["experiment"].to_numpy() if "experiment" in log else None
+    return log_step(log["t"].to_numpy(np.float64), runs)
+
+
 #: how many times a step's float error the resolution of a clock must be to be read as its
 #: rounding (:func:`rounded_clock`): finer, the stamps' float error blurs which multiple of it
 #: a step is (an epoch clock, ~1.7e9 s, is read to a millisecond)

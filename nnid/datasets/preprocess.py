@@ -45,8 +45,8 @@ from nnid.datasets.log import (
     burst_clock,
     clock_step,
     euler_rate_matrices,
+    frame_step,
     input_columns,
-    log_step,
     paced_step,
     refuse_rows,
     run_label,
@@ -1241,8 +1241,7 @@ def held_at(log: pd.DataFrame) -> tuple[list[str], float]:
     held = held_inputs(log)
     if not held:
         return held, float("nan")
-    runs = log["experiment"].to_numpy() if "experiment" in log else None
-    return held, log_step(log["t"].to_numpy(np.float64), runs)
+    return held, frame_step(log)
 
 
 # --- sensor biases ----------------------------------------------------------------------------

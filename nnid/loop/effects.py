@@ -34,7 +34,7 @@ import numpy as np
 import pandas as pd
 
 from nnid.datasets.arrays import force_arrays, logged_inputs
-from nnid.datasets.log import log_step
+from nnid.datasets.log import frame_step
 from nnid.physics.damping import parse_coefficient_key
 from nnid.physics.damping_library import LIBRARY, canonical_term
 from nnid.physics.dofs import DOF_WORD, DOFS, FORCES
@@ -194,8 +194,7 @@ def candidates(vehicle, log: pd.DataFrame, coupled: bool = True) -> list[Candida
             # searched only where a vehicle file may hold the value (nnid.vehicle's bounds)
             reach = min(2 * top, MAX_CURRENT)
             out.append(Candidate(f"current.{axis}", "current", bounds=(-reach, reach)))
-    runs = log["experiment"].to_numpy() if "experiment" in log else None
-    slowest = 100 * log_step(log["t"].to_numpy(), runs)  # 100 samples, joins left out
+    slowest = 100 * frame_step(log)  # 100 samples, joins left out
     lag = min(max(slowest, 0.5), MAX_LAG)
     out.append(Candidate("actuator_lag", "actuator_lag", bounds=(0.0, lag)))
     inputs, forces = logged_inputs(log, vehicle)

@@ -21,7 +21,7 @@ import pandas as pd
 
 from nnid.datasets.arrays import logged_inputs, nominal_forces
 from nnid.datasets.gaps import mask_gaps
-from nnid.datasets.log import ANGLES, check_log, run_pieces, typical_step
+from nnid.datasets.log import ANGLES, check_log, frame_step, log_step, run_pieces
 from nnid.datasets.preprocess import experiment_rows, refuse_bursty_runs
 from nnid.datasets.splits import say_missed_fractions, split_log
 from nnid.errors import NnidInputError
@@ -374,7 +374,7 @@ class ResidualLoop:
         ``gate_horizon_s`` ahead), then :data:`FALLBACK_S` ahead, then one step. The first one
         in which the current fit does not diverge is used, for the fit and every candidate
         alike: a diverged error is never compared with a finite one."""
-        dt = typical_step(ws.val["t"].to_numpy(), np.nan)
+        dt = frame_step(ws.val)  # its runs' step, the joins between them left out
         modes: list[tuple[str, str | int]] = []
         if self.gate_horizon_s is None:
             modes.append(("free run", "free_run"))
@@ -534,7 +534,7 @@ class ResidualLoop:
         not measured by nothing."""
         val, dofs = ws.val, self.dofs_
         r = force_residual(ws, fit.vehicle)
-        k = max(round(FALLBACK_S / typical_step(val["t"].to_numpy(), np.nan)), 1)
+        k = max(round(FALLBACK_S / frame_step(val)), 1)
         errors: dict = {}
         for name, mode in (("free_run", "free_run"), ("k_step", k), ("one_step", "one_step")):
             scores, diverged = self._velocity_scores(ws, fit.vehicle, mode)
@@ -558,7 +558,7 @@ class ResidualLoop:
 
         r = force_residual(ws, fit.vehicle)
         data = ws.data_val
-        dt = typical_step(data["t"], np.nan)
+        dt = log_step(data["t"], data["experiment"])
         derived = any(s.step == "derive accelerations" for s in self.cleaning_.steps)
         # the SG derivative's span sets how far measurement noise alone correlates
         window = savgol_window(self.savgol_window, 1.0 / dt, self.savgol_order) if derived else 1

@@ -47,7 +47,7 @@ from torch import Tensor, nn
 from torch.func import functional_call
 
 from nnid.datasets.arrays import nominal_forces
-from nnid.datasets.log import POSE, VELOCITY, log_step
+from nnid.datasets.log import POSE, VELOCITY, frame_step
 from nnid.datasets.preprocess import check_uniform, experiment_rows, first_order_lag
 from nnid.datasets.segmentation import label_transients
 from nnid.errors import NnidInputError, checked_number
@@ -650,8 +650,7 @@ class HybridModel(FossenPlant):
     @staticmethod
     def _dt(log: pd.DataFrame) -> float:
         """The typical step of ``log``'s runs, the joins between them left out."""
-        runs = log["experiment"].to_numpy() if "experiment" in log else None
-        return log_step(log["t"].to_numpy(np.float64), runs)
+        return frame_step(log)
 
     # -- fit -------------------------------------------------------------------------------------
     def _fit(self, log: pd.DataFrame, validation: pd.DataFrame | None, progress: Progress) -> None:
