@@ -713,3 +713,19 @@ def test_each_experiments_step_is_the_rule_s_whichever_way_it_is_read():
     # rounded clock and a NaN stamp are asked
     assert not ruled[[names.get_loc("grid"), names.get_loc("one")]].any()
     assert ruled[[names.get_loc(c) for c in ("ms120", "epoch", "nan")]].all()
+
+
+def test_an_experiment_written_row_by_row_with_another_reads_all_its_steps():
+    """Two loggers written row by row (a, b, a, b, ...), b dropping one row: a's rows are side
+    by side once. Read over that one step alone, a's step was one 8- or 9-ms step of its
+    120 Hz clock stamped in whole ms; interleaved, all its steps in time order are read."""
+    from nnid.datasets.log import _experiment_sorted
+
+    k = np.arange(300)
+    a = pd.DataFrame({"experiment": "a", "t": np.round(k / 120 * 1e3) / 1e3})
+    b = pd.DataFrame({"experiment": "b", "t": k / 100 + 0.002})
+    log = pd.concat([a, b]).sort_index(kind="stable").reset_index(drop=True)
+    log = log.drop(index=2 * 150 + 1).reset_index(drop=True)  # b's row 150
+    _, names, *_, step = _experiment_sorted(log)
+    assert step[list(names).index("a")] == pytest.approx(1 / 120, rel=1e-4)
+    assert step[list(names).index("b")] == pytest.approx(1 / 100, rel=1e-9)

@@ -324,7 +324,8 @@ def log_step(t: np.ndarray, experiment: np.ndarray | None = None) -> float:
 def frame_step(log: pd.DataFrame) -> float:
     """:func:`log_step` of a log's own ``t`` and ``experiment`` columns (a log without the
     latter is one run): the typical step of its runs, the joins between them left out."""
-    runs = log["experiment"].to_numpy() if "experiment" in log else None
+    # codes, not labels: numpy's == on object labels is a Python call a row
+    runs = pd.factorize(log["experiment"])[0] if "experiment" in log else None
     return log_step(log["t"].to_numpy(np.float64), runs)
 
 
@@ -577,14 +578,17 @@ def _experiment_steps(codes: np.ndarray, order: np.ndarray, t: np.ndarray, n: in
     median's 8 ms of 120 Hz stamped in whole ms sized a second's window 125 steps and said its
     120 steps were 0.96 s. Where an experiment's rows resume after another's (a reader's
     resumed run, an interleaved log), the step across is no sample step: only steps between
-    rows side by side in the log are read, each piece on a line of its own. NaN for an
-    experiment of one row."""
+    rows side by side in the log are read, each piece on a line of its own. An experiment
+    whose rows mostly alternate with another's (two loggers written row by row, or merged by
+    time) is read over all its steps in time order: its few rows side by side (where the
+    other dropped a row) are no sample of its step. NaN for an experiment of one row."""
     same = codes[1:] == codes[:-1]
     within = same & (np.diff(order) == 1)
-    # an experiment whose rows all alternate with another's (two loggers row by row) has no
-    # rows side by side: its steps in time order are all there is to read
-    alone = np.bincount(codes[1:][within], minlength=n) == 0
-    within |= same & alone[codes[1:]]
+    # side by side for fewer than half its steps: interleaved, not resumed. "None side by
+    # side" flipped to reading one step where the other logger dropped one row
+    beside = np.bincount(codes[1:][within], minlength=n)
+    interleaved = 2 * beside < np.bincount(codes[1:][same], minlength=n)
+    within |= same & interleaved[codes[1:]]
     bounds = np.searchsorted(codes, np.arange(n + 1))
     median, ruled = _plain_steps(codes, t, within, bounds)
     step = median.copy()  # pandas' array, read-only
@@ -601,10 +605,12 @@ def _plain_steps(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Each experiment's median step (of the steps ``within`` it; NaN where none), as
     :func:`clock_step` computes it, and which experiments may be rounded clocks (``True``:
-    ask :func:`rounded_clock`). Only its first refusal is read here, for all experiments at
-    once: a run whose steps near its median are one step to the stamps' float error (a grid,
-    a resampled log) keeps the median. A log a reader cut into 10^4 pieces took half a
-    second a call asking the rule one experiment at a time."""
+    ask :func:`clock_step`). :func:`rounded_clock`'s refusals before it looks for a
+    resolution are read here, for all experiments at once (fewer than two steps, no step
+    near a positive median, the steps near it one step to the stamps' float error: a grid, a
+    resampled log), and such an experiment keeps its median; non-finite stamps are asked. A
+    log a reader cut into 10^4 pieces took half a second a call asking the rule one
+    experiment at a time."""
     n = bounds.size - 1
     x = np.diff(t)[within]
     k = codes[1:][within]
