@@ -1417,6 +1417,21 @@ def test_a_column_nan_only_in_an_equation_not_analysed_is_judged_like_any_other(
     assert all(s.reason == NOT_FINITE and not s.finite for s in read)
 
 
+def _heave_fit_beside_a_current():
+    """A heave-only fit of Z:w*abs(w) on runs of a vehicle in a 0.1 m/s vertical current its
+    model lacks: (vehicle, workspace, fit)."""
+    from conftest import make_vehicle
+
+    from nnid.loop.diagnose import Workspace, refit
+
+    damping = {"model": None, "coefficients": {"Z:w*abs(w)": -30.0}}
+    truth = make_vehicle(damping=damping, current=[0.0, 0.0, 0.1])
+    runs = _heave_with_a_little_surge(truth, np.random.default_rng(5))
+    vehicle = make_vehicle(damping=damping)
+    ws = Workspace(*runs, vehicle, None, zoh_midpoint=False, dofs=("w",))
+    return vehicle, ws, refit(ws, vehicle, ["Z:w*abs(w)"])
+
+
 def test_a_search_whose_range_leaves_no_linearised_step_keeps_its_better_fit(monkeypatch):
     """The s.e. of a 1-D search's optimum is read off the effect's column linearised over
     1e-3 of the range about it. A range narrower than the floats resolve beside its size
@@ -1425,17 +1440,11 @@ def test_a_search_whose_range_leaves_no_linearised_step_keeps_its_better_fit(mon
     residual gone). It now comes back with the refit's exact numbers and its s.e. said not
     measured. The vocabulary's ranges all hold 0 (a step is 1e-3 of at least the value):
     only a Candidate built with such a range gets here."""
-    from conftest import make_vehicle
 
     import nnid.loop.diagnose as diagnose
-    from nnid.loop.diagnose import Workspace, refit, search_nonlinear
+    from nnid.loop.diagnose import refit, search_nonlinear
 
-    damping = {"model": None, "coefficients": {"Z:w*abs(w)": -30.0}}
-    truth = make_vehicle(damping=damping, current=[0.0, 0.0, 0.1])
-    runs = _heave_with_a_little_surge(truth, np.random.default_rng(5))
-    vehicle = make_vehicle(damping=damping)
-    ws = Workspace(*runs, vehicle, None, zoh_midpoint=False, dofs=("w",))
-    fit = refit(ws, vehicle, ["Z:w*abs(w)"])
+    vehicle, ws, fit = _heave_fit_beside_a_current()
     lo = 0.1
     hi = np.nextafter(np.nextafter(lo, 1.0), 1.0)
     cand = Candidate("current.z", "current", bounds=(lo, float(hi)))
@@ -1470,17 +1479,11 @@ def test_a_search_whose_linearised_column_measures_nothing_says_why(monkeypatch)
     reason lost; at a value of 0 its percentile error is inf and the verdict read 'parameter
     uncertain (inf % > 51 %)', as if an uncertainty had been measured. Both now say that no
     s.e. was measured, and why."""
-    from conftest import make_vehicle
 
     import nnid.loop.diagnose as diagnose
-    from nnid.loop.diagnose import NOT_EXCITED, Workspace, refit, search_nonlinear
+    from nnid.loop.diagnose import NOT_EXCITED, search_nonlinear
 
-    damping = {"model": None, "coefficients": {"Z:w*abs(w)": -30.0}}
-    truth = make_vehicle(damping=damping, current=[0.0, 0.0, 0.1])
-    runs = _heave_with_a_little_surge(truth, np.random.default_rng(5))
-    vehicle = make_vehicle(damping=damping)
-    ws = Workspace(*runs, vehicle, None, zoh_midpoint=False, dofs=("w",))
-    fit = refit(ws, vehicle, ["Z:w*abs(w)"])
+    vehicle, ws, fit = _heave_fit_beside_a_current()
     cand = Candidate("current.z", "current", bounds=(-0.5, 0.5))
     sensitivity, calls = diagnose.sensitivity, []
 
