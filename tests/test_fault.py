@@ -50,6 +50,7 @@ from nnid.fault.detect import (
     on_part,
     read_ratio,
     unjudged_tail,
+    window_rows,
 )
 from nnid.fault.follow import describe_alarm, follow_csv, unjudged_line
 from nnid.fault.isolation import (
@@ -995,7 +996,7 @@ def test_an_end_is_said_only_as_the_better_reading_than_the_change_persisting(ve
     standard errors) taken out of a healthy window was said ended with confidence 0.44, its
     own record giving the change persisting the better reading. An end is now said only with
     a confidence over one half; the ends of larger losses on the same rows still are."""
-    from nnid.fault.detect import Change, Rewatch, _Splits, ended_alarm, window_rows
+    from nnid.fault.detect import Change, Rewatch, _Splits, ended_alarm
     from nnid.fault.isolation import refit
 
     log = simulate_faults(vehicle, 20, seed=5)
@@ -1224,9 +1225,9 @@ def test_a_grid_ending_one_window_after_the_alarm_is_not_cut_short():
     t, k = np.arange(365) * 0.05, 164
     assert t[-1] < t[k] + 10.0  # the float grid's shortfall the rule must tolerate
     data = {"t": t, "experiment": np.zeros(t.size, dtype=int)}
-    assert not cut_short(data, k, 10.0)
+    assert not cut_short(data, k, 10.0, window_rows(data, k, 10.0))
     fewer = {"t": t[:-1], "experiment": data["experiment"][:-1]}
-    assert cut_short(fewer, k, 10.0)
+    assert cut_short(fewer, k, 10.0, window_rows(fewer, k, 10.0))
 
 
 def test_an_alarm_not_isolated_on_enough_rows_of_a_cut_window_is_unexplained(
@@ -1424,7 +1425,10 @@ def test_cut_short_reads_the_step_on_rows_follow_keeps():
     t = np.r_[t, t[k] + 10.0 - 0.02505]
     full = {"t": t, "experiment": np.zeros(t.size, dtype=int)}
     kept = {"t": t[-250:], "experiment": np.zeros(250, dtype=int)}  # as --follow keeps them
-    assert cut_short(full, k, 10.0) == cut_short(kept, k - (t.size - 250), 10.0)
+    j = k - (t.size - 250)
+    assert cut_short(full, k, 10.0, window_rows(full, k, 10.0)) == cut_short(
+        kept, j, 10.0, window_rows(kept, j, 10.0)
+    )
 
 
 @pytest.fixture(scope="module")
@@ -1534,7 +1538,6 @@ def test_a_tail_partly_inside_a_later_window_stays_unjudged(monitor):
     w.tail = [(t[29], t[30:40])]
     w.left(data, np.arange(35, 40), np.zeros((5, 6)), to_end=True)
     tail = unjudged_tail(None, w)
-    assert tail is not None
     assert (tail["from_t"], tail["to_t"], tail["samples"]) == (t[30], t[34], 5)
     assert tail["seconds"] == pytest.approx(t[34] - t[29])
 

@@ -307,10 +307,17 @@ def logged_rate(t: np.ndarray, rate: float) -> tuple[float, str | None]:
     100 kHz, not 1 kHz)."""
     if t.size < 2:
         return rate, None
+    burst, overall = _burst_pace(t)
+    return (1.0 / overall if burst else 1.0 / clock_step(t)[0]), burst
+
+
+def _burst_pace(t: np.ndarray) -> tuple[str | None, float]:
+    """:func:`nnid.datasets.log.burst_clock`'s sentence of a run's stamps (``t``: two or more)
+    where they come in bursts, else None, and their pace over the run
+    (:func:`~nnid.datasets.log.paced_step`): the median step is one inside a burst."""
     steps = np.diff(t)
     overall = paced_step(steps)
-    burst = burst_clock(float(np.median(steps)), overall)
-    return (1.0 / overall if burst else 1.0 / clock_step(t)[0]), burst
+    return burst_clock(float(np.median(steps)), overall), overall
 
 
 def refuse_bursts(t: np.ndarray, name: object, method: str, field: str) -> float:
@@ -342,8 +349,10 @@ def refuse_bursty_runs(log: pd.DataFrame, method: str) -> None:
         return
     t = log["t"].to_numpy(np.float64)
     for name, pos in experiment_rows(log):
-        if logged_rate(t[pos], np.nan)[1]:  # run_of only to name a run refused: it reads
-            # the whole log, and a log cut into thousands of pieces is checked on every fit
+        # the burst check alone (no rate: a rounded clock's is read per run, on every fit);
+        # run_of only to name a run refused: it reads the whole log, and a log cut into
+        # thousands of pieces is checked on every fit
+        if pos.size > 1 and _burst_pace(t[pos])[0]:
             refuse_bursts(t[pos], run_of(log).get(name, name), method, "t")
 
 

@@ -262,7 +262,7 @@ def isolated_alarm(
     return record, diag, rows
 
 
-def cut_short(data: dict, k: int, window_s: float) -> bool:
+def cut_short(data: dict, k: int, window_s: float, rows: np.ndarray) -> bool:
     """Whether the end of its experiment's rows cuts the isolation window of the alarm at row
     ``k`` short (:func:`window_rows`): the span from its last row to t_k + ``window_s`` is
     more than half the typical step of the window's rows, a sample missing. ``--follow``
@@ -274,9 +274,7 @@ def cut_short(data: dict, k: int, window_s: float) -> bool:
     # step is read on the window's rows, which --follow holds as batch does: on the whole run,
     # batch read it on rows that --follow (which keeps its latest 100,000 to 200,000) had
     # forgotten, and a clock whose step drifted read another half step there
-    return bool(
-        t[k] + window_s - run[-1] > typical_step(t[window_rows(data, k, window_s)], 0.0) / 2
-    )
+    return bool(t[k] + window_s - run[-1] > typical_step(t[rows], 0.0) / 2)
 
 
 #: a window whose rows hold samples over less than this share of it, samples missing inside
@@ -303,7 +301,7 @@ def on_part(data: dict, k: int, window_s: float, rows: np.ndarray, max_step: flo
     ``seconds`` its rows hold samples over (:func:`held_seconds`), ``window_s``, ``samples``
     and ``by``; None where it is whole, or holds samples over most of it."""
     held_s = held_seconds(data["t"][rows], max_step)
-    end = cut_short(data, k, window_s)
+    end = cut_short(data, k, window_s, rows)
     if not end and held_s >= HELD_SHARE * window_s:
         return None
     return {"seconds": held_s, "window_s": float(window_s), "samples": int(rows.size),
