@@ -916,3 +916,26 @@ def test_inspect_summarizes_runs_joined_without_a_fresh_index_as_alone():
     assert info == summarize(joined.reset_index(drop=True))
     assert [e["samples"] for e in info["experiments"]] == [400, 200]
     assert info["gaps"] == []
+
+
+def test_a_short_piece_cut_at_a_gap_is_left_unbridged_not_refused():
+    """A run cut at a gap into pieces (``piece_of`` set) may leave a piece shorter than the
+    Savitzky-Golay window. Velocities are not derived on such a piece, as on a stretch between
+    gaps within a run; the bridge dropped ``piece_of`` before deriving, so a velocity gap in
+    that piece was refused as a window too short for the whole log. It is left empty and not
+    counted as bridged, and the long piece's gap is still bridged."""
+    from nnid.datasets.preprocess import PIECE_OF
+
+    whole = _mocap_log(300)
+    long_piece = whole.iloc[:280].assign(experiment="dive#0")
+    short = whole.iloc[292:].assign(experiment="dive#1")  # 8 samples: under the 0.5-s window
+    log = pd.concat([long_piece, short], ignore_index=True)
+    log[PIECE_OF] = "dive"
+    log.loc[100:109, ["u", "r"]] = np.nan
+    log.loc[len(long_piece) + 3 : len(long_piece) + 5, "r"] = np.nan
+    report = CleaningReport()
+    out = bridge_from_pose(log, report=report)
+    assert out.loc[100:109, ["u", "r"]].notna().all().all()
+    assert out.loc[len(long_piece) + 3 : len(long_piece) + 5, "r"].isna().all()
+    (step,) = report.steps
+    assert "1 gap in" in step.detail, step.detail

@@ -649,14 +649,21 @@ def bridge_from_pose(
             continue
         # derive_velocities sees no velocity column, so it makes each one the pose gives; w
         # from depth alone assumes u = v = 0, an approximation a bridge must not use. The
-        # experiment column stays, so that what it warns of names the run, not "the log"
-        named = ["experiment"] if "experiment" in part else []
+        # experiment column stays, so that what it warns of names the run, not "the log", and
+        # piece_of, so that a piece cut at a gap shorter than the window gets no derivative
+        # (it was refused as a run too short for the window)
+        named = [c for c in ("experiment", PIECE_OF) if c in part]
         derived = derive_velocities(part[["t", *named, *complete]], window_s, order)
         can = [c for c in ("p", "q", "r") if c in velocity]
         if all(c in complete for c in ("x", "y", "z")):
             can += [c for c in ("u", "v", "w") if c in velocity]
         for gap, a, b in _gap_runs(part, velocity):
-            cols = [c for c in gap.columns if c in can]
+            # a short piece has no derivative: no column (nothing derived) or NaN on its rows
+            cols = [
+                c
+                for c in gap.columns
+                if c in can and c in derived and derived[c].iloc[a:b].notna().all()
+            ]
             if gap.length_s > max_bridge_s or not cols:
                 continue
             for c in cols:
