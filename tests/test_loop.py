@@ -1364,6 +1364,44 @@ def test_a_search_with_nothing_to_search_is_named_not_counted_as_tested(monkeypa
     assert len(said) == 1 and said[0].startswith(f"{len(searched)} candidate")
 
 
+def test_a_search_that_found_no_better_fit_is_named_in_loop_json_and_the_report(monkeypatch):
+    """A 1-D search that ran and found no better fit than the model's is counted among the
+    candidates tested (the Bonferroni count) but has no row to rank: loop.json and the report
+    named it nowhere, so a reader could not see what the count held. Each step's
+    ``no_better_fit`` now names it, and the report says it in one line. Here every search's
+    optimum is where it started (the stand-in optimiser returns the current value, 0)."""
+    import html
+
+    from conftest import make_vehicle
+    from scipy.optimize import OptimizeResult
+
+    import nnid.loop.diagnose as diagnose
+    from nnid.reports.loop_report import html_page, markdown
+
+    monkeypatch.setattr(
+        diagnose, "minimize_scalar", lambda *a, **k: OptimizeResult(x=0.0, success=True, nfev=1)
+    )
+    damping = {"model": None, "coefficients": {"Z:w*abs(w)": -30.0}}
+    truth = make_vehicle(damping=damping, current=[0.0, 0.0, 0.1])
+    log = pd.concat(_heave_with_a_little_surge(truth, np.random.default_rng(5), "abc"),
+                    ignore_index=True)  # fmt: skip
+    vehicle = make_vehicle(damping=damping)
+    loop = ResidualLoop(vehicle, dofs=("w",), max_effects=1).fit(log)
+    result, step = loop.as_dict(), loop.steps_[0]
+    ranked = {s.name for s in step.ranked}
+    searches = [c.name for c in candidates(vehicle, loop.workspace_.train) if not c.linear]
+    found_nothing = [n for n in searches if n not in ranked]
+    # the current's pre-screen is significant, so it was searched, and found nothing better
+    assert "current.z" in found_nothing
+    assert result["steps"][0]["no_better_fit"] == found_nothing
+    assert result["candidates_no_better_fit"] == len(found_nothing)
+    assert step.tested == sum(s.scored for s in step.ranked) + len(found_nothing)
+    line = f"{len(found_nothing)} 1-D search"
+    said = [ln for ln in markdown(result).splitlines() if ln.startswith(line)]
+    assert len(said) == 1 and "current.z" in said[0] and "steps[0].no_better_fit" in said[0]
+    assert html.escape(said[0]) in html_page(result, {})
+
+
 def _measured(s) -> tuple:
     """What the screen measured of a candidate, to compare two screens of it."""
     return (s.value, s.stderr, s.p_value, s.improvement, s.percentile_error, s.reason, s.scored)

@@ -167,6 +167,8 @@ class Step:
     # the candidates tested (scored, and 1-D searches that found no better fit): the
     # Bonferroni correction's count
     tested: int = 0
+    # the 1-D searches that ran and found no better fit: tested, with nothing to rank
+    no_better_fit: list[str] = field(default_factory=list)
 
 
 class Workspace:

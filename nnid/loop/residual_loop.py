@@ -340,9 +340,10 @@ class ResidualLoop:
         known = set(fit.unknowns)
         linear = [c for c in pool if c.linear and c.parameter not in known]
         scored = screen_linear(ws, fit, linear)
-        # searches that ran and found no better fit: tested, with nothing to rank (a candidate
-        # whose linearised column measures nothing comes back named, not searched)
-        found_nothing = 0
+        # searches that ran and found no better fit: tested, with nothing to rank, named so
+        # that a reader sees what the count holds (a candidate whose linearised column
+        # measures nothing comes back named, not searched)
+        found_nothing: list[str] = []
         if self.nonlinear:
             for cand in pool:
                 if not cand.linear:
@@ -350,11 +351,11 @@ class ResidualLoop:
                     if s is not None:
                         scored.append(s)
                     else:
-                        found_nothing += 1
+                        found_nothing.append(cand.name)
         # Bonferroni over the candidates tested: a candidate not excited, not identifiable
         # beside the model or not finite on its rows had no test (no p-value), and counting
         # them (165 of BlueROV1's 324) made the threshold stricter than the family tested asks
-        tested = max(sum(s.scored for s in scored) + found_nothing, 1)
+        tested = max(sum(s.scored for s in scored) + len(found_nothing), 1)
         # a candidate not scored (not excited, not identifiable, not finite) measures nothing:
         # ranked after every other
         scored.sort(key=lambda s: (not s.scored, -s.improvement if s.scored else 0.0))
@@ -367,7 +368,7 @@ class ResidualLoop:
         except Exception as exc:  # a second opinion must not stop the loop
             sindy = [f"(pysindy failed: {exc})"]
         chosen, augmented = self._simulation_gate(ws, fit, [s for s in scored if s.admissible])
-        return Step(scored, chosen, sindy, augmented, tested)
+        return Step(scored, chosen, sindy, augmented, tested, found_nothing)
 
     def _gate_modes(self, ws: Workspace) -> list[tuple[str, str | int]]:
         """The held-out simulations the gate may compare, first choice first: the free run (or
@@ -651,6 +652,8 @@ class ResidualLoop:
             "candidates_not_excited": sum(not s.excited for s in first.ranked),
             "candidates_not_identifiable": sum(not s.identifiable for s in first.ranked),
             "candidates_not_finite": sum(not s.finite for s in first.ranked),
+            # among those tested: the 1-D searches that found no better fit (nothing to rank)
+            "candidates_no_better_fit": len(first.no_better_fit),
             "added": self.added,
             "after": self.after_,
             "stopped": "max_effects" if self.stopped_at_limit else "no candidate passed",
@@ -662,6 +665,8 @@ class ResidualLoop:
                     "not_excited": [s.name for s in st.ranked if not s.excited],
                     "not_identifiable": [s.name for s in st.ranked if not s.identifiable],
                     "not_finite": [s.name for s in st.ranked if not s.finite],
+                    # counted in "tested", ranked nowhere: the searches that found nothing
+                    "no_better_fit": st.no_better_fit,
                     "tested": st.tested,
                     "sindy": st.sindy,
                 }

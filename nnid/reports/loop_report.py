@@ -350,6 +350,24 @@ def not_excited_line(step: dict, k: int, key: str = "not_excited") -> str:
     )
 
 
+def no_better_fit_line(step: dict, k: int) -> str:
+    """One line naming pass ``k``'s 1-D searches that ran and found no better fit ("" where
+    none, or a file without the key): counted among the candidates tested (the Bonferroni
+    count), they have no row in the pass's table, and unnamed a reader could not see what was
+    tried."""
+    names = step.get("no_better_fit") or []
+    if not names:
+        return ""
+    one = len(names) == 1
+    some = ", ".join(names[:3]) + (", ..." if len(names) > 3 else "")
+    return (
+        f"{len(names)} 1-D search{'' if one else 'es'} ({some}) found no better fit than the "
+        f"model's over {'its' if one else 'their'} range: nothing to rank, and "
+        f"{'it is' if one else 'they are'} counted among the candidates tested; the names are "
+        f"in loop.json (steps[{k - 1}].no_better_fit)."
+    )
+
+
 def _tested_text(result: dict) -> str:
     """The count the Bonferroni correction divides α by, each pass its own (``steps[k].
     tested``; a file without them, the first pass's ``candidates_tested``); "" where no pass
@@ -409,6 +427,8 @@ def markdown(result: dict) -> str:
         for key in UNSCORED:
             if not_excited_line(step, k, key):
                 lines += [not_excited_line(step, k, key), ""]
+        if no_better_fit_line(step, k):
+            lines += [no_better_fit_line(step, k), ""]
         if step["sindy"]:
             lines += [f"pysindy STLSQ second opinion: {', '.join(step['sindy'])}.", ""]
         else:
@@ -499,6 +519,11 @@ def html_page(result: dict, figures: dict[str, str]) -> str:
                 f"<p>{html.escape(not_excited_line(step, k, key))}</p>"
                 for key in UNSCORED
                 if step.get(key)
+            )
+            + (
+                f"<p>{html.escape(no_better_fit_line(step, k))}</p>"
+                if step.get("no_better_fit")
+                else ""
             )
             + f"<p>pysindy STLSQ over the strongest linear candidates: {html.escape(sindy)}.</p>"
         )
