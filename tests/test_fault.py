@@ -2209,6 +2209,71 @@ def test_the_rate_check_reads_an_alternating_clock_as_one_rate(vehicle, monitor)
     assert monitor.calibration_["interval"] == pytest.approx(monitor.calibration_["dt"], rel=1e-6)
 
 
+def test_the_monitor_reads_seconds_per_row_not_the_median_step():
+    """typical_interval is the monitor's seconds per row: a rounded clock's rate, as log_step
+    reads it (the trimmed mean of 120 Hz stamped in ms, 8, 8, 9 ms, read 8.29 ms), and on a
+    clock alternating 0.04 / 0.06 s the mean, where log_step's median is one of the two."""
+    from nnid.datasets.log import log_step
+    from nnid.fault.monitor import typical_interval
+
+    rounded = np.round(np.arange(0, 60, 1 / 120), 3)
+    assert typical_interval(rounded) == pytest.approx(1 / 120, rel=1e-6)
+    assert typical_interval(rounded) == pytest.approx(log_step(rounded), rel=1e-9)
+    # two runs, t restarting at 0: the join is no step
+    runs = np.repeat([0, 1], rounded.size)
+    assert typical_interval(np.r_[rounded, rounded], runs) == pytest.approx(1 / 120, rel=1e-6)
+    alternating = np.r_[0.0, np.cumsum(np.tile([0.06, 0.04], 300)[:-1])]
+    assert typical_interval(alternating) == pytest.approx(0.05, rel=1e-3)
+    assert log_step(alternating) == pytest.approx(0.06)  # not the clock's rate
+
+
+def test_the_thresholds_decluster_over_rearm_s_on_an_alternating_clock(vehicle, monitor):
+    """The peaks the thresholds are fitted to are declustered over the rows of rearm_s: at
+    the clock's seconds per row, not its median step (0.06 s on a clock alternating 0.06 and
+    0.04 s, which made 5 s 83 rows where it holds 100)."""
+    import nnid.fault.monitor as monitor_module
+
+    log = simulate_faults(vehicle, 30, seed=54, experiment="alt").iloc[:-1]
+    log = log.assign(t=log["t"] + np.where(np.arange(len(log)) % 2, 0.01, 0.0))
+    t = log["t"].to_numpy()
+    per_row = (t[-1] - t[0]) / (t.size - 1)  # the clock's rate, read off its ends
+    gaps = []
+
+    def spy(series, hours, rate, gap):
+        gaps.append(gap)
+        return rate_threshold(series, hours, rate, gap)
+
+    with pytest.MonkeyPatch.context() as mp, warnings.catch_warnings():
+        mp.setattr(monitor_module, "rate_threshold", spy)
+        warnings.simplefilter("ignore")  # 30 s: too short for the rate fit, and said
+        calibrated = ResidualMonitor(monitor.model).fit(log)
+    assert gaps == [round(calibrated.rearm_s / per_row)] * 2
+    assert calibrated.interval == pytest.approx(per_row, rel=1e-3)
+
+
+def test_a_healthy_log_too_short_to_calibrate_says_why(vehicle, monitor):
+    """Runs of one row give no residual (one is an interval between two rows of one run): the
+    refusal said "0 residual samples" without why. It names the runs, their rows, and what
+    is needed; where the rows were enough, how many intervals scored none and why."""
+    log = simulate_faults(vehicle, 10, seed=55, experiment="s")
+    single = log.iloc[:5].assign(experiment=[f"r{i}" for i in range(5)])
+    with pytest.raises(NnidInputError, match="gives 0 residual samples") as err:
+        ResidualMonitor(monitor.model).fit(single)
+    said = str(err.value)
+    assert err.value.field == "data"
+    assert "5 runs (r0, r1, r2 and 2 more) of 1 row each give at most 0" in said, said
+    assert "at least 100 such intervals" in said, said
+    # rows enough, values missing: the intervals lost to them counted
+    holes = log.copy()
+    holes.loc[holes.index % 3 == 0, "u"] = np.nan
+    lost = int(np.sum(holes["u"].isna().to_numpy()[1:] | holes["u"].isna().to_numpy()[:-1]))
+    with pytest.raises(NnidInputError) as err:
+        ResidualMonitor(monitor.model).fit(holes)
+    said = str(err.value)
+    assert f"s ({len(log)} rows) gives at most {len(log) - 1}" in said, said
+    assert f"0 longer than 0.075 s (samples missing), {lost} with a value missing" in said, said
+
+
 def test_missing_samples_raise_no_alarm_and_are_said(vehicle, monitor, tmp_path):
     """Rows missing (no NaN, the time jumps 2 s): across the hole the commands were not held
     and the difference quotient is not the acceleration, so that interval gets no residual and

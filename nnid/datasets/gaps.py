@@ -102,7 +102,7 @@ class SlowChannel:
             if self.runs is None:
                 where = f"({', '.join(counts)})"
             else:
-                where = f"in {_some_runs(self.runs, counts)}"
+                where = f"in {some_runs(self.runs, counts)}"
             return (
                 f"{self.column}'s rate could not be measured {where}: fewer than the "
                 f"{SLOW_MIN_STEPS + 1} samples a rate needs, and no other run of it measured "
@@ -110,14 +110,14 @@ class SlowChannel:
             )
         k = self.stride
         suffix = "th" if 10 <= k % 100 <= 20 else {1: "st", 2: "nd", 3: "rd"}.get(k % 10, "th")
-        where = "" if self.runs is None else f" in {_some_runs(self.runs)}"
+        where = "" if self.runs is None else f" in {some_runs(self.runs)}"
         return (
             f"{self.column} logged every {k}{suffix} row{where}: {self.rate_hz:.3g} Hz against "
             f"{self.clock_hz:.3g} Hz"
         )
 
 
-def _some_runs(runs: list[str], counts: list[str] | None = None) -> str:
+def some_runs(runs: list[str], counts: list[str] | None = None) -> str:
     """'a, b' or, past :data:`SAY_RUNS` runs, '350 runs (a, b, c and 347 more)': a log cut
     into hundreds of runs made a sentence hundreds of names long. ``counts``: what to say of
     each run in brackets after its name."""

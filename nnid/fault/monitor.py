@@ -29,7 +29,8 @@ from sklearn.utils.validation import check_is_fitted
 
 from nnid.datasets.arrays import check_commands, far_beyond_range, motion_arrays
 from nnid.datasets.cleaning import CleaningReport
-from nnid.datasets.log import POSE, VELOCITY, check_log, log_step
+from nnid.datasets.gaps import some_runs
+from nnid.datasets.log import POSE, VELOCITY, check_log, rounded_clock, run_label
 from nnid.datasets.preprocess import check_attitude, refuse_bursty_runs
 from nnid.errors import NnidInputError
 from nnid.fault import kernel
@@ -55,6 +56,8 @@ CLOCK_SPREAD = 0.2
 #: not held, and scored, one dropped row every 2 s raised 36 false alarms an hour (thruster
 #: losses among them) against a target of 0.01
 GAP_INTERVALS = 1.5
+#: the fewest healthy residual samples (intervals between two rows of one run) calibrated on
+MIN_RESIDUALS = 100
 TRACE_COLUMNS = [
     *(f"r_{f}" for f in FORCES),
     *(f"z_{f}" for f in FORCES),
@@ -335,12 +338,8 @@ class ResidualMonitor(BaseEstimator):
         interval = typical_interval(data["t"], data["experiment"])
         raw = self._pass(data, np.zeros(6), eye, np.zeros((6, 6)), none, interval).values[:, 0:6]
         raw = raw[np.isfinite(raw).all(1)]
-        if raw.shape[0] < 100:
-            raise NnidInputError(
-                f"the healthy log gives {raw.shape[0]} residual samples; the monitor needs at "
-                "least 100 to calibrate",
-                field="data",
-            )
+        if raw.shape[0] < MIN_RESIDUALS:
+            raise _too_few_residuals(data, raw.shape[0], interval, "experiment" in healthy)
         mu = np.where(active, raw.mean(0), 0.0)
         cov = np.cov(raw[:, active].T).reshape(int(active.sum()), -1)
         if np.any(np.diag(cov) <= 0):
@@ -360,9 +359,8 @@ class ResidualMonitor(BaseEstimator):
         self.sigma_ = np.sqrt(_variances(cov, active))  # per DOF, for the isolation's weights
         trace = self._pass(data, mu, whiten, s_inv, none, interval)
         hours = _hours(data)
-        # the runs' steps, the joins between them left out (t restarting is no step)
-        dt = log_step(data["t"], data["experiment"])
-        gap = max(round(self.rearm_s / dt), 1)
+        # the declustering gap: the rows in rearm_s, at the record's seconds per row
+        gap = max(round(self.rearm_s / interval), 1)
         series = {name: [] for name in ("T", "g")}
         for code in np.unique(data["experiment"]):
             rows = data["experiment"] == code
@@ -378,7 +376,7 @@ class ResidualMonitor(BaseEstimator):
             "hours": hours,
             "samples": int(raw.shape[0]),
             "experiments": [str(e) for e in data["experiment_names"]],
-            "dt": dt,
+            "dt": interval,  # too: nnid before "interval" read the interval from it
             "interval": interval,
         }
         self.measured_false_alarms_: dict | None = None  # :meth:`measure_false_alarms`
@@ -591,7 +589,7 @@ class _Calibration(StrictModel):
     hours: PositiveFloat
     samples: int = Field(ge=1)
     experiments: list[str]
-    dt: PositiveFloat
+    dt: PositiveFloat  # the interval (older monitors: the median step, log_step)
     interval: PositiveFloat | None = None  # :func:`typical_interval`; older monitors lack it
 
 
@@ -650,9 +648,22 @@ class Stream:
 
 
 def typical_interval(t: np.ndarray, experiment: np.ndarray | None = None) -> float:
-    """The sample interval of a record: the 10 %-trimmed mean of its intervals within each
-    experiment. Unlike the median it does not jump between the two values of a clock that
-    alternates (0.04 and 0.06 s read at 20 Hz), and unlike the mean it ignores a few holes."""
+    """The sample interval of a record, seconds per row, read from its intervals within each
+    experiment: a coarsely rounded clock's rate (:func:`~nnid.datasets.log.rounded_clock`:
+    120 Hz stamped in ms is 8.333 ms, where the trimmed mean of its 8, 8, 9-ms steps read
+    8.29), else their 10 %-trimmed mean, which ignores a few holes. Each use of it is seconds
+    per row: the longest interval scored (:attr:`ResidualMonitor.max_interval`), the rate
+    check, the rows of ``rearm_s`` the thresholds decluster over, the rows of a window. So it
+    is not :func:`~nnid.datasets.log.log_step`'s median (the step a derivative takes; the same
+    on other clocks): on a clock alternating 0.04 and 0.06 s (20 Hz) the median is 0.04 or
+    0.06 by one sample more or less, 20 % off its rate; the declustering read it (83 rows
+    where 5 s holds 100), and the rate check (10 %) and the scored limit (1.5 times 0.04 s is
+    the 0.06-s intervals themselves) cannot."""
+    t = np.asarray(t, dtype=np.float64)
+    within = None if experiment is None else _within(experiment)
+    rounded = rounded_clock(t, within)
+    if rounded is not None:
+        return rounded[0]
     steps = _steps(t, experiment)
     return float(trim_mean(steps, 0.1)) if steps.size else math.nan
 
@@ -660,9 +671,46 @@ def typical_interval(t: np.ndarray, experiment: np.ndarray | None = None) -> flo
 def _steps(t: np.ndarray, experiment: np.ndarray | None = None) -> np.ndarray:
     """The sample intervals of ``t`` within each experiment (none across a boundary)."""
     steps = np.diff(np.asarray(t, dtype=np.float64))
-    if experiment is None:
-        return steps
-    return steps[np.asarray(experiment)[1:] == np.asarray(experiment)[:-1]]
+    return steps if experiment is None else steps[_within(experiment)]
+
+
+def _within(experiment: np.ndarray) -> np.ndarray:
+    """Which steps of a log join two rows of one experiment (``experiment``: each row's)."""
+    runs = np.asarray(experiment)
+    return runs[1:] == runs[:-1]
+
+
+def _too_few_residuals(data: dict, count: int, interval: float, named: bool) -> NnidInputError:
+    """The refusal of a healthy log (:func:`monitor_inputs`, ``named``: it has an experiment
+    column) that gave ``count`` < :data:`MIN_RESIDUALS` residual samples, with why: a residual
+    is an interval between two rows of one run, so its runs' rows, or where rows were enough,
+    the intervals scored none (samples missing, or a value missing at either end)."""
+    codes = data["experiment"]
+    names = [run_label(None)] if not named else [str(n) for n in data["experiment_names"]]
+    rows = np.bincount(codes, minlength=len(names))
+    pairs = int(_within(codes).sum())
+    said = [f"{n} row{'s' * (n != 1)}" for n in rows.tolist()]
+    if len(names) > 1 and len(set(said)) == 1:  # one count for all: said once
+        runs = f"{some_runs(names)} of {said[0]} each give"
+    else:
+        runs = f"{some_runs(names, said)} give{'s' * (len(names) == 1)}"
+    why = (
+        f"the healthy log gives {count} residual samples; the monitor needs at least "
+        f"{MIN_RESIDUALS} to calibrate. A residual is the difference quotient over two "
+        f"consecutive rows of one experiment, so a run of n rows gives at most n - 1: here "
+        f"{runs} at most {pairs}"
+    )
+    if pairs < MIN_RESIDUALS:
+        fix = f"runs with at least {MIN_RESIDUALS} such intervals together"
+    else:
+        long = int(np.sum(_steps(data["t"], codes) > GAP_INTERVALS * interval))
+        why += (
+            f", and {pairs - count} of those intervals gave none: {long} longer than "
+            f"{GAP_INTERVALS * interval:.4g} s (samples missing), {pairs - count - long} with a "
+            "value missing (NaN) at either end"
+        )
+        fix = "runs with fewer gaps"
+    return NnidInputError(f"{why}; calibrate on a healthy log of {fix}", field="data")
 
 
 def _hours(data: dict) -> float:
