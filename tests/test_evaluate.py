@@ -410,3 +410,19 @@ def test_a_closed_loop_replay_refuses_repeated_labels_naming_the_table():
         NnidInputError, match=r"^the index of the replay's open-loop inputs repeats 20 labels"
     ):
         fly_closed_loop(fresh, Replay(None, joined[list(TAU)]), stepper)
+
+
+def test_a_physics_models_substeps_read_its_runs_step_without_the_joins():
+    """Two runs of 120 Hz stamped in whole ms, t restarting at 0: read over the whole log, the
+    negative step at the join took the rounded clock off its line and the sub-steps came from
+    the 8-ms median (2 of 4 ms) where each run alone steps 8.33 ms (3 of at most 4 ms). A log
+    in which no run has two samples is still stepped once a sample."""
+    from nnid.evaluation.prediction import substeps_for
+
+    t = np.round(np.arange(360) / 120.0 * 1e3) / 1e3  # 8, 8, 9 ms steps
+    run = pd.DataFrame({"t": t})
+    log = pd.concat([run.assign(experiment=name) for name in ("a", "b")], ignore_index=True)
+    assert substeps_for(run, max_step=0.004) == 3  # ceil(8.33 / 4): one run alone
+    assert substeps_for(log, max_step=0.004) == 3
+    singles = pd.DataFrame({"t": [0.0, 0.0], "experiment": ["a", "b"]})
+    assert substeps_for(singles) == substeps_for(run.iloc[:1]) == 1

@@ -567,3 +567,29 @@ def test_rls_memory_check_weights_an_equation_of_exact_data_as_batch_least_squar
     with warnings.catch_warnings():
         warnings.simplefilter("error", ExcitationWarning)
         assert LeastSquares(correlated=False).solve(reg).excitation.collinear == []
+
+
+def test_the_gradient_estimators_step_reads_its_runs_without_the_joins(seamor):
+    """Two runs of 120 Hz stamped in whole ms, t restarting at 0: read over the whole data,
+    the negative step at the join took the rounded clock off its line, and the gradient law
+    was discretised over the 8-ms median, 4 % short of each run's 8.33 ms. Data in which no
+    run has two samples still step one gain a sample (Δt None, as one sample had)."""
+    seen = []
+
+    class Seen(GradientEstimator):
+        def solve(self, reg, dt=None, progress=None):
+            seen.append(dt)
+            return super().solve(reg, dt, progress)
+
+    t = np.round(np.arange(360) / 120.0 * 1e3) / 1e3  # 8, 8, 9 ms steps
+    u = 0.5 + 0.2 * np.sin(2 * np.pi * 0.5 * t)
+    run = pd.DataFrame({"t": t, "u": u, "du": np.gradient(u, t)})
+    run = run.assign(**{f"tau_{f}": 0.0 for f in "YZKMN"}, tau_X=20.0 * u)
+    log = pd.concat([run.assign(experiment=name) for name in ("a", "b")], ignore_index=True)
+    structure = ParametricFossen(seamor, SURGE, dofs=("u",))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # no standard errors, not converged: not tested here
+        Seen(gain=1.0).fit(structure, log_arrays(log, seamor))
+        Seen(gain=1.0).fit(structure, log_arrays(log.iloc[[0, 360]], seamor))
+    assert seen[0] == pytest.approx(1 / 120, rel=1e-5)
+    assert seen[1] is None

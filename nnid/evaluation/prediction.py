@@ -21,6 +21,7 @@ from nnid.datasets.log import (
     VELOCITY,
     check_time_unit,
     check_unique_labels,
+    frame_step,
     typical_step,
 )
 from nnid.datasets.preprocess import check_uniform, experiment_rows, first_order_lag
@@ -72,9 +73,12 @@ def check_stepped(log: pd.DataFrame) -> None:
 
 
 def substeps_for(log: pd.DataFrame, max_step: float = MAX_STEP) -> int:
-    """RK4 sub-steps per sample so that no step exceeds ``max_step`` seconds."""
-    t = log["t"].to_numpy(np.float64)
-    dt = typical_step(t, max_step)
+    """RK4 sub-steps per sample so that no step exceeds ``max_step`` seconds, at the typical
+    step of the log's runs (:func:`~nnid.datasets.log.frame_step`: the joins between them
+    left out); 1 for a log in which no run has two samples (nothing to step)."""
+    dt = frame_step(log)
+    if np.isnan(dt):  # as a log of one sample was: nothing to step
+        return 1
     return max(1, int(np.ceil(dt / max_step - 1e-9)))
 
 

@@ -26,7 +26,7 @@ import numpy as np
 from numba import njit
 from sklearn.base import BaseEstimator
 
-from nnid.datasets.log import typical_step
+from nnid.datasets.log import log_step
 from nnid.errors import NnidInputError
 from nnid.evaluation.persistence import ExcitationReport, equation_rms, excitation_from_gram
 from nnid.trainers.history import Progress, silent
@@ -444,7 +444,10 @@ class GradientEstimator(BaseEstimator):
     def fit(self, structure, data: dict, progress: Progress | None = None) -> Estimate:
         """Build the regression and run the gradient law with Δt from the log's time stamps."""
         t = np.asarray(data["t"], dtype=np.float64)
-        dt = self.dt or typical_step(t, None)
+        # the step of its runs, the joins between them left out; None (one gain per sample,
+        # :meth:`solve`) where no run has two samples
+        step = log_step(t, data.get("experiment"))
+        dt = self.dt or (None if np.isnan(step) else step)
         return self.solve(structure.regression(data, self.filter_lambda), dt, progress)
 
     def solve(
