@@ -1591,3 +1591,27 @@ def test_the_loops_horizons_and_smoothing_read_held_out_runs_at_their_own_step(m
     [(dt, window)] = read  # one analysed DOF
     assert dt == pytest.approx(1 / 120, rel=1e-5)
     assert window == savgol_window(loop.savgol_window, 120.0, loop.savgol_order)
+
+
+@pytest.mark.parametrize("filter_lambda", [1.0, None])
+def test_training_runs_of_one_sample_each_are_refused_naming_why(filter_lambda):
+    """A log whose training runs hold one sample each (a Python caller's; a log file's reader
+    refuses a run of one sample) has no step to read: with the filter a division by zero in
+    the regression, without it "actuator_lag = nan leaves no valid vehicle", blaming the
+    vehicle. One refusal names the runs."""
+    from nnid.errors import NnidInputError
+
+    log = effect_log(load_vehicle("seamor"), duration=30, n_experiments=1, seed=3)
+    dt = float(log["t"].iloc[1] - log["t"].iloc[0])
+    # accelerations given, so that no run is refused for a derivative's window
+    log = log.assign(**{f"d{c}": np.gradient(log[c].to_numpy(), dt) for c in "uvwpqr"})
+    ones = log.iloc[::3].iloc[:120]
+    ones = ones.assign(experiment=[f"s{i}" for i in range(len(ones))])
+    held = log.assign(experiment="held")
+    joined = pd.concat([held, ones], ignore_index=True)
+    loop = ResidualLoop(
+        load_vehicle("seamor"), validation_experiments=["held"], filter_lambda=filter_lambda
+    )
+    with pytest.raises(NnidInputError, match="no training run has two samples") as err:
+        loop.fit(joined)
+    assert err.value.field == "experiment"

@@ -1912,3 +1912,23 @@ def test_damping_terms_are_sized_without_a_six_row_column_each(heave_only):
     in_y = np.array([n.startswith("Y:") for n in names] + [False])
     assert (one[in_y] == 0).all() and (probe[:, in_y] == 0).all()
     assert (one[~in_y] > 0).any() and one[-1] > 0  # Z_wdot: ν̇ of a heave run
+
+
+def test_filtered_least_squares_on_runs_of_one_sample_each_is_refused_naming_why():
+    """The filtered regression on runs of one sample each (a Python caller's log with its
+    accelerations given) has no sample left after the filter settles, and its advice divided
+    by the longest run's 0 s: a ZeroDivisionError. One refusal says why."""
+    from nnid.errors import NnidInputError
+    from nnid.loop.scenarios import effect_log
+    from nnid.vehicle import load_vehicle
+
+    vehicle = load_vehicle("seamor")
+    log = effect_log(vehicle, duration=10, n_experiments=1, seed=3)
+    dt = float(log["t"].iloc[1] - log["t"].iloc[0])
+    log = log.assign(**{f"d{c}": np.gradient(log[c].to_numpy(), dt) for c in "uvwpqr"})
+    ones = log.iloc[::3].iloc[:60]
+    ones = ones.assign(experiment=[f"s{i}" for i in range(len(ones))])
+    model = ParametricModel(vehicle, trainer=LeastSquares(filter_lambda=1.0))
+    with pytest.raises(NnidInputError, match="no experiment has two samples") as err:
+        model.fit(ones)
+    assert err.value.field == "experiment"

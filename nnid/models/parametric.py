@@ -339,6 +339,11 @@ class ParametricFossen:
                     float(np.ptp(data["t"][data["experiment"] == k]))
                     for k in np.unique(data["experiment"])
                 )
+                if longest <= 0.0:  # runs of one sample each: no λ helps
+                    raise NnidInputError(
+                        "no experiment has two samples: there is nothing to filter or fit",
+                        field="experiment",
+                    )
                 raise NnidInputError(
                     f"the filtered regressors settle in 3/λ = {3.0 / filter_lambda:.3g} s, "
                     f"longer than every experiment (the longest lasts {longest:.3g} s): no "
