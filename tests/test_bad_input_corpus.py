@@ -750,6 +750,9 @@ CONFIG_CASES = [
     ("train", "fossen dofs named twice", "model.dofs", None),
     # a list where a number or a list is allowed: the element is named, not "a valid integer"
     ("train", "narx delay list with a negative delay", "model.input_delays.1", None),
+    # said against the config alone ("narx.toml: input_delays must be ..."), no field named
+    ("train", "narx empty input delay list", "model.input_delays", None),
+    ("train", "narx empty output delay list", "model.output_delays", None),
     ("train", "ensemble member output not in the log", "model.member.outputs", None),
     ("compare", "second model input not in the log", "models.1.inputs", None),
     # a sequence step's experiments and unknowns: the step's, not the model's own `unknowns`
@@ -872,6 +875,8 @@ MODEL_TEXT = {
     "sindy without thresholds": '[model]\nkind = "sindy"\nthresholds = []\n',
     "sindy filter of 1e-300 rad per s": '[model]\nkind = "sindy"\nfilter_lambda = 1e-300\n',
     "narx delay list with a negative delay": f"[model]\n{_NARX}input_delays = [0, -1]\n",
+    "narx empty input delay list": f"[model]\n{_NARX}input_delays = []\n",
+    "narx empty output delay list": f"[model]\n{_NARX}output_delays = []\n",
     # a NaN bound was said as "Input should be 'train'"
     "narx bound not a number": f"[model]\n{_NARX}output_bounds = [[nan, 1.0]]\n",
     "adam floor above its rate": (
@@ -1673,6 +1678,47 @@ def test_a_model_folder_whose_files_are_folders_is_refused(fixtures, tmp_path):
         with pytest.raises(NnidInputError, match="cannot be read") as err:
             load_model(folder)
         assert err.value.source == str(target)
+
+
+@pytest.mark.parametrize(
+    ("command", "keys", "field"),
+    [
+        ("loop", 'vehicle = "minirov.toml"\nmodel = ["det"]\n', "model"),
+        ("train", 'config = "train.toml"\nmodel = "det"\n', "model"),
+        ("detect", 'model = "det"\nvehicle = "minirov.toml"\n', "vehicle"),
+        ("detect", 'model = "det"\nconfig = "train.toml"\n', "config"),
+    ],
+)
+def test_a_manifest_key_its_command_does_not_read_is_refused(tmp_path, command, keys, field):
+    """A detection model given to loop tasks, or a vehicle or config to detect tasks (whose
+    model holds both), was dropped without a word, each value another identical task."""
+    from nnid.errors import NnidInputError
+    from nnid.scale.manifest import expand
+
+    (tmp_path / "det").mkdir()
+    (tmp_path / "dive.csv").write_text("t,u\n0,0\n")
+    (tmp_path / "minirov.toml").write_text(Path(MINIROV).read_text())
+    (tmp_path / "train.toml").write_text(TRAIN_TEXT)
+    manifest = tmp_path / "m.toml"
+    manifest.write_text(f'command = "{command}"\ndata = ["dive.csv"]\n{keys}')
+    with pytest.raises(NnidInputError, match=f"does not apply to '{command}' tasks") as err:
+        expand(manifest)
+    assert err.value.field == field and err.value.source == str(manifest)
+
+
+@pytest.mark.parametrize("text", [b"https://example.org/tensors.pt\n", b"(empty)\n", b"Garbage"])
+def test_a_tensors_file_of_text_is_refused_naming_it(fixtures, tmp_path, text):
+    """Bytes that are no zip archive are read as a legacy pickle, whose unpickler failed on
+    text with its internals' KeyError, IndexError or struct.error: a traceback, exit 1."""
+    import shutil
+
+    folder = tmp_path / "model"
+    shutil.copytree(fixtures["monitor"], folder)
+    (folder / "tensors.pt").write_bytes(text)
+    args = _command("detect", tmp_path, fixtures, model=folder, out=tmp_path / "o")
+    result = CliRunner().invoke(app, args)
+    assert result.exit_code == 2, result.output
+    assert f"error: {folder / 'tensors.pt'}: damaged" in result.output
 
 
 @pytest.mark.parametrize(("text", "said"), [("u,,w", "empty name"), ("run0,run0", "run0 twice")])

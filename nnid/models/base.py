@@ -32,6 +32,7 @@ import importlib
 import inspect
 import math
 import pickle
+import struct
 import time
 from abc import ABC, abstractmethod
 from collections.abc import Iterable, Mapping
@@ -454,6 +455,11 @@ def load_model(folder: str | Path) -> NnidModel:
         raise NnidInputError(_damaged(exc), source=str(tensor_path)) from None
     except OSError as exc:  # a folder in its place, no permission
         raise NnidInputError(f"cannot be read ({exc.strerror})", source=str(tensor_path)) from None
+    except (KeyError, IndexError, struct.error):
+        # bytes that are no zip archive are read as a legacy pickle, whose unpickler fails on
+        # text with its own internals' errors (a file of "https://…" a KeyError, of "(…" an
+        # IndexError): a traceback, where the file is simply not tensors
+        raise NnidInputError(UNSAFE_TENSORS, source=str(tensor_path)) from None
     if not isinstance(tensors, dict):
         raise NnidInputError(_damaged(TypeError("no tensors by name")), source=str(tensor_path))
     # a NaN weight loads and predicts NaN everywhere: a damaged file, said at loading

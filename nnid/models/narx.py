@@ -141,7 +141,10 @@ def _delays(d: int | Sequence[int], minimum: int, what: str) -> list[int]:
     """An int n means delays 1..n (MATLAB's ``1:n``); a list is taken as given."""
     out = list(range(1, int(d) + 1)) if isinstance(d, int) else sorted({int(x) for x in d})
     if not out or min(out) < minimum:
-        raise NnidInputError(f"{what} must be a positive count or a list of delays ≥ {minimum}")
+        # named as the setting: a config's empty list was said against the file alone
+        raise NnidInputError(
+            f"a positive count or a list of delays ≥ {minimum} is expected, not {d!r}", field=what
+        )
     return out
 
 

@@ -29,7 +29,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
-from pydantic import Field, ValidationInfo, field_validator
+from pydantic import Field, ValidationInfo, field_validator, model_validator
 
 from nnid.errors import NnidInputError
 from nnid.validation import (
@@ -80,6 +80,16 @@ TAKES = {
     "compare": (),
     "loop": ("max_effects", "alpha", "dofs", "validation", "exclude"),
     "detect": ("window",),
+}
+
+#: the input keys a command's tasks do not read: a detection model's folder given to a loop
+#: (or a vehicle or config to detect, whose model holds both) was dropped without a word,
+#: and each of its values multiplied the tasks by identical runs
+IGNORES = {
+    "train": ("model",),
+    "compare": ("model",),
+    "loop": ("model",),
+    "detect": ("vehicle", "config"),
 }
 
 
@@ -136,6 +146,20 @@ class Manifest(StrictModel):
                 f"'{stray[0]}' does not apply to '{command}' tasks; the options they take: {takes}"
             )
         return value
+
+    @model_validator(mode="after")
+    def _inputs_apply(self) -> Manifest:
+        stray = [key for key in IGNORES[self.command] if getattr(self, key)]
+        if stray:
+            why = (
+                "they take the vehicle and settings of their detection model (model)"
+                if self.command == "detect"
+                else "a model is a detection model's folder, for 'detect' tasks"
+            )
+            raise NnidInputError(
+                f"does not apply to '{self.command}' tasks: {why}; drop it", field=stray[0]
+            )
+        return self
 
 
 @dataclass(frozen=True)
