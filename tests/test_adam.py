@@ -109,3 +109,30 @@ def test_a_validation_run_that_always_diverges_stops_after_max_fail():
     hist = Adam(lr=0.05, max_epochs=200, max_fail=5).fit(module, residual, train, val)
     assert hist.stop_reason == "validation diverged" and hist.epochs == 5 and hist.best_epoch == 0
     assert torch.equal(module.weight.detach(), start)
+
+
+def test_a_batch_whose_loss_is_not_finite_takes_no_step_and_the_fit_goes_on():
+    """A batch with a NaN row (a training segment that diverged) in the first epoch: its NaN
+    gradient, through clipping and Adam's moments, made every weight NaN, and the fit stopped
+    ("non-finite loss") on its start. It now takes no step, is counted, and the rest train."""
+    module, residual, train, val = _problem()
+
+    def run(params, batch):
+        r = residual(params, batch[1])
+        return torch.cat([r, r[:1] * math.nan]) if batch[0] == "diverged" else r
+
+    def epoch(k):
+        batches = [("ok", b) for b in train]
+        return [("diverged", train[0]), *batches] if k == 0 else batches
+
+    hist = Adam(lr=0.05, max_epochs=5).fit(module, run, epoch, [("ok", val[0])])
+    assert hist.stop_reason == "max_epochs" and hist.info["skipped_batches"] == 1
+    assert math.isnan(hist.train[1])  # the epoch's objective was not finite: recorded so
+    assert bool(torch.isfinite(module.weight).all())
+    assert hist.best_epoch == 5 and hist.validation[-1] < hist.validation[0]
+    # an epoch none of whose batches can step ends the fit, its start kept
+    module, residual, train, val = _problem()
+    start = module.weight.detach().clone()
+    hist = Adam(lr=0.05, max_epochs=5).fit(module, run, [("diverged", b) for b in train], None)
+    assert hist.stop_reason == "non-finite loss" and hist.epochs == 1
+    assert torch.equal(module.weight.detach(), start)

@@ -583,3 +583,73 @@ def test_a_hybrid_trained_on_a_lagged_vehicle_stays_at_the_plant():
     for dof in "uvr":
         err = float(np.nanmax(np.abs(pred[dof] - log[dof])))
         assert err < 1e-4 * log[dof].abs().max(), (dof, err)
+
+
+def test_a_velocity_the_log_lacks_is_left_out_of_the_training_not_taken_as_zero(minirov):
+    """Empty u cells (a DVL dropout, rows 50-79 of the first run): the trainer scored them as
+    ν = 0 and started segments and validation windows from u = 0, without a word; the
+    held-out error at the start was 100 times the clean log's. Now no error row scores them,
+    the segments (50, 60, 70) and the window (60) that start there are left out, counted and
+    said, and training runs on (a NaN force in the penalty would stop it)."""
+    log = effect_log(minirov, duration=20.0, n_experiments=2, dt=0.05, seed=3)
+    holes = log.copy()
+    holes.loc[holes.index[50:80], "u"] = np.nan
+    start = {}
+    for name, data in (("clean", log), ("holes", holes)):
+        model = HybridModel(
+            minirov, trainer=Adam(max_epochs=1), hidden=(4,), memory=(), segments=(0.5,),
+            validation_window=1.0,
+        )  # fmt: skip
+        if name == "holes":
+            said = "3 training segments and 1 validation windows start from a velocity"
+            with pytest.warns(UserWarning, match=said):
+                model.fit(data, data)
+        else:
+            model.fit(data, data)
+        stage = model.stages_[0]
+        start[name] = stage["validation"][0]
+    assert stage["segments_without_start"] == 3
+    assert stage["validation_windows_without_start"] == 1
+    assert stage["stop_reason"] == "max_epochs" and "skipped_batches" not in stage
+    assert np.isfinite(stage["train"]).all()
+    assert start["holes"] < 1.5 * start["clean"], start
+
+
+def test_the_recorded_training_error_is_the_simulation_errors_not_the_penaltys():
+    """One segment, the whole run, trained and held out: its training error at the start is
+    its validation error (the same free run). The force penalty's rows counted in the mean:
+    it was recorded at half of it (n_y = 6 error rows per sample, 6 penalty rows)."""
+    minirov = load_vehicle(MINIROV)
+    log = effect_log(minirov, duration=20.0, n_experiments=1, dt=0.05, seed=3)
+    model = HybridModel(
+        minirov, trainer=Adam(max_epochs=0), hidden=(4,), memory=(), segments=(1000.0,),
+        validation_window=None,
+    ).fit(log, log)  # fmt: skip
+    stage = model.stages_[0]
+    assert stage["validation"][0] > 0
+    assert stage["train"][0] == pytest.approx(stage["validation"][0], rel=1e-6)
+
+
+def test_a_diverging_adaptive_solve_is_a_diverged_prediction_not_an_exception(minirov):
+    """dopri5 on physics whose quadratic damping has the wrong sign (50 times): torchdiffeq
+    asserts on the step that underflows, and predict raised a bare AssertionError where the
+    fixed-step rk4 scores the run as diverged. Both now say diverged."""
+    log = effect_log(minirov, duration=20.0, n_experiments=1, dt=0.05, seed=3)
+    for method in ("rk4", "dopri5"):
+        model = HybridModel(
+            minirov, trainer=Adam(max_epochs=0), hidden=(4,), memory=(), segments=(0.5,),
+            method=method,
+        )  # fmt: skip
+        with pytest.warns(UserWarning, match="without validation data"):
+            model.fit(log)
+        physics = model.dynamics_.physics
+        with torch.no_grad():
+            physics.coefficients.mul_(-50.0)
+        physics.forget()
+        assert model.score(log)["total"] is None, method
+        # a training segment with gradients: NaN states, which Adam skips as a non-finite loss
+        prepared, data = model._data(log, accelerations=False)
+        x0 = torch.as_tensor(measured_states(prepared)[:1])
+        u = torch.as_tensor(model._channels(prepared, data["tau"])[None, :200])
+        states = model.dynamics_(x0, u, 0.05)
+        assert not bool(torch.isfinite(states[-1]).all()), method

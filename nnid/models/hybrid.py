@@ -416,11 +416,16 @@ class _Problem:
             net = {k[4:]: v for k, v in params.items() if k.startswith("net.")}
             dyn = self.module
             x, u = batch.measured, batch.inputs.transpose(0, 1)
+            # at measured states only: a NaN velocity's force would make every gradient NaN
+            known = torch.isfinite(x).all(-1)
+            if not bool(known.all()):
+                x, u = x[known], u[known]
             s, c = trig(x)
             _, nu_r = dyn.physics.field(False).features(x[..., 6:12], s, c)
             feats = dyn.features(nu_r, s, c, dyn.channels(u))
             f = functional_call(dyn.net, net, (feats,)) / dyn.net.out_scale
-            out.append((model.force_penalty * rows / f.numel()) ** 0.5 * f.reshape(-1))
+            if f.numel():
+                out.append((model.force_penalty * rows / f.numel()) ** 0.5 * f.reshape(-1))
         if model.physics == "joint" and model.prior_weight > 0 and self.module.physics.joint:
             delta = params["physics.delta"]
             w = (model.prior_weight * rows / delta.numel()) ** 0.5
@@ -632,6 +637,12 @@ class HybridModel(FossenPlant):
     def _runs(self, log: pd.DataFrame, data: dict[str, np.ndarray]) -> list[Run]:
         channels = self._channels(log, data["tau"])
         states = measured_states(log)
+        # a velocity not measured stays missing (measured_states starts a prediction at 0
+        # there): it trained the net toward ν = 0 and started segments from it; the trainer
+        # scores no row of it and starts no segment from it, as the parametric fit leaves it out
+        for k, c in enumerate(VELOCITY):
+            if c in log:
+                states[~np.isfinite(log[c].to_numpy(np.float64)), 6 + k] = np.nan
         targets = states[:, [6 + DOFS.index(d) for d in self.scored_]]
         targets = targets / np.array([self.velocity_scale_[d] for d in self.scored_])
         transient = label_transients(log).to_numpy()
@@ -703,6 +714,22 @@ class HybridModel(FossenPlant):
             {"segment_s": s, **h.as_dict()}
             for s, h in zip(self.segments, self.history_, strict=True)
         ]
+        left_out = {
+            what: max((stage.get(key, 0) for stage in self.stages_), default=0)
+            for key, what in (
+                ("segments_without_start", "training segments"),
+                ("validation_windows_without_start", "validation windows"),
+            )
+        }
+        if any(left_out.values()):
+            said = " and ".join(f"{n} {what}" for what, n in left_out.items() if n)
+            warnings.warn(
+                f"{said} start from a velocity the log does not hold (NaN) and were left "
+                "out of the hybrid's training (the most of any stage; describe()['stages'] "
+                "counts them per stage)",
+                UserWarning,
+                stacklevel=3,
+            )
         kept_on = _kept_on(self.stages_)
         if kept_on != "validation free run":
             # nothing held out to stop on (in every stage, or in some): the kept epoch was

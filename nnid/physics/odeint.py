@@ -14,7 +14,10 @@ and calls ``torchdiffeq.odeint`` (or ``odeint_adjoint``):
   numbers (``substeps`` a power of two) and the one-ulp perturbation always lands on the
   right side of a sample;
 - ``method="dopri5"``: adaptive steps with the sample times as ``jump_t`` (where a held input
-  jumps), so the error control restarts there instead of shrinking the step to nothing;
+  jumps), so the error control restarts there instead of shrinking the step to nothing. A
+  solve that diverges (torchdiffeq asserts on a non-finite state or a step that underflows)
+  gives NaN states, as a fixed-step solve that diverges does: a diverged free run, not an
+  exception;
 - ``adjoint=True``: gradients by the adjoint ODE (``odeint_adjoint``), which stores no
   intermediate states: a memory saver for long horizons, slower on a CPU (it integrates the
   system backwards a second time);
@@ -50,6 +53,8 @@ METHODS = ("rk4", "dopri5", "nnid_rk4")
 Hold = Literal["zoh", "linear"]
 #: inputs a ``lag`` acts on: the first six (a generalized force)
 LAGGED = 6
+#: how torchdiffeq's adaptive solvers' assertions on a diverged state begin
+_DIVERGED = ("underflow in dt", "non-finite values in state")
 
 
 class SampledInput(nn.Module):
@@ -157,7 +162,14 @@ def integrate(
     if adjoint and adjoint_params is None:
         adjoint_params = tuple(field.parameters())
     kwargs = {"adjoint_params": adjoint_params} if adjoint else {}
-    return solve(field, x0, s, rtol=rtol, atol=atol, method=method, options=options, **kwargs)
+    try:
+        return solve(field, x0, s, rtol=rtol, atol=atol, method=method, options=options, **kwargs)
+    except AssertionError as error:
+        if not str(error).startswith(_DIVERGED):
+            raise
+        # the states left the finite numbers: NaN from the start (no gradient), scored as a
+        # diverged run, where a bare AssertionError ended a fit or a prediction
+        return torch.full((steps + 1, *x0.shape), math.nan, dtype=x0.dtype)
 
 
 def _rk4_lagged(

@@ -90,11 +90,16 @@ class Adam(BaseEstimator):
         train_batches: Batches,
         val_batches: Sequence[Any] | None = None,
         progress: Progress | None = None,
+        recorded: Callable[[torch.Tensor, Any], torch.Tensor] | None = None,
     ) -> History:
         """Minimise mean(residual²) over ``train_batches`` (a list, or a callable giving the
         batches of an epoch, for resampling); stop early on ``val_batches``. ``progress(epoch,
         max_epochs, message)`` is called after every epoch; ``extra["lr"]`` holds the rate each
-        epoch trained with."""
+        epoch trained with. ``recorded(r, batch)``: the rows of a batch's residual whose mean
+        square is recorded as the training error (default: all; an objective with penalty rows
+        records its error rows, comparable with the validation error). A batch whose loss or
+        gradient is not finite takes no step (counted in ``info["skipped_batches"]``); an epoch
+        none of whose batches could step ends the fit ("non-finite loss")."""
         checked_number(self.lr, "lr")  # torch refused a NaN with its own error, ran 0 idle
         checked_number(self.max_epochs, "max_epochs", strict=False, integer=True)
         checked_number(self.max_fail, "max_fail", 1, strict=False, integer=True)
@@ -122,8 +127,11 @@ class Adam(BaseEstimator):
             return out
 
         def mean_square(batches: Iterable[Any], weights: dict[str, torch.Tensor]) -> float:
+            batches = list(batches)
             with torch.no_grad():
                 rs = [residual(weights, b) for b in batches]
+                if recorded is not None:
+                    rs = [recorded(r, b) for r, b in zip(rs, batches, strict=True)]
             return float(sum((r**2).sum() for r in rs) / max(sum(r.numel() for r in rs), 1))
 
         first = train_batches(0) if callable(train_batches) else train_batches
@@ -138,27 +146,41 @@ class Adam(BaseEstimator):
         for epoch in range(self.max_epochs):
             rate = opt.param_groups[0]["lr"]
             batches = train_batches(epoch) if callable(train_batches) else train_batches
-            total, count = 0.0, 0
+            total, count, skipped, stepped = 0.0, 0, 0, 0
             for batch in batches:
                 opt.zero_grad(set_to_none=True)
                 r = residual(params, batch)
                 loss = (r**2).mean()
+                if recorded is None:
+                    total += float(loss.detach()) * r.numel()
+                    count += r.numel()
+                else:
+                    part = recorded(r.detach(), batch)
+                    total += float((part**2).sum())
+                    count += part.numel()
+                # a non-finite loss (a segment that diverged) or gradient takes no step: its
+                # NaN, through clipping and Adam's moments, broke every weight at once
+                if not math.isfinite(float(loss.detach())):
+                    skipped += 1
+                    continue
                 loss.backward()
-                if self.clip is not None:
-                    torch.nn.utils.clip_grad_norm_(params.values(), self.clip)
+                if not _finite_gradient(params.values(), self.clip):
+                    skipped += 1
+                    continue
                 opt.step()
+                stepped += 1
                 if avg is not None:
                     with torch.no_grad():
                         for k, p in params.items():
                             avg[k].lerp_(p.detach(), 1.0 - self.average)
-                total += float(loss.detach()) * r.numel()
-                count += r.numel()
             train = total / max(count, 1)
+            if skipped:
+                hist.info["skipped_batches"] = hist.info.get("skipped_batches", 0) + skipped
             score = mean_square(val_batches, kept()) if val_batches else None
             hist.record(train, score, time.perf_counter() - start, lr=rate)
             # a diverged validation free run is a failure; only a non-finite training loss
             # (the weights themselves broke) ends the fit
-            value = stopping_score(score) if score is not None else train
+            value = stopping_score(score if score is not None else train)
             report(
                 epoch + 1,
                 self.max_epochs,
@@ -167,7 +189,8 @@ class Adam(BaseEstimator):
                 train=train,
                 **({} if score is None else {"validation": score}),
             )
-            if not math.isfinite(train):
+            if not stepped and skipped:
+                # no batch of the epoch gave a finite step: the weights cannot move on
                 hist.stop_reason = "non-finite loss"
                 break
             if value < best:
@@ -187,3 +210,12 @@ class Adam(BaseEstimator):
                 break
         module.load_state_dict(best_state)
         return hist
+
+
+def _finite_gradient(params: Iterable[torch.Tensor], clip: float | None) -> bool:
+    """Clip the gradients' norm at ``clip`` (None: leave them); whether they are finite (a
+    NaN norm would have made every clipped gradient NaN)."""
+    grads = [p for p in params if p.grad is not None]
+    if clip is not None:
+        return math.isfinite(float(torch.nn.utils.clip_grad_norm_(grads, clip)))
+    return all(bool(torch.isfinite(p.grad).all()) for p in grads)

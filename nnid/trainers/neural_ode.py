@@ -24,6 +24,7 @@ batch, its normalised outputs and the penalty rows of its objective.
 
 from __future__ import annotations
 
+import inspect
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, Protocol
@@ -42,7 +43,8 @@ from nnid.trainers.history import History, Progress, staged
 class Run:
     """One experiment as the trainer sees it: measured states ``[N, n]`` (where segments
     start), held inputs ``[N, m]``, normalised measured outputs ``[N, n_y]`` and transient
-    labels ``[N]``."""
+    labels ``[N]``. A value not measured is NaN: no segment starts from it, no error row
+    scores it."""
 
     states: Tensor
     inputs: Tensor
@@ -133,16 +135,33 @@ def take(batch: Batch, index: Tensor) -> Batch:
 
 
 def residual(problem: ShootingProblem, params: dict[str, Tensor], batch: Batch) -> Tensor:
-    """The simulation error of a batch's segments (normalised outputs, weighted rows), then
-    the problem's penalty rows on training batches."""
+    """The simulation error of a batch's segments (normalised outputs, weighted rows) where
+    the target was measured (a missing one, NaN, has no row), then the problem's penalty rows
+    on training batches."""
     states = problem.simulate(params, batch.x0, batch.inputs, batch.train)
     err = problem.outputs(states[1:]) - batch.targets
     if batch.weight is not None:
         err = err * batch.weight[None, :, None]
-    err = err.reshape(-1)
+    known = torch.isfinite(batch.targets)
+    err = err.reshape(-1) if bool(known.all()) else err[known]
     if not batch.train:
         return err
     return torch.cat([err, problem.penalty(params, batch, err.numel())])
+
+
+def error_rows(r: Tensor, batch: Batch) -> Tensor:
+    """The simulation-error rows of a batch's :func:`residual` (the penalty rows follow them):
+    what a training error is recorded on, as the validation error is."""
+    return r[: int(torch.isfinite(batch.targets).sum())]
+
+
+def startable(
+    runs: Sequence[Run], where: Sequence[tuple[int, int]]
+) -> tuple[list[tuple[int, int]], int]:
+    """The segments of ``where`` whose start state was measured (finite), and how many were
+    left out: a simulation cannot start from a missing velocity."""
+    kept = [(j, s) for j, s in where if bool(torch.isfinite(runs[j].states[s]).all())]
+    return kept, len(where) - len(kept)
 
 
 class MultipleShooting(BaseEstimator):
@@ -207,6 +226,7 @@ class MultipleShooting(BaseEstimator):
             raise NnidInputError("segments: one or more positive lengths (s)", field="segments")
         longest = max(len(r) for r in runs) - 1
         val_batches = None
+        windows_dropped = 0
         if validation:
             # each run in windows of validation_window, a run shorter than one whole: the
             # shortest run set every run's window (a 2-s run made the 5-s windows 2-s ones)
@@ -216,7 +236,11 @@ class MultipleShooting(BaseEstimator):
             for j, run in enumerate(validation):
                 n = min(val_len, len(run) - 1)
                 if n >= 1:
-                    by_length.setdefault(n, []).extend((j, s) for _, s in cut_segments([run], n))
+                    windows = [(j, s) for _, s in cut_segments([run], n)]
+                    windows, dropped = startable(validation, windows)
+                    windows_dropped += dropped
+                    if windows:
+                        by_length.setdefault(n, []).extend(windows)
             val_batches = [
                 make_batch(validation, where, n, train=False)
                 for n, where in sorted(by_length.items(), reverse=True)
@@ -230,6 +254,12 @@ class MultipleShooting(BaseEstimator):
                     f"no training experiment is longer than a segment of {seconds:g} s",
                     field="segments",
                 )
+            where, dropped = startable(runs, where)
+            if not where:
+                raise NnidInputError(
+                    f"every segment of {seconds:g} s starts from a missing (NaN) velocity",
+                    field="segments",
+                )
             labels = np.array(
                 [runs[j].transient[s : s + length].mean() >= 0.5 for j, s in where], dtype=bool
             )
@@ -241,9 +271,24 @@ class MultipleShooting(BaseEstimator):
             def loss(params: dict[str, Tensor], batch: Batch) -> Tensor:
                 return residual(problem, params, batch)
 
+            # Adam records the error rows' mean square, comparable with the validation error
+            # (with the penalty rows it was MSE·n_y/(n_y + 6) under the force penalty)
+            # (an optimiser of one's own whose fit takes no ``recorded`` records its objective)
+            takes = "recorded" in inspect.signature(optimizer.fit).parameters
+            fit_args = {"recorded": error_rows} if takes else {}
             history = optimizer.fit(
-                problem.module, loss, batches, val_batches, progress=staged(progress, stage)
+                problem.module,
+                loss,
+                batches,
+                val_batches,
+                progress=staged(progress, stage),
+                **fit_args,
             )
+            # left out for a start state that was not measured: recorded
+            if dropped:
+                history.info["segments_without_start"] = dropped
+            if windows_dropped:
+                history.info["validation_windows_without_start"] = windows_dropped
             # a segment asked longer than every run trains on the longest run: recorded
             if seconds / dt >= longest:
                 history.info["segment_s_trained"] = length * dt
