@@ -55,6 +55,8 @@ from nnid.fault.detect import (
 from nnid.fault.follow import describe_alarm, follow_csv, unjudged_line
 from nnid.fault.isolation import (
     LEAST_ROWS,
+    NOT_SIGNIFICANT,
+    SIGNIFICANCE,
     TOO_FEW,
     allowed_over,
     allowed_ratio,
@@ -299,15 +301,37 @@ def test_a_payload_keeps_a_saved_models_curve_of_no_thrust(vehicle):
 def test_a_fault_outside_the_hypotheses_is_said_unexplained(vehicle, monitor, faults):
     """Two thrusters lost at once, or a declared damping term changed: no hypothesis is the
     fault. The best one left 38 and 5.9 times the noise power and was named with confidence
-    1.00; it is said unexplained, named only as the best fit, with no size and confidence 0."""
+    1.00; it is said unexplained, named only as the best fit, with no size and no confidence
+    (it said 0, never measured: its posterior is first among the alternatives)."""
     from nnid.fault.follow import describe_alarm
 
     (a,) = detect(monitor, simulate_faults(vehicle, 35, faults=faults, seed=102)).alarms
     assert a["repeats"] >= 1  # alarmed again after its window: the same change persisting
     assert (a["kind"], a["thruster"], a["effect"], a["efficiency"]) == ("model_change", None,
                                                                         None, None)  # fmt: skip
-    assert a["confidence"] == 0.0 and "unexplained by the hypotheses" in describe_alarm(a)
+    assert a["confidence"] is None and "unexplained by the hypotheses" in describe_alarm(a)
+    assert "confidence not measured" in describe_alarm(a)
     assert a["residual_ratio"] > 2.0 and a["hypothesis"]  # isolation.UNEXPLAINED_RATIO
+    assert a["alternatives"][0]["hypothesis"] == a["hypothesis"]
+
+
+def test_an_alarm_no_hypothesis_explains_significantly_states_no_confidence(vehicle, monitor):
+    """A window of healthy rows judged as an alarm's: no hypothesis is significant, and the
+    record carried the best rejected one's posterior as its confidence (0.77 for a 0.7-N heave
+    force whose buoyancy change missed p 0.01): a diagnosis named with that confidence. None,
+    not measured (null in detect.json, "not measured" on the console); the best fit's
+    posterior is first among the alternatives."""
+    from nnid.fault.detect import isolated_alarm
+
+    log = simulate_faults(vehicle, 25, seed=31)
+    data = monitor_inputs(log, monitor.plant_)
+    k = int(np.searchsorted(data["t"], 10.0))
+    record, _, _ = isolated_alarm(monitor, data, monitor.run(log), k, 10.0)
+    assert record["meaning"].startswith(NOT_SIGNIFICANT) and record["p_value"] > SIGNIFICANCE
+    assert record["confidence"] is None
+    best = record["alternatives"][0]
+    assert best["hypothesis"] == record["hypothesis"] and 0.0 < best["posterior"] < 1.0
+    assert "confidence not measured" in describe_alarm(record)
 
 
 def test_a_second_fault_during_a_persisting_one_is_alarmed(vehicle, monitor):
@@ -821,7 +845,7 @@ def test_a_fault_after_an_unexplained_change_is_alarmed(vehicle, monitor, tmp_pa
     log = simulate_faults(vehicle, 50, faults=faults, seed=3001)
     batch, _ = _followed_as_batch(monitor, log, tmp_path)
     first, second = batch.alarms
-    assert first["kind"] == "model_change" and first["confidence"] == 0.0
+    assert first["kind"] == "model_change" and first["confidence"] is None
     assert (first["repeats"], first["last_seen_t"]) == (0, first["t"])
     assert not {"blind_until", "blind"} & (set(first) | set(second))
     assert "the statistics restart at the window's end (30.05 s)" in first["meaning"]
@@ -1919,6 +1943,23 @@ def test_no_false_alarm_on_healthy_held_out_runs(vehicle, monitor):
     assert fa["interval"][0] == 0 and fa["interval"][1] == pytest.approx(3.689 * 6, rel=1e-3)
 
 
+def test_a_logger_pause_adds_no_healthy_hours(vehicle, monitor):
+    """Rows missing for 30 s of a 60-s run give no residual: the hours behind the thresholds'
+    tail fit and the measured rate are those the monitor scored, as in the same rows cut into
+    two runs at the pause (the run's span counted the pause: twice the hours, and thresholds
+    set for half the rate and a rate measured at half of it)."""
+    log = simulate_faults(vehicle, 60, seed=23, experiment="r")
+    paused = log[(log["t"] < 15) | (log["t"] > 45)].reset_index(drop=True)
+    cut = paused.assign(experiment=np.where(paused["t"] < 30, "r", "r2"))
+    assert monitor.false_alarms(paused)["hours"] == pytest.approx(
+        monitor.false_alarms(cut)["hours"], rel=1e-12
+    )
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # 30 s: too few peaks for a rate fit, said elsewhere
+        fitted = [ResidualMonitor(monitor.plant_).fit(x).calibration_ for x in (paused, cut)]
+    assert fitted[0]["hours"] == pytest.approx(fitted[1]["hours"], rel=1e-12)
+
+
 def test_rate_threshold_extrapolates_an_exponential_tail(rng):
     """i.i.d. Exp(1) at 10 Hz: the level crossed once per hour is ln(36000) = 10.49; the fit
     sees 100 h of data but only its top 5 %."""
@@ -1926,6 +1967,39 @@ def test_rate_threshold_extrapolates_an_exponential_tail(rng):
     out = rate_threshold(series, hours=100.0, rate_per_hour=1.0, gap=1)
     assert out["value"] == pytest.approx(np.log(36_000), rel=0.05)
     assert rate_threshold([np.ones(50)], 1.0, 1.0, 1)["method"].startswith("2 x")
+
+
+def test_a_statistic_mostly_at_0_gets_a_positive_threshold(vehicle, monitor, rng):
+    """A CUSUM within its allowance most of the time has a base level of 0; a target at or
+    above its rate of leaving 0 set a threshold of 0, and an alarm's severity (its peak over
+    the threshold) was infinite. The threshold is the smallest positive healthy value, and a
+    CUSUM that never rose on the healthy record is refused (no threshold is set over 0s)."""
+    series = np.zeros(20_000)
+    series[rng.choice(20_000, 40, replace=False)] = rng.exponential(size=40) + 0.5
+    out = rate_threshold([series], hours=1.0, rate_per_hour=100.0, gap=1)  # 40 peaks an hour
+    assert out["base_level"] == 0 and out["method"].startswith("generalized Pareto")
+    assert out["value"] == series[series > 0].min()
+    with pytest.raises(ValueError, match="never rise above 0"):
+        rate_threshold([np.zeros(200)], 1.0, 1.0, 1)
+    healthy = simulate_faults(vehicle, 20, seed=40, experiment="h")
+    with pytest.raises(NnidInputError, match="CUSUM never rose above 0") as err:
+        ResidualMonitor(monitor.plant_, allowance=50.0).fit(healthy)
+    assert err.value.field == "allowance"
+
+
+def test_a_healthy_residual_dependent_across_dofs_is_refused_naming_them(vehicle, monitor):
+    """A vehicle held still on a bench while its thrusters all ran in proportion: the residual
+    of every DOF equation is the one thrust along a fixed direction, each with its variance,
+    and whitening raised numpy's LinAlgError ("Matrix is not positive definite"). One input
+    error, naming the DOF equations."""
+    log = simulate_faults(vehicle, 10, seed=40)
+    bench = log.assign(**{c: 0.0 for c in ["z", "phi", "theta", "psi", *"uvwpqr"]})
+    cmds = [c for c in log if c.startswith("cmd_")]
+    scales = np.linspace(0.3, 1.0, len(cmds) - 1)
+    bench = bench.assign(**{c: k * log[cmds[0]] for c, k in zip(cmds[1:], scales, strict=True)})
+    with pytest.raises(NnidInputError, match="linearly dependent") as err:
+        ResidualMonitor(monitor.plant_).fit(bench)
+    assert "DOF equations u, v, w, p, q, r" in str(err.value) and err.value.field == "data"
 
 
 def test_rate_interval_is_garwood():
@@ -1966,6 +2040,24 @@ def test_a_short_healthy_record_is_said_to_leave_the_false_alarm_rate_uncontroll
     write_detect_outputs(long_monitor, detect(long_monitor, short), tmp_path / "long")
     held = json.loads((tmp_path / "long" / "detect.json").read_text())
     assert held["false_alarm_rate_controlled"] is True and held["false_alarm_caveat"] is None
+
+
+def test_a_measured_rate_wholly_above_the_target_is_said_not_controlled(vehicle, monitor):
+    """Thresholds from a tail fit (a minute, re-armed after 0.5 s: over 20 peaks each) said
+    the target controlled whatever the healthy test part measured; one that alarms (here a
+    thruster stopped in it) gives a rate whose exact interval lies wholly above the target,
+    and detect.json says the rate is not controlled, with that rate and its interval."""
+    healthy = simulate_faults(vehicle, 60, seed=40, experiment="h")
+    fitted = ResidualMonitor(monitor.plant_, rearm_s=0.5).fit(healthy)
+    assert fitted.threshold_caveat() is None  # the rate fit was made: nothing said yet
+    stopped = Fault("thruster", 10.0, thruster="h1", efficiency=0.0)
+    test = fitted.measure_false_alarms(simulate_faults(vehicle, 20, faults=[stopped], seed=41))
+    lo, hi = test["interval"]
+    assert test["alarms"] >= 1 and lo > fitted.false_alarm_per_hour
+    said = detect_json(fitted, detect(fitted, healthy.iloc[:50]))
+    assert said["false_alarm_rate_controlled"] is False
+    assert f"{test['rate_per_hour']:.3g} per hour" in said["false_alarm_caveat"]
+    assert f"interval {lo:.3g}-{hi:.3g}" in said["false_alarm_caveat"]
 
 
 def test_commands_far_beyond_their_range_are_said(vehicle, monitor, tmp_path):

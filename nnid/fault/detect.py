@@ -86,7 +86,7 @@ from nnid.fault.isolation import (
     signature,
     whitened_power,
 )
-from nnid.fault.monitor import ResidualMonitor, Trace, monitor_inputs
+from nnid.fault.monitor import ResidualMonitor, Trace, held_seconds, monitor_inputs
 from nnid.reports.cells import number
 
 #: the columns of alarms.csv: the record's keys, and for an alarm that says an earlier change
@@ -281,15 +281,6 @@ def cut_short(data: dict, k: int, window_s: float, rows: np.ndarray) -> bool:
 #: its run (a gap in the log), is said judged on that part (:func:`on_part`), as one the log's
 #: end cut short is
 HELD_SHARE = 0.5
-
-
-def held_seconds(t: np.ndarray, max_step: float) -> float:
-    """The seconds over which rows at times ``t`` (a window's) hold samples: the sum of their
-    steps, less those longer than ``max_step`` (samples missing there: the monitor's
-    :attr:`~nnid.fault.monitor.ResidualMonitor.max_interval`, past which it scores no
-    interval)."""
-    steps = np.diff(np.asarray(t, dtype=float))
-    return float(steps[steps <= max_step].sum())
 
 
 def on_part(data: dict, k: int, window_s: float, rows: np.ndarray, max_step: float) -> dict | None:

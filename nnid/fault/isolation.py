@@ -79,8 +79,8 @@ class Diagnosis:
     """What changed: ``kind``, the ``thruster`` and its ``efficiency`` (with a 95 % interval),
     or the ``effect`` with its ``value`` and ``stderr`` (and, for a hypothesis of several
     parameters, every significant one in ``components``); ``confidence`` the posterior weight
-    (BIC) of the named hypothesis and those the data cannot tell from it; ``alternatives`` the
-    next ones."""
+    (BIC) of the named hypothesis and those the data cannot tell from it, None where none is
+    named (:func:`_none_named`; or none was fitted); ``alternatives`` the next ones."""
 
     kind: str
     thruster: str | None = None
@@ -89,7 +89,7 @@ class Diagnosis:
     effect: str | None = None
     value: float | None = None
     stderr: float | None = None
-    confidence: float = 0.0
+    confidence: float | None = None
     explained: float = 0.0
     p_value: float | None = None
     meaning: str = ""
@@ -362,8 +362,11 @@ def isolate(
         pick = [index[c.name] for c in j.members]
         out.fitted = [(c.name, float(t)) for c, t in zip(j.members, j.theta, strict=True)]
         out.hypothesis = j.kind if j.kind == "external_force" else "payload"
-        if not _unexplained(out, monitor, e, e + cols[:, :, pick] @ j.theta):
-            out.isolated = out.meaning != NOT_SIGNIFICANT
+        if _unexplained(out, monitor, e, e + cols[:, :, pick] @ j.theta) or (
+            out.meaning == NOT_SIGNIFICANT
+        ):
+            out.isolated = False
+            _none_named(out, float(post[len(scored) + k]))
         return out
     post = post[: len(scored)]
     best = scored[0]
@@ -391,9 +394,11 @@ def isolate(
     )
     out.fitted, out.hypothesis = [(s.name, float(s.delta))], s.name
     if _unexplained(out, monitor, e, e + s.delta * cols[:, :, index[s.name]]):
+        _none_named(out, float(post[named]))
         return out
     if s.p_value > SIGNIFICANCE:
         out.kind, out.meaning, out.isolated = "model_change", NOT_SIGNIFICANT, False
+        _none_named(out, float(post[named]))
         return out
     if out.kind == "thruster_loss":
         out.thruster = s.name.split(".", 1)[1]
@@ -440,9 +445,8 @@ class _Joint:
         ]
         keep = [k for k, p in enumerate(self.p_values) if p <= SIGNIFICANCE]
         if not keep:  # as the one-parameter path says it: no member is significant
-            return Diagnosis(
+            return Diagnosis(  # its posterior goes among the alternatives (_none_named)
                 "model_change",
-                confidence=posterior,
                 explained=self.drss / rss if rss > 0 else 0.0,
                 meaning=NOT_SIGNIFICANT,
                 alternatives=alternatives,
@@ -647,12 +651,13 @@ def _unexplained(out: Diagnosis, monitor, e: np.ndarray, post: np.ndarray) -> bo
     """Sets ``out.residual_ratio``, the :func:`noise_ratio` of the residual ``post`` the
     hypothesis leaves of ``e``; where it exceeds :func:`allowed_ratio` of ``e`` (the residual
     isolated is the baseline), the change is not the hypothesis (True, and ``out`` says so: no
-    thruster, effect or size, confidence 0), else ``out.isolated``."""
+    thruster, effect or size; the caller states no confidence, :func:`_none_named`), else
+    ``out.isolated``."""
     out.residual_ratio = noise_ratio(monitor, post)
     if out.residual_ratio <= allowed_ratio(noise_ratio(monitor, e)):
         out.isolated = True
         return False
-    out.kind, out.confidence, out.isolated, out.components = "model_change", 0.0, False, None
+    out.kind, out.isolated, out.components = "model_change", False, None
     out.thruster = out.efficiency = out.efficiency_interval = None
     out.effect = out.value = out.stderr = out.p_value = None
     out.meaning = (
@@ -660,6 +665,17 @@ def _unexplained(out: Diagnosis, monitor, e: np.ndarray, post: np.ndarray) -> bo
         f"the residual and leaves {out.residual_ratio:.2g} times the healthy noise power"
     )
     return True
+
+
+def _none_named(out: Diagnosis, posterior: float) -> None:
+    """A diagnosis that names no hypothesis (none significant, or the best leaves more than
+    :func:`allowed_ratio`): no confidence (None, not measured: it read the best rejected
+    hypothesis' posterior among hypotheses none of which was found to be the change, "0.77"
+    of one not significant, or 0 where that was 1.00); the best fit's ``posterior`` is said
+    first among the alternatives."""
+    out.confidence = None
+    out.alternatives = [{"hypothesis": out.hypothesis, "posterior": posterior},
+                        *out.alternatives][:5]  # fmt: skip
 
 
 def _kind(s) -> str:

@@ -34,7 +34,7 @@ from nnid.datasets.log import POSE, VELOCITY, check_log, rounded_clock, run_labe
 from nnid.datasets.preprocess import check_attitude, refuse_bursty_runs
 from nnid.errors import NnidInputError
 from nnid.fault import kernel
-from nnid.fault.thresholds import rate_caveat, rate_interval, rate_threshold
+from nnid.fault.thresholds import measured_caveat, rate_caveat, rate_interval, rate_threshold
 from nnid.physics.compiled import form_args
 from nnid.physics.dofs import DOFS, FORCES
 from nnid.physics.thrusters import Actuation
@@ -349,8 +349,12 @@ class ResidualMonitor(BaseEstimator):
                 "the monitor cannot normalise it",
                 field="data",
             )
+        try:
+            chol = np.linalg.cholesky(cov)
+        except np.linalg.LinAlgError:  # a traceback said "Matrix is not positive definite"
+            raise _dependent_dofs(cov, list(np.array(DOFS)[active])) from None
         whiten = np.zeros((6, 6))
-        whiten[np.ix_(active, active)] = np.linalg.inv(np.linalg.cholesky(cov))
+        whiten[np.ix_(active, active)] = np.linalg.inv(chol)
         z = self._pass(data, mu, whiten, np.eye(6), none, interval).values
         ewma = z[np.isfinite(z[:, 12]), 12:18][:, active]
         s_inv = np.zeros((6, 6))
@@ -358,7 +362,9 @@ class ResidualMonitor(BaseEstimator):
         self.mu_, self.whiten_, self.s_inv_ = mu, whiten, s_inv
         self.sigma_ = np.sqrt(_variances(cov, active))  # per DOF, for the isolation's weights
         trace = self._pass(data, mu, whiten, s_inv, none, interval)
-        hours = _hours(data)
+        # the hours scored, not the runs' spans: the tail fit's rate above the base level is
+        # over them (a logger's pause, counted, set the thresholds for a lower rate)
+        hours = _scored_hours(trace, GAP_INTERVALS * interval)
         # the declustering gap: the rows in rearm_s, at the record's seconds per row
         gap = max(round(self.rearm_s / interval), 1)
         series = {name: [] for name in ("T", "g")}
@@ -366,6 +372,15 @@ class ResidualMonitor(BaseEstimator):
             rows = data["experiment"] == code
             series["T"].append(trace.values[rows, 18])
             series["g"].append(trace.values[rows, 19])
+        if not np.any(np.concatenate(series["g"]) > 0):  # no threshold is set over 0s alone
+            raise NnidInputError(
+                f"the CUSUM never rose above 0 on the healthy record: its whitened residual "
+                f"power never exceeded (1 + allowance) = {1 + self.allowance:g} times its "
+                f"{int(active.sum())} DOF equations, so no threshold can be set for it (one of 0 "
+                "would alarm at its first rise, with a severity that is not finite); calibrate "
+                "with a smaller allowance, or on a longer healthy record",
+                field="allowance",
+            )
         half = self.false_alarm_per_hour / 2
         self.thresholds_ = {
             "ewma": rate_threshold(series["T"], hours, half, gap),
@@ -387,9 +402,15 @@ class ResidualMonitor(BaseEstimator):
 
     def threshold_caveat(self) -> str | None:
         """Why the thresholds do not hold the target false-alarm rate (a healthy record too
-        short for the peaks-over-threshold fit), or None (:func:`rate_caveat`)."""
+        short for the peaks-over-threshold fit, :func:`rate_caveat`; a healthy test part whose
+        measured rate lies wholly above it, :func:`measured_caveat`), or None."""
         check_is_fitted(self, "thresholds_", msg=UNCALIBRATED)
-        return rate_caveat(self.thresholds_, self.calibration_["hours"], self.false_alarm_per_hour)
+        target = self.false_alarm_per_hour
+        said = [
+            rate_caveat(self.thresholds_, self.calibration_["hours"], target),
+            measured_caveat(self.measured_false_alarms_, target),
+        ]
+        return "; ".join(c for c in said if c) or None
 
     @property
     def threshold_values(self) -> tuple[float, float]:
@@ -457,7 +478,7 @@ class ResidualMonitor(BaseEstimator):
     def false_alarms(self, log: pd.DataFrame, confidence: float = 0.95) -> dict:
         """Alarms on a healthy log as a rate per hour with its exact Poisson interval."""
         trace = self.run(log)
-        hours = _hours({"t": trace.t, "experiment": pd.factorize(trace.experiment)[0]})
+        hours = _scored_hours(trace, self.max_interval)
         count = int(trace.alarm.sum())
         lo, hi = rate_interval(count, hours, confidence)
         return {
@@ -576,7 +597,9 @@ class _Threshold(BaseModel):
     numbers pass through)."""
 
     model_config = ConfigDict(extra="allow", allow_inf_nan=False, strict=True)
-    value: float = Field(ge=0)  # 0 where the statistic never rose on healthy data
+    # 0 where the statistic never rose on healthy data, as nnid wrote it before refusing that
+    # (rate_threshold's floor): its alarms' severity is not finite
+    value: float = Field(ge=0)
     peaks: int = Field(ge=0)
 
 
@@ -713,12 +736,53 @@ def _too_few_residuals(data: dict, count: int, interval: float, named: bool) -> 
     return NnidInputError(f"{why}; calibrate on a healthy log of {fix}", field="data")
 
 
-def _hours(data: dict) -> float:
-    total = 0.0
-    for code in np.unique(data["experiment"]):
-        t = data["t"][data["experiment"] == code]
-        total += float(t[-1] - t[0]) if t.size > 1 else 0.0
-    return max(total, 1e-9) / 3600.0
+def _dependent_dofs(cov: np.ndarray, dofs: list[str]) -> NnidInputError:
+    """The refusal of a healthy residual whose covariance ``cov`` over the watched ``dofs`` is
+    singular (each DOF's variance positive, :meth:`ResidualMonitor.fit` checked that): some
+    DOF equations are a fixed combination of others, and no whitening exists. Named: the DOFs
+    with a share in a direction of (near) zero variance of their correlation matrix."""
+    scale = np.sqrt(np.diag(cov))
+    values, vectors = np.linalg.eigh(cov / np.outer(scale, scale))
+    # below this share of the largest, a direction is no variance: cholesky failed on it
+    null = values <= max(1e-10 * values.max(), values.min())
+    share = np.abs(vectors[:, null]).max(1)
+    named = [d for d, w in zip(dofs, share, strict=True) if w > 1e-3]
+    return NnidInputError(
+        f"the healthy residual is linearly dependent across the DOF equations "
+        f"{', '.join(named)}: one is a fixed combination of the others, and the monitor cannot "
+        "whiten it (a vehicle held still while its thrusters moved together leaves that); "
+        "calibrate on a healthy log where they vary independently",
+        field="data",
+    )
+
+
+def held_seconds(
+    t: np.ndarray,
+    max_step: float,
+    experiment: np.ndarray | None = None,
+    scored: np.ndarray | None = None,
+) -> float:
+    """The seconds over which rows at times ``t`` hold samples: the sum of their intervals
+    within each experiment, less those longer than ``max_step`` (samples missing there: the
+    monitor's :attr:`~ResidualMonitor.max_interval`, past which it scores no interval) and,
+    where ``scored`` (per row: whether the interval ending there gave a residual) is given,
+    those that gave none (a value missing at either end). The time a rate per hour is over:
+    a logger's pause, scored by no residual, is no healthy hour without an alarm."""
+    steps = np.diff(np.asarray(t, dtype=float))
+    keep = steps <= max_step
+    if experiment is not None:
+        keep &= _within(experiment)
+    if scored is not None:
+        keep &= np.asarray(scored, dtype=bool)[1:]
+    return float(steps[keep].sum())
+
+
+def _scored_hours(trace: Trace, max_step: float) -> float:
+    """The hours a monitor's ``trace`` scored (:func:`held_seconds` of the intervals that gave
+    a residual, those with a statistic T), never 0 (a rate is divided by them)."""
+    scored = np.isfinite(trace.values[:, TRACE_COLUMNS.index("T")])
+    seconds = held_seconds(trace.t, max_step, trace.experiment, scored)
+    return max(seconds, 1e-9) / 3600.0
 
 
 def _variances(cov: np.ndarray, active: np.ndarray) -> np.ndarray:

@@ -41,10 +41,19 @@ def rate_threshold(
     (one array per experiment, ``hours`` in all): a generalized Pareto fit to the declustered
     excursion peaks above the ``base_quantile`` level. With fewer than 20 peaks the fit is not
     made: the threshold is twice the largest healthy value and ``"method"`` says so. The shape
-    is kept ≥ 0 (exponential or heavier tail)."""
+    is kept ≥ 0 (exponential or heavier tail). The threshold is at least the smallest positive
+    healthy value: a statistic at 0 most of the time (a CUSUM within its allowance) has a base
+    level of 0, and a target at or above its rate of leaving 0 set a threshold of 0, every rise
+    an alarm whose severity (its peak over the threshold) was infinite. Raised from 0 to that
+    value, the healthy rate above it can only fall: it stays at or below the target. A
+    ValueError where no healthy value is finite, or none is above 0."""
     values = np.concatenate([s[np.isfinite(s)] for s in series]) if series else np.zeros(0)
     if values.size == 0:
         raise ValueError("no finite healthy values to calibrate on")
+    positive = values[values > 0]
+    if positive.size == 0:
+        raise ValueError("the healthy values never rise above 0: no threshold is set over them")
+    floor = float(positive.min())
     level = float(np.quantile(values, base_quantile))
     peaks = np.concatenate([excursion_peaks(s, level, gap) for s in series])
     top = float(values.max())
@@ -66,7 +75,7 @@ def rate_threshold(
         value = 2.0 * top
     return {
         **out,
-        "value": float(max(value, level)),
+        "value": float(max(value, level, floor)),
         "method": "generalized Pareto, peaks over threshold",
         "shape": float(shape),
         "scale": float(scale),
@@ -88,6 +97,24 @@ def rate_caveat(thresholds: dict, hours: float, rate_per_hour: float) -> str | N
         f"than the {MIN_PEAKS} a rate fit needs: those thresholds are twice the largest healthy "
         f"value, and the false-alarm rate of {rate_per_hour:g} per hour is not controlled "
         "(calibrate on a longer healthy record)"
+    )
+
+
+def measured_caveat(measured: dict | None, rate_per_hour: float) -> str | None:
+    """Why a healthy record the calibration never saw says the target ``rate_per_hour`` is not
+    held: ``measured`` (:meth:`~nnid.fault.monitor.ResidualMonitor.false_alarms`) has its
+    rate's exact interval wholly above the target. None where nothing measured it, or its
+    interval reaches the target (a fitted tail said controlled beside 1 alarm in 20 s, 180 per
+    hour with an interval of 4.6-1000, against a target of 0.01)."""
+    if measured is None or not measured["interval"][0] > rate_per_hour:
+        return None
+    lo, hi = measured["interval"]
+    return (
+        f"the healthy test part measured {measured['alarms']} false alarm(s) in "
+        f"{60 * measured['hours']:.1f} min, {measured['rate_per_hour']:.3g} per hour "
+        f"({100 * measured['confidence']:.0f} % interval {lo:.3g}-{hi:.3g}), above the target "
+        f"of {rate_per_hour:g} per hour: the thresholds do not hold it (calibrate on a longer or "
+        "more varied healthy record)"
     )
 
 

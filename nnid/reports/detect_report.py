@@ -20,7 +20,7 @@ from nnid.fault.follow import (
     withdrawn_line,
 )
 from nnid.physics.dofs import DOFS, FORCES
-from nnid.reports.cells import number, thresholds_cell
+from nnid.reports.cells import missing, number, thresholds_cell
 from nnid.reports.figures import (
     FORCE_UNITS,
     IMAGES_CHECK,
@@ -39,7 +39,8 @@ def detect_json(monitor, result: DetectResult, notes: list[str] | None = None) -
     were set for, and whether the calibration controls it (``false_alarm_rate_controlled``:
     false, with the reason in ``false_alarm_caveat``, when the healthy record was too short
     for the rate fit and the thresholds are twice its largest value: then the rate is a
-    target that was neither achieved by a fit nor measured). ``false_alarms_measured``: the
+    target that was neither achieved by a fit nor measured; or when the healthy test part
+    measured a rate whose interval lies wholly above the target). ``false_alarms_measured``: the
     alarms on the healthy test part at training, with the rate's exact interval; null where
     the training split had no test part (the rate was never measured). The contract's
     ``false_alarm_rate_per_hour`` is the target; ``target_false_alarm_rate_per_hour`` says so
@@ -192,9 +193,11 @@ def detect_html(
             "effect": "the change named in nnid's effect vocabulary",
             "severity": "peak of the monitor statistic over its threshold after the alarm",
             "confidence": "posterior weight of the named hypothesis and of those the "
-            "data cannot tell from it; 0 where the best hypothesis leaves more than "
-            "twice the healthy noise power (unexplained by the hypotheses); - where the "
-            "alarm was not judged (too few samples in its window: no hypothesis was fitted)",
+            "data cannot tell from it; - where none is named (none explains the change "
+            "significantly, or the best leaves more than twice the healthy noise power: "
+            "unexplained by the hypotheses; the best fit's posterior is then the first of "
+            "its evidence below), or the alarm was not judged (too few samples in its "
+            "window: no hypothesis was fitted)",
         }
         if repeats:
             terms["seen again"] = (
@@ -207,9 +210,12 @@ def detect_html(
         out.append("<h2>Isolation evidence</h2>")
         for a in result.alarms:
             rows = [[h["hypothesis"], f"{h['posterior']:.3g}"] for h in a.get("alternatives", [])]
+            # no confidence: none named, and the best fit heads the list (isolation's
+            # _none_named), or none was fitted and the list is empty
+            which = "hypotheses fitted" if missing(a["confidence"]) else "next hypotheses"
             out.append(
                 f"<p>t = {a['t']:.2f} s: {html.escape(a['meaning'])} ({_explains(a)}); the "
-                "next hypotheses:</p>"
+                f"{which}:</p>"
             )
             out.append(html_table(["hypothesis", "posterior"], rows))
     else:
