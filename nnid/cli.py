@@ -616,7 +616,10 @@ def batch(
         "default local processes.",
     ),
     workers: int | None = typer.Option(
-        None, "--workers", min=1, help="Local worker processes; default one per core."
+        None,
+        "--workers",
+        min=1,
+        help="Local worker processes (or the CPUs of --address local); default one per core.",
     ),
 ) -> None:
     """Run many train/loop/detect/compare tasks (logs x vehicles x configs) and write one
@@ -665,7 +668,10 @@ def sweep(
         "default local processes.",
     ),
     workers: int | None = typer.Option(
-        None, "--workers", min=1, help="Local worker processes; default one per core."
+        None,
+        "--workers",
+        min=1,
+        help="Local worker processes (or the CPUs of --address local); default one per core.",
     ),
 ) -> None:
     """Search a train config's settings and seeds ([sweep]: grid, random draws, seeds), each
@@ -682,7 +688,7 @@ def sweep(
             engine = LocalEngine(workers)
             result, ranked = run_sweep(config, out_dir, engine, data, vehicle, columns, progress)
         else:
-            engine_for(address)  # Ray installed, or one clear error
+            engine_for(address, workers, tune=True)  # Ray Tune installed, or one clear error
             # Tune's own console tables would interleave with the progress bar: the
             # command's outputs are its report and this summary. Only while Tune runs (a
             # caller of the app, a test through CliRunner, keeps its environment), and not
@@ -690,7 +696,7 @@ def sweep(
             quiet = {} if "RAY_AIR_NEW_OUTPUT" in os.environ else {"RAY_AIR_NEW_OUTPUT": "0"}
             with environment(quiet):
                 result, ranked = run_sweep_tune(
-                    config, out_dir, address, data, vehicle, columns, progress
+                    config, out_dir, address, data, vehicle, columns, progress, workers
                 )
     out.print(result.extra["sweep"]["summary"], highlight=False)
     written = "settings.csv, best.toml" if ranked[0].mean is not None else "settings.csv"

@@ -166,6 +166,8 @@ def read_toml(path: str | Path) -> dict[str, Any]:
         raise NnidInputError("file not found", source=str(path)) from None
     except IsADirectoryError:
         raise NnidInputError("is a folder, not a TOML file", source=str(path)) from None
+    except OSError as err:  # no read permission: one line naming the file, not a traceback
+        raise NnidInputError(f"cannot be read ({err.strerror or err})", source=str(path)) from None
     try:
         # utf-8-sig: the byte-order mark an editor on Windows writes is no TOML error
         text = raw.decode("utf-8-sig")

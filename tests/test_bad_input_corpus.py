@@ -1680,32 +1680,6 @@ def test_a_model_folder_whose_files_are_folders_is_refused(fixtures, tmp_path):
         assert err.value.source == str(target)
 
 
-@pytest.mark.parametrize(
-    ("command", "keys", "field"),
-    [
-        ("loop", 'vehicle = "minirov.toml"\nmodel = ["det"]\n', "model"),
-        ("train", 'config = "train.toml"\nmodel = "det"\n', "model"),
-        ("detect", 'model = "det"\nvehicle = "minirov.toml"\n', "vehicle"),
-        ("detect", 'model = "det"\nconfig = "train.toml"\n', "config"),
-    ],
-)
-def test_a_manifest_key_its_command_does_not_read_is_refused(tmp_path, command, keys, field):
-    """A detection model given to loop tasks, or a vehicle or config to detect tasks (whose
-    model holds both), was dropped without a word, each value another identical task."""
-    from nnid.errors import NnidInputError
-    from nnid.scale.manifest import expand
-
-    (tmp_path / "det").mkdir()
-    (tmp_path / "dive.csv").write_text("t,u\n0,0\n")
-    (tmp_path / "minirov.toml").write_text(Path(MINIROV).read_text())
-    (tmp_path / "train.toml").write_text(TRAIN_TEXT)
-    manifest = tmp_path / "m.toml"
-    manifest.write_text(f'command = "{command}"\ndata = ["dive.csv"]\n{keys}')
-    with pytest.raises(NnidInputError, match=f"does not apply to '{command}' tasks") as err:
-        expand(manifest)
-    assert err.value.field == field and err.value.source == str(manifest)
-
-
 @pytest.mark.parametrize("text", [b"https://example.org/tensors.pt\n", b"(empty)\n", b"Garbage"])
 def test_a_tensors_file_of_text_is_refused_naming_it(fixtures, tmp_path, text):
     """Bytes that are no zip archive are read as a legacy pickle, whose unpickler failed on

@@ -675,7 +675,7 @@ def test_a_sweep_on_ray_leaves_the_callers_environment_as_it_was(
         seen.append(os.environ.get("RAY_AIR_NEW_OUTPUT"))
         raise NnidInputError("stand-in for Tune")
 
-    monkeypatch.setattr(engines, "engine_for", lambda address, workers=None: None)
+    monkeypatch.setattr(engines, "engine_for", lambda *args, **kwargs: None)
     monkeypatch.setattr(sweep, "run_sweep_tune", tune)
     args = ["sweep", str(config), "--data", str(data), "--out", str(tmp_path / "o"),
             "--address", "auto"]  # fmt: skip
@@ -1113,7 +1113,7 @@ def test_a_trial_asha_stopped_is_said_as_stopped_not_as_failed(sweep_inputs, tmp
     )
     config, data = sweep_inputs
     ranked = [Ranked({}, [0.2, None, None], rows)]
-    monkeypatch.setattr(engines, "engine_for", lambda address, workers=None: None)
+    monkeypatch.setattr(engines, "engine_for", lambda *args, **kwargs: None)
     monkeypatch.setattr(sweep, "run_sweep_tune", lambda *a, **k: (result, ranked))
     args = ["sweep", str(config), "--data", str(data), "--out", str(tmp_path / "o"),
             "--address", "auto"]  # fmt: skip
@@ -1150,3 +1150,274 @@ def test_manifest_and_detect_take_the_window_bound_from_one_definition() -> None
     meta = Options.model_fields["window"].metadata
     assert next(m.ge for m in meta if hasattr(m, "ge")) == validation.MIN_WINDOW_S
     assert runs.MIN_WINDOW_S is validation.MIN_WINDOW_S
+
+
+@pytest.mark.parametrize(
+    ("text", "field"),
+    [
+        # a detector loads no vehicle: run twice, under two ids, in "Vehicle a"/"b" sections
+        ('command = "detect"\ndata = "log.csv"\nvehicle = ["a.toml", "b.toml"]\nmodel = "det"\n',
+         "vehicle"),
+        ('command = "detect"\ndata = "log.csv"\nconfig = "a.toml"\nmodel = "det"\n', "config"),
+        ('command = "loop"\ndata = "log.csv"\nvehicle = "a.toml"\nmodel = "det"\n', "model"),
+    ],
+)  # fmt: skip
+def test_a_manifest_key_its_command_does_not_read_is_refused(tmp_path, text, field) -> None:
+    """A key the command does not read still multiplied its tasks and their ids; refused in the
+    manifest's check, naming the key and the command (as an option of another command is)."""
+    shutil.copy(MINIROV, tmp_path / "a.toml")
+    shutil.copy(MINIROV, tmp_path / "b.toml")
+    (tmp_path / "det").mkdir()
+    (tmp_path / "log.csv").write_text("t,u\n0,1\n")
+    (tmp_path / "m.toml").write_text(text)
+    with pytest.raises(NnidInputError) as info:
+        expand(tmp_path / "m.toml")
+    command = text.split('"')[1]
+    assert info.value.field == field and str(tmp_path / "m.toml") in str(info.value)
+    assert f"'{command}' tasks do not read a {field}" in str(info.value)
+
+
+def test_an_unreadable_input_is_refused_naming_it_and_its_key(tmp_path) -> None:
+    """A log without read permission raised PermissionError from the task's hash (a traceback,
+    exit 1, before any task ran); a TOML file one from read_toml. Each is one error naming
+    the file, why, and the manifest's key."""
+    from nnid.validation import read_toml
+
+    shutil.copy(MINIROV, tmp_path / "minirov.toml")
+    (tmp_path / "dive.csv").write_text("t,u\n0,1\n")
+    (tmp_path / "m.toml").write_text(
+        'command = "loop"\nvehicle = "minirov.toml"\ndata = ["dive.csv"]\n'
+    )
+    try:
+        (tmp_path / "dive.csv").chmod(0)
+        try:  # root (os.geteuid() == 0, with its capabilities) reads a chmod 000 file all the same
+            (tmp_path / "dive.csv").open("rb").close()
+            pytest.skip("chmod 000 does not deny reading here (root)")
+        except PermissionError:
+            pass
+        with pytest.raises(NnidInputError) as info:
+            expand(tmp_path / "m.toml")
+        assert info.value.field == "data" and info.value.source == str(tmp_path / "m.toml")
+        assert str(tmp_path / "dive.csv") in str(info.value) and "ermission" in str(info.value)
+        (tmp_path / "dive.csv").chmod(0o644)
+        (tmp_path / "minirov.toml").chmod(0)
+        with pytest.raises(NnidInputError) as info:
+            read_toml(tmp_path / "minirov.toml")
+        assert info.value.source == str(tmp_path / "minirov.toml")
+        assert "cannot be read" in str(info.value)
+        with pytest.raises(NnidInputError) as info:
+            expand(tmp_path / "m.toml")
+        assert info.value.field == "vehicle" and "minirov.toml" in str(info.value)
+    finally:
+        (tmp_path / "dive.csv").chmod(0o644)
+        (tmp_path / "minirov.toml").chmod(0o644)
+
+
+@needs_ray
+def test_an_address_where_no_ray_answers_is_refused_naming_it(sweep_inputs, tmp_path, monkeypatch):
+    """`--address auto` with no cluster, or a mistyped host:port: ray.init's ConnectionError
+    was a traceback (exit 1), even when every task had finished earlier (a run of no tasks
+    still started Ray). One error naming --address; no tasks, no Ray. Ray is not started:
+    its init is replaced by one that finds no cluster."""
+    import ray
+
+    from nnid.scale.manifest import Task
+    from nnid.scale.sweep import run_sweep_tune
+
+    def init(**kwargs):
+        raise ConnectionError("Could not find any running Ray instance.")
+
+    monkeypatch.setattr(ray, "is_initialized", lambda: False)
+    monkeypatch.setattr(ray, "init", init)
+    assert list(RayEngine("auto").run([], tmp_path / "o")) == []
+    task = Task("loop", str(tmp_path / "a.csv"), id="a-1")
+    with pytest.raises(NnidInputError) as info:
+        list(RayEngine("10.0.0.1:6397").run([task], tmp_path / "o"))
+    assert info.value.field == "--address" and "'10.0.0.1:6397'" in str(info.value)
+    config, data = sweep_inputs
+    plain = tmp_path / "fifo.toml"
+    plain.write_text(config.read_text().replace("[sweep]\n", "[sweep]\nearly_stopping = false\n"))
+    with pytest.raises(NnidInputError) as info:
+        run_sweep_tune(plain, tmp_path / "s", "auto", data=str(data))
+    assert info.value.field == "--address" and "no Ray cluster" in str(info.value)
+
+
+@needs_ray
+def test_a_sweep_on_ray_without_tune_is_refused_saying_what_to_install(
+    sweep_inputs, tmp_path, monkeypatch
+) -> None:
+    """`pip install ray` without [tune]: the check found Ray and the sweep stopped on an
+    ImportError traceback (exit 1) in Tune's import. The check imports Tune too."""
+    import sys
+
+    import ray
+
+    monkeypatch.delattr(ray, "tune", raising=False)
+    monkeypatch.setitem(sys.modules, "ray.tune", None)  # an import of it fails
+    config, data = sweep_inputs
+    res = CliRunner().invoke(app, ["sweep", str(config), "--data", str(data), "--out",
+                                   str(tmp_path / "o"), "--address", "auto"])  # fmt: skip
+    assert res.exit_code == 2, res.output
+    assert "Ray Tune" in res.output and "nnid[ray]" in res.output
+
+
+class _StandInRay:
+    """Ray replaced: records what init and each remote task got; a task's row is made here."""
+
+    class exceptions:
+        RayError = RuntimeError
+
+    def __init__(self) -> None:
+        self.inits: list[dict] = []
+        self.sent: list[str] = []
+
+    def is_initialized(self) -> bool:
+        return bool(self.inits)
+
+    def init(self, **kwargs) -> None:
+        self.inits.append(kwargs)
+
+    def cluster_resources(self) -> dict:
+        return {"CPU": 2.0}
+
+    def remote(self, **options):
+        ray = self
+
+        class Remote:
+            def __init__(self, function) -> None:
+                pass
+
+            def remote(self, task, out_root):
+                ray.sent.append(out_root)
+                return task.id
+
+        return Remote
+
+    def wait(self, refs, num_returns=1):
+        return refs[:num_returns], refs[num_returns:]
+
+    def get(self, ref):
+        return {"id": ref, "status": "ok"}
+
+    def shutdown(self) -> None:
+        pass
+
+
+def test_ray_workers_get_the_output_folder_absolute(tmp_path, monkeypatch) -> None:
+    """A relative --out went to the Ray workers as typed: they write from their own working
+    folder (Ray's session folder, another node), not the driver's."""
+    import nnid.scale.engines as engines
+    from nnid.scale.manifest import Task
+
+    ray = _StandInRay()
+    monkeypatch.setattr(engines, "_import_ray", lambda tune=False: ray)
+    monkeypatch.chdir(tmp_path)
+    rows = list(RayEngine("auto").run([Task("loop", "a.csv", id="a-1")], "out"))
+    assert [r["id"] for r in rows] == ["a-1"]
+    assert ray.sent == [str(tmp_path / "out")]
+
+
+def test_workers_set_a_local_ray_and_are_refused_with_a_cluster(monkeypatch) -> None:
+    """`--workers` was dropped with `--address` (`--address local` took every core): it sets
+    the CPUs of a new local Ray, and beside a cluster's address it is refused, naming both."""
+    import nnid.scale.engines as engines
+    from nnid.scale.engines import engine_for
+    from nnid.scale.manifest import Task
+
+    ray = _StandInRay()
+    monkeypatch.setattr(engines, "_import_ray", lambda tune=False: ray)
+    engine = engine_for("local", workers=3)
+    list(engine.run([Task("loop", "/a.csv", id="a-1")], "/tmp/out"))
+    assert ray.inits[0]["address"] == "local" and ray.inits[0]["num_cpus"] == 3
+    with pytest.raises(NnidInputError) as info:
+        engine_for("auto", workers=3)
+    assert info.value.field == "--workers" and "--address auto" in str(info.value)
+
+
+def test_sweep_trials_name_their_files_absolute(sweep_inputs, tmp_path, monkeypatch) -> None:
+    """A Tune trial runs in its own trial folder: a relative --vehicle or --columns named
+    another file there, or none. Each is absolute (a --vehicle not here is the config's
+    folder's, as `nnid train` reads it); a preset stays a name."""
+    from nnid.scale.sweep import trials
+
+    sweep, data = sweep_inputs
+    (tmp_path / "cfg").mkdir()
+    config = tmp_path / "cfg" / "narx.toml"
+    shutil.copy(sweep, config)
+    shutil.copy(MINIROV, tmp_path / "here.toml")
+    shutil.copy(MINIROV, tmp_path / "cfg" / "beside.toml")
+    (tmp_path / "map.toml").write_text('vehicle = "here.toml"\n')
+    monkeypatch.chdir(tmp_path)
+    _, tasks = trials(config, str(data), "here.toml", "map.toml")
+    assert {(t.vehicle, t.columns) for t in tasks} == {
+        (str(tmp_path / "here.toml"), str(tmp_path / "map.toml"))
+    }
+    _, tasks = trials(config, str(data), "beside.toml")
+    assert {t.vehicle for t in tasks} == {str(tmp_path / "cfg" / "beside.toml")}
+    _, tasks = trials(config, str(data), "seamor")
+    assert {t.vehicle for t in tasks} == {"seamor"}
+
+
+@needs_ray
+def test_a_tune_sweep_runs_only_the_trials_not_finished_before(sweep_inputs, tmp_path, monkeypatch):
+    """`sweep --address` ran every trial again, and a trial that failed this time was said ok
+    from an earlier run's task.json. As on local processes, a finished trial is reused and not
+    given to Tune; with every trial finished, Tune is not started. Ray is not started: Tune is
+    replaced by a stand-in whose trials all fail."""
+    from types import SimpleNamespace
+
+    from nnid.scale.sweep import run_sweep_tune, trials
+    from nnid.serialization import write_json
+
+    given: list[list[int]] = []
+
+    class Tuner:
+        def __init__(self, trainable, param_space, **kwargs) -> None:
+            given.append(param_space["trial"]["grid_search"])
+
+        def fit(self):
+            return [SimpleNamespace(config={"trial": i}, metrics={},
+                                    error=RuntimeError("stand-in trial failed"))
+                    for i in given[-1]]  # fmt: skip
+
+    _stand_in_tune(monkeypatch, Tuner)
+    config, data = sweep_inputs
+    plain = tmp_path / "fifo.toml"
+    plain.write_text(config.read_text().replace("[sweep]\n", "[sweep]\nearly_stopping = false\n"))
+    _, tasks = trials(plain, str(data))
+    out = tmp_path / "o"
+    write_json(out / tasks[0].id / "task.json", {"id": tasks[0].id, **tasks[0].inputs(),
+               "status": "ok", "error": None, "validation_free_run_nrmse": 0.5})  # fmt: skip
+    result, _ = run_sweep_tune(plain, out, None, data=str(data))
+    assert given == [[0, 1, 2]] and result.reused == 1
+    assert [(r["status"], r["reused"]) for r in result.rows[:1]] == [("ok", True)]
+    assert all("stand-in trial failed" in r["error"] for r in result.rows[1:])
+    for task in tasks[1:]:
+        write_json(out / task.id / "task.json", {"id": task.id, **task.inputs(),
+                   "status": "ok", "error": None})  # fmt: skip
+    result, _ = run_sweep_tune(plain, out, None, data=str(data))
+    assert len(given) == 1 and result.reused == len(tasks)
+
+
+def test_fleet_report_sections_are_vehicle_files_and_lines_configs(monkeypatch) -> None:
+    """Sections were keyed by the vehicle's name: two files of one name merged into one, and
+    a log x config product drew its configs on one time line. A section per vehicle file,
+    one line per config over the logs."""
+    from nnid.reports import batch_report
+    from nnid.scale.batch import BatchResult
+
+    built = []
+    monkeypatch.setattr(batch_report, "figure_uri", lambda fig: built.append(fig) or "uri")
+    rows = [
+        {"id": f"{v}{c}{k}", "command": "loop", "data": f"/l/dive{k}.csv",
+         "vehicle": f"/{v}/minirov.toml", "config": f"/c/{c}.toml", "status": "ok",
+         "vehicle_name": "minirov", "param:Z:w": -30.0 - k, "stderr:Z:w": 1.0}
+        for v in ("a", "b") for c in ("fast", "slow") for k in (0, 1)
+    ]  # fmt: skip
+    page = batch_report.batch_html(BatchResult(rows, "local"))
+    assert page.count("<h2>Vehicle minirov") == 2 and "/b/minirov.toml" in page
+    lines = [line for line in built[0].axes[0].get_lines() if line.get_linestyle() == "-"]
+    assert [list(line.get_xdata()) for line in lines] == [[0, 1], [0, 1]]
+    assert [t.get_text() for t in built[0].axes[0].get_legend().get_texts()] == [
+        "fast.toml", "slow.toml"
+    ]  # fmt: skip

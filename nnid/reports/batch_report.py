@@ -1,8 +1,9 @@
 """The fleet at a glance: the ``report.html`` of ``nnid batch`` and ``nnid sweep``.
 
-Per vehicle, in manifest order of the logs (date-named logs read as a time line): the
-identified parameters with their standard errors, the effects the loop added, the alarms; and
-every failed task with its error. Numbers come from the task rows (``summary.json``).
+Per vehicle file, in manifest order of the logs (date-named logs read as a time line, one
+line per config): the identified parameters with their standard errors, the effects the loop
+added, the alarms; and every failed task with its error. Numbers come from the task rows
+(``summary.json``).
 """
 
 from __future__ import annotations
@@ -30,9 +31,25 @@ def _vehicle(row: dict) -> str:
     return str(row.get("vehicle_name") or Path(str(row.get("vehicle") or "-")).stem)
 
 
+def _section(row: dict) -> str:
+    """The vehicle a row's section is keyed by: the file (or preset) the task named, as two
+    files may share a vehicle's name; the name where the task named none (its config's)."""
+    return str(row.get("vehicle") or _vehicle(row))
+
+
+def _configs(rows: list[dict]) -> dict[str | None, str]:
+    """Each config of ``rows`` (manifest order) and its label: the file's name, or its path
+    where two share a name."""
+    paths = list(dict.fromkeys(r.get("config") for r in rows))
+    names = [Path(p).name if p else "no config" for p in paths]
+    unique = len(set(names)) == len(names)
+    return {p: n if unique else str(p or n) for p, n in zip(paths, names, strict=True)}
+
+
 def parameter_figure(rows: list[dict]) -> str | None:
-    """Each identified parameter over the vehicle's logs, ± one standard error; None when
-    the tasks identified none."""
+    """Each identified parameter over the vehicle's logs, ± one standard error, one line per
+    config (a log x config product on one line drew configs as a time line); None when the
+    tasks identified none."""
     names: dict[str, int] = {}
     for row in rows:  # identified values: those with a standard error (not a network's sizes)
         for key, value in row.items():
@@ -46,22 +63,29 @@ def parameter_figure(rows: list[dict]) -> str | None:
     cols = min(3, len(chosen))
     n_rows = -(-len(chosen) // cols)
     fig, axes = new_figure(n_rows, cols, width=10.0, height=2.4)
-    x = np.arange(len(rows))
-    labels = [_log(r) for r in rows]
+    logs = list(dict.fromkeys(r.get("data") for r in rows))  # the time line: logs in order
+    configs = _configs(rows)
+    labels = [Path(str(log)).name for log in logs]
     for ax, name in zip(axes.flat, chosen, strict=False):
-        value = np.array([r.get(f"param:{name}") for r in rows], dtype=float)
-        se = np.array([r.get(f"stderr:{name}") for r in rows], dtype=float)
-        known = np.isfinite(se)
-        line = ax.plot(x, value, "-", lw=1)[0]
-        ax.errorbar(x[known], value[known], yerr=se[known], fmt="o", ms=3, capsize=2,
-                    color=line.get_color())  # fmt: skip
-        if (~known & np.isfinite(value)).any():  # a zero-width bar would read as exact
-            ax.plot(x[~known], value[~known], "o", mfc="none", ms=4, color=line.get_color(),
-                    label="no standard error")  # fmt: skip
+        hollow = False
+        for config, label in configs.items():
+            part = [r for r in rows if r.get("config") == config]
+            x = np.array([logs.index(r.get("data")) for r in part])
+            value = np.array([r.get(f"param:{name}") for r in part], dtype=float)
+            se = np.array([r.get(f"stderr:{name}") for r in part], dtype=float)
+            known = np.isfinite(se)
+            line = ax.plot(x, value, "-", lw=1, label=label if len(configs) > 1 else None)[0]
+            ax.errorbar(x[known], value[known], yerr=se[known], fmt="o", ms=3, capsize=2,
+                        color=line.get_color())  # fmt: skip
+            if (~known & np.isfinite(value)).any():  # a zero-width bar would read as exact
+                ax.plot(x[~known], value[~known], "o", mfc="none", ms=4, color=line.get_color(),
+                        label=None if hollow else "no standard error")  # fmt: skip
+                hollow = True
+        if hollow or len(configs) > 1:
             ax.legend(fontsize=6)
         ax.set_title(name, fontsize=9)
         ax.set_ylabel(_unit(name), fontsize=8)
-        ax.set_xticks(x, labels, rotation=45, ha="right", fontsize=7)
+        ax.set_xticks(range(len(logs)), labels, rotation=45, ha="right", fontsize=7)
         ax.tick_params(axis="y", labelsize=7)
     for ax in list(axes.flat)[len(chosen) :]:
         ax.set_visible(False)
@@ -226,13 +250,19 @@ def batch_html(result, title: str = "nnid batch") -> str:
         return "\n".join(out)
     by_vehicle: dict[str, list[dict]] = {}
     for row in rows:
-        by_vehicle.setdefault(_vehicle(row), []).append(row)
-    for name, group in by_vehicle.items():
-        out.append(f"<h2>Vehicle {html.escape(name)}</h2>")
+        by_vehicle.setdefault(_section(row), []).append(row)
+    for key, group in by_vehicle.items():
+        name = next((_vehicle(r) for r in group if r.get("vehicle_name")), _vehicle(group[0]))
+        shown = "" if key == name else f" <small>({html.escape(key)})</small>"
+        out.append(f"<h2>Vehicle {html.escape(name)}{shown}</h2>")
         for command in dict.fromkeys(r["command"] for r in group):
             part = [r for r in group if r["command"] == command]
             out.append(f"<h3>{html.escape(command)}</h3>")
-            out.append(TABLES[command](part))
+            configs = _configs(part)
+            for config, label in configs.items():  # a table per config: one log, one row
+                if len(configs) > 1:
+                    out.append(f"<h4>config {html.escape(label)}</h4>")
+                out.append(TABLES[command]([r for r in part if r.get("config") == config]))
             ok = [r for r in part if r["status"] == "ok"]
             uri = parameter_figure(ok) if ok else None
             if uri:

@@ -201,8 +201,8 @@ class LocalEngine:
 
 class RayEngine:
     """Ray tasks of one CPU each on the cluster at ``address`` (``"auto"``, ``"ray://..."``
-    or ``"host:port"``); ``None`` starts a local Ray (``num_cpus`` CPUs). A Ray already
-    initialised in this process is used as it is and left running."""
+    or ``"host:port"``); ``None`` or ``"local"`` starts a local Ray (``num_cpus`` CPUs). A
+    Ray already initialised in this process is used as it is and left running."""
 
     name = "ray"
 
@@ -220,16 +220,14 @@ class RayEngine:
         return int(ray.cluster_resources().get("CPU", 1)) if ray.is_initialized() else 1
 
     def run(self, tasks: list[Task], out_root: str | Path) -> Iterator[dict[str, Any]]:
+        if not tasks:  # every task finished earlier: no cluster to reach
+            return
+        # the workers' own working folder is not this one (another node, Ray's session folder)
+        out_root = Path(out_root).absolute()
         ray = _import_ray()
         own = not ray.is_initialized()
         if own:
-            ray.init(
-                address=self.address,
-                num_cpus=self.num_cpus if self.address is None else None,
-                include_dashboard=False,
-                log_to_driver=False,
-                configure_logging=False,
-            )
+            ray_init(ray, self.address, self.num_cpus)
         self._cpus = int(ray.cluster_resources().get("CPU", 1))
         try:
             remote = ray.remote(num_cpus=1, max_retries=0, runtime_env={"env_vars": ONE_THREAD})(
@@ -269,24 +267,75 @@ def _ray_error(exc: Exception) -> str:
     return f"{type(exc).__name__}: {first[0] if first else ''}"
 
 
-def _import_ray():
+def _import_ray(tune: bool = False):
+    """The ``ray`` module (with Ray Tune where ``tune``: a sweep), or one error saying how to
+    install it."""
     from nnid.errors import NnidInputError
+
+    def missing(what: str) -> NnidInputError:
+        return NnidInputError(
+            f"{what} is not installed: pip install 'nnid[ray]' (or leave out --address to run "
+            "on local processes)",
+            field="--address",
+        )
 
     try:
         import ray
     except ImportError:
-        raise NnidInputError(
-            "Ray is not installed: pip install 'nnid[ray]' (or leave out --address to run on "
-            "local processes)",
-            field="--address",
-        ) from None
+        raise missing("Ray") from None
+    if tune:
+        try:  # ``pip install ray`` without [tune] lacks Tune's dependencies
+            import ray.tune
+        except ImportError as exc:
+            raise missing(f"Ray Tune ({exc})") from None
     return ray
 
 
-def engine_for(address: str | None, workers: int | None = None):
+#: the ``--address`` that starts a new Ray on this machine (the only one whose CPUs we set)
+LOCAL_RAY = "local"
+
+
+def ray_init(ray, address: str | None, num_cpus: int | None = None, **kwargs: Any) -> None:
+    """``ray.init`` at ``address`` (``num_cpus`` only where it starts a new Ray), quiet; an
+    address where no Ray answers (``auto`` with no cluster, a mistyped ``host:port``) is one
+    error naming ``--address``, not Ray's traceback."""
+    from nnid.errors import NnidInputError
+
+    try:
+        ray.init(
+            address=address,
+            num_cpus=num_cpus if address in (None, LOCAL_RAY) else None,
+            include_dashboard=False,
+            log_to_driver=False,
+            configure_logging=False,
+            **kwargs,
+        )
+    # Ray says no cluster at the address with ConnectionError, one that does not answer in
+    # time with RuntimeError, a malformed address (a port out of range) with ValueError
+    except (ConnectionError, RuntimeError, ValueError) as exc:
+        first = str(exc).strip().splitlines()
+        raise NnidInputError(
+            f"no Ray cluster reached at '{address}' ({first[0] if first else type(exc).__name__})"
+            ": start one (ray start --head), give its address, 'local' for a new one here, or "
+            "leave out --address to run on local processes",
+            field="--address",
+        ) from None
+
+
+def engine_for(address: str | None, workers: int | None = None, tune: bool = False):
     """The engine a command line asks for: local processes without ``address``, else Ray at
-    ``address`` (``auto`` or a Ray address)."""
+    ``address`` (``auto``, ``local`` or a Ray address; ``tune``: Ray Tune too). ``workers``
+    sets the CPUs of a new local Ray; a cluster's CPUs are its own, so there it is refused."""
+    from nnid.errors import NnidInputError
+
     if address is None:
         return LocalEngine(workers)
-    _import_ray()
-    return RayEngine(address)
+    if workers is not None and address != LOCAL_RAY:
+        raise NnidInputError(
+            f"--workers sets the CPUs of local processes or of a new local Ray (--address "
+            f"{LOCAL_RAY}); a Ray cluster at --address {address} uses its own CPUs: leave out "
+            "one of the two",
+            field="--workers",
+        )
+    _import_ray(tune)
+    return RayEngine(address, num_cpus=workers)

@@ -29,7 +29,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
-from pydantic import Field, ValidationInfo, field_validator, model_validator
+from pydantic import Field, ValidationInfo, field_validator
 
 from nnid.errors import NnidInputError
 from nnid.validation import (
@@ -82,14 +82,14 @@ TAKES = {
     "detect": ("window",),
 }
 
-#: the input keys a command's tasks do not read: a detection model's folder given to a loop
-#: (or a vehicle or config to detect, whose model holds both) was dropped without a word,
-#: and each of its values multiplied the tasks by identical runs
-IGNORES = {
-    "train": ("model",),
-    "compare": ("model",),
-    "loop": ("model",),
-    "detect": ("vehicle", "config"),
+#: the input keys (besides ``data`` and ``columns``) each command reads: a key it does not
+#: read would still multiply its tasks and their ids (a detector run once per vehicle file
+#: it never loads)
+READS = {
+    "train": ("vehicle", "config"),
+    "compare": ("vehicle", "config"),
+    "loop": ("vehicle", "config"),
+    "detect": ("model",),
 }
 
 
@@ -112,6 +112,18 @@ class Manifest(StrictModel):
     @classmethod
     def _listed(cls, value: Any) -> Any:
         return [value] if isinstance(value, str) else value
+
+    @field_validator("vehicle", "config", "model")
+    @classmethod
+    def _read_by_command(cls, value: list[str], info: ValidationInfo) -> list[str]:
+        command = info.data.get("command")
+        if value and command is not None and info.field_name not in READS[command]:
+            reads = ", ".join(("data", *READS[command], "columns"))
+            raise ValueError(
+                f"'{command}' tasks do not read a {info.field_name}: each would run once per "
+                f"{info.field_name} all the same; the inputs they read: {reads}"
+            )
+        return value
 
     @field_validator("time_unit")
     @classmethod
@@ -147,20 +159,6 @@ class Manifest(StrictModel):
             )
         return value
 
-    @model_validator(mode="after")
-    def _inputs_apply(self) -> Manifest:
-        stray = [key for key in IGNORES[self.command] if getattr(self, key)]
-        if stray:
-            why = (
-                "they take the vehicle and settings of their detection model (model)"
-                if self.command == "detect"
-                else "a model is a detection model's folder, for 'detect' tasks"
-            )
-            raise NnidInputError(
-                f"does not apply to '{self.command}' tasks: {why}; drop it", field=stray[0]
-            )
-        return self
-
 
 @dataclass(frozen=True)
 class Task:
@@ -187,22 +185,27 @@ class Task:
         return row
 
 
-def _digest(path: str | None, h) -> None:
+def _digest(path: str | None, h, key: str) -> None:
     """Feed ``path``'s contents (a file, or every file of a folder in sorted order) to ``h``;
-    a name that is no path (a preset) is fed as its name."""
+    a name that is no path (a preset) is fed as its name. A file that cannot be read is
+    refused against ``key``, the input that names it."""
     if not path:
         h.update(b"\0none")
         return
     p = Path(path)
-    if not p.exists():
-        h.update(b"\0name:" + path.encode())
-        return
-    files = sorted(q for q in p.rglob("*") if q.is_file()) if p.is_dir() else [p]
-    for q in files:
-        h.update(b"\0file:" + (str(q.relative_to(p)) if p.is_dir() else "").encode())
-        with open(q, "rb") as fh:
-            for block in iter(lambda: fh.read(1 << 20), b""):
-                h.update(block)
+    q = p
+    try:
+        if not p.exists():
+            h.update(b"\0name:" + path.encode())
+            return
+        files = sorted(q for q in p.rglob("*") if q.is_file()) if p.is_dir() else [p]
+        for q in files:
+            h.update(b"\0file:" + (str(q.relative_to(p)) if p.is_dir() else "").encode())
+            with open(q, "rb") as fh:
+                for block in iter(lambda: fh.read(1 << 20), b""):
+                    h.update(block)
+    except OSError as exc:  # no read permission, a file gone while read: before any task runs
+        raise NnidInputError(f"'{q}' cannot be read ({exc.strerror or exc})", field=key) from None
 
 
 #: the keys whose string value names another input (a config's vehicle and data files, a
@@ -263,14 +266,16 @@ def task_id(task: Task) -> str:
     if task.time_unit:  # only when declared: the ids of the tasks without one stay as they were
         settings["time_unit"] = task.time_unit
     h.update(json.dumps(settings, sort_keys=True, default=str).encode())
-    for path in (task.data, task.vehicle, task.config, task.model, task.columns):
-        _digest(path, h)
+    inputs = {"data": task.data, "vehicle": task.vehicle, "config": task.config,
+              "model": task.model, "columns": task.columns}  # fmt: skip
+    for key, path in inputs.items():
+        _digest(path, h, key)
     # what the config names (its log, vehicle, simulation): editing one re-runs the task too;
     # a task's own log replaces the config's data, which is then neither read nor hashed
     skip = DATA_KEYS if task.data else frozenset()
-    for config in (task.config, task.vehicle, task.columns):
-        for named in named_inputs(config, skip):
-            _digest(str(named), h)
+    for key in ("config", "vehicle", "columns"):
+        for named in named_inputs(inputs[key], skip):
+            _digest(str(named), h, key)
     named = task.data or task.config or "task"  # a sweep's trial may use its config's data
     stem = re.sub(r"[^A-Za-z0-9_.-]+", "_", Path(named).stem)[:40] or "task"
     return f"{stem}-{h.hexdigest()[:12]}"
@@ -394,9 +399,12 @@ def expand(path: str | Path) -> list[Task]:
     tasks: dict[str, Task] = {}
     for log, veh, cfg, model in combos:
         options = spec.options.model_dump(exclude_unset=True)
-        task = with_id(
-            Task(spec.command, log, veh, cfg, model, columns, options, time_unit=spec.time_unit)
-        )
+        try:
+            task = with_id(
+                Task(spec.command, log, veh, cfg, model, columns, options, time_unit=spec.time_unit)
+            )
+        except NnidInputError as err:  # an input that cannot be read, named against its key
+            raise err.with_source(source) from None
         first = tasks.setdefault(task.id, task)
         if first != task:  # other paths, one id: a copy of the same name and contents
             _say_merged(first, task, source)

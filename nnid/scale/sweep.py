@@ -86,10 +86,32 @@ def trials(
                     source=str(config),
                     field="sweep.seeds",
                 ) from None
-            task = Task("train", str(Path(data).resolve()) if data else "", vehicle,
-                        str(Path(config).resolve()), None, columns, {}, overrides)  # fmt: skip
-            tasks.append(with_id(task))
+            # absolute paths: a trial on Ray Tune runs in its own trial folder, where a path
+            # relative to this one names another file or none
+            task = Task("train", str(Path(data).resolve()) if data else "",
+                        _vehicle_path(vehicle, config), str(Path(config).resolve()), None,
+                        str(Path(columns).resolve()) if columns else None, {},
+                        overrides)  # fmt: skip
+            try:
+                tasks.append(with_id(task))
+            except NnidInputError as err:  # a file that cannot be read: said against its option
+                option = f"--{err.field}" if err.field in ("data", "vehicle", "columns") else None
+                raise NnidInputError(
+                    err.message, source=None if option else str(config), field=option
+                ) from None
     return spec, tasks
+
+
+def _vehicle_path(vehicle: str | None, config: Path) -> str | None:
+    """``--vehicle`` as the trial reads it, made absolute: a preset's name as it is, else the
+    file (as given where it exists, else relative to the config's folder, as ``nnid train``
+    reads it: :func:`nnid.pipeline.vehicle_source`)."""
+    from nnid.pipeline import vehicle_source
+    from nnid.vehicle import PRESETS
+
+    if not vehicle or vehicle in PRESETS:
+        return vehicle
+    return str(Path(vehicle_source(vehicle, Path(config))).resolve())
 
 
 @dataclass
@@ -304,19 +326,12 @@ def run_sweep_tune(
 ) -> tuple[BatchResult, list[Ranked]]:
     """:func:`run_sweep` on Ray Tune, one CPU per trial, with ASHA early stopping
     (``[sweep] early_stopping``): a stopped trial is a ``stopped`` row that says at which
-    epoch, and its setting is ranked on the seeds that finished. The trials' workers start
+    epoch, and its setting is ranked on the seeds that finished. A trial an earlier run into
+    ``out_dir`` finished is not run again (as :func:`run_sweep`). The trials' workers start
     with :data:`~nnid.scale.engines.ONE_THREAD` when this function starts Ray; a Ray the
     caller started keeps the caller's ``runtime_env`` (give it
     ``runtime_env={"env_vars": ONE_THREAD}`` for the same)."""
-    import threading
-    import time
-
-    import ray
-    from ray import tune
-    from ray.tune.schedulers import ASHAScheduler, FIFOScheduler
-
     from nnid.scale.batch import write_summary
-    from nnid.scale.engines import ONE_THREAD
     from nnid.scale.task import finished
 
     spec, tasks = trials(config, data, vehicle, columns)
@@ -324,15 +339,62 @@ def run_sweep_tune(
         _check_rungs(config, spec, tasks)
     out_dir = Path(out_dir).absolute()
     out_dir.mkdir(parents=True, exist_ok=True)
+    # as on local processes (run_tasks), a trial an earlier run finished is reused and never
+    # given to Tune: Tune ran every trial again, and one that failed now was said ok from the
+    # earlier run's task.json
+    earlier = {t.id: row for t in tasks if (row := finished(t, out_dir)) is not None}
+    todo = [t for t in tasks if t.id not in earlier]
+    ran, cpus, seconds = (
+        _run_tune(spec, tasks, todo, out_dir, address, num_cpus, progress) if todo else ({}, 1, 0.0)
+    )
+    rows = [{**earlier[t.id], "reused": True} if t.id in earlier else ran[t.id] for t in tasks]
+    batch = BatchResult(rows, "ray tune" + (" (ASHA)" if spec.early_stopping else ""),
+                        len(earlier), seconds, cpus)  # fmt: skip
+    ranked = _write_sweep(spec, config, tasks, batch, out_dir)
+    now = [r for r in rows if not r.get("reused")]
+    batch.extra["sweep"]["early_stopping"] = {
+        "scheduler": "ASHA" if spec.early_stopping else None,
+        "stopped": not_ok_counts(rows)[1],
+        "epochs_run": sum(r.get("epochs") or 0 for r in now),
+    }
+    if spec.early_stopping and now and all((r.get("epochs") or 0) <= 1 for r in now):
+        batch.extra["sweep"]["summary"] += (
+            f" ASHA compared no trials: no training stage reported a per-epoch validation "
+            f"{spec.metric} (a least-squares or SINDy fit has no epochs), so every trial ran "
+            "to its end."
+        )
+    write_summary(batch, out_dir, title="nnid sweep")
+    return batch, ranked
+
+
+def _run_tune(
+    spec: SweepSpec,
+    tasks: list[Task],
+    todo: list[Task],
+    out_dir: Path,
+    address: str | None,
+    num_cpus: int | None,
+    progress: Progress | None,
+) -> tuple[dict[str, dict[str, Any]], int]:
+    """Run the trials ``todo`` (of the sweep's ``tasks``) on Ray Tune: their rows by task id,
+    the cluster's CPUs and the seconds from Ray's start to the last row."""
+    import threading
+    import time
+
+    import ray
+    from ray import tune
+    from ray.tune.schedulers import ASHAScheduler, FIFOScheduler
+
+    from nnid.scale.engines import ONE_THREAD, ray_init
+    from nnid.scale.task import finished
+
     own = not ray.is_initialized()
     if own:
         # Tune starts its trials' workers itself, with no runtime_env of ours: the job's
         # gives them the one-thread environment the batch engines' workers start with (Ray
         # sets only OMP_NUM_THREADS; numba, OpenBLAS and MKL took every core)
-        ray.init(address=address, num_cpus=num_cpus if address is None else None,
-                 include_dashboard=False, log_to_driver=False, configure_logging=False,
-                 runtime_env={"env_vars": ONE_THREAD})  # fmt: skip
-    start = time.perf_counter()
+        ray_init(ray, address, num_cpus, runtime_env={"env_vars": ONE_THREAD})
+    start = time.perf_counter()  # the wall time leaves Ray's start out (docs/scale.md)
     scheduler = (
         ASHAScheduler(
             time_attr="training_iteration",
@@ -344,12 +406,12 @@ def run_sweep_tune(
         else FIFOScheduler()
     )
     trainable = tune.with_resources(
-        tune.with_parameters(_tune_trial, tasks=tasks, out_root=str(out_dir), metric=spec.metric),
+        tune.with_parameters(_tune_trial, tasks=todo, out_root=str(out_dir), metric=spec.metric),
         {"cpu": 1},
     )
     tuner = tune.Tuner(
         trainable,
-        param_space={"trial": tune.grid_search(list(range(len(tasks))))},
+        param_space={"trial": tune.grid_search(list(range(len(todo))))},
         # a trial reuses a finished one's actor: a fresh actor is a process that imports torch
         # and nnid again (8-10 s a trial of a small NARX sweep beside a busy core, 1.5 s warm).
         # A trial ASHA stopped waits in its report and ends there when its actor is reset
@@ -378,27 +440,13 @@ def run_sweep_tune(
     try:
         if "error" in box:
             raise box["error"]
-        trial_results = sorted(box["grid"], key=lambda r: r.config["trial"])
-        rows = [_tune_row(tasks[r.config["trial"]], r, out_dir, spec.metric) for r in trial_results]
+        ran = [(todo[r.config["trial"]], r) for r in box["grid"]]
+        rows = {task.id: _tune_row(task, r, out_dir, spec.metric) for task, r in ran}
+        seconds = time.perf_counter() - start
     finally:
         if own:
             ray.shutdown()
-    batch = BatchResult(rows, "ray tune" + (" (ASHA)" if spec.early_stopping else ""),
-                        0, time.perf_counter() - start, cpus)  # fmt: skip
-    ranked = _write_sweep(spec, config, tasks, batch, out_dir)
-    batch.extra["sweep"]["early_stopping"] = {
-        "scheduler": "ASHA" if spec.early_stopping else None,
-        "stopped": not_ok_counts(rows)[1],
-        "epochs_run": sum(r.get("epochs") or 0 for r in rows),
-    }
-    if spec.early_stopping and all((r.get("epochs") or 0) <= 1 for r in rows):
-        batch.extra["sweep"]["summary"] += (
-            f" ASHA compared no trials: no training stage reported a per-epoch validation "
-            f"{spec.metric} (a least-squares or SINDy fit has no epochs), so every trial ran "
-            "to its end."
-        )
-    write_summary(batch, out_dir, title="nnid sweep")
-    return batch, ranked
+    return rows, cpus, seconds
 
 
 def _check_rungs(config: Path, spec: SweepSpec, tasks: list[Task]) -> None:
@@ -420,8 +468,9 @@ def _check_rungs(config: Path, spec: SweepSpec, tasks: list[Task]) -> None:
 
 
 def _tune_row(task: Task, result, out_dir: Path, metric: str) -> dict[str, Any]:
-    """A Tune trial's row: the task's own row when it finished, else why not. ``epochs``
-    counts the reports ASHA saw (the epochs that measured ``metric``, and the last)."""
+    """A Tune trial's row: the task's own row when it finished (in this run: a trial an
+    earlier run finished is not given to Tune), else why not. ``epochs`` counts the reports
+    ASHA saw (the epochs that measured ``metric``, and the last)."""
     from nnid.scale.engines import failed_row
     from nnid.scale.task import finished
 
