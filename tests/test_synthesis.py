@@ -363,3 +363,22 @@ def test_the_named_mask_synthesis_does_not_import_pysindy():
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     done = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, timeout=120)
     assert done.returncode == 0, done.stderr.decode()[-2000:]
+
+
+def test_the_damping_terms_are_of_the_velocity_through_the_water():
+    """A Seamor flown in a 0.3 m/s current (its vehicle file's): its damping acts on
+    ν_r = ν − ν_c, and τ̄ leaves out τ_D(ν_r). The basis terms were of the logged ν, and the
+    Weiss quadratic terms came out at −25 (X) for −61, and no warning said; of ν_r
+    they are the vehicle file's."""
+    from nnid.datasets.simulator import simulate
+
+    vehicle = load_vehicle("seamor").model_copy(update={"current": [0.3, 0.0, 0.0]})
+    rng = np.random.default_rng(0)
+    inputs = np.zeros((400, 6))
+    inputs[20:, [0, 1, 5]] = np.repeat(rng.uniform(-30, 30, (19, 3)), 20, 0) * [1, 1, 0.2]
+    log = simulate(vehicle, inputs, 0.1)
+    mask = {"X": ["u*abs(u)"], "Y": ["v*abs(v)"], "N": ["r*abs(r)"]}
+    fit = SynthesisModel(vehicle, mask).fit(log)
+    truth = vehicle.damping.coefficients
+    for key in ("X:u*abs(u)", "Y:v*abs(v)", "N:r*abs(r)"):
+        assert fit.params[key]["value"] == pytest.approx(truth[key], rel=1e-3), key

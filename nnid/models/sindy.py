@@ -39,6 +39,7 @@ from nnid.models.synthesis import DampingModel, _at_zero, restored_matrices, res
 from nnid.physics.damping_library import LIBRARY
 from nnid.physics.dofs import DOFS, FORCES
 from nnid.physics.integrate import rk4
+from nnid.physics.parts import Parts, relative_velocity
 from nnid.threads import blas_threads
 from nnid.trainers.history import Progress
 from nnid.trainers.sindy import MODES, BasisFeatureLibrary, SparsePath, path_j
@@ -52,13 +53,16 @@ class SindyDamping(DampingModel):
 
     ``SindyDamping(vehicle).fit(log, validation)``: the threshold path is fitted on ``log`` and
     a model chosen on ``validation`` (without one, on the last ``holdout`` fraction of each
-    experiment): see :class:`nnid.trainers.sindy.SparsePath` for ``optimizer``,
-    ``thresholds``, ``selection``, ``tolerance``, ``alpha``, ``per_output`` and ``seed``.
-    ``path_`` lists every threshold tried, ``selected_`` the chosen entry (its
-    ``validation_nmse`` per output: ``{"X": …}``, or ``{"du": …}`` in control mode),
-    ``coefficients_`` the model as ``{"F:term": value}`` (mode ``"control"``:
-    ``{"du:term": value}`` and ``{"du:tau_X": value}``). Velocities and accelerations missing
-    from a log are derived by Savitzky-Golay (``savgol_window`` s, ``savgol_order``).
+    experiment, then left out of the fit; ``selection="aic"`` or ``"bic"`` chooses on the
+    training fit and takes no holdout: without validation data it fits the whole log, and the
+    path has no validation J nor ``selected_["validation_nmse"]``): see
+    :class:`nnid.trainers.sindy.SparsePath` for ``optimizer``, ``thresholds``, ``selection``,
+    ``tolerance``, ``alpha``, ``per_output`` and ``seed``. ``path_`` lists every threshold
+    tried, ``selected_`` the chosen entry (its ``validation_nmse`` per output: ``{"X": …}``,
+    or ``{"du": …}`` in control mode), ``coefficients_`` the model as ``{"F:term": value}``
+    (mode ``"control"``: ``{"du:term": value}`` and ``{"du:tau_X": value}``). Velocities and
+    accelerations missing from a log are derived by Savitzky-Golay (``savgol_window`` s,
+    ``savgol_order``).
     """
 
     kind = "sindy"
@@ -134,11 +138,22 @@ class SindyDamping(DampingModel):
         return theta, data["nu_dot"], data["nu"]
 
     def arrays(self, log: pd.DataFrame) -> tuple[np.ndarray, np.ndarray]:
-        """Library inputs ``x`` (ν, and τ in control mode) and targets ``y`` (τ̄ or ν̇) of a
-        log, rows with an undefined value dropped (for regressions outside the model)."""
+        """Library inputs ``x`` (ν_r, the velocity through the water the damping terms are of;
+        ν and τ in control mode) and targets ``y`` (τ̄ or ν̇) of a log, rows with an undefined
+        value dropped (for regressions outside the model). Not of the filtered form: its
+        regressors F[ξ(ν_r)] are no function of the velocities at a sample (:meth:`features`
+        gives them)."""
+        if self.filtered:
+            # F[τ̄] beside ξ(x) is not the regression the model fitted (F[τ̄] on F[ξ])
+            raise NnidInputError(
+                f"with filter_lambda = {self.filter_lambda:g} the regression's terms are "
+                "filtered, F[ξ(ν_r)], no function of each sample's velocities: take the "
+                "regression from features(log)",
+                field="filter_lambda",
+            )
         if self.mode == "residual":
             y, data = self.tau_bar(log)
-            x = data["nu"]
+            x = relative_velocity(Parts.from_vehicle(self.vehicle), data)
         else:
             log = prepare_motion(log, DOFS, self.savgol_window, self.savgol_order, True)
             data = log_arrays(log, self.vehicle)
@@ -184,12 +199,17 @@ class SindyDamping(DampingModel):
     def _sparse_fit(self, log: pd.DataFrame, validation, progress: Progress) -> None:
         if self.mode not in MODES:
             raise NnidInputError(f"mode is one of {', '.join(MODES)}", field="mode")
-        if validation is None:
+        if validation is None and self.selection == "validation":
             log, validation = self._split(log)
+        # AIC and BIC choose on the training fit: without validation data the whole log is
+        # fitted (a holdout took the last `holdout` of each run from the fit and said nothing)
         theta, y, nu = self._regression(log)
-        theta_v, y_v = self.features(validation)
         ok = self._defined(log, theta, y, "training")
-        ok_v = self._defined(validation, theta_v, y_v, "validation")
+        theta_v = y_v = None
+        if validation is not None:
+            theta_v, y_v = self.features(validation)
+            ok_v = self._defined(validation, theta_v, y_v, "validation")
+            theta_v, y_v = theta_v[ok_v], y_v[ok_v]
         self._warn_held(log, "the SINDy fit")
         # forces and moments (linear and angular accelerations) are each judged rounding within
         # their own kind, a kind put in the other's units by the vehicle's length where its
@@ -207,7 +227,7 @@ class SindyDamping(DampingModel):
             self.seed,
             self.output_names,
             self._to_linear(),
-        ).fit(theta[ok], y[ok], theta_v[ok_v], y_v[ok_v], floors)
+        ).fit(theta[ok], y[ok], theta_v, y_v, floors)
         progress(1, 1, f"SINDy path of {len(path.path_)} thresholds")
         self.path_ = path.path_
         self.selected_ = path.selected_
@@ -294,9 +314,11 @@ class SindyDamping(DampingModel):
     def regression_error(self, log: pd.DataFrame) -> float:
         """The path's J on a log (:func:`~nnid.trainers.sindy.path_j`): the mean normalised
         MSE of the regression's outputs that have something to explain there (an output still
-        on the log, its target rounding, has no NMSE)."""
-        x, y = self.arrays(log)
-        return path_j(y, self.predict_arrays(x), self._to_linear())
+        on the log, its target rounding, has no NMSE), on the regression the path scored
+        (:meth:`features`: F[τ̄] on F[ξ] with ``filter_lambda``)."""
+        theta, y = self.features(log)
+        ok = np.isfinite(theta).all(1) & np.isfinite(y).all(1)
+        return path_j(y[ok], theta[ok] @ self.coef_.T, self._to_linear())
 
     def _to_linear(self) -> float:
         """The factor that puts the regression's angular kind in its linear one's units (the

@@ -39,7 +39,7 @@ from nnid.models.parametric import (
 )
 from nnid.physics.damping_library import BasisLibrary
 from nnid.physics.dofs import DOFS, FORCES
-from nnid.physics.parts import Parts
+from nnid.physics.parts import Parts, relative_velocity
 from nnid.trainers.history import Progress
 from nnid.trainers.synthesis import (
     LOSSES,
@@ -102,18 +102,23 @@ def synthesis_data(
     filter_lambda: float | None = None,
     zoh_midpoint: bool = False,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The basis terms ξ(ν) ``[N, n_terms]`` and τ̄ ``[N, 6]`` of a log, both through F(s)
+    """The basis terms ξ(ν_r) ``[N, n_terms]`` and τ̄ ``[N, 6]`` of a log, both through F(s)
     when ``filter_lambda`` is given, so that τ̄ = K ξ holds on either form (eq. 4.6), and the
-    velocities ν ``[N, 6]`` the terms are of (unfiltered: the motion a term is judged
-    beside, :func:`~nnid.evaluation.persistence.library_floors`)."""
+    velocities through the water ν_r ``[N, 6]`` the terms are of (unfiltered: the motion a
+    term is judged beside, :func:`~nnid.evaluation.persistence.library_floors`). ν_r = ν − ν_c
+    in the vehicle file's current (:func:`~nnid.physics.parts.relative_velocity`), ν in
+    still water."""
     tau_bar, data = residual_force(
         vehicle, log, savgol_window, savgol_order, filter_lambda, zoh_midpoint
     )
-    xi = library(data["nu"])
+    # τ̄ leaves out τ_D(ν_r), what the fitted plant flies: ξ of the logged ν in a current
+    # biased K (a 0.3 m/s current took X:u*abs(u) of the Seamor from −61 to −28)
+    nu = relative_velocity(Parts.from_vehicle(vehicle), data)
+    xi = library(nu)
     if filter_lambda is not None:
         xi = filter_signal(data, xi, filter_lambda)
         xi[~np.isfinite(tau_bar).all(1)] = np.nan
-    return xi, tau_bar, data["nu"]
+    return xi, tau_bar, nu
 
 
 def restored_matrices(
