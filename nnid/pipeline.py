@@ -803,6 +803,17 @@ def k_steps(log: pd.DataFrame, seconds: float | None) -> int | None:
     return max(1, round(seconds / dt))
 
 
+def k_step_seconds(log: pd.DataFrame, k: int | None) -> float | None:
+    """The horizon ``k`` samples ahead are in ``log``'s seconds (its typical step,
+    :func:`~nnid.datasets.log.frame_step`): what a k-step score of that log predicted, which
+    a k_step_s rounded to samples (0.25 s at 10 Hz: 2 samples, 0.2 s), or a part sampled at
+    another rate than the one k was taken from, is not. None without k or a step."""
+    if not k or len(log) < 2:
+        return None
+    dt = frame_step(log)
+    return k * dt if np.isfinite(dt) else None
+
+
 def diverged_training(description: dict) -> list[str]:
     """The warnings for training stages that kept their start: those that ended on a
     non-finite loss, and those whose every validation free run diverged, the start's included
@@ -872,7 +883,10 @@ def score(
     named under ``at``, (section, config table), as :func:`named_in` names them."""
     modes = ("one_step", "k_step", "free_run") if k else ("one_step", "free_run")
     with np.errstate(all="ignore"), named_in(*at) if at else nullcontext():
-        return evaluate(model, log, modes, k, cfg.warmup_s, replay, predictions)
+        out = evaluate(model, log, modes, k, cfg.warmup_s, replay, predictions)
+    if k:  # beside its samples ("k_step"): the horizon scored, in this part's seconds
+        out["k_step_s"] = k_step_seconds(log, k)
+    return out
 
 
 def replay_of(inputs: Inputs, log: pd.DataFrame) -> Replay | None:
@@ -967,7 +981,10 @@ def run_train(
         "warnings": list(dict.fromkeys([*loaded, *caught])),
         "split": split.record,
         "warmup_s": cfg.warmup_s,
+        # the horizon as asked; the one scored is k_step_samples, taken at the validation
+        # part's step, and each part's k_step_s (those samples in its own seconds)
         "k_step_s": cfg.k_step_s,
+        "k_step_samples": k,
     }
     parts = [p for p in ("validation", "test") if len(split[p])]
     if "test" in parts:
@@ -1274,7 +1291,7 @@ def run_compare(
     comparison = {
         "vehicle": getattr(inputs.vehicle, "name", None),
         "models": rows,
-        "k_step_s": k * frame_step(held) if k else None,
+        "k_step_s": k_step_seconds(held, k),
         "k_step_samples": k,
         "warmup_s": cfg.warmup_s,
         "held_out": held_name,

@@ -638,3 +638,21 @@ def test_a_log_whose_stamps_come_in_bursts_is_refused_by_train_and_loop_naming_i
         assert "Traceback" not in text and text.count("error:") == 1, text
         assert f"{data}, field 't': experiment 'run1': its stamps come in bursts" in text, text
         assert not (tmp_path / command[0]).exists()
+
+
+def test_metrics_json_records_the_k_step_horizon_that_was_scored(tmp_path):
+    """k_step_s = 0.13 s at 20 Hz is 2.6 samples: 3 were scored, 0.15 s ahead, and
+    metrics.json kept 0.13 s alone, a horizon nothing was scored at (0.25 s at 10 Hz rounds
+    to 2 samples, 0.2 s). It keeps the asked value and says the samples scored and, per
+    part, that horizon in the part's own seconds."""
+    from nnid.config import TrainConfig, load_config
+    from nnid.pipeline import run_train
+
+    (tmp_path / "sim.toml").write_text(SIM)
+    cfg = tmp_path / "k.toml"
+    cfg.write_text(TRAIN.replace('vehicle = "seamor"', 'vehicle = "seamor"\nk_step_s = 0.13', 1))
+    metrics = run_train(load_config(cfg, TrainConfig), cfg).metrics
+    assert metrics["k_step_s"] == 0.13 and metrics["k_step_samples"] == 3
+    for part in ("train", "validation"):
+        assert metrics[part]["k_step"] == 3
+        assert metrics[part]["k_step_s"] == pytest.approx(3 * 0.05, rel=1e-9)

@@ -375,6 +375,31 @@ def test_models_scored_on_different_outputs_are_ranked_on_the_shared_ones():
     assert "scored on (" not in summary(rows[:2], rank(rows[:2], "test"), "test", False)
 
 
+def test_the_ranking_shows_the_samples_each_model_was_scored_on():
+    """Each model is scored after its own initial conditions (1 sample for a physics model,
+    its longest delay for a NARX), so two models are ranked on different samples; the page
+    said neither count. The ranking shows each one's, the k-step one's where it is fewer."""
+    from nnid.pipeline import rank, ranked_score
+    from nnid.reports.compare_report import column_terms, markdown, ranking_rows
+
+    def row(name, kind, free, samples, k_scored):
+        r = {"name": name, "kind": kind, "n_params": 3, "seconds": 1.0,
+             "test": {"columns": ["u"], "free_run_nrmse": {"u": free, "total": free},
+                      "samples": samples, "k_step_scored": k_scored}}  # fmt: skip
+        r["ranked_nrmse"] = {"free_run": ranked_score(r, "test", "free_run_nrmse", ["u"])}
+        return r
+
+    rows = [row("fossen", "fossen", 0.2, 980, 941), row("narx", "narx", 0.1, 960, 960)]
+    comparison = {"models": rows, "ranking": rank(rows, "test"), "held_out": "test",
+                  "ranked_on": ["u"], "warmup_s": 1.0, "summary": "", "train": ["a"],
+                  "validation": ["b"], "test": ["c"]}  # fmt: skip
+    head, table = ranking_rows(comparison)
+    at = head.index("scored samples")
+    assert {r[1]: r[at] for r in table} == {"narx": "960", "fossen": "980 (k-step 941)"}
+    assert "scored samples" in column_terms(comparison)
+    assert "| 980 (k-step 941) |" in markdown(comparison)
+
+
 def test_no_best_model_is_named_when_every_free_run_diverged(tmp_path):
     """A vehicle whose heave damping pushes (Z:w = +40): both models' free runs diverge, and
     the ranking falls back to their k-step scores. The batch headline's "best model (held-out

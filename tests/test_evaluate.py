@@ -64,13 +64,15 @@ def test_each_run_is_scored_as_alone_and_the_pooled_score_hides_the_failing_one(
 
 
 class RunsAway(Shifted):
-    """Shifted, but 5 off in run "small": 25 times that run's range, a tenth of the split's."""
+    """Shifted, but ``off`` more in run "small" (5: 25 times that run's range, a quarter of
+    the split's)."""
 
     kind = "runs_away"
+    off = 5.0
 
     def _predict(self, log, mode):
         out = super()._predict(log, mode)
-        out.loc[log["experiment"] == "small", "y"] += 5.0
+        out.loc[log["experiment"] == "small", "y"] += self.off
         return out
 
 
@@ -108,14 +110,23 @@ def test_a_target_the_data_barely_moves_is_still_checked_for_divergence(v_end, g
     assert (scores["free_run_nrmse"]["total"] is None) is gone
 
 
-def test_a_run_that_diverges_on_its_own_range_is_not_averaged_into_the_pooled_score(runs):
-    """Pooled, run small's miss of 5 is inside the split's range (±10) and would score a
-    finite NRMSE; on small's own range (±0.1) it left the physical range: the pooled column
-    and total are None and the run is named, in every mode, as ARCHITECTURE's JSON rule says
-    of a diverged free run."""
+def test_a_run_that_diverges_is_not_averaged_into_the_pooled_score(runs):
+    """A miss of 5 in run small is 25 of its ranges but a quarter of the split's: a poor
+    prediction, shown by small's own NRMSE, and no divergence (a run's own range is noise
+    where it barely moves the output). A miss of 205 is inside the split's bounds widened
+    by 10 of its ranges (±210), so the pooled score alone reads it as finite, but 10 split
+    ranges beyond small's own values: the pooled column and total are None and the run is
+    named, in every mode, as ARCHITECTURE's JSON rule says of a diverged free run."""
     from nnid.evaluation.evaluate import score_prediction
 
     model = RunsAway().fit(runs)
+    poor = evaluate(model, runs, ("one_step", "free_run"), warmup_s=1.0)
+    small = runs.loc[runs["experiment"] == "small", "y"].to_numpy()[10:]
+    per = poor["free_run_nrmse_per_experiment"]
+    assert per["small"]["y"] == pytest.approx(6.0 / small.std(), rel=1e-9)
+    assert poor["free_run_nrmse"]["total"] is not None and not poor["diverged"]
+    assert "diverged_per_experiment" not in poor
+    model.off = 205.0
     scores = evaluate(model, runs, ("one_step", "free_run"), warmup_s=1.0)
     pred = model.predict(runs, "free_run")
     mask = np.arange(len(runs)) % 300 >= 10  # after each run's first second
@@ -131,6 +142,34 @@ def test_a_run_that_diverges_on_its_own_range_is_not_averaged_into_the_pooled_sc
     healthy = evaluate(Shifted().fit(runs), runs, ("free_run",), warmup_s=1.0)
     assert healthy["free_run_nrmse"]["total"] is not None and not healthy["diverged"]
     assert "diverged_per_experiment" not in healthy
+
+
+def test_a_calm_run_is_judged_for_divergence_by_the_splits_range():
+    """A hover's smoothed w spans 0.002 m/s: judged by that range, a model drifting
+    0.02 m/s had diverged, which voided the split's pooled w and total (compare ranked the
+    model last, "Diverged in free run"). It is judged by the split's range now; its own NRMSE
+    is unchanged, and a prediction that really leaves the physical range still diverges."""
+    from nnid.evaluation.evaluate import score_split
+
+    t = np.arange(400) * 0.1
+    log = pd.DataFrame(
+        {
+            "t": np.r_[t, t],
+            "experiment": ["dive"] * 400 + ["hover"] * 400,
+            "w": np.r_[0.5 * np.sin(t), 0.001 * np.sin(3 * t)],
+        }
+    )
+    hover = log["experiment"].to_numpy() == "hover"
+    mask = np.ones(len(log), bool)
+    for drift, diverges in ((0.02, False), (1e3, True), (np.inf, True)):
+        pred = log[["w"]] + np.where(hover, drift, 0.0)[:, None]
+        nrmse, _, diverged, runs, left = score_split(log, pred, ["w"], mask, lambda r: ["w"])
+        assert ("hover" in left) is diverges and (nrmse["total"] is None) is diverges, drift
+        assert bool(diverged) is diverges and "dive" not in left
+    w = log.loc[hover, "w"].to_numpy()
+    pred = log[["w"]] + np.where(hover, 0.02, 0.0)[:, None]
+    runs = score_split(log, pred, ["w"], mask, lambda r: ["w"])[3]
+    assert runs["hover"]["w"] == pytest.approx(0.02 / w.std(), rel=1e-9)  # as scored alone
 
 
 def test_the_train_report_lists_each_held_out_run(runs):
@@ -314,6 +353,21 @@ def test_metrics_nrmse_does_not_score_a_prediction_that_diverged():
     scores = per_dof(measured, pd.DataFrame({"u": y + 0.05, "r": gone}), ["u", "r"],
                      np.ones(400, bool))  # fmt: skip
     assert np.isfinite(scores["u"]) and np.isnan(scores["r"]) and np.isnan(scores["total"])
+
+
+def test_metrics_rmse_does_not_score_a_prediction_that_diverged():
+    """``metrics.rmse`` dropped every non-finite error, a diverged prediction's too: a free
+    run that left for NaN half-way scored as the one that did not. It is NaN now, as
+    ``nrmse``; a sample the log lacks is still not scored."""
+    from nnid.evaluation.metrics import rmse
+
+    y = np.sin(np.linspace(0.0, 20.0, 400))
+    gone = y + 0.05
+    gone[200:] = np.nan
+    assert rmse(y, y + 0.05) == pytest.approx(0.05, rel=1e-12)
+    assert np.isnan(rmse(y, gone)) and np.isnan(rmse(y, np.where(y > 0.9, np.inf, y)))
+    missing = np.where(np.arange(400) == 7, np.nan, y)
+    assert rmse(missing, np.where(np.isnan(missing), np.nan, y + 0.05)) == pytest.approx(0.05)
 
 
 class Echo(Shifted):

@@ -863,6 +863,21 @@ def test_the_relative_force_error_has_one_yardstick_before_and_after():
         assert force["total"] == pytest.approx(np.mean(ratios), rel=1e-9)
 
 
+def test_force_rmse_takes_a_dofs_residual_and_force_over_the_same_rows():
+    """The force residual's RMS was taken over its finite rows, the input force's over all:
+    a residual missing over a stretch of small force read as a ratio of 0.14 where the
+    residual is a tenth of the force on every row it has. Both now over the same rows."""
+    from nnid.loop.diagnose import force_rmse
+
+    tau = np.zeros((200, 6))
+    tau[:, 0] = np.r_[np.full(100, 10.0), np.full(100, 1.0)]
+    r = 0.1 * tau
+    r[100:] = np.nan
+    out = force_rmse(r, tau, ("u", "r"))
+    assert out["u"] == pytest.approx(1.0) and out["total"] == pytest.approx(0.1)
+    assert out["r"] == 0.0  # no input in yaw: its residual is said, not in the total
+
+
 @pytest.mark.parametrize(
     ("settings", "field", "says"),
     [

@@ -17,7 +17,8 @@ model's target columns with one rule set (ARCHITECTURE.md "JSON outputs"):
 - a split of several experiments also gets each experiment's free-run NRMSE scored on its own
   (``free_run_nrmse_per_experiment``): the pooled NRMSE divides by the spread of all the runs,
   which can hide a run that fails on an output it barely moves; a run whose free run leaves
-  its own range is listed in ``diverged_per_experiment``, and in every mode a column that
+  the physical range (judged by the split's range: a calm run's own is its noise) is listed
+  in ``diverged_per_experiment``, and in every mode a column that
   diverged in one run has diverged in the pooled scores too (:func:`score_split`), so the
   pooled ``total`` that summaries, sweeps and the loop read never averages a diverged run;
 - models with a force equation also get McCarter's J (RMS force residual, eq. 4.25), J₀ (RMS of
@@ -163,22 +164,23 @@ def score_runs(
     columns_of: Callable[[pd.DataFrame], list[str]],
 ) -> tuple[dict[str, dict[str, float | None]], dict[str, dict[str, float]]]:
     """Each experiment of a split scored on its own (the columns ``columns_of`` gives for it,
-    its std, its range for divergence), as if scored alone: a split's pooled NRMSE divides by
-    the spread of all its runs, so a run that barely moves an output can fail on it unseen.
-    Returns the NRMSE of each run and ``{run: {column: t}}`` of the runs that diverged."""
+    its std), as if scored alone: a split's pooled NRMSE divides by the spread of all its runs,
+    so a run that barely moves an output can fail on it unseen. A run has diverged where its
+    prediction leaves its measured values by :data:`DIVERGENCE_FACTOR` ranges of the split's
+    scored samples, not of its own (noise, in a run that barely moves the output). Returns
+    the NRMSE of each run and ``{run: {column: t}}`` of the runs that diverged."""
     out, diverged = {}, {}
     split_range: dict[str, float] = {}  # each column's once, however many pieces need it
     for name, pos in experiment_rows(log):
         run = log.iloc[pos]
         cols = columns_of(run)
-        widths = None
-        # a run (or a piece between gaps) with a few scored samples has no range of its own:
-        # one sample's is 0, and any error at all read as a divergence of the whole split
-        if int(mask[pos].sum()) < MIN_RANGE_SAMPLES:
-            for c in cols:
-                if c not in split_range:
-                    split_range[c] = _range(log[c].to_numpy(np.float64)[mask])
-            widths = {c: split_range[c] for c in cols}
+        # divergence is judged by the split's range (it holds the run's own): a calm run (a
+        # hover, a rest between gaps; one scored sample's range is 0) has a range of noise,
+        # and a drift of a centimetre per second read as a divergence of the whole split
+        for c in cols:
+            if c not in split_range:
+                split_range[c] = split_width(log, c, mask)
+        widths = {c: split_range[c] for c in cols}
         nrmse, _, left = score_prediction(run, predicted.iloc[pos], cols, mask[pos], widths)
         out[str(name)] = nrmse
         if left:
@@ -186,14 +188,22 @@ def score_runs(
     return out, diverged
 
 
-#: fewer scored samples than this give a run no range of its own to judge divergence by: the
-#: split's range is used
+#: fewer scored samples than this give a split no range of its own to judge divergence by:
+#: the whole log's range is used (:func:`score_split`)
 MIN_RANGE_SAMPLES = 20
 
 
 def _range(values: np.ndarray) -> float:
     finite = values[np.isfinite(values)]
     return float(np.ptp(finite)) if finite.size else 0.0
+
+
+def split_width(log: pd.DataFrame, column: str, mask: np.ndarray) -> float:
+    """The range a split's predictions of ``column`` are judged by for divergence: that of
+    its scored samples, or of the whole log where fewer than :data:`MIN_RANGE_SAMPLES` are
+    scored (one sample's range is 0, and any error at all read as a divergence)."""
+    values = log[column].to_numpy(np.float64)
+    return _range(values[mask] if int(mask.sum()) >= MIN_RANGE_SAMPLES else values)
 
 
 def score_split(
@@ -204,14 +214,12 @@ def score_split(
     columns_of: Callable[[pd.DataFrame], list[str]],
 ) -> tuple[dict, dict, dict[str, float], dict[str, dict], dict[str, dict[str, float]]]:
     """:func:`score_prediction` over a split, and :func:`score_runs` of its experiments when it
-    has several: a pooled column that diverged in one run (left that run's own range) has
+    has several: a pooled column that diverged in one run (:func:`score_runs`) has
     diverged in the pooled scores too (``None``, listed with the time it left, ``total``
     ``None``), however small the pooled score the other runs' spread divides it into.
     Returns the pooled NRMSE, RMSE and diverged columns, and each run's NRMSE and diverged
     columns."""
-    # a split of a few scored samples has no range of its own either: the whole log's
-    few = int(mask.sum()) < MIN_RANGE_SAMPLES
-    widths = {c: _range(log[c].to_numpy(np.float64)) for c in columns} if few else None
+    widths = {c: split_width(log, c, mask) for c in columns}
     nrmse, rmse, diverged = score_prediction(log, predicted, columns, mask, widths)
     if len(experiment_rows(log)) < 2:
         return nrmse, rmse, diverged, {}, {}

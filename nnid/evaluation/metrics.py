@@ -56,9 +56,15 @@ def nrmse(measured: np.ndarray, predicted: np.ndarray) -> float:
 
 
 def rmse(measured: np.ndarray, predicted: np.ndarray) -> float:
-    err = np.asarray(predicted, float) - np.asarray(measured, float)
-    err = err[np.isfinite(err)]
-    return math.sqrt(exact_mean(err**2)) if err.size else float("nan")
+    """RMS of predicted − measured over the measured samples; NaN for none, or where the
+    prediction is not finite at a measured sample (as :func:`nrmse`: dropped, a diverged
+    prediction read as a skilful one over its finite part)."""
+    measured, predicted = np.asarray(measured, float), np.asarray(predicted, float)
+    ok = np.isfinite(measured)
+    measured, predicted = measured[ok], predicted[ok]
+    if not np.isfinite(predicted).all() or measured.size == 0:
+        return float("nan")
+    return math.sqrt(exact_mean((predicted - measured) ** 2))
 
 
 def per_dof(

@@ -967,13 +967,17 @@ def force_rmse(r: np.ndarray, tau: np.ndarray, dofs: tuple[str, ...]) -> dict[st
     """Force residual RMS per DOF of ``dofs`` (N, N m) for the residual ``r`` of the input
     forces ``tau``; ``total``: the mean over the DOFs with an input of the RMS divided by the
     RMS of that input force (forces and moments differ in units, so only the ratios can be
-    averaged)."""
-    out = {d: rmse(np.zeros(len(r)), r[:, i]) for i, d in enumerate(DOFS) if d in dofs}
-    rel = [
-        out[d] / rmse(np.zeros(len(tau)), tau[:, i])
-        for i, d in enumerate(DOFS)
-        if d in dofs and np.any(tau[:, i])
-    ]
+    averaged). A DOF's two RMS over one set of rows, those where its residual and its force
+    are finite, as :func:`nnid.evaluation.evaluate.force_scores` takes J and J₀: over
+    different rows the ratio would not be one of errors."""
+    out, rel = {}, []
+    for i, d in enumerate(DOFS):
+        if d not in dofs:
+            continue
+        rows = np.isfinite(r[:, i]) & np.isfinite(tau[:, i])
+        out[d] = rmse(np.zeros(rows.sum()), r[rows, i])
+        if np.any(tau[:, i]):
+            rel.append(out[d] / rmse(np.zeros(rows.sum()), tau[rows, i]))
     out["total"] = exact_mean(rel) if rel else float("nan")
     return out
 

@@ -84,6 +84,7 @@ def ranking_rows(comparison: dict) -> tuple[list[str], list[list[str]]]:
         "free-run NRMSE",
         "k-step NRMSE",
         "one-step NRMSE",
+        "scored samples",
         "J/J0",
         "validation used for",
     ]
@@ -103,11 +104,21 @@ def ranking_rows(comparison: dict) -> tuple[list[str], list[list[str]]]:
                 _ranked(m, comparison, "free_run_nrmse"),
                 _ranked(m, comparison, "k_step_nrmse"),
                 _ranked(m, comparison, "one_step_nrmse"),
+                _scored(held),
                 number(held.get("J_over_J0"), 3),
                 m.get("validation_used_for") or "-",
             ]
         )
     return head, rows
+
+
+def _scored(held: dict) -> str:
+    """A model's scored held-out samples, and its k-step ones where fewer: each model is
+    scored after its own initial conditions, so models are ranked on different samples."""
+    n, k = held.get("samples"), held.get("k_step_scored")
+    if n is None:
+        return "-"
+    return f"{n} (k-step {k})" if k is not None and k != n else str(n)
 
 
 def column_terms(comparison: dict) -> dict[str, str]:
@@ -141,6 +152,11 @@ def column_terms(comparison: dict) -> dict[str, str]:
             else "not computed"
         ),
         "one-step NRMSE": "the same error one sample ahead",
+        "scored samples": f"the {part} samples each model's errors are over: those after the "
+        f"first {number(comparison.get('warmup_s'), 3)} s of each run and after the model's own "
+        "initial conditions (one sample for a physics model, its longest delay for a NARX "
+        "network), so a model that needs more initial samples is scored on fewer; in brackets "
+        "the k-step count, each prediction needing k samples of its run before it",
         "J/J0": "McCarter's force error (eq. 4.25): RMS of the force residual over RMS of the "
         "force the model's fitted terms explain (the viscous force τ̄ of eq. 4.4 for damping "
         "models, the regression's target for a Fossen fit); only for models with a force "
