@@ -193,6 +193,29 @@ def test_tlog_columns_receive_time_and_sender(tmp_path: Path) -> None:
     np.testing.assert_array_equal(table["s3"], _pwm(k, 3))
 
 
+def test_tlog_message_type_of_two_senders_is_refused_naming_them(tmp_path: Path) -> None:
+    """ATTITUDE from two systems on one link was interleaved into one source, the second
+    vehicle's samples read between the first's. Refused, naming each sender."""
+    from pymavlink.dialects.v20 import ardupilotmega as mavlink
+
+    senders = [mavlink.MAVLink(None, srcSystem=s, srcComponent=1) for s in (1, 2)]
+    log = tmp_path / "two.tlog"
+    with log.open("wb") as f:
+        for k in range(N):
+            boot = BOOT0_MS + 20 * k
+            for j, mav in enumerate(senders):
+                msg = mavlink.MAVLink_attitude_message(boot + 10 * j, 0.1 + j, 0, 0, 0, 0, 0)
+                recv = round((T_RECV0 + 0.02 * k + 0.01 * j) * 1e6)
+                f.write(struct.pack(">Q", recv) + msg.pack(mav))
+            msg = mavlink.MAVLink_servo_output_raw_message(boot * 1000, 0, *([1500] * 8))
+            f.write(struct.pack(">Q", round((T_RECV0 + 0.02 * k) * 1e6)) + msg.pack(senders[0]))
+    with pytest.raises(NnidInputError) as err:
+        load_log(log, columns=_map(tmp_path, TLOG_MAP))
+    said = str(err.value)
+    assert "two.tlog" in said and "'ATTITUDE' comes from 2 senders" in said
+    assert f"1/1 ({N} messages), 2/1 ({N} messages)" in said
+
+
 def test_bin_values_units_instances_and_time_base(tmp_path: Path) -> None:
     log = write_bin(tmp_path / "00000042.BIN".lower())
     df, _ = load_log(log, columns=_map(tmp_path, BIN_MAP))

@@ -215,6 +215,44 @@ def test_gap_splits_instead_of_bridging(tmp_path):
     assert any(s.step == "split at gaps" and s.rows_removed > 0 for s in report.steps)
 
 
+def test_a_lone_sample_after_a_gap_is_said_as_rows_removed(tmp_path):
+    """A measured source's last sample 3 s after the rest (gap = 0.5 s): the run kept one piece,
+    and the 3 s of grid and the lone sample were lost without a report line (said only when
+    a run became two pieces). Every grid sample left out is now said."""
+    _sensor_tables(tmp_path)
+    t = 1.6e9 + np.r_[np.arange(0.0, 6.0, 0.05), 9.0]
+    nav = pd.DataFrame({"run": "r1", "time": t, "yaw_deg": 0.0, "depth": 0.5})
+    nav.to_csv(tmp_path / "nav.csv", index=False)
+    log, report = load_log(tmp_path, _write_map(tmp_path / "map.toml", MAP))
+    assert set(log["experiment"]) == {"r1"} and log["t"].iloc[-1] < 6.0
+    grid = round(9.0 * 20) + 1  # 0 … 9 s at rate = 20 Hz
+    split = [s for s in report.steps if s.step == "split at gaps"]
+    assert [s.rows_removed for s in split] == [grid - len(log)]
+    assert "1 lone sample" in split[0].detail
+
+
+def test_rows_outside_the_span_all_sources_share_are_said(tmp_path):
+    """Every source is trimmed to the times all share: an IMU logging before the first command
+    lost those rows without a report line. Said per source; a command in force at the start
+    (held into the run) is not among them."""
+    t = np.arange(0.0, 10.0, 0.1)
+    pd.DataFrame({"time": t, "u": t}).to_csv(tmp_path / "imu.csv", index=False)
+    cmd = {"cmd.csv": [2.0, 2.5, 6.0, 12.0], "aux.csv": [0.5, 1.0, 3.0]}
+    for name, tc in cmd.items():
+        pd.DataFrame({"time": tc, "f": np.arange(len(tc))}).to_csv(tmp_path / name, index=False)
+    body = 'rate = 10.0\n[[sources]]\nfile = "imu.csv"\ntime = "time"\ncolumns = { u = "u" }\n'
+    for name, col in (("cmd.csv", "tau_X"), ("aux.csv", "tau_Y")):
+        body += f'[[sources]]\nfile = "{name}"\ntime = "time"\nmethod = "hold"\n'
+        body += f'columns = {{ {col} = "f" }}\n'
+    log, report = load_log(tmp_path, _write_map(tmp_path / "map.toml", body))
+    early = int((t < 2.0).sum())
+    assert log["tau_Y"].iloc[0] == 1.0  # aux's row at 1.0 s is held into the run
+    trim = [s for s in report.steps if s.step == "trim to common span"]
+    assert len(trim) == 1 and f"imu.csv {early} rows before it and 0 after" in trim[0].detail
+    # cmd's row at 12 s (after the IMU's last), aux's at 0.5 s (before the one in force)
+    assert "cmd.csv 0 rows before it and 1 after, aux.csv 1 rows before it" in trim[0].detail
+
+
 def test_a_pieces_clock_shows_the_hole_it_was_cut_at(tmp_path):
     """Each piece a reader cut a run into at a gap started again at t = 0, so the second of
     r1's pieces looked like a new run and ``nnid inspect`` counted no time in gaps: the hole
@@ -565,6 +603,22 @@ def test_each_file_is_its_own_run_and_two_files_of_one_name_are_refused(tmp_path
         load_log(tmp_path, cmap)
 
 
+def test_files_joined_into_one_run_must_not_overlap_in_time(tmp_path):
+    """A glob's files without experiment = "file" are one run: two dives each restarting at
+    t = 0 were joined, the second's rows at the same stamps dropped without a word. Refused,
+    naming both files; consecutive slices of one session (tartan_auv.toml) are still read."""
+    body = FILE_RUNS.replace('experiment = "file"\n', "").replace("PATTERN", "dive_*.csv")
+    cmap = _write_map(tmp_path / "map.toml", body)
+    for k in (1, 2):
+        _dive(tmp_path / f"dive_{k}.csv", float(k))
+    with pytest.raises(NnidInputError, match=r"dive_1.csv and .*dive_2.csv, whose times overlap"):
+        load_log(tmp_path, cmap)
+    later = pd.read_csv(tmp_path / "dive_2.csv")
+    later.assign(t=later["t"] + 5.0).to_csv(tmp_path / "dive_2.csv", index=False)
+    log, _ = load_log(tmp_path, cmap)
+    assert len(log) == 200 and log["z"].iloc[0] == 1.0 and log["z"].iloc[-1] > 2.0
+
+
 @pytest.mark.parametrize(
     ("column", "said"),
     [
@@ -587,6 +641,21 @@ def test_an_unknown_unit_offers_only_units_a_column_takes(tmp_path):
     _, error = _refused_columns(tmp_path, 'u = { from = "f", unit = "furlong" }')
     offered = error.split("expected one of ")[1].split(", ")
     assert {"m/s", "deg"} <= set(offered) and not {"s", "ms"} & set(offered)
+
+
+def test_every_angle_without_a_unit_is_named_when_one_looks_like_degrees(tmp_path):
+    """Roll and pitch of a few degrees pass the ±2π check: named with the yaw that is refused
+    as degrees, or they were read as radians once the yaw alone was given unit = "deg"."""
+    t = np.arange(0.0, 5.0, 0.1)
+    angles = {"r": 3 * np.sin(t), "p": 4 * np.cos(t), "y": 170 * np.sin(t)}
+    pd.DataFrame({"t": t, **angles, "f": 1.0}).to_csv(tmp_path / "log.csv", index=False)
+    _, error = _refused_columns(tmp_path, 'phi = "r", theta = "p", psi = "y", tau_X = "f"')
+    assert "looks like degrees for psi" in error
+    assert "phi, theta of this source have no unit either" in error
+    _, error = _refused_columns(
+        tmp_path, 'phi = { from = "r", unit = "deg" }, theta = "p", psi = "y", tau_X = "f"'
+    )
+    assert "; theta of this source has no unit either" in error
 
 
 def _refused_columns(root, columns: str):
@@ -675,6 +744,20 @@ def test_a_few_repeated_or_late_stamps_are_repaired_and_said(tmp_path):
     cmd = pd.read_csv(tmp_path / "cmd.csv")
     cmd.assign(time=cmd["time"].round()).to_csv(tmp_path / "cmd.csv", index=False)
     assert len(load_log(tmp_path, _write_map(tmp_path / "map.toml", MAP))[0]) > 100
+
+
+def test_a_repeated_command_stamp_holds_the_later_command(tmp_path):
+    """Two commands at one stamp: the later message is the one in force, but the first was
+    held (as a measurement's first is kept). Said as such in the cleaning report."""
+    _sensor_tables(tmp_path)
+    cmd = pd.read_csv(tmp_path / "cmd.csv")
+    later = cmd.iloc[[1]].assign(pwm=1900)  # a second command at 2.5 s, after the first
+    pd.concat([cmd.iloc[:2], later, cmd.iloc[2:]]).to_csv(tmp_path / "cmd.csv", index=False)
+    log, report = load_log(tmp_path, _write_map(tmp_path / "map.toml", MAP))
+    held = log.loc[(log["t"] > 2.5) & (log["t"] < 5.0), "cmd_1"]
+    assert np.allclose(held, (1900 - 1500) * 0.0025)
+    said = next(s for s in report.steps if s.step == "repeated stamps")
+    assert "cmd.csv" in said.detail and "the last of each kept" in said.detail
 
 
 @pytest.mark.parametrize(

@@ -19,7 +19,8 @@ as ``name.0``, ``name.1``... Each row also has
 - ``t_recv``: in a ``.tlog``, the time the ground station received the message (UNIX seconds);
   in a ``.bin``, pymavlink's clock for the message (UNIX seconds when the log has GPS time,
   else seconds since boot);
-- ``src_system``, ``src_component`` (``.tlog`` only): the MAVLink sender.
+- ``src_system``, ``src_component`` (``.tlog`` only): the MAVLink sender; a message type
+  from several senders is refused (their messages would be interleaved).
 
 Use ``time = "t_boot"`` for the autopilot's clock (one clock for every message type), or
 ``time = "t_recv"``. The experiment is the log's file stem unless the column map names an
@@ -33,6 +34,7 @@ import io
 import os
 import re
 import tempfile
+from collections import Counter
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -200,6 +202,8 @@ def _read_types(path: Path, names: list[str]) -> tuple[dict[str, list[dict]], li
                 f"name one, e.g. '{name}[{seen[0]}]'",
                 source=str(path),
             )
+        if tlog:
+            _refuse_senders(path, name, rows[name])
         if match["instance"] != "*" and not rows[name]:
             raise NnidInputError(
                 f"message type '{match['name']}' has no instance {match['instance']}; "
@@ -207,6 +211,23 @@ def _read_types(path: Path, names: list[str]) -> tuple[dict[str, list[dict]], li
                 source=str(path),
             )
     return rows, [line for line in chatter.getvalue().splitlines() if line.strip()]
+
+
+def _refuse_senders(path: Path, name: str, rows: list[dict]) -> None:
+    """One sender per message type of a ``.tlog``: the ATTITUDE of two systems (a vehicle and
+    a companion, two vehicles on one link) was interleaved into one source, read as one
+    vehicle's. Refused naming each sender (system/component) and its message count."""
+    senders = Counter((r["src_system"], r["src_component"]) for r in rows)
+    if len(senders) > 1:
+        (sys_id, comp_id), _ = senders.most_common(1)[0]
+        said = ", ".join(f"{s}/{c} ({n} messages)" for (s, c), n in sorted(senders.items()))
+        raise NnidInputError(
+            f"message type '{name}' comes from {len(senders)} senders (system/component: "
+            f"{said}): their messages would be interleaved into one source; keep one sender's "
+            f"(e.g. mavlogdump.py --source-system {sys_id} --source-component {comp_id} "
+            f"-o one.tlog {path.name})",
+            source=str(path),
+        )
 
 
 def read_ardupilot_sources(

@@ -238,18 +238,29 @@ def map_source(
     zeroed = [name for name, spec in specs.items() if spec.factor() == 0]
     if zeroed:  # a channel known to stay neutral, or a slip: either way, said
         report.add("zero scale", f"{origin}: {', '.join(zeroed)} mapped with scale 0: all zero")
-    for col in ANGLES:
+    unitless = [col for col in ANGLES if col in specs and specs[col].unit is None]
+    for col in unitless:
         # before the frame conversion and the resampling, which wrap angles to ±π: degrees
         # wrapped as radians would pass every later check; a unit given is the user's word
-        if col in specs and specs[col].unit is None and looks_like_degrees(out, col):
+        if looks_like_degrees(out, col):
+            # a source logs its angles in one unit: a small roll and pitch in degrees pass
+            # the ±2π check, and were read as radians once the yaw alone was given "deg"
+            others = [c for c in unitless if c != col]
+            also = (
+                f"; {', '.join(others)} of this source {'has' if len(others) == 1 else 'have'} "
+                'no unit either: set unit = "deg" (or "rad") for each'
+                if others
+                else ""
+            )
             raise NnidInputError(
                 f"reaches {np.nanmax(np.abs(out[col])):.4g}, which looks like degrees for {col}: "
                 f'set unit = "deg" for {col} in the reader config (or unit = "rad" for '
-                "unwrapped radians)",
+                f"unwrapped radians){also}",
                 source=origin,
                 field=specs[col].source,
             )
-    check_clock(out, origin, "row_clock" if source.row_clock else source.time, report)
+    time = "row_clock" if source.row_clock else source.time
+    check_clock(out, origin, time, report, "last" if source.method == "hold" else "first")
     if source.quaternion:
         quat = values[source.quaternion].to_numpy(dtype=np.float64)
         norm = np.linalg.norm(quat, axis=1)
@@ -293,10 +304,13 @@ def map_source(
 RESET_SHARE = 0.1
 
 
-def check_clock(out: pd.DataFrame, origin: str, time: str, report: CleaningReport) -> None:
+def check_clock(
+    out: pd.DataFrame, origin: str, time: str, report: CleaningReport, kept: str = "first"
+) -> None:
     """A source's clock, per experiment: never reset (many samples behind an earlier stamp:
     two runs of one file without their experiment column), refused; a few late samples
-    (sorted in) and repeated stamps (the first of each kept) said in the cleaning report."""
+    (sorted in) and repeated stamps (the ``kept`` of each: the first measurement, the last
+    command, which is the one in force) said in the cleaning report."""
     t_all = out["t"].to_numpy(dtype=np.float64)
     for exp, idx in out.groupby("experiment", sort=False).indices.items():
         t = t_all[idx]
@@ -322,7 +336,7 @@ def check_clock(out: pd.DataFrame, origin: str, time: str, report: CleaningRepor
             )
             report.add(
                 "repeated stamps",
-                f"{origin}: '{exp}': {repeated} of {t.size} samples repeat a stamp, the first "
+                f"{origin}: '{exp}': {repeated} of {t.size} samples repeat a stamp, the {kept} "
                 f"of each kept{hint}",
                 repeated,
             )

@@ -226,8 +226,12 @@ def _resample(
     """
     order = np.argsort(t_src, kind="stable")  # out of order, repeated: said at mapping
     t_src, values = t_src[order], values[order]
-    t_src, first = np.unique(t_src, return_index=True)  # a repeated stamp: keep the first
-    values = values[first]
+    if method == "hold":  # a repeated stamp: the later command is the one in force
+        t_src, back = np.unique(t_src[::-1], return_index=True)
+        keep = len(order) - 1 - back
+    else:  # a measurement: the first
+        t_src, keep = np.unique(t_src, return_index=True)
+    values = values[keep]
     at = grid.copy()  # the log's own t stays the uniform grid
     snap_to_samples(at, t_src, tolerance)
     idx = np.searchsorted(t_src, at, side="right") - 1
@@ -303,6 +307,7 @@ def assemble(
                 sum(len(df) for _, df in parts),
             )
             continue
+        _say_trim(parts, start, stop, exp, report)
         samples = (stop - start) * rate
         if samples > MAX_RUN_SAMPLES:
             raise NnidInputError(
@@ -363,11 +368,18 @@ def assemble(
             )
             report.add("skip experiment", f"'{exp}': {why}", sum(len(df) for _, df in parts))
             continue
-        if len(segments) > 1:
+        # every grid sample not in a piece is said: a gap's own, and a lone sample between
+        # two gaps (a tail logged after a silence), which is no piece and was lost unsaid
+        lost = grid.size - sum(b - a for a, b in segments)
+        if lost:
+            lone = len(_runs(valid, shortest=1)) - len(segments)
             report.add(
                 "split at gaps",
-                f"'{exp}': {len(segments)} pieces (gaps > {cmap.gap} s are not interpolated)",
-                int((~valid).sum()),
+                f"'{exp}': {len(segments)} piece{'s' if len(segments) > 1 else ''} (gaps > "
+                f"{cmap.gap} s are not interpolated"
+                + (f"; {lone} lone sample(s) between gaps dropped" if lone else "")
+                + ")",
+                lost,
             )
         for k, (a, b) in enumerate(segments):
             # a piece keeps the run's clock (from its first piece's first sample, so a run
@@ -489,9 +501,41 @@ def _clock(parts: list[tuple[Source, pd.DataFrame]], cmap: ColumnMap, exp: str) 
     return step
 
 
-def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
+def _say_trim(
+    parts: list[tuple[Source, pd.DataFrame]],
+    start: float,
+    stop: float,
+    exp: str,
+    report: CleaningReport,
+) -> None:
+    """Say the rows of each source outside the span the run keeps (``start`` to ``stop``, the
+    times all its sources share): an IMU logging 40 s before the first command lost them
+    without a word. A command's row in force at ``start`` is held into the run, not lost."""
+    outside = []
+    for s, df in parts:
+        t = df["t"].to_numpy(np.float64)
+        before, after = int((t < start).sum()), int((t > stop).sum())
+        if s.method == "hold" and before and not (t == start).any():
+            before -= 1  # the last command before the start is the one in force there
+        if before or after:
+            outside.append((s.file, before, after))
+    if outside:
+        # said, not counted in rows_removed: the runs' values do not change, and reports
+        # pinned on the shared logs (rows_removed == 0) keep their totals
+        said = ", ".join(f"{f} {b} rows before it and {a} after" for f, b, a in outside)
+        report.add(
+            "trim to common span",
+            f"'{exp}': the run keeps the {stop - start:.6g} s all its sources share (t = "
+            f"{start:.12g} to {stop:.12g} s as logged); left out: {said}",
+        )
+
+
+def _runs(mask: np.ndarray, shortest: int = 2) -> list[tuple[int, int]]:
+    """The (start, stop) of each run of True in ``mask`` at least ``shortest`` long (a piece
+    of a run needs two samples)."""
     edges = np.flatnonzero(np.diff(np.concatenate([[0], mask.astype(int), [0]])))
-    return [(int(a), int(b)) for a, b in zip(edges[::2], edges[1::2], strict=True) if b - a > 1]
+    pairs = zip(edges[::2], edges[1::2], strict=True)
+    return [(int(a), int(b)) for a, b in pairs if b - a >= shortest]
 
 
 def _natural(name: str):
@@ -578,11 +622,44 @@ def read_table_sources(
             )
             for f in files
         ]
+        if cmap.experiment != "file":
+            _refuse_overlapping_files(frames, files, cmap, i)
         tables.append((source, pd.concat(frames, ignore_index=True)))
         report.add(
             "read", f"{source.file}: {sum(len(f) for f in frames)} rows from {len(files)} files"
         )
     return tables
+
+
+def _refuse_overlapping_files(
+    frames: list[pd.DataFrame], files: list[str], cmap: ColumnMap, i: int
+) -> None:
+    """Files of one source joined into one experiment must follow each other in time
+    (consecutive slices of one session): two whose spans overlap (dives each restarting at
+    t = 0) were interleaved into one run, or the rows at their common stamps dropped, as each
+    file's clock was only checked alone. Refused, naming both files and the experiment."""
+    spans: dict[str, list[tuple[float, float, str]]] = {}
+    for f, df in zip(files, frames, strict=True):
+        for exp, t in df.groupby("experiment", sort=False)["t"]:
+            spans.setdefault(exp, []).append((float(t.min()), float(t.max()), f))
+    for exp, found in spans.items():
+        found.sort()
+        end, last = found[0][1], found[0][2]
+        for start, stop, f in found[1:]:
+            if start < end:  # a file starting where the one before ends is a slice after it
+                run = (
+                    f"experiment '{exp}'" if cmap.experiment else "the one run (no experiment key)"
+                )
+                raise NnidInputError(
+                    f"'{cmap.sources[i].file}' matches {last} and {f}, whose times overlap in "
+                    f"{run}, over {start:.6g}-{min(end, stop):.6g} s: joined, two runs would be "
+                    'interleaved; make each file its own run (experiment = "file"), or name '
+                    "the column that tells them apart (experiment = ...)",
+                    source=cmap.name,
+                    field=f"sources.{i}.file",
+                )
+            if stop > end:
+                end, last = stop, f
 
 
 def read_mapped(
