@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 
+import pytest
 import torch
 from torch.func import functional_call
 
@@ -136,3 +137,20 @@ def test_a_batch_whose_loss_is_not_finite_takes_no_step_and_the_fit_goes_on():
     hist = Adam(lr=0.05, max_epochs=5).fit(module, run, [("diverged", b) for b in train], None)
     assert hist.stop_reason == "non-finite loss" and hist.epochs == 1
     assert torch.equal(module.weight.detach(), start)
+
+
+def test_weight_decay_leaves_the_unpenalised_parameters_alone():
+    # a neural state-space fit's free initial states are no weights: named unpenalised, x0
+    # reaches the data's value, 1 (decayed too, it stopped near 1 / (1 + decay) = 0.5), while
+    # the weight, which no data holds, decays to 0
+    module = torch.nn.Module()
+    module.w = torch.nn.Parameter(torch.ones(()))
+    module.x0 = torch.nn.Parameter(torch.zeros(()))
+
+    def residual(params, batch):
+        return torch.stack([params["x0"] - 1.0, 0.0 * params["w"]])
+
+    trainer = Adam(lr=0.02, max_epochs=300, schedule="constant", clip=None, weight_decay=1.0)
+    trainer.fit(module, residual, [None], unpenalised=["x0"])
+    assert float(module.x0.detach()) == pytest.approx(1.0, abs=0.01)
+    assert abs(float(module.w.detach())) < 0.01

@@ -144,6 +144,80 @@ def test_a_wild_member_warning_points_at_the_users_line(log):
     assert [w.filename for w in [*said, *flown]] == [__file__, __file__]
 
 
+class EarlyWild(Offset):
+    """An Offset member whose seed 99 goes wild in the first half second of the run only."""
+
+    kind = "offset_early"
+
+    def _predict(self, log, mode):
+        out = log[["y"]].astype(float) + (0.0 if self.seed == 99 else float(self.seed))
+        out.iloc[0] = np.nan
+        if self.seed == 99:
+            out.iloc[1:5] = 1e9
+        return out
+
+
+def test_a_member_wild_only_in_the_unscored_warm_up_is_not_named(log):
+    """The wild-member check read every row after the members' warm-up samples, where the
+    scores also leave out each run's first ``warmup_s``: a member sane on every scored row
+    was named wild."""
+    import warnings
+
+    from nnid.models.ensemble import WildMemberWarning
+
+    model = EnsembleModel(EarlyWild(), seeds=(0, 1, 99), warmup_s=1.0).fit(log)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        model.predict(log)
+    unscored = EnsembleModel(EarlyWild(), seeds=(0, 1, 99)).fit(log)  # no warm-up: it is wild
+    with pytest.warns(WildMemberWarning, match="seed 99:"):
+        unscored.predict(log)
+
+
+class Says(Offset):
+    """An Offset member whose fit warns."""
+
+    kind = "offset_says"
+
+    def _fit(self, log, validation, progress):
+        import warnings
+
+        super()._fit(log, validation, progress)
+        warnings.warn(f"fit {self.seed} has something to say", UserWarning, stacklevel=2)
+
+
+class InWorker:
+    """joblib.Parallel in this process, whose calls' own warnings reach no one, as a loky
+    worker's went to its stderr and never to the caller's record."""
+
+    def __init__(self, **settings) -> None:
+        pass
+
+    def __call__(self, calls):
+        import warnings
+
+        for fn, args, kwargs in calls:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                result = fn(*args, **kwargs)
+            yield result
+
+
+@pytest.mark.parametrize("jobs", [1, 2])
+def test_members_warnings_reach_the_caller_named_by_seed(log, monkeypatch, jobs):
+    """Fitted in worker processes (``n_jobs`` > 1), the members' warnings never reached the
+    caller (``nnid train``'s recorded warnings lost them); now every member's are said in
+    the caller, named by its seed, in either case."""
+    import joblib
+
+    monkeypatch.setattr(joblib, "Parallel", InWorker)
+    with pytest.warns(UserWarning) as said:
+        EnsembleModel(Says(), seeds=(0, 1), n_jobs=jobs).fit(log)
+    messages = [str(w.message) for w in said]
+    assert messages.count("ensemble member with seed 0: fit 0 has something to say") == 1
+    assert messages.count("ensemble member with seed 1: fit 1 has something to say") == 1
+
+
 def test_member_validation_totals_leave_out_the_runs_warm_up(log, tmp_path):
     """``member_validation_free_run_nrmse`` scored each member with only its own warm-up left
     out, ``metrics.json``'s members with the config's ``warmup_s``: two totals for one member

@@ -399,6 +399,26 @@ def test_l2_center_pulls_toward_its_point_not_toward_zero() -> None:
     assert info.value.field == "l2_center"
 
 
+def test_l2_leaves_the_unpenalised_parameters_free() -> None:
+    # a neural state-space fit's free initial states are no weights: named unpenalised, the
+    # penalty leaves them out, here a linear model's bias, and the fit is the closed form
+    # (AᵀA + λD)⁻¹Aᵀb with D zero on the bias
+    gen = torch.Generator().manual_seed(5)
+    x = torch.randn(80, 3, generator=gen, dtype=torch.float64)
+    y = x @ torch.tensor([[2.0], [-1.0], [0.5]], dtype=torch.float64) + 3.0
+    a = np.hstack([x.numpy(), np.ones((80, 1))])
+    lam = 20.0
+    want = np.linalg.solve(a.T @ a + lam * np.diag([1.0, 1.0, 1.0, 0.0]), a.T @ y.numpy()[:, 0])
+    net = torch.nn.Linear(3, 1).double()
+    LevenbergMarquardt(max_epochs=50, l2=lam, min_grad=0.0).fit(
+        net, _regression_residual(net), [(x, y)], unpenalised=["bias"]
+    )
+    np.testing.assert_allclose(_flat(net), want, rtol=1e-9, atol=1e-9)
+    with pytest.raises(NnidInputError, match="unpenalised names x0, which are not") as info:
+        LevenbergMarquardt(l2=1.0).fit(net, _regression_residual(net), [(x, y)], unpenalised=["x0"])
+    assert info.value.field == "unpenalised"
+
+
 def test_batches_drawn_per_epoch_judge_that_epochs_steps() -> None:
     # Noise-free data of a network of the same shape: every subset of samples shares the
     # minimum, so LM on a fresh quarter of the samples each epoch must reach it on all of them.

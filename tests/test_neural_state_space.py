@@ -108,7 +108,7 @@ def test_validation_warmup_estimates_states_only(fitted):
     params = {"net." + k: v.detach() for k, v in model.net_.named_parameters()}
     params["x0"] = torch.zeros(1, 2, dtype=torch.float64)
     params["x0_val"] = torch.tensor([[0.5, 0.1]], dtype=torch.float64)
-    jac = jacrev(model._shooting_residual)(params, ("state", u, y, None))
+    jac = jacrev(model._shooting_residual)(params, ("state", u, y, None, None))
     assert all(float(jac[k].abs().max()) == 0.0 for k in params if k.startswith("net."))
     assert float(jac["x0_val"].abs().max()) > 0.0
 
@@ -188,12 +188,109 @@ def test_shooting_windows_cover_every_sample_and_link_neighbours():
     model.net_ = model._new_net()
     win = model._windows(_tanks(100, 0, 1.0, 1.0), 30)
     assert [s for _, s in win.where] == [0, 29, 58, 70]
-    assert win.links.tolist() == [[0, 29, 1], [1, 29, 2], [2, 12, 3]]
+    (group,) = win.groups
+    assert group.links.tolist() == [[0, 29, 1], [1, 29, 2], [2, 12, 3]]
     covered = np.zeros(100, bool)
     for _, s in win.where:
         covered[s : s + 30] = True
-    assert covered.all() and win.u.shape == (30, 4, 1)
-    np.testing.assert_allclose(win.y[12, 2], win.y[0, 3])  # the linked samples are one sample
+    assert covered.all() and group.u.shape == (30, 4, 1)
+    np.testing.assert_allclose(group.y[12, 2], group.y[0, 3])  # the linked samples are one sample
+
+
+def _runs(**logs: pd.DataFrame) -> pd.DataFrame:
+    """One log of several experiments, named by the keywords."""
+    return pd.concat([log.assign(experiment=name) for name, log in logs.items()], ignore_index=True)
+
+
+def _bare(warmup: int = 5) -> NeuralStateSpace:
+    model = NeuralStateSpace(["pump"], ["level"], warmup=warmup)
+    model._configure()
+    model.net_ = model._new_net()
+    return model
+
+
+def test_whole_runs_and_windows_are_never_cut_to_the_shortest_run():
+    # a 30-sample run beside a 200-sample one cut every window, "whole runs" included, to 30
+    # samples (the long run became seven free runs restarted from the data); now each run is
+    # whole at its own length, and a run shorter than a window is one window of its length
+    log = _runs(long=_tanks(200, 0, 1.0, 1.0), short=_tanks(30, 1, 1.0, 1.0))
+    model = _bare()
+    whole = model._windows(log, None)
+    assert whole.where == [(0, 0), (1, 0)] and whole.window_lengths == [30, 200]
+    cut = model._windows(log, 100)
+    assert cut.where == [(0, 0), (0, 99), (0, 100), (1, 0)] and cut.window_lengths == [30, 100]
+    assert cut.groups[0].links.tolist() == [[0, 99, 1], [1, 1, 2]]
+    # the fit trains on them and its stages say the lengths simulated, held-out ones too
+    fitted = NeuralStateSpace(
+        ["pump"], ["level"], hidden=2, warmup=5, windows=(100, None),
+        trainer=LevenbergMarquardt(max_epochs=2),
+    ).fit(log, _runs(a=_tanks(120, 2, 1.0, 1.0), b=_tanks(40, 3, 1.0, 1.0)))  # fmt: skip
+    assert [s["window_lengths"] for s in fitted.stages_] == [[30, 100], [30, 200]]
+    assert fitted.stages_[-1]["validation_window_lengths"] == [40, 120]
+
+
+class _Keeps(LevenbergMarquardt):
+    """Levenberg-Marquardt that keeps the module it trained (the windows' initial states)."""
+
+    def fit(self, module, *args, **kwargs):
+        self.module_ = module
+        return super().fit(module, *args, **kwargs)
+
+
+def test_a_weight_penalty_leaves_the_windows_initial_states_free():
+    # l2 pulled the windows' free initial states toward 0 with the weights. Under a penalty
+    # that holds the weights at 0 (the states do not move; no continuity links), each
+    # window's start is the mean level of its window, which lies away from 0 (the training
+    # mean, where the old penalty held them: |start| < 1e-4)
+    log = _tanks(150, 0, 1.0, 1.0)
+    model = NeuralStateSpace(
+        ["pump"], ["level"], hidden=2, warmup=5, windows=(30,), continuity=0.0,
+        trainer=_Keeps(max_epochs=5, l2=1e6), fractions=(1.0, 0.0, 0.0),
+    ).fit(log)  # fmt: skip
+    start = model.trainer_.module_.x0.detach()[:, 0].numpy()
+    ((_, level, _),) = model._segments(log)
+    means = [level[s : s + 30, 0].mean() for s in (0, 29, 58, 87, 116, 120)]
+    assert min(np.abs(means)) > 0.1
+    np.testing.assert_allclose(start, means, atol=1e-3)
+
+
+def test_runs_too_short_for_the_warm_up_are_said():
+    long, short = _tanks(120, 0, 1.0, 1.0), _tanks(8, 1, 1.0, 1.0)
+    kw = dict(hidden=2, warmup=10, trainer=LevenbergMarquardt(max_epochs=1))
+    said = r"1 training run no longer than the warm-up \(10 samples\) left out .*'short' \(8 sa"
+    with pytest.warns(UserWarning, match=said):
+        NeuralStateSpace(["pump"], ["level"], fractions=(1.0, 0.0, 0.0), **kw).fit(
+            _runs(long=long, short=short)
+        )
+    # validation logs none of whose runs outlasts the warm-up: one run was trained on without
+    # early stopping and without a word; two were refused as if the training log were short
+    for validation in (short, _runs(a=short, b=short)):
+        with pytest.warns(UserWarning, match="no run of the validation log .* without early"):
+            model = NeuralStateSpace(["pump"], ["level"], **kw).fit(long, validation)
+        assert model.validation_use is None and not model.history_[-1].validation
+
+
+def test_the_training_windows_error_is_recorded_apart_from_the_objective():
+    # one whole run, nothing held out: the objective is the windows' fit error alone
+    model = NeuralStateSpace(
+        ["pump"], ["level"], hidden=2, warmup=5, trainer=LevenbergMarquardt(max_epochs=2),
+        fractions=(1.0, 0.0, 0.0),
+    ).fit(_tanks(80, 0, 1.0, 1.0))  # fmt: skip
+    (stage,) = model.stages_
+    assert stage["train_windows_mse"] == pytest.approx(stage["train"][-1], rel=1e-9)
+
+
+def test_train_bounds_that_cross_are_refused_naming_the_output():
+    # a low above the training maximum's "train" high clamped every prediction to the high
+    log = _tanks(60, 0, 1.0, 1.0)
+    low = float(log["level"].min())
+    assert low > 0.5
+    model = NeuralStateSpace(
+        ["pump"], ["level"], hidden=2, warmup=5, trainer=LevenbergMarquardt(max_epochs=1),
+        output_bounds=[["train", 0.5]], fractions=(1.0, 0.0, 0.0),
+    )  # fmt: skip
+    with pytest.raises(NnidInputError, match=rf"of level: low {low:g} is not below high 0.5"):
+        model.fit(log)
 
 
 def test_cli_train_state_space_writes_contract_metrics(tmp_path):

@@ -53,7 +53,8 @@ def resolve_bounds(
 ) -> Resolved | None:
     """The bounds in the outputs' units; ``"train"`` entries take the minimum (low) or maximum
     (high) of ``log``'s column. None when there are no bounds, or while ``log`` is None and a
-    ``"train"`` entry is still to be resolved."""
+    ``"train"`` entry is still to be resolved. A ``"train"`` entry that resolves to a low at or
+    above the high is refused (a clamp whose low exceeds its high returns the high everywhere)."""
     if spec is None:
         return None
     pairs = [["train", "train"] for _ in outputs] if spec == "train" else spec
@@ -67,6 +68,14 @@ def resolve_bounds(
                 col = log[c].to_numpy(np.float64)
                 v = float(np.nanmin(col) if i == 0 else np.nanmax(col))
             row.append(v)
+        lo, hi = row
+        if lo is not None and hi is not None and not lo < hi:
+            raise NnidInputError(
+                f'output_bounds of {c}: low {lo:g} is not below high {hi:g} once "train" is '
+                f"read from the training data ({pair[0]!r}, {pair[1]!r}); give a low below the "
+                "training maximum and a high above the training minimum",
+                field="output_bounds",
+            )
         out.append(row)
     return out
 

@@ -15,7 +15,8 @@ the member is not hidden.
 Members are independent fits: ``n_jobs`` > 1 fits them in that many worker processes
 (joblib's loky backend, which caps each worker's OpenMP threads at its share of the cores;
 the calling process's state is untouched). A member's result does not depend on where it
-was fitted beyond the last bits that a thread count changes.
+was fitted beyond the last bits that a thread count changes, nor do its warnings: each is
+said in the calling process, named by the member's seed.
 """
 
 from __future__ import annotations
@@ -180,8 +181,8 @@ class EnsembleModel(NnidModel):
             )
         except NnidInputError as exc:
             raise exc.within("member", self.model.get_params()) from None
-        members = [m for m, _ in fitted]
-        scores = [v for _, v in fitted]
+        members = [m for m, _, _ in fitted]
+        scores = [v for _, v, _ in fitted]
         dropped = []
         if self.drop_diverged and validation is not None:
             dropped = [s for s, v in zip(seeds, scores, strict=True) if v is None]
@@ -204,15 +205,17 @@ class EnsembleModel(NnidModel):
         warmup_s: float = 0.0,
         replay: Replay | None = None,
     ) -> list[tuple]:
-        """(member, validation free-run NRMSE) of each template, in ``jobs`` processes."""
+        """(member, validation free-run NRMSE, its fit's warnings) of each template, in
+        ``jobs`` processes; each member's warnings said here, named by its seed (a worker
+        process's own never reached the caller's record)."""
         n = len(templates)
         if jobs == 1:
-            return [
-                _fit_member(
-                    m, log, validation, staged(progress, f"member {i + 1}/{n}"), warmup_s, replay
-                )
-                for i, m in enumerate(templates)
-            ]
+            fitted = []
+            for i, m in enumerate(templates):
+                stage = staged(progress, f"member {i + 1}/{n}")
+                fitted.append(_fit_member(m, log, validation, stage, warmup_s, replay))
+                _say_member_warnings(m.seed, fitted[-1][2])
+            return fitted
         from joblib import Parallel, delayed
 
         runs = Parallel(n_jobs=jobs, backend="loky", return_as="generator")(
@@ -221,6 +224,7 @@ class EnsembleModel(NnidModel):
         fitted = []
         for i, result in enumerate(runs):
             fitted.append(result)
+            _say_member_warnings(templates[i].seed, result[2])
             progress(i + 1, n, "members fitted")
         return fitted
 
@@ -244,7 +248,9 @@ class EnsembleModel(NnidModel):
         say nothing of it. ``caller``: the warning's stacklevel, the user's line (``predict``
         reaches here one frame deeper than a ``closed_loop`` flight)."""
         preds = np.stack([p[self.outputs_].to_numpy(np.float64) for p in predictions])
-        wild = wild_members(preds, log, self.outputs_, warmup_mask(log, 0.0, self.warmup_samples_))
+        # the rows the scores read: after each run's warm-up samples and first warmup_s
+        scored = warmup_mask(log, self.warmup_s, self.warmup_samples_)
+        wild = wild_members(preds, log, self.outputs_, scored)
         if wild:
             seeds = ", ".join(str(self.member_seeds_[k]) for k in wild)
             name = mode if isinstance(mode, str) else f"{mode}-step"
@@ -379,6 +385,10 @@ def wild_members(
     return wild
 
 
+#: a warning as a worker sends it back: (category, message, file, line)
+Said = tuple[type[Warning], str, str, int]
+
+
 def _fit_member(
     member: NnidModel,
     log: pd.DataFrame,
@@ -386,11 +396,36 @@ def _fit_member(
     progress: Progress | None = None,
     warmup_s: float = 0.0,
     replay: Replay | None = None,
-) -> tuple[NnidModel, float | None]:
-    """One member fitted, and its validation free-run NRMSE (a function of its own so that a
-    worker process can run it)."""
-    member.fit(log, validation, progress)
-    return member, _free_run_total(member, validation, warmup_s, replay)
+) -> tuple[NnidModel, float | None, list[Said]]:
+    """One member fitted, its validation free-run NRMSE and the warnings of both, each once,
+    for the caller to say (a function of its own so that a worker process can run it; a
+    worker's own warnings went to its stderr, never to the caller's record). A fit that fails
+    says its warnings before the error."""
+    caught: list[warnings.WarningMessage] = []
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            member.fit(log, validation, progress)
+            score = _free_run_total(member, validation, warmup_s, replay)
+    except BaseException:
+        _say_member_warnings(member.seed, _once(caught))
+        raise
+    return member, score, _once(caught)
+
+
+def _once(caught: Iterable[warnings.WarningMessage]) -> list[Said]:
+    """The warnings caught, the first of each in order."""
+    return list(dict.fromkeys((w.category, str(w.message), w.filename, w.lineno) for w in caught))
+
+
+def _say_member_warnings(seed: int, said: list[Said]) -> None:
+    """A member's warnings, said again in the caller's process under the caller's filters,
+    each named by the member's seed, from where it was raised (whose file tells nnid's own
+    from another package's notices: :func:`nnid.warning_messages.warning_messages`)."""
+    for category, message, filename, lineno in said:
+        warnings.warn_explicit(
+            f"ensemble member with seed {seed}: {message}", category, filename, lineno
+        )
 
 
 def _free_run_total(

@@ -33,6 +33,7 @@ never scored.
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -44,6 +45,9 @@ from sklearn.base import clone
 from torch import nn
 from torch.func import functional_call
 
+from nnid.datasets.gaps import some_runs
+from nnid.datasets.log import run_label
+from nnid.datasets.preprocess import experiment_rows
 from nnid.datasets.splits import split_log
 from nnid.errors import NnidInputError, checked_number
 from nnid.evaluation.prediction import mode_steps
@@ -135,16 +139,35 @@ class StateSpaceNet(nn.Module):
 
 
 @dataclass
-class _Windows:
-    """Training windows: inputs [L, B, n_u] and outputs [L, B, n_y] (normalised), where each
-    starts (experiment number, sample) and the experiments' lengths."""
+class _Group:
+    """Training windows of one length: inputs [L, B, n_u] and outputs [L, B, n_y]
+    (normalised), and the rows of the initial-state parameter they start from (None: all)."""
 
     u: torch.Tensor
     y: torch.Tensor
+    #: (window b, sample i, window b'): window b' starts at sample i of window b (in the group)
+    links: torch.Tensor
+    rows: slice | None
+
+
+@dataclass
+class _Windows:
+    """Training windows, grouped by length (a run shorter than the window is one window of its
+    own length), where each starts (experiment number, sample; in the order of the initial
+    states) and the experiments' lengths."""
+
+    groups: list[_Group]
     where: list[tuple[int, int]]
     lengths: list[int]
-    #: (window b, sample i, window b'): window b' starts at sample i of window b
-    links: torch.Tensor
+
+    @property
+    def window_lengths(self) -> list[int]:
+        """The lengths of the windows, in samples (one per group), shortest first."""
+        return sorted(g.u.shape[0] for g in self.groups)
+
+    def batches(self, kind: str) -> list[tuple]:
+        """The groups as ``(kind, u, y, links, rows)`` batches of :meth:`_shooting_residual`."""
+        return [(kind, g.u, g.y, g.links if kind == "fit" else None, g.rows) for g in self.groups]
 
 
 class _Fit(nn.Module):
@@ -174,12 +197,16 @@ class NeuralStateSpace(InputOutputModel):
         warmup: samples at the start of each experiment used to estimate the initial state and
             never scored.
         windows: training stages, one window length in samples each (None: whole
-            experiments); every window has its own free initial state. Each stage starts from
+            experiments, each at its own length; an experiment shorter than a window is one
+            window of its own length, never a cut of the others); every window has its own
+            free initial state, which a trainer's weight penalty (``l2``, ``weight_decay``)
+            leaves alone. ``stages_`` records the lengths simulated. Each stage starts from
             the previous one's weights and simulated states: short windows first make the
             simulation error easier to minimise (multiple shooting), longer ones then fit the
             long-horizon behaviour.
-        trainer: an object with ``fit(module, residual, train_batches, val_batches)``;
-            default ``LevenbergMarquardt(max_epochs=100)``.
+        trainer: an object with ``fit(module, residual, train_batches, val_batches,
+            progress=)`` (Levenberg-Marquardt and Adam are also told the free states,
+            ``unpenalised=``); default ``LevenbergMarquardt(max_epochs=100)``.
         output_bounds: clamp of the predicted outputs (:mod:`nnid.models.bounds`).
         fractions: contiguous train/validation/test blocks when no ``validation_log`` is given
             (MATLAB's divideblock; the test block is left unused).
@@ -290,33 +317,60 @@ class NeuralStateSpace(InputOutputModel):
         self.stages_ = state["stages"]
 
     # -- data ------------------------------------------------------------------------------------
-    def _windows(self, log: pd.DataFrame, length: int | None) -> _Windows:
-        """Windows of ``length`` samples (None: the shortest experiment) starting at each
+    def _windows(
+        self, log: pd.DataFrame, length: int | None, what: str = "training log"
+    ) -> _Windows:
+        """Windows of ``length`` samples (None: each experiment whole) starting at each
         experiment's start and every ``length − 1`` samples after (a window's last sample is
         the next one's first), the last one ending at the experiment's end (overlapping more if
-        need be, so no sample is left out)."""
+        need be, so no sample is left out). An experiment shorter than ``length`` is one window
+        of its own length; experiments no longer than the warm-up are left out (``what``: the
+        log, in the error where none is longer)."""
         segs = [s for s in self._segments(log) if len(s[1]) > self.warmup_samples_]
         if not segs:
             raise NnidInputError(
-                f"no experiment is longer than the warm-up ({self.warmup_samples_} samples)",
+                f"no run of the {what} is longer than the warm-up ({self.warmup_samples_} samples)",
                 field="warmup",
             )
-        shortest = min(len(s[1]) for s in segs)
-        length = shortest if length is None else min(length, shortest)
-        us, ys, where, links = [], [], [], []
-        for j, (_, yn, un) in enumerate(segs):
+        # per experiment, its window length and starts; windows of one length are one group
+        # (one batch, one simulation), in order of first appearance
+        plan: dict[int, list[tuple[int, list[int]]]] = {}
+        for j, (_, yn, _) in enumerate(segs):
             n = len(yn)
-            starts = sorted({*range(0, n - length + 1, max(1, length - 1)), n - length})
-            for k, s in enumerate(starts):
-                if k:  # the previous window must reach this start: multiple-shooting link
-                    links.append((len(where) - 1, s - starts[k - 1], len(where)))
-                us.append(un[s : s + length])
-                ys.append(yn[s : s + length])
-                where.append((j, s))
-        u, y = torch.as_tensor(np.stack(us, 1)), torch.as_tensor(np.stack(ys, 1))
-        return _Windows(
-            u, y, where, [len(s[1]) for s in segs], torch.as_tensor(links).reshape(-1, 3)
-        )
+            size = n if length is None else min(length, n)
+            starts = sorted({*range(0, n - size + 1, max(1, size - 1)), n - size})
+            plan.setdefault(size, []).append((j, starts))
+        groups, where = [], []
+        for size, runs in plan.items():
+            us, ys, links, first = [], [], [], len(where)
+            for j, starts in runs:
+                _, yn, un = segs[j]
+                for k, s in enumerate(starts):
+                    if k:  # the previous window must reach this start: multiple-shooting link
+                        links.append(
+                            (len(where) - first - 1, s - starts[k - 1], len(where) - first)
+                        )
+                    us.append(un[s : s + size])
+                    ys.append(yn[s : s + size])
+                    where.append((j, s))
+            # one group takes every initial state as it is (no indexing: the same operations,
+            # so the same Jacobian mode and numbers, as before runs of other lengths had groups)
+            rows = None if len(plan) == 1 else slice(first, len(where))
+            groups.append(
+                _Group(
+                    torch.as_tensor(np.stack(us, 1)),
+                    torch.as_tensor(np.stack(ys, 1)),
+                    torch.as_tensor(links).reshape(-1, 3),
+                    rows,
+                )
+            )
+        return _Windows(groups, where, [len(s[1]) for s in segs])
+
+    def _runs_too_short(self, log: pd.DataFrame) -> list[str]:
+        """The experiments of ``log`` no longer than the warm-up, each with its sample count."""
+        w = self.warmup_samples_
+        short = [(name, len(pos)) for name, pos in experiment_rows(log) if len(pos) <= w]
+        return [f"{run_label(n)} ({k} sample{'s' * (k != 1)})" for n, k in short]
 
     def _initial_states(self, y: torch.Tensor) -> torch.Tensor:
         """Start of the estimate: the measured states at their first sample, the hidden ones
@@ -327,16 +381,20 @@ class NeuralStateSpace(InputOutputModel):
     def _track(self, win: _Windows, x0: torch.Tensor) -> list[np.ndarray]:
         """Per experiment, the states simulated from the fitted initial states of its windows
         (a later window overwrites the overlap): where the next stage's windows start."""
-        with torch.no_grad():
-            states = self.net_(x0, win.u).numpy()
         tracks = [np.zeros((n, self.n_x_)) for n in win.lengths]
-        for b, (j, s) in enumerate(win.where):
-            tracks[j][s : s + states.shape[0]] = states[:, b]
+        b = 0
+        for g in win.groups:
+            with torch.no_grad():
+                states = self.net_(x0 if g.rows is None else x0[g.rows], g.u).numpy()
+            for k in range(states.shape[1]):
+                j, s = win.where[b]
+                tracks[j][s : s + states.shape[0]] = states[:, k]
+                b += 1
         return tracks
 
     def _starts(self, win: _Windows, tracks: list[np.ndarray] | None) -> torch.Tensor:
         if tracks is None:
-            return self._initial_states(win.y)
+            return torch.cat([self._initial_states(g.y) for g in win.groups])
         return torch.as_tensor(np.stack([tracks[j][s] for j, s in win.where]))
 
     # -- torch pieces ----------------------------------------------------------------------------
@@ -353,10 +411,12 @@ class NeuralStateSpace(InputOutputModel):
     def _shooting_residual(self, params: dict[str, torch.Tensor], batch: tuple) -> torch.Tensor:
         """Training windows (``"fit"``: whole window), held-out windows' warm-ups with the
         network held fixed (``"state"``: their initial states only) and after it (``"val"``)."""
-        kind, u, y, links = batch
+        kind, u, y, links, rows = batch
         net = {k[4:]: v for k, v in params.items() if k.startswith("net.")}
+        x0 = params["x0" if kind == "fit" else "x0_val"]
+        if rows is not None:  # this group's windows of several lengths
+            x0 = x0[rows]
         if kind == "fit":
-            x0 = params["x0"]
             states = functional_call(self.net_, net, (x0, u))
             fit = self._outputs(states) - y
             if not len(links) or self.continuity == 0:
@@ -366,8 +426,8 @@ class NeuralStateSpace(InputOutputModel):
         if kind == "state":
             fixed = {k: v.detach() for k, v in net.items()}
             w = self.warmup_samples_
-            return (self._simulate(fixed, params["x0_val"], u[:w]) - y[:w]).reshape(-1)
-        return (self._simulate(net, params["x0_val"], u) - y)[self.warmup_samples_ :].reshape(-1)
+            return (self._simulate(fixed, x0, u[:w]) - y[:w]).reshape(-1)
+        return (self._simulate(net, x0, u) - y)[self.warmup_samples_ :].reshape(-1)
 
     # -- training --------------------------------------------------------------------------------
     def _fit(
@@ -402,22 +462,23 @@ class NeuralStateSpace(InputOutputModel):
             else LevenbergMarquardt(max_epochs=100)
         )
         self.trainer_ = trainer
-        held_out = validation_log is not None and len(validation_log) > self.warmup_samples_
+        self._say_short_runs(log)
+        held_out = self._held_out(validation_log)
         tracks = val_tracks = None
-        self.history_ = []
+        self.history_, lengths, fit_errors = [], [], []  # per stage
         for i, length in enumerate(self.windows_):
             win = self._windows(log, length)
-            val = self._windows(validation_log, length) if held_out else None  # type: ignore[arg-type]
+            val = self._windows(validation_log, length, "validation log") if held_out else None  # type: ignore[arg-type]
             fit = _Fit(
                 self.net_,
                 self._starts(win, tracks),
                 None if val is None else self._starts(val, val_tracks),
             )
-            train_batches = [("fit", win.u, win.y, win.links)]
+            train_batches = win.batches("fit")
             if val is not None:
-                train_batches.append(("state", val.u, val.y, None))
+                train_batches += val.batches("state")
             last = i == len(self.windows_) - 1
-            checks = [("val", val.u, val.y, None)] if val is not None and last else None
+            checks = val.batches("val") if val is not None and last else None
             stage = f"stage {i + 1}/{len(self.windows_)} (window {length or 'whole runs'})"
             self.history_.append(
                 trainer.fit(
@@ -426,18 +487,83 @@ class NeuralStateSpace(InputOutputModel):
                     train_batches,
                     checks,
                     progress=staged(progress, stage),
+                    **self._free_states(trainer, fit),
                 )
             )
             tracks = self._track(win, fit.x0.detach())
             if val is not None:
                 val_tracks = self._track(val, fit.x0_val.detach())
+            lengths.append((win.window_lengths, [] if val is None else val.window_lengths))
+            fit_errors.append(self._windows_error(win, fit.x0.detach()))
+        # the lengths simulated (a run shorter than the window is one window of its own length)
+        # and the training windows' error apart from the trainer's objective (``train``)
         self.stages_ = [
-            {"window": w, **h.as_dict()} for w, h in zip(self.windows_, self.history_, strict=True)
+            {
+                "window": w,
+                "window_lengths": n,
+                "validation_window_lengths": v,
+                "train_windows_mse": e,
+                **h.as_dict(),
+            }
+            for w, (n, v), e, h in zip(
+                self.windows_, lengths, fit_errors, self.history_, strict=True
+            )
         ]
         with torch.no_grad():
             if self.hidden_states:
                 x0 = torch.as_tensor(np.concatenate(tracks))  # type: ignore[arg-type]
                 self.net_.hidden_init.copy_(x0[:, len(self.outputs_) :].mean(0))
+
+    def _say_short_runs(self, log: pd.DataFrame) -> None:
+        """A warning naming the training runs no longer than the warm-up, which the windows
+        leave out (where every run is, :meth:`_windows` refuses the log)."""
+        short = self._runs_too_short(log)
+        if short and len(short) < len(experiment_rows(log)):
+            warnings.warn(
+                f"{len(short)} training run{'s' * (len(short) != 1)} no longer than the warm-up "
+                f"({self.warmup_samples_} samples) left out of the state-space fit: "
+                f"{some_runs(short)}",
+                stacklevel=5,
+            )
+
+    def _held_out(self, validation_log: pd.DataFrame | None) -> bool:
+        """Whether the validation log has a run longer than the warm-up to stop early on; a
+        warning where it has rows but no such run (NARX's rule)."""
+        if validation_log is None or not len(validation_log):
+            return False
+        w = self.warmup_samples_
+        if any(len(pos) > w for _, pos in experiment_rows(validation_log)):
+            return True
+        warnings.warn(
+            f"no run of the validation log is longer than the warm-up ({w} samples): the "
+            "state-space model trains without early stopping, on its training error alone",
+            stacklevel=5,
+        )
+        return False
+
+    @staticmethod
+    def _free_states(trainer: Any, fit: _Fit) -> dict[str, Any]:
+        """The trainer's ``unpenalised`` argument where it has one: the windows' initial states
+        are free parameters, not weights, and a weight penalty must not pull them toward 0."""
+        from nnid.trainers.adam import Adam
+        from nnid.trainers.levenberg_marquardt import LevenbergMarquardt
+
+        if not isinstance(trainer, LevenbergMarquardt | Adam):
+            return {}
+        return {"unpenalised": [k for k, _ in fit.named_parameters() if not k.startswith("net.")]}
+
+    def _windows_error(self, win: _Windows, x0: torch.Tensor) -> float:
+        """The mean square of the training windows' simulated outputs against the data
+        (normalised): the fit alone, without the continuity links and the held-out warm-ups
+        that the trainer's ``train`` series adds to it."""
+        params = dict(self.net_.named_parameters())
+        total, count = 0.0, 0
+        with torch.no_grad():
+            for g in win.groups:
+                r = self._simulate(params, x0 if g.rows is None else x0[g.rows], g.u) - g.y
+                total += float((r**2).sum())
+                count += r.numel()
+        return total / count
 
     def _validation_used(self, validation: pd.DataFrame | None) -> str | None:
         """Early stopping where a given validation log's windows were scored; not where it was

@@ -20,6 +20,7 @@ from sklearn.base import BaseEstimator
 
 from nnid.errors import checked_number
 from nnid.trainers.history import History, Progress, silent, stopping_score
+from nnid.trainers.levenberg_marquardt import unpenalised_names
 
 Residual = Callable[[dict[str, torch.Tensor], Any], torch.Tensor]
 Batches = Sequence[Any] | Callable[[int], Iterable[Any]]
@@ -83,6 +84,21 @@ class Adam(BaseEstimator):
             return None
         raise ValueError(f"schedule is 'cosine', 'plateau' or 'constant', not {self.schedule!r}")
 
+    @staticmethod
+    def _groups(
+        module: torch.nn.Module, params: dict[str, torch.Tensor], unpenalised: Iterable[str]
+    ) -> list:
+        """The optimiser's parameters: all of them, or two groups, the ``unpenalised`` ones
+        without weight decay."""
+        free = unpenalised_names(module, unpenalised)
+        if not free:
+            return list(params.values())
+        groups = [
+            {"params": [p for k, p in params.items() if k not in free]},
+            {"params": [p for k, p in params.items() if k in free], "weight_decay": 0.0},
+        ]
+        return [g for g in groups if g["params"]]
+
     def fit(
         self,
         module: torch.nn.Module,
@@ -91,6 +107,7 @@ class Adam(BaseEstimator):
         val_batches: Sequence[Any] | None = None,
         progress: Progress | None = None,
         recorded: Callable[[torch.Tensor, Any], torch.Tensor] | None = None,
+        unpenalised: Iterable[str] = (),
     ) -> History:
         """Minimise mean(residual²) over ``train_batches`` (a list, or a callable giving the
         batches of an epoch, for resampling); stop early on ``val_batches``. ``progress(epoch,
@@ -99,14 +116,18 @@ class Adam(BaseEstimator):
         square is recorded as the training error (default: all; an objective with penalty rows
         records its error rows, comparable with the validation error). A batch whose loss or
         gradient is not finite takes no step (counted in ``info["skipped_batches"]``); an epoch
-        none of whose batches could step ends the fit ("non-finite loss")."""
+        none of whose batches could step ends the fit ("non-finite loss"). ``unpenalised``:
+        names of parameters (as ``named_parameters`` gives them) that ``weight_decay`` leaves
+        alone, e.g. free initial states that are no weights."""
         checked_number(self.lr, "lr")  # torch refused a NaN with its own error, ran 0 idle
         checked_number(self.max_epochs, "max_epochs", strict=False, integer=True)
         checked_number(self.max_fail, "max_fail", 1, strict=False, integer=True)
         start = time.perf_counter()
         report = progress or silent
         params = {k: p for k, p in module.named_parameters() if p.requires_grad}
-        opt = torch.optim.Adam(params.values(), lr=self.lr, weight_decay=self.weight_decay)
+        opt = torch.optim.Adam(
+            self._groups(module, params, unpenalised), lr=self.lr, weight_decay=self.weight_decay
+        )
         scheduler = self._scheduler(opt)
         hist = History()
 

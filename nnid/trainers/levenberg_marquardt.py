@@ -111,7 +111,7 @@ from torch.overrides import TorchFunctionMode
 from nnid.errors import NnidInputError
 from nnid.trainers.history import History, Progress, silent, stopping_score
 
-__all__ = ["LevenbergMarquardt", "NormalEquations"]
+__all__ = ["LevenbergMarquardt", "NormalEquations", "unpenalised_names"]
 
 Residual = Callable[[dict[str, torch.Tensor], Any], torch.Tensor]
 #: ``jacobian_rows(params, batch, budget_elements)`` yields (J block [rows, P], residual [rows])
@@ -137,6 +137,21 @@ class NormalEquations:
     jtr: torch.Tensor  # [P]
     sse: float
     n: int
+
+
+def unpenalised_names(module: torch.nn.Module, names: Iterable[str]) -> set[str]:
+    """``names``, parameters of ``module`` that a trainer's weight penalty leaves alone (free
+    initial states, which are no weights), checked: a name the module lacks is refused."""
+    free = set(names)
+    known = [k for k, _ in module.named_parameters()]
+    unknown = sorted(free - set(known))
+    if unknown:
+        raise NnidInputError(
+            f"unpenalised names {', '.join(unknown)}, which are not parameters of the module "
+            f"({', '.join(known)})",
+            field="unpenalised",
+        )
+    return free
 
 
 # --------------------------------------------------------------------------- batch pytrees
@@ -243,7 +258,8 @@ class LevenbergMarquardt(BaseEstimator):
             the rows √λ (θ − θ_c) appended to the residual, √λ I to the Jacobian; default 0).
         l2_center: θ_c, the flat parameter vector the penalty pulls toward, in the order of
             ``module.parameters()`` (default None: the origin, plain weight decay); e.g. an
-            earlier fit whose gains the penalty should not shrink.
+            earlier fit whose gains the penalty should not shrink. The parameters named in
+            :meth:`fit`'s ``unpenalised`` are left out of the penalty.
         geodesic: add geodesic acceleration to each trial step (module docstring; default
             False, trainlm's step).
         geodesic_ratio: the largest 2‖a‖/‖δ‖ a geodesic trial may have (Transtrum & Sethna's
@@ -293,6 +309,8 @@ class LevenbergMarquardt(BaseEstimator):
         # passes to a fresh object once the batch is freed (one of another size read a stale n)
         self._rows: dict[int, tuple[tuple, int, _Cost]] = {}
         self._center: torch.Tensor | None = None
+        #: 1 where the penalty applies, 0 for the ``unpenalised`` parameters; None: everywhere
+        self._weights: torch.Tensor | None = None
 
     # ------------------------------------------------------------------ parameters
 
@@ -362,9 +380,22 @@ class LevenbergMarquardt(BaseEstimator):
             )
         return center.clone()
 
+    @staticmethod
+    def _penalised(module: torch.nn.Module, unpenalised: Iterable[str]) -> torch.Tensor | None:
+        """The flat 0/1 mask of the parameters the penalty applies to (None: all of them)."""
+        free = unpenalised_names(module, unpenalised)
+        if not free:
+            return None
+        parts = [
+            torch.full((p.numel(),), float(k not in free)) for k, p in module.named_parameters()
+        ]
+        return torch.cat(parts).to(torch.float64)
+
     def _offset(self, theta: torch.Tensor) -> torch.Tensor:
-        """θ − θ_c, what the penalty squares (θ itself without a centre)."""
-        return theta if self._center is None else theta - self._center
+        """θ − θ_c, what the penalty squares (θ itself without a centre), 0 where the
+        parameter is not penalised."""
+        d = theta if self._center is None else theta - self._center
+        return d if self._weights is None else d * self._weights
 
     def _penalty(self, theta: torch.Tensor) -> float:
         if self.l2 <= 0:
@@ -406,6 +437,7 @@ class LevenbergMarquardt(BaseEstimator):
         self._select_mode(separable, jacobian_rows)
         theta = self._flatten(module)
         self._center = self._checked_center(theta.numel())
+        self._weights = None
         return self._normal_equations(residual, theta, self._layout(module), batches)
 
     def _select_mode(self, separable: bool, jacobian_rows: JacobianRows | None) -> None:
@@ -450,7 +482,7 @@ class LevenbergMarquardt(BaseEstimator):
     def _penalise(self, ne: NormalEquations, theta: torch.Tensor) -> NormalEquations:
         """The λ‖θ − θ_c‖² rows added to a system of the data alone."""
         if self.l2 > 0:
-            ne.jtj.diagonal().add_(self.l2)
+            ne.jtj.diagonal().add_(self.l2 if self._weights is None else self.l2 * self._weights)
             ne.jtr += self.l2 * self._offset(theta)
             ne.sse += self._penalty(theta)
         return ne
@@ -646,6 +678,7 @@ class LevenbergMarquardt(BaseEstimator):
         separable: bool = False,
         jacobian_rows: JacobianRows | None = None,
         curvature_batches: Callable[[int], Sequence[Any]] | None = None,
+        unpenalised: Iterable[str] = (),
     ) -> History:
         """Train ``module``'s parameters in place; returns the per-epoch :class:`History`
         (``extra``: ``mu`` per entry, ``gradient`` ‖∇ MSE‖ = 2‖Jᵀr‖/N per Jacobian pass;
@@ -666,7 +699,9 @@ class LevenbergMarquardt(BaseEstimator):
         docstring). ``curvature_batches(epoch)``, when given, returns the batches (a subset of
         the training data) whose JᵀJ, scaled to the training rows, stands for the whole one in
         that epoch, while the gradient Jᵀr and the trial steps' SSE stay those of every
-        training batch (module docstring).
+        training batch (module docstring). ``unpenalised``: names of parameters (as
+        ``named_parameters`` gives them) that ``l2`` leaves alone, e.g. free initial states
+        that are no weights.
         """
         self._select_mode(separable, jacobian_rows)
         if not (0.0 < self.mu_dec < 1.0 < self.mu_inc):
@@ -689,6 +724,7 @@ class LevenbergMarquardt(BaseEstimator):
         layout = self._layout(module)
         theta = self._flatten(module)
         self._center = self._checked_center(theta.numel())
+        self._weights = self._penalised(module, unpenalised)
         hist = History()
         mu = self.mu
         use_val = bool(val_batches)
