@@ -600,3 +600,22 @@ def test_an_unidentified_weight_minus_buoyancy_is_flown_at_the_vehicle_files(
     assert "weight_minus_buoyancy at 0 (neutrally buoyant), where the saved model " in words
     assert "as it did when it was fitted" not in words
     assert older.parts_.buoyancy == older.parts_.weight
+
+
+def test_force_to_commands_inverts_a_thrust_curve_that_turns_near_zero():
+    """vlbv300's Weiss eq. 10 curve falls over 0 < |c| < 2.5 PWM before it rises: inverting it
+    raised a raw "thrust curve of 'VS' is not monotone" (a traceback from nnid train on a
+    caccia_campaign). It is inverted beyond that turn; a thrust inside it (below 0.026 N) is
+    flown at the nearest the curve makes, and said; a force beyond the curve's reach, which
+    np.interp flew at the limit while the report stated the design, is refused."""
+    from nnid.errors import NnidInputError
+
+    vehicle = load_vehicle("vlbv300")
+    force = np.array([-100.0, -30.0, -1.0, 0.0, 0.5, 30.0, 100.0])
+    tau = Actuation(vehicle).nominal(force_to_commands(vehicle, "w", force))
+    np.testing.assert_allclose(tau[:, 2], force, atol=1e-3)
+    with pytest.warns(UserWarning, match=r"'VS' makes no thrust between .* nearest thrust"):
+        tiny = Actuation(vehicle).nominal(force_to_commands(vehicle, "w", np.array([0.01])))
+    assert abs(tiny[0, 2] - 0.01) < 0.03  # within half the curve's gap of the design
+    with pytest.raises(NnidInputError, match=r"thruster 'VS' for [\d.]+ N.*reaches"):
+        force_to_commands(vehicle, "w", np.array([0.0, 150.0]))

@@ -2743,3 +2743,11 @@ def test_a_noise_ratio_of_no_finite_row_is_not_measured_and_dismisses_nothing(rn
         assert not explained_by_the_changes(mon, e, e)
     r = rng.normal(size=(30, 6))  # a window of healthy noise measured: within, as before
     assert explained_by_the_changes(mon, r, r)
+
+
+def test_a_fault_that_leaves_no_positive_definite_mass_matrix_is_refused_naming_it(vehicle):
+    """An added-mass fault of +1000 kg in surge makes M = M_RB + M_A indefinite: the fault
+    simulator raised a raw ValueError; it is refused as a simulated vehicle is, naming it."""
+    fault = Fault(kind="effect", t=1.0, effect="added_mass.u", value=1000.0)
+    with pytest.raises(NnidInputError, match=r"added_mass\.u = 1000.*not positive definite"):
+        simulate_faults(vehicle, 5, faults=[fault])

@@ -281,6 +281,20 @@ def test_autopilot_holds_an_unstable_vehicle_and_logs_its_force():
     assert math.isclose(log["tau_X"].iloc[0], 11.0)
 
 
+@pytest.mark.parametrize("integrator", ["rk4", "torch"])
+def test_an_autopilot_holds_a_point_whatever_the_heading(integrator):
+    """x/y gains act on the north/east error; surge and sway are body forces. The push went
+    into them unturned, so facing south (ψ = π) it drove the vehicle away from the point it
+    held. Both flights (the compiled RK4 and the per-sample law) turn it by the heading."""
+    veh = load_vehicle("seamor")
+    pilot = Autopilot(
+        kp=[20, 20, 20, 0, 0, 5], kd=[40, 40, 40, 0, 0, 5], reference=[0, 0, 0, 0, 0, math.pi]
+    )
+    x0 = [1.0, -1.0, 0, 0, 0, math.pi - 0.2, 0, 0, 0, 0, 0, 0]
+    log = simulate(veh, np.zeros((1200, 6)), 0.05, x0=x0, autopilot=pilot, integrator=integrator)
+    assert np.hypot(log["x"].iloc[-1], log["y"].iloc[-1]) < 0.05, log[["x", "y"]].iloc[-1]
+
+
 def _turning_log(rates, seconds=60.0, dt=0.05, seed=0):
     """A log whose attitude turns with the body rates ``rates(t) -> [N, 3]`` (rad/s), integrated
     on the rotation (so a pitch through ±π/2 is met as a sensor writes it, φ and ψ jumping by

@@ -1932,3 +1932,48 @@ def test_filtered_least_squares_on_runs_of_one_sample_each_is_refused_naming_why
     with pytest.raises(NnidInputError, match="no experiment has two samples") as err:
         model.fit(ones)
     assert err.value.field == "experiment"
+
+
+def _two_equations(yx: np.ndarray, yz: np.ndarray, x: np.ndarray, z: np.ndarray) -> Regression:
+    """A force equation on x and a moment equation on z, rows interleaved, no shared column."""
+    n = x.size
+    phi = np.zeros((2 * n, 2))
+    phi[0::2, 0], phi[1::2, 1] = x, z
+    y = np.empty(2 * n)
+    y[0::2], y[1::2] = yx, yz
+    return Regression(phi, y, ["X_a", "N_b"], ("u", "r"), n)
+
+
+def test_ordinary_least_squares_of_several_dofs_counts_a_missing_constant_as_error():
+    """An unmodelled constant force c = 1 N beside noise σₑ = 0.5 N in the X equation: the
+    per-equation sandwich used the centred variance, so X_a's s.e. was √(1 + c²/σₑ²) = 2.2x
+    smaller than the same equation fitted alone (Caccia eq. 12: σ̂² = rᵀr/(n − p)). The two
+    equations share no column, so each parameter's s.e. is the one its equation gives alone."""
+    rng = np.random.default_rng(0)
+    n = 2000
+    x, z = rng.normal(size=(2, n))
+    yx = 2.0 * x + 1.0 + 0.5 * rng.normal(size=n)
+    yz = -0.5 * z + 0.1 * rng.normal(size=n)
+    ols = LeastSquares(weighting="none", correlated=False)
+    alone = ols.solve(Regression(x[:, None], yx, ["X_a"], ("u",), n))
+    both = ols.solve(_two_equations(yx, yz, x, z))
+    assert both.stderr[0] == pytest.approx(alone.stderr[0], rel=1e-6)
+
+
+@pytest.mark.parametrize("weighting", ["none", "feasible"])
+def test_each_dof_equation_is_widened_by_its_own_correlation_time(weighting):
+    """X's residual a moving average over 20 samples (τ ≈ 20), N's white (τ ≈ 1): one mean τ
+    (≈ 10) for both left X_a's s.e. 0.72x and N_b's 3.2x those of each equation fitted alone.
+    Each equation's variance is widened by its own τ (Σ_k = τ_k σ_k²)."""
+    rng = np.random.default_rng(0)
+    n = 4000
+    x, z = rng.normal(size=(2, n))
+    e = np.convolve(rng.normal(size=n + 19), np.ones(20) / np.sqrt(20), "valid")
+    yx, yz = 2.0 * x + 0.5 * e, -0.5 * z + 0.1 * rng.normal(size=n)
+    ls = LeastSquares(weighting=weighting)
+    alone = [
+        ls.solve(Regression(c[:, None], t, [nm], ("u",), n)).stderr[0]
+        for c, t, nm in ((x, yx, "X_a"), (z, yz, "N_b"))
+    ]
+    both = ls.solve(_two_equations(yx, yz, x, z))
+    np.testing.assert_allclose(both.stderr, alone, rtol=0.01)

@@ -593,3 +593,26 @@ def test_the_gradient_estimators_step_reads_its_runs_without_the_joins(seamor):
         Seen(gain=1.0).fit(structure, log_arrays(log.iloc[[0, 360]], seamor))
     assert seen[0] == pytest.approx(1 / 120, rel=1e-5)
     assert seen[1] is None
+
+
+def test_rls_standard_errors_are_each_equations_own():
+    """RLS (no forgetting) over a force equation with a 1 N constant the model lacks and a
+    correlated residual (τ ≈ 20), beside a white moment equation sharing no column. Its
+    sandwich used each equation's centred variance (the constant dropped: X_a's s.e. √5 too
+    small) and one mean τ for both (N_b's s.e. 3x too wide). Each parameter's s.e. is now the
+    one its equation gives alone: rᵀr/(n − p) (Caccia eq. 12) times its own τ."""
+    rng = np.random.default_rng(0)
+    n = 4000
+    x, z = rng.normal(size=(2, n))
+    e = np.convolve(rng.normal(size=n + 19), np.ones(20) / np.sqrt(20), "valid")
+    yx, yz = 2.0 * x + 1.0 + 0.5 * e, -0.5 * z + 0.1 * rng.normal(size=n)
+    phi = np.zeros((2 * n, 2))
+    phi[0::2, 0], phi[1::2, 1] = x, z
+    y = np.empty(2 * n)
+    y[0::2], y[1::2] = yx, yz
+    both = RecursiveLeastSquares().solve(Regression(phi, y, ["X_a", "N_b"], ("u", "r"), n))
+    alone = [
+        RecursiveLeastSquares().solve(Regression(c[:, None], t, [nm], ("u",), n)).stderr[0]
+        for c, t, nm in ((x, yx, "X_a"), (z, yz, "N_b"))
+    ]
+    np.testing.assert_allclose(both.stderr, alone, rtol=0.01)

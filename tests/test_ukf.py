@@ -215,3 +215,39 @@ def test_an_underconfident_filter_says_its_standard_errors_are_conservative(seam
     with pytest.warns(UserWarning, match=r"innovations are 0\.\d+ of the variance.*conservative"):
         wide = UnscentedKalman(process_noise=1e-2, theta0=0.5 * TRUTH).fit(_structure(seamor), data)
     assert wide.sigma2 < 0.5 and (wide.stderr > 3 * calibrated.stderr).all()
+
+
+def test_a_parameter_the_vehicle_file_leaves_out_gets_a_diffuse_prior(seamor):
+    """X_u|u| absent from the vehicle file: its θ₀ was 0 and its prior σ min_std = 1e-3 (SI),
+    a prior 1e6 times more precise than 60 s of data, so it stayed at ~0 (truth -61), lost its
+    s.e. and the warning blamed excitation. Its prior σ is now the force scale of the log."""
+    import warnings
+
+    from nnid.trainers.least_squares import ExcitationWarning
+
+    coef = dict(seamor.damping.coefficients)
+    del coef["X:u*abs(u)"]
+    damping = seamor.damping.model_copy(update={"coefficients": coef})
+    absent = seamor.model_copy(update={"damping": damping})
+    data = _data(seamor, _surge_yaw(600), NOISY, seed=3)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", ExcitationWarning)
+        est = UnscentedKalman(process_noise=1e-4).fit(_structure(absent), data)
+    assert abs(est.theta[1] - TRUTH[1]) < 0.05 * abs(TRUTH[1]), est.theta
+    assert np.isfinite(est.stderr).all()
+    from nnid.trainers.ukf import force_scale
+
+    assert force_scale(_structure(absent), data)[1] > abs(TRUTH[1])  # wider than the truth
+
+
+@pytest.mark.filterwarnings("ignore:the filter's innovations")
+def test_a_prior_tighter_than_the_data_is_named_in_the_warning(seamor):
+    """A prior σ the data cannot move was reported as if the input had not excited it."""
+    from nnid.trainers.least_squares import ExcitationWarning
+
+    data = _data(seamor, _surge_yaw(600), NOISY, seed=3)
+    std = [1e-3, 1e-3, 1.0, 1.0]
+    with pytest.warns(ExcitationWarning, match=r"theta0_std: X_udot 0\.001.*tighter than the data"):
+        UnscentedKalman(process_noise=1e-4, theta0=0.5 * TRUTH, theta0_std=std).fit(
+            _structure(seamor), data
+        )

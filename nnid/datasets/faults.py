@@ -131,6 +131,27 @@ def _with_payload(vehicle, mass: float, buoyancy: float):
     return vehicle_copy(vehicle, data)
 
 
+def _plant_model(plant, active: Sequence[Fault]) -> FossenModel:
+    """The Fossen model of the plant with the faults ``active``, refused as
+    :func:`~nnid.datasets.simulator.check_mass_matrix` refuses a vehicle whose M is not
+    positive definite, naming the faults that made it so (a raw ValueError before)."""
+    from nnid.datasets.simulator import check_mass_matrix
+
+    try:
+        return check_mass_matrix(plant)
+    except NnidInputError as exc:
+        if not active:
+            raise
+        named = "; ".join(
+            f"payload of {f.mass:g} kg" if f.kind == "payload" else f"{f.effect} = {f.value:g}"
+            for f in active
+        )
+        onset = max(f.t for f in active)
+        raise NnidInputError(
+            f"with the fault {named} (from t = {onset:g} s): {exc.message}", field="faults"
+        ) from None
+
+
 def simulate_faults(
     vehicle,
     duration: float,
@@ -185,7 +206,9 @@ def simulate_faults(
             else:
                 plant = apply_effect(plant, fault.effect, fault.value)
         plants.append(plant)
-    models = [FossenModel.from_vehicle(v) for v in plants]
+    models = [
+        _plant_model(v, [faults[i] for i in key]) for v, key in zip(plants, keys, strict=True)
+    ]
     forms = [m.feature_form() for m in models]
     actuation = [Actuation(v) for v in plants]
     allocator = _Allocator(actuation[0])

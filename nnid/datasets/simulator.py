@@ -42,9 +42,12 @@ Gain = Annotated[float, Field(ge=0, allow_inf_nan=False)]
 
 class Autopilot(StrictModel):
     """A digital PD autopilot on generalized forces, evaluated once per sample and held:
-    τ_fb = −k_p (η − η_ref) − k_d ν per DOF (heading error wrapped to ±π). DOFs with k_p = k_d = 0
-    are left free. Open-loop-unstable vehicles (an AUV without its fin controller, McCarter
-    ch. 5) fly under it; the log records the total commanded force, feedback included.
+    τ_fb = −k_p (η − η_ref) − k_d ν per DOF (heading error wrapped to ±π), the x/y terms (north
+    and east errors) turned into surge and sway by the heading ψ (R_z(ψ)ᵀ; Fossen's kinematics
+    eq. with roll and pitch taken small, so that an autopilot without x/y gains keeps its law
+    and its logs bit for bit). DOFs with k_p = k_d = 0 are left free. Open-loop-unstable
+    vehicles (an AUV without its fin controller, McCarter ch. 5) fly under it; the log records
+    the total commanded force, feedback included.
     """
 
     # a negative gain is positive feedback: the autopilot would drive the vehicle away
@@ -65,7 +68,15 @@ class Autopilot(StrictModel):
         """The feedback force ``[..., 6]`` for states ``[..., 12]`` (η then ν)."""
         error = state[..., 0:6] - np.asarray(self.reference)
         error[..., 3:6] = wrap_angle(error[..., 3:6])
-        return -np.asarray(self.kp) * error - np.asarray(self.kd) * state[..., 6:12]
+        push = -np.asarray(self.kp) * error
+        if self.kp[0] or self.kp[1]:
+            # the x/y gains push north and east (NED errors); surge and sway are body forces,
+            # so the push turns by the heading: unturned, it flipped sign at ψ = π
+            cos, sin = np.cos(state[..., 5]), np.sin(state[..., 5])
+            north, east = push[..., 0].copy(), push[..., 1].copy()
+            push[..., 0] = cos * north + sin * east
+            push[..., 1] = -sin * north + cos * east
+        return push - np.asarray(self.kd) * state[..., 6:12]
 
     def pilot(self, eta_pos: np.ndarray, eta_neg: np.ndarray) -> np.ndarray:
         """The autopilot and the installation coefficients it flies through, as

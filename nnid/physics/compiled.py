@@ -281,6 +281,7 @@ def _fly(x0, tau_open, start, dt, substeps, pilot, deadband, form, states, comma
     # order, so that the compiled flight gives the bits of the per-sample one
     kp, kd, ref, eta_pos, eta_neg = pilot[0], pilot[1], pilot[2], pilot[3], pilot[4]
     held = np.empty((1, 6))
+    push = np.empty(6)
     states[0] = x0
     for j in range(states.shape[0] - 1):
         x = states[j]
@@ -288,7 +289,14 @@ def _fly(x0, tau_open, start, dt, substeps, pilot, deadband, form, states, comma
             e = x[i] - ref[i]
             if i >= 3:
                 e = (e + np.pi) % (2 * np.pi) - np.pi
-            c = tau_open[start + j, i] + (-kp[i] * e - kd[i] * x[6 + i])
+            push[i] = -kp[i] * e
+        if kp[0] != 0.0 or kp[1] != 0.0:  # north/east push turned into surge/sway by ψ
+            cos, sin = np.cos(x[5]), np.sin(x[5])
+            north, east = push[0], push[1]
+            push[0] = cos * north + sin * east
+            push[1] = -sin * north + cos * east
+        for i in range(6):
+            c = tau_open[start + j, i] + (push[i] - kd[i] * x[6 + i])
             if commanded.shape[0] > 0:
                 commanded[j, i] = c
             if abs(c) <= deadband:

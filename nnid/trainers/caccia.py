@@ -70,6 +70,7 @@ The Caccia-signed estimates are kept in :attr:`CacciaTwoStep.steady_` and
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from itertools import pairwise
@@ -451,8 +452,13 @@ def integrated_regression(
 def force_to_commands(vehicle, dof: str, force: np.ndarray) -> np.ndarray:
     """Inputs ``[N, n_channels]`` that produce the nominal generalized force ``force`` in ``dof``
     (zero elsewhere): minimum-norm thrusts B# e_ξ φ (Caccia L211, the "all" modes of Table I),
-    then each thrust curve inverted numerically (monotone curves). A vehicle without
-    thrusters takes the force itself."""
+    then each thrust curve inverted on its monotone branches: from each command limit inwards
+    as far as the thrust keeps rising (:func:`_monotone_branch`). Weiss eq. 10, sign(c)·(0.0684
+    − 0.03366|c| + 0.006736c²), falls over 0 < |c| < 2.5 (its extremum nearest zero) and
+    rises beyond: the branch beyond is the one a bigger force needs, and thrust below the
+    extremum's 0.026 N (other than 0, at c = 0) it cannot make; such a thrust is flown at the
+    nearest it makes, and said. A force beyond a curve's reach is refused (the log would not
+    fly the design it reports). A vehicle without thrusters takes the force itself."""
     act = Actuation(vehicle)
     force = np.asarray(force, np.float64)
     k = DOFS.index(dof)
@@ -467,12 +473,62 @@ def force_to_commands(vehicle, dof: str, force: np.ndarray) -> np.ndarray:
             continue
         lo = -1e3 if thruster.cmd_min is None else thruster.cmd_min
         hi = 1e3 if thruster.cmd_max is None else thruster.cmd_max
-        grid = np.linspace(lo, hi, 200_001)
-        thrust = curve(grid)
-        if np.any(np.diff(thrust) < 0):
-            raise ValueError(f"thrust curve of '{thruster.name}' is not monotone")
-        out[:, j] = np.interp(share[j] * force, thrust, grid)
+        grid, thrust = _monotone_branch(np.linspace(lo, hi, _GRID), curve)
+        asked = share[j] * force
+        beyond = (asked < thrust[0]) | (asked > thrust[-1])
+        if beyond.any():
+            worst = int(np.argmax(np.abs(asked) * beyond))
+            raise NnidInputError(
+                f"the {dof} force profile asks thruster '{thruster.name}' for "
+                f"{asked[worst]:.4g} N (at sample {worst}, force {force[worst]:.4g}); its "
+                f"thrust curve reaches {thrust[0]:.4g} to {thrust[-1]:.4g} N over commands "
+                f"{lo:g} to {hi:g}: lower the force (the sinusoid's offset and amplitude, or "
+                "the validation run's fraction)",
+                field="force",
+            )
+        # a thrust between two branches (a gap the curve cannot make): the nearer end
+        step = (hi - lo) / (_GRID - 1)
+        jumps = np.diff(grid) > 2.0 * step
+        at = np.clip(np.searchsorted(thrust, asked), 1, thrust.size - 1)
+        gap = jumps[at - 1]
+        near = np.where(asked - thrust[at - 1] <= thrust[at] - asked, at - 1, at)
+        out[:, j] = np.where(gap, grid[near], np.interp(asked, thrust, grid))
+        off = np.where(gap, np.abs(curve(out[:, j]) - asked), 0.0)
+        if off.max() > 0:
+            skipped = " and ".join(
+                f"{thrust[i]:.3g} to {thrust[i + 1]:.3g} N" for i in np.flatnonzero(jumps)
+            )
+            warnings.warn(
+                f"thruster '{thruster.name}' makes no thrust between {skipped} (its curve "
+                f"turns there): {int((off > 0).sum())} samples of the {dof} force profile "
+                f"were flown at the nearest thrust it makes, up to {off.max():.3g} N from "
+                "the design",
+                UserWarning,
+                stacklevel=2,
+            )
     return out
+
+
+#: commands on which a thrust curve is tabulated for its inversion
+_GRID = 200_001
+
+
+def _monotone_branch(grid: np.ndarray, curve) -> tuple[np.ndarray, np.ndarray]:
+    """The commands of ``grid`` (ascending) on which ``curve`` is inverted, and their thrusts
+    (non-decreasing): from each end of the grid inwards while the thrust keeps rising, and the
+    command 0 between them where its thrust lies between the two branches' (a curve
+    sign(c)·g(|c|) makes 0 there). A monotone curve is all of its grid."""
+    thrust = curve(grid)
+    falls = np.flatnonzero(np.diff(thrust) < 0)
+    if not falls.size:
+        return grid, thrust
+    low, high = slice(0, falls[0] + 1), slice(falls[-1] + 1, grid.size)
+    cmds, made = [grid[low]], [thrust[low]]
+    zero = float(curve(np.zeros(1))[0])
+    if grid[low][-1] < 0.0 < grid[high][0] and thrust[low][-1] <= zero <= thrust[high][0]:
+        cmds.append(np.zeros(1))
+        made.append(np.array([zero]))
+    return np.concatenate([*cmds, grid[high]]), np.concatenate([*made, thrust[high]])
 
 
 # --- the trainer -----------------------------------------------------------------------------

@@ -388,8 +388,9 @@ class LeastSquares(BaseEstimator):
     ordinary fit; ``"none"`` is ordinary least squares. ``filter_lambda`` (rad/s) uses the
     filtered-regressor form (Weiss eqs 86-92) instead of differentiated accelerations.
     ``correlated`` (default) widens the covariance by the residuals' integrated
-    autocorrelation time: filtered and smoothed logs have far fewer independent samples than
-    rows, and the textbook formula would report uncertainties that are too small.
+    autocorrelation time, each DOF equation's variance by its own (:func:`equation_times`):
+    filtered and smoothed logs have far fewer independent samples than rows, and the textbook
+    formula would report uncertainties that are too small.
     """
 
     kind = "ls"
@@ -450,6 +451,7 @@ class LeastSquares(BaseEstimator):
                 )
             dof_sigma2 = self._dof_variances(reg, est.theta)
         est.dof_sigma2 = dof_sigma2
+        times = equation_times(reg.residuals(est.theta)) if self.correlated else np.ones(m)
         if self.weighting == "none" and len(reg.dofs) > 1 and np.isfinite(est.sigma2):
             # ordinary least squares of several DOF equations: σ̂² (ΦᵀΦ)⁻¹ pools forces (N) and
             # moments (N m) into one variance, which on a surge-yaw log made the yaw
@@ -462,10 +464,13 @@ class LeastSquares(BaseEstimator):
                 reg.y - reg.phi[:, live] @ est.theta[live],
                 len(reg.dofs),
                 reg.y,
+                times,
             )
             est.cov = void_undetermined(cov, reg.names, est.excitation)
-        if self.correlated:
-            est.cov = est.cov * correlation_time(reg.residuals(est.theta))
+        elif self.weighting == "feasible" and m > 1:
+            est.cov = widen_by_equation(est.cov, reg.phi, np.where(ok, w, 0.0), m, times)
+        else:  # one equation, or a pooled σ̂² of several with no variance of their own
+            est.cov = est.cov * float(np.mean(times))
         return est
 
     @staticmethod
@@ -473,17 +478,21 @@ class LeastSquares(BaseEstimator):
         return dict(zip(reg.dofs, dof_variances(reg.residuals(theta)).tolist(), strict=True))
 
 
-def dof_variances(residuals: Sequence[np.ndarray] | np.ndarray) -> np.ndarray:
+def dof_variances(residuals: Sequence[np.ndarray] | np.ndarray, centred: bool = True) -> np.ndarray:
     """The variance of each DOF equation's residual (finite samples; the columns of a 2-D
-    array, or one series per equation): the first pass of the feasible weighting, whose second
-    pass weights each equation by 1/σ̂² so that forces (N) and moments (N m) count on equal
-    statistical footing. Centred: a missing effect that biases one equation's residual is not
-    taken for noise there. NaN for an equation without a finite sample."""
+    array, or one series per equation). Centred (default) for the first pass of the feasible
+    weighting, whose second pass weights each equation by 1/σ̂² so that forces (N) and moments
+    (N m) count on equal statistical footing: a missing effect that biases one equation's
+    residual is not taken for noise there. ``centred=False``: the mean square rᵀr/n, Caccia
+    eq. 12's σ̂² (before its n/(n − p)), for a covariance: a constant force the model lacks is
+    error in θ̂ as much as noise is, and the centred variance made the s.e. too small by
+    √(1 + c²/σₑ²). NaN for an equation without a finite sample."""
     series = residuals.T if isinstance(residuals, np.ndarray) and residuals.ndim == 2 else residuals
     # finite, not merely not NaN: nanvar read a ±inf (an inf regressor's row) as a sample, and
     # the equation's NaN variance then took feasible weighting's heaviest weight
     finite = [r[np.isfinite(r)] for r in (np.asarray(s, dtype=np.float64) for s in series)]
-    return np.asarray([float(np.var(r)) if r.size else np.nan for r in finite])
+    spread = np.var if centred else (lambda r: np.mean(r * r))
+    return np.asarray([float(spread(r)) if r.size else np.nan for r in finite])
 
 
 def rounding_floor(y: np.ndarray, m: int = 1) -> np.ndarray:
@@ -524,18 +533,27 @@ def feasible_weights(var: np.ndarray, floor: np.ndarray) -> np.ndarray:
     return np.where(good, 1.0 / np.where(good, v, 1.0), 1.0)
 
 
-def dof_sandwich(phi: np.ndarray, r: np.ndarray, m: int, y: np.ndarray | None = None) -> np.ndarray:
+def dof_sandwich(
+    phi: np.ndarray,
+    r: np.ndarray,
+    m: int,
+    y: np.ndarray | None = None,
+    times: np.ndarray | None = None,
+) -> np.ndarray:
     """Covariance of the *unweighted* least squares of ``m`` interleaved DOF equations (row
     i is equation i mod m): the sandwich (ΦᵀΦ)⁻¹ Φᵀ Σ Φ (ΦᵀΦ)⁻¹ with Σ each equation's own
-    residual variance (:func:`dof_variances`, times n/(n − p)), since forces (N) and moments
-    (N m) do not share one σ̂² (Caccia eq. 12 per equation). Rows with a non-finite residual or
-    regressor count as absent. Given the targets ``y``, each variance is floored at a few ulps
-    of its equation's mean square, as :func:`solve_least_squares` floors the RSS: on exact data
-    the residual is rounding, and a parameter of 1e-16 read as significant."""
+    residual mean square (:func:`dof_variances`, uncentred, times n/(n − p)), since forces (N)
+    and moments (N m) do not share one σ̂² (Caccia eq. 12 per equation), each times its own
+    correlation time ``times`` [m] where given (Σ_k = τ_k σ_k²). Rows with a non-finite
+    residual or regressor count as absent. Given the targets ``y``, each variance is floored at
+    a few ulps of its equation's mean square, as :func:`solve_least_squares` floors the RSS: on
+    exact data the residual is rounding, and a parameter of 1e-16 read as significant."""
     ok = np.isfinite(r) & np.isfinite(phi).all(1)
-    var = dof_variances(np.where(ok, r, np.nan).reshape(-1, m))
+    var = dof_variances(np.where(ok, r, np.nan).reshape(-1, m), centred=False)
     if y is not None:
         var = np.fmax(var, rounding_floor(np.where(ok, y, np.nan), m))
+    if times is not None:
+        var = var * np.asarray(times, dtype=np.float64)
     phi = np.where(ok[:, None], phi, 0.0)
     n = int(ok.sum())
     spread = np.tile(np.where(var > 0, var, 0.0), r.size // m) * ok * n / max(n - phi.shape[1], 1)
@@ -558,6 +576,41 @@ def autocorrelation_time(r: np.ndarray, max_lag: int = 5000) -> float | None:
     below = np.flatnonzero(acf < 0.05)
     cut = below[0] if below.size else acf.size
     return 1.0 + 2.0 * float(np.sum(acf[1:cut]))
+
+
+def equation_times(residuals: np.ndarray | Sequence[np.ndarray], max_lag: int = 5000) -> np.ndarray:
+    """:func:`autocorrelation_time` of each DOF equation's residual series (the columns of a
+    2-D array, or one series per equation), each at least 1 (1 where not measured): each
+    equation's own shrink of its effective sample size. One mean over the equations widened a
+    white equation's parameters for another's correlated residual, and the correlated one's
+    too little."""
+    series = residuals.T if isinstance(residuals, np.ndarray) and residuals.ndim == 2 else residuals
+    taus = [autocorrelation_time(np.asarray(r, dtype=np.float64), max_lag) for r in series]
+    return np.asarray([1.0 if t is None else max(t, 1.0) for t in taus])
+
+
+def widen_by_equation(
+    cov: np.ndarray, phi: np.ndarray, w: np.ndarray, m: int, times: np.ndarray
+) -> np.ndarray:
+    """The covariance ``cov`` = σ̂² (ΦᵀWΦ)⁻¹ of a least squares of ``m`` interleaved
+    equations weighted ``w`` (row i is equation i mod m; feasible weighting's 1/σ̂_k²), with
+    each equation's residual variance σ̂²/w_k widened by its own correlation time τ_k: the
+    sandwich A⁻¹ ΦᵀW Σ WΦ A⁻¹ with Σ = σ̂² T W⁻¹, i.e. cov (ΦᵀWTΦ) A⁻¹, A = ΦᵀWΦ and T
+    each row's τ_k; τ·cov where the τ_k are equal. Voided (NaN) parameters stay voided."""
+    times = np.asarray(times, dtype=np.float64)
+    if np.all(times == times[0]):
+        return cov * float(times[0])
+    live = np.isfinite(np.diag(cov))
+    rows = np.isfinite(phi[:, live]).all(1) & (w > 0)
+    p, wr = phi[rows][:, live], w[rows]
+    tau = np.tile(times, phi.shape[0] // m)[rows]
+    gram = (p * wr[:, None]).T @ p
+    meat = (p * (wr * tau)[:, None]).T @ p
+    c = cov[np.ix_(live, live)]
+    wide = c @ meat @ np.linalg.pinv(gram, hermitian=True)
+    out = cov.copy()
+    out[np.ix_(live, live)] = 0.5 * (wide + wide.T)
+    return out
 
 
 def correlation_time(residuals: np.ndarray | Sequence[np.ndarray], max_lag: int = 5000) -> float:

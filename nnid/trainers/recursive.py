@@ -33,9 +33,9 @@ from nnid.trainers.history import Progress, silent
 from nnid.trainers.least_squares import (
     Estimate,
     ExcitationWarning,
-    correlation_time,
     dof_sandwich,
     dof_variances,
+    equation_times,
     feasible_floor,
     feasible_weights,
     read_only_where_left_out,
@@ -221,13 +221,16 @@ def window_covariance(
     which θ is judged settled, and the window's excitation report."""
     m = len(reg.dofs)
     rows = slice(first * m, reg.n_samples * m)
-    cov = dof_sandwich(reg.phi[rows], reg.y[rows] - reg.phi[rows] @ np.nan_to_num(theta), m)
     report, ok, phi, y, r = _memory_excitation(reg, theta, first)
     r = np.where(ok, r, 0.0)
+    # each equation's residual variance widened by its own correlation time
+    times = equation_times([r[k::m] for k in range(m)])
+    cov = dof_sandwich(
+        reg.phi[rows], reg.y[rows] - reg.phi[rows] @ np.nan_to_num(theta), m, times=times
+    )
     # the window's own least-squares fit, unweighted as the recursion is
     fit = np.linalg.lstsq(phi, y, rcond=None)[0]
-    cov = void_undetermined(cov, list(reg.names), report)
-    return cov * correlation_time([r[k::m] for k in range(m)]), fit, report
+    return void_undetermined(cov, list(reg.names), report), fit, report
 
 
 def _warn_memory_excitation(report: ExcitationReport, never: list[str], window: int) -> None:

@@ -319,7 +319,9 @@ class UnscentedKalman(BaseEstimator):
     ``parameter_noise``: σ of θ's random walk per step, as a fraction of the prior σ.
     ``measurement_noise``: σ of the logged velocities (scalar or per DOF); None estimates it
     from the log (:func:`noise_level`). ``theta0``: prior mean (None: the vehicle file's
-    values); ``theta0_std``: prior σ (None: |θ₀|, at least ``min_std``). ``alpha``, ``beta``,
+    values, 0 for a parameter it leaves out); ``theta0_std``: prior σ (None: |θ₀|, at least
+    ``min_std``, and where θ₀ = 0, which carries no scale, the diffuse :func:`force_scale`).
+    ``alpha``, ``beta``,
     ``kappa``: the scaled unscented transform. After :meth:`fit`, ``history_`` holds per sample
     ``t``, ``theta``, ``theta_std``, ``nu`` (filtered ν_d) and ``innovation`` (eq 81).
 
@@ -385,11 +387,16 @@ class UnscentedKalman(BaseEstimator):
             theta0 = np.array([vehicle_parts.get(nm) for nm in names], dtype=np.float64)
         else:
             theta0 = np.asarray(self.theta0, dtype=np.float64)
-        std0 = (
-            np.maximum(np.abs(theta0), self.min_std)
-            if self.theta0_std is None
-            else np.asarray(self.theta0_std, dtype=np.float64)
-        )
+        if self.theta0_std is None:
+            std0 = np.maximum(np.abs(theta0), self.min_std)
+            zero = theta0 == 0.0
+            if zero.any():
+                # |θ₀| as σ was min_std for a parameter the vehicle file leaves out: a prior
+                # of 1e-3 (SI) held an absent X_u|u| (truth -61) at 0 against the data
+                scale = force_scale(structure, data)
+                std0[zero] = np.fmax(scale[zero], self.min_std)
+        else:
+            std0 = np.asarray(self.theta0_std, dtype=np.float64)
         r_sigma = (
             noise_level(data, structure.dofs)
             if self.measurement_noise is None
@@ -505,12 +512,15 @@ class UnscentedKalman(BaseEstimator):
             )
         prior_led = _prior_led(cov, std0, names)
         if prior_led:
+            given = "theta0_std" if self.theta0_std is not None else "the default prior σ"
+            priors = ", ".join(f"{nm} {std0[names.index(nm)]:.3g}" for nm in prior_led)
             warnings.warn(
                 "the data did not inform "
                 + ", ".join(prior_led)
-                + " beyond the prior (their prior σ, theta0_std, was not halved along a "
-                "direction they load on; a DOF never excited, or a combination the input "
-                "cannot separate): their values lean on theta0 and get no standard error",
+                + f" beyond the prior ({given}: {priors}; not halved along a direction they "
+                "load on): a prior σ tighter than the data can move (widen theta0_std), a DOF "
+                "never excited, or a combination the input cannot separate; their values lean "
+                "on theta0 and get no standard error",
                 ExcitationWarning,
                 stacklevel=2,
             )
@@ -544,6 +554,29 @@ class UnscentedKalman(BaseEstimator):
         return Estimate(
             names, x[n_v:].copy(), cov, sigma2, int(n_samples * n_v), history=hist_theta.copy()
         )
+
+
+def force_scale(structure, data: dict[str, np.ndarray]) -> np.ndarray:
+    """Each unknown's diffuse prior σ ``[P]``: the value at which it alone would carry the whole
+    target of a DOF equation of the batch regression (:meth:`ParametricFossen.regression`,
+    φ_k = R(e_k) − R(0), y = −R(0): the applied force less the known rigid-body, Coriolis and
+    restoring terms), rms(y_d)/rms(φ_k,d) in the equation d where that is smallest. A parameter
+    larger than this would be more force than the log holds, so the truth lies within it; and
+    its precision rms(φ)²/rms(y)² is below the data's n·rms(φ)²/σₑ² by the signal-to-noise
+    ratio n·rms(y)²/σₑ², so the data lead wherever they inform the parameter at all. NaN for
+    a column that is zero (or not finite) in every equation: the log cannot scale it."""
+    reg = structure.regression(data)
+    m = len(reg.dofs)
+    y = reg.y.reshape(-1, m)
+    phi = reg.phi.reshape(-1, m, reg.phi.shape[1])
+    ok = np.isfinite(y)[:, :, None] & np.isfinite(phi)
+    n = np.maximum(ok.sum(0), 1)
+    y_rms = np.sqrt(np.where(ok, y[:, :, None] ** 2, 0.0).sum(0) / n)  # [m, P]
+    phi_rms = np.sqrt(np.where(ok, phi**2, 0.0).sum(0) / n)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.where(phi_rms > 0, y_rms / phi_rms, np.inf)
+    out = ratio.min(0) if ratio.size else np.full(reg.phi.shape[1], np.inf)
+    return np.where(np.isfinite(out) & (out > 0), out, np.nan)
 
 
 #: a mean normalised innovation squared per DOF above this says the filter is overconfident
