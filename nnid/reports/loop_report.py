@@ -332,6 +332,11 @@ UNSCORED = {
 }
 
 
+def _first_names(names: list[str]) -> str:
+    """The first three of ``names``, and "..." where there are more: a line, not a table."""
+    return ", ".join(names[:3]) + (", ..." if len(names) > 3 else "")
+
+
 def not_excited_line(step: dict, k: int, key: str = "not_excited") -> str:
     """One line counting pass ``k``'s candidates the data do not excite (``key``
     ``"not_identifiable"``: whose column lies in the span of the model's; ``"not_finite"``:
@@ -341,9 +346,9 @@ def not_excited_line(step: dict, k: int, key: str = "not_excited") -> str:
     names = step.get(key) or []
     if not names:
         return ""
-    some = ", ".join(names[:3]) + (", ..." if len(names) > 3 else "")
     return (
-        f"{len(names)} candidate{'s' if len(names) > 1 else ''} {UNSCORED[key]}: {some}): "
+        f"{len(names)} candidate{'s' if len(names) > 1 else ''} {UNSCORED[key]}: "
+        f"{_first_names(names)}): "
         f"nothing of {'them' if len(names) > 1 else 'it'} is measured, and "
         f"{'they are' if len(names) > 1 else 'it is'} not counted among the candidates tested; "
         f"the names are in loop.json (steps[{k - 1}].{key})."
@@ -359,9 +364,9 @@ def no_better_fit_line(step: dict, k: int) -> str:
     if not names:
         return ""
     one = len(names) == 1
-    some = ", ".join(names[:3]) + (", ..." if len(names) > 3 else "")
     return (
-        f"{len(names)} 1-D search{'' if one else 'es'} ({some}) found no better fit than the "
+        f"{len(names)} 1-D search{'' if one else 'es'} ({_first_names(names)}) found no better "
+        "fit than the "
         f"model's over {'its' if one else 'their'} range: nothing to rank, and "
         f"{'it is' if one else 'they are'} counted among the candidates tested; the names are "
         f"in loop.json (steps[{k - 1}].no_better_fit)."
