@@ -630,6 +630,21 @@ def test_the_recorded_training_error_is_the_simulation_errors_not_the_penaltys()
     assert stage["train"][0] == pytest.approx(stage["validation"][0], rel=1e-6)
 
 
+def test_the_lm_hybrids_recorded_training_error_is_the_simulation_errors_too():
+    """As the test above with Levenberg-Marquardt: its recorded training error was the
+    objective's over the error and the force penalty's rows, half the validation error of the
+    same free run (the trainer took no ``recorded``)."""
+    minirov = load_vehicle(MINIROV)
+    log = effect_log(minirov, duration=2.0, n_experiments=1, dt=0.05, seed=3)
+    model = HybridModel(
+        minirov, trainer=LevenbergMarquardt(max_epochs=1), hidden=(4,), memory=(),
+        segments=(1000.0,), validation_window=None,
+    ).fit(log, log)  # fmt: skip
+    stage = model.stages_[0]
+    assert stage["validation"][0] > 0
+    assert stage["train"][0] == pytest.approx(stage["validation"][0], rel=1e-6)
+
+
 def test_a_diverging_adaptive_solve_is_a_diverged_prediction_not_an_exception(minirov):
     """dopri5 on physics whose quadratic damping has the wrong sign (50 times): torchdiffeq
     asserts on the step that underflows, and predict raised a bare AssertionError where the

@@ -359,13 +359,56 @@ def test_l2_penalty_is_the_residual_with_sqrt_lambda_theta_rows() -> None:
     hist = LevenbergMarquardt(max_epochs=30, l2=100.0).fit(heavy, fit, [(x, y)], [(x, y)])
     with torch.no_grad():
         plain = float((fit(dict(heavy.named_parameters()), (x, y)) ** 2).mean())
-    # validation scores the data alone; the training SSE carries the penalty
+    # validation scores the data alone, and so does the recorded training error (it carried
+    # λ‖θ‖²/N, above the validation error of the same data); the steps minimise the whole
     assert hist.validation[hist.best_epoch] == pytest.approx(plain, rel=1e-12)
-    assert hist.train[hist.best_epoch] > plain
+    assert hist.train[hist.best_epoch] == pytest.approx(plain, rel=1e-12)
     light = _mlp([2, 5, 1], seed=3)
     LevenbergMarquardt(max_epochs=30).fit(light, _regression_residual(light), [(x, y)])
     shrunk = np.linalg.norm(_flat(heavy)) < 0.5 * np.linalg.norm(_flat(light))
     assert shrunk  # the penalty shrinks the weights
+
+
+def test_recorded_keeps_the_error_rows_of_an_objective_with_penalty_rows() -> None:
+    # A residual whose training batches append penalty rows (the hybrid's force penalty): the
+    # recorded training error was the objective's mean square over error and penalty rows
+    # alike. With ``recorded`` it is the error rows' (here the validation error of the same
+    # data), and only the record changes: the same steps, to the bit.
+    net = _mlp([2, 5, 1], seed=3)
+    gen = torch.Generator().manual_seed(3)
+    x = torch.randn(60, 2, generator=gen, dtype=torch.float64)
+    y = torch.sin(x[:, :1]) * x[:, 1:]
+    base = _regression_residual(net)
+    start = {k: v.clone() for k, v in net.state_dict().items()}
+
+    def residual(params, batch):
+        x, y, train = batch
+        err = base(params, (x, y))
+        if not train:
+            return err
+        out = functional_call(net, params, (x,)).reshape(-1)
+        return torch.cat([err, 3.0 * out])  # 60 penalty rows on the network's output
+
+    def error_rows(r: torch.Tensor, batch) -> torch.Tensor:
+        return r[: batch[0].shape[0]]
+
+    hists, weights = [], []
+    for hook in (None, error_rows):
+        net.load_state_dict(start)
+        hists.append(
+            LevenbergMarquardt(max_epochs=4).fit(
+                net, residual, [(x, y, True)], [(x, y, False)], recorded=hook
+            )
+        )
+        weights.append(_flat(net))
+    whole, kept = hists
+    np.testing.assert_array_equal(weights[0], weights[1])
+    assert kept.validation == whole.validation and kept.best_epoch == whole.best_epoch
+    assert kept.train[0] == pytest.approx(kept.validation[0], rel=1e-12)
+    with torch.no_grad():
+        plain = float((base(dict(net.named_parameters()), (x, y)) ** 2).mean())
+    assert kept.train[kept.best_epoch] == pytest.approx(plain, rel=1e-12)
+    assert whole.train[0] != pytest.approx(kept.train[0], rel=1e-3)  # the penalty's rows counted
 
 
 def test_l2_center_pulls_toward_its_point_not_toward_zero() -> None:

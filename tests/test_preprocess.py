@@ -443,6 +443,28 @@ def test_a_rounded_clock_that_drops_a_sample_or_changes_rate_is_still_refused(ra
         check_uniform(changed, "a NARX model")
 
 
+def test_runs_at_rates_a_few_percent_apart_are_not_one_rate():
+    """A sample-counting model's runs at one rate: 0.050 and 0.054 s (20 and 18.5 Hz) passed
+    the 10 % of one interval's jitter and were trained (the hybrid flew both at 0.052 s).
+    Refused naming both rates; runs of one rate on a clock rounded to the millisecond still
+    pass, a short one's least-squares step (1.4 % off: read to the rounding over its steps)
+    too."""
+    runs = [
+        pd.DataFrame({"experiment": name, "t": np.arange(40) * dt, "u": 0.0})
+        for name, dt in (("a", 0.050), ("b", 0.054))
+    ]
+    with pytest.raises(NnidInputError, match=r"every 0\.054 s, against 0\.05 s in its fir") as e:
+        check_uniform(pd.concat(runs, ignore_index=True), "a NARX model", one_rate=True)
+    assert e.value.field == "t" and "experiment a" in str(e.value)
+    with pytest.raises(NnidInputError, match=r"every 0\.054 s, against 0\.05 s at training"):
+        check_uniform(runs[1], "a NARX model", interval=0.05, one_rate=True)
+    long, short = _ms_clock(240.0), _ms_clock(240.0).iloc[1:11]
+    assert abs(clock_step(short["t"].to_numpy())[0] * 240 - 1) > 0.01
+    same = pd.concat([long.assign(experiment="long"), short.assign(experiment="short")])
+    interval = check_uniform(same.reset_index(drop=True), "a NARX model", one_rate=True)
+    assert interval == pytest.approx(1 / 240, rel=1e-3)
+
+
 def test_a_clock_not_rounded_coarsely_keeps_the_median_step_bit_for_bit():
     """Float stamps (a grid, jitter within 10 %, an epoch clock, 120 Hz not rounded, a
     clock whose rate is a whole number of its rounding, a rate that changes) keep the

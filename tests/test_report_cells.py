@@ -278,3 +278,32 @@ def test_the_hybrid_free_run_figure_has_fixed_margins_and_its_labels_inside(monk
     assert [t.get_text() for t in fig.axes[0].get_legend().get_texts()] == [
         "measured", "physics only", "hybrid"
     ]  # fmt: skip
+
+
+def test_the_train_report_does_not_say_set_for_a_rate_the_test_part_measured_above_it():
+    """Thresholds fitted for both statistics, but the healthy test part's false-alarm rate
+    (5 in 6 min) lies wholly above the 0.01-per-hour target: the sentence said the thresholds
+    were "set for" the target (the monitor's caveat, and detect.json, said not controlled)."""
+    from nnid.fault.thresholds import rate_interval
+    from nnid.reports.train_report import monitor_sentence
+
+    fit = {"value": 3.0, "method": "generalized Pareto, peaks over threshold", "peaks": 25}
+    lo, hi = rate_interval(5, 0.1)
+    measured = {"alarms": 5, "hours": 0.1, "rate_per_hour": 50.0, "interval": [lo, hi],
+                "confidence": 0.95}  # fmt: skip
+    detect = {
+        "settings": {"false_alarm_per_hour": 0.01},
+        "thresholds": {"ewma": fit, "cusum": fit},
+        "calibration": {"hours": 0.1},
+        "test_false_alarms": measured,
+    }
+    sentence = monitor_sentence(detect)
+    assert "set for" not in sentence, sentence
+    assert "the target of 0.01 false alarms per hour is not controlled" in sentence
+    assert f"interval {lo:.3g}-{hi:.3g}), above the target of 0.01 per hour" in sentence
+    # a measured interval that reaches the target leaves the thresholds set for it
+    lo, hi = rate_interval(0, 0.1)
+    quiet = {**measured, "alarms": 0, "rate_per_hour": 0.0, "interval": [lo, hi]}
+    assert "set for 0.01 false alarms per hour" in monitor_sentence(
+        {**detect, "test_false_alarms": quiet}
+    )

@@ -85,6 +85,18 @@ def run_spans(log: pd.DataFrame) -> list[float]:
 #: jitter, and stamps rounded to the millisecond that step 0.033 and 0.034 s at 30 Hz
 UNIFORM_TOLERANCE = 0.1
 
+#: how far one run's typical step may differ from another's (:func:`check_uniform`'s
+#: ``one_rate``), relative, beyond what each clock's rounding leaves unread. Not
+#: :data:`UNIFORM_TOLERANCE`, a single interval's jitter: a run's typical step is read over
+#: all its steps (:func:`~nnid.datasets.log.clock_step`), a float clock's median to its float
+#: error, a coarsely rounded clock's least-squares rate to within its rounding q over the run
+#: (its stamps lie within q/2 of that rate's line: q/n over n steps, allowed on top), so a
+#: 19-Hz run beside a 20-Hz one (5 %) is another rate, refused, where 10 % passed both and
+#: trained them at one dt. 1 % leaves room for a median pulled by jitter or by a rare step
+#: of a rounded clock (under 5 % of q: 0.5 % of a 10-ms step in milliseconds); the runs of
+#: every bundled, shipped and benchmark log agree to 3e-5 (emps' two files)
+RATE_TOLERANCE = 0.01
+
 
 def off_steps(
     t: np.ndarray, tolerance: float = UNIFORM_TOLERANCE, within: np.ndarray | None = None
@@ -155,11 +167,14 @@ def check_uniform(
     the run leaves the typical one), naming the first row that is not (by its
     index label: the file's row for a log as read, whatever runs were left out): models that
     count time in samples (``what``) need it. With ``one_rate`` every experiment is sampled
-    at one rate: ``interval`` where it is given (the rate a model was trained at), else the
-    first run's. A model that steps in physical time passes a wider ``tolerance``: an
+    at one rate, its typical step within :data:`RATE_TOLERANCE` (beyond the clocks' rounding
+    over the runs) of ``interval`` where it is given (the rate a model was trained at), else
+    of the first run's. A model that steps in physical time passes a wider ``tolerance``: an
     interval 1 + ``tolerance`` times the median has samples missing. Returns that interval
     (the first run's without ``one_rate``; None where no run has two samples)."""
     given = interval is not None
+    first = ""  # the run that set the interval, in a message
+    unread = 0.0  # what the interval's run's clock rounding leaves unread of its step (s)
     t_all = log["t"].to_numpy(np.float64)
     for exp, pos in experiment_rows(log):
         t = t_all[pos]
@@ -168,18 +183,23 @@ def check_uniform(
         dt = np.diff(t)
         typical, off, rounding = off_steps(t, tolerance)
         where = f" (experiment {exp})" if exp is not None else ""
+        # a rounded clock's least-squares step is read to its rounding over the run's steps
+        slack = rounding / dt.size
         if (
             one_rate
             and interval is not None
-            and abs(typical - interval) > UNIFORM_TOLERANCE * interval
+            and abs(typical - interval) > RATE_TOLERANCE * interval + slack + unread
         ):
             raise NnidInputError(
                 f"the {name}{where} is sampled every {typical:.4g} s, against "
-                f"{interval:.4g} s {'at training' if given else 'in its first run'}, and "
-                f"{what} counts time in samples; resample the log to one rate",
+                f"{interval:.4g} s {'at training' if given else f'in its first run{first}'}, "
+                f"{abs(typical / interval - 1):.1%} apart (one rate: within "
+                f"{RATE_TOLERANCE:.0%}), and {what} counts time in samples; resample the log "
+                "to one rate",
                 field="t",
             )
-        interval = typical if interval is None else interval
+        if interval is None:
+            interval, first, unread = typical, where, slack
         if off.size:
             k = int(off[0])
             label = log.index[pos[k + 1]]  # the row named by its label, as the file's row

@@ -34,7 +34,7 @@ from nnid.datasets.log import POSE, VELOCITY, check_log, rounded_clock, run_labe
 from nnid.datasets.preprocess import check_attitude, refuse_bursty_runs
 from nnid.errors import NnidInputError
 from nnid.fault import kernel
-from nnid.fault.thresholds import measured_caveat, rate_caveat, rate_interval, rate_threshold
+from nnid.fault.thresholds import rate_interval, rate_threshold, threshold_caveat
 from nnid.physics.compiled import form_args
 from nnid.physics.dofs import DOFS, FORCES
 from nnid.physics.thrusters import Actuation
@@ -402,15 +402,15 @@ class ResidualMonitor(BaseEstimator):
 
     def threshold_caveat(self) -> str | None:
         """Why the thresholds do not hold the target false-alarm rate (a healthy record too
-        short for the peaks-over-threshold fit, :func:`rate_caveat`; a healthy test part whose
-        measured rate lies wholly above it, :func:`measured_caveat`), or None."""
+        short for the peaks-over-threshold fit; a healthy test part whose measured rate lies
+        wholly above it: :func:`~nnid.fault.thresholds.threshold_caveat`), or None."""
         check_is_fitted(self, "thresholds_", msg=UNCALIBRATED)
-        target = self.false_alarm_per_hour
-        said = [
-            rate_caveat(self.thresholds_, self.calibration_["hours"], target),
-            measured_caveat(self.measured_false_alarms_, target),
-        ]
-        return "; ".join(c for c in said if c) or None
+        return threshold_caveat(
+            self.thresholds_,
+            self.calibration_["hours"],
+            self.measured_false_alarms_,
+            self.false_alarm_per_hour,
+        )
 
     @property
     def threshold_values(self) -> tuple[float, float]:

@@ -118,6 +118,19 @@ def measured_caveat(measured: dict | None, rate_per_hour: float) -> str | None:
     )
 
 
+def threshold_caveat(
+    thresholds: dict, hours: float, measured: dict | None, rate_per_hour: float
+) -> str | None:
+    """Why thresholds set on ``hours`` of healthy data do not hold the target
+    ``rate_per_hour``: too few peaks for a rate fit (:func:`rate_caveat`), a healthy record
+    the calibration never saw whose rate lies wholly above it (``measured``:
+    :func:`measured_caveat`), both joined; None where neither. The one reading of the monitor
+    (:meth:`~nnid.fault.monitor.ResidualMonitor.threshold_caveat`) and of a saved
+    ``metrics.json``."""
+    said = [rate_caveat(thresholds, hours, rate_per_hour), measured_caveat(measured, rate_per_hour)]
+    return "; ".join(c for c in said if c) or None
+
+
 def rate_interval(count: int, hours: float, confidence: float = 0.95) -> tuple[float, float]:
     """Exact (Garwood) interval of a Poisson rate per hour from ``count`` events."""
     a = 1.0 - confidence

@@ -17,7 +17,7 @@ from nnid.datasets.log import TAU, VELOCITY
 from nnid.datasets.preprocess import experiment_rows
 from nnid.evaluation.evaluate import diverged_columns
 from nnid.evaluation.persistence import REMEMBERED
-from nnid.fault.thresholds import rate_caveat
+from nnid.fault.thresholds import threshold_caveat
 from nnid.physics.dofs import DOFS, FORCES
 from nnid.reports.cells import number, score_cell, thresholds_cell
 from nnid.reports.figures import (
@@ -288,23 +288,24 @@ MONITOR_TITLE = "Residual monitor (fault detection)"
 
 def monitor_sentence(detect: dict) -> str:
     """What a train run's ``[detect]`` calibration gave: the thresholds, the healthy time they
-    were set on (and that the target rate is not held where a statistic got no rate fit,
-    :func:`nnid.fault.thresholds.rate_caveat`), and the alarms on the healthy test part with
-    their exact Poisson interval (or that no test part measured them)."""
+    were set on (and, where they do not hold the target rate, why: the monitor's caveat,
+    :func:`nnid.fault.thresholds.threshold_caveat`), and the alarms on the healthy test part
+    with their exact Poisson interval (or that no test part measured them)."""
     th = detect["thresholds"]
     cal = detect["calibration"]
     target = detect["settings"].get("false_alarm_per_hour")
+    test = detect.get("test_false_alarms")
     stats = thresholds_cell(th)
     on = f"{60 * cal['hours']:.1f} min of healthy validation data"
     # a metrics.json without the target (none was set) has no rate to hold or to miss
-    if target is None or rate_caveat(th, cal["hours"], target) is None:
+    caveat = None if target is None else threshold_caveat(th, cal["hours"], test, target)
+    if caveat is None:
         text = f"thresholds {stats}, set for {number(target, 3)} false alarms per hour on {on}"
-    else:  # no rate fit: the target is not what the thresholds hold (the warning says why)
+    else:  # too few peaks for a rate fit, or a measured rate wholly above the target
         text = (
-            f"thresholds {stats} from {on}: too few excursion peaks for a rate fit, so the "
-            f"target of {number(target, 3)} false alarms per hour is not controlled"
+            f"thresholds {stats} from {on}, the target of {number(target, 3)} false alarms "
+            f"per hour is not controlled: {caveat}"
         )
-    test = detect.get("test_false_alarms")
     if test is None:
         return text + "; no test part: the false-alarm rate was not measured"
     lo, hi = test["interval"]

@@ -114,6 +114,8 @@ from nnid.trainers.history import History, Progress, silent, stopping_score
 __all__ = ["LevenbergMarquardt", "NormalEquations", "unpenalised_names"]
 
 Residual = Callable[[dict[str, torch.Tensor], Any], torch.Tensor]
+#: ``recorded(r, batch)``: the rows of a batch's residual whose mean square is recorded
+Recorded = Callable[[torch.Tensor, Any], torch.Tensor]
 #: ``jacobian_rows(params, batch, budget_elements)`` yields (J block [rows, P], residual [rows])
 JacobianRows = Callable[
     [dict[str, torch.Tensor], Any, int], Iterable[tuple[torch.Tensor, torch.Tensor]]
@@ -356,17 +358,26 @@ class LevenbergMarquardt(BaseEstimator):
         layout: list,
         batches: Sequence[Any],
         penalised: bool = True,
-    ):
-        """(SSE, number of residuals) over ``batches`` at ``theta`` (no autograd); with the
-        λ‖θ − θ_c‖² penalty unless ``penalised`` is False (validation scores the data alone)."""
+        recorded: Recorded | None = None,
+    ) -> tuple[float, int, float]:
+        """(SSE, number of residuals, recorded error) over ``batches`` at ``theta`` (no
+        autograd); the SSE with the λ‖θ − θ_c‖² penalty unless ``penalised`` is False
+        (validation scores the data alone). The recorded error is the mean square of each
+        batch's ``recorded(r, batch)`` rows (every row without it), never the λ penalty: the
+        error a History records, comparable with the validation error."""
         params = self._unflatten(theta, layout)
-        sse, n = 0.0, 0
+        sse, n, kept, rows = 0.0, 0, 0.0, 0
         with torch.no_grad():
             for b in batches:
                 r = residual(params, b).reshape(-1).to(torch.float64)
                 sse += float(r @ r)
                 n += r.numel()
-        return sse + (self._penalty(theta) if penalised else 0.0), n
+                if recorded is not None:
+                    part = recorded(r, b)
+                    kept += float(part @ part)
+                    rows += part.numel()
+        error = sse / max(n, 1) if recorded is None else kept / max(rows, 1)
+        return sse + (self._penalty(theta) if penalised else 0.0), n, error
 
     def _checked_center(self, n: int) -> torch.Tensor | None:
         """``l2_center`` as a float64 vector of the module's ``n`` parameters."""
@@ -679,6 +690,7 @@ class LevenbergMarquardt(BaseEstimator):
         jacobian_rows: JacobianRows | None = None,
         curvature_batches: Callable[[int], Sequence[Any]] | None = None,
         unpenalised: Iterable[str] = (),
+        recorded: Recorded | None = None,
     ) -> History:
         """Train ``module``'s parameters in place; returns the per-epoch :class:`History`
         (``extra``: ``mu`` per entry, ``gradient`` ‖∇ MSE‖ = 2‖Jᵀr‖/N per Jacobian pass;
@@ -701,7 +713,12 @@ class LevenbergMarquardt(BaseEstimator):
         that epoch, while the gradient Jᵀr and the trial steps' SSE stay those of every
         training batch (module docstring). ``unpenalised``: names of parameters (as
         ``named_parameters`` gives them) that ``l2`` leaves alone, e.g. free initial states
-        that are no weights.
+        that are no weights. ``train`` records the error, not the objective:
+        the mean square of the rows ``recorded(r, batch)`` keeps of each training batch's
+        residual (default: all; an objective with penalty rows records its error rows) without
+        the λ‖θ − θ_c‖² penalty, comparable with the validation error, which scores the data
+        alone; the steps, ``goal`` and early stopping read the objective and the validation
+        error as before.
         """
         self._select_mode(separable, jacobian_rows)
         if not (0.0 < self.mu_dec < 1.0 < self.mu_inc):
@@ -732,7 +749,7 @@ class LevenbergMarquardt(BaseEstimator):
         def val_mse(th: torch.Tensor) -> float | None:
             if not use_val:
                 return None
-            s, k = self._sse(residual, th, layout, val_batches, penalised=False)  # type: ignore[arg-type]
+            s, k, _ = self._sse(residual, th, layout, val_batches, penalised=False)  # type: ignore[arg-type]
             return s / max(k, 1)
 
         start_val = val_mse(theta)
@@ -749,7 +766,7 @@ class LevenbergMarquardt(BaseEstimator):
         # accepted null steps forever at the optimum, a stall that depended on the CPU's kernels.
         drawn = callable(train_batches)
         batches = train_batches(0) if drawn else train_batches
-        sse, _ = self._sse(residual, theta, layout, batches)
+        sse, _, error = self._sse(residual, theta, layout, batches, recorded=recorded)
         while True:
             # Stopping criteria (trainlm's); those that need no Jacobian are tested first.
             if epoch > 0 and mse <= self.goal:
@@ -764,7 +781,7 @@ class LevenbergMarquardt(BaseEstimator):
                 break
             if drawn and epoch > 0:  # this epoch's batches: the point's SSE on them
                 batches = train_batches(epoch)
-                sse, _ = self._sse(residual, theta, layout, batches)
+                sse, _, error = self._sse(residual, theta, layout, batches, recorded=recorded)
             if curvature_batches is None:
                 ne = self._normal_equations(residual, theta, layout, batches)
             else:
@@ -772,10 +789,10 @@ class LevenbergMarquardt(BaseEstimator):
                     residual, theta, layout, batches, curvature_batches(epoch)
                 )
             n = max(ne.n, 1)
-            mse = sse / n  # the SSE that trials are judged against
+            mse = sse / n  # the objective that trials are judged against, and ``goal``
             grad = 2.0 * float(torch.linalg.vector_norm(ne.jtr)) / n
             if epoch == 0:
-                hist.record(mse, start_val, time.perf_counter() - t0, mu=mu)
+                hist.record(error, start_val, time.perf_counter() - t0, mu=mu)
             hist.extra.setdefault("gradient", []).append(grad)
             if mse <= self.goal:
                 stop = "goal"
@@ -791,14 +808,14 @@ class LevenbergMarquardt(BaseEstimator):
                     delta = self._accelerate(residual, theta, layout, batches, ne, mu, delta)
                 if delta is not None:
                     trial = theta + delta
-                    sse2, _ = self._sse(residual, trial, layout, batches)
+                    sse2, _, error2 = self._sse(residual, trial, layout, batches, recorded=recorded)
                     if math.isfinite(sse2) and sse2 < sse:
                         if self.geodesic:  # the linear model's decrease for any step
                             predicted = -float(2 * delta @ ne.jtr + delta @ ne.jtj @ delta)
                         else:  # the same, for the step that solves the damped system
                             predicted = float(delta @ (mu * delta - ne.jtr))
                         rho = (sse - sse2) / predicted if predicted > 0 else 1.0
-                        theta, sse = trial, sse2
+                        theta, sse, error = trial, sse2, error2
                         mse = sse2 / n
                         if nielsen:
                             mu, nu = mu * max(1 / 3, 1 - (2 * rho - 1) ** 3), 2.0
@@ -822,14 +839,14 @@ class LevenbergMarquardt(BaseEstimator):
                     hist.best_epoch = epoch
                 elif score > best_val or math.isinf(score):
                     fails += 1
-            hist.record(mse, v, time.perf_counter() - t0, mu=mu)
+            hist.record(error, v, time.perf_counter() - t0, mu=mu)
             report(
                 epoch,
                 self.max_epochs,
-                f"LM epoch {epoch}: train MSE {mse:.4g}"
+                f"LM epoch {epoch}: train MSE {error:.4g}"
                 + (f", validation {v:.4g}" if v is not None else "")
                 + f", mu {mu:.1e}",
-                train=mse,
+                train=error,
                 **({} if v is None else {"validation": v}),
             )
         if use_val:

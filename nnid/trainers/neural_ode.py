@@ -271,9 +271,9 @@ class MultipleShooting(BaseEstimator):
             def loss(params: dict[str, Tensor], batch: Batch) -> Tensor:
                 return residual(problem, params, batch)
 
-            # Adam records the error rows' mean square, comparable with the validation error
-            # (with the penalty rows it was MSE·n_y/(n_y + 6) under the force penalty)
-            # (an optimiser of one's own whose fit takes no ``recorded`` records its objective)
+            # Adam and LM record the error rows' mean square, comparable with the validation
+            # error (with the penalty rows it was MSE·n_y/(n_y + 6) under the force penalty);
+            # an optimiser of one's own whose fit takes no ``recorded`` records its objective
             takes = "recorded" in inspect.signature(optimizer.fit).parameters
             fit_args = {"recorded": error_rows} if takes else {}
             history = optimizer.fit(
