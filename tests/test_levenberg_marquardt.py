@@ -623,3 +623,22 @@ def test_without_validation_the_kept_epoch_is_the_last_accepted_step() -> None:
     assert accepted and accepted[-1] <= hist.best_epoch < hist.epochs
     assert hist.train[hist.best_epoch] == min(hist.train)
     assert hist.stop_reason in {"mu_max", "max_epochs"}
+
+
+@pytest.mark.parametrize("mode", ["forward", "samples"])
+def test_a_training_error_that_is_not_finite_stops_as_non_finite_not_as_a_stall(mode) -> None:
+    # A training window's free run that overflowed (here a residual that is inf from the
+    # start): no μ gives a step, and the stop used to be "mu_max", which the report words as
+    # "stalled: LM found no step"; it is Adam's "non-finite loss", before any solve, and the
+    # parameters are left as they were.
+    net = torch.nn.Linear(1, 1).double()
+    start = _flat(net)
+    x = torch.ones(4, 1, dtype=torch.float64)
+
+    def residual(params, batch):
+        return functional_call(net, params, (batch,)).reshape(-1) * math.inf
+
+    hist = LevenbergMarquardt(max_epochs=20, jacobian=mode).fit(net, residual, [x])
+    assert hist.stop_reason == "non-finite loss"
+    assert hist.epochs == 0 and not math.isfinite(hist.train[0])
+    np.testing.assert_array_equal(_flat(net), start)

@@ -127,10 +127,10 @@ def test_save_load_round_trip_weights_only(seamor, tmp_path, monkeypatch):
 
 
 def test_free_run_stages_judge_each_validation_run_by_its_own_nrmse(seamor):
-    # The measure that early-stops and keeps the free-run stages is the mean over validation
-    # runs and outputs of each run's squared free-run NRMSE as the reports score it alone
-    # (its own std; an output the run barely moves not scored): the surge run's v, the sway
-    # run's u.
+    # The measure that early-stops and keeps the free-run stages is each run's squared
+    # free-run NRMSE as the reports score it alone (its own std, after the delay states; an
+    # output the run barely moves not scored: the surge run's v, the sway run's u), summed
+    # over outputs, averaged over runs by length and divided by every output.
     from nnid.evaluation.evaluate import score_runs, scored_rows, target_columns
 
     two = _runs(seamor, "surge", "sway")
@@ -950,3 +950,87 @@ def test_a_narx_predicts_each_run_from_its_own_rows_where_labels_repeat():
         # the second run is predicted from its own first samples (warm-up NaN, then values)
         assert np.isnan(want["y"].to_numpy()[300:302]).all()
         assert np.isfinite(want["y"].to_numpy()[305:]).all()
+
+
+def test_matlabs_form_takes_output_delays_without_delay_one():
+    # delta=False predicts y(k) itself, so it needs no y(k − 1): the Δ target's previous
+    # output was read whatever the form, and output_delays [2, 3] were refused as if Δ
+    train = _tank(300, 1.3, 2)
+    kw = dict(hidden=(3,), balanced=False, lm_samples=200)
+    model = NarxModel(
+        ["u"], ["y"], 2, [2, 3], delta=False,
+        trainer=LevenbergMarquardt(max_epochs=3, jacobian="samples"), **kw,
+    ).fit(train)  # fmt: skip
+    assert model.history_.train[-1] < model.history_.train[0]
+    assert np.isfinite(model.predict(train, "free_run")["y"].iloc[model.warmup_samples_ :]).all()
+    with pytest.raises(NnidInputError, match="needs output delay 1") as err:
+        NarxModel(["u"], ["y"], 2, [2, 3], **kw).fit(train)
+    assert err.value.field == "output_delays"
+
+
+def test_random_division_takes_its_statistics_from_the_training_rows_alone():
+    # division="random" keeps its validation rows in the log it fits on: the standardisation,
+    # the Δ scale and the "train" bounds came from every row, so a spike in a validation row
+    # moved the training normalisation and the clamp. They are the training rows' own.
+    log = _tank(400, 1.3, 2)
+    train = np.random.default_rng(0).random(len(log)) < 0.7  # the division's own draw (seed 0)
+    spike = int(np.flatnonzero(~train)[5])
+    log.loc[spike, "y"] = 3.0  # the tank's level never passes 1.0 otherwise
+    lm = LevenbergMarquardt(max_epochs=1, jacobian="samples")
+    model = NarxModel(
+        ["u"], ["y"], 2, 2, hidden=(3,), trainer=lm, balanced=False, division="random",
+        output_bounds=[[None, "train"]], lm_samples=200,
+    )  # fmt: skip
+    with pytest.warns(UserWarning, match="random division"):
+        model.fit(log)
+    y = log["y"].to_numpy()
+    assert model.net_.y_mean.item() == pytest.approx(y[train].mean(), rel=1e-12)
+    assert model.net_.y_std.item() == pytest.approx(y[train].std(), rel=1e-12)
+    assert model.bounds_ == [[None, float(y[train].max())]]
+    steps = np.diff(y)[train[1:] & train[:-1]] / y[train].std()
+    assert model.net_.d_scale.item() == pytest.approx(steps.std(), rel=1e-12)
+
+
+def test_a_validation_log_that_excites_no_output_is_said_so_not_called_diverged():
+    # The surge velocity never moves in the validation log: no output is scored, and the
+    # free-run score before and after the simulation stage is missing for that reason, which
+    # the record says; it used to be infinite, read as a free run that diverged.
+    train = _tank(300, 1.3, 2).rename(columns={"u": "tau_X", "y": "u"})
+    still = pd.DataFrame({"t": np.arange(200.0), "tau_X": 0.0, "u": 0.0})
+    model = NarxModel(
+        ["tau_X"], ["u"], 2, 2, hidden=(3,), balanced=False, lm_samples=200,
+        trainer=LevenbergMarquardt(max_epochs=2, jacobian="samples"),
+        simulation_epochs=1, simulation_window=20, simulation_trainer="lm",
+    ).fit(train, still)  # fmt: skip
+    ft = model.finetune_
+    assert ft["validation_free_run_nrmse_before"] is None
+    assert ft["validation_free_run_nrmse_after"] is None
+    assert ft["validation_free_run_diverged_before"] is False
+    assert ft["validation_free_run_diverged_after"] is False
+    assert ft["validation_free_run_no_output_scored"] is True
+    json.dumps(model.describe(), allow_nan=False)
+
+
+def test_the_sensitivity_buffer_is_recorded_and_no_longer_than_the_windows(monkeypatch):
+    # The LM free-run stage's recursion holds a buffer of the rows it hands LM plus the dy
+    # steps it carries: it was sized to the whole memory budget however short the windows
+    # (33M elements for 2-sample windows here), and where the budget binds it passes it,
+    # which LM's peak_jacobian_elements (the rows handed over) did not show.
+    train = _tank(300, 1.3, 2)
+
+    def fit() -> tuple[NarxModel, dict]:
+        model = NarxModel(
+            ["u"], ["y"], 2, 2, hidden=(3,), balanced=False, lm_samples=200,
+            trainer=LevenbergMarquardt(max_epochs=1, jacobian="samples"),
+            simulation_epochs=1, simulation_window=20, simulation_trainer="lm",
+        ).fit(train, train)  # fmt: skip
+        return model, model.finetune_["stages"][0]
+
+    model, stage = fit()
+    windows = model.simulation_objective(train, 20).windows[0].shape[0]
+    p = model._n_params()
+    assert stage["peak_sensitivity_elements"] == windows * (model.dy_ + 20) * p
+    budget = 400
+    monkeypatch.setattr(LevenbergMarquardt, "_budget_elements", property(lambda self: budget))
+    _, stage = fit()
+    assert stage["peak_jacobian_elements"] <= budget < stage["peak_sensitivity_elements"]

@@ -247,3 +247,29 @@ def test_a_split_part_too_short_to_score_is_refused_where_labels_repeat():
         with pytest.raises(NnidInputError, match=said):
             make_split(log, spec, warmup_s=8.0)
     assert len(make_split(joined, spec, warmup_s=5.0).validation) == 120  # 5.9 s scores
+
+
+def test_transient_thresholds_come_from_the_rows_given_and_every_row_is_labelled():
+    # A random division keeps its validation rows in the training log: their manoeuvres set
+    # the scale that labels the training rows unless ``rows`` names the rows to measure on.
+    # Run "a" moves 100x less than run "b": measured on both, none of a's samples is
+    # transient; measured on a's rows, a is labelled as it would be alone.
+    t = np.arange(0.0, 20.0, 0.01)
+    rng = np.random.default_rng(0)
+
+    def run(name: str, size: float) -> pd.DataFrame:
+        step = np.repeat(rng.uniform(-size, size, 5), len(t) // 5)
+        u = np.zeros(len(t))
+        for k in range(1, len(t)):
+            u[k] = u[k - 1] + 0.05 * (step[k - 1] - u[k - 1])
+        u += 1e-4 * size * rng.standard_normal(len(t))
+        return pd.DataFrame({"t": t, "u": u, "experiment": name})
+
+    a, b = run("a", 0.01), run("b", 1.0)
+    log = pd.concat([a, b], ignore_index=True)
+    in_a = (log["experiment"] == "a").to_numpy()
+    alone = label_transients(a).to_numpy()
+    assert alone.any() and not label_transients(log).to_numpy()[in_a].any()
+    given = label_transients(log, rows=in_a).to_numpy()
+    np.testing.assert_array_equal(given[in_a], alone)
+    assert given.size == len(log) and given[~in_a].any()

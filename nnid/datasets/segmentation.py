@@ -33,10 +33,12 @@ from nnid.datasets.preprocess import (
 
 
 def accelerations_with_noise(
-    log: pd.DataFrame, window_s: float = 1.0, order: int = 3
+    log: pd.DataFrame, window_s: float = 1.0, order: int = 3, rows: np.ndarray | None = None
 ) -> tuple[pd.DataFrame, dict[str, float]]:
-    """Body accelerations per DOF present, and the noise level of each (see module rule)."""
+    """Body accelerations per DOF present, and the noise level of each (see module rule),
+    measured on ``rows`` (a boolean mask; all by default)."""
     acc, noise = {}, {}
+    rows = np.ones(len(log), dtype=bool) if rows is None else np.asarray(rows, dtype=bool)
     for c in VELOCITY:
         if c in log:
             col, sig = np.empty(len(log)), []
@@ -44,14 +46,17 @@ def accelerations_with_noise(
                 v = log[c].to_numpy(np.float64)[pos]
                 dt, w = run_window(log["t"].to_numpy(np.float64)[pos], window_s, order, name)
                 col[pos] = savgol_derivative(v, dt, w, order, where=f"experiment {name!r}")
-                resid = v - savgol_interp(v, w, order, 0, 1.0)
+                if not rows[pos].any():
+                    continue
+                resid = (v - savgol_interp(v, w, order, 0, 1.0))[rows[pos]]
                 sigma_v = median_abs_deviation(resid, scale="normal")
                 sig.append(sigma_v * savgol_noise_gain(w, order, dt))
             acc[c], noise[c] = col, float(np.median(sig))
         elif "d" + c in log:
             a = log["d" + c].to_numpy(np.float64)
             acc[c] = a
-            noise[c] = float(median_abs_deviation(np.diff(a), scale="normal") / np.sqrt(2))
+            steps = np.diff(a)[rows[1:] & rows[:-1]]  # a step of two measured rows
+            noise[c] = float(median_abs_deviation(steps, scale="normal") / np.sqrt(2))
     if not acc:
         raise ValueError("labelling transients needs body velocities or accelerations")
     if any(c in log for c in VELOCITY):
@@ -60,14 +65,21 @@ def accelerations_with_noise(
 
 
 def label_transients(
-    log: pd.DataFrame, rel: float = 0.1, hold: float = 0.5, window_s: float = 1.0
+    log: pd.DataFrame,
+    rel: float = 0.1,
+    hold: float = 0.5,
+    window_s: float = 1.0,
+    rows: np.ndarray | None = None,
 ) -> pd.Series:
-    """Boolean Series, True where the sample is transient (rule in the module docstring)."""
-    acc, noise = accelerations_with_noise(log, window_s)
+    """Boolean Series, True where the sample is transient (rule in the module docstring).
+    ``rows`` (a boolean mask; all by default): the rows whose manoeuvre scales and noise
+    levels set the thresholds, e.g. a random division's training rows; every row is labelled."""
+    acc, noise = accelerations_with_noise(log, window_s, rows=rows)
+    fit = slice(None) if rows is None else np.asarray(rows, dtype=bool)
     labels = np.zeros(len(log), dtype=bool)
     for c in acc.columns:
         a = np.abs(acc[c].to_numpy())
-        scale = np.percentile(a, 99)
+        scale = np.percentile(a[fit], 99)
         if scale <= 3 * noise[c]:
             continue  # a DOF that never moves beyond its noise
         labels |= a > max(rel * scale, 3 * noise[c])

@@ -120,17 +120,20 @@ class InputOutputModel(NnidModel):
             out.append((pos, y[pos], u[pos]))
         return out
 
-    def free_run_error(self, log: pd.DataFrame) -> float:
+    def free_run_error(self, log: pd.DataFrame) -> float | None:
         """Mean free-run NRMSE over the outputs the log excites (warm-up excluded; the columns
-        of the reported scores, :func:`target_columns`); infinite when the free run diverges
-        in any run (:func:`score_split`) or no output is scored: the number a fine-tuning
-        reports before and after."""
+        of the reported scores, :func:`target_columns`): the number a fine-tuning reports
+        before and after. Infinite when the free run diverges in any run
+        (:func:`score_split`); None when no output is scored (the log excites none, or none
+        has a scored sample), which is no divergence."""
         pred = self._predict(log, "free_run").set_axis(log.index)
         mask = warmup_mask(log, 0.0, self.warmup_samples_)
-        nrmse = score_split(
+        nrmse, _, diverged, *_ = score_split(
             log, pred, target_columns(self, log), mask, lambda run: target_columns(self, run)
-        )[0]
-        return np.inf if nrmse["total"] is None else float(nrmse["total"])
+        )
+        if diverged:
+            return np.inf
+        return None if nrmse["total"] is None else float(nrmse["total"])
 
     def _n_params(self) -> int:
         return sum(p.numel() for p in self.net_.parameters())

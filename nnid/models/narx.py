@@ -514,12 +514,20 @@ class NarxModel(InputOutputModel):
                 col += w
         return out
 
-    def _fit_normalisation(self, log: pd.DataFrame) -> None:
-        """Standardisation, the scale of the Δ targets and of the transformed outputs."""
+    def _fit_normalisation(self, log: pd.DataFrame, rows: np.ndarray | None = None) -> None:
+        """Standardisation, the scale of the Δ targets and of the transformed outputs, from
+        the training ``rows`` of ``log`` (a boolean mask; all by default): a random division
+        holds its validation rows in the same log."""
         net = self.net_
-        self._standardise(log)
-        y = log[self.outputs_].to_numpy(np.float64)
-        diffs = [np.diff(yn, axis=0) for _, yn, _ in self._segments(log) if len(yn) > 1]
+        rows = np.ones(len(log), dtype=bool) if rows is None else rows
+        self._standardise(log[rows])
+        y = log[self.outputs_].to_numpy(np.float64)[rows]
+        # a step is a training one where both of its samples are
+        diffs = [
+            np.diff(yn, axis=0)[rows[pos][1:] & rows[pos][:-1]]
+            for pos, yn, _ in self._segments(log)
+            if len(yn) > 1
+        ]
         d = np.concatenate(diffs).std(0) if diffs else np.ones(len(self.outputs_))
         net.d_scale.copy_(
             torch.as_tensor(np.where(d > 0, d, 1.0) if self.delta else np.ones_like(d))
@@ -561,8 +569,10 @@ class NarxModel(InputOutputModel):
             code.append(np.full(len(yn), k))
         y = torch.as_tensor(np.concatenate(y_all))
         py = torch.as_tensor(np.concatenate(phi_y))
-        prev = py[:, (self._last_delay_slot()) * y.shape[1] :][:, : y.shape[1]]
-        tgt = (y - prev) / self.net_.d_scale if self.delta else y
+        tgt = y
+        if self.delta:  # only the Δ form needs y(k − 1): MATLAB's form takes any delays
+            m = y.shape[1]
+            tgt = (y - py[:, self._last_delay_slot() * m :][:, :m]) / self.net_.d_scale
         return {
             "phi": torch.cat([py, torch.as_tensor(np.concatenate(phi_u))], 1),
             "target": tgt,
@@ -575,15 +585,16 @@ class NarxModel(InputOutputModel):
             raise NnidInputError("delta=True needs output delay 1", field="output_delays")
         return self.output_delays_.index(1)
 
-    def _labels(self, log: pd.DataFrame) -> np.ndarray:
-        """Transient labels from the outputs (the rule of nnid.datasets.segmentation)."""
+    def _labels(self, log: pd.DataFrame, rows: np.ndarray | None = None) -> np.ndarray:
+        """Transient labels from the outputs (the rule of nnid.datasets.segmentation), its
+        manoeuvre scales and noise levels from the training ``rows`` (all by default)."""
         tmp = pd.DataFrame(
             {VELOCITY[i]: log[c].to_numpy(np.float64) for i, c in enumerate(self.outputs_[:6])}
         )
         tmp["t"] = log["t"].to_numpy(np.float64) if "t" in log else np.arange(len(log), dtype=float)
         if "experiment" in log:
             tmp["experiment"] = log["experiment"].to_numpy()
-        return label_transients(tmp).to_numpy()
+        return label_transients(tmp, rows=rows).to_numpy()
 
     # -- torch pieces ----------------------------------------------------------------------------
     def _weights(self) -> dict[str, torch.Tensor]:
@@ -724,20 +735,23 @@ class NarxModel(InputOutputModel):
         else:
             self._check(validation_log, "validation log")
             self.division_ = {"by": "given"}
-        self._fit_normalisation(log)
-        self.bounds_ = resolve_bounds(self.output_bounds_, self.outputs_, log)
+        # statistics of the training rows alone: a random division's validation rows are in log
+        fit_rows = None if random_rows is None else random_rows < self.fractions[0]
+        self._fit_normalisation(log, fit_rows)
+        trained = log if fit_rows is None else log[fit_rows]
+        self.bounds_ = resolve_bounds(self.output_bounds_, self.outputs_, trained)
         tab = self._table(log)
         horizon = max(1, int(self.multi_step))
         sampler = BalancedSampler(
-            self._labels(log),
+            self._labels(log, fit_rows),
             tab["code"].numpy(),
             window=self.warmup_samples_ + horizon,
             balance=self.balanced,
             seed=self.seed,
         )
-        if random_rows is not None:
-            val_rows = sampler.eligible & (random_rows >= self.fractions[0])
-            sampler.eligible &= random_rows < self.fractions[0]
+        if fit_rows is not None:
+            val_rows = sampler.eligible & ~fit_rows
+            sampler.eligible &= fit_rows
             vtab, v_idx = tab, np.flatnonzero(val_rows)
         else:
             vtab = self._table(validation_log)
@@ -876,7 +890,11 @@ class NarxModel(InputOutputModel):
         return d_theta, d_hist
 
     def _simulation_rows(
-        self, params: dict[str, torch.Tensor], batch: tuple, budget: int
+        self,
+        params: dict[str, torch.Tensor],
+        batch: tuple,
+        budget: int,
+        peak: list[int] | None = None,
     ) -> Iterator[tuple[torch.Tensor, torch.Tensor]]:
         """Rows of the Jacobian of the window residual (``_window_residual``) by the sensitivity
         recursion of the closed loop, with their residuals, in blocks of ≤ ``budget`` elements.
@@ -890,6 +908,12 @@ class NarxModel(InputOutputModel):
         by step: about the cost of one-step training, where forward mode repeats the closed
         loop once per parameter. A block may be a view of a buffer the next block overwrites:
         use it before drawing the next.
+
+        ``budget`` bounds the rows of a block, not the buffer they grow in, which also carries
+        the dy previous steps' S: nb·(dy + span)·m·P elements, up to (dy + 1)× ``budget``
+        where one step fills it. The largest buffer's elements go into ``peak[0]`` when given
+        (LM records the blocks'). Sizing the buffer to the budget instead would cut the rows
+        into other blocks, and JᵀJ summed over other blocks rounds otherwise: another fit.
         """
         hist, uf, y, *weight = batch
         b_all, t_all, m = y.shape
@@ -903,10 +927,14 @@ class NarxModel(InputOutputModel):
             z = torch.cat([hist[sl], sim[sl]], 1)  # [B, dy + T, m]
             states = z.unfold(1, dy, 1).transpose(2, 3)  # [B, T + 1, dy, m], oldest first
             nb = z.shape[0]
-            span = max(1, budget // (nb * m * p))  # steps at a time
+            # steps at a time; never past the window: the buffer was the whole budget however
+            # short the windows (the blocks are the same)
+            span = max(1, min(t_all, budget // (nb * m * p)))
             # [B, dy + span, m, P]: the carried S (zero on the measured states), then the
             # block's ∂f/∂θ, written in place and growing into S; one buffer for every block
             sens = torch.zeros(nb, dy + span, m, p, dtype=y.dtype)
+            if peak is not None:
+                peak[0] = max(peak[0], sens.numel())
             for t0 in range(0, t_all, span):
                 t1 = min(t_all, t0 + span)
                 k = t1 - t0
@@ -982,12 +1010,14 @@ class NarxModel(InputOutputModel):
         kept = measure_before is None or measure_after < measure_before
         if not kept:
             self.net_.load_state_dict(state)
-        # a diverged free run has no NRMSE: said as such, not as a missing (null) score
+        # a diverged free run has no NRMSE: said as such, not as a missing (null) score; nor
+        # has a validation log that excites no output, which is not a divergence
         self.finetune_ = {
             "validation_free_run_nrmse_before": jsonable(before),
             "validation_free_run_nrmse_after": jsonable(after),
             "validation_free_run_diverged_before": bool(before is not None and np.isinf(before)),
             "validation_free_run_diverged_after": bool(after is not None and np.isinf(after)),
+            "validation_free_run_no_output_scored": bool(held_out and before is None),
             "validation_mean_squared_nrmse_before": jsonable(measure_before),
             "validation_mean_squared_nrmse_after": jsonable(measure_after),
             "kept": bool(kept),
@@ -1037,12 +1067,19 @@ class NarxModel(InputOutputModel):
     def _whole_runs(self, table: dict[str, torch.Tensor], log: pd.DataFrame) -> list[tuple] | None:
         """One batch per experiment of ``log`` (``table``: its tensors): its free run from the
         measured delay states to its end, and each output's weight, 1 / the output's std over
-        the run where the run excites it (:func:`target_columns`), else 0. The mean square of
-        the weighted error (:meth:`_mean_square`) is then the mean over outputs and runs (each
-        as long as it is) of each run's squared free-run NRMSE, the score the reports give
-        each run (``free_run_nrmse_per_experiment``): one measure for early stopping and for
-        keeping the stages. Weighted by the training std instead, a run that barely moves an
-        output (the yaw the Munk moment alone drives) barely counts."""
+        the run after its delay states where the run excites it (:func:`target_columns`),
+        else 0. The mean square of the weighted error (:meth:`_mean_square`) is then
+        Σ_runs T_r Σ_scored NRMSE²_r,o / (m Σ_runs T_r), T_r a run's samples after its delay
+        states and m the outputs: each run's squared free-run NRMSE (its error and its std
+        after the delay states, ``warmup_samples_``) summed over the outputs it excites,
+        averaged over runs by length and divided by every output, an output a run does not
+        excite counting 0. It scales each run as ``free_run_nrmse_per_experiment`` does, but
+        is not that score (whose warm-up is ``warmup_s``, whose mean is over the scored
+        outputs). One measure for early stopping and for keeping the stages: its denominator
+        is fixed by the validation log, so it ranks epochs as a mean over scored outputs would
+        (to rounding).
+        Weighted by the training std instead, a run that barely moves an output (the yaw the
+        Munk moment alone drives) barely counts."""
         starts, stops = run_bounds(table["code"].numpy())
         runs = []
         for (_, pos), s, e in zip(experiment_rows(log), starts, stops, strict=True):
@@ -1059,8 +1096,9 @@ class NarxModel(InputOutputModel):
         return runs or None
 
     def _mean_square(self, runs: list[tuple]) -> float:
-        """Mean square of the weighted free-run error over ``runs`` (:meth:`_whole_runs`), as
-        the trainers' early stopping computes it; infinite when not finite."""
+        """Mean square of the weighted free-run error over ``runs`` (:meth:`_whole_runs`;
+        every element, zero-weighted outputs included), as the trainers' early stopping
+        computes it; infinite when not finite."""
         with torch.no_grad():
             r = torch.cat([self._window_residual(self._weights(), b) for b in runs])
         return stopping_score(float(r @ r) / max(r.numel(), 1))
@@ -1128,15 +1166,20 @@ class NarxModel(InputOutputModel):
             idx = obj.order(n, epoch)[: max(1, round(share * n))]
             return [tuple(x[idx] for x in train)]
 
-        return trainer.fit(
+        peak = [0]
+        hist = trainer.fit(
             obj.module,
             obj.residual,
             [train],
             obj.validation,
             progress=progress,
-            jacobian_rows=obj.jacobian_rows,
+            jacobian_rows=functools.partial(obj.jacobian_rows, peak=peak),
             curvature_batches=curvature if share < 1.0 else None,
         )
+        # the memory the recursion held: its buffer carries dy steps beside the rows LM was
+        # handed (LM's peak_jacobian_elements)
+        hist.info["peak_sensitivity_elements"] = peak[0]
+        return hist
 
     def _simulation_adam(self, tab, val, progress: Progress, length: int) -> History | None:
         """Adam on the windows of the LM stage (:meth:`_fixed_windows`): every window once an

@@ -699,7 +699,8 @@ class LevenbergMarquardt(BaseEstimator):
         ``residual(params, batch)`` returns the 1-D residual of one batch, computed with
         ``torch.func.functional_call(module, params, ...)`` on a parameter dict shaped like
         ``dict(module.named_parameters())``. Stops at ``max_epochs``, ``goal``, gradient below
-        ``min_grad``, μ > ``mu_max`` or ``max_fail`` consecutive validation increases; with
+        ``min_grad``, μ > ``mu_max``, ``max_fail`` consecutive validation increases, or a
+        training error or gradient that is not finite ("non-finite loss"); with
         validation batches the best-validation parameters are written back (as trainlm).
         ``progress(epoch, max_epochs, message)`` is called after every epoch. ``separable``
         tells ``jacobian="auto"`` that the residual is separable by sample (then "samples"
@@ -794,7 +795,11 @@ class LevenbergMarquardt(BaseEstimator):
             if epoch == 0:
                 hist.record(error, start_val, time.perf_counter() - t0, mu=mu)
             hist.extra.setdefault("gradient", []).append(grad)
-            if mse <= self.goal:
+            if not (math.isfinite(mse) and math.isfinite(grad)):
+                # the training error overflowed (a free run diverged): no trial is judged
+                # against it, and "mu_max" would read as a stall (Adam's words for this end)
+                stop = "non-finite loss"
+            elif mse <= self.goal:
                 stop = "goal"
             elif grad < self.min_grad:
                 stop = "min_grad"
