@@ -50,54 +50,75 @@ def check_out(out_dir: Path) -> None:
     try:  # the only sure test of writability is to write
         tempfile.TemporaryDirectory(dir=base).cleanup()
     except OSError as exc:
-        raise NnidInputError(
-            f"cannot be written ({exc.strerror or exc})", source=str(out_dir), field="--out"
-        ) from None
+        raise _unwritable(out_dir, exc) from None
 
 
 @contextmanager
 def staged(out_dir: Path, supersedes: tuple[str, ...] = ()) -> Iterator[Path]:
-    """Yield a hidden sibling folder to write the outputs into; only once every file is
-    written are they moved into ``out_dir``, so a run that fails half way leaves nothing that
-    poses as its result (and an earlier result in ``out_dir`` untouched). ``supersedes``: the
-    files an earlier run of this command may have left that this run replaces; one it did not
-    write is removed (an old ``monitor.json`` must not pair with a new model). A file where
-    ``out_dir`` holds a folder of that name, or a folder where it holds a file, is refused
-    before anything moves: it is the user's, not an earlier result."""
+    """Yield a hidden folder to write the outputs into; only once every file is written are
+    they moved into ``out_dir``, so a run that fails half way leaves nothing that poses as its
+    result (and an earlier result in ``out_dir`` untouched). ``supersedes``: the files an
+    earlier run of this command may have left that this run replaces; one it did not write is
+    removed (an old ``monitor.json`` must not pair with a new model). A file where ``out_dir``
+    holds a folder of that name, or a folder where it holds a file, is refused before
+    anything moves: it is the user's, not an earlier result. A folder that cannot be written
+    is said against ``--out``."""
     out_dir = Path(out_dir)
     where = out_dir.absolute()
-    where.parent.mkdir(parents=True, exist_ok=True)
-    # os.mkdir, not mkdtemp: the folder keeps the user's umask once it is renamed into place
-    stage = where.parent / f".{where.name}-{os.getpid()}-{uuid.uuid4().hex[:8]}"
-    stage.mkdir()
+    # an existing out_dir holds its stage: the folder check_out proved writable, and one file
+    # system (a parent that cannot be written, a mount point, failed after the whole fit);
+    # a new one is staged beside it and renamed into place whole
+    home = where if where.is_dir() else where.parent
+    try:
+        home.mkdir(parents=True, exist_ok=True)
+        # os.mkdir, not mkdtemp: the folder keeps the user's umask once it is renamed into place
+        stage = home / f".{where.name}-{os.getpid()}-{uuid.uuid4().hex[:8]}"
+        stage.mkdir()
+    except OSError as exc:
+        raise _unwritable(out_dir, exc) from None
     try:
         yield stage
-        if not out_dir.exists():
-            stage.rename(out_dir)
-            return
-        items = list(stage.iterdir())
-        for item in items:
-            target = out_dir / item.name
-            if target.exists() and target.is_dir() != item.is_dir():
-                kind = "folder" if target.is_dir() else "file"
-                raise NnidInputError(
-                    f"{target} is a {kind} of yours where this run writes its "
-                    f"{'folder' if item.is_dir() else 'file'} {item.name}: move it, or choose "
-                    "another --out",
-                    field="--out",
-                )
-        written = {item.name for item in items}
-        for name in supersedes:
-            stale = out_dir / name
-            if name not in written and stale.is_file():
-                stale.unlink()
-        for item in items:
-            target = out_dir / item.name
-            if target.is_dir() and not target.is_symlink():
-                shutil.rmtree(target)
-            os.replace(item, target)
+        try:
+            _moved_into(stage, out_dir, supersedes)
+        except OSError as exc:
+            raise _unwritable(out_dir, exc) from None
     finally:
         shutil.rmtree(stage, ignore_errors=True)
+
+
+def _moved_into(stage: Path, out_dir: Path, supersedes: tuple[str, ...]) -> None:
+    """The files of ``stage`` moved into ``out_dir`` (:func:`staged`)."""
+    if not out_dir.exists():
+        stage.rename(out_dir)
+        return
+    items = list(stage.iterdir())
+    for item in items:
+        target = out_dir / item.name
+        if target.exists() and target.is_dir() != item.is_dir():
+            kind = "folder" if target.is_dir() else "file"
+            raise NnidInputError(
+                f"{target} is a {kind} of yours where this run writes its "
+                f"{'folder' if item.is_dir() else 'file'} {item.name}: move it, or choose "
+                "another --out",
+                field="--out",
+            )
+    written = {item.name for item in items}
+    for name in supersedes:
+        stale = out_dir / name
+        if name not in written and stale.is_file():
+            stale.unlink()
+    for item in items:
+        target = out_dir / item.name
+        if target.is_dir() and not target.is_symlink():
+            shutil.rmtree(target)
+        os.replace(item, target)
+
+
+def _unwritable(out_dir: Path, exc: OSError) -> NnidInputError:
+    """The error of an output folder that refused the outputs, naming ``--out``."""
+    return NnidInputError(
+        f"cannot be written ({exc.strerror or exc})", source=str(out_dir), field="--out"
+    )
 
 
 def lost_rows(report) -> list[str]:
@@ -544,10 +565,17 @@ def detection_window(model_dir: Path) -> float:
         raise exc.with_source(str(path)) from None
 
 
-def check_detect_inputs(model_dir: Path, data: str, follow: bool = False) -> None:
-    """A detection model folder and a log that exist: checked before the model is loaded."""
+def check_detect_inputs(model_dir: Path, data: str, out_dir: Path, follow: bool = False) -> None:
+    """A detection model folder and a log that exist, and an output folder that is not the
+    model's (its report.html would be replaced): checked before the model is loaded."""
     if not Path(model_dir).is_dir():
         raise NnidInputError("no such folder", source=str(model_dir), field="--model")
+    if Path(out_dir).resolve() == Path(model_dir).resolve():
+        raise NnidInputError(
+            f"is the --model folder {model_dir}: detect's outputs would replace the model's "
+            "own (its report.html); give another --out",
+            field="--out",
+        )
     if data != "-" and not Path(data).exists():
         raise NnidInputError("no such file or folder", source=data, field="--data")
     if data == "-" and not follow:
@@ -593,24 +621,35 @@ def follow_run(
     """``nnid detect --follow``: watch a growing CSV (or ``-``, standard input), ``say`` each
     alarm as it happens; the outputs written when the log ends (a file: once it has not grown
     for ``idle_s`` seconds, ``--idle-s``, else :data:`nnid.fault.follow.IDLE_S`); their
-    sentences returned."""
+    sentences returned. Where an interrupt (Ctrl-C, SIGTERM) or a refused row stops the watch,
+    the outputs of the rows watched are written all the same, with why it stopped, their
+    sentences said, and the exception goes on (the CLI's exit code is still 130, 143 or 2)."""
     from nnid.fault.follow import IDLE_S, follow_csv
     from nnid.reports.detect_report import OUTPUTS, write_detect_outputs
 
     _checked_window(window)
-    check_detect_inputs(model_dir, data, follow=True)
+    check_detect_inputs(model_dir, data, out_dir, follow=True)
     monitor, window_s = _monitor(model_dir, window)
+
+    def written(result) -> list[str]:
+        with staged(out_dir) as stage:
+            lines = write_detect_outputs(monitor, result, stage, source=data)
+        return [*lines, f"wrote {out_dir}/: {OUTPUTS}"]
+
+    def stopped(result) -> None:
+        for line in written(result):
+            say(line)
+
     try:
         result = follow_csv(
-            monitor, data, window_s, say, idle_s=IDLE_S if idle_s is None else idle_s
-        )
+            monitor, data, window_s, say, idle_s=IDLE_S if idle_s is None else idle_s,
+            stopped=stopped,
+        )  # fmt: skip
     except NnidInputError as exc:
         if exc.field == "idle_s" and exc.source is None:  # follow_csv's check: the option's
             raise NnidInputError(exc.message, field="--idle-s") from None
         raise exc.with_source(data) from None
-    with staged(out_dir) as stage:
-        lines = write_detect_outputs(monitor, result, stage, source=data)
-    return [*lines, f"wrote {out_dir}/: {OUTPUTS}"]
+    return written(result)
 
 
 def detect_run(
@@ -631,7 +670,7 @@ def detect_run(
     from nnid.reports.detect_report import OUTPUTS, write_detect_outputs
 
     _checked_window(window)
-    check_detect_inputs(model_dir, data)
+    check_detect_inputs(model_dir, data, out_dir)
     monitor, window_s = _monitor(model_dir, window)
     lines: list[str] = []
     try:
@@ -678,6 +717,6 @@ def detect_run(
         "first_alarm_t": alarms[0]["t"] if alarms else None,
         "alarm_kinds": "; ".join(dict.fromkeys(a["kind"] for a in alarms)) or None,
         "effects": "; ".join(dict.fromkeys(a["effect"] for a in alarms if a.get("effect"))) or None,
-        "samples": int(result.trace.t.size),
+        "samples": result.samples,
     }
     return Outcome(lines, [], headline)

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import functools
 import json
+import os
 import re
 import warnings
 from collections.abc import Callable
@@ -950,6 +951,13 @@ def _out_cases() -> list[Case]:
                 return _command(command, tmp, fx, out=target)
 
             cases.append(Case(f"{command} --out {where}", args, ("OUT",)))
+    for extra in ([], ["--follow"]):  # its outputs replaced the model's report.html
+
+        def into_model(tmp, fx, extra=extra):
+            return [*_command("detect", tmp, fx, out=fx["monitor"]), *extra]
+
+        cases.append(Case(f"detect{' --follow' * bool(extra)} --out: the --model folder",
+                          into_model, ("OUT", "--model")))  # fmt: skip
     model_cases = {
         "no such model folder": lambda tmp, fx: tmp / "nothing",
         "folder without a monitor": lambda tmp, fx: tmp,
@@ -1072,6 +1080,10 @@ def test_the_corpus_is_large_and_covers_every_command():
 @pytest.mark.parametrize("case", CASES, ids=[c.id for c in CASES])
 def test_bad_input_is_refused_in_one_line_naming_the_file_and_field(case, fixtures, tmp_path):
     args = case.args(tmp_path, fixtures)
+    followed = tmp_path / "followed"
+    if "--follow" in args and str(fixtures["out"]) in args:
+        # a row refused after rows were watched writes theirs, said stopped: not to the shared out
+        args[args.index(str(fixtures["out"]))] = str(followed)
     result = CliRunner().invoke(app, args)
     output = result.output
     assert "Traceback" not in output and not isinstance(result.exception, Exception | None)
@@ -1098,6 +1110,9 @@ def test_bad_input_is_refused_in_one_line_naming_the_file_and_field(case, fixtur
             field = "tau_" if not args[0] == "detect" else "cmd_"
         assert field.lower() in line.lower(), line
     assert not fixtures["out"].exists()  # nothing written by a refused run
+    if followed.exists():  # the rows before the refused one
+        stopped = json.loads((followed / "detect.json").read_text())["stopped"]
+        assert stopped.startswith("stopped at row ") and "wrote " in output, output
 
 
 # -- property-based: the vehicle-file loader ---------------------------------------------------
@@ -1436,6 +1451,67 @@ def test_detect_follow_refuses_a_decimal_point_in_a_file_of_decimal_commas():
         _numbers(["1.5", "x"], [("u", 0)], 3, "s.csv", 2, decimal=",")
     assert (err.value.field, err.value.row) == ("u", 3) and "'1.5'" in str(err.value)
     assert _numbers(["1.5", "x"], [("u", 0)], 3, "s.csv", 2) == {"u": 1.5}
+
+
+@pytest.mark.parametrize("how", ["truncated", "replaced"])
+def test_detect_follow_refuses_a_file_truncated_or_replaced_while_followed(tmp_path, how):
+    """A followed log rotated by rename was taken as ended (its old file never grows), and one
+    truncated in place read on from the old offset: each is refused at the row to come,
+    naming the file."""
+    from nnid.errors import NnidInputError
+    from nnid.fault.follow import _rows
+
+    path = tmp_path / "live.csv"
+    path.write_text("t,u\n0.0,1\n0.1,2\n0.2,3\n")
+    rows = _rows(str(path), 0.5)
+    assert [next(rows) for _ in range(4)][-1] == ["0.2", "3"]
+    if how == "replaced":
+        path.rename(tmp_path / "live.csv.1")
+        path.write_text("t,u\n0.0,1\n0.1,2\n0.2,3\n0.3,4\n")
+    else:
+        path.write_text("t,u\n")
+    with pytest.raises(NnidInputError, match=f"was {how}") as err:
+        next(rows)
+    assert err.value.source == str(path) and err.value.row == 3
+
+
+def test_detect_follow_names_data_it_cannot_read_and_says_a_cut_last_row(tmp_path, monkeypatch):
+    """A followed file that cannot be read, or '-' with no standard input (a service started
+    without one: sys.stdin is None), ended in a traceback: each is said against --data. A
+    file whose last line has no line end when it stops growing was read as a row, though its
+    writer may be half way through a number: it is left out and said."""
+    import sys
+
+    from nnid.errors import NnidInputError
+    from nnid.fault import follow
+    from nnid.fault.follow import _rows
+
+    monkeypatch.setattr(sys, "stdin", None)
+    with pytest.raises(NnidInputError, match="no standard input") as err:
+        next(_rows("-", 0.0))
+    assert err.value.field == "--data"
+    path = tmp_path / "locked.csv"
+    path.write_text("t,u\n0.0,1\n")
+    path.chmod(0)
+    if os.access(path, os.R_OK):  # root reads it anyway: the refusal open gives others
+
+        def refused(*args, **kwargs):
+            raise PermissionError(13, "Permission denied", str(path))
+
+        monkeypatch.setattr(follow, "open", refused, raising=False)
+    with pytest.raises(NnidInputError, match="cannot be read") as err:
+        next(_rows(str(path), 0.0))
+    assert (err.value.field, err.value.source) == ("--data", str(path))
+    path.chmod(0o644)
+    monkeypatch.delattr(follow, "open", raising=False)
+    path.write_text("t,u\n0.0,1\n0.1,2\n0.2,3.1")  # the writer stopped inside 3.14159
+    said: list[str] = []
+    assert list(_rows(str(path), 0.0, None, said.append)) == [
+        ["t", "u"],
+        ["0.0", "1"],
+        ["0.1", "2"],
+    ]
+    assert len(said) == 1 and said[0].startswith("row 2 left out") and "3.1" in said[0]
 
 
 def test_detect_follow_names_a_row_the_csv_reader_refuses(tmp_path):

@@ -354,6 +354,46 @@ def test_a_run_into_an_earlier_out_folder_leaves_no_stale_result_and_keeps_yours
     assert not list(tmp_path.glob(".out-*"))  # the stage is gone
 
 
+def test_an_out_folder_whose_parent_cannot_be_written_gets_its_outputs(tmp_path, monkeypatch):
+    """`staged` made its stage beside --out and moved the files in: an --out that exists and
+    can be written under a parent that cannot (a shared folder, a mounted volume) failed
+    with PermissionError after the whole fit, a traceback. The stage is now made in --out
+    itself; a folder that refuses the outputs all the same is said against --out."""
+    import os
+
+    from nnid.errors import NnidInputError
+    from nnid.runs import check_out, staged
+
+    shared = tmp_path / "shared"
+    out = shared / "out"
+    out.mkdir(parents=True)
+    shared.chmod(0o555)
+    made = os.mkdir
+    refused: set[Path] = set()  # folders no stage may be made in
+
+    def mkdir(path, *args, **kwargs):
+        if Path(path).parent in refused:
+            raise PermissionError(13, "Permission denied", str(path))
+        return made(path, *args, **kwargs)
+
+    try:
+        if os.access(shared, os.W_OK):  # root writes it anyway: refused as for anyone else
+            refused.add(shared)
+            monkeypatch.setattr(os, "mkdir", mkdir)
+        check_out(out)
+        with staged(out) as stage:
+            (stage / "report.html").write_text("new")
+        assert [p.name for p in out.iterdir()] == ["report.html"]  # the stage gone
+        refused.add(out)
+        monkeypatch.setattr(os, "mkdir", mkdir)
+        with pytest.raises(NnidInputError, match="cannot be written") as err:
+            with staged(out) as stage:
+                pass
+        assert err.value.field == "--out" and err.value.source == str(out)
+    finally:
+        shared.chmod(0o755)
+
+
 def test_another_packages_deprecation_notice_does_not_reach_the_user():
     """torch's forward-mode AD loads its decompositions through the deprecated
     torch.jit.script: that notice is for torch's developers and was printed to every user of

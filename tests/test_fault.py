@@ -2751,3 +2751,75 @@ def test_a_fault_that_leaves_no_positive_definite_mass_matrix_is_refused_naming_
     fault = Fault(kind="effect", t=1.0, effect="added_mass.u", value=1000.0)
     with pytest.raises(NnidInputError, match=r"added_mass\.u = 1000.*not positive definite"):
         simulate_faults(vehicle, 5, faults=[fault])
+
+
+class _Interrupted:
+    """Standard input whose producer is stopped by Ctrl-C after ``lines``: a KeyboardInterrupt
+    from the read that waits for the next row."""
+
+    def __init__(self, lines: list[bytes]) -> None:
+        self.buffer, self.lines = self, list(lines)
+
+    def readline(self) -> bytes:
+        if not self.lines:
+            raise KeyboardInterrupt
+        return self.lines.pop(0)
+
+
+def test_follow_writes_its_outputs_when_interrupted_or_a_row_is_refused(
+    monitor, stopped_h1, tmp_path, monkeypatch
+):
+    """``producer | nnid detect --data - --follow`` ends with Ctrl-C, and a refused row (an
+    empty cell at hour 3) ended a watch too: the outputs were written only once the log
+    ended, so every alarm was lost. The rows watched are now settled and written, detect.json
+    and the report saying where and why the watch stopped, and the exception goes on (the
+    CLI's exit code)."""
+    from nnid.runs import follow_run
+
+    monitor.model.save(tmp_path / "m")
+    monitor.save(tmp_path / "m")
+    log = stopped_h1.head(600)  # h1 stopped at 20 s, row 400
+    text = log.to_csv(index=False).encode().splitlines(keepends=True)
+    monkeypatch.setattr("sys.stdin", _Interrupted(text[:501]))  # the header and 500 rows
+    said: list[str] = []
+    with pytest.raises(KeyboardInterrupt):
+        follow_run(tmp_path / "m", "-", tmp_path / "out", None, said.append)
+    out = json.loads((tmp_path / "out" / "detect.json").read_text())
+    t = log["t"].iloc[499]
+    assert out["stopped"].startswith(f"interrupted at row 500, t = {t:.3f} s (Ctrl-C)")
+    assert out["notes"][0] == out["stopped"] and out["samples"] == 500
+    assert [(a["kind"], a["thruster"]) for a in out["alarms"]] == [("thruster_loss", "h1")]
+    page = (tmp_path / "out" / "report.html").read_text()
+    assert html.escape(out["stopped"]) in page
+    assert len(pd.read_csv(tmp_path / "out" / "alarms.csv")) == 1
+    assert any(line.startswith(f"wrote {tmp_path / 'out'}/") for line in said), said
+    # an empty velocity cell at row 450: refused, the 450 rows before it written
+    bad = log.astype({"u": object})
+    bad.loc[450, "u"] = ""
+    bad.to_csv(tmp_path / "bad.csv", index=False)
+    with pytest.raises(NnidInputError, match="row 450") as err:
+        follow_run(
+            tmp_path / "m", str(tmp_path / "bad.csv"), tmp_path / "out2", None, said.append, 0.0
+        )
+    out = json.loads((tmp_path / "out2" / "detect.json").read_text())
+    assert out["stopped"].startswith("stopped at row 450: ") and str(err.value) in out["stopped"]
+    assert out["samples"] == 450 and len(out["alarms"]) == 1
+
+
+def test_follow_counts_the_rows_it_forgot_and_says_what_its_traces_show(
+    monitor, stopped_h1, tmp_path
+):
+    """A long --follow keeps its latest rows only: detect.json's ``samples`` and the alarm line
+    counted those (100k-200k past 200,000 rows), not the rows watched; and the report's
+    traces, of the latest rows, read as the whole watch."""
+    stopped_h1.head(300).to_csv(tmp_path / "long.csv", index=False)  # before the fault
+    result = follow_csv(
+        monitor, str(tmp_path / "long.csv"), 10.0, lambda line: None, idle_s=0.0, keep_rows=40
+    )
+    assert 0 < result.trace.t.size < 300
+    assert detect_json(monitor, result)["samples"] == 300
+    lines = write_detect_outputs(monitor, result, tmp_path / "out")
+    assert lines[0].startswith("0 alarm(s) in 300 samples")
+    page = (tmp_path / "out" / "report.html").read_text()
+    kept, first = result.trace.t.size, result.trace.t[0]
+    assert f"the last {kept} of the 300 rows watched, from t = {first:.2f} s" in page

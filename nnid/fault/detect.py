@@ -128,7 +128,9 @@ class DetectResult:
     and ``why`` (:func:`dismissed_why`), and ``cut_short`` where the log's end cut its
     window short, or a gap left its rows over part of it (:func:`on_part`). ``unjudged``:
     per experiment, the rows at its end that were not judged (:func:`unjudged_tail`), batch
-    and ``--follow`` alike."""
+    and ``--follow`` alike. ``dropped``: the rows watched before the trace's first (a long
+    ``--follow`` forgets its older rows; none in batch). ``stopped``: why ``--follow`` stopped
+    before its input ended (an interrupt, a refused row), None where it ended."""
 
     trace: Trace
     alarms: list[dict]
@@ -136,6 +138,13 @@ class DetectResult:
     withdrawn: list[dict] = field(default_factory=list)
     dismissed: list[dict] = field(default_factory=list)
     unjudged: list[dict] = field(default_factory=list)
+    dropped: int = 0
+    stopped: str | None = None
+
+    @property
+    def samples(self) -> int:
+        """The rows watched: those forgotten and those the trace holds."""
+        return self.dropped + int(self.trace.t.size)
 
 
 def dismissed_why(ratio: float | None, allowed: float | None, short: dict | None = None) -> str:

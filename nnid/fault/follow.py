@@ -37,6 +37,7 @@ first judged alarm is untouched.
 from __future__ import annotations
 
 import csv
+import os
 import sys
 import time
 from collections.abc import Callable
@@ -160,23 +161,74 @@ def _decoded(line: bytes, source: str, count: int) -> str:
     return text if count else text.removeprefix("\ufeff")
 
 
-def _rows(source: str, idle_s: float, dialect: dict | None = None):
+def _opened(source: str):
+    """The byte stream of ``source`` (``-``: stdin), or the error naming ``--data``: a file
+    that cannot be read, or no standard input (closed, or a service started without one)."""
+    if source == "-":
+        stdin = getattr(sys.stdin, "buffer", sys.stdin)
+        if stdin is None or getattr(stdin, "closed", False):
+            raise NnidInputError("'-': there is no standard input to read", field="--data")
+        return stdin
+    try:
+        return open(source, "rb")
+    except OSError as exc:
+        raise NnidInputError(
+            f"cannot be read ({exc.strerror or exc})", source=source, field="--data"
+        ) from None
+
+
+def _moved(source: str, handle, row: int | None) -> None:
+    """Refuse a followed file that is no longer the one read: renamed away or replaced (a log
+    rotated), or cut shorter than what was read (truncated in place). Either was taken as the
+    log's end, or read on from the old offset in the middle of another row."""
+    try:
+        now = os.stat(source)
+    except OSError:
+        now = None
+    opened = os.fstat(handle.fileno())
+    if now is None or (now.st_ino, now.st_dev) != (opened.st_ino, opened.st_dev):
+        why = "was replaced (renamed, removed or rotated) while followed"
+    elif now.st_size < handle.tell():
+        why = f"was truncated while followed ({now.st_size} bytes, {handle.tell()} read)"
+    else:
+        return
+    raise NnidInputError(f"{why}: follow one file that only grows", source=source, row=row)
+
+
+def _rows(
+    source: str,
+    idle_s: float,
+    dialect: dict | None = None,
+    say: Callable[[str], None] | None = None,
+):
     """Rows of a CSV as lists of strings; a file is followed until it stops growing for
     ``idle_s`` seconds, stdin until it closes. Read as the whole-log reader reads a CSV:
     UTF-8, the separator and decimal mark of :func:`~nnid.datasets.readers.csv_dialect`
-    (put in ``dialect`` once the first row is read) and blank lines skipped, not counted."""
-    stdin = getattr(sys.stdin, "buffer", sys.stdin)
-    handle = stdin if source == "-" else open(source, "rb")
+    (put in ``dialect`` once the first row is read) and blank lines skipped, not counted. A
+    file's last row still unterminated when it stops growing is left out and said to ``say``:
+    its writer may have stopped half way through a number (stdin's last line is whole: it
+    closed)."""
+    handle = _opened(source)
     found = {} if dialect is None else dialect
     try:
         buffer, quiet, count, header = b"", 0.0, 0, ""
         while True:
             line = handle.readline()
+            if not line and source != "-":
+                _moved(source, handle, count - 1 if count else None)  # the row to come
             if not line and source != "-" and quiet < idle_s:
                 time.sleep(0.1)
                 quiet += 0.1
                 continue
             if not line and not buffer.strip():
+                break
+            if not line and source != "-" and count:  # a data row cut off by the idle end
+                if say is not None:
+                    said = buffer.decode("utf-8", "replace").strip()[:60]
+                    say(
+                        f"row {count - 1} left out: the file stopped growing for {idle_s:g} s "
+                        f"inside it, no line end after {said!r} (a row still being written)"
+                    )
                 break
             if line:
                 quiet = 0.0
@@ -194,7 +246,7 @@ def _rows(source: str, idle_s: float, dialect: dict | None = None):
             yield _parse(text, source, count, found.get("sep", ","), header)
             count += 1
     finally:
-        if handle is not stdin:
+        if source != "-":
             handle.close()
 
 
@@ -262,16 +314,21 @@ def follow_csv(
     say: Callable[[str], None],
     idle_s: float = IDLE_S,
     keep_rows: int = 100_000,
+    stopped: Callable[[DetectResult], None] | None = None,
 ) -> DetectResult:
     """Watch ``source`` row by row; ``say`` gets one line per alarm and per isolation. The
     last ``keep_rows`` to twice as many samples are kept (for isolation and the report's
     traces), so a monitor left running does not grow without bound; every alarm is kept.
-    ``idle_s``: how long a file may stop growing before its log has ended (0 or more)."""
+    ``idle_s``: how long a file may stop growing before its log has ended (0 or more).
+    ``stopped``: given the result of the rows watched (settled, its ``stopped`` saying why)
+    where an interrupt (Ctrl-C, a SIGTERM raised as SystemExit) or a refused row ends the
+    watch after some rows, before that exception goes on: ending a live stream so is the
+    normal stop, and lost every alarm."""
     start = time.perf_counter()
     # checked before the source is opened: a NaN never compares, so a NaN wait was forever
     checked_number(idle_s, "idle_s", 0.0, strict=False)
     dialect: dict = {}
-    rows = _rows(source, idle_s, dialect)
+    rows = _rows(source, idle_s, dialect, say)
     header = next(rows, None)
     where = "stdin" if source == "-" else source
     if header is None:
@@ -523,156 +580,211 @@ def follow_csv(
         seen = pd.DataFrame({"t": ts[i:], **{c: kept[:, STATE.index(c)] for c in checked}})
         if exp_col is not None:  # named in the error as the whole-log reader names it
             seen["experiment"] = names[codes[-1]]
-        if rate_unit:
-            check_rate_units(seen, where, row=n)
-        if depth_unit:
-            check_depth_units(seen, where, row=n)
+        try:
+            if rate_unit:
+                check_rate_units(seen, where, row=n)
+            if depth_unit:
+                check_depth_units(seen, where, row=n)
+        except NnidInputError as exc:
+            raise _RowsRefused.of(exc) from None
 
     def unchecked_tail() -> bool:
         """Whether the current experiment has rows after its last unit check."""
         return unit_check and bool(ts) and (dropped + len(ts) - exp_first) % unit_every != 0
 
     limits = command_limits(monitor.plant_.vehicle)  # the whole-log detect refuses beyond them
-    for n, row in enumerate(rows):  # n: the data row from 0, as the whole-log reader counts
-        decimal = dialect.get("decimal", ".")
-        values = _numbers(row, read, n, where, len(header), kept_unread, decimal)
-        for c in [c for c in unread if c not in values and c not in said_held]:
-            said_held.add(c)
-            say(
-                f"{c}: empty cells (the first at row {n}) hold their run's last sample (before "
-                f"its first, not yet sampled: filled from it once it arrives), not masked: "
-                f"{UNREAD_BY} {c}"
-            )
-        for name, bounds in limits.items():
-            if name in values and not bounds.holds(values[name]):
+
+    def whole_rows() -> None:
+        """The rows every buffer holds whole, and no alarm on a row beyond them."""
+        whole = min(map(len, (ts, xs, us, vals, watched, codes, held_cells)))
+        for buf in (ts, xs, us, vals, watched, codes, held_cells):
+            del buf[whole:]
+        for rows_at in (pending, alarm_rows, queue):
+            rows_at[:] = [k for k in rows_at if k < dropped + whole]
+
+    def finish(stop: str | None = None) -> DetectResult:
+        """The rows watched as the result: the last experiment settled (``stop``: why the
+        watch stopped before its input ended)."""
+        settle()
+        said_unjudged()
+        if not ts:
+            raise NnidInputError("has a header and no rows", source=where)
+        data = _arrays(ts, xs, us, codes, names)
+        values = np.array(watched)  # the model's residual r, and the statistics watched
+        values[:, 0:6] = np.array(vals)[:, 0:6]
+        trace = Trace(data["t"], run_names(names, data["experiment"], exp_col is not None),
+                      values, np.isin(np.arange(len(ts)) + dropped, alarm_rows))  # fmt: skip
+        took = time.perf_counter() - start
+        return DetectResult(trace, alarms, took, withdrawn, unjudged=unjudged, dropped=dropped,
+                            stopped=stop)  # fmt: skip
+
+    try:
+        for n, row in enumerate(rows):  # n: the data row from 0, as the whole-log reader counts
+            decimal = dialect.get("decimal", ".")
+            values = _numbers(row, read, n, where, len(header), kept_unread, decimal)
+            for c in [c for c in unread if c not in values and c not in said_held]:
+                said_held.add(c)
+                say(
+                    f"{c}: empty cells (the first at row {n}) hold their run's last sample (before "
+                    f"its first, not yet sampled: filled from it once it arrives), not masked: "
+                    f"{UNREAD_BY} {c}"
+                )
+            for name, bounds in limits.items():
+                if name in values and not bounds.holds(values[name]):
+                    raise NnidInputError(
+                        beyond_range_message(name, values[name], bounds),
+                        source=where,
+                        field=name,
+                        row=n,
+                    )
+            for angle in [
+                a for a in unchecked if abs(values[a]) > radian_limit(a, RATE_OF[a] in col) + 1e-6
+            ]:
+                unchecked.remove(angle)  # the rows so far and this one, as the whole log is read
+                runs = [*(names[c] for c in codes), row[exp_col] if exp_col is not None else ""]
+                state = [*xs, [values.get(c, 0.0) for c in STATE]]
+                seen = pd.DataFrame(state, columns=list(STATE)).assign(
+                    t=[*ts, values["t"]], experiment=runs
+                )
+                if looks_like_degrees(
+                    seen[["t", "experiment", *(c for c in STATE if c in col)]], angle
+                ):
+                    raise _RowsRefused.of(degrees_error(seen, angle, where, n))
+            t = values["t"]
+            name = row[exp_col] if exp_col is not None else ""
+            # held within its run, as batch holds it (nearest_samples); before the run's first
+            # sample NaN, not yet sampled, not a made-up 0: its rows still kept are filled from
+            # that sample once it arrives, as batch back-fills them (no residual reads them)
+            hold = name == current
+            for j in [j for j, c in enumerate(STATE) if c in kept_unread and c in values]:
+                if hold and np.isnan(x[j]):  # the run's first sample of it
+                    for earlier in xs[max(exp_first - dropped, 0) :]:
+                        earlier[j] = values[STATE[j]]
+            x[:] = [values.get(c, (x[i] if hold else np.nan) if c in kept_unread else 0.0)
+                    for i, c in enumerate(STATE)]  # fmt: skip
+            u[:] = [values[c] for c in inputs]
+            if exp_col is not None and not name.strip():  # refused by the whole-log reader too
                 raise NnidInputError(
-                    beyond_range_message(name, values[name], bounds),
+                    "empty experiment label: label every row, or remove the column for a "
+                    "single run",
                     source=where,
-                    field=name,
+                    field="experiment",
                     row=n,
                 )
-        for angle in [
-            a for a in unchecked if abs(values[a]) > radian_limit(a, RATE_OF[a] in col) + 1e-6
-        ]:
-            unchecked.remove(angle)  # the rows so far and this one, as the whole log is read
-            runs = [*(names[c] for c in codes), row[exp_col] if exp_col is not None else ""]
-            state = [*xs, [values.get(c, 0.0) for c in STATE]]
-            seen = pd.DataFrame(state, columns=list(STATE)).assign(
-                t=[*ts, values["t"]], experiment=runs
-            )
-            if looks_like_degrees(
-                seen[["t", "experiment", *(c for c in STATE if c in col)]], angle
-            ):
-                raise degrees_error(seen, angle, where, n)
-        t = values["t"]
-        name = row[exp_col] if exp_col is not None else ""
-        # held within its run, as batch holds it (nearest_samples); before the run's first
-        # sample NaN, not yet sampled, not a made-up 0: its rows still kept are filled from
-        # that sample once it arrives, as batch back-fills them (no residual reads them)
-        hold = name == current
-        for j in [j for j, c in enumerate(STATE) if c in kept_unread and c in values]:
-            if hold and np.isnan(x[j]):  # the run's first sample of it
-                for earlier in xs[max(exp_first - dropped, 0) :]:
-                    earlier[j] = values[STATE[j]]
-        x[:] = [values.get(c, (x[i] if hold else np.nan) if c in kept_unread else 0.0)
-                for i, c in enumerate(STATE)]  # fmt: skip
-        u[:] = [values[c] for c in inputs]
-        if exp_col is not None and not name.strip():  # refused by the whole-log reader too
-            raise NnidInputError(
-                "empty experiment label: label every row, or remove the column for a single run",
-                source=where,
-                field="experiment",
-                row=n,
-            )
-        if name != current:
-            if exp_col is not None:  # as the whole-log reader checks it
-                check_label(name, where, n)
-            if unchecked_tail():  # the experiment that ended: its last rows too
-                check_units(n - 1)
-            settle()
-            stream.reset()
-            current = name
-            names.append(name)
-            exp_first = dropped + len(ts)
-        elif t <= last_t:  # the whole-log reader refuses it too (nnid.datasets.log)
-            what = "duplicated" if t == last_t else "decreasing"
-            raise NnidInputError(
-                f"time is {what}{f' in experiment {name!r}' if exp_col is not None else ''} "
-                f"({shown(last_t)} then {shown(t)}); t must be strictly increasing within an "
-                "experiment",
-                source=where,
-                field="t",
-                row=n,
-            )
-        elif t - last_t > monitor.max_interval:  # the kernel skips the interval
-            say(
-                f"t = {t:.2f} s{f' ({name})' if name else ''}: no samples for {t - last_t:.3g} s; "
-                "that interval is not scored"
-            )
-        last_t = t
-        if n >= RATE_ROWS and n % RATE_ROWS == 0:
-            # stamps in bursts, batch's rule on the rows the current experiment has (its latest
-            # RATE_WINDOW and this one), before the rate: pairs 1e-05 s apart every 0.1 s read
-            # as the calibrated 0.05 s, and a difference quotient over 1e-05 s alarmed
-            since = max(exp_first - dropped, len(ts) - RATE_WINDOW, 0)
-            try:
-                run = current if exp_col is not None else None
-                refuse_bursts(np.append(ts[since:], t), run, MONITOR_STEPS, "t")
-            except NnidInputError as exc:
-                raise NnidInputError(exc.message, source=where, field="t", row=n) from None
-            # the rate the calibration holds at, on the latest rows: a log that went from
-            # 20 to 10 Hz after its first rows gave a confident thruster loss
-            try:
-                monitor.check_rate(np.asarray(ts[-RATE_WINDOW:]), np.asarray(codes[-RATE_WINDOW:]))
-            except NnidInputError as exc:
-                raise exc.with_source(where) from None
-        # the kernel scores no row with a value that is not finite, and reads no x, y, z
-        code = stream.update(t, kernel_state(x, unread_at), u)
-        ts.append(t)
-        xs.append(x.copy())
-        empty = [c for c in unread if c not in values]
-        held_cells.append(np.isin(STATE, empty) if empty else nothing_held)
-        us.append(u.copy())
-        vals.append(stream.values.copy())
-        watched.append(vals[-1].copy())
-        codes.append(len(names) - 1)
-        row_no = dropped + len(ts) - 1
-        if unit_check and not unchecked_tail():  # a whole block of rows since the last check
-            check_units(n)  # before this row's alarm is announced
-        rewatched = ref["rewatch"] is not None and ref["code"] == codes[-1]
-        # an alarm on a row that completes an earlier alarm's window, or is past it, waits for
-        # that judgement: one that restarts the statistics drops it, as batch does
-        held = code == 1 and not rewatched and bool(pending) and judged(pending[0])
-        if rewatched and row_no >= ref["start"]:
-            queue.append(row_no)  # watched on what the isolated changes leave
-            if len(queue) >= block + ahead:
-                flush()
-        elif code == 1 and not held:
-            announce(row_no)
-        while pending and judged(pending[0]):
-            isolate(pending.pop(0))
-        if held and not (ref["rewatch"] is not None and ref["code"] == codes[-1]):
-            announce(row_no)  # no isolated change restarted the statistics: batch's alarm too
-        if len(ts) > 2 * keep_rows and not pending:  # forget the older half
-            cut = len(ts) - keep_rows
-            if queue:  # but not the rows still to be watched, nor those their signature reads
-                cut = min(cut, queue[0] - dropped - context - 1)
-            if cut > 0:
-                for buf in (ts, xs, us, vals, watched, codes, held_cells):
-                    del buf[:cut]
-                dropped += cut
+            if name != current:
+                if exp_col is not None:  # as the whole-log reader checks it
+                    check_label(name, where, n)
+                if unchecked_tail():  # the experiment that ended: its last rows too
+                    check_units(n - 1)
+                settle()
+                stream.reset()
+                current = name
+                names.append(name)
+                exp_first = dropped + len(ts)
+            elif t <= last_t:  # the whole-log reader refuses it too (nnid.datasets.log)
+                what = "duplicated" if t == last_t else "decreasing"
+                raise NnidInputError(
+                    f"time is {what}{f' in experiment {name!r}' if exp_col is not None else ''} "
+                    f"({shown(last_t)} then {shown(t)}); t must be strictly increasing within an "
+                    "experiment",
+                    source=where,
+                    field="t",
+                    row=n,
+                )
+            elif t - last_t > monitor.max_interval:  # the kernel skips the interval
+                say(
+                    f"t = {t:.2f} s{f' ({name})' if name else ''}: no samples for "
+                    f"{t - last_t:.3g} s; that interval is not scored"
+                )
+            last_t = t
+            if n >= RATE_ROWS and n % RATE_ROWS == 0:
+                # stamps in bursts, batch's rule on the rows the current experiment has (its latest
+                # RATE_WINDOW and this one), before the rate: pairs 1e-05 s apart every 0.1 s read
+                # as the calibrated 0.05 s, and a difference quotient over 1e-05 s alarmed
+                since = max(exp_first - dropped, len(ts) - RATE_WINDOW, 0)
+                try:
+                    run = current if exp_col is not None else None
+                    refuse_bursts(np.append(ts[since:], t), run, MONITOR_STEPS, "t")
+                except NnidInputError as exc:
+                    raise _RowsRefused(exc.message, source=where, field="t", row=n) from None
+                # the rate the calibration holds at, on the latest rows: a log that went from
+                # 20 to 10 Hz after its first rows gave a confident thruster loss
+                try:
+                    monitor.check_rate(
+                        np.asarray(ts[-RATE_WINDOW:]), np.asarray(codes[-RATE_WINDOW:])
+                    )
+                except NnidInputError as exc:
+                    raise _RowsRefused.of(exc.with_source(where)) from None
+            # the kernel scores no row with a value that is not finite, and reads no x, y, z
+            code = stream.update(t, kernel_state(x, unread_at), u)
+            ts.append(t)
+            xs.append(x.copy())
+            empty = [c for c in unread if c not in values]
+            held_cells.append(np.isin(STATE, empty) if empty else nothing_held)
+            us.append(u.copy())
+            vals.append(stream.values.copy())
+            watched.append(vals[-1].copy())
+            codes.append(len(names) - 1)
+            row_no = dropped + len(ts) - 1
+            if unit_check and not unchecked_tail():  # a whole block of rows since the last check
+                check_units(n)  # before this row's alarm is announced
+            rewatched = ref["rewatch"] is not None and ref["code"] == codes[-1]
+            # an alarm on a row that completes an earlier alarm's window, or is past it, waits for
+            # that judgement: one that restarts the statistics drops it, as batch does
+            held = code == 1 and not rewatched and bool(pending) and judged(pending[0])
+            if rewatched and row_no >= ref["start"]:
+                queue.append(row_no)  # watched on what the isolated changes leave
+                if len(queue) >= block + ahead:
+                    flush()
+            elif code == 1 and not held:
+                announce(row_no)
+            while pending and judged(pending[0]):
+                isolate(pending.pop(0))
+            if held and not (ref["rewatch"] is not None and ref["code"] == codes[-1]):
+                announce(row_no)  # no isolated change restarted the statistics: batch's alarm too
+            if len(ts) > 2 * keep_rows and not pending:  # forget the older half
+                cut = len(ts) - keep_rows
+                if queue:  # but not the rows still to be watched, nor those their signature reads
+                    cut = min(cut, queue[0] - dropped - context - 1)
+                if cut > 0:
+                    for buf in (ts, xs, us, vals, watched, codes, held_cells):
+                        del buf[:cut]
+                    dropped += cut
+    except (KeyboardInterrupt, SystemExit, NnidInputError) as exc:
+        whole_rows()  # an interrupt may land between one row's appends
+        if stopped is not None and ts and not isinstance(exc, _RowsRefused):
+            stopped(finish(_stop_note(exc, dropped + len(ts), ts[-1])))
+        raise
     if unchecked_tail():
         check_units(n)
-    settle()
-    said_unjudged()
-    if not ts:
-        raise NnidInputError("has a header and no rows", source=where)
-    data = _arrays(ts, xs, us, codes, names)
-    values = np.array(watched)  # the model's residual r, and the statistics watched
-    values[:, 0:6] = np.array(vals)[:, 0:6]
-    trace = Trace(data["t"], run_names(names, data["experiment"], exp_col is not None), values,
-                  np.isin(np.arange(len(ts)) + dropped, alarm_rows))  # fmt: skip
-    return DetectResult(trace, alarms, time.perf_counter() - start, withdrawn, unjudged=unjudged)
+    return finish()
+
+
+class _RowsRefused(NnidInputError):
+    """A refusal of the rows already watched, not of one row alone: their clock (stamps in
+    bursts, another rate than the calibration's) or units (deg/s rates, a depth in cm,
+    angles in degrees). Their alarms would be of misread data: none are written."""
+
+    @classmethod
+    def of(cls, exc: NnidInputError) -> _RowsRefused:
+        """``exc`` as a refusal of the rows watched."""
+        return cls(exc.message, source=exc.source, field=exc.field, row=exc.row)
+
+
+def _stop_note(exc: BaseException, rows: int, t: float) -> str:
+    """Why a watch stopped before its input ended, for the outputs: ``rows`` watched, the last
+    at ``t``."""
+    if isinstance(exc, NnidInputError):
+        at = rows if exc.row is None else exc.row
+        return (
+            f"stopped at row {at}: {exc} (the outputs hold the {rows} rows watched before it, "
+            f"to t = {t:.3f} s)"
+        )
+    how = "Ctrl-C" if isinstance(exc, KeyboardInterrupt) else f"terminated, exit code {exc.code}"
+    return (
+        f"interrupted at row {rows}, t = {t:.3f} s ({how}): the outputs hold the {rows} rows "
+        "watched before it"
+    )
 
 
 def _arrays(ts, xs, us, codes, names) -> dict:

@@ -54,7 +54,9 @@ def detect_json(monitor, result: DetectResult, notes: list[str] | None = None) -
     ``--follow``, which says them in ``withdrawn``). ``unjudged``: per experiment, the rows at
     its end that were not judged, how many, the seconds they cover, each stretch of them
     where judged rows lie between, and why (:func:`~nnid.fault.detect.unjudged_tail`; batch
-    and ``--follow`` alike)."""
+    and ``--follow`` alike). ``samples``: the rows watched, those a long ``--follow`` forgot
+    too. ``stopped``: why ``--follow`` stopped before its input ended (an interrupt, a refused
+    row; also the first of the notes), null where the input ended."""
     h_t, h_g = monitor.threshold_values
     caveat = monitor.threshold_caveat()
     measured = monitor.measured_false_alarms_
@@ -78,10 +80,16 @@ def detect_json(monitor, result: DetectResult, notes: list[str] | None = None) -
         "false_alarm_caveat": caveat,
         "false_alarms_measured": monitor.measured_false_alarms_,
         "calibration": monitor.calibration_,
-        "samples": int(result.trace.t.size),
+        "samples": result.samples,
         "seconds": result.seconds,
-        "notes": list(notes or []),
+        "stopped": result.stopped,
+        "notes": _notes(result, notes),
     }
+
+
+def _notes(result: DetectResult, notes: list[str] | None) -> list[str]:
+    """What the run said of the log, led by why the watch stopped before its end."""
+    return [*([result.stopped] if result.stopped else []), *(notes or [])]
 
 
 #: the files of a detect run, as the CLI lists them
@@ -101,7 +109,8 @@ def write_detect_outputs(
     write_text(out_dir / "report.html", detect_html(monitor, result, source, notes))
     hours = monitor.calibration_["hours"]
     lines = [
-        f"{len(result.alarms)} alarm(s) in {result.trace.t.size} samples "
+        *([f"note: {result.stopped}"] if result.stopped else []),
+        f"{len(result.alarms)} alarm(s) in {result.samples} samples "
         f"(target false-alarm rate {monitor.false_alarm_per_hour:g} per hour, calibrated on "
         f"{60 * hours:.1f} min of healthy data; {measured_rate(monitor)})",  # 0.5, not "0 min"
         *(describe_alarm(a) for a in result.alarms),
@@ -154,13 +163,13 @@ def detect_html(
         f"{60 * cal['hours']:.1f} min of healthy data ({cal['samples']} samples); thresholds "
         f"{html.escape(thresholds_cell(monitor.thresholds_))} for a target of "
         f"{monitor.false_alarm_per_hour:g} false alarms per hour. "
-        f"{len(result.alarms)} alarm(s) in {trace.t.size} samples. False-alarm rate "
+        f"{len(result.alarms)} alarm(s) in {result.samples} samples. False-alarm rate "
         f"{html.escape(measured_rate(monitor))}.</p>"
     )
     caveat = monitor.threshold_caveat()
     if caveat:
         out.append(f"<p><b>Note</b>: {html.escape(caveat)}.</p>")
-    out.append(said_list(list(notes or []), "Notes on the log"))
+    out.append(said_list(_notes(result, notes), "Notes on the log"))
     if result.alarms:
         out.append("<h2>Alarms</h2>")
         head = ["experiment", "t [s]", "kind", "thruster", "efficiency (95 %)", "effect",
@@ -227,15 +236,24 @@ def detect_html(
         items = "".join(f"<li>{html.escape(unjudged_line(u))}</li>" for u in result.unjudged)
         out.append(f"<h2>Not judged at a run's end</h2><ul>{items}</ul>")
     out.append("<h2>Residual and statistics</h2>")
-    out.append(f'<img alt="residual traces" src="{figure_uri(_figure(monitor, trace, h_t, h_g))}">')
+    if result.dropped and trace.t.size:  # a long --follow keeps its latest rows only
+        out.append(
+            f"<p>The traces show the last {trace.t.size} of the {result.samples} rows watched, "
+            f"from t = {trace.t[0]:.2f} s (row {result.dropped}); the alarms are those of all "
+            "the rows.</p>"
+        )
+    figure = _figure(monitor, trace, h_t, h_g, result.dropped)
+    out.append(f'<img alt="residual traces" src="{figure_uri(figure)}">')
     out.append(IMAGES_CHECK + "</body></html>")
     return "\n".join(out)
 
 
-def _figure(monitor, trace, h_t: float, h_g: float):
+def _figure(monitor, trace, h_t: float, h_g: float, first: int = 0):
+    """The statistics and residuals of ``trace``, against t for one run, else against the
+    row, the trace's first being row ``first``."""
     dofs = [f for f, d in zip(FORCES, DOFS, strict=True) if d in monitor.plant_.dofs_]
     fig, axes = new_figure(len(dofs) + 1, 1, height=1.6)
-    x = np.arange(trace.t.size)
+    x = np.arange(trace.t.size) + first
     t = trace.t if trace.experiment.size and len(set(trace.experiment)) == 1 else x
     label = "t [s]" if t is trace.t else "sample"
     ax = axes[0, 0]
