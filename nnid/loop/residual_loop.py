@@ -303,15 +303,6 @@ class ResidualLoop:
                 + ", or a shorter warmup_s",
                 field="warmup_s",
             )
-        if np.isnan(frame_step(train)):
-            # every later step reads a step of the training runs (the filter's settling, the
-            # actuator lag's bound): none has one, and "actuator_lag = nan leaves no valid
-            # vehicle" or a division by zero blamed the vehicle or the filter
-            raise NnidInputError(
-                f"no training run has two samples ({len(train)} rows, each a run of its own): "
-                "the loop fits accelerations over runs of samples; give longer runs",
-                field="experiment",
-            )
         if len(train) * len(self.dofs_) < 10 * max(unknowns, 1):
             raise NnidInputError(
                 f"{len(train)} training samples for {unknowns} damping coefficients in "
@@ -323,6 +314,15 @@ class ResidualLoop:
                     else f"less than {self.validation:g} (validation_fraction)"
                 ),
                 field="validation" if named else "validation_fraction",
+            )
+        if np.isnan(frame_step(train)):
+            # every later step reads a step of the training runs (the filter's settling, the
+            # actuator lag's bound): none has one, and "actuator_lag = nan leaves no valid
+            # vehicle" or a division by zero blamed the vehicle or the filter
+            raise NnidInputError(
+                f"no training run has two samples ({len(train)} rows, each a run of its own): "
+                "the loop fits accelerations over runs of samples; give longer runs",
+                field="experiment",
             )
 
     def _say_short_held_out(self, val: pd.DataFrame, tau_corr: float) -> None:
