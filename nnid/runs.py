@@ -522,6 +522,8 @@ def residual_loop_run(
         "after_free_run_nrmse": _total(result["after"], "free_run_nrmse"),
         "before_force_rmse": _total(result["before"], "force_rmse"),
         "after_force_rmse": _total(result["after"], "force_rmse"),
+        # "after" is measured on the runs that ranked and gated the effects added
+        "validation_used_for": result["validation_used_for"],
         "diverged": ", ".join(result["before"].get("diverged", {})) or None,
         "unexplained": "; ".join(f"{d}: {s}" for d, s in result["unexplained"].items()) or None,
     }

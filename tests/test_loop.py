@@ -380,14 +380,35 @@ def test_loop_scores_never_count_the_measurement_a_prediction_starts_from():
 
 
 # -- CLI -----------------------------------------------------------------------------------------
-def test_cli_demo_reports_the_injected_heave_thrust_loss(tmp_path):
+def test_cli_demo_reports_the_injected_heave_thrust_loss(tmp_path, monkeypatch):
     from typer.testing import CliRunner
 
+    import nnid.runs
     from nnid.cli import app
 
+    outcomes = []
+    real = nnid.runs.residual_loop_run
+
+    def spy(*args, **kwargs):
+        outcomes.append(real(*args, **kwargs))
+        return outcomes[-1]
+
+    monkeypatch.setattr(nnid.runs, "residual_loop_run", spy)
     res = CliRunner().invoke(app, ["demo", "--out", str(tmp_path)])
     assert res.exit_code == 0, res.output
     result = json.loads((tmp_path / "loop.json").read_text())
+    # the held-out runs that measured "after" ranked and gated the effect: said in loop.json,
+    # the batch headline and the printed summary, the README's quoted line left whole
+    (outcome,) = outcomes
+    used = result["validation_used_for"]
+    assert "ranking" in used and "choosing" in used
+    assert outcome.headline["validation_used_for"] == used
+    lines = outcome.lines
+    first = next(i for i, line in enumerate(lines) if line.startswith("Upward heave thrust is"))
+    assert lines[first].endswith("(NRMSE).")
+    assert "not an independent test" in lines[first + 1]
+    note = next(t for t in (tmp_path / "report.md").read_text().splitlines() if "gate" in t)
+    assert "ranked the candidates" in note and "not an independent test" in note
     for key in ("baseline", "before", "candidates", "added", "after"):
         assert key in result
     assert result["added"][0] == "thruster_installation.w.neg"
@@ -806,6 +827,8 @@ def test_a_loop_whose_baseline_cannot_be_simulated_says_nothing_was_judged(tmp_p
     assert "No significant effect" not in res.output
     result = json.loads((out / "loop.json").read_text())
     assert result["added"] == []
+    # nothing added: "after" is the baseline's, fitted on the training part alone
+    assert result["validation_used_for"] is None
     assert any("Z_wdot = 13.2 > 0" in w for w in result["warnings"]), result["warnings"]
     # a refusal after loading writes no loop.json: the warnings are said all the same
     res = CliRunner().invoke(app, [*args[:-1], str(tmp_path / "o2"), "--validation", "nosuch"])
@@ -833,6 +856,8 @@ def test_the_total_line_says_a_diverged_one_step_score():
     assert lines[-1] == (
         f"Total held-out one-step NRMSE: diverged before, not scored after ({effect} added)."
     )
+    # the held-out runs chose what was added: said after the effect's sentence
+    assert lines[0].startswith("Upward heave thrust") and "not an independent test" in lines[1]
     # nothing added: the baseline's one-step score is said the same way
     result.update(added=[], steps=[{"added": None, "top": [], "gate": "one step"}])
     (line, _) = summary(result)
@@ -1630,3 +1655,74 @@ def test_training_runs_of_one_sample_each_are_refused_naming_why(filter_lambda):
     with pytest.raises(NnidInputError, match="no training run has two samples") as err:
         loop.fit(joined)
     assert err.value.field == "experiment"
+
+
+def test_candidates_beyond_gate_checks_are_not_gated_and_a_gate_failure_is_not_no_effect(
+    monkeypatch,
+):
+    """The gate simulated only the first gate_checks admissible candidates: where all of those
+    failed it, the rest stayed admissible, "passes the tests; ranked below the one added", with
+    nothing added, and the report opened "No significant effect" over candidates significant
+    in the force residual whose simulation alone did not gain."""
+    from types import SimpleNamespace
+
+    import nnid.loop.residual_loop as rl
+    from nnid.loop.diagnose import Scored
+    from nnid.reports.loop_report import summary
+
+    class Fake:
+        linear = True
+
+        def __init__(self, name):
+            self.name, self.parameter = name, None
+
+        def augment(self, vehicle, value):
+            return SimpleNamespace(name=self.name)
+
+    def admissible(n):
+        out = []
+        for k in range(n):
+            s = Scored(Fake(f"c{k}"), 1.0, 0.1, 1e-9, 50.0, 0.3, {"w": 0.3}, 10.0)
+            s.admissible, s.reason = True, "passes the tests; ranked below the one added"
+            out.append(s)
+        return out
+
+    gains = {}  # the held-out free-run error with each candidate; 1.0 without
+    monkeypatch.setattr(rl, "vehicle_with", lambda vehicle, values: vehicle)
+    monkeypatch.setattr(
+        rl.ResidualLoop, "_simulation_error",
+        lambda self, ws, vehicle, mode: gains.get(getattr(vehicle, "name", None), 1.0),
+    )  # fmt: skip
+    monkeypatch.setattr(rl.ResidualLoop, "_augment", lambda self, ws, fit, s: "refitted")
+    ws = SimpleNamespace(val=pd.DataFrame({"t": np.arange(0.0, 10.0, 0.1)}))
+    fit = SimpleNamespace(vehicle=SimpleNamespace(name="fit"))
+    loop = ResidualLoop(None, gate_checks=3)
+    loop.gates_ = []
+    ranked = admissible(5)
+    assert loop._simulation_gate(ws, fit, ranked) == (None, None)
+    assert all("does not improve" in s.reason for s in ranked[:3])
+    for s in ranked[3:]:  # never simulated, and nothing was added
+        assert not s.admissible and s.reason == "not gated (beyond gate_checks = 3)"
+    # one of those gated is added: the rest are ranked below it, gated or not
+    gains["c1"] = 0.5
+    ranked = admissible(5)
+    chosen, _ = loop._simulation_gate(ws, fit, ranked)
+    assert chosen is ranked[1] and chosen.reason == "added"
+    assert all(s.admissible and "ranked below the one added" in s.reason for s in ranked[2:])
+
+    # the report: significant candidates the gate turned down are not "no significant effect"
+    none = {"free_run_nrmse": {"w": 0.8, "total": 0.8}, "diverged": {},
+            "one_step_nrmse": {"w": 0.1, "total": 0.1}, "one_step_diverged": {}}  # fmt: skip
+    step = {"added": None, "top": [], "gate": "free run",
+            "gate_turned_down": ["c0", "c1", "c2"], "not_gated": ["c3", "c4"]}  # fmt: skip
+    result = {"settings": {"k_step_s": 1.0, "gate_checks": 3}, "before": none, "after": none,
+              "added": [], "steps": [step], "unexplained": {}}  # fmt: skip
+    first = summary(result)[0]
+    assert first.startswith(
+        "No effect added: significant in the force residual, but no gain in simulation on "
+        "held-out data"
+    )
+    assert "2 more that passed were beyond gate_checks = 3 and not gated (held-out" in first
+    assert "(held-out free-run NRMSE 0.8)." in first
+    step.update(gate_turned_down=[], not_gated=[])  # nothing passed: the plain verdict
+    assert summary(result)[0].startswith("No significant effect")

@@ -7,7 +7,9 @@ re-identified), then repeats: rank every candidate effect by how much of the hel
 it explains when added and refitted (:mod:`nnid.loop.diagnose`), add the best admissible one,
 refit; until none is significant or ``max_effects`` are in. Errors before and after are
 measured on the held-out part only: free-run and one-step velocity NRMSE per DOF, and the
-force residual RMS per DOF (McCarter eq. 4.4 minus the model's damping).
+force residual RMS per DOF (McCarter eq. 4.4 minus the model's damping). The loop has no
+test part: the held-out part that measures "after" also ranked the candidates and gated the
+one added, so "after" is not an independent test of it (``validation_used_for``).
 """
 
 from __future__ import annotations
@@ -426,7 +428,9 @@ class ResidualLoop:
         for s in admissible[: self.gate_checks]:
             try:
                 vehicle = s.candidate.augment(vehicle_with(fit.vehicle, s.refit), s.value)
-            except ValueError:
+            except ValueError as exc:  # it stayed "admissible, ranked below the one added"
+                s.admissible = False
+                s.reason = f"refit not physical: {str(exc).splitlines()[0]}"
                 continue
             after = self._simulation_error(ws, vehicle, mode)
             s.gate = (before, after)
@@ -460,6 +464,10 @@ class ResidualLoop:
                 f"held-out {what} error does not improve "
                 f"({score(before, fixed=True)} -> {score(after, fixed=True)})"
             )
+        # nothing was added: those never simulated are not "ranked below the one added"
+        for s in admissible[self.gate_checks :]:
+            s.admissible = False
+            s.reason = f"{NOT_GATED} = {self.gate_checks})"
         return None, None
 
     def _simulation_error(self, ws: Workspace, vehicle, mode: str | int) -> float | None:
@@ -665,6 +673,10 @@ class ResidualLoop:
             "candidates_no_better_fit": len(first.no_better_fit),
             "added": self.added,
             "after": self.after_,
+            # the train pipeline's word for a held-out part that fitting read: with an effect
+            # added, the runs that measured "after" also ranked and gated it (None: nothing
+            # was added, and "after" is the baseline's, fitted on the training part alone)
+            "validation_used_for": HELD_OUT_USE if self.added_ else None,
             "stopped": "max_effects" if self.stopped_at_limit else "no candidate passed",
             "steps": [
                 {
@@ -678,6 +690,11 @@ class ResidualLoop:
                     "no_better_fit": st.no_better_fit,
                     "tested": st.tested,
                     "sindy": st.sindy,
+                    # passed every test but the simulation gate, which turned them down
+                    "gate_turned_down": [
+                        s.name for s in st.ranked if s.gate is not None and s is not st.added
+                    ],
+                    "not_gated": [s.name for s in st.ranked if s.reason.startswith(NOT_GATED)],
                 }
                 for st, gate in zip(self.steps_, self.gates_, strict=True)
             ],
@@ -706,6 +723,7 @@ class ResidualLoop:
                 "dofs": list(self.dofs_),
                 "min_improvement": self.min_improvement,
                 "min_gate_gain": self.min_gate_gain,
+                "gate_checks": self.gate_checks,
                 "filter_lambda": self.filter_lambda,
                 "zoh_midpoint": self.zoh_midpoint,
             },
@@ -725,6 +743,13 @@ class ResidualLoop:
             "seconds": self.seconds_,
         }
 
+
+#: what the held-out part was used for where an effect was added (``validation_used_for``)
+HELD_OUT_USE = "ranking the candidates and choosing the effects added (simulation gate)"
+
+#: the verdict's start for an admissible candidate ranked below the ``gate_checks`` that the
+#: gate simulated, where none of those was added
+NOT_GATED = "not gated (beyond gate_checks"
 
 #: the verdict of a candidate that passed every test but the simulation gate, which had no
 #: simulation to compare (the baseline's held-out one diverges at every horizon)

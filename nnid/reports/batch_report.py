@@ -115,7 +115,9 @@ def _loop_table(rows: list[dict]) -> str:
             "effects added": "the effects the residual loop found significant and added",
             "NRMSE before/after": "held-out free-run velocity NRMSE (total over the excited "
             "DOFs) of the vehicle file refitted, and with the effects added; '-' where it "
-            "was not measured (a diverged free run is never averaged)",
+            "was not measured (a diverged free run is never averaged). The held-out runs also "
+            "ranked the candidates and chose the effects added: 'after' is not an independent "
+            "test of them",
             "diverged": "DOFs whose baseline free run left the physical range",
             "unexplained": "structure the effect vocabulary does not explain",
         }

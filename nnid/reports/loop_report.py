@@ -216,15 +216,32 @@ def _verdict(result: dict, name: str, key: str, before: dict, after: dict) -> li
         ]
     if not result["added"]:
         total = result["before"]["free_run_nrmse"].get("total")
-        lines = [
-            "No significant effect: no candidate of the effect vocabulary passed the F-test, "
-            "the parameter test and the held-out checks "
-            + (
-                f"(held-out free-run NRMSE {number(total)})."
-                if total is not None
-                else f"(held-out {name} NRMSE {_total(result, 'before', key)}; {diverged[0]})."
+        where = (
+            f"(held-out free-run NRMSE {number(total)})."
+            if total is not None
+            else f"(held-out {name} NRMSE {_total(result, 'before', key)}; {diverged[0]})."
+        )
+        last = result["steps"][-1] if result["steps"] else {}
+        down, beyond = last.get("gate_turned_down") or [], last.get("not_gated") or []
+        if down:  # significant, but the simulation gate turned each down: not "no effect"
+            more = (
+                f"; {len(beyond)} more that passed were beyond gate_checks = "
+                f"{result['settings'].get('gate_checks')} and not gated"
+                if beyond
+                else ""
             )
-        ]
+            lines = [
+                "No effect added: significant in the force residual, but no gain in simulation "
+                f"on held-out data. {len(down)} candidate{'s' if len(down) > 1 else ''} passed "
+                "the F-test, the parameter test and the held-out residual check (the "
+                f"best-ranked, {down[0]}), and the simulation gate turned "
+                f"{'each' if len(down) > 1 else 'it'} down{more} {where}"
+            ]
+        else:
+            lines = [
+                "No significant effect: no candidate of the effect vocabulary passed the F-test, "
+                f"the parameter test and the held-out checks {where}"
+            ]
         if total is None or total > 0.5:
             lines.append(
                 "The baseline's free run does not follow the held-out data, so the model misses "
@@ -261,6 +278,8 @@ def _verdict(result: dict, name: str, key: str, before: dict, after: dict) -> li
         else:
             cut = ""
         lines.append(effect_sentence(added) + cut + ".")
+    # a line of its own, after the effects' sentences: the demo's is quoted in the README
+    lines.append(HELD_OUT_CHOSE_SHORT)
     if limit:
         lines.append(
             f"The loop stopped at max_effects = {max_effects}: the rest of the vocabulary was "
@@ -284,11 +303,18 @@ def _verdict(result: dict, name: str, key: str, before: dict, after: dict) -> li
     return lines
 
 
-#: said under the before/after table when an effect was added: the gate chose on these runs
+#: said under the before/after table when an effect was added: the candidates were ranked and
+#: gated on these runs
 HELD_OUT_CHOSE = (
-    "The held-out runs also chose each added effect among the best-ranked candidates (the "
-    "simulation gate), so the error after is not an independent test of it: score the fitted "
-    "vehicle on runs the loop never saw for that."
+    "The held-out runs also ranked the candidates (by the share of their force residual each "
+    "removes) and chose each added effect among the best-ranked (the simulation gate), so the "
+    "errors after, free run and force residual alike, are not an independent test of it: score "
+    "the fitted vehicle on runs the loop never saw for that."
+)
+#: the summary's line where an effect was added (the table's note says it in full)
+HELD_OUT_CHOSE_SHORT = (
+    "These held-out runs also ranked the candidates and chose the effects added, so the error "
+    "after is not an independent test of them."
 )
 
 CANDIDATE_HEAD = ["effect", "value", "± s.e.", "unit", "p (F-test)", "held-out gain", "verdict"]
