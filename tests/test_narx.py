@@ -1034,3 +1034,19 @@ def test_the_sensitivity_buffer_is_recorded_and_no_longer_than_the_windows(monke
     monkeypatch.setattr(LevenbergMarquardt, "_budget_elements", property(lambda self: budget))
     _, stage = fit()
     assert stage["peak_jacobian_elements"] <= budget < stage["peak_sensitivity_elements"]
+
+
+def test_narx_labels_a_piece_shorter_than_the_label_window_steady():
+    """A five-sample piece cut at a gap (``run#1``, ``piece_of`` set) stopped the NARX's
+    transient labels with 'too few for the Savitzky-Golay window of 21 samples', naming no
+    setting the user has: the labels' table did not carry ``piece_of``. Labelled steady."""
+    t = np.arange(400) * 0.05
+    u = np.tanh(t - 5.0) - np.tanh(t - 12.0)  # two manoeuvres between steady stretches
+    long = pd.DataFrame({"t": t, "tau_X": 0.0, "u": u, "experiment": "run#0", "piece_of": "run"})
+    short = long.iloc[:5].assign(experiment="run#1", t=t[:5] + 30.0)
+    log = pd.concat([long, short], ignore_index=True)
+    model = NarxModel(["tau_X"], ["u"])
+    model._configure()
+    with pytest.warns(UserWarning, match="5 samples in 1 piece"):
+        labels = model._labels(log)
+    assert labels[: len(long)].any() and not labels[len(long) :].any()

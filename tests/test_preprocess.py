@@ -11,7 +11,14 @@ import pytest
 
 from nnid.datasets.cleaning import CleaningReport
 from nnid.datasets.excitation import Multisine
-from nnid.datasets.log import clock_step, declare_time_unit, log_step, typical_step
+from nnid.datasets.log import (
+    POSE,
+    VELOCITY,
+    clock_step,
+    declare_time_unit,
+    log_step,
+    typical_step,
+)
 from nnid.datasets.measurement import Measurement
 from nnid.datasets.preprocess import (
     UNIFORM_TOLERANCE,
@@ -984,3 +991,81 @@ def test_a_roll_is_judged_run_by_run_where_labels_repeat():
     check_attitude(joined, vehicle, list("uvwpqr"))
     with pytest.raises(NnidInputError, match="its p in experiment 'a'"):  # a roll still is one
         check_attitude(pd.concat([a.assign(p=0.3 * np.cos(ta)), b]), vehicle, list("uvwpqr"))
+
+
+def test_lowpass_filters_each_stretch_between_gaps_on_its_own():
+    """One empty cell made filtfilt (IIR, forward and backward) turn the whole run's column
+    NaN while the report said 'zero-phase Butterworth'. Each stretch between gaps is filtered
+    on its own, one too short for filtfilt's padding is left as logged and counted, and an
+    infinite value is refused, naming its column."""
+    rng = np.random.default_rng(4)
+    t = np.arange(400) * 0.05
+    u = np.sin(t) + 0.05 * rng.standard_normal(t.size)
+    log = pd.DataFrame({"t": t, "u": u})
+    gaps = [200, 300, 305]  # 301-304: four samples, fewer than filtfilt's padding
+    log.loc[gaps, "u"] = np.nan
+    report = CleaningReport()
+    out = lowpass(log, ["u"], cutoff=2.0, report=report)["u"].to_numpy()
+    assert np.array_equal(np.flatnonzero(np.isnan(out)), gaps)
+    for a, b in [(0, 200), (201, 300), (306, 400)]:
+        alone = lowpass(log.iloc[a:b], ["u"], cutoff=2.0)["u"].to_numpy()
+        assert np.allclose(out[a:b], alone, rtol=0, atol=1e-12)
+    assert np.array_equal(out[301:305], u[301:305])
+    assert "4 samples in stretches" in report.steps[0].detail
+    with pytest.raises(NnidInputError, match="Butterworth") as err:
+        lowpass(log.assign(u=np.where(t == t[10], np.inf, u)), ["u"], cutoff=2.0)
+    assert err.value.field == "u"
+
+
+def test_resampling_counts_a_sample_alone_between_gaps_and_refuses_a_log_of_them():
+    """A piece of one sample was dropped without a word (rows_removed 0), and a log of only
+    such pieces ended in pandas' 'No objects to concatenate'."""
+    log = pd.DataFrame({"t": [0.0, 0.1, 0.2, 5.0, 10.0, 10.1, 10.2], "u": np.arange(7.0)})
+    report = CleaningReport()
+    out = resample_log(log, 10.0, gap=1.0, report=report)
+    assert report.rows_removed == 1 == len(log) - len(out)  # the grid is the samples here
+    assert "1 sample without another within 1 s" in report.steps[0].detail
+    with pytest.raises(NnidInputError, match="no run of the log has two samples") as err:
+        resample_log(log.iloc[[0, 3, 4]], 10.0, gap=1.0)
+    assert err.value.field == "gap"
+
+
+@pytest.mark.parametrize("step", ["velocities", "accelerations"])
+def test_the_derive_report_counts_samples_in_stretches_shorter_than_the_window(step):
+    """Between two empty cells five samples apart the four samples are finite, but no
+    window fits there: they were left without a derivative while the report counted only
+    the short pieces. Said now; the values are as before."""
+    t = np.arange(400) * 0.05
+    log = pd.DataFrame({c: np.sin(0.1 * (k + 1) * t) for k, c in enumerate([*POSE, *VELOCITY])})
+    log.insert(0, "t", t)
+    column = "x" if step == "velocities" else "u"
+    log.loc[[100, 105], column] = np.nan
+    report = CleaningReport()
+    if step == "velocities":
+        out = derive_velocities(log[["t", *POSE]], 0.5, report=report)["u"]
+    else:
+        out = derive_accelerations(log, 0.5, report=report)["du"]
+    window = savgol_window(0.5, 20.0, 4)
+    assert 4 < window  # the stretch 101-104 holds no window
+    assert out.iloc[101:105].isna().all() and out.iloc[106:].notna().all()
+    assert "; 4 samples in stretches between empty cells shorter than the window: none" in (
+        report.steps[-1].detail
+    )
+
+
+def test_a_gap_does_not_stop_jump_repair():
+    """An empty cell made the robust spread NaN, so no jump of the run was found or repaired.
+    The gap now stays a gap, the jump is found and mended, and the samples beside the gap
+    are not taken for jumps (their neighbours' median is a symmetric one)."""
+    rng = np.random.default_rng(3)
+    t = np.arange(0, 20, 0.05)
+    x = np.sin(t) + 0.01 * rng.standard_normal(t.size)
+    jumped = x.copy()
+    jumped[50] += 1.0
+    jumped[[300, 301, 302]] = np.nan
+    assert np.array_equal(np.flatnonzero(detect_jumps(jumped)), [50])
+    report = CleaningReport()
+    fixed = repair_jumps(pd.DataFrame({"t": t, "x": jumped}), ["x"], report=report)["x"]
+    assert np.isnan(fixed.iloc[300:303]).all()
+    assert abs(fixed.iloc[50] - x[50]) < 0.05
+    assert report.steps[0].detail.startswith("1 samples")

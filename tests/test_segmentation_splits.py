@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -273,3 +275,54 @@ def test_transient_thresholds_come_from_the_rows_given_and_every_row_is_labelled
     given = label_transients(log, rows=in_a).to_numpy()
     np.testing.assert_array_equal(given[in_a], alone)
     assert given.size == len(log) and given[~in_a].any()
+
+
+def _cut_at_gaps(log: pd.DataFrame, run: str) -> pd.DataFrame:
+    """``log`` (one run, empty cells in ``u``) as the pieces between its empty cells, each
+    ``<run>#<k>`` and marked ``piece_of`` the run, the empty rows left out."""
+    keep = log["u"].notna().to_numpy()
+    k = np.cumsum(~keep)[keep]
+    return log[keep].assign(experiment=[f"{run}#{i}" for i in k], piece_of=run)
+
+
+@pytest.mark.parametrize("gaps", [[2, 1000, 2000], [1000]], ids=["first window", "middle"])
+def test_a_gap_in_a_velocity_labels_the_run_as_its_stretches(steady_heavy_log, gaps):
+    """An empty velocity cell in a run's first window stopped the edge fit with a bare
+    ValueError; one elsewhere made the noise and the 99th percentile NaN, and the DOF never
+    labelled a transient. Away from the gaps (beyond the hold) the run now labels as the
+    pieces between its gaps label."""
+    log = steady_heavy_log[["t", "u", "experiment"]].copy()
+    log.loc[gaps, "u"] = np.nan
+    lab = label_transients(log).to_numpy()
+    pieces = _cut_at_gaps(log, "steps")
+    with warnings.catch_warnings():  # the first gap's short piece is said: another test
+        warnings.simplefilter("ignore")
+        alone = label_transients(pieces).to_numpy()
+    hold = round(0.5 / 0.05)
+    far = np.ones(len(log), dtype=bool)
+    for g in gaps:
+        far[max(0, g - hold) : g + hold + 1] = False
+    kept = log["u"].notna().to_numpy()
+    assert alone.any()
+    assert np.array_equal(lab[kept & far], alone[far[kept]])
+
+
+def test_a_piece_shorter_than_the_label_window_is_steady_and_said(steady_heavy_log):
+    """A piece of five samples cut at a gap (``run#1``, ``piece_of`` set) was refused as
+    'too few for the Savitzky-Golay window of 21 samples', naming no setting the user has:
+    it has no acceleration, is labelled steady, and the warning says how many samples."""
+    long = steady_heavy_log[["t", "u"]].assign(experiment="run#0", piece_of="run")
+    short = long.iloc[:5].assign(experiment="run#1", t=long["t"].iloc[:5] + 200.0)
+    log = pd.concat([long, short], ignore_index=True)
+    with pytest.warns(UserWarning, match=r"5 samples in 1 piece of runs cut at gaps \(.*run#1"):
+        lab = label_transients(log).to_numpy()
+    assert not lab[len(long) :].any()
+    assert np.array_equal(lab[: len(long)], label_transients(long).to_numpy())
+
+
+def test_an_assignment_key_that_is_no_part_is_refused():
+    """{"val": [...]} sent its runs to no part, without a word (an API caller's typo)."""
+    log = _two_run_log()
+    with pytest.raises(NnidInputError, match=r"\['val'\]") as err:
+        split_log(log, "experiment", assignment={"train": ["a"], "val": ["b"], "test": ["c"]})
+    assert err.value.field == "assignment"

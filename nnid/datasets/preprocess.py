@@ -240,6 +240,7 @@ def resample_log(
     # any other column that is not a number: a mode, a fault label, a flag (once dropped)
     categorical = [c for c in log.columns if c not in ("t", "experiment", *numeric, *labels)]
     pieces, rates = [], []
+    dropped_total = 0
     # a t declared in a finer unit was a number of those before it was seconds (ns since the
     # epoch are rounded to 256 ns): the samples are snapped to that rounding too
     _, per_second = TIME_UNITS.get(log.attrs.get(TIME_UNIT_ATTR), ("seconds", 1.0))
@@ -250,6 +251,9 @@ def resample_log(
         rates.append(logged)
         cuts = np.flatnonzero(np.diff(t) > gap) + 1 if gap else np.array([], int)
         bounds = np.split(np.arange(t.size), cuts)
+        # a sample alone between gaps (or a run of one) spans no interval to put a grid on
+        alone = sum(seg.size for seg in bounds if seg.size < 2)
+        dropped_total += alone
         for k, seg in enumerate(bounds):
             if seg.size < 2:
                 continue
@@ -298,8 +302,17 @@ def resample_log(
                 f"{run_label(name)}: {t.size} samples at {logged:.3g} Hz"
                 + (" over the run (its stamps in bursts)" if burst else "")
                 + f" -> uniform {rate:g} Hz"
-                + (f", split in {len(bounds)} at gaps > {gap} s" if len(bounds) > 1 else ""),
+                + (f", split in {len(bounds)} at gaps > {gap} s" if len(bounds) > 1 else "")
+                + _alone_note(alone, gap),
+                rows_removed=alone,
             )
+    if not pieces:  # pd.concat said "No objects to concatenate"
+        raise NnidInputError(
+            f"no run of the log has two samples{f' within {gap:g} s' if gap else ''}: "
+            f"each of its {dropped_total} samples is alone, and resampling needs an interval"
+            + (" (give a longer gap)" if gap else ""),
+            field="gap" if gap else "t",
+        )
     fastest, slowest = max(rates, default=rate), min(rates, default=rate)
     if fastest > RESAMPLE_RATIO * rate:  # np.interp picks samples: nothing filters first
         warnings.warn(
@@ -316,6 +329,18 @@ def resample_log(
             stacklevel=2,
         )
     return pd.concat(pieces, ignore_index=True)
+
+
+def _alone_note(samples: int, gap: float | None) -> str:
+    """The resample report's words for the ``samples`` of a run that :func:`resample_log`
+    dropped, each without another within ``gap`` s (or in a run of one)."""
+    if not samples:
+        return ""
+    within = f"within {gap:g} s" if gap else "in its run"
+    return (
+        f"; {samples} sample{'' if samples == 1 else 's'} without another {within} "
+        "(no interval to put a grid on) dropped"
+    )
 
 
 def logged_rate(t: np.ndarray, rate: float) -> tuple[float, str | None]:
@@ -657,12 +682,15 @@ def _check_window_fits(n: int, window: int, where: str, setting: str | None) -> 
         raise too_short_for_window(where, n, window, setting)
 
 
-def _refuse_infinite(log: pd.DataFrame, columns: Sequence[str], what: str) -> None:
+def _refuse_infinite(
+    log: pd.DataFrame, columns: Sequence[str], what: str, by: str = "Savitzky-Golay"
+) -> None:
     """Refuse an infinite value in ``columns`` of ``log``, or in ``t`` any value that is not a
     finite number, naming its column and row (the row's index label: the file's row for a
-    log as read): an empty cell is a gap, which a Savitzky-Golay derivative (``what``) leaves
-    out, but an inf at a run's end stopped scipy's edge fit with a message that named neither,
-    and one inside a run turned the window around it into ±inf and NaN without a word."""
+    log as read): an empty cell is a gap, which a Savitzky-Golay derivative or a low-pass
+    filter (``what``, ``by`` the filter) leaves out, but an inf at a run's end stopped scipy's
+    edge fit with a message that named neither, and one inside a run turned the window
+    around it into ±inf and NaN without a word."""
     for col in columns:
         values = log[col].to_numpy(np.float64)
         bad = ~np.isfinite(values) if col == "t" else np.isinf(values)
@@ -671,7 +699,7 @@ def _refuse_infinite(log: pd.DataFrame, columns: Sequence[str], what: str) -> No
             col,
             bad,
             None,
-            f"is not a finite number, which {what} by Savitzky-Golay needs"
+            f"is not a finite number, which {what} by {by} needs"
             + ("" if col == "t" else "; an empty cell would be a gap, left out"),
             labels=True,
         )
@@ -904,7 +932,7 @@ def derive_velocities(
     _refuse_infinite(log, ["t", *have], "deriving velocities from the pose")
     out = unwrap_angles(log)
     new = {c: np.full(len(out), np.nan) for c in VELOCITY}
-    tilted = short = 0
+    tilted = short = stretches = 0
     # each column read once and each run's rows taken by position: looking a run's labels up
     # in the whole log cost rows × runs, and a label repeated (pd.concat) read another run
     column = {c: out[c].to_numpy(np.float64) for c in ("t", *have)}
@@ -933,6 +961,7 @@ def derive_velocities(
             )
             for c in have
         }
+        stretches += without_derivative([column[c][pos] for c in have], list(rates.values()))
         # a run's rows in one stretch (ascending positions) as a view: no copy of its matrices
         rows = slice(pos[0], pos[-1] + 1) if pos[-1] - pos[0] + 1 == pos.size else pos
         dphi, dth, dpsi = rates["phi"], rates["theta"], rates["psi"]
@@ -963,7 +992,8 @@ def derive_velocities(
         report.add(
             "derive velocities",
             f"{', '.join(made)} from pose by Savitzky-Golay "
-            f"(order {order}, {window_s:g} s window) and J⁻¹(η){approx}{short_pieces_note(short)}",
+            f"(order {order}, {window_s:g} s window) and J⁻¹(η){approx}"
+            + short_pieces_note(short, stretches),
             columns=made,
         )
     return out
@@ -980,11 +1010,24 @@ def short_piece(log: pd.DataFrame, rows: np.ndarray, window: int) -> bool:
     return len(rows) < window and PIECE_OF in log and bool(log[PIECE_OF].iloc[rows].notna().all())
 
 
-def short_pieces_note(samples: int) -> str:
-    """The cleaning report's words for the samples :func:`short_piece` left without one."""
-    if not samples:
-        return ""
-    return f"; {samples} samples in pieces between gaps shorter than the window: none there"
+def short_pieces_note(samples: int, stretches: int = 0) -> str:
+    """The cleaning report's words for the samples :func:`short_piece` left without one, and
+    for the ``stretches`` samples (:func:`without_derivative`) that a stretch between empty
+    cells of a run, shorter than the window, left without one."""
+    note = f"; {samples} samples in pieces between gaps shorter than the window" if samples else ""
+    if stretches:
+        note += f"; {stretches} samples in stretches between empty cells shorter than the window"
+    return f"{note}: none there" if note else ""
+
+
+def without_derivative(values: Sequence[np.ndarray], derived: Sequence[np.ndarray]) -> int:
+    """How many samples (rows) hold a value in one of the columns ``values`` whose
+    Savitzky-Golay derivative (``derived``, the same columns) :func:`savgol_derivative` left
+    empty: those of a stretch between gaps shorter than the window."""
+    if not values:
+        return 0
+    left = np.isfinite(np.column_stack(values)) & np.isnan(np.column_stack(derived))
+    return int(left.any(axis=1).sum())
 
 
 def _held_steps(log: pd.DataFrame, pos: np.ndarray, held: list[str]) -> np.ndarray | None:
@@ -1065,7 +1108,7 @@ def derive_accelerations(
     _refuse_infinite(log, ["t", *cols], "deriving accelerations from the velocities")
     out = log.copy()
     held = held_inputs(log) if cut_at_steps else []
-    short = cuts = 0
+    short = cuts = stretches = 0
     # each run's rows by position: a run's labels may repeat another's (pd.concat)
     velocity = {c: out[c].to_numpy(np.float64) for c in cols}
     derived = {c: np.full(len(out), np.nan) for c in cols}
@@ -1085,6 +1128,9 @@ def derive_accelerations(
                 setting=setting,
                 steps=steps,
             )
+        stretches += without_derivative(
+            [velocity[c][pos] for c in cols], [derived[c][pos] for c in cols]
+        )
     if warn_uneven:
         uneven_runs(out, "the Savitzky-Golay derivative")
     for c in cols:
@@ -1095,7 +1141,7 @@ def derive_accelerations(
             "derive accelerations",
             f"d{', d'.join(cols)} by Savitzky-Golay (order {order}, {window_s:g} s window)"
             + cut
-            + short_pieces_note(short),
+            + short_pieces_note(short, stretches),
             columns=["d" + c for c in cols],
         )
     return out
@@ -1116,12 +1162,16 @@ def lowpass(
     filter steps sample by sample, so a run whose stamps come in bursts (an IMU's ten
     samples together every 10 ms) is refused (:func:`refuse_bursts`), and one whose steps
     are not one step (dropped samples, jitter) is warned of (:func:`uneven_runs`): resample
-    it first (:func:`resample_log`)."""
+    it first (:func:`resample_log`). An empty cell is a gap: each stretch between gaps is
+    filtered on its own (an IIR filter run across one turned the whole run's column NaN),
+    one too short for the filter's padding is left as logged and counted in the report."""
+    _refuse_infinite(log, ["t", *columns], "low-pass filtering", by="a Butterworth filter")
     out = log.copy()
     t_all = out["t"].to_numpy(np.float64)
     # each run's rows by position: a run's labels may repeat another's (pd.concat)
     values = {c: out[c].to_numpy(np.float64, copy=True) for c in columns}
     need = 3 * (order + 1)  # filtfilt's padding: three times the filter's order + 1 taps
+    unfiltered = 0  # samples in stretches between gaps too short for the padding
     for name, pos in experiment_rows(out):
         t = t_all[pos]
         if len(t) <= need:  # before the rate: a run of one sample has no step to read it by
@@ -1138,16 +1188,26 @@ def lowpass(
             )
         b, a = butter(order, cutoff, fs=rate)
         for c in columns:
-            values[c][pos] = filtfilt(b, a, values[c][pos])
+            y = values[c][pos]
+            for lo, hi in true_runs(np.isfinite(y)):  # a run without a gap: one stretch
+                if hi - lo <= need:
+                    unfiltered += hi - lo
+                else:
+                    y[lo:hi] = filtfilt(b, a, y[lo:hi])
+            values[c][pos] = y
     uneven_runs(out, "the low-pass filter (designed at its rate)")
     for c in columns:
         out[c] = values[c]
     if report is not None:
-        report.add(
-            "low-pass",
-            f"{', '.join(columns)}: zero-phase Butterworth order {order}, {cutoff:g} Hz",
-            columns=columns,
-        )
+        detail = f"{', '.join(columns)}: zero-phase Butterworth order {order}, {cutoff:g} Hz"
+        if any(np.isnan(values[c]).any() for c in columns):
+            detail += "; each stretch between gaps (empty cells) on its own"
+        if unfiltered:
+            detail += (
+                f", {unfiltered} samples in stretches of {need} samples or fewer (too few for "
+                "the filter's padding) left unfiltered"
+            )
+        report.add("low-pass", detail, columns=columns)
     return out
 
 
@@ -1156,20 +1216,36 @@ def detect_jumps(
 ) -> np.ndarray:
     """Samples that jump away from the median of their neighbours (the sample itself left
     out) by more than ``threshold`` robust standard deviations and ``min_jump``: motion-capture
-    occlusions and glitches (Weiss V.A.2)."""
+    occlusions and glitches (Weiss V.A.2). An empty cell (a gap) is never one, and is left
+    out of its neighbours' medians and of the robust spread (it made the spread NaN, and no
+    sample of the run was found). The ends are padded with the end sample (``mode="edge"``)."""
+    y = np.asarray(y, dtype=np.float64)
     half = kernel // 2
-    padded = np.pad(np.asarray(y, dtype=np.float64), half, mode="edge")
+    padded = np.pad(y, half, mode="edge")
     windows = np.lib.stride_tricks.sliding_window_view(padded, 2 * half + 1)
     neighbours = np.delete(windows, half, axis=1)
-    resid = y - np.median(neighbours, axis=1)
-    sigma = median_abs_deviation(resid, scale="normal") + 1e-12
+    reference = np.median(neighbours, axis=1)
+    # beside a gap the neighbour opposite each empty one is left out too: a median of the
+    # others, all on one side, is a sample off the trend (a jump on any slope); elsewhere
+    # np.median's numbers as before
+    gapped = np.isnan(neighbours) | np.isnan(neighbours[:, ::-1])
+    if gapped.any():
+        some = gapped.any(axis=1) & ~gapped.all(axis=1)
+        reference[some] = np.nanmedian(np.where(gapped, np.nan, neighbours)[some], axis=1)
+    resid = y - reference
+    measured = ~np.isnan(resid)  # an inf is a jump, repaired as before
+    if not measured.any():
+        return np.zeros(y.shape, dtype=bool)
+    sigma = median_abs_deviation(resid[measured], scale="normal") + 1e-12
     size = np.abs(resid)
     # a big jump also nudges its neighbours' reference; keep only samples that carry at least
-    # half the largest residual around them (a multi-frame occlusion keeps all its frames)
+    # half the largest residual around them (a multi-frame occlusion keeps all its frames);
+    # an empty cell counts as no residual there, not as NaN that no sample beside it beats
+    near = np.where(measured, size, 0.0)
     local_max = np.max(
-        np.lib.stride_tricks.sliding_window_view(np.pad(size, half, mode="edge"), kernel), axis=1
+        np.lib.stride_tricks.sliding_window_view(np.pad(near, half, mode="edge"), kernel), axis=1
     )
-    return (size > threshold * sigma) & (size > min_jump) & (size >= 0.5 * local_max)
+    return measured & (size > threshold * sigma) & (size > min_jump) & (size >= 0.5 * local_max)
 
 
 def repair_jumps(
@@ -1192,8 +1268,9 @@ def repair_jumps(
         for c in columns:
             y = values[c][pos]
             bad = detect_jumps(y, kernel, threshold, min_jump)
-            if bad.any() and (~bad).sum() >= 2:
-                y[bad] = np.interp(t[bad], t[~bad], y[~bad])
+            good = ~bad & np.isfinite(y)  # an empty cell is no neighbour to interpolate from
+            if bad.any() and good.sum() >= 2:
+                y[bad] = np.interp(t[bad], t[good], y[good])
                 values[c][pos] = y
                 repaired.add(c)
                 total += int(bad.sum())

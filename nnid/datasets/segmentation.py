@@ -16,18 +16,20 @@ The rule that labels a sample *transient*, per DOF and experiment:
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pandas as pd
 from scipy.ndimage import binary_dilation
 from scipy.stats import median_abs_deviation
 
-from nnid.datasets.log import VELOCITY, typical_step
+from nnid.datasets.log import VELOCITY, run_label, typical_step
 from nnid.datasets.preprocess import (
     experiment_rows,
     run_window,
     savgol_derivative,
-    savgol_interp,
     savgol_noise_gain,
+    short_piece,
     uneven_runs,
 )
 
@@ -36,31 +38,59 @@ def accelerations_with_noise(
     log: pd.DataFrame, window_s: float = 1.0, order: int = 3, rows: np.ndarray | None = None
 ) -> tuple[pd.DataFrame, dict[str, float]]:
     """Body accelerations per DOF present, and the noise level of each (see module rule),
-    measured on ``rows`` (a boolean mask; all by default)."""
+    measured on ``rows`` (a boolean mask; all by default). An empty cell is a gap: the
+    derivative and the noise are taken from the stretches between gaps (the first or last
+    window of a run stopped the edge fit with a bare ValueError, elsewhere the noise went
+    NaN), and a piece of a run cut at a gap shorter than the window (:func:`short_piece`)
+    gets none, said in a warning."""
     acc, noise = {}, {}
     rows = np.ones(len(log), dtype=bool) if rows is None else np.asarray(rows, dtype=bool)
+    t_all = log["t"].to_numpy(np.float64)
+    short: dict[object, int] = {}  # the pieces shorter than the window: their samples
     for c in VELOCITY:
         if c in log:
-            col, sig = np.empty(len(log)), []
+            col, sig = np.full(len(log), np.nan), []
+            values = log[c].to_numpy(np.float64)
             for name, pos in experiment_rows(log):
-                v = log[c].to_numpy(np.float64)[pos]
-                dt, w = run_window(log["t"].to_numpy(np.float64)[pos], window_s, order, name)
+                v = values[pos]
+                dt, w = run_window(t_all[pos], window_s, order, name)
+                if short_piece(log, pos, w):
+                    short[name] = len(pos)
+                    continue
                 col[pos] = savgol_derivative(v, dt, w, order, where=f"experiment {name!r}")
                 if not rows[pos].any():
                     continue
-                resid = (v - savgol_interp(v, w, order, 0, 1.0))[rows[pos]]
-                sigma_v = median_abs_deviation(resid, scale="normal")
-                sig.append(sigma_v * savgol_noise_gain(w, order, dt))
-            acc[c], noise[c] = col, float(np.median(sig))
+                # the fit of each stretch between gaps (deriv 0): a log without one, as before
+                fit = savgol_derivative(v, 1.0, w, order, deriv=0, where=f"experiment {name!r}")
+                resid = (v - fit)[rows[pos]]
+                resid = resid[np.isfinite(resid)]  # a gap, or a stretch shorter than w
+                if resid.size:
+                    sigma_v = median_abs_deviation(resid, scale="normal")
+                    sig.append(sigma_v * savgol_noise_gain(w, order, dt))
+            acc[c], noise[c] = col, float(np.median(sig)) if sig else np.nan
         elif "d" + c in log:
             a = log["d" + c].to_numpy(np.float64)
             acc[c] = a
             steps = np.diff(a)[rows[1:] & rows[:-1]]  # a step of two measured rows
-            noise[c] = float(median_abs_deviation(steps, scale="normal") / np.sqrt(2))
+            steps = steps[np.isfinite(steps)]  # not one into or out of a gap
+            noise[c] = (
+                float(median_abs_deviation(steps, scale="normal") / np.sqrt(2))
+                if steps.size
+                else np.nan
+            )
     if not acc:
         raise ValueError("labelling transients needs body velocities or accelerations")
     if any(c in log for c in VELOCITY):
         uneven_runs(log, "the Savitzky-Golay derivative")
+    if short:
+        named = ", ".join(run_label(n) for n in list(short)[:3]) + (", …" if len(short) > 3 else "")
+        warnings.warn(
+            f"{sum(short.values())} samples in {len(short)} piece"
+            f"{'' if len(short) == 1 else 's'} of runs cut at gaps ({named}) shorter than the "
+            f"Savitzky-Golay window of {window_s:g} s that labels transients: no acceleration "
+            "there, labelled steady",
+            stacklevel=3,
+        )
     return pd.DataFrame(acc, index=log.index), noise
 
 
@@ -73,13 +103,18 @@ def label_transients(
 ) -> pd.Series:
     """Boolean Series, True where the sample is transient (rule in the module docstring).
     ``rows`` (a boolean mask; all by default): the rows whose manoeuvre scales and noise
-    levels set the thresholds, e.g. a random division's training rows; every row is labelled."""
+    levels set the thresholds, e.g. a random division's training rows; every row is labelled.
+    A sample without an acceleration (a gap, a stretch or piece shorter than the window) is
+    steady, and the scales and noise levels are read from the samples with one."""
     acc, noise = accelerations_with_noise(log, window_s, rows=rows)
     fit = slice(None) if rows is None else np.asarray(rows, dtype=bool)
     labels = np.zeros(len(log), dtype=bool)
     for c in acc.columns:
         a = np.abs(acc[c].to_numpy())
-        scale = np.percentile(a[fit], 99)
+        known = a[fit][np.isfinite(a[fit])]  # a log without a gap: every sample, as before
+        if not known.size or not np.isfinite(noise[c]):
+            continue  # a DOF with no acceleration to read a scale or noise from
+        scale = np.percentile(known, 99)
         if scale <= 3 * noise[c]:
             continue  # a DOF that never moves beyond its noise
         labels |= a > max(rel * scale, 3 * noise[c])

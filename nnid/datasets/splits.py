@@ -69,6 +69,14 @@ def split_log(
     elif by == "experiment":
         names = [name for name, _ in groups]
         if assignment is not None:
+            # a key not a part ("val") held runs that went to no part, without a word
+            extra = sorted(map(str, set(assignment) - set(PARTS)))
+            if extra:
+                raise NnidInputError(
+                    f"assignment names {extra}, not parts of a split: the parts are "
+                    f"{', '.join(PARTS)}",
+                    field="assignment",
+                )
             unknown = sorted(set().union(*assignment.values()) - set(names))
             if unknown:
                 raise NnidInputError(

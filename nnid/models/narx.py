@@ -71,7 +71,7 @@ from torch import nn
 from torch.func import functional_call
 from torch.nn.utils import parameters_to_vector
 
-from nnid.datasets.log import VELOCITY
+from nnid.datasets.log import PIECE_OF, VELOCITY
 from nnid.datasets.preprocess import experiment_rows
 from nnid.datasets.segmentation import BalancedSampler, label_transients, run_bounds
 from nnid.datasets.splits import split_log
@@ -594,6 +594,8 @@ class NarxModel(InputOutputModel):
         tmp["t"] = log["t"].to_numpy(np.float64) if "t" in log else np.arange(len(log), dtype=float)
         if "experiment" in log:
             tmp["experiment"] = log["experiment"].to_numpy()
+        if PIECE_OF in log:  # a piece cut at a gap, shorter than the window, is labelled steady
+            tmp[PIECE_OF] = log[PIECE_OF].to_numpy()
         return label_transients(tmp, rows=rows).to_numpy()
 
     # -- torch pieces ----------------------------------------------------------------------------
