@@ -128,9 +128,17 @@ def test_a_batch_whose_loss_is_not_finite_takes_no_step_and_the_fit_goes_on():
 
     hist = Adam(lr=0.05, max_epochs=5).fit(module, run, epoch, [("ok", val[0])])
     assert hist.stop_reason == "max_epochs" and hist.info["skipped_batches"] == 1
-    assert math.isnan(hist.train[1])  # the epoch's objective was not finite: recorded so
+    assert math.isfinite(hist.train[1])  # the error of the batches that were measured
     assert bool(torch.isfinite(module.weight).all())
     assert hist.best_epoch == 5 and hist.validation[-1] < hist.validation[0]
+    # without validation the training error is the stopping score: a NaN there (the skipped
+    # batch counted in) never read as a best epoch, and the fit went back to its start
+    module, residual, train, val = _problem()
+    start = module.weight.detach().clone()
+    diverging = [("diverged", train[0]), *[("ok", b) for b in train]]
+    hist = Adam(lr=0.05, max_epochs=5).fit(module, run, diverging, None)
+    assert hist.info["skipped_batches"] == 5 and hist.best_epoch == 5
+    assert not torch.equal(module.weight.detach(), start)
     # an epoch none of whose batches can step ends the fit, its start kept
     module, residual, train, val = _problem()
     start = module.weight.detach().clone()

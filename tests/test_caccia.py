@@ -619,3 +619,22 @@ def test_force_to_commands_inverts_a_thrust_curve_that_turns_near_zero():
     assert abs(tiny[0, 2] - 0.01) < 0.03  # within half the curve's gap of the design
     with pytest.raises(NnidInputError, match=r"thruster 'VS' for [\d.]+ N.*reaches"):
         force_to_commands(vehicle, "w", np.array([0.0, 150.0]))
+
+
+def test_a_thrust_curve_of_another_shape_is_not_inverted_on_the_wrong_branches():
+    """The inversion beyond a dip keeps the commands from each limit inwards while the thrust
+    rises: right for sign(c)·g(|c|) dipping around 0 (Weiss eq. 10), wrong for a curve that
+    rolls over at its limits (each branch was the limit alone: the rising middle thrown away)
+    or a table with a dip away from 0 (thrusts no longer rising: wrong commands, unsaid).
+    Neither is inverted."""
+    from nnid.trainers.caccia import _monotone_branch
+
+    grid = np.linspace(-10.0, 10.0, 2001)
+    rolls_over = lambda c: 4.0 * c - 0.3 * c * np.abs(c) * np.abs(c) / 10.0  # noqa: E731
+    assert np.any(np.diff(rolls_over(grid)) < 0)
+    assert _monotone_branch(grid, rolls_over) is None
+    dips_away = lambda c: np.interp(c, [-10, 0, 4, 5, 10], [-10, 0, 4, 3.5, 10])  # noqa: E731
+    assert _monotone_branch(grid, dips_away) is None
+    weiss = lambda c: np.sign(c) * (0.0684 - 0.03366 * np.abs(c) + 0.006736 * c * c)  # noqa: E731
+    cmds, thrust = _monotone_branch(grid, weiss)
+    assert np.all(np.diff(thrust) >= 0) and cmds[0] == -10.0 and cmds[-1] == 10.0

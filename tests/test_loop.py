@@ -901,6 +901,11 @@ def test_force_rmse_takes_a_dofs_residual_and_force_over_the_same_rows():
     out = force_rmse(r, tau, ("u", "r"))
     assert out["u"] == pytest.approx(1.0) and out["total"] == pytest.approx(0.1)
     assert out["r"] == 0.0  # no input in yaw: its residual is said, not in the total
+    # a force only where the residual is missing: no ratio (it divided by 0)
+    tau[:, 1] = np.r_[np.zeros(100), np.full(100, 3.0)]
+    r[:100, 1] = 0.5
+    out = force_rmse(r, tau, ("u", "v"))
+    assert out["v"] == pytest.approx(0.5) and out["total"] == pytest.approx(0.1)
 
 
 @pytest.mark.parametrize(

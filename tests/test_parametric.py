@@ -1977,3 +1977,31 @@ def test_each_dof_equation_is_widened_by_its_own_correlation_time(weighting):
     ]
     both = ls.solve(_two_equations(yx, yz, x, z))
     np.testing.assert_allclose(both.stderr, alone, rtol=0.01)
+
+
+def test_the_widening_by_equation_is_the_sandwich_over_every_fitted_parameter():
+    """Feasible weighting's per-equation widening read the block of the covariance that was
+    not voided; a collinear pair was fitted too (the pseudo-inverse over all three), so that
+    block times ΦᵀWTΦ over it alone was no sandwich. The widened covariance is
+    σ̂² A⁺ ΦᵀWTΦ A⁺ over every fitted parameter, voided again where the fit voided it."""
+    from nnid.trainers.least_squares import scaled_pinv, widen_by_equation
+
+    rng = np.random.default_rng(3)
+    n, m = 500, 2
+    a, b = rng.normal(size=(2, n * m))
+    phi = np.stack([a + 0.8 * b, b, b], 1)  # the second and third collinear, the first not
+    w = np.tile([1.0, 4.0], n)
+    times = np.array([5.0, 1.0])
+    theta = np.array([1.0, 0.5, 0.5])
+    inv = scaled_pinv((phi * w[:, None]).T @ phi)
+    cov = 2.0 * inv
+    cov[1:, :] = cov[:, 1:] = np.nan  # the collinear pair, voided as the fit voids it
+    wide = widen_by_equation(cov, phi, w, m, times, theta, 2.0)
+    tau = np.tile(times, n)
+    sandwich = 2.0 * inv @ ((phi * (w * tau)[:, None]).T @ phi) @ inv
+    assert wide[0, 0] == pytest.approx(sandwich[0, 0], rel=1e-10)
+    assert np.isnan(wide[1:, :]).all() and np.isnan(wide[:, 1:]).all()
+    # the block alone (the earlier rule) is not it
+    block = cov[:1, :1] @ ((phi[:, :1] * (w * tau)[:, None]).T @ phi[:, :1])
+    block = block @ np.linalg.inv((phi[:, :1] * w[:, None]).T @ phi[:, :1])
+    assert abs(block[0, 0] - sandwich[0, 0]) > 1e-3 * sandwich[0, 0]

@@ -1239,7 +1239,9 @@ def test_an_address_where_no_ray_answers_is_refused_naming_it(sweep_inputs, tmp_
     plain.write_text(config.read_text().replace("[sweep]\n", "[sweep]\nearly_stopping = false\n"))
     with pytest.raises(NnidInputError) as info:
         run_sweep_tune(plain, tmp_path / "s", "auto", data=str(data))
-    assert info.value.field == "--address" and "no Ray cluster" in str(info.value)
+    assert info.value.field == "--address" and "Ray could not start or connect at 'auto'" in str(
+        info.value
+    )
 
 
 @needs_ray

@@ -671,8 +671,9 @@ def _none_named(out: Diagnosis, posterior: float) -> None:
     """A diagnosis that names no hypothesis (none significant, or the best leaves more than
     :func:`allowed_ratio`): no confidence (None, not measured: it read the best rejected
     hypothesis' posterior among hypotheses none of which was found to be the change, "0.77"
-    of one not significant, or 0 where that was 1.00); the best fit's ``posterior`` is said
-    first among the alternatives."""
+    of one not significant, or 0 where that was 1.00); the posterior of the hypothesis it
+    fitted (``out.hypothesis``: the one the fit chose, by priority among those the data cannot
+    tell apart, not always the highest posterior) is said first among the alternatives."""
     out.confidence = None
     out.alternatives = [{"hypothesis": out.hypothesis, "posterior": posterior},
                         *out.alternatives][:5]  # fmt: skip

@@ -976,7 +976,7 @@ def force_rmse(r: np.ndarray, tau: np.ndarray, dofs: tuple[str, ...]) -> dict[st
             continue
         rows = np.isfinite(r[:, i]) & np.isfinite(tau[:, i])
         out[d] = rmse(np.zeros(rows.sum()), r[rows, i])
-        if np.any(tau[:, i]):
+        if np.any(tau[rows, i]):  # on the rows the ratio reads: elsewhere it divides by 0
             rel.append(out[d] / rmse(np.zeros(rows.sum()), tau[rows, i]))
     out["total"] = exact_mean(rel) if rel else float("nan")
     return out

@@ -204,8 +204,8 @@ def detect_html(
             "confidence": "posterior weight of the named hypothesis and of those the "
             "data cannot tell from it; - where none is named (none explains the change "
             "significantly, or the best leaves more than twice the healthy noise power: "
-            "unexplained by the hypotheses; the best fit's posterior is then the first of "
-            "its evidence below), or the alarm was not judged (too few samples in its "
+            "unexplained by the hypotheses; the fitted hypothesis' posterior is then the "
+            "first of its evidence below), or the alarm was not judged (too few samples in its "
             "window: no hypothesis was fitted)",
         }
         if repeats:
@@ -219,7 +219,7 @@ def detect_html(
         out.append("<h2>Isolation evidence</h2>")
         for a in result.alarms:
             rows = [[h["hypothesis"], f"{h['posterior']:.3g}"] for h in a.get("alternatives", [])]
-            # no confidence: none named, and the best fit heads the list (isolation's
+            # no confidence: none named, and the fitted hypothesis heads the list (isolation's
             # _none_named), or none was fitted and the list is empty
             which = "hypotheses fitted" if missing(a["confidence"]) else "next hypotheses"
             out.append(

@@ -315,9 +315,11 @@ def ray_init(ray, address: str | None, num_cpus: int | None = None, **kwargs: An
     except (ConnectionError, RuntimeError, ValueError) as exc:
         first = str(exc).strip().splitlines()
         raise NnidInputError(
-            f"no Ray cluster reached at '{address}' ({first[0] if first else type(exc).__name__})"
-            ": start one (ray start --head), give its address, 'local' for a new one here, or "
-            "leave out --address to run on local processes",
+            f"Ray could not start or connect at "
+            f"{'a new local Ray' if address in (None, LOCAL_RAY) else repr(address)} "
+            f"({first[0] if first else type(exc).__name__}): start a cluster (ray start "
+            "--head) and give its address, 'local' for a new one here, or leave out --address "
+            "to run on local processes",
             field="--address",
         ) from None
 

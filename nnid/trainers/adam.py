@@ -172,6 +172,13 @@ class Adam(BaseEstimator):
                 opt.zero_grad(set_to_none=True)
                 r = residual(params, batch)
                 loss = (r**2).mean()
+                # a non-finite loss (a segment that diverged) or gradient takes no step: its
+                # NaN, through clipping and Adam's moments, broke every weight at once. Nor is
+                # it in the epoch's recorded error: a NaN there, without validation, was the
+                # stopping score (inf), and the fit went back to its start
+                if not math.isfinite(float(loss.detach())):
+                    skipped += 1
+                    continue
                 if recorded is None:
                     total += float(loss.detach()) * r.numel()
                     count += r.numel()
@@ -179,11 +186,6 @@ class Adam(BaseEstimator):
                     part = recorded(r.detach(), batch)
                     total += float((part**2).sum())
                     count += part.numel()
-                # a non-finite loss (a segment that diverged) or gradient takes no step: its
-                # NaN, through clipping and Adam's moments, broke every weight at once
-                if not math.isfinite(float(loss.detach())):
-                    skipped += 1
-                    continue
                 loss.backward()
                 if not _finite_gradient(params.values(), self.clip):
                     skipped += 1
@@ -194,7 +196,8 @@ class Adam(BaseEstimator):
                     with torch.no_grad():
                         for k, p in params.items():
                             avg[k].lerp_(p.detach(), 1.0 - self.average)
-            train = total / max(count, 1)
+            # the batches whose error was measured; NaN where none was
+            train = total / count if count else math.nan
             if skipped:
                 hist.info["skipped_batches"] = hist.info.get("skipped_batches", 0) + skipped
             score = mean_square(val_batches, kept()) if val_batches else None

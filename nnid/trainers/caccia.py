@@ -473,7 +473,16 @@ def force_to_commands(vehicle, dof: str, force: np.ndarray) -> np.ndarray:
             continue
         lo = -1e3 if thruster.cmd_min is None else thruster.cmd_min
         hi = 1e3 if thruster.cmd_max is None else thruster.cmd_max
-        grid, thrust = _monotone_branch(np.linspace(lo, hi, _GRID), curve)
+        branches = _monotone_branch(np.linspace(lo, hi, _GRID), curve)
+        if branches is None:
+            raise NnidInputError(
+                f"the thrust curve of thruster '{thruster.name}' is not monotone over commands "
+                f"{lo:g} to {hi:g}, and not of the shape sign(c)·g(|c|) whose dip around 0 "
+                "the design can fly beyond (Weiss eq. 10): give a curve that rises with the "
+                "command, or command limits inside its rising part",
+                field="thrusters",
+            )
+        grid, thrust = branches
         asked = share[j] * force
         beyond = (asked < thrust[0]) | (asked > thrust[-1])
         if beyond.any():
@@ -513,22 +522,28 @@ def force_to_commands(vehicle, dof: str, force: np.ndarray) -> np.ndarray:
 _GRID = 200_001
 
 
-def _monotone_branch(grid: np.ndarray, curve) -> tuple[np.ndarray, np.ndarray]:
+def _monotone_branch(grid: np.ndarray, curve) -> tuple[np.ndarray, np.ndarray] | None:
     """The commands of ``grid`` (ascending) on which ``curve`` is inverted, and their thrusts
     (non-decreasing): from each end of the grid inwards while the thrust keeps rising, and the
     command 0 between them where its thrust lies between the two branches' (a curve
-    sign(c)·g(|c|) makes 0 there). A monotone curve is all of its grid."""
+    sign(c)·g(|c|) makes 0 there). A monotone curve is all of its grid. None for a curve of
+    another shape: one whose falls do not lie between a negative and a positive rising branch
+    (a curve that rolls over at its limits would keep only the limits), or whose branches
+    together do not rise (a table with a dip away from 0)."""
     thrust = curve(grid)
     falls = np.flatnonzero(np.diff(thrust) < 0)
     if not falls.size:
         return grid, thrust
     low, high = slice(0, falls[0] + 1), slice(falls[-1] + 1, grid.size)
+    if grid[low].size < 2 or grid[high].size < 2 or not grid[low][-1] < 0.0 < grid[high][0]:
+        return None
     cmds, made = [grid[low]], [thrust[low]]
     zero = float(curve(np.zeros(1))[0])
-    if grid[low][-1] < 0.0 < grid[high][0] and thrust[low][-1] <= zero <= thrust[high][0]:
+    if thrust[low][-1] <= zero <= thrust[high][0]:
         cmds.append(np.zeros(1))
         made.append(np.array([zero]))
-    return np.concatenate([*cmds, grid[high]]), np.concatenate([*made, thrust[high]])
+    cmds, made = np.concatenate([*cmds, grid[high]]), np.concatenate([*made, thrust[high]])
+    return (cmds, made) if np.all(np.diff(made) >= 0) else None
 
 
 # --- the trainer -----------------------------------------------------------------------------

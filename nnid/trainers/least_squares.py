@@ -288,9 +288,7 @@ def solve_least_squares(
         warnings.warn("; ".join(report.warnings), ExcitationWarning, stacklevel=2)
         live = np.array([nm not in report.unexcited for nm in names])
     g = gram[np.ix_(live, live)]
-    scale = np.sqrt(np.diag(g))
-    scale[scale == 0] = 1.0
-    inv = np.linalg.pinv(g / np.outer(scale, scale), hermitian=True) / np.outer(scale, scale)
+    inv = scaled_pinv(g)
     theta = np.full(p, np.nan)
     theta[live] = inv @ rhs[live]
     # rᵀWr = yᵀWy − 2θᵀΦᵀWy + θᵀΦᵀWΦθ, three terms of size yᵀWy: below a few ulps of it the
@@ -318,6 +316,14 @@ def solve_least_squares(
     cov = np.full((p, p), np.nan)
     cov[np.ix_(live, live)] = sigma2 * inv
     return Estimate(names, theta, void_undetermined(cov, names, report), sigma2, fitted, report)
+
+
+def scaled_pinv(gram: np.ndarray) -> np.ndarray:
+    """The pseudo-inverse of a Gram matrix ΦᵀWΦ through its column-scaled form (columns of
+    N and of N m, or of 1e-3 and 1e3, no longer set its conditioning)."""
+    scale = np.sqrt(np.diag(gram))
+    scale[scale == 0] = 1.0
+    return np.linalg.pinv(gram / np.outer(scale, scale), hermitian=True) / np.outer(scale, scale)
 
 
 def solve_regression(
@@ -468,7 +474,9 @@ class LeastSquares(BaseEstimator):
             )
             est.cov = void_undetermined(cov, reg.names, est.excitation)
         elif self.weighting == "feasible" and m > 1:
-            est.cov = widen_by_equation(est.cov, reg.phi, np.where(ok, w, 0.0), m, times)
+            est.cov = widen_by_equation(
+                est.cov, reg.phi, np.where(ok, w, 0.0), m, times, est.theta, est.sigma2
+            )
         else:  # one equation, or a pooled σ̂² of several with no variance of their own
             est.cov = est.cov * float(np.mean(times))
         return est
@@ -590,26 +598,35 @@ def equation_times(residuals: np.ndarray | Sequence[np.ndarray], max_lag: int = 
 
 
 def widen_by_equation(
-    cov: np.ndarray, phi: np.ndarray, w: np.ndarray, m: int, times: np.ndarray
+    cov: np.ndarray,
+    phi: np.ndarray,
+    w: np.ndarray,
+    m: int,
+    times: np.ndarray,
+    theta: np.ndarray,
+    sigma2: float,
 ) -> np.ndarray:
-    """The covariance ``cov`` = σ̂² (ΦᵀWΦ)⁻¹ of a least squares of ``m`` interleaved
-    equations weighted ``w`` (row i is equation i mod m; feasible weighting's 1/σ̂_k²), with
-    each equation's residual variance σ̂²/w_k widened by its own correlation time τ_k: the
-    sandwich A⁻¹ ΦᵀW Σ WΦ A⁻¹ with Σ = σ̂² T W⁻¹, i.e. cov (ΦᵀWTΦ) A⁻¹, A = ΦᵀWΦ and T
-    each row's τ_k; τ·cov where the τ_k are equal. Voided (NaN) parameters stay voided."""
+    """The covariance ``cov`` = σ̂² (ΦᵀWΦ)⁺ of a least squares of ``m`` interleaved
+    equations weighted ``w`` (row i is equation i mod m; feasible weighting's 1/σ̂_k²; ``theta``
+    its estimate, NaN where not fitted; ``sigma2`` its σ̂²), with each equation's residual
+    variance σ̂²/w_k widened by its own correlation time τ_k: the sandwich
+    σ̂² A⁺ ΦᵀWTΦ A⁺, A = ΦᵀWΦ and T each row's τ_k, over every fitted parameter (a collinear
+    one ``cov`` voided was fitted too: left out, the rest's block was no sandwich), then voided
+    again where ``cov`` is; τ·cov where the τ_k are equal."""
     times = np.asarray(times, dtype=np.float64)
     if np.all(times == times[0]):
         return cov * float(times[0])
-    live = np.isfinite(np.diag(cov))
+    live = np.isfinite(theta)
     rows = np.isfinite(phi[:, live]).all(1) & (w > 0)
     p, wr = phi[rows][:, live], w[rows]
     tau = np.tile(times, phi.shape[0] // m)[rows]
-    gram = (p * wr[:, None]).T @ p
-    meat = (p * (wr * tau)[:, None]).T @ p
-    c = cov[np.ix_(live, live)]
-    wide = c @ meat @ np.linalg.pinv(gram, hermitian=True)
-    out = cov.copy()
+    inv = scaled_pinv((p * wr[:, None]).T @ p)
+    wide = sigma2 * inv @ ((p * (wr * tau)[:, None]).T @ p) @ inv
+    out = np.full_like(cov, np.nan)
     out[np.ix_(live, live)] = 0.5 * (wide + wide.T)
+    voided = ~np.isfinite(np.diag(cov))
+    out[voided, :] = np.nan
+    out[:, voided] = np.nan
     return out
 
 
