@@ -625,27 +625,39 @@ def follow_run(
     for ``idle_s`` seconds, ``--idle-s``, else :data:`nnid.fault.follow.IDLE_S`); their
     sentences returned. Where an interrupt (Ctrl-C, SIGTERM) or a refused row stops the watch,
     the outputs of the rows watched are written all the same, with why it stopped, their
-    sentences said, and the exception goes on (the CLI's exit code is still 130, 143 or 2)."""
+    sentences said, and the exception goes on (the CLI's exit code is still 130, 143 or 2),
+    also where those outputs cannot be written (that error is said). What the watch said of
+    the log (a cut last row, a pose column held, intervals without samples) is in the
+    outputs' notes, as batch's are."""
     from nnid.fault.follow import IDLE_S, follow_csv
     from nnid.reports.detect_report import OUTPUTS, write_detect_outputs
 
     _checked_window(window)
     check_detect_inputs(model_dir, data, out_dir, follow=True)
     monitor, window_s = _monitor(model_dir, window)
+    notes: list[str] = []  # filled by follow_csv as it says them
 
     def written(result) -> list[str]:
         with staged(out_dir) as stage:
-            lines = write_detect_outputs(monitor, result, stage, source=data)
+            lines = write_detect_outputs(monitor, result, stage, source=data, notes=notes)
         return [*lines, f"wrote {out_dir}/: {OUTPUTS}"]
 
     def stopped(result) -> None:
-        for line in written(result):
+        # called while the interrupt or refused row goes on: a failure to write (--out refused,
+        # a full disk) raised here would replace it, and its exit code (130, 143) with 2
+        try:
+            lines = written(result)
+        except (NnidInputError, OSError) as exc:
+            failed = exc if isinstance(exc, NnidInputError) else _unwritable(out_dir, exc)
+            say(f"error: {failed}")
+            return
+        for line in lines:
             say(line)
 
     try:
         result = follow_csv(
             monitor, data, window_s, say, idle_s=IDLE_S if idle_s is None else idle_s,
-            stopped=stopped,
+            stopped=stopped, notes=notes,
         )  # fmt: skip
     except NnidInputError as exc:
         if exc.field == "idle_s" and exc.source is None:  # follow_csv's check: the option's

@@ -1475,6 +1475,32 @@ def test_detect_follow_refuses_a_file_truncated_or_replaced_while_followed(tmp_p
     assert err.value.source == str(path) and err.value.row == 3
 
 
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="named pipes are POSIX")
+def test_detect_follow_reads_a_named_pipe_to_its_end(tmp_path):
+    """A pipe (a named one, --data /dev/stdin fed by one, <(producer)) has no size: the check
+    for a truncated file asked its offset, OSError 'Illegal seek', a traceback with the
+    outputs lost. It is read until its writer closes it, as before that check."""
+    import threading
+
+    from nnid.fault.follow import _rows
+
+    pipe = tmp_path / "live.csv"
+    os.mkfifo(pipe)
+
+    def write() -> None:
+        with open(pipe, "wb") as writer:  # waits for the reader to open it
+            for line in (b"t,u\n", b"0.0,1\n", b"0.1,2\n"):
+                writer.write(line)
+                writer.flush()
+
+    writer = threading.Thread(target=write, daemon=True)
+    writer.start()
+    try:
+        assert list(_rows(str(pipe), 0.0)) == [["t", "u"], ["0.0", "1"], ["0.1", "2"]]
+    finally:
+        writer.join(timeout=5)
+
+
 def test_detect_follow_names_data_it_cannot_read_and_says_a_cut_last_row(tmp_path, monkeypatch):
     """A followed file that cannot be read, or '-' with no standard input (a service started
     without one: sys.stdin is None), ended in a traceback: each is said against --data. A

@@ -2810,6 +2810,56 @@ def test_follow_writes_its_outputs_when_interrupted_or_a_row_is_refused(
     assert out["samples"] == 450 and len(out["alarms"]) == 1
 
 
+def test_follow_stopped_keeps_its_exit_when_the_outputs_cannot_be_written(
+    monitor, stopped_h1, tmp_path, monkeypatch
+):
+    """The outputs of a watch stopped by Ctrl-C are written while the interrupt goes on: a
+    write that failed (a full disk) replaced it, exit code 2, not 130. The failure is said
+    and the interrupt goes on."""
+    from nnid.reports import detect_report
+    from nnid.runs import follow_run
+
+    monitor.model.save(tmp_path / "m")
+    monitor.save(tmp_path / "m")
+    text = stopped_h1.head(100).to_csv(index=False).encode().splitlines(keepends=True)
+    monkeypatch.setattr("sys.stdin", _Interrupted(text))
+
+    def full(*args, **kwargs):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(detect_report, "write_detect_outputs", full)
+    said: list[str] = []
+    with pytest.raises(KeyboardInterrupt):
+        follow_run(tmp_path / "m", "-", tmp_path / "out", None, said.append)
+    assert said[-1].startswith("error: ") and "No space left on device" in said[-1], said
+    assert "--out" in said[-1] and not (tmp_path / "out").exists()
+
+
+def test_follow_writes_what_it_said_of_the_log_in_the_notes(
+    monitor, stopped_h1, tmp_path, monkeypatch
+):
+    """A cut last row left out, an interval without samples: --follow said them on the
+    console only, where batch writes its notes to detect.json and the report too."""
+    from nnid.runs import follow_run
+
+    monitor.model.save(tmp_path / "m")
+    monitor.save(tmp_path / "m")
+    log = stopped_h1.head(200).drop(index=range(100, 110))  # 10 samples missing at 5 s
+    (tmp_path / "cut.csv").write_text(log.to_csv(index=False) + "10.0,0.1")  # being written
+    said: list[str] = []
+    follow_run(tmp_path / "m", str(tmp_path / "cut.csv"), tmp_path / "out", None, said.append, 0.0)
+    notes = json.loads((tmp_path / "out" / "detect.json").read_text())["notes"]
+    gap, cut = [line for line in said if "no samples for" in line or "left out" in line]
+    assert cut.startswith("row 190 left out") and notes == [gap, cut]
+    page = (tmp_path / "out" / "report.html").read_text()
+    assert html.escape(cut) in page
+    # a monitor left running keeps the first notes, and counts the rest
+    monkeypatch.setattr("nnid.fault.follow.NOTES_KEPT", 1)
+    follow_run(tmp_path / "m", str(tmp_path / "cut.csv"), tmp_path / "out", None, said.append, 0.0)
+    notes = json.loads((tmp_path / "out" / "detect.json").read_text())["notes"]
+    assert notes == [gap, "1 more note on the log, said on the console only"]
+
+
 def test_follow_counts_the_rows_it_forgot_and_says_what_its_traces_show(
     monitor, stopped_h1, tmp_path
 ):

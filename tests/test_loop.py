@@ -1731,3 +1731,82 @@ def test_candidates_beyond_gate_checks_are_not_gated_and_a_gate_failure_is_not_n
     assert "(held-out free-run NRMSE 0.8)." in first
     step.update(gate_turned_down=[], not_gated=[])  # nothing passed: the plain verdict
     assert summary(result)[0].startswith("No significant effect")
+
+
+def test_the_gate_names_why_it_refused_a_candidate_whose_simulation_gained(monkeypatch):
+    """gate_turned_down held every candidate the gate simulated and did not add, those whose
+    free run gained but whose one-step error grew or whose joint refit left the physical
+    range too: the verdict said "no gain in simulation" of them. A candidate whose refit
+    failed before any simulation was in no list, and where every gated one did, the verdict
+    was "No significant effect", the not-gated ones unsaid."""
+    from types import SimpleNamespace
+
+    import nnid.loop.residual_loop as rl
+    from nnid.loop.diagnose import Scored, Step
+    from nnid.reports.loop_report import summary
+
+    class Fake:
+        linear = True
+
+        def __init__(self, name):
+            self.name, self.parameter = name, None
+
+        def augment(self, vehicle, value):
+            if self.name == "c1":
+                raise ValueError("added mass leaves M indefinite")
+            return SimpleNamespace(name=self.name)
+
+    def ranked(n):
+        out = [Scored(Fake(f"c{k}"), 1.0, 0.1, 1e-9, 50.0, 0.3, {"w": 0.3}, 10.0) for k in range(n)]
+        for s in out:
+            s.admissible, s.reason = True, "passes the tests; ranked below the one added"
+        return out
+
+    def error(self, ws, vehicle, mode):  # held-out errors: 1.0 for the fit
+        name = getattr(vehicle, "name", None)
+        if mode == "one_step":
+            return 100.0 if name == "c0" else 1.0  # c0's one-step error grows 100 times
+        return 0.5 if name in ("c0", "c3") else 1.0  # c0 and c3 gain in the free run
+
+    def joint(self, ws, fit, s):
+        raise ValueError("damping turns positive")
+
+    monkeypatch.setattr(rl, "vehicle_with", lambda vehicle, values: vehicle)
+    monkeypatch.setattr(rl.ResidualLoop, "_simulation_error", error)
+    monkeypatch.setattr(rl.ResidualLoop, "_augment", joint)  # c3's joint refit fails
+    ws = SimpleNamespace(val=pd.DataFrame({"t": np.arange(0.0, 10.0, 0.1)}))
+    fit = SimpleNamespace(vehicle=SimpleNamespace(name="fit"))
+    loop = ResidualLoop(None, gate_checks=4)
+    loop.gates_ = []
+    scored = ranked(6)
+    assert loop._simulation_gate(ws, fit, scored) == (None, None)
+    lists = rl.gate_verdicts(Step(scored, None, []))
+    assert lists["gate_turned_down"] == ["c2"] and lists["not_gated"] == ["c4", "c5"]
+    assert [r["effect"] for r in lists["gate_refused"]] == ["c0", "c1", "c3"]
+    assert lists["gate_refused"][0]["reason"].startswith("held-out one-step error grows")
+    assert lists["gate_refused"][1]["reason"] == (
+        "refit not physical: added mass leaves M indefinite"
+    )
+    none = {"free_run_nrmse": {"w": 0.8, "total": 0.8}, "diverged": {},
+            "one_step_nrmse": {"w": 0.1, "total": 0.1}, "one_step_diverged": {}}  # fmt: skip
+    step = {"added": None, "top": [{"effect": s.name} for s in scored], "gate": "free run", **lists}
+    result = {"settings": {"k_step_s": 1.0, "gate_checks": 4}, "before": none, "after": none,
+              "added": [], "steps": [step], "unexplained": {}}  # fmt: skip
+    assert summary(result)[0] == (
+        "No effect added: significant in the force residual, but the simulation gate added "
+        "none. 4 candidates passed the F-test, the parameter test and the held-out residual "
+        "check (the best-ranked, c0), and the simulation gate turned each down: 1 gained "
+        "nothing in the held-out simulation, 1 made the held-out one-step error grow, 2 had a "
+        "refit that was not physical; 2 more that passed were beyond gate_checks = 4 and not "
+        "gated (held-out free-run NRMSE 0.8)."
+    )
+    # every gated candidate's refit fails before any simulation: not "No significant effect"
+    monkeypatch.setattr(Fake, "augment", lambda self, vehicle, value: joint(self, 0, 0, 0))
+    scored = ranked(6)
+    loop._simulation_gate(ws, fit, scored)
+    step.update(rl.gate_verdicts(Step(scored, None, [])), top=[{"effect": s.name} for s in scored])
+    assert summary(result)[0].startswith(
+        "No effect added: significant in the force residual, but the simulation gate added "
+        "none. 4 candidates passed"
+    )
+    assert "turned each down: 4 had a refit that was not physical; 2 more" in summary(result)[0]

@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import csv
 import os
+import stat
 import sys
 import time
 from collections.abc import Callable
@@ -112,6 +113,10 @@ IDLE_S = 3.0
 #: every this many seconds of an experiment's rows, and at its end (a check of a minute at
 #: 20 Hz costs 3-9 ms; the refusal needs 2 s of turning windows anyway)
 RATE_UNIT_EVERY_S = 5.0
+#: the notes on the log a watch keeps for its outputs (``follow_csv``'s ``notes``); those after
+#: are counted there, said on the console only: a monitor left running over a log with a gap a
+#: minute must not grow them without bound
+NOTES_KEPT = 50
 
 
 def _parse(line: str, source: str, count: int, sep: str = ",", header: str = "") -> list[str]:
@@ -180,7 +185,9 @@ def _opened(source: str):
 def _moved(source: str, handle, row: int | None) -> None:
     """Refuse a followed file that is no longer the one read: renamed away or replaced (a log
     rotated), or cut shorter than what was read (truncated in place). Either was taken as the
-    log's end, or read on from the old offset in the middle of another row."""
+    log's end, or read on from the old offset in the middle of another row. A pipe (a named
+    one, ``/dev/stdin`` fed by one, ``<(producer)``) has no size and cannot tell its offset:
+    only its identity is checked."""
     try:
         now = os.stat(source)
     except OSError:
@@ -188,7 +195,7 @@ def _moved(source: str, handle, row: int | None) -> None:
     opened = os.fstat(handle.fileno())
     if now is None or (now.st_ino, now.st_dev) != (opened.st_ino, opened.st_dev):
         why = "was replaced (renamed, removed or rotated) while followed"
-    elif now.st_size < handle.tell():
+    elif stat.S_ISREG(opened.st_mode) and now.st_size < handle.tell():
         why = f"was truncated while followed ({now.st_size} bytes, {handle.tell()} read)"
     else:
         return
@@ -315,6 +322,7 @@ def follow_csv(
     idle_s: float = IDLE_S,
     keep_rows: int = 100_000,
     stopped: Callable[[DetectResult], None] | None = None,
+    notes: list[str] | None = None,
 ) -> DetectResult:
     """Watch ``source`` row by row; ``say`` gets one line per alarm and per isolation. The
     last ``keep_rows`` to twice as many samples are kept (for isolation and the report's
@@ -323,12 +331,26 @@ def follow_csv(
     ``stopped``: given the result of the rows watched (settled, its ``stopped`` saying why)
     where an interrupt (Ctrl-C, a SIGTERM raised as SystemExit) or a refused row ends the
     watch after some rows, before that exception goes on: ending a live stream so is the
-    normal stop, and lost every alarm."""
+    normal stop, and lost every alarm. ``notes``: gets what is said of the log as it is said
+    (a cut last row, a pose column held, an interval without samples; the first
+    :data:`NOTES_KEPT`, then their count), for the outputs' notes as batch writes its own."""
     start = time.perf_counter()
     # checked before the source is opened: a NaN never compares, so a NaN wait was forever
     checked_number(idle_s, "idle_s", 0.0, strict=False)
+    kept = [] if notes is None else notes
+    unkept = 0  # the notes said beyond NOTES_KEPT
+
+    def noted(line: str) -> None:
+        """Say a note on the log, and keep it for the outputs."""
+        nonlocal unkept
+        say(line)
+        if len(kept) < NOTES_KEPT:
+            kept.append(line)
+        else:
+            unkept += 1
+
     dialect: dict = {}
-    rows = _rows(source, idle_s, dialect, say)
+    rows = _rows(source, idle_s, dialect, noted)
     header = next(rows, None)
     where = "stdin" if source == "-" else source
     if header is None:
@@ -609,6 +631,10 @@ def follow_csv(
         said_unjudged()
         if not ts:
             raise NnidInputError("has a header and no rows", source=where)
+        if unkept:
+            kept.append(
+                f"{unkept} more note{'s' * (unkept != 1)} on the log, said on the console only"
+            )
         data = _arrays(ts, xs, us, codes, names)
         values = np.array(watched)  # the model's residual r, and the statistics watched
         values[:, 0:6] = np.array(vals)[:, 0:6]
@@ -624,7 +650,7 @@ def follow_csv(
             values = _numbers(row, read, n, where, len(header), kept_unread, decimal)
             for c in [c for c in unread if c not in values and c not in said_held]:
                 said_held.add(c)
-                say(
+                noted(
                     f"{c}: empty cells (the first at row {n}) hold their run's last sample (before "
                     f"its first, not yet sampled: filled from it once it arrives), not masked: "
                     f"{UNREAD_BY} {c}"
@@ -692,7 +718,7 @@ def follow_csv(
                     row=n,
                 )
             elif t - last_t > monitor.max_interval:  # the kernel skips the interval
-                say(
+                noted(
                     f"t = {t:.2f} s{f' ({name})' if name else ''}: no samples for "
                     f"{t - last_t:.3g} s; that interval is not scored"
                 )

@@ -68,6 +68,22 @@ MIN_INDEPENDENT = 10
 MAX_WORSENING = 10.0
 
 
+def gate_verdicts(step: Step) -> dict[str, list]:
+    """A pass's candidates that passed every test but the simulation gate, by what the gate
+    did (loop.json's keys): turned down for no gain in simulation; refused there for another
+    reason (its one-step error grew, its refit not physical), each with it; not simulated,
+    beyond ``gate_checks`` (:data:`NOT_GATED`)."""
+    return {
+        "gate_turned_down": [s.name for s in step.ranked if NO_GAIN in s.reason],
+        "gate_refused": [
+            {"effect": s.name, "reason": s.reason}
+            for s in step.ranked
+            if s.reason.startswith((ONE_STEP_GROWS, NOT_PHYSICAL))
+        ],
+        "not_gated": [s.name for s in step.ranked if s.reason.startswith(NOT_GATED)],
+    }
+
+
 def _scored(step: Step) -> list[Scored]:
     """The candidates of a pass that were scored (excited, identifiable beside the model and
     finite on its rows), best first: the others measure nothing."""
@@ -430,7 +446,7 @@ class ResidualLoop:
                 vehicle = s.candidate.augment(vehicle_with(fit.vehicle, s.refit), s.value)
             except ValueError as exc:  # it stayed "admissible, ranked below the one added"
                 s.admissible = False
-                s.reason = f"refit not physical: {str(exc).splitlines()[0]}"
+                s.reason = f"{NOT_PHYSICAL}: {str(exc).splitlines()[0]}"
                 continue
             after = self._simulation_error(ws, vehicle, mode)
             s.gate = (before, after)
@@ -447,7 +463,7 @@ class ResidualLoop:
                 ):
                     s.admissible = False
                     s.reason = (
-                        f"held-out one-step error grows from {score(one_step, fixed=True)} to "
+                        f"{ONE_STEP_GROWS} from {score(one_step, fixed=True)} to "
                         f"{score(worse, fixed=True)}"
                     )
                     continue
@@ -455,13 +471,13 @@ class ResidualLoop:
                     augmented = self._augment(ws, fit, s)
                 except ValueError as exc:  # the joint refit left the physical range
                     s.admissible = False
-                    s.reason = f"refit not physical: {str(exc).splitlines()[0]}"
+                    s.reason = f"{NOT_PHYSICAL}: {str(exc).splitlines()[0]}"
                     continue
                 s.reason = "added" if what == "free run" else f"added (judged {what})"
                 return s, augmented
             s.admissible = False
             s.reason = (
-                f"held-out {what} error does not improve "
+                f"held-out {what} {NO_GAIN} "
                 f"({score(before, fixed=True)} -> {score(after, fixed=True)})"
             )
         # nothing was added: those never simulated are not "ranked below the one added"
@@ -690,11 +706,7 @@ class ResidualLoop:
                     "no_better_fit": st.no_better_fit,
                     "tested": st.tested,
                     "sindy": st.sindy,
-                    # passed every test but the simulation gate, which turned them down
-                    "gate_turned_down": [
-                        s.name for s in st.ranked if s.gate is not None and s is not st.added
-                    ],
-                    "not_gated": [s.name for s in st.ranked if s.reason.startswith(NOT_GATED)],
+                    **gate_verdicts(st),
                 }
                 for st, gate in zip(self.steps_, self.gates_, strict=True)
             ],
@@ -750,6 +762,14 @@ HELD_OUT_USE = "ranking the candidates and choosing the effects added (simulatio
 #: the verdict's start for an admissible candidate ranked below the ``gate_checks`` that the
 #: gate simulated, where none of those was added
 NOT_GATED = "not gated (beyond gate_checks"
+
+#: the simulation gate's verdicts on a candidate it turned down (``gate_turned_down`` holds the
+#: first, ``gate_refused`` the others): no gain in the held-out simulation; a one-step error
+#: grown past :data:`MAX_WORSENING` times; a refit (the candidate's, or the joint one) that
+#: left the physical range
+NO_GAIN = "error does not improve"
+ONE_STEP_GROWS = "held-out one-step error grows"
+NOT_PHYSICAL = "refit not physical"
 
 #: the verdict of a candidate that passed every test but the simulation gate, which had no
 #: simulation to compare (the baseline's held-out one diverges at every horizon)

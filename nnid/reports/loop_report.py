@@ -184,6 +184,23 @@ def _total(result: dict, when: str, key: str) -> str:
     return score_cell(scores, "total", diverged_columns(result[when], key))
 
 
+def _gate_reasons(down: list[str], refused: list[dict]) -> str:
+    """Why the simulation gate turned down the candidates it met, counted by reason: nothing
+    where each had no gain in simulation (the verdict says so)."""
+    from nnid.loop.residual_loop import NOT_PHYSICAL, ONE_STEP_GROWS
+
+    if not refused:
+        return ""
+    counts = [
+        (len(down), "gained nothing in the held-out simulation"),
+        (sum(r["reason"].startswith(ONE_STEP_GROWS) for r in refused),
+         "made the held-out one-step error grow"),
+        (sum(r["reason"].startswith(NOT_PHYSICAL) for r in refused),
+         "had a refit that was not physical"),
+    ]  # fmt: skip
+    return ": " + ", ".join(f"{k} {why}" for k, why in counts if k)
+
+
 def _verdict(result: dict, name: str, key: str, before: dict, after: dict) -> list[str]:
     diverged = [
         f"the {who} held-out free run diverges ({_diverged_text(result[when])})"
@@ -223,19 +240,31 @@ def _verdict(result: dict, name: str, key: str, before: dict, after: dict) -> li
         )
         last = result["steps"][-1] if result["steps"] else {}
         down, beyond = last.get("gate_turned_down") or [], last.get("not_gated") or []
-        if down:  # significant, but the simulation gate turned each down: not "no effect"
+        refused = last.get("gate_refused") or []
+        if down or refused:  # significant, but the simulation gate turned each down
             more = (
                 f"; {len(beyond)} more that passed were beyond gate_checks = "
                 f"{result['settings'].get('gate_checks')} and not gated"
                 if beyond
                 else ""
             )
+            gated = [*down, *(r["effect"] for r in refused)]
+            # the best-ranked of both lists: the top's order (each list keeps the ranking's)
+            best = next((c["effect"] for c in last.get("top", []) if c["effect"] in gated),
+                        gated[0])  # fmt: skip
+            n = len(gated)
+            # no gain in simulation for each: said so; else what the gate did, by reason
+            how = (
+                "but no gain in simulation on held-out data"
+                if not refused
+                else "but the simulation gate added none"
+            )
             lines = [
-                "No effect added: significant in the force residual, but no gain in simulation "
-                f"on held-out data. {len(down)} candidate{'s' if len(down) > 1 else ''} passed "
-                "the F-test, the parameter test and the held-out residual check (the "
-                f"best-ranked, {down[0]}), and the simulation gate turned "
-                f"{'each' if len(down) > 1 else 'it'} down{more} {where}"
+                f"No effect added: significant in the force residual, {how}. {n} "
+                f"candidate{'s' if n > 1 else ''} passed the F-test, the parameter test and the "
+                f"held-out residual check (the best-ranked, {best}), and the simulation gate "
+                f"turned {'each' if n > 1 else 'it'} down{_gate_reasons(down, refused)}{more} "
+                f"{where}"
             ]
         else:
             lines = [
