@@ -597,7 +597,7 @@ def vehicle(
 
     vehicle_from_dict(tomllib.loads(text), source=str(out_path))  # what is written loads back
     out_path.parent.mkdir(parents=True, exist_ok=True)
-    out_path.write_text(text)
+    out_path.write_text(text, encoding="utf-8")  # as nnid reads it, whatever the locale's
     out.print(
         f"wrote {out_path}: edit what it marks ASSUMED or ESTIMATE (docs/vehicle_file.md)",
         highlight=False,

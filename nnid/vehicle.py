@@ -59,6 +59,11 @@ CurveNumber = Annotated[float, Field(ge=-MAX_COEFFICIENT, le=MAX_COEFFICIENT)]
 #: (:func:`saved_vehicle`), or a copy of a vehicle with other values set. Its curves are kept as
 #: they were, one of no thrust included (an nnid before the refusal saved such a model)
 KEEP_CURVES: dict[str, Any] = {"keep_curves": True}
+#: the validation context of a saved model's vehicle (:func:`saved_vehicle`): as
+#: :data:`KEEP_CURVES`, and its thruster directions kept bit for bit (normalised when first
+#: read; normalising again moves the last bit of a third of them, [1, 1, 0] read 0.7071...75
+#: then ...76, and the loaded model's allocation, so its predictions, were not the saved one's)
+AS_SAVED: dict[str, Any] = {**KEEP_CURVES, "as_saved": True}
 
 
 def _makes_thrust(values: list[float], what: str, info: ValidationInfo) -> list[float]:
@@ -129,7 +134,9 @@ class Thruster(StrictModel):
 
     @field_validator("direction")
     @classmethod
-    def _unit(cls, d: list[float]) -> list[float]:
+    def _unit(cls, d: list[float], info: ValidationInfo) -> list[float]:
+        if (info.context or {}).get("as_saved") and any(d):  # normalised when first read
+            return d
         norm = math.sqrt(sum(x * x for x in d))
         if not 0 < norm < math.inf:
             # hypot scales before it squares: the sum of squares overflowed [1e300, 1e300, 0]
@@ -205,7 +212,7 @@ def saved_vehicle(data: dict[str, Any], source: str = "<saved model>") -> Vehicl
             stacklevel=2,
         )
         data = {**data, "name": shown}
-    vehicle = vehicle_from_dict(data, source, context=KEEP_CURVES)
+    vehicle = vehicle_from_dict(data, source, context=AS_SAVED)
     for thruster in vehicle.thrusters:
         if not any(_curve_numbers(thruster.curve)):
             warnings.warn(

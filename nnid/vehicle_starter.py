@@ -147,4 +147,7 @@ def starter_text(
 def _toml_string(text: str) -> str:
     """``text`` as a TOML basic string: JSON's escapes (quote, backslash, newline, \\uXXXX)
     are TOML's too; DEL, which JSON leaves bare and TOML forbids, escaped as well."""
-    return json.dumps(text).replace("\x7f", "\\u007f")
+    # ensure_ascii=False: JSON escapes a character beyond the BMP (an emoji) as a surrogate
+    # pair, which TOML refuses as no scalar value (a traceback from nnid vehicle --name);
+    # control characters, the only ones that need escapes here, vehicle_name refuses
+    return json.dumps(text, ensure_ascii=False).replace("\x7f", "\\u007f")

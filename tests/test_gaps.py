@@ -939,3 +939,18 @@ def test_a_short_piece_cut_at_a_gap_is_left_unbridged_not_refused():
     assert out.loc[len(long_piece) + 3 : len(long_piece) + 5, "r"].isna().all()
     (step,) = report.steps
     assert "1 gap in" in step.detail, step.detail
+
+
+def test_a_piece_named_as_another_run_is_refused():
+    """Cutting 'dive' at a gap made pieces 'dive#0' and 'dive#1' beside the log's own run
+    'dive#1': rows go by label, so the two runs became one whose time went back."""
+    first = _mocap_log(200).assign(experiment="dive")
+    first.loc[100:109, "u"] = np.nan
+    other = _mocap_log(200).assign(experiment="dive#1")
+    log = pd.concat([first, other], ignore_index=True)
+    with pytest.raises(NnidInputError, match="piece 'dive#1', the name of another") as err:
+        mask_gaps([log], ["u", "v", "w", "p", "q", "r"])
+    assert err.value.field == "experiment"
+    # the same log with the other run named apart is cut as before
+    cut = mask_gaps([log.replace({"experiment": {"dive#1": "dive2"}})], ["u"])[0]
+    assert set(cut["experiment"]) == {"dive#0", "dive#1", "dive2"}

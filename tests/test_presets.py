@@ -457,3 +457,31 @@ def test_starter_marks_every_value_it_did_not_measure():
     unmarked = [line for line in unmarked if line not in marked]
     assert {line.split("=")[0].strip() for line in top} >= {"buoyancy", "inertia", "r_g", "r_b"}
     assert unmarked == []
+
+
+def test_a_starter_vehicle_named_beyond_the_bmp_is_written_and_loads(tmp_path):
+    """JSON escaped a name's emoji as a surrogate pair, which TOML refuses: `nnid vehicle
+    --name "ROV 🚀"` ended in a traceback."""
+    from typer.testing import CliRunner
+
+    from nnid.cli import app
+
+    out = tmp_path / "rov.toml"
+    args = ["vehicle", "--mass", "12", "--size", "0.5x0.4x0.3", "--name", "ROV 🚀"]
+    res = CliRunner().invoke(app, [*args, "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    assert load_vehicle(out).name == "ROV 🚀"
+
+
+def test_a_saved_vehicle_keeps_its_thruster_directions_bit_for_bit():
+    """A direction is normalised when read; a saved model's vehicle was normalised again on
+    loading, which moves the last bit of a third of them ([1, 1, 0]: 0.7071067811865475, then
+    ...76), and the loaded model's allocation, so its predictions, differed from the saved."""
+    from nnid.vehicle import saved_vehicle, vehicle_from_dict
+
+    data = load_vehicle("bluerov2_heavy").model_dump(mode="json")
+    data["thrusters"][0]["direction"] = [1.0, 1.0, 0.0]
+    first = vehicle_from_dict(data)
+    assert first.thrusters[0].direction == [0.7071067811865475, 0.7071067811865475, 0.0]
+    again = saved_vehicle(first.model_dump(mode="json"))
+    assert [t.direction for t in again.thrusters] == [t.direction for t in first.thrusters]

@@ -746,6 +746,8 @@ def mask_gaps(
         piece_of = np.full(len(log), None, dtype=object)  # a reader's piece stays one
         if PIECE_OF in log:
             piece_of[:] = log[PIECE_OF].to_numpy(object)
+        # the runs' own names: a piece named as another run would join it (rows by label)
+        named = {str(n) for n in log["experiment"].unique()} if "experiment" in log else set()
         for name, pos in experiment_rows(log):
             runs = true_runs(keep[pos])
             for k, (a, b) in enumerate(runs):  # from #0, as resample_log and the readers
@@ -753,7 +755,15 @@ def mask_gaps(
                     keep[pos[a:b]] = False
                     short += b - a
                 base = "run" if name is None else str(name)
-                label[pos[a:b]] = base if len(runs) == 1 else f"{base}#{k}"
+                piece = base if len(runs) == 1 else f"{base}#{k}"
+                if piece != base and piece in named:
+                    raise NnidInputError(
+                        f"cutting experiment '{base}' at its gaps makes a piece '{piece}', the "
+                        "name of another experiment of the log: its rows would join that run; "
+                        "rename that experiment",
+                        field="experiment",
+                    )
+                label[pos[a:b]] = piece
                 if len(runs) > 1:
                     piece_of[pos[a:b]] = [base if pd.isna(p) else p for p in piece_of[pos[a:b]]]
         out.append(
