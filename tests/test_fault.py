@@ -48,6 +48,7 @@ from nnid.fault.detect import (
     explained_by_the_changes,
     leave_scale,
     on_part,
+    part_clause,
     read_ratio,
     unjudged_tail,
     window_rows,
@@ -1419,6 +1420,49 @@ def test_an_alarm_whose_window_a_gap_leaves_part_of_says_so(vehicle, monitor, tm
         assert first["cut_short"]["seconds"] == pytest.approx(seconds)
         clause = ISOLATED_SHORT.replace(ON_PART, ON_HELD)
         assert f"{clause} ({seconds:.2f} s of 10 s)" in first["meaning"]
+
+
+def test_a_run_resumed_after_anothers_rows_leaves_the_other_run_alone(vehicle, monitor):
+    """Runs A, B, A (A's second block continuing A's clock), a snag in A's first block:
+    detection read A as its rows from its first to its last, so the snag's change was taken
+    out of B's residual and B's statistics rewritten. B's alarms and statistics are those of
+    B alone, and the trace keeps the log's rows."""
+    snag = [Fault("external", FAULT_T, force=SNAG)]
+    a = simulate_faults(vehicle, 40, faults=snag, seed=1).assign(experiment="A")
+    b = simulate_faults(vehicle, 32, faults=snag, seed=2).assign(experiment="B")
+    first = a["t"] <= 32.0 + 1e-9
+    log = pd.concat([a[first], b, a[~first]], ignore_index=True)
+    result, alone = detect(monitor, log), detect(monitor, b)
+    assert [x for x in result.alarms if x["experiment"] == "B"] == alone.alarms
+    assert any(x["experiment"] == "A" for x in result.alarms)
+    in_b = result.trace.experiment == "B"
+    np.testing.assert_array_equal(result.trace.t, log["t"].to_numpy())
+    np.testing.assert_array_equal(result.trace.values[in_b], alone.trace.values)
+    np.testing.assert_array_equal(result.trace.alarm[in_b], alone.trace.alarm)
+
+
+def test_a_window_a_dropout_cuts_is_said_cut_by_a_gap_not_by_the_end(vehicle, monitor):
+    """``nnid detect`` masks a dropout first, cutting its run into pieces ``<run>#k``: a snag
+    alarmed just before a dropout from 20.5 to 30.5 s (its window's rows end with the first
+    piece) was said cut short by "end", "the end of the log". A later piece of its run
+    exists, so it is a gap; an alarm in the run's last piece, its window cut by the run's
+    end, says "the end of its run"."""
+    from nnid.datasets.gaps import mask_gaps
+    from nnid.fault.monitor import monitor_motion
+
+    log = simulate_faults(vehicle, 32, faults=[Fault("external", FAULT_T, force=SNAG)], seed=1)
+    read = monitor_motion(log.columns)
+    log.loc[(log["t"] > 20.5 + 1e-9) & (log["t"] < 30.5 - 1e-9), read] = np.nan
+    pieces = mask_gaps([log.assign(experiment="run")], read)[0]
+    first = detect(monitor, pieces).alarms[0]
+    assert first["cut_short"]["by"] == "gap" and "the end of" not in first["meaning"]
+    assert ISOLATED_SHORT.replace(ON_PART, ON_HELD) in first["meaning"]
+    t = np.arange(40) * 0.05
+    data = {"t": t, "experiment": np.repeat([0, 1], 20),
+            "experiment_names": np.array(["run#0", "run#1"], dtype=object),
+            "experiment_runs": np.array(["run", "run"], dtype=object)}  # fmt: skip
+    last = on_part(data, 30, 10.0, window_rows(data, 30, 10.0), max_step=0.075)
+    assert last["by"] == "end" and "before the end of its run" in part_clause(last, ON_PART)
 
 
 def test_a_window_is_said_on_part_where_its_rows_hold_under_half_of_it():

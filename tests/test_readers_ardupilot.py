@@ -315,3 +315,20 @@ def test_missing_ardupilot_extra_says_how_to_install(
     msg = str(err.value)
     assert "reading ArduPilot logs needs the 'ardupilot' extra" in msg
     assert "pip install 'nnid[ardupilot]'" in msg
+
+
+def test_a_reboot_is_no_uint32_wrap_of_a_since_boot_clock() -> None:
+    """time_usec since boot (uint32 µs) wraps every 71.6 min: any drop over 2^31 µs was read
+    as a wrap, so a reboot after 40 min of uptime put the new boot's samples 71.6 min on.
+    A wrap is a step from near 2^32 to a small value, a typical step across."""
+    import pandas as pd
+
+    from nnid.datasets.ardupilot import _boot_time
+
+    step = 20_000.0
+    before = 2.0**32 - 3 * step + step * np.arange(3)
+    wrapped = _boot_time(pd.DataFrame({"time_usec": np.r_[before, 5_000.0, 25_000.0]}))
+    np.testing.assert_allclose(np.diff(wrapped), np.r_[step, step, step + 5_000, step] * 1e-6)
+    uptime = 40 * 60e6 + step * np.arange(3)
+    rebooted = _boot_time(pd.DataFrame({"time_usec": np.r_[uptime, 1_000.0, 21_000.0]}))
+    assert rebooted.iloc[-1] == pytest.approx(0.021)

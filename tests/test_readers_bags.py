@@ -289,6 +289,42 @@ def test_missing_field_names_topic(tmp_path: Path) -> None:
         read_bag_sources(bag, cmap, CleaningReport())
 
 
+def test_a_type_without_a_definition_names_topic_and_type(tmp_path: Path) -> None:
+    """A ROS 2 .db3 bag without message definitions (Foxy to Humble) of a type rosbags' store
+    lacks (mavros_msgs): deserializing raised KeyError, said as "cannot be read as a ROS bag
+    (KeyError: 'mavros_msgs/msg/RCOut')". It names the topic and the type."""
+    import sqlite3
+
+    from rosbags.rosbag2 import Writer
+    from rosbags.typesys import get_types_from_msg
+
+    from nnid.datasets.rosbag import read_bag_sources
+
+    ts, rc = get_typestore(Stores.ROS2_HUMBLE), "mavros_msgs/msg/RCOut"
+    ts.register(get_types_from_msg("std_msgs/Header header\nuint16[] channels", rc))
+    t = ts.types
+    bag = tmp_path / "rc"
+    with Writer(bag, version=8) as writer:
+        conn = writer.add_connection("/mavros/rc/out", rc, typestore=ts)
+        for k in range(3):
+            header = t["std_msgs/msg/Header"](
+                stamp=t["builtin_interfaces/msg/Time"](sec=k, nanosec=0), frame_id=""
+            )
+            msg = t[rc](header=header, channels=np.array([1500, 1600], dtype=np.uint16))
+            writer.write(conn, k * 10**9, ts.serialize_cdr(msg, rc))
+    for db in bag.glob("*.db3"):  # as a bag recorded before Iron: no definitions
+        con = sqlite3.connect(db)
+        con.execute("DELETE FROM message_definitions")
+        con.commit()
+        con.close()
+    columns = {"cmd_1": "channels.0"}
+    cmap = ColumnMap.model_validate(
+        {"sources": [{"file": "/mavros/rc/out", "time": "t_recv", "columns": columns}]}
+    )
+    with pytest.raises(NnidInputError, match=rf"rc.*topic '/mavros/rc/out': type {rc} has no"):
+        read_bag_sources(bag, cmap, CleaningReport())
+
+
 @pytest.mark.parametrize("kind", ["ros1", "sqlite3", "mcap"])
 def test_truncated_bag_is_a_clean_input_error(tmp_path: Path, column_map: Path, kind: str) -> None:
     if kind == "ros1":

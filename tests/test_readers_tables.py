@@ -1117,6 +1117,25 @@ def test_a_column_mapped_with_scale_zero_is_said(tmp_path):
     assert any(s.step == "zero scale" and "tau_Z" in s.detail for s in report.steps)
 
 
+def test_a_quaternion_in_ros_order_is_refused_naming_the_order(tmp_path):
+    """quaternion = ["orientation.x", ".y", ".z", ".w"] (ROS's field order): four columns of
+    norm 1, read as w, x, y, z, another attitude without a word. Names that all end in .w,
+    .x, .y, .z are refused in any other order, the expected one named."""
+    n = 20
+    df = pd.DataFrame({"t": np.arange(n) * 0.1, "orientation.w": 1.0, "orientation.x": 0.0,
+                       "orientation.y": 0.0, "orientation.z": 0.0, "u": 0.1, "f": 1.0})  # fmt: skip
+    df.to_csv(tmp_path / "odom.csv", index=False)
+    body = '[[sources]]\nfile = "odom.csv"\ntime = "t"\ncolumns = { u = "u", tau_X = "f" }\n'
+    ros = '["orientation.x", "orientation.y", "orientation.z", "orientation.w"]'
+    wrong = _write_map(tmp_path / "ros.toml", f"{body}quaternion = {ros}\n")
+    expected = "orientation.w, orientation.x, orientation.y, orientation.z"
+    with pytest.raises(NnidInputError, match=f"w, x, y, z in that order.*give {expected}"):
+        load_log(tmp_path, wrong)
+    listed = ", ".join(f'"{c}"' for c in expected.split(", "))
+    good = _write_map(tmp_path / "good.toml", f"{body}quaternion = [{listed}]\n")
+    assert np.allclose(load_log(tmp_path, good)[0]["psi"], 0.0)
+
+
 def test_quaternion_columns_that_are_no_quaternion_are_refused(tmp_path):
     """quaternion = ["qw", "qx", "qy", "u"]: normalised row by row, any four columns made an
     attitude. Norms far from 1 are refused, naming the columns; a zero row (a sensor not yet

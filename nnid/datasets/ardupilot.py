@@ -110,10 +110,26 @@ def _boot_time(raw: pd.DataFrame) -> pd.Series | None:
     if "time_usec" in raw:
         us = pd.to_numeric(raw["time_usec"]).to_numpy(dtype=np.float64)
         if us.size and us.max() < 1e12:  # since boot, not a UNIX stamp
-            # uint32 microsecond fields (SERVO_OUTPUT_RAW) wrap every 71.6 minutes
-            wraps = np.concatenate([[0], np.cumsum(np.diff(us) < -(2.0**31))])
+            wraps = np.concatenate([[0], np.cumsum(_wraps(us))])
             return pd.Series(us + wraps * 2.0**32, index=raw.index) * 1e-6
     return None
+
+
+#: how many typical steps the step across a uint32 wrap may span (messages dropped there)
+WRAP_STEPS = 10
+
+
+def _wraps(us: np.ndarray) -> np.ndarray:
+    """Where each step of a since-boot microsecond clock ``us`` wraps uint32 (SERVO_OUTPUT_RAW
+    wraps every 71.6 minutes): the earlier value near 2^32 and the later small, the step
+    across within :data:`WRAP_STEPS` typical steps. Any drop over 2^31 counted as one, and a
+    reboot after 35.8 minutes of uptime read as a wrap, 71.6 minutes added to the new boot."""
+    steps = np.diff(us)
+    ahead = steps[steps > 0]
+    if not ahead.size:
+        return np.zeros(steps.size, dtype=bool)
+    across = (2.0**32 - us[:-1]) + us[1:]  # the step, were it a wrap
+    return (us[:-1] < 2.0**32) & (us[1:] >= 0) & (across <= WRAP_STEPS * np.median(ahead))
 
 
 def _add_boot_time(raw: pd.DataFrame) -> None:

@@ -168,6 +168,15 @@ class Source(StrictModel):
     def _quat(cls, q: list[str]) -> list[str]:
         if q and len(q) != 4:
             raise ValueError("quaternion names four columns: w, x, y, z")
+        # ROS lists orientation.x, .y, .z, .w: that order passes the norm check and reads
+        # another attitude without a word
+        ends = [str(c).rsplit(".", 1)[-1].lower() if "." in str(c) else "" for c in q]
+        if sorted(ends) == ["w", "x", "y", "z"] and ends != ["w", "x", "y", "z"]:
+            expected = sorted(q, key=lambda c: "wxyz".index(str(c).rsplit(".", 1)[-1].lower()))
+            raise ValueError(
+                f"quaternion lists {', '.join(q)}: nnid reads w, x, y, z in that order (ROS "
+                f"lists x, y, z, w); give {', '.join(expected)}"
+            )
         return q
 
     @field_validator("columns")

@@ -111,6 +111,17 @@ def _read_topics(path: Path, topics: list[str]) -> dict[str, list[dict[str, Any]
                     source=str(path),
                 )
             wanted = [c for c in reader.connections if c.topic in rows]
+            # a ROS 2 bag before Iron carries no message definitions: a type outside rosbags'
+            # store (mavros_msgs) failed at its first message as a bare KeyError
+            known = reader.typestore.fielddefs
+            unknown = next((c for c in wanted if c.msgtype not in known), None)
+            if unknown is not None:
+                raise NnidInputError(
+                    f"topic '{unknown.topic}': type {unknown.msgtype} has no definition in the "
+                    "bag nor in rosbags' type store (a ROS 2 bag recorded before Iron carries "
+                    "none)",
+                    source=str(path),
+                )
             for conn, stamp, data in reader.messages(connections=wanted):
                 row = flatten_message(reader.deserialize(data, conn.msgtype))
                 row["t_recv"] = ros_seconds(*divmod(stamp, 10**9))

@@ -301,11 +301,25 @@ def on_part(data: dict, k: int, window_s: float, rows: np.ndarray, max_step: flo
     ``seconds`` its rows hold samples over (:func:`held_seconds`), ``window_s``, ``samples``
     and ``by``; None where it is whole, or holds samples over most of it."""
     held_s = held_seconds(data["t"][rows], max_step)
-    end = cut_short(data, k, window_s, rows)
+    code = int(data["experiment"][k])
+    runs = data.get("experiment_runs")  # batch: a gap cut a run into pieces (piece_of)
+    run = None if runs is None or runs[code] == data["experiment_names"][code] else runs[code]
+    # a piece with a later one of its run ends at a gap (a dropout), not at the run's end
+    later = run is not None and bool(np.any(runs[code + 1 :] == run))
+    end = not later and cut_short(data, k, window_s, rows)
     if not end and held_s >= HELD_SHARE * window_s:
         return None
-    return {"seconds": held_s, "window_s": float(window_s), "samples": int(rows.size),
-            "by": "end" if end else "gap"}  # fmt: skip
+    short = {"seconds": held_s, "window_s": float(window_s), "samples": int(rows.size),
+             "by": "end" if end else "gap"}  # fmt: skip
+    if end and run is not None:  # the last piece of a run: its run's end, not the log's
+        short["piece_of"] = str(run)
+    return short
+
+
+def end_of(short: dict | None) -> str:
+    """What ended the window ``short`` (:func:`on_part`, ``by`` "end") as said: the end of the
+    log, or of its run where the window lies in the last piece a gap cut a run into."""
+    return "the end of its run" if short and short.get("piece_of") else "the end of the log"
 
 
 def part_clause(short: dict, said: str) -> str:
@@ -315,6 +329,8 @@ def part_clause(short: dict, said: str) -> str:
     where samples missing inside the run, not the log's end, left that part."""
     if short.get("by") == "gap":
         said = said.replace(ON_PART, ON_HELD)
+    else:
+        said = said.replace("the end of the log", end_of(short))
     return f"{said} ({short['seconds']:.2f} s of {short['window_s']:g} s)"
 
 
@@ -386,13 +402,14 @@ def not_judged(record: dict, samples: int, finite: int, window_s: float) -> None
     held = "" if short is None else f" over {short['seconds']:.2f} s of {short['window_s']:g} s"
     some = f", {finite} of them finite" if finite < samples else ""
     if samples < LEAST_ROWS and by == "end":  # how much of it the log kept says the rest
+        said = NOT_JUDGED.replace("the end of the log", end_of(short))
         record["meaning"] = (
-            f"{NOT_JUDGED} ({short['seconds']:.2f} s of {short['window_s']:g} s, {samples} "
+            f"{said} ({short['seconds']:.2f} s of {short['window_s']:g} s, {samples} "
             f"samples{some}): {TOO_FEW}"
         )
         return
     if samples >= LEAST_ROWS:  # rows enough: too few of them had a residual
-        end = ", the end of the log cutting it short" if by == "end" else ""
+        end = f", {end_of(short)} cutting it short" if by == "end" else ""
         said = f"{TOO_FEW_FINITE} ({finite} of the {samples} samples it holds{held}{end}"
     elif by == "gap":
         said = f"{TOO_FEW_ROWS} ({samples} samples{some}{held}, samples missing in the rest"
@@ -1302,7 +1319,11 @@ def detect(
     those watched. ``report`` records the velocities derived from the pose, where the log
     lacks them."""
     start = time.perf_counter()
-    data = monitor_inputs(log, monitor.plant_, report)
+    data = monitor_inputs(log, monitor.plant_, report)  # on the log's rows: errors name them
+    order = by_experiment(data["experiment"])
+    if order is not None:  # a run resumed after another's rows: each run's rows together
+        log = log.iloc[order]
+        data = {k: v[order] if k in _ROWS else v for k, v in data.items()}
     trace = monitor.run(log)
     values, alarm = trace.values.copy(), trace.alarm.copy()
     residual = trace.values[:, 0:6].copy()  # the residual watched, re-referenced per change
@@ -1354,8 +1375,25 @@ def detect(
                  changed, change)  # fmt: skip
         pos = int(rows[-1]) + 1
     tails = [unjudged_tail(names[np.argmax(codes == c)], w) for c, w in rewatch.items()]
+    if order is not None:  # the trace in the log's row order
+        back = np.argsort(order)
+        watched = Trace(t[back], names[back], values[back], alarm[back])
     return DetectResult(watched, alarms, time.perf_counter() - start, dismissed=dismissed,
                         unjudged=[u for u in tails if u is not None])  # fmt: skip
+
+
+#: the keys of :func:`~nnid.fault.monitor.monitor_inputs` that hold one entry per row
+_ROWS = ("t", "x", "inputs", "experiment")
+
+
+def by_experiment(codes: np.ndarray) -> np.ndarray | None:
+    """The row order that puts each experiment's rows together (a stable sort by ``codes``),
+    or None where they already are. Detection reads an experiment as the rows from its first
+    to its last (:func:`_rest`); a run that resumes after another's (runs A, B, A) had B's
+    rows watched as A's, with A's isolated change taken out of them."""
+    if codes.size < 2 or bool(np.all(np.diff(codes) >= 0)):
+        return None
+    return np.argsort(codes, kind="stable")
 
 
 def _rest(data: dict, rows: np.ndarray) -> np.ndarray:

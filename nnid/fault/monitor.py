@@ -204,6 +204,7 @@ def monitor_inputs(
         "inputs": np.ascontiguousarray(log[cols].to_numpy(np.float64)),
         "experiment": data["experiment"],
         "experiment_names": data["experiment_names"],
+        "experiment_runs": data["experiment_runs"],  # per code: its piece_of, else itself
         "unread": np.array(unread, dtype=np.int64),
     }
 
