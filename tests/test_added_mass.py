@@ -80,8 +80,11 @@ def test_prolate_spheroid_limits_and_errors():
     # slender body: axial added mass much smaller than transverse
     slender = prolate_spheroid_added_mass(VT_LENGTH, VT_DIAMETER, mass=VT_MASS)
     assert abs(slender["X_udot"]) < 0.05 * abs(slender["Y_vdot"])
-    with pytest.raises(ValueError):
-        prolate_spheroid_added_mass(0.2, 0.3)  # length must exceed diameter
+    # length must exceed diameter, and the diameter be positive: a sphere (e = 0) and a
+    # flat body are refused in the function's words, not by a math domain error or 0/0
+    for length, diameter in ((0.2, 0.3), (0.3, 0.3), (0.3, 0.0), (0.3, -0.1)):
+        with pytest.raises(ValueError, match="prolate spheroid needs length > diameter > 0"):
+            prolate_spheroid_added_mass(length, diameter)
 
 
 # --------------------------------------------------------------------------------------------

@@ -279,6 +279,10 @@ def test_a_plateau_of_a_few_samples_is_not_used():
     assert [p.force for p in plateaus] == [2.0]
     assert all(p.n >= 10 for p in plateaus)  # MIN_PLATEAU_SAMPLES
     assert plateaus[0].speed == pytest.approx(0.2, abs=3 * plateaus[0].speed_std + 1e-6)
+    # its s.e. bounded by hand: a straight line fitted to the plateau's 30 samples of 1e-4 m
+    # noise has slope s.e. σ/√Σ(t − t̄)², and the asymptote fit may not be worse by 2x
+    tt = t[(t >= plateaus[0].start) & (t <= plateaus[0].end)]
+    assert plateaus[0].speed_std < 2 * 1e-4 / np.sqrt(np.sum((tt - tt.mean()) ** 2))
 
 
 def test_a_plateau_lasts_min_plateau_from_its_first_sample_to_its_last():
@@ -349,6 +353,9 @@ def test_plateaus_are_cut_at_missing_samples_and_other_uneven_stamps_are_refused
     assert [p.n for p in plateaus] == [300, 300]
     assert [x for p in plateaus for x in (p.start, p.end)] == pytest.approx([0, 29.9, 50, 79.9])
     assert all(p.speed == pytest.approx(0.02, abs=3 * p.speed_std) for p in plateaus)
+    # the window bounded by hand: the crudest speed of a plateau, its two end samples'
+    # difference over its 29.9 s, has s.e. σ√2/29.9 (σ = 1 mm); its s.e. is within 5x that
+    assert all(p.speed_std < 5 * 1e-3 * np.sqrt(2) / (p.end - p.start) for p in plateaus)
     t = np.r_[np.arange(600) * 0.1, 60.0 + np.arange(30)]  # then 30 s at 1 Hz
     force = np.r_[np.full(600, 1.0), np.full(30, 2.0)]
     position = np.r_[0.0, np.cumsum(0.01 * force[:-1] * np.diff(t))]

@@ -124,23 +124,37 @@ def test_a_run_that_diverges_is_not_averaged_into_the_pooled_score(runs):
     small = runs.loc[runs["experiment"] == "small", "y"].to_numpy()[10:]
     per = poor["free_run_nrmse_per_experiment"]
     assert per["small"]["y"] == pytest.approx(6.0 / small.std(), rel=1e-9)
-    assert poor["free_run_nrmse"]["total"] is not None and not poor["diverged"]
+    # pooled: the RMS of the error over both runs' scored rows (1 in big, 1 + off in small)
+    # over the std of the pooled measured values there, by hand; one column: total = y's
+    big = runs.loc[runs["experiment"] == "big", "y"].to_numpy()[10:]
+    pooled = np.r_[big, small]
+
+    def pooled_nrmse(off):
+        err = np.r_[np.ones(big.size), np.full(small.size, 1.0 + off)]
+        return np.sqrt(np.mean(err**2)) / pooled.std()
+
+    expected = pooled_nrmse(5.0)
+    assert poor["free_run_nrmse"] == pytest.approx({"y": expected, "total": expected}, rel=1e-9)
+    assert poor["one_step_nrmse"] == pytest.approx({"y": expected, "total": expected}, rel=1e-9)
+    assert not poor["diverged"]
     assert "diverged_per_experiment" not in poor
     model.off = 205.0
     scores = evaluate(model, runs, ("one_step", "free_run"), warmup_s=1.0)
     pred = model.predict(runs, "free_run")
     mask = np.arange(len(runs)) % 300 >= 10  # after each run's first second
-    assert score_prediction(runs, pred, ["y"], mask)[0]["total"] is not None  # pooled alone
+    # pooled alone it reads as finite: the same hand computation with a miss of 205
+    alone = score_prediction(runs, pred, ["y"], mask)[0]
+    assert alone["total"] == pytest.approx(pooled_nrmse(205.0), rel=1e-9) == alone["y"]
     assert scores["free_run_nrmse"] == {"y": None, "total": None}
     assert scores["free_run_rmse"]["total"] is None and "y" in scores["diverged"]
     assert list(scores["diverged_per_experiment"]) == ["small"]
     # the healthy run keeps its own score: 1 over its std, as scored alone
-    big = runs.loc[runs["experiment"] == "big", "y"].to_numpy()[10:]
     per = scores["free_run_nrmse_per_experiment"]
     assert per["big"]["y"] == pytest.approx(1.0 / big.std(), rel=1e-9)
     assert scores["one_step_nrmse"]["total"] is None and "y" in scores["one_step_diverged"]
     healthy = evaluate(Shifted().fit(runs), runs, ("free_run",), warmup_s=1.0)
-    assert healthy["free_run_nrmse"]["total"] is not None and not healthy["diverged"]
+    assert healthy["free_run_nrmse"]["total"] == pytest.approx(pooled_nrmse(0.0), rel=1e-9)
+    assert not healthy["diverged"]
     assert "diverged_per_experiment" not in healthy
 
 

@@ -324,8 +324,14 @@ def test_cli_train_writes_contract_metrics_and_a_report_that_renders(minirov, tm
         assert metrics["baseline"][part]["free_run_nrmse"]["total"] > 0
         assert metrics["correction"]["share_of_damping_force"][part]["max"] >= 0
     test = [e["experiment"] for e in metrics["split"]["parts"]["test"]]
-    loaded = load_model(out).score(log[log["experiment"].isin(test)], "free_run", 2.0)
+    back = load_model(out)
+    held = log[log["experiment"].isin(test)]
+    loaded = back.score(held, "free_run", 2.0)
     assert loaded["total"] == pytest.approx(metrics["test"]["free_run_nrmse"]["total"], rel=1e-9)
+    # the network's share on the test part is the saved model's, read again on those runs
+    share = back.correction_share(held)
+    assert share["max"] > 0
+    assert metrics["correction"]["share_of_damping_force"]["test"] == pytest.approx(share, rel=1e-9)
     dom = chromium(tmp_path, out / "report.html", dump=True).stdout
     assert 'data-images-ok="yes"' in dom
     assert "What the network learned" in dom and "Against the physics-only baseline" in dom
@@ -364,6 +370,27 @@ def test_solver_options_and_the_acceleration_level(minirov):
     assert accel.describe()["level"] == "acceleration"
     force = accel.correction(log)
     assert list(force.columns) == list("XYZKMN") and float(force.abs().to_numpy().max()) > 0
+    # the force is M a_θ: the network's acceleration times M = M_RB + M_A, by hand: M_RB =
+    # [[m I, -m S(r_g)], [m S(r_g), I_o]] of the vehicle file, M_A = -diag(X_u̇ … N_ṙ) (Fossen)
+    # of the physics the hybrid stands on (its parametric fit's derivatives, else the file's)
+    m, (xg, yg, zg) = minirov.mass, minirov.r_g
+    s_rg = np.array([[0.0, -zg, yg], [zg, 0.0, -xg], [-yg, xg, 0.0]])
+    mass = np.zeros((6, 6))
+    mass[:3, :3], mass[:3, 3:], mass[3:, :3] = m * np.eye(3), -m * s_rg, m * s_rg
+    mass[3:, 3:] = np.diag(minirov.inertia)
+    est = accel.physics_.estimate_
+    derivatives = minirov.added_mass | {
+        n: float(v) for n, v in zip(est.names, est.theta, strict=True)
+    }
+    mass -= np.diag([derivatives[f"{f}_{d}dot"] for f, d in zip("XYZKMN", "uvwpqr", strict=True)])
+    dyn = accel.dynamics_
+    rows, data = accel._data(log, accelerations=False)
+    x = torch.as_tensor(measured_states(rows))
+    u = torch.as_tensor(accel._channels(rows, data["tau"]))
+    with torch.no_grad():
+        a_theta = dyn.correction(dyn.physics.field(), x, u).numpy()
+    assert np.abs(a_theta).max() > 0
+    np.testing.assert_allclose(force.to_numpy(), a_theta @ mass.T, rtol=1e-9, atol=1e-12)
 
 
 def test_a_network_that_learned_no_force_still_gets_its_report(tmp_path):

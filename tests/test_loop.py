@@ -961,7 +961,11 @@ def test_a_searched_size_at_the_edge_of_its_range_is_a_bound_not_a_measurement(m
     said = [w for w in loop.warnings_ if "lies at" in w]
     if reach is None:  # found within its range, measured
         assert added["edge"] is None and not said
-        assert added["params"]["value"] == pytest.approx(0.15, abs=3 * added["stderr"]["value"])
+        se = added["stderr"]["value"]
+        assert added["params"]["value"] == pytest.approx(0.15, abs=3 * se)
+        # bounded apart from the fit: 6000 samples know the current better than one sample's
+        # velocity noise (0.005 m/s) does: the window is within it (a thirtieth of the current)
+        assert 3 * se < meas.velocity_noise, se
         return
     assert added["params"]["value"] == pytest.approx(reach, rel=0.01)
     assert added["edge"].startswith("the upper edge of the range searched")

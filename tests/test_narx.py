@@ -590,7 +590,11 @@ def test_simulation_windows_grow_in_stages_and_stop_on_the_whole_validation_run(
         scores, best = [v for s, v in seen if s == f"{w} samples"], record["best_epoch"]
         assert record["validation"][1:] == pytest.approx(scores, rel=1e-12)
         assert 0 <= best <= len(scores)
-        assert best == 0 or scores[best - 1] == min(scores), (w, best, scores)
+        # the record holds the start at index 0, then one entry per epoch: the kept epoch is
+        # the first lowest of them (a later tie or a rejected step's repeat does not move it)
+        start_and_epochs = record["validation"]
+        assert len(start_and_epochs) == len(scores) + 1
+        assert best == int(np.argmin(start_and_epochs)), (w, best, start_and_epochs)
     # the train report says how each stage ended, in words, the one-step stage first
     report = train_markdown(
         {"model": "narx", "params": {}, "seconds": 0.0, "describe": model.describe()}

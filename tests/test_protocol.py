@@ -42,8 +42,10 @@ from nnid.models.sindy import SindyDamping
 from nnid.models.synthesis import SynthesisModel
 from nnid.serialization import read_json
 from nnid.trainers.adam import Adam
+from nnid.trainers.caccia import CacciaTwoStep
 from nnid.trainers.least_squares import LeastSquares
 from nnid.trainers.levenberg_marquardt import LevenbergMarquardt
+from nnid.trainers.neural_ode import MultipleShooting
 from nnid.vehicle import load_vehicle
 
 MINIROV = resources.files("nnid.demo_data").joinpath("minirov.toml")
@@ -199,11 +201,27 @@ def test_save_load_reproduces_predictions(kind, fitted, runs, heave_campaign, tm
     # what fitted it and how long it took, as reported before saving (a loaded Caccia model
     # named its trainer "method", a hybrid "adam" where "shooting" fitted it)
     assert back.describe() == model.describe()
-    assert model.trainer_name() is not None
+    assert model.trainer_name() == TRAINER_NAMES[kind]
     assert back.trainer_name() == model.trainer_name()
-    if kind == "hybrid":  # and its physics fit's ("ls", None after loading)
-        assert model.baseline().trainer_name() is not None
+    if kind == "hybrid":  # and its physics fit's ("ls", None after loading): least squares
+        assert model.baseline().trainer_name() == LeastSquares.kind  # physics_trainer None
         assert back.baseline().trainer_name() == model.baseline().trainer_name()
+
+
+#: what fits each of BUILDERS' models, by its settings there: the trainer given (NARX's LM,
+#: the state space's Adam, the ensemble's members' Adam), the hybrid's multiple shooting that
+#: steps its Adam, Caccia's two steps, synthesis' default method "ls", SINDy's default
+#: optimizer "stlsq"
+TRAINER_NAMES = {
+    "fossen": LeastSquares.kind,
+    "caccia": CacciaTwoStep.kind,
+    "synthesis": "masked least squares",
+    "sindy": "pysindy stlsq",
+    "narx": LevenbergMarquardt.kind,
+    "state_space": Adam.kind,
+    "hybrid": MultipleShooting.kind,
+    "ensemble": Adam.kind,
+}
 
 
 #: what a fit records beside what it learned: the cleaning steps of its data, the added masses

@@ -12,6 +12,7 @@ from nnid.datasets.arrays import log_arrays
 from nnid.datasets.excitation import PRBS, Multisine
 from nnid.datasets.log import POSE, VELOCITY
 from nnid.datasets.simulator import simulate
+from nnid.errors import NnidInputError
 from nnid.models.parametric import ParametricFossen, ParametricModel
 from nnid.trainers.least_squares import ExcitationWarning, LeastSquares
 from nnid.trainers.recursive import GradientEstimator, RecursiveLeastSquares
@@ -196,10 +197,13 @@ def test_filtered_regressors_and_bad_arguments(seamor):
     ).fit(log)
     assert model.params["X:u*abs(u)"]["value"] == pytest.approx(X_UU, rel=0.01)
     assert model.estimate_.history.shape[0] < len(log)  # the settling time is left out
-    with pytest.raises(ValueError, match="forgetting"):
+    with pytest.raises(NnidInputError, match=r"forgetting must be in \(0, 1\]") as err:
         RecursiveLeastSquares(forgetting=1.5).solve(_surge_regression(seamor, log.assign(du=0)))
-    with pytest.raises(ValueError):
+    assert err.value.field == "forgetting"
+    # two parameters (X_udot, X:u*abs(u)): a gain of three is none of the shapes it may take
+    with pytest.raises(NnidInputError, match=r"gain must be a scalar, \[2\] or \[2, 2\]") as err:
         GradientEstimator(gain=[1.0, 2.0, 3.0]).solve(_surge_regression(seamor, log.assign(du=0)))
+    assert err.value.field == "gain"
     with pytest.warns(RuntimeWarning, match="diverged"):
         GradientEstimator(gain=1e6).solve(_surge_regression(seamor, _surge_log(seamor, 0, 5)))
 
@@ -240,7 +244,13 @@ def test_rls_gives_no_standard_error_to_what_its_memory_does_not_determine():
     # the verdict is kept with the estimate, as batch least squares keeps its own (it was
     # said in a warning only: the tables read b's missing s.e. as a plain "no")
     assert est.excitation.unexcited == ["b"] and est.as_dict()["b"]["excited"] is False
-    assert est.stderr[0] == pytest.approx(0.05, rel=0.5) and est.significant[0]
+    # a's s.e. is least squares' over the memory alone, by hand: the last 1/(1 − λ) = 100
+    # samples, the noise's mean square over n − p there, over Σ φ_a² (b's column is zero
+    # there). A memory off by 2x (50 or 200 samples) is off by √2 (0.069 or 0.035)
+    window = round(1 / (1 - 0.99))
+    a, e = phi[-window:, 0], noise[-window:]
+    by_hand = np.sqrt(np.sum(e**2) / (window - 2) / np.sum(a**2))
+    assert est.stderr[0] == pytest.approx(by_hand, rel=0.05) and est.significant[0]
     phi2 = np.repeat(phi[:, :1], 2, axis=1) * [1.0, 2.0]
     y2 = phi2 @ np.array([2.0, -3.0]) + noise
     reg2 = Regression(phi2, y2, ["a", "b"], ("u",), y2.size)
@@ -411,6 +421,12 @@ def test_rls_that_has_not_converged_says_so():
             warnings.simplefilter("error")
             est = RecursiveLeastSquares(forgetting=forgetting).solve(zero)
         assert np.isfinite(est.stderr).all() and abs(est.theta[2]) < 4 * est.stderr[2]
+        # that s.e. bounded by hand: least squares' σ √[(ΦᵀΦ)⁻¹]_cc over the memory (the
+        # whole run, or its last 1/(1 − λ) = 100 samples) with the noise's σ = 0.5
+        window = y.size if forgetting == 1.0 else round(1 / (1 - forgetting))
+        rows = zero.phi[-window:]
+        by_hand = 0.5 * np.sqrt(np.linalg.inv(rows.T @ rows)[2, 2])
+        assert est.stderr[2] < 1.5 * by_hand, (forgetting, est.stderr[2], by_hand)
 
 
 def test_rls_standard_errors_cover_the_spread_of_its_estimates():
