@@ -66,9 +66,10 @@ MAX_FALSE_ALARMS_PER_HOUR = 3600.0
 
 
 #: the Unicode categories of a character that has no place in one line of text: the control
-#: characters (a line break, a tab, \x00-\x1f, \x7f-\x9f) and the line and paragraph
-#: separators U+2028 and U+2029, which are none, yet str.splitlines breaks at them as at \n
-_NOT_ONE_LINE = ("Cc", "Zl", "Zp")
+#: characters (a line break, a tab, \x00-\x1f, \x7f-\x9f), the line and paragraph
+#: separators U+2028 and U+2029, which are none, yet str.splitlines breaks at them as at \n,
+#: and a lone surrogate (a name from bytes that were not UTF-8: no file can be written with it)
+_NOT_ONE_LINE = ("Cc", "Zl", "Zp", "Cs")
 
 
 def control_character(text: str) -> str | None:

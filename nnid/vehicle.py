@@ -8,6 +8,7 @@ water current (NED), a constant external force, a first-order actuator lag and a
 from __future__ import annotations
 
 import math
+import sys
 import tomllib
 import warnings
 from importlib import resources
@@ -135,9 +136,9 @@ class Thruster(StrictModel):
     @field_validator("direction")
     @classmethod
     def _unit(cls, d: list[float], info: ValidationInfo) -> list[float]:
-        if (info.context or {}).get("as_saved") and any(d):  # normalised when first read
-            return d
         norm = math.sqrt(sum(x * x for x in d))
+        if (info.context or {}).get("as_saved") and abs(norm - 1.0) <= 4 * sys.float_info.epsilon:
+            return d  # normalised when first read: kept bit for bit (a hand-edited one is not)
         if not 0 < norm < math.inf:
             # hypot scales before it squares: the sum of squares overflowed [1e300, 1e300, 0]
             # to inf (a direction of zeros, a thruster that pushed nowhere) and underflowed

@@ -12,6 +12,7 @@ import functools
 import json
 import os
 import re
+import time
 import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -1484,21 +1485,28 @@ def test_detect_follow_reads_a_named_pipe_to_its_end(tmp_path):
 
     from nnid.fault.follow import _rows
 
-    pipe = tmp_path / "live.csv"
-    os.mkfifo(pipe)
+    # its writer closed: its last line is whole without a line end too (it was left out as
+    # "a row still being written", as a regular file's is), and no idle wait (idle_s 30 s)
+    for last in (b"0.1,2\n", b"0.1,2"):
+        pipe = tmp_path / f"live{len(last)}.csv"
+        os.mkfifo(pipe)
 
-    def write() -> None:
-        with open(pipe, "wb") as writer:  # waits for the reader to open it
-            for line in (b"t,u\n", b"0.0,1\n", b"0.1,2\n"):
-                writer.write(line)
-                writer.flush()
+        def write(pipe=pipe, last=last) -> None:
+            with open(pipe, "wb") as writer:  # waits for the reader to open it
+                for line in (b"t,u\n", b"0.0,1\n", last):
+                    writer.write(line)
+                    writer.flush()
 
-    writer = threading.Thread(target=write, daemon=True)
-    writer.start()
-    try:
-        assert list(_rows(str(pipe), 0.0)) == [["t", "u"], ["0.0", "1"], ["0.1", "2"]]
-    finally:
-        writer.join(timeout=5)
+        writer = threading.Thread(target=write, daemon=True)
+        writer.start()
+        said = []
+        try:
+            start = time.perf_counter()
+            rows = list(_rows(str(pipe), 30.0, say=said.append))
+            assert rows == [["t", "u"], ["0.0", "1"], ["0.1", "2"]] and not said, said
+            assert time.perf_counter() - start < 10.0
+        finally:
+            writer.join(timeout=5)
 
 
 def test_detect_follow_names_data_it_cannot_read_and_says_a_cut_last_row(tmp_path, monkeypatch):

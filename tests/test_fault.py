@@ -1430,7 +1430,8 @@ def test_a_run_resumed_after_anothers_rows_leaves_the_other_run_alone(vehicle, m
     """Runs A, B, A (A's second block continuing A's clock), a snag in A's first block:
     detection read A as its rows from its first to its last, so the snag's change was taken
     out of B's residual and B's statistics rewritten. B's alarms and statistics are those of
-    B alone, and the trace keeps the log's rows."""
+    B alone, A's second stretch's those of that stretch alone, and the trace keeps the log's
+    rows."""
     snag = [Fault("external", FAULT_T, force=SNAG)]
     a = simulate_faults(vehicle, 40, faults=snag, seed=1).assign(experiment="A")
     b = simulate_faults(vehicle, 32, faults=snag, seed=2).assign(experiment="B")
@@ -1443,6 +1444,12 @@ def test_a_run_resumed_after_anothers_rows_leaves_the_other_run_alone(vehicle, m
     np.testing.assert_array_equal(result.trace.t, log["t"].to_numpy())
     np.testing.assert_array_equal(result.trace.values[in_b], alone.trace.values)
     np.testing.assert_array_equal(result.trace.alarm[in_b], alone.trace.alarm)
+    # A's second stretch is watched from a fresh start, as --follow (a new run at each change
+    # of experiment) watches it: as that stretch alone
+    second = detect(monitor, a[~first].reset_index(drop=True))
+    in_a2 = np.arange(len(log)) >= int(first.sum()) + len(b)
+    np.testing.assert_array_equal(result.trace.values[in_a2], second.trace.values)
+    assert [x for x in result.alarms if x["t"] > 32.0 and x["experiment"] == "A"] == (second.alarms)
 
 
 def test_a_window_a_dropout_cuts_is_said_cut_by_a_gap_not_by_the_end(vehicle, monitor):

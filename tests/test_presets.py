@@ -471,6 +471,11 @@ def test_a_starter_vehicle_named_beyond_the_bmp_is_written_and_loads(tmp_path):
     res = CliRunner().invoke(app, [*args, "--out", str(out)])
     assert res.exit_code == 0, res.output
     assert load_vehicle(out).name == "ROV 🚀"
+    # a lone surrogate (argv bytes that were not UTF-8) is refused before any file is written
+    bad = tmp_path / "bad.toml"
+    args[-1] = "ROV \udcff"
+    res = CliRunner().invoke(app, [*args, "--out", str(bad)])
+    assert res.exit_code == 2 and "--name" in res.output and not bad.exists(), res.output
 
 
 def test_a_saved_vehicle_keeps_its_thruster_directions_bit_for_bit():
@@ -485,3 +490,6 @@ def test_a_saved_vehicle_keeps_its_thruster_directions_bit_for_bit():
     assert first.thrusters[0].direction == [0.7071067811865475, 0.7071067811865475, 0.0]
     again = saved_vehicle(first.model_dump(mode="json"))
     assert [t.direction for t in again.thrusters] == [t.direction for t in first.thrusters]
+    # a hand-edited saved model's direction that is no unit vector is still normalised
+    edited = saved_vehicle(data)
+    assert edited.thrusters[0].direction == first.thrusters[0].direction

@@ -122,8 +122,9 @@ WRAP_STEPS = 10
 def _wraps(us: np.ndarray) -> np.ndarray:
     """Where each step of a since-boot microsecond clock ``us`` wraps uint32 (SERVO_OUTPUT_RAW
     wraps every 71.6 minutes): the earlier value near 2^32 and the later small, the step
-    across within :data:`WRAP_STEPS` typical steps. Any drop over 2^31 counted as one, and a
-    reboot after 35.8 minutes of uptime read as a wrap, 71.6 minutes added to the new boot."""
+    across within :data:`WRAP_STEPS` typical steps. A reboot is no wrap (counting any drop
+    over 2^31 as one read a reboot after 35.8 minutes of uptime as a wrap, and added 71.6
+    minutes to the new boot)."""
     steps = np.diff(us)
     ahead = steps[steps > 0]
     if not ahead.size:

@@ -1319,11 +1319,7 @@ def detect(
     those watched. ``report`` records the velocities derived from the pose, where the log
     lacks them."""
     start = time.perf_counter()
-    data = monitor_inputs(log, monitor.plant_, report)  # on the log's rows: errors name them
-    order = by_experiment(data["experiment"])
-    if order is not None:  # a run resumed after another's rows: each run's rows together
-        log = log.iloc[order]
-        data = {k: v[order] if k in _ROWS else v for k, v in data.items()}
+    data = by_block(monitor_inputs(log, monitor.plant_, report))
     trace = monitor.run(log)
     values, alarm = trace.values.copy(), trace.alarm.copy()
     residual = trace.values[:, 0:6].copy()  # the residual watched, re-referenced per change
@@ -1375,25 +1371,27 @@ def detect(
                  changed, change)  # fmt: skip
         pos = int(rows[-1]) + 1
     tails = [unjudged_tail(names[np.argmax(codes == c)], w) for c, w in rewatch.items()]
-    if order is not None:  # the trace in the log's row order
-        back = np.argsort(order)
-        watched = Trace(t[back], names[back], values[back], alarm[back])
     return DetectResult(watched, alarms, time.perf_counter() - start, dismissed=dismissed,
                         unjudged=[u for u in tails if u is not None])  # fmt: skip
 
 
-#: the keys of :func:`~nnid.fault.monitor.monitor_inputs` that hold one entry per row
-_ROWS = ("t", "x", "inputs", "experiment")
-
-
-def by_experiment(codes: np.ndarray) -> np.ndarray | None:
-    """The row order that puts each experiment's rows together (a stable sort by ``codes``),
-    or None where they already are. Detection reads an experiment as the rows from its first
-    to its last (:func:`_rest`); a run that resumes after another's (runs A, B, A) had B's
-    rows watched as A's, with A's isolated change taken out of them."""
-    if codes.size < 2 or bool(np.all(np.diff(codes) >= 0)):
-        return None
-    return np.argsort(codes, kind="stable")
+def by_block(data: dict) -> dict:
+    """:func:`~nnid.fault.monitor.monitor_inputs`' ``data`` with each stretch of consecutive
+    rows of one experiment an experiment of its own (a run that resumes after another's rows,
+    runs A, B, A: A's second stretch), named as its run; ``data`` itself where every
+    experiment is one stretch. Detection reads an experiment as the rows from its first to its
+    last (:func:`_rest`), so B's rows were watched as A's, A's isolated change taken out of
+    them (or a KeyError); the monitor's pass restarts at each stretch (as ``--follow`` does),
+    and so, now, does what detection reads."""
+    codes = data["experiment"]
+    if codes.size < 2:
+        return data
+    starts = np.r_[True, codes[1:] != codes[:-1]]
+    if int(starts.sum()) == np.unique(codes).size:
+        return data
+    first = codes[starts]  # each stretch's experiment
+    named = {k: data[k][first] for k in ("experiment_names", "experiment_runs") if k in data}
+    return {**data, "experiment": np.cumsum(starts) - 1, **named}
 
 
 def _rest(data: dict, rows: np.ndarray) -> np.ndarray:

@@ -213,23 +213,27 @@ def _rows(
     UTF-8, the separator and decimal mark of :func:`~nnid.datasets.readers.csv_dialect`
     (put in ``dialect`` once the first row is read) and blank lines skipped, not counted. A
     file's last row still unterminated when it stops growing is left out and said to ``say``:
-    its writer may have stopped half way through a number (stdin's last line is whole: it
-    closed)."""
+    its writer may have stopped half way through a number (the last line of stdin or a pipe
+    is whole: its writer closed)."""
     handle = _opened(source)
     found = {} if dialect is None else dialect
+    # a pipe (a named one, /dev/stdin fed by one, <(producer)) ends when its writer closes, as
+    # stdin does: no idle wait, and its last line is whole (it was left out as a row still
+    # being written, where only a regular file can still grow)
+    stream = source == "-" or not stat.S_ISREG(os.fstat(handle.fileno()).st_mode)
     try:
         buffer, quiet, count, header = b"", 0.0, 0, ""
         while True:
             line = handle.readline()
             if not line and source != "-":
                 _moved(source, handle, count - 1 if count else None)  # the row to come
-            if not line and source != "-" and quiet < idle_s:
+            if not line and not stream and quiet < idle_s:
                 time.sleep(0.1)
                 quiet += 0.1
                 continue
             if not line and not buffer.strip():
                 break
-            if not line and source != "-" and count:  # a data row cut off by the idle end
+            if not line and not stream and count:  # a data row cut off by the idle end
                 if say is not None:
                     said = buffer.decode("utf-8", "replace").strip()[:60]
                     say(
