@@ -1666,6 +1666,53 @@ def test_training_runs_of_one_sample_each_are_refused_naming_why(filter_lambda):
     assert err.value.field == "experiment"
 
 
+class _GateCandidate:
+    """A linear candidate the simulation gate tests stand in: ``augment`` names the vehicle
+    after it, or fails as a refit out of the physical range where it is ``refused``."""
+
+    linear = True
+
+    def __init__(self, name: str, refused: bool = False) -> None:
+        self.name, self.parameter, self.refused = name, None, refused
+
+    def augment(self, vehicle, value):
+        from types import SimpleNamespace
+
+        if self.refused:
+            raise ValueError("added mass leaves M indefinite")
+        return SimpleNamespace(name=self.name)
+
+
+def _gate_candidates(n: int, refused: tuple[str, ...] = ()) -> list:
+    """``n`` candidates c0, c1, … that passed every test before the gate."""
+    from nnid.loop.diagnose import Scored
+
+    out = []
+    for k in range(n):
+        cand = _GateCandidate(f"c{k}", f"c{k}" in refused)
+        s = Scored(cand, 1.0, 0.1, 1e-9, 50.0, 0.3, {"w": 0.3}, 10.0)
+        s.admissible, s.reason = True, "passes the tests; ranked below the one added"
+        out.append(s)
+    return out
+
+
+def _stub_gate(monkeypatch, error, augment, gate_checks: int):
+    """A loop whose gate simulates by ``error(self, ws, vehicle, mode)`` and refits jointly by
+    ``augment(self, ws, fit, s)``, and the held-out part and fit it gates on."""
+    from types import SimpleNamespace
+
+    import nnid.loop.residual_loop as rl
+
+    monkeypatch.setattr(rl, "vehicle_with", lambda vehicle, values: vehicle)
+    monkeypatch.setattr(rl.ResidualLoop, "_simulation_error", error)
+    monkeypatch.setattr(rl.ResidualLoop, "_augment", augment)
+    ws = SimpleNamespace(val=pd.DataFrame({"t": np.arange(0.0, 10.0, 0.1)}))
+    fit = SimpleNamespace(vehicle=SimpleNamespace(name="fit"))
+    loop = ResidualLoop(None, gate_checks=gate_checks)
+    loop.gates_ = []
+    return loop, ws, fit
+
+
 def test_candidates_beyond_gate_checks_are_not_gated_and_a_gate_failure_is_not_no_effect(
     monkeypatch,
 ):
@@ -1673,48 +1720,23 @@ def test_candidates_beyond_gate_checks_are_not_gated_and_a_gate_failure_is_not_n
     failed it, the rest stayed admissible, "passes the tests; ranked below the one added", with
     nothing added, and the report opened "No significant effect" over candidates significant
     in the force residual whose simulation alone did not gain."""
-    from types import SimpleNamespace
-
-    import nnid.loop.residual_loop as rl
-    from nnid.loop.diagnose import Scored
     from nnid.reports.loop_report import summary
 
-    class Fake:
-        linear = True
-
-        def __init__(self, name):
-            self.name, self.parameter = name, None
-
-        def augment(self, vehicle, value):
-            return SimpleNamespace(name=self.name)
-
-    def admissible(n):
-        out = []
-        for k in range(n):
-            s = Scored(Fake(f"c{k}"), 1.0, 0.1, 1e-9, 50.0, 0.3, {"w": 0.3}, 10.0)
-            s.admissible, s.reason = True, "passes the tests; ranked below the one added"
-            out.append(s)
-        return out
-
     gains = {}  # the held-out free-run error with each candidate; 1.0 without
-    monkeypatch.setattr(rl, "vehicle_with", lambda vehicle, values: vehicle)
-    monkeypatch.setattr(
-        rl.ResidualLoop, "_simulation_error",
+    loop, ws, fit = _stub_gate(
+        monkeypatch,
         lambda self, ws, vehicle, mode: gains.get(getattr(vehicle, "name", None), 1.0),
-    )  # fmt: skip
-    monkeypatch.setattr(rl.ResidualLoop, "_augment", lambda self, ws, fit, s: "refitted")
-    ws = SimpleNamespace(val=pd.DataFrame({"t": np.arange(0.0, 10.0, 0.1)}))
-    fit = SimpleNamespace(vehicle=SimpleNamespace(name="fit"))
-    loop = ResidualLoop(None, gate_checks=3)
-    loop.gates_ = []
-    ranked = admissible(5)
+        lambda self, ws, fit, s: "refitted",
+        gate_checks=3,
+    )
+    ranked = _gate_candidates(5)
     assert loop._simulation_gate(ws, fit, ranked) == (None, None)
     assert all("does not improve" in s.reason for s in ranked[:3])
     for s in ranked[3:]:  # never simulated, and nothing was added
         assert not s.admissible and s.reason == "not gated (beyond gate_checks = 3)"
     # one of those gated is added: the rest are ranked below it, gated or not
     gains["c1"] = 0.5
-    ranked = admissible(5)
+    ranked = _gate_candidates(5)
     chosen, _ = loop._simulation_gate(ws, fit, ranked)
     assert chosen is ranked[1] and chosen.reason == "added"
     assert all(s.admissible and "ranked below the one added" in s.reason for s in ranked[2:])
@@ -1743,28 +1765,9 @@ def test_the_gate_names_why_it_refused_a_candidate_whose_simulation_gained(monke
     range too: the verdict said "no gain in simulation" of them. A candidate whose refit
     failed before any simulation was in no list, and where every gated one did, the verdict
     was "No significant effect", the not-gated ones unsaid."""
-    from types import SimpleNamespace
-
     import nnid.loop.residual_loop as rl
-    from nnid.loop.diagnose import Scored, Step
+    from nnid.loop.diagnose import Step
     from nnid.reports.loop_report import summary
-
-    class Fake:
-        linear = True
-
-        def __init__(self, name):
-            self.name, self.parameter = name, None
-
-        def augment(self, vehicle, value):
-            if self.name == "c1":
-                raise ValueError("added mass leaves M indefinite")
-            return SimpleNamespace(name=self.name)
-
-    def ranked(n):
-        out = [Scored(Fake(f"c{k}"), 1.0, 0.1, 1e-9, 50.0, 0.3, {"w": 0.3}, 10.0) for k in range(n)]
-        for s in out:
-            s.admissible, s.reason = True, "passes the tests; ranked below the one added"
-        return out
 
     def error(self, ws, vehicle, mode):  # held-out errors: 1.0 for the fit
         name = getattr(vehicle, "name", None)
@@ -1775,14 +1778,8 @@ def test_the_gate_names_why_it_refused_a_candidate_whose_simulation_gained(monke
     def joint(self, ws, fit, s):
         raise ValueError("damping turns positive")
 
-    monkeypatch.setattr(rl, "vehicle_with", lambda vehicle, values: vehicle)
-    monkeypatch.setattr(rl.ResidualLoop, "_simulation_error", error)
-    monkeypatch.setattr(rl.ResidualLoop, "_augment", joint)  # c3's joint refit fails
-    ws = SimpleNamespace(val=pd.DataFrame({"t": np.arange(0.0, 10.0, 0.1)}))
-    fit = SimpleNamespace(vehicle=SimpleNamespace(name="fit"))
-    loop = ResidualLoop(None, gate_checks=4)
-    loop.gates_ = []
-    scored = ranked(6)
+    loop, ws, fit = _stub_gate(monkeypatch, error, joint, gate_checks=4)  # c3's joint refit fails
+    scored = _gate_candidates(6, refused=("c1",))
     assert loop._simulation_gate(ws, fit, scored) == (None, None)
     lists = rl.gate_verdicts(Step(scored, None, []))
     assert lists["gate_turned_down"] == ["c2"] and lists["not_gated"] == ["c4", "c5"]
@@ -1805,8 +1802,7 @@ def test_the_gate_names_why_it_refused_a_candidate_whose_simulation_gained(monke
         "gated (held-out free-run NRMSE 0.8)."
     )
     # every gated candidate's refit fails before any simulation: not "No significant effect"
-    monkeypatch.setattr(Fake, "augment", lambda self, vehicle, value: joint(self, 0, 0, 0))
-    scored = ranked(6)
+    scored = _gate_candidates(6, refused=("c0", "c1", "c2", "c3", "c4", "c5"))
     loop._simulation_gate(ws, fit, scored)
     step.update(rl.gate_verdicts(Step(scored, None, [])), top=[{"effect": s.name} for s in scored])
     assert summary(result)[0].startswith(

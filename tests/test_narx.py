@@ -678,6 +678,15 @@ def test_simulation_l2_centre_is_the_one_step_fit_in_every_stage(monkeypatch):
     assert err.value.field == "simulation_l2_center"
 
 
+def _small_lm_narx(inputs, outputs, lm_samples: int, epochs: int, sim_epochs: int) -> NarxModel:
+    """A 3-node NARX (2 and 2 delays) whose one-step and 20-sample free-run stages are LM's."""
+    return NarxModel(
+        inputs, outputs, 2, 2, hidden=(3,), balanced=False, lm_samples=lm_samples,
+        trainer=LevenbergMarquardt(max_epochs=epochs, jacobian="samples"),
+        simulation_epochs=sim_epochs, simulation_window=20, simulation_trainer="lm",
+    )  # fmt: skip
+
+
 def test_a_diverged_one_step_free_run_is_flagged_not_left_as_a_missing_score(monkeypatch):
     # The one-step net's validation free run diverges (its NRMSE infinite): the record says
     # "diverged" beside a null NRMSE, the simulation stage is kept on its finite result, and
@@ -691,11 +700,7 @@ def test_a_diverged_one_step_free_run_is_flagged_not_left_as_a_missing_score(mon
         return np.inf if len(calls) == 1 else real(self, log)
 
     monkeypatch.setattr(NarxModel, "free_run_error", first_diverges)
-    model = NarxModel(
-        ["u"], ["y"], 2, 2, hidden=(3,), balanced=False, lm_samples=300,
-        trainer=LevenbergMarquardt(max_epochs=3, jacobian="samples"),
-        simulation_epochs=2, simulation_window=20, simulation_trainer="lm",
-    ).fit(train, val)  # fmt: skip
+    model = _small_lm_narx(["u"], ["y"], 300, 3, 2).fit(train, val)
     ft = model.finetune_
     assert ft["validation_free_run_diverged_before"] is True
     assert ft["validation_free_run_nrmse_before"] is None
@@ -1001,11 +1006,7 @@ def test_a_validation_log_that_excites_no_output_is_said_so_not_called_diverged(
     # the record says; it used to be infinite, read as a free run that diverged.
     train = _tank(300, 1.3, 2).rename(columns={"u": "tau_X", "y": "u"})
     still = pd.DataFrame({"t": np.arange(200.0), "tau_X": 0.0, "u": 0.0})
-    model = NarxModel(
-        ["tau_X"], ["u"], 2, 2, hidden=(3,), balanced=False, lm_samples=200,
-        trainer=LevenbergMarquardt(max_epochs=2, jacobian="samples"),
-        simulation_epochs=1, simulation_window=20, simulation_trainer="lm",
-    ).fit(train, still)  # fmt: skip
+    model = _small_lm_narx(["tau_X"], ["u"], 200, 2, 1).fit(train, still)
     ft = model.finetune_
     assert ft["validation_free_run_nrmse_before"] is None
     assert ft["validation_free_run_nrmse_after"] is None
@@ -1023,11 +1024,7 @@ def test_the_sensitivity_buffer_is_recorded_and_no_longer_than_the_windows(monke
     train = _tank(300, 1.3, 2)
 
     def fit() -> tuple[NarxModel, dict]:
-        model = NarxModel(
-            ["u"], ["y"], 2, 2, hidden=(3,), balanced=False, lm_samples=200,
-            trainer=LevenbergMarquardt(max_epochs=1, jacobian="samples"),
-            simulation_epochs=1, simulation_window=20, simulation_trainer="lm",
-        ).fit(train, train)  # fmt: skip
+        model = _small_lm_narx(["u"], ["y"], 200, 1, 1).fit(train, train)
         return model, model.finetune_["stages"][0]
 
     model, stage = fit()
