@@ -375,7 +375,7 @@ def _run_tune(
     address: str | None,
     num_cpus: int | None,
     progress: Progress | None,
-) -> tuple[dict[str, dict[str, Any]], int]:
+) -> tuple[dict[str, dict[str, Any]], int, float]:
     """Run the trials ``todo`` (of the sweep's ``tasks``) on Ray Tune: their rows by task id,
     the cluster's CPUs and the seconds from Ray's start to the last row."""
     import threading
