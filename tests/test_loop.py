@@ -1810,3 +1810,83 @@ def test_the_gate_names_why_it_refused_a_candidate_whose_simulation_gained(monke
         "none. 4 candidates passed"
     )
     assert "turned each down: 4 had a refit that was not physical; 2 more" in summary(result)[0]
+
+
+def test_the_reported_model_is_scored_in_the_gates_mode_and_said_where_worse(monkeypatch):
+    """The gate accepts an effect on the free run of the candidate's own refit; "after" is the
+    joint refit reweighted, which no gate simulated. loop.json said nothing where the two
+    differ. ``after_vs_gate`` now holds both in the gate's mode; where the reported one is
+    worse (here a stand-in reweight that halves the heave drag) a warning says so, while the
+    effect added and the scores reported stay as they are."""
+    from dataclasses import replace
+
+    from conftest import make_vehicle
+
+    import nnid.loop.residual_loop as rl
+    from nnid.models.parametric import vehicle_with
+
+    quadratic = {"Z:w*abs(w)": -30.0}
+    truth = make_vehicle(damping={"model": None, "coefficients": {**quadratic, "Z:w": -20.0}})
+    log = pd.concat(_heave_with_a_little_surge(truth, np.random.default_rng(6), "abc"),
+                    ignore_index=True)  # fmt: skip
+    vehicle = make_vehicle(damping={"model": None, "coefficients": quadratic})
+
+    def fitted(reweight):
+        monkeypatch.setattr(rl, "reweight", reweight)
+        loop = ResidualLoop(vehicle, dofs=("w",), max_effects=1, nonlinear=False).fit(log)
+        return loop, loop.as_dict()
+
+    same, result = fitted(rl.reweight)
+    check = result["after_vs_gate"]
+    assert result["added"] == ["linear_damping.w"] and check["gate"] == "free run"
+    assert check["gated"] == same.added_[0].gate[1]
+    assert check["reported"] == result["after"]["free_run_nrmse"]["total"]
+    assert not check["worse"] and not any("after_vs_gate" in w for w in result["warnings"])
+
+    reweight = rl.reweight
+
+    def weaker(ws, fit):  # the refit the loop reports, its heave drag halved
+        out = reweight(ws, fit)
+        drag = out.theta[out.unknowns.index("Z:w*abs(w)")]
+        return replace(out, vehicle=vehicle_with(out.vehicle, {"Z:w*abs(w)": 0.5 * drag}))
+
+    _, result = fitted(weaker)
+    check = result["after_vs_gate"]
+    assert result["added"] == ["linear_damping.w"]  # the verdict stands
+    assert check["gated"] == same.added_[0].gate[1]
+    assert check["reported"] == result["after"]["free_run_nrmse"]["total"]
+    assert check["worse"] and check["reported"] > check["gated"]
+    said = [w for w in result["warnings"] if "after_vs_gate" in w]
+    assert len(said) == 1 and said[0].startswith(
+        "the reported model (the joint refit, reweighted, once linear_damping.w was added) "
+        f"scores {check['reported']:.6g} in the held-out free run"
+    )
+    # no effect added: nothing to compare
+    none = ResidualLoop(vehicle, dofs=("w",), max_effects=0, nonlinear=False).fit(log)
+    assert none.as_dict()["after_vs_gate"] is None
+
+
+def test_a_search_whose_optimum_the_vehicle_refuses_found_no_better_fit(monkeypatch):
+    """The refit at a 1-D search's optimum was outside any guard: a vehicle that refuses it
+    (a refit out of the physical range) raised ValueError through the loop, a traceback where
+    every value the search itself scored is refused quietly (scored inf). The search now found
+    no better fit there, and the pass names it in ``no_better_fit``, counted as tested."""
+    import nnid.loop.diagnose as diagnose
+    from nnid.loop.diagnose import search_nonlinear
+
+    vehicle, ws, fit = _heave_fit_beside_a_current()
+    cand = Candidate("current.z", "current", bounds=(-0.5, 0.5))
+    refit, optimum = diagnose.refit, []
+
+    def refused_at_the_optimum(ws, vehicle, unknowns, held_out=True):
+        if held_out:  # the search's own refits read the training part alone
+            optimum.append(vehicle)
+            raise ValueError("added mass leaves M indefinite")
+        return refit(ws, vehicle, unknowns, held_out)
+
+    monkeypatch.setattr(diagnose, "refit", refused_at_the_optimum)
+    assert search_nonlinear(ws, fit, cand) is None and len(optimum) == 1
+    loop = ResidualLoop(vehicle, dofs=("w",))
+    loop.dofs_, loop.gates_ = ("w",), []
+    step = loop._step(ws, fit, [cand])
+    assert step.no_better_fit == ["current.z"] and step.tested == 1 and step.added is None

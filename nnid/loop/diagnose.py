@@ -725,7 +725,8 @@ def search_nonlinear(
 ) -> Scored | None:
     """Bounded 1-D search of the effect value with the fit's unknowns refitted at each step;
     its standard error from the linearised column at the optimum (variable projection). None
-    only where the search ran and found no better fit (a candidate tested).
+    only where the search ran and found no better fit (a candidate tested), an optimum whose
+    refit the vehicle refuses among them.
 
     The search is run only if the effect, linearised at its current value, already explains a
     significant part of the residual (``prescreen_p``); otherwise the linearised score is
@@ -770,7 +771,12 @@ def search_nonlinear(
         if hi - value <= tol or (lo < 0 and value - lo <= tol)
         else ""
     )
-    best = refit(ws, model_at(value), fit.unknowns)
+    try:
+        best = refit(ws, model_at(value), fit.unknowns)
+    except ValueError:
+        # the vehicle refuses the optimum or its refit (out of the physical range), as it does
+        # each value the search scores inf: no better fit found there, and said so, no crash
+        return None
     if not best.rss < fit.rss:
         return None
     se, unmeasured = _linearised_stderr(ws, fit, best, cand, value)
