@@ -248,6 +248,25 @@ def test_a_dof_of_exact_data_does_not_swamp_isolation(monitor, stopped_h1, sigma
     assert a["efficiency"] == pytest.approx(0.0, abs=0.1) and 0.9 < a["explained"] <= 1.0
 
 
+def test_an_alarm_with_no_signature_on_its_window_measures_no_share(vehicle, monitor, monkeypatch):
+    """An alarm whose window no hypothesis has a signature on fits none: its share of the
+    residual explained was recorded 0 (a value not measured). None, as its confidence, and
+    every output says so."""
+    from nnid.fault import isolation
+    from nnid.reports.detect_report import detect_html
+
+    monkeypatch.setattr(isolation, "screen", lambda *args, **kwargs: [])
+    log = simulate_faults(vehicle, 22, faults=[Fault("external", FAULT_T, force=SNAG)], seed=1)
+    result = detect(monitor, log)
+    a = result.alarms[0]
+    assert "no hypothesis has a signature" in a["meaning"]
+    assert a["explained"] is None and a["confidence"] is None
+    saved = json.loads(json.dumps(detect_json(monitor, result)))["alarms"][0]
+    assert saved["explained"] is None and alarm_row(a)["explained"] is None
+    assert "explaining" not in describe_alarm(a)
+    assert "whitened residual after the alarm was not measured" in detect_html(monitor, result)
+
+
 def test_a_snag_in_two_dofs_is_one_external_wrench(vehicle, monitor):
     """A tether pulling off the centre: force and moment at once, one hypothesis with both."""
     fault = Fault("external", FAULT_T, force=(-8, 0, 0, 0, 0, 1.5))

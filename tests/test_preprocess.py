@@ -1069,3 +1069,23 @@ def test_a_gap_does_not_stop_jump_repair():
     assert np.isnan(fixed.iloc[300:303]).all()
     assert abs(fixed.iloc[50] - x[50]) < 0.05
     assert report.steps[0].detail.startswith("1 samples")
+
+
+def test_a_runs_ends_are_read_as_a_gap_by_jump_detection():
+    """The ends were padded with the end sample, which was then half its own reference: a
+    clean sine's first and last samples were jumps, and a glitch there had to be about 12
+    robust σ to be found. Beyond the ends is now read as a gap."""
+    t = np.arange(0, 30, 0.01)
+    clean = np.sin(0.5 * t) + 1e-4 * np.random.default_rng(3).standard_normal(t.size)
+    assert not detect_jumps(clean).any()
+    found = 0
+    for seed in range(10):
+        x = np.sin(0.5 * t) + 1e-3 * np.random.default_rng(seed).standard_normal(t.size)
+        # about 7 of the detector's robust σ (1.2e-3 on this noise)
+        for at, sign in [(0, 1), (0, -1), (-1, 1), (-1, -1)]:
+            glitched = x.copy()
+            glitched[at] += sign * 8.5e-3
+            found += bool(detect_jumps(glitched)[at])
+    # the one-sided reference at an end carries noise of its own: most, not all (1 of 40
+    # with the end padded)
+    assert found >= 25

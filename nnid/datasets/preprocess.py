@@ -1218,12 +1218,16 @@ def detect_jumps(
     out) by more than ``threshold`` robust standard deviations and ``min_jump``: motion-capture
     occlusions and glitches (Weiss V.A.2). An empty cell (a gap) is never one, and is left
     out of its neighbours' medians and of the robust spread (it made the spread NaN, and no
-    sample of the run was found). The ends are padded with the end sample (``mode="edge"``)."""
+    sample of the run was found). Beyond the run's ends is read as a gap: an end sample padded
+    with itself (``mode="edge"``) was half its own reference, so a clean sine's ends were
+    jumps and a glitch there had to be twice as big to be found."""
     y = np.asarray(y, dtype=np.float64)
     half = kernel // 2
-    padded = np.pad(y, half, mode="edge")
-    windows = np.lib.stride_tricks.sliding_window_view(padded, 2 * half + 1)
-    neighbours = np.delete(windows, half, axis=1)
+    # 2*half empty cells a side: the straight lines below reach 2*half samples away
+    wide = np.lib.stride_tricks.sliding_window_view(
+        np.pad(y, 2 * half, constant_values=np.nan), 4 * half + 1
+    )
+    neighbours = np.delete(wide[:, half : 3 * half + 1], half, axis=1)
     reference = np.median(neighbours, axis=1)
     # beside a gap the neighbour opposite each empty one is left out too: a median of the
     # others, all on one side, is a sample off the trend (a jump on any slope); elsewhere
@@ -1232,6 +1236,23 @@ def detect_jumps(
     if gapped.any():
         some = gapped.any(axis=1) & ~gapped.all(axis=1)
         reference[some] = np.nanmedian(np.where(gapped, np.nan, neighbours)[some], axis=1)
+        # no neighbour with a partner across the sample (a run's end, a side of a wide gap):
+        # the median of the straight lines through the samples k and 2k away on one side,
+        # which stays on a slope's trend and outvotes one glitch among them
+        k, centre = np.arange(1, half + 1), 2 * half
+        alone = gapped.all(axis=1)
+        lone = wide[alone]
+        lines = np.concatenate(
+            [
+                2 * lone[:, centre + k] - lone[:, centre + 2 * k],
+                2 * lone[:, centre - k] - lone[:, centre - 2 * k],
+            ],
+            axis=1,
+        )
+        drawn = ~np.isnan(lines).all(axis=1)  # a sample with none stays unmeasured
+        fallback = np.full(lines.shape[0], np.nan)
+        fallback[drawn] = np.nanmedian(lines[drawn], axis=1)
+        reference[alone] = fallback
     resid = y - reference
     measured = ~np.isnan(resid)  # an inf is a jump, repaired as before
     if not measured.any():

@@ -80,7 +80,10 @@ class Diagnosis:
     or the ``effect`` with its ``value`` and ``stderr`` (and, for a hypothesis of several
     parameters, every significant one in ``components``); ``confidence`` the posterior weight
     (BIC) of the named hypothesis and those the data cannot tell from it, None where none is
-    named (:func:`_none_named`; or none was fitted); ``alternatives`` the next ones."""
+    named (:func:`_none_named`; or none was fitted); ``explained`` the share of the whitened
+    residual the fitted hypothesis explains, None where none was fitted (too few rows, or no
+    hypothesis has a signature on the window: a 0 there was not measured); ``alternatives``
+    the next ones."""
 
     kind: str
     thruster: str | None = None
@@ -90,7 +93,7 @@ class Diagnosis:
     value: float | None = None
     stderr: float | None = None
     confidence: float | None = None
-    explained: float = 0.0
+    explained: float | None = None
     p_value: float | None = None
     meaning: str = ""
     alternatives: list[dict] = field(default_factory=list)
