@@ -592,9 +592,16 @@ def equation_times(residuals: np.ndarray | Sequence[np.ndarray], max_lag: int = 
     equation's own shrink of its effective sample size. One mean over the equations widened a
     white equation's parameters for another's correlated residual, and the correlated one's
     too little."""
+    return np.asarray(
+        [1.0 if t is None else max(t, 1.0) for t in _series_times(residuals, max_lag)]
+    )
+
+
+def _series_times(residuals: np.ndarray | Sequence[np.ndarray], max_lag: int) -> list[float | None]:
+    """:func:`autocorrelation_time` of each residual series: the columns of a 2-D array, or a
+    sequence of series (one per DOF equation)."""
     series = residuals.T if isinstance(residuals, np.ndarray) and residuals.ndim == 2 else residuals
-    taus = [autocorrelation_time(np.asarray(r, dtype=np.float64), max_lag) for r in series]
-    return np.asarray([1.0 if t is None else max(t, 1.0) for t in taus])
+    return [autocorrelation_time(np.asarray(r, dtype=np.float64), max_lag) for r in series]
 
 
 def widen_by_equation(
@@ -634,7 +641,5 @@ def correlation_time(residuals: np.ndarray | Sequence[np.ndarray], max_lag: int 
     """:func:`autocorrelation_time` of each residual series (the columns of a 2-D array, or a
     sequence of series: one per DOF equation), averaged (at least 1): the factor by which
     correlated samples shrink the effective sample size."""
-    series = residuals.T if isinstance(residuals, np.ndarray) and residuals.ndim == 2 else residuals
-    taus = [autocorrelation_time(np.asarray(r, dtype=np.float64), max_lag) for r in series]
-    taus = [t for t in taus if t is not None]
+    taus = [t for t in _series_times(residuals, max_lag) if t is not None]
     return max(float(np.mean(taus)), 1.0) if taus else 1.0
