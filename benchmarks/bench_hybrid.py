@@ -258,13 +258,20 @@ def scenarios(seeds=(11, 12, 13)) -> None:
             pf = p["test"]["free_run_nrmse"]["total"]
             share = h["correction"]["share_of_damping_force"]["test"]["max"]
             terms = [t["effect"] for t in h["correction"]["explanation"]["terms"][:3]]
+            # a diverged test free run scores None: said, and no ratio made of it
+            ratio = "diverged" if None in (hf, pf) else f"{hf / pf:.2f}"
             print(
-                f"| {effect} | {seed} | {pf:.4f} | {hf:.4f} | {hf / pf:.2f} | "
-                f"{'diverged' if narx_free is None else f'{narx_free:.3f}'} | {share:.3f} | "
+                f"| {effect} | {seed} | {_total(pf, 4)} | {_total(hf, 4)} | {ratio} | "
+                f"{_total(narx_free, 3)} | {share:.3f} | "
                 f"{', '.join(terms) or '-'} | {res['hybrid'].model.fit_seconds_:.0f} |",
                 flush=True,
             )
     print(f"\n{machine(torch=torch.__version__)}; {datetime.date.today()}")
+
+
+def _total(value: float | None, digits: int) -> str:
+    """A free-run total as printed: "diverged" where its score is None."""
+    return "diverged" if value is None else f"{value:.{digits}f}"
 
 
 if __name__ == "__main__":

@@ -15,18 +15,22 @@ Target levels are validation errors that LM and the tuned Adam both reach, per s
 worse of the two best errors of that seed (LM's, and the best over the Adam grid), and the other
 levels are 1/4, 1/2 and 3/4 of the way from 1 (≈ persistence) to L*. Time to a level is the
 first epoch end at or below it, from each trainer's own history (``History.time``
-of each: the ``fit`` clock, data preparation excluded). A short fit of each trainer
-is run first so that one-off costs (``torch.func`` set-up, about 1 s) are not charged to the
-first seed. Adam is scored twice: the best grid setting for each seed and level (an oracle, the
-most favourable case for Adam) and the one setting with the lowest median time to L*.
+of each: the ``fit`` clock, data preparation excluded). A short fit of each trainer is run
+first, in both objectives, so that one-off costs (``torch.func`` set-up, about 1 s) are not
+charged to the first seed. Adam is scored twice: the best grid setting for each seed and level
+(an oracle, the most favourable case for Adam) and the one setting with the lowest median time
+to L*.
 
 A second, smaller case (``--case surge``): the 3-node, 2-delay X → u net of the tests, trained
 on the surge run and validated on its block division (70 / 15 %), Adam capped at 3 s.
 
 ``--objective simulation`` (issue 14): the same question on the simulation (free-run) error.
 Per seed, one series-parallel LM initialisation (trainlm defaults on the one-step error) is
-shared by both trainers; then LM (sensitivity-recursion Jacobians, ``max_fail`` off) and Adam
-(constant rate, clipping at 1, no early stopping, capped) minimise the output error of the
+shared by both trainers; then LM (sensitivity-recursion Jacobians, ``max_fail`` off,
+``SIM_LM_EPOCHS``) and Adam (constant rate, clipping at 1, no early stopping, capped at the
+time LM's run of the same seed took: equal budgets; until 2026-12-01 Adam's cap was a fixed
+60 s (four-output net) or 5 s (surge net) against LM's whole runs of 58-605 s and 26-103 s)
+minimise the output error of the
 same fixed windows (``--window`` samples from measured delay states, every ``--every``-th
 window of ``NarxModel.simulation_objective``, which start every half window; Adam takes them in
 shuffled mini-batches of ``batch`` windows), and are scored after every epoch on the
@@ -148,7 +152,7 @@ def time_to(level: float, trace: Trace) -> float:
 
 SIM_LRS = (1e-3, 3e-3, 1e-2, 3e-2)
 SIM_BATCHES = (4, 16)  # windows per Adam step
-SIM_CAP = {"coupled": 60.0, "surge": 5.0}
+#: LM's epochs on the simulation objective; Adam's budget is the time LM's run took
 SIM_LM_EPOCHS = {"coupled": 40, "surge": 200}
 
 
@@ -192,9 +196,11 @@ def sim_data(case: str, window: int, source: str = "sequence"):
     return train, (surge_heldout() if case == "surge" else val)
 
 
-def sim_start(case: str, seed: int, train, val, window: int, every: int):
-    """The shared initialisation (one-step LM) and the batches of the simulation objective."""
-    model = net(case, LevenbergMarquardt(jacobian="samples"), seed, lm_samples=SAMPLES)
+def sim_start(case: str, seed: int, train, val, window: int, every: int, epochs: int = 1000):
+    """The shared initialisation (one-step LM, at most ``epochs``) and the batches of the
+    simulation objective."""
+    lm = LevenbergMarquardt(max_epochs=epochs, jacobian="samples")
+    model = net(case, lm, seed, lm_samples=SAMPLES)
     model.fit(train, validation=val)
     obj = model.simulation_objective(train, window, val)  # the model's own free-run stage's
     # (delay states, inputs, targets), and the runs' weights when the net has a run floor
@@ -203,16 +209,20 @@ def sim_start(case: str, seed: int, train, val, window: int, every: int):
 
 
 def sim_traces(
-    case, seed, grid, cap, window, every, train, val, lm_subset=1, lm_curvature=1, lm_tau=None,
-    lm_geodesic=False,
+    case, seed, grid, window, every, train, val, lm_subset=1, lm_curvature=1, lm_tau=None,
+    lm_geodesic=False, warmup=False,
 ) -> list[dict]:  # fmt: skip
     """LM and every Adam setting from the same start; (seconds, validation MSE) per epoch.
+    Equal budgets: LM runs ``SIM_LM_EPOCHS``, and each Adam setting is capped at the time that
+    run took on its own ``fit`` clock (``budget``; Adam stops at the first epoch end past it).
+    ``warmup``: two epochs of each (and of the one-step start), untimed, to pay one-off costs.
     ``lm_subset`` k > 1: each LM epoch on a fresh seeded draw of 1/k of the windows;
     ``lm_curvature`` k > 1: only its JᵀJ from such a draw, the gradient and SSE from all;
     ``lm_tau``: LM's starting μ is τ · max diag(JᵀJ) of its first system (Madsen, Nielsen &
     Tingleff 2004, section 3.2), not trainlm's 10⁻³ (that system built once more, untimed);
     ``lm_geodesic``: LM's steps with Transtrum & Sethna's geodesic acceleration."""
-    model, start, windows, obj = sim_start(case, seed, train, val, window, every)
+    epochs = 2 if warmup else None
+    model, start, windows, obj = sim_start(case, seed, train, val, window, every, epochs or 1000)
     runs = obj.validation
     out = []
     n = windows[0].shape[0]
@@ -231,13 +241,15 @@ def sim_traces(
         k = max(lm_subset, lm_curvature)  # a draw of 1/k of the windows stands for all
         mu = lm_tau * float(ne.jtj.diagonal().max()) * k
     lm = LevenbergMarquardt(
-        max_epochs=SIM_LM_EPOCHS[case], max_fail=10**6, mu=mu, geodesic=lm_geodesic
+        max_epochs=epochs or SIM_LM_EPOCHS[case], max_fail=10**6, mu=mu, geodesic=lm_geodesic
     )
     h = lm.fit(obj.module, obj.residual, lm_batches if lm_subset > 1 else [windows],
                runs, jacobian_rows=obj.jacobian_rows,
                curvature_batches=lm_batches if lm_curvature > 1 else None)  # fmt: skip
+    budget = math.inf if warmup else h.time[-1]  # LM's whole run: Adam's cap
     out.append({"seed": seed, "trainer": "lm", "trace": (h.time, h.validation),
-                "stop": h.stop_reason, "n_params": model.n_params})  # fmt: skip
+                "stop": h.stop_reason, "n_params": model.n_params,
+                "budget": budget})  # fmt: skip
     for lr, b in grid:
         order = torch.Generator().manual_seed(seed)
 
@@ -246,7 +258,8 @@ def sim_traces(
             return [tuple(x[i] for x in windows) for i in idx.split(b)]
 
         obj.module.load_state_dict(start)
-        adam = Adam(lr=lr, max_epochs=10**9, schedule="constant", max_fail=10**6, max_seconds=cap)
+        adam = Adam(lr=lr, max_epochs=epochs or 10**9, schedule="constant", max_fail=10**6,
+                    max_seconds=budget)  # fmt: skip
         h = adam.fit(obj.module, obj.residual, batches, runs)
         out.append({"seed": seed, "trainer": "adam", "lr": lr, "batch": b,
                     "trace": (h.time, h.validation)})  # fmt: skip
@@ -291,17 +304,20 @@ def train_case(case: str, seeds: Sequence[int], cap: float, grid: list[tuple[flo
 
 
 def train_sim_case(
-    case, seeds, cap, grid, window: int, every: int, source: str, lm_subset: int = 1,
+    case, seeds, grid, window: int, every: int, source: str, lm_subset: int = 1,
     lm_curvature: int = 1, lm_tau: float | None = None, lm_geodesic: bool = False,
 ) -> dict:  # fmt: skip
+    """LM and the Adam grid on the simulation objective of one case, each Adam run capped at
+    LM's whole run of its seed (``cap``: seed → seconds); the load average around them."""
     load0 = os.getloadavg()[0]
     train, val = sim_data(case, window, source)
+    options = (lm_subset, lm_curvature, lm_tau, lm_geodesic)
+    # one-off costs (torch.func set-up, the first sensitivity recursion) charged to no seed
+    sim_traces(case, seeds[0], grid, window, every, train, val, *options, warmup=True)
     runs = []
     for s in seeds:
-        runs += sim_traces(
-            case, s, grid, cap, window, every, train, val, lm_subset, lm_curvature, lm_tau,
-            lm_geodesic,
-        )  # fmt: skip
+        runs += sim_traces(case, s, grid, window, every, train, val, *options)
+    cap = {r["seed"]: r["budget"] for r in runs if r["trainer"] == "lm"}
     return {"case": case, "cap": cap, "load": [load0, os.getloadavg()[0]], "runs": runs,
             "n_params": runs[0]["n_params"], "objective": "simulation", "window": window,
             "every": every, "data": source}  # fmt: skip
@@ -376,8 +392,16 @@ def report(res: dict) -> None:
         if sim
         else "validation MSE of the normalised one-step residual (≈ 1 is persistence)"
     )
+    if isinstance(cap, dict):  # the simulation objective: Adam's cap is LM's run of the seed
+        lm_s = ", ".join(f"seed {k} {v:.3g} s" for k, v in cap.items())
+        cap_text = f"Adam capped at LM's whole run of the same seed (equal budgets): {lm_s}"
+    elif sim:  # histories saved before 2026-12-01: LM ran its epochs, Adam to a fixed cap
+        lm_s = ", ".join(f"seed {s} {lm[s][0][-1]:.3g} s" for s in seeds)
+        cap_text = f"Adam cap {cap:g} s against LM's whole runs of {lm_s}: unequal budgets"
+    else:
+        cap_text = f"Adam cap {cap:g} s"
     print(
-        f"Data: Seamor, 1 % noise, {data_text}; {what}. Adam cap {cap:g} s. "
+        f"Data: Seamor, 1 % noise, {data_text}; {what}. {cap_text}. "
         f"{len(seeds)} seeds (initialisation and sample draws). Load average {load0:.1f} at "
         f"the start, {load1:.1f} at the end.\n"
     )
@@ -449,7 +473,12 @@ def main() -> None:
     ap.add_argument("--case", choices=[*CASES, "all"], default="all")
     ap.add_argument("--seeds", type=int, default=5, help="seeds 0 .. n-1")
     ap.add_argument("--seed-list", type=int, nargs="+", help="these seeds instead of --seeds")
-    ap.add_argument("--cap", type=float, help="Adam wall-time cap per run, s (case default)")
+    ap.add_argument(
+        "--cap",
+        type=float,
+        help="one-step objective: Adam wall-time cap per run, s (case default); the simulation "
+        "objective caps it at LM's whole run of the seed",
+    )
     ap.add_argument("--threads", type=int, default=1, help="torch threads (1: robust to load)")
     ap.add_argument("--lr", type=float, nargs="+", default=list(LRS))
     ap.add_argument("--batch", type=int, nargs="+", default=list(BATCHES))
@@ -495,6 +524,8 @@ def main() -> None:
     )
     args = ap.parse_args()
     seeds = args.seed_list or range(args.seeds)
+    if args.cap is not None and args.objective == "simulation":
+        ap.error("--objective simulation caps Adam at LM's whole run of the same seed: no --cap")
     if args.lm_subset < 1 or args.lm_curvature < 1:
         ap.error("--lm-subset and --lm-curvature are positive integers k (1/k of the windows)")
     if args.lm_subset > 1 and args.lm_curvature > 1:
@@ -519,12 +550,10 @@ def main() -> None:
                  "lm_geodesic": args.lm_geodesic}  # fmt: skip
         for case in cases:
             if sim:
-                cap = args.cap or SIM_CAP[case]
                 saved["cases"].append(
                     train_sim_case(
                         case,
                         seeds,
-                        cap,
                         grid,
                         args.window,
                         args.every,
@@ -559,6 +588,9 @@ def main() -> None:
             )
         if saved.get("lm_geodesic"):
             drawn += ", geodesic acceleration (Transtrum & Sethna 2012, ratio 0.75)"
+        # histories saved before 2026-12-01 capped Adam at a fixed time, whatever LM took
+        equal = all(isinstance(c["cap"], dict) for c in saved["cases"])
+        capped = "capped at LM's whole run of the same seed" if equal else "a wall-time cap"
         if saved.get("lm_tau") is not None:
             drawn += (
                 f", starting μ {saved['lm_tau']:g} × the largest diagonal entry of its first JᵀJ"
@@ -566,8 +598,8 @@ def main() -> None:
         print(
             "Start: per seed, LM on the one-step error (trainlm defaults, early-stopped on the "
             "validation runs). Then LM (sensitivity-recursion Jacobian, trainlm's μ rule, "
-            f"no early stop{drawn}) and Adam (constant rate, clipping at 1, no early stop, a "
-            "wall-time cap; shuffled mini-batches of windows) on the same windows' output error; "
+            f"no early stop{drawn}) and Adam (constant rate, clipping at 1, no early stop, "
+            f"{capped}; shuffled mini-batches of windows) on the same windows' output error; "
             f"grid lr ∈ {{{', '.join(f'{x:g}' for x in lrs)}}} × windows per step ∈ "
             f"{{{', '.join(map(str, bs))}}}. Times from each trainer's history (`fit` clock). "
             "Levels, per seed: L* is the worse of LM's and the grid's best Adam's best "

@@ -5,7 +5,7 @@ the simulation (parallel, closed-loop) error of the 374-parameter network of
 ``configs/seamor_narx_lm.toml`` (10 tanh nodes, 4 input and 4 output delays, X Y Z N → u v w r)
 over 10,000 simulated steps (20 windows of 500 samples from measured delay states) in at most
 3 s, reported as a ratio to the same iteration on the one-step ("samples" mode) error of the
-same 10,000 rows, measured in the same run. Three ways to the simulation Jacobian:
+same 10,000 rows, measured in the same run. Two ways to the simulation Jacobian:
 
 - ``supplied``: the sensitivity recursion (:meth:`NarxModel._simulation_rows`): local
   Jacobians of every step in one batched reverse-mode pass, then a linear recursion in time;

@@ -4,7 +4,8 @@ model, on Cascaded Tanks, Silverbox and the Seamor four-output case.
 Needs the ``bench`` extra (``pip install -e '.[bench]'``: ``sysidentpy``, ``nonlinear-benchmarks``;
 torch stays the project's). Measured per case and model: the free-run test error, the
 validation error where there is one, the time to fit (wall clock; run with
-``OMP_NUM_THREADS=1`` for one-thread timings) and the peak resident memory the fit added
+``OMP_NUM_THREADS=1`` for one-thread timings; an ensemble's is all its members' fits, their
+median in a column of its own) and the peak resident memory the fit added
 (``VmHWM`` after resetting it through ``/proc/self/clear_refs``, minus the resident memory
 before; Linux only, else blank; for the nlbench nnid rows it spans ``bench_nlbench.run``, fit
 and scoring).
@@ -21,8 +22,10 @@ Data, splits and warm-ups.
   (``state_initialization_window_length``) equals nnid's ``Benchmark.warmup`` (from the
   folders' ``SOURCE.md``), and stops if not: 50 samples for both cases (``nonlinear-benchmarks``
   1.0.0 had 5 for the tanks, 1.0.1 has 50). The scores use its ``error_metrics.RMSE`` with
-  ``n_init`` = that warm-up. Train = the estimation split; tests = ``test`` (tanks),
-  ``test_multisine`` and ``test_arrow_full`` (silverbox), as in ``benchmarks/bench_nlbench.py``.
+  ``n_init`` = that warm-up; a free run that diverged by nnid's rule (:func:`common.
+  scored_free_run`, which scores nnid's rows) scores None. Train = the estimation split; tests
+  = ``test`` (tanks), ``test_multisine`` and ``test_arrow_full`` (silverbox), as in
+  ``benchmarks/bench_nlbench.py``.
   Score = free-run RMSE over the samples after the warm-up, in V (tanks) or mV (silverbox); the
   delay states are the measured outputs of the first ``max_lag`` samples, inside the warm-up.
 - ``seamor``: the data of ``configs/seamor_narx_lm.toml`` exactly as ``nnid train`` builds them
@@ -30,7 +33,8 @@ Data, splits and warm-ups.
   with 1 % noise, split by experiment into the config's test run, validation runs and training runs;
   the run names are printed and saved with the rows). Inputs tau_X tau_Y tau_Z tau_N, outputs u v w
   r. Score = free-run NRMSE per output (RMSE / std of the measured output,
-  :func:`nnid.evaluation.evaluate.score_prediction`, the function behind ``metrics.json``) over the
+  :func:`nnid.evaluation.evaluate.score_split`, the function behind ``metrics.json``, which also
+  scores each run alone and calls a pooled column diverged where one run's did) over the
   samples after the config's ``warmup_s`` (1 s, nnid's; ``nonlinear-benchmarks`` has no such case),
   on the columns ``nnid train`` scores (:func:`nnid.datasets.preprocess.excited_dofs`: w only where
   the run excites it); ``total`` = their mean. SysIdentPy is single-output: one model per output,
@@ -38,7 +42,8 @@ Data, splits and warm-ups.
   jointly (:class:`CoSimulation`: at each step every model's prediction uses the others' simulated
   outputs). Each run checks the co-simulation against SysIdentPy's ``model.predict`` with the other
   outputs fed measured (``cosim_check``: the largest difference over the std of the output plus the
-  size of the prediction, so that a diverging run is compared relatively). SysIdentPy takes one
+  size of the prediction, so that a diverging run is compared relatively), and stops where it
+  exceeds :data:`COSIM_TOLERANCE` (1e-3; FROLS's read 1e-14). SysIdentPy takes one
   record: the training runs are concatenated, so the ``max_lag`` rows after each junction (≤ 4 × 21
   of 147,622 with the current config's 22 training runs) have lagged values from the end of the
   previous run (each run starts at rest).
@@ -99,7 +104,7 @@ import pandas as pd
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import machine
+from common import ensemble_free_run, machine, scored_free_run
 
 from nnid.datasets.benchmarks import load_benchmark
 
@@ -354,41 +359,47 @@ def _version(dist: str) -> str:
 
 # -- scores --------------------------------------------------------------------------------------
 
-DIVERGENCE_FACTOR = 10.0  # as nnid.evaluation.evaluate: further out than 10 measured ranges
-
 
 def score(case: Case, log: pd.DataFrame, pred: np.ndarray, initial: int) -> dict:
-    """Free-run error of ``pred`` (n × outputs, in the log's units) on ``log``.
+    """Free-run error of ``pred`` (n × outputs, in the log's units) on ``log``, by the rules
+    behind ``metrics.json`` that nnid's rows are scored by.
 
     nlbench: ``{"value": RMSE in the case's unit}`` by ``nonlinear_benchmarks.error_metrics.
-    RMSE`` over the samples after the warm-up. Seamor: ``{"value": total NRMSE, "per": {column:
-    NRMSE}}`` by nnid's ``score_prediction`` (warm-up ``warmup_s`` and ``initial`` samples).
-    ``value`` is None where the free run diverged (non-finite, or beyond ``DIVERGENCE_FACTOR``
-    measured ranges)."""
+    RMSE`` over the samples after the warm-up, None where the free run diverged by nnid's rule
+    (:func:`common.scored_free_run`, the one nnid's nlbench rows get). Seamor: ``{"value": total
+    NRMSE, "per": {column: NRMSE}, "per_run": {run: {column: NRMSE}}}`` by nnid's
+    :func:`~nnid.evaluation.evaluate.score_split` (warm-up ``warmup_s`` and ``initial``
+    samples; a run that diverged alone makes the pooled column and ``total`` None), and an
+    output the data barely moves (left out of the score) that diverged makes ``total`` None
+    too (:func:`~nnid.evaluation.evaluate.unscored_divergence`), as :func:`nnid.evaluation.
+    evaluate.evaluate` scores nnid's rows."""
     pred = np.asarray(pred, dtype=np.float64).reshape(len(log), -1)
+    frame = pd.DataFrame(pred, columns=case.outputs, index=log.index)
     if case.name == "seamor":
         from nnid.datasets.preprocess import excited_dofs
-        from nnid.evaluation.evaluate import score_prediction, scored_rows
+        from nnid.evaluation.evaluate import score_split, scored_rows, unscored_divergence
 
         columns = excited_dofs(log, case.outputs)
-        frame = pd.DataFrame(pred, columns=case.outputs, index=log.index)
         mask = scored_rows(log, case.warmup_s, initial)
-        nrmse, _, diverged = score_prediction(log, frame, columns, mask)
+        nrmse, _, diverged, runs, _ = score_split(
+            log, frame, columns, mask, lambda run: excited_dofs(run, case.outputs)
+        )
+        left_out = [c for c in case.outputs if c not in columns]
+        gone = unscored_divergence(log, frame, columns, left_out, mask)
+        if gone:
+            diverged.update(gone)
+            nrmse["total"] = None
         per = {c: nrmse[c] for c in columns}
-        return {"value": nrmse["total"], "per": per, "diverged": sorted(diverged)}
+        out = {"value": nrmse["total"], "per": per, "diverged": sorted(diverged)}
+        return out | ({"per_run": runs} if runs else {})
     from nonlinear_benchmarks.error_metrics import RMSE
 
-    y = log[case.outputs[0]].to_numpy(np.float64)
-    p = pred[:, 0]
-    lo, hi = float(y.min()), float(y.max())
-    span = DIVERGENCE_FACTOR * (hi - lo)
     with np.errstate(all="ignore"):
-        q = p[case.warmup :]
-        bad = ~np.isfinite(q) | (q < lo - span) | (q > hi + span)
-    if bad.any():
+        ours = scored_free_run(log, frame, case.outputs[0], case.warmup)
+    if ours is None:
         return {"value": None, "diverged": case.outputs[:1]}
-    value = float(RMSE(y, p, n_init=case.warmup)) * case.scale
-    return {"value": value}
+    y = log[case.outputs[0]].to_numpy(np.float64)
+    return {"value": float(RMSE(y, pred[:, 0], n_init=case.warmup)) * case.scale}
 
 
 # -- SysIdentPy models ---------------------------------------------------------------------------
@@ -575,6 +586,26 @@ class CoSimulation:
         return worst
 
 
+#: the largest co-simulation check (:meth:`CoSimulation.check`) a run accepts: FROLS's checks
+#: read 1e-14 (float64); NARXNN's run in float32 (rounding 6e-8 a step), so a check above this
+#: is no rounding but a co-simulation that is not SysIdentPy's model, and its scores would be
+#: of another model
+COSIM_TOLERANCE = 1e-3
+
+
+def cosim_checked(sim: CoSimulation, y: np.ndarray, u: np.ndarray, what: str) -> float:
+    """``sim.check(y, u)``; RuntimeError where it exceeds :data:`COSIM_TOLERANCE`."""
+    check = sim.check(y, u)
+    if not check <= COSIM_TOLERANCE:
+        raise RuntimeError(
+            f"{what}: the joint free run (CoSimulation) differs from SysIdentPy's own predict "
+            f"by {check:.3g} (largest |difference| / (std + |prediction|), the other outputs "
+            f"measured), more than the {COSIM_TOLERANCE:g} it may: its scores would not be "
+            "SysIdentPy's model's"
+        )
+    return check
+
+
 # -- SysIdentPy rows ----------------------------------------------------------------------------
 
 
@@ -645,7 +676,8 @@ def _row(case: Case, toolkit: str, model: str, setting: str, **kw) -> dict:
         "unit": case.unit,
         "test": {},
         "validation": None,
-        "fit_s": None,
+        "fit_s": None,  # the model's: an ensemble's is all its members' fits
+        "member_fit_s": None,  # an ensemble's members: their median fit
         "peak_mb": None,
         "note": "",
     }
@@ -676,7 +708,9 @@ def frols_rows(case: Case, quick: bool, max_gb: float) -> list[dict]:
         row = _row(case, "SysIdentPy", "FROLS", label, validation=v, fit_s=fit_s, peak_mb=mb)
         row.update(terms=det["terms"], memory_estimate_gb=gb, _i=i)
         if case.name == "seamor":
-            row["cosim_check"] = det["sim"].check(*_arrays(case, case.validation)[::-1])
+            row["cosim_check"] = cosim_checked(
+                det["sim"], *_arrays(case, case.validation)[::-1], f"FROLS {label}"
+            )
         rows.append(row)
         print(
             f"  FROLS {label}: validation {_fmt(v)}, fit {fit_s:.1f} s, peak {_r(mb)} MB, "
@@ -750,9 +784,9 @@ def narxnn_rows(case: Case, quick: bool, seeds: tuple[int, ...]) -> list[dict]:
             seeds=list(seeds),
         )
         if case.name == "seamor":
-            row["cosim_check"] = fits[seeds[0]][1]["sim"].check(
-                *[a.astype(np.float64) for a in _scaled(case, fits[seeds[0]][1]["sim"].scaler)]
-            )
+            sim = fits[seeds[0]][1]["sim"]
+            y, u = (a.astype(np.float64) for a in _scaled(case, sim.scaler))
+            row["cosim_check"] = cosim_checked(sim, y, u, f"NARXNN {row['setting']}")
         row["_fits"], row["_epochs"], row["_s"] = fits, epochs, s
         rows.append(row)
         print(
@@ -855,19 +889,19 @@ def nnid_rows(case: Case, seeds: tuple[int, ...] | None = None, quick: bool = Fa
         pairs = nl.members(name, use)  # every seed once per variant of the setting
         per: dict[str, list] = {s: [] for s in case.tests}
         preds: dict[str, list] = {s: [] for s in case.tests}
-        times, mems, trains = [], [], []
+        times, mems, labels = [], [], []
         for seed, variant in pairs:
             with PeakMemory() as mem:
                 res = nl.run(name, seed, variant=variant)
             times.append(res["fit_s"])
             mems.append(mem.mb)
-            trains.append(res["train"])
+            var = f" variant {variant}" if "variants" in cfg else ""
+            labels.append(f"seed {seed}{var}")
             for split in case.tests:
                 per[split].append(res[split])
                 preds[split].append(res["pred"][split])
-            var = f" variant {variant}" if "variants" in cfg else ""
             print(
-                f"  nnid {model} seed {seed}{var}: test "
+                f"  nnid {model} {labels[-1]}: test "
                 f"{ {s: _r(per[s][-1]) for s in per} }, fit {res['fit_s']:.1f} s",
                 flush=True,
             )
@@ -877,23 +911,29 @@ def nnid_rows(case: Case, seeds: tuple[int, ...] | None = None, quick: bool = Fa
             "nnid",
             model,
             _nnid_label(cfg),
-            fit_s=float(np.median(times)),
+            # an ensemble's cost is all its members' fits; a median member is one fit
+            fit_s=float(np.sum(times)) if ens else float(np.median(times)),
+            member_fit_s=float(np.median(times)),
             peak_mb=_max(mems),
             seeds=list(use),
             note=f"settings of bench_nlbench.SETTINGS['{name}']",
         )
         for split in case.tests:
-            value = _median(per[split])
-            entry = {"value": value, "per_seed": per[split]}
+            entry = {"value": _median(per[split]), "per_seed": per[split]}
             if ens:
-                meas = preds[split][0][1]
-                stack = np.stack([p for p, _ in preds[split]])
-                agg = stack.mean(0) if ens == "mean" else np.median(stack, 0)
-                entry["value"] = float(np.sqrt(np.mean((agg - meas) ** 2))) * cfg["scale"]
+                runs = preds[split]
+                got = ensemble_free_run(
+                    runs[0][1], [p for p, _ in runs], labels, res["output"], res["warmup"]
+                )
+                value = got[ens]
+                entry["value"] = None if value is None else value * cfg["scale"]
                 entry["ensemble"] = ens
+                if got["wild"]:  # the ensemble diverged with them: named, not averaged away
+                    entry["wild_members"] = got["wild"]
+                    print(f"  nnid {model} {split}: wild member(s) {got['wild']}", flush=True)
             row["test"][split] = entry
         row["note"] += (
-            f"; test = {ens} of the {len(pairs)} members' free runs"
+            f"; test = {ens} of the {len(pairs)} members' free runs; fit = all members'"
             if ens
             else f"; test = median over {len(pairs)} member(s)"
         )
@@ -1054,8 +1094,8 @@ def _fmt_tests(row: dict) -> str:
 def table(rows: list[dict]) -> str:
     lines = [
         "| case | toolkit | model | setting | free-run test error | validation | fit (s) | "
-        "peak memory (MB) | note |",
-        "|---|---|---|---|---|---|---|---|---|",
+        "member fit, median (s) | peak memory (MB) | note |",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         unit = r["unit"]
@@ -1063,12 +1103,13 @@ def table(rows: list[dict]) -> str:
         if test:
             test += f" {unit}" if unit != "NRMSE" else " (NRMSE)"
         fit = f"{r['fit_s']:.3g}" if r["fit_s"] is not None else ""
+        member = f"{r['member_fit_s']:.3g}" if r["member_fit_s"] is not None else ""
         val = r["validation"]
         val_unit = f" {unit}" if val and val.get("value") is not None and unit != "NRMSE" else ""
         mem = f"{r['peak_mb']:.0f}" if r["peak_mb"] is not None else ""
         lines.append(
             f"| {r['case']} | {r['toolkit']} | {r['model']} | {r['setting']} | {test} | "
-            f"{_fmt(r['validation'])}{val_unit} | {fit} | {mem} | {r['note']} |"
+            f"{_fmt(r['validation'])}{val_unit} | {fit} | {member} | {mem} | {r['note']} |"
         )
     return "\n".join(lines)
 

@@ -2,7 +2,10 @@
 hidden sizes x 8 seeds), the full grid on local processes against Ray Tune with ASHA early
 stopping, in one run; both choose on the holdout protocol of RESULTS.md (never on Val).
 
-    python benchmarks/bench_sweep.py [--workers 2] [--grace 10]
+    python benchmarks/bench_sweep.py [--workers 2]
+
+ASHA's grace period and reduction factor are the config's ``[sweep]`` ``grace_epochs`` and
+``reduction_factor`` (printed in the record), not options of this script.
 
 The table (experiments est_head, est_tail, val) is made from ../shared/data in a temporary
 folder: the data set is read from there, never copied into the repository. Prints a JSON

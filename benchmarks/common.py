@@ -1,4 +1,5 @@
-"""Timing helpers shared by the benchmark scripts."""
+"""Helpers shared by the benchmark scripts: timing, the machine, a revision's nnid, and the
+free-run scores of single models and ensembles by nnid's own rules."""
 
 from __future__ import annotations
 
@@ -14,6 +15,9 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
+
+import numpy as np
+import pandas as pd
 
 
 def best_of(fn: Callable[[], object], repeats: int = 3) -> float:
@@ -71,3 +75,45 @@ def at_revision(rev: str, script: Path, *args: str) -> Any:
         out = subprocess.run([sys.executable, str(script), *args], env=env, check=True,
                              stdout=subprocess.PIPE, text=True).stdout  # fmt: skip
     return json.loads(out.strip().splitlines()[-1])
+
+
+def scored_free_run(log: pd.DataFrame, predicted: pd.DataFrame, column: str, warmup: int):
+    """RMSE of the free run ``predicted`` of ``column`` over the samples of ``log`` after its
+    first ``warmup``, by the rule behind ``metrics.json`` (:func:`nnid.evaluation.evaluate.
+    score_split`: each experiment of the log judged alone too): None where it diverged (not
+    finite, or :data:`~nnid.evaluation.evaluate.DIVERGENCE_FACTOR` measured ranges outside),
+    never a number over its finite part."""
+    from nnid.evaluation.evaluate import score_split
+
+    mask = np.arange(len(log)) >= warmup
+    _, rmse, _, _, _ = score_split(log, predicted, [column], mask, lambda run: [column])
+    return rmse[column]
+
+
+def ensemble_free_run(
+    log: pd.DataFrame,
+    members: list[pd.DataFrame],
+    names: list[str],
+    column: str,
+    warmup: int,
+) -> dict[str, Any]:
+    """Scores of the pointwise mean and median of members' free runs of ``column`` on ``log``
+    (:func:`nnid.models.ensemble.combine_members`, the ensemble model's rule), each by
+    :func:`scored_free_run`, and the mean's mean error. ``wild``: the ``names`` of the members
+    whose free run diverged or left the range of the others and the data
+    (:func:`nnid.models.ensemble.wild_members`); where there is one, every score is None (an
+    ensemble with a wild member has diverged: a mean averages it in, a median ranks it away
+    unsaid)."""
+    from nnid.models.ensemble import combine_members, wild_members
+
+    mask = np.arange(len(log)) >= warmup
+    preds = np.stack([m[[column]].to_numpy(np.float64) for m in members])
+    wild = [names[k] for k in wild_members(preds, log, [column], mask)]
+    out: dict[str, Any] = {"wild": wild}
+    for how in ("mean", "median"):
+        combined = pd.DataFrame(combine_members(preds, how), columns=[column], index=log.index)
+        out[how] = None if wild else scored_free_run(log, combined, column, warmup)
+        if how == "mean":
+            err = combined[column].to_numpy()[mask] - log[column].to_numpy(np.float64)[mask]
+            out["mean_error"] = None if out[how] is None else float(np.nanmean(err))
+    return out

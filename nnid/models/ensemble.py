@@ -268,13 +268,7 @@ class EnsembleModel(NnidModel):
     def _combined(self, predictions: list[pd.DataFrame], log: pd.DataFrame) -> pd.DataFrame:
         """The members' predictions of the outputs combined (``combine``)."""
         preds = np.stack([p[self.outputs_].to_numpy(np.float64) for p in predictions])
-        # every member counts (the members are fixed before any score; only drop_diverged
-        # leaves one out, named): a member's NaN has no rank, so the median is NaN there and
-        # scoring says the ensemble diverged; a member at ±inf or 1e9 has one and is ranked,
-        # which is the median rule. Never nanmedian: a silent ensemble of fewer members.
-        # Each member's own divergence is in metrics.json's "members".
-        with np.errstate(all="ignore"):  # a member's NaN warm-up rows stay NaN
-            combined = preds.mean(0) if self.combine == "mean" else np.median(preds, 0)
+        combined = combine_members(preds, self.combine)
         return pd.DataFrame(combined, columns=self.outputs_, index=log.index)
 
     @property
@@ -347,6 +341,21 @@ class EnsembleModel(NnidModel):
                 restore_learned(clone(self.model).set_params(seed=seed), saved, own)
             )
         self._take_shape()
+
+
+def combine_members(preds: np.ndarray, combine: str) -> np.ndarray:
+    """The pointwise ``combine`` ("mean" or "median") of members' predictions (axis 0 of
+    ``preds``), the rule of :meth:`EnsembleModel.predict`, which benchmark scripts that hold
+    members' free runs apply too."""
+    # every member counts (the members are fixed before any score; only drop_diverged leaves
+    # one out, named): a member's NaN has no rank, so the median is NaN there and scoring says
+    # the ensemble diverged; a member at ±inf or 1e9 has one and is ranked, which is the median
+    # rule. Never nanmedian: a silent ensemble of fewer members. Each member's own divergence
+    # is in metrics.json's "members".
+    if combine not in COMBINE:
+        raise NnidInputError("combine is 'mean' or 'median'", field="combine")
+    with np.errstate(all="ignore"):  # a member's NaN warm-up rows stay NaN
+        return preds.mean(0) if combine == "mean" else np.median(preds, 0)
 
 
 def wild_members(
