@@ -484,14 +484,17 @@ def detect(
         ..., "--out", help="Output folder: alarms.csv, detect.json, report."
     ),
     columns: str | None = typer.Option(
-        None, "--columns", help="Reader config for a log not in nnid's format."
+        None, "--columns", help="Reader config for a log not in nnid's format (not with --follow)."
     ),
     follow: bool = typer.Option(
         False, "--follow", help="Read a growing CSV (or stdin) and print each alarm as it happens."
     ),
     # bounded in nnid.runs, as --alpha: typer's min=0.5 read a NaN as under 0.5, passed inf
     window: float | None = typer.Option(
-        None, "--window", help="Seconds after an alarm used to isolate it, 0.5 or more."
+        None,
+        "--window",
+        help="Seconds after an alarm used to isolate it, 0.5 or more; default the detection "
+        "model's ([detect] window_s when it was trained, 10 s if it saved none).",
     ),
     time_unit: str | None = typer.Option(None, "--time-unit", help=TIME_UNIT_HELP),
     # bounded in nnid.runs, as --window
@@ -676,7 +679,9 @@ def sweep(
 ) -> None:
     """Search a train config's settings and seeds ([sweep]: grid, random draws, seeds), each
     trial scored on the validation experiments: writes settings.csv (ranked), best.toml (the
-    chosen setting as a ready config), summary.* (one row per trial) and report.html."""
+    chosen setting as a ready config), summary.* (one row per trial) and report.html. If no
+    setting got a score (every trial diverged, failed or was stopped), best.toml is not written
+    and the command exits 1."""
     from nnid.scale.engines import LocalEngine, engine_for, environment
     from nnid.scale.status import not_ok_message
     from nnid.scale.sweep import run_sweep, run_sweep_tune, trials

@@ -308,6 +308,23 @@ def test_help_keeps_the_toml_tables_and_rewraps_docstrings(command, words, monke
     assert "derivable signals and the excitation of each DOF" in " ".join(row.split()), listing
 
 
+def test_help_says_what_the_code_does_without_asking(monkeypatch):
+    """sweep exits 1 and writes no best.toml when no setting got a score, detect's --window
+    defaults to the detection model's and its --columns is refused with --follow: none of it
+    was in --help."""
+    monkeypatch.setenv("COLUMNS", "140")
+
+    def flat(command: str) -> str:
+        res = runner.invoke(app, [command, "--help"])
+        assert res.exit_code == 0
+        return " ".join(" ".join(line.strip(" │").split()) for line in res.output.splitlines())
+
+    assert "best.toml is not written and the command exits 1" in flat("sweep")
+    said = flat("detect")
+    assert "default the detection model's ([detect] window_s" in said, said
+    assert "format (not with --follow)" in said, said
+
+
 def test_inspect_on_a_folder_asks_for_a_reader_config(tmp_path):
     res = runner.invoke(app, ["inspect", str(tmp_path)])
     assert res.exit_code == 2 and "--columns" in res.output and str(tmp_path) in res.output

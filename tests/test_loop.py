@@ -669,6 +669,26 @@ def test_an_added_effect_is_weighed_by_the_model_that_has_it(seed):
     assert result["unexplained"] == {}, result["unexplained"]
 
 
+def test_a_negative_restoring_offset_is_never_described_as_lower():
+    """An effect's meaning is one line per kind, written before its value is known. That of
+    restoring_offset said "the centre of gravity sits lower than declared" whatever the sign:
+    loop.json carried it beside the Liu BlueROV's −0.018 m (a centre of gravity higher than
+    declared), and the hybrid's opinion printed it raw. It names the quantity and its sign
+    convention; the report's sentence says the direction, from the value."""
+    from nnid.reports.loop_report import effect_sentence, hybrid_opinion
+
+    cand = Candidate("restoring_offset.M", "restoring_offset", "r_g.z", dofs=("p", "q"))
+    assert "lower than" not in cand.meaning and "higher than" not in cand.meaning
+    assert "z_g; + is lower" in cand.meaning
+    step = {"effect": cand.name, "meaning": cand.meaning,
+            "params": {"value": -0.0177}, "stderr": {"value": 0.0022}}  # fmt: skip
+    assert "higher than the vehicle file says" in effect_sentence(step)
+    assert "lower than" not in effect_sentence(step)
+    term = {"effect": cand.name, "meaning": cand.meaning, "value": -0.0177, "share": 0.6}
+    opinion = {"terms": [term], "explained": 0.6, "force_rms": {"p": 0.1, "q": 0.2}}
+    assert "lower than" not in hybrid_opinion({"hybrid_opinion": opinion, "added": []})
+
+
 def test_a_noisy_dof_keeps_its_own_stderr_beside_an_exact_one(monkeypatch):
     """The loop's weights are feasible least squares' (1/σ̂²_dof, each σ̂² floored where it is
     rounding, spread within 1/√eps) and each DOF's RSS share is floored on its own. Beside a

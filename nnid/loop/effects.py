@@ -17,7 +17,7 @@ effect                             parameter                   value
 ``coupled_damping.<F>:<term>``     ``"<F>:<term>"``            δ
 ``thruster_installation.<d>.<s>``  ``eta.<d>.<s>``             (η₀ + δ)/η₀ (Caccia eq. 3)
 ``buoyancy_offset``                ``buoyancy``                −δ (W − B grows)
-``restoring_offset.<K|M>``         ``r_g.z``                   δ (m, z_g lower)
+``restoring_offset.<K|M>``         ``r_g.z``                   δ (m; + is lower)
 ``external_bias.<dof>``            ``external_bias.<dof>``     δ (N, N m)
 ``added_mass.<dof>``               ``X_udot`` …                δ (kg, kg m²)
 =================================  ==========================  ================================
@@ -47,7 +47,7 @@ _MEANING = {
     "coupled_damping": "coupled damping term {0}",
     "thruster_installation": "{0} thrust in the {1} direction differs from nominal",
     "buoyancy_offset": "weight and buoyancy differ (W − B)",
-    "restoring_offset": "the centre of gravity sits lower than declared (z_g)",
+    "restoring_offset": "the centre of gravity is off its declared height (z_g; + is lower)",
     "current": "a steady water current along NED {0}",
     "external_bias": "a constant external force in {0} (tether, payload)",
     "actuator_lag": "thrusters answer commands with a first-order lag",
