@@ -1,5 +1,9 @@
 """Thread counts (torch, numba, BLAS) for work made of many small operations, each set for a
-block and restored after it: the library never changes process-wide state."""
+block and restored after it: the library never changes process-wide state.
+
+The counts are the process's (numba's, the calling thread's), so a block is not thread-safe:
+two threads running such blocks at once restore each other's counts wrongly. Fits run in
+separate processes (:mod:`nnid.scale`), not threads."""
 
 from __future__ import annotations
 
@@ -47,11 +51,13 @@ def numba_threads(n: int = 1) -> Iterator[None]:
 
     With numba's OpenMP threading layer, ``numba.set_num_threads`` also resets the OpenMP
     thread count that torch reads (measured: torch's count went from 1 to 2), so torch's count
-    is put back after each change."""
+    is put back after each change. Numba's first call in a process starts that layer and
+    resets the count too, so torch's is read before it: read after, a task's
+    ``torch_threads(1)`` ran on every numba thread in a fresh process."""
     import numba
 
-    before = numba.get_num_threads()
     torch_before = torch.get_num_threads()
+    before = numba.get_num_threads()
     numba.set_num_threads(max(1, min(n, numba.config.NUMBA_NUM_THREADS)))
     torch.set_num_threads(torch_before)
     try:

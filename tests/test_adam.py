@@ -9,6 +9,7 @@ import pytest
 import torch
 from torch.func import functional_call
 
+from nnid.models.io_model import seeded_linear
 from nnid.trainers.adam import Adam
 
 
@@ -16,7 +17,8 @@ def _problem():
     gen = torch.Generator().manual_seed(0)
     x = torch.randn(64, 3, generator=gen)
     y = x @ torch.tensor([[1.0], [-2.0], [0.5]])
-    module = torch.nn.Linear(3, 1)
+    # not torch's global generator, which other tests seed and draw from
+    module = seeded_linear(3, 1, gen, x.dtype)
 
     def residual(params, batch):
         xb, yb = batch

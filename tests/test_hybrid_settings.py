@@ -15,6 +15,7 @@ import torch
 from nnid.errors import NnidInputError
 from nnid.loop.scenarios import effect_log
 from nnid.models.hybrid import HybridModel
+from nnid.models.io_model import seeded_linear
 from nnid.trainers.adam import Adam
 from nnid.trainers.history import History
 from nnid.trainers.neural_ode import MultipleShooting, Run
@@ -84,7 +85,9 @@ def test_a_short_validation_run_leaves_the_other_runs_windows_whole(window, expe
     run's window (40 steps: early stopping judged 2-s free runs where 5-s ones were asked)."""
     _Recorder.seen.clear()
     trainer = MultipleShooting(segments=(0.5,), optimizer=_Recorder(), validation_window=window)
-    problem = SimpleNamespace(module=torch.nn.Linear(1, 1))
+    problem = SimpleNamespace(
+        module=seeded_linear(1, 1, torch.Generator().manual_seed(0), torch.float64)
+    )
     trainer.fit(problem, [_run(200)], 0.05, [_run(200), _run(41)])
     assert _Recorder.seen == [expected]
 

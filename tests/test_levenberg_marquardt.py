@@ -13,16 +13,25 @@ from torch.func import functional_call
 
 from nnid.config import LevenbergMarquardtSpec
 from nnid.errors import NnidInputError
+from nnid.models.io_model import seeded_linear
 from nnid.threads import torch_threads
 from nnid.trainers.levenberg_marquardt import LevenbergMarquardt, add_gram
 
 
 def _mlp(sizes: list[int], seed: int) -> torch.nn.Sequential:
-    torch.manual_seed(seed)
+    """A tanh network of float64 layers drawn from a generator of its own: torch's global one
+    is seeded and drawn by other tests (in an order pytest-xdist's scheduling decides). The
+    weights torch.manual_seed(seed) gave, bit for bit."""
+    gen = torch.Generator().manual_seed(seed)
     layers: list[torch.nn.Module] = []
     for a, b in itertools.pairwise(sizes):
-        layers += [torch.nn.Linear(a, b), torch.nn.Tanh()]
-    return torch.nn.Sequential(*layers[:-1]).double()
+        layers += [seeded_linear(a, b, gen, torch.float64), torch.nn.Tanh()]
+    return torch.nn.Sequential(*layers[:-1])
+
+
+def _linear(n_in: int, n_out: int) -> torch.nn.Linear:
+    """A float64 linear layer, its weights drawn from a generator of its own (:func:`_mlp`)."""
+    return seeded_linear(n_in, n_out, torch.Generator().manual_seed(0), torch.float64)
 
 
 def _teacher() -> torch.nn.Sequential:
@@ -423,7 +432,7 @@ def test_l2_center_pulls_toward_its_point_not_toward_zero() -> None:
     expected = np.linalg.solve(a.T @ a + lam * np.eye(4), a.T @ y.numpy()[:, 0] + lam * center)
     least_squares = np.linalg.lstsq(a, y.numpy()[:, 0], rcond=None)[0]
     for c, want in ((center, expected), (least_squares, least_squares), (None, None)):
-        net = torch.nn.Linear(3, 1).double()
+        net = _linear(3, 1)
         with torch.no_grad():
             net.weight.zero_()
             net.bias.zero_()
@@ -452,7 +461,7 @@ def test_l2_leaves_the_unpenalised_parameters_free() -> None:
     a = np.hstack([x.numpy(), np.ones((80, 1))])
     lam = 20.0
     want = np.linalg.solve(a.T @ a + lam * np.diag([1.0, 1.0, 1.0, 0.0]), a.T @ y.numpy()[:, 0])
-    net = torch.nn.Linear(3, 1).double()
+    net = _linear(3, 1)
     LevenbergMarquardt(max_epochs=50, l2=lam, min_grad=0.0).fit(
         net, _regression_residual(net), [(x, y)], unpenalised=["bias"]
     )
@@ -614,7 +623,7 @@ def test_without_validation_the_kept_epoch_is_the_last_accepted_step() -> None:
     gen = torch.Generator().manual_seed(0)
     x = torch.rand(40, 1, generator=gen, dtype=torch.float64)
     y = 3 * x - 1 + 0.1 * torch.randn(x.shape, generator=gen, dtype=torch.float64)
-    net = torch.nn.Linear(1, 1).double()
+    net = _linear(1, 1)
     residual = _regression_residual(net)
     hist = LevenbergMarquardt(max_epochs=40, min_grad=0.0, mu_max=1e6).fit(net, residual, [(x, y)])
     # a step is accepted only if it lowers the SSE: the epochs whose training error fell are
@@ -631,7 +640,7 @@ def test_a_training_error_that_is_not_finite_stops_as_non_finite_not_as_a_stall(
     # start): no μ gives a step, and the stop used to be "mu_max", which the report words as
     # "stalled: LM found no step"; it is Adam's "non-finite loss", before any solve, and the
     # parameters are left as they were.
-    net = torch.nn.Linear(1, 1).double()
+    net = _linear(1, 1)
     start = _flat(net)
     x = torch.ones(4, 1, dtype=torch.float64)
 

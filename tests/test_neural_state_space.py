@@ -47,7 +47,6 @@ def _tanks(n: int, seed: int, upper0: float, lower0: float, noise: float = 0.0) 
 
 @pytest.fixture(scope="module")
 def fitted() -> tuple[NeuralStateSpace, pd.DataFrame]:
-    torch.manual_seed(0)
     train = _tanks(400, 0, 1.0, 1.0, noise=0.01)
     model = NeuralStateSpace(
         ["pump"],

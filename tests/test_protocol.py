@@ -15,11 +15,13 @@ import json
 import os
 import pickle
 import re
+import signal
 import warnings
 from importlib import resources
 from pathlib import Path
 
 import matplotlib
+import numba
 import numpy as np
 import pandas as pd
 import pytest
@@ -41,6 +43,7 @@ from nnid.models.parametric import ParametricModel
 from nnid.models.sindy import SindyDamping
 from nnid.models.synthesis import SynthesisModel
 from nnid.serialization import read_json
+from nnid.threads import numba_threads, torch_threads
 from nnid.trainers.adam import Adam
 from nnid.trainers.caccia import CacciaTwoStep
 from nnid.trainers.least_squares import LeastSquares
@@ -138,30 +141,44 @@ def _data(kind, runs, heave_campaign):
     return heave_campaign if kind == "caccia" else runs
 
 
-def _global_state() -> tuple:
-    return (
-        torch.initial_seed(),
-        torch.get_rng_state().clone(),
-        np.random.get_state()[1].copy(),  # noqa: NPY002 (the user's global generator)
-        torch.get_num_threads(),
-        matplotlib.get_backend(),
-        list(warnings.filters),
-    )
+def _global_state() -> dict:
+    """What a fit must leave as it found it in the user's process."""
+    return {
+        # numba first: its first call starts its OpenMP layer, which resets the count torch
+        # reads (numba's doing, not the fit's)
+        "numba threads": numba.get_num_threads(),
+        "torch seed": torch.initial_seed(),
+        "torch rng": torch.get_rng_state().clone(),
+        "numpy rng": np.random.get_state()[1].copy(),  # noqa: NPY002 (the user's generator)
+        "torch threads": torch.get_num_threads(),
+        "default dtype": torch.get_default_dtype(),
+        "grad mode": torch.is_grad_enabled(),
+        "backend": matplotlib.get_backend(),
+        "warning filters": list(warnings.filters),
+        "environment": dict(os.environ),
+        "cwd": os.getcwd(),
+        "sigterm": signal.getsignal(signal.SIGTERM),
+    }
 
 
 @pytest.fixture(scope="module")
 def fitted(minirov, runs, heave_campaign):
-    """Each kind fitted; the global state before and after its fit. A first round of fits
-    runs before: third-party modules imported lazily on first use (torch's sympy, ...) may
-    add warning filters of their own when imported, which is not nnid changing state."""
-    for kind, build in BUILDERS.items():
-        build(minirov).fit(*_data(kind, runs, heave_campaign))
+    """Each kind fitted (at the session's thread counts: the models the tests use); the
+    global state before and after a second fit of each. The first round also imports what
+    third-party modules import lazily on first use (torch's sympy, ...), which may add
+    warning filters of their own, which is not nnid changing state. The second runs on
+    every numba thread and 2 torch threads: under pytest-xdist both are 1, and a fit that
+    left one of them at 1 would pass unseen."""
+    models = {
+        kind: build(minirov).fit(*_data(kind, runs, heave_campaign))
+        for kind, build in BUILDERS.items()
+    }
     out = {}
-    for kind, build in BUILDERS.items():
-        train, val = _data(kind, runs, heave_campaign)
-        before = _global_state()
-        model = build(minirov).fit(train, val)
-        out[kind] = (model, before, _global_state())
+    with numba_threads(numba.config.NUMBA_NUM_THREADS), torch_threads(2):
+        for kind, build in BUILDERS.items():
+            before = _global_state()
+            build(minirov).fit(*_data(kind, runs, heave_campaign))
+            out[kind] = (models[kind], before, _global_state())
     return out
 
 
@@ -434,12 +451,11 @@ def test_refit_with_the_same_seed_is_identical(kind, fitted, minirov, runs, heav
 @pytest.mark.parametrize("kind", list(BUILDERS))
 def test_fit_leaves_process_wide_state_alone(kind, fitted):
     _, before, after = fitted[kind]
-    seed0, rng0, np0, threads0, backend0, filters0 = before
-    seed1, rng1, np1, threads1, backend1, filters1 = after
-    assert seed1 == seed0 and torch.equal(rng1, rng0)  # torch's global generator: untouched
-    assert np.array_equal(np1, np0)  # NumPy's global generator: untouched
-    assert threads1 == threads0 and backend1 == backend0
-    assert filters1 == filters0
+    before, after = dict(before), dict(after)
+    assert torch.equal(after.pop("torch rng"), before.pop("torch rng"))  # untouched
+    assert np.array_equal(after.pop("numpy rng"), before.pop("numpy rng"))
+    assert after == before
+    assert before["torch threads"] == 2  # the fit ran at a count it does not set itself
 
 
 @pytest.mark.parametrize("kind", list(BUILDERS))

@@ -1242,3 +1242,14 @@ def test_a_column_stored_as_a_parquet_files_index_is_refused_naming_it(tmp_path)
     # a RangeIndex that only has a name is no stored column: read as the row numbers
     log.rename_axis("t").to_parquet(tmp_path / "named.parquet")
     assert load_log(tmp_path / "named.parquet")[0].index.equals(pd.RangeIndex(40))
+
+
+def test_names_whose_numbers_are_equal_sort_the_same_whatever_order_they_come_in():
+    """run1.csv and run01.csv were equal to the natural sort: their order (files of a
+    pattern, runs of a log) was the order the file system listed them in, or a set's."""
+    from nnid.datasets.readers import _natural
+
+    names = ["run1.csv", "run10.csv", "run01.csv", "run2.csv", "run001.csv"]
+    expected = ["run001.csv", "run01.csv", "run1.csv", "run2.csv", "run10.csv"]
+    assert sorted(names, key=_natural) == expected
+    assert sorted(reversed(names), key=_natural) == expected

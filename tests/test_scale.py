@@ -462,7 +462,10 @@ def test_ray_two_node_cluster(fleet, serial, tmp_path) -> None:
     cluster.wait_for_nodes()
     try:
         out = tmp_path / "cluster"
+        # the engine connects (ray.init) and shuts down: Ray's process-wide changes undone
+        kept = (signal.getsignal(signal.SIGTERM), os.environ.get("PYTHONBREAKPOINT"))
         _, result = _run(RayEngine(cluster.address), fleet, out, kill=False)
+        assert (signal.getsignal(signal.SIGTERM), os.environ.get("PYTHONBREAKPOINT")) == kept
         rows = [r for r in result.rows if r["status"] == "ok"]
         assert len(rows) == 4
         assert len({r["node"] for r in rows}) == 2  # both nodes worked
@@ -1423,3 +1426,112 @@ def test_fleet_report_sections_are_vehicle_files_and_lines_configs(monkeypatch) 
     assert [t.get_text() for t in built[0].axes[0].get_legend().get_texts()] == [
         "fast.toml", "slow.toml"
     ]  # fmt: skip
+
+
+#: a fresh process that sets its own SIGTERM handler, runs a RayEngine on a stand-in Ray doing
+#: what ray.init does to the whole process (Ray 2.60's worker.py; ray.shutdown undoes none of
+#: it), then prints what it is left with and what its own SIGTERM does
+_RAY_LEAVES = """
+import faulthandler, json, os, signal, sys
+import nnid.scale.engines as engines
+from nnid.errors import NnidInputError
+from nnid.scale.manifest import Task
+
+class Ray:
+    class exceptions:
+        RayError = RuntimeError
+
+    up, shutdowns = False, 0
+
+    def is_initialized(self):
+        return self.up
+
+    def init(self, **kwargs):
+        signal.signal(signal.SIGTERM, lambda signum, frame: sys.exit(signum))  # before connecting
+        if sys.argv[1] == "unreached":
+            raise ConnectionError("Could not find any running Ray instance.")
+        faulthandler.enable()
+        os.environ["PYTHONBREAKPOINT"] = "ray.util.rpdb._driver_set_trace"
+        self.up = True
+
+    def cluster_resources(self):
+        return {"CPU": 1.0}
+
+    def remote(self, **options):
+        return lambda function: type("R", (), {"remote": lambda self, task, out: task.id})()
+
+    def wait(self, refs, num_returns=1):
+        return refs[:num_returns], refs[num_returns:]
+
+    def get(self, ref):
+        return {"id": ref, "status": "ok"}
+
+    def shutdown(self):
+        self.up, self.shutdowns = False, self.shutdowns + 1
+
+ray = Ray()
+engines._import_ray = lambda tune=False: ray
+signal.signal(signal.SIGTERM, lambda signum, frame: print(json.dumps(said)) or sys.exit(0))
+try:
+    rows = list(engines.RayEngine("local").run([Task("loop", "a.csv", id="a-1")], sys.argv[2]))
+except NnidInputError:
+    rows = []
+said = {"rows": len(rows), "shutdowns": ray.shutdowns, "faults": faulthandler.is_enabled(),
+        "breakpoint": os.environ.get("PYTHONBREAKPOINT")}
+os.kill(os.getpid(), signal.SIGTERM)  # the process's own handler prints and exits 0
+sys.exit(3)
+"""
+
+
+@pytest.mark.parametrize("reached", [True, False])
+def test_a_ray_started_here_leaves_the_process_as_it_found_it(reached, tmp_path) -> None:
+    """ray.init sets a SIGTERM handler that exits 15, PYTHONBREAKPOINT (Ray's debugger) and
+    faulthandler for the whole process, and ray.shutdown put none back: after a RayEngine
+    run, a user's SIGTERM handler was gone for good (the CLI's exit 143 became 15). The
+    engine puts them back after Ray's shutdown, and where no Ray answered too (Ray sets its
+    handler before it connects). A fresh process: pytest itself holds the faulthandler."""
+    import subprocess
+    import sys
+
+    env = {
+        k: v for k, v in os.environ.items() if k not in ("PYTHONBREAKPOINT", "PYTHONFAULTHANDLER")
+    }
+    env["PYTHONPATH"] = os.pathsep.join([str(Path(__file__).parents[1]), env.get("PYTHONPATH", "")])
+    args = [sys.executable, "-c", _RAY_LEAVES, "reached" if reached else "unreached", str(tmp_path)]
+    done = subprocess.run(args, env=env, capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stderr  # its own handler ran, not Ray's exit 15
+    said = json.loads(done.stdout)
+    assert said == {"rows": int(reached), "shutdowns": int(reached), "faults": False,
+                    "breakpoint": None}  # fmt: skip
+
+
+#: a fresh process: the thread counts torch and numba have inside a task (its fit replaced)
+_TASK_THREADS = """
+import sys
+import numba, torch
+import nnid.scale.task as task
+from nnid.scale.manifest import Task
+
+def probe(t, out_dir, progress):
+    raise RuntimeError(f"{torch.get_num_threads()} {numba.get_num_threads()}")
+
+task._run = probe
+print(task.run_task(Task("loop", "a.csv", id="a-1"), sys.argv[1])["error"].split(": ")[1])
+"""
+
+
+def test_a_task_in_a_fresh_process_runs_on_one_torch_thread(tmp_path) -> None:
+    """A task pins torch, then numba, to one thread; numba's first call in a process starts
+    its OpenMP layer, which resets the count torch reads to numba's (2 here), and numba's
+    pinning read torch's count after that and put the reset one back: the task ran torch on
+    every numba thread. One each."""
+    import subprocess
+    import sys
+
+    env = {k: v for k, v in os.environ.items() if k != "OMP_NUM_THREADS"}
+    env["NUMBA_NUM_THREADS"] = "2"
+    env["PYTHONPATH"] = os.pathsep.join([str(Path(__file__).parents[1]), env.get("PYTHONPATH", "")])
+    args = [sys.executable, "-c", _TASK_THREADS, str(tmp_path)]
+    done = subprocess.run(args, env=env, capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.split() == ["1", "1"]

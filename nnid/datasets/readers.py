@@ -538,8 +538,11 @@ def _runs(mask: np.ndarray, shortest: int = 2) -> list[tuple[int, int]]:
     return [(int(a), int(b)) for a, b in pairs if b - a >= shortest]
 
 
-def _natural(name: str):
-    return [int(s) if s.isdigit() else s for s in re.split(r"(\d+)", name)]
+def _natural(name: str) -> tuple[list[int | str], str]:
+    """Sort key of file and run names: their numbers as numbers (run2 before run10), then the
+    name itself, which orders names whose numbers are equal (run01, run1): without it their
+    order was the file system's listing, or a set's."""
+    return [int(s) if s.isdigit() else s for s in re.split(r"(\d+)", name)], name
 
 
 #: a source silent for this many of its typical intervals is said when it is bridged

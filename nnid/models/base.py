@@ -244,7 +244,12 @@ class NnidModel(BaseEstimator, ABC):
         is called as the fit goes. Returns the model. A run of either log whose stamps come
         in bursts is refused before any fit: every model fits and simulates at a run's
         typical step, one inside a burst (:func:`~nnid.datasets.preprocess.refuse_bursty_runs`,
-        the pipeline's rule)."""
+        the pipeline's rule).
+
+        Not thread-safe: a fit sets process-wide settings for a while (torch's and BLAS's
+        thread counts, :mod:`nnid.threads`; warning filters) and puts them back after, so fits
+        in two threads of one process undo each other's settings. Run fits in separate
+        processes, as nnid's engines do (:mod:`nnid.scale`)."""
         log = _checked(log, "training log")
         if validation is not None:
             validation = _checked(validation, "validation log")

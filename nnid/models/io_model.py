@@ -35,10 +35,12 @@ def init_linear(layer: nn.Linear, generator: torch.Generator) -> nn.Linear:
     return layer
 
 
-def seeded_linear(n_in: int, n_out: int, generator: torch.Generator) -> nn.Linear:
-    """An ``nn.Linear`` initialised from ``generator`` (built uninitialised first, so torch's
-    global generator is never drawn from)."""
-    layer = nn.utils.skip_init(nn.Linear, n_in, n_out, dtype=torch.float32)
+def seeded_linear(
+    n_in: int, n_out: int, generator: torch.Generator, dtype: torch.dtype = torch.float32
+) -> nn.Linear:
+    """An ``nn.Linear`` of ``dtype`` initialised from ``generator`` (built uninitialised
+    first, so torch's global generator is never drawn from)."""
+    layer = nn.utils.skip_init(nn.Linear, n_in, n_out, dtype=dtype)
     return init_linear(layer, generator)
 
 

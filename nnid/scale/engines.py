@@ -23,8 +23,11 @@ of ``concurrent.futures`` and Ray; nothing here schedules by itself.
 
 from __future__ import annotations
 
+import faulthandler
 import os
 import shutil
+import signal
+import threading
 from collections.abc import Iterator
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
@@ -73,11 +76,10 @@ ONE_THREAD = {
 
 
 @contextmanager
-def environment(values: dict[str, str]) -> Iterator[None]:
-    """``values`` in ``os.environ`` for the block (worker processes started in it inherit
-    them), then the previous values back."""
-    before = {k: os.environ.get(k) for k in values}
-    os.environ.update(values)
+def kept_environ(*names: str) -> Iterator[None]:
+    """The variables ``names`` of ``os.environ`` as they were before the block, after it
+    (whatever the block set, changed or removed)."""
+    before = {k: os.environ.get(k) for k in names}
     try:
         yield
     finally:
@@ -86,6 +88,15 @@ def environment(values: dict[str, str]) -> Iterator[None]:
                 os.environ.pop(k, None)
             else:
                 os.environ[k] = v
+
+
+@contextmanager
+def environment(values: dict[str, str]) -> Iterator[None]:
+    """``values`` in ``os.environ`` for the block (worker processes started in it inherit
+    them), then the previous values back."""
+    with kept_environ(*values):
+        os.environ.update(values)
+        yield
 
 
 def _pin_worker() -> None:
@@ -225,27 +236,23 @@ class RayEngine:
         # the workers' own working folder is not this one (another node, Ray's session folder)
         out_root = Path(out_root).absolute()
         ray = _import_ray()
-        own = not ray.is_initialized()
-        if own:
-            ray_init(ray, self.address, self.num_cpus)
-        self._cpus = int(ray.cluster_resources().get("CPU", 1))
-        try:
-            remote = ray.remote(num_cpus=1, max_retries=0, runtime_env={"env_vars": ONE_THREAD})(
-                _ray_task
-            )
-            refs = {remote.remote(t, str(out_root)): t for t in tasks}
-            while refs:
-                done, _ = ray.wait(list(refs), num_returns=1)
-                for ref in done:
-                    task = refs.pop(ref)
-                    try:
-                        yield ray.get(ref)
-                    except ray.exceptions.RayError as exc:
-                        yield failed_row(task, _ray_error(exc))
-        finally:
-            if own:
-                ray.shutdown()
-            shutil.rmtree(Path(out_root) / RUNNING, ignore_errors=True)
+        with ray_session(ray, self.address, self.num_cpus):
+            self._cpus = int(ray.cluster_resources().get("CPU", 1))
+            try:
+                remote = ray.remote(
+                    num_cpus=1, max_retries=0, runtime_env={"env_vars": ONE_THREAD}
+                )(_ray_task)
+                refs = {remote.remote(t, str(out_root)): t for t in tasks}
+                while refs:
+                    done, _ = ray.wait(list(refs), num_returns=1)
+                    for ref in done:
+                        task = refs.pop(ref)
+                        try:
+                            yield ray.get(ref)
+                        except ray.exceptions.RayError as exc:
+                            yield failed_row(task, _ray_error(exc))
+            finally:
+                shutil.rmtree(Path(out_root) / RUNNING, ignore_errors=True)
 
 
 def _ray_task(task: Task, out_root: str) -> dict[str, Any]:
@@ -322,6 +329,37 @@ def ray_init(ray, address: str | None, num_cpus: int | None = None, **kwargs: An
             "to run on local processes",
             field="--address",
         ) from None
+
+
+@contextmanager
+def ray_session(
+    ray, address: str | None, num_cpus: int | None = None, **kwargs: Any
+) -> Iterator[None]:
+    """Ray for the block. A Ray already initialised in this process is used as it is and left
+    running; else :func:`ray_init` starts or reaches one (``kwargs``: its job's settings),
+    shut down after the block, and what ``ray.init`` changed for the whole process is put
+    back, which ``ray.shutdown`` does not: its SIGTERM handler (``sys.exit(15)``, which
+    replaced a user's handler and the CLI's exit 143 for good), ``PYTHONBREAKPOINT`` (a
+    later ``breakpoint()`` went to Ray's debugger) and the faulthandler it enables."""
+    if ray.is_initialized():
+        yield
+        return
+    # signal handlers are set only from the main thread (Ray sets its own only there too)
+    main = threading.current_thread() is threading.main_thread()
+    sigterm = signal.getsignal(signal.SIGTERM) if main else None
+    faults = faulthandler.is_enabled()
+    try:
+        with kept_environ("PYTHONBREAKPOINT"):
+            ray_init(ray, address, num_cpus, **kwargs)  # Ray's handler is set before it connects
+            try:
+                yield
+            finally:
+                ray.shutdown()
+    finally:
+        if sigterm is not None:  # None: a handler set outside Python, which cannot be set back
+            signal.signal(signal.SIGTERM, sigterm)
+        if not faults:
+            faulthandler.disable()
 
 
 def engine_for(address: str | None, workers: int | None = None, tune: bool = False):

@@ -385,67 +385,64 @@ def _run_tune(
     from ray import tune
     from ray.tune.schedulers import ASHAScheduler, FIFOScheduler
 
-    from nnid.scale.engines import ONE_THREAD, ray_init
+    from nnid.scale.engines import ONE_THREAD, ray_session
     from nnid.scale.task import finished
 
-    own = not ray.is_initialized()
-    if own:
-        # Tune starts its trials' workers itself, with no runtime_env of ours: the job's
-        # gives them the one-thread environment the batch engines' workers start with (Ray
-        # sets only OMP_NUM_THREADS; numba, OpenBLAS and MKL took every core)
-        ray_init(ray, address, num_cpus, runtime_env={"env_vars": ONE_THREAD})
-    start = time.perf_counter()  # the wall time leaves Ray's start out (docs/scale.md)
-    scheduler = (
-        ASHAScheduler(
-            time_attr="training_iteration",
-            max_t=1_000_000,  # trials end by themselves (their own epochs and early stop)
-            grace_period=spec.grace_epochs,
-            reduction_factor=spec.reduction_factor,
+    # Tune starts its trials' workers itself, with no runtime_env of ours: the job of a Ray
+    # started here gives them the one-thread environment the batch engines' workers start
+    # with (Ray sets only OMP_NUM_THREADS; numba, OpenBLAS and MKL took every core)
+    with ray_session(ray, address, num_cpus, runtime_env={"env_vars": ONE_THREAD}):
+        start = time.perf_counter()  # the wall time leaves Ray's start out (docs/scale.md)
+        scheduler = (
+            ASHAScheduler(
+                time_attr="training_iteration",
+                max_t=1_000_000,  # trials end by themselves (their own epochs and early stop)
+                grace_period=spec.grace_epochs,
+                reduction_factor=spec.reduction_factor,
+            )
+            if spec.early_stopping
+            else FIFOScheduler()
         )
-        if spec.early_stopping
-        else FIFOScheduler()
-    )
-    trainable = tune.with_resources(
-        tune.with_parameters(_tune_trial, tasks=todo, out_root=str(out_dir), metric=spec.metric),
-        {"cpu": 1},
-    )
-    tuner = tune.Tuner(
-        trainable,
-        param_space={"trial": tune.grid_search(list(range(len(todo))))},
-        # a trial reuses a finished one's actor: a fresh actor is a process that imports torch
-        # and nnid again (8-10 s a trial of a small NARX sweep beside a busy core, 1.5 s warm).
-        # A trial ASHA stopped waits in its report and ends there when its actor is reset
-        tune_config=tune.TuneConfig(
-            metric="objective", mode="min", scheduler=scheduler, reuse_actors=True
-        ),
-        run_config=tune.RunConfig(storage_path=str(out_dir / ".tune"), name="sweep", verbose=0),
-    )
-    cpus = int(ray.cluster_resources().get("CPU", 1))
-    box: dict[str, Any] = {}
+        trainable = tune.with_resources(
+            tune.with_parameters(
+                _tune_trial, tasks=todo, out_root=str(out_dir), metric=spec.metric
+            ),
+            {"cpu": 1},
+        )
+        tuner = tune.Tuner(
+            trainable,
+            param_space={"trial": tune.grid_search(list(range(len(todo))))},
+            # a trial reuses a finished one's actor: a fresh actor is a process that imports
+            # torch and nnid again (8-10 s a trial of a small NARX sweep beside a busy core,
+            # 1.5 s warm). A trial ASHA stopped waits in its report and ends there when its
+            # actor is reset
+            tune_config=tune.TuneConfig(
+                metric="objective", mode="min", scheduler=scheduler, reuse_actors=True
+            ),
+            run_config=tune.RunConfig(storage_path=str(out_dir / ".tune"), name="sweep", verbose=0),
+        )
+        cpus = int(ray.cluster_resources().get("CPU", 1))
+        box: dict[str, Any] = {}
 
-    def fit() -> None:
-        # Tune's own failure is raised again here: a thread that dies of it printed its
-        # traceback and left a KeyError 'grid' behind
-        try:
-            box["grid"] = tuner.fit()
-        except BaseException as exc:
-            box["error"] = exc
+        def fit() -> None:
+            # Tune's own failure is raised again here: a thread that dies of it printed its
+            # traceback and left a KeyError 'grid' behind
+            try:
+                box["grid"] = tuner.fit()
+            except BaseException as exc:
+                box["error"] = exc
 
-    thread = threading.Thread(target=fit)
-    thread.start()
-    while thread.is_alive():  # progress: the trials whose outputs are written
-        done = sum(finished(t, out_dir) is not None for t in tasks)
-        (progress or silent)(done, len(tasks), f"{done} of {len(tasks)} trials finished")
-        thread.join(1.0)
-    try:
+        thread = threading.Thread(target=fit)
+        thread.start()
+        while thread.is_alive():  # progress: the trials whose outputs are written
+            done = sum(finished(t, out_dir) is not None for t in tasks)
+            (progress or silent)(done, len(tasks), f"{done} of {len(tasks)} trials finished")
+            thread.join(1.0)
         if "error" in box:
             raise box["error"]
         ran = [(todo[r.config["trial"]], r) for r in box["grid"]]
         rows = {task.id: _tune_row(task, r, out_dir, spec.metric) for task, r in ran}
         seconds = time.perf_counter() - start
-    finally:
-        if own:
-            ray.shutdown()
     return rows, cpus, seconds
 
 
