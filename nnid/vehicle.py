@@ -333,6 +333,22 @@ class Vehicle(StrictModel):
         return self
 
     @model_validator(mode="after")
+    def _length_in_metres(self) -> Vehicle:
+        # a length in cm (45 for a 0.45-m ROV) passed, and with it thruster positions and
+        # centres tens of metres out (size_slips reads them against it) and a rounding arm
+        # (rounding_length) 100 times too long
+        side = (self.mass / self.rho) ** (1 / 3)
+        if self.length is not None and self.length > MAX_SLENDERNESS * side:
+            raise NnidInputError(
+                f"{self.length:g} m is {self.length / side:.0f} times the side of the cube of "
+                f"the volume its mass displaces ({side:.3g} m: {self.mass:g} kg at rho "
+                f"{self.rho:g} kg/m³), and no vehicle is more than {MAX_SLENDERNESS:g} times "
+                "as long: the length is in metres (centimetres given?)",
+                field="length",
+            )
+        return self
+
+    @model_validator(mode="after")
     def _unique_thrusters(self) -> Vehicle:
         names = [t.name for t in self.thrusters]
         twice = repeated(names)
@@ -419,6 +435,10 @@ TRIM = 0.5
 
 #: without a length, a vehicle's size is bounded by this many sides of the cube of its volume
 SIZE_OF_VOLUME = 5.0
+#: a length beyond this many sides of the cube of its volume is refused, a unit slip: the
+#: shipped vehicles lie within 6 (VT690, 2.06 m at 41.5 kg), a torpedo-shaped AUV of ten
+#: diameters within 3, a 5-cm rod 2 m long within 13; one in cm is 100 times its length
+MAX_SLENDERNESS = 50.0
 
 
 def size_slips(vehicle: Vehicle) -> list[str]:

@@ -1191,6 +1191,30 @@ def test_geometry_no_vehicle_of_its_size_has_is_warned_of(edit, said):
             load_vehicle(name)
 
 
+def test_a_length_in_centimetres_is_refused_naming_the_file_and_field():
+    """A small ROV's length of 45 for 0.45 m loaded without a word: its thruster positions in
+    cm then lay within it, unwarned (size_slips reads them against the length), and its
+    rounding arm was 100 times too long. It is refused, naming the file, the field, the value
+    and the unit; every vehicle file the repository ships loads."""
+    from nnid.errors import NnidInputError
+    from nnid.vehicle import PRESETS, load_vehicle, vehicle_from_dict
+
+    base = {"name": "probe", "mass": 11.5, "length": 0.45, "inertia": [0.16, 0.16, 0.16]}
+    thruster = {"name": "h1", "position": [20.0, 0.0, 0.0], "direction": [1, 0, 0],
+                "curve": {"kind": "signed_quadratic", "k": 40.0}}  # fmt: skip
+    with pytest.raises(
+        NnidInputError, match=r"field 'length': 45 m is 199 times .* the length is in metres"
+    ) as err:
+        vehicle_from_dict({**base, "length": 45.0, "thrusters": [thruster]}, source="rov.toml")
+    assert err.value.field == "length" and err.value.source == "rov.toml"
+    assert vehicle_from_dict(base, source="rov.toml").length == 0.45
+    shipped = [*REPO.glob("configs/vehicles/*.toml"), REPO / "nnid/demo_data/minirov.toml"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # size and sign warnings are other tests'
+        for name in [*PRESETS, *map(str, shipped)]:
+            load_vehicle(name)
+
+
 def test_a_derivative_of_the_energy_adding_sign_or_a_weight_in_kg_is_warned_of():
     """SNAME signs (Fossen: M_A = −[X_u̇ …], D = −[X_u …]): a positive X_udot, or a positive
     diagonal damping in a row with nothing else, is said once naming the file; a coupled row's

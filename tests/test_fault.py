@@ -33,6 +33,7 @@ from nnid.fault import kernel
 from nnid.fault.detect import (
     DISMISSED_SHORT,
     ENDED_SHORT,
+    ISOLATED_HOW,
     ISOLATED_SHORT,
     NOT_JUDGED,
     ON_HELD,
@@ -1492,7 +1493,28 @@ def test_a_window_a_dropout_cuts_is_said_cut_by_a_gap_not_by_the_end(vehicle, mo
             "experiment_names": np.array(["run#0", "run#1"], dtype=object),
             "experiment_runs": np.array(["run", "run"], dtype=object)}  # fmt: skip
     last = on_part(data, 30, 10.0, window_rows(data, 30, 10.0), max_step=0.075)
-    assert last["by"] == "end" and "before the end of its run" in part_clause(last, ON_PART)
+    assert last["by"] == "end" and part_clause(last, ISOLATED_HOW).startswith(
+        "isolated on the part of its window before the end of its run ("
+    )
+
+
+def test_a_window_in_a_runs_last_piece_not_judged_says_the_end_of_its_run():
+    """A window that the end of the last piece a dropout cut its run into cut short, too
+    short to judge: its record says "the end of its run" where a whole run's says "the end
+    of the log", with too few rows and with too few of them finite alike."""
+    from nnid.fault.detect import not_judged
+
+    for piece_of, end in ((None, "the end of the log"), ("run", "the end of its run")):
+        short = {"seconds": 0.5, "window_s": 10.0, "samples": 3, "by": "end"}
+        if piece_of is not None:
+            short["piece_of"] = piece_of
+        few = {"meaning": "", "cut_short": short}
+        not_judged(few, 3, 3, 10.0)
+        said = f"not judged: {end} cut the isolation window short (0.50 s of 10 s, 3 samples)"
+        assert few["meaning"].startswith(said)
+        finite = {"meaning": "", "cut_short": dict(short, samples=LEAST_ROWS)}
+        not_judged(finite, LEAST_ROWS, 1, 10.0)
+        assert f"over 0.50 s of 10 s, {end} cutting it short;" in finite["meaning"]
 
 
 def test_a_window_is_said_on_part_where_its_rows_hold_under_half_of_it():

@@ -15,6 +15,7 @@ from nnid.config import LevenbergMarquardtSpec
 from nnid.errors import NnidInputError
 from nnid.models.io_model import seeded_linear
 from nnid.threads import torch_threads
+from nnid.trainers.adam import Adam
 from nnid.trainers.levenberg_marquardt import LevenbergMarquardt, add_gram
 
 
@@ -651,3 +652,28 @@ def test_a_training_error_that_is_not_finite_stops_as_non_finite_not_as_a_stall(
     assert hist.stop_reason == "non-finite loss"
     assert hist.epochs == 0 and not math.isfinite(hist.train[0])
     np.testing.assert_array_equal(_flat(net), start)
+
+
+@pytest.mark.parametrize("trainer", [LevenbergMarquardt, Adam])
+def test_max_epochs_0_records_the_start_and_leaves_the_weights(trainer) -> None:
+    """LM with ``max_epochs=0`` stopped before its first Jacobian and recorded nothing: no
+    training error, no validation error, where Adam records the start. Both record it (the
+    mean square of the residual at the starting weights) and keep those weights; a negative
+    ``max_epochs``, and a ``max_fail`` of 0, are refused by both, naming it."""
+    _, x, y, net, start = _teacher_problem()
+    residual = _regression_residual(net)
+    with torch.no_grad():
+        mse = float(((net(x) - y) ** 2).mean())
+        held = float(((net(x[::2]) - y[::2]) ** 2).mean())
+    hist = trainer(max_epochs=0).fit(net, residual, [(x, y)], [(x[::2], y[::2])])
+    assert hist.stop_reason == "max_epochs" and hist.epochs == 0 and hist.best_epoch == 0
+    assert hist.train == [pytest.approx(mse, rel=1e-12)] and len(hist.time) == 1
+    assert hist.validation == [pytest.approx(held, rel=1e-12)]
+    assert all(torch.equal(v, start[k]) for k, v in net.state_dict().items())
+    with pytest.raises(NnidInputError, match="not -1") as err:
+        trainer(max_epochs=-1).fit(net, residual, [(x, y)])
+    assert err.value.field == "max_epochs"
+    # max_fail 0: LM stopped before any validation error and said "validation diverged"
+    with pytest.raises(NnidInputError, match="not 0") as err:
+        trainer(max_fail=0).fit(net, residual, [(x, y)], [(x, y)])
+    assert err.value.field == "max_fail"

@@ -1615,6 +1615,37 @@ def test_a_search_whose_linearised_column_measures_nothing_says_why(monkeypatch)
     assert s.reason.startswith("parameter uncertainty not measured: its column linearised at")
 
 
+def test_a_search_at_the_edge_of_the_values_the_vehicle_takes_keeps_its_better_fit():
+    """A vehicle file that declares a vertical current of 9.9 m/s, in a 10 m/s one: the search
+    of current.z over ±0.5 finds its optimum at 0.1, the edge of the values the vehicle takes
+    (a current of at most 10 m/s), and the s.e. was read off a column linearised over a step
+    about it whose upper end the vehicle refuses: ValueError through the loop. The better fit
+    is kept with the refit's exact numbers, its s.e. said not measured, and why."""
+    from conftest import make_vehicle
+
+    from nnid.loop.diagnose import Workspace, refit, search_nonlinear
+
+    damping = {"model": None, "coefficients": {"Z:w*abs(w)": -30.0}}
+    truth = make_vehicle(damping=damping, current=[0.0, 0.0, 10.0])
+    runs = _heave_with_a_little_surge(truth, np.random.default_rng(5))
+    vehicle = make_vehicle(damping=damping, current=[0.0, 0.0, 9.9])
+    ws = Workspace(*runs, vehicle, None, zoh_midpoint=False, dofs=("w",))
+    fit = refit(ws, vehicle, ["Z:w*abs(w)"])
+    cand = Candidate("current.z", "current", bounds=(-0.5, 0.5))
+    s = search_nonlinear(ws, fit, cand)
+    assert s is not None and s.scored and s.value == pytest.approx(0.1, abs=1e-3)
+    best = refit(ws, cand.augment(fit.vehicle, s.value), fit.unknowns)
+    assert s.drss == fit.rss - best.rss > 0.99 * fit.rss and s.p_value < 1e-6
+    assert np.isnan(s.stderr) and s.as_dict()["stderr"]["value"] is None
+    with pytest.raises(ValueError):  # the step's upper end: a current above 10 m/s
+        cand.augment(fit.vehicle, s.value + 1e-3 * (0.5 - -0.5))
+    assert s.unmeasured.startswith("the vehicle refuses current.z = ")
+    ResidualLoop(vehicle)._judge(s, 1, fit)
+    assert s.reason == (
+        f"parameter uncertainty not measured: {s.unmeasured}; its significance cannot be shown"
+    )
+
+
 def test_the_loops_horizons_and_smoothing_read_held_out_runs_at_their_own_step(monkeypatch):
     """Two held-out runs of 120 Hz stamped in whole ms (8, 8, 9 ms), t restarting at 0: read
     over the whole part, the join's negative step threw the rounded clock back on its 8-ms

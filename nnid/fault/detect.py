@@ -161,7 +161,7 @@ def dismissed_why(ratio: float | None, allowed: float | None, short: dict | None
             f"{within}; beside them more than noise ({ratio:.3g} > {allowed:.3g}), but no new "
             "change named there leaves it within noise"
         )
-    return why if short is None else f"{why}; {part_clause(short, DISMISSED_SHORT)}"
+    return why if short is None else f"{why}; {part_clause(short, DISMISSED_HOW)}"
 
 
 def withdrawn_record(
@@ -265,7 +265,7 @@ def isolated_alarm(
         finite = int(fits_rows(rows, residual[rows]).sum())
         not_judged(record, int(rows.size), finite, window_s)
         return record, diag, rows
-    judged_on_part(record, short, ISOLATED_SHORT if diag.isolated else UNEXPLAINED_SHORT)
+    judged_on_part(record, short, ISOLATED_HOW if diag.isolated else UNEXPLAINED_HOW)
     if not diag.isolated:
         unexplained(record, float(data["t"][rows[-1]]))
     return record, diag, rows
@@ -316,41 +316,56 @@ def on_part(data: dict, k: int, window_s: float, rows: np.ndarray, max_step: flo
     return short
 
 
+#: what ended a window whose rows end with their run's (:func:`on_part`, ``by`` "end"), as
+#: said (:func:`end_of`) where that run is whole
+LOG_END = "the end of the log"
+#: that, where the rows are the last piece a gap (a dropout) cut their run into
+RUN_END = "the end of its run"
+
+
 def end_of(short: dict | None) -> str:
     """What ended the window ``short`` (:func:`on_part`, ``by`` "end") as said: the end of the
-    log, or of its run where the window lies in the last piece a gap cut a run into."""
-    return "the end of its run" if short and short.get("piece_of") else "the end of the log"
+    log (:data:`LOG_END`), or of its run (:data:`RUN_END`) where the window lies in the last
+    piece a gap cut a run into."""
+    return RUN_END if short and short.get("piece_of") else LOG_END
 
 
-def part_clause(short: dict, said: str) -> str:
-    """The clause that says an alarm was judged (``said``: how, one of the clauses that say
-    :data:`ON_PART`) on the part of its window that ``short`` (:func:`on_part`) holds:
-    "isolated on the part … (3.00 s of 10 s)"; :data:`ON_HELD` in place of :data:`ON_PART`
-    where samples missing inside the run, not the log's end, left that part."""
-    if short.get("by") == "gap":
-        said = said.replace(ON_PART, ON_HELD)
-    else:
-        said = said.replace("the end of the log", end_of(short))
-    return f"{said} ({short['seconds']:.2f} s of {short['window_s']:g} s)"
+def before_end(end: str) -> str:
+    """Where an alarm was judged on a window that ``end`` (:func:`end_of`) cut short."""
+    return f"on the part of its window before {end}"
 
 
-def judged_on_part(record: dict, short: dict | None, said: str | None) -> None:
+def part_clause(short: dict, how: str) -> str:
+    """The clause that says an alarm was judged (``how``: :data:`ISOLATED_HOW`,
+    :data:`UNEXPLAINED_HOW`, :data:`ENDED_HOW`, :data:`RESIZED_HOW`, :data:`DISMISSED_HOW`)
+    on the part of its window that ``short`` (:func:`on_part`) holds: "isolated on the part …
+    (3.00 s of 10 s)", before :func:`end_of` ``short``; :data:`ON_HELD` where samples missing
+    inside the run, not the end of its rows, left that part."""
+    where = ON_HELD if short.get("by") == "gap" else before_end(end_of(short))
+    return f"{how} {where} ({short['seconds']:.2f} s of {short['window_s']:g} s)"
+
+
+def judged_on_part(record: dict, short: dict | None, how: str | None) -> None:
     """An alarm's ``record`` judged on the window ``short`` (:func:`on_part`; None: whole,
     nothing to say): its ``cut_short`` key, and its ``meaning`` ending with what was judged
-    there (``said``: :data:`ISOLATED_SHORT`, :data:`UNEXPLAINED_SHORT`, :data:`ENDED_SHORT`,
-    :data:`RESIZED_SHORT`; None for a record :func:`not_judged` says). :func:`isolated_alarm`
-    and the ends and resizes of :meth:`_Splits.record` alike: an end said on the 2 s a log
-    kept of its window read as measured on all 10."""
+    there (``how``, as :func:`part_clause` takes it; None for a record :func:`not_judged`
+    says). :func:`isolated_alarm` and the ends and resizes of :meth:`_Splits.record` alike: an
+    end said on the 2 s a log kept of its window read as measured on all 10."""
     if short is None:
         return
     record["cut_short"] = short  # detect.json says so of every such alarm, judged or not
-    if said is not None:  # finding() keeps the clause
-        record["meaning"] = f"{record['meaning']}; {part_clause(short, said)}"
+    if how is not None:  # finding() keeps the clause
+        record["meaning"] = f"{record['meaning']}; {part_clause(short, how)}"
 
 
-#: how the ``meaning`` of a record whose window the log's end cut short to fewer rows than
-#: isolation fits starts (:func:`not_judged`)
-NOT_JUDGED = "not judged: the end of the log cut the isolation window short"
+def cut_window(end: str) -> str:
+    """How the ``meaning`` of a record whose window ``end`` (:func:`end_of`) cut short to
+    fewer rows than isolation fits starts (:func:`not_judged`)."""
+    return f"not judged: {end} cut the isolation window short"
+
+
+#: that start where the end of the log cut it (:func:`cut_window`)
+NOT_JUDGED = cut_window(LOG_END)
 #: how the ``meaning`` of a record whose window, not cut by the log's end, holds fewer rows
 #: than isolation fits (a gap in the log, or a window shorter than that many steps) starts
 #: (:func:`not_judged`)
@@ -359,21 +374,27 @@ TOO_FEW_ROWS = "not judged: the isolation window holds too few rows"
 #: finite residual (a sensor dropout, the run's last rows not judged), starts (:func:`not_judged`)
 TOO_FEW_FINITE = "not judged: too few rows with a finite residual in the isolation window"
 #: what the clause that ends the ``meaning`` of an alarm judged on a window the log's end
-#: cut short says after how it was read (:func:`judged_on_part`; the seconds follow)
-ON_PART = "on the part of its window before the end of the log"
+#: cut short says after how it was read (:func:`part_clause`; the seconds follow)
+ON_PART = before_end(LOG_END)
 #: what that clause says in place of :data:`ON_PART` where samples missing inside the run (a
 #: gap in the log) left the window's rows over part of it (:func:`on_part`, ``by`` "gap")
 ON_HELD = "on the part of its window that holds samples, the rest missing"
-#: that clause for a change isolated there
-ISOLATED_SHORT = f"isolated {ON_PART}"
-#: that clause for an alarm isolation judged there and did not isolate: an unexplained change
-UNEXPLAINED_SHORT = f"not isolated {ON_PART}"
-#: that clause for the end of changes measured there (:func:`ended_alarm`)
-ENDED_SHORT = f"the end measured {ON_PART}"
-#: that clause for the new size of changes measured there (:func:`resized_alarm`)
-RESIZED_SHORT = f"the new size measured {ON_PART}"
-#: that clause, ending its ``why``, for an alarm dismissed there (:func:`dismissed_why`)
-DISMISSED_SHORT = f"judged {ON_PART}"
+#: how that clause starts for a change isolated there (:func:`part_clause`)
+ISOLATED_HOW = "isolated"
+#: for an alarm isolation judged there and did not isolate: an unexplained change
+UNEXPLAINED_HOW = "not isolated"
+#: for the end of changes measured there (:func:`ended_alarm`)
+ENDED_HOW = "the end measured"
+#: for the new size of changes measured there (:func:`resized_alarm`)
+RESIZED_HOW = "the new size measured"
+#: ending its ``why``, for an alarm dismissed there (:func:`dismissed_why`)
+DISMISSED_HOW = "judged"
+#: the clauses where the end of the log cut the window short (the seconds follow)
+ISOLATED_SHORT = f"{ISOLATED_HOW} {ON_PART}"
+UNEXPLAINED_SHORT = f"{UNEXPLAINED_HOW} {ON_PART}"
+ENDED_SHORT = f"{ENDED_HOW} {ON_PART}"
+RESIZED_SHORT = f"{RESIZED_HOW} {ON_PART}"
+DISMISSED_SHORT = f"{DISMISSED_HOW} {ON_PART}"
 
 
 def not_judged(record: dict, samples: int, finite: int, window_s: float) -> None:
@@ -402,7 +423,7 @@ def not_judged(record: dict, samples: int, finite: int, window_s: float) -> None
     held = "" if short is None else f" over {short['seconds']:.2f} s of {short['window_s']:g} s"
     some = f", {finite} of them finite" if finite < samples else ""
     if samples < LEAST_ROWS and by == "end":  # how much of it the log kept says the rest
-        said = NOT_JUDGED.replace("the end of the log", end_of(short))
+        said = cut_window(end_of(short))
         record["meaning"] = (
             f"{said} ({short['seconds']:.2f} s of {short['window_s']:g} s, {samples} "
             f"samples{some}): {TOO_FEW}"
@@ -972,7 +993,7 @@ class _Splits:
         }
         # measured on the rows the log kept of the window (at least self.least: usable())
         short = on_part(self.data, k, window_s, window, m.max_interval)
-        judged_on_part(record, short, ENDED_SHORT if ended else RESIZED_SHORT)
+        judged_on_part(record, short, ENDED_HOW if ended else RESIZED_HOW)
         return record
 
 

@@ -811,6 +811,17 @@ def search_nonlinear(
     )
 
 
+def refused_step(name: str, refused: float, value: float) -> str:
+    """Why a 1-D search's s.e. was not measured where the vehicle refuses the effect ``name``
+    at ``refused``, an end of the step about the optimum ``value`` that its column is
+    linearised over (:func:`_linearised_stderr`): the optimum lies at the edge of the values
+    the vehicle takes."""
+    return (
+        f"the vehicle refuses {name} = {refused:.4g}, an end of the step about {value:.4g} to "
+        "linearise its column over (the optimum lies at the edge of the values it takes)"
+    )
+
+
 def _linearised_stderr(
     ws: Workspace, fit: Fit, best: Fit, cand: Candidate, value: float
 ) -> tuple[float, str]:
@@ -822,13 +833,21 @@ def _linearised_stderr(
     its distance from 0 (or one that underflows) leaves value ± step rounded to ``value``.
     The vocabulary's ranges all hold 0 (:func:`~nnid.loop.effects.candidates`: ±reach, 0 to
     a lag or half a width), so a step is 1e-3 of at least ``|value|`` there; a Candidate
-    built with such a range was searched and its better fit measured all the same."""
+    built with such a range was searched and its better fit measured all the same. NaN too
+    where the vehicle refuses an end of that step (:func:`refused_step`)."""
     lo, hi = cand.bounds  # type: ignore[misc]
     h = 1e-3 * (hi - lo)
     lo_v, hi_v = max(value - h, lo), min(value + h, hi)
     if not hi_v > lo_v:
         return float("nan"), NO_LINEARISED_STEP
     fitted = vehicle_with(fit.vehicle, dict(zip(best.unknowns, best.theta, strict=True)))
+    for v in (lo_v, hi_v):
+        # an optimum at the edge of the values the vehicle takes (a current it declares, plus
+        # the effect's, at its bound) leaves a step end it refuses: a crash, the fit found lost
+        try:
+            cand.augment(fitted, v)
+        except ValueError:
+            return float("nan"), refused_step(cand.name, v, value)
     (at,) = screen(ws, best, [cand], *sensitivity(ws, fitted, cand, lo_v, hi_v))
     if not at.scored:
         # its verdict less "nothing of it is measured", which the caller says of the s.e.

@@ -108,7 +108,7 @@ from sklearn.base import BaseEstimator
 from torch.func import jacrev, jvp, vjp, vmap
 from torch.overrides import TorchFunctionMode
 
-from nnid.errors import NnidInputError
+from nnid.errors import NnidInputError, checked_number
 from nnid.trainers.history import History, Progress, silent, stopping_score
 
 __all__ = ["LevenbergMarquardt", "NormalEquations", "unpenalised_names"]
@@ -698,7 +698,8 @@ class LevenbergMarquardt(BaseEstimator):
 
         ``residual(params, batch)`` returns the 1-D residual of one batch, computed with
         ``torch.func.functional_call(module, params, ...)`` on a parameter dict shaped like
-        ``dict(module.named_parameters())``. Stops at ``max_epochs``, ``goal``, gradient below
+        ``dict(module.named_parameters())``. Stops at ``max_epochs`` (0: the start alone is
+        recorded, as Adam records it), ``goal``, gradient below
         ``min_grad``, μ > ``mu_max``, ``max_fail`` consecutive validation increases, or a
         training error or gradient that is not finite ("non-finite loss"); with
         validation batches the best-validation parameters are written back (as trainlm).
@@ -722,6 +723,9 @@ class LevenbergMarquardt(BaseEstimator):
         error as before.
         """
         self._select_mode(separable, jacobian_rows)
+        # as Adam: max_fail 0 stopped before any validation error, said "validation diverged"
+        checked_number(self.max_epochs, "max_epochs", strict=False, integer=True)
+        checked_number(self.max_fail, "max_fail", 1, strict=False, integer=True)
         if not (0.0 < self.mu_dec < 1.0 < self.mu_inc):
             raise NnidInputError("need 0 < mu_dec < 1 < mu_inc", field="mu_dec")
         if self.memory_budget_mb <= 0:
@@ -854,6 +858,8 @@ class LevenbergMarquardt(BaseEstimator):
                 train=error,
                 **({} if v is None else {"validation": v}),
             )
+        if not hist.train:  # stopped before the first Jacobian (max_epochs=0): the start, as Adam
+            hist.record(error, start_val, time.perf_counter() - t0, mu=mu)
         if use_val:
             theta = best_theta
         else:  # a rejected step leaves θ as it was: the last accepted one is what is kept
