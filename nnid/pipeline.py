@@ -43,11 +43,18 @@ from nnid.datasets.log import (
 from nnid.datasets.preprocess import check_acceleration_window, experiment_rows, run_spans
 from nnid.datasets.splits import PARTS, Split, say_missed_fractions, split_log
 from nnid.errors import NnidInputError
-from nnid.evaluation.evaluate import diverged_columns, evaluate
+from nnid.evaluation.evaluate import (
+    CONSTANT,
+    diverged_columns,
+    diverged_key,
+    evaluate,
+    not_scored_key,
+)
 from nnid.evaluation.metrics import exact_mean
 from nnid.evaluation.prediction import Replay
 from nnid.models.base import FIT_AND_SIMULATION, encode_setting
 from nnid.physics.dofs import DOFS
+from nnid.reports.cells import number
 from nnid.reports.stops import training_stages
 from nnid.trainers.history import Progress, silent, staged
 from nnid.validation import resolve
@@ -1191,7 +1198,10 @@ class CompareResult:
     held_out: pd.DataFrame
     free_runs: dict[str, pd.DataFrame]
     forces: dict[str, pd.DataFrame]
-    measured_force: pd.DataFrame | None
+    #: each damping model's own force series τ̄ on the held-out data: a model's smoothing
+    #: settings (savgol_window, savgol_order, filter_lambda, zoh_midpoint) make its own, so one
+    #: series for all drew every model against the last model's τ̄
+    measured_force: dict[str, pd.DataFrame]
     report: CleaningReport
 
 
@@ -1229,7 +1239,7 @@ def run_compare(
     held_name = "test" if len(split.test) else "validation"
     held = split[held_name]
     k = k_steps(held, cfg.k_step_s)
-    rows, free_runs, forces, measured_force = [], {}, {}, None
+    rows, free_runs, forces, measured_force = [], {}, {}, {}
     for i, (spec, model) in enumerate(zip(cfg.models, models, strict=True)):
         name = spec.label()
         report(i, len(cfg.models), f"fitting {name}")
@@ -1252,7 +1262,11 @@ def run_compare(
         if model.has_force_equation:
             with named_in(f"models.{i}", spec):
                 train_force = evaluate(model, split.train, (), None, cfg.warmup_s)
-            row["train"] = {"J": train_force["J"], "J_over_J0": train_force["J_over_J0"]}
+            row["train"] = {
+                "J": train_force["J"],
+                "J0": train_force["J0"],
+                "J_over_J0": train_force["J_over_J0"],
+            }
         else:
             row["train"] = {}
         predicted: dict[str, pd.DataFrame] = {}
@@ -1277,7 +1291,7 @@ def run_compare(
             if model.kind in DAMPING_KINDS and model.has_force_equation:
                 resid, series = model.residual(held), model.force_series(held)
                 forces[name] = series - resid
-                measured_force = series
+                measured_force[name] = series
         for key, value in _coefficients(model).items():
             row[key] = value
     report(len(cfg.models), len(cfg.models), "scoring done")
@@ -1288,6 +1302,8 @@ def run_compare(
             mode: ranked_score(row, held_name, f"{mode}_nrmse", shared)
             for mode in ("free_run", "k_step", "one_step")
         }
+        # each held-out run's free run over the same outputs: the spread the verdict reads
+        row["ranked_free_run_per_experiment"] = ranked_runs(row, held_name, shared)
     comparison = {
         "vehicle": getattr(inputs.vehicle, "name", None),
         "models": rows,
@@ -1305,6 +1321,8 @@ def run_compare(
         "split_by": split.record["by"],
         "fractions": split.record["fractions"],
         "autopilot_replay": replay is not None,
+        # whether the data tell the first two apart (summary's rule), with its counts
+        "verdict": verdict(rows, ranking, held_name),
         "summary": summary(rows, ranking, held_name, replay is not None)
         + _masked_note(inputs.report, rows, ranking, held_name, len(held)),
         "warnings": said,
@@ -1394,8 +1412,90 @@ def rank(rows: list[dict], part: str) -> list[str]:
     return [r["name"] for r in sorted(rows, key=key)]
 
 
+def ranked_runs(row: dict, part: str, columns: list[str]) -> dict[str, float | None]:
+    """Each held-out run's free-run NRMSE of a model scored on its own
+    (``free_run_nrmse_per_experiment``), over ``columns`` as :func:`ranked_score` takes the
+    pooled one: None where the model diverged in that run or a column was not scored in it.
+    Empty where the held-out data are one run."""
+    held = row.get(part, {})
+    left = held.get("diverged_per_experiment") or {}
+    out = {}
+    for run, vals in (held.get("free_run_nrmse_per_experiment") or {}).items():
+        own = {
+            "columns": [c for c in vals if c != "total"],
+            "free_run_nrmse": vals,
+            diverged_key("free_run"): left.get(run, {}),
+        }
+        out[run] = ranked_score({part: own}, part, "free_run_nrmse", columns)
+    return out
+
+
+def verdict(rows: list[dict], ranking: list[str], part: str) -> dict | None:
+    """Whether the data tell the first two trained models with a measured free run apart.
+    They are *indistinguishable* when their free-run NRMSEs print the same (3 significant
+    figures, as the ranking shows them), or when the held-out data are several runs and the
+    first is lower than the second on fewer than two thirds of the runs both are measured on
+    (``lower_on_runs`` of ``runs``): a pooled score a hair lower is no win when the other
+    model does better on as many runs. None where there are not two such models."""
+    columns = ranked_columns(rows, part)
+    by_name = {r["name"]: r for r in rows}
+    measured = [
+        n
+        for n in ranking
+        if not by_name[n].get("training_diverged")
+        and ranked_score(by_name[n], part, "free_run_nrmse", columns) is not None
+    ]
+    if not columns or len(measured) < 2 or measured[0] != ranking[0]:
+        return None
+    first, second = (by_name[n] for n in measured[:2])
+    a = ranked_score(first, part, "free_run_nrmse", columns)
+    b = ranked_score(second, part, "free_run_nrmse", columns)
+    runs_a, runs_b = ranked_runs(first, part, columns), ranked_runs(second, part, columns)
+    both = [r for r in runs_a if runs_a[r] is not None and runs_b.get(r) is not None]
+    lower = sum(runs_a[r] < runs_b[r] for r in both)
+    same = number(a, 3) == number(b, 3)
+    split = len(both) >= 2 and 3 * lower < 2 * len(both)
+    return {
+        "first": first["name"],
+        "second": second["name"],
+        "first_free_run": a,
+        "second_free_run": b,
+        "runs": len(both),
+        "lower_on_runs": lower,
+        "same_printed": same,
+        "indistinguishable": same or split,
+    }
+
+
+def above_one(x: float) -> str:
+    """``x`` to 3 significant figures, or as many more as it takes not to print 1 where it is
+    not 1: a sentence that says a score "is above 1" printed 1.0004 as "1"."""
+    text = number(x, 3)
+    for digits in range(4, 18):
+        if x == 1.0 or float(text) != 1.0:
+            break
+        text = number(x, digits)
+    return text
+
+
+def unscored_reasons(rows: list[dict], names: list[str], part: str) -> dict[str, list[str]]:
+    """``{why: [model, ...]}`` of models whose free run is missing without a divergence, from
+    evaluate's ``free_run_not_scored``: no sample after the warm-ups, no output scored, or an
+    output constant on the held-out data."""
+    columns = ranked_columns(rows, part)
+    out: dict[str, list[str]] = {}
+    for row in (r for r in rows if r["name"] in names):
+        why = row.get(part, {}).get(not_scored_key("free_run")) or {}
+        reasons = [why["total"]] if "total" in why else []
+        reasons += [f"{c} {why[c]}" if why[c] == CONSTANT else why[c] for c in columns if c in why]
+        out.setdefault(reasons[0] if reasons else "not measured", []).append(row["name"])
+    return out
+
+
 def summary(rows: list[dict], ranking: list[str], part: str, replay: bool) -> str:
-    """One sentence: which model to use and why."""
+    """One sentence: which model to use and why. The first model is named for use only where
+    the data tell it from the second (:func:`verdict`); else the sentence says the two are
+    indistinguishable and why."""
     columns = ranked_columns(rows, part)
     if not columns:
         scored = "; ".join(
@@ -1449,51 +1549,67 @@ def summary(rows: list[dict], ranking: list[str], part: str, replay: bool) -> st
         trained = " of a trained model" if untrained else ""
         if unscored:
             said = ([f"diverged: {', '.join(diverged)}"] if diverged else []) + [
-                f"not scored, no sample left after the warm-ups: {', '.join(unscored)}"
+                f"not scored, {why}: {', '.join(names)}"
+                for why, names in unscored_reasons(rows, unscored, part).items()
             ]
             lead = (
                 f"No free run{trained}{loop} was scored on the {part} data{over} "
                 f"({'; '.join(said)})"
             )
-            verdict = "how these models simulate this log was not measured"
+            conclusion = "how these models simulate this log was not measured"
         else:
             lead = f"Every free run{trained}{loop} diverged on the {part} data{over}"
-            verdict = f"none of these {'trained ' if untrained else ''}models simulates this log"
+            conclusion = f"none of these {'trained ' if untrained else ''}models simulates this log"
         if k is None and one is None:  # nothing was measured: no model is ranked first
-            return f"{lead}, and no other error was measured: {verdict}.{notes}"
+            return f"{lead}, and no other error was measured: {conclusion}.{notes}"
         what = f"k-step NRMSE ({k:.3g})" if k is not None else f"one-step NRMSE ({one:.3g})"
         return (
             f"{lead}; {best['name']} ({best['kind']}, {best['n_params']} parameters) has the "
-            f"lowest {what}: {verdict}.{notes}"
+            f"lowest {what}: {conclusion}.{notes}"
         )
     others = [
         by_name[n]
         for n in ranking[1:]
         if total(by_name[n], "free_run_nrmse") is not None and n not in untrained
     ]
+    told = verdict(rows, ranking, part)
+    runs = (
+        f"; {best['name']} lower on {told['lower_on_runs']} of {told['runs']} held-out runs"
+        if told and told["runs"] >= 2
+        else ""
+    )
     if free > 1.0:  # below the mean's own error nothing is recommended (train says it too)
         sentence = (
             f"No trained model has skill on the {part} data: the lowest trained free-run "
             f"NRMSE{loop}{over}, {best['name']}'s ({best['kind']}, {best['n_params']} "
-            f"parameters: {free:.3g}"
+            f"parameters: {above_one(free)}"
+        )
+    elif told and told["indistinguishable"]:
+        nxt = by_name[told["second"]]
+        sentence = (
+            f"{best['name']} ({best['kind']}, {best['n_params']} parameters) and {nxt['name']} "
+            f"({nxt['kind']}, {nxt['n_params']} parameters) are indistinguishable on the "
+            f"free-run NRMSE{loop} on the {part} data{over} ({number(free, 3)} and "
+            f"{number(told['second_free_run'], 3)}{runs}): the data do not say which of the "
+            "two to use."
         )
     else:
         sentence = (
             f"Use {best['name']} ({best['kind']}, {best['n_params']} parameters): the lowest "
-            f"free-run NRMSE{loop} on the {part} data{over} ({free:.3g}"
+            f"free-run NRMSE{loop} on the {part} data{over} ({number(free, 3)}"
         )
-    if others:
-        nxt = others[0]
-        sentence += f", against {total(nxt, 'free_run_nrmse'):.3g} for {nxt['name']}"
-    sentence += (
-        "), is above 1: no trained model it scored predicts these data better than their mean."
-        if free > 1.0
-        else ")."
-    )
+    if free > 1.0 or not (told and told["indistinguishable"]):
+        if others:
+            nxt = others[0]
+            sentence += f", against {number(total(nxt, 'free_run_nrmse'), 3)} for {nxt['name']}"
+        sentence += runs
+        sentence += (
+            "), is above 1: no trained model it scored predicts these data better than their mean."
+            if free > 1.0
+            else ")."
+        )
     if diverged:
         sentence += f" Diverged in free run: {', '.join(diverged)}."
-    if unscored:
-        sentence += (
-            f" Not scored in free run (no sample left after the warm-ups): {', '.join(unscored)}."
-        )
+    for why, names in unscored_reasons(rows, unscored, part).items():
+        sentence += f" Not scored in free run ({why}): {', '.join(names)}."
     return sentence + notes

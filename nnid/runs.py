@@ -222,6 +222,21 @@ def train_run(
 # -- compare -------------------------------------------------------------------------------------
 
 
+def best_model(comparison: dict) -> str | None:
+    """The model a batch table names best, as the summary names it, or None: models that
+    share no output are not ranked; a ranking on k-step or one-step scores (every free run
+    diverged) or of an untrained start names none; nor does one where no model has skill
+    (free run above 1: the summary said so while the table named a best) or where the data
+    do not tell the first from the second (:func:`nnid.pipeline.verdict`)."""
+    ranking = comparison.get("ranking", [])
+    top = next((r for r in comparison["models"] if ranking and r["name"] == ranking[0]), {})
+    free = (top.get("ranked_nrmse") or {}).get("free_run")
+    trained = not top.get("training_diverged")
+    skill = free is not None and free <= 1.0
+    told = (comparison.get("verdict") or {}).get("indistinguishable", False)
+    return ranking[0] if skill and trained and not told and comparison.get("ranked_on") else None
+
+
 def compare_run(
     cfg,
     config_path: Path,
@@ -250,13 +265,7 @@ def compare_run(
         write_text(stage / "report.md", markdown(result.comparison))
         result.report.write(stage)
     comparison = result.comparison
-    ranking = comparison.get("ranking", [])
-    # models that share no output are not ranked, and a ranking on k-step or one-step scores
-    # (every free run diverged) names no best for the held-out free run: none is best
-    top = next((r for r in comparison["models"] if ranking and r["name"] == ranking[0]), {})
-    measured = (top.get("ranked_nrmse") or {}).get("free_run") is not None
-    trained = not top.get("training_diverged")  # an untrained start is no best model
-    best = ranking[0] if measured and trained and comparison.get("ranked_on") else None
+    best = best_model(comparison)
     shared = comparison.get("ranked_on") or []
     untrained = [r["name"] for r in comparison["models"] if r.get("training_diverged")]
     headline: dict[str, Any] = {

@@ -21,6 +21,8 @@ model's target columns with one rule set (ARCHITECTURE.md "JSON outputs"):
   in ``diverged_per_experiment``, and in every mode a column that
   diverged in one run has diverged in the pooled scores too (:func:`score_split`), so the
   pooled ``total`` that summaries, sweeps and the loop read never averages a diverged run;
+- a score that is None without a divergence says why under ``<mode>_not_scored``
+  (:func:`not_scored`: no sample after the warm-ups, a constant signal, or no output scored);
 - models with a force equation also get McCarter's J (RMS force residual, eq. 4.25), J₀ (RMS of
   the force series) and their ratio, and the force RMSE per DOF.
 """
@@ -49,6 +51,41 @@ def diverged_key(mode: str) -> str:
     """The key of a part's scores that holds the ``{column: t}`` of the columns that diverged
     in ``mode`` (``"free_run"``, ``"k_step"``, ``"one_step"``)."""
     return "diverged" if mode == "free_run" else f"{mode}_diverged"
+
+
+#: why a score is None though nothing diverged (:func:`not_scored`)
+NO_OUTPUT = "no output scored"
+NO_SAMPLES = "no sample left after the warm-ups"
+CONSTANT = "constant on the scored samples"
+
+
+def not_scored_key(mode: str) -> str:
+    """The key of a part's scores that holds the ``{column: why}`` of the columns of ``mode``
+    scored None though they did not diverge (:func:`not_scored`)."""
+    return f"{mode}_not_scored"
+
+
+def not_scored(
+    log: pd.DataFrame,
+    columns: Sequence[str],
+    mask: np.ndarray,
+    nrmse: dict[str, float | None],
+    diverged: dict[str, float],
+) -> dict[str, str]:
+    """``{column: why}`` of the columns whose NRMSE is None without a divergence:
+    :data:`NO_SAMPLES` (nothing measured after the warm-ups) or :data:`CONSTANT` (a measured
+    signal that does not vary: its NRMSE has no divisor); ``{"total": NO_OUTPUT}`` where no
+    column is scored at all. Read off :func:`score_prediction`'s result, so the reason is the
+    one that voided the score; a summary said "no sample left after the warm-ups" of all three."""
+    if not columns:
+        return {"total": NO_OUTPUT}
+    out = {}
+    for c in columns:
+        if nrmse.get(c) is not None or c in diverged:
+            continue
+        y = log[c].to_numpy(np.float64)[mask]
+        out[c] = NO_SAMPLES if not np.isfinite(y).any() else CONSTANT
+    return out
 
 
 def diverged_columns(scores: dict, key: str) -> dict[str, float]:
@@ -310,6 +347,9 @@ def evaluate(
         out[MODE_KEYS[name]] = nrmse
         out[MODE_KEYS[name].replace("nrmse", "rmse")] = rmse
         out[diverged_key(name)] = diverged
+        why = not_scored(log, columns, mask, nrmse, diverged)
+        if why:  # only where one is missing: the scores of every scored model keep their keys
+            out[not_scored_key(name)] = why
         if name == "free_run" and runs:
             out["free_run_nrmse_per_experiment"] = runs
             if left:

@@ -2,10 +2,11 @@
 
 One self-contained HTML page (figures embedded, no scripts from elsewhere) and a Markdown twin
 with the same tables for terminals and pull requests: the ranking with the sentence that says
-which model to use, velocity NRMSE per DOF in each prediction mode, each model's free run
-overlaid on every held-out experiment (one figure per DOF), and for the models with a force
-equation McCarter's Tables 5.1/5.2 for this data (J and J/J₀, eq. 4.25), error against
-complexity, the force series and the coefficients.
+which model to use (or that the data do not tell the first two apart), each held-out run's
+free-run NRMSE on its own, velocity NRMSE per DOF in each prediction mode, each model's free
+run overlaid on every held-out experiment (one figure per DOF), and for the models with a
+force equation McCarter's Tables 5.1/5.2 for this data (J, J₀ and J/J₀, eq. 4.25), error
+against complexity, the force series and the coefficients with their units.
 """
 
 from __future__ import annotations
@@ -31,8 +32,10 @@ from nnid.reports.figures import (
     markdown_table,
     new_figure,
     page_head,
+    plot_label,
     said_list,
 )
+from nnid.reports.loop_report import parameter_unit
 from nnid.reports.stops import HEAD as STOP_HEAD
 from nnid.reports.stops import TRAINING_TITLE, stage_cells
 
@@ -139,6 +142,12 @@ def column_terms(comparison: dict) -> dict[str, str]:
     else:
         over = ", mean over the excited DOFs"
     return {
+        "rank": "order of the held-out free-run NRMSE below (models whose free run diverged or "
+        "was not scored after, by their k-step error). The sentence above names the first "
+        "model for use only where the data tell it from the second: the two are called "
+        "indistinguishable when their free-run NRMSEs print the same, or, with several "
+        f"held-out runs, when the first is lower on fewer than two thirds of the runs ({RUNS_TITLE}"
+        " below says each run's)",
         "parameters": "number of fitted parameters (network weights for NARX and state-space "
         "models)",
         "fit s": "wall time of the fit in seconds",
@@ -160,21 +169,28 @@ def column_terms(comparison: dict) -> dict[str, str]:
         "J/J0": "McCarter's force error (eq. 4.25): RMS of the force residual over RMS of the "
         "force the model's fitted terms explain (the viscous force τ̄ of eq. 4.4 for damping "
         "models, the regression's target for a Fossen fit); only for models with a force "
-        "equation",
+        "equation. Each model's τ̄ is drawn with its own smoothing settings, so the ratios "
+        "share a J0 only where the force table's J0 column agrees",
         "validation used for": "what the model did with the validation run while fitting "
         "(early stopping or model selection): its validation scores are then not independent",
     }
 
 
-def dof_rows(comparison: dict, key: str) -> tuple[list[str], list[list[str]]]:
-    """One prediction mode's NRMSE per DOF of each model on the held-out data."""
+def outputs(comparison: dict, key: str) -> list[str]:
+    """The outputs any model is scored on in one mode's held-out scores: u v w p q r in their
+    order whichever model names them first, other outputs after in the order first seen (a
+    sorted set's order hung on the hash seed)."""
     dofs: list[str] = []
     for m in comparison["models"]:
         for d in _held(m, comparison).get(key, {}):
             if d != "total" and d not in dofs:
                 dofs.append(d)
-    # u v w p q r in their order whichever model names them first; other outputs after
-    dofs.sort(key=lambda d: DOFS.index(d) if d in DOFS else len(DOFS))
+    return sorted(dofs, key=lambda d: DOFS.index(d) if d in DOFS else len(DOFS))
+
+
+def dof_rows(comparison: dict, key: str) -> tuple[list[str], list[list[str]]]:
+    """One prediction mode's NRMSE per DOF of each model on the held-out data."""
+    dofs = outputs(comparison, key)
     rows = []
     for name in comparison["ranking"]:
         m = next(x for x in comparison["models"] if x["name"] == name)
@@ -184,12 +200,23 @@ def dof_rows(comparison: dict, key: str) -> tuple[list[str], list[list[str]]]:
     return ["model", *dofs, "total"], rows
 
 
-HEAD = ["model", "n̄", "train J", "train J/J0", "validation J", "validation J/J0"]
+HEAD = [
+    "model",
+    "n̄",
+    "train J",
+    "train J0",
+    "train J/J0",
+    "validation J",
+    "validation J0",
+    "validation J/J0",
+]
 
 
 def table_rows(comparison: dict) -> list[list[str]]:
-    """Rows of the Table 5.1/5.2 analogue for the damping models (their force series is the
-    same τ̄): n̄ terms, J and J/J₀ on train and validation."""
+    """Rows of the Table 5.1/5.2 analogue for the damping models: n̄ terms, J, J₀ and J/J₀ on
+    train and validation. Each model's force series τ̄ is its own (its savgol window and order,
+    filter_lambda and zoh_midpoint make it), so J0 is shown: ratios over different J0 are of
+    different targets."""
     rows = []
     force = [
         m for m in comparison["models"] if m["kind"] in ("synthesis", "sindy") and "J" in m["train"]
@@ -200,12 +227,39 @@ def table_rows(comparison: dict) -> list[list[str]]:
                 m["name"],
                 str(m["n_params"]),
                 number(m["train"]["J"], 4),
+                number(m["train"].get("J0"), 4),
                 number(m["train"]["J_over_J0"], 4),
                 number(m["validation"].get("J"), 4),
+                number(m["validation"].get("J0"), 4),
                 number(m["validation"].get("J_over_J0"), 4),
             ]
         )
     return rows
+
+
+RUNS_TITLE = "Free-run NRMSE of each held-out run on its own"
+
+
+def run_rows(comparison: dict) -> tuple[list[str], list[list[str]]]:
+    """Each held-out run's free-run NRMSE per model (``ranked_free_run_per_experiment``: the
+    run scored alone, over the outputs the ranking shares), models in ranking order; no rows
+    where the held-out data are one run or the models are not ranked. The pooled score hides
+    how a lead is spread: a model lower on one run and higher on the rest can rank first."""
+    if not comparison.get("ranked_on"):
+        return [], []
+    by_name = {m["name"]: m for m in comparison["models"]}
+    runs: list[str] = []
+    for m in comparison["models"]:
+        runs += [r for r in m.get("ranked_free_run_per_experiment") or {} if r not in runs]
+    if len(runs) < 2:
+        return [], []
+    rows = []
+    for name in comparison["ranking"]:
+        m = by_name[name]
+        per = m.get("ranked_free_run_per_experiment") or {}
+        left = _held(m, comparison).get("diverged_per_experiment") or {}
+        rows.append([name, *(score(per[r], diverged=r in left) if r in per else "-" for r in runs)])
+    return ["model", *(f"run {r}" for r in runs)], rows
 
 
 def _tables(comparison: dict) -> list[tuple[str, list[str], list[list[str]]]]:
@@ -213,6 +267,9 @@ def _tables(comparison: dict) -> list[tuple[str, list[str], list[list[str]]]]:
     part = comparison.get("held_out", "validation")
     h = number(comparison.get("k_step_s"), 3)
     out = [("Ranking", *ranking_rows(comparison))]
+    head, rows = run_rows(comparison)
+    if rows:
+        out.append((f"{RUNS_TITLE} ({part} data)", head, rows))
     for key, title in MODES:
         head, rows = dof_rows(comparison, key)
         if len(head) > 2:
@@ -250,6 +307,12 @@ def markdown(comparison: dict) -> str:
         lines += [f"## {title}", "", *markdown_table(head, rows), ""]
     lines += ["Columns:", ""]
     lines += [f"- **{k}**: {v}" for k, v in column_terms(comparison).items()]
+    blocks = coefficient_blocks(comparison)
+    if blocks:
+        lines += ["", "## Coefficients"]
+        for name, crow in blocks:
+            lines += ["", f"### {name} ({len(crow)} coefficients)", ""]
+            lines += markdown_table(COEFFICIENT_HEAD, crow)
     if all_warnings(comparison):
         lines += ["", "## Warnings", "", *(f"- {w}" for w in all_warnings(comparison))]
     return "\n".join(lines) + "\n"
@@ -286,13 +349,35 @@ def _data_text(comparison: dict) -> str:
     return text
 
 
+def unit_text(column: str) -> str:
+    """An output's unit for an axis label: SI for the vehicle's velocities, else "unit not
+    known" (a NARX output such as the cascaded tanks' ``y`` read "y []")."""
+    return UNITS[column] if column in UNITS else "unit not known"
+
+
+def diverged_at(comparison: dict, model: str, run: object, several: bool) -> dict[str, float]:
+    """``{column: t}`` where a model's held-out free run diverged in one run: the run's own
+    (``diverged_per_experiment``) where the held-out data are several runs, else the part's."""
+    m = next((x for x in comparison["models"] if x["name"] == model), {})
+    held = _held(m, comparison)
+    if several:
+        return (held.get("diverged_per_experiment") or {}).get(str(run)) or {}
+    return held.get("diverged") or {}
+
+
 def free_run_figures(
-    held: pd.DataFrame, free_runs: dict[str, pd.DataFrame], dofs: list[str]
+    held: pd.DataFrame,
+    free_runs: dict[str, pd.DataFrame],
+    dofs: list[str],
+    comparison: dict | None = None,
 ) -> list[tuple[str, str]]:
-    """Per held-out experiment and DOF, the measured velocity and every model's free run."""
+    """Per held-out experiment and DOF, the measured velocity and every model's free run. A
+    free run is clipped to the panel, so a model's that diverged says where in its legend
+    label (from ``comparison``'s scores): a line run off the panel said nothing."""
     out = []
     t_all = held["t"].to_numpy(np.float64)
-    for name, pos in experiment_rows(held):
+    runs = experiment_rows(held)
+    for name, pos in runs:
         t = t_all[pos] - t_all[pos[0]]
         for d in dofs:
             # fixed margins: the constrained layout drew the figure twice (to place, then to
@@ -306,12 +391,16 @@ def free_run_figures(
                 if d not in pred:
                     continue
                 p = pred[d].to_numpy(np.float64)[pos]
+                label = plot_label(model)
+                gone = diverged_at(comparison, model, name, len(runs) > 1) if comparison else {}
+                if d in gone:  # in the run's clock, as the axis
+                    label += f" (diverged at t = {gone[d] - t_all[pos[0]]:.4g} s)"
                 ax.plot(
-                    t, np.clip(p, np.nanmin(y) - span, np.nanmax(y) + span), lw=0.9, label=model
+                    t, np.clip(p, np.nanmin(y) - span, np.nanmax(y) + span), lw=0.9, label=label
                 )
             ax.set_ylim(np.nanmin(y) - 0.6 * span, np.nanmax(y) + 0.6 * span)
             ax.set_xlabel("time since the start of the run [s]")
-            ax.set_ylabel(f"{d} [{UNITS.get(d, '')}]")
+            ax.set_ylabel(f"{d} [{unit_text(d)}]")
             ax.tick_params(labelsize=8)
             legend_outside(ax, ncols=4, fontsize=7, side="below")
             label = f"{name}: {d}" if name is not None else d
@@ -328,28 +417,52 @@ def force_window(held: pd.DataFrame, window_s: float = 60.0) -> np.ndarray:
     return pos[t - t[0] <= window_s]
 
 
+def measured_groups(measured: dict[str, pd.DataFrame]) -> list[tuple[list[str], pd.DataFrame]]:
+    """The distinct force series τ̄ of the damping models, each with the models drawn from it
+    (in first-seen order): models with the same smoothing settings share one."""
+    groups: list[tuple[list[str], pd.DataFrame]] = []
+    for name, series in measured.items():
+        same = next((g for g in groups if g[1].equals(series)), None)
+        if same is None:
+            groups.append(([name], series))
+        else:
+            same[0].append(name)
+    return groups
+
+
 def force_figure(
-    measured: pd.DataFrame,
+    measured: dict[str, pd.DataFrame] | pd.DataFrame,
     forces: dict[str, pd.DataFrame],
     held: pd.DataFrame,
     window_s: float = 60.0,
 ) -> str:
     """Measured and predicted viscous force per DOF over the first ``window_s`` of the first
     held-out run (:func:`force_window`; a longer stretch turns many overlaid models into a
-    blur)."""
+    blur), on the run's clock as the free-run figures. Each model is drawn beside its own τ̄
+    (``measured``, per model): where the models' smoothing settings differ there is one black
+    line per distinct τ̄, each in its own dash, named with its models. One DataFrame is one τ̄
+    for every model."""
+    if isinstance(measured, pd.DataFrame):
+        measured = dict.fromkeys(forces, measured)
     keep = force_window(held, window_s)
-    t = held["t"].to_numpy(np.float64)
+    t = held["t"].to_numpy(np.float64)[keep]
+    t = t - t[0]
+    groups = measured_groups(measured)
+    dashes = ["-", "--", ":", "-."]
     # fixed margins: the constrained layout drew the figure twice (to place, then to paint)
     fig, axes = new_figure(6, 1, 10.0, 1.7, fixed=True, left=LONG_TICKS_LEFT_IN)
     for k, ax in enumerate(axes[:, 0]):
         f = FORCES[k]
-        ax.plot(t[keep], measured[f].to_numpy()[keep], color="black", lw=1.2, label="measured τ̄")
+        for j, (names, series) in enumerate(groups):
+            label = "measured τ̄" if len(groups) == 1 else f"τ̄ of {', '.join(names)}"
+            ax.plot(t, series[f].to_numpy()[keep], color="black", lw=1.2,
+                    ls=dashes[j % len(dashes)], label=plot_label(label))  # fmt: skip
         for name, series in forces.items():
-            ax.plot(t[keep], series[f].to_numpy()[keep], lw=0.8, label=name)
+            ax.plot(t, series[f].to_numpy()[keep], lw=0.8, label=plot_label(name))
         ax.set_ylabel(f"{f} [{FORCE_UNITS[f]}]")
         ax.tick_params(labelsize=8)
     legend_outside(axes[0, 0], ncols=5, fontsize=7)
-    axes[-1, 0].set_xlabel("t [s]")
+    axes[-1, 0].set_xlabel("time since the start of the run [s]")
     return figure_uri(fig)
 
 
@@ -373,7 +486,7 @@ def complexity_figure(comparison: dict) -> str:
             continue
         color = f"C{drawn % 10}"
         drawn += 1
-        ax.scatter(m["n_params"], ratio, zorder=3, color=color, label=m["name"])
+        ax.scatter(m["n_params"], ratio, zorder=3, color=color, label=plot_label(m["name"]))
         j0 = m["validation"].get("J0")
         pts = sorted(
             (p["n_terms"], float(np.sqrt(p["validation_J"])))
@@ -386,7 +499,7 @@ def complexity_figure(comparison: dict) -> str:
                 [p[1] for p in pts],
                 "--",
                 color=color,
-                label=f"{m['name']} path (√ of normalised MSE)",
+                label=plot_label(f"{m['name']} path (√ of normalised MSE)"),
             )
     ax.set_xlabel("number of terms n̄")
     ax.set_ylabel("validation error: points J / J0, path √ mean NMSE")
@@ -404,14 +517,25 @@ def _of_run(held: pd.DataFrame) -> str:
     return f" of run {runs[0][0]}" if len(runs) > 1 else ""
 
 
-COEFFICIENT_HEAD = ["coefficient", "value", "std. error"]
+COEFFICIENT_HEAD = ["coefficient", "unit", "value", "std. error"]
 
 
 def coefficient_rows(coefs: dict) -> list[list[str]]:
-    """A damping model's coefficients with their standard errors ("-" where the fit gives
-    none: a Nelder-Mead cost has no least-squares covariance)."""
+    """A damping model's coefficients with their SI units and standard errors ("-" where the
+    fit gives none: a Nelder-Mead cost has no least-squares covariance)."""
     return [
-        [k, number(v["value"], 5), number(v.get("stderr"), 2)] for k, v in sorted(coefs.items())
+        [k, parameter_unit(k), number(v["value"], 5), number(v.get("stderr"), 2)]
+        for k, v in sorted(coefs.items())
+    ]
+
+
+def coefficient_blocks(comparison: dict) -> list[tuple[str, list[list[str]]]]:
+    """(model name, :func:`coefficient_rows`) of each model with coefficients: the HTML page
+    and the Markdown twin both write them from here."""
+    return [
+        (m["name"], coefficient_rows(m["coefficients"]))
+        for m in comparison["models"]
+        if m.get("coefficients")
     ]
 
 
@@ -431,12 +555,8 @@ def html_page(result) -> str:
     for t, head, rows in tables[1:]:
         parts += [f"<h2>{html.escape(t)}</h2>", html_table(head, rows)]
     held = result.held_out
-    dofs = sorted(
-        {d for m in comparison["models"] for d in _held(m, comparison).get("free_run_nrmse", {})}
-        - {"total"},
-        key=lambda d: "uvwpqr".index(d) if d in "uvwpqr" else 10,
-    )
-    figures = free_run_figures(held, result.free_runs, [d for d in dofs if d in held])
+    dofs = outputs(comparison, "free_run_nrmse")
+    figures = free_run_figures(held, result.free_runs, [d for d in dofs if d in held], comparison)
     parts.append("<h2>Free runs on the held-out data</h2>")
     parts += [
         f"<h3>{html.escape(name)}</h3><img alt='{html.escape(name)}' src='{uri}'>"
@@ -451,18 +571,15 @@ def html_page(result) -> str:
             f"<img alt='measured and predicted viscous force per DOF' "
             f"src='{force_figure(result.measured_force, result.forces, held)}'>",
             "<p>J is the RMS error of the viscous force (McCarter eq. 4.25), J0 the RMS of the "
-            "force series τ̄ the damping model must explain (eq. 4.4).</p>",
+            "force series τ̄ the damping model must explain (eq. 4.4); each model's τ̄ is drawn "
+            "with its own smoothing settings, and each model is drawn beside its own. Time is "
+            "since the start of the run, as in the free-run figures.</p>",
         ]
-    coef_blocks = []
-    for m in comparison["models"]:
-        coefs = m.get("coefficients")
-        if not coefs:
-            continue
-        crow = coefficient_rows(coefs)
-        coef_blocks.append(
-            f"<details><summary>{html.escape(m['name'])} ({len(crow)} coefficients)"
-            f"</summary>{html_table(COEFFICIENT_HEAD, crow)}</details>"
-        )
+    coef_blocks = [
+        f"<details><summary>{html.escape(name)} ({len(crow)} coefficients)"
+        f"</summary>{html_table(COEFFICIENT_HEAD, crow)}</details>"
+        for name, crow in coefficient_blocks(comparison)
+    ]
     if coef_blocks:
         parts += ["<h2>Coefficients</h2>", *coef_blocks]
     parts.append(said_list(all_warnings(comparison)))

@@ -180,13 +180,27 @@ def html_table(head: list[str], rows: list[list[str]]) -> str:
     return f"<table><thead><tr>{h}</tr></thead><tbody>{body}</tbody></table>"
 
 
+def markdown_cell(text: str) -> str:
+    """A Markdown table cell's text with its pipes escaped: a model name with '|' (a config
+    label may hold one) split its cell and shifted every column after it."""
+    return text.replace("|", r"\|")
+
+
 def markdown_table(head: list[str], rows: list[list[str]]) -> list[str]:
-    """The same table in Markdown, one line per row."""
-    return [
-        "| " + " | ".join(head) + " |",
-        "|" + "---|" * len(head),
-        *("| " + " | ".join(r) + " |" for r in rows),
-    ]
+    """The same table in Markdown, one line per row (cells through :func:`markdown_cell`)."""
+
+    def line(cells: list[str]) -> str:
+        return "| " + " | ".join(markdown_cell(c) for c in cells) + " |"
+
+    return [line(head), "|" + "---|" * len(head), *(line(r) for r in rows)]
+
+
+def plot_label(name: str) -> str:
+    """A name as a matplotlib legend label draws it: '$' escaped (an even number of them was
+    parsed as mathtext, and a bad one raised in savefig after every fit) and a leading '_'
+    guarded by a space (matplotlib leaves a label starting with '_' out of the legend)."""
+    text = name.replace("$", r"\$")
+    return " " + text if text.startswith("_") else text
 
 
 def said_list(items: list[str], title: str = "Warnings") -> str:

@@ -23,6 +23,7 @@ from nnid.reports.figures import (
     UNITS,
     figure_uri,
     html_table,
+    markdown_table,
     new_figure,
     page_head,
     said_list,
@@ -469,9 +470,7 @@ def error_rows(result: dict) -> tuple[list[str], list[list[str]]]:
 
 def markdown(result: dict) -> str:
     def table(head, rows):
-        out = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
-        out += ["| " + " | ".join(r) + " |" for r in rows]
-        return "\n".join(out)
+        return "\n".join(markdown_table(head, rows))
 
     lines = [f"# Residual loop: {result.get('vehicle', '')}", ""]
     lines += [f"- {s}" for s in summary(result)]

@@ -274,13 +274,19 @@ RUNS_TITLE = "Free-run NRMSE of each held-out run on its own"
 def _runs(metrics: dict) -> tuple[list[str], list[list[str]]]:
     """Each run of a held-out split of several runs, scored alone (its own std): the split's
     pooled NRMSE can hide a run that fails on an output it barely moves."""
-    head = ["split", "run", *DOFS, "total"]
+    scored = [
+        (part, run, vals)
+        for part in ("validation", "test")
+        for run, vals in (
+            (metrics.get(part) or {}).get("free_run_nrmse_per_experiment") or {}
+        ).items()
+    ]
+    columns = _scored_columns([vals for _, _, vals in scored])
     rows = []
-    for part in ("validation", "test"):
-        per = (metrics.get(part) or {}).get("free_run_nrmse_per_experiment") or {}
+    for part, run, vals in scored:
         left = (metrics.get(part) or {}).get("diverged_per_experiment") or {}
-        rows += [[part, run, *_dof_cells(vals, left.get(run, {}))] for run, vals in per.items()]
-    return head, rows
+        rows.append([part, run, *_dof_cells(vals, left.get(run, {}), columns)])
+    return ["split", "run", *columns, "total"], rows
 
 
 MONITOR_TITLE = "Residual monitor (fault detection)"
@@ -481,20 +487,33 @@ def _img(uri: str) -> str:
 
 
 def _errors(metrics: dict) -> tuple[list[str], list[list[str]]]:
-    head = ["split", "mode", *DOFS, "total"]
-    rows = []
-    for part in ("train", "validation", "test"):
-        scores = metrics.get(part) or {}
-        for key, label in ERROR_KEYS[:3]:
-            if key not in scores:
-                continue
-            rows.append([part, label, *_dof_cells(scores[key], diverged_columns(scores, key))])
-    return head, rows
+    scored = [
+        (part, label, metrics[part], key)
+        for part in ("train", "validation", "test")
+        for key, label in ERROR_KEYS[:3]
+        if key in (metrics.get(part) or {})
+    ]
+    columns = _scored_columns([scores[key] for _, _, scores, key in scored])
+    rows = [
+        [part, label, *_dof_cells(scores[key], diverged_columns(scores, key), columns)]
+        for part, label, scores, key in scored
+    ]
+    return ["split", "mode", *columns, "total"], rows
 
 
-def _dof_cells(vals: dict, diverged: dict) -> list[str]:
-    """One cell per DOF and the total (:func:`score_cell`)."""
-    return [score_cell(vals, d, diverged) for d in (*DOFS, "total")]
+def _scored_columns(scores: list[dict]) -> list[str]:
+    """The columns of score tables: the outputs the scores name (the Markdown lists those),
+    u v w p q r in their order, other outputs (a NARX's ``y``) after in first-seen order. Fixed
+    to the six DOFs, the HTML left out a non-DOF output its Markdown twin showed."""
+    seen: list[str] = []
+    for vals in scores:
+        seen += [c for c in vals if c != "total" and c not in seen]
+    return sorted(seen, key=lambda c: DOFS.index(c) if c in DOFS else len(DOFS))
+
+
+def _dof_cells(vals: dict, diverged: dict, columns: list[str]) -> list[str]:
+    """One cell per column and the total (:func:`score_cell`)."""
+    return [score_cell(vals, d, diverged) for d in (*columns, "total")]
 
 
 def _free_run_figure(figures: dict) -> str:
