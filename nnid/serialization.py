@@ -11,7 +11,7 @@ from __future__ import annotations
 import json
 import math
 import os
-import tempfile
+import uuid
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any, BinaryIO
@@ -104,7 +104,16 @@ def write_atomic(path: str | Path, write: Callable[[BinaryIO], object]) -> Path:
     ``path``: a reader (or a crash) never meets half a file."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
+    # os.open with 0o666, not mkstemp (0o600 whatever the umask): the file keeps the user's
+    # umask once renamed into place, as open() would give it, so a shared folder stays readable
+    flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0)
+    while True:
+        tmp = path.parent / f".{path.name}.{uuid.uuid4().hex[:12]}"
+        try:
+            fd = os.open(tmp, flags, 0o666)
+            break
+        except FileExistsError:  # another writer's name: drawn again
+            continue
     try:
         with os.fdopen(fd, "wb") as fh:
             write(fh)
@@ -116,10 +125,20 @@ def write_atomic(path: str | Path, write: Callable[[BinaryIO], object]) -> Path:
 
 
 def read_json(path: str | Path) -> Any:
-    """Parse a JSON file (NaN and Infinity refused: nnid never writes them)."""
+    """Parse a JSON file (NaN and Infinity refused, as a number too large for a float, which
+    Python reads as inf: nnid never writes them)."""
 
     def refuse(token: str) -> Any:
         raise ValueError(f"'{token}' is not strict JSON")
+
+    huge: list[_Huge] = []
+
+    def finite(token: str) -> float | _Huge:
+        value = float(token)
+        if math.isfinite(value):
+            return value
+        huge.append(_Huge(token))  # found below, to name where it stands
+        return huge[-1]
 
     try:
         text = Path(path).read_text(encoding="utf-8")
@@ -128,8 +147,38 @@ def read_json(path: str | Path) -> Any:
     except OSError as exc:  # a folder in its place, no permission
         raise NnidInputError(f"cannot be read ({exc.strerror})", source=str(path)) from None
     try:
-        return json.loads(text, parse_constant=refuse)
+        value = json.loads(text, parse_constant=refuse, parse_float=finite)
+        where = _where(value, huge[0]) if huge else None
     except ValueError as exc:  # JSONDecodeError is a ValueError
         raise NnidInputError(f"is not valid JSON ({exc})", source=str(path)) from None
     except RecursionError:
         raise NnidInputError("is not valid JSON (nested too deep)", source=str(path)) from None
+    if huge:
+        raise NnidInputError(
+            f"{huge[0].token} is too large for a number (it reads as infinite): a finite number "
+            "is expected",
+            source=str(path),
+            field=where or None,
+        )
+    return value
+
+
+class _Huge:
+    """A JSON number too large for a float (1e999: Python reads it as inf), as parsed."""
+
+    def __init__(self, token: str) -> None:
+        self.token = token
+
+
+def _where(value: Any, target: _Huge) -> str | None:
+    """The dotted key path to ``target`` in parsed JSON (list items by index; "" at the top),
+    or None."""
+    if value is target:
+        return ""
+    if not isinstance(value, dict | list):
+        return None
+    for key, item in value.items() if isinstance(value, dict) else enumerate(value):
+        found = _where(item, target)
+        if found is not None:
+            return f"{key}.{found}" if found else str(key)
+    return None

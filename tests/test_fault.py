@@ -2651,6 +2651,30 @@ def test_a_hand_edited_monitor_file_is_refused(monitor, tmp_path):
         assert "monitor.json" in str(err.value)
 
 
+def test_a_monitor_beside_another_model_is_refused_and_a_model_save_removes_it(monitor, tmp_path):
+    """monitor.json was not bound to its model: a model saved into a detection model's folder
+    kept the old monitor.json, and detection applied that calibration to the new model."""
+    monitor.model.save(tmp_path / "a")
+    monitor.save(tmp_path / "a")
+    monitor.model.save(tmp_path / "a")  # saved again: the calibration it had is not kept
+    assert not (tmp_path / "a" / "monitor.json").exists()
+    monitor.save(tmp_path / "a")
+    # another model's model.json (another run's, copied in): one that loads, not this one
+    other = json.loads((tmp_path / "a" / "model.json").read_text())
+    other["fit_seconds"] = 1.0 + (other["fit_seconds"] or 0.0)
+    (tmp_path / "b").mkdir()
+    (tmp_path / "b" / "model.json").write_text(json.dumps(other))
+    good = json.loads((tmp_path / "a" / "monitor.json").read_text())
+    (tmp_path / "b" / "monitor.json").write_text(json.dumps(good))
+    with pytest.raises(NnidInputError, match="calibrated for another model") as err:
+        ResidualMonitor.load(tmp_path / "b")
+    assert err.value.source == str(tmp_path / "b" / "monitor.json")
+    # a monitor saved before it recorded its model's is believed, as it was
+    del good["model_fingerprint"]
+    (tmp_path / "b" / "monitor.json").write_text(json.dumps(good))
+    assert ResidualMonitor.load(tmp_path / "b").sigma_.tolist() == monitor.sigma_.tolist()
+
+
 def test_detect_json_names_the_target_rate_apart_from_the_measured_one(monitor, vehicle):
     """``false_alarm_rate_per_hour`` (the contract's key) is the rate the thresholds were set
     for; beside it, named for what they are, the target and the rate the healthy test part

@@ -294,6 +294,24 @@ def test_output_bounds_clamp_every_mode_and_survive_save_load(tmp_path):
         NarxModel(["u"], ["y"], output_bounds=[[1.0, 0.0]]).fit(train)
 
 
+def test_an_infinite_bound_of_numpy_survives_save_load(tmp_path):
+    """A NumPy array's inf was saved as null, read back as NaN: the model saved, then failed
+    to load ("low must be below high"); a NumPy float's inf was saved as null too (None)."""
+    from nnid.models.base import decode_setting, encode_setting
+    from nnid.serialization import dumps
+
+    train = _tank(200, 1.3, 0)
+    bounds = np.array([[-np.inf, 2.0]])
+    model = NarxModel(["u"], ["y"], 2, 2, hidden=(3,), trainer=Adam(max_epochs=1))
+    model.set_params(output_bounds=bounds).fit(train)
+    back = load_model(model.save(tmp_path))
+    np.testing.assert_array_equal(back.output_bounds, bounds)
+    pd.testing.assert_frame_equal(back.predict(train), model.predict(train))
+    given = {"bounds": [[np.float32(-np.inf), np.float64(np.inf)]]}
+    read = decode_setting(json.loads(dumps(encode_setting(given))))
+    assert read == {"bounds": [[-np.inf, np.inf]]}
+
+
 def test_a_log_with_missing_samples_is_refused_naming_where():
     """The delays count samples: a run with rows missing (t jumps 5 samples at t = 300) would
     be read as one whose dynamics change there. Refused for fitting and predicting, naming the

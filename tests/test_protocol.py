@@ -303,6 +303,34 @@ def test_a_model_saved_over_another_leaves_none_of_its_files(fitted, tmp_path):
     assert load_model(tmp_path).kind == "fossen"
 
 
+def test_a_tensors_file_another_save_wrote_is_refused(fitted, tmp_path):
+    """model.json and tensors.pt are written one after the other (and a run's are moved into
+    --out one by one): a save cut between them left one save's tensors beside another's
+    model.json, which loaded them without a word. model.json records their sha256."""
+    narx, fossen = fitted["narx"][0], fitted["fossen"][0]
+    narx.save(tmp_path / "narx")
+    tensors = torch.load(tmp_path / "narx" / "tensors.pt", weights_only=True)
+    name = next(k for k, v in tensors.items() if v.is_floating_point())
+    tensors[name] = tensors[name] + 1.0  # another fit's weights: finite, of the same shapes
+    torch.save(tensors, tmp_path / "narx" / "tensors.pt")
+    with pytest.raises(NnidInputError, match=r"tensors\.pt does not belong to model\.json") as err:
+        load_model(tmp_path / "narx")
+    assert err.value.source == str(tmp_path / "narx")
+    # a model without tensors beside a tensors.pt: not its own either
+    fossen.save(tmp_path / "fossen")
+    (tmp_path / "fossen" / "tensors.pt").write_bytes(
+        (tmp_path / "narx" / "tensors.pt").read_bytes()
+    )
+    with pytest.raises(NnidInputError, match="does not belong") as err:
+        load_model(tmp_path / "fossen")
+    assert err.value.source == str(tmp_path / "fossen")
+    # a model.json saved before the hash was kept loads as it did, unchecked
+    saved = read_json(tmp_path / "narx" / "model.json")
+    del saved["tensors_sha256"]
+    (tmp_path / "narx" / "model.json").write_text(json.dumps(saved))
+    assert load_model(tmp_path / "narx").kind == "narx"
+
+
 @pytest.mark.parametrize("kind", list(BUILDERS))
 def test_a_damaged_saved_model_is_one_input_error_naming_the_file(kind, fitted, tmp_path):
     """A model.json edited by hand (a key gone, a setting unknown) or a tensors.pt cut short

@@ -6,21 +6,25 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import warnings
 
 import numpy as np
+import pandas as pd
 import pytest
 import torch
 
 from nnid import load_model
 from nnid.datasets.simulator import simulate
 from nnid.errors import NnidInputError
+from nnid.models.hybrid import HybridModel
 from nnid.models.parametric import ParametricModel, vehicle_with
 from nnid.reports.train_report import _params_table
-from nnid.serialization import dumps
+from nnid.serialization import dumps, write_json
+from nnid.trainers.adam import Adam
 from nnid.trainers.history import History, history_state, restored_history
 from nnid.trainers.least_squares import Estimate, ExcitationWarning, solve_least_squares
-from nnid.trainers.recursive import GradientEstimator
+from nnid.trainers.recursive import GradientEstimator, RecursiveLeastSquares
 from nnid.trainers.ukf import UnscentedKalman
 from nnid.vehicle import load_vehicle, vehicle_from_dict
 
@@ -260,3 +264,71 @@ def test_a_model_saved_with_a_line_separator_in_its_vehicle_name_loads_on_one_li
     data = {**seamor.model_dump(mode="json"), "name": f"sea{separator}mor"}
     with pytest.raises(Exception, match="one line of text"):
         vehicle_from_dict(data, "new.toml")
+
+
+@pytest.mark.parametrize("physics_trainer", [RecursiveLeastSquares(), UnscentedKalman()])
+def test_a_hybrid_whose_physics_a_recursive_trainer_fitted_loads_and_predicts_as_saved(
+    seamor, surge, physics_trainer, tmp_path
+):
+    """The physics fit's tensors (its per-sample θ path) were left out of the hybrid's
+    tensors.pt: the hybrid saved, then failed to load ("'record.estimate.history' is not in
+    tensors.pt")."""
+    model = HybridModel(
+        seamor,
+        unknowns=["X_udot", "X:u*abs(u)"],
+        dofs=["u"],
+        physics_trainer=physics_trainer,
+        hidden=(4,),
+        memory=(),
+        segments=(0.5,),
+        trainer=Adam(max_epochs=1),
+    )
+    with warnings.catch_warnings():  # no validation data, a noise-free log
+        warnings.simplefilter("ignore", UserWarning)
+        model.fit(surge)
+    back = load_model(model.save(tmp_path))
+    np.testing.assert_array_equal(
+        back.baseline().estimate_.history, model.physics_.estimate_.history
+    )
+    pd.testing.assert_frame_equal(back.predict(surge), model.predict(surge))
+
+
+def test_a_history_keeps_a_count_a_whole_number_through_json():
+    """An info count (Adam's skipped_batches) came back 3.0 from a saved model, where the
+    fitted one said 3; other facts stay numbers, their inf tagged."""
+    hist = History(train=[1.0], info={"skipped_batches": 3, "peak": 2.5, "big": math.inf})
+    back = restored_history(json.loads(dumps(history_state(hist)))).info
+    assert back == hist.info and type(back["skipped_batches"]) is int
+    assert type(back["peak"]) is float
+
+
+def test_a_number_too_large_for_a_float_in_model_json_is_one_input_error(seamor, surge, tmp_path):
+    """1e999 parses to inf (NaN and Infinity were refused, it was not), and a whole number
+    too large for a float overflows where it is read as one: both ended in a traceback
+    (OverflowError) where a damaged file is one error naming it."""
+    model = ParametricModel(seamor, ["X_udot", "X:u*abs(u)"], ["u"]).fit(surge)
+    model.save(tmp_path)
+    good = json.loads((tmp_path / "model.json").read_text())
+    saved = json.loads(json.dumps(good))
+    saved["state"]["n_obs"] = "HUGE"
+    (tmp_path / "model.json").write_text(json.dumps(saved).replace('"HUGE"', "1e999"))
+    with pytest.raises(NnidInputError, match="1e999 is too large") as err:
+        load_model(tmp_path)
+    assert err.value.source == str(tmp_path / "model.json") and err.value.field == "state.n_obs"
+    _edit(tmp_path, lambda s: s.update(good) or s["state"].update(sigma2=10**400))
+    with pytest.raises(NnidInputError, match=r"model\.json: damaged.*OverflowError"):
+        load_model(tmp_path)
+
+
+@pytest.mark.parametrize("umask", [0o022, 0o027])
+def test_a_written_file_keeps_the_umask_not_mkstemps_0600(umask, tmp_path):
+    """Files went through tempfile.mkstemp, mode 0600 whatever the umask: a shared model
+    folder's model.json could be read by no colleague. A written file has the mode open()
+    gives (0666 less the umask)."""
+    old = os.umask(umask)
+    try:
+        write_json(tmp_path / "model.json", {"kind": "x"})
+    finally:
+        os.umask(old)
+    assert (tmp_path / "model.json").stat().st_mode & 0o777 == 0o666 & ~umask
+    assert [p.name for p in tmp_path.iterdir()] == ["model.json"]  # no temporary file left

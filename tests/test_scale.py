@@ -1411,6 +1411,23 @@ def test_a_tune_sweep_runs_only_the_trials_not_finished_before(sweep_inputs, tmp
     assert len(given) == 1 and result.reused == len(tasks)
 
 
+def test_a_task_marker_that_is_no_json_object_is_run_again(tmp_path):
+    """A task.json of valid JSON that is no object (a list, a number) raised AttributeError
+    or TypeError out of the batch; a damaged marker is a task to run again, as unparsable
+    JSON is."""
+    from types import SimpleNamespace
+
+    from nnid.scale.task import finished
+
+    task = SimpleNamespace(id="dive-0123456789ab")
+    (tmp_path / task.id).mkdir()
+    for text in ("[1, 2]", "3", '"ok"', "null", "{"):
+        (tmp_path / task.id / "task.json").write_text(text)
+        assert finished(task, tmp_path) is None, text
+    (tmp_path / task.id / "task.json").write_text('{"status": "ok", "id": "x"}')
+    assert finished(task, tmp_path) == {"status": "ok", "id": "x"}
+
+
 def test_fleet_report_sections_are_vehicle_files_and_lines_configs(monkeypatch) -> None:
     """Sections were keyed by the vehicle's name: two files of one name merged into one, and
     a log x config product drew its configs on one time line. A section per vehicle file,

@@ -35,6 +35,7 @@ from nnid.datasets.preprocess import check_attitude, refuse_bursty_runs
 from nnid.errors import NnidInputError
 from nnid.fault import kernel
 from nnid.fault.thresholds import rate_interval, rate_threshold, threshold_caveat
+from nnid.models.base import MODEL_FILE, MONITOR_FILE, load_model, model_fingerprint
 from nnid.physics.compiled import form_args
 from nnid.physics.dofs import DOFS, FORCES
 from nnid.physics.thrusters import Actuation
@@ -42,7 +43,8 @@ from nnid.serialization import SCHEMA_VERSION, read_json, write_json
 from nnid.threads import torch_threads_kept
 from nnid.validation import MAX_FALSE_ALARMS_PER_HOUR, PositiveFloat, StrictModel, validated
 
-MONITOR_FILE = "monitor.json"
+#: monitor.json's key of the saved model it was calibrated for (:func:`model_fingerprint`)
+FOR_MODEL = "model_fingerprint"
 #: what reads a log sample by sample at one interval, as said in a refusal of stamps in bursts
 #: (:func:`~nnid.datasets.preprocess.refuse_bursts`; batch and ``--follow`` alike)
 MONITOR_STEPS = "the residual monitor, calibrated at one sample interval,"
@@ -498,11 +500,21 @@ class ResidualMonitor(BaseEstimator):
 
     # -- persistence ----------------------------------------------------------------------------
     def save(self, folder: str | Path) -> Path:
-        """``monitor.json`` beside the saved model (strict JSON, no code)."""
-        path = Path(folder) / MONITOR_FILE
+        """``monitor.json`` beside the saved model (strict JSON, no code): the model is saved
+        into ``folder`` first (``model.save(folder)``, which removes an earlier monitor.json),
+        and the monitor records which (:func:`~nnid.models.base.model_fingerprint`)."""
+        folder = Path(folder)
+        path = folder / MONITOR_FILE
+        if not (folder / MODEL_FILE).is_file():
+            raise NnidInputError(
+                f"has no {MODEL_FILE}: save the monitor's model into it first "
+                "(monitor.model.save(dir)), then the monitor",
+                source=str(folder),
+            )
         write_json(
             path,
             {
+                FOR_MODEL: model_fingerprint(folder),
                 "settings": {
                     "false_alarm_per_hour": self.false_alarm_per_hour,
                     "time_constant_s": self.time_constant_s,
@@ -524,8 +536,6 @@ class ResidualMonitor(BaseEstimator):
     @classmethod
     def load(cls, folder: str | Path, model=None) -> ResidualMonitor:
         """The monitor saved in ``folder`` with its model (loaded from there unless given)."""
-        from nnid.models.base import load_model
-
         folder = Path(folder)
         path = folder / MONITOR_FILE
         if not path.is_file():
@@ -541,6 +551,15 @@ class ResidualMonitor(BaseEstimator):
         validated(_SavedMonitor, state, str(path))
         # the model's own errors name model.json: loaded outside the monitor's error wrapping
         model = model if model is not None else load_model(folder)
+        # a monitor saved before it recorded its model's (no key) is believed, as it was
+        held = model_fingerprint(folder) if (folder / MODEL_FILE).is_file() else None
+        if FOR_MODEL in state and state[FOR_MODEL] != held:
+            raise NnidInputError(
+                f"was calibrated for another model than the {MODEL_FILE} beside it (the model "
+                "was saved again, or the files come from different runs): train the detection "
+                "model again",
+                source=str(path),
+            )
         try:
             out = cls(model, **state["settings"])
             out._setup()

@@ -28,8 +28,10 @@ fitted (scikit-learn's ``check_is_fitted``), so a model used too early raises on
 
 from __future__ import annotations
 
+import hashlib
 import importlib
 import inspect
+import io
 import math
 import pickle
 import struct
@@ -88,6 +90,16 @@ REGRESSION_TRAINERS = ("ls", "rls", "gradient", "ukf")
 NETWORK_TRAINERS = ("lm", "adam")
 MODEL_FILE = "model.json"
 TENSOR_FILE = "tensors.pt"
+#: a detection model's calibration beside its model files (:mod:`nnid.fault.monitor`), bound
+#: to them by :func:`model_fingerprint`: a model saved into the folder removes it
+MONITOR_FILE = "monitor.json"
+#: the key of model.json that ties it to its tensors.pt (their sha256; null: no tensors)
+TENSOR_HASH = "tensors_sha256"
+#: a tensors.pt beside a model.json that another save wrote, as :func:`load_model` says it
+FOREIGN_TENSORS = (
+    f"{TENSOR_FILE} does not belong to {MODEL_FILE} (not the tensors it records): the two "
+    "were written by different saves, one interrupted, or edited; save the model again"
+)
 #: the first part of the name of a tensor that records a fit sample by sample (a filter's θ
 #: path, its innovations), not a weight: a per-sample series is no learned scalar, so it goes to
 #: ``tensors.pt``, not ``model.json`` (ARCHITECTURE.md, "The model protocol")
@@ -145,13 +157,13 @@ def encode_setting(value: Any) -> Any:
         return {"$trainer": value.kind, "params": encode_setting(value.get_params(deep=False))}
     if isinstance(value, NnidModel):  # an ensemble's member
         return {"$model": value.kind, "params": encode_setting(value.get_params(deep=False))}
-    if isinstance(value, np.ndarray):
-        return {"$array": value.tolist()}
+    if isinstance(value, np.ndarray):  # its inf tagged as a float's: null read back as NaN
+        return {"$array": encode_setting(value.tolist())}
     if isinstance(value, Mapping):
         return {str(k): encode_setting(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
         return [encode_setting(v) for v in value]
-    if isinstance(value, float) and not math.isfinite(value):
+    if isinstance(value, float | np.floating) and not math.isfinite(value):
         return exact_float(value)
     if value is None or isinstance(value, (bool, int, float, str)):
         return value
@@ -175,7 +187,7 @@ def decode_setting(value: Any, source: str = "") -> Any:
     if "$model" in value:
         return model_class(value["$model"])(**decode_setting(value["params"], source))
     if "$array" in value:
-        return np.asarray(value["$array"], dtype=float)
+        return np.asarray(decode_setting(value["$array"], source), dtype=float)
     if FLOAT_TAG in value:
         return read_exact_float(value, "a setting")
     return {k: decode_setting(v, source) for k, v in value.items()}
@@ -405,14 +417,24 @@ class NnidModel(BaseEstimator, ABC):
         folder = Path(folder)
         folder.mkdir(parents=True, exist_ok=True)
         learned, tensors = learned_state(self)
+        data = None
+        if tensors:
+            buffer = io.BytesIO()
+            torch.save(tensors, buffer)
+            data = buffer.getvalue()
         payload = {
             "kind": self.kind,
             "nnid_version": _version(),
             "settings": encode_setting(self.get_params(deep=False)),
+            # the two files are written one after the other: a save cut between them left new
+            # tensors beside the old model.json, which loaded them without a word
+            TENSOR_HASH: None if data is None else hashlib.sha256(data).hexdigest(),
             **learned,
         }
-        if tensors:  # atomically, as model.json: never half a file beside a whole one
-            write_atomic(folder / TENSOR_FILE, lambda fh: torch.save(tensors, fh))
+        # another model's calibration: detection applied it to this model
+        (folder / MONITOR_FILE).unlink(missing_ok=True)
+        if data is not None:  # atomically, as model.json: never half a file beside a whole one
+            write_atomic(folder / TENSOR_FILE, lambda fh: fh.write(data))
         else:  # another model's, saved here before: not left beside this one's model.json
             (folder / TENSOR_FILE).unlink(missing_ok=True)
         write_json(folder / MODEL_FILE, payload)
@@ -437,7 +459,9 @@ def load_model(folder: str | Path) -> NnidModel:
     try:
         payload = read_json(path)
     except NnidInputError as exc:  # said against the file once, with what is wrong with it
-        raise NnidInputError(f"not a valid model file: {exc.message}", source=str(path)) from None
+        raise NnidInputError(
+            f"not a valid model file: {exc.message}", source=str(path), field=exc.field
+        ) from None
     if not isinstance(payload, dict) or "kind" not in payload:
         raise NnidInputError("not an nnid model file (no 'kind')", source=str(path))
     version = payload.get("schema_version")
@@ -452,7 +476,8 @@ def load_model(folder: str | Path) -> NnidModel:
     # such failure is said against the file, as one input error, at this one boundary
     tensor_path = path.parent / TENSOR_FILE
     try:
-        tensors = torch.load(tensor_path, weights_only=True) if tensor_path.exists() else {}
+        data = tensor_path.read_bytes() if tensor_path.exists() else None
+        tensors = {} if data is None else torch.load(io.BytesIO(data), weights_only=True)
     except pickle.UnpicklingError:
         # torch's own message advises weights_only=False, which would run the file's code
         raise NnidInputError(UNSAFE_TENSORS, source=str(tensor_path)) from None
@@ -475,6 +500,7 @@ def load_model(folder: str | Path) -> NnidModel:
             f"'{RECORD}.' series may, as its fit recorded them)",
             source=str(tensor_path),
         )
+    _check_tensor_hash(payload, data, path)
     try:
         cls = model_class(payload["kind"])
         model = cls(**decode_setting(payload["settings"], str(path)))
@@ -483,13 +509,49 @@ def load_model(folder: str | Path) -> NnidModel:
         settings = payload.get("settings")
         keys = settings if isinstance(settings, dict) else {}
         raise exc.within("settings", keys).with_source(str(path)) from None
-    except (KeyError, TypeError, ValueError, RuntimeError, AttributeError, IndexError) as exc:
+    except (
+        KeyError,
+        TypeError,
+        ValueError,
+        RuntimeError,
+        AttributeError,
+        IndexError,
+        ArithmeticError,  # a whole number too large for a float: float(10**400) overflows
+    ) as exc:
         # a network without its tensors fails in load_state_dict, a RuntimeError
         gone = isinstance(exc, RuntimeError) and not tensor_path.exists()
         missing = f"; its {TENSOR_FILE} is missing" if gone else ""
         raise NnidInputError(_damaged(exc) + missing, source=str(path)) from None
     _check_learned(model, payload, str(path))
     return model
+
+
+def _check_tensor_hash(payload: dict, data: bytes | None, path: Path) -> None:
+    """The tensors.pt read (``data``; None: there is none) against the sha256 model.json
+    records. A file saved before the hash was kept has none: loaded as before, unchecked. A
+    missing tensors.pt is left to the model's restore, which says it where it needs one."""
+    if TENSOR_HASH not in payload:
+        return
+    recorded = payload[TENSOR_HASH]
+    if recorded is not None and not (isinstance(recorded, str) and len(recorded) == 64):
+        raise NnidInputError(
+            f"damaged, or not written by this nnid ({TENSOR_HASH} is no sha256: {recorded!r})",
+            source=str(path),
+            field=TENSOR_HASH,
+        )
+    if data is not None and recorded != hashlib.sha256(data).hexdigest():
+        raise NnidInputError(FOREIGN_TENSORS, source=str(path.parent))
+
+
+def model_fingerprint(folder: str | Path) -> str:
+    """The sha256 of the saved model in ``folder``: of its model.json's bytes, then its
+    tensors.pt's where it has one. A file written beside the model (monitor.json) records it,
+    so that it is refused beside another model."""
+    folder = Path(folder)
+    digest = hashlib.sha256((folder / MODEL_FILE).read_bytes())
+    if (folder / TENSOR_FILE).exists():
+        digest.update((folder / TENSOR_FILE).read_bytes())
+    return digest.hexdigest()
 
 
 def _check_learned(model: NnidModel, payload: dict, source: str) -> None:

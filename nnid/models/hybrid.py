@@ -97,6 +97,8 @@ _STATE_FEATURES = 15
 _CHUNK = 4096
 #: the compiled kernel's rule for each fixed-step method (torchdiffeq's rk4 is the 3/8 rule)
 _RULES = {"rk4": "3/8", "nnid_rk4": "classic"}
+#: tensors.pt prefix of the physics fit's tensors, apart from the network's state dict
+_BASELINE = "baseline."
 
 
 class HybridPhysics(nn.Module):
@@ -946,7 +948,9 @@ class HybridModel(FossenPlant):
         }
 
     def _state(self) -> tuple[dict, dict[str, Tensor]]:
-        physics_state, _ = self.physics_._state()
+        # the physics fit's own tensors (a recursive trainer's θ path) under a prefix of their
+        # own: the network's state dict has a "physics." submodule
+        physics_state, physics_tensors = self.physics_._state()
         state = {
             "physics": physics_state,
             "physics_trainer": self.physics_.trainer_name(),
@@ -957,12 +961,14 @@ class HybridModel(FossenPlant):
             "stages": self.stages_,
             "fit_history": history_state(self.history_),  # every field: stages_ sums it up
         }
-        return state, dict(self.dynamics_.state_dict())
+        tensors = {f"{_BASELINE}{k}": v for k, v in physics_tensors.items()}
+        return state, {**dict(self.dynamics_.state_dict()), **tensors}
 
     def _restore(self, state: dict, tensors: dict[str, Tensor]) -> None:
         self._check_settings()
         physics = self._physics_model()
-        physics._restore(state["physics"], {})
+        own = {k: v for k, v in tensors.items() if k.startswith(_BASELINE)}
+        physics._restore(state["physics"], {k[len(_BASELINE) :]: v for k, v in own.items()})
         physics.fitted_by_ = state.get("physics_trainer")  # absent from older files
         self.physics_ = physics
         self.parts_, self.structure_ = physics.parts_, physics.structure_
@@ -977,7 +983,7 @@ class HybridModel(FossenPlant):
         self.dt_ = float(state["dt"])
         self.stages_ = state["stages"]
         self.dynamics_ = self._new_dynamics()
-        self.dynamics_.load_state_dict(tensors)
+        self.dynamics_.load_state_dict({k: v for k, v in tensors.items() if k not in own})
         self.dynamics_.physics.forget()
 
 

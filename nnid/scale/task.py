@@ -108,5 +108,7 @@ def finished(task: Task, out_root: str | Path) -> dict[str, Any] | None:
         row = read_json(path)
     except NnidInputError:  # a damaged marker: run the task again
         return None
+    if not isinstance(row, dict):  # valid JSON, but no row: damaged too
+        return None
     row.pop("schema_version", None)
     return row if row.get("status") == "ok" else None

@@ -20,6 +20,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
+from numbers import Integral
 
 from nnid.serialization import exact_float, read_exact_float
 
@@ -84,7 +85,7 @@ class History:
     stop_reason: str = ""
     best_epoch: int = 0
     extra: dict[str, list[float]] = field(default_factory=dict)
-    info: dict[str, float] = field(default_factory=dict)
+    info: dict[str, float | int] = field(default_factory=dict)
 
     @property
     def epochs(self) -> int:
@@ -154,8 +155,23 @@ def _one_state(history: History) -> dict:
     for key in ("train", "validation", "time"):
         state[key] = exact(state[key])
     state["extra"] = {k: exact(v) for k, v in state["extra"].items()}
-    state["info"] = {k: exact_float(v) for k, v in state["info"].items()}
+    state["info"] = {k: _fact(v) for k, v in state["info"].items()}
     return state
+
+
+def _fact(value: float | int) -> float | int | dict[str, str]:
+    """An ``info`` fact as saved: a count (Adam's skipped_batches) as a whole number, so that
+    it comes back one, not 3.0; any other number as :func:`exact_float` writes it."""
+    if isinstance(value, Integral) and not isinstance(value, bool):
+        return int(value)
+    return exact_float(value)
+
+
+def _read_fact(value: object, what: str) -> float | int:
+    """Inverse of :func:`_fact` after a JSON round trip, checked (TypeError naming ``what``)."""
+    if isinstance(value, int) and not isinstance(value, bool):
+        return value
+    return _numbers([value], what)[0]
 
 
 def restored_history(value: object) -> History | list[History] | None:
@@ -186,5 +202,5 @@ def _one_history(value: object) -> History:
         stop_reason=stop,
         best_epoch=best,
         extra={str(k): _numbers(v, str(k)) for k, v in extra.items()},
-        info={str(k): _numbers([v], str(k))[0] for k, v in info.items()},
+        info={str(k): _read_fact(v, str(k)) for k, v in info.items()},
     )
