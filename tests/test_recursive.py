@@ -632,3 +632,92 @@ def test_rls_standard_errors_are_each_equations_own():
         for c, t, nm in ((x, yx, "X_a"), (z, yz, "N_b"))
     ]
     np.testing.assert_allclose(both.stderr, alone, rtol=0.01)
+
+
+def _steady(seed: int, step: float = 0.0, at: int = 1900) -> Regression:
+    """2000 samples of ten unit regressors, noise σ 0.5; the fourth parameter jumps by
+    ``step`` at sample ``at``."""
+    rng = np.random.default_rng(seed)
+    n, p = 2000, 10
+    phi = rng.normal(size=(n, p))
+    theta = np.tile(np.linspace(-2.0, 2.0, p), (n, 1))
+    theta[at:, 3] += step
+    y = (phi * theta).sum(1) + 0.5 * rng.normal(size=n)
+    return Regression(phi, y, [f"p{k}" for k in range(p)], ("u",), n)
+
+
+def test_rls_with_forgetting_does_not_call_a_steady_run_moving_but_a_step_still_is():
+    """λ = 0.99 (memory 100 samples, a tenth of the run 200): the two ends still_moving compares
+    are estimates from different data, whose difference spreads about one window s.e.; two
+    s.e. was a 5 % test per parameter, and 24 % of steady runs of ten parameters were "still
+    moving (tracking a change?)" and lost those s.e. (6 of these 20 seeds). The Bonferroni
+    bound over the parameters (1 % for the run: 0 of 300 seeds measured) says none; a jump of
+    0.5 (ten window s.e.) in one parameter 100 samples before the end is still said, of it
+    alone."""
+    rls = RecursiveLeastSquares(forgetting=0.99)
+    for seed in range(20):
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            est = rls.solve(_steady(seed))
+        assert np.isfinite(est.stderr).all(), seed
+    with pytest.warns(UserWarning, match=r"still moving \(tracking a change\?\): p3 still moved"):
+        est = rls.solve(_steady(0, step=0.5))
+    assert np.isnan(est.stderr).tolist() == [k == 3 for k in range(10)]
+
+
+def test_gradient_estimator_checks_excitation_as_rls_does():
+    """b's regressor zero throughout: the gradient law never moves it from theta0 (5.0), which
+    was reported as its value with no warning (RLS and batch least squares: NaN, and said).
+    The same check over its memory (the whole run), kept with the estimate."""
+    phi, noise = _two_regressors()
+    phi[:, 1] = 0.0
+    y = phi @ np.array([2.0, -3.0]) + noise
+    reg = Regression(phi, y, ["a", "b"], ("u",), y.size)
+    with pytest.warns(ExcitationWarning, match=r"last 2000 samples.*not excited.*: b.*theta0"):
+        est = GradientEstimator(gain=0.01, theta0=np.array([0.0, 5.0])).solve(reg)
+    assert np.isnan(est.theta[1]) and np.isnan(est.history[:, 1]).all()
+    assert est.theta[0] == pytest.approx(2.0, abs=0.1)
+    assert est.excitation.unexcited == ["b"] and est.as_dict()["b"]["value"] is None
+    # RLS's path holds no theta0 for it either: its final value is NaN
+    with pytest.warns(ExcitationWarning):
+        rls = RecursiveLeastSquares(theta0=np.array([0.0, 5.0])).solve(reg)
+    assert np.isnan(rls.history[:, 1]).all() and np.isfinite(rls.history[:, 0]).all()
+
+
+def test_recursive_estimators_say_the_rows_they_skip_as_batch_least_squares_does():
+    """b read only in rows whose target is NaN: batch least squares says "200 of 400 rows of
+    the regression are left out ... only they read b"; RLS and the gradient estimator skipped
+    the same rows without that word."""
+    phi, noise = _two_regressors(400)
+    phi[:200, 1] = 0.0
+    y = phi @ np.array([2.0, -3.0]) + noise
+    y[200:] = np.nan
+    reg = Regression(phi, y, ["a", "b"], ("u",), y.size)
+    said = []
+    for estimator in (
+        LeastSquares(weighting="none"),
+        RecursiveLeastSquares(),
+        GradientEstimator(gain=0.01),
+    ):
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            estimator.solve(reg)
+        said.append([str(w.message) for w in caught if "rows of the regression" in str(w.message)])
+    assert said[0] == said[1] == said[2] and len(said[0]) == 1, said
+    assert said[0][0].startswith("200 of 400 rows of the regression are left out")
+
+
+def test_rls_covariance_of_exact_data_is_floored_at_rounding_as_batch_least_squares():
+    """Exact data: the residual is rounding, or 0. Batch least squares floors each equation's
+    variance at a few ulps of its targets' mean square; the RLS window covariance did not, and
+    read s.e. 0 (every parameter, a 1e-16 one too, "significant")."""
+    from nnid.trainers.recursive import window_covariance
+
+    rng = np.random.default_rng(0)
+    phi = rng.integers(-3, 4, size=(300, 3)).astype(float)
+    y = phi @ np.array([2.0, -3.0, 0.0])  # integers: the residual at the truth is exactly 0
+    reg = Regression(phi, y, ["a", "b", "c"], ("u",), 300)
+    cov = window_covariance(reg, np.array([2.0, -3.0, 0.0]), 0)[0]
+    batch = LeastSquares(weighting="none", correlated=False).solve(reg)
+    assert (np.diag(cov) > 0).all()
+    np.testing.assert_allclose(cov, batch.cov, rtol=1e-6)

@@ -165,9 +165,13 @@ def test_an_overconfident_filter_widens_its_standard_errors_and_says_so(seamor):
     data = _data(seamor, _surge_yaw(1200), NOISY, seed=3)
     kw = {"process_noise": 1e-4, "theta0": 0.5 * TRUTH}
     sigma = np.asarray([0.005, 0.002]) * 0.3  # of NOISY's levels on u and r
+    filt = UnscentedKalman(measurement_noise=sigma, **kw)
     with pytest.warns(UserWarning, match=r"innovations are [\d.]+ times the variance"):
-        tight = UnscentedKalman(measurement_noise=sigma, **kw).fit(_structure(seamor), data)
+        tight = filt.fit(_structure(seamor), data)
     assert tight.sigma2 > 5.0
+    # the stored path's σ scaled as the covariance is: its last row was the filter's own,
+    # √NIS = 3.3x below the s.e. reported beside it
+    np.testing.assert_allclose(filt.history_["theta_std"][-1], tight.stderr, rtol=1e-12)
     assert np.all(np.abs(tight.theta - TRUTH) < 3.0 * tight.stderr), (tight.theta, tight.stderr)
     # the widened window bounded apart from the filter: three s.e. within 5 % of each value
     # (1200 samples of a surge-and-yaw run, noise at its true level, determine all four)
@@ -202,9 +206,14 @@ def test_a_nan_velocity_is_no_measurement_not_a_divergence(seamor):
     kw = {"process_noise": 1e-4, "theta0": 0.5 * TRUTH}
     full = UnscentedKalman(**kw).fit(_structure(seamor), data)
     data["nu"][300, 0] = np.nan
+    filt = UnscentedKalman(**kw)
     with pytest.warns(UserWarning, match="1 samples have no finite velocity of u"):
-        est = UnscentedKalman(**kw).fit(_structure(seamor), data)
+        est = filt.fit(_structure(seamor), data)
     np.testing.assert_allclose(est.theta, full.theta, rtol=0.02)
+    # no innovation where no update was made: the first sample (ν starts from it) read 0
+    innovation = filt.history_["innovation"]
+    assert np.isnan(innovation[0]).all() and np.isnan(innovation[300, 0])
+    assert np.isfinite(innovation[1:300]).all() and np.isfinite(innovation[300, 1])
     assert np.isfinite(est.stderr).all()
 
 
@@ -254,3 +263,50 @@ def test_a_prior_tighter_than_the_data_is_named_in_the_warning(seamor):
         UnscentedKalman(process_noise=1e-4, theta0=0.5 * TRUTH, theta0_std=std).fit(
             _structure(seamor), data
         )
+
+
+def test_a_prior_of_the_wrong_length_is_refused_by_name(seamor):
+    """A theta0 or theta0_std of three values for four unknowns ended in numpy's broadcast
+    error, naming neither the option nor the unknowns."""
+    from nnid.errors import NnidInputError
+
+    data = _data(seamor, _surge_yaw(40), EXACT)
+    for option, value in (("theta0", TRUTH[:3]), ("theta0_std", [1.0] * 5)):
+        with pytest.raises(
+            NnidInputError,
+            match=rf"{option} has \d values; the structure has 4 "
+            r"unknowns \(X_udot, X:u\*abs\(u\), N_rdot, N:r\*abs\(r\)\)",
+        ) as err:
+            UnscentedKalman(**{option: value}).fit(_structure(seamor), data)  # fmt: skip
+        assert err.value.field == option
+
+
+def test_correlated_innovations_widen_the_standard_errors_and_are_said(seamor):
+    """Velocity noise correlated over ten samples (a smoothed DVL), declared at its σ: the
+    filter takes its innovations as white, and X_udot ended 5.5 of its s.e. from the truth.
+    Least squares widens each equation by its residuals' correlation time; the filter now
+    widens its covariance by its innovations' (7.9 samples here), and says so."""
+    import warnings
+
+    import nnid.trainers.ukf as ukf
+
+    structure = ParametricFossen(seamor, NAMES[:2], dofs=("u",))
+    n = 400
+    data = _data(seamor, _surge_yaw(n), EXACT)
+    rng = np.random.default_rng(0)
+    data["nu"][:, 0] += 0.005 * np.convolve(rng.normal(size=n + 9), np.ones(10) / np.sqrt(10),
+                                            "valid")  # fmt: skip
+    kw = {"process_noise": 1e-4, "theta0": 0.5 * TRUTH[:2], "measurement_noise": 0.005}
+    filt = UnscentedKalman(**kw)
+    with pytest.warns(UserWarning, match=r"innovations are correlated \(u [\d.]+ samples"):
+        est = filt.fit(structure, data)
+    tau = ukf.equation_times(filt.history_["innovation"])[0]
+    assert tau > 5.0
+    assert np.all(np.abs(est.theta - TRUTH[:2]) < 3.0 * est.stderr), (est.theta, est.stderr)
+    # the widening is τ on the filter's own covariance, its path's σ with it
+    with pytest.MonkeyPatch.context() as patch, warnings.catch_warnings():
+        warnings.simplefilter("error")  # white by decree: nothing to say
+        patch.setattr(ukf, "equation_times", lambda r: np.ones(np.shape(r)[1]))
+        raw = UnscentedKalman(**kw).fit(structure, data)
+    np.testing.assert_allclose(est.cov, raw.cov * tau, rtol=1e-10)
+    np.testing.assert_allclose(filt.history_["theta_std"][-1], est.stderr, rtol=1e-12)

@@ -176,6 +176,28 @@ def read_only_where_left_out(phi: np.ndarray, kept: np.ndarray, names: Sequence[
     ]
 
 
+def warn_left_out(
+    phi: np.ndarray, finite: np.ndarray, names: Sequence[str], stacklevel: int = 3
+) -> list[str]:
+    """The parameters only the rows not ``finite`` read (:func:`read_only_where_left_out`),
+    said in an :class:`ExcitationWarning` with the count of rows left out where there are
+    any: one wording for batch least squares and the recursive estimators, which skip the
+    same rows. Masked gaps and accelerations cut at held steps are such rows, said where they
+    are made; what is said here is a parameter only the left-out rows read: a NaN known of a
+    sequence step once dropped a whole equation, and its unknowns read "zero regressor".
+    ``stacklevel``: as :func:`warnings.warn`'s, counted from the caller of this function."""
+    left_out = read_only_where_left_out(phi, finite, list(names))
+    if left_out:
+        warnings.warn(
+            f"{int((~finite).sum())} of {finite.size} rows of the regression are left out: "
+            "their target or regressor is not finite (a dropout, an undefined signal or "
+            f"value); only they read {', '.join(left_out)}",
+            ExcitationWarning,
+            stacklevel=stacklevel,
+        )
+    return left_out
+
+
 def rounding_scale(fitted: np.ndarray, reference: float = 0.0) -> tuple[np.ndarray, float]:
     """What the rounding rule (:data:`~nnid.evaluation.persistence.ROUNDING`) of
     :func:`excitation_from_gram` compares: each column's RMS over the ``fitted`` rows
@@ -241,18 +263,7 @@ def solve_least_squares(
     )
     left_out: list[str] = []
     if not finite.all():  # rows with an undefined signal (e.g. w of a tumbling vehicle)
-        # masked gaps and accelerations cut at held steps are such rows, said where they are
-        # made; what is said here is a parameter only the left-out rows read: a NaN known of a
-        # sequence step once dropped a whole equation, and its unknowns read "zero regressor"
-        left_out = read_only_where_left_out(phi, finite, names)
-        if left_out:
-            warnings.warn(
-                f"{int((~finite).sum())} of {finite.size} rows of the regression are left out: "
-                "their target or regressor is not finite (a dropout, an undefined signal or "
-                f"value); only they read {', '.join(left_out)}",
-                ExcitationWarning,
-                stacklevel=2,
-            )
+        left_out = warn_left_out(phi, finite, names)
         phi, y, equation = phi[finite], y[finite], equation[finite]
         weights = None if weights is None else np.asarray(weights)[finite]
     n, p = phi.shape

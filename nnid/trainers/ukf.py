@@ -64,7 +64,7 @@ from nnid.physics.dofs import DOFS
 from nnid.physics.fossen import FeatureForm
 from nnid.physics.integrate import rk4
 from nnid.trainers.history import Progress, silent
-from nnid.trainers.least_squares import Estimate, ExcitationWarning
+from nnid.trainers.least_squares import Estimate, ExcitationWarning, equation_times
 
 _AFFINE = ("q_rb", "q_a", "g_mat", "theta", "added_mass", "bias")
 
@@ -322,18 +322,24 @@ class UnscentedKalman(BaseEstimator):
     values, 0 for a parameter it leaves out); ``theta0_std``: prior σ (None: |θ₀|, at least
     ``min_std``, and where θ₀ = 0, which carries no scale, the diffuse :func:`force_scale`).
     ``alpha``, ``beta``,
-    ``kappa``: the scaled unscented transform. After :meth:`fit`, ``history_`` holds per sample
-    ``t``, ``theta``, ``theta_std``, ``nu`` (filtered ν_d) and ``innovation`` (eq 81).
+    ``kappa``: the scaled unscented transform. ``theta0`` and ``theta0_std`` hold one value per
+    unknown (another length is refused). After :meth:`fit`, ``history_`` holds per sample
+    ``t``, ``theta``, ``theta_std`` (scaled as the covariance is, below), ``nu`` (filtered ν_d)
+    and ``innovation`` (eq 81; NaN where no update was made: an experiment's first sample and
+    a velocity that is not finite).
 
     The covariance of θ̂ is the filter's P at the last sample. θ's random walk
     (``parameter_noise``) makes it that of a slowly drifting θ, so for a constant θ it is
     conservative (1.2-3 times the s.e. without the walk on a 60-s surge-yaw log at 1e-4), and a
     ``process_noise`` larger than the model error widens it further: a mean normalised
     innovation squared per DOF below 1/``NIS_TOLERANCE`` is said (and one above it scales the
-    covariance up). A parameter the data did not inform beyond its prior (its prior σ not
-    halved, in the prior's units, along some direction it loads on) gets no standard error and
-    an :class:`ExcitationWarning`: its value leans on ``theta0``. A velocity sample that is not
-    finite gives no update there (the filter predicts through it; said).
+    covariance up). Innovations correlated over τ > 1 samples (:func:`equation_times` per DOF:
+    a model error the noise levels do not describe) widen it by the largest DOF's τ, as least
+    squares widens by its residuals' (said above ``CORRELATED_INNOVATIONS``). A parameter the
+    data did not inform beyond its prior (its prior σ not halved, in the prior's units, along
+    some direction it loads on) gets no standard error and an :class:`ExcitationWarning`: its
+    value leans on ``theta0``. A velocity sample that is not finite gives no update there (the
+    filter predicts through it; said).
     """
 
     kind = "ukf"
@@ -386,7 +392,7 @@ class UnscentedKalman(BaseEstimator):
             vehicle_parts = Parts.from_vehicle(structure.vehicle)
             theta0 = np.array([vehicle_parts.get(nm) for nm in names], dtype=np.float64)
         else:
-            theta0 = np.asarray(self.theta0, dtype=np.float64)
+            theta0 = _prior_vector(self.theta0, "theta0", names)
         if self.theta0_std is None:
             std0 = np.maximum(np.abs(theta0), self.min_std)
             zero = theta0 == 0.0
@@ -396,7 +402,7 @@ class UnscentedKalman(BaseEstimator):
                 scale = force_scale(structure, data)
                 std0[zero] = np.fmax(scale[zero], self.min_std)
         else:
-            std0 = np.asarray(self.theta0_std, dtype=np.float64)
+            std0 = _prior_vector(self.theta0_std, "theta0_std", names)
         r_sigma = (
             noise_level(data, structure.dofs)
             if self.measurement_noise is None
@@ -423,7 +429,9 @@ class UnscentedKalman(BaseEstimator):
         hist_theta = np.empty((n_samples, n_p))
         hist_std = np.empty((n_samples, n_p))
         hist_nu = np.empty((n_samples, n_v))
-        hist_innov = np.zeros((n_samples, n_v))
+        # NaN where no update was made: an experiment's first sample (ν initialised from it)
+        # and a sample without a finite velocity; 0 there read as a perfect prediction
+        hist_innov = np.full((n_samples, n_v), np.nan)
         nis, seen_dofs = [], []
         fresh = True  # the first sample of an experiment initialised ν: no update with it
         seen = np.isfinite(z)
@@ -450,11 +458,8 @@ class UnscentedKalman(BaseEstimator):
                 ikh = np.eye(n) - gain @ hk
                 p = ikh @ p @ ikh.T + gain @ rk @ gain.T
                 hist_innov[k, o] = innov
-                hist_innov[k, ~o] = np.nan
                 nis.append(float(innov @ np.linalg.solve(s, innov)))
                 seen_dofs.append(int(o.sum()))
-            elif not fresh:
-                hist_innov[k] = np.nan
             fresh = False
             if k % 1000 == 999:
                 report(k + 1, n_samples, "unscented Kalman filter")
@@ -493,13 +498,6 @@ class UnscentedKalman(BaseEstimator):
             x = wm @ prop
             d = prop - x
             p = (d * wc[:, None]).T @ d + q_mat
-        self.history_ = {
-            "t": np.asarray(data["t"], dtype=np.float64).copy(),
-            "theta": hist_theta,
-            "theta_std": hist_std,
-            "nu": hist_nu,
-            "innovation": hist_innov,
-        }
         cov = p[n_v:, n_v:].copy()
         missing = ~seen[~starts].all(1)
         if missing.any():
@@ -551,6 +549,37 @@ class UnscentedKalman(BaseEstimator):
                 stacklevel=3,
             )
             cov = cov * sigma2
+            hist_std = hist_std * np.sqrt(sigma2)
+        # the filter takes its innovations as white; correlated ones (a model error the noise
+        # levels do not describe) hold fewer independent samples than the log has, as least
+        # squares' residuals do: widened by their correlation time (equation_times), the
+        # largest DOF's, since the filter's P does not split its information by measurement
+        # as least squares' sandwich splits it by equation (conservative for the others)
+        times = equation_times(hist_innov)
+        tau = float(times.max()) if times.size else 1.0
+        if tau > CORRELATED_INNOVATIONS:
+            slow = ", ".join(
+                f"{d} {t:.3g}" for d, t in zip(structure.dofs, times, strict=True) if t > 1.0
+            )
+            warnings.warn(
+                f"the filter's innovations are correlated ({slow} samples; a consistent "
+                "filter's are white): they hold fewer independent samples than the log, so its "
+                f"covariance is widened by {tau:.3g} and the standard errors by "
+                f"{np.sqrt(tau):.2g}x; the noise levels or the model structure are off",
+                UserWarning,
+                stacklevel=2,
+            )
+        cov = cov * tau
+        hist_std = hist_std * np.sqrt(tau)
+        # the path's σ as the reported s.e. (scaled as the covariance is, so that its last row
+        # is the s.e. where the data informed the parameter beyond its prior)
+        self.history_ = {
+            "t": np.asarray(data["t"], dtype=np.float64).copy(),
+            "theta": hist_theta,
+            "theta_std": hist_std,
+            "nu": hist_nu,
+            "innovation": hist_innov,
+        }
         return Estimate(
             names, x[n_v:].copy(), cov, sigma2, int(n_samples * n_v), history=hist_theta.copy()
         )
@@ -581,6 +610,23 @@ def force_scale(structure, data: dict[str, np.ndarray]) -> np.ndarray:
 
 #: a mean normalised innovation squared per DOF above this says the filter is overconfident
 NIS_TOLERANCE = 2.0
+
+#: an innovation correlation time (samples) above this is said; any above 1 widens the s.e.
+CORRELATED_INNOVATIONS = 2.0
+
+
+def _prior_vector(value: Sequence[float], field: str, names: list[str]) -> np.ndarray:
+    """``theta0`` or ``theta0_std`` as a vector of one value per unknown, refused (naming
+    the option, the count and the unknowns) where its length is another: numpy's broadcast
+    error named neither."""
+    out = np.asarray(value, dtype=np.float64).reshape(-1)
+    if out.size != len(names):
+        raise NnidInputError(
+            f"{field} has {out.size} values; the structure has {len(names)} unknowns "
+            f"({', '.join(names)}), one value each in that order",
+            field=field,
+        )
+    return out
 
 
 #: the data must shrink a parameter direction's prior σ at least this much to be measured
