@@ -3,7 +3,7 @@
 Simulates the ``surge-sway-c`` run of ``configs/seamor_sequence_narx.toml`` (X and Y stairs, no
 N force) noise-free with the ``seamor`` preset (Weiss Table 3 truth) and with the same vehicle
 with one coefficient scaled, and prints the yaw rate's NRMSE between the two runs. Without an
-N force the yaw comes from the Munk moment (X_u̇ − Y_v̇) u v (Weiss eqs 17-18), whose
+N force the yaw comes from the Munk moment (X_u̇ − Y_v̇) u v (Weiss eqs 27-28), whose
 coefficient is the difference of two 26-27 kg added masses.
 
 Run: ``python benchmarks/bench_munk_sensitivity.py`` (a few seconds).

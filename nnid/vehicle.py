@@ -58,7 +58,9 @@ CurveNumber = Annotated[float, Field(ge=-MAX_COEFFICIENT, le=MAX_COEFFICIENT)]
 
 #: the validation context of a vehicle whose thrust curves were read before: a saved model's
 #: (:func:`saved_vehicle`), or a copy of a vehicle with other values set. Its curves are kept as
-#: they were, one of no thrust included (an nnid before the refusal saved such a model)
+#: they were, one of no thrust included (an nnid before the refusal saved such a model), and so
+#: is its rigid body (:meth:`Vehicle._rigid_body`, refused in new input only): a fit's r_g, a
+#: payload or a saved model is said where it is flown (simulator.check_mass_matrix) or fitted
 KEEP_CURVES: dict[str, Any] = {"keep_curves": True}
 #: the validation context of a saved model's vehicle (:func:`saved_vehicle`): as
 #: :data:`KEEP_CURVES`, and its thruster directions kept bit for bit (normalised when first
@@ -188,6 +190,61 @@ def _not_absurd(key: str, value: float) -> None:
         raise ValueError(f"'{key}' = {value:g} is beyond {MAX_COEFFICIENT:g}: a unit slip?")
 
 
+#: the share by which the largest principal moment may exceed the sum of the other two before
+#: the inertia is refused (rounding of a published tensor: a thin disc has I_z = I_x + I_y)
+TRIANGLE_TOLERANCE = 1e-3
+
+
+def _inertia_of_a_body(inertia: np.ndarray) -> None:
+    """Refuse principal moments that break the triangle inequality I₁ ≤ I₂ + I₃ beyond
+    :data:`TRIANGLE_TOLERANCE`. No body's do, about any point: in the principal frame
+    I₂ + I₃ − I₁ = 2 Σ m x₁² ≥ 0 (I_o of McCarter eq. 2.21 is a sum of m(|r|² 1 − r rᵀ)); a
+    typo in one moment, or moments of two different sources, break it."""
+    principal = np.linalg.eigvalsh(inertia)
+    if principal.max() > (1 + TRIANGLE_TOLERANCE) * (principal.sum() - principal.max()):
+        moments = ", ".join(f"{m:.4g}" for m in principal)
+        raise NnidInputError(
+            f"the largest principal moment exceeds the sum of the other two ({moments} kg m²), "
+            "which no body's does (I₂ + I₃ − I₁ = 2 Σ m x₁² ≥ 0): a typo, or moments from "
+            "different sources?",
+            field="inertia",
+        )
+
+
+def _rigid_body_positive_definite(mass: float, r_g: list[float], inertia: np.ndarray) -> None:
+    """Refuse a rigid body whose M_RB = [[m 1, −m S(r_g)], [m S(r_g), I_o]] (McCarter eq.
+    2.21, Weiss eq. 19) is not positive definite. Its Schur complement is I_o + m S(r_g)²,
+    the inertia about the centre of gravity (parallel-axis theorem, I_o = I_CG − m S(r_g)²):
+    with r_g ≠ 0 a positive definite I_o is not enough. The slip it catches: a datasheet's
+    inertia about the CG declared with the origin elsewhere (at the nose, r_g = [1, 0, 0])."""
+    r = np.asarray(r_g, dtype=float)
+    # −S(r)² = |r|² 1 − r rᵀ: the inertia a point mass m at r adds about the origin
+    lever = mass * (r @ r * np.eye(3) - np.outer(r, r))
+    about_cg = inertia - lever
+    principal = np.linalg.eigvalsh(0.5 * (about_cg + about_cg.T))
+    if principal.min() > 0:
+        return
+    as_cg = inertia + lever  # what `inertia` should be, were the given one about the CG
+    raise NnidInputError(
+        f"with mass {mass:g} kg at r_g = [{', '.join(f'{v:g}' for v in r)}] m, the rigid "
+        "body's mass matrix M_RB is not positive definite: the inertia about the centre of "
+        "gravity, I_CG = I_o + m S(r_g)² (parallel-axis theorem), has principal moments "
+        f"{', '.join(f'{v:.4g}' for v in principal)} kg m², not all > 0. 'inertia' is I_o, "
+        "about the body origin, not about the centre of gravity: I_o = I_CG − m S(r_g)². If "
+        f"{_tensor_text(inertia)} is about the centre of gravity (a datasheet's usually is), give "
+        f"inertia = {_tensor_text(as_cg)}; else check r_g (its units, or the origin it is measured "
+        "from)",
+        field="inertia",
+    )
+
+
+def _tensor_text(tensor: np.ndarray) -> str:
+    """An inertia as the file writes it: ``[Ix, Iy, Iz]`` where it is diagonal, else rows."""
+    if not np.any(tensor - np.diag(np.diag(tensor))):
+        return "[" + ", ".join(f"{v:.4g}" for v in np.diag(tensor)) + "]"
+    return "[" + ", ".join("[" + ", ".join(f"{v:.4g}" for v in row) + "]" for row in tensor) + "]"
+
+
 def vehicle_name(name: str) -> str:
     """``name`` if it can label reports and saved models: a visible character, on one line. A
     line break or another control character would break a report's lines and headings."""
@@ -286,6 +343,14 @@ class Vehicle(StrictModel):
         if eigenvalues.max() > MAX_COEFFICIENT:
             raise ValueError(f"inertia above {MAX_COEFFICIENT:g} kg m² is not a vehicle")
         return inertia
+
+    @model_validator(mode="after")
+    def _rigid_body(self, info: ValidationInfo) -> Vehicle:
+        # new input only (KEEP_CURVES): a vehicle read before stays loadable as it was
+        if not (info.context or {}).get("keep_curves"):
+            _inertia_of_a_body(self.inertia_matrix())
+            _rigid_body_positive_definite(self.mass, self.r_g, self.inertia_matrix())
+        return self
 
     @field_validator("added_mass")
     @classmethod
@@ -446,9 +511,10 @@ def size_slips(vehicle: Vehicle) -> list[str]:
     kg m²) the fit would otherwise absorb without a word (an inertia 10⁴ too large came back
     as an added mass of +1600, "significant"): a radius of gyration, a centre of gravity or
     buoyancy, or a thruster further from the origin than the vehicle is long (its ``length``,
-    else :data:`SIZE_OF_VOLUME` sides of the cube of its displaced volume); principal moments
-    that break the triangle inequality a body's must keep; a thrust table that stops short of
-    the thruster's command range (commands beyond it get the table's last thrust)."""
+    else :data:`SIZE_OF_VOLUME` sides of the cube of its displaced volume); a thrust table that
+    stops short of the thruster's command range (commands beyond it get the table's last
+    thrust), or that gives thrust at zero command. Principal moments that break the triangle
+    inequality are refused (:func:`_inertia_of_a_body`)."""
     size = vehicle.length or SIZE_OF_VOLUME * (vehicle.mass / vehicle.rho) ** (1 / 3)
     what = f"the vehicle's length ({size:.3g} m)" if vehicle.length else (
         f"{SIZE_OF_VOLUME:g} sides of the cube of its volume ({size:.3g} m; no length given)"
@@ -476,11 +542,17 @@ def size_slips(vehicle: Vehicle) -> list[str]:
                     + ", ".join(f"its {k} {v:g}" for k, v in short)
                     + ": beyond the table a command gets the table's last thrust"
                 )
-    if principal.max() > 1.001 * (principal.sum() - principal.max()):
-        out.append(
-            "inertia: the largest principal moment exceeds the sum of the other two, which no "
-            f"body's does ({', '.join(f'{m:.4g}' for m in principal)} kg m²)"
-        )
+            idle = float(np.interp(0.0, t.curve.cmd, t.curve.thrust))
+            lo_cmd = -math.inf if t.cmd_min is None else t.cmd_min
+            hi_cmd = math.inf if t.cmd_max is None else t.cmd_max
+            # a command of 0 within the thruster's range (a thruster at rest) is read off the
+            # table, clamped to its ends outside it (np.interp, physics.thrusters.ThrustCurve)
+            if idle != 0 and lo_cmd <= 0 <= hi_cmd:
+                out.append(
+                    f"thruster {t.name}'s thrust table gives {idle:g} N at command 0 (of its "
+                    f"commands {lo:g} to {hi:g}): a constant force along its direction while "
+                    "it is at rest (a zero offset in the measured curve? give 0 N at command 0)"
+                )
     return out
 
 

@@ -1,7 +1,9 @@
 """A starter vehicle file for one's own ROV: from a preset, or from mass, size and a layout.
 
 What is measured (mass, size) is used as it is; the rest is an estimate that the identification
-refits, and the file says so line by line: inertia of a solid cuboid (Weiss eqs 32-34), added
+refits, and the file says so line by line: inertia of a solid cuboid about its centre (Weiss
+eqs 32-34), which is the origin and the centre of gravity (the Heavy's r_g = 0; its centres
+are scaled with the size, the centre of buoyancy above the CG by the Heavy's 1 cm), added
 mass and damping scaled from the BlueROV2 Heavy of von Benzon et al. 2022 (added mass with the
 mass, drag with the frontal areas; a rotational term with its face's area and the powers of
 the arm its Prime-system divisor has: added inertia mass × arm², linear damping area × arm²,
@@ -75,6 +77,9 @@ def starter_text(
     face = [area[1], area[2], area[1]]
     arm = [scale[1], scale[0], scale[0]]
     mass_ratio = mass / ref.mass
+    r_g = [c * s for c, s in zip(ref.r_g, scale, strict=True)]
+    r_b = [c * s for c, s in zip(ref.r_b, scale, strict=True)]
+    lever = r_g[2] - r_b[2]  # z down: the CB above the CG by this much
     weight = mass * 9.81
     lines = [
         f"# Starter vehicle file for {_toml_string(name)}, written by `nnid vehicle`: EDIT IT. "
@@ -92,13 +97,17 @@ def starter_text(
         # neutral (0.45 N of W - B at 1234.5 kg, a sink the loop would find)
         f"mass = {mass:.12g}",
         f"buoyancy = {weight:.12g}            # N, ASSUMED neutral: weigh it (W - B is identified)",
+        # about the origin, as the file's inertia is: the cuboid's centre, its CG and the
+        # origin are one point here (r_g below is the Heavy's, at its origin)
         f"inertia = {_vector(cuboid_inertia(mass, length, width, height))}"
-        "   # kg m^2, solid cuboid (Weiss eqs 32-34): ESTIMATE",
-        # the Heavy's 2 cm below the origin scaled with the height: a fixed 2 cm put the centre
-        # of gravity outside the hull of a vehicle under 4 cm tall
-        f"r_g = [0.0, 0.0, {0.02 * scale[2]:.3g}]        # m, ASSUMED below the origin (the "
-        "Heavy's 2 cm, scaled with the height; the loop tests it)",
-        "r_b = [0.0, 0.0, 0.0]         # m, ASSUMED at the origin, above r_g (it rights itself)",
+        "   # kg m^2 about the origin, solid cuboid about its centre (Weiss eqs 32-34): ESTIMATE",
+        # the Heavy's centres, each axis scaled with the size: its CG at the origin and its
+        # CB 1 cm above it [vB22], so the restoring lever z_g - z_b scales with the height (a
+        # fixed offset put a centre outside the hull of a vehicle under a few cm tall)
+        f"{'r_g = ' + _vector(r_g):<29} # m, ASSUMED the {REFERENCE}'s (origin at the CG), "
+        "scaled with the size",
+        f"{'r_b = ' + _vector(r_b):<29} # m, ASSUMED the {REFERENCE}'s scaled: {lever:.3g} m "
+        "above r_g (it rights itself; the loop tests it)",
         "",
         f"[added_mass]                  # ESTIMATE: {REFERENCE} (von Benzon 2022) x mass ratio",
         "                              # (x arm^2 for rotations)",

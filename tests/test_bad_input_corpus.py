@@ -1162,8 +1162,10 @@ def test_vehicle_loader_gives_a_vehicle_or_names_the_field(field, value, index):
     ("edit", "said"),
     [
         ({"inertia": [1600.0, 1600.0, 1600.0]}, "radius of gyration 11.8 m exceeds the vehicle's"),
-        ({"r_g": [0.0, 0.0, 2.0]}, "r_g is 2 m from the origin, beyond the vehicle's length"),
-        ({"inertia": [0.1, 0.1, 0.5]}, "largest principal moment exceeds the sum"),
+        # an inertia that holds a CG 2 m out (46 kg m² of it m |r_g|²): with 0.16 the rigid
+        # body is refused (test_an_inertia_about_the_centre_of_gravity_is_refused...)
+        ({"r_g": [0.0, 0.0, 2.0], "inertia": [46.2, 46.2, 0.32]},
+         "r_g is 2 m from the origin, beyond the vehicle's length"),
         ({"thrusters": [{"name": "h1", "position": [20.0, 0.0, 0.0], "direction": [1, 0, 0],
                          "curve": {"kind": "signed_quadratic", "k": 40.0}}]},
          "thruster h1's position is 20 m out"),
@@ -1189,6 +1191,59 @@ def test_geometry_no_vehicle_of_its_size_has_is_warned_of(edit, said):
         vehicle_from_dict(base, source="probe.toml")
         for name in PRESETS:
             load_vehicle(name)
+
+
+def test_an_inertia_about_the_centre_of_gravity_is_refused_naming_inertia_and_r_g():
+    """The origin at the nose, r_g = [1, 0, 0], mass 40 and a datasheet's Iy = Iz = 10 about
+    the CG loaded silently though M_RB (McCarter eq. 2.21) is not positive definite: I_CG =
+    I_o + m S(r_g)² = 10 − 40 < 0; simulate then refused naming no field, and a fit blamed
+    the added mass. Refused at load, naming both fields, the moments about the CG and the
+    I_o = I_CG − m S(r_g)² the datasheet's values give; that I_o loads."""
+    from nnid.errors import NnidInputError
+    from nnid.vehicle import vehicle_from_dict
+
+    nose = {"name": "probe", "mass": 40.0, "inertia": [2.0, 10.0, 10.0], "r_g": [1.0, 0, 0]}
+    with pytest.raises(NnidInputError) as err:
+        vehicle_from_dict(nose, source="nose.toml")
+    said = str(err.value)
+    assert said.startswith("nose.toml, field 'inertia': ") and "r_g = [1, 0, 0]" in said, said
+    assert "-30, -30, 2 kg m²" in said and "give inertia = [2, 50, 50]" in said, said
+    assert "about the body origin" in said and "I_o = I_CG − m S(r_g)²" in said, said
+    vehicle_from_dict({**nose, "inertia": [2.0, 50.0, 50.0]}, source="nose.toml")
+
+
+def test_principal_moments_no_body_has_are_refused():
+    """I₁ > I₂ + I₃ (beyond 0.1 %) no body has about any point (I₂ + I₃ − I₁ = 2 Σ m x₁²):
+    it was only warned of, and loaded. Refused naming the file and 'inertia'; a thin disc's
+    I_z = I_x + I_y (the bound itself) loads, and so does every shipped vehicle."""
+    from nnid.errors import NnidInputError
+    from nnid.vehicle import vehicle_from_dict
+
+    base = {"name": "probe", "mass": 11.5, "length": 0.46}
+    with pytest.raises(NnidInputError, match=r"probe.toml, field 'inertia': the largest princ"):
+        vehicle_from_dict({**base, "inertia": [0.1, 0.1, 0.5]}, source="probe.toml")
+    vehicle_from_dict({**base, "inertia": [0.1, 0.1, 0.2001]}, source="probe.toml")
+
+
+def test_a_thrust_table_that_pushes_at_zero_command_is_warned_of():
+    """A table with thrust(0) ≠ 0 pushes a thruster at rest with a constant force, and
+    loaded without a word. Warned of, naming the thruster and the value; not where its
+    commands exclude 0 (cmd_min > 0), nor for a table through 0 N."""
+    from nnid.vehicle import vehicle_from_dict
+
+    def probe(thrust: list[float], **limits: float) -> dict:
+        curve = {"kind": "table", "cmd": [-1.0, 0.0, 1.0], "thrust": thrust}
+        t1 = {"name": "t1", "position": [0.1, 0, 0], "direction": [1, 0, 0], "curve": curve}
+        return {"name": "probe", "mass": 11.5, "inertia": [0.2, 0.2, 0.3],
+                "thrusters": [{**t1, **limits}]}  # fmt: skip
+
+    said = "thruster t1's thrust table gives 0.3 N at command 0"
+    with pytest.warns(UserWarning, match=re.escape(said)):
+        vehicle_from_dict(probe([-5.0, 0.3, 6.0]), source="probe.toml")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        vehicle_from_dict(probe([-5.0, 0.0, 6.0]), source="probe.toml")
+        vehicle_from_dict(probe([-5.0, 0.3, 6.0], cmd_min=0.2, cmd_max=1.0), source="p.toml")
 
 
 def test_a_length_in_centimetres_is_refused_naming_the_file_and_field():

@@ -381,7 +381,7 @@ def test_a_level_run_driven_in_the_plane_stays_in_the_plane_exactly():
 
 
 def test_a_simulation_through_ninety_degrees_of_pitch_is_refused(vehicle_factory):
-    """Euler angles are singular at θ = ±90° (Weiss eq. 16): a run started there came back
+    """Euler angles are singular at θ = ±90° (Weiss eq. 17): a run started there came back
     with φ = ψ = −3.4e12 rad after one step and no error."""
     from nnid.datasets.simulator import simulate
     from nnid.errors import NnidInputError

@@ -43,7 +43,7 @@ def test_rotation_is_zyx_composition():
 
 
 def test_euler_rates_match_rotation_kinematics(rng):
-    """Ṙ = R S(ω) with ω = T_Θ⁻¹ Θ̇: J₂ is the Euler-rate map of the rotation (Weiss eq. 16)."""
+    """Ṙ = R S(ω) with ω = T_Θ⁻¹ Θ̇: J₂ is the Euler-rate map of the rotation (Weiss eq. 17)."""
     angles = _angles(rng, 32)
     rates = torch.tensor(rng.normal(size=(32, 3)))
     h = 1e-6

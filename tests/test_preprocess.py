@@ -120,7 +120,7 @@ def test_bias_estimation_recovers_injected_biases():
 
 
 def test_deriving_rates_from_the_attitude_does_not_need_torch(monkeypatch):
-    """p, q, r = T_Θ⁻¹ Θ̇ and the gyro bias's T_Θ (McCarter 2.13, 2.86) in numpy: reading and
+    """p, q, r = T_Θ⁻¹ Θ̇ and the gyro bias's T_Θ (McCarter eq. 2.14, 2.86) in numpy: reading and
     deriving a log imported torch for these 3x3 matrices alone."""
     import sys
 

@@ -430,18 +430,30 @@ def test_starter_vehicle_file_is_neutral_at_its_measured_mass():
         assert veh.buoyancy == pytest.approx(veh.weight, rel=1e-12, abs=0)
 
 
-def test_starter_centre_of_gravity_lies_inside_the_hull():
+def test_starter_centres_are_the_presets_scaled_and_lie_inside_the_hull():
     """A fixed r_g of 2 cm put the centre of gravity of a 1-cm-tall vehicle 1.5 cm below its
-    bottom (and warned of it when the file loaded back); the Heavy keeps its 2 cm."""
+    bottom (and warned of it when the file loaded back). The starter cites the Heavy, whose
+    CG is its origin and whose CB lies 1 cm above it [vB22]; it wrote r_g = 2 cm and r_b = 0,
+    twice the Heavy's restoring lever. At the Heavy's size it has the Heavy's centres (and
+    restoring moments), at another the lever z_g − z_b scaled with the height."""
     import tomllib
 
     from nnid.vehicle import vehicle_from_dict
     from nnid.vehicle_starter import starter_text
 
-    for size, expected in [((0.01, 0.01, 0.01), None), ((0.457, 0.575, 0.254), 0.02)]:
-        veh = vehicle_from_dict(tomllib.loads(starter_text("x", 1e-4, size)), source="x.toml")
-        assert 0 < veh.r_g[2] < size[2] / 2
-        assert expected is None or veh.r_g[2] == pytest.approx(expected, rel=0.01)
+    heavy = load_vehicle("bluerov2_heavy")
+    lever = heavy.r_g[2] - heavy.r_b[2]
+    assert lever == pytest.approx(0.01)  # the preset's 1 cm [vB22]
+    for size in [(0.01, 0.01, 0.01), (0.457, 0.575, 0.254), (0.914, 1.15, 0.508)]:
+        mass = heavy.mass * (size[2] / 0.254) ** 3  # the Heavy's density
+        veh = vehicle_from_dict(tomllib.loads(starter_text("x", mass, size)), source="x.toml")
+        for centre in (veh.r_g, veh.r_b):
+            assert all(abs(c) < s / 2 for c, s in zip(centre, size, strict=True))
+        assert veh.r_g[2] - veh.r_b[2] == pytest.approx(lever * size[2] / 0.254, rel=1e-3)
+    text = starter_text("x", heavy.mass, (0.457, 0.575, 0.254))
+    veh = vehicle_from_dict(tomllib.loads(text), source="x.toml")
+    np.testing.assert_allclose([*veh.r_g, *veh.r_b], [*heavy.r_g, *heavy.r_b], atol=1e-12)
+    assert "inertia = " in text and "about the origin" in text.split("inertia = ")[1][:120]
 
 
 def test_starter_marks_every_value_it_did_not_measure():

@@ -6,7 +6,7 @@ seconds missing: the missing samples times the sample interval, so 400 lone samp
 at 20 Hz are 20 s, not the 40 s spanned between their present neighbours):
 
 - **bridged** from the pose, as the log contract derives velocities (Savitzky-Golay rates and
-  ν = J⁻¹(η) η̇, Weiss eq. 17): p q r wherever the attitude is complete, u v w wherever the
+  ν = J⁻¹(η) η̇, McCarter eq. 2.15): p q r wherever the attitude is complete, u v w wherever the
   whole pose is, for gaps up to ``max_bridge_s``;
 - **masked** otherwise: the rows are taken out of regressions and scores and the run is cut
   into segments at them (``<experiment>#<k>``), each simulated from its own measured start, so
@@ -206,7 +206,7 @@ def slow_channels(log: pd.DataFrame, columns: list[str] | None = None) -> list[S
 def fill_slow(log: pd.DataFrame, report: CleaningReport | None = None) -> pd.DataFrame:
     """``log`` with the empty cells of each slow roll, pitch or yaw (:func:`slow_channels`)
     beside a complete gyro filled between two of its samples within each experiment with what
-    p q r turn it through, η̇ = T_Θ(η) ω (Weiss eq. 16), and what the gyro leaves unexplained
+    p q r turn it through, η̇ = T_Θ(η) ω (Weiss eq. 17), and what the gyro leaves unexplained
     spread linearly in ``t`` so that each sample is met (:func:`_between_samples`). A straight
     line alone would miss the angle's curvature, the rate's derivative, and put the restoring
     forces' error into the added mass (K_pdot 5 s.e. off on a 5th-row attitude). Every slow

@@ -460,7 +460,7 @@ def wrap_angle(a: np.ndarray) -> np.ndarray:
 
 
 def euler_rate_matrices(angles: np.ndarray, inverse: bool = False) -> np.ndarray:
-    """T_Θ (Weiss eq. 16; McCarter 2.12), or T_Θ⁻¹ with ``inverse`` (McCarter 2.13), of
+    """T_Θ (Weiss eq. 17; McCarter eq. 2.7), or T_Θ⁻¹ with ``inverse`` (McCarter eq. 2.14), of
     angles ``[..., 3]`` = (φ, θ, ψ) as ``[..., 3, 3]``: :mod:`nnid.physics.kinematics`'
     euler_rate_matrix and its inverse in numpy, because reading, cleaning and deriving a log
     do not load torch (tests/test_kinematics.py checks that they agree)."""
@@ -498,7 +498,7 @@ RATE_CHECK_MIN_COS = 0.2
 def rate_slopes(df: pd.DataFrame) -> list[tuple[object, str, float, float]]:
     """Per experiment and logged body rate p, q, r of a log with the whole attitude φ, θ, ψ:
     the least-squares slope of the rate on the attitude's kinematic rate ν₂ = T_Θ⁻¹ Θ̇
-    (McCarter 2.13, the inverse of Weiss eq. 16), over windows of about a second where the
+    (McCarter eq. 2.14, the inverse of Weiss eq. 17), over windows of about a second where the
     attitude turns that axis by more than :data:`RATE_CHECK_TURN`. Both sides are integrated
     over the window (the rate by trapezoids; Θ̇ as the wrapped difference of consecutive
     angles, each step through T_Θ⁻¹ at its midpoint) so that the attitude's noise does not

@@ -7,7 +7,7 @@
   re-done in :func:`savgol_interp` for speed alone, bit for bit that of scipy ≥ 1.17 (the
   floor pyproject sets: an older scipy's edge fit is not checked): its dispatch cost ten times
   the arithmetic of a short window, which ``detect --follow`` pays six times a flush;
-- body velocities from pose rates through ν = J⁻¹(η) η̇ (Weiss eq. 17);
+- body velocities from pose rates through ν = J⁻¹(η) η̇ (McCarter eq. 2.15);
 - zero-phase Butterworth low-pass filtering (Weiss V.A.2);
 - jump (occlusion) detection for motion capture (Weiss V.A.2);
 - accelerometer and gyro bias estimation (McCarter eqs 2.84-2.87);
@@ -918,7 +918,7 @@ def derive_velocities(
     overwrite: bool = False,
     setting: str = "savgol_window",
 ) -> pd.DataFrame:
-    """Body velocities from pose by SG differentiation and ν = J⁻¹(η) η̇ (Weiss eq. 17).
+    """Body velocities from pose by SG differentiation and ν = J⁻¹(η) η̇ (McCarter eq. 2.15).
 
     With the full pose: u v w p q r. With attitude only: p q r = T_Θ⁻¹ Θ̇. With depth and
     attitude but no x, y: also w ≈ ż / (cos θ cos φ), exact when u = v = 0 and reported as an

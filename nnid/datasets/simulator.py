@@ -227,7 +227,7 @@ def simulate(
         raise NnidInputError(
             f"the vehicle pitched to {np.degrees(states[k, 4]):.1f}° at t = {k * dt:.2f} s"
             + (f" in experiment '{experiment}'" if experiment else "")
-            + ": Euler angles are singular at ±90° of pitch (Weiss eq. 16) and the simulator "
+            + ": Euler angles are singular at ±90° of pitch (Weiss eq. 17) and the simulator "
             "integrates them; lower the pitch moments, or fly it under an autopilot",
             field="experiments",
         )

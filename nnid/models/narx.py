@@ -43,7 +43,7 @@ columns (body velocities u v w r ...).
   standardised, inside the closed loop too; still a NARX. ``"sqrt"``: √max(y(k − d_y), 0) of
   each output (in its units), e.g. Torricelli's outflow of a tank. ``"products"``: the
   products y_i y_j (i ≤ j, of the standardised outputs) of each lag, the bilinear terms of the
-  Coriolis, centripetal and Munk forces (Fossen's C(ν)ν, Weiss eqs 17-18) that a small tanh
+  Coriolis, centripetal and Munk forces (Fossen's C(ν)ν, Weiss eqs 22-28) that a small tanh
   layer otherwise has to approximate. ``"fossen"``: those products and y_i|y_i| (in the
   outputs' units), the quadratic damping terms (Weiss eq. 45): with them one explicit Euler
   step of the Fossen model is linear in the regressor, and the network only has to learn it.

@@ -48,7 +48,7 @@ def trig(eta: Tensor) -> tuple[Tensor, Tensor]:
 
 
 def eta_dot(nu: Tensor, s: Tensor, c: Tensor, positions: bool = True) -> Tensor:
-    """η̇ = J(η)ν written out (Weiss eqs 14-16) from the angles' sines ``s`` and cosines
+    """η̇ = J(η)ν written out (Weiss eqs 14-17) from the angles' sines ``s`` and cosines
     ``c``: R = R_z(ψ) R_y(θ) R_x(φ) applied as three plane rotations, and the Euler-rate
     transform. ``positions=False`` leaves ẋ ẏ ż at zero (they do not feed back into the
     dynamics; a fit of velocities does not need them)."""

@@ -1,6 +1,6 @@
 """Kinematics: rotation R(Θ), Euler-rate transform T(Θ) and J(η).
 
-Weiss eqs 14-17; McCarter 2.5-2.15.
+Weiss eqs 14-17; McCarter eqs 2.5-2.15 (the inverses: McCarter only, Weiss gives none).
 
 Frames: NED world, FRD body, Euler angles zyx (φ roll, θ pitch, ψ yaw) in radians.
 All functions take tensors with the components in the last dimension and broadcast over the rest.
@@ -27,7 +27,7 @@ def skew(a: Tensor) -> Tensor:
 
 
 def rotation_matrix(angles: Tensor) -> Tensor:
-    """J₁(Θ) = R_z(ψ) R_y(θ) R_x(φ): body-to-NED rotation (Weiss eq. 15; McCarter 2.8).
+    """J₁(Θ) = R_z(ψ) R_y(θ) R_x(φ): body-to-NED rotation (Weiss eq. 16; McCarter eq. 2.5).
 
     ``angles`` is ``[..., 3]`` = (φ, θ, ψ); the result is ``[..., 3, 3]`` and orthonormal.
     """
@@ -50,7 +50,8 @@ def rotation_matrix(angles: Tensor) -> Tensor:
 
 
 def euler_rate_matrix(angles: Tensor) -> Tensor:
-    """J₂(Θ) = T_Θ: body rates (p, q, r) to Euler-angle rates (Weiss eq. 16; McCarter 2.12).
+    """J₂(Θ) = T_Θ: body rates (p, q, r) to Euler-angle rates (Weiss eq. 17, its row 1
+    corrected; McCarter eq. 2.7).
 
     Singular at θ = ±π/2, as every zyx Euler parametrisation is.
     """
@@ -60,6 +61,9 @@ def euler_rate_matrix(angles: Tensor) -> Tensor:
     one, zero = torch.ones_like(phi), torch.zeros_like(phi)
     return torch.stack(
         [
+            # sφ tθ, not Weiss eq. 17's printed sθ tθ (a misprint): φ̇ = p + (q sφ + r cφ) tθ,
+            # as McCarter eq. 2.7 and Weiss's own Appendix A code (sin(phi)*tan(theta)) have it;
+            # docs/seed_notes/weiss.md
             torch.stack([one, sphi * tth, cphi * tth], -1),
             torch.stack([zero, cphi, -sphi], -1),
             torch.stack([zero, sphi / cth, cphi / cth], -1),
@@ -69,7 +73,7 @@ def euler_rate_matrix(angles: Tensor) -> Tensor:
 
 
 def euler_rate_matrix_inverse(angles: Tensor) -> Tensor:
-    """T_Θ⁻¹: Euler-angle rates to body rates (McCarter 2.13)."""
+    """T_Θ⁻¹: Euler-angle rates to body rates (McCarter eq. 2.14)."""
     phi, theta = angles[..., 0], angles[..., 1]
     cphi, sphi = torch.cos(phi), torch.sin(phi)
     cth, sth = torch.cos(theta), torch.sin(theta)
@@ -90,13 +94,14 @@ def _block_diag(a: Tensor, b: Tensor) -> Tensor:
 
 
 def kinematics_matrix(eta: Tensor) -> Tensor:
-    """J(η) = diag(J₁, J₂), the 6x6 map η̇ = J(η) ν (Weiss eq. 14; McCarter 2.14)."""
+    """J(η) = diag(J₁, J₂), the 6x6 map η̇ = J(η) ν (Weiss eqs 14-15; McCarter eqs 2.10-2.11)."""
     angles = eta[..., 3:6]
     return _block_diag(rotation_matrix(angles), euler_rate_matrix(angles))
 
 
 def kinematics_matrix_inverse(eta: Tensor) -> Tensor:
-    """J(η)⁻¹ = diag(J₁ᵀ, T_Θ⁻¹), the map ν = J⁻¹(η) η̇ (Weiss eq. 17)."""
+    """J(η)⁻¹ = diag(J₁ᵀ, T_Θ⁻¹), the map ν = J⁻¹(η) η̇ (McCarter eqs 2.12-2.15;
+    Weiss gives no inverse)."""
     angles = eta[..., 3:6]
     return _block_diag(rotation_matrix(angles).transpose(-1, -2), euler_rate_matrix_inverse(angles))
 

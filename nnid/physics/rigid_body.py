@@ -1,8 +1,10 @@
 """Rigid-body mass and Coriolis-centripetal terms, and a cuboid inertia estimate.
 
-M_RB and C_RB follow Fossen with the inertia tensor about the body origin (Weiss eqs 19, 23-26;
-McCarter 2.21-2.24). C_RB uses the parametrisation that does not depend on the linear
-velocity, which is skew-symmetric, so νᵀ C_RB(ν) ν = 0.
+M_RB follows Fossen with the inertia tensor about the body origin (Weiss eq. 19; McCarter eq.
+2.21). C_RB is Fossen (2011) eq. 3.60's parametrisation, which does not depend on the linear
+velocity, not the one of Weiss eqs 23-26 (McCarter eq. 2.24), which does: the matrices differ,
+C_RB(ν) ν is the same (the force is unique, its matrix is not). Both are skew-symmetric, so
+νᵀ C_RB(ν) ν = 0.
 """
 
 from __future__ import annotations
@@ -32,9 +34,11 @@ def rigid_body_mass_matrix(mass: Tensor, r_g: Tensor, inertia: Tensor) -> Tensor
 
 
 def rigid_body_coriolis_matrix(mass: Tensor, r_g: Tensor, inertia: Tensor, nu: Tensor) -> Tensor:
-    """C_RB(ν) = [[m S(ω), −m S(ω) S(r_g)], [m S(r_g) S(ω), −S(I_o ω)]] (Weiss 23-26).
+    """C_RB(ν) = [[m S(ω), −m S(ω) S(r_g)], [m S(r_g) S(ω), −S(I_o ω)]]: Fossen (2011) eq.
+    3.60, the form independent of the linear velocity; skew-symmetric.
 
-    Fossen (2011) eq. 3.60, the form independent of the linear velocity; skew-symmetric.
+    Not the matrix of Weiss eqs 23-26 (McCarter eq. 2.24), whose blocks hold u, v, w; the
+    product C_RB(ν) ν, all the equations of motion use, is the same.
     """
     mass = torch.as_tensor(mass, dtype=nu.dtype)
     m = mass[..., None, None]
