@@ -90,7 +90,14 @@ def simulate(
     vehicle: str | None = typer.Option(
         None, "--vehicle", help="Preset name or vehicle TOML; overrides the config's."
     ),
-    seed: int | None = typer.Option(None, "--seed", min=0, help="Overrides the config's seed."),
+    seed: int | None = typer.Option(
+        None,
+        "--seed",
+        min=0,
+        help="Overrides the config's seed: the sensor noise's (experiment i draws from seed + "
+        "i). A prbs or aprbs signal draws from its own 'seed' key, which --seed leaves as it "
+        "is.",
+    ),
     force: bool = typer.Option(False, "--force", help="Replace an existing --out file."),
 ) -> None:
     """Make a synthetic log from a vehicle, an excitation and optional injected effects."""

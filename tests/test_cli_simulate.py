@@ -244,6 +244,28 @@ BAD_CONFIGS = {
         CONFIG + "[measurement]\nvelocity_noise = 0.5\n",
         "set without a kind",
     ),
+    # flown as rounding noise scaled to the amplitude, or at f_min while f_max was checked
+    "a multisine of one frequency": (
+        CONFIG.replace(
+            'kind = "step", channel = "X", amplitude = 10.0, duration = 5.0',
+            'kind = "multisine", channel = "X", amplitude = 10.0, f_min = 0.5, f_max = 0.5, '
+            "duration = 5.0",
+        ),
+        "experiments.0.signals.0",
+    ),
+    "a one-sine multisine with a band": (
+        CONFIG.replace(
+            'kind = "step", channel = "X", amplitude = 10.0, duration = 5.0',
+            'kind = "multisine", channel = "X", amplitude = 10.0, f_min = 0.5, f_max = 2.0, '
+            "n = 1, duration = 5.0",
+        ),
+        "experiments.0.signals.0",
+    ),
+    # said as "starts at 5 s, at or after the experiment's end (5 s)": give it a duration
+    "a held step that sets the experiment's end": (
+        CONFIG.replace("amplitude = 10.0, duration = 5.0", "amplitude = 10.0, start = 5.0"),
+        "experiments.0.duration",
+    ),
     "an autopilot of positive feedback": (
         CONFIG + "[autopilot]\nkp = [0, 0, -50, 0, 0, 0]\n",
         "autopilot.kp.2",
@@ -369,6 +391,25 @@ def test_a_doptimal_sine_is_checked_against_nyquist_in_hz():
     stiff = {**signal, "inertia": 1e-6, "k_linear": 1e3}  # ω far above π / dt
     with pytest.raises(ValueError, match="its doptimal_sine reaches"):
         SimulateConfig.model_validate({**cfg, "experiments": [{"name": "a", "signals": [stiff]}]})
+
+
+def test_a_doptimal_sine_on_a_thruster_is_refused_naming_its_channel():
+    """Its frequency is designed from its offset as a force (Caccia eqs 13-14), while an
+    offset on a thruster is a command (docs: signal keys): a PWM offset was read as newtons.
+    Flown on a generalized force; refused on a thruster, naming the channel."""
+    from nnid.config import Experiment
+    from nnid.datasets.simulator import experiment_inputs
+    from nnid.errors import NnidInputError
+
+    signal = {"kind": "doptimal_sine", "channel": "AS", "offset": 50.0, "amplitude": 20.0,
+              "inertia": 20.0, "k_linear": 10.0, "duration": 10.0}  # fmt: skip
+    on_thruster = Experiment(name="d", signals=[signal])
+    with pytest.raises(NnidInputError, match="'AS' is a thruster, whose offset is a command"
+                       ) as err:  # fmt: skip
+        experiment_inputs(on_thruster, ("AS", "AP"), 0.1, where="experiments.0.")
+    assert err.value.field == "experiments.0.signals.0.channel"
+    on_force = Experiment(name="d", signals=[{**signal, "channel": "X"}])
+    assert experiment_inputs(on_force, tuple("XYZKMN"), 0.1)[:, 0].max() > 50.0
 
 
 @pytest.mark.parametrize(("args", "words"), [

@@ -263,6 +263,119 @@ def test_weiss_sequence_order_and_non_collinear_coupled_runs():
     assert np.linalg.matrix_rank(x) == 3 and np.linalg.cond(x) < 20
 
 
+def test_weiss_coupled_runs_fly_the_levels_their_docstring_says():
+    """The second and third DOF of a coupled run switch on slower clocks and, in the same run
+    length, fly only the first three and two levels, positive only (kept as flown: the Seamor
+    configs' data come from it; the docstring said both signs were seen)."""
+    runs = {e["name"]: e for e in WeissSequence().experiments()}
+    x, y = runs["surge-sway"]["signals"]
+    assert x["levels"] == [9.0, 19.5, 30.0, -15.0, -30.0] and y["levels"] == [9.0, 19.5, 30.0]
+    assert runs["surge-sway-yaw"]["signals"][2]["levels"] == [1.2, 2.6]
+    assert "first three (0.3, 0.65, 1" in WeissSequence.__doc__
+
+
+def test_prbs_chips_and_stairs_levels_fall_on_the_sample_clock():
+    """t = k dt is inexact and floor((k dt)/hold) read a sample just under a chip's edge as
+    the chip before: a PRBS at hold = dt = 0.01 repeated 54 chips and skipped 54 in 1000
+    samples (no longer an MLS's autocorrelation), stairs of 0.07 s at dt 0.01 held levels of
+    6 to 8 samples. Read with the simulator's slack, each chip and level is its own samples."""
+    t = np.arange(1000) * 0.01
+    assert np.array_equal(PRBS(channel="X", amplitude=1.0, hold=0.01, duration=10.0,
+                               order=10)(t), mls(10)[:1000])  # fmt: skip
+    x = PRBS(channel="X", amplitude=1.0, hold=0.01, duration=1.27, order=7)(t[:127])
+    acf = [np.dot(x, np.roll(x, k)) for k in range(127)]
+    assert acf[0] == 127 and set(acf[1:]) == {-1}
+    stairs = Stairs(channel="X", levels=list(range(1, 13)), hold=0.07, start=0.03)(t[:100])
+    assert np.bincount(stairs.astype(int)).tolist() == [16] + [7] * 12
+
+
+def test_a_multisine_of_one_frequency_is_refused_naming_its_keys():
+    """n > 1 sines of one frequency with Schroeder phases are one sine, and for an even n
+    cancel to a peak of ~5e-15, which the amplitude then divided: rounding noise flown at
+    full amplitude, broadband. And n = 1 flies f_min alone while Nyquist is checked on f_max."""
+    keys = dict(channel="X", amplitude=1.0, duration=10.0)
+    with pytest.raises(ValueError, match=r"f_min = f_max = 0\.5 Hz with n = 8"):
+        Multisine(**keys, f_min=0.5, f_max=0.5)
+    with pytest.raises(ValueError, match=r"n = 1 flies one sine at f_min = 0\.5 Hz, not f_max"):
+        Multisine(**keys, f_min=0.5, f_max=2.0, n=1)
+    one = Multisine(**keys, f_min=0.5, f_max=0.5, n=1)(np.arange(0, 10, 0.01))
+    assert abs(np.abs(one).max() - 1.0) < 1e-3
+
+
+def test_random_signals_that_draw_the_same_sequence_are_warned_of():
+    """Two PRBS (or APRBS) of one experiment left on their default seeds fly the same
+    sequence: collinear inputs that no regression separates, and --seed moves only the noise.
+    Said naming the experiment and channels; a signal of its own seed is not."""
+    from nnid.config import SimulateConfig
+    from nnid.datasets.simulator import simulate_config
+    from nnid.errors import ExcitationWarning
+
+    prbs = {"kind": "prbs", "amplitude": 5.0, "hold": 0.2, "duration": 1.0}
+    aprbs = {"kind": "aprbs", "amplitude": 5.0, "hold_min": 0.2, "hold_max": 0.4,
+             "duration": 1.0}  # fmt: skip
+    runs = [
+        {"name": "same", "signals": [prbs | {"channel": "X"}, prbs | {"channel": "Y"},
+                                     aprbs | {"channel": "Z"}, aprbs | {"channel": "N"}]},
+        # a PRBS seed is its register's start state modulo the period (2^7 - 1)
+        {"name": "period", "signals": [prbs | {"channel": "X"},
+                                       prbs | {"channel": "N", "seed": 128}]},
+        {"name": "own", "signals": [prbs | {"channel": "X"}, prbs | {"channel": "Y", "seed": 2},
+                                    aprbs | {"channel": "Z"},
+                                    aprbs | {"channel": "N", "seed": 3}]},
+    ]  # fmt: skip
+    cfg = SimulateConfig(vehicle="seamor", dt=0.1, experiments=runs)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        simulate_config(cfg, load_vehicle("seamor"))
+    said = [str(w.message) for w in caught if w.category is ExcitationWarning]
+    assert len(said) == 3, said
+    assert said[0].startswith("experiment 'same': the prbs signals on X, Y draw the same")
+    assert said[1].startswith("experiment 'same': the aprbs signals on Z, N draw the same")
+    assert said[2].startswith("experiment 'period': the prbs signals on X, N")
+    assert "--seed move the sensor noise only" in said[0]
+
+
+def test_thruster_commands_beyond_their_range_are_said_with_their_share():
+    """Commands beyond a thruster's range are flown at its bound (a PRBS of ±1.5 on a ±1
+    thruster flew ±1 throughout, logged ±1.5) without a word unless far beyond; a thruster
+    with only cmd_max was clipped with none at all. Said per thruster, with the share."""
+    from nnid.datasets.arrays import CommandSaturationWarning
+
+    veh = load_vehicle("vlbv300")  # PWM range ±102 on every thruster
+    one_sided = veh.thrusters[1].model_copy(update={"cmd_min": None})
+    veh = veh.model_copy(update={"thrusters": [veh.thrusters[0], one_sided, *veh.thrusters[2:]]})
+    inputs = np.zeros((10, len(veh.thrusters)))
+    inputs[:5, 0] = 150.0
+    inputs[:2, 1] = 120.0
+    inputs[:, 1] -= 500.0 * (np.arange(10) == 9)  # below -102, but no cmd_min: flown as asked
+    with pytest.warns(CommandSaturationWarning) as said:
+        simulate(veh, inputs, 0.1, experiment="pwm")
+    message = str(said[0].message)
+    names = [t.name for t in veh.thrusters]
+    assert message.startswith("experiment 'pwm': thruster commands beyond the thruster's range")
+    assert f"{names[0]} in 50% of the samples (asked 0 to 150, flown within [-102, 102])" in message
+    assert f"{names[1]} in 20% of the samples (asked -500 to 120, flown at most 102)" in message
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", CommandSaturationWarning)
+        simulate(veh, np.clip(inputs, -102.0, 102.0), 0.1)
+
+
+def test_a_failed_adaptive_solve_is_the_diverged_simulation_error():
+    """The adaptive integrator's failure was a bare RuntimeError, a traceback from the CLI;
+    it is the fixed-step integrators' NnidInputError, naming the time and the experiment."""
+    from nnid.vehicle import Vehicle
+
+    veh = Vehicle.model_validate({
+        "name": "box", "mass": 30.0, "inertia": [1.0, 2.0, 2.0],
+        "damping": {"model": "weiss_quadratic", "coefficients": {"X:u*abs(u)": 40.0}},
+    })  # fmt: skip
+    inputs = np.zeros((41, 6))
+    inputs[:, 0] = 100.0
+    with pytest.raises(NnidInputError, match=r"diverged at t = \d.* in experiment 'run'") as err:
+        simulate(veh, inputs, 0.05, integrator="adaptive", experiment="run")
+    assert err.value.field == "experiments"
+
+
 def test_autopilot_holds_an_unstable_vehicle_and_logs_its_force():
     """The bare VT 690 hull with McFarland damping diverges in open loop (M:q*abs(u) > 0);
     under a PD autopilot it cruises, and the log carries the commanded feedback."""

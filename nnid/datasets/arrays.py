@@ -160,6 +160,54 @@ def warn_far_beyond_range(
         warnings.warn(slip.message, CommandUnitsWarning, stacklevel=3)
 
 
+class CommandSaturationWarning(UserWarning):
+    """Thruster commands beyond the range the thruster flies (:func:`warn_clipped`): the log
+    records the commands asked, the vehicle flew them at the range's bound."""
+
+
+def flown_range(thruster) -> tuple[float, float]:
+    """The commands a thruster flies as asked: :meth:`nnid.physics.thrusters.Actuation.thrusts`
+    clips to its ``cmd_min`` and ``cmd_max`` (either one alone too), and a thrust table holds
+    its end thrust past its span; ±inf where nothing bounds it."""
+    low = -np.inf if thruster.cmd_min is None else float(thruster.cmd_min)
+    high = np.inf if thruster.cmd_max is None else float(thruster.cmd_max)
+    if getattr(thruster.curve, "kind", None) == "table":
+        low, high = max(low, thruster.curve.cmd[0]), min(high, thruster.curve.cmd[-1])
+    return low, high
+
+
+def _span(low: float, high: float) -> str:
+    if np.isfinite(low) and np.isfinite(high):
+        return f"within [{low:g}, {high:g}]"
+    return f"at most {high:g}" if np.isfinite(high) else f"at least {low:g}"
+
+
+def warn_clipped(inputs: np.ndarray, vehicle, experiment: str | None = None) -> None:
+    """Warn, with the share of samples per thruster, where the commands ``inputs`` ``[N, n]``
+    (the vehicle's thrusters in order) go beyond :func:`flown_range`: a PRBS of ±1.5 on a ±1
+    thruster was flown at ±1 throughout and logged at ±1.5 without a word."""
+    said = []
+    for k, thruster in enumerate(vehicle.thrusters):
+        low, high = flown_range(thruster)
+        asked = inputs[:, k]
+        beyond = (asked < low) | (asked > high)
+        if beyond.any():
+            said.append(
+                f"{thruster.name} in {100 * beyond.mean():.3g}% of the samples (asked "
+                f"{asked.min():g} to {asked.max():g}, flown {_span(low, high)})"
+            )
+    if said:
+        where = f"experiment {experiment!r}: " if experiment else ""
+        warnings.warn(
+            f"{where}thruster commands beyond the thruster's range were flown at its bound: "
+            + "; ".join(said)
+            + ". The log records the commands asked, not the thrust flown: keep the signals "
+            "within the range (cmd_min, cmd_max, a thrust table's span) to fly what is logged",
+            CommandSaturationWarning,
+            stacklevel=3,
+        )
+
+
 def logged_inputs(log: pd.DataFrame, vehicle) -> tuple[np.ndarray, bool]:
     """The log's inputs and whether they are forces: ``tau_X`` … ``tau_N`` when all six are
     there, else the thruster commands ``cmd_<thruster>`` of the vehicle (ARCHITECTURE.md, the

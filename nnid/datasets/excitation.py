@@ -19,10 +19,27 @@ from pydantic import Field, model_validator
 from nnid.physics.dofs import FORCES
 from nnid.validation import StrictModel
 
+#: slack, in periods, of a clock read at sampled times: t = k·dt is inexact, and (k·dt)/hold
+#: landed just under a whole number (floor then read the period before: a PRBS at hold = dt
+#: repeated 54 chips and skipped 54 in 1000 samples); the simulator reads its input samples
+#: with the same rule (:func:`nnid.datasets.simulator.integrate`)
+TICK_SLACK = 1e-9
+
+
+def ticks(t: np.ndarray | float, period: float) -> np.ndarray:
+    """Whole ``period`` s elapsed at times ``t`` (from the clock's zero), read with
+    :data:`TICK_SLACK`: a time within rounding of a period's edge is in the period it begins."""
+    return np.floor(np.asarray(t, dtype=np.float64) / period + TICK_SLACK).astype(int)
+
 
 class _Signal(StrictModel):
     channel: str
     start: float = Field(0.0, ge=0)
+
+    def draw(self) -> tuple | None:
+        """What fixes a random signal's sequence (its kind, seed and clock), for two signals
+        that would draw the same one (:func:`same_draws`); None for a deterministic signal."""
+        return None
 
     def window(self, t: np.ndarray, duration: float) -> np.ndarray:
         return (t >= self.start) & (t < self.start + duration)
@@ -66,7 +83,7 @@ class Stairs(_Signal):
         return self.start + self.hold * len(self.levels)
 
     def __call__(self, t: np.ndarray) -> np.ndarray:
-        k = np.floor((t - self.start) / self.hold).astype(int)
+        k = ticks(t - self.start, self.hold)
         inside = (k >= 0) & (k < len(self.levels))
         return np.where(inside, np.asarray(self.levels)[np.clip(k, 0, len(self.levels) - 1)], 0.0)
 
@@ -113,6 +130,21 @@ class Multisine(_Signal):
     def _band(self) -> Multisine:
         if self.f_max < self.f_min:
             raise ValueError("f_max must be at least f_min")
+        if self.n > 1 and self.f_max == self.f_min:
+            # n sines of one frequency with Schroeder phases sum to one sine, and for an even
+            # n cancel (peak ~5e-15): scaled to the amplitude, rounding noise was flown,
+            # broadband up to Nyquist
+            raise ValueError(
+                f"f_min = f_max = {self.f_min:g} Hz with n = {self.n}: n sines of one "
+                "frequency are one sine at best (for an even n they cancel); expected f_max "
+                "above f_min (or n = 1 for one sine)"
+            )
+        if self.n == 1 and self.f_max != self.f_min:
+            # one sine is flown at f_min, while the Nyquist check reads f_max
+            raise ValueError(
+                f"n = 1 flies one sine at f_min = {self.f_min:g} Hz, not f_max = "
+                f"{self.f_max:g} Hz; expected f_max equal to f_min (or n above 1 for a band)"
+            )
         return self
 
     def end(self) -> float:
@@ -161,7 +193,12 @@ def mls(order: int, seed: int = 1) -> np.ndarray:
 
 
 class PRBS(_Signal):
-    """Pseudo-random binary sequence ``offset ± amplitude`` switching on a clock of ``hold`` s."""
+    """Pseudo-random binary sequence ``offset ± amplitude`` switching on a clock of ``hold`` s.
+
+    ``seed`` picks the shift register's start state. It is the signal's own (default 1 for
+    every PRBS, not the simulate config's ``seed``, which seeds the sensor noise only): two
+    PRBS of one experiment on their defaults fly the same chips (:func:`same_draws`).
+    """
 
     kind: Literal["prbs"] = "prbs"
     amplitude: float
@@ -174,9 +211,13 @@ class PRBS(_Signal):
     def end(self) -> float:
         return self.start + self.duration
 
+    def draw(self) -> tuple | None:
+        # the register's start state is the seed modulo the period (:func:`mls`)
+        return (self.kind, self.order, self.seed % (2**self.order - 1), self.hold, self.start)
+
     def __call__(self, t: np.ndarray) -> np.ndarray:
         chips = mls(self.order, self.seed)
-        k = np.floor((t - self.start) / self.hold).astype(int) % chips.size
+        k = ticks(t - self.start, self.hold) % chips.size
         x = self.offset + self.amplitude * chips[k]
         return np.where(self.window(t, self.duration), x, 0.0)
 
@@ -189,6 +230,10 @@ class APRBS(_Signal):
     state space) must see the whole operating range and, on several channels at once, the
     combinations of inputs it will meet (Nelles, *Nonlinear System Identification*, 2nd ed.,
     section 19.7). Holds at least as long as the slowest time constant show the steady states.
+
+    ``seed`` is the signal's own (default 0 for every APRBS, not the simulate config's
+    ``seed``, which seeds the sensor noise only): two APRBS of one experiment with the same
+    seed and holds fly the same sequence, scaled (:func:`same_draws`).
     """
 
     kind: Literal["aprbs"] = "aprbs"
@@ -212,6 +257,11 @@ class APRBS(_Signal):
     def end(self) -> float:
         return self.start + self.duration
 
+    def draw(self) -> tuple | None:
+        # the holds are drawn first, as many as the duration needs, then the levels
+        count = math.ceil(self.duration / self.hold_min)
+        return (self.kind, self.seed, self.hold_min, self.hold_max, count, self.start)
+
     def switches(self) -> tuple[np.ndarray, np.ndarray]:
         """Switching times (from ``start``) and the level held from each."""
         rng = np.random.default_rng(self.seed)
@@ -225,6 +275,19 @@ class APRBS(_Signal):
         k = np.searchsorted(times, t - self.start, side="right") - 1
         x = levels[np.clip(k, 0, levels.size - 1)]
         return np.where(self.window(t, self.duration), x, 0.0)
+
+
+def same_draws(signals: list[_Signal]) -> list[list[int]]:
+    """Groups of the indices of ``signals`` that draw the same random sequence (same kind,
+    seed and clock: :meth:`_Signal.draw`) on more than one channel: their inputs are collinear
+    (correlation ±1, whatever their amplitudes and offsets), and a regression cannot separate
+    the channels' effects. Each group in the order of its first signal."""
+    groups: dict[tuple, list[int]] = {}
+    for j, signal in enumerate(signals):
+        key = signal.draw()
+        if key is not None:
+            groups.setdefault(key, []).append(j)
+    return [g for g in groups.values() if len({signals[j].channel for j in g}) > 1]
 
 
 class Sine(_Signal):
@@ -325,10 +388,16 @@ class WeissSequence(StrictModel):
     triples surge-sway, surge-heave, surge-yaw, sway-heave, sway-yaw, heave-yaw,
     surge-sway-heave and surge-sway-yaw.
 
-    Each run holds ``levels`` (fractions of the DOF's ``amplitude``, both signs so that both
-    directions and several steady speeds are seen) for ``hold`` seconds each, then lets the
-    vehicle coast for ``hold`` seconds (free decay shows the inertia). In coupled runs the
-    second and third DOF switch on slower clocks so that their inputs are not collinear.
+    A run lasts ``hold`` × (len(``levels``) + 1) s. Its first DOF (the only one of a decoupled
+    run) holds every one of ``levels`` (fractions of the DOF's ``amplitude``: by default both
+    signs, several steady speeds) for ``hold`` s each, then coasts for ``hold`` s (free decay
+    shows the inertia). In coupled runs the second and third DOF switch on slower clocks (1.37
+    and 1.71 × ``hold``) so that their inputs are not collinear; in the same run length they
+    hold only the levels whose hold ends a whole hold before the run's end: with the default
+    five levels, the second DOF flies the first three (0.3, 0.65, 1: Y at 9, 19.5 and 30 N in
+    surge-sway) and the third the first two (0.3, 0.65: N at 1.2 and 2.6 N m in
+    surge-sway-yaw), so they see one direction only. (Kept as flown: the Seamor configs'
+    data and the numbers pinned on them come from it.)
     """
 
     kind: Literal["weiss"] = "weiss"
@@ -365,6 +434,8 @@ class WeissSequence(StrictModel):
         duration = self.hold * (len(self.levels) + 1)
         for k, ch in enumerate(channels):
             hold = duration / (len(self.levels) + 1) * (1.0, 1.37, 1.71)[k]
+            # never more than len(levels), so ``self.levels * 2`` never reads its second copy
+            # (the docstring says what is flown; kept: the Seamor configs' data come from it)
             n_levels = max(1, int((duration - hold) // hold))
             levels = [(self.levels * 2)[i] * self.amplitudes[ch] for i in range(n_levels)]
             signals.append({"kind": "stairs", "channel": ch, "levels": levels, "hold": hold})

@@ -22,10 +22,11 @@ import torch
 from pydantic import Field, field_validator
 from scipy.integrate import solve_ivp
 
-from nnid.datasets.arrays import warn_far_beyond_range
+from nnid.datasets.arrays import warn_clipped, warn_far_beyond_range
+from nnid.datasets.excitation import DOptimalSine, Step, same_draws, ticks
 from nnid.datasets.log import TAU, wrap_angle
 from nnid.datasets.measurement import Measurement
-from nnid.errors import NnidInputError
+from nnid.errors import ExcitationWarning, NnidInputError
 from nnid.physics import compiled
 from nnid.physics.dofs import FORCES
 from nnid.physics.effects import apply_effect
@@ -139,7 +140,7 @@ def integrate(
         n = tau.shape[0]
 
         def fun(t, x):
-            k = min(int(t / dt + 1e-9), n - 1)
+            k = min(int(ticks(t, dt)), n - 1)  # the signals' clock rule: t/dt is inexact
             return compiled.rhs(form, x, tau[k])
 
         t_eval = np.arange(n + 1) * dt
@@ -153,9 +154,13 @@ def integrate(
             atol=atol,
             max_step=dt,
         )
-        if not sol.success:
-            raise RuntimeError(f"adaptive integration failed: {sol.message}")
-        return sol.y.T
+        # a failed solve (its step shrank below rounding: the state ran away) is a diverged
+        # run: NaN from the first sample not reached, which :func:`simulate` says as the
+        # fixed-step integrators' divergence (a bare RuntimeError was a traceback in the CLI)
+        states = np.full((n + 1, x0.size), np.nan)
+        if sol.y.size:
+            states[: sol.y.shape[1]] = sol.y.T
+        return states
     raise ValueError(f"unknown integrator '{integrator}'; expected one of {INTEGRATORS}")
 
 
@@ -200,6 +205,8 @@ def simulate(
     state = np.zeros(model.state_size)
     if x0 is not None:
         state[: len(x0)] = np.asarray(x0, dtype=np.float64)
+    if vehicle.thrusters:  # clipped to the range silently: the log would record the asked
+        warn_clipped(inputs, vehicle, experiment)
     if autopilot is None:
         applied = actuation.applied(inputs)
         states = integrate(model, state, applied[:-1], dt, substeps, integrator)
@@ -311,6 +318,30 @@ def experiment_inputs(
                 field=f"{where}signals.{j}.channel",
             )
         field = "sequence" if where is None else f"{where}signals.{j}"
+        if isinstance(signal, DOptimalSine) and signal.channel not in FORCES:
+            # its frequency is designed from its offset as a force (Caccia eqs 13-14); a
+            # thruster's offset is a command, in the command's units (docs: signal keys)
+            raise NnidInputError(
+                f"a doptimal_sine designs its frequency from its offset as a force (Caccia "
+                f"eqs 13-14); '{signal.channel}' is a thruster, whose offset is a command: "
+                "expected a generalized force channel (X Y Z K M N) of a vehicle without "
+                'thrusters; a thruster vehicle flies it by [data] kind = "caccia_campaign"',
+                field=f"{field}.channel" if where is not None else field,
+            )
+        if (
+            isinstance(signal, Step)
+            and signal.duration is None
+            and experiment.duration is None
+            and signal.start >= end
+            and where is not None
+        ):  # held to the run's end, which the other signals set before its start
+            raise NnidInputError(
+                f"a step without 'duration' is held to the experiment's end, and the "
+                f"experiment has no 'duration': its end is its signals' last end ({end:g} s), "
+                f"at or before this step's start ({signal.start:g} s); expected a 'duration' "
+                "for the experiment (or for the step)",
+                field=f"{where}duration",
+            )
         if signal.start >= end or signal.start > t[-1]:  # it would never act
             raise NnidInputError(
                 f"starts at {signal.start:g} s, at or after the experiment's end ({end:g} s): "
@@ -351,6 +382,17 @@ def simulate_config(config, vehicle, progress=None) -> pd.DataFrame:
         # the sequence's runs follow the explicit ones: their fields are the sequence's
         where = f"experiments.{i}." if i < len(config.experiments) else None
         inputs = experiment_inputs(exp, channels, config.dt, where=where)
+        for group in same_draws(exp.signals):
+            first = exp.signals[group[0]]
+            warnings.warn(
+                f"experiment {exp.name!r}: the {first.kind} signals on "
+                f"{', '.join(exp.signals[j].channel for j in group)} draw the same sequence "
+                f"(seed {getattr(first, 'seed', '')}, the same holds): their inputs are "
+                "collinear (correlation ±1) and a fit cannot tell the channels apart; give each "
+                "its own 'seed' (the config's seed and --seed move the sensor noise only)",
+                ExcitationWarning,
+                stacklevel=2,
+            )
         if vehicle.thrusters:  # PWM microseconds against ±1 would fly every run at full thrust
             warn_far_beyond_range(pd.DataFrame(inputs, columns=[f"cmd_{c}" for c in channels]),
                                   vehicle)  # fmt: skip
