@@ -21,6 +21,7 @@ from rich.progress import Progress
 from nnid.errors import NnidInputError
 from nnid.runs import check_out as _check_out
 from nnid.runs import staged as _staged
+from nnid.validation import MAX_SEED
 from nnid.warning_messages import warning_messages
 
 app = typer.Typer(
@@ -94,6 +95,7 @@ def simulate(
         None,
         "--seed",
         min=0,
+        max=MAX_SEED,
         help="Overrides the config's seed: the sensor noise's (experiment i draws from seed + "
         "i). A prbs or aprbs signal draws from its own 'seed' key, which --seed leaves as it "
         "is.",

@@ -48,6 +48,7 @@ from nnid.validation import (
     ALPHA_MAX,
     ALPHA_MIN,
     MAX_FALSE_ALARMS_PER_HOUR,
+    MAX_SEED,
     MAX_WIDTH,
     MIN_WINDOW_S,
     PositiveFloat,
@@ -73,8 +74,21 @@ Duration = Annotated[float, Field(gt=0, le=MAX_DURATION_S, allow_inf_nan=False)]
 #: the most random draws of a sweep (more is a typo that fills the memory before any trial)
 MAX_SAMPLES = 100_000
 Number = Annotated[float, Field(allow_inf_nan=False)]
-#: a random seed: numpy's generators take no negative one
-Seed = Annotated[int, Field(ge=0)]
+#: a random seed: numpy's generators take no negative one, torch's none of 2⁶⁴ (MAX_SEED)
+Seed = Annotated[int, Field(ge=0, le=MAX_SEED)]
+
+
+def _a_path(path: str) -> str:
+    """A path a config names, not blank: ``""`` named the current folder or none, said as
+    ".: is a folder, not a TOML file", naming neither the config nor the key."""
+    if not path.strip():
+        raise ValueError("is empty: a file's path (or a preset's name, for a vehicle) is expected")
+    return path
+
+
+#: a file a config names (its vehicle, log, reader config, simulate config): a blank one is
+#: refused naming the key; a config that names none leaves the key out
+PathText = Annotated[str, AfterValidator(_a_path)]
 
 
 def _once(names: list[str]) -> list[str]:
@@ -91,6 +105,17 @@ Names = Annotated[list[str], AfterValidator(_once)]
 #: character, on one line, as a vehicle's name
 Label = Annotated[str, AfterValidator(vehicle_name)]
 Dofs = Annotated[list[Dof], Field(min_length=1), AfterValidator(_once)]
+
+
+def _inert(model: BaseModel, keys: tuple[str, ...], because: str, remedy: str) -> None:
+    """Refuse a key written (one of ``keys``) that another key's value leaves doing nothing
+    (``because`` names that key and value; ``remedy`` is the other way out): accepted without a
+    word, it read as taken."""
+    given = [k for k in keys if k in model.model_fields_set]
+    if given:
+        raise NnidInputError(
+            f"does nothing with {because}: remove {given[0]}, or {remedy}", field=given[0]
+        )
 
 
 def _kind_shorthand(value: Any) -> Any:
@@ -150,7 +175,7 @@ class SimulateConfig(StrictModel):
     """``nnid simulate``: a vehicle, experiments or a sequence, injected effects, sensors."""
 
     kind: Literal["simulate"] = "simulate"
-    vehicle: str
+    vehicle: PathText
     dt: PositiveFloat = 0.01
     substeps: int = Field(1, ge=1, le=1000)
     integrator: Literal["rk4", "adaptive", "torch"] = "rk4"
@@ -181,6 +206,9 @@ class SimulateConfig(StrictModel):
         # ``sequence``, whose keys make all its runs) and the value expected there.
         from nnid.datasets.log import MAX_RUN_SAMPLES
 
+        if self.integrator == "adaptive":  # DOP853 chooses its own steps
+            _inert(self, ("substeps",), 'integrator = "adaptive" (it chooses its own steps)',
+                   'integrate with "rk4" or "torch"')  # fmt: skip
         if not self.all_experiments():
             raise ValueError("nothing to simulate: give [[experiments]] or a [sequence]")
         twice = repeated([e.name for e in self.effects])
@@ -287,6 +315,13 @@ class _DataCommon(StrictModel):
             )
         return names
 
+    @model_validator(mode="after")
+    def _noise_given(self) -> _DataCommon:
+        if self.noise == 0:
+            _inert(self, ("noise_columns",), "noise = 0 (no noise is added)",
+                   "give noise, the fraction of each column's std to add")  # fmt: skip
+        return self
+
 
 class VehicleData(_DataCommon):
     """A vehicle log: a file (``log``, through a reader config ``columns`` if it is not in
@@ -296,10 +331,21 @@ class VehicleData(_DataCommon):
     converted to seconds, and not guessed from its steps."""
 
     kind: Literal["vehicle"] = "vehicle"
-    log: str | None = None
-    columns: str | None = None
-    simulate: str | None = None
+    log: PathText | None = None
+    columns: PathText | None = None
+    simulate: PathText | None = None
     time_unit: Literal["s", "ms", "us", "ns"] | None = None
+
+    @model_validator(mode="after")
+    def _one_log(self) -> VehicleData:
+        # the log was read and the simulation dropped without a word (its file still required)
+        if self.log is not None and self.simulate is not None:
+            raise NnidInputError(
+                "a [data] table reads one log: data.log (a file) or data.simulate (a simulate "
+                "config run here), not both; remove one",
+                field="simulate",
+            )
+        return self
 
 
 class TableData(_DataCommon):
@@ -307,7 +353,7 @@ class TableData(_DataCommon):
     not a vehicle log: for the input-output models (NARX, neural state space)."""
 
     kind: Literal["table"]
-    log: str | None = None
+    log: PathText | None = None
 
 
 class SinusoidSpec(StrictModel):
@@ -351,13 +397,21 @@ class CacciaCampaignData(_DataCommon):
     ``sinusoid`` and the validation run's."""
 
     kind: Literal["caccia_campaign"]
-    campaign: str
+    campaign: PathText
     campaign_seed: Seed | None = None
     sinusoid: SinusoidSpec
     validation: ValidationRunSpec | None = Field(default_factory=ValidationRunSpec)
 
 
 DataSpec = Annotated[VehicleData | TableData | CacciaCampaignData, Field(discriminator="kind")]
+
+
+#: a split given both ways, named experiments and fractions (a train config's [split], a loop
+#: config's validation and validation_fraction): the fractions were dropped without a word
+FRACTIONS_BESIDE_NAMES = (
+    "gives fractions beside named experiments: a split names its experiments or cuts "
+    "by fractions, not both"
+)
 
 
 def _data_kind(value: Any) -> Any:
@@ -392,6 +446,25 @@ class SplitSpec(StrictModel):
                 "name at least one, or leave the key out to split by fractions"
             )
         return names
+
+    @model_validator(mode="after")
+    def _consistent(self) -> SplitSpec:
+        # what the config alone shows, said before any log is read or simulated; what needs
+        # the log (a name it lacks, a part left empty) is make_split's
+        from nnid.datasets.splits import PARTS, check_disjoint, check_fractions
+
+        check_fractions(self.fractions)
+        named = [p for p in PARTS if getattr(self, p) is not None]  # test = [] says: no test
+        if named and self.by != "experiment":  # they would be ignored
+            raise NnidInputError(
+                f'lists experiments for {", ".join(named)}, which only by = "experiment" uses '
+                f"(by = {self.by!r} cuts every experiment by fractions)",
+                field=named[0],
+            )
+        check_disjoint({p: getattr(self, p) for p in named})
+        if named and "fractions" in self.model_fields_set:  # they would be ignored
+            raise NnidInputError(FRACTIONS_BESIDE_NAMES, field="fractions")
+        return self
 
 
 # -- trainers ------------------------------------------------------------------------------------
@@ -433,6 +506,26 @@ class GradientSpec(_Trainer):
     filter_lambda: PositiveFloat | None = None
     theta0: list[Number] | None = None
     dt: PositiveFloat | None = None
+
+    @field_validator("gain")
+    @classmethod
+    def _gain_matrix(cls, gain: Any) -> Any:
+        """A matrix Γ square, symmetric and positive definite: the gradient law descends
+        the squared error only then (a ragged one failed in numpy with a traceback, a
+        negative definite one climbed it)."""
+        if not (isinstance(gain, list) and gain and isinstance(gain[0], list)):
+            return gain
+        import numpy as np
+
+        n = len(gain)
+        if any(len(row) != n for row in gain):
+            raise ValueError(f"a gain matrix is square: {n} rows, so {n} numbers in each")
+        g = np.array(gain, dtype=np.float64)
+        if not np.allclose(g, g.T, rtol=1e-9, atol=0.0):
+            raise ValueError("a gain matrix is symmetric (gain[i][j] = gain[j][i])")
+        if n == 0 or np.linalg.eigvalsh(g).min() <= 0:
+            raise ValueError("a gain matrix is positive definite (all its eigenvalues above 0)")
+        return gain
 
 
 class KalmanSpec(_Trainer):
@@ -492,6 +585,12 @@ class AdamSpec(_Trainer):
         # default floor, 1e-4, only stops the annealing of a smaller lr: the trainer's rule)
         if "lr_min" in self.model_fields_set and self.lr_min > self.lr:
             raise ValueError(f"lr_min ({self.lr_min:g}) must not exceed lr ({self.lr:g})")
+        if self.schedule != "plateau":  # the patience of the plateau schedule alone
+            _inert(self, ("plateau",), f'schedule = "{self.schedule}" (the patience of the '
+                   '"plateau" schedule)', 'set schedule = "plateau"')  # fmt: skip
+        if self.schedule == "constant":  # the floor the other schedules anneal to
+            _inert(self, ("lr_min",), 'schedule = "constant" (which keeps lr)',
+                   'set schedule = "cosine" or "plateau"')  # fmt: skip
         return self
 
 
@@ -578,6 +677,14 @@ class FossenModelSpec(_PhysicsModel):
     sequence: Literal["weiss"] | list[SequenceStep] | None = None
     zoh_midpoint: bool = False
     trainer: RegressionTrainer | None = None
+
+    @model_validator(mode="after")
+    def _sequence_alone(self) -> FossenModelSpec:
+        # the steps name their own unknowns and DOFs: beside a sequence these were dropped
+        if self.sequence is not None:
+            _inert(self, ("dofs", "unknowns"), "a sequence (its steps name the unknowns and "
+                   "the DOF equations they are fitted from)", "the sequence")  # fmt: skip
+        return self
 
 
 class CacciaModelSpec(_Model):
@@ -748,6 +855,14 @@ class NarxModelSpec(_InputOutput):
     def _rest_needs_delta(self) -> NarxModelSpec:
         if self.rest_equilibrium and not self.delta:
             raise ValueError("rest_equilibrium pins the Δ increment at rest: it needs delta = true")
+        if self.simulation_epochs == 0:  # no simulation-error stage: its settings are unread
+            stage = tuple(k for k in type(self).model_fields if k.startswith("simulation_"))
+            _inert(self, tuple(k for k in stage if k != "simulation_epochs"),
+                   "simulation_epochs = 0 (no simulation-error stage)",
+                   "give simulation_epochs")  # fmt: skip
+        if not isinstance(self.trainer, LevenbergMarquardtSpec):  # None: Adam
+            _inert(self, ("lm_samples",), "an Adam trainer (LM's full-batch draw)",
+                   'set trainer = "lm"')  # fmt: skip
         return self
 
     def arguments(self) -> dict[str, Any]:
@@ -926,6 +1041,18 @@ def _option_path(path: str) -> str:
     return path
 
 
+def _same_value(a: Any, b: Any) -> bool:
+    """Whether two TOML values are one setting: equal, and a boolean only to a boolean
+    (Python's ``True == 1`` read ``[1, true]`` as "lists True twice"); 1 and 1.0 are one."""
+    if isinstance(a, bool) or isinstance(b, bool):
+        return type(a) is type(b) and a == b
+    if isinstance(a, list) and isinstance(b, list):
+        return len(a) == len(b) and all(map(_same_value, a, b))
+    if isinstance(a, dict) and isinstance(b, dict):
+        return a.keys() == b.keys() and all(_same_value(a[k], b[k]) for k in a)
+    return a == b
+
+
 class SweepSpec(StrictModel):
     """``[sweep]`` of a train config, read by ``nnid sweep``: option paths (dotted, as in the
     config: ``model.hidden``, ``model.trainer.lr``) searched on a grid (every combination)
@@ -954,8 +1081,10 @@ class SweepSpec(StrictModel):
             for i, value in enumerate(values):
                 # a grid's repeat was merged into one setting, its seeds' scores counted twice
                 # in the mean; a random list's repeat is drawn twice as often
-                if value in values[:i]:
-                    raise ValueError(f"{path} lists {value!r} twice: give each value once")
+                if any(_same_value(value, v) for v in values[:i]):
+                    raise NnidInputError(
+                        f"{path} lists {value!r} twice: give each value once", field=f'"{path}"'
+                    )
         return searched
 
     @field_validator("seed_option")
@@ -995,7 +1124,7 @@ class TrainConfig(_Command):
     """``nnid train``: one model on one split, scored on the held-out parts."""
 
     kind: Literal["train"] = "train"
-    vehicle: str = ""
+    vehicle: PathText = ""  # none: the default, never validated
     data: DataSpec | None = None
     model: ModelSpec = Field(default_factory=FossenModelSpec)
     split: SplitSpec = Field(default_factory=SplitSpec)
@@ -1008,6 +1137,13 @@ class TrainConfig(_Command):
     detect: DetectSpec | None = None
     sweep: SweepSpec | None = None  # read by nnid sweep; nnid train fits the config as written
 
+    @model_validator(mode="after")
+    def _reference_labelled(self) -> TrainConfig:
+        if not self.reference:  # the label heads the [reference] values' column
+            _inert(self, ("reference_label",), "no [reference] table (the label of its "
+                   "values)", "give [reference]")  # fmt: skip
+        return self
+
     @field_validator("model", mode="before")
     @classmethod
     def _model(cls, value: Any) -> Any:
@@ -1019,7 +1155,7 @@ class CompareConfig(_Command):
     held-out experiments (test when the split has one, else validation)."""
 
     kind: Literal["compare"] = "compare"
-    vehicle: str = ""
+    vehicle: PathText = ""  # none: the default, never validated
     data: DataSpec | None = None
     models: list[ModelSpec] = Field(min_length=1)
     split: SplitSpec = Field(default_factory=SplitSpec)
@@ -1050,7 +1186,7 @@ class LoopConfig(_Command):
     """``nnid loop CONFIG``: the residual loop on a log (``--data``/``--vehicle`` override)."""
 
     kind: Literal["loop"] = "loop"
-    vehicle: str = ""
+    vehicle: PathText = ""  # none: the default, never validated
     data: VehicleData = Field(default_factory=VehicleData)
     # given, a list names something: [] is an error, not "all" (leave the key out for all)
     dofs: Dofs | None = None
@@ -1071,6 +1207,14 @@ class LoopConfig(_Command):
     savgol_order: int = Field(4, ge=2, le=8)
     warmup_s: float = Field(2.0, ge=0, allow_inf_nan=False)
     gate_horizon_s: PositiveFloat | None = None  # None: the gate is the free run
+
+    @model_validator(mode="after")
+    def _held_out_once(self) -> LoopConfig:
+        # the named runs were held out and the fraction dropped without a word; a train
+        # config's [split] refuses the same (SplitSpec)
+        if self.validation is not None and "validation_fraction" in self.model_fields_set:
+            raise NnidInputError(FRACTIONS_BESIDE_NAMES, field="validation_fraction")
+        return self
 
 
 #: keys of the earlier config format, with what replaced them

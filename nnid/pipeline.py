@@ -87,13 +87,13 @@ class Inputs:
 
 
 def vehicle_for(name: str, config_path: Path, key: str = "vehicle"):
-    """A preset by name, or a vehicle file (relative to the config's folder); one that does
-    not exist is said against ``key``: the config's ``vehicle``, or ``--vehicle``."""
+    """A preset by name, or a vehicle file (:func:`vehicle_source`); one that does not exist
+    is said against ``key``: the config's ``vehicle``, or ``--vehicle``."""
     from nnid.vehicle import PRESETS, load_vehicle
 
     if name in PRESETS:
         return load_vehicle(name)
-    path = Path(vehicle_source(name, config_path))
+    path = Path(vehicle_source(name, config_path, key))
     if not path.exists():
         where = f" (looked for {path})" if key == "vehicle" else ""
         raise NnidInputError(
@@ -104,7 +104,7 @@ def vehicle_for(name: str, config_path: Path, key: str = "vehicle"):
     return load_vehicle(path)
 
 
-def vehicle_label(name: str, config_path: Path) -> str:
+def vehicle_label(name: str, config_path: Path, key: str = "vehicle") -> str:
     """How an error names the vehicle ``name`` loads: "preset 'NAME'", or "vehicle file
     PATH" (:func:`vehicle_source`)."""
     from nnid.vehicle import PRESETS
@@ -112,16 +112,19 @@ def vehicle_label(name: str, config_path: Path) -> str:
     return (
         f"preset '{name}'"
         if name in PRESETS
-        else f"vehicle file {vehicle_source(name, config_path)}"
+        else f"vehicle file {vehicle_source(name, config_path, key)}"
     )
 
 
-def vehicle_source(name: str, config_path: Path) -> str:
-    """What ``name`` loads: a preset's name, or the vehicle file's path (relative to the
-    config's folder unless it exists as given)."""
+def vehicle_source(name: str, config_path: Path, key: str = "vehicle") -> str:
+    """What ``name`` loads: a preset's name, or the vehicle file's path: a config's
+    ``vehicle`` relative to the config's folder (unless absolute), ``--vehicle`` (``key``)
+    as given, relative to the current folder, as ``--data`` is."""
     from nnid.vehicle import PRESETS
 
-    return name if name in PRESETS else str(resolve(config_path.parent, name))
+    if name in PRESETS or key.startswith("--"):
+        return name
+    return str(resolve(config_path.parent, name))
 
 
 def plant_for(name: str, config_path: Path, key: str = "vehicle"):
@@ -135,7 +138,7 @@ def plant_for(name: str, config_path: Path, key: str = "vehicle"):
     try:
         check_mass_matrix(veh)
     except NnidInputError as exc:
-        raise exc.with_source(vehicle_source(name, config_path)) from None
+        raise exc.with_source(vehicle_source(name, config_path, key)) from None
     return veh
 
 
@@ -200,6 +203,17 @@ def check_paths(cfg, config_path: Path, data: str | None, columns: str | None) -
         if not value or (key != "columns" and data) or (key == "columns" and columns):
             continue
         _check_file(resolve(base, value), config_path, f"data.{key}")
+    simulated = data is None and getattr(spec, "simulate", None)
+    if simulated and (root := reader_root(reader_config(cfg, config_path, columns))):
+        # the root's files were read and the simulation dropped without a word (as beside
+        # data.log, which [data] refuses)
+        raise NnidInputError(
+            f"is not run: the reader config's root ({root}) is the log read instead; give "
+            "data.simulate or a reader config with a root, not both (or --data, which "
+            "replaces both)",
+            source=str(config_path),
+            field="data.simulate",
+        )
 
 
 #: the remedy a SINDy or named damping model's missing velocity has: no DOF can be left out
@@ -238,9 +252,9 @@ def load_inputs(
     spec = cfg.data if cfg.data is not None else VehicleData()
     base = config_path.parent
     physics = any(m.kind in PHYSICS_KINDS for m in models)
-    name = vehicle or cfg.vehicle
-    veh = vehicle_for(name, config_path, "--vehicle" if vehicle else "vehicle") if name else None
-    veh_label = vehicle_label(name, config_path) if name else None
+    name, key = (vehicle, "--vehicle") if vehicle else (cfg.vehicle, "vehicle")
+    veh = vehicle_for(name, config_path, key) if name else None
+    veh_label = vehicle_label(name, config_path, key) if name else None
     reader = reader_config(cfg, config_path, columns)
     if veh is None and reader is not None:
         veh, veh_label = reader_vehicle(reader)
@@ -556,14 +570,9 @@ def make_split(
     in, what an empty pose cell takes; :func:`~nnid.datasets.gaps.say_unread`): a 1-Hz GPS x y
     beside a 10-Hz DVL refused a Fossen fit that never reads them."""
     assignment = None
+    # what the config alone shows (named parts only by experiment, not beside fractions, not
+    # overlapping; fractions summing to 1) its SplitSpec refused
     named = [p for p in PARTS if getattr(s, p) is not None]  # test = [] says: no test part
-    if named and s.by != "experiment":  # they would be ignored
-        raise NnidInputError(
-            f'lists experiments for {", ".join(named)}, which only by = "experiment" uses '
-            f"(by = {s.by!r} cuts every experiment by fractions)",
-            source=source,
-            field=f"split.{named[0]}",
-        )
     if s.by == "experiment" and named:
         if "experiment" not in log:
             raise NnidInputError(
@@ -591,13 +600,6 @@ def make_split(
             split = split_log(log, s.by, tuple(s.fractions), assignment)
     except NnidInputError as exc:
         raise NnidInputError(exc.message, source=source, field=f"split.{exc.field}") from None
-    if assignment is not None and "fractions" in s.model_fields_set:  # they would be ignored
-        raise NnidInputError(
-            "gives fractions beside named experiments: a split names its experiments or cuts "
-            "by fractions, not both",
-            source=source,
-            field="split.fractions",
-        )
     say_missed_fractions(split)
     if report is not None and split.record.get("missed"):
         report.add("split", split.record["missed"])
@@ -957,6 +959,12 @@ def run_train(
     if cfg.detect is not None:
         check_detect_window(cfg.detect.window_s, inputs.log, source)
     model = build_model(cfg.model, inputs, cfg.warmup_s)
+    named = None  # the names the fit will estimate, where the settings give them
+    if cfg.reference:
+        with named_in("model", cfg.model):  # a bad setting they come from, as the fit says it
+            named = model.parameter_names()
+    if named is not None:  # before the fit, which may take hours
+        check_reference(cfg.reference, named, source)
     replay = replay_of(inputs, inputs.log)
     read, said = read_motion([model], inputs.log, replay), None
     if cfg.detect is not None:  # and what the monitor it calibrates reads
@@ -967,7 +975,8 @@ def run_train(
     check_savgol_window(cfg.model, model, split, "model", members_scored=True)
     check_damping_unknowns(cfg.model, inputs, "model")
     caught = fit_model(model, split, progress or silent, "model", cfg.model, replay)
-    check_reference(cfg.reference, list(model.params), source)
+    if cfg.reference and named is None:  # only the fit names them
+        check_reference(cfg.reference, list(model.params), source)
     if hasattr(model, "report_"):
         for step in model.report_.steps:
             inputs.report.add(step.step, "training split: " + step.detail, step.rows_removed)

@@ -45,6 +45,13 @@ def shown(value: Any) -> str:
     return "empty (NaN)" if math.isnan(number) else f"{number:g}"
 
 
+#: the largest random seed (a config's, ``--seed``): 2³² − 1, numpy's legacy generators' and
+#: most tools' range. Seeds are derived from it (NARX's per-epoch generator seed × 100 003 +
+#: epoch; the simulator's seed + i, the loop's seed × 1000 + i): up to this bound each stays far
+#: below torch's limit, 2⁶⁴ (2**64 overflowed torch.Generator.manual_seed, a traceback, and
+#: 2**48 only at a NARX fine-tune, after the one-step fit)
+MAX_SEED = 2**32 - 1
+
 #: the widest hidden layer (a larger one is a typo that fails to allocate): the configs' cap,
 #: and the models' for settings given in Python
 MAX_WIDTH = 100_000
@@ -153,10 +160,12 @@ def refuse_other_file(data: Mapping[str, Any], expected: str, what: str, source:
 
 
 def resolve(base: Path, path: str) -> Path:
-    """A path as given when it exists or is absolute, else relative to ``base`` (the config's
-    folder)."""
+    """A path a file names, relative to ``base`` (that file's folder) unless absolute, as the
+    batch manifest and the reader config read theirs: never the current folder's, where a
+    file of the same name silently won over the one beside the config. (An option's path,
+    ``--data`` or ``--vehicle``, is the user's, relative to the current folder.)"""
     p = Path(path)
-    return p if p.is_absolute() or p.exists() else base / p
+    return p if p.is_absolute() else base / p
 
 
 def read_toml(path: str | Path) -> dict[str, Any]:
@@ -292,6 +301,11 @@ def validated(
             # a check of a whole table (its input the table) that names the key within it at
             # fault (``experiments.2.signals.0.f1`` of a simulate config); a check of one key
             # has named it already
+            loc = tuple(first["loc"])
+            if loc and not _written(loc, data):
+                # the last step is the union member checked (a [data] table whose kind is left
+                # to its default, "vehicle"), no key of the file
+                field = field_path(loc[:-1], data)
             msg, field = inner.message, ".".join(filter(None, [field, inner.field]))
         elif first["type"] == "missing":
             msg = "is required but missing"

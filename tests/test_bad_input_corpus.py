@@ -656,9 +656,10 @@ def _vehicle_cases() -> list[Case]:
 
 # -- configs ---------------------------------------------------------------------------------
 TRAIN_TEXT = (REPO / "configs" / "fossen_ls.toml").read_text()
-#: one sequence step (its run, its unknown) put before TRAIN_TEXT's zoh_midpoint line
-_STEP = 'sequence = [{ experiments = ["%s"], dofs = ["w"], unknowns = ["%s"] }]\n'
-_STEP += "zoh_midpoint = true"
+#: one sequence step (its run, its unknown) in place of TRAIN_TEXT's unknowns (a sequence's
+#: steps name theirs: the model's beside it are refused)
+_UNKNOWNS = 'unknowns = ["added_mass", "damping"]'
+_STEP = 'sequence = [{ experiments = ["%s"], dofs = ["w"], unknowns = ["%s"] }]'
 CONFIG_CASES = [
     ("train", "unknown key", "warmup", ("warmup_s = 2.0", "warmup = 2.0")),
     ("train", "nan setting", "warmup_s", ("warmup_s = 2.0", "warmup_s = nan")),
@@ -762,13 +763,13 @@ CONFIG_CASES = [
         "train",
         "sequence step on a missing run",
         "model.sequence",
-        ("zoh_midpoint = true", _STEP % ("dive9", "Z_wdot")),
+        (_UNKNOWNS, _STEP % ("dive9", "Z_wdot")),
     ),
     (
         "train",
         "sequence step's unknowns a shortcut",
         "model.sequence",
-        ("zoh_midpoint = true", _STEP % ("run0", "added_mass")),
+        (_UNKNOWNS, _STEP % ("run0", "added_mass")),
     ),
     ("loop", "unknown dof", "dofs", None),
     ("loop", "held-out run not in log", "validation", None),
@@ -1682,15 +1683,17 @@ def test_sizes_beyond_any_log_are_refused_at_the_config(tmp_path, config, old, n
         # a value given twice was merged into one setting ("Best of 1 settings"), its seeds'
         # scores counted twice in the mean
         pytest.param(
-            'grid = { "model.hidden" = [[4], [4]] }', "sweep.grid", "model.hidden lists [4] twice",
+            'grid = { "model.hidden" = [[4], [4]] }', 'sweep.grid."model.hidden"',
+            "model.hidden lists [4] twice",
             id="grid value twice",
         ),
         pytest.param(
-            'grid = { "warmup_s" = [1.0, 1.0] }', "sweep.grid", "warmup_s lists 1.0 twice",
+            'grid = { "warmup_s" = [1.0, 1.0] }', 'sweep.grid."warmup_s"',
+            "warmup_s lists 1.0 twice",
             id="grid number twice",
         ),
         pytest.param(
-            'random = { "warmup_s" = [1.0, 2.0, 1.0] }\nsamples = 2', "sweep.random",
+            'random = { "warmup_s" = [1.0, 2.0, 1.0] }\nsamples = 2', 'sweep.random."warmup_s"',
             "warmup_s lists 1.0 twice", id="random choice twice",
         ),
         # the seeds were used as warm-up lengths: 0 s, 1 s, 2 s

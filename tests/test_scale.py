@@ -1348,8 +1348,9 @@ def test_workers_set_a_local_ray_and_are_refused_with_a_cluster(monkeypatch) -> 
 
 def test_sweep_trials_name_their_files_absolute(sweep_inputs, tmp_path, monkeypatch) -> None:
     """A Tune trial runs in its own trial folder: a relative --vehicle or --columns named
-    another file there, or none. Each is absolute (a --vehicle not here is the config's
-    folder's, as `nnid train` reads it); a preset stays a name."""
+    another file there, or none. Each is absolute (an option's path is the current folder's,
+    as `nnid train` reads it, even where the config's folder has a file of that name); a
+    preset stays a name."""
     from nnid.scale.sweep import trials
 
     sweep, data = sweep_inputs
@@ -1364,8 +1365,9 @@ def test_sweep_trials_name_their_files_absolute(sweep_inputs, tmp_path, monkeypa
     assert {(t.vehicle, t.columns) for t in tasks} == {
         (str(tmp_path / "here.toml"), str(tmp_path / "map.toml"))
     }
+    shutil.copy(MINIROV, tmp_path / "beside.toml")
     _, tasks = trials(config, str(data), "beside.toml")
-    assert {t.vehicle for t in tasks} == {str(tmp_path / "cfg" / "beside.toml")}
+    assert {t.vehicle for t in tasks} == {str(tmp_path / "beside.toml")}
     _, tasks = trials(config, str(data), "seamor")
     assert {t.vehicle for t in tasks} == {"seamor"}
 

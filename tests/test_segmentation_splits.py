@@ -205,8 +205,10 @@ def test_an_empty_list_of_experiments_in_a_split_means_what_it_says(tmp_path):
     assert done.exit_code == 2 and "split.train" in done.output, done.output
     split = make_split(log, SplitSpec(by="experiment", validation=["run1"], test=[]))
     assert set(split.validation["experiment"]) == {"run1"} and len(split.test) == 0
+    # refused as the config is read, before any log is (a SplitSpec's own check)
+    config.write_text('kind = "train"\n[split]\nby = "block"\ntest = []\n[model]\nkind = "sindy"\n')
     with pytest.raises(NnidInputError, match='only by = "experiment" uses') as err:
-        make_split(log, SplitSpec(by="block", test=[]))
+        load_config(config, TrainConfig)
     assert err.value.field == "split.test"
 
 

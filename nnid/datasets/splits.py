@@ -36,6 +36,27 @@ class Split:
         return getattr(self, part)
 
 
+def check_fractions(fractions) -> None:
+    """Three non-negative fractions summing to 1, else the error naming ``fractions``."""
+    if len(fractions) != 3 or min(fractions) < 0 or not np.isclose(sum(fractions), 1.0):
+        raise NnidInputError(
+            "split fractions must be three non-negative numbers summing to 1", field="fractions"
+        )
+
+
+def check_disjoint(chosen: dict[str, list[str]]) -> None:
+    """No experiment named for two parts, else the error naming the later part."""
+    for k, p in enumerate(PARTS):  # a run on both sides scores a fit on its own data
+        for q in PARTS[k + 1 :]:
+            both = [n for n in chosen.get(q) or [] if n in (chosen.get(p) or [])]
+            if both:
+                raise NnidInputError(
+                    f"experiments {both} are named for both {p} and {q}: a part "
+                    "scored on runs the fit has seen is no held-out score",
+                    field=q,
+                )
+
+
 def split_log(
     log: pd.DataFrame,
     by: str = "block",
@@ -46,10 +67,7 @@ def split_log(
     test blocks. ``by="experiment"``: whole experiments, either as ``assignment``
     (``{"train": [...], "validation": [...], "test": [...]}``) or in order of appearance until
     each part holds its fraction of the samples."""
-    if len(fractions) != 3 or min(fractions) < 0 or not np.isclose(sum(fractions), 1.0):
-        raise NnidInputError(
-            "split fractions must be three non-negative numbers summing to 1", field="fractions"
-        )
+    check_fractions(fractions)
     parts: dict[str, list[pd.DataFrame]] = {p: [] for p in PARTS}
     record: dict = {"by": by, "fractions": list(fractions), "parts": {p: [] for p in PARTS}}
     # each run's rows by position: by label, a log joined by pd.concat (labels repeated) put
@@ -83,15 +101,7 @@ def split_log(
                     f"experiments {unknown} are not in the log", field="assignment"
                 )
             chosen = {p: assignment.get(p, []) for p in PARTS}
-            for k, p in enumerate(PARTS):  # a run on both sides scores a fit on its own data
-                for q in PARTS[k + 1 :]:
-                    both = [n for n in chosen[q] if n in chosen[p]]
-                    if both:
-                        raise NnidInputError(
-                            f"experiments {both} are named for both {p} and {q}: a part "
-                            "scored on runs the fit has seen is no held-out score",
-                            field=q,
-                        )
+            check_disjoint(chosen)
             _check_replays(log, chosen)
         else:
             if len(names) < 2:

@@ -387,6 +387,12 @@ class NnidModel(BaseEstimator, ABC):
     def _n_params(self) -> int:
         return len(self._params())
 
+    def parameter_names(self) -> list[str] | None:
+        """The names of the parameters a fit will estimate, where the settings alone give them
+        (before any fit: a train config's ``[reference]`` is checked against them then, not
+        after hours of fitting), else None: only the fit tells."""
+        return None
+
     def trainer_name(self) -> str | None:
         """What fitted the model: the kind of its trainer (``trainer_`` after a fit, as saved
         for a loaded model; else the ``trainer`` setting)."""

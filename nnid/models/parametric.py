@@ -1573,6 +1573,10 @@ class ParametricModel(FossenPlant):
                 raise
             raise NnidInputError(f"a step's unknowns: {exc.message}", field="sequence") from None
 
+    def parameter_names(self) -> list[str]:
+        """The regression's parameters, as :meth:`_settings` gives them (the estimate's names)."""
+        return list(self._settings()[2].names)
+
     def _fit(self, log: pd.DataFrame, validation, progress: Progress) -> None:
         trainer = self._trainer()
         dofs, unknowns, self.structure_ = self._settings()

@@ -76,6 +76,15 @@ def trials(
             try:
                 load_config(config, TrainConfig, overrides)  # refused here, before any fit
             except NnidInputError as exc:
+                searched = _searched_at(exc.field, setting)
+                if searched is not None:  # a value the sweep tries, not one the config wrote
+                    table = "grid" if searched in spec.grid else "random"
+                    at = "" if exc.field == searched else f" (at {exc.field})"
+                    raise NnidInputError(
+                        f"the value {setting[searched]!r} it tries{at}: {exc.message}",
+                        source=str(config),
+                        field=f'sweep.{table}."{searched}"',
+                    ) from None
                 if seed is None or exc.field != spec.seed_option or spec.seed_option in setting:
                     raise
                 # the seed option is the sweep's (model.seed by default), not a key written
@@ -102,16 +111,24 @@ def trials(
     return spec, tasks
 
 
+def _searched_at(field: str | None, setting: dict[str, Any]) -> str | None:
+    """The option path of ``setting`` an error's ``field`` is at (the path, or a key within
+    its value), or None."""
+    if not field:
+        return None
+    return next((k for k in setting if field == k or field.startswith(k + ".")), None)
+
+
 def _vehicle_path(vehicle: str | None, config: Path) -> str | None:
     """``--vehicle`` as the trial reads it, made absolute: a preset's name as it is, else the
-    file (as given where it exists, else relative to the config's folder, as ``nnid train``
-    reads it: :func:`nnid.pipeline.vehicle_source`)."""
+    file (relative to the current folder, as ``nnid train`` reads it:
+    :func:`nnid.pipeline.vehicle_source`)."""
     from nnid.pipeline import vehicle_source
     from nnid.vehicle import PRESETS
 
     if not vehicle or vehicle in PRESETS:
         return vehicle
-    return str(Path(vehicle_source(vehicle, Path(config))).resolve())
+    return str(Path(vehicle_source(vehicle, Path(config), "--vehicle")).resolve())
 
 
 @dataclass
