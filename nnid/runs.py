@@ -164,9 +164,10 @@ def train_run(
     from nnid.models.base import MODEL_FILE, TENSOR_FILE
 
     with staged(out_dir, supersedes=(MODEL_FILE, TENSOR_FILE, MONITOR_FILE)) as stage:
-        result.model.save(stage)
-        if result.monitor is not None:
+        if result.monitor is not None:  # saves its model, then the calibration bound to it
             result.monitor.save(stage)
+        else:
+            result.model.save(stage)
         write_json(stage / "metrics.json", result.metrics)
         write_text(stage / "report.md", train_markdown(result.metrics))
         write_text(stage / "report.html", train_html(result.metrics, result.figures))

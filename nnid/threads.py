@@ -1,9 +1,10 @@
 """Thread counts (torch, numba, BLAS) for work made of many small operations, each set for a
 block and restored after it: the library never changes process-wide state.
 
-The counts are the process's (numba's, the calling thread's), so a block is not thread-safe:
-two threads running such blocks at once restore each other's counts wrongly. Fits run in
-separate processes (:mod:`nnid.scale`), not threads."""
+Torch's and BLAS's counts are the process's, so those blocks are not thread-safe: two
+threads running them at once restore each other's counts wrongly. Numba keeps its count per
+calling thread, but its OpenMP layer resets torch's (:func:`numba_threads`), so its block is
+not thread-safe either. Fits run in separate processes (:mod:`nnid.scale`), not threads."""
 
 from __future__ import annotations
 

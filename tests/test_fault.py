@@ -31,17 +31,15 @@ from nnid.datasets.preprocess import savgol_window, true_runs
 from nnid.errors import NnidInputError
 from nnid.fault import kernel
 from nnid.fault.detect import (
-    DISMISSED_SHORT,
-    ENDED_SHORT,
+    DISMISSED_HOW,
+    ENDED_HOW,
     ISOLATED_HOW,
-    ISOLATED_SHORT,
     NOT_JUDGED,
     ON_HELD,
-    ON_PART,
-    RESIZED_SHORT,
+    RESIZED_HOW,
     TOO_FEW_FINITE,
     TOO_FEW_ROWS,
-    UNEXPLAINED_SHORT,
+    UNEXPLAINED_HOW,
     Rewatch,
     alarm_row,
     cut_short,
@@ -77,6 +75,12 @@ from nnid.vehicle import load_vehicle
 REPO = Path(__file__).resolve().parents[1]
 OCTO = REPO / "configs" / "vehicles" / "octorov_sim.toml"
 FAULT_T = 20.0
+
+
+def _end_clause(how: str, seconds: float) -> str:
+    """The clause ending the meaning of an alarm judged (``how``) on the ``seconds`` of its
+    10-s window before the log's end, as :func:`part_clause` builds it."""
+    return part_clause({"by": "end", "seconds": seconds, "window_s": 10.0}, how)
 
 
 @pytest.fixture(scope="module")
@@ -1263,7 +1267,7 @@ def test_an_alarm_isolated_on_a_window_the_log_cuts_short_says_so(vehicle, monit
         assert alarm["cut_short"]["samples"] == held.size
         assert alarm["cut_short"]["seconds"] == pytest.approx(held.iloc[-1] - alarm["t"])
         assert alarm["cut_short"]["window_s"] == 10.0
-        assert f"{ISOLATED_SHORT} ({held.iloc[-1] - alarm['t']:.2f} s of 10 s)" in alarm["meaning"]
+        assert _end_clause(ISOLATED_HOW, held.iloc[-1] - alarm["t"]) in alarm["meaning"]
 
 
 def test_a_grid_ending_one_window_after_the_alarm_is_not_cut_short():
@@ -1300,17 +1304,17 @@ def test_an_alarm_not_isolated_on_enough_rows_of_a_cut_window_is_unexplained(
         assert alarm["cut_short"]["samples"] == held.size >= LEAST_ROWS
         seconds = held.iloc[-1] - alarm["t"]
         assert alarm["cut_short"]["seconds"] == pytest.approx(seconds)
-        assert f"{UNEXPLAINED_SHORT} ({seconds:.2f} s of 10 s)" in alarm["meaning"]
+        assert _end_clause(UNEXPLAINED_HOW, seconds) in alarm["meaning"]
 
 
 @pytest.mark.parametrize(
     ("faults", "seconds", "seed", "end", "hypothesis", "said"),
     [
         ([Fault("external", FAULT_T, force=SNAG, end=40.0)], 45, 3001, 42.0, "change_ended",
-         ENDED_SHORT),
+         ENDED_HOW),
         ([Fault("thruster", FAULT_T, thruster="v2", efficiency=0.0, end=40.0),
           Fault("thruster", 40.0, thruster="v2", efficiency=0.8)], 50, 3002, 44.0,
-         "change_resized", RESIZED_SHORT),
+         "change_resized", RESIZED_HOW),
     ],
 )  # fmt: skip
 def test_an_end_or_a_resize_on_a_window_the_log_cuts_short_says_so(
@@ -1330,7 +1334,7 @@ def test_an_end_or_a_resize_on_a_window_the_log_cuts_short_says_so(
         assert changed["hypothesis"] == hypothesis
         assert changed["cut_short"]["samples"] == held.size
         assert changed["cut_short"]["seconds"] == pytest.approx(seconds_held)
-        assert changed["meaning"].endswith(f"; {said} ({seconds_held:.2f} s of 10 s)")
+        assert changed["meaning"].endswith(f"; {_end_clause(said, seconds_held)}")
 
 
 def test_a_window_with_too_few_finite_rows_is_not_judged_not_unexplained(
@@ -1442,8 +1446,8 @@ def test_an_alarm_whose_window_a_gap_leaves_part_of_says_so(vehicle, monitor, tm
         assert first["cut_short"]["by"] == "gap"
         assert first["cut_short"]["samples"] == held.size
         assert first["cut_short"]["seconds"] == pytest.approx(seconds)
-        clause = ISOLATED_SHORT.replace(ON_PART, ON_HELD)
-        assert f"{clause} ({seconds:.2f} s of 10 s)" in first["meaning"]
+        assert part_clause(first["cut_short"], ISOLATED_HOW) in first["meaning"]
+        assert f"{ISOLATED_HOW} {ON_HELD} ({seconds:.2f} s of 10 s)" in first["meaning"]
 
 
 def test_a_run_resumed_after_anothers_rows_leaves_the_other_run_alone(vehicle, monitor):
@@ -1487,7 +1491,7 @@ def test_a_window_a_dropout_cuts_is_said_cut_by_a_gap_not_by_the_end(vehicle, mo
     pieces = mask_gaps([log.assign(experiment="run")], read)[0]
     first = detect(monitor, pieces).alarms[0]
     assert first["cut_short"]["by"] == "gap" and "the end of" not in first["meaning"]
-    assert ISOLATED_SHORT.replace(ON_PART, ON_HELD) in first["meaning"]
+    assert f"{ISOLATED_HOW} {ON_HELD}" in first["meaning"]
     t = np.arange(40) * 0.05
     data = {"t": t, "experiment": np.repeat([0, 1], 20),
             "experiment_names": np.array(["run#0", "run#1"], dtype=object),
@@ -1573,7 +1577,7 @@ def test_a_dismissal_on_a_window_the_log_cuts_short_says_so(monitor, payload_26,
     seconds_held = held.iloc[-1] - dismissed["t"]
     assert dismissed["cut_short"]["samples"] == held.size
     assert dismissed["cut_short"]["seconds"] == pytest.approx(seconds_held)
-    assert dismissed["why"].endswith(f"; {DISMISSED_SHORT} ({seconds_held:.2f} s of 10 s)")
+    assert dismissed["why"].endswith(f"; {_end_clause(DISMISSED_HOW, seconds_held)}")
     assert [w["reason"] for w in followed.withdrawn] == [dismissed["why"]]
     withdrawn = detect_json(monitor, followed)["withdrawn"]
     assert [w.get("cut_short") for w in withdrawn] == [dismissed["cut_short"]]
@@ -2673,6 +2677,23 @@ def test_a_monitor_beside_another_model_is_refused_and_a_model_save_removes_it(m
     del good["model_fingerprint"]
     (tmp_path / "b" / "monitor.json").write_text(json.dumps(good))
     assert ResidualMonitor.load(tmp_path / "b").sigma_.tolist() == monitor.sigma_.tolist()
+
+
+def test_a_monitor_saves_its_own_model_and_is_bound_to_it(monitor, tmp_path):
+    """save fingerprinted whatever model.json the folder held: another model saved there first
+    (``other.save(d); monitor.save(d)``) got this calibration, and load applied it to that
+    model. The monitor now writes its own model, then itself; and a model given to load with
+    no model.json beside the monitor is said as that, not as another model beside it."""
+    other = copy.deepcopy(monitor.model)
+    other.fit_seconds_ = (other.fit_seconds_ or 0.0) + 1.0
+    other.save(tmp_path / "m")
+    monitor.save(tmp_path / "m")
+    loaded = ResidualMonitor.load(tmp_path / "m")
+    assert loaded.model.fit_seconds_ == monitor.model.fit_seconds_
+    (tmp_path / "m" / "model.json").unlink()
+    with pytest.raises(NnidInputError, match=r"has no model\.json beside it") as err:
+        ResidualMonitor.load(tmp_path / "m", model=monitor.model)
+    assert "another model" not in str(err.value)
 
 
 def test_detect_json_names_the_target_rate_apart_from_the_measured_one(monitor, vehicle):

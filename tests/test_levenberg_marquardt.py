@@ -21,8 +21,7 @@ from nnid.trainers.levenberg_marquardt import LevenbergMarquardt, add_gram
 
 def _mlp(sizes: list[int], seed: int) -> torch.nn.Sequential:
     """A tanh network of float64 layers drawn from a generator of its own: torch's global one
-    is seeded and drawn by other tests (in an order pytest-xdist's scheduling decides). The
-    weights torch.manual_seed(seed) gave, bit for bit."""
+    is seeded and drawn by other tests (in an order pytest-xdist's scheduling decides)."""
     gen = torch.Generator().manual_seed(seed)
     layers: list[torch.nn.Module] = []
     for a, b in itertools.pairwise(sizes):

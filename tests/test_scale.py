@@ -1531,6 +1531,83 @@ def test_a_ray_started_here_leaves_the_process_as_it_found_it(reached, tmp_path)
                     "breakpoint": None}  # fmt: skip
 
 
+class _InProcessRay:
+    """A stand-in Ray in this process: its init sets what ray.init sets for the whole process
+    (a SIGTERM handler, PYTHONBREAKPOINT), and each task's row comes back as it is sent."""
+
+    class exceptions:
+        RayError = RuntimeError
+
+    def __init__(self) -> None:
+        self.up, self.shutdowns = False, 0
+
+    def is_initialized(self) -> bool:
+        return self.up
+
+    def init(self, **kwargs) -> None:
+        signal.signal(signal.SIGTERM, lambda signum, frame: None)
+        os.environ["PYTHONBREAKPOINT"] = "ray.util.rpdb._driver_set_trace"
+        self.up = True
+
+    def cluster_resources(self) -> dict:
+        return {"CPU": 1.0}
+
+    def remote(self, **options):
+        return lambda function: type("R", (), {"remote": lambda self, task, out: task.id})()
+
+    def wait(self, refs, num_returns=1):
+        return refs[:num_returns], refs[num_returns:]
+
+    def get(self, ref) -> dict:
+        return {"id": ref, "status": "ok"}
+
+    def shutdown(self) -> None:
+        self.up, self.shutdowns = False, self.shutdowns + 1
+
+
+def test_a_ray_run_closed_on_another_thread_still_puts_back_what_it_can(
+    monkeypatch, tmp_path
+) -> None:
+    """A RayEngine.run generator finalised on another thread (the cyclic collector runs on
+    any): signal.signal raised there, from the block's clean-up, and the faulthandler Ray had
+    enabled stayed on. Off the main thread the rest is put back, the SIGTERM handler (which
+    only the main thread may set) left; on the main thread, all of it."""
+    import nnid.scale.engines as engines
+    from nnid.scale.manifest import Task
+
+    ray = _InProcessRay()
+    disabled: list[bool] = []
+    monkeypatch.setattr(engines, "_import_ray", lambda tune=False: ray)
+    monkeypatch.setattr(engines.faulthandler, "is_enabled", lambda: False)  # pytest holds it
+    monkeypatch.setattr(engines.faulthandler, "disable", lambda: disabled.append(True))
+    monkeypatch.delenv("PYTHONBREAKPOINT", raising=False)
+    before = signal.getsignal(signal.SIGTERM)
+    errors: list[BaseException] = []
+
+    def close(run) -> None:
+        try:
+            run.close()
+        except BaseException as exc:  # what the thread met is the finding
+            errors.append(exc)
+
+    try:
+        run = RayEngine("local").run([Task("loop", "a.csv", id="a-1")], tmp_path)
+        assert next(run)["status"] == "ok"
+        elsewhere = threading.Thread(target=close, args=(run,))
+        elsewhere.start()
+        elsewhere.join()
+        assert errors == [] and ray.shutdowns == 1 and disabled == [True]
+        assert "PYTHONBREAKPOINT" not in os.environ
+        assert signal.getsignal(signal.SIGTERM) is not before  # Ray's: not settable there
+        signal.signal(signal.SIGTERM, before)
+        run = RayEngine("local").run([Task("loop", "a.csv", id="a-1")], tmp_path)
+        next(run)
+        run.close()
+        assert signal.getsignal(signal.SIGTERM) is before and disabled == [True, True]
+    finally:
+        signal.signal(signal.SIGTERM, before)
+
+
 #: a fresh process: the thread counts torch and numba have inside a task (its fit replaced)
 _TASK_THREADS = """
 import sys
@@ -1550,12 +1627,18 @@ def test_a_task_in_a_fresh_process_runs_on_one_torch_thread(tmp_path) -> None:
     """A task pins torch, then numba, to one thread; numba's first call in a process starts
     its OpenMP layer, which resets the count torch reads to numba's (2 here), and numba's
     pinning read torch's count after that and put the reset one back: the task ran torch on
-    every numba thread. One each."""
+    every numba thread. One each. Under numba's OpenMP layer, which shares torch's count: under
+    its tbb or workqueue layers the old order passed as well."""
     import subprocess
     import sys
 
+    try:
+        from numba.np.ufunc import omppool  # noqa: F401 - its OpenMP layer loads here
+    except ImportError as exc:
+        pytest.skip(f"numba's OpenMP threading layer is not available here ({exc})")
     env = {k: v for k, v in os.environ.items() if k != "OMP_NUM_THREADS"}
     env["NUMBA_NUM_THREADS"] = "2"
+    env["NUMBA_THREADING_LAYER"] = "omp"
     env["PYTHONPATH"] = os.pathsep.join([str(Path(__file__).parents[1]), env.get("PYTHONPATH", "")])
     args = [sys.executable, "-c", _TASK_THREADS, str(tmp_path)]
     done = subprocess.run(args, env=env, capture_output=True, text=True, timeout=120)

@@ -310,3 +310,24 @@ def test_correlated_innovations_widen_the_standard_errors_and_are_said(seamor):
         raw = UnscentedKalman(**kw).fit(structure, data)
     np.testing.assert_allclose(est.cov, raw.cov * tau, rtol=1e-10)
     np.testing.assert_allclose(filt.history_["theta_std"][-1], est.stderr, rtol=1e-12)
+
+
+def test_a_standard_error_the_widening_takes_past_half_the_prior_is_withheld(seamor):
+    """A prior σ far tighter than the data move: the prior-led check judged the filter's P
+    before its scaling by the innovations' size (3.7) and correlation time (70 samples), so
+    X_udot and X:u*abs(u) at 0.16 and 0.21 of their prior σ passed as measured, then were
+    reported at 2.6 and 3.4 times it. Judged on the covariance as reported, no standard error
+    is at or above half its prior σ."""
+    from nnid.trainers.least_squares import ExcitationWarning
+
+    structure = ParametricFossen(seamor, NAMES[:2], dofs=("u",))
+    n = 400
+    data = _data(seamor, _surge_yaw(n), EXACT)
+    rng = np.random.default_rng(0)
+    data["nu"][:, 0] += 0.005 * np.convolve(rng.normal(size=n + 9), np.ones(10) / np.sqrt(10),
+                                            "valid")  # fmt: skip
+    std = np.array([1.0, 1.0])
+    kw = {"process_noise": 1e-4, "theta0": 0.5 * TRUTH[:2], "measurement_noise": 0.005}
+    with pytest.warns(ExcitationWarning, match="did not inform X_udot, X:u"):
+        est = UnscentedKalman(**kw, theta0_std=std).fit(structure, data)
+    assert not np.any(est.stderr >= 0.5 * std), est.stderr

@@ -373,11 +373,10 @@ TOO_FEW_ROWS = "not judged: the isolation window holds too few rows"
 #: how the ``meaning`` of a record whose window holds rows enough, but too few of them with a
 #: finite residual (a sensor dropout, the run's last rows not judged), starts (:func:`not_judged`)
 TOO_FEW_FINITE = "not judged: too few rows with a finite residual in the isolation window"
-#: what the clause that ends the ``meaning`` of an alarm judged on a window the log's end
-#: cut short says after how it was read (:func:`part_clause`; the seconds follow)
-ON_PART = before_end(LOG_END)
-#: what that clause says in place of :data:`ON_PART` where samples missing inside the run (a
-#: gap in the log) left the window's rows over part of it (:func:`on_part`, ``by`` "gap")
+#: what the clause that ends the ``meaning`` of an alarm judged on part of its window says
+#: after how it was read (:func:`part_clause`; the seconds follow), in place of
+#: :func:`before_end`'s words where samples missing inside the run (a gap in the log) left the
+#: window's rows over part of it (:func:`on_part`, ``by`` "gap")
 ON_HELD = "on the part of its window that holds samples, the rest missing"
 #: how that clause starts for a change isolated there (:func:`part_clause`)
 ISOLATED_HOW = "isolated"
@@ -389,12 +388,6 @@ ENDED_HOW = "the end measured"
 RESIZED_HOW = "the new size measured"
 #: ending its ``why``, for an alarm dismissed there (:func:`dismissed_why`)
 DISMISSED_HOW = "judged"
-#: the clauses where the end of the log cut the window short (the seconds follow)
-ISOLATED_SHORT = f"{ISOLATED_HOW} {ON_PART}"
-UNEXPLAINED_SHORT = f"{UNEXPLAINED_HOW} {ON_PART}"
-ENDED_SHORT = f"{ENDED_HOW} {ON_PART}"
-RESIZED_SHORT = f"{RESIZED_HOW} {ON_PART}"
-DISMISSED_SHORT = f"{DISMISSED_HOW} {ON_PART}"
 
 
 def not_judged(record: dict, samples: int, finite: int, window_s: float) -> None:
@@ -416,7 +409,7 @@ def not_judged(record: dict, samples: int, finite: int, window_s: float) -> None
     end", and so was a window that a 10-s gap in the log left 5 rows. No hypothesis was
     fitted: ``confidence`` and ``explained`` are None, not measured (the diagnosis's 0 read
     "confidence 0.00, explaining 0 %"). On more rows isolation judges it, and an alarm it
-    does not isolate is an unexplained change (:data:`UNEXPLAINED_SHORT`)."""
+    does not isolate is an unexplained change (:func:`part_clause`, :data:`UNEXPLAINED_HOW`)."""
     record["confidence"] = record["explained"] = None
     short = record.get("cut_short")
     by = None if short is None else short["by"]

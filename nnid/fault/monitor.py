@@ -500,17 +500,13 @@ class ResidualMonitor(BaseEstimator):
 
     # -- persistence ----------------------------------------------------------------------------
     def save(self, folder: str | Path) -> Path:
-        """``monitor.json`` beside the saved model (strict JSON, no code): the model is saved
-        into ``folder`` first (``model.save(folder)``, which removes an earlier monitor.json),
-        and the monitor records which (:func:`~nnid.models.base.model_fingerprint`)."""
-        folder = Path(folder)
+        """The monitor's model (``model.save(folder)``, which removes an earlier monitor.json),
+        then ``monitor.json`` beside it (strict JSON, no code), which records the model it
+        wrote (:func:`~nnid.models.base.model_fingerprint`). Fingerprinting whatever model.json
+        the folder held bound this calibration to another model saved there."""
+        check_is_fitted(self, "thresholds_", msg=UNCALIBRATED)
+        folder = self.model.save(folder)
         path = folder / MONITOR_FILE
-        if not (folder / MODEL_FILE).is_file():
-            raise NnidInputError(
-                f"has no {MODEL_FILE}: save the monitor's model into it first "
-                "(monitor.model.save(dir)), then the monitor",
-                source=str(folder),
-            )
         write_json(
             path,
             {
@@ -535,7 +531,9 @@ class ResidualMonitor(BaseEstimator):
 
     @classmethod
     def load(cls, folder: str | Path, model=None) -> ResidualMonitor:
-        """The monitor saved in ``folder`` with its model (loaded from there unless given)."""
+        """The monitor saved in ``folder`` with its model (loaded from there unless given: a
+        given ``model`` is taken to be the one saved there, whose model.json is what the
+        calibration is checked against)."""
         folder = Path(folder)
         path = folder / MONITOR_FILE
         if not path.is_file():
@@ -552,7 +550,15 @@ class ResidualMonitor(BaseEstimator):
         # the model's own errors name model.json: loaded outside the monitor's error wrapping
         model = model if model is not None else load_model(folder)
         # a monitor saved before it recorded its model's (no key) is believed, as it was
-        held = model_fingerprint(folder) if (folder / MODEL_FILE).is_file() else None
+        beside = (folder / MODEL_FILE).is_file()
+        if FOR_MODEL in state and not beside:  # only a given model gets this far without one
+            raise NnidInputError(
+                f"has no {MODEL_FILE} beside it, and the calibration is bound to the model saved "
+                f"with it (monitor.save writes both): save the monitor with its model, or load "
+                "the monitor from the folder it was saved to",
+                source=str(path),
+            )
+        held = model_fingerprint(folder) if beside else None
         if FOR_MODEL in state and state[FOR_MODEL] != held:
             raise NnidInputError(
                 f"was calibrated for another model than the {MODEL_FILE} beside it (the model "

@@ -340,7 +340,8 @@ def ray_session(
     shut down after the block, and what ``ray.init`` changed for the whole process is put
     back, which ``ray.shutdown`` does not: its SIGTERM handler (``sys.exit(15)``, which
     replaced a user's handler and the CLI's exit 143 for good), ``PYTHONBREAKPOINT`` (a
-    later ``breakpoint()`` went to Ray's debugger) and the faulthandler it enables."""
+    later ``breakpoint()`` went to Ray's debugger) and the faulthandler it enables; the
+    handler only where the block ends on the main thread, the only one that may set it."""
     if ray.is_initialized():
         yield
         return
@@ -356,7 +357,11 @@ def ray_session(
             finally:
                 ray.shutdown()
     finally:
-        if sigterm is not None:  # None: a handler set outside Python, which cannot be set back
+        # None: a handler set outside Python, which cannot be set back. A generator holding
+        # the block may be finalised on another thread (the cyclic collector runs on any),
+        # where signal.signal raises and left the faulthandler on: Ray's handler stays then
+        on_main = threading.current_thread() is threading.main_thread()
+        if sigterm is not None and on_main:
             signal.signal(signal.SIGTERM, sigterm)
         if not faults:
             faulthandler.disable()

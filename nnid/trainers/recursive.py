@@ -241,26 +241,29 @@ def window_covariance(
     return void_undetermined(cov, list(reg.names), report), fit, report
 
 
-def _warn_memory_excitation(report: ExcitationReport, never: list[str], window: int) -> None:
-    """Say which parameters the memory's excitation check left without a standard error, and
-    what became of the values of its unexcited ones: those earlier samples excited are said
-    remembered by the report's own words (:meth:`ExcitationReport.with_remembered`). Only an
-    unexcited parameter can have never left theta0: the note on it would misdescribe a
-    warning about collinear ones."""
+def _warn_memory_excitation(
+    report: ExcitationReport, never: list[str], window: int, consequence: str
+) -> None:
+    """Say which parameters the memory's excitation check flagged and ``consequence``, what
+    that costs them (RLS: no standard error; the gradient estimator, which gives none: values
+    theta0's along what was not excited), and what became of the values of its unexcited
+    ones: those earlier samples excited are said remembered by the report's own words
+    (:meth:`ExcitationReport.with_remembered`). Only an unexcited parameter can have never
+    left theta0: the note on it would misdescribe a warning about collinear ones."""
     if not report.warnings:
         return
     notes = []
     if never:
         one = len(never) == 1
         notes.append(
-            f"nor the value of {', '.join(never)}: no sample of the run excited "
+            f"the value of {', '.join(never)} is not given: no sample of the run excited "
             + ("it, and it" if one else "them, and they")
             + " never left theta0"
         )
     warnings.warn(
         f"over the estimator's memory (the last {window} samples): "
         + "; ".join(report.warnings)
-        + ": their standard errors are not given"
+        + f": {consequence}"
         + (f" ({'; '.join(notes)})" if notes else ""),
         ExcitationWarning,
         stacklevel=3,
@@ -410,7 +413,9 @@ class RecursiveLeastSquares(BaseEstimator):
         report = report.with_remembered(
             [nm for nm in report.unexcited if nm not in never], collinear=run.collinear
         )
-        _warn_memory_excitation(report, never, reg.n_samples - first)
+        _warn_memory_excitation(
+            report, never, reg.n_samples - first, "their standard errors are not given"
+        )
         # and not in its path either: theta0 held there is no estimate at any sample
         theta[np.isin(reg.names, never)] = np.nan
         history[:, np.isin(reg.names, never)] = np.nan
@@ -542,7 +547,13 @@ class GradientEstimator(BaseEstimator):
         judged = np.zeros(n_par) if diverged else theta
         excitation = _memory_excitation(reg, judged, 0)[0]
         never = excitation.unexcited
-        _warn_memory_excitation(excitation, never, reg.n_samples)
+        # it gives no standard errors: what the check costs its values is said instead
+        _warn_memory_excitation(
+            excitation,
+            never,
+            reg.n_samples,
+            "along what the run did not excite, their values are theta0's, not the data's",
+        )
         theta[np.isin(reg.names, never)] = np.nan
         history[:, np.isin(reg.names, never)] = np.nan
         if diverged:
