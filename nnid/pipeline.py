@@ -1306,13 +1306,14 @@ def run_compare(
     report(len(cfg.models), len(cfg.models), "scoring done")
     ranking = rank(rows, held_name)
     shared = ranked_columns(rows, held_name)
+    by_run = run_columns(rows, held_name, shared)
     for row in rows:
         row["ranked_nrmse"] = {
             mode: ranked_score(row, held_name, f"{mode}_nrmse", shared)
             for mode in ("free_run", "k_step", "one_step")
         }
-        # each held-out run's free run over the same outputs: the spread the verdict reads
-        row["ranked_free_run_per_experiment"] = ranked_runs(row, held_name, shared)
+        # each held-out run's free run over its shared outputs: the spread the verdict reads
+        row["ranked_free_run_per_experiment"] = ranked_runs(row, held_name, by_run)
     comparison = {
         "vehicle": getattr(inputs.vehicle, "name", None),
         "models": rows,
@@ -1323,6 +1324,8 @@ def run_compare(
         "ranking": ranking,
         # the outputs the ranking's scores average (ranked_nrmse); none shared: not ranked
         "ranked_on": shared,
+        # each held-out run's of them (a run exciting u alone is compared on u)
+        "ranked_on_per_experiment": by_run,
         "train": [e["experiment"] for e in split.record["parts"]["train"]],
         "validation": [e["experiment"] for e in split.record["parts"]["validation"]],
         "test": [e["experiment"] for e in split.record["parts"]["test"]],
@@ -1421,11 +1424,25 @@ def rank(rows: list[dict], part: str) -> list[str]:
     return [r["name"] for r in sorted(rows, key=key)]
 
 
-def ranked_runs(row: dict, part: str, columns: list[str]) -> dict[str, float | None]:
+def run_columns(rows: list[dict], part: str, columns: list[str]) -> dict[str, list[str]]:
+    """Each held-out run's outputs the models are compared on: those of ``columns``
+    (:func:`ranked_columns`) that every model scored in that run, the same for all. A run
+    that does not excite every ranked output (Weiss's surge and sway runs, each moving one
+    of u and v) is compared on those it does: over all of them it had no score, and its
+    lead counted for nothing. Empty where the held-out data are one run."""
+    scored: dict[str, list[set]] = {}
+    for row in rows:
+        for run, vals in (row.get(part, {}).get("free_run_nrmse_per_experiment") or {}).items():
+            scored.setdefault(run, []).append(set(vals) - {"total"})
+    return {run: [c for c in columns if all(c in s for s in sets)] for run, sets in scored.items()}
+
+
+def ranked_runs(row: dict, part: str, by_run: dict[str, list[str]]) -> dict[str, float | None]:
     """Each held-out run's free-run NRMSE of a model scored on its own
-    (``free_run_nrmse_per_experiment``), over ``columns`` as :func:`ranked_score` takes the
-    pooled one: None where the model diverged in that run or a column was not scored in it.
-    Empty where the held-out data are one run."""
+    (``free_run_nrmse_per_experiment``), over the run's outputs of ``by_run``
+    (:func:`run_columns`) as :func:`ranked_score` takes the pooled one: None where the
+    model diverged in that run, or the run has no output every model scored. Empty where
+    the held-out data are one run."""
     held = row.get(part, {})
     left = held.get("diverged_per_experiment") or {}
     out = {}
@@ -1435,17 +1452,26 @@ def ranked_runs(row: dict, part: str, columns: list[str]) -> dict[str, float | N
             "free_run_nrmse": vals,
             diverged_key("free_run"): left.get(run, {}),
         }
-        out[run] = ranked_score({part: own}, part, "free_run_nrmse", columns)
+        out[run] = ranked_score({part: own}, part, "free_run_nrmse", by_run.get(run, []))
     return out
+
+
+#: the fewest held-out runs on which the count of runs a model is lower on decides the
+#: verdict alone (:func:`verdict`): on fewer, two printed scores that read the same do too
+RUNS_DECIDE = 3
 
 
 def verdict(rows: list[dict], ranking: list[str], part: str) -> dict | None:
     """Whether the data tell the first two trained models with a measured free run apart.
-    They are *indistinguishable* when their free-run NRMSEs print the same (3 significant
-    figures, as the ranking shows them), or when the held-out data are several runs and the
-    first is lower than the second on fewer than two thirds of the runs both are measured on
-    (``lower_on_runs`` of ``runs``): a pooled score a hair lower is no win when the other
-    model does better on as many runs. None where there are not two such models."""
+    With :data:`RUNS_DECIDE` or more held-out runs both are measured on, the runs decide: the
+    first is named where it is lower than the second on at least two thirds of them
+    (``lower_on_runs`` of ``runs``), else the two are *indistinguishable*, whatever the
+    pooled scores (a pooled 0.2131 against 0.2134 is no tie when the first is lower on 10 of
+    10 runs, and a pooled lead a hair wide is no win when the other model does better on as
+    many runs). On fewer runs they are indistinguishable when their free-run NRMSEs print the
+    same (3 significant figures, as the ranking shows them), or, on two runs, when the first
+    is not lower on both. Each run is scored over its own outputs (:func:`run_columns`).
+    None where there are not two such models."""
     columns = ranked_columns(rows, part)
     by_name = {r["name"]: r for r in rows}
     measured = [
@@ -1459,7 +1485,8 @@ def verdict(rows: list[dict], ranking: list[str], part: str) -> dict | None:
     first, second = (by_name[n] for n in measured[:2])
     a = ranked_score(first, part, "free_run_nrmse", columns)
     b = ranked_score(second, part, "free_run_nrmse", columns)
-    runs_a, runs_b = ranked_runs(first, part, columns), ranked_runs(second, part, columns)
+    by_run = run_columns(rows, part, columns)
+    runs_a, runs_b = ranked_runs(first, part, by_run), ranked_runs(second, part, by_run)
     both = [r for r in runs_a if runs_a[r] is not None and runs_b.get(r) is not None]
     lower = sum(runs_a[r] < runs_b[r] for r in both)
     same = number(a, 3) == number(b, 3)
@@ -1472,7 +1499,7 @@ def verdict(rows: list[dict], ranking: list[str], part: str) -> dict | None:
         "runs": len(both),
         "lower_on_runs": lower,
         "same_printed": same,
-        "indistinguishable": same or split,
+        "indistinguishable": split if len(both) >= RUNS_DECIDE else same or split,
     }
 
 

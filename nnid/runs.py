@@ -223,19 +223,41 @@ def train_run(
 # -- compare -------------------------------------------------------------------------------------
 
 
-def best_model(comparison: dict) -> str | None:
-    """The model a batch table names best, as the summary names it, or None: models that
-    share no output are not ranked; a ranking on k-step or one-step scores (every free run
-    diverged) or of an untrained start names none; nor does one where no model has skill
-    (free run above 1: the summary said so while the table named a best) or where the data
-    do not tell the first from the second (:func:`nnid.pipeline.verdict`)."""
+#: why a comparison names no best model (:func:`no_best_why`), as the batch table says it
+NOT_RANKED = "not ranked: no output in common"
+UNTRAINED = "training kept its start"
+NO_FREE_RUN = "no free run measured"
+NO_SKILL = "no skill (free run above 1)"
+INDISTINGUISHABLE = "first two indistinguishable"
+
+
+def no_best_why(comparison: dict) -> str | None:
+    """Why the batch table names no best model, as the summary says it, or None where it
+    names one: models that share no output are not ranked; a ranking of an untrained start,
+    or on k-step or one-step scores (every free run diverged or was not scored), names none;
+    nor does one where no model has skill (free run above 1: the summary said so while the
+    table named a best) or where the data do not tell the first from the second
+    (:func:`nnid.pipeline.verdict`). Four reasons read "-" alike in the table."""
     ranking = comparison.get("ranking", [])
-    top = next((r for r in comparison["models"] if ranking and r["name"] == ranking[0]), {})
+    if not ranking or not comparison.get("ranked_on"):
+        return NOT_RANKED
+    top = next((r for r in comparison["models"] if r["name"] == ranking[0]), {})
     free = (top.get("ranked_nrmse") or {}).get("free_run")
-    trained = not top.get("training_diverged")
-    skill = free is not None and free <= 1.0
-    told = (comparison.get("verdict") or {}).get("indistinguishable", False)
-    return ranking[0] if skill and trained and not told and comparison.get("ranked_on") else None
+    if top.get("training_diverged"):
+        return UNTRAINED
+    if free is None:
+        return NO_FREE_RUN
+    if free > 1.0:
+        return NO_SKILL
+    if (comparison.get("verdict") or {}).get("indistinguishable", False):
+        return INDISTINGUISHABLE
+    return None
+
+
+def best_model(comparison: dict) -> str | None:
+    """The model a batch table names best, as the summary names it, or None
+    (:func:`no_best_why` says why)."""
+    return None if no_best_why(comparison) else comparison["ranking"][0]
 
 
 def compare_run(
@@ -271,6 +293,7 @@ def compare_run(
     untrained = [r["name"] for r in comparison["models"] if r.get("training_diverged")]
     headline: dict[str, Any] = {
         "best": best,
+        "no_best": no_best_why(comparison),  # the four reasons read alike as "-"
         "ranked_on": ",".join(shared) or None,
         "training_diverged": ",".join(untrained) or None,
     }

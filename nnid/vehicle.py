@@ -59,7 +59,8 @@ CurveNumber = Annotated[float, Field(ge=-MAX_COEFFICIENT, le=MAX_COEFFICIENT)]
 #: the validation context of a vehicle whose thrust curves were read before: a saved model's
 #: (:func:`saved_vehicle`), or a copy of a vehicle with other values set. Its curves are kept as
 #: they were, one of no thrust included (an nnid before the refusal saved such a model), and so
-#: is its rigid body (:meth:`Vehicle._rigid_body`, refused in new input only): a fit's r_g, a
+#: are its rigid body (:meth:`Vehicle._rigid_body`) and its length (a length in cm,
+#: :meth:`Vehicle._length_in_metres`), refused in new input only: a fit's r_g, a
 #: payload or a saved model is said where it is flown (simulator.check_mass_matrix) or fitted
 KEEP_CURVES: dict[str, Any] = {"keep_curves": True}
 #: the validation context of a saved model's vehicle (:func:`saved_vehicle`): as
@@ -398,10 +399,13 @@ class Vehicle(StrictModel):
         return self
 
     @model_validator(mode="after")
-    def _length_in_metres(self) -> Vehicle:
+    def _length_in_metres(self, info: ValidationInfo) -> Vehicle:
         # a length in cm (45 for a 0.45-m ROV) passed, and with it thruster positions and
         # centres tens of metres out (size_slips reads them against it) and a rounding arm
-        # (rounding_length) 100 times too long
+        # (rounding_length) 100 times too long. New input only, as _rigid_body: a model saved
+        # before the refusal (its length in cm) loads as it was saved
+        if (info.context or {}).get("keep_curves"):
+            return self
         side = (self.mass / self.rho) ** (1 / 3)
         if self.length is not None and self.length > MAX_SLENDERNESS * side:
             raise NnidInputError(

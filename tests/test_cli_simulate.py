@@ -444,6 +444,11 @@ def test_commands_in_pwm_against_a_thrust_table_are_warned_of(tmp_path):
 
     heavy = load_vehicle("bluerov2_heavy")
     assert heavy.thrusters[0].cmd_min is None and command_range(heavy.thrusters[0]) == (-1, 1)
+    # the range the simulator flies, one rule with the saturation warning's: cmd_min/cmd_max
+    # of ±2 over a table of ±1 fly ±1 (it said ±2), and one bound clips with the table's other
+    wide = heavy.thrusters[0].model_copy(update={"cmd_min": -2.0, "cmd_max": 2.0})
+    assert command_range(wide) == (-1, 1)
+    assert command_range(wide.model_copy(update={"cmd_min": None, "cmd_max": 0.5})) == (-1, 0.5)
     pwm = pd.DataFrame({f"cmd_{t.name}": [1500.0, 1900.0] for t in heavy.thrusters})
     with pytest.warns(UserWarning, match=r"cmd_t1 reaches 1900, far beyond thruster t1's range"):
         warn_far_beyond_range(pwm, heavy)
@@ -455,6 +460,8 @@ def test_commands_in_pwm_against_a_thrust_table_are_warned_of(tmp_path):
                  "duration = 1.0 }]\n")  # fmt: skip
     result = runner.invoke(app, ["simulate", str(cfg), "--out", str(tmp_path / "x.csv")])
     assert "cmd_t1 reaches 1900, far beyond thruster t1's range [-1, 1]" in result.output
+    # one slip, one warning: not again as a saturation of the same thruster
+    assert "flown at its bound" not in result.output
 
 
 def test_a_vehicle_whose_mass_matrix_is_not_positive_definite_is_named(tmp_path, monkeypatch):

@@ -136,6 +136,11 @@ def test_autopilot_is_replayed_and_the_true_structure_ranks_first(compared):
     assert mc["free_run_nrmse"]["total"] < 0.3 and mc["diverged"] == {}
     assert comp["ranking"][0] == "mcfarland"
     assert "autopilot" in comp["summary"] and comp["summary"].startswith("Use mcfarland")
+    # the verdict the sentence reads is written, with its counts (one held-out run: none)
+    told = comp["verdict"]
+    assert told["first"] == "mcfarland" and told["second"] == comp["ranking"][1]
+    assert not told["indistinguishable"] and told["runs"] == 0
+    assert all(m["ranked_free_run_per_experiment"] == {} for m in comp["models"])
 
 
 def test_sindy_is_sparse_and_as_good_as_mcfarland(compared):
@@ -411,7 +416,7 @@ def test_no_best_model_is_named_when_every_free_run_diverged(tmp_path):
     import pandas as pd
 
     from nnid.config import CompareConfig, load_config
-    from nnid.runs import compare_run
+    from nnid.runs import NO_FREE_RUN, compare_run
 
     root = resources.files("nnid.demo_data")
     vehicle = root.joinpath("minirov.toml").read_text()
@@ -437,6 +442,7 @@ def test_no_best_model_is_named_when_every_free_run_diverged(tmp_path):
     assert all(m["ranked_nrmse"]["free_run"] is None for m in comparison["models"])
     assert len(comparison["ranking"]) == 2 and "diverged" in comparison["summary"]
     assert outcome.headline["best"] is None
+    assert outcome.headline["no_best"] == NO_FREE_RUN  # and says why
 
 
 def test_the_batch_headline_puts_totals_over_the_same_outputs_side_by_side(tmp_path):
@@ -512,7 +518,14 @@ def test_a_model_whose_training_diverged_is_never_the_one_to_use(tmp_path):
     assert rows["hybrid_broken"]["training_diverged"] and not rows["fossen_ls"]["training_diverged"]
     assert comparison["ranking"] == ["fossen_ls", "hybrid_broken"]
     assert comparison["summary"].startswith("Use fossen_ls"), comparison["summary"]
-    assert outcome.headline["best"] == "fossen_ls"
+    assert outcome.headline["best"] == "fossen_ls" and outcome.headline["no_best"] is None
+    # two held-out runs, each scored alone over the ranked outputs (w): written for every
+    # model; no verdict, the second model being untrained
+    assert comparison["verdict"] is None
+    assert comparison["ranked_on_per_experiment"] == {"run6": ["w"], "run7": ["w"]}
+    per = rows["fossen_ls"]["ranked_free_run_per_experiment"]
+    assert set(per) == {"run6", "run7"} and all(0 < v < 1 for v in per.values()), per
+    assert set(rows["hybrid_broken"]["ranked_free_run_per_experiment"]) == {"run6", "run7"}
     assert outcome.headline["training_diverged"] == "hybrid_broken"
 
 

@@ -42,16 +42,17 @@ def _row(name: str, free: float | None, runs: dict[str, float] | None = None, **
 
 def _comparison(rows: list[dict]) -> dict:
     """The comparison.json run_compare writes of these rows (its ranking, verdict, summary)."""
-    from nnid.pipeline import ranked_runs, verdict
+    from nnid.pipeline import ranked_runs, run_columns, verdict
 
     ranking = rank(rows, "validation")
     shared = ranked_columns(rows, "validation")
+    by_run = run_columns(rows, "validation", shared)
     for row in rows:
         row["ranked_nrmse"] = {
             m: ranked_score(row, "validation", f"{m}_nrmse", shared)
             for m in ("free_run", "k_step", "one_step")
         }
-        row["ranked_free_run_per_experiment"] = ranked_runs(row, "validation", shared)
+        row["ranked_free_run_per_experiment"] = ranked_runs(row, "validation", by_run)
     return {
         "vehicle": "v",
         "models": rows,
@@ -60,6 +61,7 @@ def _comparison(rows: list[dict]) -> dict:
         "held_out": "validation",
         "ranking": ranking,
         "ranked_on": shared,
+        "ranked_on_per_experiment": by_run,
         "train": ["a"],
         "validation": ["b", "c", "d"],
         "test": [],
@@ -79,9 +81,14 @@ def test_two_models_that_print_the_same_score_are_called_indistinguishable():
     assert not text.startswith("Use")
     assert "A (fossen, 6 parameters) and B (fossen, 6 parameters) are indistinguishable" in text
     assert "(0.213 and 0.213)" in text
-    from nnid.runs import best_model
+    from nnid.reports.batch_report import _compare_table
+    from nnid.runs import INDISTINGUISHABLE, best_model, no_best_why
 
     assert best_model(_comparison(rows)) is None  # the batch table names no best either
+    # and says why: "-" alone read the same as no skill, no free run or no ranking
+    assert no_best_why(_comparison(rows)) == INDISTINGUISHABLE
+    row = {"data": "a.csv", "status": "ok", "best": None, "no_best": INDISTINGUISHABLE}
+    assert f"none: {INDISTINGUISHABLE}" in _compare_table([row])
 
 
 def test_a_pooled_lead_not_held_on_two_thirds_of_the_runs_is_no_win():
@@ -123,14 +130,80 @@ def test_the_report_tables_each_held_out_runs_free_run_and_states_the_rule():
     assert comparison["ranking"] == ["A", "B"]  # the order is kept
 
 
+def test_a_lead_on_every_run_is_named_though_the_pooled_scores_print_the_same():
+    """A lower on 10 of 10 held-out runs, pooled 0.2131 against 0.2134: called
+    indistinguishable, the printed tie overriding the runs. With three or more runs the runs
+    decide; on two, a printed tie still stands."""
+    from nnid.pipeline import verdict
+    from nnid.runs import best_model
+
+    names = [f"r{k}" for k in range(10)]
+    rows = [
+        _row("A", 0.2131, {r: 0.20 for r in names}),
+        _row("B", 0.2134, {r: 0.21 for r in names}),
+    ]
+    told = verdict(rows, rank(rows, "validation"), "validation")
+    assert told is not None and told["same_printed"]
+    assert (told["lower_on_runs"], told["runs"], told["indistinguishable"]) == (10, 10, False)
+    text = summary(rows, rank(rows, "validation"), "validation", False)
+    assert text.startswith("Use A") and "A lower on 10 of 10 held-out runs" in text
+    assert best_model(_comparison(rows)) == "A"
+    assert "at least two thirds of the runs" in report.column_terms(_comparison(rows))["rank"]
+    two = [_row("A", 0.2131, {"b": 0.2, "c": 0.2}), _row("B", 0.2134, {"b": 0.21, "c": 0.21})]
+    assert verdict(two, rank(two, "validation"), "validation")["indistinguishable"]
+
+
+def test_each_run_is_compared_on_the_ranked_outputs_it_excites():
+    """Weiss-style held-out runs each excite one of u and v: each run scored over both had no
+    score, the per-run table read "not scored" everywhere and the two-thirds rule never
+    applied. Each run is scored over the ranked outputs it excites, the same for both models,
+    and the table names them where fewer than all."""
+    from nnid.pipeline import verdict
+
+    def weiss(name: str, surge: float, sway: float) -> dict:
+        row = _row(name, (surge + sway) / 2)
+        row["validation"]["columns"] = ["u", "v"]
+        row["validation"]["free_run_nrmse"] = {"u": surge, "v": sway, "total": (surge + sway) / 2}
+        row["validation"]["free_run_nrmse_per_experiment"] = {
+            "surge": {"u": surge, "total": surge},
+            "sway": {"v": sway, "total": sway},
+            "both": {"u": surge, "v": sway, "total": (surge + sway) / 2},
+        }
+        return row
+
+    rows = [weiss("A", 0.10, 0.30), weiss("B", 0.20, 0.35)]
+    comparison = _comparison(rows)
+    assert comparison["ranked_on_per_experiment"] == {
+        "surge": ["u"], "sway": ["v"], "both": ["u", "v"]
+    }  # fmt: skip
+    assert rows[0]["ranked_free_run_per_experiment"] == {"surge": 0.1, "sway": 0.3, "both": 0.2}
+    told = verdict(rows, rank(rows, "validation"), "validation")
+    assert (told["lower_on_runs"], told["runs"], told["indistinguishable"]) == (3, 3, False)
+    head, body = report.run_rows(comparison)
+    assert head == ["model", "run surge (u)", "run sway (v)", "run both"]
+    assert body[0] == ["A", "0.1", "0.3", "0.2"]
+
+
+def test_the_rank_definition_points_to_the_per_run_table_only_where_it_is_shown():
+    """With one held-out run there is no per-run table, and the rank definition said
+    "(Free-run NRMSE of each held-out run on its own below says each run's)" all the same."""
+    one = _comparison([_row("A", 0.2), _row("B", 0.3)])
+    assert report.RUNS_TITLE not in report.column_terms(one)["rank"]
+    assert report.RUNS_TITLE not in report.markdown(one)
+    runs = {"b": 0.1, "c": 0.2}
+    several = _comparison([_row("A", 0.2, runs), _row("B", 0.3, runs)])
+    assert f"({report.RUNS_TITLE} below says" in report.column_terms(several)["rank"]
+
+
 def test_a_score_just_above_one_is_not_printed_as_one():
     """A score of 1.0004 printed "1" beside "is above 1"; the batch table named it best."""
     rows = [_row("A", 1.0004), _row("B", 1.2)]
     text = summary(rows, rank(rows, "validation"), "validation", False)
     assert "No trained model has skill" in text and "1.0004" in text
-    from nnid.runs import best_model
+    from nnid.runs import NO_SKILL, best_model, no_best_why
 
     assert best_model(_comparison(rows)) is None
+    assert no_best_why(_comparison(rows)) == NO_SKILL
 
 
 def test_the_summary_says_why_a_free_run_was_not_scored():

@@ -186,6 +186,34 @@ def test_a_calm_run_is_judged_for_divergence_by_the_splits_range():
     assert runs["hover"]["w"] == pytest.approx(0.02 / w.std(), rel=1e-9)  # as scored alone
 
 
+def test_a_runs_pieces_are_scored_as_that_run_not_as_runs_of_their_own():
+    """A gap cut run 'dive' into pieces dive#0 and dive#1: each piece was scored, and counted
+    (compare's verdict, the per-run tables), as a held-out run. The pieces' squared errors
+    are pooled into their run's score; one run in pieces has no per-run score at all."""
+    from nnid.datasets.log import PIECE_OF
+    from nnid.evaluation.evaluate import score_prediction, score_split
+
+    t = np.arange(300) * 0.1
+    log = pd.DataFrame(
+        {
+            "t": t,
+            "experiment": ["dive#0"] * 100 + ["dive#1"] * 100 + ["hover"] * 100,
+            PIECE_OF: ["dive"] * 200 + [None] * 100,
+            "w": np.sin(t) * np.r_[np.ones(100), 2 * np.ones(100), 0.5 * np.ones(100)],
+        }
+    )
+    pred = (
+        log[["w"]] + np.r_[0.01 * np.ones(100), 0.05 * np.ones(100), 0.02 * np.ones(100)][:, None]
+    )
+    mask = np.ones(len(log), bool)
+    runs = score_split(log, pred, ["w"], mask, lambda r: ["w"])[3]
+    assert list(runs) == ["dive", "hover"]
+    dive = score_prediction(log.iloc[:200], pred.iloc[:200], ["w"], mask[:200])[0]
+    assert runs["dive"]["w"] == pytest.approx(dive["w"], rel=1e-12)
+    one = log.iloc[:200]
+    assert score_split(one, pred.iloc[:200], ["w"], mask[:200], lambda r: ["w"])[3] == {}
+
+
 def test_the_train_report_lists_each_held_out_run(runs):
     model = Shifted().fit(runs)
     held = evaluate(model, runs, ("free_run",), warmup_s=1.0)

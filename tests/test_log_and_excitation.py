@@ -332,6 +332,8 @@ def test_random_signals_that_draw_the_same_sequence_are_warned_of():
     assert said[0].startswith("experiment 'same': the prbs signals on X, Y draw the same")
     assert said[1].startswith("experiment 'same': the aprbs signals on Z, N draw the same")
     assert said[2].startswith("experiment 'period': the prbs signals on X, N")
+    assert "(seed 1, the same holds)" in said[0]  # one seed shared: said once
+    assert "(seeds 1 on X, 128 on N, the same holds)" in said[2]  # each its own, said each
     assert "--seed move the sensor noise only" in said[0]
 
 

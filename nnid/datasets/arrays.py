@@ -67,15 +67,23 @@ def check_commands(columns: Iterable[str], cols: list[str], vehicle_name: str) -
         )
 
 
-def command_range(thruster) -> tuple[float, float] | None:
-    """A thruster's command range: its ``cmd_min``/``cmd_max``, else its thrust table's span
-    (a command past the table gets the table's last thrust), else None (a curve of any
-    command)."""
-    if thruster.cmd_min is not None and thruster.cmd_max is not None:
-        return thruster.cmd_min, thruster.cmd_max
+def flown_range(thruster) -> tuple[float, float]:
+    """The commands a thruster flies as asked: :meth:`nnid.physics.thrusters.Actuation.thrusts`
+    clips to its ``cmd_min`` and ``cmd_max`` (either one alone too), and a thrust table holds
+    its end thrust past its span; ±inf where nothing bounds it."""
+    low = -np.inf if thruster.cmd_min is None else float(thruster.cmd_min)
+    high = np.inf if thruster.cmd_max is None else float(thruster.cmd_max)
     if getattr(thruster.curve, "kind", None) == "table":
-        return thruster.curve.cmd[0], thruster.curve.cmd[-1]
-    return None
+        low, high = max(low, thruster.curve.cmd[0]), min(high, thruster.curve.cmd[-1])
+    return low, high
+
+
+def command_range(thruster) -> tuple[float, float] | None:
+    """A thruster's command range: the commands it flies as asked (:func:`flown_range`, the
+    one rule: a ±1 thruster whose table spans ±0.8 flies ±0.8), where both ends are bounded;
+    else None (a curve of any command)."""
+    low, high = flown_range(thruster)
+    return (low, high) if np.isfinite(low) and np.isfinite(high) else None
 
 
 class CommandUnitsWarning(UserWarning):
@@ -165,29 +173,24 @@ class CommandSaturationWarning(UserWarning):
     records the commands asked, the vehicle flew them at the range's bound."""
 
 
-def flown_range(thruster) -> tuple[float, float]:
-    """The commands a thruster flies as asked: :meth:`nnid.physics.thrusters.Actuation.thrusts`
-    clips to its ``cmd_min`` and ``cmd_max`` (either one alone too), and a thrust table holds
-    its end thrust past its span; ±inf where nothing bounds it."""
-    low = -np.inf if thruster.cmd_min is None else float(thruster.cmd_min)
-    high = np.inf if thruster.cmd_max is None else float(thruster.cmd_max)
-    if getattr(thruster.curve, "kind", None) == "table":
-        low, high = max(low, thruster.curve.cmd[0]), min(high, thruster.curve.cmd[-1])
-    return low, high
-
-
 def _span(low: float, high: float) -> str:
     if np.isfinite(low) and np.isfinite(high):
         return f"within [{low:g}, {high:g}]"
     return f"at most {high:g}" if np.isfinite(high) else f"at least {low:g}"
 
 
-def warn_clipped(inputs: np.ndarray, vehicle, experiment: str | None = None) -> None:
+def warn_clipped(
+    inputs: np.ndarray, vehicle, experiment: str | None = None, said_units: Iterable[str] = ()
+) -> None:
     """Warn, with the share of samples per thruster, where the commands ``inputs`` ``[N, n]``
     (the vehicle's thrusters in order) go beyond :func:`flown_range`: a PRBS of ±1.5 on a ±1
-    thruster was flown at ±1 throughout and logged at ±1.5 without a word."""
-    said = []
+    thruster was flown at ±1 throughout and logged at ±1.5 without a word. ``said_units``:
+    the ``cmd_<thruster>`` columns already warned of as a unit slip
+    (:func:`warn_far_beyond_range`), left out: one slip, one warning."""
+    said, skip = [], set(said_units)
     for k, thruster in enumerate(vehicle.thrusters):
+        if f"cmd_{thruster.name}" in skip:
+            continue
         low, high = flown_range(thruster)
         asked = inputs[:, k]
         beyond = (asked < low) | (asked > high)

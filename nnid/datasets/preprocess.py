@@ -70,6 +70,18 @@ def experiment_rows(log: pd.DataFrame) -> list[tuple[object, np.ndarray]]:
     return list(log.groupby("experiment", sort=False).indices.items())
 
 
+def run_rows(log: pd.DataFrame) -> list[tuple[object, np.ndarray]]:
+    """(run, positions) of each run of ``log`` as logged: :func:`experiment_rows`, the pieces
+    a gap cut a run into (:func:`~nnid.datasets.log.run_of`) joined under that run's name, in
+    order of first appearance. What is said of "runs" (each held-out run's own score) is of
+    these: a run's pieces counted as runs made one gappy run several."""
+    runs = run_of(log)
+    joined: dict[object, list[np.ndarray]] = {}
+    for name, pos in experiment_rows(log):
+        joined.setdefault(runs.get(name, name), []).append(pos)
+    return [(r, np.sort(np.concatenate(p))) for r, p in joined.items()]
+
+
 def run_spans(log: pd.DataFrame) -> list[float]:
     """Each experiment's time span (s: its last sample's t less its first's, the runs of
     :func:`experiment_rows` in order)."""

@@ -22,7 +22,7 @@ import torch
 from pydantic import Field, field_validator
 from scipy.integrate import solve_ivp
 
-from nnid.datasets.arrays import warn_clipped, warn_far_beyond_range
+from nnid.datasets.arrays import far_beyond_range, warn_clipped, warn_far_beyond_range
 from nnid.datasets.excitation import DOptimalSine, Step, same_draws, ticks
 from nnid.datasets.log import TAU, wrap_angle
 from nnid.datasets.measurement import Measurement
@@ -206,7 +206,12 @@ def simulate(
     if x0 is not None:
         state[: len(x0)] = np.asarray(x0, dtype=np.float64)
     if vehicle.thrusters:  # clipped to the range silently: the log would record the asked
-        warn_clipped(inputs, vehicle, experiment)
+        # PWM microseconds against ±1 would fly every run at full thrust: said once, as the
+        # unit slip it is, and not again as a saturation of the same thruster
+        asked = pd.DataFrame(inputs, columns=[f"cmd_{c}" for c in actuation.channels])
+        slips = far_beyond_range(asked, vehicle)
+        warn_far_beyond_range(asked, vehicle, slips)
+        warn_clipped(inputs, vehicle, experiment, said_units=[s.column for s in slips])
     if autopilot is None:
         applied = actuation.applied(inputs)
         states = integrate(model, state, applied[:-1], dt, substeps, integrator)
@@ -384,18 +389,26 @@ def simulate_config(config, vehicle, progress=None) -> pd.DataFrame:
         inputs = experiment_inputs(exp, channels, config.dt, where=where)
         for group in same_draws(exp.signals):
             first = exp.signals[group[0]]
+            # each signal's own seed: a group may hold different ones (a PRBS's 1 and 128
+            # start its register alike), and the first alone read as one seed shared
+            seeds = [getattr(exp.signals[j], "seed", None) for j in group]
+            seed = (
+                f"seed {seeds[0]}"
+                if len(set(seeds)) == 1
+                else "seeds "
+                + ", ".join(
+                    f"{s} on {exp.signals[j].channel}" for j, s in zip(group, seeds, strict=True)
+                )
+            )
             warnings.warn(
                 f"experiment {exp.name!r}: the {first.kind} signals on "
                 f"{', '.join(exp.signals[j].channel for j in group)} draw the same sequence "
-                f"(seed {getattr(first, 'seed', '')}, the same holds): their inputs are "
+                f"({seed}, the same holds): their inputs are "
                 "collinear (correlation ±1) and a fit cannot tell the channels apart; give each "
                 "its own 'seed' (the config's seed and --seed move the sensor noise only)",
                 ExcitationWarning,
                 stacklevel=2,
             )
-        if vehicle.thrusters:  # PWM microseconds against ±1 would fly every run at full thrust
-            warn_far_beyond_range(pd.DataFrame(inputs, columns=[f"cmd_{c}" for c in channels]),
-                                  vehicle)  # fmt: skip
         effects = [(e.name, e.value) for e in (*config.effects, *exp.effects)]
         logs.append(
             simulate(

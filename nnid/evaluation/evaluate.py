@@ -14,13 +14,14 @@ model's target columns with one rule set (ARCHITECTURE.md "JSON outputs"):
   column scores ``None`` and is listed with the time it left, and ``total`` is ``None`` too,
   never an average that hides it; a target velocity the data barely moves (not scored) is
   checked too, against the ranges of the scored ones (:func:`unscored_divergence`);
-- a split of several experiments also gets each experiment's free-run NRMSE scored on its own
-  (``free_run_nrmse_per_experiment``): the pooled NRMSE divides by the spread of all the runs,
-  which can hide a run that fails on an output it barely moves; a run whose free run leaves
-  the physical range (judged by the split's range: a calm run's own is its noise) is listed
-  in ``diverged_per_experiment``, and in every mode a column that
-  diverged in one run has diverged in the pooled scores too (:func:`score_split`), so the
-  pooled ``total`` that summaries, sweeps and the loop read never averages a diverged run;
+- a split of several runs also gets each run's free-run NRMSE scored on its own
+  (``free_run_nrmse_per_experiment``; a run a gap cut into pieces is one run): the pooled
+  NRMSE divides by the spread of all the runs, which can hide a run that fails on an output
+  it barely moves; a run whose free run leaves the physical range (judged by the split's
+  range: a calm run's own is its noise) is listed in ``diverged_per_experiment``, and in
+  every mode a column that diverged in one run has diverged in the pooled scores too
+  (:func:`score_split`), so the pooled ``total`` that summaries, sweeps and the loop read
+  never averages a diverged run;
 - a score that is None without a divergence says why under ``<mode>_not_scored``
   (:func:`not_scored`: no sample after the warm-ups, a constant signal, or no output scored);
 - models with a force equation also get McCarter's J (RMS force residual, eq. 4.25), J₀ (RMS of
@@ -37,7 +38,7 @@ import numpy as np
 import pandas as pd
 
 from nnid.datasets.log import VELOCITY, check_log
-from nnid.datasets.preprocess import excited_dofs, experiment_rows
+from nnid.datasets.preprocess import excited_dofs, run_rows
 from nnid.evaluation.metrics import exact_mean, exact_std, warmup_mask
 from nnid.evaluation.prediction import check_mode, mode_steps
 from nnid.physics.dofs import DOFS, FORCES
@@ -200,15 +201,18 @@ def score_runs(
     mask: np.ndarray,
     columns_of: Callable[[pd.DataFrame], list[str]],
 ) -> tuple[dict[str, dict[str, float | None]], dict[str, dict[str, float]]]:
-    """Each experiment of a split scored on its own (the columns ``columns_of`` gives for it,
-    its std), as if scored alone: a split's pooled NRMSE divides by the spread of all its runs,
-    so a run that barely moves an output can fail on it unseen. A run has diverged where its
-    prediction leaves its measured values by :data:`DIVERGENCE_FACTOR` ranges of the split's
-    scored samples, not of its own (noise, in a run that barely moves the output). Returns
+    """Each run of a split scored on its own (the columns ``columns_of`` gives for it, its
+    std), as if scored alone: a split's pooled NRMSE divides by the spread of all its runs,
+    so a run that barely moves an output can fail on it unseen. A run a gap cut into pieces
+    (:func:`~nnid.datasets.preprocess.run_rows`) is scored as one, its pieces' squared errors
+    pooled as the split's are: a piece is no run of its own (the verdict counts runs). A run
+    has diverged where its prediction leaves its measured values by :data:`DIVERGENCE_FACTOR`
+    ranges of the split's scored samples, not of its own (noise, in a run that barely moves
+    the output). Returns
     the NRMSE of each run and ``{run: {column: t}}`` of the runs that diverged."""
     out, diverged = {}, {}
     split_range: dict[str, float] = {}  # each column's once, however many pieces need it
-    for name, pos in experiment_rows(log):
+    for name, pos in run_rows(log):
         run = log.iloc[pos]
         cols = columns_of(run)
         # divergence is judged by the split's range (it holds the run's own): a calm run (a
@@ -258,7 +262,7 @@ def score_split(
     columns."""
     widths = {c: split_width(log, c, mask) for c in columns}
     nrmse, rmse, diverged = score_prediction(log, predicted, columns, mask, widths)
-    if len(experiment_rows(log)) < 2:
+    if len(run_rows(log)) < 2:  # one run, in pieces or not: the pooled score is its own
         return nrmse, rmse, diverged, {}, {}
     runs, left = score_runs(log, predicted, mask, columns_of)
     # only the pooled score's own columns: a run may score one the split as a whole does not

@@ -175,9 +175,16 @@ def _detect_table(rows: list[dict]) -> str:
     return html_table(["log", "status", "alarms", "first alarm [s]", "kinds", "effects"], body)
 
 
+def _best(row: dict) -> str:
+    """A compare task's best model, or why it names none (``no_best``, :func:`nnid.runs.
+    no_best_why`): "-" alone said the same of a tie, no skill, no free run and no ranking."""
+    if row.get("best"):
+        return str(row["best"])
+    return f"none: {row['no_best']}" if row.get("no_best") else "-"
+
+
 def _compare_table(rows: list[dict]) -> str:
-    body = [[_log(r), r["status"], str(r.get("best") or "-"), str(r.get("training_diverged") or "")]
-            for r in rows]  # fmt: skip
+    body = [[_log(r), r["status"], _best(r), str(r.get("training_diverged") or "")] for r in rows]
     head = ["log", "status", "best model (held-out free run)", f"training {KEPT_START}"]
     return html_table(head, body)
 

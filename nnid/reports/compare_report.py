@@ -16,9 +16,11 @@ import html
 import numpy as np
 import pandas as pd
 
+from nnid.datasets.log import run_of
 from nnid.datasets.preprocess import experiment_rows
 from nnid.evaluation.evaluate import diverged_columns
-from nnid.physics.dofs import DOFS, FORCES
+from nnid.physics.dofs import FORCES
+from nnid.pipeline import RUNS_DECIDE
 from nnid.reports.cells import missing, number, score, score_cell
 from nnid.reports.figures import (
     FORCE_UNITS,
@@ -38,6 +40,7 @@ from nnid.reports.figures import (
 from nnid.reports.loop_report import parameter_unit
 from nnid.reports.stops import HEAD as STOP_HEAD
 from nnid.reports.stops import TRAINING_TITLE, stage_cells
+from nnid.reports.train_report import RUNS_TITLE, scored_columns
 
 MODES = (
     ("free_run_nrmse", "Free-run velocity NRMSE"),
@@ -141,13 +144,17 @@ def column_terms(comparison: dict) -> dict[str, str]:
         )
     else:
         over = ", mean over the excited DOFs"
+    # the per-run table is shown only where there are several runs: pointed to only then
+    table = f" ({RUNS_TITLE} below says each run's)" if run_rows(comparison)[1] else ""
     return {
         "rank": "order of the held-out free-run NRMSE below (models whose free run diverged or "
         "was not scored after, by their k-step error). The sentence above names the first "
-        "model for use only where the data tell it from the second: the two are called "
-        "indistinguishable when their free-run NRMSEs print the same, or, with several "
-        f"held-out runs, when the first is lower on fewer than two thirds of the runs ({RUNS_TITLE}"
-        " below says each run's)",
+        "model for use only where the data tell it from the second: with "
+        f"{RUNS_DECIDE} or more held-out runs, where the first is lower than the second on at "
+        "least two thirds of the runs (each scored alone, over the outputs it excites), "
+        "whatever the pooled scores; on fewer, the two are called indistinguishable when "
+        "their free-run NRMSEs print the same, or, on two runs, when the first is lower on "
+        f"fewer than two thirds of the runs{table}",
         "parameters": "number of fitted parameters (network weights for NARX and state-space "
         "models)",
         "fit s": "wall time of the fit in seconds",
@@ -177,15 +184,9 @@ def column_terms(comparison: dict) -> dict[str, str]:
 
 
 def outputs(comparison: dict, key: str) -> list[str]:
-    """The outputs any model is scored on in one mode's held-out scores: u v w p q r in their
-    order whichever model names them first, other outputs after in the order first seen (a
-    sorted set's order hung on the hash seed)."""
-    dofs: list[str] = []
-    for m in comparison["models"]:
-        for d in _held(m, comparison).get(key, {}):
-            if d != "total" and d not in dofs:
-                dofs.append(d)
-    return sorted(dofs, key=lambda d: DOFS.index(d) if d in DOFS else len(DOFS))
+    """The outputs any model is scored on in one mode's held-out scores
+    (:func:`~nnid.reports.train_report.scored_columns`' order)."""
+    return scored_columns(_held(m, comparison).get(key, {}) for m in comparison["models"])
 
 
 def dof_rows(comparison: dict, key: str) -> tuple[list[str], list[list[str]]]:
@@ -237,12 +238,10 @@ def table_rows(comparison: dict) -> list[list[str]]:
     return rows
 
 
-RUNS_TITLE = "Free-run NRMSE of each held-out run on its own"
-
-
 def run_rows(comparison: dict) -> tuple[list[str], list[list[str]]]:
     """Each held-out run's free-run NRMSE per model (``ranked_free_run_per_experiment``: the
-    run scored alone, over the outputs the ranking shares), models in ranking order; no rows
+    run scored alone, over the outputs the ranking shares that it excites), models in ranking
+    order; a run scored over fewer than all of them names its outputs in its head. No rows
     where the held-out data are one run or the models are not ranked. The pooled score hides
     how a lead is spread: a model lower on one run and higher on the rest can rank first."""
     if not comparison.get("ranked_on"):
@@ -259,7 +258,14 @@ def run_rows(comparison: dict) -> tuple[list[str], list[list[str]]]:
         per = m.get("ranked_free_run_per_experiment") or {}
         left = _held(m, comparison).get("diverged_per_experiment") or {}
         rows.append([name, *(score(per[r], diverged=r in left) if r in per else "-" for r in runs)])
-    return ["model", *(f"run {r}" for r in runs)], rows
+    shared = comparison["ranked_on"]
+    over = comparison.get("ranked_on_per_experiment") or {}
+
+    def head(run: str) -> str:
+        cols = over.get(run, shared)
+        return f"run {run}" if cols == shared else f"run {run} ({', '.join(cols) or 'none'})"
+
+    return ["model", *map(head, runs)], rows
 
 
 def _tables(comparison: dict) -> list[tuple[str, list[str], list[list[str]]]]:
@@ -356,7 +362,8 @@ def unit_text(column: str) -> str:
 
 
 def diverged_at(comparison: dict, model: str, run: object, several: bool) -> dict[str, float]:
-    """``{column: t}`` where a model's held-out free run diverged in one run: the run's own
+    """``{column: t}`` where a model's held-out free run diverged in one run (a gap's pieces
+    are one: :func:`~nnid.datasets.preprocess.run_rows`): the run's own
     (``diverged_per_experiment``) where the held-out data are several runs, else the part's."""
     m = next((x for x in comparison["models"] if x["name"] == model), {})
     held = _held(m, comparison)
@@ -377,6 +384,10 @@ def free_run_figures(
     out = []
     t_all = held["t"].to_numpy(np.float64)
     runs = experiment_rows(held)
+    # a piece a gap cut is drawn on its own (simulated from its own start), and said to
+    # diverge where its run did within the piece's span (a run's pieces share its clock)
+    run = run_of(held)
+    several = len(set(run.values())) > 1
     for name, pos in runs:
         t = t_all[pos] - t_all[pos[0]]
         for d in dofs:
@@ -392,8 +403,12 @@ def free_run_figures(
                     continue
                 p = pred[d].to_numpy(np.float64)[pos]
                 label = plot_label(model)
-                gone = diverged_at(comparison, model, name, len(runs) > 1) if comparison else {}
-                if d in gone:  # in the run's clock, as the axis
+                gone = (
+                    diverged_at(comparison, model, run.get(name, name), several)
+                    if comparison
+                    else {}
+                )
+                if d in gone and t_all[pos[0]] <= gone[d] <= t_all[pos[-1]]:  # the axis' clock
                     label += f" (diverged at t = {gone[d] - t_all[pos[0]]:.4g} s)"
                 ax.plot(
                     t, np.clip(p, np.nanmin(y) - span, np.nanmax(y) + span), lw=0.9, label=label

@@ -8,6 +8,7 @@ vocabulary."""
 from __future__ import annotations
 
 import html
+from collections.abc import Iterable
 from typing import Any
 
 import numpy as np
@@ -268,6 +269,8 @@ def _baseline(metrics: dict) -> tuple[list[str], list[list[str]]]:
     return head, rows
 
 
+#: the title of the table of each held-out run's free-run NRMSE, scored alone (this report's
+#: and the compare report's)
 RUNS_TITLE = "Free-run NRMSE of each held-out run on its own"
 
 
@@ -281,7 +284,7 @@ def _runs(metrics: dict) -> tuple[list[str], list[list[str]]]:
             (metrics.get(part) or {}).get("free_run_nrmse_per_experiment") or {}
         ).items()
     ]
-    columns = _scored_columns([vals for _, _, vals in scored])
+    columns = scored_columns([vals for _, _, vals in scored])
     rows = []
     for part, run, vals in scored:
         left = (metrics.get(part) or {}).get("diverged_per_experiment") or {}
@@ -493,7 +496,7 @@ def _errors(metrics: dict) -> tuple[list[str], list[list[str]]]:
         for key, label in ERROR_KEYS[:3]
         if key in (metrics.get(part) or {})
     ]
-    columns = _scored_columns([scores[key] for _, _, scores, key in scored])
+    columns = scored_columns([scores[key] for _, _, scores, key in scored])
     rows = [
         [part, label, *_dof_cells(scores[key], diverged_columns(scores, key), columns)]
         for part, label, scores, key in scored
@@ -501,10 +504,11 @@ def _errors(metrics: dict) -> tuple[list[str], list[list[str]]]:
     return ["split", "mode", *columns, "total"], rows
 
 
-def _scored_columns(scores: list[dict]) -> list[str]:
-    """The columns of score tables: the outputs the scores name (the Markdown lists those),
-    u v w p q r in their order, other outputs (a NARX's ``y``) after in first-seen order. Fixed
-    to the six DOFs, the HTML left out a non-DOF output its Markdown twin showed."""
+def scored_columns(scores: Iterable[dict]) -> list[str]:
+    """The columns of score tables (this report's and the compare report's): the outputs the
+    scores (``{column: value, "total": ...}``) name, u v w p q r in their order, other outputs
+    (a NARX's ``y``) after in first-seen order (a sorted set's order hung on the hash seed).
+    Fixed to the six DOFs, the HTML left out a non-DOF output its Markdown twin showed."""
     seen: list[str] = []
     for vals in scores:
         seen += [c for c in vals if c != "total" and c not in seen]
