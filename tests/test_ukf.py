@@ -281,6 +281,18 @@ def test_a_prior_of_the_wrong_length_is_refused_by_name(seamor):
         assert err.value.field == option
 
 
+def _smoothed_surge(seamor):
+    """A surge model and 400 samples whose surge velocity carries noise correlated over ten
+    samples (a smoothed DVL) of σ 0.005 m/s."""
+    structure = ParametricFossen(seamor, NAMES[:2], dofs=("u",))
+    n = 400
+    data = _data(seamor, _surge_yaw(n), EXACT)
+    rng = np.random.default_rng(0)
+    data["nu"][:, 0] += 0.005 * np.convolve(rng.normal(size=n + 9), np.ones(10) / np.sqrt(10),
+                                            "valid")  # fmt: skip
+    return structure, data
+
+
 def test_correlated_innovations_widen_the_standard_errors_and_are_said(seamor):
     """Velocity noise correlated over ten samples (a smoothed DVL), declared at its σ: the
     filter takes its innovations as white, and X_udot ended 5.5 of its s.e. from the truth.
@@ -290,12 +302,7 @@ def test_correlated_innovations_widen_the_standard_errors_and_are_said(seamor):
 
     import nnid.trainers.ukf as ukf
 
-    structure = ParametricFossen(seamor, NAMES[:2], dofs=("u",))
-    n = 400
-    data = _data(seamor, _surge_yaw(n), EXACT)
-    rng = np.random.default_rng(0)
-    data["nu"][:, 0] += 0.005 * np.convolve(rng.normal(size=n + 9), np.ones(10) / np.sqrt(10),
-                                            "valid")  # fmt: skip
+    structure, data = _smoothed_surge(seamor)
     kw = {"process_noise": 1e-4, "theta0": 0.5 * TRUTH[:2], "measurement_noise": 0.005}
     filt = UnscentedKalman(**kw)
     with pytest.warns(UserWarning, match=r"innovations are correlated \(u [\d.]+ samples"):
@@ -320,12 +327,7 @@ def test_a_standard_error_the_widening_takes_past_half_the_prior_is_withheld(sea
     is at or above half its prior σ."""
     from nnid.trainers.least_squares import ExcitationWarning
 
-    structure = ParametricFossen(seamor, NAMES[:2], dofs=("u",))
-    n = 400
-    data = _data(seamor, _surge_yaw(n), EXACT)
-    rng = np.random.default_rng(0)
-    data["nu"][:, 0] += 0.005 * np.convolve(rng.normal(size=n + 9), np.ones(10) / np.sqrt(10),
-                                            "valid")  # fmt: skip
+    structure, data = _smoothed_surge(seamor)
     std = np.array([1.0, 1.0])
     kw = {"process_noise": 1e-4, "theta0": 0.5 * TRUTH[:2], "measurement_noise": 0.005}
     with pytest.warns(ExcitationWarning, match="did not inform X_udot, X:u"):

@@ -523,16 +523,15 @@ class UnscentedKalman(BaseEstimator):
         if np.isfinite(sigma2) and sigma2 > NIS_TOLERANCE:
             # innovations larger than the filter predicts: its covariance is overconfident;
             # scaled as least squares scales by the residual variance, and said
-            warnings.warn(
+            cov, hist_std = _widened(
+                cov,
+                hist_std,
+                sigma2,
                 f"the filter's innovations are {sigma2:.3g} times the variance it predicts "
                 "(normalised innovation squared per DOF, 1 for a consistent filter): its "
                 f"covariance is scaled by {sigma2:.3g}, so the standard errors widen by "
-                f"{np.sqrt(sigma2):.2g}x; the noise levels or the model structure are off",
-                UserWarning,
-                stacklevel=3,
+                f"{np.sqrt(sigma2):.2g}x",
             )
-            cov = cov * sigma2
-            hist_std = hist_std * np.sqrt(sigma2)
         # the filter takes its innovations as white; correlated ones (a model error the noise
         # levels do not describe) hold fewer independent samples than the log has, as least
         # squares' residuals do: widened by their correlation time (equation_times), the
@@ -540,20 +539,20 @@ class UnscentedKalman(BaseEstimator):
         # as least squares' sandwich splits it by equation (conservative for the others)
         times = equation_times(hist_innov)
         tau = float(times.max()) if times.size else 1.0
-        if tau > CORRELATED_INNOVATIONS:
-            slow = ", ".join(
-                f"{d} {t:.3g}" for d, t in zip(structure.dofs, times, strict=True) if t > 1.0
-            )
-            warnings.warn(
-                f"the filter's innovations are correlated ({slow} samples; a consistent "
-                "filter's are white): they hold fewer independent samples than the log, so its "
-                f"covariance is widened by {tau:.3g} and the standard errors by "
-                f"{np.sqrt(tau):.2g}x; the noise levels or the model structure are off",
-                UserWarning,
-                stacklevel=2,
-            )
-        cov = cov * tau
-        hist_std = hist_std * np.sqrt(tau)
+        slow = ", ".join(
+            f"{d} {t:.3g}" for d, t in zip(structure.dofs, times, strict=True) if t > 1.0
+        )
+        cov, hist_std = _widened(
+            cov,
+            hist_std,
+            tau,
+            # widened whatever τ; said only above CORRELATED_INNOVATIONS
+            f"the filter's innovations are correlated ({slow} samples; a consistent filter's "
+            "are white): they hold fewer independent samples than the log, so its covariance "
+            f"is widened by {tau:.3g} and the standard errors by {np.sqrt(tau):.2g}x"
+            if tau > CORRELATED_INNOVATIONS
+            else None,
+        )
         # judged on the covariance as reported (scaled and widened): judged before, a parameter
         # at 0.45 of its prior σ passed as measured and was reported with 1.26 times it
         prior_led = _prior_led(cov, std0, names)
@@ -668,3 +667,16 @@ def _cholesky(p: np.ndarray) -> np.ndarray:
             jitter = base * 1e-12 if jitter == 0.0 else jitter * 100.0
     w, v = np.linalg.eigh(p)
     return v @ np.diag(np.sqrt(np.clip(w, 0.0, None)))
+
+
+def _widened(
+    cov: np.ndarray, hist_std: np.ndarray, factor: float, why: str | None
+) -> tuple[np.ndarray, np.ndarray]:
+    """The filter's covariance scaled by ``factor`` and its path's σ by √factor, said where
+    ``why`` is given: an overconfident filter's standard errors widened as least squares
+    widens them (by the residual variance, by the correlation time)."""
+    if why is not None:
+        warnings.warn(
+            f"{why}; the noise levels or the model structure are off", UserWarning, stacklevel=3
+        )
+    return cov * factor, hist_std * np.sqrt(factor)
