@@ -535,6 +535,28 @@ def test_compiled_free_run_is_the_torch_rollout(transform, rest, bounds, delta):
                                rtol=1e-12, atol=1e-12)  # fmt: skip
 
 
+def test_simulation_windows_cover_every_sample_after_the_delay_states():
+    # the half-window grid is laid from each run's end; a run whose length is not a multiple
+    # of it also gets the window that starts right after its delay states, so the transient
+    # from rest at a run's start is trained on (it lay in no window before)
+    plant = _two_output_plant(530)
+    plant["experiment"] = np.repeat(["one", "two"], [300, 230])
+    model = NarxModel(["a", "b"], ["y1", "y2"], 2, 2, hidden=(3,),
+                      trainer=LevenbergMarquardt(max_epochs=1)).fit(plant)  # fmt: skip
+    tab = model._table(plant)
+    _hist, _uf, y = model._fixed_windows(tab, 40)
+    covered = np.zeros(len(plant), bool)
+    measured = tab["y"].numpy()
+    for window in y.numpy():  # each window's targets are a stretch of one run's outputs
+        hits = [s for s in range(len(plant) - 39)
+                if np.array_equal(measured[s : s + 40], window)]  # fmt: skip
+        assert len(hits) == 1
+        covered[hits[0] : hits[0] + 40] = True
+    w = model.warmup_samples_
+    assert covered[w:300].all() and covered[300 + w :].all()
+    assert not covered[:w].any() and not covered[300 : 300 + w].any()
+
+
 def test_run_floor_scores_each_training_window_in_its_own_runs_std():
     # simulation_run_floor: a training window's error is in its own run's std of each output
     # (floored at that share of the training std), as the validation runs are scored, so a
@@ -552,7 +574,8 @@ def test_run_floor_scores_each_training_window_in_its_own_runs_std():
     runs = plant.groupby("experiment", sort=False)
     std = {n: g[["y1", "y2"]].to_numpy().std(0) for n, g in runs}
     train_std = model.net_.y_std.numpy()
-    n_run = [len(range(299, model.warmup_samples_ + 39 - 1, -20)) for _ in range(3)]
+    first = model.warmup_samples_ + 39  # the window right after the delay states, then the grid
+    n_run = [len(range(299, first, -20)) + 1 for _ in range(3)]
     own = np.concatenate([np.tile(np.maximum(std[n], 0.05 * train_std), (k, 1))
                           for n, k in zip(std, n_run, strict=True)])  # fmt: skip
     assert weight.shape == (sum(n_run), 1, 2)

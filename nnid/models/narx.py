@@ -1044,9 +1044,10 @@ class NarxModel(InputOutputModel):
     def _fixed_windows(self, table: dict[str, torch.Tensor], length: int) -> tuple | None:
         """Windows of ``length`` samples (shortened to the shortest experiment after its
         warm-up) ending at the last sample of each experiment and every ``length // 2``
-        samples before it, as one batch; None when no experiment is longer than the warm-up.
-        With ``simulation_run_floor`` the batch also carries each window's output weights
-        [B, 1, m]: 1 / its run's std of each output (normalised units), floored."""
+        samples before it, and one starting right after the experiment's delay states (so
+        every sample of a run is in a window), as one batch; None when no experiment is longer
+        than the warm-up. With ``simulation_run_floor`` the batch also carries each window's
+        output weights [B, 1, m]: 1 / its run's std of each output (normalised units), floored."""
         length = self._window_length(table, length)
         if length is None:
             return None
@@ -1059,6 +1060,10 @@ class NarxModel(InputOutputModel):
                 s + self.warmup_samples_ + length - 1
             )  # the earliest end whose delay states exist
             run_ends = list(range(e - 1, first - 1, -max(1, length // 2)))[::-1]
+            if run_ends and run_ends[0] > first:
+                # the half-window grid laid from the run's end leaves up to half a window
+                # after the delay states in no window: the transient from rest (Weiss V.B)
+                run_ends.insert(0, first)
             ends += run_ends
             if floor is not None:  # the run's std in training stds, floored: noise-only outputs
                 std = table["y"][s:e].std(0, correction=0).clamp_min(float(floor))
