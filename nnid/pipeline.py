@@ -45,6 +45,7 @@ from nnid.datasets.splits import PARTS, Split, say_missed_fractions, split_log
 from nnid.errors import NnidInputError
 from nnid.evaluation.evaluate import (
     CONSTANT,
+    common_warmup,
     diverged_columns,
     diverged_key,
     evaluate,
@@ -857,24 +858,31 @@ def without_skill(part: str, scores: dict) -> list[str]:
     ]
 
 
-def unscored_k_step(part: str, log: pd.DataFrame, scores: dict, cfg, model) -> list[str]:
+def unscored_k_step(
+    part: str, log: pd.DataFrame, scores: dict, cfg, model, warmup_samples: int | None = None
+) -> list[str]:
     """The warning for a held-out part none of whose k-step predictions was scored, with the
     horizon that would score one: a prediction k samples ahead is scored from the run's
-    sample w + k − 1 on (w the model's own warm-up samples; :func:`nnid.evaluation.evaluate.
-    evaluate`), so the longest run of n samples scores k up to n − w (the report says "not
-    scored"; this says why)."""
+    sample w + k − 1 on (w the model's own warm-up samples, or a comparison's longer common
+    ``warmup_samples``; :func:`nnid.evaluation.evaluate.evaluate`), so the longest run of n
+    samples scores k up to n − w (the report says "not scored"; this says why)."""
     if scores.get("k_step_scored") != 0 or not len(log):
         return []
     longest = max(len(pos) for _, pos in experiment_rows(log))
-    own = model.warmup_samples_
+    own = max(int(model.warmup_samples_), int(warmup_samples or 0))
+    whose = (
+        "the model's own warm-up"
+        if own == model.warmup_samples_
+        else "the comparison's warm-up, the longest of its models'"
+    )
     if longest <= own or len(log) < 2:
-        advice = "no k_step_s would: its runs are no longer than the model's warm-up"
+        advice = f"no k_step_s would: its runs are no longer than {whose}"
     else:
         dt = frame_step(log)
         advice = f"a k_step_s of at most {(longest - own) * dt:.4g} s would score it"
     return [
         f"k_step_s = {cfg.k_step_s:g} s: no {part} run is long enough for a k-step prediction "
-        f"(the longest has {longest} samples, {own} of them the model's own warm-up), so the "
+        f"(the longest has {longest} samples, {own} of them {whose}), so the "
         f"{part} part's k-step error was not scored; {advice}"
     ]
 
@@ -887,12 +895,15 @@ def score(
     replay: Replay | None = None,
     predictions: dict | None = None,
     at: tuple[str, Any] | None = None,
+    warmup_samples: int | None = None,
 ) -> dict:
     """The scores of one split (one-step, k-step when asked, free run); the model's refusals
-    named under ``at``, (section, config table), as :func:`named_in` names them."""
+    named under ``at``, (section, config table), as :func:`named_in` names them;
+    ``warmup_samples``: :func:`~nnid.evaluation.evaluate.evaluate`'s (a comparison's common
+    warm-up)."""
     modes = ("one_step", "k_step", "free_run") if k else ("one_step", "free_run")
     with np.errstate(all="ignore"), named_in(*at) if at else nullcontext():
-        out = evaluate(model, log, modes, k, cfg.warmup_s, replay, predictions)
+        out = evaluate(model, log, modes, k, cfg.warmup_s, replay, predictions, warmup_samples)
     if k:  # beside its samples ("k_step"): the horizon scored, in this part's seconds
         out["k_step_s"] = k_step_seconds(log, k)
     return out
@@ -1248,13 +1259,22 @@ def run_compare(
     held_name = "test" if len(split.test) else "validation"
     held = split[held_name]
     k = k_steps(held, cfg.k_step_s)
-    rows, free_runs, forces, measured_force = [], {}, {}, {}
+    fits = []
     for i, (spec, model) in enumerate(zip(cfg.models, models, strict=True)):
         name = spec.label()
         report(i, len(cfg.models), f"fitting {name}")
         t0 = time.perf_counter()
         caught = fit_model(model, split, staged(progress, name), f"models.{i}", spec, replay)
-        seconds = time.perf_counter() - t0
+        fits.append((caught, time.perf_counter() - t0))
+    # every model scored after the longest warm-up of them all: each after its own scored a
+    # NARX of 4 delays on fewer samples per run than a physics model, a ranking of errors
+    # over different samples
+    initial = common_warmup(models)
+    rows, free_runs, forces, measured_force = [], {}, {}, {}
+    for i, (spec, model, (caught, seconds)) in enumerate(
+        zip(cfg.models, models, fits, strict=True)
+    ):
+        name = spec.label()
         description = model.describe()
         row: dict[str, Any] = {
             "name": name,
@@ -1263,6 +1283,9 @@ def run_compare(
             "n_params": model.n_params,
             "seconds": seconds,
             "validation_used_for": model.validation_use,
+            # its own initial samples per run; it is scored after the comparison's
+            # warmup_samples, the longest of them
+            "warmup_samples": int(model.warmup_samples_),
             "warnings": caught,
             # how each stage ended: a model whose fit stalled or ran out of epochs is not
             # ranked as if it had converged without the page saying so
@@ -1287,10 +1310,13 @@ def run_compare(
             replay,
             predicted if held_name == "validation" else None,
             at=(f"models.{i}", spec),
+            warmup_samples=initial,
         )
         if held_name == "test":
-            row["test"] = score(model, held, cfg, k, replay, predicted, (f"models.{i}", spec))
-        row["warnings"] += unscored_k_step(held_name, held, row[held_name], cfg, model)
+            row["test"] = score(
+                model, held, cfg, k, replay, predicted, (f"models.{i}", spec), initial
+            )
+        row["warnings"] += unscored_k_step(held_name, held, row[held_name], cfg, model, initial)
         kept_start = diverged_training(description)
         row["warnings"] += kept_start
         row["training_diverged"] = bool(kept_start)  # ranked after every trained model
@@ -1320,6 +1346,9 @@ def run_compare(
         "k_step_s": k_step_seconds(held, k),
         "k_step_samples": k,
         "warmup_s": cfg.warmup_s,
+        # the initial samples of each run no model is scored on: the longest warm-up among
+        # the models (their own under each row's warmup_samples), so all share their samples
+        "warmup_samples": initial,
         "held_out": held_name,
         "ranking": ranking,
         # the outputs the ranking's scores average (ranked_nrmse); none shared: not ranked

@@ -159,6 +159,8 @@ def test_sindy_is_sparse_and_as_good_as_mcfarland(compared):
 def _html_tables(page: str) -> list[list[list[str]]]:
     tables = []
     for body in re.findall(r"<table>(.*?)</table>", page, re.S):
+        # a Markdown code span (a coefficient's name) is drawn as <code>: read back as one
+        body = re.sub(r"<code>(.*?)</code>", r"`\1`", body)
         rows = re.findall(r"<tr>(.*?)</tr>", body, re.S)
         tables.append([re.findall(r"<t[hd]>(.*?)</t[hd]>", r) for r in rows])
     return tables
@@ -383,9 +385,10 @@ def test_models_scored_on_different_outputs_are_ranked_on_the_shared_ones():
 
 
 def test_the_ranking_shows_the_samples_each_model_was_scored_on():
-    """Each model is scored after its own initial conditions (1 sample for a physics model,
-    its longest delay for a NARX), so two models are ranked on different samples; the page
-    said neither count. The ranking shows each one's, the k-step one's where it is fewer."""
+    """Each model was scored after its own initial conditions (1 sample for a physics model,
+    its longest delay for a NARX), so two models were ranked on different samples; the page
+    said neither count. The ranking shows each one's, the k-step one's where it is fewer (a
+    comparison.json of then, without ``warmup_samples``; now every model's are the same)."""
     from nnid.pipeline import rank, ranked_score
     from nnid.reports.compare_report import column_terms, markdown, ranking_rows
 
@@ -405,6 +408,40 @@ def test_the_ranking_shows_the_samples_each_model_was_scored_on():
     assert {r[1]: r[at] for r in table} == {"narx": "960", "fossen": "980 (k-step 941)"}
     assert "scored samples" in column_terms(comparison)
     assert "| 980 (k-step 941) |" in markdown(comparison)
+
+
+def test_models_of_different_warm_ups_are_scored_on_the_same_samples(tmp_path):
+    """A Fossen model (1 initial sample) beside a NARX of 4 delays, with no warmup_s: each
+    was scored after its own initial conditions, the NARX on 3 samples fewer per run, so the
+    ranking compared errors over different samples. All are scored after the longest."""
+    from importlib import resources
+
+    from nnid.config import CompareConfig, load_config
+    from nnid.pipeline import run_compare
+    from nnid.reports.compare_report import markdown
+
+    demo = resources.files("nnid.demo_data")
+    log = pd.read_parquet(demo.joinpath("demo_minirov_heave.parquet"))
+    keep = log["experiment"].isin(["run0", "run6", "run7"])
+    log[keep].to_csv(tmp_path / "log.csv", index=False)
+    config = tmp_path / "compare.toml"
+    config.write_text(
+        f'kind = "compare"\nvehicle = "{demo.joinpath("minirov.toml")}"\nwarmup_s = 0.0\n'
+        'k_step_s = 0.2\n[data]\nlog = "log.csv"\n[split]\nby = "experiment"\n'
+        'validation = ["run6"]\ntest = ["run7"]\n'
+        '[[models]]\nkind = "fossen"\nname = "fossen"\ndofs = ["w"]\nunknowns = ["damping"]\n'
+        '[[models]]\nkind = "narx"\nname = "narx"\ninputs = ["tau_Z"]\noutputs = ["w"]\n'
+        "input_delays = 4\noutput_delays = 4\nhidden = [2]\nlm_samples = 300\n"
+        'trainer = { kind = "lm", max_epochs = 2 }\n'
+    )
+    comparison = run_compare(load_config(config, CompareConfig), config).comparison
+    for part in ("validation", "test"):
+        counted = {(m[part]["samples"], m[part]["k_step_scored"]) for m in comparison["models"]}
+        # after the NARX's 4 samples; the k-step (4 samples ahead) after 3 more
+        assert counted == {(1200 - 4, 1200 - 4 - 3)}, (part, counted)
+    own = {m["name"]: m["warmup_samples"] for m in comparison["models"]}
+    assert own == {"fossen": 1, "narx": 4} and comparison["warmup_samples"] == 4
+    assert "nor its first 4 samples" in markdown(comparison)
 
 
 def test_no_best_model_is_named_when_every_free_run_diverged(tmp_path):
@@ -595,8 +632,8 @@ def test_comparison_coefficients_keep_their_standard_errors():
     assert coefs == params
     assert COEFFICIENT_HEAD[-1] == "std. error"
     assert coefficient_rows(coefs) == [
-        ["X:u", "N / (m/s)", "-3.25", "0.12"],
-        ["Z:w", "N / (m/s)", "-30", "-"],
+        ["`X:u`", "N / (m/s)", "-3.25", "0.12"],
+        ["`Z:w`", "N / (m/s)", "-30", "-"],
     ]
 
 

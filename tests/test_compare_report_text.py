@@ -12,7 +12,7 @@ import nnid.reports.compare_report as report
 from nnid.evaluation.evaluate import evaluate
 from nnid.physics.dofs import FORCES
 from nnid.pipeline import rank, ranked_columns, ranked_score, summary
-from nnid.reports.figures import markdown_table
+from nnid.reports.figures import html_table, markdown_table
 from nnid.reports.train_report import _errors, _runs
 
 
@@ -271,8 +271,25 @@ def test_the_markdown_twin_has_the_coefficient_tables_with_units():
     rows[0]["coefficients"] = {"X:u*abs(u)": {"value": -61.117, "stderr": 1.5}}
     md = report.markdown(_comparison(rows))
     assert "## Coefficients" in md and "### A (1 coefficients)" in md
-    assert "| X:u*abs(u) | N / (m/s · m/s) | -61.117 | 1.5 |" in md
+    assert "| `X:u*abs(u)` | N / (m/s · m/s) | -61.117 | 1.5 |" in md
     assert report.COEFFICIENT_HEAD == ["coefficient", "unit", "value", "std. error"]
+
+
+def test_coefficient_names_are_not_read_as_markdown_emphasis():
+    """A coefficient of two products has two '*': bare in the Markdown twin, the text
+    between them was set in italics and the stars dropped. Written as code spans, as the train
+    report's parameters are, in both tables (the HTML one draws them as <code>)."""
+    name = "X:u*abs(u)*v*abs(v)"
+    rows = [_row("A", 0.2), _row("B", 0.3)]
+    rows[0]["coefficients"] = {name: {"value": -2.0, "stderr": None}, "Y:v_dot": {"value": 1.0}}
+    comparison = _comparison(rows)
+    md = report.markdown(comparison)
+    cells = [line.split(" | ")[0].removeprefix("| ") for line in md.splitlines()]
+    assert f"`{name}`" in cells and "`Y:v_dot`" in cells
+    [(model, crow)] = report.coefficient_blocks(comparison)  # the HTML page's tables too
+    assert model == "A" and f"<td><code>{name}</code></td>" in html_table(
+        report.COEFFICIENT_HEAD, crow
+    )
 
 
 def test_plot_labels_escape_mathtext_and_a_leading_underscore():
@@ -308,6 +325,40 @@ def test_free_run_legends_name_every_model_and_survive_mathtext(monkeypatch):
     texts = [t.get_text() for t in ax.get_legend().get_texts()]
     assert texts == ["measured", " _hidden", r"cost \$\frac{\$ x (diverged at t = 5 s)"]
     assert ax.get_ylabel() == "y [unit not known]"
+
+
+def test_a_free_run_that_diverged_in_a_gap_piece_says_so_on_that_piece_at_its_time(monkeypatch):
+    """A gap cut run a into two pieces, each drawn on its own from its own start: the run's
+    free run diverged at t = 20 s of its clock, in the second piece (from 15 s). That piece's
+    legend says so at 5 s, its own clock; the first piece's and run b's say nothing."""
+    from nnid.datasets.log import PIECE_OF
+
+    t = np.arange(0.0, 10.0, 0.1)
+    pieces = [("a#1", "a", t), ("a#2", "a", t + 15.0), ("b", None, t)]
+    held = pd.concat(
+        [pd.DataFrame({"t": tt, "experiment": e, PIECE_OF: r, "y": np.sin(tt)})
+         for e, r, tt in pieces],
+        ignore_index=True,
+    )  # fmt: skip
+    comparison = {
+        "held_out": "validation",
+        "models": [{"name": "m", "validation": {"diverged": {"y": 20.0},
+                                                "diverged_per_experiment": {"a": {"y": 20.0}}}}],
+    }  # fmt: skip
+    drawn = []
+    monkeypatch.setattr(report, "figure_uri", lambda fig: drawn.append(fig) or "data:")
+    figures = report.free_run_figures(held, {"m": held[["y"]]}, ["y"], comparison)
+    assert [name for name, _ in figures] == [
+        "Free run, a#1: y",
+        "Free run, a#2: y",
+        "Free run, b: y",
+    ]
+    labels = [[t.get_text() for t in fig.axes[0].get_legend().get_texts()] for fig in drawn]
+    assert labels == [
+        ["measured", "m"],
+        ["measured", "m (diverged at t = 5 s)"],
+        ["measured", "m"],
+    ]
 
 
 def test_each_model_is_drawn_against_its_own_force_series_on_the_runs_clock(monkeypatch):

@@ -280,6 +280,22 @@ def test_the_hybrid_free_run_figure_has_fixed_margins_and_its_labels_inside(monk
     ]  # fmt: skip
 
 
+def test_the_hybrid_free_run_figure_survives_a_run_named_with_mathtext(monkeypatch):
+    """The figure is titled with the held-out run's name: a name with a bad '$' pair
+    ('$\\foo$') raised in savefig once the whole fit was done, as the compare report's
+    legends did (:func:`~nnid.reports.figures.plot_label`)."""
+    import pandas as pd
+
+    from nnid.reports.train_report import _free_run_figure
+
+    t = np.arange(0.0, 2.0, 0.1)
+    held = pd.DataFrame({"t": t, "experiment": r"fit $\foo$", "u": np.sin(t), "w": np.cos(t)})
+    free = held[["u", "w"]]
+    figures = {"correction": (held, None), "free_run": free, "baseline_free_run": 0.5 * free}
+    fig = _drawn(monkeypatch, lambda: _free_run_figure(figures))  # savefig raised on the name
+    assert fig.axes[0].get_title() == r"experiment fit \$\foo\$"
+
+
 def test_the_train_report_does_not_say_set_for_a_rate_the_test_part_measured_above_it():
     """Thresholds fitted for both statistics, but the healthy test part's false-alarm rate
     (5 in 6 min) lies wholly above the 0.01-per-hour target: the sentence said the thresholds

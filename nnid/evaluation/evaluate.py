@@ -7,8 +7,9 @@ model's target columns with one rule set (ARCHITECTURE.md "JSON outputs"):
   the mean over the columns the data excites (velocity DOFs that barely move are not scored:
   their NRMSE would divide by their own noise);
 - scored samples exclude, in each experiment, the model's initial conditions (its
-  ``warmup_samples_`` and the k − 1 further samples a k-step prediction needs) and the first
-  ``warmup_s`` seconds;
+  ``warmup_samples_``, or more where the caller asks: a comparison scores every model after
+  the longest of theirs, so that all are scored on the same samples; and the k − 1 further
+  samples a k-step prediction needs) and the first ``warmup_s`` seconds;
 - a prediction that leaves the physical range (non-finite, or more than
   :data:`DIVERGENCE_FACTOR` measured ranges outside the measured range) has diverged: that
   column scores ``None`` and is listed with the time it left, and ``total`` is ``None`` too,
@@ -109,6 +110,14 @@ def scored_rows(log: pd.DataFrame, warmup_s: float, initial: int) -> np.ndarray:
     """True where a sample is scored: after ``initial`` samples and ``warmup_s`` seconds of its
     experiment."""
     return warmup_mask(log, warmup_s, warmup_samples=initial)
+
+
+def common_warmup(models: Sequence) -> int:
+    """The initial samples of each run that every one of the fitted ``models`` can be scored
+    after: the longest of their ``warmup_samples_`` (0 for none). Each model scored after its
+    own scored a NARX of 4 delays on 3 samples fewer per run than a physics model: rankings
+    of errors over different samples."""
+    return max((int(m.warmup_samples_) for m in models), default=0)
 
 
 def score_prediction(
@@ -308,6 +317,7 @@ def evaluate(
     warmup_s: float = 0.0,
     autopilot=None,
     predictions: dict[str, pd.DataFrame] | None = None,
+    warmup_samples: int | None = None,
 ) -> dict[str, Any]:
     """Scores of a fitted model on ``log`` (module docstring). ``modes`` among "one_step",
     "k_step" (``k_step`` samples ahead) and "free_run"; ``autopilot`` (a
@@ -315,11 +325,15 @@ def evaluate(
     the free run and the k-step predictions of models that can fly in closed loop (those with
     a ``closed_loop`` method: physics models and hybrids) under it, so an open-loop unstable
     plant is compared as it was flown; the modes flown so are listed under ``closed_loop``.
-    ``predictions``, when given, receives each mode's predicted DataFrame (for figures)."""
+    ``predictions``, when given, receives each mode's predicted DataFrame (for figures).
+    ``warmup_samples``: the initial samples of each run left unscored where more than the
+    model's own ``warmup_samples_`` (a comparison's longest, :func:`common_warmup`); fewer
+    would score samples the model has no prediction for, so the model's own is the least."""
     log = check_log(log)  # before the scored rows, which are found before any prediction
     columns = target_columns(model, log)
     out: dict[str, Any] = {"columns": columns}
-    base = scored_rows(log, warmup_s, model.warmup_samples_)
+    initial = max(int(model.warmup_samples_), int(warmup_samples or 0))
+    base = scored_rows(log, warmup_s, initial)
     out["samples"] = int(base.sum())
     for name in modes:
         if name == "k_step":
@@ -337,7 +351,7 @@ def evaluate(
         pred = model.closed_loop(log, autopilot, mode) if closed else model.predict(log, mode)
         if predictions is not None:
             predictions[name] = pred
-        mask = scored_rows(log, warmup_s, model.warmup_samples_ + mode_steps(mode) - 1)
+        mask = scored_rows(log, warmup_s, initial + mode_steps(mode) - 1)
         if name == "k_step":  # its first k - 1 predictions of each run need k steps of history
             out["k_step_scored"] = int(mask.sum())
         nrmse, rmse, diverged, runs, left = score_split(

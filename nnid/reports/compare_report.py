@@ -119,8 +119,8 @@ def ranking_rows(comparison: dict) -> tuple[list[str], list[list[str]]]:
 
 
 def _scored(held: dict) -> str:
-    """A model's scored held-out samples, and its k-step ones where fewer: each model is
-    scored after its own initial conditions, so models are ranked on different samples."""
+    """A model's scored held-out samples, and its k-step ones where fewer (every model of a
+    comparison is scored on the same: after the longest warm-up among them)."""
     n, k = held.get("samples"), held.get("k_step_scored")
     if n is None:
         return "-"
@@ -169,10 +169,9 @@ def column_terms(comparison: dict) -> dict[str, str]:
         ),
         "one-step NRMSE": "the same error one sample ahead",
         "scored samples": f"the {part} samples each model's errors are over: those after the "
-        f"first {number(comparison.get('warmup_s'), 3)} s of each run and after the model's own "
-        "initial conditions (one sample for a physics model, its longest delay for a NARX "
-        "network), so a model that needs more initial samples is scored on fewer; in brackets "
-        "the k-step count, each prediction needing k samples of its run before it",
+        f"first {number(comparison.get('warmup_s'), 3)} s of each run and after "
+        f"{_warmup_text(comparison)}; in brackets the k-step count, each prediction needing "
+        "k samples of its run before it",
         "J/J0": "McCarter's force error (eq. 4.25): RMS of the force residual over RMS of the "
         "force the model's fitted terms explain (the viscous force τ̄ of eq. 4.4 for damping "
         "models, the regression's target for a Fossen fit); only for models with a force "
@@ -181,6 +180,25 @@ def column_terms(comparison: dict) -> dict[str, str]:
         "validation used for": "what the model did with the validation run while fitting "
         "(early stopping or model selection): its validation scores are then not independent",
     }
+
+
+def _warmup_text(comparison: dict) -> str:
+    """What the scores leave out of each run besides ``warmup_s``: the longest warm-up among
+    the models (``warmup_samples``), so every model is scored on the same samples; a
+    comparison.json written before it was kept scored each model after its own."""
+    n = comparison.get("warmup_samples")
+    if n is None:
+        return (
+            "the model's own initial conditions (one sample for a physics model, its longest "
+            "delay for a NARX network), so a model that needs more initial samples is scored "
+            "on fewer"
+        )
+    samples = "sample" if n == 1 else "samples"
+    return (
+        f"its first {n} {samples}, the longest initial conditions among the models (one "
+        "sample for a physics model, its longest delay for a NARX network), so every model "
+        "is scored on the same samples"
+    )
 
 
 def outputs(comparison: dict, key: str) -> list[str]:
@@ -337,6 +355,12 @@ def _data_text(comparison: dict) -> str:
     if comparison.get("test"):
         text += f"; test on {runs('test')} (the ranking uses the test run)"
     text += f". The first {comparison['warmup_s']:g} s of every run are not scored"
+    if comparison.get("warmup_samples"):  # the same samples for every model
+        n = comparison["warmup_samples"]
+        text += (
+            f", nor its first {n} sample{'' if n == 1 else 's'} (the longest warm-up among "
+            "the models, so that every model is scored on the same samples)"
+        )
     if comparison.get("k_step_samples", 1) > 1:  # k-step predictions need k steps of history
         text += ", nor, for the k-step scores, a run's samples before its k-th"
     text += "."
@@ -537,9 +561,11 @@ COEFFICIENT_HEAD = ["coefficient", "unit", "value", "std. error"]
 
 def coefficient_rows(coefs: dict) -> list[list[str]]:
     """A damping model's coefficients with their SI units and standard errors ("-" where the
-    fit gives none: a Nelder-Mead cost has no least-squares covariance)."""
+    fit gives none: a Nelder-Mead cost has no least-squares covariance). Names as code spans,
+    as the train report's (the HTML table draws them as ``<code>``): bare, the '*' of two
+    products (``X:u*abs(u)*v*abs(v)``) set the Markdown twin's text between them in italics."""
     return [
-        [k, parameter_unit(k), number(v["value"], 5), number(v.get("stderr"), 2)]
+        [f"`{k}`", parameter_unit(k), number(v["value"], 5), number(v.get("stderr"), 2)]
         for k, v in sorted(coefs.items())
     ]
 

@@ -32,6 +32,7 @@ from nnid.reports.figures import (
     markdown_table,
     new_figure,
     page_head,
+    plot_label,
     said_list,
 )
 from nnid.reports.loop_report import parameter_unit
@@ -534,7 +535,11 @@ def _free_run_figure(figures: dict) -> str:
         ax.plot(t, physics[c].to_numpy()[pos], color="tab:orange", lw=0.9, label="physics only")
         ax.plot(t, hybrid[c].to_numpy()[pos], color="tab:blue", lw=0.9, label="hybrid")
         ax.set_ylabel(f"{c} [{UNITS[c]}]")
-    axes[0, 0].set_title(f"experiment {name}" if name is not None else "held-out data")
+    # the user's run name, as matplotlib draws it: a '$' pair was parsed as mathtext, and a
+    # bad one ('$\foo$') raised in savefig after the whole fit
+    axes[0, 0].set_title(
+        f"experiment {plot_label(str(name))}" if name is not None else "held-out data"
+    )
     axes[0, 0].legend(loc="upper right", fontsize=8, ncols=3)
     axes[-1, 0].set_xlabel("t [s]")
     return figure_uri(fig)
