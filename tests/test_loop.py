@@ -1721,7 +1721,7 @@ class _GateCandidate:
     """A linear candidate the simulation gate tests stand in: ``augment`` names the vehicle
     after it, or fails as a refit out of the physical range where it is ``refused``."""
 
-    linear = True
+    linear, kind = True, "coupled_damping"
 
     def __init__(self, name: str, refused: bool = False) -> None:
         self.name, self.parameter, self.refused = name, None, refused
@@ -1941,3 +1941,75 @@ def test_a_search_whose_optimum_the_vehicle_refuses_found_no_better_fit(monkeypa
     loop.dofs_, loop.gates_ = ("w",), []
     step = loop._step(ws, fit, [cand])
     assert step.no_better_fit == ["current.z"] and step.tested == 1 and step.added is None
+
+
+def _stub_step(monkeypatch, scored: list, error) -> tuple:
+    """A loop whose pass (``_step``) screens ``scored`` as its linear candidates, rescores
+    nothing, asks no second opinion, and whose gate simulates by ``error`` (as
+    :func:`_stub_gate`); the joint refit is named after the candidate added."""
+    import nnid.loop.residual_loop as rl
+
+    loop, ws, fit = _stub_gate(monkeypatch, error, lambda self, ws, fit, s: s.name, gate_checks=30)
+    monkeypatch.setattr(rl, "screen_linear", lambda ws, fit, linear: list(scored))
+    monkeypatch.setattr(rl, "rescore", lambda ws, fit, ranked: None)
+    monkeypatch.setattr(rl, "sindy_opinion", lambda ws, fit, ranked: [])
+    loop.nonlinear = False
+    fit.unknowns = []
+    return loop, ws, fit
+
+
+def _significance_family(p_values: list[float], improvements: list[float]) -> list:
+    """Candidates c0, c1, … that pass every test but the F-test, at these p-values."""
+    from nnid.loop.diagnose import Scored
+
+    return [
+        Scored(_GateCandidate(f"c{k}"), 1.0, 0.1, p, 50.0, imp, {"w": imp}, 10.0)
+        for k, (p, imp) in enumerate(zip(p_values, improvements, strict=True))
+    ]
+
+
+def test_candidates_each_significant_alone_are_not_significant_over_the_family_tested(
+    monkeypatch,
+):
+    """Bonferroni over the candidates tested: of 20 scored, 19 each at p = 0.009, under
+    α = 0.01 alone but over α/20 = 5e-4, are not significant, though each would gain in the
+    gate (ranked above the one that is); the one at p = 1e-4 < α/20 is, and is added. The
+    false-alarm test (19 clean logs of 20) rejects such candidates by its other checks too,
+    so it did not fail without the correction."""
+    weak = _significance_family([0.009] * 19 + [1e-4], [0.3] * 19 + [0.1])
+
+    def gain(self, ws, vehicle, mode):  # every candidate halves the held-out error
+        return 1.0 if vehicle.name == "fit" else 0.5
+
+    loop, ws, fit = _stub_step(monkeypatch, weak, gain)
+    step = loop._step(ws, fit, [s.candidate for s in weak])
+    assert step.tested == 20
+    assert getattr(step.added, "name", None) == "c19" and weak[19].reason == "added"
+    for s in weak[:19]:
+        assert not s.admissible and s.reason == "not significant (p = 0.009 ≥ 0.0005)", s.reason
+        assert s.gate is None  # never simulated
+
+
+def test_a_candidate_that_helps_one_step_but_not_the_free_run_is_not_added(monkeypatch):
+    """The simulation gate: a significant candidate ranked first, whose held-out one-step
+    error halves but whose free run gains 2 % (under min_gate_gain = 5 %), is turned down; the
+    one ranked next, whose free run gains 10 %, is added. Without the gate the first
+    admissible one was added: a column of measured noise explains held-out noise one step
+    ahead (errors in variables) and no simulation."""
+    from nnid.loop.residual_loop import NO_GAIN
+
+    both = _significance_family([1e-9, 1e-9], [0.3, 0.1])
+    errors = {  # held-out velocity NRMSE: (free run, one step)
+        "fit": (1.0, 1.0),
+        "c0": (0.98, 0.5),
+        "c1": (0.9, 1.0),
+    }
+
+    def error(self, ws, vehicle, mode):
+        return errors[vehicle.name][mode != "free_run"]
+
+    loop, ws, fit = _stub_step(monkeypatch, both, error)
+    step = loop._step(ws, fit, [s.candidate for s in both])
+    assert getattr(step.added, "name", None) == "c1" and step.fit == "c1"
+    assert not both[0].admissible and NO_GAIN in both[0].reason, both[0].reason
+    assert both[0].gate == (1.0, 0.98) and loop.gates_ == ["free run"]
