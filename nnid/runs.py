@@ -87,7 +87,15 @@ def staged(out_dir: Path, supersedes: tuple[str, ...] = ()) -> Iterator[Path]:
 
 
 def _moved_into(stage: Path, out_dir: Path, supersedes: tuple[str, ...]) -> None:
-    """The files of ``stage`` moved into ``out_dir`` (:func:`staged`)."""
+    """The files of ``stage`` moved into ``out_dir`` (:func:`staged`). A new folder is the
+    stage renamed, whole. Into one that exists (it may hold the user's other files, and be a
+    mount point: never renamed itself), the earlier files this run replaces are moved aside
+    into a hidden folder first, then the new ones in: a failure on the way moves them back,
+    so the folder holds the earlier result whole, never a mix of the two (moved one by one,
+    a failure half way left a new model.json beside an old metrics.json). A process killed
+    between the renames cannot move them back; as every earlier file is aside before a new
+    one moves in, the folder then holds some of one result's files, never of both, and the
+    earlier ones lie in that hidden folder (``.<out>-…-old``)."""
     if not out_dir.exists():
         stage.rename(out_dir)
         return
@@ -103,15 +111,44 @@ def _moved_into(stage: Path, out_dir: Path, supersedes: tuple[str, ...]) -> None
                 field="--out",
             )
     written = {item.name for item in items}
-    for name in supersedes:
-        stale = out_dir / name
-        if name not in written and stale.is_file():
-            stale.unlink()
-    for item in items:
-        target = out_dir / item.name
-        if target.is_dir() and not target.is_symlink():
-            shutil.rmtree(target)
-        os.replace(item, target)
+    stale = [n for n in supersedes if n not in written and (out_dir / n).is_file()]
+    earlier = [n for n in (*written, *stale) if os.path.lexists(out_dir / n)]
+    aside = stage.with_name(f"{stage.name}-old")  # beside the stage: one file system
+    aside.mkdir()
+    moved: list[str] = []  # the earlier files moved aside
+    placed: list[str] = []  # the new ones moved in
+    try:
+        for name in earlier:
+            os.replace(out_dir / name, aside / name)
+            moved.append(name)
+        for item in items:
+            os.replace(item, out_dir / item.name)
+            placed.append(item.name)
+    except BaseException:
+        _moved_back(stage, out_dir, aside, placed, moved)
+        raise
+    shutil.rmtree(aside, ignore_errors=True)
+
+
+def _moved_back(
+    stage: Path, out_dir: Path, aside: Path, placed: list[str], moved: list[str]
+) -> None:
+    """Undo :func:`_moved_into`'s renames that were made: the new files ``placed`` back into
+    the stage, the earlier ones ``moved`` aside back into ``out_dir``. One that cannot be is
+    said with where the earlier result lies (the hidden folder is then kept)."""
+    try:
+        for name in reversed(placed):
+            os.replace(out_dir / name, stage / name)
+        for name in reversed(moved):
+            os.replace(aside / name, out_dir / name)
+        aside.rmdir()
+    except OSError as exc:
+        raise NnidInputError(
+            f"cannot be written, and the earlier result it held could not be put back "
+            f"({exc.strerror or exc}): its files are in {aside}",
+            source=str(out_dir),
+            field="--out",
+        ) from exc
 
 
 def _unwritable(out_dir: Path, exc: OSError) -> NnidInputError:

@@ -2,8 +2,8 @@
 
 Every JSON output is strict: no NaN or Infinity (an unmeasured or undefined number is ``null``),
 NumPy scalars and arrays become plain numbers and lists, and each file carries
-``schema_version``. Writing goes through a temporary file and a rename, so a failed run never
-leaves half a file behind.
+``schema_version``. Writing goes through a temporary file, synced to the disk, and a rename,
+so a failed run (or a power loss) never leaves half a file behind.
 """
 
 from __future__ import annotations
@@ -117,11 +117,31 @@ def write_atomic(path: str | Path, write: Callable[[BinaryIO], object]) -> Path:
     try:
         with os.fdopen(fd, "wb") as fh:
             write(fh)
+            # on the disk before the rename: after a power loss, a rename that reached it
+            # before the data left an empty file in place of the old one
+            fh.flush()
+            os.fsync(fh.fileno())
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+    _sync_folder(path.parent)
     return path
+
+
+def _sync_folder(folder: Path) -> None:
+    """Flush ``folder``'s entries (a rename into it) to the disk, where the system lets a
+    folder be opened and synced (Windows opens none)."""
+    try:
+        fd = os.open(folder, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0))
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:  # a file system that syncs no folder (some network mounts)
+        pass
+    finally:
+        os.close(fd)
 
 
 def read_json(path: str | Path) -> Any:

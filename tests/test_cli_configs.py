@@ -3,6 +3,7 @@ the file and the key, with no traceback, before any data is loaded or simulated.
 
 from __future__ import annotations
 
+import contextlib
 import re
 from pathlib import Path
 
@@ -352,6 +353,53 @@ def test_a_run_into_an_earlier_out_folder_leaves_no_stale_result_and_keeps_yours
     assert (out / "report.md" / "mine.txt").read_text() == "keep"
     assert (out / "model.json").read_text() == "new"
     assert not list(tmp_path.glob(".out-*"))  # the stage is gone
+
+
+def test_a_run_that_fails_while_moving_its_files_in_leaves_the_earlier_result_whole(
+    tmp_path, monkeypatch
+):
+    """`staged` moved a finished run's files into --out one by one: a failure after the
+    first left the new model.json beside the earlier run's metrics.json. The earlier files
+    are moved aside first and back on a failure: --out holds the earlier result whole (and
+    the user's files), or the new one whole."""
+    import os
+
+    from nnid.errors import NnidInputError
+    from nnid.runs import staged
+
+    def contents(folder):
+        return {p.name: p.read_text() for p in folder.iterdir()}
+
+    out = tmp_path / "out"
+    out.mkdir()
+    earlier = {"model.json": "old", "metrics.json": "old", "monitor.json": "old"}
+    for name, text in {**earlier, "notes.txt": "mine"}.items():
+        (out / name).write_text(text)
+    replace, into, staging = os.replace, [], []
+
+    def failing(src, dst):
+        if Path(src).parent in staging and Path(dst).parent == out:
+            into.append(dst)  # a new file moved into --out
+            if len(into) == 2 and failure:
+                raise OSError(28, "No space left on device")
+        return replace(src, dst)
+
+    monkeypatch.setattr(os, "replace", failing)
+    new = {"model.json": "new", "metrics.json": "new", "report.md": "new"}
+    for failure in (True, False):
+        into.clear()
+        with contextlib.ExitStack() as stack:
+            if failure:
+                stack.enter_context(pytest.raises(NnidInputError, match="cannot be written"))
+            with staged(out, supersedes=("model.json", "monitor.json")) as stage:
+                staging.append(stage)
+                for name, text in new.items():
+                    (stage / name).write_text(text)
+        if failure:
+            assert len(into) == 2  # one new file was in place when the second failed
+            assert contents(out) == {**earlier, "notes.txt": "mine"}
+        else:
+            assert contents(out) == {**new, "notes.txt": "mine"}  # monitor.json superseded
 
 
 def test_an_out_folder_whose_parent_cannot_be_written_gets_its_outputs(tmp_path, monkeypatch):

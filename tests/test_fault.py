@@ -1502,6 +1502,32 @@ def test_a_window_a_dropout_cuts_is_said_cut_by_a_gap_not_by_the_end(vehicle, mo
     )
 
 
+def test_a_window_before_a_runs_dropped_last_piece_is_said_cut_by_a_gap(vehicle, monitor):
+    """A dropout from 20.5 s to 2 samples before its run's end: ``mask_gaps`` drops that
+    piece of 2 samples (too short to use), and the snag alarmed at 20.05 s, its window's rows
+    ending at 20.5 s, was said judged "before the end of its run", though the run went on in
+    the log for 11 s more. It says the gap, and how much of its run it dropped."""
+    from nnid.datasets.gaps import mask_gaps
+    from nnid.fault.monitor import monitor_motion
+
+    log = simulate_faults(vehicle, 32, faults=[Fault("external", FAULT_T, force=SNAG)], seed=1)
+    read = monitor_motion(log.columns)
+    t = log["t"].to_numpy()
+    log.loc[(t > 20.5 + 1e-9) & (t < t[-2] - 1e-9), read] = np.nan
+    pieces = mask_gaps([log.assign(experiment="run")], read)[0]
+    assert set(pieces["experiment"]) == {"run#0"}  # its last piece dropped
+    kept = pieces["t"].iloc[-1]
+    dropped = {"seconds": t[-1] - kept, "samples": 2}
+    first = detect(monitor, pieces).alarms[0]
+    assert first["cut_short"]["by"] == "end" and "the end of" not in first["meaning"]
+    said = f"a gap that dropped its run's last {t[-1] - kept:.2f} s (samples missing, then 2"
+    assert said in first["meaning"]
+    assert first["cut_short"]["dropped"] == pytest.approx(dropped)
+    from nnid.datasets.gaps import DROPPED_TAILS  # what mask_gaps records of it, by piece
+
+    assert pieces.attrs[DROPPED_TAILS] == {"run#0": pytest.approx(dropped)}
+
+
 def test_a_window_in_a_runs_last_piece_not_judged_says_the_end_of_its_run():
     """A window that the end of the last piece a dropout cut its run into cut short, too
     short to judge: its record says "the end of its run" where a whole run's says "the end
@@ -2694,6 +2720,32 @@ def test_a_monitor_saves_its_own_model_and_is_bound_to_it(monitor, tmp_path):
     with pytest.raises(NnidInputError, match=r"has no model\.json beside it") as err:
         ResidualMonitor.load(tmp_path / "m", model=monitor.model)
     assert "another model" not in str(err.value)
+
+
+def test_a_model_given_to_load_is_checked_against_the_one_the_monitor_was_calibrated_for(
+    monitor, tmp_path
+):
+    """``load(folder, model=m)`` checked the calibration against the folder's model.json,
+    never against ``m``: another model given there got these thresholds without a word. A
+    given model is checked against the saved one by what it learned, not by which nnid wrote
+    the file."""
+    from nnid.models.base import load_model
+
+    monitor.save(tmp_path / "m")
+    other = copy.deepcopy(monitor.model)
+    other.estimate_.theta = other.estimate_.theta * 1.1
+    with pytest.raises(NnidInputError, match="the model given to load is another") as err:
+        ResidualMonitor.load(tmp_path / "m", model=other)
+    assert err.value.source == str(tmp_path / "m" / "monitor.json")
+    for own in (monitor.model, load_model(tmp_path / "m")):  # as fitted, or as loaded
+        assert ResidualMonitor.load(tmp_path / "m", model=own).model is own
+    from nnid.models.base import learned_fingerprint
+
+    saved = json.loads((tmp_path / "m" / "model.json").read_text())
+    (tmp_path / "v").mkdir()  # the same model, as another nnid version wrote it
+    (tmp_path / "v" / "model.json").write_text(json.dumps({**saved, "nnid_version": "0.0.1"}))
+    assert learned_fingerprint(load_model(tmp_path / "v")) == learned_fingerprint(monitor.model)
+    assert learned_fingerprint(other) != learned_fingerprint(monitor.model)
 
 
 def test_detect_json_names_the_target_rate_apart_from_the_measured_one(monitor, vehicle):

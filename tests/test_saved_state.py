@@ -332,3 +332,32 @@ def test_a_written_file_keeps_the_umask_not_mkstemps_0600(umask, tmp_path):
         os.umask(old)
     assert (tmp_path / "model.json").stat().st_mode & 0o777 == 0o666 & ~umask
     assert [p.name for p in tmp_path.iterdir()] == ["model.json"]  # no temporary file left
+
+
+def test_a_written_file_is_synced_to_the_disk_before_its_rename_and_its_folder_after(
+    tmp_path, monkeypatch
+):
+    """write_atomic renamed a temporary file that was never synced: after a power loss the
+    rename could reach the disk before the data, an empty model.json in place of the old one.
+    The file is synced whole before the rename, its folder (the rename) after it."""
+    import stat
+
+    events = []
+    sync, replace = os.fsync, os.replace
+
+    def fsync(fd):
+        st = os.fstat(fd)
+        events.append(("folder",) if stat.S_ISDIR(st.st_mode) else ("file", st.st_size))
+        sync(fd)
+
+    def rename(src, dst):
+        events.append(("rename", os.path.basename(dst)))
+        replace(src, dst)
+
+    monkeypatch.setattr(os, "fsync", fsync)
+    monkeypatch.setattr(os, "replace", rename)
+    path = write_json(tmp_path / "model.json", {"kind": "x"})
+    size = path.stat().st_size
+    assert events[:2] == [("file", size), ("rename", "model.json")]
+    if os.name == "posix":  # a folder can be opened and synced there
+        assert events[2:] == [("folder",)]

@@ -56,6 +56,12 @@ from nnid.errors import NnidInputError
 
 #: a segment left between two gaps shorter than this many samples is masked with them
 MIN_SEGMENT = 3
+#: the ``DataFrame.attrs`` key of a log :func:`mask_gaps` cut at its gaps, where a run's rows
+#: went on after its last piece kept (samples missing, and pieces too short to use): that
+#: piece's label -> ``seconds`` (from its last row to its run's last in the log) and
+#: ``samples`` (those of the short pieces dropped there). Detection says a window that ends
+#: there cut short by a gap, not by the end of its run
+DROPPED_TAILS = "nnid_dropped_tails"
 #: the cleaning steps that say what became of the gaps (bridged from the pose, masked, or left
 #: in a motion column no model reads: its own step, so no summary reads it as gaps masked)
 BRIDGE_STEP, MASK_STEP, UNREAD_STEP = "bridge velocity gaps", "mask gaps", "unread motion"
@@ -748,6 +754,7 @@ def mask_gaps(
             piece_of[:] = log[PIECE_OF].to_numpy(object)
         # the runs' own names: a piece named as another run would join it (rows by label)
         named = {str(n) for n in log["experiment"].unique()} if "experiment" in log else set()
+        tails: dict[str, dict] = {}
         for name, pos in experiment_rows(log):
             runs = true_runs(keep[pos])
             for k, (a, b) in enumerate(runs):  # from #0, as resample_log and the readers
@@ -766,9 +773,13 @@ def mask_gaps(
                 label[pos[a:b]] = piece
                 if len(runs) > 1:
                     piece_of[pos[a:b]] = [base if pd.isna(p) else p for p in piece_of[pos[a:b]]]
-        out.append(
-            log.assign(experiment=label, **{PIECE_OF: piece_of})[keep].reset_index(drop=True)
-        )
+            tail = _dropped_tail(log["t"].to_numpy(np.float64)[pos], runs)
+            if tail is not None:
+                tails[label[pos[tail.pop("last")]]] = tail
+        cut = log.assign(experiment=label, **{PIECE_OF: piece_of})[keep].reset_index(drop=True)
+        if tails:  # a new dict: pandas may share attrs with the log it was cut from
+            cut.attrs = {**cut.attrs, DROPPED_TAILS: tails}
+        out.append(cut)
     if slow and any(len(p) for p in parts) and not any(len(p) for p in out):
         raise refuse_slow(parts, slow)
     for k, (log, taken, kept) in enumerate(zip(parts, slow_runs, out, strict=True)):
@@ -789,6 +800,19 @@ def mask_gaps(
         columns = list(dict.fromkeys(ch.column for ch in slow))
         report.add(SLOW_STEP, said, rows_removed=taken, columns=columns)
     return out
+
+
+def _dropped_tail(t: np.ndarray, pieces: list[tuple[int, int]]) -> dict | None:
+    """Where a run (its clock ``t``, its present ``pieces`` as :func:`mask_gaps` cuts them)
+    goes on after its last piece kept: that piece's ``last`` row (in ``t``), the ``seconds``
+    from it to the run's last row, and the ``samples`` of the short pieces dropped there
+    (:data:`DROPPED_TAILS`); None where its last piece kept ends the run, or none is kept."""
+    kept = [(a, b) for a, b in pieces if b - a >= MIN_SEGMENT]
+    if not kept or kept[-1][1] == t.size:
+        return None
+    end = kept[-1][1]
+    samples = sum(b - a for a, b in pieces if a >= end)
+    return {"last": end - 1, "seconds": float(t[-1] - t[end - 1]), "samples": int(samples)}
 
 
 def gaps_record(gaps: list[Gap]) -> dict:

@@ -64,6 +64,7 @@ import pandas as pd
 from scipy.special import expit
 
 from nnid.datasets.cleaning import CleaningReport
+from nnid.datasets.gaps import DROPPED_TAILS
 from nnid.datasets.log import typical_step
 from nnid.fault import kernel
 from nnid.fault.isolation import (
@@ -313,6 +314,11 @@ def on_part(data: dict, k: int, window_s: float, rows: np.ndarray, max_step: flo
              "by": "end" if end else "gap"}  # fmt: skip
     if end and run is not None:  # the last piece of a run: its run's end, not the log's
         short["piece_of"] = str(run)
+    # a run that went on after these rows, dropped at a gap (mask_gaps): not its end
+    names = data.get("experiment_names")
+    tail = None if names is None else data.get(DROPPED_TAILS, {}).get(str(names[code]))
+    if end and tail and not np.any(names[code + 1 :] == names[code]):
+        short["dropped"] = dict(tail)
     return short
 
 
@@ -326,7 +332,14 @@ RUN_END = "the end of its run"
 def end_of(short: dict | None) -> str:
     """What ended the window ``short`` (:func:`on_part`, ``by`` "end") as said: the end of the
     log (:data:`LOG_END`), or of its run (:data:`RUN_END`) where the window lies in the last
-    piece a gap cut a run into."""
+    piece a gap cut a run into; a gap, where the run went on in the log after the rows kept
+    (``dropped``: samples missing, then pieces too short to use, :data:`DROPPED_TAILS`)."""
+    dropped = short.get("dropped") if short else None
+    if dropped:
+        then = f", then {dropped['samples']} samples too few to use" if dropped["samples"] else ""
+        return (
+            f"a gap that dropped its run's last {dropped['seconds']:.2f} s (samples missing{then})"
+        )
     return RUN_END if short and short.get("piece_of") else LOG_END
 
 
@@ -1334,6 +1347,7 @@ def detect(
     lacks them."""
     start = time.perf_counter()
     data = by_block(monitor_inputs(log, monitor.plant_, report))
+    data[DROPPED_TAILS] = log.attrs.get(DROPPED_TAILS, {})  # what mask_gaps cut off runs' ends
     trace = monitor.run(log)
     values, alarm = trace.values.copy(), trace.alarm.copy()
     residual = trace.values[:, 0:6].copy()  # the residual watched, re-referenced per change

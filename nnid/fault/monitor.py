@@ -35,7 +35,13 @@ from nnid.datasets.preprocess import check_attitude, refuse_bursty_runs
 from nnid.errors import NnidInputError
 from nnid.fault import kernel
 from nnid.fault.thresholds import rate_interval, rate_threshold, threshold_caveat
-from nnid.models.base import MODEL_FILE, MONITOR_FILE, load_model, model_fingerprint
+from nnid.models.base import (
+    MODEL_FILE,
+    MONITOR_FILE,
+    learned_fingerprint,
+    load_model,
+    model_fingerprint,
+)
 from nnid.physics.compiled import form_args
 from nnid.physics.dofs import DOFS, FORCES
 from nnid.physics.thrusters import Actuation
@@ -531,9 +537,11 @@ class ResidualMonitor(BaseEstimator):
 
     @classmethod
     def load(cls, folder: str | Path, model=None) -> ResidualMonitor:
-        """The monitor saved in ``folder`` with its model (loaded from there unless given: a
-        given ``model`` is taken to be the one saved there, whose model.json is what the
-        calibration is checked against)."""
+        """The monitor saved in ``folder`` with its model, loaded from there unless given. The
+        calibration is checked against the model.json beside it, and a given ``model``
+        against that model (:func:`~nnid.models.base.learned_fingerprint`: its settings and
+        what it learned, whichever nnid saved it): another model was given this calibration
+        without a word."""
         folder = Path(folder)
         path = folder / MONITOR_FILE
         if not path.is_file():
@@ -548,7 +556,8 @@ class ResidualMonitor(BaseEstimator):
             raise NnidInputError("is not a monitor nnid wrote (no JSON object)", source=str(path))
         validated(_SavedMonitor, state, str(path))
         # the model's own errors name model.json: loaded outside the monitor's error wrapping
-        model = model if model is not None else load_model(folder)
+        given = model is not None
+        model = model if given else load_model(folder)
         # a monitor saved before it recorded its model's (no key) is believed, as it was
         beside = (folder / MODEL_FILE).is_file()
         if FOR_MODEL in state and not beside:  # only a given model gets this far without one
@@ -565,6 +574,19 @@ class ResidualMonitor(BaseEstimator):
                 "was saved again, or the files come from different runs): train the detection "
                 "model again",
                 source=str(path),
+            )
+        # the calibration is the saved model's: a given one must be that model
+        if (
+            FOR_MODEL in state
+            and given
+            and learned_fingerprint(model) != learned_fingerprint(load_model(folder))
+        ):
+            raise NnidInputError(
+                f"was calibrated for the model saved beside it ({MODEL_FILE}), and the model "
+                "given to load is another (its settings or what it learned differ): give the "
+                "model saved there, or none to load it from the folder",
+                source=str(path),
+                field="model",
             )
         try:
             out = cls(model, **state["settings"])

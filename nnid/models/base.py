@@ -32,6 +32,7 @@ import hashlib
 import importlib
 import inspect
 import io
+import json
 import math
 import pickle
 import struct
@@ -56,6 +57,7 @@ from nnid.serialization import (
     FLOAT_TAG,
     SCHEMA_VERSION,
     exact_float,
+    jsonable,
     read_exact_float,
     read_json,
     write_atomic,
@@ -422,20 +424,20 @@ class NnidModel(BaseEstimator, ABC):
         check_is_fitted(self, msg=NOT_FITTED)
         folder = Path(folder)
         folder.mkdir(parents=True, exist_ok=True)
-        learned, tensors = learned_state(self)
+        form, tensors = _saved_form(self)
         data = None
         if tensors:
             buffer = io.BytesIO()
             torch.save(tensors, buffer)
             data = buffer.getvalue()
         payload = {
-            "kind": self.kind,
+            "kind": form["kind"],
             "nnid_version": _version(),
-            "settings": encode_setting(self.get_params(deep=False)),
+            "settings": form["settings"],
             # the two files are written one after the other: a save cut between them left new
             # tensors beside the old model.json, which loaded them without a word
             TENSOR_HASH: None if data is None else hashlib.sha256(data).hexdigest(),
-            **learned,
+            **form,  # the learned part, after these (kind and settings keep their places)
         }
         # another model's calibration: detection applied it to this model
         (folder / MONITOR_FILE).unlink(missing_ok=True)
@@ -558,6 +560,31 @@ def model_fingerprint(folder: str | Path) -> str:
     if (folder / TENSOR_FILE).exists():
         digest.update((folder / TENSOR_FILE).read_bytes())
     return digest.hexdigest()
+
+
+def learned_fingerprint(model: NnidModel) -> str:
+    """The sha256 of what identifies a fitted model: its kind, settings and what it learned,
+    as :meth:`NnidModel.save` writes them, and its tensors' values. Not which nnid saved it
+    (``nnid_version``), nor the bytes torch gives its tensors: a model and that model saved
+    and loaded again have the same one, where :func:`model_fingerprint` (a folder's bytes)
+    tells one save from another."""
+    form, tensors = _saved_form(model)
+    digest = hashlib.sha256(json.dumps(jsonable(form), sort_keys=True).encode("utf-8"))
+    for name in sorted(tensors):
+        value = tensors[name].detach().cpu().contiguous()
+        digest.update(name.encode("utf-8"))
+        digest.update(f"{value.dtype}{tuple(value.shape)}".encode())
+        # the bytes, not the numbers: a recorded NaN equals itself, -0.0 is not 0.0
+        digest.update(value.reshape(-1).view(torch.uint8).numpy().tobytes())
+    return digest.hexdigest()
+
+
+def _saved_form(model: NnidModel) -> tuple[dict, dict[str, torch.Tensor]]:
+    """What :meth:`NnidModel.save` writes of ``model``: model.json's kind, settings and
+    learned part (:func:`learned_state`), and the tensors by name."""
+    learned, tensors = learned_state(model)
+    form = {"kind": model.kind, "settings": encode_setting(model.get_params(deep=False))}
+    return {**form, **learned}, tensors
 
 
 def _check_learned(model: NnidModel, payload: dict, source: str) -> None:
