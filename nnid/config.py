@@ -53,10 +53,12 @@ from nnid.validation import (
     MIN_WINDOW_S,
     PositiveFloat,
     StrictModel,
+    disjoint_columns,
     read_toml,
     refuse_other_file,
     repeated,
     validated,
+    window_lengths,
 )
 from nnid.vehicle import vehicle_name
 
@@ -805,10 +807,7 @@ class _InputOutput(_Model):
 
     @model_validator(mode="after")
     def _disjoint(self) -> _InputOutput:
-        both = [c for c in self.outputs if c in self.inputs]
-        if both:
-            raise ValueError(f"{', '.join(both)} is an output and an input: the model would "
-                             "read the measured answer")  # fmt: skip
+        disjoint_columns(self.inputs, self.outputs)  # the models' own check, named at inputs
         return self
 
 
@@ -821,7 +820,10 @@ class NarxModelSpec(_InputOutput):
     kind: Literal["narx"]
     input_delays: Annotated[int, Field(ge=1)] | list[Annotated[int, Field(ge=0)]] = 2
     output_delays: Annotated[int, Field(ge=1)] | list[Annotated[int, Field(ge=1)]] = 2
-    hidden: list[Annotated[int, Field(ge=1, le=MAX_WIDTH)]] = Field(default_factory=lambda: [10])
+    # at least one layer: both closed loops (torch's, the compiled kernel) start from one
+    hidden: list[Annotated[int, Field(ge=1, le=MAX_WIDTH)]] = Field(
+        default_factory=lambda: [10], min_length=1
+    )
     balanced: bool = True
     seed: Seed = 0
     delta: bool = True
@@ -846,9 +848,10 @@ class NarxModelSpec(_InputOutput):
     @field_validator("simulation_window")
     @classmethod
     def _windows(cls, window: int | list[int]) -> int | list[int]:
-        lengths = window if isinstance(window, list) else [window]
-        if not lengths or min(lengths) < 2:
-            raise ValueError("a window length of at least 2 samples, or a list of them")
+        try:
+            window_lengths(window)  # the model's own check
+        except NnidInputError as err:  # said against this key, as a field's error is
+            raise ValueError(err.message) from None
         return window
 
     @model_validator(mode="after")

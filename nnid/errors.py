@@ -80,7 +80,8 @@ def checked_number(
     if not ok:
         kind = "a whole number" if integer else "a finite number"
         bound = f"{'above' if strict else 'at least'} {minimum:g}"
-        if math.isfinite(maximum):
-            bound += f" and at most {maximum:g}"
+        if math.isfinite(maximum):  # a whole bound in full: 2³² − 1 read "4.29497e+09"
+            top = int(maximum) if integer and float(maximum).is_integer() else f"{maximum:g}"
+            bound += f" and at most {top}"
         raise NnidInputError(f"{kind} {bound} is expected, not {value!r}", field=field)
     return int(value) if integer else float(value)

@@ -131,6 +131,41 @@ def checked_names(value: object, field: str) -> list[str]:
     return names
 
 
+def disjoint_columns(inputs: Iterable[str], outputs: Iterable[str]) -> None:
+    """Refuse a column that is both an output and an input of an input-output model, naming
+    ``inputs``: the model would read the measured answer (with input delay 0 the very sample
+    it predicts), in free run too. The configs' check and the models' (settings given in
+    Python skip the config)."""
+    read = set(inputs)
+    both = [c for c in outputs if c in read]
+    if both:
+        raise NnidInputError(
+            f"{', '.join(both)} is an output and an input: the model would read the measured "
+            "answer",
+            field="inputs",
+        )
+
+
+def window_lengths(window: object, field: str = "simulation_window") -> list[int]:
+    """``window`` (a length in samples, or a list of lengths) as a list of whole lengths of
+    at least 2, or the error naming ``field``: the configs' check and the models' (2.5 given
+    in Python was cut to 2 by ``int``). A numpy integer is a whole number."""
+    many = isinstance(window, Iterable) and not isinstance(window, str | bytes | Mapping)
+    lengths = list(window) if many else [window]
+    whole = [
+        isinstance(w, Real) and not isinstance(w, bool) and math.isfinite(w)
+        and float(w).is_integer() and w >= 2
+        for w in lengths
+    ]  # fmt: skip
+    if not lengths or not all(whole):
+        raise NnidInputError(
+            f"a window length is a whole number, at least 2 samples, or a list of them; "
+            f"not {window!r}",
+            field=field,
+        )
+    return [int(w) for w in lengths]
+
+
 def nnid_file(data: Mapping[str, Any]) -> tuple[str, str] | None:
     """Which of nnid's TOML files ``data`` is, by the key that only it has (a config's
     ``kind``, a vehicle file's ``mass``, a reader config's ``sources``, a manifest's

@@ -793,6 +793,14 @@ def _window_keys(hist, uf, y) -> list[tuple]:
             for h, u, w in zip(hist, uf, y, strict=True)]  # fmt: skip
 
 
+def _windows_per_run(n: int, warmup: int, length: int) -> int:
+    """The free-run windows of a run of ``n`` samples: one ending at its last sample and every
+    half window before it, and one starting right after its ``warmup`` delay states where
+    that grid leaves samples before its first window."""
+    grid, left = divmod(n - warmup - length, length // 2)
+    return grid + 1 + (left > 0)
+
+
 def test_adam_free_run_stage_passes_every_window_once_an_epoch_in_a_seeded_order(monkeypatch):
     # Adam's free-run stage trains on LM's windows (each run's last sample and every half
     # window before it): every window once an epoch, the order drawn per epoch from the seed
@@ -816,7 +824,7 @@ def test_adam_free_run_stage_passes_every_window_once_an_epoch_in_a_seeded_order
     model.fit(train, val)
 
     key = _window_keys(*model._fixed_windows(model._table(train), 20))
-    assert len(key) == (170 - 2 - 20) // 10 + 1 + (230 - 2 - 20) // 10 + 1  # both runs' windows
+    assert len(key) == _windows_per_run(170, 2, 20) + _windows_per_run(230, 2, 20)  # both runs'
     orders = []
     for batches in epochs:
         assert max(len(b[0]) for b in batches) == 32
@@ -903,8 +911,9 @@ def test_simulation_objective_is_the_one_the_free_run_stage_trained():
     assert measure == pytest.approx(kept, rel=1e-12)
     hist, uf, y = obj.windows
     assert y.shape[1] == 40 and hist.shape[1:] == (2, 1) and uf.shape[:2] == y.shape[:2]
-    # windows end every 20 samples back from each run's end, none before the delay states
-    per_run = [(300 - 2 - 40) // 20 + 1, (200 - 2 - 40) // 20 + 1]
+    # windows end every 20 samples back from each run's end, and one right after the delay
+    # states, none before them
+    per_run = [_windows_per_run(300, 2, 40), _windows_per_run(200, 2, 40)]
     assert y.shape[0] == sum(per_run)
     std, mean = model.net_.y_std.numpy(), model.net_.y_mean.numpy()
     last = [per_run[0] - 1, sum(per_run) - 1]  # each run's windows, earliest first
@@ -970,12 +979,14 @@ def test_layer_sizes_are_settings_not_estimated_parameters():
     ("hidden", "says"),
     [((1.5,), "a whole number"), ((float("nan"),), "a whole number"), ((0,), "at least 1"),
      ((200_000,), "at most 100000"), (8, "a list of layer widths"),
-     ("8", "a list of layer widths")],
+     ("8", "a list of layer widths"), ((), "at least one")],
 )  # fmt: skip
 def test_layer_widths_given_in_python_are_checked_and_capped_as_the_config_does(hidden, says):
     """Given in Python, ``hidden`` skipped the config's checks: 1.5 trained one unit wide
     (``int``), NaN was a bare ValueError, 200 000 (over the config's MAX_WIDTH, a typo) built
-    the layer, "8" trained an 8-wide layer and 8 was "'int' object is not iterable"."""
+    the layer, "8" trained an 8-wide layer and 8 was "'int' object is not iterable"; no layer
+    at all trained one-step, then the compiled free run read past its first layer's end
+    (garbage) and the torch closed loop raised a shape error."""
     lm = LevenbergMarquardt(max_epochs=1, jacobian="samples")
     model = NarxModel(["u"], ["y"], 2, 2, hidden=hidden, trainer=lm, balanced=False)
     with pytest.raises(NnidInputError, match=rf"^field 'hidden': .*{says}"):
@@ -1092,3 +1103,183 @@ def test_narx_labels_a_piece_shorter_than_the_label_window_steady():
     with pytest.warns(UserWarning, match="5 samples in 1 piece"):
         labels = model._labels(log)
     assert labels[: len(long)].any() and not labels[len(long) :].any()
+
+
+def test_config_refuses_a_network_without_a_hidden_layer():
+    # both closed loops start from the first hidden layer: [] was taken, then the compiled
+    # free run read past that layer's end
+    from nnid.config import TrainConfig
+
+    with pytest.raises(NnidInputError) as err:
+        load_config(ROOT / "configs/seamor_narx_lm.toml", TrainConfig,
+                    {"model.member.hidden": []})  # fmt: skip
+    assert err.value.field == "model.member.hidden"
+
+
+def test_a_horizon_longer_than_every_training_block_is_refused_naming_multi_step():
+    # 50 samples, 35 in the training block: no 40-step window fits after the 2 delay states.
+    # Every draw weight was 0/0, and numpy's "probabilities contain NaN" ended the fit
+    lm = LevenbergMarquardt(max_epochs=1, jacobian="samples")
+    model = NarxModel(["u"], ["y"], 2, 2, hidden=(3,), trainer=lm, multi_step=40)
+    with pytest.raises(NnidInputError, match=r"40-step horizon .* have 35 samples") as err:
+        model.fit(_tank(50, 1.3, 0))
+    assert err.value.field == "multi_step"
+
+
+def test_random_division_refuses_a_free_run_stage_that_would_train_on_its_held_out_rows():
+    # the free-run windows are cut over every row of each run, the rows the random division
+    # holds out for validation (and test) among them
+    model = NarxModel(["u"], ["y"], 2, 2, hidden=(3,), division="random", simulation_epochs=1)
+    with pytest.raises(NnidInputError, match="division='random'") as err:
+        model.fit(_tank(200, 1.3, 0))
+    assert err.value.field == "division"
+
+
+def _resumed(log_a: pd.DataFrame, log_b: pd.DataFrame) -> pd.DataFrame:
+    """Run a, interrupted by run b, then resumed: rows a[:half], b, a[half:]."""
+    half = len(log_a) // 2
+    a, b = log_a.assign(experiment="a"), log_b.assign(experiment="b")
+    return pd.concat([a.iloc[:half], b, a.iloc[half:]], ignore_index=True)
+
+
+def test_an_interleaved_log_trains_as_the_same_log_grouped_by_run():
+    # The network's table groups a log's rows by experiment (a, a, b); the transient labels
+    # were taken in log order (a, b, a), so half of a's samples were drawn by b's labels
+    a, b = _tank(200, 1.3, 0), _tank(110, 1.1, 1).iloc[10:]  # b's steps at another phase
+    b = b.assign(t=np.arange(len(b), dtype=float))
+    interleaved = _resumed(a, b)
+    grouped = interleaved.iloc[np.argsort(interleaved["experiment"].to_numpy(), kind="stable")]
+    grouped = grouped.reset_index(drop=True)
+    val = _tank(120, 1.2, 2)
+
+    def fit(log: pd.DataFrame) -> NarxModel:
+        lm = LevenbergMarquardt(max_epochs=2, jacobian="samples")
+        return NarxModel(["u"], ["y"], 2, 2, hidden=(3,), trainer=lm, lm_samples=150).fit(log, val)
+
+    one, other = fit(interleaved), fit(grouped)
+    assert 0 < one.transient_share_ < 1  # both kinds drawn: the labels weigh the draw
+    assert one.transient_share_ == other.transient_share_
+    # the same draws; the statistics summed in another row order differ in the last bits
+    for w, w_grouped in zip(one._weights().values(), other._weights().values(), strict=True):
+        torch.testing.assert_close(w, w_grouped, rtol=1e-9, atol=1e-12)
+
+
+def test_random_division_of_an_interleaved_log_trains_on_its_training_rows_alone(monkeypatch):
+    # The random division's mask (and the labels) are drawn per log row; the table holds the
+    # rows grouped by run: its validation rows were eligible for training and some training
+    # rows were not
+    import nnid.models.narx as narx
+
+    samplers = []
+
+    class Kept(narx.BalancedSampler):
+        def __init__(self, *args, **kwargs):
+            super().__init__(*args, **kwargs)
+            samplers.append(self)
+
+    monkeypatch.setattr(narx, "BalancedSampler", Kept)
+    log = _resumed(_tank(200, 1.3, 0), _tank(100, 1.1, 1))
+    lm = LevenbergMarquardt(max_epochs=1, jacobian="samples")
+    model = NarxModel(["u"], ["y"], 2, 2, hidden=(3,), trainer=lm, lm_samples=150,
+                      division="random")  # fmt: skip
+    with pytest.warns(UserWarning, match="random division"):
+        model.fit(log)
+    train = np.random.default_rng(0).random(len(log)) < 0.7  # the division's draw (seed 0)
+    table = np.concatenate([pos for _, pos in log.groupby("experiment").indices.items()])
+    sampler = samplers[0]
+    assert sampler.eligible.any() and not (sampler.eligible & ~train[table]).any()
+    np.testing.assert_array_equal(sampler.labels, model._labels(log, train)[table])
+
+
+@pytest.mark.parametrize(
+    ("settings", "field"),
+    [({"input_delays": [1.5]}, "input_delays.0"), ({"output_delays": 2.5}, "output_delays"),
+     ({"simulation_window": 2.5}, "simulation_window"),
+     ({"simulation_window": [100, 2.5]}, "simulation_window"),
+     ({"inputs": ["u", "y"], "input_delays": [0, 1]}, "inputs"), ({"seed": -1}, "seed"),
+     ({"multi_step": 2.5}, "multi_step"), ({"simulation_epochs": 1.5}, "simulation_epochs")],
+)  # fmt: skip
+def test_settings_given_in_python_are_refused_as_the_config_refuses_them(settings, field):
+    """Given in Python they skipped the config's checks: delays [1.5] trained delay 1 (int),
+    a 2.5-sample window trained 2-sample ones, an input that is also an output (delay 0: the
+    sample predicted) was read, and a negative seed reached numpy ("expected non-negative
+    integer")."""
+    kw = {"inputs": ["u"], "outputs": ["y"], "hidden": (3,), "balanced": False, **settings}
+    lm = LevenbergMarquardt(max_epochs=1, jacobian="samples")
+    with pytest.raises(NnidInputError) as err:
+        NarxModel(trainer=lm, **kw).fit(_tank(100, 1.3, 0))
+    assert err.value.field == field
+
+
+def test_numpy_integers_are_whole_delays_and_windows():
+    # np.int64(3) delays were "'numpy.int64' object is not iterable"
+    lm = LevenbergMarquardt(max_epochs=1, jacobian="samples")
+    model = NarxModel(["u"], ["y"], np.int64(3), [np.int64(1), np.int64(2)], hidden=(3,),
+                      trainer=lm, balanced=False, simulation_window=np.int64(20))  # fmt: skip
+    model.fit(_tank(100, 1.3, 0))
+    assert model.input_delays_ == [1, 2, 3] and model.output_delays_ == [1, 2]
+    assert model.simulation_windows_ == [20]
+
+
+def test_config_names_an_input_that_is_an_output_as_the_model_does():
+    # one check for both: the config said it against the model table, the model (given in
+    # Python) did not check at all
+    from nnid.config import TrainConfig
+
+    with pytest.raises(NnidInputError) as config_err:
+        load_config(ROOT / "configs/seamor_narx_lm.toml", TrainConfig,
+                    {"model.member.inputs": ["tau_X", "u"]})  # fmt: skip
+    with pytest.raises(NnidInputError) as model_err:
+        NarxModel(["tau_X", "u"], ["u", "v"])._configure()
+    assert config_err.value.field == "model.member.inputs"
+    assert config_err.value.message == model_err.value.message
+
+
+def test_the_lm_trainers_step_and_memory_settings_reach_the_free_run_stage(monkeypatch):
+    # The free-run stage built a default LM: the trainer's memory budget (its sensitivity
+    # buffer reaches ~1.3 GB on the Seamor net), μ and damping rule never reached it. They do;
+    # its epochs, failures and penalty stay the stage's own settings.
+    seen = []
+    fit = LevenbergMarquardt.fit
+
+    def spy(self, *args, **kwargs):
+        if kwargs.get("jacobian_rows") is not None:  # the free-run stage
+            seen.append(self.get_params())
+        return fit(self, *args, **kwargs)
+
+    monkeypatch.setattr(LevenbergMarquardt, "fit", spy)
+    budget_mb = 0.002  # 262 elements
+    lm = LevenbergMarquardt(max_epochs=1, jacobian="samples", memory_budget_mb=budget_mb, mu=0.5,
+                            damping="nielsen", l2=1e-3)  # fmt: skip
+    model = NarxModel(["u"], ["y"], 2, 2, hidden=(3,), trainer=lm, balanced=False,
+                      lm_samples=200, simulation_epochs=1, simulation_window=20,
+                      simulation_trainer="lm", simulation_l2=0.1)  # fmt: skip
+    train = _tank(300, 1.3, 2)
+    model.fit(train, train)
+    (stage_lm,) = seen
+    assert (stage_lm["memory_budget_mb"], stage_lm["mu"], stage_lm["damping"]) == (
+        budget_mb,
+        0.5,
+        "nielsen",
+    )
+    assert (stage_lm["max_epochs"], stage_lm["l2"], stage_lm["jacobian"]) == (1, 0.1, "auto")
+    stage = model.finetune_["stages"][0]
+    elements = int(budget_mb * 2**20) // 8
+    assert 0 < stage["peak_jacobian_elements"] <= elements
+    assert stage["peak_sensitivity_elements"] <= (model.dy_ + 1) * elements
+
+
+def test_the_recorded_trainer_names_both_stages_where_they_differ(tmp_path):
+    # metrics.json, the reports and compare said "lm" of a net whose free-run stage Adam
+    # trained; one trainer for both stages (the shipped configs) keeps its one name
+    train = _tank(200, 1.3, 2)
+    lm = LevenbergMarquardt(max_epochs=1, jacobian="samples")
+    kw = dict(hidden=(3,), trainer=lm, balanced=False, lm_samples=100, simulation_epochs=1,
+              simulation_window=20)  # fmt: skip
+    model = NarxModel(["u"], ["y"], 2, 2, **kw).fit(train, train)
+    assert model.trainer_name() == model.describe()["trainer"] == "lm (free run: adam)"
+    model.save(tmp_path)
+    assert load_model(tmp_path).trainer_name() == "lm (free run: adam)"
+    same = NarxModel(["u"], ["y"], 2, 2, simulation_trainer="lm", **kw)
+    assert same.trainer_name() == "lm"
+    assert NarxModel(["u"], ["y"], **{**kw, "simulation_epochs": 0}).trainer_name() == "lm"

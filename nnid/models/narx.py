@@ -89,10 +89,19 @@ from nnid.models.bounds import (
 from nnid.models.io_model import DTYPE, InputOutputModel, seeded_linear
 from nnid.serialization import jsonable
 from nnid.trainers.history import History, Progress, scored_validation, staged, stopping_score
-from nnid.validation import MAX_WIDTH, checked_names
+from nnid.validation import MAX_SEED, MAX_WIDTH, checked_names, disjoint_columns, window_lengths
 
 #: ``output_transform`` values: extra regressors computed from each lagged output
 OUTPUT_TRANSFORMS = (None, "sqrt", "products", "fossen")
+
+#: the settings of an LM ``trainer`` its free-run stage (``simulation_trainer="lm"``) takes
+#: too: how it steps and the memory its Jacobian blocks may hold. Not its stopping rules nor
+#: its penalty (``simulation_epochs``, ``simulation_max_fail``, ``simulation_l2``: the stage's
+#: own), nor ``jacobian``: the stage supplies its rows (the sensitivity recursion)
+LM_STEP_SETTINGS = (
+    "mu", "mu_dec", "mu_inc", "mu_max", "memory_budget_mb", "damping", "geodesic",
+    "geodesic_ratio",
+)  # fmt: skip
 
 
 @functools.cache
@@ -138,9 +147,16 @@ class SimulationObjective:
 
 
 def _delays(d: int | Sequence[int], minimum: int, what: str) -> list[int]:
-    """An int n means delays 1..n (MATLAB's ``1:n``); a list is taken as given."""
-    out = list(range(1, int(d) + 1)) if isinstance(d, int) else sorted({int(x) for x in d})
-    if not out or min(out) < minimum:
+    """A whole number n means delays 1..n (MATLAB's ``1:n``); a list is taken as given. Each
+    whole (a numpy integer is one), as the config has them: ``int`` cut 1.5 to 1."""
+    if isinstance(d, str | bytes) or not np.iterable(d):
+        n = checked_number(d, what, 1, strict=False, integer=True)
+        return list(range(1, int(n) + 1))
+    out = sorted(
+        {int(checked_number(x, f"{what}.{i}", minimum, strict=False, integer=True))
+         for i, x in enumerate(d)}
+    )  # fmt: skip
+    if not out:
         # named as the setting: a config's empty list was said against the file alone
         raise NnidInputError(
             f"a positive count or a list of delays ≥ {minimum} is expected, not {d!r}", field=what
@@ -221,7 +237,8 @@ class NarxModel(InputOutputModel):
     batch for LM). Without a ``validation`` log the training log is divided into contiguous
     blocks (``division="block"``, ``fractions`` 70/15/15, MATLAB's divideblock; the test block
     is left unused) or at random (``division="random"``: warns, neighbouring samples are
-    correlated). ``seed`` seeds the initial weights and the sampling (local generators).
+    correlated; refused with ``simulation_epochs``, whose windows span the rows it holds out).
+    ``seed`` seeds the initial weights and the sampling (local generators).
 
     * ``output_bounds``: None (no clamp), ``"train"`` (each output's training range) or one
       ``[low, high]`` per output in its units, each a number, None (open) or ``"train"``.
@@ -232,7 +249,8 @@ class NarxModel(InputOutputModel):
       turn, each for up to ``simulation_epochs``) ending at each experiment's last sample and
       every half window before, with ``simulation_trainer`` ``"adam"`` (every window once an
       epoch in a seeded random order, ``simulation_lr``) or ``"lm"`` (sensitivity-recursion
-      Jacobians); windows longer than the shortest experiment are cut to it (``finetune_``
+      Jacobians, with an LM ``trainer``'s step and memory settings, :data:`LM_STEP_SETTINGS`);
+      windows longer than the shortest experiment are cut to it (``finetune_``
       ``["stages"]``: per window length trained, its :meth:`History.as_dict` record, why it
       ended and the epoch it kept); early-stopped on the whole free runs of the validation
       experiments and kept only if that measure (each run's squared free-run NRMSE, averaged)
@@ -353,6 +371,12 @@ class NarxModel(InputOutputModel):
         self.outputs_ = checked_names(self.outputs, "outputs")
         if not self.inputs_ or not self.outputs_:
             raise NnidInputError("a NARX needs at least one input and one output", field="outputs")
+        disjoint_columns(self.inputs_, self.outputs_)
+        # as the config has them: numpy refused a negative seed with its own words, 2.5
+        # horizons or epochs were cut by int()
+        checked_number(self.seed, "seed", 0, strict=False, integer=True, maximum=MAX_SEED)
+        checked_number(self.multi_step, "multi_step", 1, strict=False, integer=True)
+        checked_number(self.simulation_epochs, "simulation_epochs", 0, strict=False, integer=True)
         self.targets_ = list(self.outputs_)
         self.input_delays_ = _delays(self.input_delays, 0, "input_delays")
         self.output_delays_ = _delays(self.output_delays, 1, "output_delays")
@@ -363,16 +387,14 @@ class NarxModel(InputOutputModel):
             checked_number(h, "hidden", 1, strict=False, integer=True, maximum=MAX_WIDTH)
             for h in self.hidden
         )
+        if not self.hidden_:  # both closed loops (torch's, the kernel's) start from one
+            raise NnidInputError(
+                "hidden is a list of layer widths, at least one: the network needs a hidden layer",
+                field="hidden",
+            )
         self.output_bounds_ = check_bounds(self.output_bounds, len(self.outputs_))
         self.dy_ = max(self.output_delays_)
-        windows = self.simulation_window
-        self.simulation_windows_ = [
-            int(w) for w in ([windows] if np.isscalar(windows) else windows)
-        ]
-        if not self.simulation_windows_ or min(self.simulation_windows_) < 2:
-            raise NnidInputError(
-                "simulation_window is a length ≥ 2 or a list of them", field="simulation_window"
-            )
+        self.simulation_windows_ = window_lengths(self.simulation_window)
         #: the delay states: samples at the start of each experiment neither predicted nor scored
         self.warmup_samples_ = max(self.dy_, max(self.input_delays_))
 
@@ -712,13 +734,22 @@ class NarxModel(InputOutputModel):
 
         self._configure()
         self.sample_interval_ = self._check(log)  # every later log is checked against it
+        if validation_log is None and self.division == "random" and self.simulation_epochs > 0:
+            # its windows are cut over every row of each run: it would train in free run on
+            # the rows held out to stop it (and on the test rows)
+            raise NnidInputError(
+                "division='random' holds out rows scattered through each run, and the "
+                "free-run stage (simulation_epochs > 0) trains on windows of whole runs, "
+                "those rows too: give a validation log, use division='block', or set "
+                "simulation_epochs=0",
+                field="division",
+            )
         longest = max(len(pos) for _, pos in experiment_rows(log))
         if longest <= self.warmup_samples_:  # no sample has all its delayed regressors
-            deepest = "input_delays" if max(self.input_delays_) >= self.dy_ else "output_delays"
             raise NnidInputError(
                 f"the longest training run has {longest} samples, no more than the deepest "
                 f"delay ({self.warmup_samples_}): no sample has every delayed regressor",
-                field=deepest,
+                field=self._deepest(),
             )
         self.net_ = self._new_net(self._generator())
         random_rows = None
@@ -743,17 +774,21 @@ class NarxModel(InputOutputModel):
         trained = log if fit_rows is None else log[fit_rows]
         self.bounds_ = resolve_bounds(self.output_bounds_, self.outputs_, trained)
         tab = self._table(log)
-        horizon = max(1, int(self.multi_step))
+        # the table's rows are the log's grouped by experiment (experiment_rows): labels and
+        # masks of log rows are taken in that order (a run resumed after another, A B A,
+        # put one sample's label on another)
+        order = np.concatenate([pos for _, pos in experiment_rows(log)])
+        horizon = int(self.multi_step)
         sampler = BalancedSampler(
-            self._labels(log, fit_rows),
+            self._labels(log, fit_rows)[order],
             tab["code"].numpy(),
             window=self.warmup_samples_ + horizon,
             balance=self.balanced,
             seed=self.seed,
         )
         if fit_rows is not None:
-            val_rows = sampler.eligible & ~fit_rows
-            sampler.eligible &= fit_rows
+            val_rows = sampler.eligible & ~fit_rows[order]
+            sampler.eligible &= fit_rows[order]
             vtab, v_idx = tab, np.flatnonzero(val_rows)
         else:
             vtab = self._table(validation_log)
@@ -765,6 +800,8 @@ class NarxModel(InputOutputModel):
                     "early stopping, on its training error alone",
                     stacklevel=2,
                 )
+        if not sampler.eligible.any():  # the draw's weights were 0/0: numpy's "contain NaN"
+            self._refuse_no_sample(tab, horizon, self.division_["by"])
         self.transient_share_ = sampler.transient_share(sampler.sample(20000))
         n_eligible = int(sampler.eligible.sum())
         trainer = clone(self.trainer, safe=False) if self.trainer is not None else Adam()
@@ -795,6 +832,41 @@ class NarxModel(InputOutputModel):
             self._simulation_finetune(
                 tab, held_out, staged(progress, "simulation", "free_run_nrmse")
             )
+
+    def _refuse_no_sample(self, tab: dict[str, torch.Tensor], horizon: int, division: str) -> None:
+        """The error of a training log with no sample to train on: every run (its training
+        block, after a block division) no longer than the delay states and the horizon."""
+        starts, stops = run_bounds(tab["code"].numpy())
+        lengths = sorted({int(n) for n in stops - starts}, reverse=True)
+        shown = ", ".join(map(str, lengths[:5])) + (", …" if len(lengths) > 5 else "")
+        need = self.warmup_samples_ + horizon
+        what = f"the {horizon}-step horizon" if horizon > 1 else "the predicted sample"
+        where = {
+            "block": " (each run's training block: the block division holds out the rest)",
+            "random": ", and none of their samples that have them is a training row of the "
+            "random division",
+        }.get(division, "")
+        raise NnidInputError(
+            f"no training sample has its {self.warmup_samples_} delay states and {what} in one "
+            f"run ({need} samples): the training runs have {shown} samples{where}",
+            field="multi_step" if horizon > 1 else self._deepest(),
+        )
+
+    def _deepest(self) -> str:
+        """The delay setting that sets the delay states (``warmup_samples_``)."""
+        return "input_delays" if max(self.input_delays_) >= self.dy_ else "output_delays"
+
+    def trainer_name(self) -> str | None:
+        """As :meth:`NnidModel.trainer_name`, and the free-run stage's trainer where it is
+        another (``"lm (free run: adam)"``): the one-step trainer's name alone said "lm" of a
+        net whose free-run stage Adam trained."""
+        first = super().trainer_name()
+        if getattr(self, "trainer_", None) is None and getattr(self, "fitted_by_", None):
+            return first  # as saved: both stages' already
+        stage = self.simulation_trainer if self.simulation_epochs > 0 else None
+        if first is None or stage is None or stage == first:
+            return first
+        return f"{first} (free run: {stage})"
 
     def _validation_used(self, validation: pd.DataFrame | None) -> str | None:
         """Early stopping where a given validation log was scored by a stage (one-step or
@@ -1159,7 +1231,14 @@ class NarxModel(InputOutputModel):
         obj = self._objective(tab, val, length)
         if obj is None:
             return None
+        # an LM trainer's memory budget and damping reach this stage too (its sensitivity
+        # buffer was the default's 256 MiB blocks whatever the trainer said); an Adam's: LM's
+        # defaults
+        steps: dict[str, Any] = {}
+        if isinstance(self.trainer_, LevenbergMarquardt):
+            steps = {k: getattr(self.trainer_, k) for k in LM_STEP_SETTINGS}
         trainer = LevenbergMarquardt(
+            **steps,
             max_epochs=int(self.simulation_epochs),
             max_fail=int(self.simulation_max_fail),
             l2=float(self.simulation_l2),
