@@ -534,9 +534,10 @@ class KalmanSpec(_Trainer):
     """The augmented-state unscented Kalman filter (Weiss eqs 77-84)."""
 
     kind: Literal["ukf"]
-    process_noise: PositiveFloat | list[PositiveFloat] = 1e-3
+    # per √s (UnscentedKalman): 1e-3 and 1e-4 per step at 20 Hz, the rate they were chosen at
+    process_noise: PositiveFloat | list[PositiveFloat] = 1e-3 / 0.05**0.5
     measurement_noise: PositiveFloat | list[PositiveFloat] | None = None
-    parameter_noise: float = Field(1e-4, ge=0, allow_inf_nan=False)
+    parameter_noise: float = Field(1e-4 / 0.05**0.5, ge=0, allow_inf_nan=False)
     theta0: list[Number] | None = None
     theta0_std: list[PositiveFloat] | None = None
     min_std: PositiveFloat = 1e-3

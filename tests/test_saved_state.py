@@ -75,6 +75,7 @@ def test_a_loaded_ukf_model_keeps_its_trainer_and_filter_history(ukf_model, tmp_
             "theta_std",
             "nu",
             "innovation",
+            "innovation_std",
         }
     )
     for key, series in fitted.items():
@@ -107,7 +108,14 @@ def test_a_ukf_fit_keeps_its_per_sample_series_out_of_model_json(ukf_model, tmp_
         return 0
 
     assert longest(saved) < 50 and (tmp_path / "model.json").stat().st_size < 10_000
-    assert saved["state"]["trainer_history"] == ["t", "theta", "theta_std", "nu", "innovation"]
+    assert saved["state"]["trainer_history"] == [
+        "t",
+        "theta",
+        "theta_std",
+        "nu",
+        "innovation",
+        "innovation_std",
+    ]
     assert saved["state"]["history"] == "trainer_history.theta"
     tensors = torch.load(tmp_path / "tensors.pt", weights_only=True)
     assert sorted(tensors) == sorted(

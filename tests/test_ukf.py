@@ -22,6 +22,7 @@ TRUTH = np.array([-27.08, -61.117, -0.154, -1.772])  # seamor.toml (Weiss Table 
 DT = 0.05
 EXACT = Measurement(kind="none")
 NOISY = Measurement(kind="dvl_imu")  # σ 0.005 m/s DVL, 0.002 rad/s gyro
+CALIBRATED = 1e-4 / np.sqrt(DT)  # process noise per √s: 1e-4 per step of these 20-Hz logs
 
 
 @pytest.fixture(scope="module")
@@ -68,7 +69,7 @@ def test_process_is_the_physics_model(seamor):
 def test_ukf_identifies_surge_and_yaw(seamor):
     """120 s of noisy DVL/gyro surge + yaw: each parameter within 5 % and inside ±2σ."""
     data = _data(seamor, _surge_yaw(2400), NOISY, seed=3)
-    ukf = UnscentedKalman(process_noise=1e-4, theta0=0.5 * TRUTH)
+    ukf = UnscentedKalman(process_noise=CALIBRATED, theta0=0.5 * TRUTH)
     est = ukf.fit(_structure(seamor), data)
     rel = np.abs(est.theta - TRUTH) / np.abs(TRUTH)
     assert np.all(rel < 0.05), rel
@@ -163,7 +164,7 @@ def test_an_overconfident_filter_widens_its_standard_errors_and_says_so(seamor):
     overconfident. It is scaled by that statistic, as least squares scales by its residual
     variance, and a warning says by how much; a consistent filter is left as it is."""
     data = _data(seamor, _surge_yaw(1200), NOISY, seed=3)
-    kw = {"process_noise": 1e-4, "theta0": 0.5 * TRUTH}
+    kw = {"process_noise": CALIBRATED, "theta0": 0.5 * TRUTH}
     sigma = np.asarray([0.005, 0.002]) * 0.3  # of NOISY's levels on u and r
     filt = UnscentedKalman(measurement_noise=sigma, **kw)
     with pytest.warns(UserWarning, match=r"innovations are [\d.]+ times the variance"):
@@ -188,7 +189,7 @@ def test_ukf_gives_no_standard_error_to_what_its_data_did_not_inform(seamor):
 
     inputs = _surge_yaw(600)
     inputs[:, 5] = 0.0
-    kw = {"process_noise": 1e-4, "theta0": 0.5 * TRUTH}
+    kw = {"process_noise": CALIBRATED, "theta0": 0.5 * TRUTH}
     with pytest.warns(ExcitationWarning, match=r"did not inform N_rdot, N:r\*abs\(r\) beyond"):
         est = UnscentedKalman(**kw).fit(_structure(seamor), _data(seamor, inputs, NOISY, seed=3))
     assert np.isnan(est.stderr[2:]).all() and not est.significant[2:].any()
@@ -203,7 +204,7 @@ def test_a_nan_velocity_is_no_measurement_not_a_divergence(seamor):
     """One NaN velocity sample stopped the filter with "the filter diverged ... widen the noise
     levels"; it is predicted through, without an update there, and said."""
     data = _data(seamor, _surge_yaw(600), NOISY, seed=3)
-    kw = {"process_noise": 1e-4, "theta0": 0.5 * TRUTH}
+    kw = {"process_noise": CALIBRATED, "theta0": 0.5 * TRUTH}
     full = UnscentedKalman(**kw).fit(_structure(seamor), data)
     data["nu"][300, 0] = np.nan
     filt = UnscentedKalman(**kw)
@@ -221,11 +222,13 @@ def test_an_underconfident_filter_says_its_standard_errors_are_conservative(seam
     """Process noise 100 times the model error: innovations at 0.18 of the predicted variance
     and s.e. 10-30 times those of the calibrated filter, reported as if fine."""
     data = _data(seamor, _surge_yaw(600), NOISY, seed=3)
-    calibrated = UnscentedKalman(process_noise=1e-4, theta0=0.5 * TRUTH).fit(
+    calibrated = UnscentedKalman(process_noise=CALIBRATED, theta0=0.5 * TRUTH).fit(
         _structure(seamor), data
     )
     with pytest.warns(UserWarning, match=r"innovations are 0\.\d+ of the variance.*conservative"):
-        wide = UnscentedKalman(process_noise=1e-2, theta0=0.5 * TRUTH).fit(_structure(seamor), data)
+        wide = UnscentedKalman(process_noise=100 * CALIBRATED, theta0=0.5 * TRUTH).fit(
+            _structure(seamor), data
+        )
     assert wide.sigma2 < 0.5 and (wide.stderr > 3 * calibrated.stderr).all()
 
 
@@ -244,7 +247,7 @@ def test_a_parameter_the_vehicle_file_leaves_out_gets_a_diffuse_prior(seamor):
     data = _data(seamor, _surge_yaw(600), NOISY, seed=3)
     with warnings.catch_warnings():
         warnings.simplefilter("error", ExcitationWarning)
-        est = UnscentedKalman(process_noise=1e-4).fit(_structure(absent), data)
+        est = UnscentedKalman(process_noise=CALIBRATED).fit(_structure(absent), data)
     assert abs(est.theta[1] - TRUTH[1]) < 0.05 * abs(TRUTH[1]), est.theta
     assert np.isfinite(est.stderr).all()
     from nnid.trainers.ukf import force_scale
@@ -260,7 +263,7 @@ def test_a_prior_tighter_than_the_data_is_named_in_the_warning(seamor):
     data = _data(seamor, _surge_yaw(600), NOISY, seed=3)
     std = [1e-3, 1e-3, 1.0, 1.0]
     with pytest.warns(ExcitationWarning, match=r"theta0_std: X_udot 0\.001.*tighter than the data"):
-        UnscentedKalman(process_noise=1e-4, theta0=0.5 * TRUTH, theta0_std=std).fit(
+        UnscentedKalman(process_noise=CALIBRATED, theta0=0.5 * TRUTH, theta0_std=std).fit(
             _structure(seamor), data
         )
 
@@ -297,23 +300,24 @@ def test_correlated_innovations_widen_the_standard_errors_and_are_said(seamor):
     """Velocity noise correlated over ten samples (a smoothed DVL), declared at its σ: the
     filter takes its innovations as white, and X_udot ended 5.5 of its s.e. from the truth.
     Least squares widens each equation by its residuals' correlation time; the filter now
-    widens its covariance by its innovations' (7.9 samples here), and says so."""
+    widens its covariance by its standardised innovations' (8.0 samples here), and says so."""
     import warnings
 
     import nnid.trainers.ukf as ukf
 
     structure, data = _smoothed_surge(seamor)
-    kw = {"process_noise": 1e-4, "theta0": 0.5 * TRUTH[:2], "measurement_noise": 0.005}
+    kw = {"process_noise": CALIBRATED, "theta0": 0.5 * TRUTH[:2], "measurement_noise": 0.005}
     filt = UnscentedKalman(**kw)
     with pytest.warns(UserWarning, match=r"innovations are correlated \(u [\d.]+ samples"):
         est = filt.fit(structure, data)
-    tau = ukf.equation_times(filt.history_["innovation"])[0]
+    hist = filt.history_
+    tau = ukf.equation_times(hist["innovation"] / hist["innovation_std"], about_zero=True)[0]
     assert tau > 5.0
     assert np.all(np.abs(est.theta - TRUTH[:2]) < 3.0 * est.stderr), (est.theta, est.stderr)
     # the widening is τ on the filter's own covariance, its path's σ with it
     with pytest.MonkeyPatch.context() as patch, warnings.catch_warnings():
         warnings.simplefilter("error")  # white by decree: nothing to say
-        patch.setattr(ukf, "equation_times", lambda r: np.ones(np.shape(r)[1]))
+        patch.setattr(ukf, "equation_times", lambda r, **kw: np.ones(np.shape(r)[1]))
         raw = UnscentedKalman(**kw).fit(structure, data)
     np.testing.assert_allclose(est.cov, raw.cov * tau, rtol=1e-10)
     np.testing.assert_allclose(filt.history_["theta_std"][-1], est.stderr, rtol=1e-12)
@@ -329,7 +333,111 @@ def test_a_standard_error_the_widening_takes_past_half_the_prior_is_withheld(sea
 
     structure, data = _smoothed_surge(seamor)
     std = np.array([1.0, 1.0])
-    kw = {"process_noise": 1e-4, "theta0": 0.5 * TRUTH[:2], "measurement_noise": 0.005}
+    kw = {"process_noise": CALIBRATED, "theta0": 0.5 * TRUTH[:2], "measurement_noise": 0.005}
     with pytest.warns(ExcitationWarning, match="did not inform X_udot, X:u"):
         est = UnscentedKalman(**kw, theta0_std=std).fit(structure, data)
     assert not np.any(est.stderr >= 0.5 * std), est.stderr
+
+
+def test_the_noise_settings_are_per_second_so_the_sampling_rate_keeps_the_standard_errors(seamor):
+    """One 30-s surge dive logged at 10 and 50 Hz by a DVL of one noise density (σ per sample
+    √5 times larger at 50 Hz, so both logs hold the same information): with the process and
+    parameter noise per step, the 50-Hz log walked 5 times as far per second and its s.e. were
+    1.7-1.8 times the 10-Hz log's; per √s they agree within 10 % (1 % here)."""
+    structure = ParametricFossen(seamor, NAMES[:2], dofs=("u",))
+    rng = np.random.default_rng(1)
+    levels = np.repeat(rng.uniform(-15.0, 15.0, 10), 30)  # 3-s surge levels on a 0.1-s grid
+    stderr = []
+    for hz in (10, 50):
+        inputs = np.zeros((levels.size * hz // 10, 6))
+        inputs[:, 0] = np.repeat(levels, hz // 10)
+        sigma = 0.005 * np.sqrt(hz / 10)
+        sensor = Measurement(kind="dvl_imu", velocity_noise=sigma)
+        data = log_arrays(simulate(seamor, inputs, 1.0 / hz, measurement=sensor, seed=3), seamor)
+        est = UnscentedKalman(
+            process_noise=CALIBRATED,
+            parameter_noise=CALIBRATED,
+            measurement_noise=sigma,
+            theta0=0.5 * TRUTH[:2],
+        ).fit(structure, data)
+        stderr.append(est.stderr)
+    ratio = stderr[1] / stderr[0]
+    assert np.all(np.abs(ratio - 1.0) < 0.1), ratio
+
+
+def _pushed(seamor, seed: int, push: float) -> dict[str, np.ndarray]:
+    """400 samples of a surge run with an unlogged constant surge force ``push`` (N)."""
+    inputs = _surge_yaw(400, seed) * [1, 0, 0, 0, 0, 0]
+    inputs[:, 0] += push
+    data = _data(seamor, inputs, NOISY, seed=seed)
+    data["tau"][:, 0] -= push
+    return data
+
+
+def test_the_innovations_correlation_time_is_read_per_experiment(seamor):
+    """Two runs, each with an unlogged constant surge force (a model error) that offsets its
+    innovations. Read over the two runs concatenated, the offsets' jump between them entered
+    the autocorrelation: the second run's force of the opposite sign read τ 134 samples, of
+    the same sign 49. Per experiment, pooled and about zero (the filter's innovations are
+    zero-mean: a run's offset is a model error correlated over the run), 218 and 208: the
+    sign of one run's force against the other's does not count."""
+    import warnings
+
+    structure = ParametricFossen(seamor, NAMES[:2], dofs=("u",))
+    first = _pushed(seamor, 1, 0.5)
+    times = []
+    for push in (0.5, -0.5):
+        second = _pushed(seamor, 2, push)
+        data = {k: np.concatenate([v, second[k]]) if np.shape(v)[:1] == (400,) else v
+                for k, v in first.items()}  # fmt: skip
+        data["experiment"] = np.repeat([0, 1], 400)
+        filt = UnscentedKalman(
+            process_noise=CALIBRATED, measurement_noise=0.005, theta0=0.5 * TRUTH[:2]
+        )
+        with warnings.catch_warnings(record=True) as said:
+            warnings.simplefilter("always")
+            filt.fit(structure, data)
+        widened = [str(w.message) for w in said if "correlated (u " in str(w.message)]
+        assert len(widened) == 1
+        times.append(float(widened[0].split("correlated (u ")[1].split(" ")[0]))
+    assert max(times) < 1.5 * min(times), times
+
+
+def test_a_covariance_losing_definiteness_gets_a_jitter_relative_to_each_variance():
+    """A velocity variance of 1e-10 (m/s)² beside a singular parameter block of 1e4 kg²: the
+    jitter, scaled by the largest variance, added 1e-8 to every one and made the velocity's
+    101 times what it was. Relative to each variance it keeps each to 1e-9, and says it."""
+    from nnid.trainers.ukf import _cholesky
+
+    p = np.diag([1e-10, 0.0, 0.0]) + np.outer([0.0, 100.0, 100.0], [0.0, 100.0, 100.0])
+    chol, jitter = _cholesky(p)
+    np.testing.assert_allclose(np.diag(chol @ chol.T), np.diag(p), rtol=1e-9)
+    assert 0 < jitter < 1e-9
+    held = np.diag([1e-10, 0.0, 4.0])  # a parameter a zero prior σ holds: no jitter needed
+    chol, jitter = _cholesky(held)
+    np.testing.assert_allclose(chol @ chol.T, held, rtol=1e-15, atol=0.0)
+    assert jitter == 0.0
+
+
+def test_a_fit_whose_covariance_needed_jitter_says_so_once(seamor):
+    """The jitter was added without a word; a fit that needed it at every prediction says so
+    once, with the count."""
+    import nnid.trainers.ukf as ukf
+
+    data = _data(seamor, _surge_yaw(40), EXACT)
+    cholesky, calls = np.linalg.cholesky, []
+
+    def definite_only_with_jitter(a):  # refuses every first try: a P that needs jitter
+        calls.append(a)
+        if len(calls) % 2:
+            raise np.linalg.LinAlgError("not positive definite")
+        return cholesky(a)
+
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(ukf.np.linalg, "cholesky", definite_only_with_jitter)
+        with pytest.warns(UserWarning) as said:
+            UnscentedKalman(measurement_noise=[0.005, 0.002], theta0=0.5 * TRUTH).fit(
+                _structure(seamor), data
+            )
+    jittered = [w for w in said if "lost positive definiteness" in str(w.message)]
+    assert len(jittered) == 1 and "at 39 of 39 predictions" in str(jittered[0].message)

@@ -584,35 +584,73 @@ def autocorrelation_time(r: np.ndarray, max_lag: int = 5000) -> float | None:
     """Integrated autocorrelation time 1 + 2 Σ ρ_k of one residual series (summed until ρ
     first drops below 0.05; NaNs dropped): how many samples one independent sample is worth.
     None for a series too short or all zero."""
-    r = r[np.isfinite(r)]
-    r = r - r.mean() if r.size else r
-    n = r.size
-    if n < 3 or not np.any(r):
+    return pooled_autocorrelation_time([r], max_lag)
+
+
+def pooled_autocorrelation_time(
+    pieces: Sequence[np.ndarray], max_lag: int = 5000, about_zero: bool = False
+) -> float | None:
+    """:func:`autocorrelation_time` of a series cut into ``pieces`` (one per experiment): each
+    about its own mean, as one series alone is, its lag products summed within it and pooled
+    over the pieces, so a jump between experiments is no correlation (two runs whose offsets
+    had opposite signs read 2.7 times the τ of the same runs with offsets of one sign);
+    ``about_zero``: each about zero instead, for a series the model says is zero-mean. None
+    for fewer than 3 finite values or all zero."""
+    kept = []
+    for r in pieces:
+        r = np.asarray(r, dtype=np.float64)
+        r = r[np.isfinite(r)]
+        if r.size:
+            # a series the model says is zero-mean (a filter's innovations) is read about
+            # zero: a run's offset is then the model's error, correlated over the whole run
+            kept.append(r if about_zero else r - r.mean())
+    n = sum(r.size for r in kept)
+    if n < 3 or not any(np.any(r) for r in kept):
         return None
-    spec = np.fft.rfft(r, 2 * n)
-    acf = np.fft.irfft(spec * np.conj(spec))[: min(n, max_lag)]
+    acf = np.zeros(min(max(r.size for r in kept), max_lag))
+    for r in kept:
+        spec = np.fft.rfft(r, 2 * r.size)
+        lags = min(r.size, max_lag)
+        acf[:lags] += np.fft.irfft(spec * np.conj(spec))[:lags]
     acf = acf / acf[0]
     below = np.flatnonzero(acf < 0.05)
     cut = below[0] if below.size else acf.size
     return 1.0 + 2.0 * float(np.sum(acf[1:cut]))
 
 
-def equation_times(residuals: np.ndarray | Sequence[np.ndarray], max_lag: int = 5000) -> np.ndarray:
+def equation_times(
+    residuals: np.ndarray | Sequence[np.ndarray],
+    max_lag: int = 5000,
+    starts: np.ndarray | None = None,
+    about_zero: bool = False,
+) -> np.ndarray:
     """:func:`autocorrelation_time` of each DOF equation's residual series (the columns of a
     2-D array, or one series per equation), each at least 1 (1 where not measured): each
     equation's own shrink of its effective sample size. One mean over the equations widened a
     white equation's parameters for another's correlated residual, and the correlated one's
-    too little."""
-    return np.asarray(
-        [1.0 if t is None else max(t, 1.0) for t in _series_times(residuals, max_lag)]
-    )
+    too little. ``starts``: the rows of a 2-D array where a new experiment begins; each
+    series is then cut there and pooled (:func:`pooled_autocorrelation_time`, as is
+    ``about_zero``)."""
+    times = _series_times(residuals, max_lag, starts, about_zero)
+    return np.asarray([1.0 if t is None else max(t, 1.0) for t in times])
 
 
-def _series_times(residuals: np.ndarray | Sequence[np.ndarray], max_lag: int) -> list[float | None]:
+def _series_times(
+    residuals: np.ndarray | Sequence[np.ndarray],
+    max_lag: int,
+    starts: np.ndarray | None = None,
+    about_zero: bool = False,
+) -> list[float | None]:
     """:func:`autocorrelation_time` of each residual series: the columns of a 2-D array, or a
-    sequence of series (one per DOF equation)."""
+    sequence of series (one per DOF equation); cut at ``starts`` where given."""
     series = residuals.T if isinstance(residuals, np.ndarray) and residuals.ndim == 2 else residuals
-    return [autocorrelation_time(np.asarray(r, dtype=np.float64), max_lag) for r in series]
+    cuts = [] if starts is None else np.asarray(starts, dtype=int)
+    return [
+        pooled_autocorrelation_time(
+            np.split(np.asarray(r, dtype=np.float64), cuts), max_lag, about_zero
+        )
+        for r in series
+    ]
 
 
 def widen_by_equation(

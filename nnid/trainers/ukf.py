@@ -68,6 +68,10 @@ from nnid.trainers.least_squares import Estimate, ExcitationWarning, equation_ti
 
 _AFFINE = ("q_rb", "q_a", "g_mat", "theta", "added_mass", "bias")
 
+#: the sample interval (s) the noise defaults were chosen at, 1e-3 and 1e-4 per step there
+#: (20 Hz, the Seamor logs of the tests); they are per √s since, the same at every rate
+REFERENCE_STEP = 0.05
+
 
 class _Process:
     """f(x_k, u_k) of Weiss eq 77 for a batch of augmented states: one RK4 step of the Fossen
@@ -315,27 +319,39 @@ class UnscentedKalman(BaseEstimator):
     """Unscented Kalman filter on the augmented state [ν_d, θ] (Weiss eqs 77-84, with sigma
     points instead of the Jacobians of eq 79).
 
-    ``process_noise``: σ of the velocity model error per step (m/s, rad/s; scalar or per DOF).
-    ``parameter_noise``: σ of θ's random walk per step, as a fraction of the prior σ.
-    ``measurement_noise``: σ of the logged velocities (scalar or per DOF); None estimates it
-    from the log (:func:`noise_level`). ``theta0``: prior mean (None: the vehicle file's
-    values, 0 for a parameter it leaves out); ``theta0_std``: prior σ (None: |θ₀|, at least
-    ``min_std``, and where θ₀ = 0, which carries no scale, the diffuse :func:`force_scale`).
-    ``alpha``, ``beta``,
-    ``kappa``: the scaled unscented transform. ``theta0`` and ``theta0_std`` hold one value per
-    unknown (another length is refused). After :meth:`fit`, ``history_`` holds per sample
-    ``t``, ``theta``, ``theta_std`` (scaled as the covariance is, below), ``nu`` (filtered ν_d)
-    and ``innovation`` (eq 81; NaN where no update was made: an experiment's first sample and
-    a velocity that is not finite).
+    Noise levels. ``process_noise``: the velocity model error (an unmodelled acceleration,
+    white) as σ per √s, m/s/√s or rad/s/√s (scalar or per DOF): a step of dt adds
+    ``process_noise``²·dt to ν's variance. ``parameter_noise``: θ's random walk as σ per √s, a
+    fraction of the prior σ: a step adds (``parameter_noise``·σ₀)²·dt. Both are random walks, so
+    per second they describe the same drift at every rate (per step, the 50-Hz log of a surge
+    dive gave s.e. 1.3-1.8 times those of its 10-Hz log, at one noise density). The defaults,
+    4.47e-3 and 4.47e-4, are 1e-3 and 1e-4 per step at 20 Hz (``REFERENCE_STEP``), where they
+    were chosen. Per step at another interval δ, σ per √s is σ_step/√δ.
+    ``measurement_noise``: σ of each logged velocity sample (m/s, rad/s; scalar or per DOF),
+    per sample, not per second: white sensor noise of that σ on every value at whatever rate it
+    is logged; None estimates it from the log (:func:`noise_level`). ``theta0``: prior mean
+    (None: the vehicle file's values, 0 for a parameter it leaves out); ``theta0_std``: prior σ
+    (None: |θ₀|, at least ``min_std``, and where θ₀ = 0, which carries no scale, the diffuse
+    :func:`force_scale`). ``alpha``, ``beta``, ``kappa``: the scaled unscented transform.
+    ``theta0`` and ``theta0_std`` hold one value per unknown (another length is refused).
+    After :meth:`fit`, ``history_`` holds per sample ``t``, ``theta``, ``theta_std`` (scaled as
+    the covariance is, below), ``nu`` (filtered ν_d), ``innovation`` (eq 81; NaN where no update
+    was made: an experiment's first sample and a velocity that is not finite) and
+    ``innovation_std``, its predicted σ (√diag S).
 
     The covariance of θ̂ is the filter's P at the last sample. θ's random walk
     (``parameter_noise``) makes it that of a slowly drifting θ, so for a constant θ it is
-    conservative (1.2-3 times the s.e. without the walk on a 60-s surge-yaw log at 1e-4), and a
-    ``process_noise`` larger than the model error widens it further: a mean normalised
-    innovation squared per DOF below 1/``NIS_TOLERANCE`` is said (and one above it scales the
-    covariance up). Innovations correlated over τ > 1 samples (:func:`equation_times` per DOF:
-    a model error the noise levels do not describe) widen it by the largest DOF's τ, as least
-    squares widens by its residuals' (said above ``CORRELATED_INNOVATIONS``). A parameter the
+    conservative: measured at the default walk against none on the tests' 60-s surge-yaw Seamor
+    log (20 Hz, DVL/gyro noise, ``process_noise`` 1e-4 per 20-Hz step, θ₀ = θ/2; two noise
+    seeds), 3.2 times the s.e. for X_udot, 2.1 for N_r|r|, 1.2 for X_u|u| and N_rdot; on 120 s
+    of it 5.4, 3.2, 1.6, 1.4 (the walk's share grows with the log). A ``process_noise`` larger
+    than the model error widens it further: a mean normalised innovation squared per DOF below
+    1/``NIS_TOLERANCE`` is said (and one above it scales the covariance up). Innovations
+    correlated over τ > 1 samples (:func:`equation_times` per DOF, of the innovations
+    standardised by their predicted σ, pooled over the experiments: a model error the noise
+    levels do not describe) widen it by the largest DOF's τ, as least squares widens by its
+    residuals' (said above ``CORRELATED_INNOVATIONS``). A factorisation of P that needed
+    jitter (it lost positive definiteness) is said once per fit. A parameter the
     data did not inform beyond its prior (its prior σ not halved, in the prior's units, along
     some direction it loads on) gets no standard error and an :class:`ExcitationWarning`: its
     value leans on ``theta0``. A velocity sample that is not finite gives no update there (the
@@ -346,9 +362,9 @@ class UnscentedKalman(BaseEstimator):
 
     def __init__(
         self,
-        process_noise: float | Sequence[float] = 1e-3,
+        process_noise: float | Sequence[float] = 1e-3 / REFERENCE_STEP**0.5,
         measurement_noise: float | Sequence[float] | None = None,
-        parameter_noise: float = 1e-4,
+        parameter_noise: float = 1e-4 / REFERENCE_STEP**0.5,
         theta0: Sequence[float] | None = None,
         theta0_std: Sequence[float] | None = None,
         min_std: float = 1e-3,
@@ -409,10 +425,14 @@ class UnscentedKalman(BaseEstimator):
             else np.broadcast_to(np.asarray(self.measurement_noise, dtype=np.float64), (n_v,))
         )
         r_mat = np.diag(r_sigma**2)
-        q = np.zeros(n)
-        q[:n_v] = np.broadcast_to(np.asarray(self.process_noise, dtype=np.float64), (n_v,)) ** 2
-        q[n_v:] = (self.parameter_noise * std0) ** 2
-        q_mat = np.diag(q)
+        # variances per second: the velocity error and θ's walk are random walks driven by
+        # white noise, so a step of dt adds rate·dt (per step, a 50-Hz log of a dive walked 5
+        # times as far per second as a 10-Hz one of it, and gave other standard errors)
+        q_rate = np.zeros(n)
+        q_rate[:n_v] = (
+            np.broadcast_to(np.asarray(self.process_noise, dtype=np.float64), (n_v,)) ** 2
+        )
+        q_rate[n_v:] = (self.parameter_noise * std0) ** 2
         z = np.asarray(data["nu"])[:, proc.idx]
         dts, ends = _dt(data), _boundaries(data)
         n_samples = z.shape[0]
@@ -432,6 +452,8 @@ class UnscentedKalman(BaseEstimator):
         # NaN where no update was made: an experiment's first sample (ν initialised from it)
         # and a sample without a finite velocity; 0 there read as a perfect prediction
         hist_innov = np.full((n_samples, n_v), np.nan)
+        hist_innov_std = np.full((n_samples, n_v), np.nan)  # its predicted σ, √diag S
+        jitters: list[float] = []  # the relative jitter each repaired factorisation of P needed
         nis, seen_dofs = [], []
         fresh = True  # the first sample of an experiment initialised ν: no update with it
         seen = np.isfinite(z)
@@ -458,6 +480,7 @@ class UnscentedKalman(BaseEstimator):
                 ikh = np.eye(n) - gain @ hk
                 p = ikh @ p @ ikh.T + gain @ rk @ gain.T
                 hist_innov[k, o] = innov
+                hist_innov_std[k, o] = np.sqrt(np.diag(s))
                 nis.append(float(innov @ np.linalg.solve(s, innov)))
                 seen_dofs.append(int(o.sum()))
             fresh = False
@@ -476,7 +499,9 @@ class UnscentedKalman(BaseEstimator):
                 fresh = True
                 continue
             # prediction through sigma points: Weiss eq 80 by the unscented transform
-            chol = _cholesky(p)
+            chol, jitter = _cholesky(p)
+            if jitter:
+                jitters.append(jitter)
             sig = np.concatenate([x[None], x + spread * chol.T, x - spread * chol.T], 0)
             prop = proc.step(sig, k, float(dts[k]))
             if not np.isfinite(prop).all():
@@ -497,8 +522,22 @@ class UnscentedKalman(BaseEstimator):
                 )
             x = wm @ prop
             d = prop - x
-            p = (d * wc[:, None]).T @ d + q_mat
+            p = (d * wc[:, None]).T @ d + np.diag(q_rate * dts[k])
         cov = p[n_v:, n_v:].copy()
+        if jitters:
+            worst = max(jitters)
+            warnings.warn(
+                f"the filter's covariance lost positive definiteness at {len(jitters)} of "
+                f"{n_samples - 1 - int(ends[:-1].sum())} predictions: "
+                + (
+                    f"a jitter of up to {worst:.1g} of each variance was added to factor it"
+                    if np.isfinite(worst)
+                    else "its negative eigenvalues were set to zero to factor it"
+                )
+                + "; its parameters may be near collinear or their scales far apart",
+                UserWarning,
+                stacklevel=2,
+            )
         missing = ~seen[~starts].all(1)
         if missing.any():
             gaps = [d for d, o in zip(structure.dofs, seen[~starts].all(0), strict=True) if not o]
@@ -536,8 +575,17 @@ class UnscentedKalman(BaseEstimator):
         # levels do not describe) hold fewer independent samples than the log has, as least
         # squares' residuals do: widened by their correlation time (equation_times), the
         # largest DOF's, since the filter's P does not split its information by measurement
-        # as least squares' sandwich splits it by equation (conservative for the others)
-        times = equation_times(hist_innov)
+        # as least squares' sandwich splits it by equation (conservative for the others). Read
+        # from the innovations standardised by their predicted σ (white, unit variance for a
+        # consistent filter: the large ones of its first samples, while θ is still far off,
+        # weigh as much as any) and within each experiment, pooled (a jump between
+        # experiments is no correlation), about zero: the filter says its innovations are
+        # zero-mean, so a run's offset (an unlogged force) is a model error correlated over
+        # the whole run, and widens the s.e. (about each run's mean it entered σ² alone and
+        # left the estimates 1.6-1.7 s.e. from the truth, against about 0.9 before)
+        times = equation_times(
+            hist_innov / hist_innov_std, starts=np.flatnonzero(ends) + 1, about_zero=True
+        )
         tau = float(times.max()) if times.size else 1.0
         slow = ", ".join(
             f"{d} {t:.3g}" for d, t in zip(structure.dofs, times, strict=True) if t > 1.0
@@ -581,6 +629,7 @@ class UnscentedKalman(BaseEstimator):
             "theta_std": hist_std,
             "nu": hist_nu,
             "innovation": hist_innov,
+            "innovation_std": hist_innov_std,
         }
         return Estimate(
             names, x[n_v:].copy(), cov, sigma2, int(n_samples * n_v), history=hist_theta.copy()
@@ -656,17 +705,38 @@ def _prior_led(cov: np.ndarray, std0: np.ndarray, names: list[str]) -> list[str]
     return [nm for nm in names if nm in out]
 
 
-def _cholesky(p: np.ndarray) -> np.ndarray:
-    """Lower Cholesky factor, with growing diagonal jitter if P has lost definiteness."""
+#: the first jitter, relative to each variance, added to a P that has lost definiteness
+JITTER = 1e-12
+
+
+def _cholesky(p: np.ndarray) -> tuple[np.ndarray, float]:
+    """Lower Cholesky factor of P and the jitter it needed (0 if none), relative to each
+    variance: P = D C D with D its standard deviations, and a growing jitter is added to the
+    unit diagonal of the correlation matrix C, so that each variance grows by the same fraction
+    whatever its unit (a jitter scaled by the largest variance, in kg² beside (rad/s)², could
+    swamp the smallest). A variance of exactly zero (a parameter held by a zero prior σ) stays
+    zero, a row of zeros in the factor; a negative one, or a C no jitter mends, is cut to its
+    nonnegative eigenvalues (jitter inf)."""
+    var = np.diag(p)
+    live = var > 0
+    out = np.zeros_like(p)
+    if not live.any():
+        return out, (np.inf if (var < 0).any() else 0.0)
+    d = np.sqrt(var[live])
+    c = p[np.ix_(live, live)] / np.outer(d, d)
+    eye = np.eye(c.shape[0])
     jitter = 0.0
-    base = np.max(np.abs(np.diag(p))) if p.size else 1.0
     for _ in range(8):
         try:
-            return np.linalg.cholesky(p + jitter * np.eye(p.shape[0]))
+            factor = np.linalg.cholesky(c + jitter * eye)
+            break
         except np.linalg.LinAlgError:
-            jitter = base * 1e-12 if jitter == 0.0 else jitter * 100.0
-    w, v = np.linalg.eigh(p)
-    return v @ np.diag(np.sqrt(np.clip(w, 0.0, None)))
+            jitter = JITTER if jitter == 0.0 else jitter * 100.0
+    else:
+        w, v = np.linalg.eigh(c)
+        factor, jitter = v @ np.diag(np.sqrt(np.clip(w, 0.0, None))), np.inf
+    out[np.ix_(live, live)] = d[:, None] * factor
+    return out, (np.inf if (var < 0).any() else jitter)
 
 
 def _widened(
