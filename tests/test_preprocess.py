@@ -177,6 +177,22 @@ def test_resample_splits_at_gaps_and_holds_inputs():
     assert out.loc[out["experiment"] == "run#1", "t"].iloc[0] == pytest.approx(8.0)
 
 
+def test_resampling_without_gap_says_the_hole_it_interpolates_over():
+    """Without gap, a 10-s hole in a 10-Hz log became 99 invented rows without a word; the
+    readers said the same case. Said alike: a warning and the report, the longest hole named."""
+    t = np.r_[np.arange(0, 10.05, 0.1), np.arange(20, 30.05, 0.1)]
+    log = pd.DataFrame({"t": t, "experiment": "dive", "u": np.sin(t), "tau_X": 1.0})
+    report = CleaningReport()
+    with pytest.warns(UserWarning, match=r"dive.*no sample for 10 s \(t = 10-20 s\)"):
+        out = resample_log(log, 10.0, report=report)
+    assert len(out) == 301  # bridged, as before: gap is the user's to set
+    assert any(s.step == "interpolated over a silence" for s in report.steps)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # split at the gap, or no hole: nothing to say
+        resample_log(log, 10.0, gap=1.0)
+        resample_log(log[log["t"] < 15], 10.0)
+
+
 def test_resampling_keeps_a_label_column_by_its_previous_value():
     """Columns that are not numbers (a mode, a fault label) and flags were dropped from the
     resampled log without a word; they are held as an input is, never blended."""
@@ -195,6 +211,21 @@ def test_resampling_keeps_a_label_column_by_its_previous_value():
     assert (out["mode"].to_numpy() == mode[k]).all()
     assert (out["fault"].to_numpy() == (t > 9)[k]).all()
     assert list(dict.fromkeys(out["experiment"])) == ["dive#0", "dive#1"]
+
+
+def test_resampling_holds_an_integer_coded_label_column():
+    """An integer mode or fault code was interpolated: 0 next to 2 became 1.0, a code the log
+    never held. Held by its previous value, its type kept; a measured column still blends."""
+    t = np.arange(0.0, 4.0, 0.1)
+    code = np.where(t < 2.0, 0, 2)
+    log = pd.DataFrame({"t": t, "u": t, "tau_X": 1.0, "fault_code": code})
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # 10 Hz to 13 Hz: interpolated samples, said
+        out = resample_log(log, 13.0)
+    assert out["fault_code"].dtype == log["fault_code"].dtype
+    k = np.searchsorted(t, out["t"].to_numpy() + 1e-9, "right") - 1
+    assert (out["fault_code"].to_numpy() == code[k]).all()
+    assert np.allclose(out["u"], out["t"])  # interpolated, not held
 
 
 def test_resampling_a_log_at_its_own_rate_changes_nothing():

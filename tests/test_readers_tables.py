@@ -658,6 +658,24 @@ def test_every_angle_without_a_unit_is_named_when_one_looks_like_degrees(tmp_pat
     assert "; theta of this source has no unit either" in error
 
 
+def test_an_angle_without_a_unit_beside_one_with_a_unit_is_refused(tmp_path):
+    """A roll and pitch of a few degrees pass the degrees guess: beside a yaw given in "deg"
+    they were read as radians (3° as 3 rad). One unit declared asks for one on each angle."""
+    t = np.arange(0.0, 5.0, 0.1)
+    angles = {"r": 3 * np.sin(t), "p": 4 * np.cos(t), "y": 170 * np.sin(t)}
+    pd.DataFrame({"t": t, **angles, "f": 1.0}).to_csv(tmp_path / "log.csv", index=False)
+    _, error = _refused_columns(
+        tmp_path, 'psi = { from = "y", unit = "deg" }, phi = "r", theta = "p", tau_X = "f"'
+    )
+    assert "field 'r'" in error
+    assert "psi ('y') declares a unit but phi ('r'), theta ('p') of the same source" in error
+    deg = '{ from = "r", unit = "deg" }, theta = { from = "p", unit = "deg" }'
+    cmap = f'[[sources]]\nfile = "log.csv"\ntime = "t"\ncolumns = {{ phi = {deg}, '
+    cmap += 'psi = { from = "y", unit = "deg" }, tau_X = "f" }\n'
+    log, _ = load_log(tmp_path, _write_map(tmp_path / "map.toml", cmap))
+    assert np.allclose(log["phi"], np.radians(angles["r"]))
+
+
 def _refused_columns(root, columns: str):
     """The reader config of one source with ``columns``, and the error that loading it gives."""
     cmap = f'[[sources]]\nfile = "log.csv"\ntime = "t"\ncolumns = {{ {columns} }}\n'
@@ -692,6 +710,20 @@ def _edit_nav(root, edit):
             lambda m, n: (m, n.assign(time=np.where(n.index >= 400, n["time"] - 5.0, n["time"]))),
             "column 'time', row 400: time goes back by 4.987 s in experiment 'r1' and 370 of "
             "its 770 samples stay behind: two runs in one file?",
+        ),
+        # a reboot near the end (50 of 770 samples, under the share of a reset) restarts the
+        # clock: sorted in, those samples took the times of the run's first 0.65 s
+        (
+            lambda m, n: (
+                m,
+                n.assign(
+                    time=np.where(
+                        n.index >= 720, n["time"] - (n["time"][720] - n["time"][0]), n["time"]
+                    )
+                ),
+            ),
+            "column 'time', row 720: time goes back from 1600000009.35 s to 1600000000 s in "
+            "experiment 'r1', by 9.347 s: a late sample is sorted in up to 5 of its steps",
         ),
         (lambda m, n: (m, n.iloc[:0]), "nav.csv: has no rows"),
         (lambda m, n: (m.replace("rate = 20.0", "rate = 2e6"), n), "field 'rate': 2e+06 Hz"),
@@ -827,19 +859,59 @@ def test_quaternion_euler_round_trip(rng):
 
 
 def test_nan_rows_error_or_dropped_with_count(tmp_path):
+    """Not a number in a time, command or force column: refused, or its rows dropped with
+    drop_nonfinite. (An empty motion cell is a missing measurement: the test below.)"""
     _sensor_tables(tmp_path)
     nav = pd.read_csv(tmp_path / "nav.csv")
     nav.loc[[10, 20, 21], "depth"] = np.nan
     nav.to_csv(tmp_path / "nav.csv", index=False)
+    cmd = pd.read_csv(tmp_path / "cmd.csv")
+    cmd.loc[[2], "pwm"] = np.nan
+    cmd.to_csv(tmp_path / "cmd.csv", index=False)
     with pytest.raises(NnidInputError) as info:
         load_log(tmp_path, _write_map(tmp_path / "map.toml", MAP))
     msg = str(info.value)
-    assert "nav.csv" in msg and "column 'depth'" in msg and "row 10" in msg and "3 rows" in msg
+    assert "cmd.csv" in msg and "column 'pwm'" in msg and "row 2" in msg and "1 rows" in msg
+    nav.assign(time=nav["time"].where(nav.index != 10)).to_csv(tmp_path / "nav.csv", index=False)
+    with pytest.raises(NnidInputError) as info:  # an empty stamp is no missing measurement
+        load_log(tmp_path, _write_map(tmp_path / "map.toml", MAP))
+    assert "nav.csv" in str(info.value) and "column 'time', row 10" in str(info.value)
+    cmd.loc[[2], "pwm"] = 1300
+    cmd.to_csv(tmp_path / "cmd.csv", index=False)
+    nav.to_csv(tmp_path / "nav.csv", index=False)
     log, report = load_log(
         tmp_path, _write_map(tmp_path / "map2.toml", "drop_nonfinite = true\n" + MAP)
     )
     dropped = [s for s in report.steps if s.step == "drop non-finite"]
     assert dropped and dropped[0].rows_removed == 3 and np.isfinite(log["z"]).all()
+
+
+def test_empty_cells_of_a_measured_motion_column_are_read_as_gaps(tmp_path):
+    """A DVL writing NaN for u, v, w while it lost bottom lock refused the whole source (or,
+    with drop_nonfinite, dropped the rows and their depth with them). The cells stay empty:
+    a short loss is interpolated over, a long one stays a gap, and both are reported."""
+    t = np.arange(0.0, 20.0, 0.2)
+    dvl = pd.DataFrame({"t": t, "vx": 0.1 * t, "vy": 0.0, "vz": 0.0, "depth": 1.0 + 0.01 * t})
+    lost = ((t > 3.9) & (t < 4.3)) | ((t > 10.0) & (t < 14.0))  # 0.4 s and 4 s
+    dvl.loc[lost, ["vx", "vy", "vz"]] = np.nan
+    dvl.to_csv(tmp_path / "dvl.csv", index=False)
+    pd.DataFrame({"t": [0.0, 10.0], "f": 1.0}).to_csv(tmp_path / "cmd.csv", index=False)
+    cmap = (
+        'rate = 5.0\n[[sources]]\nfile = "dvl.csv"\ntime = "t"\n'
+        'columns = { u = "vx", v = "vy", w = "vz", z = "depth" }\n'
+        '[[sources]]\nfile = "cmd.csv"\ntime = "t"\nmethod = "hold"\n'
+        'columns = { tau_X = "f" }\n'
+    )
+    log, report = load_log(tmp_path, _write_map(tmp_path / "map.toml", cmap))
+    assert len(log) == t.size and report.rows_removed == 0
+    assert np.allclose(log["z"], 1.0 + 0.01 * log["t"])  # the depth of those rows is kept
+    short = (log["t"] > 3.9) & (log["t"] < 4.3)
+    assert np.allclose(log.loc[short, "u"], 0.1 * log.loc[short, "t"])  # bridged
+    long = (log["t"] > 10.0) & (log["t"] < 14.0)
+    assert log.loc[long, ["u", "v", "w"]].isna().all().all()  # a gap, not made up
+    assert log.loc[~long, ["u", "v", "w"]].notna().all().all()
+    said = next(s for s in report.steps if s.step == "empty cells")
+    assert f"{int(lost.sum())} rows with an empty cell in vx, vy, vz" in said.detail
 
 
 BAD = """t,x,y,z,phi,theta,psi,tau_X
@@ -1134,6 +1206,26 @@ def test_a_quaternion_in_ros_order_is_refused_naming_the_order(tmp_path):
     listed = ", ".join(f'"{c}"' for c in expected.split(", "))
     good = _write_map(tmp_path / "good.toml", f"{body}quaternion = [{listed}]\n")
     assert np.allclose(load_log(tmp_path, good)[0]["psi"], 0.0)
+
+
+@pytest.mark.parametrize(
+    ("names", "expected"),
+    [
+        (["qx", "qy", "qz", "qw"], "qw, qx, qy, qz"),
+        (["quat_X", "quat_Y", "quat_Z", "quat_W"], "quat_W, quat_X, quat_Y, quat_Z"),
+    ],
+)
+def test_a_quaternion_of_undotted_names_in_ros_order_is_refused(tmp_path, names, expected):
+    """Only dotted names were checked for the order: ["qx", "qy", "qz", "qw"] passed the norm
+    check and read another attitude without a word."""
+    from nnid.datasets.column_map import load_column_map
+
+    listed = ", ".join(f'"{c}"' for c in names)
+    body = f'[[sources]]\nfile = "a.csv"\ntime = "t"\nquaternion = [{listed}]\n'
+    with pytest.raises(NnidInputError, match=f"w, x, y, z in that order.*give {expected}"):
+        load_column_map(_write_map(tmp_path / "map.toml", body))
+    right = ", ".join(f'"{c}"' for c in expected.split(", "))
+    load_column_map(_write_map(tmp_path / "map.toml", body.replace(listed, right)))
 
 
 def test_quaternion_columns_that_are_no_quaternion_are_refused(tmp_path):

@@ -103,6 +103,10 @@ class ColumnSpec(StrictModel):
         return self.scale * (UNITS[self.unit] if self.unit else 1.0)
 
 
+#: the axis letter a quaternion column's name ends in, after an optional '.' or '_'
+_AXIS_END = re.compile(r"[._]?([wxyz])$", re.IGNORECASE)
+
+
 class Source(StrictModel):
     file: str
     time: str
@@ -170,9 +174,11 @@ class Source(StrictModel):
             raise ValueError("quaternion names four columns: w, x, y, z")
         # ROS lists orientation.x, .y, .z, .w: that order passes the norm check and reads
         # another attitude without a word
-        ends = [str(c).rsplit(".", 1)[-1].lower() if "." in str(c) else "" for c in q]
+        # the axis a name ends in: orientation.x, quat_x, qx (a dotted name only let the
+        # undotted ["qx", "qy", "qz", "qw"] through)
+        ends = [m.group(1).lower() if (m := _AXIS_END.search(str(c))) else "" for c in q]
         if sorted(ends) == ["w", "x", "y", "z"] and ends != ["w", "x", "y", "z"]:
-            expected = sorted(q, key=lambda c: "wxyz".index(str(c).rsplit(".", 1)[-1].lower()))
+            expected = [c for _, c in sorted(zip(ends, q, strict=True))]  # w, x, y, z
             raise ValueError(
                 f"quaternion lists {', '.join(q)}: nnid reads w, x, y, z in that order (ROS "
                 f"lists x, y, z, w); give {', '.join(expected)}"

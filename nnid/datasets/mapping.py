@@ -20,9 +20,11 @@ from nnid.datasets.column_map import ColumnMap, Source
 from nnid.datasets.log import (
     ANGLES,
     CONTRACT,
+    MOTION,
     blank_labels,
     declare_time_unit,
     looks_like_degrees,
+    paced_step,
     refuse_rows,
 )
 from nnid.errors import NnidInputError
@@ -154,6 +156,19 @@ def label_columns(experiment: str | list[str] | None) -> list[str]:
     return [] if keys == ["file"] else keys
 
 
+def _measured(source: Source) -> list[str]:
+    """The source columns of ``source`` that only feed measured motion columns (pose,
+    velocities, accelerations, a quaternion) of a measured (``linear``) source: an empty cell
+    there is a missing measurement, not a missing time, command or force."""
+    if source.method != "linear":
+        return []
+    feeds: dict[str, set[str]] = {}
+    for name, spec in source.specs().items():
+        feeds.setdefault(spec.source, set()).add(name)
+    motion = [col for col, names in feeds.items() if names <= set(MOTION)]
+    return [c for c in [*motion, *source.quaternion] if c != source.time]
+
+
 def map_source(
     raw: pd.DataFrame,
     source: Source,
@@ -190,6 +205,18 @@ def map_source(
         clock = pd.Series(rows / source.row_clock, index=raw.index)
     values = raw[numeric].apply(pd.to_numeric, errors="coerce")
     bad = ~np.isfinite(values.to_numpy(dtype=np.float64))
+    # an empty cell of a measured motion column (a DVL's u, v, w while it lost bottom lock)
+    # stays empty: the resampling bridges it where its neighbours are close and leaves a gap
+    # (nnid.datasets.gaps) where not; dropped or refused, the row's other columns went too
+    empty = raw[numeric].isna().to_numpy() & np.isin(numeric, _measured(source))
+    if not drop_nonfinite and empty.any():
+        bad &= ~empty
+        report.add(
+            "empty cells",
+            f"{origin}: {int(empty.any(1).sum())} rows with an empty cell in "
+            f"{', '.join(sorted({numeric[c] for c in np.nonzero(empty)[1]}))}: left empty, "
+            "interpolated over where the samples beside them are close, else a gap",
+        )
     if bad.any():
         rows, cols = np.nonzero(bad)
         if not drop_nonfinite:
@@ -259,6 +286,19 @@ def map_source(
                 source=origin,
                 field=specs[col].source,
             )
+    declared = [col for col in ANGLES if col in specs and specs[col].unit is not None]
+    if declared and unitless:
+        # one source logs its attitude in one unit: a roll of a few degrees beside a yaw given
+        # "deg" passes the degrees guess, and was read as radians
+        raise NnidInputError(
+            f"{', '.join(f'{c} ({specs[c].source!r})' for c in declared)} "
+            f"{'declares a unit' if len(declared) == 1 else 'declare units'} but "
+            f"{', '.join(f'{c} ({specs[c].source!r})' for c in unitless)} of the same source "
+            f'{"has" if len(unitless) == 1 else "have"} none: set unit = "deg" (or "rad") '
+            "for each angle",
+            source=origin,
+            field=specs[unitless[0]].source,
+        )
     time = "row_clock" if source.row_clock else source.time
     check_clock(out, origin, time, report, "last" if source.method == "hold" else "first")
     if source.quaternion:
@@ -302,15 +342,20 @@ def map_source(
 #: refused as a clock reset (two runs of one file without their experiment column); a few late
 #: messages are sorted in
 RESET_SHARE = 0.1
+#: how many of a source's typical steps (its pace, :func:`~nnid.datasets.log.paced_step`) a
+#: late sample may sit behind an earlier stamp and still be sorted in; further back is a clock
+#: reset (a reboot), whose samples would be interleaved with the others' times
+LATE_STEPS = 5
 
 
 def check_clock(
     out: pd.DataFrame, origin: str, time: str, report: CleaningReport, kept: str = "first"
 ) -> None:
     """A source's clock, per experiment: never reset (many samples behind an earlier stamp:
-    two runs of one file without their experiment column), refused; a few late samples
-    (sorted in) and repeated stamps (the ``kept`` of each: the first measurement, the last
-    command, which is the one in force) said in the cleaning report."""
+    two runs of one file without their experiment column; or any sample more than
+    :data:`LATE_STEPS` steps behind, a reboot), refused; a few late samples (sorted in) and
+    repeated stamps (the ``kept`` of each: the first measurement, the last command, which is
+    the one in force) said in the cleaning report."""
     t_all = out["t"].to_numpy(dtype=np.float64)
     for exp, idx in out.groupby("experiment", sort=False).indices.items():
         t = t_all[idx]
@@ -326,6 +371,22 @@ def check_clock(
                 row=int(out.index[idx[k]]),
             )
         if behind.any():
+            # a reset in a few samples (a reboot near the log's end) is under the share above:
+            # sorted in, its times were taken for the earlier ones'
+            back = np.maximum.accumulate(t) - t
+            limit = LATE_STEPS * paced_step(np.diff(np.sort(t)))
+            if back.max() > limit:
+                k = int(np.flatnonzero(back > limit)[0])
+                raise NnidInputError(
+                    f"time goes back from {t[:k].max():.12g} s to {t[k]:.12g} s in experiment "
+                    f"'{exp}', by {back[k]:.4g} s: a late sample is sorted in up to "
+                    f"{LATE_STEPS} of its steps back ({limit:.3g} s), this is a clock reset (a "
+                    "reboot?); cut the file there, or name the column that tells the runs "
+                    "apart (experiment = ...)",
+                    source=origin,
+                    field=time,
+                    row=int(out.index[idx[k]]),
+                )
             report.add("sort", f"{origin}: '{exp}': {int(behind.sum())} late samples sorted in")
         repeated = t.size - np.unique(t).size
         if repeated:

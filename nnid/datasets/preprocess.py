@@ -36,6 +36,7 @@ from nnid.datasets.log import (
     ACCELERATION,
     ANGLES,
     MAX_RUN_SAMPLES,
+    MOTION,
     PIECE_OF,
     POSE,
     REPLAY_GROUP,
@@ -236,8 +237,11 @@ def resample_log(
     for a log without an experiment column; k from 0, as :func:`nnid.datasets.gaps.mask_gaps`
     and the readers count) and marked ``piece_of`` its run. Each run's clock starts at 0 at
     its first sample (a first piece too short to keep leaves the next one starting later), and
-    its pieces keep that clock, so the hole between two pieces is seen in ``t``. A column that is
-    not a number (a mode, a fault label) or holds true/false is kept by its previous value,
+    its pieces keep that clock, so the hole between two pieces is seen in ``t``. Without
+    ``gap``, a run's longest hole over :data:`SILENCE` typical steps is interpolated over and
+    said (a warning, and the report), as the readers say it. A column that is
+    not a number (a mode, a fault label), holds integers (a mode or fault code; not a motion
+    column) or holds true/false is kept by its previous value,
     as an input is: a label is never blended, and no column is left out."""
     held = set(input_columns(log))
     numeric = [
@@ -247,6 +251,13 @@ def resample_log(
         and pd.api.types.is_numeric_dtype(log[c])
         and not pd.api.types.is_bool_dtype(log[c])
     ]
+    # an integer column of the log's own (a mode, a fault code) is a label too: 0 next to 2
+    # was interpolated to 1.0, a code never logged; held as an input is, its type kept
+    coded = {
+        c
+        for c in numeric
+        if pd.api.types.is_integer_dtype(log[c]) and c not in held and c not in MOTION
+    }
     # a run's labels the grid keeps: a piece stays one (short_piece), a replay in its group
     labels = [c for c in (PIECE_OF, REPLAY_GROUP) if c in log and c not in numeric]
     # any other column that is not a number: a mode, a fault label, a flag (once dropped)
@@ -284,6 +295,8 @@ def resample_log(
                 y = part[col].to_numpy(np.float64)[seg]
                 if col in held:
                     out[col] = y[previous]
+                elif col in coded:
+                    out[col] = part[col].to_numpy()[seg][previous]
                 elif col in ANGLES:  # a step across ±π was interpolated through zero
                     a = np.interp(grid, ts, unwrap_finite(y))
                     # back to ±π where the log had it so (the unwrap step is the config's);
@@ -308,6 +321,14 @@ def resample_log(
             if len(bounds) > 1 and PIECE_OF not in frame:  # told by it, never by its label
                 frame[PIECE_OF] = str(base)
             pieces.append(frame)
+        # the typical step as the readers take it: the run's (its pace, for stamps in
+        # bursts) or the grid's, whichever is longer
+        hole = None if gap else longest_silence(t, max(1.0 / logged, 1.0 / rate))
+        if hole is not None:  # without gap the hole is bridged: said, as the readers say it
+            said = silence_said(run_label(name), t, *hole)
+            if report is not None:
+                report.add("interpolated over a silence", said)
+            warnings.warn(said, stacklevel=2)
         if report is not None:
             report.add(
                 "resample",
@@ -420,6 +441,29 @@ RESAMPLE_RATIO = 2.0
 #: sample: k/rate is not the logged k·Δt in floating point (k/10 and k·0.1 differ in the last
 #: bits), which moved every value of a log resampled at its own rate
 ON_SAMPLE = 1e-9
+
+
+#: a measured column silent for this many of its typical intervals is said when it is bridged
+SILENCE = 10
+
+
+def longest_silence(t: np.ndarray, typical: float) -> tuple[int, float] | None:
+    """The (index, length) of the longest step of sorted times ``t`` if it exceeds
+    :data:`SILENCE` typical steps: what an interpolation over them makes up without a
+    sample, said by the readers and :func:`resample_log` alike; else None."""
+    steps = np.diff(t)
+    if not steps.size:
+        return None
+    k = int(np.argmax(steps))
+    return (k, float(steps[k])) if steps[k] > SILENCE * typical else None
+
+
+def silence_said(who: str, t: np.ndarray, k: int, length: float, clock: str = "") -> str:
+    """The sentence of a silence (:func:`longest_silence`) bridged by interpolation."""
+    return (
+        f"{who} has no sample for {length:.3g} s (t = {t[k]:.6g}-{t[k + 1]:.6g} s{clock}): "
+        "interpolated over; set gap to split the run there"
+    )
 
 
 def run_grid(span: float, rate: float, tolerance: float) -> np.ndarray:

@@ -42,7 +42,15 @@ from nnid.datasets.log import (
     wrap_angle,
 )
 from nnid.datasets.mapping import file_label, label_columns, map_source
-from nnid.datasets.preprocess import clock_tolerance, run_grid, snap_to_samples, unwrap_finite
+from nnid.datasets.preprocess import (
+    SILENCE,
+    clock_tolerance,
+    longest_silence,
+    run_grid,
+    silence_said,
+    snap_to_samples,
+    unwrap_finite,
+)
 from nnid.datasets.rosbag import is_bag, read_bag_sources
 from nnid.errors import NnidInputError
 
@@ -545,10 +553,6 @@ def _natural(name: str) -> tuple[list[int | str], str]:
     return [int(s) if s.isdigit() else s for s in re.split(r"(\d+)", name)], name
 
 
-#: a source silent for this many of its typical intervals is said when it is bridged
-SILENCE = 10
-
-
 def _say_silences(
     source: Source, t_src: np.ndarray, grid: np.ndarray, exp, report: CleaningReport
 ) -> None:
@@ -562,13 +566,9 @@ def _say_silences(
         return
     typical = max(float(np.median(steps)), float(np.median(np.diff(grid))) if grid.size > 1 else 0)
     if source.method == "linear":
-        k = int(np.argmax(steps))
-        if steps[k] > SILENCE * typical:
-            said = (
-                f"'{exp}': {source.file} has no sample for {steps[k]:.3g} s (t = "
-                f"{t_src[k]:.6g}-{t_src[k + 1]:.6g} s after the run's start): interpolated "
-                "over; set gap to split the run there"
-            )
+        hole = longest_silence(t_src, typical)
+        if hole is not None:
+            said = silence_said(f"'{exp}': {source.file}", t_src, *hole, " after the run's start")
             report.add("interpolated over a silence", said)
             warnings.warn(said, stacklevel=4)
     elif source.hold_timeout is None and grid[-1] - t_src[-1] > SILENCE * typical:
