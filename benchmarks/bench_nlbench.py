@@ -125,7 +125,9 @@ SETTINGS = {
             # chosen on --holdout (seed 0; tail / head fold, 20 % of the training split each):
             # LM on windows of 100, then 500 samples 0.592 / 0.606 mV; Adam on windows of 200
             # (lr 5e-3, 20 epochs, the earlier setting) 2.32 / 3.47 mV (the tail-only holdout
-            # before 2026-11-26, early-stopped on the tail: 0.592 and 5.82 mV)
+            # before 2026-11-26, early-stopped on the tail: 0.592 and 5.82 mV). Re-run with the
+            # head fold corrected (2026-12-01): LM 0.8285 / 0.6058 mV, the tail not repeating
+            # its 0.592 (RESULTS, "Peers in the same run"); Adam not re-run: the choice stands
             "simulation_epochs": 30,
             "simulation_trainer": "lm",
             "simulation_window": [100, 500],
