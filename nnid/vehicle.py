@@ -11,6 +11,7 @@ import math
 import sys
 import tomllib
 import warnings
+from collections.abc import Sequence
 from importlib import resources
 from pathlib import Path
 from typing import Annotated, Any, Literal
@@ -91,13 +92,29 @@ class PolyCurve(StrictModel):
 
 
 class SignedQuadraticCurve(StrictModel):
+    """thrust = k c|c| for c ≥ 0, k_neg c|c| for c < 0 (Caccia eq. 6; c_V = 1.02 forward,
+    1.09 N/V² reverse, L217). ``k_neg`` None: k (a symmetric thruster)."""
+
     kind: Literal["signed_quadratic"]
     k: CurveNumber
+    k_neg: CurveNumber | None = None
 
     @field_validator("k")
     @classmethod
     def _thrust(cls, k: float, info: ValidationInfo) -> float:
         return _makes_thrust([k], "k = 0", info)[0]
+
+    @model_validator(mode="after")
+    def _same_way(self) -> SignedQuadraticCurve:
+        # k_neg is a magnitude like k (Caccia's 1.09, not −1.09): of the other sign, or 0, the
+        # thrust would not turn with the command, and no curve inverse (allocation) exists
+        if self.k_neg is not None and not self.k_neg * self.k > 0:
+            raise ValueError(
+                f"k_neg = {self.k_neg:g} must have the sign of k = {self.k:g}: the thrust at "
+                "a negative command c is k_neg c|c| (Caccia eq. 6, reverse c_V = 1.09 given as "
+                "1.09)"
+            )
+        return self
 
 
 class TableCurve(StrictModel):
@@ -212,25 +229,58 @@ def _inertia_of_a_body(inertia: np.ndarray) -> None:
         )
 
 
-def _rigid_body_positive_definite(mass: float, r_g: list[float], inertia: np.ndarray) -> None:
+def point_mass_inertia(mass: float, r: Sequence[float] | np.ndarray) -> np.ndarray:
+    """−m S(r)² = m (|r|² 1 − r rᵀ): the inertia a mass ``mass`` at ``r`` adds about the body
+    origin beyond its own about its centre (the parallel-axis theorem, Fossen 2011 eq. 3.37)."""
+    r = np.asarray(r, dtype=float)
+    return mass * (r @ r * np.eye(3) - np.outer(r, r))
+
+
+def check_rigid_body(
+    mass: float, r_g: Sequence[float], inertia: np.ndarray, fitted: Sequence[str] = ()
+) -> None:
+    """Refuse a rigid body no body can be: principal moments of I_o that break the triangle
+    inequality (:func:`_inertia_of_a_body`), or M_RB not positive definite
+    (:func:`_rigid_body_positive_definite`). The check of a declared vehicle, and of a fitted
+    one (``fitted``: the fitted parameters among r_g's, named as the fit's cause)."""
+    inertia = np.asarray(inertia, dtype=float)
+    _inertia_of_a_body(inertia)
+    _rigid_body_positive_definite(mass, r_g, inertia, fitted)
+
+
+def _rigid_body_positive_definite(
+    mass: float, r_g: Sequence[float], inertia: np.ndarray, fitted: Sequence[str] = ()
+) -> None:
     """Refuse a rigid body whose M_RB = [[m 1, −m S(r_g)], [m S(r_g), I_o]] (McCarter eq.
     2.21, Weiss eq. 19) is not positive definite. Its Schur complement is I_o + m S(r_g)²,
     the inertia about the centre of gravity (parallel-axis theorem, I_o = I_CG − m S(r_g)²):
     with r_g ≠ 0 a positive definite I_o is not enough. The slip it catches: a datasheet's
-    inertia about the CG declared with the origin elsewhere (at the nose, r_g = [1, 0, 0])."""
+    inertia about the CG declared with the origin elsewhere (at the nose, r_g = [1, 0, 0]);
+    in a fit (``fitted``, the fitted r_g components), an r_g the data do not determine."""
     r = np.asarray(r_g, dtype=float)
-    # −S(r)² = |r|² 1 − r rᵀ: the inertia a point mass m at r adds about the origin
-    lever = mass * (r @ r * np.eye(3) - np.outer(r, r))
+    lever = point_mass_inertia(mass, r)
     about_cg = inertia - lever
     principal = np.linalg.eigvalsh(0.5 * (about_cg + about_cg.T))
     if principal.min() > 0:
         return
+    where = f"r_g = [{', '.join(f'{v:g}' for v in r)}] m"
+    moments = (
+        "the rigid body's mass matrix M_RB is not positive definite: the inertia about the "
+        "centre of gravity, I_CG = I_o + m S(r_g)² (parallel-axis theorem), has principal "
+        f"moments {', '.join(f'{v:.4g}' for v in principal)} kg m², not all > 0"
+    )
+    if fitted:
+        # the inertia was declared, r_g fitted: the fit is the cause, not the added mass
+        raise NnidInputError(
+            f"with mass {mass:g} kg at the fitted {where} ({', '.join(fitted)} fitted), "
+            f"{moments}: no body has this centre of gravity with the declared inertia "
+            f"{_tensor_text(inertia)} about the body origin; the data do not determine r_g "
+            "(too little excitation of the DOFs it couples), fix it or excite them",
+            field="r_g",
+        )
     as_cg = inertia + lever  # what `inertia` should be, were the given one about the CG
     raise NnidInputError(
-        f"with mass {mass:g} kg at r_g = [{', '.join(f'{v:g}' for v in r)}] m, the rigid "
-        "body's mass matrix M_RB is not positive definite: the inertia about the centre of "
-        "gravity, I_CG = I_o + m S(r_g)² (parallel-axis theorem), has principal moments "
-        f"{', '.join(f'{v:.4g}' for v in principal)} kg m², not all > 0. 'inertia' is I_o, "
+        f"with mass {mass:g} kg at {where}, {moments}. 'inertia' is I_o, "
         "about the body origin, not about the centre of gravity: I_o = I_CG − m S(r_g)². If "
         f"{_tensor_text(inertia)} is about the centre of gravity (a datasheet's usually is), give "
         f"inertia = {_tensor_text(as_cg)}; else check r_g (its units, or the origin it is measured "
@@ -349,8 +399,7 @@ class Vehicle(StrictModel):
     def _rigid_body(self, info: ValidationInfo) -> Vehicle:
         # new input only (KEEP_CURVES): a vehicle read before stays loadable as it was
         if not (info.context or {}).get("keep_curves"):
-            _inertia_of_a_body(self.inertia_matrix())
-            _rigid_body_positive_definite(self.mass, self.r_g, self.inertia_matrix())
+            check_rigid_body(self.mass, self.r_g, self.inertia_matrix())
         return self
 
     @field_validator("added_mass")

@@ -117,16 +117,25 @@ def _kernel_force(cmds, act, n):
     return out
 
 
-@pytest.mark.parametrize("name", ["octorov", "vlbv300", "bluerov1"])
+@pytest.mark.parametrize("name", ["octorov", "vlbv300", "bluerov1", "octorov_reverse"])
 def test_compiled_thrust_equals_the_actuation(name, rng):
-    """Signed-quadratic, polynomial (Weiss eq. 10) and table curves with ranges and deadband:
-    the kernel's force is the physics package's, to rounding."""
+    """Signed-quadratic (``octorov_reverse``: a reverse coefficient of its own, Caccia eq. 6),
+    polynomial (Weiss eq. 10) and table curves with ranges and deadband: the kernel's force is
+    the physics package's, to rounding."""
+    from nnid.vehicle import vehicle_from_dict
+
     path = {
         "octorov": OCTO,
+        "octorov_reverse": OCTO,
         "vlbv300": REPO / "nnid" / "presets" / "vlbv300.toml",
         "bluerov1": REPO / "configs" / "vehicles" / "bluerov1_liu.toml",
     }[name]
     veh = load_vehicle(path).model_copy(update={"deadband": 0.05})
+    if name == "octorov_reverse":  # reverse thrust 1.5 times the forward, as a T200's
+        data = veh.model_dump(mode="json")
+        for thruster in data["thrusters"]:
+            thruster["curve"]["k_neg"] = 1.5 * thruster["curve"]["k"]
+        veh = vehicle_from_dict(data, name)
     act = Actuation(veh)
     cmds = rng.uniform(-1.3, 1.3, (500, len(act.channels)))
     got = _kernel_force(cmds, pack_actuation(veh, Parts.from_vehicle(veh)), len(act.channels))
@@ -312,6 +321,93 @@ def test_a_payload_keeps_a_saved_models_curve_of_no_thrust(vehicle):
     fault = Fault("payload", 0.5, mass=2.0, value=4.0)
     log = simulate_faults(saved, 1.0, faults=[fault], seed=26)
     assert np.isfinite(log["u"]).all() and f"cmd_{saved.thrusters[-1].name}" in log
+
+
+def _lever(mass, r):
+    """m(|r|² 1 − r rᵀ) = −m S(r)²: a point mass's inertia about the origin."""
+    r = np.asarray(r, dtype=float)
+    return mass * (r @ r * np.eye(3) - np.outer(r, r))
+
+
+def _payload_plant(vehicle, mass, buoyancy, position=None):
+    """The plant the fault simulator flies with one payload from t = 0 (its own copy)."""
+    from nnid.datasets.faults import _with_payload
+
+    if position is None:  # at the centre of gravity, as the payload always was
+        return _with_payload(vehicle, mass, buoyancy)
+    return _with_payload(vehicle, mass, buoyancy, position)
+
+
+def test_a_payload_at_the_centre_of_gravity_is_the_same_body_from_any_origin(vehicle):
+    """The body origin is a choice: the same vehicle described from an origin moved by s
+    (every position + s, I_o = I_CG + m(|r_g|² 1 − r_g r_gᵀ) about it) with the same payload
+    at its centre of gravity is the same body, its inertia about the new centre of gravity
+    the same (parallel-axis theorem). The old payload scaled I_o, which holds m's lever arm:
+    from an origin 0.2 m off, its I_CG came out larger."""
+    from nnid.vehicle import vehicle_copy
+
+    s = np.array([0.2, -0.1, 0.05])
+    data = vehicle.model_dump()
+    data["thrusters"] = []  # not flown: only the rigid body and the centres matter here
+    a = vehicle_copy(vehicle, data)
+    cg = np.asarray(a.inertia_matrix()) - _lever(a.mass, a.r_g)
+    moved = {
+        **data,
+        "r_g": (np.asarray(a.r_g) + s).tolist(),
+        "r_b": (np.asarray(a.r_b) + s).tolist(),
+    }
+    moved["inertia"] = (cg + _lever(a.mass, moved["r_g"])).tolist()
+    b = vehicle_copy(vehicle, moved)
+    pa, pb = _payload_plant(a, 10.0, 4.0), _payload_plant(b, 10.0, 4.0)
+    np.testing.assert_allclose(np.asarray(pb.r_g) - pa.r_g, s, atol=1e-12)
+    np.testing.assert_allclose(np.asarray(pb.r_b) - pa.r_b, s, atol=1e-12)
+
+    def about_cg(v):
+        return np.asarray(v.inertia_matrix()) - _lever(v.mass, v.r_g)
+
+    np.testing.assert_allclose(about_cg(pb), about_cg(pa), rtol=1e-12, atol=1e-12)
+    assert pa.mass == pb.mass == a.mass + 10.0
+
+
+def test_an_off_centre_payload_is_one_rigid_body_with_the_vehicle(vehicle):
+    """A 3-kg payload with 10 N of lift at r_p = [0.25, −0.1, 0.05] m: M_RB is additive over
+    bodies about one origin, so moving the payload from the centre of gravity to r_p changes
+    M_RB by a point mass's [[m 1, −m S(r)], [m S(r), m(|r|² 1 − r rᵀ)]] at r_p less the one at
+    r_g (Fossen 2011 eq. 3.37); at rest its weight less its lift, m_p g − B_p, acts at r_p:
+    the restoring force g(0) grows by (0, 0, −(m_p g − B_p), −y_p(..), x_p(m_p g − B_p), 0)."""
+    import torch
+
+    from nnid.physics.fossen import FossenModel
+    from nnid.physics.rigid_body import rigid_body_mass_matrix
+
+    m_p, b_p, r_p = 3.0, 10.0, np.array([0.25, -0.1, 0.05])
+
+    def m_rb(mass, r, inertia):
+        return rigid_body_mass_matrix(
+            torch.as_tensor(mass, dtype=torch.float64), torch.as_tensor(r, dtype=torch.float64),
+            torch.as_tensor(inertia, dtype=torch.float64),
+        ).numpy()  # fmt: skip
+
+    def of(v):
+        return m_rb(v.mass, v.r_g, v.inertia_matrix())
+
+    def point(r):
+        return m_rb(m_p, r, _lever(m_p, r))
+
+    off, at_cg = _payload_plant(vehicle, m_p, b_p, r_p), _payload_plant(vehicle, m_p, b_p)
+    np.testing.assert_allclose(
+        of(off) - of(at_cg), point(r_p) - point(vehicle.r_g), rtol=0, atol=1e-12
+    )
+    np.testing.assert_allclose(of(at_cg)[:3, :3], (vehicle.mass + m_p) * np.eye(3))
+
+    def at_rest(v):
+        return FossenModel.from_vehicle(v).restoring_force(torch.zeros(6, dtype=torch.float64))
+
+    net = m_p * vehicle.g - b_p
+    expected = [0.0, 0.0, -net, -r_p[1] * net, r_p[0] * net, 0.0]
+    change = (at_rest(off) - at_rest(vehicle)).numpy()
+    np.testing.assert_allclose(change, expected, rtol=0, atol=1e-9)
+    assert change[4] == pytest.approx(0.25 * (3.0 * vehicle.g - 10.0))  # pitch: x_p (m_p g − B_p)
 
 
 @pytest.mark.parametrize(
@@ -1583,16 +1679,16 @@ def test_cut_short_reads_the_step_on_rows_follow_keeps():
 
 @pytest.fixture(scope="module")
 def payload_26(vehicle):
-    """A payload from 20 s, 60 s (seed 26): isolated at 20.05 s, its alarm at 32.75 s
-    dismissed as within what the payload may leave; the payload reads the acceleration, so a
-    run's last half smoothing window is not judged."""
+    """A payload from 20 s, 60 s (seed 26): isolated at 20.05 s, its alarms at 31.5, 42.05 and
+    53.2 s dismissed as within what the payload may leave; the payload reads the acceleration,
+    so a run's last half smoothing window is not judged."""
     fault = Fault("payload", FAULT_T, mass=10.0, value=4.0)
     return simulate_faults(vehicle, 60, faults=[fault], seed=26)
 
 
 def test_a_dismissal_on_a_window_the_log_cuts_short_says_so(monitor, payload_26, tmp_path):
-    """The payload's alarm at 32.75 s in a log that ends at 38 s: ``dismissed`` and the
-    reason --follow gives for withdrawing it said nothing of the 5.25 s of its window judged.
+    """The payload's alarm at 31.5 s in a log that ends at 38 s: ``dismissed`` and the
+    reason --follow gives for withdrawing it said nothing of the 6.5 s of its window judged.
     Both say it. And --follow's withdrawn record kept it in those words alone, where batch's
     entry holds ``cut_short``: detect.json held it in batch and not with --follow. Both hold
     it."""
@@ -1610,13 +1706,13 @@ def test_a_dismissal_on_a_window_the_log_cuts_short_says_so(monitor, payload_26,
 
 
 def test_a_window_the_logs_end_cuts_to_rows_without_a_residual_says_so(monitor, payload_26):
-    """The payload in a log that ends at 33.4 s: the last alarm's window holds 14 rows, enough
+    """The payload in a log that ends at 42.7 s: the last alarm's window holds 14 rows, enough
     to isolate, but the run's last half smoothing window is not judged (the payload reads the
     acceleration) and 4 of them have a residual. Its record said "the end of the log cut the
     isolation window short (…, 14 samples, 4 of them finite)", though 14 rows would have been
     judged: the rows without a residual left too few, and it says so, with the window cut
     short by the log's end."""
-    shorter = payload_26[payload_26["t"] <= 33.4 + 1e-9].reset_index(drop=True)
+    shorter = payload_26[payload_26["t"] <= 42.7 + 1e-9].reset_index(drop=True)
     result = detect(monitor, shorter)
     late, (tail,) = result.alarms[-1], result.unjudged
     samples = int((shorter["t"] >= late["t"] - 1e-9).sum())

@@ -426,6 +426,33 @@ def test_non_physical_mass_matrix_warns(seamor):
         ParametricModel(seamor, ["Z_wdot"], ["w"]).fit(surge)
 
 
+def test_a_fitted_centre_of_gravity_no_body_has_is_said_as_r_g(seamor):
+    """A fitted r_g gets the rigid-body check a declared one gets (nnid.vehicle.check_rigid_body):
+    a pitch moment x W the restoring term reads as r_g.x = x. At x = 1 m the declared Seamor
+    inertia (I_y = 0.609 kg m² about the origin, m = 20.4 kg) leaves I_CG,y = 0.609 − 20.4 x² < 0:
+    M_RB is not positive definite, said as the fitted r_g, not as an added mass outweighing
+    the rigid body (there is none fitted). At x = 5 cm (I_CG,y = 0.558) nothing is said."""
+    from nnid.models.parametric import PhysicsWarning
+
+    cfg = load_config(ROOT / "configs/seamor_sequence.toml")
+    cfg.measurement.kind = "none"
+    log = simulate_config(cfg, seamor)
+    surge = log[log["experiment"] == "surge"].copy()
+    level = np.cos(surge["theta"]) * np.cos(surge["phi"])  # the restoring moment's s(η) entry
+    said = {}
+    for x in (1.0, 0.05):
+        data = surge.assign(tau_M=surge["tau_M"] + x * seamor.weight * level)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            model = ParametricModel(seamor, ["r_g.x"], ["q"]).fit(data)
+        assert model.estimate_.theta[0] == pytest.approx(x, rel=1e-6)
+        said[x] = [str(w.message) for w in caught if w.category is PhysicsWarning]
+    (text,) = said[1.0]
+    assert "fitted r_g = [1, 0, 0] m (r_g.x fitted)" in text and "M_RB" in text
+    assert "added mass" not in text
+    assert said[0.05] == []
+
+
 def test_residual_force_is_the_true_damping_force(seamor):
     """McCarter eq. 4.4 on noise-free data: M ν̇ + C(ν)ν + g(η) − τ is exactly Θ ξ(ν)."""
     import torch

@@ -202,6 +202,48 @@ def test_signed_quadratic_is_caccia_eq6():
     assert curve(np.array([4.0]))[0] == pytest.approx(16.32)
 
 
+def _romeo_reverse(romeo, k_neg):
+    """The romeo preset with Caccia's reverse c_V as every thruster's ``k_neg`` (L217)."""
+    from nnid.vehicle import vehicle_from_dict
+
+    data = romeo.model_dump(mode="json")
+    for thruster in data["thrusters"]:
+        thruster["curve"]["k_neg"] = k_neg
+    return vehicle_from_dict(data, "romeo with k_neg")
+
+
+def test_signed_quadratic_reverse_coefficient_is_caccia_eq6(romeo):
+    """Caccia eq. 6 with L217's two coefficients: c_V = 1.02 N/V² for positive thrust, 1.09
+    for negative, given in the vehicle file as k and k_neg: the thrust at −V is −1.09 V², at
+    +V 1.02 V²; through the allocation a vertical-all heave command of −V gives
+    Z = −4 · 1.09 V² (the four verticals push along +z). Without k_neg the curve is eq. 6's
+    symmetric one (the preset, so Caccia's Table II analogue, unchanged)."""
+    volts = np.array([-10.0, -3.5, -1.0, 0.0, 0.5, 2.0, 7.25])
+    asym = _romeo_reverse(romeo, 1.09)
+    (curve, *_) = Actuation(asym).curves
+    np.testing.assert_allclose(
+        curve(volts), np.where(volts >= 0, 1.02, 1.09) * volts * np.abs(volts), rtol=1e-15
+    )
+    assert curve(np.array([-4.0]))[0] == pytest.approx(-1.09 * 16.0)
+    assert curve(np.array([4.0]))[0] == pytest.approx(1.02 * 16.0)
+    act = Actuation(asym)
+    vertical = np.array([t.name.startswith("V") for t in asym.thrusters])
+    cmd = np.where(vertical, -3.0, 0.0)[None, :]
+    assert act.nominal(cmd)[0, 2] == pytest.approx(-4 * 1.09 * 9.0)
+    (plain, *_) = Actuation(romeo).curves
+    np.testing.assert_array_equal(plain(-volts), -plain(volts))
+
+
+def test_a_reverse_coefficient_against_k_is_refused(romeo):
+    """k_neg is a magnitude like k: −1.09 (the thrust's sign written in) would push the same
+    way at either command; refused naming the curve."""
+    from nnid.errors import NnidInputError
+
+    with pytest.raises(NnidInputError, match=r"k_neg = -1\.09 must have the sign of k") as err:
+        _romeo_reverse(romeo, -1.09)
+    assert "thrusters.0.curve" in str(err.value)
+
+
 def test_table_curve_interpolates_asymmetric_map():
     # Caccia L217: c_V = 1.02 N/V^2 for positive thrust, 1.09 N/V^2 for negative thrust
     volts = np.arange(-10.0, 10.5, 1.0)

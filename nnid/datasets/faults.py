@@ -18,8 +18,9 @@ thruster that recovers):
   collision);
 - ``effect``: an effect of the vocabulary with its value (:func:`nnid.physics.effects.apply_effect`;
   ``buoyancy_offset`` for a change of ballast);
-- ``payload``: ``mass`` kilograms added at the centre of gravity (weight and inertia grow)
-  with ``value`` newtons of buoyancy (the payload's displaced water).
+- ``payload``: ``mass`` kilograms added at ``position`` (body frame, m; None: at the centre of
+  gravity) with ``value`` newtons of buoyancy (the payload's displaced water) acting there;
+  the vehicle and payload become one rigid body (the parallel-axis theorem).
 """
 
 from __future__ import annotations
@@ -39,7 +40,7 @@ from nnid.physics import compiled
 from nnid.physics.effects import apply_effect
 from nnid.physics.fossen import FossenModel
 from nnid.physics.thrusters import Actuation, apply_installation
-from nnid.vehicle import vehicle_copy
+from nnid.vehicle import point_mass_inertia, vehicle_copy
 
 
 @dataclass(frozen=True)
@@ -56,6 +57,7 @@ class Fault:
     value: float = 0.0
     mass: float = 0.0
     end: float | None = None
+    position: tuple[float, float, float] | None = None
 
 
 @dataclass(frozen=True)
@@ -117,17 +119,27 @@ class _Allocator:
         return out
 
 
-def _with_payload(vehicle, mass: float, buoyancy: float):
-    """The vehicle carrying ``mass`` kg at its centre of gravity with ``buoyancy`` N of lift:
-    mass and weight grow, the rotational inertia by the payload's share (a compact payload
-    adds little), the buoyancy by its displaced water."""
+def _with_payload(vehicle, mass: float, buoyancy: float, position: Sequence[float] | None = None):
+    """The vehicle carrying ``mass`` kg at ``position`` (body frame, m; None: at its centre of
+    gravity) with ``buoyancy`` N of lift acting there: the two bodies as one about the body
+    origin (Fossen 2011 eq. 3.37, the parallel-axis theorem). The mass and weight add; the
+    centre of gravity moves to m r_g + m_p r_p over their sum, the centre of buoyancy likewise
+    by the buoyancies; I_o gains the payload's own inertia plus m_p(|r_p|² 1 − r_p r_pᵀ). Its
+    own inertia is taken as the vehicle's about its centre of gravity by the share of mass,
+    a fifth of it (a compact payload)."""
+    r_g, r_b = np.asarray(vehicle.r_g, dtype=float), np.asarray(vehicle.r_b, dtype=float)
+    r_p = r_g if position is None else np.asarray(position, dtype=float)
+    inertia = np.asarray(vehicle.inertia_matrix(), dtype=float)
+    about_cg = inertia - point_mass_inertia(vehicle.mass, r_g)
+    own = 0.2 * mass / vehicle.mass * about_cg
     data = vehicle.model_dump()
-    scale = (vehicle.mass + mass) / vehicle.mass
     data["mass"] = vehicle.mass + mass
     data["weight"] = vehicle.weight + mass * vehicle.g
     data["buoyancy"] = vehicle.buoyancy + buoyancy
-    inertia = np.asarray(vehicle.inertia_matrix())
-    data["inertia"] = (inertia * (1 + 0.2 * (scale - 1))).tolist()
+    data["r_g"] = ((vehicle.mass * r_g + mass * r_p) / data["mass"]).tolist()
+    if data["buoyancy"] > 0:
+        data["r_b"] = ((vehicle.buoyancy * r_b + buoyancy * r_p) / data["buoyancy"]).tolist()
+    data["inertia"] = (inertia + own + point_mass_inertia(mass, r_p)).tolist()
     return vehicle_copy(vehicle, data)
 
 
@@ -202,7 +214,7 @@ def simulate_faults(
         for index in key:
             fault = faults[index]
             if fault.kind == "payload":
-                plant = _with_payload(plant, fault.mass, fault.value)
+                plant = _with_payload(plant, fault.mass, fault.value, fault.position)
             else:
                 plant = apply_effect(plant, fault.effect, fault.value)
         plants.append(plant)

@@ -75,8 +75,8 @@ def _force(src, off, n, act, work):
             c = 0.0
         c = min(max(c, lo[i]), hi[i])
         kind = kinds[i]
-        if kind == CURVE_QUADRATIC:
-            work[3, i] = coeffs[i, 0] * c * abs(c)
+        if kind == CURVE_QUADRATIC:  # forward, reverse coefficient (Caccia eq. 6)
+            work[3, i] = (coeffs[i, 0] if c >= 0.0 else coeffs[i, 1]) * c * abs(c)
         elif kind == CURVE_POLY:
             mag, out, power = abs(c), 0.0, 1.0
             for j in range(coeffs.shape[1]):

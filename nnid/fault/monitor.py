@@ -117,7 +117,9 @@ def pack_actuation(vehicle, parts) -> tuple:
             tab_cmd[i, : n_tab[i]], tab_thrust[i, : n_tab[i]] = curve.cmd, curve.thrust
         else:
             kinds[i] = _KINDS[curve.kind]
-            values = curve.coeffs if curve.kind == "poly" else (curve.k,)
+            # a signed quadratic's forward and reverse coefficients (Caccia eq. 6)
+            reverse = curve.k if curve.k_neg is None else curve.k_neg
+            values = curve.coeffs if curve.kind == "poly" else (curve.k, reverse)
             coeffs[i, : len(values)] = values
         lo[i] = -np.inf if thruster.cmd_min is None else thruster.cmd_min
         hi[i] = np.inf if thruster.cmd_max is None else thruster.cmd_max

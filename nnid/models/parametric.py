@@ -1459,7 +1459,19 @@ class FossenPlant(NnidModel):
                 )
 
     def _check_mass(self) -> None:
-        mass = self.parts_.model(check=False).mass_matrix().numpy()
+        """Warn of a fitted mass matrix no vehicle has: the rigid body first, as a vehicle
+        file's is checked (:func:`nnid.vehicle.check_rigid_body`; a fitted r_g can break
+        M_RB, and the added mass was blamed for it), then M = M_RB + M_A."""
+        from nnid.vehicle import check_rigid_body
+
+        parts = self.parts_
+        fitted = [n for n in self.estimate_.names if n.startswith("r_g.")]
+        try:
+            check_rigid_body(parts.mass, parts.r_g, parts.inertia, fitted)
+        except NnidInputError as exc:  # a warning: the fit stands, its r_g is said
+            warnings.warn(exc.message, PhysicsWarning, stacklevel=3)
+            return
+        mass = parts.model(check=False).mass_matrix().numpy()
         if np.linalg.eigvalsh(0.5 * (mass + mass.T)).min() <= 0:
             warnings.warn(
                 "the identified mass matrix M = M_RB + M_A is not positive definite (an added "

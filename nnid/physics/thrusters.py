@@ -1,7 +1,8 @@
 """Thrusters: thrust curves, allocation from geometry, and installation coefficients.
 
 - Thrust curves: an odd-symmetric polynomial in the command (Weiss's PWM fit, eq. 10), Caccia's
-  τ = c_V V|V| (eq. 6), or a measured, possibly asymmetric table.
+  τ = c_V V|V| (eq. 6, c_V of its own for reverse thrust), or a measured, possibly asymmetric
+  table.
 - Allocation: τ = B f with column i of B = [dᵢ; rᵢ × dᵢ] for a thruster at rᵢ pushing along dᵢ
   (reproduces Weiss eqs 4-9 and Caccia's B_H, B_V).
 - Installation: Caccia eq. 3, the effective generalized force is η_ξ times the nominal one, with
@@ -26,6 +27,7 @@ class ThrustCurve:
     kind: str
     coeffs: tuple[float, ...] = ()
     k: float = 0.0
+    k_neg: float | None = None  # the reverse coefficient (Caccia eq. 6); None: k
     cmd: tuple[float, ...] = ()
     thrust: tuple[float, ...] = ()
 
@@ -38,7 +40,8 @@ class ThrustCurve:
                 out = out + c * mag**power
             return np.sign(command) * out
         if self.kind == "signed_quadratic":
-            return self.k * command * np.abs(command)
+            k = self.k if self.k_neg is None else np.where(command >= 0, self.k, self.k_neg)
+            return k * command * np.abs(command)
         if self.kind == "table":
             return np.interp(command, self.cmd, self.thrust)
         raise ValueError(f"unknown thrust curve kind '{self.kind}'")
