@@ -517,16 +517,11 @@ class GradientSpec(_Trainer):
         negative definite one climbed it)."""
         if not (isinstance(gain, list) and gain and isinstance(gain[0], list)):
             return gain
-        import numpy as np
+        from nnid.trainers.recursive import gain_matrix_problem
 
-        n = len(gain)
-        if any(len(row) != n for row in gain):
-            raise ValueError(f"a gain matrix is square: {n} rows, so {n} numbers in each")
-        g = np.array(gain, dtype=np.float64)
-        if not np.allclose(g, g.T, rtol=1e-9, atol=0.0):
-            raise ValueError("a gain matrix is symmetric (gain[i][j] = gain[j][i])")
-        if n == 0 or np.linalg.eigvalsh(g).min() <= 0:
-            raise ValueError("a gain matrix is positive definite (all its eigenvalues above 0)")
+        problem = gain_matrix_problem(gain)
+        if problem:
+            raise ValueError(problem)
         return gain
 
 

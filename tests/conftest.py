@@ -17,6 +17,17 @@ from threadpoolctl import threadpool_limits
 
 from nnid.vehicle import vehicle_from_dict
 
+#: a simulate config of one 5 s surge step ("a") on the seamor preset: the config tests'
+#: simulation, which a test extends with its own experiments or keys
+SIM_STEP = """kind = "simulate"
+vehicle = "seamor"
+dt = 0.05
+[[experiments]]
+name = "a"
+signals = [{ kind = "step", channel = "X", amplitude = 10.0 }]
+duration = 5.0
+"""
+
 
 def load_script(path: Path, monkeypatch: pytest.MonkeyPatch):
     """A script file (a benchmark, a docs example) as a module. Its ``sys.modules`` entry (its

@@ -8,6 +8,7 @@ import re
 from pathlib import Path
 
 import pytest
+from conftest import SIM_STEP
 from typer.testing import CliRunner
 
 import nnid.datasets.simulator as simulator
@@ -15,18 +16,13 @@ from nnid.cli import app
 
 ROOT = Path(__file__).resolve().parents[1]
 
-SIM = """kind = "simulate"
-vehicle = "seamor"
-dt = 0.05
-[[experiments]]
-name = "a"
-signals = [{ kind = "step", channel = "X", amplitude = 10.0 }]
-duration = 5.0
-[[experiments]]
+# a second run, "b" (a sway step): the validation part
+SWAY = """[[experiments]]
 name = "b"
 signals = [{ kind = "step", channel = "Y", amplitude = 10.0 }]
 duration = 5.0
 """
+SIM = SIM_STEP + SWAY
 
 TRAIN = """kind = "train"
 vehicle = "seamor"

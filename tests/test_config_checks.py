@@ -9,21 +9,13 @@ from pathlib import Path
 import pandas as pd
 import pytest
 import torch
+from conftest import SIM_STEP as SIM
 
 from nnid.config import LoopConfig, SimulateConfig, TrainConfig, load_config
 from nnid.errors import NnidInputError
 
 ROOT = Path(__file__).resolve().parents[1]
 MINIROV = (ROOT / "nnid" / "demo_data" / "minirov.toml").read_text()
-
-SIM = """kind = "simulate"
-vehicle = "seamor"
-dt = 0.05
-[[experiments]]
-name = "a"
-signals = [{ kind = "step", channel = "X", amplitude = 10.0 }]
-duration = 5.0
-"""
 
 TRAIN = """kind = "train"
 vehicle = "seamor"

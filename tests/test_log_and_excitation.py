@@ -289,6 +289,27 @@ def test_prbs_chips_and_stairs_levels_fall_on_the_sample_clock():
     assert np.bincount(stairs.astype(int)).tolist() == [16] + [7] * 12
 
 
+@pytest.mark.parametrize(
+    ("dt", "start", "duration"),
+    [(0.1, 1.1, 3.2),  # 1.1 + 3.2 = 4.300000000000001 > 43 * 0.1: a 33rd sample flown
+     (0.3, 0.9, 0.6)],  # 3 * 0.3 = 0.8999999999999999 < 0.9: the start a sample late
+)  # fmt: skip
+def test_signal_windows_fall_on_the_sample_clock(dt, start, duration):
+    """A signal's window was read as t >= start and t < start + duration, with t = k·dt and
+    the edges inexact: a sample within rounding of an edge fell on either side. Read as the
+    chips are, a window starts at sample start/dt and lasts duration/dt samples."""
+    t = np.arange(100) * dt
+    first, n = round(start / dt), round(duration / dt)
+    for signal in (
+        Step(channel="X", amplitude=1.0, start=start, duration=duration),
+        PRBS(channel="X", amplitude=1.0, hold=dt, start=start, duration=duration),
+    ):
+        on = np.flatnonzero(signal(t))
+        assert (on[0], on.size) == (first, n), signal
+    held = np.flatnonzero(Step(channel="X", amplitude=1.0, start=start)(t))  # no end
+    assert (held[0], held.size) == (first, t.size - first)
+
+
 def test_a_multisine_of_one_frequency_is_refused_naming_its_keys():
     """n > 1 sines of one frequency with Schroeder phases are one sine, and for an even n
     cancel to a peak of ~5e-15, which the amplitude then divided: rounding noise flown at

@@ -208,6 +208,25 @@ def test_filtered_regressors_and_bad_arguments(seamor):
         GradientEstimator(gain=1e6).solve(_surge_regression(seamor, _surge_log(seamor, 0, 5)))
 
 
+@pytest.mark.parametrize(
+    ("gain", "said"),
+    [([[1.0, 2.0], [3.0]], "square: 2 rows, so 2 numbers in each"),  # numpy's own error
+     ([1.0, [2.0, 3.0]], "square"),
+     (np.array([[1.0, 2.0], [0.0, 1.0]]), "symmetric"),
+     ([[-1.0, 0.0], [0.0, -1.0]], "positive definite")],  # it climbed the error, unsaid
+)  # fmt: skip
+def test_a_gain_matrix_given_from_python_is_checked_as_a_configs(rng, gain, said):
+    from nnid.config import GradientSpec
+
+    reg = Regression(rng.normal(size=(20, 2)), rng.normal(size=20), ["a", "b"], ("u",), 20)
+    with pytest.raises(NnidInputError, match=said) as err:
+        GradientEstimator(gain=gain).solve(reg)
+    assert err.value.field == "gain"
+    if isinstance(gain, list) and all(isinstance(row, list) for row in gain):
+        with pytest.raises(ValueError, match=said):  # a config's gain: the same words
+            GradientSpec(kind="gradient", gain=gain)
+
+
 def test_a_gradient_estimator_still_moving_at_the_end_of_the_data_says_so(seamor):
     """A gain far too small for 30 s of data leaves the estimates drifting toward the truth
     when the log ends; they were reported as estimates without a word. Gain 50 converges and

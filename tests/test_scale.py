@@ -811,7 +811,9 @@ def test_sweep_refuses_asha_with_nothing_to_compare(sweep_inputs, tmp_path) -> N
     )
     spec, tasks = trials(staged, data=str(data))
     _check_rungs(staged, spec, tasks)  # accepted: the simulation stage scores the free run
-    _check_rungs(config, SweepSpec(seeds=[0], metric="one_step_nrmse"), trials(config)[1])
+    _check_rungs(
+        config, SweepSpec(seeds=[0], metric="one_step_nrmse"), trials(config, str(data))[1]
+    )
 
 
 @pytest.mark.parametrize(
@@ -865,6 +867,33 @@ def test_sweep_cli_refuses_a_config_without_a_sweep(sweep_inputs, tmp_path) -> N
                                    str(tmp_path / "o")])  # fmt: skip
     assert res.exit_code == 2 and "no [sweep] table" in res.output and "plain.toml" in res.output
     assert not (tmp_path / "o").exists()  # refused before any work
+
+
+@pytest.mark.parametrize(
+    ("options", "config_line", "said"),
+    [(["--vehicle", "gone.toml"], "", "'gone.toml' is neither a preset"),
+     ([], 'vehicle = "gone.toml"', "'gone.toml' is neither a preset"),
+     (["--columns", "gone.toml"], "", "no such reader config"),
+     (["--data", "gone.csv"], "", "no such file or folder")],
+)  # fmt: skip
+def test_sweep_cli_refuses_a_missing_file_before_any_trial(
+    sweep_inputs, tmp_path, monkeypatch, options, config_line, said
+) -> None:
+    """A vehicle, reader config or log that does not exist is refused as `nnid train`
+    refuses it: one line, exit 2, before the engine starts (each trial had failed alone)."""
+    import nnid.scale.sweep as sweep
+
+    config, data = sweep_inputs
+    own = tmp_path / "narx.toml"
+    own.write_text(config_line + "\n" + config.read_text())
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(sweep, "run_tasks", lambda *a, **k: pytest.fail("trials were run"))
+    given = options if "--data" in options else ["--data", str(data), *options]
+    res = CliRunner().invoke(app, ["sweep", str(own), "--out", "o", *given])
+    assert res.exit_code == 2, res.output
+    missing = options[-1] if options else "gone.toml"
+    assert said in res.output and missing in res.output and len(res.output.splitlines()) == 1
+    assert not (tmp_path / "o").exists()
 
 
 @pytest.mark.parametrize(

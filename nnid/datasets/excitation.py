@@ -41,8 +41,13 @@ class _Signal(StrictModel):
         that would draw the same one (:func:`same_draws`); None for a deterministic signal."""
         return None
 
-    def window(self, t: np.ndarray, duration: float) -> np.ndarray:
-        return (t >= self.start) & (t < self.start + duration)
+    def window(self, t: np.ndarray, duration: float | None) -> np.ndarray:
+        """Where the signal acts: ``duration`` s from ``start`` (to the end of ``t`` where
+        None). Its edges are read as the chips' clock is (:func:`ticks`): t = k·dt is inexact,
+        and a sample within rounding of an edge fell on either side of it."""
+        if duration is None:  # the start's rounding is the one to allow for
+            return ticks(t - self.start, self.start or 1.0) >= 0
+        return ticks(t - self.start, duration) == 0
 
     def top_frequency(self) -> float:
         """The highest frequency the signal is made of, Hz (0 for steps and sequences: their
@@ -66,10 +71,7 @@ class Step(_Signal):
         return self.start + (self.duration or 0.0)
 
     def __call__(self, t: np.ndarray) -> np.ndarray:
-        on = t >= self.start
-        if self.duration is not None:
-            on &= t < self.start + self.duration
-        return np.where(on, self.amplitude, 0.0)
+        return np.where(self.window(t, self.duration), self.amplitude, 0.0)
 
 
 class Stairs(_Signal):

@@ -63,11 +63,14 @@ def trials(
 ) -> tuple[SweepSpec, list[Task]]:
     """The sweep of a train config and its trial tasks; every setting is validated as a
     config before any work (a bad option path is refused, naming it)."""
+    from nnid.pipeline import check_paths, vehicle_for
+
     cfg = load_config(config, TrainConfig, command="sweep")
     if cfg.sweep is None:
         raise NnidInputError("has no [sweep] table (see docs/scale.md)", source=str(config),
                              field="sweep")  # fmt: skip
     spec = cfg.sweep
+    vehicle_path = _vehicle_path(vehicle, config)
     seeds = spec.seeds or [None]
     tasks = []
     for setting in settings(spec):
@@ -98,7 +101,7 @@ def trials(
             # absolute paths: a trial on Ray Tune runs in its own trial folder, where a path
             # relative to this one names another file or none
             task = Task("train", str(Path(data).resolve()) if data else "",
-                        _vehicle_path(vehicle, config), str(Path(config).resolve()), None,
+                        vehicle_path, str(Path(config).resolve()), None,
                         str(Path(columns).resolve()) if columns else None, {},
                         overrides)  # fmt: skip
             try:
@@ -108,6 +111,13 @@ def trials(
                 raise NnidInputError(
                     err.message, source=None if option else str(config), field=option
                 ) from None
+    # a file that does not exist (the log, reader config or vehicle, an option's or the
+    # config's) is refused here, after the settings as `nnid train` checks it after the
+    # config, not by each trial once the engine has started
+    check_paths(cfg, Path(config), data, columns)
+    name, key = (vehicle, "--vehicle") if vehicle else (cfg.vehicle, "vehicle")
+    if name:
+        vehicle_for(name, Path(config), key)
     return spec, tasks
 
 

@@ -21,6 +21,7 @@ from __future__ import annotations
 import itertools
 import math
 import warnings
+from collections.abc import Sequence
 from statistics import NormalDist
 
 import numpy as np
@@ -463,12 +464,40 @@ class RecursiveLeastSquares(BaseEstimator):
         )
 
 
+#: what a row of a gain matrix given from Python may be
+_ROW = list | tuple | np.ndarray
+
+
+def _rows(gain: object) -> bool:
+    """Whether ``gain`` is given as a matrix: a 2-D array, or a list of rows (which may be
+    ragged, or mixed with numbers: numpy's own error named neither)."""
+    if isinstance(gain, np.ndarray):
+        return gain.ndim == 2
+    return isinstance(gain, list | tuple) and any(isinstance(row, _ROW) for row in gain)
+
+
+def gain_matrix_problem(gain: Sequence[Sequence[float]] | np.ndarray) -> str | None:
+    """What makes ``gain`` (its rows) no gain matrix Γ of the gradient law, or None: Γ is
+    square, symmetric and positive definite, as the law descends the squared error only
+    then (a negative definite one climbs it). The check of a config's ``gain`` too."""
+    n = len(gain)
+    if any(not isinstance(row, _ROW) or len(row) != n for row in gain):
+        return f"a gain matrix is square: {n} rows, so {n} numbers in each"
+    g = np.array(gain, dtype=np.float64)
+    if not np.allclose(g, g.T, rtol=1e-9, atol=0.0):
+        return "a gain matrix is symmetric (gain[i][j] = gain[j][i])"
+    if n == 0 or np.linalg.eigvalsh(g).min() <= 0:
+        return "a gain matrix is positive definite (all its eigenvalues above 0)"
+    return None
+
+
 class GradientEstimator(BaseEstimator):
     """The gradient estimator of Weiss eqs 62-65: θ̇ = −p₀ ∂(eᵀe)/∂θ ∝ Γ φ (y − φᵀθ).
 
-    ``gain`` is Γ: a scalar p₀, a vector (diagonal Γ) or a matrix. The law is discretised by
-    forward Euler over the sample interval Δt (from the log's ``t`` in :meth:`fit`, else ``dt``,
-    else 1: a gain per sample); it is stable while Δt Γ ΦᵢᵀΦᵢ stays below 2. With
+    ``gain`` is Γ: a scalar p₀, a vector (diagonal Γ) or a symmetric positive definite matrix
+    (:func:`gain_matrix_problem`). The law is discretised by forward Euler over the sample
+    interval Δt (from the log's ``t`` in :meth:`fit`, else ``dt``, else 1: a gain per sample);
+    it is stable while Δt Γ ΦᵢᵀΦᵢ stays below 2. With
     ``normalized`` the step is divided by 1 + Σ φᵀΓφ (normalised gradient), which bounds it.
     There is no covariance: ``cov`` is NaN and σ̂² comes from the final θ over the whole run.
     The whole run is its memory: the excitation check RLS makes over its memory
@@ -495,6 +524,9 @@ class GradientEstimator(BaseEstimator):
         self.dt = dt
 
     def _gamma(self, n_par: int) -> np.ndarray:
+        # a matrix is checked as a config's is: a ragged one had failed in numpy's own words
+        if _rows(self.gain) and (problem := gain_matrix_problem(self.gain)):
+            raise NnidInputError(problem, field="gain")
         g = np.asarray(self.gain, dtype=np.float64)
         if g.ndim == 0:
             return np.eye(n_par) * float(g)
