@@ -907,6 +907,25 @@ def _followed_as_batch(monitor, log, tmp_path):
     return batch, said
 
 
+def test_follow_reads_a_log_without_roll_and_pitch_as_batch_does(vehicle, monitor, tmp_path):
+    """--follow demanded phi and theta, where batch reads a log without them as level and
+    refuses it only where its own rates tilt the vehicle and the restoring forces read the
+    angle (:func:`~nnid.datasets.preprocess.check_attitude`). A level run without them is now
+    watched as batch watches it (the same records and statistics), and one whose p turns the
+    vehicle through 0.3 rad is refused by both, with batch's reason."""
+    log = simulate_faults(vehicle, 20, seed=5).drop(columns=["phi", "theta"])
+    _followed_as_batch(monitor, log, tmp_path)
+    t = log["t"].to_numpy()
+    log.loc[(t >= 5.0) & (t < 8.0), "p"] += 0.1  # 0.3 rad of roll, its median taken out
+    said = "the log has no phi column, and its p turns the vehicle through"
+    with pytest.raises(NnidInputError, match=said):
+        detect(monitor, log)
+    log.to_csv(tmp_path / "rolls.csv", index=False)
+    with pytest.raises(NnidInputError, match=said) as err:
+        follow_csv(monitor, str(tmp_path / "rolls.csv"), 10.0, lambda line: None, idle_s=0.0)
+    assert err.value.field == "phi"
+
+
 def test_follow_says_a_change_ended_as_batch_detect_does(vehicle, monitor, tmp_path):
     """The window across the recovery, followed row by row: the same three records (the end
     said at the alarm's time) and the same statistics watched, before and after the end."""
@@ -1160,6 +1179,34 @@ def test_an_end_is_said_only_as_the_better_reading_than_the_change_persisting(ve
         if said is not None:
             confidences.append(said[0]["confidence"])
     assert confidences and min(confidences) > 0.5
+
+
+def test_a_resize_is_said_only_as_the_better_reading_than_the_change_persisting(vehicle, monitor):
+    """A resize had no confidence gate, unlike an end: a 3-standard-error loss of h1 taken out
+    of a healthy window was said resized (its size significantly other after τ, what is left
+    within what a change may leave) with confidence 0.02, explaining under 1 % of the window:
+    a size change its own record called far less likely than the change persisting. A resize
+    is now said only with a confidence over one half (and so a positive share explained);
+    those of larger sizes taken out of the same rows still are."""
+    from nnid.fault.detect import Change, Rewatch, _Splits, resized_alarm
+    from nnid.fault.isolation import refit
+
+    log = simulate_faults(vehicle, 20, seed=5)
+    data, trace, k = monitor_inputs(log, monitor.plant_), monitor.run(log), 100
+    rows = window_rows(data, k, 10.0)
+    r = trace.values[rows, 0:6]
+    name = "thruster_loss.h1"
+    se = refit(monitor, data, r, rows, [name]).fits[name]["se"]
+    said = []
+    for z in (3.0, 3.3, 3.6, 4.0, 5.0, 6.0):  # the loss taken out, in standard errors
+        w = Rewatch(monitor)
+        w.changes.append(Change(float(data["t"][k]), "h1", [(name, z * se)]))
+        splits = _Splits(monitor, data, k, 10.0, w, r, w.left(data, rows, r))
+        resized = resized_alarm(splits, trace, k, 10.0)
+        if resized is not None:
+            said.append((z, resized[0]["confidence"], resized[0]["explained"]))
+    assert said and min(c for _, c, _ in said) > 0.5, said
+    assert min(e for _, _, e in said) > 0.0
 
 
 def test_a_recovery_is_said_ended_and_alarms_csv_says_when(vehicle, monitor, tmp_path):
@@ -1596,6 +1643,59 @@ def test_a_window_a_dropout_cuts_is_said_cut_by_a_gap_not_by_the_end(vehicle, mo
     assert last["by"] == "end" and part_clause(last, ISOLATED_HOW).startswith(
         "isolated on the part of its window before the end of its run ("
     )
+
+
+def test_a_dropout_after_an_isolated_loss_keeps_it_taken_out(monitor, stopped_h1, tmp_path):
+    """h1 stopped from 20 s and isolated, then one empty DVL row at 60 s: ``nnid detect``
+    masks it, cutting the run into pieces ``run#0`` and ``run#1``, and detection kept the
+    isolated changes per piece: ``run#1`` was watched on the model's own residual, alarmed
+    within a second and isolated h1 again as a second, new thruster_loss. The later piece
+    carries the run's changes, its statistics restarting at its start: one record, and the
+    later piece watched on what the loss leaves, as without the dropout. ``--follow`` refuses
+    the empty cell (a stream has no gap masking), so it never splits the run."""
+    from nnid.datasets.gaps import mask_gaps
+    from nnid.fault.monitor import monitor_motion
+
+    log = stopped_h1.assign(experiment="run")
+    read = monitor_motion(log.columns)
+    gap = int(np.flatnonzero(log["t"].to_numpy() >= 60.0)[0])
+    holed = log.copy()
+    holed.loc[gap, ["u", "v", "w"]] = np.nan
+    pieces = mask_gaps([holed], read)[0]
+    assert list(dict.fromkeys(pieces["experiment"])) == ["run#0", "run#1"]
+    result, whole = detect(monitor, pieces), detect(monitor, log)
+    (loss,) = result.alarms
+    assert (loss["kind"], loss["thruster"], loss["experiment"]) == ("thruster_loss", "h1", "run#0")
+    assert [(a["t"], a["kind"]) for a in whole.alarms] == [(loss["t"], loss["kind"])]
+    later = np.flatnonzero(result.trace.experiment == "run#1")
+    assert not result.trace.alarm[later].any()
+    # from its second row (the first has no residual), z of what the loss leaves as without
+    # the gap: the same rows, the same change taken out
+    same = np.searchsorted(whole.trace.t, result.trace.t[later[1:]])
+    np.testing.assert_allclose(result.trace.values[later[1:], 6:12],
+                               whole.trace.values[same, 6:12], rtol=1e-9, atol=1e-9)  # fmt: skip
+    holed.to_csv(tmp_path / "holed.csv", index=False)
+    with pytest.raises(NnidInputError, match="an empty cell") as err:
+        follow_csv(monitor, str(tmp_path / "holed.csv"), 10.0, lambda line: None, idle_s=0.0)
+    assert err.value.row == gap
+
+
+def test_the_pieces_of_a_run_are_one_run_and_a_resumed_run_is_not():
+    """:func:`run_pieces`: the consecutive pieces a gap cut a run into are one run (the
+    changes isolated in one carried to the next, one unexplained record open across them);
+    the stretches of a run resumed after another's rows (:func:`by_block`: runs A, B, A) and
+    runs that are no piece are each their own."""
+    from nnid.fault.detect import later_pieces, run_key, run_pieces
+
+    names = ["a#0", "a#1", "a#2", "b", "b#0", "a", "a"]
+    runs = ["a", "a", "a", "b", "b", "a", "a"]
+    data = {"experiment_names": np.array(names, dtype=object),
+            "experiment_runs": np.array(runs, dtype=object)}  # fmt: skip
+    assert [list(run_pieces(data, c)) for c in range(7)] == [
+        [0, 1, 2], [0, 1, 2], [0, 1, 2], [3], [4], [5], [6]]  # fmt: skip
+    assert [run_key(data, c) for c in range(7)] == [0, 0, 0, 3, 4, 5, 6]
+    assert later_pieces(data, 1) == [2] and later_pieces(data, 2) == [] == later_pieces(data, 5)
+    assert list(run_pieces({"experiment_names": data["experiment_names"]}, 1)) == [1]
 
 
 def test_a_window_before_a_runs_dropped_last_piece_is_said_cut_by_a_gap(vehicle, monitor):

@@ -26,11 +26,13 @@ as noise while the vehicle barely moves): a later alarm on the restarted rows is
 usual. Named and significant, it is a new change and a new record; not isolated again, it is
 no new alarm but the unexplained change persisting, counted in its open record (``repeats``,
 ``last_seen_t`` and its ``meaning``: :func:`persisting`), and the statistics restart after its
-window again. One unexplained record is open per experiment, from its first such alarm on: a
-second change that no hypothesis explains reads as the first persisting, and so does a named
-fault that isolation cannot tell apart from a change that persists in its window. An alarm
-whose window holds too few rows to isolate (the log's end, a gap) is not judged
-(:func:`not_judged`): a record of its own, neither opening nor repeating an unexplained one.
+window again. One unexplained record is open per run (the pieces a dropout cut it into,
+:func:`run_key`, are one; so are the changes isolated, carried into its later pieces:
+:func:`_rewatch`), from its first such alarm on: a second change that no hypothesis explains
+reads as the first persisting, and so does a named fault that isolation cannot tell apart
+from a change that persists in its window. An alarm whose window holds too few rows to isolate
+(the log's end, a gap) is not judged (:func:`not_judged`): a record of its own, neither
+opening nor repeating an unexplained one.
 
 A change can also go away (a snag freed, a thruster that recovers): the residual it leaves is
 then its signature reversed, which isolation would name as a new change (a pull the other way,
@@ -544,10 +546,10 @@ def filed(
     judged (:func:`not_judged`): new, whatever is open, and opening nothing: an alarm never
     judged is no evidence that an unexplained change persists (one that the log's end or a
     gap left too few rows was counted in the open record's repeats, "not isolated …
-    persisting"). Not isolated, with an unexplained record open in its experiment ``code``
-    (``open_``): the change persisting, folded into that record (:func:`persisting`;
-    ``restart_t``, its window's end), no record; else a new record, which opens the
-    experiment's unexplained record."""
+    persisting"). Not isolated, with an unexplained record open in its run ``code``
+    (:func:`run_key`; ``open_``): the change persisting, folded into that record
+    (:func:`persisting`; ``restart_t``, its window's end), no record; else a new record, which
+    opens the run's unexplained record."""
     if diag.isolated:
         return True, None if record.get("ended") else Change.of(record, diag)
     if diag.meaning == TOO_FEW:  # not judged (not_judged): neither opens nor repeats a record
@@ -835,11 +837,12 @@ class _Splits:
         m = self.monitor
         return 0.5 * np.log(max(self.n * len(m.plant_.dofs_) / m.correlation_time_, 2.0))
 
-    def persisting_bar(self) -> float:
-        """The whitened power that the changes ending must leave on the window, less than it,
-        to be the better reading by BIC (τ its one parameter) than them persisting: where
-        :meth:`record` gives an end a confidence over one half."""
-        return float(self.p_left.sum()) - 2 * self.monitor.correlation_time_ * self.penalty()
+    def persisting_bar(self, n_theta: int = 0) -> float:
+        """The whitened power that the changes ending (or resized, ``n_theta`` θ refitted)
+        must leave on the window, less than it, to be the better reading by BIC (τ and the
+        θ its parameters) than them persisting: where :meth:`record` gives the end (or the
+        new size) a confidence over one half."""
+        return float(self.p_left.sum()) - self.penalised(0.0, 1 + n_theta)
 
     def penalised(self, cost: float, n_theta: int) -> float:
         """The whitened power ``cost`` left on the window plus the BIC penalty of ``n_theta``
@@ -1046,9 +1049,16 @@ def resized_alarm(
     replaces them, or None. The changes are refitted on the rows from τ on (τ minimises the
     window's whitened power so); the new size must differ from the one taken out
     significantly (:data:`~nnid.fault.isolation.SIGNIFICANCE`) and leave no more than a change
-    may of the model's residual after τ (:func:`~nnid.fault.isolation.allowed_ratio`)."""
+    may of the model's residual after τ (:func:`~nnid.fault.isolation.allowed_ratio`). As an
+    end, it must be the better reading by BIC than the changes persisting
+    (:meth:`_Splits.persisting_bar`, τ and each θ refitted its parameters): its record's
+    confidence over one half. Without it, a 3-standard-error loss of h1 taken out of a
+    healthy window was said resized with confidence 0.02, explaining 0.6 % of the window: a
+    new size that its own record called far less likely than the change persisting."""
     split = splits.resized() if splits.usable() else None
-    if split is None or splits.new_change_fits_better(split):
+    if split is None or split.cost >= splits.persisting_bar(len(split.fit.fits)):
+        return None
+    if splits.new_change_fits_better(split):
         return None
     record = splits.record(trace, k, window_s, split, ended=False)
     fitted = [(name, fit["theta"]) for name, fit in split.fit.fits.items()]
@@ -1215,6 +1225,14 @@ class Rewatch:
         """The fitted hypotheses of the changes taken out."""
         return [f for c in self.changes for f in c.fitted]
 
+    def carried(self, t_prev: float) -> Rewatch:
+        """A :class:`Rewatch` for the next piece of this one's run (a gap cut it): the same
+        changes taken out, fresh statistics after ``t_prev``, no unjudged tail of its own yet."""
+        out = Rewatch(self.monitor)
+        out.changes, out.hypotheses = list(self.changes), self.hypotheses
+        out.restart(t_prev)
+        return out
+
     def restart(
         self,
         t_prev: float,
@@ -1354,8 +1372,9 @@ def detect(
     names = run_names(data["experiment_names"], data["experiment"], "experiment" in log)
     watched = Trace(trace.t, names, values, alarm)
     t, codes = data["t"], data["experiment"]
-    rewatch: dict[int, Rewatch] = {}  # per experiment
-    open_: dict[int, dict] = {}  # per experiment, its unexplained record (unexplained())
+    # per experiment; a later piece of a run a gap cut gets its own, the changes carried over
+    rewatch: dict[int, Rewatch] = {}
+    open_: dict[int, dict] = {}  # per run (run_key), its unexplained record (unexplained())
     alarms, dismissed, pos = [], [], 0
     changed = np.zeros(t.size, dtype=bool)  # rows watched on a re-referenced residual
     while (ks := np.flatnonzero(alarm[pos:])).size:
@@ -1383,20 +1402,21 @@ def detect(
                     )
                 else:
                     alarms.append(verdict.record)
-                _rewatch(w, data, residual, values, alarm, rows, changed, verdict=verdict)
+                _rewatch(w, data, residual, values, alarm, rows, changed, verdict=verdict,
+                         pieces=rewatch)  # fmt: skip
                 pos = int(rows[-1]) + 1
                 continue
             taken = w.fitted
         record, diag, rows = isolated_alarm(monitor, data, watched, k, window_s, residual, taken)
         code = int(codes[k])
-        new, change = filed(record, diag, open_, code, float(t[rows[-1]]))
+        new, change = filed(record, diag, open_, run_key(data, code), float(t[rows[-1]]))
         if new:
             alarms.append(record)
         else:  # the unexplained change persisting: no record, nor mark
             alarm[k] = False
         # fresh statistics after the window, isolated or not (the module docstring)
         _rewatch(rewatch.setdefault(code, Rewatch(monitor)), data, residual, values, alarm, rows,
-                 changed, change)  # fmt: skip
+                 changed, change, pieces=rewatch)  # fmt: skip
         pos = int(rows[-1]) + 1
     tails = [unjudged_tail(names[np.argmax(codes == c)], w) for c, w in rewatch.items()]
     return DetectResult(watched, alarms, time.perf_counter() - start, dismissed=dismissed,
@@ -1422,6 +1442,32 @@ def by_block(data: dict) -> dict:
     return {**data, "experiment": np.cumsum(starts) - 1, **named}
 
 
+def run_pieces(data: dict, code: int) -> np.ndarray:
+    """The experiment codes of the run that experiment ``code`` is a piece of, a gap (a
+    dropout) having cut it (:func:`nnid.datasets.gaps.mask_gaps`): the consecutive codes whose
+    ``experiment_runs`` is its run, each a piece (its run not its own name); ``code`` alone
+    where it is no piece, or the arrays name no runs (``--follow``'s). A run resumed after
+    another's rows (:func:`by_block`) is no piece: its stretches are watched apart."""
+    runs, names = data.get("experiment_runs"), data["experiment_names"]
+    if runs is None or runs[code] == names[code]:
+        return np.array([code])
+    same = np.array([r == runs[code] and r != n for r, n in zip(runs, names, strict=True)])
+    a = code - int(np.argmin(same[code::-1])) if not same[: code + 1].all() else -1
+    b = code + int(np.argmin(same[code:])) if not same[code:].all() else len(runs)
+    return np.arange(a + 1, b)
+
+
+def run_key(data: dict, code: int) -> int:
+    """The run experiment ``code`` belongs to, as its first piece's code (:func:`run_pieces`):
+    what is kept per run (its open unexplained record) is found from each of its pieces."""
+    return int(run_pieces(data, code)[0])
+
+
+def later_pieces(data: dict, code: int) -> list[int]:
+    """The codes of the pieces of ``code``'s run after it (:func:`run_pieces`)."""
+    return [int(c) for c in run_pieces(data, code) if c > code]
+
+
 def _rest(data: dict, rows: np.ndarray) -> np.ndarray:
     """The rows of the experiment after ``rows``."""
     codes = data["experiment"]
@@ -1429,18 +1475,41 @@ def _rest(data: dict, rows: np.ndarray) -> np.ndarray:
     return np.arange(k + 1, int(np.flatnonzero(codes == codes[k])[-1]) + 1)
 
 
-def _rewatch(w: Rewatch, data, residual, values, alarm, rows, changed, change=None, verdict=None):
+def _rewatch(w: Rewatch, data, residual, values, alarm, rows, changed, change=None, verdict=None,
+             pieces: dict[int, Rewatch] | None = None):  # fmt: skip
     """Watch ``residual`` from fresh statistics on the rest of the experiment after ``rows``
     (the window of an alarm: no new alarm within it); values and alarms rewritten there.
     ``change``: one just isolated, taken out of the model's residual there first; ``verdict``
     (:func:`rewatched_alarm`): changes that ended, no longer taken out, or changed size, taken
-    out at their new size."""
+    out at their new size. ``pieces`` (the :class:`Rewatch` per experiment): each later piece
+    of the run a gap cut (:func:`later_pieces`) gets one that carries ``w``'s changes, watched
+    on what they leave from fresh statistics at its start, where the monitor's pass restarts.
+    Watched on the model's own residual, a thruster stopped and isolated before one empty DVL
+    row was alarmed again within a second of the gap and isolated again as a new loss: one
+    record more per dropout."""
     rest = _rest(data, rows)
     alarm[rows[0] + 1 : rows[-1] + 1] = False
     verdict = verdict or Verdict(dismissed=True)
     w.restart(data["t"][rows[-1]], change, verdict.ended, verdict.resized)
+    refer = change is not None or not verdict.dismissed  # values' first six columns are still r
+    _watch(w, data, residual, values, alarm, rest, changed, refer)
+    if pieces is None:
+        return
+    codes = data["experiment"]
+    for code in later_pieces(data, int(codes[rows[0]])):
+        piece = np.flatnonzero(codes == code)
+        # its first row has no residual (the monitor's pass restarts there): the rest is
+        # re-referenced, each row with its predecessor in the piece, not across the gap
+        pieces[code] = w.carried(float(data["t"][piece[0]]))
+        _watch(pieces[code], data, residual, values, alarm, piece[1:], changed, refer=True)
+
+
+def _watch(w: Rewatch, data, residual, values, alarm, rest, changed, refer: bool) -> None:
+    """Watch the rows ``rest`` (to their experiment's end) on ``w``'s statistics as they
+    stand: ``residual`` there re-referenced to its changes first (``refer``; else it already
+    is), values and alarms rewritten."""
     changed[rest] = bool(w.changes)  # with none left, a later alarm is a first one again
-    if change is not None or not verdict.dismissed:  # values' first six columns are still r
+    if refer:
         residual[rest] = w.left(data, rest, values[rest, 0:6], to_end=True)
     if rest.size:
         out = w.step(data["t"][rest], residual[rest], values[rest, 0:6])

@@ -2,8 +2,11 @@
 
 Rows go through :class:`nnid.fault.monitor.Stream` as they arrive; an alarm is announced at once
 and isolated when the window after it has arrived (or at the end of the input). The log needs the
-body velocities and attitude as columns (a live monitor cannot smooth over the future) and the
-inputs of the model's vehicle. Its clock is checked on the rows it has: every
+body velocities as columns (a live monitor cannot smooth over the future) and the inputs of the
+model's vehicle; without roll or pitch it is read as batch reads it, level, and refused as batch
+refuses it where the vehicle tilts and the restoring forces read the angle
+(:func:`~nnid.datasets.preprocess.check_attitude`, on the experiment's rows so far, with the
+units' checks). Its clock is checked on the rows it has: every
 :data:`RATE_ROWS` rows, the current experiment's latest :data:`RATE_WINDOW` for stamps that come
 in bursts, refused by batch's rule (:func:`~nnid.datasets.preprocess.refuse_bursts`), then all
 the latest rows for the calibrated rate. The rows before the first check are watched unchecked,
@@ -62,7 +65,7 @@ from nnid.datasets.log import (
     out_of_bounds,
     radian_limit,
 )
-from nnid.datasets.preprocess import refuse_bursts, savgol_window
+from nnid.datasets.preprocess import check_attitude, refuse_bursts, savgol_window
 from nnid.datasets.readers import csv_dialect, refuse_comment_header, refuse_repeated_names
 from nnid.errors import NnidInputError, checked_number
 from nnid.fault.detect import (
@@ -364,12 +367,14 @@ def follow_csv(
     # as the whole-log reader: header.index would read the first of two 'u' columns unseen
     refuse_repeated_names(pd.Series([c or None for c in header]), where)
     inputs = input_columns(monitor.channels_)
-    needed = ["t", *VELOCITY, "phi", "theta", *inputs]
+    # roll and pitch as batch has them: absent, read as level and checked on the rows
+    # (check_units); demanded here, a log that batch watches was refused
+    needed = ["t", *VELOCITY, *inputs]
     missing = [c for c in needed if c not in header]
     if missing:
         raise NnidInputError(
-            f"--follow needs the columns {', '.join(missing)} (body velocities and attitude as "
-            "measured, and the model's inputs)",
+            f"--follow needs the columns {', '.join(missing)} (body velocities as measured, and "
+            "the model's inputs)",
             source=where,
         )
     if monitor.plant_.vehicle.thrusters:
@@ -589,7 +594,9 @@ def follow_csv(
     rate_unit = all(a in col for a in ANGLES)
     # velocities and depth in one unit of length (the whole-log reader's check, on the same rows)
     depth_unit = all(c in col for c in DEPTH_UNIT_COLUMNS)
-    unit_check = rate_unit or depth_unit
+    # roll or pitch absent: whether the rates tilt the vehicle where the restoring forces read it
+    level = any(a not in col for a in ("phi", "theta"))
+    unit_check = rate_unit or depth_unit or level
     unit_every = max(1, round(RATE_UNIT_EVERY_S / monitor.interval))
     unit_rows = max(unit_every + 2, round(RATE_UNIT_S / monitor.interval))
     exp_first = 0  # the current experiment's first row, counted from the first row ever read
@@ -597,7 +604,22 @@ def follow_csv(
     def check_units(n: int) -> None:
         """The body rates' unit on the current experiment's latest :data:`RATE_UNIT_S` of
         rows, the newest data row ``n``, as the whole-log reader checks a whole experiment: a
-        gyro in deg/s reads a force that is not there, and the stream was watched silently."""
+        gyro in deg/s reads a force that is not there, and the stream was watched silently.
+        And where roll or pitch is absent, batch's check that the vehicle stays level where
+        the restoring forces read it (:func:`~nnid.datasets.preprocess.check_attitude`) on
+        all the experiment's rows kept, as batch reads the whole run."""
+        if level:
+            j = max(exp_first - dropped, 0)
+            # an angle present is not checked: it stays in the frame
+            shown_cols = ["p", "q", *(a for a in ("phi", "theta") if a in col)]
+            run_x = np.array(xs[j:])
+            run = pd.DataFrame({"t": ts[j:], **{c: run_x[:, STATE.index(c)] for c in shown_cols}})
+            if exp_col is not None:  # named in the error as batch names it
+                run["experiment"] = names[codes[-1]]
+            try:
+                check_attitude(run, monitor.plant_.vehicle, monitor.plant_.dofs_)
+            except NnidInputError as exc:
+                raise _RowsRefused(exc.message, source=where, field=exc.field, row=n) from None
         i = max(exp_first, dropped + len(ts) - unit_rows, dropped) - dropped
         kept = np.array(xs[i:])
         kept[np.array(held_cells[i:])] = np.nan
