@@ -6,8 +6,10 @@ one-column least-squares refit, its F-test with the residual's correlation time,
 error) and the loop's own candidates (:func:`nnid.loop.effects.candidates`, their regressor
 columns from :class:`nnid.models.parametric.ParametricFossen`): one implementation of "name the
 effect". The fault hypotheses added here are the thrusters: thruster i losing a fraction s of its
-thrust leaves r = −s bᵢ fᵢ (bᵢ its allocation column, fᵢ its nominal thrust), so its column is
-bᵢ fᵢ and its remaining efficiency is 1 − s.
+thrust leaves r = −s cᵢ, cᵢ = η(Bf) − η(Bf − bᵢfᵢ) the force the kernel's nominal force loses
+with it stopped (bᵢ its allocation column, fᵢ its thrust past the deadband, η the installation
+coefficients by the sign of each DOF's force; ≈ η bᵢ fᵢ), so its column is cᵢ and its remaining
+efficiency is 1 − s.
 
 Kinds: ``thruster_loss`` (a thruster), ``external_force`` (``external_bias.<dof>``: a constant
 force such as a tether snag) and ``model_change`` (any other effect: ``buoyancy_offset`` for a
@@ -25,8 +27,10 @@ how sure the *group* is.
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Collection
 from dataclasses import dataclass, field
+from itertools import pairwise
 from types import SimpleNamespace
 
 import numpy as np
@@ -35,17 +39,26 @@ from scipy.special import lambertw
 from scipy.stats import f as f_dist
 
 from nnid.datasets.log import POSE, TAU, VELOCITY
-from nnid.datasets.preprocess import piece_window, savgol_derivative, step_window
+from nnid.datasets.preprocess import (
+    piece_window,
+    savgol_derivative,
+    savgol_window,
+    step_window,
+)
 from nnid.loop.diagnose import Fit, screen
 from nnid.loop.effects import Candidate, candidates
 from nnid.models.parametric import ParametricFossen, vehicle_with
-from nnid.physics.thrusters import Actuation
+from nnid.physics.thrusters import Actuation, apply_deadband, apply_installation
 from nnid.reports.cells import number
 from nnid.trainers.least_squares import feasible_floor, feasible_weights
 
 _PRIORITY = {"thruster_loss": 0, "buoyancy_offset": 1, "external_bias": 2}
 PARALLEL = 0.95  # |cos| of whitened columns above which two hypotheses are one to the data
+#: the family-wise level a hypothesis is named at: its p-value Bonferroni-adjusted over the
+#: hypotheses screened (:func:`adjusted`) at most this
 SIGNIFICANCE = 0.01
+#: the hypothesis that nothing changed, as the alternatives name it beside the changes
+NO_CHANGE = "no change"
 #: what an alarm says where no hypothesis (one parameter or joint) passes :data:`SIGNIFICANCE`
 NOT_SIGNIFICANT = "no hypothesis explains the change significantly"
 #: what an alarm says where the best hypothesis leaves more than :data:`UNEXPLAINED_RATIO`
@@ -79,11 +92,13 @@ class Diagnosis:
     """What changed: ``kind``, the ``thruster`` and its ``efficiency`` (with a 95 % interval),
     or the ``effect`` with its ``value`` and ``stderr`` (and, for a hypothesis of several
     parameters, every significant one in ``components``); ``confidence`` the posterior weight
-    (BIC) of the named hypothesis and those the data cannot tell from it, None where none is
-    named (:func:`_none_named`; or none was fitted); ``explained`` the share of the whitened
-    residual the fitted hypothesis explains, None where none was fitted (too few rows, or no
-    hypothesis has a signature on the window: a 0 there was not measured); ``alternatives``
-    the next ones."""
+    (BIC, among the hypotheses and no change at all) of the named hypothesis and those the
+    data cannot tell from it, None where none is named (:func:`_none_named`; or none was
+    fitted); ``explained`` the share of the whitened residual the fitted hypothesis explains,
+    None where none was fitted (too few rows, or no hypothesis has a signature on the window:
+    a 0 there was not measured); ``p_value`` its F-test's, Bonferroni-adjusted over the
+    hypotheses screened (:func:`adjusted`); ``alternatives`` the next ones, no change
+    (:data:`NO_CHANGE`) among them."""
 
     kind: str
     thruster: str | None = None
@@ -105,12 +120,21 @@ class Diagnosis:
 
 
 def fitted_vehicle(plant):
-    """The monitor's model as a vehicle file: its vehicle with the fitted values written in
-    (the vehicle itself where the model's parameter names are not the vehicle file's)."""
+    """The monitor's model as a vehicle file: its vehicle with the fitted values written in;
+    the vehicle itself, said in a warning, where a parameter is not the vehicle file's or a
+    value is refused (:func:`~nnid.models.parametric.vehicle_with`). Any other error is a
+    defect and raised: caught as every exception, it was silent, and the effects' values were
+    then converted against the file's values, not the model's."""
     values = {k: v["value"] for k, v in plant.params.items() if v.get("value") is not None}
     try:
         return vehicle_with(plant.vehicle, values)
-    except Exception:
+    except (KeyError, IndexError, ValueError) as err:  # a name or a value the file has not
+        warnings.warn(
+            f"the monitor's fitted values could not be written into vehicle "
+            f"'{plant.vehicle.name}' ({err}): isolation sizes the effects against the vehicle "
+            "file's values, not the model's",
+            stacklevel=2,
+        )
         return plant.vehicle
 
 
@@ -120,6 +144,7 @@ def midpoint_data(
     vehicle,
     savgol: tuple[float, int] = (0.5, 2),
     act: Actuation | None = None,
+    clock: tuple[float, float] | None = None,
 ) -> dict:
     """The arrays of the intervals ending at ``rows`` as the regression sees them: pose and
     velocity at the midpoint, the force of the commands held over the interval, and the
@@ -127,16 +152,31 @@ def midpoint_data(
     difference quotient the residual is made of: a column built from the same noisy
     difference would "explain" the residual's own noise (errors in variables; an added-mass
     column then comes out near the vehicle's whole mass on a healthy window). ``act``: the
-    ``vehicle``'s :class:`~nnid.physics.thrusters.Actuation` where the caller keeps one."""
+    ``vehicle``'s :class:`~nnid.physics.thrusters.Actuation` where the caller keeps one;
+    ``clock``: the monitor's calibrated sample interval and the longest it gives a residual
+    (:func:`smoothing_window`), the derivative cut at a longer one."""
     x, x0 = data["x"][rows], data["x"][rows - 1]
     mid = 0.5 * (x + x0)
     step = x[:, 3:6] - x0[:, 3:6]
     step -= 2 * np.pi * np.floor((step + np.pi) / (2 * np.pi))
     mid[:, 3:6] = x0[:, 3:6] + 0.5 * step
     span = np.arange(rows[0] - 1, rows[-1] + 1)
-    dt, window = smoothing_window(data["t"][span], savgol)
-    vel = data["x"][span, 6:12]
-    acc = np.column_stack([savgol_derivative(vel[:, j], dt, window, savgol[1]) for j in range(6)])
+    t = data["t"][span]
+    dt, window = smoothing_window(t, savgol, clock)
+    longest = np.inf if clock is None else clock[1]
+    acc = np.full((span.size, 6), np.nan)
+    # a stretch between two intervals too long for a residual (samples missing) on its own,
+    # as the monitor scores none across them: a window across one reads no acceleration
+    cuts = [0, *(np.flatnonzero(np.diff(t) > longest) + 1), span.size]
+    for a, b in pairwise(cuts):
+        w = piece_window(b - a, window)
+        if w > savgol[1]:
+            vel = data["x"][span[a:b], 6:12]
+            acc[a:b] = np.column_stack(
+                [savgol_derivative(vel[:, j], dt, w, savgol[1]) for j in range(6)]
+            )
+        elif b - a == 2:  # two samples: their slope
+            acc[a:b] = (data["x"][span[a + 1], 6:12] - data["x"][span[a], 6:12]) / dt
     at = rows - span[0]
     act = Actuation(vehicle) if act is None else act
     inputs = data["inputs"][rows - 1]
@@ -152,14 +192,22 @@ def midpoint_data(
     }
 
 
-def smoothing_window(t: np.ndarray, savgol: tuple[float, int]) -> tuple[float, int]:
-    """The typical step and the samples of :func:`midpoint_data`'s Savitzky-Golay derivative
-    on a span of times ``t``: ``savgol``'s window in seconds at the span's rate
-    (:func:`~nnid.datasets.preprocess.step_window`), at most the span (odd,
-    :func:`~nnid.datasets.preprocess.piece_window`). Its last half window is evaluated
-    off-centre, the window's polynomial extrapolated
+def smoothing_window(
+    t: np.ndarray, savgol: tuple[float, int], clock: tuple[float, float] | None = None
+) -> tuple[float, int]:
+    """The step and the samples of :func:`midpoint_data`'s Savitzky-Golay derivative on a
+    span of times ``t``: ``savgol``'s window in seconds at the rate of ``clock``'s interval
+    (the monitor's calibrated one, :attr:`~nnid.fault.monitor.ResidualMonitor.interval`; None:
+    the span's typical step, :func:`~nnid.datasets.preprocess.step_window`), at most the span
+    (odd, :func:`~nnid.datasets.preprocess.piece_window`). Not the span's median step: on a
+    clock alternating 0.04 and 0.06 s it is 0.04, 0.05 or 0.06 by one sample more or less,
+    and --follow's half-second spans read another acceleration than batch's rest of the run.
+    Its last half window is evaluated off-centre, the window's polynomial extrapolated
     (:func:`~nnid.datasets.preprocess.savgol_interp`)."""
-    dt, window = step_window(t, *savgol, np.nan)
+    if clock is None:
+        dt, window = step_window(t, *savgol, np.nan)
+    else:
+        dt, window = clock[0], savgol_window(savgol[0], 1.0 / clock[0], savgol[1])
     return dt, piece_window(t.size, window)
 
 
@@ -185,7 +233,14 @@ class Hypotheses:
         self.names = None if names is None else frozenset(names)
         self.vehicle = fitted_vehicle(plant)
         self.savgol = (plant.savgol_window, 2)
+        self.clock = (float(monitor.interval), float(monitor.max_interval))
         self.act = Actuation(plant.vehicle)
+        # the installation and deadband the monitor's kernel maps commands through
+        # (:func:`~nnid.fault.monitor.pack_actuation`): the model's η, the vehicle's deadband
+        self.eta = tuple(
+            np.asarray(e, dtype=np.float64) for e in (plant.parts_.eta_pos, plant.parts_.eta_neg)
+        )
+        self.deadband = float(plant.vehicle.deadband)
         self.fitted_act = Actuation(self.vehicle)  # the midpoint data's nominal force
         self.own = [Candidate(f"thruster_loss.{n}", "thruster_loss", f"thruster.{n}")
                     for n in self.act.channels] if self.act.thrusters else []  # fmt: skip
@@ -210,7 +265,9 @@ class Hypotheses:
         with its predecessor)."""
         cands, cols = [], np.zeros((rows.size, 6, 0))
         if self.loop:
-            arrays = midpoint_data(data, rows, self.vehicle, self.savgol, self.fitted_act)
+            arrays = midpoint_data(
+                data, rows, self.vehicle, self.savgol, self.fitted_act, self.clock
+            )
             if self._cands is None:
                 # the thrusters themselves stand for thrust changes; a DOF's installation
                 # coefficient would only be a coarser copy of them. Which of the others are
@@ -231,10 +288,23 @@ class Hypotheses:
                 reg = self._structure.regression(arrays)
                 cols = reg.phi.reshape(rows.size, 6, len(cands))
         if self.own:
-            thrust = self.act.thrusts(data["inputs"][rows - 1])  # [N, n]
-            cols = np.concatenate([cols, thrust[:, None, :] * self.act.matrix[None, :, :]], 2)
-            cands += self.own  # bᵢ fᵢ
+            cols = np.concatenate([cols, self.thruster_columns(data["inputs"][rows - 1])], 2)
+            cands += self.own
         return self.vehicle, cands, cols
+
+    def thruster_columns(self, inputs: np.ndarray) -> np.ndarray:
+        """Each thruster's column [N, 6, n] for the commands ``inputs`` [N, n] held: the
+        force the residual's nominal force loses with that thruster stopped, as the kernel
+        makes it (:func:`nnid.fault.kernel._force`: deadband, curve, allocation, then the
+        model's installation coefficients η by the sign of each DOF's force), η(Bf) − η(Bf −
+        bᵢfᵢ). Without η and the deadband (bᵢfᵢ), a thruster stopped where η is 0.56 was read
+        at 44 % of its thrust, and one whose command sat in the deadband was said lost."""
+        thrust = self.act.thrusts(apply_deadband(inputs, self.deadband))  # [N, n]
+        tau = thrust @ self.act.matrix.T  # [N, 6]
+        without = tau[:, :, None] - thrust[:, None, :] * self.act.matrix[None, :, :]
+        eta_pos, eta_neg = self.eta[0][:, None], self.eta[1][:, None]
+        whole = apply_installation(tau, *self.eta)
+        return whole[:, :, None] - apply_installation(without, eta_pos, eta_neg)
 
     def reads_acceleration(self) -> bool:
         """Whether a column of these hypotheses, as :meth:`columns` made them, reads the
@@ -259,7 +329,7 @@ class Hypotheses:
         out = np.zeros(rows.size, dtype=bool)
         if rows.size and self.reads_acceleration():
             span = data["t"][max(rows[0] - 1, 0) : rows[-1] + 1]  # as midpoint_data's
-            half = smoothing_window(span, self.savgol)[1] // 2
+            half = smoothing_window(span, self.savgol, self.clock)[1] // 2
             out[rows.size - min(half, rows.size) :] = True
         return out
 
@@ -344,24 +414,28 @@ def isolate(
     scored.sort(key=lambda s: -s.drss)
     index = {c.name: k for k, c in enumerate(cands)}
     # penalised log-likelihood (BIC) of the one-parameter hypotheses and of the two joint ones
-    penalty = 0.5 * np.log(max(rows.size * len(plant.dofs_) / ws.tau_corr, 2.0))
-    logl = np.array([s.drss for s in scored]) / (2 * ws.tau_corr) - penalty
+    n_eff = rows.size * len(plant.dofs_) / ws.tau_corr
+    penalty = 0.5 * np.log(max(n_eff, 2.0))
+    logl = np.array([profile_logl(s.drss, rss, n_eff) for s in scored]) - penalty
     wrench = [f"external_bias.{d}" for d in plant.dofs_]
     payload = ["buoyancy_offset", *(f"added_mass.{d}" for d in "uvw")]
     joint = [_joint("external_force", wrench, cands, cols, e, ws, penalty)]
     joint = [j for j in [*joint, _joint("model_change", payload, cands, cols, e, ws, penalty)] if j]
-    post = np.exp(
-        np.r_[logl, [j.logl for j in joint]] - max([logl.max(), *(j.logl for j in joint)])
-    )
+    # and nothing changed (log-likelihood 0, no parameter): without it the posterior was
+    # shared among changes only, and read 1.00 where BIC preferred no change at all
+    every = np.r_[logl, [j.logl for j in joint], 0.0]
+    post = np.exp(every - every.max())
     post /= post.sum()
-    alternatives = [
-        {"hypothesis": s.name, "posterior": float(q)}
-        for s, q in zip(scored, post[: len(scored)], strict=True)
-    ]
+    null = float(post[-1])
+    # the best of K hypotheses is tested: Bonferroni over the hypotheses screened, so that
+    # healthy noise names one at SIGNIFICANCE, not at K times it (~30 tried)
+    tried = len(scored) + len(joint)
+    alternatives = _ranked([s.name for s in scored], post[: len(scored)], null)
     if joint and max(j.logl for j in joint) > logl.max():
         k = int(np.argmax([j.logl for j in joint]))
         j = joint[k]
-        out = j.diagnosis(float(post[len(scored) + k]), rss, vehicle, alternatives[:5])
+        posterior = float(post[len(scored) + k])
+        out = j.diagnosis(posterior, rss, vehicle, alternatives, tried)
         pick = [index[c.name] for c in j.members]
         out.fitted = [(c.name, float(t)) for c, t in zip(j.members, j.theta, strict=True)]
         out.hypothesis = j.kind if j.kind == "external_force" else "payload"
@@ -369,7 +443,7 @@ def isolate(
             out.meaning == NOT_SIGNIFICANT
         ):
             out.isolated = False
-            _none_named(out, float(post[len(scored) + k]))
+            _none_named(out, posterior)
         return out
     post = post[: len(scored)]
     best = scored[0]
@@ -387,26 +461,22 @@ def isolate(
         _kind(s),
         confidence=float(post[group].sum()),
         explained=float(s.drss / rss) if rss > 0 else 0.0,
-        p_value=float(s.p_value),
+        p_value=adjusted(s.p_value, tried),
         meaning=s.candidate.meaning,
-        alternatives=[
-            {"hypothesis": scored[k].name, "posterior": float(post[k])}
-            for k in range(len(scored))
-            if k != named
-        ][:5],
+        alternatives=_ranked([c.name for c in scored], post, null, skip=s.name),
     )
     out.fitted, out.hypothesis = [(s.name, float(s.delta))], s.name
     if _unexplained(out, monitor, e, e + s.delta * cols[:, :, index[s.name]]):
         _none_named(out, float(post[named]))
         return out
-    if s.p_value > SIGNIFICANCE:
+    if out.p_value > SIGNIFICANCE:
         out.kind, out.meaning, out.isolated = "model_change", NOT_SIGNIFICANT, False
         _none_named(out, float(post[named]))
         return out
     if out.kind == "thruster_loss":
         out.thruster = s.name.split(".", 1)[1]
-        # the thruster's columns are its nominal thrust bᵢfᵢ, so the losses taken out before
-        # add to this one: its efficiency against nominal is 1 minus their sum
+        # the thruster's columns are the force it gives at nominal thrust, so the losses taken
+        # out before add to this one: its efficiency against nominal is 1 minus their sum
         eff = float(1.0 - s.delta - sum(theta for name, theta in taken if name == s.name))
         lo, hi = eff - 1.96 * s.stderr, eff + 1.96 * s.stderr
         if hi >= -STOPPED_SLACK and lo <= 1.0:  # a loss the interval allows: said so
@@ -440,13 +510,18 @@ class _Joint:
     drss: float
     logl: float
 
-    def diagnosis(self, posterior: float, rss: float, vehicle, alternatives: list) -> Diagnosis:
+    def diagnosis(
+        self, posterior: float, rss: float, vehicle, alternatives: list, tried: int = 1
+    ) -> Diagnosis:
+        """What the fit says (``posterior`` its weight, ``rss`` the residual's, ``tried`` the
+        hypotheses screened beside it: its members' p-values are :func:`adjusted` over them)."""
+        p_values = np.array([adjusted(p, tried) for p in self.p_values])
         values = [c.value(float(t), vehicle) for c, t in zip(self.members, self.theta, strict=True)]
         ses = [
             float(se * abs(c.value_scale(vehicle)))
             for c, se in zip(self.members, self.stderr, strict=True)
         ]
-        keep = [k for k, p in enumerate(self.p_values) if p <= SIGNIFICANCE]
+        keep = [k for k, p in enumerate(p_values) if p <= SIGNIFICANCE]
         if not keep:  # as the one-parameter path says it: no member is significant
             return Diagnosis(  # its posterior goes among the alternatives (_none_named)
                 "model_change",
@@ -475,7 +550,7 @@ class _Joint:
             stderr=ses[main],
             confidence=posterior,
             explained=self.drss / rss if rss > 0 else 0.0,
-            p_value=float(self.p_values[main]),
+            p_value=float(p_values[main]),
             meaning=what
             + ": "
             + ", ".join(
@@ -513,7 +588,7 @@ def _joint(
     n_eff = max(n / ws.tau_corr - len(pick), 1.0)
     with np.errstate(divide="ignore", invalid="ignore"):
         p_values = f_dist.sf(np.where(se > 0, (theta / se) ** 2, np.inf), 1, n_eff)
-    logl = drss / (2 * ws.tau_corr) - len(pick) * penalty
+    logl = profile_logl(drss, float(y @ y), n / ws.tau_corr) - len(pick) * penalty
     return _Joint(kind, [cands[k] for k in pick], theta, se, p_values, drss, logl)
 
 
@@ -668,6 +743,32 @@ def _unexplained(out: Diagnosis, monitor, e: np.ndarray, post: np.ndarray) -> bo
         f"the residual and leaves {out.residual_ratio:.2g} times the healthy noise power"
     )
     return True
+
+
+def profile_logl(drss: float, rss: float, n_eff: float) -> float:
+    """The log-likelihood ratio of a fit that takes ``drss`` of the weighted residual sum of
+    squares ``rss`` against none, over ``n_eff`` independent samples, the noise variance
+    profiled out: n_eff/2 · ln(RSS₀/RSS₁). drss/2τ took the weighted noise's variance to be 1,
+    the healthy one's, where the model's error grows with the fault (a residual 10⁵ times the
+    noise read thousands of log-units between two hypotheses the data barely tell apart)."""
+    if rss <= 0:
+        return 0.0
+    return 0.5 * n_eff * float(np.log(rss / max(rss - drss, np.finfo(float).eps * rss)))
+
+
+def adjusted(p_value: float, tried: int) -> float:
+    """The p-value ``p_value`` of the best of ``tried`` hypotheses, Bonferroni-adjusted over
+    them (at most 1): what :data:`SIGNIFICANCE` is read against."""
+    return float(min(1.0, p_value * max(tried, 1)))
+
+
+def _ranked(names: list[str], posts: np.ndarray, null: float, skip: str | None = None) -> list:
+    """The five likeliest of the hypotheses ``names`` (but ``skip``) and of no change
+    (:data:`NO_CHANGE`, posterior ``null``), each with its posterior, likeliest first."""
+    out = [{"hypothesis": n, "posterior": float(q)} for n, q in zip(names, posts, strict=True)]
+    out = [a for a in out if a["hypothesis"] != skip]
+    out.append({"hypothesis": NO_CHANGE, "posterior": null})
+    return sorted(out, key=lambda a: -a["posterior"])[:5]
 
 
 def _none_named(out: Diagnosis, posterior: float) -> None:
