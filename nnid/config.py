@@ -53,6 +53,7 @@ from nnid.validation import (
     MIN_WINDOW_S,
     PositiveFloat,
     StrictModel,
+    adjoint_solver,
     disjoint_columns,
     read_toml,
     refuse_other_file,
@@ -936,6 +937,12 @@ class HybridModelSpec(_PhysicsModel):
     @classmethod
     def _physics_trainer_name(cls, value: Any) -> Any:
         return _kind_shorthand(value)
+
+    @model_validator(mode="after")
+    def _adjoint_needs_torchdiffeq(self) -> HybridModelSpec:
+        # the model's own check, named at model.adjoint: the physics fit ran, then a traceback
+        adjoint_solver(self.adjoint, isinstance(self.trainer, LevenbergMarquardtSpec), self.method)
+        return self
 
     def arguments(self) -> dict[str, Any]:
         args = super().arguments()

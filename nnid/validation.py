@@ -146,6 +146,23 @@ def disjoint_columns(inputs: Iterable[str], outputs: Iterable[str]) -> None:
         )
 
 
+def adjoint_solver(adjoint: object, lm: bool, method: str) -> None:
+    """Refuse adjoint gradients (``adjoint``) where the hybrid integrates with nnid's own RK4
+    (``method`` "nnid_rk4", which the Levenberg-Marquardt trainer, ``lm``, needs and "auto"
+    takes with it): that solver has no adjoint, and the first training batch failed after the
+    whole physics fit. The config's check and the model's."""
+    if not isinstance(adjoint, bool):
+        raise NnidInputError(f"adjoint is true or false, not {adjoint!r}", field="adjoint")
+    if adjoint and (lm or method == "nnid_rk4"):
+        why = "the Levenberg-Marquardt trainer integrates" if lm else "method 'nnid_rk4' is"
+        raise NnidInputError(
+            f"adjoint gradients need torchdiffeq's solvers, and {why} nnid's own RK4, which "
+            "has no adjoint: set adjoint = false, or use an Adam trainer with method 'auto', "
+            "'rk4' or 'dopri5'",
+            field="adjoint",
+        )
+
+
 def window_lengths(window: object, field: str = "simulation_window") -> list[int]:
     """``window`` (a length in samples, or a list of lengths) as a list of whole lengths of
     at least 2, or the error naming ``field``: the configs' check and the models' (2.5 given

@@ -25,6 +25,8 @@ log = "log.csv"
 kind = "fossen"
 """
 
+HYBRID = TRAIN.replace('kind = "fossen"', 'kind = "hybrid"')
+
 NARX = """kind = "train"
 [data]
 log = "log.csv"
@@ -163,6 +165,11 @@ def test_a_misspelt_reference_is_refused_before_the_split_and_the_fit(tmp_path, 
          "data.noise_columns", "noise = 0"),
         (TRAIN.replace("[data]", 'reference_label = "Weiss"\n[data]'), TrainConfig,
          "reference_label", "[reference]"),
+        # nnid's RK4 (the LM trainer's) has no adjoint: the physics fit ran, then a traceback
+        (HYBRID + 'adjoint = true\n[model.trainer]\nkind = "lm"\n', TrainConfig,
+         "model.adjoint", "no adjoint"),
+        (HYBRID + 'adjoint = true\nmethod = "nnid_rk4"\n', TrainConfig, "model.adjoint",
+         "no adjoint"),
     ],
 )  # fmt: skip
 def test_what_the_config_alone_shows_is_refused_as_it_is_read(tmp_path, text, model, field, said):
@@ -183,6 +190,7 @@ def test_what_the_config_alone_shows_is_refused_as_it_is_read(tmp_path, text, mo
         SIM.replace("dt =", 'integrator = "adaptive"\ndt ='),
         NARX.replace('log = "log.csv"', 'log = "log.csv"\nnoise = 0.01\nnoise_columns = ["u"]'),
         TRAIN + 'sequence = "weiss"\n',
+        HYBRID + "adjoint = true\n",  # Adam through torchdiffeq
     ],
 )
 def test_the_same_keys_are_taken_where_they_act(tmp_path, text):

@@ -443,3 +443,23 @@ def test_the_state_settings_given_in_python_are_whole_and_named(setting, value):
     given = {"hidden": 4, "warmup": 5, setting: value}
     with pytest.raises(NnidInputError, match=rf"^field '{setting}': a whole number"):
         NeuralStateSpace(["pump"], ["level"], **given).fit(_tanks(50, 0, 1, 1))
+
+
+@pytest.mark.parametrize(
+    ("setting", "value", "says"),
+    [("continuity", float("nan"), "a finite number"), ("continuity", -1.0, "at least 0"),
+     ("state_epochs", 0, "a whole number"), ("state_epochs", 2.5, "a whole number"),
+     ("windows", (12.7,), "a whole number"), ("windows", (None, float("nan")), "a whole number"),
+     ("inputs", ["pump", "level"], "an output and an input")],
+)  # fmt: skip
+def test_the_training_settings_given_in_python_are_checked_as_the_config_does(setting, value, says):
+    """Given in Python, a NaN ``continuity`` stopped Levenberg-Marquardt at its first epoch
+    and returned the initial weights without an error, a negative one made the links' weight
+    complex, ``state_epochs`` was checked only at prediction, a 12.7-sample window trained 12
+    long, and an output read as an input was fitted. Each is refused as the fit starts."""
+    given = {"inputs": ["pump"], "outputs": ["level"], "hidden": 2, "warmup": 5}
+    model = NeuralStateSpace(**given, trainer=LevenbergMarquardt(max_epochs=1)).set_params(
+        **{setting: value}
+    )
+    with pytest.raises(NnidInputError, match=rf"^field '{setting}': .*{says}"):
+        model.fit(_tanks(50, 0, 1.0, 1.0))

@@ -173,9 +173,11 @@ class Replay:
 #: so it can keep its own memory, started from the log's history at each window's start
 Stepper = Callable[[np.ndarray, float], Callable[[np.ndarray, np.ndarray], np.ndarray]]
 
-#: a whole closed-loop flight: (states [B, 12], open-loop input [M, 6], window starts [B] in
-#: it, steps, dt) -> states [B, steps + 1, 12]; a window that turns non-finite may stop there
-Flight = Callable[[np.ndarray, np.ndarray, np.ndarray, int, float], np.ndarray]
+#: a whole closed-loop flight of one run: (states [B, 12], the run's open-loop input [M, 6],
+#: window starts [B] in it, steps, dt, the run's positions in the log [M]) -> states
+#: [B, steps + 1, 12]; a window that turns non-finite may stop there. A window steps through
+#: its run's samples, which need not be contiguous rows of the log (runs A, B, A)
+Flight = Callable[[np.ndarray, np.ndarray, np.ndarray, int, float, np.ndarray], np.ndarray]
 
 
 def fly_closed_loop(
@@ -188,8 +190,8 @@ def fly_closed_loop(
     samples from every measured state, all windows at once. Rows not predicted keep the
     measurement (the caller blanks them)."""
 
-    def flight(x0, tau_open, starts, steps, dt):
-        step = stepper(starts, dt)
+    def flight(x0, tau_open, starts, steps, dt, pos):
+        step = stepper(pos[starts], dt)
         states = np.full((starts.size, steps + 1, x0.shape[1]), np.nan)
         states[:, 0] = state = x0
         for j in range(steps):
@@ -229,9 +231,9 @@ def predict_closed_loop(
             raise ValueError("a lagged flight starts from the log's commanded tau_nominal")
         felt = felt_forces(parts, log, tau_nominal, lag)
 
-    def flight(x0, tau_open, starts, steps, dt):
+    def flight(x0, tau_open, starts, steps, dt, pos):
         if felt is not None:  # the lag states after the 12 of pose and velocity
-            x0 = np.concatenate([x0, felt[starts]], 1)
+            x0 = np.concatenate([x0, felt[pos[starts]]], 1)
         flown = compiled.fly_pd(form, x0, tau_open, starts, steps, dt, pilot, deadband, substeps)
         return flown[0][..., :12]
 
@@ -252,12 +254,12 @@ def _fly(log: pd.DataFrame, replay: Replay, flight: Flight, mode: str | int) -> 
     for _, pos in experiment_rows(log):
         dt = typical_step(log["t"].to_numpy(np.float64)[pos], np.nan)
         if mode == "free_run":
-            flown = flight(x[pos[:1]], tau_open, pos[:1], pos.size - 1, dt)[0]
+            flown = flight(x[pos[:1]], tau_open[pos], np.zeros(1, int), pos.size - 1, dt, pos)[0]
             bad = np.flatnonzero(~np.isfinite(flown).all(1))
             if bad.size:
                 flown[bad[0] :] = np.nan
             out[pos[1:]] = flown[1:]
         elif pos.size > k:
-            starts = pos[: pos.size - k]
-            out[starts + k] = flight(x[starts], tau_open, starts, k, dt)[:, -1]
+            starts = np.arange(pos.size - k)  # in the run: its rows need not be contiguous
+            out[pos[starts + k]] = flight(x[pos[starts]], tau_open[pos], starts, k, dt, pos)[:, -1]
     return pd.DataFrame(out, columns=[*POSE, *VELOCITY], index=log.index)

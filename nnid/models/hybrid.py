@@ -19,7 +19,8 @@ memory: τ − F_T τ for first-order filters F_T(s) = 1/(T s + 1) of the time c
 ``memory`` (an actuator that lags its command shows as a force that depends on how the
 command moved, which the instantaneous τ cannot say). Its last layer starts at zero, so the
 untrained hybrid *is* the parametric fit, and its force is scaled per DOF by the RMS input
-force of the training data. Integration goes through torchdiffeq (:mod:`nnid.physics.odeint`);
+force of the training data (:func:`input_scale`: at least a hundredth of the largest of its
+unit group). Integration goes through torchdiffeq (:mod:`nnid.physics.odeint`);
 training is multiple shooting (:class:`nnid.trainers.neural_ode.MultipleShooting`) with a
 penalty on the network's force so it stays small where the physics suffices, and early
 stopping on held-out free runs.
@@ -47,7 +48,7 @@ from torch import Tensor, nn
 from torch.func import functional_call
 
 from nnid.datasets.arrays import nominal_forces
-from nnid.datasets.log import POSE, VELOCITY, frame_step
+from nnid.datasets.log import POSE, VELOCITY, check_time_unit, frame_step
 from nnid.datasets.preprocess import check_uniform, experiment_rows, first_order_lag
 from nnid.datasets.segmentation import label_transients
 from nnid.errors import NnidInputError, checked_number
@@ -88,7 +89,7 @@ from nnid.trainers.history import (
     staged,
 )
 from nnid.trainers.neural_ode import Batch, MultipleShooting, Run
-from nnid.validation import MAX_WIDTH
+from nnid.validation import MAX_WIDTH, adjoint_solver
 
 DTYPE = torch.float64
 #: state features of the network: ν_r (scaled), then the 9 entries of R(Θ)
@@ -215,6 +216,25 @@ def _scale(fit: Tensor) -> Tensor:
         return fit.abs()
     top = float(fit.abs().max())
     return torch.where(fit.abs() > 0, fit.abs(), torch.full_like(fit, top if top > 0 else 1.0))
+
+
+#: the smallest input scale of a DOF, relative to the largest RMS force (or moment) of its unit
+#: group: a DOF whose τ is round-off (1e-13 N) was scaled by it, its input channel O(1) noise
+#: and its correction scaled to nothing
+INPUT_FLOOR = 1e-2
+
+
+def input_scale(tau: np.ndarray) -> np.ndarray:
+    """Per DOF, the RMS of the training forces ``tau`` ``[N, 6]`` (X … N), at least
+    :data:`INPUT_FLOOR` times the largest of its group (forces in N, moments in N m: the
+    scales of DOFs not actuated, or barely, in a unit); 1 in a group nothing actuates."""
+    rms = np.sqrt(np.mean(tau**2, 0))
+    scale = np.ones(6)
+    for group in (slice(0, 3), slice(3, 6)):
+        top = rms[group].max()
+        if top > 0:
+            scale[group] = np.maximum(rms[group], INPUT_FLOOR * top)
+    return scale
 
 
 class CorrectionNet(nn.Module):
@@ -471,7 +491,8 @@ class HybridModel(FossenPlant):
             ``"nnid_rk4"`` when the trainer is Levenberg-Marquardt, whose forward-mode
             Jacobians torchdiffeq's input handling cannot pass), ``"rk4"``, ``"dopri5"``
             (adaptive) or ``"nnid_rk4"`` (:func:`nnid.physics.odeint.integrate`);
-            ``adjoint``: gradients by the adjoint ODE (less memory, slower on a CPU).
+            ``adjoint``: gradients by the adjoint ODE (less memory, slower on a CPU; torchdiffeq's
+            solvers only, so neither with ``"nnid_rk4"`` nor with Levenberg-Marquardt).
         savgol_window, savgol_order: velocity and acceleration derivation where the log lacks
             them (:func:`nnid.models.parametric.prepare_motion`).
         zoh_midpoint: the parametric fit regresses on the mean of consecutive inputs (held
@@ -560,6 +581,7 @@ class HybridModel(FossenPlant):
             )
         else:
             self.method_ = self.method
+        adjoint_solver(self.adjoint, lm, self.method_)
         for name in ("hidden", "memory", "segments"):
             if isinstance(getattr(self, name), str | bytes) or not np.iterable(getattr(self, name)):
                 raise NnidInputError(f"{name} is a list of numbers", field=name)
@@ -670,6 +692,11 @@ class HybridModel(FossenPlant):
         """The parametric fit, then the network (and the joint parameters) by multiple
         shooting on the training experiments; early stopping on ``validation``'s free runs."""
         self._check_settings()
+        # time in seconds (the physics prediction's rule): a log in milliseconds trained for
+        # hours on segments and windows of whole samples, then predicted nonsense
+        check_time_unit(log)
+        if validation is not None:
+            check_time_unit(validation)
         # one rate over every run, validation's too: the training steps them all at one dt
         # (a 10-Hz run among 20-Hz ones was flown at 0.05 s: velocity RMS error 0.24)
         what = "the hybrid model's training"
@@ -687,8 +714,7 @@ class HybridModel(FossenPlant):
             raise NnidInputError("the log has no velocity of the fitted DOFs", field="dofs")
         std = {d: float(log[d].std()) for d in self.scored_}
         self.velocity_scale_ = {d: (s if s > 0 else 1.0) for d, s in std.items()}
-        tau_rms = np.sqrt(np.mean(data["tau"] ** 2, 0))
-        self.input_scale_ = np.where(tau_rms > 0, tau_rms, 1.0)
+        self.input_scale_ = input_scale(data["tau"])
         self.dynamics_ = self._new_dynamics()
         self._set_scales(log, data)
         dt = self._dt(log)
@@ -758,8 +784,8 @@ class HybridModel(FossenPlant):
 
     def _set_scales(self, log: pd.DataFrame, data: dict[str, np.ndarray]) -> None:
         """The network's input and output scales from the training data: ν by its standard
-        deviation, the output by the RMS input force per DOF (divided by the diagonal of M at
-        acceleration level)."""
+        deviation, the output by the input scale per DOF (:func:`input_scale`; divided by the
+        diagonal of M at acceleration level)."""
         net = self.dynamics_.net
         nu_std = np.array([self.velocity_scale_.get(d, 1.0) for d in DOFS])
         scale = self.input_scale_.copy()
@@ -792,6 +818,7 @@ class HybridModel(FossenPlant):
     def _predict(self, log: pd.DataFrame, mode: str | int) -> pd.DataFrame:
         """Free run from each experiment's first measured state (experiments of one length and
         sampling interval integrated as one batch); k steps ahead from every measured state."""
+        check_time_unit(log)  # stepped in seconds, as the fit was
         log, data = self._data(log, accelerations=False)
         check_uniform(log, "the hybrid model")
         channels = self._channels(log, data["tau"])
@@ -809,11 +836,16 @@ class HybridModel(FossenPlant):
                     states = self._simulate(x[pos[:, 0]], channels[pos[:, :-1]], dt)
                     out[pos.T] = states
                     continue
-                starts = pos[:, : max(size - k, 0)].reshape(-1)
+                # stepped through each run's rows, not the log's: a run's rows need not be
+                # contiguous (runs A, B, A), and a window stepped by row ran on into B's
+                rows = pos.reshape(-1)  # run after run, each in its own order
+                n = max(size - k, 0)
+                starts = (np.arange(len(members))[:, None] * size + np.arange(n)).reshape(-1)
                 for a in range(0, starts.size, _CHUNK):
                     chunk = starts[a : a + _CHUNK]
-                    windows = channels[chunk[:, None] + np.arange(k)[None, :]]
-                    out[chunk + k] = self._simulate(x[chunk], windows, dt)[-1]
+                    windows = channels[rows[chunk[:, None] + np.arange(k)[None, :]]]
+                    flown = self._simulate(x[rows[chunk]], windows, dt)
+                    out[rows[chunk + k]] = flown[-1]
         pred = pd.DataFrame(out, columns=[*POSE, *VELOCITY], index=log.index)
         return blank_initial(pred, log, self.warmup_samples_ + k - 1)
 
@@ -828,7 +860,8 @@ class HybridModel(FossenPlant):
         memory), each stepped by the command held over the sample."""
         check_is_fitted(self, msg=NOT_FITTED)
         mode = check_mode(mode)
-        log, data = self._data(check_log(log), accelerations=False)
+        check_time_unit(check_log(log))  # stepped in seconds, as the fit was
+        log, data = self._data(log, accelerations=False)
         # the filters' states at every sample, of the commands as flown (the log's): a window
         # k samples ahead starts from them, as the open-loop prediction does (from the
         # window's own first command, a k-step flight differed by 0.9-1.6 std from it)

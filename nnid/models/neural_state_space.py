@@ -22,13 +22,18 @@ initial state, which is estimated with the network (all states of every window a
 parameters, the measured ones starting at the measurement). The trainer is any object with
 ``fit(module, residual, train_batches, val_batches)``: Levenberg-Marquardt by default (forward-
 mode Jacobians of the whole simulated window), or Adam. Early stopping uses held-out windows
-whose initial states are estimated from their first ``warmup`` samples only (with the network
-held fixed), exactly as at prediction time; the samples after the warm-up are the validation
-error. Training runs in stages of growing window length (``windows``; multiple shooting with
-continuity links between neighbouring windows); early stopping applies to the last stage, the
-earlier ones being the pre-training that makes the long simulation error tractable. Prediction
-estimates each experiment's initial state the same way, then runs free; the warm-up samples are
-never scored.
+whose initial states are free parameters fitted to their first ``warmup`` samples only (the
+network held fixed in that residual), moved by the trainer's steps together with the weights
+(Levenberg-Marquardt: one step an epoch) from where the previous stage left them; the samples
+after the warm-up are the validation error. That is not prediction's estimate, which starts
+again from the measurement (and ``hidden_init``) and runs ``state_epochs`` epochs with the
+trained network, so the score an epoch is kept on can differ from the error ``predict`` then
+makes on the same run. Training runs in stages of growing window length (``windows``; multiple
+shooting with continuity links between neighbouring windows); early stopping applies to the
+last stage, the earlier ones being the pre-training that makes the long simulation error
+tractable. Prediction estimates each experiment's initial state from its warm-up
+(:meth:`NeuralStateSpace.initial_state`), then runs free; the warm-up samples are never
+scored.
 """
 
 from __future__ import annotations
@@ -62,7 +67,7 @@ from nnid.models.io_model import DTYPE, InputOutputModel
 from nnid.physics.integrate import rk4
 from nnid.threads import torch_threads
 from nnid.trainers.history import Progress, scored_validation, staged
-from nnid.validation import MAX_WIDTH, checked_names
+from nnid.validation import MAX_WIDTH, checked_names, disjoint_columns
 
 #: derivatives are learned per sample and scaled down, so a small network starts slow
 _RATE = 0.1
@@ -259,19 +264,30 @@ class NeuralStateSpace(InputOutputModel):
         self.outputs_ = checked_names(self.outputs, "outputs")
         if not self.outputs_:
             raise NnidInputError("a state-space model needs at least one output", field="outputs")
+        disjoint_columns(self.inputs_, self.outputs_)  # an output read as an input: no model
         # capped as the config caps it (wider is a typo); int() made 1.5 one unit wide
         checked_number(self.hidden, "hidden", 1, strict=False, integer=True, maximum=MAX_WIDTH)
         # each named, and whole: 1.5 hidden states or a NaN warm-up passed the comparisons
         checked_number(self.hidden_states, "hidden_states", 0, strict=False, integer=True)
         checked_number(self.substeps, "substeps", 1, strict=False, integer=True)
         checked_number(self.warmup, "warmup", 1, strict=False, integer=True)
-        windows = [None if w is None else int(w) for w in self.windows]
+        given = self.windows
+        many = not isinstance(given, str | bytes) and np.iterable(given)
+        # whole lengths, as the config's: int() trained a 12.7-sample window 12 long
+        windows = [
+            None if w is None else checked_number(w, "windows", 1, strict=False, integer=True)
+            for w in (given if many else [])
+        ]
         if not windows or any(w is not None and w <= self.warmup for w in windows):
             raise NnidInputError(
                 "windows: one or more lengths (None: whole experiments), each longer than warmup",
                 field="windows",
             )
         self.windows_ = windows
+        checked_number(self.state_epochs, "state_epochs", 1, strict=False, integer=True)
+        # a NaN weight stopped Levenberg-Marquardt at its first epoch without a word, and a
+        # negative one made the links' weight (continuity ** 0.5) complex
+        checked_number(self.continuity, "continuity", strict=False)
         self.targets_ = list(self.outputs_)
         self.warmup_samples_ = int(self.warmup)
         self.n_x_ = len(self.outputs_) + int(self.hidden_states)
