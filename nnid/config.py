@@ -504,7 +504,7 @@ class GradientSpec(_Trainer):
     """Weiss's gradient estimator (eqs 62-65)."""
 
     kind: Literal["gradient"]
-    gain: PositiveFloat | list[PositiveFloat] | list[list[Number]] = 1.0
+    gain: Number | list[Number] | list[list[Number]] = 1.0
     normalized: bool = False
     filter_lambda: PositiveFloat | None = None
     theta0: list[Number] | None = None
@@ -512,15 +512,14 @@ class GradientSpec(_Trainer):
 
     @field_validator("gain")
     @classmethod
-    def _gain_matrix(cls, gain: Any) -> Any:
-        """A matrix Γ square, symmetric and positive definite: the gradient law descends
-        the squared error only then (a ragged one failed in numpy with a traceback, a
-        negative definite one climbed it)."""
-        if not (isinstance(gain, list) and gain and isinstance(gain[0], list)):
-            return gain
-        from nnid.trainers.recursive import gain_matrix_problem
+    def _gain(cls, gain: Any) -> Any:
+        """Γ as the gradient law takes it, the check a gain given from Python gets too
+        (:func:`~nnid.trainers.recursive.gain_problem`): a scalar or vector above 0, a matrix
+        square, symmetric and positive definite (a ragged one failed in numpy with a
+        traceback, a negative definite one climbed the squared error)."""
+        from nnid.trainers.recursive import gain_problem
 
-        problem = gain_matrix_problem(gain)
+        problem = gain_problem(gain)
         if problem:
             raise ValueError(problem)
         return gain

@@ -404,6 +404,66 @@ def test_a_clock_stamped_in_whole_ms_gives_the_plateaus_of_its_float_clock():
         assert [p[4] for p in got] == pytest.approx([p[4] for p in want], rel=1e-5)
 
 
+def _wrapped(angle: np.ndarray) -> np.ndarray:
+    """An angle as readers keep it, in [−π, π)."""
+    return (angle + np.pi) % (2 * np.pi) - np.pi
+
+
+# a yaw turn of DOF r as the readers deliver it: 0.5 rad/s for 30 s at 20 Hz, ψ wrapped at ±π
+# three times (k_r = 2, k_r|r| = 1: the steady force)
+TURN_T = np.arange(600) / 20
+TURN_PSI = 0.5 * TURN_T + 2.0
+TURN_FORCE = np.full(TURN_T.size, 2.0 * 0.5 + 1.0 * 0.25)
+
+
+def test_a_turn_wrapped_at_pi_is_one_whole_plateau():
+    """ψ wrapped at ±π: each 2π step was a jump in the SG acceleration, and the plateau was cut
+    to the longest stretch between two wraps (or none was found). The yaw angle is unwrapped
+    per segment (a hole in the log cuts one) and the whole turn is the plateau at its speed."""
+    from nnid.trainers.caccia import find_plateaus
+
+    wrapped = _wrapped(TURN_PSI)
+    assert np.sum(np.abs(np.diff(wrapped)) > np.pi) == 3
+    codes = np.zeros(TURN_T.size, int)
+    (p,) = find_plateaus(TURN_T, wrapped, TURN_FORCE, codes, angle=True)
+    assert (p.start, p.end, p.n) == (0.0, 29.95, 600)
+    assert p.speed == pytest.approx(0.5, abs=1e-9)
+    # a hole of 2 s (samples missing) cuts the turn in two stretches, each unwrapped alone
+    keep = (TURN_T < 12.0) | (TURN_T >= 14.0)
+    got = find_plateaus(TURN_T[keep], wrapped[keep], TURN_FORCE[keep], codes[keep], angle=True)
+    assert [(p.start, p.end) for p in got] == [(0.0, 11.95), (14.0, 29.95)]
+    assert [p.speed for p in got] == pytest.approx([0.5, 0.5], abs=1e-9)
+
+
+def test_the_yaw_dof_unwraps_its_angle_in_both_steps():
+    """CacciaTwoStep(dof="r") on wrapped ψ: step 1 found the plateaus between wraps, and
+    step 2 (eqs 16-19) took each 2π step for motion in ξ and in k χ, θ = [m, m ξ₀ + k χ₀, b]
+    came out far from the exact [0, 0, 0] of a steady turn (y ≡ 0). Both steps read the
+    unwrapped angle, exactly as if the log had been unwrapped."""
+    from nnid.trainers.caccia import integrated_regression
+
+    speeds = np.array([0.3, -0.6, 0.9, -0.2, 0.5])
+    t = np.arange(speeds.size * 600) / 20
+    xi = np.repeat(speeds, 600)
+    psi = 1.0 + np.r_[0.0, np.cumsum(xi[:-1]) / 20]
+    force = 2.0 * xi + 1.0 * xi * np.abs(xi)
+    trainer = CacciaTwoStep(dof="r", reference=(("", "pos"), ("", "neg")), correlated=False)
+    trainer.steady_arrays(t, _wrapped(psi), force, np.zeros(t.size, int))
+    assert [(p.start, p.end) for p in trainer.plateaus_] == [
+        (30.0 * i, 30.0 * i + 29.95) for i in range(speeds.size)
+    ]
+    assert [p.speed for p in trainer.plateaus_] == pytest.approx(speeds, abs=1e-9)
+    assert trainer.steady_.theta[:2] == pytest.approx([2.0, 1.0], abs=1e-6)
+    wrapped = _wrapped(TURN_PSI)
+    want = integrated_regression(TURN_T, TURN_PSI, TURN_FORCE, 2.0, 1.0)
+    got = integrated_regression(TURN_T, wrapped, TURN_FORCE, 2.0, 1.0, angle=True)
+    assert got[0] == pytest.approx(want[0], abs=1e-9)
+    assert got[1] == pytest.approx(want[1], abs=1e-9)
+    with pytest.warns(UserWarning, match="collinear"):  # a steady turn: ξ is constant
+        theta = trainer.inertia_arrays(TURN_T, wrapped, TURN_FORCE).theta
+    assert theta == pytest.approx([0.0, 0.0, 0.0], abs=1e-6)
+
+
 def test_a_sinusoid_run_stamped_in_whole_ms_is_integrated_at_its_step():
     """Step 2 on a 120-Hz sinusoid run stamped in whole ms was refused as "not uniformly
     sampled" (every 9-ms step more than 10 % over the median 8 ms). It is now read at its

@@ -578,6 +578,24 @@ def test_the_noise_of_velocities_derived_from_the_pose_is_the_pose_noise_smoothe
     }
 
 
+def test_the_pose_noise_of_a_spin_wrapped_at_pi_is_that_of_the_unwrapped_angle():
+    """A spin at 3 rad/s logged at 10 Hz with ψ kept wrapped at ±π (as readers keep it): each
+    wrap put a 2π step in two second differences, one in ten, and the MAD of ψ's noise came
+    out a tenth too large. It is the unwrapped angle's noise."""
+    from nnid.models.parametric import pose_noise_variance
+
+    rng = np.random.default_rng(0)
+    t = np.arange(2000) * 0.1
+    eta = np.zeros((t.size, 6))
+    eta[:, 5] = 3.0 * t + rng.normal(0, 0.005, t.size)
+    wrapped = eta.copy()
+    wrapped[:, 5] = (eta[:, 5] + np.pi) % (2 * np.pi) - np.pi
+    codes = np.zeros(t.size, int)
+    want = pose_noise_variance({"eta": eta, "experiment": codes}, ["r"], ["r"])
+    got = pose_noise_variance({"eta": wrapped, "experiment": codes}, ["r"], ["r"])
+    np.testing.assert_allclose(got, want, rtol=1e-9)
+
+
 def _surge_with_sines(vehicle, sine: float):
     """Two minutes of a 10-N surge with ``sine`` N of sine at 0.5 rad/s, logged by a 10-Hz
     DVL (5 mm/s noise): the accelerations are Savitzky-Golay derivatives of noisy speeds."""

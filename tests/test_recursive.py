@@ -213,16 +213,25 @@ def test_filtered_regressors_and_bad_arguments(seamor):
     [([[1.0, 2.0], [3.0]], "square: 2 rows, so 2 numbers in each"),  # numpy's own error
      ([1.0, [2.0, 3.0]], "square"),
      (np.array([[1.0, 2.0], [0.0, 1.0]]), "symmetric"),
-     ([[-1.0, 0.0], [0.0, -1.0]], "positive definite")],  # it climbed the error, unsaid
+     ([[-1.0, 0.0], [0.0, -1.0]], "positive definite"),  # it climbed the error, unsaid
+     # a scalar or vector of 0 or below ran from Python (θ stood still, or climbed)
+     (0.0, "a gain is a finite number above 0"),
+     (-50.0, "a gain is a finite number above 0"),
+     ([1.0, -2.0], r"each number of a gain vector \(Γ's diagonal\) is a finite .* 0, not -2"),
+     (np.array([0.0, 1.0]), "each number of a gain vector"),
+     (np.inf, "a gain is a finite number above 0")],
 )  # fmt: skip
-def test_a_gain_matrix_given_from_python_is_checked_as_a_configs(rng, gain, said):
+def test_a_gain_given_from_python_is_checked_as_a_configs(rng, gain, said):
     from nnid.config import GradientSpec
 
     reg = Regression(rng.normal(size=(20, 2)), rng.normal(size=20), ["a", "b"], ("u",), 20)
     with pytest.raises(NnidInputError, match=said) as err:
         GradientEstimator(gain=gain).solve(reg)
     assert err.value.field == "gain"
-    if isinstance(gain, list) and all(isinstance(row, list) for row in gain):
+    # what a TOML file can hold (a config refuses inf, and a mixed list, by their types)
+    rows = isinstance(gain, list) and all(isinstance(row, list) for row in gain)
+    numbers = isinstance(gain, list) and all(isinstance(x, float) for x in gain)
+    if rows or numbers or (isinstance(gain, float) and np.isfinite(gain)):
         with pytest.raises(ValueError, match=said):  # a config's gain: the same words
             GradientSpec(kind="gradient", gain=gain)
 

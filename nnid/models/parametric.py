@@ -48,6 +48,7 @@ from nnid.datasets.preprocess import (
     held_at,
     savgol_noise_gain,
     step_window,
+    unwrap_finite,
     velocity_sources,
     zoh_midpoint,
 )
@@ -873,13 +874,19 @@ def pose_noise_variance(
     ``dofs`` derived from the pose (:func:`nnid.datasets.preprocess.derive_velocities`),
     per unit of the differentiator's gain: p q r = T_Θ⁻¹ Θ̇ (the Euler angle rates for small
     angles), u v w = J₁ᵀ ṗ with the full pose (``"u"`` in ``from_pose``), else w = ż/(cθ cφ)
-    (its divisor kept at 0.5 or more, as there). NaN for a DOF not in ``from_pose``."""
+    (its divisor kept at 0.5 or more, as there). NaN for a DOF not in ``from_pose``. The
+    attitude's noise is read from it unwrapped (readers keep it wrapped at ±π)."""
     from nnid.datasets.log import euler_rate_matrices
     from nnid.datasets.mapping import rotation_from_euler
     from nnid.trainers.ukf import noise_level
 
     eta = np.asarray(data["eta"], dtype=np.float64)
-    sigma2 = noise_level({"nu": eta}, DOFS) ** 2  # x y z φ θ ψ, indexed as u v w p q r
+    # a wrap's 2π step is no noise: unwrapped along the rows, every step within a run is the
+    # angle's own (a step across a join between runs is no noise either way: the MAD drops it)
+    pose = eta.copy()
+    for k in range(3, 6):
+        pose[:, k] = unwrap_finite(eta[:, k])
+    sigma2 = noise_level({"nu": pose}, DOFS) ** 2  # x y z φ θ ψ, indexed as u v w p q r
     angles = eta[:, 3:6]
     out = np.full((eta.shape[0], len(dofs)), np.nan)
     rates = linear = None

@@ -83,8 +83,15 @@ from scipy.optimize import minimize_scalar
 
 from nnid.datasets.arrays import log_arrays
 from nnid.datasets.excitation import PRBS, DOptimalSine
+from nnid.datasets.log import ANGLES
 from nnid.datasets.measurement import Measurement
-from nnid.datasets.preprocess import off_steps, savgol_interp, savgol_window, true_runs
+from nnid.datasets.preprocess import (
+    off_steps,
+    savgol_interp,
+    savgol_window,
+    true_runs,
+    unwrap_finite,
+)
 from nnid.datasets.simulator import simulate, simulate_config
 from nnid.errors import NnidInputError
 from nnid.evaluation.persistence import combined_excitation
@@ -267,6 +274,7 @@ def find_plateaus(
     settle_accel: float = 2e-3,
     min_plateau: float = 10.0,
     speed: Literal["slope", "mean", "asymptote"] = "asymptote",
+    angle: bool = False,
 ) -> list[Plateau]:
     """Steady-state plateaus of constant nominal input (rule in the module docstring).
 
@@ -275,7 +283,9 @@ def find_plateaus(
     sample with its thrust mapping mode. A code that comes back after another's rows is one
     experiment (one setting) but not one run: no plateau spans the other's rows, nor a gap
     where samples are missing; time stamps that are otherwise not uniform are refused
-    (:func:`_sample_interval`).
+    (:func:`_sample_interval`). ``angle``: the position is an attitude angle (p q r), which
+    readers keep wrapped at ±π; each constant-input segment is unwrapped before it is
+    differentiated and fitted (:func:`~nnid.datasets.preprocess.unwrap_finite`).
     """
     t = np.asarray(t, np.float64)
     position = np.asarray(position, np.float64)
@@ -302,6 +312,8 @@ def find_plateaus(
             if (b - a) * dt < min_plateau or b - a <= window:
                 continue
             seg_t, seg_x = te[a:b], xe[a:b]
+            if angle:  # a wrap is a 2π step no vehicle made: it broke the settled run
+                seg_x = unwrap_finite(seg_x)
             acc = savgol_interp(seg_x, window, settle_order, 2, dt)
             runs = true_runs(np.abs(acc) <= settle_accel)
             if not runs:
@@ -417,6 +429,7 @@ def integrated_regression(
     velocity_window: float = 5.0,
     velocity_order: int = 4,
     force_neg: np.ndarray | None = None,
+    angle: bool = False,
 ) -> tuple[np.ndarray, np.ndarray, list[str]]:
     """H and y of Caccia eqs 16-19 for one run (θ = [m_ξ, m_ξ ξ₀ + k χ₀, b]).
 
@@ -425,9 +438,14 @@ def integrated_regression(
     relative to its first sample (χ₀ is absorbed in the second parameter anyway). With an
     actuator lag, ``force`` is the lagged nominal force and ``force_neg`` its lagged negative
     part (:func:`~nnid.datasets.arrays.force_arrays`): η acts before the lag (eq. 3).
+    ``angle``: the position is an attitude angle (p q r), unwrapped first
+    (:func:`~nnid.datasets.preprocess.unwrap_finite`): readers keep it wrapped at ±π.
     """
     t = np.asarray(t, np.float64) - float(t[0])
-    chi = np.asarray(position, np.float64) - float(position[0])
+    chi = np.asarray(position, np.float64)
+    if angle:  # a wrap's 2π step entered ξ and the k χ term of y as motion
+        chi = unwrap_finite(chi)
+    chi = chi - float(chi[0])
     force = np.asarray(force, np.float64)
     dt = _sample_interval(t, np.zeros(max(t.size - 1, 0), bool), "the sinusoid run", False)[0]
     window = savgol_window(velocity_window, 1.0 / dt, velocity_order, "velocity_window")
@@ -640,6 +658,11 @@ class CacciaTwoStep:
     def force_name(self) -> str:
         return FORCES[DOFS.index(self.dof)]
 
+    @property
+    def angular(self) -> bool:
+        """Whether the DOF's position χ is an attitude angle (p q r), kept wrapped by readers."""
+        return POSITION_OF[self.dof] in ANGLES
+
     def vehicle_names(self, names: Sequence[str]) -> list[str]:
         """Caccia-signed step-1 names -> vehicle-file names (module docstring)."""
         k1, k2, nu, dnu = caccia_names(self.dof)
@@ -726,6 +749,7 @@ class CacciaTwoStep:
             self.settle_accel,
             self.min_plateau,
             self.speed,
+            self.angular,
         )
         h, y, pnames = steady_state_regression(
             self.plateaus_, self.dof, self.reference, self.force_eta_one, self.terms
@@ -841,6 +865,7 @@ class CacciaTwoStep:
             self.velocity_window,
             self.velocity_order,
             force_neg,
+            self.angular,
         )
         est = solve_least_squares(h, y, names=names)
         if self.correlated:

@@ -46,6 +46,7 @@ from nnid.trainers.least_squares import (
     warn_left_out,
 )
 from nnid.trainers.regression import Regression
+from nnid.validation import shown
 
 
 @njit(cache=True)
@@ -491,11 +492,33 @@ def gain_matrix_problem(gain: Sequence[Sequence[float]] | np.ndarray) -> str | N
     return None
 
 
+def gain_problem(
+    gain: float | Sequence[float] | Sequence[Sequence[float]] | np.ndarray,
+) -> str | None:
+    """What makes ``gain`` no gain Γ of the gradient law (Weiss eqs 62-65), or None: a matrix
+    as :func:`gain_matrix_problem` says; a scalar p₀, or each number of a vector (diagonal Γ),
+    finite and above 0, as the law descends the squared error only then (a negative gain
+    climbs it, 0 never moves θ). The check of a config's ``gain`` and of one from Python."""
+    if _rows(gain):
+        return gain_matrix_problem(gain)  # type: ignore[arg-type]
+    g = np.asarray(gain, dtype=np.float64)
+    flat = g.reshape(-1)
+    bad = flat[~(np.isfinite(flat) & (flat > 0))]
+    if not bad.size:
+        return None  # its shape is the estimator's to check: it knows the parameters
+    if g.ndim == 0:  # the value itself is shown beside the message (a config's "got")
+        return "a gain is a finite number above 0"
+    return (
+        "each number of a gain vector (Γ's diagonal) is a finite number above 0, "
+        f"not {shown(bad[0])}"
+    )
+
+
 class GradientEstimator(BaseEstimator):
     """The gradient estimator of Weiss eqs 62-65: θ̇ = −p₀ ∂(eᵀe)/∂θ ∝ Γ φ (y − φᵀθ).
 
-    ``gain`` is Γ: a scalar p₀, a vector (diagonal Γ) or a symmetric positive definite matrix
-    (:func:`gain_matrix_problem`). The law is discretised by forward Euler over the sample
+    ``gain`` is Γ: a scalar p₀ or a vector (diagonal Γ) above 0, or a symmetric positive
+    definite matrix (:func:`gain_problem`). The law is discretised by forward Euler over the sample
     interval Δt (from the log's ``t`` in :meth:`fit`, else ``dt``, else 1: a gain per sample);
     it is stable while Δt Γ ΦᵢᵀΦᵢ stays below 2. With
     ``normalized`` the step is divided by 1 + Σ φᵀΓφ (normalised gradient), which bounds it.
@@ -524,9 +547,12 @@ class GradientEstimator(BaseEstimator):
         self.dt = dt
 
     def _gamma(self, n_par: int) -> np.ndarray:
-        # a matrix is checked as a config's is: a ragged one had failed in numpy's own words
-        if _rows(self.gain) and (problem := gain_matrix_problem(self.gain)):
-            raise NnidInputError(problem, field="gain")
+        # checked as a config's gain is: a ragged matrix had failed in numpy's own words, and
+        # a gain of 0 or below ran (θ stood still, or climbed the squared error)
+        if problem := gain_problem(self.gain):
+            scalar = not _rows(self.gain) and np.ndim(self.gain) == 0  # as a config says it
+            got = f" (got {shown(self.gain)})" if scalar else ""
+            raise NnidInputError(problem + got, field="gain")
         g = np.asarray(self.gain, dtype=np.float64)
         if g.ndim == 0:
             return np.eye(n_par) * float(g)
