@@ -1154,14 +1154,9 @@ def test_a_thruster_back_only_partly_is_said_resized(vehicle, monitor, thruster,
     assert snag["components"]["external_bias.u"]["value"] == pytest.approx(-10, rel=0.1)
 
 
-def test_an_end_is_said_only_as_the_better_reading_than_the_change_persisting(vehicle, monitor):
-    """An alarm on what a change leaves was said the change's end where the change refitted
-    after τ was not significant yet significantly less than its size, without the BIC check
-    that an end inside the alarm's own window has (ended_within): a 2.5 % loss of h1 (three
-    standard errors) taken out of a healthy window was said ended with confidence 0.44, its
-    own record giving the change persisting the better reading. An end is now said only with
-    a confidence over one half; the ends of larger losses on the same rows still are."""
-    from nnid.fault.detect import Change, Rewatch, _Splits, ended_alarm
+def _healthy_window_h1(vehicle, monitor):
+    """A healthy 20-s log's 10-s window from row 100, its residual rows, and the standard error
+    of h1's loss refitted on it: the window the end and resize gates are judged on."""
     from nnid.fault.isolation import refit
 
     log = simulate_faults(vehicle, 20, seed=5)
@@ -1170,6 +1165,19 @@ def test_an_end_is_said_only_as_the_better_reading_than_the_change_persisting(ve
     r = trace.values[rows, 0:6]
     name = "thruster_loss.h1"
     se = refit(monitor, data, r, rows, [name]).fits[name]["se"]
+    return data, trace, k, rows, r, name, se
+
+
+def test_an_end_is_said_only_as_the_better_reading_than_the_change_persisting(vehicle, monitor):
+    """An alarm on what a change leaves was said the change's end where the change refitted
+    after τ was not significant yet significantly less than its size, without the BIC check
+    that an end inside the alarm's own window has (ended_within): a 2.5 % loss of h1 (three
+    standard errors) taken out of a healthy window was said ended with confidence 0.44, its
+    own record giving the change persisting the better reading. An end is now said only with
+    a confidence over one half; the ends of larger losses on the same rows still are."""
+    from nnid.fault.detect import Change, Rewatch, _Splits, ended_alarm
+
+    data, trace, k, rows, r, name, se = _healthy_window_h1(vehicle, monitor)
     confidences = []
     for z in (3.0, 3.3, 3.6, 4.0):  # the loss taken out, in standard errors of its refit
         w = Rewatch(monitor)
@@ -1189,14 +1197,8 @@ def test_a_resize_is_said_only_as_the_better_reading_than_the_change_persisting(
     is now said only with a confidence over one half (and so a positive share explained);
     those of larger sizes taken out of the same rows still are."""
     from nnid.fault.detect import Change, Rewatch, _Splits, resized_alarm
-    from nnid.fault.isolation import refit
 
-    log = simulate_faults(vehicle, 20, seed=5)
-    data, trace, k = monitor_inputs(log, monitor.plant_), monitor.run(log), 100
-    rows = window_rows(data, k, 10.0)
-    r = trace.values[rows, 0:6]
-    name = "thruster_loss.h1"
-    se = refit(monitor, data, r, rows, [name]).fits[name]["se"]
+    data, trace, k, rows, r, name, se = _healthy_window_h1(vehicle, monitor)
     said = []
     for z in (3.0, 3.3, 3.6, 4.0, 5.0, 6.0):  # the loss taken out, in standard errors
         w = Rewatch(monitor)

@@ -28,6 +28,9 @@ from nnid.trainers.recursive import GradientEstimator, RecursiveLeastSquares
 from nnid.trainers.ukf import UnscentedKalman
 from nnid.vehicle import load_vehicle, vehicle_from_dict
 
+#: the per-sample series a UKF fit keeps (its history), in the order it saves them
+UKF_HISTORY = ("t", "theta", "theta_std", "nu", "innovation", "innovation_std")
+
 
 @pytest.fixture(scope="module")
 def seamor():
@@ -66,18 +69,7 @@ def test_a_loaded_ukf_model_keeps_its_trainer_and_filter_history(ukf_model, tmp_
     back = load_model(tmp_path)
     assert back.trainer_.kind == "ukf" and back.trainer_name() == "ukf"
     fitted = model.trainer_.history_
-    assert (
-        set(back.trainer_.history_)
-        == set(fitted)
-        == {
-            "t",
-            "theta",
-            "theta_std",
-            "nu",
-            "innovation",
-            "innovation_std",
-        }
-    )
+    assert set(back.trainer_.history_) == set(fitted) == set(UKF_HISTORY)
     for key, series in fitted.items():
         np.testing.assert_array_equal(back.trainer_.history_[key], series)
         assert back.trainer_.history_[key].dtype == np.float64
@@ -108,14 +100,7 @@ def test_a_ukf_fit_keeps_its_per_sample_series_out_of_model_json(ukf_model, tmp_
         return 0
 
     assert longest(saved) < 50 and (tmp_path / "model.json").stat().st_size < 10_000
-    assert saved["state"]["trainer_history"] == [
-        "t",
-        "theta",
-        "theta_std",
-        "nu",
-        "innovation",
-        "innovation_std",
-    ]
+    assert saved["state"]["trainer_history"] == list(UKF_HISTORY)
     assert saved["state"]["history"] == "trainer_history.theta"
     tensors = torch.load(tmp_path / "tensors.pt", weights_only=True)
     assert sorted(tensors) == sorted(
